@@ -1,0 +1,17 @@
+//! inkopt-core: Monte Carlo volumetric light transport through voxel ink volumes, with path-replay gradients.
+//!
+//! Conventions (see docs/conventions.md in the repository): voxel (x, y, z) has linear index
+//! `(z * ny + y) * nx + x` (C order of a (z, y, x) array); lengths in mm, coefficients in mm^-1; geometric
+//! vectors are (x, y, z); radiance is linear RGB, each channel traced as its own monochromatic problem.
+
+pub mod render;
+pub mod rng;
+pub mod sampling;
+pub mod scene;
+pub mod trace;
+
+pub use render::{backward, render, GradBuffers, GradMethod, RenderOptions, Stats, TexelEstimate};
+pub use scene::{face_normal, Boundary, DenseMedium, Environment, Geometry, LabelMedium, Medium, Texel, EMPTY};
+
+#[cfg(test)]
+mod tests;

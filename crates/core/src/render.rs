@@ -1,0 +1,241 @@
+//! Parallel drivers: the forward render of a list of texels and the gradient pass (path replay or the biased
+//! `L_i = 1` radiative backpropagation variant). Work is split over texels; every path's random numbers come
+//! from its (seed, texel, sample, channel) key, so per-texel results are bit-identical for any thread count.
+
+use std::sync::Mutex;
+
+use rayon::prelude::*;
+
+use crate::rng::PathRng;
+use crate::scene::{Geometry, Medium, Texel};
+use crate::trace::{trace, NoTally, Tally};
+
+#[derive(Clone, Copy, Debug)]
+pub struct RenderOptions {
+    pub spp: u32,
+    pub seed: u64,
+    pub include_specular: bool,
+}
+
+/// Per-texel estimate: mean linear RGB radiance and the variance of that mean (squared standard error).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct TexelEstimate {
+    pub mean: [f32; 3],
+    pub var_mean: [f32; 3],
+}
+
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Stats {
+    /// Monochromatic paths traced (texels x spp x 3 channels), replays not included.
+    pub paths: u64,
+    /// Collisions (scattering + absorption events) of those paths.
+    pub events: u64,
+    /// Paths traced a second time by path replay, and their collisions.
+    pub replayed_paths: u64,
+    pub replayed_events: u64,
+}
+
+impl Stats {
+    fn merge(a: Stats, b: Stats) -> Stats {
+        Stats {
+            paths: a.paths + b.paths,
+            events: a.events + b.events,
+            replayed_paths: a.replayed_paths + b.replayed_paths,
+            replayed_events: a.replayed_events + b.replayed_events,
+        }
+    }
+}
+
+struct Moments {
+    sum: [f64; 3],
+    sq: [f64; 3],
+}
+
+impl Moments {
+    fn new() -> Self {
+        Moments { sum: [0.0; 3], sq: [0.0; 3] }
+    }
+    fn add(&mut self, c: usize, x: f32) {
+        self.sum[c] += x as f64;
+        self.sq[c] += (x as f64) * (x as f64);
+    }
+    fn estimate(&self, spp: u32) -> TexelEstimate {
+        let n = spp as f64;
+        let mut e = TexelEstimate::default();
+        for c in 0..3 {
+            let m = self.sum[c] / n;
+            e.mean[c] = m as f32;
+            e.var_mean[c] = if spp > 1 { ((self.sq[c] / n - m * m).max(0.0) * n / (n - 1.0) / n) as f32 } else { 0.0 };
+        }
+        e
+    }
+}
+
+/// Forward render. `first_texel` is the global index of `texels[0]` (the random-number key), so a texel list
+/// can be rendered in chunks with the same result as in one call.
+pub fn render<M: Medium>(
+    geo: &Geometry,
+    med: &M,
+    texels: &[Texel],
+    first_texel: u64,
+    opts: &RenderOptions,
+) -> (Vec<TexelEstimate>, Stats) {
+    let results: Vec<(TexelEstimate, Stats)> = texels
+        .par_iter()
+        .enumerate()
+        .map(|(i, tex)| {
+            let mut m = Moments::new();
+            let mut st = Stats::default();
+            for s in 0..opts.spp {
+                for c in 0..3 {
+                    let mut rng = PathRng::new(opts.seed, first_texel + i as u64, s, c as u32);
+                    let r = trace(geo, med, tex, c, &mut rng, opts.include_specular, &mut NoTally);
+                    m.add(c, r.value);
+                    st.events += r.events as u64;
+                }
+            }
+            st.paths = 3 * opts.spp as u64;
+            (m.estimate(opts.spp), st)
+        })
+        .collect();
+    let stats = results.iter().fold(Stats::default(), |a, r| Stats::merge(a, r.1));
+    (results.into_iter().map(|r| r.0).collect(), stats)
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GradMethod {
+    /// Unbiased path replay backpropagation (Vicini et al. 2021) for the analog estimator.
+    Replay,
+    /// Radiative backpropagation with the incident and outgoing radiance along the adjoint path approximated by
+    /// the environment radiance 1 (biased, one pass). Under this approximation the sigma_s derivative
+    /// (-L + integral of phase * L_i) vanishes, so only sigma_a receives gradient: -adjoint x track length.
+    Li1,
+}
+
+/// Gradient accumulators: one buffer per worker thread, each holding d e / d sigma_s then d e / d sigma_a,
+/// planar by channel ([s R | s G | s B | a R | a G | a B], n voxels each).
+pub struct GradBuffers {
+    n: usize,
+    bufs: Vec<Mutex<Vec<f32>>>,
+}
+
+impl GradBuffers {
+    pub fn new(n_voxels: usize, threads: usize) -> Self {
+        GradBuffers { n: n_voxels, bufs: (0..threads.max(1)).map(|_| Mutex::new(vec![0.0f32; 6 * n_voxels])).collect() }
+    }
+
+    pub fn zero(&self) {
+        for b in &self.bufs {
+            b.lock().unwrap().iter_mut().for_each(|x| *x = 0.0);
+        }
+    }
+
+    /// Sum over threads into interleaved (voxel, channel) arrays: (d e / d sigma_s, d e / d sigma_a).
+    pub fn collect(&self, grad_s: &mut [f32], grad_a: &mut [f32]) {
+        let n = self.n;
+        grad_s.iter_mut().chain(grad_a.iter_mut()).for_each(|x| *x = 0.0);
+        for b in &self.bufs {
+            let b = b.lock().unwrap();
+            for c in 0..3 {
+                for j in 0..n {
+                    grad_s[3 * j + c] += b[c * n + j];
+                    grad_a[3 * j + c] += b[(3 + c) * n + j];
+                }
+            }
+        }
+    }
+}
+
+struct ReplayTally<'a, M: Medium> {
+    buf: &'a mut [f32],
+    n: usize,
+    c: usize,
+    w: f32,
+    med: &'a M,
+}
+
+impl<M: Medium> Tally for ReplayTally<'_, M> {
+    #[inline(always)]
+    fn segment(&mut self, j: usize, len: f32) {
+        let x = self.w * len;
+        self.buf[self.c * self.n + j] -= x;
+        self.buf[(3 + self.c) * self.n + j] -= x;
+    }
+    #[inline(always)]
+    fn scatter(&mut self, j: usize) {
+        let s = self.med.sigma_s(j, self.c);
+        if s > 0.0 {
+            self.buf[self.c * self.n + j] += self.w / s;
+        }
+    }
+}
+
+struct Li1Tally<'a> {
+    buf: &'a mut [f32],
+    n: usize,
+    c: usize,
+    w: f32,
+}
+
+impl Tally for Li1Tally<'_> {
+    #[inline(always)]
+    fn segment(&mut self, j: usize, len: f32) {
+        self.buf[(3 + self.c) * self.n + j] -= self.w * len;
+    }
+    #[inline(always)]
+    fn scatter(&mut self, _: usize) {}
+}
+
+/// Gradient pass: accumulate sum_i adjoint_i . d c_i / d (sigma_s, sigma_a) into `grads` for the given texels,
+/// `adjoint[i]` = d e / d c_i (linear RGB). Returns this pass's own forward estimates and statistics.
+pub fn backward<M: Medium>(
+    geo: &Geometry,
+    med: &M,
+    texels: &[Texel],
+    first_texel: u64,
+    adjoint: &[[f32; 3]],
+    opts: &RenderOptions,
+    method: GradMethod,
+    grads: &GradBuffers,
+) -> (Vec<TexelEstimate>, Stats) {
+    assert_eq!(texels.len(), adjoint.len());
+    assert_eq!(grads.n, med.len());
+    let n = grads.n;
+    let inv_spp = 1.0 / opts.spp as f32;
+    let results: Vec<(TexelEstimate, Stats)> = texels
+        .par_iter()
+        .enumerate()
+        .map(|(i, tex)| {
+            let slot = rayon::current_thread_index().unwrap_or(0) % grads.bufs.len();
+            let mut buf = grads.bufs[slot].lock().unwrap();
+            let mut m = Moments::new();
+            let mut st = Stats { paths: 3 * opts.spp as u64, ..Stats::default() };
+            let key = first_texel + i as u64;
+            for s in 0..opts.spp {
+                for c in 0..3 {
+                    let adj = adjoint[i][c];
+                    let mut rng = PathRng::new(opts.seed, key, s, c as u32);
+                    let r = match method {
+                        GradMethod::Replay => trace(geo, med, tex, c, &mut rng, opts.include_specular, &mut NoTally),
+                        GradMethod::Li1 => {
+                            let mut t = Li1Tally { buf: &mut buf[..], n, c, w: adj * inv_spp };
+                            trace(geo, med, tex, c, &mut rng, opts.include_specular, &mut t)
+                        }
+                    };
+                    m.add(c, r.value);
+                    st.events += r.events as u64;
+                    if method == GradMethod::Replay && r.value != 0.0 && adj != 0.0 {
+                        let mut rng = PathRng::new(opts.seed, key, s, c as u32);
+                        let mut t = ReplayTally { buf: &mut buf[..], n, c, w: adj * r.value * inv_spp, med };
+                        trace(geo, med, tex, c, &mut rng, opts.include_specular, &mut t);
+                        st.replayed_paths += 1;
+                        st.replayed_events += r.events as u64;
+                    }
+                }
+            }
+            (m.estimate(opts.spp), st)
+        })
+        .collect();
+    let stats = results.iter().fold(Stats::default(), |a, r| Stats::merge(a, r.1));
+    (results.into_iter().map(|r| r.0).collect(), stats)
+}

@@ -1,0 +1,245 @@
+//! The voxel scene: grid geometry, the medium (dense coefficients or ink labels), boundary and lighting.
+//!
+//! Layout: voxel (x, y, z) has linear index `(z * ny + y) * nx + x`, i.e. C order of a (z, y, x) array.
+//! Coefficients are stored per channel in planar arrays (all voxels of R, then G, then B) as extinction
+//! sigma_t and single-scattering albedo, the two numbers the random walk needs.
+
+use crate::sampling::V3;
+
+/// Label of an empty voxel in label media.
+pub const EMPTY: u8 = 255;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Boundary {
+    /// The grid's bounding box (or the `inside` mask) bounds the object.
+    Box,
+    /// x and y wrap around: an infinite slab in x and y, bounded in z.
+    PeriodicXY,
+}
+
+/// Incident radiance from outside the object, per RGB channel. Uniform today; the tracer only calls `eval`.
+#[derive(Clone, Debug)]
+pub enum Environment {
+    Uniform([f32; 3]),
+}
+
+impl Environment {
+    #[inline(always)]
+    pub fn eval(&self, _dir: V3, channel: usize) -> f32 {
+        match self {
+            Environment::Uniform(l) => l[channel],
+        }
+    }
+}
+
+/// Per-voxel optical parameters for one channel.
+pub trait Medium: Sync {
+    /// (sigma_t in mm^-1, albedo) of voxel `idx` in channel `c`.
+    fn coeffs(&self, idx: usize, c: usize) -> (f32, f32);
+    /// sigma_s in mm^-1 of voxel `idx` in channel `c` (for gradients).
+    fn sigma_s(&self, idx: usize, c: usize) -> f32 {
+        let (t, a) = self.coeffs(idx, c);
+        t * a
+    }
+    fn len(&self) -> usize;
+}
+
+/// Dense coefficients: planar [channel][voxel] arrays.
+pub struct DenseMedium {
+    n: usize,
+    sigma_t: Vec<f32>,
+    albedo: Vec<f32>,
+}
+
+impl DenseMedium {
+    /// From interleaved (voxel, channel) arrays of sigma_s and sigma_a in mm^-1 (a (z, y, x, 3) array's memory).
+    pub fn from_interleaved(sigma_s: &[f32], sigma_a: &[f32]) -> Result<Self, String> {
+        if sigma_s.len() != sigma_a.len() || sigma_s.len() % 3 != 0 {
+            return Err("sigma_s and sigma_a must both have 3 channels per voxel and equal size".into());
+        }
+        let n = sigma_s.len() / 3;
+        let mut sigma_t = vec![0.0f32; 3 * n];
+        let mut albedo = vec![1.0f32; 3 * n];
+        for i in 0..n {
+            for c in 0..3 {
+                let (s, a) = (sigma_s[3 * i + c], sigma_a[3 * i + c]);
+                if !(s >= 0.0 && a >= 0.0 && s.is_finite() && a.is_finite()) {
+                    return Err(format!("coefficients of voxel {i} channel {c} are negative or not finite"));
+                }
+                let t = s + a;
+                sigma_t[c * n + i] = t;
+                albedo[c * n + i] = if t > 0.0 { s / t } else { 1.0 };
+            }
+        }
+        Ok(DenseMedium { n, sigma_t, albedo })
+    }
+}
+
+impl Medium for DenseMedium {
+    #[inline(always)]
+    fn coeffs(&self, idx: usize, c: usize) -> (f32, f32) {
+        let k = c * self.n + idx;
+        (self.sigma_t[k], self.albedo[k])
+    }
+    fn len(&self) -> usize {
+        self.n
+    }
+}
+
+/// One ink label (u8) per voxel and a small ink table: 1 byte per voxel.
+pub struct LabelMedium {
+    labels: Vec<u8>,
+    /// [channel][ink] (sigma_t, albedo); index 255 (EMPTY) maps to vacuum.
+    table: [[(f32, f32); 256]; 3],
+}
+
+impl LabelMedium {
+    /// `ink_sigma_s`, `ink_sigma_a`: (N, 3) row-major, mm^-1.
+    pub fn new(labels: Vec<u8>, ink_sigma_s: &[f32], ink_sigma_a: &[f32]) -> Result<Self, String> {
+        let n_inks = ink_sigma_s.len() / 3;
+        if ink_sigma_s.len() != ink_sigma_a.len() || ink_sigma_s.len() % 3 != 0 || n_inks == 0 || n_inks > 255 {
+            return Err("ink table must be (N, 3) with 1 <= N <= 255".into());
+        }
+        let mut table = [[(0.0f32, 1.0f32); 256]; 3];
+        for k in 0..n_inks {
+            for c in 0..3 {
+                let (s, a) = (ink_sigma_s[3 * k + c], ink_sigma_a[3 * k + c]);
+                if !(s >= 0.0 && a >= 0.0 && s.is_finite() && a.is_finite()) {
+                    return Err(format!("ink {k} has negative or non-finite coefficients"));
+                }
+                let t = s + a;
+                table[c][k] = (t, if t > 0.0 { s / t } else { 1.0 });
+            }
+        }
+        if let Some(bad) = labels.iter().find(|&&l| l != EMPTY && l as usize >= n_inks) {
+            return Err(format!("label {bad} has no ink in a table of {n_inks}"));
+        }
+        Ok(LabelMedium { labels, table })
+    }
+}
+
+impl Medium for LabelMedium {
+    #[inline(always)]
+    fn coeffs(&self, idx: usize, c: usize) -> (f32, f32) {
+        self.table[c][self.labels[idx] as usize]
+    }
+    fn len(&self) -> usize {
+        self.labels.len()
+    }
+}
+
+/// Geometry and boundary of the object: grid size, voxel size, which voxels are inside, shading normals.
+pub struct Geometry {
+    /// Voxel counts (x, y, z).
+    pub n: [i32; 3],
+    /// Voxel edge lengths (x, y, z) in mm.
+    pub size: [f32; 3],
+    pub boundary: Boundary,
+    /// Optional inside mask, one byte per voxel (non-zero = inside). None: the whole box is inside.
+    pub inside: Option<Vec<u8>>,
+    /// Optional outward unit shading normals (x, y, z) per voxel, interleaved; used at surface voxels.
+    pub normals: Option<Vec<f32>>,
+    /// Relative index of refraction of the object (outside: 1).
+    pub ior: f32,
+    pub g: f32,
+    pub env: Environment,
+}
+
+impl Geometry {
+    pub fn new(n_xyz: [usize; 3], size: [f32; 3], boundary: Boundary, ior: f32, g: f32) -> Result<Self, String> {
+        if n_xyz.iter().any(|&k| k == 0 || k > i32::MAX as usize / 2) {
+            return Err(format!("grid size {n_xyz:?} must be positive"));
+        }
+        if size.iter().any(|&s| !(s > 0.0 && s.is_finite())) {
+            return Err(format!("voxel size {size:?} must be positive and finite"));
+        }
+        if !(ior > 0.0 && ior.is_finite()) {
+            return Err(format!("ior {ior} must be positive"));
+        }
+        if !(g > -1.0 && g < 1.0) {
+            return Err(format!("g {g} must lie in (-1, 1)"));
+        }
+        Ok(Geometry {
+            n: [n_xyz[0] as i32, n_xyz[1] as i32, n_xyz[2] as i32],
+            size,
+            boundary,
+            inside: None,
+            normals: None,
+            ior,
+            g,
+            env: Environment::Uniform([1.0; 3]),
+        })
+    }
+
+    pub fn voxel_count(&self) -> usize {
+        self.n.iter().map(|&k| k as usize).product()
+    }
+
+    pub fn with_inside(mut self, inside: Vec<u8>) -> Result<Self, String> {
+        if inside.len() != self.voxel_count() {
+            return Err("inside mask size differs from the grid".into());
+        }
+        self.inside = Some(inside);
+        Ok(self)
+    }
+
+    pub fn with_normals(mut self, normals: Vec<f32>) -> Result<Self, String> {
+        if normals.len() != 3 * self.voxel_count() {
+            return Err("normals size differs from 3 x the grid".into());
+        }
+        self.normals = Some(normals);
+        Ok(self)
+    }
+
+    #[inline(always)]
+    pub fn index(&self, v: [i32; 3]) -> usize {
+        ((v[2] as usize * self.n[1] as usize) + v[1] as usize) * self.n[0] as usize + v[0] as usize
+    }
+
+    #[inline(always)]
+    pub fn in_grid(&self, v: [i32; 3]) -> bool {
+        v[0] >= 0 && v[1] >= 0 && v[2] >= 0 && v[0] < self.n[0] && v[1] < self.n[1] && v[2] < self.n[2]
+    }
+
+    #[inline(always)]
+    pub fn is_inside(&self, v: [i32; 3]) -> bool {
+        self.in_grid(v)
+            && match &self.inside {
+                None => true,
+                Some(m) => m[self.index(v)] != 0,
+            }
+    }
+
+    /// Outward shading normal of inside voxel v, if the scene has normals and it is a usable unit vector.
+    #[inline(always)]
+    pub fn shading_normal(&self, v: [i32; 3]) -> Option<V3> {
+        let nrm = self.normals.as_ref()?;
+        let i = 3 * self.index(v);
+        let n = [nrm[i], nrm[i + 1], nrm[i + 2]];
+        let l2 = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
+        if l2 > 0.5 {
+            Some(crate::sampling::scale(n, 1.0 / l2.sqrt()))
+        } else {
+            None
+        }
+    }
+}
+
+/// The outward unit normal (x, y, z) of face id f: 0 -x, 1 +x, 2 -y, 3 +y, 4 -z, 5 +z.
+#[inline(always)]
+pub fn face_normal(f: u8) -> V3 {
+    let mut n = [0.0f32; 3];
+    n[(f / 2) as usize] = if f % 2 == 1 { 1.0 } else { -1.0 };
+    n
+}
+
+/// A texel: the sensor element of one exposed voxel face.
+#[derive(Clone, Copy, Debug)]
+pub struct Texel {
+    /// Voxel indices (x, y, z).
+    pub voxel: [i32; 3],
+    /// Face id its camera rays cross.
+    pub face: u8,
+    /// Outward unit shading normal (x, y, z); the camera looks along -normal.
+    pub normal: V3,
+}

@@ -1,0 +1,243 @@
+//! Statistical tests of the renderer against exact results. Tolerances are multiples of the estimator's own
+//! standard error (computed from the samples), never fixed image values.
+
+use crate::*;
+
+fn slab(n: [usize; 3], size: f32, sigma_s: [f32; 3], sigma_a: [f32; 3], ior: f32, g: f32) -> (Geometry, DenseMedium) {
+    let geo = Geometry::new(n, [size; 3], Boundary::PeriodicXY, ior, g).unwrap();
+    let nv = n.iter().product::<usize>();
+    let s: Vec<f32> = (0..nv).flat_map(|_| sigma_s).collect();
+    let a: Vec<f32> = (0..nv).flat_map(|_| sigma_a).collect();
+    (geo, DenseMedium::from_interleaved(&s, &a).unwrap())
+}
+
+fn top_texels(n: [usize; 3]) -> Vec<Texel> {
+    let mut t = vec![];
+    for y in 0..n[1] {
+        for x in 0..n[0] {
+            t.push(Texel { voxel: [x as i32, y as i32, n[2] as i32 - 1], face: 5, normal: [0.0, 0.0, 1.0] });
+        }
+    }
+    t
+}
+
+/// Mean over texels and its standard error (texels are independent).
+fn mean_and_se(est: &[TexelEstimate], c: usize) -> (f64, f64) {
+    let n = est.len() as f64;
+    let m = est.iter().map(|e| e.mean[c] as f64).sum::<f64>() / n;
+    let v = est.iter().map(|e| e.var_mean[c] as f64).sum::<f64>() / (n * n);
+    (m, v.sqrt())
+}
+
+#[test]
+fn white_furnace_is_one() {
+    // No absorption and an index-matched boundary: every path escapes with radiance 1, so every texel is
+    // exactly 1 whatever the scattering (zero variance: any deviation is a bug, not noise).
+    let n = [6, 5, 4];
+    let geo = Geometry::new(n, [0.1, 0.07, 0.05], Boundary::Box, 1.0, 0.4).unwrap();
+    let nv = 120;
+    let s: Vec<f32> = (0..3 * nv).map(|i| 1.0 + (i % 17) as f32 * 3.0).collect();
+    let med = DenseMedium::from_interleaved(&s, &vec![0.0; 3 * nv]).unwrap();
+    let mut texels = vec![];
+    for f in 0..6u8 {
+        texels.push(Texel { voxel: [if f == 1 { 5 } else { 0 }, if f == 3 { 4 } else { 0 }, if f == 5 { 3 } else { 0 }], face: f, normal: face_normal(f) });
+    }
+    let (est, _) = render(&geo, &med, &texels, 0, &RenderOptions { spp: 200, seed: 1, include_specular: true });
+    for e in &est {
+        for c in 0..3 {
+            assert_eq!(e.mean[c], 1.0);
+        }
+    }
+}
+
+#[test]
+fn furnace_with_fresnel_boundary_is_one() {
+    // Non-absorbing medium inside a dielectric (ior 1.5) box: energy is conserved, paths only bounce longer.
+    let n = [4, 4, 4];
+    let geo = Geometry::new(n, [0.1; 3], Boundary::Box, 1.5, 0.4).unwrap();
+    let med = DenseMedium::from_interleaved(&vec![8.0; 3 * 64], &vec![0.0; 3 * 64]).unwrap();
+    let texels: Vec<Texel> = (0..6u8).map(|f| Texel { voxel: [1, 2, if f == 5 { 3 } else { 0 }], face: f, normal: face_normal(f) }).collect();
+    let (est, _) = render(&geo, &med, &texels, 0, &RenderOptions { spp: 50, seed: 2, include_specular: true });
+    assert!(est.iter().all(|e| e.mean.iter().all(|&m| m == 1.0)));
+}
+
+#[test]
+fn absorbing_slab_matches_fresnel_series() {
+    // Purely absorbing slab, normal incidence: the path stays on the normal, so with R0 = 0.04 and
+    // x = exp(-sigma_a L):  R + T = R0 + (1-R0)^2 x (1 + R0 x) / (1 - R0^2 x^2)   (reflections summed).
+    let n = [8, 8, 10];
+    let size = 0.05f32;
+    for &sa in &[0.5f32, 2.0, 6.0] {
+        let (geo, med) = slab(n, size, [0.0; 3], [sa, sa * 2.0, sa * 0.5], 1.5, 0.4);
+        let texels = top_texels(n);
+        let (est, _) = render(&geo, &med, &texels, 0, &RenderOptions { spp: 400, seed: 3, include_specular: true });
+        for c in 0..3 {
+            let r0 = 0.04f64;
+            let x = (-([sa, sa * 2.0, sa * 0.5][c] as f64) * 10.0 * size as f64).exp();
+            let expect = r0 + (1.0 - r0).powi(2) * x * (1.0 + r0 * x) / (1.0 - r0 * r0 * x * x);
+            let (m, se) = mean_and_se(&est, c);
+            assert!((m - expect).abs() < 4.0 * se + 1e-6, "sa={sa} c={c}: {m} vs {expect} (se {se})");
+        }
+    }
+}
+
+#[test]
+fn same_result_for_any_thread_count() {
+    let n = [10, 9, 6];
+    let nv = 540;
+    let s: Vec<f32> = (0..3 * nv).map(|i| 2.0 + ((i * 7919) % 13) as f32).collect();
+    let a: Vec<f32> = (0..3 * nv).map(|i| ((i * 104729) % 5) as f32 * 0.7).collect();
+    let geo = Geometry::new(n, [0.0847, 0.0847, 0.0847], Boundary::Box, 1.5, 0.4).unwrap();
+    let med = DenseMedium::from_interleaved(&s, &a).unwrap();
+    let texels = top_texels(n);
+    let opts = RenderOptions { spp: 8, seed: 42, include_specular: true };
+    let run = |threads: usize| {
+        rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| render(&geo, &med, &texels, 0, &opts))
+    };
+    let (a1, s1) = run(1);
+    let (a2, s2) = run(2);
+    assert_eq!(s1.events, s2.events);
+    for (x, y) in a1.iter().zip(&a2) {
+        assert_eq!(x.mean, y.mean);
+        assert_eq!(x.var_mean, y.var_mean);
+    }
+    // Chunked rendering with global texel indices gives the same numbers.
+    let (c1, _) = render(&geo, &med, &texels[..37], 0, &opts);
+    let (c2, _) = render(&geo, &med, &texels[37..], 37, &opts);
+    for (x, y) in c1.iter().chain(&c2).zip(&a1) {
+        assert_eq!(x.mean, y.mean);
+    }
+}
+
+/// Path-replay gradient against central finite differences with common random numbers. The finite-difference
+/// estimator and the gradient estimator are different estimators of the same derivative, so we compare them
+/// within the standard error of their difference, estimated over independent seeds.
+#[test]
+fn replay_gradient_matches_finite_differences() {
+    let n = [3, 3, 4];
+    let nv = 36;
+    let size = 0.1f32;
+    let mut s: Vec<f32> = (0..3 * nv).map(|i| 3.0 + ((i * 31) % 7) as f32).collect();
+    let mut a: Vec<f32> = (0..3 * nv).map(|i| 0.5 + ((i * 17) % 5) as f32 * 0.5).collect();
+    let geo = Geometry::new(n, [size; 3], Boundary::PeriodicXY, 1.5, 0.4).unwrap();
+    let texels = top_texels(n);
+    let adj: Vec<[f32; 3]> = (0..texels.len()).map(|i| [1.0, -0.5 + 0.1 * i as f32, 0.3]).collect();
+    // Objective: sum_i adj_i . c_i ; check voxels at 3 depths, channel 0 and 1, for sigma_s and sigma_a.
+    let probes = [(4 + 9 * 3, 0usize), (4 + 9 * 2, 1), (4 + 9 * 0, 0)];
+    let spp = 4000;
+    let objective = |s: &[f32], a: &[f32], seed: u64| -> f64 {
+        let med = DenseMedium::from_interleaved(s, a).unwrap();
+        let (est, _) = render(&geo, &med, &texels, 0, &RenderOptions { spp, seed, include_specular: true });
+        est.iter().zip(&adj).map(|(e, w)| (0..3).map(|c| e.mean[c] as f64 * w[c] as f64).sum::<f64>()).sum()
+    };
+    let seeds = [11u64, 12, 13, 14];
+    for &(j, c) in &probes {
+        for which in 0..2 {
+            let mut diffs = vec![];
+            let mut grads = vec![];
+            for &seed in &seeds {
+                let med = DenseMedium::from_interleaved(&s, &a).unwrap();
+                let gb = GradBuffers::new(nv, 1);
+                backward(&geo, &med, &texels, 0, &adj, &RenderOptions { spp, seed, include_specular: true }, GradMethod::Replay, &gb);
+                let mut gs = vec![0.0; 3 * nv];
+                let mut ga = vec![0.0; 3 * nv];
+                gb.collect(&mut gs, &mut ga);
+                grads.push(if which == 0 { gs[3 * j + c] } else { ga[3 * j + c] } as f64);
+                let h = 0.25f32;
+                let arr = if which == 0 { &mut s } else { &mut a };
+                let orig = arr[3 * j + c];
+                arr[3 * j + c] = orig + h;
+                let fp = objective(&s, &a, seed);
+                let arr = if which == 0 { &mut s } else { &mut a };
+                arr[3 * j + c] = orig - h;
+                let fm = objective(&s, &a, seed);
+                let arr = if which == 0 { &mut s } else { &mut a };
+                arr[3 * j + c] = orig;
+                diffs.push((fp - fm) / (2.0 * h as f64));
+            }
+            let k = seeds.len() as f64;
+            let d: Vec<f64> = grads.iter().zip(&diffs).map(|(g, f)| g - f).collect();
+            let md = d.iter().sum::<f64>() / k;
+            let sd = (d.iter().map(|x| (x - md).powi(2)).sum::<f64>() / (k - 1.0)).sqrt() / k.sqrt();
+            let mg = grads.iter().sum::<f64>() / k;
+            // 4 standard errors of the mean difference, plus a floor for the O(h^2) finite-difference bias.
+            assert!(md.abs() < 4.0 * sd + 0.02 * mg.abs() + 1e-4, "voxel {j} c {c} {}: grad {mg} fd {} (se {sd})",
+                    if which == 0 { "sigma_s" } else { "sigma_a" }, diffs.iter().sum::<f64>() / k);
+        }
+    }
+}
+
+#[test]
+fn label_medium_matches_dense() {
+    // The same volume given as labels + ink table and as dense coefficients renders bit-identically.
+    let n = [5, 4, 3];
+    let nv = 60;
+    let ink_s = [4.0f32, 1.0, 2.0, 0.5, 8.0, 3.0];
+    let ink_a = [0.1f32, 2.0, 0.3, 1.5, 0.2, 0.9];
+    let labels: Vec<u8> = (0..nv).map(|i| (i % 2) as u8).collect();
+    let s: Vec<f32> = labels.iter().flat_map(|&l| ink_s[3 * l as usize..3 * l as usize + 3].to_vec()).collect();
+    let a: Vec<f32> = labels.iter().flat_map(|&l| ink_a[3 * l as usize..3 * l as usize + 3].to_vec()).collect();
+    let geo = Geometry::new(n, [0.04, 0.08, 0.03], Boundary::Box, 1.5, 0.4).unwrap();
+    let lm = LabelMedium::new(labels, &ink_s, &ink_a).unwrap();
+    let dm = DenseMedium::from_interleaved(&s, &a).unwrap();
+    let texels = top_texels(n);
+    let opts = RenderOptions { spp: 16, seed: 5, include_specular: false };
+    let (x, _) = render(&geo, &lm, &texels, 0, &opts);
+    let (y, _) = render(&geo, &dm, &texels, 0, &opts);
+    for (p, q) in x.iter().zip(&y) {
+        for c in 0..3 {
+            assert!((p.mean[c] - q.mean[c]).abs() <= 1e-6 * q.mean[c].abs().max(1.0));
+        }
+    }
+}
+
+struct PathLength(f64);
+
+impl crate::trace::Tally for PathLength {
+    fn segment(&mut self, _: usize, len: f32) {
+        self.0 += len as f64;
+    }
+    fn scatter(&mut self, _: usize) {}
+}
+
+#[test]
+fn free_flight_histogram_matches_piecewise_exponential() {
+    // A black (albedo 0) column with a different sigma_t in every layer, index-matched, camera ray along -z:
+    // the path is absorbed at its first collision, so its length is the free-flight distance, whose pdf is
+    // sigma_t(z) exp(-tau(z)). Bins hold >= ~4k expected samples; each is tested at 5 standard errors.
+    let sig = [3.0f32, 9.0, 1.0, 6.0, 20.0, 2.0];
+    let nz = sig.len();
+    let h = 0.1f32;
+    let geo = Geometry::new([1, 1, nz], [h; 3], Boundary::PeriodicXY, 1.0, 0.4).unwrap();
+    // Layer z = nz - 1 is the top, hit first.
+    let s = vec![0.0f32; 3 * nz];
+    let a: Vec<f32> = (0..nz).flat_map(|z| [sig[nz - 1 - z]; 3]).collect();
+    let med = DenseMedium::from_interleaved(&s, &a).unwrap();
+    let tex = Texel { voxel: [0, 0, nz as i32 - 1], face: 5, normal: [0.0, 0.0, 1.0] };
+    let n = 400_000;
+    let bins_per_layer = 4;
+    let nb = nz * bins_per_layer;
+    let mut hist = vec![0usize; nb + 1];
+    for i in 0..n {
+        let mut rng = crate::rng::PathRng::new(9, i as u64, 0, 0);
+        let mut t = PathLength(0.0);
+        let r = crate::trace::trace(&geo, &med, &tex, 0, &mut rng, false, &mut t);
+        let b = if r.events == 0 { nb } else { ((t.0 / (h as f64 / bins_per_layer as f64)) as usize).min(nb - 1) };
+        hist[b] += 1;
+    }
+    let mut tau0 = 0.0f64;
+    for layer in 0..nz {
+        let st = sig[layer] as f64;
+        for k in 0..bins_per_layer {
+            let w = h as f64 / bins_per_layer as f64;
+            let p = (-tau0 - st * w * k as f64).exp() * (1.0 - (-st * w).exp());
+            let expect = p * n as f64;
+            let sd = (expect * (1.0 - p)).sqrt();
+            let got = hist[layer * bins_per_layer + k] as f64;
+            assert!((got - expect).abs() < 5.0 * sd + 1.0, "layer {layer} bin {k}: {got} vs {expect}");
+        }
+        tau0 += st * h as f64;
+    }
+    let p_escape = (-tau0).exp();
+    assert!((hist[nb] as f64 - p_escape * n as f64).abs() < 5.0 * (p_escape * n as f64).sqrt() + 1.0);
+}
