@@ -295,6 +295,43 @@ class Texels:
         fid = np.concatenate(fid)
         return cls(np.concatenate(vox), fid, FACE_NORMALS[fid])
 
+    @classmethod
+    def from_normals(cls, inside: np.ndarray, normals: np.ndarray) -> "Texels":
+        """Mesh texels: one per surface voxel (an inside voxel with an outside 6-neighbour), in C order of
+        (z, y, x); ``normal`` = the voxel's shading normal from ``normals`` (z, y, x, 3), and ``face`` = its
+        exposed face most aligned with that normal."""
+        faces = cls.exposed_faces(inside)
+        nrm = normals[tuple(faces.voxel.T)].astype(np.float64)
+        length = np.linalg.norm(nrm, axis=1)
+        nrm = np.where(length[:, None] > 1e-6, nrm / np.maximum(length, 1e-12)[:, None], FACE_NORMALS[faces.face])
+        align = np.einsum("ij,ij->i", nrm, FACE_NORMALS[faces.face])
+        flat = np.ravel_multi_index(tuple(faces.voxel.T), inside.shape)
+        # Per voxel keep the exposed face with the largest alignment: sort by (voxel, -alignment).
+        order = np.lexsort((-align, flat))
+        first = np.ones(len(order), bool)
+        first[1:] = flat[order][1:] != flat[order][:-1]
+        keep = order[first]
+        keep = keep[np.argsort(flat[keep], kind="stable")]
+        n_keep = nrm[keep]
+        bad = np.einsum("ij,ij->i", n_keep, FACE_NORMALS[faces.face[keep]]) <= 0.05
+        n_keep[bad] = FACE_NORMALS[faces.face[keep][bad]]  # a normal facing away from every exposed face
+        return cls(faces.voxel[keep], faces.face[keep], n_keep)
+
+    @classmethod
+    def for_volume(cls, volume: "Volume", faces=None) -> "Texels":
+        """The default sensor of a volume: its exposed faces (periodic-xy: only -z and +z), or for a volume with
+        shading normals (a voxelized mesh) one texel per surface voxel. ``faces`` restricts to some faces."""
+        if volume.normals is not None and faces is None:
+            return cls.from_normals(volume.inside_mask(), volume.normals)
+        if volume.boundary == "periodic-xy":
+            allowed = {4, 5}
+            faces = allowed if faces is None else {face_id(f) for f in faces} & allowed
+            if not faces:
+                raise ValueError("a periodic-xy volume has only the top and bottom faces")
+        if volume.inside is None and volume.form != "labels":
+            return cls.box_faces(volume.shape, faces)
+        return cls.exposed_faces(volume.inside_mask(), faces)
+
     def to_arrays(self) -> dict:
         return {"texel_voxel": self.voxel, "texel_face": self.face, "texel_normal": self.normal}
 

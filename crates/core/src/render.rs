@@ -86,8 +86,9 @@ pub fn render<M: Medium>(
         .map(|(i, tex)| {
             let mut m = Moments::new();
             let mut st = Stats::default();
-            for s in 0..opts.spp {
-                for c in 0..3 {
+            // Channel-major: consecutive paths read the same coefficient plane near the same texel (L2 hits).
+            for c in 0..3 {
+                for s in 0..opts.spp {
                     let mut rng = PathRng::new(opts.seed, first_texel + i as u64, s, c as u32);
                     let r = trace(geo, med, tex, c, &mut rng, opts.include_specular, &mut NoTally);
                     m.add(c, r.value);
@@ -211,8 +212,8 @@ pub fn backward<M: Medium>(
             let mut m = Moments::new();
             let mut st = Stats { paths: 3 * opts.spp as u64, ..Stats::default() };
             let key = first_texel + i as u64;
-            for s in 0..opts.spp {
-                for c in 0..3 {
+            for c in 0..3 {
+                for s in 0..opts.spp {
                     let adj = adjoint[i][c];
                     let mut rng = PathRng::new(opts.seed, key, s, c as u32);
                     let r = match method {

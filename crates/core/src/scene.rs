@@ -42,13 +42,15 @@ pub trait Medium: Sync {
         t * a
     }
     fn len(&self) -> usize;
+    /// An upper bound of sigma_t over all voxels in channel c (the majorant of delta tracking).
+    fn majorant(&self, c: usize) -> f32;
 }
 
-/// Dense coefficients: planar [channel][voxel] arrays.
+/// Dense coefficients: planar by channel, (sigma_t, albedo) pairs interleaved so one lookup is one load.
 pub struct DenseMedium {
     n: usize,
-    sigma_t: Vec<f32>,
-    albedo: Vec<f32>,
+    coef: Vec<[f32; 2]>,
+    majorant: [f32; 3],
 }
 
 impl DenseMedium {
@@ -58,8 +60,7 @@ impl DenseMedium {
             return Err("sigma_s and sigma_a must both have 3 channels per voxel and equal size".into());
         }
         let n = sigma_s.len() / 3;
-        let mut sigma_t = vec![0.0f32; 3 * n];
-        let mut albedo = vec![1.0f32; 3 * n];
+        let mut coef = vec![[0.0f32, 1.0f32]; 3 * n];
         for i in 0..n {
             for c in 0..3 {
                 let (s, a) = (sigma_s[3 * i + c], sigma_a[3 * i + c]);
@@ -67,28 +68,35 @@ impl DenseMedium {
                     return Err(format!("coefficients of voxel {i} channel {c} are negative or not finite"));
                 }
                 let t = s + a;
-                sigma_t[c * n + i] = t;
-                albedo[c * n + i] = if t > 0.0 { s / t } else { 1.0 };
+                coef[c * n + i] = [t, if t > 0.0 { s / t } else { 1.0 }];
             }
         }
-        Ok(DenseMedium { n, sigma_t, albedo })
+        let mut majorant = [0.0f32; 3];
+        for (c, m) in majorant.iter_mut().enumerate() {
+            *m = coef[c * n..(c + 1) * n].iter().fold(0.0f32, |a, x| a.max(x[0]));
+        }
+        Ok(DenseMedium { n, coef, majorant })
     }
 }
 
 impl Medium for DenseMedium {
     #[inline(always)]
     fn coeffs(&self, idx: usize, c: usize) -> (f32, f32) {
-        let k = c * self.n + idx;
-        (self.sigma_t[k], self.albedo[k])
+        let [t, a] = self.coef[c * self.n + idx];
+        (t, a)
     }
     fn len(&self) -> usize {
         self.n
+    }
+    fn majorant(&self, c: usize) -> f32 {
+        self.majorant[c]
     }
 }
 
 /// One ink label (u8) per voxel and a small ink table: 1 byte per voxel.
 pub struct LabelMedium {
     labels: Vec<u8>,
+    majorant: [f32; 3],
     /// [channel][ink] (sigma_t, albedo); index 255 (EMPTY) maps to vacuum.
     table: [[(f32, f32); 256]; 3],
 }
@@ -114,7 +122,13 @@ impl LabelMedium {
         if let Some(bad) = labels.iter().find(|&&l| l != EMPTY && l as usize >= n_inks) {
             return Err(format!("label {bad} has no ink in a table of {n_inks}"));
         }
-        Ok(LabelMedium { labels, table })
+        let mut used = [false; 256];
+        labels.iter().for_each(|&l| used[l as usize] = true);
+        let mut majorant = [0.0f32; 3];
+        for (c, m) in majorant.iter_mut().enumerate() {
+            *m = (0..256).filter(|&k| used[k]).fold(0.0f32, |a, k| a.max(table[c][k].0));
+        }
+        Ok(LabelMedium { labels, majorant, table })
     }
 }
 
@@ -126,6 +140,9 @@ impl Medium for LabelMedium {
     fn len(&self) -> usize {
         self.labels.len()
     }
+    fn majorant(&self, c: usize) -> f32 {
+        self.majorant[c]
+    }
 }
 
 /// Geometry and boundary of the object: grid size, voxel size, which voxels are inside, shading normals.
@@ -134,6 +151,10 @@ pub struct Geometry {
     pub n: [i32; 3],
     /// Voxel edge lengths (x, y, z) in mm.
     pub size: [f32; 3],
+    /// Reciprocal voxel edge lengths (mm^-1).
+    pub inv_size: [f32; 3],
+    /// Linear-index stride of a step along x, y, z.
+    pub stride: [isize; 3],
     pub boundary: Boundary,
     /// Optional inside mask, one byte per voxel (non-zero = inside). None: the whole box is inside.
     pub inside: Option<Vec<u8>>,
@@ -162,6 +183,8 @@ impl Geometry {
         Ok(Geometry {
             n: [n_xyz[0] as i32, n_xyz[1] as i32, n_xyz[2] as i32],
             size,
+            inv_size: [1.0 / size[0], 1.0 / size[1], 1.0 / size[2]],
+            stride: [1, n_xyz[0] as isize, (n_xyz[0] * n_xyz[1]) as isize],
             boundary,
             inside: None,
             normals: None,
@@ -208,6 +231,15 @@ impl Geometry {
                 None => true,
                 Some(m) => m[self.index(v)] != 0,
             }
+    }
+
+    /// Whether in-grid voxel with linear index j is inside the object.
+    #[inline(always)]
+    pub fn mask_inside(&self, j: usize) -> bool {
+        match &self.inside {
+            None => true,
+            Some(m) => m[j] != 0,
+        }
     }
 
     /// Outward shading normal of inside voxel v, if the scene has normals and it is a usable unit vector.

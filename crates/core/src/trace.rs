@@ -1,7 +1,10 @@
 //! One monochromatic random walk from a texel's camera ray through the voxel medium.
 //!
-//! Estimator: analog. Free-flight distances are sampled exactly in the piecewise-constant medium by regular
-//! tracking (voxel by voxel, subtracting each voxel's optical depth from an exponential sample); at a collision
+//! Estimator: analog. Free-flight distances are sampled exactly in the piecewise-constant medium: by delta
+//! tracking against the channel's majorant when the object is the whole grid (boxes and periodic slabs: no
+//! voxel crossings), else by regular tracking (voxel by voxel, subtracting each voxel's optical depth from an
+//! exponential sample), which finds every crossing of the object's boundary. Both sample real collisions with
+//! the same density sigma_t(x) exp(-tau), so the path-space derivatives below hold for both; at a collision
 //! the path scatters with probability albedo (Henyey-Greenstein) and is absorbed otherwise; at the object's
 //! boundary it is reflected with the Fresnel probability and refracted otherwise. A path that leaves the grid
 //! picks up the environment radiance. The throughput is always 1 (or 1 - F with specular excluded), so the
@@ -17,6 +20,8 @@ use crate::scene::{face_normal, Boundary, Geometry, Medium, Texel};
 
 /// Receives the events of a path (for gradients). The forward pass uses `NoTally`.
 pub trait Tally {
+    /// Whether the tally uses segments at all (delta tracking then skips measuring them).
+    const ACTIVE: bool = true;
     fn segment(&mut self, idx: usize, len: f32);
     fn scatter(&mut self, idx: usize);
 }
@@ -24,6 +29,7 @@ pub trait Tally {
 pub struct NoTally;
 
 impl Tally for NoTally {
+    const ACTIVE: bool = false;
     #[inline(always)]
     fn segment(&mut self, _: usize, _: f32) {}
     #[inline(always)]
@@ -100,6 +106,49 @@ fn exit_distance(geo: &Geometry, p: V3, d: V3, inv_d: V3, v: [i32; 3]) -> (f32, 
     (t, axis)
 }
 
+/// Incremental voxel traversal state along one straight flight.
+#[derive(Clone, Copy)]
+struct Dda {
+    t_max: [f32; 3],
+    t_delta: [f32; 3],
+    step: [i32; 3],
+    /// Change of the linear voxel index for a step along each axis.
+    dj: [isize; 3],
+}
+
+impl Dda {
+    #[inline(always)]
+    fn new(geo: &Geometry, p: V3, d: V3, inv_d: V3, v: [i32; 3]) -> Self {
+        let mut dda = Dda { t_max: [f32::INFINITY; 3], t_delta: [f32::INFINITY; 3], step: [0; 3], dj: [0; 3] };
+        for a in 0..3 {
+            let s = geo.size[a];
+            if d[a] > 0.0 {
+                dda.step[a] = 1;
+                dda.t_max[a] = (((v[a] + 1) as f32 * s - p[a]) * inv_d[a]).max(0.0);
+                dda.t_delta[a] = s * inv_d[a];
+            } else if d[a] < 0.0 {
+                dda.step[a] = -1;
+                dda.t_max[a] = ((v[a] as f32 * s - p[a]) * inv_d[a]).max(0.0);
+                dda.t_delta[a] = -s * inv_d[a];
+            }
+            dda.dj[a] = dda.step[a] as isize * geo.stride[a];
+        }
+        dda
+    }
+
+    #[inline(always)]
+    fn next_axis(&self) -> usize {
+        let m = &self.t_max;
+        if m[0] < m[1] {
+            if m[0] < m[2] { 0 } else { 2 }
+        } else if m[1] < m[2] {
+            1
+        } else {
+            2
+        }
+    }
+}
+
 /// Move p by t along d onto the face of voxel v on `axis`, return the neighbour across it (wrapped if periodic).
 #[inline(always)]
 fn cross(geo: &Geometry, p: &mut V3, d: V3, t: f32, axis: usize, v: [i32; 3]) -> ([i32; 3], i32) {
@@ -120,6 +169,110 @@ fn cross(geo: &Geometry, p: &mut V3, d: V3, t: f32, axis: usize, v: [i32; 3]) ->
         }
     }
     (nb, step)
+}
+
+enum Flight {
+    /// A real collision in voxel index j with the given albedo.
+    Collision(usize, f32),
+    /// The flight reached the grid's face on `axis` going in direction `step` (p is on that face).
+    Exit(usize, i32),
+}
+
+/// Delta tracking in a grid that is entirely inside the object (no mask): tentative collisions at rate `maj`,
+/// accepted with probability sigma_t(x) / maj. Moves p (wrapped into the periodic frame) and v. Tallies the
+/// exact per-voxel lengths of the flight when the tally is active.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn fly_delta<M: Medium, T: Tally>(geo: &Geometry, med: &M, c: usize, maj: f32, p: &mut V3, d: V3, inv_d: V3,
+                                  v: &mut [i32; 3], rng: &mut PathRng, tally: &mut T) -> Flight {
+    let periodic = geo.boundary == Boundary::PeriodicXY;
+    // Distance to the grid's boundary (periodic: only z bounds it).
+    let mut t_exit = f32::INFINITY;
+    let mut exit_axis = 2;
+    for a in if periodic { 2..3 } else { 0..3 } {
+        let b = if d[a] > 0.0 { geo.n[a] as f32 * geo.size[a] } else { 0.0 };
+        if d[a] != 0.0 {
+            let ta = ((b - p[a]) * inv_d[a]).max(0.0);
+            if ta < t_exit {
+                t_exit = ta;
+                exit_axis = a;
+            }
+        }
+    }
+    let p_start = *p;
+    let v_start = *v;
+    let inv_maj = if maj > 0.0 { 1.0 / maj } else { f32::INFINITY };
+    let mut t = 0.0f32;
+    loop {
+        t += free_flight(rng) * inv_maj;
+        if t >= t_exit {
+            let step = if d[exit_axis] > 0.0 { 1 } else { -1 };
+            if T::ACTIVE {
+                tally_segments(geo, p_start, d, inv_d, v_start, t_exit, tally);
+            }
+            *p = add(p_start, scale(d, t_exit));
+            p[exit_axis] = if step > 0 { geo.n[exit_axis] as f32 * geo.size[exit_axis] } else { 0.0 };
+            *v = locate(geo, p);
+            v[exit_axis] = if step > 0 { geo.n[exit_axis] - 1 } else { 0 };
+            return Flight::Exit(exit_axis, step);
+        }
+        let mut q = add(p_start, scale(d, t));
+        let w = locate(geo, &mut q);
+        let j = geo.index(w);
+        let (st, albedo) = med.coeffs(j, c);
+        if rng.next_f32() * maj < st {
+            if T::ACTIVE {
+                tally_segments(geo, p_start, d, inv_d, v_start, t, tally);
+            }
+            *p = q;
+            *v = w;
+            return Flight::Collision(j, albedo);
+        }
+    }
+}
+
+/// The voxel containing p (clamped to the grid); in a periodic grid p is first wrapped into the grid's period.
+#[inline(always)]
+fn locate(geo: &Geometry, p: &mut V3) -> [i32; 3] {
+    let mut v = [0i32; 3];
+    for a in 0..3 {
+        if geo.boundary == Boundary::PeriodicXY && a < 2 {
+            let span = geo.n[a] as f32 * geo.size[a];
+            if p[a] < 0.0 || p[a] >= span {
+                p[a] -= (p[a] / span).floor() * span;
+                if p[a] >= span {
+                    p[a] = 0.0;
+                }
+            }
+        }
+        v[a] = ((p[a] * geo.inv_size[a]) as i32).clamp(0, geo.n[a] - 1);
+    }
+    v
+}
+
+/// Emit the per-voxel segments of the straight flight from p (in voxel v) along d for `length` (a DDA).
+fn tally_segments<T: Tally>(geo: &Geometry, p: V3, d: V3, inv_d: V3, mut v: [i32; 3], length: f32, tally: &mut T) {
+    let dda0 = Dda::new(geo, p, d, inv_d, v);
+    let mut dda = dda0;
+    let mut t = 0.0f32;
+    loop {
+        let axis = dda.next_axis();
+        let t_next = dda.t_max[axis].min(length);
+        tally.segment(geo.index(v), t_next - t);
+        if t_next >= length {
+            return;
+        }
+        t = t_next;
+        dda.t_max[axis] += dda.t_delta[axis];
+        v[axis] += dda.step[axis];
+        if v[axis] < 0 || v[axis] >= geo.n[axis] {
+            if geo.boundary == Boundary::PeriodicXY && axis < 2 {
+                v[axis] = v[axis].rem_euclid(geo.n[axis]);
+            } else {
+                return; // rounding at the exit face: the remaining length is below float precision
+            }
+        }
+    }
 }
 
 /// Trace one path of channel `c` for `texel`. `include_specular`: the camera ray's Fresnel reflection of the
@@ -167,50 +320,108 @@ pub fn trace<M: Medium, T: Tally>(
     let mut inv_d = inv(d);
     let mut events = 0u32;
     let mut steps = 0u64;
+    let delta = geo.inside.is_none();
     loop {
-        if in_medium {
-            let mut tau = free_flight(rng);
+        if in_medium && delta {
+            let maj = med.majorant(c);
             loop {
                 steps += 1;
                 if steps > MAX_STEPS {
                     return PathValue { value: 0.0, events };
                 }
-                let j = geo.index(v);
+                match fly_delta(geo, med, c, maj, &mut p, d, inv_d, &mut v, rng, tally) {
+                    Flight::Collision(j, albedo) => {
+                        events += 1;
+                        if rng.next_f32() >= albedo || events > MAX_EVENTS {
+                            return PathValue { value: 0.0, events };
+                        }
+                        tally.scatter(j);
+                        d = hg_sample(d, geo.g, rng.next_f32(), rng.next_f32());
+                        inv_d = inv(d);
+                    }
+                    Flight::Exit(axis, step) => {
+                        let mut n_geo = [0.0f32; 3];
+                        n_geo[axis] = -step as f32;
+                        let (nd, transmitted) = interface(d, n_geo, n_geo, geo.ior, rng.next_f32());
+                        d = nd;
+                        inv_d = inv(d);
+                        if transmitted {
+                            v[axis] += step;
+                            in_medium = false;
+                            break;
+                        }
+                    }
+                }
+            }
+        } else if in_medium {
+            // Regular tracking with an incremental (Amanatides-Woo) DDA: p0 + t d is the position, the
+            // per-axis distances to the next voxel boundary advance without divisions.
+            let mut tau = free_flight(rng);
+            let mut p0 = p;
+            let mut dda = Dda::new(geo, p0, d, inv_d, v);
+            let mut t = 0.0f32;
+            let mut j = geo.index(v);
+            loop {
+                steps += 1;
+                if steps > MAX_STEPS {
+                    return PathValue { value: 0.0, events };
+                }
                 let (st, albedo) = med.coeffs(j, c);
-                let (t, axis) = exit_distance(geo, p, d, inv_d, v);
-                if st * t > tau {
+                let axis = dda.next_axis();
+                let t_next = dda.t_max[axis];
+                let seg = t_next - t;
+                if st * seg > tau {
                     let s = tau / st;
-                    p = add(p, scale(d, s));
                     tally.segment(j, s);
                     events += 1;
                     if rng.next_f32() >= albedo || events > MAX_EVENTS {
                         return PathValue { value: 0.0, events };
                     }
                     tally.scatter(j);
+                    p0 = add(p0, scale(d, t + s));
                     d = hg_sample(d, geo.g, rng.next_f32(), rng.next_f32());
-                    inv_d = inv(d);
+                    dda = Dda::new(geo, p0, d, inv_d, v);
+                    t = 0.0;
                     tau = free_flight(rng);
                     continue;
                 }
-                tau -= st * t;
-                tally.segment(j, t);
-                let (nb, step) = cross(geo, &mut p, d, t, axis, v);
-                if geo.is_inside(nb) {
-                    v = nb;
+                tau -= st * seg;
+                tally.segment(j, seg);
+                t = t_next;
+                dda.t_max[axis] += dda.t_delta[axis];
+                let step = dda.step[axis];
+                let mut k = v[axis] + step;
+                let mut dj = dda.dj[axis];
+                if (k as u32) >= geo.n[axis] as u32 && geo.boundary == Boundary::PeriodicXY && axis < 2 {
+                    // Wrap around: the position frame shifts by one period.
+                    k -= step * geo.n[axis];
+                    p0[axis] -= step as f32 * geo.n[axis] as f32 * geo.size[axis];
+                    dj -= step as isize * geo.n[axis] as isize * geo.stride[axis];
+                }
+                if (k as u32) < geo.n[axis] as u32 && geo.mask_inside((j as isize + dj) as usize) {
+                    v[axis] = k;
+                    j = (j as isize + dj) as usize;
                     continue;
                 }
-                // Leaving the object: the incident side is inside.
+                let mut nb = v;
+                nb[axis] = k;
+                // Leaving the object through the face of v on `axis`: the incident side is inside.
+                p = add(p0, scale(d, t));
+                p[axis] = (if step > 0 { v[axis] + 1 } else { v[axis] }) as f32 * geo.size[axis];
                 let mut n_geo = [0.0f32; 3];
                 n_geo[axis] = -step as f32;
                 let n_sh = geo.shading_normal(v).map(|n| scale(n, -1.0)).unwrap_or(n_geo);
                 let (nd, transmitted) = interface(d, n_geo, n_sh, geo.ior, rng.next_f32());
                 d = nd;
-                inv_d = inv(d);
                 if transmitted {
                     v = nb;
                     in_medium = false;
+                    inv_d = inv(d);
                     break;
                 }
+                p0 = p;
+                t = 0.0;
+                dda = Dda::new(geo, p0, d, inv_d, v);
             }
         } else {
             loop {

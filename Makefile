@@ -1,0 +1,36 @@
+# inkopt: `make demo` and `make test` work on a fresh machine (Python >= 3.10, a Rust toolchain, network to PyPI
+# and crates.io). Both set up .venv/ with inkopt installed (the Rust core is compiled in release mode).
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.inkopt-installed
+RUST_SOURCES := $(wildcard Cargo.toml crates/*/Cargo.toml crates/*/src/*.rs)
+DEMO_OUT ?= demo-out
+
+.PHONY: setup demo test test-slow bench clean
+
+setup: $(STAMP)
+
+$(PY):
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+
+$(STAMP): $(PY) pyproject.toml $(RUST_SOURCES)
+	$(PY) -m pip install --quiet -e '.[test]'
+	touch $(STAMP)
+
+demo: $(STAMP)
+	$(VENV)/bin/inkopt demo --out $(DEMO_OUT)
+
+test: $(STAMP)
+	cargo test --release -p inkopt-core
+	$(PY) -m pytest -q
+
+test-slow: $(STAMP)
+	$(PY) -m pytest -q -m slow
+
+bench: $(STAMP)
+	$(PY) bench/bench_render.py
+
+clean:
+	rm -rf $(VENV) target $(DEMO_OUT)

@@ -1,0 +1,265 @@
+//! Thin PyO3 bindings of inkopt-core: a `Scene` (geometry + medium, built once) that renders texel lists and
+//! accumulates gradients. Array conventions are the Python package's: (z, y, x[, c]) arrays, texel voxels
+//! (z, y, x), normals and voxel sizes (x, y, z). The GIL is released while rendering.
+
+use inkopt_core::{backward, render, Boundary, DenseMedium, Geometry, GradBuffers, GradMethod, LabelMedium,
+                  Medium, RenderOptions, Stats, Texel, TexelEstimate};
+use numpy::ndarray::{Array2, Array4};
+use numpy::{IntoPyArray, PyArray2, PyArray4, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4,
+            PyUntypedArrayMethods};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+enum MediumKind {
+    Dense(DenseMedium),
+    Labels(LabelMedium),
+}
+
+#[pyclass(module = "inkopt._core")]
+struct Scene {
+    geo: Geometry,
+    medium: MediumKind,
+    pool: rayon::ThreadPool,
+    grads: Option<GradBuffers>,
+    shape: [usize; 3],
+}
+
+fn err(msg: impl Into<String>) -> PyErr {
+    PyValueError::new_err(msg.into())
+}
+
+#[pymethods]
+impl Scene {
+    /// Scene(shape_zyx, voxel_mm_xyz, *, sigma_s=None, sigma_a=None, labels=None, ink_sigma_s=None,
+    /// ink_sigma_a=None, inside=None, normals=None, boundary="box", ior=1.5, g=0.4, threads=None)
+    #[new]
+    #[pyo3(signature = (shape, voxel_mm, *, sigma_s=None, sigma_a=None, labels=None, ink_sigma_s=None,
+                        ink_sigma_a=None, inside=None, normals=None, boundary="box", ior=1.5, g=0.4, threads=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        shape: (usize, usize, usize),
+        voxel_mm: (f32, f32, f32),
+        sigma_s: Option<PyReadonlyArray4<f32>>,
+        sigma_a: Option<PyReadonlyArray4<f32>>,
+        labels: Option<PyReadonlyArray3<u8>>,
+        ink_sigma_s: Option<PyReadonlyArray2<f32>>,
+        ink_sigma_a: Option<PyReadonlyArray2<f32>>,
+        inside: Option<PyReadonlyArray3<u8>>,
+        normals: Option<PyReadonlyArray4<f32>>,
+        boundary: &str,
+        ior: f32,
+        g: f32,
+        threads: Option<usize>,
+    ) -> PyResult<Self> {
+        let (nz, ny, nx) = shape;
+        let bnd = match boundary {
+            "box" => Boundary::Box,
+            "periodic-xy" => Boundary::PeriodicXY,
+            other => return Err(err(format!("unknown boundary '{other}'; use 'box' or 'periodic-xy'"))),
+        };
+        let mut geo = Geometry::new([nx, ny, nz], [voxel_mm.0, voxel_mm.1, voxel_mm.2], bnd, ior, g).map_err(err)?;
+        let nv = geo.voxel_count();
+        let check = |dims: &[usize], want: &[usize], name: &str| -> PyResult<()> {
+            if dims != want {
+                return Err(err(format!("{name} has shape {dims:?}, expected {want:?}")));
+            }
+            Ok(())
+        };
+        let medium = match (sigma_s, sigma_a, labels) {
+            (Some(s), Some(a), None) => {
+                check(s.shape(), &[nz, ny, nx, 3], "sigma_s")?;
+                check(a.shape(), &[nz, ny, nx, 3], "sigma_a")?;
+                let (s, a) = (s.as_slice().map_err(|_| err("sigma_s must be C-contiguous"))?,
+                              a.as_slice().map_err(|_| err("sigma_a must be C-contiguous"))?);
+                MediumKind::Dense(DenseMedium::from_interleaved(s, a).map_err(err)?)
+            }
+            (None, None, Some(l)) => {
+                check(l.shape(), &[nz, ny, nx], "labels")?;
+                let (is, ia) = match (ink_sigma_s, ink_sigma_a) {
+                    (Some(is), Some(ia)) => (is, ia),
+                    _ => return Err(err("a label volume needs ink_sigma_s and ink_sigma_a")),
+                };
+                let l = l.as_slice().map_err(|_| err("labels must be C-contiguous"))?.to_vec();
+                MediumKind::Labels(LabelMedium::new(l, is.as_slice()?, ia.as_slice()?).map_err(err)?)
+            }
+            _ => return Err(err("give either sigma_s and sigma_a, or labels with an ink table")),
+        };
+        if let Some(m) = inside {
+            check(m.shape(), &[nz, ny, nx], "inside")?;
+            geo = geo.with_inside(m.as_slice()?.to_vec()).map_err(err)?;
+        }
+        if let Some(nrm) = normals {
+            check(nrm.shape(), &[nz, ny, nx, 3], "normals")?;
+            geo = geo.with_normals(nrm.as_slice()?.to_vec()).map_err(err)?;
+        }
+        let mut b = rayon::ThreadPoolBuilder::new();
+        if let Some(t) = threads {
+            b = b.num_threads(t);
+        }
+        let pool = b.build().map_err(|e| err(e.to_string()))?;
+        let n_len = match &medium {
+            MediumKind::Dense(m) => m.len(),
+            MediumKind::Labels(m) => m.len(),
+        };
+        debug_assert_eq!(n_len, nv);
+        Ok(Scene { geo, medium, pool, grads: None, shape: [nz, ny, nx] })
+    }
+
+    #[getter]
+    fn threads(&self) -> usize {
+        self.pool.current_num_threads()
+    }
+
+    /// render(texel_voxel (I,3) int32 zyx, texel_face (I,) uint8, texel_normal (I,3) float32 xyz, *, spp, seed,
+    /// first_texel=0, include_specular=True) -> (mean (I,3) f32, var_mean (I,3) f32, stats dict)
+    #[pyo3(signature = (texel_voxel, texel_face, texel_normal, *, spp, seed, first_texel=0, include_specular=true))]
+    #[allow(clippy::too_many_arguments)]
+    fn render<'py>(
+        &self,
+        py: Python<'py>,
+        texel_voxel: PyReadonlyArray2<i32>,
+        texel_face: PyReadonlyArray1<u8>,
+        texel_normal: PyReadonlyArray2<f32>,
+        spp: u32,
+        seed: u64,
+        first_texel: u64,
+        include_specular: bool,
+    ) -> PyResult<(Bound<'py, PyArray2<f32>>, Bound<'py, PyArray2<f32>>, Bound<'py, PyDict>)> {
+        let texels = self.texels(&texel_voxel, &texel_face, &texel_normal)?;
+        let opts = options(spp, seed, include_specular)?;
+        let (est, stats) = py.detach(|| {
+            self.pool.install(|| match &self.medium {
+                MediumKind::Dense(m) => render(&self.geo, m, &texels, first_texel, &opts),
+                MediumKind::Labels(m) => render(&self.geo, m, &texels, first_texel, &opts),
+            })
+        });
+        pack(py, &est, &stats)
+    }
+
+    /// Reset the gradient accumulators to zero.
+    fn zero_grad(&mut self) {
+        let n = self.geo.voxel_count();
+        match &self.grads {
+            Some(g) => g.zero(),
+            None => self.grads = Some(GradBuffers::new(n, self.pool.current_num_threads())),
+        }
+    }
+
+    /// backward(texel_voxel, texel_face, texel_normal, adjoint (I,3) f32, *, spp, seed, first_texel=0,
+    /// include_specular=True, method="replay") -> (mean, var_mean, stats): accumulates adjoint . dc/dsigma.
+    #[pyo3(signature = (texel_voxel, texel_face, texel_normal, adjoint, *, spp, seed, first_texel=0,
+                        include_specular=true, method="replay"))]
+    #[allow(clippy::too_many_arguments)]
+    fn backward<'py>(
+        &mut self,
+        py: Python<'py>,
+        texel_voxel: PyReadonlyArray2<i32>,
+        texel_face: PyReadonlyArray1<u8>,
+        texel_normal: PyReadonlyArray2<f32>,
+        adjoint: PyReadonlyArray2<f32>,
+        spp: u32,
+        seed: u64,
+        first_texel: u64,
+        include_specular: bool,
+        method: &str,
+    ) -> PyResult<(Bound<'py, PyArray2<f32>>, Bound<'py, PyArray2<f32>>, Bound<'py, PyDict>)> {
+        let texels = self.texels(&texel_voxel, &texel_face, &texel_normal)?;
+        let opts = options(spp, seed, include_specular)?;
+        let method = match method {
+            "replay" => GradMethod::Replay,
+            "li1" => GradMethod::Li1,
+            other => return Err(err(format!("unknown gradient method '{other}'; use 'replay' or 'li1'"))),
+        };
+        if adjoint.shape() != [texels.len(), 3] {
+            return Err(err(format!("adjoint has shape {:?}, expected ({}, 3)", adjoint.shape(), texels.len())));
+        }
+        let adj: Vec<[f32; 3]> = adjoint.as_slice()?.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+        if adj.iter().any(|a| a.iter().any(|x| !x.is_finite())) {
+            return Err(err("adjoint contains NaN or infinite values"));
+        }
+        if self.grads.is_none() {
+            self.zero_grad();
+        }
+        let grads = self.grads.as_ref().unwrap();
+        let (est, stats) = py.detach(|| {
+            self.pool.install(|| match &self.medium {
+                MediumKind::Dense(m) => backward(&self.geo, m, &texels, first_texel, &adj, &opts, method, grads),
+                MediumKind::Labels(m) => backward(&self.geo, m, &texels, first_texel, &adj, &opts, method, grads),
+            })
+        });
+        pack(py, &est, &stats)
+    }
+
+    /// The accumulated gradients (d e/d sigma_s, d e/d sigma_a), each (z, y, x, 3) float32.
+    fn take_grad<'py>(&self, py: Python<'py>) -> PyResult<(Bound<'py, PyArray4<f32>>, Bound<'py, PyArray4<f32>>)> {
+        let [nz, ny, nx] = self.shape;
+        let n = nz * ny * nx;
+        let mut gs = vec![0.0f32; 3 * n];
+        let mut ga = vec![0.0f32; 3 * n];
+        if let Some(g) = &self.grads {
+            py.detach(|| g.collect(&mut gs, &mut ga));
+        }
+        let to = |v: Vec<f32>| Array4::from_shape_vec((nz, ny, nx, 3), v).map_err(|e| err(e.to_string()));
+        Ok((to(gs)?.into_pyarray(py), to(ga)?.into_pyarray(py)))
+    }
+}
+
+impl Scene {
+    fn texels(&self, voxel: &PyReadonlyArray2<i32>, face: &PyReadonlyArray1<u8>, normal: &PyReadonlyArray2<f32>)
+              -> PyResult<Vec<Texel>> {
+        let i = face.len();
+        if voxel.shape() != [i, 3] || normal.shape() != [i, 3] {
+            return Err(err("texel arrays must be voxel (I,3), face (I,), normal (I,3)"));
+        }
+        let (v, f, n) = (voxel.as_slice()?, face.as_slice()?, normal.as_slice()?);
+        let mut out = Vec::with_capacity(i);
+        for k in 0..i {
+            let vox = [v[3 * k + 2], v[3 * k + 1], v[3 * k]];
+            if f[k] > 5 {
+                return Err(err(format!("texel {k} has face id {} (must be 0..5)", f[k])));
+            }
+            if !self.geo.is_inside(vox) {
+                return Err(err(format!("texel {k} lies on voxel (z,y,x)={:?}, which is not inside the object",
+                                       [v[3 * k], v[3 * k + 1], v[3 * k + 2]])));
+            }
+            let nrm = [n[3 * k], n[3 * k + 1], n[3 * k + 2]];
+            let len = (nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2]).sqrt();
+            let fnrm = inkopt_core::face_normal(f[k]);
+            if !(len > 0.5 && len < 2.0) || (nrm[0] * fnrm[0] + nrm[1] * fnrm[1] + nrm[2] * fnrm[2]) <= 0.0 {
+                return Err(err(format!("texel {k} normal {nrm:?} is not a unit vector facing out of face {}", f[k])));
+            }
+            out.push(Texel { voxel: vox, face: f[k], normal: [nrm[0] / len, nrm[1] / len, nrm[2] / len] });
+        }
+        Ok(out)
+    }
+}
+
+fn options(spp: u32, seed: u64, include_specular: bool) -> PyResult<RenderOptions> {
+    if spp == 0 {
+        return Err(err("spp must be at least 1"));
+    }
+    Ok(RenderOptions { spp, seed, include_specular })
+}
+
+type Packed<'py> = (Bound<'py, PyArray2<f32>>, Bound<'py, PyArray2<f32>>, Bound<'py, PyDict>);
+
+fn pack<'py>(py: Python<'py>, est: &[TexelEstimate], stats: &Stats) -> PyResult<Packed<'py>> {
+    let n = est.len();
+    let mean: Vec<f32> = est.iter().flat_map(|e| e.mean).collect();
+    let var: Vec<f32> = est.iter().flat_map(|e| e.var_mean).collect();
+    let d = PyDict::new(py);
+    d.set_item("paths", stats.paths)?;
+    d.set_item("events", stats.events)?;
+    d.set_item("replayed_paths", stats.replayed_paths)?;
+    d.set_item("replayed_events", stats.replayed_events)?;
+    let to = |v: Vec<f32>| Array2::from_shape_vec((n, 3), v).map_err(|e| err(e.to_string()));
+    Ok((to(mean)?.into_pyarray(py), to(var)?.into_pyarray(py), d))
+}
+
+#[pymodule]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<Scene>()?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}
