@@ -1,0 +1,306 @@
+"""The perceptual loss E(C, T) over texels (method.md section 5) with analytic gradients.
+
+Colour conventions (docs/conventions.md): predictions and targets are **linear RGB** (sRGB primaries, D65);
+CIELAB uses the white of linear sRGB, i.e. ``WHITE_XYZ = M @ (1, 1, 1)`` with Y_white = 1, so that linear
+RGB (1, 1, 1) maps to exactly L*a*b* = (100, 0, 0). ``M`` is scikit-image's sRGB->XYZ matrix; its row sums
+(0.950456, 1, 1.088754) differ from scikit-image's D65 reference white (0.95047, 1, 1.08883) by < 1e-4, which
+moves a* and b* by at most ~3e-3 (tests compare to scikit-image after adapting between the two whites).
+Normalised L*a*b* (for the SSIM and Sobel terms): L*/100, (a* + 128)/255, (b* + 128)/255.
+
+All conversions accept any array of shape (..., 3), compute in float64 and return float64.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.spatial import cKDTree
+
+# sRGB (linear) -> XYZ, rows X, Y, Z (scikit-image's xyz_from_rgb, IEC 61966-2-1 primaries, D65).
+RGB_TO_XYZ = np.array([[0.412453, 0.357580, 0.180423],
+                       [0.212671, 0.715160, 0.072169],
+                       [0.019334, 0.119193, 0.950227]])
+WHITE_XYZ = RGB_TO_XYZ.sum(axis=1)  # white of linear sRGB, Y = 1
+_DELTA = 6.0 / 29.0
+_EPS = _DELTA ** 3
+# lab = _LAB_D @ f(xyz / white) + (-16, 0, 0)
+_LAB_D = np.array([[0.0, 116.0, 0.0], [500.0, -500.0, 0.0], [0.0, 200.0, -200.0]])
+_LAB_OFFSET = np.array([-16.0, 0.0, 0.0])
+# d normalise_lab / d lab (constant, diagonal) and the offset of normalise_lab.
+LAB_NORM_SCALE = np.array([1.0 / 100.0, 1.0 / 255.0, 1.0 / 255.0])
+_LAB_NORM_OFFSET = np.array([0.0, 128.0 / 255.0, 128.0 / 255.0])
+K1 = 0.01 ** 2
+K2 = 0.03 ** 2
+
+
+def _rgb(arr, name: str = "rgb") -> np.ndarray:
+    a = np.asarray(arr, dtype=np.float64)
+    if a.ndim < 1 or a.shape[-1] != 3:
+        raise ValueError(f"{name} must have shape (..., 3), got {a.shape}")
+    return a
+
+
+# ----------------------------------------------------------------------------- colour conversions
+def srgb_to_linear(srgb) -> np.ndarray:
+    """sRGB-encoded values (..., 3) -> linear RGB (IEC 61966-2-1); the linear segment extends below 0."""
+    s = _rgb(srgb, "srgb")
+    hi = np.power(np.maximum((s + 0.055) / 1.055, 0.0), 2.4)
+    return np.where(s > 0.04045, hi, s / 12.92)
+
+
+def linear_to_srgb(rgb) -> np.ndarray:
+    """Linear RGB (..., 3) -> sRGB encoding (IEC 61966-2-1); no clipping (negatives stay linear)."""
+    x = _rgb(rgb)
+    hi = 1.055 * np.power(np.maximum(x, 0.0031308), 1.0 / 2.4) - 0.055
+    return np.where(x > 0.0031308, hi, 12.92 * x)
+
+
+def linear_to_xyz(rgb) -> np.ndarray:
+    """Linear RGB (..., 3) -> CIE XYZ (..., 3), Y of white = 1."""
+    return _rgb(rgb) @ RGB_TO_XYZ.T
+
+
+def _f(t: np.ndarray) -> np.ndarray:
+    return np.where(t > _EPS, np.cbrt(t), t / (3.0 * _DELTA ** 2) + 4.0 / 29.0)
+
+
+def _fprime(t: np.ndarray) -> np.ndarray:
+    c = np.cbrt(np.maximum(t, _EPS))
+    return np.where(t > _EPS, 1.0 / (3.0 * c * c), 1.0 / (3.0 * _DELTA ** 2))
+
+
+def xyz_to_lab(xyz) -> np.ndarray:
+    """CIE XYZ (..., 3) -> CIELAB (..., 3) relative to WHITE_XYZ (linear segment below (6/29)^3; no NaN)."""
+    t = _rgb(xyz, "xyz") / WHITE_XYZ
+    return _f(t) @ _LAB_D.T + _LAB_OFFSET
+
+
+def linear_to_lab(rgb) -> np.ndarray:
+    """Linear RGB (..., 3) -> CIELAB (..., 3) float64."""
+    return xyz_to_lab(linear_to_xyz(rgb))
+
+
+def linear_to_lab_jacobian(rgb) -> np.ndarray:
+    """d lab / d rgb, shape (..., 3, 3): element [..., k, j] = d lab_k / d rgb_j."""
+    t = linear_to_xyz(rgb) / WHITE_XYZ
+    a = (_fprime(t) / WHITE_XYZ)[..., :, None] * RGB_TO_XYZ  # d f(t_m) / d rgb_j
+    return np.matmul(_LAB_D, a)
+
+
+def linear_to_lab_vjp(rgb, g_lab) -> np.ndarray:
+    """Vector-Jacobian product: g_rgb[..., j] = sum_k g_lab[..., k] * d lab_k / d rgb_j, shape (..., 3)."""
+    t = linear_to_xyz(rgb) / WHITE_XYZ
+    return ((_rgb(g_lab, "g_lab") @ _LAB_D) * _fprime(t) / WHITE_XYZ) @ RGB_TO_XYZ
+
+
+def normalise_lab(lab) -> np.ndarray:
+    """CIELAB (..., 3) -> normalised L*a*b*: L*/100, (a*+128)/255, (b*+128)/255. Derivative: LAB_NORM_SCALE."""
+    return _rgb(lab, "lab") * LAB_NORM_SCALE + _LAB_NORM_OFFSET
+
+
+def delta_e76(lab1, lab2) -> np.ndarray:
+    """CIE76 colour difference (...,) between two CIELAB arrays (..., 3)."""
+    return np.sqrt(np.sum((_rgb(lab1, "lab1") - _rgb(lab2, "lab2")) ** 2, axis=-1))
+
+
+def delta_e2000(lab1, lab2) -> np.ndarray:
+    """CIEDE2000 colour difference (...,) between two CIELAB arrays (..., 3) (scikit-image)."""
+    from skimage.color import deltaE_ciede2000
+    return deltaE_ciede2000(_rgb(lab1, "lab1"), _rgb(lab2, "lab2"), channel_axis=-1)
+
+
+# ----------------------------------------------------------------------------- neighbourhood operators
+def gaussian_window(pos_vox: np.ndarray, sigma: float):
+    """Texel Gaussian window W = diag(1/n) K.
+
+    K (I, I) CSR float64 is symmetric with K_ij = exp(-|p_i - p_j|^2 / (2 sigma^2)) for texels whose Chebyshev
+    distance is <= radius = int(3.5 sigma + 0.5) (voxels), n (I,) = K @ 1 the window weight that falls on texels.
+    On a flat face's interior W equals scikit-image's (truncate=3.5) Gaussian window. Returns (K, n, radius).
+    """
+    pos = np.asarray(pos_vox, np.float64)
+    radius = int(3.5 * sigma + 0.5)
+    n_tex = len(pos)
+    pairs = cKDTree(pos).query_pairs(radius + 1e-6, p=np.inf, output_type="ndarray")
+    i = np.ascontiguousarray(pairs[:, 0], dtype=np.int32)
+    j = np.ascontiguousarray(pairs[:, 1], dtype=np.int32)
+    del pairs
+    d2 = np.zeros(len(i))
+    for a in range(3):
+        col = np.ascontiguousarray(pos[:, a])
+        d = col[j]
+        d -= col[i]
+        d2 += d * d
+    w = np.exp(d2 * (-0.5 / (sigma * sigma)))
+    del d2, d
+    diag = np.arange(n_tex, dtype=np.int32)
+    rows, cols = np.concatenate([i, j, diag]), np.concatenate([j, i, diag])
+    del i, j
+    k = sp.coo_matrix((np.concatenate([w, w, np.ones(n_tex)]), (rows, cols)), shape=(n_tex, n_tex)).tocsr()
+    return k, np.asarray(k.sum(axis=1)).ravel(), radius
+
+
+def sobel_operators(pos_vox: np.ndarray, tol: float = 1e-6) -> sp.csr_matrix:
+    """Stacked 3D Sobel operators S = [S_x; S_y; S_z], shape (3I, I) CSR float64 (row a*I + i: axis a, texel i).
+
+    The kernel of axis a at integer offset o in {-1,0,1}^3 is d(o_a) s(o_b) s(o_c) with d = (-1, 0, 1),
+    s = (1, 2, 1). Neighbours are texels at exactly that lattice offset (within ``tol``); texels across a box
+    edge (offsets of 0.5) are not neighbours. Border handling ("replicate the centre"): the kernel weight of a
+    missing neighbour goes to the centre texel, so each row sums to 0 (a constant field has no edges). On a
+    flat face's interior, the in-plane operators equal 2x the 2D Sobel operator (the two missing out-of-plane
+    layers cancel) and the normal-axis operator is 0.
+    """
+    pos = np.asarray(pos_vox, np.float64)
+    n_tex = len(pos)
+    pairs = cKDTree(pos).query_pairs(1.0 + tol, p=np.inf, output_type="ndarray")
+    off = pos[pairs[:, 1]] - pos[pairs[:, 0]]
+    r = np.rint(off)
+    keep = np.all(np.abs(off - r) <= tol, axis=1) & np.any(r != 0, axis=1)
+    i, j, r = pairs[keep, 0], pairs[keep, 1], r[keep].astype(np.int64)
+    dtap = np.array([-1.0, 0.0, 1.0])
+    stap = np.array([1.0, 2.0, 1.0])
+    rows, cols, vals = [], [], []
+    for a in range(3):
+        b, c = [x for x in range(3) if x != a]
+        w = dtap[r[:, a] + 1] * stap[r[:, b] + 1] * stap[r[:, c] + 1]  # weight of j in row i; row j gets -w
+        nz = w != 0
+        wi, ii, jj = w[nz], i[nz], j[nz]
+        centre = -(np.bincount(ii, wi, n_tex) - np.bincount(jj, wi, n_tex))
+        rows += [a * n_tex + ii, a * n_tex + jj, a * n_tex + np.arange(n_tex)]
+        cols += [jj, ii, np.arange(n_tex)]
+        vals += [wi, -wi, centre]
+    s = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                      shape=(3 * n_tex, n_tex)).tocsr()
+    s.sum_duplicates()
+    s.eliminate_zeros()
+    return s
+
+
+# ----------------------------------------------------------------------------- the loss
+@dataclass
+class LossResult:
+    """value = E; e1, e2, e3 the three terms; grad (I, 3) float64 = dE/d pred (linear RGB);
+    lab (I, 3) float64 CIELAB of the prediction."""
+
+    value: float
+    e1: float
+    e2: float
+    e3: float
+    grad: np.ndarray
+    lab: np.ndarray
+
+
+class TexelLoss:
+    """E = (g1 E1 + g2 E2 + g3 E3) / (g1 + g2 + g3) over I texels (method.md section 5).
+
+    target_rgb (I, 3) linear RGB targets; pos_vox (I, 3) texel positions (x, y, z) in voxel units
+    (``Texels.pos_vox``); gamma = (g1, g2, g3) >= 0 with a positive sum; sigma the SSIM Gaussian window's
+    standard deviation in voxels.
+
+    - E1 = (1/I) sum_i dE76_i^2 (squared CIELAB distance).
+    - E2 = 1 - (1/(3I)) sum_i sum_{L,a,b} SSIM_i on normalised L*a*b*. We divide by 3 (the channel count)
+      so E2 lies in [0, 2] (0 when the prediction equals the target). Local means, variances and covariance
+      use the texel Gaussian window W (population form, sigma_x^2 = W(x^2) - (Wx)^2, like scikit-image's
+      ``use_sample_covariance=False``); K1 = 0.01^2, K2 = 0.03^2 (data range 1).
+    - E3 = 100 (1/3) sum_axes sum_{L,a,b} (1/I)(1/4)(1/32) sum_i (S*C - S*T)^2 on normalised L*a*b*, with the
+      texel 3D Sobel operators of ``sobel_operators``.
+
+    All three terms are always evaluated; the gradient work of a term with weight 0 is skipped.
+    Set-up builds sparse operators once (W: ~(2r+1)^2 entries per texel on a face, r = int(3.5 sigma + 0.5)).
+    """
+
+    def __init__(self, target_rgb, pos_vox, gamma=(1.0, 0.0, 0.0), sigma: float = 1.5):
+        target = np.asarray(target_rgb, np.float64)
+        pos = np.asarray(pos_vox, np.float64)
+        if target.ndim != 2 or target.shape[1] != 3 or len(target) == 0:
+            raise ValueError(f"target_rgb must have shape (I, 3) with I > 0, got {target.shape}")
+        if pos.shape != target.shape:
+            raise ValueError(f"pos_vox must have shape {target.shape} (x, y, z per texel), got {pos.shape}")
+        if not (np.all(np.isfinite(target)) and np.all(np.isfinite(pos))):
+            raise ValueError("target_rgb and pos_vox must be finite")
+        g = np.asarray(gamma, np.float64).reshape(-1)
+        if g.shape != (3,) or not np.all(np.isfinite(g)) or np.any(g < 0) or g.sum() <= 0:
+            raise ValueError(f"gamma must be 3 non-negative weights with a positive sum, got {gamma}")
+        if not (np.isfinite(sigma) and sigma > 0):
+            raise ValueError(f"sigma must be a positive number of voxels, got {sigma}")
+        self.gamma = g
+        self.sigma = float(sigma)
+        self.n = len(target)
+        self.target_rgb = target
+        self.target_lab = linear_to_lab(target)
+        self.target_n = normalise_lab(self.target_lab)
+        self.K, self.wsum, self.radius = gaussian_window(pos, self.sigma)
+        self.S = sobel_operators(pos)
+        self.ST = self.S.T.tocsr()
+        tn = self.target_n
+        self._mu_t = self._window(tn)
+        self._var_t = self._window(tn * tn) - self._mu_t ** 2
+        self._sobel_t = self.S @ tn
+
+    def _window(self, x: np.ndarray) -> np.ndarray:
+        """W @ x for x (I, k)."""
+        return (self.K @ x) / self.wsum[:, None]
+
+    def _window_t(self, y: np.ndarray) -> np.ndarray:
+        """W.T @ y for y (I, k) (K is symmetric)."""
+        return self.K @ (y / self.wsum[:, None])
+
+    def _check(self, pred_rgb) -> np.ndarray:
+        p = np.asarray(pred_rgb, np.float64)
+        if p.shape != (self.n, 3):
+            raise ValueError(f"pred_rgb must have shape ({self.n}, 3), got {p.shape}")
+        if not np.all(np.isfinite(p)):
+            raise ValueError("pred_rgb contains NaN or infinite values")
+        return p
+
+    def _ssim_parts(self, cn: np.ndarray):
+        tn = self.target_n
+        m = self._window(np.concatenate([cn, cn * cn, cn * tn], axis=1))
+        mx, qx, pxy = m[:, :3], m[:, 3:6], m[:, 6:]
+        mt = self._mu_t
+        a1 = 2.0 * mx * mt + K1
+        b1 = mx * mx + mt * mt + K1
+        a2 = 2.0 * (pxy - mx * mt) + K2
+        b2 = (qx - mx * mx) + self._var_t + K2
+        return (a1 * a2) / (b1 * b2), mx, a1, b1, a2, b2
+
+    def ssim_map(self, pred_rgb) -> np.ndarray:
+        """Per-texel, per-channel SSIM (I, 3) on normalised L*, a*, b*."""
+        cn = normalise_lab(linear_to_lab(self._check(pred_rgb)))
+        return self._ssim_parts(cn)[0]
+
+    def ssim_mean(self, pred_rgb) -> float:
+        """Mean SSIM over texels and the three normalised L*a*b* channels (= 1 - E2)."""
+        return float(self.ssim_map(pred_rgb).mean())
+
+    def __call__(self, pred_rgb) -> LossResult:
+        pred = self._check(pred_rgb)
+        n = self.n
+        g1, g2, g3 = self.gamma
+        lab = linear_to_lab(pred)
+        dlab = lab - self.target_lab
+        e1 = float(np.sum(dlab * dlab) / n)
+        cn = normalise_lab(lab)
+        ssim, mx, a1, b1, a2, b2 = self._ssim_parts(cn)
+        e2 = float(1.0 - ssim.mean())
+        c3 = 100.0 / (3.0 * n * 4.0 * 32.0)
+        sob = self.S @ cn - self._sobel_t
+        e3 = float(c3 * np.sum(sob * sob))
+        gs = self.gamma.sum()
+        value = (g1 * e1 + g2 * e2 + g3 * e3) / gs
+
+        g_lab = (2.0 * g1 / n) * dlab if g1 > 0 else np.zeros_like(lab)
+        g_n = np.zeros_like(lab)
+        if g2 > 0:
+            coef = -g2 / (3.0 * n)  # dE2 / dSSIM_ic, times gamma2
+            mt = self._mu_t
+            gm = coef * 2.0 * ssim * (mt / a1 - mx / b1 - mt / a2 + mx / b2)  # d/d(Wx)
+            gq = coef * (-ssim / b2)                                           # d/d(W x^2)
+            gp = coef * 2.0 * ssim / a2                                        # d/d(W x t)
+            back = self._window_t(np.concatenate([gm, gq, gp], axis=1))
+            g_n += back[:, :3] + 2.0 * cn * back[:, 3:6] + self.target_n * back[:, 6:]
+        if g3 > 0:
+            g_n += (2.0 * g3 * c3) * (self.ST @ sob)
+        g_lab += g_n * LAB_NORM_SCALE
+        grad = linear_to_lab_vjp(pred, g_lab / gs)
+        return LossResult(value=float(value), e1=e1, e2=e2, e3=e3, grad=grad, lab=lab)

@@ -1,0 +1,316 @@
+"""Quantization of an optimised ink mixture to one ink per printer voxel (method.md §7).
+
+The optimiser works on a coarse grid (300 DPI, ~85 µm voxels); the printer deposits one ink per voxel on a
+finer, anisotropic grid (600 × 300 DPI in x × y, 27 µm layers by default). ``quantize`` upsamples the mixture
+to the printer grid and gives every printer voxel exactly one ink:
+
+- ``random``: the paper's method. Each printer voxel draws its ink independently with the (upsampled) mixture as
+  the probability distribution (``numpy.random.default_rng(seed)``). Adds white noise.
+- ``blue-noise`` (default): ordered dithering. A 3D blue-noise threshold array ``t`` (void-and-cluster, tiled
+  periodically over the printer grid) is compared with the cumulative mixture: the voxel gets ink ``k`` with
+  ``c_{k-1} <= t < c_k``, ``c_k = rho_0 + ... + rho_k``. Every ink then occupies a band of threshold values
+  whose share equals its mixture weight, and because the thresholds of neighbouring voxels are spread evenly,
+  the local ink fractions match the mixture much more closely than independent draws (the error is pushed to
+  high spatial frequencies, which the scattering medium low-passes).
+
+Both methods use the same inverse-CDF rule with a threshold ``t`` in [0, 1): uniform random numbers make it an
+exact draw from the mixture, the blue-noise array makes it ordered dithering.
+
+Upsampling (``upsample``): ``nearest`` (default, as the paper) gives every printer voxel the mixture of the
+optimisation voxel that encloses its centre; ``linear`` interpolates the mixture trilinearly between
+optimisation voxel centres (normalised over voxels inside the object, so empty space never bleeds in). The
+``inside`` mask is always upsampled by nearest; printer voxels outside get label ``EMPTY`` (255).
+
+Memory: the printer grid is processed one layer at a time; only the xy-upsampled cumulative mixture of one or
+two optimisation layers (N × Y × X float32) exists at a time, never the full upsampled float volume.
+
+Conventions (docs/conventions.md): arrays (z, y, x[, ink]); ``voxel_mm`` and ``dpi`` are (x, y, z).
+"""
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import numpy as np
+
+from .volume import EMPTY, atomic_write_bytes
+
+METHODS = ("blue-noise", "random")
+UPSAMPLE = ("nearest", "linear")
+MM_PER_INCH = 25.4
+DEFAULT_DPI = (600.0, 300.0)
+DEFAULT_LAYER_UM = 27.0
+BLUE_NOISE_SHAPE = (32, 32, 32)
+BLUE_NOISE_SIGMA = 1.5
+DATA_DIR = Path(__file__).resolve().parent / "data"
+
+
+# ----------------------------------------------------------------------------------------------- grids
+def printer_grid(shape_opt, voxel_mm_opt, dpi=(600, 300, None), layer_um: float = DEFAULT_LAYER_UM):
+    """Printer voxel grid covering the same box as an optimisation grid.
+
+    shape_opt (z, y, x) voxels; voxel_mm_opt (x, y, z) mm; ``dpi`` (x, y) or (x, y, z) dots per inch, the z
+    entry None (default) meaning "use ``layer_um``" (layer thickness in µm, 27 by default, 14 for high quality).
+    Each printer dimension is ``round(extent_mm / printer_voxel_mm)`` (at least 1), so the printed extent differs
+    from the optimised one by at most half a printer voxel.
+    Returns ``(shape_p (Z, Y, X) tuple of int, voxel_mm_p (3,) float64 (x, y, z) mm)``.
+    """
+    shape_opt = tuple(int(s) for s in shape_opt)
+    vo = np.asarray(voxel_mm_opt, np.float64).reshape(-1)
+    if len(shape_opt) != 3 or min(shape_opt) < 1:
+        raise ValueError(f"shape_opt must be 3 positive sizes (z, y, x), got {shape_opt}")
+    if vo.shape != (3,) or not np.all(np.isfinite(vo)) or np.any(vo <= 0):
+        raise ValueError(f"voxel_mm must be 3 positive finite sizes (x, y, z) in mm, got {vo}")
+    dpi = tuple(dpi)
+    if len(dpi) not in (2, 3):
+        raise ValueError(f"dpi must be (x, y) or (x, y, z), got {dpi}")
+    if len(dpi) == 3 and dpi[2] is not None:
+        vz = MM_PER_INCH / float(dpi[2])
+    else:
+        vz = float(layer_um) / 1000.0
+    vp = np.array([MM_PER_INCH / float(dpi[0]), MM_PER_INCH / float(dpi[1]), vz], np.float64)
+    if not np.all(np.isfinite(vp)) or np.any(vp <= 0):
+        raise ValueError(f"dpi and layer_um must be positive, got dpi={dpi} layer_um={layer_um}")
+    extent = np.array(shape_opt[::-1], np.float64) * vo  # (x, y, z) mm
+    n = np.maximum(1, np.rint(extent / vp)).astype(int)
+    return (int(n[2]), int(n[1]), int(n[0])), vp
+
+
+def _enclosing(n_p: int, vp: float, n_o: int, vo: float) -> np.ndarray:
+    """Index (int64) of the optimisation voxel that encloses each printer voxel centre along one axis."""
+    return np.clip(np.floor((np.arange(n_p) + 0.5) * (vp / vo)).astype(np.int64), 0, n_o - 1)
+
+
+def _linear(n_p: int, vp: float, n_o: int, vo: float):
+    """(i0, i1, w1) of linear interpolation between optimisation voxel centres at printer voxel centres."""
+    s = np.clip((np.arange(n_p) + 0.5) * (vp / vo) - 0.5, 0.0, n_o - 1.0)
+    i0 = np.minimum(np.floor(s).astype(np.int64), n_o - 1)
+    i1 = np.minimum(i0 + 1, n_o - 1)
+    return i0, i1, (s - i0).astype(np.float32)
+
+
+# ----------------------------------------------------------------------------------------- blue noise
+def void_and_cluster(shape=BLUE_NOISE_SHAPE, sigma: float = BLUE_NOISE_SIGMA, seed: int = 0,
+                     initial_fraction: float = 0.1) -> np.ndarray:
+    """Blue-noise dither array by Ulichney's void-and-cluster algorithm on a periodic grid of any dimension.
+
+    Energy of a pattern = periodic convolution of its "on" points with a Gaussian (``sigma`` in voxels, truncated
+    at 3 sigma). Phase 0 relaxes a random initial pattern (``initial_fraction`` on, ``default_rng(seed)``) by
+    moving the tightest cluster into the largest void until stable; phase 1 ranks its points by repeatedly
+    removing the tightest cluster; phase 2 ranks the rest by repeatedly filling the largest void (the
+    "tightest cluster of zeros" of Ulichney's phase 3 is the same voxel, since the energies of the ones and the
+    zeros add up to a constant). Deterministic for a given (shape, sigma, seed); ties go to the lowest index.
+    Returns the ranks, int64 array of ``shape``, a permutation of 0..n-1; every prefix ``rank < k`` is a
+    blue-noise pattern. O(n * (n + (6 sigma)^d)); 32^3 takes a few seconds.
+    """
+    shape = tuple(int(s) for s in shape)
+    if not shape or min(shape) < 2:
+        raise ValueError(f"blue-noise shape must have sizes >= 2, got {shape}")
+    n, d = int(np.prod(shape)), len(shape)
+    shp = np.array(shape)
+    r = int(np.ceil(3 * sigma))
+    axes = [np.arange(-min(r, (s - 1) // 2), min(r, (s - 1) // 2) + 1) for s in shape]
+    offs = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, d)
+    kern = np.exp(-np.sum(offs.astype(np.float64) ** 2, 1) / (2.0 * sigma ** 2))
+    strides = np.array([int(np.prod(shape[i + 1:])) for i in range(d)])
+
+    rng = np.random.default_rng(seed)
+    m = max(1, int(round(initial_fraction * n)))
+    ones = np.zeros(n, bool)
+    ones[rng.choice(n, m, replace=False)] = True
+    k_full = np.zeros(shape)
+    k_full[tuple((offs % shp).T)] = kern
+    energy = np.real(np.fft.ifftn(np.fft.fftn(ones.reshape(shape).astype(np.float64)) * np.fft.fftn(k_full)))
+    energy = energy.ravel()
+    on = np.where(ones, energy, -np.inf)   # energy of "on" points, -inf elsewhere (argmax: tightest cluster)
+    off = np.where(ones, np.inf, energy)   # energy of "off" points, +inf elsewhere (argmin: largest void)
+
+    def flip(p: int, to_on: bool) -> None:
+        idx = ((np.array(np.unravel_index(p, shape)) + offs) % shp) @ strides
+        step = kern if to_on else -kern
+        on[idx] += step
+        off[idx] += step
+        if to_on:
+            on[p], off[p] = off[p], np.inf
+        else:
+            off[p], on[p] = on[p], -np.inf
+
+    for _ in range(n):  # phase 0
+        c = int(np.argmax(on))
+        flip(c, False)
+        v = int(np.argmin(off))
+        flip(v, True)
+        if v == c:
+            break
+    rank = np.empty(n, np.int64)
+    on0, off0 = on.copy(), off.copy()
+    for cnt in range(m - 1, -1, -1):  # phase 1
+        c = int(np.argmax(on))
+        flip(c, False)
+        rank[c] = cnt
+    on[:], off[:] = on0, off0
+    for cnt in range(m, n):  # phase 2 (+3)
+        v = int(np.argmin(off))
+        flip(v, True)
+        rank[v] = cnt
+    return rank.reshape(shape)
+
+
+def blue_noise_path(shape=BLUE_NOISE_SHAPE) -> Path:
+    return DATA_DIR / ("blue_noise_" + "x".join(str(int(s)) for s in shape) + ".npy")
+
+
+def load_blue_noise(shape=BLUE_NOISE_SHAPE) -> np.ndarray:
+    """Blue-noise thresholds, float32 array of ``shape`` (z, y, x) with values (rank + 0.5) / n in (0, 1).
+
+    Loads the shipped ranks (``inkopt/data/blue_noise_<shape>.npy``, uint16, ``void_and_cluster(shape)`` with
+    the default sigma and seed); other shapes are generated and cached there (atomically) when writable.
+    """
+    shape = tuple(int(s) for s in shape)
+    path = blue_noise_path(shape)
+    ranks = None
+    if path.is_file():
+        ranks = np.load(path, allow_pickle=False)
+        if ranks.shape != shape:
+            ranks = None
+    if ranks is None:
+        ranks = void_and_cluster(shape)
+        try:
+            buf = io.BytesIO()
+            np.save(buf, ranks.astype(np.uint16 if ranks.size <= 65536 else np.uint32))
+            atomic_write_bytes(path, buf.getvalue())
+            path.chmod(0o644)
+        except OSError:
+            pass  # read-only install: use the generated array without caching
+    return ((ranks.astype(np.float64) + 0.5) / ranks.size).astype(np.float32)
+
+
+# ----------------------------------------------------------------------------------------- quantization
+def quantize(mixture, voxel_mm, *, method: str = "blue-noise", dpi=DEFAULT_DPI, layer_um: float = DEFAULT_LAYER_UM,
+             inside=None, seed: int = 0, upsample: str = "nearest"):
+    """One ink per printer voxel from a mixture on the optimisation grid.
+
+    mixture  float (z, y, x, N), non-negative; rows are normalised to sum 1 (rows inside must have a positive sum)
+    voxel_mm (x, y, z) mm of the optimisation grid
+    method   "blue-noise" (ordered dithering, default) or "random" (the paper's independent draws)
+    dpi      printer (x, y) or (x, y, z) DPI; z None -> ``layer_um`` (µm per layer)
+    inside   optional bool (z, y, x); printer voxels whose enclosing optimisation voxel is outside get 255
+    seed     ``default_rng(seed)``: the random draws (one layer after the other, so the result does not depend on
+             any chunking), or the toroidal offset of the blue-noise tile
+    upsample "nearest" (enclosing voxel) or "linear" (trilinear between voxel centres, inside voxels only)
+    Returns ``(labels uint8 (Z, Y, X), voxel_mm_printer (3,) float64 (x, y, z))``; label = ink index, 255 = empty.
+    """
+    m = np.asarray(mixture)
+    if m.ndim != 4 or m.shape[3] < 1:
+        raise ValueError(f"mixture must have shape (z, y, x, N), got {m.shape}")
+    n_inks = m.shape[3]
+    if n_inks >= EMPTY:
+        raise ValueError(f"at most {EMPTY - 1} inks fit uint8 labels, got {n_inks}")
+    if method not in METHODS:
+        raise ValueError(f"unknown quantization method '{method}'; use one of {list(METHODS)}")
+    if upsample not in UPSAMPLE:
+        raise ValueError(f"unknown upsample '{upsample}'; use one of {list(UPSAMPLE)}")
+    if not np.issubdtype(m.dtype, np.floating):
+        m = m.astype(np.float32)
+    if not np.all(np.isfinite(m)) or m.min() < 0:
+        raise ValueError("mixture must be finite and non-negative")
+    nz, ny, nx = m.shape[:3]
+    if inside is not None:
+        inside = np.asarray(inside, bool)
+        if inside.shape != (nz, ny, nx):
+            raise ValueError(f"inside mask shape {inside.shape} differs from mixture shape {(nz, ny, nx)}")
+    total = m.sum(axis=3, dtype=np.float64)
+    if np.any((total <= 0) if inside is None else (inside & (total <= 0))):
+        raise ValueError("mixture rows inside the object must have a positive sum")
+    shape_p, vp = printer_grid((nz, ny, nx), voxel_mm, dpi=dpi, layer_um=layer_um)
+    vo = np.asarray(voxel_mm, np.float64).reshape(-1)
+    Z, Y, X = shape_p
+
+    enc = [_enclosing(Z, vp[2], nz, vo[2]), _enclosing(Y, vp[1], ny, vo[1]), _enclosing(X, vp[0], nx, vo[0])]
+    rng = np.random.default_rng(seed)
+    if method == "blue-noise":
+        tile = load_blue_noise()
+        tz, ty, tx = tile.shape
+        oz, oy, ox = (int(v) for v in rng.integers(0, tile.shape))
+        ty_idx = ((np.arange(Y) + oy) % ty)[:, None]
+        tx_idx = ((np.arange(X) + ox) % tx)[None, :]
+
+        def thresholds(k):
+            return tile[(k + oz) % tz][ty_idx, tx_idx]
+    else:
+        def thresholds(k):
+            return rng.random((Y, X), dtype=np.float32)
+
+    lin = None if upsample == "nearest" else [_linear(Z, vp[2], nz, vo[2]), _linear(Y, vp[1], ny, vo[1]),
+                                                _linear(X, vp[0], nx, vo[0])]
+    cache: dict[int, np.ndarray] = {}
+
+    def layer_cum(z: int) -> np.ndarray:
+        """xy-upsampled cumulative mixture of optimisation layer z, float32 (N, Y, X); entry N-1 = weight."""
+        if z in cache:
+            return cache[z]
+        lay = m[z].astype(np.float64)
+        w = np.ones((ny, nx)) if inside is None else inside[z].astype(np.float64)
+        t = total[z]
+        lay = lay * (w / np.where(t > 0, t, 1.0))[..., None]  # rows sum to 1 inside, 0 outside
+        c = np.cumsum(lay, axis=2).astype(np.float32).transpose(2, 0, 1)  # (N, ny, nx)
+        if lin is None:
+            out = c[:, enc[1]][:, :, enc[2]]
+        else:
+            (y0, y1, wy), (x0, x1, wx) = lin[1], lin[2]
+            c = c[:, y0] * (1 - wy)[None, :, None] + c[:, y1] * wy[None, :, None]
+            out = c[:, :, x0] * (1 - wx) + c[:, :, x1] * wx
+        if len(cache) >= 2:
+            cache.pop(next(iter(cache)))
+        cache[z] = np.ascontiguousarray(out, dtype=np.float32)
+        return cache[z]
+
+    labels = np.empty(shape_p, np.uint8)
+    for k in range(Z):
+        if lin is None:
+            c = layer_cum(int(enc[0][k]))
+        else:
+            z0, z1, wz = (a[k] for a in lin[0])
+            c = layer_cum(int(z0)) * (1 - wz) + layer_cum(int(z1)) * wz
+        t = thresholds(k)
+        if lin is not None:
+            t = t * c[-1]  # normalise by the interpolated inside weight (t * w >= c_n  <=>  t >= c_n / w)
+        lab = np.zeros((Y, X), np.uint8)
+        for n in range(n_inks - 1):
+            lab += t >= c[n]
+        if inside is not None:
+            lab[~inside[enc[0][k]][enc[1][:, None], enc[2][None, :]]] = EMPTY
+        labels[k] = lab
+    return labels, vp
+
+
+def ink_fractions(labels, n_inks: int, shape_opt, voxel_mm_opt, voxel_mm_printer):
+    """Per optimisation voxel, the fraction of each ink among the printer voxels it encloses.
+
+    labels uint8 (Z, Y, X) (255 = empty, not counted); shape_opt (z, y, x); voxel sizes (x, y, z) mm. The printer
+    voxel -> optimisation voxel map is the one ``quantize`` uses (the voxel enclosing the printer voxel centre).
+    Returns ``(fractions float64 (z, y, x, N), counts int64 (z, y, x))``: counts = non-empty printer voxels per
+    optimisation voxel; fractions are 0 where counts is 0.
+    """
+    labels = np.asarray(labels)
+    if labels.ndim != 3 or labels.dtype != np.uint8:
+        raise ValueError(f"labels must be uint8 (Z, Y, X), got {labels.dtype} {labels.shape}")
+    nz, ny, nx = (int(s) for s in shape_opt)
+    vo = np.asarray(voxel_mm_opt, np.float64).reshape(-1)
+    vp = np.asarray(voxel_mm_printer, np.float64).reshape(-1)
+    Z, Y, X = labels.shape
+    iz, iy, ix = _enclosing(Z, vp[2], nz, vo[2]), _enclosing(Y, vp[1], ny, vo[1]), _enclosing(X, vp[0], nx, vo[0])
+    used = labels[labels != EMPTY]
+    if used.size and int(used.max()) >= n_inks:
+        raise ValueError(f"labels use ink {int(used.max())} but n_inks is {n_inks}")
+    nb = n_inks + 1  # last bin: empty
+    base = ((iy[:, None] * nx + ix[None, :]) * nb).ravel()
+    acc = np.zeros((nz, ny * nx * nb), np.int64)
+    for k in range(Z):
+        lab = labels[k].ravel().astype(np.int64)
+        lab[lab == EMPTY] = n_inks
+        acc[iz[k]] += np.bincount(base + lab, minlength=ny * nx * nb)
+    counts = acc.reshape(nz, ny, nx, nb)[..., :n_inks]
+    tot = counts.sum(axis=3)
+    frac = counts / np.maximum(tot, 1)[..., None]
+    return frac, tot

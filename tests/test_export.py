@@ -1,0 +1,151 @@
+"""Tests of inkopt.export: PNG slice stacks read back with Pillow, manifest, material limits, atomic writes."""
+import json
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from inkopt.export import (DEFAULT_PALETTE, PRINTER_PROFILES, ink_colours, read_png_slices, write_png_slices)
+from inkopt.quantize import quantize
+
+VP = np.array([25.4 / 600, 25.4 / 300, 0.027])
+INKS = ["cyan", "magenta", "yellow", "black", "white"]
+
+
+def random_labels(shape=(7, 11, 13), n=5, seed=0, empty=0.2):
+    rng = np.random.default_rng(seed)
+    lab = rng.integers(0, n, shape).astype(np.uint8)
+    lab[rng.random(shape) < empty] = 255
+    return lab
+
+
+def leftovers(parent, name):
+    return [p.name for p in parent.iterdir() if p.name.startswith(f".{name}.")]
+
+
+def test_slice_stack_read_with_pillow(tmp_path):
+    lab = random_labels()
+    out = tmp_path / "job"
+    man = write_png_slices(lab, VP, INKS, out)
+    Z, Y, X = lab.shape
+    files = sorted(p.name for p in out.glob("*.png"))
+    assert files == [f"slice_{k:05d}.png" for k in range(Z)]
+    colour = {tuple(DEFAULT_PALETTE[name]) + (255,): i for i, name in enumerate(INKS)}
+    colour[(0, 0, 0, 0)] = 255  # default background
+    counts = {}
+    for k in range(Z):
+        with Image.open(out / files[k]) as im:
+            assert im.mode == "RGBA" and im.size == (X, Y)
+            assert im.info["dpi"] == pytest.approx((600, 300), abs=0.1)
+            rgba = np.asarray(im)
+        keys = [tuple(int(v) for v in px) for px in rgba.reshape(-1, 4)]
+        assert set(keys) <= set(colour), "only palette colours and the background"
+        decoded = np.array([colour[c] for c in keys], np.uint8).reshape(Y, X)
+        np.testing.assert_array_equal(decoded, lab[k, ::-1, :])  # row 0 = largest y, column 0 = smallest x
+        for c in keys:
+            counts[c] = counts.get(c, 0) + 1
+    for c, i in colour.items():
+        assert counts.get(c, 0) == int(np.sum(lab == i))
+    disk = json.loads((out / "manifest.json").read_text())
+    assert disk == json.loads(json.dumps(man))
+    assert disk["dpi"] == {"x": pytest.approx(600), "y": pytest.approx(300)}
+    assert disk["layer_thickness_um"] == pytest.approx(27.0)
+    assert disk["layer_count"] == Z and disk["image_size"] == {"width": X, "height": Y}
+    assert [m["ink"] for m in disk["materials"]] == INKS
+    assert [m["voxel_count"] for m in disk["materials"]] == [int(np.sum(lab == i)) for i in range(5)]
+    assert disk["empty_voxel_count"] == int(np.sum(lab == 255))
+    assert disk["materials"][0]["color"] == [0, 255, 255, 255] and disk["materials"][0]["hex"] == "#00FFFF"
+    assert "largest y" in disk["orientation"]["rows"]
+    back, _ = read_png_slices(out)
+    np.testing.assert_array_equal(back, lab)
+    assert leftovers(tmp_path, "job") == []
+
+
+def test_quantize_then_export_roundtrip(tmp_path):
+    mix = np.random.default_rng(1).dirichlet(np.ones(5), size=(6, 10, 12)).astype(np.float32)
+    inside = np.ones(mix.shape[:3], bool)
+    inside[:, :2] = False
+    lab, vp = quantize(mix, (25.4 / 300,) * 3, inside=inside)
+    man = write_png_slices(lab, vp, INKS, tmp_path / "s", max_materials="j750")
+    assert man["layer_count"] == lab.shape[0] and man["materials_used"] == 5
+    np.testing.assert_array_equal(read_png_slices(tmp_path / "s")[0], lab)
+
+
+def test_refuses_too_many_materials(tmp_path):
+    inks = INKS + ["transparent", "orange"]
+    lab = random_labels(n=7, empty=0.0)
+    assert PRINTER_PROFILES["j750"]["max_materials"] == 6
+    for limit in ("j750", 6, "J55"):
+        with pytest.raises(ValueError, match="uses 7 materials") as err:
+            write_png_slices(lab, VP, inks, tmp_path / "job", max_materials=limit)
+        assert "\n" not in str(err.value)
+        assert not (tmp_path / "job").exists() and leftovers(tmp_path, "job") == []
+    write_png_slices(lab, VP, inks, tmp_path / "ok", max_materials=" J850")  # 7 fit a J850
+    # only inks actually used count: 7 inks in the table but 3 used fit a 6-material printer
+    write_png_slices(np.minimum(lab, 2), VP, inks, tmp_path / "few", max_materials="j750")
+    with pytest.raises(ValueError, match="printer profile"):
+        write_png_slices(lab, VP, inks, tmp_path / "x", max_materials="j9000")
+
+
+def test_atomic_on_error(tmp_path, monkeypatch):
+    lab = random_labels()
+    out = tmp_path / "job"
+    write_png_slices(lab, VP, INKS, out)
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    calls = {"n": 0}
+    real_save = Image.Image.save
+
+    def failing_save(self, *args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise OSError("disk full")
+        return real_save(self, *args, **kwargs)
+
+    monkeypatch.setattr(Image.Image, "save", failing_save)
+    with pytest.raises(OSError, match="disk full"):
+        write_png_slices(random_labels(seed=1), VP, INKS, out)
+    with pytest.raises(OSError, match="disk full"):
+        calls["n"] = 0
+        write_png_slices(lab, VP, INKS, tmp_path / "new")
+    monkeypatch.undo()
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before, "the old folder survives intact"
+    assert not (tmp_path / "new").exists()
+    assert leftovers(tmp_path, "job") == [] and leftovers(tmp_path, "new") == []
+    # a successful rewrite replaces the old folder completely
+    write_png_slices(lab[:3], VP, INKS, out)
+    assert len(list(out.glob("*.png"))) == 3 and leftovers(tmp_path, "job") == []
+
+
+def test_refuses_foreign_folder(tmp_path):
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "thesis.tex").write_text("precious")
+    with pytest.raises(ValueError, match="not an inkopt slice folder"):
+        write_png_slices(random_labels(), VP, INKS, tmp_path / "mine")
+    assert (tmp_path / "mine" / "thesis.tex").read_text() == "precious"
+
+
+def test_palette_and_bad_input(tmp_path):
+    cols = ink_colours(["cyan", "Glow", "white"], palette={"white": "#F0F0F0"})
+    assert cols[0] == (0, 255, 255, 255) and cols[2] == (240, 240, 240, 255)
+    assert cols[1][3] == 255 and cols[1] not in (cols[0], cols[2])
+    with pytest.raises(ValueError, match="already used"):
+        ink_colours(["cyan", "magenta"], palette={"magenta": (0, 255, 255)})
+    with pytest.raises(ValueError, match="opaque"):
+        ink_colours(["cyan"], palette={"cyan": (0, 255, 255, 128)})
+    with pytest.raises(ValueError, match="already used"):
+        ink_colours(["black"], background=(0, 0, 0, 255))
+    with pytest.raises(ValueError, match="labels use ink 5"):
+        write_png_slices(np.full((2, 2, 2), 5, np.uint8), VP, INKS, tmp_path / "a")
+    with pytest.raises(ValueError, match="uint8"):
+        write_png_slices(np.zeros((2, 2, 2), np.int32), VP, INKS, tmp_path / "b")
+    assert not any(tmp_path.iterdir())
+
+
+def test_background_option(tmp_path):
+    lab = np.full((3, 2, 2), 255, np.uint8)
+    lab[1, 0, 0] = 0
+    man = write_png_slices(lab, VP, ["white"], tmp_path / "s", background=(10, 20, 30, 255))
+    assert man["files"]["first"] == "slice_00000.png" and man["background"] == [10, 20, 30, 255]
+    with Image.open(tmp_path / "s" / "slice_00001.png") as im:
+        assert im.getpixel((0, 1)) == (255, 255, 255, 255) and im.getpixel((1, 1)) == (10, 20, 30, 255)
+    assert man["materials_used"] == 1 and man["empty_voxel_count"] == 11
