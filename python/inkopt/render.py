@@ -128,7 +128,7 @@ class Renderer:
         adjoint = np.asarray(adjoint, np.float32)
         if adjoint.shape != (len(texels), 3):
             raise ValueError(f"adjoint must have shape ({len(texels)}, 3), got {adjoint.shape}")
-        self._scene.zero_grad()
+        self._scene.zero_grad(float(np.abs(adjoint).max(initial=0.0)))
         res = self._run(texels, spp, seed, include_specular, progress, "gradient", adjoint, method)
         gs, ga = self._scene.take_grad()
         return gs, ga, res

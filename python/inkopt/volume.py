@@ -239,6 +239,8 @@ class Texels:
     voxel: np.ndarray
     face: np.ndarray
     normal: np.ndarray
+    #: True for mesh texels (one per surface voxel): positions are voxel centres, not face centres.
+    centred: bool = False
 
     def __post_init__(self):
         self.voxel = np.ascontiguousarray(self.voxel, dtype=np.int32).reshape(-1, 3)
@@ -252,15 +254,18 @@ class Texels:
 
     @property
     def pos_vox(self) -> np.ndarray:
-        """(I, 3) float64 face-centre positions (x, y, z) in voxel units (texels of one face are 1 apart)."""
+        """(I, 3) float64 positions (x, y, z) in voxel units: face centres (box texels), or voxel centres
+        (mesh texels, ``centred``); neighbouring texels of one face or surface are 1 apart."""
         centre = self.voxel[:, ::-1].astype(np.float64) + 0.5
+        if self.centred:
+            return centre
         return centre + 0.5 * FACE_NORMALS[self.face].astype(np.float64)
 
     def position_mm(self, voxel_mm) -> np.ndarray:
         return self.pos_vox * np.asarray(voxel_mm, np.float64)
 
     def subset(self, sel) -> "Texels":
-        return Texels(self.voxel[sel], self.face[sel], self.normal[sel])
+        return Texels(self.voxel[sel], self.face[sel], self.normal[sel], self.centred)
 
     @classmethod
     def box_faces(cls, shape, faces=None) -> "Texels":
@@ -315,7 +320,7 @@ class Texels:
         n_keep = nrm[keep]
         bad = np.einsum("ij,ij->i", n_keep, FACE_NORMALS[faces.face[keep]]) <= 0.05
         n_keep[bad] = FACE_NORMALS[faces.face[keep][bad]]  # a normal facing away from every exposed face
-        return cls(faces.voxel[keep], faces.face[keep], n_keep)
+        return cls(faces.voxel[keep], faces.face[keep], n_keep, centred=True)
 
     @classmethod
     def for_volume(cls, volume: "Volume", faces=None) -> "Texels":
@@ -333,11 +338,13 @@ class Texels:
         return cls.exposed_faces(volume.inside_mask(), faces)
 
     def to_arrays(self) -> dict:
-        return {"texel_voxel": self.voxel, "texel_face": self.face, "texel_normal": self.normal}
+        return {"texel_voxel": self.voxel, "texel_face": self.face, "texel_normal": self.normal,
+                "texel_centred": np.bool_(self.centred)}
 
     @classmethod
     def from_arrays(cls, data) -> "Texels":
-        return cls(data["texel_voxel"], data["texel_face"], data["texel_normal"])
+        return cls(data["texel_voxel"], data["texel_face"], data["texel_normal"],
+                   bool(data["texel_centred"]) if "texel_centred" in data else False)
 
 
 def save_npz(path: str | Path, arrays: dict, compressed: bool = True) -> None:

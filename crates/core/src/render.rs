@@ -114,43 +114,59 @@ pub enum GradMethod {
 }
 
 /// Gradient accumulators: one buffer per worker thread, each holding d e / d sigma_s then d e / d sigma_a,
-/// planar by channel ([s R | s G | s B | a R | a G | a B], n voxels each).
+/// planar by channel ([s R | s G | s B | a R | a G | a B], n voxels each), in fixed point: every contribution is
+/// rounded to a multiple of `quantum` and summed as i64. Integer sums do not depend on their order, so the
+/// gradient is bit-identical for any thread count and work split (float sums are not). The quantum is set per
+/// pass from the largest adjoint, 2^-32 of it: far below f32 resolution for any realistic voxel total, with
+/// +-2^31 adjoint-units of headroom per voxel.
 pub struct GradBuffers {
     n: usize,
-    bufs: Vec<Mutex<Vec<f32>>>,
+    quantum: f64,
+    bufs: Vec<Mutex<Vec<i64>>>,
 }
 
 impl GradBuffers {
     pub fn new(n_voxels: usize, threads: usize) -> Self {
-        GradBuffers { n: n_voxels, bufs: (0..threads.max(1)).map(|_| Mutex::new(vec![0.0f32; 6 * n_voxels])).collect() }
+        GradBuffers { n: n_voxels, quantum: 1.0, bufs: (0..threads.max(1)).map(|_| Mutex::new(vec![0i64; 6 * n_voxels])).collect() }
     }
 
-    pub fn zero(&self) {
+    /// Clear the buffers for a pass whose adjoints are at most `max_abs_adjoint` in magnitude.
+    pub fn zero(&mut self, max_abs_adjoint: f32) {
+        let m = if max_abs_adjoint > 0.0 && max_abs_adjoint.is_finite() { max_abs_adjoint as f64 } else { 1.0 };
+        self.quantum = m / 4_294_967_296.0;
         for b in &self.bufs {
-            b.lock().unwrap().iter_mut().for_each(|x| *x = 0.0);
+            b.lock().unwrap().iter_mut().for_each(|x| *x = 0);
         }
     }
 
     /// Sum over threads into interleaved (voxel, channel) arrays: (d e / d sigma_s, d e / d sigma_a).
     pub fn collect(&self, grad_s: &mut [f32], grad_a: &mut [f32]) {
         let n = self.n;
-        grad_s.iter_mut().chain(grad_a.iter_mut()).for_each(|x| *x = 0.0);
-        for b in &self.bufs {
-            let b = b.lock().unwrap();
-            for c in 0..3 {
-                for j in 0..n {
-                    grad_s[3 * j + c] += b[c * n + j];
-                    grad_a[3 * j + c] += b[(3 + c) * n + j];
+        let locked: Vec<_> = self.bufs.iter().map(|b| b.lock().unwrap()).collect();
+        for c in 0..3 {
+            for j in 0..n {
+                let (mut s, mut a) = (0i64, 0i64);
+                for b in &locked {
+                    s = s.wrapping_add(b[c * n + j]);
+                    a = a.wrapping_add(b[(3 + c) * n + j]);
                 }
+                grad_s[3 * j + c] = (s as f64 * self.quantum) as f32;
+                grad_a[3 * j + c] = (a as f64 * self.quantum) as f32;
             }
         }
     }
 }
 
+#[inline(always)]
+fn fixed(x: f32, inv_quantum: f32) -> i64 {
+    (x * inv_quantum).round() as i64
+}
+
 struct ReplayTally<'a, M: Medium> {
-    buf: &'a mut [f32],
+    buf: &'a mut [i64],
     n: usize,
     c: usize,
+    /// Weight in quanta.
     w: f32,
     med: &'a M,
 }
@@ -158,7 +174,7 @@ struct ReplayTally<'a, M: Medium> {
 impl<M: Medium> Tally for ReplayTally<'_, M> {
     #[inline(always)]
     fn segment(&mut self, j: usize, len: f32) {
-        let x = self.w * len;
+        let x = fixed(len, self.w);
         self.buf[self.c * self.n + j] -= x;
         self.buf[(3 + self.c) * self.n + j] -= x;
     }
@@ -166,13 +182,13 @@ impl<M: Medium> Tally for ReplayTally<'_, M> {
     fn scatter(&mut self, j: usize) {
         let s = self.med.sigma_s(j, self.c);
         if s > 0.0 {
-            self.buf[self.c * self.n + j] += self.w / s;
+            self.buf[self.c * self.n + j] += fixed(1.0 / s, self.w);
         }
     }
 }
 
 struct Li1Tally<'a> {
-    buf: &'a mut [f32],
+    buf: &'a mut [i64],
     n: usize,
     c: usize,
     w: f32,
@@ -181,14 +197,14 @@ struct Li1Tally<'a> {
 impl Tally for Li1Tally<'_> {
     #[inline(always)]
     fn segment(&mut self, j: usize, len: f32) {
-        self.buf[(3 + self.c) * self.n + j] -= self.w * len;
+        self.buf[(3 + self.c) * self.n + j] -= fixed(len, self.w);
     }
     #[inline(always)]
     fn scatter(&mut self, _: usize) {}
 }
 
 /// Gradient pass: accumulate sum_i adjoint_i . d c_i / d (sigma_s, sigma_a) into `grads` for the given texels,
-/// `adjoint[i]` = d e / d c_i (linear RGB). Returns this pass's own forward estimates and statistics.
+/// `adjoint[i]` = d e / d c_i (linear RGB), |adjoint| at most the bound given to `GradBuffers::zero`. Returns this pass's own forward estimates and statistics.
 pub fn backward<M: Medium>(
     geo: &Geometry,
     med: &M,
@@ -203,6 +219,7 @@ pub fn backward<M: Medium>(
     assert_eq!(grads.n, med.len());
     let n = grads.n;
     let inv_spp = 1.0 / opts.spp as f32;
+    let inv_q = (1.0 / grads.quantum) as f32;
     let results: Vec<(TexelEstimate, Stats)> = texels
         .par_iter()
         .enumerate()
@@ -219,7 +236,7 @@ pub fn backward<M: Medium>(
                     let r = match method {
                         GradMethod::Replay => trace(geo, med, tex, c, &mut rng, opts.include_specular, &mut NoTally),
                         GradMethod::Li1 => {
-                            let mut t = Li1Tally { buf: &mut buf[..], n, c, w: adj * inv_spp };
+                            let mut t = Li1Tally { buf: &mut buf[..], n, c, w: adj * inv_spp * inv_q };
                             trace(geo, med, tex, c, &mut rng, opts.include_specular, &mut t)
                         }
                     };
@@ -227,7 +244,7 @@ pub fn backward<M: Medium>(
                     st.events += r.events as u64;
                     if method == GradMethod::Replay && r.value != 0.0 && adj != 0.0 {
                         let mut rng = PathRng::new(opts.seed, key, s, c as u32);
-                        let mut t = ReplayTally { buf: &mut buf[..], n, c, w: adj * r.value * inv_spp, med };
+                        let mut t = ReplayTally { buf: &mut buf[..], n, c, w: adj * r.value * inv_spp * inv_q, med };
                         trace(geo, med, tex, c, &mut rng, opts.include_specular, &mut t);
                         st.replayed_paths += 1;
                         st.replayed_events += r.events as u64;

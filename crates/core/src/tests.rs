@@ -137,7 +137,8 @@ fn replay_gradient_matches_finite_differences() {
             let mut grads = vec![];
             for &seed in &seeds {
                 let med = DenseMedium::from_interleaved(&s, &a).unwrap();
-                let gb = GradBuffers::new(nv, 1);
+                let mut gb = GradBuffers::new(nv, 1);
+                gb.zero(1.0);
                 backward(&geo, &med, &texels, 0, &adj, &RenderOptions { spp, seed, include_specular: true }, GradMethod::Replay, &gb);
                 let mut gs = vec![0.0; 3 * nv];
                 let mut ga = vec![0.0; 3 * nv];

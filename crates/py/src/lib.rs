@@ -137,13 +137,12 @@ impl Scene {
         pack(py, &est, &stats)
     }
 
-    /// Reset the gradient accumulators to zero.
-    fn zero_grad(&mut self) {
+    /// Reset the gradient accumulators for a pass whose adjoints are at most `max_abs_adjoint` in magnitude
+    /// (sets the fixed-point quantum of the accumulators).
+    fn zero_grad(&mut self, max_abs_adjoint: f32) {
         let n = self.geo.voxel_count();
-        match &self.grads {
-            Some(g) => g.zero(),
-            None => self.grads = Some(GradBuffers::new(n, self.pool.current_num_threads())),
-        }
+        let threads = self.pool.current_num_threads();
+        self.grads.get_or_insert_with(|| GradBuffers::new(n, threads)).zero(max_abs_adjoint);
     }
 
     /// backward(texel_voxel, texel_face, texel_normal, adjoint (I,3) f32, *, spp, seed, first_texel=0,
@@ -178,8 +177,9 @@ impl Scene {
         if adj.iter().any(|a| a.iter().any(|x| !x.is_finite())) {
             return Err(err("adjoint contains NaN or infinite values"));
         }
+        let max_adj = adj.iter().flat_map(|a| a.iter()).fold(0.0f32, |m, x| m.max(x.abs()));
         if self.grads.is_none() {
-            self.zero_grad();
+            self.zero_grad(max_adj);
         }
         let grads = self.grads.as_ref().unwrap();
         let (est, stats) = py.detach(|| {
