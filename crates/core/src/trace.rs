@@ -90,7 +90,8 @@ fn inv(d: V3) -> V3 {
 
 /// Distance along d from p to the boundary of voxel v, and the axis crossed there.
 #[inline(always)]
-fn exit_distance(geo: &Geometry, p: V3, d: V3, inv_d: V3, v: [i32; 3]) -> (f32, usize) {
+fn exit_distance(geo: &Geometry, p: V3, d: V3, v: [i32; 3]) -> (f32, usize) {
+    let inv_d = inv(d);
     let mut t = f32::INFINITY;
     let mut axis = 0;
     for a in 0..3 {
@@ -118,7 +119,8 @@ struct Dda {
 
 impl Dda {
     #[inline(always)]
-    fn new(geo: &Geometry, p: V3, d: V3, inv_d: V3, v: [i32; 3]) -> Self {
+    fn new(geo: &Geometry, p: V3, d: V3, v: [i32; 3]) -> Self {
+        let inv_d = inv(d);
         let mut dda = Dda { t_max: [f32::INFINITY; 3], t_delta: [f32::INFINITY; 3], step: [0; 3], dj: [0; 3] };
         for a in 0..3 {
             let s = geo.size[a];
@@ -183,8 +185,9 @@ enum Flight {
 /// exact per-voxel lengths of the flight when the tally is active.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn fly_delta<M: Medium, T: Tally>(geo: &Geometry, med: &M, c: usize, maj: f32, p: &mut V3, d: V3, inv_d: V3,
+fn fly_delta<M: Medium, T: Tally>(geo: &Geometry, med: &M, c: usize, maj: f32, p: &mut V3, d: V3,
                                   v: &mut [i32; 3], rng: &mut PathRng, tally: &mut T) -> Flight {
+    let inv_d = inv(d);
     let periodic = geo.boundary == Boundary::PeriodicXY;
     // Distance to the grid's boundary (periodic: only z bounds it).
     let mut t_exit = f32::INFINITY;
@@ -208,7 +211,7 @@ fn fly_delta<M: Medium, T: Tally>(geo: &Geometry, med: &M, c: usize, maj: f32, p
         if t >= t_exit {
             let step = if d[exit_axis] > 0.0 { 1 } else { -1 };
             if T::ACTIVE {
-                tally_segments(geo, p_start, d, inv_d, v_start, t_exit, tally);
+                tally_segments(geo, p_start, d, v_start, t_exit, tally);
             }
             *p = add(p_start, scale(d, t_exit));
             p[exit_axis] = if step > 0 { geo.n[exit_axis] as f32 * geo.size[exit_axis] } else { 0.0 };
@@ -222,7 +225,7 @@ fn fly_delta<M: Medium, T: Tally>(geo: &Geometry, med: &M, c: usize, maj: f32, p
         let (st, albedo) = med.coeffs(j, c);
         if rng.next_f32() * maj < st {
             if T::ACTIVE {
-                tally_segments(geo, p_start, d, inv_d, v_start, t, tally);
+                tally_segments(geo, p_start, d, v_start, t, tally);
             }
             *p = q;
             *v = w;
@@ -251,8 +254,8 @@ fn locate(geo: &Geometry, p: &mut V3) -> [i32; 3] {
 }
 
 /// Emit the per-voxel segments of the straight flight from p (in voxel v) along d for `length` (a DDA).
-fn tally_segments<T: Tally>(geo: &Geometry, p: V3, d: V3, inv_d: V3, mut v: [i32; 3], length: f32, tally: &mut T) {
-    let dda0 = Dda::new(geo, p, d, inv_d, v);
+fn tally_segments<T: Tally>(geo: &Geometry, p: V3, d: V3, mut v: [i32; 3], length: f32, tally: &mut T) {
+    let dda0 = Dda::new(geo, p, d, v);
     let mut dda = dda0;
     let mut t = 0.0f32;
     loop {
@@ -317,7 +320,6 @@ pub fn trace<M: Medium, T: Tally>(
         }
         in_medium = true;
     }
-    let mut inv_d = inv(d);
     let mut events = 0u32;
     let mut steps = 0u64;
     let delta = geo.inside.is_none();
@@ -329,7 +331,7 @@ pub fn trace<M: Medium, T: Tally>(
                 if steps > MAX_STEPS {
                     return PathValue { value: 0.0, events };
                 }
-                match fly_delta(geo, med, c, maj, &mut p, d, inv_d, &mut v, rng, tally) {
+                match fly_delta(geo, med, c, maj, &mut p, d, &mut v, rng, tally) {
                     Flight::Collision(j, albedo) => {
                         events += 1;
                         if rng.next_f32() >= albedo || events > MAX_EVENTS {
@@ -337,14 +339,12 @@ pub fn trace<M: Medium, T: Tally>(
                         }
                         tally.scatter(j);
                         d = hg_sample(d, geo.g, rng.next_f32(), rng.next_f32());
-                        inv_d = inv(d);
                     }
                     Flight::Exit(axis, step) => {
                         let mut n_geo = [0.0f32; 3];
                         n_geo[axis] = -step as f32;
                         let (nd, transmitted) = interface(d, n_geo, n_geo, geo.ior, rng.next_f32());
                         d = nd;
-                        inv_d = inv(d);
                         if transmitted {
                             v[axis] += step;
                             in_medium = false;
@@ -358,7 +358,7 @@ pub fn trace<M: Medium, T: Tally>(
             // per-axis distances to the next voxel boundary advance without divisions.
             let mut tau = free_flight(rng);
             let mut p0 = p;
-            let mut dda = Dda::new(geo, p0, d, inv_d, v);
+            let mut dda = Dda::new(geo, p0, d, v);
             let mut t = 0.0f32;
             let mut j = geo.index(v);
             loop {
@@ -380,7 +380,7 @@ pub fn trace<M: Medium, T: Tally>(
                     tally.scatter(j);
                     p0 = add(p0, scale(d, t + s));
                     d = hg_sample(d, geo.g, rng.next_f32(), rng.next_f32());
-                    dda = Dda::new(geo, p0, d, inv_d, v);
+                    dda = Dda::new(geo, p0, d, v);
                     t = 0.0;
                     tau = free_flight(rng);
                     continue;
@@ -416,12 +416,11 @@ pub fn trace<M: Medium, T: Tally>(
                 if transmitted {
                     v = nb;
                     in_medium = false;
-                    inv_d = inv(d);
                     break;
                 }
                 p0 = p;
                 t = 0.0;
-                dda = Dda::new(geo, p0, d, inv_d, v);
+                dda = Dda::new(geo, p0, d, v);
             }
         } else {
             loop {
@@ -432,7 +431,7 @@ pub fn trace<M: Medium, T: Tally>(
                 if steps > MAX_STEPS {
                     return PathValue { value: 0.0, events };
                 }
-                let (t, axis) = exit_distance(geo, p, d, inv_d, v);
+                let (t, axis) = exit_distance(geo, p, d, v);
                 let (nb, step) = cross(geo, &mut p, d, t, axis, v);
                 if geo.is_inside(nb) {
                     // Entering voxel nb: the incident side is outside, nb's face normal points back at v.
@@ -441,7 +440,6 @@ pub fn trace<M: Medium, T: Tally>(
                     let n_sh = geo.shading_normal(nb).unwrap_or(n_geo);
                     let (nd, transmitted) = interface(d, n_geo, n_sh, eta_in, rng.next_f32());
                     d = nd;
-                    inv_d = inv(d);
                     if transmitted {
                         v = nb;
                         in_medium = true;

@@ -1,0 +1,48 @@
+"""``inkopt evaluate DIR``: ΔE76, ΔE2000 and SSIM of the continuous result, the quantized (printed) result and the
+naive baselines against the target; writes DIR/evaluation.json and DIR/evaluation_<face>.png (``inkopt.evaluate``).
+"""
+from __future__ import annotations
+
+import json
+import sys
+
+from .baselines import DEFAULT_PATCH_MM
+from .evaluate import DEFAULT_SPP, evaluate_run, table_lines
+from .quantize import METHODS
+
+
+def _evaluate_cmd(args) -> int:
+    if args.method is not None and args.method not in METHODS:
+        raise ValueError(f"unknown quantization method '{args.method}'; use one of {list(METHODS)}")
+    if args.spp < 1:
+        raise ValueError(f"--spp must be at least 1, got {args.spp}")
+    log = None if args.json else (lambda msg: print(msg, file=sys.stderr, flush=True))
+    ev = evaluate_run(args.dir, spp=args.spp, seed=args.seed, method=args.method, threads=args.threads,
+                      baselines=not args.no_baselines, refine=not args.nearest, patch_mm=args.patch_mm, log=log)
+    if args.json:
+        print(json.dumps(ev))
+    else:
+        for line in table_lines(ev):
+            print(line)
+        print(f"{ev['spp']} spp per scene texel, {ev['seconds']:.0f} s; wrote {args.dir}/evaluation.json"
+              + "".join(f", {p}" for p in ev.get("pictures", [])))
+    return 0
+
+
+def register_cli(sub) -> None:
+    p = sub.add_parser("evaluate", help="colour error and SSIM of a run, its printed version and the baselines",
+                       description="Render a run's continuous and quantized results and two naive baselines "
+                                   "(surface colouring, extrusion) and compare them with the target.")
+    p.add_argument("dir", help="run directory holding volume.npz and scene.npz")
+    p.add_argument("--spp", type=int, default=DEFAULT_SPP,
+                   help=f"samples per scene texel (default {DEFAULT_SPP}); printer texels share them")
+    p.add_argument("--seed", type=int, default=0, help="render seed (default 0)")
+    p.add_argument("--method", help="quantization method (default: that of DIR/quantized.npz, else blue-noise)")
+    p.add_argument("--threads", type=int, help="render threads (default: all cores)")
+    p.add_argument("--patch-mm", type=float, default=DEFAULT_PATCH_MM,
+                   help=f"thickness of the baselines' colour-chart patches (default {DEFAULT_PATCH_MM} mm)")
+    p.add_argument("--nearest", action="store_true",
+                   help="baselines: nearest colour-table entry instead of the blend of the 8 nearest")
+    p.add_argument("--no-baselines", action="store_true", help="skip the baselines")
+    p.add_argument("--json", action="store_true", help="print the evaluation as one JSON object, no progress")
+    p.set_defaults(func=_evaluate_cmd)
