@@ -97,6 +97,9 @@ class Parameterization:
         self.free_share = np.clip(1.0 - total, 0.0, 1.0)
         self.free_index = np.flatnonzero(self.free_share.reshape(-1) > 1e-6)
         self.n_inks = fixed_share.shape[-1]
+        # Gradient slot of every voxel (-1: not a variable), for the renderer's sparse gradient.
+        self.grad_index = np.full(fixed_share.shape[:3], -1, np.int32)
+        self.grad_index.reshape(-1)[self.free_index] = np.arange(len(self.free_index), dtype=np.int32)
 
     @property
     def n_free(self) -> int:
@@ -118,9 +121,13 @@ class Parameterization:
         return rho.reshape(self.fixed_share.shape)
 
     def backward(self, x: np.ndarray, grad_rho: np.ndarray, natural: bool = False) -> np.ndarray:
-        """dE/dx (F, N) from dE/drho (z, y, x, N). ``natural``: the mirror-descent direction on the simplex
-        instead (softmax only): g - <g, p>, the exponentiated-gradient step in logit space."""
-        g = grad_rho.reshape(-1, self.n_inks)[self.free_index] * self.free_share.reshape(-1)[self.free_index, None]
+        """dE/dx (F, N) from dE/drho, given per free voxel (F, N) or for the whole grid (z, y, x, N).
+        ``natural``: the mirror-descent direction on the simplex instead (softmax only): g - <g, p>, the
+        exponentiated-gradient step in logit space."""
+        g = grad_rho.reshape(-1, self.n_inks)
+        if len(g) != self.n_free:
+            g = g[self.free_index]
+        g = g * self.free_share.reshape(-1)[self.free_index, None]
         p, aux = self._p(x)
         centred = g - np.sum(g * p, axis=1, keepdims=True)
         if natural:
@@ -312,7 +319,7 @@ class Optimization:
         de = float(delta_e76(lr.lab, self.loss.target_lab).mean())
         t2 = time.perf_counter()
         gs, ga, gres = renderer.gradient(self.texels, lr.grad.astype(np.float32), cfg.spp, grad_seed,
-                                         cfg.include_specular, cfg.grad_method)
+                                         cfg.include_specular, cfg.grad_method, grad_index=self.param.grad_index)
         # The gradient pass's own estimate joins the average only now, after its gradient is taken, so the
         # adjoint never correlates with the noise of the gradient it multiplies.
         self.c_avg = (0.5 * (c + gres.rgb) if self.c_avg is not None else 0.5 * (res.rgb + gres.rgb)).astype(np.float32)

@@ -118,17 +118,22 @@ class Renderer:
         return self._run(texels, spp, seed, include_specular, progress, "render")
 
     def gradient(self, texels: Texels, adjoint: np.ndarray, spp: int = 16, seed: int = 1,
-                 include_specular: bool = True, method: str = "replay", progress: bool = False):
+                 include_specular: bool = True, method: str = "replay", progress: bool = False,
+                 grad_index: np.ndarray | None = None):
         """Gradient of e with respect to the coefficients, given ``adjoint`` = de/dc (I, 3) in texel order.
 
         Returns (grad_sigma_s, grad_sigma_a, result): (z, y, x, 3) float32 each, and the pass's own forward
-        estimate. Use a different seed from the forward render whose image produced the adjoint, so that the
-        gradient of a nonlinear loss is not correlated with the image noise.
+        estimate. With ``grad_index`` ((z, y, x) int32: a slot per voxel, -1 for none) only those voxels'
+        gradients are kept, returned as (F, 3) per slot (memory proportional to F, not the grid).
+        Use a different seed from the forward render whose image produced the adjoint, so that the gradient of a
+        nonlinear loss is not correlated with the image noise.
         """
         adjoint = np.asarray(adjoint, np.float32)
         if adjoint.shape != (len(texels), 3):
             raise ValueError(f"adjoint must have shape ({len(texels)}, 3), got {adjoint.shape}")
-        self._scene.zero_grad(float(np.abs(adjoint).max(initial=0.0)))
+        if grad_index is not None:
+            grad_index = np.ascontiguousarray(grad_index, np.int32)
+        self._scene.zero_grad(float(np.abs(adjoint).max(initial=0.0)), grad_index)
         res = self._run(texels, spp, seed, include_specular, progress, "gradient", adjoint, method)
         gs, ga = self._scene.take_grad()
         return gs, ga, res

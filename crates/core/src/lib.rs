@@ -10,7 +10,7 @@ pub mod sampling;
 pub mod scene;
 pub mod trace;
 
-pub use render::{backward, render, GradBuffers, GradMethod, RenderOptions, Stats, TexelEstimate};
+pub use render::{backward, render, GradBuffers, GradMethod, RenderOptions, Stats, TexelEstimate, NO_GRADIENT};
 pub use scene::{face_normal, Boundary, DenseMedium, Environment, Geometry, LabelMedium, Medium, Texel, EMPTY};
 
 #[cfg(test)]

@@ -119,15 +119,61 @@ pub enum GradMethod {
 /// gradient is bit-identical for any thread count and work split (float sums are not). The quantum is set per
 /// pass from the largest adjoint, 2^-32 of it: far below f32 resolution for any realistic voxel total, with
 /// +-2^31 adjoint-units of headroom per voxel.
+///
+/// An optional index map restricts gradients to some voxels (e.g. the free voxels of a shell): `map[j]` is the
+/// slot of voxel j, or `NO_GRADIENT`; the buffers then hold only the mapped voxels.
 pub struct GradBuffers {
+    /// Voxels in the grid.
+    n_voxels: usize,
+    /// Gradient slots (= n_voxels without a map).
     n: usize,
+    map: Option<Vec<u32>>,
     quantum: f64,
     bufs: Vec<Mutex<Vec<i64>>>,
 }
 
+pub const NO_GRADIENT: u32 = u32::MAX;
+
 impl GradBuffers {
     pub fn new(n_voxels: usize, threads: usize) -> Self {
-        GradBuffers { n: n_voxels, quantum: 1.0, bufs: (0..threads.max(1)).map(|_| Mutex::new(vec![0i64; 6 * n_voxels])).collect() }
+        Self::with_map(n_voxels, threads, None).unwrap()
+    }
+
+    /// Buffers for the voxels of `map` (slot per voxel or NO_GRADIENT; slots must be < the number of mapped
+    /// voxels' maximum + 1).
+    pub fn with_map(n_voxels: usize, threads: usize, map: Option<Vec<u32>>) -> Result<Self, String> {
+        let n = match &map {
+            None => n_voxels,
+            Some(m) => {
+                if m.len() != n_voxels {
+                    return Err(format!("gradient index has {} entries, the grid {}", m.len(), n_voxels));
+                }
+                m.iter().filter(|&&k| k != NO_GRADIENT).map(|&k| k as usize + 1).max().unwrap_or(0)
+            }
+        };
+        let bufs = (0..threads.max(1)).map(|_| Mutex::new(vec![0i64; 6 * n])).collect();
+        Ok(GradBuffers { n_voxels, n, map, quantum: 1.0, bufs })
+    }
+
+    /// Whether the buffers cover only the voxels of an index map.
+    pub fn is_mapped(&self) -> bool {
+        self.map.is_some()
+    }
+
+    /// Number of gradient slots.
+    pub fn slots(&self) -> usize {
+        self.n
+    }
+
+    #[inline(always)]
+    fn slot(&self, j: usize) -> Option<usize> {
+        match &self.map {
+            None => Some(j),
+            Some(m) => {
+                let k = m[j];
+                if k == NO_GRADIENT { None } else { Some(k as usize) }
+            }
+        }
     }
 
     /// Clear the buffers for a pass whose adjoints are at most `max_abs_adjoint` in magnitude.
@@ -139,7 +185,7 @@ impl GradBuffers {
         }
     }
 
-    /// Sum over threads into interleaved (voxel, channel) arrays: (d e / d sigma_s, d e / d sigma_a).
+    /// Sum over threads into interleaved (slot, channel) arrays: (d e / d sigma_s, d e / d sigma_a).
     pub fn collect(&self, grad_s: &mut [f32], grad_a: &mut [f32]) {
         let n = self.n;
         let locked: Vec<_> = self.bufs.iter().map(|b| b.lock().unwrap()).collect();
@@ -164,7 +210,7 @@ fn fixed(x: f32, inv_quantum: f32) -> i64 {
 
 struct ReplayTally<'a, M: Medium> {
     buf: &'a mut [i64],
-    n: usize,
+    grads: &'a GradBuffers,
     c: usize,
     /// Weight in quanta.
     w: f32,
@@ -174,22 +220,24 @@ struct ReplayTally<'a, M: Medium> {
 impl<M: Medium> Tally for ReplayTally<'_, M> {
     #[inline(always)]
     fn segment(&mut self, j: usize, len: f32) {
-        let x = fixed(len, self.w);
-        self.buf[self.c * self.n + j] -= x;
-        self.buf[(3 + self.c) * self.n + j] -= x;
+        if let Some(k) = self.grads.slot(j) {
+            let (n, x) = (self.grads.n, fixed(len, self.w));
+            self.buf[self.c * n + k] -= x;
+            self.buf[(3 + self.c) * n + k] -= x;
+        }
     }
     #[inline(always)]
     fn scatter(&mut self, j: usize) {
         let s = self.med.sigma_s(j, self.c);
-        if s > 0.0 {
-            self.buf[self.c * self.n + j] += fixed(1.0 / s, self.w);
+        if let (Some(k), true) = (self.grads.slot(j), s > 0.0) {
+            self.buf[self.c * self.grads.n + k] += fixed(1.0 / s, self.w);
         }
     }
 }
 
 struct Li1Tally<'a> {
     buf: &'a mut [i64],
-    n: usize,
+    grads: &'a GradBuffers,
     c: usize,
     w: f32,
 }
@@ -197,7 +245,9 @@ struct Li1Tally<'a> {
 impl Tally for Li1Tally<'_> {
     #[inline(always)]
     fn segment(&mut self, j: usize, len: f32) {
-        self.buf[(3 + self.c) * self.n + j] -= fixed(len, self.w);
+        if let Some(k) = self.grads.slot(j) {
+            self.buf[(3 + self.c) * self.grads.n + k] -= fixed(len, self.w);
+        }
     }
     #[inline(always)]
     fn scatter(&mut self, _: usize) {}
@@ -216,8 +266,7 @@ pub fn backward<M: Medium>(
     grads: &GradBuffers,
 ) -> (Vec<TexelEstimate>, Stats) {
     assert_eq!(texels.len(), adjoint.len());
-    assert_eq!(grads.n, med.len());
-    let n = grads.n;
+    assert_eq!(grads.n_voxels, med.len());
     let inv_spp = 1.0 / opts.spp as f32;
     let inv_q = (1.0 / grads.quantum) as f32;
     let results: Vec<(TexelEstimate, Stats)> = texels
@@ -236,7 +285,7 @@ pub fn backward<M: Medium>(
                     let r = match method {
                         GradMethod::Replay => trace(geo, med, tex, c, &mut rng, opts.include_specular, &mut NoTally),
                         GradMethod::Li1 => {
-                            let mut t = Li1Tally { buf: &mut buf[..], n, c, w: adj * inv_spp * inv_q };
+                            let mut t = Li1Tally { buf: &mut buf[..], grads, c, w: adj * inv_spp * inv_q };
                             trace(geo, med, tex, c, &mut rng, opts.include_specular, &mut t)
                         }
                     };
@@ -244,7 +293,7 @@ pub fn backward<M: Medium>(
                     st.events += r.events as u64;
                     if method == GradMethod::Replay && r.value != 0.0 && adj != 0.0 {
                         let mut rng = PathRng::new(opts.seed, key, s, c as u32);
-                        let mut t = ReplayTally { buf: &mut buf[..], n, c, w: adj * r.value * inv_spp * inv_q, med };
+                        let mut t = ReplayTally { buf: &mut buf[..], grads, c, w: adj * r.value * inv_spp * inv_q, med };
                         trace(geo, med, tex, c, &mut rng, opts.include_specular, &mut t);
                         st.replayed_paths += 1;
                         st.replayed_events += r.events as u64;

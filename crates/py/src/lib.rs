@@ -3,9 +3,9 @@
 //! (z, y, x), normals and voxel sizes (x, y, z). The GIL is released while rendering.
 
 use inkopt_core::{backward, render, Boundary, DenseMedium, Geometry, GradBuffers, GradMethod, LabelMedium,
-                  Medium, RenderOptions, Stats, Texel, TexelEstimate};
+                  Medium, RenderOptions, Stats, Texel, TexelEstimate, NO_GRADIENT};
 use numpy::ndarray::{Array2, Array4};
-use numpy::{IntoPyArray, PyArray2, PyArray4, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4,
+use numpy::{IntoPyArray, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4,
             PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -22,7 +22,13 @@ struct Scene {
     medium: MediumKind,
     pool: rayon::ThreadPool,
     grads: Option<GradBuffers>,
+    /// Whether the gradient buffers are per slot of a grad_index (else per voxel).
+    sparse: bool,
     shape: [usize; 3],
+}
+
+fn grad_index_given(g: &Option<GradBuffers>) -> bool {
+    g.as_ref().map(|g| g.is_mapped()).unwrap_or(false)
 }
 
 fn err(msg: impl Into<String>) -> PyErr {
@@ -103,7 +109,7 @@ impl Scene {
             MediumKind::Labels(m) => m.len(),
         };
         debug_assert_eq!(n_len, nv);
-        Ok(Scene { geo, medium, pool, grads: None, shape: [nz, ny, nx] })
+        Ok(Scene { geo, medium, pool, grads: None, sparse: false, shape: [nz, ny, nx] })
     }
 
     #[getter]
@@ -138,11 +144,27 @@ impl Scene {
     }
 
     /// Reset the gradient accumulators for a pass whose adjoints are at most `max_abs_adjoint` in magnitude
-    /// (sets the fixed-point quantum of the accumulators).
-    fn zero_grad(&mut self, max_abs_adjoint: f32) {
+    /// (sets the fixed-point quantum). `grad_index` (z, y, x) int32: the gradient slot of each voxel, -1 for
+    /// none; gradients are then returned per slot, (F, 3). None: every voxel, (z, y, x, 3).
+    #[pyo3(signature = (max_abs_adjoint, grad_index=None))]
+    fn zero_grad(&mut self, max_abs_adjoint: f32, grad_index: Option<PyReadonlyArray3<i32>>) -> PyResult<()> {
         let n = self.geo.voxel_count();
         let threads = self.pool.current_num_threads();
-        self.grads.get_or_insert_with(|| GradBuffers::new(n, threads)).zero(max_abs_adjoint);
+        let map = match grad_index {
+            None => None,
+            Some(ix) => {
+                let [nz, ny, nx] = self.shape;
+                if ix.shape() != [nz, ny, nx] {
+                    return Err(err(format!("grad_index has shape {:?}, expected {:?}", ix.shape(), self.shape)));
+                }
+                Some(ix.as_slice()?.iter().map(|&k| if k < 0 { NO_GRADIENT } else { k as u32 }).collect())
+            }
+        };
+        let mut g = GradBuffers::with_map(n, threads, map).map_err(err)?;
+        g.zero(max_abs_adjoint);
+        self.grads = Some(g);
+        self.sparse = grad_index_given(&self.grads);
+        Ok(())
     }
 
     /// backward(texel_voxel, texel_face, texel_normal, adjoint (I,3) f32, *, spp, seed, first_texel=0,
@@ -177,9 +199,8 @@ impl Scene {
         if adj.iter().any(|a| a.iter().any(|x| !x.is_finite())) {
             return Err(err("adjoint contains NaN or infinite values"));
         }
-        let max_adj = adj.iter().flat_map(|a| a.iter()).fold(0.0f32, |m, x| m.max(x.abs()));
         if self.grads.is_none() {
-            self.zero_grad(max_adj);
+            return Err(err("call zero_grad before backward"));
         }
         let grads = self.grads.as_ref().unwrap();
         let (est, stats) = py.detach(|| {
@@ -191,17 +212,21 @@ impl Scene {
         pack(py, &est, &stats)
     }
 
-    /// The accumulated gradients (d e/d sigma_s, d e/d sigma_a), each (z, y, x, 3) float32.
-    fn take_grad<'py>(&self, py: Python<'py>) -> PyResult<(Bound<'py, PyArray4<f32>>, Bound<'py, PyArray4<f32>>)> {
+    /// The accumulated gradients (d e/d sigma_s, d e/d sigma_a): (z, y, x, 3) float32 each, or (F, 3) per slot
+    /// when zero_grad was given a grad_index.
+    fn take_grad<'py>(&self, py: Python<'py>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
         let [nz, ny, nx] = self.shape;
-        let n = nz * ny * nx;
+        let g = self.grads.as_ref().ok_or_else(|| err("no gradient: call zero_grad and backward first"))?;
+        let n = g.slots();
         let mut gs = vec![0.0f32; 3 * n];
         let mut ga = vec![0.0f32; 3 * n];
-        if let Some(g) = &self.grads {
-            py.detach(|| g.collect(&mut gs, &mut ga));
+        py.detach(|| g.collect(&mut gs, &mut ga));
+        if self.sparse {
+            let to = |v: Vec<f32>| Array2::from_shape_vec((n, 3), v).map_err(|e| err(e.to_string()));
+            return Ok((to(gs)?.into_pyarray(py).into_any(), to(ga)?.into_pyarray(py).into_any()));
         }
         let to = |v: Vec<f32>| Array4::from_shape_vec((nz, ny, nx, 3), v).map_err(|e| err(e.to_string()));
-        Ok((to(gs)?.into_pyarray(py), to(ga)?.into_pyarray(py)))
+        Ok((to(gs)?.into_pyarray(py).into_any(), to(ga)?.into_pyarray(py).into_any()))
     }
 }
 
