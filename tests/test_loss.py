@@ -193,7 +193,7 @@ def test_loss_values():
     lab_t = color.xyz2lab(loss.linear_to_xyz(target) * SKI_WHITE / loss.WHITE_XYZ)
     np.testing.assert_allclose(res.e1, np.mean(color.deltaE_cie76(lab_p, lab_t) ** 2), rtol=1e-9)
     np.testing.assert_allclose(res.lab, lab_p, atol=1e-6)
-    np.testing.assert_allclose(res.value, (res.e1 + 4 * res.e2 + 2 * res.e3) / 7)
+    np.testing.assert_allclose(res.value, (loss.E1_WEIGHT_SCALE * res.e1 + 4 * res.e2 + 2 * res.e3) / 7)
     assert 0 <= res.e2 <= 2 and res.e3 > 0
     # E3 computed independently from the stacked Sobel matrix
     d = lf.S.toarray() @ (loss.normalise_lab(lab_p) - loss.normalise_lab(lab_t))

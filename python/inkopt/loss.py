@@ -32,6 +32,10 @@ LAB_NORM_SCALE = np.array([1.0 / 100.0, 1.0 / 255.0, 1.0 / 255.0])
 _LAB_NORM_OFFSET = np.array([0.0, 128.0 / 255.0, 128.0 / 255.0])
 K1 = 0.01 ** 2
 K2 = 0.03 ** 2
+# E1 enters the combined loss in units of (dE/100)^2: that puts it in the range of E2 and E3 (method.md: "the
+# factor 100 brings E3 into E1/E2's range"), so the paper's weight recommendations (g2 in [3, 9], g3 <= 3) apply.
+# The reported e1 stays the mean dE76^2.
+E1_WEIGHT_SCALE = 1e-4
 
 
 def _rgb(arr, name: str = "rgb") -> np.ndarray:
@@ -191,7 +195,8 @@ class LossResult:
 
 
 class TexelLoss:
-    """E = (g1 E1 + g2 E2 + g3 E3) / (g1 + g2 + g3) over I texels (method.md section 5).
+    """E = (g1 E1 / 100^2 + g2 E2 + g3 E3) / (g1 + g2 + g3) over I texels (method.md section 5; E1 is scaled
+    to units of (dE/100)^2 in the sum, see ``E1_WEIGHT_SCALE``).
 
     target_rgb (I, 3) linear RGB targets; pos_vox (I, 3) texel positions (x, y, z) in voxel units
     (``Texels.pos_vox``); gamma = (g1, g2, g3) >= 0 with a positive sum; sigma the SSIM Gaussian window's
@@ -287,9 +292,9 @@ class TexelLoss:
         sob = self.S @ cn - self._sobel_t
         e3 = float(c3 * np.sum(sob * sob))
         gs = self.gamma.sum()
-        value = (g1 * e1 + g2 * e2 + g3 * e3) / gs
+        value = (g1 * E1_WEIGHT_SCALE * e1 + g2 * e2 + g3 * e3) / gs
 
-        g_lab = (2.0 * g1 / n) * dlab if g1 > 0 else np.zeros_like(lab)
+        g_lab = (2.0 * g1 * E1_WEIGHT_SCALE / n) * dlab if g1 > 0 else np.zeros_like(lab)
         g_n = np.zeros_like(lab)
         if g2 > 0:
             coef = -g2 / (3.0 * n)  # dE2 / dSSIM_ic, times gamma2

@@ -1,0 +1,163 @@
+"""Tests of inkopt.baselines: simplex lattice, colour table (accuracy, cache), surface and extrusion baselines."""
+import time
+from math import comb
+
+import numpy as np
+import pytest
+
+from inkopt.baselines import (ColourTable, colour_table, default_step, extrusion_baseline, render_patches,
+                              simplex_lattice, simplex_least_squares, surface_baseline, white_mixture)
+from inkopt.loss import delta_e76, linear_to_lab
+from inkopt.materials import InkTable
+from inkopt.volume import Texels, Volume
+
+V300 = 25.4 / 300
+INKS3 = InkTable.from_names(["cyan", "magenta", "white"])
+
+
+@pytest.fixture(scope="module", autouse=True)
+def cache_in_tmp(tmp_path_factory):
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("INKOPT_CACHE_DIR", str(tmp_path_factory.mktemp("cache")))
+        yield
+
+
+@pytest.fixture(scope="module")
+def cyan_white():
+    """A 2-ink table (cyan, white), step 1/8, 1 mm patches: 9 entries."""
+    inks = InkTable.from_names(["cyan", "white"])
+    return inks, colour_table(inks, patch_mm=1.0, step=8, max_stderr=0.3)
+
+
+@pytest.fixture(scope="module")
+def table3():
+    return colour_table(INKS3, patch_mm=1.0, step=2, max_stderr=0.5)
+
+
+def test_simplex_lattice_counts_and_rows():
+    for n, step in [(1, 3), (2, 8), (3, 4), (5, 8)]:
+        lat = simplex_lattice(n, step)
+        assert lat.shape == (comb(step + n - 1, n - 1), n)
+        np.testing.assert_allclose(lat.sum(1), 1.0, atol=1e-6)
+        np.testing.assert_allclose(lat * step, np.rint(lat * step), atol=1e-5)  # on the 1/step grid
+        assert len(np.unique(lat, axis=0)) == len(lat) and lat.min() >= 0
+    assert default_step(5) == 8 and len(simplex_lattice(5, 8)) == 495
+    assert default_step(8) <= 4
+
+
+def test_simplex_least_squares_matches_brute_force():
+    rng = np.random.default_rng(0)
+    b = rng.normal(size=(50, 4, 3)) * 10
+    w = simplex_least_squares(b, 2000)
+    assert np.all(w >= -1e-12) and np.allclose(w.sum(1), 1)
+    f = np.sum(np.einsum("uk,ukc->uc", w, b) ** 2, 1)
+    # brute force over a fine simplex grid (step 1/40): the solver must not be worse (up to the grid resolution)
+    grid = simplex_lattice(4, 40).astype(np.float64)
+    fb = np.sum(np.einsum("gk,ukc->ugc", grid, b) ** 2, 2).min(1)
+    assert np.all(f <= fb + 1e-6 * (1 + fb))
+
+
+def test_table_maps_rendered_colour_back(cyan_white):
+    inks, table = cyan_white
+    assert table.lab.shape == (9, 3) and table.stderr.max() < 0.3 * 1.5  # pilot-sized second pass: some slack
+    assert np.all(np.diff(table.lab[:, 0]) < 0)  # more cyan -> darker (lattice order: cyan share 0 -> 1)
+    # lattice mixtures rendered with other seeds map back to themselves (neighbours are >> noise apart in Lab)
+    mixes = table.mixtures[[1, 3, 6]]
+    rgb, se = render_patches(mixes, inks, inks.g, 1.5, patch_mm=1.0, seed=99)
+    np.testing.assert_array_equal(table.lookup(rgb, refine=False), mixes)
+    # off-lattice mixtures: the refined look-up's rendered colour lies within half the Lab gap between the two
+    # enclosing lattice entries (the nearest entry alone guarantees that bound; the blend should beat it), plus
+    # 4 standard errors of MC noise
+    off = np.array([[0.30, 0.70], [0.06, 0.94]], np.float32)
+    rgb_off, se_off = render_patches(off, inks, inks.g, 1.5, patch_mm=1.0, seed=7)
+    for refine in (False, True):
+        got = table.lookup(rgb_off, refine=refine)
+        rgb_got, se_got = render_patches(got, inks, inks.g, 1.5, patch_mm=1.0, seed=8)
+        de = delta_e76(linear_to_lab(rgb_off), linear_to_lab(rgb_got))
+        lo = np.floor(off[:, 0] * 8).astype(int)
+        idx = [int(np.flatnonzero(np.isclose(table.mixtures[:, 0], k / 8))[0]) for k in lo]
+        idx2 = [int(np.flatnonzero(np.isclose(table.mixtures[:, 0], (k + 1) / 8))[0]) for k in lo]
+        gap = delta_e76(table.lab[idx], table.lab[idx2])
+        assert np.all(de <= 0.5 * gap + 4 * np.hypot(se_off, se_got)), (refine, de, gap)
+        if refine:
+            assert np.all(de < 0.25 * gap + 4 * np.hypot(se_off, se_got)), (de, gap)
+
+
+def test_cache_reused(cyan_white):
+    inks, table = cyan_white
+    t0 = time.perf_counter()
+    again = colour_table(inks, patch_mm=1.0, step=8, max_stderr=0.3)
+    assert time.perf_counter() - t0 < 0.5 and again.cached and again.key == table.key
+    np.testing.assert_array_equal(again.lab, table.lab)
+    np.testing.assert_array_equal(again.mixtures, table.mixtures)
+    other = InkTable.from_names(["cyan", "white"], g=0.5)  # another g is another table
+    from inkopt.baselines import table_key
+    assert table_key(other, other.g, 1.5, 1.0, 8, 0.3) != table.key
+
+
+# ----------------------------------------------------------------------------------------------- baselines
+def patch_scene(shape=(6, 16, 24), faces=("top",)):
+    """A slab with a target of 4 colour patches (quadrants) on each textured face."""
+    vol = Volume(voxel_mm=[V300] * 3, mixture=np.full(shape + (3,), 1 / 3, np.float32), inks=INKS3)
+    tex = Texels.box_faces(shape, faces)
+    quad = (tex.voxel[:, 1] >= shape[1] // 2) * 2 + (tex.voxel[:, 2] >= shape[2] // 2)
+    colours = np.array([[0.05, 0.3, 0.6], [0.6, 0.1, 0.3], [0.8, 0.8, 0.8], [0.2, 0.5, 0.8]])
+    target = colours[quad].astype(np.float32)
+    if len(faces) > 1:
+        target[tex.face == 4] = colours[::-1][quad[tex.face == 4]]
+    scene = {**tex.to_arrays(), "target_rgb": target, "fixed_share": np.zeros(shape + (3,), np.float32)}
+    return vol, tex, scene
+
+
+def test_surface_baseline_top_layer_only(table3):
+    vol, tex, scene = patch_scene()
+    mix = surface_baseline(vol, scene, table3)
+    white = white_mixture(INKS3)
+    assert mix.shape == vol.shape + (3,) and mix.dtype == np.float32
+    np.testing.assert_allclose(mix.sum(-1), 1.0, atol=1e-5)
+    np.testing.assert_array_equal(mix[:-1], np.broadcast_to(white, mix[:-1].shape))  # below the top: white
+    expect = table3.lookup(scene["target_rgb"])
+    np.testing.assert_allclose(mix[-1].reshape(-1, 3), expect, atol=1e-6)  # texel order = C order of (y, x)
+    assert not np.allclose(mix[-1], white)  # the colour is there
+
+
+def test_extrusion_fills_columns_and_halves(table3):
+    vol, tex, scene = patch_scene()
+    mix = extrusion_baseline(vol, scene, table3)
+    top = table3.lookup(scene["target_rgb"]).reshape(16, 24, 3)
+    np.testing.assert_allclose(mix, np.broadcast_to(top, mix.shape), atol=1e-6)  # every layer = its top texel
+    vol, tex, scene = patch_scene(faces=("top", "bottom"))
+    mix = extrusion_baseline(vol, scene, table3)
+    mapped = table3.lookup(scene["target_rgb"])
+    bottom, top = mapped[tex.face == 4].reshape(16, 24, 3), mapped[tex.face == 5].reshape(16, 24, 3)
+    np.testing.assert_allclose(mix[3:], np.broadcast_to(top, mix[3:].shape), atol=1e-6)
+    np.testing.assert_allclose(mix[:3], np.broadcast_to(bottom, mix[:3].shape), atol=1e-6)
+
+
+def test_fixed_share_and_inside_kept(table3):
+    vol, tex, scene = patch_scene()
+    inside = np.ones(vol.shape, bool)
+    inside[:, :, :2] = False
+    vol = Volume(voxel_mm=vol.voxel_mm, mixture=vol.mixture, inks=INKS3, inside=inside)
+    tex = Texels.exposed_faces(inside, ["top"])
+    fixed = np.zeros(vol.shape + (3,), np.float32)
+    fixed[:3, ..., 1] = 0.5  # half magenta fixed in the lower half
+    scene = {**tex.to_arrays(), "target_rgb": np.tile([[0.1, 0.4, 0.7]], (len(tex), 1)).astype(np.float32),
+             "fixed_share": fixed}
+    mix = extrusion_baseline(vol, scene, table3)
+    assert np.all(mix[~inside] == 0)
+    base = table3.lookup(scene["target_rgb"][:1])[0]
+    lower = mix[:3][inside[:3]]
+    np.testing.assert_allclose(lower, np.broadcast_to(0.5 * base + [0, 0.5, 0], lower.shape), atol=1e-6)
+    np.testing.assert_allclose(mix[3:][inside[3:]], np.broadcast_to(base, (int(inside[3:].sum()), 3)), atol=1e-6)
+
+
+def test_errors(table3):
+    vol, tex, scene = patch_scene()
+    other = ColourTable(("a", "b", "c"), table3.mixtures, table3.rgb, table3.lab, table3.stderr, 1.0, 2, "k")
+    with pytest.raises(ValueError, match="differ"):
+        surface_baseline(vol, scene, other)
+    with pytest.raises(ValueError, match="target_rgb"):
+        surface_baseline(vol, {**scene, "target_rgb": scene["target_rgb"][:5]}, table3)
+    with pytest.raises(ValueError, match="patch thickness"):
+        colour_table(INKS3, patch_mm=0.0)

@@ -1,0 +1,172 @@
+"""Tests of inkopt.evaluate: printer->scene texel maps, averaging, pictures, and a full synthetic run directory."""
+import json
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from inkopt.baselines import colour_table, extrusion_baseline, surface_baseline
+from inkopt.evaluate import average_to_scene, evaluate_run, face_picture, map_texels, printer_texels
+from inkopt.loss import linear_to_srgb
+from inkopt.materials import InkTable
+from inkopt.quantize import _enclosing, printer_grid, quantize
+from inkopt.volume import Texels, Volume, save_npz
+
+V300 = 25.4 / 300
+INKS3 = InkTable.from_names(["cyan", "magenta", "white"])
+SHAPE = (6, 16, 24)
+
+
+@pytest.fixture(scope="module", autouse=True)
+def cache_in_tmp(tmp_path_factory):
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("INKOPT_CACHE_DIR", str(tmp_path_factory.mktemp("cache")))
+        yield
+
+
+@pytest.fixture(scope="module")
+def table3():
+    return colour_table(INKS3, patch_mm=1.0, step=2, max_stderr=0.5)
+
+
+def test_map_texels_is_the_enclosing_voxel_map():
+    """Each printer texel maps to the scene texel whose voxel encloses it (the quantizer's own map), on all six
+    faces of a box; every scene texel gets printer texels, so no stand-ins."""
+    shape = (5, 7, 9)
+    vo = np.array([V300] * 3)
+    shape_p, vp = printer_grid(shape, vo)
+    scene = Texels.box_faces(shape)
+    printer = Texels.box_faces(shape_p)
+    to_scene, stand_in = map_texels(printer, vp, scene, vo)
+    enc = [_enclosing(shape_p[a], vp[2 - a], shape[a], vo[2 - a]) for a in range(3)]  # z, y, x
+    expect_voxel = np.stack([enc[a][printer.voxel[:, a]] for a in range(3)], 1)
+    np.testing.assert_array_equal(scene.voxel[to_scene], expect_voxel)
+    np.testing.assert_array_equal(scene.face[to_scene], printer.face)
+    assert np.all(stand_in == -1)
+    # a coarser printer grid than the scene (x): some scene texels get none and take their nearest printer texel
+    shape_p, vp = printer_grid(shape, vo, dpi=(150, 300))
+    printer = Texels.box_faces(shape_p, ["top"])
+    scene = Texels.box_faces(shape, ["top"])
+    to_scene, stand_in = map_texels(printer, vp, scene, vo)
+    missing = np.setdiff1d(np.arange(len(scene)), to_scene)
+    assert len(missing) > 0 and np.all(stand_in[missing] >= 0)
+    ps, pp = scene.position_mm(vo)[missing], printer.position_mm(vp)
+    d = np.linalg.norm(ps - pp[stand_in[missing]], axis=1)
+    brute = np.linalg.norm(ps[:, None] - pp[None], axis=2).min(1)  # the stand-in is the nearest printer texel
+    np.testing.assert_allclose(d, brute, atol=1e-12)
+
+
+def test_average_to_scene_matches_loop():
+    rng = np.random.default_rng(0)
+    to_scene = rng.integers(0, 6, 40)
+    to_scene[to_scene == 4] = 5  # scene texel 4 gets nothing
+    stand_in = np.full(6, -1)
+    stand_in[4] = 7
+    rgb_p, var_p = rng.random((40, 3)), rng.random((40, 3))
+    rgb, var = average_to_scene(rgb_p, var_p, to_scene, stand_in, 6)
+    for i in range(6):
+        sel = to_scene == i
+        if i == 4:
+            np.testing.assert_allclose(rgb[i], rgb_p[7])
+            np.testing.assert_allclose(var[i], var_p[7])
+        else:
+            np.testing.assert_allclose(rgb[i], rgb_p[sel].mean(0))
+            np.testing.assert_allclose(var[i], var_p[sel].sum(0) / sel.sum() ** 2)
+
+
+def test_face_picture_layout():
+    pix = np.arange(12).reshape(3, 4)[::-1]
+    a = np.random.default_rng(1).random((12, 3))
+    img = np.asarray(face_picture([("one", a), ("two", a * 0.5)], pix))
+    s = 64  # 4 px wide -> x64 to reach 256
+    assert img.shape[1] == 2 * 4 * s + 3 * 8
+    band = 20
+    for j, col in enumerate([a, a * 0.5]):
+        x0 = 8 + j * (4 * s + 8)
+        got = img[band + s // 2, x0 + s // 2]  # pixel (row 0, col 0) of the panel
+        expect = np.round(np.clip(linear_to_srgb(col[pix[0, 0]]), 0, 1) * 255)
+        np.testing.assert_array_equal(got, expect)
+    assert np.any(img[:band] < 128)  # the label text
+
+
+def make_run(d, table, kind="surface"):
+    """A 24x16x6 slab with a 4-patch target on top; its mixture IS the surface (or extrusion) baseline."""
+    tex = Texels.box_faces(SHAPE, ["top"])
+    quad = (tex.voxel[:, 1] >= SHAPE[1] // 2) * 2 + (tex.voxel[:, 2] >= SHAPE[2] // 2)
+    colours = np.array([[0.05, 0.3, 0.6], [0.6, 0.1, 0.3], [0.8, 0.8, 0.8], [0.2, 0.5, 0.8]])
+    target = colours[quad].astype(np.float32)
+    ny, nx = SHAPE[1:]
+    pix = (np.arange(ny)[::-1, None] * nx + np.arange(nx)[None, :]).astype(np.int32)  # row 0 = largest y
+    scene = {**tex.to_arrays(), "target_rgb": target, "kind": np.array("slab"),
+             "fixed_share": np.zeros(SHAPE + (3,), np.float32), "faces": np.array(["top"]), "pix_top": pix}
+    vol = Volume(voxel_mm=[V300] * 3, mixture=np.full(SHAPE + (3,), 1 / 3, np.float32), inks=INKS3)
+    fn = surface_baseline if kind == "surface" else extrusion_baseline
+    vol = vol.with_mixture(fn(vol, scene, table))
+    d.mkdir(parents=True, exist_ok=True)
+    vol.save(d / "volume.npz")
+    save_npz(d / "scene.npz", scene)
+    return vol, scene
+
+
+def test_evaluate_run_synthetic(tmp_path, table3):
+    vol, scene = make_run(tmp_path / "run", table3, "extrusion")
+    ev = evaluate_run(tmp_path / "run", spp=8, table=table3)
+    disk = json.loads((tmp_path / "run" / "evaluation.json").read_text())
+    assert disk == json.loads(json.dumps(ev))
+    keys = {"delta_e76_mean", "delta_e76_p95", "delta_e2000_mean", "ssim", "spp", "seconds", "method"}
+    for entry in (disk["continuous"], disk["quantized"], disk["baselines"]["surface"],
+                  disk["baselines"]["extrusion"]):
+        assert keys <= set(entry)
+        assert all(np.isfinite(entry[k]) for k in keys - {"method"})
+        assert 0 <= entry["delta_e76_mean"] <= entry["delta_e76_p95"] + 1e-9 and -1 <= entry["ssim"] <= 1
+    assert disk["quantized"]["method"] == "blue-noise" and (tmp_path / "run" / "quantized.npz").is_file()
+    # the run's mixture is the extrusion baseline: quantized the same way and rendered with the same seed it
+    # is bit-identical, so its figures equal ours exactly
+    for k in ("delta_e76_mean", "delta_e76_p95", "delta_e2000_mean", "ssim"):
+        assert disk["baselines"]["extrusion"][k] == disk["quantized"][k]
+    # quantization changes the look little on uniform columns: the ΔE of the printed and continuous results
+    # agree within the Monte Carlo noise of a texel's colour (both are means over 384 texels of ~8 spp each;
+    # 3x the per-texel noise level is a generous bound on the difference of the means plus the dither error)
+    c, q = disk["continuous"], disk["quantized"]
+    assert abs(q["delta_e76_mean"] - c["delta_e76_mean"]) < 3 * max(c["delta_e76_noise"], q["delta_e76_noise"])
+    assert q["spp_printer"] == 4  # 2 printer texels per scene texel on top at 600 x 300 DPI share the 8 spp
+    with Image.open(tmp_path / "run" / "evaluation_top.png") as im:
+        assert im.size[0] >= 5 * 256 and disk["pictures"] == ["evaluation_top.png"]
+
+
+def test_evaluate_surface_run_and_method_mismatch(tmp_path, table3):
+    d = tmp_path / "run"
+    make_run(d, table3, "surface")
+    q = Volume.load(d / "volume.npz")
+    labels, vp = quantize(q.mixture, q.voxel_mm, method="random", seed=5)
+    Volume(voxel_mm=vp, labels=labels, inks=INKS3,
+           extra={"method": np.array("random"), "seed": np.int64(5), "dpi": 25.4 / vp,
+                  "upsample": np.array("nearest")}).save(d / "quantized.npz")
+    ev = evaluate_run(d, spp=4, table=table3)
+    assert ev["quantization"]["method"] == "random" and ev["quantization"]["seed"] == 5
+    for k in ("delta_e76_mean", "ssim"):  # the surface baseline, quantized like ours (random, seed 5) = ours
+        assert ev["baselines"]["surface"][k] == ev["quantized"][k]
+    with pytest.raises(ValueError, match="quantized with 'random'"):
+        evaluate_run(d, spp=1, method="blue-noise", table=table3)
+
+
+def test_evaluate_mesh_kind(tmp_path, table3):
+    """A voxelized ball with shading normals: printer texels come from the upsampled normals."""
+    n = 10
+    c = (np.indices((n, n, n)).transpose(1, 2, 3, 0)[..., ::-1] + 0.5 - n / 2)  # xyz offsets from the centre
+    inside = np.linalg.norm(c, axis=-1) < n / 2 - 0.5
+    normals = (c / np.linalg.norm(c, axis=-1, keepdims=True)).astype(np.float32)
+    mix = np.zeros((n, n, n, 3), np.float32)
+    mix[inside] = [0.2, 0.1, 0.7]
+    vol = Volume(voxel_mm=[V300] * 3, mixture=mix, inks=INKS3, inside=inside, normals=normals)
+    tex = Texels.from_normals(inside, normals)
+    d = tmp_path / "mesh"
+    d.mkdir()
+    vol.save(d / "volume.npz")
+    save_npz(d / "scene.npz", {**tex.to_arrays(), "target_rgb": np.full((len(tex), 3), 0.3, np.float32),
+                               "kind": np.array("mesh"), "fixed_share": np.zeros(mix.shape, np.float32)})
+    ev = evaluate_run(d, spp=2, table=table3)
+    q = Volume.load(d / "quantized.npz")
+    assert q.normals is not None and len(printer_texels(q, tex, "mesh")) == ev["printer_texels"]
+    assert all(np.isfinite(ev[k]["delta_e76_mean"]) for k in ("continuous", "quantized"))
+    assert not list(d.glob("evaluation_*.png"))  # pictures only for slabs
