@@ -23,10 +23,12 @@ def add_optimizer_args(p) -> None:
                    help="ink set: a preset (vero-cmykw, vero-cmykw+orange, vero-cmykwt), a comma list of ink names, "
                         "or a JSON/TOML file of inks (default vero-cmykw)")
     p.add_argument("--iterations", type=int, default=d.iterations, help=f"(default {d.iterations})")
-    p.add_argument("--spp", type=int, default=d.spp, help=f"samples per texel per iteration (default {d.spp})")
+    p.add_argument("--spp", type=int, default=d.spp, help=f"samples per texel of the gradient pass (default {d.spp})")
+    p.add_argument("--forward-spp", type=int, default=d.forward_spp,
+                   help=f"samples per texel of the forward render the loss is evaluated at (default {d.forward_spp})")
     p.add_argument("--gamma", default=",".join(f"{g:g}" for g in d.gamma),
                    help="loss weights g1,g2,g3 of colour (dE76^2), SSIM and edge terms (default %(default)s)")
-    p.add_argument("--lr", type=float, help="step size (default: 0.5 for eg and adagrad, 0.1 for adam)")
+    p.add_argument("--lr", type=float, help="step size (default: 2 for eg, 0.5 for adagrad, 0.1 for adam)")
     p.add_argument("--optimizer", choices=("eg", "adam", "adagrad"), default=d.optimizer,
                    help="eg: exponentiated gradient with momentum (default); adagrad: the paper's; adam")
     p.add_argument("--param", choices=("softmax", "sigmoid"), default=d.param,
@@ -44,7 +46,7 @@ def add_optimizer_args(p) -> None:
 def config_from_args(args):
     from .optimize import OptimizeConfig
 
-    cfg = OptimizeConfig(iterations=args.iterations, spp=args.spp, gamma=parse_gamma(args.gamma), lr=args.lr,
+    cfg = OptimizeConfig(iterations=args.iterations, spp=args.spp, forward_spp=args.forward_spp, gamma=parse_gamma(args.gamma), lr=args.lr,
                          optimizer=args.optimizer, param=args.param, init=args.init, seed=args.seed,
                          grad_method=args.gradient, checkpoint_every=args.checkpoint_every)
     cfg.validate()

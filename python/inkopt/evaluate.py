@@ -17,9 +17,11 @@ Each result is compared with the scene's ``target_rgb``: ΔE76 mean and 95th per
 SSIM (``TexelLoss(...).ssim_mean``, sigma 1.5 voxels, on the scene texels), and ``delta_e76_noise``, the mean
 over texels of the Monte Carlo standard error of a texel's CIELAB colour (ΔE), and ``delta_e76_rms`` with
 ``delta_e76_rms_denoised``: the RMS ΔE76 and an unbiased estimate of it without the render noise
-(sqrt(mean(ΔE² - se²))). At 64 spp a texel's colour has a standard error of several ΔE (dark colours most), which
-inflates every ΔE mean; compare results rendered at the same spp, or use the denoised RMS. Writes DIR/evaluation.json and, for slabs, DIR/evaluation_<face>.png per textured face:
-target | optimized | quantized | surface | extrusion (sRGB).
+(sqrt(mean(ΔE² - se²))). At 64 spp a texel's colour has a standard error of several ΔE (dark colours most),
+which inflates every ΔE mean; compare results rendered at the same spp, or use the denoised RMS.
+
+Writes DIR/evaluation.json and, for slabs, DIR/evaluation_<face>.png per textured face: target | optimized |
+quantized | surface | extrusion (sRGB).
 """
 from __future__ import annotations
 
@@ -31,7 +33,8 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .baselines import DEFAULT_PATCH_MM, ColourTable, _lab_stderr, colour_table, extrusion_baseline, surface_baseline
+from .baselines import (DEFAULT_PATCH_MM, ColourTable, colour_table, extrusion_baseline, lab_stderr,
+                        surface_baseline)
 from .cli_quantize import load_run_volume, quantization_settings, quantize_volume, run_dir
 from .loss import TexelLoss, delta_e76, delta_e2000, linear_to_lab, linear_to_srgb
 from .volume import Texels, Volume, atomic_write_bytes
@@ -49,7 +52,7 @@ def texel_metrics(rgb, target_rgb, loss: TexelLoss, var_mean=None) -> dict:
     out = {"delta_e76_mean": float(de.mean()), "delta_e76_p95": float(np.percentile(de, 95)),
            "delta_e2000_mean": float(delta_e2000(lab_p, lab_t).mean()), "ssim": loss.ssim_mean(rgb)}
     if var_mean is not None:
-        se = _lab_stderr(np.asarray(rgb, np.float64), np.asarray(var_mean, np.float64))
+        se = lab_stderr(np.asarray(rgb, np.float64), np.asarray(var_mean, np.float64))
         out["delta_e76_noise"] = float(se.mean())
         out["delta_e76_rms"] = float(np.sqrt(np.mean(de * de)))
         # E|c + n - t|^2 = |c - t|^2 + tr(cov n) (to first order in Lab): an unbiased estimate of the noise-free
@@ -248,10 +251,11 @@ def evaluate_run(path, spp: int = DEFAULT_SPP, seed: int = 0, method: str | None
             table = colour_table(vol.inks, vol.g, vol.ior, patch_mm=patch_mm, threads=threads,
                                  progress=log is not None)
         say(f"colour table: {len(table.lab)} patches of {table.patch_mm:g} mm, step 1/{table.step}, "
-            + ("cached" if table.cached else f"built in {table.seconds:.0f} s"))
+            + ("(cached)" if table.cached else f"built in {table.seconds:.0f} s"))
         out["colour_table"] = {"entries": len(table.lab), "patch_mm": table.patch_mm, "step": table.step,
                                "max_stderr": float(table.stderr.max()), "refine": bool(refine),
-                               "key": table.key, "seconds": time.perf_counter() - t0}
+                               "key": table.key, "cached": table.cached, "build_seconds": table.seconds,
+                               "seconds": time.perf_counter() - t0}
         out["baselines"] = {}
         for name, fn in (("surface", surface_baseline), ("extrusion", extrusion_baseline)):
             mix = fn(vol, scene, table, refine=refine)

@@ -32,6 +32,7 @@ from .volume import Volume, save_npz
 
 FIXED_SHARE_MAX_ENTRIES = 50_000_000  # store scene.npz's dense fixed_share only below this many entries
 DPI = 300.0
+VIEW_SIZE = 320  # pixels per view in views.png (tests lower it)
 
 
 def peak_rss_gb() -> float:
@@ -106,9 +107,14 @@ def build_mesh_scene(mesh_path, inks: InkTable, height_mm: float | None = None, 
         raise ValueError(f"--dpi must be positive, got {dpi}")
     if "white" not in inks.names:
         white_fixed_share(np.ones((1, 1, 1), bool), inks)  # raises the one-line error before the slow part
+    if shell_mm is not None and not (np.isfinite(shell_mm) and shell_mm > 0):
+        raise ValueError(f"--shell-mm must be a positive thickness in mm, got {shell_mm}")
     t0 = time.perf_counter()
     mesh = load_mesh(mesh_path, height_mm=height_mm, scale=scale, up=up)
-    vox = voxelize(mesh, voxel_mm=25.4 / dpi)
+    voxel_mm = 25.4 / dpi
+    # The SDF is exact only within ``band`` voxels of the surface; the shell's boundary must lie inside it.
+    band = 3.0 if shell_mm is None else max(3.0, np.ceil(shell_mm / voxel_mm) + 2.0)
+    vox = voxelize(mesh, voxel_mm=voxel_mm, band=band)
     seconds = time.perf_counter() - t0
     free = free_voxels(vox, shell_mm)
     fixed = white_fixed_share(free, inks)
@@ -120,15 +126,17 @@ def build_mesh_scene(mesh_path, inks: InkTable, height_mm: float | None = None, 
     return MeshScene(mesh, vox, vol, free, fixed, shell_mm, seconds)
 
 
-def write_mesh_views(out: Path, scene: MeshScene, pred_rgb: np.ndarray, views: int = 4) -> list[Path]:
-    """prediction.glb, target.glb (vertex colours baked from the texels) and views.png (target vs prediction)."""
+def write_mesh_views(out: Path, scene: MeshScene, pred_rgb: np.ndarray, views: int = 4,
+                     size: int | None = None) -> list[Path]:
+    """prediction.glb, target.glb (vertex colours baked from the texels: target and predicted linear RGB (I, 3))
+    and views.png (target row over prediction row, ``views`` azimuths, ``size`` pixels each)."""
     tx, vox = scene.vox.texels, scene.vox
     target = bake_vertex_colors(scene.mesh, vox.closest_mm, vox.targets, texel_normal=tx.normal)
     pred = bake_vertex_colors(scene.mesh, vox.closest_mm, np.clip(pred_rgb, 0, 1), texel_normal=tx.normal)
     paths = [out / "prediction.glb", out / "target.glb", out / "views.png"]
     write_glb(pred, paths[0])
     write_glb(target, paths[1])
-    render_views(scene.mesh, target, pred, paths[2], views=views)
+    render_views(scene.mesh, target, pred, paths[2], views=views, size=size or VIEW_SIZE)
     return paths
 
 

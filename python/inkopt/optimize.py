@@ -26,13 +26,19 @@ from .render import Renderer
 from .volume import Texels, Volume, save_npz
 
 PARAMS = ("sigmoid", "softmax")
+EG_WARMUP = 5  # iterations over which the exponentiated-gradient step scale is measured
 OPTIMIZERS = ("eg", "adam", "adagrad")
 
 
 @dataclass
 class OptimizeConfig:
     iterations: int = 200
-    spp: int = 8
+    #: samples per texel of the gradient pass (unbiased at any spp; fewer is noisier)
+    spp: int = 4
+    #: samples per texel of the forward render that the adjoint dE/dC is evaluated at. dE/dC is a nonlinear
+    #: function of C (CIELAB is steep near black): evaluated at a few-spp estimate its expectation is biased, for
+    #: dark colours even in sign (measured: bench/README), so the adjoint gets more samples than the gradient.
+    forward_spp: int = 16
     gamma: tuple[float, float, float] = (1.0, 3.0, 0.0)
     lr: float | None = None  # default per optimizer: see default_lr
     optimizer: str = "eg"
@@ -42,16 +48,16 @@ class OptimizeConfig:
     grad_method: str = "replay"
     checkpoint_every: int = 10
     include_specular: bool = True
-    #: Weight of the past in the running average of the prediction used for the adjoint (0: this iteration's
-    #: render only). A few-spp texel estimate is so noisy that dE/dC evaluated at it is strongly biased (the
-    #: CIELAB curve is steep near black); averaging over iterations removes most of that bias.
+    #: Per-iteration decay of the sample-weighted running average of the prediction that the adjoint is evaluated
+    #: at (0: this iteration's forward render only). The mixture changes slowly, so averaging over iterations
+    #: multiplies the adjoint's samples (~ (forward_spp + spp) / (1 - decay)) at no rendering cost.
     adjoint_ema: float = 0.8
 
     def validate(self) -> None:
         if self.iterations < 0:
             raise ValueError(f"iterations must be >= 0, got {self.iterations}")
-        if self.spp < 1:
-            raise ValueError(f"spp must be >= 1, got {self.spp}")
+        if self.spp < 1 or self.forward_spp < 1:
+            raise ValueError(f"spp and forward spp must be >= 1, got {self.spp}, {self.forward_spp}")
         if self.param not in PARAMS:
             raise ValueError(f"unknown parameterisation '{self.param}'; use one of {PARAMS}")
         if self.optimizer not in OPTIMIZERS:
@@ -75,7 +81,7 @@ class OptimizeConfig:
 def default_lr(optimizer: str) -> float:
     """Step sizes in logit units (eg: of the most influential voxels) that converge in ~100-200 iterations on
     the test charts (see bench/)."""
-    return {"eg": 0.5, "adagrad": 0.5, "adam": 0.1}[optimizer]
+    return {"eg": 2.0, "adagrad": 0.5, "adam": 0.1}[optimizer]
 
 
 # ----------------------------------------------------------------------------------------- parameterisation
@@ -192,13 +198,13 @@ class Optimizer:
     def step(self, x: np.ndarray, g: np.ndarray) -> np.ndarray:
         self.t += 1
         if self.kind == "eg":
-            b1, b2 = 0.8, 0.9
-            scale = float(np.percentile(np.abs(g), 99)) if g.size else 0.0
-            self.v[0] = b2 * self.v[0] + (1 - b2) * scale
+            b1 = 0.8
+            if self.t <= EG_WARMUP:  # the step scale: mean over the first iterations, then frozen
+                scale = float(np.percentile(np.abs(g), 99)) if g.size else 0.0
+                self.v[0] += (scale - self.v[0]) / self.t
             self.m = b1 * self.m + (1 - b1) * g
-            s = self.v[0] / (1 - b2 ** self.t)
             mh = self.m / (1 - b1 ** self.t)
-            return x - self.lr * mh / (s + 1e-30)
+            return x - self.lr * mh / (self.v[0] + 1e-30)
         if self.kind == "adagrad":
             self.v += g * g
             return x - self.lr * g / (np.sqrt(self.v) + 1e-8)
@@ -271,6 +277,7 @@ class Optimization:
         self.iteration = 0
         self.history = History()
         self.c_avg: np.ndarray | None = None  # running average of the prediction (I, 3)
+        self.c_weight = 0.0                     # its effective number of samples per texel
 
     # -------------------------------------------------------------- state
     def mixture(self) -> np.ndarray:
@@ -289,7 +296,7 @@ class Optimization:
         return json.dumps(d, sort_keys=True)
 
     def save_checkpoint(self, path: Path) -> None:
-        extra = {} if self.c_avg is None else {"c_avg": self.c_avg}
+        extra = {} if self.c_avg is None else {"c_avg": self.c_avg, "c_weight": np.float64(self.c_weight)}
         save_npz(path, {"x": self.x, "iteration": np.int64(self.iteration), **extra,
                         "config_key": np.array(self.config_key()), **self.opt.state(), **self.history.arrays()},
                  compressed=False)
@@ -304,6 +311,7 @@ class Optimization:
         self.opt.load(d)
         self.history = History.from_arrays(d)
         self.c_avg = np.asarray(d["c_avg"], np.float32) if "c_avg" in d else None
+        self.c_weight = float(d["c_weight"]) if "c_weight" in d else 0.0
 
     # -------------------------------------------------------------- one step
     def step(self) -> dict:
@@ -311,10 +319,9 @@ class Optimization:
         t0 = time.perf_counter()
         fwd_seed, grad_seed = iteration_seeds(cfg.seed, self.iteration)
         renderer = Renderer(self.volume(), self.threads)
-        res = renderer.render(self.texels, cfg.spp, fwd_seed, cfg.include_specular)
+        res = renderer.render(self.texels, cfg.forward_spp, fwd_seed, cfg.include_specular)
         t1 = time.perf_counter()
-        b = cfg.adjoint_ema
-        c = res.rgb if self.c_avg is None else b * self.c_avg + (1 - b) * res.rgb
+        c = self._average(res.rgb, cfg.forward_spp, decay=True)
         lr = self.loss(c)
         de = float(delta_e76(lr.lab, self.loss.target_lab).mean())
         t2 = time.perf_counter()
@@ -322,7 +329,7 @@ class Optimization:
                                          cfg.include_specular, cfg.grad_method, grad_index=self.param.grad_index)
         # The gradient pass's own estimate joins the average only now, after its gradient is taken, so the
         # adjoint never correlates with the noise of the gradient it multiplies.
-        self.c_avg = (0.5 * (c + gres.rgb) if self.c_avg is not None else 0.5 * (res.rgb + gres.rgb)).astype(np.float32)
+        self._average(gres.rgb, cfg.spp, decay=False)
         t3 = time.perf_counter()
         g_x = self.param.backward(self.x, mix_grad(gs, ga, self.base.inks), natural=self.opt.natural)
         self.x = self.opt.step(self.x, g_x).astype(np.float32)
@@ -331,6 +338,17 @@ class Optimization:
         self.history.append(loss=lr.value, e1=lr.e1, e2=lr.e2, e3=lr.e3, delta_e76=de, seconds=t4 - t0,
                             render_s=t1 - t0, gradient_s=t3 - t2, loss_s=t2 - t1, step_s=t4 - t3)
         return {"loss": lr.value, "delta_e76": de}
+
+    def _average(self, rgb: np.ndarray, spp: int, decay: bool) -> np.ndarray:
+        """Add an estimate of ``spp`` samples per texel to the sample-weighted running average (first decaying
+        the past by ``adjoint_ema`` if ``decay``); return the average."""
+        w_old = self.c_weight * (self.cfg.adjoint_ema if decay else 1.0)
+        if self.c_avg is None or w_old <= 0:
+            self.c_avg, self.c_weight = rgb.astype(np.float32), float(spp)
+        else:
+            self.c_avg = ((w_old * self.c_avg + spp * rgb) / (w_old + spp)).astype(np.float32)
+            self.c_weight = w_old + spp
+        return self.c_avg
 
     def run(self, checkpoint: Path | None = None, progress: bool = False) -> None:
         """Iterate up to ``cfg.iterations`` (continuing from ``self.iteration``), checkpointing every

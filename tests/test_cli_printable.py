@@ -1,0 +1,143 @@
+"""Tests of the printable-output commands: inkopt quantize, export, evaluate (cli.main and one subprocess)."""
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from inkopt.cli import main
+from inkopt.export import read_png_slices
+from inkopt.materials import InkTable
+from inkopt.quantize import _enclosing, printer_grid, quantize
+from inkopt.volume import Texels, Volume, save_npz
+
+V300 = 25.4 / 300
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def make_run(d, shape=(4, 8, 10), normals=False):
+    inks = InkTable.parse("vero-cmykw")
+    mix = np.random.default_rng(0).dirichlet(np.ones(5), size=shape).astype(np.float32)
+    kw = {}
+    if normals:
+        c = np.indices(shape).transpose(1, 2, 3, 0)[..., ::-1] + 0.5 - np.array(shape[::-1]) / 2
+        kw = dict(inside=np.linalg.norm(c, axis=-1) < min(shape) / 2,
+                  normals=(c / np.linalg.norm(c, axis=-1, keepdims=True)).astype(np.float32))
+    vol = Volume(voxel_mm=[V300] * 3, mixture=mix, inks=inks, **kw)
+    d.mkdir(parents=True, exist_ok=True)
+    vol.save(d / "volume.npz")
+    tex = Texels.box_faces(shape, ["top"])
+    ny, nx = shape[1:]
+    save_npz(d / "scene.npz", {**tex.to_arrays(), "target_rgb": np.full((len(tex), 3), 0.4, np.float32),
+                               "kind": np.array("slab"), "fixed_share": np.zeros(mix.shape, np.float32),
+                               "faces": np.array(["top"]),
+                               "pix_top": (np.arange(ny)[::-1, None] * nx + np.arange(nx)).astype(np.int32)})
+    return vol
+
+
+def run(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_quantize_writes_renderable_labels(tmp_path, capsys):
+    vol = make_run(tmp_path / "r")
+    code, out, err = run(capsys, "quantize", tmp_path / "r")
+    assert code == 0 and "printer grid 20 x 8 x 13" in out and "cyan" in out, out + err
+    q = Volume.load(tmp_path / "r" / "quantized.npz")
+    shape_p, vp = printer_grid(vol.shape, vol.voxel_mm)
+    labels, _ = quantize(vol.mixture, vol.voxel_mm)  # the defaults: blue-noise, seed 0, nearest
+    np.testing.assert_array_equal(q.labels, labels)
+    np.testing.assert_allclose(q.voxel_mm, vp)
+    assert str(q.extra["method"]) == "blue-noise" and int(q.extra["seed"]) == 0
+    np.testing.assert_allclose(q.extra["dpi"], [600, 300, 25.4 / 0.027])
+    assert q.inks.names == vol.inks.names and q.inside is None and q.normals is None
+    # renderable by `inkopt render` (a fresh process, as a user would run it)
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "python")}
+    proc = subprocess.run([sys.executable, "-m", "inkopt.cli", "render", str(tmp_path / "r" / "quantized.npz"),
+                           "--spp", "1", "--json"], capture_output=True, text=True, env=env, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads(proc.stdout)
+    assert summary["texels"] == 2 * (20 * 8 + 20 * 13 + 8 * 13) and all(0 < v < 1.2 for v in summary["mean_rgb"])
+
+
+def test_quantize_options(tmp_path, capsys):
+    vol = make_run(tmp_path / "r")
+    code, out, err = run(capsys, "quantize", tmp_path / "r", "--method", "random", "--dpi", "300x300x600",
+                         "--seed", "4", "--upsample", "linear")
+    assert code == 0, err
+    q = Volume.load(tmp_path / "r" / "quantized.npz")
+    labels, vp = quantize(vol.mixture, vol.voxel_mm, method="random", dpi=(300, 300, 600), seed=4,
+                          upsample="linear")
+    np.testing.assert_array_equal(q.labels, labels)
+    assert str(q.extra["method"]) == "random" and str(q.extra["upsample"]) == "linear"
+    code, _, _ = run(capsys, "quantize", tmp_path / "r", "--layer-um", "14")
+    assert code == 0 and Volume.load(tmp_path / "r" / "quantized.npz").voxel_mm[2] == pytest.approx(0.014)
+
+
+def test_quantize_upsamples_mesh_normals(tmp_path, capsys):
+    vol = make_run(tmp_path / "m", shape=(6, 6, 6), normals=True)
+    assert run(capsys, "quantize", tmp_path / "m")[0] == 0
+    q = Volume.load(tmp_path / "m" / "quantized.npz")
+    Z, Y, X = q.labels.shape
+    iz, iy, ix = (_enclosing(Z, q.voxel_mm[2], 6, V300), _enclosing(Y, q.voxel_mm[1], 6, V300),
+                  _enclosing(X, q.voxel_mm[0], 6, V300))
+    np.testing.assert_array_equal(q.normals, vol.normals[np.ix_(iz, iy, ix)])
+    np.testing.assert_array_equal(q.labels == 255, ~vol.inside[np.ix_(iz, iy, ix)])
+    tex = Texels.for_volume(q)  # one texel per printer surface voxel, from the normals
+    assert len(tex) > 0 and np.all(np.abs(np.linalg.norm(tex.normal, axis=1) - 1) < 1e-5)
+
+
+def test_export_png_slices(tmp_path, capsys):
+    make_run(tmp_path / "r")
+    assert run(capsys, "export", tmp_path / "r")[0] == 2  # no quantized.npz yet
+    assert run(capsys, "quantize", tmp_path / "r")[0] == 0
+    q = Volume.load(tmp_path / "r" / "quantized.npz")
+    code, out, err = run(capsys, "export", tmp_path / "r", "--format", "png-slices", "--out", tmp_path / "s",
+                         "--printer", "j750", "--palette", '{"white": "#F0F0F0"}')
+    assert code == 0, err
+    assert len(list((tmp_path / "s").glob("slice_*.png"))) == q.labels.shape[0]
+    labels, man = read_png_slices(tmp_path / "s")
+    np.testing.assert_array_equal(labels, q.labels)
+    assert man["materials"][4]["hex"] == "#F0F0F0" and man["max_materials"] == 6
+    code, out, err = run(capsys, "export", tmp_path / "r")  # default: DIR/slices
+    assert code == 0 and (tmp_path / "r" / "slices" / "manifest.json").is_file()
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["quantize", "{tmp}/nope"], "does not exist"),
+    (["quantize", "{tmp}/empty"], "volume.npz does not exist"),
+    (["quantize", "{tmp}/r", "--method", "floyd"], "unknown quantization method"),
+    (["quantize", "{tmp}/r", "--dpi", "600"], "--dpi"),
+    (["quantize", "{tmp}/r", "--dpi", "600x300x900", "--layer-um", "14"], "layer thickness once"),
+    (["export", "{tmp}/r", "--format", "3mf"], "lib3mf 2.5.0 cannot write volumetric composites"),
+    (["export", "{tmp}/r", "--format", "stl"], "unknown export format"),
+    (["export", "{tmp}/r", "--printer", "x9"], "unknown printer"),
+    (["export", "{tmp}/r", "--palette", "{bad"], "--palette"),
+    (["evaluate", "{tmp}/nope"], "does not exist"),
+    (["evaluate", "{tmp}/r", "--method", "floyd"], "unknown quantization method"),
+    (["evaluate", "{tmp}/r", "--spp", "0"], "--spp"),
+])
+def test_bad_input_exits_2_with_one_line(tmp_path, capsys, argv, message):
+    make_run(tmp_path / "r")
+    (tmp_path / "empty").mkdir()
+    code, out, err = run(capsys, *[a.replace("{tmp}", str(tmp_path)) for a in argv])
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("inkopt: error:") and message in lines[0], err
+
+
+def test_evaluate_cli_json(tmp_path, capsys):
+    make_run(tmp_path / "r")
+    code, out, err = run(capsys, "evaluate", tmp_path / "r", "--spp", "2", "--no-baselines", "--json")
+    assert code == 0, err
+    ev = json.loads(out)
+    assert ev == json.loads((tmp_path / "r" / "evaluation.json").read_text())
+    assert ev["quantized"]["method"] == "blue-noise" and np.isfinite(ev["quantized"]["delta_e76_mean"])
+    assert (tmp_path / "r" / "quantized.npz").is_file() and (tmp_path / "r" / "evaluation_top.png").is_file()
+    code, out, err = run(capsys, "evaluate", tmp_path / "r", "--spp", "2", "--no-baselines")
+    assert code == 0 and "dE76 mean" in out and "quantized" in out

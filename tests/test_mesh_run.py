@@ -1,0 +1,203 @@
+"""Tests of ``inkopt optimize MESH`` (inkopt.mesh_run, inkopt.cli_optimize): outputs, quality gain, shell,
+resume, one-line errors.
+
+Most tests use a 1 mm-radius sphere (26^3 grid, ~1400 texels, ~0.15 s per iteration at spp 2) painted in three
+saturated colours (cyan top, magenta bottom, yellow on +x); the all-white start is ~75 ΔE76 off.
+Runs are deterministic: renders are bit-identical for any thread count and seeds derive from (seed, iteration).
+"""
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from inkopt import cli
+from inkopt.materials import InkTable
+from inkopt.volume import Texels, Volume
+
+pytest.importorskip("inkopt._core")
+
+SPOT = Path("/work/shared/data/spot/spot.obj")
+RADIUS = 1.0
+_SPHERE = trimesh.creation.icosphere(subdivisions=4, radius=RADIUS)
+# the pipeline stands the mesh on z = 0 (centred in x, y): the sphere's centre in the object's frame
+CENTRE = np.array([0.0, 0.0, -_SPHERE.vertices[:, 2].min()])
+OUTPUTS = ("volume.npz", "scene.npz", "report.json", "checkpoint.npz", "loss.png", "prediction.glb", "target.glb",
+           "views.png")
+REPORT_KEYS = ("initial_delta_e76_mean", "delta_e76_mean", "delta_e76_p95", "delta_e2000_mean", "ssim", "loss",
+               "e1", "e2", "e3", "iterations", "spp", "seconds", "seconds_per_iteration", "time_split", "voxels",
+               "inside_voxels", "free_voxels", "texels", "voxelize_seconds", "peak_rss_gb", "shell_mm")
+
+
+@pytest.fixture(scope="module", autouse=True)
+def small_views():
+    """views.png at 64 px per view: the z-buffer picture costs seconds at full size and is not under test here."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr("inkopt.mesh_run.VIEW_SIZE", 64)
+        yield
+
+
+@pytest.fixture(scope="module")
+def ball(tmp_path_factory) -> Path:
+    """A vertex-coloured icosphere (radius 1 mm, z up) as PLY."""
+    sph = _SPHERE
+    v = sph.vertices
+    col = np.where(v[:, 2:3] > 0, [[0, 200, 230, 255]], [[230, 0, 160, 255]]).astype(np.uint8)
+    col[v[:, 0] > 0.5 * RADIUS] = [240, 220, 0, 255]
+    path = tmp_path_factory.mktemp("mesh") / "ball.ply"
+    trimesh.Trimesh(v, sph.faces, vertex_colors=col, process=False).export(path)
+    return path
+
+
+def optimize(mesh, out, *extra, iterations=3, spp=2, eval_spp=8):
+    argv = ["optimize", str(mesh), "--out", str(out), "--iterations", str(iterations), "--spp", str(spp),
+            "--eval-spp", str(eval_spp), "--threads", "2", *extra]
+    if "--height-mm" not in extra and "--scale" not in extra:
+        argv += ["--scale", "1", "--up", "z"]
+    return cli.main(argv)
+
+
+@pytest.fixture(scope="module")
+def ball_run(ball, tmp_path_factory):
+    out = tmp_path_factory.mktemp("ballrun")
+    assert optimize(ball, out, "--lr", "2", iterations=30, spp=2, eval_spp=32) == 0
+    return out
+
+
+def test_outputs_and_quality(ball_run):
+    for name in OUTPUTS:
+        assert (ball_run / name).is_file(), name
+    rep = json.loads((ball_run / "report.json").read_text())
+    assert set(REPORT_KEYS) <= set(rep)
+    assert rep["iterations"] == 30 and rep["shell_mm"] is None
+    assert rep["inside_voxels"] == rep["free_voxels"] < rep["voxels"]
+    # The final and the all-white start are evaluated with the same seed at 32 spp over ~1400 texels: the
+    # evaluation noise of each mean ΔE76 is ~0.1 (per-texel ΔE spread of a few units / sqrt(1400)). The run itself
+    # is deterministic; over seeds 0-3 it lowers ΔE76 from 75 to 46-48, so a margin of 15 leaves room for
+    # renderer changes that alter the random streams without hiding a broken optimiser (which leaves ~75).
+    assert rep["initial_delta_e76_mean"] > 60
+    assert rep["delta_e76_mean"] < rep["initial_delta_e76_mean"] - 15
+
+
+def test_volume_and_scene_files(ball_run):
+    vol = Volume.load(ball_run / "volume.npz")
+    scene = dict(np.load(ball_run / "scene.npz", allow_pickle=False))
+    assert vol.form == "mixture" and vol.inks.names == InkTable.parse("vero-cmykw").names
+    assert vol.boundary == "box" and vol.inside is not None and vol.normals is not None
+    np.testing.assert_allclose(vol.mixture.sum(-1), 1.0, atol=1e-5)
+    np.testing.assert_allclose(vol.extra["origin_mm"], scene["origin_mm"])
+    # the grid's low corner sits one voxel (the padding) below the mesh's bounding box
+    lo = [-CENTRE[2], -CENTRE[2], 0.0]
+    np.testing.assert_allclose(scene["origin_mm"], np.array(lo) - vol.voxel_mm, atol=1e-9)
+    assert str(scene["kind"]) == "mesh" and Path(str(scene["mesh_path"])).is_absolute()
+    assert float(scene["mesh_scale"]) == 1.0 and np.isnan(scene["shell_mm"])
+    # the texels a reader derives from the saved volume are the scene's texels
+    tx, saved = Texels.for_volume(vol), Texels.from_arrays(scene)
+    np.testing.assert_array_equal(tx.voxel, saved.voxel)
+    np.testing.assert_array_equal(tx.face, saved.face)
+    np.testing.assert_allclose(tx.normal, saved.normal, atol=1e-6)
+    t = scene["target_rgb"]
+    assert t.shape == (len(tx), 3) and t.dtype == np.float32
+    # fixed_share: one-hot white exactly outside the object (nothing inside is fixed without a shell)
+    fixed, white = scene["fixed_share"], vol.inks.index("white")
+    np.testing.assert_array_equal(fixed[..., white], (~vol.inside).astype(np.float32))
+    assert fixed.sum() == (~vol.inside).sum()
+    np.testing.assert_array_equal(scene["free_mask"], vol.inside)
+    assert np.all(vol.mixture[~vol.inside][:, white] == 1.0)
+    # the optimiser puts each cap's ink under that cap: mean share of cyan (magenta, yellow) in the surface voxels
+    # of the cyan (magenta, yellow) region is over 3x its share in the other regions (measured: 10-100x)
+    p = scene["texel_closest_mm"] - CENTRE
+    regions = {"cyan": (p[:, 2] > 0.5 * RADIUS) & (p[:, 0] < 0.3 * RADIUS),
+               "magenta": (p[:, 2] < -0.5 * RADIUS) & (p[:, 0] < 0.3 * RADIUS), "yellow": p[:, 0] > 0.6 * RADIUS}
+    surf = vol.mixture[tuple(saved.voxel.T)]
+    for ink, sel in regions.items():
+        k = vol.inks.index(ink)
+        others = np.any([r for n, r in regions.items() if n != ink], axis=0)
+        assert sel.sum() > 50 and others.sum() > 50
+        assert surf[sel, k].mean() > 3 * surf[others, k].mean(), ink
+
+
+def test_shell_fixes_deep_voxels(ball, tmp_path):
+    shell = 0.3
+    assert optimize(ball, tmp_path, "--shell-mm", str(shell), iterations=2) == 0
+    vol = Volume.load(tmp_path / "volume.npz")
+    scene = np.load(tmp_path / "scene.npz")
+    rep = json.loads((tmp_path / "report.json").read_text())
+    # independent reference: the exact sphere SDF at voxel centres (the icosphere lies within ~2 µm of the
+    # sphere; voxels within 5 µm of the shell's boundary are not judged)
+    nz, ny, nx = vol.shape
+    zz, yy, xx = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")
+    pos = scene["origin_mm"] + (np.stack([xx, yy, zz], -1) + 0.5) * vol.voxel_mm
+    sdf = np.linalg.norm(pos - CENTRE, axis=-1) - RADIUS
+    deep = sdf < -shell - 0.005
+    near = (sdf > -shell + 0.005) & vol.inside
+    assert deep.sum() > 1000 and rep["shell_mm"] == shell
+    assert rep["free_voxels"] == int(scene["free_mask"].sum()) < rep["inside_voxels"]
+    white = vol.inks.index("white")
+    m = vol.mixture
+    assert np.all(m[deep][:, white] == 1.0) and np.all(np.delete(m[deep], white, axis=1) == 0.0)
+    assert not scene["free_mask"][deep].any() and scene["free_mask"][near].all()
+    assert np.all(m[near][:, white] < 1.0)  # variables: started at 97 % white and moved
+    np.testing.assert_array_equal(scene["fixed_share"][..., white], (~scene["free_mask"]).astype(np.float32))
+
+
+def test_resume_continues_exactly(ball, tmp_path):
+    a, b = tmp_path / "a", tmp_path / "b"
+    assert optimize(ball, a, iterations=4) == 0
+    assert optimize(ball, a, "--resume", iterations=6) == 0
+    assert optimize(ball, b, iterations=6) == 0
+    ra, rb = (json.loads((d / "report.json").read_text()) for d in (a, b))
+    assert ra["iterations"] == rb["iterations"] == 6
+    ma, mb = (Volume.load(d / "volume.npz").mixture for d in (a, b))
+    np.testing.assert_array_equal(ma, mb)
+    ha, hb = (np.load(d / "checkpoint.npz")["hist_loss"] for d in (a, b))
+    np.testing.assert_array_equal(ha, hb)
+    assert ra["delta_e76_mean"] == rb["delta_e76_mean"]
+    assert optimize(ball, a, "--resume", "--seed", "5", iterations=7) == 2  # other settings: refused
+
+
+@pytest.mark.skipif(not SPOT.is_file(), reason="Spot data set not present")
+def test_spot_textured_obj(tmp_path):
+    """The textured OBJ path end to end (2 iterations: outputs, not quality)."""
+    assert optimize(SPOT, tmp_path, "--height-mm", "6", iterations=2, spp=1, eval_spp=2) == 0
+    for name in OUTPUTS:
+        assert (tmp_path / name).is_file(), name
+    rep = json.loads((tmp_path / "report.json").read_text())
+    assert rep["height_mm"] == pytest.approx(6.0) and rep["texels"] > 5000
+    glb = trimesh.load(tmp_path / "prediction.glb", force="mesh")
+    assert glb.visual.vertex_colors.shape[1] == 4
+
+
+def _bad(tmp_path, capsys, argv):
+    rc = cli.main(argv)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and err[0].startswith("inkopt: error: "), (rc, err)
+    return err[0]
+
+
+def test_bad_input(ball, tmp_path, capsys):
+    out = str(tmp_path / "o")
+    base = ["optimize", "--out", out, "--iterations", "1"]
+    assert "does not exist" in _bad(tmp_path, capsys, base + [str(tmp_path / "none.obj"), "--height-mm", "5"])
+    garbage = tmp_path / "garbage.ply"
+    garbage.write_bytes(b"\x89PNG not a mesh at all")
+    assert "not a readable mesh" in _bad(tmp_path, capsys, base + [str(garbage), "--height-mm", "5"])
+    quad = tmp_path / "quad.ply"
+    trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [[0, 1, 2], [0, 2, 3]], process=False).export(quad)
+    assert "does not enclose a solid" in _bad(tmp_path, capsys, base + [str(quad), "--height-mm", "5"])
+    assert "exactly one of" in _bad(tmp_path, capsys, base + [str(ball)])
+    assert "exactly one of" in _bad(tmp_path, capsys, base + [str(ball), "--height-mm", "2", "--scale", "1"])
+    assert "no 'white'" in _bad(tmp_path, capsys, base + [str(ball), "--scale", "1", "--inks", "cyan,magenta"])
+    assert "shell" in _bad(tmp_path, capsys, base + [str(ball), "--scale", "1", "--shell-mm", "-1"])
+    assert not Path(out).exists()  # nothing written on bad input
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not SPOT.is_file(), reason="Spot data set not present")
+def test_spot_20mm_quality(tmp_path):
+    """Spot at 20 mm (7.8 M voxels, 96 k texels): 20 iterations take ~10-20 min on 2 cores."""
+    assert optimize(SPOT, tmp_path, "--height-mm", "20", iterations=20, spp=2, eval_spp=16) == 0
+    rep = json.loads((tmp_path / "report.json").read_text())
+    # TODO(margin): set from the measured runs (see report)
+    assert rep["delta_e76_mean"] < 0.6 * rep["initial_delta_e76_mean"]
