@@ -34,6 +34,13 @@ impl PathRng {
         mix64(self.state)
     }
 
+    /// Two independent uniforms in [0, 1), 24 random bits each, from one hash.
+    #[inline(always)]
+    pub fn next_f32_pair(&mut self) -> (f32, f32) {
+        let x = self.next_u64();
+        ((x >> 40) as f32 * (1.0 / 16_777_216.0), ((x >> 8) & 0xFF_FFFF) as f32 * (1.0 / 16_777_216.0))
+    }
+
     /// Uniform in [0, 1) with 24 random bits.
     #[inline(always)]
     pub fn next_f32(&mut self) -> f32 {

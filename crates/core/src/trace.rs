@@ -207,7 +207,8 @@ fn fly_delta<M: Medium, T: Tally>(geo: &Geometry, med: &M, c: usize, maj: f32, p
     let inv_maj = if maj > 0.0 { 1.0 / maj } else { f32::INFINITY };
     let mut t = 0.0f32;
     loop {
-        t += free_flight(rng) * inv_maj;
+        let (u_flight, u_accept) = rng.next_f32_pair();
+        t += -(1.0 - u_flight).ln() * inv_maj;
         if t >= t_exit {
             let step = if d[exit_axis] > 0.0 { 1 } else { -1 };
             if T::ACTIVE {
@@ -220,10 +221,10 @@ fn fly_delta<M: Medium, T: Tally>(geo: &Geometry, med: &M, c: usize, maj: f32, p
             return Flight::Exit(exit_axis, step);
         }
         let mut q = add(p_start, scale(d, t));
-        let w = locate(geo, &mut q);
+        let w = if periodic { locate(geo, &mut q) } else { locate_box(geo, q) };
         let j = geo.index(w);
         let (st, albedo) = med.coeffs(j, c);
-        if rng.next_f32() * maj < st {
+        if u_accept * maj < st {
             if T::ACTIVE {
                 tally_segments(geo, p_start, d, v_start, t, tally);
             }
@@ -232,6 +233,16 @@ fn fly_delta<M: Medium, T: Tally>(geo: &Geometry, med: &M, c: usize, maj: f32, p
             return Flight::Collision(j, albedo);
         }
     }
+}
+
+/// The voxel containing p, clamped to the grid (no periodic wrap).
+#[inline(always)]
+fn locate_box(geo: &Geometry, p: V3) -> [i32; 3] {
+    let mut v = [0i32; 3];
+    for a in 0..3 {
+        v[a] = ((p[a] * geo.inv_size[a]) as i32).max(0).min(geo.n[a] - 1);
+    }
+    v
 }
 
 /// The voxel containing p (clamped to the grid); in a periodic grid p is first wrapped into the grid's period.
@@ -248,7 +259,7 @@ fn locate(geo: &Geometry, p: &mut V3) -> [i32; 3] {
                 }
             }
         }
-        v[a] = ((p[a] * geo.inv_size[a]) as i32).clamp(0, geo.n[a] - 1);
+        v[a] = ((p[a] * geo.inv_size[a]) as i32).max(0).min(geo.n[a] - 1);
     }
     v
 }
@@ -338,7 +349,8 @@ pub fn trace<M: Medium, T: Tally>(
                             return PathValue { value: 0.0, events };
                         }
                         tally.scatter(j);
-                        d = hg_sample(d, geo.g, rng.next_f32(), rng.next_f32());
+                        let (u1, u2) = rng.next_f32_pair();
+                        d = hg_sample(d, geo.g, u1, u2);
                     }
                     Flight::Exit(axis, step) => {
                         let mut n_geo = [0.0f32; 3];
@@ -379,7 +391,8 @@ pub fn trace<M: Medium, T: Tally>(
                     }
                     tally.scatter(j);
                     p0 = add(p0, scale(d, t + s));
-                    d = hg_sample(d, geo.g, rng.next_f32(), rng.next_f32());
+                    let (u1, u2) = rng.next_f32_pair();
+                    d = hg_sample(d, geo.g, u1, u2);
                     dda = Dda::new(geo, p0, d, v);
                     t = 0.0;
                     tau = free_flight(rng);
