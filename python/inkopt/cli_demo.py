@@ -32,7 +32,7 @@ def _demo(args) -> int:
 
     # 2. Optimise a 6 x 4 x 1 mm two-sided slab.
     top = charts.save(charts.colour_chart(288, 192), out / "chart.png")
-    bottom = charts.save(charts.zebra(288, 192), out / "zebra.png")
+    bottom = charts.save(charts.zebra(71, 47), out / "zebra.png")  # the face's texel grid: exact stripe widths
     cfg = OptimizeConfig(iterations=args.iterations, spp=4, seed=0)
     print(f"[2/2] optimising a 6 x 4 x 1 mm slab: {top.name} on top, {bottom.name} below, {cfg.iterations} "
           "iterations ...")
