@@ -91,7 +91,7 @@ def test_table_maps_rendered_colour_back(cyan_white):
         assert np.all(de <= bound + 4 * np.hypot(se_off, se_got)), (refine, de, bound)
 
 
-def test_cache_reused(cyan_white):
+def test_cache_reused(cyan_white, tmp_path):
     inks, table = cyan_white
     t0 = time.perf_counter()
     again = colour_table(inks, patch_mm=1.0, step=8, max_stderr=0.4)
@@ -99,7 +99,10 @@ def test_cache_reused(cyan_white):
     np.testing.assert_array_equal(again.lab, table.lab)
     np.testing.assert_array_equal(again.mixtures, table.mixtures)
     other = InkTable.from_names(["cyan", "white"], g=0.5)  # another g is another table
-    assert table_key(other, other.g, 1.5, 1.0, 8, 0.3) != table.key
+    assert table_key(other, other.g, 1.5, 1.0, 8, 0.4) != table.key
+    # the ink table of a volume read from disk (float32 coefficients) finds the same table
+    Volume(voxel_mm=[V300] * 3, mixture=np.ones((1, 1, 1, 2), np.float32) / 2, inks=inks).save(tmp_path / "v.npz")
+    assert colour_table(Volume.load(tmp_path / "v.npz").inks, patch_mm=1.0, step=8, max_stderr=0.4).cached
 
 
 # ----------------------------------------------------------------------------------------------- baselines

@@ -103,8 +103,10 @@ def table_key(inks: InkTable, g: float, ior: float, patch_mm: float, step: int, 
     h = hashlib.sha256()
     h.update(repr((TABLE_VERSION, __version__, tuple(inks.names), round(float(g), 9), round(float(ior), 9),
                    round(float(patch_mm), 9), int(step), round(float(max_stderr), 9))).encode())
-    h.update(np.ascontiguousarray(inks.sigma_s, np.float64).tobytes())
-    h.update(np.ascontiguousarray(inks.sigma_a, np.float64).tobytes())
+    # float32, as volume files store the ink table: a table built from InkTable.parse(...) is found again from a
+    # volume loaded from disk
+    h.update(np.ascontiguousarray(inks.sigma_s, np.float32).tobytes())
+    h.update(np.ascontiguousarray(inks.sigma_a, np.float32).tobytes())
     return h.hexdigest()[:20]
 
 
