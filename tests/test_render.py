@@ -94,10 +94,15 @@ def test_mask_regular_tracking_matches_delta_tracking():
     assert np.all(np.abs(a.mean_rgb - b.mean_rgb) < 4 * se)
 
 
-def _fd_check(vol, probes, spp=3000, seeds=(11, 12, 13), h=0.3):
+def _fd_check(vol, probes, spp=800, seeds=tuple(range(11, 23)), h=0.3):
     """Replay gradient of sum(adj * c) vs central finite differences with common random numbers, per probe
-    (z, y, x, channel, 'sigma_s'|'sigma_a'); compared within 4 standard errors of the difference over seeds plus
-    2 % for the O(h^2) bias of the difference quotient."""
+    (z, y, x, channel, 'sigma_s'|'sigma_a'). Both are unbiased estimators, so their difference over independent
+    seeds has mean ~0: we test it against the Student-t quantile for a two-sided false-alarm rate of 1e-4 per probe
+    (the standard error is itself estimated from the 12 seeds, so a normal 4-sigma bound would fire ~1 % of the
+    time per probe), plus 2 % for the O(h^2) bias of the difference quotient."""
+    from scipy.stats import t as student_t
+
+    t_crit = student_t.ppf(1 - 1e-4 / 2, len(seeds) - 1)
     tex = Texels.for_volume(vol, ["top"])
     adj = np.random.default_rng(0).uniform(0.2, 1.0, (len(tex), 3)).astype(np.float32)
     for (z, y, x, c, which) in probes:
@@ -114,7 +119,8 @@ def _fd_check(vol, probes, spp=3000, seeds=(11, 12, 13), h=0.3):
             fd.append((vals[0] - vals[1]) / (2 * h))
         d = np.array(g) - np.array(fd)
         se = d.std(ddof=1) / np.sqrt(len(d))
-        assert abs(d.mean()) < 4 * se + 0.02 * abs(np.mean(fd)) + 1e-5, (z, y, x, c, which, np.mean(g), np.mean(fd))
+        assert abs(d.mean()) < t_crit * se + 0.02 * abs(np.mean(fd)) + 1e-5, (z, y, x, c, which, np.mean(g),
+                                                                                  np.mean(fd), se)
 
 
 @pytest.mark.parametrize("masked", [False, True])
