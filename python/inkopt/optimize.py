@@ -39,7 +39,10 @@ class OptimizeConfig:
     #: function of C (CIELAB is steep near black): evaluated at a few-spp estimate its expectation is biased, for
     #: dark colours even in sign (measured: bench/README), so the adjoint gets more samples than the gradient.
     forward_spp: int = 16
-    gamma: tuple[float, float, float] = (1.0, 3.0, 0.0)
+    #: loss weights (colour, SSIM, edges). Colour only by default: the SSIM term evaluated on a Monte Carlo
+    #: estimate is biased towards lower contrast (the estimate's noise inflates its local variance), which on a
+    #: black/white zebra chart lowered SSIM from 0.66 to 0.44 (README, "Known limits").
+    gamma: tuple[float, float, float] = (1.0, 0.0, 0.0)
     lr: float | None = None  # default per optimizer: see default_lr
     optimizer: str = "eg"
     param: str = "softmax"
