@@ -46,11 +46,12 @@ PANEL_MIN_WIDTH = 256
 # ----------------------------------------------------------------------------------------------- metrics
 def texel_metrics(rgb, target_rgb, loss: TexelLoss, var_mean=None) -> dict:
     """ΔE76 mean / p95, CIEDE2000 mean, SSIM of predictions rgb (I, 3) linear vs target_rgb (I, 3) linear; with
-    the predictions' variances var_mean (I, 3) also the noise level and the RMS ΔE76 with the noise removed."""
+    the predictions' variances var_mean (I, 3) also the noise level and the RMS ΔE76 with the noise removed,
+    and SSIM with the noise removed from its statistics (an estimate for the noise-free prediction)."""
     lab_p, lab_t = linear_to_lab(rgb), linear_to_lab(target_rgb)
     de = delta_e76(lab_p, lab_t)
     out = {"delta_e76_mean": float(de.mean()), "delta_e76_p95": float(np.percentile(de, 95)),
-           "delta_e2000_mean": float(delta_e2000(lab_p, lab_t).mean()), "ssim": loss.ssim_mean(rgb)}
+           "delta_e2000_mean": float(delta_e2000(lab_p, lab_t).mean()), "ssim": loss.ssim_mean(rgb, var_mean)}
     if var_mean is not None:
         se = lab_stderr(np.asarray(rgb, np.float64), np.asarray(var_mean, np.float64))
         out["delta_e76_noise"] = float(se.mean())

@@ -235,6 +235,7 @@ class TexelLoss:
         self.target_lab = linear_to_lab(target)
         self.target_n = normalise_lab(self.target_lab)
         self.K, self.wsum, self.radius = gaussian_window(pos, self.sigma)
+        self._K2 = None  # K squared entrywise, built on first use (noise correction)
         self.S = sobel_operators(pos)
         self.ST = self.S.T.tocsr()
         tn = self.target_n
@@ -258,27 +259,67 @@ class TexelLoss:
             raise ValueError("pred_rgb contains NaN or infinite values")
         return p
 
-    def _ssim_parts(self, cn: np.ndarray):
+    def _noise(self, pred: np.ndarray, pred_var) -> tuple[np.ndarray, np.ndarray] | None:
+        """Noise of a Monte Carlo prediction in the windowed statistics: (W v, sum_j W_ij^2 v_j) with v the
+        variance of each texel's normalised L*a*b* (delta method from the linear-RGB variance ``pred_var``)."""
+        if pred_var is None:
+            return None
+        var = np.asarray(pred_var, np.float64)
+        if var.shape != pred.shape or not np.all(np.isfinite(var)) or np.any(var < 0):
+            raise ValueError(f"pred_var must be a non-negative (I, 3) array like pred_rgb, got {var.shape}")
+        jac = linear_to_lab_jacobian(pred)                      # (I, 3 lab, 3 rgb)
+        v = np.einsum("ikj,ij->ik", jac * jac, var) * LAB_NORM_SCALE ** 2
+        if self._K2 is None:
+            self._K2 = self.K.multiply(self.K).tocsr()
+        return (self.K @ v) / self.wsum[:, None], (self._K2 @ v) / (self.wsum ** 2)[:, None]
+
+    def _ssim_parts(self, cn: np.ndarray, noise=None):
+        """SSIM terms. ``noise`` = (W v, W^2 v): with it, the prediction's windowed mean square and variance are
+        corrected for the estimator's noise (E[(W c^)^2] = (W c)^2 + W^2 v, E[W c^2] = W c^2 + W v); the noise is
+        independent of the target, so the covariance needs no correction. Corrections are constants for the
+        gradient."""
         tn = self.target_n
         m = self._window(np.concatenate([cn, cn * cn, cn * tn], axis=1))
         mx, qx, pxy = m[:, :3], m[:, 3:6], m[:, 6:]
         mt = self._mu_t
+        mx2, var_x = mx * mx, qx - mx * mx
+        if noise is not None:
+            wv, w2v = noise
+            mx2 = np.maximum(mx2 - w2v, 0.0)
+            var_x = np.maximum(var_x - wv + w2v, 0.0)
         a1 = 2.0 * mx * mt + K1
-        b1 = mx * mx + mt * mt + K1
+        b1 = mx2 + mt * mt + K1
         a2 = 2.0 * (pxy - mx * mt) + K2
-        b2 = (qx - mx * mx) + self._var_t + K2
+        b2 = var_x + self._var_t + K2
         return (a1 * a2) / (b1 * b2), mx, a1, b1, a2, b2
 
-    def ssim_map(self, pred_rgb) -> np.ndarray:
-        """Per-texel, per-channel SSIM (I, 3) on normalised L*, a*, b*."""
-        cn = normalise_lab(linear_to_lab(self._check(pred_rgb)))
-        return self._ssim_parts(cn)[0]
+    def ssim_map(self, pred_rgb, pred_var=None) -> np.ndarray:
+        """Per-texel, per-channel SSIM (I, 3) on normalised L*, a*, b*. ``pred_var`` (I, 3): the variance of a
+        Monte Carlo prediction (``RenderResult.var_mean``): its noise is removed from the statistics, so the
+        value estimates the SSIM of the noise-free prediction instead of being biased low."""
+        pred = self._check(pred_rgb)
+        cn = normalise_lab(linear_to_lab(pred))
+        return self._ssim_parts(cn, self._noise(pred, pred_var))[0]
 
-    def ssim_mean(self, pred_rgb) -> float:
-        """Mean SSIM over texels and the three normalised L*a*b* channels (= 1 - E2)."""
-        return float(self.ssim_map(pred_rgb).mean())
+    def ssim_mean(self, pred_rgb, pred_var=None) -> float:
+        """Mean SSIM over texels and the three normalised L*a*b* channels (= 1 - E2); see ``ssim_map``."""
+        return float(self.ssim_map(pred_rgb, pred_var).mean())
 
-    def __call__(self, pred_rgb) -> LossResult:
+    def _value_with_noise(self, pred_rgb, noise) -> float:
+        """The loss value with a fixed noise correction (for gradient checks)."""
+        pred = self._check(pred_rgb)
+        lab = linear_to_lab(pred)
+        dlab = lab - self.target_lab
+        cn = normalise_lab(lab)
+        ssim = self._ssim_parts(cn, noise)[0]
+        sob = self.S @ cn - self._sobel_t
+        e1, e2 = float(np.sum(dlab * dlab) / self.n), float(1.0 - ssim.mean())
+        e3 = float(100.0 / (3.0 * self.n * 4.0 * 32.0) * np.sum(sob * sob))
+        g1, g2, g3 = self.gamma
+        return (g1 * E1_WEIGHT_SCALE * e1 + g2 * e2 + g3 * e3) / self.gamma.sum()
+
+    def __call__(self, pred_rgb, pred_var=None) -> LossResult:
+        """Loss and gradient at ``pred_rgb``; ``pred_var`` (I, 3) corrects the SSIM term for Monte Carlo noise."""
         pred = self._check(pred_rgb)
         n = self.n
         g1, g2, g3 = self.gamma
@@ -286,7 +327,7 @@ class TexelLoss:
         dlab = lab - self.target_lab
         e1 = float(np.sum(dlab * dlab) / n)
         cn = normalise_lab(lab)
-        ssim, mx, a1, b1, a2, b2 = self._ssim_parts(cn)
+        ssim, mx, a1, b1, a2, b2 = self._ssim_parts(cn, self._noise(pred, pred_var))
         e2 = float(1.0 - ssim.mean())
         c3 = 100.0 / (3.0 * n * 4.0 * 32.0)
         sob = self.S @ cn - self._sobel_t

@@ -176,13 +176,13 @@ def run_mesh(mesh_path, out_dir, inks: InkTable, cfg, height_mm: float | None = 
     eval_spp = eval_spp or max(256, 4 * cfg.spp)
     eval_seed = 2**62 + cfg.seed
     res = Renderer(final, threads).render(tx, eval_spp, eval_seed, cfg.include_specular, progress)
-    report = evaluate_prediction(run.loss, res.rgb)
+    report = evaluate_prediction(run.loss, res.rgb, res.var_mean)
     del final
     p0 = initial_free_mixture(inks, run.param, cfg.init, cfg.seed)
     initial = vol.with_mixture(run.param.mixture(run.param.variables_for(p0)))
     res0 = Renderer(initial, threads).render(tx, eval_spp, eval_seed, cfg.include_specular, progress)
     del initial
-    init = evaluate_prediction(run.loss, res0.rgb)
+    init = evaluate_prediction(run.loss, res0.rgb, res0.var_mean)
     de = delta_e76(run.loss(res.rgb).lab, run.loss.target_lab)
     write_mesh_views(out, scene, res.rgb)
     write_loss_png(out, run.history)

@@ -281,6 +281,7 @@ class Optimization:
         self.history = History()
         self.c_avg: np.ndarray | None = None  # running average of the prediction (I, 3)
         self.c_weight = 0.0                     # its effective number of samples per texel
+        self.c_var: np.ndarray | None = None    # the variance of the running average (I, 3)
 
     # -------------------------------------------------------------- state
     def mixture(self) -> np.ndarray:
@@ -299,7 +300,8 @@ class Optimization:
         return json.dumps(d, sort_keys=True)
 
     def save_checkpoint(self, path: Path) -> None:
-        extra = {} if self.c_avg is None else {"c_avg": self.c_avg, "c_weight": np.float64(self.c_weight)}
+        extra = {} if self.c_avg is None else {"c_avg": self.c_avg, "c_weight": np.float64(self.c_weight),
+                                                "c_var": self.c_var}
         save_npz(path, {"x": self.x, "iteration": np.int64(self.iteration), **extra,
                         "config_key": np.array(self.config_key()), **self.opt.state(), **self.history.arrays()},
                  compressed=False)
@@ -315,6 +317,7 @@ class Optimization:
         self.history = History.from_arrays(d)
         self.c_avg = np.asarray(d["c_avg"], np.float32) if "c_avg" in d else None
         self.c_weight = float(d["c_weight"]) if "c_weight" in d else 0.0
+        self.c_var = np.asarray(d["c_var"], np.float32) if "c_var" in d else None
 
     # -------------------------------------------------------------- one step
     def step(self) -> dict:
@@ -324,15 +327,15 @@ class Optimization:
         renderer = Renderer(self.volume(), self.threads)
         res = renderer.render(self.texels, cfg.forward_spp, fwd_seed, cfg.include_specular)
         t1 = time.perf_counter()
-        c = self._average(res.rgb, cfg.forward_spp, decay=True)
-        lr = self.loss(c)
+        c = self._average(res.rgb, res.var_mean, cfg.forward_spp, decay=True)
+        lr = self.loss(c, self.c_var)
         de = float(delta_e76(lr.lab, self.loss.target_lab).mean())
         t2 = time.perf_counter()
         gs, ga, gres = renderer.gradient(self.texels, lr.grad.astype(np.float32), cfg.spp, grad_seed,
                                          cfg.include_specular, cfg.grad_method, grad_index=self.param.grad_index)
         # The gradient pass's own estimate joins the average only now, after its gradient is taken, so the
         # adjoint never correlates with the noise of the gradient it multiplies.
-        self._average(gres.rgb, cfg.spp, decay=False)
+        self._average(gres.rgb, gres.var_mean, cfg.spp, decay=False)
         t3 = time.perf_counter()
         g_x = self.param.backward(self.x, mix_grad(gs, ga, self.base.inks), natural=self.opt.natural)
         self.x = self.opt.step(self.x, g_x).astype(np.float32)
@@ -342,15 +345,18 @@ class Optimization:
                             render_s=t1 - t0, gradient_s=t3 - t2, loss_s=t2 - t1, step_s=t4 - t3)
         return {"loss": lr.value, "delta_e76": de}
 
-    def _average(self, rgb: np.ndarray, spp: int, decay: bool) -> np.ndarray:
-        """Add an estimate of ``spp`` samples per texel to the sample-weighted running average (first decaying
-        the past by ``adjoint_ema`` if ``decay``); return the average."""
+    def _average(self, rgb: np.ndarray, var: np.ndarray, spp: int, decay: bool) -> np.ndarray:
+        """Add an estimate of ``spp`` samples per texel (variance ``var``) to the sample-weighted running average
+        (first decaying the past by ``adjoint_ema`` if ``decay``); return the average. Its variance, kept in
+        ``c_var``, lets the SSIM term remove the estimate's noise."""
         w_old = self.c_weight * (self.cfg.adjoint_ema if decay else 1.0)
         if self.c_avg is None or w_old <= 0:
-            self.c_avg, self.c_weight = rgb.astype(np.float32), float(spp)
+            self.c_avg, self.c_var, self.c_weight = rgb.astype(np.float32), var.astype(np.float32), float(spp)
         else:
-            self.c_avg = ((w_old * self.c_avg + spp * rgb) / (w_old + spp)).astype(np.float32)
-            self.c_weight = w_old + spp
+            tot = w_old + spp
+            self.c_avg = ((w_old * self.c_avg + spp * rgb) / tot).astype(np.float32)
+            self.c_var = ((w_old ** 2 * self.c_var + spp ** 2 * var) / tot ** 2).astype(np.float32)
+            self.c_weight = tot
         return self.c_avg
 
     def run(self, checkpoint: Path | None = None, progress: bool = False) -> None:
@@ -379,12 +385,13 @@ class Optimization:
             self.save_checkpoint(checkpoint)
 
 
-def evaluate_prediction(loss: TexelLoss, rgb: np.ndarray) -> dict:
-    """Quality figures of a prediction (I, 3) linear RGB against the loss's target."""
+def evaluate_prediction(loss: TexelLoss, rgb: np.ndarray, var: np.ndarray | None = None) -> dict:
+    """Quality figures of a prediction (I, 3) linear RGB against the loss's target; ``var`` (I, 3), the
+    prediction's Monte Carlo variance, makes SSIM an estimate for the noise-free prediction."""
     from .loss import delta_e2000
 
-    r = loss(rgb)
+    r = loss(rgb, var)
     de = delta_e76(r.lab, loss.target_lab)
     return {"delta_e76_mean": float(de.mean()), "delta_e76_p95": float(np.percentile(de, 95)),
             "delta_e2000_mean": float(delta_e2000(r.lab, loss.target_lab).mean()),
-            "ssim": float(loss.ssim_mean(rgb)), "loss": r.value, "e1": r.e1, "e2": r.e2, "e3": r.e3}
+            "ssim": float(loss.ssim_mean(rgb, var)), "loss": r.value, "e1": r.e1, "e2": r.e2, "e3": r.e3}

@@ -207,13 +207,13 @@ def run_slab(top_path, bottom_path, size_mm, out_dir, inks: InkTable, cfg, resum
     eval_spp = eval_spp or max(256, 4 * cfg.spp)
     eval_seed = 2**62 + cfg.seed
     res = Renderer(final, threads).render(scene.texels, eval_spp, eval_seed, cfg.include_specular, progress)
-    report = evaluate_prediction(run.loss, res.rgb)
+    report = evaluate_prediction(run.loss, res.rgb, res.var_mean)
     if initial_volume is None:  # resumed: the start is reconstructible from the configuration
         from .optimize import initial_free_mixture
         p0 = initial_free_mixture(inks, run.param, cfg.init, cfg.seed)
         initial_volume = scene.volume.with_mixture(run.param.mixture(run.param.variables_for(p0)))
     res0 = Renderer(initial_volume, threads).render(scene.texels, eval_spp, eval_seed, cfg.include_specular)
-    init = evaluate_prediction(run.loss, res0.rgb)
+    init = evaluate_prediction(run.loss, res0.rgb, res0.var_mean)
     de = delta_e76(run.loss(res.rgb).lab, run.loss.target_lab)
     write_face_pngs(out, scene, res.rgb, de)
     write_loss_png(out, run.history)
