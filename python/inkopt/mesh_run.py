@@ -63,6 +63,14 @@ def white_fixed_share(free: np.ndarray, inks: InkTable) -> np.ndarray:
     return fixed
 
 
+def scene_fixed_share(scene, inks: InkTable) -> np.ndarray:
+    """The (z, y, x, N) float32 fixed shares of a run from its scene.npz arrays (a mapping): stored densely for
+    small objects, else rebuilt from ``free_mask`` (100 % white wherever the mask is False)."""
+    if "fixed_share" in scene:
+        return np.asarray(scene["fixed_share"], np.float32)
+    return white_fixed_share(np.asarray(scene["free_mask"], bool), inks)
+
+
 @dataclass
 class MeshScene:
     """A voxelized object ready to optimise.
