@@ -167,13 +167,7 @@ def run_mesh(mesh_path, out_dir, inks: InkTable, cfg, height_mm: float | None = 
         f"{n_inside} inside, {n_free} free, {len(tx)} texels; voxelized in {scene.voxelize_seconds:.1f} s")
     run = Optimization(vol, tx, scene.vox.targets, cfg, fixed_share=scene.fixed_share, threads=threads)
     scene.fixed_share = run.param.fixed_share  # the same array (no copy), kept for scene.npz
-    ckpt = out / "checkpoint.npz"
-    out.mkdir(parents=True, exist_ok=True)
-    if resume and ckpt.is_file():
-        run.load_checkpoint(ckpt)
-        log(f"resuming at iteration {run.iteration} from {ckpt}")
-    elif resume:
-        log(f"no checkpoint in {out}; starting from scratch")
+    ckpt = run.start(out, resume, log)
     save_npz(out / "scene.npz", scene.scene_arrays(Path(mesh_path), up))
     run.run(ckpt, progress=progress)
     final = run.volume()

@@ -359,6 +359,18 @@ class Optimization:
             self.c_weight = tot
         return self.c_avg
 
+    def start(self, out: Path, resume: bool, log=print) -> Path:
+        """Create the run directory ``out`` and, with ``resume``, continue from its checkpoint if there is one.
+        Returns the checkpoint path for :meth:`run`."""
+        ckpt = Path(out) / "checkpoint.npz"
+        Path(out).mkdir(parents=True, exist_ok=True)
+        if resume and ckpt.is_file():
+            self.load_checkpoint(ckpt)
+            log(f"resuming at iteration {self.iteration} from {ckpt}")
+        elif resume:
+            log(f"no checkpoint in {out}; starting from scratch")
+        return ckpt
+
     def run(self, checkpoint: Path | None = None, progress: bool = False) -> None:
         """Iterate up to ``cfg.iterations`` (continuing from ``self.iteration``), checkpointing every
         ``cfg.checkpoint_every`` iterations and at the end (and on Ctrl-C, after the current iteration)."""

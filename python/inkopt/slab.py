@@ -190,13 +190,7 @@ def run_slab(top_path, bottom_path, size_mm, out_dir, inks: InkTable, cfg, resum
     log(f"slab {nx} x {ny} x {nz} voxels ({scene.volume.voxel_mm[0] * 1000:.1f} µm), {len(scene.texels)} texels, "
         f"inks {','.join(inks.names)}")
     run = Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, threads=threads)
-    ckpt = out / "checkpoint.npz"
-    out.mkdir(parents=True, exist_ok=True)
-    if resume and ckpt.is_file():
-        run.load_checkpoint(ckpt)
-        log(f"resuming at iteration {run.iteration} from {ckpt}")
-    elif resume:
-        log(f"no checkpoint in {out}; starting from scratch")
+    ckpt = run.start(out, resume, log)
     save_npz(out / "scene.npz", scene.scene_arrays())
     initial_volume = run.volume() if run.iteration == 0 else None
     run.run(ckpt, progress=progress)
