@@ -3,6 +3,10 @@ picture (scikit-image's astronaut), quantize each with blue-noise and with rando
 surface and extrusion baselines. Writes bench/results/printable.json and prints a markdown table.
 
     .venv/bin/python bench/printable_eval.py [--iterations 200] [--spp 256] [--out bench-out]
+        [--cases zebra,astronaut] [--init white|surface|extrusion]
+
+A start other than the default all-white one is recorded as its own case ("zebra@extrusion"); cases not run
+keep their earlier entries in printable.json.
 """
 import argparse
 import json
@@ -14,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import machine, write  # noqa: E402
+from common import RESULTS, machine, write  # noqa: E402
 
 from inkopt import charts  # noqa: E402
 
@@ -31,6 +35,8 @@ def main():
     ap.add_argument("--iterations", type=int, default=200)
     ap.add_argument("--spp", type=int, default=256, help="evaluation spp")
     ap.add_argument("--out", default="bench-out")
+    ap.add_argument("--cases", default="zebra,astronaut")
+    ap.add_argument("--init", default="white", help="the optimisation's start (inkopt slab --init)")
     a = ap.parse_args()
     out = Path(a.out)
     out.mkdir(exist_ok=True)
@@ -43,11 +49,15 @@ def main():
         "astronaut": (charts.save((resize(data.astronaut(), (236, 236), anti_aliasing=True) * 255).astype(np.uint8),
                                   out / "astronaut.png"), "10x10x2"),
     }
-    results = {}
-    for name, (img, size) in cases.items():
-        d = out / name
+    previous = RESULTS / "printable.json"
+    results = json.loads(previous.read_text())["results"] if previous.is_file() else {}
+    for case in a.cases.split(","):
+        img, size = cases[case]
+        name = case if a.init == "white" else f"{case}@{a.init}"
+        d = out / name.replace("@", "-")
         if not (d / "report.json").is_file():
-            run(["slab", str(img), "--size-mm", size, "--out", str(d), "--iterations", str(a.iterations), "--resume"])
+            run(["slab", str(img), "--size-mm", size, "--out", str(d), "--iterations", str(a.iterations), "--resume",
+                 "--init", a.init])
         results[name] = {"report": json.loads((d / "report.json").read_text())}
         for method in ("random", "blue-noise"):
             if (d / f"evaluation_{method}.json").is_file():  # done in an earlier, interrupted run

@@ -109,6 +109,36 @@ def test_resume_continues_exactly(tmp_path):
         d.load_checkpoint(tmp_path / "ck.npz")
 
 
+@pytest.mark.parametrize("kind", ["surface", "extrusion"])
+def test_start_from_a_baseline(kind, monkeypatch):
+    """--init surface|extrusion starts from that baseline's mixture (fixed shares kept, zeros lifted to 1e-6 by
+    the softmax), and the start is reproducible (what a resumed run reports)."""
+    from inkopt import baselines
+
+    inks = InkTable.from_names(["cyan", "white"])
+    table = baselines.colour_table(inks, patch_mm=1.0, step=8, max_stderr=0.4)  # small table, cached after once
+    monkeypatch.setattr(baselines, "colour_table", lambda *a, **k: table)
+    from inkopt.loss import srgb_to_linear
+    img = np.full((6, 8, 3), 255, np.uint8)
+    img[:, :4] = (0, 160, 220)  # cyan half
+    vox = 25.4 / 300
+    scene = build_slab(srgb_to_linear(img / 255.0).astype(np.float32), None, (8 * vox, 6 * vox, 4 * vox), inks)
+    fixed = np.zeros(scene.volume.shape + (2,), np.float32)
+    fixed[0, ..., 1] = 1.0  # bottom layer fixed white
+    r = Optimization(scene.volume, scene.texels, scene.target_rgb, OptimizeConfig(init=kind, iterations=1),
+                     fixed_share=fixed)
+    sc = {**scene.texels.to_arrays(), "target_rgb": scene.target_rgb, "fixed_share": fixed}
+    make = baselines.surface_baseline if kind == "surface" else baselines.extrusion_baseline
+    want = make(scene.volume, sc, table)
+    got = r.initial_volume().mixture
+    np.testing.assert_allclose(got, want, atol=2e-6)
+    np.testing.assert_allclose(r.volume().mixture, got)
+    assert want[-1, 0, 0, 0] > want[-1, 0, -1, 0] + 0.1  # the cyan half has cyan ink, the white half less
+    with pytest.raises(ValueError, match="needs the run's texels"):
+        from inkopt.optimize import initial_free_mixture
+        initial_free_mixture(inks, r.param, kind, 0)
+
+
 @pytest.mark.slow
 def test_ssim_term_raises_ssim():
     """gamma2 > 0 raises SSIM against the target compared with gamma2 = 0 (same seeds, 80 iterations)."""

@@ -19,7 +19,7 @@ def _optimize(args) -> int:
     rep = run_mesh(args.mesh, args.out, inks, cfg, height_mm=args.height_mm, scale=args.scale,
                    shell_mm=args.shell_mm, dpi=args.dpi, up=args.up, resume=args.resume, eval_spp=args.eval_spp,
                    threads=args.threads, progress=sys.stderr.isatty(), log=log)
-    print(f"mean ΔE76 {rep['initial_delta_e76_mean']:.2f} (all-white start) -> {rep['delta_e76_mean']:.2f} "
+    print(f"mean ΔE76 {rep['initial_delta_e76_mean']:.2f} ({args.init} start) -> {rep['delta_e76_mean']:.2f} "
           f"(p95 {rep['delta_e76_p95']:.2f}, ΔE2000 {rep['delta_e2000_mean']:.2f}, SSIM {rep['ssim']:.3f}) "
           f"after {rep['iterations']} iterations in {rep['seconds']:.0f} s (peak memory {rep['peak_rss_gb']:.1f} GiB)")
     print(f"views: {args.out}/views.png, {args.out}/prediction.glb; report: {args.out}/report.json")

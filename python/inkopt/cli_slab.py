@@ -33,7 +33,9 @@ def add_optimizer_args(p) -> None:
                    help="eg: exponentiated gradient with momentum (default); adagrad: the paper's; adam")
     p.add_argument("--param", choices=("softmax", "sigmoid"), default=d.param,
                    help="variables -> mixture map (sigmoid = the paper's sigmoid + normalisation)")
-    p.add_argument("--init", default=d.init, help="white (97 %% white), random, or a volume .npz to start from")
+    p.add_argument("--init", default=d.init,
+                   help="white (97 %% white), random, surface or extrusion (start from that print-shop baseline of "
+                        "`inkopt evaluate`; builds or reuses its cached colour table), or a volume .npz")
     p.add_argument("--gradient", choices=("replay", "li1"), default=d.grad_method,
                    help="unbiased path replay (default) or the paper's biased L_i = 1 approximation")
     p.add_argument("--seed", type=int, default=d.seed)
@@ -63,7 +65,7 @@ def _slab(args) -> int:
     log = (lambda m: print(m, file=sys.stderr))
     rep = run_slab(args.top, args.bottom, parse_size(args.size_mm), args.out, inks, cfg, resume=args.resume,
                    eval_spp=args.eval_spp, threads=args.threads, progress=progress, log=log)
-    print(f"mean ΔE76 {rep['initial_delta_e76_mean']:.2f} (all-white start) -> {rep['delta_e76_mean']:.2f} "
+    print(f"mean ΔE76 {rep['initial_delta_e76_mean']:.2f} ({args.init} start) -> {rep['delta_e76_mean']:.2f} "
           f"(p95 {rep['delta_e76_p95']:.2f}, ΔE2000 {rep['delta_e2000_mean']:.2f}, SSIM {rep['ssim']:.3f}) "
           f"after {rep['iterations']} iterations in {rep['seconds']:.0f} s")
     print(f"pictures: {args.out}/face_*.png, {args.out}/loss.png; report: {args.out}/report.json")

@@ -154,7 +154,7 @@ def run_mesh(mesh_path, out_dir, inks: InkTable, cfg, height_mm: float | None = 
              progress: bool = False, log=print) -> dict:
     """The whole ``inkopt optimize`` run (see module docstring); returns the report (report.json)."""
     from .loss import delta_e76
-    from .optimize import Optimization, evaluate_prediction, initial_free_mixture
+    from .optimize import Optimization, evaluate_prediction
     from .render import Renderer
 
     t_start = time.perf_counter()
@@ -180,8 +180,7 @@ def run_mesh(mesh_path, out_dir, inks: InkTable, cfg, height_mm: float | None = 
     res = Renderer(final, threads).render(tx, eval_spp, eval_seed, cfg.include_specular, progress)
     report = evaluate_prediction(run.loss, res.rgb, res.var_mean)
     del final
-    p0 = initial_free_mixture(inks, run.param, cfg.init, cfg.seed)
-    initial = vol.with_mixture(run.param.mixture(run.param.variables_for(p0)))
+    initial = run.initial_volume()
     res0 = Renderer(initial, threads).render(tx, eval_spp, eval_seed, cfg.include_specular, progress)
     del initial
     init = evaluate_prediction(run.loss, res0.rgb, res0.var_mean)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -157,9 +158,14 @@ class Parameterization:
         return np.log(p / (1.0 - p + 1e-12)).astype(np.float32)  # sigmoid(x) = p, and sum(p) = 1
 
 
-def initial_free_mixture(inks: InkTable, param: Parameterization, init: str, seed: int) -> np.ndarray:
+BASELINE_INITS = ("surface", "extrusion")
+
+
+def initial_free_mixture(inks: InkTable, param: Parameterization, init: str, seed: int,
+                         baseline: Callable[[str], np.ndarray] | None = None) -> np.ndarray:
     """The free part's starting mixture (F, N): 97 % white + the rest split over the other inks (paper), a seeded
-    random mixture, or the mixture of an earlier result file."""
+    random mixture, a print-shop baseline ("surface" or "extrusion", see ``baselines``; ``baseline(kind)`` returns
+    its full (z, y, x, N) mixture), or the mixture of an earlier result file."""
     n, f = len(inks), param.n_free
     if init == "white":
         if "white" not in inks.names:
@@ -169,6 +175,15 @@ def initial_free_mixture(inks: InkTable, param: Parameterization, init: str, see
         return p
     if init == "random":
         return np.random.default_rng(seed).dirichlet(np.ones(n), size=f)
+    if init in BASELINE_INITS:
+        if baseline is None:
+            raise ValueError(f"--init {init} needs the run's texels and targets")
+        rho = np.asarray(baseline(init), np.float64).reshape(-1, n)[param.free_index]
+        fixed = param.fixed_share.reshape(-1, n)[param.free_index]
+        share = param.free_share.reshape(-1)[param.free_index, None]
+        p = np.clip(rho - fixed, 0.0, None) / share
+        total = p.sum(1, keepdims=True)
+        return np.where(total > 0, p / np.where(total > 0, total, 1.0), 1.0 / n)
     vol = Volume.load(init)
     if vol.form != "mixture" or vol.inks.names != inks.names:
         raise ValueError(f"--init {init}: needs a mixture volume with inks {list(inks.names)}")
@@ -274,14 +289,28 @@ class Optimization:
         shape = base.shape + (len(base.inks),)
         self.param = Parameterization(cfg.param, np.zeros(shape, np.float32) if fixed_share is None else fixed_share)
         self.loss = TexelLoss(self.target, texels.pos_vox, gamma=cfg.gamma)
-        p0 = initial_free_mixture(base.inks, self.param, cfg.init, cfg.seed)
-        self.x = self.param.variables_for(p0)
+        self.x = self.param.variables_for(self._initial_free_mixture())
         self.opt = Optimizer(cfg.optimizer, cfg.step_size, self.x.shape)
         self.iteration = 0
         self.history = History()
         self.c_avg: np.ndarray | None = None  # running average of the prediction (I, 3)
         self.c_weight = 0.0                     # its effective number of samples per texel
         self.c_var: np.ndarray | None = None    # the variance of the running average (I, 3)
+
+    def _initial_free_mixture(self) -> np.ndarray:
+        return initial_free_mixture(self.base.inks, self.param, self.cfg.init, self.cfg.seed, self._baseline)
+
+    def _baseline(self, kind: str) -> np.ndarray:
+        """The full mixture of a print-shop baseline for this run's texels (colour table cached on disk)."""
+        from . import baselines
+
+        scene = {**self.texels.to_arrays(), "target_rgb": self.target, "fixed_share": self.param.fixed_share}
+        make = baselines.surface_baseline if kind == "surface" else baselines.extrusion_baseline
+        return make(self.base, scene, progress=True)
+
+    def initial_volume(self) -> Volume:
+        """The run's starting point as a volume (recomputed from the configuration: same after a resume)."""
+        return self.base.with_mixture(self.param.mixture(self.param.variables_for(self._initial_free_mixture())))
 
     # -------------------------------------------------------------- state
     def mixture(self) -> np.ndarray:

@@ -192,7 +192,6 @@ def run_slab(top_path, bottom_path, size_mm, out_dir, inks: InkTable, cfg, resum
     run = Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, threads=threads)
     ckpt = run.start(out, resume, log)
     save_npz(out / "scene.npz", scene.scene_arrays())
-    initial_volume = run.volume() if run.iteration == 0 else None
     run.run(ckpt, progress=progress)
     final = run.volume()
     final.save(out / "volume.npz")
@@ -202,11 +201,7 @@ def run_slab(top_path, bottom_path, size_mm, out_dir, inks: InkTable, cfg, resum
     eval_seed = 2**62 + cfg.seed
     res = Renderer(final, threads).render(scene.texels, eval_spp, eval_seed, cfg.include_specular, progress)
     report = evaluate_prediction(run.loss, res.rgb, res.var_mean)
-    if initial_volume is None:  # resumed: the start is reconstructible from the configuration
-        from .optimize import initial_free_mixture
-        p0 = initial_free_mixture(inks, run.param, cfg.init, cfg.seed)
-        initial_volume = scene.volume.with_mixture(run.param.mixture(run.param.variables_for(p0)))
-    res0 = Renderer(initial_volume, threads).render(scene.texels, eval_spp, eval_seed, cfg.include_specular)
+    res0 = Renderer(run.initial_volume(), threads).render(scene.texels, eval_spp, eval_seed, cfg.include_specular)
     init = evaluate_prediction(run.loss, res0.rgb, res0.var_mean)
     de = delta_e76(run.loss(res.rgb).lab, run.loss.target_lab)
     write_face_pngs(out, scene, res.rgb, de)
