@@ -4,6 +4,7 @@
 //! `(z * ny + y) * nx + x` (C order of a (z, y, x) array); lengths in mm, coefficients in mm^-1; geometric
 //! vectors are (x, y, z); radiance is linear RGB, each channel traced as its own monochromatic problem.
 
+mod packet;
 pub mod render;
 pub mod rng;
 pub mod sampling;

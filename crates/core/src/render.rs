@@ -8,6 +8,7 @@ use rayon::prelude::*;
 
 use crate::rng::PathRng;
 use crate::scene::{Geometry, Medium, Texel};
+use crate::packet::trace_paths;
 use crate::trace::{trace, NoTally, Tally};
 
 #[derive(Clone, Copy, Debug)]
@@ -80,6 +81,9 @@ pub fn render<M: Medium>(
     first_texel: u64,
     opts: &RenderOptions,
 ) -> (Vec<TexelEstimate>, Stats) {
+    if geo.inside.is_none() {
+        return render_packets(geo, med, texels, first_texel, opts);
+    }
     let results: Vec<(TexelEstimate, Stats)> = texels
         .par_iter()
         .enumerate()
@@ -101,6 +105,39 @@ pub fn render<M: Medium>(
         .collect();
     let stats = results.iter().fold(Stats::default(), |a, r| Stats::merge(a, r.1));
     (results.into_iter().map(|r| r.0).collect(), stats)
+}
+
+/// Texels per work item of the eight-lane renderer: enough paths to keep the lanes busy (a lane idles only
+/// while the item's last paths finish), few enough to balance the threads.
+const PACKET_CHUNK: usize = 64;
+
+/// `render` for mask-free volumes: eight paths at a time (`packet`), each texel's path values summed in a
+/// fixed order, so results are bit-identical for any thread count.
+fn render_packets<M: Medium>(geo: &Geometry, med: &M, texels: &[Texel], first_texel: u64, opts: &RenderOptions)
+    -> (Vec<TexelEstimate>, Stats) {
+    let spp = opts.spp as usize;
+    let chunks: Vec<(Vec<TexelEstimate>, Stats)> = texels
+        .par_chunks(PACKET_CHUNK)
+        .enumerate()
+        .map(|(k, chunk)| {
+            let mut values = vec![0.0f32; chunk.len() * 3 * spp];
+            let key = first_texel + (k * PACKET_CHUNK) as u64;
+            let events = trace_paths(geo, med, chunk, key, spp, opts.seed, opts.include_specular, &mut values);
+            let est = values
+                .chunks(3 * spp)
+                .map(|v| {
+                    let mut m = Moments::new();
+                    for c in 0..3 {
+                        v[c * spp..(c + 1) * spp].iter().for_each(|&x| m.add(c, x));
+                    }
+                    m.estimate(opts.spp)
+                })
+                .collect();
+            (est, Stats { paths: (chunk.len() * 3 * spp) as u64, events, ..Stats::default() })
+        })
+        .collect();
+    let stats = chunks.iter().fold(Stats::default(), |a, r| Stats::merge(a, r.1));
+    (chunks.into_iter().flat_map(|r| r.0).collect(), stats)
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -13,6 +13,14 @@ pub fn mix64(mut z: u64) -> u64 {
     z ^ (z >> 31)
 }
 
+/// The 64-bit key of one path's stream: a hash of (seed, texel, sample, channel).
+#[inline]
+pub fn path_key(seed: u64, texel: u64, sample: u32, channel: u32) -> u64 {
+    let k = mix64(seed.wrapping_add(GAMMA));
+    let k = mix64(k ^ texel.wrapping_mul(0xD6E8_FEB8_6659_FD93));
+    mix64(k ^ (((sample as u64) << 8) | channel as u64))
+}
+
 /// The stream of one path: one (seed, texel, sample, channel) tuple.
 #[derive(Clone, Debug)]
 pub struct PathRng {
@@ -22,10 +30,7 @@ pub struct PathRng {
 impl PathRng {
     #[inline]
     pub fn new(seed: u64, texel: u64, sample: u32, channel: u32) -> Self {
-        let k = mix64(seed.wrapping_add(GAMMA));
-        let k = mix64(k ^ texel.wrapping_mul(0xD6E8_FEB8_6659_FD93));
-        let k = mix64(k ^ (((sample as u64) << 8) | channel as u64));
-        PathRng { state: k }
+        PathRng { state: path_key(seed, texel, sample, channel) }
     }
 
     #[inline(always)]

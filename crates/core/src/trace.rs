@@ -43,11 +43,11 @@ impl Tally for NoTally {
 
 /// Paths that are still going after this many collisions are cut (value 0). At albedo 0.9997 the chance to
 /// survive 2e6 collisions is exp(-600): the cut never biases a physical medium.
-const MAX_EVENTS: u32 = 2_000_000;
+pub(crate) const MAX_EVENTS: u32 = 2_000_000;
 /// Weights below this play Russian roulette. 1.0 would be analog absorption; on the reference slab 0.5 gives
 /// 30 % less variance per path at 1.6x the collisions (+11 % efficiency), more on dark colours.
-const RR_THRESHOLD: f32 = 0.5;
-const MAX_STEPS: u64 = 50_000_000;
+pub(crate) const RR_THRESHOLD: f32 = 0.5;
+pub(crate) const MAX_STEPS: u64 = 50_000_000;
 
 /// Result of one path: its value (radiance reaching the texel) and its number of collisions.
 #[derive(Clone, Copy, Debug)]
@@ -61,7 +61,7 @@ pub struct PathValue {
 /// Reflects with the Fresnel probability, else refracts. Shading normals that would send the path to the wrong
 /// side of the geometric face fall back to the geometric normal (exact on planar faces, where they agree).
 #[inline(always)]
-fn interface(d: V3, n_geo: V3, n_sh: V3, eta: f32, u: f32) -> (V3, bool) {
+pub(crate) fn interface(d: V3, n_geo: V3, n_sh: V3, eta: f32, u: f32) -> (V3, bool) {
     let n = pick_normal(d, n_geo, n_sh);
     let f = fresnel(-dot(d, n), eta);
     if u < f {
@@ -312,6 +312,51 @@ fn tally_segments<T: Tally>(geo: &Geometry, p: V3, d: V3, mut v: [i32; 3], lengt
     }
 }
 
+/// Where a camera ray is after its first interface.
+pub(crate) enum Start {
+    /// Refracted into the medium at p (voxel v), direction d, with this weight.
+    Medium(V3, V3, [i32; 3], f32),
+    /// Reflected (specular included): outside at p, in voxel v (the face's outer neighbour), direction d.
+    Outside(V3, V3, [i32; 3]),
+    /// The path ends here (the camera ray cannot refract and the specular is excluded).
+    Done(PathValue),
+}
+
+/// The camera ray of `texel`: a uniform point on its face (two uniforms), looking along -normal, through the
+/// first interface (one uniform when `include_specular`: the Fresnel reflection is sampled and counts; else the
+/// ray refracts with weight 1 - F). `uniform` draws the path's next random number.
+#[inline(always)]
+pub(crate) fn camera_ray(geo: &Geometry, texel: &Texel, include_specular: bool, uniform: &mut impl FnMut() -> f32)
+    -> Start {
+    let mut v = texel.voxel;
+    let fa = (texel.face / 2) as usize;
+    let mut p = [0.0f32; 3];
+    for a in 0..3 {
+        p[a] = if a == fa {
+            (v[a] + (texel.face % 2) as i32) as f32 * geo.size[a]
+        } else {
+            (v[a] as f32 + uniform()) * geo.size[a]
+        };
+    }
+    let n_face = face_normal(texel.face);
+    let d = scale(texel.normal, -1.0);
+    let eta_in = 1.0 / geo.ior;
+    if include_specular {
+        let (nd, transmitted) = interface(d, n_face, texel.normal, eta_in, uniform());
+        if transmitted {
+            return Start::Medium(p, nd, v, 1.0);
+        }
+        v[fa] += if texel.face % 2 == 1 { 1 } else { -1 };
+        return Start::Outside(p, nd, v);
+    }
+    let n = pick_normal(d, n_face, texel.normal);
+    let weight = 1.0 - fresnel(-dot(d, n), eta_in);
+    match refract(d, n, eta_in) {
+        Some(t) if dot(t, n_face) < 0.0 => Start::Medium(p, t, v, weight),
+        _ => Start::Done(PathValue { value: 0.0, events: 0 }),
+    }
+}
+
 /// Trace one path of channel `c` for `texel`. `include_specular`: the camera ray's Fresnel reflection of the
 /// environment counts (else the first interface refracts with weight 1 - F).
 pub fn trace<M: Medium, T: Tally>(
@@ -323,37 +368,13 @@ pub fn trace<M: Medium, T: Tally>(
     include_specular: bool,
     tally: &mut T,
 ) -> PathValue {
-    let mut v = texel.voxel;
-    let fa = (texel.face / 2) as usize;
-    let mut p = [0.0f32; 3];
-    for a in 0..3 {
-        p[a] = if a == fa {
-            (v[a] + (texel.face % 2) as i32) as f32 * geo.size[a]
-        } else {
-            (v[a] as f32 + rng.next_f32()) * geo.size[a]
+    let (mut p, mut d, mut v, mut weight, mut in_medium) =
+        match camera_ray(geo, texel, include_specular, &mut || rng.next_f32()) {
+            Start::Medium(p, d, v, w) => (p, d, v, w, true),
+            Start::Outside(p, d, v) => (p, d, v, 1.0, false),
+            Start::Done(r) => return r,
         };
-    }
-    let n_face = face_normal(texel.face);
-    let mut d = scale(texel.normal, -1.0);
-    let mut weight = 1.0f32;
     let eta_in = 1.0 / geo.ior;
-    let mut in_medium;
-    if include_specular {
-        let (nd, transmitted) = interface(d, n_face, texel.normal, eta_in, rng.next_f32());
-        d = nd;
-        in_medium = transmitted;
-        if !transmitted {
-            v[fa] += if texel.face % 2 == 1 { 1 } else { -1 };
-        }
-    } else {
-        let n = pick_normal(d, n_face, texel.normal);
-        weight = 1.0 - fresnel(-dot(d, n), eta_in);
-        match refract(d, n, eta_in) {
-            Some(t) if dot(t, n_face) < 0.0 => d = t,
-            _ => return PathValue { value: 0.0, events: 0 },
-        }
-        in_medium = true;
-    }
     let mut events = 0u32;
     let mut steps = 0u64;
     let delta = geo.inside.is_none();

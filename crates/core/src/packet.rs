@@ -1,0 +1,377 @@
+//! Forward rendering of mask-free volumes (boxes and periodic slabs) eight paths at a time.
+//!
+//! One path's delta-tracking walk is a long chain of dependent operations (random number, logarithm, voxel
+//! lookup, coefficient load, accept test, phase sampling) that leaves most of a core idle. Here eight
+//! independent paths advance in SIMD lanes (`wide::f32x8`, AVX2 with `target-cpu=native`): every step draws
+//! a tentative collision for each lane, and the lanes whose collision is real scatter, all in vector arithmetic.
+//! The rarer events (a flight reaching the grid's face, a path ending and its lane taking the next path) are
+//! handled per lane. The walk is `trace`'s delta tracking with implicit absorption and Russian roulette, the
+//! same estimator; only the random numbers differ: each path keys a 32-bit counter-based hash (draw i of path
+//! key k is lowbias32(lowbias32(i ^ k_hi) + k_lo), 24 bits per uniform), which vectorises, where `PathRng`'s
+//! 64-bit multiplies do not. A path's value depends only on its key, never on its lane or thread, so renders
+//! stay bit-identical for any thread count. The gradient pass keeps the scalar `trace` (its replay needs the
+//! tallies), which is an independent estimate of the same quantity.
+
+use bytemuck::cast;
+use wide::{f32x8, i32x8, u32x8, CmpEq, CmpGe, CmpGt, CmpLt};
+
+use crate::rng::path_key;
+use crate::sampling::{add, scale, V3};
+use crate::scene::{Boundary, Geometry, Medium, Texel};
+use crate::trace::{camera_ray, interface, trace, NoTally, Start, MAX_EVENTS, MAX_STEPS, RR_THRESHOLD};
+
+const W: usize = 8;
+/// Uniforms drawn by a camera ray (2 for the point on the face, 1 for the Fresnel event); the walk starts after.
+const CAMERA_DRAWS: u32 = 3;
+/// Uniforms drawn per lane per step: free flight, accept test, roulette or Fresnel, two for the phase function.
+const STEP_DRAWS: u32 = 5;
+
+#[inline(always)]
+fn lowbias32(mut x: u32) -> u32 {
+    x ^= x >> 16;
+    x = x.wrapping_mul(0x7FEB_352D);
+    x ^= x >> 15;
+    x = x.wrapping_mul(0x846C_A68B);
+    x ^ (x >> 16)
+}
+
+#[inline(always)]
+fn lowbias32x8(mut x: u32x8) -> u32x8 {
+    x = x ^ (x >> 16u32);
+    x = x * u32x8::splat(0x7FEB_352D);
+    x = x ^ (x >> 15u32);
+    x = x * u32x8::splat(0x846C_A68B);
+    x ^ (x >> 16u32)
+}
+
+/// Uniform in [0, 1) with 24 random bits: draw `i` of the stream keyed (k_lo, k_hi).
+#[inline(always)]
+pub(crate) fn uniform(k_lo: u32, k_hi: u32, i: u32) -> f32 {
+    (lowbias32(lowbias32(i ^ k_hi).wrapping_add(k_lo)) >> 8) as f32 * (1.0 / 16_777_216.0)
+}
+
+#[inline(always)]
+fn uniform8(k_lo: u32x8, k_hi: u32x8, i: u32x8) -> f32x8 {
+    let h = lowbias32x8(lowbias32x8(i ^ k_hi) + k_lo) >> 8u32;
+    cast::<u32x8, i32x8>(h).round_float() * f32x8::splat(1.0 / 16_777_216.0)
+}
+
+#[inline(always)]
+fn select_i32(mask: f32x8, t: i32x8, f: i32x8) -> i32x8 {
+    cast::<f32x8, i32x8>(mask).blend(t, f)
+}
+
+/// Distance along d from p to the grid's boundary (periodic: only z bounds it) and the axis reached there;
+/// the same comparisons in the same order as `trace`'s delta tracking.
+#[inline(always)]
+fn exit8(geo: &Geometry, p: [f32x8; 3], d: [f32x8; 3]) -> (f32x8, i32x8) {
+    let zero = f32x8::ZERO;
+    let mut t = f32x8::splat(f32::INFINITY);
+    let mut axis = i32x8::splat(2);
+    let first = if geo.boundary == Boundary::PeriodicXY { 2 } else { 0 };
+    for a in first..3 {
+        let far = f32x8::splat(geo.n[a] as f32 * geo.size[a]);
+        let b = d[a].cmp_gt(zero).blend(far, zero);
+        let ta = ((b - p[a]) / d[a]).max(zero);
+        let ta = d[a].cmp_eq(zero).blend(f32x8::splat(f32::INFINITY), ta);
+        let nearer = ta.cmp_lt(t);
+        t = nearer.blend(ta, t);
+        axis = select_i32(nearer, i32x8::splat(a as i32), axis);
+    }
+    (t, axis)
+}
+
+/// New directions after Henyey-Greenstein scattering of d (as `sampling::hg_sample`, vectorised).
+#[inline(always)]
+fn hg8(d: [f32x8; 3], g: f32, u1: f32x8, u2: f32x8) -> [f32x8; 3] {
+    let one = f32x8::ONE;
+    let c = if g.abs() < 1e-3 {
+        one - u1 * f32x8::splat(2.0)
+    } else {
+        let sq = f32x8::splat(1.0 - g * g) / (f32x8::splat(1.0 - g) + u1 * f32x8::splat(2.0 * g));
+        ((f32x8::splat(1.0 + g * g) - sq * sq) * f32x8::splat(0.5 / g)).max(-one).min(one)
+    };
+    let s = (one - c * c).max(f32x8::ZERO).sqrt();
+    let sign = d[2].cmp_ge(f32x8::ZERO).blend(one, -one);
+    let a = -one / (sign + d[2]);
+    let b = d[0] * d[1] * a;
+    let b1 = [one + sign * d[0] * d[0] * a, sign * b, -(sign * d[0])];
+    let b2 = [b, sign + d[1] * d[1] * a, -d[1]];
+    let (sp, cp) = (u2 * f32x8::splat(std::f32::consts::TAU)).sin_cos();
+    let (x, y) = (s * cp, s * sp);
+    let w = [b1[0] * x + b2[0] * y + d[0] * c, b1[1] * x + b2[1] * y + d[1] * c, b1[2] * x + b2[2] * y + d[2] * c];
+    let k = f32x8::splat(0.5) * (f32x8::splat(3.0) - (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]));
+    [w[0] * k, w[1] * k, w[2] * k]
+}
+
+/// Eight paths in flight: per-lane state, structure of arrays.
+struct Packet {
+    /// Start of the current straight flight (wrapped into the periodic frame), direction, distance flown.
+    p: [[f32; W]; 3],
+    d: [[f32; W]; 3],
+    t: [f32; W],
+    t_exit: [f32; W],
+    axis: [i32; W],
+    weight: [f32; W],
+    maj: [f32; W],
+    inv_maj: [f32; W],
+    k_lo: [u32; W],
+    k_hi: [u32; W],
+    draw: [u32; W],
+    events: [u32; W],
+    steps: [u32; W],
+    chan: [usize; W],
+    /// The path (index into the output) each lane carries; `None`: idle.
+    job: [Option<usize>; W],
+}
+
+/// What a step left for per-lane handling (bit l = lane l).
+struct StepEvents {
+    exits: i32,
+    ended: i32,
+    /// The third uniform of the step (the Fresnel decision of a lane that reached the face).
+    u_fresnel: [f32; W],
+}
+
+impl Packet {
+    fn new() -> Self {
+        Packet {
+            p: [[0.0; W]; 3],
+            d: [[0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0]; 3],
+            t: [0.0; W],
+            t_exit: [0.0; W],
+            axis: [2; W],
+            weight: [0.0; W],
+            maj: [0.0; W],
+            inv_maj: [0.0; W],
+            k_lo: [0; W],
+            k_hi: [0; W],
+            draw: [0; W],
+            events: [0; W],
+            steps: [0; W],
+            chan: [0; W],
+            job: [None; W],
+        }
+    }
+
+    fn live_mask(&self) -> f32x8 {
+        cast(i32x8::from(self.job.map(|j| -(j.is_some() as i32))))
+    }
+
+    /// Begin a flight from p along d in lane l (scalar: after a camera ray or a reflection at the face).
+    fn start_flight(&mut self, geo: &Geometry, l: usize, p: V3, d: V3) {
+        for a in 0..3 {
+            self.p[a][l] = p[a];
+            self.d[a][l] = d[a];
+        }
+        let pv = p.map(f32x8::splat);
+        let dv = d.map(f32x8::splat);
+        let (t_exit, axis) = exit8(geo, pv, dv);
+        self.t[l] = 0.0;
+        self.t_exit[l] = t_exit.to_array()[0];
+        self.axis[l] = axis.to_array()[0];
+    }
+
+    /// One tentative collision in every live lane; real collisions scatter (vectorised).
+    #[inline(always)]
+    fn step<M: Medium>(&mut self, geo: &Geometry, med: &M) -> StepEvents {
+        let live = self.live_mask();
+        let (k_lo, k_hi) = (u32x8::from(self.k_lo), u32x8::from(self.k_hi));
+        let i = u32x8::from(self.draw);
+        let u = |k: u32| uniform8(k_lo, k_hi, i + u32x8::splat(k));
+        let (u_flight, u_accept, u_third, u_phase1, u_phase2) = (u(0), u(1), u(2), u(3), u(4));
+        self.draw = (i + u32x8::splat(STEP_DRAWS)).into();
+
+        let one = f32x8::ONE;
+        let t = f32x8::from(self.t) - (one - u_flight).ln() * f32x8::from(self.inv_maj);
+        let t_exit = f32x8::from(self.t_exit);
+        let exit = t.cmp_ge(t_exit) & live;
+        let p = self.p.map(f32x8::from);
+        let d = self.d.map(f32x8::from);
+        let mut q = [p[0] + d[0] * t, p[1] + d[1] * t, p[2] + d[2] * t];
+        let mut v = [i32x8::ZERO; 3];
+        for a in 0..3 {
+            if a < 2 && geo.boundary == Boundary::PeriodicXY {
+                let span = geo.n[a] as f32 * geo.size[a];
+                let w = q[a] - (q[a] * f32x8::splat(1.0 / span)).floor() * f32x8::splat(span);
+                q[a] = w.cmp_ge(f32x8::splat(span)).blend(f32x8::ZERO, w);
+            }
+            v[a] = (q[a] * f32x8::splat(geo.inv_size[a])).trunc_int().max(i32x8::ZERO).min(i32x8::splat(geo.n[a] - 1));
+        }
+        let j = ((v[2] * i32x8::splat(geo.n[1]) + v[1]) * i32x8::splat(geo.n[0]) + v[0]).to_array();
+        let (mut st, mut albedo) = ([0.0f32; W], [0.0f32; W]);
+        for l in 0..W {
+            (st[l], albedo[l]) = med.coeffs(j[l] as usize, self.chan[l]);
+        }
+        let (st, albedo) = (f32x8::from(st), f32x8::from(albedo));
+        let maj = f32x8::from(self.maj);
+        let accept = live & !exit & (u_accept * maj).cmp_lt(st);
+
+        // Implicit absorption and Russian roulette at real collisions.
+        let rr = f32x8::splat(RR_THRESHOLD);
+        let w = f32x8::from(self.weight) * albedo;
+        let low = w.cmp_lt(rr);
+        let dead = accept & low & !(u_third * rr).cmp_lt(w);
+        let scatter = accept & !dead;
+        self.weight = accept.blend(low.blend(rr, w), f32x8::from(self.weight)).into();
+        self.events = (u32x8::from(self.events) - cast::<f32x8, u32x8>(accept)).into();
+        self.steps = (u32x8::from(self.steps) + u32x8::splat(1)).into();
+
+        // Scattering lanes: new direction, a new flight from the collision point.
+        let nd = hg8(d, geo.g, u_phase1, u_phase2);
+        let p2 = [scatter.blend(q[0], p[0]), scatter.blend(q[1], p[1]), scatter.blend(q[2], p[2])];
+        let d2 = [scatter.blend(nd[0], d[0]), scatter.blend(nd[1], d[1]), scatter.blend(nd[2], d[2])];
+        let (te, ax) = exit8(geo, p2, d2);
+        self.p = p2.map(<[f32; W]>::from);
+        self.d = d2.map(<[f32; W]>::from);
+        self.t = scatter.blend(f32x8::ZERO, t).into();
+        self.t_exit = scatter.blend(te, t_exit).into();
+        self.axis = select_i32(scatter, ax, i32x8::from(self.axis)).into();
+
+        let too_long = cast::<u32x8, f32x8>(
+            u32x8::from(self.events).cmp_gt(u32x8::splat(MAX_EVENTS))
+                | u32x8::from(self.steps).cmp_gt(u32x8::splat(MAX_STEPS as u32)),
+        );
+        StepEvents {
+            exits: (exit & !too_long).move_mask(),
+            ended: ((dead | too_long) & live).move_mask(),
+            u_fresnel: u_third.into(),
+        }
+    }
+}
+
+/// Trace every path of `texels` (mask-free geometry) and write path values to `values`, laid out
+/// [texel][channel][sample] (3 * spp per texel). `first_key` is the random-number key of `texels[0]`.
+/// Returns the number of collisions.
+pub(crate) fn trace_paths<M: Medium>(geo: &Geometry, med: &M, texels: &[Texel], first_key: u64, spp: usize,
+                                     seed: u64, include_specular: bool, values: &mut [f32]) -> u64 {
+    debug_assert!(geo.inside.is_none());
+    let per_texel = 3 * spp;
+    let jobs = texels.len() * per_texel;
+    assert_eq!(values.len(), jobs);
+    let mut pk = Packet::new();
+    let mut next = 0usize;
+    let mut events = 0u64;
+    // Give lane l the next path that enters the medium (paths that end at the camera are written directly).
+    let refill = |pk: &mut Packet, l: usize, next: &mut usize, events: &mut u64, values: &mut [f32]| {
+        pk.job[l] = None;
+        while *next < jobs {
+            let job = *next;
+            *next += 1;
+            let (ti, r) = (job / per_texel, job % per_texel);
+            let (c, s) = (r / spp, (r % spp) as u32);
+            let key = path_key(seed, first_key + ti as u64, s, c as u32);
+            let (k_lo, k_hi) = (key as u32, (key >> 32) as u32);
+            let mut i = 0u32;
+            let start = camera_ray(geo, &texels[ti], include_specular, &mut || {
+                i += 1;
+                uniform(k_lo, k_hi, i - 1)
+            });
+            match start {
+                Start::Medium(p, d, _, w) => {
+                    let maj = med.majorant(c);
+                    pk.maj[l] = maj;
+                    pk.inv_maj[l] = if maj > 0.0 { 1.0 / maj } else { f32::INFINITY };
+                    (pk.k_lo[l], pk.k_hi[l], pk.draw[l]) = (k_lo, k_hi, CAMERA_DRAWS);
+                    (pk.weight[l], pk.events[l], pk.steps[l], pk.chan[l]) = (w, 0, 0, c);
+                    pk.start_flight(geo, l, p, d);
+                    pk.job[l] = Some(job);
+                    return;
+                }
+                Start::Done(r) => values[job] = r.value,
+                Start::Outside(_, d, v) if !geo.in_grid(v) => values[job] = geo.env.eval(d, c),
+                Start::Outside(..) => {
+                    // A texel inside the grid (not one of our texel lists): the general tracer.
+                    let mut rng = crate::rng::PathRng::new(seed, first_key + ti as u64, s, c as u32);
+                    let r = trace(geo, med, &texels[ti], c, &mut rng, include_specular, &mut NoTally);
+                    values[job] = r.value;
+                    *events += r.events as u64;
+                }
+            }
+        }
+    };
+    for l in 0..W {
+        refill(&mut pk, l, &mut next, &mut events, values);
+    }
+    while pk.job.iter().any(|j| j.is_some()) {
+        let ev = pk.step(geo, med);
+        let mut bits = ev.ended | ev.exits;
+        while bits != 0 {
+            let l = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            let job = pk.job[l].expect("a live lane");
+            let c = pk.chan[l];
+            if ev.ended >> l & 1 == 1 {
+                values[job] = 0.0;
+                events += pk.events[l] as u64;
+                refill(&mut pk, l, &mut next, &mut events, values);
+                continue;
+            }
+            // The flight reached the grid's face: Fresnel reflection or out into the environment.
+            let axis = pk.axis[l] as usize;
+            let d = [pk.d[0][l], pk.d[1][l], pk.d[2][l]];
+            let mut p = add([pk.p[0][l], pk.p[1][l], pk.p[2][l]], scale(d, pk.t_exit[l]));
+            let out = d[axis] > 0.0;
+            p[axis] = if out { geo.n[axis] as f32 * geo.size[axis] } else { 0.0 };
+            if geo.boundary == Boundary::PeriodicXY {
+                for a in 0..2 {
+                    let span = geo.n[a] as f32 * geo.size[a];
+                    p[a] -= (p[a] / span).floor() * span;
+                }
+            }
+            let mut n_geo = [0.0f32; 3];
+            n_geo[axis] = if out { -1.0 } else { 1.0 };
+            let (nd, transmitted) = interface(d, n_geo, n_geo, geo.ior, ev.u_fresnel[l]);
+            if transmitted {
+                values[job] = pk.weight[l] * geo.env.eval(nd, c);
+                events += pk.events[l] as u64;
+                refill(&mut pk, l, &mut next, &mut events, values);
+            } else {
+                pk.start_flight(geo, l, p, nd);
+            }
+        }
+    }
+    events
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn vector_and_scalar_uniforms_agree_and_are_uniform() {
+        let (k_lo, k_hi) = (0x1234_5678u32, 0x9ABC_DEF0u32);
+        let v = uniform8(u32x8::splat(k_lo), u32x8::splat(k_hi), u32x8::from([0, 1, 2, 3, 4, 5, 6, 7])).to_array();
+        for (i, x) in v.iter().enumerate() {
+            assert_eq!(*x, uniform(k_lo, k_hi, i as u32));
+        }
+        // Mean and variance over many keys and draws: n = 1e6, standard error of the mean 2.9e-4, test at 5 sigma.
+        let n = 1_000_000u32;
+        let (mut s, mut s2) = (0.0f64, 0.0f64);
+        for t in 0..n {
+            let key = path_key(3, t as u64 / 8, 0, 0);
+            let x = uniform(key as u32, (key >> 32) as u32, t % 8) as f64;
+            assert!((0.0..1.0).contains(&x));
+            s += x;
+            s2 += x * x;
+        }
+        let mean = s / n as f64;
+        assert!((mean - 0.5).abs() < 5.0 * (1.0f64 / 12.0 / n as f64).sqrt());
+        assert!((s2 / n as f64 - mean * mean - 1.0 / 12.0).abs() < 1e-3);
+    }
+
+    #[test]
+    fn hg8_matches_the_scalar_sampler() {
+        let d = crate::sampling::normalize([0.3, -0.5, 0.81]);
+        let u1 = f32x8::from([0.01, 0.2, 0.35, 0.5, 0.61, 0.77, 0.9, 0.999]);
+        let u2 = f32x8::from([0.9, 0.1, 0.33, 0.5, 0.7, 0.25, 0.05, 0.6]);
+        let w = hg8(d.map(f32x8::splat), 0.4, u1, u2);
+        let (a, b) = (u1.to_array(), u2.to_array());
+        for l in 0..W {
+            let s = crate::sampling::hg_sample(d, 0.4, a[l], b[l]);
+            for k in 0..3 {
+                assert!((w[k].to_array()[l] - s[k]).abs() < 2e-5, "lane {l}: {:?} vs {s:?}", w.map(|x| x.to_array()[l]));
+            }
+        }
+    }
+}
