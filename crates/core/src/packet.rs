@@ -15,10 +15,13 @@
 use bytemuck::cast;
 use wide::{f32x8, i32x8, u32x8, CmpEq, CmpGe, CmpGt, CmpLt};
 
-use crate::rng::path_key;
+use crate::render::RenderOptions;
+use crate::rng::{path_key, Uniforms};
 use crate::sampling::{add, scale, V3};
 use crate::scene::{Boundary, Geometry, Medium, Texel};
-use crate::trace::{camera_ray, interface, trace, NoTally, Start, MAX_EVENTS, MAX_STEPS, RR_THRESHOLD};
+use crate::trace::PathValue;
+use crate::trace::{camera_ray, interface, trace, walk_masked, NoTally, Start, Walk, WalkEnd, MAX_EVENTS, MAX_STEPS,
+                   RR_THRESHOLD};
 
 const W: usize = 8;
 /// Uniforms drawn by a camera ray (2 for the point on the face, 1 for the Fresnel event); the walk starts after.
@@ -48,6 +51,25 @@ fn lowbias32x8(mut x: u32x8) -> u32x8 {
 #[inline(always)]
 pub(crate) fn uniform(k_lo: u32, k_hi: u32, i: u32) -> f32 {
     (lowbias32(lowbias32(i ^ k_hi).wrapping_add(k_lo)) >> 8) as f32 * (1.0 / 16_777_216.0)
+}
+
+/// A lane's stream as scalar uniforms (camera rays and the walk near the surface).
+struct LaneRng {
+    k_lo: u32,
+    k_hi: u32,
+    draw: u32,
+}
+
+impl Uniforms for LaneRng {
+    #[inline(always)]
+    fn next_f32(&mut self) -> f32 {
+        self.draw += 1;
+        uniform(self.k_lo, self.k_hi, self.draw - 1)
+    }
+    #[inline(always)]
+    fn next_f32_pair(&mut self) -> (f32, f32) {
+        (self.next_f32(), self.next_f32())
+    }
 }
 
 #[inline(always)]
@@ -110,6 +132,8 @@ struct Packet {
     p: [[f32; W]; 3],
     d: [[f32; W]; 3],
     t: [f32; W],
+    /// Where the flight stops without a collision: the grid's face (mask-free), or the edge of the ball around
+    /// the flight's start that is certainly inside the object (with a mask; see `Geometry::safe`).
     t_exit: [f32; W],
     axis: [i32; W],
     weight: [f32; W],
@@ -127,9 +151,13 @@ struct Packet {
 
 /// What a step left for per-lane handling (bit l = lane l).
 struct StepEvents {
+    /// Flights that reached t_exit without a collision.
     exits: i32,
+    /// Paths that ended (absorbed by the roulette, or cut).
     ended: i32,
-    /// The third uniform of the step (the Fresnel decision of a lane that reached the face).
+    /// Lanes that scattered into a voxel next to the object's surface (masked volumes): the general walk.
+    shallow: i32,
+    /// The third uniform of the step (the Fresnel decision of a lane that reached the grid's face).
     u_fresnel: [f32; W],
 }
 
@@ -158,23 +186,31 @@ impl Packet {
         cast(i32x8::from(self.job.map(|j| -(j.is_some() as i32))))
     }
 
-    /// Begin a flight from p along d in lane l (scalar: after a camera ray or a reflection at the face).
+    fn rng(&self, l: usize) -> LaneRng {
+        LaneRng { k_lo: self.k_lo[l], k_hi: self.k_hi[l], draw: self.draw[l] }
+    }
+
+    /// Begin a flight from p along d in lane l (scalar: after a camera ray, a reflection or the general walk).
     fn start_flight(&mut self, geo: &Geometry, l: usize, p: V3, d: V3) {
         for a in 0..3 {
             self.p[a][l] = p[a];
             self.d[a][l] = d[a];
         }
-        let pv = p.map(f32x8::splat);
-        let dv = d.map(f32x8::splat);
-        let (t_exit, axis) = exit8(geo, pv, dv);
         self.t[l] = 0.0;
-        self.t_exit[l] = t_exit.to_array()[0];
-        self.axis[l] = axis.to_array()[0];
+        if geo.inside.is_some() {
+            let j = geo.index(locate_box(geo, p));
+            self.t_exit[l] = safe_radius(geo, geo.safe_distance(j) as f32);
+        } else {
+            let (t_exit, axis) = exit8(geo, p.map(f32x8::splat), d.map(f32x8::splat));
+            self.t_exit[l] = t_exit.to_array()[0];
+            self.axis[l] = axis.to_array()[0];
+        }
     }
 
     /// One tentative collision in every live lane; real collisions scatter (vectorised).
     #[inline(always)]
     fn step<M: Medium>(&mut self, geo: &Geometry, med: &M) -> StepEvents {
+        let masked = geo.inside.is_some();
         let live = self.live_mask();
         let (k_lo, k_hi) = (u32x8::from(self.k_lo), u32x8::from(self.k_hi));
         let i = u32x8::from(self.draw);
@@ -199,9 +235,12 @@ impl Packet {
             v[a] = (q[a] * f32x8::splat(geo.inv_size[a])).trunc_int().max(i32x8::ZERO).min(i32x8::splat(geo.n[a] - 1));
         }
         let j = ((v[2] * i32x8::splat(geo.n[1]) + v[1]) * i32x8::splat(geo.n[0]) + v[0]).to_array();
-        let (mut st, mut albedo) = ([0.0f32; W], [0.0f32; W]);
+        let (mut st, mut albedo, mut safe) = ([0.0f32; W], [0.0f32; W], [0.0f32; W]);
         for l in 0..W {
             (st[l], albedo[l]) = med.coeffs(j[l] as usize, self.chan[l]);
+            if masked {
+                safe[l] = geo.safe_distance(j[l] as usize) as f32;
+            }
         }
         let (st, albedo) = (f32x8::from(st), f32x8::from(albedo));
         let maj = f32x8::from(self.maj);
@@ -221,12 +260,20 @@ impl Packet {
         let nd = hg8(d, geo.g, u_phase1, u_phase2);
         let p2 = [scatter.blend(q[0], p[0]), scatter.blend(q[1], p[1]), scatter.blend(q[2], p[2])];
         let d2 = [scatter.blend(nd[0], d[0]), scatter.blend(nd[1], d[1]), scatter.blend(nd[2], d[2])];
-        let (te, ax) = exit8(geo, p2, d2);
+        let mut shallow = 0;
+        if masked {
+            let safe = f32x8::from(safe);
+            shallow = (scatter & safe.cmp_lt(f32x8::splat(2.0))).move_mask();
+            let radius = (safe - one) * f32x8::splat(geo.size[0].min(geo.size[1]).min(geo.size[2]));
+            self.t_exit = scatter.blend(radius, t_exit).into();
+        } else {
+            let (te, ax) = exit8(geo, p2, d2);
+            self.t_exit = scatter.blend(te, t_exit).into();
+            self.axis = select_i32(scatter, ax, i32x8::from(self.axis)).into();
+        }
         self.p = p2.map(<[f32; W]>::from);
         self.d = d2.map(<[f32; W]>::from);
         self.t = scatter.blend(f32x8::ZERO, t).into();
-        self.t_exit = scatter.blend(te, t_exit).into();
-        self.axis = select_i32(scatter, ax, i32x8::from(self.axis)).into();
 
         let too_long = cast::<u32x8, f32x8>(
             u32x8::from(self.events).cmp_gt(u32x8::splat(MAX_EVENTS))
@@ -235,24 +282,65 @@ impl Packet {
         StepEvents {
             exits: (exit & !too_long).move_mask(),
             ended: ((dead | too_long) & live).move_mask(),
+            shallow: shallow & !too_long.move_mask(),
             u_fresnel: u_third.into(),
+        }
+    }
+
+    /// Continue lane l's path with the general walk (masked volumes: near the surface and outside the object)
+    /// from p in voxel v; returns the path's value if it ended, else the lane is flying in the deep interior.
+    fn walk<M: Medium>(&mut self, geo: &Geometry, med: &M, l: usize, p: V3, d: V3, v: [i32; 3], in_medium: bool)
+        -> Option<PathValue> {
+        let mut rng = self.rng(l);
+        let mut w = Walk { p, d, v, weight: self.weight[l], in_medium, events: self.events[l], steps: self.steps[l] as u64 };
+        let end = walk_masked(geo, med, self.chan[l], &mut w, &mut rng, &mut NoTally, true);
+        self.draw[l] = rng.draw;
+        match end {
+            WalkEnd::Done(r) => Some(r),
+            WalkEnd::Deep => {
+                (self.weight[l], self.events[l], self.steps[l]) = (w.weight, w.events, w.steps.min(u32::MAX as u64) as u32);
+                self.start_flight(geo, l, w.p, w.d);
+                None
+            }
         }
     }
 }
 
-/// Trace every path of `texels` (mask-free geometry) and write path values to `values`, laid out
-/// [texel][channel][sample] (3 * spp per texel). `first_key` is the random-number key of `texels[0]`.
-/// Returns the number of collisions.
-pub(crate) fn trace_paths<M: Medium>(geo: &Geometry, med: &M, texels: &[Texel], first_key: u64, spp: usize,
-                                     seed: u64, include_specular: bool, values: &mut [f32]) -> u64 {
-    debug_assert!(geo.inside.is_none());
+/// Radius of the ball around a point of a voxel with safe distance `s` that lies inside the object.
+#[inline(always)]
+fn safe_radius(geo: &Geometry, s: f32) -> f32 {
+    (s - 1.0) * geo.size[0].min(geo.size[1]).min(geo.size[2])
+}
+
+/// The voxel containing p, clamped to the grid.
+#[inline(always)]
+fn locate_box(geo: &Geometry, p: V3) -> [i32; 3] {
+    let mut v = [0i32; 3];
+    for a in 0..3 {
+        v[a] = ((p[a] * geo.inv_size[a]) as i32).max(0).min(geo.n[a] - 1);
+    }
+    v
+}
+
+/// Whether `trace_paths` handles this geometry (mask-free volumes, and masked boxes).
+pub(crate) fn supported(geo: &Geometry) -> bool {
+    geo.inside.is_none() || geo.boundary == Boundary::Box
+}
+
+/// Trace every path of `texels` and write path values to `values`, laid out [texel][channel][sample]
+/// (3 * spp per texel). `first_key` is the random-number key of `texels[0]`. Returns the number of collisions.
+pub(crate) fn trace_paths<M: Medium>(geo: &Geometry, med: &M, texels: &[Texel], first_key: u64, opts: &RenderOptions,
+                                     values: &mut [f32]) -> u64 {
+    assert!(supported(geo));
+    let masked = geo.inside.is_some();
+    let (spp, seed, include_specular) = (opts.spp as usize, opts.seed, opts.include_specular);
     let per_texel = 3 * spp;
     let jobs = texels.len() * per_texel;
     assert_eq!(values.len(), jobs);
     let mut pk = Packet::new();
     let mut next = 0usize;
     let mut events = 0u64;
-    // Give lane l the next path that enters the medium (paths that end at the camera are written directly).
+    // Give lane l the next path that reaches the (deep) interior; paths that end before are written directly.
     let refill = |pk: &mut Packet, l: usize, next: &mut usize, events: &mut u64, values: &mut [f32]| {
         pk.job[l] = None;
         while *next < jobs {
@@ -261,31 +349,43 @@ pub(crate) fn trace_paths<M: Medium>(geo: &Geometry, med: &M, texels: &[Texel], 
             let (ti, r) = (job / per_texel, job % per_texel);
             let (c, s) = (r / spp, (r % spp) as u32);
             let key = path_key(seed, first_key + ti as u64, s, c as u32);
-            let (k_lo, k_hi) = (key as u32, (key >> 32) as u32);
-            let mut i = 0u32;
-            let start = camera_ray(geo, &texels[ti], include_specular, &mut || {
-                i += 1;
-                uniform(k_lo, k_hi, i - 1)
-            });
-            match start {
-                Start::Medium(p, d, _, w) => {
-                    let maj = med.majorant(c);
-                    pk.maj[l] = maj;
-                    pk.inv_maj[l] = if maj > 0.0 { 1.0 / maj } else { f32::INFINITY };
-                    (pk.k_lo[l], pk.k_hi[l], pk.draw[l]) = (k_lo, k_hi, CAMERA_DRAWS);
-                    (pk.weight[l], pk.events[l], pk.steps[l], pk.chan[l]) = (w, 0, 0, c);
-                    pk.start_flight(geo, l, p, d);
-                    pk.job[l] = Some(job);
-                    return;
+            let mut rng = LaneRng { k_lo: key as u32, k_hi: (key >> 32) as u32, draw: 0 };
+            let start = camera_ray(geo, &texels[ti], include_specular, &mut rng);
+            let maj = med.majorant(c);
+            pk.maj[l] = maj;
+            pk.inv_maj[l] = if maj > 0.0 { 1.0 / maj } else { f32::INFINITY };
+            (pk.k_lo[l], pk.k_hi[l], pk.draw[l]) = (rng.k_lo, rng.k_hi, CAMERA_DRAWS);
+            (pk.events[l], pk.steps[l], pk.chan[l]) = (0, 0, c);
+            let ended = match start {
+                Start::Done(r) => Some(r),
+                Start::Medium(p, d, v, w) if masked => {
+                    pk.weight[l] = w;
+                    pk.walk(geo, med, l, p, d, v, true)
                 }
-                Start::Done(r) => values[job] = r.value,
-                Start::Outside(_, d, v) if !geo.in_grid(v) => values[job] = geo.env.eval(d, c),
+                Start::Outside(p, d, v) if masked => {
+                    pk.weight[l] = 1.0;
+                    pk.walk(geo, med, l, p, d, v, false)
+                }
+                Start::Medium(p, d, _, w) => {
+                    pk.weight[l] = w;
+                    pk.start_flight(geo, l, p, d);
+                    None
+                }
+                Start::Outside(_, d, v) if !geo.in_grid(v) => Some(PathValue { value: geo.env.eval(d, c), events: 0 }),
                 Start::Outside(..) => {
-                    // A texel inside the grid (not one of our texel lists): the general tracer.
+                    // A texel inside a mask-free grid (not one of our texel lists): the scalar tracer.
                     let mut rng = crate::rng::PathRng::new(seed, first_key + ti as u64, s, c as u32);
-                    let r = trace(geo, med, &texels[ti], c, &mut rng, include_specular, &mut NoTally);
+                    Some(trace(geo, med, &texels[ti], c, &mut rng, include_specular, &mut NoTally))
+                }
+            };
+            match ended {
+                Some(r) => {
                     values[job] = r.value;
                     *events += r.events as u64;
+                }
+                None => {
+                    pk.job[l] = Some(job);
+                    return;
                 }
             }
         }
@@ -295,39 +395,54 @@ pub(crate) fn trace_paths<M: Medium>(geo: &Geometry, med: &M, texels: &[Texel], 
     }
     while pk.job.iter().any(|j| j.is_some()) {
         let ev = pk.step(geo, med);
-        let mut bits = ev.ended | ev.exits;
+        let mut bits = ev.ended | ev.exits | ev.shallow;
         while bits != 0 {
             let l = bits.trailing_zeros() as usize;
             bits &= bits - 1;
             let job = pk.job[l].expect("a live lane");
             let c = pk.chan[l];
-            if ev.ended >> l & 1 == 1 {
-                values[job] = 0.0;
-                events += pk.events[l] as u64;
-                refill(&mut pk, l, &mut next, &mut events, values);
-                continue;
-            }
-            // The flight reached the grid's face: Fresnel reflection or out into the environment.
-            let axis = pk.axis[l] as usize;
-            let d = [pk.d[0][l], pk.d[1][l], pk.d[2][l]];
-            let mut p = add([pk.p[0][l], pk.p[1][l], pk.p[2][l]], scale(d, pk.t_exit[l]));
-            let out = d[axis] > 0.0;
-            p[axis] = if out { geo.n[axis] as f32 * geo.size[axis] } else { 0.0 };
-            if geo.boundary == Boundary::PeriodicXY {
-                for a in 0..2 {
-                    let span = geo.n[a] as f32 * geo.size[a];
-                    p[a] -= (p[a] / span).floor() * span;
+            let ended = if ev.ended >> l & 1 == 1 {
+                Some(PathValue { value: 0.0, events: pk.events[l] })
+            } else if masked {
+                // A shallow collision (the lane is at it), or the edge of the safe ball: the general walk from there.
+                let d = [pk.d[0][l], pk.d[1][l], pk.d[2][l]];
+                let mut p = [pk.p[0][l], pk.p[1][l], pk.p[2][l]];
+                if ev.exits >> l & 1 == 1 {
+                    p = add(p, scale(d, pk.t_exit[l]));
+                    let s = geo.safe_distance(geo.index(locate_box(geo, p)));
+                    if s >= 2 {
+                        pk.start_flight(geo, l, p, d);
+                        continue;
+                    }
                 }
-            }
-            let mut n_geo = [0.0f32; 3];
-            n_geo[axis] = if out { -1.0 } else { 1.0 };
-            let (nd, transmitted) = interface(d, n_geo, n_geo, geo.ior, ev.u_fresnel[l]);
-            if transmitted {
-                values[job] = pk.weight[l] * geo.env.eval(nd, c);
-                events += pk.events[l] as u64;
-                refill(&mut pk, l, &mut next, &mut events, values);
+                pk.walk(geo, med, l, p, d, locate_box(geo, p), true)
             } else {
-                pk.start_flight(geo, l, p, nd);
+                // The flight reached the grid's face: Fresnel reflection or out into the environment.
+                let axis = pk.axis[l] as usize;
+                let d = [pk.d[0][l], pk.d[1][l], pk.d[2][l]];
+                let mut p = add([pk.p[0][l], pk.p[1][l], pk.p[2][l]], scale(d, pk.t_exit[l]));
+                let out = d[axis] > 0.0;
+                p[axis] = if out { geo.n[axis] as f32 * geo.size[axis] } else { 0.0 };
+                if geo.boundary == Boundary::PeriodicXY {
+                    for pa in p.iter_mut().take(2).zip(0..2) {
+                        let span = geo.n[pa.1] as f32 * geo.size[pa.1];
+                        *pa.0 -= (*pa.0 / span).floor() * span;
+                    }
+                }
+                let mut n_geo = [0.0f32; 3];
+                n_geo[axis] = if out { -1.0 } else { 1.0 };
+                let (nd, transmitted) = interface(d, n_geo, n_geo, geo.ior, ev.u_fresnel[l]);
+                if transmitted {
+                    Some(PathValue { value: pk.weight[l] * geo.env.eval(nd, c), events: pk.events[l] })
+                } else {
+                    pk.start_flight(geo, l, p, nd);
+                    None
+                }
+            };
+            if let Some(r) = ended {
+                values[job] = r.value;
+                events += r.events as u64;
+                refill(&mut pk, l, &mut next, &mut events, values);
             }
         }
     }

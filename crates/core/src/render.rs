@@ -8,7 +8,7 @@ use rayon::prelude::*;
 
 use crate::rng::PathRng;
 use crate::scene::{Geometry, Medium, Texel};
-use crate::packet::trace_paths;
+use crate::packet::{self, trace_paths};
 use crate::trace::{trace, NoTally, Tally};
 
 #[derive(Clone, Copy, Debug)]
@@ -81,7 +81,7 @@ pub fn render<M: Medium>(
     first_texel: u64,
     opts: &RenderOptions,
 ) -> (Vec<TexelEstimate>, Stats) {
-    if geo.inside.is_none() {
+    if packet::supported(geo) {
         return render_packets(geo, med, texels, first_texel, opts);
     }
     let results: Vec<(TexelEstimate, Stats)> = texels
@@ -111,7 +111,7 @@ pub fn render<M: Medium>(
 /// while the item's last paths finish), few enough to balance the threads.
 const PACKET_CHUNK: usize = 64;
 
-/// `render` for mask-free volumes: eight paths at a time (`packet`), each texel's path values summed in a
+/// `render` for mask-free volumes and masked boxes: eight paths at a time (`packet`), each texel's path values summed in a
 /// fixed order, so results are bit-identical for any thread count.
 fn render_packets<M: Medium>(geo: &Geometry, med: &M, texels: &[Texel], first_texel: u64, opts: &RenderOptions)
     -> (Vec<TexelEstimate>, Stats) {
@@ -122,7 +122,7 @@ fn render_packets<M: Medium>(geo: &Geometry, med: &M, texels: &[Texel], first_te
         .map(|(k, chunk)| {
             let mut values = vec![0.0f32; chunk.len() * 3 * spp];
             let key = first_texel + (k * PACKET_CHUNK) as u64;
-            let events = trace_paths(geo, med, chunk, key, spp, opts.seed, opts.include_specular, &mut values);
+            let events = trace_paths(geo, med, chunk, key, opts, &mut values);
             let est = values
                 .chunks(3 * spp)
                 .map(|v| {

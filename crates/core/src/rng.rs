@@ -13,6 +13,24 @@ pub fn mix64(mut z: u64) -> u64 {
     z ^ (z >> 31)
 }
 
+/// A path's source of uniforms in [0, 1) (24 random bits each).
+pub trait Uniforms {
+    fn next_f32(&mut self) -> f32;
+    /// Two independent uniforms.
+    fn next_f32_pair(&mut self) -> (f32, f32);
+}
+
+impl Uniforms for PathRng {
+    #[inline(always)]
+    fn next_f32(&mut self) -> f32 {
+        PathRng::next_f32(self)
+    }
+    #[inline(always)]
+    fn next_f32_pair(&mut self) -> (f32, f32) {
+        PathRng::next_f32_pair(self)
+    }
+}
+
 /// The 64-bit key of one path's stream: a hash of (seed, texel, sample, channel).
 #[inline]
 pub fn path_key(seed: u64, texel: u64, sample: u32, channel: u32) -> u64 {

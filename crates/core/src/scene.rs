@@ -158,6 +158,9 @@ pub struct Geometry {
     pub boundary: Boundary,
     /// Optional inside mask, one byte per voxel (non-zero = inside). None: the whole box is inside.
     pub inside: Option<Vec<u8>>,
+    /// With `inside`: each voxel's safe distance, the Chebyshev distance in voxels to the nearest voxel outside
+    /// the object or the grid (0 outside, 1 at the surface, capped at `SAFE_CAP`).
+    pub safe: Option<Vec<u8>>,
     /// Optional outward unit shading normals (x, y, z) per voxel, interleaved; used at surface voxels.
     pub normals: Option<Vec<f32>>,
     /// Relative index of refraction of the object (outside: 1).
@@ -187,6 +190,7 @@ impl Geometry {
             stride: [1, n_xyz[0] as isize, (n_xyz[0] * n_xyz[1]) as isize],
             boundary,
             inside: None,
+            safe: None,
             normals: None,
             ior,
             g,
@@ -202,8 +206,18 @@ impl Geometry {
         if inside.len() != self.voxel_count() {
             return Err("inside mask size differs from the grid".into());
         }
+        self.safe = Some(safe_distances(&inside, [self.n[0] as usize, self.n[1] as usize, self.n[2] as usize]));
         self.inside = Some(inside);
         Ok(self)
+    }
+
+    /// Safe distance of voxel j (`safe`); `SAFE_CAP` when there is no mask.
+    #[inline(always)]
+    pub fn safe_distance(&self, j: usize) -> u8 {
+        match &self.safe {
+            None => SAFE_CAP,
+            Some(s) => s[j],
+        }
     }
 
     pub fn with_normals(mut self, normals: Vec<f32>) -> Result<Self, String> {
@@ -255,6 +269,40 @@ impl Geometry {
             None
         }
     }
+}
+
+/// Largest safe distance stored: 16 voxels (1.3 mm at 300 DPI), far beyond a free flight in any ink.
+pub const SAFE_CAP: u8 = 16;
+
+/// Safe distances of a mask (non-zero = inside) over an (nx, ny, nz) grid: the number of successive erosions by
+/// the 3 x 3 x 3 cube (separable: three 1D passes) a voxel survives, outside the grid counting as outside. A
+/// voxel with safe distance s has every voxel within s - 1 steps (any of the 26 directions) inside.
+pub fn safe_distances(inside: &[u8], n: [usize; 3]) -> Vec<u8> {
+    let stride = [1, n[0], n[0] * n[1]];
+    let mut cur: Vec<u8> = inside.iter().map(|&m| (m != 0) as u8).collect();
+    let mut safe = cur.clone();
+    let mut tmp = vec![0u8; cur.len()];
+    for _ in 1..SAFE_CAP {
+        for a in 0..3 {
+            let (len, st) = (n[a], stride[a]);
+            for (j, out) in tmp.iter_mut().enumerate() {
+                let k = (j / st) % len;
+                let lo = if k > 0 { cur[j - st] } else { 0 };
+                let hi = if k + 1 < len { cur[j + st] } else { 0 };
+                *out = cur[j] & lo & hi;
+            }
+            std::mem::swap(&mut cur, &mut tmp);
+        }
+        let mut any = false;
+        for (s, &c) in safe.iter_mut().zip(&cur) {
+            *s += c;
+            any |= c != 0;
+        }
+        if !any {
+            break;
+        }
+    }
+    safe
 }
 
 /// The outward unit normal (x, y, z) of face id f: 0 -x, 1 +x, 2 -y, 3 +y, 4 -z, 5 +z.

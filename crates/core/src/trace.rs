@@ -19,7 +19,7 @@
 //! roulette's survival probabilities are sampling decisions, not differentiated: unbiased). A `Tally` receives
 //! every segment (voxel, length) and collision.
 
-use crate::rng::PathRng;
+use crate::rng::{PathRng, Uniforms};
 use crate::sampling::{add, dot, fresnel, hg_sample, reflect, refract, scale, V3};
 use crate::scene::{face_normal, Boundary, Geometry, Medium, Texel};
 
@@ -88,7 +88,7 @@ fn pick_normal(d: V3, n_geo: V3, n_sh: V3) -> V3 {
 
 /// Multiply the weight by the albedo; Russian roulette below the threshold. False: the path ends (value 0).
 #[inline(always)]
-fn survive(weight: &mut f32, albedo: f32, rng: &mut PathRng) -> bool {
+fn survive<U: Uniforms>(weight: &mut f32, albedo: f32, rng: &mut U) -> bool {
     *weight *= albedo;
     if *weight >= RR_THRESHOLD {
         return true;
@@ -102,7 +102,7 @@ fn survive(weight: &mut f32, albedo: f32, rng: &mut PathRng) -> bool {
 }
 
 #[inline(always)]
-fn free_flight(rng: &mut PathRng) -> f32 {
+fn free_flight<U: Uniforms>(rng: &mut U) -> f32 {
     -(1.0 - rng.next_f32()).ln()
 }
 
@@ -324,10 +324,9 @@ pub(crate) enum Start {
 
 /// The camera ray of `texel`: a uniform point on its face (two uniforms), looking along -normal, through the
 /// first interface (one uniform when `include_specular`: the Fresnel reflection is sampled and counts; else the
-/// ray refracts with weight 1 - F). `uniform` draws the path's next random number.
+/// ray refracts with weight 1 - F).
 #[inline(always)]
-pub(crate) fn camera_ray(geo: &Geometry, texel: &Texel, include_specular: bool, uniform: &mut impl FnMut() -> f32)
-    -> Start {
+pub(crate) fn camera_ray<U: Uniforms>(geo: &Geometry, texel: &Texel, include_specular: bool, rng: &mut U) -> Start {
     let mut v = texel.voxel;
     let fa = (texel.face / 2) as usize;
     let mut p = [0.0f32; 3];
@@ -335,14 +334,14 @@ pub(crate) fn camera_ray(geo: &Geometry, texel: &Texel, include_specular: bool, 
         p[a] = if a == fa {
             (v[a] + (texel.face % 2) as i32) as f32 * geo.size[a]
         } else {
-            (v[a] as f32 + uniform()) * geo.size[a]
+            (v[a] as f32 + rng.next_f32()) * geo.size[a]
         };
     }
     let n_face = face_normal(texel.face);
     let d = scale(texel.normal, -1.0);
     let eta_in = 1.0 / geo.ior;
     if include_specular {
-        let (nd, transmitted) = interface(d, n_face, texel.normal, eta_in, uniform());
+        let (nd, transmitted) = interface(d, n_face, texel.normal, eta_in, rng.next_f32());
         if transmitted {
             return Start::Medium(p, nd, v, 1.0);
         }
@@ -368,48 +367,80 @@ pub fn trace<M: Medium, T: Tally>(
     include_specular: bool,
     tally: &mut T,
 ) -> PathValue {
-    let (mut p, mut d, mut v, mut weight, mut in_medium) =
-        match camera_ray(geo, texel, include_specular, &mut || rng.next_f32()) {
+    let (mut p, mut d, mut v, mut weight, in_medium) =
+        match camera_ray(geo, texel, include_specular, rng) {
             Start::Medium(p, d, v, w) => (p, d, v, w, true),
             Start::Outside(p, d, v) => (p, d, v, 1.0, false),
             Start::Done(r) => return r,
         };
-    let eta_in = 1.0 / geo.ior;
-    let mut events = 0u32;
-    let mut steps = 0u64;
-    let delta = geo.inside.is_none();
-    loop {
-        if in_medium && delta {
-            let maj = med.majorant(c);
-            loop {
-                steps += 1;
-                if steps > MAX_STEPS {
-                    return PathValue { value: 0.0, events };
-                }
-                match fly_delta(geo, med, c, maj, &mut p, d, &mut v, rng, tally) {
-                    Flight::Collision(j, albedo) => {
-                        events += 1;
-                        if !survive(&mut weight, albedo, rng) || events > MAX_EVENTS {
-                            return PathValue { value: 0.0, events };
-                        }
-                        tally.scatter(j);
-                        let (u1, u2) = rng.next_f32_pair();
-                        d = hg_sample(d, geo.g, u1, u2);
+    if in_medium && geo.inside.is_none() {
+        let maj = med.majorant(c);
+        let mut events = 0u32;
+        let mut steps = 0u64;
+        loop {
+            steps += 1;
+            if steps > MAX_STEPS {
+                return PathValue { value: 0.0, events };
+            }
+            match fly_delta(geo, med, c, maj, &mut p, d, &mut v, rng, tally) {
+                Flight::Collision(j, albedo) => {
+                    events += 1;
+                    if !survive(&mut weight, albedo, rng) || events > MAX_EVENTS {
+                        return PathValue { value: 0.0, events };
                     }
-                    Flight::Exit(axis, step) => {
-                        let mut n_geo = [0.0f32; 3];
-                        n_geo[axis] = -step as f32;
-                        let (nd, transmitted) = interface(d, n_geo, n_geo, geo.ior, rng.next_f32());
-                        d = nd;
-                        if transmitted {
-                            v[axis] += step;
-                            in_medium = false;
-                            break;
-                        }
+                    tally.scatter(j);
+                    let (u1, u2) = rng.next_f32_pair();
+                    d = hg_sample(d, geo.g, u1, u2);
+                }
+                Flight::Exit(axis, step) => {
+                    let mut n_geo = [0.0f32; 3];
+                    n_geo[axis] = -step as f32;
+                    let (nd, transmitted) = interface(d, n_geo, n_geo, geo.ior, rng.next_f32());
+                    d = nd;
+                    if transmitted {
+                        // Through a face of the grid, which is the object: out into the environment.
+                        return PathValue { value: weight * geo.env.eval(d, c), events };
                     }
                 }
             }
-        } else if in_medium {
+        }
+    }
+    let mut w = Walk { p, d, v, weight, in_medium, events: 0, steps: 0 };
+    match walk_masked(geo, med, c, &mut w, rng, tally, false) {
+        WalkEnd::Done(r) => r,
+        WalkEnd::Deep => unreachable!("walk_masked stops at deep voxels only when asked"),
+    }
+}
+
+/// A path's state in the general walk (`walk_masked`).
+pub(crate) struct Walk {
+    pub p: V3,
+    pub d: V3,
+    pub v: [i32; 3],
+    pub weight: f32,
+    pub in_medium: bool,
+    pub events: u32,
+    pub steps: u64,
+}
+
+pub(crate) enum WalkEnd {
+    /// The path ended with this value.
+    Done(PathValue),
+    /// It scattered (state updated) in a voxel at least 2 voxels from the object's surface, where delta
+    /// tracking inside a safe ball can take over (only when `stop_deep`).
+    Deep,
+}
+
+/// The general walk: regular tracking inside the object (an `inside` mask bounds it: every crossing of its
+/// surface is found, with Fresnel events on the shading normals), straight flights outside it until the path
+/// re-enters a concave part or leaves the grid. With `stop_deep` it returns `Deep` after a collision in a voxel
+/// whose safe distance is at least 2.
+pub(crate) fn walk_masked<M: Medium, T: Tally, U: Uniforms>(geo: &Geometry, med: &M, c: usize, w: &mut Walk,
+                                                            rng: &mut U, tally: &mut T, stop_deep: bool) -> WalkEnd {
+    let eta_in = 1.0 / geo.ior;
+    let Walk { mut p, mut d, mut v, mut weight, mut in_medium, mut events, mut steps } = *w;
+    loop {
+        if in_medium {
             // Regular tracking with an incremental (Amanatides-Woo) DDA: p0 + t d is the position, the
             // per-axis distances to the next voxel boundary advance without divisions.
             let mut tau = free_flight(rng);
@@ -420,7 +451,7 @@ pub fn trace<M: Medium, T: Tally>(
             loop {
                 steps += 1;
                 if steps > MAX_STEPS {
-                    return PathValue { value: 0.0, events };
+                    return WalkEnd::Done(PathValue { value: 0.0, events });
                 }
                 let (st, albedo) = med.coeffs(j, c);
                 let axis = dda.next_axis();
@@ -431,12 +462,16 @@ pub fn trace<M: Medium, T: Tally>(
                     tally.segment(j, s);
                     events += 1;
                     if !survive(&mut weight, albedo, rng) || events > MAX_EVENTS {
-                        return PathValue { value: 0.0, events };
+                        return WalkEnd::Done(PathValue { value: 0.0, events });
                     }
                     tally.scatter(j);
                     p0 = add(p0, scale(d, t + s));
                     let (u1, u2) = rng.next_f32_pair();
                     d = hg_sample(d, geo.g, u1, u2);
+                    if stop_deep && geo.safe_distance(j) >= 2 {
+                        *w = Walk { p: p0, d, v, weight, in_medium: true, events, steps };
+                        return WalkEnd::Deep;
+                    }
                     dda = Dda::new(geo, p0, d, v);
                     t = 0.0;
                     tau = free_flight(rng);
@@ -483,10 +518,10 @@ pub fn trace<M: Medium, T: Tally>(
             loop {
                 steps += 1;
                 if !geo.in_grid(v) {
-                    return PathValue { value: weight * geo.env.eval(d, c), events };
+                    return WalkEnd::Done(PathValue { value: weight * geo.env.eval(d, c), events });
                 }
                 if steps > MAX_STEPS {
-                    return PathValue { value: 0.0, events };
+                    return WalkEnd::Done(PathValue { value: 0.0, events });
                 }
                 let (t, axis) = exit_distance(geo, p, d, v);
                 let (nb, step) = cross(geo, &mut p, d, t, axis, v);
