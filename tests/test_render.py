@@ -125,7 +125,8 @@ def _fd_check(vol, probes, spp=800, seeds=tuple(range(11, 23)), h=0.3):
 
 @pytest.mark.parametrize("masked", [False, True])
 def test_gradient_matches_finite_differences(masked):
-    """Both sigma_s and sigma_a, voxels at several depths, with delta tracking (no mask) and regular tracking."""
+    """Both sigma_s and sigma_a, voxels at several depths, in a periodic slab with delta tracking in packets (no
+    mask) and with the scalar regular-tracking walk (a mask)."""
     rng = np.random.default_rng(3)
     shape = (4, 3, 3)
     s = rng.uniform(2, 12, shape + (3,)).astype(np.float32)
@@ -134,6 +135,20 @@ def test_gradient_matches_finite_differences(masked):
     vol = Volume(voxel_mm=(0.1,) * 3, sigma_s=s, sigma_a=a, boundary="periodic-xy", inside=inside)
     _fd_check(vol, [(3, 1, 1, 0, "sigma_s"), (3, 1, 1, 2, "sigma_a"), (2, 0, 1, 1, "sigma_s"),
                     (1, 1, 2, 0, "sigma_a")])
+
+
+def test_gradient_matches_finite_differences_masked_object():
+    """A masked object (a box with a notch, vacuum outside) as meshes are rendered: packets with delta tracking
+    inside safe balls in the interior (safe distance 3 at the centre) and the general walk near the surface."""
+    rng = np.random.default_rng(5)
+    shape = (6, 6, 6)
+    inside = np.ones(shape, bool)
+    inside[3:, 2:4, :2] = False  # a notch in the top (light can leave and re-enter)
+    s = np.where(inside[..., None], rng.uniform(4, 12, shape + (3,)), 0).astype(np.float32)
+    a = np.where(inside[..., None], rng.uniform(0.2, 2, shape + (3,)), 0).astype(np.float32)
+    vol = Volume(voxel_mm=(0.1,) * 3, sigma_s=s, sigma_a=a, boundary="box", inside=inside)
+    _fd_check(vol, [(5, 3, 3, 0, "sigma_s"), (5, 1, 1, 1, "sigma_a"), (2, 2, 2, 2, "sigma_s"),
+                    (3, 3, 3, 0, "sigma_a")], spp=400)
 
 
 def test_li1_gradient_is_correlated_with_replay():

@@ -20,8 +20,8 @@ use crate::rng::{path_key, Uniforms};
 use crate::sampling::{add, scale, V3};
 use crate::scene::{Boundary, Geometry, Medium, Texel};
 use crate::trace::PathValue;
-use crate::trace::{camera_ray, interface, trace, walk_masked, NoTally, Start, Walk, WalkEnd, MAX_EVENTS, MAX_STEPS,
-                   RR_THRESHOLD};
+use crate::trace::{camera_ray, interface, tally_segments, trace, walk_masked, Start, Tally, Walk, WalkEnd,
+                   MAX_EVENTS, MAX_STEPS, RR_THRESHOLD};
 
 const W: usize = 8;
 /// Uniforms drawn by a camera ray (2 for the point on the face, 1 for the Fresnel event); the walk starts after.
@@ -126,6 +126,47 @@ fn hg8(d: [f32x8; 3], g: f32, u1: f32x8, u2: f32x8) -> [f32x8; 3] {
     [w[0] * k, w[1] * k, w[2] * k]
 }
 
+/// Gradient tallies of the paths `trace_paths` traces, per path (`job`) and channel `c`: the segments (voxel,
+/// length) of every flight and the voxel of every scattering, as `trace::Tally` for one path.
+pub(crate) trait PathTally {
+    const ACTIVE: bool;
+    /// Whether to trace path `job` at all (a replay skips the paths that carry no gradient).
+    fn wanted(&self, _job: usize) -> bool {
+        true
+    }
+    fn segment(&mut self, job: usize, c: usize, j: usize, len: f32);
+    fn scatter(&mut self, job: usize, c: usize, j: usize);
+}
+
+pub(crate) struct NoPathTally;
+
+impl PathTally for NoPathTally {
+    const ACTIVE: bool = false;
+    #[inline(always)]
+    fn segment(&mut self, _: usize, _: usize, _: usize, _: f32) {}
+    #[inline(always)]
+    fn scatter(&mut self, _: usize, _: usize, _: usize) {}
+}
+
+/// One path's view of a `PathTally` (for the scalar walk and `tally_segments`).
+struct JobTally<'a, P: PathTally> {
+    inner: &'a mut P,
+    job: usize,
+    c: usize,
+}
+
+impl<P: PathTally> Tally for JobTally<'_, P> {
+    const ACTIVE: bool = P::ACTIVE;
+    #[inline(always)]
+    fn segment(&mut self, j: usize, len: f32) {
+        self.inner.segment(self.job, self.c, j, len);
+    }
+    #[inline(always)]
+    fn scatter(&mut self, j: usize) {
+        self.inner.scatter(self.job, self.c, j);
+    }
+}
+
 /// Eight paths in flight: per-lane state, structure of arrays.
 struct Packet {
     /// Start of the current straight flight (wrapped into the periodic frame), direction, distance flown.
@@ -157,6 +198,10 @@ struct StepEvents {
     ended: i32,
     /// Lanes that scattered into a voxel next to the object's surface (masked volumes): the general walk.
     shallow: i32,
+    /// Real collisions (scattered or absorbed), at distance `t` along the flight, in voxel `j`.
+    collided: i32,
+    t: [f32; W],
+    j: [i32; W],
     /// The third uniform of the step (the Fresnel decision of a lane that reached the grid's face).
     u_fresnel: [f32; W],
 }
@@ -283,17 +328,22 @@ impl Packet {
             exits: (exit & !too_long).move_mask(),
             ended: ((dead | too_long) & live).move_mask(),
             shallow: shallow & !too_long.move_mask(),
+            collided: accept.move_mask(),
+            t: t.into(),
+            j,
             u_fresnel: u_third.into(),
         }
     }
 
     /// Continue lane l's path with the general walk (masked volumes: near the surface and outside the object)
     /// from p in voxel v; returns the path's value if it ended, else the lane is flying in the deep interior.
-    fn walk<M: Medium>(&mut self, geo: &Geometry, med: &M, l: usize, p: V3, d: V3, v: [i32; 3], in_medium: bool)
-        -> Option<PathValue> {
+    #[allow(clippy::too_many_arguments)]
+    fn walk<M: Medium, P: PathTally>(&mut self, geo: &Geometry, med: &M, l: usize, job: usize, p: V3, d: V3,
+                                     v: [i32; 3], in_medium: bool, tally: &mut P) -> Option<PathValue> {
         let mut rng = self.rng(l);
         let mut w = Walk { p, d, v, weight: self.weight[l], in_medium, events: self.events[l], steps: self.steps[l] as u64 };
-        let end = walk_masked(geo, med, self.chan[l], &mut w, &mut rng, &mut NoTally, true);
+        let mut jt = JobTally { inner: tally, job, c: self.chan[l] };
+        let end = walk_masked(geo, med, self.chan[l], &mut w, &mut rng, &mut jt, true);
         self.draw[l] = rng.draw;
         match end {
             WalkEnd::Done(r) => Some(r),
@@ -327,10 +377,12 @@ pub(crate) fn supported(geo: &Geometry) -> bool {
     geo.inside.is_none() || geo.boundary == Boundary::Box
 }
 
-/// Trace every path of `texels` and write path values to `values`, laid out [texel][channel][sample]
-/// (3 * spp per texel). `first_key` is the random-number key of `texels[0]`. Returns the number of collisions.
-pub(crate) fn trace_paths<M: Medium>(geo: &Geometry, med: &M, texels: &[Texel], first_key: u64, opts: &RenderOptions,
-                                     values: &mut [f32]) -> u64 {
+/// Trace the paths of `texels` (those the tally wants) and write their values to `values`, laid out
+/// [texel][channel][sample] (3 * spp per texel; entries of paths not traced are left alone). `first_key` is the
+/// random-number key of `texels[0]`. Every path is a pure function of its key, so a replay with an active tally
+/// follows exactly the paths of an earlier pass. Returns the number of collisions.
+pub(crate) fn trace_paths<M: Medium, P: PathTally>(geo: &Geometry, med: &M, texels: &[Texel], first_key: u64,
+                                                   opts: &RenderOptions, values: &mut [f32], tally: &mut P) -> u64 {
     assert!(supported(geo));
     let masked = geo.inside.is_some();
     let (spp, seed, include_specular) = (opts.spp as usize, opts.seed, opts.include_specular);
@@ -341,11 +393,14 @@ pub(crate) fn trace_paths<M: Medium>(geo: &Geometry, med: &M, texels: &[Texel], 
     let mut next = 0usize;
     let mut events = 0u64;
     // Give lane l the next path that reaches the (deep) interior; paths that end before are written directly.
-    let refill = |pk: &mut Packet, l: usize, next: &mut usize, events: &mut u64, values: &mut [f32]| {
+    let refill = |pk: &mut Packet, l: usize, next: &mut usize, events: &mut u64, values: &mut [f32], tally: &mut P| {
         pk.job[l] = None;
         while *next < jobs {
             let job = *next;
             *next += 1;
+            if !tally.wanted(job) {
+                continue;
+            }
             let (ti, r) = (job / per_texel, job % per_texel);
             let (c, s) = (r / spp, (r % spp) as u32);
             let key = path_key(seed, first_key + ti as u64, s, c as u32);
@@ -360,11 +415,11 @@ pub(crate) fn trace_paths<M: Medium>(geo: &Geometry, med: &M, texels: &[Texel], 
                 Start::Done(r) => Some(r),
                 Start::Medium(p, d, v, w) if masked => {
                     pk.weight[l] = w;
-                    pk.walk(geo, med, l, p, d, v, true)
+                    pk.walk(geo, med, l, job, p, d, v, true, tally)
                 }
                 Start::Outside(p, d, v) if masked => {
                     pk.weight[l] = 1.0;
-                    pk.walk(geo, med, l, p, d, v, false)
+                    pk.walk(geo, med, l, job, p, d, v, false, tally)
                 }
                 Start::Medium(p, d, _, w) => {
                     pk.weight[l] = w;
@@ -375,7 +430,8 @@ pub(crate) fn trace_paths<M: Medium>(geo: &Geometry, med: &M, texels: &[Texel], 
                 Start::Outside(..) => {
                     // A texel inside a mask-free grid (not one of our texel lists): the scalar tracer.
                     let mut rng = crate::rng::PathRng::new(seed, first_key + ti as u64, s, c as u32);
-                    Some(trace(geo, med, &texels[ti], c, &mut rng, include_specular, &mut NoTally))
+                    let mut jt = JobTally { inner: &mut *tally, job, c };
+                    Some(trace(geo, med, &texels[ti], c, &mut rng, include_specular, &mut jt))
                 }
             };
             match ended {
@@ -391,10 +447,28 @@ pub(crate) fn trace_paths<M: Medium>(geo: &Geometry, med: &M, texels: &[Texel], 
         }
     };
     for l in 0..W {
-        refill(&mut pk, l, &mut next, &mut events, values);
+        refill(&mut pk, l, &mut next, &mut events, values, tally);
     }
     while pk.job.iter().any(|j| j.is_some()) {
+        let (p0, d0) = (pk.p, pk.d);
         let ev = pk.step(geo, med);
+        if P::ACTIVE {
+            // The flights that ended in this step: a collision at t, or t_exit (grid face or safe-ball edge).
+            let mut bits = ev.collided | ev.exits;
+            while bits != 0 {
+                let l = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let (job, c) = (pk.job[l].expect("a live lane"), pk.chan[l]);
+                let (p, d) = ([p0[0][l], p0[1][l], p0[2][l]], [d0[0][l], d0[1][l], d0[2][l]]);
+                let collided = ev.collided >> l & 1 == 1;
+                let len = if collided { ev.t[l] } else { pk.t_exit[l] };
+                let mut jt = JobTally { inner: &mut *tally, job, c };
+                tally_segments(geo, p, d, locate_box(geo, p), len, &mut jt);
+                if collided && ev.ended >> l & 1 == 0 {
+                    jt.scatter(ev.j[l] as usize);
+                }
+            }
+        }
         let mut bits = ev.ended | ev.exits | ev.shallow;
         while bits != 0 {
             let l = bits.trailing_zeros() as usize;
@@ -415,7 +489,7 @@ pub(crate) fn trace_paths<M: Medium>(geo: &Geometry, med: &M, texels: &[Texel], 
                         continue;
                     }
                 }
-                pk.walk(geo, med, l, p, d, locate_box(geo, p), true)
+                pk.walk(geo, med, l, job, p, d, locate_box(geo, p), true, tally)
             } else {
                 // The flight reached the grid's face: Fresnel reflection or out into the environment.
                 let axis = pk.axis[l] as usize;
@@ -442,7 +516,7 @@ pub(crate) fn trace_paths<M: Medium>(geo: &Geometry, med: &M, texels: &[Texel], 
             if let Some(r) = ended {
                 values[job] = r.value;
                 events += r.events as u64;
-                refill(&mut pk, l, &mut next, &mut events, values);
+                refill(&mut pk, l, &mut next, &mut events, values, tally);
             }
         }
     }

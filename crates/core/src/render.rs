@@ -8,7 +8,7 @@ use rayon::prelude::*;
 
 use crate::rng::PathRng;
 use crate::scene::{Geometry, Medium, Texel};
-use crate::packet::{self, trace_paths};
+use crate::packet::{self, trace_paths, NoPathTally, PathTally};
 use crate::trace::{trace, NoTally, Tally};
 
 #[derive(Clone, Copy, Debug)]
@@ -122,22 +122,26 @@ fn render_packets<M: Medium>(geo: &Geometry, med: &M, texels: &[Texel], first_te
         .map(|(k, chunk)| {
             let mut values = vec![0.0f32; chunk.len() * 3 * spp];
             let key = first_texel + (k * PACKET_CHUNK) as u64;
-            let events = trace_paths(geo, med, chunk, key, opts, &mut values);
-            let est = values
-                .chunks(3 * spp)
-                .map(|v| {
-                    let mut m = Moments::new();
-                    for c in 0..3 {
-                        v[c * spp..(c + 1) * spp].iter().for_each(|&x| m.add(c, x));
-                    }
-                    m.estimate(opts.spp)
-                })
-                .collect();
-            (est, Stats { paths: (chunk.len() * 3 * spp) as u64, events, ..Stats::default() })
+            let events = trace_paths(geo, med, chunk, key, opts, &mut values, &mut NoPathTally);
+            (estimates(&values, spp), Stats { paths: (chunk.len() * 3 * spp) as u64, events, ..Stats::default() })
         })
         .collect();
     let stats = chunks.iter().fold(Stats::default(), |a, r| Stats::merge(a, r.1));
     (chunks.into_iter().flat_map(|r| r.0).collect(), stats)
+}
+
+/// Per-texel estimates from path values laid out [texel][channel][sample], summed in that order.
+fn estimates(values: &[f32], spp: usize) -> Vec<TexelEstimate> {
+    values
+        .chunks(3 * spp)
+        .map(|v| {
+            let mut m = Moments::new();
+            for c in 0..3 {
+                v[c * spp..(c + 1) * spp].iter().for_each(|&x| m.add(c, x));
+            }
+            m.estimate(spp as u32)
+        })
+        .collect()
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -304,6 +308,9 @@ pub fn backward<M: Medium>(
 ) -> (Vec<TexelEstimate>, Stats) {
     assert_eq!(texels.len(), adjoint.len());
     assert_eq!(grads.n_voxels, med.len());
+    if packet::supported(geo) {
+        return backward_packets(geo, med, texels, first_texel, adjoint, opts, method, grads);
+    }
     let inv_spp = 1.0 / opts.spp as f32;
     let inv_q = (1.0 / grads.quantum) as f32;
     let results: Vec<(TexelEstimate, Stats)> = texels
@@ -342,4 +349,78 @@ pub fn backward<M: Medium>(
         .collect();
     let stats = results.iter().fold(Stats::default(), |a, r| Stats::merge(a, r.1));
     (results.into_iter().map(|r| r.0).collect(), stats)
+}
+
+/// Per-path weights (in quanta) of a packet gradient pass: path `job` of a chunk adds weight x (its tallies) to
+/// the gradient buffer, as `ReplayTally` / `Li1Tally` do for one path. A replay skips paths of weight 0.
+struct PacketTally<'a, M: Medium> {
+    buf: &'a mut [i64],
+    grads: &'a GradBuffers,
+    med: &'a M,
+    method: GradMethod,
+    w: Vec<f32>,
+}
+
+impl<M: Medium> PathTally for PacketTally<'_, M> {
+    const ACTIVE: bool = true;
+    #[inline(always)]
+    fn wanted(&self, job: usize) -> bool {
+        self.method == GradMethod::Li1 || self.w[job] != 0.0
+    }
+    #[inline(always)]
+    fn segment(&mut self, job: usize, c: usize, j: usize, len: f32) {
+        let (buf, grads, w) = (&mut self.buf[..], self.grads, self.w[job]);
+        match self.method {
+            GradMethod::Replay => ReplayTally { buf, grads, c, w, med: self.med }.segment(j, len),
+            GradMethod::Li1 => Li1Tally { buf, grads, c, w }.segment(j, len),
+        }
+    }
+    #[inline(always)]
+    fn scatter(&mut self, job: usize, c: usize, j: usize) {
+        if self.method == GradMethod::Replay {
+            ReplayTally { buf: &mut self.buf[..], grads: self.grads, c, w: self.w[job], med: self.med }.scatter(j);
+        }
+    }
+}
+
+/// `backward` with packets (`packet::supported` geometries). Path replay: a forward pass gives every path's
+/// value, then the paths with a non-zero value and adjoint are traced again, exactly (each path is a pure
+/// function of its key), with their tallies. `L_i = 1`: one pass with tallies.
+#[allow(clippy::too_many_arguments)]
+fn backward_packets<M: Medium>(geo: &Geometry, med: &M, texels: &[Texel], first_texel: u64, adjoint: &[[f32; 3]],
+                               opts: &RenderOptions, method: GradMethod, grads: &GradBuffers)
+    -> (Vec<TexelEstimate>, Stats) {
+    let spp = opts.spp as usize;
+    let scale = 1.0 / opts.spp as f32 * (1.0 / grads.quantum) as f32;
+    let chunks: Vec<(Vec<TexelEstimate>, Stats)> = texels
+        .par_chunks(PACKET_CHUNK)
+        .enumerate()
+        .map(|(k, chunk)| {
+            let first = k * PACKET_CHUNK;
+            let key = first_texel + first as u64;
+            let slot = rayon::current_thread_index().unwrap_or(0) % grads.bufs.len();
+            let mut buf = grads.bufs[slot].lock().unwrap();
+            let jobs = chunk.len() * 3 * spp;
+            let adj = |job: usize| adjoint[first + job / (3 * spp)][job % (3 * spp) / spp];
+            let mut values = vec![0.0f32; jobs];
+            let mut st = Stats { paths: jobs as u64, ..Stats::default() };
+            let mut tally = PacketTally { buf: &mut buf[..], grads, med, method, w: vec![0.0; jobs] };
+            match method {
+                GradMethod::Li1 => {
+                    tally.w = (0..jobs).map(|job| adj(job) * scale).collect();
+                    st.events = trace_paths(geo, med, chunk, key, opts, &mut values, &mut tally);
+                }
+                GradMethod::Replay => {
+                    st.events = trace_paths(geo, med, chunk, key, opts, &mut values, &mut NoPathTally);
+                    tally.w = (0..jobs).map(|job| adj(job) * values[job] * scale).collect();
+                    st.replayed_paths = tally.w.iter().filter(|&&w| w != 0.0).count() as u64;
+                    let mut scratch = vec![0.0f32; jobs];
+                    st.replayed_events = trace_paths(geo, med, chunk, key, opts, &mut scratch, &mut tally);
+                }
+            }
+            (estimates(&values, spp), st)
+        })
+        .collect();
+    let stats = chunks.iter().fold(Stats::default(), |a, r| Stats::merge(a, r.1));
+    (chunks.into_iter().flat_map(|r| r.0).collect(), stats)
 }

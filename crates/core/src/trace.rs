@@ -288,7 +288,7 @@ fn locate(geo: &Geometry, p: &mut V3) -> [i32; 3] {
 }
 
 /// Emit the per-voxel segments of the straight flight from p (in voxel v) along d for `length` (a DDA).
-fn tally_segments<T: Tally>(geo: &Geometry, p: V3, d: V3, mut v: [i32; 3], length: f32, tally: &mut T) {
+pub(crate) fn tally_segments<T: Tally>(geo: &Geometry, p: V3, d: V3, mut v: [i32; 3], length: f32, tally: &mut T) {
     let dda0 = Dda::new(geo, p, d, v);
     let mut dda = dda0;
     let mut t = 0.0f32;
