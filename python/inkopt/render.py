@@ -3,8 +3,9 @@
 The renderer (method.md §4): smooth dielectric boundary (``Volume.ior``, 1.5 by default), uniform environment of
 radiance 1, one sensor element per texel looking along the texel's inward normal. A texel's value is the mean
 linear-RGB radiance leaving it toward the viewer, including the specular reflection of the environment unless
-``include_specular=False``. Each channel is its own monochromatic random walk (exact regular tracking through
-the voxels, analog absorption, Henyey-Greenstein scattering, Fresnel reflection/refraction).
+``include_specular=False``. Each channel is its own monochromatic random walk (exact free flights by delta
+tracking, and regular tracking near the surface of masked objects; implicit absorption with Russian roulette;
+Henyey-Greenstein scattering; Fresnel reflection/refraction), eight paths per core at a time (SIMD lanes).
 
 Gradients (``Renderer.gradient``): given per-texel adjoints de/dc (I, 3), the derivatives de/dsigma_s and
 de/dsigma_a (z, y, x, 3) by path replay backpropagation (unbiased, ``method="replay"``) or the paper's biased

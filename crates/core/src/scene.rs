@@ -278,31 +278,68 @@ pub const SAFE_CAP: u8 = 16;
 /// the 3 x 3 x 3 cube (separable: three 1D passes) a voxel survives, outside the grid counting as outside. A
 /// voxel with safe distance s has every voxel within s - 1 steps (any of the 26 directions) inside.
 pub fn safe_distances(inside: &[u8], n: [usize; 3]) -> Vec<u8> {
-    let stride = [1, n[0], n[0] * n[1]];
-    let mut cur: Vec<u8> = inside.iter().map(|&m| (m != 0) as u8).collect();
+    use rayon::prelude::*;
+    let plane = n[0] * n[1];
+    let mut cur: Vec<u8> = inside.par_iter().map(|&m| (m != 0) as u8).collect();
     let mut safe = cur.clone();
     let mut tmp = vec![0u8; cur.len()];
     for _ in 1..SAFE_CAP {
         for a in 0..3 {
-            let (len, st) = (n[a], stride[a]);
-            for (j, out) in tmp.iter_mut().enumerate() {
-                let k = (j / st) % len;
-                let lo = if k > 0 { cur[j - st] } else { 0 };
-                let hi = if k + 1 < len { cur[j + st] } else { 0 };
-                *out = cur[j] & lo & hi;
-            }
+            erode_axis(&cur, &mut tmp, n, a);
             std::mem::swap(&mut cur, &mut tmp);
         }
-        let mut any = false;
-        for (s, &c) in safe.iter_mut().zip(&cur) {
-            *s += c;
-            any |= c != 0;
-        }
+        let any = safe
+            .par_chunks_mut(plane)
+            .zip(cur.par_chunks(plane))
+            .map(|(s, c)| {
+                s.iter_mut().zip(c).for_each(|(s, &c)| *s += c);
+                c.iter().any(|&c| c != 0)
+            })
+            .reduce(|| false, |x, y| x || y);
         if !any {
             break;
         }
     }
     safe
+}
+
+/// out = cur eroded along axis a by one voxel (a voxel stays only if both neighbours on that axis are inside;
+/// outside the grid counts as outside). Whole rows and planes at a time, so the loops vectorise.
+fn erode_axis(cur: &[u8], out: &mut [u8], n: [usize; 3], a: usize) {
+    use rayon::prelude::*;
+    let (nx, plane) = (n[0], n[0] * n[1]);
+    let and3 = |o: &mut [u8], x: &[u8], y: &[u8], z: &[u8]| {
+        o.iter_mut().zip(x).zip(y).zip(z).for_each(|(((o, &x), &y), &z)| *o = x & y & z);
+    };
+    out.par_chunks_mut(plane).enumerate().for_each(|(k, o)| {
+        let c = &cur[k * plane..(k + 1) * plane];
+        match a {
+            0 => {
+                for (o, c) in o.chunks_mut(nx).zip(c.chunks(nx)) {
+                    o[0] = 0;
+                    o[nx - 1] = 0;
+                    if nx > 2 {
+                        and3(&mut o[1..nx - 1], &c[..nx - 2], &c[1..nx - 1], &c[2..]);
+                    }
+                }
+            }
+            1 => {
+                let ny = n[1];
+                o[..nx].fill(0);
+                o[plane - nx..].fill(0);
+                if ny > 2 {
+                    and3(&mut o[nx..plane - nx], &c[..plane - 2 * nx], &c[nx..plane - nx], &c[2 * nx..]);
+                }
+            }
+            _ => {
+                if k == 0 || k + 1 == n[2] {
+                    o.fill(0);
+                } else {
+                    and3(o, &cur[(k - 1) * plane..k * plane], c, &cur[(k + 1) * plane..(k + 2) * plane]);
+                }
+            }
+        }
+    });
 }
 
 /// The outward unit normal (x, y, z) of face id f: 0 -x, 1 +x, 2 -y, 3 +y, 4 -z, 5 +z.

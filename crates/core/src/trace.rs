@@ -1,12 +1,12 @@
 //! One monochromatic random walk from a texel's camera ray through the voxel medium.
 //!
-//! Estimator: analog. Free-flight distances are sampled exactly in the piecewise-constant medium: by delta
-//! tracking against the channel's majorant when the object is the whole grid (boxes and periodic slabs: no
-//! voxel crossings), else by regular tracking (voxel by voxel, subtracting each voxel's optical depth from an
-//! exponential sample), which finds every crossing of the object's boundary. Both sample real collisions with
-//! the same density sigma_t(x) exp(-tau), so the path-space derivatives below hold for both; at a collision
-//! the path scatters with probability albedo (Henyey-Greenstein) and is absorbed otherwise; at the object's
-//! boundary it is reflected with the Fresnel probability and refracted otherwise. A path that leaves the grid
+//! This is the scalar reference walk; `packet` runs the same estimator eight paths at a time. Free-flight
+//! distances are sampled exactly in the piecewise-constant medium: by delta tracking against the channel's
+//! majorant when the object is the whole grid (boxes and periodic slabs: no voxel crossings), else by regular
+//! tracking (voxel by voxel, subtracting each voxel's optical depth from an exponential sample), which finds
+//! every crossing of the object's boundary (`walk_masked`). Both sample real collisions with the same density
+//! sigma_t(x) exp(-tau), so the path-space derivatives below hold for both; at the object's boundary the path
+//! is reflected with the Fresnel probability and refracted otherwise. A path that leaves the grid
 //! picks up the environment radiance times its weight. At every collision the path scatters and its weight is
 //! multiplied by the albedo (implicit absorption); a weight below `RR_THRESHOLD` plays Russian roulette
 //! (survives with probability weight / threshold, then carries the threshold). Compared with analog absorption
