@@ -243,8 +243,10 @@ impl Packet {
         }
         self.t[l] = 0.0;
         if geo.inside.is_some() {
-            let j = geo.index(locate_box(geo, p));
-            self.t_exit[l] = safe_radius(geo, geo.safe_distance(j) as f32);
+            let v = locate_box(geo, p);
+            let (pv, vv) = (p.map(f32x8::splat), v.map(i32x8::splat));
+            let s = f32x8::splat(geo.safe_distance(geo.index(v)) as f32);
+            self.t_exit[l] = safe_radius8(geo, pv, vv, s).to_array()[0];
         } else {
             let (t_exit, axis) = exit8(geo, p.map(f32x8::splat), d.map(f32x8::splat));
             self.t_exit[l] = t_exit.to_array()[0];
@@ -309,7 +311,7 @@ impl Packet {
         if masked {
             let safe = f32x8::from(safe);
             shallow = (scatter & safe.cmp_lt(f32x8::splat(2.0))).move_mask();
-            let radius = (safe - one) * f32x8::splat(geo.size[0].min(geo.size[1]).min(geo.size[2]));
+            let radius = safe_radius8(geo, q, v, safe);
             self.t_exit = scatter.blend(radius, t_exit).into();
         } else {
             let (te, ax) = exit8(geo, p2, d2);
@@ -356,10 +358,19 @@ impl Packet {
     }
 }
 
-/// Radius of the ball around a point of a voxel with safe distance `s` that lies inside the object.
+/// Radius of a ball around p (in voxel v, safe distance s) that lies inside the object: every voxel within s - 1
+/// steps of v is inside, so the ball may reach (s - 1) voxels beyond p's own voxel along each axis. Shrunk by
+/// 1e-4 relative so that rounding never puts the ball's edge into an outside voxel (any smaller ball is exact too).
 #[inline(always)]
-fn safe_radius(geo: &Geometry, s: f32) -> f32 {
-    (s - 1.0) * geo.size[0].min(geo.size[1]).min(geo.size[2])
+fn safe_radius8(geo: &Geometry, p: [f32x8; 3], v: [i32x8; 3], s: f32x8) -> f32x8 {
+    let mut r = f32x8::splat(f32::INFINITY);
+    for a in 0..3 {
+        let h = f32x8::splat(geo.size[a]);
+        let lo = (p[a] - v[a].round_float() * h).max(f32x8::ZERO);
+        let own = lo.min((h - lo).max(f32x8::ZERO));
+        r = r.min((s - f32x8::ONE) * h + own);
+    }
+    r * f32x8::splat(1.0 - 1e-4)
 }
 
 /// The voxel containing p, clamped to the grid.
@@ -547,6 +558,52 @@ mod tests {
         let mean = s / n as f64;
         assert!((mean - 0.5).abs() < 5.0 * (1.0f64 / 12.0 / n as f64).sqrt());
         assert!((s2 / n as f64 - mean * mean - 1.0 / 12.0).abs() < 1e-3);
+    }
+
+    #[test]
+    fn safe_balls_stay_inside_the_object() {
+        // Random points in the voxels of a random blob (anisotropic voxels): no voxel that the ball of radius
+        // safe_radius8 around the point reaches (box-to-point distance below the radius) is outside.
+        let n = [14usize, 12, 13];
+        let size = [0.05f32, 0.08, 0.03];
+        let mut inside = vec![0u8; n.iter().product()];
+        for z in 0..n[2] {
+            for y in 0..n[1] {
+                for x in 0..n[0] {
+                    let r2 = ((x as f32 - 6.5) / 6.0).powi(2) + ((y as f32 - 5.5) / 5.0).powi(2) + ((z as f32 - 6.0) / 5.5).powi(2);
+                    inside[(z * n[1] + y) * n[0] + x] = (r2 < 1.0 && (x + 2 * y) % 11 != 3) as u8;
+                }
+            }
+        }
+        let geo = Geometry::new(n, size, Boundary::Box, 1.5, 0.4).unwrap().with_inside(inside.clone()).unwrap();
+        let mut rng = crate::rng::PathRng::new(9, 0, 0, 0);
+        let mut checked = 0;
+        for j in 0..inside.len() {
+            let s = geo.safe_distance(j);
+            if s < 2 {
+                continue;
+            }
+            let v = [(j % n[0]) as i32, ((j / n[0]) % n[1]) as i32, (j / (n[0] * n[1])) as i32];
+            for _ in 0..20 {
+                let p: V3 = std::array::from_fn(|a| (v[a] as f32 + rng.next_f32()) * size[a]);
+                let r = safe_radius8(&geo, p.map(f32x8::splat), v.map(i32x8::splat), f32x8::splat(s as f32)).to_array()[0];
+                assert!(r >= (s as f32 - 1.0) * 0.03 * (1.0 - 1e-4) - 1e-6);
+                for k in 0..inside.len() {
+                    let w = [(k % n[0]) as i32, ((k / n[0]) % n[1]) as i32, (k / (n[0] * n[1])) as i32];
+                    let d2: f32 = (0..3)
+                        .map(|a| {
+                            let (lo, hi) = (w[a] as f32 * size[a], (w[a] + 1) as f32 * size[a]);
+                            (lo - p[a]).max(p[a] - hi).max(0.0).powi(2)
+                        })
+                        .sum();
+                    if d2 < r * r * (1.0 - 1e-5) {
+                        assert_eq!(inside[k], 1, "point {p:?} in voxel {v:?} (safe {s}) radius {r} reaches {w:?}");
+                    }
+                }
+                checked += 1;
+            }
+        }
+        assert!(checked > 500, "{checked}");
     }
 
     #[test]
