@@ -2,7 +2,7 @@
 
     .venv/bin/python bench/bench_render.py [--spp 16] [--repeats 3] [--threads N]
 
-Prints and writes bench/results/render.json: texel-samples/s (one texel-sample = 3 monochromatic paths),
+Prints and writes bench/results/render.json (render_threads<N>.json with --threads N): texel-samples/s (one texel-sample = 3 monochromatic paths),
 paths/s, collision events/s (best of the repeats), with the machine's load for context.
 """
 import argparse
@@ -34,7 +34,7 @@ def main():
            "all_seconds": [x.seconds for x in runs], **machine()}
     print(f"{out['texels']} texels x {a.spp} spp on {r.threads} threads: {best.seconds:.3f} s, "
           f"{out['texel_samples_per_s'] / 1e6:.2f} M texel-samples/s, {out['events_per_s'] / 1e6:.1f} M events/s")
-    print("wrote", write("render.json", out))
+    print("wrote", write("render.json" if a.threads is None else f"render_threads{a.threads}.json", out))
 
 
 if __name__ == "__main__":
