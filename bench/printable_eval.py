@@ -3,10 +3,10 @@ picture (scikit-image's astronaut), quantize each with blue-noise and with rando
 surface and extrusion baselines. Writes bench/results/printable.json and prints a markdown table.
 
     .venv/bin/python bench/printable_eval.py [--iterations 200] [--spp 256] [--out bench-out]
-        [--cases zebra,astronaut] [--init white|surface|extrusion]
+        [--cases zebra,astronaut] [--init white|surface|extrusion] [--lr X]
 
-A start other than the default all-white one is recorded as its own case ("zebra@extrusion"); cases not run
-keep their earlier entries in printable.json.
+A start other than the default all-white one, or a step size other than the default, is recorded as its own case
+("zebra@extrusion", "zebra@extrusion,lr1"); cases not run keep their earlier entries in printable.json.
 """
 import argparse
 import json
@@ -37,6 +37,7 @@ def main():
     ap.add_argument("--out", default="bench-out")
     ap.add_argument("--cases", default="zebra,astronaut")
     ap.add_argument("--init", default="white", help="the optimisation's start (inkopt slab --init)")
+    ap.add_argument("--lr", type=float, help="step size (inkopt slab --lr; default: the optimiser's)")
     a = ap.parse_args()
     out = Path(a.out)
     out.mkdir(exist_ok=True)
@@ -53,11 +54,12 @@ def main():
     results = json.loads(previous.read_text())["results"] if previous.is_file() else {}
     for case in a.cases.split(","):
         img, size = cases[case]
-        name = case if a.init == "white" else f"{case}@{a.init}"
-        d = out / name.replace("@", "-")
+        tags = ([a.init] if a.init != "white" else []) + ([f"lr{a.lr:g}"] if a.lr is not None else [])
+        name = case + ("@" + ",".join(tags) if tags else "")
+        d = out / name.replace("@", "-").replace(",", "-")
         if not (d / "report.json").is_file():
             run(["slab", str(img), "--size-mm", size, "--out", str(d), "--iterations", str(a.iterations), "--resume",
-                 "--init", a.init])
+                 "--init", a.init] + (["--lr", str(a.lr)] if a.lr is not None else []))
         results[name] = {"report": json.loads((d / "report.json").read_text())}
         for method in ("random", "blue-noise"):
             if (d / f"evaluation_{method}.json").is_file():  # done in an earlier, interrupted run
