@@ -1,13 +1,8 @@
 """The perceptual loss E(C, T) over texels (method.md section 5) with analytic gradients.
 
-Colour conventions (docs/conventions.md): predictions and targets are **linear RGB** (sRGB primaries, D65);
-CIELAB uses the white of linear sRGB, i.e. ``WHITE_XYZ = M @ (1, 1, 1)`` with Y_white = 1, so that linear
-RGB (1, 1, 1) maps to exactly L*a*b* = (100, 0, 0). ``M`` is scikit-image's sRGB->XYZ matrix; its row sums
-(0.950456, 1, 1.088754) differ from scikit-image's D65 reference white (0.95047, 1, 1.08883) by < 1e-4, which
-moves a* and b* by at most ~3e-3 (tests compare to scikit-image after adapting between the two whites).
-Normalised L*a*b* (for the SSIM and Sobel terms): L*/100, (a* + 128)/255, (b* + 128)/255.
-
-All conversions accept any array of shape (..., 3), compute in float64 and return float64.
+Predictions and targets are linear RGB (I, 3) per texel; the terms are computed in CIELAB (``inkopt.color``):
+E1 mean ΔE76², E2 texel SSIM on normalised L*a*b* with a Gaussian window restricted to texels, E3 3D Sobel on
+normalised L*a*b*.
 """
 from __future__ import annotations
 
@@ -17,101 +12,15 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-# sRGB (linear) -> XYZ, rows X, Y, Z (scikit-image's xyz_from_rgb, IEC 61966-2-1 primaries, D65).
-RGB_TO_XYZ = np.array([[0.412453, 0.357580, 0.180423],
-                       [0.212671, 0.715160, 0.072169],
-                       [0.019334, 0.119193, 0.950227]])
-WHITE_XYZ = RGB_TO_XYZ.sum(axis=1)  # white of linear sRGB, Y = 1
-_DELTA = 6.0 / 29.0
-_EPS = _DELTA ** 3
-# lab = _LAB_D @ f(xyz / white) + (-16, 0, 0)
-_LAB_D = np.array([[0.0, 116.0, 0.0], [500.0, -500.0, 0.0], [0.0, 200.0, -200.0]])
-_LAB_OFFSET = np.array([-16.0, 0.0, 0.0])
-# d normalise_lab / d lab (constant, diagonal) and the offset of normalise_lab.
-LAB_NORM_SCALE = np.array([1.0 / 100.0, 1.0 / 255.0, 1.0 / 255.0])
-_LAB_NORM_OFFSET = np.array([0.0, 128.0 / 255.0, 128.0 / 255.0])
+from .color import (LAB_NORM_SCALE, delta_e76, linear_to_lab, linear_to_lab_jacobian, linear_to_lab_vjp,
+                    normalise_lab)
+
 K1 = 0.01 ** 2
 K2 = 0.03 ** 2
 # E1 enters the combined loss in units of (dE/100)^2: that puts it in the range of E2 and E3 (method.md: "the
 # factor 100 brings E3 into E1/E2's range"), so the paper's weight recommendations (g2 in [3, 9], g3 <= 3) apply.
 # The reported e1 stays the mean dE76^2.
 E1_WEIGHT_SCALE = 1e-4
-
-
-def _rgb(arr, name: str = "rgb") -> np.ndarray:
-    a = np.asarray(arr, dtype=np.float64)
-    if a.ndim < 1 or a.shape[-1] != 3:
-        raise ValueError(f"{name} must have shape (..., 3), got {a.shape}")
-    return a
-
-
-# ----------------------------------------------------------------------------- colour conversions
-def srgb_to_linear(srgb) -> np.ndarray:
-    """sRGB-encoded values (..., 3) -> linear RGB (IEC 61966-2-1); the linear segment extends below 0."""
-    s = _rgb(srgb, "srgb")
-    hi = np.power(np.maximum((s + 0.055) / 1.055, 0.0), 2.4)
-    return np.where(s > 0.04045, hi, s / 12.92)
-
-
-def linear_to_srgb(rgb) -> np.ndarray:
-    """Linear RGB (..., 3) -> sRGB encoding (IEC 61966-2-1); no clipping (negatives stay linear)."""
-    x = _rgb(rgb)
-    hi = 1.055 * np.power(np.maximum(x, 0.0031308), 1.0 / 2.4) - 0.055
-    return np.where(x > 0.0031308, hi, 12.92 * x)
-
-
-def linear_to_xyz(rgb) -> np.ndarray:
-    """Linear RGB (..., 3) -> CIE XYZ (..., 3), Y of white = 1."""
-    return _rgb(rgb) @ RGB_TO_XYZ.T
-
-
-def _f(t: np.ndarray) -> np.ndarray:
-    return np.where(t > _EPS, np.cbrt(t), t / (3.0 * _DELTA ** 2) + 4.0 / 29.0)
-
-
-def _fprime(t: np.ndarray) -> np.ndarray:
-    c = np.cbrt(np.maximum(t, _EPS))
-    return np.where(t > _EPS, 1.0 / (3.0 * c * c), 1.0 / (3.0 * _DELTA ** 2))
-
-
-def xyz_to_lab(xyz) -> np.ndarray:
-    """CIE XYZ (..., 3) -> CIELAB (..., 3) relative to WHITE_XYZ (linear segment below (6/29)^3; no NaN)."""
-    t = _rgb(xyz, "xyz") / WHITE_XYZ
-    return _f(t) @ _LAB_D.T + _LAB_OFFSET
-
-
-def linear_to_lab(rgb) -> np.ndarray:
-    """Linear RGB (..., 3) -> CIELAB (..., 3) float64."""
-    return xyz_to_lab(linear_to_xyz(rgb))
-
-
-def linear_to_lab_jacobian(rgb) -> np.ndarray:
-    """d lab / d rgb, shape (..., 3, 3): element [..., k, j] = d lab_k / d rgb_j."""
-    t = linear_to_xyz(rgb) / WHITE_XYZ
-    a = (_fprime(t) / WHITE_XYZ)[..., :, None] * RGB_TO_XYZ  # d f(t_m) / d rgb_j
-    return np.matmul(_LAB_D, a)
-
-
-def linear_to_lab_vjp(rgb, g_lab) -> np.ndarray:
-    """Vector-Jacobian product: g_rgb[..., j] = sum_k g_lab[..., k] * d lab_k / d rgb_j, shape (..., 3)."""
-    t = linear_to_xyz(rgb) / WHITE_XYZ
-    return ((_rgb(g_lab, "g_lab") @ _LAB_D) * _fprime(t) / WHITE_XYZ) @ RGB_TO_XYZ
-
-
-def normalise_lab(lab) -> np.ndarray:
-    """CIELAB (..., 3) -> normalised L*a*b*: L*/100, (a*+128)/255, (b*+128)/255. Derivative: LAB_NORM_SCALE."""
-    return _rgb(lab, "lab") * LAB_NORM_SCALE + _LAB_NORM_OFFSET
-
-
-def delta_e76(lab1, lab2) -> np.ndarray:
-    """CIE76 colour difference (...,) between two CIELAB arrays (..., 3)."""
-    return np.sqrt(np.sum((_rgb(lab1, "lab1") - _rgb(lab2, "lab2")) ** 2, axis=-1))
-
-
-def delta_e2000(lab1, lab2) -> np.ndarray:
-    """CIEDE2000 colour difference (...,) between two CIELAB arrays (..., 3) (scikit-image)."""
-    from skimage.color import deltaE_ciede2000
-    return deltaE_ciede2000(_rgb(lab1, "lab1"), _rgb(lab2, "lab2"), channel_axis=-1)
 
 
 # ----------------------------------------------------------------------------- neighbourhood operators

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .volume import Texels, Volume
+from .model import Texels, Volume
 
 # Texels per call into the core; a call re-enters Python only to update the progress bar.
 CHUNK = 4096
@@ -56,7 +56,9 @@ class RenderResult:
 
 
 class Renderer:
-    """A volume prepared for rendering (the medium is copied into the core once).
+    """A volume prepared for rendering: geometry (grid, inside mask and its safe distances, shading normals,
+    boundary) and the thread pool are set up once; the medium can be replaced (:meth:`set_volume`) without
+    rebuilding them, as the optimiser does every iteration.
 
     ``threads``: worker threads (default: all cores). Results do not depend on it.
     """
@@ -65,18 +67,29 @@ class Renderer:
         from . import _core
 
         self.volume = volume
-        kw = dict(boundary=volume.boundary, ior=float(volume.ior), g=float(volume.g), threads=threads)
-        if volume.form == "labels":
-            kw.update(labels=volume.labels, ink_sigma_s=volume.inks.sigma_s.astype(np.float32),
-                      ink_sigma_a=volume.inks.sigma_a.astype(np.float32))
-        else:
-            s, a = volume.coefficients()
-            kw.update(sigma_s=np.ascontiguousarray(s, np.float32), sigma_a=np.ascontiguousarray(a, np.float32))
+        kw = dict(boundary=volume.boundary, ior=float(volume.ior), g=float(volume.g), threads=threads,
+                  **self._medium_arrays(volume))
         if volume.inside is not None or volume.form == "labels":
             kw["inside"] = np.ascontiguousarray(volume.inside_mask(), dtype=np.uint8)
         if volume.normals is not None:
             kw["normals"] = volume.normals
         self._scene = _core.Scene(volume.shape, tuple(float(v) for v in volume.voxel_mm), **kw)
+
+    @staticmethod
+    def _medium_arrays(volume: Volume) -> dict:
+        if volume.form == "labels":
+            return dict(labels=volume.labels, ink_sigma_s=volume.inks.sigma_s.astype(np.float32),
+                        ink_sigma_a=volume.inks.sigma_a.astype(np.float32))
+        s, a = volume.coefficients()
+        return dict(sigma_s=np.ascontiguousarray(s, np.float32), sigma_a=np.ascontiguousarray(a, np.float32))
+
+    def set_volume(self, volume: Volume) -> None:
+        """Render ``volume`` from now on: same grid, boundary, ior, g, inside mask and normals as the volume this
+        renderer was built for (not checked beyond the shape); only the medium is replaced."""
+        if volume.shape != self.volume.shape:
+            raise ValueError(f"set_volume: shape {volume.shape} differs from the renderer's {self.volume.shape}")
+        self._scene.set_medium(**self._medium_arrays(volume))
+        self.volume = volume
 
     @property
     def threads(self) -> int:

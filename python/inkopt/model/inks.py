@@ -126,7 +126,7 @@ class InkTable:
         return cls.from_names(spec.split(","))
 
     def to_arrays(self) -> dict:
-        """Arrays for a volume .npz file (see inkopt.volume)."""
+        """Arrays for a volume .npz file (see inkopt.model.volume)."""
         return {"ink_names": np.array(self.names), "ink_sigma_s": self.sigma_s.astype(np.float32),
                 "ink_sigma_a": self.sigma_a.astype(np.float32)}
 

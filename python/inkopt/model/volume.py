@@ -1,0 +1,314 @@
+"""The voxel volume: geometry plus one medium in one of three explicit forms, and its ``.npz`` file.
+
+Conventions (docs/conventions.md): arrays are (z, y, x[, c]); ``voxel_mm``, ``origin_mm`` and normals are
+(x, y, z); coefficients in mm^-1; z = 0 is the bottom layer.
+
+Medium forms (exactly one per volume, ``Volume.medium``):
+
+- ``Dense``:   ``sigma_s``, ``sigma_a`` float32 (z, y, x, 3), mm^-1
+- ``Mixture``: ``mixture`` float32 (z, y, x, N), rows summing to 1, plus the ink table
+- ``Labels``:  ``labels`` uint8 (z, y, x), ink index per voxel (``EMPTY`` = 255 = no ink), plus the ink table
+
+The volume file (``.npz``) stores the medium's arrays under those names; the ink table as ``ink_names`` (N,) str,
+``ink_sigma_s``/``ink_sigma_a`` float32 (N, 3) mm^-1. Always: ``voxel_mm`` (3,) float (x, y, z). Optional:
+``g`` (default 0.4), ``ior`` (default 1.5), ``inside`` bool (z, y, x) (default: the whole box), ``normals``
+float32 (z, y, x, 3) outward shading normals (x, y, z components) for surface voxels, ``boundary`` ("box" or
+"periodic-xy"), ``origin_mm`` (3,) (x, y, z of voxel (0, 0, 0)'s low corner; meshes), and for quantized volumes
+the ``Quantization`` settings ``method``, ``seed``, ``dpi`` (3,) (x, y, z), ``upsample``.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from ..io import load_npz, save_npz
+from .inks import DEFAULT_G, InkTable, mix
+
+BOUNDARIES = ("box", "periodic-xy")
+# Memory the renderer may use for one volume; a volume above this is refused (bytes).
+MAX_VOLUME_BYTES = int(os.environ.get("INKOPT_MAX_VOLUME_BYTES", 16 * 2**30))
+EMPTY = 255
+
+
+class VolumeError(ValueError):
+    """A volume that cannot be rendered; the message is one line naming the problem."""
+
+
+# ----------------------------------------------------------------------------------------- medium forms
+@dataclass
+class Dense:
+    """Per-voxel coefficients (z, y, x, 3) float32 mm^-1."""
+
+    sigma_s: np.ndarray
+    sigma_a: np.ndarray
+    form = "dense"
+
+    def __post_init__(self):
+        for key in ("sigma_s", "sigma_a"):
+            arr = np.ascontiguousarray(getattr(self, key), dtype=np.float32)
+            if arr.ndim != 4 or arr.shape[3] != 3:
+                raise VolumeError(f"{key} must have shape (z, y, x, 3), got {arr.shape}")
+            if not np.all(np.isfinite(arr)):
+                raise VolumeError(f"{key} contains NaN or infinite values")
+            if np.any(arr < 0):
+                raise VolumeError(f"{key} contains negative coefficients")
+            setattr(self, key, arr)
+        if self.sigma_s.shape != self.sigma_a.shape:
+            raise VolumeError(f"sigma_s {self.sigma_s.shape} and sigma_a {self.sigma_a.shape} differ in shape")
+
+    @property
+    def shape(self):
+        return self.sigma_s.shape[:3]
+
+    def arrays(self) -> dict:
+        return {"sigma_s": self.sigma_s, "sigma_a": self.sigma_a}
+
+
+@dataclass
+class Mixture:
+    """Per-voxel ink shares (z, y, x, N) float32 of the ink table ``inks``."""
+
+    mixture: np.ndarray
+    inks: InkTable
+    form = "mixture"
+
+    def __post_init__(self):
+        m = np.ascontiguousarray(self.mixture, dtype=np.float32)
+        if m.ndim != 4 or m.shape[3] != len(self.inks):
+            raise VolumeError(f"mixture must have shape (z, y, x, {len(self.inks)}), got {m.shape}")
+        if not np.all(np.isfinite(m)) or np.any(m < 0):
+            raise VolumeError("mixture must be finite and non-negative")
+        self.mixture = m
+
+    @property
+    def shape(self):
+        return self.mixture.shape[:3]
+
+    def arrays(self) -> dict:
+        return {"mixture": self.mixture, **self.inks.to_arrays()}
+
+
+@dataclass
+class Labels:
+    """One ink index per voxel (z, y, x) uint8 of the ink table ``inks``; ``EMPTY`` = no ink."""
+
+    labels: np.ndarray
+    inks: InkTable
+    form = "labels"
+
+    def __post_init__(self):
+        lab = np.ascontiguousarray(self.labels)
+        if lab.dtype != np.uint8 or lab.ndim != 3:
+            raise VolumeError(f"labels must be uint8 (z, y, x), got {lab.dtype} {lab.shape}")
+        used = lab[lab != EMPTY]
+        if used.size and int(used.max()) >= len(self.inks):
+            raise VolumeError(f"labels use ink {int(used.max())} but the ink table has {len(self.inks)}")
+        self.labels = lab
+
+    @property
+    def shape(self):
+        return self.labels.shape
+
+    def arrays(self) -> dict:
+        return {"labels": self.labels, **self.inks.to_arrays()}
+
+
+Medium = Dense | Mixture | Labels
+
+
+@dataclass(frozen=True)
+class Quantization:
+    """How a labels volume was made from a mixture (``inkopt.printing.quantize``); dpi is (x, y, z)."""
+
+    method: str = "blue-noise"
+    seed: int = 0
+    dpi: tuple[float, float, float] | None = None
+    upsample: str = "nearest"
+
+    def arrays(self) -> dict:
+        out = {"method": np.array(self.method), "seed": np.int64(self.seed), "upsample": np.array(self.upsample)}
+        if self.dpi is not None:
+            out["dpi"] = np.asarray(self.dpi, np.float64)
+        return out
+
+    @classmethod
+    def from_arrays(cls, data) -> "Quantization | None":
+        if "method" not in data:
+            return None
+        return cls(str(data["method"]), int(data["seed"]) if "seed" in data else 0,
+                   tuple(float(v) for v in np.asarray(data["dpi"]).reshape(-1)) if "dpi" in data else None,
+                   str(data["upsample"]) if "upsample" in data else "nearest")
+
+
+# ----------------------------------------------------------------------------------------- the volume
+@dataclass
+class Volume:
+    """A voxel medium on a grid. Build it with one medium form (``medium=Mixture(...)``), or by keyword:
+    ``Volume(voxel_mm, mixture=m, inks=t)``, ``Volume(voxel_mm, labels=l, inks=t)``,
+    ``Volume(voxel_mm, sigma_s=s, sigma_a=a)``."""
+
+    voxel_mm: np.ndarray
+    medium: Medium | None = None
+    g: float = DEFAULT_G
+    ior: float = 1.5
+    inside: np.ndarray | None = None
+    normals: np.ndarray | None = None
+    boundary: str = "box"
+    origin_mm: np.ndarray | None = None
+    quantization: Quantization | None = None
+    # keyword forms of the medium (consumed by __post_init__; read them back through the properties below)
+    sigma_s: np.ndarray | None = field(default=None, repr=False)
+    sigma_a: np.ndarray | None = field(default=None, repr=False)
+    mixture: np.ndarray | None = field(default=None, repr=False)
+    labels: np.ndarray | None = field(default=None, repr=False)
+    inks: InkTable | None = field(default=None, repr=False)
+
+    def __post_init__(self):
+        self.voxel_mm = np.asarray(self.voxel_mm, dtype=np.float64).reshape(-1)
+        if self.medium is None:
+            self.medium = _medium_from_keywords(self.sigma_s, self.sigma_a, self.mixture, self.labels, self.inks)
+        # the keyword fields mirror the medium (one source of truth: the medium object)
+        self.sigma_s = getattr(self.medium, "sigma_s", None)
+        self.sigma_a = getattr(self.medium, "sigma_a", None)
+        self.mixture = getattr(self.medium, "mixture", None)
+        self.labels = getattr(self.medium, "labels", None)
+        self.inks = getattr(self.medium, "inks", None)
+        if self.origin_mm is not None:
+            self.origin_mm = np.asarray(self.origin_mm, np.float64).reshape(3)
+        self.validate()
+
+    @property
+    def form(self) -> str:
+        """"dense", "mixture" or "labels"."""
+        return self.medium.form
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return tuple(int(s) for s in self.medium.shape)
+
+    def validate(self) -> None:
+        if self.voxel_mm.shape != (3,) or not np.all(np.isfinite(self.voxel_mm)) or np.any(self.voxel_mm <= 0):
+            raise VolumeError(f"voxel_mm must be 3 positive finite sizes (x, y, z) in mm, got {self.voxel_mm}")
+        if self.boundary not in BOUNDARIES:
+            raise VolumeError(f"unknown boundary '{self.boundary}'; use one of {list(BOUNDARIES)}")
+        if not -1 < self.g < 1:
+            raise VolumeError(f"g must lie in (-1, 1), got {self.g}")
+        if not (np.isfinite(self.ior) and self.ior > 0):
+            raise VolumeError(f"ior must be positive, got {self.ior}")
+        shp = self.shape
+        if min(shp) < 1:
+            raise VolumeError(f"volume shape {shp} is empty")
+        if self.inside is not None:
+            ins = np.asarray(self.inside)
+            if ins.shape != shp:
+                raise VolumeError(f"inside mask shape {ins.shape} differs from volume shape {shp}")
+            self.inside = np.ascontiguousarray(ins, dtype=bool)
+        if self.normals is not None:
+            nrm = np.ascontiguousarray(self.normals, dtype=np.float32)
+            if nrm.shape != shp + (3,):
+                raise VolumeError(f"normals must have shape {shp + (3,)}, got {nrm.shape}")
+            self.normals = nrm
+        need = self.render_bytes()
+        if need > MAX_VOLUME_BYTES:
+            raise VolumeError(f"volume {shp} needs {need / 2**30:.1f} GiB to render, more than the "
+                              f"{MAX_VOLUME_BYTES / 2**30:.1f} GiB allowed (INKOPT_MAX_VOLUME_BYTES)")
+
+    def render_bytes(self) -> int:
+        """Memory the renderer needs for this medium (bytes)."""
+        n = int(np.prod(self.shape, dtype=np.int64))
+        per = 1 if self.form == "labels" else 24  # labels: u8; else sigma_s, sigma_a f32 x 3 channels
+        per += 1 if self.inside is not None else 0
+        per += 12 if self.normals is not None else 0
+        return n * per
+
+    # ----------------------------------------------------------------- conversions
+    def coefficients(self) -> tuple[np.ndarray, np.ndarray]:
+        """(sigma_s, sigma_a), each (z, y, x, 3) float32 mm^-1."""
+        med = self.medium
+        if isinstance(med, Dense):
+            return med.sigma_s, med.sigma_a
+        if isinstance(med, Mixture):
+            return mix(med.mixture, med.inks)
+        s = np.zeros(self.shape + (3,), np.float32)
+        a = np.zeros_like(s)
+        for k in range(len(med.inks)):
+            sel = med.labels == k
+            s[sel] = med.inks.sigma_s[k]
+            a[sel] = med.inks.sigma_a[k]
+        return s, a
+
+    def inside_mask(self) -> np.ndarray:
+        if self.inside is not None:
+            return self.inside
+        if isinstance(self.medium, Labels):
+            return self.medium.labels != EMPTY
+        return np.ones(self.shape, bool)
+
+    def with_medium(self, medium: Medium, **changes) -> "Volume":
+        """The same geometry with another medium (and any other field ``changes``)."""
+        return replace(self, medium=medium, sigma_s=None, sigma_a=None, mixture=None, labels=None, inks=None,
+                       **changes)
+
+    def with_mixture(self, mixture: np.ndarray) -> "Volume":
+        """The same geometry and inks with another mixture (z, y, x, N)."""
+        return self.with_medium(Mixture(mixture, self.inks))
+
+    def require_mixture(self, what: str = "this step") -> Mixture:
+        if not isinstance(self.medium, Mixture):
+            raise VolumeError(f"{what} needs a mixture volume, got a {self.form} volume")
+        return self.medium
+
+    # ----------------------------------------------------------------- files
+    def to_arrays(self) -> dict:
+        out = {"voxel_mm": self.voxel_mm, "g": np.float64(self.g), "ior": np.float64(self.ior),
+               "boundary": np.array(self.boundary), **self.medium.arrays()}
+        if self.inside is not None:
+            out["inside"] = self.inside
+        if self.normals is not None:
+            out["normals"] = self.normals
+        if self.origin_mm is not None:
+            out["origin_mm"] = self.origin_mm
+        if self.quantization is not None:
+            out.update(self.quantization.arrays())
+        return out
+
+    def save(self, path: str | Path) -> None:
+        save_npz(path, self.to_arrays())
+
+    @classmethod
+    def load(cls, path: str | Path) -> "Volume":
+        try:
+            data = load_npz(path, "volume file")
+        except ValueError as exc:
+            raise VolumeError(str(exc)) from None
+        if "voxel_mm" not in data:
+            raise VolumeError(f"{path}: missing array 'voxel_mm' (3 voxel sizes x, y, z in mm)")
+        g = float(data["g"]) if "g" in data else DEFAULT_G
+        inks = None
+        if "ink_names" in data:
+            try:
+                inks = InkTable.from_arrays(data, g)
+            except (KeyError, ValueError) as exc:
+                raise VolumeError(f"{path}: bad ink table: {exc}") from None
+        return cls(voxel_mm=data["voxel_mm"], sigma_s=data.get("sigma_s"), sigma_a=data.get("sigma_a"),
+                   mixture=data.get("mixture"), labels=data.get("labels"), inks=inks, g=g,
+                   ior=float(data["ior"]) if "ior" in data else 1.5, inside=data.get("inside"),
+                   normals=data.get("normals"), boundary=str(data["boundary"]) if "boundary" in data else "box",
+                   origin_mm=data.get("origin_mm"), quantization=Quantization.from_arrays(data))
+
+
+def _medium_from_keywords(sigma_s, sigma_a, mixture, labels, inks) -> Medium:
+    given = [sigma_s is not None or sigma_a is not None, mixture is not None, labels is not None]
+    if sum(given) != 1:
+        raise VolumeError("volume needs exactly one of: sigma_s+sigma_a, mixture, labels")
+    if given[0]:
+        if sigma_s is None or sigma_a is None:
+            raise VolumeError("dense volume needs both sigma_s and sigma_a")
+        return Dense(sigma_s, sigma_a)
+    form = "mixture" if given[1] else "labels"
+    if inks is None:
+        raise VolumeError(f"a {form} volume needs an ink table (ink_names, ink_sigma_s, ink_sigma_a)")
+    return Mixture(mixture, inks) if given[1] else Labels(labels, inks)
