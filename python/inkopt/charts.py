@@ -40,12 +40,7 @@ def zebra(width: int, height: int, stripes=(30, 15, 10, 5, 3, 1)) -> np.ndarray:
 
 
 def save(img: np.ndarray, path: str | Path) -> Path:
-    from PIL import Image
+    """Write a chart as PNG (atomically)."""
+    from .io import write_png
 
-    from .volume import atomic_write_bytes
-    import io
-
-    buf = io.BytesIO()
-    Image.fromarray(img).save(buf, format="PNG")
-    atomic_write_bytes(path, buf.getvalue())
-    return Path(path)
+    return write_png(path, img)

@@ -5,25 +5,25 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+import numpy as np
+
 
 def _demo(args) -> int:
-    from . import charts
-    from .materials import InkTable
-    from .optimize import OptimizeConfig
-    from .render import render
-    from .slab import run_slab
-    from .volume import Texels, Volume
+    from .. import charts
+    from ..model import InkTable, Texels, Volume
+    from ..optim import OptimizeConfig
+    from ..render import render
+    from ..run import run_slab
+    from ..units import voxel_mm
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     inks = InkTable.parse("vero-cmykw")
 
     # 1. Render: a uniform 50 % white / 50 % cyan slab, top face, and what it looks like.
-    import numpy as np
-
-    mix = np.zeros((30, 24, 24, 5), np.float32)
-    mix[..., 0], mix[..., 4] = 0.5, 0.5
-    vol = Volume(voxel_mm=(25.4 / 300,) * 3, mixture=mix, inks=inks, boundary="periodic-xy")
+    mix = np.zeros((30, 24, 24, len(inks)), np.float32)
+    mix[..., inks.index("cyan")] = mix[..., inks.index("white")] = 0.5
+    vol = Volume(voxel_mm=(voxel_mm(),) * 3, mixture=mix, inks=inks, boundary="periodic-xy")
     vol.save(out / "cyan_white.npz")
     res = render(vol, Texels.for_volume(vol, ["top"]), spp=64, seed=0)
     m, e = res.mean_rgb, res.mean_rgb_stderr

@@ -1,27 +1,25 @@
-"""``inkopt optimize MESH``: optimise the inks of a textured 3D object (see ``inkopt.mesh_run``)."""
+"""``inkopt optimize MESH``: optimise the inks of a textured 3D object (``inkopt.run.run_mesh``)."""
 from __future__ import annotations
 
 import sys
 
-from .cli_slab import add_optimizer_args, config_from_args
+from ..units import OPT_DPI
+from .common import add_optimizer_args, config_from_args, print_run_summary, stderr_log
 
 
 def _optimize(args) -> int:
-    from .materials import InkTable
-    from .mesh_run import run_mesh
+    from ..model import InkTable
+    from ..run import run_mesh
 
     if (args.height_mm is None) == (args.scale is None):
         raise ValueError("give exactly one of --height-mm H (the object's height in mm) and --scale S "
                          "(mm per model unit)")
     inks = InkTable.parse(args.inks)
     cfg = config_from_args(args)
-    log = (lambda m: print(m, file=sys.stderr))
     rep = run_mesh(args.mesh, args.out, inks, cfg, height_mm=args.height_mm, scale=args.scale,
                    shell_mm=args.shell_mm, dpi=args.dpi, up=args.up, resume=args.resume, eval_spp=args.eval_spp,
-                   threads=args.threads, progress=sys.stderr.isatty(), log=log)
-    print(f"mean ΔE76 {rep['initial_delta_e76_mean']:.2f} ({args.init} start) -> {rep['delta_e76_mean']:.2f} "
-          f"(p95 {rep['delta_e76_p95']:.2f}, ΔE2000 {rep['delta_e2000_mean']:.2f}, SSIM {rep['ssim']:.3f}) "
-          f"after {rep['iterations']} iterations in {rep['seconds']:.0f} s (peak memory {rep['peak_rss_gb']:.1f} GiB)")
+                   threads=args.threads, progress=sys.stderr.isatty(), log=stderr_log)
+    print_run_summary(rep, args.init, f" (peak memory {rep['peak_rss_gb']:.1f} GiB)")
     print(f"views: {args.out}/views.png, {args.out}/prediction.glb; report: {args.out}/report.json")
     return 0
 
@@ -38,6 +36,6 @@ def register_cli(sub) -> None:
     p.add_argument("--shell-mm", type=float, metavar="D",
                    help="optimise only voxels less than D mm below the surface; deeper ones are printed white "
                         "(default: every voxel of the object is optimised)")
-    p.add_argument("--dpi", type=float, default=300.0, help="optimisation grid resolution (default 300)")
+    p.add_argument("--dpi", type=float, default=OPT_DPI, help=f"optimisation grid resolution (default {OPT_DPI:g})")
     add_optimizer_args(p)
     p.set_defaults(func=_optimize)

@@ -1,73 +1,21 @@
-"""``inkopt slab``: optimise a textured 2.5D slab."""
+"""``inkopt slab``: optimise a textured 2.5D slab (``inkopt.run.run_slab``)."""
 from __future__ import annotations
 
 import sys
 
-
-def parse_gamma(text: str) -> tuple[float, float, float]:
-    try:
-        g = tuple(float(v) for v in text.split(","))
-    except ValueError:
-        g = ()
-    if len(g) != 3 or min(g) < 0 or sum(g) <= 0:
-        raise ValueError(f"--gamma must be three non-negative weights g1,g2,g3 with a positive sum, got '{text}'")
-    return g
-
-
-def add_optimizer_args(p) -> None:
-    """Options shared by `inkopt slab` and `inkopt optimize`."""
-    from .optimize import OptimizeConfig
-
-    d = OptimizeConfig()
-    p.add_argument("--inks", default="vero-cmykw",
-                   help="ink set: a preset (vero-cmykw, vero-cmykw+orange, vero-cmykwt), a comma list of ink names, "
-                        "or a JSON/TOML file of inks (default vero-cmykw)")
-    p.add_argument("--iterations", type=int, default=d.iterations, help=f"(default {d.iterations})")
-    p.add_argument("--spp", type=int, default=d.spp, help=f"samples per texel of the gradient pass (default {d.spp})")
-    p.add_argument("--forward-spp", type=int, default=d.forward_spp,
-                   help=f"samples per texel of the forward render the loss is evaluated at (default {d.forward_spp})")
-    p.add_argument("--gamma", default=",".join(f"{g:g}" for g in d.gamma),
-                   help="loss weights g1,g2,g3 of colour (dE76^2), SSIM and edge terms (default %(default)s)")
-    p.add_argument("--lr", type=float, help="step size (default: 2 for eg, 0.5 for adagrad, 0.1 for adam)")
-    p.add_argument("--optimizer", choices=("eg", "adam", "adagrad"), default=d.optimizer,
-                   help="eg: exponentiated gradient with momentum (default); adagrad: the paper's; adam")
-    p.add_argument("--param", choices=("softmax", "sigmoid"), default=d.param,
-                   help="variables -> mixture map (sigmoid = the paper's sigmoid + normalisation)")
-    p.add_argument("--init", default=d.init,
-                   help="white (97 %% white), random, surface or extrusion (start from that print-shop baseline of "
-                        "`inkopt evaluate`; builds or reuses its cached colour table), or a volume .npz")
-    p.add_argument("--gradient", choices=("replay", "li1"), default=d.grad_method,
-                   help="unbiased path replay (default) or the paper's biased L_i = 1 approximation")
-    p.add_argument("--seed", type=int, default=d.seed)
-    p.add_argument("--checkpoint-every", type=int, default=d.checkpoint_every)
-    p.add_argument("--eval-spp", type=int, help="spp of the final evaluation renders (default max(256, 4 spp))")
-    p.add_argument("--threads", type=int, help="worker threads (default: all cores)")
-    p.add_argument("--resume", action="store_true", help="continue from DIR/checkpoint.npz if present")
-
-
-def config_from_args(args):
-    from .optimize import OptimizeConfig
-
-    cfg = OptimizeConfig(iterations=args.iterations, spp=args.spp, forward_spp=args.forward_spp, gamma=parse_gamma(args.gamma), lr=args.lr,
-                         optimizer=args.optimizer, param=args.param, init=args.init, seed=args.seed,
-                         grad_method=args.gradient, checkpoint_every=args.checkpoint_every)
-    cfg.validate()
-    return cfg
+from .common import add_optimizer_args, config_from_args, print_run_summary, stderr_log
 
 
 def _slab(args) -> int:
-    from .materials import InkTable
-    from .slab import parse_size, run_slab
+    from ..model import InkTable
+    from ..run import run_slab
+    from ..units import parse_size_mm
 
     inks = InkTable.parse(args.inks)
     cfg = config_from_args(args)
-    progress = sys.stderr.isatty()
-    log = (lambda m: print(m, file=sys.stderr))
-    rep = run_slab(args.top, args.bottom, parse_size(args.size_mm), args.out, inks, cfg, resume=args.resume,
-                   eval_spp=args.eval_spp, threads=args.threads, progress=progress, log=log)
-    print(f"mean ΔE76 {rep['initial_delta_e76_mean']:.2f} ({args.init} start) -> {rep['delta_e76_mean']:.2f} "
-          f"(p95 {rep['delta_e76_p95']:.2f}, ΔE2000 {rep['delta_e2000_mean']:.2f}, SSIM {rep['ssim']:.3f}) "
-          f"after {rep['iterations']} iterations in {rep['seconds']:.0f} s")
+    rep = run_slab(args.top, args.bottom, parse_size_mm(args.size_mm), args.out, inks, cfg, resume=args.resume,
+                   eval_spp=args.eval_spp, threads=args.threads, progress=sys.stderr.isatty(), log=stderr_log)
+    print_run_summary(rep, args.init)
     print(f"pictures: {args.out}/face_*.png, {args.out}/loss.png; report: {args.out}/report.json")
     return 0
 

@@ -6,9 +6,10 @@ difference between its 16- and 32-point quadratures as an estimate of its discre
 import numpy as np
 import pytest
 
-from inkopt.materials import InkTable, mix
+from inkopt.model import InkTable, Texels, Volume, mix
 from inkopt.render import Renderer, render
-from inkopt.volume import Texels, Volume
+
+from helpers import assert_same_mean
 
 VOX = 25.4 / 300
 
@@ -97,12 +98,8 @@ def test_mask_regular_tracking_matches_delta_tracking():
 def _fd_check(vol, probes, spp=800, seeds=tuple(range(11, 23)), h=0.3):
     """Replay gradient of sum(adj * c) vs central finite differences with common random numbers, per probe
     (z, y, x, channel, 'sigma_s'|'sigma_a'). Both are unbiased estimators, so their difference over independent
-    seeds has mean ~0: we test it against the Student-t quantile for a two-sided false-alarm rate of 1e-4 per probe
-    (the standard error is itself estimated from the 12 seeds, so a normal 4-sigma bound would fire ~1 % of the
-    time per probe), plus 2 % for the O(h^2) bias of the difference quotient."""
-    from scipy.stats import t as student_t
-
-    t_crit = student_t.ppf(1 - 1e-4 / 2, len(seeds) - 1)
+    seeds has mean ~0 (``helpers.assert_same_mean``: Student-t bound, false-alarm rate 1e-4 per probe, plus 2 %
+    for the O(h^2) bias of the difference quotient)."""
     tex = Texels.for_volume(vol, ["top"])
     adj = np.random.default_rng(0).uniform(0.2, 1.0, (len(tex), 3)).astype(np.float32)
     for (z, y, x, c, which) in probes:
@@ -117,10 +114,7 @@ def _fd_check(vol, probes, spp=800, seeds=tuple(range(11, 23)), h=0.3):
                 v2 = Volume(voxel_mm=vol.voxel_mm, boundary=vol.boundary, inside=vol.inside, **arr)
                 vals.append(float(np.sum(render(v2, tex, spp=spp, seed=seed).rgb * adj)))
             fd.append((vals[0] - vals[1]) / (2 * h))
-        d = np.array(g) - np.array(fd)
-        se = d.std(ddof=1) / np.sqrt(len(d))
-        assert abs(d.mean()) < t_crit * se + 0.02 * abs(np.mean(fd)) + 1e-5, (z, y, x, c, which, np.mean(g),
-                                                                                  np.mean(fd), se)
+        assert_same_mean(g, fd, rel_bias=0.02, false_alarm=1e-4, what=(z, y, x, c, which))
 
 
 @pytest.mark.parametrize("masked", [False, True])
@@ -166,3 +160,32 @@ def test_li1_gradient_is_correlated_with_replay():
     assert np.all(ls == 0)
     cos = float(np.sum(ga * la) / np.sqrt(np.sum(ga * ga) * np.sum(la * la)))
     assert cos > 0.5, cos
+
+
+@pytest.mark.parametrize("masked", [False, True])
+def test_set_volume_renders_like_a_fresh_renderer(masked):
+    """One renderer for a whole optimisation: replacing the medium gives bit-identically the render and gradient
+    of a renderer built for the new volume (geometry, safe distances and thread pool are kept)."""
+    rng = np.random.default_rng(8)
+    inks = InkTable.parse("vero-cmykw")
+    shape = (6, 7, 8)
+    inside = None
+    if masked:
+        inside = np.ones(shape, bool)
+        inside[4:, 2:5, :3] = False
+    a = Volume(voxel_mm=(VOX,) * 3, mixture=rng.dirichlet(np.ones(5), size=shape).astype(np.float32), inks=inks,
+               inside=inside)
+    b = a.with_mixture(rng.dirichlet(np.ones(5), size=shape).astype(np.float32))
+    tex = Texels.for_volume(a)
+    adj = rng.normal(size=(len(tex), 3)).astype(np.float32)
+    reused = Renderer(a)
+    reused.render(tex, spp=2, seed=0)
+    reused.set_volume(b)
+    fresh = Renderer(b)
+    r1, r2 = reused.render(tex, spp=4, seed=3), fresh.render(tex, spp=4, seed=3)
+    np.testing.assert_array_equal(r1.rgb, r2.rgb)
+    g1, g2 = reused.gradient(tex, adj, spp=3, seed=4), fresh.gradient(tex, adj, spp=3, seed=4)
+    np.testing.assert_array_equal(g1[0], g2[0])
+    np.testing.assert_array_equal(g1[1], g2[1])
+    with pytest.raises(ValueError, match="shape"):
+        reused.set_volume(Volume(voxel_mm=(VOX,) * 3, mixture=np.ones((2, 2, 2, 5), np.float32) / 5, inks=inks))

@@ -12,8 +12,7 @@ import pytest
 
 from inkopt import charts
 from inkopt.cli import main
-from inkopt.materials import InkTable
-from inkopt.volume import Volume
+from inkopt.model import InkTable, Volume
 
 INKOPT = [sys.executable, "-m", "inkopt.cli"]
 
