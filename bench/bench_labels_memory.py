@@ -10,9 +10,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import machine, write  # noqa: E402
 
-from inkopt.materials import InkTable  # noqa: E402
+from inkopt.model import InkTable, Texels, Volume  # noqa: E402
 from inkopt.render import Renderer  # noqa: E402
-from inkopt.volume import Texels, Volume  # noqa: E402
 
 shape = (180, 470, 709)
 labels = np.random.default_rng(0).integers(0, 5, shape, dtype=np.uint8)

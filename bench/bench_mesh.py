@@ -17,16 +17,17 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "python"))
 
-SPOT = Path("/work/shared/data/spot/spot.obj")
+SPOT = Path(__file__).resolve().parents[2] / "shared" / "data" / "spot" / "spot.obj"  # ../shared beside the repo
 
 
 def main(argv=None) -> dict:
     import numpy as np
 
-    from inkopt.materials import InkTable
-    from inkopt.mesh_run import build_mesh_scene, peak_rss_gb
-    from inkopt.optimize import Optimization, OptimizeConfig
-    from inkopt.volume import atomic_write_bytes
+    from inkopt.io import atomic_write_bytes
+    from inkopt.model import InkTable
+    from inkopt.optim import Optimization, OptimizeConfig
+    from inkopt.run import peak_rss_gb
+    from inkopt.scenes.mesh import build_mesh_scene
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("height_mm", type=float, nargs="?", default=40.0)

@@ -16,10 +16,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import machine, reference_slab, write  # noqa: E402
 
 from inkopt import charts  # noqa: E402
-from inkopt.loss import srgb_to_linear  # noqa: E402
-from inkopt.optimize import Optimization, OptimizeConfig  # noqa: E402
+from inkopt.color import srgb_to_linear  # noqa: E402
+from inkopt.optim import Optimization, OptimizeConfig  # noqa: E402
 from inkopt.render import Renderer  # noqa: E402
-from inkopt.slab import build_slab  # noqa: E402
+from inkopt.scenes.slab import build_slab  # noqa: E402
 
 
 def main():

@@ -13,7 +13,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import machine, reference_slab, write  # noqa: E402
 
 from inkopt.render import Renderer  # noqa: E402
-from inkopt.volume import Texels  # noqa: E402
+from inkopt.model import Texels  # noqa: E402
 
 
 def main():

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from inkopt.materials import InkTable
-from inkopt.volume import Volume, atomic_write_bytes
+from inkopt.io import atomic_write_bytes
+from inkopt.model import InkTable, Volume
 
 RESULTS = Path(__file__).resolve().parent / "results"
 

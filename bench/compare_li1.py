@@ -15,9 +15,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import machine, write  # noqa: E402
 
-from inkopt.materials import InkTable, mix_grad  # noqa: E402
+from inkopt.model import InkTable, Texels, Volume, mix_grad  # noqa: E402
 from inkopt.render import Renderer  # noqa: E402
-from inkopt.volume import Texels, Volume  # noqa: E402
 
 
 def cos(a, b):

@@ -21,7 +21,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import machine, write  # noqa: E402
 
-SPOT = Path("/work/shared/data/spot/spot.obj")
+SPOT = Path(__file__).resolve().parents[2] / "shared" / "data" / "spot" / "spot.obj"  # ../shared beside the repo
 
 
 def high_frequency_power(tex, target_rgb, a_rgb, b_rgb, k: int = 6) -> dict:
@@ -29,7 +29,7 @@ def high_frequency_power(tex, target_rgb, a_rgb, b_rgb, k: int = 6) -> dict:
     (ΔL*)², over all texels and over the target's flat half (texels whose target power is below the median)."""
     from scipy.spatial import cKDTree
 
-    from inkopt.loss import linear_to_lab
+    from inkopt.color import linear_to_lab
 
     pos = tex.pos_vox.astype(np.float64)
     _, nb = cKDTree(pos).query(pos, k + 1)
@@ -47,7 +47,7 @@ def high_frequency_power(tex, target_rgb, a_rgb, b_rgb, k: int = 6) -> dict:
 
 def structure(run_dir: Path, spp: int, threads: int) -> dict:
     from inkopt.render import Renderer
-    from inkopt.volume import Texels, Volume
+    from inkopt.model import Texels, Volume
 
     with np.load(run_dir / "scene.npz") as sc:
         scene = dict(sc)

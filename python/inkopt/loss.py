@@ -12,7 +12,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from .color import (LAB_NORM_SCALE, delta_e76, linear_to_lab, linear_to_lab_jacobian, linear_to_lab_vjp,
+from .color import (LAB_NORM_SCALE, linear_to_lab, linear_to_lab_jacobian, linear_to_lab_vjp,
                     normalise_lab)
 
 K1 = 0.01 ** 2

@@ -6,11 +6,15 @@ Inputs are per-texel linear RGB (I, 3) and, for a face, ``pix`` (H, W) int: the 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .color import to_srgb8
 from .io import save_figure
+
+if TYPE_CHECKING:
+    from PIL import Image
 
 PANEL_MIN_WIDTH = 256
 

@@ -167,7 +167,6 @@ def test_noise_corrected_ssim_is_unbiased():
     draws must be within 4 standard errors of the clean value, while the uncorrected value is far below it."""
     rng = np.random.default_rng(0)
     pos = _face()
-    n = len(pos)
     x = pos[:, 0]
     clean = np.stack([0.2 + 0.15 * np.sin(x / 3), 0.3 + 0.1 * np.cos(x / 5), 0.25 + 0.05 * (x % 4)], 1)
     target = np.clip(clean + rng.normal(0, 0.03, clean.shape), 0.01, 1)

@@ -6,9 +6,9 @@ from __future__ import annotations
 import json
 import sys
 
-from .baselines import DEFAULT_PATCH_MM
-from .evaluate import DEFAULT_SPP, evaluate_run, table_lines
-from .quantize import METHODS
+from ..evaluation.colour_table import DEFAULT_PATCH_MM
+from ..evaluation.evaluate import DEFAULT_SPP, evaluate_run, table_lines
+from ..printing.quantize import METHODS
 
 
 def _evaluate_cmd(args) -> int:

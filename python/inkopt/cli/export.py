@@ -1,7 +1,7 @@
 """``inkopt export DIR``: printer input from DIR/quantized.npz (docs/run-dir.md).
 
-``--format png-slices`` (the only format): one RGBA PNG per layer plus manifest.json (``inkopt.export``).
-``--format 3mf`` is refused: lib3mf 2.5.0 cannot write volumetric composites (see ``inkopt.export``).
+``--format png-slices`` (the only format): one RGBA PNG per layer plus manifest.json (``inkopt.printing.export``).
+``--format 3mf`` is refused: lib3mf 2.5.0 cannot write volumetric composites (see ``inkopt.printing.export``).
 """
 from __future__ import annotations
 
@@ -9,11 +9,9 @@ import json
 import sys
 from pathlib import Path
 
-import numpy as np
-
-from .cli_quantize import run_dir
-from .export import PRINTER_PROFILES, write_png_slices
-from .volume import Volume
+from ..printing.export import write_png_slices
+from ..printing.profiles import PRINTER_PROFILES, printer_profile, resolution_mismatch
+from ..rundir import RunDir
 
 FORMATS = ("png-slices", "3mf")
 NO_3MF = ("3mf export is not available: lib3mf 2.5.0 cannot write volumetric composites "
@@ -35,38 +33,21 @@ def load_palette(text: str | None) -> dict | None:
     return pal
 
 
-def load_quantized(d: Path) -> Volume:
-    path = d / "quantized.npz"
-    if not path.is_file():
-        raise ValueError(f"{path} does not exist (run 'inkopt quantize {d}' first)")
-    vol = Volume.load(path)
-    if vol.form != "labels":
-        raise ValueError(f"{path} holds a {vol.form} volume, not printer labels")
-    return vol
-
-
 def _export_cmd(args) -> int:
     if args.format not in FORMATS:
         raise ValueError(f"unknown export format '{args.format}'; use one of {list(FORMATS)}")
     if args.format == "3mf":
         raise ValueError(NO_3MF)
     printer = str(args.printer).strip().lower()
-    if printer not in PRINTER_PROFILES:
-        raise ValueError(f"unknown printer '{args.printer}'; use one of {list(PRINTER_PROFILES)}")
+    prof = printer_profile(printer)
     palette = load_palette(args.palette)
-    d = run_dir(args.dir)
-    q = load_quantized(d)
-    out = Path(args.out) if args.out else d / "slices"
+    d = RunDir(args.dir)
+    q = d.load_quantized()
+    out = Path(args.out) if args.out else d.slices()
     man = write_png_slices(q.labels, q.voxel_mm, q.inks.names, out, palette=palette, max_materials=printer)
-    prof = PRINTER_PROFILES[printer]
-    if "dpi" in prof:
-        vp = q.voxel_mm
-        dpi = 25.4 / vp[:2]
-        if not np.allclose(dpi, prof["dpi"], rtol=1e-3) or not any(
-                abs(vp[2] * 1000 - t) < 0.05 for t in prof.get("layer_um", (vp[2] * 1000,))):
-            print(f"inkopt: warning: the slices are {dpi[0]:.0f} x {dpi[1]:.0f} DPI with {vp[2] * 1000:.1f} um "
-                  f"layers; {prof['name']} prints {prof['dpi'][0]} x {prof['dpi'][1]} DPI with "
-                  f"{' or '.join(f'{t:g}' for t in prof['layer_um'])} um layers", file=sys.stderr)
+    mismatch = resolution_mismatch(prof, q.voxel_mm)
+    if mismatch:
+        print(f"inkopt: warning: {mismatch}", file=sys.stderr)
     used = ", ".join(f"{m['ink']} {m['hex']}" for m in man["materials"] if m["voxel_count"] > 0)
     print(f"{man['layer_count']} slices of {man['image_size']['width']} x {man['image_size']['height']} px "
           f"({man['dpi']['x']:.0f} x {man['dpi']['y']:.0f} DPI, {man['layer_thickness_um']:.1f} um layers), "

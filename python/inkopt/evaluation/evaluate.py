@@ -10,11 +10,11 @@ result and the naive baselines come to the target?
   samples. Each printer texel is assigned to the scene texel of the same face whose face centre is nearest in mm
   (meshes: the nearest scene texel), i.e. the scene texel whose footprint contains it, and the printer texels of
   a scene texel are averaged (a scene texel that gets none takes its nearest printer texel);
-- ``baselines``: ``surface`` and ``extrusion`` (``inkopt.baselines``) quantized exactly like ours (same method,
+- ``baselines``: ``surface`` and ``extrusion`` (``evaluation.baselines``) quantized exactly like ours (same method,
   seed, DPI, upsampling) and rendered like ``quantized``.
 
-Each result is compared with the scene's ``target_rgb``: ΔE76 mean and 95th percentile, CIEDE2000 mean, mean
-SSIM (``TexelLoss(...).ssim_mean``, sigma 1.5 voxels, on the scene texels), and ``delta_e76_noise``, the mean
+Each result is compared with the scene's ``target_rgb`` by ``metrics.prediction_metrics``: ΔE76 mean and 95th
+percentile, CIEDE2000 mean, mean SSIM (sigma 1.5 voxels, on the scene texels), ``delta_e76_noise``, the mean
 over texels of the Monte Carlo standard error of a texel's CIELAB colour (ΔE), and ``delta_e76_rms`` with
 ``delta_e76_rms_denoised``: the RMS ΔE76 and an unbiased estimate of it without the render noise
 (sqrt(mean(ΔE² - se²))). At 64 spp a texel's colour has a standard error of several ΔE (dark colours most),
@@ -25,41 +25,25 @@ quantized | surface | extrusion (sRGB).
 """
 from __future__ import annotations
 
-import io
-import json
 import time
-from pathlib import Path
+from dataclasses import asdict
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .baselines import (DEFAULT_PATCH_MM, ColourTable, colour_table, extrusion_baseline, lab_stderr,
-                        surface_baseline)
-from .cli_quantize import load_run_volume, quantization_settings, quantize_volume, run_dir
-from .loss import TexelLoss, delta_e76, delta_e2000, linear_to_lab, linear_to_srgb
-from .volume import Texels, Volume, atomic_write_bytes
+from ..io import write_png
+from ..loss import TexelLoss
+from ..model import Quantization, Texels, Volume
+from ..pictures import panels
+from ..printing.quantize import quantize_volume
+from ..render import Renderer
+from ..rundir import RunDir, SceneRecord
+from ..units import dpi_of
+from .baselines import BASELINES
+from .colour_table import DEFAULT_PATCH_MM, ColourTable, colour_table
+from .metrics import prediction_metrics
 
 DEFAULT_SPP = 64
-PANEL_MIN_WIDTH = 256
-
-
-# ----------------------------------------------------------------------------------------------- metrics
-def texel_metrics(rgb, target_rgb, loss: TexelLoss, var_mean=None) -> dict:
-    """ΔE76 mean / p95, CIEDE2000 mean, SSIM of predictions rgb (I, 3) linear vs target_rgb (I, 3) linear; with
-    the predictions' variances var_mean (I, 3) also the noise level and the RMS ΔE76 with the noise removed,
-    and SSIM with the noise removed from its statistics (an estimate for the noise-free prediction)."""
-    lab_p, lab_t = linear_to_lab(rgb), linear_to_lab(target_rgb)
-    de = delta_e76(lab_p, lab_t)
-    out = {"delta_e76_mean": float(de.mean()), "delta_e76_p95": float(np.percentile(de, 95)),
-           "delta_e2000_mean": float(delta_e2000(lab_p, lab_t).mean()), "ssim": loss.ssim_mean(rgb, var_mean)}
-    if var_mean is not None:
-        se = lab_stderr(np.asarray(rgb, np.float64), np.asarray(var_mean, np.float64))
-        out["delta_e76_noise"] = float(se.mean())
-        out["delta_e76_rms"] = float(np.sqrt(np.mean(de * de)))
-        # E|c + n - t|^2 = |c - t|^2 + tr(cov n) (to first order in Lab): an unbiased estimate of the noise-free
-        # mean squared ΔE76
-        out["delta_e76_rms_denoised"] = float(np.sqrt(max(0.0, np.mean(de * de - se * se))))
-    return out
 
 
 # ----------------------------------------------------------------------------------------------- texel maps
@@ -112,8 +96,6 @@ def render_printed(qvol: Volume, scene: Texels, voxel_mm_scene, kind: str, spp: 
     """Render a labels volume on its printer texels and average onto the scene texels.
 
     Returns (rgb (I, 3), var_mean (I, 3), spp_printer, seconds, printer texel count)."""
-    from .render import Renderer
-
     t0 = time.perf_counter()
     ptex = printer_texels(qvol, scene, kind)
     to_scene, stand_in = map_texels(ptex, qvol.voxel_mm, scene, voxel_mm_scene, per_face=kind != "mesh")
@@ -125,63 +107,21 @@ def render_printed(qvol: Volume, scene: Texels, voxel_mm_scene, kind: str, spp: 
 
 
 # ----------------------------------------------------------------------------------------------- pictures
-def face_picture(panels, pix) -> "Image.Image":
-    """Side-by-side labelled panels: panels = [(label, rgb (I, 3) linear)], pix (H, W) texel index per pixel
-    (row 0 = top; negative = no texel). Nearest-neighbour upscaling to >= 256 px panel width."""
-    from PIL import Image, ImageDraw
-
-    pix = np.asarray(pix, np.int64)
-    h, w = pix.shape
-    s = max(1, int(np.ceil(PANEL_MIN_WIDTH / w)))
-    gap, band = 8, 20
-    pw, ph = w * s, h * s
-    canvas = Image.new("RGB", (len(panels) * pw + (len(panels) + 1) * gap, ph + band + gap), (255, 255, 255))
-    draw = ImageDraw.Draw(canvas)
-    for j, (label, rgb) in enumerate(panels):
-        srgb = np.clip(linear_to_srgb(np.asarray(rgb, np.float64)), 0.0, 1.0)
-        img = np.round(srgb[np.maximum(pix, 0)] * 255).astype(np.uint8)
-        img[pix < 0] = 128
-        img = np.repeat(np.repeat(img, s, 0), s, 1)
-        x0 = gap + j * (pw + gap)
-        canvas.paste(Image.fromarray(img), (x0, band))
-        draw.text((x0, 4), label, fill=(0, 0, 0))
-    return canvas
-
-
-def write_face_pictures(d: Path, scene, results: dict) -> list[str]:
-    """DIR/evaluation_<face>.png for every face in the scene's ``faces``; returns the file names."""
+def write_face_pictures(d: RunDir, rec: SceneRecord, results: dict) -> list[str]:
+    """DIR/evaluation_<face>.png (target | optimized | quantized | baselines) for every textured face of a slab;
+    returns the file names."""
+    items = [("target", results["target"]), ("optimized", results["continuous"]), ("quantized", results["quantized"])]
+    items += [(k, results[k]) for k in ("surface", "extrusion") if k in results]
     names = []
-    panels_rgb = [("target", results["target"]), ("optimized", results["continuous"]),
-                  ("quantized", results["quantized"])]
-    panels_rgb += [(k, results[k]) for k in ("surface", "extrusion") if k in results]
-    for face in [str(f) for f in np.asarray(scene["faces"]).reshape(-1)]:
-        key = f"pix_{face}"
-        if key not in scene:
-            continue
-        buf = io.BytesIO()
-        face_picture(panels_rgb, scene[key]).save(buf, format="PNG")
-        name = f"evaluation_{face}.png"
-        atomic_write_bytes(d / name, buf.getvalue())
-        names.append(name)
+    for face in rec.faces:
+        if face in rec.pix:
+            name = f"evaluation_{face}.png"
+            write_png(d / name, panels(items, rec.pix[face]))
+            names.append(name)
     return names
 
 
 # ----------------------------------------------------------------------------------------------- the stage
-def load_scene(d: Path) -> dict:
-    path = d / "scene.npz"
-    if not path.is_file():
-        raise ValueError(f"{path} does not exist (run 'inkopt slab' or 'inkopt optimize' first)")
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            scene = dict(z)
-    except Exception as exc:
-        raise ValueError(f"{path} is not a readable .npz file ({type(exc).__name__})") from None
-    for k in ("texel_voxel", "texel_face", "texel_normal", "target_rgb"):
-        if k not in scene:
-            raise ValueError(f"{path} lacks array '{k}'")
-    return scene
-
-
 def evaluate_run(path, spp: int = DEFAULT_SPP, seed: int = 0, method: str | None = None, threads=None,
                  baselines: bool = True, refine: bool = True, patch_mm: float = DEFAULT_PATCH_MM,
                  table: ColourTable | None = None, write: bool = True, log=None) -> dict:
@@ -190,19 +130,14 @@ def evaluate_run(path, spp: int = DEFAULT_SPP, seed: int = 0, method: str | None
     quantized.npz is missing) and of the baselines; None = that of quantized.npz, else blue-noise.
     table: the baselines' colour table (default ``colour_table(inks, g, ior, patch_mm)``, cached).
     ``log``: callable taking one progress line (default: silent)."""
-    from .render import Renderer
-
     say = log or (lambda msg: None)
     if spp < 1:
         raise ValueError(f"spp must be at least 1, got {spp}")
-    d = run_dir(path)
-    vol = load_run_volume(d)
-    scene = load_scene(d)
-    stex = Texels.from_arrays(scene)
-    target = np.asarray(scene["target_rgb"], np.float64)
-    if target.shape != (len(stex), 3) or len(stex) == 0:
-        raise ValueError(f"scene target_rgb has shape {target.shape}, expected ({len(stex)}, 3) with texels")
-    kind = str(scene.get("kind", "slab"))
+    d = RunDir(path)
+    vol = d.load_volume()
+    rec = d.load_scene()
+    stex, kind = rec.texels, rec.kind
+    target = rec.target_rgb.astype(np.float64)
     t_all = time.perf_counter()
     loss = TexelLoss(target, stex.pos_vox, sigma=1.5)
     out = {"spp": int(spp), "seed": int(seed), "texels": len(stex), "kind": kind}
@@ -211,29 +146,26 @@ def evaluate_run(path, spp: int = DEFAULT_SPP, seed: int = 0, method: str | None
     t0 = time.perf_counter()
     res = Renderer(vol, threads).render(stex, spp, seed, progress=log is not None)
     colours["continuous"] = res.rgb.astype(np.float64)
-    out["continuous"] = {**texel_metrics(res.rgb, target, loss, res.var_mean), "spp": int(spp),
+    out["continuous"] = {**prediction_metrics(loss, res.rgb, res.var_mean), "spp": int(spp),
                          "seconds": time.perf_counter() - t0, "method": None}
     say(f"continuous: {len(stex)} texels x {spp} spp in {out['continuous']['seconds']:.1f} s")
 
-    qpath = d / "quantized.npz"
-    if qpath.is_file():
-        qvol = Volume.load(qpath)
-        if qvol.form != "labels":
-            raise ValueError(f"{qpath} holds a {qvol.form} volume, not printer labels")
-        qs = quantization_settings(qvol)
-        if method is not None and method != qs["method"]:
-            raise ValueError(f"{qpath} was quantized with '{qs['method']}', not '{method}'; rerun 'inkopt quantize "
-                             f"{d} --method {method}' or omit --method")
+    if d.has_quantized():
+        qvol = d.load_quantized()
+        q = qvol.quantization or Quantization()
+        if method is not None and method != q.method:
+            raise ValueError(f"{d / d.QUANTIZED} was quantized with '{q.method}', not '{method}'; rerun 'inkopt "
+                             f"quantize {d} --method {method}' or omit --method")
     else:
         t0 = time.perf_counter()
         qvol = quantize_volume(vol, method=method or "blue-noise")
-        qvol.save(qpath)
-        qs = quantization_settings(qvol)
-        say(f"quantized {vol.shape} -> {qvol.shape} ({qs['method']}) in {time.perf_counter() - t0:.1f} s; "
+        qpath = d.save_quantized(qvol)
+        q = qvol.quantization
+        say(f"quantized {vol.shape} -> {qvol.shape} ({q.method}) in {time.perf_counter() - t0:.1f} s; "
             f"wrote {qpath}")
-    out["quantization"] = qs
-    qkw = dict(method=qs["method"], seed=qs["seed"], upsample=qs["upsample"],
-               dpi=tuple(qs["dpi"]) if qs["dpi"] else tuple(25.4 / qvol.voxel_mm))
+    dpi = q.dpi or tuple(float(v) for v in dpi_of(qvol.voxel_mm))
+    out["quantization"] = {**asdict(q), "dpi": list(dpi)}
+    qkw = dict(method=q.method, seed=q.seed, upsample=q.upsample, dpi=tuple(dpi))
 
     def printed(name: str, q: Volume) -> dict:
         rgb, var, spp_p, secs, n_p = render_printed(q, stex, vol.voxel_mm, kind, spp, seed, threads,
@@ -241,8 +173,8 @@ def evaluate_run(path, spp: int = DEFAULT_SPP, seed: int = 0, method: str | None
         colours[name] = rgb
         say(f"{name}: {n_p} printer texels x {spp_p} spp in {secs:.1f} s")
         out["printer_texels"] = n_p
-        return {**texel_metrics(rgb, target, loss, var), "spp": int(spp), "spp_printer": spp_p,
-                "seconds": secs, "method": qs["method"]}
+        return {**prediction_metrics(loss, rgb, var), "spp": int(spp), "spp_printer": spp_p,
+                "seconds": secs, "method": q.method}
 
     out["quantized"] = printed("quantized", qvol)
     del qvol
@@ -258,15 +190,16 @@ def evaluate_run(path, spp: int = DEFAULT_SPP, seed: int = 0, method: str | None
                                "key": table.key, "cached": table.cached, "build_seconds": table.seconds,
                                "seconds": time.perf_counter() - t0}
         out["baselines"] = {}
-        for name, fn in (("surface", surface_baseline), ("extrusion", extrusion_baseline)):
-            mix = fn(vol, scene, table, refine=refine)
+        fixed = rec.fixed_share(vol.inks, vol.shape)
+        for name, fn in BASELINES.items():
+            mix = fn(vol, stex, target, fixed, table, refine=refine)
             qb = quantize_volume(vol.with_mixture(mix), **qkw)
             out["baselines"][name] = printed(name, qb)
     out["seconds"] = time.perf_counter() - t_all
     if write:
-        if kind == "slab" and "faces" in scene:
-            out["pictures"] = write_face_pictures(d, scene, colours)
-        atomic_write_bytes(d / "evaluation.json", (json.dumps(out, indent=1) + "\n").encode())
+        if rec.faces:
+            out["pictures"] = write_face_pictures(d, rec, colours)
+        d.write_evaluation(out)
     return out
 
 

@@ -15,7 +15,7 @@ renamed into place):
   the colour -> ink table with per-ink voxel counts, background, and the material limit applied.
 
 The printer's software maps colours to materials; a printer holds only a few model materials per job
-(``PRINTER_PROFILES``), so a job using more distinct inks than ``max_materials`` is refused.
+(``profiles.PRINTER_PROFILES``), so a job using more distinct inks than ``max_materials`` is refused.
 
 Not provided: a 3MF with the continuous mixture (3MF Volumetric extension, ``<composite>`` of
 ``<materialmapping>``). lib3mf 2.5.0 writes image stacks, functionfromimage3d, volumedata color and property
@@ -33,10 +33,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .volume import EMPTY
+from ..model import EMPTY
+from ..units import MM_PER_INCH
+from .profiles import resolve_max_materials
 
 FORMAT = "inkopt-png-slices"
-MM_PER_INCH = 25.4
 
 # Default opaque colour (R, G, B) of each ink name; used unless a palette entry overrides it.
 DEFAULT_PALETTE: dict[str, tuple[int, int, int]] = {
@@ -56,17 +57,6 @@ DEFAULT_PALETTE: dict[str, tuple[int, int, int]] = {
 SPARE_COLOURS = [(255, 0, 0), (0, 255, 0), (0, 0, 255), (128, 0, 0), (0, 128, 0), (0, 0, 128), (128, 128, 0),
                  (128, 0, 128), (0, 128, 128), (64, 64, 64), (192, 192, 192)]
 
-# Model-material slots per job (support material not counted), from the vendors' spec sheets; check your
-# machine's configuration. None = no limit.
-PRINTER_PROFILES: dict[str, dict] = {
-    "j750": {"name": "Stratasys J750", "max_materials": 6, "dpi": (600, 300), "layer_um": (27.0, 14.0)},
-    "j850": {"name": "Stratasys J850", "max_materials": 7, "dpi": (600, 300), "layer_um": (27.0, 14.0)},
-    "j55": {"name": "Stratasys J55 Prime", "max_materials": 5, "dpi": (600, 300), "layer_um": (18.75,)},
-    "mimaki-3duj-553": {"name": "Mimaki 3DUJ-553 (C, M, Y, K, W, clear)", "max_materials": 6},
-    "generic": {"name": "no material limit", "max_materials": None},
-}
-
-
 def _rgba(colour, what: str) -> tuple[int, int, int, int]:
     if isinstance(colour, str):
         h = colour.lstrip("#")
@@ -79,21 +69,6 @@ def _rgba(colour, what: str) -> tuple[int, int, int, int]:
     if len(c) != 4 or any(not 0 <= v <= 255 for v in c):
         raise ValueError(f"{what}: colour {colour} must be 3 or 4 integers in 0..255")
     return tuple(c)
-
-
-def resolve_max_materials(max_materials) -> int | None:
-    """An int limit, a ``PRINTER_PROFILES`` key (its limit), or None (no limit)."""
-    if max_materials is None:
-        return None
-    if isinstance(max_materials, str):
-        key = max_materials.strip().lower()
-        if key not in PRINTER_PROFILES:
-            raise ValueError(f"unknown printer profile '{max_materials}'; use one of {list(PRINTER_PROFILES)}")
-        return PRINTER_PROFILES[key]["max_materials"]
-    n = int(max_materials)
-    if n < 1:
-        raise ValueError(f"max_materials must be at least 1, got {max_materials}")
-    return n
 
 
 def ink_colours(ink_names, palette=None, background=(0, 0, 0, 0)) -> list[tuple[int, int, int, int]]:
@@ -141,7 +116,7 @@ def write_png_slices(labels, voxel_mm_printer, ink_names, out_dir, palette=None,
     voxel_mm_printer  (x, y, z) printer voxel size in mm (DPI = 25.4 / size; layer thickness = z)
     ink_names         N names, label i -> ink_names[i]
     palette           optional {ink name: (r, g, b) | "#rrggbb"} overriding ``DEFAULT_PALETTE``
-    max_materials     int, printer profile name (``PRINTER_PROFILES``) or None: refuse (ValueError) if the labels
+    max_materials     int, printer profile name (``profiles.PRINTER_PROFILES``) or None: refuse (ValueError) if the labels
                       use more distinct inks
     background        RGBA of empty voxels
     An existing ``out_dir`` is replaced only if it is empty or an earlier slice folder (has our manifest).

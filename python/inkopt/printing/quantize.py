@@ -28,21 +28,19 @@ Conventions (docs/conventions.md): arrays (z, y, x[, ink]); ``voxel_mm`` and ``d
 """
 from __future__ import annotations
 
-import io
-from pathlib import Path
-
 import numpy as np
 
-from .volume import EMPTY, atomic_write_bytes
+from ..model import EMPTY, MAX_VOLUME_BYTES, Quantization, Volume
+from ..units import MM_PER_INCH, PRINTER_DPI, PRINTER_LAYER_UM
+from .dither import load_blue_noise
 
 METHODS = ("blue-noise", "random")
 UPSAMPLE = ("nearest", "linear")
-MM_PER_INCH = 25.4
-DEFAULT_DPI = (600.0, 300.0)
-DEFAULT_LAYER_UM = 27.0
-BLUE_NOISE_SHAPE = (32, 32, 32)
-BLUE_NOISE_SIGMA = 1.5
-DATA_DIR = Path(__file__).resolve().parent / "data"
+DEFAULT_DPI = PRINTER_DPI
+DEFAULT_LAYER_UM = PRINTER_LAYER_UM
+# Nearest-upsampled shading normals (12 bytes per printer voxel) are kept up to this size; above it the quantized
+# volume has none (its texels are then flat voxel faces).
+MAX_NORMALS_BYTES = 2 * 2**30
 
 
 # ----------------------------------------------------------------------------------------------- grids
@@ -87,102 +85,6 @@ def _linear(n_p: int, vp: float, n_o: int, vo: float):
     i0 = np.minimum(np.floor(s).astype(np.int64), n_o - 1)
     i1 = np.minimum(i0 + 1, n_o - 1)
     return i0, i1, (s - i0).astype(np.float32)
-
-
-# ----------------------------------------------------------------------------------------- blue noise
-def void_and_cluster(shape=BLUE_NOISE_SHAPE, sigma: float = BLUE_NOISE_SIGMA, seed: int = 0,
-                     initial_fraction: float = 0.1) -> np.ndarray:
-    """Blue-noise dither array by Ulichney's void-and-cluster algorithm on a periodic grid of any dimension.
-
-    Energy of a pattern = periodic convolution of its "on" points with a Gaussian (``sigma`` in voxels, truncated
-    at 3 sigma). Phase 0 relaxes a random initial pattern (``initial_fraction`` on, ``default_rng(seed)``) by
-    moving the tightest cluster into the largest void until stable; phase 1 ranks its points by repeatedly
-    removing the tightest cluster; phase 2 ranks the rest by repeatedly filling the largest void (the
-    "tightest cluster of zeros" of Ulichney's phase 3 is the same voxel, since the energies of the ones and the
-    zeros add up to a constant). Deterministic for a given (shape, sigma, seed); ties go to the lowest index.
-    Returns the ranks, int64 array of ``shape``, a permutation of 0..n-1; every prefix ``rank < k`` is a
-    blue-noise pattern. O(n * (n + (6 sigma)^d)); 32^3 takes a few seconds.
-    """
-    shape = tuple(int(s) for s in shape)
-    if not shape or min(shape) < 2:
-        raise ValueError(f"blue-noise shape must have sizes >= 2, got {shape}")
-    n, d = int(np.prod(shape)), len(shape)
-    shp = np.array(shape)
-    r = int(np.ceil(3 * sigma))
-    axes = [np.arange(-min(r, (s - 1) // 2), min(r, (s - 1) // 2) + 1) for s in shape]
-    offs = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, d)
-    kern = np.exp(-np.sum(offs.astype(np.float64) ** 2, 1) / (2.0 * sigma ** 2))
-    strides = np.array([int(np.prod(shape[i + 1:])) for i in range(d)])
-
-    rng = np.random.default_rng(seed)
-    m = max(1, int(round(initial_fraction * n)))
-    ones = np.zeros(n, bool)
-    ones[rng.choice(n, m, replace=False)] = True
-    k_full = np.zeros(shape)
-    k_full[tuple((offs % shp).T)] = kern
-    energy = np.real(np.fft.ifftn(np.fft.fftn(ones.reshape(shape).astype(np.float64)) * np.fft.fftn(k_full)))
-    energy = energy.ravel()
-    on = np.where(ones, energy, -np.inf)   # energy of "on" points, -inf elsewhere (argmax: tightest cluster)
-    off = np.where(ones, np.inf, energy)   # energy of "off" points, +inf elsewhere (argmin: largest void)
-
-    def flip(p: int, to_on: bool) -> None:
-        idx = ((np.array(np.unravel_index(p, shape)) + offs) % shp) @ strides
-        step = kern if to_on else -kern
-        on[idx] += step
-        off[idx] += step
-        if to_on:
-            on[p], off[p] = off[p], np.inf
-        else:
-            off[p], on[p] = on[p], -np.inf
-
-    for _ in range(n):  # phase 0
-        c = int(np.argmax(on))
-        flip(c, False)
-        v = int(np.argmin(off))
-        flip(v, True)
-        if v == c:
-            break
-    rank = np.empty(n, np.int64)
-    on0, off0 = on.copy(), off.copy()
-    for cnt in range(m - 1, -1, -1):  # phase 1
-        c = int(np.argmax(on))
-        flip(c, False)
-        rank[c] = cnt
-    on[:], off[:] = on0, off0
-    for cnt in range(m, n):  # phase 2 (+3)
-        v = int(np.argmin(off))
-        flip(v, True)
-        rank[v] = cnt
-    return rank.reshape(shape)
-
-
-def blue_noise_path(shape=BLUE_NOISE_SHAPE) -> Path:
-    return DATA_DIR / ("blue_noise_" + "x".join(str(int(s)) for s in shape) + ".npy")
-
-
-def load_blue_noise(shape=BLUE_NOISE_SHAPE) -> np.ndarray:
-    """Blue-noise thresholds, float32 array of ``shape`` (z, y, x) with values (rank + 0.5) / n in (0, 1).
-
-    Loads the shipped ranks (``inkopt/data/blue_noise_<shape>.npy``, uint16, ``void_and_cluster(shape)`` with
-    the default sigma and seed); other shapes are generated and cached there (atomically) when writable.
-    """
-    shape = tuple(int(s) for s in shape)
-    path = blue_noise_path(shape)
-    ranks = None
-    if path.is_file():
-        ranks = np.load(path, allow_pickle=False)
-        if ranks.shape != shape:
-            ranks = None
-    if ranks is None:
-        ranks = void_and_cluster(shape)
-        try:
-            buf = io.BytesIO()
-            np.save(buf, ranks.astype(np.uint16 if ranks.size <= 65536 else np.uint32))
-            atomic_write_bytes(path, buf.getvalue())
-            path.chmod(0o644)
-        except OSError:
-            pass  # read-only install: use the generated array without caching
-    return ((ranks.astype(np.float64) + 0.5) / ranks.size).astype(np.float32)
 
 
 # ----------------------------------------------------------------------------------------- quantization
@@ -314,3 +216,59 @@ def ink_fractions(labels, n_inks: int, shape_opt, voxel_mm_opt, voxel_mm_printer
     tot = counts.sum(axis=3)
     frac = counts / np.maximum(tot, 1)[..., None]
     return frac, tot
+
+
+# ----------------------------------------------------------------------------------------- volumes
+def quantize_volume(volume: Volume, *, method: str = "blue-noise", dpi=DEFAULT_DPI,
+                    layer_um: float = DEFAULT_LAYER_UM, seed: int = 0, upsample: str = "nearest",
+                    normals: bool = True) -> Volume:
+    """A labels Volume at printer resolution from a mixture Volume (``inkopt.quantize.quantize``).
+
+    dpi (x, y) or (x, y, z) printer DPI (z None/absent -> ``layer_um`` µm layers). Keeps inks, g, ior, boundary;
+    ``inside`` is encoded by label 255. Shading normals (meshes) are upsampled by nearest if ``normals`` and
+    they fit ``MAX_NORMALS_BYTES``. The settings are kept in ``Volume.quantization`` (dpi (x, y, z)).
+    """
+    if volume.form != "mixture":
+        raise ValueError(f"quantization needs a mixture volume, got a {volume.form} volume")
+    if method not in METHODS:
+        raise ValueError(f"unknown quantization method '{method}'; use one of {list(METHODS)}")
+    if upsample not in UPSAMPLE:
+        raise ValueError(f"unknown upsample '{upsample}'; use one of {list(UPSAMPLE)}")
+    labels, vp = quantize(volume.mixture, volume.voxel_mm, method=method, dpi=tuple(dpi), layer_um=layer_um,
+                          inside=volume.inside, seed=int(seed), upsample=upsample)
+    nrm = None
+    fits = labels.size * 12 <= MAX_NORMALS_BYTES and labels.size * 13 <= MAX_VOLUME_BYTES
+    if normals and volume.normals is not None and fits:
+        (nz, ny, nx), vo = volume.shape, volume.voxel_mm
+        Z, Y, X = labels.shape
+        iz, iy, ix = (_enclosing(Z, vp[2], nz, vo[2]), _enclosing(Y, vp[1], ny, vo[1]),
+                      _enclosing(X, vp[0], nx, vo[0]))
+        nrm = np.empty(labels.shape + (3,), np.float32)
+        for k in range(Z):  # one printer layer at a time (bounded temporaries)
+            nrm[k] = volume.normals[iz[k]][iy][:, ix]
+    q = Quantization(method, int(seed), tuple(float(v) for v in MM_PER_INCH / np.asarray(vp, np.float64)), upsample)
+    return Volume(voxel_mm=vp, labels=labels, inks=volume.inks, g=volume.g, ior=volume.ior, inside=None,
+                  normals=nrm, boundary=volume.boundary, origin_mm=volume.origin_mm, quantization=q)
+
+
+def summary_lines(qvol: Volume, seconds: float, skipped_normals: bool) -> list[str]:
+    """What ``inkopt quantize`` prints about a labels volume: grid, ink voxel counts, settings."""
+    lab = qvol.labels
+    counts = np.zeros(256, np.int64)
+    for k in range(lab.shape[0]):
+        counts += np.bincount(lab[k].ravel(), minlength=256)
+    filled = int(counts[:EMPTY].sum())
+    Z, Y, X = lab.shape
+    vp = qvol.voxel_mm
+    q = qvol.quantization or Quantization()
+    dpi = MM_PER_INCH / np.asarray(vp, np.float64)
+    out = [f"printer grid {X} x {Y} x {Z} (x, y, z) voxels of {vp[0] * 1000:.1f} x {vp[1] * 1000:.1f} x "
+           f"{vp[2] * 1000:.1f} um ({dpi[0]:.0f} x {dpi[1]:.0f} DPI, {vp[2] * 1000:.1f} um layers)",
+           f"{filled} ink voxels ({counts[EMPTY]} empty); method {q.method}, seed {q.seed}, upsample "
+           f"{q.upsample}; {seconds:.1f} s",
+           "inks: " + ", ".join(f"{n} {counts[i]} ({100.0 * counts[i] / max(filled, 1):.1f} %)"
+                                for i, n in enumerate(qvol.inks.names))]
+    if skipped_normals:
+        out.append(f"note: shading normals not kept (they would need {lab.size * 12 / 2**30:.1f} GiB); "
+                   "the quantized volume's texels are flat voxel faces")
+    return out

@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 
 from inkopt.cli import main
-from inkopt.export import read_png_slices
-from inkopt.materials import InkTable
-from inkopt.quantize import _enclosing, printer_grid, quantize
-from inkopt.volume import Texels, Volume, save_npz
+from inkopt.io import save_npz
+from inkopt.model import InkTable, Texels, Volume
+from inkopt.printing.export import read_png_slices
+from inkopt.printing.quantize import _enclosing, printer_grid, quantize
 
 V300 = 25.4 / 300
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def make_run(d, shape=(4, 8, 10), normals=False):
@@ -53,8 +53,8 @@ def test_quantize_writes_renderable_labels(tmp_path, capsys):
     labels, _ = quantize(vol.mixture, vol.voxel_mm)  # the defaults: blue-noise, seed 0, nearest
     np.testing.assert_array_equal(q.labels, labels)
     np.testing.assert_allclose(q.voxel_mm, vp)
-    assert str(q.extra["method"]) == "blue-noise" and int(q.extra["seed"]) == 0
-    np.testing.assert_allclose(q.extra["dpi"], [600, 300, 25.4 / 0.027])
+    assert q.quantization.method == "blue-noise" and q.quantization.seed == 0
+    np.testing.assert_allclose(q.quantization.dpi, [600, 300, 25.4 / 0.027])
     assert q.inks.names == vol.inks.names and q.inside is None and q.normals is None
     # renderable by `inkopt render` (a fresh process, as a user would run it)
     env = {**os.environ, "PYTHONPATH": str(ROOT / "python")}
@@ -74,7 +74,7 @@ def test_quantize_options(tmp_path, capsys):
     labels, vp = quantize(vol.mixture, vol.voxel_mm, method="random", dpi=(300, 300, 600), seed=4,
                           upsample="linear")
     np.testing.assert_array_equal(q.labels, labels)
-    assert str(q.extra["method"]) == "random" and str(q.extra["upsample"]) == "linear"
+    assert q.quantization.method == "random" and q.quantization.upsample == "linear"
     code, _, _ = run(capsys, "quantize", tmp_path / "r", "--layer-um", "14")
     assert code == 0 and Volume.load(tmp_path / "r" / "quantized.npz").voxel_mm[2] == pytest.approx(0.014)
 

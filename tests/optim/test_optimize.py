@@ -2,21 +2,18 @@
 import numpy as np
 import pytest
 
+from helpers import central_differences as _fd
+
 from inkopt import charts
-from inkopt.materials import InkTable, mix, mix_grad
-from inkopt.optimize import Optimization, OptimizeConfig, Parameterization
-from inkopt.slab import build_slab
+from inkopt.color import srgb_to_linear
+from inkopt.evaluation.metrics import prediction_metrics
+from inkopt.model import InkTable, mix, mix_grad
+from inkopt.optim import (AdaGrad, Adam, ExponentiatedGradient, Optimization, OptimizeConfig, Parameterization,
+                          initial_free_mixture, make_optimizer)
+from inkopt.render import Renderer
+from inkopt.scenes.slab import build_slab
 
 INKS = InkTable.parse("vero-cmykw")
-
-
-def _fd(f, x, h=1e-3):
-    g = np.zeros_like(x)
-    for i in np.ndindex(x.shape):
-        e = np.zeros_like(x)
-        e[i] = h
-        g[i] = (f(x + e) - f(x - e)) / (2 * h)
-    return g
 
 
 def test_mix_grad_is_the_chain_rule():
@@ -61,7 +58,6 @@ def test_exponentiated_gradient_direction():
 
 def small_chart_scene(w=24, h=16, depth_mm=0.5, bottom=False):
     top = charts.colour_chart(w * 4, h * 4)
-    from inkopt.loss import srgb_to_linear
     lin = lambda im: srgb_to_linear(im / 255.0).astype(np.float32)
     bot = lin(charts.zebra(w * 4, h * 4, (8, 4))) if bottom else None
     vox = 25.4 / 300
@@ -77,14 +73,11 @@ def run(scene, **kw):
 def test_optimisation_lowers_delta_e_far_below_white_start():
     """30 iterations on a small colour chart, colour term only: the mean dE76 (at 64 spp, noise < 1 dE)
     drops far below the all-white start, and the training loss goes down."""
-    from inkopt.optimize import evaluate_prediction
-    from inkopt.render import Renderer
-
     scene = small_chart_scene()
     r = run(scene, gamma=(1.0, 0.0, 0.0))
-    start = evaluate_prediction(r.loss, Renderer(r.volume()).render(scene.texels, 64, 99).rgb)
+    start = prediction_metrics(r.loss, Renderer(r.volume()).render(scene.texels, 64, 99).rgb)
     r.run()
-    end = evaluate_prediction(r.loss, Renderer(r.volume()).render(scene.texels, 64, 99).rgb)
+    end = prediction_metrics(r.loss, Renderer(r.volume()).render(scene.texels, 64, 99).rgb)
     assert end["delta_e76_mean"] < 0.75 * start["delta_e76_mean"], (start, end)
     h = np.array(r.history.loss)
     assert h[-5:].mean() < 0.7 * h[:5].mean()
@@ -113,42 +106,81 @@ def test_resume_continues_exactly(tmp_path):
 def test_start_from_a_baseline(kind, monkeypatch):
     """--init surface|extrusion starts from that baseline's mixture (fixed shares kept, zeros lifted to 1e-6 by
     the softmax), and the start is reproducible (what a resumed run reports)."""
-    from inkopt import baselines
+    from inkopt.evaluation import baselines
 
     inks = InkTable.from_names(["cyan", "white"])
     table = baselines.colour_table(inks, patch_mm=1.0, step=8, max_stderr=0.4)  # small table, cached after once
     monkeypatch.setattr(baselines, "colour_table", lambda *a, **k: table)
-    from inkopt.loss import srgb_to_linear
     img = np.full((6, 8, 3), 255, np.uint8)
     img[:, :4] = (0, 160, 220)  # cyan half
     vox = 25.4 / 300
     scene = build_slab(srgb_to_linear(img / 255.0).astype(np.float32), None, (8 * vox, 6 * vox, 4 * vox), inks)
     fixed = np.zeros(scene.volume.shape + (2,), np.float32)
     fixed[0, ..., 1] = 1.0  # bottom layer fixed white
+    start = lambda k: baselines.baseline_mixture(k, scene.volume, scene.texels, scene.target_rgb, fixed, table=table)
     r = Optimization(scene.volume, scene.texels, scene.target_rgb, OptimizeConfig(init=kind, iterations=1),
-                     fixed_share=fixed)
-    sc = {**scene.texels.to_arrays(), "target_rgb": scene.target_rgb, "fixed_share": fixed}
+                     fixed_share=fixed, baseline=start)
     make = baselines.surface_baseline if kind == "surface" else baselines.extrusion_baseline
-    want = make(scene.volume, sc, table)
+    want = make(scene.volume, scene.texels, scene.target_rgb, fixed, table)
     got = r.initial_volume().mixture
     np.testing.assert_allclose(got, want, atol=2e-6)
     np.testing.assert_allclose(r.volume().mixture, got)
     assert want[-1, 0, 0, 0] > want[-1, 0, -1, 0] + 0.1  # the cyan half has cyan ink, the white half less
     with pytest.raises(ValueError, match="needs the run's texels"):
-        from inkopt.optimize import initial_free_mixture
         initial_free_mixture(inks, r.param, kind, 0)
+
+
+def test_exponentiated_gradient_step_scale_is_frozen_after_warmup():
+    """EG's step scale is the mean of the 99th percentile of |g| over the first ``warmup`` steps, then fixed: the
+    most influential coordinates move by about lr per step whatever the gradient's later size."""
+    rng = np.random.default_rng(3)
+    opt = ExponentiatedGradient(lr=1.0, shape=(200, 3), beta=0.0, warmup=3)
+    x = np.zeros((200, 3), np.float32)
+    scales = []
+    for t in range(6):
+        g = rng.normal(size=(200, 3)) * (10.0 ** t)
+        if t < 3:
+            scales.append(np.percentile(np.abs(g), 99))
+        x_new = opt.step(x, g)
+        if t < 3:
+            np.testing.assert_allclose(opt.v[0], np.mean(scales), rtol=1e-5)
+        np.testing.assert_allclose(x_new - x, -g / np.mean(scales), rtol=1e-4)  # beta = 0: m = g
+        x = x_new
+
+
+@pytest.mark.parametrize("kind,cls", [("eg", ExponentiatedGradient), ("adagrad", AdaGrad), ("adam", Adam)])
+def test_optimizer_state_round_trips(kind, cls):
+    """state() / load() restore an optimiser exactly (what resume relies on), under the same checkpoint keys."""
+    rng = np.random.default_rng(4)
+    a, b = make_optimizer(kind, 0.5, (7, 4)), make_optimizer(kind, 0.5, (7, 4))
+    assert isinstance(a, cls) and a.natural == (kind == "eg")
+    x = rng.normal(size=(7, 4)).astype(np.float32)
+    for _ in range(3):
+        x = a.step(x, rng.normal(size=(7, 4)).astype(np.float32))
+    assert set(a.state()) == {"opt_m", "opt_v", "opt_t"}
+    b.load(a.state())
+    g = rng.normal(size=(7, 4)).astype(np.float32)
+    np.testing.assert_array_equal(a.step(x, g), b.step(x, g))
+
+
+def test_one_renderer_per_run():
+    """The loop builds its renderer once and swaps the medium each iteration (no per-iteration set-up)."""
+    scene = small_chart_scene(8, 6, 0.2)
+    r = run(scene, iterations=2)
+    r.run()
+    first = r._renderer
+    r.cfg.iterations = 3
+    r.run()
+    assert r._renderer is first
 
 
 @pytest.mark.slow
 def test_ssim_term_raises_ssim():
     """gamma2 > 0 raises SSIM against the target compared with gamma2 = 0 (same seeds, 80 iterations)."""
-    from inkopt.optimize import evaluate_prediction
-    from inkopt.render import Renderer
-
     scene = small_chart_scene(32, 24, 1.0, bottom=True)
     out = {}
     for g2 in (0.0, 3.0):
         r = run(scene, iterations=80, gamma=(1.0, g2, 0.0))  # measured: SSIM 0.555 (g2=0) vs 0.593 (g2=3)
         r.run()
-        out[g2] = evaluate_prediction(r.loss, Renderer(r.volume()).render(scene.texels, 256, 7).rgb)["ssim"]
+        out[g2] = prediction_metrics(r.loss, Renderer(r.volume()).render(scene.texels, 256, 7).rgb)["ssim"]
     assert out[3.0] > out[0.0] + 0.01, out

@@ -1,16 +1,18 @@
-"""Tests of inkopt.evaluate: printer->scene texel maps, averaging, pictures, and a full synthetic run directory."""
+"""Tests of inkopt.evaluation.evaluate: printer->scene texel maps, averaging, pictures, and a full synthetic run directory."""
 import json
 
 import numpy as np
 import pytest
 from PIL import Image
 
-from inkopt.baselines import colour_table, extrusion_baseline, surface_baseline
-from inkopt.evaluate import average_to_scene, evaluate_run, face_picture, map_texels, printer_texels
-from inkopt.loss import linear_to_srgb
-from inkopt.materials import InkTable
-from inkopt.quantize import _enclosing, printer_grid, quantize
-from inkopt.volume import Texels, Volume, save_npz
+from inkopt.color import linear_to_srgb
+from inkopt.evaluation.baselines import extrusion_baseline, surface_baseline
+from inkopt.evaluation.colour_table import colour_table
+from inkopt.evaluation.evaluate import average_to_scene, evaluate_run, map_texels, printer_texels
+from inkopt.io import save_npz
+from inkopt.model import InkTable, Quantization, Texels, Volume
+from inkopt.pictures import panels
+from inkopt.printing.quantize import _enclosing, printer_grid, quantize
 
 V300 = 25.4 / 300
 INKS3 = InkTable.from_names(["cyan", "magenta", "white"])
@@ -74,10 +76,10 @@ def test_average_to_scene_matches_loop():
             np.testing.assert_allclose(var[i], var_p[sel].sum(0) / sel.sum() ** 2)
 
 
-def test_face_picture_layout():
+def test_panels_layout():
     pix = np.arange(12).reshape(3, 4)[::-1]
     a = np.random.default_rng(1).random((12, 3))
-    img = np.asarray(face_picture([("one", a), ("two", a * 0.5)], pix))
+    img = np.asarray(panels([("one", a), ("two", a * 0.5)], pix))
     s = 64  # 4 px wide -> x64 to reach 256
     assert img.shape[1] == 2 * 4 * s + 3 * 8
     band = 20
@@ -97,11 +99,12 @@ def make_run(d, table, kind="surface"):
     target = colours[quad].astype(np.float32)
     ny, nx = SHAPE[1:]
     pix = (np.arange(ny)[::-1, None] * nx + np.arange(nx)[None, :]).astype(np.int32)  # row 0 = largest y
+    fixed = np.zeros(SHAPE + (3,), np.float32)
     scene = {**tex.to_arrays(), "target_rgb": target, "kind": np.array("slab"),
-             "fixed_share": np.zeros(SHAPE + (3,), np.float32), "faces": np.array(["top"]), "pix_top": pix}
+             "fixed_share": fixed, "faces": np.array(["top"]), "pix_top": pix}
     vol = Volume(voxel_mm=[V300] * 3, mixture=np.full(SHAPE + (3,), 1 / 3, np.float32), inks=INKS3)
     fn = surface_baseline if kind == "surface" else extrusion_baseline
-    vol = vol.with_mixture(fn(vol, scene, table))
+    vol = vol.with_mixture(fn(vol, tex, target, fixed, table))
     d.mkdir(parents=True, exist_ok=True)
     vol.save(d / "volume.npz")
     save_npz(d / "scene.npz", scene)
@@ -140,8 +143,7 @@ def test_evaluate_surface_run_and_method_mismatch(tmp_path, table3):
     q = Volume.load(d / "volume.npz")
     labels, vp = quantize(q.mixture, q.voxel_mm, method="random", seed=5)
     Volume(voxel_mm=vp, labels=labels, inks=INKS3,
-           extra={"method": np.array("random"), "seed": np.int64(5), "dpi": 25.4 / vp,
-                  "upsample": np.array("nearest")}).save(d / "quantized.npz")
+           quantization=Quantization("random", 5, tuple(25.4 / vp), "nearest")).save(d / "quantized.npz")
     ev = evaluate_run(d, spp=4, table=table3)
     assert ev["quantization"]["method"] == "random" and ev["quantization"]["seed"] == 5
     for k in ("delta_e76_mean", "ssim"):  # the surface baseline, quantized like ours (random, seed 5) = ours

@@ -5,8 +5,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from inkopt.export import (DEFAULT_PALETTE, PRINTER_PROFILES, ink_colours, read_png_slices, write_png_slices)
-from inkopt.quantize import quantize
+from inkopt.printing.export import DEFAULT_PALETTE, ink_colours, read_png_slices, write_png_slices
+from inkopt.printing.profiles import PRINTER_PROFILES
+from inkopt.printing.quantize import quantize
 
 VP = np.array([25.4 / 600, 25.4 / 300, 0.027])
 INKS = ["cyan", "magenta", "yellow", "black", "white"]

@@ -1,16 +1,17 @@
-"""Tests of inkopt.baselines: simplex lattice, colour table (accuracy, cache), surface and extrusion baselines."""
+"""Tests of inkopt.evaluation.colour_table and .baselines: simplex lattice, colour table (accuracy, cache),
+surface and extrusion baselines, and the constraints they keep."""
 import time
 from math import comb
 
 import numpy as np
 import pytest
 
-from inkopt.baselines import (ColourTable, colour_table, default_step, extrusion_baseline, render_patches,
-                              simplex_lattice, simplex_least_squares, surface_baseline, table_key, table_mixtures,
-                              white_mixture)
-from inkopt.loss import delta_e76, linear_to_lab
-from inkopt.materials import InkTable
-from inkopt.volume import Texels, Volume
+from inkopt.color import delta_e76, linear_to_lab
+from inkopt.evaluation.baselines import extrusion_baseline, surface_baseline, white_mixture
+from inkopt.evaluation.colour_table import (ColourTable, colour_table, default_step, render_patches, simplex_lattice,
+                                            simplex_least_squares, table_key, table_mixtures)
+from inkopt.model import InkTable, Texels, Volume
+from inkopt.rundir import SceneRecord
 
 V300 = 25.4 / 300
 INKS3 = InkTable.from_names(["cyan", "magenta", "white"])
@@ -115,59 +116,71 @@ def patch_scene(shape=(6, 16, 24), faces=("top",)):
     target = colours[quad].astype(np.float32)
     if len(faces) > 1:
         target[tex.face == 4] = colours[::-1][quad[tex.face == 4]]
-    scene = {**tex.to_arrays(), "target_rgb": target, "fixed_share": np.zeros(shape + (3,), np.float32)}
-    return vol, tex, scene
+    return vol, tex, target, np.zeros(shape + (3,), np.float32)
 
 
 def test_surface_baseline_top_layer_only(table3):
-    vol, tex, scene = patch_scene()
-    mix = surface_baseline(vol, scene, table3)
+    vol, tex, target, fixed = patch_scene()
+    mix = surface_baseline(vol, tex, target, fixed, table3)
     white = white_mixture(INKS3)
     assert mix.shape == vol.shape + (3,) and mix.dtype == np.float32
     np.testing.assert_allclose(mix.sum(-1), 1.0, atol=1e-5)
     np.testing.assert_array_equal(mix[:-1], np.broadcast_to(white, mix[:-1].shape))  # below the top: white
-    expect = table3.lookup(scene["target_rgb"])
+    expect = table3.lookup(target)
     np.testing.assert_allclose(mix[-1].reshape(-1, 3), expect, atol=1e-6)  # texel order = C order of (y, x)
     assert not np.allclose(mix[-1], white)  # the colour is there
 
 
 def test_extrusion_fills_columns_and_halves(table3):
-    vol, tex, scene = patch_scene()
-    mix = extrusion_baseline(vol, scene, table3)
-    top = table3.lookup(scene["target_rgb"]).reshape(16, 24, 3)
+    vol, tex, target, fixed = patch_scene()
+    mix = extrusion_baseline(vol, tex, target, fixed, table3)
+    top = table3.lookup(target).reshape(16, 24, 3)
     np.testing.assert_allclose(mix, np.broadcast_to(top, mix.shape), atol=1e-6)  # every layer = its top texel
-    vol, tex, scene = patch_scene(faces=("top", "bottom"))
-    mix = extrusion_baseline(vol, scene, table3)
-    mapped = table3.lookup(scene["target_rgb"])
+    vol, tex, target, fixed = patch_scene(faces=("top", "bottom"))
+    mix = extrusion_baseline(vol, tex, target, fixed, table3)
+    mapped = table3.lookup(target)
     bottom, top = mapped[tex.face == 4].reshape(16, 24, 3), mapped[tex.face == 5].reshape(16, 24, 3)
     np.testing.assert_allclose(mix[3:], np.broadcast_to(top, mix[3:].shape), atol=1e-6)
     np.testing.assert_allclose(mix[:3], np.broadcast_to(bottom, mix[:3].shape), atol=1e-6)
 
 
 def test_fixed_share_and_inside_kept(table3):
-    vol, tex, scene = patch_scene()
+    vol, *_ = patch_scene()
     inside = np.ones(vol.shape, bool)
     inside[:, :, :2] = False
     vol = Volume(voxel_mm=vol.voxel_mm, mixture=vol.mixture, inks=INKS3, inside=inside)
     tex = Texels.exposed_faces(inside, ["top"])
     fixed = np.zeros(vol.shape + (3,), np.float32)
     fixed[:3, ..., 1] = 0.5  # half magenta fixed in the lower half
-    scene = {**tex.to_arrays(), "target_rgb": np.tile([[0.1, 0.4, 0.7]], (len(tex), 1)).astype(np.float32),
-             "fixed_share": fixed}
-    mix = extrusion_baseline(vol, scene, table3)
+    target = np.tile([[0.1, 0.4, 0.7]], (len(tex), 1)).astype(np.float32)
+    mix = extrusion_baseline(vol, tex, target, fixed, table3)
     assert np.all(mix[~inside] == 0)
-    base = table3.lookup(scene["target_rgb"][:1])[0]
+    base = table3.lookup(target[:1])[0]
     lower = mix[:3][inside[:3]]
     np.testing.assert_allclose(lower, np.broadcast_to(0.5 * base + [0, 0.5, 0], lower.shape), atol=1e-6)
     np.testing.assert_allclose(mix[3:][inside[3:]], np.broadcast_to(base, (int(inside[3:].sum()), 3)), atol=1e-6)
 
 
+def test_free_mask_only_scene_keeps_its_white_core(table3):
+    """A large shelled mesh stores only free_mask in scene.npz (no dense fixed_share): the baselines built from
+    that record must still print the non-free core 100 % white (they once lost it and extruded colour into it)."""
+    vol, tex, target, _ = patch_scene()
+    free = np.zeros(vol.shape, bool)
+    free[-2:] = True  # a two-layer shell under the textured top
+    rec = SceneRecord.from_arrays(SceneRecord("mesh", tex, target, free_mask=free).arrays())
+    assert "fixed_share" not in rec.arrays() and rec.fixed_share_dense is None
+    mix = extrusion_baseline(vol, tex, target, rec.fixed_share(INKS3, vol.shape), table3)
+    white = white_mixture(INKS3)
+    np.testing.assert_array_equal(mix[~free], np.broadcast_to(white, mix[~free].shape))
+    np.testing.assert_allclose(mix[-1].reshape(-1, 3), table3.lookup(target), atol=1e-6)  # the shell is coloured
+
+
 def test_errors(table3):
-    vol, tex, scene = patch_scene()
+    vol, tex, target, fixed = patch_scene()
     other = ColourTable(("a", "b", "c"), table3.mixtures, table3.rgb, table3.lab, table3.stderr, 1.0, 2, "k")
     with pytest.raises(ValueError, match="differ"):
-        surface_baseline(vol, scene, other)
+        surface_baseline(vol, tex, target, fixed, other)
     with pytest.raises(ValueError, match="target_rgb"):
-        surface_baseline(vol, {**scene, "target_rgb": scene["target_rgb"][:5]}, table3)
+        surface_baseline(vol, tex, target[:5], fixed, table3)
     with pytest.raises(ValueError, match="patch thickness"):
         colour_table(INKS3, patch_mm=0.0)

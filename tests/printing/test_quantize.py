@@ -1,12 +1,12 @@
-"""Tests of inkopt.quantize: printer grid, one ink per printer voxel, statistics of random and blue-noise."""
+"""Tests of inkopt.printing.quantize and .dither: printer grid, one ink per printer voxel, statistics of random and blue-noise."""
 import tracemalloc
 
 import numpy as np
 import pytest
 from scipy.ndimage import gaussian_filter
 
-from inkopt.quantize import (BLUE_NOISE_SHAPE, blue_noise_path, ink_fractions, load_blue_noise, printer_grid,
-                             quantize, void_and_cluster)
+from inkopt.printing.dither import BLUE_NOISE_SHAPE, blue_noise_path, load_blue_noise, void_and_cluster
+from inkopt.printing.quantize import ink_fractions, printer_grid, quantize
 
 V300 = 25.4 / 300
 

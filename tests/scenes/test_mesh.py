@@ -1,15 +1,16 @@
-"""Tests of inkopt.mesh: loading, voxelization (volume, SDF, normals, colours), baking, GLB and views."""
-from pathlib import Path
+"""Tests of inkopt.scenes.mesh: loading, voxelization (volume, SDF, normals, colours), baking, GLB and views."""
 
 import numpy as np
 import pytest
 import trimesh
 from PIL import Image
 
-from inkopt.mesh import (bake_vertex_colors, load_mesh, mesh_from_trimesh, render_views, voxelize, write_glb)
-from inkopt.volume import FACE_NORMALS
+from helpers import SPOT
 
-SPOT = Path("/work/shared/data/spot/spot.obj")
+from inkopt.model import FACE_NORMALS
+from inkopt.scenes.mesh import (bake_vertex_colors, load_mesh, mesh_from_trimesh, render_views, voxelize,
+                                write_glb)
+
 # sRGB 128/255 decoded to linear by the IEC 61966-2-1 formula (reference value, not our code)
 LIN = {0: 0.0, 128: 0.21586050011389926, 255: 1.0}
 # one colour per face id (0 -x, 1 +x, 2 -y, 3 +y, 4 -z, 5 +z), channels from {0, 128, 255}

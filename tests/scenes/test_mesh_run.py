@@ -1,4 +1,4 @@
-"""Tests of ``inkopt optimize MESH`` (inkopt.mesh_run, inkopt.cli_optimize): outputs, quality gain, shell,
+"""Tests of ``inkopt optimize MESH`` (inkopt.scenes.mesh, inkopt.run, inkopt.cli.optimize): outputs, quality gain, shell,
 resume, one-line errors.
 
 Most tests use a 1 mm-radius sphere (26^3 grid, ~1400 texels, ~0.3 s per iteration) painted in three
@@ -12,14 +12,14 @@ import numpy as np
 import pytest
 import trimesh
 
+from helpers import SPOT
+
 from inkopt import cli
-from inkopt.materials import InkTable
-from inkopt.mesh_run import scene_fixed_share
-from inkopt.volume import Texels, Volume
+from inkopt.model import InkTable, Texels, Volume
+from inkopt.rundir import SceneRecord
 
 pytest.importorskip("inkopt._core")
 
-SPOT = Path("/work/shared/data/spot/spot.obj")
 RADIUS = 1.0
 _SPHERE = trimesh.creation.icosphere(subdivisions=4, radius=RADIUS)
 # the pipeline stands the mesh on z = 0 (centred in x, y): the sphere's centre in the object's frame
@@ -35,7 +35,7 @@ REPORT_KEYS = ("initial_delta_e76_mean", "delta_e76_mean", "delta_e76_p95", "del
 def small_views():
     """views.png at 64 px per view: the z-buffer picture costs seconds at full size and is not under test here."""
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr("inkopt.mesh_run.VIEW_SIZE", 64)
+        mp.setattr("inkopt.scenes.mesh.scene.VIEW_SIZE", 64)
         yield
 
 
@@ -88,7 +88,7 @@ def test_volume_and_scene_files(ball_run):
     assert vol.form == "mixture" and vol.inks.names == InkTable.parse("vero-cmykw").names
     assert vol.boundary == "box" and vol.inside is not None and vol.normals is not None
     np.testing.assert_allclose(vol.mixture.sum(-1), 1.0, atol=1e-5)
-    np.testing.assert_allclose(vol.extra["origin_mm"], scene["origin_mm"])
+    np.testing.assert_allclose(vol.origin_mm, scene["origin_mm"])
     # the grid's low corner sits one voxel (the padding) below the mesh's bounding box
     lo = [-CENTRE[2], -CENTRE[2], 0.0]
     np.testing.assert_allclose(scene["origin_mm"], np.array(lo) - vol.voxel_mm, atol=1e-9)
@@ -143,7 +143,7 @@ def test_shell_fixes_deep_voxels(ball, tmp_path):
     assert np.all(m[near][:, white] < 1.0)  # variables: started at 97 % white and moved
     np.testing.assert_array_equal(scene["fixed_share"][..., white], (~scene["free_mask"]).astype(np.float32))
     no_dense = {k: v for k, v in scene.items() if k != "fixed_share"}  # as stored for large objects
-    np.testing.assert_array_equal(scene_fixed_share(no_dense, vol.inks), scene["fixed_share"])
+    np.testing.assert_array_equal(SceneRecord.from_arrays(no_dense).fixed_share(vol.inks), scene["fixed_share"])
 
 
 def test_resume_continues_exactly(ball, tmp_path):

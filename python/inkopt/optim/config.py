@@ -1,0 +1,67 @@
+"""Settings of an optimisation run (method.md §6) and their checks."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+PARAMS = ("sigmoid", "softmax")
+OPTIMIZERS = ("eg", "adam", "adagrad")
+GRAD_METHODS = ("replay", "li1")
+
+
+@dataclass
+class OptimizeConfig:
+    iterations: int = 200
+    #: samples per texel of the gradient pass (unbiased at any spp; fewer is noisier)
+    spp: int = 4
+    #: samples per texel of the forward render that the adjoint dE/dC is evaluated at. dE/dC is a nonlinear
+    #: function of C (CIELAB is steep near black): evaluated at a few-spp estimate its expectation is biased, for
+    #: dark colours even in sign (measured: bench/README), so the adjoint gets more samples than the gradient.
+    forward_spp: int = 16
+    #: loss weights (colour, SSIM, edges). Colour only by default: the SSIM term evaluated on a Monte Carlo
+    #: estimate is biased towards lower contrast (the estimate's noise inflates its local variance), which on a
+    #: black/white zebra chart lowered SSIM from 0.66 to 0.44 (README, "Known limits").
+    gamma: tuple[float, float, float] = (1.0, 0.0, 0.0)
+    lr: float | None = None  # default per optimizer: see default_lr
+    optimizer: str = "eg"
+    param: str = "softmax"
+    #: "white" (97 % white), "random", "surface" or "extrusion" (a print-shop baseline), or a path to a volume
+    #: .npz with a mixture
+    init: str = "white"
+    seed: int = 0
+    grad_method: str = "replay"
+    checkpoint_every: int = 10
+    include_specular: bool = True
+    #: Per-iteration decay of the sample-weighted running average of the prediction that the adjoint is evaluated
+    #: at (0: this iteration's forward render only). The mixture changes slowly, so averaging over iterations
+    #: multiplies the adjoint's samples (~ (forward_spp + spp) / (1 - decay)) at no rendering cost.
+    adjoint_ema: float = 0.8
+
+    def validate(self) -> None:
+        if self.iterations < 0:
+            raise ValueError(f"iterations must be >= 0, got {self.iterations}")
+        if self.spp < 1 or self.forward_spp < 1:
+            raise ValueError(f"spp and forward spp must be >= 1, got {self.spp}, {self.forward_spp}")
+        if self.param not in PARAMS:
+            raise ValueError(f"unknown parameterisation '{self.param}'; use one of {PARAMS}")
+        if self.optimizer not in OPTIMIZERS:
+            raise ValueError(f"unknown optimizer '{self.optimizer}'; use one of {OPTIMIZERS}")
+        if self.grad_method not in GRAD_METHODS:
+            raise ValueError(f"unknown gradient method '{self.grad_method}'; use one of {GRAD_METHODS}")
+        if self.optimizer == "eg" and self.param != "softmax":
+            raise ValueError("the exponentiated-gradient optimizer works on the softmax parameterisation")
+        if self.lr is not None and not self.lr > 0:
+            raise ValueError(f"learning rate must be positive, got {self.lr}")
+        if self.checkpoint_every < 1:
+            raise ValueError("checkpoint_every must be >= 1")
+        if not 0.0 <= self.adjoint_ema < 1.0:
+            raise ValueError(f"adjoint_ema must lie in [0, 1), got {self.adjoint_ema}")
+
+    @property
+    def step_size(self) -> float:
+        return self.lr if self.lr is not None else default_lr(self.optimizer)
+
+
+def default_lr(optimizer: str) -> float:
+    """Step sizes in logit units (eg: of the most influential voxels) that converge in ~100-200 iterations on
+    the test charts (see bench/)."""
+    return {"eg": 2.0, "adagrad": 0.5, "adam": 0.1}[optimizer]

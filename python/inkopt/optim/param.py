@@ -1,0 +1,118 @@
+"""The optimisation variables: for every *free* voxel an unconstrained vector x (N inks), mapped to a mixture by
+``sigmoid`` (the paper: sigmoid, then per-voxel normalisation) or ``softmax``, and the run's starting point.
+
+Constraints are fixed ink shares: a voxel's mixture is ``fixed_share + (1 - sum(fixed_share)) * p(x)``; a voxel
+whose fixed share sums to 1 is not a variable at all (a white core below a shell, masks), and a share below 1 fixes
+part of the mixture (e.g. 80 % transparent ink in a translucent region, the rest optimised).
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from ..model import InkTable, Volume
+from .config import PARAMS
+
+
+class Parameterization:
+    """Maps variables x (F, N) of the free voxels to the full mixture (z, y, x, N), and gradients back.
+
+    fixed_share: (z, y, x, N) float32 ink shares the optimiser may not change (all zero: everything free).
+    """
+
+    def __init__(self, kind: str, fixed_share: np.ndarray):
+        if kind not in PARAMS:
+            raise ValueError(f"unknown parameterisation '{kind}'")
+        fixed_share = np.asarray(fixed_share, np.float32)
+        total = fixed_share.sum(-1)
+        if np.any(fixed_share < 0) or np.any(total > 1 + 1e-5):
+            raise ValueError("fixed ink shares must be non-negative and sum to at most 1 per voxel")
+        self.kind = kind
+        self.fixed_share = fixed_share
+        self.free_share = np.clip(1.0 - total, 0.0, 1.0)
+        self.free_index = np.flatnonzero(self.free_share.reshape(-1) > 1e-6)
+        self.n_inks = fixed_share.shape[-1]
+        # Gradient slot of every voxel (-1: not a variable), for the renderer's sparse gradient.
+        self.grad_index = np.full(fixed_share.shape[:3], -1, np.int32)
+        self.grad_index.reshape(-1)[self.free_index] = np.arange(len(self.free_index), dtype=np.int32)
+
+    @property
+    def n_free(self) -> int:
+        return len(self.free_index)
+
+    def _p(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Free-part mixture p (F, N) and an auxiliary array for the backward pass."""
+        if self.kind == "softmax":
+            e = np.exp(x - x.max(axis=1, keepdims=True))
+            p = e / e.sum(axis=1, keepdims=True)
+            return p, p
+        s = 1.0 / (1.0 + np.exp(-x))
+        return s / s.sum(axis=1, keepdims=True), s
+
+    def mixture(self, x: np.ndarray) -> np.ndarray:
+        rho = self.fixed_share.copy().reshape(-1, self.n_inks)
+        p, _ = self._p(x)
+        rho[self.free_index] += self.free_share.reshape(-1)[self.free_index, None] * p
+        return rho.reshape(self.fixed_share.shape)
+
+    def backward(self, x: np.ndarray, grad_rho: np.ndarray, natural: bool = False) -> np.ndarray:
+        """dE/dx (F, N) from dE/drho, given per free voxel (F, N) or for the whole grid (z, y, x, N).
+        ``natural``: the mirror-descent direction on the simplex instead (softmax only): g - <g, p>, the
+        exponentiated-gradient step in logit space."""
+        g = grad_rho.reshape(-1, self.n_inks)
+        if len(g) != self.n_free:
+            g = g[self.free_index]
+        g = g * self.free_share.reshape(-1)[self.free_index, None]
+        p, aux = self._p(x)
+        centred = g - np.sum(g * p, axis=1, keepdims=True)
+        if natural:
+            if self.kind != "softmax":
+                raise ValueError("the natural (exponentiated-gradient) direction needs the softmax parameterisation")
+            return centred.astype(np.float32)
+        if self.kind == "softmax":
+            return (p * centred).astype(np.float32)
+        s = aux
+        return (centred * s * (1.0 - s) / s.sum(axis=1, keepdims=True)).astype(np.float32)
+
+    def variables_for(self, p: np.ndarray) -> np.ndarray:
+        """Variables x (F, N) whose free-part mixture is p (F, N) (entries clipped to [1e-6, 1])."""
+        p = np.clip(np.asarray(p, np.float64), 1e-6, 1.0)
+        p /= p.sum(axis=1, keepdims=True)
+        if self.kind == "softmax":
+            return np.log(p).astype(np.float32)
+        return np.log(p / (1.0 - p + 1e-12)).astype(np.float32)  # sigmoid(x) = p, and sum(p) = 1
+
+
+BASELINE_INITS = ("surface", "extrusion")
+
+
+def initial_free_mixture(inks: InkTable, param: Parameterization, init: str, seed: int,
+                         baseline: Callable[[str], np.ndarray] | None = None) -> np.ndarray:
+    """The free part's starting mixture (F, N): 97 % white + the rest split over the other inks (paper), a seeded
+    random mixture, a print-shop baseline ("surface" or "extrusion"; ``baseline(kind)``, given by the caller,
+    returns its full (z, y, x, N) mixture), or the mixture of an earlier result file."""
+    n, f = len(inks), param.n_free
+    if init == "white":
+        if "white" not in inks.names:
+            raise ValueError("--init white needs a 'white' ink in the ink set; use --init random")
+        p = np.full((f, n), 0.03 / max(n - 1, 1), np.float64)
+        p[:, inks.index("white")] = 0.97 if n > 1 else 1.0
+        return p
+    if init == "random":
+        return np.random.default_rng(seed).dirichlet(np.ones(n), size=f)
+    if init in BASELINE_INITS:
+        if baseline is None:
+            raise ValueError(f"--init {init} needs the run's texels and targets")
+        rho = np.asarray(baseline(init), np.float64).reshape(-1, n)[param.free_index]
+        fixed = param.fixed_share.reshape(-1, n)[param.free_index]
+        share = param.free_share.reshape(-1)[param.free_index, None]
+        p = np.clip(rho - fixed, 0.0, None) / share
+        total = p.sum(1, keepdims=True)
+        return np.where(total > 0, p / np.where(total > 0, total, 1.0), 1.0 / n)
+    vol = Volume.load(init)
+    if vol.form != "mixture" or vol.inks.names != inks.names:
+        raise ValueError(f"--init {init}: needs a mixture volume with inks {list(inks.names)}")
+    if vol.shape != param.fixed_share.shape[:3]:
+        raise ValueError(f"--init {init}: volume shape {vol.shape} differs from {param.fixed_share.shape[:3]}")
+    return vol.mixture.reshape(-1, n)[param.free_index].astype(np.float64)

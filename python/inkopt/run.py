@@ -1,0 +1,108 @@
+"""The run driver: one optimisation run of any scene, from start (or resume) to report (docs/run-dir.md).
+
+``run_optimisation(scene, out_dir, cfg)``: write scene.npz, optimise with checkpoints (``resume`` continues
+exactly), save volume.npz, then the final figures: the optimised and the initial volume rendered at ``eval_spp``
+(default max(256, 4 spp)) with seed ``2**62 + cfg.seed`` (never used by the optimisation), compared with the target
+by ``evaluation.metrics.prediction_metrics``; the scene's pictures, loss.png and report.json. ``run_slab`` and
+``run_mesh`` build the scene from user inputs and call it.
+"""
+from __future__ import annotations
+
+import resource
+import time
+
+import numpy as np
+
+from .evaluation.baselines import baseline_mixture
+from .evaluation.metrics import delta_e76_map, prediction_metrics
+from .model import InkTable
+from .optim import Optimization, OptimizeConfig
+from .pictures import loss_figure
+from .render import Renderer
+from .rundir import RunDir
+from .scenes import Scene
+from .units import OPT_DPI
+
+EVAL_SEED_OFFSET = 2**62  # evaluation seeds: 2**62 + seed, disjoint from the optimisation's (iteration_seeds)
+
+
+def peak_rss_gb() -> float:
+    """Peak resident memory of this process so far, GiB (Linux reports ru_maxrss in KiB)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
+
+
+def eval_spp_for(cfg: OptimizeConfig, eval_spp: int | None = None) -> int:
+    return int(eval_spp or max(256, 4 * cfg.spp))
+
+
+def run_optimisation(scene: Scene, out_dir, cfg: OptimizeConfig, *, resume: bool = False,
+                     eval_spp: int | None = None, threads: int | None = None, progress: bool = False,
+                     log=print) -> dict:
+    """Optimise ``scene`` into run directory ``out_dir``; returns the report (also report.json)."""
+    t_start = time.perf_counter()
+    log(scene.describe())
+    def baseline(kind: str) -> np.ndarray:  # a print-shop start (cfg.init "surface" or "extrusion")
+        return baseline_mixture(kind, scene.volume, scene.texels, scene.target_rgb, scene.fixed_share,
+                                progress=progress)
+
+    run = Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, fixed_share=scene.fixed_share,
+                       threads=threads, baseline=baseline)
+    rd = RunDir.create(out_dir)
+    if resume:
+        run.resume(rd.checkpoint, log)
+    rd.save_scene(scene.record())
+    run.run(rd.checkpoint, progress=progress)
+    final = run.volume()
+    rd.save_volume(final)
+
+    # Final figures at higher spp with seeds unused by the optimisation; the start is reconstructed from the
+    # configuration (identical to the first iterate whether or not the run was resumed). One renderer serves both.
+    spp = eval_spp_for(cfg, eval_spp)
+    seed = EVAL_SEED_OFFSET + cfg.seed
+    renderer = Renderer(final, threads)
+    res = renderer.render(scene.texels, spp, seed, cfg.include_specular, progress)
+    metrics = prediction_metrics(run.loss, res.rgb, res.var_mean)
+    del final
+    renderer.set_volume(run.initial_volume())
+    res0 = renderer.render(scene.texels, spp, seed, cfg.include_specular, progress)
+    del renderer
+    init = prediction_metrics(run.loss, res0.rgb, res0.var_mean)
+    de = delta_e76_map(run.loss, res.rgb)
+    scene.write_pictures(rd.path, res.rgb, de)
+    loss_figure(rd / RunDir.LOSS_PNG, run.history.loss, run.history.delta_e76)
+    h = run.history
+    n = max(len(h.seconds), 1)
+    report = {
+        "initial_delta_e76_mean": init["delta_e76_mean"], "initial_ssim": init["ssim"], **metrics,
+        "delta_e76_max": float(de.max()),
+        "iterations": run.iteration, "spp": cfg.spp, "eval_spp": spp,
+        "seconds": time.perf_counter() - t_start,
+        "seconds_per_iteration": float(np.sum(h.seconds) / n),
+        "time_split": {k: float(np.sum(getattr(h, k)) / n) for k in ("render_s", "gradient_s", "loss_s", "step_s")},
+        **scene.report_fields(),
+        "inks": list(scene.volume.inks.names), "gamma": list(cfg.gamma), "lr": cfg.step_size,
+        "optimizer": cfg.optimizer, "param": cfg.param, "init": cfg.init, "seed": cfg.seed,
+        "gradient": cfg.grad_method, "threads": threads, "peak_rss_gb": peak_rss_gb(),
+    }
+    rd.write_report(report)
+    return report
+
+
+def run_slab(top_path, bottom_path, size_mm, out_dir, inks: InkTable, cfg: OptimizeConfig, *,
+             dpi: float = OPT_DPI, **kw) -> dict:
+    """``inkopt slab``: pictures ``top_path`` (and ``bottom_path`` or None) on a slab of ``size_mm`` (W, H, D);
+    keyword arguments as ``run_optimisation``."""
+    from .scenes.slab import load_slab
+
+    return run_optimisation(load_slab(top_path, bottom_path, size_mm, inks, dpi), out_dir, cfg, **kw)
+
+
+def run_mesh(mesh_path, out_dir, inks: InkTable, cfg: OptimizeConfig, *, height_mm: float | None = None,
+             scale: float | None = None, shell_mm: float | None = None, dpi: float = OPT_DPI, up: str = "y",
+             **kw) -> dict:
+    """``inkopt optimize MESH``: a textured mesh scaled to ``height_mm`` (or by ``scale`` mm per unit), optimised
+    within ``shell_mm`` of its surface (None: everywhere inside); keyword arguments as ``run_optimisation``."""
+    from .scenes.mesh import build_mesh_scene
+
+    scene = build_mesh_scene(mesh_path, inks, height_mm, scale, shell_mm, dpi, up)
+    return run_optimisation(scene, out_dir, cfg, **kw)

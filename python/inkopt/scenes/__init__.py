@@ -1,0 +1,38 @@
+"""Scenes: what the user gives (pictures and a size, or a textured mesh) turned into what the optimiser needs.
+
+A scene (``Scene`` protocol) holds the base ``volume`` (a mixture Volume: grid geometry and ink table; its
+mixture is ignored), the ``texels`` (the sensor), ``target_rgb`` (I, 3) float32 linear, and ``fixed_share``
+((z, y, x, N) float32 ink shares the optimiser may not change, or None). It knows how to store itself
+(``record()`` -> the run directory's ``SceneRecord``), what to tell the user and the report, and which pictures
+show a prediction of it. The run driver (``inkopt.run``) needs nothing else, so a new kind of scene is a new
+module here and no change anywhere after it.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+
+from ..model import Texels, Volume
+from ..rundir import SceneRecord
+
+
+class Scene(Protocol):
+    kind: str
+    volume: Volume
+    texels: Texels
+    target_rgb: np.ndarray
+    fixed_share: np.ndarray | None
+
+    def record(self) -> SceneRecord:
+        """What scene.npz stores: enough for evaluation and baselines to see the same constraints."""
+
+    def describe(self) -> str:
+        """One line for the log: grid, voxel size, texels."""
+
+    def report_fields(self) -> dict:
+        """The scene's own entries of report.json (sizes, paths)."""
+
+    def write_pictures(self, out: Path, pred_rgb: np.ndarray, delta_e: np.ndarray) -> list[Path]:
+        """Pictures of a prediction (I, 3) linear with per-texel ΔE76 (I,) in folder ``out``."""
