@@ -4,7 +4,7 @@ PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.inkopt-installed
-RUST_SOURCES := $(wildcard Cargo.toml crates/*/Cargo.toml crates/*/src/*.rs)
+RUST_SOURCES := $(wildcard Cargo.toml crates/*/Cargo.toml) $(shell find crates -name '*.rs')
 DEMO_OUT ?= demo-out
 
 .PHONY: setup demo test test-slow bench clean

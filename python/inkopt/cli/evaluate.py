@@ -1,5 +1,5 @@
 """``inkopt evaluate DIR``: ΔE76, ΔE2000 and SSIM of the continuous result, the quantized (printed) result and the
-naive baselines against the target; writes DIR/evaluation.json and DIR/evaluation_<face>.png (``inkopt.evaluate``).
+naive baselines against the target; writes DIR/evaluation.json and DIR/evaluation_<face>.png (``inkopt.evaluation.evaluate``).
 """
 from __future__ import annotations
 

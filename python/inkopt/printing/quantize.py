@@ -222,7 +222,7 @@ def ink_fractions(labels, n_inks: int, shape_opt, voxel_mm_opt, voxel_mm_printer
 def quantize_volume(volume: Volume, *, method: str = "blue-noise", dpi=DEFAULT_DPI,
                     layer_um: float = DEFAULT_LAYER_UM, seed: int = 0, upsample: str = "nearest",
                     normals: bool = True) -> Volume:
-    """A labels Volume at printer resolution from a mixture Volume (``inkopt.quantize.quantize``).
+    """A labels Volume at printer resolution from a mixture Volume (``quantize`` above).
 
     dpi (x, y) or (x, y, z) printer DPI (z None/absent -> ``layer_um`` µm layers). Keeps inks, g, ior, boundary;
     ``inside`` is encoded by label 255. Shading normals (meshes) are upsampled by nearest if ``normals`` and
