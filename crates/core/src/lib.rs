@@ -4,7 +4,9 @@
 //! `(z * ny + y) * nx + x` (C order of a (z, y, x) array); lengths in mm, coefficients in mm^-1; geometric
 //! vectors are (x, y, z); radiance is linear RGB, each channel traced as its own monochromatic problem.
 
-mod packet;
+mod flight;
+mod grid;
+pub(crate) mod packet;
 pub mod render;
 pub mod rng;
 pub mod sampling;
@@ -12,7 +14,7 @@ pub mod scene;
 pub mod trace;
 
 pub use render::{backward, render, GradBuffers, GradMethod, RenderOptions, Stats, TexelEstimate, NO_GRADIENT};
-pub use scene::{face_normal, Boundary, DenseMedium, Environment, Geometry, LabelMedium, Medium, Texel, EMPTY};
+pub use scene::{face_normal, Boundary, DenseMedium, Geometry, LabelMedium, Light, Medium, Texel, UniformLight, EMPTY};
 
 #[cfg(test)]
 mod tests;

@@ -3,6 +3,12 @@
 //! Every random number is a pure function of (seed, texel, sample, channel, draw index): the key is a hash of
 //! the first four, and draw `i` is SplitMix64's output for counter `key + i * GAMMA`. A path can therefore be
 //! replayed exactly (path replay backpropagation), and results do not depend on how work is split over threads.
+//!
+//! Two generators: `PathRng` (SplitMix64, 64-bit; the scalar walk) and the packets' 32-bit counter-based hash
+//! (draw i of path key k is lowbias32(lowbias32(i ^ k_hi) + k_lo), 24 bits per uniform), which vectorises
+//! (`uniform8`) where 64-bit multiplies do not; `LaneRng` is one lane's stream of it as scalar uniforms.
+
+use wide::{f32x8, i32x8, u32x8};
 
 const GAMMA: u64 = 0x9E37_79B9_7F4A_7C15;
 
@@ -71,6 +77,64 @@ impl PathRng {
     }
 }
 
+#[inline(always)]
+fn lowbias32(mut x: u32) -> u32 {
+    x ^= x >> 16;
+    x = x.wrapping_mul(0x7FEB_352D);
+    x ^= x >> 15;
+    x = x.wrapping_mul(0x846C_A68B);
+    x ^ (x >> 16)
+}
+
+#[inline(always)]
+fn lowbias32x8(mut x: u32x8) -> u32x8 {
+    x = x ^ (x >> 16u32);
+    x = x * u32x8::splat(0x7FEB_352D);
+    x = x ^ (x >> 15u32);
+    x = x * u32x8::splat(0x846C_A68B);
+    x ^ (x >> 16u32)
+}
+
+/// Uniform in [0, 1) with 24 random bits: draw `i` of the packet stream keyed (k_lo, k_hi).
+#[inline(always)]
+pub(crate) fn uniform(k_lo: u32, k_hi: u32, i: u32) -> f32 {
+    (lowbias32(lowbias32(i ^ k_hi).wrapping_add(k_lo)) >> 8) as f32 * (1.0 / 16_777_216.0)
+}
+
+/// `uniform` in eight lanes: draw i[l] of the stream keyed (k_lo[l], k_hi[l]), bit-identical per lane.
+#[inline(always)]
+pub(crate) fn uniform8(k_lo: u32x8, k_hi: u32x8, i: u32x8) -> f32x8 {
+    let h = lowbias32x8(lowbias32x8(i ^ k_hi) + k_lo) >> 8u32;
+    bytemuck::cast::<u32x8, i32x8>(h).round_float() * f32x8::splat(1.0 / 16_777_216.0)
+}
+
+/// One packet lane's stream as scalar uniforms (camera rays and the walk near the surface): the next draw is
+/// number `draw`.
+pub(crate) struct LaneRng {
+    pub k_lo: u32,
+    pub k_hi: u32,
+    pub draw: u32,
+}
+
+impl LaneRng {
+    /// The stream of path key `key`, from its first draw.
+    pub fn new(key: u64) -> Self {
+        LaneRng { k_lo: key as u32, k_hi: (key >> 32) as u32, draw: 0 }
+    }
+}
+
+impl Uniforms for LaneRng {
+    #[inline(always)]
+    fn next_f32(&mut self) -> f32 {
+        self.draw += 1;
+        uniform(self.k_lo, self.k_hi, self.draw - 1)
+    }
+    #[inline(always)]
+    fn next_f32_pair(&mut self) -> (f32, f32) {
+        (self.next_f32(), self.next_f32())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -104,5 +168,27 @@ mod tests {
         let var = s2 / n as f64 - mean * mean;
         assert!((mean - 0.5).abs() < 5.0 * (1.0f64 / 12.0 / n as f64).sqrt());
         assert!((var - 1.0 / 12.0).abs() < 1e-3);
+    }
+
+    #[test]
+    fn vector_and_scalar_uniforms_agree_and_are_uniform() {
+        let (k_lo, k_hi) = (0x1234_5678u32, 0x9ABC_DEF0u32);
+        let v = uniform8(u32x8::splat(k_lo), u32x8::splat(k_hi), u32x8::from([0, 1, 2, 3, 4, 5, 6, 7])).to_array();
+        for (i, x) in v.iter().enumerate() {
+            assert_eq!(*x, uniform(k_lo, k_hi, i as u32));
+        }
+        // Mean and variance over many keys and draws: n = 1e6, standard error of the mean 2.9e-4, test at 5 sigma.
+        let n = 1_000_000u32;
+        let (mut s, mut s2) = (0.0f64, 0.0f64);
+        for t in 0..n {
+            let key = path_key(3, t as u64 / 8, 0, 0);
+            let x = uniform(key as u32, (key >> 32) as u32, t % 8) as f64;
+            assert!((0.0..1.0).contains(&x));
+            s += x;
+            s2 += x * x;
+        }
+        let mean = s / n as f64;
+        assert!((mean - 0.5).abs() < 5.0 * (1.0f64 / 12.0 / n as f64).sqrt());
+        assert!((s2 / n as f64 - mean * mean - 1.0 / 12.0).abs() < 1e-3);
     }
 }

@@ -1,4 +1,5 @@
-//! The voxel scene: grid geometry, the medium (dense coefficients or ink labels), boundary and lighting.
+//! The voxel scene: grid geometry (size, boundary, inside mask and its safe distances, shading normals), the
+//! medium (dense coefficients or ink labels, behind the `Medium` trait), the light (`Light` trait) and texels.
 //!
 //! Layout: voxel (x, y, z) has linear index `(z * ny + y) * nx + x`, i.e. C order of a (z, y, x) array.
 //! Coefficients are stored per channel in planar arrays (all voxels of R, then G, then B) as extinction
@@ -17,18 +18,24 @@ pub enum Boundary {
     PeriodicXY,
 }
 
-/// Incident radiance from outside the object, per RGB channel. Uniform today; the tracer only calls `eval`.
-#[derive(Clone, Debug)]
-pub enum Environment {
-    Uniform([f32; 3]),
+/// The light arriving at the object from outside. Every path that leaves the grid calls `radiance` once with
+/// the direction it leaves in; its value is the path's weight times that radiance. A new kind of light (an
+/// environment map, an area light) is a new type implementing this trait, given to `Geometry::with_light`; the
+/// tracers need no change.
+pub trait Light: Send + Sync {
+    /// Radiance (linear, channel `channel` of RGB) arriving along -`dir`, i.e. seen looking out along the unit
+    /// direction `dir` (x, y, z).
+    fn radiance(&self, dir: V3, channel: usize) -> f32;
 }
 
-impl Environment {
+/// The same radiance from every direction, per RGB channel (the default: 1, a white furnace).
+#[derive(Clone, Copy, Debug)]
+pub struct UniformLight(pub [f32; 3]);
+
+impl Light for UniformLight {
     #[inline(always)]
-    pub fn eval(&self, _dir: V3, channel: usize) -> f32 {
-        match self {
-            Environment::Uniform(l) => l[channel],
-        }
+    fn radiance(&self, _dir: V3, channel: usize) -> f32 {
+        self.0[channel]
     }
 }
 
@@ -165,8 +172,10 @@ pub struct Geometry {
     pub normals: Option<Vec<f32>>,
     /// Relative index of refraction of the object (outside: 1).
     pub ior: f32,
+    /// Henyey-Greenstein anisotropy of the medium.
     pub g: f32,
-    pub env: Environment,
+    /// The light outside the object.
+    pub light: Box<dyn Light>,
 }
 
 impl Geometry {
@@ -194,8 +203,14 @@ impl Geometry {
             normals: None,
             ior,
             g,
-            env: Environment::Uniform([1.0; 3]),
+            light: Box::new(UniformLight([1.0; 3])),
         })
+    }
+
+    /// The same geometry lit by `light`.
+    pub fn with_light(mut self, light: Box<dyn Light>) -> Self {
+        self.light = light;
+        self
     }
 
     pub fn voxel_count(&self) -> usize {

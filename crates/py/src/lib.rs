@@ -1,9 +1,11 @@
 //! Thin PyO3 bindings of inkopt-core: a `Scene` (geometry + medium, built once) that renders texel lists and
 //! accumulates gradients. Array conventions are the Python package's: (z, y, x[, c]) arrays, texel voxels
-//! (z, y, x), normals and voxel sizes (x, y, z). The GIL is released while rendering.
+//! (z, y, x), normals and voxel sizes (x, y, z). The GIL is released while rendering. `set_medium` swaps the
+//! medium of a scene and keeps its geometry (safe distances), thread pool and gradient buffers, for optimisers
+//! that render a new medium every iteration.
 
 use inkopt_core::{backward, render, Boundary, DenseMedium, Geometry, GradBuffers, GradMethod, LabelMedium,
-                  Medium, RenderOptions, Stats, Texel, TexelEstimate, NO_GRADIENT};
+                  RenderOptions, Stats, Texel, TexelEstimate, NO_GRADIENT};
 use numpy::ndarray::{Array2, Array4};
 use numpy::{IntoPyArray, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4,
             PyUntypedArrayMethods};
@@ -65,38 +67,13 @@ impl Scene {
             other => return Err(err(format!("unknown boundary '{other}'; use 'box' or 'periodic-xy'"))),
         };
         let mut geo = Geometry::new([nx, ny, nz], [voxel_mm.0, voxel_mm.1, voxel_mm.2], bnd, ior, g).map_err(err)?;
-        let nv = geo.voxel_count();
-        let check = |dims: &[usize], want: &[usize], name: &str| -> PyResult<()> {
-            if dims != want {
-                return Err(err(format!("{name} has shape {dims:?}, expected {want:?}")));
-            }
-            Ok(())
-        };
-        let medium = match (sigma_s, sigma_a, labels) {
-            (Some(s), Some(a), None) => {
-                check(s.shape(), &[nz, ny, nx, 3], "sigma_s")?;
-                check(a.shape(), &[nz, ny, nx, 3], "sigma_a")?;
-                let (s, a) = (s.as_slice().map_err(|_| err("sigma_s must be C-contiguous"))?,
-                              a.as_slice().map_err(|_| err("sigma_a must be C-contiguous"))?);
-                MediumKind::Dense(DenseMedium::from_interleaved(s, a).map_err(err)?)
-            }
-            (None, None, Some(l)) => {
-                check(l.shape(), &[nz, ny, nx], "labels")?;
-                let (is, ia) = match (ink_sigma_s, ink_sigma_a) {
-                    (Some(is), Some(ia)) => (is, ia),
-                    _ => return Err(err("a label volume needs ink_sigma_s and ink_sigma_a")),
-                };
-                let l = l.as_slice().map_err(|_| err("labels must be C-contiguous"))?.to_vec();
-                MediumKind::Labels(LabelMedium::new(l, is.as_slice()?, ia.as_slice()?).map_err(err)?)
-            }
-            _ => return Err(err("give either sigma_s and sigma_a, or labels with an ink table")),
-        };
+        let medium = medium_from([nz, ny, nx], sigma_s, sigma_a, labels, ink_sigma_s, ink_sigma_a)?;
         if let Some(m) = inside {
-            check(m.shape(), &[nz, ny, nx], "inside")?;
+            check_shape(m.shape(), &[nz, ny, nx], "inside")?;
             geo = geo.with_inside(m.as_slice()?.to_vec()).map_err(err)?;
         }
         if let Some(nrm) = normals {
-            check(nrm.shape(), &[nz, ny, nx, 3], "normals")?;
+            check_shape(nrm.shape(), &[nz, ny, nx, 3], "normals")?;
             geo = geo.with_normals(nrm.as_slice()?.to_vec()).map_err(err)?;
         }
         let mut b = rayon::ThreadPoolBuilder::new();
@@ -104,12 +81,23 @@ impl Scene {
             b = b.num_threads(t);
         }
         let pool = b.build().map_err(|e| err(e.to_string()))?;
-        let n_len = match &medium {
-            MediumKind::Dense(m) => m.len(),
-            MediumKind::Labels(m) => m.len(),
-        };
-        debug_assert_eq!(n_len, nv);
         Ok(Scene { geo, medium, pool, grads: None, sparse: false, shape: [nz, ny, nx] })
+    }
+
+    /// set_medium(*, sigma_s=None, sigma_a=None, labels=None, ink_sigma_s=None, ink_sigma_a=None): replace the
+    /// medium (the same arguments as the constructor's) and keep the geometry (grid, boundary, ior, g, inside
+    /// mask and its safe distances, normals), the thread pool and any gradient buffers.
+    #[pyo3(signature = (*, sigma_s=None, sigma_a=None, labels=None, ink_sigma_s=None, ink_sigma_a=None))]
+    fn set_medium(
+        &mut self,
+        sigma_s: Option<PyReadonlyArray4<f32>>,
+        sigma_a: Option<PyReadonlyArray4<f32>>,
+        labels: Option<PyReadonlyArray3<u8>>,
+        ink_sigma_s: Option<PyReadonlyArray2<f32>>,
+        ink_sigma_a: Option<PyReadonlyArray2<f32>>,
+    ) -> PyResult<()> {
+        self.medium = medium_from(self.shape, sigma_s, sigma_a, labels, ink_sigma_s, ink_sigma_a)?;
+        Ok(())
     }
 
     #[getter]
@@ -257,6 +245,50 @@ impl Scene {
             out.push(Texel { voxel: vox, face: f[k], normal: [nrm[0] / len, nrm[1] / len, nrm[2] / len] });
         }
         Ok(out)
+    }
+}
+
+fn check_shape(dims: &[usize], want: &[usize], name: &str) -> PyResult<()> {
+    if dims != want {
+        return Err(err(format!("{name} has shape {dims:?}, expected {want:?}")));
+    }
+    Ok(())
+}
+
+/// The medium of a (z, y, x) = `shape` grid: dense sigma_s and sigma_a (z, y, x, 3) float32, or labels
+/// (z, y, x) uint8 with an ink table ink_sigma_s, ink_sigma_a (N, 3) float32.
+fn medium_from(
+    shape: [usize; 3],
+    sigma_s: Option<PyReadonlyArray4<f32>>,
+    sigma_a: Option<PyReadonlyArray4<f32>>,
+    labels: Option<PyReadonlyArray3<u8>>,
+    ink_sigma_s: Option<PyReadonlyArray2<f32>>,
+    ink_sigma_a: Option<PyReadonlyArray2<f32>>,
+) -> PyResult<MediumKind> {
+    let [nz, ny, nx] = shape;
+    match (sigma_s, sigma_a, labels) {
+        (Some(s), Some(a), None) => {
+            check_shape(s.shape(), &[nz, ny, nx, 3], "sigma_s")?;
+            check_shape(a.shape(), &[nz, ny, nx, 3], "sigma_a")?;
+            let (s, a) = (s.as_slice().map_err(|_| err("sigma_s must be C-contiguous"))?,
+                          a.as_slice().map_err(|_| err("sigma_a must be C-contiguous"))?);
+            Ok(MediumKind::Dense(DenseMedium::from_interleaved(s, a).map_err(err)?))
+        }
+        (None, None, Some(l)) => {
+            check_shape(l.shape(), &[nz, ny, nx], "labels")?;
+            let (is, ia) = match (ink_sigma_s, ink_sigma_a) {
+                (Some(is), Some(ia)) => (is, ia),
+                _ => return Err(err("a label volume needs ink_sigma_s and ink_sigma_a")),
+            };
+            for (t, name) in [(&is, "ink_sigma_s"), (&ia, "ink_sigma_a")] {
+                if t.shape().len() != 2 || t.shape()[1] != 3 {
+                    return Err(err(format!("{name} has shape {:?}, expected (n_inks, 3)", t.shape())));
+                }
+            }
+            let l = l.as_slice().map_err(|_| err("labels must be C-contiguous"))?.to_vec();
+            Ok(MediumKind::Labels(LabelMedium::new(l, is.as_slice()?, ia.as_slice()?).map_err(err)?))
+        }
+        _ => Err(err("give either sigma_s and sigma_a, or labels with an ink table")),
     }
 }
 
