@@ -3,7 +3,7 @@
 //! Two exact samplers of the same collision density sigma_t(x) exp(-tau) in the piecewise-constant medium:
 //! - `Regular` tracking: one exponential optical depth per flight, used up voxel by voxel along a DDA; it finds
 //!   every crossing of the object's boundary (an `inside` mask), so it serves masked volumes, the paths near a
-//!   surface, and every flight that starts outside a mask-free grid.
+//!   surface, and mask-free grids' paths whose camera ray stays outside the object at first.
 //! - `Delta` tracking: tentative collisions at the channel's majorant, each accepted with probability
 //!   sigma_t(x) / majorant; no voxel crossings, for grids that are entirely inside the object.
 //!

@@ -3,6 +3,11 @@
 //! Conventions (see docs/conventions.md in the repository): voxel (x, y, z) has linear index
 //! `(z * ny + y) * nx + x` (C order of a (z, y, x) array); lengths in mm, coefficients in mm^-1; geometric
 //! vectors are (x, y, z); radiance is linear RGB, each channel traced as its own monochromatic problem.
+//!
+//! Modules: `scene` (geometry, media, light, texels), `grid` (locating points, voxel traversal, exit distances,
+//! periodic wrap), `flight` (the free-flight samplers), `trace` (the scalar walk), `packet` (eight paths per
+//! core in SIMD lanes), `render` (parallel drivers and gradient buffers), `rng` (counter-based random
+//! numbers), `sampling` (phase function, Fresnel).
 
 mod flight;
 mod grid;

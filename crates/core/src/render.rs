@@ -1,7 +1,9 @@
-//! Parallel drivers: the forward render of a list of texels and the gradient pass (path replay or the biased
-//! `L_i = 1` radiative backpropagation variant). Work is split over texels; every path's random numbers come
-//! from its (seed, texel, sample, channel) key, so per-texel results are bit-identical for any thread count.
-
+//! Parallel drivers: the forward render of a list of texels and the gradient pass (path replay, or the biased
+//! `L_i = 1` radiative backpropagation variant), and the fixed-point gradient buffers. Mask-free volumes and
+//! masked boxes run eight paths at a time (`packet`, chunks of `PACKET_CHUNK` texels per work item); masked
+//! periodic slabs run the scalar `trace`, one texel per work item. Every path's random numbers come from its
+//! (seed, texel, sample, channel) key and each texel's path values are summed in a fixed order, so per-texel
+//! results and gradients are bit-identical for any thread count and work split.
 use std::sync::Mutex;
 
 use rayon::prelude::*;
