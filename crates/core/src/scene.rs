@@ -53,6 +53,16 @@ pub trait Medium: Sync {
     fn majorant(&self, c: usize) -> f32;
 }
 
+/// (sigma_t, albedo) of coefficients sigma_s, sigma_a (albedo 1 in vacuum); None unless both are finite and
+/// non-negative.
+fn extinction_albedo(s: f32, a: f32) -> Option<(f32, f32)> {
+    if !(s >= 0.0 && a >= 0.0 && s.is_finite() && a.is_finite()) {
+        return None;
+    }
+    let t = s + a;
+    Some((t, if t > 0.0 { s / t } else { 1.0 }))
+}
+
 /// Dense coefficients: planar by channel, (sigma_t, albedo) pairs interleaved so one lookup is one load.
 pub struct DenseMedium {
     n: usize,
@@ -70,18 +80,12 @@ impl DenseMedium {
         let mut coef = vec![[0.0f32, 1.0f32]; 3 * n];
         for i in 0..n {
             for c in 0..3 {
-                let (s, a) = (sigma_s[3 * i + c], sigma_a[3 * i + c]);
-                if !(s >= 0.0 && a >= 0.0 && s.is_finite() && a.is_finite()) {
-                    return Err(format!("coefficients of voxel {i} channel {c} are negative or not finite"));
-                }
-                let t = s + a;
-                coef[c * n + i] = [t, if t > 0.0 { s / t } else { 1.0 }];
+                let (t, albedo) = extinction_albedo(sigma_s[3 * i + c], sigma_a[3 * i + c])
+                    .ok_or_else(|| format!("coefficients of voxel {i} channel {c} are negative or not finite"))?;
+                coef[c * n + i] = [t, albedo];
             }
         }
-        let mut majorant = [0.0f32; 3];
-        for (c, m) in majorant.iter_mut().enumerate() {
-            *m = coef[c * n..(c + 1) * n].iter().fold(0.0f32, |a, x| a.max(x[0]));
-        }
+        let majorant = std::array::from_fn(|c| coef[c * n..(c + 1) * n].iter().fold(0.0f32, |a, x| a.max(x[0])));
         Ok(DenseMedium { n, coef, majorant })
     }
 }
@@ -118,12 +122,8 @@ impl LabelMedium {
         let mut table = [[(0.0f32, 1.0f32); 256]; 3];
         for k in 0..n_inks {
             for c in 0..3 {
-                let (s, a) = (ink_sigma_s[3 * k + c], ink_sigma_a[3 * k + c]);
-                if !(s >= 0.0 && a >= 0.0 && s.is_finite() && a.is_finite()) {
-                    return Err(format!("ink {k} has negative or non-finite coefficients"));
-                }
-                let t = s + a;
-                table[c][k] = (t, if t > 0.0 { s / t } else { 1.0 });
+                table[c][k] = extinction_albedo(ink_sigma_s[3 * k + c], ink_sigma_a[3 * k + c])
+                    .ok_or_else(|| format!("ink {k} has negative or non-finite coefficients"))?;
             }
         }
         if let Some(bad) = labels.iter().find(|&&l| l != EMPTY && l as usize >= n_inks) {
@@ -131,10 +131,7 @@ impl LabelMedium {
         }
         let mut used = [false; 256];
         labels.iter().for_each(|&l| used[l as usize] = true);
-        let mut majorant = [0.0f32; 3];
-        for (c, m) in majorant.iter_mut().enumerate() {
-            *m = (0..256).filter(|&k| used[k]).fold(0.0f32, |a, k| a.max(table[c][k].0));
-        }
+        let majorant = std::array::from_fn(|c| (0..256).filter(|&k| used[k]).fold(0.0f32, |a, k| a.max(table[c][k].0)));
         Ok(LabelMedium { labels, majorant, table })
     }
 }
