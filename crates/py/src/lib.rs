@@ -6,9 +6,9 @@
 
 use inkopt_core::{backward, render, Boundary, DenseMedium, Geometry, GradBuffers, GradMethod, LabelMedium,
                   RenderOptions, Stats, Texel, TexelEstimate, NO_GRADIENT};
-use numpy::ndarray::{Array2, Array4};
-use numpy::{IntoPyArray, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4,
-            PyUntypedArrayMethods};
+use numpy::ndarray::{Array2, Array4, Dimension};
+use numpy::{Element, IntoPyArray, PyArray2, PyReadonlyArray, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
+            PyReadonlyArray4, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -70,11 +70,11 @@ impl Scene {
         let medium = medium_from([nz, ny, nx], sigma_s, sigma_a, labels, ink_sigma_s, ink_sigma_a)?;
         if let Some(m) = inside {
             check_shape(m.shape(), &[nz, ny, nx], "inside")?;
-            geo = geo.with_inside(m.as_slice()?.to_vec()).map_err(err)?;
+            geo = geo.with_inside(c_slice(&m, "inside")?.to_vec()).map_err(err)?;
         }
         if let Some(nrm) = normals {
             check_shape(nrm.shape(), &[nz, ny, nx, 3], "normals")?;
-            geo = geo.with_normals(nrm.as_slice()?.to_vec()).map_err(err)?;
+            geo = geo.with_normals(c_slice(&nrm, "normals")?.to_vec()).map_err(err)?;
         }
         let mut b = rayon::ThreadPoolBuilder::new();
         if let Some(t) = threads {
@@ -145,7 +145,7 @@ impl Scene {
                 if ix.shape() != [nz, ny, nx] {
                     return Err(err(format!("grad_index has shape {:?}, expected {:?}", ix.shape(), self.shape)));
                 }
-                Some(ix.as_slice()?.iter().map(|&k| if k < 0 { NO_GRADIENT } else { k as u32 }).collect())
+                Some(c_slice(&ix, "grad_index")?.iter().map(|&k| if k < 0 { NO_GRADIENT } else { k as u32 }).collect())
             }
         };
         let mut g = GradBuffers::with_map(n, threads, map).map_err(err)?;
@@ -183,7 +183,7 @@ impl Scene {
         if adjoint.shape() != [texels.len(), 3] {
             return Err(err(format!("adjoint has shape {:?}, expected ({}, 3)", adjoint.shape(), texels.len())));
         }
-        let adj: Vec<[f32; 3]> = adjoint.as_slice()?.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+        let adj: Vec<[f32; 3]> = c_slice(&adjoint, "adjoint")?.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
         if adj.iter().any(|a| a.iter().any(|x| !x.is_finite())) {
             return Err(err("adjoint contains NaN or infinite values"));
         }
@@ -225,7 +225,7 @@ impl Scene {
         if voxel.shape() != [i, 3] || normal.shape() != [i, 3] {
             return Err(err("texel arrays must be voxel (I,3), face (I,), normal (I,3)"));
         }
-        let (v, f, n) = (voxel.as_slice()?, face.as_slice()?, normal.as_slice()?);
+        let (v, f, n) = (c_slice(voxel, "texel_voxel")?, c_slice(face, "texel_face")?, c_slice(normal, "texel_normal")?);
         let mut out = Vec::with_capacity(i);
         for k in 0..i {
             let vox = [v[3 * k + 2], v[3 * k + 1], v[3 * k]];
@@ -246,6 +246,15 @@ impl Scene {
         }
         Ok(out)
     }
+}
+
+/// The array's data in C order; a ValueError for other layouts (a Fortran-ordered array is contiguous too, but
+/// its memory is not in the (z, y, x[, c]) order the core reads).
+fn c_slice<'a, T: Element, D: Dimension>(a: &'a PyReadonlyArray<'_, T, D>, name: &str) -> PyResult<&'a [T]> {
+    if !a.is_c_contiguous() {
+        return Err(err(format!("{name} must be C-contiguous (np.ascontiguousarray)")));
+    }
+    a.as_slice().map_err(|_| err(format!("{name} must be C-contiguous (np.ascontiguousarray)")))
 }
 
 fn check_shape(dims: &[usize], want: &[usize], name: &str) -> PyResult<()> {
@@ -270,8 +279,7 @@ fn medium_from(
         (Some(s), Some(a), None) => {
             check_shape(s.shape(), &[nz, ny, nx, 3], "sigma_s")?;
             check_shape(a.shape(), &[nz, ny, nx, 3], "sigma_a")?;
-            let (s, a) = (s.as_slice().map_err(|_| err("sigma_s must be C-contiguous"))?,
-                          a.as_slice().map_err(|_| err("sigma_a must be C-contiguous"))?);
+            let (s, a) = (c_slice(&s, "sigma_s")?, c_slice(&a, "sigma_a")?);
             Ok(MediumKind::Dense(DenseMedium::from_interleaved(s, a).map_err(err)?))
         }
         (None, None, Some(l)) => {
@@ -285,8 +293,8 @@ fn medium_from(
                     return Err(err(format!("{name} has shape {:?}, expected (n_inks, 3)", t.shape())));
                 }
             }
-            let l = l.as_slice().map_err(|_| err("labels must be C-contiguous"))?.to_vec();
-            Ok(MediumKind::Labels(LabelMedium::new(l, is.as_slice()?, ia.as_slice()?).map_err(err)?))
+            let l = c_slice(&l, "labels")?.to_vec();
+            Ok(MediumKind::Labels(LabelMedium::new(l, c_slice(&is, "ink_sigma_s")?, c_slice(&ia, "ink_sigma_a")?).map_err(err)?))
         }
         _ => Err(err("give either sigma_s and sigma_a, or labels with an ink table")),
     }
