@@ -3,6 +3,7 @@ import json
 import os
 import subprocess
 import sys
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -18,9 +19,9 @@ V300 = 25.4 / 300
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def make_run(d, shape=(4, 8, 10), normals=False):
-    inks = InkTable.parse("vero-cmykw")
-    mix = np.random.default_rng(0).dirichlet(np.ones(5), size=shape).astype(np.float32)
+def make_run(d, shape=(4, 8, 10), normals=False, inks="vero-cmykw"):
+    inks = InkTable.parse(inks)
+    mix = np.random.default_rng(0).dirichlet(np.ones(len(inks.names)), size=shape).astype(np.float32)
     kw = {}
     if normals:
         c = np.indices(shape).transpose(1, 2, 3, 0)[..., ::-1] + 0.5 - np.array(shape[::-1]) / 2
@@ -108,6 +109,40 @@ def test_export_png_slices(tmp_path, capsys):
     assert code == 0 and (tmp_path / "r" / "slices" / "manifest.json").is_file()
 
 
+def test_export_gcvf(tmp_path, capsys):
+    make_run(tmp_path / "r", inks="vero-cmykw+orange")
+    assert run(capsys, "quantize", tmp_path / "r")[0] == 0
+    q = Volume.load(tmp_path / "r" / "quantized.npz")
+    code, out, err = run(capsys, "export", tmp_path / "r", "--format", "gcvf")  # default printer: J750
+    assert code == 0, err
+    path = tmp_path / "r" / "slices.gcvf"
+    with zipfile.ZipFile(path) as zf:
+        names = zf.namelist()
+    assert {"ConfigFile.xml", "model.stl", "zbuffer.png"} <= set(names)
+    assert sum(n.startswith("layer_") for n in names) == q.labels.shape[0]
+    assert "cyan #00FFFF = VeroCyan-V" in out and "orange #FF8000," not in out and f"wrote {path}" in out
+    code, out, err = run(capsys, "export", tmp_path / "r", "--format", "gcvf", "--printer", "j55")
+    assert code == 2 and "6 inks" in err and "J55 Prime holds 5" in err and len(err.strip().splitlines()) == 1
+
+
+def test_export_refuses_more_inks_than_slots(tmp_path, capsys):
+    """Seven inks on a six-slot J750: one line naming the inks and the limit; no folder, no package."""
+    inks = "cyan,magenta,yellow,black,white,transparent,orange"
+    make_run(tmp_path / "r", shape=(4, 12, 12), inks=inks)
+    assert run(capsys, "quantize", tmp_path / "r", "--method", "random")[0] == 0
+    assert len(np.unique(Volume.load(tmp_path / "r" / "quantized.npz").labels)) >= 7
+    for fmt, out in (("png-slices", "s"), ("gcvf", "p.gcvf")):
+        code, _, err = run(capsys, "export", tmp_path / "r", "--format", fmt, "--printer", "j750",
+                           "--out", tmp_path / out)
+        lines = err.strip().splitlines()
+        assert code == 2 and len(lines) == 1, err
+        assert lines[0] == (f"inkopt: error: the print uses 7 inks ({inks.replace(',', ', ')}) but Stratasys J750 "
+                            "holds 6 materials per job; use an ink set of at most 6 inks or a printer with more "
+                            "material slots (--printer)")
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["r"], "nothing written, no temporary left"
+    assert run(capsys, "export", tmp_path / "r", "--printer", "j850", "--out", tmp_path / "s")[0] == 0
+
+
 @pytest.mark.parametrize("argv, message", [
     (["quantize", "{tmp}/nope"], "does not exist"),
     (["quantize", "{tmp}/empty"], "volume.npz does not exist"),
@@ -117,6 +152,7 @@ def test_export_png_slices(tmp_path, capsys):
     (["export", "{tmp}/r", "--format", "3mf"], "lib3mf 2.5.0 cannot write volumetric composites"),
     (["export", "{tmp}/r", "--format", "stl"], "unknown export format"),
     (["export", "{tmp}/r", "--printer", "x9"], "unknown printer"),
+    (["export", "{tmp}/r", "--format", "gcvf", "--printer", "x9"], "unknown printer"),
     (["export", "{tmp}/r", "--palette", "{bad"], "--palette"),
     (["evaluate", "{tmp}/nope"], "does not exist"),
     (["evaluate", "{tmp}/r", "--method", "floyd"], "unknown quantization method"),

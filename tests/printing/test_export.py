@@ -76,16 +76,33 @@ def test_refuses_too_many_materials(tmp_path):
     inks = INKS + ["transparent", "orange"]
     lab = random_labels(n=7, empty=0.0)
     assert PRINTER_PROFILES["j750"]["max_materials"] == 6
-    for limit in ("j750", 6, "J55"):
-        with pytest.raises(ValueError, match="uses 7 materials") as err:
+    for limit, who in (("j750", "Stratasys J750 holds 6"), (6, "the printer holds 6"), ("J55", "J55 Prime holds 5")):
+        with pytest.raises(ValueError, match="uses 7 inks") as err:
             write_png_slices(lab, VP, inks, tmp_path / "job", max_materials=limit)
-        assert "\n" not in str(err.value)
+        assert "\n" not in str(err.value) and who in str(err.value)
+        assert "(cyan, magenta, yellow, black, white, transparent, orange)" in str(err.value)
         assert not (tmp_path / "job").exists() and leftovers(tmp_path, "job") == []
     write_png_slices(lab, VP, inks, tmp_path / "ok", max_materials=" J850")  # 7 fit a J850
     # only inks actually used count: 7 inks in the table but 3 used fit a 6-material printer
     write_png_slices(np.minimum(lab, 2), VP, inks, tmp_path / "few", max_materials="j750")
-    with pytest.raises(ValueError, match="printer profile"):
+    with pytest.raises(ValueError, match="unknown printer"):
         write_png_slices(lab, VP, inks, tmp_path / "x", max_materials="j9000")
+    with pytest.raises(ValueError, match="J850 holds 7"):  # the printer's limit, unless max_materials overrides it
+        write_png_slices(np.arange(8, dtype=np.uint8).reshape(1, 2, 4), VP, inks + ["cyan2"], tmp_path / "y", printer="j850")
+    write_png_slices(lab, VP, inks, tmp_path / "z", printer="j750", max_materials=7)
+
+
+def test_manifest_names_printer_materials(tmp_path):
+    inks = ["cyan", "magenta", "yellow", "black", "white", "orange"]
+    man = write_png_slices(random_labels(n=6), VP, inks, tmp_path / "s", printer="j750")
+    assert [m["material"] for m in man["materials"]] == ["VeroCyan-V", "VeroMagenta-V", "VeroYellow-V",
+                                                         "VeroBlack", "VeroUltraWhite", None]
+    assert man["printer"] == {"key": "j750", "name": "Stratasys J750"} and man["max_materials"] == 6
+    assert json.loads((tmp_path / "s" / "manifest.json").read_text())["materials"][5]["material"] is None
+    man = write_png_slices(random_labels(n=6), VP, inks, tmp_path / "g")  # no printer: no material names
+    assert man["printer"] is None and {m["material"] for m in man["materials"]} == {None}
+    for key, prof in PRINTER_PROFILES.items():
+        assert prof["max_materials"] is None or prof["max_materials"] >= 5, key
 
 
 def test_atomic_on_error(tmp_path, monkeypatch):

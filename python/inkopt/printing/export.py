@@ -12,10 +12,12 @@ renamed into place):
 - the PNGs carry the printer DPI (x, y) in their pHYs chunk; printer voxels are not square (600 × 300 DPI), so the
   images look stretched 2:1 in x in an ordinary viewer;
 - ``manifest.json``: format, DPI (x, y), layer thickness (µm), layer count, image size, voxel size, orientation,
-  the colour -> ink table with per-ink voxel counts, background, and the material limit applied.
+  the colour -> ink table with per-ink voxel counts and the printer's material name (``material``, null where
+  the profile names none), background, the material limit applied and the printer profile (``printer``).
 
 The printer's software maps colours to materials; a printer holds only a few model materials per job
-(``profiles.PRINTER_PROFILES``), so a job using more distinct inks than ``max_materials`` is refused.
+(``profiles.PRINTER_PROFILES``), so a job using more distinct inks than the limit is refused by ``check_job``
+before anything is written. ``gcvf.py`` packs the same slices as a GrabCAD Voxel Print package.
 
 Not provided: a 3MF with the continuous mixture (3MF Volumetric extension, ``<composite>`` of
 ``<materialmapping>``). lib3mf 2.5.0 writes image stacks, functionfromimage3d, volumedata color and property
@@ -29,13 +31,14 @@ import os
 import shutil
 import tempfile
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..model import EMPTY
 from ..units import MM_PER_INCH
-from .profiles import resolve_max_materials
+from .profiles import material_name, printer_profile, resolve_max_materials, too_many_inks
 
 FORMAT = "inkopt-png-slices"
 
@@ -108,22 +111,34 @@ def _is_slice_folder(path: Path) -> bool:
         return False
 
 
-def write_png_slices(labels, voxel_mm_printer, ink_names, out_dir, palette=None, max_materials=None,
-                     background=(0, 0, 0, 0)) -> dict:
-    """Write one RGBA PNG per layer plus ``manifest.json`` into ``out_dir`` (layout: module docstring).
+@dataclass
+class Job:
+    """A checked print job: labels, printer voxel size, ink names, per-label voxel counts (256 entries, 255 =
+    empty), the indices of the inks used, the material limit and the printer profile (or None)."""
+    labels: np.ndarray
+    vp: np.ndarray
+    names: list
+    counts: np.ndarray
+    used: list
+    limit: int | None
+    profile: dict | None
 
-    labels            uint8 (Z, Y, X) ink index per printer voxel, 255 = empty
-    voxel_mm_printer  (x, y, z) printer voxel size in mm (DPI = 25.4 / size; layer thickness = z)
-    ink_names         N names, label i -> ink_names[i]
-    palette           optional {ink name: (r, g, b) | "#rrggbb"} overriding ``DEFAULT_PALETTE``
-    max_materials     int, printer profile name (``profiles.PRINTER_PROFILES``) or None: refuse (ValueError) if the labels
-                      use more distinct inks
-    background        RGBA of empty voxels
-    An existing ``out_dir`` is replaced only if it is empty or an earlier slice folder (has our manifest).
-    Returns the manifest (dict).
+    @property
+    def dpi(self) -> tuple[float, float]:
+        return MM_PER_INCH / self.vp[0], MM_PER_INCH / self.vp[1]
+
+    def material(self, i: int) -> str | None:
+        """The printer's material name for ink ``i`` (None if unknown)."""
+        return material_name(self.profile, self.names[i])
+
+
+def check_job(labels, voxel_mm_printer, ink_names, max_materials=None, printer=None) -> Job:
+    """Check a job before anything is written (every problem is a one-line ValueError).
+
+    ``printer`` is a ``profiles.PRINTER_PROFILES`` key (its limit and material names); ``max_materials`` an int or
+    a profile key overriding the limit (a key given there alone also names the printer). A job using more
+    distinct inks than the limit is refused with a line naming the inks and the limit.
     """
-    from PIL import Image
-
     labels = np.asarray(labels)
     if labels.ndim != 3 or labels.dtype != np.uint8 or min(labels.shape) < 1:
         raise ValueError(f"labels must be a non-empty uint8 (Z, Y, X) array, got {labels.dtype} {labels.shape}")
@@ -133,31 +148,67 @@ def write_png_slices(labels, voxel_mm_printer, ink_names, out_dir, palette=None,
     names = [str(n) for n in ink_names]
     if not names or len(set(names)) != len(names) or len(names) >= EMPTY:
         raise ValueError(f"ink_names must be 1..{EMPTY - 1} unique names, got {names}")
-    colours = ink_colours(names, palette, background)
-    bg = _rgba(background, "background")
-    limit = resolve_max_materials(max_materials)
-
-    Z, Y, X = labels.shape
+    if printer is None and isinstance(max_materials, str):
+        printer = max_materials
+    profile = printer_profile(printer) if printer is not None else None
+    limit = resolve_max_materials(max_materials) if max_materials is not None else \
+        (profile["max_materials"] if profile else None)
     counts = np.zeros(256, np.int64)
-    for k in range(Z):
+    for k in range(labels.shape[0]):
         counts += np.bincount(labels[k].ravel(), minlength=256)
     bad = np.flatnonzero(counts[len(names):EMPTY])
     if bad.size:
         raise ValueError(f"labels use ink {len(names) + int(bad[0])} but only {len(names)} ink names are given")
     used = [i for i in range(len(names)) if counts[i] > 0]
-    if limit is not None and len(used) > limit:
-        raise ValueError(f"the job uses {len(used)} materials ({', '.join(names[i] for i in used)}) but the "
-                         f"printer holds at most {limit}")
+    refusal = too_many_inks([names[i] for i in used], limit, profile["name"] if profile else None)
+    if refusal:
+        raise ValueError(refusal)
+    return Job(labels, vp, names, counts, used, limit, profile)
+
+
+def slice_lut(names, palette=None, background=(0, 0, 0, 0)):
+    """(lut (256, 4) uint8 label -> RGBA, ink colours, background RGBA); validates the palette."""
+    colours = ink_colours(names, palette, background)
+    bg = _rgba(background, "background")
+    lut = np.zeros((256, 4), np.uint8)
+    lut[:] = bg
+    lut[:len(names)] = colours
+    return lut, colours, bg
+
+
+def slice_image(lut, layer):
+    """One layer (Y, X) of labels as an RGBA image, row 0 = largest y (the module's orientation)."""
+    from PIL import Image
+
+    return Image.fromarray(lut[layer[::-1, :]])
+
+
+def write_png_slices(labels, voxel_mm_printer, ink_names, out_dir, palette=None, max_materials=None,
+                     background=(0, 0, 0, 0), printer=None) -> dict:
+    """Write one RGBA PNG per layer plus ``manifest.json`` into ``out_dir`` (layout: module docstring).
+
+    labels            uint8 (Z, Y, X) ink index per printer voxel, 255 = empty
+    voxel_mm_printer  (x, y, z) printer voxel size in mm (DPI = 25.4 / size; layer thickness = z)
+    ink_names         N names, label i -> ink_names[i]
+    palette           optional {ink name: (r, g, b) | "#rrggbb"} overriding ``DEFAULT_PALETTE``
+    max_materials     int, printer profile name (``profiles.PRINTER_PROFILES``) or None: refuse (ValueError) if the labels
+                      use more distinct inks
+    background        RGBA of empty voxels
+    printer           printer profile key: its material limit and material names (manifest ``material``)
+    An existing ``out_dir`` is replaced only if it is empty or an earlier slice folder (has our manifest).
+    Returns the manifest (dict).
+    """
+    job = check_job(labels, voxel_mm_printer, ink_names, max_materials, printer)
+    lut, colours, bg = slice_lut(job.names, palette, background)
+    labels, vp, names, counts, used = job.labels, job.vp, job.names, job.counts, job.used
+    Z, Y, X = labels.shape
 
     out = Path(out_dir)
     if out.exists() and not (out.is_dir() and _is_slice_folder(out)):
         raise ValueError(f"{out} exists and is not an inkopt slice folder; refusing to replace it")
     out.parent.mkdir(parents=True, exist_ok=True)
 
-    lut = np.zeros((256, 4), np.uint8)
-    lut[:] = bg
-    lut[:len(names)] = colours
-    dpi = (MM_PER_INCH / vp[0], MM_PER_INCH / vp[1])
+    dpi = job.dpi
     width = max(5, len(str(Z - 1)))
     fname = "slice_{:0%dd}.png" % width
     manifest = {
@@ -174,10 +225,12 @@ def write_png_slices(labels, voxel_mm_printer, ink_names, out_dir, palette=None,
                         "rows": "row 0 = largest y (view from above, +y up)"},
         "background": list(bg),
         "materials": [{"index": i, "ink": names[i], "color": list(colours[i]),
-                       "hex": "#%02X%02X%02X" % colours[i][:3], "voxel_count": int(counts[i])}
+                       "hex": "#%02X%02X%02X" % colours[i][:3], "voxel_count": int(counts[i]),
+                       "material": job.material(i)}
                       for i in range(len(names))],
         "materials_used": len(used),
-        "max_materials": limit,
+        "max_materials": job.limit,
+        "printer": None if job.profile is None else {"key": job.profile["key"], "name": job.profile["name"]},
         "empty_voxel_count": int(counts[EMPTY]),
     }
 
@@ -187,8 +240,7 @@ def write_png_slices(labels, voxel_mm_printer, ink_names, out_dir, palette=None,
         tmp.chmod(0o755)
 
         def save(k: int) -> None:  # Pillow's PNG encoder releases the GIL: threads overlap the zlib work
-            Image.fromarray(lut[labels[k, ::-1, :]]).save(tmp / fname.format(k), format="PNG", dpi=dpi,
-                                                          compress_level=1)
+            slice_image(lut, labels[k]).save(tmp / fname.format(k), format="PNG", dpi=dpi, compress_level=1)
 
         with ThreadPoolExecutor(max_workers=min(8, os.cpu_count() or 1)) as pool:
             futures = [pool.submit(save, k) for k in range(Z)]

@@ -1,7 +1,21 @@
-"""Printer profiles: how many model materials a job may use, and the resolutions a machine prints.
+"""Printer profiles: how many model materials a job may use, the resolutions a machine prints and the vendor's
+name of the material loaded for each inkopt ink.
 
-Model-material slots per job (support material not counted) are from the vendors' spec sheets; check your
-machine's configuration. A new printer is one entry here.
+Where the figures come from (say so for every new entry; check your machine's configuration before printing):
+
+- Voxel printing on Stratasys PolyJet (GrabCAD Voxel Print) takes 600 x 300 DPI slices of 27 um: the GCVF
+  configuration written by OpenVCAD (``GCVFExporter``: ``m_x_dpi = 600``, ``m_y_dpi = 300``,
+  ``m_slice_thickness_nm = 27000``; C++ API docs, matterassembly.org/OpenVCAD-Docs/v2/cpp-api/
+  libvcad-compilers-inkjet.html) and its material-inkjet guide ("J750-style voxel pitch 0.0423 x 0.0846 x
+  0.027 mm"). Stratasys's "PolyJet Multi-Color design guideline" (GrabCAD tutorials) gives 27 um layers.
+- Material slots: the Stratasys spec sheets (J750: six model materials loaded at once plus support; J850:
+  seven plus support; J55 Prime: five) and Mimaki's 3DUJ-553 brochure (C, M, Y, K, white and clear plus
+  support). These we know from the vendors' public spec sheets but could not re-check against a stored copy;
+  neither could we the 14 um (J750/J850 high-quality mode) and 18.75 um (J55) layers. The Mimaki has no DPI
+  here: we found no public figure for its voxel grid, so resolutions are not checked for it.
+- Material names: Stratasys's Vero colour family (VeroCyan-V, VeroMagenta-V, VeroYellow-V, VeroBlack,
+  VeroUltraWhite / VeroPureWhite, VeroClear / VeroUltraClear). An ink without a vendor material (orange,
+  cyan2, ...) maps to None: load a material of your choice and map its colour in the printer's software.
 """
 from __future__ import annotations
 
@@ -9,21 +23,37 @@ import numpy as np
 
 from ..units import dpi_of
 
+# inkopt ink name -> Stratasys material loaded for it (Vero "vivid" colour family)
+_VERO = {"cyan": "VeroCyan-V", "magenta": "VeroMagenta-V", "yellow": "VeroYellow-V", "black": "VeroBlack",
+         "white": "VeroUltraWhite"}
+
 PRINTER_PROFILES: dict[str, dict] = {
-    "j750": {"name": "Stratasys J750", "max_materials": 6, "dpi": (600, 300), "layer_um": (27.0, 14.0)},
-    "j850": {"name": "Stratasys J850", "max_materials": 7, "dpi": (600, 300), "layer_um": (27.0, 14.0)},
-    "j55": {"name": "Stratasys J55 Prime", "max_materials": 5, "dpi": (600, 300), "layer_um": (18.75,)},
-    "mimaki-3duj-553": {"name": "Mimaki 3DUJ-553 (C, M, Y, K, W, clear)", "max_materials": 6},
-    "generic": {"name": "no material limit", "max_materials": None},
+    # six colour materials at once + support (Stratasys J750 spec sheet); 27 um voxel-print layers, 14 um HQ
+    "j750": {"name": "Stratasys J750", "max_materials": 6, "dpi": (600, 300), "layer_um": (27.0, 14.0),
+             "materials": {**_VERO, "transparent": "VeroClear", "clear": "VeroClear"}},
+    # seven materials at once + support (Stratasys J850 spec sheet); same voxel grid as the J750
+    "j850": {"name": "Stratasys J850", "max_materials": 7, "dpi": (600, 300), "layer_um": (27.0, 14.0),
+             "materials": {**_VERO, "transparent": "VeroUltraClear", "clear": "VeroUltraClear"}},
+    # five materials + support, 18.75 um layers (Stratasys J55 Prime spec sheet; not re-checked)
+    "j55": {"name": "Stratasys J55 Prime", "max_materials": 5, "dpi": (600, 300), "layer_um": (18.75,),
+            "materials": {**_VERO, "transparent": "VeroUltraClear", "clear": "VeroUltraClear"}},
+    # C, M, Y, K, white, clear + support (Mimaki 3DUJ-553 brochure); no public voxel grid or ink names found
+    "mimaki-3duj-553": {"name": "Mimaki 3DUJ-553", "max_materials": 6, "materials": {}},
+    "generic": {"name": "no material limit", "max_materials": None, "materials": {}},
 }
 
 
 def printer_profile(name: str) -> dict:
-    """The profile ``name`` (case-insensitive); a one-line ValueError names the known ones."""
+    """The profile ``name`` (case-insensitive) with its key; a one-line ValueError names the known ones."""
     key = str(name).strip().lower()
     if key not in PRINTER_PROFILES:
         raise ValueError(f"unknown printer '{name}'; use one of {list(PRINTER_PROFILES)}")
-    return PRINTER_PROFILES[key]
+    return {"key": key, **PRINTER_PROFILES[key]}
+
+
+def material_name(profile: dict | None, ink: str) -> str | None:
+    """The vendor material ``profile`` loads for ``ink`` (case-insensitive), or None if unknown."""
+    return None if profile is None else profile.get("materials", {}).get(str(ink).lower())
 
 
 def resolve_max_materials(max_materials) -> int | None:
@@ -39,6 +69,15 @@ def resolve_max_materials(max_materials) -> int | None:
     if n < 1:
         raise ValueError(f"max_materials must be at least 1, got {max_materials}")
     return n
+
+
+def too_many_inks(used: list[str], limit: int | None, printer: str | None = None) -> str | None:
+    """The one-line refusal when a job uses more inks than ``limit`` (None if it fits)."""
+    if limit is None or len(used) <= limit:
+        return None
+    who = printer or "the printer"
+    return (f"the print uses {len(used)} inks ({', '.join(used)}) but {who} holds {limit} materials per job; "
+            f"use an ink set of at most {limit} inks or a printer with more material slots (--printer)")
 
 
 def resolution_mismatch(profile: dict, voxel_mm_printer) -> str | None:
