@@ -167,8 +167,8 @@ def evaluate_run(path, spp: int = DEFAULT_SPP, seed: int = 0, method: str | None
     out["quantization"] = {**asdict(q), "dpi": list(dpi)}
     qkw = dict(method=q.method, seed=q.seed, upsample=q.upsample, dpi=tuple(dpi))
 
-    def printed(name: str, q: Volume) -> dict:
-        rgb, var, spp_p, secs, n_p = render_printed(q, stex, vol.voxel_mm, kind, spp, seed, threads,
+    def printed(name: str, labels_vol: Volume) -> dict:
+        rgb, var, spp_p, secs, n_p = render_printed(labels_vol, stex, vol.voxel_mm, kind, spp, seed, threads,
                                                     progress=log is not None)
         colours[name] = rgb
         say(f"{name}: {n_p} printer texels x {spp_p} spp in {secs:.1f} s")
