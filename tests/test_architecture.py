@@ -17,6 +17,7 @@ LAYERS = [
     {"printing"},
     {"evaluation"},
     {"run"},
+    {"inksets"},
     {"cli", "__main__"},
 ]
 

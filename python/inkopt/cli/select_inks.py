@@ -1,0 +1,81 @@
+"""``inkopt select-inks TARGET``: which candidate inks to load into the printer (``inkopt.inksets``)."""
+from __future__ import annotations
+
+import argparse
+import sys
+
+from ..units import OPT_DPI
+from .common import add_optimizer_args, config_from_args, stderr_log
+
+
+def _target(args) -> dict:
+    if (args.size_mm is None) == (args.height_mm is None):
+        raise ValueError("give exactly one of --size-mm WxHxD (TARGET is a picture: a slab) and --height-mm H "
+                         "(TARGET is a textured mesh)")
+    if args.size_mm is not None:
+        from ..units import parse_size_mm
+
+        return {"kind": "image", "top": args.target, "bottom": args.bottom,
+                "size_mm": list(parse_size_mm(args.size_mm)), "dpi": args.dpi}
+    return {"kind": "mesh", "path": args.target, "height_mm": args.height_mm, "shell_mm": args.shell_mm,
+            "dpi": args.dpi, "up": args.up}
+
+
+def _select(args) -> int:
+    from ..inksets import Selection, make_backend, run_selection
+
+    if args.inks is not None:
+        raise ValueError("select-inks takes the inks from --candidates and --always, not --inks")
+    if args.workers is not None and args.workers < 1:
+        raise ValueError(f"--workers must be at least 1, got {args.workers}")
+    sel = Selection(_target(args), args.candidates, args.choose, args.always, config_from_args(args),
+                    args.strategy, args.eval_spp or 256, args.rung_eval_spp,
+                    None if args.printer == "none" else args.printer)
+    sel.validate()  # every input error before any work (or a Ray start)
+    backend = make_backend(args.workers, args.ray, args.threads)
+    try:
+        res = run_selection(sel, args.out, backend, resume=args.resume, log=stderr_log)
+    finally:
+        backend.close()
+    for what, key, sign in (("ΔE76", "delta_e76_mean", 1), ("ΔE2000", "delta_e2000_mean", 1), ("SSIM", "ssim", -1)):
+        final = [c for c in res["candidates"] if c["iterations"] == res["candidates"][0]["iterations"]]
+        best = min(final, key=lambda c: sign * c[key])
+        print(f"best by {what}: {','.join(best['inks'])} ({best[key]:.3f})")
+    print(f"winner (lowest loss): {','.join(res['winner']['inks'])} (loss {res['winner']['loss']:.5g}); "
+          f"{res['texel_samples']:.3g} texel-samples")
+    print(f"selection: {args.out}/selection.json, {args.out}/selection.png; winner's run: {args.out}/winner")
+    return 0
+
+
+def register_cli(sub) -> None:
+    p = sub.add_parser("select-inks", help="choose the inks to load: try subsets of candidate inks",
+                       description="Optimise TARGET with every subset of --choose of the --candidates inks (plus "
+                                   "the --always inks) and keep the best, by successive halving (default) or "
+                                   "brute force.")
+    p.add_argument("target", metavar="TARGET", help="a picture (with --size-mm) or a textured mesh (--height-mm)")
+    p.add_argument("--size-mm", help="slab WxHxD in mm (TARGET is its top picture)")
+    p.add_argument("--bottom", metavar="IMAGE", help="picture of the slab's bottom face")
+    p.add_argument("--height-mm", type=float, help="mesh height in mm (TARGET is a mesh)")
+    p.add_argument("--shell-mm", type=float, help="mesh: optimise only voxels this close to the surface")
+    p.add_argument("--up", choices=("y", "z"), default="y", help="mesh up axis (default y)")
+    p.add_argument("--dpi", type=float, default=OPT_DPI, help=f"optimisation grid resolution (default {OPT_DPI:g})")
+    p.add_argument("--candidates", required=True, help="comma list of candidate inks, e.g. "
+                                                       "cyan,cyan2,magenta,magenta2,yellow,yellow2")
+    p.add_argument("--choose", type=int, required=True, help="how many candidates each set takes")
+    p.add_argument("--always", default="black,white", help="inks in every set (default %(default)s)")
+    p.add_argument("--printer", default="j750",
+                   help="printer whose material slots bound the set size (default j750: 6; 'none': no limit)")
+    p.add_argument("--out", required=True, metavar="DIR", help="selection directory")
+    p.add_argument("--strategy", choices=("halving", "brute"), default="halving")
+    p.add_argument("--rung-eval-spp", type=int, default=32,
+                   help="halving: spp of the evaluation that ranks the intermediate rungs (default 32)")
+    ex = p.add_mutually_exclusive_group()
+    ex.add_argument("--workers", type=int, help="runs at once in a local process pool")
+    ex.add_argument("--ray", metavar="auto|ADDRESS",
+                    help="run on Ray: 'auto' starts a local instance, ADDRESS joins a cluster (pip install "
+                         "'inkopt[ray]')")
+    add_optimizer_args(p)
+    for a in p._actions:
+        if a.dest == "inks":
+            a.default, a.help = None, argparse.SUPPRESS
+    p.set_defaults(func=_select)

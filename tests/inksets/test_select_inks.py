@@ -1,0 +1,161 @@
+"""Tests of ``inkopt select-inks`` (inkopt.inksets): outputs and their keys, halving vs brute force, resume,
+serial / process pool / Ray giving identical results, meshes, one-line errors before any work.
+
+A 2 x 1.33 x 0.5 mm colour-chart slab (24 x 16 x 6 voxels, 384 texels) at 2 + 4 spp: a run of a few iterations
+takes a fraction of a second. Results are deterministic (seeded, bit-identical for any thread count).
+"""
+import json
+import shutil
+
+import numpy as np
+import pytest
+import trimesh
+
+from inkopt import charts
+from inkopt.cli import main
+from inkopt.inksets import Pool, Selection, Serial, run_selection
+from inkopt.optim import OptimizeConfig
+from inkopt.rundir import RunDir
+
+pytest.importorskip("inkopt._core")
+
+CANDIDATE_KEYS = {"inks", "iterations", "loss", "delta_e76_mean", "delta_e2000_mean", "ssim", "texel_samples"}
+
+
+@pytest.fixture(scope="module")
+def chart(tmp_path_factory):
+    return charts.save(charts.colour_chart(24, 16), tmp_path_factory.mktemp("chart") / "chart.png")
+
+
+def selection(chart, strategy="halving", candidates="cyan,magenta,yellow", choose=2, iterations=4, **kw):
+    cfg = OptimizeConfig(iterations=iterations, spp=2, forward_spp=4, checkpoint_every=2)
+    target = {"kind": "image", "top": str(chart), "bottom": None, "size_mm": [2.0, 4 / 3, 0.5], "dpi": 300.0}
+    return Selection(target, candidates, choose, ["black", "white"], cfg, strategy, eval_spp=16, rung_eval_spp=8,
+                     **kw)
+
+
+@pytest.fixture(scope="module")
+def halving(chart, tmp_path_factory):
+    out = tmp_path_factory.mktemp("halving")
+    return out, run_selection(selection(chart), out, Serial(2), log=lambda m: None)
+
+
+def test_outputs_keys_and_work(halving):
+    out, res = halving
+    assert json.loads((out / "selection.json").read_text()) == res
+    assert set(res) == {"strategy", "candidates", "winner", "texel_samples"} and res["strategy"] == "halving"
+    assert len(res["candidates"]) == 3
+    for c in res["candidates"]:
+        assert set(c) == CANDIDATE_KEYS and c["inks"][-2:] == ["black", "white"]
+    # 3 sets: rungs of 2 and 4 iterations; the first two continue, the third stops at 2
+    assert [c["iterations"] for c in res["candidates"]] == [4, 4, 2]
+    assert res["winner"] == {"inks": res["candidates"][0]["inks"], "loss": res["candidates"][0]["loss"]}
+    assert res["candidates"][0]["loss"] <= res["candidates"][1]["loss"]
+    texels = 24 * 16
+    # work: iterations x (2 + 4) spp + two evaluation renders per rung (8 spp, then 16 on the last)
+    assert res["candidates"][2]["texel_samples"] == texels * (2 * 6 + 2 * 8)
+    assert res["candidates"][0]["texel_samples"] == texels * (4 * 6 + 2 * 8 + 2 * 16)
+    assert res["texel_samples"] == sum(c["texel_samples"] for c in res["candidates"])
+    assert (out / "selection.png").stat().st_size > 1000
+
+
+def test_winner_is_a_run_directory(halving, capsys):
+    out, res = halving
+    rep = RunDir(out / "winner").read_report()
+    assert rep["inks"] == res["winner"]["inks"] and rep["loss"] == res["winner"]["loss"]
+    assert main(["quantize", str(out / "winner")]) == 0
+
+
+def test_halving_final_run_equals_brute_force(chart, halving, tmp_path):
+    """The resumed runs continue exactly: the winner's figures equal brute force's run of the same set."""
+    _, res = halving
+    brute = run_selection(selection(chart, "brute"), tmp_path, log=lambda m: None)
+    assert all(c["iterations"] == 4 for c in brute["candidates"])
+    by_inks = {tuple(c["inks"]): c for c in brute["candidates"]}
+    for c in res["candidates"][:2]:
+        b = by_inks[tuple(c["inks"])]
+        assert {k: c[k] for k in ("loss", "delta_e76_mean", "ssim")} == {k: b[k] for k in ("loss", "delta_e76_mean",
+                                                                                        "ssim")}
+    assert brute["texel_samples"] == 3 * 24 * 16 * (4 * 6 + 2 * 16)
+
+
+class Interrupted(Serial):
+    """Serial execution that is killed (Ctrl-C) before its ``runs``+1-th run."""
+
+    def __init__(self, runs):
+        super().__init__(2)
+        self.left = runs
+
+    def map(self, fn, tasks):
+        for t in tasks:
+            if self.left == 0:
+                raise KeyboardInterrupt
+            self.left -= 1
+            yield fn(t)
+
+
+def test_resume_after_interruption(chart, halving, tmp_path):
+    """A selection killed in its second rung (one run of it done, the other still at its first-rung checkpoint)
+    finishes with the same result, continuing that run from its checkpoint."""
+    _, res = halving
+    with pytest.raises(KeyboardInterrupt):
+        run_selection(selection(chart), tmp_path / "sel", Interrupted(4), log=lambda m: None)
+    state = json.loads((tmp_path / "sel" / "selection_state.json").read_text())
+    assert [len(r["results"]) for r in state["rungs"]] == [3, 1]
+    again = run_selection(selection(chart), tmp_path / "sel", resume=True, log=lambda m: None)
+    assert again == res
+    with pytest.raises(ValueError, match="different settings"):
+        run_selection(selection(chart, iterations=6), tmp_path / "sel", resume=True, log=lambda m: None)
+
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--candidates", "cyan", "--choose", "2"], "needs at least 2 candidates"),
+    (["--candidates", "cyan,teal", "--choose", "1"], "unknown ink(s) teal"),
+    (["--candidates", "cyan,white", "--choose", "1"], "in both --candidates and --always"),
+    (["--candidates", "cyan,cyan2,magenta,magenta2,yellow", "--choose", "5"], "holds 6 materials"),
+    (["--candidates", "cyan,magenta", "--choose", "1", "--ray", "auto", "--inks", "vero-cmykw"], "not --inks"),
+])
+def test_bad_input_one_line_before_work(chart, tmp_path, capsys, argv, message):
+    out = tmp_path / "sel"
+    assert main(["select-inks", str(chart), "--size-mm", "2x1.333x0.5", "--out", str(out), *argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("inkopt: error:") and message in err and "\n" not in err
+    assert not out.exists()
+
+
+def test_ray_missing_says_how_to_install(chart, tmp_path, capsys, monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray -> ImportError
+    argv = ["select-inks", str(chart), "--size-mm", "2x1.333x0.5", "--out", str(tmp_path / "s"), "--candidates",
+            "cyan,magenta", "--choose", "1", "--ray", "auto"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "pip install 'inkopt[ray]'" in err
+
+
+def test_cli_mesh_target(tmp_path, capsys, monkeypatch):
+    """A mesh target: a tiny vertex-coloured icosphere (1 mm), two candidates choose 1, two iterations."""
+    monkeypatch.setattr("inkopt.scenes.mesh.scene.VIEW_SIZE", 32)
+    sph = trimesh.creation.icosphere(subdivisions=3, radius=0.5)
+    col = np.where(sph.vertices[:, 2:3] > 0, [[0, 200, 230, 255]], [[230, 0, 160, 255]]).astype(np.uint8)
+    mesh = tmp_path / "ball.ply"
+    trimesh.Trimesh(sph.vertices, sph.faces, vertex_colors=col, process=False).export(mesh)
+    out = tmp_path / "sel"
+    assert main(["select-inks", str(mesh), "--height-mm", "1", "--up", "z", "--candidates", "cyan,magenta",
+                 "--choose", "1", "--out", str(out), "--iterations", "2", "--spp", "1", "--forward-spp", "2",
+                 "--eval-spp", "4", "--threads", "2"]) == 0
+    res = json.loads((out / "selection.json").read_text())
+    assert len(res["candidates"]) == 2 and RunDir(out / "winner").load_scene().kind == "mesh"
+    assert "winner (lowest loss)" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_pool_equals_serial(chart, halving, tmp_path):
+    _, res = halving
+    pool = Pool(2)
+    try:
+        assert run_selection(selection(chart), tmp_path, pool, log=lambda m: None) == res
+    finally:
+        pool.close()
