@@ -1,9 +1,10 @@
 """The run driver: one optimisation run of any scene, from start (or resume) to report (docs/run-dir.md).
 
 ``run_optimisation(scene, out_dir, cfg)``: write scene.npz, optimise with checkpoints (``resume`` continues
-exactly), save volume.npz, then the final figures: the optimised and the initial volume rendered at ``eval_spp``
-(default max(256, 4 spp)) with seed ``2**62 + cfg.seed`` (never used by the optimisation), compared with the target
-by ``evaluation.metrics.prediction_metrics``; the scene's pictures, loss.png and report.json. ``run_slab`` and
+exactly), save volume.npz, then the final figures: the optimised and the initial volume rendered with seeds from
+``2**62 + cfg.seed`` (never used by the optimisation) at ``eval_spp`` samples per texel if given, else adaptively
+(``evaluation.noise.adaptive_render``: enough that the Monte Carlo noise adds at most ~0.5 to the mean ΔE76, at
+most 4096), compared with the target by ``evaluation.metrics.prediction_metrics``; the scene's pictures, loss.png and report.json. ``run_slab`` and
 ``run_mesh`` build the scene from user inputs and call it.
 """
 from __future__ import annotations
@@ -15,6 +16,7 @@ import numpy as np
 
 from .evaluation.baselines import baseline_mixture
 from .evaluation.metrics import delta_e76_map, prediction_metrics
+from .evaluation.noise import EVAL_SEED_OFFSET, adaptive_render
 from .model import InkTable
 from .optim import Optimization, OptimizeConfig
 from .pictures import loss_figure
@@ -23,7 +25,6 @@ from .rundir import RunDir
 from .scenes import Scene
 from .units import OPT_DPI
 
-EVAL_SEED_OFFSET = 2**62  # evaluation seeds: 2**62 + seed, disjoint from the optimisation's (iteration_seeds)
 
 
 def peak_rss_gb() -> float:
@@ -31,8 +32,9 @@ def peak_rss_gb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
 
 
-def eval_spp_for(cfg: OptimizeConfig, eval_spp: int | None = None) -> int:
-    return int(eval_spp or max(256, 4 * cfg.spp))
+def eval_spp_for(cfg: OptimizeConfig, eval_spp: int | None = None) -> int | None:
+    """The final evaluation's fixed spp, or None: adaptive."""
+    return int(eval_spp) if eval_spp else None
 
 
 def run_optimisation(scene: Scene, out_dir, cfg: OptimizeConfig, *, resume: bool = False,
@@ -55,18 +57,23 @@ def run_optimisation(scene: Scene, out_dir, cfg: OptimizeConfig, *, resume: bool
     final = run.volume()
     rd.save_volume(final)
 
-    # Final figures at higher spp with seeds unused by the optimisation; the start is reconstructed from the
-    # configuration (identical to the first iterate whether or not the run was resumed). One renderer serves both.
+    # Final figures with seeds unused by the optimisation, adaptive spp unless given; the start is reconstructed
+    # from the configuration (identical to the first iterate whether or not the run was resumed). One renderer.
     spp = eval_spp_for(cfg, eval_spp)
     seed = EVAL_SEED_OFFSET + cfg.seed
     renderer = Renderer(final, threads)
-    res = renderer.render(scene.texels, spp, seed, cfg.include_specular, progress)
-    metrics = prediction_metrics(run.loss, res.rgb, res.var_mean)
+
+    def render(n: int, s: int):
+        r = renderer.render(scene.texels, n, s, cfg.include_specular, progress)
+        return r.rgb, r.var_mean, n
+
+    res = adaptive_render(render, run.loss.target_lab, seed, spp, log=log)
+    metrics = prediction_metrics(run.loss, res.rgb, res.var)
     del final
     renderer.set_volume(run.initial_volume())
-    res0 = renderer.render(scene.texels, spp, seed, cfg.include_specular, progress)
+    res0 = adaptive_render(render, run.loss.target_lab, seed, spp, log=log)
     del renderer
-    init = prediction_metrics(run.loss, res0.rgb, res0.var_mean)
+    init = prediction_metrics(run.loss, res0.rgb, res0.var)
     de = delta_e76_map(run.loss, res.rgb)
     scene.write_pictures(rd.path, res.rgb, de)
     loss_figure(rd / RunDir.LOSS_PNG, run.history.loss, run.history.delta_e76)
@@ -75,7 +82,9 @@ def run_optimisation(scene: Scene, out_dir, cfg: OptimizeConfig, *, resume: bool
     report = {
         "initial_delta_e76_mean": init["delta_e76_mean"], "initial_ssim": init["ssim"], **metrics,
         "delta_e76_max": float(de.max()),
-        "iterations": run.iteration, "spp": cfg.spp, "eval_spp": spp,
+        "iterations": run.iteration, "spp": cfg.spp, "eval_spp": res.spp, "spp_adaptive": spp is None,
+        "eval_spp_passes": res.passes, "initial_eval_spp": res0.spp,
+        "initial_delta_e76_mean_corrected": init["delta_e76_mean_corrected"],
         "seconds": time.perf_counter() - t_start,
         "seconds_per_iteration": float(np.sum(h.seconds) / n),
         "time_split": {k: float(np.sum(getattr(h, k)) / n) for k in ("render_s", "gradient_s", "loss_s", "step_s")},

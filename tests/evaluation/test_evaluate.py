@@ -8,7 +8,8 @@ from PIL import Image
 from inkopt.color import linear_to_srgb
 from inkopt.evaluation.baselines import extrusion_baseline, surface_baseline
 from inkopt.evaluation.colour_table import colour_table
-from inkopt.evaluation.evaluate import average_to_scene, evaluate_run, map_texels, printer_texels
+from inkopt.evaluation.evaluate import average_to_scene, evaluate_run, map_texels, printer_texels, table_lines
+from inkopt.evaluation.noise import MAX_SPP, PILOT_SPP, TARGET_NOISE_DE76
 from inkopt.io import save_npz
 from inkopt.model import InkTable, Quantization, Texels, Volume
 from inkopt.pictures import panels
@@ -135,6 +136,21 @@ def test_evaluate_run_synthetic(tmp_path, table3):
     assert q["spp_printer"] == 4  # 2 printer texels per scene texel on top at 600 x 300 DPI share the 8 spp
     with Image.open(tmp_path / "run" / "evaluation_top.png") as im:
         assert im.size[0] >= 5 * 256 and disk["pictures"] == ["evaluation_top.png"]
+    assert disk["spp"] == 8 and not disk["spp_adaptive"] and c["spp_passes"] == [8]   # explicit spp: exact
+    floor = disk["gamut_floor_delta_e76"]  # the baselines reach the table's colours: none is better than the floor
+    assert 0 <= floor <= min(b["delta_e76_mean_corrected"] for b in disk["baselines"].values()) + 1
+
+
+def test_evaluate_run_adaptive(tmp_path, table3):
+    """Default spp: every result is rendered until its estimated noise contribution is below the target (or the
+    cap), pilot first, and the figures say so."""
+    make_run(tmp_path / "run", table3, "surface")
+    ev = evaluate_run(tmp_path / "run", table=table3, write=False)
+    assert ev["spp_adaptive"] and ev["spp"] == ev["continuous"]["spp"]
+    for m in (ev["continuous"], ev["quantized"], *ev["baselines"].values()):
+        assert m["spp_passes"][0] == PILOT_SPP and m["spp"] == sum(m["spp_passes"])
+        assert m["delta_e76_noise_contribution"] <= TARGET_NOISE_DE76 or m["spp"] >= MAX_SPP
+    assert any(line.startswith("gamut floor") for line in table_lines(ev))
 
 
 def test_evaluate_surface_run_and_method_mismatch(tmp_path, table3):

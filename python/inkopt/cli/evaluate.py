@@ -8,13 +8,14 @@ import sys
 
 from ..evaluation.colour_table import DEFAULT_PATCH_MM
 from ..evaluation.evaluate import DEFAULT_SPP, evaluate_run, table_lines
+from ..evaluation.noise import MAX_SPP, PILOT_SPP, TARGET_NOISE_DE76
 from ..printing.quantize import METHODS
 
 
 def _evaluate_cmd(args) -> int:
     if args.method is not None and args.method not in METHODS:
         raise ValueError(f"unknown quantization method '{args.method}'; use one of {list(METHODS)}")
-    if args.spp < 1:
+    if args.spp is not None and args.spp < 1:
         raise ValueError(f"--spp must be at least 1, got {args.spp}")
     log = None if args.json else (lambda msg: print(msg, file=sys.stderr, flush=True))
     ev = evaluate_run(args.dir, spp=args.spp, seed=args.seed, method=args.method, threads=args.threads,
@@ -24,7 +25,8 @@ def _evaluate_cmd(args) -> int:
     else:
         for line in table_lines(ev):
             print(line)
-        print(f"{ev['spp']} spp per scene texel, {ev['seconds']:.0f} s; wrote {args.dir}/evaluation.json"
+        how = "adaptive, " if ev["spp_adaptive"] else ""
+        print(f"{ev['spp']} spp per scene texel ({how}continuous result), {ev['seconds']:.0f} s; wrote {args.dir}/evaluation.json"
               + "".join(f", {p}" for p in ev.get("pictures", [])))
     return 0
 
@@ -35,7 +37,9 @@ def register_cli(sub) -> None:
                                    "(surface colouring, extrusion) and compare them with the target.")
     p.add_argument("dir", help="run directory holding volume.npz and scene.npz")
     p.add_argument("--spp", type=int, default=DEFAULT_SPP,
-                   help=f"samples per scene texel (default {DEFAULT_SPP}); printer texels share them")
+                   help=f"samples per scene texel, used exactly; printer texels share them (default: adaptive, "
+                        f"a {PILOT_SPP}-spp pilot and then as many as make the Monte Carlo noise add at most "
+                        f"{TARGET_NOISE_DE76:g} to each result's mean dE76, up to {MAX_SPP})")
     p.add_argument("--seed", type=int, default=0, help="render seed (default 0)")
     p.add_argument("--method", help="quantization method (default: that of DIR/quantized.npz, else blue-noise)")
     p.add_argument("--threads", type=int, help="render threads (default: all cores)")

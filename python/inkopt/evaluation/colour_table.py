@@ -141,6 +141,19 @@ class ColourTable:
         out = np.einsum("uk,ukn->un", w, self.mixtures[idx].astype(np.float64))
         return out.astype(np.float32)[inv.reshape(-1)]
 
+    def reachable_lab(self, target_rgb, k: int = REFINE_K, iterations: int = 300) -> np.ndarray:
+        """CIELAB (I, 3) of the colour nearest each target (I, 3 linear) that a thick homogeneous patch reaches:
+        the refined look-up's predicted colour, the convex blend of the k nearest entries' colours closest to
+        the target (an in-gamut target is reached exactly; the distance of an out-of-gamut one is to the local
+        hull of the table, not to the lattice points, whose spacing would add ~2.6 ΔE76)."""
+        lab_t = linear_to_lab(np.asarray(target_rgb, np.float64))
+        uniq, inv = np.unique(lab_t, axis=0, return_inverse=True)
+        k = int(min(k, len(self.lab)))
+        _, idx = self._tree.query(uniq, k)
+        idx = idx.reshape(len(uniq), k)
+        w = simplex_least_squares(self.lab[idx] - uniq[:, None, :], iterations)
+        return np.einsum("uk,ukc->uc", w, self.lab[idx])[inv.reshape(-1)]
+
     def to_arrays(self) -> dict:
         return {"ink_names": np.array(self.ink_names), "mixtures": self.mixtures, "rgb": self.rgb,
                 "lab": self.lab, "stderr": self.stderr, "patch_mm": np.float64(self.patch_mm),

@@ -1,7 +1,10 @@
 """Evaluation of a run directory (docs/run-dir.md): how close do the continuous result, the printed (quantized)
 result and the naive baselines come to the target?
 
-``evaluate_run(DIR)`` renders, on the same render seed:
+``evaluate_run(DIR)`` renders, on the same render seeds (``EVAL_SEED_OFFSET + seed``, never used by an
+optimisation), each result with enough samples that the Monte Carlo noise adds at most ~0.5 to its mean ΔE76
+(``evaluation.noise.adaptive_render``: a 64-spp pilot, the noise contribution estimated from it, the rest rendered
+with independent seeds and pooled; at most 4096 spp). An explicit ``spp`` renders exactly that many instead:
 
 - ``continuous``: DIR/volume.npz on the scene texels at ``spp`` samples per texel;
 - ``quantized``: DIR/quantized.npz (made with default settings first if missing) on its own printer-grid
@@ -17,8 +20,11 @@ Each result is compared with the scene's ``target_rgb`` by ``metrics.prediction_
 percentile, CIEDE2000 mean, mean SSIM (sigma 1.5 voxels, on the scene texels), ``delta_e76_noise``, the mean
 over texels of the Monte Carlo standard error of a texel's CIELAB colour (ΔE), and ``delta_e76_rms`` with
 ``delta_e76_rms_denoised``: the RMS ΔE76 and an unbiased estimate of it without the render noise
-(sqrt(mean(ΔE² - se²))). At 64 spp a texel's colour has a standard error of several ΔE (dark colours most),
-which inflates every ΔE mean; compare results rendered at the same spp, or use the denoised RMS.
+(sqrt(mean(ΔE² - se²))), ``delta_e76_noise_contribution`` (the estimated inflation of the mean ΔE76 by the
+noise; ``delta_e76_mean_corrected`` the mean without it), the mottle (``metrics``), and ``spp`` (samples per
+scene texel, all passes), ``spp_passes``. With the baselines, ``gamut_floor_delta_e76``: the mean over texels of
+the ΔE76 from the target to the nearest colour a thick homogeneous patch of the inks reaches
+(``ColourTable.reachable_lab``).
 
 Writes DIR/evaluation.json and, for slabs, DIR/evaluation_<face>.png per textured face: target | optimized |
 quantized | surface | extrusion (sRGB).
@@ -40,10 +46,12 @@ from ..render import Renderer
 from ..rundir import RunDir, SceneRecord
 from ..units import dpi_of
 from .baselines import BASELINES
+from ..color import delta_e76
 from .colour_table import DEFAULT_PATCH_MM, ColourTable, colour_table
 from .metrics import prediction_metrics
+from .noise import EVAL_SEED_OFFSET, MAX_SPP, PILOT_SPP, TARGET_NOISE_DE76, adaptive_render
 
-DEFAULT_SPP = 64
+DEFAULT_SPP = None  # adaptive
 
 
 # ----------------------------------------------------------------------------------------------- texel maps
@@ -122,16 +130,17 @@ def write_face_pictures(d: RunDir, rec: SceneRecord, results: dict) -> list[str]
 
 
 # ----------------------------------------------------------------------------------------------- the stage
-def evaluate_run(path, spp: int = DEFAULT_SPP, seed: int = 0, method: str | None = None, threads=None,
+def evaluate_run(path, spp: int | None = DEFAULT_SPP, seed: int = 0, method: str | None = None, threads=None,
                  baselines: bool = True, refine: bool = True, patch_mm: float = DEFAULT_PATCH_MM,
                  table: ColourTable | None = None, write: bool = True, log=None) -> dict:
     """Evaluate run directory ``path`` (module docstring); returns the evaluation dict (also written to
-    DIR/evaluation.json with the face pictures when ``write``). ``method``: quantization method of ours (when
+    DIR/evaluation.json with the face pictures when ``write``). ``spp``: None = adaptive (module docstring),
+    else exactly that many samples per scene texel. ``method``: quantization method of ours (when
     quantized.npz is missing) and of the baselines; None = that of quantized.npz, else blue-noise.
     table: the baselines' colour table (default ``colour_table(inks, g, ior, patch_mm)``, cached).
     ``log``: callable taking one progress line (default: silent)."""
     say = log or (lambda msg: None)
-    if spp < 1:
+    if spp is not None and spp < 1:
         raise ValueError(f"spp must be at least 1, got {spp}")
     d = RunDir(path)
     vol = d.load_volume()
@@ -140,15 +149,28 @@ def evaluate_run(path, spp: int = DEFAULT_SPP, seed: int = 0, method: str | None
     target = rec.target_rgb.astype(np.float64)
     t_all = time.perf_counter()
     loss = TexelLoss(target, stex.pos_vox, sigma=1.5)
-    out = {"spp": int(spp), "seed": int(seed), "texels": len(stex), "kind": kind}
+    out = {"spp": spp, "seed": int(seed), "texels": len(stex), "kind": kind, "spp_adaptive": spp is None,
+           "noise_target_delta_e76": TARGET_NOISE_DE76, "spp_pilot": PILOT_SPP, "spp_max": MAX_SPP}
     colours = {"target": target}
+    rseed = EVAL_SEED_OFFSET + int(seed)
+
+    def measured(name: str, render) -> dict:
+        """Adaptive (or fixed-spp) render of one result; its colours and figures."""
+        ad = adaptive_render(render, loss.target_lab, rseed, spp, log=say)
+        colours[name] = ad.rgb
+        return {**prediction_metrics(loss, ad.rgb, ad.var), "spp": ad.spp, "spp_passes": ad.passes}
 
     t0 = time.perf_counter()
-    res = Renderer(vol, threads).render(stex, spp, seed, progress=log is not None)
-    colours["continuous"] = res.rgb.astype(np.float64)
-    out["continuous"] = {**prediction_metrics(loss, res.rgb, res.var_mean), "spp": int(spp),
-                         "seconds": time.perf_counter() - t0, "method": None}
-    say(f"continuous: {len(stex)} texels x {spp} spp in {out['continuous']['seconds']:.1f} s")
+    renderer = Renderer(vol, threads)
+
+    def continuous(n: int, s: int):
+        r = renderer.render(stex, n, s, progress=log is not None)
+        return r.rgb, r.var_mean, n
+
+    out["continuous"] = {**measured("continuous", continuous), "seconds": time.perf_counter() - t0, "method": None}
+    del renderer
+    out["spp"] = out["continuous"]["spp"]
+    say(f"continuous: {len(stex)} texels x {out['spp']} spp in {out['continuous']['seconds']:.1f} s")
 
     if d.has_quantized():
         qvol = d.load_quantized()
@@ -168,13 +190,19 @@ def evaluate_run(path, spp: int = DEFAULT_SPP, seed: int = 0, method: str | None
     qkw = dict(method=q.method, seed=q.seed, upsample=q.upsample, dpi=tuple(dpi))
 
     def printed(name: str, labels_vol: Volume) -> dict:
-        rgb, var, spp_p, secs, n_p = render_printed(labels_vol, stex, vol.voxel_mm, kind, spp, seed, threads,
-                                                    progress=log is not None)
-        colours[name] = rgb
-        say(f"{name}: {n_p} printer texels x {spp_p} spp in {secs:.1f} s")
-        out["printer_texels"] = n_p
-        return {**prediction_metrics(loss, rgb, var), "spp": int(spp), "spp_printer": spp_p,
-                "seconds": secs, "method": q.method}
+        t0, info = time.perf_counter(), {"spp_printer": 0}
+
+        def render(n: int, s: int):
+            rgb, var, spp_p, _, n_p = render_printed(labels_vol, stex, vol.voxel_mm, kind, n, s, threads,
+                                                     progress=log is not None)
+            info["spp_printer"] += spp_p
+            out["printer_texels"] = n_p
+            return rgb, var, spp_p
+
+        m = measured(name, render)
+        secs = time.perf_counter() - t0
+        say(f"{name}: {out['printer_texels']} printer texels x {info['spp_printer']} spp in {secs:.1f} s")
+        return {**m, "spp_printer": info["spp_printer"], "seconds": secs, "method": q.method}
 
     out["quantized"] = printed("quantized", qvol)
     del qvol
@@ -189,6 +217,9 @@ def evaluate_run(path, spp: int = DEFAULT_SPP, seed: int = 0, method: str | None
                                "max_stderr": float(table.stderr.max()), "refine": bool(refine),
                                "key": table.key, "cached": table.cached, "build_seconds": table.seconds,
                                "seconds": time.perf_counter() - t0}
+        floor = delta_e76(table.reachable_lab(target), loss.target_lab)
+        out["gamut_floor_delta_e76"] = float(floor.mean())
+        out["gamut_floor_delta_e76_p95"] = float(np.percentile(floor, 95))
         out["baselines"] = {}
         fixed = rec.fixed_share(vol.inks, vol.shape)
         for name, fn in BASELINES.items():
@@ -208,10 +239,23 @@ def table_lines(ev: dict) -> list[str]:
     rows = [("continuous", ev["continuous"]), ("quantized", ev["quantized"])]
     rows += [(f"{k} baseline", v) for k, v in ev.get("baselines", {}).items()]
     nan = float("nan")
+
+    def num(m, key):
+        v = m.get(key)
+        return nan if v is None else v
+
     lines = [f"{'result':<20}{'dE76 mean':>10}{'dE76 p95':>10}{'dE2000':>9}{'SSIM':>8}{'noise':>8}"
-             f"{'rms w/o noise':>15}{'s':>7}"]
+             f"{'rms w/o noise':>15}{'noise in mean':>14}{'mottle':>8}{'spp':>6}{'s':>7}"]
     for name, m in rows:
         lines.append(f"{name:<20}{m['delta_e76_mean']:>10.2f}{m['delta_e76_p95']:>10.2f}"
-                     f"{m['delta_e2000_mean']:>9.2f}{m['ssim']:>8.3f}{m.get('delta_e76_noise', nan):>8.2f}"
-                     f"{m.get('delta_e76_rms_denoised', nan):>15.2f}{m['seconds']:>7.1f}")
+                     f"{m['delta_e2000_mean']:>9.2f}{m['ssim']:>8.3f}{num(m, 'delta_e76_noise'):>8.2f}"
+                     f"{num(m, 'delta_e76_rms_denoised'):>15.2f}{num(m, 'delta_e76_noise_contribution'):>14.2f}"
+                     f"{num(m, 'mottle_l2'):>8.2f}{m.get('spp', 0):>6}{m['seconds']:>7.1f}")
+    c = ev["continuous"]
+    if c.get("flat_texels"):
+        lines.append(f"mottle: high-frequency L* power, (dL*)^2, on {c['flat_texels']} texels where the target is "
+                     f"flat (target's own: {c['mottle_l2_target']:.2f})")
+    if "gamut_floor_delta_e76" in ev:
+        lines.append(f"gamut floor: mean dE76 from the target to the nearest colour the inks reach in a "
+                     f"{ev['colour_table']['patch_mm']:g} mm patch: {ev['gamut_floor_delta_e76']:.2f}")
     return lines

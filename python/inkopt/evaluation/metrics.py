@@ -1,22 +1,76 @@
 """Quality figures of a predicted appearance against its target, the same for every report (report.json of a
-run, evaluation.json of ``inkopt evaluate``, benchmarks)."""
+run, evaluation.json of ``inkopt evaluate``, benchmarks).
+
+**Mottle** (``mottle``): high-frequency L* power where the target is flat. For each texel, h_i = L*_i - (W L*)_i
+with W the loss's texel Gaussian window (``TexelLoss``: sigma 1.5 voxels, built from the texel positions, the
+texel itself included with weight w_ii). A texel is *flat* when the target's windowed standard deviation of L*
+is below ``FLAT_L_STD`` = 1 and that of its chroma, sqrt(var a* + var b*), below ``FLAT_CHROMA_STD`` = 2 (about
+the 8-bit quantization of a flat picture region). The figure is the mean of h_i² over flat texels, in (ΔL*)²,
+minus the Monte Carlo noise's expected share: with v_j the variance of texel j's L* (delta method from the
+linear-RGB variance, ``color.linear_to_lab_jacobian``), E h_i² gains (1 - w_ii)² v_i + Σ_{j≠i} w_ij² v_j.
+``mottle_l2_target`` is the target's own figure (no noise), ``flat_texels`` the count (figures None when 0).
+"""
 from __future__ import annotations
 
 import numpy as np
 
-from ..color import delta_e76, delta_e2000, lab_stderr, linear_to_lab
+from ..color import delta_e76, delta_e2000, lab_stderr, linear_to_lab, linear_to_lab_jacobian
 from ..loss import TexelLoss
+from .noise import NoiseModel
+
+FLAT_L_STD = 1.0
+FLAT_CHROMA_STD = 2.0
+
+
+def _window(loss: TexelLoss, x: np.ndarray) -> np.ndarray:
+    return (loss.K @ x) / loss.wsum[:, None]
+
+
+def flat_texels(loss: TexelLoss) -> np.ndarray:
+    """Boolean (I,): texels whose target neighbourhood is flat (module docstring)."""
+    lab = loss.target_lab
+    var = np.maximum(_window(loss, lab * lab) - _window(loss, lab) ** 2, 0.0)
+    return (np.sqrt(var[:, 0]) < FLAT_L_STD) & (np.sqrt(var[:, 1] + var[:, 2]) < FLAT_CHROMA_STD)
+
+
+def highpass_power(loss: TexelLoss, lum: np.ndarray) -> np.ndarray:
+    """h_i² per texel for a per-texel L* (I,)."""
+    h = lum - _window(loss, lum[:, None])[:, 0]
+    return h * h
+
+
+def highpass_noise(loss: TexelLoss, var_l: np.ndarray) -> np.ndarray:
+    """E of the noise's part of h_i² for independent per-texel L* variances var_l (I,):
+    (1 - w_ii)² v_i + Σ_{j≠i} w_ij² v_j = Σ_j w_ij² v_j + (1 - 2 w_ii) v_i (w_ii = 1 / wsum_i)."""
+    w2v = (loss.K.multiply(loss.K) @ var_l) / loss.wsum ** 2
+    return w2v + (1.0 - 2.0 / loss.wsum) * var_l
+
+
+def mottle(loss: TexelLoss, rgb, var_mean=None) -> dict:
+    """``mottle_l2`` (noise-corrected when ``var_mean`` is given), ``mottle_l2_target``, ``flat_texels``."""
+    rgb = np.asarray(rgb, np.float64)
+    flat = flat_texels(loss)
+    n = int(flat.sum())
+    if n == 0:
+        return {"mottle_l2": None, "mottle_l2_target": None, "flat_texels": 0}
+    p = highpass_power(loss, linear_to_lab(rgb)[:, 0])
+    if var_mean is not None:
+        jl = linear_to_lab_jacobian(rgb)[:, 0, :]
+        p = p - highpass_noise(loss, np.einsum("ij,ij->i", jl * jl, np.asarray(var_mean, np.float64)))
+    pt = highpass_power(loss, loss.target_lab[:, 0])
+    return {"mottle_l2": float(p[flat].mean()), "mottle_l2_target": float(pt[flat].mean()), "flat_texels": n}
 
 
 def prediction_metrics(loss: TexelLoss, rgb, var_mean=None) -> dict:
     """Figures of predictions ``rgb`` (I, 3) linear against ``loss``'s target (I, 3) linear.
 
-    Always: ``delta_e76_mean``, ``delta_e76_p95``, ``delta_e2000_mean``, ``ssim`` (mean texel SSIM), and the
-    loss's ``loss``, ``e1``, ``e2``, ``e3`` at its weights. With ``var_mean`` (I, 3), the Monte Carlo variance of
-    each prediction: SSIM with that noise removed from its statistics (an estimate for the noise-free
-    prediction), ``delta_e76_noise`` (mean standard error of a texel's CIELAB colour, ΔE), ``delta_e76_rms`` and
-    ``delta_e76_rms_denoised`` (an unbiased estimate of the noise-free RMS ΔE76: E|c + n - t|² = |c - t|² +
-    tr(cov n) to first order in Lab)."""
+    Always: ``delta_e76_mean``, ``delta_e76_p95``, ``delta_e2000_mean``, ``ssim`` (mean texel SSIM), the loss's
+    ``loss``, ``e1``, ``e2``, ``e3`` at its weights, and the mottle (module docstring). With ``var_mean`` (I, 3),
+    the Monte Carlo variance of each prediction: SSIM with that noise removed from its statistics (an estimate
+    for the noise-free prediction), ``delta_e76_noise`` (mean standard error of a texel's CIELAB colour, ΔE),
+    ``delta_e76_noise_contribution`` (the noise's estimated inflation of ``delta_e76_mean``, ``evaluation.noise``)
+    and ``delta_e76_mean_corrected`` (the mean minus it), ``delta_e76_rms`` and ``delta_e76_rms_denoised`` (an
+    unbiased estimate of the noise-free RMS ΔE76: E|c + n - t|² = |c - t|² + tr(cov n) to first order in Lab)."""
     rgb = np.asarray(rgb, np.float64)
     res = loss(rgb, var_mean)
     lab_t = loss.target_lab
@@ -25,9 +79,14 @@ def prediction_metrics(loss: TexelLoss, rgb, var_mean=None) -> dict:
            "delta_e2000_mean": float(delta_e2000(res.lab, lab_t).mean()),
            "ssim": float(loss.ssim_mean(rgb, var_mean)), "loss": res.value, "e1": res.e1, "e2": res.e2,
            "e3": res.e3}
+    out.update(mottle(loss, rgb, var_mean))
     if var_mean is not None:
-        se = lab_stderr(rgb, np.asarray(var_mean, np.float64))
+        var = np.asarray(var_mean, np.float64)
+        se = lab_stderr(rgb, var)
         out["delta_e76_noise"] = float(se.mean())
+        contrib = NoiseModel.of(rgb, var, lab_t).contribution()
+        out["delta_e76_noise_contribution"] = contrib
+        out["delta_e76_mean_corrected"] = float(de.mean()) - contrib
         out["delta_e76_rms"] = float(np.sqrt(np.mean(de * de)))
         out["delta_e76_rms_denoised"] = float(np.sqrt(max(0.0, np.mean(de * de - se * se))))
     return out
