@@ -1,0 +1,96 @@
+"""Tests of inkopt.evaluation.noise: the Monte Carlo inflation of a mean ΔE76, its estimate and adaptive spp, on
+synthetic colours with Gaussian noise of known variance in linear RGB (the noise-free figures are known)."""
+import numpy as np
+import pytest
+
+from inkopt.color import delta_e76, linear_to_lab
+from inkopt.evaluation.noise import (ESTIMATE_RANGE, SEED_STRIDE, TARGET_NOISE_DE76, NoiseModel, adaptive_render,
+                                     chi3_mean)
+
+I = 20000
+
+
+def synthetic(err: float, seed: int = 1):
+    """Targets t and noise-free predictions c (linear RGB, I x 3): c = t times log-normal errors of size err."""
+    rng = np.random.default_rng(seed)
+    t = rng.uniform(0.02, 0.9, (I, 3))
+    c = np.clip(t * np.exp(rng.normal(0, err, (I, 3))), 1e-3, 1)
+    return t, c
+
+
+def noisy(c, var, rng):
+    return np.maximum(c + np.sqrt(var) * rng.standard_normal(c.shape), 1e-4)
+
+
+def test_chi3_mean_against_sampling():
+    """g(λ) = E|λ e + z| (noncentral chi, 3 d.o.f.) against 200 000 samples: within 4 standard errors."""
+    rng = np.random.default_rng(0)
+    for lam in (0.0, 0.5, 1.0, 2.0, 5.0):
+        z = rng.standard_normal((200_000, 3))
+        z[:, 0] += lam
+        r = np.linalg.norm(z, axis=1)
+        assert abs(r.mean() - chi3_mean(lam)) < 4 * r.std() / np.sqrt(len(r))
+    assert chi3_mean(0.0) == pytest.approx(2 * np.sqrt(2 / np.pi))
+    assert chi3_mean(1e6) - 1e6 == pytest.approx(1e-6, rel=1e-3)   # g(λ) - λ → 1/λ
+
+
+@pytest.mark.parametrize("err", [0.0, 0.05, 0.2])
+@pytest.mark.parametrize("rel", [0.02, 0.05, 0.1])
+def test_estimate_within_stated_range(err, rel):
+    """The estimated inflation of the mean ΔE76 is within ESTIMATE_RANGE of the true one (raw mean - noise-free
+    mean, up to 4 standard errors of the raw mean's own sampling noise) for noise adding ~0.07-6.5 ΔE76."""
+    t, c = synthetic(err)
+    lab_t = linear_to_lab(t)
+    truth = delta_e76(linear_to_lab(c), lab_t).mean()
+    var = np.full((I, 3), 1.0) * (rel * c) ** 2
+    ch = noisy(c, var, np.random.default_rng(2))
+    de = delta_e76(linear_to_lab(ch), lab_t)
+    infl = de.mean() - truth
+    slack = 4 * (de - delta_e76(linear_to_lab(c), lab_t)).std() / np.sqrt(I)
+    est = NoiseModel.of(ch, var, lab_t).contribution()
+    lo, hi = ESTIMATE_RANGE
+    assert lo * infl - slack <= est <= hi * infl + slack, (infl, est)
+
+
+def fake_renderer(c, var1, calls):
+    """A render of noise-free colours c with per-sample variance var1: the mean of n samples has variance var1/n;
+    the seed picks the noise (a different seed per pass: independent passes)."""
+    def render(n, seed):
+        calls.append((n, seed))
+        rng = np.random.default_rng(seed % 2**32 + seed // SEED_STRIDE)
+        v = var1 / n
+        return noisy(c, v, rng), v, n
+    return render
+
+
+def test_adaptive_render_reaches_target_and_is_near_noise_free():
+    """Per-sample noise that adds ~6 ΔE76 at 64 spp: the adaptive render raises spp until the estimated
+    contribution is below the target; the raw mean is then within target x (upper end of ESTIMATE_RANGE) of the
+    noise-free mean (the estimate may be low by that factor), plus 4 standard errors."""
+    t, c = synthetic(0.2)
+    lab_t = linear_to_lab(t)
+    truth = delta_e76(linear_to_lab(c), lab_t)
+    var1 = 64 * (0.1 * c) ** 2
+    calls = []
+    ad = adaptive_render(fake_renderer(c, var1, calls), lab_t, seed=7)
+    assert ad.noise <= TARGET_NOISE_DE76
+    assert ad.spp == sum(ad.passes) and len(calls) == len(ad.passes) >= 2
+    assert len({s for _, s in calls}) == len(calls)                    # independent seeds
+    np.testing.assert_allclose(ad.var, var1 / ad.spp, rtol=1e-12)       # pooled variance = that of spp samples
+    de = delta_e76(linear_to_lab(ad.rgb), lab_t)
+    slack = 4 * (de - truth).std() / np.sqrt(I)
+    assert de.mean() - truth.mean() <= TARGET_NOISE_DE76 / ESTIMATE_RANGE[0] + slack
+    assert abs(de.mean() - ad.noise - truth.mean()) <= (ESTIMATE_RANGE[1] - 1) * ad.noise + slack
+    # the plan is not wasteful: half the samples would not have reached the target
+    half = NoiseModel.of(ad.rgb, 2 * ad.var, lab_t).contribution()
+    assert half > 0.9 * TARGET_NOISE_DE76 * 0.9
+
+
+def test_explicit_spp_is_exact_and_cap_holds():
+    t, c = synthetic(0.05)
+    calls = []
+    ad = adaptive_render(fake_renderer(c, (0.1 * c) ** 2 * 64, calls), linear_to_lab(t), seed=0, spp=32)
+    assert calls == [(32, 0)] and ad.spp == 32
+    calls = []
+    ad = adaptive_render(fake_renderer(c, (0.1 * c) ** 2 * 1e6, calls), linear_to_lab(t), seed=0, max_spp=256)
+    assert ad.spp == 256 and ad.noise > TARGET_NOISE_DE76 and calls[0][0] == 64
