@@ -36,7 +36,7 @@ def _demo(args) -> int:
     cfg = OptimizeConfig(iterations=args.iterations, spp=4, seed=0)
     print(f"[2/2] optimising a 6 x 4 x 1 mm slab: {top.name} on top, {bottom.name} below, {cfg.iterations} "
           "iterations ...")
-    rep = run_slab(top, bottom, (6.0, 4.0, 1.0), out / "slab", inks, cfg, eval_spp=256,
+    rep = run_slab(top, bottom, (6.0, 4.0, 1.0), out / "slab", inks, cfg,
                    progress=sys.stderr.isatty(), log=lambda s: print("      " + s), resume=True)
     print(f"      mean ΔE76 {rep['initial_delta_e76_mean']:.1f} (all-white start) -> {rep['delta_e76_mean']:.1f}, "
           f"SSIM {rep['initial_ssim']:.3f} -> {rep['ssim']:.3f}, {rep['seconds']:.0f} s")
