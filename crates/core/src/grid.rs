@@ -110,21 +110,34 @@ pub(crate) fn grid_exit(geo: &Geometry, p: V3, d: V3) -> (f32, usize) {
     nearest_plane(p, d, axes, |a| if d[a] > 0.0 { span(geo, a) } else { 0.0 })
 }
 
-/// The point at distance t along d from p, put exactly onto the grid face it reaches on `axis`.
+/// v[axis], as a select over the three components: indexing a local array by a run-time axis puts the array in
+/// memory (in the packet loop, scalar stores then a wider reload: a stalled store-to-load forward per exit).
+#[inline(always)]
+pub(crate) fn component(v: V3, axis: usize) -> f32 {
+    debug_assert!(axis < 3);
+    if axis == 0 {
+        v[0]
+    } else if axis == 1 {
+        v[1]
+    } else {
+        v[2]
+    }
+}
+
+/// The point at distance t along d from p, put exactly onto the grid face it reaches on `axis`
+/// (`p + d * t` on the other axes; written per component, without indexing by `axis`, see `component`).
 #[inline(always)]
 pub(crate) fn grid_face_point(geo: &Geometry, p: V3, d: V3, t: f32, axis: usize) -> V3 {
-    let mut q = add(p, scale(d, t));
-    q[axis] = if d[axis] > 0.0 { span(geo, axis) } else { 0.0 };
-    q
+    let face = if component(d, axis) > 0.0 { span(geo, axis) } else { 0.0 };
+    std::array::from_fn(|a| if a == axis { face } else { p[a] + d[a] * t })
 }
 
 /// The outward normal of the face on `axis` that a flight going `step` (+-1) along it crosses, seen from the
 /// side it comes from: pointing back at the flight.
 #[inline(always)]
 pub(crate) fn facing_normal(axis: usize, step: i32) -> V3 {
-    let mut n = [0.0f32; 3];
-    n[axis] = -step as f32;
-    n
+    debug_assert!(axis < 3);
+    std::array::from_fn(|a| if a == axis { -step as f32 } else { 0.0 })
 }
 
 /// Incremental (Amanatides-Woo) voxel traversal along one straight flight: the distances to the next voxel

@@ -20,7 +20,7 @@
 pub(crate) mod step;
 
 use crate::flight::Regular;
-use crate::grid::{facing_normal, grid_exit8, grid_face_point, locate_box, safe_radius8, span, tally_segments,
+use crate::grid::{component, facing_normal, grid_exit8, grid_face_point, locate_box, safe_radius8, span, tally_segments,
                   wrap_coord};
 use crate::render::RenderOptions;
 use crate::rng::{path_key, LaneRng, PathRng};
@@ -297,7 +297,7 @@ pub(crate) fn trace_paths<M: Medium, P: PathTally>(geo: &Geometry, med: &M, texe
                         p[a] = wrap_coord(p[a], span(geo, a));
                     }
                 }
-                let n_geo = facing_normal(axis, if d[axis] > 0.0 { 1 } else { -1 });
+                let n_geo = facing_normal(axis, if component(d, axis) > 0.0 { 1 } else { -1 });
                 let (nd, transmitted) = interface(d, n_geo, n_geo, geo.ior, ev.u_fresnel[l]);
                 if transmitted {
                     Some(PathValue { value: pk.weight[l] * geo.light.radiance(nd, c), events: pk.events[l] })
