@@ -159,3 +159,37 @@ def test_pool_equals_serial(chart, halving, tmp_path):
         assert run_selection(selection(chart), tmp_path, pool, log=lambda m: None) == res
     finally:
         pool.close()
+
+
+@pytest.fixture(scope="module")
+def local_ray():
+    """A local Ray instance of 2 CPUs for this module's Ray tests."""
+    ray = pytest.importorskip("ray")
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    yield ray
+    ray.shutdown()
+
+
+def test_ray_equals_serial(chart, halving, local_ray, tmp_path):
+    from inkopt.inksets import Ray
+
+    _, res = halving
+    backend = Ray("auto")
+    assert backend.cpus == 2
+    assert run_selection(selection(chart), tmp_path, backend, log=lambda m: None) == res
+
+
+@pytest.mark.slow
+def test_cli_ray_pool_serial_identical_brute_six_candidates(chart, local_ray, tmp_path):
+    """The paper's 15 sets (brute force, 3 iterations) through the command line: serial, a pool of 2 and Ray
+    (the local 2-CPU instance) write the same selection.json."""
+    out = {}
+    for how, extra in (("serial", []), ("pool", ["--workers", "2"]), ("ray", ["--ray", "auto"])):
+        argv = ["select-inks", str(chart), "--size-mm", "2x1.333x0.5", "--candidates",
+                "cyan,cyan2,magenta,magenta2,yellow,yellow2", "--choose", "4", "--out", str(tmp_path / how),
+                "--strategy", "brute", "--iterations", "3", "--spp", "2", "--forward-spp", "4", "--eval-spp", "16",
+                *extra]
+        assert main(argv) == 0
+        out[how] = json.loads((tmp_path / how / "selection.json").read_text())
+    assert len(out["serial"]["candidates"]) == 15
+    assert out["serial"] == out["pool"] == out["ray"]
