@@ -4,13 +4,14 @@
 //! `(z * ny + y) * nx + x` (C order of a (z, y, x) array); lengths in mm, coefficients in mm^-1; geometric
 //! vectors are (x, y, z); radiance is linear RGB, each channel traced as its own monochromatic problem.
 //!
-//! Modules: `scene` (geometry, media, light, texels), `grid` (locating points, voxel traversal, exit distances,
-//! periodic wrap), `flight` (the free-flight samplers), `trace` (the scalar walk), `packet` (eight paths per
-//! core in SIMD lanes), `render` (parallel drivers and gradient buffers), `rng` (counter-based random
-//! numbers), `sampling` (phase function, Fresnel).
+//! Modules: `scene` (geometry, media, texels), `light` (the `Light` trait: uniform light, environment maps),
+//! `grid` (locating points, voxel traversal, exit distances, periodic wrap), `flight` (the free-flight
+//! samplers), `trace` (the scalar walk), `packet` (eight paths per core in SIMD lanes), `render` (parallel
+//! drivers and gradient buffers), `rng` (counter-based random numbers), `sampling` (phase function, Fresnel).
 
 mod flight;
 mod grid;
+pub mod light;
 pub(crate) mod packet;
 pub mod render;
 pub mod rng;
@@ -19,6 +20,7 @@ pub mod scene;
 pub mod trace;
 
 pub use render::{backward, render, GradBuffers, GradMethod, RenderOptions, Stats, TexelEstimate, NO_GRADIENT};
+pub use light::EnvMap;
 pub use scene::{face_normal, Boundary, DenseMedium, Geometry, LabelMedium, Light, Medium, Texel, UniformLight, EMPTY};
 
 #[cfg(test)]

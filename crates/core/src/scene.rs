@@ -1,10 +1,12 @@
 //! The voxel scene: grid geometry (size, boundary, inside mask and its safe distances, shading normals), the
-//! medium (dense coefficients or ink labels, behind the `Medium` trait), the light (`Light` trait) and texels.
+//! medium (dense coefficients or ink labels, behind the `Medium` trait), the light it is lit by (a `Light`, see
+//! `light`; set with `Geometry::with_light`) and texels.
 //!
 //! Layout: voxel (x, y, z) has linear index `(z * ny + y) * nx + x`, i.e. C order of a (z, y, x) array.
 //! Coefficients are stored per channel in planar arrays (all voxels of R, then G, then B) as extinction
 //! sigma_t and single-scattering albedo, the two numbers the random walk needs.
 
+pub use crate::light::{Light, UniformLight};
 use crate::sampling::V3;
 
 /// Label of an empty voxel in label media.
@@ -16,27 +18,6 @@ pub enum Boundary {
     Box,
     /// x and y wrap around: an infinite slab in x and y, bounded in z.
     PeriodicXY,
-}
-
-/// The light arriving at the object from outside. Every path that leaves the grid calls `radiance` once with
-/// the direction it leaves in; its value is the path's weight times that radiance. A new kind of light (an
-/// environment map, an area light) is a new type implementing this trait, given to `Geometry::with_light`; the
-/// tracers need no change.
-pub trait Light: Send + Sync {
-    /// Radiance (linear, channel `channel` of RGB) arriving along -`dir`, i.e. seen looking out along the unit
-    /// direction `dir` (x, y, z).
-    fn radiance(&self, dir: V3, channel: usize) -> f32;
-}
-
-/// The same radiance from every direction, per RGB channel (the default: 1, a white furnace).
-#[derive(Clone, Copy, Debug)]
-pub struct UniformLight(pub [f32; 3]);
-
-impl Light for UniformLight {
-    #[inline(always)]
-    fn radiance(&self, _dir: V3, channel: usize) -> f32 {
-        self.0[channel]
-    }
 }
 
 /// Per-voxel optical parameters for one channel.
@@ -206,8 +187,13 @@ impl Geometry {
 
     /// The same geometry lit by `light`.
     pub fn with_light(mut self, light: Box<dyn Light>) -> Self {
-        self.light = light;
+        self.set_light(light);
         self
+    }
+
+    /// Light the geometry by `light` from now on (the tracers only call it; nothing else depends on it).
+    pub fn set_light(&mut self, light: Box<dyn Light>) {
+        self.light = light;
     }
 
     pub fn voxel_count(&self) -> usize {

@@ -2,10 +2,10 @@
 //! accumulates gradients. Array conventions are the Python package's: (z, y, x[, c]) arrays, texel voxels
 //! (z, y, x), normals and voxel sizes (x, y, z). The GIL is released while rendering. `set_medium` swaps the
 //! medium of a scene and keeps its geometry (safe distances), thread pool and gradient buffers, for optimisers
-//! that render a new medium every iteration.
+//! that render a new medium every iteration; `set_light` lights it by a uniform light or an environment map.
 
-use inkopt_core::{backward, render, Boundary, DenseMedium, Geometry, GradBuffers, GradMethod, LabelMedium,
-                  RenderOptions, Stats, Texel, TexelEstimate, NO_GRADIENT};
+use inkopt_core::{backward, render, Boundary, DenseMedium, EnvMap, Geometry, GradBuffers, GradMethod, LabelMedium,
+                  RenderOptions, Stats, Texel, TexelEstimate, UniformLight, NO_GRADIENT};
 use numpy::ndarray::{Array2, Array4, Dimension};
 use numpy::{Element, IntoPyArray, PyArray2, PyReadonlyArray, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
             PyReadonlyArray4, PyUntypedArrayMethods};
@@ -97,6 +97,26 @@ impl Scene {
         ink_sigma_a: Option<PyReadonlyArray2<f32>>,
     ) -> PyResult<()> {
         self.medium = medium_from(self.shape, sigma_s, sigma_a, labels, ink_sigma_s, ink_sigma_a)?;
+        Ok(())
+    }
+
+    /// set_light(map=None, rotate_deg=0.0): light the scene by an equirectangular environment map of linear
+    /// radiance, (H, 2H, 3) float32 C-contiguous (row 0 looks up along +z, column 0 starts at +x, longitude
+    /// grows towards +y; bilinear per channel), turned by `rotate_deg` about z (from +x towards +y); None: the
+    /// uniform white light of radiance 1 (the default).
+    #[pyo3(signature = (map=None, rotate_deg=0.0))]
+    fn set_light(&mut self, map: Option<PyReadonlyArray3<f32>>, rotate_deg: f32) -> PyResult<()> {
+        match map {
+            None => self.geo.set_light(Box::new(UniformLight([1.0; 3]))),
+            Some(m) => {
+                let s = m.shape();
+                if s[2] != 3 {
+                    return Err(err(format!("the light map has shape {s:?}, expected (H, 2H, 3)")));
+                }
+                let env = EnvMap::new(s[0], s[1], c_slice(&m, "light map")?, rotate_deg).map_err(err)?;
+                self.geo.set_light(Box::new(env));
+            }
+        }
         Ok(())
     }
 

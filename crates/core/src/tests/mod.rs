@@ -1,13 +1,14 @@
 //! Statistical tests of the renderer against exact results, one file per topic: `analytic` (furnaces, slabs
 //! and free flights with closed forms), `samplers` (the samplers and walks against each other), `gradients`
-//! (gradients against finite differences), `determinism` (thread counts, chunking, media forms), `geometry`
-//! (safe distances and balls). Tolerances are multiples of the estimator's own standard error (computed from
-//! the samples), never fixed image values.
+//! (gradients against finite differences), `light` (environment maps), `determinism` (thread counts, chunking,
+//! media forms), `geometry` (safe distances and balls). Tolerances are multiples of the estimator's own
+//! standard error (computed from the samples), never fixed image values.
 
 mod analytic;
 mod determinism;
 mod geometry;
 mod gradients;
+mod light;
 mod samplers;
 
 use crate::*;

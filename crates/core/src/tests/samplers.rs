@@ -7,7 +7,7 @@ use super::*;
 use crate::packet::step::hg8;
 
 /// Mean, variance of the mean and collisions of `spp` scalar-traced paths of texel i (`trace::trace`).
-fn scalar_estimate<M: Medium>(geo: &Geometry, med: &M, tex: &Texel, i: u64, c: usize, spp: u32, seed: u64,
+pub(super) fn scalar_estimate<M: Medium>(geo: &Geometry, med: &M, tex: &Texel, i: u64, c: usize, spp: u32, seed: u64,
                               include_specular: bool) -> (f64, f64, u64) {
     let (mut sum, mut sq, mut events) = (0.0f64, 0.0f64, 0u64);
     for k in 0..spp {
