@@ -39,3 +39,28 @@ def assert_same_mean(estimates, references, rel_bias: float = 0.02, false_alarm:
     se = d.std(ddof=1) / np.sqrt(len(d))
     bound = t_crit * se + rel_bias * abs(np.mean(references)) + 1e-5
     assert abs(d.mean()) < bound, (what, float(np.mean(estimates)), float(np.mean(references)), float(se))
+
+
+def replay_matches_fd(vol, probes, spp=800, seeds=tuple(range(11, 23)), h=0.3, lighting=None):
+    """Replay gradient of sum(adj * c) vs central finite differences with common random numbers, per probe
+    (z, y, x, channel, 'sigma_s'|'sigma_a'). Both are unbiased estimators, so their difference over independent
+    seeds has mean ~0 (``assert_same_mean``: Student-t bound, false-alarm rate 1e-4 per probe, plus 2 %
+    for the O(h^2) bias of the difference quotient). ``lighting``: as ``Renderer``'s."""
+    from inkopt.model import Texels, Volume
+    from inkopt.render import Renderer, render
+
+    tex = Texels.for_volume(vol, ["top"])
+    adj = np.random.default_rng(0).uniform(0.2, 1.0, (len(tex), 3)).astype(np.float32)
+    for (z, y, x, c, which) in probes:
+        g, fd = [], []
+        for seed in seeds:
+            gs, ga, _ = Renderer(vol, lighting=lighting).gradient(tex, adj, spp=spp, seed=seed)
+            g.append((gs if which == "sigma_s" else ga)[z, y, x, c])
+            vals = []
+            for sign in (1, -1):
+                arr = {"sigma_s": vol.sigma_s.copy(), "sigma_a": vol.sigma_a.copy()}
+                arr[which][z, y, x, c] += sign * h
+                v2 = Volume(voxel_mm=vol.voxel_mm, boundary=vol.boundary, inside=vol.inside, **arr)
+                vals.append(float(np.sum(render(v2, tex, spp=spp, seed=seed, lighting=lighting).rgb * adj)))
+            fd.append((vals[0] - vals[1]) / (2 * h))
+        assert_same_mean(g, fd, rel_bias=0.02, false_alarm=1e-4, what=(z, y, x, c, which))

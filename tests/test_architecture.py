@@ -7,7 +7,7 @@ from helpers import REPO
 PKG = REPO / "python" / "inkopt"
 # top to bottom; a module may import from its own layer and any layer before it
 LAYERS = [
-    {"units", "color", "io", "pictures", "charts", "_core", "__init__"},
+    {"units", "color", "io", "pictures", "charts", "lighting", "_core", "__init__"},
     {"model"},
     {"rundir"},
     {"render"},

@@ -1,16 +1,17 @@
 """Predict the appearance of a volume: the Monte Carlo texel-space renderer (Rust core) and its gradients.
 
-The renderer (method.md §4): smooth dielectric boundary (``Volume.ior``, 1.5 by default), uniform environment of
-radiance 1, one sensor element per texel looking along the texel's inward normal. A texel's value is the mean
+The renderer (method.md §4): smooth dielectric boundary (``Volume.ior``, 1.5 by default), lit by the uniform
+environment of radiance 1 or by an environment map (``lighting``: a :class:`inkopt.lighting.Lighting`, "uniform"
+or a map file), one sensor element per texel looking along the texel's inward normal. A texel's value is the mean
 linear-RGB radiance leaving it toward the viewer, including the specular reflection of the environment unless
-``include_specular=False``. Each channel is its own monochromatic random walk (exact free flights by delta
+``include_specular=False``; a path that leaves the object picks up the light's radiance in its direction. Each channel is its own monochromatic random walk (exact free flights by delta
 tracking, and regular tracking near the surface of masked objects; implicit absorption with Russian roulette;
 Henyey-Greenstein scattering; Fresnel reflection/refraction), eight paths per core at a time (SIMD lanes).
 
 Gradients (``Renderer.gradient``): given per-texel adjoints de/dc (I, 3), the derivatives de/dsigma_s and
 de/dsigma_a (z, y, x, 3) by path replay backpropagation (unbiased, ``method="replay"``) or the paper's biased
-one-pass approximation (``method="li1"``: radiance along the adjoint path approximated by 1; only sigma_a
-receives gradient under it).
+one-pass approximation (``method="li1"``: radiance along the adjoint path approximated by 1, whatever the
+lighting; only sigma_a receives gradient under it).
 """
 from __future__ import annotations
 
@@ -20,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .lighting import Lighting, load_lighting
 from .model import Texels, Volume
 
 # Texels per call into the core; a call re-enters Python only to update the progress bar.
@@ -61,9 +63,11 @@ class Renderer:
     rebuilding them, as the optimiser does every iteration.
 
     ``threads``: worker threads (default: all cores). Results do not depend on it.
+    ``lighting``: None or "uniform" (radiance 1 from every direction), a map file or a
+    :class:`~inkopt.lighting.Lighting` (see :mod:`inkopt.lighting`); :meth:`set_lighting` changes it.
     """
 
-    def __init__(self, volume: Volume, threads: int | None = None):
+    def __init__(self, volume: Volume, threads: int | None = None, lighting: Lighting | str | None = None):
         from . import _core
 
         self.volume = volume
@@ -74,6 +78,14 @@ class Renderer:
         if volume.normals is not None:
             kw["normals"] = volume.normals
         self._scene = _core.Scene(volume.shape, tuple(float(v) for v in volume.voxel_mm), **kw)
+        self.lighting = Lighting()
+        self.set_lighting(lighting)
+
+    def set_lighting(self, lighting: Lighting | str | None) -> None:
+        """Light the volume by ``lighting`` from now on (None / "uniform", a map file, or a Lighting)."""
+        light = load_lighting(lighting)
+        self._scene.set_light(light.map, float(light.rotate_deg))
+        self.lighting = light
 
     @staticmethod
     def _medium_arrays(volume: Volume) -> dict:
@@ -154,6 +166,6 @@ class Renderer:
 
 
 def render(volume: Volume, texels: Texels, spp: int = 16, seed: int = 0, include_specular: bool = True,
-           threads: int | None = None, progress: bool = False) -> RenderResult:
+           threads: int | None = None, progress: bool = False, lighting: Lighting | str | None = None) -> RenderResult:
     """One-shot forward render (builds a :class:`Renderer`)."""
-    return Renderer(volume, threads).render(texels, spp, seed, include_specular, progress)
+    return Renderer(volume, threads, lighting).render(texels, spp, seed, include_specular, progress)

@@ -17,6 +17,7 @@ import numpy as np
 from .evaluation.baselines import baseline_mixture
 from .evaluation.metrics import delta_e76_map, prediction_metrics
 from .evaluation.noise import EVAL_SEED_OFFSET, adaptive_render
+from .lighting import Lighting, load_lighting
 from .model import InkTable
 from .optim import Optimization, OptimizeConfig
 from .pictures import loss_figure
@@ -39,8 +40,10 @@ def eval_spp_for(cfg: OptimizeConfig, eval_spp: int | None = None) -> int | None
 
 def run_optimisation(scene: Scene, out_dir, cfg: OptimizeConfig, *, resume: bool = False,
                      eval_spp: int | None = None, threads: int | None = None, progress: bool = False,
-                     log=print) -> dict:
-    """Optimise ``scene`` into run directory ``out_dir``; returns the report (also report.json)."""
+                     lighting: Lighting | str | None = None, log=print) -> dict:
+    """Optimise ``scene`` into run directory ``out_dir`` under the display ``lighting`` (default uniform; the
+    final figures are rendered under it too); returns the report (also report.json)."""
+    lighting = load_lighting(lighting)
     t_start = time.perf_counter()
     log(scene.describe())
     def baseline(kind: str) -> np.ndarray:  # a print-shop start (cfg.init "surface" or "extrusion")
@@ -48,7 +51,7 @@ def run_optimisation(scene: Scene, out_dir, cfg: OptimizeConfig, *, resume: bool
                                 progress=progress)
 
     run = Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, fixed_share=scene.fixed_share,
-                       threads=threads, baseline=baseline)
+                       threads=threads, baseline=baseline, lighting=lighting)
     rd = RunDir.create(out_dir)
     if resume:
         run.resume(rd.checkpoint, log)
@@ -61,7 +64,7 @@ def run_optimisation(scene: Scene, out_dir, cfg: OptimizeConfig, *, resume: bool
     # from the configuration (identical to the first iterate whether or not the run was resumed). One renderer.
     spp = eval_spp_for(cfg, eval_spp)
     seed = EVAL_SEED_OFFSET + cfg.seed
-    renderer = Renderer(final, threads)
+    renderer = Renderer(final, threads, lighting)
 
     def render(n: int, s: int):
         r = renderer.render(scene.texels, n, s, cfg.include_specular, progress)
@@ -91,7 +94,7 @@ def run_optimisation(scene: Scene, out_dir, cfg: OptimizeConfig, *, resume: bool
         **scene.report_fields(),
         "inks": list(scene.volume.inks.names), "gamma": list(cfg.gamma), "lr": cfg.step_size,
         "optimizer": cfg.optimizer, "param": cfg.param, "init": cfg.init, "seed": cfg.seed,
-        "gradient": cfg.grad_method, "threads": threads, "peak_rss_gb": peak_rss_gb(),
+        "gradient": cfg.grad_method, "threads": threads, "peak_rss_gb": peak_rss_gb(), **lighting.describe(),
     }
     rd.write_report(report)
     return report

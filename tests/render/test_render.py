@@ -9,7 +9,7 @@ import pytest
 from inkopt.model import InkTable, Texels, Volume, mix
 from inkopt.render import Renderer, render
 
-from helpers import assert_same_mean
+from helpers import assert_same_mean, replay_matches_fd
 
 VOX = 25.4 / 300
 
@@ -95,28 +95,6 @@ def test_mask_regular_tracking_matches_delta_tracking():
     assert np.all(np.abs(a.mean_rgb - b.mean_rgb) < 4 * se)
 
 
-def _fd_check(vol, probes, spp=800, seeds=tuple(range(11, 23)), h=0.3):
-    """Replay gradient of sum(adj * c) vs central finite differences with common random numbers, per probe
-    (z, y, x, channel, 'sigma_s'|'sigma_a'). Both are unbiased estimators, so their difference over independent
-    seeds has mean ~0 (``helpers.assert_same_mean``: Student-t bound, false-alarm rate 1e-4 per probe, plus 2 %
-    for the O(h^2) bias of the difference quotient)."""
-    tex = Texels.for_volume(vol, ["top"])
-    adj = np.random.default_rng(0).uniform(0.2, 1.0, (len(tex), 3)).astype(np.float32)
-    for (z, y, x, c, which) in probes:
-        g, fd = [], []
-        for seed in seeds:
-            gs, ga, _ = Renderer(vol).gradient(tex, adj, spp=spp, seed=seed)
-            g.append((gs if which == "sigma_s" else ga)[z, y, x, c])
-            vals = []
-            for sign in (1, -1):
-                arr = {"sigma_s": vol.sigma_s.copy(), "sigma_a": vol.sigma_a.copy()}
-                arr[which][z, y, x, c] += sign * h
-                v2 = Volume(voxel_mm=vol.voxel_mm, boundary=vol.boundary, inside=vol.inside, **arr)
-                vals.append(float(np.sum(render(v2, tex, spp=spp, seed=seed).rgb * adj)))
-            fd.append((vals[0] - vals[1]) / (2 * h))
-        assert_same_mean(g, fd, rel_bias=0.02, false_alarm=1e-4, what=(z, y, x, c, which))
-
-
 @pytest.mark.parametrize("masked", [False, True])
 def test_gradient_matches_finite_differences(masked):
     """Both sigma_s and sigma_a, voxels at several depths, in a periodic slab with delta tracking in packets (no
@@ -127,7 +105,7 @@ def test_gradient_matches_finite_differences(masked):
     a = rng.uniform(0.2, 3, shape + (3,)).astype(np.float32)
     inside = np.ones(shape, bool) if masked else None
     vol = Volume(voxel_mm=(0.1,) * 3, sigma_s=s, sigma_a=a, boundary="periodic-xy", inside=inside)
-    _fd_check(vol, [(3, 1, 1, 0, "sigma_s"), (3, 1, 1, 2, "sigma_a"), (2, 0, 1, 1, "sigma_s"),
+    replay_matches_fd(vol, [(3, 1, 1, 0, "sigma_s"), (3, 1, 1, 2, "sigma_a"), (2, 0, 1, 1, "sigma_s"),
                     (1, 1, 2, 0, "sigma_a")])
 
 
@@ -141,7 +119,7 @@ def test_gradient_matches_finite_differences_masked_object():
     s = np.where(inside[..., None], rng.uniform(4, 12, shape + (3,)), 0).astype(np.float32)
     a = np.where(inside[..., None], rng.uniform(0.2, 2, shape + (3,)), 0).astype(np.float32)
     vol = Volume(voxel_mm=(0.1,) * 3, sigma_s=s, sigma_a=a, boundary="box", inside=inside)
-    _fd_check(vol, [(5, 3, 3, 0, "sigma_s"), (5, 1, 1, 1, "sigma_a"), (2, 2, 2, 2, "sigma_s"),
+    replay_matches_fd(vol, [(5, 3, 3, 0, "sigma_s"), (5, 1, 1, 1, "sigma_a"), (2, 2, 2, 2, "sigma_s"),
                     (3, 3, 3, 0, "sigma_a")], spp=400)
 
 

@@ -1,5 +1,5 @@
-"""What the subcommands share: the usage error, the optimiser options of ``slab`` and ``optimize``, and their
-one-line summaries."""
+"""What the subcommands share: the usage error, the display-lighting options, the optimiser options of ``slab``
+and ``optimize``, and their one-line summaries."""
 from __future__ import annotations
 
 import sys
@@ -21,6 +21,22 @@ def parse_gamma(text: str) -> tuple[float, float, float]:
     if len(g) != 3 or min(g) < 0 or sum(g) <= 0:
         raise ValueError(f"--gamma must be three non-negative weights g1,g2,g3 with a positive sum, got '{text}'")
     return g
+
+
+def add_lighting_args(p, what: str = "render") -> None:
+    """``--lighting uniform|FILE`` and ``--lighting-rotate DEG`` (``inkopt.lighting``)."""
+    p.add_argument("--lighting", default="uniform", metavar="uniform|FILE",
+                   help=f"display lighting to {what} under: uniform (radiance 1 from every direction, the default) "
+                        "or an equirectangular environment map of linear radiance (.hdr, .exr, or .npy (H, 2H, 3)); "
+                        "row 0 looks up (+z), column 0 starts at +x, longitude grows towards +y")
+    p.add_argument("--lighting-rotate", type=float, default=0.0, metavar="DEG",
+                   help="turn the map about z by DEG degrees, from +x towards +y (default 0)")
+
+
+def lighting_from_args(args):
+    from ..lighting import load_lighting
+
+    return load_lighting(args.lighting, args.lighting_rotate)
 
 
 def add_optimizer_args(p) -> None:
@@ -53,6 +69,7 @@ def add_optimizer_args(p) -> None:
                    "adaptive, until the Monte Carlo noise adds less than 0.5 to the mean ΔE76)")
     p.add_argument("--threads", type=int, help="worker threads (default: all cores)")
     p.add_argument("--resume", action="store_true", help="continue from DIR/checkpoint.npz if present")
+    add_lighting_args(p, "optimise and evaluate")
 
 
 def config_from_args(args):

@@ -10,6 +10,7 @@ from ..evaluation.colour_table import DEFAULT_PATCH_MM
 from ..evaluation.evaluate import DEFAULT_SPP, evaluate_run, table_lines
 from ..evaluation.noise import MAX_SPP, PILOT_SPP, TARGET_NOISE_DE76
 from ..printing.quantize import METHODS
+from .common import add_lighting_args, lighting_from_args
 
 
 def _evaluate_cmd(args) -> int:
@@ -19,13 +20,16 @@ def _evaluate_cmd(args) -> int:
         raise ValueError(f"--spp must be at least 1, got {args.spp}")
     log = None if args.json else (lambda msg: print(msg, file=sys.stderr, flush=True))
     ev = evaluate_run(args.dir, spp=args.spp, seed=args.seed, method=args.method, threads=args.threads,
-                      baselines=not args.no_baselines, refine=not args.nearest, patch_mm=args.patch_mm, log=log)
+                      baselines=not args.no_baselines, refine=not args.nearest, patch_mm=args.patch_mm,
+                      lighting=lighting_from_args(args), log=log)
     if args.json:
         print(json.dumps(ev))
     else:
         for line in table_lines(ev):
             print(line)
         how = "adaptive, " if ev["spp_adaptive"] else ""
+        print(f"lighting: {ev['lighting']}" + (f", turned {ev['lighting_rotate_deg']:g} degrees"
+                                               if ev["lighting_rotate_deg"] else ""))
         print(f"{ev['spp']} spp per scene texel ({how}continuous result), {ev['seconds']:.0f} s; wrote {args.dir}/evaluation.json"
               + "".join(f", {p}" for p in ev.get("pictures", [])))
     return 0
@@ -49,4 +53,5 @@ def register_cli(sub) -> None:
                    help="baselines: nearest colour-table entry instead of the blend of the 8 nearest")
     p.add_argument("--no-baselines", action="store_true", help="skip the baselines")
     p.add_argument("--json", action="store_true", help="print the evaluation as one JSON object, no progress")
+    add_lighting_args(p, "evaluate")
     p.set_defaults(func=_evaluate_cmd)

@@ -4,7 +4,7 @@ from __future__ import annotations
 import sys
 
 from ..units import OPT_DPI
-from .common import add_optimizer_args, config_from_args, print_run_summary, stderr_log
+from .common import add_optimizer_args, config_from_args, lighting_from_args, print_run_summary, stderr_log
 
 
 def _optimize(args) -> int:
@@ -18,7 +18,8 @@ def _optimize(args) -> int:
     cfg = config_from_args(args)
     rep = run_mesh(args.mesh, args.out, inks, cfg, height_mm=args.height_mm, scale=args.scale,
                    shell_mm=args.shell_mm, dpi=args.dpi, up=args.up, resume=args.resume, eval_spp=args.eval_spp,
-                   threads=args.threads, progress=sys.stderr.isatty(), log=stderr_log)
+                   threads=args.threads, progress=sys.stderr.isatty(), lighting=lighting_from_args(args),
+                   log=stderr_log)
     print_run_summary(rep, args.init, f" (peak memory {rep['peak_rss_gb']:.1f} GiB)")
     print(f"views: {args.out}/views.png, {args.out}/prediction.glb; report: {args.out}/report.json")
     return 0

@@ -5,7 +5,7 @@ import json
 
 import numpy as np
 
-from .common import UsageError
+from .common import UsageError, add_lighting_args, lighting_from_args
 
 
 def _render(args) -> int:
@@ -29,7 +29,7 @@ def _render(args) -> int:
             raise UsageError("adjoint contains NaN or infinite values")
         if not args.out:
             raise UsageError("--adjoint needs --out G.npz to write the gradient to")
-    rnd = Renderer(vol, threads=args.threads)
+    rnd = Renderer(vol, threads=args.threads, lighting=lighting_from_args(args))
     progress = not args.json
     if adjoint is None:
         res = rnd.render(texels, spp=args.spp, seed=args.seed, include_specular=not args.no_specular,
@@ -47,7 +47,7 @@ def _render(args) -> int:
         save_npz(args.out, out)
     summary = {"mean_rgb": [float(x) for x in res.mean_rgb],
                "mean_rgb_stderr": [float(x) for x in res.mean_rgb_stderr],
-               **res.stats(), "seed": args.seed, "threads": rnd.threads,
+               **res.stats(), "seed": args.seed, "threads": rnd.threads, **rnd.lighting.describe(),
                "events_per_second": res.events / max(res.seconds, 1e-9)}
     if grads:
         summary["gradient_method"] = args.method
@@ -67,7 +67,8 @@ def _render(args) -> int:
 def register_cli(sub) -> None:
     r = sub.add_parser("render", help="render a volume file (.npz) in texel space",
                        description="Render a volume file: mean radiance of every surface texel under uniform "
-                                   "white light. With --adjoint, also the gradient of sum(adjoint * rgb).")
+                                   "white light or an environment map (--lighting). With --adjoint, also the "
+                                   "gradient of sum(adjoint * rgb).")
     r.add_argument("file", help="volume .npz (see inkopt.model.volume for the format)")
     r.add_argument("--spp", type=int, default=16, help="samples per texel and channel (default 16)")
     r.add_argument("--seed", type=int, default=0)
@@ -79,4 +80,5 @@ def register_cli(sub) -> None:
                    help="gradient estimator: unbiased path replay (default) or the biased one-pass L_i = 1")
     r.add_argument("--no-specular", action="store_true", help="exclude the specular reflection of the environment")
     r.add_argument("--threads", type=int, help="worker threads (default: all cores; results do not depend on it)")
+    add_lighting_args(r)
     r.set_defaults(func=_render)

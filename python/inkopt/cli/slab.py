@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import sys
 
-from .common import add_optimizer_args, config_from_args, print_run_summary, stderr_log
+from .common import add_optimizer_args, config_from_args, lighting_from_args, print_run_summary, stderr_log
 
 
 def _slab(args) -> int:
@@ -14,7 +14,8 @@ def _slab(args) -> int:
     inks = InkTable.parse(args.inks)
     cfg = config_from_args(args)
     rep = run_slab(args.top, args.bottom, parse_size_mm(args.size_mm), args.out, inks, cfg, resume=args.resume,
-                   eval_spp=args.eval_spp, threads=args.threads, progress=sys.stderr.isatty(), log=stderr_log)
+                   eval_spp=args.eval_spp, threads=args.threads, progress=sys.stderr.isatty(),
+                   lighting=lighting_from_args(args), log=stderr_log)
     print_run_summary(rep, args.init)
     print(f"pictures: {args.out}/face_*.png, {args.out}/loss.png; report: {args.out}/report.json")
     return 0

@@ -38,6 +38,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..io import write_png
+from ..lighting import Lighting, load_lighting
 from ..loss import TexelLoss
 from ..model import Quantization, Texels, Volume
 from ..pictures import panels
@@ -100,7 +101,7 @@ def printer_texels(qvol: Volume, scene: Texels, kind: str) -> Texels:
 
 
 def render_printed(qvol: Volume, scene: Texels, voxel_mm_scene, kind: str, spp: int, seed: int, threads=None,
-                   progress: bool = False):
+                   progress: bool = False, lighting: Lighting | None = None):
     """Render a labels volume on its printer texels and average onto the scene texels.
 
     Returns (rgb (I, 3), var_mean (I, 3), spp_printer, seconds, printer texel count)."""
@@ -108,7 +109,7 @@ def render_printed(qvol: Volume, scene: Texels, voxel_mm_scene, kind: str, spp: 
     ptex = printer_texels(qvol, scene, kind)
     to_scene, stand_in = map_texels(ptex, qvol.voxel_mm, scene, voxel_mm_scene, per_face=kind != "mesh")
     spp_p = max(1, int(np.ceil(spp * len(scene) / len(ptex))))
-    res = Renderer(qvol, threads).render(ptex, spp_p, seed, progress=progress)
+    res = Renderer(qvol, threads, lighting).render(ptex, spp_p, seed, progress=progress)
     rgb, var = average_to_scene(res.rgb.astype(np.float64), res.var_mean.astype(np.float64), to_scene, stand_in,
                                 len(scene))
     return rgb, var, spp_p, time.perf_counter() - t0, len(ptex)
@@ -132,13 +133,17 @@ def write_face_pictures(d: RunDir, rec: SceneRecord, results: dict) -> list[str]
 # ----------------------------------------------------------------------------------------------- the stage
 def evaluate_run(path, spp: int | None = DEFAULT_SPP, seed: int = 0, method: str | None = None, threads=None,
                  baselines: bool = True, refine: bool = True, patch_mm: float = DEFAULT_PATCH_MM,
-                 table: ColourTable | None = None, write: bool = True, log=None) -> dict:
+                 table: ColourTable | None = None, write: bool = True, lighting: Lighting | str | None = None,
+                 log=None) -> dict:
     """Evaluate run directory ``path`` (module docstring); returns the evaluation dict (also written to
     DIR/evaluation.json with the face pictures when ``write``). ``spp``: None = adaptive (module docstring),
     else exactly that many samples per scene texel. ``method``: quantization method of ours (when
     quantized.npz is missing) and of the baselines; None = that of quantized.npz, else blue-noise.
     table: the baselines' colour table (default ``colour_table(inks, g, ior, patch_mm)``, cached).
+    ``lighting``: the display lighting every result is rendered under (``inkopt.lighting``; default uniform; the
+    baselines' colour table stays a uniform-light property of the inks).
     ``log``: callable taking one progress line (default: silent)."""
+    lighting = load_lighting(lighting)
     say = log or (lambda msg: None)
     if spp is not None and spp < 1:
         raise ValueError(f"spp must be at least 1, got {spp}")
@@ -150,7 +155,8 @@ def evaluate_run(path, spp: int | None = DEFAULT_SPP, seed: int = 0, method: str
     t_all = time.perf_counter()
     loss = TexelLoss(target, stex.pos_vox, sigma=1.5)
     out = {"spp": spp, "seed": int(seed), "texels": len(stex), "kind": kind, "spp_adaptive": spp is None,
-           "noise_target_delta_e76": TARGET_NOISE_DE76, "spp_pilot": PILOT_SPP, "spp_max": MAX_SPP}
+           "noise_target_delta_e76": TARGET_NOISE_DE76, "spp_pilot": PILOT_SPP, "spp_max": MAX_SPP,
+           **lighting.describe()}
     colours = {"target": target}
     rseed = EVAL_SEED_OFFSET + int(seed)
 
@@ -161,7 +167,7 @@ def evaluate_run(path, spp: int | None = DEFAULT_SPP, seed: int = 0, method: str
         return {**prediction_metrics(loss, ad.rgb, ad.var), "spp": ad.spp, "spp_passes": ad.passes}
 
     t0 = time.perf_counter()
-    renderer = Renderer(vol, threads)
+    renderer = Renderer(vol, threads, lighting)
 
     def continuous(n: int, s: int):
         r = renderer.render(stex, n, s, progress=log is not None)
@@ -194,7 +200,7 @@ def evaluate_run(path, spp: int | None = DEFAULT_SPP, seed: int = 0, method: str
 
         def render(n: int, s: int):
             rgb, var, spp_p, _, n_p = render_printed(labels_vol, stex, vol.voxel_mm, kind, n, s, threads,
-                                                     progress=log is not None)
+                                                     progress=log is not None, lighting=lighting)
             info["spp_printer"] += spp_p
             out["printer_texels"] = n_p
             return rgb, var, spp_p

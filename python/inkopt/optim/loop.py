@@ -19,6 +19,7 @@ import numpy as np
 
 from ..color import delta_e76
 from ..io import save_npz
+from ..lighting import Lighting, load_lighting
 from ..loss import TexelLoss
 from ..model import Texels, Volume, mix_grad
 from ..render import Renderer
@@ -63,13 +64,15 @@ class Optimization:
 
     base: a mixture Volume giving the geometry and ink table (its mixture is ignored); texels and target_rgb
     (I, 3) linear; fixed_share (z, y, x, N) float32 or None; ``baseline(kind)`` -> (z, y, x, N) mixture of a
-    print-shop baseline, needed only for ``cfg.init`` "surface" or "extrusion" (the run driver supplies it).
+    print-shop baseline, needed only for ``cfg.init`` "surface" or "extrusion" (the run driver supplies it);
+    ``lighting``: the display lighting the prediction is rendered under (``inkopt.lighting``; default uniform).
     """
 
     def __init__(self, base: Volume, texels: Texels, target_rgb: np.ndarray, cfg: OptimizeConfig,
                  fixed_share: np.ndarray | None = None, threads: int | None = None,
-                 baseline: Callable[[str], np.ndarray] | None = None):
+                 baseline: Callable[[str], np.ndarray] | None = None, lighting: Lighting | str | None = None):
         cfg.validate()
+        self.lighting = load_lighting(lighting)
         if base.inks is None:
             raise ValueError("the volume needs an ink table")
         self.base, self.texels, self.cfg, self.threads, self.baseline = base, texels, cfg, threads, baseline
@@ -107,6 +110,8 @@ class Optimization:
         d.pop("checkpoint_every")
         d.update(shape=list(self.base.shape), inks=list(self.base.inks.names), texels=len(self.texels),
                  free=self.param.n_free)
+        if not self.lighting.uniform:
+            d["lighting"] = self.lighting.key()
         return json.dumps(d, sort_keys=True)
 
     def save_checkpoint(self, path: Path) -> None:
@@ -133,7 +138,7 @@ class Optimization:
     def renderer(self) -> Renderer:
         """The run's renderer, set to the current mixture."""
         if self._renderer is None:
-            self._renderer = Renderer(self.volume(), self.threads)
+            self._renderer = Renderer(self.volume(), self.threads, self.lighting)
         else:
             self._renderer.set_volume(self.volume())
         return self._renderer
