@@ -7,8 +7,10 @@
 //! Modules: `scene` (geometry, media, texels), `light` (the `Light` trait: uniform light, environment maps),
 //! `grid` (locating points, voxel traversal, exit distances, periodic wrap), `flight` (the free-flight
 //! samplers), `trace` (the scalar walk), `packet` (eight paths per core in SIMD lanes), `render` (parallel
-//! drivers and gradient buffers), `rng` (counter-based random numbers), `sampling` (phase function, Fresnel).
+//! drivers and gradient buffers), `rng` (counter-based random numbers), `sampling` (phase function, Fresnel),
+//! `diffuse` (3D vector error diffusion of ink mixtures to one ink per printer voxel).
 
+pub mod diffuse;
 mod flight;
 mod grid;
 pub mod light;

@@ -41,7 +41,8 @@ def register_cli(sub) -> None:
                                    "DPI, 27 um layers by default) and write DIR/quantized.npz.")
     p.add_argument("dir", help="run directory holding volume.npz")
     p.add_argument("--method", default="blue-noise",
-                   help="blue-noise (ordered dithering, default) or random (the paper's independent draws)")
+                   help="blue-noise (ordered dithering, default), random (the paper's independent draws) or "
+                        "error-diffusion (deterministic 3D vector error diffusion)")
     p.add_argument("--dpi", help="printer resolution XxY or XxYxZ dots per inch (default 600x300)")
     p.add_argument("--layer-um", type=float, help=f"layer thickness in um (default {DEFAULT_LAYER_UM:g})")
     p.add_argument("--seed", type=int, default=0, help="random draws / blue-noise tile offset (default 0)")

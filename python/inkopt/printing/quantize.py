@@ -12,8 +12,18 @@ to the printer grid and gives every printer voxel exactly one ink:
   whose share equals its mixture weight, and because the thresholds of neighbouring voxels are spread evenly,
   the local ink fractions match the mixture much more closely than independent draws (the error is pushed to
   high spatial frequencies, which the scattering medium low-passes).
+- ``error-diffusion``: deterministic 3D vector error diffusion (``inkopt_core::diffuse``, in Rust). Printer
+  voxels are visited layer by layer (z up), rows in y, each row serpentine in x (direction alternating with
+  ``y + z``); each takes the ink with the largest component of its corrected mixture (mixture + carried error,
+  i.e. the nearest one-hot vector) and passes the residual (corrected mixture - one-hot) to unvisited
+  neighbours: 7/8 in its layer with Floyd–Steinberg's proportions (49, 21, 35, 7)/128, 1/8 to the next layer
+  (8/128 straight down, 2/128 to each of that voxel's four xy neighbours; the weights and the measurements that
+  chose them are in crates/core/src/diffuse.rs). Weights are renormalised over neighbours
+  inside the object; outside voxels neither take nor pass error. The ink counts of any window differ from its
+  summed mixture only by the residuals crossing its boundary (each bounded: within [-1/2, 1/2] for two inks).
+  ``seed`` is unused.
 
-Both methods use the same inverse-CDF rule with a threshold ``t`` in [0, 1): uniform random numbers make it an
+The first two use the same inverse-CDF rule with a threshold ``t`` in [0, 1): uniform random numbers make it an
 exact draw from the mixture, the blue-noise array makes it ordered dithering.
 
 Upsampling (``upsample``): ``nearest`` (default, as the paper) gives every printer voxel the mixture of the
@@ -22,7 +32,8 @@ optimisation voxel centres (normalised over voxels inside the object, so empty s
 ``inside`` mask is always upsampled by nearest; printer voxels outside get label ``EMPTY`` (255).
 
 Memory: the printer grid is processed one layer at a time; only the xy-upsampled cumulative mixture of one or
-two optimisation layers (N × Y × X float32) exists at a time, never the full upsampled float volume.
+two optimisation layers (N × Y × X float32) exists at a time, never the full upsampled float volume (error
+diffusion adds the carried error of this and the next printer layer, 2 × Y × X × N float32).
 
 Conventions (docs/conventions.md): arrays (z, y, x[, ink]); ``voxel_mm`` and ``dpi`` are (x, y, z).
 """
@@ -34,7 +45,7 @@ from ..model import EMPTY, MAX_VOLUME_BYTES, Quantization, Volume
 from ..units import MM_PER_INCH, PRINTER_DPI, PRINTER_LAYER_UM
 from .dither import load_blue_noise
 
-METHODS = ("blue-noise", "random")
+METHODS = ("blue-noise", "random", "error-diffusion")
 UPSAMPLE = ("nearest", "linear")
 DEFAULT_DPI = PRINTER_DPI
 DEFAULT_LAYER_UM = PRINTER_LAYER_UM
@@ -94,11 +105,12 @@ def quantize(mixture, voxel_mm, *, method: str = "blue-noise", dpi=DEFAULT_DPI, 
 
     mixture  float (z, y, x, N), non-negative; rows are normalised to sum 1 (rows inside must have a positive sum)
     voxel_mm (x, y, z) mm of the optimisation grid
-    method   "blue-noise" (ordered dithering, default) or "random" (the paper's independent draws)
+    method   "blue-noise" (ordered dithering, default), "random" (the paper's independent draws) or
+             "error-diffusion" (deterministic 3D vector error diffusion)
     dpi      printer (x, y) or (x, y, z) DPI; z None -> ``layer_um`` (µm per layer)
     inside   optional bool (z, y, x); printer voxels whose enclosing optimisation voxel is outside get 255
     seed     ``default_rng(seed)``: the random draws (one layer after the other, so the result does not depend on
-             any chunking), or the toroidal offset of the blue-noise tile
+             any chunking), or the toroidal offset of the blue-noise tile; unused by error diffusion
     upsample "nearest" (enclosing voxel) or "linear" (trilinear between voxel centres, inside voxels only)
     Returns ``(labels uint8 (Z, Y, X), voxel_mm_printer (3,) float64 (x, y, z))``; label = ink index, 255 = empty.
     """
@@ -139,7 +151,7 @@ def quantize(mixture, voxel_mm, *, method: str = "blue-noise", dpi=DEFAULT_DPI, 
 
         def thresholds(k):
             return tile[(k + oz) % tz][ty_idx, tx_idx]
-    else:
+    elif method == "random":
         def thresholds(k):
             return rng.random((Y, X), dtype=np.float32)
 
@@ -167,13 +179,25 @@ def quantize(mixture, voxel_mm, *, method: str = "blue-noise", dpi=DEFAULT_DPI, 
         cache[z] = np.ascontiguousarray(out, dtype=np.float32)
         return cache[z]
 
+    def inside_p(k: int) -> np.ndarray:
+        """Printer layer k's inside mask (nearest), bool (Y, X); all False past the last layer."""
+        if k >= Z:
+            return np.zeros((Y, X), bool)
+        if inside is None:
+            return np.ones((Y, X), bool)
+        return inside[enc[0][k]][enc[1][:, None], enc[2][None, :]]
+
     labels = np.empty(shape_p, np.uint8)
+    error = np.zeros((2, Y, X, n_inks), np.float32) if method == "error-diffusion" else None
     for k in range(Z):
         if lin is None:
             c = layer_cum(int(enc[0][k]))
         else:
             z0, z1, wz = (a[k] for a in lin[0])
             c = layer_cum(int(z0)) * (1 - wz) + layer_cum(int(z1)) * wz
+        if error is not None:
+            _diffuse(c, inside_p(k), inside_p(k + 1), error, k, labels[k])
+            continue
         t = thresholds(k)
         if lin is not None:
             t = t * c[-1]  # normalise by the interpolated inside weight (t * w >= c_n  <=>  t >= c_n / w)
@@ -181,9 +205,21 @@ def quantize(mixture, voxel_mm, *, method: str = "blue-noise", dpi=DEFAULT_DPI, 
         for n in range(n_inks - 1):
             lab += t >= c[n]
         if inside is not None:
-            lab[~inside[enc[0][k]][enc[1][:, None], enc[2][None, :]]] = EMPTY
+            lab[~inside_p(k)] = EMPTY
         labels[k] = lab
     return labels, vp
+
+
+def _diffuse(cum, inside_k, inside_next, error, k: int, out) -> None:
+    """Error-diffuse printer layer k in Rust: ``cum`` (N, Y, X) cumulative mixture whose last entry is the
+    (interpolated) inside weight; ``error`` (2, Y, X, N) float32 carried error; writes the labels into ``out``."""
+    from .. import _core
+
+    w = cum[-1]
+    mix = np.diff(cum, axis=0, prepend=np.zeros((1,) + w.shape, np.float32))
+    mix /= np.where(w > 0, w, 1.0).astype(np.float32)
+    _core.diffuse_layer(np.ascontiguousarray(mix, np.float32), inside_k.view(np.uint8),
+                        inside_next.view(np.uint8), error, int(k), out)
 
 
 def ink_fractions(labels, n_inks: int, shape_opt, voxel_mm_opt, voxel_mm_printer):
