@@ -6,8 +6,9 @@ they ask a :class:`RunDir`.
 
 ``scene.npz`` is typed as a :class:`SceneRecord`: the sensor (texels), the targets, how the slab's faces map to
 pictures, and the optimisation's constraints (``free_mask``, ``fixed_share``). Large objects store only
-``free_mask``; :meth:`SceneRecord.fixed_share` rebuilds the dense shares from it, so every reader sees the same
-constraints however the file stores them.
+``free_mask``; :meth:`SceneRecord.fixed_share` rebuilds the dense shares from it and from the translucency
+constraint (:class:`Translucency`, stored sparsely), so every reader sees the same constraints however the file
+stores them.
 """
 from __future__ import annotations
 
@@ -32,6 +33,82 @@ def white_fixed_share(free: np.ndarray, inks: InkTable) -> np.ndarray:
     fixed = np.zeros(free.shape + (len(inks),), np.float32)
     fixed[..., inks.index("white")] = ~free
     return fixed
+
+
+TRANSPARENT_INKS = ("transparent", "clear")  # ink names that count as the transparent ink
+
+
+def transparent_ink(inks: InkTable) -> str:
+    """The name of the ink set's transparent ink; one-line ValueError if it has none."""
+    for name in TRANSPARENT_INKS:
+        if name in inks.names:
+            return name
+    raise ValueError(f"--translucency needs a transparent ink ('transparent' or 'clear') in the ink set, but "
+                     f"{list(inks.names)} has none; use e.g. --inks vero-cmykwt")
+
+
+@dataclass
+class Translucency:
+    """A translucency constraint: the voxels ``index`` ((K,) int64, flat C-order indices of the (z, y, x) grid
+    ``shape``) must hold the share ``share`` ((K,) float32 in (0, 1]) of ink ``ink`` (the transparent ink); the
+    optimiser chooses the rest of their mixture. ``depth_mm``: how deep below the surface it reaches (None: the
+    whole object); ``source``: the mask file or "alpha" (a mesh texture's alpha channel)."""
+
+    ink: str
+    shape: tuple
+    index: np.ndarray
+    share: np.ndarray
+    depth_mm: float | None = None
+    source: str = ""
+
+    def __post_init__(self):
+        self.shape = tuple(int(v) for v in self.shape)
+        self.index = np.asarray(self.index, np.int64).reshape(-1)
+        self.share = np.asarray(self.share, np.float32).reshape(-1)
+
+    def grid(self) -> np.ndarray:
+        """(z, y, x) float32: the required transparent share of every voxel (0: unconstrained)."""
+        out = np.zeros(self.shape, np.float32)
+        out.reshape(-1)[self.index] = self.share
+        return out
+
+    def texel_share(self, texels: Texels) -> np.ndarray:
+        """(I,) float32: the required share at each texel's voxel."""
+        return self.grid()[tuple(np.asarray(texels.voxel).T)]
+
+    def apply(self, fixed: np.ndarray, inks: InkTable) -> np.ndarray:
+        """Set the constrained voxels' transparent share in ``fixed`` (z, y, x, N) float32 (in place; returned).
+        Their other fixed shares (the white of a core or outside voxel) shrink to make room: a voxel that was
+        100 % white becomes ``share`` transparent + (1 - ``share``) white; free voxels keep no other fixed share.
+        Idempotent."""
+        if fixed.shape[:3] != self.shape:
+            raise ValueError(f"translucency constraint is for a {self.shape} grid, not {fixed.shape[:3]}")
+        if self.ink not in inks.names:
+            raise ValueError(f"the translucency constraint needs ink '{self.ink}', not in {list(inks.names)}")
+        t = inks.index(self.ink)
+        flat = fixed.reshape(-1, len(inks))
+        rows = flat[self.index]
+        rows[:, t] = 0.0
+        other = rows.sum(1)
+        room = 1.0 - self.share
+        rows *= np.where(other > room, room / np.maximum(other, 1e-12), 1.0)[:, None]
+        rows[:, t] = self.share
+        flat[self.index] = rows
+        return fixed
+
+    def arrays(self) -> dict:
+        return {"translucency_ink": np.array(self.ink), "translucency_shape": np.array(self.shape, np.int64),
+                "translucency_index": self.index, "translucency_share": self.share,
+                "translucency_depth_mm": np.float64(np.nan if self.depth_mm is None else self.depth_mm),
+                "translucency_source": np.array(self.source)}
+
+    @classmethod
+    def from_arrays(cls, d) -> "Translucency | None":
+        if "translucency_index" not in d:
+            return None
+        depth = float(d["translucency_depth_mm"])
+        return cls(str(d["translucency_ink"]), tuple(np.asarray(d["translucency_shape"])), d["translucency_index"],
+                   d["translucency_share"], None if np.isnan(depth) else depth, str(d["translucency_source"]))
 
 
 @dataclass
@@ -68,7 +145,8 @@ class SceneRecord:
     kind: "slab" or "mesh"; texels: the sensor; target_rgb (I, 3) float32 linear; faces: the textured faces of a
     slab (e.g. ["bottom", "top"]) with pix[F] (H, W) int32 the texel index at each picture pixel (row 0 = top);
     free_mask (z, y, x) bool: the voxels the optimiser may change (None: decided by fixed_share alone);
-    fixed_share_dense (z, y, x, N) float32 or None; mesh: a mesh run's MeshInfo.
+    fixed_share_dense (z, y, x, N) float32 or None (includes the translucency); mesh: a mesh run's MeshInfo;
+    translucency: the translucency constraint (:class:`Translucency`) or None.
     """
 
     kind: str
@@ -79,6 +157,7 @@ class SceneRecord:
     free_mask: np.ndarray | None = None
     fixed_share_dense: np.ndarray | None = None
     mesh: MeshInfo | None = None
+    translucency: Translucency | None = None
 
     def __post_init__(self):
         self.target_rgb = np.asarray(self.target_rgb, np.float32)
@@ -88,13 +167,19 @@ class SceneRecord:
 
     def fixed_share(self, inks: InkTable, shape=None) -> np.ndarray | None:
         """(z, y, x, N) float32 fixed ink shares: stored densely, or rebuilt from ``free_mask`` (100 % white
-        wherever the mask is False), or None if the scene has no constraints. ``shape`` (z, y, x) checks it."""
+        wherever the mask is False) and the translucency constraint, or None if the scene has no constraints.
+        ``shape`` (z, y, x) checks it."""
+        tr = self.translucency
         if self.fixed_share_dense is not None:
             fixed = np.asarray(self.fixed_share_dense, np.float32)
         elif self.free_mask is not None:
             fixed = white_fixed_share(np.asarray(self.free_mask, bool), inks)
+        elif tr is not None:
+            fixed = np.zeros(tr.shape + (len(inks),), np.float32)
         else:
             return None
+        if tr is not None and self.fixed_share_dense is None:
+            tr.apply(fixed, inks)
         if fixed.shape[-1] != len(inks) or (shape is not None and fixed.shape[:3] != tuple(shape)):
             raise ValueError(f"scene fixed_share has shape {fixed.shape}, expected {tuple(shape or ())} x "
                              f"{len(inks)} inks")
@@ -111,6 +196,8 @@ class SceneRecord:
             out["fixed_share"] = self.fixed_share_dense
         if self.mesh is not None:
             out.update(self.mesh.arrays())
+        if self.translucency is not None:
+            out.update(self.translucency.arrays())
         return out
 
     @classmethod
@@ -123,7 +210,8 @@ class SceneRecord:
         return cls(kind, Texels.from_arrays(d), d["target_rgb"], faces,
                    {f: np.asarray(d[f"pix_{f}"]) for f in faces if f"pix_{f}" in d},
                    np.asarray(d["free_mask"], bool) if "free_mask" in d else None,
-                   d.get("fixed_share"), MeshInfo.from_arrays(d) if kind == "mesh" and "mesh_path" in d else None)
+                   d.get("fixed_share"), MeshInfo.from_arrays(d) if kind == "mesh" and "mesh_path" in d else None,
+                   Translucency.from_arrays(d))
 
 
 class RunDir:

@@ -33,6 +33,22 @@ def add_lighting_args(p, what: str = "render") -> None:
                    help="turn the map about z by DEG degrees, from +x towards +y (default 0)")
 
 
+def add_translucency_args(p, mesh: bool = False) -> None:
+    """``--translucency`` and ``--translucency-depth-mm`` (``inkopt.scenes.translucency``)."""
+    if mesh:
+        p.add_argument("--translucency", metavar="alpha|MASK",
+                       help="translucent regions: 'alpha' (share of transparent ink = 1 - the texture's alpha) or a "
+                            "grey mask image in texture space (grey level 0..1 = share); needs a transparent ink")
+    else:
+        p.add_argument("--translucency", metavar="MASK",
+                       help="translucent regions: a grey mask image of the top picture's size (grey level 0..1 = "
+                            "required share of transparent ink under that pixel); needs a transparent ink "
+                            "(e.g. --inks vero-cmykwt)")
+    p.add_argument("--translucency-depth-mm", type=float, metavar="D",
+                   help="how deep below the surface the translucent regions reach (default: through the whole "
+                        + ("object)" if mesh else "slab)"))
+
+
 def lighting_from_args(args):
     from ..lighting import load_lighting
 

@@ -4,22 +4,25 @@ from __future__ import annotations
 import sys
 
 from ..units import OPT_DPI
-from .common import add_optimizer_args, config_from_args, lighting_from_args, print_run_summary, stderr_log
+from .common import (add_optimizer_args, add_translucency_args, config_from_args, lighting_from_args,
+                     print_run_summary, stderr_log)
 
 
 def _optimize(args) -> int:
     from ..model import InkTable
-    from ..run import run_mesh
+    from ..run import run_optimisation
+    from ..scenes.mesh import build_mesh_scene
 
     if (args.height_mm is None) == (args.scale is None):
         raise ValueError("give exactly one of --height-mm H (the object's height in mm) and --scale S "
                          "(mm per model unit)")
     inks = InkTable.parse(args.inks)
     cfg = config_from_args(args)
-    rep = run_mesh(args.mesh, args.out, inks, cfg, height_mm=args.height_mm, scale=args.scale,
-                   shell_mm=args.shell_mm, dpi=args.dpi, up=args.up, resume=args.resume, eval_spp=args.eval_spp,
-                   threads=args.threads, progress=sys.stderr.isatty(), lighting=lighting_from_args(args),
-                   log=stderr_log)
+    lighting = lighting_from_args(args)
+    scene = build_mesh_scene(args.mesh, inks, args.height_mm, args.scale, args.shell_mm, args.dpi, args.up,
+                             args.translucency, args.translucency_depth_mm)
+    rep = run_optimisation(scene, args.out, cfg, resume=args.resume, eval_spp=args.eval_spp, threads=args.threads,
+                           progress=sys.stderr.isatty(), lighting=lighting, log=stderr_log)
     print_run_summary(rep, args.init, f" (peak memory {rep['peak_rss_gb']:.1f} GiB)")
     print(f"views: {args.out}/views.png, {args.out}/prediction.glb; report: {args.out}/report.json")
     return 0
@@ -38,5 +41,6 @@ def register_cli(sub) -> None:
                    help="optimise only voxels less than D mm below the surface; deeper ones are printed white "
                         "(default: every voxel of the object is optimised)")
     p.add_argument("--dpi", type=float, default=OPT_DPI, help=f"optimisation grid resolution (default {OPT_DPI:g})")
+    add_translucency_args(p, mesh=True)
     add_optimizer_args(p)
     p.set_defaults(func=_optimize)

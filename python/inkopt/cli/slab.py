@@ -3,19 +3,23 @@ from __future__ import annotations
 
 import sys
 
-from .common import add_optimizer_args, config_from_args, lighting_from_args, print_run_summary, stderr_log
+from .common import (add_optimizer_args, add_translucency_args, config_from_args, lighting_from_args,
+                     print_run_summary, stderr_log)
 
 
 def _slab(args) -> int:
     from ..model import InkTable
-    from ..run import run_slab
+    from ..run import run_optimisation
+    from ..scenes.slab import load_slab
     from ..units import parse_size_mm
 
     inks = InkTable.parse(args.inks)
     cfg = config_from_args(args)
-    rep = run_slab(args.top, args.bottom, parse_size_mm(args.size_mm), args.out, inks, cfg, resume=args.resume,
-                   eval_spp=args.eval_spp, threads=args.threads, progress=sys.stderr.isatty(),
-                   lighting=lighting_from_args(args), log=stderr_log)
+    lighting = lighting_from_args(args)
+    scene = load_slab(args.top, args.bottom, parse_size_mm(args.size_mm), inks, translucency=args.translucency,
+                      translucency_depth_mm=args.translucency_depth_mm)
+    rep = run_optimisation(scene, args.out, cfg, resume=args.resume, eval_spp=args.eval_spp, threads=args.threads,
+                           progress=sys.stderr.isatty(), lighting=lighting, log=stderr_log)
     print_run_summary(rep, args.init)
     print(f"pictures: {args.out}/face_*.png, {args.out}/loss.png; report: {args.out}/report.json")
     return 0
@@ -29,5 +33,6 @@ def register_cli(sub) -> None:
     p.add_argument("--bottom", metavar="IMAGE", help="picture of the bottom face (seen from below, like a page's back)")
     p.add_argument("--size-mm", required=True, help="WxHxD in mm, e.g. 15x10x2.5 (must match the picture's aspect)")
     p.add_argument("--out", required=True, metavar="DIR", help="run directory (see docs/run-dir.md)")
+    add_translucency_args(p)
     add_optimizer_args(p)
     p.set_defaults(func=_slab)

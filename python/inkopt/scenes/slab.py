@@ -4,6 +4,9 @@ Picture orientation: the top picture is the slab seen from above (row 0 = larges
 The bottom picture is the slab seen from below after turning it over about the y axis, like the back of a page:
 row 0 = largest y, column 0 = **largest** x. Pictures are sRGB; they are resampled in linear light to the face's
 texel grid (one texel per voxel face, 300 DPI by default) with anti-aliasing.
+
+Translucency (``translucency``: a mask of the top picture's size, ``scenes.translucency``): the voxels under the
+masked texels, down to ``translucency_depth_mm``, hold the mask's share of transparent ink as a fixed share.
 """
 from __future__ import annotations
 
@@ -15,8 +18,9 @@ import numpy as np
 from ..color import srgb_to_linear
 from ..model import InkTable, Texels, Volume
 from ..pictures import error_figure
-from ..rundir import SceneRecord
+from ..rundir import SceneRecord, Translucency, transparent_ink
 from ..units import OPT_DPI, voxel_mm
+from .translucency import check_depth, load_mask, slab_translucency, translucency_fields
 
 ASPECT_TOLERANCE = 0.02  # relative mismatch of picture and face aspect ratios allowed (resampling rounding)
 
@@ -53,11 +57,17 @@ class SlabScene:
     faces: list[str]          # textured faces, texel order: "bottom" (if any) then "top"
     pix: dict                 # face -> (H, W) int32 texel index per picture pixel
     size_mm: tuple = ()       # (W, H, D)
+    translucency: Translucency | None = None
     kind = "slab"
-    fixed_share = None
+
+    @property
+    def fixed_share(self) -> np.ndarray | None:
+        """(z, y, x, N) float32: the translucency constraint's transparent shares, or None."""
+        return self.record().fixed_share(self.volume.inks, self.volume.shape)
 
     def record(self) -> SceneRecord:
-        return SceneRecord("slab", self.texels, self.target_rgb, list(self.faces), dict(self.pix))
+        return SceneRecord("slab", self.texels, self.target_rgb, list(self.faces), dict(self.pix),
+                           translucency=self.translucency)
 
     def describe(self) -> str:
         nz, ny, nx = self.volume.shape
@@ -66,7 +76,7 @@ class SlabScene:
 
     def report_fields(self) -> dict:
         return {"voxels": int(np.prod(self.volume.shape)), "texels": len(self.texels),
-                "size_mm": [float(v) for v in self.size_mm]}
+                "size_mm": [float(v) for v in self.size_mm], **translucency_fields(self.translucency)}
 
     def write_pictures(self, out: Path, pred_rgb: np.ndarray, delta_e: np.ndarray) -> list[Path]:
         """DIR/face_F.png: target | prediction | ΔE76 heat map, per textured face."""
@@ -75,8 +85,11 @@ class SlabScene:
 
 
 def build_slab(top: np.ndarray, bottom: np.ndarray | None, size_mm, inks: InkTable,
-               dpi: float = OPT_DPI) -> SlabScene:
-    """top, bottom: (H, W, 3) linear pictures; size_mm (W, H, D)."""
+               dpi: float = OPT_DPI, translucency: np.ndarray | None = None,
+               translucency_depth_mm: float | None = None, translucency_source: str = "") -> SlabScene:
+    """top, bottom: (H, W, 3) linear pictures; size_mm (W, H, D); translucency: (H, W) mask of transparent-ink
+    shares in the top picture's pixels (``scenes.translucency``), down to ``translucency_depth_mm`` (None: the
+    whole slab)."""
     w_mm, h_mm, d_mm = size_mm
     vox = voxel_mm(dpi)
     nx, ny, nz = (max(1, int(round(v / vox))) for v in (w_mm, h_mm, d_mm))
@@ -103,11 +116,22 @@ def build_slab(top: np.ndarray, bottom: np.ndarray | None, size_mm, inks: InkTab
     mixture = np.zeros((nz, ny, nx, len(inks)), np.float32)
     mixture[..., inks.index("white") if "white" in inks.names else 0] = 1.0
     vol = Volume(voxel_mm=(vox, vox, vox), mixture=mixture, inks=inks)
-    return SlabScene(vol, texels, np.clip(target, 0.0, 1.0), faces, pix, tuple(size_mm))
+    tr = None
+    if translucency is not None:
+        tr = slab_translucency(translucency, top.shape[:2], (nz, ny, nx), vox, inks, translucency_depth_mm,
+                               translucency_source)
+    return SlabScene(vol, texels, np.clip(target, 0.0, 1.0), faces, pix, tuple(size_mm), tr)
 
 
-def load_slab(top_path, bottom_path, size_mm, inks: InkTable, dpi: float = OPT_DPI) -> SlabScene:
-    """A slab scene from picture files (``bottom_path`` may be None); size_mm (W, H, D)."""
+def load_slab(top_path, bottom_path, size_mm, inks: InkTable, dpi: float = OPT_DPI, translucency=None,
+              translucency_depth_mm: float | None = None) -> SlabScene:
+    """A slab scene from picture files (``bottom_path`` may be None); size_mm (W, H, D); ``translucency``: a
+    mask file (``scenes.translucency.load_mask``) or None."""
+    mask = None
+    if translucency is not None:
+        transparent_ink(inks)
+        check_depth(translucency_depth_mm)
+        mask = load_mask(translucency)
     top = load_picture(top_path)
     bottom = load_picture(bottom_path) if bottom_path else None
-    return build_slab(top, bottom, size_mm, inks, dpi)
+    return build_slab(top, bottom, size_mm, inks, dpi, mask, translucency_depth_mm, str(translucency or ""))

@@ -37,6 +37,7 @@ class TexturedMesh:
     convention: v = 0 at the image's bottom row; wrap mode repeat) and multiplied by ``tint`` (3,) linear (glTF
     baseColorFactor; 1 for OBJ, whose Kd is ignored when a map_Kd exists); ``vertex_colors`` (V, 3) float32
     sRGB; ``face_colors`` (F, 3) float32 sRGB; else the constant ``color`` (3,) float32 sRGB.
+    ``texture_alpha``: the texture's alpha channel (H, W) float32 in [0, 1] if it has one (translucency).
     """
 
     vertices: np.ndarray
@@ -51,6 +52,7 @@ class TexturedMesh:
     color: np.ndarray = field(default_factory=lambda: np.ones(3, np.float32))
     mm_per_unit: float = 1.0
     source: str = ""
+    texture_alpha: np.ndarray | None = None
 
     @property
     def color_source(self) -> str:
@@ -70,19 +72,30 @@ class TexturedMesh:
         bary = np.asarray(bary, np.float64)
         src = self.color_source
         if src == "texture":
-            uv = np.einsum("nk,nkj->nj", bary, self.uv[self.faces[fi]])
             tex = np.asarray(self.texture.convert("RGB"), np.float32) / 255.0
-            return _sample_bilinear(tex, uv) * np.asarray(self.tint, np.float32)
+            return from_srgb8(self.sample_at(tex, fi, bary)) * np.asarray(self.tint, np.float32)
         if src == "vertex":
             return from_srgb8(np.einsum("nk,nkj->nj", bary, self.vertex_colors[self.faces[fi]]))
         if src == "face":
             return from_srgb8(self.face_colors[fi])
         return np.broadcast_to(from_srgb8(self.color), (len(fi), 3)).copy()
 
+    def sample_at(self, image: np.ndarray, face_index: np.ndarray, bary: np.ndarray) -> np.ndarray:
+        """Bilinear look-up of an image in texture space (H, W[, C]) at surface points (face (n,), barycentrics
+        (n, 3)) through ``uv``: (n[, C]) values as stored (no colour decoding)."""
+        fi = np.asarray(face_index, np.int64)
+        uv = np.einsum("nk,nkj->nj", np.asarray(bary, np.float64), self.uv[self.faces[fi]])
+        return _bilinear(np.asarray(image, np.float32), uv)
 
-def _sample_bilinear(tex: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """Bilinear look-up of an sRGB texture (H, W, 3) float in [0, 1] at uv (n, 2), v up, wrap mode repeat;
-    interpolates the sRGB values, then decodes: returns linear RGB (n, 3) float32."""
+    def alpha_at(self, face_index: np.ndarray, bary: np.ndarray) -> np.ndarray:
+        """The texture's alpha (n,) float32 at surface points (1 where the texture has no alpha channel)."""
+        if self.texture_alpha is None or self.uv is None:
+            return np.ones(len(face_index), np.float32)
+        return self.sample_at(self.texture_alpha, face_index, bary)
+
+
+def _bilinear(tex: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Bilinear look-up of an image (H, W[, C]) at uv (n, 2), v up (v = 0 the bottom row), wrap mode repeat."""
     h, w = tex.shape[:2]
     x = uv[:, 0] * w - 0.5
     y = (1.0 - uv[:, 1]) * h - 0.5  # image row 0 is the top, v = 0 the bottom
@@ -90,9 +103,10 @@ def _sample_bilinear(tex: np.ndarray, uv: np.ndarray) -> np.ndarray:
     fx, fy = (x - x0)[:, None], (y - y0)[:, None]
     x0, y0 = x0.astype(np.int64) % w, y0.astype(np.int64) % h
     x1, y1 = (x0 + 1) % w, (y0 + 1) % h
-    c = (tex[y0, x0] * (1 - fx) * (1 - fy) + tex[y0, x1] * fx * (1 - fy)
-         + tex[y1, x0] * (1 - fx) * fy + tex[y1, x1] * fx * fy)
-    return from_srgb8(c)
+    if tex.ndim == 2:
+        fx, fy = fx[:, 0], fy[:, 0]
+    return (tex[y0, x0] * (1 - fx) * (1 - fy) + tex[y0, x1] * fx * (1 - fy)
+            + tex[y1, x0] * (1 - fx) * fy + tex[y1, x1] * fx * fy)
 
 
 def load_mesh(path, height_mm: float | None = None, scale: float | None = None, up: str = "y") -> TexturedMesh:
@@ -179,6 +193,8 @@ def _read_colours(tm, mesh: TexturedMesh) -> None:
         uv = getattr(vis, "uv", None)
         if img is not None and uv is not None and len(uv) == len(mesh.vertices):
             mesh.texture = img.convert("RGB")
+            if img.mode in ("RGBA", "LA", "PA") or (img.mode == "P" and "transparency" in img.info):
+                mesh.texture_alpha = np.asarray(img.convert("RGBA"), np.float32)[..., 3] / 255.0
             mesh.uv = np.array(uv, np.float64)[:, :2]
             if type(mat).__name__ == "PBRMaterial" and getattr(mat, "baseColorFactor", None) is not None:
                 mesh.tint = np.asarray(mat.baseColorFactor, np.float32)[:3] / 255.0

@@ -11,7 +11,13 @@ voxels outside the object, get a fixed share of 100 % white: the core is printed
 the renderer ignores) are not variables, so the optimiser's memory scales with the free voxels.
 
 ``scene.npz`` (``rundir.SceneRecord``) holds ``free_mask`` (z, y, x) bool (the voxels that were variables);
-the dense fixed shares only for small objects, since they equal ``one_hot(white) * ~free_mask``.
+the dense fixed shares only for small objects, since they equal ``one_hot(white) * ~free_mask`` plus the
+translucency constraint, which it stores sparsely.
+
+Translucency (``translucency``: "alpha" for the texture's alpha channel, or a mask in texture space;
+``scenes.translucency``): inside voxels within ``translucency_depth_mm`` of the surface (None: all) hold their
+nearest texel's share of transparent ink as a fixed share; a white core voxel that a region reaches becomes that
+share of transparent and the rest white.
 """
 from __future__ import annotations
 
@@ -22,8 +28,10 @@ from pathlib import Path
 import numpy as np
 
 from ...model import InkTable, Volume
-from ...rundir import MeshInfo, SceneRecord, white_fixed_share
+from ...rundir import MeshInfo, SceneRecord, Translucency, transparent_ink, white_fixed_share
 from ...units import OPT_DPI, voxel_mm
+from ..translucency import (ALPHA, check_depth, check_mask, load_mask, mesh_texel_share, mesh_translucency,
+                            translucency_fields)
 from .load import TexturedMesh, load_mesh
 from .views import bake_vertex_colors, render_views, write_glb
 from .voxelize import VoxelizedObject, voxelize
@@ -63,6 +71,7 @@ class MeshScene:
 
     mesh_path: str = ""
     up: str = "y"
+    translucency: Translucency | None = None
     kind = "mesh"
 
     @property
@@ -82,7 +91,7 @@ class MeshScene:
         info = MeshInfo(self.mesh_path, float(self.mesh.mm_per_unit), self.height_mm, self.up, vox.origin_mm,
                         vox.voxel_mm, vox.closest_mm, self.shell_mm)
         return SceneRecord("mesh", vox.texels, vox.targets, free_mask=self.free, fixed_share_dense=self.fixed_share,
-                           mesh=info)
+                           mesh=info, translucency=self.translucency)
 
     def describe(self) -> str:
         nz, ny, nx = self.volume.shape
@@ -96,7 +105,7 @@ class MeshScene:
                 "free_voxels": int(self.free.sum()), "texels": len(self.texels),
                 "voxelize_seconds": self.voxelize_seconds, "shell_mm": self.shell_mm, "height_mm": self.height_mm,
                 "mesh_scale": self.mesh.mm_per_unit, "mesh_path": self.mesh_path,
-                "voxel_mm": [float(v) for v in self.volume.voxel_mm]}
+                "voxel_mm": [float(v) for v in self.volume.voxel_mm], **translucency_fields(self.translucency)}
 
     def write_pictures(self, out: Path, pred_rgb: np.ndarray, delta_e: np.ndarray | None = None,
                        views: int = 4, size: int | None = None) -> list[Path]:
@@ -113,8 +122,11 @@ class MeshScene:
 
 
 def build_mesh_scene(mesh_path, inks: InkTable, height_mm: float | None = None, scale: float | None = None,
-                     shell_mm: float | None = None, dpi: float = OPT_DPI, up: str = "y") -> MeshScene:
-    """Load and voxelize ``mesh_path``; exactly one of ``height_mm`` and ``scale`` (mm per model unit)."""
+                     shell_mm: float | None = None, dpi: float = OPT_DPI, up: str = "y", translucency=None,
+                     translucency_depth_mm: float | None = None) -> MeshScene:
+    """Load and voxelize ``mesh_path``; exactly one of ``height_mm`` and ``scale`` (mm per model unit).
+    ``translucency``: None, "alpha" (the texture's alpha channel) or a mask (file or (H, W) array) in texture
+    space; ``translucency_depth_mm``: its depth below the surface (None: the whole object)."""
     if (height_mm is None) == (scale is None):
         raise ValueError("give exactly one of --height-mm and --scale")
     if not (np.isfinite(dpi) and dpi > 0):
@@ -123,18 +135,33 @@ def build_mesh_scene(mesh_path, inks: InkTable, height_mm: float | None = None, 
         white_fixed_share(np.ones((1, 1, 1), bool), inks)  # raises the one-line error before the slow part
     if shell_mm is not None and not (np.isfinite(shell_mm) and shell_mm > 0):
         raise ValueError(f"--shell-mm must be a positive thickness in mm, got {shell_mm}")
+    mask = None
+    if translucency is not None:
+        transparent_ink(inks)
+        translucency_depth_mm = check_depth(translucency_depth_mm)
+        mask = None if isinstance(translucency, str) and translucency == ALPHA else (
+            check_mask(translucency) if isinstance(translucency, np.ndarray) else load_mask(translucency))
     t0 = time.perf_counter()
     mesh = load_mesh(mesh_path, height_mm=height_mm, scale=scale, up=up)
     vmm = voxel_mm(dpi)
-    # The SDF is exact only within ``band`` voxels of the surface; the shell's boundary must lie inside it.
-    band = 3.0 if shell_mm is None else max(3.0, np.ceil(shell_mm / vmm) + 2.0)
+    # The SDF is exact only within ``band`` voxels of the surface; the shell's and the translucent regions'
+    # boundaries must lie inside it.
+    band = 3.0
+    for d in (shell_mm, translucency_depth_mm if translucency is not None else None):
+        band = band if d is None else max(band, np.ceil(d / vmm) + 2.0)
     vox = voxelize(mesh, voxel_mm=vmm, band=band)
     seconds = time.perf_counter() - t0
     free = free_voxels(vox, shell_mm)
     fixed = white_fixed_share(free, inks)
+    tr = None
+    if translucency is not None:  # before the SDF is dropped
+        source = ALPHA if mask is None else str(translucency if not isinstance(translucency, np.ndarray) else "mask")
+        tr = mesh_translucency(vox, mesh_texel_share(mesh, vox, mask), inks, translucency_depth_mm, source)
+        if tr is not None:
+            tr.apply(fixed, inks)
     # The base volume's mixture is ignored by the optimiser (it only gives geometry and inks): share the
     # fixed-share array instead of allocating another (z, y, x, N) array.
     vol = Volume(voxel_mm=vox.voxel_mm, mixture=fixed, inks=inks, g=inks.g, inside=vox.inside,
                  normals=vox.normals, boundary="box", origin_mm=vox.origin_mm)
     vox.sdf = None  # 4 bytes per grid voxel no longer needed
-    return MeshScene(mesh, vox, vol, free, fixed, shell_mm, seconds, str(Path(mesh_path).resolve()), up)
+    return MeshScene(mesh, vox, vol, free, fixed, shell_mm, seconds, str(Path(mesh_path).resolve()), up, tr)
