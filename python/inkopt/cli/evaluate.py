@@ -21,7 +21,9 @@ def _evaluate_cmd(args) -> int:
     log = None if args.json else (lambda msg: print(msg, file=sys.stderr, flush=True))
     ev = evaluate_run(args.dir, spp=args.spp, seed=args.seed, method=args.method, threads=args.threads,
                       baselines=not args.no_baselines, refine=not args.nearest, patch_mm=args.patch_mm,
-                      lighting=lighting_from_args(args), log=log)
+                      lighting=lighting_from_args(args), log=log,
+                      translucency=False if args.no_translucency else None,
+                      translucency_compare=args.translucency_compare)
     if args.json:
         print(json.dumps(ev))
     else:
@@ -53,5 +55,10 @@ def register_cli(sub) -> None:
                    help="baselines: nearest colour-table entry instead of the blend of the 8 nearest")
     p.add_argument("--no-baselines", action="store_true", help="skip the baselines")
     p.add_argument("--json", action="store_true", help="print the evaluation as one JSON object, no progress")
+    p.add_argument("--translucency-compare", metavar="DIR2",
+                   help="also measure the translucency of DIR2 (an unconstrained run of the same target) on DIR's "
+                        "translucent regions, beside DIR's own")
+    p.add_argument("--no-translucency", action="store_true",
+                   help="skip the translucency figures (transmittance, lateral spread) of a constrained run")
     add_lighting_args(p, "evaluate")
     p.set_defaults(func=_evaluate_cmd)

@@ -26,6 +26,10 @@ scene texel, all passes), ``spp_passes``. With the baselines, ``gamut_floor_delt
 the ΔE76 from the target to the nearest colour a thick homogeneous patch of the inks reaches
 (``ColourTable.reachable_lab``).
 
+Translucency (``evaluation.translucency``): when the scene has a translucency constraint or ``translucency_compare``
+names an unconstrained run of the same target, ``translucency`` holds the diffuse transmittance and lateral
+light spread per constrained region and for the whole object (and the compared run's on the same regions).
+
 Writes DIR/evaluation.json and, for slabs, DIR/evaluation_<face>.png per textured face: target | optimized |
 quantized | surface | extrusion (sRGB).
 """
@@ -51,6 +55,8 @@ from ..color import delta_e76
 from .colour_table import DEFAULT_PATCH_MM, ColourTable, colour_table
 from .metrics import prediction_metrics
 from .noise import EVAL_SEED_OFFSET, MAX_SPP, PILOT_SPP, TARGET_NOISE_DE76, adaptive_render
+from .translucency import evaluate_translucency
+from .translucency import table_lines as translucency_lines
 
 DEFAULT_SPP = None  # adaptive
 
@@ -134,7 +140,7 @@ def write_face_pictures(d: RunDir, rec: SceneRecord, results: dict) -> list[str]
 def evaluate_run(path, spp: int | None = DEFAULT_SPP, seed: int = 0, method: str | None = None, threads=None,
                  baselines: bool = True, refine: bool = True, patch_mm: float = DEFAULT_PATCH_MM,
                  table: ColourTable | None = None, write: bool = True, lighting: Lighting | str | None = None,
-                 log=None) -> dict:
+                 log=None, translucency: bool | None = None, translucency_compare=None) -> dict:
     """Evaluate run directory ``path`` (module docstring); returns the evaluation dict (also written to
     DIR/evaluation.json with the face pictures when ``write``). ``spp``: None = adaptive (module docstring),
     else exactly that many samples per scene texel. ``method``: quantization method of ours (when
@@ -142,7 +148,8 @@ def evaluate_run(path, spp: int | None = DEFAULT_SPP, seed: int = 0, method: str
     table: the baselines' colour table (default ``colour_table(inks, g, ior, patch_mm)``, cached).
     ``lighting``: the display lighting every result is rendered under (``inkopt.lighting``; default uniform; the
     baselines' colour table stays a uniform-light property of the inks).
-    ``log``: callable taking one progress line (default: silent)."""
+    ``log``: callable taking one progress line (default: silent). ``translucency``: measure translucency (None:
+    if the scene is constrained or ``translucency_compare``, an unconstrained run directory, is given)."""
     lighting = load_lighting(lighting)
     say = log or (lambda msg: None)
     if spp is not None and spp < 1:
@@ -177,6 +184,8 @@ def evaluate_run(path, spp: int | None = DEFAULT_SPP, seed: int = 0, method: str
     del renderer
     out["spp"] = out["continuous"]["spp"]
     say(f"continuous: {len(stex)} texels x {out['spp']} spp in {out['continuous']['seconds']:.1f} s")
+    if translucency or (translucency is None and (rec.translucency is not None or translucency_compare)):
+        out["translucency"] = evaluate_translucency(vol, rec, translucency_compare, rseed, threads, lighting, log=say)
 
     if d.has_quantized():
         qvol = d.load_quantized()
@@ -261,6 +270,8 @@ def table_lines(ev: dict) -> list[str]:
     if c.get("flat_texels"):
         lines.append(f"mottle: high-frequency L* power, (dL*)^2, on {c['flat_texels']} texels where the target is "
                      f"flat (target's own: {c['mottle_l2_target']:.2f})")
+    if "translucency" in ev:
+        lines += translucency_lines(ev["translucency"])
     if "gamut_floor_delta_e76" in ev:
         lines.append(f"gamut floor: mean dE76 from the target to the nearest colour the inks reach in a "
                      f"{ev['colour_table']['patch_mm']:g} mm patch: {ev['gamut_floor_delta_e76']:.2f}")
