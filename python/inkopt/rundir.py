@@ -13,6 +13,7 @@ stores them.
 from __future__ import annotations
 
 import json
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -20,6 +21,7 @@ import numpy as np
 
 from .io import load_npz, save_npz, write_json
 from .model import InkTable, Texels, Volume
+from .model.labelfile import LabelFileWriter
 
 #: scene.npz stores the dense (z, y, x, N) fixed_share only below this many entries (else: free_mask only)
 FIXED_SHARE_MAX_ENTRIES = 50_000_000
@@ -219,6 +221,7 @@ class RunDir:
 
     VOLUME, SCENE, CHECKPOINT, REPORT = "volume.npz", "scene.npz", "checkpoint.npz", "report.json"
     QUANTIZED, EVALUATION, SLICES, LOSS_PNG = "quantized.npz", "evaluation.json", "slices", "loss.png"
+    QUANTIZED_LABELS = "quantized_labels.npy"
 
     def __init__(self, path):
         self.path = Path(path)
@@ -270,8 +273,35 @@ class RunDir:
 
     # ------------------------------------------------------------------ printer labels
     def save_quantized(self, vol: Volume) -> Path:
-        vol.save(self.path / self.QUANTIZED)
+        """quantized.npz (everything but the labels) + quantized_labels.npy (the labels, copied layer by layer)."""
+        with self.quantized_writer(vol, vol.shape) as w:
+            for k in range(vol.shape[0]):
+                w[k] = vol.labels[k]
         return self.path / self.QUANTIZED
+
+    @contextmanager
+    def quantized_writer(self, meta: Volume, shape):
+        """Write the quantized volume one printer layer at a time: ``with d.quantized_writer(meta, shape) as w:
+        w[k] = layer`` (k = 0, 1, ...; ``model.labelfile.LabelFileWriter``). ``meta``: a labels Volume giving
+        everything but the labels (voxel size, inks, settings, normals; its own labels are ignored). On success
+        the labels file replaces quantized_labels.npy and then quantized.npz is written (the old quantized.npz is
+        removed first, so a crash never pairs an old quantized.npz with new labels)."""
+        arrays = {k: v for k, v in meta.to_arrays().items() if k != "labels"}
+        w = LabelFileWriter(self.path / self.QUANTIZED_LABELS, shape)
+        try:
+            yield w
+            (self.path / self.QUANTIZED).unlink(missing_ok=True)
+            w.commit()
+        except BaseException:
+            w.abort()
+            raise
+        save_npz(self.path / self.QUANTIZED, {**arrays, "labels_file": np.array(self.QUANTIZED_LABELS),
+                                              "labels_shape": np.asarray(w.shape, np.int64),
+                                              "label_counts": w.counts})
+
+    def volume_file(self) -> Path:
+        """The path of volume.npz (checked to exist), for stages that read it lazily."""
+        return self._need(self.VOLUME, "run 'inkopt slab' or 'inkopt optimize' first")
 
     def has_quantized(self) -> bool:
         return (self.path / self.QUANTIZED).is_file()

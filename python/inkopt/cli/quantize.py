@@ -1,20 +1,18 @@
 """``inkopt quantize DIR``: the run's continuous mixture (DIR/volume.npz) -> one ink per printer voxel
-(DIR/quantized.npz, a labels volume at printer resolution; docs/run-dir.md). The stage is
-``inkopt.printing.quantize.quantize_volume``."""
+(DIR/quantized.npz + DIR/quantized_labels.npy, a labels volume at printer resolution; docs/run-dir.md). The stage
+is ``inkopt.printing.stream.quantize_run`` (layer by layer; ``inkopt.printing.quantize``)."""
 from __future__ import annotations
-
-import time
 
 import numpy as np
 
-from ..printing.quantize import DEFAULT_DPI, DEFAULT_LAYER_UM, METHODS, UPSAMPLE, quantize_volume, summary_lines
+from ..printing.quantize import DEFAULT_DPI, DEFAULT_LAYER_UM, METHODS, UPSAMPLE
+from ..printing.stream import quantize_run
 from ..rundir import RunDir
 from ..units import parse_dpi
 
 
 def _quantize_cmd(args) -> int:
     d = RunDir(args.dir)
-    vol = d.load_volume()
     if args.method not in METHODS:
         raise ValueError(f"unknown quantization method '{args.method}'; use one of {list(METHODS)}")
     if args.upsample not in UPSAMPLE:
@@ -25,18 +23,14 @@ def _quantize_cmd(args) -> int:
     layer = DEFAULT_LAYER_UM if args.layer_um is None else float(args.layer_um)
     if not (np.isfinite(layer) and layer > 0):
         raise ValueError(f"--layer-um must be positive, got {args.layer_um}")
-    t0 = time.perf_counter()
-    q = quantize_volume(vol, method=args.method, dpi=dpi, layer_um=layer, seed=args.seed, upsample=args.upsample)
-    path = d.save_quantized(q)
-    skipped = vol.normals is not None and q.normals is None
-    for line in summary_lines(q, time.perf_counter() - t0, skipped):
+    for line in quantize_run(d, method=args.method, dpi=dpi, layer_um=layer, seed=args.seed, upsample=args.upsample):
         print(line)
-    print(f"wrote {path}")
+    print(f"wrote {d / d.QUANTIZED} and {d / d.QUANTIZED_LABELS}")
     return 0
 
 
 def register_cli(sub) -> None:
-    p = sub.add_parser("quantize", help="one ink per printer voxel: DIR/volume.npz -> DIR/quantized.npz",
+    p = sub.add_parser("quantize", help="one ink per printer voxel: DIR/volume.npz -> DIR/quantized.npz (+ quantized_labels.npy)",
                        description="Quantize a run's optimised mixture to one ink per printer voxel (600 x 300 "
                                    "DPI, 27 um layers by default) and write DIR/quantized.npz.")
     p.add_argument("dir", help="run directory holding volume.npz")

@@ -14,7 +14,9 @@ The volume file (``.npz``) stores the medium's arrays under those names; the ink
 ``g`` (default 0.4), ``ior`` (default 1.5), ``inside`` bool (z, y, x) (default: the whole box), ``normals``
 float32 (z, y, x, 3) outward shading normals (x, y, z components) for surface voxels, ``boundary`` ("box" or
 "periodic-xy"), ``origin_mm`` (3,) (x, y, z of voxel (0, 0, 0)'s low corner; meshes), and for quantized volumes
-the ``Quantization`` settings ``method``, ``seed``, ``dpi`` (3,) (x, y, z), ``upsample``.
+the ``Quantization`` settings ``method``, ``seed``, ``dpi`` (3,) (x, y, z), ``upsample``. Instead of ``labels``
+a file may name ``labels_file`` (a .npy beside it, ``model.labelfile``; shape ``labels_shape``): the labels are
+then memory-mapped read-only.
 """
 from __future__ import annotations
 
@@ -26,6 +28,7 @@ import numpy as np
 
 from ..io import load_npz, save_npz
 from .inks import DEFAULT_G, InkTable, mix
+from .labelfile import load_label_file
 
 BOUNDARIES = ("box", "periodic-xy")
 # Memory the renderer may use for one volume; a volume above this is refused (bytes).
@@ -100,12 +103,14 @@ class Labels:
     form = "labels"
 
     def __post_init__(self):
-        lab = np.ascontiguousarray(self.labels)
+        lab = np.ascontiguousarray(self.labels)  # a read-only memory map (a label file) stays one
         if lab.dtype != np.uint8 or lab.ndim != 3:
             raise VolumeError(f"labels must be uint8 (z, y, x), got {lab.dtype} {lab.shape}")
-        used = lab[lab != EMPTY]
-        if used.size and int(used.max()) >= len(self.inks):
-            raise VolumeError(f"labels use ink {int(used.max())} but the ink table has {len(self.inks)}")
+        step = max(1, 2**24 // max(1, lab[0].size))  # checked in slabs of layers: bounded temporaries
+        for z in range(0, lab.shape[0], step):
+            used = lab[z:z + step][lab[z:z + step] != EMPTY]
+            if used.size and int(used.max()) >= len(self.inks):
+                raise VolumeError(f"labels use ink {int(used.max())} but the ink table has {len(self.inks)}")
         self.labels = lab
 
     @property
@@ -293,8 +298,17 @@ class Volume:
                 inks = InkTable.from_arrays(data, g)
             except (KeyError, ValueError) as exc:
                 raise VolumeError(f"{path}: bad ink table: {exc}") from None
+        labels = data.get("labels")
+        if labels is None and "labels_file" in data:  # labels in a sibling .npy (quantized.npz, docs/run-dir.md)
+            name = str(data["labels_file"])
+            if Path(name).name != name:
+                raise VolumeError(f"{path}: labels_file must be a file name beside it, got '{name}'")
+            try:
+                labels = load_label_file(Path(path).parent / name, data.get("labels_shape"))
+            except ValueError as exc:
+                raise VolumeError(str(exc)) from None
         return cls(voxel_mm=data["voxel_mm"], sigma_s=data.get("sigma_s"), sigma_a=data.get("sigma_a"),
-                   mixture=data.get("mixture"), labels=data.get("labels"), inks=inks, g=g,
+                   mixture=data.get("mixture"), labels=labels, inks=inks, g=g,
                    ior=float(data["ior"]) if "ior" in data else 1.5, inside=data.get("inside"),
                    normals=data.get("normals"), boundary=str(data["boundary"]) if "boundary" in data else "box",
                    origin_mm=data.get("origin_mm"), quantization=Quantization.from_arrays(data))

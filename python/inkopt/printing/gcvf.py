@@ -1,6 +1,8 @@
 """GrabCAD Voxel Print package (``.gcvf``): the file print labs load into GrabCAD Print for Stratasys voxel printing.
 
-``write_gcvf`` writes one zip (atomically, through ``inkopt.io.atomic_write_bytes``) holding:
+``write_gcvf`` writes one zip (atomically: a temporary file beside it, then renamed), streaming: one layer at a
+time is encoded (``labels`` may be a memory-mapped label file), the z-buffer and the outline's occupancy are
+accumulated on the way, and nothing but the current layers is held. The zip holds:
 
 - ``layer_0.png`` ... ``layer_{Z-1}.png``: one opaque RGBA PNG per layer, slice 0 = bottom layer, numbered from 0
   without zero padding, every slice the same pixel size (the printer grid's X x Y), DPI in the pHYs chunk. Pixel
@@ -17,7 +19,11 @@
   lab assigns by hand in GrabCAD Print).
 - ``model.stl``: the outline of the print (every non-empty voxel), binary STL in mm in the slices' frame (origin
   at the corner of voxel (0, 0, 0), +x along image columns, +y towards row 0, +z up the stack), from marching
-  cubes on the printer-grid occupancy at level 0.5, i.e. on the voxel faces.
+  cubes on the printer-grid occupancy at level 0.5, i.e. on the voxel faces. Grids above ``OUTLINE_MAX_CELLS``
+  printer voxels (marching cubes on 10^9 voxels would need tens of GB) use blocks of fz x fy x fx printer voxels
+  instead (``outline_factors``: the smallest near-cubic blocks that bring the grid under the limit; about
+  0.1 mm for a 40 mm object): a block is occupied if any of its voxels is, so the outline encloses every printed
+  voxel and lies within one block of them.
 - ``zbuffer.png``: the z-buffer seen from above: a 16-bit grey PNG of the slices' pixel size and orientation whose
   value is 1 + the index of the topmost occupied layer in that column (0 = nothing printed there).
 
@@ -36,18 +42,20 @@ from __future__ import annotations
 
 import io
 import os
+import tempfile
 import zipfile
 import xml.etree.ElementTree as ET
+from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
-from ..io import atomic_write_bytes
 from ..model import EMPTY
 from .export import check_job, slice_image, slice_lut
 
 CONFIG, STL, ZBUFFER, PREFIX = "ConfigFile.xml", "model.stl", "zbuffer.png", "layer_"
+OUTLINE_MAX_CELLS = 2**24  # marching cubes on at most this many cells (float32: 64 MB)
 BACKGROUND = (0, 0, 0, 255)
 GCVF_PALETTE = {"black": "#282828"}  # the background is opaque black: move the black ink off it
 # GrabCAD material codes used by the reference builder for the printer profiles' material names
@@ -87,11 +95,39 @@ def outline_mesh(occupied, voxel_mm_printer):
     return trimesh.Trimesh(verts[:, ::-1] - 0.5 * vp, faces, process=True)
 
 
-def zbuffer(occupied) -> np.ndarray:
-    """(Y, X) uint16: 1 + the topmost occupied layer of each column (0 = empty), row 0 = largest y."""
-    occ = np.asarray(occupied, bool)
-    top = occ.shape[0] - np.argmax(occ[::-1], axis=0)
-    return np.where(occ.any(axis=0), top, 0).astype(np.uint16)[::-1, :]
+def outline_factors(shape, voxel_mm_printer, max_cells: int | None = None) -> tuple[int, int, int]:
+    """Block size (fz, fy, fx) in printer voxels for the outline of a (Z, Y, X) grid: (1, 1, 1) up to
+    ``max_cells`` (default ``OUTLINE_MAX_CELLS``) voxels, else grown one step at a time along the axis whose
+    block is thinnest in mm."""
+    max_cells = OUTLINE_MAX_CELLS if max_cells is None else max_cells
+    shape = np.asarray(shape, np.int64)
+    size = np.asarray(voxel_mm_printer, np.float64)[::-1]  # (z, y, x) mm
+    f = np.ones(3, np.int64)
+    while np.prod(-(-shape // f)) > max_cells:
+        grow = f < shape
+        i = int(np.argmin(np.where(grow, size * f, np.inf)))
+        f[i] += 1
+    return tuple(int(v) for v in f)
+
+
+def _block_any(occ, fy: int, fx: int) -> np.ndarray:
+    """(Y, X) bool -> (ceil(Y / fy), ceil(X / fx)): True where any voxel of the block is."""
+    if fy == fx == 1:
+        return occ
+    Y, X = occ.shape
+    pad = np.pad(occ, ((0, -Y % fy), (0, -X % fx)))
+    return pad.reshape(pad.shape[0] // fy, fy, pad.shape[1] // fx, fx).any(axis=(1, 3))
+
+
+def _in_order(pool, fn, n: int, window: int):
+    """fn(0), ..., fn(n - 1) computed in ``pool`` with at most ``window`` results pending, yielded in order."""
+    pending: deque = deque()
+    for k in range(n):
+        pending.append(pool.submit(fn, k))
+        if len(pending) >= window:
+            yield pending.popleft().result()
+    while pending:
+        yield pending.popleft().result()
 
 
 def config_xml(job, colours, bg, dpi_int, layer_nm) -> bytes:
@@ -146,24 +182,34 @@ def write_gcvf(labels, voxel_mm_printer, ink_names, path, printer="j750", palett
     path = Path(path)
     _check_target(path)
 
-    occupied = job.labels != EMPTY
-    Z, Y, X = job.labels.shape
-    with ThreadPoolExecutor(max_workers=min(8, os.cpu_count() or 1)) as pool:
-        pngs = list(pool.map(lambda k: _png(slice_image(lut, job.labels[k]), dpi_int), range(Z)))
     from PIL import Image
 
-    mesh = outline_mesh(occupied, job.vp)
-    buf = io.BytesIO()
-    with zipfile.ZipFile(buf, "w") as zf:
-        for k, data in enumerate(pngs):
-            zf.writestr(f"{PREFIX}{k}.png", data, compress_type=zipfile.ZIP_STORED)
-        zf.writestr(CONFIG, config_xml(job, colours, bg, dpi_int, layer_nm), compress_type=zipfile.ZIP_DEFLATED)
-        zf.writestr(ZBUFFER, _png(Image.fromarray(zbuffer(occupied)), dpi_int), compress_type=zipfile.ZIP_STORED)
-        zf.writestr(STL, mesh.export(file_type="stl"), compress_type=zipfile.ZIP_DEFLATED)
-    atomic_write_bytes(path, buf.getvalue())
+    Z, Y, X = job.labels.shape
+    fz, fy, fx = outline_factors((Z, Y, X), job.vp)
+    coarse = np.zeros((-(-Z // fz), -(-Y // fy), -(-X // fx)), bool)
+    top = np.zeros((Y, X), np.uint16)  # 1 + topmost occupied layer
+    workers = min(8, os.cpu_count() or 1)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh, zipfile.ZipFile(fh, "w") as zf, ThreadPoolExecutor(workers) as pool:
+            pngs = _in_order(pool, lambda k: _png(slice_image(lut, job.labels[k]), dpi_int), Z, 4 * workers)
+            for k, data in enumerate(pngs):
+                zf.writestr(f"{PREFIX}{k}.png", data, compress_type=zipfile.ZIP_STORED)
+                occ = np.asarray(job.labels[k]) != EMPTY
+                top[occ] = k + 1
+                coarse[k // fz] |= _block_any(occ, fy, fx)
+            zf.writestr(CONFIG, config_xml(job, colours, bg, dpi_int, layer_nm), compress_type=zipfile.ZIP_DEFLATED)
+            zf.writestr(ZBUFFER, _png(Image.fromarray(top[::-1, :]), dpi_int), compress_type=zipfile.ZIP_STORED)
+            mesh = outline_mesh(coarse, job.vp * np.array([fx, fy, fz]))
+            zf.writestr(STL, mesh.export(file_type="stl"), compress_type=zipfile.ZIP_DEFLATED)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
     return {"path": str(path), "layer_count": Z, "image_size": {"width": X, "height": Y},
             "dpi": {"x": dpi_int[0], "y": dpi_int[1]}, "layer_thickness_nm": layer_nm,
             "materials": [{"ink": job.names[i], "material": job.material(i), "color": list(colours[i]),
                            "voxel_count": int(job.counts[i])} for i in job.used],
             "printer": job.profile["name"] if job.profile else None, "stl_triangles": len(mesh.faces),
-            "bytes": len(buf.getvalue())}
+            "outline_block": [fx, fy, fz], "bytes": path.stat().st_size}

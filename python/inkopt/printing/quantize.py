@@ -100,7 +100,7 @@ def _linear(n_p: int, vp: float, n_o: int, vo: float):
 
 # ----------------------------------------------------------------------------------------- quantization
 def quantize(mixture, voxel_mm, *, method: str = "blue-noise", dpi=DEFAULT_DPI, layer_um: float = DEFAULT_LAYER_UM,
-             inside=None, seed: int = 0, upsample: str = "nearest"):
+             inside=None, seed: int = 0, upsample: str = "nearest", out=None):
     """One ink per printer voxel from a mixture on the optimisation grid.
 
     mixture  float (z, y, x, N), non-negative; rows are normalised to sum 1 (rows inside must have a positive sum)
@@ -112,10 +112,16 @@ def quantize(mixture, voxel_mm, *, method: str = "blue-noise", dpi=DEFAULT_DPI, 
     seed     ``default_rng(seed)``: the random draws (one layer after the other, so the result does not depend on
              any chunking), or the toroidal offset of the blue-noise tile; unused by error diffusion
     upsample "nearest" (enclosing voxel) or "linear" (trilinear between voxel centres, inside voxels only)
-    Returns ``(labels uint8 (Z, Y, X), voxel_mm_printer (3,) float64 (x, y, z))``; label = ink index, 255 = empty.
+    out      None (a new array is returned) or anything taking ``out[k] = layer`` (Y, X) uint8 for k = 0, 1, ...
+             in order (``model.labelfile.LabelFileWriter``: the labels go to a file one layer at a time)
+    ``mixture`` may also be a layer source (``stream.MixtureSource``): ``shape`` (z, y, x, N) and ``[z]`` giving
+    one (y, x, N) layer, asked for in increasing z; its layers are checked as they are read.
+    Returns ``(labels uint8 (Z, Y, X) or out, voxel_mm_printer (3,) float64 (x, y, z))``; label = ink index,
+    255 = empty.
     """
-    m = np.asarray(mixture)
-    if m.ndim != 4 or m.shape[3] < 1:
+    source = not isinstance(mixture, np.ndarray) and hasattr(mixture, "shape")
+    m = mixture if source else np.asarray(mixture)
+    if len(m.shape) != 4 or m.shape[3] < 1:
         raise ValueError(f"mixture must have shape (z, y, x, N), got {m.shape}")
     n_inks = m.shape[3]
     if n_inks >= EMPTY:
@@ -124,18 +130,22 @@ def quantize(mixture, voxel_mm, *, method: str = "blue-noise", dpi=DEFAULT_DPI, 
         raise ValueError(f"unknown quantization method '{method}'; use one of {list(METHODS)}")
     if upsample not in UPSAMPLE:
         raise ValueError(f"unknown upsample '{upsample}'; use one of {list(UPSAMPLE)}")
-    if not np.issubdtype(m.dtype, np.floating):
-        m = m.astype(np.float32)
-    if not np.all(np.isfinite(m)) or m.min() < 0:
-        raise ValueError("mixture must be finite and non-negative")
     nz, ny, nx = m.shape[:3]
     if inside is not None:
         inside = np.asarray(inside, bool)
         if inside.shape != (nz, ny, nx):
             raise ValueError(f"inside mask shape {inside.shape} differs from mixture shape {(nz, ny, nx)}")
-    total = m.sum(axis=3, dtype=np.float64)
-    if np.any((total <= 0) if inside is None else (inside & (total <= 0))):
-        raise ValueError("mixture rows inside the object must have a positive sum")
+    if source:
+        def get(z: int):
+            lay = np.asarray(m[z])
+            return lay, _checked_total(lay, None if inside is None else inside[z])
+    else:
+        if not np.issubdtype(m.dtype, np.floating):
+            m = m.astype(np.float32)
+        total = _checked_total(m, inside)
+
+        def get(z: int):
+            return m[z], total[z]
     shape_p, vp = printer_grid((nz, ny, nx), voxel_mm, dpi=dpi, layer_um=layer_um)
     vo = np.asarray(voxel_mm, np.float64).reshape(-1)
     Z, Y, X = shape_p
@@ -163,9 +173,9 @@ def quantize(mixture, voxel_mm, *, method: str = "blue-noise", dpi=DEFAULT_DPI, 
         """xy-upsampled cumulative mixture of optimisation layer z, float32 (N, Y, X); entry N-1 = weight."""
         if z in cache:
             return cache[z]
-        lay = m[z].astype(np.float64)
+        lay, t = get(z)
+        lay = lay.astype(np.float64)
         w = np.ones((ny, nx)) if inside is None else inside[z].astype(np.float64)
-        t = total[z]
         lay = lay * (w / np.where(t > 0, t, 1.0))[..., None]  # rows sum to 1 inside, 0 outside
         c = np.cumsum(lay, axis=2).astype(np.float32).transpose(2, 0, 1)  # (N, ny, nx)
         if lin is None:
@@ -187,7 +197,7 @@ def quantize(mixture, voxel_mm, *, method: str = "blue-noise", dpi=DEFAULT_DPI, 
             return np.ones((Y, X), bool)
         return inside[enc[0][k]][enc[1][:, None], enc[2][None, :]]
 
-    labels = np.empty(shape_p, np.uint8)
+    labels = np.empty(shape_p, np.uint8) if out is None else out
     error = np.zeros((2, Y, X, n_inks), np.float32) if method == "error-diffusion" else None
     for k in range(Z):
         if lin is None:
@@ -196,7 +206,9 @@ def quantize(mixture, voxel_mm, *, method: str = "blue-noise", dpi=DEFAULT_DPI, 
             z0, z1, wz = (a[k] for a in lin[0])
             c = layer_cum(int(z0)) * (1 - wz) + layer_cum(int(z1)) * wz
         if error is not None:
-            _diffuse(c, inside_p(k), inside_p(k + 1), error, k, labels[k])
+            lab = np.empty((Y, X), np.uint8)
+            _diffuse(c, inside_p(k), inside_p(k + 1), error, k, lab)
+            labels[k] = lab
             continue
         t = thresholds(k)
         if lin is not None:
@@ -208,6 +220,16 @@ def quantize(mixture, voxel_mm, *, method: str = "blue-noise", dpi=DEFAULT_DPI, 
             lab[~inside_p(k)] = EMPTY
         labels[k] = lab
     return labels, vp
+
+
+def _checked_total(m, inside) -> np.ndarray:
+    """Row sums (float64) of a mixture array (..., N), checked: finite, non-negative, positive inside."""
+    if not np.all(np.isfinite(m)) or m.min() < 0:
+        raise ValueError("mixture must be finite and non-negative")
+    total = m.sum(axis=-1, dtype=np.float64)
+    if np.any((total <= 0) if inside is None else (inside & (total <= 0))):
+        raise ValueError("mixture rows inside the object must have a positive sum")
+    return total
 
 
 def _diffuse(cum, inside_k, inside_next, error, k: int, out) -> None:
@@ -255,6 +277,11 @@ def ink_fractions(labels, n_inks: int, shape_opt, voxel_mm_opt, voxel_mm_printer
 
 
 # ----------------------------------------------------------------------------------------- volumes
+def normals_fit(printer_voxels: int) -> bool:
+    """Whether shading normals upsampled to a printer grid of this many voxels are kept."""
+    return printer_voxels * 12 <= MAX_NORMALS_BYTES and printer_voxels * 13 <= MAX_VOLUME_BYTES
+
+
 def quantize_volume(volume: Volume, *, method: str = "blue-noise", dpi=DEFAULT_DPI,
                     layer_um: float = DEFAULT_LAYER_UM, seed: int = 0, upsample: str = "nearest",
                     normals: bool = True) -> Volume:
@@ -273,8 +300,7 @@ def quantize_volume(volume: Volume, *, method: str = "blue-noise", dpi=DEFAULT_D
     labels, vp = quantize(volume.mixture, volume.voxel_mm, method=method, dpi=tuple(dpi), layer_um=layer_um,
                           inside=volume.inside, seed=int(seed), upsample=upsample)
     nrm = None
-    fits = labels.size * 12 <= MAX_NORMALS_BYTES and labels.size * 13 <= MAX_VOLUME_BYTES
-    if normals and volume.normals is not None and fits:
+    if normals and volume.normals is not None and normals_fit(labels.size):
         (nz, ny, nx), vo = volume.shape, volume.voxel_mm
         Z, Y, X = labels.shape
         iz, iy, ix = (_enclosing(Z, vp[2], nz, vo[2]), _enclosing(Y, vp[1], ny, vo[1]),
@@ -287,24 +313,29 @@ def quantize_volume(volume: Volume, *, method: str = "blue-noise", dpi=DEFAULT_D
                   normals=nrm, boundary=volume.boundary, origin_mm=volume.origin_mm, quantization=q)
 
 
-def summary_lines(qvol: Volume, seconds: float, skipped_normals: bool) -> list[str]:
-    """What ``inkopt quantize`` prints about a labels volume: grid, ink voxel counts, settings."""
-    lab = qvol.labels
+def label_counts(labels) -> np.ndarray:
+    """(256,) int64 voxel count of every label value, counted one layer at a time."""
     counts = np.zeros(256, np.int64)
-    for k in range(lab.shape[0]):
-        counts += np.bincount(lab[k].ravel(), minlength=256)
+    for k in range(labels.shape[0]):
+        counts += np.bincount(np.asarray(labels[k]).ravel(), minlength=256)
+    return counts
+
+
+def summary_lines(shape, vp, ink_names, q: Quantization | None, counts, seconds: float,
+                  skipped_normals: bool) -> list[str]:
+    """What ``inkopt quantize`` prints about a labels volume: grid ``shape`` (Z, Y, X) of ``vp`` (x, y, z) mm
+    voxels, the ink voxel ``counts`` (256,) (``label_counts``), settings."""
     filled = int(counts[:EMPTY].sum())
-    Z, Y, X = lab.shape
-    vp = qvol.voxel_mm
-    q = qvol.quantization or Quantization()
+    Z, Y, X = shape
+    q = q or Quantization()
     dpi = MM_PER_INCH / np.asarray(vp, np.float64)
     out = [f"printer grid {X} x {Y} x {Z} (x, y, z) voxels of {vp[0] * 1000:.1f} x {vp[1] * 1000:.1f} x "
            f"{vp[2] * 1000:.1f} um ({dpi[0]:.0f} x {dpi[1]:.0f} DPI, {vp[2] * 1000:.1f} um layers)",
            f"{filled} ink voxels ({counts[EMPTY]} empty); method {q.method}, seed {q.seed}, upsample "
            f"{q.upsample}; {seconds:.1f} s",
            "inks: " + ", ".join(f"{n} {counts[i]} ({100.0 * counts[i] / max(filled, 1):.1f} %)"
-                                for i, n in enumerate(qvol.inks.names))]
+                                for i, n in enumerate(ink_names))]
     if skipped_normals:
-        out.append(f"note: shading normals not kept (they would need {lab.size * 12 / 2**30:.1f} GiB); "
+        out.append(f"note: shading normals not kept (they would need {Z * Y * X * 12 / 2**30:.1f} GiB); "
                    "the quantized volume's texels are flat voxel faces")
     return out

@@ -1,0 +1,130 @@
+"""Quantization of a run without the whole printer label volume (or the whole mixture) in memory.
+
+``MixtureSource`` reads a mixture volume file (volume.npz) lazily: its small arrays (voxel size, ink table,
+``g``, ``ior``, boundary, origin, the ``inside`` mask: 1 byte per optimisation voxel) at once, the ``mixture``
+one (y, x, N) layer at a time by decompressing its zip member sequentially (layers are asked for in increasing
+z; going back further than the two layers it keeps reopens the member), and the shading normals not at all.
+
+``quantize_run`` is ``inkopt quantize``: the labels go layer by layer from ``quantize.quantize`` into the run's
+label file (``RunDir.quantized_writer``: quantized.npz + quantized_labels.npy, docs/run-dir.md), so memory holds
+the inside mask, a few mixture layers and a few printer layers. When the quantized volume keeps shading normals
+(meshes whose printer grid is small enough, ``quantize.normals_fit``) the volume is loaded whole and quantized
+by ``quantize_volume`` as before: the normals (12 bytes per printer voxel) dominate memory there anyway.
+Both paths give identical labels.
+"""
+from __future__ import annotations
+
+import time
+import zipfile
+
+import numpy as np
+
+from ..model import InkTable, Quantization, Volume
+from ..model.inks import DEFAULT_G
+from ..rundir import RunDir
+from ..units import MM_PER_INCH
+from .quantize import label_counts, normals_fit, printer_grid, quantize, quantize_volume, summary_lines
+
+HEAVY = ("mixture", "normals")  # members not loaded at once
+
+
+def _read_header(fh):
+    major, _ = np.lib.format.read_magic(fh)
+    read = np.lib.format.read_array_header_1_0 if major == 1 else np.lib.format.read_array_header_2_0
+    return read(fh)
+
+
+class MixtureSource:
+    """A mixture volume file read lazily (module docstring). ``shape`` (z, y, x, N); ``[z]`` one layer
+    (y, x, N); ``inside`` (z, y, x) bool or None; ``voxel_mm``, ``inks``, ``g``, ``ior``, ``boundary``,
+    ``origin_mm``; ``has_normals``; ``load()`` the whole Volume."""
+
+    def __init__(self, path):
+        self.path = path
+        try:
+            self._zip = zipfile.ZipFile(path)
+            names = {n[:-4]: n for n in self._zip.namelist() if n.endswith(".npy")}
+            small = {k: np.lib.format.read_array(self._zip.open(n), allow_pickle=False)
+                     for k, n in names.items() if k not in HEAVY}
+        except (OSError, zipfile.BadZipFile, ValueError) as exc:
+            raise ValueError(f"{path} is not a readable .npz volume file ({type(exc).__name__}: {exc})") from None
+        if "mixture" not in names:
+            form = "labels" if "labels" in names else "dense"
+            raise ValueError(f"{path} holds a {form} volume; this step needs a mixture volume")
+        self.has_normals = "normals" in names
+        self.g = float(small["g"]) if "g" in small else DEFAULT_G
+        self.voxel_mm = np.asarray(small["voxel_mm"], np.float64).reshape(-1)
+        self.inks = InkTable.from_arrays(small, self.g)
+        self.ior = float(small["ior"]) if "ior" in small else 1.5
+        self.boundary = str(small["boundary"]) if "boundary" in small else "box"
+        self.origin_mm = small.get("origin_mm")
+        self.inside = np.asarray(small["inside"], bool) if "inside" in small else None
+        self._member = names["mixture"]
+        self._open()
+        if len(self.shape) != 4 or self.shape[3] != len(self.inks) or self._fortran:
+            raise ValueError(f"{path}: mixture of shape {self.shape} does not fit {len(self.inks)} inks")
+
+    def _open(self) -> None:
+        self._fh = self._zip.open(self._member)
+        self.shape, self._fortran, self.dtype = _read_header(self._fh)
+        self._next = 0
+        self._kept: dict[int, np.ndarray] = {}
+
+    def __getitem__(self, z: int) -> np.ndarray:
+        z = int(z)
+        if z in self._kept:
+            return self._kept[z]
+        if not 0 <= z < self.shape[0]:
+            raise IndexError(f"layer {z} outside 0..{self.shape[0] - 1}")
+        if z < self._next:
+            self._fh.close()
+            self._open()
+        n = int(np.prod(self.shape[1:])) * self.dtype.itemsize
+        while self._next <= z:
+            data = self._fh.read(n)
+            if len(data) != n:
+                raise ValueError(f"{self.path}: the mixture ends after {self._next} layers")
+            self._next += 1
+        lay = np.frombuffer(data, self.dtype).reshape(self.shape[1:])
+        if len(self._kept) >= 2:
+            self._kept.pop(min(self._kept))
+        self._kept[z] = lay
+        return lay
+
+    def load(self) -> Volume:
+        return Volume.load(self.path)
+
+    def labels_meta(self, vp, q: Quantization) -> Volume:
+        """A labels Volume with this file's inks, g, ior, boundary and origin on the printer grid ``vp``, for
+        ``RunDir.quantized_writer`` (its one-voxel labels are a placeholder: the real ones go to the file)."""
+        return Volume(voxel_mm=vp, labels=np.zeros((1, 1, 1), np.uint8), inks=self.inks, g=self.g, ior=self.ior,
+                      boundary=self.boundary, origin_mm=self.origin_mm, quantization=q)
+
+    def close(self) -> None:
+        self._fh.close()
+        self._zip.close()
+
+
+def quantize_run(d: RunDir, *, method: str, dpi, layer_um: float, seed: int, upsample: str) -> list[str]:
+    """``inkopt quantize``: DIR/volume.npz -> DIR/quantized.npz + quantized_labels.npy (module docstring).
+    Returns the summary lines (``quantize.summary_lines``)."""
+    t0 = time.perf_counter()
+    src = MixtureSource(d.volume_file())
+    try:
+        shape_p, vp = printer_grid(src.shape[:3], src.voxel_mm, dpi=tuple(dpi), layer_um=layer_um)
+        n = int(np.prod(shape_p, dtype=np.int64))
+        if src.has_normals and normals_fit(n):
+            vol = src.load()
+            q = quantize_volume(vol, method=method, dpi=dpi, layer_um=layer_um, seed=seed, upsample=upsample)
+            d.save_quantized(q)
+            counts, quant = label_counts(q.labels), q.quantization
+        else:
+            quant = Quantization(method, int(seed), tuple(float(v) for v in MM_PER_INCH / vp), upsample)
+            with d.quantized_writer(src.labels_meta(vp, quant), shape_p) as w:
+                quantize(src, src.voxel_mm, method=method, dpi=tuple(dpi), layer_um=layer_um, inside=src.inside,
+                         seed=int(seed), upsample=upsample, out=w)
+            counts = w.counts
+    finally:
+        src.close()
+    return summary_lines(shape_p, vp, src.inks.names, quant, counts, time.perf_counter() - t0,
+                         src.has_normals and not normals_fit(n))

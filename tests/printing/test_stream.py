@@ -1,0 +1,154 @@
+"""Tests of the streaming printer output: inkopt.printing.stream (a run quantized layer by layer into
+quantized.npz + quantized_labels.npy), model.labelfile, the old embedded format, and GCVF's block outline."""
+import io
+import zipfile
+
+import numpy as np
+import pytest
+import trimesh
+
+from inkopt.model import InkTable, Quantization, Volume
+from inkopt.model.labelfile import LabelFileWriter, load_label_file
+from inkopt.printing import gcvf
+from inkopt.printing.export import read_png_slices, write_png_slices
+from inkopt.printing.quantize import quantize, quantize_volume
+from inkopt.printing.stream import MixtureSource, quantize_run
+from inkopt.rundir import RunDir
+
+V300 = 25.4 / 300
+KW = dict(dpi=(600, 300), layer_um=27.0, seed=3)
+
+
+def mixture_run(path, shape=(6, 9, 11), inside=True, normals=False):
+    inks = InkTable.parse("vero-cmykw")
+    rng = np.random.default_rng(1)
+    mix = rng.dirichlet(np.ones(len(inks)), size=shape).astype(np.float32)
+    kw = {}
+    if inside:
+        kw["inside"] = rng.random(shape) < 0.7
+        mix[~kw["inside"]] = 0.0  # outside rows may be empty
+    if normals:
+        kw["normals"] = np.tile(np.array([0, 0, 1], np.float32), shape + (1,))
+    vol = Volume(voxel_mm=(V300,) * 3, mixture=mix, inks=inks, origin_mm=(1.0, 2.0, 3.0), **kw)
+    d = RunDir.create(path)
+    d.save_volume(vol)
+    return d, vol
+
+
+@pytest.mark.parametrize("method,upsample", [("blue-noise", "nearest"), ("random", "linear"),
+                                             ("error-diffusion", "linear"), ("error-diffusion", "nearest")])
+def test_streaming_run_equals_in_memory_quantization(tmp_path, method, upsample):
+    d, vol = mixture_run(tmp_path / "r")
+    lines = quantize_run(d, method=method, upsample=upsample, **KW)
+    expect = quantize_volume(vol, method=method, upsample=upsample, **KW)
+    raw = np.load(d / d.QUANTIZED)
+    assert "labels" not in raw.files and str(raw["labels_file"]) == d.QUANTIZED_LABELS
+    q = d.load_quantized()
+    assert isinstance(q.labels, np.memmap) or isinstance(q.labels.base, np.memmap)
+    np.testing.assert_array_equal(q.labels, expect.labels)
+    np.testing.assert_allclose(q.voxel_mm, expect.voxel_mm)
+    np.testing.assert_allclose(q.origin_mm, vol.origin_mm)
+    assert q.quantization == expect.quantization and q.inks.names == vol.inks.names
+    counts = np.bincount(expect.labels.ravel(), minlength=256)
+    np.testing.assert_array_equal(raw["label_counts"], counts)
+    assert f"{counts[255]} empty" in lines[1]
+
+
+def test_normals_keep_the_in_memory_path_and_the_same_files(tmp_path):
+    d, vol = mixture_run(tmp_path / "m", normals=True)
+    quantize_run(d, method="blue-noise", upsample="nearest", **KW)
+    q = d.load_quantized()
+    assert q.normals is not None and q.normals.shape == q.shape + (3,)
+    np.testing.assert_array_equal(q.labels, quantize_volume(vol, **KW).labels)
+    assert "labels" not in np.load(d / d.QUANTIZED).files
+
+
+def test_mixture_source_reads_layers_in_any_order(tmp_path):
+    d, vol = mixture_run(tmp_path / "r")
+    src = MixtureSource(d.volume_file())
+    assert src.shape == vol.mixture.shape and src.has_normals is False
+    np.testing.assert_array_equal(src.inside, vol.inside)
+    for z in (0, 3, 3, 2, 5, 1, 0, 4):
+        np.testing.assert_array_equal(src[z], vol.mixture[z])
+    src.close()
+    vol.with_medium(quantize_volume(vol).medium, inside=None).save(tmp_path / "labels.npz")
+    with pytest.raises(ValueError, match="needs a mixture volume"):
+        MixtureSource(tmp_path / "labels.npz")
+
+
+def test_bad_layer_is_refused_and_leaves_no_file(tmp_path):
+    d, vol = mixture_run(tmp_path / "r", inside=False)
+    bad = vol.mixture.copy()
+    bad[4, 2, 3] = 0.0
+    vol.with_mixture(bad).save(d / d.VOLUME)
+    with pytest.raises(ValueError, match="positive sum"):
+        quantize_run(d, method="blue-noise", upsample="nearest", **KW)
+    assert not d.has_quantized() and sorted(p.name for p in d.path.iterdir()) == ["volume.npz"]
+
+
+def test_old_embedded_quantized_files_still_load(tmp_path):
+    d, vol = mixture_run(tmp_path / "r")
+    q = quantize_volume(vol, **KW)
+    q.save(d / d.QUANTIZED)  # the format before quantized_labels.npy: labels inside the npz
+    np.testing.assert_array_equal(d.load_quantized().labels, q.labels)
+    d.save_quantized(q)  # the current format; a stale labels file never pairs with an old npz
+    np.testing.assert_array_equal(Volume.load(d / d.QUANTIZED).labels, q.labels)
+    (d / d.QUANTIZED_LABELS).unlink()
+    with pytest.raises(ValueError, match="does not exist"):
+        d.load_quantized()
+
+
+def test_label_file_writer(tmp_path):
+    lab = np.random.default_rng(0).integers(0, 6, (3, 4, 5), dtype=np.uint8)
+    w = LabelFileWriter(tmp_path / "l.npy", lab.shape)
+    with pytest.raises(ValueError, match="in order"):
+        w[1] = lab[1]
+    w[0] = lab[0]
+    with pytest.raises(ValueError, match="incomplete"):
+        w.commit()
+    assert list(tmp_path.iterdir()) == []
+    w = LabelFileWriter(tmp_path / "l.npy", lab.shape)
+    for k in range(3):
+        w[k] = lab[k]
+    w.commit()
+    np.testing.assert_array_equal(load_label_file(tmp_path / "l.npy", lab.shape), lab)
+    np.testing.assert_array_equal(w.counts, np.bincount(lab.ravel(), minlength=256))
+    with pytest.raises(ValueError, match="expected uint8"):
+        load_label_file(tmp_path / "l.npy", (3, 4, 6))
+
+
+def test_export_from_a_memory_mapped_label_file(tmp_path):
+    d, vol = mixture_run(tmp_path / "r")
+    quantize_run(d, method="blue-noise", upsample="nearest", **KW)
+    q = d.load_quantized()
+    write_png_slices(q.labels, q.voxel_mm, q.inks.names, tmp_path / "s")
+    np.testing.assert_array_equal(read_png_slices(tmp_path / "s")[0], q.labels)
+
+
+def test_gcvf_block_outline_encloses_every_voxel(tmp_path, monkeypatch):
+    z, y, x = np.indices((30, 20, 40))
+    lab = np.where((x - 20) ** 2 / 300 + (y - 10) ** 2 / 80 + (z - 15) ** 2 / 200 < 1, 1, 255).astype(np.uint8)
+    vp = np.array([25.4 / 600, 25.4 / 300, 0.027])
+    monkeypatch.setattr(gcvf, "OUTLINE_MAX_CELLS", 2000)
+    f = gcvf.outline_factors(lab.shape, vp, 2000)
+    assert np.prod(-(-np.array(lab.shape) // f)) <= 2000 and max(f) > 1
+    summary = gcvf.write_gcvf(lab, vp, ["cyan", "white"], tmp_path / "j.gcvf")
+    assert summary["outline_block"] == [f[2], f[1], f[0]]
+    with zipfile.ZipFile(tmp_path / "j.gcvf") as zf:
+        mesh = trimesh.load(io.BytesIO(zf.read(gcvf.STL)), file_type="stl")
+    assert mesh.is_watertight
+    occ = np.argwhere(lab != 255)  # (z, y, x): every printed voxel's box lies inside the outline's box
+    lo, hi = occ.min(0)[::-1] * vp, (occ.max(0)[::-1] + 1) * vp
+    assert np.all(mesh.bounds[0] <= lo + 1e-6) and np.all(mesh.bounds[1] >= hi - 1e-6)  # float32 STL
+    centres = (occ[:, ::-1] + 0.5) * vp
+    assert mesh.contains(centres[::7]).all()
+    assert mesh.volume < 2.5 * len(occ) * np.prod(vp)
+
+
+def test_quantization_metadata_roundtrip(tmp_path):
+    d, vol = mixture_run(tmp_path / "r")
+    q = quantize_volume(vol, method="random", seed=9, **{k: v for k, v in KW.items() if k != "seed"})
+    d.save_quantized(q)
+    assert d.load_quantized().quantization == Quantization("random", 9, q.quantization.dpi, "nearest")
+    lab, _ = quantize(vol.mixture, vol.voxel_mm, method="random", seed=9, inside=vol.inside, dpi=(600, 300))
+    np.testing.assert_array_equal(d.load_quantized().labels, lab)
