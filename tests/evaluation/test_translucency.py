@@ -80,3 +80,31 @@ def test_evaluate_constrained_beside_unconstrained(tmp_path, capsys, monkeypatch
     assert ours["transmittance"] - theirs["transmittance"] > 4 * se  # the constrained region lets light through
     for r in (ours, theirs, tr["whole"]):
         assert np.isfinite(r["spread_mm"]) and r["probe_layers"] == 6 and "delta_e76_mean" in r
+
+
+@pytest.mark.slow
+def test_evaluate_mesh_alpha_region(tmp_path, capsys, monkeypatch):
+    """A 1 mm cube whose texture alpha asks for 80 % transparent ink on five faces: evaluate finds the region (all
+    but the opaque top face), every texel axis gets its own back light, and the region transmits more than the
+    unconstrained run's."""
+    import importlib.util
+    from pathlib import Path
+
+    spec = importlib.util.spec_from_file_location("scene_tr", Path(__file__).parents[1] / "scenes" / "test_translucency.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    monkeypatch.setattr("inkopt.evaluation.translucency.PROBE_SPP", 16)
+    monkeypatch.setattr("inkopt.evaluation.translucency.PROBE_WIDTH", 96)
+    cube = mod._alpha_cube(tmp_path)
+    base = ["optimize", str(cube), "--scale", "1", "--up", "z", "--iterations", "2", "--spp", "1", "--forward-spp",
+            "2", "--eval-spp", "4", "--threads", "2", "--inks", "vero-cmykwt"]
+    assert cli.main(base + ["--out", str(tmp_path / "tr"), "--translucency", "alpha",
+                            "--translucency-depth-mm", "0.3"]) == 0
+    assert cli.main(base + ["--out", str(tmp_path / "free")]) == 0
+    assert cli.main(["evaluate", str(tmp_path / "tr"), "--spp", "4", "--no-baselines", "--threads", "2",
+                     "--translucency-compare", str(tmp_path / "free")]) == 0
+    tr = json.loads((tmp_path / "tr" / "evaluation.json").read_text())["translucency"]
+    ours, theirs = tr["regions"][0], tr["compare"]["regions"][0]
+    assert len(tr["regions"]) == 1 and ours["texels"] > 0.6 * tr["whole"]["texels"]
+    se = np.hypot(ours["transmittance_stderr"], theirs["transmittance_stderr"])
+    assert ours["transmittance"] - theirs["transmittance"] > 4 * se
