@@ -10,7 +10,7 @@ LAYERS = [
     {"units", "color", "io", "pictures", "charts", "lighting", "_core", "__init__"},
     {"model"},
     {"rundir"},
-    {"render"},
+    {"render", "distributed"},
     {"loss"},
     {"scenes"},
     {"optim"},

@@ -108,7 +108,7 @@ class Renderer:
         return self._scene.threads
 
     def _run(self, texels: Texels, spp: int, seed: int, include_specular: bool, progress: bool, desc: str,
-             adjoint: np.ndarray | None = None, method: str = "replay") -> RenderResult:
+             adjoint: np.ndarray | None = None, method: str = "replay", first_texel: int = 0) -> RenderResult:
         if spp < 1:
             raise ValueError(f"spp must be at least 1, got {spp}")
         n = len(texels)
@@ -123,7 +123,7 @@ class Renderer:
         for a in range(0, n, CHUNK):
             b = min(a + CHUNK, n)
             args = (texels.voxel[a:b], texels.face[a:b], texels.normal[a:b])
-            kw = dict(spp=int(spp), seed=int(seed), first_texel=a, include_specular=include_specular)
+            kw = dict(spp=int(spp), seed=int(seed), first_texel=first_texel + a, include_specular=include_specular)
             if adjoint is None:
                 m, v, st = self._scene.render(*args, **kw)
             else:
@@ -139,9 +139,10 @@ class Renderer:
         return RenderResult(rgb, var, int(spp), time.perf_counter() - t0, **totals)
 
     def render(self, texels: Texels, spp: int = 16, seed: int = 0, include_specular: bool = True,
-               progress: bool = False) -> RenderResult:
-        """Forward render of ``texels``; see module docstring."""
-        return self._run(texels, spp, seed, include_specular, progress, "render")
+               progress: bool = False, first_texel: int = 0) -> RenderResult:
+        """Forward render of ``texels``; see module docstring. Random numbers are keyed by (seed, texel index,
+        sample); ``first_texel`` is the index of ``texels[0]`` (a shard of a longer list renders as in the list)."""
+        return self._run(texels, spp, seed, include_specular, progress, "render", first_texel=first_texel)
 
     def gradient(self, texels: Texels, adjoint: np.ndarray, spp: int = 16, seed: int = 1,
                  include_specular: bool = True, method: str = "replay", progress: bool = False,
@@ -154,15 +155,39 @@ class Renderer:
         Use a different seed from the forward render whose image produced the adjoint, so that the gradient of a
         nonlinear loss is not correlated with the image noise.
         """
+        res = self._backward(texels, adjoint, spp, seed, include_specular, method, progress, grad_index)
+        gs, ga = self._scene.take_grad()
+        return gs, ga, res
+
+    def gradient_fixed(self, texels: Texels, adjoint: np.ndarray, spp: int = 16, seed: int = 1,
+                       include_specular: bool = True, method: str = "replay", grad_index: np.ndarray | None = None,
+                       first_texel: int = 0, max_abs_adjoint: float | None = None):
+        """:meth:`gradient` of a shard of texels (``texels[0]`` has index ``first_texel``), as raw fixed-point sums:
+        (sum_s, sum_a, quantum, result), int64 arrays shaped like :meth:`gradient`'s. The shards of one pass, each
+        given the whole pass's ``max_abs_adjoint`` (default: this shard's), add up (int64, wrapping) to the pass's
+        sums, and :func:`fixed_to_float` of those is :meth:`gradient`'s result, bit for bit."""
+        res = self._backward(texels, adjoint, spp, seed, include_specular, method, False, grad_index, first_texel,
+                             max_abs_adjoint)
+        gs, ga, quantum = self._scene.take_grad_fixed()
+        return gs, ga, quantum, res
+
+    def _backward(self, texels, adjoint, spp, seed, include_specular, method, progress, grad_index,
+                  first_texel=0, max_abs_adjoint=None) -> RenderResult:
         adjoint = np.asarray(adjoint, np.float32)
         if adjoint.shape != (len(texels), 3):
             raise ValueError(f"adjoint must have shape ({len(texels)}, 3), got {adjoint.shape}")
         if grad_index is not None:
             grad_index = np.ascontiguousarray(grad_index, np.int32)
-        self._scene.zero_grad(float(np.abs(adjoint).max(initial=0.0)), grad_index)
-        res = self._run(texels, spp, seed, include_specular, progress, "gradient", adjoint, method)
-        gs, ga = self._scene.take_grad()
-        return gs, ga, res
+        if max_abs_adjoint is None:
+            max_abs_adjoint = float(np.abs(adjoint).max(initial=0.0))
+        self._scene.zero_grad(float(max_abs_adjoint), grad_index)
+        return self._run(texels, spp, seed, include_specular, progress, "gradient", adjoint, method, first_texel)
+
+
+def fixed_to_float(fixed_sum: np.ndarray, quantum: float) -> np.ndarray:
+    """A gradient from its fixed-point sum, converted exactly as the core converts it: float32(float64(sum) x
+    quantum)."""
+    return (np.asarray(fixed_sum, np.int64).astype(np.float64) * np.float64(quantum)).astype(np.float32)
 
 
 def render(volume: Volume, texels: Texels, spp: int = 16, seed: int = 0, include_specular: bool = True,

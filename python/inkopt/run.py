@@ -21,7 +21,7 @@ from .lighting import Lighting, load_lighting
 from .model import InkTable
 from .optim import Optimization, OptimizeConfig
 from .pictures import loss_figure
-from .render import Renderer
+from .distributed import renderer_factory
 from .rundir import RunDir
 from .scenes import Scene
 from .units import OPT_DPI
@@ -40,10 +40,17 @@ def eval_spp_for(cfg: OptimizeConfig, eval_spp: int | None = None) -> int | None
 
 def run_optimisation(scene: Scene, out_dir, cfg: OptimizeConfig, *, resume: bool = False,
                      eval_spp: int | None = None, threads: int | None = None, progress: bool = False,
-                     lighting: Lighting | str | None = None, log=print) -> dict:
+                     lighting: Lighting | str | None = None, ray: str | None = None, log=print) -> dict:
     """Optimise ``scene`` into run directory ``out_dir`` under the display ``lighting`` (default uniform; the
-    final figures are rendered under it too); returns the report (also report.json)."""
-    lighting = load_lighting(lighting)
+    final figures are rendered under it too); returns the report (also report.json). ``ray``: "auto" or a Ray
+    cluster's address: every render is split into texel shards on Ray workers (``inkopt.distributed``; the
+    results are bit-identical), ``threads`` then being each worker's."""
+    with renderer_factory(ray, threads) as make_renderer:
+        return _optimise(scene, out_dir, cfg, resume, eval_spp, threads, progress, load_lighting(lighting), log,
+                         make_renderer)
+
+
+def _optimise(scene, out_dir, cfg, resume, eval_spp, threads, progress, lighting, log, make_renderer) -> dict:
     t_start = time.perf_counter()
     log(scene.describe())
     def baseline(kind: str) -> np.ndarray:  # a print-shop start (cfg.init "surface" or "extrusion")
@@ -51,7 +58,7 @@ def run_optimisation(scene: Scene, out_dir, cfg: OptimizeConfig, *, resume: bool
                                 progress=progress)
 
     run = Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, fixed_share=scene.fixed_share,
-                       threads=threads, baseline=baseline, lighting=lighting)
+                       threads=threads, baseline=baseline, lighting=lighting, renderer_factory=make_renderer)
     rd = RunDir.create(out_dir)
     if resume:
         run.resume(rd.checkpoint, log)
@@ -64,7 +71,7 @@ def run_optimisation(scene: Scene, out_dir, cfg: OptimizeConfig, *, resume: bool
     # from the configuration (identical to the first iterate whether or not the run was resumed). One renderer.
     spp = eval_spp_for(cfg, eval_spp)
     seed = EVAL_SEED_OFFSET + cfg.seed
-    renderer = Renderer(final, threads, lighting)
+    renderer = make_renderer(final, threads, lighting)
 
     def render(n: int, s: int):
         r = renderer.render(scene.texels, n, s, cfg.include_specular, progress)

@@ -230,6 +230,30 @@ impl GradBuffers {
 
     /// Sum over threads into interleaved (slot, channel) arrays: (d e / d sigma_s, d e / d sigma_a).
     pub fn collect(&self, grad_s: &mut [f32], grad_a: &mut [f32]) {
+        let q = self.quantum;
+        self.sum_threads(|k, s, a| {
+            grad_s[k] = (s as f64 * q) as f32;
+            grad_a[k] = (a as f64 * q) as f32;
+        });
+    }
+
+    /// As `collect`, but the raw fixed-point sums (multiples of `quantum()`): sums of passes over disjoint texels
+    /// with the same quantum add up (wrapping i64) to the sum of one pass over all of them, so shards combine
+    /// bit-identically when converted as `collect` does: `(sum as f64 * quantum) as f32`.
+    pub fn collect_fixed(&self, grad_s: &mut [i64], grad_a: &mut [i64]) {
+        self.sum_threads(|k, s, a| {
+            grad_s[k] = s;
+            grad_a[k] = a;
+        });
+    }
+
+    /// The fixed-point unit of the current pass (set by `zero`).
+    pub fn quantum(&self) -> f64 {
+        self.quantum
+    }
+
+    /// Hand each (interleaved index 3 slot + channel, sigma_s sum, sigma_a sum) of the thread buffers to `out`.
+    fn sum_threads(&self, mut out: impl FnMut(usize, i64, i64)) {
         let n = self.n;
         let locked: Vec<_> = self.bufs.iter().map(|b| b.lock().unwrap()).collect();
         for c in 0..3 {
@@ -239,8 +263,7 @@ impl GradBuffers {
                     s = s.wrapping_add(b[c * n + j]);
                     a = a.wrapping_add(b[(3 + c) * n + j]);
                 }
-                grad_s[3 * j + c] = (s as f64 * self.quantum) as f32;
-                grad_a[3 * j + c] = (a as f64 * self.quantum) as f32;
+                out(3 * j + c, s, a);
             }
         }
     }

@@ -223,22 +223,38 @@ impl Scene {
     /// The accumulated gradients (d e/d sigma_s, d e/d sigma_a): (z, y, x, 3) float32 each, or (F, 3) per slot
     /// when zero_grad was given a grad_index.
     fn take_grad<'py>(&self, py: Python<'py>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
-        let [nz, ny, nx] = self.shape;
         let g = self.grads.as_ref().ok_or_else(|| err("no gradient: call zero_grad and backward first"))?;
         let n = g.slots();
         let mut gs = vec![0.0f32; 3 * n];
         let mut ga = vec![0.0f32; 3 * n];
         py.detach(|| g.collect(&mut gs, &mut ga));
-        if self.sparse {
-            let to = |v: Vec<f32>| Array2::from_shape_vec((n, 3), v).map_err(|e| err(e.to_string()));
-            return Ok((to(gs)?.into_pyarray(py).into_any(), to(ga)?.into_pyarray(py).into_any()));
-        }
-        let to = |v: Vec<f32>| Array4::from_shape_vec((nz, ny, nx, 3), v).map_err(|e| err(e.to_string()));
-        Ok((to(gs)?.into_pyarray(py).into_any(), to(ga)?.into_pyarray(py).into_any()))
+        Ok((self.grad_array(py, gs)?, self.grad_array(py, ga)?))
+    }
+
+    /// The gradients as take_grad, but as their raw fixed-point sums (int64) and the quantum (float): the float
+    /// gradient is float32(float64(sum) * quantum). Sums of shards of one pass (same max_abs_adjoint) add up,
+    /// wrapping, to the whole pass's sums, which is how texel shards on several machines combine bit-identically.
+    fn take_grad_fixed<'py>(&self, py: Python<'py>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>, f64)> {
+        let g = self.grads.as_ref().ok_or_else(|| err("no gradient: call zero_grad and backward first"))?;
+        let n = g.slots();
+        let mut gs = vec![0i64; 3 * n];
+        let mut ga = vec![0i64; 3 * n];
+        py.detach(|| g.collect_fixed(&mut gs, &mut ga));
+        Ok((self.grad_array(py, gs)?, self.grad_array(py, ga)?, g.quantum()))
     }
 }
 
 impl Scene {
+    /// A gradient buffer as an array: (F, 3) per slot after a grad_index, else (z, y, x, 3).
+    fn grad_array<'py, T: Element>(&self, py: Python<'py>, v: Vec<T>) -> PyResult<Bound<'py, PyAny>> {
+        let [nz, ny, nx] = self.shape;
+        if self.sparse {
+            let n = v.len() / 3;
+            return Ok(Array2::from_shape_vec((n, 3), v).map_err(|e| err(e.to_string()))?.into_pyarray(py).into_any());
+        }
+        Ok(Array4::from_shape_vec((nz, ny, nx, 3), v).map_err(|e| err(e.to_string()))?.into_pyarray(py).into_any())
+    }
+
     fn texels(&self, voxel: &PyReadonlyArray2<i32>, face: &PyReadonlyArray1<u8>, normal: &PyReadonlyArray2<f32>)
               -> PyResult<Vec<Texel>> {
         let i = face.len();

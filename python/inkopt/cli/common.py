@@ -88,6 +88,23 @@ def add_optimizer_args(p) -> None:
     add_lighting_args(p, "optimise and evaluate")
 
 
+def add_ray_arg(p) -> None:
+    """``--ray auto|ADDRESS`` of ``slab`` and ``optimize`` (``inkopt.distributed``)."""
+    p.add_argument("--ray", metavar="auto|ADDRESS",
+                   help="render texel shards on Ray workers, one per node, with results identical to a "
+                        "single-machine run: 'auto' starts a local instance, ADDRESS joins a cluster (pip install "
+                        "'inkopt[ray]')")
+
+
+def ray_from_args(args) -> str | None:
+    """``--ray``, checked before any work: a one-line error if Ray is not installed."""
+    if args.ray:
+        from ..distributed import import_ray
+
+        import_ray()
+    return args.ray
+
+
 def config_from_args(args):
     from ..optim import OptimizeConfig
 

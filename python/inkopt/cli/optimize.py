@@ -4,8 +4,8 @@ from __future__ import annotations
 import sys
 
 from ..units import OPT_DPI
-from .common import (add_optimizer_args, add_translucency_args, config_from_args, lighting_from_args,
-                     print_run_summary, stderr_log)
+from .common import (add_optimizer_args, add_ray_arg, add_translucency_args, config_from_args, lighting_from_args,
+                     print_run_summary, ray_from_args, stderr_log)
 
 
 def _optimize(args) -> int:
@@ -18,11 +18,12 @@ def _optimize(args) -> int:
                          "(mm per model unit)")
     inks = InkTable.parse(args.inks)
     cfg = config_from_args(args)
+    ray = ray_from_args(args)
     lighting = lighting_from_args(args)
     scene = build_mesh_scene(args.mesh, inks, args.height_mm, args.scale, args.shell_mm, args.dpi, args.up,
                              args.translucency, args.translucency_depth_mm)
     rep = run_optimisation(scene, args.out, cfg, resume=args.resume, eval_spp=args.eval_spp, threads=args.threads,
-                           progress=sys.stderr.isatty(), lighting=lighting, log=stderr_log)
+                           progress=sys.stderr.isatty(), lighting=lighting, ray=ray, log=stderr_log)
     print_run_summary(rep, args.init, f" (peak memory {rep['peak_rss_gb']:.1f} GiB)")
     print(f"views: {args.out}/views.png, {args.out}/prediction.glb; report: {args.out}/report.json")
     return 0
@@ -43,4 +44,5 @@ def register_cli(sub) -> None:
     p.add_argument("--dpi", type=float, default=OPT_DPI, help=f"optimisation grid resolution (default {OPT_DPI:g})")
     add_translucency_args(p, mesh=True)
     add_optimizer_args(p)
+    add_ray_arg(p)
     p.set_defaults(func=_optimize)

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import sys
 
-from .common import (add_optimizer_args, add_translucency_args, config_from_args, lighting_from_args,
-                     print_run_summary, stderr_log)
+from .common import (add_optimizer_args, add_ray_arg, add_translucency_args, config_from_args, lighting_from_args,
+                     print_run_summary, ray_from_args, stderr_log)
 
 
 def _slab(args) -> int:
@@ -15,11 +15,12 @@ def _slab(args) -> int:
 
     inks = InkTable.parse(args.inks)
     cfg = config_from_args(args)
+    ray = ray_from_args(args)
     lighting = lighting_from_args(args)
     scene = load_slab(args.top, args.bottom, parse_size_mm(args.size_mm), inks, translucency=args.translucency,
                       translucency_depth_mm=args.translucency_depth_mm)
     rep = run_optimisation(scene, args.out, cfg, resume=args.resume, eval_spp=args.eval_spp, threads=args.threads,
-                           progress=sys.stderr.isatty(), lighting=lighting, log=stderr_log)
+                           progress=sys.stderr.isatty(), lighting=lighting, ray=ray, log=stderr_log)
     print_run_summary(rep, args.init)
     print(f"pictures: {args.out}/face_*.png, {args.out}/loss.png; report: {args.out}/report.json")
     return 0
@@ -35,4 +36,5 @@ def register_cli(sub) -> None:
     p.add_argument("--out", required=True, metavar="DIR", help="run directory (see docs/run-dir.md)")
     add_translucency_args(p)
     add_optimizer_args(p)
+    add_ray_arg(p)
     p.set_defaults(func=_slab)

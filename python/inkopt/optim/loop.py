@@ -66,12 +66,16 @@ class Optimization:
     (I, 3) linear; fixed_share (z, y, x, N) float32 or None; ``baseline(kind)`` -> (z, y, x, N) mixture of a
     print-shop baseline, needed only for ``cfg.init`` "surface" or "extrusion" (the run driver supplies it);
     ``lighting``: the display lighting the prediction is rendered under (``inkopt.lighting``; default uniform).
+    ``renderer_factory(volume, threads, lighting)``: what renders (default ``Renderer``; e.g. texel shards on Ray,
+    ``inkopt.distributed.RayShards.renderer``, with identical results).
     """
 
     def __init__(self, base: Volume, texels: Texels, target_rgb: np.ndarray, cfg: OptimizeConfig,
                  fixed_share: np.ndarray | None = None, threads: int | None = None,
-                 baseline: Callable[[str], np.ndarray] | None = None, lighting: Lighting | str | None = None):
+                 baseline: Callable[[str], np.ndarray] | None = None, lighting: Lighting | str | None = None,
+                 renderer_factory: Callable[..., Renderer] | None = None):
         cfg.validate()
+        self.renderer_factory = renderer_factory or Renderer
         self.lighting = load_lighting(lighting)
         if base.inks is None:
             raise ValueError("the volume needs an ink table")
@@ -138,7 +142,7 @@ class Optimization:
     def renderer(self) -> Renderer:
         """The run's renderer, set to the current mixture."""
         if self._renderer is None:
-            self._renderer = Renderer(self.volume(), self.threads, self.lighting)
+            self._renderer = self.renderer_factory(self.volume(), self.threads, self.lighting)
         else:
             self._renderer.set_volume(self.volume())
         return self._renderer

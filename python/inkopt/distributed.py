@@ -1,0 +1,248 @@
+"""Texel shards on Ray: one render or gradient pass split over Ray workers (a local Ray instance or a cluster),
+bit-identical to the same pass in one process.
+
+:class:`RayShards` connects to Ray and starts the workers (actors): by default one per node, with as many
+threads as the node has CPUs. ``RayShards.renderer(volume, threads, lighting)`` is a drop-in for
+:class:`inkopt.render.Renderer` (same ``render``, ``gradient``, ``set_volume``, ``set_lighting``), so it serves as
+``Optimization``'s ``renderer_factory``. Each worker builds its own renderer once from the volume (shipped once
+through Ray's object store) and renders a contiguous range of the texels, in proportion to its threads.
+
+Why the result does not depend on the split: random numbers are keyed by (seed, texel index, sample), and a
+worker renders its range with the texels' global indices (``first_texel``); forward results are per texel, so
+they are concatenated. Gradients are accumulated in fixed point (multiples of a quantum set from the largest
+adjoint of the whole pass, which every worker is given); workers return the raw int64 sums
+(``Renderer.gradient_fixed``), which are added here in integer arithmetic and converted once, as the core does.
+
+Per iteration, the driver sends each node the voxels whose mixture changed (int32 index + ink shares, float32)
+through the object store, and each worker its slice of the adjoints (12 bytes per texel); each worker returns
+rgb and variance of its texels for both passes (2 x 24 bytes per texel) and the gradient sums (2 x 3 x int64 =
+48 bytes per gradient slot, i.e. per free voxel).
+"""
+from __future__ import annotations
+
+import contextlib
+import time
+
+import numpy as np
+
+from .render import Renderer, RenderResult, fixed_to_float
+
+RAY_INSTALL_HINT = "--ray needs Ray: pip install 'inkopt[ray]' (or pip install 'ray[default]')"
+
+
+def import_ray():
+    """The ray module, or a ValueError with the one-line install hint."""
+    try:
+        import ray
+    except ImportError:
+        raise ValueError(RAY_INSTALL_HINT) from None
+    return ray
+
+
+def connect_ray(address: str = "auto", num_cpus: int | None = None):
+    """(ray, started): join Ray if it is already initialised in this process, else start a local instance
+    (``address`` "auto", ``num_cpus`` of it, default all cores) or join the cluster at ``address``. ``started``:
+    whether this call started it (and its caller should shut it down)."""
+    ray = import_ray()
+    if ray.is_initialized():
+        return ray, False
+    if address == "auto":
+        ray.init(num_cpus=num_cpus, include_dashboard=False, log_to_driver=False)
+    else:
+        ray.init(address=address, log_to_driver=False)
+    return ray, True
+
+
+class _ShardWorker:
+    """A Ray actor: one renderer, rendering the texel ranges it is given."""
+
+    def __init__(self, threads: int):
+        self.threads, self.renderer, self.mix = threads, None, None
+
+    def load(self, volume, lighting) -> None:
+        self.renderer = Renderer(volume, self.threads, lighting)
+        self.mix = None if volume.form != "mixture" else np.array(volume.mixture, np.float32)
+
+    def set_volume(self, volume) -> None:
+        self.renderer.set_volume(volume)
+        self.mix = None if volume.form != "mixture" else np.array(volume.mixture, np.float32)
+
+    def update_mixture(self, change) -> None:
+        """Set the mixture of the voxels ``change`` = (flat voxel indices, (K, N) shares) lists."""
+        idx, shares = change
+        self.mix.reshape(-1, self.mix.shape[-1])[idx] = shares
+        self.renderer.set_volume(self.renderer.volume.with_mixture(self.mix.copy()))
+
+    def set_lighting(self, lighting) -> None:
+        self.renderer.set_lighting(lighting)
+
+    def render(self, texels, lo, hi, spp, seed, include_specular):
+        r = self.renderer.render(texels.subset(slice(lo, hi)), spp, seed, include_specular, first_texel=lo)
+        return r.rgb, r.var_mean, _totals(r)
+
+    def gradient(self, texels, lo, hi, adjoint, max_abs, spp, seed, include_specular, method, grad_index):
+        gs, ga, q, r = self.renderer.gradient_fixed(texels.subset(slice(lo, hi)), adjoint, spp, seed,
+                                                    include_specular, method, grad_index, lo, max_abs)
+        return gs, ga, q, r.rgb, r.var_mean, _totals(r)
+
+
+def _totals(r: RenderResult) -> dict:
+    return dict(paths=r.paths, events=r.events, replayed_paths=r.replayed_paths, replayed_events=r.replayed_events)
+
+
+class RayShards:
+    """Ray workers for texel shards. ``address``: "auto" (a local instance of ``num_cpus``) or a cluster address;
+    ``workers``: how many (default one per node, each with all of its node's CPUs); ``threads``: threads per worker
+    (default: the node's CPUs, or the cluster's CPUs / workers when ``workers`` is given)."""
+
+    def __init__(self, address: str = "auto", workers: int | None = None, threads: int | None = None,
+                 num_cpus: int | None = None):
+        ray, self._started = connect_ray(address, num_cpus)
+        self._ray = ray
+        nodes = [n for n in ray.nodes() if n.get("Alive") and n["Resources"].get("CPU", 0) >= 1]
+        actor = ray.remote(_ShardWorker)
+        if workers is None:
+            from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
+
+            self.threads = [threads or int(n["Resources"]["CPU"]) for n in nodes]
+            self.actors = [actor.options(num_cpus=t, scheduling_strategy=NodeAffinitySchedulingStrategy(
+                n["NodeID"], soft=False)).remote(t) for n, t in zip(nodes, self.threads)]
+        else:
+            if workers < 1:
+                raise ValueError(f"workers must be at least 1, got {workers}")
+            cpus = int(ray.cluster_resources().get("CPU", 1))
+            self.threads = [threads or max(1, cpus // workers)] * workers
+            self.actors = [actor.options(num_cpus=t, scheduling_strategy="SPREAD").remote(t) for t in self.threads]
+
+    def renderer(self, volume, threads: int | None = None, lighting=None) -> "ShardedRenderer":
+        """A renderer of ``volume`` on these workers (``threads`` is ignored: each worker has its own)."""
+        return ShardedRenderer(self, volume, lighting)
+
+    def close(self) -> None:
+        for a in self.actors:
+            self._ray.kill(a)
+        self.actors = []
+        if self._started:
+            self._ray.shutdown()
+
+
+class ShardedRenderer:
+    """:class:`~inkopt.render.Renderer`'s interface over the workers of a :class:`RayShards`; results are
+    bit-identical to a ``Renderer``'s for the same volume, texels, seeds and lighting."""
+
+    def __init__(self, shards: RayShards, volume, lighting=None):
+        from .lighting import load_lighting
+
+        self._shards, self._ray = shards, shards._ray
+        self.volume, self.lighting = volume, load_lighting(lighting)
+        self._refs: dict = {}
+        ref = self._ray.put(volume)
+        self._pending = [a.load.remote(ref, self.lighting) for a in shards.actors]
+        self._shipped = self._mixture_of(volume)
+
+    @property
+    def threads(self) -> int:
+        return sum(self._shards.threads)
+
+    @staticmethod
+    def _mixture_of(volume):
+        return None if volume.form != "mixture" else np.array(volume.mixture, np.float32)
+
+    def set_volume(self, volume) -> None:
+        """As ``Renderer.set_volume``: only the medium changes. A mixture goes out as the voxels that changed."""
+        if volume.shape != self.volume.shape:
+            raise ValueError(f"set_volume: shape {volume.shape} differs from the renderer's {self.volume.shape}")
+        new, old = self._mixture_of(volume), self._shipped
+        if new is None or old is None or new.shape != old.shape or volume.inks is not self.volume.inks:
+            ref = self._ray.put(volume)
+            self._pending += [a.set_volume.remote(ref) for a in self._shards.actors]
+        else:
+            n = new.shape[-1]
+            flat, was = new.reshape(-1, n), old.reshape(-1, n)
+            changed = np.flatnonzero((flat.view(np.uint32) != was.view(np.uint32)).any(axis=1))
+            if len(changed):
+                idx = changed.astype(np.int32 if len(flat) < 2**31 else np.int64)
+                ref = self._ray.put((idx, flat[changed]))
+                self._pending += [a.update_mixture.remote(ref) for a in self._shards.actors]
+        self._shipped, self.volume = new, volume
+
+    def set_lighting(self, lighting) -> None:
+        from .lighting import load_lighting
+
+        self.lighting = load_lighting(lighting)
+        self._pending += [a.set_lighting.remote(self.lighting) for a in self._shards.actors]
+
+    def _ref(self, obj):
+        """An object-store reference to ``obj`` (texels, a gradient index), put once while the same object is
+        passed again."""
+        hit = self._refs.get(id(obj))
+        if hit is None or hit[0] is not obj:
+            if len(self._refs) > 8:
+                self._refs.clear()
+            hit = self._refs[id(obj)] = (obj, self._ray.put(obj))
+        return hit[1]
+
+    def _bounds(self, n: int) -> list[tuple[int, int]]:
+        """Contiguous texel ranges, one per worker, in proportion to its threads."""
+        cut = np.round(np.cumsum([0] + self._shards.threads) / sum(self._shards.threads) * n).astype(int)
+        return list(zip(cut[:-1].tolist(), cut[1:].tolist()))
+
+    def _gather(self, calls) -> list:
+        """Results of ``calls`` (remote calls already made), after the medium updates before them succeeded."""
+        pending, self._pending = self._pending, []
+        self._ray.get(pending)
+        return self._ray.get(calls)
+
+    def render(self, texels, spp: int = 16, seed: int = 0, include_specular: bool = True,
+               progress: bool = False) -> RenderResult:
+        if spp < 1:
+            raise ValueError(f"spp must be at least 1, got {spp}")
+        t0 = time.perf_counter()
+        tex = self._ref(texels)
+        outs = self._gather([a.render.remote(tex, lo, hi, int(spp), int(seed), include_specular)
+                             for a, (lo, hi) in zip(self._shards.actors, self._bounds(len(texels)))])
+        return self._result(outs, spp, t0)
+
+    def gradient(self, texels, adjoint: np.ndarray, spp: int = 16, seed: int = 1, include_specular: bool = True,
+                 method: str = "replay", progress: bool = False, grad_index: np.ndarray | None = None):
+        """As ``Renderer.gradient``: the workers' fixed-point sums are added in int64 and converted once."""
+        if spp < 1:
+            raise ValueError(f"spp must be at least 1, got {spp}")
+        adjoint = np.asarray(adjoint, np.float32)
+        if adjoint.shape != (len(texels), 3):
+            raise ValueError(f"adjoint must have shape ({len(texels)}, 3), got {adjoint.shape}")
+        t0 = time.perf_counter()
+        max_abs = float(np.abs(adjoint).max(initial=0.0))
+        tex, gi = self._ref(texels), None if grad_index is None else self._ref(grad_index)
+        outs = self._gather([a.gradient.remote(tex, lo, hi, adjoint[lo:hi], max_abs, int(spp), int(seed),
+                                               include_specular, method, gi)
+                             for a, (lo, hi) in zip(self._shards.actors, self._bounds(len(texels)))])
+        quanta = {o[2] for o in outs}
+        assert len(quanta) == 1, f"shards used different fixed-point quanta {quanta}"
+        gs, ga = np.array(outs[0][0], np.int64), np.array(outs[0][1], np.int64)
+        for o in outs[1:]:
+            gs += o[0]  # int64 array sums wrap, as the core's wrapping_add does
+            ga += o[1]
+        q = quanta.pop()
+        return fixed_to_float(gs, q), fixed_to_float(ga, q), self._result([o[3:] for o in outs], spp, t0)
+
+    @staticmethod
+    def _result(outs, spp: int, t0: float) -> RenderResult:
+        totals = {k: sum(o[2][k] for o in outs) for k in outs[0][2]}
+        rgb = np.concatenate([o[0] for o in outs]).astype(np.float32)
+        var = np.concatenate([o[1] for o in outs]).astype(np.float32)
+        return RenderResult(rgb, var, int(spp), time.perf_counter() - t0, **totals)
+
+
+@contextlib.contextmanager
+def renderer_factory(ray: str | None = None, threads: int | None = None):
+    """``Renderer`` (no ``ray``), or ``RayShards(ray, threads=threads).renderer`` for the duration of the block
+    (Ray started for it is shut down at the end)."""
+    if not ray:
+        yield Renderer
+        return
+    shards = RayShards(ray, threads=threads)
+    try:
+        yield shards.renderer
+    finally:
+        shards.close()
