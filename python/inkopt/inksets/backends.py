@@ -15,7 +15,8 @@ from multiprocessing import get_context
 
 import numpy as np
 
-RAY_INSTALL_HINT = "--ray needs Ray: pip install 'inkopt[ray]' (or pip install 'ray[default]')"
+# the one Ray import and start, shared with --ray texel shards; RAY_INSTALL_HINT re-exported by inksets
+from ..distributed import RAY_INSTALL_HINT, connect_ray  # noqa: F401
 
 
 class _Capture:
@@ -114,17 +115,8 @@ class Ray(Serial):
     name = "ray"
 
     def __init__(self, address: str = "auto", workers: int | None = None, num_cpus: int | None = None):
-        try:
-            import ray
-        except ImportError:
-            raise ValueError(RAY_INSTALL_HINT) from None
+        ray, self._started = connect_ray(address, num_cpus)
         self._ray = ray
-        self._started = not ray.is_initialized()
-        if self._started:
-            if address == "auto":
-                ray.init(num_cpus=num_cpus, include_dashboard=False, log_to_driver=False)
-            else:
-                ray.init(address=address, log_to_driver=False)
         self.cpus = int(ray.cluster_resources().get("CPU", 1))
         # a task's threads must fit on one node
         self.node_cpus = max([int(n["Resources"].get("CPU", 1)) for n in ray.nodes() if n.get("Alive")] or [1])
