@@ -14,6 +14,7 @@ import trimesh
 from inkopt import charts
 from inkopt.cli import main
 from inkopt.inksets import Pool, Selection, Serial, run_selection
+from inkopt.inksets.search import extrapolate_loss
 from inkopt.optim import OptimizeConfig
 from inkopt.rundir import RunDir
 
@@ -77,6 +78,29 @@ def test_halving_final_run_equals_brute_force(chart, halving, tmp_path):
         assert {k: c[k] for k in ("loss", "delta_e76_mean", "ssim")} == {k: b[k] for k in ("loss", "delta_e76_mean",
                                                                                         "ssim")}
     assert brute["texel_samples"] == 3 * 24 * 16 * (4 * 6 + 2 * 16)
+
+
+def test_extrapolate_loss():
+    """The rung ranking's learning-curve extrapolation: exact on a power law (fitted on the second half), never
+    below a rising history's mean, the last value for fewer than 3 points."""
+    t = np.arange(1, 21)
+    assert extrapolate_loss(0.1 + 0.5 * t ** -0.7, 80) == pytest.approx(0.1 + 0.5 * 80 ** -0.7, rel=1e-6)
+    rising = 0.2 + 0.001 * t
+    assert extrapolate_loss(rising, 80) == pytest.approx(rising[10:].mean())
+    assert extrapolate_loss([0.3, 0.2], 80) == 0.2
+    assert extrapolate_loss([0.5, 0.4, 0.33, 0.29, 0.27, 0.26], 80) < 0.26
+
+
+def test_budgets_paper_setup():
+    """15 sets: rungs of 1/8 and 1/4 of the budget, then (no half-budget rung) the last 4 run the full budget;
+    work (iterations, evaluation renders at 16 and 256 spp) at most 40 % of brute force's."""
+    sel = Selection({}, "cyan,cyan2,magenta,magenta2,yellow,yellow2", 4, ["black", "white"],
+                    OptimizeConfig(iterations=80))
+    assert sel.budgets() == [10, 20, 80]
+    assert Selection({}, "cyan,magenta,yellow", 2, [], OptimizeConfig(iterations=4)).budgets() == [2, 4]
+    per_it = sel.cfg.spp + sel.cfg.forward_spp
+    work = 15 * (10 * per_it + 2 * 16) + 8 * (10 * per_it + 2 * 16) + 4 * (60 * per_it + 2 * 256)
+    assert work / (15 * (80 * per_it + 2 * 256)) <= 0.40
 
 
 class Interrupted(Serial):
@@ -157,6 +181,26 @@ def test_pool_equals_serial(chart, halving, tmp_path):
     pool = Pool(2)
     try:
         assert run_selection(selection(chart), tmp_path, pool, log=lambda m: None) == res
+    finally:
+        pool.close()
+
+
+@pytest.mark.slow
+def test_halving_fifteen_sets_pool_equals_serial(chart, tmp_path):
+    """The paper's 15 sets by halving (24 iterations: rungs of 3, 6, 24): 15, 8 then 4 sets, ranked between rungs
+    by the extrapolated training loss; a pool of 2 gives the same selection.json as serial execution."""
+    sel = lambda: selection(chart, candidates="cyan,cyan2,magenta,magenta2,yellow,yellow2", choose=4,
+                            iterations=24)  # noqa: E731
+    res = run_selection(sel(), tmp_path / "serial", Serial(2), log=lambda m: None)
+    state = json.loads((tmp_path / "serial" / "selection_state.json").read_text())
+    assert [(r["iterations"], len(r["results"])) for r in state["rungs"]] == [(3, 15), (6, 8), (24, 4)]
+    for k in (0, 1):
+        ranked = sorted(state["rungs"][k]["results"].items(), key=lambda kv: (kv[1]["predicted_loss"], kv[0]))
+        assert {n for n, _ in ranked[:len(state["rungs"][k + 1]["results"])]} == set(state["rungs"][k + 1]["results"])
+    assert [c["iterations"] for c in res["candidates"]] == [24] * 4 + [6] * 4 + [3] * 7
+    pool = Pool(2)
+    try:
+        assert run_selection(sel(), tmp_path / "pool", pool, log=lambda m: None) == res
     finally:
         pool.close()
 

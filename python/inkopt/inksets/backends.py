@@ -12,6 +12,7 @@ import os
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict
 from multiprocessing import get_context
+from pathlib import Path
 
 import numpy as np
 
@@ -49,8 +50,8 @@ def build_scene(target: dict, inks):
 
 def run_candidate(task: dict) -> dict:
     """One rung of one candidate: build its scene, optimise (continuing from its checkpoint when ``resume``) up to
-    ``cfg["iterations"]``, evaluate at ``eval_spp``. Returns the report's figures, the texel count and the
-    final prediction (I, 3) linear RGB."""
+    ``cfg["iterations"]``, evaluate at ``eval_spp``. Returns the report's figures, the texel count, the run's
+    training-loss history (``hist_loss``, every iteration from the start) and the final prediction (I, 3)."""
     from ..model import InkTable
     from ..optim import OptimizeConfig
     from ..run import run_optimisation
@@ -62,6 +63,8 @@ def run_candidate(task: dict) -> dict:
                            threads=task["threads"], log=lambda msg: None)
     keys = ("loss", "delta_e76_mean", "delta_e2000_mean", "ssim", "iterations", "texels")
     out = {k: rep[k] for k in keys if k in rep}
+    with np.load(Path(task["out"]) / "checkpoint.npz") as ck:  # the whole run's training-loss history
+        out["hist_loss"] = [float(v) for v in ck["hist_loss"]]
     out["texels"] = len(scene.texels)
     out["prediction"] = scene.prediction
     return out
