@@ -167,3 +167,10 @@ def test_set_volume_renders_like_a_fresh_renderer(masked):
     np.testing.assert_array_equal(g1[1], g2[1])
     with pytest.raises(ValueError, match="shape"):
         reused.set_volume(Volume(voxel_mm=(VOX,) * 3, mixture=np.ones((2, 2, 2, 5), np.float32) / 5, inks=inks))
+    # A dense medium is overwritten in place; bad coefficients are refused before anything is written.
+    s, a_ = b.coefficients()
+    bad = np.ascontiguousarray(s, np.float32).copy()
+    bad[1, 2, 3, 1] = -1.0
+    with pytest.raises(ValueError, match="voxel .* channel 1 are negative"):
+        reused._scene.set_medium(sigma_s=bad, sigma_a=np.ascontiguousarray(a_, np.float32))
+    np.testing.assert_array_equal(reused.render(tex, spp=4, seed=3).rgb, r2.rgb)

@@ -58,16 +58,31 @@ impl DenseMedium {
             return Err("sigma_s and sigma_a must both have 3 channels per voxel and equal size".into());
         }
         let n = sigma_s.len() / 3;
-        let mut coef = vec![[0.0f32, 1.0f32]; 3 * n];
+        let mut medium = DenseMedium { n, coef: vec![[0.0f32, 1.0f32]; 3 * n], majorant: [0.0; 3] };
+        medium.refill(sigma_s, sigma_a)?;
+        Ok(medium)
+    }
+
+    /// Replace the coefficients by new ones for the same voxels, in place: the optimiser swaps the medium every
+    /// iteration, and a second copy of it would be the largest allocation of a big object. Checked before
+    /// anything is written, so an error leaves the medium as it was.
+    pub fn refill(&mut self, sigma_s: &[f32], sigma_a: &[f32]) -> Result<(), String> {
+        let n = self.n;
+        if sigma_s.len() != 3 * n || sigma_a.len() != 3 * n {
+            return Err(format!("sigma_s and sigma_a must have 3 channels for each of the {n} voxels"));
+        }
+        if let Some(k) = (0..3 * n).find(|&k| extinction_albedo(sigma_s[k], sigma_a[k]).is_none()) {
+            return Err(format!("coefficients of voxel {} channel {} are negative or not finite", k / 3, k % 3));
+        }
         for i in 0..n {
             for c in 0..3 {
-                let (t, albedo) = extinction_albedo(sigma_s[3 * i + c], sigma_a[3 * i + c])
-                    .ok_or_else(|| format!("coefficients of voxel {i} channel {c} are negative or not finite"))?;
-                coef[c * n + i] = [t, albedo];
+                let (t, albedo) = extinction_albedo(sigma_s[3 * i + c], sigma_a[3 * i + c]).unwrap();
+                self.coef[c * n + i] = [t, albedo];
             }
         }
-        let majorant = std::array::from_fn(|c| coef[c * n..(c + 1) * n].iter().fold(0.0f32, |a, x| a.max(x[0])));
-        Ok(DenseMedium { n, coef, majorant })
+        let coef = &self.coef;
+        self.majorant = std::array::from_fn(|c| coef[c * n..(c + 1) * n].iter().fold(0.0f32, |a, x| a.max(x[0])));
+        Ok(())
     }
 }
 

@@ -96,6 +96,13 @@ impl Scene {
         ink_sigma_s: Option<PyReadonlyArray2<f32>>,
         ink_sigma_a: Option<PyReadonlyArray2<f32>>,
     ) -> PyResult<()> {
+        // A dense medium replaced by a dense one is overwritten in place (no second copy at the peak).
+        if let (MediumKind::Dense(m), Some(s), Some(a), None) = (&mut self.medium, &sigma_s, &sigma_a, &labels) {
+            let [nz, ny, nx] = self.shape;
+            check_shape(s.shape(), &[nz, ny, nx, 3], "sigma_s")?;
+            check_shape(a.shape(), &[nz, ny, nx, 3], "sigma_a")?;
+            return m.refill(c_slice(s, "sigma_s")?, c_slice(a, "sigma_a")?).map_err(err);
+        }
         self.medium = medium_from(self.shape, sigma_s, sigma_a, labels, ink_sigma_s, ink_sigma_a)?;
         Ok(())
     }

@@ -144,6 +144,9 @@ class Optimization:
         if self._renderer is None:
             self._renderer = self.renderer_factory(self.volume(), self.threads, self.lighting)
         else:
+            # Let go of the last iterate before the next mixture is built: one (z, y, x, N) array less at the
+            # peak (156 MB for Spot 20 mm). The base volume has the same geometry and ink table.
+            self._renderer.volume = self.base
             self._renderer.set_volume(self.volume())
         return self._renderer
 
