@@ -67,8 +67,8 @@ def register_cli(sub) -> None:
                    help="printer whose material slots bound the set size (default j750: 6; 'none': no limit)")
     p.add_argument("--out", required=True, metavar="DIR", help="selection directory")
     p.add_argument("--strategy", choices=("halving", "brute"), default="halving")
-    p.add_argument("--rung-eval-spp", type=int, default=32,
-                   help="halving: spp of the evaluation that ranks the intermediate rungs (default 32)")
+    p.add_argument("--rung-eval-spp", type=int, default=16,
+                   help="halving: spp of the intermediate rungs' evaluation renders (figures and pictures only; default 16)")
     ex = p.add_mutually_exclusive_group()
     ex.add_argument("--workers", type=int, help="runs at once in a local process pool")
     ex.add_argument("--ray", metavar="auto|ADDRESS",
