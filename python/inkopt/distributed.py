@@ -104,7 +104,8 @@ class RayShards:
         if workers is None:
             from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
 
-            self.threads = [threads or int(n["Resources"]["CPU"]) for n in nodes]
+            # at most a node's CPUs: an actor pinned to a node that cannot hold it would never start
+            self.threads = [min(threads or 10**9, int(n["Resources"]["CPU"])) for n in nodes]
             self.actors = [actor.options(num_cpus=t, scheduling_strategy=NodeAffinitySchedulingStrategy(
                 n["NodeID"], soft=False)).remote(t) for n, t in zip(nodes, self.threads)]
         else:

@@ -230,7 +230,11 @@ class RunDir:
 
     @classmethod
     def create(cls, path) -> "RunDir":
+        """Make the folder (if needed) and remove the temporary files of an earlier process that was killed while
+        writing (``inkopt.io`` writes ``NAME.XXXX.tmp[.npz]`` and renames it into place)."""
         Path(path).mkdir(parents=True, exist_ok=True)
+        for stale in [*Path(path).glob("*.tmp"), *Path(path).glob("*.tmp.npz")]:
+            stale.unlink(missing_ok=True)
         return cls(path)
 
     def __truediv__(self, name: str) -> Path:

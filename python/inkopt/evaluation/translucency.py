@@ -121,8 +121,9 @@ def regions(rec: SceneRecord, group: np.ndarray) -> list[np.ndarray]:
     grid[tuple(vox[on].T)] = 1
     lab, n = ndimage.label(grid, np.ones((3, 3, 3), bool))
     ids = lab[tuple(vox.T)]
-    out = [group[ids == k] for k in range(1, n + 1)]
-    out = [r for r in out if len(r) >= MIN_REGION_TEXELS]
+    order = np.argsort(ids, kind="stable")  # one pass over the texels however many components there are
+    bounds = np.cumsum(np.bincount(ids, minlength=n + 1))
+    out = [r for r in np.split(group[order], bounds[:-1])[1:] if len(r) >= MIN_REGION_TEXELS]
     return sorted(out, key=len, reverse=True)[:MAX_REGIONS]
 
 

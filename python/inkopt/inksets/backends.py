@@ -108,7 +108,7 @@ class Pool(Serial):
         return self._ex.map(fn, tasks)
 
     def close(self) -> None:
-        self._ex.shutdown()
+        self._ex.shutdown(wait=True, cancel_futures=True)  # after Ctrl-C or a failure: do not run the queued rest
 
 
 class Ray(Serial):

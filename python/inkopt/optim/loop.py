@@ -9,6 +9,7 @@ as if it had not stopped.
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import time
 from collections.abc import Callable
@@ -84,6 +85,10 @@ class Optimization:
         shape = base.shape + (len(base.inks),)
         self.param = Parameterization(cfg.param, np.zeros(shape, np.float32) if fixed_share is None else fixed_share)
         self.loss = TexelLoss(self.target, texels.pos_vox, gamma=cfg.gamma)
+        # what the run optimises towards and under which constraints: part of the checkpoint key
+        h = hashlib.sha256(self.target.tobytes())
+        h.update(np.ascontiguousarray(self.param.fixed_share).data)
+        self._problem_digest = h.hexdigest()[:16]
         self.x = self.param.variables_for(self._initial_free_mixture())
         self.opt = make_optimizer(cfg.optimizer, cfg.step_size, self.x.shape)
         self._renderer: Renderer | None = None
@@ -113,7 +118,7 @@ class Optimization:
         d.pop("iterations")
         d.pop("checkpoint_every")
         d.update(shape=list(self.base.shape), inks=list(self.base.inks.names), texels=len(self.texels),
-                 free=self.param.n_free)
+                 free=self.param.n_free, problem=self._problem_digest)
         if not self.lighting.uniform:
             d["lighting"] = self.lighting.key()
         return json.dumps(d, sort_keys=True)
@@ -126,7 +131,8 @@ class Optimization:
                  compressed=False)
 
     def load_checkpoint(self, path: Path) -> None:
-        d = np.load(path, allow_pickle=False)
+        with np.load(path, allow_pickle=False) as z:
+            d = dict(z)
         if str(d["config_key"]) != self.config_key():
             raise ValueError(f"checkpoint {path} was made with different settings; rerun without --resume or "
                              "with the original settings")
@@ -149,6 +155,18 @@ class Optimization:
             self._renderer.volume = self.base
             self._renderer.set_volume(self.volume())
         return self._renderer
+
+    def _snapshot(self) -> tuple:
+        """References to everything a step replaces (it never changes these arrays in place)."""
+        o = self.opt
+        return (self.x, self.iteration, self.c_avg, self.c_var, self.c_weight, o.m, o.v, o.t,
+                len(self.history.loss))
+
+    def _restore(self, snap: tuple) -> None:
+        o = self.opt
+        self.x, self.iteration, self.c_avg, self.c_var, self.c_weight, o.m, o.v, o.t, n = snap
+        for name in asdict(self.history):
+            del getattr(self.history, name)[n:]
 
     def step(self) -> dict:
         cfg = self.cfg
@@ -205,15 +223,20 @@ class Optimization:
         if progress:
             from tqdm import tqdm
             bar = tqdm(total=self.cfg.iterations, initial=self.iteration, unit="it", desc="optimize")
+        snap = None
         try:
             while self.iteration < self.cfg.iterations:
+                snap = self._snapshot()
                 info = self.step()
+                snap = None
                 if checkpoint is not None and self.iteration % self.cfg.checkpoint_every == 0:
                     self.save_checkpoint(checkpoint)
                 if bar is not None:
                     bar.set_postfix(loss=f"{info['loss']:.3g}", dE76=f"{info['delta_e76']:.2f}")
                     bar.update(1)
         except KeyboardInterrupt:
+            if snap is not None:  # interrupted inside a step: back to its start, so a resume repeats it exactly
+                self._restore(snap)
             if checkpoint is not None:
                 self.save_checkpoint(checkpoint)
             raise

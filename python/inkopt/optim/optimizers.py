@@ -1,6 +1,7 @@
 """Update rules on the optimisation variables x (F, N), one class per optimiser with named hyperparameters.
 
-Each has ``step(x, g) -> x'``, ``state() -> dict`` and ``load(dict)`` (checkpoint arrays ``opt_m``, ``opt_v``,
+Each has ``step(x, g) -> x'`` (which replaces its state arrays rather than changing them in place, so a snapshot
+of references restores an interrupted step exactly), ``state() -> dict`` and ``load(dict)`` (checkpoint arrays ``opt_m``, ``opt_v``,
 ``opt_t``, the same keys for every optimiser so that checkpoints stay readable), and ``natural``: whether it wants
 the mirror-descent direction (``Parameterization.backward(natural=True)``) instead of dE/dx.
 """
@@ -46,6 +47,7 @@ class ExponentiatedGradient(_Moments):
         self.t += 1
         if self.t <= self.warmup:
             scale = float(np.percentile(np.abs(g), self.percentile)) if g.size else 0.0
+            self.v = self.v.copy()  # a new array: state is replaced, never changed in place
             self.v[0] += (scale - self.v[0]) / self.t
         self.m = self.beta * self.m + (1 - self.beta) * g
         mh = self.m / (1 - self.beta ** self.t)
@@ -61,7 +63,7 @@ class AdaGrad(_Moments):
 
     def step(self, x: np.ndarray, g: np.ndarray) -> np.ndarray:
         self.t += 1
-        self.v += g * g
+        self.v = self.v + g * g
         return x - self.lr * g / (np.sqrt(self.v) + self.eps)
 
 
