@@ -41,17 +41,18 @@ from dataclasses import asdict
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..color import delta_e76
 from ..io import write_png
 from ..lighting import Lighting, load_lighting
 from ..loss import TexelLoss
 from ..model import Quantization, Texels, Volume
 from ..pictures import panels
-from ..printing.quantize import quantize_volume
+from ..printing.quantize import DEFAULT_DPI, DEFAULT_LAYER_UM, quantize_volume
+from ..printing.stream import quantize_run
 from ..render import Renderer
 from ..rundir import RunDir, SceneRecord
 from ..units import dpi_of
 from .baselines import BASELINES
-from ..color import delta_e76
 from .colour_table import DEFAULT_PATCH_MM, ColourTable, colour_table
 from .metrics import prediction_metrics
 from .noise import EVAL_SEED_OFFSET, MAX_SPP, PILOT_SPP, TARGET_NOISE_DE76, adaptive_render
@@ -106,19 +107,26 @@ def printer_texels(qvol: Volume, scene: Texels, kind: str) -> Texels:
     return Texels.for_volume(qvol, sorted({int(f) for f in np.unique(scene.face)}))
 
 
-def render_printed(qvol: Volume, scene: Texels, voxel_mm_scene, kind: str, spp: int, seed: int, threads=None,
-                   progress: bool = False, lighting: Lighting | None = None):
-    """Render a labels volume on its printer texels and average onto the scene texels.
+class PrintedRenderer:
+    """A labels volume set up once for rendering on its printer texels (texel map, renderer), then rendered any
+    number of times and averaged onto the scene texels (adaptive evaluation renders it in several passes)."""
 
-    Returns (rgb (I, 3), var_mean (I, 3), spp_printer, seconds, printer texel count)."""
-    t0 = time.perf_counter()
-    ptex = printer_texels(qvol, scene, kind)
-    to_scene, stand_in = map_texels(ptex, qvol.voxel_mm, scene, voxel_mm_scene, per_face=kind != "mesh")
-    spp_p = max(1, int(np.ceil(spp * len(scene) / len(ptex))))
-    res = Renderer(qvol, threads, lighting).render(ptex, spp_p, seed, progress=progress)
-    rgb, var = average_to_scene(res.rgb.astype(np.float64), res.var_mean.astype(np.float64), to_scene, stand_in,
-                                len(scene))
-    return rgb, var, spp_p, time.perf_counter() - t0, len(ptex)
+    def __init__(self, qvol: Volume, scene: Texels, voxel_mm_scene, kind: str, threads=None,
+                 lighting: Lighting | None = None):
+        self.ptex = printer_texels(qvol, scene, kind)
+        self.to_scene, self.stand_in = map_texels(self.ptex, qvol.voxel_mm, scene, voxel_mm_scene,
+                                                  per_face=kind != "mesh")
+        self.n_scene = len(scene)
+        self.renderer = Renderer(qvol, threads, lighting)
+
+    def __call__(self, spp: int, seed: int, progress: bool = False):
+        """(rgb (I, 3), var_mean (I, 3)) on the scene texels from ``spp`` samples per scene texel, shared by its
+        printer texels, and the printer spp used."""
+        spp_p = max(1, int(np.ceil(spp * self.n_scene / len(self.ptex))))
+        res = self.renderer.render(self.ptex, spp_p, seed, progress=progress)
+        rgb, var = average_to_scene(res.rgb.astype(np.float64), res.var_mean.astype(np.float64), self.to_scene,
+                                    self.stand_in, self.n_scene)
+        return rgb, var, spp_p
 
 
 # ----------------------------------------------------------------------------------------------- pictures
@@ -194,24 +202,25 @@ def evaluate_run(path, spp: int | None = DEFAULT_SPP, seed: int = 0, method: str
             raise ValueError(f"{d / d.QUANTIZED} was quantized with '{q.method}', not '{method}'; rerun 'inkopt "
                              f"quantize {d} --method {method}' or omit --method")
     else:
-        t0 = time.perf_counter()
-        qvol = quantize_volume(vol, method=method or "blue-noise")
-        qpath = d.save_quantized(qvol)
+        t0 = time.perf_counter()  # inkopt quantize's defaults, layer by layer as that command does
+        quantize_run(d, method=method or "blue-noise", dpi=DEFAULT_DPI, layer_um=DEFAULT_LAYER_UM, seed=0,
+                     upsample="nearest")
+        qvol = d.load_quantized()
         q = qvol.quantization
         say(f"quantized {vol.shape} -> {qvol.shape} ({q.method}) in {time.perf_counter() - t0:.1f} s; "
-            f"wrote {qpath}")
+            f"wrote {d / d.QUANTIZED}")
     dpi = q.dpi or tuple(float(v) for v in dpi_of(qvol.voxel_mm))
     out["quantization"] = {**asdict(q), "dpi": list(dpi)}
     qkw = dict(method=q.method, seed=q.seed, upsample=q.upsample, dpi=tuple(dpi))
 
     def printed(name: str, labels_vol: Volume) -> dict:
         t0, info = time.perf_counter(), {"spp_printer": 0}
+        printer = PrintedRenderer(labels_vol, stex, vol.voxel_mm, kind, threads, lighting)
+        out["printer_texels"] = len(printer.ptex)
 
         def render(n: int, s: int):
-            rgb, var, spp_p, _, n_p = render_printed(labels_vol, stex, vol.voxel_mm, kind, n, s, threads,
-                                                     progress=log is not None, lighting=lighting)
+            rgb, var, spp_p = printer(n, s, progress=log is not None)
             info["spp_printer"] += spp_p
-            out["printer_texels"] = n_p
             return rgb, var, spp_p
 
         m = measured(name, render)
