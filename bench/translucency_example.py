@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import RESULTS, machine, write  # noqa: E402
+from common import machine, write  # noqa: E402
 
 DOCS = Path(__file__).resolve().parents[1] / "docs"
 

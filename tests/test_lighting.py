@@ -9,7 +9,7 @@ import pytest
 from inkopt import charts
 from inkopt.cli import main
 from inkopt.lighting import Lighting, load_lighting, mean_radiance, read_map, write_map
-from inkopt.model import InkTable, Texels, Volume
+from inkopt.model import Texels, Volume
 from inkopt.render import Renderer
 
 

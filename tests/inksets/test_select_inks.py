@@ -5,7 +5,6 @@ A 2 x 1.33 x 0.5 mm colour-chart slab (24 x 16 x 6 voxels, 384 texels) at 2 + 4 
 takes a fraction of a second. Results are deterministic (seeded, bit-identical for any thread count).
 """
 import json
-import shutil
 
 import numpy as np
 import pytest

@@ -9,7 +9,7 @@ import pytest
 from inkopt.model import InkTable, Texels, Volume, mix
 from inkopt.render import Renderer, render
 
-from helpers import assert_same_mean, replay_matches_fd
+from helpers import replay_matches_fd
 
 VOX = 25.4 / 300
 

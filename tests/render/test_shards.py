@@ -74,7 +74,7 @@ def test_ray_missing_is_one_line(tmp_path, capsys, monkeypatch):
 def test_ray_shards_equal_one_machine():
     """Three iterations of a small slab with every render split over 2 local Ray workers (1 thread each): the
     same variables, loss history and running prediction as in one process, bit for bit; and a final render."""
-    ray = pytest.importorskip("ray")
+    pytest.importorskip("ray")
     from inkopt.distributed import RayShards
 
     scene = chart_scene()

@@ -11,7 +11,7 @@ from inkopt.io import load_npz
 from inkopt.model import InkTable, Volume
 from inkopt.rundir import RunDir, SceneRecord
 from inkopt.scenes.mesh import build_mesh_scene
-from inkopt.scenes.slab import build_slab, load_slab
+from inkopt.scenes.slab import build_slab
 from inkopt.scenes.translucency import load_mask
 
 INKS = InkTable.parse("vero-cmykwt")

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import argparse
-import sys
 
 from ..units import OPT_DPI
 from .common import add_optimizer_args, config_from_args, stderr_log
