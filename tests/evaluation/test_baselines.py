@@ -17,23 +17,11 @@ V300 = 25.4 / 300
 INKS3 = InkTable.from_names(["cyan", "magenta", "white"])
 
 
-@pytest.fixture(scope="module", autouse=True)
-def cache_in_tmp(tmp_path_factory):
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setenv("INKOPT_CACHE_DIR", str(tmp_path_factory.mktemp("cache")))
-        yield
-
-
 @pytest.fixture(scope="module")
 def cyan_white():
     """A 2-ink table (cyan, white), step 1/8, 1 mm patches: 9 entries."""
     inks = InkTable.from_names(["cyan", "white"])
     return inks, colour_table(inks, patch_mm=1.0, step=8, max_stderr=0.4)
-
-
-@pytest.fixture(scope="module")
-def table3():
-    return colour_table(INKS3, patch_mm=1.0, step=2, max_stderr=0.5)
 
 
 def test_simplex_lattice_counts_and_rows():

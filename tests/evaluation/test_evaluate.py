@@ -7,7 +7,6 @@ from PIL import Image
 
 from inkopt.color import linear_to_srgb
 from inkopt.evaluation.baselines import extrusion_baseline, surface_baseline
-from inkopt.evaluation.colour_table import colour_table
 from inkopt.evaluation.evaluate import average_to_scene, evaluate_run, map_texels, printer_texels, table_lines
 from inkopt.evaluation.noise import MAX_SPP, PILOT_SPP, TARGET_NOISE_DE76
 from inkopt.io import save_npz
@@ -18,18 +17,6 @@ from inkopt.printing.quantize import _enclosing, printer_grid, quantize
 V300 = 25.4 / 300
 INKS3 = InkTable.from_names(["cyan", "magenta", "white"])
 SHAPE = (6, 16, 24)
-
-
-@pytest.fixture(scope="module", autouse=True)
-def cache_in_tmp(tmp_path_factory):
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setenv("INKOPT_CACHE_DIR", str(tmp_path_factory.mktemp("cache")))
-        yield
-
-
-@pytest.fixture(scope="module")
-def table3():
-    return colour_table(INKS3, patch_mm=1.0, step=2, max_stderr=0.5)
 
 
 def test_map_texels_is_the_enclosing_voxel_map():
