@@ -40,15 +40,17 @@ class MixtureSource:
     ``origin_mm``; ``has_normals``; ``load()`` the whole Volume."""
 
     def __init__(self, path):
-        self.path = path
+        self.path, self._zip = path, None
         try:
             self._zip = zipfile.ZipFile(path)
             names = {n[:-4]: n for n in self._zip.namelist() if n.endswith(".npy")}
             small = {k: np.lib.format.read_array(self._zip.open(n), allow_pickle=False)
                      for k, n in names.items() if k not in HEAVY}
         except (OSError, zipfile.BadZipFile, ValueError) as exc:
+            self.close()
             raise ValueError(f"{path} is not a readable .npz volume file ({type(exc).__name__}: {exc})") from None
         if "mixture" not in names:
+            self.close()
             form = "labels" if "labels" in names else "dense"
             raise ValueError(f"{path} holds a {form} volume; this step needs a mixture volume")
         self.has_normals = "normals" in names
@@ -101,8 +103,9 @@ class MixtureSource:
                       boundary=self.boundary, origin_mm=self.origin_mm, quantization=q)
 
     def close(self) -> None:
-        self._fh.close()
-        self._zip.close()
+        for handle in (getattr(self, "_fh", None), self._zip):
+            if handle is not None:
+                handle.close()
 
 
 def quantize_run(d: RunDir, *, method: str, dpi, layer_um: float, seed: int, upsample: str) -> list[str]:

@@ -11,6 +11,7 @@ masked texels, down to ``translucency_depth_mm``, hold the mask's share of trans
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -60,9 +61,9 @@ class SlabScene:
     translucency: Translucency | None = None
     kind = "slab"
 
-    @property
+    @cached_property
     def fixed_share(self) -> np.ndarray | None:
-        """(z, y, x, N) float32: the translucency constraint's transparent shares, or None."""
+        """(z, y, x, N) float32: the translucency constraint's transparent shares, or None (built once)."""
         return self.record().fixed_share(self.volume.inks, self.volume.shape)
 
     def record(self) -> SceneRecord:
