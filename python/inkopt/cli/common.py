@@ -66,7 +66,9 @@ def add_optimizer_args(p) -> None:
     p.add_argument("--iterations", type=int, default=d.iterations, help=f"(default {d.iterations})")
     p.add_argument("--spp", type=int, default=d.spp, help=f"samples per texel of the gradient pass (default {d.spp})")
     p.add_argument("--forward-spp", type=int, default=d.forward_spp,
-                   help=f"samples per texel of the forward render the loss is evaluated at (default {d.forward_spp})")
+                   help=f"samples per texel of the forward render the loss is evaluated at (default {d.forward_spp}; 0: no "
+                   "forward renders after the first iteration, the loss is taken on the average of the gradient "
+                   "passes' own estimates: cheaper iterations, each worth less)")
     p.add_argument("--gamma", default=",".join(f"{g:g}" for g in d.gamma),
                    help="loss weights g1,g2,g3 of colour (dE76^2), SSIM and edge terms (default %(default)s)")
     p.add_argument("--lr", type=float, help="step size (default: 2 for eg, 0.5 for adagrad, 0.1 for adam)")

@@ -2,7 +2,9 @@
 
 One iteration: mixture -> coefficients -> forward render (seed a) -> loss and dE/dC -> path-replay gradient pass
 (seed b != a, so the adjoint's noise and the gradient's noise are independent) -> dE/dsigma -> dE/drho -> dE/dx ->
-optimiser step (``optimizers``). One :class:`~inkopt.render.Renderer` serves the whole run: geometry and thread
+optimiser step (``optimizers``). The loss is taken on a running average of the renders (``adjoint_ema``); with
+``forward_spp`` 0 there is no forward render after the first iteration, and the adjoint is evaluated at the
+average of the earlier gradient passes' own estimates (cheaper iterations, each worth less: see README). One :class:`~inkopt.render.Renderer` serves the whole run: geometry and thread
 pool are set up once and only the medium is replaced each iteration. Seeds are derived from (seed, iteration), and
 renders and gradients are bit-identical for any thread count, so a run resumed from a checkpoint continues exactly
 as if it had not stopped.
@@ -52,6 +54,10 @@ class History:
     @classmethod
     def from_arrays(cls, d) -> "History":
         return cls(**{k: [float(x) for x in d[f"hist_{k}"]] for k in asdict(cls()) if f"hist_{k}" in d})
+
+
+#: samples per texel of the first iteration's forward render of a run without forward passes (forward_spp 0)
+PILOT_SPP = 16
 
 
 def iteration_seeds(seed: int, it: int) -> tuple[int, int]:
@@ -173,9 +179,13 @@ class Optimization:
         t0 = time.perf_counter()
         fwd_seed, grad_seed = iteration_seeds(cfg.seed, self.iteration)
         renderer = self.renderer()
-        res = renderer.render(self.texels, cfg.forward_spp, fwd_seed, cfg.include_specular)
+        forward = cfg.forward_spp > 0 or self.c_avg is None
+        if forward:  # without forward passes (forward_spp 0) only the first iteration renders one
+            spp0 = cfg.forward_spp or PILOT_SPP
+            res = renderer.render(self.texels, spp0, fwd_seed, cfg.include_specular)
+            self._average(res.rgb, res.var_mean, spp0, decay=True)
         t1 = time.perf_counter()
-        c = self._average(res.rgb, res.var_mean, cfg.forward_spp, decay=True)
+        c = self.c_avg
         lr = self.loss(c, self.c_var)
         de = float(delta_e76(lr.lab, self.loss.target_lab).mean())
         t2 = time.perf_counter()
@@ -183,7 +193,7 @@ class Optimization:
                                          cfg.include_specular, cfg.grad_method, grad_index=self.param.grad_index)
         # The gradient pass's own estimate joins the average only now, after its gradient is taken, so the
         # adjoint never correlates with the noise of the gradient it multiplies.
-        self._average(gres.rgb, gres.var_mean, cfg.spp, decay=False)
+        self._average(gres.rgb, gres.var_mean, cfg.spp, decay=not forward)
         t3 = time.perf_counter()
         g_x = self.param.backward(self.x, mix_grad(gs, ga, self.base.inks), natural=self.opt.natural)
         self.x = self.opt.step(self.x, g_x).astype(np.float32)
