@@ -80,9 +80,46 @@ impl DenseMedium {
                 self.coef[c * n + i] = [t, albedo];
             }
         }
-        let coef = &self.coef;
-        self.majorant = std::array::from_fn(|c| coef[c * n..(c + 1) * n].iter().fold(0.0f32, |a, x| a.max(x[0])));
+        self.update_majorant();
         Ok(())
+    }
+
+    /// Overwrite the coefficients of some voxels in place, as `refill` would store them: `index` holds linear
+    /// voxel indices (a voxel listed twice takes its last values), `sigma_s` and `sigma_a` their interleaved
+    /// (entry, channel) coefficients in mm^-1. The optimiser changes only the free voxels of a big object, so
+    /// this costs O(K) plus one pass over the coefficients for the majorant (which may go down), and allocates
+    /// nothing. Checked before anything is written, so an error leaves the medium as it was.
+    pub fn set_voxels(&mut self, index: &[i64], sigma_s: &[f32], sigma_a: &[f32]) -> Result<(), String> {
+        let (n, k) = (self.n, index.len());
+        if sigma_s.len() != 3 * k || sigma_a.len() != 3 * k {
+            return Err(format!("sigma_s and sigma_a must have 3 channels for each of the {k} indexed voxels, \
+                                got {} and {} values", sigma_s.len(), sigma_a.len()));
+        }
+        if let Some(e) = index.iter().position(|&j| j < 0 || j as u64 >= n as u64) {
+            return Err(format!("index entry {e} is voxel {}, outside the grid of {n} voxels", index[e]));
+        }
+        if let Some(q) = (0..3 * k).find(|&q| extinction_albedo(sigma_s[q], sigma_a[q]).is_none()) {
+            return Err(format!("coefficients of entry {} (voxel {}) channel {} are negative or not finite",
+                               q / 3, index[q / 3], q % 3));
+        }
+        for (e, &j) in index.iter().enumerate() {
+            for c in 0..3 {
+                let (t, albedo) = extinction_albedo(sigma_s[3 * e + c], sigma_a[3 * e + c]).unwrap();
+                self.coef[c * n + j as usize] = [t, albedo];
+            }
+        }
+        self.update_majorant();
+        Ok(())
+    }
+
+    /// The largest sigma_t of each channel, over all voxels (in parallel: max is exact in any order).
+    fn update_majorant(&mut self) {
+        use rayon::prelude::*;
+        let (coef, n) = (&self.coef, self.n);
+        self.majorant = std::array::from_fn(|c| {
+            coef[c * n..(c + 1) * n].par_chunks(1 << 16).map(|b| b.iter().fold(0.0f32, |a, x| a.max(x[0])))
+                .reduce(|| 0.0f32, f32::max)
+        });
     }
 }
 

@@ -2,7 +2,8 @@
 //! accumulates gradients. Array conventions are the Python package's: (z, y, x[, c]) arrays, texel voxels
 //! (z, y, x), normals and voxel sizes (x, y, z). The GIL is released while rendering. `set_medium` swaps the
 //! medium of a scene and keeps its geometry (safe distances), thread pool and gradient buffers, for optimisers
-//! that render a new medium every iteration; `set_light` lights it by a uniform light or an environment map.
+//! that render a new medium every iteration (`set_voxels` overwrites only some voxels of a dense medium);
+//! `set_light` lights it by a uniform light or an environment map.
 
 use inkopt_core::{backward, render, Boundary, DenseMedium, EnvMap, Geometry, GradBuffers, GradMethod, LabelMedium,
                   RenderOptions, Stats, Texel, TexelEstimate, UniformLight, NO_GRADIENT};
@@ -105,6 +106,28 @@ impl Scene {
         }
         self.medium = medium_from(self.shape, sigma_s, sigma_a, labels, ink_sigma_s, ink_sigma_a)?;
         Ok(())
+    }
+
+    /// set_voxels(index, sigma_s, sigma_a): overwrite the coefficients of some voxels of a dense medium in place
+    /// (the optimiser's free voxels, every iteration) and recompute the majorant. `index` (K,) int64: linear
+    /// voxel indices of the (z, y, x) grid (a voxel listed twice takes its last values); `sigma_s`, `sigma_a`
+    /// (K, 3) float32, mm^-1. All checked before anything is written. The GIL is released.
+    fn set_voxels(
+        &mut self,
+        py: Python<'_>,
+        index: PyReadonlyArray1<i64>,
+        sigma_s: PyReadonlyArray2<f32>,
+        sigma_a: PyReadonlyArray2<f32>,
+    ) -> PyResult<()> {
+        let MediumKind::Dense(m) = &mut self.medium else {
+            return Err(err("set_voxels needs a dense medium (sigma_s, sigma_a), not labels"));
+        };
+        let k = index.len();
+        check_shape(sigma_s.shape(), &[k, 3], "sigma_s")?;
+        check_shape(sigma_a.shape(), &[k, 3], "sigma_a")?;
+        let (ix, s, a) = (c_slice(&index, "index")?, c_slice(&sigma_s, "sigma_s")?, c_slice(&sigma_a, "sigma_a")?);
+        let pool = &self.pool;
+        py.detach(|| pool.install(|| m.set_voxels(ix, s, a))).map_err(err)
     }
 
     /// set_light(map=None, rotate_deg=0.0): light the scene by an equirectangular environment map of linear

@@ -1,0 +1,69 @@
+//! Compact and in-place storage of big objects, bit-identical to the plain forms: `DenseMedium::set_voxels`
+//! against a medium built from the modified full arrays.
+
+use super::*;
+
+/// Every voxel's (sigma_t, albedo) of every channel, as bits, and the majorants.
+fn medium_bits(m: &DenseMedium) -> (Vec<(u32, u32)>, [f32; 3]) {
+    let bits = (0..3).flat_map(|c| (0..m.len()).map(move |j| (c, j)))
+        .map(|(c, j)| { let (t, a) = m.coeffs(j, c); (t.to_bits(), a.to_bits()) }).collect();
+    (bits, [m.majorant(0), m.majorant(1), m.majorant(2)])
+}
+
+#[test]
+fn set_voxels_matches_a_medium_built_from_the_modified_arrays() {
+    let n = [10usize, 9, 6];
+    let nv = 540;
+    let mut s: Vec<f32> = (0..3 * nv).map(|i| 2.0 + ((i * 7919) % 13) as f32).collect();
+    let mut a: Vec<f32> = (0..3 * nv).map(|i| ((i * 104729) % 5) as f32 * 0.7).collect();
+    // A few very dense voxels set the majorant; set_voxels lowers all of them, so the majorant must go down.
+    for j in [17usize, 230, 401] {
+        s[3 * j..3 * j + 3].copy_from_slice(&[60.0, 70.0, 80.0]);
+    }
+    let mut inside = vec![1u8; nv];
+    inside[(5 * 9 + 4) * 10..(5 * 9 + 4) * 10 + 3].fill(0);
+    let geo = Geometry::new(n, [0.0847; 3], Boundary::Box, 1.5, 0.4).unwrap().with_inside(inside).unwrap();
+    let mut med = DenseMedium::from_interleaved(&s, &a).unwrap();
+    let old_majorant = [med.majorant(0), med.majorant(1), med.majorant(2)];
+    // Every third voxel, the dense ones, a vacuum voxel and one voxel listed twice (the last values win).
+    let mut index: Vec<i64> = (0..nv as i64).step_by(3).chain([17, 230, 401, 5, 5]).collect();
+    let k = index.len();
+    let mut ns: Vec<f32> = (0..3 * k).map(|q| 0.5 + ((q * 31) % 11) as f32 * 0.9).collect();
+    let mut na: Vec<f32> = (0..3 * k).map(|q| ((q * 17) % 7) as f32 * 0.3).collect();
+    ns[3 * (k - 2)..3 * (k - 1)].fill(0.0); // voxel 5's first entry is vacuum (albedo 1), its second wins
+    na[3 * (k - 2)..3 * (k - 1)].fill(0.0);
+    for (e, &j) in index.iter().enumerate() {
+        let j = j as usize;
+        s[3 * j..3 * j + 3].copy_from_slice(&ns[3 * e..3 * e + 3]);
+        a[3 * j..3 * j + 3].copy_from_slice(&na[3 * e..3 * e + 3]);
+    }
+    med.set_voxels(&index, &ns, &na).unwrap();
+    let want = DenseMedium::from_interleaved(&s, &a).unwrap();
+    assert_eq!(medium_bits(&med), medium_bits(&want));
+    assert!((0..3).all(|c| med.majorant(c) < old_majorant[c]), "the majorant went down");
+    let texels = box_texels(n, &[0, 1, 2, 3, 4, 5]);
+    let opts = RenderOptions { spp: 8, seed: 9, include_specular: true };
+    let (x, sx) = render(&geo, &med, &texels, 0, &opts);
+    let (y, sy) = render(&geo, &want, &texels, 0, &opts);
+    assert_eq!(sx.events, sy.events);
+    for (p, q) in x.iter().zip(&y) {
+        assert_eq!((p.mean.map(f32::to_bits), p.var_mean.map(f32::to_bits)),
+                   (q.mean.map(f32::to_bits), q.var_mean.map(f32::to_bits)));
+    }
+    // Errors name the problem and leave the medium as it was (the valid entries before the bad one included).
+    let before = medium_bits(&med);
+    let bad_value = |q: usize, x: f32| { let mut v = ns.clone(); v[q] = x; v };
+    let cases: Vec<(Vec<i64>, Vec<f32>, Vec<f32>, &str)> = vec![
+        (index.clone(), ns[..3 * k - 3].to_vec(), na.clone(), "3 channels"),
+        ({ index[7] = nv as i64; index.clone() }, ns.clone(), na.clone(), "entry 7 is voxel 540, outside"),
+        ({ index[7] = -1; index.clone() }, ns.clone(), na.clone(), "entry 7 is voxel -1, outside"),
+        ({ index[7] = 21; index.clone() }, bad_value(40, f32::NAN), na.clone(), "entry 13 (voxel 39) channel 1"),
+        (index.clone(), ns.clone(), bad_value(5, -1e-3), "entry 1 (voxel 3) channel 2"),
+        (index.clone(), bad_value(3 * k - 1, f32::INFINITY), na.clone(), "negative or not finite"),
+    ];
+    for (ix, cs, ca, msg) in cases {
+        let e = med.set_voxels(&ix, &cs, &ca).unwrap_err();
+        assert!(e.contains(msg) && !e.contains('\n'), "{e}");
+        assert!(medium_bits(&med) == before, "{msg}: the medium changed");
+    }
+}
