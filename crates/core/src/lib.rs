@@ -7,11 +7,13 @@
 //! Modules: `scene` (geometry, media, texels), `light` (the `Light` trait: uniform light, environment maps),
 //! `grid` (locating points, voxel traversal, exit distances, periodic wrap), `flight` (the free-flight
 //! samplers), `trace` (the scalar walk), `packet` (eight paths per core in SIMD lanes), `render` (parallel
-//! drivers and gradient buffers), `rng` (counter-based random numbers), `sampling` (phase function, Fresnel),
-//! `diffuse` (3D vector error diffusion of ink mixtures to one ink per printer voxel).
+//! drivers of the forward render), `grad` (the gradient pass and its fixed-point buffers), `rng` (counter-based
+//! random numbers), `sampling` (phase function, Fresnel), `diffuse` (3D vector error diffusion of ink mixtures
+//! to one ink per printer voxel).
 
 pub mod diffuse;
 mod flight;
+pub mod grad;
 mod grid;
 pub mod light;
 pub(crate) mod packet;
@@ -21,7 +23,8 @@ pub mod sampling;
 pub mod scene;
 pub mod trace;
 
-pub use render::{backward, render, GradBuffers, GradMethod, RenderOptions, Stats, TexelEstimate, NO_GRADIENT};
+pub use grad::{backward, GradBuffers, GradMethod, NO_GRADIENT};
+pub use render::{render, RenderOptions, Stats, TexelEstimate};
 pub use light::EnvMap;
 pub use scene::{face_normal, Boundary, DenseMedium, Geometry, LabelMedium, Light, Medium, Texel, UniformLight, EMPTY};
 

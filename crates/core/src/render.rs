@@ -1,17 +1,14 @@
-//! Parallel drivers: the forward render of a list of texels and the gradient pass (path replay, or the biased
-//! `L_i = 1` radiative backpropagation variant), and the fixed-point gradient buffers. Mask-free volumes and
-//! masked boxes run eight paths at a time (`packet`, chunks of `PACKET_CHUNK` texels per work item); masked
-//! periodic slabs run the scalar `trace`, one texel per work item. Every path's random numbers come from its
-//! (seed, texel, sample, channel) key and each texel's path values are summed in a fixed order, so per-texel
-//! results and gradients are bit-identical for any thread count and work split.
-use std::sync::Mutex;
-
+//! Parallel drivers of the forward render of a list of texels (the gradient pass, `grad`, shares them).
+//! Mask-free volumes and masked boxes run eight paths at a time (`packet`, chunks of `PACKET_CHUNK` texels per
+//! work item); masked periodic slabs run the scalar `trace`, one texel per work item. Every path's random
+//! numbers come from its (seed, texel, sample, channel) key and each texel's path values are summed in a fixed
+//! order, so per-texel results and gradients are bit-identical for any thread count and work split.
 use rayon::prelude::*;
 
 use crate::rng::PathRng;
 use crate::scene::{Geometry, Medium, Texel};
-use crate::packet::{self, trace_paths, NoPathTally, PathTally};
-use crate::trace::{trace, NoTally, Tally};
+use crate::packet::{self, trace_paths, NoPathTally};
+use crate::trace::{trace, NoTally};
 
 #[derive(Clone, Copy, Debug)]
 pub struct RenderOptions {
@@ -39,7 +36,7 @@ pub struct Stats {
 }
 
 impl Stats {
-    fn merge(a: Stats, b: Stats) -> Stats {
+    pub(crate) fn merge(a: Stats, b: Stats) -> Stats {
         Stats {
             paths: a.paths + b.paths,
             events: a.events + b.events,
@@ -49,20 +46,20 @@ impl Stats {
     }
 }
 
-struct Moments {
+pub(crate) struct Moments {
     sum: [f64; 3],
     sq: [f64; 3],
 }
 
 impl Moments {
-    fn new() -> Self {
+    pub(crate) fn new() -> Self {
         Moments { sum: [0.0; 3], sq: [0.0; 3] }
     }
-    fn add(&mut self, c: usize, x: f32) {
+    pub(crate) fn add(&mut self, c: usize, x: f32) {
         self.sum[c] += x as f64;
         self.sq[c] += (x as f64) * (x as f64);
     }
-    fn estimate(&self, spp: u32) -> TexelEstimate {
+    pub(crate) fn estimate(&self, spp: u32) -> TexelEstimate {
         let n = spp as f64;
         let mut e = TexelEstimate::default();
         for c in 0..3 {
@@ -111,7 +108,7 @@ pub fn render<M: Medium>(
 
 /// Texels per work item of the eight-lane renderer: enough paths to keep the lanes busy (a lane idles only
 /// while the item's last paths finish), few enough to balance the threads.
-const PACKET_CHUNK: usize = 64;
+pub(crate) const PACKET_CHUNK: usize = 64;
 
 /// `render` for mask-free volumes and masked boxes: eight paths at a time (`packet`), each texel's path values summed in a
 /// fixed order, so results are bit-identical for any thread count.
@@ -133,7 +130,7 @@ fn render_packets<M: Medium>(geo: &Geometry, med: &M, texels: &[Texel], first_te
 }
 
 /// Per-texel estimates from path values laid out [texel][channel][sample], summed in that order.
-fn estimates(values: &[f32], spp: usize) -> Vec<TexelEstimate> {
+pub(crate) fn estimates(values: &[f32], spp: usize) -> Vec<TexelEstimate> {
     values
         .chunks(3 * spp)
         .map(|v| {
@@ -144,308 +141,4 @@ fn estimates(values: &[f32], spp: usize) -> Vec<TexelEstimate> {
             m.estimate(spp as u32)
         })
         .collect()
-}
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum GradMethod {
-    /// Unbiased path replay backpropagation (Vicini et al. 2021) for the analog estimator.
-    Replay,
-    /// Radiative backpropagation with the incident and outgoing radiance along the adjoint path approximated by
-    /// the environment radiance 1 (biased, one pass). Under this approximation the sigma_s derivative
-    /// (-L + integral of phase * L_i) vanishes, so only sigma_a receives gradient: -adjoint x track length.
-    Li1,
-}
-
-/// Gradient accumulators: one buffer per worker thread, each holding d e / d sigma_s then d e / d sigma_a,
-/// planar by channel ([s R | s G | s B | a R | a G | a B], n voxels each), in fixed point: every contribution is
-/// rounded to a multiple of `quantum` and summed as i64. Integer sums do not depend on their order, so the
-/// gradient is bit-identical for any thread count and work split (float sums are not). The quantum is set per
-/// pass from the largest adjoint, 2^-32 of it: far below f32 resolution for any realistic voxel total, with
-/// +-2^31 adjoint-units of headroom per voxel.
-///
-/// An optional index map restricts gradients to some voxels (e.g. the free voxels of a shell): `map[j]` is the
-/// slot of voxel j, or `NO_GRADIENT`; the buffers then hold only the mapped voxels.
-pub struct GradBuffers {
-    /// Voxels in the grid.
-    n_voxels: usize,
-    /// Gradient slots (= n_voxels without a map).
-    n: usize,
-    map: Option<Vec<u32>>,
-    quantum: f64,
-    bufs: Vec<Mutex<Vec<i64>>>,
-}
-
-pub const NO_GRADIENT: u32 = u32::MAX;
-
-impl GradBuffers {
-    pub fn new(n_voxels: usize, threads: usize) -> Self {
-        Self::with_map(n_voxels, threads, None).unwrap()
-    }
-
-    /// Buffers for the voxels of `map` (slot per voxel or NO_GRADIENT; slots must be < the number of mapped
-    /// voxels' maximum + 1).
-    pub fn with_map(n_voxels: usize, threads: usize, map: Option<Vec<u32>>) -> Result<Self, String> {
-        let n = match &map {
-            None => n_voxels,
-            Some(m) => {
-                if m.len() != n_voxels {
-                    return Err(format!("gradient index has {} entries, the grid {}", m.len(), n_voxels));
-                }
-                m.iter().filter(|&&k| k != NO_GRADIENT).map(|&k| k as usize + 1).max().unwrap_or(0)
-            }
-        };
-        let bufs = (0..threads.max(1)).map(|_| Mutex::new(vec![0i64; 6 * n])).collect();
-        Ok(GradBuffers { n_voxels, n, map, quantum: 1.0, bufs })
-    }
-
-    /// Whether the buffers cover only the voxels of an index map.
-    pub fn is_mapped(&self) -> bool {
-        self.map.is_some()
-    }
-
-    /// Number of gradient slots.
-    pub fn slots(&self) -> usize {
-        self.n
-    }
-
-    #[inline(always)]
-    fn slot(&self, j: usize) -> Option<usize> {
-        match &self.map {
-            None => Some(j),
-            Some(m) => {
-                let k = m[j];
-                if k == NO_GRADIENT { None } else { Some(k as usize) }
-            }
-        }
-    }
-
-    /// Clear the buffers for a pass whose adjoints are at most `max_abs_adjoint` in magnitude.
-    pub fn zero(&mut self, max_abs_adjoint: f32) {
-        let m = if max_abs_adjoint > 0.0 && max_abs_adjoint.is_finite() { max_abs_adjoint as f64 } else { 1.0 };
-        self.quantum = m / 4_294_967_296.0;
-        for b in &self.bufs {
-            b.lock().unwrap().iter_mut().for_each(|x| *x = 0);
-        }
-    }
-
-    /// Sum over threads into interleaved (slot, channel) arrays: (d e / d sigma_s, d e / d sigma_a).
-    pub fn collect(&self, grad_s: &mut [f32], grad_a: &mut [f32]) {
-        let q = self.quantum;
-        self.sum_threads(|k, s, a| {
-            grad_s[k] = (s as f64 * q) as f32;
-            grad_a[k] = (a as f64 * q) as f32;
-        });
-    }
-
-    /// As `collect`, but the raw fixed-point sums (multiples of `quantum()`): sums of passes over disjoint texels
-    /// with the same quantum add up (wrapping i64) to the sum of one pass over all of them, so shards combine
-    /// bit-identically when converted as `collect` does: `(sum as f64 * quantum) as f32`.
-    pub fn collect_fixed(&self, grad_s: &mut [i64], grad_a: &mut [i64]) {
-        self.sum_threads(|k, s, a| {
-            grad_s[k] = s;
-            grad_a[k] = a;
-        });
-    }
-
-    /// The fixed-point unit of the current pass (set by `zero`).
-    pub fn quantum(&self) -> f64 {
-        self.quantum
-    }
-
-    /// Hand each (interleaved index 3 slot + channel, sigma_s sum, sigma_a sum) of the thread buffers to `out`.
-    fn sum_threads(&self, mut out: impl FnMut(usize, i64, i64)) {
-        let n = self.n;
-        let locked: Vec<_> = self.bufs.iter().map(|b| b.lock().unwrap()).collect();
-        for c in 0..3 {
-            for j in 0..n {
-                let (mut s, mut a) = (0i64, 0i64);
-                for b in &locked {
-                    s = s.wrapping_add(b[c * n + j]);
-                    a = a.wrapping_add(b[(3 + c) * n + j]);
-                }
-                out(3 * j + c, s, a);
-            }
-        }
-    }
-}
-
-#[inline(always)]
-fn fixed(x: f32, inv_quantum: f32) -> i64 {
-    (x * inv_quantum).round() as i64
-}
-
-struct ReplayTally<'a, M: Medium> {
-    buf: &'a mut [i64],
-    grads: &'a GradBuffers,
-    c: usize,
-    /// Weight in quanta.
-    w: f32,
-    med: &'a M,
-}
-
-impl<M: Medium> Tally for ReplayTally<'_, M> {
-    #[inline(always)]
-    fn segment(&mut self, j: usize, len: f32) {
-        if let Some(k) = self.grads.slot(j) {
-            let (n, x) = (self.grads.n, fixed(len, self.w));
-            self.buf[self.c * n + k] -= x;
-            self.buf[(3 + self.c) * n + k] -= x;
-        }
-    }
-    #[inline(always)]
-    fn scatter(&mut self, j: usize) {
-        let s = self.med.sigma_s(j, self.c);
-        if let (Some(k), true) = (self.grads.slot(j), s > 0.0) {
-            self.buf[self.c * self.grads.n + k] += fixed(1.0 / s, self.w);
-        }
-    }
-}
-
-struct Li1Tally<'a> {
-    buf: &'a mut [i64],
-    grads: &'a GradBuffers,
-    c: usize,
-    w: f32,
-}
-
-impl Tally for Li1Tally<'_> {
-    #[inline(always)]
-    fn segment(&mut self, j: usize, len: f32) {
-        if let Some(k) = self.grads.slot(j) {
-            self.buf[(3 + self.c) * self.grads.n + k] -= fixed(len, self.w);
-        }
-    }
-    #[inline(always)]
-    fn scatter(&mut self, _: usize) {}
-}
-
-/// Gradient pass: accumulate sum_i adjoint_i . d c_i / d (sigma_s, sigma_a) into `grads` for the given texels,
-/// `adjoint[i]` = d e / d c_i (linear RGB), |adjoint| at most the bound given to `GradBuffers::zero`. Returns this pass's own forward estimates and statistics.
-pub fn backward<M: Medium>(
-    geo: &Geometry,
-    med: &M,
-    texels: &[Texel],
-    first_texel: u64,
-    adjoint: &[[f32; 3]],
-    opts: &RenderOptions,
-    method: GradMethod,
-    grads: &GradBuffers,
-) -> (Vec<TexelEstimate>, Stats) {
-    assert_eq!(texels.len(), adjoint.len());
-    assert_eq!(grads.n_voxels, med.len());
-    if packet::supported(geo) {
-        return backward_packets(geo, med, texels, first_texel, adjoint, opts, method, grads);
-    }
-    let inv_spp = 1.0 / opts.spp as f32;
-    let inv_q = (1.0 / grads.quantum) as f32;
-    let results: Vec<(TexelEstimate, Stats)> = texels
-        .par_iter()
-        .enumerate()
-        .map(|(i, tex)| {
-            let slot = rayon::current_thread_index().unwrap_or(0) % grads.bufs.len();
-            let mut buf = grads.bufs[slot].lock().unwrap();
-            let mut m = Moments::new();
-            let mut st = Stats { paths: 3 * opts.spp as u64, ..Stats::default() };
-            let key = first_texel + i as u64;
-            for c in 0..3 {
-                for s in 0..opts.spp {
-                    let adj = adjoint[i][c];
-                    let mut rng = PathRng::new(opts.seed, key, s, c as u32);
-                    let r = match method {
-                        GradMethod::Replay => trace(geo, med, tex, c, &mut rng, opts.include_specular, &mut NoTally),
-                        GradMethod::Li1 => {
-                            let mut t = Li1Tally { buf: &mut buf[..], grads, c, w: adj * inv_spp * inv_q };
-                            trace(geo, med, tex, c, &mut rng, opts.include_specular, &mut t)
-                        }
-                    };
-                    m.add(c, r.value);
-                    st.events += r.events as u64;
-                    if method == GradMethod::Replay && r.value != 0.0 && adj != 0.0 {
-                        let mut rng = PathRng::new(opts.seed, key, s, c as u32);
-                        let mut t = ReplayTally { buf: &mut buf[..], grads, c, w: adj * r.value * inv_spp * inv_q, med };
-                        trace(geo, med, tex, c, &mut rng, opts.include_specular, &mut t);
-                        st.replayed_paths += 1;
-                        st.replayed_events += r.events as u64;
-                    }
-                }
-            }
-            (m.estimate(opts.spp), st)
-        })
-        .collect();
-    let stats = results.iter().fold(Stats::default(), |a, r| Stats::merge(a, r.1));
-    (results.into_iter().map(|r| r.0).collect(), stats)
-}
-
-/// Per-path weights (in quanta) of a packet gradient pass: path `job` of a chunk adds weight x (its tallies) to
-/// the gradient buffer, as `ReplayTally` / `Li1Tally` do for one path. A replay skips paths of weight 0.
-struct PacketTally<'a, M: Medium> {
-    buf: &'a mut [i64],
-    grads: &'a GradBuffers,
-    med: &'a M,
-    method: GradMethod,
-    w: Vec<f32>,
-}
-
-impl<M: Medium> PathTally for PacketTally<'_, M> {
-    const ACTIVE: bool = true;
-    #[inline(always)]
-    fn wanted(&self, job: usize) -> bool {
-        self.method == GradMethod::Li1 || self.w[job] != 0.0
-    }
-    #[inline(always)]
-    fn segment(&mut self, job: usize, c: usize, j: usize, len: f32) {
-        let (buf, grads, w) = (&mut self.buf[..], self.grads, self.w[job]);
-        match self.method {
-            GradMethod::Replay => ReplayTally { buf, grads, c, w, med: self.med }.segment(j, len),
-            GradMethod::Li1 => Li1Tally { buf, grads, c, w }.segment(j, len),
-        }
-    }
-    #[inline(always)]
-    fn scatter(&mut self, job: usize, c: usize, j: usize) {
-        if self.method == GradMethod::Replay {
-            ReplayTally { buf: &mut self.buf[..], grads: self.grads, c, w: self.w[job], med: self.med }.scatter(j);
-        }
-    }
-}
-
-/// `backward` with packets (`packet::supported` geometries). Path replay: a forward pass gives every path's
-/// value, then the paths with a non-zero value and adjoint are traced again, exactly (each path is a pure
-/// function of its key), with their tallies. `L_i = 1`: one pass with tallies.
-#[allow(clippy::too_many_arguments)]
-fn backward_packets<M: Medium>(geo: &Geometry, med: &M, texels: &[Texel], first_texel: u64, adjoint: &[[f32; 3]],
-                               opts: &RenderOptions, method: GradMethod, grads: &GradBuffers)
-    -> (Vec<TexelEstimate>, Stats) {
-    let spp = opts.spp as usize;
-    let scale = 1.0 / opts.spp as f32 * (1.0 / grads.quantum) as f32;
-    let chunks: Vec<(Vec<TexelEstimate>, Stats)> = texels
-        .par_chunks(PACKET_CHUNK)
-        .enumerate()
-        .map(|(k, chunk)| {
-            let first = k * PACKET_CHUNK;
-            let key = first_texel + first as u64;
-            let slot = rayon::current_thread_index().unwrap_or(0) % grads.bufs.len();
-            let mut buf = grads.bufs[slot].lock().unwrap();
-            let jobs = chunk.len() * 3 * spp;
-            let adj = |job: usize| adjoint[first + job / (3 * spp)][job % (3 * spp) / spp];
-            let mut values = vec![0.0f32; jobs];
-            let mut st = Stats { paths: jobs as u64, ..Stats::default() };
-            let mut tally = PacketTally { buf: &mut buf[..], grads, med, method, w: vec![0.0; jobs] };
-            match method {
-                GradMethod::Li1 => {
-                    tally.w = (0..jobs).map(|job| adj(job) * scale).collect();
-                    st.events = trace_paths(geo, med, chunk, key, opts, &mut values, &mut tally);
-                }
-                GradMethod::Replay => {
-                    st.events = trace_paths(geo, med, chunk, key, opts, &mut values, &mut NoPathTally);
-                    tally.w = (0..jobs).map(|job| adj(job) * values[job] * scale).collect();
-                    st.replayed_paths = tally.w.iter().filter(|&&w| w != 0.0).count() as u64;
-                    let mut scratch = vec![0.0f32; jobs];
-                    st.replayed_events = trace_paths(geo, med, chunk, key, opts, &mut scratch, &mut tally);
-                }
-            }
-            (estimates(&values, spp), st)
-        })
-        .collect();
-    let stats = chunks.iter().fold(Stats::default(), |a, r| Stats::merge(a, r.1));
-    (chunks.into_iter().flat_map(|r| r.0).collect(), stats)
 }

@@ -183,26 +183,40 @@ impl Scene {
 
     /// Reset the gradient accumulators for a pass whose adjoints are at most `max_abs_adjoint` in magnitude
     /// (sets the fixed-point quantum). `grad_index` (z, y, x) int32: the gradient slot of each voxel, -1 for
-    /// none; gradients are then returned per slot, (F, 3). None: every voxel, (z, y, x, 3).
+    /// none; gradients are then returned per slot, (F, 3). None: every voxel, (z, y, x, 3). The buffers of the
+    /// previous call are zeroed in place when its grad_index was the same (element by element) or both None;
+    /// otherwise they are freed before the new ones are allocated. The GIL is released.
     #[pyo3(signature = (max_abs_adjoint, grad_index=None))]
-    fn zero_grad(&mut self, max_abs_adjoint: f32, grad_index: Option<PyReadonlyArray3<i32>>) -> PyResult<()> {
+    fn zero_grad(&mut self, py: Python<'_>, max_abs_adjoint: f32, grad_index: Option<PyReadonlyArray3<i32>>)
+                 -> PyResult<()> {
         let n = self.geo.voxel_count();
         let threads = self.pool.current_num_threads();
-        let map = match grad_index {
+        let ix = match &grad_index {
             None => None,
             Some(ix) => {
-                let [nz, ny, nx] = self.shape;
-                if ix.shape() != [nz, ny, nx] {
-                    return Err(err(format!("grad_index has shape {:?}, expected {:?}", ix.shape(), self.shape)));
-                }
-                Some(c_slice(&ix, "grad_index")?.iter().map(|&k| if k < 0 { NO_GRADIENT } else { k as u32 }).collect())
+                check_shape(ix.shape(), &self.shape, "grad_index")?;
+                Some(c_slice(ix, "grad_index")?)
             }
         };
-        let mut g = GradBuffers::with_map(n, threads, map).map_err(err)?;
-        g.zero(max_abs_adjoint);
-        self.grads = Some(g);
+        let slot = |k: i32| if k < 0 { NO_GRADIENT } else { k as u32 };
+        let (pool, grads) = (&self.pool, &mut self.grads);
+        let done = py.detach(|| pool.install(|| {
+            use rayon::prelude::*;
+            let same = grads.as_ref().is_some_and(|g| g.threads() == threads.max(1) && match (g.map(), ix) {
+                (None, None) => true,
+                (Some(m), Some(ix)) => m.len() == ix.len() && m.par_iter().zip(ix).all(|(&m, &k)| m == slot(k)),
+                _ => false,
+            });
+            if !same {
+                *grads = None; // free the old buffers first: two sets of them would be the peak of a big object
+                let map = ix.map(|ix| ix.par_iter().map(|&k| slot(k)).collect());
+                *grads = Some(GradBuffers::with_map(n, threads, map)?);
+            }
+            grads.as_mut().unwrap().zero(max_abs_adjoint);
+            Ok::<(), String>(())
+        }));
         self.sparse = grad_index_given(&self.grads);
-        Ok(())
+        done.map_err(err)
     }
 
     /// backward(texel_voxel, texel_face, texel_normal, adjoint (I,3) f32, *, spp, seed, first_texel=0,
