@@ -55,8 +55,10 @@ def main(argv=None) -> dict:
     import resource
 
     cpu0 = resource.getrusage(resource.RUSAGE_SELF)
+    passes = []
     for i in range(args.iterations):
         info = run.step()
+        passes.append(run.last_passes)
         h = run.history
         print(f"iteration {i + 1}: {h.seconds[-1]:.1f} s (render {h.render_s[-1]:.1f}, gradient "
               f"{h.gradient_s[-1]:.1f}), ΔE76 {info['delta_e76']:.2f}, peak {peak_rss_gb():.2f} GiB",
@@ -77,6 +79,11 @@ def main(argv=None) -> dict:
         "time_split": {k: float(np.mean(getattr(h, k))) if h.seconds else None
                        for k in ("render_s", "gradient_s", "loss_s", "step_s")},
         "delta_e76_training": h.delta_e76,
+        # events per path (free-flight collisions, real and null, plus boundary events) of the forward renders and
+        # of the gradient passes' forward walks, summed over the iterations
+        "events_per_path": {k: float(sum(p[k]["events"] for p in passes if p[k]) /
+                                     max(sum(p[k]["paths"] for p in passes if p[k]), 1))
+                            for k in ("forward", "gradient")},
         "peak_rss_gb": rss["after_iterations"], "peak_rss_gb_by_stage": rss,
         "machine": {"cpu": platform.processor() or platform.machine(), "python": platform.python_version()},
         "note": "CPU may be shared with other processes: wall-clock times are upper bounds; "
@@ -85,7 +92,7 @@ def main(argv=None) -> dict:
     out = Path(args.out) if args.out else ROOT / "bench" / "results" / f"mesh_{args.height_mm:g}mm.json"
     atomic_write_bytes(out, (json.dumps(result, indent=2) + "\n").encode())
     print(json.dumps({k: result[k] for k in ("grid_zyx", "texels", "voxelize_seconds", "seconds_per_iteration",
-                                             "cpu_seconds_per_iteration", "peak_rss_gb")}))
+                                             "cpu_seconds_per_iteration", "peak_rss_gb", "events_per_path")}))
     return result
 
 

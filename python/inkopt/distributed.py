@@ -3,7 +3,7 @@ bit-identical to the same pass in one process.
 
 :class:`RayShards` connects to Ray and starts the workers (actors): by default one per node, with as many
 threads as the node has CPUs. ``RayShards.renderer(volume, threads, lighting)`` is a drop-in for
-:class:`inkopt.render.Renderer` (same ``render``, ``gradient``, ``set_volume``, ``set_lighting``), so it serves as
+:class:`inkopt.render.Renderer` (same ``render``, ``gradient``, ``set_volume``, ``set_mixture``, ``set_lighting``), so it serves as
 ``Optimization``'s ``renderer_factory``. Each worker builds its own renderer once from the volume (shipped once
 through Ray's object store) and renders a contiguous range of the texels, in proportion to its threads.
 
@@ -13,9 +13,9 @@ they are concatenated. Gradients are accumulated in fixed point (multiples of a 
 adjoint of the whole pass, which every worker is given); workers return the raw int64 sums
 (``Renderer.gradient_fixed``), which are added here in integer arithmetic and converted once, as the core does.
 
-Per iteration, the driver sends each node the voxels whose mixture changed (int32 index + ink shares, float32)
-through the object store, and each worker its slice of the adjoints (12 bytes per texel); each worker returns
-rgb and variance of its texels for both passes (2 x 24 bytes per texel) and the gradient sums (2 x 3 x int64 =
+Per iteration, the driver puts the free voxels' mixtures (F x N float32; their int64 index only once) into the
+object store, which every node fetches once, and each worker its slice of the adjoints (12 bytes per texel); each
+worker returns rgb and variance of its texels for both passes (2 x 24 bytes per texel) and the gradient sums (2 x 3 x int64 =
 48 bytes per gradient slot, i.e. per free voxel).
 """
 from __future__ import annotations
@@ -57,21 +57,17 @@ class _ShardWorker:
     """A Ray actor: one renderer, rendering the texel ranges it is given."""
 
     def __init__(self, threads: int):
-        self.threads, self.renderer, self.mix = threads, None, None
+        self.threads, self.renderer = threads, None
 
     def load(self, volume, lighting) -> None:
         self.renderer = Renderer(volume, self.threads, lighting)
-        self.mix = None if volume.form != "mixture" else np.array(volume.mixture, np.float32)
 
     def set_volume(self, volume) -> None:
         self.renderer.set_volume(volume)
-        self.mix = None if volume.form != "mixture" else np.array(volume.mixture, np.float32)
 
-    def update_mixture(self, change) -> None:
-        """Set the mixture of the voxels ``change`` = (flat voxel indices, (K, N) shares) lists."""
-        idx, shares = change
-        self.mix.reshape(-1, self.mix.shape[-1])[idx] = shares
-        self.renderer.set_volume(self.renderer.volume.with_mixture(self.mix.copy()))
+    def set_mixture(self, index, rows) -> None:
+        """Set the mixtures of the voxels ``index`` ((K,) flat indices) to ``rows`` (K, N)."""
+        self.renderer.set_mixture(index, rows)
 
     def set_lighting(self, lighting) -> None:
         self.renderer.set_lighting(lighting)
@@ -139,33 +135,24 @@ class ShardedRenderer:
         self._refs: dict = {}
         ref = self._ray.put(volume)
         self._pending = [a.load.remote(ref, self.lighting) for a in shards.actors]
-        self._shipped = self._mixture_of(volume)
 
     @property
     def threads(self) -> int:
         return sum(self._shards.threads)
 
-    @staticmethod
-    def _mixture_of(volume):
-        return None if volume.form != "mixture" else np.array(volume.mixture, np.float32)
-
     def set_volume(self, volume) -> None:
-        """As ``Renderer.set_volume``: only the medium changes. A mixture goes out as the voxels that changed."""
+        """As ``Renderer.set_volume``: the whole volume goes out to every worker."""
         if volume.shape != self.volume.shape:
             raise ValueError(f"set_volume: shape {volume.shape} differs from the renderer's {self.volume.shape}")
-        new, old = self._mixture_of(volume), self._shipped
-        if new is None or old is None or new.shape != old.shape or volume.inks is not self.volume.inks:
-            ref = self._ray.put(volume)
-            self._pending += [a.set_volume.remote(ref) for a in self._shards.actors]
-        else:
-            n = new.shape[-1]
-            flat, was = new.reshape(-1, n), old.reshape(-1, n)
-            changed = np.flatnonzero((flat.view(np.uint32) != was.view(np.uint32)).any(axis=1))
-            if len(changed):
-                idx = changed.astype(np.int32 if len(flat) < 2**31 else np.int64)
-                ref = self._ray.put((idx, flat[changed]))
-                self._pending += [a.update_mixture.remote(ref) for a in self._shards.actors]
-        self._shipped, self.volume = new, volume
+        ref = self._ray.put(volume)
+        self._pending += [a.set_volume.remote(ref) for a in self._shards.actors]
+        self.volume = volume
+
+    def set_mixture(self, index, rows) -> None:
+        """As ``Renderer.set_mixture``: the rows (K x N float32) go out through the object store once for all
+        workers; the index (the optimiser passes the same array every iteration) only the first time."""
+        rows_ref = self._ray.put(np.ascontiguousarray(rows, np.float32))
+        self._pending += [a.set_mixture.remote(self._ref(index), rows_ref) for a in self._shards.actors]
 
     def set_lighting(self, lighting) -> None:
         from .lighting import load_lighting

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .lighting import Lighting, load_lighting
-from .model import Texels, Volume
+from .model import Texels, Volume, mix
 
 # Texels per call into the core; a call re-enters Python only to update the progress bar.
 CHUNK = 4096
@@ -102,6 +102,17 @@ class Renderer:
             raise ValueError(f"set_volume: shape {volume.shape} differs from the renderer's {self.volume.shape}")
         self._scene.set_medium(**self._medium_arrays(volume))
         self.volume = volume
+
+    def set_mixture(self, index: np.ndarray, mixture: np.ndarray) -> None:
+        """Give the voxels ``index`` ((K,) flat (z, y, x) indices) the mixtures ``mixture`` ((K, N), the volume's
+        inks), in place: the optimiser's per-iteration update of the free voxels, with no grid-sized array. The
+        other voxels keep their medium; :attr:`volume` still describes the geometry but no longer the medium."""
+        inks = self.volume.inks
+        if inks is None:
+            raise ValueError("set_mixture needs a volume with an ink table")
+        s, a = mix(mixture, inks)
+        self._scene.set_voxels(np.ascontiguousarray(index, np.int64), np.ascontiguousarray(s, np.float32),
+                               np.ascontiguousarray(a, np.float32))
 
     @property
     def threads(self) -> int:

@@ -64,6 +64,7 @@ def _optimise(scene, out_dir, cfg, resume, eval_spp, threads, progress, lighting
         run.resume(rd.checkpoint, log)
     rd.save_scene(scene.record())
     run.run(rd.checkpoint, progress=progress)
+    run.release_renderer()  # its medium and gradient buffers are the size of the grid: gone before evaluating
     final = run.volume()
     rd.save_volume(final)
 

@@ -103,6 +103,8 @@ class Optimization:
         self.c_avg: np.ndarray | None = None  # running average of the prediction (I, 3)
         self.c_weight = 0.0                     # its effective number of samples per texel
         self.c_var: np.ndarray | None = None    # the variance of the running average (I, 3)
+        #: the last step's render statistics (``RenderResult.stats()``: paths, events, seconds, ...) per pass
+        self.last_passes: dict = {}
 
     def _initial_free_mixture(self) -> np.ndarray:
         return initial_free_mixture(self.base.inks, self.param, self.cfg.init, self.cfg.seed, self.baseline)
@@ -152,15 +154,19 @@ class Optimization:
 
     # -------------------------------------------------------------- one step
     def renderer(self) -> Renderer:
-        """The run's renderer, set to the current mixture."""
+        """The run's renderer, set to the current mixture. It is built once from the fixed shares (the base
+        geometry with ``fixed_share`` as its mixture, no copy); every iteration then overwrites only the free
+        voxels' media (``Renderer.set_mixture``), so no grid-sized mixture or coefficient array is made per step."""
         if self._renderer is None:
-            self._renderer = self.renderer_factory(self.volume(), self.threads, self.lighting)
-        else:
-            # Let go of the last iterate before the next mixture is built: one (z, y, x, N) array less at the
-            # peak (156 MB for Spot 20 mm). The base volume has the same geometry and ink table.
-            self._renderer.volume = self.base
-            self._renderer.set_volume(self.volume())
+            self._renderer = self.renderer_factory(self.base.with_mixture(self.param.fixed_share), self.threads,
+                                                   self.lighting)
+        self._renderer.set_mixture(self.param.free_index, self.param.free_rows(self.x))
         return self._renderer
+
+    def release_renderer(self) -> None:
+        """Drop the run's renderer (its memory, with the gradient buffers, is the size of the grid); a later
+        :meth:`step` builds a new one, with identical results."""
+        self._renderer = None
 
     def _snapshot(self) -> tuple:
         """References to everything a step replaces (it never changes these arrays in place)."""
@@ -199,6 +205,7 @@ class Optimization:
         self.x = self.opt.step(self.x, g_x).astype(np.float32)
         self.iteration += 1
         t4 = time.perf_counter()
+        self.last_passes = {"forward": res.stats() if forward else None, "gradient": gres.stats()}
         self.history.append(loss=lr.value, e1=lr.e1, e2=lr.e2, e3=lr.e3, delta_e76=de, seconds=t4 - t0,
                             render_s=t1 - t0, gradient_s=t3 - t2, loss_s=t2 - t1, step_s=t4 - t3)
         return {"loss": lr.value, "delta_e76": de}

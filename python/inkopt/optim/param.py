@@ -30,9 +30,17 @@ class Parameterization:
             raise ValueError("fixed ink shares must be non-negative and sum to at most 1 per voxel")
         self.kind = kind
         self.fixed_share = fixed_share
-        self.free_share = np.clip(1.0 - total, 0.0, 1.0)
-        self.free_index = np.flatnonzero(self.free_share.reshape(-1) > 1e-6)
         self.n_inks = fixed_share.shape[-1]
+        free_share = np.clip(1.0 - total, 0.0, 1.0).reshape(-1)
+        del total
+        #: flat (z, y, x) indices of the free voxels (F,) int64
+        self.free_index = np.flatnonzero(free_share > 1e-6)
+        #: the free voxels' free share (F,) and fixed shares (F, N) (None: all zero); nothing grid-sized is kept
+        #: beyond ``fixed_share`` itself and ``grad_index``
+        self.share_f = free_share[self.free_index]
+        del free_share
+        fixed_f = fixed_share.reshape(-1, self.n_inks)[self.free_index]
+        self.fixed_f = fixed_f if fixed_f.any() else None
         # Gradient slot of every voxel (-1: not a variable), for the renderer's sparse gradient.
         self.grad_index = np.full(fixed_share.shape[:3], -1, np.int32)
         self.grad_index.reshape(-1)[self.free_index] = np.arange(len(self.free_index), dtype=np.int32)
@@ -50,10 +58,18 @@ class Parameterization:
         s = 1.0 / (1.0 + np.exp(-x))
         return s / s.sum(axis=1, keepdims=True), s
 
+    def free_rows(self, x: np.ndarray) -> np.ndarray:
+        """The free voxels' whole mixtures (F, N) float32 (fixed + free part), in ``free_index`` order: what
+        :meth:`mixture` holds at those voxels, bit for bit."""
+        p, _ = self._p(x)
+        rows = self.share_f[:, None] * p
+        return rows if self.fixed_f is None else self.fixed_f + rows
+
     def mixture(self, x: np.ndarray) -> np.ndarray:
+        """The whole grid's mixture (z, y, x, N) float32 of variables x (F, N)."""
         rho = self.fixed_share.copy().reshape(-1, self.n_inks)
         p, _ = self._p(x)
-        rho[self.free_index] += self.free_share.reshape(-1)[self.free_index, None] * p
+        rho[self.free_index] += self.share_f[:, None] * p
         return rho.reshape(self.fixed_share.shape)
 
     def backward(self, x: np.ndarray, grad_rho: np.ndarray, natural: bool = False) -> np.ndarray:
@@ -63,7 +79,7 @@ class Parameterization:
         g = grad_rho.reshape(-1, self.n_inks)
         if len(g) != self.n_free:
             g = g[self.free_index]
-        g = g * self.free_share.reshape(-1)[self.free_index, None]
+        g = g * self.share_f[:, None]
         p, aux = self._p(x)
         centred = g - np.sum(g * p, axis=1, keepdims=True)
         if natural:
@@ -105,8 +121,8 @@ def initial_free_mixture(inks: InkTable, param: Parameterization, init: str, see
         if baseline is None:
             raise ValueError(f"--init {init} needs the run's texels and targets")
         rho = np.asarray(baseline(init), np.float64).reshape(-1, n)[param.free_index]
-        fixed = param.fixed_share.reshape(-1, n)[param.free_index]
-        share = param.free_share.reshape(-1)[param.free_index, None]
+        fixed = 0.0 if param.fixed_f is None else param.fixed_f
+        share = param.share_f[:, None]
         p = np.clip(rho - fixed, 0.0, None) / share
         total = p.sum(1, keepdims=True)
         return np.where(total > 0, p / np.where(total > 0, total, 1.0), 1.0 / n)
