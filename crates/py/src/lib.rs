@@ -183,14 +183,13 @@ impl Scene {
 
     /// Reset the gradient accumulators for a pass whose adjoints are at most `max_abs_adjoint` in magnitude
     /// (sets the fixed-point quantum). `grad_index` (z, y, x) int32: the gradient slot of each voxel, -1 for
-    /// none; gradients are then returned per slot, (F, 3). None: every voxel, (z, y, x, 3). The buffers of the
-    /// previous call are zeroed in place when its grad_index was the same (element by element) or both None;
-    /// otherwise they are freed before the new ones are allocated. The GIL is released.
+    /// none; gradients are then returned per slot, (F, 3). None: every voxel, (z, y, x, 3). The buffer of the
+    /// previous call is zeroed in place when its grad_index was the same (element by element) or both None;
+    /// otherwise it is freed before the new one is allocated. The GIL is released.
     #[pyo3(signature = (max_abs_adjoint, grad_index=None))]
     fn zero_grad(&mut self, py: Python<'_>, max_abs_adjoint: f32, grad_index: Option<PyReadonlyArray3<i32>>)
                  -> PyResult<()> {
         let n = self.geo.voxel_count();
-        let threads = self.pool.current_num_threads();
         let ix = match &grad_index {
             None => None,
             Some(ix) => {
@@ -202,7 +201,7 @@ impl Scene {
         let (pool, grads) = (&self.pool, &mut self.grads);
         let done = py.detach(|| pool.install(|| {
             use rayon::prelude::*;
-            let same = grads.as_ref().is_some_and(|g| g.threads() == threads.max(1) && match (g.map(), ix) {
+            let same = grads.as_ref().is_some_and(|g| match (g.map(), ix) {
                 (None, None) => true,
                 (Some(m), Some(ix)) => m.len() == ix.len() && m.par_iter().zip(ix).all(|(&m, &k)| m == slot(k)),
                 _ => false,
@@ -210,7 +209,7 @@ impl Scene {
             if !same {
                 *grads = None; // free the old buffers first: two sets of them would be the peak of a big object
                 let map = ix.map(|ix| ix.par_iter().map(|&k| slot(k)).collect());
-                *grads = Some(GradBuffers::with_map(n, threads, map)?);
+                *grads = Some(GradBuffers::with_map(n, map)?);
             }
             grads.as_mut().unwrap().zero(max_abs_adjoint);
             Ok::<(), String>(())

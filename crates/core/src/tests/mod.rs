@@ -76,7 +76,7 @@ fn objective<M: Medium>(geo: &Geometry, med: &M, texels: &[Texel], adj: &[[f32; 
 fn replay_gradient<M: Medium>(geo: &Geometry, med: &M, texels: &[Texel], adj: &[[f32; 3]], opts: &RenderOptions)
     -> (Vec<f32>, Vec<f32>) {
     let nv = med.len();
-    let mut gb = GradBuffers::new(nv, 1);
+    let mut gb = GradBuffers::new(nv);
     gb.zero(1.0);
     backward(geo, med, texels, 0, adj, opts, GradMethod::Replay, &gb);
     let (mut gs, mut ga) = (vec![0.0; 3 * nv], vec![0.0; 3 * nv]);

@@ -70,9 +70,9 @@ fn set_voxels_matches_a_medium_built_from_the_modified_arrays() {
 
 #[test]
 fn reused_gradient_buffers_match_fresh_ones() {
-    // A second pass into buffers zeroed after a first one (another adjoint bound, seed and texels) gives the same
-    // fixed-point sums, quantum and gradient as the same pass into fresh buffers: per voxel and per slot of a map,
-    // on the packet and the scalar paths, with 2 threads.
+    // A second pass into a buffer zeroed after a first one (another adjoint bound, seed and texels) gives the
+    // same fixed-point sums, quantum and gradient as the same pass into a fresh buffer: per voxel and per slot of
+    // a map, on the packet and the scalar paths, with 2 threads against 1 (the shared atomic buffer).
     let n = [6usize, 6, 6];
     let nv = 216;
     let med = heterogeneous(nv);
@@ -81,13 +81,13 @@ fn reused_gradient_buffers_match_fresh_ones() {
         (0..texels.len()).map(|i| [scale, -0.5 * scale + 0.03 * i as f32, 0.3]).collect()
     };
     let map: Vec<u32> = (0..nv as u32).map(|j| if j % 5 == 2 { NO_GRADIENT } else { j / 2 }).collect();
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+    let pools = [1, 2].map(|t| rayon::ThreadPoolBuilder::new().num_threads(t).build().unwrap());
     let geos = [Geometry::new(n, [0.1; 3], Boundary::Box, 1.5, 0.4).unwrap(),
                 Geometry::new(n, [0.1; 3], Boundary::PeriodicXY, 1.5, 0.4).unwrap().with_inside(vec![1; nv]).unwrap()];
     for geo in &geos {
         for m in [None, Some(map.clone())] {
             for method in [GradMethod::Replay, GradMethod::Li1] {
-                let pass = |g: &mut GradBuffers, bound: f32, seed: u64, first: usize| {
+                let pass = |g: &mut GradBuffers, bound: f32, seed: u64, first: usize, pool: &rayon::ThreadPool| {
                     g.zero(bound);
                     let opts = RenderOptions { spp: 6, seed, include_specular: true };
                     let a = adj(bound);
@@ -99,10 +99,10 @@ fn reused_gradient_buffers_match_fresh_ones() {
                     let bits = |v: Vec<f32>| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
                     (fs, fa, bits(s), bits(a), g.quantum())
                 };
-                let mut reused = GradBuffers::with_map(nv, 2, m.clone()).unwrap();
-                let first = pass(&mut reused, 3.0, 1, 0);
-                let second = pass(&mut reused, 1.5, 2, 7);
-                let fresh = pass(&mut GradBuffers::with_map(nv, 2, m.clone()).unwrap(), 1.5, 2, 7);
+                let mut reused = GradBuffers::with_map(nv, m.clone()).unwrap();
+                let first = pass(&mut reused, 3.0, 1, 0, &pools[1]);
+                let second = pass(&mut reused, 1.5, 2, 7, &pools[1]);
+                let fresh = pass(&mut GradBuffers::with_map(nv, m.clone()).unwrap(), 1.5, 2, 7, &pools[0]);
                 assert!(first.1.iter().any(|&x| x != 0) && first.1 != second.1, "the first pass left sums");
                 assert!(second == fresh, "{:?} mapped {} {method:?}", geo.boundary, m.is_some());
             }
