@@ -4,18 +4,19 @@
 //! `(z * ny + y) * nx + x` (C order of a (z, y, x) array); lengths in mm, coefficients in mm^-1; geometric
 //! vectors are (x, y, z); radiance is linear RGB, each channel traced as its own monochromatic problem.
 //!
-//! Modules: `scene` (geometry, media, texels), `light` (the `Light` trait: uniform light, environment maps),
-//! `grid` (locating points, voxel traversal, exit distances, periodic wrap), `flight` (the free-flight
-//! samplers), `trace` (the scalar walk), `packet` (eight paths per core in SIMD lanes), `render` (parallel
-//! drivers of the forward render), `grad` (the gradient pass and its fixed-point buffers), `rng` (counter-based
-//! random numbers), `sampling` (phase function, Fresnel), `diffuse` (3D vector error diffusion of ink mixtures
-//! to one ink per printer voxel).
+//! Modules: `scene` (geometry, media, texels), `normals` (sparse shading normals), `light` (the `Light` trait:
+//! uniform light, environment maps), `grid` (locating points, voxel traversal, exit distances, periodic wrap),
+//! `flight` (the free-flight samplers), `trace` (the scalar walk), `packet` (eight paths per core in SIMD
+//! lanes), `render` (parallel drivers of the forward render), `grad` (the gradient pass and its fixed-point
+//! buffers), `rng` (counter-based random numbers), `sampling` (phase function, Fresnel), `diffuse` (3D vector
+//! error diffusion of ink mixtures to one ink per printer voxel).
 
 pub mod diffuse;
 mod flight;
 pub mod grad;
 mod grid;
 pub mod light;
+pub mod normals;
 pub(crate) mod packet;
 pub mod render;
 pub mod rng;

@@ -7,6 +7,7 @@
 //! sigma_t and single-scattering albedo, the two numbers the random walk needs.
 
 pub use crate::light::{Light, UniformLight};
+pub use crate::normals::ShadingNormals;
 use crate::sampling::V3;
 
 /// Label of an empty voxel in label media.
@@ -198,8 +199,9 @@ pub struct Geometry {
     /// With `inside`: each voxel's safe distance, the Chebyshev distance in voxels to the nearest voxel outside
     /// the object or the grid (0 outside, 1 at the surface, capped at `SAFE_CAP`).
     pub safe: Option<Vec<u8>>,
-    /// Optional outward unit shading normals (x, y, z) per voxel, interleaved; used at surface voxels.
-    pub normals: Option<Vec<f32>>,
+    /// Optional outward unit shading normals of the (surface) voxels that have one; used where paths meet the
+    /// surface.
+    pub normals: Option<ShadingNormals>,
     /// Relative index of refraction of the object (outside: 1).
     pub ior: f32,
     /// Henyey-Greenstein anisotropy of the medium.
@@ -270,11 +272,11 @@ impl Geometry {
         }
     }
 
-    pub fn with_normals(mut self, normals: Vec<f32>) -> Result<Self, String> {
-        if normals.len() != 3 * self.voxel_count() {
-            return Err("normals size differs from 3 x the grid".into());
-        }
-        self.normals = Some(normals);
+    /// Shading normals from dense (x, y, z) vectors interleaved per voxel (a (z, y, x, 3) array's memory),
+    /// unit or zero; only the usable ones (`normals::unit_normal`) are kept, normalised.
+    pub fn with_normals(mut self, normals: &[f32]) -> Result<Self, String> {
+        let n = [self.n[0] as usize, self.n[1] as usize, self.n[2] as usize];
+        self.normals = Some(ShadingNormals::from_dense(normals, n)?);
         Ok(self)
     }
 
@@ -309,15 +311,7 @@ impl Geometry {
     /// Outward shading normal of inside voxel v, if the scene has normals and it is a usable unit vector.
     #[inline(always)]
     pub fn shading_normal(&self, v: [i32; 3]) -> Option<V3> {
-        let nrm = self.normals.as_ref()?;
-        let i = 3 * self.index(v);
-        let n = [nrm[i], nrm[i + 1], nrm[i + 2]];
-        let l2 = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
-        if l2 > 0.5 {
-            Some(crate::sampling::scale(n, 1.0 / l2.sqrt()))
-        } else {
-            None
-        }
+        self.normals.as_ref()?.get(v)
     }
 }
 

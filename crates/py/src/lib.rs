@@ -75,7 +75,7 @@ impl Scene {
         }
         if let Some(nrm) = normals {
             check_shape(nrm.shape(), &[nz, ny, nx, 3], "normals")?;
-            geo = geo.with_normals(c_slice(&nrm, "normals")?.to_vec()).map_err(err)?;
+            geo = geo.with_normals(c_slice(&nrm, "normals")?).map_err(err)?; // kept sparse, not copied
         }
         let mut b = rayon::ThreadPoolBuilder::new();
         if let Some(t) = threads {

@@ -1,7 +1,9 @@
 //! Compact and in-place storage of big objects, bit-identical to the plain forms: `DenseMedium::set_voxels`
-//! against a medium built from the modified full arrays; gradient buffers zeroed for reuse against fresh ones.
+//! against a medium built from the modified full arrays; gradient buffers zeroed for reuse against fresh ones;
+//! sparse shading normals against the dense formula.
 
 use super::*;
+use crate::sampling::V3;
 
 /// Every voxel's (sigma_t, albedo) of every channel, as bits, and the majorants.
 fn medium_bits(m: &DenseMedium) -> (Vec<(u32, u32)>, [f32; 3]) {
@@ -108,4 +110,58 @@ fn reused_gradient_buffers_match_fresh_ones() {
             }
         }
     }
+}
+
+#[test]
+fn sparse_normals_match_the_dense_formula() {
+    // Every voxel of a random normals field (zero, short, unit, long, borderline |n|^2 = 0.5, NaN and infinite
+    // vectors; rows with none and a row with all) gets exactly the shading normal of the former dense lookup.
+    let n = [9usize, 5, 4];
+    let nv = 180;
+    let mut rng = crate::rng::PathRng::new(7, 0, 0, 0);
+    let mut dense = vec![0.0f32; 3 * nv];
+    for j in 0..nv {
+        let mut v = [(); 3].map(|_| 2.0 * rng.next_f32() - 1.0);
+        let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        let row = j / n[0];
+        // Rows 2 and 11 without normals, row 5 with a unit normal everywhere; elsewhere zero, short (|n| < 0.6),
+        // around the threshold (|n| 0.69 .. 0.73 against 0.707), unit up to rounding, or |n| 0.5 .. 1.5.
+        let s = match (row, j % 7) {
+            (2 | 11, _) | (_, 0 | 1) => 0.0,
+            (5, _) | (_, 4) => 1.0 / len,
+            (_, 2) => 0.6 * rng.next_f32() / len,
+            (_, 3) => (0.69 + 0.04 * rng.next_f32()) / len,
+            _ => (0.5 + rng.next_f32()) / len,
+        };
+        v = v.map(|x| x * s);
+        dense[3 * j..3 * j + 3].copy_from_slice(&v);
+    }
+    dense[3 * 3..3 * 4].copy_from_slice(&[0.5, 0.5, 0.0]); // |n|^2 = 0.5 exactly: no normal
+    dense[3 * 10..3 * 11].copy_from_slice(&[f32::NAN, 1.0, 0.0]);
+    dense[3 * 12..3 * 13].copy_from_slice(&[f32::INFINITY, 0.0, 0.0]);
+    // The dense lookup as it was: normalise at the query.
+    let old = |j: usize| -> Option<V3> {
+        let i = 3 * j;
+        let n = [dense[i], dense[i + 1], dense[i + 2]];
+        let l2 = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
+        if l2 > 0.5 { Some(crate::sampling::scale(n, 1.0 / l2.sqrt())) } else { None }
+    };
+    let geo = Geometry::new(n, [0.1; 3], Boundary::Box, 1.5, 0.4).unwrap().with_normals(&dense).unwrap();
+    let bits = |v: Option<V3>| v.map(|v| v.map(f32::to_bits));
+    let mut kept = 0;
+    for z in 0..n[2] as i32 {
+        for y in 0..n[1] as i32 {
+            for x in 0..n[0] as i32 {
+                let j = geo.index([x, y, z]);
+                let v = &dense[3 * j..3 * j + 3];
+                assert_eq!(bits(geo.shading_normal([x, y, z])), bits(old(j)), "voxel {j} {v:?}");
+                kept += old(j).is_some() as usize;
+            }
+        }
+    }
+    let sparse = geo.normals.as_ref().unwrap();
+    assert!(kept > 40 && kept < nv - 40 && sparse.len() == kept, "{kept} of {nv} voxels have a normal");
+    assert_eq!(sparse.bytes(), 4 * (n[1] * n[2] + 1) + 16 * kept);
+    let e = Geometry::new(n, [0.1; 3], Boundary::Box, 1.5, 0.4).unwrap().with_normals(&dense[3..]).err().unwrap();
+    assert!(e.contains("normals size"), "{e}");
 }
