@@ -1,0 +1,63 @@
+"""Convergence study on the demo slab (6 x 4 x 1 mm, colour chart on top, zebra below, the `inkopt demo` run):
+final noise-free quality of the optimiser's settings at equal iterations and at about equal time.
+
+    .venv/bin/python bench/convergence_study.py [--threads 2] [--only NAME ...]
+
+Each setting is one `run_slab` from the 97 %-white start with seed 0; the final figures come from the driver's
+adaptive evaluation (noise adds <= 0.5 to the mean dE76), so differences of a few tenths are real for this seed
+and scene, not for every scene. Writes bench/results/convergence_demo.json (one entry per setting: mean dE76
+(noise-corrected), mean dE2000, SSIM, mottle (dL*)^2 in the target's flat regions, seconds of the whole run).
+"""
+import argparse
+import sys
+import tempfile
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import machine, write  # noqa: E402
+
+from inkopt import charts  # noqa: E402
+from inkopt.model import InkTable  # noqa: E402
+from inkopt.optim import OptimizeConfig  # noqa: E402
+from inkopt.run import run_slab  # noqa: E402
+
+# name -> (iterations, OptimizeConfig overrides); the defaults are spp 4, forward spp 16, lr 2 (eg), ema 0.8
+SETTINGS = {
+    "default_150": (150, {}),
+    "default_300": (300, {}),
+    "lr1_150": (150, {"lr": 1.0}),
+    "lr0.5_300": (300, {"lr": 0.5}),
+    "spp16_150": (150, {"spp": 16}),
+    "forward0_ema0.9_150": (150, {"forward_spp": 0, "adjoint_ema": 0.9}),
+    "forward0_ema0.9_400": (400, {"forward_spp": 0, "adjoint_ema": 0.9}),
+    "forward0_ema0.9_spp8_150": (150, {"forward_spp": 0, "adjoint_ema": 0.9, "spp": 8}),
+}
+KEYS = ("delta_e76_mean_corrected", "delta_e76_mean", "delta_e2000_mean", "ssim", "mottle_l2", "seconds",
+        "seconds_per_iteration")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--threads", type=int)
+    ap.add_argument("--only", nargs="*", choices=sorted(SETTINGS))
+    a = ap.parse_args()
+    inks = InkTable.parse("vero-cmykw")
+    out = {"machine": machine(), "threads": a.threads, "settings": {}}
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        top = charts.save(charts.colour_chart(288, 192), tmp / "chart.png")
+        bottom = charts.save(charts.zebra(71, 47), tmp / "zebra.png")
+        for name in a.only or SETTINGS:
+            iterations, kw = SETTINGS[name]
+            cfg = OptimizeConfig(iterations=iterations, seed=0, **kw)
+            rep = run_slab(top, bottom, (6.0, 4.0, 1.0), tmp / name, inks, cfg, threads=a.threads,
+                           log=lambda s: None)
+            row = {"iterations": iterations, **kw, **{k: rep[k] for k in KEYS}}
+            out["settings"][name] = row
+            print(name, " ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()),
+                  flush=True)
+    write("convergence_demo.json", out)
+
+
+if __name__ == "__main__":
+    main()
