@@ -55,7 +55,8 @@ fn set_voxels_matches_a_medium_built_from_the_modified_arrays() {
     // Errors name the problem and leave the medium as it was (the valid entries before the bad one included).
     let before = medium_bits(&med);
     let bad_value = |q: usize, x: f32| { let mut v = ns.clone(); v[q] = x; v };
-    let cases: Vec<(Vec<i64>, Vec<f32>, Vec<f32>, &str)> = vec![
+    type Case = (Vec<i64>, Vec<f32>, Vec<f32>, &'static str); // index, sigma_s, sigma_a, error message
+    let cases: Vec<Case> = vec![
         (index.clone(), ns[..3 * k - 3].to_vec(), na.clone(), "3 channels"),
         ({ index[7] = nv as i64; index.clone() }, ns.clone(), na.clone(), "entry 7 is voxel 540, outside"),
         ({ index[7] = -1; index.clone() }, ns.clone(), na.clone(), "entry 7 is voxel -1, outside"),
