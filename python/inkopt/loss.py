@@ -146,7 +146,7 @@ class TexelLoss:
         self.K, self.wsum, self.radius = gaussian_window(pos, self.sigma)
         self._K2 = None  # K squared entrywise, built on first use (noise correction)
         self.S = sobel_operators(pos)
-        self.ST = self.S.T.tocsr()
+        self._ST = None  # S transposed, built on first use (the edge term's gradient)
         tn = self.target_n
         self._mu_t = self._window(tn)
         self._var_t = self._window(tn * tn) - self._mu_t ** 2
@@ -178,8 +178,9 @@ class TexelLoss:
             raise ValueError(f"pred_var must be a non-negative (I, 3) array like pred_rgb, got {var.shape}")
         jac = linear_to_lab_jacobian(pred)                      # (I, 3 lab, 3 rgb)
         v = np.einsum("ikj,ij->ik", jac * jac, var) * LAB_NORM_SCALE ** 2
-        if self._K2 is None:
-            self._K2 = self.K.multiply(self.K).tocsr()
+        if self._K2 is None:  # K's sparsity pattern shared, not copied (K has no explicit zeros)
+            K = self.K
+            self._K2 = sp.csr_matrix((K.data * K.data, K.indices, K.indptr), shape=K.shape)
         return (self.K @ v) / self.wsum[:, None], (self._K2 @ v) / (self.wsum ** 2)[:, None]
 
     def _ssim_parts(self, cn: np.ndarray, noise=None):
@@ -255,7 +256,9 @@ class TexelLoss:
             back = self._window_t(np.concatenate([gm, gq, gp], axis=1))
             g_n += back[:, :3] + 2.0 * cn * back[:, 3:6] + self.target_n * back[:, 6:]
         if g3 > 0:
-            g_n += (2.0 * g3 * c3) * (self.ST @ sob)
+            if self._ST is None:
+                self._ST = self.S.T.tocsr()
+            g_n += (2.0 * g3 * c3) * (self._ST @ sob)
         g_lab += g_n * LAB_NORM_SCALE
         grad = linear_to_lab_vjp(pred, g_lab / gs)
         return LossResult(value=float(value), e1=e1, e2=e2, e3=e3, grad=grad, lab=lab)
