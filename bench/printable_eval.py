@@ -1,9 +1,15 @@
-"""Issue "printable output": optimise the zebra chart (1 mm slab, stripes of 30/15/10/5/3/1 voxels) and a colour
-picture (scikit-image's astronaut), quantize each with blue-noise and with random draws, and evaluate against the
-surface and extrusion baselines. Writes bench/results/printable.json and prints a markdown table.
+"""Issue "printable output": optimise the zebra chart (1 mm slab, stripes of 30/15/10/5/3/1 voxels), a colour
+picture (scikit-image's astronaut) and the issues' reference slab (15 x 10 x 2.5 mm, colour chart on top, zebra
+below), quantize each with blue-noise and with random draws, and evaluate against the surface and extrusion
+baselines. Writes bench/results/printable.json and prints a markdown table.
 
-    .venv/bin/python bench/printable_eval.py [--iterations 200] [--spp 256] [--out bench-out]
-        [--cases zebra,astronaut] [--init white|surface|extrusion] [--lr X]
+    .venv/bin/python bench/printable_eval.py [--iterations 200] [--spp 0] [--out bench-out]
+        [--cases zebra,astronaut,reference] [--init white|surface|extrusion] [--lr X]
+
+``--spp 0`` (the default) evaluates noise-free: ``inkopt evaluate`` without ``--spp`` renders adaptively until
+the Monte Carlo noise adds at most 0.5 to each result's mean ΔE76; ``--spp N`` renders exactly N spp. Every case
+records its mode (``eval_mode``, ``eval_spp``). A run directory's evaluations are reused only if made in the
+requested mode.
 
 A start other than the default all-white one, or a step size other than the default, is recorded as its own case
 ("zebra@extrusion", "zebra@extrusion,lr1"); cases not run keep their earlier entries in printable.json.
@@ -23,6 +29,7 @@ from common import RESULTS, machine, write  # noqa: E402
 from inkopt import charts  # noqa: E402
 
 INKOPT = [sys.executable, "-m", "inkopt.cli"]
+VOX = 25.4 / 300
 
 
 def run(args):
@@ -30,12 +37,43 @@ def run(args):
     subprocess.run(INKOPT + args, check=True)
 
 
+def eval_mode(ev: dict) -> str:
+    """'adaptive' or 'fixed N spp', from an evaluation.json."""
+    return "adaptive" if ev.get("spp_adaptive") else f"fixed {ev.get('spp')} spp"
+
+
+def de76(m: dict) -> float:
+    """The noise-corrected mean ΔE76 where the evaluation has it, else the plain mean."""
+    v = m.get("delta_e76_mean_corrected")
+    return m["delta_e76_mean"] if v is None else v
+
+
+def verdict(name: str, bn: dict) -> str:
+    """Does the blue-noise quantized print beat both baselines in ΔE76 (noise-corrected), ΔE2000 and SSIM, and is
+    it within 1 ΔE76 of the continuous result?"""
+    q, c = bn["quantized"], bn["continuous"]
+    lines, met = [], True
+    for b in ("surface", "extrusion"):
+        m = bn["baselines"][b]
+        won = [de76(q) < de76(m), q["delta_e2000_mean"] < m["delta_e2000_mean"], q["ssim"] > m["ssim"]]
+        figs = (f"ΔE76 {de76(q):.2f} vs {de76(m):.2f}, ΔE2000 {q['delta_e2000_mean']:.2f} vs "
+                f"{m['delta_e2000_mean']:.2f}, SSIM {q['ssim']:.3f} vs {m['ssim']:.3f}")
+        lines.append(f"{b}: {'beats' if all(won) else 'does NOT beat'} ({sum(won)}/3; {figs})")
+        met = met and all(won)
+    gap = de76(q) - de76(c)
+    lines.append(f"{'within' if gap <= 1.0 else 'NOT within'} 1 ΔE76 of the continuous result ({gap:+.2f})")
+    met = met and gap <= 1.0
+    return (f"- {name} [{eval_mode(bn)}]: target {'met' if met else 'NOT met'}: quantized (blue-noise) "
+            + "; ".join(lines))
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--iterations", type=int, default=200)
-    ap.add_argument("--spp", type=int, default=256, help="evaluation spp")
+    ap.add_argument("--spp", type=int, default=0,
+                    help="evaluation spp, used exactly; 0 (default): adaptive, noise adds at most 0.5 to mean ΔE76")
     ap.add_argument("--out", default="bench-out")
-    ap.add_argument("--cases", default="zebra,astronaut")
+    ap.add_argument("--cases", default="zebra,astronaut,reference")
     ap.add_argument("--init", default="white", help="the optimisation's start (inkopt slab --init)")
     ap.add_argument("--lr", type=float, help="step size (inkopt slab --lr; default: the optimiser's)")
     a = ap.parse_args()
@@ -46,33 +84,55 @@ def main():
 
     cases = {
         # 180 x 60 texels at 300 DPI: every stripe width in voxels exactly, 1 mm thick (the paper's zebra slab).
-        "zebra": (charts.save(charts.zebra(180, 60), out / "zebra.png"), f"{180 * 25.4 / 300:.4f}x{60 * 25.4 / 300:.4f}x1.0"),
-        "astronaut": (charts.save((resize(data.astronaut(), (236, 236), anti_aliasing=True) * 255).astype(np.uint8),
-                                  out / "astronaut.png"), "10x10x2"),
+        "zebra": lambda: (charts.save(charts.zebra(180, 60), out / "zebra.png"),
+                          f"{180 * 25.4 / 300:.4f}x{60 * 25.4 / 300:.4f}x1.0", []),
+        "astronaut": lambda: (charts.save((resize(data.astronaut(), (236, 236), anti_aliasing=True) * 255)
+                                          .astype(np.uint8), out / "astronaut.png"), "10x10x2", []),
+        # The issues' reference slab (bench/bench_optimize.py): 177 x 118 x 30 voxels, colour chart on top (4 px
+        # per voxel), zebra below.
+        "reference": lambda: (charts.save(charts.colour_chart(708, 472), out / "reference_top.png"),
+                              f"{177 * VOX:.4f}x{118 * VOX:.4f}x{30 * VOX:.4f}",
+                              ["--bottom", str(charts.save(charts.zebra(177, 118), out / "reference_bottom.png"))]),
     }
+    mode = "adaptive" if a.spp == 0 else f"fixed {a.spp} spp"
     previous = RESULTS / "printable.json"
     results = json.loads(previous.read_text())["results"] if previous.is_file() else {}
+    for r in results.values():  # entries from before the mode was recorded
+        if "blue-noise" in r:
+            r.setdefault("eval_mode", eval_mode(r["blue-noise"]))
+            r.setdefault("eval_spp", None if r["blue-noise"].get("spp_adaptive") else r["blue-noise"].get("spp"))
     for case in a.cases.split(","):
-        img, size = cases[case]
+        img, size, extra = cases[case]()
         tags = ([a.init] if a.init != "white" else []) + ([f"lr{a.lr:g}"] if a.lr is not None else [])
         name = case + ("@" + ",".join(tags) if tags else "")
         d = out / name.replace("@", "-").replace(",", "-")
         if not (d / "report.json").is_file():
-            run(["slab", str(img), "--size-mm", size, "--out", str(d), "--iterations", str(a.iterations), "--resume",
-                 "--init", a.init] + (["--lr", str(a.lr)] if a.lr is not None else []))
-        results[name] = {"report": json.loads((d / "report.json").read_text())}
-        for method in ("random", "blue-noise"):
-            if (d / f"evaluation_{method}.json").is_file():  # done in an earlier, interrupted run
-                results[name][method] = json.loads((d / f"evaluation_{method}.json").read_text())
+            run(["slab", str(img)] + extra + ["--size-mm", size, "--out", str(d), "--iterations", str(a.iterations),
+                                              "--resume", "--init", a.init]
+                + (["--lr", str(a.lr)] if a.lr is not None else []))
+        results[name] = {"report": json.loads((d / "report.json").read_text()), "eval_mode": mode,
+                         "eval_spp": a.spp or None}
+        for method in ("blue-noise", "random"):
+            done = d / f"evaluation_{method}.json"
+            if done.is_file() and eval_mode(json.loads(done.read_text())) == mode:  # an earlier, interrupted run
+                results[name][method] = json.loads(done.read_text())
                 continue
             run(["quantize", str(d), "--method", method])
-            run(["evaluate", str(d), "--spp", str(a.spp), "--method", method])
+            run(["evaluate", str(d), "--method", method] + (["--spp", str(a.spp)] if a.spp else []))
             ev = json.loads((d / "evaluation.json").read_text())
-            shutil.copy(d / "evaluation.json", d / f"evaluation_{method}.json")
+            shutil.copy(d / "evaluation.json", done)
             results[name][method] = ev
-    write("printable.json", {"results": results, "iterations": a.iterations, "eval_spp": a.spp, **machine()})
-    keys = ("delta_e76_mean", "delta_e76_p95", "delta_e2000_mean", "ssim")
-    print("| case | result | ΔE76 mean | ΔE76 p95 | ΔE2000 mean | SSIM |\n|---|---|---|---|---|---|")
+        results[name] = {k: results[name][k] for k in ("report", "random", "blue-noise", "eval_mode", "eval_spp")}
+        write("printable.json", {"results": results, "iterations": a.iterations, "eval_spp": a.spp,
+                                 "eval_mode": mode, **machine()})
+    keys = ("delta_e76_mean", "delta_e76_mean_corrected", "delta_e76_p95", "delta_e2000_mean", "ssim", "mottle_l2")
+
+    def fmt(m, k):
+        v = m.get(k)
+        return "–" if v is None else f"{v:.3f}" if k == "ssim" else f"{v:.2f}"
+
+    print("| case | result | ΔE76 mean | ΔE76 (noise-corrected) | ΔE76 p95 | ΔE2000 mean | SSIM | mottle (ΔL*)² |"
+          "\n|---|---|---|---|---|---|---|---|")
     for name, r in results.items():
         bn, rnd = r["blue-noise"], r["random"]
         rows = [("optimised (continuous)", bn["continuous"]), ("optimised, blue-noise quantized", bn["quantized"]),
@@ -80,7 +140,11 @@ def main():
                 ("surface baseline (blue-noise)", bn["baselines"]["surface"]),
                 ("extrusion baseline (blue-noise)", bn["baselines"]["extrusion"])]
         for label, m in rows:
-            print(f"| {name} | {label} | " + " | ".join(f"{m[k]:.3f}" if k == "ssim" else f"{m[k]:.2f}" for k in keys) + " |")
+            print(f"| {name} [{eval_mode(bn)}] | {label} | " + " | ".join(fmt(m, k) for k in keys) + " |")
+    print()
+    for name, r in results.items():
+        floor = r["blue-noise"].get("gamut_floor_delta_e76")
+        print(verdict(name, r["blue-noise"]) + (f"; gamut floor {floor:.2f} ΔE76" if floor is not None else ""))
 
 
 if __name__ == "__main__":
