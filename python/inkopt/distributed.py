@@ -3,8 +3,8 @@ bit-identical to the same pass in one process.
 
 :class:`RayShards` connects to Ray and starts the workers (actors): by default one per node, with as many
 threads as the node has CPUs. ``RayShards.renderer(volume, threads, lighting)`` is a drop-in for
-:class:`inkopt.render.Renderer` (same ``render``, ``gradient``, ``set_volume``, ``set_mixture``, ``set_lighting``), so it serves as
-``Optimization``'s ``renderer_factory``. Each worker builds its own renderer once from the volume (shipped once
+:class:`inkopt.render.Renderer` (same ``render``, ``gradient``, ``set_volume``, ``set_mixture``,
+``set_lighting``), so it serves as ``Optimization``'s ``renderer_factory``. Each worker builds its own renderer once from the volume (shipped once
 through Ray's object store) and renders a contiguous range of the texels, in proportion to its threads.
 
 Why the result does not depend on the split: random numbers are keyed by (seed, texel index, sample), and a
@@ -15,8 +15,8 @@ adjoint of the whole pass, which every worker is given); workers return the raw 
 
 Per iteration, the driver puts the free voxels' mixtures (F x N float32; their int64 index only once) into the
 object store, which every node fetches once, and each worker its slice of the adjoints (12 bytes per texel); each
-worker returns rgb and variance of its texels for both passes (2 x 24 bytes per texel) and the gradient sums (2 x 3 x int64 =
-48 bytes per gradient slot, i.e. per free voxel).
+worker returns rgb and variance of its texels for both passes (2 x 24 bytes per texel) and the gradient sums
+(2 x 3 x int64 = 48 bytes per gradient slot, i.e. per free voxel).
 """
 from __future__ import annotations
 

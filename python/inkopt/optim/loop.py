@@ -4,8 +4,9 @@ One iteration: mixture -> coefficients -> forward render (seed a) -> loss and dE
 (seed b != a, so the adjoint's noise and the gradient's noise are independent) -> dE/dsigma -> dE/drho -> dE/dx ->
 optimiser step (``optimizers``). The loss is taken on a running average of the renders (``adjoint_ema``); with
 ``forward_spp`` 0 there is no forward render after the first iteration, and the adjoint is evaluated at the
-average of the earlier gradient passes' own estimates (cheaper iterations, each worth less: see README). One :class:`~inkopt.render.Renderer` serves the whole run: geometry and thread
-pool are set up once and only the medium is replaced each iteration. Seeds are derived from (seed, iteration), and
+average of the earlier gradient passes' own estimates (cheaper iterations, each worth less: see README). One
+:class:`~inkopt.render.Renderer` serves the whole run: geometry and thread pool are set up once and only the free
+voxels' media are overwritten each iteration. Seeds are derived from (seed, iteration), and
 renders and gradients are bit-identical for any thread count, so a run resumed from a checkpoint continues exactly
 as if it had not stopped.
 """
