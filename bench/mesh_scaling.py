@@ -4,9 +4,10 @@
     python bench/mesh_scaling.py [10 20 40 60mm_shell2 ...]
 
 Reads bench/results/mesh_<height>mm.json (an argument with letters names the file stem after "mesh_", e.g.
-60mm_shell2 for a run with ``--out bench/results/mesh_60mm_shell2.json``) and prints a markdown table (grid voxels, inside voxels, texels, events
-per path, seconds per iteration split into render / gradient / rest, CPU seconds, peak memory) and how each cost
-grows with size between successive heights (the exponent k in cost ~ height^k).
+60mm_shell2 for a run with ``--out bench/results/mesh_60mm_shell2.json``) and prints a markdown table (grid voxels,
+inside voxels, texels, events per path, seconds per iteration split into render / gradient / rest, CPU seconds,
+peak memory) and how each cost grows with size between successive heights (the exponent k in cost ~
+height^k).
 """
 import json
 import math

@@ -1,11 +1,12 @@
 """Texel shards on Ray: one render or gradient pass split over Ray workers (a local Ray instance or a cluster),
 bit-identical to the same pass in one process.
 
-:class:`RayShards` connects to Ray and starts the workers (actors): by default one per node, with as many
-threads as the node has CPUs. ``RayShards.renderer(volume, threads, lighting)`` is a drop-in for
-:class:`inkopt.render.Renderer` (same ``render``, ``gradient``, ``set_volume``, ``set_mixture``,
-``set_lighting``), so it serves as ``Optimization``'s ``renderer_factory``. Each worker builds its own renderer once from the volume (shipped once
-through Ray's object store) and renders a contiguous range of the texels, in proportion to its threads.
+:class:`RayShards` connects to Ray and starts the workers (actors): by default one per node, with as many threads
+as the node has CPUs. ``RayShards.renderer(volume, threads, lighting)`` is a drop-in for
+:class:`inkopt.render.Renderer` (same ``render``, ``gradient``, ``set_volume``, ``set_mixture``, ``set_lighting``),
+so it serves as ``Optimization``'s ``renderer_factory``. Each worker builds its own renderer once from the volume
+(shipped once through Ray's object store) and renders a contiguous range of the texels, in proportion to its
+threads.
 
 Why the result does not depend on the split: random numbers are keyed by (seed, texel index, sample), and a
 worker renders its range with the texels' global indices (``first_texel``); forward results are per texel, so
