@@ -68,8 +68,7 @@ class Parameterization:
     def mixture(self, x: np.ndarray) -> np.ndarray:
         """The whole grid's mixture (z, y, x, N) float32 of variables x (F, N)."""
         rho = self.fixed_share.copy().reshape(-1, self.n_inks)
-        p, _ = self._p(x)
-        rho[self.free_index] += self.share_f[:, None] * p
+        rho[self.free_index] = self.free_rows(x)
         return rho.reshape(self.fixed_share.shape)
 
     def backward(self, x: np.ndarray, grad_rho: np.ndarray, natural: bool = False) -> np.ndarray:
