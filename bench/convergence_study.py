@@ -9,12 +9,13 @@ and scene, not for every scene. Writes bench/results/convergence_demo.json (one 
 (noise-corrected), mean dE2000, SSIM, mottle (dL*)^2 in the target's flat regions, seconds of the whole run).
 """
 import argparse
+import json
 import sys
 import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import machine, write  # noqa: E402
+from common import RESULTS, machine, write  # noqa: E402
 
 from inkopt import charts  # noqa: E402
 from inkopt.model import InkTable  # noqa: E402
@@ -31,6 +32,18 @@ SETTINGS = {
     "forward0_ema0.9_150": (150, {"forward_spp": 0, "adjoint_ema": 0.9}),
     "forward0_ema0.9_400": (400, {"forward_spp": 0, "adjoint_ema": 0.9}),
     "forward0_ema0.9_spp8_150": (150, {"forward_spp": 0, "adjoint_ema": 0.9, "spp": 8}),
+    "smooth0.7_150": (150, {"smooth": 0.7}),
+    "smooth1_150": (150, {"smooth": 1.0}),
+    "smooth1.5_150": (150, {"smooth": 1.5}),
+    "smooth1_300": (300, {"smooth": 1.0}),
+    "smooth0.7_300": (300, {"smooth": 0.7}),
+    "smooth2_150": (150, {"smooth": 2.0}),
+    "smooth1.5_300": (300, {"smooth": 1.5}),
+    "smooth1_spp8_150": (150, {"smooth": 1.0, "spp": 8}),
+    "smooth1_lr1_300": (300, {"smooth": 1.0, "lr": 1.0}),
+    "smooth0.7_150_seed1": (150, {"smooth": 0.7, "seed": 1}),
+    "default_150_seed1": (150, {"seed": 1}),
+    "smooth1_150_seed1": (150, {"smooth": 1.0, "seed": 1}),
 }
 KEYS = ("delta_e76_mean_corrected", "delta_e76_mean", "delta_e2000_mean", "ssim", "mottle_l2", "seconds",
         "seconds_per_iteration")
@@ -49,13 +62,18 @@ def main():
         bottom = charts.save(charts.zebra(71, 47), tmp / "zebra.png")
         for name in a.only or SETTINGS:
             iterations, kw = SETTINGS[name]
-            cfg = OptimizeConfig(iterations=iterations, seed=0, **kw)
+            cfg = OptimizeConfig(**{"iterations": iterations, "seed": 0, **kw})
             rep = run_slab(top, bottom, (6.0, 4.0, 1.0), tmp / name, inks, cfg, threads=a.threads,
                            log=lambda s: None)
             row = {"iterations": iterations, **kw, **{k: rep[k] for k in KEYS}}
             out["settings"][name] = row
             print(name, " ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()),
                   flush=True)
+    previous = RESULTS / "convergence_demo.json"
+    if a.only and previous.is_file():  # a partial run updates the settings it ran
+        old = json.loads(previous.read_text())
+        old["settings"].update(out["settings"])
+        out["settings"] = old["settings"]
     write("convergence_demo.json", out)
 
 

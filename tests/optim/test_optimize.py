@@ -105,15 +105,15 @@ def test_without_forward_renders(monkeypatch):
         OptimizeConfig(forward_spp=-1).validate()
 
 
-@pytest.mark.parametrize("forward_spp", [16, 0])
-def test_resume_continues_exactly(tmp_path, forward_spp):
+@pytest.mark.parametrize("forward_spp,smooth", [(16, 0.0), (0, 0.0), (16, 1.0)])
+def test_resume_continues_exactly(tmp_path, forward_spp, smooth):
     """6 iterations in one go and 3 + 3 through a checkpoint give bit-identical variables."""
     scene = small_chart_scene(12, 8, 0.3)
-    a = run(scene, iterations=6, forward_spp=forward_spp)
+    a = run(scene, iterations=6, forward_spp=forward_spp, smooth=smooth)
     a.run()
-    b = run(scene, iterations=3, forward_spp=forward_spp)
+    b = run(scene, iterations=3, forward_spp=forward_spp, smooth=smooth)
     b.run(tmp_path / "ck.npz")
-    c = run(scene, iterations=6, forward_spp=forward_spp)
+    c = run(scene, iterations=6, forward_spp=forward_spp, smooth=smooth)
     c.load_checkpoint(tmp_path / "ck.npz")
     assert c.iteration == 3
     c.run(tmp_path / "ck.npz")
@@ -123,6 +123,11 @@ def test_resume_continues_exactly(tmp_path, forward_spp):
     d = run(scene, iterations=6, lr=0.3)
     with pytest.raises(ValueError, match="different settings"):
         d.load_checkpoint(tmp_path / "ck.npz")
+    # the smoothing width is part of the key, but off it leaves the key as it was before the setting existed
+    e = run(scene, iterations=6, forward_spp=forward_spp, smooth=0.5 if smooth else 1.0)
+    with pytest.raises(ValueError, match="different settings"):
+        e.load_checkpoint(tmp_path / "ck.npz")
+    assert ('"smooth"' in c.config_key()) == bool(smooth)
 
 
 @pytest.mark.parametrize("kind", ["surface", "extrusion"])

@@ -9,7 +9,8 @@
 //! `flight` (the free-flight samplers), `trace` (the scalar walk), `packet` (eight paths per core in SIMD
 //! lanes), `render` (parallel drivers of the forward render), `grad` (the gradient pass and its fixed-point
 //! buffers), `rng` (counter-based random numbers), `sampling` (phase function, Fresnel), `diffuse` (3D vector
-//! error diffusion of ink mixtures to one ink per printer voxel).
+//! error diffusion of ink mixtures to one ink per printer voxel), `smooth` (diffusion of per-voxel values over a
+//! sparse voxel set: the optimiser's step preconditioner).
 
 pub mod diffuse;
 mod flight;
@@ -22,6 +23,7 @@ pub mod render;
 pub mod rng;
 pub mod sampling;
 pub mod scene;
+pub mod smooth;
 pub mod trace;
 
 pub use grad::{backward, GradBuffers, GradMethod, NO_GRADIENT};

@@ -72,6 +72,9 @@ def add_optimizer_args(p) -> None:
     p.add_argument("--gamma", default=",".join(f"{g:g}" for g in d.gamma),
                    help="loss weights g1,g2,g3 of colour (dE76^2), SSIM and edge terms (default %(default)s)")
     p.add_argument("--lr", type=float, help="step size (default: 2 for eg, 0.5 for adagrad, 0.1 for adam)")
+    p.add_argument("--smooth", type=float, default=d.smooth, metavar="VOXELS",
+                   help="width of the step's spatial smoothing in voxels, which damps voxel-to-voxel mottle "
+                        f"(default {d.smooth:g}; 0: off)")
     p.add_argument("--optimizer", choices=("eg", "adam", "adagrad"), default=d.optimizer,
                    help="eg: exponentiated gradient with momentum (default); adagrad: the paper's; adam")
     p.add_argument("--param", choices=("softmax", "sigmoid"), default=d.param,
@@ -112,7 +115,7 @@ def config_from_args(args):
 
     cfg = OptimizeConfig(iterations=args.iterations, spp=args.spp, forward_spp=args.forward_spp, gamma=parse_gamma(args.gamma), lr=args.lr,
                          optimizer=args.optimizer, param=args.param, init=args.init, seed=args.seed,
-                         grad_method=args.gradient, checkpoint_every=args.checkpoint_every)
+                         grad_method=args.gradient, checkpoint_every=args.checkpoint_every, smooth=args.smooth)
     cfg.validate()
     return cfg
 

@@ -30,6 +30,7 @@ from ..render import Renderer
 from .config import OptimizeConfig
 from .optimizers import make_optimizer
 from .param import Parameterization, initial_free_mixture
+from .smooth import GradientSmoother
 
 
 @dataclass
@@ -98,6 +99,7 @@ class Optimization:
         self._problem_digest = h.hexdigest()[:16]
         self.x = self.param.variables_for(self._initial_free_mixture())
         self.opt = make_optimizer(cfg.optimizer, cfg.step_size, self.x.shape)
+        self.smoother = GradientSmoother(self.param.grad_index, cfg.smooth) if cfg.smooth > 0 else None
         self._renderer: Renderer | None = None
         self.iteration = 0
         self.history = History()
@@ -126,6 +128,8 @@ class Optimization:
         d = asdict(self.cfg)
         d.pop("iterations")
         d.pop("checkpoint_every")
+        if not d["smooth"]:  # a setting added later: checkpoints made before it stay resumable
+            d.pop("smooth")
         d.update(shape=list(self.base.shape), inks=list(self.base.inks.names), texels=len(self.texels),
                  free=self.param.n_free, problem=self._problem_digest)
         if not self.lighting.uniform:
@@ -203,6 +207,8 @@ class Optimization:
         self._average(gres.rgb, gres.var_mean, cfg.spp, decay=not forward)
         t3 = time.perf_counter()
         g_x = self.param.backward(self.x, mix_grad(gs, ga, self.base.inks), natural=self.opt.natural)
+        if self.smoother is not None:
+            g_x = self.smoother(g_x)
         self.x = self.opt.step(self.x, g_x).astype(np.float32)
         self.iteration += 1
         t4 = time.perf_counter()

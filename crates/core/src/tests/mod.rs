@@ -1,7 +1,8 @@
 //! Statistical tests of the renderer against exact results, one file per topic: `analytic` (furnaces, slabs
 //! and free flights with closed forms), `samplers` (the samplers and walks against each other), `gradients`
 //! (gradients against finite differences), `light` (environment maps), `determinism` (thread counts, chunking,
-//! media forms), `geometry` (safe distances and balls), `storage` (in-place updates and compact storage against
+//! media forms), `geometry` (safe distances and balls), `smooth` (the step preconditioner against a plain
+//! implementation), `storage` (in-place updates and compact storage against
 //! the plain forms, bit for bit). Tolerances are multiples of the estimator's own standard error (computed from
 //! the samples), never fixed image values.
 
@@ -11,6 +12,7 @@ mod geometry;
 mod gradients;
 mod light;
 mod samplers;
+mod smooth;
 mod storage;
 
 use crate::*;
