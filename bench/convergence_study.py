@@ -1,11 +1,12 @@
 """Convergence study on the demo slab (6 x 4 x 1 mm, colour chart on top, zebra below, the `inkopt demo` run):
-final noise-free quality of the optimiser's settings at equal iterations and at about equal time.
+final noise-free quality of the optimiser's settings at equal iterations and at about equal time; with --case,
+on the zebra chart or the astronaut photograph of bench/printable_eval.py instead (200 iterations).
 
-    .venv/bin/python bench/convergence_study.py [--threads 2] [--only NAME ...]
+    .venv/bin/python bench/convergence_study.py [--threads 2] [--only NAME ...] [--case demo|zebra|astronaut]
 
 Each setting is one `run_slab` from the 97 %-white start with seed 0; the final figures come from the driver's
 adaptive evaluation (noise adds <= 0.5 to the mean dE76), so differences of a few tenths are real for this seed
-and scene, not for every scene. Writes bench/results/convergence_demo.json (one entry per setting: mean dE76
+and scene, not for every scene. Writes bench/results/convergence_CASE.json (one entry per setting: mean dE76
 (noise-corrected), mean dE2000, SSIM, mottle (dL*)^2 in the target's flat regions, seconds of the whole run).
 """
 import argparse
@@ -13,6 +14,8 @@ import json
 import sys
 import tempfile
 from pathlib import Path
+
+import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import RESULTS, machine, write  # noqa: E402
@@ -32,49 +35,64 @@ SETTINGS = {
     "forward0_ema0.9_150": (150, {"forward_spp": 0, "adjoint_ema": 0.9}),
     "forward0_ema0.9_400": (400, {"forward_spp": 0, "adjoint_ema": 0.9}),
     "forward0_ema0.9_spp8_150": (150, {"forward_spp": 0, "adjoint_ema": 0.9, "spp": 8}),
-    "smooth0.7_150": (150, {"smooth": 0.7}),
-    "smooth1_150": (150, {"smooth": 1.0}),
-    "smooth1.5_150": (150, {"smooth": 1.5}),
-    "smooth1_300": (300, {"smooth": 1.0}),
-    "smooth0.7_300": (300, {"smooth": 0.7}),
-    "smooth2_150": (150, {"smooth": 2.0}),
-    "smooth1.5_300": (300, {"smooth": 1.5}),
-    "smooth1_spp8_150": (150, {"smooth": 1.0, "spp": 8}),
-    "smooth1_lr1_300": (300, {"smooth": 1.0, "lr": 1.0}),
-    "smooth0.7_150_seed1": (150, {"smooth": 0.7, "seed": 1}),
     "default_150_seed1": (150, {"seed": 1}),
-    "smooth1_150_seed1": (150, {"smooth": 1.0, "seed": 1}),
+    "smooth0.7_150": (150, {"smooth": 0.7}),
+    "smooth0.7_150_seed1": (150, {"smooth": 0.7, "seed": 1}),
+    "smooth0.7_edge10_150": (150, {"smooth": 0.7, "smooth_edge": 10.0}),
+    "smooth0.7_edge10_150_seed1": (150, {"smooth": 0.7, "smooth_edge": 10.0, "seed": 1}),
+    "smooth0.7_unguided_150": (150, {"smooth": 0.7, "smooth_edge": 0.0}),
+    "smooth1_150": (150, {"smooth": 1.0}),
+}
+# --case zebra|astronaut: name -> overrides, 200 iterations
+CASE_SETTINGS = {
+    "default_200": {},
+    "smooth0.7_200": {"smooth": 0.7},
 }
 KEYS = ("delta_e76_mean_corrected", "delta_e76_mean", "delta_e2000_mean", "ssim", "mottle_l2", "seconds",
         "seconds_per_iteration")
 
 
+def scene(case: str, tmp: Path):
+    """(top picture, bottom picture or None, size in mm) of a case; zebra and astronaut as in printable_eval.py."""
+    if case == "demo":
+        return (charts.save(charts.colour_chart(288, 192), tmp / "chart.png"),
+                charts.save(charts.zebra(71, 47), tmp / "zebra.png"), (6.0, 4.0, 1.0))
+    if case == "zebra":
+        return charts.save(charts.zebra(180, 60), tmp / "zebra.png"), None, (180 * 25.4 / 300, 60 * 25.4 / 300, 1.0)
+    from skimage import data
+    from skimage.transform import resize
+
+    img = (resize(data.astronaut(), (236, 236), anti_aliasing=True) * 255).astype(np.uint8)
+    return charts.save(img, tmp / "astronaut.png"), None, (10.0, 10.0, 2.0)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--threads", type=int)
-    ap.add_argument("--only", nargs="*", choices=sorted(SETTINGS))
+    ap.add_argument("--only", nargs="*", choices=sorted(SETTINGS) + sorted(CASE_SETTINGS))
+    ap.add_argument("--case", choices=("demo", "zebra", "astronaut"), default="demo")
     a = ap.parse_args()
+    settings = SETTINGS if a.case == "demo" else {k: (200, v) for k, v in CASE_SETTINGS.items()}
     inks = InkTable.parse("vero-cmykw")
     out = {"machine": machine(), "threads": a.threads, "settings": {}}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        top = charts.save(charts.colour_chart(288, 192), tmp / "chart.png")
-        bottom = charts.save(charts.zebra(71, 47), tmp / "zebra.png")
-        for name in a.only or SETTINGS:
-            iterations, kw = SETTINGS[name]
+        top, bottom, size = scene(a.case, tmp)
+        for name in a.only or settings:
+            iterations, kw = settings[name]
             cfg = OptimizeConfig(**{"iterations": iterations, "seed": 0, **kw})
-            rep = run_slab(top, bottom, (6.0, 4.0, 1.0), tmp / name, inks, cfg, threads=a.threads,
+            rep = run_slab(top, bottom, size, tmp / name, inks, cfg, threads=a.threads,
                            log=lambda s: None)
             row = {"iterations": iterations, **kw, **{k: rep[k] for k in KEYS}}
             out["settings"][name] = row
             print(name, " ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()),
                   flush=True)
-    previous = RESULTS / "convergence_demo.json"
+    previous = RESULTS / f"convergence_{a.case}.json"
     if a.only and previous.is_file():  # a partial run updates the settings it ran
         old = json.loads(previous.read_text())
         old["settings"].update(out["settings"])
         out["settings"] = old["settings"]
-    write("convergence_demo.json", out)
+    write(f"convergence_{a.case}.json", out)
 
 
 if __name__ == "__main__":

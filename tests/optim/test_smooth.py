@@ -49,14 +49,14 @@ def test_conserves_each_channel_sum_and_keeps_constants_on_an_irregular_set():
     np.testing.assert_allclose(out.sum(0), g.sum(0), atol=1e-3)
     const = np.full_like(g, 0.25)
     np.testing.assert_allclose(GradientSmoother(gi, sigma=1.5)(const), const, rtol=1e-6)
-    # never amplifies: the explicit step's eigenvalues lie in [-1/2, 1]
+    # never amplifies: an even number of steps has eigenvalues in [0, 1]
     assert np.linalg.norm(out) <= np.linalg.norm(g)
 
 
 def test_kernel_width_and_voxel_scale_damping():
     """A unit impulse in the middle of a large box spreads with variance 2 a k per axis (the explicit scheme's
     exact moment), >= sigma²; the checkerboard (the highest frequency: pure voxel-to-voxel noise) is damped by
-    exactly (1 - 12 a)^k; the smooth lowest mode barely changes."""
+    exactly (1 - 12 a)^k (positive: k is even); the smooth lowest mode barely changes."""
     n = 25
     gi = _free_grid(np.ones((n, n, n), bool))
     sm = GradientSmoother(gi, sigma=1.0)
@@ -81,6 +81,39 @@ def test_kernel_width_and_voxel_scale_damping():
 def test_settings_are_checked():
     with pytest.raises(ValueError, match="smoothing"):
         OptimizeConfig(smooth=-1).validate()
+    with pytest.raises(ValueError, match="smoothing edge"):
+        OptimizeConfig(smooth_edge=-1).validate()
     with pytest.raises(ValueError, match="smoothing"):
         GradientSmoother(np.zeros((2, 2, 2), np.int32), 0.0)
-    assert diffusion_steps(0) == 0 and diffusion_steps(0.5) == 1 and diffusion_steps(1.5) == 9
+    assert diffusion_steps(0) == 0 and diffusion_steps(0.5) == 2 and diffusion_steps(0.7) == 2
+    assert diffusion_steps(1.5) == 10
+
+
+def test_guide_stops_the_flux_at_target_edges():
+    """Two halves of a box with target colours 100 ΔE76 apart: with edge 10 (weight e^-100) nothing crosses
+    between them (each half keeps its sum), with a uniform guide the result is the unguided one."""
+    from inkopt.optim.smooth import nearest_texel_guide
+
+    rng = np.random.default_rng(2)
+    shape = (4, 6, 8)
+    gi = _free_grid(np.ones(shape, bool))
+    g = rng.normal(size=(gi.size, 2)).astype(np.float32)
+    left = (np.indices(shape)[2] < 4).reshape(-1)
+    guide = np.where(left[:, None], [[0, 0, 0]], [[100, 0, 0]]).astype(np.float32)
+    out = GradientSmoother(gi, 1.0, guide, edge=10.0)(g)
+    for half in (left, ~left):
+        np.testing.assert_allclose(out[half].sum(0), g[half].sum(0), atol=1e-4)
+    assert not np.allclose(out[left], g[left])
+    same = GradientSmoother(gi, 1.0, np.zeros_like(guide), edge=10.0)(g)
+    np.testing.assert_allclose(same, GradientSmoother(gi, 1.0)(g), atol=1e-6)
+    # each voxel's guide is its nearest texel's target: texels on the top face (z = 4) of a 2-layer free set
+    gi2 = np.full(shape, -1, np.int32)
+    gi2[2:] = np.arange(2 * 6 * 8, dtype=np.int32).reshape(2, 6, 8)
+    y, x = np.mgrid[:6, :8]
+    pos = np.stack([x.ravel() + 0.5, y.ravel() + 0.5, np.full(48, 4.0)], 1)
+    lab = rng.normal(size=(48, 3)).astype(np.float32)
+    got = nearest_texel_guide(gi2, pos, lab, depth_de=30.0, chunk=7).reshape(2, 48, 4)
+    np.testing.assert_array_equal(got[..., :3], np.stack([lab, lab]))
+    np.testing.assert_allclose(got[..., 3], [[45.0] * 48, [15.0] * 48])  # 1.5 and 0.5 voxels below the face
+    with pytest.raises(ValueError, match="edge"):
+        GradientSmoother(gi, 1.0, guide, edge=0.0)

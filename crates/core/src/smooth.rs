@@ -10,18 +10,30 @@
 //! ```
 //!
 //! so nothing flows across the set's boundary (the sum of each channel is conserved) and a constant is a fixed
-//! point; with alpha <= 1/6 no value leaves the range of its neighbourhood. Each output row is a fixed-order
+//! point; with alpha <= 1/6 no value leaves the range of its neighbourhood. With a `Guide` (a vector per row,
+//! e.g. the target colour the voxel shows) each term is weighted by w = exp(-|guide[r] - guide[q]|² / tau²),
+//! symmetric in r and q, so the flux between rows that should look different fades (an edge-stopping
+//! diffusion, as in Perona and Malik's) and the properties above still hold. Each output row is a fixed-order
 //! sum of its own inputs, so the result does not depend on the thread count. Work per step: one pass over the
 //! grid's index plane by plane (in parallel over planes) and the rows of the plane and its two neighbours;
 //! memory: one more copy of the values.
 
 use rayon::prelude::*;
 
-/// Diffuse `values` (rows × `channels`, rows numbered as in `index`) `steps` times with weight `alpha`.
-/// `n` = (nz, ny, nx) of `index`. Errors if `index` does not number its rows 0, 1, ... in grid order, or if
-/// the sizes disagree.
-pub fn diffuse_rows(n: [usize; 3], index: &[i32], values: &mut [f32], channels: usize, steps: usize, alpha: f32)
-                    -> Result<(), String> {
+/// Per-row vectors that weight the diffusion between two rows by exp(-|a - b|² / tau²).
+#[derive(Clone, Copy)]
+pub struct Guide<'a> {
+    /// rows × `dims` values
+    pub values: &'a [f32],
+    pub dims: usize,
+    pub tau: f32,
+}
+
+/// Diffuse `values` (rows × `channels`, rows numbered as in `index`) `steps` times with weight `alpha`
+/// (and `guide`'s weights if given). `n` = (nz, ny, nx) of `index`. Errors if `index` does not number its rows
+/// 0, 1, ... in grid order, or if the sizes disagree.
+pub fn diffuse_rows(n: [usize; 3], index: &[i32], values: &mut [f32], channels: usize, steps: usize, alpha: f32,
+                    guide: Option<Guide>) -> Result<(), String> {
     let [nz, ny, nx] = n;
     let plane = ny * nx;
     if index.len() != nz * plane {
@@ -49,6 +61,11 @@ pub fn diffuse_rows(n: [usize; 3], index: &[i32], values: &mut [f32], channels: 
     if next != rows {
         return Err(format!("index has {next} rows in the set, values have {rows}"));
     }
+    if let Some(g) = guide {
+        if g.dims == 0 || g.values.len() != rows * g.dims || !(g.tau > 0.0) {
+            return Err(format!("guide: {} values for {rows} rows of {} dims, tau {}", g.values.len(), g.dims, g.tau));
+        }
+    }
     if steps == 0 || rows == 0 {
         return Ok(());
     }
@@ -63,7 +80,7 @@ pub fn diffuse_rows(n: [usize; 3], index: &[i32], values: &mut [f32], channels: 
             chunks.push((z, head));
             rest = tail;
         }
-        chunks.into_par_iter().for_each(|(z, out)| step_plane(n, index, from, out, channels, alpha, z));
+        chunks.into_par_iter().for_each(|(z, out)| step_plane(n, index, from, out, channels, alpha, guide, z));
     }
     if steps % 2 == 0 {
         values.copy_from_slice(&src);
@@ -72,7 +89,9 @@ pub fn diffuse_rows(n: [usize; 3], index: &[i32], values: &mut [f32], channels: 
 }
 
 /// One step for the rows of plane z (`out`: those rows, in order).
-fn step_plane(n: [usize; 3], index: &[i32], from: &[f32], out: &mut [f32], channels: usize, alpha: f32, z: usize) {
+#[allow(clippy::too_many_arguments)]
+fn step_plane(n: [usize; 3], index: &[i32], from: &[f32], out: &mut [f32], channels: usize, alpha: f32,
+              guide: Option<Guide>, z: usize) {
     let [nz, ny, nx] = n;
     let plane = ny * nx;
     let mut o = 0usize;
@@ -83,7 +102,8 @@ fn step_plane(n: [usize; 3], index: &[i32], from: &[f32], out: &mut [f32], chann
             if r < 0 {
                 continue;
             }
-            let r = r as usize * channels;
+            let row = r as usize;
+            let r = row * channels;
             // neighbours in a fixed order: -z, +z, -y, +y, -x, +x
             let nb = [
                 if z > 0 { index[j - plane] } else { -1 },
@@ -93,15 +113,26 @@ fn step_plane(n: [usize; 3], index: &[i32], from: &[f32], out: &mut [f32], chann
                 if x > 0 { index[j - 1] } else { -1 },
                 if x + 1 < nx { index[j + 1] } else { -1 },
             ];
+            let mut w = [alpha; 6];
+            if let Some(g) = guide {
+                let a = &g.values[row * g.dims..(row + 1) * g.dims];
+                for (wk, &q) in w.iter_mut().zip(&nb) {
+                    if q >= 0 {
+                        let b = &g.values[q as usize * g.dims..(q as usize + 1) * g.dims];
+                        let d2: f32 = a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum();
+                        *wk = alpha * (-d2 / (g.tau * g.tau)).exp();
+                    }
+                }
+            }
             for c in 0..channels {
                 let v = from[r + c];
                 let mut acc = 0.0f32;
-                for &q in &nb {
+                for (&q, &wk) in nb.iter().zip(&w) {
                     if q >= 0 {
-                        acc += from[q as usize * channels + c] - v;
+                        acc += wk * (from[q as usize * channels + c] - v);
                     }
                 }
-                out[o + c] = v + alpha * acc;
+                out[o + c] = v + acc;
             }
             o += channels;
         }

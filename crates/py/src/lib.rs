@@ -432,23 +432,31 @@ fn diffuse_layer(
     py.detach(|| inkopt_core::diffuse::diffuse_layer(shape, z, m, i, i_next, cur, next, o)).map_err(err)
 }
 
-/// smooth_rows(index (Z, Y, X) i32, values (F, C) f32, steps, alpha) -> (F, C) f32: `steps` explicit diffusion
-/// steps of weight `alpha` over the 6-neighbourhood of the voxels with index >= 0, whose rows are numbered in grid
-/// order (inkopt_core::smooth). The GIL is released; threads: rayon's global pool.
+/// smooth_rows(index (Z, Y, X) i32, values (F, C) f32, steps, alpha, guide (F, D) f32 or None, tau) -> (F, C)
+/// f32: `steps` explicit diffusion steps of weight `alpha` over the 6-neighbourhood of the voxels with index >= 0,
+/// whose rows are numbered in grid order, each neighbour weighted by exp(-|guide_r - guide_q|² / tau²) if a guide
+/// is given (inkopt_core::smooth). The GIL is released; threads: rayon's global pool.
 #[pyfunction]
+#[pyo3(signature = (index, values, steps, alpha, guide=None, tau=1.0))]
 fn smooth_rows<'py>(
     py: Python<'py>,
     index: PyReadonlyArray3<i32>,
     values: PyReadonlyArray2<f32>,
     steps: usize,
     alpha: f32,
+    guide: Option<PyReadonlyArray2<f32>>,
+    tau: f32,
 ) -> PyResult<Bound<'py, PyArray2<f32>>> {
     let sh = index.shape();
     let n = [sh[0], sh[1], sh[2]];
     let (rows, ch) = (values.shape()[0], values.shape()[1]);
     let idx = c_slice(&index, "index")?;
     let mut v = c_slice(&values, "values")?.to_vec();
-    py.detach(|| inkopt_core::smooth::diffuse_rows(n, idx, &mut v, ch, steps, alpha)).map_err(err)?;
+    let g = match &guide {
+        Some(a) => Some(inkopt_core::smooth::Guide { values: c_slice(a, "guide")?, dims: a.shape()[1], tau }),
+        None => None,
+    };
+    py.detach(|| inkopt_core::smooth::diffuse_rows(n, idx, &mut v, ch, steps, alpha, g)).map_err(err)?;
     Ok(Array2::from_shape_vec((rows, ch), v).map_err(|e| err(e.to_string()))?.into_pyarray(py))
 }
 

@@ -73,8 +73,12 @@ def add_optimizer_args(p) -> None:
                    help="loss weights g1,g2,g3 of colour (dE76^2), SSIM and edge terms (default %(default)s)")
     p.add_argument("--lr", type=float, help="step size (default: 2 for eg, 0.5 for adagrad, 0.1 for adam)")
     p.add_argument("--smooth", type=float, default=d.smooth, metavar="VOXELS",
-                   help="width of the step's spatial smoothing in voxels, which damps voxel-to-voxel mottle "
-                        f"(default {d.smooth:g}; 0: off)")
+                   help="width in voxels of the step's spatial smoothing where the target is flat: damps "
+                        "voxel-to-voxel mottle; 0.7 helps flat-colour artwork, costs colour accuracy on photographs "
+                        f"(default {d.smooth:g}: off)")
+    p.add_argument("--smooth-edge", type=float, default=d.smooth_edge, metavar="DE76",
+                   help="target-colour difference at which the smoothing between two voxels fades to 1/e, so that "
+                        f"it stops at the target's edges (default {d.smooth_edge:g}; 0: smooth across edges too)")
     p.add_argument("--optimizer", choices=("eg", "adam", "adagrad"), default=d.optimizer,
                    help="eg: exponentiated gradient with momentum (default); adagrad: the paper's; adam")
     p.add_argument("--param", choices=("softmax", "sigmoid"), default=d.param,
@@ -115,7 +119,8 @@ def config_from_args(args):
 
     cfg = OptimizeConfig(iterations=args.iterations, spp=args.spp, forward_spp=args.forward_spp, gamma=parse_gamma(args.gamma), lr=args.lr,
                          optimizer=args.optimizer, param=args.param, init=args.init, seed=args.seed,
-                         grad_method=args.gradient, checkpoint_every=args.checkpoint_every, smooth=args.smooth)
+                         grad_method=args.gradient, checkpoint_every=args.checkpoint_every, smooth=args.smooth,
+                         smooth_edge=args.smooth_edge)
     cfg.validate()
     return cfg
 

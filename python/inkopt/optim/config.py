@@ -37,10 +37,14 @@ class OptimizeConfig:
     #: at (0: this iteration's forward render only). The mixture changes slowly, so averaging over iterations
     #: multiplies the adjoint's samples (~ (forward_spp + spp) / (1 - decay)) at no rendering cost.
     adjoint_ema: float = 0.8
-    #: Width (voxels) of the spatial preconditioner of the step (``optim/smooth.py``): the gradient is diffused
-    #: over the free voxels' neighbourhood, damping the voxel-scale noise that shows as mottle (0: off). 0.7 (two
-    #: diffusion steps) beat 0, 1, 1.5 and 2 on the demo slab in every figure (bench/convergence_study.py).
-    smooth: float = 0.7
+    #: Width (voxels) of the spatial preconditioner of the step (``optim/smooth.py``): the step is diffused over
+    #: the free voxels' neighbourhood where the target is flat, damping the voxel-scale noise that shows as mottle
+    #: (0: off). Off by default: 0.7 improves every figure on charts (demo slab, zebra) but costs ~0.9 mean ΔE76 on
+    #: a photograph (astronaut), README "Optimisation: what we learned".
+    smooth: float = 0.0
+    #: Guide of the smoothing: the target-colour difference (ΔE76) at which the smoothing between two voxels falls
+    #: to 1/e, so it stays within regions of one target colour (0: across the target's edges too).
+    smooth_edge: float = 4.0
 
     def validate(self) -> None:
         if self.iterations < 0:
@@ -63,6 +67,8 @@ class OptimizeConfig:
             raise ValueError("checkpoint_every must be >= 1")
         if not self.smooth >= 0.0:
             raise ValueError(f"smoothing width must be >= 0 voxels, got {self.smooth}")
+        if not self.smooth_edge >= 0.0:
+            raise ValueError(f"smoothing edge must be >= 0 (dE76), got {self.smooth_edge}")
         if not 0.0 <= self.adjoint_ema < 1.0:
             raise ValueError(f"adjoint_ema must lie in [0, 1), got {self.adjoint_ema}")
 

@@ -2,9 +2,10 @@
 
 One iteration: mixture -> coefficients -> forward render (seed a) -> loss and dE/dC -> path-replay gradient pass
 (seed b != a, so the adjoint's noise and the gradient's noise are independent) -> dE/dsigma -> dE/drho -> dE/dx ->
-optimiser step (``optimizers``). The loss is taken on a running average of the renders (``adjoint_ema``); with
-``forward_spp`` 0 there is no forward render after the first iteration, and the adjoint is evaluated at the
-average of the earlier gradient passes' own estimates (cheaper iterations, each worth less: see README). One
+optimiser step (``optimizers``), diffused where the target is flat with ``smooth`` > 0 (``smooth``). The loss is
+taken on a running average of the renders (``adjoint_ema``); with ``forward_spp`` 0 there is no forward render
+after the first iteration, and the adjoint is evaluated at the average of the earlier gradient passes' own
+estimates (cheaper iterations, each worth less: see README). One
 :class:`~inkopt.render.Renderer` serves the whole run: geometry and thread pool are set up once and only the free
 voxels' media are overwritten each iteration. Seeds are derived from (seed, iteration), and
 renders and gradients are bit-identical for any thread count, so a run resumed from a checkpoint continues exactly
@@ -30,7 +31,7 @@ from ..render import Renderer
 from .config import OptimizeConfig
 from .optimizers import make_optimizer
 from .param import Parameterization, initial_free_mixture
-from .smooth import GradientSmoother
+from .smooth import GradientSmoother, nearest_texel_guide
 
 
 @dataclass
@@ -99,7 +100,11 @@ class Optimization:
         self._problem_digest = h.hexdigest()[:16]
         self.x = self.param.variables_for(self._initial_free_mixture())
         self.opt = make_optimizer(cfg.optimizer, cfg.step_size, self.x.shape)
-        self.smoother = GradientSmoother(self.param.grad_index, cfg.smooth) if cfg.smooth > 0 else None
+        self.smoother = None
+        if cfg.smooth > 0:
+            guide = (nearest_texel_guide(self.param.grad_index, texels.pos_vox, self.loss.target_lab)
+                     if cfg.smooth_edge > 0 else None)
+            self.smoother = GradientSmoother(self.param.grad_index, cfg.smooth, guide, cfg.smooth_edge)
         self._renderer: Renderer | None = None
         self.iteration = 0
         self.history = History()
@@ -128,8 +133,9 @@ class Optimization:
         d = asdict(self.cfg)
         d.pop("iterations")
         d.pop("checkpoint_every")
-        if not d["smooth"]:  # a setting added later: checkpoints made before it stay resumable
+        if not d["smooth"]:  # settings added later: checkpoints made before them stay resumable
             d.pop("smooth")
+            d.pop("smooth_edge")
         d.update(shape=list(self.base.shape), inks=list(self.base.inks.names), texels=len(self.texels),
                  free=self.param.n_free, problem=self._problem_digest)
         if not self.lighting.uniform:
@@ -207,9 +213,10 @@ class Optimization:
         self._average(gres.rgb, gres.var_mean, cfg.spp, decay=not forward)
         t3 = time.perf_counter()
         g_x = self.param.backward(self.x, mix_grad(gs, ga, self.base.inks), natural=self.opt.natural)
-        if self.smoother is not None:
-            g_x = self.smoother(g_x)
-        self.x = self.opt.step(self.x, g_x).astype(np.float32)
+        x_new = self.opt.step(self.x, g_x).astype(np.float32)
+        if self.smoother is not None:  # the step, not the gradient: the optimiser's step scale stays its own
+            x_new = self.x + self.smoother(x_new - self.x)
+        self.x = x_new
         self.iteration += 1
         t4 = time.perf_counter()
         self.last_passes = {"forward": res.stats() if forward else None, "gradient": gres.stats()}

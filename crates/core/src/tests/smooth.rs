@@ -2,7 +2,7 @@
 //! its conservation, thread-count independence and its refusal of badly numbered sets.
 
 use crate::rng::uniform;
-use crate::smooth::diffuse_rows;
+use crate::smooth::{diffuse_rows, Guide};
 
 /// An irregular set (about 60 % of a 7 x 6 x 5 grid) numbered in grid order, and random values.
 fn set(channels: usize) -> ([usize; 3], Vec<i32>, Vec<f32>) {
@@ -21,11 +21,32 @@ fn set(channels: usize) -> ([usize; 3], Vec<i32>, Vec<f32>) {
 
 #[test]
 fn matches_a_plain_implementation_and_conserves_sums() {
+    check_against_plain(false);
+}
+
+#[test]
+fn guided_matches_a_plain_implementation_and_conserves_sums() {
+    check_against_plain(true);
+}
+
+/// Against an f64 implementation from the formula; with a guide (2 dims, tau 0.4), weights exp(-d²/tau²).
+fn check_against_plain(guided: bool) {
     let ch = 3;
     let (n, index, v0) = set(ch);
+    let rows = v0.len() / ch;
+    let gv: Vec<f32> = (0..rows * 2).map(|i| uniform(14, 0, i as u32)).collect();
+    let tau = 0.4f32;
+    let guide = guided.then_some(Guide { values: &gv, dims: 2, tau });
     let (steps, alpha) = (5, 0.125f32);
     let mut v = v0.clone();
-    diffuse_rows(n, &index, &mut v, ch, steps, alpha).unwrap();
+    diffuse_rows(n, &index, &mut v, ch, steps, alpha, guide).unwrap();
+    let weight = |p: usize, q: usize| -> f64 {
+        if !guided {
+            return 1.0;
+        }
+        let d2: f64 = (0..2).map(|k| (gv[p * 2 + k] as f64 - gv[q * 2 + k] as f64).powi(2)).sum();
+        (-d2 / (tau as f64 * tau as f64)).exp()
+    };
     let mut r: Vec<f64> = v0.iter().map(|&x| x as f64).collect();
     let at = |z: i64, y: i64, x: i64| -> Option<usize> {
         if z < 0 || y < 0 || x < 0 || z >= n[0] as i64 || y >= n[1] as i64 || x >= n[2] as i64 {
@@ -43,7 +64,7 @@ fn matches_a_plain_implementation_and_conserves_sums() {
                     for (dz, dy, dx) in [(1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)] {
                         if let Some(q) = at(z + dz, y + dy, x + dx) {
                             for c in 0..ch {
-                                next[p * ch + c] += alpha as f64 * (r[q * ch + c] - r[p * ch + c]);
+                                next[p * ch + c] += alpha as f64 * weight(p, q) * (r[q * ch + c] - r[p * ch + c]);
                             }
                         }
                     }
@@ -65,10 +86,12 @@ fn matches_a_plain_implementation_and_conserves_sums() {
 #[test]
 fn same_bits_for_any_thread_count() {
     let (n, index, v0) = set(2);
+    let gv: Vec<f32> = (0..v0.len()).map(|i| uniform(13, 0, i as u32)).collect();
+    let guide = Guide { values: &gv, dims: 2, tau: 0.5 };
     let run = |threads: usize| {
         let mut v = v0.clone();
         rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap()
-            .install(|| diffuse_rows(n, &index, &mut v, 2, 4, 0.125).unwrap());
+            .install(|| diffuse_rows(n, &index, &mut v, 2, 4, 0.125, Some(guide)).unwrap());
         v
     };
     assert_eq!(run(1), run(3));
@@ -79,9 +102,9 @@ fn refuses_sets_out_of_grid_order_and_size_mismatches() {
     let (n, mut index, mut v) = set(1);
     let (a, b) = (index.iter().position(|&r| r == 0).unwrap(), index.iter().position(|&r| r == 1).unwrap());
     index.swap(a, b);
-    assert!(diffuse_rows(n, &index, &mut v, 1, 1, 0.125).unwrap_err().contains("grid order"));
+    assert!(diffuse_rows(n, &index, &mut v, 1, 1, 0.125, None).unwrap_err().contains("grid order"));
     index.swap(a, b);
     v.push(0.0);
-    assert!(diffuse_rows(n, &index, &mut v, 1, 1, 0.125).unwrap_err().contains("rows"));
-    assert!(diffuse_rows([1, 1, 1], &index, &mut v, 1, 1, 0.125).unwrap_err().contains("entries"));
+    assert!(diffuse_rows(n, &index, &mut v, 1, 1, 0.125, None).unwrap_err().contains("rows"));
+    assert!(diffuse_rows([1, 1, 1], &index, &mut v, 1, 1, 0.125, None).unwrap_err().contains("entries"));
 }
