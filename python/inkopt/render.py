@@ -76,7 +76,7 @@ class Renderer:
         if volume.inside is not None or volume.form == "labels":
             kw["inside"] = np.ascontiguousarray(volume.inside_mask(), dtype=np.uint8)
         if volume.normals is not None:
-            kw["normals"] = volume.normals
+            kw["normal_index"], kw["normal_vectors"] = volume.normals.index, volume.normals.vectors
         self._scene = _core.Scene(volume.shape, tuple(float(v) for v in volume.voxel_mm), **kw)
         self.lighting = Lighting()
         self.set_lighting(lighting)

@@ -65,8 +65,8 @@ def test_sphere_texels_and_normals(sphere):
     assert not vo.inside[nb[:, 0], nb[:, 1], nb[:, 2]].any()
     assert np.mean(np.sum(FACE_NORMALS[tx.face] * tx.normal, 1) > 0.55) > 0.99
     # the normals volume carries the texel normals and nothing else
-    np.testing.assert_array_equal(vo.normals[tuple(tx.voxel.T)], tx.normal)
-    assert np.count_nonzero(np.abs(vo.normals).sum(-1)) == len(tx)
+    np.testing.assert_array_equal(vo.normals.at(tx.voxel), tx.normal)
+    assert len(vo.normals.index) == len(tx)
     # closest points lie on the flat faces, within their sagitta (~2 um) of the sphere
     assert np.linalg.norm(vo.closest_mm - [0, 0, 2.0], axis=1) == pytest.approx(2.0, abs=0.003)
 

@@ -51,6 +51,38 @@ impl ShadingNormals {
         Ok(s)
     }
 
+    /// From the voxels that have a normal: `index` their linear indices (strictly increasing), `vectors` their
+    /// normals (x, y, z) interleaved, 3 per index. Entries that are no `unit_normal` are dropped, as in
+    /// `from_dense`, so both forms of one field give the same lookups.
+    pub fn from_sparse(index: &[i64], vectors: &[f32], n: [usize; 3]) -> Result<Self, String> {
+        let (nx, n_rows) = (n[0], n[1] * n[2]);
+        if vectors.len() != 3 * index.len() {
+            return Err(format!("{} normal vectors for {} voxel indices", vectors.len() / 3, index.len()));
+        }
+        let mut s = ShadingNormals { n, rows: Vec::with_capacity(n_rows + 1), xs: vec![], normals: vec![] };
+        s.rows.push(0);
+        let mut prev = -1i64;
+        for (&j, v) in index.iter().zip(vectors.chunks_exact(3)) {
+            if j <= prev || j >= (nx * n_rows) as i64 {
+                return Err(format!("normal voxel indices must increase and lie in the grid (got {j} after {prev})"));
+            }
+            prev = j;
+            let (row, x) = (j as usize / nx, j as usize % nx);
+            while s.rows.len() <= row {
+                s.rows.push(s.xs.len() as u32);
+            }
+            if let Some(u) = unit_normal([v[0], v[1], v[2]]) {
+                s.xs.push(x as u32);
+                s.normals.push(u);
+            }
+        }
+        let end = u32::try_from(s.xs.len()).map_err(|_| "more than 2^32 voxels with a normal")?;
+        while s.rows.len() <= n_rows {
+            s.rows.push(end);
+        }
+        Ok(s)
+    }
+
     /// The unit shading normal of in-grid voxel v = (x, y, z), if it has one.
     #[inline(always)]
     pub fn get(&self, v: [i32; 3]) -> Option<V3> {

@@ -280,6 +280,13 @@ impl Geometry {
         Ok(self)
     }
 
+    /// `with_normals` from the voxels that have one (`ShadingNormals::from_sparse`).
+    pub fn with_sparse_normals(mut self, index: &[i64], vectors: &[f32]) -> Result<Self, String> {
+        let n = [self.n[0] as usize, self.n[1] as usize, self.n[2] as usize];
+        self.normals = Some(ShadingNormals::from_sparse(index, vectors, n)?);
+        Ok(self)
+    }
+
     #[inline(always)]
     pub fn index(&self, v: [i32; 3]) -> usize {
         ((v[2] as usize * self.n[1] as usize) + v[1] as usize) * self.n[0] as usize + v[0] as usize

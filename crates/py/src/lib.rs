@@ -41,10 +41,13 @@ fn err(msg: impl Into<String>) -> PyErr {
 #[pymethods]
 impl Scene {
     /// Scene(shape_zyx, voxel_mm_xyz, *, sigma_s=None, sigma_a=None, labels=None, ink_sigma_s=None,
-    /// ink_sigma_a=None, inside=None, normals=None, boundary="box", ior=1.5, g=0.4, threads=None)
+    /// ink_sigma_a=None, inside=None, normals=None, normal_index=None, normal_vectors=None, boundary="box",
+    /// ior=1.5, g=0.4, threads=None). Shading normals: dense (`normals` (Z, Y, X, 3) f32) or sparse
+    /// (`normal_index` (K,) i64 increasing linear indices, `normal_vectors` (K, 3) f32).
     #[new]
     #[pyo3(signature = (shape, voxel_mm, *, sigma_s=None, sigma_a=None, labels=None, ink_sigma_s=None,
-                        ink_sigma_a=None, inside=None, normals=None, boundary="box", ior=1.5, g=0.4, threads=None))]
+                        ink_sigma_a=None, inside=None, normals=None, normal_index=None, normal_vectors=None,
+                        boundary="box", ior=1.5, g=0.4, threads=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         shape: (usize, usize, usize),
@@ -56,6 +59,8 @@ impl Scene {
         ink_sigma_a: Option<PyReadonlyArray2<f32>>,
         inside: Option<PyReadonlyArray3<u8>>,
         normals: Option<PyReadonlyArray4<f32>>,
+        normal_index: Option<PyReadonlyArray1<i64>>,
+        normal_vectors: Option<PyReadonlyArray2<f32>>,
         boundary: &str,
         ior: f32,
         g: f32,
@@ -73,9 +78,21 @@ impl Scene {
             check_shape(m.shape(), &[nz, ny, nx], "inside")?;
             geo = geo.with_inside(c_slice(&m, "inside")?.to_vec()).map_err(err)?;
         }
-        if let Some(nrm) = normals {
+        if let Some(nrm) = &normals {
             check_shape(nrm.shape(), &[nz, ny, nx, 3], "normals")?;
-            geo = geo.with_normals(c_slice(&nrm, "normals")?).map_err(err)?; // kept sparse, not copied
+            geo = geo.with_normals(c_slice(nrm, "normals")?).map_err(err)?; // kept sparse, not copied
+        }
+        match (normal_index, normal_vectors) {
+            (Some(i), Some(v)) => {
+                if normals.is_some() {
+                    return Err(err("give the normals dense or sparse, not both"));
+                }
+                check_shape(v.shape(), &[i.len(), 3], "normal_vectors")?;
+                geo = geo.with_sparse_normals(c_slice(&i, "normal_index")?, c_slice(&v, "normal_vectors")?)
+                    .map_err(err)?;
+            }
+            (None, None) => {}
+            _ => return Err(err("normal_index and normal_vectors go together")),
         }
         let mut b = rayon::ThreadPoolBuilder::new();
         if let Some(t) = threads {

@@ -1,10 +1,12 @@
 """The data model shared by every stage: inks and ink sets (``inks``), the voxel volume in its three medium forms
-(``volume``) and the renderer's sensor elements, texels (``texels``)."""
+(``volume``, its surface's shading normals in ``normals``) and the renderer's sensor elements, texels
+(``texels``)."""
 from .inks import DEFAULT_G, INK_LIBRARY, PRESETS, InkTable, mix, mix_grad
+from .normals import SurfaceNormals
 from .texels import FACE_ALIASES, FACE_NAMES, FACE_NORMALS, Texels, face_id
 from .volume import (BOUNDARIES, EMPTY, MAX_VOLUME_BYTES, Dense, Labels, Mixture, Quantization, Volume,
                      VolumeError)
 
 __all__ = ["DEFAULT_G", "INK_LIBRARY", "PRESETS", "InkTable", "mix", "mix_grad", "FACE_ALIASES", "FACE_NAMES",
            "FACE_NORMALS", "Texels", "face_id", "BOUNDARIES", "EMPTY", "MAX_VOLUME_BYTES", "Dense", "Labels",
-           "Mixture", "Quantization", "Volume", "VolumeError"]
+           "Mixture", "Quantization", "Volume", "VolumeError", "SurfaceNormals"]

@@ -10,6 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .normals import SurfaceNormals
+
 FACE_NAMES = ("-x", "+x", "-y", "+y", "-z", "+z")
 FACE_ALIASES = {"left": 0, "right": 1, "front": 2, "back": 3, "bottom": 4, "top": 5}
 # Outward normal (x, y, z) of each face id.
@@ -101,12 +103,14 @@ class Texels:
         return cls(np.concatenate(vox), fid, FACE_NORMALS[fid])
 
     @classmethod
-    def from_normals(cls, inside: np.ndarray, normals: np.ndarray) -> "Texels":
+    def from_normals(cls, inside: np.ndarray, normals) -> "Texels":
         """Mesh texels: one per surface voxel (an inside voxel with an outside 6-neighbour), in C order of
-        (z, y, x); ``normal`` = the voxel's shading normal from ``normals`` (z, y, x, 3), and ``face`` = its
-        exposed face most aligned with that normal."""
+        (z, y, x); ``normal`` = the voxel's shading normal from ``normals`` (``SurfaceNormals``, or a dense
+        (z, y, x, 3) array), and ``face`` = its exposed face most aligned with that normal."""
+        if not isinstance(normals, SurfaceNormals):  # a dense (z, y, x, 3) array
+            normals = SurfaceNormals.from_dense(normals)
         faces = cls.exposed_faces(inside)
-        nrm = normals[tuple(faces.voxel.T)].astype(np.float64)
+        nrm = normals.at(faces.voxel).astype(np.float64)
         length = np.linalg.norm(nrm, axis=1)
         nrm = np.where(length[:, None] > 1e-6, nrm / np.maximum(length, 1e-12)[:, None], FACE_NORMALS[faces.face])
         align = np.einsum("ij,ij->i", nrm, FACE_NORMALS[faces.face])

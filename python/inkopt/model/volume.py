@@ -11,8 +11,10 @@ Medium forms (exactly one per volume, ``Volume.medium``):
 
 The volume file (``.npz``) stores the medium's arrays under those names; the ink table as ``ink_names`` (N,) str,
 ``ink_sigma_s``/``ink_sigma_a`` float32 (N, 3) mm^-1. Always: ``voxel_mm`` (3,) float (x, y, z). Optional:
-``g`` (default 0.4), ``ior`` (default 1.5), ``inside`` bool (z, y, x) (default: the whole box), ``normals``
-float32 (z, y, x, 3) outward shading normals (x, y, z components) for surface voxels, ``boundary`` ("box" or
+``g`` (default 0.4), ``ior`` (default 1.5), ``inside`` bool (z, y, x) (default: the whole box), outward shading
+normals of the surface voxels as ``normal_index`` (K,) int64 linear indices and ``normal_vectors`` (K, 3) float32
+(x, y, z) (``model.normals.SurfaceNormals``; files written before it hold a dense ``normals`` (z, y, x, 3), which
+still loads), ``boundary`` ("box" or
 "periodic-xy"), ``origin_mm`` (3,) (x, y, z of voxel (0, 0, 0)'s low corner; meshes), and for quantized volumes
 the ``Quantization`` settings ``method``, ``seed``, ``dpi`` (3,) (x, y, z), ``upsample``. Instead of ``labels``
 a file may name ``labels_file`` (a .npy beside it, ``model.labelfile``; shape ``labels_shape``): the labels are
@@ -28,6 +30,7 @@ import numpy as np
 
 from ..io import load_npz, save_npz
 from .inks import DEFAULT_G, InkTable, mix
+from .normals import SurfaceNormals
 from .labelfile import load_label_file
 
 BOUNDARIES = ("box", "periodic-xy")
@@ -160,7 +163,8 @@ class Volume:
     g: float = DEFAULT_G
     ior: float = 1.5
     inside: np.ndarray | None = None
-    normals: np.ndarray | None = None
+    #: shading normals of the surface voxels (``SurfaceNormals``; a dense (z, y, x, 3) array is converted)
+    normals: SurfaceNormals | None = None
     boundary: str = "box"
     origin_mm: np.ndarray | None = None
     quantization: Quantization | None = None
@@ -212,10 +216,13 @@ class Volume:
                 raise VolumeError(f"inside mask shape {ins.shape} differs from volume shape {shp}")
             self.inside = np.ascontiguousarray(ins, dtype=bool)
         if self.normals is not None:
-            nrm = np.ascontiguousarray(self.normals, dtype=np.float32)
-            if nrm.shape != shp + (3,):
-                raise VolumeError(f"normals must have shape {shp + (3,)}, got {nrm.shape}")
-            self.normals = nrm
+            try:
+                if not isinstance(self.normals, SurfaceNormals):
+                    self.normals = SurfaceNormals.from_dense(self.normals)
+            except ValueError as exc:
+                raise VolumeError(str(exc)) from None
+            if self.normals.shape != shp:
+                raise VolumeError(f"normals are for a grid of shape {self.normals.shape}, the volume is {shp}")
         need = self.render_bytes()
         if need > MAX_VOLUME_BYTES:
             raise VolumeError(f"volume {shp} needs {need / 2**30:.1f} GiB to render, more than the "
@@ -226,8 +233,7 @@ class Volume:
         n = int(np.prod(self.shape, dtype=np.int64))
         per = 1 if self.form == "labels" else 24  # labels: u8; else sigma_s, sigma_a f32 x 3 channels
         per += 1 if self.inside is not None else 0
-        per += 12 if self.normals is not None else 0
-        return n * per
+        return n * per + (20 * len(self.normals.index) if self.normals is not None else 0)
 
     # ----------------------------------------------------------------- conversions
     def coefficients(self) -> tuple[np.ndarray, np.ndarray]:
@@ -273,7 +279,7 @@ class Volume:
         if self.inside is not None:
             out["inside"] = self.inside
         if self.normals is not None:
-            out["normals"] = self.normals
+            out["normal_index"], out["normal_vectors"] = self.normals.index, self.normals.vectors
         if self.origin_mm is not None:
             out["origin_mm"] = self.origin_mm
         if self.quantization is not None:
@@ -307,11 +313,18 @@ class Volume:
                 labels = load_label_file(Path(path).parent / name, data.get("labels_shape"))
             except ValueError as exc:
                 raise VolumeError(str(exc)) from None
-        return cls(voxel_mm=data["voxel_mm"], sigma_s=data.get("sigma_s"), sigma_a=data.get("sigma_a"),
-                   mixture=data.get("mixture"), labels=labels, inks=inks, g=g,
-                   ior=float(data["ior"]) if "ior" in data else 1.5, inside=data.get("inside"),
-                   normals=data.get("normals"), boundary=str(data["boundary"]) if "boundary" in data else "box",
-                   origin_mm=data.get("origin_mm"), quantization=Quantization.from_arrays(data))
+        vol = cls(voxel_mm=data["voxel_mm"], sigma_s=data.get("sigma_s"), sigma_a=data.get("sigma_a"),
+                  mixture=data.get("mixture"), labels=labels, inks=inks, g=g,
+                  ior=float(data["ior"]) if "ior" in data else 1.5, inside=data.get("inside"),
+                  normals=data.get("normals"), boundary=str(data["boundary"]) if "boundary" in data else "box",
+                  origin_mm=data.get("origin_mm"), quantization=Quantization.from_arrays(data))
+        if "normal_index" in data:  # the sparse form (files before it hold a dense "normals", read above)
+            try:
+                vol.normals = SurfaceNormals(vol.shape, data["normal_index"], data["normal_vectors"])
+            except (KeyError, ValueError) as exc:
+                raise VolumeError(f"{path}: bad normals: {exc}") from None
+            vol.validate()
+        return vol
 
 
 def _medium_from_keywords(sigma_s, sigma_a, mixture, labels, inks) -> Medium:

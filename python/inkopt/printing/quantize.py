@@ -41,7 +41,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model import EMPTY, MAX_VOLUME_BYTES, Quantization, Volume
+from ..model import EMPTY, MAX_VOLUME_BYTES, Quantization, SurfaceNormals, Volume
 from ..units import MM_PER_INCH, PRINTER_DPI, PRINTER_LAYER_UM
 from .dither import load_blue_noise
 
@@ -49,8 +49,10 @@ METHODS = ("blue-noise", "random", "error-diffusion")
 UPSAMPLE = ("nearest", "linear")
 DEFAULT_DPI = PRINTER_DPI
 DEFAULT_LAYER_UM = PRINTER_LAYER_UM
-# Nearest-upsampled shading normals (12 bytes per printer voxel) are kept up to this size; above it the quantized
-# volume has none (its texels are then flat voxel faces).
+# Nearest-upsampled shading normals are kept for printer grids up to this size at 12 bytes per printer voxel (the
+# dense form they once had; they are now stored per surface printer voxel, but above this size `inkopt quantize`
+# streams its labels layer by layer, and that path does not carry normals yet); above it the quantized volume has
+# none (its texels are then flat voxel faces).
 MAX_NORMALS_BYTES = 2 * 2**30
 
 
@@ -305,9 +307,13 @@ def quantize_volume(volume: Volume, *, method: str = "blue-noise", dpi=DEFAULT_D
         Z, Y, X = labels.shape
         iz, iy, ix = (_enclosing(Z, vp[2], nz, vo[2]), _enclosing(Y, vp[1], ny, vo[1]),
                       _enclosing(X, vp[0], nx, vo[0]))
-        nrm = np.empty(labels.shape + (3,), np.float32)
-        for k in range(Z):  # one printer layer at a time (bounded temporaries)
-            nrm[k] = volume.normals[iz[k]][iy][:, ix]
+        index, vectors = [], []
+        for k in range(Z):  # one printer layer at a time: the printer voxels whose enclosing voxel has a normal
+            up = volume.normals.layer(iz[k])[iy][:, ix].reshape(-1, 3)
+            has = np.flatnonzero(np.any(up != 0, axis=1))
+            index.append(k * Y * X + has)
+            vectors.append(up[has])
+        nrm = SurfaceNormals(labels.shape, np.concatenate(index), np.concatenate(vectors))
     q = Quantization(method, int(seed), tuple(float(v) for v in MM_PER_INCH / np.asarray(vp, np.float64)), upsample)
     return Volume(voxel_mm=vp, labels=labels, inks=volume.inks, g=volume.g, ior=volume.ior, inside=None,
                   normals=nrm, boundary=volume.boundary, origin_mm=volume.origin_mm, quantization=q)

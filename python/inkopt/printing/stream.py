@@ -53,7 +53,7 @@ class MixtureSource:
             self.close()
             form = "labels" if "labels" in names else "dense"
             raise ValueError(f"{path} holds a {form} volume; this step needs a mixture volume")
-        self.has_normals = "normals" in names
+        self.has_normals = "normals" in names or "normal_index" in names
         self.g = float(small["g"]) if "g" in small else DEFAULT_G
         self.voxel_mm = np.asarray(small["voxel_mm"], np.float64).reshape(-1)
         self.inks = InkTable.from_arrays(small, self.g)

@@ -165,4 +165,23 @@ fn sparse_normals_match_the_dense_formula() {
     assert_eq!(sparse.bytes(), 4 * (n[1] * n[2] + 1) + 16 * kept);
     let e = Geometry::new(n, [0.1; 3], Boundary::Box, 1.5, 0.4).unwrap().with_normals(&dense[3..]).err().unwrap();
     assert!(e.contains("normals size"), "{e}");
+    // The sparse form of the same field (every voxel with a nonzero vector, NaN and short ones included) gives
+    // the same lookups bit for bit, and the same storage.
+    let (mut index, mut vectors) = (vec![], vec![]);
+    for j in 0..nv {
+        if dense[3 * j..3 * j + 3].iter().any(|&c| c != 0.0) {
+            index.push(j as i64);
+            vectors.extend_from_slice(&dense[3 * j..3 * j + 3]);
+        }
+    }
+    let geo2 = Geometry::new(n, [0.1; 3], Boundary::Box, 1.5, 0.4).unwrap().with_sparse_normals(&index, &vectors).unwrap();
+    for j in 0..nv {
+        let v = [(j % n[0]) as i32, ((j / n[0]) % n[1]) as i32, (j / (n[0] * n[1])) as i32];
+        assert_eq!(bits(geo2.shading_normal(v)), bits(geo.shading_normal(v)), "voxel {j}");
+    }
+    assert_eq!(geo2.normals.as_ref().unwrap().bytes(), sparse.bytes());
+    let fresh = || Geometry::new(n, [0.1; 3], Boundary::Box, 1.5, 0.4).unwrap();
+    assert!(fresh().with_sparse_normals(&[3, 3], &[0.0; 6]).err().unwrap().contains("increase"));
+    assert!(fresh().with_sparse_normals(&[nv as i64], &[0.0; 3]).err().unwrap().contains("in the grid"));
+    assert!(fresh().with_sparse_normals(&[1], &[0.0; 6]).err().unwrap().contains("normal vectors"));
 }

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from ...model import Texels
+from ...model import SurfaceNormals, Texels
 from ...units import voxel_mm as _voxel_mm
 from .load import _CHUNK, TexturedMesh, barycentric, corner_normals, winding_number
 
@@ -34,7 +34,7 @@ class VoxelizedObject:
     targets    (I, 3) float32 linear RGB of the closest surface point
     closest_mm (I, 3) float64 closest surface point (x, y, z) to each texel's voxel centre
     face_index (I,) int64 the triangle holding it (index into the mesh's faces)
-    normals    (z, y, x, 3) float32 texel normals at surface voxels, zero elsewhere (for ``Volume.normals``)
+    normals    ``SurfaceNormals``: the texels' normals at the surface voxels (for ``Volume.normals``)
     """
 
     inside: np.ndarray
@@ -45,7 +45,7 @@ class VoxelizedObject:
     targets: np.ndarray
     closest_mm: np.ndarray
     face_index: np.ndarray
-    normals: np.ndarray
+    normals: SurfaceNormals
     band_mm: float
 
     @property
@@ -146,7 +146,7 @@ def voxelize(mesh: TexturedMesh, voxel_mm=DEFAULT_VOXEL_MM, pad: int = 1, band: 
     ``band`` voxels (of the largest edge). Texel normals are the closest triangle's smooth normal
     (``corner_normals`` interpolated barycentrically at the closest point): more robust than the gradient of
     the voxel SDF, which is noisy at one-voxel resolution and undefined on thin parts. Targets: the closest
-    point's colour (``TexturedMesh.colors_at``). Needs ~17 bytes per grid voxel (``normals`` takes 12).
+    point's colour (``TexturedMesh.colors_at``). Needs ~5 bytes per grid voxel.
     """
     import igl
     v = np.broadcast_to(np.asarray(voxel_mm, np.float64), (3,)).copy()
@@ -177,12 +177,10 @@ def voxelize(mesh: TexturedMesh, voxel_mm=DEFAULT_VOXEL_MM, pad: int = 1, band: 
     bary = barycentric(vs[fs[fi]], closest)
     nrm = np.einsum("nk,nkj->nj", bary, corner_normals(vs, fs, crease_deg)[fi])
     nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-12)
-    normals = np.zeros(shape + (3,), np.float32)
-    normals[idx[:, 0], idx[:, 1], idx[:, 2]] = nrm
-    texels = Texels.from_normals(inside, normals)  # the same texels a saved volume gives back
+    texels = Texels.from_normals(inside, SurfaceNormals.from_voxels(shape, idx, nrm))  # as a saved volume gives
     if not np.array_equal(texels.voxel, idx):
         raise RuntimeError("Texels.from_normals lists other surface voxels than voxelize")
-    normals[idx[:, 0], idx[:, 1], idx[:, 2]] = texels.normal  # as re-normalised there
+    normals = SurfaceNormals.from_voxels(shape, idx, texels.normal)  # as re-normalised there
     return VoxelizedObject(inside=inside, sdf=sdf, voxel_mm=v, origin_mm=origin,
                            texels=texels, targets=mesh.colors_at(fi, bary),
                            closest_mm=closest, face_index=fi.astype(np.int64), normals=normals, band_mm=band_mm)
