@@ -284,13 +284,16 @@ class RunDir:
         return self.path / self.QUANTIZED
 
     @contextmanager
-    def quantized_writer(self, meta: Volume, shape):
+    def quantized_writer(self, meta: Volume, shape, normals=None):
         """Write the quantized volume one printer layer at a time: ``with d.quantized_writer(meta, shape) as w:
         w[k] = layer`` (k = 0, 1, ...; ``model.labelfile.LabelFileWriter``). ``meta``: a labels Volume giving
-        everything but the labels (voxel size, inks, settings, normals; its own labels are ignored). On success
+        everything but the labels (voxel size, inks, settings; its own labels are ignored); ``normals``: the
+        printer grid's ``SurfaceNormals`` or None. On success
         the labels file replaces quantized_labels.npy and then quantized.npz is written (the old quantized.npz is
         removed first, so a crash never pairs an old quantized.npz with new labels)."""
         arrays = {k: v for k, v in meta.to_arrays().items() if k != "labels"}
+        if normals is not None:
+            arrays.update(normal_index=normals.index, normal_vectors=normals.vectors)
         w = LabelFileWriter(self.path / self.QUANTIZED_LABELS, shape)
         try:
             yield w

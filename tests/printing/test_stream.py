@@ -54,7 +54,7 @@ def test_streaming_run_equals_in_memory_quantization(tmp_path, method, upsample)
     assert f"{counts[255]} empty" in lines[1]
 
 
-def test_normals_keep_the_in_memory_path_and_the_same_files(tmp_path):
+def test_normals_stream_like_in_memory_and_the_same_files(tmp_path):
     d, vol = mixture_run(tmp_path / "m", normals=True)
     quantize_run(d, method="blue-noise", upsample="nearest", **KW)
     q = d.load_quantized()
@@ -64,12 +64,24 @@ def test_normals_keep_the_in_memory_path_and_the_same_files(tmp_path):
     np.testing.assert_array_equal(q.normals.vectors, expect.normals.vectors)
     np.testing.assert_array_equal(q.labels, expect.labels)
     assert "labels" not in np.load(d / d.QUANTIZED).files
+    # a volume file of the earlier format (dense normals) streams to the same normals
+    from inkopt.io import save_npz
+
+    old = vol.to_arrays()
+    dense = vol.normals.dense()
+    del old["normal_index"], old["normal_vectors"]
+    save_npz(d.volume_file(), {**old, "normals": dense})
+    src = MixtureSource(d.volume_file())
+    np.testing.assert_array_equal(src.normals.dense(), dense)
+    src.close()
+    quantize_run(d, method="blue-noise", upsample="nearest", **KW)
+    np.testing.assert_array_equal(d.load_quantized().normals.index, expect.normals.index)
 
 
 def test_mixture_source_reads_layers_in_any_order(tmp_path):
     d, vol = mixture_run(tmp_path / "r")
     src = MixtureSource(d.volume_file())
-    assert src.shape == vol.mixture.shape and src.has_normals is False
+    assert src.shape == vol.mixture.shape and src.normals is None
     np.testing.assert_array_equal(src.inside, vol.inside)
     for z in (0, 3, 3, 2, 5, 1, 0, 4):
         np.testing.assert_array_equal(src[z], vol.mixture[z])

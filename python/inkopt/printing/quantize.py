@@ -49,12 +49,6 @@ METHODS = ("blue-noise", "random", "error-diffusion")
 UPSAMPLE = ("nearest", "linear")
 DEFAULT_DPI = PRINTER_DPI
 DEFAULT_LAYER_UM = PRINTER_LAYER_UM
-# Nearest-upsampled shading normals are kept for printer grids up to this size at 12 bytes per printer voxel (the
-# dense form they once had; they are now stored per surface printer voxel, but above this size `inkopt quantize`
-# streams its labels layer by layer, and that path does not carry normals yet); above it the quantized volume has
-# none (its texels are then flat voxel faces).
-MAX_NORMALS_BYTES = 2 * 2**30
-
 
 # ----------------------------------------------------------------------------------------------- grids
 def printer_grid(shape_opt, voxel_mm_opt, dpi=(600, 300, None), layer_um: float = DEFAULT_LAYER_UM):
@@ -279,9 +273,19 @@ def ink_fractions(labels, n_inks: int, shape_opt, voxel_mm_opt, voxel_mm_printer
 
 
 # ----------------------------------------------------------------------------------------- volumes
-def normals_fit(printer_voxels: int) -> bool:
-    """Whether shading normals upsampled to a printer grid of this many voxels are kept."""
-    return printer_voxels * 12 <= MAX_NORMALS_BYTES and printer_voxels * 13 <= MAX_VOLUME_BYTES
+def upsample_normals(normals: SurfaceNormals, shape_p, vp, vo) -> SurfaceNormals:
+    """Shading normals on the printer grid ``shape_p`` (Z, Y, X) of ``vp`` (x, y, z) mm voxels, nearest from
+    ``normals`` on an optimisation grid of ``vo`` mm voxels: every printer voxel inside a voxel with a normal gets
+    it (a few printer voxels per surface voxel; 20 bytes each). Built one printer layer at a time."""
+    (nz, ny, nx), (Z, Y, X) = normals.shape, shape_p
+    iz, iy, ix = (_enclosing(Z, vp[2], nz, vo[2]), _enclosing(Y, vp[1], ny, vo[1]), _enclosing(X, vp[0], nx, vo[0]))
+    index, vectors = [], []
+    for k in range(Z):
+        up = normals.layer(iz[k])[iy][:, ix].reshape(-1, 3)
+        has = np.flatnonzero(np.any(up != 0, axis=1))
+        index.append(k * Y * X + has)
+        vectors.append(up[has])
+    return SurfaceNormals(shape_p, np.concatenate(index), np.concatenate(vectors))
 
 
 def quantize_volume(volume: Volume, *, method: str = "blue-noise", dpi=DEFAULT_DPI,
@@ -290,8 +294,8 @@ def quantize_volume(volume: Volume, *, method: str = "blue-noise", dpi=DEFAULT_D
     """A labels Volume at printer resolution from a mixture Volume (``quantize`` above).
 
     dpi (x, y) or (x, y, z) printer DPI (z None/absent -> ``layer_um`` µm layers). Keeps inks, g, ior, boundary;
-    ``inside`` is encoded by label 255. Shading normals (meshes) are upsampled by nearest if ``normals`` and
-    they fit ``MAX_NORMALS_BYTES``. The settings are kept in ``Volume.quantization`` (dpi (x, y, z)).
+    ``inside`` is encoded by label 255. Shading normals (meshes) are upsampled by nearest if ``normals``
+    (``upsample_normals``). The settings are kept in ``Volume.quantization`` (dpi (x, y, z)).
     """
     if volume.form != "mixture":
         raise ValueError(f"quantization needs a mixture volume, got a {volume.form} volume")
@@ -302,18 +306,8 @@ def quantize_volume(volume: Volume, *, method: str = "blue-noise", dpi=DEFAULT_D
     labels, vp = quantize(volume.mixture, volume.voxel_mm, method=method, dpi=tuple(dpi), layer_um=layer_um,
                           inside=volume.inside, seed=int(seed), upsample=upsample)
     nrm = None
-    if normals and volume.normals is not None and normals_fit(labels.size):
-        (nz, ny, nx), vo = volume.shape, volume.voxel_mm
-        Z, Y, X = labels.shape
-        iz, iy, ix = (_enclosing(Z, vp[2], nz, vo[2]), _enclosing(Y, vp[1], ny, vo[1]),
-                      _enclosing(X, vp[0], nx, vo[0]))
-        index, vectors = [], []
-        for k in range(Z):  # one printer layer at a time: the printer voxels whose enclosing voxel has a normal
-            up = volume.normals.layer(iz[k])[iy][:, ix].reshape(-1, 3)
-            has = np.flatnonzero(np.any(up != 0, axis=1))
-            index.append(k * Y * X + has)
-            vectors.append(up[has])
-        nrm = SurfaceNormals(labels.shape, np.concatenate(index), np.concatenate(vectors))
+    if normals and volume.normals is not None:
+        nrm = upsample_normals(volume.normals, labels.shape, vp, volume.voxel_mm)
     q = Quantization(method, int(seed), tuple(float(v) for v in MM_PER_INCH / np.asarray(vp, np.float64)), upsample)
     return Volume(voxel_mm=vp, labels=labels, inks=volume.inks, g=volume.g, ior=volume.ior, inside=None,
                   normals=nrm, boundary=volume.boundary, origin_mm=volume.origin_mm, quantization=q)
@@ -327,8 +321,7 @@ def label_counts(labels) -> np.ndarray:
     return counts
 
 
-def summary_lines(shape, vp, ink_names, q: Quantization | None, counts, seconds: float,
-                  skipped_normals: bool) -> list[str]:
+def summary_lines(shape, vp, ink_names, q: Quantization | None, counts, seconds: float) -> list[str]:
     """What ``inkopt quantize`` prints about a labels volume: grid ``shape`` (Z, Y, X) of ``vp`` (x, y, z) mm
     voxels, the ink voxel ``counts`` (256,) (``label_counts``), settings."""
     filled = int(counts[:EMPTY].sum())
@@ -341,7 +334,4 @@ def summary_lines(shape, vp, ink_names, q: Quantization | None, counts, seconds:
            f"{q.upsample}; {seconds:.1f} s",
            "inks: " + ", ".join(f"{n} {counts[i]} ({100.0 * counts[i] / max(filled, 1):.1f} %)"
                                 for i, n in enumerate(ink_names))]
-    if skipped_normals:
-        out.append(f"note: shading normals not kept (they would need {Z * Y * X * 12 / 2**30:.1f} GiB); "
-                   "the quantized volume's texels are flat voxel faces")
     return out

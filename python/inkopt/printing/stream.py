@@ -3,14 +3,14 @@
 ``MixtureSource`` reads a mixture volume file (volume.npz) lazily: its small arrays (voxel size, ink table,
 ``g``, ``ior``, boundary, origin, the ``inside`` mask: 1 byte per optimisation voxel) at once, the ``mixture``
 one (y, x, N) layer at a time by decompressing its zip member sequentially (layers are asked for in increasing
-z; going back further than the two layers it keeps reopens the member), and the shading normals not at all.
+z; going back further than the two layers it keeps reopens the member), and the shading normals of the surface
+voxels (small; a file of the earlier format with dense normals has them read once and made sparse).
 
 ``quantize_run`` is ``inkopt quantize``: the labels go layer by layer from ``quantize.quantize`` into the run's
 label file (``RunDir.quantized_writer``: quantized.npz + quantized_labels.npy, docs/run-dir.md), so memory holds
-the inside mask, a few mixture layers and a few printer layers. When the quantized volume keeps shading normals
-(meshes whose printer grid is small enough, ``quantize.normals_fit``) the volume is loaded whole and quantized
-by ``quantize_volume`` as before: the normals (12 bytes per printer voxel) dominate memory there anyway.
-Both paths give identical labels.
+the inside mask, a few mixture layers and a few printer layers; a mesh's shading normals go to the printer grid
+by ``quantize.upsample_normals`` (20 bytes per printer voxel inside a surface voxel). Labels and normals are
+identical to ``quantize_volume``'s in memory.
 """
 from __future__ import annotations
 
@@ -19,11 +19,11 @@ import zipfile
 
 import numpy as np
 
-from ..model import InkTable, Quantization, Volume
+from ..model import InkTable, Quantization, SurfaceNormals, Volume
 from ..model.inks import DEFAULT_G
 from ..rundir import RunDir
 from ..units import MM_PER_INCH
-from .quantize import label_counts, normals_fit, printer_grid, quantize, quantize_volume, summary_lines
+from .quantize import printer_grid, quantize, summary_lines, upsample_normals
 
 HEAVY = ("mixture", "normals")  # members not loaded at once
 
@@ -37,7 +37,7 @@ def _read_header(fh):
 class MixtureSource:
     """A mixture volume file read lazily (module docstring). ``shape`` (z, y, x, N); ``[z]`` one layer
     (y, x, N); ``inside`` (z, y, x) bool or None; ``voxel_mm``, ``inks``, ``g``, ``ior``, ``boundary``,
-    ``origin_mm``; ``has_normals``; ``load()`` the whole Volume."""
+    ``origin_mm``; ``normals`` (``SurfaceNormals`` or None); ``load()`` the whole Volume."""
 
     def __init__(self, path):
         self.path, self._zip = path, None
@@ -53,7 +53,7 @@ class MixtureSource:
             self.close()
             form = "labels" if "labels" in names else "dense"
             raise ValueError(f"{path} holds a {form} volume; this step needs a mixture volume")
-        self.has_normals = "normals" in names or "normal_index" in names
+        dense_normals = "normals" in names
         self.g = float(small["g"]) if "g" in small else DEFAULT_G
         self.voxel_mm = np.asarray(small["voxel_mm"], np.float64).reshape(-1)
         self.inks = InkTable.from_arrays(small, self.g)
@@ -65,6 +65,16 @@ class MixtureSource:
         self._open()
         if len(self.shape) != 4 or self.shape[3] != len(self.inks) or self._fortran:
             raise ValueError(f"{path}: mixture of shape {self.shape} does not fit {len(self.inks)} inks")
+        self.normals = None
+        try:
+            if "normal_index" in small:
+                self.normals = SurfaceNormals(self.shape[:3], small["normal_index"], small["normal_vectors"])
+            elif dense_normals:  # files of the earlier format
+                self.normals = SurfaceNormals.from_dense(
+                    np.lib.format.read_array(self._zip.open(names["normals"]), allow_pickle=False))
+        except (KeyError, ValueError) as exc:
+            self.close()
+            raise ValueError(f"{path}: bad shading normals ({exc})") from None
 
     def _open(self) -> None:
         self._fh = self._zip.open(self._member)
@@ -115,19 +125,12 @@ def quantize_run(d: RunDir, *, method: str, dpi, layer_um: float, seed: int, ups
     src = MixtureSource(d.volume_file())
     try:
         shape_p, vp = printer_grid(src.shape[:3], src.voxel_mm, dpi=tuple(dpi), layer_um=layer_um)
-        n = int(np.prod(shape_p, dtype=np.int64))
-        if src.has_normals and normals_fit(n):
-            vol = src.load()
-            q = quantize_volume(vol, method=method, dpi=dpi, layer_um=layer_um, seed=seed, upsample=upsample)
-            d.save_quantized(q)
-            counts, quant = label_counts(q.labels), q.quantization
-        else:
-            quant = Quantization(method, int(seed), tuple(float(v) for v in MM_PER_INCH / vp), upsample)
-            with d.quantized_writer(src.labels_meta(vp, quant), shape_p) as w:
-                quantize(src, src.voxel_mm, method=method, dpi=tuple(dpi), layer_um=layer_um, inside=src.inside,
-                         seed=int(seed), upsample=upsample, out=w)
-            counts = w.counts
+        quant = Quantization(method, int(seed), tuple(float(v) for v in MM_PER_INCH / vp), upsample)
+        nrm = None if src.normals is None else upsample_normals(src.normals, shape_p, vp, src.voxel_mm)
+        with d.quantized_writer(src.labels_meta(vp, quant), shape_p, normals=nrm) as w:
+            quantize(src, src.voxel_mm, method=method, dpi=tuple(dpi), layer_um=layer_um, inside=src.inside,
+                     seed=int(seed), upsample=upsample, out=w)
+        counts = w.counts
     finally:
         src.close()
-    return summary_lines(shape_p, vp, src.inks.names, quant, counts, time.perf_counter() - t0,
-                         src.has_normals and not normals_fit(n))
+    return summary_lines(shape_p, vp, src.inks.names, quant, counts, time.perf_counter() - t0)
