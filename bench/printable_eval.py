@@ -4,7 +4,7 @@ below), quantize each with blue-noise and with random draws, and evaluate agains
 baselines. Writes bench/results/printable.json and prints a markdown table.
 
     .venv/bin/python bench/printable_eval.py [--iterations 200] [--spp 0] [--out bench-out]
-        [--cases zebra,astronaut,reference] [--init white|surface|extrusion] [--lr X]
+        [--cases zebra,astronaut,reference] [--init white|surface|extrusion] [--lr X] [--smooth S]
 
 ``--spp 0`` (the default) evaluates noise-free: ``inkopt evaluate`` without ``--spp`` renders adaptively until
 the Monte Carlo noise adds at most 0.5 to each result's mean ΔE76; ``--spp N`` renders exactly N spp. Every case
@@ -76,6 +76,7 @@ def main():
     ap.add_argument("--cases", default="zebra,astronaut,reference")
     ap.add_argument("--init", default="white", help="the optimisation's start (inkopt slab --init)")
     ap.add_argument("--lr", type=float, help="step size (inkopt slab --lr; default: the optimiser's)")
+    ap.add_argument("--smooth", type=float, help="step smoothing width (inkopt slab --smooth; default: off)")
     a = ap.parse_args()
     out = Path(a.out)
     out.mkdir(exist_ok=True)
@@ -103,13 +104,15 @@ def main():
             r.setdefault("eval_spp", None if r["blue-noise"].get("spp_adaptive") else r["blue-noise"].get("spp"))
     for case in a.cases.split(","):
         img, size, extra = cases[case]()
-        tags = ([a.init] if a.init != "white" else []) + ([f"lr{a.lr:g}"] if a.lr is not None else [])
+        tags = (([a.init] if a.init != "white" else []) + ([f"lr{a.lr:g}"] if a.lr is not None else [])
+                + ([f"smooth{a.smooth:g}"] if a.smooth else []))
         name = case + ("@" + ",".join(tags) if tags else "")
         d = out / name.replace("@", "-").replace(",", "-")
         if not (d / "report.json").is_file():
             run(["slab", str(img)] + extra + ["--size-mm", size, "--out", str(d), "--iterations", str(a.iterations),
                                               "--resume", "--init", a.init]
-                + (["--lr", str(a.lr)] if a.lr is not None else []))
+                + (["--lr", str(a.lr)] if a.lr is not None else [])
+                + (["--smooth", str(a.smooth)] if a.smooth else []))
         results[name] = {"report": json.loads((d / "report.json").read_text()), "eval_mode": mode,
                          "eval_spp": a.spp or None}
         for method in ("blue-noise", "random"):
