@@ -73,6 +73,9 @@ def main():
     ap.add_argument("--case", choices=("demo", "zebra", "astronaut"), default="demo")
     a = ap.parse_args()
     settings = SETTINGS if a.case == "demo" else {k: (200, v) for k, v in CASE_SETTINGS.items()}
+    unknown = set(a.only or ()) - set(settings)
+    if unknown:
+        ap.error(f"settings {sorted(unknown)} are not run for --case {a.case}")
     inks = InkTable.parse("vero-cmykw")
     out = {"machine": machine(), "threads": a.threads, "settings": {}}
     with tempfile.TemporaryDirectory() as tmp:
@@ -84,6 +87,8 @@ def main():
             rep = run_slab(top, bottom, size, tmp / name, inks, cfg, threads=a.threads,
                            log=lambda s: None)
             row = {"iterations": iterations, **kw, **{k: rep[k] for k in KEYS}}
+            if cfg.smooth:
+                row.setdefault("smooth_edge", cfg.smooth_edge)
             out["settings"][name] = row
             print(name, " ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()),
                   flush=True)

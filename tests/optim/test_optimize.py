@@ -241,3 +241,24 @@ def test_ssim_term_raises_ssim():
         r.run()
         out[g2] = prediction_metrics(r.loss, Renderer(r.volume()).render(scene.texels, 256, 7).rgb)["ssim"]
     assert out[3.0] > out[0.0] + 0.01, out
+
+
+def test_the_loop_smooths_the_optimisers_step():
+    """One iteration with smoothing moves the variables by exactly the smoothed step of the same iteration
+    without it (same seeds, same start): the smoother acts on the step, after the optimiser."""
+    from inkopt.optim.smooth import GradientSmoother, nearest_texel_guide
+
+    scene = small_chart_scene(12, 8, 0.3)
+    runs = {}
+    for smooth in (0.0, 1.0):
+        cfg = OptimizeConfig(iterations=1, spp=4, forward_spp=16, smooth=smooth)
+        r = Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, threads=2)
+        x0 = r.x.copy()
+        r.run()
+        runs[smooth] = (x0, r)
+    x0, plain = runs[0.0]
+    _, smoothed = runs[1.0]
+    guide = nearest_texel_guide(plain.param.grad_index, scene.texels.pos_vox, plain.loss.target_lab)
+    expect = x0 + GradientSmoother(plain.param.grad_index, 1.0, guide, 4.0)(plain.x - x0)
+    np.testing.assert_allclose(smoothed.x, expect, atol=1e-5)
+    assert np.abs(smoothed.x - plain.x).max() > 1e-3

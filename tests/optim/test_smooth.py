@@ -1,5 +1,6 @@
 """The step's spatial preconditioner (optim/smooth.py): checked against scipy.ndimage's convolution, its
-conservation and spectral properties, and in the loop (resume, checkpoint keys, mottle)."""
+conservation and spectral properties, its guide; in the loop: test_optimize.py (what it is applied to, resume,
+checkpoint keys)."""
 import numpy as np
 import pytest
 from scipy import ndimage
@@ -117,3 +118,4 @@ def test_guide_stops_the_flux_at_target_edges():
     np.testing.assert_allclose(got[..., 3], [[45.0] * 48, [15.0] * 48])  # 1.5 and 0.5 voxels below the face
     with pytest.raises(ValueError, match="edge"):
         GradientSmoother(gi, 1.0, guide, edge=0.0)
+

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 
-@dataclass
+@dataclass(eq=False)
 class SurfaceNormals:
     """Normals at some voxels of a grid of ``shape`` (z, y, x): ``index`` (K,) int64 increasing linear indices,
     ``vectors`` (K, 3) float32 (x, y, z)."""

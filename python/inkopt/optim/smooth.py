@@ -42,8 +42,9 @@ def diffusion_steps(sigma: float) -> int:
 
 
 #: ΔE76 that one voxel of difference in depth (distance to the nearest texel) counts as in the guide: with the
-#: default edge of 10 ΔE76, neighbours one voxel apart in depth are not smoothed together (weight e^-9), those
-#: side by side under a face are; a sloped surface's neighbours, a fraction of a voxel apart, partly.
+#: default edge of 4 ΔE76, neighbours one voxel apart in depth are not smoothed together (weight e^-56), those
+#: side by side under a face are; on a sloped surface, neighbours 0.1 voxel apart in depth get e^-0.56, 0.2 apart
+#: e^-2.3.
 DEPTH_DE = 30.0
 
 
@@ -66,7 +67,8 @@ def nearest_texel_guide(grad_index: np.ndarray, pos_vox: np.ndarray, target_lab:
 
 class GradientSmoother:
     """Diffuses per-free-voxel arrays (F, N) over the free voxels' 6-neighbourhood (the loop in the Rust core,
-    ``inkopt_core::smooth``: parallel, no memory beyond one copy of the values, thread-count independent).
+    ``inkopt_core::smooth``: parallel, thread-count independent; two working copies of the values during a call,
+    and the guide, 16 bytes per free voxel, kept for the run).
 
     grad_index: (z, y, x) int32, each voxel's row among the free voxels (-1: not free), rows numbered in grid
     order, as ``Parameterization.grad_index`` (kept by reference, not copied); ``sigma``: kernel width in voxels

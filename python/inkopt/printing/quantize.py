@@ -279,12 +279,14 @@ def upsample_normals(normals: SurfaceNormals, shape_p, vp, vo) -> SurfaceNormals
     it (a few printer voxels per surface voxel; 20 bytes each). Built one printer layer at a time."""
     (nz, ny, nx), (Z, Y, X) = normals.shape, shape_p
     iz, iy, ix = (_enclosing(Z, vp[2], nz, vo[2]), _enclosing(Y, vp[1], ny, vo[1]), _enclosing(X, vp[0], nx, vo[0]))
-    index, vectors = [], []
+    index, vectors, last = [], [], None
     for k in range(Z):
-        up = normals.layer(iz[k])[iy][:, ix].reshape(-1, 3)
-        has = np.flatnonzero(np.any(up != 0, axis=1))
+        if iz[k] != last:  # printer layers in one optimisation layer share its upsampled normals (iz is sorted)
+            up = normals.layer(iz[k])[iy][:, ix].reshape(-1, 3)
+            has = np.flatnonzero(np.any(up != 0, axis=1))
+            vec, last = up[has], iz[k]
         index.append(k * Y * X + has)
-        vectors.append(up[has])
+        vectors.append(vec)
     return SurfaceNormals(shape_p, np.concatenate(index), np.concatenate(vectors))
 
 
@@ -313,17 +315,9 @@ def quantize_volume(volume: Volume, *, method: str = "blue-noise", dpi=DEFAULT_D
                   normals=nrm, boundary=volume.boundary, origin_mm=volume.origin_mm, quantization=q)
 
 
-def label_counts(labels) -> np.ndarray:
-    """(256,) int64 voxel count of every label value, counted one layer at a time."""
-    counts = np.zeros(256, np.int64)
-    for k in range(labels.shape[0]):
-        counts += np.bincount(np.asarray(labels[k]).ravel(), minlength=256)
-    return counts
-
-
 def summary_lines(shape, vp, ink_names, q: Quantization | None, counts, seconds: float) -> list[str]:
     """What ``inkopt quantize`` prints about a labels volume: grid ``shape`` (Z, Y, X) of ``vp`` (x, y, z) mm
-    voxels, the ink voxel ``counts`` (256,) (``label_counts``), settings."""
+    voxels, the ink voxel ``counts`` (256,), settings."""
     filled = int(counts[:EMPTY].sum())
     Z, Y, X = shape
     q = q or Quantization()

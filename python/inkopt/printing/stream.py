@@ -37,7 +37,7 @@ def _read_header(fh):
 class MixtureSource:
     """A mixture volume file read lazily (module docstring). ``shape`` (z, y, x, N); ``[z]`` one layer
     (y, x, N); ``inside`` (z, y, x) bool or None; ``voxel_mm``, ``inks``, ``g``, ``ior``, ``boundary``,
-    ``origin_mm``; ``normals`` (``SurfaceNormals`` or None); ``load()`` the whole Volume."""
+    ``origin_mm``; ``normals`` (``SurfaceNormals`` or None)."""
 
     def __init__(self, path):
         self.path, self._zip = path, None
@@ -72,6 +72,8 @@ class MixtureSource:
             elif dense_normals:  # files of the earlier format
                 self.normals = SurfaceNormals.from_dense(
                     np.lib.format.read_array(self._zip.open(names["normals"]), allow_pickle=False))
+            if self.normals is not None and self.normals.shape != tuple(self.shape[:3]):
+                raise ValueError(f"normals for a grid of {self.normals.shape}, the mixture is {self.shape[:3]}")
         except (KeyError, ValueError) as exc:
             self.close()
             raise ValueError(f"{path}: bad shading normals ({exc})") from None
@@ -102,9 +104,6 @@ class MixtureSource:
             self._kept.pop(min(self._kept))
         self._kept[z] = lay
         return lay
-
-    def load(self) -> Volume:
-        return Volume.load(self.path)
 
     def labels_meta(self, vp, q: Quantization) -> Volume:
         """A labels Volume with this file's inks, g, ior, boundary and origin on the printer grid ``vp``, for
