@@ -3,6 +3,10 @@ every voxel free and with shells of 1 and 0.5 mm (same seeds and settings), then
 high-frequency structure ("mottle") against the target's. Writes bench/results/shell_mm.json and prints a table.
 
     .venv/bin/python bench/shell_compare.py [--out bench-out/shell] [--iterations 20] [--shells none,1,0.5]
+        [--smooth S]
+
+``--smooth S`` runs the same with the optimiser's step smoothing (``inkopt optimize --smooth S``); its results are
+keyed ``SHELL+smoothS``. Results of shells not run this time are kept from the previous shell_mm.json.
 
 Runs whose report.json exists are not re-run (delete the folder to redo one). Mottle: with two renders a, b of
 independent seeds, each texel's deviation from the mean of its 6 nearest texels (in L*) is formed in both; the
@@ -19,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import machine, write  # noqa: E402
+from common import RESULTS, machine, write  # noqa: E402
 
 SPOT = Path(__file__).resolve().parents[2] / "shared" / "data" / "spot" / "spot.obj"  # ../shared beside the repo
 
@@ -76,23 +80,27 @@ def main():
     ap.add_argument("--shells", default="none,1,0.5")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--structure-spp", type=int, default=64)
+    ap.add_argument("--smooth", type=float)
     a = ap.parse_args()
     out = Path(a.out)
-    results = {}
+    previous = RESULTS / "shell_mm.json"
+    results = json.loads(previous.read_text())["results"] if previous.is_file() else {}
+    tag = f"+smooth{a.smooth:g}" if a.smooth else ""
     for s in a.shells.split(","):
-        d = out / f"shell_{s}"
+        d = out / f"shell_{s}{tag}"
         if not (d / "report.json").is_file():
             cmd = [sys.executable, "-m", "inkopt", "optimize", str(SPOT), "--height-mm", "20", "--out", str(d),
                    "--iterations", str(a.iterations), "--spp", "4", "--eval-spp", "64", "--threads", str(a.threads),
                    "--seed", "0", "--resume"] + ([] if s == "none" else ["--shell-mm", s])
+            cmd += ["--smooth", str(a.smooth)] if a.smooth else []
             print("$ inkopt " + " ".join(cmd[3:]), flush=True)
             subprocess.run(cmd, check=True)
         rep = json.loads((d / "report.json").read_text())
-        results[s] = {k: rep[k] for k in ("free_voxels", "inside_voxels", "seconds_per_iteration", "time_split",
+        results[s + tag] = {k: rep[k] for k in ("free_voxels", "inside_voxels", "seconds_per_iteration", "time_split",
                                           "peak_rss_gb", "initial_delta_e76_mean", "delta_e76_mean",
                                           "delta_e76_p95", "delta_e2000_mean", "initial_ssim", "ssim",
                                           "iterations")}
-        results[s]["high_frequency_power"] = structure(d, a.structure_spp, a.threads)
+        results[s + tag]["high_frequency_power"] = structure(d, a.structure_spp, a.threads)
     write("shell_mm.json", {"results": results, "mesh": "spot, 20 mm", **machine()})
     print("| shell | free voxels | s/iteration | peak GB | ΔE76 start → end | p95 | ΔE2000 | SSIM start → end "
           "| HF power pred / target (flat half) |\n|---|---|---|---|---|---|---|---|---|")
