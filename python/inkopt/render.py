@@ -89,9 +89,15 @@ class Renderer:
 
     @staticmethod
     def _medium_arrays(volume: Volume) -> dict:
+        """The core's medium arguments: labels with the ink table; the inside voxels' coefficients (sparse: 4
+        bytes per grid voxel + 24 per inside voxel) when the volume has an inside mask; else dense coefficients."""
         if volume.form == "labels":
             return dict(labels=volume.labels, ink_sigma_s=volume.inks.sigma_s.astype(np.float32),
                         ink_sigma_a=volume.inks.sigma_a.astype(np.float32))
+        if volume.inside is not None:
+            index = np.flatnonzero(volume.inside)
+            s, a = volume.coefficients_at(index)
+            return dict(medium_index=index, sigma_s=s, sigma_a=a)
         s, a = volume.coefficients()
         return dict(sigma_s=np.ascontiguousarray(s, np.float32), sigma_a=np.ascontiguousarray(a, np.float32))
 
@@ -161,8 +167,10 @@ class Renderer:
         """Gradient of e with respect to the coefficients, given ``adjoint`` = de/dc (I, 3) in texel order.
 
         Returns (grad_sigma_s, grad_sigma_a, result): (z, y, x, 3) float32 each, and the pass's own forward
-        estimate. With ``grad_index`` ((z, y, x) int32: a slot per voxel, -1 for none) only those voxels'
-        gradients are kept, returned as (F, 3) per slot (memory proportional to F, not the grid).
+        estimate. With ``grad_index`` only some voxels' gradients are kept, returned as (F, 3) per slot (memory
+        proportional to F, not the grid): either (z, y, x) int32, a slot per voxel (-1 for none), or (F,) int64,
+        strictly increasing flat (z, y, x) indices of the voxels of slots 0..F-1 (the optimiser's free voxels; no
+        grid-sized array).
         Use a different seed from the forward render whose image produced the adjoint, so that the gradient of a
         nonlinear loss is not correlated with the image noise.
         """
@@ -188,7 +196,8 @@ class Renderer:
         if adjoint.shape != (len(texels), 3):
             raise ValueError(f"adjoint must have shape ({len(texels)}, 3), got {adjoint.shape}")
         if grad_index is not None:
-            grad_index = np.ascontiguousarray(grad_index, np.int32)
+            grad_index = np.asarray(grad_index)
+            grad_index = np.ascontiguousarray(grad_index, np.int64 if grad_index.ndim == 1 else np.int32)
         if max_abs_adjoint is None:
             max_abs_adjoint = float(np.abs(adjoint).max(initial=0.0))
         self._scene.zero_grad(float(max_abs_adjoint), grad_index)

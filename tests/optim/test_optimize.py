@@ -262,3 +262,24 @@ def test_the_loop_smooths_the_optimisers_step():
     expect = x0 + GradientSmoother(plain.param.grad_index, 1.0, guide, 4.0)(plain.x - x0)
     np.testing.assert_allclose(smoothed.x, expect, atol=1e-5)
     assert np.abs(smoothed.x - plain.x).max() > 1e-3
+
+
+@pytest.mark.parametrize("opt", ["eg", "adam", "adagrad"])
+def test_steps_in_blocks_of_rows_are_bit_identical(opt, monkeypatch):
+    """A big object's per-voxel arithmetic (mixtures to the renderer, the chain rule, the optimiser's update)
+    runs in blocks of rows to bound its temporaries: with blocks of a few rows, 4 iterations give the same
+    variables and optimiser state, bit for bit, as with one block."""
+    from inkopt.optim import optimizers
+
+    scene = small_chart_scene(bottom=True)
+    whole = run(scene, iterations=4, optimizer=opt, lr=0.5)
+    whole.run()
+    monkeypatch.setattr(optimizers, "ROWS", 37)
+    orig = Parameterization.chunks
+    monkeypatch.setattr(Parameterization, "chunks", lambda self, rows=0: orig(self, 101))
+    blocks = run(scene, iterations=4, optimizer=opt, lr=0.5)
+    assert len(blocks.param.chunks()) > 10
+    blocks.run()
+    np.testing.assert_array_equal(blocks.x, whole.x)
+    for k, v in whole.opt.state().items():
+        np.testing.assert_array_equal(blocks.opt.state()[k], v)

@@ -153,7 +153,7 @@ def test_set_mixture_of_some_voxels_renders_like_a_fresh_renderer():
     mix0[..., inks.index("white")] += 3.0  # a high majorant that the update removes
     mix0 /= mix0.sum(-1, keepdims=True)
     a = Volume(voxel_mm=(VOX,) * 3, mixture=mix0, inks=inks, inside=inside)
-    index = np.sort(rng.choice(mix0.size // 5, 150, replace=False))
+    index = np.sort(rng.choice(np.flatnonzero(inside), 150, replace=False))  # the optimiser's are inside
     rows = rng.dirichlet(np.ones(5), size=len(index)).astype(np.float32)
     mix1 = mix0.copy().reshape(-1, 5)
     mix1[index] = rows
@@ -169,11 +169,69 @@ def test_set_mixture_of_some_voxels_renders_like_a_fresh_renderer():
     np.testing.assert_array_equal(g1[1], g2[1])
     with pytest.raises(ValueError, match="index"):
         reused.set_mixture(np.array([mix0.size // 5], np.int64), rows[:1])
+    with pytest.raises(ValueError, match="does not store"):  # the sparse medium keeps only the inside
+        reused.set_mixture(np.flatnonzero(~inside)[:1], rows[:1])
     bad = rows[:2].copy()
     bad[1, 0] = np.nan
     with pytest.raises(ValueError):
         reused.set_mixture(index[:2], bad)
     np.testing.assert_array_equal(reused.render(tex, spp=4, seed=3).rgb, fresh.render(tex, spp=4, seed=3).rgb)
+
+
+def test_masked_volumes_store_only_their_inside_and_render_as_the_dense_form():
+    """A volume with an inside mask goes to the core as the inside voxels' coefficients only (4 bytes per grid
+    voxel + 24 per inside voxel instead of 24 per grid voxel): renders and gradients are bit-identical to the dense
+    form with vacuum outside, whatever the mixture outside the mask (the walks never read it)."""
+    from inkopt import _core
+
+    rng = np.random.default_rng(5)
+    inks = InkTable.parse("vero-cmykw")
+    shape = (7, 6, 9)
+    inside = np.ones(shape, bool)
+    inside[2:5, 1:4, 3:7] = False  # a cavity
+    inside[:, 0, :2] = False       # a notch through the object
+    mixture = rng.dirichlet(np.ones(5), size=shape).astype(np.float32)
+    vol = Volume(voxel_mm=(VOX,) * 3, mixture=mixture, inks=inks, inside=inside)
+    n, k = inside.size, int(inside.sum())
+    assert vol.render_bytes() == 4 * n + 24 * k + 2 * n
+    s, a = vol.coefficients()
+    s, a = (np.where(inside[..., None], x, 0).astype(np.float32) for x in (s, a))
+    dense = _core.Scene(shape, (VOX,) * 3, sigma_s=s, sigma_a=a, inside=inside.astype(np.uint8))
+    tex = Texels.for_volume(vol)
+    adj = rng.normal(size=(len(tex), 3)).astype(np.float32)
+    args = (tex.voxel, tex.face, tex.normal)
+    want = dense.render(*args, spp=4, seed=3, first_texel=0, include_specular=True)
+    for outside_mix in (mixture, np.zeros_like(mixture)):  # what lies outside the mask does not matter
+        r = Renderer(vol.with_mixture(np.where(inside[..., None], mixture, outside_mix)))
+        got = r.render(tex, spp=4, seed=3)
+        np.testing.assert_array_equal(got.rgb, want[0])
+        np.testing.assert_array_equal(got.var_mean, want[1])
+    dense.zero_grad(float(np.abs(adj).max()), None)
+    dense.backward(*args, adj, spp=3, seed=4, first_texel=0, include_specular=True, method="replay")
+    gs, ga, _ = r.gradient(tex, adj, spp=3, seed=4)
+    for g, w in zip((gs, ga), dense.take_grad()):
+        np.testing.assert_array_equal(g, w)
+    assert np.abs(ga).sum() > 0
+
+
+@pytest.mark.parametrize("form", ["dense", "mixture", "labels"])
+def test_coefficients_at_matches_the_dense_coefficients(form):
+    rng = np.random.default_rng(6)
+    inks = InkTable.parse("vero-cmykw")
+    shape = (3, 4, 5)
+    mixture = rng.dirichlet(np.ones(5), size=shape).astype(np.float32)
+    vol = Volume(voxel_mm=(VOX,) * 3, mixture=mixture, inks=inks)
+    if form == "dense":
+        vol = Volume(voxel_mm=(VOX,) * 3, sigma_s=vol.coefficients()[0], sigma_a=vol.coefficients()[1])
+    elif form == "labels":
+        labels = rng.integers(0, 5, size=shape).astype(np.uint8)
+        labels[0, 0, :3] = 255
+        vol = Volume(voxel_mm=(VOX,) * 3, labels=labels, inks=inks)
+    index = np.sort(rng.choice(60, 25, replace=False))
+    s, a = vol.coefficients_at(index, chunk=7)
+    ds, da = vol.coefficients()
+    np.testing.assert_array_equal(s, ds.reshape(-1, 3)[index])
+    np.testing.assert_array_equal(a, da.reshape(-1, 3)[index])
 
 
 @pytest.mark.parametrize("masked", [False, True])
@@ -210,3 +268,36 @@ def test_set_volume_renders_like_a_fresh_renderer(masked):
     with pytest.raises(ValueError, match="voxel .* channel 1 are negative"):
         reused._scene.set_medium(sigma_s=bad, sigma_a=np.ascontiguousarray(a_, np.float32))
     np.testing.assert_array_equal(reused.render(tex, spp=4, seed=3).rgb, r2.rgb)
+
+
+def test_gradient_slots_from_a_voxel_list_match_the_slot_map():
+    """grad_index as the free voxels' flat indices (what the optimiser passes: no grid-sized array) gives the same
+    per-slot gradients as the equivalent (z, y, x) slot map, bit for bit, in a fresh and in a reused buffer;
+    a list that is not strictly increasing or leaves the grid is refused in one line."""
+    rng = np.random.default_rng(12)
+    inks = InkTable.parse("vero-cmykw")
+    shape = (5, 6, 7)
+    inside = np.ones(shape, bool)
+    inside[3:, :2, :2] = False
+    vol = Volume(voxel_mm=(VOX,) * 3, mixture=rng.dirichlet(np.ones(5), size=shape).astype(np.float32), inks=inks,
+                 inside=inside)
+    tex = Texels.for_volume(vol)
+    adj = rng.normal(size=(len(tex), 3)).astype(np.float32)
+    voxels = np.sort(rng.choice(np.flatnonzero(inside), 90, replace=False))
+    slot_map = np.full(shape, -1, np.int32)
+    slot_map.reshape(-1)[voxels] = np.arange(len(voxels))
+    r = Renderer(vol)
+    want = r.gradient(tex, adj, spp=3, seed=4, grad_index=slot_map)
+    for _ in range(2):  # a fresh buffer, then the same one zeroed in place
+        got = r.gradient(tex, adj, spp=3, seed=4, grad_index=voxels)
+        assert got[0].shape == (len(voxels), 3)
+        np.testing.assert_array_equal(got[0], want[0])
+        np.testing.assert_array_equal(got[1], want[1])
+    assert np.abs(want[1]).sum() > 0
+    other = voxels[1:]  # other slots: a new buffer, not the old one reused
+    np.testing.assert_array_equal(r.gradient(tex, adj, spp=3, seed=4, grad_index=other)[1],
+                                  r.gradient(tex, adj, spp=3, seed=4,
+                                             grad_index=np.where(slot_map > 0, slot_map - 1, -1).astype(np.int32))[1])
+    for bad, msg in ((voxels[::-1], "strictly increasing"), (np.array([vol.inside.size]), "outside the grid")):
+        with pytest.raises(ValueError, match=msg):
+            r.gradient(tex, adj, spp=1, seed=4, grad_index=bad)

@@ -4,7 +4,7 @@
 //! `(z * ny + y) * nx + x` (C order of a (z, y, x) array); lengths in mm, coefficients in mm^-1; geometric
 //! vectors are (x, y, z); radiance is linear RGB, each channel traced as its own monochromatic problem.
 //!
-//! Modules: `scene` (geometry, media, texels), `normals` (sparse shading normals), `light` (the `Light` trait:
+//! Modules: `scene` (geometry, texels), `medium` (dense, sparse and label media), `normals` (sparse shading normals), `light` (the `Light` trait:
 //! uniform light, environment maps), `grid` (locating points, voxel traversal, exit distances, periodic wrap),
 //! `flight` (the free-flight samplers), `trace` (the scalar walk), `packet` (eight paths per core in SIMD
 //! lanes), `render` (parallel drivers of the forward render), `grad` (the gradient pass and its fixed-point
@@ -17,6 +17,7 @@ mod flight;
 pub mod grad;
 mod grid;
 pub mod light;
+pub mod medium;
 pub mod normals;
 pub(crate) mod packet;
 pub mod render;
@@ -29,7 +30,8 @@ pub mod trace;
 pub use grad::{backward, GradBuffers, GradMethod, NO_GRADIENT};
 pub use render::{render, RenderOptions, Stats, TexelEstimate};
 pub use light::EnvMap;
-pub use scene::{face_normal, Boundary, DenseMedium, Geometry, LabelMedium, Light, Medium, Texel, UniformLight, EMPTY};
+pub use scene::{face_normal, Boundary, DenseMedium, Geometry, LabelMedium, Light, Medium, SparseMedium, Texel,
+                UniformLight, EMPTY};
 
 #[cfg(test)]
 mod tests;

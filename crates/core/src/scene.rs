@@ -1,17 +1,13 @@
 //! The voxel scene: grid geometry (size, boundary, inside mask and its safe distances, shading normals), the
-//! medium (dense coefficients or ink labels, behind the `Medium` trait), the light it is lit by (a `Light`, see
-//! `light`; set with `Geometry::with_light`) and texels.
+//! light it is lit by (a `Light`, see `light`; set with `Geometry::with_light`) and texels. The media (behind
+//! the `Medium` trait) are in `medium` and re-exported here.
 //!
 //! Layout: voxel (x, y, z) has linear index `(z * ny + y) * nx + x`, i.e. C order of a (z, y, x) array.
-//! Coefficients are stored per channel in planar arrays (all voxels of R, then G, then B) as extinction
-//! sigma_t and single-scattering albedo, the two numbers the random walk needs.
 
 pub use crate::light::{Light, UniformLight};
+pub use crate::medium::{DenseMedium, LabelMedium, Medium, SparseMedium, EMPTY};
 pub use crate::normals::ShadingNormals;
 use crate::sampling::V3;
-
-/// Label of an empty voxel in label media.
-pub const EMPTY: u8 = 255;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Boundary {
@@ -19,168 +15,6 @@ pub enum Boundary {
     Box,
     /// x and y wrap around: an infinite slab in x and y, bounded in z.
     PeriodicXY,
-}
-
-/// Per-voxel optical parameters for one channel.
-pub trait Medium: Sync {
-    /// (sigma_t in mm^-1, albedo) of voxel `idx` in channel `c`.
-    fn coeffs(&self, idx: usize, c: usize) -> (f32, f32);
-    /// sigma_s in mm^-1 of voxel `idx` in channel `c` (for gradients).
-    fn sigma_s(&self, idx: usize, c: usize) -> f32 {
-        let (t, a) = self.coeffs(idx, c);
-        t * a
-    }
-    fn len(&self) -> usize;
-    /// An upper bound of sigma_t over all voxels in channel c (the majorant of delta tracking).
-    fn majorant(&self, c: usize) -> f32;
-}
-
-/// (sigma_t, albedo) of coefficients sigma_s, sigma_a (albedo 1 in vacuum); None unless both are finite and
-/// non-negative.
-fn extinction_albedo(s: f32, a: f32) -> Option<(f32, f32)> {
-    if !(s >= 0.0 && a >= 0.0 && s.is_finite() && a.is_finite()) {
-        return None;
-    }
-    let t = s + a;
-    Some((t, if t > 0.0 { s / t } else { 1.0 }))
-}
-
-/// Dense coefficients: planar by channel, (sigma_t, albedo) pairs interleaved so one lookup is one load.
-pub struct DenseMedium {
-    n: usize,
-    coef: Vec<[f32; 2]>,
-    majorant: [f32; 3],
-}
-
-impl DenseMedium {
-    /// From interleaved (voxel, channel) arrays of sigma_s and sigma_a in mm^-1 (a (z, y, x, 3) array's memory).
-    pub fn from_interleaved(sigma_s: &[f32], sigma_a: &[f32]) -> Result<Self, String> {
-        if sigma_s.len() != sigma_a.len() || sigma_s.len() % 3 != 0 {
-            return Err("sigma_s and sigma_a must both have 3 channels per voxel and equal size".into());
-        }
-        let n = sigma_s.len() / 3;
-        let mut medium = DenseMedium { n, coef: vec![[0.0f32, 1.0f32]; 3 * n], majorant: [0.0; 3] };
-        medium.refill(sigma_s, sigma_a)?;
-        Ok(medium)
-    }
-
-    /// Replace the coefficients by new ones for the same voxels, in place: the optimiser swaps the medium every
-    /// iteration, and a second copy of it would be the largest allocation of a big object. Checked before
-    /// anything is written, so an error leaves the medium as it was.
-    pub fn refill(&mut self, sigma_s: &[f32], sigma_a: &[f32]) -> Result<(), String> {
-        let n = self.n;
-        if sigma_s.len() != 3 * n || sigma_a.len() != 3 * n {
-            return Err(format!("sigma_s and sigma_a must have 3 channels for each of the {n} voxels"));
-        }
-        if let Some(k) = (0..3 * n).find(|&k| extinction_albedo(sigma_s[k], sigma_a[k]).is_none()) {
-            return Err(format!("coefficients of voxel {} channel {} are negative or not finite", k / 3, k % 3));
-        }
-        for i in 0..n {
-            for c in 0..3 {
-                let (t, albedo) = extinction_albedo(sigma_s[3 * i + c], sigma_a[3 * i + c]).unwrap();
-                self.coef[c * n + i] = [t, albedo];
-            }
-        }
-        self.update_majorant();
-        Ok(())
-    }
-
-    /// Overwrite the coefficients of some voxels in place, as `refill` would store them: `index` holds linear
-    /// voxel indices (a voxel listed twice takes its last values), `sigma_s` and `sigma_a` their interleaved
-    /// (entry, channel) coefficients in mm^-1. The optimiser changes only the free voxels of a big object, so
-    /// this costs O(K) plus one pass over the coefficients for the majorant (which may go down), and allocates
-    /// nothing. Checked before anything is written, so an error leaves the medium as it was.
-    pub fn set_voxels(&mut self, index: &[i64], sigma_s: &[f32], sigma_a: &[f32]) -> Result<(), String> {
-        let (n, k) = (self.n, index.len());
-        if sigma_s.len() != 3 * k || sigma_a.len() != 3 * k {
-            return Err(format!("sigma_s and sigma_a must have 3 channels for each of the {k} indexed voxels, \
-                                got {} and {} values", sigma_s.len(), sigma_a.len()));
-        }
-        if let Some(e) = index.iter().position(|&j| j < 0 || j as u64 >= n as u64) {
-            return Err(format!("index entry {e} is voxel {}, outside the grid of {n} voxels", index[e]));
-        }
-        if let Some(q) = (0..3 * k).find(|&q| extinction_albedo(sigma_s[q], sigma_a[q]).is_none()) {
-            return Err(format!("coefficients of entry {} (voxel {}) channel {} are negative or not finite",
-                               q / 3, index[q / 3], q % 3));
-        }
-        for (e, &j) in index.iter().enumerate() {
-            for c in 0..3 {
-                let (t, albedo) = extinction_albedo(sigma_s[3 * e + c], sigma_a[3 * e + c]).unwrap();
-                self.coef[c * n + j as usize] = [t, albedo];
-            }
-        }
-        self.update_majorant();
-        Ok(())
-    }
-
-    /// The largest sigma_t of each channel, over all voxels (in parallel: max is exact in any order).
-    fn update_majorant(&mut self) {
-        use rayon::prelude::*;
-        let (coef, n) = (&self.coef, self.n);
-        self.majorant = std::array::from_fn(|c| {
-            coef[c * n..(c + 1) * n].par_chunks(1 << 16).map(|b| b.iter().fold(0.0f32, |a, x| a.max(x[0])))
-                .reduce(|| 0.0f32, f32::max)
-        });
-    }
-}
-
-impl Medium for DenseMedium {
-    #[inline(always)]
-    fn coeffs(&self, idx: usize, c: usize) -> (f32, f32) {
-        let [t, a] = self.coef[c * self.n + idx];
-        (t, a)
-    }
-    fn len(&self) -> usize {
-        self.n
-    }
-    fn majorant(&self, c: usize) -> f32 {
-        self.majorant[c]
-    }
-}
-
-/// One ink label (u8) per voxel and a small ink table: 1 byte per voxel.
-pub struct LabelMedium {
-    labels: Vec<u8>,
-    majorant: [f32; 3],
-    /// [channel][ink] (sigma_t, albedo); index 255 (EMPTY) maps to vacuum.
-    table: [[(f32, f32); 256]; 3],
-}
-
-impl LabelMedium {
-    /// `ink_sigma_s`, `ink_sigma_a`: (N, 3) row-major, mm^-1.
-    pub fn new(labels: Vec<u8>, ink_sigma_s: &[f32], ink_sigma_a: &[f32]) -> Result<Self, String> {
-        let n_inks = ink_sigma_s.len() / 3;
-        if ink_sigma_s.len() != ink_sigma_a.len() || ink_sigma_s.len() % 3 != 0 || n_inks == 0 || n_inks > 255 {
-            return Err("ink table must be (N, 3) with 1 <= N <= 255".into());
-        }
-        let mut table = [[(0.0f32, 1.0f32); 256]; 3];
-        for k in 0..n_inks {
-            for c in 0..3 {
-                table[c][k] = extinction_albedo(ink_sigma_s[3 * k + c], ink_sigma_a[3 * k + c])
-                    .ok_or_else(|| format!("ink {k} has negative or non-finite coefficients"))?;
-            }
-        }
-        if let Some(bad) = labels.iter().find(|&&l| l != EMPTY && l as usize >= n_inks) {
-            return Err(format!("label {bad} has no ink in a table of {n_inks}"));
-        }
-        let mut used = [false; 256];
-        labels.iter().for_each(|&l| used[l as usize] = true);
-        let majorant = std::array::from_fn(|c| (0..256).filter(|&k| used[k]).fold(0.0f32, |a, k| a.max(table[c][k].0)));
-        Ok(LabelMedium { labels, majorant, table })
-    }
-}
-
-impl Medium for LabelMedium {
-    #[inline(always)]
-    fn coeffs(&self, idx: usize, c: usize) -> (f32, f32) {
-        self.table[c][self.labels[idx] as usize]
-    }
-    fn len(&self) -> usize {
-        self.labels.len()
-    }
-    fn majorant(&self, c: usize) -> f32 {
-        self.majorant[c]
-    }
 }
 
 /// Geometry and boundary of the object: grid size, voxel size, which voxels are inside, shading normals.

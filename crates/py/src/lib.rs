@@ -6,17 +6,29 @@
 //! `set_light` lights it by a uniform light or an environment map.
 
 use inkopt_core::{backward, render, Boundary, DenseMedium, EnvMap, Geometry, GradBuffers, GradMethod, LabelMedium,
-                  RenderOptions, Stats, Texel, TexelEstimate, UniformLight, NO_GRADIENT};
+                  RenderOptions, SparseMedium, Stats, Texel, TexelEstimate, UniformLight, NO_GRADIENT};
 use numpy::ndarray::{Array2, Array4, Dimension};
 use numpy::{Element, IntoPyArray, PyArray2, PyReadonlyArray, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
-            PyReadonlyArray4, PyUntypedArrayMethods};
+            PyReadonlyArray4, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 enum MediumKind {
     Dense(DenseMedium),
+    Sparse(SparseMedium),
     Labels(LabelMedium),
+}
+
+/// Run `$body` with `$m` bound to the scene's medium, whatever its kind (each kind its own monomorphised walk).
+macro_rules! with_medium {
+    ($medium:expr, $m:ident => $body:expr) => {
+        match $medium {
+            MediumKind::Dense($m) => $body,
+            MediumKind::Sparse($m) => $body,
+            MediumKind::Labels($m) => $body,
+        }
+    };
 }
 
 #[pyclass(module = "inkopt._core")]
@@ -27,6 +39,8 @@ struct Scene {
     grads: Option<GradBuffers>,
     /// Whether the gradient buffers are per slot of a grad_index (else per voxel).
     sparse: bool,
+    /// Whether their map was built from a list of voxels (zero_grad's second grad_index form).
+    grad_from_voxels: bool,
     shape: [usize; 3],
 }
 
@@ -40,20 +54,24 @@ fn err(msg: impl Into<String>) -> PyErr {
 
 #[pymethods]
 impl Scene {
-    /// Scene(shape_zyx, voxel_mm_xyz, *, sigma_s=None, sigma_a=None, labels=None, ink_sigma_s=None,
-    /// ink_sigma_a=None, inside=None, normals=None, normal_index=None, normal_vectors=None, boundary="box",
-    /// ior=1.5, g=0.4, threads=None). Shading normals: dense (`normals` (Z, Y, X, 3) f32) or sparse
-    /// (`normal_index` (K,) i64 increasing linear indices, `normal_vectors` (K, 3) f32).
+    /// Scene(shape_zyx, voxel_mm_xyz, *, sigma_s=None, sigma_a=None, medium_index=None, labels=None,
+    /// ink_sigma_s=None, ink_sigma_a=None, inside=None, normals=None, normal_index=None, normal_vectors=None,
+    /// boundary="box", ior=1.5, g=0.4, threads=None). Medium: dense (`sigma_s`, `sigma_a` (Z, Y, X, 3) f32),
+    /// sparse (`medium_index` (K,) i64 strictly increasing linear indices of the voxels that are not vacuum, with
+    /// `sigma_s`, `sigma_a` (K, 3) f32: 24 bytes per voxel of each row's span of them), or labels. Shading normals:
+    /// dense (`normals` (Z, Y, X, 3) f32) or sparse (`normal_index` (K,) i64 increasing linear indices,
+    /// `normal_vectors` (K, 3) f32).
     #[new]
-    #[pyo3(signature = (shape, voxel_mm, *, sigma_s=None, sigma_a=None, labels=None, ink_sigma_s=None,
-                        ink_sigma_a=None, inside=None, normals=None, normal_index=None, normal_vectors=None,
-                        boundary="box", ior=1.5, g=0.4, threads=None))]
+    #[pyo3(signature = (shape, voxel_mm, *, sigma_s=None, sigma_a=None, medium_index=None, labels=None,
+                        ink_sigma_s=None, ink_sigma_a=None, inside=None, normals=None, normal_index=None,
+                        normal_vectors=None, boundary="box", ior=1.5, g=0.4, threads=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         shape: (usize, usize, usize),
         voxel_mm: (f32, f32, f32),
-        sigma_s: Option<PyReadonlyArray4<f32>>,
-        sigma_a: Option<PyReadonlyArray4<f32>>,
+        sigma_s: Option<PyReadonlyArrayDyn<f32>>,
+        sigma_a: Option<PyReadonlyArrayDyn<f32>>,
+        medium_index: Option<PyReadonlyArray1<i64>>,
         labels: Option<PyReadonlyArray3<u8>>,
         ink_sigma_s: Option<PyReadonlyArray2<f32>>,
         ink_sigma_a: Option<PyReadonlyArray2<f32>>,
@@ -73,7 +91,7 @@ impl Scene {
             other => return Err(err(format!("unknown boundary '{other}'; use 'box' or 'periodic-xy'"))),
         };
         let mut geo = Geometry::new([nx, ny, nz], [voxel_mm.0, voxel_mm.1, voxel_mm.2], bnd, ior, g).map_err(err)?;
-        let medium = medium_from([nz, ny, nx], sigma_s, sigma_a, labels, ink_sigma_s, ink_sigma_a)?;
+        let medium = medium_from([nz, ny, nx], sigma_s, sigma_a, medium_index, labels, ink_sigma_s, ink_sigma_a)?;
         if let Some(m) = inside {
             check_shape(m.shape(), &[nz, ny, nx], "inside")?;
             geo = geo.with_inside(c_slice(&m, "inside")?.to_vec()).map_err(err)?;
@@ -99,33 +117,45 @@ impl Scene {
             b = b.num_threads(t);
         }
         let pool = b.build().map_err(|e| err(e.to_string()))?;
-        Ok(Scene { geo, medium, pool, grads: None, sparse: false, shape: [nz, ny, nx] })
+        Ok(Scene { geo, medium, pool, grads: None, sparse: false, grad_from_voxels: false, shape: [nz, ny, nx] })
     }
 
-    /// set_medium(*, sigma_s=None, sigma_a=None, labels=None, ink_sigma_s=None, ink_sigma_a=None): replace the
-    /// medium (the same arguments as the constructor's) and keep the geometry (grid, boundary, ior, g, inside
-    /// mask and its safe distances, normals), the thread pool and any gradient buffers.
-    #[pyo3(signature = (*, sigma_s=None, sigma_a=None, labels=None, ink_sigma_s=None, ink_sigma_a=None))]
+    /// set_medium(*, sigma_s=None, sigma_a=None, medium_index=None, labels=None, ink_sigma_s=None,
+    /// ink_sigma_a=None): replace the medium (the same arguments as the constructor's) and keep the geometry
+    /// (grid, boundary, ior, g, inside mask and its safe distances, normals), the thread pool and any gradient
+    /// buffers. A dense medium replaced by a dense one, or a sparse one by a sparse one of the same voxels, is
+    /// overwritten in place (no second copy at the peak).
+    #[pyo3(signature = (*, sigma_s=None, sigma_a=None, medium_index=None, labels=None, ink_sigma_s=None,
+                        ink_sigma_a=None))]
     fn set_medium(
         &mut self,
-        sigma_s: Option<PyReadonlyArray4<f32>>,
-        sigma_a: Option<PyReadonlyArray4<f32>>,
+        sigma_s: Option<PyReadonlyArrayDyn<f32>>,
+        sigma_a: Option<PyReadonlyArrayDyn<f32>>,
+        medium_index: Option<PyReadonlyArray1<i64>>,
         labels: Option<PyReadonlyArray3<u8>>,
         ink_sigma_s: Option<PyReadonlyArray2<f32>>,
         ink_sigma_a: Option<PyReadonlyArray2<f32>>,
     ) -> PyResult<()> {
-        // A dense medium replaced by a dense one is overwritten in place (no second copy at the peak).
-        if let (MediumKind::Dense(m), Some(s), Some(a), None) = (&mut self.medium, &sigma_s, &sigma_a, &labels) {
-            let [nz, ny, nx] = self.shape;
-            check_shape(s.shape(), &[nz, ny, nx, 3], "sigma_s")?;
-            check_shape(a.shape(), &[nz, ny, nx, 3], "sigma_a")?;
-            return m.refill(c_slice(s, "sigma_s")?, c_slice(a, "sigma_a")?).map_err(err);
+        let [nz, ny, nx] = self.shape;
+        match (&mut self.medium, &sigma_s, &sigma_a, &medium_index, &labels) {
+            (MediumKind::Dense(m), Some(s), Some(a), None, None) => {
+                check_shape(s.shape(), &[nz, ny, nx, 3], "sigma_s")?;
+                check_shape(a.shape(), &[nz, ny, nx, 3], "sigma_a")?;
+                return m.refill(c_slice(s, "sigma_s")?, c_slice(a, "sigma_a")?).map_err(err);
+            }
+            (MediumKind::Sparse(m), Some(s), Some(a), Some(ix), None) if m.stores(c_slice(ix, "medium_index")?) => {
+                check_shape(s.shape(), &[ix.len(), 3], "sigma_s")?;
+                check_shape(a.shape(), &[ix.len(), 3], "sigma_a")?;
+                return m.refill(c_slice(s, "sigma_s")?, c_slice(a, "sigma_a")?).map_err(err);
+            }
+            _ => {}
         }
-        self.medium = medium_from(self.shape, sigma_s, sigma_a, labels, ink_sigma_s, ink_sigma_a)?;
+        self.medium = medium_from(self.shape, sigma_s, sigma_a, medium_index, labels, ink_sigma_s, ink_sigma_a)?;
         Ok(())
     }
 
-    /// set_voxels(index, sigma_s, sigma_a): overwrite the coefficients of some voxels of a dense medium in place
+    /// set_voxels(index, sigma_s, sigma_a): overwrite the coefficients of some voxels of a dense or sparse
+    /// medium (a sparse one must store them) in place
     /// (the optimiser's free voxels, every iteration) and recompute the majorant. `index` (K,) int64: linear
     /// voxel indices of the (z, y, x) grid (a voxel listed twice takes its last values); `sigma_s`, `sigma_a`
     /// (K, 3) float32, mm^-1. All checked before anything is written. The GIL is released.
@@ -136,15 +166,16 @@ impl Scene {
         sigma_s: PyReadonlyArray2<f32>,
         sigma_a: PyReadonlyArray2<f32>,
     ) -> PyResult<()> {
-        let MediumKind::Dense(m) = &mut self.medium else {
-            return Err(err("set_voxels needs a dense medium (sigma_s, sigma_a), not labels"));
-        };
         let k = index.len();
         check_shape(sigma_s.shape(), &[k, 3], "sigma_s")?;
         check_shape(sigma_a.shape(), &[k, 3], "sigma_a")?;
         let (ix, s, a) = (c_slice(&index, "index")?, c_slice(&sigma_s, "sigma_s")?, c_slice(&sigma_a, "sigma_a")?);
         let pool = &self.pool;
-        py.detach(|| pool.install(|| m.set_voxels(ix, s, a))).map_err(err)
+        match &mut self.medium {
+            MediumKind::Dense(m) => py.detach(|| pool.install(|| m.set_voxels(ix, s, a))).map_err(err),
+            MediumKind::Sparse(m) => py.detach(|| pool.install(|| m.set_voxels(ix, s, a))).map_err(err),
+            MediumKind::Labels(_) => Err(err("set_voxels needs coefficients (sigma_s, sigma_a), not labels")),
+        }
     }
 
     /// set_light(map=None, rotate_deg=0.0): light the scene by an equirectangular environment map of linear
@@ -190,47 +221,81 @@ impl Scene {
         let texels = self.texels(&texel_voxel, &texel_face, &texel_normal)?;
         let opts = options(spp, seed, include_specular)?;
         let (est, stats) = py.detach(|| {
-            self.pool.install(|| match &self.medium {
-                MediumKind::Dense(m) => render(&self.geo, m, &texels, first_texel, &opts),
-                MediumKind::Labels(m) => render(&self.geo, m, &texels, first_texel, &opts),
-            })
+            self.pool.install(|| with_medium!(&self.medium, m => render(&self.geo, m, &texels, first_texel, &opts)))
         });
         pack(py, &est, &stats)
     }
 
     /// Reset the gradient accumulators for a pass whose adjoints are at most `max_abs_adjoint` in magnitude
-    /// (sets the fixed-point quantum). `grad_index` (z, y, x) int32: the gradient slot of each voxel, -1 for
-    /// none; gradients are then returned per slot, (F, 3). None: every voxel, (z, y, x, 3). The buffer of the
-    /// previous call is zeroed in place when its grad_index was the same (element by element) or both None;
-    /// otherwise it is freed before the new one is allocated. The GIL is released.
+    /// (sets the fixed-point quantum). `grad_index`: which voxels get gradients, and in which slot; gradients are
+    /// then returned per slot, (F, 3). Either (z, y, x) int32, the slot of each voxel or -1 for none, or (F,)
+    /// int64, strictly increasing linear indices of the voxels whose slots are 0..F (4 bytes per grid voxel
+    /// fewer on the caller's side). None: every voxel, (z, y, x, 3). The buffer of the previous call is zeroed in
+    /// place when it was for the same slots (checked: element by element, or in O(F) for the second form) or both
+    /// None; otherwise it is freed before the new one is allocated. The GIL is released.
     #[pyo3(signature = (max_abs_adjoint, grad_index=None))]
-    fn zero_grad(&mut self, py: Python<'_>, max_abs_adjoint: f32, grad_index: Option<PyReadonlyArray3<i32>>)
+    fn zero_grad(&mut self, py: Python<'_>, max_abs_adjoint: f32, grad_index: Option<Bound<'_, PyAny>>)
                  -> PyResult<()> {
         let n = self.geo.voxel_count();
-        let ix = match &grad_index {
-            None => None,
-            Some(ix) => {
-                check_shape(ix.shape(), &self.shape, "grad_index")?;
-                Some(c_slice(ix, "grad_index")?)
+        let dense_ix: Option<PyReadonlyArray3<i32>>;
+        let voxels_ix: Option<PyReadonlyArray1<i64>>;
+        match &grad_index {
+            None => (dense_ix, voxels_ix) = (None, None),
+            Some(a) => {
+                if let Ok(d) = a.extract::<PyReadonlyArray3<i32>>() {
+                    check_shape(d.shape(), &self.shape, "grad_index")?;
+                    (dense_ix, voxels_ix) = (Some(d), None);
+                } else if let Ok(v) = a.extract::<PyReadonlyArray1<i64>>() {
+                    (dense_ix, voxels_ix) = (None, Some(v));
+                } else {
+                    return Err(err("grad_index must be a (z, y, x) int32 slot map or (F,) int64 voxel indices"));
+                }
             }
-        };
+        }
+        let dense = match &dense_ix { Some(d) => Some(c_slice(d, "grad_index")?), None => None };
+        let voxels = match &voxels_ix { Some(v) => Some(c_slice(v, "grad_index")?), None => None };
+        if let Some(v) = voxels {
+            if let Some(e) = v.iter().position(|&j| j < 0 || j as u64 >= n as u64) {
+                return Err(err(format!("grad_index entry {e} is voxel {}, outside the grid of {n} voxels", v[e])));
+            }
+            if let Some(e) = (1..v.len()).find(|&e| v[e] <= v[e - 1]) {
+                return Err(err(format!("grad_index must be strictly increasing; entry {e} is voxel {} after {}",
+                                       v[e], v[e - 1])));
+            }
+            if v.len() >= NO_GRADIENT as usize {
+                return Err(err(format!("{} gradient voxels are too many", v.len())));
+            }
+        }
         let slot = |k: i32| if k < 0 { NO_GRADIENT } else { k as u32 };
-        let (pool, grads) = (&self.pool, &mut self.grads);
+        let from_voxels = voxels.is_some();
+        let (pool, grads, was_voxels) = (&self.pool, &mut self.grads, self.grad_from_voxels);
         let done = py.detach(|| pool.install(|| {
             use rayon::prelude::*;
-            let same = grads.as_ref().is_some_and(|g| match (g.map(), ix) {
-                (None, None) => true,
-                (Some(m), Some(ix)) => m.len() == ix.len() && m.par_iter().zip(ix).all(|(&m, &k)| m == slot(k)),
+            let same = grads.as_ref().is_some_and(|g| match (g.map(), dense, voxels) {
+                (None, None, None) => true,
+                (Some(m), Some(ix), None) => m.len() == ix.len() && m.par_iter().zip(ix).all(|(&m, &k)| m == slot(k)),
+                // A map built from F voxels has exactly F mapped entries, slots 0..F: equal iff these F map so.
+                (Some(m), None, Some(v)) => was_voxels && g.slots() == v.len()
+                    && v.par_iter().enumerate().all(|(e, &j)| m[j as usize] == e as u32),
                 _ => false,
             });
             if !same {
                 *grads = None; // free the old buffers first: two sets of them would be the peak of a big object
-                let map = ix.map(|ix| ix.par_iter().map(|&k| slot(k)).collect());
+                let map = match (dense, voxels) {
+                    (Some(ix), _) => Some(ix.par_iter().map(|&k| slot(k)).collect()),
+                    (None, Some(v)) => {
+                        let mut m = vec![NO_GRADIENT; n];
+                        v.iter().enumerate().for_each(|(e, &j)| m[j as usize] = e as u32);
+                        Some(m)
+                    }
+                    (None, None) => None,
+                };
                 *grads = Some(GradBuffers::with_map(n, map)?);
             }
             grads.as_mut().unwrap().zero(max_abs_adjoint);
             Ok::<(), String>(())
         }));
+        self.grad_from_voxels = from_voxels && done.is_ok();
         self.sparse = grad_index_given(&self.grads);
         done.map_err(err)
     }
@@ -272,10 +337,8 @@ impl Scene {
         }
         let grads = self.grads.as_ref().unwrap();
         let (est, stats) = py.detach(|| {
-            self.pool.install(|| match &self.medium {
-                MediumKind::Dense(m) => backward(&self.geo, m, &texels, first_texel, &adj, &opts, method, grads),
-                MediumKind::Labels(m) => backward(&self.geo, m, &texels, first_texel, &adj, &opts, method, grads),
-            })
+            self.pool.install(|| with_medium!(&self.medium, m =>
+                backward(&self.geo, m, &texels, first_texel, &adj, &opts, method, grads)))
         });
         pack(py, &est, &stats)
     }
@@ -360,12 +423,14 @@ fn check_shape(dims: &[usize], want: &[usize], name: &str) -> PyResult<()> {
     Ok(())
 }
 
-/// The medium of a (z, y, x) = `shape` grid: dense sigma_s and sigma_a (z, y, x, 3) float32, or labels
-/// (z, y, x) uint8 with an ink table ink_sigma_s, ink_sigma_a (N, 3) float32.
+/// The medium of a (z, y, x) = `shape` grid: dense sigma_s and sigma_a (z, y, x, 3) float32; sparse: those of
+/// the voxels `medium_index` only, (K, 3) each; or labels (z, y, x) uint8 with an ink table ink_sigma_s,
+/// ink_sigma_a (N, 3) float32.
 fn medium_from(
     shape: [usize; 3],
-    sigma_s: Option<PyReadonlyArray4<f32>>,
-    sigma_a: Option<PyReadonlyArray4<f32>>,
+    sigma_s: Option<PyReadonlyArrayDyn<f32>>,
+    sigma_a: Option<PyReadonlyArrayDyn<f32>>,
+    medium_index: Option<PyReadonlyArray1<i64>>,
     labels: Option<PyReadonlyArray3<u8>>,
     ink_sigma_s: Option<PyReadonlyArray2<f32>>,
     ink_sigma_a: Option<PyReadonlyArray2<f32>>,
@@ -373,12 +438,25 @@ fn medium_from(
     let [nz, ny, nx] = shape;
     match (sigma_s, sigma_a, labels) {
         (Some(s), Some(a), None) => {
-            check_shape(s.shape(), &[nz, ny, nx, 3], "sigma_s")?;
-            check_shape(a.shape(), &[nz, ny, nx, 3], "sigma_a")?;
-            let (s, a) = (c_slice(&s, "sigma_s")?, c_slice(&a, "sigma_a")?);
-            Ok(MediumKind::Dense(DenseMedium::from_interleaved(s, a).map_err(err)?))
+            let (s_, a_) = (c_slice(&s, "sigma_s")?, c_slice(&a, "sigma_a")?);
+            match medium_index {
+                None => {
+                    check_shape(s.shape(), &[nz, ny, nx, 3], "sigma_s")?;
+                    check_shape(a.shape(), &[nz, ny, nx, 3], "sigma_a")?;
+                    Ok(MediumKind::Dense(DenseMedium::from_interleaved(s_, a_).map_err(err)?))
+                }
+                Some(ix) => {
+                    check_shape(s.shape(), &[ix.len(), 3], "sigma_s")?;
+                    check_shape(a.shape(), &[ix.len(), 3], "sigma_a")?;
+                    let ix = c_slice(&ix, "medium_index")?;
+                    Ok(MediumKind::Sparse(SparseMedium::new([nx, ny, nz], ix, s_, a_).map_err(err)?))
+                }
+            }
         }
         (None, None, Some(l)) => {
+            if medium_index.is_some() {
+                return Err(err("medium_index goes with sigma_s and sigma_a, not labels"));
+            }
             check_shape(l.shape(), &[nz, ny, nx], "labels")?;
             let (is, ia) = match (ink_sigma_s, ink_sigma_a) {
                 (Some(is), Some(ia)) => (is, ia),

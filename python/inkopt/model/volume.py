@@ -229,11 +229,18 @@ class Volume:
                               f"{MAX_VOLUME_BYTES / 2**30:.1f} GiB allowed (INKOPT_MAX_VOLUME_BYTES)")
 
     def render_bytes(self) -> int:
-        """Memory the renderer needs for this medium (bytes)."""
+        """Memory the renderer needs for this medium (bytes): labels 1 per voxel; coefficients 24 per voxel
+        (sigma_t, albedo f32 x 3 channels), or with an inside mask 4 per voxel (slot) + 24 per inside voxel; the
+        mask and its safe distances 2 per voxel; 20 per shading normal."""
         n = int(np.prod(self.shape, dtype=np.int64))
-        per = 1 if self.form == "labels" else 24  # labels: u8; else sigma_s, sigma_a f32 x 3 channels
-        per += 1 if self.inside is not None else 0
-        return n * per + (20 * len(self.normals.index) if self.normals is not None else 0)
+        if self.form == "labels":
+            need = n
+        elif self.inside is not None:
+            need = 4 * n + 24 * int(np.count_nonzero(self.inside))
+        else:
+            need = 24 * n
+        need += 2 * n if self.inside is not None else 0
+        return need + (20 * len(self.normals.index) if self.normals is not None else 0)
 
     # ----------------------------------------------------------------- conversions
     def coefficients(self) -> tuple[np.ndarray, np.ndarray]:
@@ -249,6 +256,27 @@ class Volume:
             sel = med.labels == k
             s[sel] = med.inks.sigma_s[k]
             a[sel] = med.inks.sigma_a[k]
+        return s, a
+
+    def coefficients_at(self, index: np.ndarray, chunk: int = 1 << 20) -> tuple[np.ndarray, np.ndarray]:
+        """(sigma_s, sigma_a) of the voxels ``index`` ((K,) flat (z, y, x) indices), each (K, 3) float32 mm^-1,
+        computed ``chunk`` voxels at a time (no grid-sized temporary)."""
+        index = np.asarray(index, np.int64)
+        s = np.empty((len(index), 3), np.float32)
+        a = np.empty_like(s)
+        med = self.medium
+        for lo in range(0, len(index), chunk):
+            ix = index[lo:lo + chunk]
+            if isinstance(med, Dense):
+                s[lo:lo + chunk] = med.sigma_s.reshape(-1, 3)[ix]
+                a[lo:lo + chunk] = med.sigma_a.reshape(-1, 3)[ix]
+            elif isinstance(med, Mixture):
+                s[lo:lo + chunk], a[lo:lo + chunk] = mix(med.mixture.reshape(-1, len(med.inks))[ix], med.inks)
+            else:
+                lab = med.labels.reshape(-1)[ix]
+                full = lab != EMPTY
+                s[lo:lo + chunk] = np.where(full[:, None], med.inks.sigma_s[np.where(full, lab, 0)], 0)
+                a[lo:lo + chunk] = np.where(full[:, None], med.inks.sigma_a[np.where(full, lab, 0)], 0)
         return s, a
 
     def inside_mask(self) -> np.ndarray:

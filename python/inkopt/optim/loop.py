@@ -102,9 +102,10 @@ class Optimization:
         self.opt = make_optimizer(cfg.optimizer, cfg.step_size, self.x.shape)
         self.smoother = None
         if cfg.smooth > 0:
-            guide = (nearest_texel_guide(self.param.grad_index, texels.pos_vox, self.loss.target_lab)
+            grad_index = self.param.grad_index
+            guide = (nearest_texel_guide(grad_index, texels.pos_vox, self.loss.target_lab)
                      if cfg.smooth_edge > 0 else None)
-            self.smoother = GradientSmoother(self.param.grad_index, cfg.smooth, guide, cfg.smooth_edge)
+            self.smoother = GradientSmoother(grad_index, cfg.smooth, guide, cfg.smooth_edge)
         self._renderer: Renderer | None = None
         self.iteration = 0
         self.history = History()
@@ -171,7 +172,8 @@ class Optimization:
         if self._renderer is None:
             self._renderer = self.renderer_factory(self.base.with_mixture(self.param.fixed_share), self.threads,
                                                    self.lighting)
-        self._renderer.set_mixture(self.param.free_index, self.param.free_rows(self.x))
+        for lo, hi in self.param.chunks():  # in pieces: no (F, N) temporaries for a big object
+            self._renderer.set_mixture(self.param.free_index[lo:hi], self.param.free_rows(self.x[lo:hi], lo))
         return self._renderer
 
     def release_renderer(self) -> None:
@@ -207,13 +209,17 @@ class Optimization:
         de = float(delta_e76(lr.lab, self.loss.target_lab).mean())
         t2 = time.perf_counter()
         gs, ga, gres = renderer.gradient(self.texels, lr.grad.astype(np.float32), cfg.spp, grad_seed,
-                                         cfg.include_specular, cfg.grad_method, grad_index=self.param.grad_index)
+                                         cfg.include_specular, cfg.grad_method, grad_index=self.param.free_index)
         # The gradient pass's own estimate joins the average only now, after its gradient is taken, so the
         # adjoint never correlates with the noise of the gradient it multiplies.
         self._average(gres.rgb, gres.var_mean, cfg.spp, decay=not forward)
         t3 = time.perf_counter()
-        g_x = self.param.backward(self.x, mix_grad(gs, ga, self.base.inks), natural=self.opt.natural)
-        x_new = self.opt.step(self.x, g_x).astype(np.float32)
+        g_x = np.empty_like(self.x)
+        for lo, hi in self.param.chunks():  # dE/dsigma -> dE/drho -> dE/dx in pieces (bit-identical)
+            g_rho = mix_grad(gs[lo:hi], ga[lo:hi], self.base.inks)
+            g_x[lo:hi] = self.param.backward(self.x[lo:hi], g_rho, natural=self.opt.natural, lo=lo)
+        del gs, ga
+        x_new = self.opt.step(self.x, g_x).astype(np.float32, copy=False)
         if self.smoother is not None:  # the step, not the gradient: the optimiser's step scale stays its own
             x_new = self.x + self.smoother(x_new - self.x)
         self.x = x_new

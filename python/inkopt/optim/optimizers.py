@@ -4,10 +4,20 @@ Each has ``step(x, g) -> x'`` (which replaces its state arrays rather than chang
 of references restores an interrupted step exactly), ``state() -> dict`` and ``load(dict)`` (checkpoint arrays ``opt_m``, ``opt_v``,
 ``opt_t``, the same keys for every optimiser so that checkpoints stay readable), and ``natural``: whether it wants
 the mirror-descent direction (``Parameterization.backward(natural=True)``) instead of dE/dx.
+
+The element-wise updates run over blocks of rows into the new arrays, so that a big object's step makes no
+(F, N) temporaries beyond its results (each block computes exactly what the whole-array expression would).
 """
 from __future__ import annotations
 
 import numpy as np
+
+#: rows per block of the element-wise updates
+ROWS = 1 << 18
+
+
+def _blocks(n: int):
+    return (slice(lo, lo + ROWS) for lo in range(0, max(n, 1), ROWS))
 
 
 class _Moments:
@@ -46,12 +56,18 @@ class ExponentiatedGradient(_Moments):
     def step(self, x: np.ndarray, g: np.ndarray) -> np.ndarray:
         self.t += 1
         if self.t <= self.warmup:
-            scale = float(np.percentile(np.abs(g), self.percentile)) if g.size else 0.0
+            scale = float(np.percentile(np.abs(g), self.percentile, overwrite_input=True)) if g.size else 0.0
             self.v = self.v.copy()  # a new array: state is replaced, never changed in place
             self.v[0] += (scale - self.v[0]) / self.t
-        self.m = self.beta * self.m + (1 - self.beta) * g
-        mh = self.m / (1 - self.beta ** self.t)
-        return x - self.lr * mh / (self.v[0] + 1e-30)
+        m_new = np.empty(self.m.shape, np.result_type(self.m, g))  # the dtypes of the whole-array expression
+        x_new = np.empty(x.shape, np.result_type(x, m_new, self.v))
+        bias, scale = 1 - self.beta ** self.t, self.v[0] + 1e-30
+        for b in _blocks(len(x)):
+            m = self.beta * self.m[b] + (1 - self.beta) * g[b]
+            m_new[b] = m
+            x_new[b] = x[b] - self.lr * (m / bias) / scale
+        self.m = m_new
+        return x_new
 
 
 class AdaGrad(_Moments):
@@ -63,8 +79,14 @@ class AdaGrad(_Moments):
 
     def step(self, x: np.ndarray, g: np.ndarray) -> np.ndarray:
         self.t += 1
-        self.v = self.v + g * g
-        return x - self.lr * g / (np.sqrt(self.v) + self.eps)
+        v_new = np.empty(self.v.shape, np.result_type(self.v, g))
+        x_new = np.empty(x.shape, np.result_type(x, g, v_new))
+        for b in _blocks(len(x)):
+            v = self.v[b] + g[b] * g[b]
+            v_new[b] = v
+            x_new[b] = x[b] - self.lr * g[b] / (np.sqrt(v) + self.eps)
+        self.v = v_new
+        return x_new
 
 
 class Adam(_Moments):
@@ -77,11 +99,17 @@ class Adam(_Moments):
     def step(self, x: np.ndarray, g: np.ndarray) -> np.ndarray:
         self.t += 1
         b1, b2 = self.beta1, self.beta2
-        self.m = b1 * self.m + (1 - b1) * g
-        self.v = b2 * self.v + (1 - b2) * g * g
-        mh = self.m / (1 - b1 ** self.t)
-        vh = self.v / (1 - b2 ** self.t)
-        return x - self.lr * mh / (np.sqrt(vh) + self.eps)
+        c1, c2 = 1 - b1 ** self.t, 1 - b2 ** self.t
+        m_new = np.empty(self.m.shape, np.result_type(self.m, g))
+        v_new = np.empty(self.v.shape, np.result_type(self.v, g))
+        x_new = np.empty(x.shape, np.result_type(x, m_new, v_new))
+        for b in _blocks(len(x)):
+            m = b1 * self.m[b] + (1 - b1) * g[b]
+            v = b2 * self.v[b] + (1 - b2) * g[b] * g[b]
+            m_new[b], v_new[b] = m, v
+            x_new[b] = x[b] - self.lr * (m / c1) / (np.sqrt(v / c2) + self.eps)
+        self.m, self.v = m_new, v_new
+        return x_new
 
 
 OPTIMIZER_CLASSES = {"eg": ExponentiatedGradient, "adagrad": AdaGrad, "adam": Adam}

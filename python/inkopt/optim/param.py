@@ -36,18 +36,29 @@ class Parameterization:
         #: flat (z, y, x) indices of the free voxels (F,) int64
         self.free_index = np.flatnonzero(free_share > 1e-6)
         #: the free voxels' free share (F,) and fixed shares (F, N) (None: all zero); nothing grid-sized is kept
-        #: beyond ``fixed_share`` itself and ``grad_index``
+        #: beyond ``fixed_share`` itself (the renderer's gradient slots are ``free_index``'s order)
         self.share_f = free_share[self.free_index]
         del free_share
         fixed_f = fixed_share.reshape(-1, self.n_inks)[self.free_index]
         self.fixed_f = fixed_f if fixed_f.any() else None
-        # Gradient slot of every voxel (-1: not a variable), for the renderer's sparse gradient.
-        self.grad_index = np.full(fixed_share.shape[:3], -1, np.int32)
-        self.grad_index.reshape(-1)[self.free_index] = np.arange(len(self.free_index), dtype=np.int32)
+
+    @property
+    def grad_index(self) -> np.ndarray:
+        """(z, y, x) int32: each voxel's row among the free voxels, -1 if it is not a variable (made on request:
+        4 bytes per grid voxel)."""
+        index = np.full(self.fixed_share.shape[:3], -1, np.int32)
+        index.reshape(-1)[self.free_index] = np.arange(len(self.free_index), dtype=np.int32)
+        return index
 
     @property
     def n_free(self) -> int:
         return len(self.free_index)
+
+    def chunks(self, rows: int = 1 << 20):
+        """Row ranges (lo, hi) covering the F free voxels, ``rows`` at a time: the per-voxel arithmetic of a big
+        object in pieces, so that its temporaries are a few MB instead of several (F, N) arrays. Every operation
+        is per row, so the result does not depend on the chunking, bit for bit."""
+        return [(lo, min(lo + rows, self.n_free)) for lo in range(0, self.n_free, rows)]
 
     def _p(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Free-part mixture p (F, N) and an auxiliary array for the backward pass."""
@@ -58,12 +69,13 @@ class Parameterization:
         s = 1.0 / (1.0 + np.exp(-x))
         return s / s.sum(axis=1, keepdims=True), s
 
-    def free_rows(self, x: np.ndarray) -> np.ndarray:
+    def free_rows(self, x: np.ndarray, lo: int = 0) -> np.ndarray:
         """The free voxels' whole mixtures (F, N) float32 (fixed + free part), in ``free_index`` order: what
-        :meth:`mixture` holds at those voxels, bit for bit."""
+        :meth:`mixture` holds at those voxels, bit for bit. ``x`` may be the rows lo:lo+len(x) only."""
+        hi = lo + len(x)
         p, _ = self._p(x)
-        rows = self.share_f[:, None] * p
-        return rows if self.fixed_f is None else self.fixed_f + rows
+        rows = self.share_f[lo:hi, None] * p
+        return rows if self.fixed_f is None else self.fixed_f[lo:hi] + rows
 
     def mixture(self, x: np.ndarray) -> np.ndarray:
         """The whole grid's mixture (z, y, x, N) float32 of variables x (F, N)."""
@@ -71,14 +83,15 @@ class Parameterization:
         rho[self.free_index] = self.free_rows(x)
         return rho.reshape(self.fixed_share.shape)
 
-    def backward(self, x: np.ndarray, grad_rho: np.ndarray, natural: bool = False) -> np.ndarray:
+    def backward(self, x: np.ndarray, grad_rho: np.ndarray, natural: bool = False, lo: int = 0) -> np.ndarray:
         """dE/dx (F, N) from dE/drho, given per free voxel (F, N) or for the whole grid (z, y, x, N).
         ``natural``: the mirror-descent direction on the simplex instead (softmax only): g - <g, p>, the
-        exponentiated-gradient step in logit space."""
+        exponentiated-gradient step in logit space. With ``lo``: x and grad_rho are the free voxels' rows
+        lo:lo+len(x) only (see :meth:`chunks`)."""
         g = grad_rho.reshape(-1, self.n_inks)
-        if len(g) != self.n_free:
+        if len(g) != len(x):
             g = g[self.free_index]
-        g = g * self.share_f[:, None]
+        g = g * self.share_f[lo:lo + len(x), None]
         p, aux = self._p(x)
         centred = g - np.sum(g * p, axis=1, keepdims=True)
         if natural:

@@ -1,6 +1,6 @@
 //! Compact and in-place storage of big objects, bit-identical to the plain forms: `DenseMedium::set_voxels`
 //! against a medium built from the modified full arrays; gradient buffers zeroed for reuse against fresh ones;
-//! sparse shading normals against the dense formula.
+//! sparse shading normals against the dense formula; the sparse medium against the dense one.
 
 use super::*;
 use crate::sampling::V3;
@@ -184,4 +184,112 @@ fn sparse_normals_match_the_dense_formula() {
     assert!(fresh().with_sparse_normals(&[3, 3], &[0.0; 6]).err().unwrap().contains("increase"));
     assert!(fresh().with_sparse_normals(&[nv as i64], &[0.0; 3]).err().unwrap().contains("in the grid"));
     assert!(fresh().with_sparse_normals(&[1], &[0.0; 6]).err().unwrap().contains("normal vectors"));
+}
+
+/// (sigma_t, albedo) bits of every voxel and channel of any medium, and its majorants.
+fn lookup_bits<M: Medium>(m: &M) -> (Vec<(u32, u32)>, [u32; 3]) {
+    let bits = (0..3).flat_map(|c| (0..m.len()).map(move |j| (c, j)))
+        .map(|(c, j)| { let (t, a) = m.coeffs(j, c); (t.to_bits(), a.to_bits()) }).collect();
+    (bits, [0, 1, 2].map(|c| m.majorant(c).to_bits()))
+}
+
+#[test]
+fn sparse_medium_matches_the_dense_one_bit_for_bit() {
+    // A masked object (a box with an inner cavity and a notch: vacuum voxels the walks cross) stored only at
+    // its inside voxels reads exactly what the dense medium with vacuum outside reads: every lookup, majorant,
+    // render and path-replay gradient, before and after set_voxels / refill; errors leave it unchanged.
+    let n = [9usize, 8, 7];
+    let nv = n.iter().product::<usize>();
+    let outside = |j: usize| {
+        let (x, y, z) = (j % n[0], (j / n[0]) % n[1], j / (n[0] * n[1]));
+        (z >= 2 && z <= 4 && (3..6).contains(&x) && (2..5).contains(&y)) || (z == 3 && y == 0 && x < 4)
+    };
+    let inside: Vec<u8> = (0..nv).map(|j| !outside(j) as u8).collect();
+    let index: Vec<i64> = (0..nv as i64).filter(|&j| inside[j as usize] != 0).collect();
+    let k = index.len();
+    let mut s: Vec<f32> = (0..3 * nv).map(|i| 1.0 + ((i * 7919) % 23) as f32).collect();
+    let mut a: Vec<f32> = (0..3 * nv).map(|i| ((i * 104729) % 7) as f32 * 0.8).collect();
+    for j in (0..nv).filter(|&j| outside(j)) {
+        s[3 * j..3 * j + 3].fill(0.0);
+        a[3 * j..3 * j + 3].fill(0.0);
+    }
+    let gather = |v: &[f32]| -> Vec<f32> { index.iter().flat_map(|&j| v[3 * j as usize..3 * j as usize + 3].to_vec()).collect() };
+    let mut sparse = SparseMedium::new(n, &index, &gather(&s), &gather(&a)).unwrap();
+    let dense = DenseMedium::from_interleaved(&s, &a).unwrap();
+    // Rows through the cavity store it (vacuum between inside voxels); the notch's rows start after it.
+    assert_eq!(sparse.stored(), k + 27);
+    assert!(k < nv - 20, "the mask leaves {} voxels outside", nv - k);
+    assert_eq!(lookup_bits(&sparse), lookup_bits(&dense));
+    let geo = Geometry::new(n, [0.1; 3], Boundary::Box, 1.5, 0.4).unwrap().with_inside(inside).unwrap();
+    let texels = box_texels(n, &[0, 1, 2, 3, 4, 5]);
+    let adj: Vec<[f32; 3]> = (0..texels.len()).map(|i| [1.0, -0.4 + 0.05 * i as f32, 0.2]).collect();
+    let check = |sparse: &SparseMedium, dense: &DenseMedium, seed: u64| {
+        assert_eq!(lookup_bits(sparse), lookup_bits(dense));
+        let opts = RenderOptions { spp: 8, seed, include_specular: true };
+        let ((x, sx), (y, sy)) = (render(&geo, sparse, &texels, 0, &opts), render(&geo, dense, &texels, 0, &opts));
+        assert_eq!(sx.events, sy.events);
+        assert!(sx.events > 1000, "paths scatter: {}", sx.events);
+        let bits = |e: &[TexelEstimate]| e.iter().map(|e| (e.mean.map(f32::to_bits), e.var_mean.map(f32::to_bits)))
+            .collect::<Vec<_>>();
+        assert_eq!(bits(&x), bits(&y));
+        let (gs, ga) = replay_gradient(&geo, sparse, &texels, &adj, &opts);
+        assert_eq!((gs, ga), replay_gradient(&geo, dense, &texels, &adj, &opts));
+    };
+    check(&sparse, &dense, 3);
+    // The walks never read an outside voxel's coefficients: a dense medium with matter there (below the
+    // majorant, so delta tracking is unchanged) renders exactly as the sparse one does.
+    let (mut s_out, mut a_out) = (s.clone(), a.clone());
+    for j in (0..nv).filter(|&j| outside(j)) {
+        s_out[3 * j..3 * j + 3].copy_from_slice(&[5.0, 7.0, 9.0]);
+        a_out[3 * j..3 * j + 3].copy_from_slice(&[0.5, 0.0, 1.0]);
+    }
+    let matter_outside = DenseMedium::from_interleaved(&s_out, &a_out).unwrap();
+    assert_eq!([0, 1, 2].map(|c| matter_outside.majorant(c)), [0, 1, 2].map(|c| dense.majorant(c)));
+    let opts = RenderOptions { spp: 8, seed: 3, include_specular: true };
+    let bits = |m: &DenseMedium| render(&geo, m, &texels, 0, &opts).0.iter().map(|e| e.mean.map(f32::to_bits))
+        .collect::<Vec<_>>();
+    assert_eq!(bits(&matter_outside), bits(&dense));
+    assert_eq!(replay_gradient(&geo, &matter_outside, &texels, &adj, &opts),
+               replay_gradient(&geo, &dense, &texels, &adj, &opts));
+    // set_voxels on some stored voxels (one listed twice: the last values win) = the dense medium rebuilt.
+    let sub: Vec<i64> = index.iter().copied().step_by(4).chain([index[5], index[5]]).collect();
+    let q = sub.len();
+    let ns: Vec<f32> = (0..3 * q).map(|i| 0.5 + ((i * 31) % 11) as f32 * 0.9).collect();
+    let na: Vec<f32> = (0..3 * q).map(|i| ((i * 17) % 7) as f32 * 0.3).collect();
+    for (e, &j) in sub.iter().enumerate() {
+        s[3 * j as usize..3 * j as usize + 3].copy_from_slice(&ns[3 * e..3 * e + 3]);
+        a[3 * j as usize..3 * j as usize + 3].copy_from_slice(&na[3 * e..3 * e + 3]);
+    }
+    sparse.set_voxels(&sub, &ns, &na).unwrap();
+    check(&sparse, &DenseMedium::from_interleaved(&s, &a).unwrap(), 4);
+    // refill of every stored voxel, in index order.
+    let (s2, a2): (Vec<f32>, Vec<f32>) = (s.iter().map(|x| 0.5 * x).collect(), a.iter().map(|x| x + 0.1).collect());
+    let a2: Vec<f32> = a2.iter().enumerate().map(|(i, &x)| if outside(i / 3) { 0.0 } else { x }).collect();
+    assert!(sparse.stores(&index) && !sparse.stores(&index[1..]) && !sparse.stores(&sub));
+    sparse.refill(&gather(&s2), &gather(&a2)).unwrap();
+    check(&sparse, &DenseMedium::from_interleaved(&s2, &a2).unwrap(), 5);
+    // Errors name the problem in one line and leave the medium as it was.
+    let before = lookup_bits(&sparse);
+    let hole = (0..nv as i64).find(|&j| outside(j as usize)).unwrap(); // in the cavity: inside its row's span
+    let notch = ((3 * n[1]) * n[0]) as i64; // (x, y, z) = (0, 0, 3): before its row's span
+    let bad = |q: usize, x: f32| { let mut v = gather(&s2); v[q] = x; v };
+    let errs = [
+        sparse.set_voxels(&[index[2], hole], &[1.0; 6], &[0.0; 6]).unwrap_err(),
+        sparse.set_voxels(&[nv as i64], &[1.0; 3], &[0.0; 3]).unwrap_err(),
+        sparse.set_voxels(&[notch], &[1.0; 3], &[0.0; 3]).unwrap_err(),
+        sparse.set_voxels(&[index[2]], &[1.0; 3], &[-1.0, 0.0, 0.0]).unwrap_err(),
+        sparse.refill(&bad(7, f32::NAN), &gather(&a2)).unwrap_err(),
+        sparse.refill(&gather(&s2)[3..], &gather(&a2)).unwrap_err(),
+    ];
+    let want = [format!("voxel {hole}, which the medium does not store"), format!("voxel {nv}, outside the grid"),
+                format!("voxel {notch}, which the medium does not store"),
+                "entry 0 (voxel".to_string(), "entry 2 channel 1".to_string(), "3 channels".to_string()];
+    for (e, w) in errs.iter().zip(&want) {
+        assert!(e.contains(w.as_str()) && !e.contains('\n'), "{e} (want {w})");
+    }
+    assert!(lookup_bits(&sparse) == before, "a refused update changed the medium");
+    for (ix, w) in [(vec![3i64, 3], "strictly increasing"), (vec![-1], "voxel -1, outside"), (vec![nv as i64], "outside")] {
+        let e = SparseMedium::new(n, &ix, &vec![1.0; 3 * ix.len()], &vec![0.0; 3 * ix.len()]).err().unwrap();
+        assert!(e.contains(w), "{e}");
+    }
 }

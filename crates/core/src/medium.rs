@@ -1,0 +1,363 @@
+//! The media a walk reads (behind the `Medium` trait): per-voxel (sigma_t, albedo) of each channel.
+//!
+//! - `DenseMedium`: every grid voxel's coefficients, 24 bytes per voxel.
+//! - `SparseMedium`: only some voxels' coefficients (an object's inside voxels), the rest vacuum: 24 bytes per
+//!   voxel of each grid row's span from its first to its last inside voxel, and 16 bytes per row. For a
+//!   figurine whose inside is a quarter of its bounding grid this is about a third of the dense form, and a
+//!   lookup reads the same values, so renders are bit-identical.
+//! - `LabelMedium`: one ink label per voxel and an ink table, 1 byte per voxel (quantized volumes).
+//!
+//! Coefficients are stored per channel in planar arrays (all voxels of R, then G, then B) as interleaved
+//! (sigma_t, albedo) pairs, the two numbers the random walk needs, so one lookup is one load.
+
+/// Label of an empty voxel in label media.
+pub const EMPTY: u8 = 255;
+
+/// Per-voxel optical parameters for one channel.
+pub trait Medium: Sync {
+    /// (sigma_t in mm^-1, albedo) of voxel `idx` in channel `c`.
+    fn coeffs(&self, idx: usize, c: usize) -> (f32, f32);
+    /// sigma_s in mm^-1 of voxel `idx` in channel `c` (for gradients).
+    fn sigma_s(&self, idx: usize, c: usize) -> f32 {
+        let (t, a) = self.coeffs(idx, c);
+        t * a
+    }
+    fn len(&self) -> usize;
+    /// An upper bound of sigma_t over all voxels in channel c (the majorant of delta tracking).
+    fn majorant(&self, c: usize) -> f32;
+}
+
+/// (sigma_t, albedo) of coefficients sigma_s, sigma_a (albedo 1 in vacuum); None unless both are finite and
+/// non-negative.
+pub(crate) fn extinction_albedo(s: f32, a: f32) -> Option<(f32, f32)> {
+    if !(s >= 0.0 && a >= 0.0 && s.is_finite() && a.is_finite()) {
+        return None;
+    }
+    let t = s + a;
+    Some((t, if t > 0.0 { s / t } else { 1.0 }))
+}
+
+/// Dense coefficients: planar by channel, (sigma_t, albedo) pairs interleaved so one lookup is one load.
+pub struct DenseMedium {
+    n: usize,
+    coef: Vec<[f32; 2]>,
+    majorant: [f32; 3],
+}
+
+impl DenseMedium {
+    /// From interleaved (voxel, channel) arrays of sigma_s and sigma_a in mm^-1 (a (z, y, x, 3) array's memory).
+    pub fn from_interleaved(sigma_s: &[f32], sigma_a: &[f32]) -> Result<Self, String> {
+        if sigma_s.len() != sigma_a.len() || sigma_s.len() % 3 != 0 {
+            return Err("sigma_s and sigma_a must both have 3 channels per voxel and equal size".into());
+        }
+        let n = sigma_s.len() / 3;
+        let mut medium = DenseMedium { n, coef: vec![[0.0f32, 1.0f32]; 3 * n], majorant: [0.0; 3] };
+        medium.refill(sigma_s, sigma_a)?;
+        Ok(medium)
+    }
+
+    /// Replace the coefficients by new ones for the same voxels, in place: the optimiser swaps the medium every
+    /// iteration, and a second copy of it would be the largest allocation of a big object. Checked before
+    /// anything is written, so an error leaves the medium as it was.
+    pub fn refill(&mut self, sigma_s: &[f32], sigma_a: &[f32]) -> Result<(), String> {
+        let n = self.n;
+        if sigma_s.len() != 3 * n || sigma_a.len() != 3 * n {
+            return Err(format!("sigma_s and sigma_a must have 3 channels for each of the {n} voxels"));
+        }
+        if let Some(k) = (0..3 * n).find(|&k| extinction_albedo(sigma_s[k], sigma_a[k]).is_none()) {
+            return Err(format!("coefficients of voxel {} channel {} are negative or not finite", k / 3, k % 3));
+        }
+        for i in 0..n {
+            for c in 0..3 {
+                let (t, albedo) = extinction_albedo(sigma_s[3 * i + c], sigma_a[3 * i + c]).unwrap();
+                self.coef[c * n + i] = [t, albedo];
+            }
+        }
+        self.update_majorant();
+        Ok(())
+    }
+
+    /// Overwrite the coefficients of some voxels in place, as `refill` would store them: `index` holds linear
+    /// voxel indices (a voxel listed twice takes its last values), `sigma_s` and `sigma_a` their interleaved
+    /// (entry, channel) coefficients in mm^-1. The optimiser changes only the free voxels of a big object, so
+    /// this costs O(K) plus one pass over the coefficients for the majorant (which may go down), and allocates
+    /// nothing. Checked before anything is written, so an error leaves the medium as it was.
+    pub fn set_voxels(&mut self, index: &[i64], sigma_s: &[f32], sigma_a: &[f32]) -> Result<(), String> {
+        let (n, k) = (self.n, index.len());
+        if sigma_s.len() != 3 * k || sigma_a.len() != 3 * k {
+            return Err(format!("sigma_s and sigma_a must have 3 channels for each of the {k} indexed voxels, \
+                                got {} and {} values", sigma_s.len(), sigma_a.len()));
+        }
+        if let Some(e) = index.iter().position(|&j| j < 0 || j as u64 >= n as u64) {
+            return Err(format!("index entry {e} is voxel {}, outside the grid of {n} voxels", index[e]));
+        }
+        if let Some(q) = (0..3 * k).find(|&q| extinction_albedo(sigma_s[q], sigma_a[q]).is_none()) {
+            return Err(format!("coefficients of entry {} (voxel {}) channel {} are negative or not finite",
+                               q / 3, index[q / 3], q % 3));
+        }
+        for (e, &j) in index.iter().enumerate() {
+            for c in 0..3 {
+                let (t, albedo) = extinction_albedo(sigma_s[3 * e + c], sigma_a[3 * e + c]).unwrap();
+                self.coef[c * n + j as usize] = [t, albedo];
+            }
+        }
+        self.update_majorant();
+        Ok(())
+    }
+
+    fn update_majorant(&mut self) {
+        self.majorant = majorant_of(&self.coef, self.n);
+    }
+}
+
+impl Medium for DenseMedium {
+    #[inline(always)]
+    fn coeffs(&self, idx: usize, c: usize) -> (f32, f32) {
+        let [t, a] = self.coef[c * self.n + idx];
+        (t, a)
+    }
+    fn len(&self) -> usize {
+        self.n
+    }
+    fn majorant(&self, c: usize) -> f32 {
+        self.majorant[c]
+    }
+}
+
+/// One ink label (u8) per voxel and a small ink table: 1 byte per voxel.
+pub struct LabelMedium {
+    labels: Vec<u8>,
+    majorant: [f32; 3],
+    /// [channel][ink] (sigma_t, albedo); index 255 (EMPTY) maps to vacuum.
+    table: [[(f32, f32); 256]; 3],
+}
+
+impl LabelMedium {
+    /// `ink_sigma_s`, `ink_sigma_a`: (N, 3) row-major, mm^-1.
+    pub fn new(labels: Vec<u8>, ink_sigma_s: &[f32], ink_sigma_a: &[f32]) -> Result<Self, String> {
+        let n_inks = ink_sigma_s.len() / 3;
+        if ink_sigma_s.len() != ink_sigma_a.len() || ink_sigma_s.len() % 3 != 0 || n_inks == 0 || n_inks > 255 {
+            return Err("ink table must be (N, 3) with 1 <= N <= 255".into());
+        }
+        let mut table = [[(0.0f32, 1.0f32); 256]; 3];
+        for k in 0..n_inks {
+            for c in 0..3 {
+                table[c][k] = extinction_albedo(ink_sigma_s[3 * k + c], ink_sigma_a[3 * k + c])
+                    .ok_or_else(|| format!("ink {k} has negative or non-finite coefficients"))?;
+            }
+        }
+        if let Some(bad) = labels.iter().find(|&&l| l != EMPTY && l as usize >= n_inks) {
+            return Err(format!("label {bad} has no ink in a table of {n_inks}"));
+        }
+        let mut used = [false; 256];
+        labels.iter().for_each(|&l| used[l as usize] = true);
+        let majorant = std::array::from_fn(|c| (0..256).filter(|&k| used[k]).fold(0.0f32, |a, k| a.max(table[c][k].0)));
+        Ok(LabelMedium { labels, majorant, table })
+    }
+}
+
+impl Medium for LabelMedium {
+    #[inline(always)]
+    fn coeffs(&self, idx: usize, c: usize) -> (f32, f32) {
+        self.table[c][self.labels[idx] as usize]
+    }
+    fn len(&self) -> usize {
+        self.labels.len()
+    }
+    fn majorant(&self, c: usize) -> f32 {
+        self.majorant[c]
+    }
+}
+
+
+/// Check interleaved (entry, channel) coefficient arrays of `k` entries: lengths, and every pair finite and
+/// non-negative. `name(q)` names entry q in the error.
+fn check_coefficients(k: usize, sigma_s: &[f32], sigma_a: &[f32], name: impl Fn(usize) -> String)
+                      -> Result<(), String> {
+    if sigma_s.len() != 3 * k || sigma_a.len() != 3 * k {
+        return Err(format!("sigma_s and sigma_a must have 3 channels for each of the {k} voxels, got {} and {} \
+                            values", sigma_s.len(), sigma_a.len()));
+    }
+    if let Some(q) = (0..3 * k).find(|&q| extinction_albedo(sigma_s[q], sigma_a[q]).is_none()) {
+        return Err(format!("coefficients of {} channel {} are negative or not finite", name(q / 3), q % 3));
+    }
+    Ok(())
+}
+
+/// The largest sigma_t of each channel over planar coefficients of `k` entries per channel (in parallel: max is
+/// exact in any order).
+fn majorant_of(coef: &[[f32; 2]], k: usize) -> [f32; 3] {
+    use rayon::prelude::*;
+    std::array::from_fn(|c| {
+        coef[c * k..(c + 1) * k].par_chunks(1 << 16).map(|b| b.iter().fold(0.0f32, |a, x| a.max(x[0])))
+            .reduce(|| 0.0f32, f32::max)
+    })
+}
+
+/// One (z, y) row of a `SparseMedium`: voxels x0..x1 are stored, voxel x at slot `off + x`.
+#[derive(Clone, Copy)]
+struct Span {
+    off: i64,
+    x0: u32,
+    x1: u32,
+}
+
+/// Coefficients of the voxels of an index set (the inside of a masked object), every other voxel vacuum
+/// (sigma_t 0, albedo 1). Each (z, y) row of the grid stores the span from its first to its last indexed voxel
+/// (the voxels between that are not indexed, e.g. a cavity, are stored as vacuum), so a lookup reads a small
+/// per-row table (16 bytes per row: it stays in cache) and then the coefficients, which lie closer together than
+/// in the dense form. Slots run in grid order. A bitset marks which stored voxels were indexed (the object).
+pub struct SparseMedium {
+    /// Grid voxels, and voxels per row (x).
+    n: usize,
+    nx: usize,
+    /// 1 / nx, to find a voxel's row without an integer division.
+    inv_nx: f64,
+    spans: Vec<Span>,
+    /// Stored voxels (slots), and how many of them were indexed.
+    k: usize,
+    given: usize,
+    /// Bit s: slot s is an indexed voxel.
+    indexed: Vec<u64>,
+    /// Planar by channel: `coef[c * k + slot]`.
+    coef: Vec<[f32; 2]>,
+    majorant: [f32; 3],
+}
+
+impl SparseMedium {
+    /// A grid of (nx, ny, nz) voxels storing the voxels `index` (strictly increasing linear indices) with
+    /// interleaved (entry, channel) coefficients `sigma_s`, `sigma_a` (mm^-1); every other voxel is vacuum.
+    pub fn new(n_xyz: [usize; 3], index: &[i64], sigma_s: &[f32], sigma_a: &[f32]) -> Result<Self, String> {
+        let (nx, n) = (n_xyz[0], n_xyz.iter().product::<usize>());
+        let given = index.len();
+        if let Some(e) = index.iter().position(|&j| j < 0 || j as u64 >= n as u64) {
+            return Err(format!("index entry {e} is voxel {}, outside the grid of {n} voxels", index[e]));
+        }
+        if let Some(e) = (1..given).find(|&e| index[e] <= index[e - 1]) {
+            return Err(format!("index must be strictly increasing; entry {e} is voxel {} after {}", index[e],
+                               index[e - 1]));
+        }
+        check_coefficients(given, sigma_s, sigma_a, |e| format!("entry {e} (voxel {})", index[e]))?;
+        let mut spans = vec![Span { off: 0, x0: 0, x1: 0 }; n / nx];
+        let mut k = 0usize;
+        let mut e = 0;
+        while e < given {
+            let row = index[e] as usize / nx;
+            let first = e;
+            while e < given && index[e] as usize / nx == row {
+                e += 1;
+            }
+            let (x0, x1) = (index[first] as usize % nx, index[e - 1] as usize % nx + 1);
+            spans[row] = Span { off: k as i64 - x0 as i64, x0: x0 as u32, x1: x1 as u32 };
+            k += x1 - x0;
+        }
+        let mut medium = SparseMedium { n, nx, inv_nx: 1.0 / nx as f64, spans, k, given,
+                                        indexed: vec![0u64; k.div_ceil(64)], coef: vec![[0.0f32, 1.0f32]; 3 * k],
+                                        majorant: [0.0; 3] };
+        let slots: Vec<usize> = index.iter().map(|&j| medium.slot(j as usize).unwrap()).collect();
+        for &s in &slots {
+            medium.indexed[s / 64] |= 1 << (s % 64);
+        }
+        medium.store(slots.into_iter().enumerate(), sigma_s, sigma_a);
+        Ok(medium)
+    }
+
+    /// The slot of voxel j, if its row's span holds it.
+    #[inline(always)]
+    fn slot(&self, j: usize) -> Option<usize> {
+        // j / nx by a float reciprocal, corrected by one where rounding crossed a row boundary.
+        let mut row = (j as f64 * self.inv_nx) as usize;
+        if row * self.nx > j {
+            row -= 1;
+        } else if (row + 1) * self.nx <= j {
+            row += 1;
+        }
+        let x = j - row * self.nx;
+        let sp = self.spans[row];
+        if x < sp.x0 as usize || x >= sp.x1 as usize {
+            return None;
+        }
+        Some((sp.off + x as i64) as usize)
+    }
+
+    /// The slot of voxel j if it was indexed (is part of the object).
+    fn indexed_slot(&self, j: usize) -> Option<usize> {
+        self.slot(j).filter(|&s| self.indexed[s / 64] >> (s % 64) & 1 == 1)
+    }
+
+    /// Whether this medium stores exactly the voxels `index` (a `new` argument): then `refill` may replace its
+    /// coefficients in place. O(len).
+    pub fn stores(&self, index: &[i64]) -> bool {
+        index.len() == self.given
+            && (1..index.len()).all(|e| index[e] > index[e - 1])
+            && index.iter().all(|&j| j >= 0 && (j as u64) < self.n as u64 && self.indexed_slot(j as usize).is_some())
+    }
+
+    /// Replace every indexed voxel's coefficients (entries in the order of the `index` this medium was built
+    /// from), in place. Checked before anything is written.
+    pub fn refill(&mut self, sigma_s: &[f32], sigma_a: &[f32]) -> Result<(), String> {
+        check_coefficients(self.given, sigma_s, sigma_a, |e| format!("entry {e}"))?;
+        // Slots run in grid order, so the e-th indexed slot is the e-th entry's.
+        let slots: Vec<usize> = (0..self.k).filter(|&s| self.indexed[s / 64] >> (s % 64) & 1 == 1).collect();
+        self.store(slots.into_iter().enumerate(), sigma_s, sigma_a);
+        Ok(())
+    }
+
+    /// `DenseMedium::set_voxels` for indexed voxels: overwrite some of them in place (a voxel listed twice takes
+    /// its last values); a voxel the medium was not built with is an error. Checked before anything is written.
+    pub fn set_voxels(&mut self, index: &[i64], sigma_s: &[f32], sigma_a: &[f32]) -> Result<(), String> {
+        let n = self.n;
+        if let Some(e) = index.iter().position(|&j| j < 0 || j as u64 >= n as u64) {
+            return Err(format!("index entry {e} is voxel {}, outside the grid of {n} voxels", index[e]));
+        }
+        let slots: Vec<Option<usize>> = index.iter().map(|&j| self.indexed_slot(j as usize)).collect();
+        if let Some(e) = slots.iter().position(|s| s.is_none()) {
+            return Err(format!("index entry {e} is voxel {}, which the medium does not store (outside the \
+                                object)", index[e]));
+        }
+        check_coefficients(index.len(), sigma_s, sigma_a, |e| format!("entry {e} (voxel {})", index[e]))?;
+        self.store(slots.into_iter().map(Option::unwrap).enumerate(), sigma_s, sigma_a);
+        Ok(())
+    }
+
+    /// Write checked coefficients of entries e into slots s for each (e, s), then recompute the majorant.
+    fn store(&mut self, pairs: impl Iterator<Item = (usize, usize)>, sigma_s: &[f32], sigma_a: &[f32]) {
+        let k = self.k;
+        for (e, s) in pairs {
+            for c in 0..3 {
+                let (t, albedo) = extinction_albedo(sigma_s[3 * e + c], sigma_a[3 * e + c]).unwrap();
+                self.coef[c * k + s] = [t, albedo];
+            }
+        }
+        self.majorant = majorant_of(&self.coef, k);
+    }
+
+    /// Number of stored voxels (the indexed ones and the vacuum between them in their rows).
+    pub fn stored(&self) -> usize {
+        self.k
+    }
+
+    /// Bytes of this medium's arrays.
+    pub fn bytes(&self) -> usize {
+        24 * self.k + 16 * self.spans.len() + 8 * self.indexed.len()
+    }
+}
+
+impl Medium for SparseMedium {
+    #[inline(always)]
+    fn coeffs(&self, idx: usize, c: usize) -> (f32, f32) {
+        match self.slot(idx) {
+            None => (0.0, 1.0),
+            Some(s) => {
+                let [t, a] = self.coef[c * self.k + s];
+                (t, a)
+            }
+        }
+    }
+    fn len(&self) -> usize {
+        self.n
+    }
+    fn majorant(&self, c: usize) -> f32 {
+        self.majorant[c]
+    }
+}
