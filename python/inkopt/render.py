@@ -78,6 +78,7 @@ class Renderer:
         if volume.normals is not None:
             kw["normal_index"], kw["normal_vectors"] = volume.normals.index, volume.normals.vectors
         self._scene = _core.Scene(volume.shape, tuple(float(v) for v in volume.voxel_mm), **kw)
+        self._labels = volume.form == "labels"
         self.lighting = Lighting()
         self.set_lighting(lighting)
 
@@ -108,14 +109,25 @@ class Renderer:
             raise ValueError(f"set_volume: shape {volume.shape} differs from the renderer's {self.volume.shape}")
         self._scene.set_medium(**self._medium_arrays(volume))
         self.volume = volume
+        self._labels = volume.form == "labels"
 
     def set_mixture(self, index: np.ndarray, mixture: np.ndarray) -> None:
         """Give the voxels ``index`` ((K,) flat (z, y, x) indices) the mixtures ``mixture`` ((K, N), the volume's
         inks), in place: the optimiser's per-iteration update of the free voxels, with no grid-sized array. The
-        other voxels keep their medium; :attr:`volume` still describes the geometry but no longer the medium."""
+        other voxels keep their medium; :attr:`volume` still describes the geometry but no longer the medium. A
+        renderer of a label volume (with an inside mask) first turns its medium into the inside voxels'
+        coefficients (each its label's ink), so a big object's base can be labels (1 byte per voxel)."""
         inks = self.volume.inks
         if inks is None:
             raise ValueError("set_mixture needs a volume with an ink table")
+        if self._labels:  # a label medium takes coefficients from now on: its inside voxels', per ink label
+            vol = self.volume
+            if vol.inside is None:
+                raise ValueError("set_mixture on a label volume needs an inside mask")
+            inside = np.flatnonzero(vol.inside)
+            cs, ca = vol.coefficients_at(inside)
+            self._scene.set_medium(medium_index=inside, sigma_s=cs, sigma_a=ca)
+            self._labels = False
         s, a = mix(mixture, inks)
         self._scene.set_voxels(np.ascontiguousarray(index, np.int64), np.ascontiguousarray(s, np.float32),
                                np.ascontiguousarray(a, np.float32))

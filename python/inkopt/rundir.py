@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from .io import load_npz, save_npz, write_json
-from .model import InkTable, Texels, Volume
+from .model import FixedShares, InkTable, Texels, Volume
 from .model.labelfile import LabelFileWriter
 
 #: scene.npz stores the dense (z, y, x, N) fixed_share only below this many entries (else: free_mask only)
@@ -29,12 +29,17 @@ FIXED_SHARE_MAX_ENTRIES = 50_000_000
 
 def white_fixed_share(free: np.ndarray, inks: InkTable) -> np.ndarray:
     """(z, y, x, N) float32 fixed ink shares: 100 % white where ``free`` (z, y, x) is False, none where True."""
+    return white_fixed_shares(free, inks).dense()
+
+
+def white_fixed_shares(free: np.ndarray, inks: InkTable) -> FixedShares:
+    """:func:`white_fixed_share` in compact form (``free`` kept by reference)."""
     if "white" not in inks.names:
         raise ValueError(f"voxels that are not optimised (outside the object, the core below --shell-mm) are "
                          f"printed white, but the ink set {list(inks.names)} has no 'white'")
-    fixed = np.zeros(free.shape + (len(inks),), np.float32)
-    fixed[..., inks.index("white")] = ~free
-    return fixed
+    held = np.zeros(len(inks), np.float32)
+    held[inks.index("white")] = 1.0
+    return FixedShares(free, held)
 
 
 TRANSPARENT_INKS = ("transparent", "clear")  # ink names that count as the transparent ink
@@ -83,20 +88,35 @@ class Translucency:
         Their other fixed shares (the white of a core or outside voxel) shrink to make room: a voxel that was
         100 % white becomes ``share`` transparent + (1 - ``share``) white; free voxels keep no other fixed share.
         Idempotent."""
-        if fixed.shape[:3] != self.shape:
-            raise ValueError(f"translucency constraint is for a {self.shape} grid, not {fixed.shape[:3]}")
+        self._check(fixed.shape, inks)
+        flat = fixed.reshape(-1, len(inks))
+        flat[self.index] = self._constrain(flat[self.index], inks)
+        return fixed
+
+    def applied(self, fixed: FixedShares, inks: InkTable) -> FixedShares:
+        """:meth:`apply` on compact fixed shares: a new ``FixedShares`` whose dense form is ``apply``'s result."""
+        self._check(fixed.shape, inks)
+        index = np.union1d(fixed.index, self.index)
+        rows = fixed.at(index)
+        pos = np.searchsorted(index, self.index)
+        rows[pos] = self._constrain(rows[pos], inks)
+        return FixedShares(fixed.free, fixed.held, index, rows)
+
+    def _check(self, shape, inks: InkTable) -> None:
+        if tuple(shape[:3]) != self.shape:
+            raise ValueError(f"translucency constraint is for a {self.shape} grid, not {tuple(shape[:3])}")
         if self.ink not in inks.names:
             raise ValueError(f"the translucency constraint needs ink '{self.ink}', not in {list(inks.names)}")
+
+    def _constrain(self, rows: np.ndarray, inks: InkTable) -> np.ndarray:
+        """The constrained voxels' fixed shares (K, N) float32 from their unconstrained ones (changed in place)."""
         t = inks.index(self.ink)
-        flat = fixed.reshape(-1, len(inks))
-        rows = flat[self.index]
         rows[:, t] = 0.0
         other = rows.sum(1)
         room = 1.0 - self.share
         rows *= np.where(other > room, room / np.maximum(other, 1e-12), 1.0)[:, None]
         rows[:, t] = self.share
-        flat[self.index] = rows
-        return fixed
+        return rows
 
     def arrays(self) -> dict:
         return {"translucency_ink": np.array(self.ink), "translucency_shape": np.array(self.shape, np.int64),

@@ -301,3 +301,24 @@ def test_gradient_slots_from_a_voxel_list_match_the_slot_map():
     for bad, msg in ((voxels[::-1], "strictly increasing"), (np.array([vol.inside.size]), "outside the grid")):
         with pytest.raises(ValueError, match=msg):
             r.gradient(tex, adj, spp=1, seed=4, grad_index=bad)
+
+
+def test_set_mixture_on_a_label_volume_switches_to_coefficients():
+    """A renderer of a masked label volume (a big object's 1-byte base) given mixtures for some voxels renders
+    as a fresh renderer of the mixture volume with the labels' inks elsewhere, bit for bit."""
+    rng = np.random.default_rng(13)
+    inks = InkTable.parse("vero-cmykw")
+    shape = (5, 6, 7)
+    inside = np.ones(shape, bool)
+    inside[3:, :3, :2] = False
+    labels = np.where(inside, rng.integers(0, 5, size=shape), 255).astype(np.uint8)
+    base = Volume(voxel_mm=(VOX,) * 3, labels=labels, inks=inks, inside=inside)
+    index = np.sort(rng.choice(np.flatnonzero(inside), 60, replace=False))
+    rows = rng.dirichlet(np.ones(5), size=len(index)).astype(np.float32)
+    full = np.eye(5, dtype=np.float32)[np.where(inside, labels, 0)] * inside[..., None]
+    full.reshape(-1, 5)[index] = rows
+    tex = Texels.for_volume(base)
+    r = Renderer(base)
+    r.set_mixture(index, rows)
+    np.testing.assert_array_equal(r.render(tex, spp=4, seed=2).rgb,
+                                  Renderer(base.with_mixture(full)).render(tex, spp=4, seed=2).rgb)

@@ -36,7 +36,7 @@ def test_slab_constraint_region_depth_and_record():
                     translucency_depth_mm=4 * vox)
     nz, ny, nx = sc.volume.shape
     assert (nz, ny, nx) == (10, 20, 30)
-    fixed = sc.fixed_share
+    fixed = np.asarray(sc.fixed_share)  # dense form of the compact FixedShares
     assert fixed.shape == (10, 20, 30, len(INKS))
     np.testing.assert_allclose(fixed[6:, :, :15, T], 0.8)           # the region, 4 layers from the top
     assert np.all(fixed[:6, ..., T] == 0) and np.all(fixed[:, :, 15:, T] == 0)
@@ -127,7 +127,7 @@ def test_mesh_alpha_depth_and_core(tmp_path):
     # the region reaches 4 voxels deep: the centre of the cube (~6 voxels deep) is not constrained
     nz, ny, nx = inside.shape
     assert g[nz // 2, ny // 2, nx // 2] == 0
-    fixed = sc.fixed_share
+    fixed = np.asarray(sc.fixed_share)  # dense form of the compact FixedShares
     reached_core = (g > 0) & ~sc.free & inside
     assert reached_core.any()                                # depth 4 > shell 2: the region reaches the core
     np.testing.assert_allclose(fixed[reached_core][:, T], g[reached_core])
@@ -211,7 +211,7 @@ def test_constraint_holds_through_quantization():
         m[4:20, 2:12] = s
         sc = build_slab(_pic(24, 24), None, (24 * vox, 24 * vox, 8 * vox), INKS, translucency=m,
                         translucency_depth_mm=5 * vox)
-        fixed = sc.fixed_share
+        fixed = np.asarray(sc.fixed_share)  # dense form of the compact FixedShares
         free = rng.dirichlet(np.ones(len(INKS)), size=shape)
         mix = (fixed + (1 - fixed.sum(-1, keepdims=True)) * free).astype(np.float32)
         vol = Volume(voxel_mm=(vox,) * 3, mixture=mix, inks=INKS)

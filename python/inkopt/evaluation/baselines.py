@@ -39,8 +39,8 @@ def white_mixture(inks: InkTable, table: ColourTable | None = None) -> np.ndarra
 
 
 def _check(volume: Volume, table: ColourTable):
-    if volume.form != "mixture":
-        raise ValueError(f"baselines need a mixture volume, got a {volume.form} volume")
+    if volume.inks is None:  # only the geometry and the ink table are used, not the medium
+        raise ValueError(f"baselines need a volume with an ink table, got a {volume.form} volume")
     if tuple(table.ink_names) != tuple(volume.inks.names):
         raise ValueError(f"colour table inks {list(table.ink_names)} differ from the volume's "
                          f"{list(volume.inks.names)}")
@@ -63,7 +63,7 @@ def surface_baseline(volume: Volume, texels: Texels, target_rgb, fixed_share=Non
                      table: ColourTable | None = None, refine: bool = True, progress: bool = False) -> np.ndarray:
     """Mixture (z, y, x, N) float32: each scene texel's mapped mixture in its voxel, white elsewhere inside.
 
-    volume: the run's mixture volume (grid, inks, g, ior); texels and their target_rgb (I, 3) linear;
+    volume: the run's volume (grid, inks, g, ior; mixture or labels: its medium is not used); texels and their target_rgb (I, 3) linear;
     fixed_share (z, y, x, N) or None: the run's constraints (``SceneRecord.fixed_share``), kept by the baseline.
     table: default ``colour_table`` of the volume's inks.
     """

@@ -1,6 +1,7 @@
 """The data model shared by every stage: inks and ink sets (``inks``), the voxel volume in its three medium forms
-(``volume``, its surface's shading normals in ``normals``) and the renderer's sensor elements, texels
+(``volume``, its surface's shading normals in ``normals``, fixed ink shares of big objects in ``fixed``) and the renderer's sensor elements, texels
 (``texels``)."""
+from .fixed import FixedShares
 from .inks import DEFAULT_G, INK_LIBRARY, PRESETS, InkTable, mix, mix_grad
 from .normals import SurfaceNormals
 from .texels import FACE_ALIASES, FACE_NAMES, FACE_NORMALS, Texels, face_id
@@ -9,4 +10,4 @@ from .volume import (BOUNDARIES, EMPTY, MAX_VOLUME_BYTES, Dense, Labels, Mixture
 
 __all__ = ["DEFAULT_G", "INK_LIBRARY", "PRESETS", "InkTable", "mix", "mix_grad", "FACE_ALIASES", "FACE_NAMES",
            "FACE_NORMALS", "Texels", "face_id", "BOUNDARIES", "EMPTY", "MAX_VOLUME_BYTES", "Dense", "Labels",
-           "Mixture", "Quantization", "Volume", "VolumeError", "SurfaceNormals"]
+           "Mixture", "Quantization", "Volume", "VolumeError", "SurfaceNormals", "FixedShares"]

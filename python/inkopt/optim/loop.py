@@ -26,7 +26,7 @@ from ..color import delta_e76
 from ..io import save_npz
 from ..lighting import Lighting, load_lighting
 from ..loss import TexelLoss
-from ..model import Texels, Volume, mix_grad
+from ..model import FixedShares, Texels, Volume, mix_grad
 from ..render import Renderer
 from .config import OptimizeConfig
 from .optimizers import make_optimizer
@@ -96,7 +96,10 @@ class Optimization:
         self.loss = TexelLoss(self.target, texels.pos_vox, gamma=cfg.gamma)
         # what the run optimises towards and under which constraints: part of the checkpoint key
         h = hashlib.sha256(self.target.tobytes())
-        h.update(np.ascontiguousarray(self.param.fixed_share).data)
+        if isinstance(self.param.fixed_share, FixedShares):
+            self.param.fixed_share.digest(h)  # the same bytes as the dense array's, a layer at a time
+        else:
+            h.update(np.ascontiguousarray(self.param.fixed_share).data)
         self._problem_digest = h.hexdigest()[:16]
         self.x = self.param.variables_for(self._initial_free_mixture())
         self.opt = make_optimizer(cfg.optimizer, cfg.step_size, self.x.shape)
@@ -167,11 +170,23 @@ class Optimization:
     # -------------------------------------------------------------- one step
     def renderer(self) -> Renderer:
         """The run's renderer, set to the current mixture. It is built once from the fixed shares (the base
-        geometry with ``fixed_share`` as its mixture, no copy); every iteration then overwrites only the free
-        voxels' media (``Renderer.set_mixture``), so no grid-sized mixture or coefficient array is made per step."""
+        geometry with ``fixed_share`` as its mixture, no copy; compact fixed shares of a masked object: the base
+        volume, whose medium is then replaced at every inside voxel that is not a variable); every iteration then
+        overwrites only the free voxels' media (``Renderer.set_mixture``), so no grid-sized mixture or coefficient
+        array is made per step."""
         if self._renderer is None:
-            self._renderer = self.renderer_factory(self.base.with_mixture(self.param.fixed_share), self.threads,
-                                                   self.lighting)
+            fs = self.param.fixed_share
+            if isinstance(fs, FixedShares) and self.base.inside is not None:
+                self._renderer = self.renderer_factory(self.base, self.threads, self.lighting)
+                held = self.base.inside.copy()
+                held.reshape(-1)[self.param.free_index] = False
+                held = np.flatnonzero(held)
+                for lo in range(0, len(held), 1 << 20):
+                    self._renderer.set_mixture(held[lo:lo + (1 << 20)], fs.at(held[lo:lo + (1 << 20)]))
+                del held
+            else:
+                self._renderer = self.renderer_factory(self.base.with_mixture(np.asarray(fs)), self.threads,
+                                                       self.lighting)
         for lo, hi in self.param.chunks():  # in pieces: no (F, N) temporaries for a big object
             self._renderer.set_mixture(self.param.free_index[lo:hi], self.param.free_rows(self.x[lo:hi], lo))
         return self._renderer

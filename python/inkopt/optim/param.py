@@ -11,24 +11,31 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..model import InkTable, Volume
+from ..model import FixedShares, InkTable, Volume
 from .config import PARAMS
+
+
+BAD_SHARES = "fixed ink shares must be non-negative and sum to at most 1 per voxel"
 
 
 class Parameterization:
     """Maps variables x (F, N) of the free voxels to the full mixture (z, y, x, N), and gradients back.
 
-    fixed_share: (z, y, x, N) float32 ink shares the optimiser may not change (all zero: everything free).
+    fixed_share: (z, y, x, N) float32 ink shares the optimiser may not change (all zero: everything free), dense or
+    as :class:`~inkopt.model.FixedShares` (kept by reference; no grid-sized float array is made from it).
     """
 
-    def __init__(self, kind: str, fixed_share: np.ndarray):
+    def __init__(self, kind: str, fixed_share):
         if kind not in PARAMS:
             raise ValueError(f"unknown parameterisation '{kind}'")
+        self.kind = kind
+        if isinstance(fixed_share, FixedShares):
+            self._init_compact(fixed_share)
+            return
         fixed_share = np.asarray(fixed_share, np.float32)
         total = fixed_share.sum(-1)
         if np.any(fixed_share < 0) or np.any(total > 1 + 1e-5):
-            raise ValueError("fixed ink shares must be non-negative and sum to at most 1 per voxel")
-        self.kind = kind
+            raise ValueError(BAD_SHARES)
         self.fixed_share = fixed_share
         self.n_inks = fixed_share.shape[-1]
         free_share = np.clip(1.0 - total, 0.0, 1.0).reshape(-1)
@@ -42,11 +49,35 @@ class Parameterization:
         fixed_f = fixed_share.reshape(-1, self.n_inks)[self.free_index]
         self.fixed_f = fixed_f if fixed_f.any() else None
 
+    def _init_compact(self, fs: FixedShares) -> None:
+        """The same free voxels, shares and fixed rows as from ``np.asarray(fs)``, bit for bit, in pieces."""
+        if np.any(fs.held < 0) or np.any(fs.rows < 0) or np.any(fs.rows.sum(-1) > 1 + 1e-5) or (
+                fs.held.sum() > 1 + 1e-5 and not fs.free.all()):
+            raise ValueError(BAD_SHARES)
+        self.fixed_share, self.n_inks = fs, fs.shape[-1]
+        held_free = np.clip(1.0 - fs.held.sum(), 0.0, 1.0) > 1e-6  # the held row leaves room: variables too
+        candidate = np.ones(fs.free.shape, bool) if held_free else fs.free.copy()
+        candidate.reshape(-1)[fs.index] = np.clip(1.0 - fs.rows.sum(-1), 0.0, 1.0) > 1e-6
+        self.free_index = np.flatnonzero(candidate)
+        del candidate
+        self.share_f = np.empty(len(self.free_index), np.float32)
+        any_fixed = False
+        for lo, hi in self.chunks():
+            rows = fs.at(self.free_index[lo:hi])
+            self.share_f[lo:hi] = np.clip(1.0 - rows.sum(-1), 0.0, 1.0)
+            any_fixed = any_fixed or bool(rows.any())
+        self.fixed_f = fs.at(self.free_index) if any_fixed else None
+
+    @property
+    def shape(self) -> tuple:
+        """(z, y, x) of the grid."""
+        return tuple(self.fixed_share.shape[:3])
+
     @property
     def grad_index(self) -> np.ndarray:
         """(z, y, x) int32: each voxel's row among the free voxels, -1 if it is not a variable (made on request:
         4 bytes per grid voxel)."""
-        index = np.full(self.fixed_share.shape[:3], -1, np.int32)
+        index = np.full(self.shape, -1, np.int32)
         index.reshape(-1)[self.free_index] = np.arange(len(self.free_index), dtype=np.int32)
         return index
 
@@ -79,9 +110,10 @@ class Parameterization:
 
     def mixture(self, x: np.ndarray) -> np.ndarray:
         """The whole grid's mixture (z, y, x, N) float32 of variables x (F, N)."""
-        rho = self.fixed_share.copy().reshape(-1, self.n_inks)
+        fs = self.fixed_share
+        rho = (fs.dense() if isinstance(fs, FixedShares) else fs.copy()).reshape(-1, self.n_inks)
         rho[self.free_index] = self.free_rows(x)
-        return rho.reshape(self.fixed_share.shape)
+        return rho.reshape(self.shape + (self.n_inks,))
 
     def backward(self, x: np.ndarray, grad_rho: np.ndarray, natural: bool = False, lo: int = 0) -> np.ndarray:
         """dE/dx (F, N) from dE/drho, given per free voxel (F, N) or for the whole grid (z, y, x, N).
@@ -141,6 +173,6 @@ def initial_free_mixture(inks: InkTable, param: Parameterization, init: str, see
     vol = Volume.load(init)
     if vol.form != "mixture" or vol.inks.names != inks.names:
         raise ValueError(f"--init {init}: needs a mixture volume with inks {list(inks.names)}")
-    if vol.shape != param.fixed_share.shape[:3]:
-        raise ValueError(f"--init {init}: volume shape {vol.shape} differs from {param.fixed_share.shape[:3]}")
+    if vol.shape != param.shape:
+        raise ValueError(f"--init {init}: volume shape {vol.shape} differs from {param.shape}")
     return vol.mixture.reshape(-1, n)[param.free_index].astype(np.float64)

@@ -1,7 +1,7 @@
 """The scene of a textured 3D object (``inkopt optimize MESH``).
 
 Load the mesh (``load.load_mesh``: z up, standing on z = 0, scaled to ``height_mm`` or by ``scale`` mm per model
-unit) -> voxelize it on the optimisation grid (``voxelize.voxelize``, 300 DPI by default) -> a mixture ``Volume``
+unit) -> voxelize it on the optimisation grid (``voxelize.voxelize``, 300 DPI by default) -> a label ``Volume`` (white inside)
 with the object's ``inside`` mask, shading ``normals`` and ``origin_mm`` (box boundary), one texel per surface
 voxel whose target is the texture colour of the closest surface point.
 
@@ -27,8 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ...model import InkTable, Volume
-from ...rundir import MeshInfo, SceneRecord, Translucency, transparent_ink, white_fixed_share
+from ...model import EMPTY, FixedShares, InkTable, Volume
+from ...rundir import (FIXED_SHARE_MAX_ENTRIES, MeshInfo, SceneRecord, Translucency, transparent_ink,
+                       white_fixed_share, white_fixed_shares)
 from ...units import OPT_DPI, voxel_mm
 from ..translucency import (ALPHA, check_depth, check_mask, load_mask, mesh_texel_share, mesh_translucency,
                             translucency_fields)
@@ -56,16 +57,17 @@ def free_voxels(vox: VoxelizedObject, shell_mm: float | None = None) -> np.ndarr
 class MeshScene:
     """A voxelized object ready to optimise.
 
-    mesh: the loaded mesh (mm, z up); vox: its voxelization (``sdf`` dropped); volume: mixture Volume giving the
-    geometry (inside, normals, box boundary, origin_mm) whose mixture *is* ``fixed_share`` (the same array;
-    the optimiser ignores the base mixture); free: (z, y, x) bool variables; fixed_share: (z, y, x, N) float32.
+    mesh: the loaded mesh (mm, z up); vox: its voxelization (``sdf`` dropped); volume: a label Volume giving the
+    geometry (inside, normals, box boundary, origin_mm) and inks (white labels inside; the optimiser takes its
+    fixed shares from ``fixed_share``); free: (z, y, x) bool variables; fixed_share: the (z, y, x, N) fixed ink
+    shares as :class:`~inkopt.model.FixedShares` (``np.asarray`` gives the dense array).
     """
 
     mesh: TexturedMesh
     vox: VoxelizedObject
     volume: Volume
     free: np.ndarray
-    fixed_share: np.ndarray
+    fixed_share: FixedShares
     shell_mm: float | None
     voxelize_seconds: float
 
@@ -90,8 +92,10 @@ class MeshScene:
         vox = self.vox
         info = MeshInfo(self.mesh_path, float(self.mesh.mm_per_unit), self.height_mm, self.up, vox.origin_mm,
                         vox.voxel_mm, vox.closest_mm, self.shell_mm)
-        return SceneRecord("mesh", vox.texels, vox.targets, free_mask=self.free, fixed_share_dense=self.fixed_share,
-                           mesh=info, translucency=self.translucency)
+        small = np.prod(self.fixed_share.shape) < FIXED_SHARE_MAX_ENTRIES  # else rebuilt from free_mask
+        return SceneRecord("mesh", vox.texels, vox.targets, free_mask=self.free,
+                           fixed_share_dense=self.fixed_share.dense() if small else None, mesh=info,
+                           translucency=self.translucency)
 
     def describe(self) -> str:
         nz, ny, nx = self.volume.shape
@@ -152,16 +156,17 @@ def build_mesh_scene(mesh_path, inks: InkTable, height_mm: float | None = None, 
     vox = voxelize(mesh, voxel_mm=vmm, band=band)
     seconds = time.perf_counter() - t0
     free = free_voxels(vox, shell_mm)
-    fixed = white_fixed_share(free, inks)
+    fixed = white_fixed_shares(free, inks)
     tr = None
     if translucency is not None:  # before the SDF is dropped
         source = ALPHA if mask is None else str(translucency if not isinstance(translucency, np.ndarray) else "mask")
         tr = mesh_translucency(vox, mesh_texel_share(mesh, vox, mask), inks, translucency_depth_mm, source)
         if tr is not None:
-            tr.apply(fixed, inks)
-    # The base volume's mixture is ignored by the optimiser (it only gives geometry and inks): share the
-    # fixed-share array instead of allocating another (z, y, x, N) array.
-    vol = Volume(voxel_mm=vox.voxel_mm, mixture=fixed, inks=inks, g=inks.g, inside=vox.inside,
+            fixed = tr.applied(fixed, inks)
+    # The base volume's medium is not the optimiser's (it takes geometry and inks from it, and the fixed shares
+    # from ``fixed``): white labels inside, 1 byte per voxel, instead of a (z, y, x, N) mixture.
+    labels = np.where(vox.inside, np.uint8(inks.index("white")), np.uint8(EMPTY))
+    vol = Volume(voxel_mm=vox.voxel_mm, labels=labels, inks=inks, g=inks.g, inside=vox.inside,
                  normals=vox.normals, boundary="box", origin_mm=vox.origin_mm)
     vox.sdf = None  # 4 bytes per grid voxel no longer needed
     return MeshScene(mesh, vox, vol, free, fixed, shell_mm, seconds, str(Path(mesh_path).resolve()), up, tr)

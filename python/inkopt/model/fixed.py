@@ -1,0 +1,76 @@
+"""Fixed ink shares of a big object without the dense (z, y, x, N) array.
+
+A mesh run fixes 100 % white in every voxel that is not a variable (outside the object, the core below
+``--shell-mm``) and, with a translucency constraint, a share of transparent ink in some voxels. As a dense float32
+array that is 20 bytes per grid voxel (1.2 GB for a 40 mm figurine), almost all of it one repeated row.
+:class:`FixedShares` keeps the same shares as a ``free`` mask (the voxels without a fixed share), the one row the
+others hold, and the rows of the few voxels that differ (``index``, ``rows``). It behaves as the dense array where
+one is needed (``np.asarray(fixed)``, ``.shape``), and gives rows (:meth:`at`), planes and the dense bytes' hash
+without making it.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+class FixedShares:
+    """Fixed ink shares (z, y, x, N) float32: voxels where ``free`` ((z, y, x) bool, kept by reference) is False
+    hold ``held`` ((N,) float32), those where it is True none, except the voxels ``index`` ((K,) int64, strictly
+    increasing flat (z, y, x) indices), which hold ``rows`` ((K, N) float32)."""
+
+    ndim = 4
+    dtype = np.dtype(np.float32)
+
+    def __init__(self, free: np.ndarray, held: np.ndarray, index: np.ndarray | None = None,
+                 rows: np.ndarray | None = None):
+        self.free = np.asarray(free, bool)
+        self.held = np.asarray(held, np.float32).reshape(-1)
+        n = len(self.held)
+        self.index = np.zeros(0, np.int64) if index is None else np.asarray(index, np.int64).reshape(-1)
+        self.rows = np.zeros((0, n), np.float32) if rows is None else np.asarray(rows, np.float32).reshape(-1, n)
+        if self.free.ndim != 3:
+            raise ValueError(f"free must be a (z, y, x) mask, got shape {self.free.shape}")
+        if len(self.rows) != len(self.index):
+            raise ValueError(f"{len(self.index)} indexed voxels but {len(self.rows)} rows")
+        if len(self.index) and (np.any(np.diff(self.index) <= 0) or self.index[0] < 0
+                                or self.index[-1] >= self.free.size):
+            raise ValueError("fixed-share index must be strictly increasing voxel indices inside the grid")
+
+    @property
+    def shape(self) -> tuple:
+        return self.free.shape + (len(self.held),)
+
+    def at(self, index: np.ndarray) -> np.ndarray:
+        """(K, N) float32: the shares of the voxels ``index`` ((K,) flat indices), as the dense array holds them."""
+        index = np.asarray(index, np.int64)
+        out = np.where(self.free.reshape(-1)[index][:, None], np.float32(0), self.held[None, :]).astype(np.float32)
+        if len(self.index):
+            pos = np.searchsorted(self.index, index).clip(0, len(self.index) - 1)
+            hit = self.index[pos] == index
+            out[hit] = self.rows[pos[hit]]
+        return out
+
+    def plane(self, z: int) -> np.ndarray:
+        """(y, x, N) float32: layer z of the dense array."""
+        ny, nx = self.free.shape[1:]
+        return self.at(np.arange(z * ny * nx, (z + 1) * ny * nx, dtype=np.int64)).reshape(ny, nx, -1)
+
+    def dense(self) -> np.ndarray:
+        """The dense (z, y, x, N) float32 array (20 bytes per voxel for 5 inks: for small objects and outputs)."""
+        out = np.zeros(self.shape, np.float32)
+        out[~self.free] = self.held
+        out.reshape(-1, self.shape[-1])[self.index] = self.rows
+        return out
+
+    def __array__(self, dtype=None, copy=None):
+        out = self.dense()
+        return out if dtype is None else out.astype(dtype, copy=False)
+
+    def digest(self, h) -> None:
+        """Feed the dense array's bytes (C order) to the hash ``h``, one layer at a time."""
+        for z in range(self.free.shape[0]):
+            h.update(np.ascontiguousarray(self.plane(z)).data)
+
+    def any(self) -> bool:
+        """Whether any voxel holds a fixed share."""
+        return bool(np.any(self.rows)) or (bool(np.any(self.held)) and not bool(self.free.all()))
