@@ -230,8 +230,8 @@ impl Scene {
     /// (sets the fixed-point quantum). `grad_index`: which voxels get gradients, and in which slot; gradients are
     /// then returned per slot, (F, 3). Either (z, y, x) int32, the slot of each voxel or -1 for none, or (F,)
     /// int64, strictly increasing linear indices of the voxels whose slots are 0..F (4 bytes per grid voxel
-    /// fewer on the caller's side). None: every voxel, (z, y, x, 3). The buffer of the previous call is zeroed in
-    /// place when it was for the same slots (checked: element by element, or in O(F) for the second form) or both
+    /// fewer on the caller's side). None: every voxel, (z, y, x, 3). The buffer of the previous call, if it was
+    /// not taken (take_grad frees it), is zeroed in place when it was for the same slots (checked: element by element, or in O(F) for the second form) or both
     /// None; otherwise it is freed before the new one is allocated. The GIL is released.
     #[pyo3(signature = (max_abs_adjoint, grad_index=None))]
     fn zero_grad(&mut self, py: Python<'_>, max_abs_adjoint: f32, grad_index: Option<Bound<'_, PyAny>>)
@@ -344,26 +344,31 @@ impl Scene {
     }
 
     /// The accumulated gradients (d e/d sigma_s, d e/d sigma_a): (z, y, x, 3) float32 each, or (F, 3) per slot
-    /// when zero_grad was given a grad_index.
-    fn take_grad<'py>(&self, py: Python<'py>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
-        let g = self.grads.as_ref().ok_or_else(|| err("no gradient: call zero_grad and backward first"))?;
+    /// when zero_grad was given a grad_index. The buffers are freed (48 bytes per slot: a big object's optimiser
+    /// step should not hold them beside its own arrays); the next zero_grad allocates new ones.
+    fn take_grad<'py>(&mut self, py: Python<'py>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+        let g = self.grads.take().ok_or_else(|| err("no gradient: call zero_grad and backward first"))?;
         let n = g.slots();
         let mut gs = vec![0.0f32; 3 * n];
         let mut ga = vec![0.0f32; 3 * n];
         py.detach(|| g.collect(&mut gs, &mut ga));
+        drop(g);
         Ok((self.grad_array(py, gs)?, self.grad_array(py, ga)?))
     }
 
     /// The gradients as take_grad, but as their raw fixed-point sums (int64) and the quantum (float): the float
     /// gradient is float32(float64(sum) * quantum). Sums of shards of one pass (same max_abs_adjoint) add up,
     /// wrapping, to the whole pass's sums, which is how texel shards on several machines combine bit-identically.
-    fn take_grad_fixed<'py>(&self, py: Python<'py>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>, f64)> {
-        let g = self.grads.as_ref().ok_or_else(|| err("no gradient: call zero_grad and backward first"))?;
+    /// (Also frees the buffers, as take_grad does.)
+    fn take_grad_fixed<'py>(&mut self, py: Python<'py>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>, f64)> {
+        let g = self.grads.take().ok_or_else(|| err("no gradient: call zero_grad and backward first"))?;
         let n = g.slots();
         let mut gs = vec![0i64; 3 * n];
         let mut ga = vec![0i64; 3 * n];
         py.detach(|| g.collect_fixed(&mut gs, &mut ga));
-        Ok((self.grad_array(py, gs)?, self.grad_array(py, ga)?, g.quantum()))
+        let quantum = g.quantum();
+        drop(g);
+        Ok((self.grad_array(py, gs)?, self.grad_array(py, ga)?, quantum))
     }
 }
 
