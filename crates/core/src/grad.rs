@@ -10,6 +10,7 @@ use crate::packet::{self, trace_paths, NoPathTally, PathTally};
 use crate::render::{estimates, Moments, RenderOptions, Stats, TexelEstimate, PACKET_CHUNK};
 use crate::rng::PathRng;
 use crate::scene::{Geometry, Medium, Texel};
+use crate::spans::RowSpans;
 use crate::trace::{trace, NoTally, Tally};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -32,15 +33,22 @@ pub enum GradMethod {
 /// +-2^31 adjoint-units of headroom per voxel.
 ///
 /// An optional index map restricts gradients to some voxels (e.g. the free voxels of a shell): `map[j]` is the
-/// slot of voxel j, or `NO_GRADIENT`; the buffers then hold only the mapped voxels.
+/// slot of voxel j, or `NO_GRADIENT`; the buffers then hold only the mapped voxels. `with_voxels` gives the slots
+/// of a list of voxels (slot = entry) without a map per grid voxel (`RowSpans`: a few MB for any object).
 pub struct GradBuffers {
     /// Voxels in the grid.
     n_voxels: usize,
     /// Gradient slots (= n_voxels without a map).
     n: usize,
-    map: Option<Vec<u32>>,
+    map: SlotMap,
     quantum: f64,
     buf: Vec<AtomicI64>,
+}
+
+enum SlotMap {
+    All,
+    Dense(Vec<u32>),
+    Ranks(RowSpans),
 }
 
 pub const NO_GRADIENT: u32 = u32::MAX;
@@ -53,28 +61,47 @@ impl GradBuffers {
     /// Buffers for the voxels of `map` (slot per voxel or NO_GRADIENT; slots must be < the number of mapped
     /// voxels' maximum + 1).
     pub fn with_map(n_voxels: usize, map: Option<Vec<u32>>) -> Result<Self, String> {
-        let n = match &map {
-            None => n_voxels,
+        let (n, map) = match map {
+            None => (n_voxels, SlotMap::All),
             Some(m) => {
                 if m.len() != n_voxels {
                     return Err(format!("gradient index has {} entries, the grid {}", m.len(), n_voxels));
                 }
-                m.iter().filter(|&&k| k != NO_GRADIENT).map(|&k| k as usize + 1).max().unwrap_or(0)
+                (m.iter().filter(|&&k| k != NO_GRADIENT).map(|&k| k as usize + 1).max().unwrap_or(0), SlotMap::Dense(m))
             }
         };
+        Ok(Self::allocate(n_voxels, n, map))
+    }
+
+    /// Buffers for the voxels `index` (strictly increasing linear indices of an (nx, ny, nz) grid): voxel
+    /// `index[e]` has slot e.
+    pub fn with_voxels(n_xyz: [usize; 3], index: &[i64]) -> Result<Self, String> {
+        let ranks = RowSpans::new(n_xyz, index)?;
+        Ok(Self::allocate(ranks.grid(), index.len(), SlotMap::Ranks(ranks)))
+    }
+
+    fn allocate(n_voxels: usize, n: usize, map: SlotMap) -> Self {
         let buf = (0..6 * n).map(|_| AtomicI64::new(0)).collect();
-        Ok(GradBuffers { n_voxels, n, map, quantum: 1.0, buf })
+        GradBuffers { n_voxels, n, map, quantum: 1.0, buf }
     }
 
-    /// Whether the buffers cover only the voxels of an index map.
+    /// Whether the buffers cover only the voxels of an index map or list.
     pub fn is_mapped(&self) -> bool {
-        self.map.is_some()
+        !matches!(self.map, SlotMap::All)
     }
 
-    /// The index map (slot per voxel or NO_GRADIENT), if any: a caller whose next pass has the same map reuses
-    /// these buffers (`zero`) instead of allocating new ones.
+    /// The index map (slot per voxel or NO_GRADIENT), if the buffers were made with one: a caller whose next pass
+    /// has the same map reuses these buffers (`zero`) instead of allocating new ones.
     pub fn map(&self) -> Option<&[u32]> {
-        self.map.as_deref()
+        match &self.map {
+            SlotMap::Dense(m) => Some(m),
+            _ => None,
+        }
+    }
+
+    /// Whether the buffers were made `with_voxels(.., index)` for exactly these voxels. O(len).
+    pub fn lists(&self, index: &[i64]) -> bool {
+        matches!(&self.map, SlotMap::Ranks(r) if r.lists(index))
     }
 
     /// Number of gradient slots.
@@ -82,14 +109,20 @@ impl GradBuffers {
         self.n
     }
 
+    /// Voxels in the grid.
+    pub fn voxels(&self) -> usize {
+        self.n_voxels
+    }
+
     #[inline(always)]
     fn slot(&self, j: usize) -> Option<usize> {
         match &self.map {
-            None => Some(j),
-            Some(m) => {
+            SlotMap::All => Some(j),
+            SlotMap::Dense(m) => {
                 let k = m[j];
                 if k == NO_GRADIENT { None } else { Some(k as usize) }
             }
+            SlotMap::Ranks(r) => r.rank(j),
         }
     }
 

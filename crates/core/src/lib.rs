@@ -4,7 +4,7 @@
 //! `(z * ny + y) * nx + x` (C order of a (z, y, x) array); lengths in mm, coefficients in mm^-1; geometric
 //! vectors are (x, y, z); radiance is linear RGB, each channel traced as its own monochromatic problem.
 //!
-//! Modules: `scene` (geometry, texels), `medium` (dense, sparse and label media), `normals` (sparse shading normals), `light` (the `Light` trait:
+//! Modules: `scene` (geometry, texels), `medium` (dense, sparse and label media), `spans` (voxel sets stored per grid row), `normals` (sparse shading normals), `light` (the `Light` trait:
 //! uniform light, environment maps), `grid` (locating points, voxel traversal, exit distances, periodic wrap),
 //! `flight` (the free-flight samplers), `trace` (the scalar walk), `packet` (eight paths per core in SIMD
 //! lanes), `render` (parallel drivers of the forward render), `grad` (the gradient pass and its fixed-point
@@ -25,6 +25,7 @@ pub mod rng;
 pub mod sampling;
 pub mod scene;
 pub mod smooth;
+pub mod spans;
 pub mod trace;
 
 pub use grad::{backward, GradBuffers, GradMethod, NO_GRADIENT};

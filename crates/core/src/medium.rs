@@ -10,6 +10,8 @@
 //! Coefficients are stored per channel in planar arrays (all voxels of R, then G, then B) as interleaved
 //! (sigma_t, albedo) pairs, the two numbers the random walk needs, so one lookup is one load.
 
+use crate::spans::RowSpans;
+
 /// Label of an empty voxel in label media.
 pub const EMPTY: u8 = 255;
 
@@ -194,32 +196,15 @@ fn majorant_of(coef: &[[f32; 2]], k: usize) -> [f32; 3] {
     })
 }
 
-/// One (z, y) row of a `SparseMedium`: voxels x0..x1 are stored, voxel x at slot `off + x`.
-#[derive(Clone, Copy)]
-struct Span {
-    off: i64,
-    x0: u32,
-    x1: u32,
-}
-
 /// Coefficients of the voxels of an index set (the inside of a masked object), every other voxel vacuum
-/// (sigma_t 0, albedo 1). Each (z, y) row of the grid stores the span from its first to its last indexed voxel
-/// (the voxels between that are not indexed, e.g. a cavity, are stored as vacuum), so a lookup reads a small
-/// per-row table (16 bytes per row: it stays in cache) and then the coefficients, which lie closer together than
-/// in the dense form. Slots run in grid order. A bitset marks which stored voxels were indexed (the object).
+/// (sigma_t 0, albedo 1), stored per grid row span (`RowSpans`: a lookup reads a small per-row table, then the
+/// coefficients, which lie closer together than in the dense form; the unlisted voxels inside a span, e.g. a
+/// cavity, are stored as vacuum).
 pub struct SparseMedium {
-    /// Grid voxels, and voxels per row (x).
-    n: usize,
-    nx: usize,
-    /// 1 / nx, to find a voxel's row without an integer division.
-    inv_nx: f64,
-    spans: Vec<Span>,
-    /// Stored voxels (slots), and how many of them were indexed.
+    at: RowSpans,
+    /// Stored positions.
     k: usize,
-    given: usize,
-    /// Bit s: slot s is an indexed voxel.
-    indexed: Vec<u64>,
-    /// Planar by channel: `coef[c * k + slot]`.
+    /// Planar by channel: `coef[c * k + position]`.
     coef: Vec<[f32; 2]>,
     majorant: [f32; 3],
 }
@@ -228,89 +213,38 @@ impl SparseMedium {
     /// A grid of (nx, ny, nz) voxels storing the voxels `index` (strictly increasing linear indices) with
     /// interleaved (entry, channel) coefficients `sigma_s`, `sigma_a` (mm^-1); every other voxel is vacuum.
     pub fn new(n_xyz: [usize; 3], index: &[i64], sigma_s: &[f32], sigma_a: &[f32]) -> Result<Self, String> {
-        let (nx, n) = (n_xyz[0], n_xyz.iter().product::<usize>());
-        let given = index.len();
-        if let Some(e) = index.iter().position(|&j| j < 0 || j as u64 >= n as u64) {
-            return Err(format!("index entry {e} is voxel {}, outside the grid of {n} voxels", index[e]));
-        }
-        if let Some(e) = (1..given).find(|&e| index[e] <= index[e - 1]) {
-            return Err(format!("index must be strictly increasing; entry {e} is voxel {} after {}", index[e],
-                               index[e - 1]));
-        }
-        check_coefficients(given, sigma_s, sigma_a, |e| format!("entry {e} (voxel {})", index[e]))?;
-        let mut spans = vec![Span { off: 0, x0: 0, x1: 0 }; n / nx];
-        let mut k = 0usize;
-        let mut e = 0;
-        while e < given {
-            let row = index[e] as usize / nx;
-            let first = e;
-            while e < given && index[e] as usize / nx == row {
-                e += 1;
-            }
-            let (x0, x1) = (index[first] as usize % nx, index[e - 1] as usize % nx + 1);
-            spans[row] = Span { off: k as i64 - x0 as i64, x0: x0 as u32, x1: x1 as u32 };
-            k += x1 - x0;
-        }
-        let mut medium = SparseMedium { n, nx, inv_nx: 1.0 / nx as f64, spans, k, given,
-                                        indexed: vec![0u64; k.div_ceil(64)], coef: vec![[0.0f32, 1.0f32]; 3 * k],
-                                        majorant: [0.0; 3] };
-        let slots: Vec<usize> = index.iter().map(|&j| medium.slot(j as usize).unwrap()).collect();
-        for &s in &slots {
-            medium.indexed[s / 64] |= 1 << (s % 64);
-        }
+        let at = RowSpans::new(n_xyz, index)?;
+        check_coefficients(index.len(), sigma_s, sigma_a, |e| format!("entry {e} (voxel {})", index[e]))?;
+        let k = at.positions();
+        let mut medium = SparseMedium { at, k, coef: vec![[0.0f32, 1.0f32]; 3 * k], majorant: [0.0; 3] };
+        let slots: Vec<usize> = medium.at.listed_positions().collect();
         medium.store(slots.into_iter().enumerate(), sigma_s, sigma_a);
         Ok(medium)
-    }
-
-    /// The slot of voxel j, if its row's span holds it.
-    #[inline(always)]
-    fn slot(&self, j: usize) -> Option<usize> {
-        // j / nx by a float reciprocal, corrected by one where rounding crossed a row boundary.
-        let mut row = (j as f64 * self.inv_nx) as usize;
-        if row * self.nx > j {
-            row -= 1;
-        } else if (row + 1) * self.nx <= j {
-            row += 1;
-        }
-        let x = j - row * self.nx;
-        let sp = self.spans[row];
-        if x < sp.x0 as usize || x >= sp.x1 as usize {
-            return None;
-        }
-        Some((sp.off + x as i64) as usize)
-    }
-
-    /// The slot of voxel j if it was indexed (is part of the object).
-    fn indexed_slot(&self, j: usize) -> Option<usize> {
-        self.slot(j).filter(|&s| self.indexed[s / 64] >> (s % 64) & 1 == 1)
     }
 
     /// Whether this medium stores exactly the voxels `index` (a `new` argument): then `refill` may replace its
     /// coefficients in place. O(len).
     pub fn stores(&self, index: &[i64]) -> bool {
-        index.len() == self.given
-            && (1..index.len()).all(|e| index[e] > index[e - 1])
-            && index.iter().all(|&j| j >= 0 && (j as u64) < self.n as u64 && self.indexed_slot(j as usize).is_some())
+        self.at.lists(index)
     }
 
-    /// Replace every indexed voxel's coefficients (entries in the order of the `index` this medium was built
+    /// Replace every listed voxel's coefficients (entries in the order of the `index` this medium was built
     /// from), in place. Checked before anything is written.
     pub fn refill(&mut self, sigma_s: &[f32], sigma_a: &[f32]) -> Result<(), String> {
-        check_coefficients(self.given, sigma_s, sigma_a, |e| format!("entry {e}"))?;
-        // Slots run in grid order, so the e-th indexed slot is the e-th entry's.
-        let slots: Vec<usize> = (0..self.k).filter(|&s| self.indexed[s / 64] >> (s % 64) & 1 == 1).collect();
+        check_coefficients(self.at.listed(), sigma_s, sigma_a, |e| format!("entry {e}"))?;
+        let slots: Vec<usize> = self.at.listed_positions().collect();
         self.store(slots.into_iter().enumerate(), sigma_s, sigma_a);
         Ok(())
     }
 
-    /// `DenseMedium::set_voxels` for indexed voxels: overwrite some of them in place (a voxel listed twice takes
+    /// `DenseMedium::set_voxels` for listed voxels: overwrite some of them in place (a voxel listed twice takes
     /// its last values); a voxel the medium was not built with is an error. Checked before anything is written.
     pub fn set_voxels(&mut self, index: &[i64], sigma_s: &[f32], sigma_a: &[f32]) -> Result<(), String> {
-        let n = self.n;
+        let n = self.at.grid();
         if let Some(e) = index.iter().position(|&j| j < 0 || j as u64 >= n as u64) {
             return Err(format!("index entry {e} is voxel {}, outside the grid of {n} voxels", index[e]));
         }
-        let slots: Vec<Option<usize>> = index.iter().map(|&j| self.indexed_slot(j as usize)).collect();
+        let slots: Vec<Option<usize>> = index.iter().map(|&j| self.at.listed_position(j as usize)).collect();
         if let Some(e) = slots.iter().position(|s| s.is_none()) {
             return Err(format!("index entry {e} is voxel {}, which the medium does not store (outside the \
                                 object)", index[e]));
@@ -320,7 +254,7 @@ impl SparseMedium {
         Ok(())
     }
 
-    /// Write checked coefficients of entries e into slots s for each (e, s), then recompute the majorant.
+    /// Write checked coefficients of entries e into positions s for each (e, s), then recompute the majorant.
     fn store(&mut self, pairs: impl Iterator<Item = (usize, usize)>, sigma_s: &[f32], sigma_a: &[f32]) {
         let k = self.k;
         for (e, s) in pairs {
@@ -332,21 +266,21 @@ impl SparseMedium {
         self.majorant = majorant_of(&self.coef, k);
     }
 
-    /// Number of stored voxels (the indexed ones and the vacuum between them in their rows).
+    /// Number of stored voxels (the listed ones and the vacuum between them in their rows).
     pub fn stored(&self) -> usize {
         self.k
     }
 
     /// Bytes of this medium's arrays.
     pub fn bytes(&self) -> usize {
-        24 * self.k + 16 * self.spans.len() + 8 * self.indexed.len()
+        24 * self.k + self.at.bytes()
     }
 }
 
 impl Medium for SparseMedium {
     #[inline(always)]
     fn coeffs(&self, idx: usize, c: usize) -> (f32, f32) {
-        match self.slot(idx) {
+        match self.at.position(idx) {
             None => (0.0, 1.0),
             Some(s) => {
                 let [t, a] = self.coef[c * self.k + s];
@@ -355,7 +289,7 @@ impl Medium for SparseMedium {
         }
     }
     fn len(&self) -> usize {
-        self.n
+        self.at.grid()
     }
     fn majorant(&self, c: usize) -> f32 {
         self.majorant[c]

@@ -39,8 +39,6 @@ struct Scene {
     grads: Option<GradBuffers>,
     /// Whether the gradient buffers are per slot of a grad_index (else per voxel).
     sparse: bool,
-    /// Whether their map was built from a list of voxels (zero_grad's second grad_index form).
-    grad_from_voxels: bool,
     shape: [usize; 3],
 }
 
@@ -117,7 +115,7 @@ impl Scene {
             b = b.num_threads(t);
         }
         let pool = b.build().map_err(|e| err(e.to_string()))?;
-        Ok(Scene { geo, medium, pool, grads: None, sparse: false, grad_from_voxels: false, shape: [nz, ny, nx] })
+        Ok(Scene { geo, medium, pool, grads: None, sparse: false, shape: [nz, ny, nx] })
     }
 
     /// set_medium(*, sigma_s=None, sigma_a=None, medium_index=None, labels=None, ink_sigma_s=None,
@@ -229,8 +227,8 @@ impl Scene {
     /// Reset the gradient accumulators for a pass whose adjoints are at most `max_abs_adjoint` in magnitude
     /// (sets the fixed-point quantum). `grad_index`: which voxels get gradients, and in which slot; gradients are
     /// then returned per slot, (F, 3). Either (z, y, x) int32, the slot of each voxel or -1 for none, or (F,)
-    /// int64, strictly increasing linear indices of the voxels whose slots are 0..F (4 bytes per grid voxel
-    /// fewer on the caller's side). None: every voxel, (z, y, x, 3). The buffer of the previous call, if it was
+    /// int64, strictly increasing linear indices of the voxels whose slots are 0..F (no map per grid voxel on
+    /// either side: the core ranks them per grid row, `inkopt_core::spans`). None: every voxel, (z, y, x, 3). The buffer of the previous call, if it was
     /// not taken (take_grad frees it), is zeroed in place when it was for the same slots (checked: element by element, or in O(F) for the second form) or both
     /// None; otherwise it is freed before the new one is allocated. The GIL is released.
     #[pyo3(signature = (max_abs_adjoint, grad_index=None))]
@@ -267,35 +265,27 @@ impl Scene {
             }
         }
         let slot = |k: i32| if k < 0 { NO_GRADIENT } else { k as u32 };
-        let from_voxels = voxels.is_some();
-        let (pool, grads, was_voxels) = (&self.pool, &mut self.grads, self.grad_from_voxels);
+        let [nz, ny, nx] = self.shape;
+        let (pool, grads) = (&self.pool, &mut self.grads);
         let done = py.detach(|| pool.install(|| {
             use rayon::prelude::*;
             let same = grads.as_ref().is_some_and(|g| match (g.map(), dense, voxels) {
-                (None, None, None) => true,
+                (None, None, None) => !g.is_mapped(),
                 (Some(m), Some(ix), None) => m.len() == ix.len() && m.par_iter().zip(ix).all(|(&m, &k)| m == slot(k)),
-                // A map built from F voxels has exactly F mapped entries, slots 0..F: equal iff these F map so.
-                (Some(m), None, Some(v)) => was_voxels && g.slots() == v.len()
-                    && v.par_iter().enumerate().all(|(e, &j)| m[j as usize] == e as u32),
+                (None, None, Some(v)) => g.lists(v),
                 _ => false,
             });
             if !same {
                 *grads = None; // free the old buffers first: two sets of them would be the peak of a big object
-                let map = match (dense, voxels) {
-                    (Some(ix), _) => Some(ix.par_iter().map(|&k| slot(k)).collect()),
-                    (None, Some(v)) => {
-                        let mut m = vec![NO_GRADIENT; n];
-                        v.iter().enumerate().for_each(|(e, &j)| m[j as usize] = e as u32);
-                        Some(m)
-                    }
-                    (None, None) => None,
-                };
-                *grads = Some(GradBuffers::with_map(n, map)?);
+                *grads = Some(match (dense, voxels) {
+                    (Some(ix), _) => GradBuffers::with_map(n, Some(ix.par_iter().map(|&k| slot(k)).collect()))?,
+                    (None, Some(v)) => GradBuffers::with_voxels([nx, ny, nz], v)?,
+                    (None, None) => GradBuffers::with_map(n, None)?,
+                });
             }
             grads.as_mut().unwrap().zero(max_abs_adjoint);
             Ok::<(), String>(())
         }));
-        self.grad_from_voxels = from_voxels && done.is_ok();
         self.sparse = grad_index_given(&self.grads);
         done.map_err(err)
     }
