@@ -49,6 +49,8 @@ def main(argv) -> None:
               f"| {r['cpu']:.0f} | {r['gb']:.2f} GB |")
     print()
     for a, b in zip(rows, rows[1:]):
+        if b["height"] == a["height"]:  # another setting at the same height (e.g. a shell): no growth to fit
+            continue
         lh = math.log(b["height"] / a["height"])
         k = {key: math.log(b[key] / a[key]) / lh for key in ("inside", "texels", "cpu", "gb") if a[key] and b[key]}
         if a["events"] and b["events"]:

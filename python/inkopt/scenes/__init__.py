@@ -1,8 +1,9 @@
 """Scenes: what the user gives (pictures and a size, or a textured mesh) turned into what the optimiser needs.
 
-A scene (``Scene`` protocol) holds the base ``volume`` (a mixture Volume: grid geometry and ink table; its
-mixture is ignored), the ``texels`` (the sensor), ``target_rgb`` (I, 3) float32 linear, and ``fixed_share``
-((z, y, x, N) float32 ink shares the optimiser may not change, or None). It knows how to store itself
+A scene (``Scene`` protocol) holds the base ``volume`` (a mixture or label Volume: grid geometry and ink table;
+its medium is not the optimiser's), the ``texels`` (the sensor), ``target_rgb`` (I, 3) float32 linear, and
+``fixed_share`` ((z, y, x, N) float32 ink shares the optimiser may not change, dense or as a compact
+``model.FixedShares``, or None). It knows how to store itself
 (``record()`` -> the run directory's ``SceneRecord``), what to tell the user and the report, and which pictures
 show a prediction of it. The run driver (``inkopt.run``) needs nothing else, so a new kind of scene is a new
 module here and no change anywhere after it.
@@ -14,7 +15,7 @@ from typing import Protocol
 
 import numpy as np
 
-from ..model import Texels, Volume
+from ..model import FixedShares, Texels, Volume
 from ..rundir import SceneRecord
 
 
@@ -23,7 +24,7 @@ class Scene(Protocol):
     volume: Volume
     texels: Texels
     target_rgb: np.ndarray
-    fixed_share: np.ndarray | None
+    fixed_share: np.ndarray | FixedShares | None
 
     def record(self) -> SceneRecord:
         """What scene.npz stores: enough for evaluation and baselines to see the same constraints."""
