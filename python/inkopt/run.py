@@ -64,15 +64,15 @@ def _optimise(scene, out_dir, cfg, resume, eval_spp, threads, progress, lighting
         run.resume(rd.checkpoint, log)
     rd.save_scene(scene.record())
     run.run(rd.checkpoint, progress=progress)
-    run.release_renderer()  # its medium and gradient buffers are the size of the grid: gone before evaluating
-    final = run.volume()
-    rd.save_volume(final)
+    rd.save_volume(run.volume())  # the whole grid's mixture exists only while it is written
 
     # Final figures with seeds unused by the optimisation, adaptive spp unless given; the start is reconstructed
-    # from the configuration (identical to the first iterate whether or not the run was resumed). One renderer.
+    # from the configuration (identical to the first iterate whether or not the run was resumed). The run's own
+    # renderer, set to the final then to the starting mixture (only the free voxels change: no grid-sized volume),
+    # renders exactly what a renderer built from the result volume would.
     spp = eval_spp_for(cfg, eval_spp)
     seed = EVAL_SEED_OFFSET + cfg.seed
-    renderer = make_renderer(final, threads, lighting)
+    renderer = run.renderer()
 
     def render(n: int, s: int):
         r = renderer.render(scene.texels, n, s, cfg.include_specular, progress)
@@ -80,10 +80,10 @@ def _optimise(scene, out_dir, cfg, resume, eval_spp, threads, progress, lighting
 
     res = adaptive_render(render, run.loss.target_lab, seed, spp, log=log)
     metrics = prediction_metrics(run.loss, res.rgb, res.var)
-    del final
-    renderer.set_volume(run.initial_volume())
+    run.renderer(run.initial_variables())
     res0 = adaptive_render(render, run.loss.target_lab, seed, spp, log=log)
     del renderer
+    run.release_renderer()
     init = prediction_metrics(run.loss, res0.rgb, res0.var)
     de = delta_e76_map(run.loss, res.rgb)
     scene.write_pictures(rd.path, res.rgb, de)

@@ -121,9 +121,13 @@ class Optimization:
     def _initial_free_mixture(self) -> np.ndarray:
         return initial_free_mixture(self.base.inks, self.param, self.cfg.init, self.cfg.seed, self.baseline)
 
+    def initial_variables(self) -> np.ndarray:
+        """The run's starting variables x (F, N) (recomputed from the configuration: same after a resume)."""
+        return self.param.variables_for(self._initial_free_mixture())
+
     def initial_volume(self) -> Volume:
-        """The run's starting point as a volume (recomputed from the configuration: same after a resume)."""
-        return self.base.with_mixture(self.param.mixture(self.param.variables_for(self._initial_free_mixture())))
+        """The run's starting point as a volume (the whole grid's mixture: see :meth:`renderer` for a render)."""
+        return self.base.with_mixture(self.param.mixture(self.initial_variables()))
 
     # -------------------------------------------------------------- state
     def mixture(self) -> np.ndarray:
@@ -168,8 +172,9 @@ class Optimization:
         self.c_var = np.asarray(d["c_var"], np.float32) if "c_var" in d else None
 
     # -------------------------------------------------------------- one step
-    def renderer(self) -> Renderer:
-        """The run's renderer, set to the current mixture. It is built once from the fixed shares (the base
+    def renderer(self, x: np.ndarray | None = None) -> Renderer:
+        """The run's renderer, set to the mixture of variables ``x`` (F, N) (default: the current ones; e.g.
+        :meth:`initial_variables` to render the start without a grid-sized volume). It is built once from the fixed shares (the base
         geometry with ``fixed_share`` as its mixture, no copy; compact fixed shares of a masked object: the base
         volume, whose medium is then replaced at every inside voxel that is not a variable); every iteration then
         overwrites only the free voxels' media (``Renderer.set_mixture``), so no grid-sized mixture or coefficient
@@ -187,13 +192,14 @@ class Optimization:
             else:
                 self._renderer = self.renderer_factory(self.base.with_mixture(np.asarray(fs)), self.threads,
                                                        self.lighting)
+        x = self.x if x is None else x
         for lo, hi in self.param.chunks():  # in pieces: no (F, N) temporaries for a big object
-            self._renderer.set_mixture(self.param.free_index[lo:hi], self.param.free_rows(self.x[lo:hi], lo))
+            self._renderer.set_mixture(self.param.free_index[lo:hi], self.param.free_rows(x[lo:hi], lo))
         return self._renderer
 
     def release_renderer(self) -> None:
-        """Drop the run's renderer (its memory, with the gradient buffers, is the size of the grid); a later
-        :meth:`step` builds a new one, with identical results."""
+        """Drop the run's renderer (its medium: 24 B per inside voxel); a later :meth:`step` or :meth:`renderer`
+        builds a new one, with identical results."""
         self._renderer = None
 
     def _snapshot(self) -> tuple:
