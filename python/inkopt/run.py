@@ -64,12 +64,13 @@ def _optimise(scene, out_dir, cfg, resume, eval_spp, threads, progress, lighting
         run.resume(rd.checkpoint, log)
     rd.save_scene(scene.record())
     run.run(rd.checkpoint, progress=progress)
-    rd.save_volume(run.volume())  # the whole grid's mixture exists only while it is written
+    run.release_renderer()  # not beside the whole grid's mixture, which exists only while it is written
+    rd.save_volume(run.volume())
 
     # Final figures with seeds unused by the optimisation, adaptive spp unless given; the start is reconstructed
     # from the configuration (identical to the first iterate whether or not the run was resumed). The run's own
-    # renderer, set to the final then to the starting mixture (only the free voxels change: no grid-sized volume),
-    # renders exactly what a renderer built from the result volume would.
+    # renderer (built again), set to the final then to the starting mixture (only the free voxels change: no
+    # grid-sized volume), renders exactly what a renderer built from the result volume would.
     spp = eval_spp_for(cfg, eval_spp)
     seed = EVAL_SEED_OFFSET + cfg.seed
     renderer = run.renderer()

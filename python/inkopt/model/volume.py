@@ -85,8 +85,11 @@ class Mixture:
         m = np.ascontiguousarray(self.mixture, dtype=np.float32)
         if m.ndim != 4 or m.shape[3] != len(self.inks):
             raise VolumeError(f"mixture must have shape (z, y, x, {len(self.inks)}), got {m.shape}")
-        if not np.all(np.isfinite(m)) or np.any(m < 0):
-            raise VolumeError("mixture must be finite and non-negative")
+        step = max(1, 2**22 // max(1, m[0].size))  # checked in slabs of layers: bounded temporaries
+        for z in range(0, m.shape[0], step):
+            part = m[z:z + step]
+            if not np.all(np.isfinite(part)) or np.any(part < 0):
+                raise VolumeError("mixture must be finite and non-negative")
         self.mixture = m
 
     @property

@@ -112,7 +112,8 @@ class Parameterization:
         """The whole grid's mixture (z, y, x, N) float32 of variables x (F, N)."""
         fs = self.fixed_share
         rho = (fs.dense() if isinstance(fs, FixedShares) else fs.copy()).reshape(-1, self.n_inks)
-        rho[self.free_index] = self.free_rows(x)
+        for lo, hi in self.chunks():  # in pieces: no (F, N) temporaries beside the grid-sized result
+            rho[self.free_index[lo:hi]] = self.free_rows(x[lo:hi], lo)
         return rho.reshape(self.shape + (self.n_inks,))
 
     def backward(self, x: np.ndarray, grad_rho: np.ndarray, natural: bool = False, lo: int = 0) -> np.ndarray:
