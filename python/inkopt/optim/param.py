@@ -137,12 +137,14 @@ class Parameterization:
         return (centred * s * (1.0 - s) / s.sum(axis=1, keepdims=True)).astype(np.float32)
 
     def variables_for(self, p: np.ndarray) -> np.ndarray:
-        """Variables x (F, N) whose free-part mixture is p (F, N) (entries clipped to [1e-6, 1])."""
-        p = np.clip(np.asarray(p, np.float64), 1e-6, 1.0)
-        p /= p.sum(axis=1, keepdims=True)
-        if self.kind == "softmax":
-            return np.log(p).astype(np.float32)
-        return np.log(p / (1.0 - p + 1e-12)).astype(np.float32)  # sigmoid(x) = p, and sum(p) = 1
+        """Variables x (F, N) float32 whose free-part mixture is p (F, N) (entries clipped to [1e-6, 1]); row by
+        row, in blocks (float64 temporaries of a block only)."""
+        x = np.empty(np.shape(p), np.float32)
+        for lo in range(0, len(x), 1 << 20):
+            q = np.clip(np.asarray(p[lo:lo + (1 << 20)], np.float64), 1e-6, 1.0)
+            q /= q.sum(axis=1, keepdims=True)
+            x[lo:lo + (1 << 20)] = np.log(q) if self.kind == "softmax" else np.log(q / (1.0 - q + 1e-12))
+        return x  # sigmoid: sigmoid(x) = p, and sum(p) = 1
 
 
 BASELINE_INITS = ("surface", "extrusion")
@@ -157,9 +159,9 @@ def initial_free_mixture(inks: InkTable, param: Parameterization, init: str, see
     if init == "white":
         if "white" not in inks.names:
             raise ValueError("--init white needs a 'white' ink in the ink set; use --init random")
-        p = np.full((f, n), 0.03 / max(n - 1, 1), np.float64)
-        p[:, inks.index("white")] = 0.97 if n > 1 else 1.0
-        return p
+        row = np.full(n, 0.03 / max(n - 1, 1), np.float64)
+        row[inks.index("white")] = 0.97 if n > 1 else 1.0
+        return np.broadcast_to(row, (f, n))  # one row for every voxel: a read-only view, no (F, N) array
     if init == "random":
         return np.random.default_rng(seed).dirichlet(np.ones(n), size=f)
     if init in BASELINE_INITS:
