@@ -35,7 +35,6 @@ def test_compact_shares_are_the_dense_array():
     fs.digest(h1)
     h2.update(want.data)
     assert h1.hexdigest() == h2.hexdigest()
-    assert fs.any() and not FixedShares(free, np.zeros(len(INKS))).any()
     again = tr.applied(fs, INKS)  # idempotent, as apply is
     np.testing.assert_array_equal(again.dense(), want)
     with pytest.raises(ValueError, match="strictly increasing"):

@@ -109,11 +109,6 @@ impl GradBuffers {
         self.n
     }
 
-    /// Voxels in the grid.
-    pub fn voxels(&self) -> usize {
-        self.n_voxels
-    }
-
     #[inline(always)]
     fn slot(&self, j: usize) -> Option<usize> {
         match &self.map {

@@ -270,11 +270,6 @@ impl SparseMedium {
     pub fn stored(&self) -> usize {
         self.k
     }
-
-    /// Bytes of this medium's arrays.
-    pub fn bytes(&self) -> usize {
-        24 * self.k + self.at.bytes()
-    }
 }
 
 impl Medium for SparseMedium {

@@ -131,9 +131,4 @@ impl RowSpans {
     pub fn listed_positions(&self) -> impl Iterator<Item = usize> + '_ {
         (0..self.positions).filter(|&p| self.is_listed(p))
     }
-
-    /// Bytes of the structure.
-    pub fn bytes(&self) -> usize {
-        16 * self.spans.len() + 12 * self.bits.len()
-    }
 }

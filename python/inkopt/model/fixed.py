@@ -70,7 +70,3 @@ class FixedShares:
         """Feed the dense array's bytes (C order) to the hash ``h``, one layer at a time."""
         for z in range(self.free.shape[0]):
             h.update(np.ascontiguousarray(self.plane(z)).data)
-
-    def any(self) -> bool:
-        """Whether any voxel holds a fixed share."""
-        return bool(np.any(self.rows)) or (bool(np.any(self.held)) and not bool(self.free.all()))
