@@ -252,18 +252,6 @@ impl Scene {
         }
         let dense = match &dense_ix { Some(d) => Some(c_slice(d, "grad_index")?), None => None };
         let voxels = match &voxels_ix { Some(v) => Some(c_slice(v, "grad_index")?), None => None };
-        if let Some(v) = voxels {
-            if let Some(e) = v.iter().position(|&j| j < 0 || j as u64 >= n as u64) {
-                return Err(err(format!("grad_index entry {e} is voxel {}, outside the grid of {n} voxels", v[e])));
-            }
-            if let Some(e) = (1..v.len()).find(|&e| v[e] <= v[e - 1]) {
-                return Err(err(format!("grad_index must be strictly increasing; entry {e} is voxel {} after {}",
-                                       v[e], v[e - 1])));
-            }
-            if v.len() >= NO_GRADIENT as usize {
-                return Err(err(format!("{} gradient voxels are too many", v.len())));
-            }
-        }
         let slot = |k: i32| if k < 0 { NO_GRADIENT } else { k as u32 };
         let [nz, ny, nx] = self.shape;
         let (pool, grads) = (&self.pool, &mut self.grads);
