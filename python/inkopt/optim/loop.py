@@ -186,8 +186,8 @@ class Optimization:
                 held = self.base.inside.copy()
                 held.reshape(-1)[self.param.free_index] = False
                 held = np.flatnonzero(held)
-                for lo in range(0, len(held), 1 << 20):
-                    self._renderer.set_mixture(held[lo:lo + (1 << 20)], fs.at(held[lo:lo + (1 << 20)]))
+                for block in np.array_split(held, max(1, len(held) >> 20)):  # ~1 M voxels at a time
+                    self._renderer.set_mixture(block, fs.at(block))
                 del held
             else:
                 self._renderer = self.renderer_factory(self.base.with_mixture(np.asarray(fs)), self.threads,
