@@ -1,6 +1,6 @@
 """Benchmark of the mesh pipeline on Spot: voxelization time, seconds per optimisation iteration, peak memory.
 
-    python bench/bench_mesh.py [HEIGHT_MM=40] [--iterations 3] [--spp 4] [--threads 2] [--shell-mm D]
+    python bench/bench_mesh.py [HEIGHT_MM=40] [--iterations 3] [--spp 4] [--threads 2] [--shell-mm D] [--smooth S]
 
 Writes bench/results/mesh_<height>mm.json (the folder is created if missing). Peak memory is the process's
 resident-set high-water mark (getrusage), recorded after each stage; run one height per process.
@@ -37,6 +37,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--shell-mm", type=float)
     ap.add_argument("--inks", default="vero-cmykw")
+    ap.add_argument("--smooth", type=float, help="step smoothing width (default: the optimiser's default)")
     ap.add_argument("--out", help="JSON path (default bench/results/mesh_<height>mm.json)")
     args = ap.parse_args(argv)
 
@@ -46,7 +47,8 @@ def main(argv=None) -> dict:
                              shell_mm=args.shell_mm)
     build_s = time.perf_counter() - t0
     rss["after_voxelize"] = peak_rss_gb()
-    cfg = OptimizeConfig(iterations=args.iterations, spp=args.spp)
+    cfg = OptimizeConfig(iterations=args.iterations, spp=args.spp,
+                         **({} if args.smooth is None else {"smooth": args.smooth}))
     t0 = time.perf_counter()
     run = Optimization(scene.volume, scene.vox.texels, scene.vox.targets, cfg, fixed_share=scene.fixed_share,
                        threads=args.threads)
@@ -73,7 +75,7 @@ def main(argv=None) -> dict:
         "inside_voxels": int(scene.vox.inside.sum()), "free_voxels": int(scene.free.sum()),
         "texels": len(scene.vox.texels), "shell_mm": args.shell_mm,
         "voxelize_seconds": scene.voxelize_seconds, "build_seconds": build_s, "setup_seconds": setup_s,
-        "iterations": args.iterations, "spp": args.spp, "threads": args.threads,
+        "iterations": args.iterations, "spp": args.spp, "threads": args.threads, "smooth": cfg.smooth,
         "seconds_per_iteration": float(np.mean(h.seconds)) if h.seconds else None,
         "cpu_seconds_per_iteration": cpu_s,
         "time_split": {k: float(np.mean(getattr(h, k))) if h.seconds else None

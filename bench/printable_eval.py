@@ -4,15 +4,15 @@ below), quantize each with blue-noise and with random draws, and evaluate agains
 baselines. Writes bench/results/printable.json and prints a markdown table.
 
     .venv/bin/python bench/printable_eval.py [--iterations 200] [--spp 0] [--out bench-out]
-        [--cases zebra,astronaut,reference] [--init white|surface|extrusion] [--lr X] [--smooth S]
+        [--cases zebra,astronaut,reference] [--init white|surface|extrusion] [--lr X] [--smooth S] [--grad-spp N]
 
 ``--spp 0`` (the default) evaluates noise-free: ``inkopt evaluate`` without ``--spp`` renders adaptively until
 the Monte Carlo noise adds at most 0.5 to each result's mean ΔE76; ``--spp N`` renders exactly N spp. Every case
 records its mode (``eval_mode``, ``eval_spp``). A run directory's evaluations are reused only if made in the
 requested mode.
 
-A start other than the default all-white one, or a step size other than the default, is recorded as its own case
-("zebra@extrusion", "zebra@extrusion,lr1"); cases not run keep their earlier entries in printable.json.
+A start other than the default all-white one, or a step size, smoothing or gradient spp given explicitly, is
+recorded as its own case ("zebra@extrusion", "zebra@extrusion,lr1", "zebra@smooth0.7,spp8"); cases not run keep their earlier entries in printable.json.
 """
 import argparse
 import json
@@ -76,7 +76,8 @@ def main():
     ap.add_argument("--cases", default="zebra,astronaut,reference")
     ap.add_argument("--init", default="white", help="the optimisation's start (inkopt slab --init)")
     ap.add_argument("--lr", type=float, help="step size (inkopt slab --lr; default: the optimiser's)")
-    ap.add_argument("--smooth", type=float, help="step smoothing width (inkopt slab --smooth; default: off)")
+    ap.add_argument("--smooth", type=float, help="step smoothing width (inkopt slab --smooth; default: the CLI's)")
+    ap.add_argument("--grad-spp", type=int, help="gradient samples per texel (inkopt slab --spp; default: the CLI's)")
     a = ap.parse_args()
     out = Path(a.out)
     out.mkdir(exist_ok=True)
@@ -105,14 +106,16 @@ def main():
     for case in a.cases.split(","):
         img, size, extra = cases[case]()
         tags = (([a.init] if a.init != "white" else []) + ([f"lr{a.lr:g}"] if a.lr is not None else [])
-                + ([f"smooth{a.smooth:g}"] if a.smooth else []))
+                + ([f"smooth{a.smooth:g}"] if a.smooth is not None else [])
+                + ([f"spp{a.grad_spp}"] if a.grad_spp is not None else []))
         name = case + ("@" + ",".join(tags) if tags else "")
         d = out / name.replace("@", "-").replace(",", "-")
         if not (d / "report.json").is_file():
             run(["slab", str(img)] + extra + ["--size-mm", size, "--out", str(d), "--iterations", str(a.iterations),
                                               "--resume", "--init", a.init]
                 + (["--lr", str(a.lr)] if a.lr is not None else [])
-                + (["--smooth", str(a.smooth)] if a.smooth else []))
+                + (["--smooth", str(a.smooth)] if a.smooth is not None else [])
+                + (["--spp", str(a.grad_spp)] if a.grad_spp is not None else []))
         results[name] = {"report": json.loads((d / "report.json").read_text()), "eval_mode": mode,
                          "eval_spp": a.spp or None}
         for method in ("blue-noise", "random"):

@@ -5,8 +5,8 @@ high-frequency structure ("mottle") against the target's. Writes bench/results/s
     .venv/bin/python bench/shell_compare.py [--out bench-out/shell] [--iterations 20] [--shells none,1,0.5]
         [--smooth S]
 
-``--smooth S`` runs the same with the optimiser's step smoothing (``inkopt optimize --smooth S``); its results are
-keyed ``SHELL+smoothS``. Results of shells not run this time are kept from the previous shell_mm.json.
+``--smooth S`` runs the same with that step smoothing (``inkopt optimize --smooth S``; without it, the default,
+0.7 under flat texels since 2026-11-24); its results are keyed ``SHELL+smoothS``, the default's ``SHELL``. Results of shells not run this time are kept from the previous shell_mm.json.
 
 Runs whose report.json exists are not re-run (delete the folder to redo one). Mottle: with two renders a, b of
 independent seeds, each texel's deviation from the mean of its 6 nearest texels (in L*) is formed in both; the
@@ -85,14 +85,14 @@ def main():
     out = Path(a.out)
     previous = RESULTS / "shell_mm.json"
     results = json.loads(previous.read_text())["results"] if previous.is_file() else {}
-    tag = f"+smooth{a.smooth:g}" if a.smooth else ""
+    tag = f"+smooth{a.smooth:g}" if a.smooth is not None else ""
     for s in a.shells.split(","):
         d = out / f"shell_{s}{tag}"
         if not (d / "report.json").is_file():
             cmd = [sys.executable, "-m", "inkopt", "optimize", str(SPOT), "--height-mm", "20", "--out", str(d),
                    "--iterations", str(a.iterations), "--spp", "4", "--eval-spp", "64", "--threads", str(a.threads),
                    "--seed", "0", "--resume"] + ([] if s == "none" else ["--shell-mm", s])
-            cmd += ["--smooth", str(a.smooth)] if a.smooth else []
+            cmd += ["--smooth", str(a.smooth)] if a.smooth is not None else []
             print("$ inkopt " + " ".join(cmd[3:]), flush=True)
             subprocess.run(cmd, check=True)
         rep = json.loads((d / "report.json").read_text())

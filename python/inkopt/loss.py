@@ -21,6 +21,11 @@ K2 = 0.03 ** 2
 # factor 100 brings E3 into E1/E2's range"), so the paper's weight recommendations (g2 in [3, 9], g3 <= 3) apply.
 # The reported e1 stays the mean dE76^2.
 E1_WEIGHT_SCALE = 1e-4
+# A texel is "flat" when the target's windowed standard deviation of L* is below FLAT_L_STD and that of its chroma,
+# sqrt(var a* + var b*), below FLAT_CHROMA_STD (about the 8-bit quantization of a flat picture region): where the
+# mottle figure (``evaluation.metrics``) looks and the optimiser's step smoothing (``optim.smooth``) acts.
+FLAT_L_STD = 1.0
+FLAT_CHROMA_STD = 2.0
 
 
 # ----------------------------------------------------------------------------- neighbourhood operators
@@ -151,6 +156,14 @@ class TexelLoss:
         self._mu_t = self._window(tn)
         self._var_t = self._window(tn * tn) - self._mu_t ** 2
         self._sobel_t = self.S @ tn
+        lab = self.target_lab
+        var = np.maximum(self._window(lab * lab) - self._window(lab) ** 2, 0.0)
+        #: (I,) bool: texels whose target neighbourhood is flat (``FLAT_L_STD``, ``FLAT_CHROMA_STD``)
+        self.flat = (np.sqrt(var[:, 0]) < FLAT_L_STD) & (np.sqrt(var[:, 1] + var[:, 2]) < FLAT_CHROMA_STD)
+
+    def highpass(self, x: np.ndarray) -> np.ndarray:
+        """(1 - W) x for x (I, k): each texel's value minus its windowed mean."""
+        return x - self._window(x)
 
     def _window(self, x: np.ndarray) -> np.ndarray:
         """W @ x for x (I, k)."""

@@ -246,9 +246,9 @@ def test_ssim_term_raises_ssim():
 def test_the_loop_smooths_the_optimisers_step():
     """One iteration with smoothing moves the variables by exactly the smoothed step of the same iteration
     without it (same seeds, same start): the smoother acts on the step, after the optimiser."""
-    from inkopt.optim.smooth import GradientSmoother, nearest_texel_guide
+    from inkopt.optim.smooth import GradientSmoother, nearest_texels, texel_guide
 
-    scene = small_chart_scene(12, 8, 0.3)
+    scene = small_chart_scene(48, 32, 0.3)  # big enough for flat texels (patch interiors): 61 of 1536
     runs = {}
     for smooth in (0.0, 1.0):
         cfg = OptimizeConfig(iterations=1, spp=4, forward_spp=16, smooth=smooth)
@@ -258,9 +258,16 @@ def test_the_loop_smooths_the_optimisers_step():
         runs[smooth] = (x0, r)
     x0, plain = runs[0.0]
     _, smoothed = runs[1.0]
-    guide = nearest_texel_guide(plain.param.grad_index, scene.texels.pos_vox, plain.loss.target_lab)
-    expect = x0 + GradientSmoother(plain.param.grad_index, 1.0, guide, 4.0)(plain.x - x0)
+    p = plain.param
+    nearest, dist = nearest_texels(p.shape, p.free_index, scene.texels.pos_vox)
+    rows = np.flatnonzero(plain.loss.flat[nearest])  # the free voxels under flat texels
+    assert 0 < len(rows) < p.n_free
+    sm = GradientSmoother(p.shape, p.free_index, 1.0, texel_guide(plain.loss.target_lab, nearest[rows], dist[rows]),
+                          4.0, rows)
+    expect = x0 + sm(plain.x - x0)
     np.testing.assert_allclose(smoothed.x, expect, atol=1e-5)
+    others = np.setdiff1d(np.arange(p.n_free), rows)
+    np.testing.assert_allclose(smoothed.x[others], plain.x[others], atol=1e-6)  # the others take the plain step
     assert np.abs(smoothed.x - plain.x).max() > 1e-3
 
 

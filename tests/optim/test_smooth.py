@@ -6,13 +6,12 @@ import pytest
 from scipy import ndimage
 
 from inkopt.optim import OptimizeConfig
-from inkopt.optim.smooth import ALPHA, GradientSmoother, diffusion_steps
+from inkopt.optim.smooth import ALPHA, GradientSmoother, diffusion_steps, nearest_texels, texel_guide
 
 
 def _free_grid(mask):
-    gi = np.full(mask.shape, -1, np.int32)
-    gi[mask] = np.arange(mask.sum(), dtype=np.int32)
-    return gi
+    """(grid shape, the free voxels' increasing linear indices), as GradientSmoother takes them."""
+    return mask.shape, np.flatnonzero(mask)
 
 
 def test_matches_a_dense_convolution_on_a_full_box():
@@ -21,7 +20,7 @@ def test_matches_a_dense_convolution_on_a_full_box():
     rng = np.random.default_rng(0)
     shape = (5, 7, 6)
     g = rng.normal(size=shape + (3,)).astype(np.float32)
-    sm = GradientSmoother(_free_grid(np.ones(shape, bool)), sigma=1.0)
+    sm = GradientSmoother(*_free_grid(np.ones(shape, bool)), sigma=1.0)
     assert sm.steps == diffusion_steps(1.0) == 4
     out = sm(g.reshape(-1, 3)).reshape(g.shape)
     k = np.zeros((3, 3, 3))
@@ -45,11 +44,11 @@ def test_conserves_each_channel_sum_and_keeps_constants_on_an_irregular_set():
     gi = _free_grid(mask)
     g = rng.normal(size=(mask.sum(), 4)).astype(np.float32)
     g0 = g.copy()
-    out = GradientSmoother(gi, sigma=1.5)(g)
+    out = GradientSmoother(*gi, sigma=1.5)(g)
     np.testing.assert_array_equal(g, g0)
     np.testing.assert_allclose(out.sum(0), g.sum(0), atol=1e-3)
     const = np.full_like(g, 0.25)
-    np.testing.assert_allclose(GradientSmoother(gi, sigma=1.5)(const), const, rtol=1e-6)
+    np.testing.assert_allclose(GradientSmoother(*gi, sigma=1.5)(const), const, rtol=1e-6)
     # never amplifies: an even number of steps has eigenvalues in [0, 1]
     assert np.linalg.norm(out) <= np.linalg.norm(g)
 
@@ -60,7 +59,7 @@ def test_kernel_width_and_voxel_scale_damping():
     exactly (1 - 12 a)^k (positive: k is even); the smooth lowest mode barely changes."""
     n = 25
     gi = _free_grid(np.ones((n, n, n), bool))
-    sm = GradientSmoother(gi, sigma=1.0)
+    sm = GradientSmoother(*gi, sigma=1.0)
     d = np.zeros((n, n, n, 1), np.float32)
     d[n // 2, n // 2, n // 2] = 1
     out = sm(d.reshape(-1, 1)).reshape(n, n, n)
@@ -85,7 +84,7 @@ def test_settings_are_checked():
     with pytest.raises(ValueError, match="smoothing edge"):
         OptimizeConfig(smooth_edge=-1).validate()
     with pytest.raises(ValueError, match="smoothing"):
-        GradientSmoother(np.zeros((2, 2, 2), np.int32), 0.0)
+        GradientSmoother((2, 2, 2), np.arange(8), 0.0)
     assert diffusion_steps(0) == 0 and diffusion_steps(0.5) == 2 and diffusion_steps(0.7) == 2
     assert diffusion_steps(1.5) == 10
 
@@ -93,29 +92,51 @@ def test_settings_are_checked():
 def test_guide_stops_the_flux_at_target_edges():
     """Two halves of a box with target colours 100 ΔE76 apart: with edge 10 (weight e^-100) nothing crosses
     between them (each half keeps its sum), with a uniform guide the result is the unguided one."""
-    from inkopt.optim.smooth import nearest_texel_guide
-
     rng = np.random.default_rng(2)
     shape = (4, 6, 8)
     gi = _free_grid(np.ones(shape, bool))
-    g = rng.normal(size=(gi.size, 2)).astype(np.float32)
+    g = rng.normal(size=(np.prod(shape), 2)).astype(np.float32)
     left = (np.indices(shape)[2] < 4).reshape(-1)
     guide = np.where(left[:, None], [[0, 0, 0]], [[100, 0, 0]]).astype(np.float32)
-    out = GradientSmoother(gi, 1.0, guide, edge=10.0)(g)
+    out = GradientSmoother(*gi, 1.0, guide, edge=10.0)(g)
     for half in (left, ~left):
         np.testing.assert_allclose(out[half].sum(0), g[half].sum(0), atol=1e-4)
     assert not np.allclose(out[left], g[left])
-    same = GradientSmoother(gi, 1.0, np.zeros_like(guide), edge=10.0)(g)
-    np.testing.assert_allclose(same, GradientSmoother(gi, 1.0)(g), atol=1e-6)
+    same = GradientSmoother(*gi, 1.0, np.zeros_like(guide), edge=10.0)(g)
+    np.testing.assert_allclose(same, GradientSmoother(*gi, 1.0)(g), atol=1e-6)
     # each voxel's guide is its nearest texel's target: texels on the top face (z = 4) of a 2-layer free set
-    gi2 = np.full(shape, -1, np.int32)
-    gi2[2:] = np.arange(2 * 6 * 8, dtype=np.int32).reshape(2, 6, 8)
+    mask = np.zeros(shape, bool)
+    mask[2:] = True
     y, x = np.mgrid[:6, :8]
     pos = np.stack([x.ravel() + 0.5, y.ravel() + 0.5, np.full(48, 4.0)], 1)
     lab = rng.normal(size=(48, 3)).astype(np.float32)
-    got = nearest_texel_guide(gi2, pos, lab, depth_de=30.0, chunk=7).reshape(2, 48, 4)
+    nearest, dist = nearest_texels(shape, np.flatnonzero(mask), pos, chunk=7)
+    got = texel_guide(lab, nearest, dist, depth_de=30.0).reshape(2, 48, 4)
     np.testing.assert_array_equal(got[..., :3], np.stack([lab, lab]))
     np.testing.assert_allclose(got[..., 3], [[45.0] * 48, [15.0] * 48])  # 1.5 and 0.5 voxels below the face
     with pytest.raises(ValueError, match="edge"):
-        GradientSmoother(gi, 1.0, guide, edge=0.0)
+        GradientSmoother(*gi, 1.0, guide, edge=0.0)
+    with pytest.raises(ValueError, match="guide has"):
+        GradientSmoother(*gi, 1.0, guide[:5], edge=1.0)
 
+
+def test_a_subset_of_rows_is_smoothed_alone():
+    """With ``rows``, only those free voxels are smoothed, as if they were the whole free set (no flux to the
+    others), and the other rows are kept exactly; ``apply`` does the same in place."""
+    rng = np.random.default_rng(5)
+    shape = (3, 6, 8)
+    index = np.arange(np.prod(shape))
+    sub = (np.indices(shape)[2] < 5).reshape(-1)                     # the rows to smooth: x < 5
+    rows = np.flatnonzero(sub)
+    g = rng.normal(size=(len(index), 3)).astype(np.float32)
+    guide = rng.normal(size=(len(rows), 4)).astype(np.float32)
+    out = GradientSmoother(shape, index, 1.0, guide, 4.0, rows=rows)(g)
+    np.testing.assert_array_equal(out[~sub], g[~sub])
+    alone = GradientSmoother(shape, index[rows], 1.0, guide, 4.0)(g[rows])
+    np.testing.assert_array_equal(out[rows], alone)
+    assert not np.allclose(out[rows], g[rows])
+    inplace = g.copy()
+    assert GradientSmoother(shape, index, 1.0, guide, 4.0, rows=rows).apply(inplace) is inplace
+    np.testing.assert_array_equal(inplace, out)
+    with pytest.raises(ValueError, match="increasing"):
+        GradientSmoother(shape, index[::-1].copy(), 1.0)(g)

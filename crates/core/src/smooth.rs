@@ -1,9 +1,8 @@
 //! Explicit diffusion of per-voxel values over a sparse set of grid voxels (the optimiser's step
 //! preconditioner, `python/inkopt/optim/smooth.py`, which says why).
 //!
-//! The set is given by `index`, a (z, y, x) grid of row numbers (-1: not in the set) whose rows are numbered in
-//! grid (C) order: 0, 1, 2, ... as the flat index grows, like `Parameterization.grad_index`. Values are
-//! `rows × channels` f32. One step:
+//! The set is given by `index`, the strictly increasing linear (C-order, (z, y, x)) indices of its voxels; row r
+//! of the values belongs to voxel `index[r]`. Values are `rows × channels` f32. One step:
 //!
 //! ```text
 //!   v'[r] = v[r] + alpha * sum over the 6 face neighbours q of r that are in the set of (v[q] - v[r])
@@ -14,11 +13,13 @@
 //! e.g. the target colour the voxel shows) each term is weighted by w = exp(-|guide[r] - guide[q]|² / tau²),
 //! symmetric in r and q, so the flux between rows that should look different fades (an edge-stopping
 //! diffusion, as in Perona and Malik's) and the properties above still hold. Each output row is a fixed-order
-//! sum of its own inputs, so the result does not depend on the thread count. Work per step: one pass over the
-//! grid's index plane by plane (in parallel over planes) and the rows of the plane and its two neighbours;
-//! memory: one more copy of the values.
+//! sum of its own inputs, so the result does not depend on the thread count. A neighbour's row is found through
+//! a `RowSpans` of the set (16 bytes per grid row and a bit per stored voxel), not a map over the grid; work per
+//! step: the rows in parallel blocks; memory: one more copy of the values.
 
 use rayon::prelude::*;
+
+use crate::spans::RowSpans;
 
 /// Per-row vectors that weight the diffusion between two rows by exp(-|a - b|² / tau²).
 #[derive(Clone, Copy)]
@@ -29,38 +30,26 @@ pub struct Guide<'a> {
     pub tau: f32,
 }
 
-/// Diffuse `values` (rows × `channels`, rows numbered as in `index`) `steps` times with weight `alpha`
-/// (and `guide`'s weights if given). `n` = (nz, ny, nx) of `index`. Errors if `index` does not number its rows
-/// 0, 1, ... in grid order, or if the sizes disagree.
-pub fn diffuse_rows(n: [usize; 3], index: &[i32], values: &mut [f32], channels: usize, steps: usize, alpha: f32,
+/// Rows per parallel block of a step.
+const BLOCK: usize = 4096;
+
+/// Diffuse `values` (rows × `channels`, row r for voxel `index[r]`) `steps` times with weight `alpha` (and
+/// `guide`'s weights if given). `n` = (nz, ny, nx) of the grid. Errors if `index` is not strictly increasing
+/// within the grid, or if the sizes disagree.
+pub fn diffuse_rows(n: [usize; 3], index: &[i64], values: &mut [f32], channels: usize, steps: usize, alpha: f32,
                     guide: Option<Guide>) -> Result<(), String> {
     let [nz, ny, nx] = n;
-    let plane = ny * nx;
-    if index.len() != nz * plane {
-        return Err(format!("index has {} entries, expected {nz} x {ny} x {nx}", index.len()));
+    if nz * ny * nx == 0 {
+        return Err(format!("the grid {nz} x {ny} x {nx} has no voxels"));
     }
     if channels == 0 || values.len() % channels != 0 {
         return Err(format!("values ({}) are not a whole number of rows of {channels} channels", values.len()));
     }
     let rows = values.len() / channels;
-    // First row of every plane (and the total), checking that the rows are numbered in grid order.
-    let mut first = Vec::with_capacity(nz + 1);
-    let mut next = 0usize;
-    for z in 0..nz {
-        first.push(next);
-        for &r in &index[z * plane..(z + 1) * plane] {
-            if r >= 0 {
-                if r as usize != next {
-                    return Err(format!("index numbers its rows out of grid order (found {r}, expected {next})"));
-                }
-                next += 1;
-            }
-        }
+    if index.len() != rows {
+        return Err(format!("index has {} voxels, values have {rows} rows", index.len()));
     }
-    first.push(next);
-    if next != rows {
-        return Err(format!("index has {next} rows in the set, values have {rows}"));
-    }
+    let set = RowSpans::new([nx, ny, nz], index)?;
     if let Some(g) = guide {
         if g.dims == 0 || g.values.len() != rows * g.dims || !(g.tau > 0.0) {
             return Err(format!("guide: {} values for {rows} rows of {} dims, tau {}", g.values.len(), g.dims, g.tau));
@@ -73,14 +62,9 @@ pub fn diffuse_rows(n: [usize; 3], index: &[i32], values: &mut [f32], channels: 
     for s in 0..steps {
         // After an odd number of steps the latest values are in `values`, else in `src`.
         let (from, to): (&[f32], &mut [f32]) = if s % 2 == 0 { (&src, &mut *values) } else { (&*values, &mut src) };
-        let mut chunks = Vec::with_capacity(nz);
-        let mut rest = to;
-        for z in 0..nz {
-            let (head, tail) = rest.split_at_mut((first[z + 1] - first[z]) * channels);
-            chunks.push((z, head));
-            rest = tail;
-        }
-        chunks.into_par_iter().for_each(|(z, out)| step_plane(n, index, from, out, channels, alpha, guide, z));
+        to.par_chunks_mut(BLOCK * channels).enumerate().for_each(|(b, out)| {
+            step_rows(n, index, &set, from, out, b * BLOCK, channels, alpha, guide)
+        });
     }
     if steps % 2 == 0 {
         values.copy_from_slice(&src);
@@ -88,53 +72,47 @@ pub fn diffuse_rows(n: [usize; 3], index: &[i32], values: &mut [f32], channels: 
     Ok(())
 }
 
-/// One step for the rows of plane z (`out`: those rows, in order).
+/// One step for rows `first..first + out.len() / channels`.
 #[allow(clippy::too_many_arguments)]
-fn step_plane(n: [usize; 3], index: &[i32], from: &[f32], out: &mut [f32], channels: usize, alpha: f32,
-              guide: Option<Guide>, z: usize) {
+fn step_rows(n: [usize; 3], index: &[i64], set: &RowSpans, from: &[f32], out: &mut [f32], first: usize,
+             channels: usize, alpha: f32, guide: Option<Guide>) {
     let [nz, ny, nx] = n;
     let plane = ny * nx;
-    let mut o = 0usize;
-    for y in 0..ny {
-        for x in 0..nx {
-            let j = z * plane + y * nx + x;
-            let r = index[j];
-            if r < 0 {
-                continue;
-            }
-            let row = r as usize;
-            let r = row * channels;
-            // neighbours in a fixed order: -z, +z, -y, +y, -x, +x
-            let nb = [
-                if z > 0 { index[j - plane] } else { -1 },
-                if z + 1 < nz { index[j + plane] } else { -1 },
-                if y > 0 { index[j - nx] } else { -1 },
-                if y + 1 < ny { index[j + nx] } else { -1 },
-                if x > 0 { index[j - 1] } else { -1 },
-                if x + 1 < nx { index[j + 1] } else { -1 },
-            ];
-            let mut w = [alpha; 6];
-            if let Some(g) = guide {
-                let a = &g.values[row * g.dims..(row + 1) * g.dims];
-                for (wk, &q) in w.iter_mut().zip(&nb) {
-                    if q >= 0 {
-                        let b = &g.values[q as usize * g.dims..(q as usize + 1) * g.dims];
-                        let d2: f32 = a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum();
-                        *wk = alpha * (-d2 / (g.tau * g.tau)).exp();
-                    }
+    let row_of = |j: usize| set.rank(j).map_or(-1, |r| r as i64);
+    for (k, o) in out.chunks_exact_mut(channels).enumerate() {
+        let row = first + k;
+        let j = index[row] as usize;
+        let (z, y, x) = (j / plane, j / nx % ny, j % nx);
+        // neighbours in a fixed order: -z, +z, -y, +y, -x, +x
+        let nb = [
+            if z > 0 { row_of(j - plane) } else { -1 },
+            if z + 1 < nz { row_of(j + plane) } else { -1 },
+            if y > 0 { row_of(j - nx) } else { -1 },
+            if y + 1 < ny { row_of(j + nx) } else { -1 },
+            if x > 0 { row_of(j - 1) } else { -1 },
+            if x + 1 < nx { row_of(j + 1) } else { -1 },
+        ];
+        let mut w = [alpha; 6];
+        if let Some(g) = guide {
+            let a = &g.values[row * g.dims..(row + 1) * g.dims];
+            for (wk, &q) in w.iter_mut().zip(&nb) {
+                if q >= 0 {
+                    let b = &g.values[q as usize * g.dims..(q as usize + 1) * g.dims];
+                    let d2: f32 = a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum();
+                    *wk = alpha * (-d2 / (g.tau * g.tau)).exp();
                 }
             }
-            for c in 0..channels {
-                let v = from[r + c];
-                let mut acc = 0.0f32;
-                for (&q, &wk) in nb.iter().zip(&w) {
-                    if q >= 0 {
-                        acc += wk * (from[q as usize * channels + c] - v);
-                    }
+        }
+        let r = row * channels;
+        for (c, oc) in o.iter_mut().enumerate() {
+            let v = from[r + c];
+            let mut acc = 0.0f32;
+            for (&q, &wk) in nb.iter().zip(&w) {
+                if q >= 0 {
+                    acc += wk * (from[q as usize * channels + c] - v);
                 }
-                out[o + c] = v + acc;
             }
-            o += channels;
+            *oc = v + acc;
         }
     }
 }

@@ -510,23 +510,25 @@ fn diffuse_layer(
     py.detach(|| inkopt_core::diffuse::diffuse_layer(shape, z, m, i, i_next, cur, next, o)).map_err(err)
 }
 
-/// smooth_rows(index (Z, Y, X) i32, values (F, C) f32, steps, alpha, guide (F, D) f32 or None, tau) -> (F, C)
-/// f32: `steps` explicit diffusion steps of weight `alpha` over the 6-neighbourhood of the voxels with index >= 0,
-/// whose rows are numbered in grid order, each neighbour weighted by exp(-|guide_r - guide_q|² / tau²) if a guide
-/// is given (inkopt_core::smooth). The GIL is released; threads: rayon's global pool.
+/// smooth_rows(shape (Z, Y, X), index (F,) i64, values (F, C) f32, steps, alpha, guide (F, D) f32 or None, tau)
+/// -> (F, C) f32: `steps` explicit diffusion steps of weight `alpha` over the 6-neighbourhood of the voxels
+/// `index` (strictly increasing linear indices into the grid `shape`; row r of the values is voxel index[r]),
+/// each neighbour weighted by exp(-|guide_r - guide_q|² / tau²) if a guide is given (inkopt_core::smooth). The
+/// GIL is released; threads: rayon's global pool.
 #[pyfunction]
-#[pyo3(signature = (index, values, steps, alpha, guide=None, tau=1.0))]
+#[pyo3(signature = (shape, index, values, steps, alpha, guide=None, tau=1.0))]
+#[allow(clippy::too_many_arguments)]
 fn smooth_rows<'py>(
     py: Python<'py>,
-    index: PyReadonlyArray3<i32>,
+    shape: (usize, usize, usize),
+    index: PyReadonlyArray1<i64>,
     values: PyReadonlyArray2<f32>,
     steps: usize,
     alpha: f32,
     guide: Option<PyReadonlyArray2<f32>>,
     tau: f32,
 ) -> PyResult<Bound<'py, PyArray2<f32>>> {
-    let sh = index.shape();
-    let n = [sh[0], sh[1], sh[2]];
+    let n = [shape.0, shape.1, shape.2];
     let (rows, ch) = (values.shape()[0], values.shape()[1]);
     let idx = c_slice(&index, "index")?;
     let mut v = c_slice(&values, "values")?.to_vec();

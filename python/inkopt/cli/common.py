@@ -73,12 +73,12 @@ def add_optimizer_args(p) -> None:
                    help="loss weights g1,g2,g3 of colour (dE76^2), SSIM and edge terms (default %(default)s)")
     p.add_argument("--lr", type=float, help="step size (default: 2 for eg, 0.5 for adagrad, 0.1 for adam)")
     p.add_argument("--smooth", type=float, default=d.smooth, metavar="VOXELS",
-                   help="width in voxels of the step's spatial smoothing where the target is flat: damps "
-                        "voxel-to-voxel mottle; 0.7 helps flat-colour artwork, costs colour accuracy on photographs "
-                        f"(default {d.smooth:g}: off)")
+                   help="width in voxels of the step's spatial smoothing under texels where the target is flat: "
+                        f"damps voxel-to-voxel mottle (default {d.smooth:g}; 0: off)")
     p.add_argument("--smooth-edge", type=float, default=d.smooth_edge, metavar="DE76",
                    help="target-colour difference at which the smoothing between two voxels fades to 1/e, so that "
-                        f"it stops at the target's edges (default {d.smooth_edge:g}; 0: smooth across edges too)")
+                        f"it stops at the target's edges (default {d.smooth_edge:g}; 0: smooth everywhere, across "
+                        "edges too)")
     p.add_argument("--optimizer", choices=("eg", "adam", "adagrad"), default=d.optimizer,
                    help="eg: exponentiated gradient with momentum (default); adagrad: the paper's; adam")
     p.add_argument("--param", choices=("softmax", "sigmoid"), default=d.param,

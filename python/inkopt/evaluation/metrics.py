@@ -15,27 +15,18 @@ from __future__ import annotations
 import numpy as np
 
 from ..color import delta_e76, delta_e2000, lab_stderr, linear_to_lab, linear_to_lab_jacobian
-from ..loss import TexelLoss
+from ..loss import FLAT_CHROMA_STD, FLAT_L_STD, TexelLoss  # noqa: F401 (the thresholds, re-exported)
 from .noise import NoiseModel
-
-FLAT_L_STD = 1.0
-FLAT_CHROMA_STD = 2.0
-
-
-def _window(loss: TexelLoss, x: np.ndarray) -> np.ndarray:
-    return (loss.K @ x) / loss.wsum[:, None]
 
 
 def flat_texels(loss: TexelLoss) -> np.ndarray:
-    """Boolean (I,): texels whose target neighbourhood is flat (module docstring)."""
-    lab = loss.target_lab
-    var = np.maximum(_window(loss, lab * lab) - _window(loss, lab) ** 2, 0.0)
-    return (np.sqrt(var[:, 0]) < FLAT_L_STD) & (np.sqrt(var[:, 1] + var[:, 2]) < FLAT_CHROMA_STD)
+    """Boolean (I,): texels whose target neighbourhood is flat (module docstring; ``TexelLoss.flat``)."""
+    return loss.flat
 
 
 def highpass_power(loss: TexelLoss, lum: np.ndarray) -> np.ndarray:
     """h_i² per texel for a per-texel L* (I,)."""
-    h = lum - _window(loss, lum[:, None])[:, 0]
+    h = loss.highpass(np.asarray(lum, np.float64)[:, None])[:, 0]
     return h * h
 
 

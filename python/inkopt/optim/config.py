@@ -38,12 +38,14 @@ class OptimizeConfig:
     #: multiplies the adjoint's samples (~ (forward_spp + spp) / (1 - decay)) at no rendering cost.
     adjoint_ema: float = 0.8
     #: Width (voxels) of the spatial preconditioner of the step (``optim/smooth.py``): the step is diffused over
-    #: the free voxels' neighbourhood where the target is flat, damping the voxel-scale noise that shows as mottle
-    #: (0: off). Off by default: 0.7 improves every figure on charts (demo slab, zebra) but costs ~0.9 mean ΔE76 on
-    #: a photograph (astronaut), README "Optimisation: what we learned".
-    smooth: float = 0.0
+    #: the free voxels under texels where the target is flat, damping the voxel-scale noise that shows as mottle
+    #: (0: off). 0.7 by default: on the astronaut photograph and the demo slab it improves every noise-free figure
+    #: at no cost per iteration (README, "Optimisation: what we learned"); smoothing everywhere instead of under
+    #: flat texels only cost the photograph ~0.9 mean ΔE76.
+    smooth: float = 0.7
     #: Guide of the smoothing: the target-colour difference (ΔE76) at which the smoothing between two voxels falls
-    #: to 1/e, so it stays within regions of one target colour (0: across the target's edges too).
+    #: to 1/e, so it stays within regions of one target colour; with a guide, only voxels under flat texels
+    #: (``TexelLoss.flat``) are smoothed (0: no guide, smooth everywhere and across the target's edges too).
     smooth_edge: float = 4.0
 
     def validate(self) -> None:

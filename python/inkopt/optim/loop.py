@@ -2,7 +2,7 @@
 
 One iteration: mixture -> coefficients -> forward render (seed a) -> loss and dE/dC -> path-replay gradient pass
 (seed b != a, so the adjoint's noise and the gradient's noise are independent) -> dE/dsigma -> dE/drho -> dE/dx ->
-optimiser step (``optimizers``), diffused where the target is flat with ``smooth`` > 0 (``smooth``). The loss is
+optimiser step (``optimizers``), diffused where the target is flat (``smooth``; ``OptimizeConfig.smooth``). The loss is
 taken on a running average of the renders (``adjoint_ema``); with ``forward_spp`` 0 there is no forward render
 after the first iteration, and the adjoint is evaluated at the average of the earlier gradient passes' own
 estimates (cheaper iterations, each worth less: see README). One
@@ -31,7 +31,7 @@ from ..render import Renderer
 from .config import OptimizeConfig
 from .optimizers import make_optimizer
 from .param import Parameterization, initial_free_mixture
-from .smooth import GradientSmoother, nearest_texel_guide
+from .smooth import GradientSmoother, nearest_texels, texel_guide
 
 
 @dataclass
@@ -105,10 +105,14 @@ class Optimization:
         self.opt = make_optimizer(cfg.optimizer, cfg.step_size, self.x.shape)
         self.smoother = None
         if cfg.smooth > 0:
-            grad_index = self.param.grad_index
-            guide = (nearest_texel_guide(grad_index, texels.pos_vox, self.loss.target_lab)
-                     if cfg.smooth_edge > 0 else None)
-            self.smoother = GradientSmoother(grad_index, cfg.smooth, guide, cfg.smooth_edge)
+            guide = rows = None
+            if cfg.smooth_edge > 0:  # guided: the free voxels under flat texels only
+                nearest, dist = nearest_texels(self.param.shape, self.param.free_index, texels.pos_vox)
+                rows = np.flatnonzero(self.loss.flat[nearest])
+                guide = texel_guide(self.loss.target_lab, nearest[rows], dist[rows])
+                del nearest, dist
+            self.smoother = GradientSmoother(self.param.shape, self.param.free_index, cfg.smooth, guide,
+                                             cfg.smooth_edge, rows)
         self._renderer: Renderer | None = None
         self.iteration = 0
         self.history = History()
@@ -144,6 +148,8 @@ class Optimization:
         if not d["smooth"]:  # settings added later: checkpoints made before them stay resumable
             d.pop("smooth")
             d.pop("smooth_edge")
+        elif d["smooth_edge"]:  # guided smoothing acts under flat texels only (since it became the default)
+            d["smooth_where"] = "flat"
         d.update(shape=list(self.base.shape), inks=list(self.base.inks.names), texels=len(self.texels),
                  free=self.param.n_free, problem=self._problem_digest)
         if not self.lighting.uniform:
@@ -242,7 +248,7 @@ class Optimization:
         del gs, ga
         x_new = self.opt.step(self.x, g_x).astype(np.float32, copy=False)
         if self.smoother is not None:  # the step, not the gradient: the optimiser's step scale stays its own
-            x_new = self.x + self.smoother(x_new - self.x)
+            x_new = self.x + self.smoother.apply(x_new - self.x)
         self.x = x_new
         self.iteration += 1
         t4 = time.perf_counter()

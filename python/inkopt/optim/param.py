@@ -74,14 +74,6 @@ class Parameterization:
         return tuple(self.fixed_share.shape[:3])
 
     @property
-    def grad_index(self) -> np.ndarray:
-        """(z, y, x) int32: each voxel's row among the free voxels, -1 if it is not a variable (made on request:
-        4 bytes per grid voxel)."""
-        index = np.full(self.shape, -1, np.int32)
-        index.reshape(-1)[self.free_index] = np.arange(len(self.free_index), dtype=np.int32)
-        return index
-
-    @property
     def n_free(self) -> int:
         return len(self.free_index)
 

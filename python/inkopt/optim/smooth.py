@@ -48,47 +48,78 @@ def diffusion_steps(sigma: float) -> int:
 DEPTH_DE = 30.0
 
 
-def nearest_texel_guide(grad_index: np.ndarray, pos_vox: np.ndarray, target_lab: np.ndarray,
-                        depth_de: float = DEPTH_DE, chunk: int = 1 << 21) -> np.ndarray:
-    """(F, 4) float32 per free voxel (rows of ``grad_index``, in grid order): the CIELAB target of its nearest
-    texel, and its distance to that texel (voxels) times ``depth_de``. ``pos_vox`` (I, 3) texel positions
-    (x, y, z) in voxel units (``Texels.pos_vox``), ``target_lab`` (I, 3). Works in chunks of free voxels."""
+def nearest_texels(shape, index: np.ndarray, pos_vox: np.ndarray, chunk: int = 1 << 21):
+    """For voxels ``index`` (F,) (increasing linear indices into the grid ``shape`` (z, y, x)): the nearest
+    texel (F,) int64 and the distance to it (F,) float32, in voxels. ``pos_vox`` (I, 3) texel positions (x, y,
+    z) in voxel units (``Texels.pos_vox``). Works in chunks of voxels."""
     tree = cKDTree(np.asarray(pos_vox, np.float64))
-    target_lab = np.asarray(target_lab, np.float32)
-    free = np.flatnonzero(np.asarray(grad_index).reshape(-1) >= 0)
-    out = np.empty((len(free), 4), np.float32)
-    for s in range(0, len(free), chunk):
-        z, y, x = np.unravel_index(free[s:s + chunk], grad_index.shape)
-        dist, k = tree.query(np.stack([x, y, z], axis=1) + 0.5)
-        out[s:s + chunk, :3] = target_lab[k]
-        out[s:s + chunk, 3] = dist * depth_de
+    index = np.asarray(index)
+    k = np.empty(len(index), np.int64)
+    dist = np.empty(len(index), np.float32)
+    for s in range(0, len(index), chunk):
+        z, y, x = np.unravel_index(index[s:s + chunk], shape)
+        dist[s:s + chunk], k[s:s + chunk] = tree.query(np.stack([x, y, z], axis=1) + 0.5)
+    return k, dist
+
+
+def texel_guide(target_lab: np.ndarray, nearest: np.ndarray, dist: np.ndarray,
+                depth_de: float = DEPTH_DE) -> np.ndarray:
+    """(F, 4) float32 per voxel: the CIELAB target (``target_lab`` (I, 3)) of its nearest texel ``nearest`` (F,)
+    and its distance ``dist`` (F,) to that texel (voxels) times ``depth_de`` (from :func:`nearest_texels`)."""
+    out = np.empty((len(nearest), 4), np.float32)
+    out[:, :3] = np.asarray(target_lab, np.float32)[nearest]
+    out[:, 3] = dist * depth_de
     return out
 
 
 class GradientSmoother:
-    """Diffuses per-free-voxel arrays (F, N) over the free voxels' 6-neighbourhood (the loop in the Rust core,
-    ``inkopt_core::smooth``: parallel, thread-count independent; two working copies of the values during a call,
-    and the guide, 16 bytes per free voxel, kept for the run).
+    """Diffuses per-free-voxel arrays (F, N) over a set of the free voxels' 6-neighbourhood (the loop in the Rust
+    core, ``inkopt_core::smooth``: parallel, thread-count independent; two working copies of the set's values
+    during a call; kept for the run: the set's rows and the guide, 8 + 16 bytes per voxel of the set).
 
-    grad_index: (z, y, x) int32, each voxel's row among the free voxels (-1: not free), rows numbered in grid
-    order, as ``Parameterization.grad_index`` (kept by reference, not copied); ``sigma``: kernel width in voxels
-    (> 0); ``guide`` (F, D) float32 and ``edge``: neighbours are weighted by exp(-|guide_r - guide_q|² / edge²)
-    (e.g. the voxels' target CIELAB from :func:`nearest_texel_guide` and an edge in ΔE76); None: unweighted.
+    shape (z, y, x) of the grid; index (F,) int64: the free voxels' increasing linear indices
+    (``Parameterization.free_index``; kept by reference); ``rows``: which of them are smoothed (e.g. those under
+    flat texels), increasing row numbers, or None for all; the others are left as they are and exchange nothing
+    with the set (no flux crosses its boundary). ``sigma``: kernel width in voxels (> 0); ``guide`` (len(rows), D)
+    float32 and ``edge``: neighbours are weighted by exp(-|guide_r - guide_q|² / edge²) (e.g. the voxels' target
+    CIELAB and depth from :func:`texel_guide` and an edge in ΔE76); None: unweighted.
     """
 
-    def __init__(self, grad_index: np.ndarray, sigma: float, guide: np.ndarray | None = None, edge: float = 0.0):
+    def __init__(self, shape, index: np.ndarray, sigma: float, guide: np.ndarray | None = None,
+                 edge: float = 0.0, rows: np.ndarray | None = None):
         if not sigma > 0:
             raise ValueError(f"smoothing width must be positive, got {sigma}")
         if guide is not None and not edge > 0:
             raise ValueError(f"the guide's edge must be positive, got {edge}")
         self.steps = diffusion_steps(sigma)
-        self.grad_index = np.ascontiguousarray(grad_index, np.int32)
+        self.shape = tuple(int(v) for v in shape)
+        self.rows = None if rows is None else np.asarray(rows, np.int64)
+        index = np.asarray(index, np.int64)
+        self.index = index if self.rows is None else np.ascontiguousarray(index[self.rows])
+        n = len(self.index)
         self.guide = None if guide is None else np.ascontiguousarray(guide, np.float32)
+        if self.guide is not None and len(self.guide) != n:
+            raise ValueError(f"the guide has {len(self.guide)} rows for a set of {n} voxels")
         self.edge = float(edge)
 
-    def __call__(self, g: np.ndarray) -> np.ndarray:
-        """The diffused copy of g (F, N) float32 (g itself is not changed)."""
+    def _diffuse(self, g: np.ndarray) -> np.ndarray:
         from .. import _core
 
-        return _core.smooth_rows(self.grad_index, np.ascontiguousarray(g, np.float32), self.steps, ALPHA,
+        return _core.smooth_rows(self.shape, self.index, np.ascontiguousarray(g, np.float32), self.steps, ALPHA,
                                  self.guide, self.edge or 1.0)
+
+    def __call__(self, g: np.ndarray) -> np.ndarray:
+        """The diffused copy of g (F, N) float32 (g itself is not changed; rows outside the set are copied)."""
+        if self.rows is None:
+            return self._diffuse(g)
+        out = np.array(g, np.float32)
+        out[self.rows] = self._diffuse(out[self.rows])
+        return out
+
+    def apply(self, g: np.ndarray) -> np.ndarray:
+        """Diffuse g (F, N) float32 in place (rows outside the set unchanged) and return it."""
+        if self.rows is None:
+            g[...] = self._diffuse(g)
+        else:
+            g[self.rows] = self._diffuse(g[self.rows])
+        return g
