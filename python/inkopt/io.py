@@ -6,6 +6,9 @@ import io
 import json
 import os
 import tempfile
+import zipfile
+from collections.abc import Iterable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -24,14 +27,51 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
         raise
 
 
+@dataclass
+class Streamed:
+    """An array written to an .npz piece by piece (``save_npz``), never whole in memory: ``shape`` and ``dtype``
+    of the whole, and ``parts``, an iterable of C-contiguous blocks along axis 0 that together make it, in order
+    (e.g. slabs of layers of a grid-sized array)."""
+
+    shape: tuple
+    dtype: np.dtype
+    parts: Iterable[np.ndarray]
+
+
+def _write_streamed(fh, a: Streamed) -> None:
+    dtype = np.dtype(a.dtype)
+    np.lib.format.write_array_header_2_0(fh, {"descr": np.lib.format.dtype_to_descr(dtype),
+                                              "fortran_order": False, "shape": tuple(a.shape)})
+    rows, inner = 0, tuple(a.shape[1:])
+    for part in a.parts:
+        part = np.ascontiguousarray(part, dtype)
+        if part.shape[1:] != inner:
+            raise ValueError(f"a streamed part has shape {part.shape}, expected (k,) + {inner}")
+        fh.write(part.data)
+        rows += len(part)
+    if rows != a.shape[0]:
+        raise ValueError(f"the streamed parts hold {rows} rows, expected {a.shape[0]}")
+
+
 def save_npz(path: str | Path, arrays: dict, compressed: bool = True) -> None:
-    """Write an .npz atomically."""
+    """Write an .npz atomically. Values may be ``Streamed`` (written piece by piece; the file reads back as if
+    the whole array had been given)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp.npz", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as fh:
-            (np.savez_compressed if compressed else np.savez)(fh, **arrays)
+            if not any(isinstance(v, Streamed) for v in arrays.values()):
+                (np.savez_compressed if compressed else np.savez)(fh, **arrays)
+            else:  # what np.savez does, member by member, with the streamed ones written in parts
+                mode = zipfile.ZIP_DEFLATED if compressed else zipfile.ZIP_STORED
+                with zipfile.ZipFile(fh, "w", compression=mode, allowZip64=True) as zf:
+                    for name, v in arrays.items():
+                        with zf.open(name + ".npy", "w", force_zip64=True) as member:
+                            if isinstance(v, Streamed):
+                                _write_streamed(member, v)
+                            else:
+                                np.lib.format.write_array(member, np.asanyarray(v), allow_pickle=False)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

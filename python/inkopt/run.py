@@ -64,8 +64,8 @@ def _optimise(scene, out_dir, cfg, resume, eval_spp, threads, progress, lighting
         run.resume(rd.checkpoint, log)
     rd.save_scene(scene.record())
     run.run(rd.checkpoint, progress=progress)
-    run.release_renderer()  # not beside the whole grid's mixture, which exists only while it is written
-    rd.save_volume(run.volume())
+    run.release_renderer()  # not beside the writing of the result
+    rd.save_volume_slabs(run.base, run.mixture_slabs(), run.base.inks)  # a slab of layers at a time
 
     # Final figures with seeds unused by the optimisation, adaptive spp unless given; the start is reconstructed
     # from the configuration (identical to the first iterate whether or not the run was resumed). The run's own

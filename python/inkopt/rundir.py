@@ -278,6 +278,11 @@ class RunDir:
         vol.save(self.path / self.VOLUME)
         return self.path / self.VOLUME
 
+    def save_volume_slabs(self, geometry: Volume, mixture_slabs, inks) -> Path:
+        """volume.npz of ``geometry`` with a mixture given as z slabs (``Volume.save_with_mixture``)."""
+        geometry.save_with_mixture(self.path / self.VOLUME, mixture_slabs, inks)
+        return self.path / self.VOLUME
+
     def load_volume(self) -> Volume:
         """The optimised mixture volume (volume.npz)."""
         p = self._need(self.VOLUME, "run 'inkopt slab' or 'inkopt optimize' first")

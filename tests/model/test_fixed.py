@@ -56,6 +56,8 @@ def test_parameterisation_of_compact_shares_matches_the_dense_one(kind):
     assert compact.shape == free.shape and compact.fixed_share is fs
     x = rng.normal(size=(compact.n_free, len(INKS))).astype(np.float32)
     np.testing.assert_array_equal(compact.mixture(x), dense.mixture(x))
+    for p in (compact, dense):  # the result written in slabs of layers: the same, bit for bit
+        np.testing.assert_array_equal(np.concatenate(list(p.mixture_slabs(x, voxels=37))), dense.mixture(x))
     plain = Parameterization(kind, white_fixed_shares(free, INKS))  # no constraint: every free voxel, no fixed rows
     assert plain.fixed_f is None and np.array_equal(plain.free_index, np.flatnonzero(free))
     with pytest.raises(ValueError, match="sum to at most 1"):

@@ -70,3 +70,32 @@ def test_require_mixture():
     lab = Volume(VOX, labels=np.zeros((2, 2, 2), np.uint8), inks=INKS)
     with pytest.raises(VolumeError, match="needs a mixture volume, got a labels volume"):
         lab.require_mixture("quantization")
+
+
+@pytest.mark.parametrize("compressed_base", ["labels", "mixture"])
+def test_mixture_written_in_slabs_reads_back_as_the_whole(tmp_path, compressed_base):
+    """``save_with_mixture`` (the result of a big run, a slab of layers at a time) gives the file that
+    ``with_mixture(whole).save`` gives, array by array; a bad slab or a short stream leaves no file behind."""
+    from inkopt.model import SurfaceNormals
+
+    m = _mixture((5, 4, 3), seed=2)
+    inside = np.ones((5, 4, 3), bool)
+    inside[0, 0, :2] = False
+    med = Labels(np.zeros((5, 4, 3), np.uint8), INKS) if compressed_base == "labels" else Mixture(m * 0.5, INKS)
+    normals = SurfaceNormals((5, 4, 3), np.array([1, 7, 30]), np.eye(3, dtype=np.float32))
+    base = Volume(VOX, medium=med, inside=inside, normals=normals, origin_mm=(1.0, 2.0, 3.0))
+    base.with_mixture(m).save(tmp_path / "whole.npz")
+    base.save_with_mixture(tmp_path / "slabs.npz", (m[z:z + 2] for z in range(0, 5, 2)), INKS)
+    with np.load(tmp_path / "whole.npz") as a, np.load(tmp_path / "slabs.npz") as b:
+        assert sorted(a.files) == sorted(b.files) and "labels" not in b.files
+        for k in a.files:
+            np.testing.assert_array_equal(a[k], b[k])
+    v = Volume.load(tmp_path / "slabs.npz")
+    assert v.form == "mixture" and v.normals is not None
+    bad = m.copy()
+    bad[3, 1, 1, 0] = np.nan
+    with pytest.raises(VolumeError, match="finite"):
+        base.save_with_mixture(tmp_path / "bad.npz", (bad[z:z + 1] for z in range(5)), INKS)
+    with pytest.raises(ValueError, match="rows"):
+        base.save_with_mixture(tmp_path / "short.npz", iter([m[:2]]), INKS)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["slabs.npz", "whole.npz"]

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io import load_npz, save_npz
+from ..io import Streamed, load_npz, save_npz
 from .inks import DEFAULT_G, InkTable, mix
 from .normals import SurfaceNormals
 from .labelfile import load_label_file
@@ -305,8 +305,28 @@ class Volume:
 
     # ----------------------------------------------------------------- files
     def to_arrays(self) -> dict:
+        return {**self.geometry_arrays(), **self.medium.arrays()}
+
+    def save_with_mixture(self, path: str | Path, mixture_slabs, inks: InkTable) -> None:
+        """Save this geometry as a mixture volume whose (z, y, x, N) float32 mixture is given as slabs of layers
+        (``mixture_slabs``: an iterable of (k, y, x, N) arrays in z order), written one at a time, so the whole
+        grid's mixture is never in memory; the file reads back as ``self.with_mixture(whole).save(path)``'s does,
+        and each slab is checked like a ``Mixture``'s (finite, non-negative)."""
+        shape = self.shape + (len(inks),)
+
+        def checked():
+            for part in mixture_slabs:
+                if not np.all(np.isfinite(part)) or np.any(part < 0):
+                    raise VolumeError("mixture must be finite and non-negative")
+                yield part
+
+        save_npz(path, {**self.geometry_arrays(), "mixture": Streamed(shape, np.float32, checked()),
+                        **inks.to_arrays()})
+
+    def geometry_arrays(self) -> dict:
+        """Everything ``to_arrays`` writes but the medium's own arrays."""
         out = {"voxel_mm": self.voxel_mm, "g": np.float64(self.g), "ior": np.float64(self.ior),
-               "boundary": np.array(self.boundary), **self.medium.arrays()}
+               "boundary": np.array(self.boundary)}
         if self.inside is not None:
             out["inside"] = self.inside
         if self.normals is not None:

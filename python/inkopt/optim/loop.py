@@ -137,6 +137,10 @@ class Optimization:
     def mixture(self) -> np.ndarray:
         return self.param.mixture(self.x)
 
+    def mixture_slabs(self):
+        """The current mixture in z slabs (``Parameterization.mixture_slabs``)."""
+        return self.param.mixture_slabs(self.x)
+
     def volume(self) -> Volume:
         return self.base.with_mixture(self.mixture())
 

@@ -108,6 +108,26 @@ class Parameterization:
             rho[self.free_index[lo:hi]] = self.free_rows(x[lo:hi], lo)
         return rho.reshape(self.shape + (self.n_inks,))
 
+    def mixture_slabs(self, x: np.ndarray, voxels: int = 1 << 22):
+        """The whole grid's mixture of variables x (F, N) as (k, y, x, N) float32 slabs of about ``voxels`` voxels
+        in z order (an iterator; each slab equals the same layers of :meth:`mixture`, bit for bit), so that a big
+        object's result can be written without the grid-sized array."""
+        nz, ny, nx = self.shape
+        plane = ny * nx
+        step = max(1, voxels // max(plane, 1))
+        fs = self.fixed_share
+        for z0 in range(0, nz, step):
+            z1 = min(nz, z0 + step)
+            if isinstance(fs, FixedShares):
+                rho = fs.at(np.arange(z0 * plane, z1 * plane, dtype=np.int64))
+            else:
+                rho = np.array(fs[z0:z1], np.float32).reshape(-1, self.n_inks)
+            lo, hi = np.searchsorted(self.free_index, [z0 * plane, z1 * plane])
+            for a in range(lo, hi, 1 << 20):
+                b = min(hi, a + (1 << 20))
+                rho[self.free_index[a:b] - z0 * plane] = self.free_rows(x[a:b], a)
+            yield rho.reshape(z1 - z0, ny, nx, self.n_inks)
+
     def backward(self, x: np.ndarray, grad_rho: np.ndarray, natural: bool = False, lo: int = 0) -> np.ndarray:
         """dE/dx (F, N) from dE/drho, given per free voxel (F, N) or for the whole grid (z, y, x, N).
         ``natural``: the mirror-descent direction on the simplex instead (softmax only): g - <g, p>, the
