@@ -246,7 +246,7 @@ def test_ssim_term_raises_ssim():
 def test_the_loop_smooths_the_optimisers_step():
     """One iteration with smoothing moves the variables by exactly the smoothed step of the same iteration
     without it (same seeds, same start): the smoother acts on the step, after the optimiser."""
-    from inkopt.optim.smooth import GradientSmoother, nearest_texels, texel_guide
+    from inkopt.optim.smooth import MAX_DEPTH, GradientSmoother, nearest_texels, texel_guide
 
     scene = small_chart_scene(48, 32, 0.3)  # big enough for flat texels (patch interiors): 61 of 1536
     runs = {}
@@ -259,8 +259,8 @@ def test_the_loop_smooths_the_optimisers_step():
     x0, plain = runs[0.0]
     _, smoothed = runs[1.0]
     p = plain.param
-    nearest, dist = nearest_texels(p.shape, p.free_index, scene.texels.pos_vox)
-    rows = np.flatnonzero(plain.loss.flat[nearest])  # the free voxels under flat texels
+    nearest, dist = nearest_texels(p.shape, p.free_index, scene.texels.pos_vox, MAX_DEPTH)
+    rows = np.flatnonzero((nearest >= 0) & plain.loss.flat[nearest])  # the free voxels under flat texels
     assert 0 < len(rows) < p.n_free
     sm = GradientSmoother(p.shape, p.free_index, 1.0, texel_guide(plain.loss.target_lab, nearest[rows], dist[rows]),
                           4.0, rows)

@@ -114,6 +114,9 @@ def test_guide_stops_the_flux_at_target_edges():
     got = texel_guide(lab, nearest, dist, depth_de=30.0).reshape(2, 48, 4)
     np.testing.assert_array_equal(got[..., :3], np.stack([lab, lab]))
     np.testing.assert_allclose(got[..., 3], [[45.0] * 48, [15.0] * 48])  # 1.5 and 0.5 voxels below the face
+    near, d = nearest_texels(shape, np.flatnonzero(mask), pos, max_dist=1.0)  # only the top layer is that close
+    np.testing.assert_array_equal(near.reshape(2, 48), np.stack([np.full(48, -1), nearest.reshape(2, 48)[1]]))
+    assert np.all(np.isinf(d.reshape(2, 48)[0])) and np.array_equal(d.reshape(2, 48)[1], dist.reshape(2, 48)[1])
     with pytest.raises(ValueError, match="edge"):
         GradientSmoother(*gi, 1.0, guide, edge=0.0)
     with pytest.raises(ValueError, match="guide has"):

@@ -31,7 +31,7 @@ from ..render import Renderer
 from .config import OptimizeConfig
 from .optimizers import make_optimizer
 from .param import Parameterization, initial_free_mixture
-from .smooth import GradientSmoother, nearest_texels, texel_guide
+from .smooth import MAX_DEPTH, GradientSmoother, nearest_texels, texel_guide
 
 
 @dataclass
@@ -106,9 +106,9 @@ class Optimization:
         self.smoother = None
         if cfg.smooth > 0:
             guide = rows = None
-            if cfg.smooth_edge > 0:  # guided: the free voxels under flat texels only
-                nearest, dist = nearest_texels(self.param.shape, self.param.free_index, texels.pos_vox)
-                rows = np.flatnonzero(self.loss.flat[nearest])
+            if cfg.smooth_edge > 0:  # guided: the free voxels under flat texels only, down to MAX_DEPTH
+                nearest, dist = nearest_texels(self.param.shape, self.param.free_index, texels.pos_vox, MAX_DEPTH)
+                rows = np.flatnonzero((nearest >= 0) & self.loss.flat[nearest])
                 guide = texel_guide(self.loss.target_lab, nearest[rows], dist[rows])
                 del nearest, dist
             self.smoother = GradientSmoother(self.param.shape, self.param.free_index, cfg.smooth, guide,
