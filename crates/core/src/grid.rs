@@ -13,7 +13,7 @@ use bytemuck::cast;
 use wide::{f32x8, i32x8, CmpEq, CmpGe, CmpGt, CmpLt};
 
 use crate::sampling::{add, scale, V3};
-use crate::scene::{Boundary, Geometry};
+use crate::scene::{Boundary, Geometry, BRICK};
 use crate::trace::Tally;
 
 /// The grid's extent along axis a (n * size): its period on a periodic axis.
@@ -42,6 +42,42 @@ pub(crate) fn locate_box(geo: &Geometry, p: V3) -> [i32; 3] {
         v[a] = ((p[a] * geo.inv_size[a]) as i32).max(0).min(geo.n[a] - 1);
     }
     v
+}
+
+/// The voxel containing p, not clamped: outside the grid when p is (a flight leaving the grid).
+#[inline(always)]
+pub(crate) fn voxel_of(geo: &Geometry, p: V3) -> [i32; 3] {
+    std::array::from_fn(|a| (p[a] * geo.inv_size[a]).floor() as i32)
+}
+
+/// Radius of a ball around p that reaches no cell beyond those within s - 1 steps (26 directions) of p's cell
+/// `c` (cells of edge `h`): per axis, s - 1 cells plus p's distance to its own cell's nearer face, shrunk by
+/// 1e-4 relative against rounding.
+#[inline(always)]
+fn ball_radius(p: V3, c: [i32; 3], h: [f32; 3], s: u8) -> f32 {
+    let mut r = f32::INFINITY;
+    for a in 0..3 {
+        let lo = (p[a] - c[a] as f32 * h[a]).max(0.0);
+        let own = lo.min((h[a] - lo).max(0.0));
+        r = r.min((s - 1) as f32 * h[a] + own);
+    }
+    r * (1.0 - 1e-4)
+}
+
+/// For a flight outside the object at p in (in-grid, outside) voxel v: the radius of a ball around p that holds
+/// no voxel of the object, from the brick level (`Geometry::brick_empty`) or else the voxel level
+/// (`Geometry::empty_distance`); None where neither guarantees more than p's own voxel (next to the object, or without
+/// empty distances): the flight then goes on voxel by voxel.
+#[inline(always)]
+pub(crate) fn empty_ball(geo: &Geometry, p: V3, v: [i32; 3]) -> Option<f32> {
+    let bricks = geo.brick_empty.as_ref()?;
+    let b: [i32; 3] = std::array::from_fn(|a| v[a] / BRICK as i32);
+    let e = bricks[((b[2] * geo.bricks[1] + b[1]) * geo.bricks[0] + b[0]) as usize];
+    if e >= 2 {
+        return Some(ball_radius(p, b, std::array::from_fn(|a| geo.size[a] * BRICK as f32), e));
+    }
+    let e = geo.empty_distance(geo.index(v));
+    (e >= 2).then(|| ball_radius(p, v, geo.size, e))
 }
 
 /// The voxel containing p (clamped to the grid); on periodic axes p is first wrapped into [0, span).

@@ -1,4 +1,4 @@
-//! The voxel scene: grid geometry (size, boundary, inside mask and its safe distances, shading normals), the
+//! The voxel scene: grid geometry (size, boundary, inside mask as signed distances, shading normals), the
 //! light it is lit by (a `Light`, see `light`; set with `Geometry::with_light`) and texels. The media (behind
 //! the `Medium` trait) are in `medium` and re-exported here.
 //!
@@ -28,11 +28,21 @@ pub struct Geometry {
     /// Linear-index stride of a step along x, y, z.
     pub stride: [isize; 3],
     pub boundary: Boundary,
-    /// Optional inside mask, one byte per voxel (non-zero = inside). None: the whole box is inside.
-    pub inside: Option<Vec<u8>>,
-    /// With `inside`: each voxel's safe distance, the Chebyshev distance in voxels to the nearest voxel outside
-    /// the object or the grid (0 outside, 1 at the surface, capped at `SAFE_CAP`).
-    pub safe: Option<Vec<u8>>,
+    /// With an inside mask (`with_inside`): each voxel's signed distance, one byte per voxel. Inside voxels hold
+    /// their safe distance, the Chebyshev distance in voxels to the nearest voxel outside the object or the grid
+    /// (1 at the surface); outside voxels minus their empty distance, the Chebyshev distance to the nearest
+    /// inside voxel (-1 next to the object; the grid's exterior counts as empty); both capped at `SAFE_CAP`. A
+    /// voxel is inside iff its value is positive. One array for both, so the flight that leaves the object
+    /// finds the empty distance of its next voxel in the cache line it just read. None: the whole box is inside.
+    pub dist: Option<Vec<i8>>,
+    /// With a mask and `Boundary::Box`: the empty distance per brick of `BRICK`^3 voxels (x fastest), in bricks
+    /// (a brick is occupied if any of its voxels is inside), capped at 255: a few kilobytes that stay in cache,
+    /// so a flight far from the object crosses it in a few jumps without touching the per-voxel array. Flights
+    /// outside the object jump across the empty balls these guarantee (`grid::empty_ball`, `trace::walk`);
+    /// None (periodic grids, where a flight leaving the grid re-enters on the other side): no jumps.
+    pub brick_empty: Option<Vec<u8>>,
+    /// Bricks along x, y, z.
+    pub bricks: [i32; 3],
     /// Optional outward unit shading normals of the (surface) voxels that have one; used where paths meet the
     /// surface.
     pub normals: Option<ShadingNormals>,
@@ -64,8 +74,9 @@ impl Geometry {
             inv_size: [1.0 / size[0], 1.0 / size[1], 1.0 / size[2]],
             stride: [1, n_xyz[0] as isize, (n_xyz[0] * n_xyz[1]) as isize],
             boundary,
-            inside: None,
-            safe: None,
+            dist: None,
+            brick_empty: None,
+            bricks: std::array::from_fn(|a| n_xyz[a].div_ceil(BRICK) as i32),
             normals: None,
             ior,
             g,
@@ -92,17 +103,36 @@ impl Geometry {
         if inside.len() != self.voxel_count() {
             return Err("inside mask size differs from the grid".into());
         }
-        self.safe = Some(safe_distances(&inside, [self.n[0] as usize, self.n[1] as usize, self.n[2] as usize]));
-        self.inside = Some(inside);
+        let n = [self.n[0] as usize, self.n[1] as usize, self.n[2] as usize];
+        let (safe, empty) = (safe_distances(&inside, n), empty_distances(&inside, n));
+        self.dist = Some(safe.iter().zip(&empty).map(|(&s, &e)| if s > 0 { s as i8 } else { -(e as i8) }).collect());
+        if self.boundary == Boundary::Box {
+            self.brick_empty = Some(brick_empty_distances(&inside, n));
+        }
         Ok(self)
     }
 
-    /// Safe distance of voxel j (`safe`); `SAFE_CAP` when there is no mask.
+    /// Whether an inside mask bounds the object (else the whole grid is inside).
+    #[inline(always)]
+    pub fn masked(&self) -> bool {
+        self.dist.is_some()
+    }
+
+    /// Safe distance of voxel j (`dist`; 0 outside the object); `SAFE_CAP` when there is no mask.
     #[inline(always)]
     pub fn safe_distance(&self, j: usize) -> u8 {
-        match &self.safe {
+        match &self.dist {
             None => SAFE_CAP,
-            Some(s) => s[j],
+            Some(d) => d[j].max(0) as u8,
+        }
+    }
+
+    /// Empty distance of voxel j (`dist`; 0 inside the object and without a mask).
+    #[inline(always)]
+    pub fn empty_distance(&self, j: usize) -> u8 {
+        match &self.dist {
+            None => 0,
+            Some(d) => (-d[j]).max(0) as u8,
         }
     }
 
@@ -134,18 +164,18 @@ impl Geometry {
     #[inline(always)]
     pub fn is_inside(&self, v: [i32; 3]) -> bool {
         self.in_grid(v)
-            && match &self.inside {
+            && match &self.dist {
                 None => true,
-                Some(m) => m[self.index(v)] != 0,
+                Some(d) => d[self.index(v)] > 0,
             }
     }
 
     /// Whether in-grid voxel with linear index j is inside the object.
     #[inline(always)]
     pub fn mask_inside(&self, j: usize) -> bool {
-        match &self.inside {
+        match &self.dist {
             None => true,
-            Some(m) => m[j] != 0,
+            Some(d) => d[j] > 0,
         }
     }
 
@@ -163,17 +193,53 @@ pub const SAFE_CAP: u8 = 16;
 /// the 3 x 3 x 3 cube (separable: three 1D passes) a voxel survives, outside the grid counting as outside. A
 /// voxel with safe distance s has every voxel within s - 1 steps (any of the 26 directions) inside.
 pub fn safe_distances(inside: &[u8], n: [usize; 3]) -> Vec<u8> {
+    erosion_depths(inside.iter().map(|&m| (m != 0) as u8).collect(), n, 0, SAFE_CAP)
+}
+
+/// Edge of the bricks of `Geometry::brick_empty`, in voxels.
+pub const BRICK: usize = 8;
+
+/// `empty_distances` at the scale of bricks of `BRICK`^3 voxels (x fastest over ceil(n / BRICK) bricks): each
+/// brick's Chebyshev distance in bricks to the nearest brick holding an inside voxel (capped at 255; the grid's
+/// exterior is empty). A brick with distance e has every voxel of the bricks within e - 1 brick steps outside.
+pub fn brick_empty_distances(inside: &[u8], n: [usize; 3]) -> Vec<u8> {
+    let nb: [usize; 3] = std::array::from_fn(|a| n[a].div_ceil(BRICK));
+    let mut free = vec![1u8; nb[0] * nb[1] * nb[2]];
+    for z in 0..n[2] {
+        for y in 0..n[1] {
+            let row = &inside[(z * n[1] + y) * n[0]..][..n[0]];
+            let b = ((z / BRICK) * nb[1] + y / BRICK) * nb[0];
+            for (x, &m) in row.iter().enumerate() {
+                if m != 0 {
+                    free[b + x / BRICK] = 0;
+                }
+            }
+        }
+    }
+    erosion_depths(free, nb, 1, 255)
+}
+
+/// Empty distances of a mask (non-zero = inside): `safe_distances` of its complement, with the grid's exterior
+/// counting as empty. An outside voxel with empty distance e has every voxel within e - 1 steps outside the
+/// object (or beyond the grid); inside voxels have 0.
+pub fn empty_distances(inside: &[u8], n: [usize; 3]) -> Vec<u8> {
+    erosion_depths(inside.iter().map(|&m| (m == 0) as u8).collect(), n, 1, SAFE_CAP)
+}
+
+/// For a set (1 = in it, 0 = not), the number of successive erosions by the 3 x 3 x 3 cube each voxel survives
+/// (its Chebyshev distance to the nearest voxel not in the set), capped at `cap`; beyond the grid is in the set
+/// if `border` is 1.
+fn erosion_depths(mut cur: Vec<u8>, n: [usize; 3], border: u8, cap: u8) -> Vec<u8> {
     use rayon::prelude::*;
     let plane = n[0] * n[1];
-    let mut cur: Vec<u8> = inside.par_iter().map(|&m| (m != 0) as u8).collect();
-    let mut safe = cur.clone();
+    let mut depth = cur.clone();
     let mut tmp = vec![0u8; cur.len()];
-    for _ in 1..SAFE_CAP {
+    for _ in 1..cap {
         for a in 0..3 {
-            erode_axis(&cur, &mut tmp, n, a);
+            erode_axis(&cur, &mut tmp, n, a, border);
             std::mem::swap(&mut cur, &mut tmp);
         }
-        let any = safe
+        let any = depth
             .par_chunks_mut(plane)
             .zip(cur.par_chunks(plane))
             .map(|(s, c)| {
@@ -185,24 +251,35 @@ pub fn safe_distances(inside: &[u8], n: [usize; 3]) -> Vec<u8> {
             break;
         }
     }
-    safe
+    depth
 }
 
-/// out = cur eroded along axis a by one voxel (a voxel stays only if both neighbours on that axis are inside;
-/// outside the grid counts as outside). Whole rows and planes at a time, so the loops vectorise.
-fn erode_axis(cur: &[u8], out: &mut [u8], n: [usize; 3], a: usize) {
+/// out = cur eroded along axis a by one voxel (a voxel stays only if both neighbours on that axis are in the set;
+/// beyond the grid counts as `border`). Whole rows and planes at a time, so the loops vectorise.
+fn erode_axis(cur: &[u8], out: &mut [u8], n: [usize; 3], a: usize, border: u8) {
     use rayon::prelude::*;
     let (nx, plane) = (n[0], n[0] * n[1]);
     let and3 = |o: &mut [u8], x: &[u8], y: &[u8], z: &[u8]| {
         o.iter_mut().zip(x).zip(y).zip(z).for_each(|(((o, &x), &y), &z)| *o = x & y & z);
+    };
+    // The first and last of m cells of `st` bytes each (a row's voxels, a plane's rows): one neighbour beyond
+    // the grid; the interior cells are done by `and3`.
+    let ends = |o: &mut [u8], c: &[u8], m: usize, st: usize| {
+        let cell = |i: usize| &c[i * st..(i + 1) * st];
+        if m == 1 {
+            o.iter_mut().zip(c).for_each(|(o, &c)| *o = c & border);
+            return;
+        }
+        let (first, last) = (cell(0).iter().zip(cell(1)), cell(m - 1).iter().zip(cell(m - 2)));
+        o[..st].iter_mut().zip(first).for_each(|(o, (&c, &b))| *o = c & b & border);
+        o[(m - 1) * st..].iter_mut().zip(last).for_each(|(o, (&c, &b))| *o = c & b & border);
     };
     out.par_chunks_mut(plane).enumerate().for_each(|(k, o)| {
         let c = &cur[k * plane..(k + 1) * plane];
         match a {
             0 => {
                 for (o, c) in o.chunks_mut(nx).zip(c.chunks(nx)) {
-                    o[0] = 0;
-                    o[nx - 1] = 0;
+                    ends(o, c, nx, 1);
                     if nx > 2 {
                         and3(&mut o[1..nx - 1], &c[..nx - 2], &c[1..nx - 1], &c[2..]);
                     }
@@ -210,15 +287,19 @@ fn erode_axis(cur: &[u8], out: &mut [u8], n: [usize; 3], a: usize) {
             }
             1 => {
                 let ny = n[1];
-                o[..nx].fill(0);
-                o[plane - nx..].fill(0);
+                ends(o, c, ny, nx);
                 if ny > 2 {
                     and3(&mut o[nx..plane - nx], &c[..plane - 2 * nx], &c[nx..plane - nx], &c[2 * nx..]);
                 }
             }
             _ => {
-                if k == 0 || k + 1 == n[2] {
-                    o.fill(0);
+                let nz = n[2];
+                if nz == 1 {
+                    o.iter_mut().zip(c).for_each(|(o, &c)| *o = c & border);
+                } else if k == 0 || k + 1 == nz {
+                    let m = if k == 0 { 1 } else { k - 1 };
+                    let nb = &cur[m * plane..(m + 1) * plane];
+                    o.iter_mut().zip(c).zip(nb).for_each(|((o, &c), &b)| *o = c & b & border);
                 } else {
                     and3(o, &cur[(k - 1) * plane..k * plane], c, &cur[(k + 1) * plane..(k + 2) * plane]);
                 }

@@ -7,8 +7,8 @@
 //! roulette: it survives with probability weight / threshold, then carries the threshold; compared with analog
 //! absorption the variance is never larger and, for dark inks, much smaller); at the object's surface the path
 //! is reflected with the Fresnel probability and refracted otherwise (shading normals where the scene has
-//! them); outside it flies straight, voxel by voxel, until it re-enters a concave part or leaves the grid,
-//! where it picks up the light's radiance (`scene::Light`) times its weight. `packet` runs the same estimator
+//! them); outside it flies straight, voxel by voxel next to the object and across empty balls away from it
+//! (`grid::empty_ball`), until it re-enters a concave part or leaves the grid, where it picks up the light's radiance (`scene::Light`) times its weight. `packet` runs the same estimator
 //! eight paths at a time and uses `walk` per lane near surfaces.
 //!
 //! Path-space derivatives (for path replay backpropagation): the density of the collision points is
@@ -20,9 +20,9 @@
 //! gives its gradient.
 
 use crate::flight::{survive, Delta, Event, Regular, Tracker};
-use crate::grid::{cross, facing_normal, voxel_exit};
+use crate::grid::{cross, empty_ball, facing_normal, voxel_exit, voxel_of};
 use crate::rng::{PathRng, Uniforms};
-use crate::sampling::{dot, fresnel, hg_sample, reflect, refract, scale, V3};
+use crate::sampling::{add, dot, fresnel, hg_sample, reflect, refract, scale, V3};
 use crate::scene::{face_normal, Geometry, Medium, Texel};
 
 /// Receives the events of a path (for gradients). The forward pass uses `NoTally`.
@@ -148,7 +148,7 @@ pub fn trace<M: Medium, T: Tally>(
         Start::Outside(p, d, v) => Walk { p, d, v, weight: 1.0, in_medium: false, events: 0, steps: 0 },
         Start::Done(r) => return r,
     };
-    let end = if w.in_medium && geo.inside.is_none() {
+    let end = if w.in_medium && !geo.masked() {
         walk(geo, med, c, &mut w, &mut Delta::new(med.majorant(c)), rng, tally, false)
     } else {
         walk(geo, med, c, &mut w, &mut Regular::new(), rng, tally, false)
@@ -231,6 +231,13 @@ pub(crate) fn walk<K: Tracker, M: Medium, T: Tally, U: Uniforms>(geo: &Geometry,
                 }
                 if s.steps > MAX_STEPS {
                     return cut(&s);
+                }
+                if let Some(r) = empty_ball(geo, s.p, s.v) {
+                    // No voxel of the object within r: fly across at once (a straight flight in vacuum draws
+                    // nothing, so only the path's position changes).
+                    s.p = add(s.p, scale(s.d, r));
+                    s.v = voxel_of(geo, s.p);
+                    continue;
                 }
                 let (t, axis) = voxel_exit(geo, s.p, s.d, s.v);
                 let (nb, step) = cross(geo, &mut s.p, s.d, t, axis, s.v);

@@ -136,7 +136,7 @@ impl Packet {
             self.d[a][l] = d[a];
         }
         self.t[l] = 0.0;
-        if geo.inside.is_some() {
+        if geo.masked() {
             let v = locate_box(geo, p);
             let (pv, vv) = (p.map(f32x8::splat), v.map(i32x8::splat));
             let s = f32x8::splat(geo.safe_distance(geo.index(v)) as f32);
@@ -171,7 +171,7 @@ impl Packet {
 
 /// Whether `trace_paths` handles this geometry (mask-free volumes, and masked boxes).
 pub(crate) fn supported(geo: &Geometry) -> bool {
-    geo.inside.is_none() || geo.boundary == Boundary::Box
+    !geo.masked() || geo.boundary == Boundary::Box
 }
 
 /// Trace the paths of `texels` (those the tally wants) and write their values to `values`, laid out
@@ -181,7 +181,7 @@ pub(crate) fn supported(geo: &Geometry) -> bool {
 pub(crate) fn trace_paths<M: Medium, P: PathTally>(geo: &Geometry, med: &M, texels: &[Texel], first_key: u64,
                                                    opts: &RenderOptions, values: &mut [f32], tally: &mut P) -> u64 {
     assert!(supported(geo));
-    let masked = geo.inside.is_some();
+    let masked = geo.masked();
     let (spp, seed, include_specular) = (opts.spp as usize, opts.seed, opts.include_specular);
     let per_texel = 3 * spp;
     let jobs = texels.len() * per_texel;

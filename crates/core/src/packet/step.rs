@@ -64,7 +64,7 @@ impl Packet {
     /// One tentative collision in every live lane; real collisions scatter (vectorised).
     #[inline(always)]
     pub(super) fn step<M: Medium>(&mut self, geo: &Geometry, med: &M) -> StepEvents {
-        let masked = geo.inside.is_some();
+        let masked = geo.masked();
         let live = self.live_mask();
         let (k_lo, k_hi) = (u32x8::from(self.k_lo), u32x8::from(self.k_hi));
         let i = u32x8::from(self.draw);

@@ -92,3 +92,120 @@ fn safe_balls_stay_inside_the_object() {
     }
     assert!(checked > 500, "{checked}");
 }
+
+/// Brute-force Chebyshev distance (in cells) from cell c to the nearest cell of an (n) grid for which `hit` is
+/// true, cells beyond the grid never hit; capped.
+fn nearest_hit(n: [usize; 3], c: [i32; 3], cap: i32, hit: impl Fn(usize) -> bool) -> i32 {
+    let mut best = cap;
+    for z in 0..n[2] {
+        for y in 0..n[1] {
+            for x in 0..n[0] {
+                if hit((z * n[1] + y) * n[0] + x) {
+                    best = best.min((x as i32 - c[0]).abs().max((y as i32 - c[1]).abs()).max((z as i32 - c[2]).abs()));
+                }
+            }
+        }
+    }
+    best
+}
+
+/// A mask of three random blobs (concavities between them) in a grid of n voxels.
+fn blobs(n: [usize; 3], seed: u64) -> Vec<u8> {
+    let mut rng = crate::rng::PathRng::new(seed, 0, 0, 0);
+    let centres: Vec<[f32; 3]> = (0..3)
+        .map(|_| std::array::from_fn(|a| 2.0 + rng.next_f32() * (n[a] as f32 - 4.0)))
+        .collect();
+    let mut inside = vec![0u8; n.iter().product()];
+    for z in 0..n[2] {
+        for y in 0..n[1] {
+            for x in 0..n[0] {
+                let p = [x as f32, y as f32, z as f32];
+                inside[(z * n[1] + y) * n[0] + x] =
+                    centres.iter().any(|c| (0..3).map(|a| (p[a] - c[a]).powi(2)).sum::<f32>() < 12.0) as u8;
+            }
+        }
+    }
+    inside
+}
+
+#[test]
+fn empty_distances_match_brute_force() {
+    // Every voxel's empty distance is its Chebyshev distance to the nearest inside voxel (0 inside, the grid's
+    // exterior empty, capped); every brick's, in bricks, to the nearest brick that holds an inside voxel.
+    let n = [40usize, 19, 27];
+    let inside = blobs(n, 3);
+    let empty = crate::scene::empty_distances(&inside, n);
+    let cap = crate::scene::SAFE_CAP as i32;
+    for z in 0..n[2] {
+        for y in 0..n[1] {
+            for x in 0..n[0] {
+                let want = nearest_hit(n, [x as i32, y as i32, z as i32], cap, |k| inside[k] != 0);
+                assert_eq!(empty[(z * n[1] + y) * n[0] + x] as i32, want, "voxel {x} {y} {z}");
+            }
+        }
+    }
+    assert!(empty.iter().any(|&e| e >= 4), "the test grid should have empty space");
+    // The geometry keeps both in one signed array.
+    let safe = crate::scene::safe_distances(&inside, n);
+    let geo = Geometry::new(n, [0.1; 3], Boundary::Box, 1.5, 0.4).unwrap().with_inside(inside.clone()).unwrap();
+    for j in 0..inside.len() {
+        assert_eq!((geo.safe_distance(j), geo.empty_distance(j), geo.mask_inside(j)), (safe[j], empty[j], inside[j] != 0));
+    }
+    let b = crate::scene::BRICK;
+    let nb: [usize; 3] = std::array::from_fn(|a| n[a].div_ceil(b));
+    let bricks = crate::scene::brick_empty_distances(&inside, n);
+    let occupied = |k: usize| {
+        let c = [k % nb[0], (k / nb[0]) % nb[1], k / (nb[0] * nb[1])];
+        (0..inside.len()).any(|j| {
+            let v = [j % n[0], (j / n[0]) % n[1], j / (n[0] * n[1])];
+            inside[j] != 0 && (0..3).all(|a| v[a] / b == c[a])
+        })
+    };
+    let occ: Vec<bool> = (0..bricks.len()).map(occupied).collect();
+    for k in 0..bricks.len() {
+        let c = [(k % nb[0]) as i32, ((k / nb[0]) % nb[1]) as i32, (k / (nb[0] * nb[1])) as i32];
+        assert_eq!(bricks[k] as i32, nearest_hit(nb, c, 255, |i| occ[i]), "brick {c:?}");
+    }
+    // Mask without any inside voxel: everything is empty as far as the cap.
+    let none = crate::scene::empty_distances(&vec![0u8; 60], [5, 4, 3]);
+    assert!(none.iter().all(|&e| e == crate::scene::SAFE_CAP));
+}
+
+#[test]
+fn empty_balls_hold_no_voxel_of_the_object() {
+    // Random points in outside voxels (anisotropic voxels): the ball `empty_ball` gives reaches no inside voxel,
+    // and away from the object the brick level gives balls larger than the voxel level could.
+    let n = [75usize, 21, 30];
+    let size = [0.05f32, 0.08, 0.03];
+    // Blobs in the first 30 voxels along x, empty space beyond (bricks far from the object).
+    let sub = blobs([30, n[1], n[2]], 11);
+    let inside: Vec<u8> = (0..n.iter().product::<usize>())
+        .map(|j| if j % n[0] < 30 { sub[(j / n[0]) * 30 + j % n[0]] } else { 0 })
+        .collect();
+    let geo = Geometry::new(n, size, Boundary::Box, 1.5, 0.4).unwrap().with_inside(inside.clone()).unwrap();
+    let mut rng = crate::rng::PathRng::new(4, 0, 0, 0);
+    let (mut checked, mut big) = (0, 0);
+    let voxel_cap = (crate::scene::SAFE_CAP - 1) as f32 * 0.08 + 0.08;
+    for j in (0..inside.len()).filter(|&j| inside[j] == 0).step_by(7) {
+        let v = [(j % n[0]) as i32, ((j / n[0]) % n[1]) as i32, (j / (n[0] * n[1])) as i32];
+        let p: V3 = std::array::from_fn(|a| (v[a] as f32 + rng.next_f32()) * size[a]);
+        let Some(r) = crate::grid::empty_ball(&geo, p, v) else { continue };
+        assert!(r > 0.0);
+        big += (r > voxel_cap) as usize;
+        for k in (0..inside.len()).filter(|&k| inside[k] != 0) {
+            let w = [(k % n[0]) as i32, ((k / n[0]) % n[1]) as i32, (k / (n[0] * n[1])) as i32];
+            let d2: f32 = (0..3)
+                .map(|a| {
+                    let (lo, hi) = (w[a] as f32 * size[a], (w[a] + 1) as f32 * size[a]);
+                    (lo - p[a]).max(p[a] - hi).max(0.0).powi(2)
+                })
+                .sum();
+            assert!(d2 >= r * r * (1.0 - 1e-5), "point {p:?} in voxel {v:?}: radius {r} reaches inside voxel {w:?}");
+        }
+        checked += 1;
+    }
+    assert!(checked > 300 && big > 0, "{checked} balls, {big} from bricks");
+    // Periodic grids have none (a flight wraps around).
+    let periodic = Geometry::new(n, size, Boundary::PeriodicXY, 1.5, 0.4).unwrap().with_inside(inside).unwrap();
+    assert!(periodic.brick_empty.is_none());
+}

@@ -85,7 +85,7 @@ fn total_gradient_matches_a_uniform_shift() {
                                 objective(&geo, &shift(-h), &texels, &adj, &opts(seed)));
                 fd.push((fp - fm) / (2.0 * h as f64));
             }
-            let what = format!("{:?} masked {} {}", geo.boundary, geo.inside.is_some(), ["sigma_s", "sigma_a"][which]);
+            let what = format!("{:?} masked {} {}", geo.boundary, geo.masked(), ["sigma_s", "sigma_a"][which]);
             assert_gradient_matches_fd(&g, &fd, 5.41, 0.01, 0.0, &what);
         }
     }
