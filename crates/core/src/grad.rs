@@ -23,8 +23,10 @@ pub enum GradMethod {
     Li1,
 }
 
-/// Gradient accumulators: one buffer shared by all worker threads, holding d e / d sigma_s then d e / d sigma_a,
-/// planar by channel ([s R | s G | s B | a R | a G | a B], n voxels each), in fixed point: every contribution is
+/// Gradient accumulators: one buffer shared by all worker threads, holding d e / d sigma_s - d e / d sigma_a, then
+/// d e / d sigma_a, planar by channel ([s-a R | s-a G | s-a B | a R | a G | a B], n voxels each): the path-space
+/// derivatives are k/sigma_s - l (sigma_s) and -l (sigma_a), so a replayed segment adds to the sigma_a sums only and
+/// a collision to the difference only, one atomic add each (`collect` forms the sigma_s sum). In fixed point: every contribution is
 /// rounded to a multiple of `quantum` and added to an `AtomicI64` (relaxed `fetch_add`: the sums are only read
 /// after the pass). Integer sums do not depend on their order, so the gradient is bit-identical for any thread
 /// count and work split (float sums are not). One shared buffer rather than one per thread: half the memory
@@ -153,13 +155,16 @@ impl GradBuffers {
         self.quantum
     }
 
-    /// Hand each (interleaved index 3 slot + channel, sigma_s sum, sigma_a sum) of the buffer to `out`.
+    /// Hand each (interleaved index 3 slot + channel, sigma_s sum, sigma_a sum) of the buffer to `out`. The sums are
+    /// integers (wrapping, as the atomic adds), so sigma_s = difference + sigma_a is exactly the sum of every
+    /// sigma_s contribution.
     fn each_sum(&self, mut out: impl FnMut(usize, i64, i64)) {
         let n = self.n;
         let b = &self.buf;
         for c in 0..3 {
             for j in 0..n {
-                out(3 * j + c, b[c * n + j].load(Relaxed), b[(3 + c) * n + j].load(Relaxed));
+                let a = b[(3 + c) * n + j].load(Relaxed);
+                out(3 * j + c, b[c * n + j].load(Relaxed).wrapping_add(a), a);
             }
         }
     }
@@ -182,10 +187,9 @@ struct ReplayTally<'a, M: Medium> {
 impl<M: Medium> Tally for ReplayTally<'_, M> {
     #[inline(always)]
     fn segment(&mut self, j: usize, len: f32) {
+        // -l for sigma_a, and the same -l for sigma_s, which the difference sums leave out.
         if let Some(k) = self.grads.slot(j) {
-            let (n, x) = (self.grads.n, fixed(len, self.w));
-            self.buf[self.c * n + k].fetch_sub(x, Relaxed);
-            self.buf[(3 + self.c) * n + k].fetch_sub(x, Relaxed);
+            self.buf[(3 + self.c) * self.grads.n + k].fetch_sub(fixed(len, self.w), Relaxed);
         }
     }
     #[inline(always)]
@@ -207,8 +211,11 @@ struct Li1Tally<'a> {
 impl Tally for Li1Tally<'_> {
     #[inline(always)]
     fn segment(&mut self, j: usize, len: f32) {
+        // -l for sigma_a, nothing for sigma_s: the difference sums get +l.
         if let Some(k) = self.grads.slot(j) {
-            self.buf[(3 + self.c) * self.grads.n + k].fetch_sub(fixed(len, self.w), Relaxed);
+            let (n, x) = (self.grads.n, fixed(len, self.w));
+            self.buf[(3 + self.c) * n + k].fetch_sub(x, Relaxed);
+            self.buf[self.c * n + k].fetch_add(x, Relaxed);
         }
     }
     #[inline(always)]
