@@ -6,6 +6,21 @@ use crate::grid::safe_radius8;
 use crate::sampling::V3;
 use crate::*;
 
+/// Voxel (x, y, z) of linear index j in a grid of n voxels.
+fn voxel_at(n: [usize; 3], j: usize) -> [i32; 3] {
+    [(j % n[0]) as i32, ((j / n[0]) % n[1]) as i32, (j / (n[0] * n[1])) as i32]
+}
+
+/// Squared distance from point p to the box of voxel w (edges `size`).
+fn box_distance2(p: V3, w: [i32; 3], size: [f32; 3]) -> f32 {
+    (0..3)
+        .map(|a| {
+            let (lo, hi) = (w[a] as f32 * size[a], (w[a] + 1) as f32 * size[a]);
+            (lo - p[a]).max(p[a] - hi).max(0.0).powi(2)
+        })
+        .sum()
+}
+
 #[test]
 fn safe_distances_match_brute_force() {
     // Random blobs: every voxel's safe distance equals the brute-force Chebyshev distance to the nearest voxel
@@ -70,20 +85,14 @@ fn safe_balls_stay_inside_the_object() {
         if s < 2 {
             continue;
         }
-        let v = [(j % n[0]) as i32, ((j / n[0]) % n[1]) as i32, (j / (n[0] * n[1])) as i32];
+        let v = voxel_at(n, j);
         for _ in 0..20 {
             let p: V3 = std::array::from_fn(|a| (v[a] as f32 + rng.next_f32()) * size[a]);
             let r = safe_radius8(&geo, p.map(f32x8::splat), v.map(i32x8::splat), f32x8::splat(s as f32)).to_array()[0];
             assert!(r >= (s as f32 - 1.0) * 0.03 * (1.0 - 1e-4) - 1e-6);
             for k in 0..inside.len() {
-                let w = [(k % n[0]) as i32, ((k / n[0]) % n[1]) as i32, (k / (n[0] * n[1])) as i32];
-                let d2: f32 = (0..3)
-                    .map(|a| {
-                        let (lo, hi) = (w[a] as f32 * size[a], (w[a] + 1) as f32 * size[a]);
-                        (lo - p[a]).max(p[a] - hi).max(0.0).powi(2)
-                    })
-                    .sum();
-                if d2 < r * r * (1.0 - 1e-5) {
+                let w = voxel_at(n, k);
+                if box_distance2(p, w, size) < r * r * (1.0 - 1e-5) {
                     assert_eq!(inside[k], 1, "point {p:?} in voxel {v:?} (safe {s}) radius {r} reaches {w:?}");
                 }
             }
@@ -187,20 +196,15 @@ fn empty_balls_hold_no_voxel_of_the_object() {
     let (mut checked, mut big) = (0, 0);
     let voxel_cap = (crate::scene::SAFE_CAP - 1) as f32 * 0.08 + 0.08;
     for j in (0..inside.len()).filter(|&j| inside[j] == 0).step_by(7) {
-        let v = [(j % n[0]) as i32, ((j / n[0]) % n[1]) as i32, (j / (n[0] * n[1])) as i32];
+        let v = voxel_at(n, j);
         let p: V3 = std::array::from_fn(|a| (v[a] as f32 + rng.next_f32()) * size[a]);
         let Some(r) = crate::grid::empty_ball(&geo, p, v) else { continue };
         assert!(r > 0.0);
         big += (r > voxel_cap) as usize;
         for k in (0..inside.len()).filter(|&k| inside[k] != 0) {
-            let w = [(k % n[0]) as i32, ((k / n[0]) % n[1]) as i32, (k / (n[0] * n[1])) as i32];
-            let d2: f32 = (0..3)
-                .map(|a| {
-                    let (lo, hi) = (w[a] as f32 * size[a], (w[a] + 1) as f32 * size[a]);
-                    (lo - p[a]).max(p[a] - hi).max(0.0).powi(2)
-                })
-                .sum();
-            assert!(d2 >= r * r * (1.0 - 1e-5), "point {p:?} in voxel {v:?}: radius {r} reaches inside voxel {w:?}");
+            let w = voxel_at(n, k);
+            assert!(box_distance2(p, w, size) >= r * r * (1.0 - 1e-5),
+                    "point {p:?} in voxel {v:?}: radius {r} reaches inside voxel {w:?}");
         }
         checked += 1;
     }
