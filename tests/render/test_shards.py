@@ -94,3 +94,33 @@ def test_ray_shards_equal_one_machine():
         np.testing.assert_array_equal(final.rgb, Renderer(plain.volume()).render(scene.texels, 8, 99).rgb)
     finally:
         shards.close()
+
+
+def test_ray_shards_equal_one_machine_on_a_mesh(tmp_path):
+    """The same for a voxelized mesh with a shell (masked object, label base volume, compact fixed shares, empty
+    space around it): two iterations sharded over 2 local Ray workers equal one process, bit for bit."""
+    pytest.importorskip("ray")
+    import trimesh
+
+    from inkopt.distributed import RayShards
+    from inkopt.scenes.mesh import build_mesh_scene
+
+    sph = trimesh.creation.icosphere(subdivisions=3, radius=0.6)
+    colours = np.where(sph.vertices[:, 2:3] > 0, [[0, 200, 230, 255]], [[230, 0, 160, 255]]).astype(np.uint8)
+    trimesh.Trimesh(sph.vertices, sph.faces, vertex_colors=colours, process=False).export(tmp_path / "ball.ply")
+    scene = build_mesh_scene(tmp_path / "ball.ply", InkTable.parse("vero-cmykw"), scale=1.0, up="z", shell_mm=0.2)
+    assert 0 < scene.free.sum() < scene.vox.inside.sum()
+    cfg = OptimizeConfig(iterations=2, spp=2, forward_spp=4)
+    args = (scene.volume, scene.vox.texels, scene.vox.targets, cfg)
+    plain = Optimization(*args, fixed_share=scene.fixed_share, threads=2)
+    plain.run()
+    assert plain.history.loss[-1] != plain.history.loss[0]
+    shards = RayShards("auto", workers=2, threads=1, num_cpus=2)
+    try:
+        sharded = Optimization(*args, fixed_share=scene.fixed_share, threads=2, renderer_factory=shards.renderer)
+        sharded.run()
+        np.testing.assert_array_equal(sharded.x, plain.x)
+        assert sharded.history.loss == plain.history.loss
+        np.testing.assert_array_equal(sharded.c_avg, plain.c_avg)
+    finally:
+        shards.close()
