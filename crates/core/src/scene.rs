@@ -100,12 +100,13 @@ impl Geometry {
     }
 
     pub fn with_inside(mut self, inside: Vec<u8>) -> Result<Self, String> {
+        use rayon::prelude::*;
         if inside.len() != self.voxel_count() {
             return Err("inside mask size differs from the grid".into());
         }
         let n = [self.n[0] as usize, self.n[1] as usize, self.n[2] as usize];
         let (safe, empty) = (safe_distances(&inside, n), empty_distances(&inside, n));
-        self.dist = Some(safe.iter().zip(&empty).map(|(&s, &e)| if s > 0 { s as i8 } else { -(e as i8) }).collect());
+        self.dist = Some(safe.par_iter().zip(&empty).map(|(&s, &e)| if s > 0 { s as i8 } else { -(e as i8) }).collect());
         if self.boundary == Boundary::Box {
             self.brick_empty = Some(brick_empty_distances(&inside, n));
         }
@@ -193,7 +194,8 @@ pub const SAFE_CAP: u8 = 16;
 /// the 3 x 3 x 3 cube (separable: three 1D passes) a voxel survives, outside the grid counting as outside. A
 /// voxel with safe distance s has every voxel within s - 1 steps (any of the 26 directions) inside.
 pub fn safe_distances(inside: &[u8], n: [usize; 3]) -> Vec<u8> {
-    erosion_depths(inside.iter().map(|&m| (m != 0) as u8).collect(), n, 0, SAFE_CAP)
+    use rayon::prelude::*;
+    erosion_depths(inside.par_iter().map(|&m| (m != 0) as u8).collect(), n, 0, SAFE_CAP)
 }
 
 /// Edge of the bricks of `Geometry::brick_empty`, in voxels.
@@ -223,7 +225,8 @@ pub fn brick_empty_distances(inside: &[u8], n: [usize; 3]) -> Vec<u8> {
 /// counting as empty. An outside voxel with empty distance e has every voxel within e - 1 steps outside the
 /// object (or beyond the grid); inside voxels have 0.
 pub fn empty_distances(inside: &[u8], n: [usize; 3]) -> Vec<u8> {
-    erosion_depths(inside.iter().map(|&m| (m == 0) as u8).collect(), n, 1, SAFE_CAP)
+    use rayon::prelude::*;
+    erosion_depths(inside.par_iter().map(|&m| (m == 0) as u8).collect(), n, 1, SAFE_CAP)
 }
 
 /// For a set (1 = in it, 0 = not), the number of successive erosions by the 3 x 3 x 3 cube each voxel survives
