@@ -26,7 +26,8 @@ pub enum GradMethod {
 /// Gradient accumulators: one buffer shared by all worker threads, holding d e / d sigma_s - d e / d sigma_a, then
 /// d e / d sigma_a, planar by channel ([s-a R | s-a G | s-a B | a R | a G | a B], n voxels each): the path-space
 /// derivatives are k/sigma_s - l (sigma_s) and -l (sigma_a), so a replayed segment adds to the sigma_a sums only and
-/// a collision to the difference only, one atomic add each (`collect` forms the sigma_s sum). In fixed point: every contribution is
+/// a collision to the difference only, one atomic add each (`collect` forms the sigma_s sum; the `L_i = 1` pass,
+/// whose sigma_s derivative is 0, adds a segment to both). In fixed point: every contribution is
 /// rounded to a multiple of `quantum` and added to an `AtomicI64` (relaxed `fetch_add`: the sums are only read
 /// after the pass). Integer sums do not depend on their order, so the gradient is bit-identical for any thread
 /// count and work split (float sums are not). One shared buffer rather than one per thread: half the memory

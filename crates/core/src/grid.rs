@@ -64,20 +64,35 @@ fn ball_radius(p: V3, c: [i32; 3], h: [f32; 3], s: u8) -> f32 {
     r * (1.0 - 1e-4)
 }
 
-/// For a flight outside the object at p in (in-grid, outside) voxel v: the radius of a ball around p that holds
-/// no voxel of the object, from the brick level (`Geometry::brick_empty`) or else the voxel level
-/// (`Geometry::empty_distance`); None where neither guarantees more than p's own voxel (next to the object, or without
-/// empty distances): the flight then goes on voxel by voxel.
+/// A flight outside the object at p in (in-grid, outside) voxel v, along d: where it is after crossing, at once,
+/// a ball around p that holds no voxel of the object (no random numbers are drawn in vacuum, so only its position
+/// changes): the ball from the brick level (`Geometry::brick_empty`) or else the voxel level
+/// (`Geometry::empty_distance`). Returns the new position and its voxel (possibly beyond the grid); None where
+/// neither level guarantees more than p's own voxel (next to the object, or without empty distances): the flight
+/// then goes on voxel by voxel. The voxel is located from the new position but kept within the block of empty
+/// voxels the ball was taken from: far from the origin the rounding of p + r d and of its voxel's index exceeds
+/// the ball's margin and could otherwise name a voxel of the object.
 #[inline(always)]
-pub(crate) fn empty_ball(geo: &Geometry, p: V3, v: [i32; 3]) -> Option<f32> {
+pub(crate) fn empty_jump(geo: &Geometry, p: V3, d: V3, v: [i32; 3]) -> Option<(V3, [i32; 3])> {
     let bricks = geo.brick_empty.as_ref()?;
-    let b: [i32; 3] = std::array::from_fn(|a| v[a] / BRICK as i32);
+    let k = BRICK as i32;
+    let b: [i32; 3] = std::array::from_fn(|a| v[a] / k);
     let e = bricks[((b[2] * geo.bricks[1] + b[1]) * geo.bricks[0] + b[0]) as usize];
-    if e >= 2 {
-        return Some(ball_radius(p, b, std::array::from_fn(|a| geo.size[a] * BRICK as f32), e));
-    }
-    let e = geo.empty_distance(geo.index(v));
-    (e >= 2).then(|| ball_radius(p, v, geo.size, e))
+    let (r, lo, hi) = if e >= 2 {
+        let m = e as i32 - 1;
+        let r = ball_radius(p, b, std::array::from_fn(|a| geo.size[a] * k as f32), e);
+        (r, b.map(|c| (c - m) * k), b.map(|c| (c + m + 1) * k - 1))
+    } else {
+        let e = geo.empty_distance(geo.index(v));
+        if e < 2 {
+            return None;
+        }
+        let m = e as i32 - 1;
+        (ball_radius(p, v, geo.size, e), v.map(|c| c - m), v.map(|c| c + m))
+    };
+    let q = add(p, scale(d, r));
+    let w = voxel_of(geo, q);
+    Some((q, std::array::from_fn(|a| w[a].clamp(lo[a], hi[a]))))
 }
 
 /// The voxel containing p (clamped to the grid); on periodic axes p is first wrapped into [0, span).

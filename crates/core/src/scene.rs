@@ -105,11 +105,17 @@ impl Geometry {
             return Err("inside mask size differs from the grid".into());
         }
         let n = [self.n[0] as usize, self.n[1] as usize, self.n[2] as usize];
-        let (safe, empty) = (safe_distances(&inside, n), empty_distances(&inside, n));
-        self.dist = Some(safe.par_iter().zip(&empty).map(|(&s, &e)| if s > 0 { s as i8 } else { -(e as i8) }).collect());
+        let safe = safe_distances(&inside, n);
+        let mut dist: Vec<i8> = safe.par_iter().map(|&s| if s > 0 { s as i8 } else { -1 }).collect();
+        drop(safe);
+        // On periodic axes a flight leaving the grid re-enters on the other side: no empty distances (every outside
+        // voxel -1, "next to the object") and no jumps there.
         if self.boundary == Boundary::Box {
+            let empty = empty_distances(&inside, n);
+            dist.par_iter_mut().zip(&empty).filter(|(d, _)| **d < 0).for_each(|(d, &e)| *d = -(e as i8));
             self.brick_empty = Some(brick_empty_distances(&inside, n));
         }
+        self.dist = Some(dist);
         Ok(self)
     }
 
@@ -128,7 +134,8 @@ impl Geometry {
         }
     }
 
-    /// Empty distance of voxel j (`dist`; 0 inside the object and without a mask).
+    /// Empty distance of voxel j (`dist`; 0 inside the object and without a mask; 1 everywhere outside on
+    /// periodic grids, which have no empty distances).
     #[inline(always)]
     pub fn empty_distance(&self, j: usize) -> u8 {
         match &self.dist {
@@ -189,6 +196,8 @@ impl Geometry {
 
 /// Largest safe distance stored: 16 voxels (1.3 mm at 300 DPI), far beyond a free flight in any ink.
 pub const SAFE_CAP: u8 = 16;
+// Safe and empty distances share a signed byte (`Geometry::dist`).
+const _: () = assert!(SAFE_CAP <= 127);
 
 /// Safe distances of a mask (non-zero = inside) over an (nx, ny, nz) grid: the number of successive erosions by
 /// the 3 x 3 x 3 cube (separable: three 1D passes) a voxel survives, outside the grid counting as outside. A

@@ -8,8 +8,9 @@
 //! absorption the variance is never larger and, for dark inks, much smaller); at the object's surface the path
 //! is reflected with the Fresnel probability and refracted otherwise (shading normals where the scene has
 //! them); outside it flies straight, voxel by voxel next to the object and across empty balls away from it
-//! (`grid::empty_ball`), until it re-enters a concave part or leaves the grid, where it picks up the light's radiance (`scene::Light`) times its weight. `packet` runs the same estimator
-//! eight paths at a time and uses `walk` per lane near surfaces.
+//! (`grid::empty_jump`), until it re-enters a concave part or leaves the grid, where it picks up the light's
+//! radiance (`scene::Light`) times its weight. `packet` runs the same estimator eight paths at a time and uses
+//! `walk` per lane near surfaces.
 //!
 //! Path-space derivatives (for path replay backpropagation): the density of the collision points is
 //! prod sigma_t(x_i) exp(-sum sigma_t l) and the weight prod sigma_s(x_i) / sigma_t(x_i); together, as a
@@ -20,9 +21,9 @@
 //! gives its gradient.
 
 use crate::flight::{survive, Delta, Event, Regular, Tracker};
-use crate::grid::{cross, empty_ball, facing_normal, voxel_exit, voxel_of};
+use crate::grid::{cross, empty_jump, facing_normal, voxel_exit};
 use crate::rng::{PathRng, Uniforms};
-use crate::sampling::{add, dot, fresnel, hg_sample, reflect, refract, scale, V3};
+use crate::sampling::{dot, fresnel, hg_sample, reflect, refract, scale, V3};
 use crate::scene::{face_normal, Geometry, Medium, Texel};
 
 /// Receives the events of a path (for gradients). The forward pass uses `NoTally`.
@@ -232,11 +233,8 @@ pub(crate) fn walk<K: Tracker, M: Medium, T: Tally, U: Uniforms>(geo: &Geometry,
                 if s.steps > MAX_STEPS {
                     return cut(&s);
                 }
-                if let Some(r) = empty_ball(geo, s.p, s.v) {
-                    // No voxel of the object within r: fly across at once (a straight flight in vacuum draws
-                    // nothing, so only the path's position changes).
-                    s.p = add(s.p, scale(s.d, r));
-                    s.v = voxel_of(geo, s.p);
+                if let Some((p, v)) = empty_jump(geo, s.p, s.d, s.v) {
+                    (s.p, s.v) = (p, v);
                     continue;
                 }
                 let (t, axis) = voxel_exit(geo, s.p, s.d, s.v);

@@ -181,9 +181,10 @@ fn empty_distances_match_brute_force() {
 }
 
 #[test]
-fn empty_balls_hold_no_voxel_of_the_object() {
-    // Random points in outside voxels (anisotropic voxels): the ball `empty_ball` gives reaches no inside voxel,
-    // and away from the object the brick level gives balls larger than the voxel level could.
+fn empty_jumps_cross_no_voxel_of_the_object() {
+    // Random points in outside voxels, random directions (anisotropic voxels): no inside voxel lies within the
+    // jump's length of its start (the ball it crosses), the voxel it names holds the new position, and away from
+    // the object the brick level gives jumps longer than the voxel level could.
     let n = [75usize, 21, 30];
     let size = [0.05f32, 0.08, 0.03];
     // Blobs in the first 30 voxels along x, empty space beyond (bricks far from the object).
@@ -198,18 +199,81 @@ fn empty_balls_hold_no_voxel_of_the_object() {
     for j in (0..inside.len()).filter(|&j| inside[j] == 0).step_by(7) {
         let v = voxel_at(n, j);
         let p: V3 = std::array::from_fn(|a| (v[a] as f32 + rng.next_f32()) * size[a]);
-        let Some(r) = crate::grid::empty_ball(&geo, p, v) else { continue };
+        let d = crate::sampling::hg_sample([0.0, 0.0, 1.0], 0.0, rng.next_f32(), rng.next_f32());
+        let Some((q, w)) = crate::grid::empty_jump(&geo, p, d, v) else { continue };
+        let r = (0..3).map(|a| (q[a] - p[a]).powi(2)).sum::<f32>().sqrt();
         assert!(r > 0.0);
         big += (r > voxel_cap) as usize;
+        assert!(box_distance2(q, w, size) < 1e-10, "jump to {q:?} names voxel {w:?}");
         for k in (0..inside.len()).filter(|&k| inside[k] != 0) {
             let w = voxel_at(n, k);
             assert!(box_distance2(p, w, size) >= r * r * (1.0 - 1e-5),
-                    "point {p:?} in voxel {v:?}: radius {r} reaches inside voxel {w:?}");
+                    "point {p:?} in voxel {v:?}: a jump of {r} reaches inside voxel {w:?}");
         }
         checked += 1;
     }
-    assert!(checked > 300 && big > 0, "{checked} balls, {big} from bricks");
+    assert!(checked > 300 && big > 0, "{checked} jumps, {big} from bricks");
     // Periodic grids have none (a flight wraps around).
     let periodic = Geometry::new(n, size, Boundary::PeriodicXY, 1.5, 0.4).unwrap().with_inside(inside).unwrap();
     assert!(periodic.brick_empty.is_none());
+}
+
+#[test]
+fn empty_jumps_far_from_the_origin_never_land_inside() {
+    // 2400 voxels of 27 µm along x: walls every 6 voxels (voxel-level jumps) up to x = 1990, then empty space
+    // (brick-level jumps) up to a last wall at the far end. Far from the origin the rounding of the landing point
+    // and of its voxel index is larger than the balls' margin; the jump must still never name an inside voxel.
+    let n = [2400usize, 3, 3];
+    let size = [0.027f32; 3];
+    let inside: Vec<u8> = (0..n.iter().product::<usize>())
+        .map(|j| {
+            let x = j % n[0];
+            ((x < 1990 && x % 6 == 0) || x == n[0] - 1) as u8
+        })
+        .collect();
+    let geo = Geometry::new(n, size, Boundary::Box, 1.5, 0.4).unwrap().with_inside(inside.clone()).unwrap();
+    let mut rng = crate::rng::PathRng::new(8, 0, 0, 0);
+    let mut jumps = 0;
+    for _ in 0..40_000 {
+        let x = 1000 + (rng.next_f32() * 1399.0) as i32;
+        let v = [x, 1, 1];
+        if inside[geo.index(v)] != 0 {
+            continue;
+        }
+        let p: V3 = std::array::from_fn(|a| (v[a] as f32 + rng.next_f32()) * size[a]);
+        let d = if rng.next_f32() < 0.5 { [1.0, 0.0, 0.0] } else { [-1.0, 0.0, 0.0] };
+        if let Some((_, w)) = crate::grid::empty_jump(&geo, p, d, v) {
+            jumps += 1;
+            assert!(!geo.is_inside(w), "a jump from {p:?} (voxel {v:?}) along {d:?} named inside voxel {w:?}");
+        }
+    }
+    assert!(jumps > 20_000, "{jumps}");
+}
+
+#[test]
+fn erosion_of_tiny_grids_matches_brute_force() {
+    // Every grid of 1 to 4 voxels per axis (the border cases of the separable erosion), random masks: safe and
+    // empty distances as brute force.
+    let mut rng = crate::rng::PathRng::new(2, 0, 0, 0);
+    for nx in 1..=4usize {
+        for ny in 1..=4usize {
+            for nz in 1..=4usize {
+                let n = [nx, ny, nz];
+                for _ in 0..3 {
+                    let inside: Vec<u8> = (0..nx * ny * nz).map(|_| (rng.next_f32() < 0.7) as u8).collect();
+                    let (safe, empty) = (crate::scene::safe_distances(&inside, n), crate::scene::empty_distances(&inside, n));
+                    for j in 0..inside.len() {
+                        let v = voxel_at(n, j);
+                        let cap = crate::scene::SAFE_CAP as i32;
+                        // Safe: distance to the nearest outside voxel, the grid's exterior (one step beyond a face) included.
+                        let to_border = (0..3).map(|a| (v[a] + 1).min(n[a] as i32 - v[a])).min().unwrap();
+                        let want_safe = if inside[j] == 0 { 0 } else { nearest_hit(n, v, cap, |k| inside[k] == 0).min(to_border) };
+                        assert_eq!(safe[j] as i32, want_safe.min(cap), "safe, grid {n:?}, voxel {v:?}");
+                        let want_empty = nearest_hit(n, v, cap, |k| inside[k] != 0);
+                        assert_eq!(empty[j] as i32, want_empty, "empty, grid {n:?}, voxel {v:?}");
+                    }
+                }
+            }
+        }
+    }
 }
