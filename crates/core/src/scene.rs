@@ -38,7 +38,7 @@ pub struct Geometry {
     /// With a mask and `Boundary::Box`: the empty distance per brick of `BRICK`^3 voxels (x fastest), in bricks
     /// (a brick is occupied if any of its voxels is inside), capped at 255: a few kilobytes that stay in cache,
     /// so a flight far from the object crosses it in a few jumps without touching the per-voxel array. Flights
-    /// outside the object jump across the empty balls these guarantee (`grid::empty_ball`, `trace::walk`);
+    /// outside the object jump across the empty balls these guarantee (`grid::empty_jump`, `trace::walk`);
     /// None (periodic grids, where a flight leaving the grid re-enters on the other side): no jumps.
     pub brick_empty: Option<Vec<u8>>,
     /// Bricks along x, y, z.
