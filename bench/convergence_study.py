@@ -26,7 +26,8 @@ from inkopt.optim import OptimizeConfig  # noqa: E402
 from inkopt.run import run_slab  # noqa: E402
 
 # name -> (iterations, OptimizeConfig overrides); the defaults are spp 4, forward spp 16, lr 2 (eg), ema 0.8 and
-# (since 2026-11-24) step smoothing 0.7 under flat texels; "nosmooth" entries turn the smoothing off. Entries of
+# step smoothing 1.5 under flat texels (since 2026-11-25; 0.7 from 2026-11-24, entries "smooth0.7_*"); "nosmooth"
+# entries turn the smoothing off. Entries of
 # the results file that are not listed here were made by earlier code (see their "note").
 SETTINGS = {
     "default_150": (150, {}),
@@ -38,21 +39,27 @@ SETTINGS = {
     "lr0.5_300": (300, {"lr": 0.5, "smooth": 0.0}),
     "spp16_150": (150, {"spp": 16, "smooth": 0.0}),
     "spp8_150": (150, {"spp": 8, "smooth": 0.0}),
-    "spp8_smooth0.7_150": (150, {"spp": 8}),
+    "spp8_smooth0.7_150": (150, {"spp": 8, "smooth": 0.7}),
     "forward0_ema0.9_150": (150, {"forward_spp": 0, "adjoint_ema": 0.9, "smooth": 0.0}),
     "forward0_ema0.9_400": (400, {"forward_spp": 0, "adjoint_ema": 0.9, "smooth": 0.0}),
     "forward0_ema0.9_spp8_150": (150, {"forward_spp": 0, "adjoint_ema": 0.9, "spp": 8, "smooth": 0.0}),
     "smooth0.7_unguided_150": (150, {"smooth": 0.7, "smooth_edge": 0.0}),
-    # half the forward samples (an iteration ~30 % cheaper): at equal iterations and at about equal time
-    "forward8_150": (150, {"forward_spp": 8}),
-    "forward8_215": (215, {"forward_spp": 8}),
+    # half the forward samples (an iteration ~30 % cheaper): at equal iterations and at about equal time (run with
+    # the smoothing default of then, 0.7, and its depth weight 30, not 5 as now)
+    "forward8_150": (150, {"forward_spp": 8, "smooth": 0.7}),
+    "forward8_215": (215, {"forward_spp": 8, "smooth": 0.7}),
+    # wider step smoothing under flat texels (kernel width 1.5 / 3 voxels; run with the depth weight 30 of then)
+    "smooth1.5_150": (150, {"smooth": 1.5}),
+    "smooth3_150": (150, {"smooth": 3.0}),
+    "smooth0.7_150": (150, {"smooth": 0.7}),
 }
 # --case zebra|astronaut: name -> overrides, 200 iterations
 CASE_SETTINGS = {
     "default_200": {},
     "nosmooth_200": {"smooth": 0.0},
     "spp8_200": {"spp": 8, "smooth": 0.0},
-    "forward8_200": {"forward_spp": 8},
+    "forward8_200": {"forward_spp": 8, "smooth": 0.7},
+    "smooth0.7_200": {"smooth": 0.7},
 }
 KEYS = ("delta_e76_mean_corrected", "delta_e76_mean", "delta_e2000_mean", "ssim", "mottle_l2", "seconds",
         "seconds_per_iteration")

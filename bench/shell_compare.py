@@ -5,8 +5,10 @@ high-frequency structure ("mottle") against the target's. Writes bench/results/s
     .venv/bin/python bench/shell_compare.py [--out bench-out/shell] [--iterations 20] [--shells none,1,0.5]
         [--smooth S]
 
-``--smooth S`` runs the same with that step smoothing (``inkopt optimize --smooth S``; without it, the default,
-0.7 under flat texels since 2026-11-24); its results are keyed ``SHELL+smoothS``, the default's ``SHELL``. Results of shells not run this time are kept from the previous shell_mm.json.
+``--smooth S`` runs the same with that step smoothing (``inkopt optimize --smooth S``; without it, the default:
+1.5 under flat texels since 2026-11-25, 0.7 from 2026-11-24); its results are keyed ``SHELL+smoothS``, the
+default's ``SHELL``. The final figures are inkopt's adaptive evaluation (``--eval-spp 0``, since 2026-11-25; the
+entries made before used 64 spp, whose noise-corrected SSIM is ~0.03 low on Spot). Results of shells not run this time are kept from the previous shell_mm.json.
 
 Runs whose report.json exists are not re-run (delete the folder to redo one). Mottle: with two renders a, b of
 independent seeds, each texel's deviation from the mean of its 6 nearest texels (in L*) is formed in both; the
@@ -81,6 +83,9 @@ def main():
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--structure-spp", type=int, default=64)
     ap.add_argument("--smooth", type=float)
+    ap.add_argument("--eval-spp", type=int, default=0,
+                    help="samples of the final evaluation (0, the default since 2026-11-25: adaptive, as inkopt's "
+                         "own default; the rows made before used 64, whose SSIM is biased low by ~0.03 on Spot)")
     a = ap.parse_args()
     out = Path(a.out)
     previous = RESULTS / "shell_mm.json"
@@ -90,16 +95,20 @@ def main():
         d = out / f"shell_{s}{tag}"
         if not (d / "report.json").is_file():
             cmd = [sys.executable, "-m", "inkopt", "optimize", str(SPOT), "--height-mm", "20", "--out", str(d),
-                   "--iterations", str(a.iterations), "--spp", "4", "--eval-spp", "64", "--threads", str(a.threads),
+                   "--iterations", str(a.iterations), "--spp", "4", "--threads", str(a.threads),
                    "--seed", "0", "--resume"] + ([] if s == "none" else ["--shell-mm", s])
             cmd += ["--smooth", str(a.smooth)] if a.smooth is not None else []
+            cmd += ["--eval-spp", str(a.eval_spp)] if a.eval_spp else []
             print("$ inkopt " + " ".join(cmd[3:]), flush=True)
             subprocess.run(cmd, check=True)
         rep = json.loads((d / "report.json").read_text())
         results[s + tag] = {k: rep[k] for k in ("free_voxels", "inside_voxels", "seconds_per_iteration", "time_split",
                                           "peak_rss_gb", "initial_delta_e76_mean", "delta_e76_mean",
                                           "delta_e76_p95", "delta_e2000_mean", "initial_ssim", "ssim",
-                                          "iterations")}
+                                          "iterations", "eval_spp", "initial_eval_spp")}
+        # the report's own figures (runs since 2026-11-25): noise-corrected mean ΔE76 and mottle (metrics.py)
+        results[s + tag].update({k: rep[k] for k in ("delta_e76_mean_corrected", "mottle_l2", "mottle_l2_target",
+                                                     "flat_texels") if k in rep})
         results[s + tag]["high_frequency_power"] = structure(d, a.structure_spp, a.threads)
     write("shell_mm.json", {"results": results, "mesh": "spot, 20 mm", **machine()})
     print("| shell | free voxels | s/iteration | peak GB | ΔE76 start → end | p95 | ΔE2000 | SSIM start → end "

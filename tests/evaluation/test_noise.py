@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from inkopt.color import delta_e76, linear_to_lab
-from inkopt.evaluation.noise import (ESTIMATE_RANGE, SEED_STRIDE, TARGET_NOISE_DE76, NoiseModel, adaptive_render,
-                                     chi3_mean)
+from inkopt.evaluation.noise import (ESTIMATE_RANGE, SEED_STRIDE, SSIM_NOISE_RATIO, TARGET_NOISE_DE76, NoiseModel,
+                                     adaptive_render, chi3_mean)
 
 I = 20000
 
@@ -81,9 +81,25 @@ def test_adaptive_render_reaches_target_and_is_near_noise_free():
     slack = 4 * (de - truth).std() / np.sqrt(I)
     assert de.mean() - truth.mean() <= TARGET_NOISE_DE76 / ESTIMATE_RANGE[0] + slack
     assert abs(de.mean() - ad.noise - truth.mean()) <= (ESTIMATE_RANGE[1] - 1) * ad.noise + slack
-    # the plan is not wasteful: half the samples would not have reached the target
-    half = NoiseModel.of(ad.rgb, 2 * ad.var, lab_t).contribution()
-    assert half > 0.9 * TARGET_NOISE_DE76 * 0.9
+    # the plan is not wasteful: half the samples would not have reached both targets
+    half = NoiseModel.of(ad.rgb, 2 * ad.var, lab_t)
+    assert half.contribution() > 0.9 * TARGET_NOISE_DE76 * 0.9 or half.ssim_ratio > 0.9 * SSIM_NOISE_RATIO * 0.9
+
+
+def test_adaptive_render_samples_until_ssim_noise_is_small():
+    """Errors far above the noise (ΔE76 target met by the pilot) but noise variance comparable to SSIM's K2: the
+    adaptive render goes on until the SSIM noise ratio is at most SSIM_NOISE_RATIO (r scales as 1/spp, so the
+    planned spp hits it in one round), and not far beyond it."""
+    t, c = synthetic(1.5)
+    lab_t = linear_to_lab(t)
+    var1 = 64 * (0.08 * c) ** 2
+    pilot = NoiseModel.of(c, var1 / 64, lab_t)
+    assert pilot.contribution() <= TARGET_NOISE_DE76 and pilot.ssim_ratio > 2 * SSIM_NOISE_RATIO
+    ad = adaptive_render(fake_renderer(c, var1, []), lab_t, seed=3)
+    final = NoiseModel.of(ad.rgb, ad.var, lab_t)
+    assert final.ssim_ratio <= SSIM_NOISE_RATIO < NoiseModel.of(ad.rgb, 2 * ad.var, lab_t).ssim_ratio
+    # r is the largest channel's mean per-texel variance of normalised L*a*b* over K2, ∝ 1/spp
+    np.testing.assert_allclose(NoiseModel.of(c, var1 / 640, lab_t).ssim_ratio, pilot.ssim_ratio / 10, rtol=1e-9)
 
 
 def test_explicit_spp_is_exact_and_cap_holds():

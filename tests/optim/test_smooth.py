@@ -143,3 +143,32 @@ def test_a_subset_of_rows_is_smoothed_alone():
     np.testing.assert_array_equal(inplace, out)
     with pytest.raises(ValueError, match="increasing"):
         GradientSmoother(shape, index[::-1].copy(), 1.0)(g)
+
+
+def test_depth_guide_lets_neighbours_under_a_sloped_surface_exchange():
+    """Mesh texels sit at surface-voxel centres, so on a sloped surface grid neighbours side by side differ by a
+    fraction of a voxel in their distance to the nearest texel. The default depth weight (DEPTH_DE) must leave
+    them coupled: under a 26.6° slope (z rises 0.5 voxel per x) at least 90 % of the x-neighbour pairs keep a
+    guide weight above 0.1 at the default edge of 4 ΔE76, as all do under an axis-aligned face. The weight of
+    before (30 ΔE76 per voxel) kept 10 % (the smoothing hardly acted on Spot's curved surfaces)."""
+    from inkopt.optim.smooth import MAX_DEPTH
+
+    edge = OptimizeConfig().smooth_edge
+
+    def coupled_share(slope: float, **kw) -> float:
+        z, y, x = np.mgrid[:40, :8, :40]
+        inside = (z + 0.5) < slope * (x + 0.5) + 5
+        above = np.concatenate([inside[1:], np.zeros((1, 8, 40), bool)])
+        sz, sy, sx = np.nonzero(inside & ~above)  # the top surface's voxels: the texels
+        idx = np.flatnonzero(inside.ravel())
+        near, dist = nearest_texels(inside.shape, idx, np.stack([sx, sy, sz], 1) + 0.5, MAX_DEPTH)
+        ok = near >= 0
+        depth = np.full(inside.size, np.nan)
+        depth[idx[ok]] = texel_guide(np.zeros((len(sx), 3), np.float32), near[ok], dist[ok], **kw)[:, 3]
+        d = np.diff(depth.reshape(inside.shape), axis=2).ravel()
+        d = d[np.isfinite(d)]
+        return float(np.mean(np.exp(-(d / edge) ** 2) > 0.1))
+
+    assert coupled_share(0.0) == 1.0
+    assert coupled_share(0.5) >= 0.9
+    assert coupled_share(0.5, depth_de=30.0) < 0.5

@@ -45,7 +45,8 @@ def register_cli(sub) -> None:
     p.add_argument("--spp", type=int, default=DEFAULT_SPP,
                    help=f"samples per scene texel, used exactly; printer texels share them (default: adaptive, "
                         f"a {PILOT_SPP}-spp pilot and then as many as make the Monte Carlo noise add at most "
-                        f"{TARGET_NOISE_DE76:g} to each result's mean dE76, up to {MAX_SPP})")
+                        f"{TARGET_NOISE_DE76:g} to each result's mean dE76 and keep SSIM's and the mottle's noise "
+                        f"correction accurate, up to {MAX_SPP})")
     p.add_argument("--seed", type=int, default=0, help="render seed (default 0)")
     p.add_argument("--method", help="quantization method (default: that of DIR/quantized.npz, else blue-noise)")
     p.add_argument("--threads", type=int, help="render threads (default: all cores)")

@@ -2,8 +2,9 @@
 result and the naive baselines come to the target?
 
 ``evaluate_run(DIR)`` renders, on the same render seeds (``EVAL_SEED_OFFSET + seed``, never used by an
-optimisation), each result with enough samples that the Monte Carlo noise adds at most ~0.5 to its mean ΔE76
-(``evaluation.noise.adaptive_render``: a 64-spp pilot, the noise contribution estimated from it, the rest rendered
+optimisation), each result with enough samples that the Monte Carlo noise adds at most ~0.5 to its mean ΔE76 and
+SSIM's and the mottle's noise correction is accurate (``evaluation.noise.adaptive_render``: a 64-spp pilot, the
+noise contribution and SSIM noise ratio estimated from it, the rest rendered
 with independent seeds and pooled; at most 4096 spp). An explicit ``spp`` renders exactly that many instead:
 
 - ``continuous``: DIR/volume.npz on the scene texels at ``spp`` samples per texel;

@@ -24,11 +24,21 @@ test_noise.py; noise adding 0.07 to 6.5 ΔE76 to errors of 0 to 12 ΔE76): the e
 ``ESTIMATE_RANGE`` = (0.65, 1.35) of the true inflation; it underestimates (by ~30 %) only where the noise-free
 error is far below the noise, and overestimates for very noisy dark colours (the Lab transform's curvature).
 
+**SSIM and mottle** are corrected for the noise by subtracting its delta-method variance from the windowed
+statistics (``TexelLoss``, ``metrics.mottle``); that correction is accurate only while the noise variance is small
+against SSIM's constant K2 = 0.03² (normalised L*a*b*): SSIM is a ratio of noisy local variances (Jensen), the
+corrected variance is clamped at 0, and the delta method misses the Lab transform's curvature (σ⁴ terms). Measured
+(the demo slab's and Spot 20 mm's optimised results, noise-corrected SSIM against 4096 / 512 spp): with r = the
+largest channel's mean per-texel noise variance / K2, SSIM is biased low by 0.019 / 0.031 at r ≈ 1.2 / 0.8 (64
+spp), 0.003 / 0.004 at r ≈ 0.3 / 0.2, 0.0002 at r = 0.075 (demo), and the mottle by +0.17 (ΔL*)² at Spot's 64
+spp (0.02 at 256). So the adaptive rule also asks r ≤ ``SSIM_NOISE_RATIO`` = 0.1 (~0.002 SSIM; r ∝ 1/spp).
+
 **Adaptive samples** (``adaptive_render``): a pilot of ``PILOT_SPP`` samples per texel; Σ scales as 1/spp, so the
 contribution at n samples is predicted from the pilot (D fixed, σ⊥ ∝ n^-1/2) and the smallest n whose predicted
-contribution is ≤ 0.9 × target (a margin for the pilot's own noise) is chosen, capped at ``MAX_SPP``; the
+contribution is ≤ 0.9 × target (a margin for the pilot's own noise) and whose r is ≤ 0.9 × ``SSIM_NOISE_RATIO``
+is chosen, capped at ``MAX_SPP``; the
 remaining n - spp samples are rendered with an independent seed and pooled with the pilot (weights by sample
-count). If the pooled estimate is still above the target (and below the cap), one more round. Seeds: pass k uses
+count). If the pooled estimate is still above either target (and below the cap), one more round. Seeds: pass k uses
 ``seed + k * SEED_STRIDE``; callers pass ``EVAL_SEED_OFFSET + seed``, disjoint from the optimisation's seeds.
 """
 from __future__ import annotations
@@ -39,13 +49,15 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import erf
 
-from ..color import linear_to_lab, linear_to_lab_jacobian
+from ..color import LAB_NORM_SCALE, linear_to_lab, linear_to_lab_jacobian
+from ..loss import K2
 
 TARGET_NOISE_DE76 = 0.5   # wanted Monte Carlo contribution to the mean ΔE76
 PILOT_SPP = 64
 MAX_SPP = 4096
 MAX_ROUNDS = 3            # passes after the pilot
 PLAN_MARGIN = 0.9         # plan for this fraction of the target
+SSIM_NOISE_RATIO = 0.1    # wanted noise variance / K2 for SSIM and mottle (module docstring)
 ESTIMATE_RANGE = (0.65, 1.35)  # estimated / true inflation, measured (module docstring)
 EVAL_SEED_OFFSET = 2**62  # evaluation seeds: 2**62 + seed, disjoint from the optimisation's (iteration_seeds)
 SEED_STRIDE = 2**40       # seed of pass k: seed + k * SEED_STRIDE
@@ -75,10 +87,13 @@ def lab_covariance(rgb, var_mean) -> np.ndarray:
 
 @dataclass
 class NoiseModel:
-    """Per-texel parts of the estimator: D (I,) the estimated noise-free |d|, s2 (I,) σ⊥² at the render's spp."""
+    """Per-texel parts of the estimator: D (I,) the estimated noise-free |d|, s2 (I,) σ⊥² at the render's spp;
+    ``ssim_ratio``: r at the render's spp, the largest channel's mean noise variance of normalised L*a*b* over
+    SSIM's K2 (module docstring)."""
 
     dist: np.ndarray
     s2: np.ndarray
+    ssim_ratio: float = 0.0
 
     @classmethod
     def of(cls, rgb, var_mean, target_lab) -> "NoiseModel":
@@ -91,7 +106,9 @@ class NoiseModel:
         perp = np.where(n2 > 0, 0.5 * (tr - np.einsum("ik,ikl,il->i", u, cov, u)), tr / 3)
         dist2 = np.maximum(n2 - 0.5 * tr, 0.0)
         w = dist2 / np.maximum(dist2 + tr, 1e-300)
-        return cls(np.sqrt(dist2), np.maximum(w * perp + (1 - w) * tr / 3, 0.0))
+        v = np.diagonal(cov, axis1=1, axis2=2) * LAB_NORM_SCALE ** 2
+        ratio = float(v.mean(0).max() / K2) if len(v) else 0.0
+        return cls(np.sqrt(dist2), np.maximum(w * perp + (1 - w) * tr / 3, 0.0), ratio)
 
     def per_texel(self, scale: float = 1.0) -> np.ndarray:
         """Expected inflation E|d + n| - |d| per texel, with the variance multiplied by ``scale``."""
@@ -103,8 +120,17 @@ class NoiseModel:
     def contribution(self, scale: float = 1.0) -> float:
         return float(self.per_texel(scale).mean())
 
-    def spp_for(self, spp_now: int, target: float, max_spp: int) -> int:
-        """The smallest spp ≥ spp_now (≤ max_spp) whose predicted contribution is ≤ target."""
+    def converged(self, target: float, ratio: float = SSIM_NOISE_RATIO) -> bool:
+        """Noise contribution ≤ target and SSIM noise ratio ≤ ratio."""
+        return self.contribution() <= target and self.ssim_ratio <= ratio
+
+    def spp_for(self, spp_now: int, target: float, max_spp: int, ratio: float = SSIM_NOISE_RATIO) -> int:
+        """The smallest spp ≥ spp_now (≤ max_spp) whose predicted contribution is ≤ target and predicted SSIM
+        noise ratio ≤ ratio."""
+        need = int(min(max_spp, max(spp_now, math.ceil(spp_now * self.ssim_ratio / ratio))))
+        return max(need, self._spp_for_contribution(spp_now, target, max_spp))
+
+    def _spp_for_contribution(self, spp_now: int, target: float, max_spp: int) -> int:
         if self.contribution() <= target:
             return int(spp_now)
         if self.contribution(spp_now / max_spp) > target:
@@ -148,12 +174,13 @@ def adaptive_render(render, target_lab, seed: int, spp: int | None = None, pilot
     total, passes = first, [first]
     model = NoiseModel.of(rgb, var, target_lab)
     for k in range(1, MAX_ROUNDS + 1):
-        if spp is not None or model.contribution() <= target or total >= max_spp:
+        if spp is not None or model.converged(target) or total >= max_spp:
             break
-        want = model.spp_for(total, PLAN_MARGIN * target, max_spp)
+        want = model.spp_for(total, PLAN_MARGIN * target, max_spp, PLAN_MARGIN * SSIM_NOISE_RATIO)
         extra = want - total
         if log is not None:
-            log(f"  noise {model.contribution():.2f} dE76 at {total} spp (target {target:g}): {extra} more")
+            log(f"  noise {model.contribution():.2f} dE76, SSIM noise ratio {model.ssim_ratio:.2f} at {total} spp "
+                f"(targets {target:g}, {SSIM_NOISE_RATIO:g}): {extra} more")
         r1, v1, w1 = render(extra, seed + k * SEED_STRIDE)
         r1, v1, w1 = np.asarray(r1, np.float64), np.asarray(v1, np.float64), float(w1)
         rgb = (w * rgb + w1 * r1) / (w + w1)

@@ -39,10 +39,11 @@ class OptimizeConfig:
     adjoint_ema: float = 0.8
     #: Width (voxels) of the spatial preconditioner of the step (``optim/smooth.py``): the step is diffused over
     #: the free voxels under texels where the target is flat, damping the voxel-scale noise that shows as mottle
-    #: (0: off). 0.7 by default: on the astronaut photograph and the demo slab it improves every noise-free figure
-    #: at no cost per iteration (README, "Optimisation: what we learned"); smoothing everywhere instead of under
-    #: flat texels only cost the photograph ~0.9 mean ΔE76.
-    smooth: float = 0.7
+    #: (0: off). 1.5 by default (0.7 from 2026-11-24 to 11-25): on the demo slab, the astronaut photograph, the
+    #: reference slab and Spot it improves every noise-free figure over 0.7 and no smoothing, 3 gains nothing
+    #: more (README, "Optimisation: what we learned"); smoothing everywhere instead of under flat texels only cost
+    #: the photograph ~0.9 mean ΔE76, widening the set by 4 voxels around flat texels ~0.5.
+    smooth: float = 1.5
     #: Guide of the smoothing: the target-colour difference (ΔE76) at which the smoothing between two voxels falls
     #: to 1/e, so it stays within regions of one target colour; with a guide, only voxels under flat texels
     #: (``TexelLoss.flat``) are smoothed (0: no guide, smooth everywhere and across the target's edges too).

@@ -15,9 +15,9 @@ lowered the exponentiated-gradient step scale (the 99th percentile of |g|, which
 
 Guided by the target: the diffusion between two voxels is weighted by exp(-|guide_r - guide_q|² / edge²), the
 guide being each voxel's nearest texel's target CIELAB and its depth below that texel (``DEPTH_DE`` ΔE76 per
-voxel), so steps are smoothed within a region of one colour, side by side under the surface, but not across the
-target's edges, where the optimum changes sharply (unguided, the zebra chart lost 0.08 SSIM), nor from the surface
-into the depth.
+voxel), so steps are smoothed within a region of one colour, mostly side by side under the surface, but not across
+the target's edges, where the optimum changes sharply (unguided, the zebra chart lost 0.08 SSIM), and only a little
+from one depth to the next.
 
 Steps: ``d <- d + a * sum_nb w (d_nb - d)`` with a = 1/8, repeated an even number of times ``k = 2 ceil(sigma² /
 (4 a))``, so the kernel's variance along each axis is 2 a k >= sigma² (voxel units). One step's eigenvalues lie in
@@ -42,10 +42,13 @@ def diffusion_steps(sigma: float) -> int:
 
 
 #: ΔE76 that one voxel of difference in depth (distance to the nearest texel) counts as in the guide: with the
-#: default edge of 4 ΔE76, neighbours one voxel apart in depth are not smoothed together (weight e^-56), those
-#: side by side under a face are; on a sloped surface, neighbours 0.1 voxel apart in depth get e^-0.56, 0.2 apart
-#: e^-2.3.
-DEPTH_DE = 30.0
+#: default edge of 4 ΔE76, neighbours one voxel apart in depth exchange a little per pass (weight e^-1.56 = 0.21),
+#: those side by side under a face fully. Not more: on a mesh, grid neighbours side by side under a sloped surface
+#: differ by up to ~0.7 voxel in their distance to the nearest (surface-voxel) texel; with 30 ΔE76 per voxel (the
+#: value until 2026-11-25) only a third of the smoothed set's neighbour pairs on Spot 20 mm kept a weight above
+#: 0.1 and the smoothing hardly acted on curved surfaces. Measured 30 → 5 (README, "Optimisation: what we
+#: learned"): the demo slab equal, the astronaut photograph and Spot better in every figure.
+DEPTH_DE = 5.0
 
 
 #: Voxels farther than this from every texel (voxels; 0.85 mm at 300 DPI) are not smoothed: light that reaches
