@@ -4,7 +4,7 @@
 exactly), save volume.npz, then the final figures: the optimised and the initial volume rendered with seeds from
 ``2**62 + cfg.seed`` (never used by the optimisation) at ``eval_spp`` samples per texel if given, else adaptively
 (``evaluation.noise.adaptive_render``: enough that the Monte Carlo noise adds at most ~0.5 to the mean ΔE76 and
-SSIM's noise correction is accurate, at most 4096), compared with the target by ``evaluation.metrics.prediction_metrics``; the scene's pictures, loss.png and report.json. ``run_slab`` and
+SSIM's and the mottle's noise correction is accurate, at most 4096), compared with the target by ``evaluation.metrics.prediction_metrics``; the scene's pictures, loss.png and report.json. ``run_slab`` and
 ``run_mesh`` build the scene from user inputs and call it.
 """
 from __future__ import annotations

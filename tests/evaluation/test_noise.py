@@ -110,3 +110,35 @@ def test_explicit_spp_is_exact_and_cap_holds():
     calls = []
     ad = adaptive_render(fake_renderer(c, (0.1 * c) ** 2 * 1e6, calls), linear_to_lab(t), seed=0, max_spp=256)
     assert ad.spp == 256 and ad.noise > TARGET_NOISE_DE76 and calls[0][0] == 64
+
+
+def test_spp_for_takes_the_larger_of_both_requirements():
+    """spp_for plans for whichever rule needs more samples: the ΔE76 contribution (bisection, r set to 0) or the
+    SSIM noise ratio (r ∝ 1/spp: ceil(spp r / ratio))."""
+    from dataclasses import replace
+
+    t, c = synthetic(0.2)
+    model = NoiseModel.of(c, (0.1 * c) ** 2, linear_to_lab(t))
+    de_only = replace(model, ssim_ratio=0.0)
+    n_de = de_only.spp_for(64, 0.5, 4096)
+    assert de_only.contribution(64 / n_de) <= 0.5 < de_only.contribution(64 / (0.95 * n_de))
+    assert replace(model, ssim_ratio=1.0).spp_for(64, 1e9, 4096) == 640
+    assert replace(model, ssim_ratio=1.0).spp_for(64, 0.5, 4096) == max(640, n_de)
+    assert replace(model, ssim_ratio=100.0).spp_for(64, 0.5, 4096) == 4096   # the cap
+
+
+def test_ssim_ratio_matches_sampled_noise():
+    """r is the largest channel's mean variance of normalised L*a*b* over K2: against sampled small noise."""
+    from inkopt.color import normalise_lab
+    from inkopt.loss import K2
+
+    t, c = synthetic(0.2)
+    c, t = c[:2000], t[:2000]
+    var = (0.01 * c) ** 2
+    rng = np.random.default_rng(5)
+    samples = np.stack([normalise_lab(linear_to_lab(c + np.sqrt(var) * rng.standard_normal(c.shape)))
+                        for _ in range(400)])
+    empirical = samples.var(0).mean(0).max() / K2
+    # 400 draws x 2000 texels: the sampled mean variance's relative standard error is ~0.2 %; 5 % leaves room for
+    # the delta method's curvature error at 1 % noise, but not for a wrong channel scale (1/100 vs 1/255: 6.5x)
+    np.testing.assert_allclose(NoiseModel.of(c, var, linear_to_lab(t)).ssim_ratio, empirical, rtol=0.05)

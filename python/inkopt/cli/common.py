@@ -91,8 +91,8 @@ def add_optimizer_args(p) -> None:
     p.add_argument("--seed", type=int, default=d.seed)
     p.add_argument("--checkpoint-every", type=int, default=d.checkpoint_every)
     p.add_argument("--eval-spp", type=int, help="spp of the final evaluation renders, used exactly (default: "
-                   "adaptive, until the Monte Carlo noise adds less than 0.5 to the mean ΔE76 and SSIM's noise "
-                   "correction is accurate)")
+                   "adaptive, until the Monte Carlo noise adds less than 0.5 to the mean ΔE76 and SSIM's and "
+                   "the mottle's noise correction is accurate)")
     p.add_argument("--threads", type=int, help="worker threads (default: all cores)")
     p.add_argument("--resume", action="store_true", help="continue from DIR/checkpoint.npz if present")
     add_lighting_args(p, "optimise and evaluate")

@@ -56,7 +56,7 @@ from ..units import dpi_of
 from .baselines import BASELINES
 from .colour_table import DEFAULT_PATCH_MM, ColourTable, colour_table
 from .metrics import prediction_metrics
-from .noise import EVAL_SEED_OFFSET, MAX_SPP, PILOT_SPP, TARGET_NOISE_DE76, adaptive_render
+from .noise import EVAL_SEED_OFFSET, MAX_SPP, PILOT_SPP, SSIM_NOISE_RATIO, TARGET_NOISE_DE76, adaptive_render
 from .translucency import evaluate_translucency
 from .translucency import table_lines as translucency_lines
 
@@ -171,7 +171,8 @@ def evaluate_run(path, spp: int | None = DEFAULT_SPP, seed: int = 0, method: str
     t_all = time.perf_counter()
     loss = TexelLoss(target, stex.pos_vox, sigma=1.5)
     out = {"spp": spp, "seed": int(seed), "texels": len(stex), "kind": kind, "spp_adaptive": spp is None,
-           "noise_target_delta_e76": TARGET_NOISE_DE76, "spp_pilot": PILOT_SPP, "spp_max": MAX_SPP,
+           "noise_target_delta_e76": TARGET_NOISE_DE76,
+           "noise_target_ssim_ratio": SSIM_NOISE_RATIO, "spp_pilot": PILOT_SPP, "spp_max": MAX_SPP,
            **lighting.describe()}
     colours = {"target": target}
     rseed = EVAL_SEED_OFFSET + int(seed)

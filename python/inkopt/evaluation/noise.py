@@ -1,4 +1,4 @@
-"""How much Monte Carlo noise adds to a mean ΔE76, and renders with enough samples to make that small.
+"""How much Monte Carlo noise adds to a mean ΔE76 and biases SSIM, and renders with enough samples to make both small.
 
 A render gives each texel an estimate ĉ = c + n of its noise-free colour c, with n ≈ N(0, Σ) in CIELAB
 (Σ = J diag(var) Jᵀ from the linear-RGB variance of the mean, J = d lab / d rgb: the delta method). The
