@@ -3,16 +3,18 @@ picture (scikit-image's astronaut) and the issues' reference slab (15 x 10 x 2.5
 below), quantize each with blue-noise and with random draws, and evaluate against the surface and extrusion
 baselines. Writes bench/results/printable.json and prints a markdown table.
 
-    .venv/bin/python bench/printable_eval.py [--iterations 200] [--spp 0] [--out bench-out]
+    .venv/bin/python bench/printable_eval.py [--iterations N] [--spp 0] [--out bench-out]
         [--cases zebra,astronaut,reference] [--init white|surface|extrusion] [--lr X] [--smooth S] [--grad-spp N]
+        [--decay F]
 
 ``--spp 0`` (the default) evaluates noise-free: ``inkopt evaluate`` without ``--spp`` renders adaptively until
 the Monte Carlo noise adds at most 0.5 to each result's mean ΔE76; ``--spp N`` renders exactly N spp. Every case
 records its mode (``eval_mode``, ``eval_spp``). A run directory's evaluations are reused only if made in the
 requested mode.
 
-A start other than the default all-white one, or a step size, smoothing or gradient spp given explicitly, is
-recorded as its own case ("zebra@extrusion", "zebra@extrusion,lr1", "zebra@smooth0.7,spp8"); cases not run keep their earlier entries in printable.json.
+A start other than the default all-white one, or an iteration count, step size, smoothing, gradient spp or step
+decay given explicitly, is recorded as its own case ("zebra@extrusion", "zebra@extrusion,lr1",
+"zebra@smooth0.7,spp8", "zebra@200it,decay0"); cases not run keep their earlier entries in printable.json.
 """
 import argparse
 import json
@@ -27,6 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import RESULTS, machine, write  # noqa: E402
 
 from inkopt import charts  # noqa: E402
+from inkopt.optim import OptimizeConfig  # noqa: E402
 
 INKOPT = [sys.executable, "-m", "inkopt.cli"]
 VOX = 25.4 / 300
@@ -69,7 +72,7 @@ def verdict(name: str, bn: dict) -> str:
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--iterations", type=int, default=200)
+    ap.add_argument("--iterations", type=int, help="(default: the CLI's)")
     ap.add_argument("--spp", type=int, default=0,
                     help="evaluation spp, used exactly; 0 (default): adaptive, noise adds at most 0.5 to mean ΔE76")
     ap.add_argument("--out", default="bench-out")
@@ -78,6 +81,7 @@ def main():
     ap.add_argument("--lr", type=float, help="step size (inkopt slab --lr; default: the optimiser's)")
     ap.add_argument("--smooth", type=float, help="step smoothing width (inkopt slab --smooth; default: the CLI's)")
     ap.add_argument("--grad-spp", type=int, help="gradient samples per texel (inkopt slab --spp; default: the CLI's)")
+    ap.add_argument("--decay", type=float, help="step decay fraction (inkopt slab --decay; default: the CLI's)")
     a = ap.parse_args()
     out = Path(a.out)
     out.mkdir(exist_ok=True)
@@ -105,17 +109,20 @@ def main():
             r.setdefault("eval_spp", None if r["blue-noise"].get("spp_adaptive") else r["blue-noise"].get("spp"))
     for case in a.cases.split(","):
         img, size, extra = cases[case]()
-        tags = (([a.init] if a.init != "white" else []) + ([f"lr{a.lr:g}"] if a.lr is not None else [])
+        tags = (([f"{a.iterations}it"] if a.iterations is not None else [])
+                + ([a.init] if a.init != "white" else []) + ([f"lr{a.lr:g}"] if a.lr is not None else [])
                 + ([f"smooth{a.smooth:g}"] if a.smooth is not None else [])
-                + ([f"spp{a.grad_spp}"] if a.grad_spp is not None else []))
+                + ([f"spp{a.grad_spp}"] if a.grad_spp is not None else [])
+                + ([f"decay{a.decay:g}"] if a.decay is not None else []))
         name = case + ("@" + ",".join(tags) if tags else "")
         d = out / name.replace("@", "-").replace(",", "-")
         if not (d / "report.json").is_file():
-            run(["slab", str(img)] + extra + ["--size-mm", size, "--out", str(d), "--iterations", str(a.iterations),
-                                              "--resume", "--init", a.init]
+            run(["slab", str(img)] + extra + ["--size-mm", size, "--out", str(d), "--resume", "--init", a.init]
+                + (["--iterations", str(a.iterations)] if a.iterations is not None else [])
                 + (["--lr", str(a.lr)] if a.lr is not None else [])
                 + (["--smooth", str(a.smooth)] if a.smooth is not None else [])
-                + (["--spp", str(a.grad_spp)] if a.grad_spp is not None else []))
+                + (["--spp", str(a.grad_spp)] if a.grad_spp is not None else [])
+                + (["--decay", str(a.decay)] if a.decay is not None else []))
         results[name] = {"report": json.loads((d / "report.json").read_text()), "eval_mode": mode,
                          "eval_spp": a.spp or None}
         for method in ("blue-noise", "random"):
@@ -129,7 +136,9 @@ def main():
             shutil.copy(d / "evaluation.json", done)
             results[name][method] = ev
         results[name] = {k: results[name][k] for k in ("report", "random", "blue-noise", "eval_mode", "eval_spp")}
-        write("printable.json", {"results": results, "iterations": a.iterations, "eval_spp": a.spp,
+        results[name]["iterations"] = results[name]["report"].get("iterations")
+        write("printable.json", {"results": results, "iterations": a.iterations or OptimizeConfig().iterations,
+                                 "eval_spp": a.spp,
                                  "eval_mode": mode, **machine()})
     keys = ("delta_e76_mean", "delta_e76_mean_corrected", "delta_e76_p95", "delta_e2000_mean", "ssim", "mottle_l2")
 

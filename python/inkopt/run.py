@@ -102,7 +102,8 @@ def _optimise(scene, out_dir, cfg, resume, eval_spp, threads, progress, lighting
         "time_split": {k: float(np.sum(getattr(h, k)) / n) for k in ("render_s", "gradient_s", "loss_s", "step_s")},
         **scene.report_fields(),
         "inks": list(scene.volume.inks.names), "gamma": list(cfg.gamma), "lr": cfg.step_size,
-        "optimizer": cfg.optimizer, "param": cfg.param, "init": cfg.init, "seed": cfg.seed,
+        "optimizer": cfg.optimizer, "param": cfg.param, "init": cfg.init, "seed": cfg.seed, "decay": cfg.decay,
+        "smooth": cfg.smooth,
         "gradient": cfg.grad_method, "threads": threads, "peak_rss_gb": peak_rss_gb(), **lighting.describe(),
     }
     rd.write_report(report)

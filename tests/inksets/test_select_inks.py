@@ -28,7 +28,9 @@ def chart(tmp_path_factory):
 
 
 def selection(chart, strategy="halving", candidates="cyan,magenta,yellow", choose=2, iterations=4, **kw):
-    cfg = OptimizeConfig(iterations=iterations, spp=2, forward_spp=4, checkpoint_every=2)
+    # decay 0.5: the step decays in the last 2 of 4 iterations, so a rung of 2 that planned its own decay would
+    # differ from the full run (test_halving_final_run_equals_brute_force)
+    cfg = OptimizeConfig(iterations=iterations, spp=2, forward_spp=4, checkpoint_every=2, decay=0.5)
     target = {"kind": "image", "top": str(chart), "bottom": None, "size_mm": [2.0, 4 / 3, 0.5], "dpi": 300.0}
     return Selection(target, candidates, choose, ["black", "white"], cfg, strategy, eval_spp=16, rung_eval_spp=8,
                      **kw)

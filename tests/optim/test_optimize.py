@@ -109,11 +109,13 @@ def test_without_forward_renders(monkeypatch):
 def test_resume_continues_exactly(tmp_path, forward_spp, smooth):
     """6 iterations in one go and 3 + 3 through a checkpoint give bit-identical variables."""
     scene = small_chart_scene(12, 8, 0.3)
-    a = run(scene, iterations=6, forward_spp=forward_spp, smooth=smooth)
+    a = run(scene, iterations=6, forward_spp=forward_spp, smooth=smooth, decay=0.5)  # steps 3-5 decayed
     a.run()
-    b = run(scene, iterations=3, forward_spp=forward_spp, smooth=smooth)
-    b.run(tmp_path / "ck.npz")
-    c = run(scene, iterations=6, forward_spp=forward_spp, smooth=smooth)
+    b = run(scene, iterations=6, forward_spp=forward_spp, smooth=smooth, decay=0.5)
+    for _ in range(3):  # a run of 6 stopped after 3
+        b.step()
+    b.save_checkpoint(tmp_path / "ck.npz")
+    c = run(scene, iterations=6, forward_spp=forward_spp, smooth=smooth, decay=0.5)
     c.load_checkpoint(tmp_path / "ck.npz")
     assert c.iteration == 3
     c.run(tmp_path / "ck.npz")
@@ -124,10 +126,15 @@ def test_resume_continues_exactly(tmp_path, forward_spp, smooth):
     with pytest.raises(ValueError, match="different settings"):
         d.load_checkpoint(tmp_path / "ck.npz")
     # the smoothing width is part of the key, but off it leaves the key as it was before the setting existed
-    e = run(scene, iterations=6, forward_spp=forward_spp, smooth=0.5 if smooth else 1.0)
+    e = run(scene, iterations=6, forward_spp=forward_spp, smooth=0.5 if smooth else 1.0, decay=0.5)
     with pytest.raises(ValueError, match="different settings"):
         e.load_checkpoint(tmp_path / "ck.npz")
     assert ('"smooth"' in c.config_key()) == bool(smooth)
+    # so is the step decay (off, the key is as before the setting existed)
+    f = run(scene, iterations=6, forward_spp=forward_spp, smooth=smooth, decay=0.25)
+    with pytest.raises(ValueError, match="different settings"):
+        f.load_checkpoint(tmp_path / "ck.npz")
+    assert '"decay"' in c.config_key() and '"decay"' not in run(scene, decay=0.0).config_key()
 
 
 @pytest.mark.parametrize("kind", ["surface", "extrusion"])
@@ -290,3 +297,33 @@ def test_steps_in_blocks_of_rows_are_bit_identical(opt, monkeypatch):
     np.testing.assert_array_equal(blocks.x, whole.x)
     for k, v in whole.opt.state().items():
         np.testing.assert_array_equal(blocks.opt.state()[k], v)
+
+
+def test_step_decay_schedule():
+    """The full step until the run's last `decay` fraction, then DECAY_HALVINGS halvings in equal stages."""
+    from inkopt.optim.optimizers import DECAY_HALVINGS, step_factor
+
+    assert DECAY_HALVINGS == 3
+    f = [step_factor(t, 8, 0.5) for t in range(8)]
+    assert f == [1, 1, 1, 1, 0.5, 0.5, 0.25, 0.125]
+    f = [step_factor(t, 200, 0.25) for t in range(200)]
+    assert f[149] == 1 and f[150] == 0.5 and f[166] == 0.5 and f[167] == 0.25 and f[184] == 0.125 == min(f)
+    assert sorted(set(f)) == [0.125, 0.25, 0.5, 1] and all(a >= b for a, b in zip(f, f[1:]))
+    assert all(step_factor(t, 200, 0.0) == 1 for t in range(200))
+    for bad in (-0.1, 1.0):
+        with pytest.raises(ValueError, match="decay"):
+            OptimizeConfig(decay=bad).validate()
+
+
+@pytest.mark.parametrize("decay", [0.5, 0.0])
+def test_the_loop_steps_with_the_decayed_step_size(decay):
+    """Each step is taken with the configured step size times the schedule's factor for that iteration."""
+    from inkopt.optim.optimizers import step_factor
+
+    r = run(small_chart_scene(12, 8, 0.3), iterations=6, decay=decay)
+    used, step = [], r.opt.step
+    r.opt.step = lambda x, g: used.append(r.opt.lr) or step(x, g)
+    r.run()
+    base = r.cfg.step_size
+    assert used == [base * step_factor(t, 6, decay) for t in range(6)]
+    assert (used[-1] == base / 8) if decay else (used == [base] * 6)

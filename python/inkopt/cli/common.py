@@ -79,6 +79,9 @@ def add_optimizer_args(p) -> None:
                    help="target-colour difference at which the smoothing between two voxels fades to 1/e, so that "
                         f"it stops at the target's edges (default {d.smooth_edge:g}; 0: smooth everywhere, across "
                         "edges too)")
+    p.add_argument("--decay", type=float, default=d.decay, metavar="FRACTION",
+                   help="step decay: over this last fraction of the iterations the step size halves three times, so "
+                        f"that the mixtures settle (default {d.decay:g}; 0: a constant step)")
     p.add_argument("--optimizer", choices=("eg", "adam", "adagrad"), default=d.optimizer,
                    help="eg: exponentiated gradient with momentum (default); adagrad: the paper's; adam")
     p.add_argument("--param", choices=("softmax", "sigmoid"), default=d.param,
@@ -121,7 +124,7 @@ def config_from_args(args):
     cfg = OptimizeConfig(iterations=args.iterations, spp=args.spp, forward_spp=args.forward_spp, gamma=parse_gamma(args.gamma), lr=args.lr,
                          optimizer=args.optimizer, param=args.param, init=args.init, seed=args.seed,
                          grad_method=args.gradient, checkpoint_every=args.checkpoint_every, smooth=args.smooth,
-                         smooth_edge=args.smooth_edge)
+                         smooth_edge=args.smooth_edge, decay=args.decay)
     cfg.validate()
     return cfg
 

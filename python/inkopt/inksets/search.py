@@ -213,7 +213,10 @@ def run_selection(sel: Selection, out, backend=None, *, resume: bool = False, lo
         rung = state["rungs"][k]
         todo = [s for s in alive if set_name(s) not in rung["results"]]
         threads = threads_per_run(backend, len(todo))
-        tasks = [{"target": sel.target, "inks": sel.inks(s), "cfg": {**config_dict(sel.cfg), "iterations": budget},
+        # every rung steps as the full run would (step decay planned for the full budget), so intermediate rungs
+        # take constant steps and a final run is the same as brute force's run of that set
+        cfg = {**config_dict(sel.cfg), "iterations": budget, "schedule_iterations": sel.cfg.iterations}
+        tasks = [{"target": sel.target, "inks": sel.inks(s), "cfg": cfg,
                   "out": str(out / "runs" / set_name(s)), "resume": resume or k > 0, "eval_spp": rung["eval_spp"],
                   "threads": threads} for s in todo]
         for s, res in zip(todo, backend.map(run_candidate, tasks)):

@@ -29,7 +29,7 @@ from ..loss import TexelLoss
 from ..model import FixedShares, Texels, Volume, mix_grad
 from ..render import Renderer
 from .config import OptimizeConfig
-from .optimizers import make_optimizer
+from .optimizers import make_optimizer, step_factor
 from .param import Parameterization, initial_free_mixture
 from .smooth import MAX_DEPTH, GradientSmoother, nearest_texels, texel_guide
 
@@ -149,7 +149,11 @@ class Optimization:
         d = asdict(self.cfg)
         d.pop("iterations")
         d.pop("checkpoint_every")
-        if not d["smooth"]:  # settings added later: checkpoints made before them stay resumable
+        if d["schedule_iterations"] is None:  # settings added later: checkpoints made before them stay resumable
+            d.pop("schedule_iterations")
+        if not d["decay"]:
+            d.pop("decay")
+        if not d["smooth"]:
             d.pop("smooth")
             d.pop("smooth_edge")
         elif d["smooth_edge"]:  # guided smoothing acts under flat texels only (since it became the default)
@@ -250,6 +254,7 @@ class Optimization:
             g_rho = mix_grad(gs[lo:hi], ga[lo:hi], self.base.inks)
             g_x[lo:hi] = self.param.backward(self.x[lo:hi], g_rho, natural=self.opt.natural, lo=lo)
         del gs, ga
+        self.opt.lr = cfg.step_size * step_factor(self.iteration, cfg.schedule_length, cfg.decay)
         x_new = self.opt.step(self.x, g_x).astype(np.float32, copy=False)
         if self.smoother is not None:  # the step, not the gradient: the optimiser's step scale stays its own
             x_new = self.x + self.smoother.apply(x_new - self.x)
