@@ -79,6 +79,10 @@ def add_optimizer_args(p) -> None:
                    help="target-colour difference at which the smoothing between two voxels fades to 1/e, so that "
                         f"it stops at the target's edges (default {d.smooth_edge:g}; 0: smooth everywhere, across "
                         "edges too)")
+    p.add_argument("--adjoint-ema", type=float, default=d.adjoint_ema, metavar="DECAY",
+                   help="per-iteration decay of the running average of the prediction the loss is evaluated at "
+                        f"(default {d.adjoint_ema:g}; 0: this iteration's render only; on meshes 0.5 is measured "
+                        "better: README, Known limits)")
     p.add_argument("--decay", type=float, default=d.decay, metavar="FRACTION",
                    help="step decay: over this last fraction of the iterations the step size halves three times, so "
                         f"that the mixtures settle (default {d.decay:g}; 0: a constant step)")
@@ -124,7 +128,8 @@ def config_from_args(args):
     cfg = OptimizeConfig(iterations=args.iterations, spp=args.spp, forward_spp=args.forward_spp, gamma=parse_gamma(args.gamma), lr=args.lr,
                          optimizer=args.optimizer, param=args.param, init=args.init, seed=args.seed,
                          grad_method=args.gradient, checkpoint_every=args.checkpoint_every, smooth=args.smooth,
-                         smooth_edge=args.smooth_edge, decay=args.decay)
+                         smooth_edge=args.smooth_edge, decay=args.decay,
+                         adjoint_ema=args.adjoint_ema)
     cfg.validate()
     return cfg
 
