@@ -1,6 +1,6 @@
 """Convergence study on the demo slab (6 x 4 x 1 mm, colour chart on top, zebra below, the `inkopt demo` run):
 final noise-free quality of the optimiser's settings at equal iterations and at about equal time; with --case,
-on the zebra chart or the astronaut photograph of bench/printable_eval.py instead (200 iterations).
+on the zebra chart or the astronaut photograph of bench/printable_eval.py instead (200-300 iterations).
 
     .venv/bin/python bench/convergence_study.py [--threads 2] [--only NAME ...] [--case demo|zebra|astronaut]
 
@@ -25,41 +25,49 @@ from inkopt.model import InkTable  # noqa: E402
 from inkopt.optim import OptimizeConfig  # noqa: E402
 from inkopt.run import run_slab  # noqa: E402
 
-# name -> (iterations, OptimizeConfig overrides); the defaults are spp 4, forward spp 16, lr 2 (eg), ema 0.8 and
+# name -> (iterations, OptimizeConfig overrides), all with the constant step they were run with (decay 0; the
+# default since 2026-11-25 14:00 is 0.25); the defaults are spp 4, forward spp 16, lr 2 (eg), ema 0.8 and
 # step smoothing 1.5 under flat texels (since 2026-11-25; 0.7 from 2026-11-24, entries "smooth0.7_*"); "nosmooth"
 # entries turn the smoothing off. Entries of
 # the results file that are not listed here were made by earlier code (see their "note").
 SETTINGS = {
-    "default_150": (150, {}),
-    "default_150_seed1": (150, {"seed": 1}),
-    "nosmooth_150": (150, {"smooth": 0.0}),
-    "nosmooth_300": (300, {"smooth": 0.0}),
-    "nosmooth_150_seed1": (150, {"smooth": 0.0, "seed": 1}),
-    "lr1_150": (150, {"lr": 1.0, "smooth": 0.0}),
-    "lr0.5_300": (300, {"lr": 0.5, "smooth": 0.0}),
-    "spp16_150": (150, {"spp": 16, "smooth": 0.0}),
-    "spp8_150": (150, {"spp": 8, "smooth": 0.0}),
-    "spp8_smooth0.7_150": (150, {"spp": 8, "smooth": 0.7}),
-    "forward0_ema0.9_150": (150, {"forward_spp": 0, "adjoint_ema": 0.9, "smooth": 0.0}),
-    "forward0_ema0.9_400": (400, {"forward_spp": 0, "adjoint_ema": 0.9, "smooth": 0.0}),
-    "forward0_ema0.9_spp8_150": (150, {"forward_spp": 0, "adjoint_ema": 0.9, "spp": 8, "smooth": 0.0}),
-    "smooth0.7_unguided_150": (150, {"smooth": 0.7, "smooth_edge": 0.0}),
+    "default_150": (150, {"decay": 0.0}),
+    "default_150_seed1": (150, {"decay": 0.0, "seed": 1}),
+    "nosmooth_150": (150, {"decay": 0.0, "smooth": 0.0}),
+    "nosmooth_300": (300, {"decay": 0.0, "smooth": 0.0}),
+    "nosmooth_150_seed1": (150, {"decay": 0.0, "smooth": 0.0, "seed": 1}),
+    "lr1_150": (150, {"decay": 0.0, "lr": 1.0, "smooth": 0.0}),
+    "lr0.5_300": (300, {"decay": 0.0, "lr": 0.5, "smooth": 0.0}),
+    "spp16_150": (150, {"decay": 0.0, "spp": 16, "smooth": 0.0}),
+    "spp8_150": (150, {"decay": 0.0, "spp": 8, "smooth": 0.0}),
+    "spp8_smooth0.7_150": (150, {"decay": 0.0, "spp": 8, "smooth": 0.7}),
+    "forward0_ema0.9_150": (150, {"decay": 0.0, "forward_spp": 0, "adjoint_ema": 0.9, "smooth": 0.0}),
+    "forward0_ema0.9_400": (400, {"decay": 0.0, "forward_spp": 0, "adjoint_ema": 0.9, "smooth": 0.0}),
+    "forward0_ema0.9_spp8_150": (150, {"decay": 0.0, "forward_spp": 0, "adjoint_ema": 0.9, "spp": 8, "smooth": 0.0}),
+    "smooth0.7_unguided_150": (150, {"decay": 0.0, "smooth": 0.7, "smooth_edge": 0.0}),
     # half the forward samples (an iteration ~30 % cheaper): at equal iterations and at about equal time (run with
     # the smoothing default of then, 0.7, and its depth weight 30, not 5 as now)
-    "forward8_150": (150, {"forward_spp": 8, "smooth": 0.7}),
-    "forward8_215": (215, {"forward_spp": 8, "smooth": 0.7}),
+    "forward8_150": (150, {"decay": 0.0, "forward_spp": 8, "smooth": 0.7}),
+    "forward8_215": (215, {"decay": 0.0, "forward_spp": 8, "smooth": 0.7}),
     # wider step smoothing under flat texels (kernel width 1.5 / 3 voxels; run with the depth weight 30 of then)
-    "smooth1.5_150": (150, {"smooth": 1.5}),
-    "smooth3_150": (150, {"smooth": 3.0}),
-    "smooth0.7_150": (150, {"smooth": 0.7}),
+    "smooth1.5_150": (150, {"decay": 0.0, "smooth": 1.5}),
+    "smooth3_150": (150, {"decay": 0.0, "smooth": 3.0}),
+    "smooth0.7_150": (150, {"decay": 0.0, "smooth": 0.7}),
 }
-# --case zebra|astronaut: name -> overrides, 200 iterations
+# --case zebra|astronaut: name -> (iterations, overrides); the default since 2026-11-25 is 300 iterations with step
+# decay 0.25 ("default_300"); entries run before then had 200 iterations and a constant step (decay 0)
 CASE_SETTINGS = {
-    "default_200": {},
-    "nosmooth_200": {"smooth": 0.0},
-    "spp8_200": {"spp": 8, "smooth": 0.0},
-    "forward8_200": {"forward_spp": 8, "smooth": 0.7},
-    "smooth0.7_200": {"smooth": 0.7},
+    "default_300": (300, {}),
+    "constant_200": (200, {"decay": 0.0}),
+    "decay0.25_200": (200, {}),
+    "decay0.5_200": (200, {"decay": 0.5}),
+    "decay0.25_250": (250, {}),
+    "decay0.25_lr3_200": (200, {"lr": 3.0}),
+    "decay0.25_spp8_200": (200, {"spp": 8}),
+    "nosmooth_200": (200, {"smooth": 0.0, "decay": 0.0}),
+    "spp8_200": (200, {"spp": 8, "smooth": 0.0, "decay": 0.0}),
+    "forward8_200": (200, {"forward_spp": 8, "smooth": 0.7, "decay": 0.0}),
+    "smooth0.7_200": (200, {"smooth": 0.7, "decay": 0.0}),
 }
 KEYS = ("delta_e76_mean_corrected", "delta_e76_mean", "delta_e2000_mean", "ssim", "mottle_l2", "seconds",
         "seconds_per_iteration")
@@ -85,7 +93,7 @@ def main():
     ap.add_argument("--only", nargs="*", choices=sorted(SETTINGS) + sorted(CASE_SETTINGS))
     ap.add_argument("--case", choices=("demo", "zebra", "astronaut"), default="demo")
     a = ap.parse_args()
-    settings = SETTINGS if a.case == "demo" else {k: (200, v) for k, v in CASE_SETTINGS.items()}
+    settings = SETTINGS if a.case == "demo" else CASE_SETTINGS
     unknown = set(a.only or ()) - set(settings)
     if unknown:
         ap.error(f"settings {sorted(unknown)} are not run for --case {a.case}")
