@@ -11,8 +11,8 @@ GRAD_METHODS = ("replay", "li1")
 @dataclass
 class OptimizeConfig:
     #: 300 since 2026-11-25 (was 200): with the step decay, the zebra chart and the astronaut photograph still
-    #: gain 0.3 and 0.8+ mean ΔE76 from 200 to 300 iterations; the reference slab's 300 take ~7 min on 2 cores
-    #: (README, "Optimisation: what we learned")
+    #: gain 0.3 and 0.55 mean ΔE76 from 200 to 300 iterations; the reference slab's 300 take 7-10 min on 2 cores
+    #: (README, "Optimisation: what we learned" and "Quality")
     iterations: int = 300
     #: samples per texel of the gradient pass (unbiased at any spp; fewer is noisier)
     spp: int = 4
