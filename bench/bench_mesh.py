@@ -51,7 +51,7 @@ def main(argv=None) -> dict:
                          **({} if args.smooth is None else {"smooth": args.smooth}))
     t0 = time.perf_counter()
     run = Optimization(scene.volume, scene.vox.texels, scene.vox.targets, cfg, fixed_share=scene.fixed_share,
-                       threads=args.threads)
+                       threads=args.threads, kind="mesh")
     setup_s = time.perf_counter() - t0
     rss["after_setup"] = peak_rss_gb()
     import resource

@@ -5,15 +5,15 @@ baselines. Writes bench/results/printable.json and prints a markdown table.
 
     .venv/bin/python bench/printable_eval.py [--iterations N] [--spp 0] [--out bench-out]
         [--cases zebra,astronaut,reference] [--init white|surface|extrusion] [--lr X] [--smooth S] [--grad-spp N]
-        [--decay F]
+        [--decay F] [--adjoint-ema W]
 
 ``--spp 0`` (the default) evaluates noise-free: ``inkopt evaluate`` without ``--spp`` renders adaptively until
 the Monte Carlo noise adds at most 0.5 to each result's mean ΔE76; ``--spp N`` renders exactly N spp. Every case
 records its mode (``eval_mode``, ``eval_spp``). A run directory's evaluations are reused only if made in the
 requested mode.
 
-A start other than the default all-white one, or an iteration count, step size, smoothing, gradient spp or step
-decay given explicitly, is recorded as its own case ("zebra@extrusion", "zebra@extrusion,lr1",
+A start other than the default all-white one, or an iteration count, step size, smoothing, gradient spp, step
+decay or adjoint average given explicitly, is recorded as its own case ("zebra@extrusion", "zebra@extrusion,lr1",
 "zebra@smooth0.7,spp8", "zebra@200it,decay0"); cases not run keep their earlier entries in printable.json.
 """
 import argparse
@@ -82,6 +82,8 @@ def main():
     ap.add_argument("--smooth", type=float, help="step smoothing width (inkopt slab --smooth; default: the CLI's)")
     ap.add_argument("--grad-spp", type=int, help="gradient samples per texel (inkopt slab --spp; default: the CLI's)")
     ap.add_argument("--decay", type=float, help="step decay fraction (inkopt slab --decay; default: the CLI's)")
+    ap.add_argument("--adjoint-ema", type=float,
+                    help="adjoint running-average weight (inkopt slab --adjoint-ema; default: the CLI's)")
     a = ap.parse_args()
     out = Path(a.out)
     out.mkdir(exist_ok=True)
@@ -113,7 +115,8 @@ def main():
                 + ([a.init] if a.init != "white" else []) + ([f"lr{a.lr:g}"] if a.lr is not None else [])
                 + ([f"smooth{a.smooth:g}"] if a.smooth is not None else [])
                 + ([f"spp{a.grad_spp}"] if a.grad_spp is not None else [])
-                + ([f"decay{a.decay:g}"] if a.decay is not None else []))
+                + ([f"decay{a.decay:g}"] if a.decay is not None else [])
+                + ([f"ema{a.adjoint_ema:g}"] if a.adjoint_ema is not None else []))
         name = case + ("@" + ",".join(tags) if tags else "")
         d = out / name.replace("@", "-").replace(",", "-")
         if not (d / "report.json").is_file():
@@ -122,7 +125,8 @@ def main():
                 + (["--lr", str(a.lr)] if a.lr is not None else [])
                 + (["--smooth", str(a.smooth)] if a.smooth is not None else [])
                 + (["--spp", str(a.grad_spp)] if a.grad_spp is not None else [])
-                + (["--decay", str(a.decay)] if a.decay is not None else []))
+                + (["--decay", str(a.decay)] if a.decay is not None else [])
+                + (["--adjoint-ema", str(a.adjoint_ema)] if a.adjoint_ema is not None else []))
         results[name] = {"report": json.loads((d / "report.json").read_text()), "eval_mode": mode,
                          "eval_spp": a.spp or None}
         for method in ("blue-noise", "random"):

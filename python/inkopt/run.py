@@ -58,7 +58,8 @@ def _optimise(scene, out_dir, cfg, resume, eval_spp, threads, progress, lighting
                                 progress=progress)
 
     run = Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, fixed_share=scene.fixed_share,
-                       threads=threads, baseline=baseline, lighting=lighting, renderer_factory=make_renderer)
+                       threads=threads, baseline=baseline, lighting=lighting, renderer_factory=make_renderer,
+                       kind=scene.kind)
     rd = RunDir.create(out_dir)
     if resume:
         run.resume(rd.checkpoint, log)
@@ -103,7 +104,7 @@ def _optimise(scene, out_dir, cfg, resume, eval_spp, threads, progress, lighting
         **scene.report_fields(),
         "inks": list(scene.volume.inks.names), "gamma": list(cfg.gamma), "lr": cfg.step_size,
         "optimizer": cfg.optimizer, "param": cfg.param, "init": cfg.init, "seed": cfg.seed, "decay": cfg.decay,
-        "smooth": cfg.smooth,
+        "smooth": cfg.smooth, "adjoint_ema": run.cfg.adjoint_ema,
         "gradient": cfg.grad_method, "threads": threads, "peak_rss_gb": peak_rss_gb(), **lighting.describe(),
     }
     rd.write_report(report)

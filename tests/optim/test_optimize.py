@@ -327,3 +327,27 @@ def test_the_loop_steps_with_the_decayed_step_size(decay):
     base = r.cfg.step_size
     assert used == [base * step_factor(t, 6, decay) for t in range(6)]
     assert (used[-1] == base / 8) if decay else (used == [base] * 6)
+
+
+def test_the_adjoint_average_is_left_to_the_scene_kind():
+    """adjoint_ema unset: the scene kind's value (0.8 on slabs, 0.5 on meshes; a set value is kept). The run's cfg
+    is the resolved one, so checkpoints of the two do not mix, and the running average's weight follows its
+    recursion w <- ema * w + forward_spp + spp (tending to 20 / (1 - ema) samples per texel)."""
+    from inkopt.optim import ADJOINT_EMA
+
+    assert (ADJOINT_EMA["slab"], ADJOINT_EMA["mesh"]) == (0.8, 0.5)
+    assert OptimizeConfig().adjoint_ema is None
+    assert OptimizeConfig().for_scene("mesh").adjoint_ema == 0.5
+    assert OptimizeConfig(adjoint_ema=0.3).for_scene("mesh").adjoint_ema == 0.3
+    with pytest.raises(ValueError, match="scene kind"):
+        OptimizeConfig().for_scene("torus")
+    scene = small_chart_scene(12, 8, 0.3)
+    cfg = OptimizeConfig(iterations=8, spp=4, forward_spp=16)
+    runs = {kind: Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, threads=2, kind=kind)
+            for kind in ("slab", "mesh")}
+    assert runs["slab"].config_key() != runs["mesh"].config_key()
+    for kind, r in runs.items():
+        assert r.cfg.adjoint_ema == ADJOINT_EMA[kind]
+        r.run()
+        ema = ADJOINT_EMA[kind]
+        assert r.c_weight == pytest.approx(sum(20 * ema ** k for k in range(8)), rel=1e-6)

@@ -57,7 +57,7 @@ def lighting_from_args(args):
 
 def add_optimizer_args(p) -> None:
     """Options shared by `inkopt slab` and `inkopt optimize`."""
-    from ..optim import OptimizeConfig
+    from ..optim import ADJOINT_EMA, OptimizeConfig
 
     d = OptimizeConfig()
     p.add_argument("--inks", default="vero-cmykw",
@@ -79,10 +79,10 @@ def add_optimizer_args(p) -> None:
                    help="target-colour difference at which the smoothing between two voxels fades to 1/e, so that "
                         f"it stops at the target's edges (default {d.smooth_edge:g}; 0: smooth everywhere, across "
                         "edges too)")
-    p.add_argument("--adjoint-ema", type=float, default=d.adjoint_ema, metavar="DECAY",
+    p.add_argument("--adjoint-ema", type=float, metavar="DECAY",
                    help="per-iteration decay of the running average of the prediction the loss is evaluated at "
-                        f"(default {d.adjoint_ema:g}; 0: this iteration's render only; on meshes 0.5 is measured "
-                        "better: README, Known limits)")
+                        f"(default: {ADJOINT_EMA['slab']:g} on slabs, {ADJOINT_EMA['mesh']:g} on meshes, where a "
+                        "longer average lags enough to make the run oscillate; 0: this iteration's render only)")
     p.add_argument("--decay", type=float, default=d.decay, metavar="FRACTION",
                    help="step decay: over this last fraction of the iterations the step size halves three times, so "
                         f"that the mixtures settle (default {d.decay:g}; 0: a constant step)")

@@ -1,11 +1,17 @@
 """Settings of an optimisation run (method.md §6) and their checks."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 PARAMS = ("sigmoid", "softmax")
 OPTIMIZERS = ("eg", "adam", "adagrad")
 GRAD_METHODS = ("replay", "li1")
+#: ``adjoint_ema`` by scene kind when unset (README, "Optimisation: what we learned"). Slabs: 0.8, the adjoint's
+#: bias on dark colours needs the samples (0.5 cost the zebra chart 0.6 and the astronaut 1.0 mean ΔE76 at 300
+#: iterations). Meshes: 0.5, with 0.8 the lagging average and the momentum make a delayed feedback loop and the
+#: run oscillates (Spot 10 mm, 60 iterations: training ΔE76 swings 17-24, final 18.0 / SSIM 0.806 below the
+#: start's 0.834; with 0.5 it falls steadily to 11.6 / SSIM 0.877).
+ADJOINT_EMA = {"slab": 0.8, "mesh": 0.5}
 
 
 @dataclass
@@ -38,8 +44,9 @@ class OptimizeConfig:
     include_specular: bool = True
     #: Per-iteration decay of the sample-weighted running average of the prediction that the adjoint is evaluated
     #: at (0: this iteration's forward render only). The mixture changes slowly, so averaging over iterations
-    #: multiplies the adjoint's samples (~ (forward_spp + spp) / (1 - decay)) at no rendering cost.
-    adjoint_ema: float = 0.8
+    #: multiplies the adjoint's samples (~ (forward_spp + spp) / (1 - decay)) at no rendering cost, but lags the
+    #: mixture by ~decay / (1 - decay) iterations. None: the scene kind's value (``ADJOINT_EMA``, ``for_scene``).
+    adjoint_ema: float | None = None
     #: Width (voxels) of the spatial preconditioner of the step (``optim/smooth.py``): the step is diffused over
     #: the free voxels under texels where the target is flat, damping the voxel-scale noise that shows as mottle
     #: (0: off). 1.5 by default (0.7 from 2026-11-24 to 11-25): on the demo slab, the astronaut photograph, the
@@ -89,8 +96,15 @@ class OptimizeConfig:
                              f"({self.iterations})")
         if not 0.0 <= self.decay < 1.0:
             raise ValueError(f"decay must lie in [0, 1) (a fraction of the iterations), got {self.decay}")
-        if not 0.0 <= self.adjoint_ema < 1.0:
+        if self.adjoint_ema is not None and not 0.0 <= self.adjoint_ema < 1.0:
             raise ValueError(f"adjoint_ema must lie in [0, 1), got {self.adjoint_ema}")
+
+    def for_scene(self, kind: str) -> OptimizeConfig:
+        """This config with the settings left to the scene (``adjoint_ema`` None) set for a scene of ``kind``
+        ("slab" or "mesh")."""
+        if kind not in ADJOINT_EMA:
+            raise ValueError(f"unknown scene kind '{kind}'; use one of {tuple(ADJOINT_EMA)}")
+        return self if self.adjoint_ema is not None else replace(self, adjoint_ema=ADJOINT_EMA[kind])
 
     @property
     def schedule_length(self) -> int:
