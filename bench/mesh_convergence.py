@@ -3,6 +3,10 @@ iteration (does it fall steadily or oscillate?) and the noise-free final figures
 OptimizeConfig overrides. Writes bench/results/mesh_convergence.json (one entry per name, updated in place).
 
     .venv/bin/python bench/mesh_convergence.py NAME [--height-mm 10] [--iterations 60] [--set KEY=VALUE ...]
+        [--out DIR]
+
+``--out DIR`` keeps the run directory (default: a temporary one), and a run stopped part-way resumes from its
+checkpoint there.
 
 e.g. ``default_60`` (no --set) and ``ema0.5_60 --set adjoint_ema=0.5``. Seed 0, all cores, adaptive final
 evaluation (Monte Carlo noise adds <= 0.5 to the mean ΔE76, SSIM noise ratio <= 0.1).
@@ -24,7 +28,7 @@ from inkopt.optim import OptimizeConfig  # noqa: E402
 from inkopt.run import run_mesh  # noqa: E402
 
 KEYS = ("initial_delta_e76_mean_corrected", "delta_e76_mean_corrected", "delta_e2000_mean", "initial_ssim", "ssim",
-        "mottle_l2", "seconds", "seconds_per_iteration", "eval_spp")
+        "mottle_l2", "seconds", "seconds_per_iteration", "eval_spp", "adjoint_ema")
 
 
 def main():
@@ -34,13 +38,15 @@ def main():
     ap.add_argument("--iterations", type=int, default=60)
     ap.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="OptimizeConfig overrides (JSON values)")
     ap.add_argument("--threads", type=int)
+    ap.add_argument("--out", help="run directory to keep (and resume from)")
     a = ap.parse_args()
     kw = {k: json.loads(v) for k, v in (s.split("=", 1) for s in a.set)}
     cfg = OptimizeConfig(**{"iterations": a.iterations, "seed": 0, **kw})
     with tempfile.TemporaryDirectory() as tmp:
-        rep = run_mesh(SPOT, Path(tmp), InkTable.parse("vero-cmykw"), cfg, height_mm=a.height_mm,
-                       threads=a.threads, log=lambda s: None)
-        with np.load(Path(tmp) / "checkpoint.npz") as ck:
+        d = Path(a.out or tmp)
+        rep = run_mesh(SPOT, d, InkTable.parse("vero-cmykw"), cfg, height_mm=a.height_mm, threads=a.threads,
+                       resume=a.out is not None, log=lambda s: None)
+        with np.load(d / "checkpoint.npz") as ck:
             train = [round(float(v), 3) for v in ck["hist_delta_e76"]]
     row = {"height_mm": a.height_mm, "iterations": a.iterations, **kw, **{k: rep[k] for k in KEYS if k in rep},
            "train_delta_e76": train}

@@ -7,6 +7,6 @@ from .optimizers import AdaGrad, Adam, ExponentiatedGradient, make_optimizer
 from .param import BASELINE_INITS, Parameterization, initial_free_mixture
 from .smooth import GradientSmoother
 
-__all__ = ["ADJOINT_EMA", "OPTIMIZERS", "PARAMS", "OptimizeConfig", "default_lr", "History", "Optimization", "iteration_seeds",
-           "AdaGrad", "Adam", "ExponentiatedGradient", "make_optimizer", "BASELINE_INITS", "Parameterization",
-           "initial_free_mixture", "GradientSmoother"]
+__all__ = ["ADJOINT_EMA", "OPTIMIZERS", "PARAMS", "OptimizeConfig", "default_lr", "History", "Optimization",
+           "iteration_seeds", "AdaGrad", "Adam", "ExponentiatedGradient", "make_optimizer", "BASELINE_INITS",
+           "Parameterization", "initial_free_mixture", "GradientSmoother"]
