@@ -110,7 +110,7 @@ def main():
             rep = run_slab(top, bottom, size, tmp / name, inks, cfg, threads=a.threads,
                            log=lambda s: None)
             row = {"iterations": iterations, **kw, **{k: rep[k] for k in KEYS}}
-            if cfg.smooth:
+            if rep["smooth"]:
                 row.setdefault("smooth_edge", cfg.smooth_edge)
             out["settings"][name] = row
             print(name, " ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()),

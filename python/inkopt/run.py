@@ -104,7 +104,7 @@ def _optimise(scene, out_dir, cfg, resume, eval_spp, threads, progress, lighting
         **scene.report_fields(),
         "inks": list(scene.volume.inks.names), "gamma": list(cfg.gamma), "lr": cfg.step_size,
         "optimizer": cfg.optimizer, "param": cfg.param, "init": cfg.init, "seed": cfg.seed, "decay": cfg.decay,
-        "smooth": cfg.smooth, "adjoint_ema": run.cfg.adjoint_ema,
+        "smooth": run.cfg.smooth, "adjoint_ema": run.cfg.adjoint_ema,
         "gradient": cfg.grad_method, "threads": threads, "peak_rss_gb": peak_rss_gb(), **lighting.describe(),
     }
     rd.write_report(report)

@@ -119,7 +119,7 @@ def test_slab_outputs(tmp_path, chart):
     for k in ("initial_delta_e76_mean", "delta_e76_mean", "delta_e76_p95", "delta_e2000_mean", "loss", "e1",
               "e2", "e3", "iterations", "spp", "seconds", "ssim"):
         assert k in rep and np.isfinite(rep[k]), k
-    assert rep["adjoint_ema"] == 0.8  # the slab's default (OptimizeConfig.for_scene)
+    assert (rep["adjoint_ema"], rep["smooth"]) == (0.8, 1.5)  # the slab defaults (OptimizeConfig.for_scene)
     for f in ("volume.npz", "scene.npz", "face_top.png", "face_bottom.png", "loss.png", "checkpoint.npz"):
         assert (out / f).is_file(), f
     vol = Volume.load(out / "volume.npz")

@@ -329,16 +329,20 @@ def test_the_loop_steps_with_the_decayed_step_size(decay):
     assert (used[-1] == base / 8) if decay else (used == [base] * 6)
 
 
-def test_the_adjoint_average_is_left_to_the_scene_kind():
-    """adjoint_ema unset: the scene kind's value (0.8 on slabs, 0.5 on meshes; a set value is kept). The run's cfg
-    is the resolved one, so checkpoints of the two do not mix, and the running average's weight follows its
-    recursion w <- ema * w + forward_spp + spp (tending to 20 / (1 - ema) samples per texel)."""
-    from inkopt.optim import ADJOINT_EMA
+def test_settings_left_to_the_scene_kind():
+    """adjoint_ema and smooth unset: the scene kind's values (slabs 0.8 and 1.5, meshes 0.5 and 3; a set value is
+    kept). The run's cfg is the resolved one, so checkpoints of the two do not mix, and the running average's weight
+    follows its recursion w <- ema * w + forward_spp + spp (tending to 20 / (1 - ema) samples per texel)."""
+    from inkopt.optim import SCENE_DEFAULTS
+    from inkopt.optim.smooth import diffusion_steps
 
-    assert (ADJOINT_EMA["slab"], ADJOINT_EMA["mesh"]) == (0.8, 0.5)
-    assert OptimizeConfig().adjoint_ema is None
-    assert OptimizeConfig().for_scene("mesh").adjoint_ema == 0.5
-    assert OptimizeConfig(adjoint_ema=0.3).for_scene("mesh").adjoint_ema == 0.3
+    assert diffusion_steps(1.5) != diffusion_steps(3.0)
+    assert SCENE_DEFAULTS == {"slab": {"adjoint_ema": 0.8, "smooth": 1.5}, "mesh": {"adjoint_ema": 0.5, "smooth": 3.0}}
+    assert OptimizeConfig().adjoint_ema is None and OptimizeConfig().smooth is None
+    mesh = OptimizeConfig().for_scene("mesh")
+    assert (mesh.adjoint_ema, mesh.smooth) == (0.5, 3.0)
+    kept = OptimizeConfig(adjoint_ema=0.3, smooth=0.0).for_scene("mesh")
+    assert (kept.adjoint_ema, kept.smooth) == (0.3, 0.0)
     with pytest.raises(ValueError, match="scene kind"):
         OptimizeConfig().for_scene("torus")
     scene = small_chart_scene(12, 8, 0.3)
@@ -347,7 +351,7 @@ def test_the_adjoint_average_is_left_to_the_scene_kind():
             for kind in ("slab", "mesh")}
     assert runs["slab"].config_key() != runs["mesh"].config_key()
     for kind, r in runs.items():
-        assert r.cfg.adjoint_ema == ADJOINT_EMA[kind]
+        ema, smooth = SCENE_DEFAULTS[kind]["adjoint_ema"], SCENE_DEFAULTS[kind]["smooth"]
+        assert (r.cfg.adjoint_ema, r.cfg.smooth, r.smoother.steps) == (ema, smooth, diffusion_steps(smooth))
         r.run()
-        ema = ADJOINT_EMA[kind]
         assert r.c_weight == pytest.approx(sum(20 * ema ** k for k in range(8)), rel=1e-6)

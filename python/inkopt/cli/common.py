@@ -57,9 +57,9 @@ def lighting_from_args(args):
 
 def add_optimizer_args(p) -> None:
     """Options shared by `inkopt slab` and `inkopt optimize`."""
-    from ..optim import ADJOINT_EMA, OptimizeConfig
+    from ..optim import SCENE_DEFAULTS, OptimizeConfig
 
-    d = OptimizeConfig()
+    d, slab, mesh = OptimizeConfig(), SCENE_DEFAULTS["slab"], SCENE_DEFAULTS["mesh"]
     p.add_argument("--inks", default="vero-cmykw",
                    help="ink set: a preset (vero-cmykw, vero-cmykw+orange, vero-cmykwt), a comma list of ink names, "
                         "or a JSON/TOML file of inks (default vero-cmykw)")
@@ -72,16 +72,17 @@ def add_optimizer_args(p) -> None:
     p.add_argument("--gamma", default=",".join(f"{g:g}" for g in d.gamma),
                    help="loss weights g1,g2,g3 of colour (dE76^2), SSIM and edge terms (default %(default)s)")
     p.add_argument("--lr", type=float, help="step size (default: 2 for eg, 0.5 for adagrad, 0.1 for adam)")
-    p.add_argument("--smooth", type=float, default=d.smooth, metavar="VOXELS",
+    p.add_argument("--smooth", type=float, metavar="VOXELS",
                    help="width in voxels of the step's spatial smoothing under texels where the target is flat: "
-                        f"damps voxel-to-voxel mottle (default {d.smooth:g}; 0: off)")
+                        f"damps voxel-to-voxel mottle (default {slab['smooth']:g} on slabs, {mesh['smooth']:g} on meshes; "
+                        "0: off)")
     p.add_argument("--smooth-edge", type=float, default=d.smooth_edge, metavar="DE76",
                    help="target-colour difference at which the smoothing between two voxels fades to 1/e, so that "
                         f"it stops at the target's edges (default {d.smooth_edge:g}; 0: smooth everywhere, across "
                         "edges too)")
     p.add_argument("--adjoint-ema", type=float, metavar="DECAY",
                    help="per-iteration decay of the running average of the prediction the loss is evaluated at "
-                        f"(default: {ADJOINT_EMA['slab']:g} on slabs, {ADJOINT_EMA['mesh']:g} on meshes, where a "
+                        f"(default: {slab['adjoint_ema']:g} on slabs, {mesh['adjoint_ema']:g} on meshes, where a "
                         "longer average lags enough to make the run oscillate; 0: this iteration's render only)")
     p.add_argument("--decay", type=float, default=d.decay, metavar="FRACTION",
                    help="step decay: over this last fraction of the iterations the step size halves three times, so "

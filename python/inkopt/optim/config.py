@@ -6,12 +6,15 @@ from dataclasses import dataclass, replace
 PARAMS = ("sigmoid", "softmax")
 OPTIMIZERS = ("eg", "adam", "adagrad")
 GRAD_METHODS = ("replay", "li1")
-#: ``adjoint_ema`` by scene kind when unset (README, "Optimisation: what we learned"). Slabs: 0.8, the adjoint's
-#: bias on dark colours needs the samples (0.5 cost the zebra chart 0.6 and the astronaut 1.0 mean ΔE76 at 300
-#: iterations). Meshes: 0.5, with 0.8 the lagging average and the momentum make a delayed feedback loop and the
-#: run oscillates (Spot 10 mm, 60 iterations: training ΔE76 swings 17-24, final 18.0 / SSIM 0.806 below the
-#: start's 0.834; with 0.5 it falls steadily to 11.6 / SSIM 0.877).
-ADJOINT_EMA = {"slab": 0.8, "mesh": 0.5}
+#: Settings whose default depends on the scene kind, used where the config leaves them None
+#: (``OptimizeConfig.for_scene``; README, "Optimisation: what we learned").
+#: ``adjoint_ema``: slabs 0.8, the adjoint's bias on dark colours needs the samples (0.5 cost the zebra chart 0.6
+#: and the astronaut 1.0 mean ΔE76 at 300 iterations). Meshes 0.5: with 0.8 the lagging average and the momentum
+#: make a delayed feedback loop and the run oscillates (Spot 10 mm, 60 iterations: training ΔE76 swings 17-24,
+#: final 18.0 / SSIM 0.806 below the start's 0.834; with 0.5 it falls steadily to 11.6 / SSIM 0.877).
+#: ``smooth``: slabs 1.5 (3 gained nothing on the demo slab); meshes 3: on Spot the flat regions' mottle grows
+#: with the iterations at 1.5 (10 mm, 60 iterations: 0.55 (ΔL*)²; 3: 0.25, ΔE76 and SSIM slightly better too).
+SCENE_DEFAULTS = {"slab": {"adjoint_ema": 0.8, "smooth": 1.5}, "mesh": {"adjoint_ema": 0.5, "smooth": 3.0}}
 
 
 @dataclass
@@ -45,15 +48,16 @@ class OptimizeConfig:
     #: Per-iteration decay of the sample-weighted running average of the prediction that the adjoint is evaluated
     #: at (0: this iteration's forward render only). The mixture changes slowly, so averaging over iterations
     #: multiplies the adjoint's samples (~ (forward_spp + spp) / (1 - decay)) at no rendering cost, but lags the
-    #: mixture by ~decay / (1 - decay) iterations. None: the scene kind's value (``ADJOINT_EMA``, ``for_scene``).
+    #: mixture by ~decay / (1 - decay) iterations. None: the scene kind's value (``SCENE_DEFAULTS``, ``for_scene``).
     adjoint_ema: float | None = None
     #: Width (voxels) of the spatial preconditioner of the step (``optim/smooth.py``): the step is diffused over
     #: the free voxels under texels where the target is flat, damping the voxel-scale noise that shows as mottle
     #: (0: off). 1.5 by default (0.7 from 2026-11-24 to 11-25): on the demo slab, the astronaut photograph, the
     #: reference slab and Spot it improves every noise-free figure over 0.7 and no smoothing, 3 gains nothing
     #: more (README, "Optimisation: what we learned"); smoothing everywhere instead of under flat texels only cost
-    #: the photograph ~0.9 mean ΔE76, widening the set by 4 voxels around flat texels ~0.5.
-    smooth: float = 1.5
+    #: the photograph ~0.9 mean ΔE76, widening the set by 4 voxels around flat texels ~0.5. None: the scene kind's
+    #: value (``SCENE_DEFAULTS``: 1.5 on slabs, 3 on meshes since 2026-11-25).
+    smooth: float | None = None
     #: Guide of the smoothing: the target-colour difference (ΔE76) at which the smoothing between two voxels falls
     #: to 1/e, so it stays within regions of one target colour; with a guide, only voxels under flat texels
     #: (``TexelLoss.flat``) are smoothed (0: no guide, smooth everywhere and across the target's edges too).
@@ -87,7 +91,7 @@ class OptimizeConfig:
             raise ValueError(f"learning rate must be positive, got {self.lr}")
         if self.checkpoint_every < 1:
             raise ValueError("checkpoint_every must be >= 1")
-        if not 0.0 <= self.smooth <= 4.0:  # 4 voxels: 2 x 32 diffusion passes per iteration, already blurry
+        if self.smooth is not None and not 0.0 <= self.smooth <= 4.0:  # 4 voxels: 2 x 32 diffusion passes per iteration, already blurry
             raise ValueError(f"smoothing width must lie in [0, 4] voxels, got {self.smooth}")
         if not 0.0 <= self.smooth_edge < float("inf"):
             raise ValueError(f"smoothing edge must be >= 0 (dE76), got {self.smooth_edge}")
@@ -100,11 +104,12 @@ class OptimizeConfig:
             raise ValueError(f"adjoint_ema must lie in [0, 1), got {self.adjoint_ema}")
 
     def for_scene(self, kind: str) -> OptimizeConfig:
-        """This config with the settings left to the scene (``adjoint_ema`` None) set for a scene of ``kind``
-        ("slab" or "mesh")."""
-        if kind not in ADJOINT_EMA:
-            raise ValueError(f"unknown scene kind '{kind}'; use one of {tuple(ADJOINT_EMA)}")
-        return self if self.adjoint_ema is not None else replace(self, adjoint_ema=ADJOINT_EMA[kind])
+        """This config with the settings it leaves to the scene (those of ``SCENE_DEFAULTS`` that are None) set for a
+        scene of ``kind`` ("slab" or "mesh")."""
+        if kind not in SCENE_DEFAULTS:
+            raise ValueError(f"unknown scene kind '{kind}'; use one of {tuple(SCENE_DEFAULTS)}")
+        unset = {k: v for k, v in SCENE_DEFAULTS[kind].items() if getattr(self, k) is None}
+        return replace(self, **unset) if unset else self
 
     @property
     def schedule_length(self) -> int:

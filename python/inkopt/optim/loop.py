@@ -85,7 +85,7 @@ class Optimization:
                  fixed_share: np.ndarray | None = None, threads: int | None = None,
                  baseline: Callable[[str], np.ndarray] | None = None, lighting: Lighting | str | None = None,
                  renderer_factory: Callable[..., Renderer] | None = None, kind: str = "slab"):
-        cfg = cfg.for_scene(kind)  # settings left to the scene kind ("slab" or "mesh": OptimizeConfig.ADJOINT_EMA)
+        cfg = cfg.for_scene(kind)  # settings left to the scene kind ("slab" or "mesh": config.SCENE_DEFAULTS)
         cfg.validate()
         self.renderer_factory = renderer_factory or Renderer
         self.lighting = load_lighting(lighting)
