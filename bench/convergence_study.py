@@ -58,8 +58,6 @@ SETTINGS = {
 # decay 0.25 ("default_300"); entries run before then had 200 iterations and a constant step (decay 0)
 CASE_SETTINGS = {
     "default_300": (300, {}),
-    "ema0.5_300": (300, {"adjoint_ema": 0.5}),
-    "ema0.65_300": (300, {"adjoint_ema": 0.65}),
     "constant_200": (200, {"decay": 0.0}),
     "decay0.25_200": (200, {}),
     "decay0.5_200": (200, {"decay": 0.5}),
