@@ -74,8 +74,8 @@ def add_optimizer_args(p) -> None:
     p.add_argument("--lr", type=float, help="step size (default: 2 for eg, 0.5 for adagrad, 0.1 for adam)")
     p.add_argument("--smooth", type=float, metavar="VOXELS",
                    help="width in voxels of the step's spatial smoothing under texels where the target is flat: "
-                        f"damps voxel-to-voxel mottle (default {slab['smooth']:g} on slabs, {mesh['smooth']:g} on meshes; "
-                        "0: off)")
+                        f"damps voxel-to-voxel mottle (default {slab['smooth']:g} on slabs, {mesh['smooth']:g} on "
+                        "meshes; 0: off)")
     p.add_argument("--smooth-edge", type=float, default=d.smooth_edge, metavar="DE76",
                    help="target-colour difference at which the smoothing between two voxels fades to 1/e, so that "
                         f"it stops at the target's edges (default {d.smooth_edge:g}; 0: smooth everywhere, across "

@@ -91,7 +91,8 @@ class OptimizeConfig:
             raise ValueError(f"learning rate must be positive, got {self.lr}")
         if self.checkpoint_every < 1:
             raise ValueError("checkpoint_every must be >= 1")
-        if self.smooth is not None and not 0.0 <= self.smooth <= 4.0:  # 4 voxels: 2 x 32 diffusion passes per iteration, already blurry
+        # at most 4 voxels: 2 x 32 diffusion passes per iteration, already blurry
+        if self.smooth is not None and not 0.0 <= self.smooth <= 4.0:
             raise ValueError(f"smoothing width must lie in [0, 4] voxels, got {self.smooth}")
         if not 0.0 <= self.smooth_edge < float("inf"):
             raise ValueError(f"smoothing edge must be >= 0 (dE76), got {self.smooth_edge}")
