@@ -8,8 +8,11 @@ OptimizeConfig overrides. Writes bench/results/mesh_convergence.json (one entry 
 ``--out DIR`` keeps the run directory (default: a temporary one), and a run stopped part-way resumes from its
 checkpoint there.
 
-e.g. ``default_60`` (no --set) and ``ema0.5_60 --set adjoint_ema=0.5``. Seed 0, all cores, adaptive final
-evaluation (Monte Carlo noise adds <= 0.5 to the mean ΔE76, SSIM noise ratio <= 0.1).
+e.g. ``spot20_default_300 --height-mm 20 --iterations 300`` (the mesh defaults: running-average weight 0.5,
+smoothing 3) and ``ema0.8_60 --set adjoint_ema=0.8 smooth=1.5`` (the slabs' settings). Every entry records the
+resolved ``adjoint_ema`` and ``smooth`` (the entries ``default_60``, ``ema0.5_60`` and ``spot20_ema0.5_60`` ran
+before the mesh defaults, at 0.8 / 1.5, 0.5 / 1.5 and 0.5 / 1.5). Seed 0, all cores, adaptive final evaluation
+(Monte Carlo noise adds <= 0.5 to the mean ΔE76, SSIM noise ratio <= 0.1).
 """
 import argparse
 import json
@@ -28,7 +31,7 @@ from inkopt.optim import OptimizeConfig  # noqa: E402
 from inkopt.run import run_mesh  # noqa: E402
 
 KEYS = ("initial_delta_e76_mean_corrected", "delta_e76_mean_corrected", "delta_e2000_mean", "initial_ssim", "ssim",
-        "mottle_l2", "seconds", "seconds_per_iteration", "eval_spp", "adjoint_ema")
+        "mottle_l2", "seconds", "seconds_per_iteration", "eval_spp", "adjoint_ema", "smooth")
 
 
 def main():

@@ -5,9 +5,10 @@ high-frequency structure ("mottle") against the target's. Writes bench/results/s
     .venv/bin/python bench/shell_compare.py [--out bench-out/shell] [--iterations 20] [--shells none,1,0.5]
         [--smooth S]
 
-``--smooth S`` runs the same with that step smoothing (``inkopt optimize --smooth S``; without it, the default:
-1.5 under flat texels since 2026-11-25, 0.7 from 2026-11-24); its results are keyed ``SHELL+smoothS``, the
-default's ``SHELL``. The final figures are inkopt's adaptive evaluation (``--eval-spp 0``, since 2026-11-25; the
+``--smooth S`` runs the same with that step smoothing (``inkopt optimize --smooth S``; without it, the mesh
+default: 3 under flat texels with running-average weight 0.5 since the evening of 2026-11-25, 1.5 and 0.8 before,
+smoothing 0.7 from 2026-11-24); its results are keyed ``SHELL+smoothS``, the default's ``SHELL`` (the entries
+record ``adjoint_ema`` and ``smooth`` since the evening of 2026-11-25; older ones ran at the defaults of then). The final figures are inkopt's adaptive evaluation (``--eval-spp 0``, since 2026-11-25; the
 entries made before used 64 spp, whose noise-corrected SSIM is ~0.03 low on Spot). Results of shells not run this time are kept from the previous shell_mm.json.
 
 Runs whose report.json exists are not re-run (delete the folder to redo one). Mottle: with two renders a, b of
@@ -108,7 +109,7 @@ def main():
                                           "iterations", "eval_spp", "initial_eval_spp")}
         # the report's own figures (runs since 2026-11-25): noise-corrected mean ΔE76 and mottle (metrics.py)
         results[s + tag].update({k: rep[k] for k in ("delta_e76_mean_corrected", "mottle_l2", "mottle_l2_target",
-                                                     "flat_texels") if k in rep})
+                                                     "flat_texels", "adjoint_ema", "smooth") if k in rep})
         results[s + tag]["high_frequency_power"] = structure(d, a.structure_spp, a.threads)
     write("shell_mm.json", {"results": results, "mesh": "spot, 20 mm", **machine()})
     print("| shell | free voxels | s/iteration | peak GB | ΔE76 start → end | p95 | ΔE2000 | SSIM start → end "

@@ -133,6 +133,22 @@ def test_resume_after_interruption(chart, halving, tmp_path):
         run_selection(selection(chart, iterations=6), tmp_path / "sel", resume=True, log=lambda m: None)
 
 
+def test_resume_key_holds_the_scene_kinds_settings(chart):
+    """The key holds the settings as the target's kind resolves them: a picture search of the unset defaults has
+    the key of explicit 0.8 and 1.5 (searches started before these were left to the kind resume); a mesh target's
+    unset defaults are 0.5 and 3, so an old mesh search does not."""
+    from dataclasses import replace
+
+    def key(sel, **cfg):
+        sel.cfg = replace(sel.cfg, **cfg)
+        return json.loads(sel.key())["cfg"]
+
+    assert key(selection(chart)) == key(selection(chart), adjoint_ema=0.8, smooth=1.5)
+    mesh = selection(chart)
+    mesh.target = {"kind": "mesh", "path": str(chart)}
+    assert (key(mesh)["adjoint_ema"], key(mesh)["smooth"]) == (0.5, 3.0)
+
+
 
 @pytest.mark.parametrize("argv, message", [
     (["--candidates", "cyan", "--choose", "2"], "needs at least 2 candidates"),

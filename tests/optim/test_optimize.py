@@ -1,4 +1,6 @@
 """The optimiser: parameterisations, chain rule to the mixture, convergence on a chart, exact resume."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -350,6 +352,14 @@ def test_settings_left_to_the_scene_kind():
     runs = {kind: Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, threads=2, kind=kind)
             for kind in ("slab", "mesh")}
     assert runs["slab"].config_key() != runs["mesh"].config_key()
+    # checkpoints made when 0.8 and 1.5 were every scene's defaults still resume on slabs; an integer spelling of a
+    # setting (``--set smooth=3``) gives the default's key
+    old = Optimization(scene.volume, scene.texels, scene.target_rgb,
+                       replace(cfg, adjoint_ema=0.8, smooth=1.5), threads=2, kind="slab")
+    assert old.config_key() == runs["slab"].config_key()
+    spelled = Optimization(scene.volume, scene.texels, scene.target_rgb, replace(cfg, smooth=3, adjoint_ema=0.5),
+                           threads=2, kind="mesh")
+    assert spelled.config_key() == runs["mesh"].config_key()
     for kind, r in runs.items():
         ema, smooth = SCENE_DEFAULTS[kind]["adjoint_ema"], SCENE_DEFAULTS[kind]["smooth"]
         assert (r.cfg.adjoint_ema, r.cfg.smooth, r.smoother.steps) == (ema, smooth, diffusion_steps(smooth))

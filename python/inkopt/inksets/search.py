@@ -145,9 +145,11 @@ class Selection:
         return b[:-2] + b[-1:] if r >= 3 else b
 
     def key(self) -> str:
-        """What must match for ``resume`` (everything)."""
+        """What must match for ``resume`` (everything; the settings as the target's scene kind resolves them, so
+        that searches started before a setting was left to the kind still resume)."""
+        cfg = self.cfg.for_scene("slab" if self.target["kind"] == "image" else "mesh")
         return json.dumps({"target": self.target, "candidates": self.candidates, "choose": self.choose,
-                           "always": self.always, "cfg": config_dict(self.cfg), "strategy": self.strategy,
+                           "always": self.always, "cfg": config_dict(cfg), "strategy": self.strategy,
                            "eval_spp": self.final_eval_spp, "rung_eval_spp": self.rung_eval_spp, "rule": RULE},
                           sort_keys=True)
 

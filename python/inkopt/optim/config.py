@@ -52,11 +52,11 @@ class OptimizeConfig:
     adjoint_ema: float | None = None
     #: Width (voxels) of the spatial preconditioner of the step (``optim/smooth.py``): the step is diffused over
     #: the free voxels under texels where the target is flat, damping the voxel-scale noise that shows as mottle
-    #: (0: off). 1.5 by default (0.7 from 2026-11-24 to 11-25): on the demo slab, the astronaut photograph, the
-    #: reference slab and Spot it improves every noise-free figure over 0.7 and no smoothing, 3 gains nothing
-    #: more (README, "Optimisation: what we learned"); smoothing everywhere instead of under flat texels only cost
-    #: the photograph ~0.9 mean ΔE76, widening the set by 4 voxels around flat texels ~0.5. None: the scene kind's
-    #: value (``SCENE_DEFAULTS``: 1.5 on slabs, 3 on meshes since 2026-11-25).
+    #: (0: off). None: the scene kind's value (``SCENE_DEFAULTS``): 1.5 on slabs (0.7 from 2026-11-24 to 11-25):
+    #: on the demo slab, the astronaut photograph and the reference slab it improves every noise-free figure over
+    #: 0.7 and no smoothing, 3 gains nothing more there; 3 on meshes since 2026-11-25 (Spot's flat-region mottle
+    #: halves, README "Optimisation: what we learned"). Smoothing everywhere instead of under flat texels only
+    #: cost the photograph ~0.9 mean ΔE76, widening the set by 4 voxels around flat texels ~0.5.
     smooth: float | None = None
     #: Guide of the smoothing: the target-colour difference (ΔE76) at which the smoothing between two voxels falls
     #: to 1/e, so it stays within regions of one target colour; with a guide, only voxels under flat texels
@@ -109,8 +109,10 @@ class OptimizeConfig:
         scene of ``kind`` ("slab" or "mesh")."""
         if kind not in SCENE_DEFAULTS:
             raise ValueError(f"unknown scene kind '{kind}'; use one of {tuple(SCENE_DEFAULTS)}")
-        unset = {k: v for k, v in SCENE_DEFAULTS[kind].items() if getattr(self, k) is None}
-        return replace(self, **unset) if unset else self
+        # floats, so that the checkpoint key of an explicit integer (``--set smooth=3``) equals the default's
+        resolved = {k: float(v if getattr(self, k) is None else getattr(self, k))
+                    for k, v in SCENE_DEFAULTS[kind].items()}
+        return replace(self, **resolved)
 
     @property
     def schedule_length(self) -> int:

@@ -6,7 +6,7 @@ its medium is not the optimiser's), the ``texels`` (the sensor), ``target_rgb`` 
 ``model.FixedShares``, or None). It knows how to store itself
 (``record()`` -> the run directory's ``SceneRecord``), what to tell the user and the report, and which pictures
 show a prediction of it. The run driver (``inkopt.run``) needs nothing else, so a new kind of scene is a new
-module here and no change anywhere after it.
+module here plus its settings in ``optim.config.SCENE_DEFAULTS`` (the optimiser settings it leaves to the kind).
 """
 from __future__ import annotations
 
