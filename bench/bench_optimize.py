@@ -43,7 +43,7 @@ def main():
     t0 = time.perf_counter(); r.gradient(scene.texels, adj, a.spp, 2, method=a.method); t_g = time.perf_counter() - t0
     cfg = OptimizeConfig(iterations=a.iterations, spp=a.spp, forward_spp=fwd, grad_method=a.method)
     t0 = time.perf_counter()
-    run = Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, threads=a.threads)
+    run = Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, kind="slab", threads=a.threads)
     setup = time.perf_counter() - t0
     run.run()
     h = run.history

@@ -9,10 +9,13 @@ OptimizeConfig overrides. Writes bench/results/mesh_convergence.json (one entry 
 checkpoint there.
 
 e.g. ``spot20_default_300 --height-mm 20 --iterations 300`` (the mesh defaults: running-average weight 0.5,
-smoothing 3) and ``ema0.8_60 --set adjoint_ema=0.8 smooth=1.5`` (the slabs' settings). Every entry records the
+smoothing 3), ``ema0.8_60 --set adjoint_ema=0.8 smooth=1.5`` (the slabs' settings) and the converged reference of
+issue 13, a warm start from the default run's result at 4x the gradient and 2x the forward samples:
+``spot20_converged --height-mm 20 --iterations 150 --set spp=16 forward_spp=32 seed=7
+init='"bench-out/spot20_default_300/volume.npz"' --out bench-out/spot20_converged``. Every entry records the
 resolved ``adjoint_ema`` and ``smooth`` (the entries ``default_60``, ``ema0.5_60`` and ``spot20_ema0.5_60`` ran
-before the mesh defaults, at 0.8 / 1.5, 0.5 / 1.5 and 0.5 / 1.5). Seed 0, all cores, adaptive final evaluation
-(Monte Carlo noise adds <= 0.5 to the mean ΔE76, SSIM noise ratio <= 0.1).
+before the mesh defaults, at 0.8 / 1.5, 0.5 / 1.5 and 0.5 / 1.5) and the command. Seed 0 unless set, all cores,
+adaptive final evaluation (Monte Carlo noise adds <= 0.5 to the mean ΔE76, SSIM noise ratio <= 0.1).
 """
 import argparse
 import json
@@ -51,7 +54,8 @@ def main():
                        resume=a.out is not None, log=lambda s: None)
         with np.load(d / "checkpoint.npz") as ck:
             train = [round(float(v), 3) for v in ck["hist_delta_e76"]]
-    row = {"height_mm": a.height_mm, "iterations": a.iterations, **kw, **{k: rep[k] for k in KEYS if k in rep},
+    row = {"command": "python bench/mesh_convergence.py " + " ".join(sys.argv[1:]), "height_mm": a.height_mm,
+           "iterations": a.iterations, **kw, **{k: rep[k] for k in KEYS if k in rep},
            "train_delta_e76": train}
     print(a.name, " ".join(f"{k}={v:.4g}" for k, v in row.items() if isinstance(v, float)))
     print("training ΔE76:", train)

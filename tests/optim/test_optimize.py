@@ -68,7 +68,7 @@ def small_chart_scene(w=24, h=16, depth_mm=0.5, bottom=False):
 
 def run(scene, **kw):
     cfg = OptimizeConfig(**{"iterations": 30, "spp": 4, "forward_spp": 16, **kw})
-    r = Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, threads=2)
+    r = Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, kind=scene.kind, threads=2)
     return r
 
 
@@ -156,7 +156,7 @@ def test_start_from_a_baseline(kind, monkeypatch):
     fixed[0, ..., 1] = 1.0  # bottom layer fixed white
     start = lambda k: baselines.baseline_mixture(k, scene.volume, scene.texels, scene.target_rgb, fixed, table=table)
     r = Optimization(scene.volume, scene.texels, scene.target_rgb, OptimizeConfig(init=kind, iterations=1),
-                     fixed_share=fixed, baseline=start)
+                     kind=scene.kind, fixed_share=fixed, baseline=start)
     make = baselines.surface_baseline if kind == "surface" else baselines.extrusion_baseline
     want = make(scene.volume, scene.texels, scene.target_rgb, fixed, table)
     got = r.initial_volume().mixture
@@ -261,7 +261,7 @@ def test_the_loop_smooths_the_optimisers_step():
     runs = {}
     for smooth in (0.0, 1.0):
         cfg = OptimizeConfig(iterations=1, spp=4, forward_spp=16, smooth=smooth)
-        r = Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, threads=2)
+        r = Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, kind=scene.kind, threads=2)
         x0 = r.x.copy()
         r.run()
         runs[smooth] = (x0, r)

@@ -79,12 +79,12 @@ def test_ray_shards_equal_one_machine():
 
     scene = chart_scene()
     cfg = OptimizeConfig(iterations=3, spp=2, forward_spp=4)
-    plain = Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, threads=2)
+    plain = Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, kind=scene.kind, threads=2)
     plain.run()
     shards = RayShards("auto", workers=2, threads=1, num_cpus=2)
     try:
         assert [hi - lo for lo, hi in shards.renderer(scene.volume)._bounds(len(scene.texels))] == [48, 48]
-        sharded = Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, threads=2,
+        sharded = Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, kind=scene.kind, threads=2,
                                renderer_factory=shards.renderer)
         sharded.run()
         np.testing.assert_array_equal(sharded.x, plain.x)
@@ -112,12 +112,12 @@ def test_ray_shards_equal_one_machine_on_a_mesh(tmp_path):
     assert 0 < scene.free.sum() < scene.vox.inside.sum()
     cfg = OptimizeConfig(iterations=2, spp=2, forward_spp=4)
     args = (scene.volume, scene.vox.texels, scene.vox.targets, cfg)
-    plain = Optimization(*args, fixed_share=scene.fixed_share, threads=2)
+    plain = Optimization(*args, kind="mesh", fixed_share=scene.fixed_share, threads=2)
     plain.run()
     assert plain.history.loss[-1] != plain.history.loss[0]
     shards = RayShards("auto", workers=2, threads=1, num_cpus=2)
     try:
-        sharded = Optimization(*args, fixed_share=scene.fixed_share, threads=2, renderer_factory=shards.renderer)
+        sharded = Optimization(*args, kind="mesh", fixed_share=scene.fixed_share, threads=2, renderer_factory=shards.renderer)
         sharded.run()
         np.testing.assert_array_equal(sharded.x, plain.x)
         assert sharded.history.loss == plain.history.loss

@@ -77,14 +77,15 @@ class Optimization:
     print-shop baseline, needed only for ``cfg.init`` "surface" or "extrusion" (the run driver supplies it);
     ``lighting``: the display lighting the prediction is rendered under (``inkopt.lighting``; default uniform).
     ``renderer_factory(volume, threads, lighting)``: what renders (default ``Renderer``; e.g. texel shards on Ray,
-    ``inkopt.distributed.RayShards.renderer``, with identical results). ``kind``: the scene's kind ("slab" or
-    "mesh"), which sets what ``cfg`` leaves to it (``OptimizeConfig.for_scene``); ``self.cfg`` is the resolved one.
+    ``inkopt.distributed.RayShards.renderer``, with identical results). ``kind`` (required, keyword): the scene's
+    kind ("slab" or "mesh"), which sets what ``cfg`` leaves to it (``OptimizeConfig.for_scene``); ``self.cfg`` is the
+    resolved one.
     """
 
-    def __init__(self, base: Volume, texels: Texels, target_rgb: np.ndarray, cfg: OptimizeConfig,
+    def __init__(self, base: Volume, texels: Texels, target_rgb: np.ndarray, cfg: OptimizeConfig, *, kind: str,
                  fixed_share: np.ndarray | None = None, threads: int | None = None,
                  baseline: Callable[[str], np.ndarray] | None = None, lighting: Lighting | str | None = None,
-                 renderer_factory: Callable[..., Renderer] | None = None, kind: str = "slab"):
+                 renderer_factory: Callable[..., Renderer] | None = None):
         cfg = cfg.for_scene(kind)  # settings left to the scene kind ("slab" or "mesh": config.SCENE_DEFAULTS)
         cfg.validate()
         self.renderer_factory = renderer_factory or Renderer
