@@ -11,7 +11,7 @@ checkpoint there.
 e.g. ``spot20_default_300 --height-mm 20 --iterations 300`` (the mesh defaults: running-average weight 0.5,
 smoothing 3), ``ema0.8_60 --set adjoint_ema=0.8 smooth=1.5`` (the slabs' settings) and the converged reference of
 issue 13, a warm start from the default run's result at 4x the gradient and 2x the forward samples:
-``spot20_converged --height-mm 20 --iterations 150 --set spp=16 forward_spp=32 seed=7
+``spot20_converged --height-mm 20 --iterations 100 --set spp=16 forward_spp=32 seed=7
 init='"bench-out/spot20_default_300/volume.npz"' --out bench-out/spot20_converged``. Every entry records the
 resolved ``adjoint_ema`` and ``smooth`` (the entries ``default_60``, ``ema0.5_60`` and ``spot20_ema0.5_60`` ran
 before the mesh defaults, at 0.8 / 1.5, 0.5 / 1.5 and 0.5 / 1.5) and the command. Seed 0 unless set, all cores,
@@ -34,7 +34,7 @@ from inkopt.optim import OptimizeConfig  # noqa: E402
 from inkopt.run import run_mesh  # noqa: E402
 
 KEYS = ("initial_delta_e76_mean_corrected", "delta_e76_mean_corrected", "delta_e2000_mean", "initial_ssim", "ssim",
-        "mottle_l2", "seconds", "seconds_per_iteration", "eval_spp", "adjoint_ema", "smooth")
+        "mottle_l2", "seconds", "seconds_iterations", "seconds_per_iteration", "eval_spp", "adjoint_ema", "smooth")
 
 
 def main():

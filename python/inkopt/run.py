@@ -98,7 +98,10 @@ def _optimise(scene, out_dir, cfg, resume, eval_spp, threads, progress, lighting
         "iterations": run.iteration, "spp": cfg.spp, "eval_spp": res.spp, "spp_adaptive": spp is None,
         "eval_spp_passes": res.passes, "initial_eval_spp": res0.spp,
         "initial_delta_e76_mean_corrected": init["delta_e76_mean_corrected"],
+        # this invocation's wall time (set-up, the iterations it ran, the evaluation); a resumed run's earlier
+        # iterations are in the history, so seconds_iterations covers all of them
         "seconds": time.perf_counter() - t_start,
+        "seconds_iterations": float(np.sum(h.seconds)),
         "seconds_per_iteration": float(np.sum(h.seconds) / n),
         "time_split": {k: float(np.sum(getattr(h, k)) / n) for k in ("render_s", "gradient_s", "loss_s", "step_s")},
         **scene.report_fields(),

@@ -27,8 +27,9 @@ CENTRE = np.array([0.0, 0.0, -_SPHERE.vertices[:, 2].min()])
 OUTPUTS = ("volume.npz", "scene.npz", "report.json", "checkpoint.npz", "loss.png", "prediction.glb", "target.glb",
            "views.png")
 REPORT_KEYS = ("initial_delta_e76_mean", "delta_e76_mean", "delta_e76_p95", "delta_e2000_mean", "ssim", "loss",
-               "e1", "e2", "e3", "iterations", "spp", "seconds", "seconds_per_iteration", "time_split", "voxels",
-               "inside_voxels", "free_voxels", "texels", "voxelize_seconds", "peak_rss_gb", "shell_mm")
+               "e1", "e2", "e3", "iterations", "spp", "seconds", "seconds_iterations", "seconds_per_iteration",
+               "time_split", "voxels", "inside_voxels", "free_voxels", "texels", "voxelize_seconds", "peak_rss_gb",
+               "shell_mm")
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -160,6 +161,8 @@ def test_resume_continues_exactly(ball, tmp_path):
     ha, hb = (np.load(d / "checkpoint.npz")["hist_loss"] for d in (a, b))
     np.testing.assert_array_equal(ha, hb)
     assert ra["delta_e76_mean"] == rb["delta_e76_mean"]
+    secs = np.load(a / "checkpoint.npz")["hist_seconds"]  # the iterations of both invocations
+    assert len(secs) == 3 and ra["seconds_iterations"] == pytest.approx(float(secs.sum()))
     assert optimize(ball, a, "--resume", "--seed", "5", iterations=4) == 2  # other settings: refused
 
 
