@@ -10,8 +10,9 @@ checkpoint there.
 
 e.g. ``spot20_default_300 --height-mm 20 --iterations 300`` (the mesh defaults: running-average weight 0.5,
 smoothing 3), ``ema0.8_60 --set adjoint_ema=0.8 smooth=1.5`` (the slabs' settings) and the converged reference of
-issue 13, a warm start from the default run's result at 4x the gradient and 2x the forward samples:
-``spot20_converged --height-mm 20 --iterations 100 --set spp=16 forward_spp=32 seed=7
+issue 13, a warm start from the default run's result at 4x the gradient and 2x the forward samples, at half the
+step (a warm start calibrates the step scale on its small gradients: 3.0e-6 against the cold start's 6.5e-6, so
+``lr`` 2 overshoots): ``spot20_converged --height-mm 20 --iterations 80 --set spp=16 forward_spp=32 seed=7 lr=1
 init='"bench-out/spot20_default_300/volume.npz"' --out bench-out/spot20_converged``. Every entry records the
 resolved ``adjoint_ema`` and ``smooth`` (the entries ``default_60``, ``ema0.5_60`` and ``spot20_ema0.5_60`` ran
 before the mesh defaults, at 0.8 / 1.5, 0.5 / 1.5 and 0.5 / 1.5) and the command. Seed 0 unless set, all cores,
