@@ -141,6 +141,23 @@ def test_loss_values():
     np.testing.assert_allclose(lf.ssim_mean(target), 1.0)
 
 
+@pytest.mark.parametrize("gamma", [(1.0, 0.0, 0.0), (1.0, 4.0, 0.0), (0.0, 0.0, 2.0)])
+def test_training_call_skips_only_unweighted_terms(gamma):
+    """all_terms=False (the optimiser's steps) gives the same value and gradient, bit for bit; a term of weight 0
+    is NaN, a weighted one equals the full call's."""
+    rng = _rng()
+    pos = Texels.box_faces((4, 5, 6)).pos_vox
+    target, pred = rng.uniform(0, 1, (len(pos), 3)), rng.uniform(0, 1, (len(pos), 3))
+    var = rng.uniform(0, 1e-4, pred.shape)
+    lf = loss.TexelLoss(target, pos, gamma=gamma)
+    full, part = lf(pred, var), lf(pred, var, all_terms=False)
+    assert part.value == full.value and part.e1 == full.e1
+    np.testing.assert_array_equal(part.grad, full.grad)
+    for g, name in zip(gamma[1:], ("e2", "e3")):
+        got = getattr(part, name)
+        assert (got == getattr(full, name)) if g > 0 else np.isnan(got)
+
+
 def test_box_edges_and_bad_input():
     pos = Texels.box_faces((4, 5, 6)).pos_vox
     n = len(pos)

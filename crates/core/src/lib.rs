@@ -10,7 +10,8 @@
 //! lanes), `render` (parallel drivers of the forward render), `grad` (the gradient pass and its fixed-point
 //! buffers), `rng` (counter-based random numbers), `sampling` (phase function, Fresnel), `diffuse` (3D vector
 //! error diffusion of ink mixtures to one ink per printer voxel), `smooth` (diffusion of per-voxel values over a
-//! sparse voxel set: the optimiser's step preconditioner).
+//! sparse voxel set: the optimiser's step preconditioner), `simplex` (row-wise softmax of the optimiser's variables and
+//! its backward map).
 
 pub mod diffuse;
 mod flight;
@@ -24,6 +25,7 @@ pub mod render;
 pub mod rng;
 pub mod sampling;
 pub mod scene;
+pub mod simplex;
 pub mod smooth;
 pub mod spans;
 pub mod trace;

@@ -540,11 +540,38 @@ fn smooth_rows<'py>(
     Ok(Array2::from_shape_vec((rows, ch), v).map_err(|e| err(e.to_string()))?.into_pyarray(py))
 }
 
+/// softmax_rows(x) -> p: the softmax of each row of x (rows, n) float32 (``inkopt_core::simplex``, parallel,
+/// thread-count independent). The GIL is released.
+#[pyfunction]
+fn softmax_rows<'py>(py: Python<'py>, x: PyReadonlyArray2<f32>) -> PyResult<Bound<'py, PyArray2<f32>>> {
+    let (rows, n) = (x.shape()[0], x.shape()[1]);
+    let xs = c_slice(&x, "x")?;
+    let mut p = vec![0.0f32; rows * n];
+    py.detach(|| inkopt_core::simplex::softmax_rows(xs, n, &mut p)).map_err(err)?;
+    Ok(Array2::from_shape_vec((rows, n), p).map_err(|e| err(e.to_string()))?.into_pyarray(py))
+}
+
+/// softmax_backward(x, g, scale, natural) -> (rows, n) float32: with p = softmax_rows(x) and c = scale g -
+/// <scale g, p> per row, c if natural (the exponentiated-gradient direction) else p c (dE/dx for g = dE/dp).
+/// x, g (rows, n) float32, scale (rows,) float32. The GIL is released.
+#[pyfunction]
+fn softmax_backward<'py>(py: Python<'py>, x: PyReadonlyArray2<f32>, g: PyReadonlyArray2<f32>,
+                         scale: PyReadonlyArray1<f32>, natural: bool) -> PyResult<Bound<'py, PyArray2<f32>>> {
+    let (rows, n) = (x.shape()[0], x.shape()[1]);
+    check_shape(g.shape(), &[rows, n], "g")?;
+    let (xs, gs, ss) = (c_slice(&x, "x")?, c_slice(&g, "g")?, c_slice(&scale, "scale")?);
+    let mut out = vec![0.0f32; rows * n];
+    py.detach(|| inkopt_core::simplex::softmax_backward(xs, gs, ss, n, natural, &mut out)).map_err(err)?;
+    Ok(Array2::from_shape_vec((rows, n), out).map_err(|e| err(e.to_string()))?.into_pyarray(py))
+}
+
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Scene>()?;
     m.add_function(wrap_pyfunction!(diffuse_layer, m)?)?;
     m.add_function(wrap_pyfunction!(smooth_rows, m)?)?;
+    m.add_function(wrap_pyfunction!(softmax_rows, m)?)?;
+    m.add_function(wrap_pyfunction!(softmax_backward, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

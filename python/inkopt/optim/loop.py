@@ -36,6 +36,10 @@ from .smooth import MAX_DEPTH, GradientSmoother, nearest_texels, texel_guide
 
 @dataclass
 class History:
+    """Per-iteration figures of the training loss (on the running-average prediction): ``e1``-``e3`` are the
+    loss terms, NaN for a term of weight 0 (not evaluated in training; the final evaluation reports all three);
+    ``delta_e76`` the mean ΔE76; seconds of the whole step and of its parts."""
+
     loss: list = field(default_factory=list)
     e1: list = field(default_factory=list)
     e2: list = field(default_factory=list)
@@ -243,7 +247,7 @@ class Optimization:
             self._average(res.rgb, res.var_mean, spp0, decay=True)
         t1 = time.perf_counter()
         c = self.c_avg
-        lr = self.loss(c, self.c_var)
+        lr = self.loss(c, self.c_var, all_terms=False)  # the terms it optimises; the evaluation has all
         de = float(delta_e76(lr.lab, self.loss.target_lab).mean())
         t2 = time.perf_counter()
         gs, ga, gres = renderer.gradient(self.texels, lr.grad.astype(np.float32), cfg.spp, grad_seed,

@@ -11,6 +11,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from .. import _core
 from ..model import FixedShares, InkTable, Volume
 from .config import PARAMS
 
@@ -85,9 +86,8 @@ class Parameterization:
 
     def _p(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Free-part mixture p (F, N) and an auxiliary array for the backward pass."""
-        if self.kind == "softmax":
-            e = np.exp(x - x.max(axis=1, keepdims=True))
-            p = e / e.sum(axis=1, keepdims=True)
+        if self.kind == "softmax":  # in the Rust core: parallel and one pass (numpy's took ~5 % of an iteration)
+            p = _core.softmax_rows(np.ascontiguousarray(x, np.float32))
             return p, p
         s = 1.0 / (1.0 + np.exp(-x))
         return s / s.sum(axis=1, keepdims=True), s
@@ -136,16 +136,15 @@ class Parameterization:
         g = grad_rho.reshape(-1, self.n_inks)
         if len(g) != len(x):
             g = g[self.free_index]
-        g = g * self.share_f[lo:lo + len(x), None]
-        p, aux = self._p(x)
-        centred = g - np.sum(g * p, axis=1, keepdims=True)
+        share = self.share_f[lo:lo + len(x)]
+        if self.kind == "softmax":  # p and the centring fused in the Rust core (``inkopt_core::simplex``)
+            return _core.softmax_backward(np.ascontiguousarray(x, np.float32), np.ascontiguousarray(g, np.float32),
+                                          np.ascontiguousarray(share, np.float32), bool(natural))
         if natural:
-            if self.kind != "softmax":
-                raise ValueError("the natural (exponentiated-gradient) direction needs the softmax parameterisation")
-            return centred.astype(np.float32)
-        if self.kind == "softmax":
-            return (p * centred).astype(np.float32)
-        s = aux
+            raise ValueError("the natural (exponentiated-gradient) direction needs the softmax parameterisation")
+        g = g * share[:, None]
+        p, s = self._p(x)
+        centred = g - np.sum(g * p, axis=1, keepdims=True)
         return (centred * s * (1.0 - s) / s.sum(axis=1, keepdims=True)).astype(np.float32)
 
     def variables_for(self, p: np.ndarray) -> np.ndarray:
