@@ -88,8 +88,8 @@ def texel_guide(target_lab: np.ndarray, nearest: np.ndarray, dist: np.ndarray,
 
 class GradientSmoother:
     """Diffuses per-free-voxel arrays (F, N) over a set of the free voxels' 6-neighbourhood (the loop in the Rust
-    core, ``inkopt_core::smooth``: parallel, thread-count independent; two working copies of the set's values
-    during a call; kept for the run: the set's rows and the guide, 8 + 16 bytes per voxel of the set).
+    core, ``inkopt_core::smooth``: parallel, thread-count independent; two working copies of the set's values and
+    each voxel's neighbours and weights (48 bytes per voxel of the set) during a call; kept for the run: the set's rows and the guide, 8 + 16 bytes per voxel of the set).
 
     shape (z, y, x) of the grid; index (F,) int64: the free voxels' increasing linear indices
     (``Parameterization.free_index``; kept by reference); ``rows``: which of them are smoothed (e.g. those under
