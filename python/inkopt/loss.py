@@ -97,8 +97,8 @@ def sobel_operators(pos_vox: np.ndarray, tol: float = 1e-6) -> sp.csr_matrix:
 # ----------------------------------------------------------------------------- the loss
 @dataclass
 class LossResult:
-    """value = E; e1, e2, e3 the three terms; grad (I, 3) float64 = dE/d pred (linear RGB);
-    lab (I, 3) float64 CIELAB of the prediction."""
+    """value = E; e1, e2, e3 the three terms (e2, e3 NaN when not evaluated: ``all_terms=False`` at weight 0);
+    grad (I, 3) float64 = dE/d pred (linear RGB); lab (I, 3) float64 CIELAB of the prediction."""
 
     value: float
     e1: float
@@ -183,14 +183,22 @@ class TexelLoss:
             raise ValueError("pred_rgb contains NaN or infinite values")
         return p
 
-    def _noise(self, pred: np.ndarray, pred_var) -> tuple[np.ndarray, np.ndarray] | None:
-        """Noise of a Monte Carlo prediction in the windowed statistics: (W v, sum_j W_ij^2 v_j) with v the
-        variance of each texel's normalised L*a*b* (delta method from the linear-RGB variance ``pred_var``)."""
+    @staticmethod
+    def _check_var(pred: np.ndarray, pred_var) -> np.ndarray | None:
+        """``pred_var`` as float64 (I, 3), or None; a one-line error if it is not a non-negative finite array."""
         if pred_var is None:
             return None
         var = np.asarray(pred_var, np.float64)
         if var.shape != pred.shape or not np.all(np.isfinite(var)) or np.any(var < 0):
             raise ValueError(f"pred_var must be a non-negative (I, 3) array like pred_rgb, got {var.shape}")
+        return var
+
+    def _noise(self, pred: np.ndarray, pred_var) -> tuple[np.ndarray, np.ndarray] | None:
+        """Noise of a Monte Carlo prediction in the windowed statistics: (W v, sum_j W_ij^2 v_j) with v the
+        variance of each texel's normalised L*a*b* (delta method from the linear-RGB variance ``pred_var``)."""
+        var = self._check_var(pred, pred_var)
+        if var is None:
+            return None
         jac = linear_to_lab_jacobian(pred)                      # (I, 3 lab, 3 rgb)
         v = np.einsum("ikj,ij->ik", jac * jac, var) * LAB_NORM_SCALE ** 2
         if self._K2 is None:  # K's sparsity pattern shared, not copied (K has no explicit zeros)
@@ -257,6 +265,8 @@ class TexelLoss:
         if all_terms or g2 > 0:
             ssim, mx, a1, b1, a2, b2 = self._ssim_parts(cn, self._noise(pred, pred_var))
             e2 = float(1.0 - ssim.mean())
+        else:
+            self._check_var(pred, pred_var)  # unused, but a bad variance is still an error
         c3 = 100.0 / (3.0 * n * 4.0 * 32.0)
         if all_terms or g3 > 0:
             sob = self.S @ cn - self._sobel_t

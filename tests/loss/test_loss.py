@@ -156,6 +156,8 @@ def test_training_call_skips_only_unweighted_terms(gamma):
     for g, name in zip(gamma[1:], ("e2", "e3")):
         got = getattr(part, name)
         assert (got == getattr(full, name)) if g > 0 else np.isnan(got)
+    with pytest.raises(ValueError, match="pred_var"):
+        lf(pred, -var, all_terms=False)
 
 
 def test_box_edges_and_bad_input():

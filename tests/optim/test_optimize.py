@@ -58,6 +58,28 @@ def test_exponentiated_gradient_direction():
     np.testing.assert_allclose(new, eg / eg.sum(1, keepdims=True), rtol=1e-5)
 
 
+def test_softmax_in_the_core_matches_numpy():
+    """The Rust core's softmax and backward map (``inkopt_core::simplex``) against the numpy expressions they
+    replaced, on more rows than two of its parallel blocks, with a non-contiguous float64 input and on no rows."""
+    rng = np.random.default_rng(5)
+    fixed = np.zeros((3, 40, 100, 5), np.float32)  # 12 000 free voxels
+    fixed[:, :, 0] = [0.5, 0, 0, 0, 0]                # a free share of 0.5 on a column
+    p = Parameterization("softmax", fixed)
+    x = (rng.normal(size=(p.n_free, 10)) * 4)[:, ::2]  # strided float64
+    g = rng.normal(size=(p.n_free, 5)).astype(np.float32)
+    e = np.exp(x.astype(np.float32) - x.astype(np.float32).max(1, keepdims=True))
+    want_p = e / e.sum(1, keepdims=True)
+    # float32 rounding of exp (numpy's vectorised exp and Rust's differ by an ulp): entries of at most 1
+    np.testing.assert_allclose(p.free_rows(x), p.fixed_f + p.share_f[:, None] * want_p, rtol=0, atol=1e-6)
+    gs = g * p.share_f[:, None]
+    centred = gs - np.sum(gs * want_p, axis=1, keepdims=True)
+    np.testing.assert_allclose(p.backward(x, g, natural=True), centred, rtol=0, atol=4e-6)
+    np.testing.assert_allclose(p.backward(x, g), want_p * centred, rtol=0, atol=4e-6)
+    assert p.backward(x, g).dtype == np.float32
+    empty = Parameterization("softmax", np.ones((1, 2, 2, 1), np.float32))
+    assert empty.n_free == 0 and empty.backward(np.zeros((0, 1), np.float32), np.zeros((1, 2, 2, 1))).shape == (0, 1)
+
+
 def small_chart_scene(w=24, h=16, depth_mm=0.5, bottom=False):
     top = charts.colour_chart(w * 4, h * 4)
     lin = lambda im: srgb_to_linear(im / 255.0).astype(np.float32)

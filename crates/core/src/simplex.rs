@@ -23,7 +23,7 @@ use rayon::prelude::*;
 const BLOCK: usize = 4096;
 
 fn check(x: &[f32], n: usize, others: &[(&str, usize)]) -> Result<usize, String> {
-    if n == 0 || x.len() % n != 0 {
+    if n == 0 || !x.len().is_multiple_of(n) {
         return Err(format!("x ({} values) is not a whole number of rows of {n}", x.len()));
     }
     for &(name, len) in others {
@@ -155,6 +155,20 @@ mod tests {
             // <c, p> = 0 up to the f32 rounding of terms of order 1
             assert!(cr.iter().zip(pr).map(|(c, p)| c * p).sum::<f32>().abs() < 1e-5);
         }
+    }
+
+    #[test]
+    fn same_bits_for_any_thread_count() {
+        let (x, g, s) = rows();
+        let run = |threads: usize| {
+            let (mut p, mut c) = (vec![0.0; x.len()], vec![0.0; x.len()]);
+            rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| {
+                softmax_rows(&x, 5, &mut p).unwrap();
+                softmax_backward(&x, &g, &s, 5, true, &mut c).unwrap();
+            });
+            (p, c)
+        };
+        assert_eq!(run(1), run(3));
     }
 
     #[test]

@@ -11,7 +11,6 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .. import _core
 from ..model import FixedShares, InkTable, Volume
 from .config import PARAMS
 
@@ -87,6 +86,8 @@ class Parameterization:
     def _p(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Free-part mixture p (F, N) and an auxiliary array for the backward pass."""
         if self.kind == "softmax":  # in the Rust core: parallel and one pass (numpy's took ~5 % of an iteration)
+            from .. import _core
+
             p = _core.softmax_rows(np.ascontiguousarray(x, np.float32))
             return p, p
         s = 1.0 / (1.0 + np.exp(-x))
@@ -138,6 +139,8 @@ class Parameterization:
             g = g[self.free_index]
         share = self.share_f[lo:lo + len(x)]
         if self.kind == "softmax":  # p and the centring fused in the Rust core (``inkopt_core::simplex``)
+            from .. import _core
+
             return _core.softmax_backward(np.ascontiguousarray(x, np.float32), np.ascontiguousarray(g, np.float32),
                                           np.ascontiguousarray(share, np.float32), bool(natural))
         if natural:
