@@ -93,7 +93,9 @@ def add_optimizer_args(p) -> None:
                    help="variables -> mixture map (sigmoid = the paper's sigmoid + normalisation)")
     p.add_argument("--init", default=d.init,
                    help="white (97 %% white), random, surface or extrusion (start from that print-shop baseline of "
-                        "`inkopt evaluate`; builds or reuses its cached colour table), or a volume .npz")
+                        "`inkopt evaluate`; builds or reuses its cached colour table), or a volume .npz (from an "
+                        "optimised run pass --lr 1: the step scale is set by the first gradients, ~2x smaller "
+                        "there)")
     p.add_argument("--gradient", choices=("replay", "li1"), default=d.grad_method,
                    help="unbiased path replay (default) or the paper's biased L_i = 1 approximation")
     p.add_argument("--seed", type=int, default=d.seed)
