@@ -13,6 +13,7 @@ use numpy::{Element, IntoPyArray, PyArray2, PyReadonlyArray, PyReadonlyArray1, P
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use std::sync::{Arc, Mutex};
 
 enum MediumKind {
     Dense(DenseMedium),
@@ -48,6 +49,30 @@ fn grad_index_given(g: &Option<GradBuffers>) -> bool {
 
 fn err(msg: impl Into<String>) -> PyErr {
     PyValueError::new_err(msg.into())
+}
+
+/// Run `f` on `threads` threads: None (or 0) in rayon's global pool (all cores, as a `Scene` without
+/// `threads`), else in a pool of that many, built once per process and count and kept. The free functions below
+/// run in it, so that a caller's thread count (e.g. an ink-set search's per-run share) holds for them as for its
+/// renders, without a new pool per call.
+fn run_on<R: Send>(threads: Option<usize>, f: impl FnOnce() -> R + Send) -> PyResult<R> {
+    static POOLS: Mutex<Vec<(usize, Arc<rayon::ThreadPool>)>> = Mutex::new(Vec::new());
+    let n = match threads {
+        None | Some(0) => return Ok(f()),
+        Some(n) => n,
+    };
+    let pool = {
+        let mut pools = POOLS.lock().map_err(|e| err(e.to_string()))?;
+        match pools.iter().find(|(k, _)| *k == n) {
+            Some((_, p)) => p.clone(),
+            None => {
+                let p = rayon::ThreadPoolBuilder::new().num_threads(n).build().map_err(|e| err(e.to_string()))?;
+                pools.push((n, Arc::new(p)));
+                pools[pools.len() - 1].1.clone()
+            }
+        }
+    };
+    Ok(pool.install(f))
 }
 
 #[pymethods]
@@ -514,9 +539,9 @@ fn diffuse_layer(
 /// -> (F, C) f32: `steps` explicit diffusion steps of weight `alpha` over the 6-neighbourhood of the voxels
 /// `index` (strictly increasing linear indices into the grid `shape`; row r of the values is voxel index[r]),
 /// each neighbour weighted by exp(-|guide_r - guide_q|² / tau²) if a guide is given (inkopt_core::smooth). The
-/// GIL is released; threads: rayon's global pool.
+/// GIL is released; `threads` as for a `Scene` (default all cores).
 #[pyfunction]
-#[pyo3(signature = (shape, index, values, steps, alpha, guide=None, tau=1.0))]
+#[pyo3(signature = (shape, index, values, steps, alpha, guide=None, tau=1.0, threads=None))]
 #[allow(clippy::too_many_arguments)]
 fn smooth_rows<'py>(
     py: Python<'py>,
@@ -527,6 +552,7 @@ fn smooth_rows<'py>(
     alpha: f32,
     guide: Option<PyReadonlyArray2<f32>>,
     tau: f32,
+    threads: Option<usize>,
 ) -> PyResult<Bound<'py, PyArray2<f32>>> {
     let n = [shape.0, shape.1, shape.2];
     let (rows, ch) = (values.shape()[0], values.shape()[1]);
@@ -536,32 +562,38 @@ fn smooth_rows<'py>(
         Some(a) => Some(inkopt_core::smooth::Guide { values: c_slice(a, "guide")?, dims: a.shape()[1], tau }),
         None => None,
     };
-    py.detach(|| inkopt_core::smooth::diffuse_rows(n, idx, &mut v, ch, steps, alpha, g)).map_err(err)?;
+    py.detach(|| run_on(threads, || inkopt_core::smooth::diffuse_rows(n, idx, &mut v, ch, steps, alpha, g)))?
+        .map_err(err)?;
     Ok(Array2::from_shape_vec((rows, ch), v).map_err(|e| err(e.to_string()))?.into_pyarray(py))
 }
 
-/// softmax_rows(x) -> p: the softmax of each row of x (rows, n) float32 (``inkopt_core::simplex``, parallel,
-/// thread-count independent). The GIL is released.
+/// softmax_rows(x, threads=None) -> p: the softmax of each row of x (rows, n) float32 (``inkopt_core::simplex``,
+/// parallel on `threads` (default all cores), thread-count independent). The GIL is released.
 #[pyfunction]
-fn softmax_rows<'py>(py: Python<'py>, x: PyReadonlyArray2<f32>) -> PyResult<Bound<'py, PyArray2<f32>>> {
+#[pyo3(signature = (x, threads=None))]
+fn softmax_rows<'py>(py: Python<'py>, x: PyReadonlyArray2<f32>, threads: Option<usize>)
+                     -> PyResult<Bound<'py, PyArray2<f32>>> {
     let (rows, n) = (x.shape()[0], x.shape()[1]);
     let xs = c_slice(&x, "x")?;
     let mut p = vec![0.0f32; rows * n];
-    py.detach(|| inkopt_core::simplex::softmax_rows(xs, n, &mut p)).map_err(err)?;
+    py.detach(|| run_on(threads, || inkopt_core::simplex::softmax_rows(xs, n, &mut p)))?.map_err(err)?;
     Ok(Array2::from_shape_vec((rows, n), p).map_err(|e| err(e.to_string()))?.into_pyarray(py))
 }
 
-/// softmax_backward(x, g, scale, natural) -> (rows, n) float32: with p = softmax_rows(x) and c = scale g -
-/// <scale g, p> per row, c if natural (the exponentiated-gradient direction) else p c (dE/dx for g = dE/dp).
-/// x, g (rows, n) float32, scale (rows,) float32. The GIL is released.
+/// softmax_backward(x, g, scale, natural, threads=None) -> (rows, n) float32: with p = softmax_rows(x) and
+/// c = scale g - <scale g, p> per row, c if natural (the exponentiated-gradient direction) else p c (dE/dx for
+/// g = dE/dp). x, g (rows, n) float32, scale (rows,) float32. The GIL is released.
 #[pyfunction]
+#[pyo3(signature = (x, g, scale, natural, threads=None))]
 fn softmax_backward<'py>(py: Python<'py>, x: PyReadonlyArray2<f32>, g: PyReadonlyArray2<f32>,
-                         scale: PyReadonlyArray1<f32>, natural: bool) -> PyResult<Bound<'py, PyArray2<f32>>> {
+                         scale: PyReadonlyArray1<f32>, natural: bool, threads: Option<usize>)
+                         -> PyResult<Bound<'py, PyArray2<f32>>> {
     let (rows, n) = (x.shape()[0], x.shape()[1]);
     check_shape(g.shape(), &[rows, n], "g")?;
     let (xs, gs, ss) = (c_slice(&x, "x")?, c_slice(&g, "g")?, c_slice(&scale, "scale")?);
     let mut out = vec![0.0f32; rows * n];
-    py.detach(|| inkopt_core::simplex::softmax_backward(xs, gs, ss, n, natural, &mut out)).map_err(err)?;
+    py.detach(|| run_on(threads, || inkopt_core::simplex::softmax_backward(xs, gs, ss, n, natural, &mut out)))?
+        .map_err(err)?;
     Ok(Array2::from_shape_vec((rows, n), out).map_err(|e| err(e.to_string()))?.into_pyarray(py))
 }
 

@@ -99,7 +99,8 @@ class Optimization:
         self.base, self.texels, self.cfg, self.threads, self.baseline = base, texels, cfg, threads, baseline
         self.target = np.asarray(target_rgb, np.float32)
         shape = base.shape + (len(base.inks),)
-        self.param = Parameterization(cfg.param, np.zeros(shape, np.float32) if fixed_share is None else fixed_share)
+        self.param = Parameterization(cfg.param, np.zeros(shape, np.float32) if fixed_share is None else fixed_share,
+                                      threads)
         self.loss = TexelLoss(self.target, texels.pos_vox, gamma=cfg.gamma)
         # what the run optimises towards and under which constraints: part of the checkpoint key
         h = hashlib.sha256(self.target.tobytes())
@@ -114,12 +115,13 @@ class Optimization:
         if cfg.smooth > 0:
             guide = rows = None
             if cfg.smooth_edge > 0:  # guided: the free voxels under flat texels only, down to MAX_DEPTH
-                nearest, dist = nearest_texels(self.param.shape, self.param.free_index, texels.pos_vox, MAX_DEPTH)
+                nearest, dist = nearest_texels(self.param.shape, self.param.free_index, texels.pos_vox, MAX_DEPTH,
+                                               threads=threads)
                 rows = np.flatnonzero((nearest >= 0) & self.loss.flat[nearest])
                 guide = texel_guide(self.loss.target_lab, nearest[rows], dist[rows])
                 del nearest, dist
             self.smoother = GradientSmoother(self.param.shape, self.param.free_index, cfg.smooth, guide,
-                                             cfg.smooth_edge, rows)
+                                             cfg.smooth_edge, rows, threads)
         self._renderer: Renderer | None = None
         self.iteration = 0
         self.history = History()

@@ -23,12 +23,13 @@ class Parameterization:
 
     fixed_share: (z, y, x, N) float32 ink shares the optimiser may not change (all zero: everything free), dense or
     as :class:`~inkopt.model.FixedShares` (kept by reference; no grid-sized float array is made from it).
+    ``threads``: threads of the softmax and its backward map (default all cores; results do not depend on it).
     """
 
-    def __init__(self, kind: str, fixed_share):
+    def __init__(self, kind: str, fixed_share, threads: int | None = None):
         if kind not in PARAMS:
             raise ValueError(f"unknown parameterisation '{kind}'")
-        self.kind = kind
+        self.kind, self.threads = kind, threads
         if isinstance(fixed_share, FixedShares):
             self._init_compact(fixed_share)
             return
@@ -88,7 +89,7 @@ class Parameterization:
         if self.kind == "softmax":  # in the Rust core: parallel and one pass (numpy's took ~5 % of an iteration)
             from .. import _core
 
-            p = _core.softmax_rows(np.ascontiguousarray(x, np.float32))
+            p = _core.softmax_rows(np.ascontiguousarray(x, np.float32), self.threads)
             return p, p
         s = 1.0 / (1.0 + np.exp(-x))
         return s / s.sum(axis=1, keepdims=True), s
@@ -142,7 +143,7 @@ class Parameterization:
             from .. import _core
 
             return _core.softmax_backward(np.ascontiguousarray(x, np.float32), np.ascontiguousarray(g, np.float32),
-                                          np.ascontiguousarray(share, np.float32), bool(natural))
+                                          np.ascontiguousarray(share, np.float32), bool(natural), self.threads)
         if natural:
             raise ValueError("the natural (exponentiated-gradient) direction needs the softmax parameterisation")
         g = g * share[:, None]

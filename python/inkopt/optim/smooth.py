@@ -59,18 +59,18 @@ MAX_DEPTH = 10.0
 
 
 def nearest_texels(shape, index: np.ndarray, pos_vox: np.ndarray, max_dist: float = np.inf,
-                   chunk: int = 1 << 21):
+                   chunk: int = 1 << 21, threads: int | None = None):
     """For voxels ``index`` (F,) (increasing linear indices into the grid ``shape`` (z, y, x)): the nearest
     texel (F,) int64 and the distance to it (F,) float32, in voxels; for voxels with no texel within
     ``max_dist``, -1 and inf. ``pos_vox`` (I, 3) texel positions (x, y, z) in voxel units (``Texels.pos_vox``).
-    Works in chunks of voxels, on all cores."""
+    Works in chunks of voxels, on ``threads`` threads (default all cores)."""
     tree = cKDTree(np.asarray(pos_vox, np.float64))
     index = np.asarray(index)
     k = np.empty(len(index), np.int64)
     dist = np.empty(len(index), np.float32)
     for s in range(0, len(index), chunk):
         z, y, x = np.unravel_index(index[s:s + chunk], shape)
-        dist[s:s + chunk], k[s:s + chunk] = tree.query(np.stack([x, y, z], axis=1) + 0.5, workers=-1,
+        dist[s:s + chunk], k[s:s + chunk] = tree.query(np.stack([x, y, z], axis=1) + 0.5, workers=threads or -1,
                                                        distance_upper_bound=max_dist)
     k[k == tree.n] = -1
     return k, dist
@@ -96,11 +96,12 @@ class GradientSmoother:
     flat texels), increasing row numbers, or None for all; the others are left as they are and exchange nothing
     with the set (no flux crosses its boundary). ``sigma``: kernel width in voxels (> 0); ``guide`` (len(rows), D)
     float32 and ``edge``: neighbours are weighted by exp(-|guide_r - guide_q|² / edge²) (e.g. the voxels' target
-    CIELAB and depth from :func:`texel_guide` and an edge in ΔE76); None: unweighted.
+    CIELAB and depth from :func:`texel_guide` and an edge in ΔE76); None: unweighted. ``threads``: default all
+    cores (results do not depend on it).
     """
 
     def __init__(self, shape, index: np.ndarray, sigma: float, guide: np.ndarray | None = None,
-                 edge: float = 0.0, rows: np.ndarray | None = None):
+                 edge: float = 0.0, rows: np.ndarray | None = None, threads: int | None = None):
         if not sigma > 0:
             raise ValueError(f"smoothing width must be positive, got {sigma}")
         if guide is not None and not edge > 0:
@@ -114,13 +115,13 @@ class GradientSmoother:
         self.guide = None if guide is None else np.ascontiguousarray(guide, np.float32)
         if self.guide is not None and len(self.guide) != n:
             raise ValueError(f"the guide has {len(self.guide)} rows for a set of {n} voxels")
-        self.edge = float(edge)
+        self.edge, self.threads = float(edge), threads
 
     def _diffuse(self, g: np.ndarray) -> np.ndarray:
         from .. import _core
 
         return _core.smooth_rows(self.shape, self.index, np.ascontiguousarray(g, np.float32), self.steps, ALPHA,
-                                 self.guide, self.edge or 1.0)
+                                 self.guide, self.edge or 1.0, self.threads)
 
     def __call__(self, g: np.ndarray) -> np.ndarray:
         """The diffused copy of g (F, N) float32 (g itself is not changed; rows outside the set are copied)."""
