@@ -52,9 +52,10 @@ fn err(msg: impl Into<String>) -> PyErr {
 }
 
 /// Run `f` on `threads` threads: None (or 0) in rayon's global pool (all cores, as a `Scene` without
-/// `threads`), else in a pool of that many, built once per process and count and kept. The free functions below
-/// run in it, so that a caller's thread count (e.g. an ink-set search's per-run share) holds for them as for its
-/// renders, without a new pool per call.
+/// `threads`), else in a pool of that many (threads named `inkopt-p{n}-{i}`), built once per process and count
+/// and kept (a process whose callers ask for several counts keeps one idle pool per count). The free functions
+/// below run in it, so that a caller's thread count (e.g. an ink-set search's per-run share) holds for them as for
+/// its renders, without a new pool per call.
 fn run_on<R: Send>(threads: Option<usize>, f: impl FnOnce() -> R + Send) -> PyResult<R> {
     static POOLS: Mutex<Vec<(usize, Arc<rayon::ThreadPool>)>> = Mutex::new(Vec::new());
     let n = match threads {
@@ -66,7 +67,8 @@ fn run_on<R: Send>(threads: Option<usize>, f: impl FnOnce() -> R + Send) -> PyRe
         match pools.iter().find(|(k, _)| *k == n) {
             Some((_, p)) => p.clone(),
             None => {
-                let p = rayon::ThreadPoolBuilder::new().num_threads(n).build().map_err(|e| err(e.to_string()))?;
+                let p = rayon::ThreadPoolBuilder::new().num_threads(n).thread_name(move |i| format!("inkopt-p{n}-{i}"))
+                    .build().map_err(|e| err(e.to_string()))?;
                 pools.push((n, Arc::new(p)));
                 pools[pools.len() - 1].1.clone()
             }
@@ -535,8 +537,8 @@ fn diffuse_layer(
     py.detach(|| inkopt_core::diffuse::diffuse_layer(shape, z, m, i, i_next, cur, next, o)).map_err(err)
 }
 
-/// smooth_rows(shape (Z, Y, X), index (F,) i64, values (F, C) f32, steps, alpha, guide (F, D) f32 or None, tau)
-/// -> (F, C) f32: `steps` explicit diffusion steps of weight `alpha` over the 6-neighbourhood of the voxels
+/// smooth_rows(shape (Z, Y, X), index (F,) i64, values (F, C) f32, steps, alpha, guide (F, D) f32 or None, tau,
+/// threads=None) -> (F, C) f32: `steps` explicit diffusion steps of weight `alpha` over the 6-neighbourhood of the voxels
 /// `index` (strictly increasing linear indices into the grid `shape`; row r of the values is voxel index[r]),
 /// each neighbour weighted by exp(-|guide_r - guide_q|² / tau²) if a guide is given (inkopt_core::smooth). The
 /// GIL is released; `threads` as for a `Scene` (default all cores).
