@@ -67,10 +67,10 @@ fn run_on<R: Send>(threads: Option<usize>, f: impl FnOnce() -> R + Send) -> PyRe
         match pools.iter().find(|(k, _)| *k == n) {
             Some((_, p)) => p.clone(),
             None => {
-                let p = rayon::ThreadPoolBuilder::new().num_threads(n).thread_name(move |i| format!("inkopt-p{n}-{i}"))
-                    .build().map_err(|e| err(e.to_string()))?;
-                pools.push((n, Arc::new(p)));
-                pools[pools.len() - 1].1.clone()
+                let b = rayon::ThreadPoolBuilder::new().num_threads(n).thread_name(move |i| format!("inkopt-p{n}-{i}"));
+                let p = Arc::new(b.build().map_err(|e| err(e.to_string()))?);
+                pools.push((n, p.clone()));
+                p
             }
         }
     };
@@ -538,8 +538,8 @@ fn diffuse_layer(
 }
 
 /// smooth_rows(shape (Z, Y, X), index (F,) i64, values (F, C) f32, steps, alpha, guide (F, D) f32 or None, tau,
-/// threads=None) -> (F, C) f32: `steps` explicit diffusion steps of weight `alpha` over the 6-neighbourhood of the voxels
-/// `index` (strictly increasing linear indices into the grid `shape`; row r of the values is voxel index[r]),
+/// threads=None) -> (F, C) f32: `steps` explicit diffusion steps of weight `alpha` over the 6-neighbourhood of the
+/// voxels `index` (strictly increasing linear indices into the grid `shape`; row r of the values is voxel index[r]),
 /// each neighbour weighted by exp(-|guide_r - guide_q|² / tau²) if a guide is given (inkopt_core::smooth). The
 /// GIL is released; `threads` as for a `Scene` (default all cores).
 #[pyfunction]
