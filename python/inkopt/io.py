@@ -113,3 +113,41 @@ def save_figure(path: str | Path, fig, dpi: int = 110) -> Path:
     fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
     atomic_write_bytes(path, buf.getvalue())
     return Path(path)
+
+
+FORMAT_KEY = "format_version"
+
+
+class FormatError(ValueError):
+    """A file of a format version this inkopt cannot read (one line: the file, its version, what to do)."""
+
+
+def format_version_of(data) -> int:
+    """The ``format_version`` of a loaded file (a JSON object, or the arrays of an .npz, where it is a 0-d
+    array); 0 for a file written before files carried one."""
+    v = data.get(FORMAT_KEY, 0)
+    return int(np.asarray(v).item()) if not isinstance(v, int) else v
+
+
+def upgrade_format(data: dict, *, kind: str, where, current: int, upgrades: dict) -> dict:
+    """Bring a loaded file to format version ``current``.
+
+    ``data``: a JSON object or the dict of an .npz's arrays. ``upgrades[v]`` turns version ``v`` into ``v + 1``
+    (a function of the dict, returning the new dict): one per older version users may hold. A newer version, or an
+    older one without an upgrade, is a one-line ``FormatError`` naming ``where`` and the ``kind`` of file. The
+    result carries ``format_version = current``.
+    """
+    v = format_version_of(data)
+    if v > current:
+        raise FormatError(f"{where} is a {kind} of format version {v}; this inkopt reads versions up to {current} "
+                          f"(update inkopt)")
+    data = dict(data)
+    while v < current:
+        if v not in upgrades:
+            oldest = min(upgrades, default=current)
+            raise FormatError(f"{where} is a {kind} of format version {v}, which this inkopt no longer reads "
+                              f"(it reads versions {oldest} to {current}); write it again with this inkopt")
+        data = dict(upgrades[v](data))
+        v += 1
+    data[FORMAT_KEY] = current
+    return data
