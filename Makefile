@@ -7,7 +7,7 @@ STAMP := $(VENV)/.inkopt-installed
 RUST_SOURCES := $(wildcard Cargo.toml crates/*/Cargo.toml) $(shell find crates -name '*.rs')
 DEMO_OUT ?= demo-out
 
-.PHONY: setup demo test test-slow bench clean
+.PHONY: setup demo test lint test-slow bench clean
 
 setup: $(STAMP)
 
@@ -22,9 +22,16 @@ $(STAMP): $(PY) pyproject.toml $(RUST_SOURCES)
 demo: $(STAMP)
 	$(VENV)/bin/inkopt demo --out $(DEMO_OUT)
 
-test: $(STAMP)
+test: $(STAMP) lint
 	cargo test --release -p inkopt-core
 	$(PY) -m pytest -q
+
+# ruff (lint and format) for Python, rustfmt and clippy for Rust; `make test` runs it first
+lint: $(STAMP)
+	$(VENV)/bin/ruff check python tests bench experiments
+	$(VENV)/bin/ruff format --check python tests bench experiments
+	cargo fmt --all -- --check
+	cargo clippy --release --workspace --all-targets --quiet -- -D warnings
 
 test-slow: $(STAMP)
 	$(PY) -m pytest -q -m slow
