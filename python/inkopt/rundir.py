@@ -6,8 +6,8 @@ they ask a :class:`RunDir`.
 
 ``scene.npz`` is typed as a :class:`SceneRecord`: the sensor (texels), the targets, how the slab's faces map to
 pictures, and the optimisation's constraints (``free_mask``, ``fixed_share``). Large objects store only
-``free_mask``; :meth:`SceneRecord.fixed_share` rebuilds the dense shares from it and from the translucency
-constraint (:class:`Translucency`, stored sparsely), so every reader sees the same constraints however the file
+``free_mask``; :meth:`SceneRecord.fixed_share` rebuilds the fixed shares from it and from the translucency
+constraint (``model.Translucency``, stored sparsely), so every reader sees the same constraints however the file
 stores them.
 """
 from __future__ import annotations
@@ -20,144 +20,11 @@ from pathlib import Path
 import numpy as np
 
 from .io import load_npz, save_npz, write_json
-from .model import FixedShares, InkTable, Texels, Volume
+from .model import FixedShares, InkTable, MeshInfo, Texels, Translucency, Volume, scene_fixed_shares
 from .model.labelfile import LabelFileWriter
 
 #: scene.npz stores the dense (z, y, x, N) fixed_share only below this many entries (else: free_mask only)
 FIXED_SHARE_MAX_ENTRIES = 50_000_000
-
-
-def white_fixed_share(free: np.ndarray, inks: InkTable) -> np.ndarray:
-    """(z, y, x, N) float32 fixed ink shares: 100 % white where ``free`` (z, y, x) is False, none where True."""
-    return white_fixed_shares(free, inks).dense()
-
-
-def white_fixed_shares(free: np.ndarray, inks: InkTable) -> FixedShares:
-    """:func:`white_fixed_share` in compact form (``free`` kept by reference)."""
-    if "white" not in inks.names:
-        raise ValueError(f"voxels that are not optimised (outside the object, the core below --shell-mm) are "
-                         f"printed white, but the ink set {list(inks.names)} has no 'white'")
-    held = np.zeros(len(inks), np.float32)
-    held[inks.index("white")] = 1.0
-    return FixedShares(free, held)
-
-
-TRANSPARENT_INKS = ("transparent", "clear")  # ink names that count as the transparent ink
-
-
-def transparent_ink(inks: InkTable) -> str:
-    """The name of the ink set's transparent ink; one-line ValueError if it has none."""
-    for name in TRANSPARENT_INKS:
-        if name in inks.names:
-            return name
-    raise ValueError(f"--translucency needs a transparent ink ('transparent' or 'clear') in the ink set, but "
-                     f"{list(inks.names)} has none; use e.g. --inks vero-cmykwt")
-
-
-@dataclass
-class Translucency:
-    """A translucency constraint: the voxels ``index`` ((K,) int64, flat C-order indices of the (z, y, x) grid
-    ``shape``) must hold the share ``share`` ((K,) float32 in (0, 1]) of ink ``ink`` (the transparent ink); the
-    optimiser chooses the rest of their mixture. ``depth_mm``: how deep below the surface it reaches (None: the
-    whole object); ``source``: the mask file or "alpha" (a mesh texture's alpha channel)."""
-
-    ink: str
-    shape: tuple
-    index: np.ndarray
-    share: np.ndarray
-    depth_mm: float | None = None
-    source: str = ""
-
-    def __post_init__(self):
-        self.shape = tuple(int(v) for v in self.shape)
-        self.index = np.asarray(self.index, np.int64).reshape(-1)
-        self.share = np.asarray(self.share, np.float32).reshape(-1)
-
-    def grid(self) -> np.ndarray:
-        """(z, y, x) float32: the required transparent share of every voxel (0: unconstrained)."""
-        out = np.zeros(self.shape, np.float32)
-        out.reshape(-1)[self.index] = self.share
-        return out
-
-    def texel_share(self, texels: Texels) -> np.ndarray:
-        """(I,) float32: the required share at each texel's voxel."""
-        return self.grid()[tuple(np.asarray(texels.voxel).T)]
-
-    def apply(self, fixed: np.ndarray, inks: InkTable) -> np.ndarray:
-        """Set the constrained voxels' transparent share in ``fixed`` (z, y, x, N) float32 (in place; returned).
-        Their other fixed shares (the white of a core or outside voxel) shrink to make room: a voxel that was
-        100 % white becomes ``share`` transparent + (1 - ``share``) white; free voxels keep no other fixed share.
-        Idempotent."""
-        self._check(fixed.shape, inks)
-        flat = fixed.reshape(-1, len(inks))
-        flat[self.index] = self._constrain(flat[self.index], inks)
-        return fixed
-
-    def applied(self, fixed: FixedShares, inks: InkTable) -> FixedShares:
-        """:meth:`apply` on compact fixed shares: a new ``FixedShares`` whose dense form is ``apply``'s result."""
-        self._check(fixed.shape, inks)
-        index = np.union1d(fixed.index, self.index)
-        rows = fixed.at(index)
-        pos = np.searchsorted(index, self.index)
-        rows[pos] = self._constrain(rows[pos], inks)
-        return FixedShares(fixed.free, fixed.held, index, rows)
-
-    def _check(self, shape, inks: InkTable) -> None:
-        if tuple(shape[:3]) != self.shape:
-            raise ValueError(f"translucency constraint is for a {self.shape} grid, not {tuple(shape[:3])}")
-        if self.ink not in inks.names:
-            raise ValueError(f"the translucency constraint needs ink '{self.ink}', not in {list(inks.names)}")
-
-    def _constrain(self, rows: np.ndarray, inks: InkTable) -> np.ndarray:
-        """The constrained voxels' fixed shares (K, N) float32 from their unconstrained ones (changed in place)."""
-        t = inks.index(self.ink)
-        rows[:, t] = 0.0
-        other = rows.sum(1)
-        room = 1.0 - self.share
-        rows *= np.where(other > room, room / np.maximum(other, 1e-12), 1.0)[:, None]
-        rows[:, t] = self.share
-        return rows
-
-    def arrays(self) -> dict:
-        return {"translucency_ink": np.array(self.ink), "translucency_shape": np.array(self.shape, np.int64),
-                "translucency_index": self.index, "translucency_share": self.share,
-                "translucency_depth_mm": np.float64(np.nan if self.depth_mm is None else self.depth_mm),
-                "translucency_source": np.array(self.source)}
-
-    @classmethod
-    def from_arrays(cls, d) -> "Translucency | None":
-        if "translucency_index" not in d:
-            return None
-        depth = float(d["translucency_depth_mm"])
-        return cls(str(d["translucency_ink"]), tuple(np.asarray(d["translucency_shape"])), d["translucency_index"],
-                   d["translucency_share"], None if np.isnan(depth) else depth, str(d["translucency_source"]))
-
-
-@dataclass
-class MeshInfo:
-    """Where a mesh run's object came from and how it sits on the grid (mm, x, y, z)."""
-
-    mesh_path: str
-    mesh_scale: float          # mm per model unit
-    height_mm: float
-    up: str
-    origin_mm: np.ndarray      # (3,) low corner of voxel (0, 0, 0)
-    voxel_mm: np.ndarray       # (3,)
-    texel_closest_mm: np.ndarray  # (I, 3) closest surface point of each texel
-    shell_mm: float | None
-
-    def arrays(self) -> dict:
-        return {"mesh_path": np.array(self.mesh_path), "mesh_scale": np.float64(self.mesh_scale),
-                "height_mm": np.float64(self.height_mm), "up": np.array(self.up), "origin_mm": self.origin_mm,
-                "voxel_mm": self.voxel_mm, "texel_closest_mm": self.texel_closest_mm,
-                "shell_mm": np.float64(np.nan if self.shell_mm is None else self.shell_mm)}
-
-    @classmethod
-    def from_arrays(cls, d) -> "MeshInfo":
-        shell = float(d["shell_mm"]) if "shell_mm" in d else float("nan")
-        return cls(str(d["mesh_path"]), float(d["mesh_scale"]), float(d.get("height_mm", np.nan)),
-                   str(d.get("up", "y")), np.asarray(d["origin_mm"]), np.asarray(d["voxel_mm"]),
-                   np.asarray(d["texel_closest_mm"]), None if np.isnan(shell) else shell)
 
 
 @dataclass
@@ -166,9 +33,10 @@ class SceneRecord:
 
     kind: "slab" or "mesh"; texels: the sensor; target_rgb (I, 3) float32 linear; faces: the textured faces of a
     slab (e.g. ["bottom", "top"]) with pix[F] (H, W) int32 the texel index at each picture pixel (row 0 = top);
-    free_mask (z, y, x) bool: the voxels the optimiser may change (None: decided by fixed_share alone);
-    fixed_share_dense (z, y, x, N) float32 or None (includes the translucency); mesh: a mesh run's MeshInfo;
-    translucency: the translucency constraint (:class:`Translucency`) or None.
+    free_mask (z, y, x) bool: the voxels the optimiser may change (None: decided by the fixed shares alone);
+    fixed: the fixed ink shares (``FixedShares``, translucency included) or None (then rebuilt from free_mask and
+    translucency); mesh: a mesh run's ``MeshInfo``; translucency: the translucency constraint (``Translucency``)
+    or None.
     """
 
     kind: str
@@ -177,7 +45,7 @@ class SceneRecord:
     faces: list[str] = field(default_factory=list)
     pix: dict[str, np.ndarray] = field(default_factory=dict)
     free_mask: np.ndarray | None = None
-    fixed_share_dense: np.ndarray | None = None
+    fixed: FixedShares | None = None
     mesh: MeshInfo | None = None
     translucency: Translucency | None = None
 
@@ -187,35 +55,30 @@ class SceneRecord:
             raise ValueError(f"scene target_rgb has shape {self.target_rgb.shape}, expected ({len(self.texels)}, 3)"
                              " with texels")
 
-    def fixed_share(self, inks: InkTable, shape=None) -> np.ndarray | None:
-        """(z, y, x, N) float32 fixed ink shares: stored densely, or rebuilt from ``free_mask`` (100 % white
-        wherever the mask is False) and the translucency constraint, or None if the scene has no constraints.
-        ``shape`` (z, y, x) checks it."""
-        tr = self.translucency
-        if self.fixed_share_dense is not None:
-            fixed = np.asarray(self.fixed_share_dense, np.float32)
-        elif self.free_mask is not None:
-            fixed = white_fixed_share(np.asarray(self.free_mask, bool), inks)
-        elif tr is not None:
-            fixed = np.zeros(tr.shape + (len(inks),), np.float32)
-        else:
-            return None
-        if tr is not None and self.fixed_share_dense is None:
-            tr.apply(fixed, inks)
-        if fixed.shape[-1] != len(inks) or (shape is not None and fixed.shape[:3] != tuple(shape)):
+    def fixed_share(self, inks: InkTable, shape=None) -> FixedShares | None:
+        """The (z, y, x, N) fixed ink shares: as stored, or rebuilt from ``free_mask`` (100 % white wherever the
+        mask is False) and the translucency constraint (``model.scene_fixed_shares``), or None if the scene has
+        no constraints. ``shape`` (z, y, x) checks it."""
+        fixed = self.fixed
+        if fixed is None:
+            free = None if self.free_mask is None else np.asarray(self.free_mask, bool)
+            fixed = scene_fixed_shares(inks, free, self.translucency)
+        if fixed is not None and (fixed.shape[-1] != len(inks) or (shape is not None
+                                                                   and fixed.shape[:3] != tuple(shape))):
             raise ValueError(f"scene fixed_share has shape {fixed.shape}, expected {tuple(shape or ())} x "
                              f"{len(inks)} inks")
         return fixed
 
     def arrays(self) -> dict:
+        """The arrays of scene.npz (the dense fixed shares only below ``FIXED_SHARE_MAX_ENTRIES`` entries)."""
         out = {**self.texels.to_arrays(), "target_rgb": self.target_rgb, "kind": np.array(self.kind)}
         if self.faces:
             out["faces"] = np.array(self.faces)
         out.update({f"pix_{f}": p for f, p in self.pix.items()})
         if self.free_mask is not None:
             out["free_mask"] = self.free_mask
-        if self.fixed_share_dense is not None and self.fixed_share_dense.size < FIXED_SHARE_MAX_ENTRIES:
-            out["fixed_share"] = self.fixed_share_dense
+        if self.fixed is not None and np.prod(self.fixed.shape) < FIXED_SHARE_MAX_ENTRIES:
+            out["fixed_share"] = self.fixed.dense()
         if self.mesh is not None:
             out.update(self.mesh.arrays())
         if self.translucency is not None:
@@ -223,16 +86,17 @@ class SceneRecord:
         return out
 
     @classmethod
-    def from_arrays(cls, d, where: str = "scene.npz") -> "SceneRecord":
-        for k in ("texel_voxel", "texel_face", "texel_normal", "target_rgb"):
+    def from_arrays(cls, d, where: str = "scene.npz") -> SceneRecord:
+        for k in ("texel_voxel", "texel_face", "texel_normal", "target_rgb", "kind"):
             if k not in d:
                 raise ValueError(f"{where} lacks array '{k}'")
         faces = [str(f) for f in np.asarray(d["faces"]).reshape(-1)] if "faces" in d else []
-        kind = str(d.get("kind", "slab"))
+        kind = str(d["kind"])
         return cls(kind, Texels.from_arrays(d), d["target_rgb"], faces,
                    {f: np.asarray(d[f"pix_{f}"]) for f in faces if f"pix_{f}" in d},
                    np.asarray(d["free_mask"], bool) if "free_mask" in d else None,
-                   d.get("fixed_share"), MeshInfo.from_arrays(d) if kind == "mesh" and "mesh_path" in d else None,
+                   FixedShares.from_dense(d["fixed_share"]) if "fixed_share" in d else None,
+                   MeshInfo.from_arrays(d) if kind == "mesh" and "mesh_path" in d else None,
                    Translucency.from_arrays(d))
 
 

@@ -156,7 +156,7 @@ def test_free_mask_only_scene_keeps_its_white_core(table3):
     free = np.zeros(vol.shape, bool)
     free[-2:] = True  # a two-layer shell under the textured top
     rec = SceneRecord.from_arrays(SceneRecord("mesh", tex, target, free_mask=free).arrays())
-    assert "fixed_share" not in rec.arrays() and rec.fixed_share_dense is None
+    assert "fixed_share" not in rec.arrays() and rec.fixed is None
     mix = extrusion_baseline(vol, tex, target, rec.fixed_share(INKS3, vol.shape), table3)
     white = white_mixture(INKS3)
     np.testing.assert_array_equal(mix[~free], np.broadcast_to(white, mix[~free].shape))

@@ -77,8 +77,9 @@ class Optimization:
     """An optimisation run over a volume's mixture.
 
     base: a mixture Volume giving the geometry and ink table (its mixture is ignored); texels and target_rgb
-    (I, 3) linear; fixed_share (z, y, x, N) float32 or None; ``baseline(kind)`` -> (z, y, x, N) mixture of a
-    print-shop baseline, needed only for ``cfg.init`` "surface" or "extrusion" (the run driver supplies it);
+    (I, 3) linear; fixed_share: the (z, y, x, N) fixed ink shares (``model.FixedShares``) or None (none);
+    ``baseline(kind)`` -> (z, y, x, N) mixture of a print-shop baseline, needed only for ``cfg.init`` "surface"
+    or "extrusion" (the run driver supplies it);
     ``lighting``: the display lighting the prediction is rendered under (``inkopt.lighting``; default uniform).
     ``renderer_factory(volume, threads, lighting)``: what renders (default ``Renderer``; e.g. texel shards on Ray,
     ``inkopt.distributed.RayShards.renderer``, with identical results). ``kind`` (required, keyword): the scene's
@@ -87,7 +88,7 @@ class Optimization:
     """
 
     def __init__(self, base: Volume, texels: Texels, target_rgb: np.ndarray, cfg: OptimizeConfig, *, kind: str,
-                 fixed_share: np.ndarray | None = None, threads: int | None = None,
+                 fixed_share: FixedShares | None = None, threads: int | None = None,
                  baseline: Callable[[str], np.ndarray] | None = None, lighting: Lighting | str | None = None,
                  renderer_factory: Callable[..., Renderer] | None = None):
         cfg = cfg.for_scene(kind)  # settings left to the scene kind ("slab" or "mesh": config.SCENE_DEFAULTS)
@@ -98,16 +99,13 @@ class Optimization:
             raise ValueError("the volume needs an ink table")
         self.base, self.texels, self.cfg, self.threads, self.baseline = base, texels, cfg, threads, baseline
         self.target = np.asarray(target_rgb, np.float32)
-        shape = base.shape + (len(base.inks),)
-        self.param = Parameterization(cfg.param, np.zeros(shape, np.float32) if fixed_share is None else fixed_share,
-                                      threads)
+        if fixed_share is None:
+            fixed_share = FixedShares.none(base.shape, len(base.inks))
+        self.param = Parameterization(cfg.param, fixed_share, threads)
         self.loss = TexelLoss(self.target, texels.pos_vox, gamma=cfg.gamma)
         # what the run optimises towards and under which constraints: part of the checkpoint key
         h = hashlib.sha256(self.target.tobytes())
-        if isinstance(self.param.fixed_share, FixedShares):
-            self.param.fixed_share.digest(h)  # the same bytes as the dense array's, a layer at a time
-        else:
-            h.update(np.ascontiguousarray(self.param.fixed_share).data)
+        self.param.fixed_share.digest(h)  # the dense array's bytes, a layer at a time
         self._problem_digest = h.hexdigest()[:16]
         self.x = self.param.variables_for(self._initial_free_mixture())
         self.opt = make_optimizer(cfg.optimizer, cfg.step_size, self.x.shape)
@@ -197,14 +195,14 @@ class Optimization:
     # -------------------------------------------------------------- one step
     def renderer(self, x: np.ndarray | None = None) -> Renderer:
         """The run's renderer, set to the mixture of variables ``x`` (F, N) (default: the current ones; e.g.
-        :meth:`initial_variables` to render the start without a grid-sized volume). It is built once from the fixed shares (the base
-        geometry with ``fixed_share`` as its mixture, no copy; compact fixed shares of a masked object: the base
-        volume, whose medium is then replaced at every inside voxel that is not a variable); every iteration then
-        overwrites only the free voxels' media (``Renderer.set_mixture``), so no grid-sized mixture or coefficient
-        array is made per step."""
+        :meth:`initial_variables` to render the start without a grid-sized volume). It is built once from the
+        fixed shares (an object with an inside mask: the base volume, whose medium is then replaced at every
+        inside voxel that is not a variable; else the base geometry with the fixed shares as its mixture); every
+        iteration then overwrites only the free voxels' media (``Renderer.set_mixture``), so no grid-sized mixture
+        or coefficient array is made per step."""
         if self._renderer is None:
             fs = self.param.fixed_share
-            if isinstance(fs, FixedShares) and self.base.inside is not None:
+            if self.base.inside is not None:
                 self._renderer = self.renderer_factory(self.base, self.threads, self.lighting)
                 held = self.base.inside.copy()
                 held.reshape(-1)[self.param.free_index] = False
@@ -213,7 +211,7 @@ class Optimization:
                     self._renderer.set_mixture(block, fs.at(block))
                 del held
             else:
-                self._renderer = self.renderer_factory(self.base.with_mixture(np.asarray(fs)), self.threads,
+                self._renderer = self.renderer_factory(self.base.with_mixture(fs.dense()), self.threads,
                                                        self.lighting)
         x = self.x if x is None else x
         for lo, hi in self.param.chunks():  # in pieces: no (F, N) temporaries for a big object

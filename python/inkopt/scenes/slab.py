@@ -17,10 +17,11 @@ from pathlib import Path
 import numpy as np
 
 from ..color import srgb_to_linear
-from ..model import InkTable, Texels, Volume
+from ..model import FixedShares, InkTable, Texels, Translucency, Volume, transparent_ink
 from ..pictures import error_figure
-from ..rundir import SceneRecord, Translucency, transparent_ink
+from ..rundir import SceneRecord
 from ..units import OPT_DPI, voxel_mm
+from .picture import resample
 from .translucency import check_depth, load_mask, slab_translucency, translucency_fields
 
 ASPECT_TOLERANCE = 0.02  # relative mismatch of picture and face aspect ratios allowed (resampling rounding)
@@ -42,12 +43,6 @@ def load_picture(path: str | Path) -> np.ndarray:
     return srgb_to_linear(rgb * alpha + (1.0 - alpha)).astype(np.float32)
 
 
-def resample(picture: np.ndarray, ny: int, nx: int) -> np.ndarray:
-    from skimage.transform import resize
-
-    return resize(picture, (ny, nx, 3), order=1, anti_aliasing=True, mode="edge").astype(np.float32)
-
-
 @dataclass
 class SlabScene:
     """A slab ready to optimise (the ``Scene`` protocol of ``inkopt.scenes``)."""
@@ -62,8 +57,8 @@ class SlabScene:
     kind = "slab"
 
     @cached_property
-    def fixed_share(self) -> np.ndarray | None:
-        """(z, y, x, N) float32: the translucency constraint's transparent shares, or None (built once)."""
+    def fixed_share(self) -> FixedShares | None:
+        """The translucency constraint's transparent shares, or None (built once)."""
         return self.record().fixed_share(self.volume.inks, self.volume.shape)
 
     def record(self) -> SceneRecord:

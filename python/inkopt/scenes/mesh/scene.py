@@ -27,13 +27,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ...model import EMPTY, FixedShares, InkTable, Volume
-from ...rundir import (FIXED_SHARE_MAX_ENTRIES, MeshInfo, SceneRecord, Translucency, transparent_ink,
-                       white_fixed_share, white_fixed_shares)
+from ...model import (EMPTY, FixedShares, InkTable, MeshInfo, Translucency, Volume, transparent_ink,
+                      white_fixed_shares)
+from ...rundir import SceneRecord
 from ...units import OPT_DPI, voxel_mm
-from ..translucency import (ALPHA, check_depth, check_mask, load_mask, mesh_texel_share, mesh_translucency,
-                            translucency_fields)
+from ..translucency import ALPHA, check_depth, check_mask, load_mask, translucency_fields
 from .load import TexturedMesh, load_mesh
+from .translucency import mesh_texel_share, mesh_translucency
 from .views import bake_vertex_colors, render_views, write_glb
 from .voxelize import VoxelizedObject, voxelize
 
@@ -60,7 +60,7 @@ class MeshScene:
     mesh: the loaded mesh (mm, z up); vox: its voxelization (``sdf`` dropped); volume: a label Volume giving the
     geometry (inside, normals, box boundary, origin_mm) and inks (white labels inside; the optimiser takes its
     fixed shares from ``fixed_share``); free: (z, y, x) bool variables; fixed_share: the (z, y, x, N) fixed ink
-    shares as :class:`~inkopt.model.FixedShares` (``np.asarray`` gives the dense array).
+    shares (:class:`~inkopt.model.FixedShares`).
     """
 
     mesh: TexturedMesh
@@ -92,9 +92,7 @@ class MeshScene:
         vox = self.vox
         info = MeshInfo(self.mesh_path, float(self.mesh.mm_per_unit), self.height_mm, self.up, vox.origin_mm,
                         vox.voxel_mm, vox.closest_mm, self.shell_mm)
-        small = np.prod(self.fixed_share.shape) < FIXED_SHARE_MAX_ENTRIES  # else rebuilt from free_mask
-        return SceneRecord("mesh", vox.texels, vox.targets, free_mask=self.free,
-                           fixed_share_dense=self.fixed_share.dense() if small else None, mesh=info,
+        return SceneRecord("mesh", vox.texels, vox.targets, free_mask=self.free, fixed=self.fixed_share, mesh=info,
                            translucency=self.translucency)
 
     def describe(self) -> str:
@@ -136,7 +134,7 @@ def build_mesh_scene(mesh_path, inks: InkTable, height_mm: float | None = None, 
     if not (np.isfinite(dpi) and dpi > 0):
         raise ValueError(f"--dpi must be positive, got {dpi}")
     if "white" not in inks.names:
-        white_fixed_share(np.ones((1, 1, 1), bool), inks)  # raises the one-line error before the slow part
+        white_fixed_shares(np.ones((1, 1, 1), bool), inks)  # raises the one-line error before the slow part
     if shell_mm is not None and not (np.isfinite(shell_mm) and shell_mm > 0):
         raise ValueError(f"--shell-mm must be a positive thickness in mm, got {shell_mm}")
     mask = None
