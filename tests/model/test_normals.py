@@ -47,7 +47,7 @@ def test_volume_files_and_renders(tmp_path):
     inside = np.ones((6, 6, 6), bool)
     inks = InkTable.parse("vero-cmykw")
     mix = np.full((6, 6, 6, len(inks)), 1 / len(inks), np.float32)
-    vol = Volume(voxel_mm=[0.1] * 3, mixture=mix, inks=inks, inside=inside, normals=dense)
+    vol = Volume.from_mixture(voxel_mm=[0.1] * 3, mixture=mix, inks=inks, inside=inside, normals=dense)
     assert isinstance(vol.normals, SurfaceNormals)
     vol.save(tmp_path / "v.npz")
     with np.load(tmp_path / "v.npz") as z:
@@ -70,4 +70,4 @@ def test_volume_files_and_renders(tmp_path):
     b._scene = sc
     np.testing.assert_array_equal(a, b.render(tex, 8, 3).rgb)
     with pytest.raises(VolumeError, match="grid of shape"):
-        Volume(voxel_mm=[0.1] * 3, mixture=mix, inks=inks, normals=SurfaceNormals((2, 2, 2), [], np.zeros((0, 3))))
+        Volume.from_mixture([0.1] * 3, mixture=mix, inks=inks, normals=SurfaceNormals((2, 2, 2), [], np.zeros((0, 3))))

@@ -29,7 +29,7 @@ def mixture_run(path, shape=(6, 9, 11), inside=True, normals=False):
         mix[~kw["inside"]] = 0.0  # outside rows may be empty
     if normals:
         kw["normals"] = np.tile(np.array([0, 0, 1], np.float32), shape + (1,))
-    vol = Volume(voxel_mm=(V300,) * 3, mixture=mix, inks=inks, origin_mm=(1.0, 2.0, 3.0), **kw)
+    vol = Volume.from_mixture(voxel_mm=(V300,) * 3, mixture=mix, inks=inks, origin_mm=(1.0, 2.0, 3.0), **kw)
     d = RunDir.create(path)
     d.save_volume(vol)
     return d, vol

@@ -214,7 +214,7 @@ def test_constraint_holds_through_quantization():
         fixed = np.asarray(sc.fixed_share)  # dense form of the compact FixedShares
         free = rng.dirichlet(np.ones(len(INKS)), size=shape)
         mix = (fixed + (1 - fixed.sum(-1, keepdims=True)) * free).astype(np.float32)
-        vol = Volume(voxel_mm=(vox,) * 3, mixture=mix, inks=INKS)
+        vol = Volume.from_mixture(voxel_mm=(vox,) * 3, mixture=mix, inks=INKS)
         q = quantize_volume(vol)
         lab = q.labels
         # the region in printer voxels: map printer voxel centres back to optimisation voxels

@@ -23,7 +23,7 @@ then memory-mapped read-only.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -157,12 +157,13 @@ class Quantization:
 # ----------------------------------------------------------------------------------------- the volume
 @dataclass
 class Volume:
-    """A voxel medium on a grid. Build it with one medium form (``medium=Mixture(...)``), or by keyword:
-    ``Volume(voxel_mm, mixture=m, inks=t)``, ``Volume(voxel_mm, labels=l, inks=t)``,
-    ``Volume(voxel_mm, sigma_s=s, sigma_a=a)``."""
+    """A voxel medium on a grid: geometry plus one medium (``Dense``, ``Mixture`` or ``Labels``). Build it from a
+    medium, ``Volume(voxel_mm, Mixture(m, inks), ...)``, or with the classmethods :meth:`from_coefficients`,
+    :meth:`from_mixture` and :meth:`from_labels`; the medium's arrays read back as ``sigma_s``, ``sigma_a``,
+    ``mixture``, ``labels`` and ``inks`` (None where the medium has no such array)."""
 
     voxel_mm: np.ndarray
-    medium: Medium | None = None
+    medium: Medium
     g: float = DEFAULT_G
     ior: float = 1.5
     inside: np.ndarray | None = None
@@ -171,26 +172,49 @@ class Volume:
     boundary: str = "box"
     origin_mm: np.ndarray | None = None
     quantization: Quantization | None = None
-    # keyword forms of the medium (consumed by __post_init__; read them back through the properties below)
-    sigma_s: np.ndarray | None = field(default=None, repr=False)
-    sigma_a: np.ndarray | None = field(default=None, repr=False)
-    mixture: np.ndarray | None = field(default=None, repr=False)
-    labels: np.ndarray | None = field(default=None, repr=False)
-    inks: InkTable | None = field(default=None, repr=False)
 
     def __post_init__(self):
         self.voxel_mm = np.asarray(self.voxel_mm, dtype=np.float64).reshape(-1)
-        if self.medium is None:
-            self.medium = _medium_from_keywords(self.sigma_s, self.sigma_a, self.mixture, self.labels, self.inks)
-        # the keyword fields mirror the medium (one source of truth: the medium object)
-        self.sigma_s = getattr(self.medium, "sigma_s", None)
-        self.sigma_a = getattr(self.medium, "sigma_a", None)
-        self.mixture = getattr(self.medium, "mixture", None)
-        self.labels = getattr(self.medium, "labels", None)
-        self.inks = getattr(self.medium, "inks", None)
+        if not isinstance(self.medium, (Dense, Mixture, Labels)):
+            raise VolumeError(f"a volume's medium is a Dense, Mixture or Labels, not {type(self.medium).__name__}")
         if self.origin_mm is not None:
             self.origin_mm = np.asarray(self.origin_mm, np.float64).reshape(3)
         self.validate()
+
+    @classmethod
+    def from_coefficients(cls, voxel_mm, sigma_s: np.ndarray, sigma_a: np.ndarray, **geometry) -> Volume:
+        """A dense volume: ``sigma_s``, ``sigma_a`` (z, y, x, 3) float32 mm^-1; ``geometry``: the other fields."""
+        return cls(voxel_mm, Dense(sigma_s, sigma_a), **geometry)
+
+    @classmethod
+    def from_mixture(cls, voxel_mm, mixture: np.ndarray, inks: InkTable, **geometry) -> Volume:
+        """A mixture volume: ink shares ``mixture`` (z, y, x, N) float32 of ``inks``."""
+        return cls(voxel_mm, Mixture(mixture, inks), **geometry)
+
+    @classmethod
+    def from_labels(cls, voxel_mm, labels: np.ndarray, inks: InkTable, **geometry) -> Volume:
+        """A labels volume: one ink index of ``inks`` per voxel, ``labels`` (z, y, x) uint8 (``EMPTY``: none)."""
+        return cls(voxel_mm, Labels(labels, inks), **geometry)
+
+    @property
+    def sigma_s(self) -> np.ndarray | None:
+        return getattr(self.medium, "sigma_s", None)
+
+    @property
+    def sigma_a(self) -> np.ndarray | None:
+        return getattr(self.medium, "sigma_a", None)
+
+    @property
+    def mixture(self) -> np.ndarray | None:
+        return getattr(self.medium, "mixture", None)
+
+    @property
+    def labels(self) -> np.ndarray | None:
+        return getattr(self.medium, "labels", None)
+
+    @property
+    def inks(self) -> InkTable | None:
+        return getattr(self.medium, "inks", None)
 
     @property
     def form(self) -> str:
@@ -291,8 +315,7 @@ class Volume:
 
     def with_medium(self, medium: Medium, **changes) -> "Volume":
         """The same geometry with another medium (and any other field ``changes``)."""
-        return replace(self, medium=medium, sigma_s=None, sigma_a=None, mixture=None, labels=None, inks=None,
-                       **changes)
+        return replace(self, medium=medium, **changes)
 
     def with_mixture(self, mixture: np.ndarray) -> "Volume":
         """The same geometry and inks with another mixture (z, y, x, N)."""
@@ -364,8 +387,8 @@ class Volume:
                 labels = load_label_file(Path(path).parent / name, data.get("labels_shape"))
             except ValueError as exc:
                 raise VolumeError(str(exc)) from None
-        vol = cls(voxel_mm=data["voxel_mm"], sigma_s=data.get("sigma_s"), sigma_a=data.get("sigma_a"),
-                  mixture=data.get("mixture"), labels=labels, inks=inks, g=g,
+        vol = cls(data["voxel_mm"], _medium_of(data.get("sigma_s"), data.get("sigma_a"), data.get("mixture"),
+                                             labels, inks), g=g,
                   ior=float(data["ior"]) if "ior" in data else 1.5, inside=data.get("inside"),
                   normals=data.get("normals"), boundary=str(data["boundary"]) if "boundary" in data else "box",
                   origin_mm=data.get("origin_mm"), quantization=Quantization.from_arrays(data))
@@ -378,7 +401,8 @@ class Volume:
         return vol
 
 
-def _medium_from_keywords(sigma_s, sigma_a, mixture, labels, inks) -> Medium:
+def _medium_of(sigma_s, sigma_a, mixture, labels, inks) -> Medium:
+    """The medium a volume file's arrays hold (exactly one form); one-line VolumeError otherwise."""
     given = [sigma_s is not None or sigma_a is not None, mixture is not None, labels is not None]
     if sum(given) != 1:
         raise VolumeError("volume needs exactly one of: sigma_s+sigma_a, mixture, labels")

@@ -108,7 +108,7 @@ class MixtureSource:
     def labels_meta(self, vp, q: Quantization) -> Volume:
         """A labels Volume with this file's inks, g, ior, boundary and origin on the printer grid ``vp``, for
         ``RunDir.quantized_writer`` (its one-voxel labels are a placeholder: the real ones go to the file)."""
-        return Volume(voxel_mm=vp, labels=np.zeros((1, 1, 1), np.uint8), inks=self.inks, g=self.g, ior=self.ior,
+        return Volume.from_labels(vp, labels=np.zeros((1, 1, 1), np.uint8), inks=self.inks, g=self.g, ior=self.ior,
                       boundary=self.boundary, origin_mm=self.origin_mm, quantization=q)
 
     def close(self) -> None:

@@ -111,7 +111,7 @@ def build_slab(top: np.ndarray, bottom: np.ndarray | None, size_mm, inks: InkTab
         target[pix[f].reshape(-1)] = pic.reshape(-1, 3)
     mixture = np.zeros((nz, ny, nx, len(inks)), np.float32)
     mixture[..., inks.index("white") if "white" in inks.names else 0] = 1.0
-    vol = Volume(voxel_mm=(vox, vox, vox), mixture=mixture, inks=inks)
+    vol = Volume.from_mixture(voxel_mm=(vox, vox, vox), mixture=mixture, inks=inks)
     tr = None
     if translucency is not None:
         tr = slab_translucency(translucency, top.shape[:2], (nz, ny, nx), vox, inks, translucency_depth_mm,

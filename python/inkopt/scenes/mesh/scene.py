@@ -164,7 +164,7 @@ def build_mesh_scene(mesh_path, inks: InkTable, height_mm: float | None = None, 
     # The base volume's medium is not the optimiser's (it takes geometry and inks from it, and the fixed shares
     # from ``fixed``): white labels inside, 1 byte per voxel, instead of a (z, y, x, N) mixture.
     labels = np.where(vox.inside, np.uint8(inks.index("white")), np.uint8(EMPTY))
-    vol = Volume(voxel_mm=vox.voxel_mm, labels=labels, inks=inks, g=inks.g, inside=vox.inside,
+    vol = Volume.from_labels(voxel_mm=vox.voxel_mm, labels=labels, inks=inks, g=inks.g, inside=vox.inside,
                  normals=vox.normals, boundary="box", origin_mm=vox.origin_mm)
     vox.sdf = None  # 4 bytes per grid voxel no longer needed
     return MeshScene(mesh, vox, vol, free, fixed, shell_mm, seconds, str(Path(mesh_path).resolve()), up, tr)
