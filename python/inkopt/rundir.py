@@ -19,12 +19,15 @@ from pathlib import Path
 
 import numpy as np
 
-from .io import load_npz, save_npz, write_json
+from .io import FORMAT_KEY, FormatError, load_npz, save_npz, upgrade_format, write_json
 from .model import FixedShares, InkTable, MeshInfo, Texels, Translucency, Volume, scene_fixed_shares
 from .model.labelfile import LabelFileWriter
+from .model.volume import upgrade_volume
 
 #: scene.npz stores the dense (z, y, x, N) fixed_share only below this many entries (else: free_mask only)
 FIXED_SHARE_MAX_ENTRIES = 50_000_000
+#: the format version scene.npz is written in (``format_version``)
+SCENE_FORMAT = 1
 
 
 @dataclass
@@ -71,7 +74,8 @@ class SceneRecord:
 
     def arrays(self) -> dict:
         """The arrays of scene.npz (the dense fixed shares only below ``FIXED_SHARE_MAX_ENTRIES`` entries)."""
-        out = {**self.texels.to_arrays(), "target_rgb": self.target_rgb, "kind": np.array(self.kind)}
+        out = {FORMAT_KEY: np.int64(SCENE_FORMAT), **self.texels.to_arrays(), "target_rgb": self.target_rgb,
+               "kind": np.array(self.kind)}
         if self.faces:
             out["faces"] = np.array(self.faces)
         out.update({f"pix_{f}": p for f, p in self.pix.items()})
@@ -87,6 +91,10 @@ class SceneRecord:
 
     @classmethod
     def from_arrays(cls, d, where: str = "scene.npz") -> SceneRecord:
+        """The record of scene.npz's arrays ``d`` (any format version this inkopt reads; ``where`` names the file
+        in errors)."""
+        d = upgrade_format(d, kind="scene file", where=where, current=SCENE_FORMAT,
+                           upgrades={0: lambda a: _scene_from_0(a, where)})
         for k in ("texel_voxel", "texel_face", "texel_normal", "target_rgb", "kind"):
             if k not in d:
                 raise ValueError(f"{where} lacks array '{k}'")
@@ -100,12 +108,28 @@ class SceneRecord:
                    Translucency.from_arrays(d))
 
 
+def _scene_from_0(d: dict, where) -> dict:
+    """scene.npz version 0 -> 1: the same arrays; the pre-release layouts (no ``kind``; a mesh record without
+    ``height_mm``, ``up`` or ``shell_mm``) are refused in one line."""
+    missing = [k for k in ("kind",) if k not in d]
+    if str(d.get("kind")) == "mesh" and "mesh_path" in d:
+        missing += [k for k in ("height_mm", "up", "shell_mm") if k not in d]
+    if missing:
+        raise FormatError(f"{where} lacks {', '.join(missing)}: a pre-release layout; rerun the optimisation with "
+                          f"this inkopt")
+    return d
+
+
 class RunDir:
-    """A run directory. ``RunDir(path)`` requires it to exist; ``RunDir.create(path)`` makes it."""
+    """A run directory. ``RunDir(path)`` requires it to exist; ``RunDir.create(path)`` makes it.
+
+    Every file and folder of a run has a named accessor (``*_path``: where it is, whether or not it exists yet)
+    and, for the files inkopt reads back, a load/save or read/write method with its checks."""
 
     VOLUME, SCENE, CHECKPOINT, REPORT = "volume.npz", "scene.npz", "checkpoint.npz", "report.json"
     QUANTIZED, EVALUATION, SLICES, LOSS_PNG = "quantized.npz", "evaluation.json", "slices", "loss.png"
-    QUANTIZED_LABELS = "quantized_labels.npy"
+    QUANTIZED_LABELS, GCVF = "quantized_labels.npy", "slices.gcvf"
+    VIEWS_PNG, PREDICTION_GLB, TARGET_GLB = "views.png", "prediction.glb", "target.glb"
 
     def __init__(self, path):
         self.path = Path(path)
@@ -113,7 +137,7 @@ class RunDir:
             raise ValueError(f"run directory {self.path} does not exist")
 
     @classmethod
-    def create(cls, path) -> "RunDir":
+    def create(cls, path) -> RunDir:
         """Make the folder (if needed) and remove the temporary files of an earlier process that was killed while
         writing (``inkopt.io`` writes ``NAME.XXXX.tmp[.npz]`` and renames it into place)."""
         Path(path).mkdir(parents=True, exist_ok=True)
@@ -121,35 +145,96 @@ class RunDir:
             stale.unlink(missing_ok=True)
         return cls(path)
 
-    def __truediv__(self, name: str) -> Path:
-        return self.path / name
-
     def __str__(self) -> str:
         return str(self.path)
 
+    # ------------------------------------------------------------------ names
     @property
-    def checkpoint(self) -> Path:
+    def volume_path(self) -> Path:
+        """volume.npz: the optimised mixture."""
+        return self.path / self.VOLUME
+
+    @property
+    def scene_path(self) -> Path:
+        """scene.npz: texels, targets, constraints (:class:`SceneRecord`)."""
+        return self.path / self.SCENE
+
+    @property
+    def checkpoint_path(self) -> Path:
+        """checkpoint.npz: the optimiser's state for an exact resume (``optim.checkpoint``)."""
         return self.path / self.CHECKPOINT
 
-    def _need(self, name: str, hint: str) -> Path:
-        p = self.path / name
-        if not p.is_file():
-            raise ValueError(f"{p} does not exist ({hint})")
-        return p
+    @property
+    def report_path(self) -> Path:
+        return self.path / self.REPORT
+
+    @property
+    def quantized_path(self) -> Path:
+        """quantized.npz: the printer labels volume without its labels (those are in quantized_labels.npy)."""
+        return self.path / self.QUANTIZED
+
+    @property
+    def quantized_labels_path(self) -> Path:
+        return self.path / self.QUANTIZED_LABELS
+
+    @property
+    def evaluation_path(self) -> Path:
+        return self.path / self.EVALUATION
+
+    @property
+    def slices_path(self) -> Path:
+        """slices/: the default folder of ``inkopt export``'s PNG slices."""
+        return self.path / self.SLICES
+
+    @property
+    def gcvf_path(self) -> Path:
+        """slices.gcvf: the default GrabCAD Voxel Print package of ``inkopt export --format gcvf``."""
+        return self.path / self.GCVF
+
+    @property
+    def loss_picture_path(self) -> Path:
+        """loss.png: the training loss and ΔE76 per iteration."""
+        return self.path / self.LOSS_PNG
+
+    def face_picture_path(self, face: str) -> Path:
+        """face_<face>.png: a slab face's target | prediction | ΔE76 map."""
+        return self.path / f"face_{face}.png"
+
+    def evaluation_picture_path(self, face: str) -> Path:
+        """evaluation_<face>.png: a slab face's target | optimized | quantized | baselines (``inkopt evaluate``)."""
+        return self.path / f"evaluation_{face}.png"
+
+    @property
+    def views_picture_path(self) -> Path:
+        """views.png: a mesh's target and predicted views."""
+        return self.path / self.VIEWS_PNG
+
+    @property
+    def prediction_glb_path(self) -> Path:
+        return self.path / self.PREDICTION_GLB
+
+    @property
+    def target_glb_path(self) -> Path:
+        return self.path / self.TARGET_GLB
+
+    def _need(self, path: Path, hint: str) -> Path:
+        if not path.is_file():
+            raise ValueError(f"{path} does not exist ({hint})")
+        return path
 
     # ------------------------------------------------------------------ the continuous result
     def save_volume(self, vol: Volume) -> Path:
-        vol.save(self.path / self.VOLUME)
-        return self.path / self.VOLUME
+        vol.save(self.volume_path)
+        return self.volume_path
 
     def save_volume_slabs(self, geometry: Volume, mixture_slabs, inks) -> Path:
         """volume.npz of ``geometry`` with a mixture given as z slabs (``Volume.save_with_mixture``)."""
-        geometry.save_with_mixture(self.path / self.VOLUME, mixture_slabs, inks)
-        return self.path / self.VOLUME
+        geometry.save_with_mixture(self.volume_path, mixture_slabs, inks)
+        return self.volume_path
 
     def load_volume(self) -> Volume:
         """The optimised mixture volume (volume.npz)."""
-        p = self._need(self.VOLUME, "run 'inkopt slab' or 'inkopt optimize' first")
+        p = self._need(self.volume_path, "run 'inkopt slab' or 'inkopt optimize' first")
         vol = Volume.load(p)
         if vol.form != "mixture":
             raise ValueError(f"{p} holds a {vol.form} volume; this step needs a mixture volume")
@@ -157,11 +242,11 @@ class RunDir:
 
     # ------------------------------------------------------------------ the scene
     def save_scene(self, rec: SceneRecord) -> Path:
-        save_npz(self.path / self.SCENE, rec.arrays())
-        return self.path / self.SCENE
+        save_npz(self.scene_path, rec.arrays())
+        return self.scene_path
 
     def load_scene(self) -> SceneRecord:
-        p = self._need(self.SCENE, "run 'inkopt slab' or 'inkopt optimize' first")
+        p = self._need(self.scene_path, "run 'inkopt slab' or 'inkopt optimize' first")
         return SceneRecord.from_arrays(load_npz(p, "scene file"), str(p))
 
     # ------------------------------------------------------------------ printer labels
@@ -170,7 +255,7 @@ class RunDir:
         with self.quantized_writer(vol, vol.shape) as w:
             for k in range(vol.shape[0]):
                 w[k] = vol.labels[k]
-        return self.path / self.QUANTIZED
+        return self.quantized_path
 
     @contextmanager
     def quantized_writer(self, meta: Volume, shape, normals=None):
@@ -183,41 +268,37 @@ class RunDir:
         arrays = {k: v for k, v in meta.to_arrays().items() if k != "labels"}
         if normals is not None:
             arrays.update(normal_index=normals.index, normal_vectors=normals.vectors)
-        w = LabelFileWriter(self.path / self.QUANTIZED_LABELS, shape)
+        w = LabelFileWriter(self.quantized_labels_path, shape)
         try:
             yield w
-            (self.path / self.QUANTIZED).unlink(missing_ok=True)
+            self.quantized_path.unlink(missing_ok=True)
             w.commit()
         except BaseException:
             w.abort()
             raise
-        save_npz(self.path / self.QUANTIZED, {**arrays, "labels_file": np.array(self.QUANTIZED_LABELS),
-                                              "labels_shape": np.asarray(w.shape, np.int64),
-                                              "label_counts": w.counts})
+        save_npz(self.quantized_path, {**arrays, "labels_file": np.array(self.QUANTIZED_LABELS),
+                                       "labels_shape": np.asarray(w.shape, np.int64), "label_counts": w.counts})
 
     def volume_file(self) -> Path:
         """The path of volume.npz (checked to exist), for stages that read it lazily."""
-        return self._need(self.VOLUME, "run 'inkopt slab' or 'inkopt optimize' first")
+        return self._need(self.volume_path, "run 'inkopt slab' or 'inkopt optimize' first")
 
     def has_quantized(self) -> bool:
-        return (self.path / self.QUANTIZED).is_file()
+        return self.quantized_path.is_file()
 
     def load_quantized(self) -> Volume:
-        p = self._need(self.QUANTIZED, f"run 'inkopt quantize {self.path}' first")
-        vol = Volume.load(p)
+        p = self._need(self.quantized_path, f"run 'inkopt quantize {self.path}' first")
+        vol = Volume.from_arrays(upgrade_volume(load_npz(p, "quantized volume"), p, quantized=True), p)
         if vol.form != "labels":
             raise ValueError(f"{p} holds a {vol.form} volume, not printer labels")
         return vol
 
     # ------------------------------------------------------------------ reports
     def write_report(self, report: dict) -> Path:
-        return write_json(self.path / self.REPORT, report)
+        return write_json(self.report_path, report)
 
     def read_report(self) -> dict:
-        return json.loads(self._need(self.REPORT, "the run has not finished").read_text())
+        return json.loads(self._need(self.report_path, "the run has not finished").read_text())
 
     def write_evaluation(self, ev: dict) -> Path:
-        return write_json(self.path / self.EVALUATION, ev, indent=1)
-
-    def slices(self) -> Path:
-        return self.path / self.SLICES
+        return write_json(self.evaluation_path, ev, indent=1)

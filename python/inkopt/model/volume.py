@@ -13,12 +13,12 @@ The volume file (``.npz``) stores the medium's arrays under those names; the ink
 ``ink_sigma_s``/``ink_sigma_a`` float32 (N, 3) mm^-1. Always: ``voxel_mm`` (3,) float (x, y, z). Optional:
 ``g`` (default 0.4), ``ior`` (default 1.5), ``inside`` bool (z, y, x) (default: the whole box), outward shading
 normals of the surface voxels as ``normal_index`` (K,) int64 linear indices and ``normal_vectors`` (K, 3) float32
-(x, y, z) (``model.normals.SurfaceNormals``; files written before it hold a dense ``normals`` (z, y, x, 3), which
-still loads), ``boundary`` ("box" or
-"periodic-xy"), ``origin_mm`` (3,) (x, y, z of voxel (0, 0, 0)'s low corner; meshes), and for quantized volumes
-the ``Quantization`` settings ``method``, ``seed``, ``dpi`` (3,) (x, y, z), ``upsample``. Instead of ``labels``
-a file may name ``labels_file`` (a .npy beside it, ``model.labelfile``; shape ``labels_shape``): the labels are
-then memory-mapped read-only.
+(x, y, z) (``model.normals.SurfaceNormals``), ``boundary`` ("box" or "periodic-xy"), ``origin_mm`` (3,) (x, y, z
+of voxel (0, 0, 0)'s low corner; meshes), and for quantized volumes the ``Quantization`` settings ``method``,
+``seed``, ``dpi`` (3,) (x, y, z), ``upsample``. Instead of ``labels`` a file may name ``labels_file`` (a .npy
+beside it, ``model.labelfile``; shape ``labels_shape``): the labels are then memory-mapped read-only. Every file
+carries ``format_version`` int64 (``VOLUME_FORMAT``); :func:`upgrade_volume` reads the older versions users may
+hold.
 """
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io import Streamed, load_npz, save_npz
+from ..io import FORMAT_KEY, FormatError, Streamed, load_npz, save_npz, upgrade_format
 from .inks import DEFAULT_G, InkTable, mix
 from .normals import SurfaceNormals
 from .labelfile import load_label_file
@@ -37,6 +37,8 @@ BOUNDARIES = ("box", "periodic-xy")
 # Memory the renderer may use for one volume; a volume above this is refused (bytes).
 MAX_VOLUME_BYTES = int(os.environ.get("INKOPT_MAX_VOLUME_BYTES", 16 * 2**30))
 EMPTY = 255
+#: the format version volume files are written in (``format_version``; ``upgrade_volume`` reads older ones)
+VOLUME_FORMAT = 1
 
 
 class VolumeError(ValueError):
@@ -348,8 +350,8 @@ class Volume:
 
     def geometry_arrays(self) -> dict:
         """Everything ``to_arrays`` writes but the medium's own arrays."""
-        out = {"voxel_mm": self.voxel_mm, "g": np.float64(self.g), "ior": np.float64(self.ior),
-               "boundary": np.array(self.boundary)}
+        out = {FORMAT_KEY: np.int64(VOLUME_FORMAT), "voxel_mm": self.voxel_mm, "g": np.float64(self.g),
+               "ior": np.float64(self.ior), "boundary": np.array(self.boundary)}
         if self.inside is not None:
             out["inside"] = self.inside
         if self.normals is not None:
@@ -364,11 +366,18 @@ class Volume:
         save_npz(path, self.to_arrays())
 
     @classmethod
-    def load(cls, path: str | Path) -> "Volume":
+    def load(cls, path: str | Path) -> Volume:
+        """A volume file (module docstring), brought to the current format version (``upgrade_volume``)."""
         try:
             data = load_npz(path, "volume file")
         except ValueError as exc:
             raise VolumeError(str(exc)) from None
+        return cls.from_arrays(upgrade_volume(data, path), path)
+
+    @classmethod
+    def from_arrays(cls, data: dict, path: str | Path) -> Volume:
+        """The volume of a volume file's arrays ``data`` (current format version), read from ``path`` (which
+        names it in errors and locates a ``labels_file``)."""
         if "voxel_mm" not in data:
             raise VolumeError(f"{path}: missing array 'voxel_mm' (3 voxel sizes x, y, z in mm)")
         g = float(data["g"]) if "g" in data else DEFAULT_G
@@ -388,17 +397,37 @@ class Volume:
             except ValueError as exc:
                 raise VolumeError(str(exc)) from None
         vol = cls(data["voxel_mm"], _medium_of(data.get("sigma_s"), data.get("sigma_a"), data.get("mixture"),
-                                             labels, inks), g=g,
+                                               labels, inks), g=g,
                   ior=float(data["ior"]) if "ior" in data else 1.5, inside=data.get("inside"),
-                  normals=data.get("normals"), boundary=str(data["boundary"]) if "boundary" in data else "box",
+                  boundary=str(data["boundary"]) if "boundary" in data else "box",
                   origin_mm=data.get("origin_mm"), quantization=Quantization.from_arrays(data))
-        if "normal_index" in data:  # the sparse form (files before it hold a dense "normals", read above)
+        if "normal_index" in data:
             try:
                 vol.normals = SurfaceNormals(vol.shape, data["normal_index"], data["normal_vectors"])
             except (KeyError, ValueError) as exc:
                 raise VolumeError(f"{path}: bad normals: {exc}") from None
             vol.validate()
         return vol
+
+
+def upgrade_volume(data: dict, where, quantized: bool = False) -> dict:
+    """A volume file's arrays (or, for a lazy reader, its small arrays plus the names of the others as keys)
+    brought to ``VOLUME_FORMAT``; ``quantized``: the file is a run's quantized.npz. Version 0 (files without
+    ``format_version``) reads as version 1, except the pre-release layouts, refused in one line
+    (``FormatError``): dense shading normals (``normals`` (z, y, x, 3)) and a quantized.npz holding its labels."""
+    kind = "quantized volume" if quantized else "volume file"
+    again = f"run 'inkopt quantize {Path(where).parent}' again" if quantized else \
+        "write it again with this inkopt (e.g. rerun the optimisation)"
+
+    def from_0(d: dict) -> dict:
+        if "normals" in d:
+            raise FormatError(f"{where} stores dense shading normals, a pre-release layout; {again}")
+        if quantized and "labels" in d:
+            raise FormatError(f"{where} holds its labels inside (a pre-release layout, now {Path(where).parent}/"
+                              f"quantized_labels.npy); {again}")
+        return d
+
+    return upgrade_format(data, kind=kind, where=where, current=VOLUME_FORMAT, upgrades={0: from_0})
 
 
 def _medium_of(sigma_s, sigma_a, mixture, labels, inks) -> Medium:

@@ -17,50 +17,21 @@ import hashlib
 import json
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
 from ..color import delta_e76
-from ..io import save_npz
 from ..lighting import Lighting, load_lighting
 from ..loss import TexelLoss
 from ..model import FixedShares, Texels, Volume, mix_grad
 from ..render import Renderer
+from .checkpoint import History, read_checkpoint, write_checkpoint
 from .config import OptimizeConfig
 from .optimizers import make_optimizer, step_factor
 from .param import Parameterization, initial_free_mixture
 from .smooth import MAX_DEPTH, GradientSmoother, nearest_texels, texel_guide
-
-
-@dataclass
-class History:
-    """Per-iteration figures of the training loss (on the running-average prediction): ``e1``-``e3`` are the
-    loss terms, NaN for a term of weight 0 (not evaluated in training; the final evaluation reports all three);
-    ``delta_e76`` the mean ΔE76; seconds of the whole step and of its parts."""
-
-    loss: list = field(default_factory=list)
-    e1: list = field(default_factory=list)
-    e2: list = field(default_factory=list)
-    e3: list = field(default_factory=list)
-    delta_e76: list = field(default_factory=list)
-    seconds: list = field(default_factory=list)
-    render_s: list = field(default_factory=list)
-    gradient_s: list = field(default_factory=list)
-    loss_s: list = field(default_factory=list)
-    step_s: list = field(default_factory=list)
-
-    def append(self, **kw):
-        for k, v in kw.items():
-            getattr(self, k).append(float(v))
-
-    def arrays(self) -> dict:
-        return {f"hist_{k}": np.asarray(v, np.float64) for k, v in asdict(self).items()}
-
-    @classmethod
-    def from_arrays(cls, d) -> "History":
-        return cls(**{k: [float(x) for x in d[f"hist_{k}"]] for k in asdict(cls()) if f"hist_{k}" in d})
 
 
 #: samples per texel of the first iteration's forward render of a run without forward passes (forward_spp 0)
@@ -152,36 +123,27 @@ class Optimization:
         return self.base.with_mixture(self.mixture())
 
     def config_key(self) -> str:
-        """What must match for a checkpoint to be resumable (not the iteration count)."""
+        """What must match for a checkpoint to be resumable (not the iteration count): the settings, the grid,
+        inks, texels, free voxels, a digest of the targets and fixed shares, and the lighting, as JSON."""
         d = asdict(self.cfg)
         d.pop("iterations")
         d.pop("checkpoint_every")
-        if d["schedule_iterations"] is None:  # settings added later: checkpoints made before them stay resumable
-            d.pop("schedule_iterations")
-        if not d["decay"]:
-            d.pop("decay")
-        if not d["smooth"]:
-            d.pop("smooth")
+        if not d["smooth"]:  # without smoothing its edge guide does nothing
             d.pop("smooth_edge")
-        elif d["smooth_edge"]:  # guided smoothing acts under flat texels only (since it became the default)
-            d["smooth_where"] = "flat"
         d.update(shape=list(self.base.shape), inks=list(self.base.inks.names), texels=len(self.texels),
-                 free=self.param.n_free, problem=self._problem_digest)
-        if not self.lighting.uniform:
-            d["lighting"] = self.lighting.key()
+                 free=self.param.n_free, problem=self._problem_digest, lighting=self.lighting.key())
         return json.dumps(d, sort_keys=True)
 
     def save_checkpoint(self, path: Path) -> None:
         extra = {} if self.c_avg is None else {"c_avg": self.c_avg, "c_weight": np.float64(self.c_weight),
                                                 "c_var": self.c_var}
-        save_npz(path, {"x": self.x, "iteration": np.int64(self.iteration), **extra,
-                        "config_key": np.array(self.config_key()), **self.opt.state(), **self.history.arrays()},
-                 compressed=False)
+        write_checkpoint(path, {"x": self.x, "iteration": np.int64(self.iteration), **extra,
+                                "config_key": np.array(self.config_key()), **self.opt.state(),
+                                **self.history.arrays()})
 
     def load_checkpoint(self, path: Path) -> None:
-        with np.load(path, allow_pickle=False) as z:
-            d = dict(z)
-        if str(d["config_key"]) != self.config_key():
+        d = read_checkpoint(path)
+        if json.loads(str(d["config_key"])) != json.loads(self.config_key()):
             raise ValueError(f"checkpoint {path} was made with different settings; rerun without --resume or "
                              "with the original settings")
         self.x = np.asarray(d["x"], np.float32)

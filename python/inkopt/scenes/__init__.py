@@ -16,7 +16,7 @@ from typing import Protocol
 import numpy as np
 
 from ..model import FixedShares, Texels, Volume
-from ..rundir import SceneRecord
+from ..rundir import RunDir, SceneRecord
 
 
 class Scene(Protocol):
@@ -35,5 +35,5 @@ class Scene(Protocol):
     def report_fields(self) -> dict:
         """The scene's own entries of report.json (sizes, paths)."""
 
-    def write_pictures(self, out: Path, pred_rgb: np.ndarray, delta_e: np.ndarray) -> list[Path]:
-        """Pictures of a prediction (I, 3) linear with per-texel ΔE76 (I,) in folder ``out``."""
+    def write_pictures(self, out: RunDir, pred_rgb: np.ndarray, delta_e: np.ndarray) -> list[Path]:
+        """Pictures of a prediction (I, 3) linear with per-texel ΔE76 (I,) in run directory ``out``."""

@@ -19,7 +19,7 @@ import numpy as np
 from ..color import srgb_to_linear
 from ..model import FixedShares, InkTable, Texels, Translucency, Volume, transparent_ink
 from ..pictures import error_figure
-from ..rundir import SceneRecord
+from ..rundir import RunDir, SceneRecord
 from ..units import OPT_DPI, voxel_mm
 from .picture import resample
 from .translucency import check_depth, load_mask, slab_translucency, translucency_fields
@@ -74,9 +74,9 @@ class SlabScene:
         return {"voxels": int(np.prod(self.volume.shape)), "texels": len(self.texels),
                 "size_mm": [float(v) for v in self.size_mm], **translucency_fields(self.translucency)}
 
-    def write_pictures(self, out: Path, pred_rgb: np.ndarray, delta_e: np.ndarray) -> list[Path]:
+    def write_pictures(self, out: RunDir, pred_rgb: np.ndarray, delta_e: np.ndarray) -> list[Path]:
         """DIR/face_F.png: target | prediction | ΔE76 heat map, per textured face."""
-        return [error_figure(Path(out) / f"face_{f}.png", f, self.target_rgb, pred_rgb, delta_e, self.pix[f])
+        return [error_figure(out.face_picture_path(f), f, self.target_rgb, pred_rgb, delta_e, self.pix[f])
                 for f in self.faces]
 
 

@@ -29,7 +29,7 @@ import numpy as np
 
 from ...model import (EMPTY, FixedShares, InkTable, MeshInfo, Translucency, Volume, transparent_ink,
                       white_fixed_shares)
-from ...rundir import SceneRecord
+from ...rundir import RunDir, SceneRecord
 from ...units import OPT_DPI, voxel_mm
 from ..translucency import ALPHA, check_depth, check_mask, load_mask, translucency_fields
 from .load import TexturedMesh, load_mesh
@@ -109,14 +109,14 @@ class MeshScene:
                 "mesh_scale": self.mesh.mm_per_unit, "mesh_path": self.mesh_path,
                 "voxel_mm": [float(v) for v in self.volume.voxel_mm], **translucency_fields(self.translucency)}
 
-    def write_pictures(self, out: Path, pred_rgb: np.ndarray, delta_e: np.ndarray | None = None,
+    def write_pictures(self, out: RunDir, pred_rgb: np.ndarray, delta_e: np.ndarray | None = None,
                        views: int = 4, size: int | None = None) -> list[Path]:
         """prediction.glb, target.glb (vertex colours baked from the texels: target and predicted linear RGB
         (I, 3)) and views.png (target row over prediction row, ``views`` azimuths, ``size`` pixels each)."""
-        tx, vox, out = self.vox.texels, self.vox, Path(out)
+        tx, vox = self.vox.texels, self.vox
         target = bake_vertex_colors(self.mesh, vox.closest_mm, vox.targets, texel_normal=tx.normal)
         pred = bake_vertex_colors(self.mesh, vox.closest_mm, np.clip(pred_rgb, 0, 1), texel_normal=tx.normal)
-        paths = [out / "prediction.glb", out / "target.glb", out / "views.png"]
+        paths = [out.prediction_glb_path, out.target_glb_path, out.views_picture_path]
         write_glb(pred, paths[0])
         write_glb(target, paths[1])
         render_views(self.mesh, target, pred, paths[2], views=views, size=size or VIEW_SIZE)
