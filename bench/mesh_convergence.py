@@ -28,8 +28,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import RESULTS, machine, write  # noqa: E402
 from shell_compare import SPOT  # noqa: E402
 
-import numpy as np  # noqa: E402
-
 from inkopt.model import InkTable  # noqa: E402
 from inkopt.optim import OptimizeConfig  # noqa: E402
 from inkopt.optim.checkpoint import read_checkpoint  # noqa: E402

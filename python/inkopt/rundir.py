@@ -2,13 +2,14 @@
 
 Every optimisation (``inkopt slab``, ``inkopt optimize``) writes one folder; later stages (quantize, export,
 evaluate) read it and add to it. All files are written atomically. Stages never build these paths themselves:
-they ask a :class:`RunDir`.
+they ask a :class:`RunDir` (a named ``*_path`` accessor per file and folder; load/save methods with the checks).
 
 ``scene.npz`` is typed as a :class:`SceneRecord`: the sensor (texels), the targets, how the slab's faces map to
 pictures, and the optimisation's constraints (``free_mask``, ``fixed_share``). Large objects store only
 ``free_mask``; :meth:`SceneRecord.fixed_share` rebuilds the fixed shares from it and from the translucency
 constraint (``model.Translucency``, stored sparsely), so every reader sees the same constraints however the file
-stores them.
+stores them. scene.npz carries ``format_version`` (``SCENE_FORMAT``); older versions are read through
+``io.upgrade_format``.
 """
 from __future__ import annotations
 
