@@ -15,7 +15,7 @@ from inkopt.render import Renderer  # noqa: E402
 
 shape = (180, 470, 709)
 labels = np.random.default_rng(0).integers(0, 5, shape, dtype=np.uint8)
-vol = Volume(voxel_mm=(25.4 / 600, 25.4 / 300, 0.027), labels=labels, inks=InkTable.parse("vero-cmykw"))
+vol = Volume.from_labels(voxel_mm=(25.4 / 600, 25.4 / 300, 0.027), labels=labels, inks=InkTable.parse("vero-cmykw"))
 tex = Texels.for_volume(vol, ["top"])
 t0 = time.perf_counter()
 res = Renderer(vol).render(tex, 1, 0)

@@ -60,6 +60,8 @@ def timed(args: list[str]) -> dict:
 def main() -> dict:
     from common import machine, write
 
+    from inkopt.rundir import RunDir
+
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("height_mm", type=float, nargs="?", default=40.0)
     ap.add_argument("--dir", default="/tmp/inkopt_print_bench")
@@ -71,7 +73,7 @@ def main() -> dict:
     if args.build_only:
         build(out, args.height_mm, args.mesh)
         return {}
-    if not (args.reuse and (out / "volume.npz").is_file()):
+    if not (args.reuse and RunDir.create(out).volume_path.is_file()):
         subprocess.run([sys.executable, __file__, str(args.height_mm), "--dir", str(out), "--mesh",
                         args.mesh, "--build-only"], check=True)
     q = timed(["quantize", str(out)])
@@ -79,7 +81,8 @@ def main() -> dict:
     g = timed(["export", str(out), "--format", "gcvf"])
     import numpy as np
 
-    meta = np.load(out / "quantized.npz")
+    d = RunDir(out)
+    meta = np.load(d.quantized_path)
     shape = [int(v) for v in meta["labels_shape"]]
     res = {"mesh": Path(args.mesh).name, "height_mm": args.height_mm, "printer_grid_zyx": shape,
            "printer_voxels": int(np.prod(shape)), "ink_voxels": int(meta["label_counts"][:255].sum()),
@@ -88,9 +91,9 @@ def main() -> dict:
            "export_seconds": e["seconds"], "export_cpu_seconds": e["cpu_seconds"],
            "export_peak_rss_gb": e["peak_rss_gb"],
            "gcvf_seconds": g["seconds"], "gcvf_cpu_seconds": g["cpu_seconds"], "gcvf_peak_rss_gb": g["peak_rss_gb"],
-           "labels_file_gb": (out / "quantized_labels.npy").stat().st_size / 2**30,
-           "slices_gb": sum(p.stat().st_size for p in (out / "slices").iterdir()) / 2**30,
-           "gcvf_gb": (out / "slices.gcvf").stat().st_size / 2**30,
+           "labels_file_gb": d.quantized_labels_path.stat().st_size / 2**30,
+           "slices_gb": sum(p.stat().st_size for p in d.slices_path.iterdir()) / 2**30,
+           "gcvf_gb": d.gcvf_path.stat().st_size / 2**30,
            "output": {"quantize": q["stdout"], "export": e["stdout"], "gcvf": g["stdout"]},
            "targets": {"seconds": 120, "peak_rss_gb": 2}, **machine(),
            "note": "random mixture on every inside voxel (no optimisation); wall-clock times on a shared 2-core "

@@ -20,7 +20,7 @@ def reference_slab(seed: int = 0) -> Volume:
     m = np.zeros((30, 118, 177, 5), np.float32)
     m[..., :4] = 0.5 * rng.dirichlet(np.ones(4), size=(30, 118, 177))
     m[..., 4] = 0.5
-    return Volume(voxel_mm=(25.4 / 300,) * 3, mixture=m, inks=inks)
+    return Volume.from_mixture(voxel_mm=(25.4 / 300,) * 3, mixture=m, inks=inks)
 
 
 def machine() -> dict:

@@ -33,7 +33,7 @@ def main():
         else:
             m = np.zeros((20, 40, 40, 5), np.float32)
             m[..., :4], m[..., 4] = 0.0075, 0.97
-        vol = Volume(voxel_mm=(25.4 / 300,) * 3, mixture=m, inks=inks)
+        vol = Volume.from_mixture(voxel_mm=(25.4 / 300,) * 3, mixture=m, inks=inks)
         tex = Texels.for_volume(vol, ["top"])
         adj = rng.uniform(0.2, 1.0, (len(tex), 3)).astype(np.float32)
         r = Renderer(vol)

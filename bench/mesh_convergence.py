@@ -28,11 +28,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import RESULTS, machine, write  # noqa: E402
 from shell_compare import SPOT  # noqa: E402
 
-import numpy as np  # noqa: E402
-
 from inkopt.model import InkTable  # noqa: E402
 from inkopt.optim import OptimizeConfig  # noqa: E402
+from inkopt.optim.checkpoint import read_checkpoint  # noqa: E402
 from inkopt.run import run_mesh  # noqa: E402
+from inkopt.rundir import RunDir  # noqa: E402
 
 KEYS = ("initial_delta_e76_mean_corrected", "delta_e76_mean_corrected", "delta_e2000_mean", "initial_ssim", "ssim",
         "mottle_l2", "seconds", "seconds_iterations", "seconds_per_iteration", "eval_spp", "adjoint_ema", "smooth")
@@ -53,8 +53,8 @@ def main():
         d = Path(a.out or tmp)
         rep = run_mesh(SPOT, d, InkTable.parse("vero-cmykw"), cfg, height_mm=a.height_mm, threads=a.threads,
                        resume=a.out is not None, log=lambda s: None)
-        with np.load(d / "checkpoint.npz") as ck:
-            train = [round(float(v), 3) for v in ck["hist_delta_e76"]]
+        ck = read_checkpoint(RunDir(d).checkpoint_path)
+        train = [round(float(v), 3) for v in ck["hist_delta_e76"]]
     row = {"command": "python bench/mesh_convergence.py " + " ".join(sys.argv[1:]), "height_mm": a.height_mm,
            "iterations": a.iterations, **kw, **{k: rep[k] for k in KEYS if k in rep},
            "train_delta_e76": train}

@@ -54,13 +54,13 @@ def high_frequency_power(tex, target_rgb, a_rgb, b_rgb, k: int = 6) -> dict:
 
 def structure(run_dir: Path, spp: int, threads: int) -> dict:
     from inkopt.render import Renderer
-    from inkopt.model import Texels, Volume
+    from inkopt.rundir import RunDir
 
-    with np.load(run_dir / "scene.npz") as sc:
-        scene = dict(sc)
-    tex = Texels.from_arrays(scene)
-    target = np.asarray(scene["target_rgb"], np.float64)
-    vol = Volume.load(run_dir / "volume.npz")
+    rd = RunDir(run_dir)
+    rec = rd.load_scene()
+    tex = rec.texels
+    target = np.asarray(rec.target_rgb, np.float64)
+    vol = rd.load_volume()
     r = Renderer(vol, threads)
     a, b = r.render(tex, spp, seed=2**61 + 1), r.render(tex, spp, seed=2**61 + 2)
     out = high_frequency_power(tex, target, a.rgb, b.rgb)

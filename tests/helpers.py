@@ -60,7 +60,8 @@ def replay_matches_fd(vol, probes, spp=800, seeds=tuple(range(11, 23)), h=0.3, l
             for sign in (1, -1):
                 arr = {"sigma_s": vol.sigma_s.copy(), "sigma_a": vol.sigma_a.copy()}
                 arr[which][z, y, x, c] += sign * h
-                v2 = Volume(voxel_mm=vol.voxel_mm, boundary=vol.boundary, inside=vol.inside, **arr)
+                v2 = Volume.from_coefficients(vol.voxel_mm, arr["sigma_s"], arr["sigma_a"], boundary=vol.boundary,
+                                              inside=vol.inside)
                 vals.append(float(np.sum(render(v2, tex, spp=spp, seed=seed, lighting=lighting).rgb * adj)))
             fd.append((vals[0] - vals[1]) / (2 * h))
         assert_same_mean(g, fd, rel_bias=0.02, false_alarm=1e-4, what=(z, y, x, c, which))

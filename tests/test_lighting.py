@@ -54,7 +54,7 @@ def test_bad_maps_are_one_line_errors(tmp_path, capsys, arr, needle):
         read_map(path)
     assert needle in str(e.value) and "\n" not in str(e.value)
     vol = tmp_path / "v.npz"
-    Volume(voxel_mm=(0.1,) * 3, sigma_s=np.ones((2, 2, 2, 3), np.float32),
+    Volume.from_coefficients(voxel_mm=(0.1,) * 3, sigma_s=np.ones((2, 2, 2, 3), np.float32),
            sigma_a=np.ones((2, 2, 2, 3), np.float32)).save(vol)
     assert main(["render", str(vol), "--spp", "1", "--lighting", str(path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
@@ -88,7 +88,7 @@ def test_the_lit_side_is_where_the_map_says(axis, rotate, lit, dark):
     """A grey cube under a map bright around ``axis`` (turned by ``rotate`` about z, from +x towards +y): the face
     looking at the light is brighter than the opposite one by far more than the noise."""
     s = np.full((6, 6, 6, 3), 10.0, np.float32)
-    vol = Volume(voxel_mm=(0.1,) * 3, sigma_s=s, sigma_a=np.full_like(s, 1.0))
+    vol = Volume.from_coefficients(voxel_mm=(0.1,) * 3, sigma_s=s, sigma_a=np.full_like(s, 1.0))
     rnd = Renderer(vol, lighting=Lighting(_lobe_map(axis), rotate, "lobe"))
     res = {f: rnd.render(Texels.for_volume(vol, [f]), spp=256, seed=2) for f in (lit, dark)}
     gap = res[lit].mean_rgb - res[dark].mean_rgb
@@ -100,7 +100,7 @@ def test_render_cli_with_a_map(tmp_path, capsys):
     """Radiance 1 everywhere renders exactly as uniform light; --lighting-rotate is reported."""
     s = np.full((3, 4, 4, 3), 5.0, np.float32)
     path = tmp_path / "v.npz"
-    Volume(voxel_mm=(0.1,) * 3, sigma_s=s, sigma_a=np.full_like(s, 0.5)).save(path)
+    Volume.from_coefficients(voxel_mm=(0.1,) * 3, sigma_s=s, sigma_a=np.full_like(s, 0.5)).save(path)
     ones = write_map(tmp_path / "ones.npy", np.ones((4, 8, 3), np.float32))
     outs = []
     for extra in ([], ["--lighting", str(ones), "--lighting-rotate", "45"]):

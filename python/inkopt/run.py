@@ -62,9 +62,9 @@ def _optimise(scene, out_dir, cfg, resume, eval_spp, threads, progress, lighting
                        kind=scene.kind)
     rd = RunDir.create(out_dir)
     if resume:
-        run.resume(rd.checkpoint, log)
+        run.resume(rd.checkpoint_path, log)
     rd.save_scene(scene.record())
-    run.run(rd.checkpoint, progress=progress)
+    run.run(rd.checkpoint_path, progress=progress)
     run.release_renderer()  # not beside the writing of the result
     rd.save_volume_slabs(run.base, run.mixture_slabs(), run.base.inks)  # a slab of layers at a time
 
@@ -88,8 +88,8 @@ def _optimise(scene, out_dir, cfg, resume, eval_spp, threads, progress, lighting
     run.release_renderer()
     init = prediction_metrics(run.loss, res0.rgb, res0.var)
     de = delta_e76_map(run.loss, res.rgb)
-    scene.write_pictures(rd.path, res.rgb, de)
-    loss_figure(rd / RunDir.LOSS_PNG, run.history.loss, run.history.delta_e76)
+    scene.write_pictures(rd, res.rgb, de)
+    loss_figure(rd.loss_picture_path, run.history.loss, run.history.delta_e76)
     h = run.history
     n = max(len(h.seconds), 1)
     report = {

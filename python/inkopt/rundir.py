@@ -2,13 +2,14 @@
 
 Every optimisation (``inkopt slab``, ``inkopt optimize``) writes one folder; later stages (quantize, export,
 evaluate) read it and add to it. All files are written atomically. Stages never build these paths themselves:
-they ask a :class:`RunDir`.
+they ask a :class:`RunDir` (a named ``*_path`` accessor per file and folder; load/save methods with the checks).
 
 ``scene.npz`` is typed as a :class:`SceneRecord`: the sensor (texels), the targets, how the slab's faces map to
 pictures, and the optimisation's constraints (``free_mask``, ``fixed_share``). Large objects store only
-``free_mask``; :meth:`SceneRecord.fixed_share` rebuilds the dense shares from it and from the translucency
-constraint (:class:`Translucency`, stored sparsely), so every reader sees the same constraints however the file
-stores them.
+``free_mask``; :meth:`SceneRecord.fixed_share` rebuilds the fixed shares from it and from the translucency
+constraint (``model.Translucency``, stored sparsely), so every reader sees the same constraints however the file
+stores them. scene.npz carries ``format_version`` (``SCENE_FORMAT``); older versions are read through
+``io.upgrade_format``.
 """
 from __future__ import annotations
 
@@ -19,145 +20,15 @@ from pathlib import Path
 
 import numpy as np
 
-from .io import load_npz, save_npz, write_json
-from .model import FixedShares, InkTable, Texels, Volume
+from .io import FORMAT_KEY, FormatError, load_npz, save_npz, upgrade_format, write_json
+from .model import FixedShares, InkTable, MeshInfo, Texels, Translucency, Volume, scene_fixed_shares
 from .model.labelfile import LabelFileWriter
+from .model.volume import upgrade_volume
 
 #: scene.npz stores the dense (z, y, x, N) fixed_share only below this many entries (else: free_mask only)
 FIXED_SHARE_MAX_ENTRIES = 50_000_000
-
-
-def white_fixed_share(free: np.ndarray, inks: InkTable) -> np.ndarray:
-    """(z, y, x, N) float32 fixed ink shares: 100 % white where ``free`` (z, y, x) is False, none where True."""
-    return white_fixed_shares(free, inks).dense()
-
-
-def white_fixed_shares(free: np.ndarray, inks: InkTable) -> FixedShares:
-    """:func:`white_fixed_share` in compact form (``free`` kept by reference)."""
-    if "white" not in inks.names:
-        raise ValueError(f"voxels that are not optimised (outside the object, the core below --shell-mm) are "
-                         f"printed white, but the ink set {list(inks.names)} has no 'white'")
-    held = np.zeros(len(inks), np.float32)
-    held[inks.index("white")] = 1.0
-    return FixedShares(free, held)
-
-
-TRANSPARENT_INKS = ("transparent", "clear")  # ink names that count as the transparent ink
-
-
-def transparent_ink(inks: InkTable) -> str:
-    """The name of the ink set's transparent ink; one-line ValueError if it has none."""
-    for name in TRANSPARENT_INKS:
-        if name in inks.names:
-            return name
-    raise ValueError(f"--translucency needs a transparent ink ('transparent' or 'clear') in the ink set, but "
-                     f"{list(inks.names)} has none; use e.g. --inks vero-cmykwt")
-
-
-@dataclass
-class Translucency:
-    """A translucency constraint: the voxels ``index`` ((K,) int64, flat C-order indices of the (z, y, x) grid
-    ``shape``) must hold the share ``share`` ((K,) float32 in (0, 1]) of ink ``ink`` (the transparent ink); the
-    optimiser chooses the rest of their mixture. ``depth_mm``: how deep below the surface it reaches (None: the
-    whole object); ``source``: the mask file or "alpha" (a mesh texture's alpha channel)."""
-
-    ink: str
-    shape: tuple
-    index: np.ndarray
-    share: np.ndarray
-    depth_mm: float | None = None
-    source: str = ""
-
-    def __post_init__(self):
-        self.shape = tuple(int(v) for v in self.shape)
-        self.index = np.asarray(self.index, np.int64).reshape(-1)
-        self.share = np.asarray(self.share, np.float32).reshape(-1)
-
-    def grid(self) -> np.ndarray:
-        """(z, y, x) float32: the required transparent share of every voxel (0: unconstrained)."""
-        out = np.zeros(self.shape, np.float32)
-        out.reshape(-1)[self.index] = self.share
-        return out
-
-    def texel_share(self, texels: Texels) -> np.ndarray:
-        """(I,) float32: the required share at each texel's voxel."""
-        return self.grid()[tuple(np.asarray(texels.voxel).T)]
-
-    def apply(self, fixed: np.ndarray, inks: InkTable) -> np.ndarray:
-        """Set the constrained voxels' transparent share in ``fixed`` (z, y, x, N) float32 (in place; returned).
-        Their other fixed shares (the white of a core or outside voxel) shrink to make room: a voxel that was
-        100 % white becomes ``share`` transparent + (1 - ``share``) white; free voxels keep no other fixed share.
-        Idempotent."""
-        self._check(fixed.shape, inks)
-        flat = fixed.reshape(-1, len(inks))
-        flat[self.index] = self._constrain(flat[self.index], inks)
-        return fixed
-
-    def applied(self, fixed: FixedShares, inks: InkTable) -> FixedShares:
-        """:meth:`apply` on compact fixed shares: a new ``FixedShares`` whose dense form is ``apply``'s result."""
-        self._check(fixed.shape, inks)
-        index = np.union1d(fixed.index, self.index)
-        rows = fixed.at(index)
-        pos = np.searchsorted(index, self.index)
-        rows[pos] = self._constrain(rows[pos], inks)
-        return FixedShares(fixed.free, fixed.held, index, rows)
-
-    def _check(self, shape, inks: InkTable) -> None:
-        if tuple(shape[:3]) != self.shape:
-            raise ValueError(f"translucency constraint is for a {self.shape} grid, not {tuple(shape[:3])}")
-        if self.ink not in inks.names:
-            raise ValueError(f"the translucency constraint needs ink '{self.ink}', not in {list(inks.names)}")
-
-    def _constrain(self, rows: np.ndarray, inks: InkTable) -> np.ndarray:
-        """The constrained voxels' fixed shares (K, N) float32 from their unconstrained ones (changed in place)."""
-        t = inks.index(self.ink)
-        rows[:, t] = 0.0
-        other = rows.sum(1)
-        room = 1.0 - self.share
-        rows *= np.where(other > room, room / np.maximum(other, 1e-12), 1.0)[:, None]
-        rows[:, t] = self.share
-        return rows
-
-    def arrays(self) -> dict:
-        return {"translucency_ink": np.array(self.ink), "translucency_shape": np.array(self.shape, np.int64),
-                "translucency_index": self.index, "translucency_share": self.share,
-                "translucency_depth_mm": np.float64(np.nan if self.depth_mm is None else self.depth_mm),
-                "translucency_source": np.array(self.source)}
-
-    @classmethod
-    def from_arrays(cls, d) -> "Translucency | None":
-        if "translucency_index" not in d:
-            return None
-        depth = float(d["translucency_depth_mm"])
-        return cls(str(d["translucency_ink"]), tuple(np.asarray(d["translucency_shape"])), d["translucency_index"],
-                   d["translucency_share"], None if np.isnan(depth) else depth, str(d["translucency_source"]))
-
-
-@dataclass
-class MeshInfo:
-    """Where a mesh run's object came from and how it sits on the grid (mm, x, y, z)."""
-
-    mesh_path: str
-    mesh_scale: float          # mm per model unit
-    height_mm: float
-    up: str
-    origin_mm: np.ndarray      # (3,) low corner of voxel (0, 0, 0)
-    voxel_mm: np.ndarray       # (3,)
-    texel_closest_mm: np.ndarray  # (I, 3) closest surface point of each texel
-    shell_mm: float | None
-
-    def arrays(self) -> dict:
-        return {"mesh_path": np.array(self.mesh_path), "mesh_scale": np.float64(self.mesh_scale),
-                "height_mm": np.float64(self.height_mm), "up": np.array(self.up), "origin_mm": self.origin_mm,
-                "voxel_mm": self.voxel_mm, "texel_closest_mm": self.texel_closest_mm,
-                "shell_mm": np.float64(np.nan if self.shell_mm is None else self.shell_mm)}
-
-    @classmethod
-    def from_arrays(cls, d) -> "MeshInfo":
-        shell = float(d["shell_mm"]) if "shell_mm" in d else float("nan")
-        return cls(str(d["mesh_path"]), float(d["mesh_scale"]), float(d.get("height_mm", np.nan)),
-                   str(d.get("up", "y")), np.asarray(d["origin_mm"]), np.asarray(d["voxel_mm"]),
-                   np.asarray(d["texel_closest_mm"]), None if np.isnan(shell) else shell)
+#: the format version scene.npz is written in (``format_version``)
+SCENE_FORMAT = 1
 
 
 @dataclass
@@ -166,9 +37,10 @@ class SceneRecord:
 
     kind: "slab" or "mesh"; texels: the sensor; target_rgb (I, 3) float32 linear; faces: the textured faces of a
     slab (e.g. ["bottom", "top"]) with pix[F] (H, W) int32 the texel index at each picture pixel (row 0 = top);
-    free_mask (z, y, x) bool: the voxels the optimiser may change (None: decided by fixed_share alone);
-    fixed_share_dense (z, y, x, N) float32 or None (includes the translucency); mesh: a mesh run's MeshInfo;
-    translucency: the translucency constraint (:class:`Translucency`) or None.
+    free_mask (z, y, x) bool: the voxels the optimiser may change (None: decided by the fixed shares alone);
+    fixed: the fixed ink shares (``FixedShares``, translucency included) or None (then rebuilt from free_mask and
+    translucency); mesh: a mesh run's ``MeshInfo``; translucency: the translucency constraint (``Translucency``)
+    or None.
     """
 
     kind: str
@@ -177,7 +49,7 @@ class SceneRecord:
     faces: list[str] = field(default_factory=list)
     pix: dict[str, np.ndarray] = field(default_factory=dict)
     free_mask: np.ndarray | None = None
-    fixed_share_dense: np.ndarray | None = None
+    fixed: FixedShares | None = None
     mesh: MeshInfo | None = None
     translucency: Translucency | None = None
 
@@ -187,35 +59,31 @@ class SceneRecord:
             raise ValueError(f"scene target_rgb has shape {self.target_rgb.shape}, expected ({len(self.texels)}, 3)"
                              " with texels")
 
-    def fixed_share(self, inks: InkTable, shape=None) -> np.ndarray | None:
-        """(z, y, x, N) float32 fixed ink shares: stored densely, or rebuilt from ``free_mask`` (100 % white
-        wherever the mask is False) and the translucency constraint, or None if the scene has no constraints.
-        ``shape`` (z, y, x) checks it."""
-        tr = self.translucency
-        if self.fixed_share_dense is not None:
-            fixed = np.asarray(self.fixed_share_dense, np.float32)
-        elif self.free_mask is not None:
-            fixed = white_fixed_share(np.asarray(self.free_mask, bool), inks)
-        elif tr is not None:
-            fixed = np.zeros(tr.shape + (len(inks),), np.float32)
-        else:
-            return None
-        if tr is not None and self.fixed_share_dense is None:
-            tr.apply(fixed, inks)
-        if fixed.shape[-1] != len(inks) or (shape is not None and fixed.shape[:3] != tuple(shape)):
+    def fixed_share(self, inks: InkTable, shape=None) -> FixedShares | None:
+        """The (z, y, x, N) fixed ink shares: as stored, or rebuilt from ``free_mask`` (100 % white wherever the
+        mask is False) and the translucency constraint (``model.scene_fixed_shares``), or None if the scene has
+        no constraints. ``shape`` (z, y, x) checks it."""
+        fixed = self.fixed
+        if fixed is None:
+            free = None if self.free_mask is None else np.asarray(self.free_mask, bool)
+            fixed = scene_fixed_shares(inks, free, self.translucency)
+        if fixed is not None and (fixed.shape[-1] != len(inks) or (shape is not None
+                                                                   and fixed.shape[:3] != tuple(shape))):
             raise ValueError(f"scene fixed_share has shape {fixed.shape}, expected {tuple(shape or ())} x "
                              f"{len(inks)} inks")
         return fixed
 
     def arrays(self) -> dict:
-        out = {**self.texels.to_arrays(), "target_rgb": self.target_rgb, "kind": np.array(self.kind)}
+        """The arrays of scene.npz (the dense fixed shares only below ``FIXED_SHARE_MAX_ENTRIES`` entries)."""
+        out = {FORMAT_KEY: np.int64(SCENE_FORMAT), **self.texels.to_arrays(), "target_rgb": self.target_rgb,
+               "kind": np.array(self.kind)}
         if self.faces:
             out["faces"] = np.array(self.faces)
         out.update({f"pix_{f}": p for f, p in self.pix.items()})
         if self.free_mask is not None:
             out["free_mask"] = self.free_mask
-        if self.fixed_share_dense is not None and self.fixed_share_dense.size < FIXED_SHARE_MAX_ENTRIES:
-            out["fixed_share"] = self.fixed_share_dense
+        if self.fixed is not None and np.prod(self.fixed.shape) < FIXED_SHARE_MAX_ENTRIES:
+            out["fixed_share"] = self.fixed.dense()
         if self.mesh is not None:
             out.update(self.mesh.arrays())
         if self.translucency is not None:
@@ -223,25 +91,46 @@ class SceneRecord:
         return out
 
     @classmethod
-    def from_arrays(cls, d, where: str = "scene.npz") -> "SceneRecord":
-        for k in ("texel_voxel", "texel_face", "texel_normal", "target_rgb"):
+    def from_arrays(cls, d, where: str = "scene.npz") -> SceneRecord:
+        """The record of scene.npz's arrays ``d`` (any format version this inkopt reads; ``where`` names the file
+        in errors)."""
+        d = upgrade_format(d, kind="scene file", where=where, current=SCENE_FORMAT,
+                           upgrades={0: lambda a: _scene_from_0(a, where)})
+        for k in ("texel_voxel", "texel_face", "texel_normal", "target_rgb", "kind"):
             if k not in d:
                 raise ValueError(f"{where} lacks array '{k}'")
         faces = [str(f) for f in np.asarray(d["faces"]).reshape(-1)] if "faces" in d else []
-        kind = str(d.get("kind", "slab"))
+        kind = str(d["kind"])
         return cls(kind, Texels.from_arrays(d), d["target_rgb"], faces,
                    {f: np.asarray(d[f"pix_{f}"]) for f in faces if f"pix_{f}" in d},
                    np.asarray(d["free_mask"], bool) if "free_mask" in d else None,
-                   d.get("fixed_share"), MeshInfo.from_arrays(d) if kind == "mesh" and "mesh_path" in d else None,
+                   FixedShares.from_dense(d["fixed_share"]) if "fixed_share" in d else None,
+                   MeshInfo.from_arrays(d) if kind == "mesh" and "mesh_path" in d else None,
                    Translucency.from_arrays(d))
 
 
+def _scene_from_0(d: dict, where) -> dict:
+    """scene.npz version 0 -> 1: the same arrays; the pre-release layouts (no ``kind``; a mesh record without
+    ``height_mm``, ``up`` or ``shell_mm``) are refused in one line."""
+    missing = [k for k in ("kind",) if k not in d]
+    if str(d.get("kind")) == "mesh" and "mesh_path" in d:
+        missing += [k for k in ("height_mm", "up", "shell_mm") if k not in d]
+    if missing:
+        raise FormatError(f"{where} lacks {', '.join(missing)}: a pre-release layout; rerun the optimisation with "
+                          f"this inkopt")
+    return d
+
+
 class RunDir:
-    """A run directory. ``RunDir(path)`` requires it to exist; ``RunDir.create(path)`` makes it."""
+    """A run directory. ``RunDir(path)`` requires it to exist; ``RunDir.create(path)`` makes it.
+
+    Every file and folder of a run has a named accessor (``*_path``: where it is, whether or not it exists yet)
+    and, for the files inkopt reads back, a load/save or read/write method with its checks."""
 
     VOLUME, SCENE, CHECKPOINT, REPORT = "volume.npz", "scene.npz", "checkpoint.npz", "report.json"
     QUANTIZED, EVALUATION, SLICES, LOSS_PNG = "quantized.npz", "evaluation.json", "slices", "loss.png"
-    QUANTIZED_LABELS = "quantized_labels.npy"
+    QUANTIZED_LABELS, GCVF = "quantized_labels.npy", "slices.gcvf"
+    VIEWS_PNG, PREDICTION_GLB, TARGET_GLB = "views.png", "prediction.glb", "target.glb"
 
     def __init__(self, path):
         self.path = Path(path)
@@ -249,7 +138,7 @@ class RunDir:
             raise ValueError(f"run directory {self.path} does not exist")
 
     @classmethod
-    def create(cls, path) -> "RunDir":
+    def create(cls, path) -> RunDir:
         """Make the folder (if needed) and remove the temporary files of an earlier process that was killed while
         writing (``inkopt.io`` writes ``NAME.XXXX.tmp[.npz]`` and renames it into place)."""
         Path(path).mkdir(parents=True, exist_ok=True)
@@ -257,35 +146,96 @@ class RunDir:
             stale.unlink(missing_ok=True)
         return cls(path)
 
-    def __truediv__(self, name: str) -> Path:
-        return self.path / name
-
     def __str__(self) -> str:
         return str(self.path)
 
+    # ------------------------------------------------------------------ names
     @property
-    def checkpoint(self) -> Path:
+    def volume_path(self) -> Path:
+        """volume.npz: the optimised mixture."""
+        return self.path / self.VOLUME
+
+    @property
+    def scene_path(self) -> Path:
+        """scene.npz: texels, targets, constraints (:class:`SceneRecord`)."""
+        return self.path / self.SCENE
+
+    @property
+    def checkpoint_path(self) -> Path:
+        """checkpoint.npz: the optimiser's state for an exact resume (``optim.checkpoint``)."""
         return self.path / self.CHECKPOINT
 
-    def _need(self, name: str, hint: str) -> Path:
-        p = self.path / name
-        if not p.is_file():
-            raise ValueError(f"{p} does not exist ({hint})")
-        return p
+    @property
+    def report_path(self) -> Path:
+        return self.path / self.REPORT
+
+    @property
+    def quantized_path(self) -> Path:
+        """quantized.npz: the printer labels volume without its labels (those are in quantized_labels.npy)."""
+        return self.path / self.QUANTIZED
+
+    @property
+    def quantized_labels_path(self) -> Path:
+        return self.path / self.QUANTIZED_LABELS
+
+    @property
+    def evaluation_path(self) -> Path:
+        return self.path / self.EVALUATION
+
+    @property
+    def slices_path(self) -> Path:
+        """slices/: the default folder of ``inkopt export``'s PNG slices."""
+        return self.path / self.SLICES
+
+    @property
+    def gcvf_path(self) -> Path:
+        """slices.gcvf: the default GrabCAD Voxel Print package of ``inkopt export --format gcvf``."""
+        return self.path / self.GCVF
+
+    @property
+    def loss_picture_path(self) -> Path:
+        """loss.png: the training loss and ΔE76 per iteration."""
+        return self.path / self.LOSS_PNG
+
+    def face_picture_path(self, face: str) -> Path:
+        """face_<face>.png: a slab face's target | prediction | ΔE76 map."""
+        return self.path / f"face_{face}.png"
+
+    def evaluation_picture_path(self, face: str) -> Path:
+        """evaluation_<face>.png: a slab face's target | optimized | quantized | baselines (``inkopt evaluate``)."""
+        return self.path / f"evaluation_{face}.png"
+
+    @property
+    def views_picture_path(self) -> Path:
+        """views.png: a mesh's target and predicted views."""
+        return self.path / self.VIEWS_PNG
+
+    @property
+    def prediction_glb_path(self) -> Path:
+        return self.path / self.PREDICTION_GLB
+
+    @property
+    def target_glb_path(self) -> Path:
+        return self.path / self.TARGET_GLB
+
+    def _need(self, path: Path, hint: str) -> Path:
+        if not path.is_file():
+            raise ValueError(f"{path} does not exist ({hint})")
+        return path
 
     # ------------------------------------------------------------------ the continuous result
     def save_volume(self, vol: Volume) -> Path:
-        vol.save(self.path / self.VOLUME)
-        return self.path / self.VOLUME
+        vol.save(self.volume_path)
+        return self.volume_path
 
     def save_volume_slabs(self, geometry: Volume, mixture_slabs, inks) -> Path:
         """volume.npz of ``geometry`` with a mixture given as z slabs (``Volume.save_with_mixture``)."""
-        geometry.save_with_mixture(self.path / self.VOLUME, mixture_slabs, inks)
-        return self.path / self.VOLUME
+        geometry.save_with_mixture(self.volume_path, mixture_slabs, inks)
+        return self.volume_path
 
     def load_volume(self) -> Volume:
         """The optimised mixture volume (volume.npz)."""
-        p = self._need(self.VOLUME, "run 'inkopt slab' or 'inkopt optimize' first")
+        p = self._need(self.volume_path, "run 'inkopt slab' or 'inkopt optimize' first")
         vol = Volume.load(p)
         if vol.form != "mixture":
             raise ValueError(f"{p} holds a {vol.form} volume; this step needs a mixture volume")
@@ -293,11 +243,11 @@ class RunDir:
 
     # ------------------------------------------------------------------ the scene
     def save_scene(self, rec: SceneRecord) -> Path:
-        save_npz(self.path / self.SCENE, rec.arrays())
-        return self.path / self.SCENE
+        save_npz(self.scene_path, rec.arrays())
+        return self.scene_path
 
     def load_scene(self) -> SceneRecord:
-        p = self._need(self.SCENE, "run 'inkopt slab' or 'inkopt optimize' first")
+        p = self._need(self.scene_path, "run 'inkopt slab' or 'inkopt optimize' first")
         return SceneRecord.from_arrays(load_npz(p, "scene file"), str(p))
 
     # ------------------------------------------------------------------ printer labels
@@ -306,7 +256,7 @@ class RunDir:
         with self.quantized_writer(vol, vol.shape) as w:
             for k in range(vol.shape[0]):
                 w[k] = vol.labels[k]
-        return self.path / self.QUANTIZED
+        return self.quantized_path
 
     @contextmanager
     def quantized_writer(self, meta: Volume, shape, normals=None):
@@ -319,41 +269,37 @@ class RunDir:
         arrays = {k: v for k, v in meta.to_arrays().items() if k != "labels"}
         if normals is not None:
             arrays.update(normal_index=normals.index, normal_vectors=normals.vectors)
-        w = LabelFileWriter(self.path / self.QUANTIZED_LABELS, shape)
+        w = LabelFileWriter(self.quantized_labels_path, shape)
         try:
             yield w
-            (self.path / self.QUANTIZED).unlink(missing_ok=True)
+            self.quantized_path.unlink(missing_ok=True)
             w.commit()
         except BaseException:
             w.abort()
             raise
-        save_npz(self.path / self.QUANTIZED, {**arrays, "labels_file": np.array(self.QUANTIZED_LABELS),
-                                              "labels_shape": np.asarray(w.shape, np.int64),
-                                              "label_counts": w.counts})
+        save_npz(self.quantized_path, {**arrays, "labels_file": np.array(self.QUANTIZED_LABELS),
+                                       "labels_shape": np.asarray(w.shape, np.int64), "label_counts": w.counts})
 
     def volume_file(self) -> Path:
         """The path of volume.npz (checked to exist), for stages that read it lazily."""
-        return self._need(self.VOLUME, "run 'inkopt slab' or 'inkopt optimize' first")
+        return self._need(self.volume_path, "run 'inkopt slab' or 'inkopt optimize' first")
 
     def has_quantized(self) -> bool:
-        return (self.path / self.QUANTIZED).is_file()
+        return self.quantized_path.is_file()
 
     def load_quantized(self) -> Volume:
-        p = self._need(self.QUANTIZED, f"run 'inkopt quantize {self.path}' first")
-        vol = Volume.load(p)
+        p = self._need(self.quantized_path, f"run 'inkopt quantize {self.path}' first")
+        vol = Volume.from_arrays(upgrade_volume(load_npz(p, "quantized volume"), p, quantized=True), p)
         if vol.form != "labels":
             raise ValueError(f"{p} holds a {vol.form} volume, not printer labels")
         return vol
 
     # ------------------------------------------------------------------ reports
     def write_report(self, report: dict) -> Path:
-        return write_json(self.path / self.REPORT, report)
+        return write_json(self.report_path, report)
 
     def read_report(self) -> dict:
-        return json.loads(self._need(self.REPORT, "the run has not finished").read_text())
+        return json.loads(self._need(self.report_path, "the run has not finished").read_text())
 
     def write_evaluation(self, ev: dict) -> Path:
-        return write_json(self.path / self.EVALUATION, ev, indent=1)
-
-    def slices(self) -> Path:
-        return self.path / self.SLICES
+        return write_json(self.evaluation_path, ev, indent=1)

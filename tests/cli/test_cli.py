@@ -19,7 +19,7 @@ INKOPT = [sys.executable, "-m", "inkopt.cli"]
 def small_volume(tmp_path, **kw):
     rng = np.random.default_rng(0)
     m = rng.dirichlet(np.ones(5), size=(4, 5, 6)).astype(np.float32)
-    v = Volume(voxel_mm=(0.0847,) * 3, mixture=m, inks=InkTable.parse("vero-cmykw"), **kw)
+    v = Volume.from_mixture(voxel_mm=(0.0847,) * 3, mixture=m, inks=InkTable.parse("vero-cmykw"), **kw)
     path = tmp_path / "v.npz"
     v.save(path)
     return path

@@ -27,7 +27,7 @@ def make_run(d, shape=(4, 8, 10), normals=False, inks="vero-cmykw"):
         c = np.indices(shape).transpose(1, 2, 3, 0)[..., ::-1] + 0.5 - np.array(shape[::-1]) / 2
         kw = dict(inside=np.linalg.norm(c, axis=-1) < min(shape) / 2,
                   normals=(c / np.linalg.norm(c, axis=-1, keepdims=True)).astype(np.float32))
-    vol = Volume(voxel_mm=[V300] * 3, mixture=mix, inks=inks, **kw)
+    vol = Volume.from_mixture(voxel_mm=[V300] * 3, mixture=mix, inks=inks, **kw)
     d.mkdir(parents=True, exist_ok=True)
     vol.save(d / "volume.npz")
     tex = Texels.box_faces(shape, ["top"])

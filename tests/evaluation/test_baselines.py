@@ -90,14 +90,14 @@ def test_cache_reused(cyan_white, tmp_path):
     other = InkTable.from_names(["cyan", "white"], g=0.5)  # another g is another table
     assert table_key(other, other.g, 1.5, 1.0, 8, 0.4) != table.key
     # the ink table of a volume read from disk (float32 coefficients) finds the same table
-    Volume(voxel_mm=[V300] * 3, mixture=np.ones((1, 1, 1, 2), np.float32) / 2, inks=inks).save(tmp_path / "v.npz")
+    Volume.from_mixture([V300] * 3, mixture=np.ones((1, 1, 1, 2), np.float32) / 2, inks=inks).save(tmp_path / "v.npz")
     assert colour_table(Volume.load(tmp_path / "v.npz").inks, patch_mm=1.0, step=8, max_stderr=0.4).cached
 
 
 # ----------------------------------------------------------------------------------------------- baselines
 def patch_scene(shape=(6, 16, 24), faces=("top",)):
     """A slab with a target of 4 colour patches (quadrants) on each textured face."""
-    vol = Volume(voxel_mm=[V300] * 3, mixture=np.full(shape + (3,), 1 / 3, np.float32), inks=INKS3)
+    vol = Volume.from_mixture(voxel_mm=[V300] * 3, mixture=np.full(shape + (3,), 1 / 3, np.float32), inks=INKS3)
     tex = Texels.box_faces(shape, faces)
     quad = (tex.voxel[:, 1] >= shape[1] // 2) * 2 + (tex.voxel[:, 2] >= shape[2] // 2)
     colours = np.array([[0.05, 0.3, 0.6], [0.6, 0.1, 0.3], [0.8, 0.8, 0.8], [0.2, 0.5, 0.8]])
@@ -136,7 +136,7 @@ def test_fixed_share_and_inside_kept(table3):
     vol, *_ = patch_scene()
     inside = np.ones(vol.shape, bool)
     inside[:, :, :2] = False
-    vol = Volume(voxel_mm=vol.voxel_mm, mixture=vol.mixture, inks=INKS3, inside=inside)
+    vol = Volume.from_mixture(voxel_mm=vol.voxel_mm, mixture=vol.mixture, inks=INKS3, inside=inside)
     tex = Texels.exposed_faces(inside, ["top"])
     fixed = np.zeros(vol.shape + (3,), np.float32)
     fixed[:3, ..., 1] = 0.5  # half magenta fixed in the lower half
@@ -156,7 +156,7 @@ def test_free_mask_only_scene_keeps_its_white_core(table3):
     free = np.zeros(vol.shape, bool)
     free[-2:] = True  # a two-layer shell under the textured top
     rec = SceneRecord.from_arrays(SceneRecord("mesh", tex, target, free_mask=free).arrays())
-    assert "fixed_share" not in rec.arrays() and rec.fixed_share_dense is None
+    assert "fixed_share" not in rec.arrays() and rec.fixed is None
     mix = extrusion_baseline(vol, tex, target, rec.fixed_share(INKS3, vol.shape), table3)
     white = white_mixture(INKS3)
     np.testing.assert_array_equal(mix[~free], np.broadcast_to(white, mix[~free].shape))

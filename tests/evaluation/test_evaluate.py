@@ -90,7 +90,7 @@ def make_run(d, table, kind="surface"):
     fixed = np.zeros(SHAPE + (3,), np.float32)
     scene = {**tex.to_arrays(), "target_rgb": target, "kind": np.array("slab"),
              "fixed_share": fixed, "faces": np.array(["top"]), "pix_top": pix}
-    vol = Volume(voxel_mm=[V300] * 3, mixture=np.full(SHAPE + (3,), 1 / 3, np.float32), inks=INKS3)
+    vol = Volume.from_mixture(voxel_mm=[V300] * 3, mixture=np.full(SHAPE + (3,), 1 / 3, np.float32), inks=INKS3)
     fn = surface_baseline if kind == "surface" else extrusion_baseline
     vol = vol.with_mixture(fn(vol, tex, target, fixed, table))
     d.mkdir(parents=True, exist_ok=True)
@@ -145,7 +145,7 @@ def test_evaluate_surface_run_and_method_mismatch(tmp_path, table3):
     make_run(d, table3, "surface")
     q = Volume.load(d / "volume.npz")
     labels, vp = quantize(q.mixture, q.voxel_mm, method="random", seed=5)
-    Volume(voxel_mm=vp, labels=labels, inks=INKS3,
+    Volume.from_labels(voxel_mm=vp, labels=labels, inks=INKS3,
            quantization=Quantization("random", 5, tuple(25.4 / vp), "nearest")).save(d / "quantized.npz")
     ev = evaluate_run(d, spp=4, table=table3)
     assert ev["quantization"]["method"] == "random" and ev["quantization"]["seed"] == 5
@@ -163,7 +163,7 @@ def test_evaluate_mesh_kind(tmp_path, table3):
     normals = (c / np.linalg.norm(c, axis=-1, keepdims=True)).astype(np.float32)
     mix = np.zeros((n, n, n, 3), np.float32)
     mix[inside] = [0.2, 0.1, 0.7]
-    vol = Volume(voxel_mm=[V300] * 3, mixture=mix, inks=INKS3, inside=inside, normals=normals)
+    vol = Volume.from_mixture(voxel_mm=[V300] * 3, mixture=mix, inks=INKS3, inside=inside, normals=normals)
     tex = Texels.from_normals(inside, normals)
     d = tmp_path / "mesh"
     d.mkdir()

@@ -33,7 +33,7 @@ def test_back_light_is_lit_behind_the_face():
 @pytest.mark.parametrize("sigma_a", [0.0, 2.0])
 def test_transmittance_of_non_scattering_slab(sigma_a):
     L = 12
-    vol = Volume(voxel_mm=(VOX,) * 3, sigma_s=np.zeros((L, 6, 6, 3), np.float32),
+    vol = Volume.from_coefficients(voxel_mm=(VOX,) * 3, sigma_s=np.zeros((L, 6, 6, 3), np.float32),
                  sigma_a=np.full((L, 6, 6, 3), sigma_a + 1e-6, np.float32), g=0.4, ior=1.5)
     y, var = transmittance(vol, Texels.box_faces(vol.shape, ["top"]), spp=128, threads=2)
     se = np.sqrt(var.sum()) / len(y)

@@ -1,14 +1,15 @@
-"""Compact fixed ink shares (``model.FixedShares``) against the dense array they stand for."""
+"""Fixed ink shares (``model.FixedShares``) against the dense array they stand for, and the constraints that
+build them (``model.constraints``)."""
 import hashlib
 
 import numpy as np
 import pytest
 
-from inkopt.model import FixedShares, InkTable
+from inkopt.model import FixedShares, InkTable, Translucency, scene_fixed_shares, white_fixed_shares
 from inkopt.optim import Parameterization
-from inkopt.rundir import Translucency, white_fixed_share, white_fixed_shares
 
 INKS = InkTable.parse("vero-cmykwt")
+T, W = INKS.index("transparent"), INKS.index("white")
 
 
 def _scene(rng):
@@ -18,11 +19,22 @@ def _scene(rng):
     return free, tr
 
 
+def _dense(free, tr):
+    """The dense shares the constraints stand for, written out voxel by voxel."""
+    want = np.zeros(free.shape + (len(INKS),), np.float32)
+    want[~free, W] = 1.0
+    for i, s in zip(tr.index, tr.share):
+        row = want.reshape(-1, len(INKS))[i]
+        row[W] = min(row[W], np.float32(1.0) - s)
+        row[T] = s
+    return want
+
+
 def test_compact_shares_are_the_dense_array():
     """Rows, layers, the dense form, its hash and the translucency constraint agree with the dense array."""
     rng = np.random.default_rng(3)
     free, tr = _scene(rng)
-    want = tr.apply(white_fixed_share(free, INKS), INKS)
+    want = _dense(free, tr)
     fs = tr.applied(white_fixed_shares(free, INKS), INKS)
     assert fs.shape == want.shape and fs.free is free  # the mask is kept by reference
     np.testing.assert_array_equal(fs.dense(), want)
@@ -35,29 +47,55 @@ def test_compact_shares_are_the_dense_array():
     fs.digest(h1)
     h2.update(want.data)
     assert h1.hexdigest() == h2.hexdigest()
-    again = tr.applied(fs, INKS)  # idempotent, as apply is
+    again = tr.applied(fs, INKS)  # idempotent
     np.testing.assert_array_equal(again.dense(), want)
+    np.testing.assert_array_equal(scene_fixed_shares(INKS, free, tr).dense(), want)
+    only_tr = scene_fixed_shares(INKS, None, tr).dense()  # no white core: the transparent shares alone
+    np.testing.assert_array_equal(only_tr[..., T], tr.grid())
+    assert scene_fixed_shares(INKS) is None
     with pytest.raises(ValueError, match="strictly increasing"):
         FixedShares(free, fs.held, [3, 3], np.zeros((2, len(INKS))))
+    with pytest.raises(ValueError, match="no 'white'"):
+        white_fixed_shares(free, InkTable.from_names(["cyan", "magenta"]))
+
+
+def test_from_dense_round_trips():
+    """Any dense array, also one whose fixed rows all differ, comes back bit for bit."""
+    rng = np.random.default_rng(5)
+    free, tr = _scene(rng)
+    for dense in (_dense(free, tr), rng.uniform(0, 0.2, (3, 4, 5, len(INKS))).astype(np.float32),
+                  np.zeros((2, 3, 4, len(INKS)), np.float32)):
+        fs = FixedShares.from_dense(dense)
+        np.testing.assert_array_equal(fs.dense(), dense)
+        np.testing.assert_array_equal(fs.free, ~dense.any(-1))
+    np.testing.assert_array_equal(FixedShares.none((2, 3, 4), 6).dense(), np.zeros((2, 3, 4, 6), np.float32))
+    with pytest.raises(ValueError, match="shape"):
+        FixedShares.from_dense(np.zeros((3, 4, 5)))
 
 
 @pytest.mark.parametrize("kind", ["softmax", "sigmoid"])
-def test_parameterisation_of_compact_shares_matches_the_dense_one(kind):
-    """Free voxels, free shares, fixed rows and mixtures are bit-identical from either form; bad shares are
-    refused in one line."""
+def test_parameterisation_of_fixed_shares(kind):
+    """Free voxels, free shares and fixed rows are those of the dense array; the mixture holds the fixed shares
+    plus the free share of p(x), whole or in slabs of layers, bit for bit; bad shares are refused in one line."""
     rng = np.random.default_rng(4)
     free, tr = _scene(rng)
-    dense = Parameterization(kind, tr.apply(white_fixed_share(free, INKS), INKS))
+    dense = _dense(free, tr)
     fs = tr.applied(white_fixed_shares(free, INKS), INKS)
-    compact = Parameterization(kind, fs)
-    np.testing.assert_array_equal(compact.free_index, dense.free_index)
-    np.testing.assert_array_equal(compact.share_f, dense.share_f)
-    np.testing.assert_array_equal(compact.fixed_f, dense.fixed_f)
-    assert compact.shape == free.shape and compact.fixed_share is fs
-    x = rng.normal(size=(compact.n_free, len(INKS))).astype(np.float32)
-    np.testing.assert_array_equal(compact.mixture(x), dense.mixture(x))
-    for p in (compact, dense):  # the result written in slabs of layers: the same, bit for bit
-        np.testing.assert_array_equal(np.concatenate(list(p.mixture_slabs(x, voxels=37))), dense.mixture(x))
+    p = Parameterization(kind, fs)
+    flat = dense.reshape(-1, len(INKS))
+    share = np.clip(1.0 - flat.sum(-1), 0.0, 1.0)
+    np.testing.assert_array_equal(p.free_index, np.flatnonzero(share > 1e-6))
+    np.testing.assert_array_equal(p.share_f, share[p.free_index])
+    np.testing.assert_array_equal(p.fixed_f, flat[p.free_index])
+    assert p.shape == free.shape and p.fixed_share is fs
+    x = rng.normal(size=(p.n_free, len(INKS))).astype(np.float32)
+    mix = p.mixture(x)
+    np.testing.assert_array_equal(mix.reshape(-1, len(INKS))[p.free_index], p.free_rows(x))
+    held = np.setdiff1d(np.arange(free.size), p.free_index)
+    np.testing.assert_array_equal(mix.reshape(-1, len(INKS))[held], flat[held])
+    np.testing.assert_array_equal(np.concatenate(list(p.mixture_slabs(x, voxels=37))), mix)
+    same = Parameterization(kind, FixedShares.from_dense(dense))  # the same shares in another compact layout
+    np.testing.assert_array_equal(same.mixture(x), mix)
     plain = Parameterization(kind, white_fixed_shares(free, INKS))  # no constraint: every free voxel, no fixed rows
     assert plain.fixed_f is None and np.array_equal(plain.free_index, np.flatnonzero(free))
     with pytest.raises(ValueError, match="sum to at most 1"):

@@ -3,7 +3,7 @@ dense files."""
 import numpy as np
 import pytest
 
-from inkopt.io import save_npz
+from inkopt.io import FormatError, save_npz
 from inkopt.model import InkTable, SurfaceNormals, Texels, Volume, VolumeError
 from inkopt.render import Renderer
 
@@ -40,14 +40,14 @@ def test_forms_agree():
 
 
 def test_volume_files_and_renders(tmp_path):
-    """A volume keeps its normals sparse, saves them as normal_index/normal_vectors, loads them back, and still
-    loads an old file with a dense 'normals' array; renders are bit-identical with either form given to the
+    """A volume keeps its normals sparse, saves them as normal_index/normal_vectors, loads them back, and refuses
+    a pre-release file with a dense 'normals' array in one line; renders are bit-identical with either form given to the
     core, and texels come out the same."""
     dense = _field((6, 6, 6))
     inside = np.ones((6, 6, 6), bool)
     inks = InkTable.parse("vero-cmykw")
     mix = np.full((6, 6, 6, len(inks)), 1 / len(inks), np.float32)
-    vol = Volume(voxel_mm=[0.1] * 3, mixture=mix, inks=inks, inside=inside, normals=dense)
+    vol = Volume.from_mixture(voxel_mm=[0.1] * 3, mixture=mix, inks=inks, inside=inside, normals=dense)
     assert isinstance(vol.normals, SurfaceNormals)
     vol.save(tmp_path / "v.npz")
     with np.load(tmp_path / "v.npz") as z:
@@ -55,10 +55,11 @@ def test_volume_files_and_renders(tmp_path):
     back = Volume.load(tmp_path / "v.npz")
     np.testing.assert_array_equal(back.normals.dense(), dense)
     old = vol.to_arrays()
-    del old["normal_index"], old["normal_vectors"]
+    del old["normal_index"], old["normal_vectors"], old["format_version"]
     old["normals"] = dense
     save_npz(tmp_path / "old.npz", old)
-    np.testing.assert_array_equal(Volume.load(tmp_path / "old.npz").normals.dense(), dense)
+    with pytest.raises(FormatError, match="dense shading normals, a pre-release layout; write it again"):
+        Volume.load(tmp_path / "old.npz")
     tex = Texels.for_volume(vol)
     assert tex.centred and len(tex) == len(Texels.from_normals(inside, dense))
     a = Renderer(back).render(tex, 8, 3).rgb
@@ -70,4 +71,4 @@ def test_volume_files_and_renders(tmp_path):
     b._scene = sc
     np.testing.assert_array_equal(a, b.render(tex, 8, 3).rgb)
     with pytest.raises(VolumeError, match="grid of shape"):
-        Volume(voxel_mm=[0.1] * 3, mixture=mix, inks=inks, normals=SurfaceNormals((2, 2, 2), [], np.zeros((0, 3))))
+        Volume.from_mixture([0.1] * 3, mixture=mix, inks=inks, normals=SurfaceNormals((2, 2, 2), [], np.zeros((0, 3))))

@@ -12,9 +12,9 @@ def _mixture(shape=(3, 4, 5), seed=0):
     return np.random.default_rng(seed).dirichlet(np.ones(len(INKS)), size=shape).astype(np.float32)
 
 
-def test_keyword_and_typed_construction_agree():
+def test_classmethod_and_medium_construction_agree():
     m = _mixture()
-    a = Volume(VOX, mixture=m, inks=INKS)
+    a = Volume.from_mixture(VOX, mixture=m, inks=INKS)
     b = Volume(VOX, medium=Mixture(m, INKS))
     assert isinstance(a.medium, Mixture) and a.form == b.form == "mixture" and a.shape == (3, 4, 5)
     np.testing.assert_array_equal(a.mixture, b.mixture)
@@ -25,7 +25,7 @@ def test_keyword_and_typed_construction_agree():
 def test_file_round_trip_keeps_form_and_typed_fields(tmp_path, form):
     m = _mixture()
     if form == "dense":
-        med = Dense(*Volume(VOX, mixture=m, inks=INKS).coefficients())
+        med = Dense(*Volume.from_mixture(VOX, mixture=m, inks=INKS).coefficients())
     elif form == "mixture":
         med = Mixture(m, INKS)
     else:
@@ -45,29 +45,42 @@ def test_file_round_trip_keeps_form_and_typed_fields(tmp_path, form):
 def test_with_mixture_keeps_geometry_and_inks():
     inside = np.ones((3, 4, 5), bool)
     inside[0, 0, 0] = False
-    v = Volume(VOX, mixture=_mixture(), inks=INKS, inside=inside, origin_mm=(0, 0, 0))
+    v = Volume.from_mixture(VOX, mixture=_mixture(), inks=INKS, inside=inside, origin_mm=(0, 0, 0))
     w = v.with_mixture(_mixture(seed=1))
     assert w.inks is INKS and w.inside is v.inside and w.origin_mm is not None
     np.testing.assert_array_equal(w.mixture, _mixture(seed=1))
 
 
-@pytest.mark.parametrize("kw, needle", [
-    (dict(), "exactly one of"),
-    (dict(mixture=np.ones((2, 2, 2, 5), np.float32), labels=np.zeros((2, 2, 2), np.uint8), inks=INKS),
-     "exactly one of"),
-    (dict(mixture=np.ones((2, 2, 2, 4), np.float32), inks=INKS), "mixture must have shape"),
-    (dict(mixture=np.ones((2, 2, 2, 5), np.float32)), "needs an ink table"),
-    (dict(sigma_s=np.ones((2, 2, 2, 3), np.float32)), "needs both"),
-    (dict(labels=np.full((2, 2, 2), 7, np.uint8), inks=INKS), "labels use ink 7"),
+@pytest.mark.parametrize("make, needle", [
+    (lambda: Volume.from_mixture(VOX, np.ones((2, 2, 2, 4), np.float32), INKS), "mixture must have shape"),
+    (lambda: Volume.from_labels(VOX, np.full((2, 2, 2), 7, np.uint8), INKS), "labels use ink 7"),
+    (lambda: Volume.from_coefficients(VOX, np.ones((2, 2, 2, 3), np.float32), -np.ones((2, 2, 2, 3), np.float32)),
+     "negative"),
+    (lambda: Volume(VOX, np.ones((2, 2, 2, 3), np.float32)), "Dense, Mixture or Labels"),
+    (lambda: Volume.from_mixture((0.1, 0.1), np.ones((2, 2, 2, 5), np.float32), INKS), "voxel_mm"),
 ])
-def test_bad_volumes_are_one_line_errors(kw, needle):
+def test_bad_volumes_are_one_line_errors(make, needle):
     with pytest.raises(VolumeError, match=needle) as e:
-        Volume(VOX, **kw)
+        make()
+    assert "\n" not in str(e.value)
+
+
+@pytest.mark.parametrize("arrays, needle", [
+    (dict(), "exactly one of"),
+    (dict(mixture=np.ones((2, 2, 2, 5), np.float32), labels=np.zeros((2, 2, 2), np.uint8)), "exactly one of"),
+    (dict(mixture=np.ones((2, 2, 2, 5), np.float32), ink_names=None), "needs an ink table"),
+    (dict(sigma_s=np.ones((2, 2, 2, 3), np.float32)), "needs both"),
+])
+def test_bad_volume_files_are_one_line_errors(tmp_path, arrays, needle):
+    full = {"voxel_mm": np.asarray(VOX), **INKS.to_arrays(), **arrays}
+    np.savez(tmp_path / "v.npz", **{k: v for k, v in full.items() if v is not None})
+    with pytest.raises(VolumeError, match=needle) as e:
+        Volume.load(tmp_path / "v.npz")
     assert "\n" not in str(e.value)
 
 
 def test_require_mixture():
-    lab = Volume(VOX, labels=np.zeros((2, 2, 2), np.uint8), inks=INKS)
+    lab = Volume.from_labels(VOX, labels=np.zeros((2, 2, 2), np.uint8), inks=INKS)
     with pytest.raises(VolumeError, match="needs a mixture volume, got a labels volume"):
         lab.require_mixture("quantization")
 

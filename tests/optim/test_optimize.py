@@ -10,7 +10,7 @@ from helpers import central_differences as _fd
 from inkopt import charts
 from inkopt.color import srgb_to_linear
 from inkopt.evaluation.metrics import prediction_metrics
-from inkopt.model import InkTable, mix, mix_grad
+from inkopt.model import FixedShares, InkTable, mix, mix_grad
 from inkopt.optim import (AdaGrad, Adam, ExponentiatedGradient, GradientSmoother, Optimization, OptimizeConfig,
                           Parameterization, initial_free_mixture, make_optimizer)
 from inkopt.render import Renderer
@@ -33,7 +33,7 @@ def test_parameterisation_gradient_and_fixed_shares(kind):
     fixed = np.zeros((2, 2, 3, 4), np.float32)
     fixed[0, 0, 0] = [0, 0, 0, 1]          # a fully fixed voxel: not a variable
     fixed[1, 1, 1] = [0.8, 0, 0, 0]        # 80 % of ink 0 fixed, 20 % free (a translucency-style constraint)
-    p = Parameterization(kind, fixed)
+    p = Parameterization(kind, FixedShares.from_dense(fixed))
     assert p.n_free == 11
     x = rng.normal(size=(p.n_free, 4))
     rho = p.mixture(x)
@@ -50,7 +50,7 @@ def test_parameterisation_gradient_and_fixed_shares(kind):
 def test_exponentiated_gradient_direction():
     """The natural direction is g - <g, p>: a small EG step multiplies rho by exp(-eta (g - <g,p>)) (renormalised)."""
     rng = np.random.default_rng(2)
-    p = Parameterization("softmax", np.zeros((1, 1, 2, 3), np.float32))
+    p = Parameterization("softmax", FixedShares.none((1, 1, 2), 3))
     x = rng.normal(size=(2, 3))
     g = rng.normal(size=(1, 1, 2, 3))
     eta = 1e-2
@@ -65,7 +65,7 @@ def test_softmax_in_the_core_matches_numpy():
     rng = np.random.default_rng(5)
     fixed = np.zeros((3, 40, 100, 5), np.float32)  # 12 000 free voxels
     fixed[:, :, 0] = [0.5, 0, 0, 0, 0]                # a free share of 0.5 on a column
-    p = Parameterization("softmax", fixed)
+    p = Parameterization("softmax", FixedShares.from_dense(fixed))
     x = (rng.normal(size=(p.n_free, 10)) * 4)[:, ::2]  # strided float64
     g = rng.normal(size=(p.n_free, 5)).astype(np.float32)
     e = np.exp(x.astype(np.float32) - x.astype(np.float32).max(1, keepdims=True))
@@ -77,7 +77,7 @@ def test_softmax_in_the_core_matches_numpy():
     np.testing.assert_allclose(p.backward(x, g, natural=True), centred, rtol=0, atol=4e-6)
     np.testing.assert_allclose(p.backward(x, g), want_p * centred, rtol=0, atol=4e-6)
     assert p.backward(x, g).dtype == np.float32
-    empty = Parameterization("softmax", np.ones((1, 2, 2, 1), np.float32))
+    empty = Parameterization("softmax", FixedShares.from_dense(np.ones((1, 2, 2, 1), np.float32)))
     assert empty.n_free == 0 and empty.backward(np.zeros((0, 1), np.float32), np.zeros((1, 2, 2, 1))).shape == (0, 1)
 
 
@@ -183,16 +183,13 @@ def test_resume_continues_exactly(tmp_path, forward_spp, smooth):
     d = run(scene, iterations=6, lr=0.3)
     with pytest.raises(ValueError, match="different settings"):
         d.load_checkpoint(tmp_path / "ck.npz")
-    # the smoothing width is part of the key, but off it leaves the key as it was before the setting existed
+    # the smoothing width and the step decay are part of the key
     e = run(scene, iterations=6, forward_spp=forward_spp, smooth=0.5 if smooth else 1.0, decay=0.5)
     with pytest.raises(ValueError, match="different settings"):
         e.load_checkpoint(tmp_path / "ck.npz")
-    assert ('"smooth"' in c.config_key()) == bool(smooth)
-    # so is the step decay (off, the key is as before the setting existed)
     f = run(scene, iterations=6, forward_spp=forward_spp, smooth=smooth, decay=0.25)
     with pytest.raises(ValueError, match="different settings"):
         f.load_checkpoint(tmp_path / "ck.npz")
-    assert '"decay"' in c.config_key() and '"decay"' not in run(scene, decay=0.0).config_key()
 
 
 @pytest.mark.parametrize("kind", ["surface", "extrusion"])
@@ -212,7 +209,7 @@ def test_start_from_a_baseline(kind, monkeypatch):
     fixed[0, ..., 1] = 1.0  # bottom layer fixed white
     start = lambda k: baselines.baseline_mixture(k, scene.volume, scene.texels, scene.target_rgb, fixed, table=table)
     r = Optimization(scene.volume, scene.texels, scene.target_rgb, OptimizeConfig(init=kind, iterations=1),
-                     kind=scene.kind, fixed_share=fixed, baseline=start)
+                     kind=scene.kind, fixed_share=FixedShares.from_dense(fixed), baseline=start)
     make = baselines.surface_baseline if kind == "surface" else baselines.extrusion_baseline
     want = make(scene.volume, scene.texels, scene.target_rgb, fixed, table)
     got = r.initial_volume().mixture

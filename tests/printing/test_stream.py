@@ -1,5 +1,6 @@
 """Tests of the streaming printer output: inkopt.printing.stream (a run quantized layer by layer into
-quantized.npz + quantized_labels.npy), model.labelfile, the old embedded format, and GCVF's block outline."""
+quantized.npz + quantized_labels.npy), model.labelfile, the pre-release layouts refused, and GCVF's block
+outline."""
 import io
 import zipfile
 
@@ -7,6 +8,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from inkopt.io import FormatError, save_npz
 from inkopt.model import InkTable, Quantization, Volume
 from inkopt.model.labelfile import LabelFileWriter, load_label_file
 from inkopt.printing import gcvf
@@ -29,7 +31,7 @@ def mixture_run(path, shape=(6, 9, 11), inside=True, normals=False):
         mix[~kw["inside"]] = 0.0  # outside rows may be empty
     if normals:
         kw["normals"] = np.tile(np.array([0, 0, 1], np.float32), shape + (1,))
-    vol = Volume(voxel_mm=(V300,) * 3, mixture=mix, inks=inks, origin_mm=(1.0, 2.0, 3.0), **kw)
+    vol = Volume.from_mixture(voxel_mm=(V300,) * 3, mixture=mix, inks=inks, origin_mm=(1.0, 2.0, 3.0), **kw)
     d = RunDir.create(path)
     d.save_volume(vol)
     return d, vol
@@ -41,8 +43,9 @@ def test_streaming_run_equals_in_memory_quantization(tmp_path, method, upsample)
     d, vol = mixture_run(tmp_path / "r")
     lines = quantize_run(d, method=method, upsample=upsample, **KW)
     expect = quantize_volume(vol, method=method, upsample=upsample, **KW)
-    raw = np.load(d / d.QUANTIZED)
-    assert "labels" not in raw.files and str(raw["labels_file"]) == d.QUANTIZED_LABELS
+    raw = np.load(d.quantized_path)
+    assert "labels" not in raw.files and str(raw["labels_file"]) == d.quantized_labels_path.name
+    assert int(raw["format_version"]) == 1
     q = d.load_quantized()
     assert isinstance(q.labels, np.memmap) or isinstance(q.labels.base, np.memmap)
     np.testing.assert_array_equal(q.labels, expect.labels)
@@ -63,19 +66,18 @@ def test_normals_stream_like_in_memory_and_the_same_files(tmp_path):
     np.testing.assert_array_equal(q.normals.index, expect.normals.index)
     np.testing.assert_array_equal(q.normals.vectors, expect.normals.vectors)
     np.testing.assert_array_equal(q.labels, expect.labels)
-    assert "labels" not in np.load(d / d.QUANTIZED).files
-    # a volume file of the earlier format (dense normals) streams to the same normals
-    from inkopt.io import save_npz
-
+    assert "labels" not in np.load(d.quantized_path).files
+    # a volume file of the pre-release layout (dense normals, no format_version) is refused in one line
     old = vol.to_arrays()
     dense = vol.normals.dense()
-    del old["normal_index"], old["normal_vectors"]
+    del old["normal_index"], old["normal_vectors"], old["format_version"]
     save_npz(d.volume_file(), {**old, "normals": dense})
-    src = MixtureSource(d.volume_file())
-    np.testing.assert_array_equal(src.normals.dense(), dense)
-    src.close()
-    quantize_run(d, method="blue-noise", upsample="nearest", **KW)
-    np.testing.assert_array_equal(d.load_quantized().normals.index, expect.normals.index)
+    with pytest.raises(FormatError, match="dense shading normals, a pre-release layout") as e:
+        MixtureSource(d.volume_file())
+    assert "\n" not in str(e.value)
+    np.savez(d.volume_file(), **{**vol.to_arrays(), "format_version": np.int64(2)})  # a newer inkopt's file
+    with pytest.raises(FormatError, match="format version 2; this inkopt reads versions up to 1"):
+        MixtureSource(d.volume_file())
 
 
 def test_mixture_source_reads_layers_in_any_order(tmp_path):
@@ -95,20 +97,30 @@ def test_bad_layer_is_refused_and_leaves_no_file(tmp_path):
     d, vol = mixture_run(tmp_path / "r", inside=False)
     bad = vol.mixture.copy()
     bad[4, 2, 3] = 0.0
-    vol.with_mixture(bad).save(d / d.VOLUME)
+    vol.with_mixture(bad).save(d.volume_path)
     with pytest.raises(ValueError, match="positive sum"):
         quantize_run(d, method="blue-noise", upsample="nearest", **KW)
     assert not d.has_quantized() and sorted(p.name for p in d.path.iterdir()) == ["volume.npz"]
 
 
-def test_old_embedded_quantized_files_still_load(tmp_path):
+def test_quantized_files_of_each_version(tmp_path):
+    """Today's quantized.npz without format_version (version 0) loads; the pre-release layout with the labels
+    inside is refused in one line that says to quantize again; a file written now carries version 1."""
     d, vol = mixture_run(tmp_path / "r")
     q = quantize_volume(vol, **KW)
-    q.save(d / d.QUANTIZED)  # the format before quantized_labels.npy: labels inside the npz
+    d.save_quantized(q)
+    assert int(np.load(d.quantized_path)["format_version"]) == 1
+    np.testing.assert_array_equal(Volume.load(d.quantized_path).labels, q.labels)
+    v0 = {k: v for k, v in np.load(d.quantized_path).items() if k != "format_version"}
+    save_npz(d.quantized_path, v0)
     np.testing.assert_array_equal(d.load_quantized().labels, q.labels)
-    d.save_quantized(q)  # the current format; a stale labels file never pairs with an old npz
-    np.testing.assert_array_equal(Volume.load(d / d.QUANTIZED).labels, q.labels)
-    (d / d.QUANTIZED_LABELS).unlink()
+    arrays = {k: v for k, v in q.to_arrays().items() if k != "format_version"}
+    save_npz(d.quantized_path, arrays)  # labels inside the npz, no format_version: the pre-release layout
+    with pytest.raises(FormatError, match=f"holds its labels inside .*run 'inkopt quantize {d.path}' again") as e:
+        d.load_quantized()
+    assert "\n" not in str(e.value)
+    d.save_quantized(q)
+    d.quantized_labels_path.unlink()
     with pytest.raises(ValueError, match="does not exist"):
         d.load_quantized()
 

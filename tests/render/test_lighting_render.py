@@ -21,7 +21,7 @@ def homogeneous(a, b, d=1.0, nz=10, nxy=6):
     """An infinite (periodic) slab of thickness d mm, albedo a, optical thickness b, g 0.4, IOR 1.5."""
     mu_t = b / d
     s = np.full((nz, nxy, nxy, 3), mu_t * a, np.float32)
-    return Volume(voxel_mm=(d / nz,) * 3, sigma_s=s, sigma_a=np.full_like(s, mu_t * (1 - a)), g=0.4, ior=1.5,
+    return Volume.from_coefficients((d / nz,) * 3, sigma_s=s, sigma_a=np.full_like(s, mu_t * (1 - a)), g=0.4, ior=1.5,
                   boundary="periodic-xy")
 
 
@@ -77,7 +77,7 @@ def test_light_from_above_gives_reflectance_on_top_and_transmittance_below(a, b)
 def _small_slab():
     rng = np.random.default_rng(3)
     s = rng.uniform(2, 12, (4, 3, 3, 3)).astype(np.float32)
-    return Volume(voxel_mm=(0.1,) * 3, sigma_s=s, sigma_a=rng.uniform(0.2, 3, s.shape).astype(np.float32),
+    return Volume.from_coefficients((0.1,) * 3, sigma_s=s, sigma_a=rng.uniform(0.2, 3, s.shape).astype(np.float32),
                   boundary="periodic-xy")
 
 

@@ -17,7 +17,7 @@ VOX = 25.4 / 300
 def homogeneous(a, b, d=1.0, nz=10, nxy=6, g=0.4, ior=1.5, boundary="periodic-xy"):
     mu_t = b / d
     s = np.full((nz, nxy, nxy, 3), mu_t * a, np.float32)
-    return Volume(voxel_mm=(d / nz,) * 3, sigma_s=s, sigma_a=np.full_like(s, mu_t * (1 - a)), g=g, ior=ior,
+    return Volume.from_coefficients((d / nz,) * 3, sigma_s=s, sigma_a=np.full_like(s, mu_t * (1 - a)), g=g, ior=ior,
                   boundary=boundary)
 
 
@@ -39,12 +39,12 @@ def test_white_furnace_and_energy_bound():
     """No absorption, index-matched boundary: every texel is exactly 1. With absorption nothing exceeds 1."""
     rng = np.random.default_rng(0)
     s = rng.uniform(1, 30, (5, 6, 7, 3)).astype(np.float32)
-    vol = Volume(voxel_mm=(0.05, 0.08, 0.03), sigma_s=s, sigma_a=np.zeros_like(s), ior=1.0)
+    vol = Volume.from_coefficients(voxel_mm=(0.05, 0.08, 0.03), sigma_s=s, sigma_a=np.zeros_like(s), ior=1.0)
     tex = Texels.for_volume(vol)
     assert len(tex) == 2 * (6 * 7 + 5 * 7 + 5 * 6)
     res = render(vol, tex, spp=64, seed=1)
     assert np.all(res.rgb == 1.0)
-    vol2 = Volume(voxel_mm=(0.05, 0.08, 0.03), sigma_s=s, sigma_a=rng.uniform(0, 2, s.shape).astype(np.float32))
+    vol2 = Volume.from_coefficients((0.05, 0.08, 0.03), s, sigma_a=rng.uniform(0, 2, s.shape).astype(np.float32))
     res2 = render(vol2, tex, spp=64, seed=1)
     assert np.all(res2.rgb <= 1.0) and np.all(res2.rgb >= 0.0)
 
@@ -53,7 +53,7 @@ def test_bit_identical_for_any_thread_count():
     rng = np.random.default_rng(1)
     inks = InkTable.parse("vero-cmykw")
     m = rng.dirichlet(np.ones(5), size=(6, 9, 11)).astype(np.float32)
-    vol = Volume(voxel_mm=(VOX,) * 3, mixture=m, inks=inks)
+    vol = Volume.from_mixture(voxel_mm=(VOX,) * 3, mixture=m, inks=inks)
     tex = Texels.for_volume(vol)
     a = Renderer(vol, threads=1).render(tex, spp=8, seed=7)
     b = Renderer(vol, threads=2).render(tex, spp=8, seed=7)
@@ -71,9 +71,9 @@ def test_labels_mixture_and_dense_forms_agree():
     labels = rng.integers(0, 5, (4, 7, 9)).astype(np.uint8)
     onehot = np.eye(5, dtype=np.float32)[labels]
     s, a = mix(onehot, inks)
-    vols = [Volume(voxel_mm=(0.04, 0.08, 0.03), labels=labels, inks=inks),
-            Volume(voxel_mm=(0.04, 0.08, 0.03), mixture=onehot, inks=inks),
-            Volume(voxel_mm=(0.04, 0.08, 0.03), sigma_s=s, sigma_a=a)]
+    vols = [Volume.from_labels(voxel_mm=(0.04, 0.08, 0.03), labels=labels, inks=inks),
+            Volume.from_mixture(voxel_mm=(0.04, 0.08, 0.03), mixture=onehot, inks=inks),
+            Volume.from_coefficients(voxel_mm=(0.04, 0.08, 0.03), sigma_s=s, sigma_a=a)]
     tex = Texels.for_volume(vols[1])
     out = [render(v, tex, spp=4, seed=5).rgb for v in vols]
     # The label form goes through regular tracking (it has an inside mask), the others through delta tracking:
@@ -87,7 +87,7 @@ def test_labels_mixture_and_dense_forms_agree():
 def test_mask_regular_tracking_matches_delta_tracking():
     """An inside mask that is all True takes the regular-tracking path; it must agree with delta tracking."""
     vol = homogeneous(0.95, 3.0, boundary="box", nxy=8)
-    vol_m = Volume(voxel_mm=vol.voxel_mm, sigma_s=vol.sigma_s, sigma_a=vol.sigma_a,
+    vol_m = Volume.from_coefficients(voxel_mm=vol.voxel_mm, sigma_s=vol.sigma_s, sigma_a=vol.sigma_a,
                    inside=np.ones(vol.shape, bool))
     tex = Texels.for_volume(vol, ["top"])
     a, b = render(vol, tex, spp=400, seed=1), render(vol_m, tex, spp=400, seed=2)
@@ -104,7 +104,7 @@ def test_gradient_matches_finite_differences(masked):
     s = rng.uniform(2, 12, shape + (3,)).astype(np.float32)
     a = rng.uniform(0.2, 3, shape + (3,)).astype(np.float32)
     inside = np.ones(shape, bool) if masked else None
-    vol = Volume(voxel_mm=(0.1,) * 3, sigma_s=s, sigma_a=a, boundary="periodic-xy", inside=inside)
+    vol = Volume.from_coefficients(voxel_mm=(0.1,) * 3, sigma_s=s, sigma_a=a, boundary="periodic-xy", inside=inside)
     replay_matches_fd(vol, [(3, 1, 1, 0, "sigma_s"), (3, 1, 1, 2, "sigma_a"), (2, 0, 1, 1, "sigma_s"),
                     (1, 1, 2, 0, "sigma_a")])
 
@@ -118,7 +118,7 @@ def test_gradient_matches_finite_differences_masked_object():
     inside[3:, 2:4, :2] = False  # a notch in the top (light can leave and re-enter)
     s = np.where(inside[..., None], rng.uniform(4, 12, shape + (3,)), 0).astype(np.float32)
     a = np.where(inside[..., None], rng.uniform(0.2, 2, shape + (3,)), 0).astype(np.float32)
-    vol = Volume(voxel_mm=(0.1,) * 3, sigma_s=s, sigma_a=a, boundary="box", inside=inside)
+    vol = Volume.from_coefficients(voxel_mm=(0.1,) * 3, sigma_s=s, sigma_a=a, boundary="box", inside=inside)
     replay_matches_fd(vol, [(5, 3, 3, 0, "sigma_s"), (5, 1, 1, 1, "sigma_a"), (2, 2, 2, 2, "sigma_s"),
                     (3, 3, 3, 0, "sigma_a")], spp=400)
 
@@ -129,7 +129,7 @@ def test_li1_gradient_is_correlated_with_replay():
     rng = np.random.default_rng(4)
     inks = InkTable.parse("vero-cmykw")
     m = rng.dirichlet(np.ones(5), size=(8, 10, 10)).astype(np.float32)
-    vol = Volume(voxel_mm=(VOX,) * 3, mixture=m, inks=inks)
+    vol = Volume.from_mixture(voxel_mm=(VOX,) * 3, mixture=m, inks=inks)
     tex = Texels.for_volume(vol, ["top"])
     adj = rng.uniform(0.5, 1.0, (len(tex), 3)).astype(np.float32)
     r = Renderer(vol)
@@ -152,7 +152,7 @@ def test_set_mixture_of_some_voxels_renders_like_a_fresh_renderer():
     mix0 = rng.dirichlet(np.ones(5), size=shape).astype(np.float32)
     mix0[..., inks.index("white")] += 3.0  # a high majorant that the update removes
     mix0 /= mix0.sum(-1, keepdims=True)
-    a = Volume(voxel_mm=(VOX,) * 3, mixture=mix0, inks=inks, inside=inside)
+    a = Volume.from_mixture(voxel_mm=(VOX,) * 3, mixture=mix0, inks=inks, inside=inside)
     index = np.sort(rng.choice(np.flatnonzero(inside), 150, replace=False))  # the optimiser's are inside
     rows = rng.dirichlet(np.ones(5), size=len(index)).astype(np.float32)
     mix1 = mix0.copy().reshape(-1, 5)
@@ -191,7 +191,7 @@ def test_masked_volumes_store_only_their_inside_and_render_as_the_dense_form():
     inside[2:5, 1:4, 3:7] = False  # a cavity
     inside[:, 0, :2] = False       # a notch through the object
     mixture = rng.dirichlet(np.ones(5), size=shape).astype(np.float32)
-    vol = Volume(voxel_mm=(VOX,) * 3, mixture=mixture, inks=inks, inside=inside)
+    vol = Volume.from_mixture(voxel_mm=(VOX,) * 3, mixture=mixture, inks=inks, inside=inside)
     n, k = inside.size, int(inside.sum())
     assert vol.render_bytes() == 4 * n + 24 * k + 2 * n
     s, a = vol.coefficients()
@@ -220,13 +220,13 @@ def test_coefficients_at_matches_the_dense_coefficients(form):
     inks = InkTable.parse("vero-cmykw")
     shape = (3, 4, 5)
     mixture = rng.dirichlet(np.ones(5), size=shape).astype(np.float32)
-    vol = Volume(voxel_mm=(VOX,) * 3, mixture=mixture, inks=inks)
+    vol = Volume.from_mixture(voxel_mm=(VOX,) * 3, mixture=mixture, inks=inks)
     if form == "dense":
-        vol = Volume(voxel_mm=(VOX,) * 3, sigma_s=vol.coefficients()[0], sigma_a=vol.coefficients()[1])
+        vol = Volume.from_coefficients((VOX,) * 3, sigma_s=vol.coefficients()[0], sigma_a=vol.coefficients()[1])
     elif form == "labels":
         labels = rng.integers(0, 5, size=shape).astype(np.uint8)
         labels[0, 0, :3] = 255
-        vol = Volume(voxel_mm=(VOX,) * 3, labels=labels, inks=inks)
+        vol = Volume.from_labels(voxel_mm=(VOX,) * 3, labels=labels, inks=inks)
     index = np.sort(rng.choice(60, 25, replace=False))
     s, a = vol.coefficients_at(index, chunk=7)
     ds, da = vol.coefficients()
@@ -245,7 +245,7 @@ def test_set_volume_renders_like_a_fresh_renderer(masked):
     if masked:
         inside = np.ones(shape, bool)
         inside[4:, 2:5, :3] = False
-    a = Volume(voxel_mm=(VOX,) * 3, mixture=rng.dirichlet(np.ones(5), size=shape).astype(np.float32), inks=inks,
+    a = Volume.from_mixture((VOX,) * 3, mixture=rng.dirichlet(np.ones(5), size=shape).astype(np.float32), inks=inks,
                inside=inside)
     b = a.with_mixture(rng.dirichlet(np.ones(5), size=shape).astype(np.float32))
     tex = Texels.for_volume(a)
@@ -260,7 +260,7 @@ def test_set_volume_renders_like_a_fresh_renderer(masked):
     np.testing.assert_array_equal(g1[0], g2[0])
     np.testing.assert_array_equal(g1[1], g2[1])
     with pytest.raises(ValueError, match="shape"):
-        reused.set_volume(Volume(voxel_mm=(VOX,) * 3, mixture=np.ones((2, 2, 2, 5), np.float32) / 5, inks=inks))
+        reused.set_volume(Volume.from_mixture((VOX,) * 3, mixture=np.ones((2, 2, 2, 5), np.float32) / 5, inks=inks))
     # A dense medium is overwritten in place; bad coefficients are refused before anything is written.
     s, a_ = b.coefficients()
     bad = np.ascontiguousarray(s, np.float32).copy()
@@ -279,7 +279,7 @@ def test_gradient_slots_from_a_voxel_list_match_the_slot_map():
     shape = (5, 6, 7)
     inside = np.ones(shape, bool)
     inside[3:, :2, :2] = False
-    vol = Volume(voxel_mm=(VOX,) * 3, mixture=rng.dirichlet(np.ones(5), size=shape).astype(np.float32), inks=inks,
+    vol = Volume.from_mixture((VOX,) * 3, mixture=rng.dirichlet(np.ones(5), size=shape).astype(np.float32), inks=inks,
                  inside=inside)
     tex = Texels.for_volume(vol)
     adj = rng.normal(size=(len(tex), 3)).astype(np.float32)
@@ -312,7 +312,7 @@ def test_set_mixture_on_a_label_volume_switches_to_coefficients():
     inside = np.ones(shape, bool)
     inside[3:, :3, :2] = False
     labels = np.where(inside, rng.integers(0, 5, size=shape), 255).astype(np.uint8)
-    base = Volume(voxel_mm=(VOX,) * 3, labels=labels, inks=inks, inside=inside)
+    base = Volume.from_labels(voxel_mm=(VOX,) * 3, labels=labels, inks=inks, inside=inside)
     index = np.sort(rng.choice(np.flatnonzero(inside), 60, replace=False))
     rows = rng.dirichlet(np.ones(5), size=len(index)).astype(np.float32)
     full = np.eye(5, dtype=np.float32)[np.where(inside, labels, 0)] * inside[..., None]

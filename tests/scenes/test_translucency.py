@@ -1,4 +1,4 @@
-"""Tests of translucency constraints (inkopt.scenes.translucency, rundir.Translucency): slab masks, mesh alpha and
+"""Tests of translucency constraints (inkopt.scenes.translucency, model.Translucency): slab masks, mesh alpha and
 texture-space masks, depth, the white core, scene.npz round trip, one-line errors, the CLI, and that the
 constraint survives quantization."""
 import numpy as np
@@ -138,7 +138,7 @@ def test_mesh_alpha_depth_and_core(tmp_path):
     assert np.all(fixed[core][:, W] == 1)
     assert np.all(fixed.sum(-1) <= 1 + 1e-6)
     rec = SceneRecord.from_arrays(sc.record().arrays())
-    rec.fixed_share_dense = None  # as a large object stores it: free mask + sparse translucency
+    rec.fixed = None  # as a large object stores it: free mask + sparse translucency
     np.testing.assert_array_equal(rec.fixed_share(INKS, inside.shape), fixed)
 
 
@@ -214,7 +214,7 @@ def test_constraint_holds_through_quantization():
         fixed = np.asarray(sc.fixed_share)  # dense form of the compact FixedShares
         free = rng.dirichlet(np.ones(len(INKS)), size=shape)
         mix = (fixed + (1 - fixed.sum(-1, keepdims=True)) * free).astype(np.float32)
-        vol = Volume(voxel_mm=(vox,) * 3, mixture=mix, inks=INKS)
+        vol = Volume.from_mixture(voxel_mm=(vox,) * 3, mixture=mix, inks=INKS)
         q = quantize_volume(vol)
         lab = q.labels
         # the region in printer voxels: map printer voxel centres back to optimisation voxels

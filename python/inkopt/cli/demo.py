@@ -23,7 +23,7 @@ def _demo(args) -> int:
     # 1. Render: a uniform 50 % white / 50 % cyan slab, top face, and what it looks like.
     mix = np.zeros((30, 24, 24, len(inks)), np.float32)
     mix[..., inks.index("cyan")] = mix[..., inks.index("white")] = 0.5
-    vol = Volume(voxel_mm=(voxel_mm(),) * 3, mixture=mix, inks=inks, boundary="periodic-xy")
+    vol = Volume.from_mixture(voxel_mm=(voxel_mm(),) * 3, mixture=mix, inks=inks, boundary="periodic-xy")
     vol.save(out / "cyan_white.npz")
     res = render(vol, Texels.for_volume(vol, ["top"]), spp=64, seed=0)
     m, e = res.mean_rgb, res.mean_rgb_stderr

@@ -48,11 +48,11 @@ def _export_cmd(args) -> int:
     d = RunDir(args.dir)
     q = d.load_quantized()
     if args.format == "gcvf":
-        out = Path(args.out) if args.out else d.slices().with_suffix(".gcvf")
+        out = Path(args.out) if args.out else d.gcvf_path
         man = write_gcvf(q.labels, q.voxel_mm, q.inks.names, out, printer=printer, palette=palette)
         layers_um = man["layer_thickness_nm"] / 1000
     else:
-        out = Path(args.out) if args.out else d.slices()
+        out = Path(args.out) if args.out else d.slices_path
         man = write_png_slices(q.labels, q.voxel_mm, q.inks.names, out, palette=palette, printer=printer)
         layers_um = man["layer_thickness_um"]
     mats = [m for m in man["materials"] if m["voxel_count"] > 0]

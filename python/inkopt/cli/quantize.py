@@ -25,7 +25,7 @@ def _quantize_cmd(args) -> int:
         raise ValueError(f"--layer-um must be positive, got {args.layer_um}")
     for line in quantize_run(d, method=args.method, dpi=dpi, layer_um=layer, seed=args.seed, upsample=args.upsample):
         print(line)
-    print(f"wrote {d / d.QUANTIZED} and {d / d.QUANTIZED_LABELS}")
+    print(f"wrote {d.quantized_path} and {d.quantized_labels_path}")
     return 0
 
 

@@ -210,7 +210,7 @@ def render_patches(mixtures, inks: InkTable, g: float, ior: float, patch_mm: flo
         from tqdm import tqdm
         bar = tqdm(total=len(mixtures), desc="colour table", unit="patch", leave=False)
     for j, row in enumerate(mixtures):  # a loop over table entries (hundreds), not voxels
-        vol = Volume(voxel_mm=[PATCH_LATERAL_MM, PATCH_LATERAL_MM, patch_mm], inks=inks, g=g, ior=ior,
+        vol = Volume.from_mixture(voxel_mm=[PATCH_LATERAL_MM, PATCH_LATERAL_MM, patch_mm], inks=inks, g=g, ior=ior,
                      mixture=np.broadcast_to(row, (1, n_lat, n_lat, len(row))).copy(), boundary="periodic-xy")
         if texels is None:
             texels = Texels.for_volume(vol, ["top"])

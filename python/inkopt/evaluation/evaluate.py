@@ -139,9 +139,9 @@ def write_face_pictures(d: RunDir, rec: SceneRecord, results: dict) -> list[str]
     names = []
     for face in rec.faces:
         if face in rec.pix:
-            name = f"evaluation_{face}.png"
-            write_png(d / name, panels(items, rec.pix[face]))
-            names.append(name)
+            path = d.evaluation_picture_path(face)
+            write_png(path, panels(items, rec.pix[face]))
+            names.append(path.name)
     return names
 
 
@@ -201,7 +201,7 @@ def evaluate_run(path, spp: int | None = DEFAULT_SPP, seed: int = 0, method: str
         qvol = d.load_quantized()
         q = qvol.quantization or Quantization()
         if method is not None and method != q.method:
-            raise ValueError(f"{d / d.QUANTIZED} was quantized with '{q.method}', not '{method}'; rerun 'inkopt "
+            raise ValueError(f"{d.quantized_path} was quantized with '{q.method}', not '{method}'; rerun 'inkopt "
                              f"quantize {d} --method {method}' or omit --method")
     else:
         t0 = time.perf_counter()  # inkopt quantize's defaults, layer by layer as that command does
@@ -210,7 +210,7 @@ def evaluate_run(path, spp: int | None = DEFAULT_SPP, seed: int = 0, method: str
         qvol = d.load_quantized()
         q = qvol.quantization
         say(f"quantized {vol.shape} -> {qvol.shape} ({q.method}) in {time.perf_counter() - t0:.1f} s; "
-            f"wrote {d / d.QUANTIZED}")
+            f"wrote {d.quantized_path}")
     dpi = q.dpi or tuple(float(v) for v in dpi_of(qvol.voxel_mm))
     out["quantization"] = {**asdict(q), "dpi": list(dpi)}
     qkw = dict(method=q.method, seed=q.seed, upsample=q.upsample, dpi=tuple(dpi))

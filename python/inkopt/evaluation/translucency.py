@@ -87,7 +87,7 @@ def knife_edge_spread(sigma_s: np.ndarray, sigma_a: np.ndarray, voxel_mm: float,
     ss[1:] = np.asarray(sigma_s, np.float32)[::-1, None, None]  # z = L: the surface layer, viewed from +z
     sa[1:] = np.asarray(sigma_a, np.float32)[::-1, None, None]
     sa[0, :, : width // 2] = MASK_SIGMA_A
-    vol = Volume(voxel_mm=(voxel_mm,) * 3, sigma_s=ss, sigma_a=sa, g=g, ior=ior, boundary="periodic-xy")
+    vol = Volume.from_coefficients((voxel_mm,) * 3, sigma_s=ss, sigma_a=sa, g=g, ior=ior, boundary="periodic-xy")
     tex = Texels.box_faces(vol.shape, ["top"])
     r = Renderer(vol, threads, back_light(5)).render(tex, spp, seed)
     y = (r.rgb.astype(np.float64) @ LUMA).reshape(2, width).sum(0)

@@ -12,9 +12,11 @@ import os
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict
 from multiprocessing import get_context
-from pathlib import Path
 
 import numpy as np
+
+from ..optim.checkpoint import read_checkpoint
+from ..rundir import RunDir
 
 # the one Ray import and start, shared with --ray texel shards; RAY_INSTALL_HINT re-exported by inksets
 from ..distributed import RAY_INSTALL_HINT, connect_ray  # noqa: F401
@@ -63,8 +65,8 @@ def run_candidate(task: dict) -> dict:
                            threads=task["threads"], log=lambda msg: None)
     keys = ("loss", "delta_e76_mean", "delta_e2000_mean", "ssim", "iterations", "texels")
     out = {k: rep[k] for k in keys if k in rep}
-    with np.load(Path(task["out"]) / "checkpoint.npz") as ck:  # the whole run's training-loss history
-        out["hist_loss"] = [float(v) for v in ck["hist_loss"]]
+    ck = read_checkpoint(RunDir(task["out"]).checkpoint_path)  # the whole run's training-loss history
+    out["hist_loss"] = [float(v) for v in ck["hist_loss"]]
     out["texels"] = len(scene.texels)
     out["prediction"] = scene.prediction
     return out

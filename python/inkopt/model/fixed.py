@@ -6,7 +6,8 @@ array that is 20 bytes per grid voxel (1.2 GB for a 40 mm figurine), almost all 
 :class:`FixedShares` keeps the same shares as a ``free`` mask (the voxels without a fixed share), the one row the
 others hold, and the rows of the few voxels that differ (``index``, ``rows``). It behaves as the dense array where
 one is needed (``np.asarray(fixed)``, ``.shape``), and gives rows (:meth:`at`), planes and the dense bytes' hash
-without making it.
+without making it. It is the one form of fixed shares: scenes build it, ``optim.param`` takes it, and a dense
+array converts with :meth:`from_dense`.
 """
 from __future__ import annotations
 
@@ -35,6 +36,25 @@ class FixedShares:
         if len(self.index) and (np.any(np.diff(self.index) <= 0) or self.index[0] < 0
                                 or self.index[-1] >= self.free.size):
             raise ValueError("fixed-share index must be strictly increasing voxel indices inside the grid")
+
+    @classmethod
+    def none(cls, shape, n_inks: int) -> FixedShares:
+        """No fixed share anywhere: every voxel of the (z, y, x) grid ``shape`` free, for ``n_inks`` inks."""
+        return cls(np.ones(tuple(shape), bool), np.zeros(n_inks, np.float32))
+
+    @classmethod
+    def from_dense(cls, dense: np.ndarray) -> FixedShares:
+        """The compact form of a dense (z, y, x, N) array (its ``dense()`` equals it bit for bit): voxels whose
+        row is all zero are free, the first other voxel's row is ``held`` and the rows that differ from it are
+        indexed."""
+        dense = np.asarray(dense, np.float32)
+        if dense.ndim != 4:
+            raise ValueError(f"fixed shares must have shape (z, y, x, N), got {dense.shape}")
+        flat = dense.reshape(-1, dense.shape[-1])
+        fixed = np.flatnonzero(np.any(flat != 0, axis=1))
+        held = flat[fixed[0]] if len(fixed) else np.zeros(dense.shape[-1], np.float32)
+        index = fixed[np.any(flat[fixed] != held, axis=1)]
+        return cls(np.all(dense == 0, axis=-1), held, index, flat[index])
 
     @property
     def shape(self) -> tuple:

@@ -13,22 +13,22 @@ The volume file (``.npz``) stores the medium's arrays under those names; the ink
 ``ink_sigma_s``/``ink_sigma_a`` float32 (N, 3) mm^-1. Always: ``voxel_mm`` (3,) float (x, y, z). Optional:
 ``g`` (default 0.4), ``ior`` (default 1.5), ``inside`` bool (z, y, x) (default: the whole box), outward shading
 normals of the surface voxels as ``normal_index`` (K,) int64 linear indices and ``normal_vectors`` (K, 3) float32
-(x, y, z) (``model.normals.SurfaceNormals``; files written before it hold a dense ``normals`` (z, y, x, 3), which
-still loads), ``boundary`` ("box" or
-"periodic-xy"), ``origin_mm`` (3,) (x, y, z of voxel (0, 0, 0)'s low corner; meshes), and for quantized volumes
-the ``Quantization`` settings ``method``, ``seed``, ``dpi`` (3,) (x, y, z), ``upsample``. Instead of ``labels``
-a file may name ``labels_file`` (a .npy beside it, ``model.labelfile``; shape ``labels_shape``): the labels are
-then memory-mapped read-only.
+(x, y, z) (``model.normals.SurfaceNormals``), ``boundary`` ("box" or "periodic-xy"), ``origin_mm`` (3,) (x, y, z
+of voxel (0, 0, 0)'s low corner; meshes), and for quantized volumes the ``Quantization`` settings ``method``,
+``seed``, ``dpi`` (3,) (x, y, z), ``upsample``. Instead of ``labels`` a file may name ``labels_file`` (a .npy
+beside it, ``model.labelfile``; shape ``labels_shape``): the labels are then memory-mapped read-only. Every file
+carries ``format_version`` int64 (``VOLUME_FORMAT``); :func:`upgrade_volume` reads the older versions users may
+hold.
 """
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
-from ..io import Streamed, load_npz, save_npz
+from ..io import FORMAT_KEY, FormatError, Streamed, load_npz, save_npz, upgrade_format
 from .inks import DEFAULT_G, InkTable, mix
 from .normals import SurfaceNormals
 from .labelfile import load_label_file
@@ -37,6 +37,8 @@ BOUNDARIES = ("box", "periodic-xy")
 # Memory the renderer may use for one volume; a volume above this is refused (bytes).
 MAX_VOLUME_BYTES = int(os.environ.get("INKOPT_MAX_VOLUME_BYTES", 16 * 2**30))
 EMPTY = 255
+#: the format version volume files are written in (``format_version``; ``upgrade_volume`` reads older ones)
+VOLUME_FORMAT = 1
 
 
 class VolumeError(ValueError):
@@ -157,12 +159,13 @@ class Quantization:
 # ----------------------------------------------------------------------------------------- the volume
 @dataclass
 class Volume:
-    """A voxel medium on a grid. Build it with one medium form (``medium=Mixture(...)``), or by keyword:
-    ``Volume(voxel_mm, mixture=m, inks=t)``, ``Volume(voxel_mm, labels=l, inks=t)``,
-    ``Volume(voxel_mm, sigma_s=s, sigma_a=a)``."""
+    """A voxel medium on a grid: geometry plus one medium (``Dense``, ``Mixture`` or ``Labels``). Build it from a
+    medium, ``Volume(voxel_mm, Mixture(m, inks), ...)``, or with the classmethods :meth:`from_coefficients`,
+    :meth:`from_mixture` and :meth:`from_labels`; the medium's arrays read back as ``sigma_s``, ``sigma_a``,
+    ``mixture``, ``labels`` and ``inks`` (None where the medium has no such array)."""
 
     voxel_mm: np.ndarray
-    medium: Medium | None = None
+    medium: Medium
     g: float = DEFAULT_G
     ior: float = 1.5
     inside: np.ndarray | None = None
@@ -171,26 +174,49 @@ class Volume:
     boundary: str = "box"
     origin_mm: np.ndarray | None = None
     quantization: Quantization | None = None
-    # keyword forms of the medium (consumed by __post_init__; read them back through the properties below)
-    sigma_s: np.ndarray | None = field(default=None, repr=False)
-    sigma_a: np.ndarray | None = field(default=None, repr=False)
-    mixture: np.ndarray | None = field(default=None, repr=False)
-    labels: np.ndarray | None = field(default=None, repr=False)
-    inks: InkTable | None = field(default=None, repr=False)
 
     def __post_init__(self):
         self.voxel_mm = np.asarray(self.voxel_mm, dtype=np.float64).reshape(-1)
-        if self.medium is None:
-            self.medium = _medium_from_keywords(self.sigma_s, self.sigma_a, self.mixture, self.labels, self.inks)
-        # the keyword fields mirror the medium (one source of truth: the medium object)
-        self.sigma_s = getattr(self.medium, "sigma_s", None)
-        self.sigma_a = getattr(self.medium, "sigma_a", None)
-        self.mixture = getattr(self.medium, "mixture", None)
-        self.labels = getattr(self.medium, "labels", None)
-        self.inks = getattr(self.medium, "inks", None)
+        if not isinstance(self.medium, (Dense, Mixture, Labels)):
+            raise VolumeError(f"a volume's medium is a Dense, Mixture or Labels, not {type(self.medium).__name__}")
         if self.origin_mm is not None:
             self.origin_mm = np.asarray(self.origin_mm, np.float64).reshape(3)
         self.validate()
+
+    @classmethod
+    def from_coefficients(cls, voxel_mm, sigma_s: np.ndarray, sigma_a: np.ndarray, **geometry) -> Volume:
+        """A dense volume: ``sigma_s``, ``sigma_a`` (z, y, x, 3) float32 mm^-1; ``geometry``: the other fields."""
+        return cls(voxel_mm, Dense(sigma_s, sigma_a), **geometry)
+
+    @classmethod
+    def from_mixture(cls, voxel_mm, mixture: np.ndarray, inks: InkTable, **geometry) -> Volume:
+        """A mixture volume: ink shares ``mixture`` (z, y, x, N) float32 of ``inks``."""
+        return cls(voxel_mm, Mixture(mixture, inks), **geometry)
+
+    @classmethod
+    def from_labels(cls, voxel_mm, labels: np.ndarray, inks: InkTable, **geometry) -> Volume:
+        """A labels volume: one ink index of ``inks`` per voxel, ``labels`` (z, y, x) uint8 (``EMPTY``: none)."""
+        return cls(voxel_mm, Labels(labels, inks), **geometry)
+
+    @property
+    def sigma_s(self) -> np.ndarray | None:
+        return getattr(self.medium, "sigma_s", None)
+
+    @property
+    def sigma_a(self) -> np.ndarray | None:
+        return getattr(self.medium, "sigma_a", None)
+
+    @property
+    def mixture(self) -> np.ndarray | None:
+        return getattr(self.medium, "mixture", None)
+
+    @property
+    def labels(self) -> np.ndarray | None:
+        return getattr(self.medium, "labels", None)
+
+    @property
+    def inks(self) -> InkTable | None:
+        return getattr(self.medium, "inks", None)
 
     @property
     def form(self) -> str:
@@ -291,8 +317,7 @@ class Volume:
 
     def with_medium(self, medium: Medium, **changes) -> "Volume":
         """The same geometry with another medium (and any other field ``changes``)."""
-        return replace(self, medium=medium, sigma_s=None, sigma_a=None, mixture=None, labels=None, inks=None,
-                       **changes)
+        return replace(self, medium=medium, **changes)
 
     def with_mixture(self, mixture: np.ndarray) -> "Volume":
         """The same geometry and inks with another mixture (z, y, x, N)."""
@@ -325,8 +350,8 @@ class Volume:
 
     def geometry_arrays(self) -> dict:
         """Everything ``to_arrays`` writes but the medium's own arrays."""
-        out = {"voxel_mm": self.voxel_mm, "g": np.float64(self.g), "ior": np.float64(self.ior),
-               "boundary": np.array(self.boundary)}
+        out = {FORMAT_KEY: np.int64(VOLUME_FORMAT), "voxel_mm": self.voxel_mm, "g": np.float64(self.g),
+               "ior": np.float64(self.ior), "boundary": np.array(self.boundary)}
         if self.inside is not None:
             out["inside"] = self.inside
         if self.normals is not None:
@@ -341,11 +366,18 @@ class Volume:
         save_npz(path, self.to_arrays())
 
     @classmethod
-    def load(cls, path: str | Path) -> "Volume":
+    def load(cls, path: str | Path) -> Volume:
+        """A volume file (module docstring), brought to the current format version (``upgrade_volume``)."""
         try:
             data = load_npz(path, "volume file")
         except ValueError as exc:
             raise VolumeError(str(exc)) from None
+        return cls.from_arrays(upgrade_volume(data, path), path)
+
+    @classmethod
+    def from_arrays(cls, data: dict, path: str | Path) -> Volume:
+        """The volume of a volume file's arrays ``data`` (current format version), read from ``path`` (which
+        names it in errors and locates a ``labels_file``)."""
         if "voxel_mm" not in data:
             raise VolumeError(f"{path}: missing array 'voxel_mm' (3 voxel sizes x, y, z in mm)")
         g = float(data["g"]) if "g" in data else DEFAULT_G
@@ -364,12 +396,12 @@ class Volume:
                 labels = load_label_file(Path(path).parent / name, data.get("labels_shape"))
             except ValueError as exc:
                 raise VolumeError(str(exc)) from None
-        vol = cls(voxel_mm=data["voxel_mm"], sigma_s=data.get("sigma_s"), sigma_a=data.get("sigma_a"),
-                  mixture=data.get("mixture"), labels=labels, inks=inks, g=g,
+        vol = cls(data["voxel_mm"], _medium_of(data.get("sigma_s"), data.get("sigma_a"), data.get("mixture"),
+                                               labels, inks), g=g,
                   ior=float(data["ior"]) if "ior" in data else 1.5, inside=data.get("inside"),
-                  normals=data.get("normals"), boundary=str(data["boundary"]) if "boundary" in data else "box",
+                  boundary=str(data["boundary"]) if "boundary" in data else "box",
                   origin_mm=data.get("origin_mm"), quantization=Quantization.from_arrays(data))
-        if "normal_index" in data:  # the sparse form (files before it hold a dense "normals", read above)
+        if "normal_index" in data:
             try:
                 vol.normals = SurfaceNormals(vol.shape, data["normal_index"], data["normal_vectors"])
             except (KeyError, ValueError) as exc:
@@ -378,7 +410,28 @@ class Volume:
         return vol
 
 
-def _medium_from_keywords(sigma_s, sigma_a, mixture, labels, inks) -> Medium:
+def upgrade_volume(data: dict, where, quantized: bool = False) -> dict:
+    """A volume file's arrays (or, for a lazy reader, its small arrays plus the names of the others as keys)
+    brought to ``VOLUME_FORMAT``; ``quantized``: the file is a run's quantized.npz. Version 0 (files without
+    ``format_version``) reads as version 1, except the pre-release layouts, refused in one line
+    (``FormatError``): dense shading normals (``normals`` (z, y, x, 3)) and a quantized.npz holding its labels."""
+    kind = "quantized volume" if quantized else "volume file"
+    again = f"run 'inkopt quantize {Path(where).parent}' again" if quantized else \
+        "write it again with this inkopt (e.g. rerun the optimisation)"
+
+    def from_0(d: dict) -> dict:
+        if "normals" in d:
+            raise FormatError(f"{where} stores dense shading normals, a pre-release layout; {again}")
+        if quantized and "labels" in d:
+            raise FormatError(f"{where} holds its labels inside (a pre-release layout, now {Path(where).parent}/"
+                              f"quantized_labels.npy); {again}")
+        return d
+
+    return upgrade_format(data, kind=kind, where=where, current=VOLUME_FORMAT, upgrades={0: from_0})
+
+
+def _medium_of(sigma_s, sigma_a, mixture, labels, inks) -> Medium:
+    """The medium a volume file's arrays hold (exactly one form); one-line VolumeError otherwise."""
     given = [sigma_s is not None or sigma_a is not None, mixture is not None, labels is not None]
     if sum(given) != 1:
         raise VolumeError("volume needs exactly one of: sigma_s+sigma_a, mixture, labels")

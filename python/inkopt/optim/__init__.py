@@ -2,7 +2,8 @@
 (``optimizers``), the step's spatial preconditioner (``smooth``) and the iteration loop with checkpoints
 (``loop``)."""
 from .config import OPTIMIZERS, PARAMS, SCENE_DEFAULTS, OptimizeConfig, default_lr
-from .loop import History, Optimization, iteration_seeds
+from .checkpoint import History
+from .loop import Optimization, iteration_seeds
 from .optimizers import AdaGrad, Adam, ExponentiatedGradient, make_optimizer
 from .param import BASELINE_INITS, Parameterization, initial_free_mixture
 from .smooth import GradientSmoother

@@ -17,50 +17,21 @@ import hashlib
 import json
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
 from ..color import delta_e76
-from ..io import save_npz
 from ..lighting import Lighting, load_lighting
 from ..loss import TexelLoss
 from ..model import FixedShares, Texels, Volume, mix_grad
 from ..render import Renderer
+from .checkpoint import History, read_checkpoint, write_checkpoint
 from .config import OptimizeConfig
 from .optimizers import make_optimizer, step_factor
 from .param import Parameterization, initial_free_mixture
 from .smooth import MAX_DEPTH, GradientSmoother, nearest_texels, texel_guide
-
-
-@dataclass
-class History:
-    """Per-iteration figures of the training loss (on the running-average prediction): ``e1``-``e3`` are the
-    loss terms, NaN for a term of weight 0 (not evaluated in training; the final evaluation reports all three);
-    ``delta_e76`` the mean ΔE76; seconds of the whole step and of its parts."""
-
-    loss: list = field(default_factory=list)
-    e1: list = field(default_factory=list)
-    e2: list = field(default_factory=list)
-    e3: list = field(default_factory=list)
-    delta_e76: list = field(default_factory=list)
-    seconds: list = field(default_factory=list)
-    render_s: list = field(default_factory=list)
-    gradient_s: list = field(default_factory=list)
-    loss_s: list = field(default_factory=list)
-    step_s: list = field(default_factory=list)
-
-    def append(self, **kw):
-        for k, v in kw.items():
-            getattr(self, k).append(float(v))
-
-    def arrays(self) -> dict:
-        return {f"hist_{k}": np.asarray(v, np.float64) for k, v in asdict(self).items()}
-
-    @classmethod
-    def from_arrays(cls, d) -> "History":
-        return cls(**{k: [float(x) for x in d[f"hist_{k}"]] for k in asdict(cls()) if f"hist_{k}" in d})
 
 
 #: samples per texel of the first iteration's forward render of a run without forward passes (forward_spp 0)
@@ -77,8 +48,9 @@ class Optimization:
     """An optimisation run over a volume's mixture.
 
     base: a mixture Volume giving the geometry and ink table (its mixture is ignored); texels and target_rgb
-    (I, 3) linear; fixed_share (z, y, x, N) float32 or None; ``baseline(kind)`` -> (z, y, x, N) mixture of a
-    print-shop baseline, needed only for ``cfg.init`` "surface" or "extrusion" (the run driver supplies it);
+    (I, 3) linear; fixed_share: the (z, y, x, N) fixed ink shares (``model.FixedShares``) or None (none);
+    ``baseline(kind)`` -> (z, y, x, N) mixture of a print-shop baseline, needed only for ``cfg.init`` "surface"
+    or "extrusion" (the run driver supplies it);
     ``lighting``: the display lighting the prediction is rendered under (``inkopt.lighting``; default uniform).
     ``renderer_factory(volume, threads, lighting)``: what renders (default ``Renderer``; e.g. texel shards on Ray,
     ``inkopt.distributed.RayShards.renderer``, with identical results). ``kind`` (required, keyword): the scene's
@@ -87,7 +59,7 @@ class Optimization:
     """
 
     def __init__(self, base: Volume, texels: Texels, target_rgb: np.ndarray, cfg: OptimizeConfig, *, kind: str,
-                 fixed_share: np.ndarray | None = None, threads: int | None = None,
+                 fixed_share: FixedShares | None = None, threads: int | None = None,
                  baseline: Callable[[str], np.ndarray] | None = None, lighting: Lighting | str | None = None,
                  renderer_factory: Callable[..., Renderer] | None = None):
         cfg = cfg.for_scene(kind)  # settings left to the scene kind ("slab" or "mesh": config.SCENE_DEFAULTS)
@@ -98,16 +70,13 @@ class Optimization:
             raise ValueError("the volume needs an ink table")
         self.base, self.texels, self.cfg, self.threads, self.baseline = base, texels, cfg, threads, baseline
         self.target = np.asarray(target_rgb, np.float32)
-        shape = base.shape + (len(base.inks),)
-        self.param = Parameterization(cfg.param, np.zeros(shape, np.float32) if fixed_share is None else fixed_share,
-                                      threads)
+        if fixed_share is None:
+            fixed_share = FixedShares.none(base.shape, len(base.inks))
+        self.param = Parameterization(cfg.param, fixed_share, threads)
         self.loss = TexelLoss(self.target, texels.pos_vox, gamma=cfg.gamma)
         # what the run optimises towards and under which constraints: part of the checkpoint key
         h = hashlib.sha256(self.target.tobytes())
-        if isinstance(self.param.fixed_share, FixedShares):
-            self.param.fixed_share.digest(h)  # the same bytes as the dense array's, a layer at a time
-        else:
-            h.update(np.ascontiguousarray(self.param.fixed_share).data)
+        self.param.fixed_share.digest(h)  # the dense array's bytes, a layer at a time
         self._problem_digest = h.hexdigest()[:16]
         self.x = self.param.variables_for(self._initial_free_mixture())
         self.opt = make_optimizer(cfg.optimizer, cfg.step_size, self.x.shape)
@@ -154,36 +123,27 @@ class Optimization:
         return self.base.with_mixture(self.mixture())
 
     def config_key(self) -> str:
-        """What must match for a checkpoint to be resumable (not the iteration count)."""
+        """What must match for a checkpoint to be resumable (not the iteration count): the settings, the grid,
+        inks, texels, free voxels, a digest of the targets and fixed shares, and the lighting, as JSON."""
         d = asdict(self.cfg)
         d.pop("iterations")
         d.pop("checkpoint_every")
-        if d["schedule_iterations"] is None:  # settings added later: checkpoints made before them stay resumable
-            d.pop("schedule_iterations")
-        if not d["decay"]:
-            d.pop("decay")
-        if not d["smooth"]:
-            d.pop("smooth")
+        if not d["smooth"]:  # without smoothing its edge guide does nothing
             d.pop("smooth_edge")
-        elif d["smooth_edge"]:  # guided smoothing acts under flat texels only (since it became the default)
-            d["smooth_where"] = "flat"
         d.update(shape=list(self.base.shape), inks=list(self.base.inks.names), texels=len(self.texels),
-                 free=self.param.n_free, problem=self._problem_digest)
-        if not self.lighting.uniform:
-            d["lighting"] = self.lighting.key()
+                 free=self.param.n_free, problem=self._problem_digest, lighting=self.lighting.key())
         return json.dumps(d, sort_keys=True)
 
     def save_checkpoint(self, path: Path) -> None:
         extra = {} if self.c_avg is None else {"c_avg": self.c_avg, "c_weight": np.float64(self.c_weight),
                                                 "c_var": self.c_var}
-        save_npz(path, {"x": self.x, "iteration": np.int64(self.iteration), **extra,
-                        "config_key": np.array(self.config_key()), **self.opt.state(), **self.history.arrays()},
-                 compressed=False)
+        write_checkpoint(path, {"x": self.x, "iteration": np.int64(self.iteration), **extra,
+                                "config_key": np.array(self.config_key()), **self.opt.state(),
+                                **self.history.arrays()})
 
     def load_checkpoint(self, path: Path) -> None:
-        with np.load(path, allow_pickle=False) as z:
-            d = dict(z)
-        if str(d["config_key"]) != self.config_key():
+        d = read_checkpoint(path)
+        if json.loads(str(d["config_key"])) != json.loads(self.config_key()):
             raise ValueError(f"checkpoint {path} was made with different settings; rerun without --resume or "
                              "with the original settings")
         self.x = np.asarray(d["x"], np.float32)
@@ -197,14 +157,14 @@ class Optimization:
     # -------------------------------------------------------------- one step
     def renderer(self, x: np.ndarray | None = None) -> Renderer:
         """The run's renderer, set to the mixture of variables ``x`` (F, N) (default: the current ones; e.g.
-        :meth:`initial_variables` to render the start without a grid-sized volume). It is built once from the fixed shares (the base
-        geometry with ``fixed_share`` as its mixture, no copy; compact fixed shares of a masked object: the base
-        volume, whose medium is then replaced at every inside voxel that is not a variable); every iteration then
-        overwrites only the free voxels' media (``Renderer.set_mixture``), so no grid-sized mixture or coefficient
-        array is made per step."""
+        :meth:`initial_variables` to render the start without a grid-sized volume). It is built once from the
+        fixed shares (an object with an inside mask: the base volume, whose medium is then replaced at every
+        inside voxel that is not a variable; else the base geometry with the fixed shares as its mixture); every
+        iteration then overwrites only the free voxels' media (``Renderer.set_mixture``), so no grid-sized mixture
+        or coefficient array is made per step."""
         if self._renderer is None:
             fs = self.param.fixed_share
-            if isinstance(fs, FixedShares) and self.base.inside is not None:
+            if self.base.inside is not None:
                 self._renderer = self.renderer_factory(self.base, self.threads, self.lighting)
                 held = self.base.inside.copy()
                 held.reshape(-1)[self.param.free_index] = False
@@ -213,7 +173,7 @@ class Optimization:
                     self._renderer.set_mixture(block, fs.at(block))
                 del held
             else:
-                self._renderer = self.renderer_factory(self.base.with_mixture(np.asarray(fs)), self.threads,
+                self._renderer = self.renderer_factory(self.base.with_mixture(fs.dense()), self.threads,
                                                        self.lighting)
         x = self.x if x is None else x
         for lo, hi in self.param.chunks():  # in pieces: no (F, N) temporaries for a big object

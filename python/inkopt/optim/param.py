@@ -21,37 +21,16 @@ BAD_SHARES = "fixed ink shares must be non-negative and sum to at most 1 per vox
 class Parameterization:
     """Maps variables x (F, N) of the free voxels to the full mixture (z, y, x, N), and gradients back.
 
-    fixed_share: (z, y, x, N) float32 ink shares the optimiser may not change (all zero: everything free), dense or
-    as :class:`~inkopt.model.FixedShares` (kept by reference; no grid-sized float array is made from it).
-    ``threads``: threads of the softmax and its backward map (default all cores; results do not depend on it).
+    fixed_share: the (z, y, x, N) ink shares the optimiser may not change (:class:`~inkopt.model.FixedShares`, kept
+    by reference; no grid-sized float array is made from it). ``threads``: threads of the softmax and its backward
+    map (default all cores; results do not depend on it).
     """
 
-    def __init__(self, kind: str, fixed_share, threads: int | None = None):
+    def __init__(self, kind: str, fixed_share: FixedShares, threads: int | None = None):
         if kind not in PARAMS:
             raise ValueError(f"unknown parameterisation '{kind}'")
         self.kind, self.threads = kind, threads
-        if isinstance(fixed_share, FixedShares):
-            self._init_compact(fixed_share)
-            return
-        fixed_share = np.asarray(fixed_share, np.float32)
-        total = fixed_share.sum(-1)
-        if np.any(fixed_share < 0) or np.any(total > 1 + 1e-5):
-            raise ValueError(BAD_SHARES)
-        self.fixed_share = fixed_share
-        self.n_inks = fixed_share.shape[-1]
-        free_share = np.clip(1.0 - total, 0.0, 1.0).reshape(-1)
-        del total
-        #: flat (z, y, x) indices of the free voxels (F,) int64
-        self.free_index = np.flatnonzero(free_share > 1e-6)
-        #: the free voxels' free share (F,) and fixed shares (F, N) (None: all zero); nothing grid-sized is kept
-        #: beyond ``fixed_share`` itself (the renderer's gradient slots are ``free_index``'s order)
-        self.share_f = free_share[self.free_index]
-        del free_share
-        fixed_f = fixed_share.reshape(-1, self.n_inks)[self.free_index]
-        self.fixed_f = fixed_f if fixed_f.any() else None
-
-    def _init_compact(self, fs: FixedShares) -> None:
-        """The same free voxels, shares and fixed rows as from ``np.asarray(fs)``, bit for bit, in pieces."""
+        fs = fixed_share
         if np.any(fs.held < 0) or np.any(fs.rows < 0) or np.any(fs.rows.sum(-1) > 1 + 1e-5) or (
                 fs.held.sum() > 1 + 1e-5 and not fs.free.all()):
             raise ValueError(BAD_SHARES)
@@ -59,8 +38,10 @@ class Parameterization:
         held_free = np.clip(1.0 - fs.held.sum(), 0.0, 1.0) > 1e-6  # the held row leaves room: variables too
         candidate = np.ones(fs.free.shape, bool) if held_free else fs.free.copy()
         candidate.reshape(-1)[fs.index] = np.clip(1.0 - fs.rows.sum(-1), 0.0, 1.0) > 1e-6
+        #: flat (z, y, x) indices of the free voxels (F,) int64 (the renderer's gradient slots are in this order)
         self.free_index = np.flatnonzero(candidate)
         del candidate
+        #: the free voxels' free share (F,) and fixed shares (F, N) (None: all zero), made in pieces
         self.share_f = np.empty(len(self.free_index), np.float32)
         any_fixed = False
         for lo, hi in self.chunks():
@@ -104,8 +85,7 @@ class Parameterization:
 
     def mixture(self, x: np.ndarray) -> np.ndarray:
         """The whole grid's mixture (z, y, x, N) float32 of variables x (F, N)."""
-        fs = self.fixed_share
-        rho = (fs.dense() if isinstance(fs, FixedShares) else fs.copy()).reshape(-1, self.n_inks)
+        rho = self.fixed_share.dense().reshape(-1, self.n_inks)
         for lo, hi in self.chunks():  # in pieces: no (F, N) temporaries beside the grid-sized result
             rho[self.free_index[lo:hi]] = self.free_rows(x[lo:hi], lo)
         return rho.reshape(self.shape + (self.n_inks,))
@@ -120,10 +100,7 @@ class Parameterization:
         fs = self.fixed_share
         for z0 in range(0, nz, step):
             z1 = min(nz, z0 + step)
-            if isinstance(fs, FixedShares):
-                rho = fs.at(np.arange(z0 * plane, z1 * plane, dtype=np.int64))
-            else:
-                rho = np.array(fs[z0:z1], np.float32).reshape(-1, self.n_inks)
+            rho = fs.at(np.arange(z0 * plane, z1 * plane, dtype=np.int64))
             lo, hi = np.searchsorted(self.free_index, [z0 * plane, z1 * plane])
             for a in range(lo, hi, 1 << 20):
                 b = min(hi, a + (1 << 20))

@@ -11,7 +11,8 @@ renamed into place):
   (label 255) get the background colour (transparent black by default);
 - the PNGs carry the printer DPI (x, y) in their pHYs chunk; printer voxels are not square (600 × 300 DPI), so the
   images look stretched 2:1 in x in an ordinary viewer;
-- ``manifest.json``: format, DPI (x, y), layer thickness (µm), layer count, image size, voxel size, orientation,
+- ``manifest.json``: format, ``format_version`` (``MANIFEST_FORMAT``; a manifest without it is version 0, read
+  as version 1), DPI (x, y), layer thickness (µm), layer count, image size, voxel size, orientation,
   the colour -> ink table with per-ink voxel counts and the printer's material name (``material``, null where
   the profile names none), background, the material limit applied and the printer profile (``printer``).
 
@@ -36,11 +37,14 @@ from pathlib import Path
 
 import numpy as np
 
+from ..io import FORMAT_KEY, upgrade_format
 from ..model import EMPTY
 from ..units import MM_PER_INCH
 from .profiles import material_name, printer_profile, resolve_max_materials, too_many_inks
 
 FORMAT = "inkopt-png-slices"
+#: the format version of manifest.json (``format_version``)
+MANIFEST_FORMAT = 1
 
 # Default opaque colour (R, G, B) of each ink name; used unless a palette entry overrides it.
 DEFAULT_PALETTE: dict[str, tuple[int, int, int]] = {
@@ -212,7 +216,7 @@ def write_png_slices(labels, voxel_mm_printer, ink_names, out_dir, palette=None,
     width = max(5, len(str(Z - 1)))
     fname = "slice_{:0%dd}.png" % width
     manifest = {
-        "format": FORMAT, "version": 1,
+        "format": FORMAT, "version": 1, FORMAT_KEY: MANIFEST_FORMAT,
         "dpi": {"x": round(dpi[0], 6), "y": round(dpi[1], 6)},
         "layer_thickness_um": round(vp[2] * 1000.0, 6),
         "voxel_mm": [float(v) for v in vp],
@@ -285,8 +289,10 @@ def read_png_slices(folder):
         manifest = json.loads((folder / "manifest.json").read_text())
     except (OSError, ValueError) as exc:
         raise ValueError(f"{folder}: no readable manifest.json ({type(exc).__name__})") from None
-    if manifest.get("format") != FORMAT:
+    if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
         raise ValueError(f"{folder}: manifest format is not '{FORMAT}'")
+    manifest = upgrade_format(manifest, kind="slice manifest", where=folder / "manifest.json",
+                              current=MANIFEST_FORMAT, upgrades={0: dict})
     Z, Y, X = manifest["layer_count"], manifest["image_size"]["height"], manifest["image_size"]["width"]
     pack = _pack_rgba
     keys = [pack(m["color"]) for m in manifest["materials"]] + [pack(manifest["background"])]

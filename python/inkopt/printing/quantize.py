@@ -311,7 +311,7 @@ def quantize_volume(volume: Volume, *, method: str = "blue-noise", dpi=DEFAULT_D
     if normals and volume.normals is not None:
         nrm = upsample_normals(volume.normals, labels.shape, vp, volume.voxel_mm)
     q = Quantization(method, int(seed), tuple(float(v) for v in MM_PER_INCH / np.asarray(vp, np.float64)), upsample)
-    return Volume(voxel_mm=vp, labels=labels, inks=volume.inks, g=volume.g, ior=volume.ior, inside=None,
+    return Volume.from_labels(voxel_mm=vp, labels=labels, inks=volume.inks, g=volume.g, ior=volume.ior, inside=None,
                   normals=nrm, boundary=volume.boundary, origin_mm=volume.origin_mm, quantization=q)
 
 

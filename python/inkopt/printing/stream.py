@@ -4,7 +4,7 @@
 ``g``, ``ior``, boundary, origin, the ``inside`` mask: 1 byte per optimisation voxel) at once, the ``mixture``
 one (y, x, N) layer at a time by decompressing its zip member sequentially (layers are asked for in increasing
 z; going back further than the two layers it keeps reopens the member), and the shading normals of the surface
-voxels (small; a file of the earlier format with dense normals has them read once and made sparse).
+voxels (small). Its format version is checked as ``Volume.load`` checks it (``model.volume.upgrade_volume``).
 
 ``quantize_run`` is ``inkopt quantize``: the labels go layer by layer from ``quantize.quantize`` into the run's
 label file (``RunDir.quantized_writer``: quantized.npz + quantized_labels.npy, docs/run-dir.md), so memory holds
@@ -21,11 +21,12 @@ import numpy as np
 
 from ..model import InkTable, Quantization, SurfaceNormals, Volume
 from ..model.inks import DEFAULT_G
+from ..model.volume import upgrade_volume
 from ..rundir import RunDir
 from ..units import MM_PER_INCH
 from .quantize import printer_grid, quantize, summary_lines, upsample_normals
 
-HEAVY = ("mixture", "normals")  # members not loaded at once
+HEAVY = ("mixture", "normals")  # members not loaded at once (dense normals: a pre-release layout, refused)
 
 
 def _read_header(fh):
@@ -49,11 +50,15 @@ class MixtureSource:
         except (OSError, zipfile.BadZipFile, ValueError) as exc:
             self.close()
             raise ValueError(f"{path} is not a readable .npz volume file ({type(exc).__name__}: {exc})") from None
+        try:
+            small = upgrade_volume({**small, **dict.fromkeys(set(HEAVY) & set(names))}, path)
+        except ValueError:
+            self.close()
+            raise
         if "mixture" not in names:
             self.close()
             form = "labels" if "labels" in names else "dense"
             raise ValueError(f"{path} holds a {form} volume; this step needs a mixture volume")
-        dense_normals = "normals" in names
         self.g = float(small["g"]) if "g" in small else DEFAULT_G
         self.voxel_mm = np.asarray(small["voxel_mm"], np.float64).reshape(-1)
         self.inks = InkTable.from_arrays(small, self.g)
@@ -69,9 +74,6 @@ class MixtureSource:
         try:
             if "normal_index" in small:
                 self.normals = SurfaceNormals(self.shape[:3], small["normal_index"], small["normal_vectors"])
-            elif dense_normals:  # files of the earlier format
-                self.normals = SurfaceNormals.from_dense(
-                    np.lib.format.read_array(self._zip.open(names["normals"]), allow_pickle=False))
             if self.normals is not None and self.normals.shape != tuple(self.shape[:3]):
                 raise ValueError(f"normals for a grid of {self.normals.shape}, the mixture is {self.shape[:3]}")
         except (KeyError, ValueError) as exc:
@@ -108,7 +110,7 @@ class MixtureSource:
     def labels_meta(self, vp, q: Quantization) -> Volume:
         """A labels Volume with this file's inks, g, ior, boundary and origin on the printer grid ``vp``, for
         ``RunDir.quantized_writer`` (its one-voxel labels are a placeholder: the real ones go to the file)."""
-        return Volume(voxel_mm=vp, labels=np.zeros((1, 1, 1), np.uint8), inks=self.inks, g=self.g, ior=self.ior,
+        return Volume.from_labels(vp, labels=np.zeros((1, 1, 1), np.uint8), inks=self.inks, g=self.g, ior=self.ior,
                       boundary=self.boundary, origin_mm=self.origin_mm, quantization=q)
 
     def close(self) -> None:

@@ -2,11 +2,11 @@
 
 A scene (``Scene`` protocol) holds the base ``volume`` (a mixture or label Volume: grid geometry and ink table;
 its medium is not the optimiser's), the ``texels`` (the sensor), ``target_rgb`` (I, 3) float32 linear, and
-``fixed_share`` ((z, y, x, N) float32 ink shares the optimiser may not change, dense or as a compact
-``model.FixedShares``, or None). It knows how to store itself
-(``record()`` -> the run directory's ``SceneRecord``), what to tell the user and the report, and which pictures
-show a prediction of it. The run driver (``inkopt.run``) needs nothing else, so a new kind of scene is a new
-module here plus its settings in ``optim.config.SCENE_DEFAULTS`` (the optimiser settings it leaves to the kind).
+``fixed_share`` (the (z, y, x, N) ink shares the optimiser may not change, a ``model.FixedShares``, or None).
+It knows how to store itself (``record()`` -> the run directory's ``SceneRecord``), what to tell the user and
+the report, and which pictures show a prediction of it. The run driver (``inkopt.run``) needs nothing else, so a
+new kind of scene is a new module here plus its settings in ``optim.config.SCENE_DEFAULTS`` (the optimiser
+settings it leaves to the kind).
 """
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from typing import Protocol
 import numpy as np
 
 from ..model import FixedShares, Texels, Volume
-from ..rundir import SceneRecord
+from ..rundir import RunDir, SceneRecord
 
 
 class Scene(Protocol):
@@ -24,7 +24,7 @@ class Scene(Protocol):
     volume: Volume
     texels: Texels
     target_rgb: np.ndarray
-    fixed_share: np.ndarray | FixedShares | None
+    fixed_share: FixedShares | None
 
     def record(self) -> SceneRecord:
         """What scene.npz stores: enough for evaluation and baselines to see the same constraints."""
@@ -35,5 +35,5 @@ class Scene(Protocol):
     def report_fields(self) -> dict:
         """The scene's own entries of report.json (sizes, paths)."""
 
-    def write_pictures(self, out: Path, pred_rgb: np.ndarray, delta_e: np.ndarray) -> list[Path]:
-        """Pictures of a prediction (I, 3) linear with per-texel ΔE76 (I,) in folder ``out``."""
+    def write_pictures(self, out: RunDir, pred_rgb: np.ndarray, delta_e: np.ndarray) -> list[Path]:
+        """Pictures of a prediction (I, 3) linear with per-texel ΔE76 (I,) in run directory ``out``."""

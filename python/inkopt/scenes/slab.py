@@ -17,10 +17,11 @@ from pathlib import Path
 import numpy as np
 
 from ..color import srgb_to_linear
-from ..model import InkTable, Texels, Volume
+from ..model import FixedShares, InkTable, Texels, Translucency, Volume, transparent_ink
 from ..pictures import error_figure
-from ..rundir import SceneRecord, Translucency, transparent_ink
+from ..rundir import RunDir, SceneRecord
 from ..units import OPT_DPI, voxel_mm
+from .picture import resample
 from .translucency import check_depth, load_mask, slab_translucency, translucency_fields
 
 ASPECT_TOLERANCE = 0.02  # relative mismatch of picture and face aspect ratios allowed (resampling rounding)
@@ -42,12 +43,6 @@ def load_picture(path: str | Path) -> np.ndarray:
     return srgb_to_linear(rgb * alpha + (1.0 - alpha)).astype(np.float32)
 
 
-def resample(picture: np.ndarray, ny: int, nx: int) -> np.ndarray:
-    from skimage.transform import resize
-
-    return resize(picture, (ny, nx, 3), order=1, anti_aliasing=True, mode="edge").astype(np.float32)
-
-
 @dataclass
 class SlabScene:
     """A slab ready to optimise (the ``Scene`` protocol of ``inkopt.scenes``)."""
@@ -62,8 +57,8 @@ class SlabScene:
     kind = "slab"
 
     @cached_property
-    def fixed_share(self) -> np.ndarray | None:
-        """(z, y, x, N) float32: the translucency constraint's transparent shares, or None (built once)."""
+    def fixed_share(self) -> FixedShares | None:
+        """The translucency constraint's transparent shares, or None (built once)."""
         return self.record().fixed_share(self.volume.inks, self.volume.shape)
 
     def record(self) -> SceneRecord:
@@ -79,9 +74,9 @@ class SlabScene:
         return {"voxels": int(np.prod(self.volume.shape)), "texels": len(self.texels),
                 "size_mm": [float(v) for v in self.size_mm], **translucency_fields(self.translucency)}
 
-    def write_pictures(self, out: Path, pred_rgb: np.ndarray, delta_e: np.ndarray) -> list[Path]:
+    def write_pictures(self, out: RunDir, pred_rgb: np.ndarray, delta_e: np.ndarray) -> list[Path]:
         """DIR/face_F.png: target | prediction | ΔE76 heat map, per textured face."""
-        return [error_figure(Path(out) / f"face_{f}.png", f, self.target_rgb, pred_rgb, delta_e, self.pix[f])
+        return [error_figure(out.face_picture_path(f), f, self.target_rgb, pred_rgb, delta_e, self.pix[f])
                 for f in self.faces]
 
 
@@ -116,7 +111,7 @@ def build_slab(top: np.ndarray, bottom: np.ndarray | None, size_mm, inks: InkTab
         target[pix[f].reshape(-1)] = pic.reshape(-1, 3)
     mixture = np.zeros((nz, ny, nx, len(inks)), np.float32)
     mixture[..., inks.index("white") if "white" in inks.names else 0] = 1.0
-    vol = Volume(voxel_mm=(vox, vox, vox), mixture=mixture, inks=inks)
+    vol = Volume.from_mixture(voxel_mm=(vox, vox, vox), mixture=mixture, inks=inks)
     tr = None
     if translucency is not None:
         tr = slab_translucency(translucency, top.shape[:2], (nz, ny, nx), vox, inks, translucency_depth_mm,

@@ -27,13 +27,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ...model import EMPTY, FixedShares, InkTable, Volume
-from ...rundir import (FIXED_SHARE_MAX_ENTRIES, MeshInfo, SceneRecord, Translucency, transparent_ink,
-                       white_fixed_share, white_fixed_shares)
+from ...model import (EMPTY, FixedShares, InkTable, MeshInfo, Translucency, Volume, transparent_ink,
+                      white_fixed_shares)
+from ...rundir import RunDir, SceneRecord
 from ...units import OPT_DPI, voxel_mm
-from ..translucency import (ALPHA, check_depth, check_mask, load_mask, mesh_texel_share, mesh_translucency,
-                            translucency_fields)
+from ..translucency import ALPHA, check_depth, check_mask, load_mask, translucency_fields
 from .load import TexturedMesh, load_mesh
+from .translucency import mesh_texel_share, mesh_translucency
 from .views import bake_vertex_colors, render_views, write_glb
 from .voxelize import VoxelizedObject, voxelize
 
@@ -60,7 +60,7 @@ class MeshScene:
     mesh: the loaded mesh (mm, z up); vox: its voxelization (``sdf`` dropped); volume: a label Volume giving the
     geometry (inside, normals, box boundary, origin_mm) and inks (white labels inside; the optimiser takes its
     fixed shares from ``fixed_share``); free: (z, y, x) bool variables; fixed_share: the (z, y, x, N) fixed ink
-    shares as :class:`~inkopt.model.FixedShares` (``np.asarray`` gives the dense array).
+    shares (:class:`~inkopt.model.FixedShares`).
     """
 
     mesh: TexturedMesh
@@ -92,9 +92,7 @@ class MeshScene:
         vox = self.vox
         info = MeshInfo(self.mesh_path, float(self.mesh.mm_per_unit), self.height_mm, self.up, vox.origin_mm,
                         vox.voxel_mm, vox.closest_mm, self.shell_mm)
-        small = np.prod(self.fixed_share.shape) < FIXED_SHARE_MAX_ENTRIES  # else rebuilt from free_mask
-        return SceneRecord("mesh", vox.texels, vox.targets, free_mask=self.free,
-                           fixed_share_dense=self.fixed_share.dense() if small else None, mesh=info,
+        return SceneRecord("mesh", vox.texels, vox.targets, free_mask=self.free, fixed=self.fixed_share, mesh=info,
                            translucency=self.translucency)
 
     def describe(self) -> str:
@@ -111,14 +109,14 @@ class MeshScene:
                 "mesh_scale": self.mesh.mm_per_unit, "mesh_path": self.mesh_path,
                 "voxel_mm": [float(v) for v in self.volume.voxel_mm], **translucency_fields(self.translucency)}
 
-    def write_pictures(self, out: Path, pred_rgb: np.ndarray, delta_e: np.ndarray | None = None,
+    def write_pictures(self, out: RunDir, pred_rgb: np.ndarray, delta_e: np.ndarray | None = None,
                        views: int = 4, size: int | None = None) -> list[Path]:
         """prediction.glb, target.glb (vertex colours baked from the texels: target and predicted linear RGB
         (I, 3)) and views.png (target row over prediction row, ``views`` azimuths, ``size`` pixels each)."""
-        tx, vox, out = self.vox.texels, self.vox, Path(out)
+        tx, vox = self.vox.texels, self.vox
         target = bake_vertex_colors(self.mesh, vox.closest_mm, vox.targets, texel_normal=tx.normal)
         pred = bake_vertex_colors(self.mesh, vox.closest_mm, np.clip(pred_rgb, 0, 1), texel_normal=tx.normal)
-        paths = [out / "prediction.glb", out / "target.glb", out / "views.png"]
+        paths = [out.prediction_glb_path, out.target_glb_path, out.views_picture_path]
         write_glb(pred, paths[0])
         write_glb(target, paths[1])
         render_views(self.mesh, target, pred, paths[2], views=views, size=size or VIEW_SIZE)
@@ -136,7 +134,7 @@ def build_mesh_scene(mesh_path, inks: InkTable, height_mm: float | None = None, 
     if not (np.isfinite(dpi) and dpi > 0):
         raise ValueError(f"--dpi must be positive, got {dpi}")
     if "white" not in inks.names:
-        white_fixed_share(np.ones((1, 1, 1), bool), inks)  # raises the one-line error before the slow part
+        white_fixed_shares(np.ones((1, 1, 1), bool), inks)  # raises the one-line error before the slow part
     if shell_mm is not None and not (np.isfinite(shell_mm) and shell_mm > 0):
         raise ValueError(f"--shell-mm must be a positive thickness in mm, got {shell_mm}")
     mask = None
@@ -166,7 +164,7 @@ def build_mesh_scene(mesh_path, inks: InkTable, height_mm: float | None = None, 
     # The base volume's medium is not the optimiser's (it takes geometry and inks from it, and the fixed shares
     # from ``fixed``): white labels inside, 1 byte per voxel, instead of a (z, y, x, N) mixture.
     labels = np.where(vox.inside, np.uint8(inks.index("white")), np.uint8(EMPTY))
-    vol = Volume(voxel_mm=vox.voxel_mm, labels=labels, inks=inks, g=inks.g, inside=vox.inside,
+    vol = Volume.from_labels(voxel_mm=vox.voxel_mm, labels=labels, inks=inks, g=inks.g, inside=vox.inside,
                  normals=vox.normals, boundary="box", origin_mm=vox.origin_mm)
     vox.sdf = None  # 4 bytes per grid voxel no longer needed
     return MeshScene(mesh, vox, vol, free, fixed, shell_mm, seconds, str(Path(mesh_path).resolve()), up, tr)

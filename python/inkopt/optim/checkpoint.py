@@ -1,0 +1,92 @@
+"""The checkpoint file (the run directory's checkpoint.npz, ``RunDir.checkpoint_path``): what an exact resume
+needs, with its format version.
+
+Arrays (format version 1): ``format_version`` int64; ``x`` (F, N) float32, the variables; ``iteration`` int64;
+``config_key`` str, the JSON object of the settings and problem a resume must match
+(``Optimization.config_key``); the optimiser's ``opt_m``, ``opt_v``, ``opt_t``; the running average of the
+prediction ``c_avg``, ``c_var`` (I, 3) float32 and ``c_weight`` (absent before the first iteration); and the
+per-iteration history ``hist_*`` (float64, one entry per iteration from the start).
+
+A file without ``format_version`` (version 0) has the same arrays; its ``config_key`` leaves out the settings at
+their "off" value (no ``schedule_iterations``, ``decay`` 0, ``smooth`` 0, uniform lighting) and marks guided
+smoothing with ``"smooth_where": "flat"``. The upgrade to version 1 writes those settings out, so such a
+checkpoint resumes; one made before smoothing was limited to flat texels (guided smoothing without the mark)
+cannot continue the same run and is refused in one line.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..io import FORMAT_KEY, FormatError, load_npz, save_npz, upgrade_format
+
+CHECKPOINT_FORMAT = 1
+
+
+@dataclass
+class History:
+    """Per-iteration figures of the training loss (on the running-average prediction): ``e1``-``e3`` are the
+    loss terms, NaN for a term of weight 0 (not evaluated in training; the final evaluation reports all three);
+    ``delta_e76`` the mean ΔE76; seconds of the whole step and of its parts."""
+
+    loss: list = field(default_factory=list)
+    e1: list = field(default_factory=list)
+    e2: list = field(default_factory=list)
+    e3: list = field(default_factory=list)
+    delta_e76: list = field(default_factory=list)
+    seconds: list = field(default_factory=list)
+    render_s: list = field(default_factory=list)
+    gradient_s: list = field(default_factory=list)
+    loss_s: list = field(default_factory=list)
+    step_s: list = field(default_factory=list)
+
+    def append(self, **kw):
+        for k, v in kw.items():
+            getattr(self, k).append(float(v))
+
+    def arrays(self) -> dict:
+        return {f"hist_{k}": np.asarray(v, np.float64) for k, v in asdict(self).items()}
+
+    @classmethod
+    def keys(cls) -> list[str]:
+        """The checkpoint arrays it is stored in."""
+        return [f"hist_{k}" for k in asdict(cls())]
+
+    @classmethod
+    def from_arrays(cls, d) -> History:
+        return cls(**{k: [float(x) for x in d[f"hist_{k}"]] for k in asdict(cls())})
+
+
+def write_checkpoint(path: str | Path, arrays: dict) -> None:
+    """Write ``arrays`` (the keys of the module docstring but ``format_version``) atomically, uncompressed."""
+    save_npz(path, {FORMAT_KEY: np.int64(CHECKPOINT_FORMAT), **arrays}, compressed=False)
+
+
+def read_checkpoint(path: str | Path) -> dict:
+    """The arrays of a checkpoint file, brought to the current format version (one-line ``FormatError`` for a
+    version this inkopt does not read; ValueError for a missing or unreadable file)."""
+    data = load_npz(path, "checkpoint")
+    return upgrade_format(data, kind="checkpoint", where=path, current=CHECKPOINT_FORMAT,
+                          upgrades={0: lambda d: _upgrade_0(d, path)})
+
+
+def _upgrade_0(data: dict, where) -> dict:
+    """Version 0 -> 1: the settings a version-0 ``config_key`` leaves out, written out (module docstring)."""
+    if "config_key" not in data:
+        raise FormatError(f"{where} is not an inkopt checkpoint (no config_key); rerun without --resume")
+    if any(k not in data for k in History.keys()):
+        raise FormatError(f"{where} was made by a pre-release inkopt without the whole per-iteration history; it "
+                          f"cannot be continued: rerun without --resume")
+    key = json.loads(str(data["config_key"]))
+    if key.get("smooth") and key.get("smooth_edge") and key.get("smooth_where") != "flat":
+        raise FormatError(f"{where} was made by a pre-release inkopt that smoothed every voxel's step; it cannot "
+                          f"be continued: rerun without --resume")
+    key.pop("smooth_where", None)
+    key.setdefault("schedule_iterations", None)
+    key.setdefault("decay", 0.0)
+    key.setdefault("smooth", 0.0)
+    key.setdefault("lighting", "uniform")
+    return {**data, "config_key": np.array(json.dumps(key, sort_keys=True))}
