@@ -2,6 +2,8 @@
 from dataclasses import replace
 from pathlib import Path
 
+import time
+
 import numpy as np
 import pytest
 
@@ -81,15 +83,22 @@ def test_softmax_in_the_core_matches_numpy():
     assert empty.n_free == 0 and empty.backward(np.zeros((0, 1), np.float32), np.zeros((1, 2, 2, 1))).shape == (0, 1)
 
 
-def _pool_threads(n: int) -> int:
-    """How many threads of the bindings' kept pool of ``n`` (named ``inkopt-p{n}-{i}``) the process has."""
-    count = 0
-    for t in Path("/proc/self/task").iterdir():
-        try:
-            count += (t / "comm").read_text().startswith(f"inkopt-p{n}-")
-        except OSError:  # a thread that ended meanwhile
-            pass
-    return count
+def _pool_threads(n: int, want: int | None = None, wait_s: float = 10.0) -> int:
+    """How many threads of the bindings' kept pool of ``n`` (named ``inkopt-p{n}-{i}``) the process has.
+
+    A new thread takes its name once it first runs, which on a busy machine can be after the pool's first jobs
+    have returned; with ``want`` given, count again until that many are seen or ``wait_s`` has passed."""
+    deadline = time.monotonic() + wait_s
+    while True:
+        count = 0
+        for t in Path("/proc/self/task").iterdir():
+            try:
+                count += (t / "comm").read_text().startswith(f"inkopt-p{n}-")
+            except OSError:  # a thread that ended meanwhile
+                pass
+        if want is None or count >= want or time.monotonic() > deadline:
+            return count
+        time.sleep(0.01)
 
 
 @pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="reads the process's thread names in /proc")
@@ -108,7 +117,7 @@ def test_core_array_functions_keep_to_the_callers_threads():
     for _ in range(2):  # the second round reuses the pool
         got = (_core.softmax_rows(x, 7), _core.softmax_backward(x, g, scale, True, 7),
                GradientSmoother(shape, index, 1.5, threads=7)(g))
-        assert _pool_threads(7) == 7
+        assert _pool_threads(7, want=7) == 7
         for a, b in zip(got, want):
             np.testing.assert_array_equal(a, b)
     assert _pool_threads(3) == 0  # no pool of a count nobody asked for
