@@ -4,10 +4,10 @@ A colour-chart slab is optimised twice with the same seeds and settings, once un
 once under a display map (a warm key light low on the +x side, a cool sky, a dark floor; written to
 OUT/display.hdr and read back as `--lighting` reads it). Both results (continuous and quantized) are then
 evaluated under both lightings with the same render seeds (``evaluate_run``, fixed spp). Writes
-bench/results/lighting.json and bench/results/lighting.png (target | optimised under uniform | optimised under
+experiments/results/lighting.json and experiments/results/lighting.png (target | optimised under uniform | optimised under
 the map, both seen under the map) and prints a table.
 
-    .venv/bin/python bench/lighting_compare.py [--out bench-out/lighting] [--iterations 300] [--eval-spp 1024] [--depth-mm 1]
+    .venv/bin/python experiments/lighting_compare.py [--out bench-out/lighting] [--iterations 300] [--eval-spp 1024] [--depth-mm 1]
 
 The same runs from the command line:
 
@@ -22,8 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import RESULTS, machine, write  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+from common import STUDY_RESULTS as RESULTS, machine, write_study as write  # noqa: E402
 
 
 def display_map(h: int = 64) -> np.ndarray:
@@ -97,7 +97,7 @@ def main() -> int:
                   ("optimised under map, seen under map", colours["display"])], rec.pix["top"])
     img.save(RESULTS / "lighting.png")
     res = {"machine": machine(), "iterations": a.iterations, "seed": a.seed, "eval_spp": a.eval_spp, "slab_mm": list(size),
-           "inks": "vero-cmykw", "map": "display_map() in bench/lighting_compare.py, 64 x 128",
+           "inks": "vero-cmykw", "map": "display_map() in experiments/lighting_compare.py, 64 x 128",
            "seconds": time.perf_counter() - t0, "results": table}
     path = write("lighting.json", res)
     print(f"{'optimised under':<16}{'seen under':<12}{'ΔE76':>8}{'ΔE2000':>8}{'ΔE76 quantized':>16}{'ΔE2000 q.':>11}")

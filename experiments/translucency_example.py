@@ -4,11 +4,11 @@ paper), beside an unconstrained run of the same target.
 A procedural orange slice (rind, pith, ten pulp segments with pale membranes, on a leaf-green ground) is the top
 picture of a W x W x D mm slab (vero-cmykwt); the mask is 0.8 on the pulp disc, 0 elsewhere, through the whole
 slab. Both runs use the same seed and settings; the constrained run is then evaluated (fixed spp, no baselines)
-with ``--translucency-compare`` the unconstrained one. Writes bench/results/translucency.json,
+with ``--translucency-compare`` the unconstrained one. Writes experiments/results/translucency.json,
 docs/translucency.png (target | constrained | unconstrained under the uniform light, then both lit only from
 behind: what shines through) and prints the table.
 
-    .venv/bin/python bench/translucency_example.py [--out bench-out/translucency] [--iterations 150] [--px 48]
+    .venv/bin/python experiments/translucency_example.py [--out bench-out/translucency] [--iterations 150] [--px 48]
 
 The same from the command line:
 
@@ -23,8 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import machine, write  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+from common import machine, write_study as write  # noqa: E402
 
 DOCS = Path(__file__).resolve().parents[1] / "docs"
 

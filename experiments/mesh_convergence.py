@@ -1,8 +1,8 @@
 """Convergence of the optimiser on Spot (public-domain mesh in ../shared/data/spot): the training ΔE76 of every
 iteration (does it fall steadily or oscillate?) and the noise-free final figures, for settings given as
-OptimizeConfig overrides. Writes bench/results/mesh_convergence.json (one entry per name, updated in place).
+OptimizeConfig overrides. Writes experiments/results/mesh_convergence.json (one entry per name, updated in place).
 
-    .venv/bin/python bench/mesh_convergence.py NAME [--height-mm 10] [--iterations 60] [--set KEY=VALUE ...]
+    .venv/bin/python experiments/mesh_convergence.py NAME [--height-mm 10] [--iterations 60] [--set KEY=VALUE ...]
         [--out DIR]
 
 ``--out DIR`` keeps the run directory (default: a temporary one), and a run stopped part-way resumes from its
@@ -24,8 +24,8 @@ import sys
 import tempfile
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import RESULTS, machine, write  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+from common import STUDY_RESULTS as RESULTS, machine, write_study as write  # noqa: E402
 from shell_compare import SPOT  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -55,7 +55,7 @@ def main():
                        resume=a.out is not None, log=lambda s: None)
         with np.load(d / "checkpoint.npz") as ck:
             train = [round(float(v), 3) for v in ck["hist_delta_e76"]]
-    row = {"command": "python bench/mesh_convergence.py " + " ".join(sys.argv[1:]), "height_mm": a.height_mm,
+    row = {"command": "python experiments/mesh_convergence.py " + " ".join(sys.argv[1:]), "height_mm": a.height_mm,
            "iterations": a.iterations, **kw, **{k: rep[k] for k in KEYS if k in rep},
            "train_delta_e76": train}
     print(a.name, " ".join(f"{k}={v:.4g}" for k, v in row.items() if isinstance(v, float)))

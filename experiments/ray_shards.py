@@ -1,8 +1,8 @@
 """Issue 12, "Beyond one machine": seconds per optimisation iteration of a small slab in one process and on
 local Ray workers (1 worker x 2 threads, 2 workers x 1 thread), the results checked bit-identical, and the bytes
-each iteration moves between the driver and the workers. Writes bench/results/ray_shards.json.
+each iteration moves between the driver and the workers. Writes experiments/results/ray_shards.json.
 
-    .venv/bin/python bench/ray_shards.py [--texels-x 96] [--iterations 6]
+    .venv/bin/python experiments/ray_shards.py [--texels-x 96] [--iterations 6]
 
 The figures are a local machine's: workers share its cores, so they show the overhead of sharding, not a
 cluster's speed-up (which a cluster gets by adding nodes: each iteration's work splits in proportion to threads).
@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import machine, write  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+from common import machine, write_study as write  # noqa: E402
 
 from inkopt import charts  # noqa: E402
 from inkopt.color import srgb_to_linear  # noqa: E402

@@ -3,9 +3,9 @@ cyan2, magenta, magenta2, yellow, yellow2 choose 4, always black and white: 15 s
 at 300 DPI: 71 x 47 x 12 voxels, 3337 top-face texels). Both strategies run every set with the same settings and
 seed; halving's final runs are resumed and continue exactly, so its winner's loss equals brute force's run of the
 same set. Halving's rule (inkopt.inksets.search): rungs of 1/8 and 1/4 of the budget ranked by the extrapolated
-training loss, then the last 4 sets run the full budget (rung evaluations at 16 spp). Writes bench/results/select_inks.json and prints a markdown table.
+training loss, then the last 4 sets run the full budget (rung evaluations at 16 spp). Writes experiments/results/select_inks.json and prints a markdown table.
 
-    .venv/bin/python bench/select_inks.py [--charts colour,astronaut] [--iterations 80] [--workers 2]
+    .venv/bin/python experiments/select_inks.py [--charts colour,astronaut] [--iterations 80] [--workers 2]
         [--out bench-out/select_inks] [--suffix _NAME]
 
 Work is counted in texel-samples (iterations x texels x (spp + forward spp) + evaluation renders).
@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import machine, write  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+from common import machine, write_study as write  # noqa: E402
 
 from inkopt import charts  # noqa: E402
 from inkopt.inksets import Selection, make_backend, run_selection  # noqa: E402
@@ -52,7 +52,7 @@ def main():
     ap.add_argument("--iterations", type=int, default=80)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out", default="bench-out/select_inks")
-    ap.add_argument("--suffix", default="", help="results file bench/results/select_inks{SUFFIX}.json")
+    ap.add_argument("--suffix", default="", help="results file experiments/results/select_inks{SUFFIX}.json")
     args = ap.parse_args()
     out = Path(args.out)
     results = {"machine": machine(), "candidates": CANDIDATES, "choose": 4, "always": ["black", "white"],

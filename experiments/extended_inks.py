@@ -1,8 +1,8 @@
 """Issue 10 §1: an extended ink set end to end. The same target (the colour chart on a 6 x 4 x 1 mm slab) optimised,
 quantized, exported and evaluated with CMYKW and with CMYKW + orange, same settings and seed. Writes
-bench/results/extended_inks.json and prints a markdown table.
+experiments/results/extended_inks.json and prints a markdown table.
 
-    .venv/bin/python bench/extended_inks.py [--iterations 100] [--out bench-out/extended_inks]
+    .venv/bin/python experiments/extended_inks.py [--iterations 100] [--out bench-out/extended_inks]
 """
 import argparse
 import json
@@ -10,8 +10,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import machine, write  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+from common import machine, write_study as write  # noqa: E402
 
 from inkopt import charts  # noqa: E402
 

@@ -1,10 +1,10 @@
 """Compare the paper's biased one-pass L_i = 1 gradient with the unbiased path-replay gradient.
 
-    .venv/bin/python bench/compare_li1.py
+    .venv/bin/python experiments/compare_li1.py
 
 On a random CMYKW slab (and on an all-white start) with a random positive adjoint on the top face: cosine
 similarity of the sigma_a gradients and of the mixture gradients, ratio of norms, and cost of each pass.
-Writes bench/results/li1_vs_replay.json.
+Writes experiments/results/li1_vs_replay.json.
 """
 import sys
 import time
@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import machine, write  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+from common import machine, write_study as write  # noqa: E402
 
 from inkopt.model import InkTable, Texels, Volume, mix_grad  # noqa: E402
 from inkopt.render import Renderer  # noqa: E402

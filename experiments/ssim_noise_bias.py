@@ -1,7 +1,7 @@
 """How the noise-corrected SSIM and mottle of a run's result depend on the render's samples (issue 13): the
 evidence behind the adaptive evaluation's SSIM noise ratio (``evaluation/noise.py``, ``SSIM_NOISE_RATIO``).
 
-    .venv/bin/python bench/ssim_noise_bias.py RUN_DIR [--spp 64,256,1024] [--white] [--baselines] [--name NAME]
+    .venv/bin/python experiments/ssim_noise_bias.py RUN_DIR [--spp 64,256,1024] [--white] [--baselines] [--name NAME]
         [--threads 2]
 
 For each spp: one render of the run's volume.npz on its scene texels (evaluation seeds), its noise-corrected SSIM
@@ -9,7 +9,7 @@ For each spp: one render of the run's volume.npz on its scene texels (evaluation
 variance over K2), and the mottle from two independent renders' high-pass product (no noise model: the two
 renders' noise is independent, so its expectation is the noise-free figure). ``--white`` does the same for the
 97 %-white start of the same object, ``--baselines`` for the surface and extrusion baselines' mixtures (continuous,
-not quantized; ``evaluation.baselines``). Writes bench/results/ssim_noise_bias_NAME.json (NAME: the run folder's name).
+not quantized; ``evaluation.baselines``). Writes experiments/results/ssim_noise_bias_NAME.json (NAME: the run folder's name).
 """
 import argparse
 import sys
@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import machine, write  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+from common import machine, write_study as write  # noqa: E402
 
 from inkopt.color import linear_to_lab  # noqa: E402
 from inkopt.evaluation.metrics import prediction_metrics  # noqa: E402

@@ -1,12 +1,12 @@
 """A/B of the compact storage of big objects against the per-grid-voxel forms it replaced, on Spot.
 
-    python bench/storage_ab.py [HEIGHT_MM=20] [--reps 3] [--threads 2]
+    python experiments/storage_ab.py [HEIGHT_MM=20] [--reps 3] [--threads 2]
 
 (1) a forward render (4 spp, the 97 %-white start) with the coefficients stored per grid voxel (``DenseMedium``)
 against the inside voxels only (``SparseMedium``, what ``Renderer`` uses for masked volumes); (2) a gradient pass
 (4 spp) into slots given by a (z, y, x) int32 map against the free voxels' list (ranked per row in the core, what
 the optimiser passes). The forms are interleaved, repeated ``--reps`` times; renders and gradients must be
-identical (checked). Writes bench/results/storage_ab_<height>mm.json: per form the seconds of every repetition and
+identical (checked). Writes experiments/results/medium_storage_<height>mm.json: per form the seconds of every repetition and
 their mean.
 """
 from __future__ import annotations
@@ -19,6 +19,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "python"))
+sys.path.insert(0, str(ROOT / "bench"))
 SPOT = Path(__file__).resolve().parents[2] / "shared" / "data" / "spot" / "spot.obj"
 
 
@@ -26,7 +27,7 @@ def main(argv=None) -> dict:
     import numpy as np
 
     from inkopt import _core
-    from inkopt.io import atomic_write_bytes
+    from common import write_study
     from inkopt.model import InkTable, mix
     from inkopt.render import Renderer
     from inkopt.scenes.mesh import build_mesh_scene
@@ -74,8 +75,7 @@ def main(argv=None) -> dict:
     result = {"height_mm": args.height_mm, "grid_zyx": list(vol.shape), "free_voxels": int(len(free)),
               "texels": len(tex), "threads": args.threads, "reps": args.reps, "seconds": times,
               "mean_seconds": {k: float(np.mean(v)) for k, v in times.items()}}
-    out = ROOT / "bench" / "results" / f"storage_ab_{args.height_mm:g}mm.json"
-    atomic_write_bytes(out, (json.dumps(result, indent=2) + "\n").encode())
+    write_study(f"medium_storage_{args.height_mm:g}mm.json", result)
     print(json.dumps(result["mean_seconds"]))
     return result
 

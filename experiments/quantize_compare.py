@@ -3,9 +3,9 @@
 For each case, optimise a slab (``inkopt slab``, reused when its report exists), then quantize it with every method
 under the same settings (600 x 300 DPI, 27 um layers, nearest upsampling, seed 0) and evaluate the printed result
 (``evaluate_run``, adaptive noise-free sampling, no baselines: they do not depend on our quantization). Writes
-bench/results/quantize_compare.json and prints a markdown table.
+experiments/results/quantize_compare.json and prints a markdown table.
 
-    .venv/bin/python bench/quantize_compare.py [--iterations 60] [--out bench-out/quantize] [--cases demo,zebra]
+    .venv/bin/python experiments/quantize_compare.py [--iterations 60] [--out bench-out/quantize] [--cases demo,zebra]
         [--methods blue-noise,random,error-diffusion] [--upsample nearest]
 
 Cases: ``demo`` (the demo's 6 x 4 x 1 mm slab: colour chart on top, zebra below), ``zebra`` (the paper's zebra,
@@ -21,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import RESULTS, machine, write  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+from common import STUDY_RESULTS as RESULTS, machine, write_study as write  # noqa: E402
 
 from inkopt import charts  # noqa: E402
 from inkopt.evaluation.evaluate import evaluate_run  # noqa: E402

@@ -1,9 +1,9 @@
 """Issue "printable output": optimise the zebra chart (1 mm slab, stripes of 30/15/10/5/3/1 voxels), a colour
 picture (scikit-image's astronaut) and the issues' reference slab (15 x 10 x 2.5 mm, colour chart on top, zebra
 below), quantize each with blue-noise and with random draws, and evaluate against the surface and extrusion
-baselines. Writes bench/results/printable.json and prints a markdown table.
+baselines. Writes experiments/results/printable.json and prints a markdown table.
 
-    .venv/bin/python bench/printable_eval.py [--iterations N] [--spp 0] [--out bench-out]
+    .venv/bin/python experiments/printable_eval.py [--iterations N] [--spp 0] [--out bench-out]
         [--cases zebra,astronaut,reference] [--init white|surface|extrusion] [--lr X] [--smooth S] [--grad-spp N]
         [--decay F] [--adjoint-ema W]
 
@@ -25,8 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import RESULTS, machine, write  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+from common import STUDY_RESULTS as RESULTS, machine, write_study as write  # noqa: E402
 
 from inkopt import charts  # noqa: E402
 from inkopt.optim import OptimizeConfig  # noqa: E402

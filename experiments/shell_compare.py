@@ -1,8 +1,8 @@
 """Issue "textured 3D objects": what `--shell-mm D` does to time, memory and quality. Optimises Spot at 20 mm with
 every voxel free and with shells of 1 and 0.5 mm (same seeds and settings), then measures each result's
-high-frequency structure ("mottle") against the target's. Writes bench/results/shell_mm.json and prints a table.
+high-frequency structure ("mottle") against the target's. Writes experiments/results/shell_mm.json and prints a table.
 
-    .venv/bin/python bench/shell_compare.py [--out bench-out/shell] [--iterations 20] [--shells none,1,0.5]
+    .venv/bin/python experiments/shell_compare.py [--out bench-out/shell] [--iterations 20] [--shells none,1,0.5]
         [--smooth S]
 
 ``--smooth S`` runs the same with that step smoothing (``inkopt optimize --smooth S``; without it, the mesh
@@ -25,8 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import RESULTS, machine, write  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+from common import STUDY_RESULTS as RESULTS, machine, write_study as write  # noqa: E402
 
 SPOT = Path(__file__).resolve().parents[2] / "shared" / "data" / "spot" / "spot.obj"  # ../shared beside the repo
 

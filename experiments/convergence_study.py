@@ -1,12 +1,12 @@
 """Convergence study on the demo slab (6 x 4 x 1 mm, colour chart on top, zebra below, the `inkopt demo` run):
 final noise-free quality of the optimiser's settings at equal iterations and at about equal time; with --case,
-on the zebra chart or the astronaut photograph of bench/printable_eval.py instead (200-300 iterations).
+on the zebra chart or the astronaut photograph of experiments/printable_eval.py instead (200-300 iterations).
 
-    .venv/bin/python bench/convergence_study.py [--threads 2] [--only NAME ...] [--case demo|zebra|astronaut]
+    .venv/bin/python experiments/convergence_study.py [--threads 2] [--only NAME ...] [--case demo|zebra|astronaut]
 
 Each setting is one `run_slab` from the 97 %-white start with seed 0; the final figures come from the driver's
 adaptive evaluation (noise adds <= 0.5 to the mean dE76), so differences of a few tenths are real for this seed
-and scene, not for every scene. Writes bench/results/convergence_CASE.json (one entry per setting: mean dE76
+and scene, not for every scene. Writes experiments/results/convergence_CASE.json (one entry per setting: mean dE76
 (noise-corrected), mean dE2000, SSIM, mottle (dL*)^2 in the target's flat regions, seconds of the whole run).
 """
 import argparse
@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import RESULTS, machine, write  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+from common import STUDY_RESULTS as RESULTS, machine, write_study as write  # noqa: E402
 
 from inkopt import charts  # noqa: E402
 from inkopt.model import InkTable  # noqa: E402
