@@ -77,7 +77,8 @@ def main(argv=None) -> dict:
         "inside_voxels": int(scene.vox.inside.sum()), "free_voxels": int(scene.free.sum()),
         "texels": len(scene.vox.texels), "shell_mm": args.shell_mm,
         "voxelize_seconds": scene.voxelize_seconds, "build_seconds": build_s, "setup_seconds": setup_s,
-        "iterations": args.iterations, "spp": args.spp, "threads": args.threads, "smooth": run.cfg.smooth, "adjoint_ema": run.cfg.adjoint_ema,
+        "iterations": args.iterations, "spp": args.spp, "threads": args.threads,
+        "smooth": run.cfg.smooth, "adjoint_ema": run.cfg.adjoint_ema,
         "seconds_per_iteration": float(np.mean(h.seconds)) if h.seconds else None,
         "cpu_seconds_per_iteration": cpu_s,
         "time_split": {k: float(np.mean(getattr(h, k))) if h.seconds else None

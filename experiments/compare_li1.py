@@ -38,7 +38,8 @@ def main():
         adj = rng.uniform(0.2, 1.0, (len(tex), 3)).astype(np.float32)
         r = Renderer(vol)
         t0 = time.perf_counter(); r.render(tex, 64, 0); tf = time.perf_counter() - t0
-        t0 = time.perf_counter(); gs, ga, _ = r.gradient(tex, adj, 64, 1, method="replay"); tr = time.perf_counter() - t0
+        t0 = time.perf_counter(); gs, ga, _ = r.gradient(tex, adj, 64, 1, method="replay")
+        tr = time.perf_counter() - t0
         t0 = time.perf_counter(); ls, la, _ = r.gradient(tex, adj, 64, 1, method="li1"); tl = time.perf_counter() - t0
         gm, lm = mix_grad(gs, ga, inks), mix_grad(ls, la, inks)
         out[name] = {"cos_sigma_a": cos(ga, la), "cos_mixture": cos(gm, lm),

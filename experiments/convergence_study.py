@@ -25,11 +25,10 @@ from inkopt.model import InkTable  # noqa: E402
 from inkopt.optim import OptimizeConfig  # noqa: E402
 from inkopt.run import run_slab  # noqa: E402
 
-# name -> (iterations, OptimizeConfig overrides), all with the constant step they were run with (decay 0; the
-# default since 2026-11-25 14:00 is 0.25); the defaults are spp 4, forward spp 16, lr 2 (eg), ema 0.8 and
-# step smoothing 1.5 under flat texels (since 2026-11-25; 0.7 from 2026-11-24, entries "smooth0.7_*"); "nosmooth"
-# entries turn the smoothing off. Entries of
-# the results file that are not listed here were made by earlier code (see their "note").
+# name -> (iterations, OptimizeConfig overrides), all with a constant step (decay 0; the default decay is 0.25);
+# otherwise the defaults: spp 4, forward spp 16, lr 2 (eg), ema 0.8 and step smoothing 1.5 under flat texels;
+# "nosmooth" entries turn the smoothing off. Entries of the results file that are not listed here were made by
+# other code (see their "note" and docs/experiments.md).
 SETTINGS = {
     "default_150": (150, {"decay": 0.0}),
     "default_150_seed1": (150, {"decay": 0.0, "seed": 1}),
@@ -45,17 +44,17 @@ SETTINGS = {
     "forward0_ema0.9_400": (400, {"decay": 0.0, "forward_spp": 0, "adjoint_ema": 0.9, "smooth": 0.0}),
     "forward0_ema0.9_spp8_150": (150, {"decay": 0.0, "forward_spp": 0, "adjoint_ema": 0.9, "spp": 8, "smooth": 0.0}),
     "smooth0.7_unguided_150": (150, {"decay": 0.0, "smooth": 0.7, "smooth_edge": 0.0}),
-    # half the forward samples (an iteration ~30 % cheaper): at equal iterations and at about equal time (run with
-    # the smoothing default of then, 0.7, and its depth weight 30, not 5 as now)
+    # half the forward samples (an iteration ~30 % cheaper): at equal iterations and at about equal time (the
+    # entries in the results file were made with the smoothing's depth weight 30; docs/experiments.md)
     "forward8_150": (150, {"decay": 0.0, "forward_spp": 8, "smooth": 0.7}),
     "forward8_215": (215, {"decay": 0.0, "forward_spp": 8, "smooth": 0.7}),
-    # wider step smoothing under flat texels (kernel width 1.5 / 3 voxels; run with the depth weight 30 of then)
+    # wider step smoothing under flat texels (kernel width 1.5 / 3 voxels; the results were made with depth weight 30)
     "smooth1.5_150": (150, {"decay": 0.0, "smooth": 1.5}),
     "smooth3_150": (150, {"decay": 0.0, "smooth": 3.0}),
     "smooth0.7_150": (150, {"decay": 0.0, "smooth": 0.7}),
 }
-# --case zebra|astronaut: name -> (iterations, overrides); the default since 2026-11-25 is 300 iterations with step
-# decay 0.25 ("default_300"); entries run before then had 200 iterations and a constant step (decay 0)
+# --case zebra|astronaut: name -> (iterations, overrides); "default_300" is the default run (300 iterations, step
+# decay 0.25); the other entries vary one setting from 200 iterations
 CASE_SETTINGS = {
     "default_300": (300, {}),
     "constant_200": (200, {"decay": 0.0}),

@@ -1,4 +1,4 @@
-"""Issue 10 §1: an extended ink set end to end. The same target (the colour chart on a 6 x 4 x 1 mm slab) optimised,
+"""An extended ink set end to end. The same target (the colour chart on a 6 x 4 x 1 mm slab) optimised,
 quantized, exported and evaluated with CMYKW and with CMYKW + orange, same settings and seed. Writes
 experiments/results/extended_inks.json and prints a markdown table.
 

@@ -1,13 +1,14 @@
-"""Issue 11 §2, "display lighting": does optimising under the lighting a print will be seen in pay off?
+"""Display lighting: does optimising under the lighting a print will be seen in pay off?
 
 A colour-chart slab is optimised twice with the same seeds and settings, once under the uniform white light and
 once under a display map (a warm key light low on the +x side, a cool sky, a dark floor; written to
 OUT/display.hdr and read back as `--lighting` reads it). Both results (continuous and quantized) are then
 evaluated under both lightings with the same render seeds (``evaluate_run``, fixed spp). Writes
-experiments/results/lighting.json and experiments/results/lighting.png (target | optimised under uniform | optimised under
-the map, both seen under the map) and prints a table.
+experiments/results/lighting.json and experiments/results/lighting.png (target | optimised under uniform |
+optimised under the map, both seen under the map) and prints a table.
 
-    .venv/bin/python experiments/lighting_compare.py [--out bench-out/lighting] [--iterations 300] [--eval-spp 1024] [--depth-mm 1]
+    .venv/bin/python experiments/lighting_compare.py [--out bench-out/lighting] [--iterations 300] [--eval-spp 1024]
+        [--depth-mm 1]
 
 The same runs from the command line:
 
@@ -96,7 +97,8 @@ def main() -> int:
     img = panels([("target", rec.target_rgb), ("optimised uniform, seen under map", colours["uniform"]),
                   ("optimised under map, seen under map", colours["display"])], rec.pix["top"])
     img.save(RESULTS / "lighting.png")
-    res = {"machine": machine(), "iterations": a.iterations, "seed": a.seed, "eval_spp": a.eval_spp, "slab_mm": list(size),
+    res = {"machine": machine(), "iterations": a.iterations, "seed": a.seed, "eval_spp": a.eval_spp,
+           "slab_mm": list(size),
            "inks": "vero-cmykw", "map": "display_map() in experiments/lighting_compare.py, 64 x 128",
            "seconds": time.perf_counter() - t0, "results": table}
     path = write("lighting.json", res)

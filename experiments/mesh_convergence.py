@@ -1,4 +1,4 @@
-"""Convergence of the optimiser on Spot (public-domain mesh in ../shared/data/spot): the training ΔE76 of every
+"""Convergence of the optimiser on Spot (public-domain mesh, ``SPOT``): the training ΔE76 of every
 iteration (does it fall steadily or oscillate?) and the noise-free final figures, for settings given as
 OptimizeConfig overrides. Writes experiments/results/mesh_convergence.json (one entry per name, updated in place).
 
@@ -9,13 +9,13 @@ OptimizeConfig overrides. Writes experiments/results/mesh_convergence.json (one 
 checkpoint there.
 
 e.g. ``spot20_default_300 --height-mm 20 --iterations 300`` (the mesh defaults: running-average weight 0.5,
-smoothing 3), ``ema0.8_60 --set adjoint_ema=0.8 smooth=1.5`` (the slabs' settings) and the converged reference of
-issue 13, a warm start from the default run's result at 4x the gradient and 2x the forward samples, at half the
-step (a warm start calibrates the step scale on its small gradients: 3.0e-6 against the cold start's 6.5e-6, so
-``lr`` 2 overshoots): ``spot20_converged --height-mm 20 --iterations 80 --set spp=16 forward_spp=32 seed=7 lr=1
+smoothing 3), ``ema0.8_60 --set adjoint_ema=0.8 smooth=1.5`` (the slabs' settings) and the converged reference,
+a warm start from the default run's result at 4x the gradient and 2x the forward samples, at half the step (a
+warm start calibrates the step scale on its small gradients: 3.0e-6 against the cold start's 6.5e-6, so ``lr`` 2
+overshoots): ``spot20_converged --height-mm 20 --iterations 80 --set spp=16 forward_spp=32 seed=7 lr=1
 init='"bench-out/spot20_default_300/volume.npz"' --out bench-out/spot20_converged``. Every entry records the
-resolved ``adjoint_ema`` and ``smooth`` (the entries ``default_60``, ``ema0.5_60`` and ``spot20_ema0.5_60`` ran
-before the mesh defaults, at 0.8 / 1.5, 0.5 / 1.5 and 0.5 / 1.5) and the command. Seed 0 unless set, all cores,
+resolved ``adjoint_ema`` and ``smooth`` (``default_60``, ``ema0.5_60`` and ``spot20_ema0.5_60``: 0.8 / 1.5,
+0.5 / 1.5 and 0.5 / 1.5) and the command. Seed 0 unless set, all cores,
 adaptive final evaluation (Monte Carlo noise adds <= 0.5 to the mean ΔE76, SSIM noise ratio <= 0.1).
 """
 import argparse

@@ -1,5 +1,5 @@
-"""Issue "printable output": optimise the zebra chart (1 mm slab, stripes of 30/15/10/5/3/1 voxels), a colour
-picture (scikit-image's astronaut) and the issues' reference slab (15 x 10 x 2.5 mm, colour chart on top, zebra
+"""Printable output: optimise the zebra chart (1 mm slab, stripes of 30/15/10/5/3/1 voxels), a colour
+picture (scikit-image's astronaut) and the reference slab (15 x 10 x 2.5 mm, colour chart on top, zebra
 below), quantize each with blue-noise and with random draws, and evaluate against the surface and extrusion
 baselines. Writes experiments/results/printable.json and prints a markdown table.
 
@@ -96,7 +96,7 @@ def main():
                           f"{180 * 25.4 / 300:.4f}x{60 * 25.4 / 300:.4f}x1.0", []),
         "astronaut": lambda: (charts.save((resize(data.astronaut(), (236, 236), anti_aliasing=True) * 255)
                                           .astype(np.uint8), out / "astronaut.png"), "10x10x2", []),
-        # The issues' reference slab (bench/bench_optimize.py): 177 x 118 x 30 voxels, colour chart on top (4 px
+        # The reference slab (bench/bench_optimize.py): 177 x 118 x 30 voxels, colour chart on top (4 px
         # per voxel), zebra below.
         "reference": lambda: (charts.save(charts.colour_chart(708, 472), out / "reference_top.png"),
                               f"{177 * VOX:.4f}x{118 * VOX:.4f}x{30 * VOX:.4f}",
@@ -105,7 +105,7 @@ def main():
     mode = "adaptive" if a.spp == 0 else f"fixed {a.spp} spp"
     previous = RESULTS / "printable.json"
     results = json.loads(previous.read_text())["results"] if previous.is_file() else {}
-    for r in results.values():  # entries from before the mode was recorded
+    for r in results.values():  # entries that do not record the mode
         if "blue-noise" in r:
             r.setdefault("eval_mode", eval_mode(r["blue-noise"]))
             r.setdefault("eval_spp", None if r["blue-noise"].get("spp_adaptive") else r["blue-noise"].get("spp"))

@@ -1,4 +1,4 @@
-"""Issue 13, item 3: compare the quantization methods (blue-noise, random, error-diffusion) on optimised charts.
+"""Compare the quantization methods (blue-noise, random, error-diffusion) on optimised charts.
 
 For each case, optimise a slab (``inkopt slab``, reused when its report exists), then quantize it with every method
 under the same settings (600 x 300 DPI, 27 um layers, nearest upsampling, seed 0) and evaluate the printed result

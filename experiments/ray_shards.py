@@ -1,4 +1,4 @@
-"""Issue 12, "Beyond one machine": seconds per optimisation iteration of a small slab in one process and on
+"""Beyond one machine: seconds per optimisation iteration of a small slab in one process and on
 local Ray workers (1 worker x 2 threads, 2 workers x 1 thread), the results checked bit-identical, and the bytes
 each iteration moves between the driver and the workers. Writes experiments/results/ray_shards.json.
 

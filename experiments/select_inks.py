@@ -1,9 +1,10 @@
-"""Issue 10 §2: successive halving vs brute force for ink-set selection, on the paper's setup (candidates cyan,
+"""Successive halving vs brute force for ink-set selection, on the paper's setup (candidates cyan,
 cyan2, magenta, magenta2, yellow, yellow2 choose 4, always black and white: 15 sets) on small slabs (6 x 4 x 1 mm
 at 300 DPI: 71 x 47 x 12 voxels, 3337 top-face texels). Both strategies run every set with the same settings and
 seed; halving's final runs are resumed and continue exactly, so its winner's loss equals brute force's run of the
 same set. Halving's rule (inkopt.inksets.search): rungs of 1/8 and 1/4 of the budget ranked by the extrapolated
-training loss, then the last 4 sets run the full budget (rung evaluations at 16 spp). Writes experiments/results/select_inks.json and prints a markdown table.
+training loss, then the last 4 sets run the full budget (rung evaluations at 16 spp). Writes
+experiments/results/select_inks.json and prints a markdown table.
 
     .venv/bin/python experiments/select_inks.py [--charts colour,astronaut] [--iterations 80] [--workers 2]
         [--out bench-out/select_inks] [--suffix _NAME]
@@ -83,7 +84,8 @@ def main():
             results["charts"][name] = {
                 "brute": brute, "halving": halv, "seconds": secs, "loss_gap_percent": gap, "work_ratio": ratio,
                 "same_winner": brute["winner"]["inks"] == halv["winner"]["inks"],
-                "halving_winner_loss_equals_brute_run": halv["winner"]["loss"] == loss_of[tuple(halv["winner"]["inks"])],
+                "halving_winner_loss_equals_brute_run":
+                    halv["winner"]["loss"] == loss_of[tuple(halv["winner"]["inks"])],
                 "paper_set_rank": paper_rank,
                 "paper_set_gap_percent": 100 * (loss_of[tuple(PAPER_WINNER)] - best) / best}
             rows.append(f"| {name} | {','.join(brute['winner']['inks'][:4])} ({best:.5f}) | "

@@ -1,4 +1,4 @@
-"""Issue "textured 3D objects": what `--shell-mm D` does to time, memory and quality. Optimises Spot at 20 mm with
+"""What `--shell-mm D` does to time, memory and quality. Optimises Spot at 20 mm with
 every voxel free and with shells of 1 and 0.5 mm (same seeds and settings), then measures each result's
 high-frequency structure ("mottle") against the target's. Writes experiments/results/shell_mm.json and prints a table.
 
@@ -6,10 +6,11 @@ high-frequency structure ("mottle") against the target's. Writes experiments/res
         [--smooth S]
 
 ``--smooth S`` runs the same with that step smoothing (``inkopt optimize --smooth S``; without it, the mesh
-default: 3 under flat texels with running-average weight 0.5 since the evening of 2026-11-25, 1.5 and 0.8 before,
-smoothing 0.7 from 2026-11-24); its results are keyed ``SHELL+smoothS``, the default's ``SHELL`` (the entries
-record ``adjoint_ema`` and ``smooth`` since the evening of 2026-11-25; older ones ran at the defaults of then). The final figures are inkopt's adaptive evaluation (``--eval-spp 0``, since 2026-11-25; the
-entries made before used 64 spp, whose noise-corrected SSIM is ~0.03 low on Spot). Results of shells not run this time are kept from the previous shell_mm.json.
+default); its results are keyed ``SHELL+smoothS``, the default's ``SHELL``. Entries record ``adjoint_ema`` and
+``smooth`` where the report had them; entries without them ran at other defaults (their "note",
+docs/experiments.md). The final figures are inkopt's adaptive evaluation (``--eval-spp 0``; entries with 64 spp
+have a noise-corrected SSIM ~0.03 low on Spot). Results of shells not run this time are kept from the previous
+shell_mm.json.
 
 Runs whose report.json exists are not re-run (delete the folder to redo one). Mottle: with two renders a, b of
 independent seeds, each texel's deviation from the mean of its 6 nearest texels (in L*) is formed in both; the
@@ -85,8 +86,8 @@ def main():
     ap.add_argument("--structure-spp", type=int, default=64)
     ap.add_argument("--smooth", type=float)
     ap.add_argument("--eval-spp", type=int, default=0,
-                    help="samples of the final evaluation (0, the default since 2026-11-25: adaptive, as inkopt's "
-                         "own default; the rows made before used 64, whose SSIM is biased low by ~0.03 on Spot)")
+                    help="samples of the final evaluation (0, the default: adaptive, as inkopt's own default; 64 spp "
+                         "biases SSIM low by ~0.03 on Spot)")
     a = ap.parse_args()
     out = Path(a.out)
     previous = RESULTS / "shell_mm.json"
@@ -107,7 +108,7 @@ def main():
                                           "peak_rss_gb", "initial_delta_e76_mean", "delta_e76_mean",
                                           "delta_e76_p95", "delta_e2000_mean", "initial_ssim", "ssim",
                                           "iterations", "eval_spp", "initial_eval_spp")}
-        # the report's own figures (runs since 2026-11-25): noise-corrected mean ΔE76 and mottle (metrics.py)
+        # the report's own figures where it has them: noise-corrected mean ΔE76 and mottle (metrics.py)
         results[s + tag].update({k: rep[k] for k in ("delta_e76_mean_corrected", "mottle_l2", "mottle_l2_target",
                                                      "flat_texels", "adjoint_ema", "smooth") if k in rep})
         results[s + tag]["high_frequency_power"] = structure(d, a.structure_spp, a.threads)

@@ -1,4 +1,4 @@
-"""How the noise-corrected SSIM and mottle of a run's result depend on the render's samples (issue 13): the
+"""How the noise-corrected SSIM and mottle of a run's result depend on the render's samples: the
 evidence behind the adaptive evaluation's SSIM noise ratio (``evaluation/noise.py``, ``SSIM_NOISE_RATIO``).
 
     .venv/bin/python experiments/ssim_noise_bias.py RUN_DIR [--spp 64,256,1024] [--white] [--baselines] [--name NAME]
@@ -9,7 +9,8 @@ For each spp: one render of the run's volume.npz on its scene texels (evaluation
 variance over K2), and the mottle from two independent renders' high-pass product (no noise model: the two
 renders' noise is independent, so its expectation is the noise-free figure). ``--white`` does the same for the
 97 %-white start of the same object, ``--baselines`` for the surface and extrusion baselines' mixtures (continuous,
-not quantized; ``evaluation.baselines``). Writes experiments/results/ssim_noise_bias_NAME.json (NAME: the run folder's name).
+not quantized; ``evaluation.baselines``). Writes experiments/results/ssim_noise_bias_NAME.json (NAME: the run
+folder's name).
 """
 import argparse
 import sys

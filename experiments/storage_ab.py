@@ -6,8 +6,8 @@
 against the inside voxels only (``SparseMedium``, what ``Renderer`` uses for masked volumes); (2) a gradient pass
 (4 spp) into slots given by a (z, y, x) int32 map against the free voxels' list (ranked per row in the core, what
 the optimiser passes). The forms are interleaved, repeated ``--reps`` times; renders and gradients must be
-identical (checked). Writes experiments/results/medium_storage_<height>mm.json: per form the seconds of every repetition and
-their mean.
+identical (checked). Writes experiments/results/medium_storage_<height>mm.json: per form the seconds of every
+repetition and their mean.
 """
 from __future__ import annotations
 

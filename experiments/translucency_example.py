@@ -1,4 +1,4 @@
-"""Issue 11 §1, "translucency": an orange-like slab whose pulp is constrained to 80 % transparent ink (as the
+"""Translucency: an orange-like slab whose pulp is constrained to 80 % transparent ink (as the
 paper), beside an unconstrained run of the same target.
 
 A procedural orange slice (rind, pith, ten pulp segments with pale membranes, on a leaf-green ground) is the top
@@ -107,7 +107,8 @@ def main() -> int:
 
     def row(t: dict, e: dict) -> dict:
         reg, whole = t["regions"][0], t["whole"]
-        return {"delta_e76_mean": e["continuous"]["delta_e76_mean"], "delta_e2000_mean": e["continuous"]["delta_e2000_mean"],
+        return {"delta_e76_mean": e["continuous"]["delta_e76_mean"],
+                "delta_e2000_mean": e["continuous"]["delta_e2000_mean"],
                 "delta_e76_quantized": e["quantized"]["delta_e76_mean"], "pulp_delta_e76": reg["delta_e76_mean"],
                 "pulp_transmittance": reg["transmittance"], "pulp_transmittance_stderr": reg["transmittance_stderr"],
                 "pulp_spread_mm": reg["spread_mm"], "pulp_spread_stderr_mm": reg["spread_stderr_mm"],
