@@ -16,6 +16,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "python"))
+sys.path.insert(0, str(ROOT / "bench"))
 
 SPOT = Path(__file__).resolve().parents[2] / "shared" / "data" / "spot" / "spot.obj"  # ../shared beside the repo
 
@@ -23,6 +24,7 @@ SPOT = Path(__file__).resolve().parents[2] / "shared" / "data" / "spot" / "spot.
 def main(argv=None) -> dict:
     import numpy as np
 
+    from common import provenance
     from inkopt.io import atomic_write_bytes
     from inkopt.model import InkTable
     from inkopt.optim import Optimization, OptimizeConfig
@@ -75,7 +77,8 @@ def main(argv=None) -> dict:
         "inside_voxels": int(scene.vox.inside.sum()), "free_voxels": int(scene.free.sum()),
         "texels": len(scene.vox.texels), "shell_mm": args.shell_mm,
         "voxelize_seconds": scene.voxelize_seconds, "build_seconds": build_s, "setup_seconds": setup_s,
-        "iterations": args.iterations, "spp": args.spp, "threads": args.threads, "smooth": run.cfg.smooth, "adjoint_ema": run.cfg.adjoint_ema,
+        "iterations": args.iterations, "spp": args.spp, "threads": args.threads,
+        "smooth": run.cfg.smooth, "adjoint_ema": run.cfg.adjoint_ema,
         "seconds_per_iteration": float(np.mean(h.seconds)) if h.seconds else None,
         "cpu_seconds_per_iteration": cpu_s,
         "time_split": {k: float(np.mean(getattr(h, k))) if h.seconds else None
@@ -92,7 +95,7 @@ def main(argv=None) -> dict:
                 "cpu_seconds_per_iteration (user + system, all threads) is not affected",
     }
     out = Path(args.out) if args.out else ROOT / "bench" / "results" / f"mesh_{args.height_mm:g}mm.json"
-    atomic_write_bytes(out, (json.dumps(result, indent=2) + "\n").encode())
+    atomic_write_bytes(out, (json.dumps({**result, **provenance()}, indent=2) + "\n").encode())
     print(json.dumps({k: result[k] for k in ("grid_zyx", "texels", "voxelize_seconds", "seconds_per_iteration",
                                              "cpu_seconds_per_iteration", "peak_rss_gb", "events_per_path")}))
     return result

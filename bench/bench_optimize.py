@@ -3,7 +3,7 @@ zebra below), forward + gradient + loss + step, and the cost of the gradient pas
 
     .venv/bin/python bench/bench_optimize.py [--spp 16] [--iterations 5] [--method replay]
 
-Writes bench/results/optimize.json (seconds per iteration and where the time goes).
+Writes bench/results/optimize_<method>_spp<spp>.json (seconds per iteration and where the time goes).
 """
 import argparse
 import sys

@@ -2,8 +2,9 @@
 
     .venv/bin/python bench/bench_render.py [--spp 16] [--repeats 3] [--threads N]
 
-Prints and writes bench/results/render.json (render_threads<N>.json with --threads N): texel-samples/s (one texel-sample = 3 monochromatic paths),
-paths/s, collision events/s (best of the repeats), with the machine's load for context.
+Prints and writes bench/results/render.json (render_threads<N>.json with --threads N): texel-samples/s
+(one texel-sample = 3 monochromatic paths), paths/s, collision events/s (best of the repeats), with the
+machine's load for context.
 """
 import argparse
 import sys

@@ -1,8 +1,12 @@
-"""Shared set-up of the benchmarks: the reference slab of the issues (177 x 118 x 30 voxels at 300 DPI,
-15 x 10 x 2.5 mm, a seeded random CMYKW mixture with 50 % white)."""
+"""Shared set-up of the benchmarks (bench/) and studies (experiments/): the reference slab (177 x 118 x 30 voxels at
+300 DPI, 15 x 10 x 2.5 mm, a seeded random CMYKW mixture with 50 % white), the machine description, and writing a
+results JSON that records the commit and the command that produced it."""
 import json
 import os
 import platform
+import shlex
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -11,7 +15,9 @@ import numpy as np
 from inkopt.io import atomic_write_bytes
 from inkopt.model import InkTable, Volume
 
-RESULTS = Path(__file__).resolve().parent / "results"
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "bench" / "results"
+STUDY_RESULTS = ROOT / "experiments" / "results"
 
 
 def reference_slab(seed: int = 0) -> Volume:
@@ -29,7 +35,33 @@ def machine() -> dict:
             "load_average_1min": os.getloadavg()[0]}
 
 
-def write(name: str, data: dict) -> Path:
-    path = RESULTS / name
-    atomic_write_bytes(path, (json.dumps(data, indent=2) + "\n").encode())
+def provenance() -> dict:
+    """``commit``: the checkout's HEAD (with " + uncommitted changes" when tracked files differ from it, None
+    outside git); ``command``: this process's command line, the script path relative to the repository."""
+    def git(*args: str) -> str:
+        return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True, check=True).stdout.strip()
+
+    try:
+        commit = git("rev-parse", "HEAD")
+        if git("status", "--porcelain", "--untracked-files=no"):
+            commit += " + uncommitted changes"
+    except (OSError, subprocess.CalledProcessError):
+        commit = None
+    script = Path(sys.argv[0]).resolve()
+    if script.is_relative_to(ROOT):
+        script = script.relative_to(ROOT)
+    return {"commit": commit, "command": shlex.join(["python", str(script), *sys.argv[1:]])}
+
+
+def write(name: str, data: dict, folder: Path = RESULTS) -> Path:
+    """Write ``data`` as ``folder/name`` (atomically), adding ``commit`` and ``command`` (``provenance``) unless
+    ``data`` has them."""
+    path = folder / name
+    out = {**data, **{k: v for k, v in provenance().items() if k not in data}}
+    atomic_write_bytes(path, (json.dumps(out, indent=2) + "\n").encode())
     return path
+
+
+def write_study(name: str, data: dict) -> Path:
+    """``write`` into experiments/results/."""
+    return write(name, data, STUDY_RESULTS)

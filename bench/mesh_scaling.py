@@ -1,4 +1,5 @@
-"""The README's scaling table of the mesh pipeline, from the results of `bench/bench_mesh.py` at several heights.
+"""The scaling table of the mesh pipeline (docs/performance.md), from the results of `bench/bench_mesh.py` at
+several heights.
 
     python bench/bench_mesh.py 10 --iterations 2     # and 20, 40, 60 (one process each)
     python bench/mesh_scaling.py [10 20 40 60mm_shell2 ...]

@@ -1,5 +1,5 @@
 """Procedural test charts (sRGB uint8 pictures): colour patches with a hue gradient, and the paper's zebra
-stripes (method.md §8). Used by the demo, the tests and the benchmarks, so nothing needs downloading."""
+stripes (docs/method.md §8). Used by the demo, the tests and the benchmarks, so nothing needs downloading."""
 from __future__ import annotations
 
 from pathlib import Path

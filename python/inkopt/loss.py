@@ -1,4 +1,4 @@
-"""The perceptual loss E(C, T) over texels (method.md section 5) with analytic gradients.
+"""The perceptual loss E(C, T) over texels (docs/method.md §5) with analytic gradients.
 
 Predictions and targets are linear RGB (I, 3) per texel; the terms are computed in CIELAB (``inkopt.color``):
 E1 mean ΔE76², E2 texel SSIM on normalised L*a*b* with a Gaussian window restricted to texels, E3 3D Sobel on
@@ -17,8 +17,8 @@ from .color import (LAB_NORM_SCALE, linear_to_lab, linear_to_lab_jacobian, linea
 
 K1 = 0.01 ** 2
 K2 = 0.03 ** 2
-# E1 enters the combined loss in units of (dE/100)^2: that puts it in the range of E2 and E3 (method.md: "the
-# factor 100 brings E3 into E1/E2's range"), so the paper's weight recommendations (g2 in [3, 9], g3 <= 3) apply.
+# E1 enters the combined loss in units of (dE/100)^2: that puts it in the range of E2 and E3 (E3's factor 100 is
+# chosen for the same range, docs/method.md §5), so the paper's weight recommendations (g2 in [3, 9], g3 <= 3) apply.
 # The reported e1 stays the mean dE76^2.
 E1_WEIGHT_SCALE = 1e-4
 # A texel is "flat" when the target's windowed standard deviation of L* is below FLAT_L_STD and that of its chroma,
@@ -109,7 +109,7 @@ class LossResult:
 
 
 class TexelLoss:
-    """E = (g1 E1 / 100^2 + g2 E2 + g3 E3) / (g1 + g2 + g3) over I texels (method.md section 5; E1 is scaled
+    """E = (g1 E1 / 100^2 + g2 E2 + g3 E3) / (g1 + g2 + g3) over I texels (docs/method.md §5; E1 is scaled
     to units of (dE/100)^2 in the sum, see ``E1_WEIGHT_SCALE``).
 
     target_rgb (I, 3) linear RGB targets; pos_vox (I, 3) texel positions (x, y, z) in voxel units

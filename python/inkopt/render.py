@@ -1,6 +1,6 @@
 """Predict the appearance of a volume: the Monte Carlo texel-space renderer (Rust core) and its gradients.
 
-The renderer (method.md §4): smooth dielectric boundary (``Volume.ior``, 1.5 by default), lit by the uniform
+The renderer (docs/method.md §4): smooth dielectric boundary (``Volume.ior``, 1.5 by default), lit by the uniform
 environment of radiance 1 or by an environment map (``lighting``: a :class:`inkopt.lighting.Lighting`, "uniform"
 or a map file), one sensor element per texel looking along the texel's inward normal. A texel's value is the mean
 linear-RGB radiance leaving it toward the viewer, including the specular reflection of the environment unless

@@ -149,8 +149,8 @@ def test_depth_guide_lets_neighbours_under_a_sloped_surface_exchange():
     """Mesh texels sit at surface-voxel centres, so on a sloped surface grid neighbours side by side differ by a
     fraction of a voxel in their distance to the nearest texel. The default depth weight (DEPTH_DE) must leave
     them coupled: under a 26.6° slope (z rises 0.5 voxel per x) at least 90 % of the x-neighbour pairs keep a
-    guide weight above 0.1 at the default edge of 4 ΔE76, as all do under an axis-aligned face. The weight of
-    before (30 ΔE76 per voxel) kept 10 % (the smoothing hardly acted on Spot's curved surfaces)."""
+    guide weight above 0.1 at the default edge of 4 ΔE76, as all do under an axis-aligned face. A weight of
+    30 ΔE76 per voxel keeps 10 % (the smoothing hardly acts on Spot's curved surfaces)."""
     from inkopt.optim.smooth import MAX_DEPTH
 
     edge = OptimizeConfig().smooth_edge

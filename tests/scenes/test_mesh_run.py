@@ -78,7 +78,7 @@ def test_outputs_and_quality(ball_run):
     # The final and the all-white start are evaluated with the same seed at 32 spp over ~1400 texels: the
     # evaluation noise of each mean ΔE76 is ~0.1 (per-texel ΔE spread of a few units / sqrt(1400)). The run itself
     # is deterministic; over seeds 0-3 it lowers ΔE76 from 75.3 to 36.8-38.3 (36.8-37.4 with the slabs' adjoint
-    # average and smoothing used on meshes before 2026-11-25), so a margin of 20 leaves room for
+    # average and smoothing), so a margin of 20 leaves room for
     # renderer/optimiser changes that alter the random streams without hiding a broken optimiser (which stays
     # near 75; 30 iterations at the old default step 0.5 still reach 53).
     assert rep["initial_delta_e76_mean"] > 60

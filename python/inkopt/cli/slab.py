@@ -1,4 +1,4 @@
-"""``inkopt slab``: optimise a textured 2.5D slab (``inkopt.run.run_slab``)."""
+"""``inkopt slab``: optimise a textured 2.5D slab (its scene from the pictures, then ``inkopt.run``)."""
 from __future__ import annotations
 
 import sys

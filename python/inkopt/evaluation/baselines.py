@@ -1,4 +1,4 @@
-"""Naive baselines: what a print shop does without this project (method.md §8).
+"""Naive baselines: what a print shop does without this project (docs/method.md §8).
 
 Both colour the object from the ink set's colour -> mixture table (``colour_table``).
 ``surface_baseline``: each scene texel's mapped mixture in its own voxel (voxels with several texels, e.g. box

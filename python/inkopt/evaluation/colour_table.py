@@ -1,4 +1,4 @@
-"""The colour -> mixture table of an ink set: what a print shop measures, used by the baselines (method.md §8).
+"""The colour -> mixture table of an ink set: what a print shop measures, used by the baselines (docs/method.md §8).
 
 - The table (``colour_table``) holds the rendered colour of infinite homogeneous patches (``boundary =
   "periodic-xy"``, one layer of ``patch_mm`` = 2.5 mm by default, i.e. a print shop's fixed-thickness colour

@@ -1,4 +1,5 @@
-"""Translucency measurements of a run (issue 11 §1): how much light goes through, and how far it spreads sideways.
+"""Translucency measurements of a run: how much light goes through, and how far it spreads sideways
+(docs/lighting-and-translucency.md).
 
 Two figures, per constrained region (a connected set of texels whose voxels carry a translucency constraint) and
 for the whole object, always on the same texels (those of the constrained run's scene):

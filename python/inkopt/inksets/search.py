@@ -10,7 +10,7 @@ figure, at the same iteration count for all sets of a rung.
 - ``halving`` (successive halving with learning-curve extrapolation): with r = ceil(log2(n)) rungs of budgets
   iterations / 2^(r-1-k), every subset first runs the smallest budget and the better half (rounded up) continues
   to the next, resuming from its checkpoint (a resumed run continues exactly). Two changes to the textbook rule,
-  both measured on the paper's setup (README, "select-inks"):
+  both measured on the paper's setup (docs/select-inks.md, experiments/results/select_inks*.json):
 
   * intermediate rungs rank sets by their *predicted* loss at the full budget, not by their loss now: a power law
     loss(t) = a + b t^-c (a, b >= 0) fitted to the second half of the set's training-loss history (the first half

@@ -1,4 +1,4 @@
-"""Inks and ink mixtures (method.md §3).
+"""Inks and ink mixtures (docs/method.md §3).
 
 An ink is given by its extinction coefficient mu_t (mm^-1) and single-scattering albedo per RGB channel.
 Mixtures mix scattering and absorption coefficients *linearly*:

@@ -1,4 +1,4 @@
-"""Settings of an optimisation run (method.md §6) and their checks."""
+"""Settings of an optimisation run (docs/method.md §6) and their checks."""
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -7,7 +7,8 @@ PARAMS = ("sigmoid", "softmax")
 OPTIMIZERS = ("eg", "adam", "adagrad")
 GRAD_METHODS = ("replay", "li1")
 #: Settings whose default depends on the scene kind, used where the config leaves them None
-#: (``OptimizeConfig.for_scene``; README, "Optimisation: what we learned").
+#: (``OptimizeConfig.for_scene``; measured in experiments/results/printable.json and mesh_convergence.json,
+#: docs/experiments.md).
 #: ``adjoint_ema``: slabs 0.8, the adjoint's bias on dark colours needs the samples (0.5 cost the zebra chart 0.6
 #: and the astronaut 1.0 mean ΔE76 at 300 iterations). Meshes 0.5: with 0.8 the lagging average and the momentum
 #: make a delayed feedback loop and the run oscillates (Spot 10 mm, 60 iterations: training ΔE76 swings 17-24,
@@ -19,21 +20,22 @@ SCENE_DEFAULTS = {"slab": {"adjoint_ema": 0.8, "smooth": 1.5}, "mesh": {"adjoint
 
 @dataclass
 class OptimizeConfig:
-    #: 300 since 2026-11-25 (was 200): with the step decay, the zebra chart and the astronaut photograph still
-    #: gain 0.3 and 0.55 mean ΔE76 from 200 to 300 iterations; the reference slab's 300 take 7-10 min on 2 cores
-    #: (README, "Optimisation: what we learned" and "Quality")
+    #: with the step decay, the zebra chart and the astronaut photograph gain 0.3 and 0.55 mean ΔE76 from 200 to 300
+    #: iterations (experiments/results/convergence_{zebra,astronaut}.json); the reference slab's 300 take ~10 min
+    #: on 2 cores (experiments/results/printable.json)
     iterations: int = 300
     #: samples per texel of the gradient pass (unbiased at any spp; fewer is noisier)
     spp: int = 4
     #: samples per texel of the forward render that the adjoint dE/dC is evaluated at. dE/dC is a nonlinear
     #: function of C (CIELAB is steep near black): evaluated at a few-spp estimate its expectation is biased, for
-    #: dark colours even in sign (measured: bench/README), so the adjoint gets more samples than the gradient.
+    #: dark colours even in sign (docs/experiments.md), so the adjoint gets more samples than the gradient.
     #: 0: no forward renders after the first iteration; the adjoint is evaluated at the running average of the
-    #: earlier gradient passes' estimates (iterations ~2.5x cheaper, about equal quality at equal time: README).
+    #: earlier gradient passes' estimates (iterations ~2.5x cheaper, about equal quality at equal time:
+    #: experiments/results/convergence_demo.json, entries ``forward0_*``).
     forward_spp: int = 16
     #: loss weights (colour, SSIM, edges). Colour only by default: the SSIM term evaluated on a Monte Carlo
     #: estimate is biased towards lower contrast (the estimate's noise inflates its local variance), which on a
-    #: black/white zebra chart lowered SSIM from 0.66 to 0.44 (README, "Known limits").
+    #: black/white zebra chart lowered SSIM (docs/experiments.md).
     gamma: tuple[float, float, float] = (1.0, 0.0, 0.0)
     lr: float | None = None  # default per optimizer: see default_lr
     optimizer: str = "eg"
@@ -52,10 +54,10 @@ class OptimizeConfig:
     adjoint_ema: float | None = None
     #: Width (voxels) of the spatial preconditioner of the step (``optim/smooth.py``): the step is diffused over
     #: the free voxels under texels where the target is flat, damping the voxel-scale noise that shows as mottle
-    #: (0: off). None: the scene kind's value (``SCENE_DEFAULTS``): 1.5 on slabs (0.7 from 2026-11-24 to 11-25):
-    #: on the demo slab, the astronaut photograph and the reference slab it improves every noise-free figure over
-    #: 0.7 and no smoothing, 3 gains nothing more there; 3 on meshes since 2026-11-25 (Spot's flat-region mottle
-    #: halves, README "Optimisation: what we learned"). Smoothing everywhere instead of under flat texels only
+    #: (0: off). None: the scene kind's value (``SCENE_DEFAULTS``): 1.5 on slabs: on the demo slab, the astronaut
+    #: photograph and the reference slab it improves every noise-free figure over 0.7 and no smoothing, 3 gains
+    #: nothing more there (experiments/results/convergence_*.json); 3 on meshes (Spot's flat-region mottle halves,
+    #: experiments/results/mesh_convergence.json). Smoothing everywhere instead of under flat texels only
     #: cost the photograph ~0.9 mean ΔE76, widening the set by 4 voxels around flat texels ~0.5.
     smooth: float | None = None
     #: Guide of the smoothing: the target-colour difference (ΔE76) at which the smoothing between two voxels falls
@@ -65,7 +67,7 @@ class OptimizeConfig:
     #: Step decay (``optimizers.step_factor``): over the run's last ``decay`` fraction of iterations the step size
     #: halves ``DECAY_HALVINGS`` (3) times in equal stages (0: a constant step). With a constant step the mixtures
     #: keep moving about the optimum by an amount that grows with the step, which SSIM sees as voxel-to-voxel
-    #: variation; chosen by measurement (README, "Optimisation: what we learned").
+    #: variation; chosen by measurement (experiments/results/convergence_{zebra,astronaut}.json).
     decay: float = 0.25
     #: The run length the step decay is planned for (None: ``iterations``). A run stopped early on purpose and
     #: continued later (``inkopt select-inks``' rungs) sets the full length here, so that every part steps as the

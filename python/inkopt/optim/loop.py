@@ -1,11 +1,11 @@
-"""The optimisation loop: gradient descent on the ink mixture of every voxel (method.md §3 and §6).
+"""The optimisation loop: gradient descent on the ink mixture of every voxel (docs/method.md §3 and §6).
 
 One iteration: mixture -> coefficients -> forward render (seed a) -> loss and dE/dC -> path-replay gradient pass
 (seed b != a, so the adjoint's noise and the gradient's noise are independent) -> dE/dsigma -> dE/drho -> dE/dx ->
 optimiser step (``optimizers``), diffused where the target is flat (``smooth``; ``OptimizeConfig.smooth``). The loss is
 taken on a running average of the renders (``adjoint_ema``); with ``forward_spp`` 0 there is no forward render
 after the first iteration, and the adjoint is evaluated at the average of the earlier gradient passes' own
-estimates (cheaper iterations, each worth less: see README). One
+estimates (cheaper iterations, each worth less: docs/experiments.md). One
 :class:`~inkopt.render.Renderer` serves the whole run: geometry and thread pool are set up once and only the free
 voxels' media are overwritten each iteration. Seeds are derived from (seed, iteration), and
 renders and gradients are bit-identical for any thread count, so a run resumed from a checkpoint continues exactly

@@ -123,8 +123,9 @@ def step_factor(iteration: int, iterations: int, decay: float, halvings: int = D
     Why: a constant step with stochastic gradients does not settle at the optimum but keeps the mixtures moving
     about it by an amount that grows with the step, and that voxel-to-voxel variation is what SSIM's structure term
     sees (on a black-and-white chart as chroma from stripe to stripe). Halving the step a few times at the end lets
-    the mixtures settle: measured in the README ("Optimisation: what we learned"). A function of the iteration
-    and the run's length only, so a resumed run steps exactly as an uninterrupted one of the same length.
+    the mixtures settle (experiments/results/convergence_{zebra,astronaut}.json, docs/experiments.md). A function
+    of the iteration and the run's length only, so a resumed run steps exactly as an uninterrupted one of the same
+    length.
     """
     start = (1.0 - decay) * iterations
     if decay <= 0 or iteration < start:

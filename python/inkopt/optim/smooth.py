@@ -4,14 +4,14 @@
 
 Why: the loss sees a voxel's mixture only through light that has scattered over several voxels, so its curvature
 is small at voxel-scale spatial frequencies, while a few-spp gradient puts as much noise there as anywhere. Plain
-steps therefore let the mixture random-walk at those frequencies: the mottle of issue 13 (in flat regions the
+steps therefore let the mixture random-walk at those frequencies: the mottle (in flat regions the
 prediction carries ~1 (ΔL*)² of texel-scale power that the target has no trace of). Diffusing the step damps each
 spatial frequency by its heat-kernel factor: the noise injected at voxel scale shrinks by that factor, while the
 low frequencies (the colour of a region) move at the full step.
 
 What is diffused is the step the optimiser chose (new x - x), not the gradient: diffusing the gradient also
 lowered the exponentiated-gradient step scale (the 99th percentile of |g|, which the voxel-scale noise sets) by
-~25 %, i.e. made every step larger, and on the zebra chart cost 0.03 SSIM (README, "Optimisation").
+~25 %, i.e. made every step larger, and on the zebra chart cost 0.03 SSIM (docs/experiments.md).
 
 Guided by the target: the diffusion between two voxels is weighted by exp(-|guide_r - guide_q|² / edge²), the
 guide being each voxel's nearest texel's target CIELAB and its depth below that texel (``DEPTH_DE`` ΔE76 per
@@ -44,10 +44,10 @@ def diffusion_steps(sigma: float) -> int:
 #: ΔE76 that one voxel of difference in depth (distance to the nearest texel) counts as in the guide: with the
 #: default edge of 4 ΔE76, neighbours one voxel apart in depth exchange a little per pass (weight e^-1.56 = 0.21),
 #: those side by side under a face fully. Not more: on a mesh, grid neighbours side by side under a sloped surface
-#: differ by up to ~0.7 voxel in their distance to the nearest (surface-voxel) texel; with 30 ΔE76 per voxel (the
-#: value until 2026-11-25) only a third of the smoothed set's neighbour pairs on Spot 20 mm kept a weight above
-#: 0.1 and the smoothing hardly acted on curved surfaces. Measured 30 → 5 (README, "Optimisation: what we
-#: learned"): the demo slab equal, the astronaut photograph and Spot better in every figure.
+#: differ by up to ~0.7 voxel in their distance to the nearest (surface-voxel) texel; with 30 ΔE76 per voxel only
+#: a third of the smoothed set's neighbour pairs on Spot 20 mm keep a weight above 0.1 and the smoothing hardly
+#: acts on curved surfaces. Measured 30 against 5 (experiments/results/convergence_*.json entries ``smooth1.5*``,
+#: shell_mm.json ``none+smooth1.5_depth*``): the demo slab equal, the astronaut photograph and Spot better.
 DEPTH_DE = 5.0
 
 

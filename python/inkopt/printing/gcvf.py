@@ -27,16 +27,16 @@ accumulated on the way, and nothing but the current layers is held. The zip hold
 - ``zbuffer.png``: the z-buffer seen from above: a 16-bit grey PNG of the slices' pixel size and orientation whose
   value is 1 + the index of the topmost occupied layer in that column (0 = nothing printed there).
 
-Source followed: the public GCVF builder ``buildGCVF.js`` (a Node script found in the code index; its repository
-is not named there) for the zip layout at the root, ``ConfigFile.xml`` and every element, value and material
-code, the ``layer_N.png`` naming and the opaque-black background; and OpenVCAD's ``GCVFExporter`` (C++ API
-docs, MacCurdyLab/OpenVCAD-Docs ``v2/_sources/cpp-api/libvcad-compilers-inkjet.rst.txt`` and
+Source followed: a public GCVF builder, the Node script ``buildGCVF.js`` (its repository unknown to us), for the
+zip layout at the root, ``ConfigFile.xml`` and every element, value and material code, the ``layer_N.png``
+naming and the opaque-black background; and OpenVCAD's ``GCVFExporter`` (C++ API docs,
+MacCurdyLab/OpenVCAD-Docs ``v2/_sources/cpp-api/libvcad-compilers-inkjet.rst.txt`` and
 matterassembly.org/OpenVCAD-Docs/v2/cpp-api/libvcad-compilers-inkjet.html) for the package's parts (PNG stack,
 z-buffer image, STL mesh, XML configuration, a bounding-box file, zipped) and its defaults 600 x 300 DPI and
-27000 nm. Not confirmed: OpenVCAD's exporter source (``gcvf_exporter.cpp``) is not in the public index we could
-search, so the names ``model.stl`` and ``zbuffer.png``, the z-buffer's encoding, what ``BitDepth`` means, and
-the bounding-box file (not written: its format is not described anywhere we found) are our choices; nor have we
-loaded a package into GrabCAD Print.
+27000 nm. Not confirmed: we have not seen OpenVCAD's exporter source (``gcvf_exporter.cpp``), so the names
+``model.stl`` and ``zbuffer.png``, the z-buffer's encoding, what ``BitDepth`` means, and the bounding-box file
+(not written: its format is not described anywhere we found) are our choices; nor have we loaded a package into
+GrabCAD Print.
 """
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Quantization of an optimised ink mixture to one ink per printer voxel (method.md §7).
+"""Quantization of an optimised ink mixture to one ink per printer voxel (docs/method.md §7).
 
 The optimiser works on a coarse grid (300 DPI, ~85 µm voxels); the printer deposits one ink per voxel on a
 finer, anisotropic grid (600 × 300 DPI in x × y, 27 µm layers by default). ``quantize`` upsamples the mixture

@@ -1,4 +1,5 @@
-"""Translucency constraints: regions that must hold a fixed share of transparent ink.
+"""Translucency constraints: regions that must hold a fixed share of transparent ink
+(docs/lighting-and-translucency.md).
 
 A *mask* gives, per picture pixel (slabs: the top picture) or texture texel (meshes), the required share
 ``s`` in [0, 1] of the transparent ink (``model.TRANSPARENT_INKS``): the grey level of a PNG (8 or 16 bit;
