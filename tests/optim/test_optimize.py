@@ -142,7 +142,7 @@ def test_optimisation_lowers_delta_e_far_below_white_start():
 
 
 def test_without_forward_renders(monkeypatch):
-    """forward_spp 0: only the first iteration renders forward (PILOT_SPP); the loss is taken on the running
+    """forward_spp 0: only the first iteration renders forward (START_FORWARD_SPP); the loss is taken on the running
     average of the gradient passes' estimates, and 30 iterations still lower dE76 far below the white start."""
     from inkopt.optim import loop
 
@@ -154,7 +154,7 @@ def test_without_forward_renders(monkeypatch):
     start = prediction_metrics(r.loss, Renderer(r.volume()).render(scene.texels, 64, 99).rgb)
     calls.clear()
     r.run()
-    assert calls == [loop.PILOT_SPP]
+    assert calls == [loop.START_FORWARD_SPP]
     end = prediction_metrics(r.loss, Renderer(r.volume()).render(scene.texels, 64, 99).rgb)
     assert end["delta_e76_mean"] < 0.75 * start["delta_e76_mean"], (start, end)
     # the average's weight tends to spp / (1 - adjoint_ema): 4 / 0.1 = 40 samples per texel
