@@ -23,7 +23,8 @@ from common import RESULTS, machine, write  # noqa: E402
 from inkopt import charts  # noqa: E402
 from inkopt.model import InkTable  # noqa: E402
 from inkopt.optim import OptimizeConfig  # noqa: E402
-from inkopt.run import run_slab  # noqa: E402
+from inkopt.run import run_optimisation  # noqa: E402
+from inkopt.scenes.spec import SlabSpec  # noqa: E402
 
 # name -> (iterations, OptimizeConfig overrides), all with the constant step they were run with (decay 0; the
 # default since 2026-11-25 14:00 is 0.25); the defaults are spp 4, forward spp 16, lr 2 (eg), ema 0.8 and
@@ -105,8 +106,8 @@ def main():
         for name in a.only or settings:
             iterations, kw = settings[name]
             cfg = OptimizeConfig(**{"iterations": iterations, "seed": 0, **kw})
-            rep = run_slab(top, bottom, size, tmp / name, inks, cfg, threads=a.threads,
-                           log=lambda s: None)
+            rep = run_optimisation(SlabSpec(top, size, bottom).build(inks), tmp / name, cfg, threads=a.threads,
+                                   log=lambda s: None).to_json()
             row = {"iterations": iterations, **kw, **{k: rep[k] for k in KEYS}}
             if rep["smooth"]:
                 row.setdefault("smooth_edge", cfg.smooth_edge)
