@@ -33,6 +33,21 @@ def add_lighting_args(p, what: str = "render") -> None:
                    help="turn the map about z by DEG degrees, from +x towards +y (default 0)")
 
 
+def add_mesh_args(p, what: str = "") -> None:
+    """The inputs of a mesh scene (``scenes.spec.MeshSpec``): ``--height-mm`` or ``--scale``, ``--up``,
+    ``--shell-mm`` and ``--dpi``; ``what`` prefixes their help (e.g. "mesh: ")."""
+    from ..scenes.spec import UP_AXES
+    from ..units import OPT_DPI
+
+    p.add_argument("--height-mm", type=float, metavar="H", help=f"{what}scale the object to this height (mm)")
+    p.add_argument("--scale", type=float, metavar="S", help=f"{what}or scale it by S mm per model unit")
+    p.add_argument("--up", choices=UP_AXES, default="y", help=f"{what}the file's up axis (default y, as OBJ/glTF)")
+    p.add_argument("--shell-mm", type=float, metavar="D",
+                   help=f"{what}optimise only voxels less than D mm below the surface; deeper ones are printed white "
+                        "(default: every voxel of the object is optimised)")
+    p.add_argument("--dpi", type=float, default=OPT_DPI, help=f"optimisation grid resolution (default {OPT_DPI:g})")
+
+
 def add_translucency_args(p, mesh: bool = False, both: bool = False) -> None:
     """``--translucency`` and ``--translucency-depth-mm`` (``inkopt.scenes.translucency``) of a slab, a mesh or
     (``both``) either."""

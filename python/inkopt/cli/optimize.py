@@ -2,10 +2,8 @@
 ``inkopt.run``)."""
 from __future__ import annotations
 
-from ..scenes.spec import UP_AXES
-from ..units import OPT_DPI
-from .common import (add_optimizer_args, add_ray_arg, add_translucency_args, mesh_spec_from_args, print_run_summary,
-                     run_from_args)
+from .common import (add_mesh_args, add_optimizer_args, add_ray_arg, add_translucency_args, mesh_spec_from_args,
+                     print_run_summary, run_from_args)
 
 
 def _optimize(args) -> int:
@@ -21,13 +19,7 @@ def register_cli(sub) -> None:
                                    "the printed object's surface matches its texture.")
     p.add_argument("mesh", metavar="MESH", help="textured mesh: OBJ (+MTL +texture), glTF/GLB or PLY; must be solid")
     p.add_argument("--out", required=True, metavar="DIR", help="run directory (see docs/run-dir.md)")
-    p.add_argument("--height-mm", type=float, metavar="H", help="scale the object to this height (mm)")
-    p.add_argument("--scale", type=float, metavar="S", help="or: mm per model unit")
-    p.add_argument("--up", choices=UP_AXES, default="y", help="the file's up axis (default y, as OBJ/glTF)")
-    p.add_argument("--shell-mm", type=float, metavar="D",
-                   help="optimise only voxels less than D mm below the surface; deeper ones are printed white "
-                        "(default: every voxel of the object is optimised)")
-    p.add_argument("--dpi", type=float, default=OPT_DPI, help=f"optimisation grid resolution (default {OPT_DPI:g})")
+    add_mesh_args(p)
     add_translucency_args(p, mesh=True)
     add_optimizer_args(p)
     add_ray_arg(p)

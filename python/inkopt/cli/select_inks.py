@@ -3,9 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..scenes.spec import UP_AXES
-from ..units import OPT_DPI
-from .common import (add_optimizer_args, add_translucency_args, config_from_args, mesh_spec_from_args,
+from .common import (add_mesh_args, add_optimizer_args, add_translucency_args, config_from_args, mesh_spec_from_args,
                      slab_spec_from_args, stderr_log)
 
 
@@ -55,14 +53,11 @@ def register_cli(sub) -> None:
                        description="Optimise TARGET with every subset of --choose of the --candidates inks (plus "
                                    "the --always inks) and keep the best, by successive halving (default) or "
                                    "brute force.")
-    p.add_argument("target", metavar="TARGET", help="a picture (with --size-mm) or a textured mesh (--height-mm)")
+    p.add_argument("target", metavar="TARGET",
+                   help="a picture (with --size-mm) or a textured mesh (--height-mm or --scale)")
     p.add_argument("--size-mm", help="slab WxHxD in mm (TARGET is its top picture)")
     p.add_argument("--bottom", metavar="IMAGE", help="picture of the slab's bottom face")
-    p.add_argument("--height-mm", type=float, help="mesh height in mm (TARGET is a mesh)")
-    p.add_argument("--scale", type=float, metavar="S", help="or: mm per model unit of the mesh")
-    p.add_argument("--shell-mm", type=float, help="mesh: optimise only voxels this close to the surface")
-    p.add_argument("--up", choices=UP_AXES, default="y", help="mesh up axis (default y)")
-    p.add_argument("--dpi", type=float, default=OPT_DPI, help=f"optimisation grid resolution (default {OPT_DPI:g})")
+    add_mesh_args(p, "mesh target: ")
     add_translucency_args(p, both=True)
     p.add_argument("--candidates", required=True, help="comma list of candidate inks, e.g. "
                                                        "cyan,cyan2,magenta,magenta2,yellow,yellow2")
