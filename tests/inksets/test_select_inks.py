@@ -157,6 +157,9 @@ def test_resume_key_holds_the_scene_kinds_settings(chart):
     (["--candidates", "cyan,white", "--choose", "1"], "in both --candidates and --always"),
     (["--candidates", "cyan,cyan2,magenta,magenta2,yellow", "--choose", "5"], "holds 6 materials"),
     (["--candidates", "cyan,magenta", "--choose", "1", "--ray", "auto", "--inks", "vero-cmykw"], "not --inks"),
+    (["--candidates", "cyan,magenta", "--choose", "1", "--workers", "0"], "--workers must be at least 1"),
+    (["--candidates", "cyan,magenta", "--choose", "1", "--shell-mm", "0.2"], "--shell-mm is for a mesh target"),
+    (["--candidates", "cyan,magenta", "--choose", "1", "--scale", "1"], "exactly one of --size-mm"),
 ])
 def test_bad_input_one_line_before_work(chart, tmp_path, capsys, argv, message):
     out = tmp_path / "sel"

@@ -17,8 +17,6 @@ from .common import add_lighting_args, lighting_from_args
 def _evaluate_cmd(args) -> int:
     if args.method is not None:
         check_quantization(args.method)
-    if args.spp is not None and args.spp < 1:
-        raise ValueError(f"--spp must be at least 1, got {args.spp}")
     log = None if args.json else (lambda msg: print(msg, file=sys.stderr, flush=True))
     ev = evaluate_run(args.dir, spp=args.spp, seed=args.seed, method=args.method, threads=args.threads,
                       baselines=not args.no_baselines, refine=not args.nearest, patch_mm=args.patch_mm,

@@ -27,8 +27,6 @@ def _select(args) -> int:
         raise ValueError("select-inks takes the inks from --candidates and --always, not --inks")
     if str(args.lighting).lower() != "uniform" or args.lighting_rotate:
         raise ValueError("select-inks ranks ink sets under uniform light only; --lighting is not supported here")
-    if args.workers is not None and args.workers < 1:
-        raise ValueError(f"--workers must be at least 1, got {args.workers}")
     sel = Selection(_target(args), args.candidates, args.choose, args.always, config_from_args(args),
                     args.strategy, args.eval_spp or 256, args.rung_eval_spp,
                     None if args.printer == "none" else args.printer)

@@ -163,7 +163,7 @@ def evaluate_run(path, spp: int | None = DEFAULT_SPP, seed: int = 0, method: str
     lighting = load_lighting(lighting)
     say = log or (lambda msg: None)
     if spp is not None and spp < 1:
-        raise ValueError(f"spp must be at least 1, got {spp}")
+        raise ValueError(f"--spp must be at least 1, got {spp}")
     d = RunDir(path)
     vol = d.load_volume()
     rec = d.load_scene()

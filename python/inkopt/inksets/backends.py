@@ -88,8 +88,6 @@ class Pool(Serial):
     name = "pool"
 
     def __init__(self, workers: int):
-        if workers < 1:
-            raise ValueError(f"--workers must be at least 1, got {workers}")
         self.cpus, self.workers = os.cpu_count() or 1, workers
         self._ex = ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"))
 
@@ -127,6 +125,8 @@ class Ray(Serial):
 
 def make_backend(workers: int | None = None, ray: str | None = None, threads: int | None = None):
     """Serial (no options), a process pool (``workers``) or Ray (``ray``: "auto" or a cluster address)."""
+    if workers is not None and workers < 1:
+        raise ValueError(f"--workers must be at least 1, got {workers}")
     if ray:
         return Ray(ray, workers)
     if workers and workers > 1:
