@@ -36,7 +36,7 @@ def add_lighting_args(p, what: str = "render") -> None:
 def add_mesh_args(p, what: str = "") -> None:
     """The inputs of a mesh scene (``scenes.spec.MeshSpec``): ``--height-mm`` or ``--scale``, ``--up``,
     ``--shell-mm`` and ``--dpi``; ``what`` prefixes their help (e.g. "mesh: ")."""
-    from ..scenes.spec import UP_AXES
+    from ..scenes.mesh import UP_AXES
     from ..units import OPT_DPI
 
     p.add_argument("--height-mm", type=float, metavar="H", help=f"{what}scale the object to this height (mm)")

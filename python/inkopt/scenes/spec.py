@@ -28,10 +28,8 @@ from ..model import InkTable
 from ..units import OPT_DPI
 from .translucency import ALPHA, check_depth
 
-UP_AXES = ("y", "z")
-
-
 def check_dpi(dpi: float) -> None:
+    """One-line ValueError unless the optimisation grid's ``dpi`` is positive (the one check of it)."""
     if not (np.isfinite(dpi) and dpi > 0):
         raise ValueError(f"--dpi must be positive, got {dpi}")
 
@@ -115,13 +113,11 @@ class MeshSpec:
     def validate(self, inks: InkTable | None = None) -> None:
         """One-line ValueErrors for inputs that are wrong before the mesh is read; with ``inks``, also an ink set
         that cannot honour the constraints (the white core, translucency)."""
-        from .mesh import check_mesh_inputs, check_scaling  # the mesh modules only when a mesh is given
+        from .mesh import check_mesh_inputs, check_placement  # the mesh modules only when a mesh is given
 
-        check_scaling(self.height_mm, self.scale)
+        check_placement(self.height_mm, self.scale, self.up)
         check_mesh_inputs(self.shell_mm, inks)
         check_dpi(self.dpi)
-        if self.up not in UP_AXES:
-            raise ValueError(f"--up must be one of {list(UP_AXES)}, got {self.up!r}")
         _check_translucency(self.translucency, self.translucency_depth_mm, inks, mesh=True)
         _check_file(self.path, "mesh file")
 

@@ -109,14 +109,20 @@ def _bilinear(tex: np.ndarray, uv: np.ndarray) -> np.ndarray:
             + tex[y1, x0] * (1 - fx) * fy + tex[y1, x1] * fx * fy)
 
 
-def check_scaling(height_mm: float | None, scale: float | None) -> None:
-    """One-line ValueError unless exactly one of ``height_mm`` and ``scale`` is given, and it is positive."""
+UP_AXES = ("y", "z")  # the up axes a mesh file may have
+
+
+def check_placement(height_mm: float | None, scale: float | None, up: str = "y") -> None:
+    """One-line ValueError unless exactly one of ``height_mm`` and ``scale`` is given, it is positive, and ``up``
+    is one of ``UP_AXES``."""
     if (height_mm is None) == (scale is None):
         raise ValueError("give exactly one of --height-mm H (the object's height in mm) and --scale S "
                          "(mm per model unit)")
     for flag, v in (("--height-mm", height_mm), ("--scale", scale)):
         if v is not None and not (np.isfinite(v) and v > 0):
             raise ValueError(f"{flag} must be positive, got {v}")
+    if up not in UP_AXES:
+        raise ValueError(f"--up must be one of {list(UP_AXES)}, got {up!r}")
 
 
 def load_mesh(path, height_mm: float | None = None, scale: float | None = None, up: str = "y") -> TexturedMesh:
@@ -145,9 +151,7 @@ def mesh_from_trimesh(tm, height_mm: float | None = None, scale: float | None = 
         tm = tm.to_geometry() if hasattr(tm, "to_geometry") else tm.dump(concatenate=True)
     if not isinstance(tm, trimesh.Trimesh):
         raise ValueError(f"{source}: holds no triangle mesh (got {type(tm).__name__})")
-    check_scaling(height_mm, scale)
-    if up not in ("y", "z"):
-        raise ValueError(f"up must be 'y' or 'z', got {up!r}")
+    check_placement(height_mm, scale, up)
     verts = np.array(tm.vertices, np.float64).reshape(-1, 3)
     faces = np.array(tm.faces, np.int64).reshape(-1, 3)
     if len(faces) == 0:

@@ -140,8 +140,6 @@ def build_mesh_scene(mesh_path, inks: InkTable, height_mm: float | None = None, 
     """Load and voxelize ``mesh_path``; exactly one of ``height_mm`` and ``scale`` (mm per model unit).
     ``translucency``: None, "alpha" (the texture's alpha channel) or a mask (file or (H, W) array) in texture
     space; ``translucency_depth_mm``: its depth below the surface (None: the whole object)."""
-    if not (np.isfinite(dpi) and dpi > 0):
-        raise ValueError(f"--dpi must be positive, got {dpi}")
     check_mesh_inputs(shell_mm, inks)
     mask = None
     if translucency is not None:
