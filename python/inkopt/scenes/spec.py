@@ -25,14 +25,8 @@ from typing import ClassVar
 import numpy as np
 
 from ..model import InkTable
-from ..units import OPT_DPI
+from ..units import OPT_DPI, voxel_mm
 from .translucency import ALPHA, check_depth
-
-def check_dpi(dpi: float) -> None:
-    """One-line ValueError unless the optimisation grid's ``dpi`` is positive (the one check of it)."""
-    if not (np.isfinite(dpi) and dpi > 0):
-        raise ValueError(f"--dpi must be positive, got {dpi}")
-
 
 def _check_file(path, what: str) -> None:
     if not Path(path).is_file():
@@ -65,7 +59,7 @@ class SlabSpec:
         files); with ``inks``, also an ink set that cannot honour the constraints."""
         if len(self.size_mm) != 3 or not all(np.isfinite(v) and v > 0 for v in self.size_mm):
             raise ValueError(f"--size-mm sizes must be three positive numbers W x H x D, got {self.size_mm}")
-        check_dpi(self.dpi)
+        voxel_mm(self.dpi)  # its one-line error for a dpi that is not positive
         _check_translucency(self.translucency, self.translucency_depth_mm, inks, mesh=False)
         _check_file(self.top, "picture")
         if self.bottom is not None:
@@ -117,7 +111,7 @@ class MeshSpec:
 
         check_placement(self.height_mm, self.scale, self.up)
         check_mesh_inputs(self.shell_mm, inks)
-        check_dpi(self.dpi)
+        voxel_mm(self.dpi)  # its one-line error for a dpi that is not positive
         _check_translucency(self.translucency, self.translucency_depth_mm, inks, mesh=True)
         _check_file(self.path, "mesh file")
 
