@@ -62,6 +62,19 @@ def test_outputs_keys_and_work(halving):
     assert (out / "selection.png").stat().st_size > 1000
 
 
+def test_selection_json_versions(halving, tmp_path):
+    """selection.json written before files carried a version (0) loads as version 1; a newer one is refused."""
+    from inkopt.io import FormatError
+
+    _, res = halving
+    old = {k: v for k, v in res.items() if k != "format_version"}
+    (tmp_path / "selection.json").write_text(json.dumps(old))
+    assert load_selection(tmp_path) == res
+    (tmp_path / "selection.json").write_text(json.dumps({**old, "format_version": 2}))
+    with pytest.raises(FormatError, match="format version 2"):
+        load_selection(tmp_path)
+
+
 def test_winner_is_a_run_directory(halving, capsys):
     out, res = halving
     rep = RunDir(out / "winner").read_report()
