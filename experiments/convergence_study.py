@@ -4,7 +4,7 @@ on the zebra chart or the astronaut photograph of experiments/printable_eval.py 
 
     .venv/bin/python experiments/convergence_study.py [--threads 2] [--only NAME ...] [--case demo|zebra|astronaut]
 
-Each setting is one `run_slab` from the 97 %-white start with seed 0; the final figures come from the driver's
+Each setting is one `run_optimisation` of a `SlabSpec` scene from the 97 %-white start with seed 0; the final figures come from the driver's
 adaptive evaluation (noise adds <= 0.5 to the mean dE76), so differences of a few tenths are real for this seed
 and scene, not for every scene. Writes experiments/results/convergence_CASE.json (one entry per setting: mean dE76
 (noise-corrected), mean dE2000, SSIM, mottle (dL*)^2 in the target's flat regions, seconds of the whole run).
@@ -23,7 +23,8 @@ from common import STUDY_RESULTS as RESULTS, machine, write_study as write  # no
 from inkopt import charts  # noqa: E402
 from inkopt.model import InkTable  # noqa: E402
 from inkopt.optim import OptimizeConfig  # noqa: E402
-from inkopt.run import run_slab  # noqa: E402
+from inkopt.run import run_optimisation  # noqa: E402
+from inkopt.scenes.spec import SlabSpec  # noqa: E402
 
 # name -> (iterations, OptimizeConfig overrides), all with a constant step (decay 0; the default decay is 0.25);
 # otherwise the defaults: spp 4, forward spp 16, lr 2 (eg), ema 0.8 and step smoothing 1.5 under flat texels;
@@ -104,8 +105,8 @@ def main():
         for name in a.only or settings:
             iterations, kw = settings[name]
             cfg = OptimizeConfig(**{"iterations": iterations, "seed": 0, **kw})
-            rep = run_slab(top, bottom, size, tmp / name, inks, cfg, threads=a.threads,
-                           log=lambda s: None)
+            rep = run_optimisation(SlabSpec(top, size, bottom).build(inks), tmp / name, cfg, threads=a.threads,
+                                   log=lambda s: None).to_json()
             row = {"iterations": iterations, **kw, **{k: rep[k] for k in KEYS}}
             if rep["smooth"]:
                 row.setdefault("smooth_edge", cfg.smooth_edge)

@@ -63,7 +63,8 @@ def main() -> int:
     from inkopt.optim import OptimizeConfig
     from inkopt.pictures import panels
     from inkopt.rundir import RunDir
-    from inkopt.run import run_slab
+    from inkopt.run import run_optimisation
+    from inkopt.scenes.spec import SlabSpec
     from inkopt.units import OPT_DPI
 
     out = Path(a.out)
@@ -78,13 +79,14 @@ def main() -> int:
         d = out / f"optimised_{name}"
         cfg = OptimizeConfig(iterations=a.iterations, seed=a.seed)
         if not (d / "report.json").is_file():
-            run_slab(chart, None, size, d, inks, cfg, eval_spp=a.eval_spp, threads=a.threads, lighting=light,
-                     log=lambda m: None)
+            run_optimisation(SlabSpec(chart, size).build(inks), d, cfg, eval_spp=a.eval_spp, threads=a.threads,
+                             lighting=light, log=lambda m: None)
         runs[name] = d
     table, colours = {}, {}
     for run_name, d in runs.items():
         for light_name, light in lights.items():
-            ev = evaluate_run(d, spp=a.eval_spp, baselines=False, threads=a.threads, lighting=light, write=False)
+            ev = evaluate_run(d, spp=a.eval_spp, baselines=False, threads=a.threads, lighting=light,
+                              write=False).to_json()
             table[f"optimised_{run_name}/seen_{light_name}"] = {
                 k: {m: ev[k][m] for m in ("delta_e76_mean", "delta_e76_mean_corrected", "delta_e2000_mean",
                                           "delta_e76_p95", "ssim", "spp")} for k in ("continuous", "quantized")}

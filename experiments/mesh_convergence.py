@@ -31,8 +31,9 @@ from shell_compare import SPOT  # noqa: E402
 from inkopt.model import InkTable  # noqa: E402
 from inkopt.optim import OptimizeConfig  # noqa: E402
 from inkopt.optim.checkpoint import read_checkpoint  # noqa: E402
-from inkopt.run import run_mesh  # noqa: E402
+from inkopt.run import run_optimisation  # noqa: E402
 from inkopt.rundir import RunDir  # noqa: E402
+from inkopt.scenes.spec import MeshSpec  # noqa: E402
 
 KEYS = ("initial_delta_e76_mean_corrected", "delta_e76_mean_corrected", "delta_e2000_mean", "initial_ssim", "ssim",
         "mottle_l2", "seconds", "seconds_iterations", "seconds_per_iteration", "eval_spp", "adjoint_ema", "smooth")
@@ -51,8 +52,9 @@ def main():
     cfg = OptimizeConfig(**{"iterations": a.iterations, "seed": 0, **kw})
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(a.out or tmp)
-        rep = run_mesh(SPOT, d, InkTable.parse("vero-cmykw"), cfg, height_mm=a.height_mm, threads=a.threads,
-                       resume=a.out is not None, log=lambda s: None)
+        scene = MeshSpec(SPOT, height_mm=a.height_mm).build(InkTable.parse("vero-cmykw"))
+        rep = run_optimisation(scene, d, cfg, threads=a.threads, resume=a.out is not None,
+                               log=lambda s: None).to_json()
         ck = read_checkpoint(RunDir(d).checkpoint_path)
         train = [round(float(v), 3) for v in ck["hist_delta_e76"]]
     row = {"command": "python experiments/mesh_convergence.py " + " ".join(sys.argv[1:]), "height_mm": a.height_mm,

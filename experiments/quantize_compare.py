@@ -78,7 +78,7 @@ def main():
             q = quantize_volume(vol, method=method, upsample=a.upsample)
             tq = time.perf_counter() - t0
             RunDir(d).save_quantized(q)
-            ev = evaluate_run(d, spp=None, method=method, baselines=False, write=False)
+            ev = evaluate_run(d, spp=None, method=method, baselines=False, write=False).to_json()
             res["continuous"] = {k: ev["continuous"].get(k) for k in KEYS}
             res[method] = {**{k: ev["quantized"].get(k) for k in KEYS}, "quantize_seconds": tq,
                            "spp": ev["quantized"].get("spp"), "upsample": a.upsample}

@@ -43,7 +43,7 @@ def figures(vol, tex, loss, spp_list, threads) -> dict:
     for spp in spp_list:
         a, b = (r.render(tex, spp, EVAL_SEED_OFFSET + 1000 + k) for k in (0, 1))
         rgb, var = np.asarray(a.rgb, np.float64), np.asarray(a.var_mean, np.float64)
-        pm = prediction_metrics(loss, rgb, var)
+        pm = prediction_metrics(loss, rgb, var).to_json()
         ha, hb = (loss.highpass(linear_to_lab(np.asarray(x.rgb, np.float64))[:, :1])[:, 0] for x in (a, b))
         out[str(spp)] = {"ssim": pm["ssim"], "ssim_lab": loss.ssim_map(rgb, var).mean(0).tolist(),
                          "mottle_l2": pm["mottle_l2"], "mottle_l2_two_renders": float((ha * hb)[loss.flat].mean()),

@@ -90,7 +90,7 @@ def main() -> int:
     optimise_s = time.perf_counter() - t0
     ev = {name: evaluate_run(d, spp=a.eval_spp, baselines=False, threads=a.threads,
                              translucency=name == "constrained",
-                             translucency_compare=runs["unconstrained"] if name == "constrained" else None)
+                             translucency_compare=runs["unconstrained"] if name == "constrained" else None).to_json()
           for name, d in runs.items()}
     tr = ev["constrained"]["translucency"]
 

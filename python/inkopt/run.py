@@ -4,8 +4,10 @@
 exactly), save volume.npz, then the final figures: the optimised and the initial volume rendered with seeds from
 ``2**62 + cfg.seed`` (never used by the optimisation) at ``eval_spp`` samples per texel if given, else adaptively
 (``evaluation.noise.adaptive_render``: enough that the Monte Carlo noise adds at most ~0.5 to the mean ΔE76 and
-SSIM's and the mottle's noise correction is accurate, at most 4096), compared with the target by ``evaluation.metrics.prediction_metrics``; the scene's pictures, loss.png and report.json. ``run_slab`` and
-``run_mesh`` build the scene from user inputs and call it.
+SSIM's and the mottle's noise correction is accurate, at most 4096), compared with the target by
+``evaluation.metrics.prediction_metrics``; the scene's pictures, loss.png and report.json
+(``evaluation.results.Report``). The scene comes from user inputs through a spec (``scenes.spec``:
+``SlabSpec(...).build(inks)``, ``MeshSpec(...).build(inks)``).
 """
 from __future__ import annotations
 
@@ -17,15 +19,13 @@ import numpy as np
 from .evaluation.baselines import baseline_mixture
 from .evaluation.metrics import delta_e76_map, prediction_metrics
 from .evaluation.noise import EVAL_SEED_OFFSET, adaptive_render
+from .evaluation.results import Report
 from .lighting import Lighting, load_lighting
-from .model import InkTable
 from .optim import Optimization, OptimizeConfig
 from .pictures import loss_figure
 from .distributed import renderer_factory
 from .rundir import RunDir
 from .scenes import Scene
-from .units import OPT_DPI
-
 
 
 def peak_rss_gb() -> float:
@@ -33,14 +33,9 @@ def peak_rss_gb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
 
 
-def eval_spp_for(cfg: OptimizeConfig, eval_spp: int | None = None) -> int | None:
-    """The final evaluation's fixed spp, or None: adaptive."""
-    return int(eval_spp) if eval_spp else None
-
-
 def run_optimisation(scene: Scene, out_dir, cfg: OptimizeConfig, *, resume: bool = False,
                      eval_spp: int | None = None, threads: int | None = None, progress: bool = False,
-                     lighting: Lighting | str | None = None, ray: str | None = None, log=print) -> dict:
+                     lighting: Lighting | str | None = None, ray: str | None = None, log=print) -> Report:
     """Optimise ``scene`` into run directory ``out_dir`` under the display ``lighting`` (default uniform; the
     final figures are rendered under it too); returns the report (also report.json). ``ray``: "auto" or a Ray
     cluster's address: every render is split into texel shards on Ray workers (``inkopt.distributed``; the
@@ -50,7 +45,7 @@ def run_optimisation(scene: Scene, out_dir, cfg: OptimizeConfig, *, resume: bool
                          make_renderer)
 
 
-def _optimise(scene, out_dir, cfg, resume, eval_spp, threads, progress, lighting, log, make_renderer) -> dict:
+def _optimise(scene, out_dir, cfg, resume, eval_spp, threads, progress, lighting, log, make_renderer) -> Report:
     t_start = time.perf_counter()
     log(scene.describe())
     def baseline(kind: str) -> np.ndarray:  # a print-shop start (cfg.init "surface" or "extrusion")
@@ -72,7 +67,7 @@ def _optimise(scene, out_dir, cfg, resume, eval_spp, threads, progress, lighting
     # from the configuration (identical to the first iterate whether or not the run was resumed). The run's own
     # renderer (built again), set to the final then to the starting mixture (only the free voxels change: no
     # grid-sized volume), renders exactly what a renderer built from the result volume would.
-    spp = eval_spp_for(cfg, eval_spp)
+    spp = int(eval_spp) if eval_spp else None  # None: adaptive
     seed = EVAL_SEED_OFFSET + cfg.seed
     renderer = run.renderer()
 
@@ -92,43 +87,20 @@ def _optimise(scene, out_dir, cfg, resume, eval_spp, threads, progress, lighting
     loss_figure(rd.loss_picture_path, run.history.loss, run.history.delta_e76)
     h = run.history
     n = max(len(h.seconds), 1)
-    report = {
-        "initial_delta_e76_mean": init["delta_e76_mean"], "initial_ssim": init["ssim"], **metrics,
-        "delta_e76_max": float(de.max()),
-        "iterations": run.iteration, "spp": cfg.spp, "eval_spp": res.spp, "spp_adaptive": spp is None,
-        "eval_spp_passes": res.passes, "initial_eval_spp": res0.spp,
-        "initial_delta_e76_mean_corrected": init["delta_e76_mean_corrected"],
+    report = Report(
+        metrics=metrics, initial_delta_e76_mean=init.delta_e76_mean, initial_ssim=init.ssim,
+        initial_delta_e76_mean_corrected=init.delta_e76_mean_corrected, delta_e76_max=float(de.max()),
+        iterations=run.iteration, spp=cfg.spp, eval_spp=res.spp, spp_adaptive=spp is None,
+        eval_spp_passes=res.passes, initial_eval_spp=res0.spp,
         # this invocation's wall time (set-up, the iterations it ran, the evaluation); a resumed run's earlier
         # iterations are in the history, so seconds_iterations covers all of them
-        "seconds": time.perf_counter() - t_start,
-        "seconds_iterations": float(np.sum(h.seconds)),
-        "seconds_per_iteration": float(np.sum(h.seconds) / n),
-        "time_split": {k: float(np.sum(getattr(h, k)) / n) for k in ("render_s", "gradient_s", "loss_s", "step_s")},
-        **scene.report_fields(),
-        "inks": list(scene.volume.inks.names), "gamma": list(cfg.gamma), "lr": cfg.step_size,
-        "optimizer": cfg.optimizer, "param": cfg.param, "init": cfg.init, "seed": cfg.seed, "decay": cfg.decay,
-        "smooth": run.cfg.smooth, "adjoint_ema": run.cfg.adjoint_ema,
-        "gradient": cfg.grad_method, "threads": threads, "peak_rss_gb": peak_rss_gb(), **lighting.describe(),
-    }
-    rd.write_report(report)
+        seconds=time.perf_counter() - t_start, seconds_iterations=float(np.sum(h.seconds)),
+        seconds_per_iteration=float(np.sum(h.seconds) / n),
+        time_split={k: float(np.sum(getattr(h, k)) / n) for k in ("render_s", "gradient_s", "loss_s", "step_s")},
+        scene=scene.report_fields(), inks=list(scene.volume.inks.names), gamma=list(cfg.gamma), lr=cfg.step_size,
+        optimizer=cfg.optimizer, param=cfg.param, init=cfg.init, seed=cfg.seed, decay=cfg.decay,
+        smooth=run.cfg.smooth, adjoint_ema=run.cfg.adjoint_ema, gradient=cfg.grad_method, threads=threads,
+        peak_rss_gb=peak_rss_gb(), lighting=lighting.describe())
+    rd.write_report(report.to_json())
     return report
 
-
-def run_slab(top_path, bottom_path, size_mm, out_dir, inks: InkTable, cfg: OptimizeConfig, *,
-             dpi: float = OPT_DPI, **kw) -> dict:
-    """``inkopt slab``: pictures ``top_path`` (and ``bottom_path`` or None) on a slab of ``size_mm`` (W, H, D);
-    keyword arguments as ``run_optimisation``."""
-    from .scenes.slab import load_slab
-
-    return run_optimisation(load_slab(top_path, bottom_path, size_mm, inks, dpi), out_dir, cfg, **kw)
-
-
-def run_mesh(mesh_path, out_dir, inks: InkTable, cfg: OptimizeConfig, *, height_mm: float | None = None,
-             scale: float | None = None, shell_mm: float | None = None, dpi: float = OPT_DPI, up: str = "y",
-             **kw) -> dict:
-    """``inkopt optimize MESH``: a textured mesh scaled to ``height_mm`` (or by ``scale`` mm per unit), optimised
-    within ``shell_mm`` of its surface (None: everywhere inside); keyword arguments as ``run_optimisation``."""
-    from .scenes.mesh import build_mesh_scene
-
-    scene = build_mesh_scene(mesh_path, inks, height_mm, scale, shell_mm, dpi, up)
-    return run_optimisation(scene, out_dir, cfg, **kw)

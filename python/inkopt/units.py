@@ -17,7 +17,9 @@ PRINTER_LAYER_UM = 27.0
 
 
 def voxel_mm(dpi: float = OPT_DPI) -> float:
-    """Edge of a voxel (mm) of a grid of ``dpi`` dots per inch."""
+    """Edge of a voxel (mm) of a grid of ``dpi`` dots per inch; a one-line ValueError unless ``dpi`` is positive."""
+    if not (np.isfinite(dpi) and dpi > 0):
+        raise ValueError(f"--dpi must be positive, got {dpi}")
     return MM_PER_INCH / float(dpi)
 
 

@@ -9,6 +9,7 @@ from inkopt.color import linear_to_srgb
 from inkopt.evaluation.baselines import extrusion_baseline, surface_baseline
 from inkopt.evaluation.evaluate import average_to_scene, evaluate_run, map_texels, printer_texels, table_lines
 from inkopt.evaluation.noise import MAX_SPP, PILOT_SPP, TARGET_NOISE_DE76
+from inkopt.evaluation.results import Evaluation
 from inkopt.io import save_npz
 from inkopt.model import InkTable, Quantization, Texels, Volume
 from inkopt.pictures import panels
@@ -103,7 +104,10 @@ def test_evaluate_run_synthetic(tmp_path, table3):
     vol, scene = make_run(tmp_path / "run", table3, "extrusion")
     ev = evaluate_run(tmp_path / "run", spp=8, table=table3)
     disk = json.loads((tmp_path / "run" / "evaluation.json").read_text())
-    assert disk == json.loads(json.dumps(ev))
+    assert disk == json.loads(json.dumps(ev.to_json())) and disk["format_version"] == 1
+    assert Evaluation.read(tmp_path / "run" / "evaluation.json") == ev  # the typed round trip
+    del disk["format_version"]  # a file written before files carried a version (0) reads the same
+    assert Evaluation.from_json(disk) == ev
     keys = {"delta_e76_mean", "delta_e76_p95", "delta_e2000_mean", "ssim", "spp", "seconds", "method"}
     for entry in (disk["continuous"], disk["quantized"], disk["baselines"]["surface"],
                   disk["baselines"]["extrusion"]):
@@ -132,12 +136,13 @@ def test_evaluate_run_adaptive(tmp_path, table3):
     """Default spp: every result is rendered until its estimated noise contribution is below the target (or the
     cap), pilot first, and the figures say so."""
     make_run(tmp_path / "run", table3, "surface")
-    ev = evaluate_run(tmp_path / "run", table=table3, write=False)
+    typed = evaluate_run(tmp_path / "run", table=table3, write=False)
+    ev = typed.to_json()
     assert ev["spp_adaptive"] and ev["spp"] == ev["continuous"]["spp"]
     for m in (ev["continuous"], ev["quantized"], *ev["baselines"].values()):
         assert m["spp_passes"][0] == PILOT_SPP and m["spp"] == sum(m["spp_passes"])
         assert m["delta_e76_noise_contribution"] <= TARGET_NOISE_DE76 or m["spp"] >= MAX_SPP
-    assert any(line.startswith("gamut floor") for line in table_lines(ev))
+    assert any(line.startswith("gamut floor") for line in table_lines(typed))
 
 
 def test_evaluate_surface_run_and_method_mismatch(tmp_path, table3):
@@ -147,7 +152,7 @@ def test_evaluate_surface_run_and_method_mismatch(tmp_path, table3):
     labels, vp = quantize(q.mixture, q.voxel_mm, method="random", seed=5)
     Volume.from_labels(voxel_mm=vp, labels=labels, inks=INKS3,
            quantization=Quantization("random", 5, tuple(25.4 / vp), "nearest")).save(d / "quantized.npz")
-    ev = evaluate_run(d, spp=4, table=table3)
+    ev = evaluate_run(d, spp=4, table=table3).to_json()
     assert ev["quantization"]["method"] == "random" and ev["quantization"]["seed"] == 5
     for k in ("delta_e76_mean", "ssim"):  # the surface baseline, quantized like ours (random, seed 5) = ours
         assert ev["baselines"]["surface"][k] == ev["quantized"][k]
@@ -170,7 +175,7 @@ def test_evaluate_mesh_kind(tmp_path, table3):
     vol.save(d / "volume.npz")
     save_npz(d / "scene.npz", {**tex.to_arrays(), "target_rgb": np.full((len(tex), 3), 0.3, np.float32),
                                "kind": np.array("mesh"), "fixed_share": np.zeros(mix.shape, np.float32)})
-    ev = evaluate_run(d, spp=2, table=table3)
+    ev = evaluate_run(d, spp=2, table=table3).to_json()
     q = Volume.load(d / "quantized.npz")
     assert q.normals is not None and len(printer_texels(q, tex, "mesh")) == ev["printer_texels"]
     assert all(np.isfinite(ev[k]["delta_e76_mean"]) for k in ("continuous", "quantized"))

@@ -1,11 +1,13 @@
 """Tests of inkopt.evaluation.metrics (the mottle figure) and of the gamut floor's reachable colours
 (ColourTable.reachable_lab), on synthetic texel grids and tables with known answers."""
+import json
+
 import numpy as np
 import pytest
 
 from inkopt.color import linear_to_lab, linear_to_lab_jacobian
 from inkopt.evaluation.colour_table import ColourTable
-from inkopt.evaluation.metrics import flat_texels, mottle, prediction_metrics
+from inkopt.evaluation.metrics import Metrics, flat_texels, mottle, prediction_metrics
 from inkopt.loss import TexelLoss
 
 N = 48          # texels per side of a flat face
@@ -89,26 +91,21 @@ def test_noise_correction_removes_pure_noise(face, amp):
 def test_prediction_metrics_keys(face):
     loss, sign, _ = face
     rgb = grey(50 + sign)
-    out = prediction_metrics(loss, rgb, np.full((loss.n, 3), 1e-6))
+    m = prediction_metrics(loss, rgb, np.full((loss.n, 3), 1e-6))
+    out = m.to_json()
     for k in ("mottle_l2", "mottle_l2_target", "flat_texels", "delta_e76_noise_contribution",
               "delta_e76_mean_corrected", "delta_e76_mean", "delta_e76_rms_denoised"):
         assert k in out
-    assert out["delta_e76_mean_corrected"] == pytest.approx(out["delta_e76_mean"]
-                                                            - out["delta_e76_noise_contribution"])
-    assert "delta_e76_noise_contribution" not in prediction_metrics(loss, rgb)
+    assert m.delta_e76_mean_corrected == pytest.approx(m.delta_e76_mean - m.delta_e76_noise_contribution)
+    assert "delta_e76_noise_contribution" not in prediction_metrics(loss, rgb).to_json()
 
 
-def test_reachable_lab_in_and_out_of_gamut():
-    """Entries around a target reach it (floor 0); entries on a plane 10 L* above it reach the plane's foot
-    (floor 10), nearer than any entry (the nearest-entry figure would add the lattice spacing)."""
-    t = np.array([[0.2, 0.3, 0.1]])
-    lab_t = linear_to_lab(t)[0]
-    cube = np.array([[i, j, k] for i in (-3, 3) for j in (-3, 3) for k in (-3, 3)], np.float64)
-    grid = np.array([[10.0, a, b] for a in (-4, 0, 4) for b in (-4, 0, 4)]) + [0, 2, 2]
-    for offsets, floor in ((cube, 0.0), (grid, 10.0)):
-        lab = lab_t + offsets
-        tab = ColourTable(("a", "b"), np.zeros((len(lab), 2), np.float32), np.zeros_like(lab), lab,
-                          np.zeros(len(lab)), 1.0, 2, "test")
-        reach = tab.reachable_lab(t)
-        assert np.linalg.norm(reach[0] - lab_t) == pytest.approx(floor, abs=1e-3)
-        assert np.linalg.norm(lab - lab_t, axis=1).min() >= floor
+def test_metrics_json_round_trip(face):
+    """to_json -> JSON text -> from_json gives the same metrics, with and without the noise figures."""
+    loss, sign, _ = face
+    rgb = grey(50 + sign)
+    for var in (None, np.full((loss.n, 3), 1e-6)):
+        m = prediction_metrics(loss, rgb, var)
+        back = Metrics.from_json(json.loads(json.dumps(m.to_json())))
+        assert back == m
+        assert back.to_json() == m.to_json()

@@ -12,10 +12,11 @@ import trimesh
 
 from inkopt import charts
 from inkopt.cli import main
-from inkopt.inksets import Pool, Selection, Serial, run_selection
+from inkopt.inksets import Pool, Selection, Serial, load_selection, run_selection
 from inkopt.inksets.search import extrapolate_loss
 from inkopt.optim import OptimizeConfig
 from inkopt.rundir import RunDir
+from inkopt.scenes.spec import MeshSpec, SlabSpec
 
 pytest.importorskip("inkopt._core")
 
@@ -31,9 +32,8 @@ def selection(chart, strategy="halving", candidates="cyan,magenta,yellow", choos
     # decay 0.5: the step decays in the last 2 of 4 iterations, so a rung of 2 that planned its own decay would
     # differ from the full run (test_halving_final_run_equals_brute_force)
     cfg = OptimizeConfig(iterations=iterations, spp=2, forward_spp=4, checkpoint_every=2, decay=0.5)
-    target = {"kind": "image", "top": str(chart), "bottom": None, "size_mm": [2.0, 4 / 3, 0.5], "dpi": 300.0}
-    return Selection(target, candidates, choose, ["black", "white"], cfg, strategy, eval_spp=16, rung_eval_spp=8,
-                     **kw)
+    return Selection(SlabSpec(str(chart), (2.0, 4 / 3, 0.5)), candidates, choose, ["black", "white"], cfg, strategy,
+                     eval_spp=16, rung_eval_spp=8, **kw)
 
 
 @pytest.fixture(scope="module")
@@ -44,8 +44,9 @@ def halving(chart, tmp_path_factory):
 
 def test_outputs_keys_and_work(halving):
     out, res = halving
-    assert json.loads((out / "selection.json").read_text()) == res
-    assert set(res) == {"strategy", "candidates", "winner", "texel_samples"} and res["strategy"] == "halving"
+    assert json.loads((out / "selection.json").read_text()) == res == load_selection(out)
+    assert set(res) == {"strategy", "candidates", "winner", "texel_samples", "format_version"}
+    assert res["strategy"] == "halving" and res["format_version"] == 1
     assert len(res["candidates"]) == 3
     for c in res["candidates"]:
         assert set(c) == CANDIDATE_KEYS and c["inks"][-2:] == ["black", "white"]
@@ -59,6 +60,19 @@ def test_outputs_keys_and_work(halving):
     assert res["candidates"][0]["texel_samples"] == texels * (4 * 6 + 2 * 8 + 2 * 16)
     assert res["texel_samples"] == sum(c["texel_samples"] for c in res["candidates"])
     assert (out / "selection.png").stat().st_size > 1000
+
+
+def test_selection_json_versions(halving, tmp_path):
+    """selection.json written before files carried a version (0) loads as version 1; a newer one is refused."""
+    from inkopt.io import FormatError
+
+    _, res = halving
+    old = {k: v for k, v in res.items() if k != "format_version"}
+    (tmp_path / "selection.json").write_text(json.dumps(old))
+    assert load_selection(tmp_path) == res
+    (tmp_path / "selection.json").write_text(json.dumps({**old, "format_version": 2}))
+    with pytest.raises(FormatError, match="format version 2"):
+        load_selection(tmp_path)
 
 
 def test_winner_is_a_run_directory(halving, capsys):
@@ -95,10 +109,10 @@ def test_extrapolate_loss():
 def test_budgets_paper_setup():
     """15 sets: rungs of 1/8 and 1/4 of the budget, then (no half-budget rung) the last 4 run the full budget;
     work (iterations, evaluation renders at 16 and 256 spp) at most 40 % of brute force's."""
-    sel = Selection({}, "cyan,cyan2,magenta,magenta2,yellow,yellow2", 4, ["black", "white"],
+    sel = Selection(None, "cyan,cyan2,magenta,magenta2,yellow,yellow2", 4, ["black", "white"],
                     OptimizeConfig(iterations=80))
     assert sel.budgets() == [10, 20, 80]
-    assert Selection({}, "cyan,magenta,yellow", 2, [], OptimizeConfig(iterations=4)).budgets() == [2, 4]
+    assert Selection(None, "cyan,magenta,yellow", 2, [], OptimizeConfig(iterations=4)).budgets() == [2, 4]
     per_it = sel.cfg.spp + sel.cfg.forward_spp
     work = 15 * (10 * per_it + 2 * 16) + 8 * (10 * per_it + 2 * 16) + 4 * (60 * per_it + 2 * 256)
     assert work / (15 * (80 * per_it + 2 * 256)) <= 0.40
@@ -145,7 +159,7 @@ def test_resume_key_holds_the_scene_kinds_settings(chart):
 
     assert key(selection(chart)) == key(selection(chart), adjoint_ema=0.8, smooth=1.5)
     mesh = selection(chart)
-    mesh.target = {"kind": "mesh", "path": str(chart)}
+    mesh.target = MeshSpec(str(chart), height_mm=1.0)
     assert (key(mesh)["adjoint_ema"], key(mesh)["smooth"]) == (0.5, 3.0)
 
 
@@ -156,6 +170,9 @@ def test_resume_key_holds_the_scene_kinds_settings(chart):
     (["--candidates", "cyan,white", "--choose", "1"], "in both --candidates and --always"),
     (["--candidates", "cyan,cyan2,magenta,magenta2,yellow", "--choose", "5"], "holds 6 materials"),
     (["--candidates", "cyan,magenta", "--choose", "1", "--ray", "auto", "--inks", "vero-cmykw"], "not --inks"),
+    (["--candidates", "cyan,magenta", "--choose", "1", "--workers", "0"], "--workers must be at least 1"),
+    (["--candidates", "cyan,magenta", "--choose", "1", "--shell-mm", "0.2"], "--shell-mm is for a mesh target"),
+    (["--candidates", "cyan,magenta", "--choose", "1", "--scale", "1"], "exactly one of --size-mm"),
 ])
 def test_bad_input_one_line_before_work(chart, tmp_path, capsys, argv, message):
     out = tmp_path / "sel"

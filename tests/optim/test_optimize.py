@@ -145,13 +145,13 @@ def test_optimisation_lowers_delta_e_far_below_white_start():
     start = prediction_metrics(r.loss, Renderer(r.volume()).render(scene.texels, 64, 99).rgb)
     r.run()
     end = prediction_metrics(r.loss, Renderer(r.volume()).render(scene.texels, 64, 99).rgb)
-    assert end["delta_e76_mean"] < 0.75 * start["delta_e76_mean"], (start, end)
+    assert end.delta_e76_mean < 0.75 * start.delta_e76_mean, (start, end)
     h = np.array(r.history.loss)
     assert h[-5:].mean() < 0.7 * h[:5].mean()
 
 
 def test_without_forward_renders(monkeypatch):
-    """forward_spp 0: only the first iteration renders forward (PILOT_SPP); the loss is taken on the running
+    """forward_spp 0: only the first iteration renders forward (START_FORWARD_SPP); the loss is taken on the running
     average of the gradient passes' estimates, and 30 iterations still lower dE76 far below the white start."""
     from inkopt.optim import loop
 
@@ -163,9 +163,9 @@ def test_without_forward_renders(monkeypatch):
     start = prediction_metrics(r.loss, Renderer(r.volume()).render(scene.texels, 64, 99).rgb)
     calls.clear()
     r.run()
-    assert calls == [loop.PILOT_SPP]
+    assert calls == [loop.START_FORWARD_SPP]
     end = prediction_metrics(r.loss, Renderer(r.volume()).render(scene.texels, 64, 99).rgb)
-    assert end["delta_e76_mean"] < 0.75 * start["delta_e76_mean"], (start, end)
+    assert end.delta_e76_mean < 0.75 * start.delta_e76_mean, (start, end)
     # the average's weight tends to spp / (1 - adjoint_ema): 4 / 0.1 = 40 samples per texel
     assert abs(r.c_weight - 40.0) < 2.0, r.c_weight
     with pytest.raises(ValueError, match="forward spp"):
@@ -310,7 +310,7 @@ def test_ssim_term_raises_ssim():
     for g2 in (0.0, 3.0):
         r = run(scene, iterations=80, gamma=(1.0, g2, 0.0))  # measured: SSIM 0.555 (g2=0) vs 0.593 (g2=3)
         r.run()
-        out[g2] = prediction_metrics(r.loss, Renderer(r.volume()).render(scene.texels, 256, 7).rgb)["ssim"]
+        out[g2] = prediction_metrics(r.loss, Renderer(r.volume()).render(scene.texels, 256, 7).rgb).ssim
     assert out[3.0] > out[0.0] + 0.01, out
 
 

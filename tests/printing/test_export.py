@@ -75,7 +75,7 @@ def test_quantize_then_export_roundtrip(tmp_path):
 def test_refuses_too_many_materials(tmp_path):
     inks = INKS + ["transparent", "orange"]
     lab = random_labels(n=7, empty=0.0)
-    assert PRINTER_PROFILES["j750"]["max_materials"] == 6
+    assert PRINTER_PROFILES["j750"].max_materials == 6
     for limit, who in (("j750", "Stratasys J750 holds 6"), (6, "the printer holds 6"), ("J55", "J55 Prime holds 5")):
         with pytest.raises(ValueError, match="uses 7 inks") as err:
             write_png_slices(lab, VP, inks, tmp_path / "job", max_materials=limit)
@@ -102,7 +102,7 @@ def test_manifest_names_printer_materials(tmp_path):
     man = write_png_slices(random_labels(n=6), VP, inks, tmp_path / "g")  # no printer: no material names
     assert man["printer"] is None and {m["material"] for m in man["materials"]} == {None}
     for key, prof in PRINTER_PROFILES.items():
-        assert prof["max_materials"] is None or prof["max_materials"] >= 5, key
+        assert prof.max_materials is None or prof.max_materials >= 5, key
 
 
 def test_atomic_on_error(tmp_path, monkeypatch):

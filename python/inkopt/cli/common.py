@@ -1,5 +1,5 @@
 """What the subcommands share: the usage error, the display-lighting options, the optimiser options of ``slab``
-and ``optimize``, and their one-line summaries."""
+and ``optimize``, the scene specs of their inputs (``scenes.spec``) and their one-line summaries."""
 from __future__ import annotations
 
 import sys
@@ -33,9 +33,30 @@ def add_lighting_args(p, what: str = "render") -> None:
                    help="turn the map about z by DEG degrees, from +x towards +y (default 0)")
 
 
-def add_translucency_args(p, mesh: bool = False) -> None:
-    """``--translucency`` and ``--translucency-depth-mm`` (``inkopt.scenes.translucency``)."""
-    if mesh:
+def add_mesh_args(p, what: str = "") -> None:
+    """The inputs of a mesh scene (``scenes.spec.MeshSpec``): ``--height-mm`` or ``--scale``, ``--up``,
+    ``--shell-mm`` and ``--dpi``; ``what`` prefixes their help (e.g. "mesh: ")."""
+    from ..scenes.mesh import UP_AXES
+    from ..units import OPT_DPI
+
+    p.add_argument("--height-mm", type=float, metavar="H", help=f"{what}scale the object to this height (mm)")
+    p.add_argument("--scale", type=float, metavar="S", help=f"{what}or scale it by S mm per model unit")
+    p.add_argument("--up", choices=UP_AXES, default="y", help=f"{what}the file's up axis (default y, as OBJ/glTF)")
+    p.add_argument("--shell-mm", type=float, metavar="D",
+                   help=f"{what}optimise only voxels less than D mm below the surface; deeper ones are printed white "
+                        "(default: every voxel of the object is optimised)")
+    p.add_argument("--dpi", type=float, default=OPT_DPI, help=f"optimisation grid resolution (default {OPT_DPI:g})")
+
+
+def add_translucency_args(p, mesh: bool = False, both: bool = False) -> None:
+    """``--translucency`` and ``--translucency-depth-mm`` (``inkopt.scenes.translucency``) of a slab, a mesh or
+    (``both``) either."""
+    if both:
+        p.add_argument("--translucency", metavar="MASK|alpha",
+                       help="translucent regions: a grey mask image (slab: of the picture's size; mesh: in texture "
+                            "space; grey level 0..1 = required share of transparent ink) or, for a mesh, 'alpha' "
+                            "(share = 1 - the texture's alpha); needs a transparent ink in --always")
+    elif mesh:
         p.add_argument("--translucency", metavar="alpha|MASK",
                        help="translucent regions: 'alpha' (share of transparent ink = 1 - the texture's alpha) or a "
                             "grey mask image in texture space (grey level 0..1 = share); needs a transparent ink")
@@ -46,7 +67,7 @@ def add_translucency_args(p, mesh: bool = False) -> None:
                             "(e.g. --inks vero-cmykwt)")
     p.add_argument("--translucency-depth-mm", type=float, metavar="D",
                    help="how deep below the surface the translucent regions reach (default: through the whole "
-                        + ("object)" if mesh else "slab)"))
+                        + ("object)" if mesh or both else "slab)"))
 
 
 def lighting_from_args(args):
@@ -66,9 +87,10 @@ def add_optimizer_args(p) -> None:
     p.add_argument("--iterations", type=int, default=d.iterations, help=f"(default {d.iterations})")
     p.add_argument("--spp", type=int, default=d.spp, help=f"samples per texel of the gradient pass (default {d.spp})")
     p.add_argument("--forward-spp", type=int, default=d.forward_spp,
-                   help=f"samples per texel of the forward render the loss is evaluated at (default {d.forward_spp}; 0: no "
-                   "forward renders after the first iteration, the loss is taken on the average of the gradient "
-                   "passes' own estimates: cheaper iterations, each worth less)")
+                   help="samples per texel of the forward render the loss is evaluated at "
+                        f"(default {d.forward_spp}; 0: no forward renders after the first iteration, the loss is "
+                        "taken on the average of the gradient passes' own estimates: cheaper iterations, each worth "
+                        "less)")
     p.add_argument("--gamma", default=",".join(f"{g:g}" for g in d.gamma),
                    help="loss weights g1,g2,g3 of colour (dE76^2), SSIM and edge terms (default %(default)s)")
     p.add_argument("--lr", type=float, help="step size (default: 2 for eg, 0.5 for adagrad, 0.1 for adam)")
@@ -128,7 +150,8 @@ def ray_from_args(args) -> str | None:
 def config_from_args(args):
     from ..optim import OptimizeConfig
 
-    cfg = OptimizeConfig(iterations=args.iterations, spp=args.spp, forward_spp=args.forward_spp, gamma=parse_gamma(args.gamma), lr=args.lr,
+    cfg = OptimizeConfig(iterations=args.iterations, spp=args.spp, forward_spp=args.forward_spp,
+                         gamma=parse_gamma(args.gamma), lr=args.lr,
                          optimizer=args.optimizer, param=args.param, init=args.init, seed=args.seed,
                          grad_method=args.gradient, checkpoint_every=args.checkpoint_every, smooth=args.smooth,
                          smooth_edge=args.smooth_edge, decay=args.decay,
@@ -137,8 +160,43 @@ def config_from_args(args):
     return cfg
 
 
-def print_run_summary(rep: dict, init: str, extra: str = "") -> None:
-    """The closing line of ``slab`` and ``optimize`` from their report."""
-    print(f"mean ΔE76 {rep['initial_delta_e76_mean']:.2f} ({init} start) -> {rep['delta_e76_mean']:.2f} "
-          f"(p95 {rep['delta_e76_p95']:.2f}, ΔE2000 {rep['delta_e2000_mean']:.2f}, SSIM {rep['ssim']:.3f}) "
-          f"after {rep['iterations']} iterations in {rep['seconds']:.0f} s{extra}")
+def slab_spec_from_args(args, top: str):
+    """The ``SlabSpec`` of ``top`` and the slab options (``--size-mm``, ``--bottom``, ``--dpi``, translucency)."""
+    from ..scenes.spec import SlabSpec
+    from ..units import OPT_DPI, parse_size_mm
+
+    return SlabSpec(top, parse_size_mm(args.size_mm), args.bottom, getattr(args, "dpi", OPT_DPI),
+                    args.translucency, args.translucency_depth_mm)
+
+
+def mesh_spec_from_args(args, path: str):
+    """The ``MeshSpec`` of ``path`` and the mesh options (``--height-mm`` or ``--scale``, ``--shell-mm``,
+    ``--dpi``, ``--up``, translucency)."""
+    from ..scenes.spec import MeshSpec
+
+    return MeshSpec(path, args.height_mm, args.scale, args.shell_mm, args.dpi, args.up, args.translucency,
+                    args.translucency_depth_mm)
+
+
+def run_from_args(args, spec):
+    """``slab`` and ``optimize``: check ``spec`` (before the ink set and the optimiser settings are read), build
+    its scene with ``--inks`` and optimise it into ``--out``; returns the run's ``Report``."""
+    from ..model import InkTable
+    from ..run import run_optimisation
+
+    spec.validate()
+    inks = InkTable.parse(args.inks)
+    cfg = config_from_args(args)
+    ray = ray_from_args(args)
+    lighting = lighting_from_args(args)
+    scene = spec.build(inks)
+    return run_optimisation(scene, args.out, cfg, resume=args.resume, eval_spp=args.eval_spp, threads=args.threads,
+                            progress=sys.stderr.isatty(), lighting=lighting, ray=ray, log=stderr_log)
+
+
+def print_run_summary(rep, init: str, extra: str = "") -> None:
+    """The closing line of ``slab`` and ``optimize`` from their ``Report``."""
+    m = rep.metrics
+    print(f"mean ΔE76 {rep.initial_delta_e76_mean:.2f} ({init} start) -> {m.delta_e76_mean:.2f} "
+          f"(p95 {m.delta_e76_p95:.2f}, ΔE2000 {m.delta_e2000_mean:.2f}, SSIM {m.ssim:.3f}) "
+          f"after {rep.iterations} iterations in {rep.seconds:.0f} s{extra}")

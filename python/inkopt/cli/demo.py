@@ -13,7 +13,8 @@ def _demo(args) -> int:
     from ..model import InkTable, Texels, Volume
     from ..optim import OptimizeConfig
     from ..render import render
-    from ..run import run_slab
+    from ..run import run_optimisation
+    from ..scenes.spec import SlabSpec
     from ..units import voxel_mm
 
     out = Path(args.out)
@@ -28,7 +29,8 @@ def _demo(args) -> int:
     res = render(vol, Texels.for_volume(vol, ["top"]), spp=64, seed=0)
     m, e = res.mean_rgb, res.mean_rgb_stderr
     print(f"[1/2] rendered {out / 'cyan_white.npz'} (50 % cyan + 50 % white, 2.5 mm, periodic): linear RGB "
-          + " ".join(f"{a:.3f}±{b:.3f}" for a, b in zip(m, e)) + f"  ({res.events / res.seconds / 1e6:.1f} M events/s)")
+          + " ".join(f"{a:.3f}±{b:.3f}" for a, b in zip(m, e))
+          + f"  ({res.events / res.seconds / 1e6:.1f} M events/s)")
 
     # 2. Optimise a 6 x 4 x 1 mm two-sided slab.
     top = charts.save(charts.colour_chart(288, 192), out / "chart.png")
@@ -36,10 +38,11 @@ def _demo(args) -> int:
     cfg = OptimizeConfig(iterations=args.iterations, spp=4, seed=0)
     print(f"[2/2] optimising a 6 x 4 x 1 mm slab: {top.name} on top, {bottom.name} below, {cfg.iterations} "
           "iterations ...")
-    rep = run_slab(top, bottom, (6.0, 4.0, 1.0), out / "slab", inks, cfg,
-                   progress=sys.stderr.isatty(), log=lambda s: print("      " + s), resume=True)
-    print(f"      mean ΔE76 {rep['initial_delta_e76_mean']:.1f} (all-white start) -> {rep['delta_e76_mean']:.1f}, "
-          f"SSIM {rep['initial_ssim']:.3f} -> {rep['ssim']:.3f}, {rep['seconds']:.0f} s")
+    scene = SlabSpec(top, (6.0, 4.0, 1.0), bottom).build(inks)
+    rep = run_optimisation(scene, out / "slab", cfg, progress=sys.stderr.isatty(),
+                           log=lambda s: print("      " + s), resume=True)
+    print(f"      mean ΔE76 {rep.initial_delta_e76_mean:.1f} (all-white start) -> {rep.metrics.delta_e76_mean:.1f}, "
+          f"SSIM {rep.initial_ssim:.3f} -> {rep.metrics.ssim:.3f}, {rep.seconds:.0f} s")
     print(f"look at: {out / 'slab' / 'face_top.png'}, {out / 'slab' / 'face_bottom.png'}, "
           f"{out / 'slab' / 'loss.png'}; numbers: {out / 'slab' / 'report.json'}")
     return 0

@@ -1,5 +1,6 @@
 """``inkopt evaluate DIR``: ΔE76, ΔE2000 and SSIM of the continuous result, the quantized (printed) result and the
-naive baselines against the target; writes DIR/evaluation.json and DIR/evaluation_<face>.png (``inkopt.evaluation.evaluate``).
+naive baselines against the target; writes DIR/evaluation.json and DIR/evaluation_<face>.png
+(``inkopt.evaluation.evaluate``).
 """
 from __future__ import annotations
 
@@ -9,15 +10,13 @@ import sys
 from ..evaluation.colour_table import DEFAULT_PATCH_MM
 from ..evaluation.evaluate import DEFAULT_SPP, evaluate_run, table_lines
 from ..evaluation.noise import MAX_SPP, PILOT_SPP, TARGET_NOISE_DE76
-from ..printing.quantize import METHODS
+from ..printing.quantize import check_quantization
 from .common import add_lighting_args, lighting_from_args
 
 
 def _evaluate_cmd(args) -> int:
-    if args.method is not None and args.method not in METHODS:
-        raise ValueError(f"unknown quantization method '{args.method}'; use one of {list(METHODS)}")
-    if args.spp is not None and args.spp < 1:
-        raise ValueError(f"--spp must be at least 1, got {args.spp}")
+    if args.method is not None:
+        check_quantization(args.method)
     log = None if args.json else (lambda msg: print(msg, file=sys.stderr, flush=True))
     ev = evaluate_run(args.dir, spp=args.spp, seed=args.seed, method=args.method, threads=args.threads,
                       baselines=not args.no_baselines, refine=not args.nearest, patch_mm=args.patch_mm,
@@ -25,15 +24,15 @@ def _evaluate_cmd(args) -> int:
                       translucency=False if args.no_translucency else None,
                       translucency_compare=args.translucency_compare)
     if args.json:
-        print(json.dumps(ev))
+        print(json.dumps(ev.to_json()))
     else:
         for line in table_lines(ev):
             print(line)
-        how = "adaptive, " if ev["spp_adaptive"] else ""
-        print(f"lighting: {ev['lighting']}" + (f", turned {ev['lighting_rotate_deg']:g} degrees"
-                                               if ev["lighting_rotate_deg"] else ""))
-        print(f"{ev['spp']} spp per scene texel ({how}continuous result), {ev['seconds']:.0f} s; wrote {args.dir}/evaluation.json"
-              + "".join(f", {p}" for p in ev.get("pictures", [])))
+        how = "adaptive, " if ev.spp_adaptive else ""
+        rotate = ev.lighting.get("lighting_rotate_deg")
+        print(f"lighting: {ev.lighting['lighting']}" + (f", turned {rotate:g} degrees" if rotate else ""))
+        print(f"{ev.spp} spp per scene texel ({how}continuous result), {ev.seconds:.0f} s; wrote "
+              f"{args.dir}/evaluation.json" + "".join(f", {p}" for p in ev.pictures or []))
     return 0
 
 

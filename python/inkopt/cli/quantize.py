@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..printing.quantize import DEFAULT_DPI, DEFAULT_LAYER_UM, METHODS, UPSAMPLE
+from ..printing.quantize import DEFAULT_DPI, DEFAULT_LAYER_UM, check_quantization
 from ..printing.stream import quantize_run
 from ..rundir import RunDir
 from ..units import parse_dpi
@@ -13,10 +13,7 @@ from ..units import parse_dpi
 
 def _quantize_cmd(args) -> int:
     d = RunDir(args.dir)
-    if args.method not in METHODS:
-        raise ValueError(f"unknown quantization method '{args.method}'; use one of {list(METHODS)}")
-    if args.upsample not in UPSAMPLE:
-        raise ValueError(f"unknown upsample '{args.upsample}'; use one of {list(UPSAMPLE)}")
+    check_quantization(args.method, args.upsample)
     if args.dpi is not None and args.layer_um is not None and len(parse_dpi(args.dpi)) == 3:
         raise ValueError("give the layer thickness once: --dpi XxYxZ or --layer-um, not both")
     dpi = parse_dpi(args.dpi) if args.dpi is not None else DEFAULT_DPI
@@ -30,7 +27,8 @@ def _quantize_cmd(args) -> int:
 
 
 def register_cli(sub) -> None:
-    p = sub.add_parser("quantize", help="one ink per printer voxel: DIR/volume.npz -> DIR/quantized.npz (+ quantized_labels.npy)",
+    p = sub.add_parser("quantize",
+                       help="one ink per printer voxel: DIR/volume.npz -> DIR/quantized.npz (+ quantized_labels.npy)",
                        description="Quantize a run's optimised mixture to one ink per printer voxel (600 x 300 "
                                    "DPI, 27 um layers by default) and write DIR/quantized.npz.")
     p.add_argument("dir", help="run directory holding volume.npz")

@@ -3,21 +3,21 @@ from __future__ import annotations
 
 import argparse
 
-from ..units import OPT_DPI
-from .common import add_optimizer_args, config_from_args, stderr_log
+from .common import (add_mesh_args, add_optimizer_args, add_translucency_args, config_from_args, mesh_spec_from_args,
+                     slab_spec_from_args, stderr_log)
 
 
-def _target(args) -> dict:
-    if (args.size_mm is None) == (args.height_mm is None):
+def _target(args):
+    """The target's spec: a slab (``--size-mm``) or a mesh (``--height-mm`` or ``--scale``)."""
+    mesh = args.height_mm is not None or args.scale is not None
+    if (args.size_mm is None) == (not mesh):
         raise ValueError("give exactly one of --size-mm WxHxD (TARGET is a picture: a slab) and --height-mm H "
-                         "(TARGET is a textured mesh)")
-    if args.size_mm is not None:
-        from ..units import parse_size_mm
-
-        return {"kind": "image", "top": args.target, "bottom": args.bottom,
-                "size_mm": list(parse_size_mm(args.size_mm)), "dpi": args.dpi}
-    return {"kind": "mesh", "path": args.target, "height_mm": args.height_mm, "shell_mm": args.shell_mm,
-            "dpi": args.dpi, "up": args.up}
+                         "(TARGET is a textured mesh; or --scale S)")
+    if mesh:
+        return mesh_spec_from_args(args, args.target)
+    if args.shell_mm is not None:
+        raise ValueError("--shell-mm is for a mesh target; a slab is optimised through its whole depth")
+    return slab_spec_from_args(args, args.target)
 
 
 def _select(args) -> int:
@@ -27,8 +27,6 @@ def _select(args) -> int:
         raise ValueError("select-inks takes the inks from --candidates and --always, not --inks")
     if str(args.lighting).lower() != "uniform" or args.lighting_rotate:
         raise ValueError("select-inks ranks ink sets under uniform light only; --lighting is not supported here")
-    if args.workers is not None and args.workers < 1:
-        raise ValueError(f"--workers must be at least 1, got {args.workers}")
     sel = Selection(_target(args), args.candidates, args.choose, args.always, config_from_args(args),
                     args.strategy, args.eval_spp or 256, args.rung_eval_spp,
                     None if args.printer == "none" else args.printer)
@@ -53,13 +51,12 @@ def register_cli(sub) -> None:
                        description="Optimise TARGET with every subset of --choose of the --candidates inks (plus "
                                    "the --always inks) and keep the best, by successive halving (default) or "
                                    "brute force.")
-    p.add_argument("target", metavar="TARGET", help="a picture (with --size-mm) or a textured mesh (--height-mm)")
+    p.add_argument("target", metavar="TARGET",
+                   help="a picture (with --size-mm) or a textured mesh (--height-mm or --scale)")
     p.add_argument("--size-mm", help="slab WxHxD in mm (TARGET is its top picture)")
     p.add_argument("--bottom", metavar="IMAGE", help="picture of the slab's bottom face")
-    p.add_argument("--height-mm", type=float, help="mesh height in mm (TARGET is a mesh)")
-    p.add_argument("--shell-mm", type=float, help="mesh: optimise only voxels this close to the surface")
-    p.add_argument("--up", choices=("y", "z"), default="y", help="mesh up axis (default y)")
-    p.add_argument("--dpi", type=float, default=OPT_DPI, help=f"optimisation grid resolution (default {OPT_DPI:g})")
+    add_mesh_args(p, "mesh target: ")
+    add_translucency_args(p, both=True)
     p.add_argument("--candidates", required=True, help="comma list of candidate inks, e.g. "
                                                        "cyan,cyan2,magenta,magenta2,yellow,yellow2")
     p.add_argument("--choose", type=int, required=True, help="how many candidates each set takes")
@@ -69,7 +66,8 @@ def register_cli(sub) -> None:
     p.add_argument("--out", required=True, metavar="DIR", help="selection directory")
     p.add_argument("--strategy", choices=("halving", "brute"), default="halving")
     p.add_argument("--rung-eval-spp", type=int, default=16,
-                   help="halving: spp of the intermediate rungs' evaluation renders (figures and pictures only; default 16)")
+                   help="halving: spp of the intermediate rungs' evaluation renders (figures and pictures only; "
+                        "default 16)")
     ex = p.add_mutually_exclusive_group()
     ex.add_argument("--workers", type=int, help="runs at once in a local process pool")
     ex.add_argument("--ray", metavar="auto|ADDRESS",

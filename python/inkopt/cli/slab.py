@@ -1,26 +1,12 @@
-"""``inkopt slab``: optimise a textured 2.5D slab (its scene from the pictures, then ``inkopt.run``)."""
+"""``inkopt slab``: optimise a textured 2.5D slab (a ``scenes.spec.SlabSpec`` run by ``inkopt.run``)."""
 from __future__ import annotations
 
-import sys
-
-from .common import (add_optimizer_args, add_ray_arg, add_translucency_args, config_from_args, lighting_from_args,
-                     print_run_summary, ray_from_args, stderr_log)
+from .common import (add_optimizer_args, add_ray_arg, add_translucency_args, print_run_summary, run_from_args,
+                     slab_spec_from_args)
 
 
 def _slab(args) -> int:
-    from ..model import InkTable
-    from ..run import run_optimisation
-    from ..scenes.slab import load_slab
-    from ..units import parse_size_mm
-
-    inks = InkTable.parse(args.inks)
-    cfg = config_from_args(args)
-    ray = ray_from_args(args)
-    lighting = lighting_from_args(args)
-    scene = load_slab(args.top, args.bottom, parse_size_mm(args.size_mm), inks, translucency=args.translucency,
-                      translucency_depth_mm=args.translucency_depth_mm)
-    rep = run_optimisation(scene, args.out, cfg, resume=args.resume, eval_spp=args.eval_spp, threads=args.threads,
-                           progress=sys.stderr.isatty(), lighting=lighting, ray=ray, log=stderr_log)
+    rep = run_from_args(args, slab_spec_from_args(args, args.top))
     print_run_summary(rep, args.init)
     print(f"pictures: {args.out}/face_*.png, {args.out}/loss.png; report: {args.out}/report.json")
     return 0

@@ -43,7 +43,7 @@ DEFAULT_MAX_STDERR = 0.3      # ΔE76 standard error of each table colour
 MAX_TABLE_ENTRIES = 600       # default_step picks the finest step with at most this many mixtures
 PATCH_LATERAL = 8             # texels per side of a patch (periodic; 64 texels keep all threads busy)
 PATCH_LATERAL_MM = 0.25       # lateral voxel size of a patch (irrelevant for a homogeneous periodic medium)
-PILOT_SPP = 16
+PATCH_PILOT_SPP = 16          # spp of the pilot render of every patch
 MAX_PATCH_SPP = 8192
 REFINE_K = 8
 TABLE_VERSION = 2
@@ -196,7 +196,7 @@ def render_patches(mixtures, inks: InkTable, g: float, ior: float, patch_mm: flo
                    max_stderr: float = DEFAULT_MAX_STDERR, seed: int = 0, threads=None, progress: bool = False):
     """Render infinite homogeneous patches of ``mixtures`` (M, N): returns (rgb (M, 3), stderr (M,)).
 
-    Each patch: a pilot of ``PILOT_SPP`` spp on 64 texels, then (if its ΔE standard error exceeds
+    Each patch: a pilot of ``PATCH_PILOT_SPP`` spp on 64 texels, then (if its ΔE standard error exceeds
     ``max_stderr``) a second pass sized by the pilot's error (x1.2 margin, at most ``MAX_PATCH_SPP``);
     the two passes (independent seeds) are pooled per texel.
     """
@@ -215,14 +215,14 @@ def render_patches(mixtures, inks: InkTable, g: float, ior: float, patch_mm: flo
         if texels is None:
             texels = Texels.for_volume(vol, ["top"])
         rnd = Renderer(vol, threads)
-        r0 = rnd.render(texels, PILOT_SPP, seed=2 * j + seed * 1_000_003)
+        r0 = rnd.render(texels, PATCH_PILOT_SPP, seed=2 * j + seed * 1_000_003)
         m, v = r0.rgb.astype(np.float64), r0.var_mean.astype(np.float64)
         mean = m.mean(0)
         se = lab_stderr(mean, v.sum(0) / len(texels) ** 2)
         if se > max_stderr:
-            spp1 = int(min(MAX_PATCH_SPP, np.ceil(PILOT_SPP * ((se / max_stderr) ** 2 * 1.2 - 1.0))))
+            spp1 = int(min(MAX_PATCH_SPP, np.ceil(PATCH_PILOT_SPP * ((se / max_stderr) ** 2 * 1.2 - 1.0))))
             r1 = rnd.render(texels, max(spp1, 1), seed=2 * j + 1 + seed * 1_000_003)
-            n0, n1 = PILOT_SPP, r1.spp
+            n0, n1 = PATCH_PILOT_SPP, r1.spp
             m = (n0 * m + n1 * r1.rgb) / (n0 + n1)
             v = (n0 * n0 * v + n1 * n1 * r1.var_mean) / (n0 + n1) ** 2
             mean = m.mean(0)

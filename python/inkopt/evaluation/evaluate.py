@@ -57,6 +57,7 @@ from .baselines import BASELINES
 from .colour_table import DEFAULT_PATCH_MM, ColourTable, colour_table
 from .metrics import prediction_metrics
 from .noise import EVAL_SEED_OFFSET, MAX_SPP, PILOT_SPP, SSIM_NOISE_RATIO, TARGET_NOISE_DE76, adaptive_render
+from .results import Evaluation, Measured
 from .translucency import evaluate_translucency
 from .translucency import table_lines as translucency_lines
 
@@ -149,8 +150,8 @@ def write_face_pictures(d: RunDir, rec: SceneRecord, results: dict) -> list[str]
 def evaluate_run(path, spp: int | None = DEFAULT_SPP, seed: int = 0, method: str | None = None, threads=None,
                  baselines: bool = True, refine: bool = True, patch_mm: float = DEFAULT_PATCH_MM,
                  table: ColourTable | None = None, write: bool = True, lighting: Lighting | str | None = None,
-                 log=None, translucency: bool | None = None, translucency_compare=None) -> dict:
-    """Evaluate run directory ``path`` (module docstring); returns the evaluation dict (also written to
+                 log=None, translucency: bool | None = None, translucency_compare=None) -> Evaluation:
+    """Evaluate run directory ``path`` (module docstring); returns the ``results.Evaluation`` (also written to
     DIR/evaluation.json with the face pictures when ``write``). ``spp``: None = adaptive (module docstring),
     else exactly that many samples per scene texel. ``method``: quantization method of ours (when
     quantized.npz is missing) and of the baselines; None = that of quantized.npz, else blue-noise.
@@ -162,7 +163,7 @@ def evaluate_run(path, spp: int | None = DEFAULT_SPP, seed: int = 0, method: str
     lighting = load_lighting(lighting)
     say = log or (lambda msg: None)
     if spp is not None and spp < 1:
-        raise ValueError(f"spp must be at least 1, got {spp}")
+        raise ValueError(f"--spp must be at least 1, got {spp}")
     d = RunDir(path)
     vol = d.load_volume()
     rec = d.load_scene()
@@ -170,18 +171,16 @@ def evaluate_run(path, spp: int | None = DEFAULT_SPP, seed: int = 0, method: str
     target = rec.target_rgb.astype(np.float64)
     t_all = time.perf_counter()
     loss = TexelLoss(target, stex.pos_vox, sigma=1.5)
-    out = {"spp": spp, "seed": int(seed), "texels": len(stex), "kind": kind, "spp_adaptive": spp is None,
-           "noise_target_delta_e76": TARGET_NOISE_DE76,
-           "noise_target_ssim_ratio": SSIM_NOISE_RATIO, "spp_pilot": PILOT_SPP, "spp_max": MAX_SPP,
-           **lighting.describe()}
     colours = {"target": target}
     rseed = EVAL_SEED_OFFSET + int(seed)
 
-    def measured(name: str, render) -> dict:
+    def measured(name: str, render, seconds_from: float, method: str | None, spp_printer=None) -> Measured:
         """Adaptive (or fixed-spp) render of one result; its colours and figures."""
         ad = adaptive_render(render, loss.target_lab, rseed, spp, log=say)
         colours[name] = ad.rgb
-        return {**prediction_metrics(loss, ad.rgb, ad.var), "spp": ad.spp, "spp_passes": ad.passes}
+        m = prediction_metrics(loss, ad.rgb, ad.var)
+        sp = None if spp_printer is None else spp_printer["spp"]
+        return Measured(m, ad.spp, ad.passes, time.perf_counter() - seconds_from, method, sp)
 
     t0 = time.perf_counter()
     renderer = Renderer(vol, threads, lighting)
@@ -190,12 +189,12 @@ def evaluate_run(path, spp: int | None = DEFAULT_SPP, seed: int = 0, method: str
         r = renderer.render(stex, n, s, progress=log is not None)
         return r.rgb, r.var_mean, n
 
-    out["continuous"] = {**measured("continuous", continuous), "seconds": time.perf_counter() - t0, "method": None}
+    cont = measured("continuous", continuous, t0, None)
     del renderer
-    out["spp"] = out["continuous"]["spp"]
-    say(f"continuous: {len(stex)} texels x {out['spp']} spp in {out['continuous']['seconds']:.1f} s")
+    say(f"continuous: {len(stex)} texels x {cont.spp} spp in {cont.seconds:.1f} s")
+    tr = None
     if translucency or (translucency is None and (rec.translucency is not None or translucency_compare)):
-        out["translucency"] = evaluate_translucency(vol, rec, translucency_compare, rseed, threads, lighting, log=say)
+        tr = evaluate_translucency(vol, rec, translucency_compare, rseed, threads, lighting, log=say)
 
     if d.has_quantized():
         qvol = d.load_quantized()
@@ -212,26 +211,28 @@ def evaluate_run(path, spp: int | None = DEFAULT_SPP, seed: int = 0, method: str
         say(f"quantized {vol.shape} -> {qvol.shape} ({q.method}) in {time.perf_counter() - t0:.1f} s; "
             f"wrote {d.quantized_path}")
     dpi = q.dpi or tuple(float(v) for v in dpi_of(qvol.voxel_mm))
-    out["quantization"] = {**asdict(q), "dpi": list(dpi)}
     qkw = dict(method=q.method, seed=q.seed, upsample=q.upsample, dpi=tuple(dpi))
+    printer_texels = 0
 
-    def printed(name: str, labels_vol: Volume) -> dict:
-        t0, info = time.perf_counter(), {"spp_printer": 0}
+    def printed(name: str, labels_vol: Volume) -> Measured:
+        nonlocal printer_texels
+        t0, info = time.perf_counter(), {"spp": 0}
         printer = PrintedRenderer(labels_vol, stex, vol.voxel_mm, kind, threads, lighting)
-        out["printer_texels"] = len(printer.ptex)
+        printer_texels = len(printer.ptex)
 
         def render(n: int, s: int):
             rgb, var, spp_p = printer(n, s, progress=log is not None)
-            info["spp_printer"] += spp_p
+            info["spp"] += spp_p
             return rgb, var, spp_p
 
-        m = measured(name, render)
-        secs = time.perf_counter() - t0
-        say(f"{name}: {out['printer_texels']} printer texels x {info['spp_printer']} spp in {secs:.1f} s")
-        return {**m, "spp_printer": info["spp_printer"], "seconds": secs, "method": q.method}
+        m = measured(name, render, t0, q.method, info)
+        say(f"{name}: {printer_texels} printer texels x {info['spp']} spp in {m.seconds:.1f} s")
+        return m
 
-    out["quantized"] = printed("quantized", qvol)
+    quantized = printed("quantized", qvol)
     del qvol
+    floor = {}
+    base = None
     if baselines:
         t0 = time.perf_counter()
         if table is None:
@@ -239,51 +240,54 @@ def evaluate_run(path, spp: int | None = DEFAULT_SPP, seed: int = 0, method: str
                                  progress=log is not None)
         say(f"colour table: {len(table.lab)} patches of {table.patch_mm:g} mm, step 1/{table.step}, "
             + ("(cached)" if table.cached else f"built in {table.seconds:.0f} s"))
-        out["colour_table"] = {"entries": len(table.lab), "patch_mm": table.patch_mm, "step": table.step,
-                               "max_stderr": float(table.stderr.max()), "refine": bool(refine),
-                               "key": table.key, "cached": table.cached, "build_seconds": table.seconds,
-                               "seconds": time.perf_counter() - t0}
-        floor = delta_e76(table.reachable_lab(target), loss.target_lab)
-        out["gamut_floor_delta_e76"] = float(floor.mean())
-        out["gamut_floor_delta_e76_p95"] = float(np.percentile(floor, 95))
-        out["baselines"] = {}
+        floor["colour_table"] = {"entries": len(table.lab), "patch_mm": table.patch_mm, "step": table.step,
+                                 "max_stderr": float(table.stderr.max()), "refine": bool(refine),
+                                 "key": table.key, "cached": table.cached, "build_seconds": table.seconds,
+                                 "seconds": time.perf_counter() - t0}
+        de = delta_e76(table.reachable_lab(target), loss.target_lab)
+        floor["gamut_floor_delta_e76"] = float(de.mean())
+        floor["gamut_floor_delta_e76_p95"] = float(np.percentile(de, 95))
+        base = {}
         fixed = rec.fixed_share(vol.inks, vol.shape)
         for name, fn in BASELINES.items():
             mix = fn(vol, stex, target, fixed, table, refine=refine)
             qb = quantize_volume(vol.with_mixture(mix), **qkw)
-            out["baselines"][name] = printed(name, qb)
-    out["seconds"] = time.perf_counter() - t_all
+            base[name] = printed(name, qb)
+    ev = Evaluation(spp=cont.spp, seed=int(seed), texels=len(stex), kind=kind, spp_adaptive=spp is None,
+                    noise_target_delta_e76=TARGET_NOISE_DE76, noise_target_ssim_ratio=SSIM_NOISE_RATIO,
+                    spp_pilot=PILOT_SPP, spp_max=MAX_SPP, lighting=lighting.describe(), continuous=cont,
+                    quantization={**asdict(q), "dpi": list(dpi)}, printer_texels=printer_texels,
+                    quantized=quantized, seconds=time.perf_counter() - t_all, translucency=tr, **floor,
+                    baselines=base)
     if write:
         if rec.faces:
-            out["pictures"] = write_face_pictures(d, rec, colours)
-        d.write_evaluation(out)
-    return out
+            ev.pictures = write_face_pictures(d, rec, colours)
+        d.write_evaluation(ev.to_json())
+    return ev
 
 
-def table_lines(ev: dict) -> list[str]:
-    """A plain-text table of an evaluation dict."""
-    rows = [("continuous", ev["continuous"]), ("quantized", ev["quantized"])]
-    rows += [(f"{k} baseline", v) for k, v in ev.get("baselines", {}).items()]
+def table_lines(ev: Evaluation) -> list[str]:
+    """A plain-text table of an evaluation."""
     nan = float("nan")
 
-    def num(m, key):
-        v = m.get(key)
+    def num(v):
         return nan if v is None else v
 
     lines = [f"{'result':<20}{'dE76 mean':>10}{'dE76 p95':>10}{'dE2000':>9}{'SSIM':>8}{'noise':>8}"
              f"{'rms w/o noise':>15}{'noise in mean':>14}{'mottle':>8}{'spp':>6}{'s':>7}"]
-    for name, m in rows:
-        lines.append(f"{name:<20}{m['delta_e76_mean']:>10.2f}{m['delta_e76_p95']:>10.2f}"
-                     f"{m['delta_e2000_mean']:>9.2f}{m['ssim']:>8.3f}{num(m, 'delta_e76_noise'):>8.2f}"
-                     f"{num(m, 'delta_e76_rms_denoised'):>15.2f}{num(m, 'delta_e76_noise_contribution'):>14.2f}"
-                     f"{num(m, 'mottle_l2'):>8.2f}{m.get('spp', 0):>6}{m['seconds']:>7.1f}")
-    c = ev["continuous"]
-    if c.get("flat_texels"):
-        lines.append(f"mottle: high-frequency L* power, (dL*)^2, on {c['flat_texels']} texels where the target is "
-                     f"flat (target's own: {c['mottle_l2_target']:.2f})")
-    if "translucency" in ev:
-        lines += translucency_lines(ev["translucency"])
-    if "gamut_floor_delta_e76" in ev:
+    for name, r in ev.results():
+        m = r.metrics
+        lines.append(f"{name:<20}{m.delta_e76_mean:>10.2f}{m.delta_e76_p95:>10.2f}"
+                     f"{m.delta_e2000_mean:>9.2f}{m.ssim:>8.3f}{num(m.delta_e76_noise):>8.2f}"
+                     f"{num(m.delta_e76_rms_denoised):>15.2f}{num(m.delta_e76_noise_contribution):>14.2f}"
+                     f"{num(m.mottle_l2):>8.2f}{r.spp:>6}{r.seconds:>7.1f}")
+    c = ev.continuous.metrics
+    if c.flat_texels:
+        lines.append(f"mottle: high-frequency L* power, (dL*)^2, on {c.flat_texels} texels where the target is "
+                     f"flat (target's own: {c.mottle_l2_target:.2f})")
+    if ev.translucency is not None:
+        lines += translucency_lines(ev.translucency)
+    if ev.gamut_floor_delta_e76 is not None:
         lines.append(f"gamut floor: mean dE76 from the target to the nearest colour the inks reach in a "
-                     f"{ev['colour_table']['patch_mm']:g} mm patch: {ev['gamut_floor_delta_e76']:.2f}")
+                     f"{ev.colour_table['patch_mm']:g} mm patch: {ev.gamut_floor_delta_e76:.2f}")
     return lines

@@ -12,6 +12,8 @@ linear-RGB variance, ``color.linear_to_lab_jacobian``), E h_i² gains (1 - w_ii)
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, fields
+
 import numpy as np
 
 from ..color import delta_e76, delta_e2000, lab_stderr, linear_to_lab, linear_to_lab_jacobian
@@ -52,7 +54,44 @@ def mottle(loss: TexelLoss, rgb, var_mean=None) -> dict:
     return {"mottle_l2": float(p[flat].mean()), "mottle_l2_target": float(pt[flat].mean()), "flat_texels": n}
 
 
-def prediction_metrics(loss: TexelLoss, rgb, var_mean=None) -> dict:
+@dataclass
+class Metrics:
+    """The figures of one prediction against its target (``prediction_metrics``); ΔE in CIELAB units, mottle in
+    (ΔL*)². The noise figures are None when the prediction's Monte Carlo variance was not given; the mottle
+    figures are None when no texel is flat."""
+
+    delta_e76_mean: float
+    delta_e76_p95: float
+    delta_e2000_mean: float
+    ssim: float
+    loss: float
+    e1: float
+    e2: float
+    e3: float
+    mottle_l2: float | None
+    mottle_l2_target: float | None
+    flat_texels: int
+    delta_e76_noise: float | None = None
+    delta_e76_noise_contribution: float | None = None
+    delta_e76_mean_corrected: float | None = None
+    delta_e76_rms: float | None = None
+    delta_e76_rms_denoised: float | None = None
+
+    NOISE_KEYS = ("delta_e76_noise", "delta_e76_noise_contribution", "delta_e76_mean_corrected", "delta_e76_rms",
+                  "delta_e76_rms_denoised")
+
+    def to_json(self) -> dict:
+        """The figures by name; the noise figures only when they were estimated."""
+        d = {f.name: getattr(self, f.name) for f in fields(self)}
+        return {k: v for k, v in d.items() if not (k in self.NOISE_KEYS and v is None)}
+
+    @classmethod
+    def from_json(cls, d: dict) -> "Metrics":
+        """The metrics among the entries of ``d`` (other keys, e.g. a report's, are ignored)."""
+        return cls(**{f.name: d[f.name] for f in fields(cls) if f.name in d})
+
+
+def prediction_metrics(loss: TexelLoss, rgb, var_mean=None) -> Metrics:
     """Figures of predictions ``rgb`` (I, 3) linear against ``loss``'s target (I, 3) linear.
 
     Always: ``delta_e76_mean``, ``delta_e76_p95``, ``delta_e2000_mean``, ``ssim`` (mean texel SSIM), the loss's
@@ -80,7 +119,7 @@ def prediction_metrics(loss: TexelLoss, rgb, var_mean=None) -> dict:
         out["delta_e76_mean_corrected"] = float(de.mean()) - contrib
         out["delta_e76_rms"] = float(np.sqrt(np.mean(de * de)))
         out["delta_e76_rms_denoised"] = float(np.sqrt(max(0.0, np.mean(de * de - se * se))))
-    return out
+    return Metrics(**out)
 
 
 def delta_e76_map(loss: TexelLoss, rgb) -> np.ndarray:

@@ -1,9 +1,9 @@
 """Where the candidate runs of an ink-set search execute: in this process, in a local process pool, or as Ray
 tasks (a local Ray instance or a cluster). Nothing else: no scheduler of our own.
 
-A task is a plain dict (target paths and sizes, ink names, the optimiser settings, the run directory, the
-budget) and :func:`run_candidate` builds the scene in the worker, so a task pickles in a few hundred bytes and any
-machine with inkopt and the same file paths (a shared filesystem for the target and DIR) can run it. Renders are
+A task is a plain dict (the target's ``scenes.spec`` spec, ink names, the optimiser settings, the run directory,
+the budget) and :func:`run_candidate` builds the scene in the worker, so a task pickles in a few hundred bytes and
+any machine with inkopt and the same file paths (a shared filesystem for the target and DIR) can run it. Renders are
 bit-identical for any thread count, so every backend returns the same numbers for the same tasks.
 """
 from __future__ import annotations
@@ -37,34 +37,23 @@ class _Capture:
         return self._scene.write_pictures(out, pred_rgb, delta_e)
 
 
-def build_scene(target: dict, inks):
-    """The scene of a search's target: ``{"kind": "image", "top", "bottom", "size_mm", "dpi"}`` or
-    ``{"kind": "mesh", "path", "height_mm", "shell_mm", "dpi", "up"}``."""
-    if target["kind"] == "image":
-        from ..scenes.slab import load_slab
-
-        return load_slab(target["top"], target.get("bottom"), tuple(target["size_mm"]), inks, target["dpi"])
-    from ..scenes.mesh import build_mesh_scene
-
-    return build_mesh_scene(target["path"], inks, target["height_mm"], None, target.get("shell_mm"),
-                            target["dpi"], target.get("up", "y"))
-
-
 def run_candidate(task: dict) -> dict:
-    """One rung of one candidate: build its scene, optimise (continuing from its checkpoint when ``resume``) up to
-    ``cfg["iterations"]``, evaluate at ``eval_spp``. Returns the report's figures, the texel count, the run's
-    training-loss history (``hist_loss``, every iteration from the start) and the final prediction (I, 3)."""
+    """One rung of one candidate: build its scene from the task's spec (``task["spec"]``, a ``scenes.spec``
+    spec), optimise (continuing from its checkpoint when ``resume``) up to ``cfg["iterations"]``, evaluate at
+    ``eval_spp``. Returns the report's figures, the texel count, the run's training-loss history (``hist_loss``,
+    every iteration from the start) and the final prediction (I, 3)."""
     from ..model import InkTable
     from ..optim import OptimizeConfig
     from ..run import run_optimisation
 
     inks = InkTable.from_names(task["inks"])
     cfg = OptimizeConfig(**{**task["cfg"], "gamma": tuple(task["cfg"]["gamma"])})
-    scene = _Capture(build_scene(task["target"], inks))
+    scene = _Capture(task["spec"].build(inks))
     rep = run_optimisation(scene, task["out"], cfg, resume=task["resume"], eval_spp=task["eval_spp"],
                            threads=task["threads"], log=lambda msg: None)
-    keys = ("loss", "delta_e76_mean", "delta_e2000_mean", "ssim", "iterations", "texels")
-    out = {k: rep[k] for k in keys if k in rep}
+    m = rep.metrics
+    out = {"loss": m.loss, "delta_e76_mean": m.delta_e76_mean, "delta_e2000_mean": m.delta_e2000_mean,
+           "ssim": m.ssim, "iterations": rep.iterations}
     ck = read_checkpoint(RunDir(task["out"]).checkpoint_path)  # the whole run's training-loss history
     out["hist_loss"] = [float(v) for v in ck["hist_loss"]]
     out["texels"] = len(scene.texels)
@@ -101,8 +90,6 @@ class Pool(Serial):
     name = "pool"
 
     def __init__(self, workers: int):
-        if workers < 1:
-            raise ValueError(f"--workers must be at least 1, got {workers}")
         self.cpus, self.workers = os.cpu_count() or 1, workers
         self._ex = ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"))
 
@@ -140,6 +127,8 @@ class Ray(Serial):
 
 def make_backend(workers: int | None = None, ray: str | None = None, threads: int | None = None):
     """Serial (no options), a process pool (``workers``) or Ray (``ray``: "auto" or a cluster address)."""
+    if workers is not None and workers < 1:
+        raise ValueError(f"--workers must be at least 1, got {workers}")
     if ray:
         return Ray(ray, workers)
     if workers and workers > 1:

@@ -40,15 +40,18 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io import load_npz, save_npz, write_json
+from ..io import FORMAT_KEY, load_npz, save_npz, upgrade_format, write_json
 from ..model.inks import INK_LIBRARY
 from ..optim import OptimizeConfig
 from ..printing.profiles import printer_profile
+from ..model import TRANSPARENT_INKS
 from ..rundir import RunDir
+from ..scenes.spec import SceneSpec
 from .backends import Serial, config_dict, run_candidate, threads_per_run
 
 STRATEGIES = ("halving", "brute")
 STATE, SELECTION, PICTURE = "selection_state.json", "selection.json", "selection.png"
+SELECTION_FORMAT = 1  # selection.json; version 0 (no format_version) has the same keys
 RULE = "halving: power-law extrapolation of the second half of the training loss; no half-budget rung"
 _EXPONENTS = np.linspace(0.05, 3.0, 60)
 
@@ -79,10 +82,11 @@ def extrapolate_loss(hist, total: int, start: float = 0.5) -> float:
 
 @dataclass
 class Selection:
-    """What to search. ``target``: see ``backends.build_scene``; ``cfg``: the optimiser settings of every run
-    (``cfg.iterations``: the full budget); ``printer``: a ``printing.profiles`` key whose slots bound the set."""
+    """What to search. ``target``: the scene's spec (``scenes.spec.SlabSpec`` or ``MeshSpec``; every candidate's
+    run builds it with its inks); ``cfg``: the optimiser settings of every run (``cfg.iterations``: the full
+    budget); ``printer``: a ``printing.profiles`` key whose slots bound the set."""
 
-    target: dict
+    target: SceneSpec
     candidates: list[str]
     choose: int
     always: list[str]
@@ -114,9 +118,9 @@ class Selection:
                              f"1; got {len(self.candidates)} ({','.join(self.candidates) or 'none'})")
         n = self.choose + len(self.always)
         prof = printer_profile(self.printer) if self.printer is not None else None
-        if prof is not None and prof["max_materials"] is not None and n > prof["max_materials"]:
+        if prof is not None and prof.max_materials is not None and n > prof.max_materials:
             raise ValueError(f"--choose {self.choose} plus {len(self.always)} --always inks make {n} inks but "
-                             f"{prof['name']} holds {prof['max_materials']} materials per job; choose fewer or use "
+                             f"{prof.name} holds {prof.max_materials} materials per job; choose fewer or use "
                              "a --printer with more material slots")
         self.cfg.validate()
         if self.cfg.iterations < 1:
@@ -126,7 +130,7 @@ class Selection:
                              "add it or use --init random")
         if self.rung_eval_spp < 1 or self.eval_spp < 1:
             raise ValueError("evaluation spp must be at least 1")
-        _check_target(self.target)
+        self._check_target()
 
     def subsets(self) -> list[tuple[str, ...]]:
         """The chosen part of every set, in candidate order."""
@@ -147,11 +151,26 @@ class Selection:
     def key(self) -> str:
         """What must match for ``resume`` (everything; the settings as the target's scene kind resolves them, so
         that searches started before a setting was left to the kind still resume)."""
-        cfg = self.cfg.for_scene("slab" if self.target["kind"] == "image" else "mesh")
-        return json.dumps({"target": self.target, "candidates": self.candidates, "choose": self.choose,
+        cfg = self.cfg.for_scene(self.target.kind)
+        return json.dumps({"target": self.target.to_json(), "candidates": self.candidates, "choose": self.choose,
                            "always": self.always, "cfg": config_dict(cfg), "strategy": self.strategy,
                            "eval_spp": self.final_eval_spp, "rung_eval_spp": self.rung_eval_spp, "rule": RULE},
                           sort_keys=True)
+
+    def _check_target(self) -> None:
+        """The target's inputs, with every set's inks (each must honour the constraints: white for a mesh's
+        core, a transparent ink for translucency). A slab's pictures and mask are read once (readable, sizes
+        matching); a mesh is voxelized only in the runs."""
+        from ..model import InkTable
+
+        if self.target.translucency is not None and not set(TRANSPARENT_INKS) & set(self.always):
+            raise ValueError("--translucency needs a transparent ink ('transparent' or 'clear') in every set; add "
+                             "it to --always")
+        sets = [InkTable.from_names(self.inks(s)) for s in self.subsets()]
+        for inks in sets:
+            self.target.validate(inks)
+        if self.target.kind == "slab":
+            self.target.build(sets[0])
 
     @property
     def final_eval_spp(self) -> int:
@@ -163,21 +182,6 @@ def _names(names) -> list[str]:
     if isinstance(names, str):
         names = names.split(",")
     return [n.strip().lower() for n in names if n.strip()]
-
-
-def _check_target(target: dict) -> None:
-    paths = [target["top"]] + ([target["bottom"]] if target.get("bottom") else []) if target["kind"] == "image" \
-        else [target["path"]]
-    for p in paths:
-        if not Path(p).is_file():
-            raise ValueError(f"target {p} does not exist")
-    if target["kind"] == "image":
-        from ..model import InkTable
-        from .backends import build_scene
-
-        build_scene(target, InkTable.from_names(["white"]))  # picture readable, aspect matches --size-mm
-    elif not target.get("height_mm", 0) > 0:
-        raise ValueError("a mesh target needs --height-mm H > 0")
 
 
 def set_name(subset) -> str:
@@ -218,7 +222,7 @@ def run_selection(sel: Selection, out, backend=None, *, resume: bool = False, lo
         # every rung steps as the full run would (step decay planned for the full budget), so intermediate rungs
         # take constant steps and a final run is the same as brute force's run of that set
         cfg = {**config_dict(sel.cfg), "iterations": budget, "schedule_iterations": sel.cfg.iterations}
-        tasks = [{"target": sel.target, "inks": sel.inks(s), "cfg": cfg,
+        tasks = [{"spec": sel.target, "inks": sel.inks(s), "cfg": cfg,
                   "out": str(out / "runs" / set_name(s)), "resume": resume or k > 0, "eval_spp": rung["eval_spp"],
                   "threads": threads} for s in todo]
         for s, res in zip(todo, backend.map(run_candidate, tasks)):
@@ -256,7 +260,7 @@ def _finish(sel: Selection, out: Path, state: dict, winner, log) -> dict:
     wname = set_name(winner)
     result = {"strategy": sel.strategy, "candidates": cands,
               "winner": {"inks": sel.inks(winner), "loss": latest[wname]["loss"]},
-              "texel_samples": int(sum(work.values()))}
+              "texel_samples": int(sum(work.values())), FORMAT_KEY: SELECTION_FORMAT}
     _copy_run(out / "runs" / wname, out / "winner")
     write_json(out / SELECTION, result)
     from .figures import selection_figure
@@ -267,6 +271,16 @@ def _finish(sel: Selection, out: Path, state: dict, winner, log) -> dict:
     log(f"winner: {','.join(result['winner']['inks'])} (loss {result['winner']['loss']:.5g}); "
         f"{result['texel_samples']:.3g} texel-samples")
     return result
+
+
+def load_selection(out) -> dict:
+    """selection.json of selection directory ``out`` (a one-line ValueError if missing or of a format version
+    this inkopt does not read)."""
+    path = Path(out) / SELECTION
+    if not path.is_file():
+        raise ValueError(f"{path} does not exist (the selection has not finished)")
+    return upgrade_format(json.loads(path.read_text()), kind="ink-set selection", where=path,
+                          current=SELECTION_FORMAT, upgrades={0: dict})
 
 
 def _copy_run(src: Path, dst: Path) -> None:

@@ -35,7 +35,7 @@ from .smooth import MAX_DEPTH, GradientSmoother, nearest_texels, texel_guide
 
 
 #: samples per texel of the first iteration's forward render of a run without forward passes (forward_spp 0)
-PILOT_SPP = 16
+START_FORWARD_SPP = 16
 
 
 def iteration_seeds(seed: int, it: int) -> tuple[int, int]:
@@ -204,7 +204,7 @@ class Optimization:
         renderer = self.renderer()
         forward = cfg.forward_spp > 0 or self.c_avg is None
         if forward:  # without forward passes (forward_spp 0) only the first iteration renders one
-            spp0 = cfg.forward_spp or PILOT_SPP
+            spp0 = cfg.forward_spp or START_FORWARD_SPP
             res = renderer.render(self.texels, spp0, fwd_seed, cfg.include_specular)
             self._average(res.rgb, res.var_mean, spp0, decay=True)
         t1 = time.perf_counter()

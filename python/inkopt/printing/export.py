@@ -40,7 +40,7 @@ import numpy as np
 from ..io import FORMAT_KEY, upgrade_format
 from ..model import EMPTY
 from ..units import MM_PER_INCH
-from .profiles import material_name, printer_profile, resolve_max_materials, too_many_inks
+from .profiles import PrinterProfile, material_name, printer_profile, resolve_max_materials, too_many_inks
 
 FORMAT = "inkopt-png-slices"
 #: the format version of manifest.json (``format_version``)
@@ -125,7 +125,7 @@ class Job:
     counts: np.ndarray
     used: list
     limit: int | None
-    profile: dict | None
+    profile: PrinterProfile | None
 
     @property
     def dpi(self) -> tuple[float, float]:
@@ -156,7 +156,7 @@ def check_job(labels, voxel_mm_printer, ink_names, max_materials=None, printer=N
         printer = max_materials
     profile = printer_profile(printer) if printer is not None else None
     limit = resolve_max_materials(max_materials) if max_materials is not None else \
-        (profile["max_materials"] if profile else None)
+        (profile.max_materials if profile else None)
     counts = np.zeros(256, np.int64)
     for k in range(labels.shape[0]):
         counts += np.bincount(labels[k].ravel(), minlength=256)
@@ -164,7 +164,7 @@ def check_job(labels, voxel_mm_printer, ink_names, max_materials=None, printer=N
     if bad.size:
         raise ValueError(f"labels use ink {len(names) + int(bad[0])} but only {len(names)} ink names are given")
     used = [i for i in range(len(names)) if counts[i] > 0]
-    refusal = too_many_inks([names[i] for i in used], limit, profile["name"] if profile else None)
+    refusal = too_many_inks([names[i] for i in used], limit, profile.name if profile else None)
     if refusal:
         raise ValueError(refusal)
     return Job(labels, vp, names, counts, used, limit, profile)
@@ -234,7 +234,7 @@ def write_png_slices(labels, voxel_mm_printer, ink_names, out_dir, palette=None,
                       for i in range(len(names))],
         "materials_used": len(used),
         "max_materials": job.limit,
-        "printer": None if job.profile is None else {"key": job.profile["key"], "name": job.profile["name"]},
+        "printer": None if job.profile is None else {"key": job.profile.key, "name": job.profile.name},
         "empty_voxel_count": int(counts[EMPTY]),
     }
 

@@ -211,5 +211,5 @@ def write_gcvf(labels, voxel_mm_printer, ink_names, path, printer="j750", palett
             "dpi": {"x": dpi_int[0], "y": dpi_int[1]}, "layer_thickness_nm": layer_nm,
             "materials": [{"ink": job.names[i], "material": job.material(i), "color": list(colours[i]),
                            "voxel_count": int(job.counts[i])} for i in job.used],
-            "printer": job.profile["name"] if job.profile else None, "stl_triangles": len(mesh.faces),
+            "printer": job.profile.name if job.profile else None, "stl_triangles": len(mesh.faces),
             "outline_block": [fx, fy, fz], "bytes": path.stat().st_size}

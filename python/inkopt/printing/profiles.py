@@ -19,6 +19,8 @@ Where the figures come from (say so for every new entry; check your machine's co
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 
 from ..units import dpi_of
@@ -27,33 +29,67 @@ from ..units import dpi_of
 _VERO = {"cyan": "VeroCyan-V", "magenta": "VeroMagenta-V", "yellow": "VeroYellow-V", "black": "VeroBlack",
          "white": "VeroUltraWhite"}
 
-PRINTER_PROFILES: dict[str, dict] = {
+@dataclass(frozen=True)
+class PrinterProfile:
+    """What a printer takes: ``key`` (its name in ``PRINTER_PROFILES``), ``name`` (for people), ``max_materials``
+    model materials per job (None: no limit), ``dpi`` (x, y) of its voxel grid and ``layer_um`` its layer
+    thicknesses in µm (None and () where no public figure is known: not checked), ``materials`` the vendor
+    material loaded for each inkopt ink name."""
+
+    key: str
+    name: str
+    max_materials: int | None
+    dpi: tuple[int, int] | None = None
+    layer_um: tuple[float, ...] = ()
+    materials: dict = field(default_factory=dict)
+
+    def material(self, ink: str) -> str | None:
+        """The vendor material loaded for ``ink`` (case-insensitive), or None if unknown."""
+        return self.materials.get(str(ink).lower())
+
+    def to_json(self) -> dict:
+        """The profile as a JSON object; ``dpi`` and ``layer_um`` only where known."""
+        d = {"key": self.key, "name": self.name, "max_materials": self.max_materials}
+        if self.dpi is not None:
+            d["dpi"] = list(self.dpi)
+        if self.layer_um:
+            d["layer_um"] = list(self.layer_um)
+        return {**d, "materials": dict(self.materials)}
+
+    @classmethod
+    def from_json(cls, d: dict) -> "PrinterProfile":
+        dpi = d.get("dpi")
+        return cls(d["key"], d["name"], d.get("max_materials"), None if dpi is None else tuple(dpi),
+                   tuple(d.get("layer_um", ())), dict(d.get("materials", {})))
+
+
+PRINTER_PROFILES: dict[str, PrinterProfile] = {p.key: p for p in (
     # six colour materials at once + support (Stratasys J750 spec sheet); 27 um voxel-print layers, 14 um HQ
-    "j750": {"name": "Stratasys J750", "max_materials": 6, "dpi": (600, 300), "layer_um": (27.0, 14.0),
-             "materials": {**_VERO, "transparent": "VeroClear", "clear": "VeroClear"}},
+    PrinterProfile("j750", "Stratasys J750", 6, (600, 300), (27.0, 14.0),
+                   {**_VERO, "transparent": "VeroClear", "clear": "VeroClear"}),
     # seven materials at once + support (Stratasys J850 spec sheet); same voxel grid as the J750
-    "j850": {"name": "Stratasys J850", "max_materials": 7, "dpi": (600, 300), "layer_um": (27.0, 14.0),
-             "materials": {**_VERO, "transparent": "VeroUltraClear", "clear": "VeroUltraClear"}},
+    PrinterProfile("j850", "Stratasys J850", 7, (600, 300), (27.0, 14.0),
+                   {**_VERO, "transparent": "VeroUltraClear", "clear": "VeroUltraClear"}),
     # five materials + support, 18.75 um layers (Stratasys J55 Prime spec sheet; not re-checked)
-    "j55": {"name": "Stratasys J55 Prime", "max_materials": 5, "dpi": (600, 300), "layer_um": (18.75,),
-            "materials": {**_VERO, "transparent": "VeroUltraClear", "clear": "VeroUltraClear"}},
+    PrinterProfile("j55", "Stratasys J55 Prime", 5, (600, 300), (18.75,),
+                   {**_VERO, "transparent": "VeroUltraClear", "clear": "VeroUltraClear"}),
     # C, M, Y, K, white, clear + support (Mimaki 3DUJ-553 brochure); no public voxel grid or ink names found
-    "mimaki-3duj-553": {"name": "Mimaki 3DUJ-553", "max_materials": 6, "materials": {}},
-    "generic": {"name": "no material limit", "max_materials": None, "materials": {}},
-}
+    PrinterProfile("mimaki-3duj-553", "Mimaki 3DUJ-553", 6),
+    PrinterProfile("generic", "no material limit", None),
+)}
 
 
-def printer_profile(name: str) -> dict:
-    """The profile ``name`` (case-insensitive) with its key; a one-line ValueError names the known ones."""
+def printer_profile(name: str) -> PrinterProfile:
+    """The profile ``name`` (case-insensitive); a one-line ValueError names the known ones."""
     key = str(name).strip().lower()
     if key not in PRINTER_PROFILES:
         raise ValueError(f"unknown printer '{name}'; use one of {list(PRINTER_PROFILES)}")
-    return {"key": key, **PRINTER_PROFILES[key]}
+    return PRINTER_PROFILES[key]
 
 
-def material_name(profile: dict | None, ink: str) -> str | None:
+def material_name(profile: PrinterProfile | None, ink: str) -> str | None:
     """The vendor material ``profile`` loads for ``ink`` (case-insensitive), or None if unknown."""
-    return None if profile is None else profile.get("materials", {}).get(str(ink).lower())
+    return None if profile is None else profile.material(ink)
 
 
 def resolve_max_materials(max_materials) -> int | None:
@@ -61,10 +97,7 @@ def resolve_max_materials(max_materials) -> int | None:
     if max_materials is None:
         return None
     if isinstance(max_materials, str):
-        key = max_materials.strip().lower()
-        if key not in PRINTER_PROFILES:
-            raise ValueError(f"unknown printer profile '{max_materials}'; use one of {list(PRINTER_PROFILES)}")
-        return PRINTER_PROFILES[key]["max_materials"]
+        return printer_profile(max_materials).max_materials
     n = int(max_materials)
     if n < 1:
         raise ValueError(f"max_materials must be at least 1, got {max_materials}")
@@ -80,16 +113,16 @@ def too_many_inks(used: list[str], limit: int | None, printer: str | None = None
             f"use an ink set of at most {limit} inks or a printer with more material slots (--printer)")
 
 
-def resolution_mismatch(profile: dict, voxel_mm_printer) -> str | None:
+def resolution_mismatch(profile: PrinterProfile, voxel_mm_printer) -> str | None:
     """Why a printer grid of ``voxel_mm_printer`` (x, y, z) mm does not match what ``profile`` prints (its DPI in
     x and y, one of its layer thicknesses), or None if it does or the profile does not say."""
-    if "dpi" not in profile:
+    if profile.dpi is None:
         return None
     vp = np.asarray(voxel_mm_printer, np.float64)
     dpi = dpi_of(vp[:2])
-    layer_ok = any(abs(vp[2] * 1000 - t) < 0.05 for t in profile.get("layer_um", (vp[2] * 1000,)))
-    if np.allclose(dpi, profile["dpi"], rtol=1e-3) and layer_ok:
+    layer_ok = any(abs(vp[2] * 1000 - t) < 0.05 for t in profile.layer_um or (vp[2] * 1000,))
+    if np.allclose(dpi, profile.dpi, rtol=1e-3) and layer_ok:
         return None
-    return (f"the slices are {dpi[0]:.0f} x {dpi[1]:.0f} DPI with {vp[2] * 1000:.1f} um layers; {profile['name']} "
-            f"prints {profile['dpi'][0]} x {profile['dpi'][1]} DPI with "
-            f"{' or '.join(f'{t:g}' for t in profile['layer_um'])} um layers")
+    return (f"the slices are {dpi[0]:.0f} x {dpi[1]:.0f} DPI with {vp[2] * 1000:.1f} um layers; {profile.name} "
+            f"prints {profile.dpi[0]} x {profile.dpi[1]} DPI with "
+            f"{' or '.join(f'{t:g}' for t in profile.layer_um)} um layers")

@@ -95,6 +95,14 @@ def _linear(n_p: int, vp: float, n_o: int, vo: float):
 
 
 # ----------------------------------------------------------------------------------------- quantization
+def check_quantization(method: str, upsample: str = "nearest") -> None:
+    """One-line ValueError for an unknown quantization ``method`` or ``upsample``."""
+    if method not in METHODS:
+        raise ValueError(f"unknown quantization method '{method}'; use one of {list(METHODS)}")
+    if upsample not in UPSAMPLE:
+        raise ValueError(f"unknown upsample '{upsample}'; use one of {list(UPSAMPLE)}")
+
+
 def quantize(mixture, voxel_mm, *, method: str = "blue-noise", dpi=DEFAULT_DPI, layer_um: float = DEFAULT_LAYER_UM,
              inside=None, seed: int = 0, upsample: str = "nearest", out=None):
     """One ink per printer voxel from a mixture on the optimisation grid.
@@ -122,10 +130,7 @@ def quantize(mixture, voxel_mm, *, method: str = "blue-noise", dpi=DEFAULT_DPI, 
     n_inks = m.shape[3]
     if n_inks >= EMPTY:
         raise ValueError(f"at most {EMPTY - 1} inks fit uint8 labels, got {n_inks}")
-    if method not in METHODS:
-        raise ValueError(f"unknown quantization method '{method}'; use one of {list(METHODS)}")
-    if upsample not in UPSAMPLE:
-        raise ValueError(f"unknown upsample '{upsample}'; use one of {list(UPSAMPLE)}")
+    check_quantization(method, upsample)
     nz, ny, nx = m.shape[:3]
     if inside is not None:
         inside = np.asarray(inside, bool)
@@ -301,10 +306,7 @@ def quantize_volume(volume: Volume, *, method: str = "blue-noise", dpi=DEFAULT_D
     """
     if volume.form != "mixture":
         raise ValueError(f"quantization needs a mixture volume, got a {volume.form} volume")
-    if method not in METHODS:
-        raise ValueError(f"unknown quantization method '{method}'; use one of {list(METHODS)}")
-    if upsample not in UPSAMPLE:
-        raise ValueError(f"unknown upsample '{upsample}'; use one of {list(UPSAMPLE)}")
+    check_quantization(method, upsample)
     labels, vp = quantize(volume.mixture, volume.voxel_mm, method=method, dpi=tuple(dpi), layer_um=layer_um,
                           inside=volume.inside, seed=int(seed), upsample=upsample)
     nrm = None

@@ -7,6 +7,7 @@ It knows how to store itself (``record()`` -> the run directory's ``SceneRecord`
 the report, and which pictures show a prediction of it. The run driver (``inkopt.run``) needs nothing else, so a
 new kind of scene is a new module here plus its settings in ``optim.config.SCENE_DEFAULTS`` (the optimiser
 settings it leaves to the kind).
+A scene is made from the user's inputs through its spec (``spec.SlabSpec``, ``spec.MeshSpec``: ``build(inks)``).
 """
 from __future__ import annotations
 

@@ -109,6 +109,22 @@ def _bilinear(tex: np.ndarray, uv: np.ndarray) -> np.ndarray:
             + tex[y1, x0] * (1 - fx) * fy + tex[y1, x1] * fx * fy)
 
 
+UP_AXES = ("y", "z")  # the up axes a mesh file may have
+
+
+def check_placement(height_mm: float | None, scale: float | None, up: str = "y") -> None:
+    """One-line ValueError unless exactly one of ``height_mm`` and ``scale`` is given, it is positive, and ``up``
+    is one of ``UP_AXES``."""
+    if (height_mm is None) == (scale is None):
+        raise ValueError("give exactly one of --height-mm H (the object's height in mm) and --scale S "
+                         "(mm per model unit)")
+    for flag, v in (("--height-mm", height_mm), ("--scale", scale)):
+        if v is not None and not (np.isfinite(v) and v > 0):
+            raise ValueError(f"{flag} must be positive, got {v}")
+    if up not in UP_AXES:
+        raise ValueError(f"--up must be one of {list(UP_AXES)}, got {up!r}")
+
+
 def load_mesh(path, height_mm: float | None = None, scale: float | None = None, up: str = "y") -> TexturedMesh:
     """Load an OBJ (+MTL +texture), glTF/GLB or PLY file; see ``mesh_from_trimesh`` for the arguments."""
     import trimesh
@@ -135,10 +151,7 @@ def mesh_from_trimesh(tm, height_mm: float | None = None, scale: float | None = 
         tm = tm.to_geometry() if hasattr(tm, "to_geometry") else tm.dump(concatenate=True)
     if not isinstance(tm, trimesh.Trimesh):
         raise ValueError(f"{source}: holds no triangle mesh (got {type(tm).__name__})")
-    if (height_mm is None) == (scale is None):
-        raise ValueError("give exactly one of height_mm and scale")
-    if up not in ("y", "z"):
-        raise ValueError(f"up must be 'y' or 'z', got {up!r}")
+    check_placement(height_mm, scale, up)
     verts = np.array(tm.vertices, np.float64).reshape(-1, 3)
     faces = np.array(tm.faces, np.int64).reshape(-1, 3)
     if len(faces) == 0:
@@ -149,14 +162,10 @@ def mesh_from_trimesh(tm, height_mm: float | None = None, scale: float | None = 
         verts = np.stack([verts[:, 0], -verts[:, 2], verts[:, 1]], axis=1)
     lo, hi = verts[faces].reshape(-1, 3).min(0), verts[faces].reshape(-1, 3).max(0)
     if height_mm is not None:
-        if not (np.isfinite(height_mm) and height_mm > 0):
-            raise ValueError(f"height_mm must be positive, got {height_mm}")
         if hi[2] - lo[2] <= 0:
             raise ValueError(f"{source}: the mesh has zero height along its up axis ({up})")
         s = float(height_mm) / (hi[2] - lo[2])
     else:
-        if not (np.isfinite(scale) and scale > 0):
-            raise ValueError(f"scale must be positive (mm per model unit), got {scale}")
         s = float(scale)
     verts = (verts - [(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2]]) * s
 

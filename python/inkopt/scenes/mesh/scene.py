@@ -123,20 +123,22 @@ class MeshScene:
         return paths
 
 
+def check_mesh_inputs(shell_mm: float | None, inks: InkTable | None = None) -> None:
+    """One-line ValueErrors for a shell that is not a positive thickness and (with ``inks``) an ink set without
+    white for the core, before the slow part."""
+    if inks is not None and "white" not in inks.names:
+        white_fixed_shares(np.ones((1, 1, 1), bool), inks)  # its one-line error
+    if shell_mm is not None and not (np.isfinite(shell_mm) and shell_mm > 0):
+        raise ValueError(f"--shell-mm must be a positive thickness in mm, got {shell_mm}")
+
+
 def build_mesh_scene(mesh_path, inks: InkTable, height_mm: float | None = None, scale: float | None = None,
                      shell_mm: float | None = None, dpi: float = OPT_DPI, up: str = "y", translucency=None,
                      translucency_depth_mm: float | None = None) -> MeshScene:
     """Load and voxelize ``mesh_path``; exactly one of ``height_mm`` and ``scale`` (mm per model unit).
     ``translucency``: None, "alpha" (the texture's alpha channel) or a mask (file or (H, W) array) in texture
     space; ``translucency_depth_mm``: its depth below the surface (None: the whole object)."""
-    if (height_mm is None) == (scale is None):
-        raise ValueError("give exactly one of --height-mm and --scale")
-    if not (np.isfinite(dpi) and dpi > 0):
-        raise ValueError(f"--dpi must be positive, got {dpi}")
-    if "white" not in inks.names:
-        white_fixed_shares(np.ones((1, 1, 1), bool), inks)  # raises the one-line error before the slow part
-    if shell_mm is not None and not (np.isfinite(shell_mm) and shell_mm > 0):
-        raise ValueError(f"--shell-mm must be a positive thickness in mm, got {shell_mm}")
+    check_mesh_inputs(shell_mm, inks)
     mask = None
     if translucency is not None:
         transparent_ink(inks)

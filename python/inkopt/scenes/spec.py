@@ -1,0 +1,165 @@
+"""Scene specs: every user input of a scene in one frozen, picklable value, checked in one place and built into a
+``Scene`` for any ink set.
+
+A spec holds paths and numbers only (no arrays), so it travels in a few hundred bytes to a worker process or a Ray
+task, which calls ``spec.build(inks)`` there; the command line (``slab``, ``optimize``, ``select-inks``, ``demo``),
+the run driver and the ink-set search build their scenes through it alike.
+
+- ``SlabSpec``: pictures on a slab (``scenes.slab``): the top picture, an optional bottom one, the size (W, H, D) mm.
+- ``MeshSpec``: a textured mesh (``scenes.mesh``) scaled to ``height_mm`` or by ``scale`` mm per model unit,
+  optimised within ``shell_mm`` of its surface (None: everywhere inside).
+
+Both take a translucency constraint (``scenes.translucency``): ``translucency`` a mask file (meshes also "alpha",
+the texture's alpha channel) and ``translucency_depth_mm`` (None: through the whole object).
+
+``to_json()`` is the spec as a JSON object (the target of a selection's state file); ``spec_from_json`` reads it
+back. Slabs are written with kind "image" and the inputs a spec leaves at None are left out, so the targets of
+selections made before translucency could be given read and compare the same.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import ClassVar
+
+import numpy as np
+
+from ..model import InkTable, transparent_ink
+from ..units import OPT_DPI, voxel_mm
+from .translucency import ALPHA, check_depth
+
+def _check_file(path, what: str) -> None:
+    if not Path(path).is_file():
+        raise ValueError(f"{what} {path} does not exist")
+
+
+@dataclass(frozen=True)
+class SlabSpec:
+    """Pictures on a slab: ``top`` (and ``bottom``) picture files (sRGB), ``size_mm`` (W, H, D) mm, the grid at
+    ``dpi``; ``translucency``: a grey mask file of the top picture's size, down to ``translucency_depth_mm``."""
+
+    top: str
+    size_mm: tuple[float, float, float]
+    bottom: str | None = None
+    dpi: float = OPT_DPI
+    translucency: str | None = None
+    translucency_depth_mm: float | None = None
+    kind: ClassVar[str] = "slab"
+
+    def __post_init__(self):
+        object.__setattr__(self, "top", str(self.top))
+        object.__setattr__(self, "bottom", None if self.bottom is None else str(self.bottom))
+        object.__setattr__(self, "size_mm", tuple(float(v) for v in self.size_mm))
+        object.__setattr__(self, "dpi", float(self.dpi))
+        if self.translucency is not None:
+            object.__setattr__(self, "translucency", str(self.translucency))
+
+    def validate(self, inks: InkTable | None = None) -> None:
+        """One-line ValueErrors for inputs that are wrong before any file is read (sizes, dpi, depth, missing
+        files); with ``inks``, also an ink set that cannot honour the constraints."""
+        if len(self.size_mm) != 3 or not all(np.isfinite(v) and v > 0 for v in self.size_mm):
+            raise ValueError(f"--size-mm sizes must be three positive numbers W x H x D, got {self.size_mm}")
+        voxel_mm(self.dpi)  # its one-line error for a dpi that is not positive
+        _check_translucency(self.translucency, self.translucency_depth_mm, inks, mesh=False)
+        _check_file(self.top, "picture")
+        if self.bottom is not None:
+            _check_file(self.bottom, "picture")
+
+    def build(self, inks: InkTable):
+        """The ``scenes.slab.SlabScene`` of these inputs for ink set ``inks``."""
+        from .slab import load_slab
+
+        self.validate(inks)
+        return load_slab(self.top, self.bottom, self.size_mm, inks, self.dpi, self.translucency,
+                         self.translucency_depth_mm)
+
+    def to_json(self) -> dict:
+        d = {"kind": "image", "top": self.top, "bottom": self.bottom, "size_mm": list(self.size_mm), "dpi": self.dpi}
+        return _with_translucency(d, self)
+
+
+@dataclass(frozen=True)
+class MeshSpec:
+    """A textured mesh file ``path`` (OBJ, glTF/GLB, PLY) scaled to ``height_mm`` or by ``scale`` mm per model
+    unit (exactly one), ``up`` its up axis ("y" or "z"), optimised within ``shell_mm`` of the surface (None:
+    every inside voxel) on a grid at ``dpi``; ``translucency``: "alpha" or a grey mask file in texture space,
+    down to ``translucency_depth_mm`` below the surface."""
+
+    path: str
+    height_mm: float | None = None
+    scale: float | None = None
+    shell_mm: float | None = None
+    dpi: float = OPT_DPI
+    up: str = "y"
+    translucency: str | None = None
+    translucency_depth_mm: float | None = None
+    kind: ClassVar[str] = "mesh"
+
+    def __post_init__(self):
+        object.__setattr__(self, "path", str(self.path))
+        object.__setattr__(self, "dpi", float(self.dpi))
+        for name in ("height_mm", "scale", "shell_mm"):
+            if getattr(self, name) is not None:
+                object.__setattr__(self, name, float(getattr(self, name)))
+        if self.translucency is not None:
+            object.__setattr__(self, "translucency", str(self.translucency))
+
+    def validate(self, inks: InkTable | None = None) -> None:
+        """One-line ValueErrors for inputs that are wrong before the mesh is read; with ``inks``, also an ink set
+        that cannot honour the constraints (the white core, translucency)."""
+        from .mesh import check_mesh_inputs, check_placement  # the mesh modules only when a mesh is given
+
+        check_placement(self.height_mm, self.scale, self.up)
+        check_mesh_inputs(self.shell_mm, inks)
+        voxel_mm(self.dpi)  # its one-line error for a dpi that is not positive
+        _check_translucency(self.translucency, self.translucency_depth_mm, inks, mesh=True)
+        _check_file(self.path, "mesh file")
+
+    def build(self, inks: InkTable):
+        """The ``scenes.mesh.MeshScene`` of these inputs for ink set ``inks`` (loads and voxelizes the mesh)."""
+        from .mesh import build_mesh_scene
+
+        self.validate(inks)
+        return build_mesh_scene(self.path, inks, self.height_mm, self.scale, self.shell_mm, self.dpi, self.up,
+                                self.translucency, self.translucency_depth_mm)
+
+    def to_json(self) -> dict:
+        d = {"kind": "mesh", "path": self.path, "height_mm": self.height_mm, "shell_mm": self.shell_mm,
+             "dpi": self.dpi, "up": self.up}
+        if self.scale is not None:
+            d["scale"] = self.scale
+        return _with_translucency(d, self)
+
+
+SceneSpec = SlabSpec | MeshSpec
+
+
+def _check_translucency(translucency, depth_mm, inks, mesh: bool) -> None:
+    if translucency is None:
+        if depth_mm is not None:
+            raise ValueError("--translucency-depth-mm needs --translucency")
+        return
+    check_depth(depth_mm)
+    if inks is not None:
+        transparent_ink(inks)
+    if not (mesh and translucency == ALPHA):
+        _check_file(translucency, "translucency mask")
+
+
+def _with_translucency(d: dict, spec) -> dict:
+    if spec.translucency is not None:
+        d["translucency"] = spec.translucency
+        d["translucency_depth_mm"] = spec.translucency_depth_mm
+    return d
+
+
+def spec_from_json(d: dict) -> SceneSpec:
+    """The spec of a ``to_json()`` object (kind "image" or "slab": a ``SlabSpec``; "mesh": a ``MeshSpec``)."""
+    kind = d.get("kind")
+    tr = {"translucency": d.get("translucency"), "translucency_depth_mm": d.get("translucency_depth_mm")}
+    if kind in ("image", "slab"):
+        return SlabSpec(d["top"], tuple(d["size_mm"]), d.get("bottom"), d.get("dpi", OPT_DPI), **tr)
+    if kind == "mesh":
+        return MeshSpec(d["path"], d.get("height_mm"), d.get("scale"), d.get("shell_mm"), d.get("dpi", OPT_DPI),
+                        d.get("up", "y"), **tr)
+    raise ValueError(f"unknown scene kind {kind!r}; expected 'image' (a slab) or 'mesh'")

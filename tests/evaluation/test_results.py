@@ -1,0 +1,63 @@
+"""The typed results files (inkopt.evaluation.results): a fresh report.json has exactly the keys scripts read
+plus ``format_version``, reads back into the same ``Report``, and files without a version (0) or of a newer one
+load or fail as ``io.upgrade_format`` says."""
+import json
+
+import pytest
+
+from inkopt import charts
+from inkopt.cli import main
+from inkopt.evaluation.results import Evaluation, Report
+from inkopt.io import FormatError
+
+pytest.importorskip("inkopt._core")
+
+# report.json of a slab run as bench/ and the tests read it (the metrics, the run, the scene's and the lighting's
+# entries, the settings)
+SLAB_REPORT_KEYS = {
+    "adjoint_ema", "decay", "delta_e2000_mean", "delta_e76_max", "delta_e76_mean", "delta_e76_mean_corrected",
+    "delta_e76_noise", "delta_e76_noise_contribution", "delta_e76_p95", "delta_e76_rms", "delta_e76_rms_denoised",
+    "e1", "e2", "e3", "eval_spp", "eval_spp_passes", "flat_texels", "gamma", "gradient", "init",
+    "initial_delta_e76_mean", "initial_delta_e76_mean_corrected", "initial_eval_spp", "initial_ssim", "inks",
+    "iterations", "lighting", "lighting_rotate_deg", "loss", "lr", "mottle_l2", "mottle_l2_target", "optimizer",
+    "param", "peak_rss_gb", "seconds", "seconds_iterations", "seconds_per_iteration", "seed", "size_mm", "smooth",
+    "spp", "spp_adaptive", "ssim", "texels", "threads", "time_split", "voxels"}
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    d = tmp_path_factory.mktemp("run")
+    chart = charts.save(charts.colour_chart(24, 16), d / "chart.png")
+    assert main(["slab", str(chart), "--size-mm", "2x1.333x0.5", "--out", str(d / "r"), "--iterations", "2",
+                 "--spp", "1", "--forward-spp", "2", "--eval-spp", "4", "--threads", "2"]) == 0
+    return d / "r"
+
+
+def test_report_keys_and_round_trip(run):
+    data = json.loads((run / "report.json").read_text())
+    assert set(data) == SLAB_REPORT_KEYS | {"format_version"} and data["format_version"] == 1
+    rep = Report.read(run / "report.json")
+    assert rep.to_json() == data and list(rep.to_json()) == list(data)  # the same keys in the same order
+    assert rep.scene == {"voxels": 24 * 16 * 6, "texels": 24 * 16, "size_mm": [2.0, 1.333, 0.5]}
+    assert rep.lighting == {"lighting": "uniform", "lighting_rotate_deg": 0.0}
+    assert rep.metrics.delta_e76_mean == data["delta_e76_mean"]
+    old = {k: v for k, v in data.items() if k != "format_version"}  # as written before files carried a version
+    assert Report.from_json(old) == rep
+
+
+def test_newer_format_is_a_one_line_error(run, tmp_path):
+    data = json.loads((run / "report.json").read_text())
+    (tmp_path / "report.json").write_text(json.dumps({**data, "format_version": 2}))
+    with pytest.raises(FormatError, match="format version 2") as err:
+        Report.read(tmp_path / "report.json")
+    assert "\n" not in str(err.value)
+
+
+def test_evaluation_json_round_trip(run, capsys):
+    assert main(["evaluate", str(run), "--spp", "2", "--no-baselines", "--threads", "2", "--json"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    ev = Evaluation.read(run / "evaluation.json")
+    assert ev.to_json() == printed and printed["format_version"] == 1
+    assert ev.baselines is None and ev.quantized.spp_printer > 0 and ev.continuous.spp_printer is None
+    with pytest.raises(FormatError, match="evaluation of format version 7"):
+        Evaluation.from_json({**printed, "format_version": 7}, where="x.json")

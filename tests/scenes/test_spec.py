@@ -1,0 +1,80 @@
+"""Scene specs (inkopt.scenes.spec): frozen and picklable, one-line errors for bad inputs before any file is read,
+the JSON form round trip, and ``build`` giving the scene the scene modules build from the same inputs."""
+import pickle
+from dataclasses import FrozenInstanceError
+
+import numpy as np
+import pytest
+import trimesh
+
+from inkopt import charts
+from inkopt.model import InkTable
+from inkopt.scenes.mesh import build_mesh_scene
+from inkopt.scenes.slab import load_slab
+from inkopt.scenes.spec import MeshSpec, SlabSpec, spec_from_json
+
+INKS = InkTable.parse("vero-cmykw")
+
+
+@pytest.fixture(scope="module")
+def chart(tmp_path_factory):
+    return charts.save(charts.colour_chart(24, 16), tmp_path_factory.mktemp("chart") / "chart.png")
+
+
+@pytest.fixture(scope="module")
+def ball(tmp_path_factory):
+    sph = trimesh.creation.icosphere(subdivisions=3, radius=0.5)
+    col = np.where(sph.vertices[:, 2:3] > 0, [[0, 200, 230, 255]], [[230, 0, 160, 255]]).astype(np.uint8)
+    path = tmp_path_factory.mktemp("ball") / "ball.ply"
+    trimesh.Trimesh(sph.vertices, sph.faces, vertex_colors=col, process=False).export(path)
+    return path
+
+
+def test_frozen_picklable_and_json_round_trip(chart, ball):
+    specs = [SlabSpec(chart, (2, 4 / 3, 0.5)), SlabSpec(chart, (2, 4 / 3, 0.5), chart, 150, chart, 0.2),
+             MeshSpec(ball, height_mm=1, up="z"), MeshSpec(ball, scale=2, shell_mm=0.3, translucency="alpha")]
+    for spec in specs:
+        assert pickle.loads(pickle.dumps(spec)) == spec
+        assert spec_from_json(spec.to_json()) == spec
+        with pytest.raises(FrozenInstanceError):
+            spec.dpi = 1.0
+    assert specs[0].to_json()["kind"] == "image" and "translucency" not in specs[0].to_json()
+    assert "scale" not in specs[2].to_json() and specs[3].to_json()["scale"] == 2.0
+
+
+@pytest.mark.parametrize("spec, message", [
+    (lambda c, b: MeshSpec(b), "exactly one of --height-mm H"),
+    (lambda c, b: MeshSpec(b, height_mm=1, scale=1), "exactly one of --height-mm H"),
+    (lambda c, b: MeshSpec(b, height_mm=-1), "--height-mm must be positive"),
+    (lambda c, b: MeshSpec(b, height_mm=1, shell_mm=0), "--shell-mm must be a positive thickness"),
+    (lambda c, b: MeshSpec(b, height_mm=1, up="x"), "--up must be one of"),
+    (lambda c, b: MeshSpec(b, height_mm=1, dpi=0), "--dpi must be positive"),
+    (lambda c, b: MeshSpec(str(b) + ".missing", height_mm=1), "does not exist"),
+    (lambda c, b: SlabSpec(c, (2, 1, -1)), "--size-mm sizes must be three positive numbers"),
+    (lambda c, b: SlabSpec(str(c) + ".missing", (2, 1, 1)), "picture"),
+    (lambda c, b: SlabSpec(c, (2, 1, 1), translucency_depth_mm=0.2), "needs --translucency"),
+    (lambda c, b: SlabSpec(c, (2, 1, 1), translucency=c, translucency_depth_mm=-1), "positive depth"),
+    (lambda c, b: SlabSpec(c, (2, 1, 1), translucency="alpha"), "translucency mask alpha does not exist"),
+])
+def test_one_line_errors(chart, ball, spec, message):
+    with pytest.raises(ValueError, match=message) as err:
+        spec(chart, ball).validate()
+    assert "\n" not in str(err.value)
+
+
+def test_ink_set_checks(chart, ball):
+    with pytest.raises(ValueError, match="transparent ink"):
+        SlabSpec(chart, (2, 4 / 3, 0.5), translucency=chart).validate(INKS)
+    with pytest.raises(ValueError, match="white"):
+        MeshSpec(ball, height_mm=1).validate(InkTable.parse("cyan,magenta,yellow,black"))
+
+
+def test_build_equals_the_scene_modules(chart, ball):
+    a = SlabSpec(chart, (2, 4 / 3, 0.5), chart).build(INKS)
+    b = load_slab(chart, chart, (2, 4 / 3, 0.5), INKS)
+    np.testing.assert_array_equal(a.target_rgb, b.target_rgb)
+    assert a.volume.shape == b.volume.shape and a.faces == b.faces
+    m = MeshSpec(ball, height_mm=1, up="z", shell_mm=0.2).build(INKS)
+    n = build_mesh_scene(ball, INKS, 1.0, None, 0.2, up="z")
+    np.testing.assert_array_equal(m.target_rgb, n.target_rgb)
+    np.testing.assert_array_equal(m.free, n.free)
