@@ -533,8 +533,8 @@ fn diffuse_layer(
     let o = out.as_slice_mut().map_err(|_| err("out must be C-contiguous"))?;
     let (e0, e1) = e.split_at_mut(n * ny * nx);
     let (cur, next) = if z.is_multiple_of(2) { (e0, e1) } else { (e1, e0) };
-    let shape = inkopt_core::diffuse::LayerShape { n, ny, nx };
-    py.detach(|| inkopt_core::diffuse::diffuse_layer(shape, z, m, i, i_next, cur, next, o)).map_err(err)
+    let shape = inkopt_core::kernels::diffuse::LayerShape { n, ny, nx };
+    py.detach(|| inkopt_core::kernels::diffuse::diffuse_layer(shape, z, m, i, i_next, cur, next, o)).map_err(err)
 }
 
 /// smooth_rows(shape (Z, Y, X), index (F,) i64, values (F, C) f32, steps, alpha, guide (F, D) f32 or None, tau,
@@ -561,10 +561,10 @@ fn smooth_rows<'py>(
     let idx = c_slice(&index, "index")?;
     let mut v = c_slice(&values, "values")?.to_vec();
     let g = match &guide {
-        Some(a) => Some(inkopt_core::smooth::Guide { values: c_slice(a, "guide")?, dims: a.shape()[1], tau }),
+        Some(a) => Some(inkopt_core::kernels::smooth::Guide { values: c_slice(a, "guide")?, dims: a.shape()[1], tau }),
         None => None,
     };
-    py.detach(|| run_on(threads, || inkopt_core::smooth::diffuse_rows(n, idx, &mut v, ch, steps, alpha, g)))?
+    py.detach(|| run_on(threads, || inkopt_core::kernels::smooth::diffuse_rows(n, idx, &mut v, ch, steps, alpha, g)))?
         .map_err(err)?;
     Ok(Array2::from_shape_vec((rows, ch), v).map_err(|e| err(e.to_string()))?.into_pyarray(py))
 }
@@ -578,7 +578,7 @@ fn softmax_rows<'py>(py: Python<'py>, x: PyReadonlyArray2<f32>, threads: Option<
     let (rows, n) = (x.shape()[0], x.shape()[1]);
     let xs = c_slice(&x, "x")?;
     let mut p = vec![0.0f32; rows * n];
-    py.detach(|| run_on(threads, || inkopt_core::simplex::softmax_rows(xs, n, &mut p)))?.map_err(err)?;
+    py.detach(|| run_on(threads, || inkopt_core::kernels::simplex::softmax_rows(xs, n, &mut p)))?.map_err(err)?;
     Ok(Array2::from_shape_vec((rows, n), p).map_err(|e| err(e.to_string()))?.into_pyarray(py))
 }
 
@@ -594,7 +594,7 @@ fn softmax_backward<'py>(py: Python<'py>, x: PyReadonlyArray2<f32>, g: PyReadonl
     check_shape(g.shape(), &[rows, n], "g")?;
     let (xs, gs, ss) = (c_slice(&x, "x")?, c_slice(&g, "g")?, c_slice(&scale, "scale")?);
     let mut out = vec![0.0f32; rows * n];
-    py.detach(|| run_on(threads, || inkopt_core::simplex::softmax_backward(xs, gs, ss, n, natural, &mut out)))?
+    py.detach(|| run_on(threads, || inkopt_core::kernels::simplex::softmax_backward(xs, gs, ss, n, natural, &mut out)))?
         .map_err(err)?;
     Ok(Array2::from_shape_vec((rows, n), out).map_err(|e| err(e.to_string()))?.into_pyarray(py))
 }

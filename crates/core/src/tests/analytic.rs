@@ -57,7 +57,7 @@ fn absorbing_slab_matches_fresnel_series() {
 
 struct PathLength(f64);
 
-impl crate::trace::Tally for PathLength {
+impl crate::transport::path::Tally for PathLength {
     fn segment(&mut self, _: usize, len: f32) {
         self.0 += len as f64;
     }
@@ -83,9 +83,9 @@ fn free_flight_histogram_matches_piecewise_exponential() {
     let nb = nz * bins_per_layer;
     let mut hist = vec![0usize; nb + 1];
     for i in 0..n {
-        let mut rng = crate::rng::PathRng::new(9, i as u64, 0, 0);
+        let mut rng = crate::transport::rng::PathRng::new(9, i as u64, 0, 0);
         let mut t = PathLength(0.0);
-        let r = crate::trace::trace(&geo, &med, &tex, 0, &mut rng, false, &mut t);
+        let r = crate::transport::trace::trace(&geo, &med, &tex, 0, &mut rng, false, &mut t);
         let b = if r.events == 0 { nb } else { ((t.0 / (h as f64 / bins_per_layer as f64)) as usize).min(nb - 1) };
         hist[b] += 1;
     }

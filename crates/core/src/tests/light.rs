@@ -2,7 +2,7 @@
 //! as the uniform light; the packets and the scalar tracer agree under a directional map.
 
 use super::*;
-use crate::sampling::V3;
+use crate::transport::sampling::V3;
 use std::f32::consts::PI;
 
 /// A map of h x 2h pixels whose channel c at (row i, column j) is f(i, j, c).

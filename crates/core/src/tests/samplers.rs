@@ -4,15 +4,15 @@
 use wide::f32x8;
 
 use super::*;
-use crate::packet::step::hg8;
+use crate::transport::packet::step::hg8;
 
 /// Mean, variance of the mean and collisions of `spp` scalar-traced paths of texel i (`trace::trace`).
 pub(super) fn scalar_estimate<M: Medium>(geo: &Geometry, med: &M, tex: &Texel, i: u64, c: usize, spp: u32, seed: u64,
                               include_specular: bool) -> (f64, f64, u64) {
     let (mut sum, mut sq, mut events) = (0.0f64, 0.0f64, 0u64);
     for k in 0..spp {
-        let mut rng = crate::rng::PathRng::new(seed, i, k, c as u32);
-        let r = crate::trace::trace(geo, med, tex, c, &mut rng, include_specular, &mut crate::trace::NoTally);
+        let mut rng = crate::transport::rng::PathRng::new(seed, i, k, c as u32);
+        let r = crate::transport::trace::trace(geo, med, tex, c, &mut rng, include_specular, &mut crate::transport::path::NoTally);
         sum += r.value as f64;
         sq += (r.value as f64).powi(2);
         events += r.events as u64;
@@ -111,13 +111,13 @@ fn packet_renderer_matches_scalar_trace() {
 
 #[test]
 fn hg8_matches_the_scalar_sampler() {
-    let d = crate::sampling::normalize([0.3, -0.5, 0.81]);
+    let d = crate::transport::sampling::normalize([0.3, -0.5, 0.81]);
     let u1 = f32x8::from([0.01, 0.2, 0.35, 0.5, 0.61, 0.77, 0.9, 0.999]);
     let u2 = f32x8::from([0.9, 0.1, 0.33, 0.5, 0.7, 0.25, 0.05, 0.6]);
     let w = hg8(d.map(f32x8::splat), 0.4, u1, u2);
     let (a, b) = (u1.to_array(), u2.to_array());
     for l in 0..8 {
-        let s = crate::sampling::hg_sample(d, 0.4, a[l], b[l]);
+        let s = crate::transport::sampling::hg_sample(d, 0.4, a[l], b[l]);
         for k in 0..3 {
             assert!((w[k].to_array()[l] - s[k]).abs() < 2e-5, "lane {l}: {:?} vs {s:?}", w.map(|x| x.to_array()[l]));
         }
@@ -171,13 +171,13 @@ fn jumps_across_empty_space_leave_renders_unchanged() {
     // random numbers) until it scatters deep in a plate or ends: the same outcome and voxel either way, and
     // fewer steps with the jumps whenever it scatters in the upper plate.
     let walk = |geo: &Geometry, key: u64| {
-        let mut w = crate::trace::Walk { p: [1.0, 0.9, 0.2], d: [0.0, 0.0, 1.0], v: [20, 18, 4], weight: 1.0,
+        let mut w = crate::transport::path::Walk { p: [1.0, 0.9, 0.2], d: [0.0, 0.0, 1.0], v: [20, 18, 4], weight: 1.0,
                                          in_medium: false, events: 0, steps: 0 };
-        let mut rng = crate::rng::PathRng::new(1, key, 3, 0);
-        let mut tracker = crate::flight::Regular::new();
-        match crate::trace::walk(geo, &med_both, 0, &mut w, &mut tracker, &mut rng, &mut crate::trace::NoTally, true) {
-            crate::trace::WalkEnd::Deep => Some((w.steps, w.v)),
-            crate::trace::WalkEnd::Done(_) => None,
+        let mut rng = crate::transport::rng::PathRng::new(1, key, 3, 0);
+        let mut tracker = crate::transport::flight::Regular::new();
+        match crate::transport::trace::walk(geo, &med_both, 0, &mut w, &mut tracker, &mut rng, &mut crate::transport::path::NoTally, true) {
+            crate::transport::trace::WalkEnd::Deep => Some((w.steps, w.v)),
+            crate::transport::trace::WalkEnd::Done(_) => None,
         }
     };
     let mut upper = 0;

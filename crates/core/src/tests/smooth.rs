@@ -2,8 +2,8 @@
 //! a map over the grid; and the same in f32 in the core's order of operations, bit for bit), its conservation,
 //! thread-count independence and its refusal of bad sets. The set has more than two parallel blocks of rows.
 
-use crate::rng::uniform;
-use crate::smooth::{diffuse_rows, Guide};
+use crate::transport::rng::uniform;
+use crate::kernels::smooth::{diffuse_rows, Guide};
 
 /// An irregular set (about 60 % of a 26 x 24 x 22 grid: ~8 200 rows, more than two of the core's parallel blocks
 /// of 4 096) as its increasing linear indices, and random values.

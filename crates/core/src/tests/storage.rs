@@ -3,7 +3,7 @@
 //! sparse shading normals against the dense formula; the sparse medium against the dense one.
 
 use super::*;
-use crate::sampling::V3;
+use crate::transport::sampling::V3;
 
 /// Every voxel's (sigma_t, albedo) of every channel, as bits, and the majorants.
 fn medium_bits(m: &DenseMedium) -> (Vec<(u32, u32)>, [f32; 3]) {
@@ -119,7 +119,7 @@ fn sparse_normals_match_the_dense_formula() {
     // vectors; rows with none and a row with all) gets exactly the shading normal of the former dense lookup.
     let n = [9usize, 5, 4];
     let nv = 180;
-    let mut rng = crate::rng::PathRng::new(7, 0, 0, 0);
+    let mut rng = crate::transport::rng::PathRng::new(7, 0, 0, 0);
     let mut dense = vec![0.0f32; 3 * nv];
     for j in 0..nv {
         let mut v = [(); 3].map(|_| 2.0 * rng.next_f32() - 1.0);
@@ -145,7 +145,7 @@ fn sparse_normals_match_the_dense_formula() {
         let i = 3 * j;
         let n = [dense[i], dense[i + 1], dense[i + 2]];
         let l2 = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
-        if l2 > 0.5 { Some(crate::sampling::scale(n, 1.0 / l2.sqrt())) } else { None }
+        if l2 > 0.5 { Some(crate::transport::sampling::scale(n, 1.0 / l2.sqrt())) } else { None }
     };
     let geo = Geometry::new(n, [0.1; 3], Boundary::Box, 1.5, 0.4).unwrap().with_normals(&dense).unwrap();
     let bits = |v: Option<V3>| v.map(|v| v.map(f32::to_bits));

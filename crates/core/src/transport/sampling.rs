@@ -122,7 +122,7 @@ pub fn refract(d: V3, n: V3, eta: f32) -> Option<V3> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rng::PathRng;
+    use crate::transport::rng::PathRng;
 
     /// Histogram of sampled HG cosines against the integral of the pdf over each bin.
     /// Bins of 50k expected counts have a relative standard error of 0.45 %; we test each at 5 sigma.

@@ -6,12 +6,14 @@ use std::sync::atomic::{AtomicI64, Ordering::Relaxed};
 
 use rayon::prelude::*;
 
-use crate::packet::{self, trace_paths, NoPathTally, PathTally};
-use crate::render::{estimates, Moments, RenderOptions, Stats, TexelEstimate, PACKET_CHUNK};
-use crate::rng::PathRng;
-use crate::scene::{Geometry, Medium, Texel};
+use crate::transport::packet::{self, trace_paths, NoPathTally, PathTally};
+use crate::transport::estimate::{estimates, Moments, RenderOptions, Stats, TexelEstimate};
+use crate::transport::path::{NoTally, Tally};
+use crate::transport::render::PACKET_CHUNK;
+use crate::transport::rng::PathRng;
+use crate::transport::scene::{Geometry, Medium, Texel};
 use crate::spans::RowSpans;
-use crate::trace::{trace, NoTally, Tally};
+use crate::transport::trace::trace;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum GradMethod {

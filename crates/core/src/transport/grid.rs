@@ -12,9 +12,9 @@ use std::ops::Range;
 use bytemuck::cast;
 use wide::{f32x8, i32x8, CmpEq, CmpGe, CmpGt, CmpLt};
 
-use crate::sampling::{add, scale, V3};
-use crate::scene::{Boundary, Geometry, BRICK};
-use crate::trace::Tally;
+use crate::transport::sampling::{add, scale, V3};
+use crate::transport::scene::{Boundary, Geometry, BRICK};
+use crate::transport::path::Tally;
 
 /// The grid's extent along axis a (n * size): its period on a periodic axis.
 #[inline(always)]

@@ -4,7 +4,7 @@
 //! it leaves in; a new kind of light (e.g. a finite-size area light) is one more type implementing the trait,
 //! given to `Geometry::with_light`, and the tracers need no change.
 
-use crate::sampling::V3;
+use crate::transport::sampling::V3;
 use std::f32::consts::{PI, TAU};
 
 /// The light outside the object. Every path that leaves the grid calls `radiance` once with the direction it

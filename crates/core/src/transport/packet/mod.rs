@@ -19,14 +19,15 @@
 
 pub(crate) mod step;
 
-use crate::flight::Regular;
-use crate::grid::{component, facing_normal, grid_exit8, grid_face_point, locate_box, safe_radius8, span, tally_segments,
+use crate::transport::flight::Regular;
+use crate::transport::grid::{component, facing_normal, grid_exit8, grid_face_point, locate_box, safe_radius8, span, tally_segments,
                   wrap_coord};
-use crate::render::RenderOptions;
-use crate::rng::{path_key, LaneRng, PathRng};
-use crate::sampling::{add, scale, V3};
-use crate::scene::{Boundary, Geometry, Medium, Texel};
-use crate::trace::{camera_ray, interface, trace, walk, PathValue, Start, Tally, Walk, WalkEnd};
+use crate::transport::estimate::RenderOptions;
+use crate::transport::rng::{path_key, LaneRng, PathRng};
+use crate::transport::sampling::{add, scale, V3};
+use crate::transport::scene::{Boundary, Geometry, Medium, Texel};
+use crate::transport::path::{PathValue, Tally, Walk};
+use crate::transport::trace::{camera_ray, interface, trace, walk, Start, WalkEnd};
 use bytemuck::cast;
 use wide::{f32x8, i32x8};
 
@@ -37,7 +38,7 @@ const CAMERA_DRAWS: u32 = 3;
 const STEP_DRAWS: u32 = 5;
 
 /// Gradient tallies of the paths `trace_paths` traces, per path (`job`) and channel `c`: the segments (voxel,
-/// length) of every flight and the voxel of every scattering, as `trace::Tally` for one path.
+/// length) of every flight and the voxel of every scattering, as `path::Tally` for one path.
 pub(crate) trait PathTally {
     const ACTIVE: bool;
     /// Whether to trace path `job` at all (a replay skips the paths that carry no gradient).

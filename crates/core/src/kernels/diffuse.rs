@@ -34,7 +34,7 @@
 //! is conserved up to the object's boundary. Memory: the caller keeps two (ny, nx, n) f32 error planes (this
 //! layer's and the next one's); the mixture of one layer at a time. Sequential and deterministic.
 
-use crate::scene::EMPTY;
+use crate::transport::medium::EMPTY;
 
 /// (dx in sweep direction, dy, weight in 128ths) within the layer; Floyd–Steinberg.
 const IN_LAYER: [(i64, i64, f32); 4] = [(1, 0, 49.0), (-1, 1, 21.0), (0, 1, 35.0), (1, 1, 7.0)];

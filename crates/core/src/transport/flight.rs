@@ -17,11 +17,11 @@
 //! Both samplers also report the exact per-voxel lengths of every flight and each collision's voxel to a
 //! `Tally` (see `trace` for the path-space derivatives they feed).
 
-use crate::grid::{facing_normal, grid_exit, locate, locate_box, tally_segments, wrap_step, Dda};
-use crate::rng::Uniforms;
-use crate::sampling::{add, scale, V3};
-use crate::scene::{Boundary, Geometry, Medium};
-use crate::trace::{Tally, Walk, MAX_STEPS, RR_THRESHOLD};
+use crate::transport::grid::{facing_normal, grid_exit, grid_face_point, locate, locate_box, tally_segments, wrap_step, Dda};
+use crate::transport::rng::Uniforms;
+use crate::transport::sampling::{add, scale, V3};
+use crate::transport::scene::{Boundary, Geometry, Medium};
+use crate::transport::path::{Tally, Walk, MAX_STEPS, RR_THRESHOLD};
 
 /// An exponential sample with mean 1 (an optical depth) from uniform u in [0, 1).
 #[inline(always)]
@@ -185,7 +185,7 @@ impl Tracker for Delta {
                 if T::ACTIVE {
                     tally_segments(geo, p_start, d, v_start, t_exit, tally);
                 }
-                w.p = crate::grid::grid_face_point(geo, p_start, d, t_exit, axis);
+                w.p = grid_face_point(geo, p_start, d, t_exit, axis);
                 w.v = locate(geo, &mut w.p);
                 w.v[axis] = if step > 0 { geo.n[axis] - 1 } else { 0 };
                 let mut nb = w.v;
