@@ -51,14 +51,27 @@ fn main() {
             events += trace(&geo, &med, tex, c, &mut r, true, &mut cnt).events as u64;
         }
     }
-    println!("segments per collision {:.2}, scatters per collision {:.2}", cnt.0 as f64 / events as f64, cnt.1 as f64 / events as f64);
-    println!("forward: {:.3} s, {:.2} M events/s, {:.2} M texel-samples/s, {:.2} events/path", dt,
-             st.events as f64 / dt / 1e6, (texels.len() as f64 * spp as f64) / dt / 1e6, st.events as f64 / st.paths as f64);
+    println!(
+        "segments per collision {:.2}, scatters per collision {:.2}",
+        cnt.0 as f64 / events as f64,
+        cnt.1 as f64 / events as f64
+    );
+    println!(
+        "forward: {:.3} s, {:.2} M events/s, {:.2} M texel-samples/s, {:.2} events/path",
+        dt,
+        st.events as f64 / dt / 1e6,
+        (texels.len() as f64 * spp as f64) / dt / 1e6,
+        st.events as f64 / st.paths as f64
+    );
 }
 
 #[allow(dead_code)]
 pub struct Count(pub u64, pub u64);
 impl Tally for Count {
-    fn segment(&mut self, _: usize, _: f32) { self.0 += 1; }
-    fn scatter(&mut self, _: usize) { self.1 += 1; }
+    fn segment(&mut self, _: usize, _: f32) {
+        self.0 += 1;
+    }
+    fn scatter(&mut self, _: usize) {
+        self.1 += 1;
+    }
 }

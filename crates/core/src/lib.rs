@@ -22,8 +22,8 @@ pub mod kernels;
 pub mod spans;
 pub mod transport;
 
-pub use transport::grad::{backward, GradBuffers, GradMethod, NO_GRADIENT};
 pub use transport::estimate::{RenderOptions, Stats, TexelEstimate};
+pub use transport::grad::{backward, GradBuffers, GradMethod, NO_GRADIENT};
 pub use transport::light::EnvMap;
 pub use transport::render::render;
 pub use transport::scene::{

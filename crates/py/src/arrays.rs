@@ -4,7 +4,9 @@
 
 use inkopt_core::{face_normal, Geometry, RenderOptions, Stats, Texel, TexelEstimate};
 use numpy::ndarray::{Array2, Dimension};
-use numpy::{Element, IntoPyArray, PyArray2, PyReadonlyArray, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use numpy::{
+    Element, IntoPyArray, PyArray2, PyReadonlyArray, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods,
+};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -34,8 +36,12 @@ pub(crate) fn check_shape(dims: &[usize], want: &[usize], name: &str) -> PyResul
 /// The texels of a render or gradient pass from the Python arrays: voxel (I, 3) int32 (z, y, x), face (I,) uint8
 /// (0..5: -x, +x, -y, +y, -z, +z), normal (I, 3) float32 (x, y, z), each normal made unit; a ValueError for a
 /// texel on a voxel outside the object or a normal that does not face out of its face.
-pub(crate) fn texels(geo: &Geometry, voxel: &PyReadonlyArray2<i32>, face: &PyReadonlyArray1<u8>,
-                     normal: &PyReadonlyArray2<f32>) -> PyResult<Vec<Texel>> {
+pub(crate) fn texels(
+    geo: &Geometry,
+    voxel: &PyReadonlyArray2<i32>,
+    face: &PyReadonlyArray1<u8>,
+    normal: &PyReadonlyArray2<f32>,
+) -> PyResult<Vec<Texel>> {
     let i = face.len();
     if voxel.shape() != [i, 3] || normal.shape() != [i, 3] {
         return Err(err("texel arrays must be voxel (I,3), face (I,), normal (I,3)"));
@@ -48,8 +54,10 @@ pub(crate) fn texels(geo: &Geometry, voxel: &PyReadonlyArray2<i32>, face: &PyRea
             return Err(err(format!("texel {k} has face id {} (must be 0..5)", f[k])));
         }
         if !geo.is_inside(vox) {
-            return Err(err(format!("texel {k} lies on voxel (z,y,x)={:?}, which is not inside the object",
-                                   [v[3 * k], v[3 * k + 1], v[3 * k + 2]])));
+            return Err(err(format!(
+                "texel {k} lies on voxel (z,y,x)={:?}, which is not inside the object",
+                [v[3 * k], v[3 * k + 1], v[3 * k + 2]]
+            )));
         }
         let nrm = [n[3 * k], n[3 * k + 1], n[3 * k + 2]];
         let len = (nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2]).sqrt();

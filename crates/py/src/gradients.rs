@@ -17,8 +17,12 @@ fn grad_index_given(g: &Option<GradBuffers>) -> bool {
 }
 
 /// `Scene.zero_grad`.
-pub(crate) fn zero_grad(scene: &mut Scene, py: Python<'_>, max_abs_adjoint: f32,
-                        grad_index: Option<Bound<'_, PyAny>>) -> PyResult<()> {
+pub(crate) fn zero_grad(
+    scene: &mut Scene,
+    py: Python<'_>,
+    max_abs_adjoint: f32,
+    grad_index: Option<Bound<'_, PyAny>>,
+) -> PyResult<()> {
     let n = scene.geo.voxel_count();
     let dense_ix: Option<PyReadonlyArray3<i32>>;
     let voxels_ix: Option<PyReadonlyArray1<i64>>;
@@ -35,30 +39,38 @@ pub(crate) fn zero_grad(scene: &mut Scene, py: Python<'_>, max_abs_adjoint: f32,
             }
         }
     }
-    let dense = match &dense_ix { Some(d) => Some(c_slice(d, "grad_index")?), None => None };
-    let voxels = match &voxels_ix { Some(v) => Some(c_slice(v, "grad_index")?), None => None };
+    let dense = match &dense_ix {
+        Some(d) => Some(c_slice(d, "grad_index")?),
+        None => None,
+    };
+    let voxels = match &voxels_ix {
+        Some(v) => Some(c_slice(v, "grad_index")?),
+        None => None,
+    };
     let slot = |k: i32| if k < 0 { NO_GRADIENT } else { k as u32 };
     let [nz, ny, nx] = scene.shape;
     let (pool, grads) = (&scene.pool, &mut scene.grads);
-    let done = py.detach(|| pool.install(|| {
-        use rayon::prelude::*;
-        let same = grads.as_ref().is_some_and(|g| match (g.map(), dense, voxels) {
-            (None, None, None) => !g.is_mapped(),
-            (Some(m), Some(ix), None) => m.len() == ix.len() && m.par_iter().zip(ix).all(|(&m, &k)| m == slot(k)),
-            (None, None, Some(v)) => g.lists(v),
-            _ => false,
-        });
-        if !same {
-            *grads = None; // free the old buffers first: two sets of them would be the peak of a big object
-            *grads = Some(match (dense, voxels) {
-                (Some(ix), _) => GradBuffers::with_map(n, Some(ix.par_iter().map(|&k| slot(k)).collect()))?,
-                (None, Some(v)) => GradBuffers::with_voxels([nx, ny, nz], v)?,
-                (None, None) => GradBuffers::with_map(n, None)?,
+    let done = py.detach(|| {
+        pool.install(|| {
+            use rayon::prelude::*;
+            let same = grads.as_ref().is_some_and(|g| match (g.map(), dense, voxels) {
+                (None, None, None) => !g.is_mapped(),
+                (Some(m), Some(ix), None) => m.len() == ix.len() && m.par_iter().zip(ix).all(|(&m, &k)| m == slot(k)),
+                (None, None, Some(v)) => g.lists(v),
+                _ => false,
             });
-        }
-        grads.as_mut().unwrap().zero(max_abs_adjoint);
-        Ok::<(), String>(())
-    }));
+            if !same {
+                *grads = None; // free the old buffers first: two sets of them would be the peak of a big object
+                *grads = Some(match (dense, voxels) {
+                    (Some(ix), _) => GradBuffers::with_map(n, Some(ix.par_iter().map(|&k| slot(k)).collect()))?,
+                    (None, Some(v)) => GradBuffers::with_voxels([nx, ny, nz], v)?,
+                    (None, None) => GradBuffers::with_map(n, None)?,
+                });
+            }
+            grads.as_mut().unwrap().zero(max_abs_adjoint);
+            Ok::<(), String>(())
+        })
+    });
     scene.sparse = grad_index_given(&scene.grads);
     done.map_err(err)
 }
@@ -97,8 +109,10 @@ pub(crate) fn backward<'py>(
     }
     let grads = scene.grads.as_ref().unwrap();
     let (est, stats) = py.detach(|| {
-        scene.pool.install(|| with_medium!(&scene.medium, m =>
-            core_backward(&scene.geo, m, &texels, first_texel, &adj, &opts, method, grads)))
+        scene.pool.install(|| {
+            with_medium!(&scene.medium, m =>
+            core_backward(&scene.geo, m, &texels, first_texel, &adj, &opts, method, grads))
+        })
     });
     pack(py, &est, &stats)
 }
@@ -115,8 +129,10 @@ pub(crate) fn take_grad<'py>(scene: &mut Scene, py: Python<'py>) -> PyResult<(Bo
 }
 
 /// `Scene.take_grad_fixed`.
-pub(crate) fn take_grad_fixed<'py>(scene: &mut Scene, py: Python<'py>)
-                                   -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>, f64)> {
+pub(crate) fn take_grad_fixed<'py>(
+    scene: &mut Scene,
+    py: Python<'py>,
+) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>, f64)> {
     let g = scene.grads.take().ok_or_else(|| err("no gradient: call zero_grad and backward first"))?;
     let n = g.slots();
     let mut gs = vec![0i64; 3 * n];

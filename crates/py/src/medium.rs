@@ -71,7 +71,9 @@ pub(crate) fn medium_from(
                 }
             }
             let l = c_slice(&l, "labels")?.to_vec();
-            Ok(MediumKind::Labels(LabelMedium::new(l, c_slice(&is, "ink_sigma_s")?, c_slice(&ia, "ink_sigma_a")?).map_err(err)?))
+            Ok(MediumKind::Labels(
+                LabelMedium::new(l, c_slice(&is, "ink_sigma_s")?, c_slice(&ia, "ink_sigma_a")?).map_err(err)?,
+            ))
         }
         _ => Err(err("give either sigma_s and sigma_a, or labels with an ink table")),
     }

@@ -72,8 +72,11 @@ pub(crate) fn smooth_rows<'py>(
 /// parallel on `threads` (default all cores), thread-count independent). The GIL is released.
 #[pyfunction]
 #[pyo3(signature = (x, threads=None))]
-pub(crate) fn softmax_rows<'py>(py: Python<'py>, x: PyReadonlyArray2<f32>, threads: Option<usize>)
-                     -> PyResult<Bound<'py, PyArray2<f32>>> {
+pub(crate) fn softmax_rows<'py>(
+    py: Python<'py>,
+    x: PyReadonlyArray2<f32>,
+    threads: Option<usize>,
+) -> PyResult<Bound<'py, PyArray2<f32>>> {
     let (rows, n) = (x.shape()[0], x.shape()[1]);
     let xs = c_slice(&x, "x")?;
     let mut p = vec![0.0f32; rows * n];
@@ -86,14 +89,21 @@ pub(crate) fn softmax_rows<'py>(py: Python<'py>, x: PyReadonlyArray2<f32>, threa
 /// g = dE/dp). x, g (rows, n) float32, scale (rows,) float32. The GIL is released.
 #[pyfunction]
 #[pyo3(signature = (x, g, scale, natural, threads=None))]
-pub(crate) fn softmax_backward<'py>(py: Python<'py>, x: PyReadonlyArray2<f32>, g: PyReadonlyArray2<f32>,
-                         scale: PyReadonlyArray1<f32>, natural: bool, threads: Option<usize>)
-                         -> PyResult<Bound<'py, PyArray2<f32>>> {
+pub(crate) fn softmax_backward<'py>(
+    py: Python<'py>,
+    x: PyReadonlyArray2<f32>,
+    g: PyReadonlyArray2<f32>,
+    scale: PyReadonlyArray1<f32>,
+    natural: bool,
+    threads: Option<usize>,
+) -> PyResult<Bound<'py, PyArray2<f32>>> {
     let (rows, n) = (x.shape()[0], x.shape()[1]);
     check_shape(g.shape(), &[rows, n], "g")?;
     let (xs, gs, ss) = (c_slice(&x, "x")?, c_slice(&g, "g")?, c_slice(&scale, "scale")?);
     let mut out = vec![0.0f32; rows * n];
-    py.detach(|| run_on(threads, || inkopt_core::kernels::simplex::softmax_backward(xs, gs, ss, n, natural, &mut out)))?
-        .map_err(err)?;
+    py.detach(|| {
+        run_on(threads, || inkopt_core::kernels::simplex::softmax_backward(xs, gs, ss, n, natural, &mut out))
+    })?
+    .map_err(err)?;
     Ok(Array2::from_shape_vec((rows, n), out).map_err(|e| err(e.to_string()))?.into_pyarray(py))
 }

@@ -28,7 +28,8 @@ pub(crate) fn diffuse_layer(
     if !error.is_c_contiguous() || !out.is_c_contiguous() {
         return Err(err("error and out must be C-contiguous"));
     }
-    let (m, i, i_next) = (c_slice(&mixture, "mixture")?, c_slice(&inside, "inside")?, c_slice(&inside_next, "inside_next")?);
+    let (m, i, i_next) =
+        (c_slice(&mixture, "mixture")?, c_slice(&inside, "inside")?, c_slice(&inside_next, "inside_next")?);
     let e = error.as_slice_mut().map_err(|_| err("error must be C-contiguous"))?;
     let o = out.as_slice_mut().map_err(|_| err("out must be C-contiguous"))?;
     let (e0, e1) = e.split_at_mut(n * ny * nx);

@@ -5,8 +5,9 @@
 //! work is in `gradients`. The GIL is released while rendering.
 
 use inkopt_core::{render, Boundary, EnvMap, Geometry, GradBuffers, UniformLight};
-use numpy::{PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4, PyReadonlyArrayDyn,
-            PyUntypedArrayMethods};
+use numpy::{
+    PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4, PyReadonlyArrayDyn, PyUntypedArrayMethods,
+};
 use pyo3::prelude::*;
 
 use crate::arrays::{c_slice, check_shape, err, options, pack, texels, Packed};
@@ -80,7 +81,8 @@ impl Scene {
                     return Err(err("give the normals dense or sparse, not both"));
                 }
                 check_shape(v.shape(), &[i.len(), 3], "normal_vectors")?;
-                geo = geo.with_sparse_normals(c_slice(&i, "normal_index")?, c_slice(&v, "normal_vectors")?)
+                geo = geo
+                    .with_sparse_normals(c_slice(&i, "normal_index")?, c_slice(&v, "normal_vectors")?)
                     .map_err(err)?;
             }
             (None, None) => {}
@@ -204,12 +206,17 @@ impl Scene {
     /// (sets the fixed-point quantum). `grad_index`: which voxels get gradients, and in which slot; gradients are
     /// then returned per slot, (F, 3). Either (z, y, x) int32, the slot of each voxel or -1 for none, or (F,)
     /// int64, strictly increasing linear indices of the voxels whose slots are 0..F (no map per grid voxel on
-    /// either side: the core ranks them per grid row, `inkopt_core::spans`). None: every voxel, (z, y, x, 3). The buffer of the previous call, if it was
-    /// not taken (take_grad frees it), is zeroed in place when it was for the same slots (checked: element by element, or in O(F) for the second form) or both
-    /// None; otherwise it is freed before the new one is allocated. The GIL is released.
+    /// either side: the core ranks them per grid row, `inkopt_core::spans`). None: every voxel, (z, y, x, 3).
+    /// The buffer of the previous call, if it was not taken (take_grad frees it), is zeroed in place when it was
+    /// for the same slots (checked: element by element, or in O(F) for the second form) or both None; otherwise
+    /// it is freed before the new one is allocated. The GIL is released.
     #[pyo3(signature = (max_abs_adjoint, grad_index=None))]
-    fn zero_grad(&mut self, py: Python<'_>, max_abs_adjoint: f32, grad_index: Option<Bound<'_, PyAny>>)
-                 -> PyResult<()> {
+    fn zero_grad(
+        &mut self,
+        py: Python<'_>,
+        max_abs_adjoint: f32,
+        grad_index: Option<Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
         gradients::zero_grad(self, py, max_abs_adjoint, grad_index)
     }
 
@@ -231,8 +238,19 @@ impl Scene {
         include_specular: bool,
         method: &str,
     ) -> PyResult<Packed<'py>> {
-        gradients::backward(self, py, texel_voxel, texel_face, texel_normal, adjoint, spp, seed, first_texel,
-                            include_specular, method)
+        gradients::backward(
+            self,
+            py,
+            texel_voxel,
+            texel_face,
+            texel_normal,
+            adjoint,
+            spp,
+            seed,
+            first_texel,
+            include_specular,
+            method,
+        )
     }
 
     /// The accumulated gradients (d e/d sigma_s, d e/d sigma_a): (z, y, x, 3) float32 each, or (F, 3) per slot

@@ -14,7 +14,11 @@ fn white_furnace_is_one() {
     let med = DenseMedium::from_interleaved(&s, &vec![0.0; 3 * nv]).unwrap();
     let mut texels = vec![];
     for f in 0..6u8 {
-        texels.push(Texel { voxel: [if f == 1 { 5 } else { 0 }, if f == 3 { 4 } else { 0 }, if f == 5 { 3 } else { 0 }], face: f, normal: face_normal(f) });
+        texels.push(Texel {
+            voxel: [if f == 1 { 5 } else { 0 }, if f == 3 { 4 } else { 0 }, if f == 5 { 3 } else { 0 }],
+            face: f,
+            normal: face_normal(f),
+        });
     }
     let (est, _) = render(&geo, &med, &texels, 0, &RenderOptions { spp: 200, seed: 1, include_specular: true });
     for e in &est {
@@ -30,7 +34,9 @@ fn furnace_with_fresnel_boundary_is_one() {
     let n = [4, 4, 4];
     let geo = Geometry::new(n, [0.1; 3], Boundary::Box, 1.5, 0.4).unwrap();
     let med = DenseMedium::from_interleaved(&vec![8.0; 3 * 64], &vec![0.0; 3 * 64]).unwrap();
-    let texels: Vec<Texel> = (0..6u8).map(|f| Texel { voxel: [1, 2, if f == 5 { 3 } else { 0 }], face: f, normal: face_normal(f) }).collect();
+    let texels: Vec<Texel> = (0..6u8)
+        .map(|f| Texel { voxel: [1, 2, if f == 5 { 3 } else { 0 }], face: f, normal: face_normal(f) })
+        .collect();
     let (est, _) = render(&geo, &med, &texels, 0, &RenderOptions { spp: 50, seed: 2, include_specular: true });
     assert!(est.iter().all(|e| e.mean.iter().all(|&m| m == 1.0)));
 }

@@ -27,14 +27,16 @@ fn safe_distances_match_brute_force() {
     // outside the object or the grid (capped).
     let n = [15usize, 13, 14];
     let mut rng = crate::transport::rng::PathRng::new(5, 0, 0, 0);
-    let centres: Vec<[f32; 3]> = (0..3).map(|_| [3.0 + rng.next_f32() * 9.0, 3.0 + rng.next_f32() * 7.0, 3.0 + rng.next_f32() * 8.0]).collect();
+    let centres: Vec<[f32; 3]> =
+        (0..3).map(|_| [3.0 + rng.next_f32() * 9.0, 3.0 + rng.next_f32() * 7.0, 3.0 + rng.next_f32() * 8.0]).collect();
     let idx = |x: usize, y: usize, z: usize| (z * n[1] + y) * n[0] + x;
     let mut inside = vec![0u8; n[0] * n[1] * n[2]];
     for z in 0..n[2] {
         for y in 0..n[1] {
             for x in 0..n[0] {
                 let p = [x as f32, y as f32, z as f32];
-                inside[idx(x, y, z)] = centres.iter().any(|c| (0..3).map(|a| (p[a] - c[a]).powi(2)).sum::<f32>() < 30.0) as u8;
+                inside[idx(x, y, z)] =
+                    centres.iter().any(|c| (0..3).map(|a| (p[a] - c[a]).powi(2)).sum::<f32>() < 30.0) as u8;
             }
         }
     }
@@ -46,7 +48,12 @@ fn safe_distances_match_brute_force() {
                 for oz in -1..=n[2] as i32 {
                     for oy in -1..=n[1] as i32 {
                         for ox in -1..=n[0] as i32 {
-                            let out = ox < 0 || oy < 0 || oz < 0 || ox >= n[0] as i32 || oy >= n[1] as i32 || oz >= n[2] as i32
+                            let out = ox < 0
+                                || oy < 0
+                                || oz < 0
+                                || ox >= n[0] as i32
+                                || oy >= n[1] as i32
+                                || oz >= n[2] as i32
                                 || inside[idx(ox as usize, oy as usize, oz as usize)] == 0;
                             if out {
                                 best = best.min((ox - x).abs().max((oy - y).abs()).max((oz - z).abs()));
@@ -72,7 +79,9 @@ fn safe_balls_stay_inside_the_object() {
     for z in 0..n[2] {
         for y in 0..n[1] {
             for x in 0..n[0] {
-                let r2 = ((x as f32 - 6.5) / 6.0).powi(2) + ((y as f32 - 5.5) / 5.0).powi(2) + ((z as f32 - 6.0) / 5.5).powi(2);
+                let r2 = ((x as f32 - 6.5) / 6.0).powi(2)
+                    + ((y as f32 - 5.5) / 5.0).powi(2)
+                    + ((z as f32 - 6.0) / 5.5).powi(2);
                 inside[(z * n[1] + y) * n[0] + x] = (r2 < 1.0 && (x + 2 * y) % 11 != 3) as u8;
             }
         }
@@ -121,9 +130,8 @@ fn nearest_hit(n: [usize; 3], c: [i32; 3], cap: i32, hit: impl Fn(usize) -> bool
 /// A mask of three random blobs (concavities between them) in a grid of n voxels.
 fn blobs(n: [usize; 3], seed: u64) -> Vec<u8> {
     let mut rng = crate::transport::rng::PathRng::new(seed, 0, 0, 0);
-    let centres: Vec<[f32; 3]> = (0..3)
-        .map(|_| std::array::from_fn(|a| 2.0 + rng.next_f32() * (n[a] as f32 - 4.0)))
-        .collect();
+    let centres: Vec<[f32; 3]> =
+        (0..3).map(|_| std::array::from_fn(|a| 2.0 + rng.next_f32() * (n[a] as f32 - 4.0))).collect();
     let mut inside = vec![0u8; n.iter().product()];
     for z in 0..n[2] {
         for y in 0..n[1] {
@@ -158,7 +166,10 @@ fn empty_distances_match_brute_force() {
     let safe = crate::transport::scene::safe_distances(&inside, n);
     let geo = Geometry::new(n, [0.1; 3], Boundary::Box, 1.5, 0.4).unwrap().with_inside(inside.clone()).unwrap();
     for j in 0..inside.len() {
-        assert_eq!((geo.safe_distance(j), geo.empty_distance(j), geo.mask_inside(j)), (safe[j], empty[j], inside[j] != 0));
+        assert_eq!(
+            (geo.safe_distance(j), geo.empty_distance(j), geo.mask_inside(j)),
+            (safe[j], empty[j], inside[j] != 0)
+        );
     }
     let b = crate::transport::scene::BRICK;
     let nb: [usize; 3] = std::array::from_fn(|a| n[a].div_ceil(b));
@@ -207,8 +218,10 @@ fn empty_jumps_cross_no_voxel_of_the_object() {
         assert!(box_distance2(q, w, size) < 1e-10, "jump to {q:?} names voxel {w:?}");
         for k in (0..inside.len()).filter(|&k| inside[k] != 0) {
             let w = voxel_at(n, k);
-            assert!(box_distance2(p, w, size) >= r * r * (1.0 - 1e-5),
-                    "point {p:?} in voxel {v:?}: a jump of {r} reaches inside voxel {w:?}");
+            assert!(
+                box_distance2(p, w, size) >= r * r * (1.0 - 1e-5),
+                "point {p:?} in voxel {v:?}: a jump of {r} reaches inside voxel {w:?}"
+            );
         }
         checked += 1;
     }
@@ -261,13 +274,18 @@ fn erosion_of_tiny_grids_matches_brute_force() {
                 let n = [nx, ny, nz];
                 for _ in 0..3 {
                     let inside: Vec<u8> = (0..nx * ny * nz).map(|_| (rng.next_f32() < 0.7) as u8).collect();
-                    let (safe, empty) = (crate::transport::scene::safe_distances(&inside, n), crate::transport::scene::empty_distances(&inside, n));
+                    let (safe, empty) = (
+                        crate::transport::scene::safe_distances(&inside, n),
+                        crate::transport::scene::empty_distances(&inside, n),
+                    );
                     for j in 0..inside.len() {
                         let v = voxel_at(n, j);
                         let cap = crate::transport::scene::SAFE_CAP as i32;
-                        // Safe: distance to the nearest outside voxel, the grid's exterior (one step beyond a face) included.
+                        // Safe: distance to the nearest outside voxel, the grid's exterior (one step beyond a
+                        // face) included.
                         let to_border = (0..3).map(|a| (v[a] + 1).min(n[a] as i32 - v[a])).min().unwrap();
-                        let want_safe = if inside[j] == 0 { 0 } else { nearest_hit(n, v, cap, |k| inside[k] == 0).min(to_border) };
+                        let want_safe =
+                            if inside[j] == 0 { 0 } else { nearest_hit(n, v, cap, |k| inside[k] == 0).min(to_border) };
                         assert_eq!(safe[j] as i32, want_safe.min(cap), "safe, grid {n:?}, voxel {v:?}");
                         let want_empty = nearest_hit(n, v, cap, |k| inside[k] != 0);
                         assert_eq!(empty[j] as i32, want_empty, "empty, grid {n:?}, voxel {v:?}");

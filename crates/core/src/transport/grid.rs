@@ -12,9 +12,9 @@ use std::ops::Range;
 use bytemuck::cast;
 use wide::{f32x8, i32x8, CmpEq, CmpGe, CmpGt, CmpLt};
 
+use crate::transport::path::Tally;
 use crate::transport::sampling::{add, scale, V3};
 use crate::transport::scene::{Boundary, Geometry, BRICK};
-use crate::transport::path::Tally;
 
 /// The grid's extent along axis a (n * size): its period on a periodic axis.
 #[inline(always)]
@@ -228,7 +228,11 @@ impl Dda {
     pub fn next_axis(&self) -> usize {
         let m = &self.t_max;
         if m[0] < m[1] {
-            if m[0] < m[2] { 0 } else { 2 }
+            if m[0] < m[2] {
+                0
+            } else {
+                2
+            }
         } else if m[1] < m[2] {
             1
         } else {

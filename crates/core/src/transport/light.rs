@@ -56,8 +56,12 @@ impl EnvMap {
         }
         if let Some(k) = rgb.iter().position(|x| !(x.is_finite() && *x >= 0.0)) {
             let (p, c) = (k / 3, k % 3);
-            return Err(format!("map radiance at row {} column {} channel {c} is {} (must be finite and >= 0)",
-                               p / w, p % w, rgb[k]));
+            return Err(format!(
+                "map radiance at row {} column {} channel {c} is {} (must be finite and >= 0)",
+                p / w,
+                p % w,
+                rgb[k]
+            ));
         }
         if !rotate_deg.is_finite() {
             return Err(format!("map rotation {rotate_deg} must be finite"));

@@ -17,17 +17,17 @@
 //! - `render`: parallel drivers of the forward render.
 //! - `grad`: the gradient pass and its fixed-point buffers.
 
-pub mod sampling;
-pub mod rng;
-pub mod light;
-pub mod normals;
-pub mod medium;
-pub mod scene;
-pub mod path;
-pub(crate) mod grid;
-pub(crate) mod flight;
-pub mod trace;
 pub mod estimate;
-pub(crate) mod packet;
-pub mod render;
+pub(crate) mod flight;
 pub mod grad;
+pub(crate) mod grid;
+pub mod light;
+pub mod medium;
+pub mod normals;
+pub(crate) mod packet;
+pub mod path;
+pub mod render;
+pub mod rng;
+pub mod sampling;
+pub mod scene;
+pub mod trace;

@@ -59,8 +59,12 @@ impl ShadingNormals {
         if vectors.len() != 3 * index.len() {
             return Err(format!("{} normal vectors for {} voxel indices", vectors.len() / 3, index.len()));
         }
-        let mut s = ShadingNormals { n, rows: Vec::with_capacity(n_rows + 1), xs: Vec::with_capacity(index.len()),
-                                     normals: Vec::with_capacity(index.len()) };
+        let mut s = ShadingNormals {
+            n,
+            rows: Vec::with_capacity(n_rows + 1),
+            xs: Vec::with_capacity(index.len()),
+            normals: Vec::with_capacity(index.len()),
+        };
         s.rows.push(0);
         let mut prev = -1i64;
         for (&j, v) in index.iter().zip(vectors.chunks_exact(3)) {

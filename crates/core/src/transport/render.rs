@@ -51,10 +51,15 @@ pub fn render<M: Medium>(
 /// while the item's last paths finish), few enough to balance the threads.
 pub(crate) const PACKET_CHUNK: usize = 64;
 
-/// `render` for mask-free volumes and masked boxes: eight paths at a time (`packet`), each texel's path values summed in a
-/// fixed order, so results are bit-identical for any thread count.
-fn render_packets<M: Medium>(geo: &Geometry, med: &M, texels: &[Texel], first_texel: u64, opts: &RenderOptions)
-    -> (Vec<TexelEstimate>, Stats) {
+/// `render` for mask-free volumes and masked boxes: eight paths at a time (`packet`), each texel's path values
+/// summed in a fixed order, so results are bit-identical for any thread count.
+fn render_packets<M: Medium>(
+    geo: &Geometry,
+    med: &M,
+    texels: &[Texel],
+    first_texel: u64,
+    opts: &RenderOptions,
+) -> (Vec<TexelEstimate>, Stats) {
     let spp = opts.spp as usize;
     let chunks: Vec<(Vec<TexelEstimate>, Stats)> = texels
         .par_chunks(PACKET_CHUNK)

@@ -144,7 +144,13 @@ mod tests {
                 let h = (hi - lo) / m as f64;
                 let mut acc = 0.0;
                 for k in 0..=m {
-                    let w = if k == 0 || k == m { 1.0 } else if k % 2 == 1 { 4.0 } else { 2.0 };
+                    let w = if k == 0 || k == m {
+                        1.0
+                    } else if k % 2 == 1 {
+                        4.0
+                    } else {
+                        2.0
+                    };
                     acc += w * 2.0 * std::f64::consts::PI * hg_pdf((lo + k as f64 * h) as f32, g) as f64;
                 }
                 let expect = acc * h / 3.0 * n as f64;

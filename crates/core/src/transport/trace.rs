@@ -141,9 +141,16 @@ pub(crate) enum WalkEnd {
 /// least 2 (the packets' delta tracking takes over there).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-pub(crate) fn walk<K: Tracker, M: Medium, T: Tally, U: Uniforms>(geo: &Geometry, med: &M, c: usize, w: &mut Walk,
-                                                                 tracker: &mut K, rng: &mut U, tally: &mut T,
-                                                                 stop_deep: bool) -> WalkEnd {
+pub(crate) fn walk<K: Tracker, M: Medium, T: Tally, U: Uniforms>(
+    geo: &Geometry,
+    med: &M,
+    c: usize,
+    w: &mut Walk,
+    tracker: &mut K,
+    rng: &mut U,
+    tally: &mut T,
+    stop_deep: bool,
+) -> WalkEnd {
     let eta_in = 1.0 / geo.ior;
     let mut s = *w;
     let cut = |s: &Walk| WalkEnd::Done(PathValue { value: 0.0, events: s.events });
@@ -168,7 +175,8 @@ pub(crate) fn walk<K: Tracker, M: Medium, T: Tally, U: Uniforms>(geo: &Geometry,
                         tracker.start(geo, &s, rng);
                     }
                     Event::Surface { axis, step, nb, n_sh } => {
-                        let (nd, transmitted) = interface(s.d, facing_normal(axis, step), n_sh, geo.ior, rng.next_f32());
+                        let (nd, transmitted) =
+                            interface(s.d, facing_normal(axis, step), n_sh, geo.ior, rng.next_f32());
                         s.d = nd;
                         if transmitted {
                             s.v = nb;
