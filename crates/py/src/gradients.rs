@@ -76,7 +76,6 @@ pub(crate) fn zero_grad(
 }
 
 /// `Scene.backward`.
-#[allow(clippy::too_many_arguments)]
 pub(crate) fn backward<'py>(
     scene: &Scene,
     py: Python<'py>,

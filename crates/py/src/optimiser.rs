@@ -43,7 +43,6 @@ fn run_on<R: Send>(threads: Option<usize>, f: impl FnOnce() -> R + Send) -> PyRe
 /// GIL is released; `threads` as for a `Scene` (default all cores).
 #[pyfunction]
 #[pyo3(signature = (shape, index, values, steps, alpha, guide=None, tau=1.0, threads=None))]
-#[allow(clippy::too_many_arguments)]
 pub(crate) fn smooth_rows<'py>(
     py: Python<'py>,
     shape: (usize, usize, usize),

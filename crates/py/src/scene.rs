@@ -40,7 +40,6 @@ impl Scene {
     #[pyo3(signature = (shape, voxel_mm, *, sigma_s=None, sigma_a=None, medium_index=None, labels=None,
                         ink_sigma_s=None, ink_sigma_a=None, inside=None, normals=None, normal_index=None,
                         normal_vectors=None, boundary="box", ior=1.5, g=0.4, threads=None))]
-    #[allow(clippy::too_many_arguments)]
     fn new(
         shape: (usize, usize, usize),
         voxel_mm: (f32, f32, f32),
@@ -182,7 +181,6 @@ impl Scene {
     /// render(texel_voxel (I,3) int32 zyx, texel_face (I,) uint8, texel_normal (I,3) float32 xyz, *, spp, seed,
     /// first_texel=0, include_specular=True) -> (mean (I,3) f32, var_mean (I,3) f32, stats dict)
     #[pyo3(signature = (texel_voxel, texel_face, texel_normal, *, spp, seed, first_texel=0, include_specular=true))]
-    #[allow(clippy::too_many_arguments)]
     fn render<'py>(
         &self,
         py: Python<'py>,
@@ -224,7 +222,6 @@ impl Scene {
     /// include_specular=True, method="replay") -> (mean, var_mean, stats): accumulates adjoint . dc/dsigma.
     #[pyo3(signature = (texel_voxel, texel_face, texel_normal, adjoint, *, spp, seed, first_texel=0,
                         include_specular=true, method="replay"))]
-    #[allow(clippy::too_many_arguments)]
     fn backward<'py>(
         &mut self,
         py: Python<'py>,

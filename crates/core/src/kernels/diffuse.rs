@@ -87,7 +87,6 @@ impl LayerShape {
 /// into this layer (it receives this layer's own diffusion too, and is zeroed on return, ready to be the next
 /// call's `err_next`); `err_next` (ny, nx, n): accumulates the error for layer z + 1 (zero before the first
 /// call that writes it); `out` (ny, nx): ink index or [`EMPTY`].
-#[allow(clippy::too_many_arguments)]
 pub fn diffuse_layer(
     shape: LayerShape,
     z: usize,

@@ -50,7 +50,7 @@ pub fn diffuse_rows(
     if nz * ny * nx == 0 {
         return Err(format!("the grid {nz} x {ny} x {nx} has no voxels"));
     }
-    if channels == 0 || values.len() % channels != 0 {
+    if channels == 0 || !values.len().is_multiple_of(channels) {
         return Err(format!("values ({}) are not a whole number of rows of {channels} channels", values.len()));
     }
     let rows = values.len() / channels;
@@ -59,6 +59,8 @@ pub fn diffuse_rows(
     }
     let set = RowSpans::new([nx, ny, nz], index)?;
     if let Some(g) = guide {
+        // `!(tau > 0)` rejects NaN too.
+        #[allow(clippy::neg_cmp_op_on_partial_ord)]
         if g.dims == 0 || g.values.len() != rows * g.dims || !(g.tau > 0.0) {
             return Err(format!("guide: {} values for {rows} rows of {} dims, tau {}", g.values.len(), g.dims, g.tau));
         }
@@ -78,7 +80,7 @@ pub fn diffuse_rows(
             .enumerate()
             .for_each(|(b, out)| stencil.step(from, out, b * BLOCK, channels));
     }
-    if steps % 2 == 0 {
+    if steps.is_multiple_of(2) {
         values.copy_from_slice(&src);
     }
     Ok(())

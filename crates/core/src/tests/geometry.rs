@@ -187,7 +187,7 @@ fn empty_distances_match_brute_force() {
         assert_eq!(bricks[k] as i32, nearest_hit(nb, c, 255, |i| occ[i]), "brick {c:?}");
     }
     // Mask without any inside voxel: everything is empty as far as the cap.
-    let none = crate::transport::scene::empty_distances(&vec![0u8; 60], [5, 4, 3]);
+    let none = crate::transport::scene::empty_distances(&[0u8; 60], [5, 4, 3]);
     assert!(none.iter().all(|&e| e == crate::transport::scene::SAFE_CAP));
 }
 
@@ -241,7 +241,7 @@ fn empty_jumps_far_from_the_origin_never_land_inside() {
     let inside: Vec<u8> = (0..n.iter().product::<usize>())
         .map(|j| {
             let x = j % n[0];
-            ((x < 1990 && x % 6 == 0) || x == n[0] - 1) as u8
+            ((x < 1990 && x.is_multiple_of(6)) || x == n[0] - 1) as u8
         })
         .collect();
     let geo = Geometry::new(n, size, Boundary::Box, 1.5, 0.4).unwrap().with_inside(inside.clone()).unwrap();

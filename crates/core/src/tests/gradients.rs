@@ -17,7 +17,8 @@ fn replay_gradient_matches_finite_differences() {
     let geo = Geometry::new(n, [0.1; 3], Boundary::PeriodicXY, 1.5, 0.4).unwrap();
     let texels = top_texels(n);
     let adj: Vec<[f32; 3]> = (0..texels.len()).map(|i| [1.0, -0.5 + 0.1 * i as f32, 0.3]).collect();
-    let probes = [(4 + 9 * 3, 0usize), (4 + 9 * 2, 1), (4 + 9 * 0, 0)];
+    // Voxel (1, 1) of layers z = 3, 2 and 0 (9 voxels per layer), and a channel each.
+    let probes = [(4 + 9 * 3, 0usize), (4 + 9 * 2, 1), (4, 0)];
     let opts = |seed| RenderOptions { spp: 1500, seed, include_specular: true };
     let medium = |c: &[Vec<f32>; 2]| DenseMedium::from_interleaved(&c[0], &c[1]).unwrap();
     for &(j, c) in &probes {

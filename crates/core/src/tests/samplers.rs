@@ -72,7 +72,7 @@ fn packet_renderer_matches_scalar_trace() {
     for z in 0..big[2] {
         for y in 0..big[1] {
             for x in 0..big[0] {
-                if (x >= 5 && x <= 6 && z >= 6) || (x + y + z < 4) {
+                if ((5..=6).contains(&x) && z >= 6) || (x + y + z < 4) {
                     inside[(z * big[1] + y) * big[0] + x] = 0;
                 }
             }

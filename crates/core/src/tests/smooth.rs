@@ -80,7 +80,6 @@ fn check_against_plain(guided: bool) {
     for _ in 0..steps {
         let mut next = r32.clone();
         for (p, &j) in index.iter().enumerate() {
-            let j = j as i64;
             let (z, y, x) = (j / (n[1] * n[2]) as i64, j / n[2] as i64 % n[1] as i64, j % n[2] as i64);
             let nb: Vec<Option<usize>> = [(-1, 0, 0), (1, 0, 0), (0, -1, 0), (0, 1, 0), (0, 0, -1), (0, 0, 1)]
                 .iter()

@@ -249,7 +249,7 @@ fn sparse_medium_matches_the_dense_one_bit_for_bit() {
     let nv = n.iter().product::<usize>();
     let outside = |j: usize| {
         let (x, y, z) = (j % n[0], (j / n[0]) % n[1], j / (n[0] * n[1]));
-        (z >= 2 && z <= 4 && (3..6).contains(&x) && (2..5).contains(&y)) || (z == 3 && y == 0 && x < 4)
+        ((2..=4).contains(&z) && (3..6).contains(&x) && (2..5).contains(&y)) || (z == 3 && y == 0 && x < 4)
     };
     let inside: Vec<u8> = (0..nv).map(|j| !outside(j) as u8).collect();
     let index: Vec<i64> = (0..nv as i64).filter(|&j| inside[j as usize] != 0).collect();

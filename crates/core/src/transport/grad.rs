@@ -321,7 +321,6 @@ impl<M: Medium> PathTally for PacketTally<'_, M> {
 /// `backward` with packets (`packet::supported` geometries). Path replay: a forward pass gives every path's
 /// value, then the paths with a non-zero value and adjoint are traced again, exactly (each path is a pure
 /// function of its key), with their tallies. `L_i = 1`: one pass with tallies.
-#[allow(clippy::too_many_arguments)]
 fn backward_packets<M: Medium>(
     geo: &Geometry,
     med: &M,

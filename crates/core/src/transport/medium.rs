@@ -16,6 +16,8 @@ use crate::spans::RowSpans;
 pub const EMPTY: u8 = 255;
 
 /// Per-voxel optical parameters for one channel.
+// A medium always covers its whole grid (`len` voxels), so it has no `is_empty`.
+#[allow(clippy::len_without_is_empty)]
 pub trait Medium: Sync {
     /// (sigma_t in mm^-1, albedo) of voxel `idx` in channel `c`.
     fn coeffs(&self, idx: usize, c: usize) -> (f32, f32);
@@ -24,6 +26,7 @@ pub trait Medium: Sync {
         let (t, a) = self.coeffs(idx, c);
         t * a
     }
+    /// The number of voxels.
     fn len(&self) -> usize;
     /// An upper bound of sigma_t over all voxels in channel c (the majorant of delta tracking).
     fn majorant(&self, c: usize) -> f32;
@@ -49,7 +52,7 @@ pub struct DenseMedium {
 impl DenseMedium {
     /// From interleaved (voxel, channel) arrays of sigma_s and sigma_a in mm^-1 (a (z, y, x, 3) array's memory).
     pub fn from_interleaved(sigma_s: &[f32], sigma_a: &[f32]) -> Result<Self, String> {
-        if sigma_s.len() != sigma_a.len() || sigma_s.len() % 3 != 0 {
+        if sigma_s.len() != sigma_a.len() || !sigma_s.len().is_multiple_of(3) {
             return Err("sigma_s and sigma_a must both have 3 channels per voxel and equal size".into());
         }
         let n = sigma_s.len() / 3;
@@ -146,7 +149,8 @@ impl LabelMedium {
     /// `ink_sigma_s`, `ink_sigma_a`: (N, 3) row-major, mm^-1.
     pub fn new(labels: Vec<u8>, ink_sigma_s: &[f32], ink_sigma_a: &[f32]) -> Result<Self, String> {
         let n_inks = ink_sigma_s.len() / 3;
-        if ink_sigma_s.len() != ink_sigma_a.len() || ink_sigma_s.len() % 3 != 0 || n_inks == 0 || n_inks > 255 {
+        let rows = ink_sigma_s.len() == ink_sigma_a.len() && ink_sigma_s.len().is_multiple_of(3);
+        if !rows || n_inks == 0 || n_inks > 255 {
             return Err("ink table must be (N, 3) with 1 <= N <= 255".into());
         }
         let mut table = [[(0.0f32, 1.0f32); 256]; 3];

@@ -139,7 +139,6 @@ pub(crate) enum WalkEnd {
 /// The walk of one path from state `w`: free flights inside the object from `tracker`, straight flights
 /// outside it. With `stop_deep` it returns `Deep` after a collision in a voxel whose safe distance is at
 /// least 2 (the packets' delta tracking takes over there).
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 pub(crate) fn walk<K: Tracker, M: Medium, T: Tally, U: Uniforms>(
     geo: &Geometry,

@@ -152,7 +152,6 @@ impl Packet {
 
     /// Continue lane l's path with the general walk (masked volumes: near the surface and outside the object)
     /// from p in voxel v; returns the path's value if it ended, else the lane is flying in the deep interior.
-    #[allow(clippy::too_many_arguments)]
     fn walk<M: Medium, P: PathTally>(
         &mut self,
         geo: &Geometry,
