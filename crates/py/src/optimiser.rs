@@ -39,8 +39,8 @@ fn run_on<R: Send>(threads: Option<usize>, f: impl FnOnce() -> R + Send) -> PyRe
 /// smooth_rows(shape (Z, Y, X), index (F,) i64, values (F, C) f32, steps, alpha, guide (F, D) f32 or None, tau,
 /// threads=None) -> (F, C) f32: `steps` explicit diffusion steps of weight `alpha` over the 6-neighbourhood of the
 /// voxels `index` (strictly increasing linear indices into the grid `shape`; row r of the values is voxel index[r]),
-/// each neighbour weighted by exp(-|guide_r - guide_q|² / tau²) if a guide is given (inkopt_core::smooth). The
-/// GIL is released; `threads` as for a `Scene` (default all cores).
+/// each neighbour weighted by exp(-|guide_r - guide_q|² / tau²) if a guide is given
+/// (inkopt_core::kernels::smooth). The GIL is released; `threads` as for a `Scene` (default all cores).
 #[pyfunction]
 #[pyo3(signature = (shape, index, values, steps, alpha, guide=None, tau=1.0, threads=None))]
 pub(crate) fn smooth_rows<'py>(
@@ -67,7 +67,7 @@ pub(crate) fn smooth_rows<'py>(
     Ok(Array2::from_shape_vec((rows, ch), v).map_err(|e| err(e.to_string()))?.into_pyarray(py))
 }
 
-/// softmax_rows(x, threads=None) -> p: the softmax of each row of x (rows, n) float32 (``inkopt_core::simplex``,
+/// softmax_rows(x, threads=None) -> p: the softmax of each row of x (rows, n) float32 (`inkopt_core::kernels::simplex`,
 /// parallel on `threads` (default all cores), thread-count independent). The GIL is released.
 #[pyfunction]
 #[pyo3(signature = (x, threads=None))]

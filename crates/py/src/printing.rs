@@ -7,9 +7,9 @@ use pyo3::prelude::*;
 use crate::arrays::{c_slice, check_shape, err};
 
 /// diffuse_layer(mixture (N, Y, X) f32, inside (Y, X) u8, inside_next (Y, X) u8, error (2, Y, X, N) f32, z, out
-/// (Y, X) u8): 3D vector error diffusion of printer layer z (inkopt_core::diffuse). error[z % 2] holds the error
-/// carried into layer z and is zeroed on return; error[(z + 1) % 2] accumulates the next layer's. Writes the
-/// labels (ink index, 255 outside) into `out`. The GIL is released.
+/// (Y, X) u8): 3D vector error diffusion of printer layer z (inkopt_core::kernels::diffuse). error[z % 2] holds
+/// the error carried into layer z and is zeroed on return; error[(z + 1) % 2] accumulates the next layer's.
+/// Writes the labels (ink index, 255 outside) into `out`. The GIL is released.
 #[pyfunction]
 pub(crate) fn diffuse_layer(
     py: Python<'_>,

@@ -14,8 +14,8 @@
 //!   dE/dx[r, k] = p[r, k] c[r, k]                                  (the Euclidean gradient)
 //! ```
 //!
-//! Every row is computed on its own in a fixed order (f32, like the numpy expressions they replace, which made
-//! several passes over the (rows, n) arrays on one core), so the result does not depend on the thread count.
+//! Every row is computed on its own in a fixed order (f32, rows in parallel), so the result does not depend on
+//! the thread count.
 
 use rayon::prelude::*;
 

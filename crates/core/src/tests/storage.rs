@@ -177,8 +177,8 @@ fn sparse_normals_match_the_dense_formula() {
     dense[3 * 3..3 * 4].copy_from_slice(&[0.5, 0.5, 0.0]); // |n|^2 = 0.5 exactly: no normal
     dense[3 * 10..3 * 11].copy_from_slice(&[f32::NAN, 1.0, 0.0]);
     dense[3 * 12..3 * 13].copy_from_slice(&[f32::INFINITY, 0.0, 0.0]);
-    // The dense lookup as it was: normalise at the query.
-    let old = |j: usize| -> Option<V3> {
+    // The plain dense lookup, normalising at the query: the sparse store must give the same bits.
+    let plain = |j: usize| -> Option<V3> {
         let i = 3 * j;
         let n = [dense[i], dense[i + 1], dense[i + 2]];
         let l2 = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
@@ -196,8 +196,8 @@ fn sparse_normals_match_the_dense_formula() {
             for x in 0..n[0] as i32 {
                 let j = geo.index([x, y, z]);
                 let v = &dense[3 * j..3 * j + 3];
-                assert_eq!(bits(geo.shading_normal([x, y, z])), bits(old(j)), "voxel {j} {v:?}");
-                kept += old(j).is_some() as usize;
+                assert_eq!(bits(geo.shading_normal([x, y, z])), bits(plain(j)), "voxel {j} {v:?}");
+                kept += plain(j).is_some() as usize;
             }
         }
     }

@@ -4,8 +4,8 @@
 //!
 //! Scalar helpers serve the scalar walks (`trace`, `flight`) and the per-lane code of `packet`; the `*8`
 //! helpers are their eight-lane forms for the packet step. The two forms are not always the same arithmetic
-//! (the lanes divide where the scalar code multiplies by a reciprocal), and each keeps its own so that renders
-//! stay bit-identical to the earlier code; the comments say which is which.
+//! (the lanes divide where the scalar code multiplies by a reciprocal); each keeps its own, since unifying them
+//! would change the bits of one renderer's results; the comments say which is which.
 
 use std::ops::Range;
 
