@@ -2,14 +2,15 @@
 //! and free flights with closed forms), `samplers` (the samplers and walks against each other), `gradients`
 //! (gradients against finite differences), `light` (environment maps), `determinism` (thread counts, chunking,
 //! media forms), `geometry` (safe distances and balls), `smooth` (the step preconditioner against a plain
-//! implementation), `storage` (in-place updates and compact storage against
-//! the plain forms, bit for bit). Tolerances are multiples of the estimator's own standard error (computed from
-//! the samples), never fixed image values.
+//! implementation), `storage` (in-place updates and compact storage against the plain forms, bit for bit),
+//! `layering` (the module layering, on the source). Tolerances are multiples of the estimator's own standard
+//! error (computed from the samples), never fixed image values.
 
 mod analytic;
 mod determinism;
 mod geometry;
 mod gradients;
+mod layering;
 mod light;
 mod samplers;
 mod smooth;
