@@ -19,6 +19,7 @@ pub struct TexelEstimate {
     pub var_mean: [f32; 3],
 }
 
+/// What a render or gradient pass traced: paths and collisions, its own and replayed.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Stats {
     /// Monochromatic paths traced (texels x spp x 3 channels), replays not included.
@@ -41,6 +42,7 @@ impl Stats {
     }
 }
 
+/// Running sums of one texel's path values and their squares per channel (f64, in the order added).
 pub(crate) struct Moments {
     sum: [f64; 3],
     sq: [f64; 3],
