@@ -28,6 +28,8 @@ fn run_on<R: Send>(threads: Option<usize>, f: impl FnOnce() -> R + Send) -> PyRe
             None => {
                 let b = rayon::ThreadPoolBuilder::new().num_threads(n).thread_name(move |i| format!("inkopt-p{n}-{i}"));
                 let p = Arc::new(b.build().map_err(|e| err(e.to_string()))?);
+                // Wait until every thread runs (and carries its name): the pool is whole when it is first used.
+                p.broadcast(|_| ());
                 pools.push((n, p.clone()));
                 p
             }
