@@ -1,5 +1,6 @@
 //! Profiling target: the reference slab (177 x 118 x 30 voxels at 300 DPI, seeded random CMYKW mixture with
 //! 50 % white), top face, without Python. `cargo run --release --example refslab -- SPP THREADS`.
+use inkopt_core::transport::{path::Tally, rng, trace::trace};
 use inkopt_core::*;
 
 fn main() {
@@ -47,17 +48,30 @@ fn main() {
     for (i, tex) in texels.iter().enumerate().take(2000) {
         for c in 0..3 {
             let mut r = rng::PathRng::new(1, i as u64, 0, c as u32);
-            events += inkopt_core::trace::trace(&geo, &med, tex, c, &mut r, true, &mut cnt).events as u64;
+            events += trace(&geo, &med, tex, c, &mut r, true, &mut cnt).events as u64;
         }
     }
-    println!("segments per collision {:.2}, scatters per collision {:.2}", cnt.0 as f64 / events as f64, cnt.1 as f64 / events as f64);
-    println!("forward: {:.3} s, {:.2} M events/s, {:.2} M texel-samples/s, {:.2} events/path", dt,
-             st.events as f64 / dt / 1e6, (texels.len() as f64 * spp as f64) / dt / 1e6, st.events as f64 / st.paths as f64);
+    println!(
+        "segments per collision {:.2}, scatters per collision {:.2}",
+        cnt.0 as f64 / events as f64,
+        cnt.1 as f64 / events as f64
+    );
+    println!(
+        "forward: {:.3} s, {:.2} M events/s, {:.2} M texel-samples/s, {:.2} events/path",
+        dt,
+        st.events as f64 / dt / 1e6,
+        (texels.len() as f64 * spp as f64) / dt / 1e6,
+        st.events as f64 / st.paths as f64
+    );
 }
 
 #[allow(dead_code)]
 pub struct Count(pub u64, pub u64);
-impl inkopt_core::trace::Tally for Count {
-    fn segment(&mut self, _: usize, _: f32) { self.0 += 1; }
-    fn scatter(&mut self, _: usize) { self.1 += 1; }
+impl Tally for Count {
+    fn segment(&mut self, _: usize, _: f32) {
+        self.0 += 1;
+    }
+    fn scatter(&mut self, _: usize) {
+        self.1 += 1;
+    }
 }

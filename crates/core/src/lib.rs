@@ -1,40 +1,35 @@
-//! inkopt-core: Monte Carlo volumetric light transport through voxel ink volumes, with path-replay gradients.
+//! inkopt-core: Monte Carlo volumetric light transport through voxel ink volumes, with path-replay gradients,
+//! and the printing and optimiser kernels that run beside it.
 //!
-//! Conventions (see docs/conventions.md in the repository): voxel (x, y, z) has linear index
+//! Conventions (see `docs/conventions.md` in the repository): voxel (x, y, z) has linear index
 //! `(z * ny + y) * nx + x` (C order of a (z, y, x) array); lengths in mm, coefficients in mm^-1; geometric
 //! vectors are (x, y, z); radiance is linear RGB, each channel traced as its own monochromatic problem.
 //!
-//! Modules: `scene` (geometry, texels), `medium` (dense, sparse and label media), `spans` (voxel sets stored per grid row), `normals` (sparse shading normals), `light` (the `Light` trait:
-//! uniform light, environment maps), `grid` (locating points, voxel traversal, exit distances, periodic wrap),
-//! `flight` (the free-flight samplers), `trace` (the scalar walk), `packet` (eight paths per core in SIMD
-//! lanes), `render` (parallel drivers of the forward render), `grad` (the gradient pass and its fixed-point
-//! buffers), `rng` (counter-based random numbers), `sampling` (phase function, Fresnel), `diffuse` (3D vector
-//! error diffusion of ink mixtures to one ink per printer voxel), `smooth` (diffusion of per-voxel values over a
-//! sparse voxel set: the optimiser's step preconditioner), `simplex` (row-wise softmax of the optimiser's variables and
-//! its backward map).
+//! Layout:
+//! - [`transport`]: light transport. The scene (grid geometry, media, shading normals, lights, texels), grid
+//!   traversal, free-flight sampling, the scalar walk, eight-path packets, the render and gradient drivers,
+//!   random numbers and sampling routines.
+//! - [`kernels`]: the printing kernel (`diffuse`: error diffusion of ink mixtures to one ink per printer voxel)
+//!   and the optimiser's kernels (`smooth`: the step preconditioner; `simplex`: the softmax of its variables).
+//! - [`spans`]: voxel sets stored per grid row, the storage both share (sparse media, gradient slots, the
+//!   smoothing's neighbour lookup).
+//!
+//! Layering: `spans` uses nothing in the crate; `transport` uses `spans`; `kernels` use `spans` and
+//! `transport::medium::EMPTY` (the label of an empty voxel, which `diffuse` writes); nothing uses `kernels`.
+//! Inside `transport` each module uses only the modules listed before it in `transport`'s documentation. The
+//! test `tests/layering.rs` checks this order on the source, so the module graph has no circles.
 
-pub mod diffuse;
-mod flight;
-pub mod grad;
-mod grid;
-pub mod light;
-pub mod medium;
-pub mod normals;
-pub(crate) mod packet;
-pub mod render;
-pub mod rng;
-pub mod sampling;
-pub mod scene;
-pub mod simplex;
-pub mod smooth;
+pub mod kernels;
 pub mod spans;
-pub mod trace;
+pub mod transport;
 
-pub use grad::{backward, GradBuffers, GradMethod, NO_GRADIENT};
-pub use render::{render, RenderOptions, Stats, TexelEstimate};
-pub use light::EnvMap;
-pub use scene::{face_normal, Boundary, DenseMedium, Geometry, LabelMedium, Light, Medium, SparseMedium, Texel,
-                UniformLight, EMPTY};
+pub use transport::estimate::{RenderOptions, Stats, TexelEstimate};
+pub use transport::grad::{backward, GradBuffers, GradMethod, NO_GRADIENT};
+pub use transport::light::EnvMap;
+pub use transport::render::render;
+pub use transport::scene::{
+    face_normal, Boundary, DenseMedium, Geometry, LabelMedium, Light, Medium, SparseMedium, Texel, UniformLight, EMPTY,
+};
 
 #[cfg(test)]
 mod tests;

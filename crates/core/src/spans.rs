@@ -37,8 +37,11 @@ impl RowSpans {
             return Err(format!("index entry {e} is voxel {}, outside the grid of {n} voxels", index[e]));
         }
         if let Some(e) = (1..listed).find(|&e| index[e] <= index[e - 1]) {
-            return Err(format!("index must be strictly increasing; entry {e} is voxel {} after {}", index[e],
-                               index[e - 1]));
+            return Err(format!(
+                "index must be strictly increasing; entry {e} is voxel {} after {}",
+                index[e],
+                index[e - 1]
+            ));
         }
         let mut spans = vec![Span { off: 0, x0: 0, x1: 0 }; n / nx];
         let mut positions = 0usize;
@@ -56,14 +59,30 @@ impl RowSpans {
         if positions >= u32::MAX as usize {
             return Err(format!("{positions} stored voxels are more than a row-span store numbers"));
         }
-        let mut s = RowSpans { n, nx, inv_nx: 1.0 / nx as f64, spans, positions, listed,
-                               bits: vec![0u64; positions.div_ceil(64)], before: vec![] };
+        let mut s = RowSpans {
+            n,
+            nx,
+            inv_nx: 1.0 / nx as f64,
+            spans,
+            positions,
+            listed,
+            bits: vec![0u64; positions.div_ceil(64)],
+            before: vec![],
+        };
         for &j in index {
             let p = s.position(j as usize).expect("a listed voxel lies in its row's span");
             s.bits[p / 64] |= 1 << (p % 64);
         }
         let mut count = 0u32;
-        s.before = s.bits.iter().map(|w| { let b = count; count += w.count_ones(); b }).collect();
+        s.before = s
+            .bits
+            .iter()
+            .map(|w| {
+                let b = count;
+                count += w.count_ones();
+                b
+            })
+            .collect();
         Ok(s)
     }
 

@@ -14,7 +14,11 @@ fn white_furnace_is_one() {
     let med = DenseMedium::from_interleaved(&s, &vec![0.0; 3 * nv]).unwrap();
     let mut texels = vec![];
     for f in 0..6u8 {
-        texels.push(Texel { voxel: [if f == 1 { 5 } else { 0 }, if f == 3 { 4 } else { 0 }, if f == 5 { 3 } else { 0 }], face: f, normal: face_normal(f) });
+        texels.push(Texel {
+            voxel: [if f == 1 { 5 } else { 0 }, if f == 3 { 4 } else { 0 }, if f == 5 { 3 } else { 0 }],
+            face: f,
+            normal: face_normal(f),
+        });
     }
     let (est, _) = render(&geo, &med, &texels, 0, &RenderOptions { spp: 200, seed: 1, include_specular: true });
     for e in &est {
@@ -30,7 +34,9 @@ fn furnace_with_fresnel_boundary_is_one() {
     let n = [4, 4, 4];
     let geo = Geometry::new(n, [0.1; 3], Boundary::Box, 1.5, 0.4).unwrap();
     let med = DenseMedium::from_interleaved(&vec![8.0; 3 * 64], &vec![0.0; 3 * 64]).unwrap();
-    let texels: Vec<Texel> = (0..6u8).map(|f| Texel { voxel: [1, 2, if f == 5 { 3 } else { 0 }], face: f, normal: face_normal(f) }).collect();
+    let texels: Vec<Texel> = (0..6u8)
+        .map(|f| Texel { voxel: [1, 2, if f == 5 { 3 } else { 0 }], face: f, normal: face_normal(f) })
+        .collect();
     let (est, _) = render(&geo, &med, &texels, 0, &RenderOptions { spp: 50, seed: 2, include_specular: true });
     assert!(est.iter().all(|e| e.mean.iter().all(|&m| m == 1.0)));
 }
@@ -57,7 +63,7 @@ fn absorbing_slab_matches_fresnel_series() {
 
 struct PathLength(f64);
 
-impl crate::trace::Tally for PathLength {
+impl crate::transport::path::Tally for PathLength {
     fn segment(&mut self, _: usize, len: f32) {
         self.0 += len as f64;
     }
@@ -83,9 +89,9 @@ fn free_flight_histogram_matches_piecewise_exponential() {
     let nb = nz * bins_per_layer;
     let mut hist = vec![0usize; nb + 1];
     for i in 0..n {
-        let mut rng = crate::rng::PathRng::new(9, i as u64, 0, 0);
+        let mut rng = crate::transport::rng::PathRng::new(9, i as u64, 0, 0);
         let mut t = PathLength(0.0);
-        let r = crate::trace::trace(&geo, &med, &tex, 0, &mut rng, false, &mut t);
+        let r = crate::transport::trace::trace(&geo, &med, &tex, 0, &mut rng, false, &mut t);
         let b = if r.events == 0 { nb } else { ((t.0 / (h as f64 / bins_per_layer as f64)) as usize).min(nb - 1) };
         hist[b] += 1;
     }

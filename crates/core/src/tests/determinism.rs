@@ -13,7 +13,11 @@ fn same_result_for_any_thread_count() {
     let texels = top_texels(n);
     let opts = RenderOptions { spp: 8, seed: 42, include_specular: true };
     let run = |threads: usize| {
-        rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| render(&geo, &med, &texels, 0, &opts))
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| render(&geo, &med, &texels, 0, &opts))
     };
     let (a1, s1) = run(1);
     let (a2, s2) = run(2);

@@ -2,8 +2,8 @@
 
 use wide::{f32x8, i32x8};
 
-use crate::grid::safe_radius8;
-use crate::sampling::V3;
+use crate::transport::grid::safe_radius8;
+use crate::transport::sampling::V3;
 use crate::*;
 
 /// Voxel (x, y, z) of linear index j in a grid of n voxels.
@@ -26,19 +26,21 @@ fn safe_distances_match_brute_force() {
     // Random blobs: every voxel's safe distance equals the brute-force Chebyshev distance to the nearest voxel
     // outside the object or the grid (capped).
     let n = [15usize, 13, 14];
-    let mut rng = crate::rng::PathRng::new(5, 0, 0, 0);
-    let centres: Vec<[f32; 3]> = (0..3).map(|_| [3.0 + rng.next_f32() * 9.0, 3.0 + rng.next_f32() * 7.0, 3.0 + rng.next_f32() * 8.0]).collect();
+    let mut rng = crate::transport::rng::PathRng::new(5, 0, 0, 0);
+    let centres: Vec<[f32; 3]> =
+        (0..3).map(|_| [3.0 + rng.next_f32() * 9.0, 3.0 + rng.next_f32() * 7.0, 3.0 + rng.next_f32() * 8.0]).collect();
     let idx = |x: usize, y: usize, z: usize| (z * n[1] + y) * n[0] + x;
     let mut inside = vec![0u8; n[0] * n[1] * n[2]];
     for z in 0..n[2] {
         for y in 0..n[1] {
             for x in 0..n[0] {
                 let p = [x as f32, y as f32, z as f32];
-                inside[idx(x, y, z)] = centres.iter().any(|c| (0..3).map(|a| (p[a] - c[a]).powi(2)).sum::<f32>() < 30.0) as u8;
+                inside[idx(x, y, z)] =
+                    centres.iter().any(|c| (0..3).map(|a| (p[a] - c[a]).powi(2)).sum::<f32>() < 30.0) as u8;
             }
         }
     }
-    let safe = crate::scene::safe_distances(&inside, n);
+    let safe = crate::transport::scene::safe_distances(&inside, n);
     for z in 0..n[2] as i32 {
         for y in 0..n[1] as i32 {
             for x in 0..n[0] as i32 {
@@ -46,7 +48,12 @@ fn safe_distances_match_brute_force() {
                 for oz in -1..=n[2] as i32 {
                     for oy in -1..=n[1] as i32 {
                         for ox in -1..=n[0] as i32 {
-                            let out = ox < 0 || oy < 0 || oz < 0 || ox >= n[0] as i32 || oy >= n[1] as i32 || oz >= n[2] as i32
+                            let out = ox < 0
+                                || oy < 0
+                                || oz < 0
+                                || ox >= n[0] as i32
+                                || oy >= n[1] as i32
+                                || oz >= n[2] as i32
                                 || inside[idx(ox as usize, oy as usize, oz as usize)] == 0;
                             if out {
                                 best = best.min((ox - x).abs().max((oy - y).abs()).max((oz - z).abs()));
@@ -54,7 +61,7 @@ fn safe_distances_match_brute_force() {
                         }
                     }
                 }
-                let want = best.min(crate::scene::SAFE_CAP as i32) as u8;
+                let want = best.min(crate::transport::scene::SAFE_CAP as i32) as u8;
                 assert_eq!(safe[idx(x as usize, y as usize, z as usize)], want, "voxel {x} {y} {z}");
             }
         }
@@ -72,13 +79,15 @@ fn safe_balls_stay_inside_the_object() {
     for z in 0..n[2] {
         for y in 0..n[1] {
             for x in 0..n[0] {
-                let r2 = ((x as f32 - 6.5) / 6.0).powi(2) + ((y as f32 - 5.5) / 5.0).powi(2) + ((z as f32 - 6.0) / 5.5).powi(2);
+                let r2 = ((x as f32 - 6.5) / 6.0).powi(2)
+                    + ((y as f32 - 5.5) / 5.0).powi(2)
+                    + ((z as f32 - 6.0) / 5.5).powi(2);
                 inside[(z * n[1] + y) * n[0] + x] = (r2 < 1.0 && (x + 2 * y) % 11 != 3) as u8;
             }
         }
     }
     let geo = Geometry::new(n, size, Boundary::Box, 1.5, 0.4).unwrap().with_inside(inside.clone()).unwrap();
-    let mut rng = crate::rng::PathRng::new(9, 0, 0, 0);
+    let mut rng = crate::transport::rng::PathRng::new(9, 0, 0, 0);
     let mut checked = 0;
     for j in 0..inside.len() {
         let s = geo.safe_distance(j);
@@ -120,10 +129,9 @@ fn nearest_hit(n: [usize; 3], c: [i32; 3], cap: i32, hit: impl Fn(usize) -> bool
 
 /// A mask of three random blobs (concavities between them) in a grid of n voxels.
 fn blobs(n: [usize; 3], seed: u64) -> Vec<u8> {
-    let mut rng = crate::rng::PathRng::new(seed, 0, 0, 0);
-    let centres: Vec<[f32; 3]> = (0..3)
-        .map(|_| std::array::from_fn(|a| 2.0 + rng.next_f32() * (n[a] as f32 - 4.0)))
-        .collect();
+    let mut rng = crate::transport::rng::PathRng::new(seed, 0, 0, 0);
+    let centres: Vec<[f32; 3]> =
+        (0..3).map(|_| std::array::from_fn(|a| 2.0 + rng.next_f32() * (n[a] as f32 - 4.0))).collect();
     let mut inside = vec![0u8; n.iter().product()];
     for z in 0..n[2] {
         for y in 0..n[1] {
@@ -143,8 +151,8 @@ fn empty_distances_match_brute_force() {
     // exterior empty, capped); every brick's, in bricks, to the nearest brick that holds an inside voxel.
     let n = [40usize, 19, 27];
     let inside = blobs(n, 3);
-    let empty = crate::scene::empty_distances(&inside, n);
-    let cap = crate::scene::SAFE_CAP as i32;
+    let empty = crate::transport::scene::empty_distances(&inside, n);
+    let cap = crate::transport::scene::SAFE_CAP as i32;
     for z in 0..n[2] {
         for y in 0..n[1] {
             for x in 0..n[0] {
@@ -155,14 +163,17 @@ fn empty_distances_match_brute_force() {
     }
     assert!(empty.iter().any(|&e| e >= 4), "the test grid should have empty space");
     // The geometry keeps both in one signed array.
-    let safe = crate::scene::safe_distances(&inside, n);
+    let safe = crate::transport::scene::safe_distances(&inside, n);
     let geo = Geometry::new(n, [0.1; 3], Boundary::Box, 1.5, 0.4).unwrap().with_inside(inside.clone()).unwrap();
     for j in 0..inside.len() {
-        assert_eq!((geo.safe_distance(j), geo.empty_distance(j), geo.mask_inside(j)), (safe[j], empty[j], inside[j] != 0));
+        assert_eq!(
+            (geo.safe_distance(j), geo.empty_distance(j), geo.mask_inside(j)),
+            (safe[j], empty[j], inside[j] != 0)
+        );
     }
-    let b = crate::scene::BRICK;
+    let b = crate::transport::scene::BRICK;
     let nb: [usize; 3] = std::array::from_fn(|a| n[a].div_ceil(b));
-    let bricks = crate::scene::brick_empty_distances(&inside, n);
+    let bricks = crate::transport::scene::brick_empty_distances(&inside, n);
     let occupied = |k: usize| {
         let c = [k % nb[0], (k / nb[0]) % nb[1], k / (nb[0] * nb[1])];
         (0..inside.len()).any(|j| {
@@ -176,8 +187,8 @@ fn empty_distances_match_brute_force() {
         assert_eq!(bricks[k] as i32, nearest_hit(nb, c, 255, |i| occ[i]), "brick {c:?}");
     }
     // Mask without any inside voxel: everything is empty as far as the cap.
-    let none = crate::scene::empty_distances(&vec![0u8; 60], [5, 4, 3]);
-    assert!(none.iter().all(|&e| e == crate::scene::SAFE_CAP));
+    let none = crate::transport::scene::empty_distances(&[0u8; 60], [5, 4, 3]);
+    assert!(none.iter().all(|&e| e == crate::transport::scene::SAFE_CAP));
 }
 
 #[test]
@@ -193,22 +204,24 @@ fn empty_jumps_cross_no_voxel_of_the_object() {
         .map(|j| if j % n[0] < 30 { sub[(j / n[0]) * 30 + j % n[0]] } else { 0 })
         .collect();
     let geo = Geometry::new(n, size, Boundary::Box, 1.5, 0.4).unwrap().with_inside(inside.clone()).unwrap();
-    let mut rng = crate::rng::PathRng::new(4, 0, 0, 0);
+    let mut rng = crate::transport::rng::PathRng::new(4, 0, 0, 0);
     let (mut checked, mut big) = (0, 0);
-    let voxel_cap = (crate::scene::SAFE_CAP - 1) as f32 * 0.08 + 0.08;
+    let voxel_cap = (crate::transport::scene::SAFE_CAP - 1) as f32 * 0.08 + 0.08;
     for j in (0..inside.len()).filter(|&j| inside[j] == 0).step_by(7) {
         let v = voxel_at(n, j);
         let p: V3 = std::array::from_fn(|a| (v[a] as f32 + rng.next_f32()) * size[a]);
-        let d = crate::sampling::hg_sample([0.0, 0.0, 1.0], 0.0, rng.next_f32(), rng.next_f32());
-        let Some((q, w)) = crate::grid::empty_jump(&geo, p, d, v) else { continue };
+        let d = crate::transport::sampling::hg_sample([0.0, 0.0, 1.0], 0.0, rng.next_f32(), rng.next_f32());
+        let Some((q, w)) = crate::transport::grid::empty_jump(&geo, p, d, v) else { continue };
         let r = (0..3).map(|a| (q[a] - p[a]).powi(2)).sum::<f32>().sqrt();
         assert!(r > 0.0);
         big += (r > voxel_cap) as usize;
         assert!(box_distance2(q, w, size) < 1e-10, "jump to {q:?} names voxel {w:?}");
         for k in (0..inside.len()).filter(|&k| inside[k] != 0) {
             let w = voxel_at(n, k);
-            assert!(box_distance2(p, w, size) >= r * r * (1.0 - 1e-5),
-                    "point {p:?} in voxel {v:?}: a jump of {r} reaches inside voxel {w:?}");
+            assert!(
+                box_distance2(p, w, size) >= r * r * (1.0 - 1e-5),
+                "point {p:?} in voxel {v:?}: a jump of {r} reaches inside voxel {w:?}"
+            );
         }
         checked += 1;
     }
@@ -228,11 +241,11 @@ fn empty_jumps_far_from_the_origin_never_land_inside() {
     let inside: Vec<u8> = (0..n.iter().product::<usize>())
         .map(|j| {
             let x = j % n[0];
-            ((x < 1990 && x % 6 == 0) || x == n[0] - 1) as u8
+            ((x < 1990 && x.is_multiple_of(6)) || x == n[0] - 1) as u8
         })
         .collect();
     let geo = Geometry::new(n, size, Boundary::Box, 1.5, 0.4).unwrap().with_inside(inside.clone()).unwrap();
-    let mut rng = crate::rng::PathRng::new(8, 0, 0, 0);
+    let mut rng = crate::transport::rng::PathRng::new(8, 0, 0, 0);
     let mut jumps = 0;
     for _ in 0..40_000 {
         let x = 1000 + (rng.next_f32() * 1399.0) as i32;
@@ -242,7 +255,7 @@ fn empty_jumps_far_from_the_origin_never_land_inside() {
         }
         let p: V3 = std::array::from_fn(|a| (v[a] as f32 + rng.next_f32()) * size[a]);
         let d = if rng.next_f32() < 0.5 { [1.0, 0.0, 0.0] } else { [-1.0, 0.0, 0.0] };
-        if let Some((_, w)) = crate::grid::empty_jump(&geo, p, d, v) {
+        if let Some((_, w)) = crate::transport::grid::empty_jump(&geo, p, d, v) {
             jumps += 1;
             assert!(!geo.is_inside(w), "a jump from {p:?} (voxel {v:?}) along {d:?} named inside voxel {w:?}");
         }
@@ -254,20 +267,25 @@ fn empty_jumps_far_from_the_origin_never_land_inside() {
 fn erosion_of_tiny_grids_matches_brute_force() {
     // Every grid of 1 to 4 voxels per axis (the border cases of the separable erosion), random masks: safe and
     // empty distances as brute force.
-    let mut rng = crate::rng::PathRng::new(2, 0, 0, 0);
+    let mut rng = crate::transport::rng::PathRng::new(2, 0, 0, 0);
     for nx in 1..=4usize {
         for ny in 1..=4usize {
             for nz in 1..=4usize {
                 let n = [nx, ny, nz];
                 for _ in 0..3 {
                     let inside: Vec<u8> = (0..nx * ny * nz).map(|_| (rng.next_f32() < 0.7) as u8).collect();
-                    let (safe, empty) = (crate::scene::safe_distances(&inside, n), crate::scene::empty_distances(&inside, n));
+                    let (safe, empty) = (
+                        crate::transport::scene::safe_distances(&inside, n),
+                        crate::transport::scene::empty_distances(&inside, n),
+                    );
                     for j in 0..inside.len() {
                         let v = voxel_at(n, j);
-                        let cap = crate::scene::SAFE_CAP as i32;
-                        // Safe: distance to the nearest outside voxel, the grid's exterior (one step beyond a face) included.
+                        let cap = crate::transport::scene::SAFE_CAP as i32;
+                        // Safe: distance to the nearest outside voxel, the grid's exterior (one step beyond a
+                        // face) included.
                         let to_border = (0..3).map(|a| (v[a] + 1).min(n[a] as i32 - v[a])).min().unwrap();
-                        let want_safe = if inside[j] == 0 { 0 } else { nearest_hit(n, v, cap, |k| inside[k] == 0).min(to_border) };
+                        let want_safe =
+                            if inside[j] == 0 { 0 } else { nearest_hit(n, v, cap, |k| inside[k] == 0).min(to_border) };
                         assert_eq!(safe[j] as i32, want_safe.min(cap), "safe, grid {n:?}, voxel {v:?}");
                         let want_empty = nearest_hit(n, v, cap, |k| inside[k] != 0);
                         assert_eq!(empty[j] as i32, want_empty, "empty, grid {n:?}, voxel {v:?}");

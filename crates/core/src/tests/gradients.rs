@@ -10,12 +10,15 @@ fn replay_gradient_matches_finite_differences() {
     // 2 % for the O(h^2) finite-difference bias.
     let n = [3, 3, 4];
     let nv = 36;
-    let mut coeffs = [(0..3 * nv).map(|i| 3.0 + ((i * 31) % 7) as f32).collect::<Vec<f32>>(),
-                      (0..3 * nv).map(|i| 0.5 + ((i * 17) % 5) as f32 * 0.5).collect()];
+    let mut coeffs = [
+        (0..3 * nv).map(|i| 3.0 + ((i * 31) % 7) as f32).collect::<Vec<f32>>(),
+        (0..3 * nv).map(|i| 0.5 + ((i * 17) % 5) as f32 * 0.5).collect(),
+    ];
     let geo = Geometry::new(n, [0.1; 3], Boundary::PeriodicXY, 1.5, 0.4).unwrap();
     let texels = top_texels(n);
     let adj: Vec<[f32; 3]> = (0..texels.len()).map(|i| [1.0, -0.5 + 0.1 * i as f32, 0.3]).collect();
-    let probes = [(4 + 9 * 3, 0usize), (4 + 9 * 2, 1), (4 + 9 * 0, 0)];
+    // Voxel (1, 1) of layers z = 3, 2 and 0 (9 voxels per layer), and a channel each.
+    let probes = [(4 + 9 * 3, 0usize), (4 + 9 * 2, 1), (4, 0)];
     let opts = |seed| RenderOptions { spp: 1500, seed, include_specular: true };
     let medium = |c: &[Vec<f32>; 2]| DenseMedium::from_interleaved(&c[0], &c[1]).unwrap();
     for &(j, c) in &probes {
@@ -59,10 +62,17 @@ fn total_gradient_matches_a_uniform_shift() {
     }
     let cases = [
         (Geometry::new(n, [0.1; 3], Boundary::PeriodicXY, 1.5, 0.4).unwrap(), vec![1u8; nv]),
-        (Geometry::new(n, [0.1; 3], Boundary::Box, 1.5, 0.4).unwrap().with_inside(inside_notch.clone()).unwrap(), inside_notch.clone()),
-        (Geometry::new(n, [0.1; 3], Boundary::PeriodicXY, 1.5, 0.4).unwrap().with_inside(vec![1u8; nv]).unwrap(), vec![1u8; nv]),
+        (
+            Geometry::new(n, [0.1; 3], Boundary::Box, 1.5, 0.4).unwrap().with_inside(inside_notch.clone()).unwrap(),
+            inside_notch.clone(),
+        ),
+        (
+            Geometry::new(n, [0.1; 3], Boundary::PeriodicXY, 1.5, 0.4).unwrap().with_inside(vec![1u8; nv]).unwrap(),
+            vec![1u8; nv],
+        ),
     ];
-    let texels: Vec<Texel> = top_texels(n).into_iter().filter(|t| !(t.voxel[1] >= 2 && t.voxel[1] < 4 && t.voxel[0] < 2)).collect();
+    let texels: Vec<Texel> =
+        top_texels(n).into_iter().filter(|t| !(t.voxel[1] >= 2 && t.voxel[1] < 4 && t.voxel[0] < 2)).collect();
     let adj: Vec<[f32; 3]> = (0..texels.len()).map(|i| [1.0, 0.5 + 0.05 * i as f32, -0.7]).collect();
     let base_s: Vec<f32> = (0..3 * nv).map(|i| 4.0 + ((i * 31) % 7) as f32).collect();
     let base_a: Vec<f32> = (0..3 * nv).map(|i| 0.5 + ((i * 17) % 5) as f32 * 0.3).collect();
@@ -81,8 +91,10 @@ fn total_gradient_matches_a_uniform_shift() {
                 g.push((0..3 * nv).filter(|i| inside[i / 3] != 0).map(|i| grad[i] as f64).sum::<f64>());
                 let h = 0.2f32;
                 let shift = |x: f32| if which == 0 { coeffs(x, 0.0) } else { coeffs(0.0, x) };
-                let (fp, fm) = (objective(&geo, &shift(h), &texels, &adj, &opts(seed)),
-                                objective(&geo, &shift(-h), &texels, &adj, &opts(seed)));
+                let (fp, fm) = (
+                    objective(&geo, &shift(h), &texels, &adj, &opts(seed)),
+                    objective(&geo, &shift(-h), &texels, &adj, &opts(seed)),
+                );
                 fd.push((fp - fm) / (2.0 * h as f64));
             }
             let what = format!("{:?} masked {} {}", geo.boundary, geo.masked(), ["sigma_s", "sigma_a"][which]);
@@ -99,14 +111,24 @@ fn li1_gives_sigma_a_only() {
     let n = [4, 3, 3];
     let nv = 36;
     let med = heterogeneous(nv);
-    for geo in [Geometry::new(n, [0.1; 3], Boundary::Box, 1.5, 0.4).unwrap(),
-                Geometry::new(n, [0.1; 3], Boundary::PeriodicXY, 1.5, 0.4).unwrap().with_inside(vec![1; nv]).unwrap()] {
+    for geo in [
+        Geometry::new(n, [0.1; 3], Boundary::Box, 1.5, 0.4).unwrap(),
+        Geometry::new(n, [0.1; 3], Boundary::PeriodicXY, 1.5, 0.4).unwrap().with_inside(vec![1; nv]).unwrap(),
+    ] {
         let texels = top_texels(n);
         let adj: Vec<[f32; 3]> = (0..texels.len()).map(|i| [1.0, -0.5 + 0.1 * i as f32, 0.3]).collect();
         let mut gb = GradBuffers::new(nv);
         gb.zero(1.0);
-        backward(&geo, &med, &texels, 0, &adj, &RenderOptions { spp: 64, seed: 3, include_specular: true },
-                 GradMethod::Li1, &gb);
+        backward(
+            &geo,
+            &med,
+            &texels,
+            0,
+            &adj,
+            &RenderOptions { spp: 64, seed: 3, include_specular: true },
+            GradMethod::Li1,
+            &gb,
+        );
         let (mut gs, mut ga) = (vec![1.0; 3 * nv], vec![0.0; 3 * nv]);
         gb.collect(&mut gs, &mut ga);
         assert!(gs.iter().all(|&g| g == 0.0), "{:?}: sigma_s gradient {gs:?}", geo.boundary);

@@ -2,7 +2,7 @@
 //! as the uniform light; the packets and the scalar tracer agree under a directional map.
 
 use super::*;
-use crate::sampling::V3;
+use crate::transport::sampling::V3;
 use std::f32::consts::PI;
 
 /// A map of h x 2h pixels whose channel c at (row i, column j) is f(i, j, c).
@@ -55,7 +55,15 @@ fn column_zero_starts_at_plus_x_and_longitude_grows_towards_plus_y() {
         close(m.radiance(dir(PI / 2.0, (j as f32 + 0.5 + f) * 2.0 * half), 1), j as f32 + f, "column interpolation");
     }
     // Across the seam: halfway between the last column's centre and column 0's, towards +y.
-    let m = map_of(h, 0.0, |_, j, _| if j == w - 1 { 4.0 } else if j == 0 { 2.0 } else { 0.0 });
+    let m = map_of(h, 0.0, |_, j, _| {
+        if j == w - 1 {
+            4.0
+        } else if j == 0 {
+            2.0
+        } else {
+            0.0
+        }
+    });
     close(m.radiance(dir(PI / 2.0, -0.5 * half), 0), 3.5, "seam");
 }
 
@@ -108,7 +116,11 @@ fn a_constant_map_renders_exactly_as_the_uniform_light() {
     for (boundary, mask) in [(Boundary::Box, false), (Boundary::PeriodicXY, false), (Boundary::PeriodicXY, true)] {
         let geo = || {
             let g = Geometry::new(n, [0.1; 3], boundary, 1.5, 0.4).unwrap();
-            if mask { g.with_inside(vec![1; 60]).unwrap() } else { g }
+            if mask {
+                g.with_inside(vec![1; 60]).unwrap()
+            } else {
+                g
+            }
         };
         let texels: Vec<Texel> = texels.iter().filter(|t| boundary == Boundary::Box || t.face >= 4).copied().collect();
         let (a, _) = render(&geo().with_light(Box::new(UniformLight(k))), &med, &texels, 0, &opts);
@@ -142,8 +154,12 @@ fn packets_match_the_scalar_trace_under_a_directional_map() {
             for c in 0..3 {
                 let (m, var_mean, _) = super::samplers::scalar_estimate(&geo, &med, tex, i as u64, c, spp, 32, true);
                 let se = (x.var_mean[c] as f64 + var_mean).sqrt();
-                assert!((x.mean[c] as f64 - m).abs() < 4.5 * se + 1e-6,
-                        "{boundary:?} texel {i} face {} c {c}: {} vs {m} (se {se})", tex.face, x.mean[c]);
+                assert!(
+                    (x.mean[c] as f64 - m).abs() < 4.5 * se + 1e-6,
+                    "{boundary:?} texel {i} face {} c {c}: {} vs {m} (se {se})",
+                    tex.face,
+                    x.mean[c]
+                );
             }
         }
     }

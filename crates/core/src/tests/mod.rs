@@ -2,14 +2,15 @@
 //! and free flights with closed forms), `samplers` (the samplers and walks against each other), `gradients`
 //! (gradients against finite differences), `light` (environment maps), `determinism` (thread counts, chunking,
 //! media forms), `geometry` (safe distances and balls), `smooth` (the step preconditioner against a plain
-//! implementation), `storage` (in-place updates and compact storage against
-//! the plain forms, bit for bit). Tolerances are multiples of the estimator's own standard error (computed from
-//! the samples), never fixed image values.
+//! implementation), `storage` (in-place updates and compact storage against the plain forms, bit for bit),
+//! `layering` (the module layering, on the source). Tolerances are multiples of the estimator's own standard
+//! error (computed from the samples), never fixed image values.
 
 mod analytic;
 mod determinism;
 mod geometry;
 mod gradients;
+mod layering;
 mod light;
 mod samplers;
 mod smooth;
@@ -44,8 +45,11 @@ fn box_texels(n: [usize; 3], faces: &[u8]) -> Vec<Texel> {
         .iter()
         .flat_map(|&f| {
             (0..5).map(move |k| {
-                let v = [if f == 1 { last(0) } else { k % last(0) }, if f == 3 { last(1) } else { k % last(1) },
-                         if f == 5 { last(2) } else { k % last(2) }];
+                let v = [
+                    if f == 1 { last(0) } else { k % last(0) },
+                    if f == 3 { last(1) } else { k % last(1) },
+                    if f == 5 { last(2) } else { k % last(2) },
+                ];
                 Texel { voxel: v, face: f, normal: face_normal(f) }
             })
         })
@@ -75,8 +79,13 @@ fn objective<M: Medium>(geo: &Geometry, med: &M, texels: &[Texel], adj: &[[f32; 
 }
 
 /// The path-replay gradient of `objective`: (d/d sigma_s, d/d sigma_a), interleaved (voxel, channel).
-fn replay_gradient<M: Medium>(geo: &Geometry, med: &M, texels: &[Texel], adj: &[[f32; 3]], opts: &RenderOptions)
-    -> (Vec<f32>, Vec<f32>) {
+fn replay_gradient<M: Medium>(
+    geo: &Geometry,
+    med: &M,
+    texels: &[Texel],
+    adj: &[[f32; 3]],
+    opts: &RenderOptions,
+) -> (Vec<f32>, Vec<f32>) {
     let nv = med.len();
     let mut gb = GradBuffers::new(nv);
     gb.zero(1.0);

@@ -4,15 +4,31 @@
 use wide::f32x8;
 
 use super::*;
-use crate::packet::step::hg8;
+use crate::transport::packet::step::hg8;
 
 /// Mean, variance of the mean and collisions of `spp` scalar-traced paths of texel i (`trace::trace`).
-pub(super) fn scalar_estimate<M: Medium>(geo: &Geometry, med: &M, tex: &Texel, i: u64, c: usize, spp: u32, seed: u64,
-                              include_specular: bool) -> (f64, f64, u64) {
+pub(super) fn scalar_estimate<M: Medium>(
+    geo: &Geometry,
+    med: &M,
+    tex: &Texel,
+    i: u64,
+    c: usize,
+    spp: u32,
+    seed: u64,
+    include_specular: bool,
+) -> (f64, f64, u64) {
     let (mut sum, mut sq, mut events) = (0.0f64, 0.0f64, 0u64);
     for k in 0..spp {
-        let mut rng = crate::rng::PathRng::new(seed, i, k, c as u32);
-        let r = crate::trace::trace(geo, med, tex, c, &mut rng, include_specular, &mut crate::trace::NoTally);
+        let mut rng = crate::transport::rng::PathRng::new(seed, i, k, c as u32);
+        let r = crate::transport::trace::trace(
+            geo,
+            med,
+            tex,
+            c,
+            &mut rng,
+            include_specular,
+            &mut crate::transport::path::NoTally,
+        );
         sum += r.value as f64;
         sq += (r.value as f64).powi(2);
         events += r.events as u64;
@@ -27,7 +43,8 @@ fn regular_and_delta_tracking_agree_on_heterogeneous_media() {
     // voxel) and without (delta tracking): two exact samplers of the same transport, within 4 standard errors.
     let n = [7, 6, 5];
     let geo_d = Geometry::new(n, [0.08, 0.05, 0.1], Boundary::Box, 1.5, 0.4).unwrap();
-    let geo_r = Geometry::new(n, [0.08, 0.05, 0.1], Boundary::Box, 1.5, 0.4).unwrap().with_inside(vec![1; 210]).unwrap();
+    let geo_r =
+        Geometry::new(n, [0.08, 0.05, 0.1], Boundary::Box, 1.5, 0.4).unwrap().with_inside(vec![1; 210]).unwrap();
     let med = heterogeneous(210);
     for (i, tex) in box_texels(n, &[0, 1, 2, 3, 4, 5]).iter().enumerate() {
         for c in 0..3 {
@@ -55,7 +72,7 @@ fn packet_renderer_matches_scalar_trace() {
     for z in 0..big[2] {
         for y in 0..big[1] {
             for x in 0..big[0] {
-                if (x >= 5 && x <= 6 && z >= 6) || (x + y + z < 4) {
+                if ((5..=6).contains(&x) && z >= 6) || (x + y + z < 4) {
                     inside[(z * big[1] + y) * big[0] + x] = 0;
                 }
             }
@@ -63,10 +80,31 @@ fn packet_renderer_matches_scalar_trace() {
     }
     // Vacuum outside the object, as in voxelized meshes.
     // Channel 0 thin (free paths of several voxels: flights often reach the edge of their safe ball), 1-2 dense.
-    let big_s: Vec<f32> = (0..3 * inside.len()).map(|i| if inside[i / 3] == 0 { 0.0 } else if i % 3 == 0 { 2.0 + ((i * 7919) % 5) as f32 } else { 5.0 + ((i * 7919) % 23) as f32 }).collect();
-    let big_a: Vec<f32> = (0..3 * inside.len()).map(|i| if inside[i / 3] == 0 { 0.0 } else if i % 3 == 0 { 0.2 } else { ((i * 104729) % 7) as f32 * 0.5 }).collect();
+    let big_s: Vec<f32> = (0..3 * inside.len())
+        .map(|i| {
+            if inside[i / 3] == 0 {
+                0.0
+            } else if i % 3 == 0 {
+                2.0 + ((i * 7919) % 5) as f32
+            } else {
+                5.0 + ((i * 7919) % 23) as f32
+            }
+        })
+        .collect();
+    let big_a: Vec<f32> = (0..3 * inside.len())
+        .map(|i| {
+            if inside[i / 3] == 0 {
+                0.0
+            } else if i % 3 == 0 {
+                0.2
+            } else {
+                ((i * 104729) % 7) as f32 * 0.5
+            }
+        })
+        .collect();
     let big_med = DenseMedium::from_interleaved(&big_s, &big_a).unwrap();
-    let masked_geo = Geometry::new(big, [0.05; 3], Boundary::Box, 1.5, 0.4).unwrap().with_inside(inside.clone()).unwrap();
+    let masked_geo =
+        Geometry::new(big, [0.05; 3], Boundary::Box, 1.5, 0.4).unwrap().with_inside(inside.clone()).unwrap();
     let masked_texels: Vec<Texel> = (0..inside.len())
         .filter(|&j| inside[j] != 0)
         .flat_map(|j| {
@@ -85,7 +123,11 @@ fn packet_renderer_matches_scalar_trace() {
     let cases = [
         (Geometry::new(n, [0.08, 0.05, 0.1], Boundary::Box, 1.5, 0.4).unwrap(), &med, box_texels(&[0, 1, 2, 3, 4, 5])),
         (Geometry::new(n, [0.08, 0.05, 0.1], Boundary::PeriodicXY, 1.5, 0.4).unwrap(), &med, box_texels(&[4, 5])),
-        (Geometry::new(big, [0.05; 3], Boundary::Box, 1.5, 0.4).unwrap().with_inside(inside.clone()).unwrap(), &big_med, masked_texels),
+        (
+            Geometry::new(big, [0.05; 3], Boundary::Box, 1.5, 0.4).unwrap().with_inside(inside.clone()).unwrap(),
+            &big_med,
+            masked_texels,
+        ),
     ];
     for (geo, med, texels) in cases {
         let boundary = (geo.boundary, geo.masked());
@@ -98,8 +140,11 @@ fn packet_renderer_matches_scalar_trace() {
                     let (m, var_mean, ev) = scalar_estimate(&geo, med, tex, i as u64, c, spp, 22, include_specular);
                     scalar_events += ev;
                     let se = (x.var_mean[c] as f64 + var_mean).sqrt();
-                    assert!((x.mean[c] as f64 - m).abs() < 4.5 * se + 1e-6,
-                            "{boundary:?} specular {include_specular} texel {i} c {c}: {} vs {m} (se {se})", x.mean[c]);
+                    assert!(
+                        (x.mean[c] as f64 - m).abs() < 4.5 * se + 1e-6,
+                        "{boundary:?} specular {include_specular} texel {i} c {c}: {} vs {m} (se {se})",
+                        x.mean[c]
+                    );
                 }
             }
             // Collisions per path agree too (same walk): within 3 %, far above the noise of ~1e5 paths.
@@ -111,13 +156,13 @@ fn packet_renderer_matches_scalar_trace() {
 
 #[test]
 fn hg8_matches_the_scalar_sampler() {
-    let d = crate::sampling::normalize([0.3, -0.5, 0.81]);
+    let d = crate::transport::sampling::normalize([0.3, -0.5, 0.81]);
     let u1 = f32x8::from([0.01, 0.2, 0.35, 0.5, 0.61, 0.77, 0.9, 0.999]);
     let u2 = f32x8::from([0.9, 0.1, 0.33, 0.5, 0.7, 0.25, 0.05, 0.6]);
     let w = hg8(d.map(f32x8::splat), 0.4, u1, u2);
     let (a, b) = (u1.to_array(), u2.to_array());
     for l in 0..8 {
-        let s = crate::sampling::hg_sample(d, 0.4, a[l], b[l]);
+        let s = crate::transport::sampling::hg_sample(d, 0.4, a[l], b[l]);
         for k in 0..3 {
             assert!((w[k].to_array()[l] - s[k]).abs() < 2e-5, "lane {l}: {:?} vs {s:?}", w.map(|x| x.to_array()[l]));
         }
@@ -140,7 +185,8 @@ fn jumps_across_empty_space_leave_renders_unchanged() {
         (0..n.iter().product::<usize>()).map(|j| plate(j / (n[0] * n[1]), upper) as u8).collect()
     };
     let (both, lower) = (mask(true), mask(false));
-    let coeffs = |m: &[u8], v: f32| -> Vec<f32> { (0..3 * m.len()).map(|i| if m[i / 3] == 0 { 0.0 } else { v }).collect() };
+    let coeffs =
+        |m: &[u8], v: f32| -> Vec<f32> { (0..3 * m.len()).map(|i| if m[i / 3] == 0 { 0.0 } else { v }).collect() };
     let med = |m: &[u8]| DenseMedium::from_interleaved(&coeffs(m, 20.0), &coeffs(m, 0.5)).unwrap();
     let (med_both, med_lower) = (med(&both), med(&lower));
     let geo = |m: &[u8]| Geometry::new(n, [0.05; 3], Boundary::Box, 1.5, 0.4).unwrap().with_inside(m.to_vec()).unwrap();
@@ -158,7 +204,10 @@ fn jumps_across_empty_space_leave_renders_unchanged() {
     for c in 0..3 {
         let ((ma, se), (mb, _), (mo, seo)) = (mean_and_se(&a, c), mean_and_se(&b, c), mean_and_se(&open, c));
         assert!((ma - mb).abs() < 1e-3 * ma, "channel {c}: {ma} with jumps, {mb} voxel by voxel");
-        assert!((ma - mo).abs() > 10.0 * (se * se + seo * seo).sqrt(), "channel {c}: {ma} with the upper plate, {mo} without");
+        assert!(
+            (ma - mo).abs() > 10.0 * (se * se + seo * seo).sqrt(),
+            "channel {c}: {ma} with the upper plate, {mo} without"
+        );
         let mut same = 0;
         for (i, (x, y)) in a.iter().zip(&b).enumerate() {
             let se = (x.var_mean[c] as f64).sqrt();
@@ -171,13 +220,29 @@ fn jumps_across_empty_space_leave_renders_unchanged() {
     // random numbers) until it scatters deep in a plate or ends: the same outcome and voxel either way, and
     // fewer steps with the jumps whenever it scatters in the upper plate.
     let walk = |geo: &Geometry, key: u64| {
-        let mut w = crate::trace::Walk { p: [1.0, 0.9, 0.2], d: [0.0, 0.0, 1.0], v: [20, 18, 4], weight: 1.0,
-                                         in_medium: false, events: 0, steps: 0 };
-        let mut rng = crate::rng::PathRng::new(1, key, 3, 0);
-        let mut tracker = crate::flight::Regular::new();
-        match crate::trace::walk(geo, &med_both, 0, &mut w, &mut tracker, &mut rng, &mut crate::trace::NoTally, true) {
-            crate::trace::WalkEnd::Deep => Some((w.steps, w.v)),
-            crate::trace::WalkEnd::Done(_) => None,
+        let mut w = crate::transport::path::Walk {
+            p: [1.0, 0.9, 0.2],
+            d: [0.0, 0.0, 1.0],
+            v: [20, 18, 4],
+            weight: 1.0,
+            in_medium: false,
+            events: 0,
+            steps: 0,
+        };
+        let mut rng = crate::transport::rng::PathRng::new(1, key, 3, 0);
+        let mut tracker = crate::transport::flight::Regular::new();
+        match crate::transport::trace::walk(
+            geo,
+            &med_both,
+            0,
+            &mut w,
+            &mut tracker,
+            &mut rng,
+            &mut crate::transport::path::NoTally,
+            true,
+        ) {
+            crate::transport::trace::WalkEnd::Deep => Some((w.steps, w.v)),
+            crate::transport::trace::WalkEnd::Done(_) => None,
         }
     };
     let mut upper = 0;

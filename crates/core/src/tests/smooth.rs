@@ -2,8 +2,8 @@
 //! a map over the grid; and the same in f32 in the core's order of operations, bit for bit), its conservation,
 //! thread-count independence and its refusal of bad sets. The set has more than two parallel blocks of rows.
 
-use crate::rng::uniform;
-use crate::smooth::{diffuse_rows, Guide};
+use crate::kernels::smooth::{diffuse_rows, Guide};
+use crate::transport::rng::uniform;
 
 /// An irregular set (about 60 % of a 26 x 24 x 22 grid: ~8 200 rows, more than two of the core's parallel blocks
 /// of 4 096) as its increasing linear indices, and random values.
@@ -80,16 +80,18 @@ fn check_against_plain(guided: bool) {
     for _ in 0..steps {
         let mut next = r32.clone();
         for (p, &j) in index.iter().enumerate() {
-            let j = j as i64;
             let (z, y, x) = (j / (n[1] * n[2]) as i64, j / n[2] as i64 % n[1] as i64, j % n[2] as i64);
-            let nb: Vec<Option<usize>> = [(-1, 0, 0), (1, 0, 0), (0, -1, 0), (0, 1, 0), (0, 0, -1), (0, 0, 1)].iter()
-                .map(|&(dz, dy, dx)| at(z + dz, y + dy, x + dx)).collect();
+            let nb: Vec<Option<usize>> = [(-1, 0, 0), (1, 0, 0), (0, -1, 0), (0, 1, 0), (0, 0, -1), (0, 0, 1)]
+                .iter()
+                .map(|&(dz, dy, dx)| at(z + dz, y + dy, x + dx))
+                .collect();
             for c in 0..ch {
                 let v = r32[p * ch + c];
                 let mut acc = 0.0f32;
                 for q in nb.iter().flatten() {
                     let w = if guided {
-                        let d2: f32 = (0..2).map(|k| (gv[p * 2 + k] - gv[q * 2 + k]) * (gv[p * 2 + k] - gv[q * 2 + k])).sum();
+                        let d2: f32 =
+                            (0..2).map(|k| (gv[p * 2 + k] - gv[q * 2 + k]) * (gv[p * 2 + k] - gv[q * 2 + k])).sum();
                         alpha * (-d2 / (tau * tau)).exp()
                     } else {
                         alpha
@@ -103,8 +105,10 @@ fn check_against_plain(guided: bool) {
     }
     assert_eq!(v, r32);
     for c in 0..ch {
-        let (s0, s1): (f64, f64) = (v0.iter().skip(c).step_by(ch).map(|&x| x as f64).sum(),
-                                    v.iter().skip(c).step_by(ch).map(|&x| x as f64).sum());
+        let (s0, s1): (f64, f64) = (
+            v0.iter().skip(c).step_by(ch).map(|&x| x as f64).sum(),
+            v.iter().skip(c).step_by(ch).map(|&x| x as f64).sum(),
+        );
         assert!((s0 - s1).abs() < 1e-4, "channel {c}: {s0} vs {s1}");
     }
 }
@@ -116,7 +120,10 @@ fn same_bits_for_any_thread_count() {
     let guide = Guide { values: &gv, dims: 2, tau: 0.5 };
     let run = |threads: usize| {
         let mut v = v0.clone();
-        rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap()
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
             .install(|| diffuse_rows(n, &index, &mut v, 2, 4, 0.125, Some(guide)).unwrap());
         v
     };

@@ -3,12 +3,17 @@
 //! sparse shading normals against the dense formula; the sparse medium against the dense one.
 
 use super::*;
-use crate::sampling::V3;
+use crate::transport::sampling::V3;
 
 /// Every voxel's (sigma_t, albedo) of every channel, as bits, and the majorants.
 fn medium_bits(m: &DenseMedium) -> (Vec<(u32, u32)>, [f32; 3]) {
-    let bits = (0..3).flat_map(|c| (0..m.len()).map(move |j| (c, j)))
-        .map(|(c, j)| { let (t, a) = m.coeffs(j, c); (t.to_bits(), a.to_bits()) }).collect();
+    let bits = (0..3)
+        .flat_map(|c| (0..m.len()).map(move |j| (c, j)))
+        .map(|(c, j)| {
+            let (t, a) = m.coeffs(j, c);
+            (t.to_bits(), a.to_bits())
+        })
+        .collect();
     (bits, [m.majorant(0), m.majorant(1), m.majorant(2)])
 }
 
@@ -49,18 +54,48 @@ fn set_voxels_matches_a_medium_built_from_the_modified_arrays() {
     let (y, sy) = render(&geo, &want, &texels, 0, &opts);
     assert_eq!(sx.events, sy.events);
     for (p, q) in x.iter().zip(&y) {
-        assert_eq!((p.mean.map(f32::to_bits), p.var_mean.map(f32::to_bits)),
-                   (q.mean.map(f32::to_bits), q.var_mean.map(f32::to_bits)));
+        assert_eq!(
+            (p.mean.map(f32::to_bits), p.var_mean.map(f32::to_bits)),
+            (q.mean.map(f32::to_bits), q.var_mean.map(f32::to_bits))
+        );
     }
     // Errors name the problem and leave the medium as it was (the valid entries before the bad one included).
     let before = medium_bits(&med);
-    let bad_value = |q: usize, x: f32| { let mut v = ns.clone(); v[q] = x; v };
+    let bad_value = |q: usize, x: f32| {
+        let mut v = ns.clone();
+        v[q] = x;
+        v
+    };
     type Case = (Vec<i64>, Vec<f32>, Vec<f32>, &'static str); // index, sigma_s, sigma_a, error message
     let cases: Vec<Case> = vec![
         (index.clone(), ns[..3 * k - 3].to_vec(), na.clone(), "3 channels"),
-        ({ index[7] = nv as i64; index.clone() }, ns.clone(), na.clone(), "entry 7 is voxel 540, outside"),
-        ({ index[7] = -1; index.clone() }, ns.clone(), na.clone(), "entry 7 is voxel -1, outside"),
-        ({ index[7] = 21; index.clone() }, bad_value(40, f32::NAN), na.clone(), "entry 13 (voxel 39) channel 1"),
+        (
+            {
+                index[7] = nv as i64;
+                index.clone()
+            },
+            ns.clone(),
+            na.clone(),
+            "entry 7 is voxel 540, outside",
+        ),
+        (
+            {
+                index[7] = -1;
+                index.clone()
+            },
+            ns.clone(),
+            na.clone(),
+            "entry 7 is voxel -1, outside",
+        ),
+        (
+            {
+                index[7] = 21;
+                index.clone()
+            },
+            bad_value(40, f32::NAN),
+            na.clone(),
+            "entry 13 (voxel 39) channel 1",
+        ),
         (index.clone(), ns.clone(), bad_value(5, -1e-3), "entry 1 (voxel 3) channel 2"),
         (index.clone(), bad_value(3 * k - 1, f32::INFINITY), na.clone(), "negative or not finite"),
     ];
@@ -85,8 +120,10 @@ fn reused_gradient_buffers_match_fresh_ones() {
     };
     let map: Vec<u32> = (0..nv as u32).map(|j| if j % 5 == 2 { NO_GRADIENT } else { j / 2 }).collect();
     let pools = [1, 2].map(|t| rayon::ThreadPoolBuilder::new().num_threads(t).build().unwrap());
-    let geos = [Geometry::new(n, [0.1; 3], Boundary::Box, 1.5, 0.4).unwrap(),
-                Geometry::new(n, [0.1; 3], Boundary::PeriodicXY, 1.5, 0.4).unwrap().with_inside(vec![1; nv]).unwrap()];
+    let geos = [
+        Geometry::new(n, [0.1; 3], Boundary::Box, 1.5, 0.4).unwrap(),
+        Geometry::new(n, [0.1; 3], Boundary::PeriodicXY, 1.5, 0.4).unwrap().with_inside(vec![1; nv]).unwrap(),
+    ];
     for geo in &geos {
         for m in [None, Some(map.clone())] {
             for method in [GradMethod::Replay, GradMethod::Li1] {
@@ -119,7 +156,7 @@ fn sparse_normals_match_the_dense_formula() {
     // vectors; rows with none and a row with all) gets exactly the shading normal of the former dense lookup.
     let n = [9usize, 5, 4];
     let nv = 180;
-    let mut rng = crate::rng::PathRng::new(7, 0, 0, 0);
+    let mut rng = crate::transport::rng::PathRng::new(7, 0, 0, 0);
     let mut dense = vec![0.0f32; 3 * nv];
     for j in 0..nv {
         let mut v = [(); 3].map(|_| 2.0 * rng.next_f32() - 1.0);
@@ -140,12 +177,16 @@ fn sparse_normals_match_the_dense_formula() {
     dense[3 * 3..3 * 4].copy_from_slice(&[0.5, 0.5, 0.0]); // |n|^2 = 0.5 exactly: no normal
     dense[3 * 10..3 * 11].copy_from_slice(&[f32::NAN, 1.0, 0.0]);
     dense[3 * 12..3 * 13].copy_from_slice(&[f32::INFINITY, 0.0, 0.0]);
-    // The dense lookup as it was: normalise at the query.
-    let old = |j: usize| -> Option<V3> {
+    // The plain dense lookup, normalising at the query: the sparse store must give the same bits.
+    let plain = |j: usize| -> Option<V3> {
         let i = 3 * j;
         let n = [dense[i], dense[i + 1], dense[i + 2]];
         let l2 = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
-        if l2 > 0.5 { Some(crate::sampling::scale(n, 1.0 / l2.sqrt())) } else { None }
+        if l2 > 0.5 {
+            Some(crate::transport::sampling::scale(n, 1.0 / l2.sqrt()))
+        } else {
+            None
+        }
     };
     let geo = Geometry::new(n, [0.1; 3], Boundary::Box, 1.5, 0.4).unwrap().with_normals(&dense).unwrap();
     let bits = |v: Option<V3>| v.map(|v| v.map(f32::to_bits));
@@ -155,8 +196,8 @@ fn sparse_normals_match_the_dense_formula() {
             for x in 0..n[0] as i32 {
                 let j = geo.index([x, y, z]);
                 let v = &dense[3 * j..3 * j + 3];
-                assert_eq!(bits(geo.shading_normal([x, y, z])), bits(old(j)), "voxel {j} {v:?}");
-                kept += old(j).is_some() as usize;
+                assert_eq!(bits(geo.shading_normal([x, y, z])), bits(plain(j)), "voxel {j} {v:?}");
+                kept += plain(j).is_some() as usize;
             }
         }
     }
@@ -174,7 +215,8 @@ fn sparse_normals_match_the_dense_formula() {
             vectors.extend_from_slice(&dense[3 * j..3 * j + 3]);
         }
     }
-    let geo2 = Geometry::new(n, [0.1; 3], Boundary::Box, 1.5, 0.4).unwrap().with_sparse_normals(&index, &vectors).unwrap();
+    let geo2 =
+        Geometry::new(n, [0.1; 3], Boundary::Box, 1.5, 0.4).unwrap().with_sparse_normals(&index, &vectors).unwrap();
     for j in 0..nv {
         let v = [(j % n[0]) as i32, ((j / n[0]) % n[1]) as i32, (j / (n[0] * n[1])) as i32];
         assert_eq!(bits(geo2.shading_normal(v)), bits(geo.shading_normal(v)), "voxel {j}");
@@ -188,8 +230,13 @@ fn sparse_normals_match_the_dense_formula() {
 
 /// (sigma_t, albedo) bits of every voxel and channel of any medium, and its majorants.
 fn lookup_bits<M: Medium>(m: &M) -> (Vec<(u32, u32)>, [u32; 3]) {
-    let bits = (0..3).flat_map(|c| (0..m.len()).map(move |j| (c, j)))
-        .map(|(c, j)| { let (t, a) = m.coeffs(j, c); (t.to_bits(), a.to_bits()) }).collect();
+    let bits = (0..3)
+        .flat_map(|c| (0..m.len()).map(move |j| (c, j)))
+        .map(|(c, j)| {
+            let (t, a) = m.coeffs(j, c);
+            (t.to_bits(), a.to_bits())
+        })
+        .collect();
     (bits, [0, 1, 2].map(|c| m.majorant(c).to_bits()))
 }
 
@@ -202,7 +249,7 @@ fn sparse_medium_matches_the_dense_one_bit_for_bit() {
     let nv = n.iter().product::<usize>();
     let outside = |j: usize| {
         let (x, y, z) = (j % n[0], (j / n[0]) % n[1], j / (n[0] * n[1]));
-        (z >= 2 && z <= 4 && (3..6).contains(&x) && (2..5).contains(&y)) || (z == 3 && y == 0 && x < 4)
+        ((2..=4).contains(&z) && (3..6).contains(&x) && (2..5).contains(&y)) || (z == 3 && y == 0 && x < 4)
     };
     let inside: Vec<u8> = (0..nv).map(|j| !outside(j) as u8).collect();
     let index: Vec<i64> = (0..nv as i64).filter(|&j| inside[j as usize] != 0).collect();
@@ -213,7 +260,9 @@ fn sparse_medium_matches_the_dense_one_bit_for_bit() {
         s[3 * j..3 * j + 3].fill(0.0);
         a[3 * j..3 * j + 3].fill(0.0);
     }
-    let gather = |v: &[f32]| -> Vec<f32> { index.iter().flat_map(|&j| v[3 * j as usize..3 * j as usize + 3].to_vec()).collect() };
+    let gather = |v: &[f32]| -> Vec<f32> {
+        index.iter().flat_map(|&j| v[3 * j as usize..3 * j as usize + 3].to_vec()).collect()
+    };
     let mut sparse = SparseMedium::new(n, &index, &gather(&s), &gather(&a)).unwrap();
     let dense = DenseMedium::from_interleaved(&s, &a).unwrap();
     // Rows through the cavity store it (vacuum between inside voxels); the notch's rows start after it.
@@ -229,8 +278,9 @@ fn sparse_medium_matches_the_dense_one_bit_for_bit() {
         let ((x, sx), (y, sy)) = (render(&geo, sparse, &texels, 0, &opts), render(&geo, dense, &texels, 0, &opts));
         assert_eq!(sx.events, sy.events);
         assert!(sx.events > 1000, "paths scatter: {}", sx.events);
-        let bits = |e: &[TexelEstimate]| e.iter().map(|e| (e.mean.map(f32::to_bits), e.var_mean.map(f32::to_bits)))
-            .collect::<Vec<_>>();
+        let bits = |e: &[TexelEstimate]| {
+            e.iter().map(|e| (e.mean.map(f32::to_bits), e.var_mean.map(f32::to_bits))).collect::<Vec<_>>()
+        };
         assert_eq!(bits(&x), bits(&y));
         let (gs, ga) = replay_gradient(&geo, sparse, &texels, &adj, &opts);
         assert_eq!((gs, ga), replay_gradient(&geo, dense, &texels, &adj, &opts));
@@ -246,11 +296,14 @@ fn sparse_medium_matches_the_dense_one_bit_for_bit() {
     let matter_outside = DenseMedium::from_interleaved(&s_out, &a_out).unwrap();
     assert_eq!([0, 1, 2].map(|c| matter_outside.majorant(c)), [0, 1, 2].map(|c| dense.majorant(c)));
     let opts = RenderOptions { spp: 8, seed: 3, include_specular: true };
-    let bits = |m: &DenseMedium| render(&geo, m, &texels, 0, &opts).0.iter().map(|e| e.mean.map(f32::to_bits))
-        .collect::<Vec<_>>();
+    let bits = |m: &DenseMedium| {
+        render(&geo, m, &texels, 0, &opts).0.iter().map(|e| e.mean.map(f32::to_bits)).collect::<Vec<_>>()
+    };
     assert_eq!(bits(&matter_outside), bits(&dense));
-    assert_eq!(replay_gradient(&geo, &matter_outside, &texels, &adj, &opts),
-               replay_gradient(&geo, &dense, &texels, &adj, &opts));
+    assert_eq!(
+        replay_gradient(&geo, &matter_outside, &texels, &adj, &opts),
+        replay_gradient(&geo, &dense, &texels, &adj, &opts)
+    );
     // set_voxels on some stored voxels (one listed twice: the last values win) = the dense medium rebuilt.
     let sub: Vec<i64> = index.iter().copied().step_by(4).chain([index[5], index[5]]).collect();
     let q = sub.len();
@@ -272,7 +325,11 @@ fn sparse_medium_matches_the_dense_one_bit_for_bit() {
     let before = lookup_bits(&sparse);
     let hole = (0..nv as i64).find(|&j| outside(j as usize)).unwrap(); // in the cavity: inside its row's span
     let notch = ((3 * n[1]) * n[0]) as i64; // (x, y, z) = (0, 0, 3): before its row's span
-    let bad = |q: usize, x: f32| { let mut v = gather(&s2); v[q] = x; v };
+    let bad = |q: usize, x: f32| {
+        let mut v = gather(&s2);
+        v[q] = x;
+        v
+    };
     let errs = [
         sparse.set_voxels(&[index[2], hole], &[1.0; 6], &[0.0; 6]).unwrap_err(),
         sparse.set_voxels(&[nv as i64], &[1.0; 3], &[0.0; 3]).unwrap_err(),
@@ -281,14 +338,21 @@ fn sparse_medium_matches_the_dense_one_bit_for_bit() {
         sparse.refill(&bad(7, f32::NAN), &gather(&a2)).unwrap_err(),
         sparse.refill(&gather(&s2)[3..], &gather(&a2)).unwrap_err(),
     ];
-    let want = [format!("voxel {hole}, which the medium does not store"), format!("voxel {nv}, outside the grid"),
-                format!("voxel {notch}, which the medium does not store"),
-                "entry 0 (voxel".to_string(), "entry 2 channel 1".to_string(), "3 channels".to_string()];
+    let want = [
+        format!("voxel {hole}, which the medium does not store"),
+        format!("voxel {nv}, outside the grid"),
+        format!("voxel {notch}, which the medium does not store"),
+        "entry 0 (voxel".to_string(),
+        "entry 2 channel 1".to_string(),
+        "3 channels".to_string(),
+    ];
     for (e, w) in errs.iter().zip(&want) {
         assert!(e.contains(w.as_str()) && !e.contains('\n'), "{e} (want {w})");
     }
     assert!(lookup_bits(&sparse) == before, "a refused update changed the medium");
-    for (ix, w) in [(vec![3i64, 3], "strictly increasing"), (vec![-1], "voxel -1, outside"), (vec![nv as i64], "outside")] {
+    for (ix, w) in
+        [(vec![3i64, 3], "strictly increasing"), (vec![-1], "voxel -1, outside"), (vec![nv as i64], "outside")]
+    {
         let e = SparseMedium::new(n, &ix, &vec![1.0; 3 * ix.len()], &vec![0.0; 3 * ix.len()]).err().unwrap();
         assert!(e.contains(w), "{e}");
     }

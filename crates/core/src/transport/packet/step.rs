@@ -11,10 +11,10 @@ use bytemuck::cast;
 use wide::{f32x8, i32x8, u32x8, CmpGe, CmpLt};
 
 use super::{Packet, STEP_DRAWS, W};
-use crate::grid::{grid_exit8, locate8, safe_radius8};
-use crate::rng::uniform8;
-use crate::scene::{Geometry, Medium};
-use crate::trace::{MAX_EVENTS, MAX_STEPS, RR_THRESHOLD};
+use crate::transport::grid::{grid_exit8, locate8, safe_radius8};
+use crate::transport::path::{MAX_EVENTS, MAX_STEPS, RR_THRESHOLD};
+use crate::transport::rng::uniform8;
+use crate::transport::scene::{Geometry, Medium};
 
 /// What a step left for per-lane handling (bit l = lane l).
 pub(super) struct StepEvents {

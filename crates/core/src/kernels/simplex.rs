@@ -14,8 +14,8 @@
 //!   dE/dx[r, k] = p[r, k] c[r, k]                                  (the Euclidean gradient)
 //! ```
 //!
-//! Every row is computed on its own in a fixed order (f32, like the numpy expressions they replace, which made
-//! several passes over the (rows, n) arrays on one core), so the result does not depend on the thread count.
+//! Every row is computed on its own in a fixed order (f32, rows in parallel), so the result does not depend on
+//! the thread count.
 
 use rayon::prelude::*;
 
@@ -61,8 +61,14 @@ pub fn softmax_rows(x: &[f32], n: usize, p: &mut [f32]) -> Result<(), String> {
 
 /// The backward map of [`softmax_rows`] (module docs): `out` = the natural direction c if `natural`, else p c,
 /// from logits `x` and `g` = dE/dp (both rows × `n`) and the per-row `scale` (rows).
-pub fn softmax_backward(x: &[f32], g: &[f32], scale: &[f32], n: usize, natural: bool, out: &mut [f32])
-                        -> Result<(), String> {
+pub fn softmax_backward(
+    x: &[f32],
+    g: &[f32],
+    scale: &[f32],
+    n: usize,
+    natural: bool,
+    out: &mut [f32],
+) -> Result<(), String> {
     let rows = check(x, n, &[("g", g.len()), ("out", out.len())])?;
     if scale.len() != rows {
         return Err(format!("scale has {} values for {rows} rows", scale.len()));
@@ -91,7 +97,9 @@ mod tests {
         // 9 001 rows of 5 (more than two blocks, a partial last one), spread logits incl. large ones
         let n = 5;
         let r = 9001;
-        let x: Vec<f32> = (0..r * n).map(|i| ((i * 7919 % 1000) as f32 / 50.0 - 10.0) * if i % 11 == 0 { 9.0 } else { 1.0 }).collect();
+        let x: Vec<f32> = (0..r * n)
+            .map(|i| ((i * 7919 % 1000) as f32 / 50.0 - 10.0) * if i % 11 == 0 { 9.0 } else { 1.0 })
+            .collect();
         let g: Vec<f32> = (0..r * n).map(|i| (i * 104_729 % 997) as f32 / 997.0 - 0.5).collect();
         let s: Vec<f32> = (0..r).map(|i| 0.2 + (i % 9) as f32 / 10.0).collect();
         (x, g, s)
@@ -128,7 +136,9 @@ mod tests {
         };
         for r in (0..9001).step_by(97) {
             let xr: Vec<f64> = x[r * 5..r * 5 + 5].iter().map(|&v| v as f64).collect();
-            let e = |xv: &[f64]| -> f64 { p64(xv).iter().zip(&g[r * 5..r * 5 + 5]).map(|(p, &w)| s[r] as f64 * p * w as f64).sum() };
+            let e = |xv: &[f64]| -> f64 {
+                p64(xv).iter().zip(&g[r * 5..r * 5 + 5]).map(|(p, &w)| s[r] as f64 * p * w as f64).sum()
+            };
             for k in 0..5 {
                 let h = 1e-6;
                 let (mut a, mut b) = (xr.clone(), xr.clone());

@@ -4,17 +4,17 @@
 //!
 //! Scalar helpers serve the scalar walks (`trace`, `flight`) and the per-lane code of `packet`; the `*8`
 //! helpers are their eight-lane forms for the packet step. The two forms are not always the same arithmetic
-//! (the lanes divide where the scalar code multiplies by a reciprocal), and each keeps its own so that renders
-//! stay bit-identical to the earlier code; the comments say which is which.
+//! (the lanes divide where the scalar code multiplies by a reciprocal); each keeps its own, since unifying them
+//! would change the bits of one renderer's results; the comments say which is which.
 
 use std::ops::Range;
 
 use bytemuck::cast;
 use wide::{f32x8, i32x8, CmpEq, CmpGe, CmpGt, CmpLt};
 
-use crate::sampling::{add, scale, V3};
-use crate::scene::{Boundary, Geometry, BRICK};
-use crate::trace::Tally;
+use crate::transport::path::Tally;
+use crate::transport::sampling::{add, scale, V3};
+use crate::transport::scene::{Boundary, Geometry, BRICK};
 
 /// The grid's extent along axis a (n * size): its period on a periodic axis.
 #[inline(always)]
@@ -228,7 +228,11 @@ impl Dda {
     pub fn next_axis(&self) -> usize {
         let m = &self.t_max;
         if m[0] < m[1] {
-            if m[0] < m[2] { 0 } else { 2 }
+            if m[0] < m[2] {
+                0
+            } else {
+                2
+            }
         } else if m[1] < m[2] {
             1
         } else {

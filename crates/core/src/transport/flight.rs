@@ -17,11 +17,13 @@
 //! Both samplers also report the exact per-voxel lengths of every flight and each collision's voxel to a
 //! `Tally` (see `trace` for the path-space derivatives they feed).
 
-use crate::grid::{facing_normal, grid_exit, locate, locate_box, tally_segments, wrap_step, Dda};
-use crate::rng::Uniforms;
-use crate::sampling::{add, scale, V3};
-use crate::scene::{Boundary, Geometry, Medium};
-use crate::trace::{Tally, Walk, MAX_STEPS, RR_THRESHOLD};
+use crate::transport::grid::{
+    facing_normal, grid_exit, grid_face_point, locate, locate_box, tally_segments, wrap_step, Dda,
+};
+use crate::transport::path::{Tally, Walk, MAX_STEPS, RR_THRESHOLD};
+use crate::transport::rng::Uniforms;
+use crate::transport::sampling::{add, scale, V3};
+use crate::transport::scene::{Boundary, Geometry, Medium};
 
 /// An exponential sample with mean 1 (an optical depth) from uniform u in [0, 1).
 #[inline(always)]
@@ -63,8 +65,15 @@ pub(crate) enum Event {
 pub(crate) trait Tracker {
     fn start<U: Uniforms>(&mut self, geo: &Geometry, w: &Walk, rng: &mut U);
     fn redirect(&mut self, geo: &Geometry, w: &Walk);
-    fn next<M: Medium, T: Tally, U: Uniforms>(&mut self, geo: &Geometry, med: &M, c: usize, w: &mut Walk, rng: &mut U,
-                                              tally: &mut T) -> Event;
+    fn next<M: Medium, T: Tally, U: Uniforms>(
+        &mut self,
+        geo: &Geometry,
+        med: &M,
+        c: usize,
+        w: &mut Walk,
+        rng: &mut U,
+        tally: &mut T,
+    ) -> Event;
 }
 
 /// Regular tracking: the optical depth left, and the flight from p0 (t flown so far) through voxel index j.
@@ -78,7 +87,13 @@ pub(crate) struct Regular {
 
 impl Regular {
     pub fn new() -> Self {
-        Regular { tau: 0.0, p0: [0.0; 3], t: 0.0, dda: Dda { t_max: [0.0; 3], t_delta: [0.0; 3], step: [0; 3], dj: [0; 3] }, j: 0 }
+        Regular {
+            tau: 0.0,
+            p0: [0.0; 3],
+            t: 0.0,
+            dda: Dda { t_max: [0.0; 3], t_delta: [0.0; 3], step: [0; 3], dj: [0; 3] },
+            j: 0,
+        }
     }
 }
 
@@ -98,8 +113,15 @@ impl Tracker for Regular {
     }
 
     #[inline(always)]
-    fn next<M: Medium, T: Tally, U: Uniforms>(&mut self, geo: &Geometry, med: &M, c: usize, w: &mut Walk, _: &mut U,
-                                              tally: &mut T) -> Event {
+    fn next<M: Medium, T: Tally, U: Uniforms>(
+        &mut self,
+        geo: &Geometry,
+        med: &M,
+        c: usize,
+        w: &mut Walk,
+        _: &mut U,
+        tally: &mut T,
+    ) -> Event {
         loop {
             w.steps += 1;
             if w.steps > MAX_STEPS {
@@ -165,8 +187,15 @@ impl Tracker for Delta {
     /// One flight from p: tentative collisions (two uniforms each) until a real one or the grid's face. Moves p
     /// (wrapped into the periodic frame) and v; tallies the exact per-voxel lengths when the tally is active.
     #[inline(always)]
-    fn next<M: Medium, T: Tally, U: Uniforms>(&mut self, geo: &Geometry, med: &M, c: usize, w: &mut Walk,
-                                              rng: &mut U, tally: &mut T) -> Event {
+    fn next<M: Medium, T: Tally, U: Uniforms>(
+        &mut self,
+        geo: &Geometry,
+        med: &M,
+        c: usize,
+        w: &mut Walk,
+        rng: &mut U,
+        tally: &mut T,
+    ) -> Event {
         w.steps += 1;
         if w.steps > MAX_STEPS {
             return Event::Cut;
@@ -185,7 +214,7 @@ impl Tracker for Delta {
                 if T::ACTIVE {
                     tally_segments(geo, p_start, d, v_start, t_exit, tally);
                 }
-                w.p = crate::grid::grid_face_point(geo, p_start, d, t_exit, axis);
+                w.p = grid_face_point(geo, p_start, d, t_exit, axis);
                 w.v = locate(geo, &mut w.p);
                 w.v[axis] = if step > 0 { geo.n[axis] - 1 } else { 0 };
                 let mut nb = w.v;

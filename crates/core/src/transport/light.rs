@@ -4,7 +4,7 @@
 //! it leaves in; a new kind of light (e.g. a finite-size area light) is one more type implementing the trait,
 //! given to `Geometry::with_light`, and the tracers need no change.
 
-use crate::sampling::V3;
+use crate::transport::sampling::V3;
 use std::f32::consts::{PI, TAU};
 
 /// The light outside the object. Every path that leaves the grid calls `radiance` once with the direction it
@@ -56,8 +56,12 @@ impl EnvMap {
         }
         if let Some(k) = rgb.iter().position(|x| !(x.is_finite() && *x >= 0.0)) {
             let (p, c) = (k / 3, k % 3);
-            return Err(format!("map radiance at row {} column {} channel {c} is {} (must be finite and >= 0)",
-                               p / w, p % w, rgb[k]));
+            return Err(format!(
+                "map radiance at row {} column {} channel {c} is {} (must be finite and >= 0)",
+                p / w,
+                p % w,
+                rgb[k]
+            ));
         }
         if !rotate_deg.is_finite() {
             return Err(format!("map rotation {rotate_deg} must be finite"));

@@ -5,71 +5,12 @@
 //! order, so per-texel results and gradients are bit-identical for any thread count and work split.
 use rayon::prelude::*;
 
-use crate::rng::PathRng;
-use crate::scene::{Geometry, Medium, Texel};
-use crate::packet::{self, trace_paths, NoPathTally};
-use crate::trace::{trace, NoTally};
-
-#[derive(Clone, Copy, Debug)]
-pub struct RenderOptions {
-    pub spp: u32,
-    pub seed: u64,
-    pub include_specular: bool,
-}
-
-/// Per-texel estimate: mean linear RGB radiance and the variance of that mean (squared standard error).
-#[derive(Clone, Copy, Debug, Default)]
-pub struct TexelEstimate {
-    pub mean: [f32; 3],
-    pub var_mean: [f32; 3],
-}
-
-#[derive(Clone, Copy, Debug, Default)]
-pub struct Stats {
-    /// Monochromatic paths traced (texels x spp x 3 channels), replays not included.
-    pub paths: u64,
-    /// Collisions (scattering + absorption events) of those paths.
-    pub events: u64,
-    /// Paths traced a second time by path replay, and their collisions.
-    pub replayed_paths: u64,
-    pub replayed_events: u64,
-}
-
-impl Stats {
-    pub(crate) fn merge(a: Stats, b: Stats) -> Stats {
-        Stats {
-            paths: a.paths + b.paths,
-            events: a.events + b.events,
-            replayed_paths: a.replayed_paths + b.replayed_paths,
-            replayed_events: a.replayed_events + b.replayed_events,
-        }
-    }
-}
-
-pub(crate) struct Moments {
-    sum: [f64; 3],
-    sq: [f64; 3],
-}
-
-impl Moments {
-    pub(crate) fn new() -> Self {
-        Moments { sum: [0.0; 3], sq: [0.0; 3] }
-    }
-    pub(crate) fn add(&mut self, c: usize, x: f32) {
-        self.sum[c] += x as f64;
-        self.sq[c] += (x as f64) * (x as f64);
-    }
-    pub(crate) fn estimate(&self, spp: u32) -> TexelEstimate {
-        let n = spp as f64;
-        let mut e = TexelEstimate::default();
-        for c in 0..3 {
-            let m = self.sum[c] / n;
-            e.mean[c] = m as f32;
-            e.var_mean[c] = if spp > 1 { ((self.sq[c] / n - m * m).max(0.0) * n / (n - 1.0) / n) as f32 } else { 0.0 };
-        }
-        e
-    }
-}
+use crate::transport::estimate::{estimates, Moments, RenderOptions, Stats, TexelEstimate};
+use crate::transport::packet::{self, trace_paths, NoPathTally};
+use crate::transport::path::NoTally;
+use crate::transport::rng::PathRng;
+use crate::transport::scene::{Geometry, Medium, Texel};
+use crate::transport::trace::trace;
 
 /// Forward render. `first_texel` is the global index of `texels[0]` (the random-number key), so a texel list
 /// can be rendered in chunks with the same result as in one call.
@@ -110,10 +51,15 @@ pub fn render<M: Medium>(
 /// while the item's last paths finish), few enough to balance the threads.
 pub(crate) const PACKET_CHUNK: usize = 64;
 
-/// `render` for mask-free volumes and masked boxes: eight paths at a time (`packet`), each texel's path values summed in a
-/// fixed order, so results are bit-identical for any thread count.
-fn render_packets<M: Medium>(geo: &Geometry, med: &M, texels: &[Texel], first_texel: u64, opts: &RenderOptions)
-    -> (Vec<TexelEstimate>, Stats) {
+/// `render` for mask-free volumes and masked boxes: eight paths at a time (`packet`), each texel's path values
+/// summed in a fixed order, so results are bit-identical for any thread count.
+fn render_packets<M: Medium>(
+    geo: &Geometry,
+    med: &M,
+    texels: &[Texel],
+    first_texel: u64,
+    opts: &RenderOptions,
+) -> (Vec<TexelEstimate>, Stats) {
     let spp = opts.spp as usize;
     let chunks: Vec<(Vec<TexelEstimate>, Stats)> = texels
         .par_chunks(PACKET_CHUNK)
@@ -127,18 +73,4 @@ fn render_packets<M: Medium>(geo: &Geometry, med: &M, texels: &[Texel], first_te
         .collect();
     let stats = chunks.iter().fold(Stats::default(), |a, r| Stats::merge(a, r.1));
     (chunks.into_iter().flat_map(|r| r.0).collect(), stats)
-}
-
-/// Per-texel estimates from path values laid out [texel][channel][sample], summed in that order.
-pub(crate) fn estimates(values: &[f32], spp: usize) -> Vec<TexelEstimate> {
-    values
-        .chunks(3 * spp)
-        .map(|v| {
-            let mut m = Moments::new();
-            for c in 0..3 {
-                v[c * spp..(c + 1) * spp].iter().for_each(|&x| m.add(c, x));
-            }
-            m.estimate(spp as u32)
-        })
-        .collect()
 }

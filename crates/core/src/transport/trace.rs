@@ -3,7 +3,7 @@
 //! `trace` = `camera_ray` (a point on the texel's face, the first interface) + `walk`, the one scalar walk:
 //! inside the object it asks a free-flight sampler (`flight::Tracker`: delta tracking in mask-free grids,
 //! regular tracking elsewhere) where the flight ends; at a collision the path scatters (Henyey-Greenstein) and
-//! its weight is multiplied by the albedo (implicit absorption; a weight below `RR_THRESHOLD` plays Russian
+//! its weight is multiplied by the albedo (implicit absorption; a weight below `path::RR_THRESHOLD` plays Russian
 //! roulette: it survives with probability weight / threshold, then carries the threshold; compared with analog
 //! absorption the variance is never larger and, for dark inks, much smaller); at the object's surface the path
 //! is reflected with the Fresnel probability and refracted otherwise (shading normals where the scene has
@@ -20,44 +20,12 @@
 //! every segment (voxel, length) and collision; replaying a path (same key, same random numbers) with a tally
 //! gives its gradient.
 
-use crate::flight::{survive, Delta, Event, Regular, Tracker};
-use crate::grid::{cross, empty_jump, facing_normal, voxel_exit};
-use crate::rng::{PathRng, Uniforms};
-use crate::sampling::{dot, fresnel, hg_sample, reflect, refract, scale, V3};
-use crate::scene::{face_normal, Geometry, Medium, Texel};
-
-/// Receives the events of a path (for gradients). The forward pass uses `NoTally`.
-pub trait Tally {
-    /// Whether the tally uses segments at all (delta tracking then skips measuring them).
-    const ACTIVE: bool = true;
-    fn segment(&mut self, idx: usize, len: f32);
-    fn scatter(&mut self, idx: usize);
-}
-
-pub struct NoTally;
-
-impl Tally for NoTally {
-    const ACTIVE: bool = false;
-    #[inline(always)]
-    fn segment(&mut self, _: usize, _: f32) {}
-    #[inline(always)]
-    fn scatter(&mut self, _: usize) {}
-}
-
-/// Paths that are still going after this many collisions are cut (value 0). At albedo 0.9997 the chance to
-/// survive 2e6 collisions is exp(-600): the cut never biases a physical medium.
-pub(crate) const MAX_EVENTS: u32 = 2_000_000;
-/// Weights below this play Russian roulette. 1.0 would be analog absorption; on the reference slab 0.5 gives
-/// 30 % less variance per path at 1.6x the collisions (+11 % efficiency), more on dark colours.
-pub(crate) const RR_THRESHOLD: f32 = 0.5;
-pub(crate) const MAX_STEPS: u64 = 50_000_000;
-
-/// Result of one path: its value (radiance reaching the texel) and its number of collisions.
-#[derive(Clone, Copy, Debug)]
-pub struct PathValue {
-    pub value: f32,
-    pub events: u32,
-}
+use crate::transport::flight::{survive, Delta, Event, Regular, Tracker};
+use crate::transport::grid::{cross, empty_jump, facing_normal, voxel_exit};
+use crate::transport::path::{PathValue, Tally, Walk, MAX_EVENTS, MAX_STEPS};
+use crate::transport::rng::{PathRng, Uniforms};
+use crate::transport::sampling::{dot, fresnel, hg_sample, reflect, refract, scale, V3};
+use crate::transport::scene::{face_normal, Geometry, Medium, Texel};
 
 /// Direction after an interface event. `n_geo`: geometric unit normal on the incident side
 /// (dot(d, n_geo) < 0); `n_sh`: shading normal on the incident side; eta = n_incident / n_transmitted.
@@ -160,19 +128,6 @@ pub fn trace<M: Medium, T: Tally>(
     }
 }
 
-/// A path's state in the walk: position, direction, voxel, weight, whether it is inside the object, its
-/// collisions and steps so far.
-#[derive(Clone, Copy)]
-pub(crate) struct Walk {
-    pub p: V3,
-    pub d: V3,
-    pub v: [i32; 3],
-    pub weight: f32,
-    pub in_medium: bool,
-    pub events: u32,
-    pub steps: u64,
-}
-
 pub(crate) enum WalkEnd {
     /// The path ended with this value.
     Done(PathValue),
@@ -184,11 +139,17 @@ pub(crate) enum WalkEnd {
 /// The walk of one path from state `w`: free flights inside the object from `tracker`, straight flights
 /// outside it. With `stop_deep` it returns `Deep` after a collision in a voxel whose safe distance is at
 /// least 2 (the packets' delta tracking takes over there).
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
-pub(crate) fn walk<K: Tracker, M: Medium, T: Tally, U: Uniforms>(geo: &Geometry, med: &M, c: usize, w: &mut Walk,
-                                                                 tracker: &mut K, rng: &mut U, tally: &mut T,
-                                                                 stop_deep: bool) -> WalkEnd {
+pub(crate) fn walk<K: Tracker, M: Medium, T: Tally, U: Uniforms>(
+    geo: &Geometry,
+    med: &M,
+    c: usize,
+    w: &mut Walk,
+    tracker: &mut K,
+    rng: &mut U,
+    tally: &mut T,
+    stop_deep: bool,
+) -> WalkEnd {
     let eta_in = 1.0 / geo.ior;
     let mut s = *w;
     let cut = |s: &Walk| WalkEnd::Done(PathValue { value: 0.0, events: s.events });
@@ -213,7 +174,8 @@ pub(crate) fn walk<K: Tracker, M: Medium, T: Tally, U: Uniforms>(geo: &Geometry,
                         tracker.start(geo, &s, rng);
                     }
                     Event::Surface { axis, step, nb, n_sh } => {
-                        let (nd, transmitted) = interface(s.d, facing_normal(axis, step), n_sh, geo.ior, rng.next_f32());
+                        let (nd, transmitted) =
+                            interface(s.d, facing_normal(axis, step), n_sh, geo.ior, rng.next_f32());
                         s.d = nd;
                         if transmitted {
                             s.v = nb;

@@ -37,13 +37,20 @@ const BLOCK: usize = 4096;
 /// Diffuse `values` (rows × `channels`, row r for voxel `index[r]`) `steps` times with weight `alpha` (and
 /// `guide`'s weights if given). `n` = (nz, ny, nx) of the grid. Errors if `index` is not strictly increasing
 /// within the grid, or if the sizes disagree.
-pub fn diffuse_rows(n: [usize; 3], index: &[i64], values: &mut [f32], channels: usize, steps: usize, alpha: f32,
-                    guide: Option<Guide>) -> Result<(), String> {
+pub fn diffuse_rows(
+    n: [usize; 3],
+    index: &[i64],
+    values: &mut [f32],
+    channels: usize,
+    steps: usize,
+    alpha: f32,
+    guide: Option<Guide>,
+) -> Result<(), String> {
     let [nz, ny, nx] = n;
     if nz * ny * nx == 0 {
         return Err(format!("the grid {nz} x {ny} x {nx} has no voxels"));
     }
-    if channels == 0 || values.len() % channels != 0 {
+    if channels == 0 || !values.len().is_multiple_of(channels) {
         return Err(format!("values ({}) are not a whole number of rows of {channels} channels", values.len()));
     }
     let rows = values.len() / channels;
@@ -52,6 +59,8 @@ pub fn diffuse_rows(n: [usize; 3], index: &[i64], values: &mut [f32], channels: 
     }
     let set = RowSpans::new([nx, ny, nz], index)?;
     if let Some(g) = guide {
+        // `!(tau > 0)` rejects NaN too.
+        #[allow(clippy::neg_cmp_op_on_partial_ord)]
         if g.dims == 0 || g.values.len() != rows * g.dims || !(g.tau > 0.0) {
             return Err(format!("guide: {} values for {rows} rows of {} dims, tau {}", g.values.len(), g.dims, g.tau));
         }
@@ -67,11 +76,11 @@ pub fn diffuse_rows(n: [usize; 3], index: &[i64], values: &mut [f32], channels: 
     for s in 0..steps {
         // After an odd number of steps the latest values are in `values`, else in `src`.
         let (from, to): (&[f32], &mut [f32]) = if s % 2 == 0 { (&src, &mut *values) } else { (&*values, &mut src) };
-        to.par_chunks_mut(BLOCK * channels).enumerate().for_each(|(b, out)| {
-            stencil.step(from, out, b * BLOCK, channels)
-        });
+        to.par_chunks_mut(BLOCK * channels)
+            .enumerate()
+            .for_each(|(b, out)| stencil.step(from, out, b * BLOCK, channels));
     }
-    if steps % 2 == 0 {
+    if steps.is_multiple_of(2) {
         values.copy_from_slice(&src);
     }
     Ok(())

@@ -34,7 +34,7 @@
 //! is conserved up to the object's boundary. Memory: the caller keeps two (ny, nx, n) f32 error planes (this
 //! layer's and the next one's); the mixture of one layer at a time. Sequential and deterministic.
 
-use crate::scene::EMPTY;
+use crate::transport::medium::EMPTY;
 
 /// (dx in sweep direction, dy, weight in 128ths) within the layer; Floyd–Steinberg.
 const IN_LAYER: [(i64, i64, f32); 4] = [(1, 0, 49.0), (-1, 1, 21.0), (0, 1, 35.0), (1, 1, 7.0)];
@@ -50,14 +50,27 @@ pub struct LayerShape {
 }
 
 impl LayerShape {
-    fn check(&self, mixture: &[f32], inside: &[u8], inside_next: &[u8], err: &[f32], err_next: &[f32], out: &[u8])
-        -> Result<(), String> {
+    fn check(
+        &self,
+        mixture: &[f32],
+        inside: &[u8],
+        inside_next: &[u8],
+        err: &[f32],
+        err_next: &[f32],
+        out: &[u8],
+    ) -> Result<(), String> {
         let (n, m) = (self.n, self.ny * self.nx);
         if n == 0 || n >= EMPTY as usize {
             return Err(format!("need 1 to {} inks, got {n}", EMPTY as usize - 1));
         }
-        let want = [(mixture.len(), n * m, "mixture"), (inside.len(), m, "inside"), (inside_next.len(), m, "inside_next"),
-                    (err.len(), n * m, "error"), (err_next.len(), n * m, "error_next"), (out.len(), m, "labels")];
+        let want = [
+            (mixture.len(), n * m, "mixture"),
+            (inside.len(), m, "inside"),
+            (inside_next.len(), m, "inside_next"),
+            (err.len(), n * m, "error"),
+            (err_next.len(), n * m, "error_next"),
+            (out.len(), m, "labels"),
+        ];
         for (got, expect, name) in want {
             if got != expect {
                 return Err(format!("{name} has {got} elements, expected {expect}"));
@@ -74,9 +87,16 @@ impl LayerShape {
 /// into this layer (it receives this layer's own diffusion too, and is zeroed on return, ready to be the next
 /// call's `err_next`); `err_next` (ny, nx, n): accumulates the error for layer z + 1 (zero before the first
 /// call that writes it); `out` (ny, nx): ink index or [`EMPTY`].
-#[allow(clippy::too_many_arguments)]
-pub fn diffuse_layer(shape: LayerShape, z: usize, mixture: &[f32], inside: &[u8], inside_next: &[u8], err: &mut [f32],
-                     err_next: &mut [f32], out: &mut [u8]) -> Result<(), String> {
+pub fn diffuse_layer(
+    shape: LayerShape,
+    z: usize,
+    mixture: &[f32],
+    inside: &[u8],
+    inside_next: &[u8],
+    err: &mut [f32],
+    err_next: &mut [f32],
+    out: &mut [u8],
+) -> Result<(), String> {
     shape.check(mixture, inside, inside_next, err, err_next, out)?;
     let LayerShape { n, ny, nx } = shape;
     let plane = ny * nx;
@@ -145,16 +165,27 @@ pub fn diffuse_layer(shape: LayerShape, z: usize, mixture: &[f32], inside: &[u8]
 pub fn diffuse_volume(shape: LayerShape, nz: usize, mixture: &[f32], inside: &[u8]) -> Result<Vec<u8>, String> {
     let (m, n) = (shape.ny * shape.nx, shape.n);
     if mixture.len() != nz * n * m || inside.len() != nz * m {
-        return Err(format!("mixture / inside sizes {} / {} do not match {nz} layers of {shape:?}", mixture.len(),
-                           inside.len()));
+        return Err(format!(
+            "mixture / inside sizes {} / {} do not match {nz} layers of {shape:?}",
+            mixture.len(),
+            inside.len()
+        ));
     }
     let mut out = vec![0u8; nz * m];
     let (mut err, mut err_next) = (vec![0.0f32; n * m], vec![0.0f32; n * m]);
     let none = vec![0u8; m];
     for z in 0..nz {
         let nxt = if z + 1 < nz { &inside[(z + 1) * m..(z + 2) * m] } else { &none[..] };
-        diffuse_layer(shape, z, &mixture[z * n * m..(z + 1) * n * m], &inside[z * m..(z + 1) * m], nxt, &mut err,
-                      &mut err_next, &mut out[z * m..(z + 1) * m])?;
+        diffuse_layer(
+            shape,
+            z,
+            &mixture[z * n * m..(z + 1) * n * m],
+            &inside[z * m..(z + 1) * m],
+            nxt,
+            &mut err,
+            &mut err_next,
+            &mut out[z * m..(z + 1) * m],
+        )?;
         std::mem::swap(&mut err, &mut err_next);
     }
     Ok(out)
@@ -240,7 +271,8 @@ mod tests {
         let shape = LayerShape { n: 2, ny: 2, nx: 2 };
         let (mut e, mut en, mut o) = (vec![0.0; 8], vec![0.0; 8], vec![0u8; 4]);
         assert!(diffuse_layer(shape, 0, &[0.5; 7], &[1; 4], &[1; 4], &mut e, &mut en, &mut o).is_err());
-        assert!(diffuse_layer(LayerShape { n: 0, ..shape }, 0, &[], &[1; 4], &[1; 4], &mut e, &mut en, &mut o).is_err());
+        let no_inks = LayerShape { n: 0, ..shape };
+        assert!(diffuse_layer(no_inks, 0, &[], &[1; 4], &[1; 4], &mut e, &mut en, &mut o).is_err());
     }
 
     #[test]

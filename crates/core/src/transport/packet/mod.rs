@@ -19,14 +19,16 @@
 
 pub(crate) mod step;
 
-use crate::flight::Regular;
-use crate::grid::{component, facing_normal, grid_exit8, grid_face_point, locate_box, safe_radius8, span, tally_segments,
-                  wrap_coord};
-use crate::render::RenderOptions;
-use crate::rng::{path_key, LaneRng, PathRng};
-use crate::sampling::{add, scale, V3};
-use crate::scene::{Boundary, Geometry, Medium, Texel};
-use crate::trace::{camera_ray, interface, trace, walk, PathValue, Start, Tally, Walk, WalkEnd};
+use crate::transport::estimate::RenderOptions;
+use crate::transport::flight::Regular;
+use crate::transport::grid::{
+    component, facing_normal, grid_exit8, grid_face_point, locate_box, safe_radius8, span, tally_segments, wrap_coord,
+};
+use crate::transport::path::{PathValue, Tally, Walk};
+use crate::transport::rng::{path_key, LaneRng, PathRng};
+use crate::transport::sampling::{add, scale, V3};
+use crate::transport::scene::{Boundary, Geometry, Medium, Texel};
+use crate::transport::trace::{camera_ray, interface, trace, walk, Start, WalkEnd};
 use bytemuck::cast;
 use wide::{f32x8, i32x8};
 
@@ -37,7 +39,7 @@ const CAMERA_DRAWS: u32 = 3;
 const STEP_DRAWS: u32 = 5;
 
 /// Gradient tallies of the paths `trace_paths` traces, per path (`job`) and channel `c`: the segments (voxel,
-/// length) of every flight and the voxel of every scattering, as `trace::Tally` for one path.
+/// length) of every flight and the voxel of every scattering, as `path::Tally` for one path.
 pub(crate) trait PathTally {
     const ACTIVE: bool;
     /// Whether to trace path `job` at all (a replay skips the paths that carry no gradient).
@@ -150,18 +152,29 @@ impl Packet {
 
     /// Continue lane l's path with the general walk (masked volumes: near the surface and outside the object)
     /// from p in voxel v; returns the path's value if it ended, else the lane is flying in the deep interior.
-    #[allow(clippy::too_many_arguments)]
-    fn walk<M: Medium, P: PathTally>(&mut self, geo: &Geometry, med: &M, l: usize, job: usize, p: V3, d: V3,
-                                     v: [i32; 3], in_medium: bool, tally: &mut P) -> Option<PathValue> {
+    fn walk<M: Medium, P: PathTally>(
+        &mut self,
+        geo: &Geometry,
+        med: &M,
+        l: usize,
+        job: usize,
+        p: V3,
+        d: V3,
+        v: [i32; 3],
+        in_medium: bool,
+        tally: &mut P,
+    ) -> Option<PathValue> {
         let mut rng = self.rng(l);
-        let mut w = Walk { p, d, v, weight: self.weight[l], in_medium, events: self.events[l], steps: self.steps[l] as u64 };
+        let mut w =
+            Walk { p, d, v, weight: self.weight[l], in_medium, events: self.events[l], steps: self.steps[l] as u64 };
         let mut jt = JobTally { inner: tally, job, c: self.chan[l] };
         let end = walk(geo, med, self.chan[l], &mut w, &mut Regular::new(), &mut rng, &mut jt, true);
         self.draw[l] = rng.draw;
         match end {
             WalkEnd::Done(r) => Some(r),
             WalkEnd::Deep => {
-                (self.weight[l], self.events[l], self.steps[l]) = (w.weight, w.events, w.steps.min(u32::MAX as u64) as u32);
+                (self.weight[l], self.events[l], self.steps[l]) =
+                    (w.weight, w.events, w.steps.min(u32::MAX as u64) as u32);
                 self.start_flight(geo, l, w.p, w.d);
                 None
             }
@@ -178,8 +191,15 @@ pub(crate) fn supported(geo: &Geometry) -> bool {
 /// [texel][channel][sample] (3 * spp per texel; entries of paths not traced are left alone). `first_key` is the
 /// random-number key of `texels[0]`. Every path is a pure function of its key, so a replay with an active tally
 /// follows exactly the paths of an earlier pass. Returns the number of collisions.
-pub(crate) fn trace_paths<M: Medium, P: PathTally>(geo: &Geometry, med: &M, texels: &[Texel], first_key: u64,
-                                                   opts: &RenderOptions, values: &mut [f32], tally: &mut P) -> u64 {
+pub(crate) fn trace_paths<M: Medium, P: PathTally>(
+    geo: &Geometry,
+    med: &M,
+    texels: &[Texel],
+    first_key: u64,
+    opts: &RenderOptions,
+    values: &mut [f32],
+    tally: &mut P,
+) -> u64 {
     assert!(supported(geo));
     let masked = geo.masked();
     let (spp, seed, include_specular) = (opts.spp as usize, opts.seed, opts.include_specular);
@@ -223,7 +243,9 @@ pub(crate) fn trace_paths<M: Medium, P: PathTally>(geo: &Geometry, med: &M, texe
                     pk.start_flight(geo, l, p, d);
                     None
                 }
-                Start::Outside(_, d, v) if !geo.in_grid(v) => Some(PathValue { value: geo.light.radiance(d, c), events: 0 }),
+                Start::Outside(_, d, v) if !geo.in_grid(v) => {
+                    Some(PathValue { value: geo.light.radiance(d, c), events: 0 })
+                }
                 Start::Outside(..) => {
                     // A texel inside a mask-free grid (not one of our texel lists): the scalar tracer.
                     let mut rng = PathRng::new(seed, first_key + ti as u64, s, c as u32);

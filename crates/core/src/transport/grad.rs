@@ -6,12 +6,14 @@ use std::sync::atomic::{AtomicI64, Ordering::Relaxed};
 
 use rayon::prelude::*;
 
-use crate::packet::{self, trace_paths, NoPathTally, PathTally};
-use crate::render::{estimates, Moments, RenderOptions, Stats, TexelEstimate, PACKET_CHUNK};
-use crate::rng::PathRng;
-use crate::scene::{Geometry, Medium, Texel};
 use crate::spans::RowSpans;
-use crate::trace::{trace, NoTally, Tally};
+use crate::transport::estimate::{estimates, Moments, RenderOptions, Stats, TexelEstimate};
+use crate::transport::packet::{self, trace_paths, NoPathTally, PathTally};
+use crate::transport::path::{NoTally, Tally};
+use crate::transport::render::PACKET_CHUNK;
+use crate::transport::rng::PathRng;
+use crate::transport::scene::{Geometry, Medium, Texel};
+use crate::transport::trace::trace;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum GradMethod {
@@ -118,7 +120,11 @@ impl GradBuffers {
             SlotMap::All => Some(j),
             SlotMap::Dense(m) => {
                 let k = m[j];
-                if k == NO_GRADIENT { None } else { Some(k as usize) }
+                if k == NO_GRADIENT {
+                    None
+                } else {
+                    Some(k as usize)
+                }
             }
             SlotMap::Ranks(r) => r.rank(j),
         }
@@ -224,7 +230,8 @@ impl Tally for Li1Tally<'_> {
 }
 
 /// Gradient pass: accumulate sum_i adjoint_i . d c_i / d (sigma_s, sigma_a) into `grads` for the given texels,
-/// `adjoint[i]` = d e / d c_i (linear RGB), |adjoint| at most the bound given to `GradBuffers::zero`. Returns this pass's own forward estimates and statistics.
+/// `adjoint[i]` = d e / d c_i (linear RGB), |adjoint| at most the bound given to `GradBuffers::zero`. Returns
+/// this pass's own forward estimates and statistics.
 pub fn backward<M: Medium>(
     geo: &Geometry,
     med: &M,
@@ -314,10 +321,16 @@ impl<M: Medium> PathTally for PacketTally<'_, M> {
 /// `backward` with packets (`packet::supported` geometries). Path replay: a forward pass gives every path's
 /// value, then the paths with a non-zero value and adjoint are traced again, exactly (each path is a pure
 /// function of its key), with their tallies. `L_i = 1`: one pass with tallies.
-#[allow(clippy::too_many_arguments)]
-fn backward_packets<M: Medium>(geo: &Geometry, med: &M, texels: &[Texel], first_texel: u64, adjoint: &[[f32; 3]],
-                               opts: &RenderOptions, method: GradMethod, grads: &GradBuffers)
-    -> (Vec<TexelEstimate>, Stats) {
+fn backward_packets<M: Medium>(
+    geo: &Geometry,
+    med: &M,
+    texels: &[Texel],
+    first_texel: u64,
+    adjoint: &[[f32; 3]],
+    opts: &RenderOptions,
+    method: GradMethod,
+    grads: &GradBuffers,
+) -> (Vec<TexelEstimate>, Stats) {
     let spp = opts.spp as usize;
     let scale = 1.0 / opts.spp as f32 * (1.0 / grads.quantum) as f32;
     let chunks: Vec<(Vec<TexelEstimate>, Stats)> = texels

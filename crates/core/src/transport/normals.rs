@@ -2,7 +2,7 @@
 //! grid voxel (12 bytes) is mostly zeros: `ShadingNormals` keeps the voxels that have one, grid row by grid row
 //! (a row is the voxels of one (y, z) along x), 16 bytes per such voxel plus 4 bytes per row.
 
-use crate::sampling::{scale, V3};
+use crate::transport::sampling::{scale, V3};
 
 /// The unit shading normal of a stored normal vector `n`: n / |n|, or None unless |n|^2 > 0.5 (zero, short or
 /// NaN vectors are no usable normal).
@@ -59,8 +59,12 @@ impl ShadingNormals {
         if vectors.len() != 3 * index.len() {
             return Err(format!("{} normal vectors for {} voxel indices", vectors.len() / 3, index.len()));
         }
-        let mut s = ShadingNormals { n, rows: Vec::with_capacity(n_rows + 1), xs: Vec::with_capacity(index.len()),
-                                     normals: Vec::with_capacity(index.len()) };
+        let mut s = ShadingNormals {
+            n,
+            rows: Vec::with_capacity(n_rows + 1),
+            xs: Vec::with_capacity(index.len()),
+            normals: Vec::with_capacity(index.len()),
+        };
         s.rows.push(0);
         let mut prev = -1i64;
         for (&j, v) in index.iter().zip(vectors.chunks_exact(3)) {

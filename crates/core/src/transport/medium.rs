@@ -16,6 +16,8 @@ use crate::spans::RowSpans;
 pub const EMPTY: u8 = 255;
 
 /// Per-voxel optical parameters for one channel.
+// A medium always covers its whole grid (`len` voxels), so it has no `is_empty`.
+#[allow(clippy::len_without_is_empty)]
 pub trait Medium: Sync {
     /// (sigma_t in mm^-1, albedo) of voxel `idx` in channel `c`.
     fn coeffs(&self, idx: usize, c: usize) -> (f32, f32);
@@ -24,6 +26,7 @@ pub trait Medium: Sync {
         let (t, a) = self.coeffs(idx, c);
         t * a
     }
+    /// The number of voxels.
     fn len(&self) -> usize;
     /// An upper bound of sigma_t over all voxels in channel c (the majorant of delta tracking).
     fn majorant(&self, c: usize) -> f32;
@@ -49,7 +52,7 @@ pub struct DenseMedium {
 impl DenseMedium {
     /// From interleaved (voxel, channel) arrays of sigma_s and sigma_a in mm^-1 (a (z, y, x, 3) array's memory).
     pub fn from_interleaved(sigma_s: &[f32], sigma_a: &[f32]) -> Result<Self, String> {
-        if sigma_s.len() != sigma_a.len() || sigma_s.len() % 3 != 0 {
+        if sigma_s.len() != sigma_a.len() || !sigma_s.len().is_multiple_of(3) {
             return Err("sigma_s and sigma_a must both have 3 channels per voxel and equal size".into());
         }
         let n = sigma_s.len() / 3;
@@ -87,15 +90,23 @@ impl DenseMedium {
     pub fn set_voxels(&mut self, index: &[i64], sigma_s: &[f32], sigma_a: &[f32]) -> Result<(), String> {
         let (n, k) = (self.n, index.len());
         if sigma_s.len() != 3 * k || sigma_a.len() != 3 * k {
-            return Err(format!("sigma_s and sigma_a must have 3 channels for each of the {k} indexed voxels, \
-                                got {} and {} values", sigma_s.len(), sigma_a.len()));
+            return Err(format!(
+                "sigma_s and sigma_a must have 3 channels for each of the {k} indexed voxels, \
+                                got {} and {} values",
+                sigma_s.len(),
+                sigma_a.len()
+            ));
         }
         if let Some(e) = index.iter().position(|&j| j < 0 || j as u64 >= n as u64) {
             return Err(format!("index entry {e} is voxel {}, outside the grid of {n} voxels", index[e]));
         }
         if let Some(q) = (0..3 * k).find(|&q| extinction_albedo(sigma_s[q], sigma_a[q]).is_none()) {
-            return Err(format!("coefficients of entry {} (voxel {}) channel {} are negative or not finite",
-                               q / 3, index[q / 3], q % 3));
+            return Err(format!(
+                "coefficients of entry {} (voxel {}) channel {} are negative or not finite",
+                q / 3,
+                index[q / 3],
+                q % 3
+            ));
         }
         for (e, &j) in index.iter().enumerate() {
             for c in 0..3 {
@@ -138,7 +149,8 @@ impl LabelMedium {
     /// `ink_sigma_s`, `ink_sigma_a`: (N, 3) row-major, mm^-1.
     pub fn new(labels: Vec<u8>, ink_sigma_s: &[f32], ink_sigma_a: &[f32]) -> Result<Self, String> {
         let n_inks = ink_sigma_s.len() / 3;
-        if ink_sigma_s.len() != ink_sigma_a.len() || ink_sigma_s.len() % 3 != 0 || n_inks == 0 || n_inks > 255 {
+        let rows = ink_sigma_s.len() == ink_sigma_a.len() && ink_sigma_s.len().is_multiple_of(3);
+        if !rows || n_inks == 0 || n_inks > 255 {
             return Err("ink table must be (N, 3) with 1 <= N <= 255".into());
         }
         let mut table = [[(0.0f32, 1.0f32); 256]; 3];
@@ -171,14 +183,21 @@ impl Medium for LabelMedium {
     }
 }
 
-
 /// Check interleaved (entry, channel) coefficient arrays of `k` entries: lengths, and every pair finite and
 /// non-negative. `name(q)` names entry q in the error.
-fn check_coefficients(k: usize, sigma_s: &[f32], sigma_a: &[f32], name: impl Fn(usize) -> String)
-                      -> Result<(), String> {
+fn check_coefficients(
+    k: usize,
+    sigma_s: &[f32],
+    sigma_a: &[f32],
+    name: impl Fn(usize) -> String,
+) -> Result<(), String> {
     if sigma_s.len() != 3 * k || sigma_a.len() != 3 * k {
-        return Err(format!("sigma_s and sigma_a must have 3 channels for each of the {k} voxels, got {} and {} \
-                            values", sigma_s.len(), sigma_a.len()));
+        return Err(format!(
+            "sigma_s and sigma_a must have 3 channels for each of the {k} voxels, got {} and {} \
+                            values",
+            sigma_s.len(),
+            sigma_a.len()
+        ));
     }
     if let Some(q) = (0..3 * k).find(|&q| extinction_albedo(sigma_s[q], sigma_a[q]).is_none()) {
         return Err(format!("coefficients of {} channel {} are negative or not finite", name(q / 3), q % 3));
@@ -191,7 +210,9 @@ fn check_coefficients(k: usize, sigma_s: &[f32], sigma_a: &[f32], name: impl Fn(
 fn majorant_of(coef: &[[f32; 2]], k: usize) -> [f32; 3] {
     use rayon::prelude::*;
     std::array::from_fn(|c| {
-        coef[c * k..(c + 1) * k].par_chunks(1 << 16).map(|b| b.iter().fold(0.0f32, |a, x| a.max(x[0])))
+        coef[c * k..(c + 1) * k]
+            .par_chunks(1 << 16)
+            .map(|b| b.iter().fold(0.0f32, |a, x| a.max(x[0])))
             .reduce(|| 0.0f32, f32::max)
     })
 }
@@ -246,8 +267,11 @@ impl SparseMedium {
         }
         let slots: Vec<Option<usize>> = index.iter().map(|&j| self.at.listed_position(j as usize)).collect();
         if let Some(e) = slots.iter().position(|s| s.is_none()) {
-            return Err(format!("index entry {e} is voxel {}, which the medium does not store (outside the \
-                                object)", index[e]));
+            return Err(format!(
+                "index entry {e} is voxel {}, which the medium does not store (outside the \
+                                object)",
+                index[e]
+            ));
         }
         check_coefficients(index.len(), sigma_s, sigma_a, |e| format!("entry {e} (voxel {})", index[e]))?;
         self.store(slots.into_iter().map(Option::unwrap).enumerate(), sigma_s, sigma_a);

@@ -4,10 +4,10 @@
 //!
 //! Layout: voxel (x, y, z) has linear index `(z * ny + y) * nx + x`, i.e. C order of a (z, y, x) array.
 
-pub use crate::light::{Light, UniformLight};
-pub use crate::medium::{DenseMedium, LabelMedium, Medium, SparseMedium, EMPTY};
-pub use crate::normals::ShadingNormals;
-use crate::sampling::V3;
+pub use crate::transport::light::{Light, UniformLight};
+pub use crate::transport::medium::{DenseMedium, LabelMedium, Medium, SparseMedium, EMPTY};
+pub use crate::transport::normals::ShadingNormals;
+use crate::transport::sampling::V3;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Boundary {

@@ -122,7 +122,7 @@ pub fn refract(d: V3, n: V3, eta: f32) -> Option<V3> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rng::PathRng;
+    use crate::transport::rng::PathRng;
 
     /// Histogram of sampled HG cosines against the integral of the pdf over each bin.
     /// Bins of 50k expected counts have a relative standard error of 0.45 %; we test each at 5 sigma.
@@ -144,7 +144,13 @@ mod tests {
                 let h = (hi - lo) / m as f64;
                 let mut acc = 0.0;
                 for k in 0..=m {
-                    let w = if k == 0 || k == m { 1.0 } else if k % 2 == 1 { 4.0 } else { 2.0 };
+                    let w = if k == 0 || k == m {
+                        1.0
+                    } else if k % 2 == 1 {
+                        4.0
+                    } else {
+                        2.0
+                    };
                     acc += w * 2.0 * std::f64::consts::PI * hg_pdf((lo + k as f64 * h) as f32, g) as f64;
                 }
                 let expect = acc * h / 3.0 * n as f64;

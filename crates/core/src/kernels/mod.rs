@@ -1,0 +1,14 @@
+//! The printing and optimiser kernels: array code that runs beside the light transport and shares none of it.
+//!
+//! - `diffuse` (printing): 3D vector error diffusion of per-voxel ink mixtures to one ink label per printer
+//!   voxel, layer by layer.
+//! - `smooth` (optimiser): explicit diffusion of per-voxel values over a sparse voxel set, the step
+//!   preconditioner.
+//! - `simplex` (optimiser): the row-wise softmax of the optimiser's variables and its backward map.
+//!
+//! Each is a fixed-order computation per row or voxel, so results do not depend on the thread count. They use
+//! `crate::spans` (voxel sets by grid row) and, for `diffuse`, the empty-voxel label `transport::medium::EMPTY`.
+
+pub mod diffuse;
+pub mod simplex;
+pub mod smooth;

@@ -1,0 +1,33 @@
+//! Light transport: Monte Carlo random walks of monochromatic paths through a voxel medium, their forward
+//! render and their gradients (path replay).
+//!
+//! Modules, each using only those listed before it (and `crate::spans`):
+//! - `sampling`: vectors, the Henyey-Greenstein phase function, Fresnel, reflection and refraction.
+//! - `rng`: counter-based random numbers (a path's numbers are a pure function of its key).
+//! - `light`: the `Light` trait (uniform light, environment maps).
+//! - `normals`: sparse shading normals.
+//! - `medium`: the `Medium` trait and its dense, sparse and label forms.
+//! - `scene`: the grid geometry (size, boundary, inside mask, safe and empty distances), texels.
+//! - `path`: a path's walk state, its value, the `Tally` that receives its segments, the walk's limits.
+//! - `grid`: locating points, voxel traversal (DDA), exit distances, the periodic wrap, empty jumps.
+//! - `flight`: the free-flight samplers (regular and delta tracking) and the roulette.
+//! - `trace`: the camera ray, the surface interface and the one scalar walk.
+//! - `estimate`: render options, per-texel estimates, statistics and their fixed-order sums.
+//! - `packet`: eight paths per core in SIMD lanes (`packet::step` is its vector step and uses `packet`).
+//! - `render`: parallel drivers of the forward render.
+//! - `grad`: the gradient pass and its fixed-point buffers.
+
+pub mod estimate;
+pub(crate) mod flight;
+pub mod grad;
+pub(crate) mod grid;
+pub mod light;
+pub mod medium;
+pub mod normals;
+pub(crate) mod packet;
+pub mod path;
+pub mod render;
+pub mod rng;
+pub mod sampling;
+pub mod scene;
+pub mod trace;

@@ -1,0 +1,110 @@
+//! The optimiser's kernels: `smooth_rows` (the step preconditioner, `inkopt_core::kernels::smooth`) and
+//! `softmax_rows` / `softmax_backward` (the softmax parameterisation, `inkopt_core::kernels::simplex`), each run
+//! on a kept thread pool of the caller's size.
+
+use std::sync::{Arc, Mutex};
+
+use numpy::ndarray::Array2;
+use numpy::{IntoPyArray, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use pyo3::prelude::*;
+
+use crate::arrays::{c_slice, check_shape, err};
+
+/// Run `f` on `threads` threads: None (or 0) in rayon's global pool (all cores, as a `Scene` without
+/// `threads`), else in a pool of that many (threads named `inkopt-p{n}-{i}`), built once per process and count
+/// and kept (a process whose callers ask for several counts keeps one idle pool per count). The free functions
+/// below run in it, so that a caller's thread count (e.g. an ink-set search's per-run share) holds for them as for
+/// its renders, without a new pool per call.
+fn run_on<R: Send>(threads: Option<usize>, f: impl FnOnce() -> R + Send) -> PyResult<R> {
+    static POOLS: Mutex<Vec<(usize, Arc<rayon::ThreadPool>)>> = Mutex::new(Vec::new());
+    let n = match threads {
+        None | Some(0) => return Ok(f()),
+        Some(n) => n,
+    };
+    let pool = {
+        let mut pools = POOLS.lock().map_err(|e| err(e.to_string()))?;
+        match pools.iter().find(|(k, _)| *k == n) {
+            Some((_, p)) => p.clone(),
+            None => {
+                let b = rayon::ThreadPoolBuilder::new().num_threads(n).thread_name(move |i| format!("inkopt-p{n}-{i}"));
+                let p = Arc::new(b.build().map_err(|e| err(e.to_string()))?);
+                // Wait until every thread runs (and carries its name): the pool is whole when it is first used.
+                p.broadcast(|_| ());
+                pools.push((n, p.clone()));
+                p
+            }
+        }
+    };
+    Ok(pool.install(f))
+}
+
+/// smooth_rows(shape (Z, Y, X), index (F,) i64, values (F, C) f32, steps, alpha, guide (F, D) f32 or None, tau,
+/// threads=None) -> (F, C) f32: `steps` explicit diffusion steps of weight `alpha` over the 6-neighbourhood of the
+/// voxels `index` (strictly increasing linear indices into the grid `shape`; row r of the values is voxel index[r]),
+/// each neighbour weighted by exp(-|guide_r - guide_q|² / tau²) if a guide is given
+/// (inkopt_core::kernels::smooth). The GIL is released; `threads` as for a `Scene` (default all cores).
+#[pyfunction]
+#[pyo3(signature = (shape, index, values, steps, alpha, guide=None, tau=1.0, threads=None))]
+pub(crate) fn smooth_rows<'py>(
+    py: Python<'py>,
+    shape: (usize, usize, usize),
+    index: PyReadonlyArray1<i64>,
+    values: PyReadonlyArray2<f32>,
+    steps: usize,
+    alpha: f32,
+    guide: Option<PyReadonlyArray2<f32>>,
+    tau: f32,
+    threads: Option<usize>,
+) -> PyResult<Bound<'py, PyArray2<f32>>> {
+    let n = [shape.0, shape.1, shape.2];
+    let (rows, ch) = (values.shape()[0], values.shape()[1]);
+    let idx = c_slice(&index, "index")?;
+    let mut v = c_slice(&values, "values")?.to_vec();
+    let g = match &guide {
+        Some(a) => Some(inkopt_core::kernels::smooth::Guide { values: c_slice(a, "guide")?, dims: a.shape()[1], tau }),
+        None => None,
+    };
+    py.detach(|| run_on(threads, || inkopt_core::kernels::smooth::diffuse_rows(n, idx, &mut v, ch, steps, alpha, g)))?
+        .map_err(err)?;
+    Ok(Array2::from_shape_vec((rows, ch), v).map_err(|e| err(e.to_string()))?.into_pyarray(py))
+}
+
+/// softmax_rows(x, threads=None) -> p: the softmax of each row of x (rows, n) float32 (`inkopt_core::kernels::simplex`,
+/// parallel on `threads` (default all cores), thread-count independent). The GIL is released.
+#[pyfunction]
+#[pyo3(signature = (x, threads=None))]
+pub(crate) fn softmax_rows<'py>(
+    py: Python<'py>,
+    x: PyReadonlyArray2<f32>,
+    threads: Option<usize>,
+) -> PyResult<Bound<'py, PyArray2<f32>>> {
+    let (rows, n) = (x.shape()[0], x.shape()[1]);
+    let xs = c_slice(&x, "x")?;
+    let mut p = vec![0.0f32; rows * n];
+    py.detach(|| run_on(threads, || inkopt_core::kernels::simplex::softmax_rows(xs, n, &mut p)))?.map_err(err)?;
+    Ok(Array2::from_shape_vec((rows, n), p).map_err(|e| err(e.to_string()))?.into_pyarray(py))
+}
+
+/// softmax_backward(x, g, scale, natural, threads=None) -> (rows, n) float32: with p = softmax_rows(x) and
+/// c = scale g - <scale g, p> per row, c if natural (the exponentiated-gradient direction) else p c (dE/dx for
+/// g = dE/dp). x, g (rows, n) float32, scale (rows,) float32. The GIL is released.
+#[pyfunction]
+#[pyo3(signature = (x, g, scale, natural, threads=None))]
+pub(crate) fn softmax_backward<'py>(
+    py: Python<'py>,
+    x: PyReadonlyArray2<f32>,
+    g: PyReadonlyArray2<f32>,
+    scale: PyReadonlyArray1<f32>,
+    natural: bool,
+    threads: Option<usize>,
+) -> PyResult<Bound<'py, PyArray2<f32>>> {
+    let (rows, n) = (x.shape()[0], x.shape()[1]);
+    check_shape(g.shape(), &[rows, n], "g")?;
+    let (xs, gs, ss) = (c_slice(&x, "x")?, c_slice(&g, "g")?, c_slice(&scale, "scale")?);
+    let mut out = vec![0.0f32; rows * n];
+    py.detach(|| {
+        run_on(threads, || inkopt_core::kernels::simplex::softmax_backward(xs, gs, ss, n, natural, &mut out))
+    })?
+    .map_err(err)?;
+    Ok(Array2::from_shape_vec((rows, n), out).map_err(|e| err(e.to_string()))?.into_pyarray(py))
+}

@@ -1,0 +1,39 @@
+//! The printing kernel: `diffuse_layer`, one printer layer of 3D vector error diffusion
+//! (`inkopt_core::kernels::diffuse`).
+
+use numpy::{PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
+use pyo3::prelude::*;
+
+use crate::arrays::{c_slice, check_shape, err};
+
+/// diffuse_layer(mixture (N, Y, X) f32, inside (Y, X) u8, inside_next (Y, X) u8, error (2, Y, X, N) f32, z, out
+/// (Y, X) u8): 3D vector error diffusion of printer layer z (inkopt_core::kernels::diffuse). error[z % 2] holds
+/// the error carried into layer z and is zeroed on return; error[(z + 1) % 2] accumulates the next layer's.
+/// Writes the labels (ink index, 255 outside) into `out`. The GIL is released.
+#[pyfunction]
+pub(crate) fn diffuse_layer(
+    py: Python<'_>,
+    mixture: PyReadonlyArray3<f32>,
+    inside: PyReadonlyArray2<u8>,
+    inside_next: PyReadonlyArray2<u8>,
+    mut error: numpy::PyReadwriteArray4<f32>,
+    z: usize,
+    mut out: numpy::PyReadwriteArray2<u8>,
+) -> PyResult<()> {
+    let (n, ny, nx) = (mixture.shape()[0], mixture.shape()[1], mixture.shape()[2]);
+    check_shape(inside.shape(), &[ny, nx], "inside")?;
+    check_shape(inside_next.shape(), &[ny, nx], "inside_next")?;
+    check_shape(error.shape(), &[2, ny, nx, n], "error")?;
+    check_shape(out.shape(), &[ny, nx], "out")?;
+    if !error.is_c_contiguous() || !out.is_c_contiguous() {
+        return Err(err("error and out must be C-contiguous"));
+    }
+    let (m, i, i_next) =
+        (c_slice(&mixture, "mixture")?, c_slice(&inside, "inside")?, c_slice(&inside_next, "inside_next")?);
+    let e = error.as_slice_mut().map_err(|_| err("error must be C-contiguous"))?;
+    let o = out.as_slice_mut().map_err(|_| err("out must be C-contiguous"))?;
+    let (e0, e1) = e.split_at_mut(n * ny * nx);
+    let (cur, next) = if z.is_multiple_of(2) { (e0, e1) } else { (e1, e0) };
+    let shape = inkopt_core::kernels::diffuse::LayerShape { n, ny, nx };
+    py.detach(|| inkopt_core::kernels::diffuse::diffuse_layer(shape, z, m, i, i_next, cur, next, o)).map_err(err)
+}

@@ -1,0 +1,267 @@
+//! The `Scene` class: a voxel scene built once (geometry, medium, light, thread pool) that renders texel lists
+//! and accumulates gradients. `set_medium` swaps the medium and keeps the geometry (safe distances), thread
+//! pool and gradient buffers, for optimisers that render a new medium every iteration (`set_voxels` overwrites
+//! only some voxels); `set_light` lights it by a uniform light or an environment map. The gradient methods'
+//! work is in `gradients`. The GIL is released while rendering.
+
+use inkopt_core::{render, Boundary, EnvMap, Geometry, GradBuffers, UniformLight};
+use numpy::{
+    PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4, PyReadonlyArrayDyn, PyUntypedArrayMethods,
+};
+use pyo3::prelude::*;
+
+use crate::arrays::{c_slice, check_shape, err, options, pack, texels, Packed};
+use crate::gradients;
+use crate::medium::{medium_from, with_medium, MediumKind};
+
+/// A voxel scene (geometry, medium, light) with its thread pool and gradient buffers; the Python class
+/// `inkopt._core.Scene`.
+#[pyclass(module = "inkopt._core")]
+pub(crate) struct Scene {
+    pub(crate) geo: Geometry,
+    pub(crate) medium: MediumKind,
+    pub(crate) pool: rayon::ThreadPool,
+    pub(crate) grads: Option<GradBuffers>,
+    /// Whether the gradient buffers are per slot of a grad_index (else per voxel).
+    pub(crate) sparse: bool,
+    pub(crate) shape: [usize; 3],
+}
+
+#[pymethods]
+impl Scene {
+    /// Scene(shape_zyx, voxel_mm_xyz, *, sigma_s=None, sigma_a=None, medium_index=None, labels=None,
+    /// ink_sigma_s=None, ink_sigma_a=None, inside=None, normals=None, normal_index=None, normal_vectors=None,
+    /// boundary="box", ior=1.5, g=0.4, threads=None). Medium: dense (`sigma_s`, `sigma_a` (Z, Y, X, 3) f32),
+    /// sparse (`medium_index` (K,) i64 strictly increasing linear indices of the voxels that are not vacuum, with
+    /// `sigma_s`, `sigma_a` (K, 3) f32: 24 bytes per voxel of each row's span of them), or labels. Shading normals:
+    /// dense (`normals` (Z, Y, X, 3) f32) or sparse (`normal_index` (K,) i64 increasing linear indices,
+    /// `normal_vectors` (K, 3) f32).
+    #[new]
+    #[pyo3(signature = (shape, voxel_mm, *, sigma_s=None, sigma_a=None, medium_index=None, labels=None,
+                        ink_sigma_s=None, ink_sigma_a=None, inside=None, normals=None, normal_index=None,
+                        normal_vectors=None, boundary="box", ior=1.5, g=0.4, threads=None))]
+    fn new(
+        shape: (usize, usize, usize),
+        voxel_mm: (f32, f32, f32),
+        sigma_s: Option<PyReadonlyArrayDyn<f32>>,
+        sigma_a: Option<PyReadonlyArrayDyn<f32>>,
+        medium_index: Option<PyReadonlyArray1<i64>>,
+        labels: Option<PyReadonlyArray3<u8>>,
+        ink_sigma_s: Option<PyReadonlyArray2<f32>>,
+        ink_sigma_a: Option<PyReadonlyArray2<f32>>,
+        inside: Option<PyReadonlyArray3<u8>>,
+        normals: Option<PyReadonlyArray4<f32>>,
+        normal_index: Option<PyReadonlyArray1<i64>>,
+        normal_vectors: Option<PyReadonlyArray2<f32>>,
+        boundary: &str,
+        ior: f32,
+        g: f32,
+        threads: Option<usize>,
+    ) -> PyResult<Self> {
+        let (nz, ny, nx) = shape;
+        let bnd = match boundary {
+            "box" => Boundary::Box,
+            "periodic-xy" => Boundary::PeriodicXY,
+            other => return Err(err(format!("unknown boundary '{other}'; use 'box' or 'periodic-xy'"))),
+        };
+        let mut geo = Geometry::new([nx, ny, nz], [voxel_mm.0, voxel_mm.1, voxel_mm.2], bnd, ior, g).map_err(err)?;
+        let medium = medium_from([nz, ny, nx], sigma_s, sigma_a, medium_index, labels, ink_sigma_s, ink_sigma_a)?;
+        if let Some(m) = inside {
+            check_shape(m.shape(), &[nz, ny, nx], "inside")?;
+            geo = geo.with_inside(c_slice(&m, "inside")?.to_vec()).map_err(err)?;
+        }
+        if let Some(nrm) = &normals {
+            check_shape(nrm.shape(), &[nz, ny, nx, 3], "normals")?;
+            geo = geo.with_normals(c_slice(nrm, "normals")?).map_err(err)?; // kept sparse, not copied
+        }
+        match (normal_index, normal_vectors) {
+            (Some(i), Some(v)) => {
+                if normals.is_some() {
+                    return Err(err("give the normals dense or sparse, not both"));
+                }
+                check_shape(v.shape(), &[i.len(), 3], "normal_vectors")?;
+                geo = geo
+                    .with_sparse_normals(c_slice(&i, "normal_index")?, c_slice(&v, "normal_vectors")?)
+                    .map_err(err)?;
+            }
+            (None, None) => {}
+            _ => return Err(err("normal_index and normal_vectors go together")),
+        }
+        let mut b = rayon::ThreadPoolBuilder::new();
+        if let Some(t) = threads {
+            b = b.num_threads(t);
+        }
+        let pool = b.build().map_err(|e| err(e.to_string()))?;
+        Ok(Scene { geo, medium, pool, grads: None, sparse: false, shape: [nz, ny, nx] })
+    }
+
+    /// set_medium(*, sigma_s=None, sigma_a=None, medium_index=None, labels=None, ink_sigma_s=None,
+    /// ink_sigma_a=None): replace the medium (the same arguments as the constructor's) and keep the geometry
+    /// (grid, boundary, ior, g, inside mask and its safe distances, normals), the thread pool and any gradient
+    /// buffers. A dense medium replaced by a dense one, or a sparse one by a sparse one of the same voxels, is
+    /// overwritten in place (no second copy at the peak).
+    #[pyo3(signature = (*, sigma_s=None, sigma_a=None, medium_index=None, labels=None, ink_sigma_s=None,
+                        ink_sigma_a=None))]
+    fn set_medium(
+        &mut self,
+        sigma_s: Option<PyReadonlyArrayDyn<f32>>,
+        sigma_a: Option<PyReadonlyArrayDyn<f32>>,
+        medium_index: Option<PyReadonlyArray1<i64>>,
+        labels: Option<PyReadonlyArray3<u8>>,
+        ink_sigma_s: Option<PyReadonlyArray2<f32>>,
+        ink_sigma_a: Option<PyReadonlyArray2<f32>>,
+    ) -> PyResult<()> {
+        let [nz, ny, nx] = self.shape;
+        match (&mut self.medium, &sigma_s, &sigma_a, &medium_index, &labels) {
+            (MediumKind::Dense(m), Some(s), Some(a), None, None) => {
+                check_shape(s.shape(), &[nz, ny, nx, 3], "sigma_s")?;
+                check_shape(a.shape(), &[nz, ny, nx, 3], "sigma_a")?;
+                return m.refill(c_slice(s, "sigma_s")?, c_slice(a, "sigma_a")?).map_err(err);
+            }
+            (MediumKind::Sparse(m), Some(s), Some(a), Some(ix), None) if m.stores(c_slice(ix, "medium_index")?) => {
+                check_shape(s.shape(), &[ix.len(), 3], "sigma_s")?;
+                check_shape(a.shape(), &[ix.len(), 3], "sigma_a")?;
+                return m.refill(c_slice(s, "sigma_s")?, c_slice(a, "sigma_a")?).map_err(err);
+            }
+            _ => {}
+        }
+        self.medium = medium_from(self.shape, sigma_s, sigma_a, medium_index, labels, ink_sigma_s, ink_sigma_a)?;
+        Ok(())
+    }
+
+    /// set_voxels(index, sigma_s, sigma_a): overwrite the coefficients of some voxels of a dense or sparse
+    /// medium (a sparse one must store them) in place
+    /// (the optimiser's free voxels, every iteration) and recompute the majorant. `index` (K,) int64: linear
+    /// voxel indices of the (z, y, x) grid (a voxel listed twice takes its last values); `sigma_s`, `sigma_a`
+    /// (K, 3) float32, mm^-1. All checked before anything is written. The GIL is released.
+    fn set_voxels(
+        &mut self,
+        py: Python<'_>,
+        index: PyReadonlyArray1<i64>,
+        sigma_s: PyReadonlyArray2<f32>,
+        sigma_a: PyReadonlyArray2<f32>,
+    ) -> PyResult<()> {
+        let k = index.len();
+        check_shape(sigma_s.shape(), &[k, 3], "sigma_s")?;
+        check_shape(sigma_a.shape(), &[k, 3], "sigma_a")?;
+        let (ix, s, a) = (c_slice(&index, "index")?, c_slice(&sigma_s, "sigma_s")?, c_slice(&sigma_a, "sigma_a")?);
+        let pool = &self.pool;
+        match &mut self.medium {
+            MediumKind::Dense(m) => py.detach(|| pool.install(|| m.set_voxels(ix, s, a))).map_err(err),
+            MediumKind::Sparse(m) => py.detach(|| pool.install(|| m.set_voxels(ix, s, a))).map_err(err),
+            MediumKind::Labels(_) => Err(err("set_voxels needs coefficients (sigma_s, sigma_a), not labels")),
+        }
+    }
+
+    /// set_light(map=None, rotate_deg=0.0): light the scene by an equirectangular environment map of linear
+    /// radiance, (H, 2H, 3) float32 C-contiguous (row 0 looks up along +z, column 0 starts at +x, longitude
+    /// grows towards +y; bilinear per channel), turned by `rotate_deg` about z (from +x towards +y); None: the
+    /// uniform white light of radiance 1 (the default).
+    #[pyo3(signature = (map=None, rotate_deg=0.0))]
+    fn set_light(&mut self, map: Option<PyReadonlyArray3<f32>>, rotate_deg: f32) -> PyResult<()> {
+        match map {
+            None => self.geo.set_light(Box::new(UniformLight([1.0; 3]))),
+            Some(m) => {
+                let s = m.shape();
+                if s[2] != 3 {
+                    return Err(err(format!("the light map has shape {s:?}, expected (H, 2H, 3)")));
+                }
+                let env = EnvMap::new(s[0], s[1], c_slice(&m, "light map")?, rotate_deg).map_err(err)?;
+                self.geo.set_light(Box::new(env));
+            }
+        }
+        Ok(())
+    }
+
+    #[getter]
+    fn threads(&self) -> usize {
+        self.pool.current_num_threads()
+    }
+
+    /// render(texel_voxel (I,3) int32 zyx, texel_face (I,) uint8, texel_normal (I,3) float32 xyz, *, spp, seed,
+    /// first_texel=0, include_specular=True) -> (mean (I,3) f32, var_mean (I,3) f32, stats dict)
+    #[pyo3(signature = (texel_voxel, texel_face, texel_normal, *, spp, seed, first_texel=0, include_specular=true))]
+    fn render<'py>(
+        &self,
+        py: Python<'py>,
+        texel_voxel: PyReadonlyArray2<i32>,
+        texel_face: PyReadonlyArray1<u8>,
+        texel_normal: PyReadonlyArray2<f32>,
+        spp: u32,
+        seed: u64,
+        first_texel: u64,
+        include_specular: bool,
+    ) -> PyResult<Packed<'py>> {
+        let texels = texels(&self.geo, &texel_voxel, &texel_face, &texel_normal)?;
+        let opts = options(spp, seed, include_specular)?;
+        let (est, stats) = py.detach(|| {
+            self.pool.install(|| with_medium!(&self.medium, m => render(&self.geo, m, &texels, first_texel, &opts)))
+        });
+        pack(py, &est, &stats)
+    }
+
+    /// Reset the gradient accumulators for a pass whose adjoints are at most `max_abs_adjoint` in magnitude
+    /// (sets the fixed-point quantum). `grad_index`: which voxels get gradients, and in which slot; gradients are
+    /// then returned per slot, (F, 3). Either (z, y, x) int32, the slot of each voxel or -1 for none, or (F,)
+    /// int64, strictly increasing linear indices of the voxels whose slots are 0..F (no map per grid voxel on
+    /// either side: the core ranks them per grid row, `inkopt_core::spans`). None: every voxel, (z, y, x, 3).
+    /// The buffer of the previous call, if it was not taken (take_grad frees it), is zeroed in place when it was
+    /// for the same slots (checked: element by element, or in O(F) for the second form) or both None; otherwise
+    /// it is freed before the new one is allocated. The GIL is released.
+    #[pyo3(signature = (max_abs_adjoint, grad_index=None))]
+    fn zero_grad(
+        &mut self,
+        py: Python<'_>,
+        max_abs_adjoint: f32,
+        grad_index: Option<Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
+        gradients::zero_grad(self, py, max_abs_adjoint, grad_index)
+    }
+
+    /// backward(texel_voxel, texel_face, texel_normal, adjoint (I,3) f32, *, spp, seed, first_texel=0,
+    /// include_specular=True, method="replay") -> (mean, var_mean, stats): accumulates adjoint . dc/dsigma.
+    #[pyo3(signature = (texel_voxel, texel_face, texel_normal, adjoint, *, spp, seed, first_texel=0,
+                        include_specular=true, method="replay"))]
+    fn backward<'py>(
+        &mut self,
+        py: Python<'py>,
+        texel_voxel: PyReadonlyArray2<i32>,
+        texel_face: PyReadonlyArray1<u8>,
+        texel_normal: PyReadonlyArray2<f32>,
+        adjoint: PyReadonlyArray2<f32>,
+        spp: u32,
+        seed: u64,
+        first_texel: u64,
+        include_specular: bool,
+        method: &str,
+    ) -> PyResult<Packed<'py>> {
+        gradients::backward(
+            self,
+            py,
+            texel_voxel,
+            texel_face,
+            texel_normal,
+            adjoint,
+            spp,
+            seed,
+            first_texel,
+            include_specular,
+            method,
+        )
+    }
+
+    /// The accumulated gradients (d e/d sigma_s, d e/d sigma_a): (z, y, x, 3) float32 each, or (F, 3) per slot
+    /// when zero_grad was given a grad_index. The buffers are freed (48 bytes per slot: a big object's optimiser
+    /// step should not hold them beside its own arrays); the next zero_grad allocates new ones.
+    fn take_grad<'py>(&mut self, py: Python<'py>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+        gradients::take_grad(self, py)
+    }
+
+    /// The gradients as take_grad, but as their raw fixed-point sums (int64) and the quantum (float): the float
+    /// gradient is float32(float64(sum) * quantum). Sums of shards of one pass (same max_abs_adjoint) add up,
+    /// wrapping, to the whole pass's sums, which is how texel shards on several machines combine bit-identically.
+    /// (Also frees the buffers, as take_grad does.)
+    fn take_grad_fixed<'py>(&mut self, py: Python<'py>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>, f64)> {
+        gradients::take_grad_fixed(self, py)
+    }
+}

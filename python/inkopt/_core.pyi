@@ -1,0 +1,134 @@
+"""Type stub of ``inkopt._core``, the Rust core's bindings (``crates/py``): the ``Scene`` class (render and
+gradients) and the printing and optimiser kernels.
+
+Array conventions: grids are (z, y, x[, c]) C-contiguous arrays; texel voxels are (z, y, x); normals, directions
+and voxel sizes are (x, y, z); lengths in mm, coefficients in mm^-1, radiance linear RGB. Bad input raises
+ValueError. ``tests/test_core_stub.py`` checks this stub against the compiled module.
+"""
+
+import numpy as np
+from numpy.typing import NDArray
+
+__version__: str
+
+class Scene:
+    """A voxel scene (geometry, medium, light, thread pool) that renders texel lists and accumulates gradients."""
+
+    def __new__(
+        cls,
+        shape: tuple[int, int, int],
+        voxel_mm: tuple[float, float, float],
+        *,
+        sigma_s: NDArray[np.float32] | None = None,
+        sigma_a: NDArray[np.float32] | None = None,
+        medium_index: NDArray[np.int64] | None = None,
+        labels: NDArray[np.uint8] | None = None,
+        ink_sigma_s: NDArray[np.float32] | None = None,
+        ink_sigma_a: NDArray[np.float32] | None = None,
+        inside: NDArray[np.uint8] | None = None,
+        normals: NDArray[np.float32] | None = None,
+        normal_index: NDArray[np.int64] | None = None,
+        normal_vectors: NDArray[np.float32] | None = None,
+        boundary: str = "box",
+        ior: float = 1.5,
+        g: float = 0.4,
+        threads: int | None = None,
+    ) -> Scene:
+        """Grid shape (z,y,x) of voxel_mm (x,y,z) mm voxels; medium (Z,Y,X,3) f32, (K,) i64 + (K,3) f32, or labels."""
+
+    def set_medium(
+        self,
+        *,
+        sigma_s: NDArray[np.float32] | None = None,
+        sigma_a: NDArray[np.float32] | None = None,
+        medium_index: NDArray[np.int64] | None = None,
+        labels: NDArray[np.uint8] | None = None,
+        ink_sigma_s: NDArray[np.float32] | None = None,
+        ink_sigma_a: NDArray[np.float32] | None = None,
+    ) -> None:
+        """Replace the medium (the constructor's forms, mm^-1), keeping geometry, thread pool and gradient buffers."""
+
+    def set_voxels(
+        self, index: NDArray[np.int64], sigma_s: NDArray[np.float32], sigma_a: NDArray[np.float32]
+    ) -> None:
+        """Overwrite voxels index (K,) i64 (linear zyx) of a dense/sparse medium with (K, 3) f32 mm^-1, in place."""
+
+    def set_light(self, map: NDArray[np.float32] | None = None, rotate_deg: float = 0.0) -> None:
+        """Light by an equirectangular map (H, 2H, 3) f32 linear radiance turned rotate_deg about z; None: uniform 1."""
+
+    @property
+    def threads(self) -> int:
+        """Threads of the scene's pool."""
+
+    def render(
+        self,
+        texel_voxel: NDArray[np.int32],
+        texel_face: NDArray[np.uint8],
+        texel_normal: NDArray[np.float32],
+        *,
+        spp: int,
+        seed: int,
+        first_texel: int = 0,
+        include_specular: bool = True,
+    ) -> tuple[NDArray[np.float32], NDArray[np.float32], dict[str, int]]:
+        """Texels voxel (I,3) i32 zyx, face (I,) u8, normal (I,3) f32 xyz -> mean, var_mean (I,3) f32, stats dict."""
+
+    def zero_grad(
+        self, max_abs_adjoint: float, grad_index: NDArray[np.int32] | NDArray[np.int64] | None = None
+    ) -> None:
+        """Reset gradient buffers: per voxel, per slot of a (z,y,x) i32 slot map (-1: none) or of (F,) i64 voxels."""
+
+    def backward(
+        self,
+        texel_voxel: NDArray[np.int32],
+        texel_face: NDArray[np.uint8],
+        texel_normal: NDArray[np.float32],
+        adjoint: NDArray[np.float32],
+        *,
+        spp: int,
+        seed: int,
+        first_texel: int = 0,
+        include_specular: bool = True,
+        method: str = "replay",
+    ) -> tuple[NDArray[np.float32], NDArray[np.float32], dict[str, int]]:
+        """Accumulate adjoint (I,3) f32 . d colour / d sigma ("replay" or "li1"); returns the pass's own render."""
+
+    def take_grad(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+        """d e/d sigma_s, d e/d sigma_a: (z,y,x,3) f32 each, or (F,3) per slot; frees the buffers."""
+
+    def take_grad_fixed(self) -> tuple[NDArray[np.int64], NDArray[np.int64], float]:
+        """The gradients as raw fixed-point sums (int64, shaped as take_grad's) and the quantum; frees the buffers."""
+
+def diffuse_layer(
+    mixture: NDArray[np.float32],
+    inside: NDArray[np.uint8],
+    inside_next: NDArray[np.uint8],
+    error: NDArray[np.float32],
+    z: int,
+    out: NDArray[np.uint8],
+) -> None:
+    """Error-diffuse layer z: mixture (N,Y,X) f32, masks (Y,X) u8, error (2,Y,X,N) f32 -> labels into out (Y,X) u8."""
+
+def smooth_rows(
+    shape: tuple[int, int, int],
+    index: NDArray[np.int64],
+    values: NDArray[np.float32],
+    steps: int,
+    alpha: float,
+    guide: NDArray[np.float32] | None = None,
+    tau: float = 1.0,
+    threads: int | None = None,
+) -> NDArray[np.float32]:
+    """Diffuse values (F, C) f32 of voxels index (F,) i64 over their 6-neighbours, guide (F, D) f32 -> (F, C) f32."""
+
+def softmax_rows(x: NDArray[np.float32], threads: int | None = None) -> NDArray[np.float32]:
+    """The softmax of each row of x (rows, n) f32 -> (rows, n) f32."""
+
+def softmax_backward(
+    x: NDArray[np.float32],
+    g: NDArray[np.float32],
+    scale: NDArray[np.float32],
+    natural: bool,
+    threads: int | None = None,
+) -> NDArray[np.float32]:
+    """Softmax backward map: x, g = dE/dp (rows, n) f32, scale (rows,) f32 -> c (natural) or dE/dx, (rows, n) f32."""
