@@ -4,8 +4,8 @@ on the zebra chart or the astronaut photograph of experiments/printable_eval.py 
 
     .venv/bin/python experiments/convergence_study.py [--threads 2] [--only NAME ...] [--case demo|zebra|astronaut]
 
-Each setting is one `run_optimisation` of a `SlabSpec` scene from the 97 %-white start with seed 0; the final figures come from the driver's
-adaptive evaluation (noise adds <= 0.5 to the mean dE76), so differences of a few tenths are real for this seed
+Each setting is one `run_optimisation` of a `SlabSpec` scene from the 97 %-white start with seed 0; the final
+figures come from the driver's adaptive evaluation (noise adds <= 0.5 to the mean dE76), so differences of a few tenths are real for this seed
 and scene, not for every scene. Writes experiments/results/convergence_CASE.json (one entry per setting: mean dE76
 (noise-corrected), mean dE2000, SSIM, mottle (dL*)^2 in the target's flat regions, seconds of the whole run).
 """

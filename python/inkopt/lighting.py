@@ -3,7 +3,7 @@
 ``load_lighting("uniform" | FILE, rotate_deg=0)`` gives a :class:`Lighting`: the uniform white environment of
 radiance 1 (the default everywhere), or an equirectangular environment map of linear radiance read from a
 Radiance ``.hdr`` or OpenEXR ``.exr`` file (through OpenCV, ``opencv-python-headless``) or a ``.npy`` array of
-shape (H, W, 3), RGB. The renderer (``crates/core/src/light.rs``, ``EnvMap``) looks every path that leaves the
+shape (H, W, 3), RGB. The renderer (``crates/core/src/transport/light.rs``, ``EnvMap``) looks every path that leaves the
 object up in the map, bilinearly and per channel.
 
 World frame (docs/conventions.md, z up): the map has W = 2H columns; row 0 looks straight up (+z), the middle of

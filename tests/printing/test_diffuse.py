@@ -1,5 +1,5 @@
 """Tests of quantize(method="error-diffusion"): 3D vector error diffusion on the printer grid (Rust core in
-crates/core/src/diffuse.rs, which has its own unit tests)."""
+crates/core/src/kernels/diffuse.rs, which has its own unit tests)."""
 import hashlib
 import os
 import subprocess

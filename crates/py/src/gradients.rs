@@ -9,7 +9,7 @@ use pyo3::prelude::*;
 
 use crate::arrays::{c_slice, check_shape, err, options, pack, texels, Packed};
 use crate::medium::with_medium;
-use crate::scene::Scene;
+use crate::state::Scene;
 
 /// Whether the buffers are per slot of a grad_index (else per voxel).
 fn grad_index_given(g: &Option<GradBuffers>) -> bool {

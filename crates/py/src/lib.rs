@@ -3,7 +3,7 @@
 //! arrays, texel voxels (z, y, x), normals and voxel sizes (x, y, z). The type stub `python/inkopt/_core.pyi`
 //! lists the Python API.
 //!
-//! Files: `scene` (the `Scene` class: construction, media, light, render), `medium` (the scene's medium from
+//! Files: `state` (the `Scene` class's fields), `scene` (its Python methods: construction, media, light, render), `medium` (the scene's medium from
 //! arrays), `gradients` (the gradient methods of `Scene`), `printing` (error diffusion), `optimiser` (smoothing
 //! and softmax kernels on kept thread pools), `arrays` (argument checks and conversions shared by all).
 
@@ -15,10 +15,11 @@ mod medium;
 mod optimiser;
 mod printing;
 mod scene;
+mod state;
 
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_class::<scene::Scene>()?;
+    m.add_class::<state::Scene>()?;
     m.add_function(wrap_pyfunction!(printing::diffuse_layer, m)?)?;
     m.add_function(wrap_pyfunction!(optimiser::smooth_rows, m)?)?;
     m.add_function(wrap_pyfunction!(optimiser::softmax_rows, m)?)?;

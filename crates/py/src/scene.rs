@@ -4,7 +4,7 @@
 //! only some voxels); `set_light` lights it by a uniform light or an environment map. The gradient methods'
 //! work is in `gradients`. The GIL is released while rendering.
 
-use inkopt_core::{render, Boundary, EnvMap, Geometry, GradBuffers, UniformLight};
+use inkopt_core::{render, Boundary, EnvMap, Geometry, UniformLight};
 use numpy::{
     PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4, PyReadonlyArrayDyn, PyUntypedArrayMethods,
 };
@@ -13,19 +13,7 @@ use pyo3::prelude::*;
 use crate::arrays::{c_slice, check_shape, err, options, pack, texels, Packed};
 use crate::gradients;
 use crate::medium::{medium_from, with_medium, MediumKind};
-
-/// A voxel scene (geometry, medium, light) with its thread pool and gradient buffers; the Python class
-/// `inkopt._core.Scene`.
-#[pyclass(module = "inkopt._core")]
-pub(crate) struct Scene {
-    pub(crate) geo: Geometry,
-    pub(crate) medium: MediumKind,
-    pub(crate) pool: rayon::ThreadPool,
-    pub(crate) grads: Option<GradBuffers>,
-    /// Whether the gradient buffers are per slot of a grad_index (else per voxel).
-    pub(crate) sparse: bool,
-    pub(crate) shape: [usize; 3],
-}
+use crate::state::Scene;
 
 #[pymethods]
 impl Scene {

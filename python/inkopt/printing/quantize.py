@@ -18,7 +18,7 @@ to the printer grid and gives every printer voxel exactly one ink:
   i.e. the nearest one-hot vector) and passes the residual (corrected mixture - one-hot) to unvisited
   neighbours: 7/8 in its layer with Floyd–Steinberg's proportions (49, 21, 35, 7)/128, 1/8 to the next layer
   (8/128 straight down, 2/128 to each of that voxel's four xy neighbours; the weights and the measurements that
-  chose them are in crates/core/src/diffuse.rs). Weights are renormalised over neighbours
+  chose them are in crates/core/src/kernels/diffuse.rs). Weights are renormalised over neighbours
   inside the object; outside voxels neither take nor pass error. The ink counts of any window differ from its
   summed mixture only by the residuals crossing its boundary (each bounded: within [-1/2, 1/2] for two inks).
   ``seed`` is unused.
