@@ -5,6 +5,7 @@
 Writes bench/results/mesh_<height>mm.json (the folder is created if missing). Peak memory is the process's
 resident-set high-water mark (getrusage), recorded after each stage; run one height per process.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -23,8 +24,8 @@ SPOT = Path(__file__).resolve().parents[2] / "shared" / "data" / "spot" / "spot.
 
 def main(argv=None) -> dict:
     import numpy as np
-
     from common import provenance
+
     from inkopt.io import atomic_write_bytes
     from inkopt.model import InkTable
     from inkopt.optim import Optimization, OptimizeConfig
@@ -45,15 +46,22 @@ def main(argv=None) -> dict:
 
     rss = {"start": peak_rss_gb()}
     t0 = time.perf_counter()
-    scene = build_mesh_scene(args.mesh, InkTable.parse(args.inks), height_mm=args.height_mm,
-                             shell_mm=args.shell_mm)
+    scene = build_mesh_scene(args.mesh, InkTable.parse(args.inks), height_mm=args.height_mm, shell_mm=args.shell_mm)
     build_s = time.perf_counter() - t0
     rss["after_voxelize"] = peak_rss_gb()
-    cfg = OptimizeConfig(iterations=args.iterations, spp=args.spp,
-                         **({} if args.smooth is None else {"smooth": args.smooth}))
+    cfg = OptimizeConfig(
+        iterations=args.iterations, spp=args.spp, **({} if args.smooth is None else {"smooth": args.smooth})
+    )
     t0 = time.perf_counter()
-    run = Optimization(scene.volume, scene.vox.texels, scene.vox.targets, cfg, fixed_share=scene.fixed_share,
-                       threads=args.threads, kind="mesh")
+    run = Optimization(
+        scene.volume,
+        scene.vox.texels,
+        scene.vox.targets,
+        cfg,
+        fixed_share=scene.fixed_share,
+        threads=args.threads,
+        kind="mesh",
+    )
     setup_s = time.perf_counter() - t0
     rss["after_setup"] = peak_rss_gb()
     import resource
@@ -64,40 +72,70 @@ def main(argv=None) -> dict:
         info = run.step()
         passes.append(run.last_passes)
         h = run.history
-        print(f"iteration {i + 1}: {h.seconds[-1]:.1f} s (render {h.render_s[-1]:.1f}, gradient "
-              f"{h.gradient_s[-1]:.1f}), ΔE76 {info['delta_e76']:.2f}, peak {peak_rss_gb():.2f} GiB",
-              file=sys.stderr)
+        print(
+            f"iteration {i + 1}: {h.seconds[-1]:.1f} s (render {h.render_s[-1]:.1f}, gradient "
+            f"{h.gradient_s[-1]:.1f}), ΔE76 {info['delta_e76']:.2f}, peak {peak_rss_gb():.2f} GiB",
+            file=sys.stderr,
+        )
     rss["after_iterations"] = peak_rss_gb()
     cpu1 = resource.getrusage(resource.RUSAGE_SELF)
     cpu_s = (cpu1.ru_utime + cpu1.ru_stime - cpu0.ru_utime - cpu0.ru_stime) / max(args.iterations, 1)
     h = run.history
     nz, ny, nx = scene.volume.shape
     result = {
-        "mesh": args.mesh, "height_mm": args.height_mm, "grid_zyx": [nz, ny, nx], "voxels": nz * ny * nx,
-        "inside_voxels": int(scene.vox.inside.sum()), "free_voxels": int(scene.free.sum()),
-        "texels": len(scene.vox.texels), "shell_mm": args.shell_mm,
-        "voxelize_seconds": scene.voxelize_seconds, "build_seconds": build_s, "setup_seconds": setup_s,
-        "iterations": args.iterations, "spp": args.spp, "threads": args.threads,
-        "smooth": run.cfg.smooth, "adjoint_ema": run.cfg.adjoint_ema,
+        "mesh": args.mesh,
+        "height_mm": args.height_mm,
+        "grid_zyx": [nz, ny, nx],
+        "voxels": nz * ny * nx,
+        "inside_voxels": int(scene.vox.inside.sum()),
+        "free_voxels": int(scene.free.sum()),
+        "texels": len(scene.vox.texels),
+        "shell_mm": args.shell_mm,
+        "voxelize_seconds": scene.voxelize_seconds,
+        "build_seconds": build_s,
+        "setup_seconds": setup_s,
+        "iterations": args.iterations,
+        "spp": args.spp,
+        "threads": args.threads,
+        "smooth": run.cfg.smooth,
+        "adjoint_ema": run.cfg.adjoint_ema,
         "seconds_per_iteration": float(np.mean(h.seconds)) if h.seconds else None,
         "cpu_seconds_per_iteration": cpu_s,
-        "time_split": {k: float(np.mean(getattr(h, k))) if h.seconds else None
-                       for k in ("render_s", "gradient_s", "loss_s", "step_s")},
+        "time_split": {
+            k: float(np.mean(getattr(h, k))) if h.seconds else None
+            for k in ("render_s", "gradient_s", "loss_s", "step_s")
+        },
         "delta_e76_training": h.delta_e76,
         # events per path (free-flight collisions, real and null, plus boundary events) of the forward renders and
         # of the gradient passes' forward walks, summed over the iterations
-        "events_per_path": {k: float(sum(p[k]["events"] for p in passes if p[k]) /
-                                     max(sum(p[k]["paths"] for p in passes if p[k]), 1))
-                            for k in ("forward", "gradient")},
-        "peak_rss_gb": rss["after_iterations"], "peak_rss_gb_by_stage": rss,
+        "events_per_path": {
+            k: float(sum(p[k]["events"] for p in passes if p[k]) / max(sum(p[k]["paths"] for p in passes if p[k]), 1))
+            for k in ("forward", "gradient")
+        },
+        "peak_rss_gb": rss["after_iterations"],
+        "peak_rss_gb_by_stage": rss,
         "machine": {"cpu": platform.processor() or platform.machine(), "python": platform.python_version()},
         "note": "CPU may be shared with other processes: wall-clock times are upper bounds; "
-                "cpu_seconds_per_iteration (user + system, all threads) is not affected",
+        "cpu_seconds_per_iteration (user + system, all threads) is not affected",
     }
     out = Path(args.out) if args.out else ROOT / "bench" / "results" / f"mesh_{args.height_mm:g}mm.json"
     atomic_write_bytes(out, (json.dumps({**result, **provenance()}, indent=2) + "\n").encode())
-    print(json.dumps({k: result[k] for k in ("grid_zyx", "texels", "voxelize_seconds", "seconds_per_iteration",
-                                             "cpu_seconds_per_iteration", "peak_rss_gb", "events_per_path")}))
+    print(
+        json.dumps(
+            {
+                k: result[k]
+                for k in (
+                    "grid_zyx",
+                    "texels",
+                    "voxelize_seconds",
+                    "seconds_per_iteration",
+                    "cpu_seconds_per_iteration",
+                    "peak_rss_gb",
+                    "events_per_path",
+                )
+            }
+        )
+    )
     return result
 
 

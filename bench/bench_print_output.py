@@ -8,6 +8,7 @@ vero-cmykw), a seeded random mixture (Dirichlet, alpha 1) on every inside voxel 
 for the PNG encoder than an optimised object's white core) saved as volume.npz with the scene record, no
 optimisation. ``--reuse`` keeps an existing one. Writes bench/results/print_output.json.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -46,12 +47,16 @@ def build(out: Path, height_mm: float, mesh: str) -> None:
 
 def timed(args: list[str]) -> dict:
     """Run ``python -m inkopt.cli ARGS`` under /usr/bin/time -v: seconds, peak RSS (GB), stdout."""
-    proc = subprocess.run(["/usr/bin/time", "-v", sys.executable, "-m", "inkopt.cli", *args], capture_output=True,
-                          text=True, env={"PYTHONPATH": str(ROOT / "python"), "PATH": "/usr/bin:/bin"})
+    proc = subprocess.run(
+        ["/usr/bin/time", "-v", sys.executable, "-m", "inkopt.cli", *args],
+        capture_output=True,
+        text=True,
+        env={"PYTHONPATH": str(ROOT / "python"), "PATH": "/usr/bin:/bin"},
+    )
     if proc.returncode:
         raise SystemExit(f"inkopt {' '.join(args)} failed:\n{proc.stdout}\n{proc.stderr}")
     wall = re.search(r"Elapsed \(wall clock\) time \(h:mm:ss or m:ss\): (\S+)", proc.stderr).group(1)
-    secs = sum(float(p) * 60 ** i for i, p in enumerate(reversed(wall.split(":"))))
+    secs = sum(float(p) * 60**i for i, p in enumerate(reversed(wall.split(":"))))
     rss_kb = int(re.search(r"Maximum resident set size \(kbytes\): (\d+)", proc.stderr).group(1))
     cpu = sum(float(re.search(rf"{k} time \(seconds\): (\S+)", proc.stderr).group(1)) for k in ("User", "System"))
     return {"seconds": secs, "cpu_seconds": cpu, "peak_rss_gb": rss_kb / 2**20, "stdout": proc.stdout.strip()}
@@ -74,8 +79,10 @@ def main() -> dict:
         build(out, args.height_mm, args.mesh)
         return {}
     if not (args.reuse and RunDir.create(out).volume_path.is_file()):
-        subprocess.run([sys.executable, __file__, str(args.height_mm), "--dir", str(out), "--mesh",
-                        args.mesh, "--build-only"], check=True)
+        subprocess.run(
+            [sys.executable, __file__, str(args.height_mm), "--dir", str(out), "--mesh", args.mesh, "--build-only"],
+            check=True,
+        )
     q = timed(["quantize", str(out)])
     e = timed(["export", str(out)])
     g = timed(["export", str(out), "--format", "gcvf"])
@@ -84,20 +91,30 @@ def main() -> dict:
     d = RunDir(out)
     meta = np.load(d.quantized_path)
     shape = [int(v) for v in meta["labels_shape"]]
-    res = {"mesh": Path(args.mesh).name, "height_mm": args.height_mm, "printer_grid_zyx": shape,
-           "printer_voxels": int(np.prod(shape)), "ink_voxels": int(meta["label_counts"][:255].sum()),
-           "quantize_seconds": q["seconds"], "quantize_cpu_seconds": q["cpu_seconds"],
-           "quantize_peak_rss_gb": q["peak_rss_gb"],
-           "export_seconds": e["seconds"], "export_cpu_seconds": e["cpu_seconds"],
-           "export_peak_rss_gb": e["peak_rss_gb"],
-           "gcvf_seconds": g["seconds"], "gcvf_cpu_seconds": g["cpu_seconds"], "gcvf_peak_rss_gb": g["peak_rss_gb"],
-           "labels_file_gb": d.quantized_labels_path.stat().st_size / 2**30,
-           "slices_gb": sum(p.stat().st_size for p in d.slices_path.iterdir()) / 2**30,
-           "gcvf_gb": d.gcvf_path.stat().st_size / 2**30,
-           "output": {"quantize": q["stdout"], "export": e["stdout"], "gcvf": g["stdout"]},
-           "targets": {"seconds": 120, "peak_rss_gb": 2}, **machine(),
-           "note": "random mixture on every inside voxel (no optimisation); wall-clock times on a shared 2-core "
-                   "machine are upper bounds"}
+    res = {
+        "mesh": Path(args.mesh).name,
+        "height_mm": args.height_mm,
+        "printer_grid_zyx": shape,
+        "printer_voxels": int(np.prod(shape)),
+        "ink_voxels": int(meta["label_counts"][:255].sum()),
+        "quantize_seconds": q["seconds"],
+        "quantize_cpu_seconds": q["cpu_seconds"],
+        "quantize_peak_rss_gb": q["peak_rss_gb"],
+        "export_seconds": e["seconds"],
+        "export_cpu_seconds": e["cpu_seconds"],
+        "export_peak_rss_gb": e["peak_rss_gb"],
+        "gcvf_seconds": g["seconds"],
+        "gcvf_cpu_seconds": g["cpu_seconds"],
+        "gcvf_peak_rss_gb": g["peak_rss_gb"],
+        "labels_file_gb": d.quantized_labels_path.stat().st_size / 2**30,
+        "slices_gb": sum(p.stat().st_size for p in d.slices_path.iterdir()) / 2**30,
+        "gcvf_gb": d.gcvf_path.stat().st_size / 2**30,
+        "output": {"quantize": q["stdout"], "export": e["stdout"], "gcvf": g["stdout"]},
+        "targets": {"seconds": 120, "peak_rss_gb": 2},
+        **machine(),
+        "note": "random mixture on every inside voxel (no optimisation); wall-clock times on a shared 2-core "
+        "machine are upper bounds",
+    }
     print({k: v for k, v in res.items() if k != "output"})
     print("wrote", write("print_output.json", res))
     return res

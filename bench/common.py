@@ -1,6 +1,7 @@
 """Shared set-up of the benchmarks (bench/) and studies (experiments/): the reference slab (177 x 118 x 30 voxels at
 300 DPI, 15 x 10 x 2.5 mm, a seeded random CMYKW mixture with 50 % white), the machine description, and writing a
 results JSON that records the commit and the command that produced it."""
+
 import json
 import os
 import platform
@@ -30,14 +31,20 @@ def reference_slab(seed: int = 0) -> Volume:
 
 
 def machine() -> dict:
-    return {"cpus": os.cpu_count(), "machine": platform.machine(), "processor": platform.processor(),
-            "python": platform.python_version(), "date": time.strftime("%Y-%m-%d %H:%M"),
-            "load_average_1min": os.getloadavg()[0]}
+    return {
+        "cpus": os.cpu_count(),
+        "machine": platform.machine(),
+        "processor": platform.processor(),
+        "python": platform.python_version(),
+        "date": time.strftime("%Y-%m-%d %H:%M"),
+        "load_average_1min": os.getloadavg()[0],
+    }
 
 
 def provenance() -> dict:
     """``commit``: the checkout's HEAD (with " + uncommitted changes" when tracked files differ from it, None
     outside git); ``command``: this process's command line, the script path relative to the repository."""
+
     def git(*args: str) -> str:
         return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True, check=True).stdout.strip()
 

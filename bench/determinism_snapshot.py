@@ -8,6 +8,7 @@ Covers every code path of the core (packets on a box and a periodic slab, the ma
 normals, the scalar tracer of a masked periodic slab, label media, dense and sparse gradients, replay and L_i = 1)
 and the Python optimisation loop (3 iterations of a two-sided slab). Arrays are compared exactly (bytes).
 """
+
 import argparse
 import sys
 
@@ -20,14 +21,22 @@ def _scene(shape, voxel_mm, rng, *, boundary="box", mask=None, normals=None, lab
     nz, ny, nx = shape
     kw = dict(boundary=boundary, ior=1.5, g=0.4, threads=None)
     if labels:
-        kw.update(labels=rng.integers(0, 5, size=shape).astype(np.uint8),
-                  ink_sigma_s=np.array([[8.6, 3.1, 7.3], [2.4, .3, 9.], [2.2, 3.7, 2.8], [1.7, 1.9, 2.2],
-                                        [6., 9., 24.]], np.float32) * np.float32(0.999),
-                  ink_sigma_a=np.array([[.4, 1.4, .2], [.1, 2.7, 1.], [.01, .02, 16.], [3.2, 3.6, 4.2],
-                                        [.005, .003, .02]], np.float32))
+        kw.update(
+            labels=rng.integers(0, 5, size=shape).astype(np.uint8),
+            ink_sigma_s=np.array(
+                [[8.6, 3.1, 7.3], [2.4, 0.3, 9.0], [2.2, 3.7, 2.8], [1.7, 1.9, 2.2], [6.0, 9.0, 24.0]], np.float32
+            )
+            * np.float32(0.999),
+            ink_sigma_a=np.array(
+                [[0.4, 1.4, 0.2], [0.1, 2.7, 1.0], [0.01, 0.02, 16.0], [3.2, 3.6, 4.2], [0.005, 0.003, 0.02]],
+                np.float32,
+            ),
+        )
     else:
-        kw.update(sigma_s=rng.uniform(0.5, 12.0, size=shape + (3,)).astype(np.float32),
-                  sigma_a=rng.uniform(0.0, 2.0, size=shape + (3,)).astype(np.float32))
+        kw.update(
+            sigma_s=rng.uniform(0.5, 12.0, size=shape + (3,)).astype(np.float32),
+            sigma_a=rng.uniform(0.0, 2.0, size=shape + (3,)).astype(np.float32),
+        )
     if mask is not None:
         kw["inside"] = mask.astype(np.uint8)
     if normals is not None:
@@ -64,8 +73,10 @@ def core_snapshot() -> dict:
         "periodic": (dict(shape=(12, 8, 8), voxel_mm=vmm, boundary="periodic-xy"), [4, 5]),
         "labels": (dict(shape=(9, 10, 11), voxel_mm=(0.042, 0.085, 0.027), labels=True), None),
         "masked": (dict(shape=ball.shape, voxel_mm=vmm, mask=ball, normals=nrm.astype(np.float32)), None),
-        "masked_periodic": (dict(shape=(8, 6, 6), voxel_mm=vmm, boundary="periodic-xy",
-                                 mask=np.ones((8, 6, 6), bool)), [4, 5]),
+        "masked_periodic": (
+            dict(shape=(8, 6, 6), voxel_mm=vmm, boundary="periodic-xy", mask=np.ones((8, 6, 6), bool)),
+            [4, 5],
+        ),
     }
     for name, (kw, faces) in cases.items():
         shape = kw.pop("shape")
@@ -95,22 +106,27 @@ def core_snapshot() -> dict:
 
 def optimisation_snapshot() -> dict:
     try:  # the layout after the stage-subpackage reorganisation
-        from inkopt.optim import Optimization, OptimizeConfig
         from inkopt.model import InkTable
+        from inkopt.optim import Optimization, OptimizeConfig
         from inkopt.scenes.slab import build_slab
     except ImportError:
         from inkopt.materials import InkTable
         from inkopt.optimize import Optimization, OptimizeConfig
         from inkopt.slab import build_slab
     from inkopt import charts
+
     try:
         from inkopt.color import srgb_to_linear
     except ImportError:
         from inkopt.loss import srgb_to_linear
     lin = lambda im: srgb_to_linear(im / 255.0).astype(np.float32)
     inks = InkTable.parse("vero-cmykw")
-    scene = build_slab(lin(charts.colour_chart(96, 64)), lin(charts.zebra(24, 16)), (24 * 25.4 / 300,
-                       16 * 25.4 / 300, 8 * 25.4 / 300), inks)
+    scene = build_slab(
+        lin(charts.colour_chart(96, 64)),
+        lin(charts.zebra(24, 16)),
+        (24 * 25.4 / 300, 16 * 25.4 / 300, 8 * 25.4 / 300),
+        inks,
+    )
     out = {}
     for opt in ("eg", "adam"):
         cfg = OptimizeConfig(iterations=3, spp=2, forward_spp=4, optimizer=opt, seed=5, gamma=(1.0, 1.0, 1.0))
@@ -135,13 +151,11 @@ def main():
         return 0
     ref = np.load(a.compare)
     keys = [k for k in ref.files if not (a.core_only and k.startswith("opt_"))]
-    bad = [k for k in keys if k not in snap or snap[k].shape != ref[k].shape
-           or snap[k].tobytes() != ref[k].tobytes()]
+    bad = [k for k in keys if k not in snap or snap[k].shape != ref[k].shape or snap[k].tobytes() != ref[k].tobytes()]
     missing = [k for k in snap if k not in ref.files]
     for k in bad:
         print(f"DIFFERS: {k}")
-    print(f"{len(keys) - len(bad)} of {len(keys)} arrays bit-identical" +
-          (f"; new: {missing}" if missing else ""))
+    print(f"{len(keys) - len(bad)} of {len(keys)} arrays bit-identical" + (f"; new: {missing}" if missing else ""))
     return 1 if bad else 0
 
 

@@ -6,6 +6,7 @@ On a random CMYKW slab (and on an all-white start) with a random positive adjoin
 similarity of the sigma_a gradients and of the mixture gradients, ratio of norms, and cost of each pass.
 Writes experiments/results/li1_vs_replay.json.
 """
+
 import sys
 import time
 from pathlib import Path
@@ -13,7 +14,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-from common import machine, write_study as write  # noqa: E402
+from common import machine  # noqa: E402
+from common import write_study as write
 
 from inkopt.model import InkTable, Texels, Volume, mix_grad  # noqa: E402
 from inkopt.render import Renderer  # noqa: E402
@@ -37,14 +39,24 @@ def main():
         tex = Texels.for_volume(vol, ["top"])
         adj = rng.uniform(0.2, 1.0, (len(tex), 3)).astype(np.float32)
         r = Renderer(vol)
-        t0 = time.perf_counter(); r.render(tex, 64, 0); tf = time.perf_counter() - t0
-        t0 = time.perf_counter(); gs, ga, _ = r.gradient(tex, adj, 64, 1, method="replay")
+        t0 = time.perf_counter()
+        r.render(tex, 64, 0)
+        tf = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        gs, ga, _ = r.gradient(tex, adj, 64, 1, method="replay")
         tr = time.perf_counter() - t0
-        t0 = time.perf_counter(); ls, la, _ = r.gradient(tex, adj, 64, 1, method="li1"); tl = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        ls, la, _ = r.gradient(tex, adj, 64, 1, method="li1")
+        tl = time.perf_counter() - t0
         gm, lm = mix_grad(gs, ga, inks), mix_grad(ls, la, inks)
-        out[name] = {"cos_sigma_a": cos(ga, la), "cos_mixture": cos(gm, lm),
-                     "norm_ratio_sigma_a": float(np.linalg.norm(la) / np.linalg.norm(ga)),
-                     "forward_s": tf, "replay_s": tr, "li1_s": tl}
+        out[name] = {
+            "cos_sigma_a": cos(ga, la),
+            "cos_mixture": cos(gm, lm),
+            "norm_ratio_sigma_a": float(np.linalg.norm(la) / np.linalg.norm(ga)),
+            "forward_s": tf,
+            "replay_s": tr,
+            "li1_s": tl,
+        }
         print(name, {k: round(v, 3) for k, v in out[name].items()})
     print("wrote", write("li1_vs_replay.json", {**out, **machine()}))
 

@@ -4,11 +4,12 @@ on the zebra chart or the astronaut photograph of experiments/printable_eval.py 
 
     .venv/bin/python experiments/convergence_study.py [--threads 2] [--only NAME ...] [--case demo|zebra|astronaut]
 
-Each setting is one `run_optimisation` of a `SlabSpec` scene from the 97 %-white start with seed 0; the final
-figures come from the driver's adaptive evaluation (noise adds <= 0.5 to the mean dE76), so differences of a few tenths are real for this seed
-and scene, not for every scene. Writes experiments/results/convergence_CASE.json (one entry per setting: mean dE76
-(noise-corrected), mean dE2000, SSIM, mottle (dL*)^2 in the target's flat regions, seconds of the whole run).
+Each setting is one `run_optimisation` of a `SlabSpec` scene from the 97 %-white start with seed 0; the final figures
+come from the driver's adaptive evaluation (noise adds <= 0.5 to the mean dE76), so differences of a few tenths are real
+for this seed and scene, not for every scene. Writes experiments/results/convergence_CASE.json (one entry per setting:
+mean dE76 (noise-corrected), mean dE2000, SSIM, mottle (dL*)^2 in the target's flat regions, seconds of the whole run).
 """
+
 import argparse
 import json
 import sys
@@ -18,7 +19,9 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-from common import STUDY_RESULTS as RESULTS, machine, write_study as write  # noqa: E402
+from common import STUDY_RESULTS as RESULTS  # noqa: E402
+from common import machine
+from common import write_study as write
 
 from inkopt import charts  # noqa: E402
 from inkopt.model import InkTable  # noqa: E402
@@ -69,15 +72,25 @@ CASE_SETTINGS = {
     "forward8_200": (200, {"forward_spp": 8, "smooth": 0.7, "decay": 0.0}),
     "smooth0.7_200": (200, {"smooth": 0.7, "decay": 0.0}),
 }
-KEYS = ("delta_e76_mean_corrected", "delta_e76_mean", "delta_e2000_mean", "ssim", "mottle_l2", "seconds",
-        "seconds_per_iteration")
+KEYS = (
+    "delta_e76_mean_corrected",
+    "delta_e76_mean",
+    "delta_e2000_mean",
+    "ssim",
+    "mottle_l2",
+    "seconds",
+    "seconds_per_iteration",
+)
 
 
 def scene(case: str, tmp: Path):
     """(top picture, bottom picture or None, size in mm) of a case; zebra and astronaut as in printable_eval.py."""
     if case == "demo":
-        return (charts.save(charts.colour_chart(288, 192), tmp / "chart.png"),
-                charts.save(charts.zebra(71, 47), tmp / "zebra.png"), (6.0, 4.0, 1.0))
+        return (
+            charts.save(charts.colour_chart(288, 192), tmp / "chart.png"),
+            charts.save(charts.zebra(71, 47), tmp / "zebra.png"),
+            (6.0, 4.0, 1.0),
+        )
     if case == "zebra":
         return charts.save(charts.zebra(180, 60), tmp / "zebra.png"), None, (180 * 25.4 / 300, 60 * 25.4 / 300, 1.0)
     from skimage import data
@@ -105,14 +118,18 @@ def main():
         for name in a.only or settings:
             iterations, kw = settings[name]
             cfg = OptimizeConfig(**{"iterations": iterations, "seed": 0, **kw})
-            rep = run_optimisation(SlabSpec(top, size, bottom).build(inks), tmp / name, cfg, threads=a.threads,
-                                   log=lambda s: None).to_json()
+            rep = run_optimisation(
+                SlabSpec(top, size, bottom).build(inks), tmp / name, cfg, threads=a.threads, log=lambda s: None
+            ).to_json()
             row = {"iterations": iterations, **kw, **{k: rep[k] for k in KEYS}}
             if rep["smooth"]:
                 row.setdefault("smooth_edge", cfg.smooth_edge)
             out["settings"][name] = row
-            print(name, " ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()),
-                  flush=True)
+            print(
+                name,
+                " ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()),
+                flush=True,
+            )
     previous = RESULTS / f"convergence_{a.case}.json"
     if a.only and previous.is_file():  # a partial run updates the settings it ran
         old = json.loads(previous.read_text())

@@ -16,6 +16,7 @@ The same runs from the command line:
     inkopt slab CHART.png --size-mm 2.71x1.78x1 --out B --iterations 300 --lighting OUT/display.hdr
     inkopt evaluate A --lighting OUT/display.hdr --no-baselines;  inkopt evaluate B --lighting OUT/display.hdr ...
 """
+
 import argparse
 import sys
 import time
@@ -24,7 +25,9 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-from common import STUDY_RESULTS as RESULTS, machine, write_study as write  # noqa: E402
+from common import STUDY_RESULTS as RESULTS  # noqa: E402
+from common import machine
+from common import write_study as write
 
 
 def display_map(h: int = 64) -> np.ndarray:
@@ -62,8 +65,8 @@ def main() -> int:
     from inkopt.model import InkTable
     from inkopt.optim import OptimizeConfig
     from inkopt.pictures import panels
-    from inkopt.rundir import RunDir
     from inkopt.run import run_optimisation
+    from inkopt.rundir import RunDir
     from inkopt.scenes.spec import SlabSpec
     from inkopt.units import OPT_DPI
 
@@ -71,45 +74,83 @@ def main() -> int:
     out.mkdir(parents=True, exist_ok=True)
     chart = charts.save(charts.colour_chart(32, 21), out / "chart.png")
     size = (32 * 25.4 / OPT_DPI, 21 * 25.4 / OPT_DPI, a.depth_mm)
-    lights = {"uniform": load_lighting("uniform"), "display": load_lighting(write_map(out / "display.hdr",
-                                                                                     display_map()))}
+    lights = {
+        "uniform": load_lighting("uniform"),
+        "display": load_lighting(write_map(out / "display.hdr", display_map())),
+    }
     inks = InkTable.parse("vero-cmykw")
     runs, t0 = {}, time.perf_counter()
     for name, light in lights.items():
         d = out / f"optimised_{name}"
         cfg = OptimizeConfig(iterations=a.iterations, seed=a.seed)
         if not (d / "report.json").is_file():
-            run_optimisation(SlabSpec(chart, size).build(inks), d, cfg, eval_spp=a.eval_spp, threads=a.threads,
-                             lighting=light, log=lambda m: None)
+            run_optimisation(
+                SlabSpec(chart, size).build(inks),
+                d,
+                cfg,
+                eval_spp=a.eval_spp,
+                threads=a.threads,
+                lighting=light,
+                log=lambda m: None,
+            )
         runs[name] = d
     table, colours = {}, {}
     for run_name, d in runs.items():
         for light_name, light in lights.items():
-            ev = evaluate_run(d, spp=a.eval_spp, baselines=False, threads=a.threads, lighting=light,
-                              write=False).to_json()
+            ev = evaluate_run(
+                d, spp=a.eval_spp, baselines=False, threads=a.threads, lighting=light, write=False
+            ).to_json()
             table[f"optimised_{run_name}/seen_{light_name}"] = {
-                k: {m: ev[k][m] for m in ("delta_e76_mean", "delta_e76_mean_corrected", "delta_e2000_mean",
-                                          "delta_e76_p95", "ssim", "spp")} for k in ("continuous", "quantized")}
+                k: {
+                    m: ev[k][m]
+                    for m in (
+                        "delta_e76_mean",
+                        "delta_e76_mean_corrected",
+                        "delta_e2000_mean",
+                        "delta_e76_p95",
+                        "ssim",
+                        "spp",
+                    )
+                }
+                for k in ("continuous", "quantized")
+            }
             if light_name == "display":
                 from inkopt.render import Renderer
+
                 rec = RunDir(d).load_scene()
-                colours[run_name] = Renderer(RunDir(d).load_volume(), a.threads, light).render(
-                    rec.texels, a.eval_spp, 2**62).rgb
+                colours[run_name] = (
+                    Renderer(RunDir(d).load_volume(), a.threads, light).render(rec.texels, a.eval_spp, 2**62).rgb
+                )
     rec = RunDir(runs["uniform"]).load_scene()
-    img = panels([("target", rec.target_rgb), ("optimised uniform, seen under map", colours["uniform"]),
-                  ("optimised under map, seen under map", colours["display"])], rec.pix["top"])
+    img = panels(
+        [
+            ("target", rec.target_rgb),
+            ("optimised uniform, seen under map", colours["uniform"]),
+            ("optimised under map, seen under map", colours["display"]),
+        ],
+        rec.pix["top"],
+    )
     img.save(RESULTS / "lighting.png")
-    res = {"machine": machine(), "iterations": a.iterations, "seed": a.seed, "eval_spp": a.eval_spp,
-           "slab_mm": list(size),
-           "inks": "vero-cmykw", "map": "display_map() in experiments/lighting_compare.py, 64 x 128",
-           "seconds": time.perf_counter() - t0, "results": table}
+    res = {
+        "machine": machine(),
+        "iterations": a.iterations,
+        "seed": a.seed,
+        "eval_spp": a.eval_spp,
+        "slab_mm": list(size),
+        "inks": "vero-cmykw",
+        "map": "display_map() in experiments/lighting_compare.py, 64 x 128",
+        "seconds": time.perf_counter() - t0,
+        "results": table,
+    }
     path = write("lighting.json", res)
     print(f"{'optimised under':<16}{'seen under':<12}{'ΔE76':>8}{'ΔE2000':>8}{'ΔE76 quantized':>16}{'ΔE2000 q.':>11}")
     for key, v in table.items():
         run_name, seen = key.split("/")
         c, q = v["continuous"], v["quantized"]
-        print(f"{run_name[10:]:<16}{seen[5:]:<12}{c['delta_e76_mean']:8.2f}{c['delta_e2000_mean']:8.2f}"
-              f"{q['delta_e76_mean']:16.2f}{q['delta_e2000_mean']:11.2f}")
+        print(
+            f"{run_name[10:]:<16}{seen[5:]:<12}{c['delta_e76_mean']:8.2f}{c['delta_e2000_mean']:8.2f}"
+            f"{q['delta_e76_mean']:16.2f}{q['delta_e2000_mean']:11.2f}"
+        )
     print(f"wrote {path} and {RESULTS / 'lighting.png'}")
     return 0
 

@@ -18,6 +18,7 @@ resolved ``adjoint_ema`` and ``smooth`` (``default_60``, ``ema0.5_60`` and ``spo
 0.5 / 1.5 and 0.5 / 1.5) and the command. Seed 0 unless set, all cores,
 adaptive final evaluation (Monte Carlo noise adds <= 0.5 to the mean ΔE76, SSIM noise ratio <= 0.1).
 """
+
 import argparse
 import json
 import sys
@@ -25,7 +26,9 @@ import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-from common import STUDY_RESULTS as RESULTS, machine, write_study as write  # noqa: E402
+from common import STUDY_RESULTS as RESULTS  # noqa: E402
+from common import machine
+from common import write_study as write
 from shell_compare import SPOT  # noqa: E402
 
 from inkopt.model import InkTable  # noqa: E402
@@ -35,8 +38,20 @@ from inkopt.run import run_optimisation  # noqa: E402
 from inkopt.rundir import RunDir  # noqa: E402
 from inkopt.scenes.spec import MeshSpec  # noqa: E402
 
-KEYS = ("initial_delta_e76_mean_corrected", "delta_e76_mean_corrected", "delta_e2000_mean", "initial_ssim", "ssim",
-        "mottle_l2", "seconds", "seconds_iterations", "seconds_per_iteration", "eval_spp", "adjoint_ema", "smooth")
+KEYS = (
+    "initial_delta_e76_mean_corrected",
+    "delta_e76_mean_corrected",
+    "delta_e2000_mean",
+    "initial_ssim",
+    "ssim",
+    "mottle_l2",
+    "seconds",
+    "seconds_iterations",
+    "seconds_per_iteration",
+    "eval_spp",
+    "adjoint_ema",
+    "smooth",
+)
 
 
 def main():
@@ -53,13 +68,17 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(a.out or tmp)
         scene = MeshSpec(SPOT, height_mm=a.height_mm).build(InkTable.parse("vero-cmykw"))
-        rep = run_optimisation(scene, d, cfg, threads=a.threads, resume=a.out is not None,
-                               log=lambda s: None).to_json()
+        rep = run_optimisation(scene, d, cfg, threads=a.threads, resume=a.out is not None, log=lambda s: None).to_json()
         ck = read_checkpoint(RunDir(d).checkpoint_path)
         train = [round(float(v), 3) for v in ck["hist_delta_e76"]]
-    row = {"command": "python experiments/mesh_convergence.py " + " ".join(sys.argv[1:]), "height_mm": a.height_mm,
-           "iterations": a.iterations, **kw, **{k: rep[k] for k in KEYS if k in rep},
-           "train_delta_e76": train}
+    row = {
+        "command": "python experiments/mesh_convergence.py " + " ".join(sys.argv[1:]),
+        "height_mm": a.height_mm,
+        "iterations": a.iterations,
+        **kw,
+        **{k: rep[k] for k in KEYS if k in rep},
+        "train_delta_e76": train,
+    }
     print(a.name, " ".join(f"{k}={v:.4g}" for k, v in row.items() if isinstance(v, float)))
     print("training ΔE76:", train)
     path = RESULTS / "mesh_convergence.json"

@@ -7,6 +7,7 @@ each iteration moves between the driver and the workers. Writes experiments/resu
 The figures are a local machine's: workers share its cores, so they show the overhead of sharding, not a
 cluster's speed-up (which a cluster gets by adding nodes: each iteration's work splits in proportion to threads).
 """
+
 import argparse
 import os
 import sys
@@ -15,7 +16,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-from common import machine, write_study as write  # noqa: E402
+from common import machine  # noqa: E402
+from common import write_study as write
 
 from inkopt import charts  # noqa: E402
 from inkopt.color import srgb_to_linear  # noqa: E402
@@ -30,10 +32,16 @@ def bytes_per_iteration(opt: Optimization, workers: int, nodes: int) -> dict:
     + N float32 shares), the adjoints out (12 bytes per texel), per-texel rgb + variance back for two passes,
     and per worker the int64 gradient sums (2 x 3 x 8 bytes per free voxel)."""
     n_tex, free, n_inks = len(opt.texels), opt.param.n_free, len(opt.base.inks)
-    return {"mixture_out_per_node": free * (4 * n_inks + 4), "adjoint_out": 12 * n_tex,
-            "renders_back": 2 * 24 * n_tex, "gradients_back_per_worker": 48 * free,
-            "total": nodes * free * (4 * n_inks + 4) + 12 * n_tex + 48 * n_tex + workers * 48 * free,
-            "free_voxels": free, "texels": n_tex, "inks": n_inks}
+    return {
+        "mixture_out_per_node": free * (4 * n_inks + 4),
+        "adjoint_out": 12 * n_tex,
+        "renders_back": 2 * 24 * n_tex,
+        "gradients_back_per_worker": 48 * free,
+        "total": nodes * free * (4 * n_inks + 4) + 12 * n_tex + 48 * n_tex + workers * 48 * free,
+        "free_voxels": free,
+        "texels": n_tex,
+        "inks": n_inks,
+    }
 
 
 def main():
@@ -48,8 +56,9 @@ def main():
     cfg = OptimizeConfig(iterations=args.iterations, spp=8, forward_spp=16)
 
     def timed(factory=None):
-        opt = Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, kind="slab", threads=2,
-                           renderer_factory=factory)
+        opt = Optimization(
+            scene.volume, scene.texels, scene.target_rgb, cfg, kind="slab", threads=2, renderer_factory=factory
+        )
         opt.run()
         return opt, float(np.mean(opt.history.seconds[1:]))  # the first iteration builds the renderers
 
@@ -64,10 +73,17 @@ def main():
         assert np.array_equal(opt.x, plain.x) and opt.history.loss == plain.history.loss, "not bit-identical"
         rows[f"Ray, {workers} worker(s) x {threads} thread(s)"] = s
     rows["one process, 2 threads (again, last)"] = timed()[1]  # the machine is shared: see its drift
-    out = {"seconds_per_iteration": rows, "bit_identical": True, "shape": list(scene.volume.shape),
-           "spp": cfg.spp, "forward_spp": cfg.forward_spp, "iterations": cfg.iterations,
-           "bytes_per_iteration_2_workers_1_node": bytes_per_iteration(plain, 2, 1), "machine": machine(),
-           "load_average_1_5_15_min": list(os.getloadavg())}
+    out = {
+        "seconds_per_iteration": rows,
+        "bit_identical": True,
+        "shape": list(scene.volume.shape),
+        "spp": cfg.spp,
+        "forward_spp": cfg.forward_spp,
+        "iterations": cfg.iterations,
+        "bytes_per_iteration_2_workers_1_node": bytes_per_iteration(plain, 2, 1),
+        "machine": machine(),
+        "load_average_1_5_15_min": list(os.getloadavg()),
+    }
     print(write("ray_shards.json", out))
     for k, v in rows.items():
         print(f"| {k} | {v:.2f} s |")

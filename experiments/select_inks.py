@@ -11,6 +11,7 @@ experiments/results/select_inks.json and prints a markdown table.
 
 Work is counted in texel-samples (iterations x texels x (spp + forward spp) + evaluation renders).
 """
+
 import argparse
 import shutil
 import sys
@@ -20,7 +21,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-from common import machine, write_study as write  # noqa: E402
+from common import machine  # noqa: E402
+from common import write_study as write
 
 from inkopt import charts  # noqa: E402
 from inkopt.inksets import Selection, make_backend, run_selection  # noqa: E402
@@ -56,9 +58,17 @@ def main():
     ap.add_argument("--suffix", default="", help="results file experiments/results/select_inks{SUFFIX}.json")
     args = ap.parse_args()
     out = Path(args.out)
-    results = {"machine": machine(), "candidates": CANDIDATES, "choose": 4, "always": ["black", "white"],
-               "size_mm": SIZE_MM, "iterations": args.iterations, "workers": args.workers, "rule": RULE,
-               "charts": {}}
+    results = {
+        "machine": machine(),
+        "candidates": CANDIDATES,
+        "choose": 4,
+        "always": ["black", "white"],
+        "size_mm": SIZE_MM,
+        "iterations": args.iterations,
+        "workers": args.workers,
+        "rule": RULE,
+        "charts": {},
+    }
     backend = make_backend(args.workers)
     rows = []
     try:
@@ -69,8 +79,9 @@ def main():
             for strategy in ("brute", "halving"):
                 d = out / name / strategy
                 shutil.rmtree(d, ignore_errors=True)
-                sel = Selection(target, CANDIDATES, 4, ["black", "white"], OptimizeConfig(iterations=args.iterations),
-                                strategy)
+                sel = Selection(
+                    target, CANDIDATES, 4, ["black", "white"], OptimizeConfig(iterations=args.iterations), strategy
+                )
                 t0 = time.perf_counter()
                 res[strategy] = run_selection(sel, d, backend, log=lambda m: print(m, flush=True))
                 secs[strategy] = time.perf_counter() - t0
@@ -82,21 +93,30 @@ def main():
             ranked = [c["inks"] for c in brute["candidates"]]
             paper_rank = ranked.index(PAPER_WINNER) + 1
             results["charts"][name] = {
-                "brute": brute, "halving": halv, "seconds": secs, "loss_gap_percent": gap, "work_ratio": ratio,
+                "brute": brute,
+                "halving": halv,
+                "seconds": secs,
+                "loss_gap_percent": gap,
+                "work_ratio": ratio,
                 "same_winner": brute["winner"]["inks"] == halv["winner"]["inks"],
-                "halving_winner_loss_equals_brute_run":
-                    halv["winner"]["loss"] == loss_of[tuple(halv["winner"]["inks"])],
+                "halving_winner_loss_equals_brute_run": halv["winner"]["loss"]
+                == loss_of[tuple(halv["winner"]["inks"])],
                 "paper_set_rank": paper_rank,
-                "paper_set_gap_percent": 100 * (loss_of[tuple(PAPER_WINNER)] - best) / best}
-            rows.append(f"| {name} | {','.join(brute['winner']['inks'][:4])} ({best:.5f}) | "
-                        f"{','.join(halv['winner']['inks'][:4])} ({halv['winner']['loss']:.5f}) | {gap:.2f} % | "
-                        f"{ratio:.2f} | {paper_rank} / 15 ({results['charts'][name]['paper_set_gap_percent']:+.1f} %) "
-                        f"| {secs['brute']:.0f} / {secs['halving']:.0f} |")
+                "paper_set_gap_percent": 100 * (loss_of[tuple(PAPER_WINNER)] - best) / best,
+            }
+            rows.append(
+                f"| {name} | {','.join(brute['winner']['inks'][:4])} ({best:.5f}) | "
+                f"{','.join(halv['winner']['inks'][:4])} ({halv['winner']['loss']:.5f}) | {gap:.2f} % | "
+                f"{ratio:.2f} | {paper_rank} / 15 ({results['charts'][name]['paper_set_gap_percent']:+.1f} %) "
+                f"| {secs['brute']:.0f} / {secs['halving']:.0f} |"
+            )
             write(f"select_inks{args.suffix}.json", results)
     finally:
         backend.close()
-    print("| chart | brute-force winner (loss) | halving winner (loss) | loss gap | work ratio | paper's set: rank "
-          "(gap) | seconds brute / halving |")
+    print(
+        "| chart | brute-force winner (loss) | halving winner (loss) | loss gap | work ratio | paper's set: rank "
+        "(gap) | seconds brute / halving |"
+    )
     print("|---|---|---|---|---|---|---|")
     print("\n".join(rows))
 

@@ -18,6 +18,7 @@ mean of their products estimates the noise-free high-frequency power (the render
 drops out). Compared with the target's own high-frequency power it tells whether a result has texture the
 target has not, which the SSIM of `report.json` penalises.
 """
+
 import argparse
 import json
 import subprocess
@@ -27,7 +28,9 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-from common import STUDY_RESULTS as RESULTS, machine, write_study as write  # noqa: E402
+from common import STUDY_RESULTS as RESULTS  # noqa: E402
+from common import machine
+from common import write_study as write
 
 SPOT = Path(__file__).resolve().parents[2] / "shared" / "data" / "spot" / "spot.obj"  # ../shared beside the repo
 
@@ -49,8 +52,12 @@ def high_frequency_power(tex, target_rgb, a_rgb, b_rgb, k: int = 6) -> dict:
 
     t, a, b = dev(target_rgb), dev(a_rgb), dev(b_rgb)
     flat = t * t <= np.median(t * t)
-    return {"prediction": float(np.mean(a * b)), "target": float(np.mean(t * t)),
-            "prediction_flat": float(np.mean((a * b)[flat])), "target_flat": float(np.mean((t * t)[flat]))}
+    return {
+        "prediction": float(np.mean(a * b)),
+        "target": float(np.mean(t * t)),
+        "prediction_flat": float(np.mean((a * b)[flat])),
+        "target_flat": float(np.mean((t * t)[flat])),
+    }
 
 
 def structure(run_dir: Path, spp: int, threads: int) -> dict:
@@ -85,9 +92,13 @@ def main():
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--structure-spp", type=int, default=64)
     ap.add_argument("--smooth", type=float)
-    ap.add_argument("--eval-spp", type=int, default=0,
-                    help="samples of the final evaluation (0, the default: adaptive, as inkopt's own default; 64 spp "
-                         "biases SSIM low by ~0.03 on Spot)")
+    ap.add_argument(
+        "--eval-spp",
+        type=int,
+        default=0,
+        help="samples of the final evaluation (0, the default: adaptive, as inkopt's own default; 64 spp "
+        "biases SSIM low by ~0.03 on Spot)",
+    )
     a = ap.parse_args()
     out = Path(a.out)
     previous = RESULTS / "shell_mm.json"
@@ -96,31 +107,79 @@ def main():
     for s in a.shells.split(","):
         d = out / f"shell_{s}{tag}"
         if not (d / "report.json").is_file():
-            cmd = [sys.executable, "-m", "inkopt", "optimize", str(SPOT), "--height-mm", "20", "--out", str(d),
-                   "--iterations", str(a.iterations), "--spp", "4", "--threads", str(a.threads),
-                   "--seed", "0", "--resume"] + ([] if s == "none" else ["--shell-mm", s])
+            cmd = [
+                sys.executable,
+                "-m",
+                "inkopt",
+                "optimize",
+                str(SPOT),
+                "--height-mm",
+                "20",
+                "--out",
+                str(d),
+                "--iterations",
+                str(a.iterations),
+                "--spp",
+                "4",
+                "--threads",
+                str(a.threads),
+                "--seed",
+                "0",
+                "--resume",
+            ] + ([] if s == "none" else ["--shell-mm", s])
             cmd += ["--smooth", str(a.smooth)] if a.smooth is not None else []
             cmd += ["--eval-spp", str(a.eval_spp)] if a.eval_spp else []
             print("$ inkopt " + " ".join(cmd[3:]), flush=True)
             subprocess.run(cmd, check=True)
         rep = json.loads((d / "report.json").read_text())
-        results[s + tag] = {k: rep[k] for k in ("free_voxels", "inside_voxels", "seconds_per_iteration", "time_split",
-                                          "peak_rss_gb", "initial_delta_e76_mean", "delta_e76_mean",
-                                          "delta_e76_p95", "delta_e2000_mean", "initial_ssim", "ssim",
-                                          "iterations", "eval_spp", "initial_eval_spp")}
+        results[s + tag] = {
+            k: rep[k]
+            for k in (
+                "free_voxels",
+                "inside_voxels",
+                "seconds_per_iteration",
+                "time_split",
+                "peak_rss_gb",
+                "initial_delta_e76_mean",
+                "delta_e76_mean",
+                "delta_e76_p95",
+                "delta_e2000_mean",
+                "initial_ssim",
+                "ssim",
+                "iterations",
+                "eval_spp",
+                "initial_eval_spp",
+            )
+        }
         # the report's own figures where it has them: noise-corrected mean ΔE76 and mottle (metrics.py)
-        results[s + tag].update({k: rep[k] for k in ("delta_e76_mean_corrected", "mottle_l2", "mottle_l2_target",
-                                                     "flat_texels", "adjoint_ema", "smooth") if k in rep})
+        results[s + tag].update(
+            {
+                k: rep[k]
+                for k in (
+                    "delta_e76_mean_corrected",
+                    "mottle_l2",
+                    "mottle_l2_target",
+                    "flat_texels",
+                    "adjoint_ema",
+                    "smooth",
+                )
+                if k in rep
+            }
+        )
         results[s + tag]["high_frequency_power"] = structure(d, a.structure_spp, a.threads)
     write("shell_mm.json", {"results": results, "mesh": "spot, 20 mm", **machine()})
-    print("| shell | free voxels | s/iteration | peak GB | ΔE76 start → end | p95 | ΔE2000 | SSIM start → end "
-          "| HF power pred / target (flat half) |\n|---|---|---|---|---|---|---|---|---|")
+    print(
+        "| shell | free voxels | s/iteration | peak GB | ΔE76 start → end | p95 | ΔE2000 | SSIM start → end "
+        "| HF power pred / target (flat half) |\n|---|---|---|---|---|---|---|---|---|"
+    )
     for s, r in results.items():
         h = r["high_frequency_power"]
-        print(f"| {s} | {r['free_voxels']:,} | {r['seconds_per_iteration']:.1f} | {r['peak_rss_gb']:.2f} | "
-              f"{r['initial_delta_e76_mean']:.1f} → {r['delta_e76_mean']:.1f} | {r['delta_e76_p95']:.1f} | "
-              f"{r['delta_e2000_mean']:.1f} | {r['initial_ssim']:.3f} → {r['ssim']:.3f} | "
-              f"{h['prediction_flat']:.2f} / {h['target_flat']:.2f} |")
+        print(
+            f"| {s} | {r['free_voxels']:,} | {r['seconds_per_iteration']:.1f} | {r['peak_rss_gb']:.2f} | "
+            f"{r['initial_delta_e76_mean']:.1f} → {r['delta_e76_mean']:.1f} | {r['delta_e76_p95']:.1f} | "
+            f"{r['delta_e2000_mean']:.1f} | {r['initial_ssim']:.3f} → {r['ssim']:.3f} | "
+            f"{h['prediction_flat']:.2f} / {h['target_flat']:.2f} |"
+        )
 
 
 if __name__ == "__main__":

@@ -12,6 +12,7 @@ renders' noise is independent, so its expectation is the noise-free figure). ``-
 not quantized; ``evaluation.baselines``). Writes experiments/results/ssim_noise_bias_NAME.json (NAME: the run
 folder's name).
 """
+
 import argparse
 import sys
 from pathlib import Path
@@ -19,7 +20,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-from common import machine, write_study as write  # noqa: E402
+from common import machine  # noqa: E402
+from common import write_study as write
 
 from inkopt.color import linear_to_lab  # noqa: E402
 from inkopt.evaluation.metrics import prediction_metrics  # noqa: E402
@@ -45,10 +47,14 @@ def figures(vol, tex, loss, spp_list, threads) -> dict:
         rgb, var = np.asarray(a.rgb, np.float64), np.asarray(a.var_mean, np.float64)
         pm = prediction_metrics(loss, rgb, var).to_json()
         ha, hb = (loss.highpass(linear_to_lab(np.asarray(x.rgb, np.float64))[:, :1])[:, 0] for x in (a, b))
-        out[str(spp)] = {"ssim": pm["ssim"], "ssim_lab": loss.ssim_map(rgb, var).mean(0).tolist(),
-                         "mottle_l2": pm["mottle_l2"], "mottle_l2_two_renders": float((ha * hb)[loss.flat].mean()),
-                         "ssim_noise_ratio": NoiseModel.of(rgb, var, loss.target_lab).ssim_ratio,
-                         "delta_e76_mean_corrected": pm["delta_e76_mean_corrected"]}
+        out[str(spp)] = {
+            "ssim": pm["ssim"],
+            "ssim_lab": loss.ssim_map(rgb, var).mean(0).tolist(),
+            "mottle_l2": pm["mottle_l2"],
+            "mottle_l2_two_renders": float((ha * hb)[loss.flat].mean()),
+            "ssim_noise_ratio": NoiseModel.of(rgb, var, loss.target_lab).ssim_ratio,
+            "delta_e76_mean_corrected": pm["delta_e76_mean_corrected"],
+        }
         print(spp, {k: np.round(v, 4).tolist() for k, v in out[str(spp)].items()}, flush=True)
     return out
 

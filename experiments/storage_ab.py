@@ -9,6 +9,7 @@ the optimiser passes). The forms are interleaved, repeated ``--reps`` times; ren
 identical (checked). Writes experiments/results/medium_storage_<height>mm.json: per form the seconds of every
 repetition and their mean.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -25,9 +26,9 @@ SPOT = Path(__file__).resolve().parents[2] / "shared" / "data" / "spot" / "spot.
 
 def main(argv=None) -> dict:
     import numpy as np
+    from common import write_study
 
     from inkopt import _core
-    from common import write_study
     from inkopt.model import InkTable, mix
     from inkopt.render import Renderer
     from inkopt.scenes.mesh import build_mesh_scene
@@ -49,9 +50,16 @@ def main(argv=None) -> dict:
     dense_s = np.zeros(vol.shape + (3,), np.float32)
     dense_a = np.zeros_like(dense_s)
     dense_s.reshape(-1, 3)[free], dense_a.reshape(-1, 3)[free] = s, a
-    dense = _core.Scene(vol.shape, tuple(float(v) for v in vol.voxel_mm), sigma_s=dense_s, sigma_a=dense_a,
-                        inside=vol.inside.astype(np.uint8), normal_index=vol.normals.index,
-                        normal_vectors=vol.normals.vectors, threads=args.threads)
+    dense = _core.Scene(
+        vol.shape,
+        tuple(float(v) for v in vol.voxel_mm),
+        sigma_s=dense_s,
+        sigma_a=dense_a,
+        inside=vol.inside.astype(np.uint8),
+        normal_index=vol.normals.index,
+        normal_vectors=vol.normals.vectors,
+        threads=args.threads,
+    )
     del dense_s, dense_a
     slot_map = np.full(vol.shape, -1, np.int32)
     slot_map.reshape(-1)[free] = np.arange(len(free), dtype=np.int32)
@@ -72,9 +80,16 @@ def main(argv=None) -> dict:
             times[key].append(time.perf_counter() - t)
         assert np.array_equal(grads[0], grads[1]), "the two slot forms accumulated differently"
         print(f"rep {rep + 1}: " + ", ".join(f"{k} {v[-1]:.2f} s" for k, v in times.items()), file=sys.stderr)
-    result = {"height_mm": args.height_mm, "grid_zyx": list(vol.shape), "free_voxels": int(len(free)),
-              "texels": len(tex), "threads": args.threads, "reps": args.reps, "seconds": times,
-              "mean_seconds": {k: float(np.mean(v)) for k, v in times.items()}}
+    result = {
+        "height_mm": args.height_mm,
+        "grid_zyx": list(vol.shape),
+        "free_voxels": int(len(free)),
+        "texels": len(tex),
+        "threads": args.threads,
+        "reps": args.reps,
+        "seconds": times,
+        "mean_seconds": {k: float(np.mean(v)) for k, v in times.items()},
+    }
     write_study(f"medium_storage_{args.height_mm:g}mm.json", result)
     print(json.dumps(result["mean_seconds"]))
     return result

@@ -16,6 +16,7 @@ The same from the command line:
     inkopt slab orange.png --size-mm 4.06x4.06x1.5 --inks vero-cmykwt --out U
     inkopt evaluate T --translucency-compare U --no-baselines --spp 256
 """
+
 import argparse
 import sys
 import time
@@ -24,7 +25,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-from common import machine, write_study as write  # noqa: E402
+from common import machine  # noqa: E402
+from common import write_study as write
 
 DOCS = Path(__file__).resolve().parents[1] / "docs"
 
@@ -34,14 +36,14 @@ def orange(px: int) -> tuple[np.ndarray, np.ndarray]:
     y, x = (np.mgrid[0:px, 0:px] + 0.5) / px * 2 - 1
     r, a = np.hypot(x, y), np.arctan2(y, x)
     img = np.empty((px, px, 3), np.float64)
-    img[:] = (70, 120, 40)                      # leaf green
-    img[r < 0.95] = (230, 110, 20)              # rind
-    img[r < 0.86] = (250, 225, 170)             # pith
+    img[:] = (70, 120, 40)  # leaf green
+    img[r < 0.95] = (230, 110, 20)  # rind
+    img[r < 0.86] = (250, 225, 170)  # pith
     pulp = r < 0.78
     seg = np.abs(((a / (2 * np.pi) * 10) % 1) - 0.5) * 2  # 1 at a segment's middle, 0 on a membrane
     shade = np.clip(0.55 + 0.45 * seg, 0, 1)[..., None]
     img[pulp] = (shade * np.array([255, 150, 20]) + (1 - shade) * np.array([250, 215, 160]))[pulp]
-    img[r < 0.08] = (250, 225, 170)             # the core
+    img[r < 0.08] = (250, 225, 170)  # the core
     mask = np.where(pulp, 0.8, 0.0)
     return img.round().astype(np.uint8), mask
 
@@ -83,15 +85,29 @@ def main() -> int:
     for name, d in runs.items():
         if (d / "report.json").is_file():
             continue
-        scene = load_slab(out / "orange.png", None, size, inks,
-                          translucency=out / "pulp.png" if name == "constrained" else None)
-        run_optimisation(scene, d, OptimizeConfig(iterations=a.iterations, seed=a.seed), eval_spp=a.eval_spp,
-                         threads=a.threads, log=lambda m: print(m, flush=True))
+        scene = load_slab(
+            out / "orange.png", None, size, inks, translucency=out / "pulp.png" if name == "constrained" else None
+        )
+        run_optimisation(
+            scene,
+            d,
+            OptimizeConfig(iterations=a.iterations, seed=a.seed),
+            eval_spp=a.eval_spp,
+            threads=a.threads,
+            log=lambda m: print(m, flush=True),
+        )
     optimise_s = time.perf_counter() - t0
-    ev = {name: evaluate_run(d, spp=a.eval_spp, baselines=False, threads=a.threads,
-                             translucency=name == "constrained",
-                             translucency_compare=runs["unconstrained"] if name == "constrained" else None).to_json()
-          for name, d in runs.items()}
+    ev = {
+        name: evaluate_run(
+            d,
+            spp=a.eval_spp,
+            baselines=False,
+            threads=a.threads,
+            translucency=name == "constrained",
+            translucency_compare=runs["unconstrained"] if name == "constrained" else None,
+        ).to_json()
+        for name, d in runs.items()
+    }
     tr = ev["constrained"]["translucency"]
 
     rec = RunDir(runs["constrained"]).load_scene()
@@ -100,32 +116,60 @@ def main() -> int:
         vol = RunDir(d).load_volume()
         front[name] = Renderer(vol, a.threads).render(rec.texels, a.eval_spp, 2**62).rgb
         back[name] = Renderer(vol, a.threads, back_light(5)).render(rec.texels, a.eval_spp, 2**62).rgb
-    img = panels([("target", rec.target_rgb), ("80 % clear pulp", front["constrained"]),
-                  ("unconstrained", front["unconstrained"]), ("80 % clear pulp, lit from behind", back["constrained"]),
-                  ("unconstrained, lit from behind", back["unconstrained"])], rec.pix["top"])
+    img = panels(
+        [
+            ("target", rec.target_rgb),
+            ("80 % clear pulp", front["constrained"]),
+            ("unconstrained", front["unconstrained"]),
+            ("80 % clear pulp, lit from behind", back["constrained"]),
+            ("unconstrained, lit from behind", back["unconstrained"]),
+        ],
+        rec.pix["top"],
+    )
     img.save(DOCS / "translucency.png")
 
     def row(t: dict, e: dict) -> dict:
         reg, whole = t["regions"][0], t["whole"]
-        return {"delta_e76_mean": e["continuous"]["delta_e76_mean"],
-                "delta_e2000_mean": e["continuous"]["delta_e2000_mean"],
-                "delta_e76_quantized": e["quantized"]["delta_e76_mean"], "pulp_delta_e76": reg["delta_e76_mean"],
-                "pulp_transmittance": reg["transmittance"], "pulp_transmittance_stderr": reg["transmittance_stderr"],
-                "pulp_spread_mm": reg["spread_mm"], "pulp_spread_stderr_mm": reg["spread_stderr_mm"],
-                "whole_transmittance": whole["transmittance"], "whole_spread_mm": whole["spread_mm"]}
+        return {
+            "delta_e76_mean": e["continuous"]["delta_e76_mean"],
+            "delta_e2000_mean": e["continuous"]["delta_e2000_mean"],
+            "delta_e76_quantized": e["quantized"]["delta_e76_mean"],
+            "pulp_delta_e76": reg["delta_e76_mean"],
+            "pulp_transmittance": reg["transmittance"],
+            "pulp_transmittance_stderr": reg["transmittance_stderr"],
+            "pulp_spread_mm": reg["spread_mm"],
+            "pulp_spread_stderr_mm": reg["spread_stderr_mm"],
+            "whole_transmittance": whole["transmittance"],
+            "whole_spread_mm": whole["spread_mm"],
+        }
 
     table = {"constrained": row(tr, ev["constrained"]), "unconstrained": row(tr["compare"], ev["unconstrained"])}
-    res = {"machine": machine(), "iterations": a.iterations, "seed": a.seed, "eval_spp": a.eval_spp,
-           "slab_mm": list(size), "texels_per_side": a.px, "inks": "vero-cmykwt", "pulp_share": 0.8,
-           "pulp_texels": tr["regions"][0]["texels"], "optimise_seconds": optimise_s,
-           "seconds": time.perf_counter() - t0, "results": table, "translucency": tr}
+    res = {
+        "machine": machine(),
+        "iterations": a.iterations,
+        "seed": a.seed,
+        "eval_spp": a.eval_spp,
+        "slab_mm": list(size),
+        "texels_per_side": a.px,
+        "inks": "vero-cmykwt",
+        "pulp_share": 0.8,
+        "pulp_texels": tr["regions"][0]["texels"],
+        "optimise_seconds": optimise_s,
+        "seconds": time.perf_counter() - t0,
+        "results": table,
+        "translucency": tr,
+    }
     path = write("translucency.json", res)
-    print(f"{'run':<15}{'ΔE76':>7}{'ΔE2000':>8}{'ΔE76 q.':>9}{'pulp ΔE76':>11}{'pulp T':>9}{'pulp spread':>13}"
-          f"{'whole T':>9}{'whole spread':>14}")
+    print(
+        f"{'run':<15}{'ΔE76':>7}{'ΔE2000':>8}{'ΔE76 q.':>9}{'pulp ΔE76':>11}{'pulp T':>9}{'pulp spread':>13}"
+        f"{'whole T':>9}{'whole spread':>14}"
+    )
     for name, v in table.items():
-        print(f"{name:<15}{v['delta_e76_mean']:7.2f}{v['delta_e2000_mean']:8.2f}{v['delta_e76_quantized']:9.2f}"
-              f"{v['pulp_delta_e76']:11.2f}{v['pulp_transmittance']:9.3f}{v['pulp_spread_mm']:10.3f} mm"
-              f"{v['whole_transmittance']:9.3f}{v['whole_spread_mm']:11.3f} mm")
+        print(
+            f"{name:<15}{v['delta_e76_mean']:7.2f}{v['delta_e2000_mean']:8.2f}{v['delta_e76_quantized']:9.2f}"
+            f"{v['pulp_delta_e76']:11.2f}{v['pulp_transmittance']:9.3f}{v['pulp_spread_mm']:10.3f} mm"
+            f"{v['whole_transmittance']:9.3f}{v['whole_spread_mm']:11.3f} mm"
+        )
     print(f"wrote {path} and {DOCS / 'translucency.png'}")
     return 0
 

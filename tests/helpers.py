@@ -3,6 +3,7 @@
 Shared data (test meshes) is found relative to the repository: ``../shared`` beside the project root, as CI
 and every developer machine lay it out.
 """
+
 from pathlib import Path
 
 import numpy as np
@@ -51,7 +52,7 @@ def replay_matches_fd(vol, probes, spp=800, seeds=tuple(range(11, 23)), h=0.3, l
 
     tex = Texels.for_volume(vol, ["top"])
     adj = np.random.default_rng(0).uniform(0.2, 1.0, (len(tex), 3)).astype(np.float32)
-    for (z, y, x, c, which) in probes:
+    for z, y, x, c, which in probes:
         g, fd = [], []
         for seed in seeds:
             gs, ga, _ = Renderer(vol, lighting=lighting).gradient(tex, adj, spp=spp, seed=seed)
@@ -60,8 +61,9 @@ def replay_matches_fd(vol, probes, spp=800, seeds=tuple(range(11, 23)), h=0.3, l
             for sign in (1, -1):
                 arr = {"sigma_s": vol.sigma_s.copy(), "sigma_a": vol.sigma_a.copy()}
                 arr[which][z, y, x, c] += sign * h
-                v2 = Volume.from_coefficients(vol.voxel_mm, arr["sigma_s"], arr["sigma_a"], boundary=vol.boundary,
-                                              inside=vol.inside)
+                v2 = Volume.from_coefficients(
+                    vol.voxel_mm, arr["sigma_s"], arr["sigma_a"], boundary=vol.boundary, inside=vol.inside
+                )
                 vals.append(float(np.sum(render(v2, tex, spp=spp, seed=seed, lighting=lighting).rgb * adj)))
             fd.append((vals[0] - vals[1]) / (2 * h))
         assert_same_mean(g, fd, rel_bias=0.02, false_alarm=1e-4, what=(z, y, x, c, which))

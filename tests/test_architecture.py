@@ -2,6 +2,7 @@
 layer or the layers above it, so data flows one way and nothing outside cli/ reaches into the command line; no
 import circles, in Python or in the Rust crates; files stay focused; source comments say what the code does, not
 when or under which issue it was written, and cite nothing outside the repository."""
+
 import ast
 import io
 import re
@@ -63,7 +64,7 @@ def _imported_modules(path):
     for node in ast.walk(ast.parse(path.read_text())):
         if isinstance(node, ast.ImportFrom):
             if node.level:
-                base = package[:len(package) - node.level + 1]
+                base = package[: len(package) - node.level + 1]
                 mod = ".".join(base + (node.module.split(".") if node.module else []))
             else:
                 mod = node.module or ""
@@ -106,7 +107,7 @@ def _cycle(graph: dict) -> list | None:
         stack.append(n)
         for m in sorted(graph.get(n, ())):
             if state.get(m) == 1:
-                return stack[stack.index(m):] + [m]
+                return stack[stack.index(m) :] + [m]
             if m not in state and (c := visit(m)):
                 return c
         stack.pop()
@@ -166,7 +167,7 @@ def _rust_graph(src) -> dict:
             head, *rest = ref.split("::", 1)
             tail = rest[0] if rest else ""
             base = [] if head == "crate" else here[:-1] if head == "super" else list(here)
-            for item in (tail[1:-1].split(",") if tail.startswith("{") else [tail]):
+            for item in tail[1:-1].split(",") if tail.startswith("{") else [tail]:
                 parts = base + [s for s in item.strip().split("::") if s and s != "{"]
                 parts = [s.strip("{} ") for s in parts]
                 while parts and "::".join(parts) not in mods:
@@ -188,10 +189,16 @@ def test_no_rust_module_circle():
 
 def test_no_source_file_is_huge():
     """Files stay focused (a few hundred lines); a long one is a sign that it holds two things."""
-    long = [f"{p.relative_to(REPO)}: {n}" for p in PKG.rglob("*.py")
-            if (n := len(p.read_text().splitlines())) > MAX_PY_LINES]
-    long += [f"{p.relative_to(REPO)}: {n}" for p in CRATES.rglob("*.rs")
-             if (n := len(p.read_text().splitlines())) > MAX_RS_LINES]
+    long = [
+        f"{p.relative_to(REPO)}: {n}"
+        for p in PKG.rglob("*.py")
+        if (n := len(p.read_text().splitlines())) > MAX_PY_LINES
+    ]
+    long += [
+        f"{p.relative_to(REPO)}: {n}"
+        for p in CRATES.rglob("*.rs")
+        if (n := len(p.read_text().splitlines())) > MAX_RS_LINES
+    ]
     assert not long, long
 
 

@@ -1,4 +1,5 @@
 """Tests of inkopt.color against scikit-image and finite differences."""
+
 import numpy as np
 import pytest
 from skimage import color

@@ -1,12 +1,13 @@
 """The type stub python/inkopt/_core.pyi against the compiled module: the same public names, and for every callable
 the same parameters (names in order, positional or keyword-only, defaults), so the stub cannot drift from the
 bindings in crates/py."""
+
 import ast
 import inspect
 
 import pytest
-
 from helpers import REPO
+
 from inkopt import _core
 
 STUB = REPO / "python" / "inkopt" / "_core.pyi"

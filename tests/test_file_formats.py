@@ -2,6 +2,7 @@
 the slice manifest, a file written now carries version 1 and round-trips, today's files without the key
 (version 0) load, a newer version is refused in one line, and each pre-release layout is refused in one line that
 says what to do. (quantized.npz and dense normals: tests/printing/test_stream.py, tests/model/test_normals.py.)"""
+
 import json
 from dataclasses import asdict
 
@@ -59,8 +60,9 @@ def _scene_record(kind="slab"):
     mesh = None
     if kind == "mesh":
         mesh = MeshInfo("spot.obj", 10.0, 20.0, "y", np.zeros(3), np.full(3, 0.1), np.zeros((len(tex), 3)), None)
-    return SceneRecord(kind, tex, np.full((len(tex), 3), 0.5, np.float32), free_mask=np.ones((2, 3, 4), bool),
-                       mesh=mesh)
+    return SceneRecord(
+        kind, tex, np.full((len(tex), 3), 0.5, np.float32), free_mask=np.ones((2, 3, 4), bool), mesh=mesh
+    )
 
 
 @pytest.mark.parametrize("kind", ["slab", "mesh"])
@@ -107,13 +109,19 @@ def _version_0_key(run: Optimization) -> str:
         d.pop("smooth_edge")
     elif d["smooth_edge"]:
         d["smooth_where"] = "flat"
-    d.update(shape=list(run.base.shape), inks=list(run.base.inks.names), texels=len(run.texels),
-             free=run.param.n_free, problem=run._problem_digest)
+    d.update(
+        shape=list(run.base.shape),
+        inks=list(run.base.inks.names),
+        texels=len(run.texels),
+        free=run.param.n_free,
+        problem=run._problem_digest,
+    )
     return json.dumps(d, sort_keys=True)
 
 
-@pytest.mark.parametrize("settings", [{}, {"decay": 0.0, "smooth": 0.0}, {"smooth_edge": 0.0},
-                                      {"schedule_iterations": 5}])
+@pytest.mark.parametrize(
+    "settings", [{}, {"decay": 0.0, "smooth": 0.0}, {"smooth_edge": 0.0}, {"schedule_iterations": 5}]
+)
 def test_checkpoint_versions(tmp_path, settings):
     path = tmp_path / "ck.npz"
     a = _optimization(**settings)
@@ -149,8 +157,9 @@ def test_pre_release_checkpoints_are_refused(tmp_path):
     with pytest.raises(FormatError) as e:
         _optimization().load_checkpoint(path)
     _one_line(e, "pre-release", "rerun without --resume")
-    save_npz(path, {k: v for k, v in arrays.items() if k != "hist_step_s"} | {
-        "config_key": np.array(_version_0_key(a))})  # before the history had every timing
+    save_npz(
+        path, {k: v for k, v in arrays.items() if k != "hist_step_s"} | {"config_key": np.array(_version_0_key(a))}
+    )  # before the history had every timing
     with pytest.raises(FormatError) as e:
         _optimization().load_checkpoint(path)
     _one_line(e, "pre-release", "rerun without --resume")

@@ -1,6 +1,7 @@
 """Display lighting from the user's side (``inkopt.lighting`` and ``--lighting``): reading maps (.hdr, .exr, .npy),
 one-line errors for bad maps, the map's orientation as the renderer sees it, and the commands that take it.
 (The renderer under maps against references: tests/render/test_lighting_render.py.)"""
+
 import json
 
 import numpy as np
@@ -18,7 +19,7 @@ def smooth_map(h=16):
     return rng.uniform(0.05, 4.0, (h, 2 * h, 3)).astype(np.float32)
 
 
-@pytest.mark.parametrize("suffix,rtol", [(".npy", 0), (".exr", 0), (".hdr", 2 ** -7)])
+@pytest.mark.parametrize("suffix,rtol", [(".npy", 0), (".exr", 0), (".hdr", 2**-7)])
 def test_maps_round_trip_through_their_files(tmp_path, suffix, rtol):
     """.npy and OpenEXR keep float32 exactly; Radiance RGBE keeps 8 mantissa bits shared by a pixel's channels
     (relative error at most 2^-8 of the pixel's largest channel)."""
@@ -40,13 +41,16 @@ def test_mean_radiance_is_solid_angle_weighted():
     np.testing.assert_allclose(mean_radiance(np.full((8, 16, 3), 2.0, np.float32)), 2.0)
 
 
-@pytest.mark.parametrize("arr,needle", [
-    (np.ones((4, 6, 3)), "not an equirectangular map: 6 x 4"),
-    (np.ones((4, 8)), "(H, W, 3)"),
-    (np.ones((4, 8, 4)), "(H, W, 3)"),
-    (np.where(np.arange(96).reshape(4, 8, 3) == 50, -1.0, 1.0), "negative radiance -1 at row 2, column 0"),
-    (np.where(np.arange(96).reshape(4, 8, 3) == 7, np.nan, 1.0), "NaN or infinite at row 0, column 2"),
-])
+@pytest.mark.parametrize(
+    "arr,needle",
+    [
+        (np.ones((4, 6, 3)), "not an equirectangular map: 6 x 4"),
+        (np.ones((4, 8)), "(H, W, 3)"),
+        (np.ones((4, 8, 4)), "(H, W, 3)"),
+        (np.where(np.arange(96).reshape(4, 8, 3) == 50, -1.0, 1.0), "negative radiance -1 at row 2, column 0"),
+        (np.where(np.arange(96).reshape(4, 8, 3) == 7, np.nan, 1.0), "NaN or infinite at row 0, column 2"),
+    ],
+)
 def test_bad_maps_are_one_line_errors(tmp_path, capsys, arr, needle):
     path = tmp_path / "bad.npy"
     np.save(path, arr)
@@ -54,8 +58,9 @@ def test_bad_maps_are_one_line_errors(tmp_path, capsys, arr, needle):
         read_map(path)
     assert needle in str(e.value) and "\n" not in str(e.value)
     vol = tmp_path / "v.npz"
-    Volume.from_coefficients(voxel_mm=(0.1,) * 3, sigma_s=np.ones((2, 2, 2, 3), np.float32),
-           sigma_a=np.ones((2, 2, 2, 3), np.float32)).save(vol)
+    Volume.from_coefficients(
+        voxel_mm=(0.1,) * 3, sigma_s=np.ones((2, 2, 2, 3), np.float32), sigma_a=np.ones((2, 2, 2, 3), np.float32)
+    ).save(vol)
     assert main(["render", str(vol), "--spp", "1", "--lighting", str(path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("inkopt: error:") and needle in err[0]
@@ -63,8 +68,11 @@ def test_bad_maps_are_one_line_errors(tmp_path, capsys, arr, needle):
 
 def test_unreadable_lighting(tmp_path):
     (tmp_path / "junk.hdr").write_text("not a picture")
-    for spec, needle in [(tmp_path / "none.exr", "no such file"), (tmp_path / "junk.hdr", "not a readable .hdr"),
-                         (tmp_path / "sky.png", "use 'uniform' or a map file")]:
+    for spec, needle in [
+        (tmp_path / "none.exr", "no such file"),
+        (tmp_path / "junk.hdr", "not a readable .hdr"),
+        (tmp_path / "sky.png", "use 'uniform' or a map file"),
+    ]:
         with pytest.raises(ValueError, match=needle):
             load_lighting(spec)
     with pytest.raises(ValueError, match="no meaning with uniform"):
@@ -81,9 +89,15 @@ def _lobe_map(axis, h=32):
     return np.repeat((1 + 4 * lobe)[..., None], 3, -1).astype(np.float32)
 
 
-@pytest.mark.parametrize("axis,rotate,lit,dark", [
-    ((1, 0, 0), 0.0, "+x", "-x"), ((0, 0, 1), 0.0, "top", "bottom"), ((1, 0, 0), 90.0, "+y", "-y"),
-    ((0, 1, 0), 90.0, "-x", "+x")])
+@pytest.mark.parametrize(
+    "axis,rotate,lit,dark",
+    [
+        ((1, 0, 0), 0.0, "+x", "-x"),
+        ((0, 0, 1), 0.0, "top", "bottom"),
+        ((1, 0, 0), 90.0, "+y", "-y"),
+        ((0, 1, 0), 90.0, "-x", "+x"),
+    ],
+)
 def test_the_lit_side_is_where_the_map_says(axis, rotate, lit, dark):
     """A grey cube under a map bright around ``axis`` (turned by ``rotate`` about z, from +x towards +y): the face
     looking at the light is brighter than the opposite one by far more than the noise."""
@@ -117,8 +131,24 @@ def test_slab_and_evaluate_under_a_map(tmp_path, capsys):
     chart = charts.save(charts.colour_chart(24, 16), tmp_path / "chart.png")
     env = write_map(tmp_path / "sky.npy", _lobe_map((0.6, 0, 0.8), h=16) * 0.5)
     out = tmp_path / "run"
-    args = ["slab", str(chart), "--size-mm", "2x1.333x0.5", "--out", str(out), "--iterations", "2", "--spp", "1",
-            "--forward-spp", "2", "--eval-spp", "4", "--inks", "cyan,magenta,yellow,white"]
+    args = [
+        "slab",
+        str(chart),
+        "--size-mm",
+        "2x1.333x0.5",
+        "--out",
+        str(out),
+        "--iterations",
+        "2",
+        "--spp",
+        "1",
+        "--forward-spp",
+        "2",
+        "--eval-spp",
+        "4",
+        "--inks",
+        "cyan,magenta,yellow,white",
+    ]
     assert main(args + ["--lighting", str(env), "--lighting-rotate", "20"]) == 0
     rep = json.loads((out / "report.json").read_text())
     assert rep["lighting"] == "sky.npy" and rep["lighting_rotate_deg"] == 20.0
@@ -130,4 +160,3 @@ def test_slab_and_evaluate_under_a_map(tmp_path, capsys):
         ev = json.loads(capsys.readouterr().out)
         assert ev["lighting"] == ("uniform" if spec == "uniform" else "sky.npy")
         assert np.isfinite(ev["continuous"]["delta_e76_mean"])
-

@@ -5,4 +5,5 @@ optim -> printing (quantize, export) -> evaluation; run.py drives one optimisati
 directory, cli/ is the command line. Conventions (axis order, units, colour spaces, texel order):
 docs/conventions.md.
 """
+
 __version__ = "0.1.0"

@@ -1,5 +1,6 @@
 """Procedural test charts (sRGB uint8 pictures): colour patches with a hue gradient, and the paper's zebra
 stripes (docs/method.md §8). Used by the demo, the tests and the benchmarks, so nothing needs downloading."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -7,9 +8,23 @@ from pathlib import Path
 import numpy as np
 
 # A few saturated and neutral patch colours (sRGB 0-255).
-PATCHES = np.array([[220, 40, 40], [40, 160, 60], [40, 70, 200], [240, 200, 30],
-                    [30, 30, 30], [250, 250, 250], [0, 170, 200], [200, 40, 160],
-                    [240, 130, 20], [128, 128, 128], [120, 70, 30], [170, 200, 240]], np.uint8)
+PATCHES = np.array(
+    [
+        [220, 40, 40],
+        [40, 160, 60],
+        [40, 70, 200],
+        [240, 200, 30],
+        [30, 30, 30],
+        [250, 250, 250],
+        [0, 170, 200],
+        [200, 40, 160],
+        [240, 130, 20],
+        [128, 128, 128],
+        [120, 70, 30],
+        [170, 200, 240],
+    ],
+    np.uint8,
+)
 
 
 def colour_chart(width: int, height: int) -> np.ndarray:
@@ -19,7 +34,7 @@ def colour_chart(width: int, height: int) -> np.ndarray:
     rows, cols = 3, 4
     for k, col in enumerate(PATCHES):
         r, c = divmod(k, cols)
-        img[r * top // rows:(r + 1) * top // rows, c * width // cols:(c + 1) * width // cols] = col
+        img[r * top // rows : (r + 1) * top // rows, c * width // cols : (c + 1) * width // cols] = col
     from matplotlib.colors import hsv_to_rgb
 
     h = np.linspace(0, 1, width, endpoint=False)

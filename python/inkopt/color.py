@@ -10,17 +10,16 @@ Normalised L*a*b* (for the SSIM and Sobel terms): L*/100, (a* + 128)/255, (b* + 
 All conversions accept any array of shape (..., 3), compute in float64 and return float64, except the 8-bit
 file helpers at the end (``to_srgb8``, ``from_srgb8``).
 """
+
 from __future__ import annotations
 
 import numpy as np
 
 # sRGB (linear) -> XYZ, rows X, Y, Z (scikit-image's xyz_from_rgb, IEC 61966-2-1 primaries, D65).
-RGB_TO_XYZ = np.array([[0.412453, 0.357580, 0.180423],
-                       [0.212671, 0.715160, 0.072169],
-                       [0.019334, 0.119193, 0.950227]])
+RGB_TO_XYZ = np.array([[0.412453, 0.357580, 0.180423], [0.212671, 0.715160, 0.072169], [0.019334, 0.119193, 0.950227]])
 WHITE_XYZ = RGB_TO_XYZ.sum(axis=1)  # white of linear sRGB, Y = 1
 _DELTA = 6.0 / 29.0
-_EPS = _DELTA ** 3
+_EPS = _DELTA**3
 # lab = _LAB_D @ f(xyz / white) + (-16, 0, 0)
 _LAB_D = np.array([[0.0, 116.0, 0.0], [500.0, -500.0, 0.0], [0.0, 200.0, -200.0]])
 _LAB_OFFSET = np.array([-16.0, 0.0, 0.0])
@@ -57,12 +56,12 @@ def linear_to_xyz(rgb) -> np.ndarray:
 
 
 def _f(t: np.ndarray) -> np.ndarray:
-    return np.where(t > _EPS, np.cbrt(t), t / (3.0 * _DELTA ** 2) + 4.0 / 29.0)
+    return np.where(t > _EPS, np.cbrt(t), t / (3.0 * _DELTA**2) + 4.0 / 29.0)
 
 
 def _fprime(t: np.ndarray) -> np.ndarray:
     c = np.cbrt(np.maximum(t, _EPS))
-    return np.where(t > _EPS, 1.0 / (3.0 * c * c), 1.0 / (3.0 * _DELTA ** 2))
+    return np.where(t > _EPS, 1.0 / (3.0 * c * c), 1.0 / (3.0 * _DELTA**2))
 
 
 def xyz_to_lab(xyz) -> np.ndarray:
@@ -102,6 +101,7 @@ def delta_e76(lab1, lab2) -> np.ndarray:
 def delta_e2000(lab1, lab2) -> np.ndarray:
     """CIEDE2000 colour difference (...,) between two CIELAB arrays (..., 3) (scikit-image)."""
     from skimage.color import deltaE_ciede2000
+
     return deltaE_ciede2000(_rgb(lab1, "lab1"), _rgb(lab2, "lab2"), channel_axis=-1)
 
 

@@ -19,6 +19,7 @@ object store, which every node fetches once, and each worker its slice of the ad
 worker returns rgb and variance of its texels for both passes (2 x 24 bytes per texel) and the gradient sums
 (2 x 3 x int64 = 48 bytes per gradient slot, i.e. per free voxel).
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -78,8 +79,9 @@ class _ShardWorker:
         return r.rgb, r.var_mean, _totals(r)
 
     def gradient(self, texels, lo, hi, adjoint, max_abs, spp, seed, include_specular, method, grad_index):
-        gs, ga, q, r = self.renderer.gradient_fixed(texels.subset(slice(lo, hi)), adjoint, spp, seed,
-                                                    include_specular, method, grad_index, lo, max_abs)
+        gs, ga, q, r = self.renderer.gradient_fixed(
+            texels.subset(slice(lo, hi)), adjoint, spp, seed, include_specular, method, grad_index, lo, max_abs
+        )
         return gs, ga, q, r.rgb, r.var_mean, _totals(r)
 
 
@@ -92,8 +94,9 @@ class RayShards:
     ``workers``: how many (default one per node, each with all of its node's CPUs); ``threads``: threads per worker
     (default: the node's CPUs, or the cluster's CPUs / workers when ``workers`` is given)."""
 
-    def __init__(self, address: str = "auto", workers: int | None = None, threads: int | None = None,
-                 num_cpus: int | None = None):
+    def __init__(
+        self, address: str = "auto", workers: int | None = None, threads: int | None = None, num_cpus: int | None = None
+    ):
         ray, self._started = connect_ray(address, num_cpus)
         self._ray = ray
         nodes = [n for n in ray.nodes() if n.get("Alive") and n["Resources"].get("CPU", 0) >= 1]
@@ -103,8 +106,12 @@ class RayShards:
 
             # at most a node's CPUs: an actor pinned to a node that cannot hold it would never start
             self.threads = [min(threads or 10**9, int(n["Resources"]["CPU"])) for n in nodes]
-            self.actors = [actor.options(num_cpus=t, scheduling_strategy=NodeAffinitySchedulingStrategy(
-                n["NodeID"], soft=False)).remote(t) for n, t in zip(nodes, self.threads)]
+            self.actors = [
+                actor.options(
+                    num_cpus=t, scheduling_strategy=NodeAffinitySchedulingStrategy(n["NodeID"], soft=False)
+                ).remote(t)
+                for n, t in zip(nodes, self.threads)
+            ]
         else:
             if workers < 1:
                 raise ValueError(f"workers must be at least 1, got {workers}")
@@ -112,7 +119,7 @@ class RayShards:
             self.threads = [threads or max(1, cpus // workers)] * workers
             self.actors = [actor.options(num_cpus=t, scheduling_strategy="SPREAD").remote(t) for t in self.threads]
 
-    def renderer(self, volume, threads: int | None = None, lighting=None) -> "ShardedRenderer":
+    def renderer(self, volume, threads: int | None = None, lighting=None) -> ShardedRenderer:
         """A renderer of ``volume`` on these workers (``threads`` is ignored: each worker has its own)."""
         return ShardedRenderer(self, volume, lighting)
 
@@ -182,18 +189,32 @@ class ShardedRenderer:
         self._ray.get(pending)
         return self._ray.get(calls)
 
-    def render(self, texels, spp: int = 16, seed: int = 0, include_specular: bool = True,
-               progress: bool = False) -> RenderResult:
+    def render(
+        self, texels, spp: int = 16, seed: int = 0, include_specular: bool = True, progress: bool = False
+    ) -> RenderResult:
         if spp < 1:
             raise ValueError(f"spp must be at least 1, got {spp}")
         t0 = time.perf_counter()
         tex = self._ref(texels)
-        outs = self._gather([a.render.remote(tex, lo, hi, int(spp), int(seed), include_specular)
-                             for a, (lo, hi) in zip(self._shards.actors, self._bounds(len(texels)))])
+        outs = self._gather(
+            [
+                a.render.remote(tex, lo, hi, int(spp), int(seed), include_specular)
+                for a, (lo, hi) in zip(self._shards.actors, self._bounds(len(texels)))
+            ]
+        )
         return self._result(outs, spp, t0)
 
-    def gradient(self, texels, adjoint: np.ndarray, spp: int = 16, seed: int = 1, include_specular: bool = True,
-                 method: str = "replay", progress: bool = False, grad_index: np.ndarray | None = None):
+    def gradient(
+        self,
+        texels,
+        adjoint: np.ndarray,
+        spp: int = 16,
+        seed: int = 1,
+        include_specular: bool = True,
+        method: str = "replay",
+        progress: bool = False,
+        grad_index: np.ndarray | None = None,
+    ):
         """As ``Renderer.gradient``: the workers' fixed-point sums are added in int64 and converted once."""
         if spp < 1:
             raise ValueError(f"spp must be at least 1, got {spp}")
@@ -203,9 +224,14 @@ class ShardedRenderer:
         t0 = time.perf_counter()
         max_abs = float(np.abs(adjoint).max(initial=0.0))
         tex, gi = self._ref(texels), None if grad_index is None else self._ref(grad_index)
-        outs = self._gather([a.gradient.remote(tex, lo, hi, adjoint[lo:hi], max_abs, int(spp), int(seed),
-                                               include_specular, method, gi)
-                             for a, (lo, hi) in zip(self._shards.actors, self._bounds(len(texels)))])
+        outs = self._gather(
+            [
+                a.gradient.remote(
+                    tex, lo, hi, adjoint[lo:hi], max_abs, int(spp), int(seed), include_specular, method, gi
+                )
+                for a, (lo, hi) in zip(self._shards.actors, self._bounds(len(texels)))
+            ]
+        )
         quanta = {o[2] for o in outs}
         assert len(quanta) == 1, f"shards used different fixed-point quanta {quanta}"
         gs, ga = np.array(outs[0][0], np.int64), np.array(outs[0][1], np.int64)

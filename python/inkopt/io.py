@@ -1,5 +1,6 @@
 """Atomic file output: every file inkopt writes appears whole or not at all (temporary file in the same folder,
 then an atomic rename), so an interrupted run never leaves a half-written result behind."""
+
 from __future__ import annotations
 
 import io
@@ -40,8 +41,9 @@ class Streamed:
 
 def _write_streamed(fh, a: Streamed) -> None:
     dtype = np.dtype(a.dtype)
-    np.lib.format.write_array_header_2_0(fh, {"descr": np.lib.format.dtype_to_descr(dtype),
-                                              "fortran_order": False, "shape": tuple(a.shape)})
+    np.lib.format.write_array_header_2_0(
+        fh, {"descr": np.lib.format.dtype_to_descr(dtype), "fortran_order": False, "shape": tuple(a.shape)}
+    )
     rows, inner = 0, tuple(a.shape[1:])
     for part in a.parts:
         part = np.ascontiguousarray(part, dtype)
@@ -139,14 +141,17 @@ def upgrade_format(data: dict, *, kind: str, where, current: int, upgrades: dict
     """
     v = format_version_of(data)
     if v > current:
-        raise FormatError(f"{where} is a {kind} of format version {v}; this inkopt reads versions up to {current} "
-                          f"(update inkopt)")
+        raise FormatError(
+            f"{where} is a {kind} of format version {v}; this inkopt reads versions up to {current} (update inkopt)"
+        )
     data = dict(data)
     while v < current:
         if v not in upgrades:
             oldest = min(upgrades, default=current)
-            raise FormatError(f"{where} is a {kind} of format version {v}, which this inkopt no longer reads "
-                              f"(it reads versions {oldest} to {current}); write it again with this inkopt")
+            raise FormatError(
+                f"{where} is a {kind} of format version {v}, which this inkopt no longer reads "
+                f"(it reads versions {oldest} to {current}); write it again with this inkopt"
+            )
         data = dict(upgrades[v](data))
         v += 1
     data[FORMAT_KEY] = current

@@ -11,6 +11,7 @@ the map is the horizon, the last row looks straight down; column 0 starts at +x 
 (pixel (i, j) covers colatitude [i, i + 1] pi / H and longitude [j, j + 1] 2 pi / W). ``rotate_deg`` turns the map
 about z, from +x towards +y. Maps are not normalised: radiance 1 everywhere is exactly the uniform light.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -70,8 +71,9 @@ def check_map(env, name: str = "map") -> np.ndarray:
         raise ValueError(f"{name}: an environment map must be an (H, W, 3) RGB image, got shape {a.shape}")
     h, w = a.shape[:2]
     if h < 1 or w != 2 * h:
-        raise ValueError(f"{name}: not an equirectangular map: {w} x {h} pixels (W x H); the width must be "
-                         f"twice the height")
+        raise ValueError(
+            f"{name}: not an equirectangular map: {w} x {h} pixels (W x H); the width must be twice the height"
+        )
     if not np.issubdtype(a.dtype, np.floating) and not np.issubdtype(a.dtype, np.integer):
         raise ValueError(f"{name}: map values must be numbers, got dtype {a.dtype}")
     a = np.ascontiguousarray(a, np.float32)
@@ -81,8 +83,9 @@ def check_map(env, name: str = "map") -> np.ndarray:
         raise ValueError(f"{name}: radiance is NaN or infinite at row {i}, column {j} ({int(bad.sum())} values)")
     if (a < 0).any():
         i, j, c = np.argwhere(a < 0)[0]
-        raise ValueError(f"{name}: negative radiance {a[i, j, c]:g} at row {i}, column {j}; linear radiance "
-                         f"must be >= 0")
+        raise ValueError(
+            f"{name}: negative radiance {a[i, j, c]:g} at row {i}, column {j}; linear radiance must be >= 0"
+        )
     return a
 
 

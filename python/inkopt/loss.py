@@ -4,6 +4,7 @@ Predictions and targets are linear RGB (I, 3) per texel; the terms are computed 
 E1 mean ΔE76², E2 texel SSIM on normalised L*a*b* with a Gaussian window restricted to texels, E3 3D Sobel on
 normalised L*a*b*.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -12,11 +13,10 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from .color import (LAB_NORM_SCALE, linear_to_lab, linear_to_lab_jacobian, linear_to_lab_vjp,
-                    normalise_lab)
+from .color import LAB_NORM_SCALE, linear_to_lab, linear_to_lab_jacobian, linear_to_lab_vjp, normalise_lab
 
-K1 = 0.01 ** 2
-K2 = 0.03 ** 2
+K1 = 0.01**2
+K2 = 0.03**2
 # E1 enters the combined loss in units of (dE/100)^2: that puts it in the range of E2 and E3 (E3's factor 100 is
 # chosen for the same range, docs/method.md §5), so the paper's weight recommendations (g2 in [3, 9], g3 <= 3) apply.
 # The reported e1 stays the mean dE76^2.
@@ -87,8 +87,9 @@ def sobel_operators(pos_vox: np.ndarray, tol: float = 1e-6) -> sp.csr_matrix:
         rows += [a * n_tex + ii, a * n_tex + jj, a * n_tex + np.arange(n_tex)]
         cols += [jj, ii, np.arange(n_tex)]
         vals += [wi, -wi, centre]
-    s = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                      shape=(3 * n_tex, n_tex)).tocsr()
+    s = sp.coo_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * n_tex, n_tex)
+    ).tocsr()
     s.sum_duplicates()
     s.eliminate_zeros()
     return s
@@ -156,7 +157,7 @@ class TexelLoss:
         self._ST = None  # S transposed, built on first use (the edge term's gradient)
         tn = self.target_n
         self._mu_t = self._window(tn)
-        self._var_t = self._window(tn * tn) - self._mu_t ** 2
+        self._var_t = self._window(tn * tn) - self._mu_t**2
         self._sobel_t = self.S @ tn
         lab = self.target_lab
         var = np.maximum(self._window(lab * lab) - self._window(lab) ** 2, 0.0)
@@ -199,12 +200,12 @@ class TexelLoss:
         var = self._check_var(pred, pred_var)
         if var is None:
             return None
-        jac = linear_to_lab_jacobian(pred)                      # (I, 3 lab, 3 rgb)
-        v = np.einsum("ikj,ij->ik", jac * jac, var) * LAB_NORM_SCALE ** 2
+        jac = linear_to_lab_jacobian(pred)  # (I, 3 lab, 3 rgb)
+        v = np.einsum("ikj,ij->ik", jac * jac, var) * LAB_NORM_SCALE**2
         if self._K2 is None:  # K's sparsity pattern shared, not copied (K has no explicit zeros)
             K = self.K
             self._K2 = sp.csr_matrix((K.data * K.data, K.indices, K.indptr), shape=K.shape)
-        return (self.K @ v) / self.wsum[:, None], (self._K2 @ v) / (self.wsum ** 2)[:, None]
+        return (self.K @ v) / self.wsum[:, None], (self._K2 @ v) / (self.wsum**2)[:, None]
 
     def _ssim_parts(self, cn: np.ndarray, noise=None):
         """SSIM terms. ``noise`` = (W v, W^2 v): with it, the prediction's windowed mean square and variance are
@@ -280,8 +281,8 @@ class TexelLoss:
             coef = -g2 / (3.0 * n)  # dE2 / dSSIM_ic, times gamma2
             mt = self._mu_t
             gm = coef * 2.0 * ssim * (mt / a1 - mx / b1 - mt / a2 + mx / b2)  # d/d(Wx)
-            gq = coef * (-ssim / b2)                                           # d/d(W x^2)
-            gp = coef * 2.0 * ssim / a2                                        # d/d(W x t)
+            gq = coef * (-ssim / b2)  # d/d(W x^2)
+            gp = coef * 2.0 * ssim / a2  # d/d(W x t)
             back = self._window_t(np.concatenate([gm, gq, gp], axis=1))
             g_n += back[:, :3] + 2.0 * cn * back[:, 3:6] + self.target_n * back[:, 6:]
         if g3 > 0:

@@ -3,6 +3,7 @@
 Inputs are per-texel linear RGB (I, 3) and, for a face, ``pix`` (H, W) int: the texel index shown at each pixel
 (row 0 = top of the picture; negative = no texel, drawn grey). Files are written atomically (``inkopt.io``).
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -27,7 +28,7 @@ def face_image(rgb, pix) -> np.ndarray:
     return img
 
 
-def panels(items, pix) -> "Image.Image":
+def panels(items, pix) -> Image.Image:
     """Side-by-side labelled panels: items = [(label, rgb (I, 3) linear)]; nearest-neighbour upscaling to at
     least ``PANEL_MIN_WIDTH`` px per panel."""
     from PIL import Image, ImageDraw
@@ -64,8 +65,9 @@ def error_figure(path: Path, title: str, target_rgb, pred_rgb, delta_e, pix) -> 
     ax[0].set_title(f"{title}: target")
     ax[1].imshow(face_image(pred_rgb, pix), interpolation="nearest")
     ax[1].set_title("predicted print")
-    im = ax[2].imshow(delta_e[pix], cmap="magma", vmin=0, vmax=max(10.0, float(np.percentile(delta_e, 99))),
-                      interpolation="nearest")
+    im = ax[2].imshow(
+        delta_e[pix], cmap="magma", vmin=0, vmax=max(10.0, float(np.percentile(delta_e, 99))), interpolation="nearest"
+    )
     ax[2].set_title(f"ΔE76 (mean {delta_e[pix].mean():.2f})")
     fig.colorbar(im, ax=ax[2], fraction=0.046, pad=0.04)
     for a in ax:

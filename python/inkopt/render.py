@@ -1,18 +1,20 @@
 """Predict the appearance of a volume: the Monte Carlo texel-space renderer (Rust core) and its gradients.
 
 The renderer (docs/method.md §4): smooth dielectric boundary (``Volume.ior``, 1.5 by default), lit by the uniform
-environment of radiance 1 or by an environment map (``lighting``: a :class:`inkopt.lighting.Lighting`, "uniform"
-or a map file), one sensor element per texel looking along the texel's inward normal. A texel's value is the mean
-linear-RGB radiance leaving it toward the viewer, including the specular reflection of the environment unless
-``include_specular=False``; a path that leaves the object picks up the light's radiance in its direction. Each channel is its own monochromatic random walk (exact free flights by delta
-tracking, and regular tracking near the surface of masked objects; implicit absorption with Russian roulette;
-Henyey-Greenstein scattering; Fresnel reflection/refraction), eight paths per core at a time (SIMD lanes).
+environment of radiance 1 or by an environment map (``lighting``: a :class:`inkopt.lighting.Lighting`, "uniform" or a
+map file), one sensor element per texel looking along the texel's inward normal. A texel's value is the mean linear-RGB
+radiance leaving it toward the viewer, including the specular reflection of the environment unless
+``include_specular=False``; a path that leaves the object picks up the light's radiance in its direction. Each channel
+is its own monochromatic random walk (exact free flights by delta tracking, and regular tracking near the surface of
+masked objects; implicit absorption with Russian roulette; Henyey-Greenstein scattering; Fresnel reflection/refraction),
+eight paths per core at a time (SIMD lanes).
 
 Gradients (``Renderer.gradient``): given per-texel adjoints de/dc (I, 3), the derivatives de/dsigma_s and
 de/dsigma_a (z, y, x, 3) by path replay backpropagation (unbiased, ``method="replay"``) or the paper's biased
 one-pass approximation (``method="li1"``: radiance along the adjoint path approximated by 1, whatever the
 lighting; only sigma_a receives gradient under it).
 """
+
 from __future__ import annotations
 
 import sys
@@ -52,9 +54,15 @@ class RenderResult:
         return np.sqrt(self.var_mean.astype(np.float64).sum(axis=0)) / max(len(self.rgb), 1)
 
     def stats(self) -> dict:
-        return {"texels": int(len(self.rgb)), "spp": self.spp, "paths": self.paths, "events": self.events,
-                "seconds": self.seconds, "replayed_paths": self.replayed_paths,
-                "replayed_events": self.replayed_events}
+        return {
+            "texels": int(len(self.rgb)),
+            "spp": self.spp,
+            "paths": self.paths,
+            "events": self.events,
+            "seconds": self.seconds,
+            "replayed_paths": self.replayed_paths,
+            "replayed_events": self.replayed_events,
+        }
 
 
 class Renderer:
@@ -71,8 +79,13 @@ class Renderer:
         from . import _core
 
         self.volume = volume
-        kw = dict(boundary=volume.boundary, ior=float(volume.ior), g=float(volume.g), threads=threads,
-                  **self._medium_arrays(volume))
+        kw = dict(
+            boundary=volume.boundary,
+            ior=float(volume.ior),
+            g=float(volume.g),
+            threads=threads,
+            **self._medium_arrays(volume),
+        )
         if volume.inside is not None or volume.form == "labels":
             kw["inside"] = np.ascontiguousarray(volume.inside_mask(), dtype=np.uint8)
         if volume.normals is not None:
@@ -93,8 +106,11 @@ class Renderer:
         """The core's medium arguments: labels with the ink table; the inside voxels' coefficients (sparse: 4
         bytes per grid voxel + 24 per inside voxel) when the volume has an inside mask; else dense coefficients."""
         if volume.form == "labels":
-            return dict(labels=volume.labels, ink_sigma_s=volume.inks.sigma_s.astype(np.float32),
-                        ink_sigma_a=volume.inks.sigma_a.astype(np.float32))
+            return dict(
+                labels=volume.labels,
+                ink_sigma_s=volume.inks.sigma_s.astype(np.float32),
+                ink_sigma_a=volume.inks.sigma_a.astype(np.float32),
+            )
         if volume.inside is not None:
             index = np.flatnonzero(volume.inside)
             s, a = volume.coefficients_at(index)
@@ -129,15 +145,28 @@ class Renderer:
             self._scene.set_medium(medium_index=inside, sigma_s=cs, sigma_a=ca)
             self._labels = False
         s, a = mix(mixture, inks)
-        self._scene.set_voxels(np.ascontiguousarray(index, np.int64), np.ascontiguousarray(s, np.float32),
-                               np.ascontiguousarray(a, np.float32))
+        self._scene.set_voxels(
+            np.ascontiguousarray(index, np.int64),
+            np.ascontiguousarray(s, np.float32),
+            np.ascontiguousarray(a, np.float32),
+        )
 
     @property
     def threads(self) -> int:
         return self._scene.threads
 
-    def _run(self, texels: Texels, spp: int, seed: int, include_specular: bool, progress: bool, desc: str,
-             adjoint: np.ndarray | None = None, method: str = "replay", first_texel: int = 0) -> RenderResult:
+    def _run(
+        self,
+        texels: Texels,
+        spp: int,
+        seed: int,
+        include_specular: bool,
+        progress: bool,
+        desc: str,
+        adjoint: np.ndarray | None = None,
+        method: str = "replay",
+        first_texel: int = 0,
+    ) -> RenderResult:
         if spp < 1:
             raise ValueError(f"spp must be at least 1, got {spp}")
         n = len(texels)
@@ -147,6 +176,7 @@ class Renderer:
         bar = None
         if progress and n > CHUNK and sys.stderr.isatty():
             from tqdm import tqdm
+
             bar = tqdm(total=n * spp, unit="texel-spp", unit_scale=True, desc=desc, leave=False)
         t0 = time.perf_counter()
         for a in range(0, n, CHUNK):
@@ -156,8 +186,9 @@ class Renderer:
             if adjoint is None:
                 m, v, st = self._scene.render(*args, **kw)
             else:
-                m, v, st = self._scene.backward(*args, np.ascontiguousarray(adjoint[a:b], np.float32), **kw,
-                                                method=method)
+                m, v, st = self._scene.backward(
+                    *args, np.ascontiguousarray(adjoint[a:b], np.float32), **kw, method=method
+                )
             rgb[a:b], var[a:b] = m, v
             for k in totals:
                 totals[k] += st[k]
@@ -167,15 +198,30 @@ class Renderer:
             bar.close()
         return RenderResult(rgb, var, int(spp), time.perf_counter() - t0, **totals)
 
-    def render(self, texels: Texels, spp: int = 16, seed: int = 0, include_specular: bool = True,
-               progress: bool = False, first_texel: int = 0) -> RenderResult:
+    def render(
+        self,
+        texels: Texels,
+        spp: int = 16,
+        seed: int = 0,
+        include_specular: bool = True,
+        progress: bool = False,
+        first_texel: int = 0,
+    ) -> RenderResult:
         """Forward render of ``texels``; see module docstring. Random numbers are keyed by (seed, texel index,
         sample); ``first_texel`` is the index of ``texels[0]`` (a shard of a longer list renders as in the list)."""
         return self._run(texels, spp, seed, include_specular, progress, "render", first_texel=first_texel)
 
-    def gradient(self, texels: Texels, adjoint: np.ndarray, spp: int = 16, seed: int = 1,
-                 include_specular: bool = True, method: str = "replay", progress: bool = False,
-                 grad_index: np.ndarray | None = None):
+    def gradient(
+        self,
+        texels: Texels,
+        adjoint: np.ndarray,
+        spp: int = 16,
+        seed: int = 1,
+        include_specular: bool = True,
+        method: str = "replay",
+        progress: bool = False,
+        grad_index: np.ndarray | None = None,
+    ):
         """Gradient of e with respect to the coefficients, given ``adjoint`` = de/dc (I, 3) in texel order.
 
         Returns (grad_sigma_s, grad_sigma_a, result): (z, y, x, 3) float32 each, and the pass's own forward
@@ -190,20 +236,41 @@ class Renderer:
         gs, ga = self._scene.take_grad()
         return gs, ga, res
 
-    def gradient_fixed(self, texels: Texels, adjoint: np.ndarray, spp: int = 16, seed: int = 1,
-                       include_specular: bool = True, method: str = "replay", grad_index: np.ndarray | None = None,
-                       first_texel: int = 0, max_abs_adjoint: float | None = None):
+    def gradient_fixed(
+        self,
+        texels: Texels,
+        adjoint: np.ndarray,
+        spp: int = 16,
+        seed: int = 1,
+        include_specular: bool = True,
+        method: str = "replay",
+        grad_index: np.ndarray | None = None,
+        first_texel: int = 0,
+        max_abs_adjoint: float | None = None,
+    ):
         """:meth:`gradient` of a shard of texels (``texels[0]`` has index ``first_texel``), as raw fixed-point sums:
         (sum_s, sum_a, quantum, result), int64 arrays shaped like :meth:`gradient`'s. The shards of one pass, each
         given the whole pass's ``max_abs_adjoint`` (default: this shard's), add up (int64, wrapping) to the pass's
         sums, and :func:`fixed_to_float` of those is :meth:`gradient`'s result, bit for bit."""
-        res = self._backward(texels, adjoint, spp, seed, include_specular, method, False, grad_index, first_texel,
-                             max_abs_adjoint)
+        res = self._backward(
+            texels, adjoint, spp, seed, include_specular, method, False, grad_index, first_texel, max_abs_adjoint
+        )
         gs, ga, quantum = self._scene.take_grad_fixed()
         return gs, ga, quantum, res
 
-    def _backward(self, texels, adjoint, spp, seed, include_specular, method, progress, grad_index,
-                  first_texel=0, max_abs_adjoint=None) -> RenderResult:
+    def _backward(
+        self,
+        texels,
+        adjoint,
+        spp,
+        seed,
+        include_specular,
+        method,
+        progress,
+        grad_index,
+        first_texel=0,
+        max_abs_adjoint=None,
+    ) -> RenderResult:
         adjoint = np.asarray(adjoint, np.float32)
         if adjoint.shape != (len(texels), 3):
             raise ValueError(f"adjoint must have shape ({len(texels)}, 3), got {adjoint.shape}")
@@ -222,7 +289,15 @@ def fixed_to_float(fixed_sum: np.ndarray, quantum: float) -> np.ndarray:
     return (np.asarray(fixed_sum, np.int64).astype(np.float64) * np.float64(quantum)).astype(np.float32)
 
 
-def render(volume: Volume, texels: Texels, spp: int = 16, seed: int = 0, include_specular: bool = True,
-           threads: int | None = None, progress: bool = False, lighting: Lighting | str | None = None) -> RenderResult:
+def render(
+    volume: Volume,
+    texels: Texels,
+    spp: int = 16,
+    seed: int = 0,
+    include_specular: bool = True,
+    threads: int | None = None,
+    progress: bool = False,
+    lighting: Lighting | str | None = None,
+) -> RenderResult:
     """One-shot forward render (builds a :class:`Renderer`)."""
     return Renderer(volume, threads, lighting).render(texels, spp, seed, include_specular, progress)

@@ -11,6 +11,7 @@ constraint (``model.Translucency``, stored sparsely), so every reader sees the s
 stores them. scene.npz carries ``format_version`` (``SCENE_FORMAT``); older versions are read through
 ``io.upgrade_format``.
 """
+
 from __future__ import annotations
 
 import json
@@ -56,8 +57,9 @@ class SceneRecord:
     def __post_init__(self):
         self.target_rgb = np.asarray(self.target_rgb, np.float32)
         if self.target_rgb.shape != (len(self.texels), 3) or len(self.texels) == 0:
-            raise ValueError(f"scene target_rgb has shape {self.target_rgb.shape}, expected ({len(self.texels)}, 3)"
-                             " with texels")
+            raise ValueError(
+                f"scene target_rgb has shape {self.target_rgb.shape}, expected ({len(self.texels)}, 3) with texels"
+            )
 
     def fixed_share(self, inks: InkTable, shape=None) -> FixedShares | None:
         """The (z, y, x, N) fixed ink shares: as stored, or rebuilt from ``free_mask`` (100 % white wherever the
@@ -67,16 +69,22 @@ class SceneRecord:
         if fixed is None:
             free = None if self.free_mask is None else np.asarray(self.free_mask, bool)
             fixed = scene_fixed_shares(inks, free, self.translucency)
-        if fixed is not None and (fixed.shape[-1] != len(inks) or (shape is not None
-                                                                   and fixed.shape[:3] != tuple(shape))):
-            raise ValueError(f"scene fixed_share has shape {fixed.shape}, expected {tuple(shape or ())} x "
-                             f"{len(inks)} inks")
+        if fixed is not None and (
+            fixed.shape[-1] != len(inks) or (shape is not None and fixed.shape[:3] != tuple(shape))
+        ):
+            raise ValueError(
+                f"scene fixed_share has shape {fixed.shape}, expected {tuple(shape or ())} x {len(inks)} inks"
+            )
         return fixed
 
     def arrays(self) -> dict:
         """The arrays of scene.npz (the dense fixed shares only below ``FIXED_SHARE_MAX_ENTRIES`` entries)."""
-        out = {FORMAT_KEY: np.int64(SCENE_FORMAT), **self.texels.to_arrays(), "target_rgb": self.target_rgb,
-               "kind": np.array(self.kind)}
+        out = {
+            FORMAT_KEY: np.int64(SCENE_FORMAT),
+            **self.texels.to_arrays(),
+            "target_rgb": self.target_rgb,
+            "kind": np.array(self.kind),
+        }
         if self.faces:
             out["faces"] = np.array(self.faces)
         out.update({f"pix_{f}": p for f, p in self.pix.items()})
@@ -94,19 +102,25 @@ class SceneRecord:
     def from_arrays(cls, d, where: str = "scene.npz") -> SceneRecord:
         """The record of scene.npz's arrays ``d`` (any format version this inkopt reads; ``where`` names the file
         in errors)."""
-        d = upgrade_format(d, kind="scene file", where=where, current=SCENE_FORMAT,
-                           upgrades={0: lambda a: _scene_from_0(a, where)})
+        d = upgrade_format(
+            d, kind="scene file", where=where, current=SCENE_FORMAT, upgrades={0: lambda a: _scene_from_0(a, where)}
+        )
         for k in ("texel_voxel", "texel_face", "texel_normal", "target_rgb", "kind"):
             if k not in d:
                 raise ValueError(f"{where} lacks array '{k}'")
         faces = [str(f) for f in np.asarray(d["faces"]).reshape(-1)] if "faces" in d else []
         kind = str(d["kind"])
-        return cls(kind, Texels.from_arrays(d), d["target_rgb"], faces,
-                   {f: np.asarray(d[f"pix_{f}"]) for f in faces if f"pix_{f}" in d},
-                   np.asarray(d["free_mask"], bool) if "free_mask" in d else None,
-                   FixedShares.from_dense(d["fixed_share"]) if "fixed_share" in d else None,
-                   MeshInfo.from_arrays(d) if kind == "mesh" and "mesh_path" in d else None,
-                   Translucency.from_arrays(d))
+        return cls(
+            kind,
+            Texels.from_arrays(d),
+            d["target_rgb"],
+            faces,
+            {f: np.asarray(d[f"pix_{f}"]) for f in faces if f"pix_{f}" in d},
+            np.asarray(d["free_mask"], bool) if "free_mask" in d else None,
+            FixedShares.from_dense(d["fixed_share"]) if "fixed_share" in d else None,
+            MeshInfo.from_arrays(d) if kind == "mesh" and "mesh_path" in d else None,
+            Translucency.from_arrays(d),
+        )
 
 
 def _scene_from_0(d: dict, where) -> dict:
@@ -116,8 +130,9 @@ def _scene_from_0(d: dict, where) -> dict:
     if str(d.get("kind")) == "mesh" and "mesh_path" in d:
         missing += [k for k in ("height_mm", "up", "shell_mm") if k not in d]
     if missing:
-        raise FormatError(f"{where} lacks {', '.join(missing)}: a pre-release layout; rerun the optimisation with "
-                          f"this inkopt")
+        raise FormatError(
+            f"{where} lacks {', '.join(missing)}: a pre-release layout; rerun the optimisation with this inkopt"
+        )
     return d
 
 
@@ -277,8 +292,15 @@ class RunDir:
         except BaseException:
             w.abort()
             raise
-        save_npz(self.quantized_path, {**arrays, "labels_file": np.array(self.QUANTIZED_LABELS),
-                                       "labels_shape": np.asarray(w.shape, np.int64), "label_counts": w.counts})
+        save_npz(
+            self.quantized_path,
+            {
+                **arrays,
+                "labels_file": np.array(self.QUANTIZED_LABELS),
+                "labels_shape": np.asarray(w.shape, np.int64),
+                "label_counts": w.counts,
+            },
+        )
 
     def volume_file(self) -> Path:
         """The path of volume.npz (checked to exist), for stages that read it lazily."""

@@ -4,6 +4,7 @@ Lengths are in mm, coefficients in mm^-1. The optimisation grid has cubic voxels
 25.4 / 300 ≈ 0.0847 mm, docs/method.md §2); the printer grid is anisotropic, ``PRINTER_DPI`` (x, y) dots per inch and
 ``PRINTER_LAYER_UM`` µm layers in z (docs/method.md §7). Vectors of sizes and resolutions are (x, y, z).
 """
+
 from __future__ import annotations
 
 import numpy as np

@@ -1,4 +1,5 @@
 """The command line as a user meets it: outputs, one-line errors with exit status 2, kill -9 and --resume."""
+
 import json
 import os
 import signal
@@ -27,8 +28,24 @@ def small_volume(tmp_path, **kw):
 
 def test_render_json_out_and_adjoint(tmp_path, capsys):
     path = small_volume(tmp_path)
-    assert main(["render", str(path), "--spp", "4", "--seed", "1", "--face", "top", "--json",
-                 "--out", str(tmp_path / "o.npz")]) == 0
+    assert (
+        main(
+            [
+                "render",
+                str(path),
+                "--spp",
+                "4",
+                "--seed",
+                "1",
+                "--face",
+                "top",
+                "--json",
+                "--out",
+                str(tmp_path / "o.npz"),
+            ]
+        )
+        == 0
+    )
     info = json.loads(capsys.readouterr().out)
     assert info["texels"] == 30 and info["paths"] == 30 * 4 * 3 and len(info["mean_rgb"]) == 3
     assert {"seconds", "events", "spp"} <= set(info)
@@ -37,8 +54,24 @@ def test_render_json_out_and_adjoint(tmp_path, capsys):
     np.testing.assert_allclose(out["rgb"].mean(0), info["mean_rgb"], rtol=1e-5)
     np.testing.assert_array_equal(out["normal"], np.tile([0, 0, 1], (30, 1)))
     np.save(tmp_path / "adj.npy", np.ones((30, 3), np.float32))
-    assert main(["render", str(path), "--spp", "4", "--face", "top", "--json", "--adjoint",
-                 str(tmp_path / "adj.npy"), "--out", str(tmp_path / "g.npz")]) == 0
+    assert (
+        main(
+            [
+                "render",
+                str(path),
+                "--spp",
+                "4",
+                "--face",
+                "top",
+                "--json",
+                "--adjoint",
+                str(tmp_path / "adj.npy"),
+                "--out",
+                str(tmp_path / "g.npz"),
+            ]
+        )
+        == 0
+    )
     g = np.load(tmp_path / "g.npz")
     assert g["grad_sigma_s"].shape == (4, 5, 6, 3) and g["grad_sigma_a"].shape == (4, 5, 6, 3)
     # More absorption anywhere near the top can only darken the top face: d(sum c)/d sigma_a <= 0 on average.
@@ -46,8 +79,11 @@ def test_render_json_out_and_adjoint(tmp_path, capsys):
 
 
 def _bad_volume(tmp_path, name, **arrays):
-    base = {"voxel_mm": np.array([0.1, 0.1, 0.1]), "sigma_s": np.ones((2, 3, 4, 3), np.float32),
-            "sigma_a": np.ones((2, 3, 4, 3), np.float32)}
+    base = {
+        "voxel_mm": np.array([0.1, 0.1, 0.1]),
+        "sigma_s": np.ones((2, 3, 4, 3), np.float32),
+        "sigma_a": np.ones((2, 3, 4, 3), np.float32),
+    }
     base.update(arrays)
     base = {k: v for k, v in base.items() if v is not None}
     p = tmp_path / f"{name}.npz"
@@ -55,16 +91,19 @@ def _bad_volume(tmp_path, name, **arrays):
     return p
 
 
-@pytest.mark.parametrize("name,arrays,needle", [
-    ("negative", {"sigma_a": -np.ones((2, 3, 4, 3), np.float32)}, "negative"),
-    ("nan", {"sigma_s": np.full((2, 3, 4, 3), np.nan, np.float32)}, "NaN"),
-    ("shape", {"sigma_s": np.ones((2, 3, 4), np.float32)}, "shape"),
-    ("mismatch", {"sigma_a": np.ones((2, 3, 5, 3), np.float32)}, "differ"),
-    ("zero_voxel", {"voxel_mm": np.array([0.1, 0.0, 0.1])}, "voxel_mm"),
-    ("boundary", {"boundary": np.array("torus")}, "boundary"),
-    ("missing", {"sigma_a": None}, "sigma_a"),
-    ("huge", {"sigma_s": None, "sigma_a": None, "labels": np.zeros((1, 1, 1), np.uint8)}, "ink table"),
-])
+@pytest.mark.parametrize(
+    "name,arrays,needle",
+    [
+        ("negative", {"sigma_a": -np.ones((2, 3, 4, 3), np.float32)}, "negative"),
+        ("nan", {"sigma_s": np.full((2, 3, 4, 3), np.nan, np.float32)}, "NaN"),
+        ("shape", {"sigma_s": np.ones((2, 3, 4), np.float32)}, "shape"),
+        ("mismatch", {"sigma_a": np.ones((2, 3, 5, 3), np.float32)}, "differ"),
+        ("zero_voxel", {"voxel_mm": np.array([0.1, 0.0, 0.1])}, "voxel_mm"),
+        ("boundary", {"boundary": np.array("torus")}, "boundary"),
+        ("missing", {"sigma_a": None}, "sigma_a"),
+        ("huge", {"sigma_s": None, "sigma_a": None, "labels": np.zeros((1, 1, 1), np.uint8)}, "ink table"),
+    ],
+)
 def test_render_bad_input_is_one_line_exit_2(tmp_path, name, arrays, needle):
     p = _bad_volume(tmp_path, name, **arrays)
     r = subprocess.run(INKOPT + ["render", str(p), "--json"], capture_output=True, text=True)
@@ -111,13 +150,43 @@ def test_slab_bad_input(tmp_path, chart):
 
 def test_slab_outputs(tmp_path, chart):
     out = tmp_path / "run"
-    r = subprocess.run(INKOPT + ["slab", str(chart), "--bottom", str(chart), "--size-mm", "2x1.333x0.5",
-                                 "--out", str(out), "--iterations", "4", "--spp", "2", "--eval-spp", "8"],
-                       capture_output=True, text=True)
+    r = subprocess.run(
+        INKOPT
+        + [
+            "slab",
+            str(chart),
+            "--bottom",
+            str(chart),
+            "--size-mm",
+            "2x1.333x0.5",
+            "--out",
+            str(out),
+            "--iterations",
+            "4",
+            "--spp",
+            "2",
+            "--eval-spp",
+            "8",
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 0, r.stderr
     rep = json.loads((out / "report.json").read_text())
-    for k in ("initial_delta_e76_mean", "delta_e76_mean", "delta_e76_p95", "delta_e2000_mean", "loss", "e1",
-              "e2", "e3", "iterations", "spp", "seconds", "ssim"):
+    for k in (
+        "initial_delta_e76_mean",
+        "delta_e76_mean",
+        "delta_e76_p95",
+        "delta_e2000_mean",
+        "loss",
+        "e1",
+        "e2",
+        "e3",
+        "iterations",
+        "spp",
+        "seconds",
+        "ssim",
+    ):
         assert k in rep and np.isfinite(rep[k]), k
     assert (rep["adjoint_ema"], rep["smooth"]) == (0.8, 1.5)  # the slab defaults (OptimizeConfig.for_scene)
     for f in ("volume.npz", "scene.npz", "face_top.png", "face_bottom.png", "loss.png", "checkpoint.npz"):
@@ -126,16 +195,31 @@ def test_slab_outputs(tmp_path, chart):
     assert vol.form == "mixture" and vol.shape == (6, 16, 24)
     np.testing.assert_allclose(vol.mixture.sum(-1), 1, atol=1e-5)
     # The result renders with `inkopt render`.
-    r2 = subprocess.run(INKOPT + ["render", str(out / "volume.npz"), "--spp", "1", "--json"], capture_output=True,
-                        text=True)
+    r2 = subprocess.run(
+        INKOPT + ["render", str(out / "volume.npz"), "--spp", "1", "--json"], capture_output=True, text=True
+    )
     assert r2.returncode == 0 and json.loads(r2.stdout)["texels"] > 0
 
 
 def test_slab_survives_kill_9_and_resumes_exactly(tmp_path, chart):
     """A run killed with SIGKILL loses at most the iterations since its last checkpoint; --resume then ends
     exactly where an uninterrupted run ends (renders and gradients are deterministic)."""
-    args = ["slab", str(chart), "--size-mm", "2x1.333x0.5", "--iterations", "24", "--spp", "2", "--eval-spp", "4",
-            "--checkpoint-every", "3", "--threads", "2"]
+    args = [
+        "slab",
+        str(chart),
+        "--size-mm",
+        "2x1.333x0.5",
+        "--iterations",
+        "24",
+        "--spp",
+        "2",
+        "--eval-spp",
+        "4",
+        "--checkpoint-every",
+        "3",
+        "--threads",
+        "2",
+    ]
     ref = tmp_path / "ref"
     assert subprocess.run(INKOPT + args + ["--out", str(ref)], capture_output=True).returncode == 0
     out = tmp_path / "killed"

@@ -1,4 +1,5 @@
 """Tests of the printable-output commands: inkopt quantize, export, evaluate (cli.main and one subprocess)."""
+
 import json
 import os
 import subprocess
@@ -25,17 +26,26 @@ def make_run(d, shape=(4, 8, 10), normals=False, inks="vero-cmykw"):
     kw = {}
     if normals:
         c = np.indices(shape).transpose(1, 2, 3, 0)[..., ::-1] + 0.5 - np.array(shape[::-1]) / 2
-        kw = dict(inside=np.linalg.norm(c, axis=-1) < min(shape) / 2,
-                  normals=(c / np.linalg.norm(c, axis=-1, keepdims=True)).astype(np.float32))
+        kw = dict(
+            inside=np.linalg.norm(c, axis=-1) < min(shape) / 2,
+            normals=(c / np.linalg.norm(c, axis=-1, keepdims=True)).astype(np.float32),
+        )
     vol = Volume.from_mixture(voxel_mm=[V300] * 3, mixture=mix, inks=inks, **kw)
     d.mkdir(parents=True, exist_ok=True)
     vol.save(d / "volume.npz")
     tex = Texels.box_faces(shape, ["top"])
     ny, nx = shape[1:]
-    save_npz(d / "scene.npz", {**tex.to_arrays(), "target_rgb": np.full((len(tex), 3), 0.4, np.float32),
-                               "kind": np.array("slab"), "fixed_share": np.zeros(mix.shape, np.float32),
-                               "faces": np.array(["top"]),
-                               "pix_top": (np.arange(ny)[::-1, None] * nx + np.arange(nx)).astype(np.int32)})
+    save_npz(
+        d / "scene.npz",
+        {
+            **tex.to_arrays(),
+            "target_rgb": np.full((len(tex), 3), 0.4, np.float32),
+            "kind": np.array("slab"),
+            "fixed_share": np.zeros(mix.shape, np.float32),
+            "faces": np.array(["top"]),
+            "pix_top": (np.arange(ny)[::-1, None] * nx + np.arange(nx)).astype(np.int32),
+        },
+    )
     return vol
 
 
@@ -59,8 +69,13 @@ def test_quantize_writes_renderable_labels(tmp_path, capsys):
     assert q.inks.names == vol.inks.names and q.inside is None and q.normals is None
     # renderable by `inkopt render` (a fresh process, as a user would run it)
     env = {**os.environ, "PYTHONPATH": str(ROOT / "python")}
-    proc = subprocess.run([sys.executable, "-m", "inkopt.cli", "render", str(tmp_path / "r" / "quantized.npz"),
-                           "--spp", "1", "--json"], capture_output=True, text=True, env=env, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "-m", "inkopt.cli", "render", str(tmp_path / "r" / "quantized.npz"), "--spp", "1", "--json"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+    )
     assert proc.returncode == 0, proc.stderr
     summary = json.loads(proc.stdout)
     assert summary["texels"] == 2 * (20 * 8 + 20 * 13 + 8 * 13) and all(0 < v < 1.2 for v in summary["mean_rgb"])
@@ -68,12 +83,22 @@ def test_quantize_writes_renderable_labels(tmp_path, capsys):
 
 def test_quantize_options(tmp_path, capsys):
     vol = make_run(tmp_path / "r")
-    code, out, err = run(capsys, "quantize", tmp_path / "r", "--method", "random", "--dpi", "300x300x600",
-                         "--seed", "4", "--upsample", "linear")
+    code, out, err = run(
+        capsys,
+        "quantize",
+        tmp_path / "r",
+        "--method",
+        "random",
+        "--dpi",
+        "300x300x600",
+        "--seed",
+        "4",
+        "--upsample",
+        "linear",
+    )
     assert code == 0, err
     q = Volume.load(tmp_path / "r" / "quantized.npz")
-    labels, vp = quantize(vol.mixture, vol.voxel_mm, method="random", dpi=(300, 300, 600), seed=4,
-                          upsample="linear")
+    labels, vp = quantize(vol.mixture, vol.voxel_mm, method="random", dpi=(300, 300, 600), seed=4, upsample="linear")
     np.testing.assert_array_equal(q.labels, labels)
     assert q.quantization.method == "random" and q.quantization.upsample == "linear"
     code, _, _ = run(capsys, "quantize", tmp_path / "r", "--layer-um", "14")
@@ -85,8 +110,11 @@ def test_quantize_upsamples_mesh_normals(tmp_path, capsys):
     assert run(capsys, "quantize", tmp_path / "m")[0] == 0
     q = Volume.load(tmp_path / "m" / "quantized.npz")
     Z, Y, X = q.labels.shape
-    iz, iy, ix = (_enclosing(Z, q.voxel_mm[2], 6, V300), _enclosing(Y, q.voxel_mm[1], 6, V300),
-                  _enclosing(X, q.voxel_mm[0], 6, V300))
+    iz, iy, ix = (
+        _enclosing(Z, q.voxel_mm[2], 6, V300),
+        _enclosing(Y, q.voxel_mm[1], 6, V300),
+        _enclosing(X, q.voxel_mm[0], 6, V300),
+    )
     np.testing.assert_array_equal(q.normals.dense(), vol.normals.dense()[np.ix_(iz, iy, ix)])
     np.testing.assert_array_equal(q.labels == 255, ~vol.inside[np.ix_(iz, iy, ix)])
     tex = Texels.for_volume(q)  # one texel per printer surface voxel, from the normals
@@ -98,8 +126,19 @@ def test_export_png_slices(tmp_path, capsys):
     assert run(capsys, "export", tmp_path / "r")[0] == 2  # no quantized.npz yet
     assert run(capsys, "quantize", tmp_path / "r")[0] == 0
     q = Volume.load(tmp_path / "r" / "quantized.npz")
-    code, out, err = run(capsys, "export", tmp_path / "r", "--format", "png-slices", "--out", tmp_path / "s",
-                         "--printer", "j750", "--palette", '{"white": "#F0F0F0"}')
+    code, out, err = run(
+        capsys,
+        "export",
+        tmp_path / "r",
+        "--format",
+        "png-slices",
+        "--out",
+        tmp_path / "s",
+        "--printer",
+        "j750",
+        "--palette",
+        '{"white": "#F0F0F0"}',
+    )
     assert code == 0, err
     assert len(list((tmp_path / "s").glob("slice_*.png"))) == q.labels.shape[0]
     labels, man = read_png_slices(tmp_path / "s")
@@ -132,32 +171,38 @@ def test_export_refuses_more_inks_than_slots(tmp_path, capsys):
     assert run(capsys, "quantize", tmp_path / "r", "--method", "random")[0] == 0
     assert len(np.unique(Volume.load(tmp_path / "r" / "quantized.npz").labels)) >= 7
     for fmt, out in (("png-slices", "s"), ("gcvf", "p.gcvf")):
-        code, _, err = run(capsys, "export", tmp_path / "r", "--format", fmt, "--printer", "j750",
-                           "--out", tmp_path / out)
+        code, _, err = run(
+            capsys, "export", tmp_path / "r", "--format", fmt, "--printer", "j750", "--out", tmp_path / out
+        )
         lines = err.strip().splitlines()
         assert code == 2 and len(lines) == 1, err
-        assert lines[0] == (f"inkopt: error: the print uses 7 inks ({inks.replace(',', ', ')}) but Stratasys J750 "
-                            "holds 6 materials per job; use an ink set of at most 6 inks or a printer with more "
-                            "material slots (--printer)")
+        assert lines[0] == (
+            f"inkopt: error: the print uses 7 inks ({inks.replace(',', ', ')}) but Stratasys J750 "
+            "holds 6 materials per job; use an ink set of at most 6 inks or a printer with more "
+            "material slots (--printer)"
+        )
         assert sorted(p.name for p in tmp_path.iterdir()) == ["r"], "nothing written, no temporary left"
     assert run(capsys, "export", tmp_path / "r", "--printer", "j850", "--out", tmp_path / "s")[0] == 0
 
 
-@pytest.mark.parametrize("argv, message", [
-    (["quantize", "{tmp}/nope"], "does not exist"),
-    (["quantize", "{tmp}/empty"], "volume.npz does not exist"),
-    (["quantize", "{tmp}/r", "--method", "floyd"], "unknown quantization method"),
-    (["quantize", "{tmp}/r", "--dpi", "600"], "--dpi"),
-    (["quantize", "{tmp}/r", "--dpi", "600x300x900", "--layer-um", "14"], "layer thickness once"),
-    (["export", "{tmp}/r", "--format", "3mf"], "lib3mf 2.5.0 cannot write volumetric composites"),
-    (["export", "{tmp}/r", "--format", "stl"], "unknown export format"),
-    (["export", "{tmp}/r", "--printer", "x9"], "unknown printer"),
-    (["export", "{tmp}/r", "--format", "gcvf", "--printer", "x9"], "unknown printer"),
-    (["export", "{tmp}/r", "--palette", "{bad"], "--palette"),
-    (["evaluate", "{tmp}/nope"], "does not exist"),
-    (["evaluate", "{tmp}/r", "--method", "floyd"], "unknown quantization method"),
-    (["evaluate", "{tmp}/r", "--spp", "0"], "--spp"),
-])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["quantize", "{tmp}/nope"], "does not exist"),
+        (["quantize", "{tmp}/empty"], "volume.npz does not exist"),
+        (["quantize", "{tmp}/r", "--method", "floyd"], "unknown quantization method"),
+        (["quantize", "{tmp}/r", "--dpi", "600"], "--dpi"),
+        (["quantize", "{tmp}/r", "--dpi", "600x300x900", "--layer-um", "14"], "layer thickness once"),
+        (["export", "{tmp}/r", "--format", "3mf"], "lib3mf 2.5.0 cannot write volumetric composites"),
+        (["export", "{tmp}/r", "--format", "stl"], "unknown export format"),
+        (["export", "{tmp}/r", "--printer", "x9"], "unknown printer"),
+        (["export", "{tmp}/r", "--format", "gcvf", "--printer", "x9"], "unknown printer"),
+        (["export", "{tmp}/r", "--palette", "{bad"], "--palette"),
+        (["evaluate", "{tmp}/nope"], "does not exist"),
+        (["evaluate", "{tmp}/r", "--method", "floyd"], "unknown quantization method"),
+        (["evaluate", "{tmp}/r", "--spp", "0"], "--spp"),
+    ],
+)
 def test_bad_input_exits_2_with_one_line(tmp_path, capsys, argv, message):
     make_run(tmp_path / "r")
     (tmp_path / "empty").mkdir()

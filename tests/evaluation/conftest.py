@@ -1,4 +1,5 @@
 """Fixtures of the evaluation tests: colour tables cached in a temporary folder, and a small 3-ink table."""
+
 import pytest
 
 from inkopt.evaluation.colour_table import colour_table

@@ -1,5 +1,6 @@
 """Tests of inkopt.evaluation.colour_table and .baselines: simplex lattice, colour table (accuracy, cache),
 surface and extrusion baselines, and the constraints they keep."""
+
 import time
 from math import comb
 
@@ -8,8 +9,16 @@ import pytest
 
 from inkopt.color import delta_e76, linear_to_lab
 from inkopt.evaluation.baselines import extrusion_baseline, surface_baseline, white_mixture
-from inkopt.evaluation.colour_table import (ColourTable, colour_table, default_step, render_patches, simplex_lattice,
-                                            simplex_least_squares, table_key, table_mixtures)
+from inkopt.evaluation.colour_table import (
+    ColourTable,
+    colour_table,
+    default_step,
+    render_patches,
+    simplex_lattice,
+    simplex_least_squares,
+    table_key,
+    table_mixtures,
+)
 from inkopt.model import InkTable, Texels, Volume
 from inkopt.rundir import SceneRecord
 
@@ -38,7 +47,7 @@ def test_simplex_lattice_counts_and_rows():
 def test_table_mixtures_add_the_tint_warp():
     mixes = table_mixtures(2, 8)
     k = np.arange(9)
-    expect = np.unique(np.concatenate([k / 8, k ** 2 / (k ** 2 + (8 - k) ** 2)]))  # 9 + 6 new (k = 0, 4, 8 shared)
+    expect = np.unique(np.concatenate([k / 8, k**2 / (k**2 + (8 - k) ** 2)]))  # 9 + 6 new (k = 0, 4, 8 shared)
     np.testing.assert_allclose(mixes[:, 0], expect, atol=1e-6)
     np.testing.assert_allclose(mixes.sum(1), 1.0, atol=1e-6)
     assert len(table_mixtures(5, 8)) == 970

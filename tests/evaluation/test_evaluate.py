@@ -1,4 +1,6 @@
-"""Tests of inkopt.evaluation.evaluate: printer->scene texel maps, averaging, pictures, and a full synthetic run directory."""
+"""Tests of inkopt.evaluation.evaluate: printer->scene texel maps, averaging, pictures, and a full synthetic run
+directory."""
+
 import json
 
 import numpy as np
@@ -89,8 +91,14 @@ def make_run(d, table, kind="surface"):
     ny, nx = SHAPE[1:]
     pix = (np.arange(ny)[::-1, None] * nx + np.arange(nx)[None, :]).astype(np.int32)  # row 0 = largest y
     fixed = np.zeros(SHAPE + (3,), np.float32)
-    scene = {**tex.to_arrays(), "target_rgb": target, "kind": np.array("slab"),
-             "fixed_share": fixed, "faces": np.array(["top"]), "pix_top": pix}
+    scene = {
+        **tex.to_arrays(),
+        "target_rgb": target,
+        "kind": np.array("slab"),
+        "fixed_share": fixed,
+        "faces": np.array(["top"]),
+        "pix_top": pix,
+    }
     vol = Volume.from_mixture(voxel_mm=[V300] * 3, mixture=np.full(SHAPE + (3,), 1 / 3, np.float32), inks=INKS3)
     fn = surface_baseline if kind == "surface" else extrusion_baseline
     vol = vol.with_mixture(fn(vol, tex, target, fixed, table))
@@ -109,8 +117,7 @@ def test_evaluate_run_synthetic(tmp_path, table3):
     del disk["format_version"]  # a file written before files carried a version (0) reads the same
     assert Evaluation.from_json(disk) == ev
     keys = {"delta_e76_mean", "delta_e76_p95", "delta_e2000_mean", "ssim", "spp", "seconds", "method"}
-    for entry in (disk["continuous"], disk["quantized"], disk["baselines"]["surface"],
-                  disk["baselines"]["extrusion"]):
+    for entry in (disk["continuous"], disk["quantized"], disk["baselines"]["surface"], disk["baselines"]["extrusion"]):
         assert keys <= set(entry)
         assert all(np.isfinite(entry[k]) for k in keys - {"method"})
         assert 0 <= entry["delta_e76_mean"] <= entry["delta_e76_p95"] + 1e-9 and -1 <= entry["ssim"] <= 1
@@ -127,7 +134,7 @@ def test_evaluate_run_synthetic(tmp_path, table3):
     assert q["spp_printer"] == 4  # 2 printer texels per scene texel on top at 600 x 300 DPI share the 8 spp
     with Image.open(tmp_path / "run" / "evaluation_top.png") as im:
         assert im.size[0] >= 5 * 256 and disk["pictures"] == ["evaluation_top.png"]
-    assert disk["spp"] == 8 and not disk["spp_adaptive"] and c["spp_passes"] == [8]   # explicit spp: exact
+    assert disk["spp"] == 8 and not disk["spp_adaptive"] and c["spp_passes"] == [8]  # explicit spp: exact
     floor = disk["gamut_floor_delta_e76"]  # the baselines reach the table's colours: none is better than the floor
     assert 0 <= floor <= min(b["delta_e76_mean_corrected"] for b in disk["baselines"].values()) + 1
 
@@ -150,8 +157,9 @@ def test_evaluate_surface_run_and_method_mismatch(tmp_path, table3):
     make_run(d, table3, "surface")
     q = Volume.load(d / "volume.npz")
     labels, vp = quantize(q.mixture, q.voxel_mm, method="random", seed=5)
-    Volume.from_labels(voxel_mm=vp, labels=labels, inks=INKS3,
-           quantization=Quantization("random", 5, tuple(25.4 / vp), "nearest")).save(d / "quantized.npz")
+    Volume.from_labels(
+        voxel_mm=vp, labels=labels, inks=INKS3, quantization=Quantization("random", 5, tuple(25.4 / vp), "nearest")
+    ).save(d / "quantized.npz")
     ev = evaluate_run(d, spp=4, table=table3).to_json()
     assert ev["quantization"]["method"] == "random" and ev["quantization"]["seed"] == 5
     for k in ("delta_e76_mean", "ssim"):  # the surface baseline, quantized like ours (random, seed 5) = ours
@@ -163,7 +171,7 @@ def test_evaluate_surface_run_and_method_mismatch(tmp_path, table3):
 def test_evaluate_mesh_kind(tmp_path, table3):
     """A voxelized ball with shading normals: printer texels come from the upsampled normals."""
     n = 10
-    c = (np.indices((n, n, n)).transpose(1, 2, 3, 0)[..., ::-1] + 0.5 - n / 2)  # xyz offsets from the centre
+    c = np.indices((n, n, n)).transpose(1, 2, 3, 0)[..., ::-1] + 0.5 - n / 2  # xyz offsets from the centre
     inside = np.linalg.norm(c, axis=-1) < n / 2 - 0.5
     normals = (c / np.linalg.norm(c, axis=-1, keepdims=True)).astype(np.float32)
     mix = np.zeros((n, n, n, 3), np.float32)
@@ -173,8 +181,15 @@ def test_evaluate_mesh_kind(tmp_path, table3):
     d = tmp_path / "mesh"
     d.mkdir()
     vol.save(d / "volume.npz")
-    save_npz(d / "scene.npz", {**tex.to_arrays(), "target_rgb": np.full((len(tex), 3), 0.3, np.float32),
-                               "kind": np.array("mesh"), "fixed_share": np.zeros(mix.shape, np.float32)})
+    save_npz(
+        d / "scene.npz",
+        {
+            **tex.to_arrays(),
+            "target_rgb": np.full((len(tex), 3), 0.3, np.float32),
+            "kind": np.array("mesh"),
+            "fixed_share": np.zeros(mix.shape, np.float32),
+        },
+    )
     ev = evaluate_run(d, spp=2, table=table3).to_json()
     q = Volume.load(d / "quantized.npz")
     assert q.normals is not None and len(printer_texels(q, tex, "mesh")) == ev["printer_texels"]

@@ -1,17 +1,17 @@
 """Tests of inkopt.evaluation.metrics (the mottle figure) and of the gamut floor's reachable colours
 (ColourTable.reachable_lab), on synthetic texel grids and tables with known answers."""
+
 import json
 
 import numpy as np
 import pytest
 
-from inkopt.color import linear_to_lab, linear_to_lab_jacobian
-from inkopt.evaluation.colour_table import ColourTable
+from inkopt.color import linear_to_lab_jacobian
 from inkopt.evaluation.metrics import Metrics, flat_texels, mottle, prediction_metrics
 from inkopt.loss import TexelLoss
 
-N = 48          # texels per side of a flat face
-BAND = 6        # random border: radius + 1 of the sigma-1.5 window, so flat texels have complete windows
+N = 48  # texels per side of a flat face
+BAND = 6  # random border: radius + 1 of the sigma-1.5 window, so flat texels have complete windows
 SIGMA = 1.5
 
 
@@ -37,20 +37,20 @@ def face():
 def test_flat_texels_are_the_interior(face):
     loss, _, flat = face
     assert flat.sum() > 0.5 * (N - 2 * BAND) ** 2
-    assert np.all(np.ptp(loss.target_lab[flat], 0) < 1e-9)     # flat texels sit on the constant target
+    assert np.all(np.ptp(loss.target_lab[flat], 0) < 1e-9)  # flat texels sit on the constant target
 
 
 def test_constant_prediction_has_no_mottle(face):
     loss, _, flat = face
     m = mottle(loss, grey(np.full(N * N, 40.0)))
     assert m["mottle_l2"] == pytest.approx(0.0, abs=1e-20) and m["flat_texels"] == flat.sum()
-    assert 0 <= m["mottle_l2_target"] < 1e-3    # only window corners reach the random band
+    assert 0 <= m["mottle_l2_target"] < 1e-3  # only window corners reach the random band
 
 
 def nyquist_gain() -> float:
     """1 - r: what h keeps of a checkerboard, r = the window's response at (π, π) (separable, radius 5)."""
     k = np.arange(-int(3.5 * SIGMA + 0.5), int(3.5 * SIGMA + 0.5) + 1)
-    g = np.exp(-k * k / (2 * SIGMA ** 2))
+    g = np.exp(-k * k / (2 * SIGMA**2))
     return 1.0 - (np.sum(g * (-1.0) ** k) / g.sum()) ** 2
 
 
@@ -75,7 +75,7 @@ def test_noise_correction_removes_pure_noise(face, amp):
     Cov(h_i², h_j²) = 4 m_i m_j C_ij + 2 C_ij² with C = Cov(e) = (I - W) diag(v) (I - W)ᵀ (delta-method v)."""
     loss, sign, flat = face
     clean = grey(50 + amp * sign)
-    var = (0.05 * clean) ** 2                                   # ~0.7 (ΔL*)² per texel
+    var = (0.05 * clean) ** 2  # ~0.7 (ΔL*)² per texel
     noisy = clean + np.sqrt(var) * np.random.default_rng(3).standard_normal(clean.shape)
     jl = linear_to_lab_jacobian(clean)[:, 0, :]
     c = highpass_cov(loss, np.einsum("ij,ij->i", jl * jl, var))[np.ix_(flat, flat)]
@@ -84,8 +84,8 @@ def test_noise_correction_removes_pure_noise(face, amp):
     truth = (amp * nyquist_gain()) ** 2
     raw = mottle(loss, noisy)["mottle_l2"]
     corrected = mottle(loss, noisy, var)["mottle_l2"]
-    assert raw - truth > 8 * se                                 # the noise is there ...
-    assert abs(corrected - truth) < 4 * se                      # ... and the correction removes it
+    assert raw - truth > 8 * se  # the noise is there ...
+    assert abs(corrected - truth) < 4 * se  # ... and the correction removes it
 
 
 def test_prediction_metrics_keys(face):
@@ -93,8 +93,15 @@ def test_prediction_metrics_keys(face):
     rgb = grey(50 + sign)
     m = prediction_metrics(loss, rgb, np.full((loss.n, 3), 1e-6))
     out = m.to_json()
-    for k in ("mottle_l2", "mottle_l2_target", "flat_texels", "delta_e76_noise_contribution",
-              "delta_e76_mean_corrected", "delta_e76_mean", "delta_e76_rms_denoised"):
+    for k in (
+        "mottle_l2",
+        "mottle_l2_target",
+        "flat_texels",
+        "delta_e76_noise_contribution",
+        "delta_e76_mean_corrected",
+        "delta_e76_mean",
+        "delta_e76_rms_denoised",
+    ):
         assert k in out
     assert m.delta_e76_mean_corrected == pytest.approx(m.delta_e76_mean - m.delta_e76_noise_contribution)
     assert "delta_e76_noise_contribution" not in prediction_metrics(loss, rgb).to_json()

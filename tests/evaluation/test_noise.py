@@ -1,13 +1,21 @@
 """Tests of inkopt.evaluation.noise: the Monte Carlo inflation of a mean ΔE76, its estimate and adaptive spp, on
 synthetic colours with Gaussian noise of known variance in linear RGB (the noise-free figures are known)."""
+
 import numpy as np
 import pytest
 
 from inkopt.color import delta_e76, linear_to_lab
-from inkopt.evaluation.noise import (ESTIMATE_RANGE, SEED_STRIDE, SSIM_NOISE_RATIO, TARGET_NOISE_DE76, NoiseModel,
-                                     adaptive_render, chi3_mean)
+from inkopt.evaluation.noise import (
+    ESTIMATE_RANGE,
+    SEED_STRIDE,
+    SSIM_NOISE_RATIO,
+    TARGET_NOISE_DE76,
+    NoiseModel,
+    adaptive_render,
+    chi3_mean,
+)
 
-I = 20000
+I = 20000  # noqa: E741 (I is the texel count throughout the package)
 
 
 def synthetic(err: float, seed: int = 1):
@@ -31,7 +39,7 @@ def test_chi3_mean_against_sampling():
         r = np.linalg.norm(z, axis=1)
         assert abs(r.mean() - chi3_mean(lam)) < 4 * r.std() / np.sqrt(len(r))
     assert chi3_mean(0.0) == pytest.approx(2 * np.sqrt(2 / np.pi))
-    assert chi3_mean(1e6) - 1e6 == pytest.approx(1e-6, rel=1e-3)   # g(λ) - λ → 1/λ
+    assert chi3_mean(1e6) - 1e6 == pytest.approx(1e-6, rel=1e-3)  # g(λ) - λ → 1/λ
 
 
 @pytest.mark.parametrize("err", [0.0, 0.05, 0.2])
@@ -55,11 +63,13 @@ def test_estimate_within_stated_range(err, rel):
 def fake_renderer(c, var1, calls):
     """A render of noise-free colours c with per-sample variance var1: the mean of n samples has variance var1/n;
     the seed picks the noise (a different seed per pass: independent passes)."""
+
     def render(n, seed):
         calls.append((n, seed))
         rng = np.random.default_rng(seed % 2**32 + seed // SEED_STRIDE)
         v = var1 / n
         return noisy(c, v, rng), v, n
+
     return render
 
 
@@ -75,8 +85,8 @@ def test_adaptive_render_reaches_target_and_is_near_noise_free():
     ad = adaptive_render(fake_renderer(c, var1, calls), lab_t, seed=7)
     assert ad.noise <= TARGET_NOISE_DE76
     assert ad.spp == sum(ad.passes) and len(calls) == len(ad.passes) >= 2
-    assert len({s for _, s in calls}) == len(calls)                    # independent seeds
-    np.testing.assert_allclose(ad.var, var1 / ad.spp, rtol=1e-12)       # pooled variance = that of spp samples
+    assert len({s for _, s in calls}) == len(calls)  # independent seeds
+    np.testing.assert_allclose(ad.var, var1 / ad.spp, rtol=1e-12)  # pooled variance = that of spp samples
     de = delta_e76(linear_to_lab(ad.rgb), lab_t)
     slack = 4 * (de - truth).std() / np.sqrt(I)
     assert de.mean() - truth.mean() <= TARGET_NOISE_DE76 / ESTIMATE_RANGE[0] + slack
@@ -124,7 +134,7 @@ def test_spp_for_takes_the_larger_of_both_requirements():
     assert de_only.contribution(64 / n_de) <= 0.5 < de_only.contribution(64 / (0.95 * n_de))
     assert replace(model, ssim_ratio=1.0).spp_for(64, 1e9, 4096) == 640
     assert replace(model, ssim_ratio=1.0).spp_for(64, 0.5, 4096) == max(640, n_de)
-    assert replace(model, ssim_ratio=100.0).spp_for(64, 0.5, 4096) == 4096   # the cap
+    assert replace(model, ssim_ratio=100.0).spp_for(64, 0.5, 4096) == 4096  # the cap
 
 
 def test_ssim_ratio_matches_sampled_noise():
@@ -136,8 +146,9 @@ def test_ssim_ratio_matches_sampled_noise():
     c, t = c[:2000], t[:2000]
     var = (0.01 * c) ** 2
     rng = np.random.default_rng(5)
-    samples = np.stack([normalise_lab(linear_to_lab(c + np.sqrt(var) * rng.standard_normal(c.shape)))
-                        for _ in range(400)])
+    samples = np.stack(
+        [normalise_lab(linear_to_lab(c + np.sqrt(var) * rng.standard_normal(c.shape))) for _ in range(400)]
+    )
     empirical = samples.var(0).mean(0).max() / K2
     # 400 draws x 2000 texels: the sampled mean variance's relative standard error is ~0.2 %; 5 % leaves room for
     # the delta method's curvature error at 1 % noise, but not for a wrong channel scale (1/100 vs 1/255: 6.5x)

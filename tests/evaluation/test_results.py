@@ -1,6 +1,7 @@
 """The typed results files (inkopt.evaluation.results): a fresh report.json has exactly the keys scripts read
 plus ``format_version``, reads back into the same ``Report``, and files without a version (0) or of a newer one
 load or fail as ``io.upgrade_format`` says."""
+
 import json
 
 import pytest
@@ -15,21 +16,84 @@ pytest.importorskip("inkopt._core")
 # report.json of a slab run as bench/ and the tests read it (the metrics, the run, the scene's and the lighting's
 # entries, the settings)
 SLAB_REPORT_KEYS = {
-    "adjoint_ema", "decay", "delta_e2000_mean", "delta_e76_max", "delta_e76_mean", "delta_e76_mean_corrected",
-    "delta_e76_noise", "delta_e76_noise_contribution", "delta_e76_p95", "delta_e76_rms", "delta_e76_rms_denoised",
-    "e1", "e2", "e3", "eval_spp", "eval_spp_passes", "flat_texels", "gamma", "gradient", "init",
-    "initial_delta_e76_mean", "initial_delta_e76_mean_corrected", "initial_eval_spp", "initial_ssim", "inks",
-    "iterations", "lighting", "lighting_rotate_deg", "loss", "lr", "mottle_l2", "mottle_l2_target", "optimizer",
-    "param", "peak_rss_gb", "seconds", "seconds_iterations", "seconds_per_iteration", "seed", "size_mm", "smooth",
-    "spp", "spp_adaptive", "ssim", "texels", "threads", "time_split", "voxels"}
+    "adjoint_ema",
+    "decay",
+    "delta_e2000_mean",
+    "delta_e76_max",
+    "delta_e76_mean",
+    "delta_e76_mean_corrected",
+    "delta_e76_noise",
+    "delta_e76_noise_contribution",
+    "delta_e76_p95",
+    "delta_e76_rms",
+    "delta_e76_rms_denoised",
+    "e1",
+    "e2",
+    "e3",
+    "eval_spp",
+    "eval_spp_passes",
+    "flat_texels",
+    "gamma",
+    "gradient",
+    "init",
+    "initial_delta_e76_mean",
+    "initial_delta_e76_mean_corrected",
+    "initial_eval_spp",
+    "initial_ssim",
+    "inks",
+    "iterations",
+    "lighting",
+    "lighting_rotate_deg",
+    "loss",
+    "lr",
+    "mottle_l2",
+    "mottle_l2_target",
+    "optimizer",
+    "param",
+    "peak_rss_gb",
+    "seconds",
+    "seconds_iterations",
+    "seconds_per_iteration",
+    "seed",
+    "size_mm",
+    "smooth",
+    "spp",
+    "spp_adaptive",
+    "ssim",
+    "texels",
+    "threads",
+    "time_split",
+    "voxels",
+}
 
 
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     d = tmp_path_factory.mktemp("run")
     chart = charts.save(charts.colour_chart(24, 16), d / "chart.png")
-    assert main(["slab", str(chart), "--size-mm", "2x1.333x0.5", "--out", str(d / "r"), "--iterations", "2",
-                 "--spp", "1", "--forward-spp", "2", "--eval-spp", "4", "--threads", "2"]) == 0
+    assert (
+        main(
+            [
+                "slab",
+                str(chart),
+                "--size-mm",
+                "2x1.333x0.5",
+                "--out",
+                str(d / "r"),
+                "--iterations",
+                "2",
+                "--spp",
+                "1",
+                "--forward-spp",
+                "2",
+                "--eval-spp",
+                "4",
+                "--threads",
+                "2",
+            ]
+        )
+        == 0
+    )
     return d / "r"
 
 

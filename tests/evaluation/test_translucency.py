@@ -1,6 +1,7 @@
 """Tests of the translucency measurements (inkopt.evaluation.translucency): diffuse transmittance against the
 closed form of a non-scattering slab, the knife-edge spread on known cases, and ``inkopt evaluate`` of a
 constrained slab beside an unconstrained run of the same target."""
+
 import json
 
 import numpy as np
@@ -33,8 +34,13 @@ def test_back_light_is_lit_behind_the_face():
 @pytest.mark.parametrize("sigma_a", [0.0, 2.0])
 def test_transmittance_of_non_scattering_slab(sigma_a):
     L = 12
-    vol = Volume.from_coefficients(voxel_mm=(VOX,) * 3, sigma_s=np.zeros((L, 6, 6, 3), np.float32),
-                 sigma_a=np.full((L, 6, 6, 3), sigma_a + 1e-6, np.float32), g=0.4, ior=1.5)
+    vol = Volume.from_coefficients(
+        voxel_mm=(VOX,) * 3,
+        sigma_s=np.zeros((L, 6, 6, 3), np.float32),
+        sigma_a=np.full((L, 6, 6, 3), sigma_a + 1e-6, np.float32),
+        g=0.4,
+        ior=1.5,
+    )
     y, var = transmittance(vol, Texels.box_faces(vol.shape, ["top"]), spp=128, threads=2)
     se = np.sqrt(var.sum()) / len(y)
     assert abs(y.mean() - slab_t(sigma_a, L * VOX)) < 4 * se + 2e-3
@@ -47,7 +53,9 @@ def test_knife_edge_known_cases():
     clear = knife_edge_spread(np.zeros((6, 3)), np.full((6, 3), 1e-4), VOX, 0.4, 1.5, spp=16, threads=2)
     assert clear["spread_mm"] == 0.0 and clear["probe_transmittance"] == pytest.approx(slab_t(0, 0), abs=0.01)
     thin = knife_edge_spread(np.full((4, 3), 9.0), np.full((4, 3), 0.01), VOX, 0.4, 1.5, spp=16, threads=2, width=128)
-    thick = knife_edge_spread(np.full((12, 3), 9.0), np.full((12, 3), 0.01), VOX, 0.4, 1.5, spp=16, threads=2, width=128)
+    thick = knife_edge_spread(
+        np.full((12, 3), 9.0), np.full((12, 3), 0.01), VOX, 0.4, 1.5, spp=16, threads=2, width=128
+    )
     assert thin["spread_mm"] > 5 * thin["spread_stderr_mm"]
     diff, se = thick["spread_mm"] - thin["spread_mm"], np.hypot(thick["spread_stderr_mm"], thin["spread_stderr_mm"])
     assert diff > 4 * se
@@ -61,13 +69,43 @@ def test_evaluate_constrained_beside_unconstrained(tmp_path, capsys, monkeypatch
     m = np.zeros((16, 24), np.uint8)
     m[:, :12] = 204  # 80 % transparent in the left half
     Image.fromarray(m).save(tmp_path / "mask.png")
-    base = ["slab", str(chart), "--size-mm", "2.032x1.355x0.5", "--iterations", "2", "--spp", "1",
-            "--forward-spp", "1", "--eval-spp", "2", "--threads", "2", "--inks", "vero-cmykwt"]
+    base = [
+        "slab",
+        str(chart),
+        "--size-mm",
+        "2.032x1.355x0.5",
+        "--iterations",
+        "2",
+        "--spp",
+        "1",
+        "--forward-spp",
+        "1",
+        "--eval-spp",
+        "2",
+        "--threads",
+        "2",
+        "--inks",
+        "vero-cmykwt",
+    ]
     assert cli.main(base + ["--out", str(tmp_path / "free")]) == 0
     assert cli.main(base + ["--out", str(tmp_path / "tr"), "--translucency", str(tmp_path / "mask.png")]) == 0
     capsys.readouterr()
-    assert cli.main(["evaluate", str(tmp_path / "tr"), "--spp", "4", "--no-baselines", "--threads", "2",
-                     "--translucency-compare", str(tmp_path / "free")]) == 0
+    assert (
+        cli.main(
+            [
+                "evaluate",
+                str(tmp_path / "tr"),
+                "--spp",
+                "4",
+                "--no-baselines",
+                "--threads",
+                "2",
+                "--translucency-compare",
+                str(tmp_path / "free"),
+            ]
+        )
+        == 0
+    )
     text = capsys.readouterr().out
     assert "unconstrained region 1" in text and "transmittance" in text
     ev = json.loads((tmp_path / "tr" / "evaluation.json").read_text())
@@ -90,19 +128,55 @@ def test_evaluate_mesh_alpha_region(tmp_path, capsys, monkeypatch):
     import importlib.util
     from pathlib import Path
 
-    spec = importlib.util.spec_from_file_location("scene_tr", Path(__file__).parents[1] / "scenes" / "test_translucency.py")
+    spec = importlib.util.spec_from_file_location(
+        "scene_tr", Path(__file__).parents[1] / "scenes" / "test_translucency.py"
+    )
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     monkeypatch.setattr("inkopt.evaluation.translucency.PROBE_SPP", 16)
     monkeypatch.setattr("inkopt.evaluation.translucency.PROBE_WIDTH", 96)
     cube = mod._alpha_cube(tmp_path)
-    base = ["optimize", str(cube), "--scale", "1", "--up", "z", "--iterations", "2", "--spp", "1", "--forward-spp",
-            "2", "--eval-spp", "4", "--threads", "2", "--inks", "vero-cmykwt"]
-    assert cli.main(base + ["--out", str(tmp_path / "tr"), "--translucency", "alpha",
-                            "--translucency-depth-mm", "0.3"]) == 0
+    base = [
+        "optimize",
+        str(cube),
+        "--scale",
+        "1",
+        "--up",
+        "z",
+        "--iterations",
+        "2",
+        "--spp",
+        "1",
+        "--forward-spp",
+        "2",
+        "--eval-spp",
+        "4",
+        "--threads",
+        "2",
+        "--inks",
+        "vero-cmykwt",
+    ]
+    assert (
+        cli.main(base + ["--out", str(tmp_path / "tr"), "--translucency", "alpha", "--translucency-depth-mm", "0.3"])
+        == 0
+    )
     assert cli.main(base + ["--out", str(tmp_path / "free")]) == 0
-    assert cli.main(["evaluate", str(tmp_path / "tr"), "--spp", "4", "--no-baselines", "--threads", "2",
-                     "--translucency-compare", str(tmp_path / "free")]) == 0
+    assert (
+        cli.main(
+            [
+                "evaluate",
+                str(tmp_path / "tr"),
+                "--spp",
+                "4",
+                "--no-baselines",
+                "--threads",
+                "2",
+                "--translucency-compare",
+                str(tmp_path / "free"),
+            ]
+        )
+        == 0
+    )
     tr = json.loads((tmp_path / "tr" / "evaluation.json").read_text())["translucency"]
     ours, theirs = tr["regions"][0], tr["compare"]["regions"][0]
     assert len(tr["regions"]) == 1 and ours["texels"] > 0.6 * tr["whole"]["texels"]

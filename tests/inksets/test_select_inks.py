@@ -4,6 +4,7 @@ serial / process pool / Ray giving identical results, meshes, one-line errors be
 A 2 x 1.33 x 0.5 mm colour-chart slab (24 x 16 x 6 voxels, 384 texels) at 2 + 4 spp: a run of a few iterations
 takes a fraction of a second. Results are deterministic (seeded, bit-identical for any thread count).
 """
+
 import json
 
 import numpy as np
@@ -32,8 +33,17 @@ def selection(chart, strategy="halving", candidates="cyan,magenta,yellow", choos
     # decay 0.5: the step decays in the last 2 of 4 iterations, so a rung of 2 that planned its own decay would
     # differ from the full run (test_halving_final_run_equals_brute_force)
     cfg = OptimizeConfig(iterations=iterations, spp=2, forward_spp=4, checkpoint_every=2, decay=0.5)
-    return Selection(SlabSpec(str(chart), (2.0, 4 / 3, 0.5)), candidates, choose, ["black", "white"], cfg, strategy,
-                     eval_spp=16, rung_eval_spp=8, **kw)
+    return Selection(
+        SlabSpec(str(chart), (2.0, 4 / 3, 0.5)),
+        candidates,
+        choose,
+        ["black", "white"],
+        cfg,
+        strategy,
+        eval_spp=16,
+        rung_eval_spp=8,
+        **kw,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -90,8 +100,9 @@ def test_halving_final_run_equals_brute_force(chart, halving, tmp_path):
     by_inks = {tuple(c["inks"]): c for c in brute["candidates"]}
     for c in res["candidates"][:2]:
         b = by_inks[tuple(c["inks"])]
-        assert {k: c[k] for k in ("loss", "delta_e76_mean", "ssim")} == {k: b[k] for k in ("loss", "delta_e76_mean",
-                                                                                        "ssim")}
+        assert {k: c[k] for k in ("loss", "delta_e76_mean", "ssim")} == {
+            k: b[k] for k in ("loss", "delta_e76_mean", "ssim")
+        }
     assert brute["texel_samples"] == 3 * 24 * 16 * (4 * 6 + 2 * 16)
 
 
@@ -99,7 +110,7 @@ def test_extrapolate_loss():
     """The rung ranking's learning-curve extrapolation: exact on a power law (fitted on the second half), never
     below a rising history's mean, the last value for fewer than 3 points."""
     t = np.arange(1, 21)
-    assert extrapolate_loss(0.1 + 0.5 * t ** -0.7, 80) == pytest.approx(0.1 + 0.5 * 80 ** -0.7, rel=1e-6)
+    assert extrapolate_loss(0.1 + 0.5 * t**-0.7, 80) == pytest.approx(0.1 + 0.5 * 80**-0.7, rel=1e-6)
     rising = 0.2 + 0.001 * t
     assert extrapolate_loss(rising, 80) == pytest.approx(rising[10:].mean())
     assert extrapolate_loss([0.3, 0.2], 80) == 0.2
@@ -109,8 +120,9 @@ def test_extrapolate_loss():
 def test_budgets_paper_setup():
     """15 sets: rungs of 1/8 and 1/4 of the budget, then (no half-budget rung) the last 4 run the full budget;
     work (iterations, evaluation renders at 16 and 256 spp) at most 40 % of brute force's."""
-    sel = Selection(None, "cyan,cyan2,magenta,magenta2,yellow,yellow2", 4, ["black", "white"],
-                    OptimizeConfig(iterations=80))
+    sel = Selection(
+        None, "cyan,cyan2,magenta,magenta2,yellow,yellow2", 4, ["black", "white"], OptimizeConfig(iterations=80)
+    )
     assert sel.budgets() == [10, 20, 80]
     assert Selection(None, "cyan,magenta,yellow", 2, [], OptimizeConfig(iterations=4)).budgets() == [2, 4]
     per_it = sel.cfg.spp + sel.cfg.forward_spp
@@ -163,17 +175,19 @@ def test_resume_key_holds_the_scene_kinds_settings(chart):
     assert (key(mesh)["adjoint_ema"], key(mesh)["smooth"]) == (0.5, 3.0)
 
 
-
-@pytest.mark.parametrize("argv, message", [
-    (["--candidates", "cyan", "--choose", "2"], "needs at least 2 candidates"),
-    (["--candidates", "cyan,teal", "--choose", "1"], "unknown ink(s) teal"),
-    (["--candidates", "cyan,white", "--choose", "1"], "in both --candidates and --always"),
-    (["--candidates", "cyan,cyan2,magenta,magenta2,yellow", "--choose", "5"], "holds 6 materials"),
-    (["--candidates", "cyan,magenta", "--choose", "1", "--ray", "auto", "--inks", "vero-cmykw"], "not --inks"),
-    (["--candidates", "cyan,magenta", "--choose", "1", "--workers", "0"], "--workers must be at least 1"),
-    (["--candidates", "cyan,magenta", "--choose", "1", "--shell-mm", "0.2"], "--shell-mm is for a mesh target"),
-    (["--candidates", "cyan,magenta", "--choose", "1", "--scale", "1"], "exactly one of --size-mm"),
-])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--candidates", "cyan", "--choose", "2"], "needs at least 2 candidates"),
+        (["--candidates", "cyan,teal", "--choose", "1"], "unknown ink(s) teal"),
+        (["--candidates", "cyan,white", "--choose", "1"], "in both --candidates and --always"),
+        (["--candidates", "cyan,cyan2,magenta,magenta2,yellow", "--choose", "5"], "holds 6 materials"),
+        (["--candidates", "cyan,magenta", "--choose", "1", "--ray", "auto", "--inks", "vero-cmykw"], "not --inks"),
+        (["--candidates", "cyan,magenta", "--choose", "1", "--workers", "0"], "--workers must be at least 1"),
+        (["--candidates", "cyan,magenta", "--choose", "1", "--shell-mm", "0.2"], "--shell-mm is for a mesh target"),
+        (["--candidates", "cyan,magenta", "--choose", "1", "--scale", "1"], "exactly one of --size-mm"),
+    ],
+)
 def test_bad_input_one_line_before_work(chart, tmp_path, capsys, argv, message):
     out = tmp_path / "sel"
     assert main(["select-inks", str(chart), "--size-mm", "2x1.333x0.5", "--out", str(out), *argv]) == 2
@@ -186,8 +200,20 @@ def test_ray_missing_says_how_to_install(chart, tmp_path, capsys, monkeypatch):
     import sys
 
     monkeypatch.setitem(sys.modules, "ray", None)  # import ray -> ImportError
-    argv = ["select-inks", str(chart), "--size-mm", "2x1.333x0.5", "--out", str(tmp_path / "s"), "--candidates",
-            "cyan,magenta", "--choose", "1", "--ray", "auto"]
+    argv = [
+        "select-inks",
+        str(chart),
+        "--size-mm",
+        "2x1.333x0.5",
+        "--out",
+        str(tmp_path / "s"),
+        "--candidates",
+        "cyan,magenta",
+        "--choose",
+        "1",
+        "--ray",
+        "auto",
+    ]
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "pip install 'inkopt[ray]'" in err
@@ -201,9 +227,35 @@ def test_cli_mesh_target(tmp_path, capsys, monkeypatch):
     mesh = tmp_path / "ball.ply"
     trimesh.Trimesh(sph.vertices, sph.faces, vertex_colors=col, process=False).export(mesh)
     out = tmp_path / "sel"
-    assert main(["select-inks", str(mesh), "--height-mm", "1", "--up", "z", "--candidates", "cyan,magenta",
-                 "--choose", "1", "--out", str(out), "--iterations", "2", "--spp", "1", "--forward-spp", "2",
-                 "--eval-spp", "4", "--threads", "2"]) == 0
+    assert (
+        main(
+            [
+                "select-inks",
+                str(mesh),
+                "--height-mm",
+                "1",
+                "--up",
+                "z",
+                "--candidates",
+                "cyan,magenta",
+                "--choose",
+                "1",
+                "--out",
+                str(out),
+                "--iterations",
+                "2",
+                "--spp",
+                "1",
+                "--forward-spp",
+                "2",
+                "--eval-spp",
+                "4",
+                "--threads",
+                "2",
+            ]
+        )
+        == 0
+    )
     res = json.loads((out / "selection.json").read_text())
     assert len(res["candidates"]) == 2 and RunDir(out / "winner").load_scene().kind == "mesh"
     assert "winner (lowest loss)" in capsys.readouterr().out
@@ -223,14 +275,13 @@ def test_pool_equals_serial(chart, halving, tmp_path):
 def test_halving_fifteen_sets_pool_equals_serial(chart, tmp_path):
     """The paper's 15 sets by halving (24 iterations: rungs of 3, 6, 24): 15, 8 then 4 sets, ranked between rungs
     by the extrapolated training loss; a pool of 2 gives the same selection.json as serial execution."""
-    sel = lambda: selection(chart, candidates="cyan,cyan2,magenta,magenta2,yellow,yellow2", choose=4,
-                            iterations=24)  # noqa: E731
+    sel = lambda: selection(chart, candidates="cyan,cyan2,magenta,magenta2,yellow,yellow2", choose=4, iterations=24)  # noqa: E731
     res = run_selection(sel(), tmp_path / "serial", Serial(2), log=lambda m: None)
     state = json.loads((tmp_path / "serial" / "selection_state.json").read_text())
     assert [(r["iterations"], len(r["results"])) for r in state["rungs"]] == [(3, 15), (6, 8), (24, 4)]
     for k in (0, 1):
         ranked = sorted(state["rungs"][k]["results"].items(), key=lambda kv: (kv[1]["predicted_loss"], kv[0]))
-        assert {n for n, _ in ranked[:len(state["rungs"][k + 1]["results"])]} == set(state["rungs"][k + 1]["results"])
+        assert {n for n, _ in ranked[: len(state["rungs"][k + 1]["results"])]} == set(state["rungs"][k + 1]["results"])
     assert [c["iterations"] for c in res["candidates"]] == [24] * 4 + [6] * 4 + [3] * 7
     pool = Pool(2)
     try:
@@ -263,10 +314,29 @@ def test_cli_ray_pool_serial_identical_brute_six_candidates(chart, local_ray, tm
     (the local 2-CPU instance) write the same selection.json."""
     out = {}
     for how, extra in (("serial", []), ("pool", ["--workers", "2"]), ("ray", ["--ray", "auto"])):
-        argv = ["select-inks", str(chart), "--size-mm", "2x1.333x0.5", "--candidates",
-                "cyan,cyan2,magenta,magenta2,yellow,yellow2", "--choose", "4", "--out", str(tmp_path / how),
-                "--strategy", "brute", "--iterations", "3", "--spp", "2", "--forward-spp", "4", "--eval-spp", "16",
-                *extra]
+        argv = [
+            "select-inks",
+            str(chart),
+            "--size-mm",
+            "2x1.333x0.5",
+            "--candidates",
+            "cyan,cyan2,magenta,magenta2,yellow,yellow2",
+            "--choose",
+            "4",
+            "--out",
+            str(tmp_path / how),
+            "--strategy",
+            "brute",
+            "--iterations",
+            "3",
+            "--spp",
+            "2",
+            "--forward-spp",
+            "4",
+            "--eval-spp",
+            "16",
+            *extra,
+        ]
         assert main(argv) == 0
         out[how] = json.loads((tmp_path / how / "selection.json").read_text())
     assert len(out["serial"]["candidates"]) == 15

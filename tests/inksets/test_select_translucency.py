@@ -1,6 +1,7 @@
 """``inkopt select-inks --translucency``: the mask reaches every candidate's run as fixed shares of the transparent
 ink, a set without a transparent ink is refused before any work, and a slab target's resume key is the one
 selections wrote before translucency could be given."""
+
 import json
 
 import numpy as np
@@ -32,10 +33,39 @@ def chart_and_mask(tmp_path_factory):
 def test_mask_reaches_every_candidates_run(chart_and_mask, tmp_path, capsys):
     chart, mask = chart_and_mask
     out = tmp_path / "sel"
-    assert main(["select-inks", str(chart), "--size-mm", SIZE, "--translucency", str(mask),
-                 "--translucency-depth-mm", "0.17", "--candidates", "cyan,magenta", "--choose", "1",
-                 "--always", "black,white,transparent", "--out", str(out), "--iterations", "2", "--spp", "1",
-                 "--forward-spp", "2", "--eval-spp", "4", "--threads", "2"]) == 0
+    assert (
+        main(
+            [
+                "select-inks",
+                str(chart),
+                "--size-mm",
+                SIZE,
+                "--translucency",
+                str(mask),
+                "--translucency-depth-mm",
+                "0.17",
+                "--candidates",
+                "cyan,magenta",
+                "--choose",
+                "1",
+                "--always",
+                "black,white,transparent",
+                "--out",
+                str(out),
+                "--iterations",
+                "2",
+                "--spp",
+                "1",
+                "--forward-spp",
+                "2",
+                "--eval-spp",
+                "4",
+                "--threads",
+                "2",
+            ]
+        )
+        == 0
+    )
     runs = sorted((out / "runs").iterdir())
     assert [r.name for r in runs] == ["cyan", "magenta"]
     for run in runs + [out / "winner"]:
@@ -53,8 +83,25 @@ def test_mask_reaches_every_candidates_run(chart_and_mask, tmp_path, capsys):
 def test_translucency_needs_a_transparent_ink_in_always(chart_and_mask, tmp_path, capsys):
     chart, mask = chart_and_mask
     out = tmp_path / "sel"
-    assert main(["select-inks", str(chart), "--size-mm", SIZE, "--translucency", str(mask),
-                 "--candidates", "cyan,transparent", "--choose", "1", "--out", str(out)]) == 2
+    assert (
+        main(
+            [
+                "select-inks",
+                str(chart),
+                "--size-mm",
+                SIZE,
+                "--translucency",
+                str(mask),
+                "--candidates",
+                "cyan,transparent",
+                "--choose",
+                "1",
+                "--out",
+                str(out),
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err.strip()
     assert err.startswith("inkopt: error:") and "--always" in err and "\n" not in err
     assert not out.exists()
@@ -66,7 +113,12 @@ def test_slab_key_is_the_one_of_earlier_selections(chart_and_mask):
     chart, mask = chart_and_mask
     cfg = OptimizeConfig(iterations=4)
     sel = Selection(SlabSpec(str(chart), (2.0, 1.333, 0.5)), "cyan,magenta", 1, ["black", "white"], cfg)
-    assert json.loads(sel.key())["target"] == {"kind": "image", "top": str(chart), "bottom": None,
-                                               "size_mm": [2.0, 1.333, 0.5], "dpi": 300.0}
+    assert json.loads(sel.key())["target"] == {
+        "kind": "image",
+        "top": str(chart),
+        "bottom": None,
+        "size_mm": [2.0, 1.333, 0.5],
+        "dpi": 300.0,
+    }
     sel.target = SlabSpec(str(chart), (2.0, 1.333, 0.5), translucency=str(mask))
     assert json.loads(sel.key())["target"]["translucency"] == str(mask)

@@ -1,4 +1,5 @@
 """Tests of inkopt.loss against scikit-image, finite differences and independent computations."""
+
 import numpy as np
 import pytest
 from skimage import color as skcolor
@@ -24,6 +25,7 @@ def _flat_face(ny=40, nx=50):
 
 def _smooth_image(shape, rng):
     from scipy.ndimage import gaussian_filter
+
     img = gaussian_filter(rng.uniform(0, 1, shape + (3,)), (2, 2, 0))
     return np.clip((img - img.min()) / (img.max() - img.min()), 0, 1)
 
@@ -40,8 +42,15 @@ def test_ssim_matches_skimage_on_flat_face_interior():
     tn = color.normalise_lab(color.linear_to_lab(target))
     cn = color.normalise_lab(color.linear_to_lab(pred))
     for c in range(3):
-        _, full = structural_similarity(cn[..., c], tn[..., c], gaussian_weights=True, sigma=1.5,
-                                        use_sample_covariance=False, data_range=1.0, full=True)
+        _, full = structural_similarity(
+            cn[..., c],
+            tn[..., c],
+            gaussian_weights=True,
+            sigma=1.5,
+            use_sample_covariance=False,
+            data_range=1.0,
+            full=True,
+        )
         np.testing.assert_allclose(smap[r:-r, r:-r, c], full[r:-r, r:-r], atol=1e-9)
         assert abs(smap[r:-r, r:-r, c].mean() - full[r:-r, r:-r].mean()) < 1e-6
     np.testing.assert_allclose(lf.ssim_mean(pred.reshape(-1, 3)), smap.mean())
@@ -65,7 +74,7 @@ def test_sobel_of_ramp_is_constant_on_flat_face():
 def test_gaussian_window_rows_and_interior():
     pos, shape = _flat_face(30, 30)
     k, wsum, r = loss.gaussian_window(pos, 1.5)
-    g1 = np.exp(-np.arange(-5, 6) ** 2 / (2 * 1.5 ** 2))
+    g1 = np.exp(-(np.arange(-5, 6) ** 2) / (2 * 1.5**2))
     centre = 15 * 30 + 15
     np.testing.assert_allclose(wsum[centre], g1.sum() ** 2)
     np.testing.assert_allclose((k.toarray() - k.toarray().T), 0.0)
@@ -134,7 +143,7 @@ def test_loss_values():
     assert 0 <= res.e2 <= 2 and res.e3 > 0
     # E3 computed independently from the stacked Sobel matrix
     d = lf.S.toarray() @ (color.normalise_lab(lab_p) - color.normalise_lab(lab_t))
-    np.testing.assert_allclose(res.e3, 100 / 3 * np.sum(d ** 2) / (n * 4 * 32), rtol=1e-9)
+    np.testing.assert_allclose(res.e3, 100 / 3 * np.sum(d**2) / (n * 4 * 32), rtol=1e-9)
     same = lf(target)
     assert abs(same.value) < 1e-12 and abs(same.e2) < 1e-12 and same.e1 == 0 and same.e3 < 1e-24
     np.testing.assert_allclose(same.grad, 0.0, atol=1e-12)
@@ -191,7 +200,7 @@ def test_noise_corrected_ssim_is_unbiased():
     target = np.clip(clean + rng.normal(0, 0.03, clean.shape), 0.01, 1)
     lf = loss.TexelLoss(target, pos, gamma=(1, 1, 0))
     s_clean = lf.ssim_mean(clean)
-    var = np.full_like(clean, 0.02 ** 2)
+    var = np.full_like(clean, 0.02**2)
     corr, unc = [], []
     for _ in range(40):
         noisy = clean + rng.normal(0, 0.02, clean.shape)
@@ -217,6 +226,6 @@ def test_noise_corrected_loss_gradient():
         e[i] = h
         # The noise correction is a constant for the gradient: keep it at pred's value.
         noise = lf._noise(pred, var)
-        f = lambda p: lf._value_with_noise(p, noise)
+        f = lambda p, noise=noise: lf._value_with_noise(p, noise)
         num[i] = (f(pred + e) - f(pred - e)) / (2 * h)
     np.testing.assert_allclose(g, num, rtol=1e-4, atol=1e-9)

@@ -1,5 +1,6 @@
 """Fixed ink shares (``model.FixedShares``) against the dense array they stand for, and the constraints that
 build them (``model.constraints``)."""
+
 import hashlib
 
 import numpy as np
@@ -63,8 +64,11 @@ def test_from_dense_round_trips():
     """Any dense array, also one whose fixed rows all differ, comes back bit for bit."""
     rng = np.random.default_rng(5)
     free, tr = _scene(rng)
-    for dense in (_dense(free, tr), rng.uniform(0, 0.2, (3, 4, 5, len(INKS))).astype(np.float32),
-                  np.zeros((2, 3, 4, len(INKS)), np.float32)):
+    for dense in (
+        _dense(free, tr),
+        rng.uniform(0, 0.2, (3, 4, 5, len(INKS))).astype(np.float32),
+        np.zeros((2, 3, 4, len(INKS)), np.float32),
+    ):
         fs = FixedShares.from_dense(dense)
         np.testing.assert_array_equal(fs.dense(), dense)
         np.testing.assert_array_equal(fs.free, ~dense.any(-1))

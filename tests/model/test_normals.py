@@ -1,5 +1,6 @@
 """SurfaceNormals (model/normals.py): the sparse form of a volume's shading normals, its file keys, and the old
 dense files."""
+
 import numpy as np
 import pytest
 
@@ -64,9 +65,9 @@ def test_volume_files_and_renders(tmp_path):
     assert tex.centred and len(tex) == len(Texels.from_normals(inside, dense))
     a = Renderer(back).render(tex, 8, 3).rgb
     from inkopt import _core
+
     s, sa = vol.coefficients()
-    sc = _core.Scene(vol.shape, (0.1, 0.1, 0.1), sigma_s=s, sigma_a=sa, inside=inside.astype(np.uint8),
-                     normals=dense)
+    sc = _core.Scene(vol.shape, (0.1, 0.1, 0.1), sigma_s=s, sigma_a=sa, inside=inside.astype(np.uint8), normals=dense)
     b = Renderer(back)
     b._scene = sc
     np.testing.assert_array_equal(a, b.render(tex, 8, 3).rgb)

@@ -1,4 +1,5 @@
 """The volume model: explicit medium forms, typed optional fields, the .npz round trip, one-line errors."""
+
 import numpy as np
 import pytest
 
@@ -51,26 +52,36 @@ def test_with_mixture_keeps_geometry_and_inks():
     np.testing.assert_array_equal(w.mixture, _mixture(seed=1))
 
 
-@pytest.mark.parametrize("make, needle", [
-    (lambda: Volume.from_mixture(VOX, np.ones((2, 2, 2, 4), np.float32), INKS), "mixture must have shape"),
-    (lambda: Volume.from_labels(VOX, np.full((2, 2, 2), 7, np.uint8), INKS), "labels use ink 7"),
-    (lambda: Volume.from_coefficients(VOX, np.ones((2, 2, 2, 3), np.float32), -np.ones((2, 2, 2, 3), np.float32)),
-     "negative"),
-    (lambda: Volume(VOX, np.ones((2, 2, 2, 3), np.float32)), "Dense, Mixture or Labels"),
-    (lambda: Volume.from_mixture((0.1, 0.1), np.ones((2, 2, 2, 5), np.float32), INKS), "voxel_mm"),
-])
+@pytest.mark.parametrize(
+    "make, needle",
+    [
+        (lambda: Volume.from_mixture(VOX, np.ones((2, 2, 2, 4), np.float32), INKS), "mixture must have shape"),
+        (lambda: Volume.from_labels(VOX, np.full((2, 2, 2), 7, np.uint8), INKS), "labels use ink 7"),
+        (
+            lambda: Volume.from_coefficients(
+                VOX, np.ones((2, 2, 2, 3), np.float32), -np.ones((2, 2, 2, 3), np.float32)
+            ),
+            "negative",
+        ),
+        (lambda: Volume(VOX, np.ones((2, 2, 2, 3), np.float32)), "Dense, Mixture or Labels"),
+        (lambda: Volume.from_mixture((0.1, 0.1), np.ones((2, 2, 2, 5), np.float32), INKS), "voxel_mm"),
+    ],
+)
 def test_bad_volumes_are_one_line_errors(make, needle):
     with pytest.raises(VolumeError, match=needle) as e:
         make()
     assert "\n" not in str(e.value)
 
 
-@pytest.mark.parametrize("arrays, needle", [
-    (dict(), "exactly one of"),
-    (dict(mixture=np.ones((2, 2, 2, 5), np.float32), labels=np.zeros((2, 2, 2), np.uint8)), "exactly one of"),
-    (dict(mixture=np.ones((2, 2, 2, 5), np.float32), ink_names=None), "needs an ink table"),
-    (dict(sigma_s=np.ones((2, 2, 2, 3), np.float32)), "needs both"),
-])
+@pytest.mark.parametrize(
+    "arrays, needle",
+    [
+        (dict(), "exactly one of"),
+        (dict(mixture=np.ones((2, 2, 2, 5), np.float32), labels=np.zeros((2, 2, 2), np.uint8)), "exactly one of"),
+        (dict(mixture=np.ones((2, 2, 2, 5), np.float32), ink_names=None), "needs an ink table"),
+        (dict(sigma_s=np.ones((2, 2, 2, 3), np.float32)), "needs both"),
+    ],
+)
 def test_bad_volume_files_are_one_line_errors(tmp_path, arrays, needle):
     full = {"voxel_mm": np.asarray(VOX), **INKS.to_arrays(), **arrays}
     np.savez(tmp_path / "v.npz", **{k: v for k, v in full.items() if v is not None})
@@ -98,7 +109,7 @@ def test_mixture_written_in_slabs_reads_back_as_the_whole(tmp_path, compressed_b
     normals = SurfaceNormals((5, 4, 3), np.array([1, 7, 30]), np.eye(3, dtype=np.float32))
     base = Volume(VOX, medium=med, inside=inside, normals=normals, origin_mm=(1.0, 2.0, 3.0))
     base.with_mixture(m).save(tmp_path / "whole.npz")
-    base.save_with_mixture(tmp_path / "slabs.npz", (m[z:z + 2] for z in range(0, 5, 2)), INKS)
+    base.save_with_mixture(tmp_path / "slabs.npz", (m[z : z + 2] for z in range(0, 5, 2)), INKS)
     with np.load(tmp_path / "whole.npz") as a, np.load(tmp_path / "slabs.npz") as b:
         assert sorted(a.files) == sorted(b.files) and "labels" not in b.files
         for k in a.files:
@@ -108,7 +119,7 @@ def test_mixture_written_in_slabs_reads_back_as_the_whole(tmp_path, compressed_b
     bad = m.copy()
     bad[3, 1, 1, 0] = np.nan
     with pytest.raises(VolumeError, match="finite"):
-        base.save_with_mixture(tmp_path / "bad.npz", (bad[z:z + 1] for z in range(5)), INKS)
+        base.save_with_mixture(tmp_path / "bad.npz", (bad[z : z + 1] for z in range(5)), INKS)
     with pytest.raises(ValueError, match="rows"):
         base.save_with_mixture(tmp_path / "short.npz", iter([m[:2]]), INKS)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["slabs.npz", "whole.npz"]

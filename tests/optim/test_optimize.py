@@ -1,20 +1,28 @@
 """The optimiser: parameterisations, chain rule to the mixture, convergence on a chart, exact resume."""
+
+import time
 from dataclasses import replace
 from pathlib import Path
 
-import time
-
 import numpy as np
 import pytest
-
 from helpers import central_differences as _fd
 
 from inkopt import charts
 from inkopt.color import srgb_to_linear
 from inkopt.evaluation.metrics import prediction_metrics
 from inkopt.model import FixedShares, InkTable, mix, mix_grad
-from inkopt.optim import (AdaGrad, Adam, ExponentiatedGradient, GradientSmoother, Optimization, OptimizeConfig,
-                          Parameterization, initial_free_mixture, make_optimizer)
+from inkopt.optim import (
+    AdaGrad,
+    Adam,
+    ExponentiatedGradient,
+    GradientSmoother,
+    Optimization,
+    OptimizeConfig,
+    Parameterization,
+    initial_free_mixture,
+    make_optimizer,
+)
 from inkopt.render import Renderer
 from inkopt.scenes.slab import build_slab
 
@@ -33,8 +41,8 @@ def test_mix_grad_is_the_chain_rule():
 def test_parameterisation_gradient_and_fixed_shares(kind):
     rng = np.random.default_rng(1)
     fixed = np.zeros((2, 2, 3, 4), np.float32)
-    fixed[0, 0, 0] = [0, 0, 0, 1]          # a fully fixed voxel: not a variable
-    fixed[1, 1, 1] = [0.8, 0, 0, 0]        # 80 % of ink 0 fixed, 20 % free (a translucency-style constraint)
+    fixed[0, 0, 0] = [0, 0, 0, 1]  # a fully fixed voxel: not a variable
+    fixed[1, 1, 1] = [0.8, 0, 0, 0]  # 80 % of ink 0 fixed, 20 % free (a translucency-style constraint)
     p = Parameterization(kind, FixedShares.from_dense(fixed))
     assert p.n_free == 11
     x = rng.normal(size=(p.n_free, 4))
@@ -66,7 +74,7 @@ def test_softmax_in_the_core_matches_numpy():
     replaced, on more rows than two of its parallel blocks, with a non-contiguous float64 input and on no rows."""
     rng = np.random.default_rng(5)
     fixed = np.zeros((3, 40, 100, 5), np.float32)  # 12 000 free voxels
-    fixed[:, :, 0] = [0.5, 0, 0, 0, 0]                # a free share of 0.5 on a column
+    fixed[:, :, 0] = [0.5, 0, 0, 0, 0]  # a free share of 0.5 on a column
     p = Parameterization("softmax", FixedShares.from_dense(fixed))
     x = (rng.normal(size=(p.n_free, 10)) * 4)[:, ::2]  # strided float64
     g = rng.normal(size=(p.n_free, 5)).astype(np.float32)
@@ -115,8 +123,11 @@ def test_core_array_functions_keep_to_the_callers_threads():
     index, shape = np.arange(5000), (5, 10, 100)
     want = (_core.softmax_rows(x), _core.softmax_backward(x, g, scale, True), GradientSmoother(shape, index, 1.5)(g))
     for _ in range(2):  # the second round reuses the pool
-        got = (_core.softmax_rows(x, 7), _core.softmax_backward(x, g, scale, True, 7),
-               GradientSmoother(shape, index, 1.5, threads=7)(g))
+        got = (
+            _core.softmax_rows(x, 7),
+            _core.softmax_backward(x, g, scale, True, 7),
+            GradientSmoother(shape, index, 1.5, threads=7)(g),
+        )
         assert _pool_threads(7, want=7) == 7
         for a, b in zip(got, want):
             np.testing.assert_array_equal(a, b)
@@ -217,8 +228,15 @@ def test_start_from_a_baseline(kind, monkeypatch):
     fixed = np.zeros(scene.volume.shape + (2,), np.float32)
     fixed[0, ..., 1] = 1.0  # bottom layer fixed white
     start = lambda k: baselines.baseline_mixture(k, scene.volume, scene.texels, scene.target_rgb, fixed, table=table)
-    r = Optimization(scene.volume, scene.texels, scene.target_rgb, OptimizeConfig(init=kind, iterations=1),
-                     kind=scene.kind, fixed_share=FixedShares.from_dense(fixed), baseline=start)
+    r = Optimization(
+        scene.volume,
+        scene.texels,
+        scene.target_rgb,
+        OptimizeConfig(init=kind, iterations=1),
+        kind=scene.kind,
+        fixed_share=FixedShares.from_dense(fixed),
+        baseline=start,
+    )
     make = baselines.surface_baseline if kind == "surface" else baselines.extrusion_baseline
     want = make(scene.volume, scene.texels, scene.target_rgb, fixed, table)
     got = r.initial_volume().mixture
@@ -266,7 +284,7 @@ def test_exponentiated_gradient_step_scale_is_frozen_after_warmup():
     x = np.zeros((200, 3), np.float32)
     scales = []
     for t in range(6):
-        g = rng.normal(size=(200, 3)) * (10.0 ** t)
+        g = rng.normal(size=(200, 3)) * (10.0**t)
         if t < 3:
             scales.append(np.percentile(np.abs(g), 99))
         x_new = opt.step(x, g)
@@ -333,8 +351,9 @@ def test_the_loop_smooths_the_optimisers_step():
     nearest, dist = nearest_texels(p.shape, p.free_index, scene.texels.pos_vox, MAX_DEPTH)
     rows = np.flatnonzero((nearest >= 0) & plain.loss.flat[nearest])  # the free voxels under flat texels
     assert 0 < len(rows) < p.n_free
-    sm = GradientSmoother(p.shape, p.free_index, 1.0, texel_guide(plain.loss.target_lab, nearest[rows], dist[rows]),
-                          4.0, rows)
+    sm = GradientSmoother(
+        p.shape, p.free_index, 1.0, texel_guide(plain.loss.target_lab, nearest[rows], dist[rows]), 4.0, rows
+    )
     expect = x0 + sm(plain.x - x0)
     np.testing.assert_allclose(smoothed.x, expect, atol=1e-5)
     others = np.setdiff1d(np.arange(p.n_free), rows)
@@ -411,19 +430,23 @@ def test_settings_left_to_the_scene_kind():
         OptimizeConfig().for_scene("torus")
     scene = small_chart_scene(12, 8, 0.3)
     cfg = OptimizeConfig(iterations=8, spp=4, forward_spp=16)
-    runs = {kind: Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, threads=2, kind=kind)
-            for kind in ("slab", "mesh")}
+    runs = {
+        kind: Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, threads=2, kind=kind)
+        for kind in ("slab", "mesh")
+    }
     assert runs["slab"].config_key() != runs["mesh"].config_key()
     # checkpoints made when 0.8 and 1.5 were every scene's defaults still resume on slabs; an integer spelling of a
     # setting (``--set smooth=3``) gives the default's key
-    old = Optimization(scene.volume, scene.texels, scene.target_rgb,
-                       replace(cfg, adjoint_ema=0.8, smooth=1.5), threads=2, kind="slab")
+    old = Optimization(
+        scene.volume, scene.texels, scene.target_rgb, replace(cfg, adjoint_ema=0.8, smooth=1.5), threads=2, kind="slab"
+    )
     assert old.config_key() == runs["slab"].config_key()
-    spelled = Optimization(scene.volume, scene.texels, scene.target_rgb, replace(cfg, smooth=3, adjoint_ema=0.5),
-                           threads=2, kind="mesh")
+    spelled = Optimization(
+        scene.volume, scene.texels, scene.target_rgb, replace(cfg, smooth=3, adjoint_ema=0.5), threads=2, kind="mesh"
+    )
     assert spelled.config_key() == runs["mesh"].config_key()
     for kind, r in runs.items():
         ema, smooth = SCENE_DEFAULTS[kind]["adjoint_ema"], SCENE_DEFAULTS[kind]["smooth"]
         assert (r.cfg.adjoint_ema, r.cfg.smooth, r.smoother.steps) == (ema, smooth, diffusion_steps(smooth))
         r.run()
-        assert r.c_weight == pytest.approx(sum(20 * ema ** k for k in range(8)), rel=1e-6)
+        assert r.c_weight == pytest.approx(sum(20 * ema**k for k in range(8)), rel=1e-6)

@@ -1,6 +1,7 @@
 """The step's spatial preconditioner (optim/smooth.py): checked against scipy.ndimage's convolution, its
 conservation and spectral properties, its guide; in the loop: test_optimize.py (what it is applied to, resume,
 checkpoint keys)."""
+
 import numpy as np
 import pytest
 from scipy import ndimage
@@ -64,7 +65,7 @@ def test_kernel_width_and_voxel_scale_damping():
     d[n // 2, n // 2, n // 2] = 1
     out = sm(d.reshape(-1, 1)).reshape(n, n, n)
     c = np.arange(n) - n // 2
-    var_x = float((out.sum((0, 1)) * c ** 2).sum())
+    var_x = float((out.sum((0, 1)) * c**2).sum())
     assert var_x == pytest.approx(2 * ALPHA * sm.steps, rel=1e-5)
     assert var_x >= 1.0
     z, y, x = np.indices((n, n, n))
@@ -129,7 +130,7 @@ def test_a_subset_of_rows_is_smoothed_alone():
     rng = np.random.default_rng(5)
     shape = (3, 6, 8)
     index = np.arange(np.prod(shape))
-    sub = (np.indices(shape)[2] < 5).reshape(-1)                     # the rows to smooth: x < 5
+    sub = (np.indices(shape)[2] < 5).reshape(-1)  # the rows to smooth: x < 5
     rows = np.flatnonzero(sub)
     g = rng.normal(size=(len(index), 3)).astype(np.float32)
     guide = rng.normal(size=(len(rows), 4)).astype(np.float32)
@@ -167,7 +168,7 @@ def test_depth_guide_lets_neighbours_under_a_sloped_surface_exchange():
         depth[idx[ok]] = texel_guide(np.zeros((len(sx), 3), np.float32), near[ok], dist[ok], **kw)[:, 3]
         d = np.diff(depth.reshape(inside.shape), axis=2).ravel()
         d = d[np.isfinite(d)]
-        return float(np.mean(np.exp(-(d / edge) ** 2) > 0.1))
+        return float(np.mean(np.exp(-((d / edge) ** 2)) > 0.1))
 
     assert coupled_share(0.0) == 1.0
     assert coupled_share(0.5) >= 0.9

@@ -1,5 +1,6 @@
 """Tests of quantize(method="error-diffusion"): 3D vector error diffusion on the printer grid (Rust core in
 crates/core/src/kernels/diffuse.rs, which has its own unit tests)."""
+
 import hashlib
 import os
 import subprocess
@@ -23,8 +24,10 @@ NEXT_LAYER = [(0, 0, 8), (-1, 0, 2), (1, 0, 2), (0, -1, 2), (0, 1, 2)]
 def crossing_weight(k: int, z0: int, y0: int, x0: int) -> float:
     """Total filter weight of the links u -> v with exactly one end in the k^3 window at (z0, y0, x0), for a
     window whose neighbourhood lies inside the grid (no renormalisation). Rows sweep +x when y + z is even."""
+
     def inside(z, y, x):
         return z0 <= z < z0 + k and y0 <= y < y0 + k and x0 <= x < x0 + k
+
     tot = 0.0
     for z, y, x in np.ndindex(k + 2, k + 2, k + 2):
         z, y, x = z + z0 - 1, y + y0 - 1, x + x0 - 1
@@ -39,8 +42,8 @@ def window_deviation(lab, p0: float, k: int, margin: int = 2) -> np.ndarray:
     """|count of ink 0 - k^3 p0| over every k^3 window at least ``margin`` voxels from the grid's faces."""
     c = sliding_window_view((lab == 0).astype(float), (k, k, k)).sum((-1, -2, -3))
     n = lab.shape
-    c = c[margin:n[0] - k - margin + 1, margin:n[1] - k - margin + 1, margin:n[2] - k - margin + 1]
-    return np.abs(c - k ** 3 * p0)
+    c = c[margin : n[0] - k - margin + 1, margin : n[1] - k - margin + 1, margin : n[2] - k - margin + 1]
+    return np.abs(c - k**3 * p0)
 
 
 @pytest.mark.parametrize("p0", [0.3, 0.137])
@@ -65,7 +68,7 @@ def test_window_counts_sure_bound_and_spread(p0):
         assert 1.0 * k * k < bound < 1.4 * k * k
         dev, dev_r = window_deviation(lab, p0, k), window_deviation(lab_r, p0, k)
         assert dev.max() <= bound + 1e-3, (k, dev.max(), bound)
-        rms, rms_r = np.sqrt(np.mean(dev ** 2)), np.sqrt(np.mean(dev_r ** 2))
+        rms, rms_r = np.sqrt(np.mean(dev**2)), np.sqrt(np.mean(dev_r**2))
         assert rms < (0.7 if k < 4 else 0.5) * rms_r, (k, rms, rms_r)
         assert dev.max() < dev_r.max(), (k, dev.max(), dev_r.max())
     # the total over the whole box: only the very last voxel's residual is dropped
@@ -94,11 +97,18 @@ def test_deterministic_seed_free_and_thread_independent():
     mix = np.random.default_rng(2).dirichlet(np.ones(4), size=(6, 9, 10)).astype(np.float32)
     a = labels_hash(mix, seed=1)
     assert a == labels_hash(mix, seed=1) == labels_hash(mix, seed=99)
-    code = ("import sys, numpy as np; sys.path[:0] = sys.argv[1:]; from printing.test_diffuse import labels_hash; "
-            "print(labels_hash(np.random.default_rng(2).dirichlet(np.ones(4), size=(6, 9, 10)).astype(np.float32)))")
+    code = (
+        "import sys, numpy as np; sys.path[:0] = sys.argv[1:]; from printing.test_diffuse import labels_hash; "
+        "print(labels_hash(np.random.default_rng(2).dirichlet(np.ones(4), size=(6, 9, 10)).astype(np.float32)))"
+    )
     env = {**os.environ, "RAYON_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
-    got = subprocess.run([sys.executable, "-c", code, os.path.dirname(os.path.dirname(__file__))], env=env, check=True,
-                         capture_output=True, text=True).stdout.strip()
+    got = subprocess.run(
+        [sys.executable, "-c", code, os.path.dirname(os.path.dirname(__file__))],
+        env=env,
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout.strip()
     assert got == a
 
 
@@ -155,6 +165,7 @@ def test_speed():
     """The reference slab's printer grid (94 x 118 x 354 = 3.9 M voxels, 5 inks): measured ~0.3 s; generous
     bound for a shared machine."""
     import time
+
     mix = np.random.default_rng(6).dirichlet(np.ones(5), size=(30, 118, 177)).astype(np.float32)
     t = time.perf_counter()
     lab, _ = quantize(mix, (V300,) * 3, method=ED)

@@ -1,4 +1,5 @@
 """Tests of inkopt.export: PNG slice stacks read back with Pillow, manifest, material limits, atomic writes."""
+
 import json
 
 import numpy as np
@@ -88,15 +89,23 @@ def test_refuses_too_many_materials(tmp_path):
     with pytest.raises(ValueError, match="unknown printer"):
         write_png_slices(lab, VP, inks, tmp_path / "x", max_materials="j9000")
     with pytest.raises(ValueError, match="J850 holds 7"):  # the printer's limit, unless max_materials overrides it
-        write_png_slices(np.arange(8, dtype=np.uint8).reshape(1, 2, 4), VP, inks + ["cyan2"], tmp_path / "y", printer="j850")
+        write_png_slices(
+            np.arange(8, dtype=np.uint8).reshape(1, 2, 4), VP, inks + ["cyan2"], tmp_path / "y", printer="j850"
+        )
     write_png_slices(lab, VP, inks, tmp_path / "z", printer="j750", max_materials=7)
 
 
 def test_manifest_names_printer_materials(tmp_path):
     inks = ["cyan", "magenta", "yellow", "black", "white", "orange"]
     man = write_png_slices(random_labels(n=6), VP, inks, tmp_path / "s", printer="j750")
-    assert [m["material"] for m in man["materials"]] == ["VeroCyan-V", "VeroMagenta-V", "VeroYellow-V",
-                                                         "VeroBlack", "VeroUltraWhite", None]
+    assert [m["material"] for m in man["materials"]] == [
+        "VeroCyan-V",
+        "VeroMagenta-V",
+        "VeroYellow-V",
+        "VeroBlack",
+        "VeroUltraWhite",
+        None,
+    ]
     assert man["printer"] == {"key": "j750", "name": "Stratasys J750"} and man["max_materials"] == 6
     assert json.loads((tmp_path / "s" / "manifest.json").read_text())["materials"][5]["material"] is None
     man = write_png_slices(random_labels(n=6), VP, inks, tmp_path / "g")  # no printer: no material names

@@ -1,5 +1,6 @@
 """Tests of inkopt.printing.gcvf: the GrabCAD Voxel Print package opened as a zip, its XML parsed, its slices
 decoded through the XML palette, its STL loaded with trimesh and its z-buffer checked against the labels."""
+
 import io
 import xml.etree.ElementTree as ET
 import zipfile
@@ -38,8 +39,9 @@ def test_package_structure_and_palette(tmp_path):
     Z, Y, X = lab.shape
     summary = write_gcvf(lab, VP, INKS, tmp_path / "job.gcvf", printer="j750")
     files = read_package(tmp_path / "job.gcvf")
-    assert sorted(files) == sorted([f"layer_{k}.png" for k in range(Z)] + ["ConfigFile.xml", "model.stl",
-                                                                           "zbuffer.png"])
+    assert sorted(files) == sorted(
+        [f"layer_{k}.png" for k in range(Z)] + ["ConfigFile.xml", "model.stl", "zbuffer.png"]
+    )
     assert files["ConfigFile.xml"].startswith(b'<?xml version="1.0" encoding="UTF-8"?>')
     root = ET.fromstring(files["ConfigFile.xml"])
     assert root.tag == "GCVF" and text(root, "Version") == "2"
@@ -51,8 +53,14 @@ def test_package_structure_and_palette(tmp_path):
     assert text(root, "MaxNumberOfColors") == "6" and text(root, "CreationMode") == "MODEL_ONLY"
     assert text(root, "MaterialList/BackGroundMaterialRGBA") == "0 0 0 255"
     mats = root.findall("MaterialList/Material")
-    assert [text(m, "Name") for m in mats] == ["VeroCY-V", "VeroMGT-V", "VeroYL-V", "VeroBlack", "VUltraWhite",
-                                               "orange"]
+    assert [text(m, "Name") for m in mats] == [
+        "VeroCY-V",
+        "VeroMGT-V",
+        "VeroYL-V",
+        "VeroBlack",
+        "VUltraWhite",
+        "orange",
+    ]
     palette = {tuple(int(v) for v in text(m, "RGBA").split()): i for i, m in enumerate(mats)}
     palette[(0, 0, 0, 255)] = 255
     assert len(palette) == len(INKS) + 1, "every ink has its own colour, none is the background"
@@ -115,5 +123,6 @@ def test_refusals_write_nothing(tmp_path):
     assert text(root, "MaxNumberOfColors") == "7"
     assert [text(m, "Name") for m in root.findall("MaterialList/Material")][-2:] == ["orange", "VeroUltraClear"]
     write_gcvf(lab[..., :2], VP, seven, tmp_path / "j850.gcvf", printer="j850")  # an old package is replaced
-    assert text(ET.fromstring(read_package(tmp_path / "j850.gcvf")["ConfigFile.xml"]),
-                "SliceDimensions/SliceWidth") == "2"
+    assert (
+        text(ET.fromstring(read_package(tmp_path / "j850.gcvf")["ConfigFile.xml"]), "SliceDimensions/SliceWidth") == "2"
+    )

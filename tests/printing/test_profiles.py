@@ -1,18 +1,24 @@
 """Printer profiles (inkopt.printing.profiles): typed, JSON round trip, lookups and the resolution check."""
+
 import json
 
 import pytest
 
-from inkopt.printing.profiles import (PRINTER_PROFILES, PrinterProfile, material_name, printer_profile,
-                                      resolution_mismatch, resolve_max_materials)
+from inkopt.printing.profiles import (
+    PRINTER_PROFILES,
+    PrinterProfile,
+    material_name,
+    printer_profile,
+    resolution_mismatch,
+    resolve_max_materials,
+)
 
 
 def test_json_round_trip_and_keys():
     for key, prof in PRINTER_PROFILES.items():
         d = prof.to_json()
         assert PrinterProfile.from_json(json.loads(json.dumps(d))) == prof and d["key"] == key
-    assert set(PRINTER_PROFILES["j750"].to_json()) == {"key", "name", "max_materials", "dpi", "layer_um",
-                                                       "materials"}
+    assert set(PRINTER_PROFILES["j750"].to_json()) == {"key", "name", "max_materials", "dpi", "layer_um", "materials"}
     assert set(PRINTER_PROFILES["generic"].to_json()) == {"key", "name", "max_materials", "materials"}
 
 

@@ -1,4 +1,6 @@
-"""Tests of inkopt.printing.quantize and .dither: printer grid, one ink per printer voxel, statistics of random and blue-noise."""
+"""Tests of inkopt.printing.quantize and .dither: printer grid, one ink per printer voxel, statistics of random and
+blue-noise."""
+
 import tracemalloc
 
 import numpy as np
@@ -20,7 +22,11 @@ def nearest_index(n_p, vp, n_o, vo):
 def upsample_nearest(arr, vo, vp):
     nz, ny, nx = arr.shape[:3]
     Z, Y, X = (int(round(n * o / p)) for n, o, p in zip((nz, ny, nx), vo[::-1], vp[::-1]))
-    iz, iy, ix = nearest_index(Z, vp[2], nz, vo[2]), nearest_index(Y, vp[1], ny, vo[1]), nearest_index(X, vp[0], nx, vo[0])
+    iz, iy, ix = (
+        nearest_index(Z, vp[2], nz, vo[2]),
+        nearest_index(Y, vp[1], ny, vo[1]),
+        nearest_index(X, vp[0], nx, vo[0]),
+    )
     return arr[iz][:, iy][:, :, ix]
 
 
@@ -168,8 +174,11 @@ def lowpass_error(labels, mixture, vo, vp, sigma_mm=0.1):
     """RMSE between Gaussian-filtered one-hot ink volumes and the filtered nearest-upsampled mixture."""
     up = upsample_nearest(mixture, np.asarray(vo), vp)
     sig = sigma_mm / vp[::-1]
-    err = [gaussian_filter((labels == k).astype(float), sig, mode="wrap") - gaussian_filter(up[..., k].astype(float),
-           sig, mode="wrap") for k in range(mixture.shape[-1])]
+    err = [
+        gaussian_filter((labels == k).astype(float), sig, mode="wrap")
+        - gaussian_filter(up[..., k].astype(float), sig, mode="wrap")
+        for k in range(mixture.shape[-1])
+    ]
     return float(np.sqrt(np.mean(np.square(err))))
 
 
@@ -220,8 +229,12 @@ def test_memory_is_layerwise():
     shape, n = (16, 118, 177), 5
     mix = np.random.default_rng(6).dirichlet(np.ones(n), size=shape).astype(np.float32)
     _, vp = printer_grid(shape, (V300,) * 3)
-    for up, method in [("nearest", "blue-noise"), ("linear", "blue-noise"), ("nearest", "error-diffusion"),
-                       ("linear", "error-diffusion")]:
+    for up, method in [
+        ("nearest", "blue-noise"),
+        ("linear", "blue-noise"),
+        ("nearest", "error-diffusion"),
+        ("linear", "error-diffusion"),
+    ]:
         tracemalloc.start()
         try:
             lab, _ = quantize(mix, (V300,) * 3, method=method, upsample=up)
@@ -244,7 +257,7 @@ def spectrum_ratio(pattern, fmax=0.15):
 
 def test_void_and_cluster_is_blue():
     ranks = void_and_cluster((16, 16, 16), seed=0)
-    np.testing.assert_array_equal(np.sort(ranks.ravel()), np.arange(16 ** 3))
+    np.testing.assert_array_equal(np.sort(ranks.ravel()), np.arange(16**3))
     np.testing.assert_array_equal(ranks, void_and_cluster((16, 16, 16), seed=0))
     white = np.random.default_rng(0).random((16, 16, 16))
     for level in (0.1, 0.5, 0.8):

@@ -1,6 +1,7 @@
 """Tests of the streaming printer output: inkopt.printing.stream (a run quantized layer by layer into
 quantized.npz + quantized_labels.npy), model.labelfile, the pre-release layouts refused, and GCVF's block
 outline."""
+
 import io
 import zipfile
 
@@ -37,8 +38,10 @@ def mixture_run(path, shape=(6, 9, 11), inside=True, normals=False):
     return d, vol
 
 
-@pytest.mark.parametrize("method,upsample", [("blue-noise", "nearest"), ("random", "linear"),
-                                             ("error-diffusion", "linear"), ("error-diffusion", "nearest")])
+@pytest.mark.parametrize(
+    "method,upsample",
+    [("blue-noise", "nearest"), ("random", "linear"), ("error-diffusion", "linear"), ("error-diffusion", "nearest")],
+)
 def test_streaming_run_equals_in_memory_quantization(tmp_path, method, upsample):
     d, vol = mixture_run(tmp_path / "r")
     lines = quantize_run(d, method=method, upsample=upsample, **KW)

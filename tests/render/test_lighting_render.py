@@ -7,22 +7,23 @@ thousands of paths is normal to a very good approximation, and 4 standard errors
 6e-5 per comparison (about a dozen comparisons here: ~1e-3 for the file). Adding-doubling also gets the
 difference between its 16- and 32-point quadratures as its own discretisation error.
 """
+
 import numpy as np
 import pytest
+from helpers import replay_matches_fd
 
 from inkopt.lighting import Lighting, load_lighting
 from inkopt.model import Texels, Volume
 from inkopt.render import Renderer, render
-
-from helpers import replay_matches_fd
 
 
 def homogeneous(a, b, d=1.0, nz=10, nxy=6):
     """An infinite (periodic) slab of thickness d mm, albedo a, optical thickness b, g 0.4, IOR 1.5."""
     mu_t = b / d
     s = np.full((nz, nxy, nxy, 3), mu_t * a, np.float32)
-    return Volume.from_coefficients((d / nz,) * 3, sigma_s=s, sigma_a=np.full_like(s, mu_t * (1 - a)), g=0.4, ior=1.5,
-                  boundary="periodic-xy")
+    return Volume.from_coefficients(
+        (d / nz,) * 3, sigma_s=s, sigma_a=np.full_like(s, mu_t * (1 - a)), g=0.4, ior=1.5, boundary="periodic-xy"
+    )
 
 
 def constant_map(rgb, h=8) -> Lighting:
@@ -48,7 +49,7 @@ def test_a_constant_map_is_the_uniform_light():
     k = np.array([0.5, 1.0, 2.5])
     a = render(vol, tex, spp=512, seed=6, lighting=constant_map(k))
     b = render(vol, tex, spp=512, seed=7)
-    se = np.sqrt(a.mean_rgb_stderr ** 2 + (k * b.mean_rgb_stderr) ** 2)
+    se = np.sqrt(a.mean_rgb_stderr**2 + (k * b.mean_rgb_stderr) ** 2)
     assert np.all(np.abs(a.mean_rgb - k * b.mean_rgb) < 4 * se), (a.mean_rgb, k * b.mean_rgb, se)
 
 
@@ -77,8 +78,9 @@ def test_light_from_above_gives_reflectance_on_top_and_transmittance_below(a, b)
 def _small_slab():
     rng = np.random.default_rng(3)
     s = rng.uniform(2, 12, (4, 3, 3, 3)).astype(np.float32)
-    return Volume.from_coefficients((0.1,) * 3, sigma_s=s, sigma_a=rng.uniform(0.2, 3, s.shape).astype(np.float32),
-                  boundary="periodic-xy")
+    return Volume.from_coefficients(
+        (0.1,) * 3, sigma_s=s, sigma_a=rng.uniform(0.2, 3, s.shape).astype(np.float32), boundary="periodic-xy"
+    )
 
 
 PROBES = [(3, 1, 1, 0, "sigma_s"), (3, 1, 1, 2, "sigma_a"), (2, 0, 1, 1, "sigma_s"), (1, 1, 2, 0, "sigma_a")]
@@ -95,8 +97,12 @@ def test_gradient_under_a_directional_map_matches_finite_differences():
     h = 32
     theta = (np.arange(h) + 0.5) * np.pi / h
     phi = (np.arange(2 * h) + 0.5) * np.pi / h
-    d = np.stack(np.broadcast_arrays(np.sin(theta)[:, None] * np.cos(phi), np.sin(theta)[:, None] * np.sin(phi),
-                                     np.cos(theta)[:, None] + 0 * phi), -1)
+    d = np.stack(
+        np.broadcast_arrays(
+            np.sin(theta)[:, None] * np.cos(phi), np.sin(theta)[:, None] * np.sin(phi), np.cos(theta)[:, None] + 0 * phi
+        ),
+        -1,
+    )
     key = np.clip(d @ np.array([0.8, 0.0, 0.6]), 0, None) ** 4
     env = 0.1 * np.array([0.6, 0.8, 1.2]) * (d[..., 2:] > 0) + key[..., None] * np.array([3.0, 2.0, 1.0])
     replay_matches_fd(_small_slab(), PROBES, spp=600, lighting=Lighting(env.astype(np.float32), 30.0, "key"))

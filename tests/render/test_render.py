@@ -3,13 +3,13 @@
 Monte Carlo tolerances are multiples of the estimator's own standard error (and, for adding-doubling, plus the
 difference between its 16- and 32-point quadratures as an estimate of its discretisation error).
 """
+
 import numpy as np
 import pytest
+from helpers import replay_matches_fd
 
 from inkopt.model import InkTable, Texels, Volume, mix
 from inkopt.render import Renderer, render
-
-from helpers import replay_matches_fd
 
 VOX = 25.4 / 300
 
@@ -17,8 +17,9 @@ VOX = 25.4 / 300
 def homogeneous(a, b, d=1.0, nz=10, nxy=6, g=0.4, ior=1.5, boundary="periodic-xy"):
     mu_t = b / d
     s = np.full((nz, nxy, nxy, 3), mu_t * a, np.float32)
-    return Volume.from_coefficients((d / nz,) * 3, sigma_s=s, sigma_a=np.full_like(s, mu_t * (1 - a)), g=g, ior=ior,
-                  boundary=boundary)
+    return Volume.from_coefficients(
+        (d / nz,) * 3, sigma_s=s, sigma_a=np.full_like(s, mu_t * (1 - a)), g=g, ior=ior, boundary=boundary
+    )
 
 
 @pytest.mark.parametrize("a,b", [(0.0, 1.0), (0.5, 0.5), (0.9, 2.0), (0.99, 4.0), (0.999, 8.0)])
@@ -71,9 +72,11 @@ def test_labels_mixture_and_dense_forms_agree():
     labels = rng.integers(0, 5, (4, 7, 9)).astype(np.uint8)
     onehot = np.eye(5, dtype=np.float32)[labels]
     s, a = mix(onehot, inks)
-    vols = [Volume.from_labels(voxel_mm=(0.04, 0.08, 0.03), labels=labels, inks=inks),
-            Volume.from_mixture(voxel_mm=(0.04, 0.08, 0.03), mixture=onehot, inks=inks),
-            Volume.from_coefficients(voxel_mm=(0.04, 0.08, 0.03), sigma_s=s, sigma_a=a)]
+    vols = [
+        Volume.from_labels(voxel_mm=(0.04, 0.08, 0.03), labels=labels, inks=inks),
+        Volume.from_mixture(voxel_mm=(0.04, 0.08, 0.03), mixture=onehot, inks=inks),
+        Volume.from_coefficients(voxel_mm=(0.04, 0.08, 0.03), sigma_s=s, sigma_a=a),
+    ]
     tex = Texels.for_volume(vols[1])
     out = [render(v, tex, spp=4, seed=5).rgb for v in vols]
     # The label form goes through regular tracking (it has an inside mask), the others through delta tracking:
@@ -87,8 +90,9 @@ def test_labels_mixture_and_dense_forms_agree():
 def test_mask_regular_tracking_matches_delta_tracking():
     """An inside mask that is all True takes the regular-tracking path; it must agree with delta tracking."""
     vol = homogeneous(0.95, 3.0, boundary="box", nxy=8)
-    vol_m = Volume.from_coefficients(voxel_mm=vol.voxel_mm, sigma_s=vol.sigma_s, sigma_a=vol.sigma_a,
-                   inside=np.ones(vol.shape, bool))
+    vol_m = Volume.from_coefficients(
+        voxel_mm=vol.voxel_mm, sigma_s=vol.sigma_s, sigma_a=vol.sigma_a, inside=np.ones(vol.shape, bool)
+    )
     tex = Texels.for_volume(vol, ["top"])
     a, b = render(vol, tex, spp=400, seed=1), render(vol_m, tex, spp=400, seed=2)
     se = np.hypot(a.mean_rgb_stderr, b.mean_rgb_stderr)
@@ -105,8 +109,9 @@ def test_gradient_matches_finite_differences(masked):
     a = rng.uniform(0.2, 3, shape + (3,)).astype(np.float32)
     inside = np.ones(shape, bool) if masked else None
     vol = Volume.from_coefficients(voxel_mm=(0.1,) * 3, sigma_s=s, sigma_a=a, boundary="periodic-xy", inside=inside)
-    replay_matches_fd(vol, [(3, 1, 1, 0, "sigma_s"), (3, 1, 1, 2, "sigma_a"), (2, 0, 1, 1, "sigma_s"),
-                    (1, 1, 2, 0, "sigma_a")])
+    replay_matches_fd(
+        vol, [(3, 1, 1, 0, "sigma_s"), (3, 1, 1, 2, "sigma_a"), (2, 0, 1, 1, "sigma_s"), (1, 1, 2, 0, "sigma_a")]
+    )
 
 
 def test_gradient_matches_finite_differences_masked_object():
@@ -119,8 +124,11 @@ def test_gradient_matches_finite_differences_masked_object():
     s = np.where(inside[..., None], rng.uniform(4, 12, shape + (3,)), 0).astype(np.float32)
     a = np.where(inside[..., None], rng.uniform(0.2, 2, shape + (3,)), 0).astype(np.float32)
     vol = Volume.from_coefficients(voxel_mm=(0.1,) * 3, sigma_s=s, sigma_a=a, boundary="box", inside=inside)
-    replay_matches_fd(vol, [(5, 3, 3, 0, "sigma_s"), (5, 1, 1, 1, "sigma_a"), (2, 2, 2, 2, "sigma_s"),
-                    (3, 3, 3, 0, "sigma_a")], spp=400)
+    replay_matches_fd(
+        vol,
+        [(5, 3, 3, 0, "sigma_s"), (5, 1, 1, 1, "sigma_a"), (2, 2, 2, 2, "sigma_s"), (3, 3, 3, 0, "sigma_a")],
+        spp=400,
+    )
 
 
 def test_li1_gradient_is_correlated_with_replay():
@@ -189,7 +197,7 @@ def test_masked_volumes_store_only_their_inside_and_render_as_the_dense_form():
     shape = (7, 6, 9)
     inside = np.ones(shape, bool)
     inside[2:5, 1:4, 3:7] = False  # a cavity
-    inside[:, 0, :2] = False       # a notch through the object
+    inside[:, 0, :2] = False  # a notch through the object
     mixture = rng.dirichlet(np.ones(5), size=shape).astype(np.float32)
     vol = Volume.from_mixture(voxel_mm=(VOX,) * 3, mixture=mixture, inks=inks, inside=inside)
     n, k = inside.size, int(inside.sum())
@@ -245,8 +253,9 @@ def test_set_volume_renders_like_a_fresh_renderer(masked):
     if masked:
         inside = np.ones(shape, bool)
         inside[4:, 2:5, :3] = False
-    a = Volume.from_mixture((VOX,) * 3, mixture=rng.dirichlet(np.ones(5), size=shape).astype(np.float32), inks=inks,
-               inside=inside)
+    a = Volume.from_mixture(
+        (VOX,) * 3, mixture=rng.dirichlet(np.ones(5), size=shape).astype(np.float32), inks=inks, inside=inside
+    )
     b = a.with_mixture(rng.dirichlet(np.ones(5), size=shape).astype(np.float32))
     tex = Texels.for_volume(a)
     adj = rng.normal(size=(len(tex), 3)).astype(np.float32)
@@ -279,8 +288,9 @@ def test_gradient_slots_from_a_voxel_list_match_the_slot_map():
     shape = (5, 6, 7)
     inside = np.ones(shape, bool)
     inside[3:, :2, :2] = False
-    vol = Volume.from_mixture((VOX,) * 3, mixture=rng.dirichlet(np.ones(5), size=shape).astype(np.float32), inks=inks,
-                 inside=inside)
+    vol = Volume.from_mixture(
+        (VOX,) * 3, mixture=rng.dirichlet(np.ones(5), size=shape).astype(np.float32), inks=inks, inside=inside
+    )
     tex = Texels.for_volume(vol)
     adj = rng.normal(size=(len(tex), 3)).astype(np.float32)
     voxels = np.sort(rng.choice(np.flatnonzero(inside), 90, replace=False))
@@ -295,9 +305,10 @@ def test_gradient_slots_from_a_voxel_list_match_the_slot_map():
         np.testing.assert_array_equal(got[1], want[1])
     assert np.abs(want[1]).sum() > 0
     other = voxels[1:]  # other slots: a new buffer, not the old one reused
-    np.testing.assert_array_equal(r.gradient(tex, adj, spp=3, seed=4, grad_index=other)[1],
-                                  r.gradient(tex, adj, spp=3, seed=4,
-                                             grad_index=np.where(slot_map > 0, slot_map - 1, -1).astype(np.int32))[1])
+    np.testing.assert_array_equal(
+        r.gradient(tex, adj, spp=3, seed=4, grad_index=other)[1],
+        r.gradient(tex, adj, spp=3, seed=4, grad_index=np.where(slot_map > 0, slot_map - 1, -1).astype(np.int32))[1],
+    )
     for bad, msg in ((voxels[::-1], "strictly increasing"), (np.array([vol.inside.size]), "outside the grid")):
         with pytest.raises(ValueError, match=msg):
             r.gradient(tex, adj, spp=1, seed=4, grad_index=bad)
@@ -320,5 +331,6 @@ def test_set_mixture_on_a_label_volume_switches_to_coefficients():
     tex = Texels.for_volume(base)
     r = Renderer(base)
     r.set_mixture(index, rows)
-    np.testing.assert_array_equal(r.render(tex, spp=4, seed=2).rgb,
-                                  Renderer(base.with_mixture(full)).render(tex, spp=4, seed=2).rgb)
+    np.testing.assert_array_equal(
+        r.render(tex, spp=4, seed=2).rgb, Renderer(base.with_mixture(full)).render(tex, spp=4, seed=2).rgb
+    )

@@ -1,5 +1,6 @@
 """Texel shards: renders and fixed-point gradients of texel ranges combine bit-identically into one pass, in
 this process and on Ray workers (``inkopt.distributed``), and ``--ray`` without Ray is a one-line error."""
+
 import sys
 
 import numpy as np
@@ -31,8 +32,9 @@ def test_shards_in_one_process_equal_one_pass(sparse):
     """Three uneven texel ranges, each rendered with its global texel indices and given the whole pass's largest
     adjoint: concatenated renders and summed int64 gradients converted once equal one pass, bit for bit."""
     scene = chart_scene()
-    vol = scene.volume.with_mixture(np.random.default_rng(0).dirichlet(np.ones(5), scene.volume.shape).astype(
-        np.float32))
+    vol = scene.volume.with_mixture(
+        np.random.default_rng(0).dirichlet(np.ones(5), scene.volume.shape).astype(np.float32)
+    )
     tex, n = scene.texels, len(scene.texels)
     adj = np.random.default_rng(1).normal(size=(n, 3)).astype(np.float32)
     gi = None
@@ -42,10 +44,21 @@ def test_shards_in_one_process_equal_one_pass(sparse):
     r = Renderer(vol, threads=2)
     full = r.render(tex, 4, 7)
     gs, ga, gres = r.gradient(tex, adj, 4, 8, grad_index=gi)
-    parts = [(r.render(tex.subset(slice(a, b)), 4, 7, first_texel=a),
-              r.gradient_fixed(tex.subset(slice(a, b)), adj[a:b], 4, 8, grad_index=gi, first_texel=a,
-                               max_abs_adjoint=float(np.abs(adj).max())))
-             for a, b in bounds(n, 3)]
+    parts = [
+        (
+            r.render(tex.subset(slice(a, b)), 4, 7, first_texel=a),
+            r.gradient_fixed(
+                tex.subset(slice(a, b)),
+                adj[a:b],
+                4,
+                8,
+                grad_index=gi,
+                first_texel=a,
+                max_abs_adjoint=float(np.abs(adj).max()),
+            ),
+        )
+        for a, b in bounds(n, 3)
+    ]
     np.testing.assert_array_equal(np.concatenate([p.rgb for p, _ in parts]), full.rgb)
     np.testing.assert_array_equal(np.concatenate([p.var_mean for p, _ in parts]), full.var_mean)
     np.testing.assert_array_equal(np.concatenate([g[3].rgb for _, g in parts]), gres.rgb)
@@ -63,8 +76,7 @@ def test_ray_missing_is_one_line(tmp_path, capsys, monkeypatch):
 
     Image.fromarray(charts.colour_chart(40, 24)).save(tmp_path / "c.png")
     monkeypatch.setitem(sys.modules, "ray", None)  # import ray -> ImportError
-    argv = ["slab", str(tmp_path / "c.png"), "--size-mm", "2x1.2x0.3", "--out", str(tmp_path / "run"), "--ray",
-            "auto"]
+    argv = ["slab", str(tmp_path / "c.png"), "--size-mm", "2x1.2x0.3", "--out", str(tmp_path / "run"), "--ray", "auto"]
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--ray needs Ray: pip install 'inkopt[ray]'" in err
@@ -84,8 +96,15 @@ def test_ray_shards_equal_one_machine():
     shards = RayShards("auto", workers=2, threads=1, num_cpus=2)
     try:
         assert [hi - lo for lo, hi in shards.renderer(scene.volume)._bounds(len(scene.texels))] == [48, 48]
-        sharded = Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, kind=scene.kind, threads=2,
-                               renderer_factory=shards.renderer)
+        sharded = Optimization(
+            scene.volume,
+            scene.texels,
+            scene.target_rgb,
+            cfg,
+            kind=scene.kind,
+            threads=2,
+            renderer_factory=shards.renderer,
+        )
         sharded.run()
         np.testing.assert_array_equal(sharded.x, plain.x)
         assert sharded.history.loss == plain.history.loss
@@ -117,7 +136,9 @@ def test_ray_shards_equal_one_machine_on_a_mesh(tmp_path):
     assert plain.history.loss[-1] != plain.history.loss[0]
     shards = RayShards("auto", workers=2, threads=1, num_cpus=2)
     try:
-        sharded = Optimization(*args, kind="mesh", fixed_share=scene.fixed_share, threads=2, renderer_factory=shards.renderer)
+        sharded = Optimization(
+            *args, kind="mesh", fixed_share=scene.fixed_share, threads=2, renderer_factory=shards.renderer
+        )
         sharded.run()
         np.testing.assert_array_equal(sharded.x, plain.x)
         assert sharded.history.loss == plain.history.loss

@@ -3,13 +3,11 @@
 import numpy as np
 import pytest
 import trimesh
+from helpers import SPOT
 from PIL import Image
 
-from helpers import SPOT
-
 from inkopt.model import FACE_NORMALS
-from inkopt.scenes.mesh import (bake_vertex_colors, load_mesh, mesh_from_trimesh, render_views, voxelize,
-                                write_glb)
+from inkopt.scenes.mesh import bake_vertex_colors, load_mesh, mesh_from_trimesh, render_views, voxelize, write_glb
 
 # sRGB 128/255 decoded to linear by the IEC 61966-2-1 formula (reference value, not our code)
 LIN = {0: 0.0, 128: 0.21586050011389926, 255: 1.0}
@@ -49,8 +47,15 @@ def test_sphere_texels_and_normals(sphere):
     tx = vo.texels
     # texels = inside voxels with a 6-neighbour outside, in C order of (z, y, x)
     ins = np.pad(vo.inside, 1)
-    core = ins[1:-1, 1:-1, 1:-1] & ins[:-2, 1:-1, 1:-1] & ins[2:, 1:-1, 1:-1] & ins[1:-1, :-2, 1:-1] \
-        & ins[1:-1, 2:, 1:-1] & ins[1:-1, 1:-1, :-2] & ins[1:-1, 1:-1, 2:]
+    core = (
+        ins[1:-1, 1:-1, 1:-1]
+        & ins[:-2, 1:-1, 1:-1]
+        & ins[2:, 1:-1, 1:-1]
+        & ins[1:-1, :-2, 1:-1]
+        & ins[1:-1, 2:, 1:-1]
+        & ins[1:-1, 1:-1, :-2]
+        & ins[1:-1, 1:-1, 2:]
+    )
     np.testing.assert_array_equal(tx.voxel, np.argwhere(vo.inside & ~core))
     # Bound 0.5 deg: subdivision-4 icosphere edges span ~4 deg of arc, so flat face normals deviate up to
     # ~2.7 deg from radial and a one-voxel SDF gradient by several degrees; interpolated smooth normals at the
@@ -83,8 +88,13 @@ def _textured_cube(side=2.0, margin=0.15):
         ang = np.arctan2(quad[:, v_ax], quad[:, u_ax])
         quad = quad[np.argsort(ang)]
         cu, cv = fid % 3, fid // 3  # the cell of this face
-        uv = np.stack([(cu + margin + (1 - 2 * margin) * (quad[:, u_ax] > 0)) / 3,
-                       (cv + margin + (1 - 2 * margin) * (quad[:, v_ax] > 0)) / 2], 1)
+        uv = np.stack(
+            [
+                (cu + margin + (1 - 2 * margin) * (quad[:, u_ax] > 0)) / 3,
+                (cv + margin + (1 - 2 * margin) * (quad[:, v_ax] > 0)) / 2,
+            ],
+            1,
+        )
         base = len(verts) * 4
         tri = np.array([[0, 1, 2], [0, 2, 3]]) + base
         n = np.cross(quad[1] - quad[0], quad[2] - quad[0])
@@ -96,7 +106,7 @@ def _textured_cube(side=2.0, margin=0.15):
     img = np.zeros((32, 48, 3), np.uint8)
     for fid in range(6):
         cu, cv = fid % 3, fid // 3
-        img[32 - 16 * (cv + 1): 32 - 16 * cv, 16 * cu: 16 * (cu + 1)] = FACE_RGB[fid]  # v = 0 at the bottom
+        img[32 - 16 * (cv + 1) : 32 - 16 * cv, 16 * cu : 16 * (cu + 1)] = FACE_RGB[fid]  # v = 0 at the bottom
     mat = trimesh.visual.material.SimpleMaterial(image=Image.fromarray(img), diffuse=[255, 255, 255, 255])
     vis = trimesh.visual.TextureVisuals(uv=np.concatenate(uvs), material=mat)
     return trimesh.Trimesh(np.concatenate(verts), np.concatenate(faces), visual=vis, process=False)
@@ -188,8 +198,9 @@ def test_orientation_repaired(damage):
     faces = sph.faces.copy()
     sel = np.ones(len(faces), bool) if damage == "inside-out" else np.random.default_rng(1).random(len(faces)) < 0.2
     faces[sel] = faces[sel, ::-1]
-    vo = voxelize(mesh_from_trimesh(trimesh.Trimesh(sph.vertices, faces, process=False), scale=1.0, up="z"),
-                  voxel_mm=0.1)
+    vo = voxelize(
+        mesh_from_trimesh(trimesh.Trimesh(sph.vertices, faces, process=False), scale=1.0, up="z"), voxel_mm=0.1
+    )
     np.testing.assert_array_equal(vo.inside, ref.inside)
     np.testing.assert_allclose(vo.texels.normal, ref.texels.normal, atol=1e-6)
     assert np.all(np.sum(vo.texels.normal * (vo.closest_mm - [0, 0, 1]), 1) > 0)  # outward
@@ -203,7 +214,7 @@ def test_bake_glb_roundtrip_and_views(sphere, tmp_path):
     vc = np.asarray(baked.visual.vertex_colors)
     assert vc.shape == (len(mesh.solid_vertices), 4) and vc.dtype == np.uint8
     want = np.clip((mesh.solid_vertices - [0, 0, 2.0]) / 4 + 0.5, 0, 1)
-    got = (vc[:, :3] / 255.0)
+    got = vc[:, :3] / 255.0
     got = np.where(got <= 0.04045, got / 12.92, ((got + 0.055) / 1.055) ** 2.4)
     assert np.abs(got - want).max() < 0.03  # texels ~0.08 mm apart on a field of slope 0.25 / mm
     path = tmp_path / "out" / "pred.glb"

@@ -1,17 +1,17 @@
-"""Tests of ``inkopt optimize MESH`` (inkopt.scenes.mesh, inkopt.run, inkopt.cli.optimize): outputs, quality gain, shell,
-resume, one-line errors.
+"""Tests of ``inkopt optimize MESH`` (inkopt.scenes.mesh, inkopt.run, inkopt.cli.optimize): outputs, quality gain,
+shell, resume, one-line errors.
 
 Most tests use a 1 mm-radius sphere (26^3 grid, ~1400 texels, ~0.3 s per iteration) painted in three
 saturated colours (cyan top, magenta bottom, yellow on +x); the all-white start is ~75 ΔE76 off.
 Runs are deterministic: renders are bit-identical for any thread count and seeds derive from (seed, iteration).
 """
+
 import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 import trimesh
-
 from helpers import SPOT
 
 from inkopt import cli
@@ -24,12 +24,40 @@ RADIUS = 1.0
 _SPHERE = trimesh.creation.icosphere(subdivisions=4, radius=RADIUS)
 # the pipeline stands the mesh on z = 0 (centred in x, y): the sphere's centre in the object's frame
 CENTRE = np.array([0.0, 0.0, -_SPHERE.vertices[:, 2].min()])
-OUTPUTS = ("volume.npz", "scene.npz", "report.json", "checkpoint.npz", "loss.png", "prediction.glb", "target.glb",
-           "views.png")
-REPORT_KEYS = ("initial_delta_e76_mean", "delta_e76_mean", "delta_e76_p95", "delta_e2000_mean", "ssim", "loss",
-               "e1", "e2", "e3", "iterations", "spp", "seconds", "seconds_iterations", "seconds_per_iteration",
-               "time_split", "voxels", "inside_voxels", "free_voxels", "texels", "voxelize_seconds", "peak_rss_gb",
-               "shell_mm")
+OUTPUTS = (
+    "volume.npz",
+    "scene.npz",
+    "report.json",
+    "checkpoint.npz",
+    "loss.png",
+    "prediction.glb",
+    "target.glb",
+    "views.png",
+)
+REPORT_KEYS = (
+    "initial_delta_e76_mean",
+    "delta_e76_mean",
+    "delta_e76_p95",
+    "delta_e2000_mean",
+    "ssim",
+    "loss",
+    "e1",
+    "e2",
+    "e3",
+    "iterations",
+    "spp",
+    "seconds",
+    "seconds_iterations",
+    "seconds_per_iteration",
+    "time_split",
+    "voxels",
+    "inside_voxels",
+    "free_voxels",
+    "texels",
+    "voxelize_seconds",
+    "peak_rss_gb",
+    "shell_mm",
+)
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -53,8 +81,21 @@ def ball(tmp_path_factory) -> Path:
 
 
 def optimize(mesh, out, *extra, iterations=3, spp=2, eval_spp=8):
-    argv = ["optimize", str(mesh), "--out", str(out), "--iterations", str(iterations), "--spp", str(spp),
-            "--eval-spp", str(eval_spp), "--threads", "2", *extra]
+    argv = [
+        "optimize",
+        str(mesh),
+        "--out",
+        str(out),
+        "--iterations",
+        str(iterations),
+        "--spp",
+        str(spp),
+        "--eval-spp",
+        str(eval_spp),
+        "--threads",
+        "2",
+        *extra,
+    ]
     if "--height-mm" not in extra and "--scale" not in extra:
         argv += ["--scale", "1", "--up", "z"]
     return cli.main(argv)
@@ -113,8 +154,11 @@ def test_volume_and_scene_files(ball_run):
     # the optimiser puts each cap's ink under that cap: mean share of cyan (magenta, yellow) in the surface voxels
     # of the cyan (magenta, yellow) region is over 3x its share in the other regions (measured: 10-100x)
     p = scene["texel_closest_mm"] - CENTRE
-    regions = {"cyan": (p[:, 2] > 0.5 * RADIUS) & (p[:, 0] < 0.3 * RADIUS),
-               "magenta": (p[:, 2] < -0.5 * RADIUS) & (p[:, 0] < 0.3 * RADIUS), "yellow": p[:, 0] > 0.6 * RADIUS}
+    regions = {
+        "cyan": (p[:, 2] > 0.5 * RADIUS) & (p[:, 0] < 0.3 * RADIUS),
+        "magenta": (p[:, 2] < -0.5 * RADIUS) & (p[:, 0] < 0.3 * RADIUS),
+        "yellow": p[:, 0] > 0.6 * RADIUS,
+    }
     surf = vol.mixture[tuple(saved.voxel.T)]
     for ink, sel in regions.items():
         k = vol.inks.index(ink)
@@ -206,8 +250,7 @@ def test_bad_input(ball, tmp_path, capsys):
 @pytest.mark.skipif(not SPOT.is_file(), reason="Spot data set not present")
 def test_spot_20mm_quality(tmp_path):
     """Spot at 20 mm (7.8 M voxels, 96 k texels): 10 iterations, ~10 CPU-minutes (~5 min on 2 idle cores)."""
-    assert optimize(SPOT, tmp_path, "--height-mm", "20", "--forward-spp", "8", iterations=10, spp=2,
-                    eval_spp=64) == 0
+    assert optimize(SPOT, tmp_path, "--height-mm", "20", "--forward-spp", "8", iterations=10, spp=2, eval_spp=64) == 0
     rep = json.loads((tmp_path / "report.json").read_text())
     # Measured: 28.5 -> 22.6 (ratio 0.79). Spot is mostly white, so the all-white start is only ~28 off; the gain
     # is in the dark patches and the muzzle. Evaluation at 64 spp: at 16 spp the noise of the estimate inflates

@@ -1,5 +1,6 @@
 """Scene specs (inkopt.scenes.spec): frozen and picklable, one-line errors for bad inputs before any file is read,
 the JSON form round trip, and ``build`` giving the scene the scene modules build from the same inputs."""
+
 import pickle
 from dataclasses import FrozenInstanceError
 
@@ -31,8 +32,12 @@ def ball(tmp_path_factory):
 
 
 def test_frozen_picklable_and_json_round_trip(chart, ball):
-    specs = [SlabSpec(chart, (2, 4 / 3, 0.5)), SlabSpec(chart, (2, 4 / 3, 0.5), chart, 150, chart, 0.2),
-             MeshSpec(ball, height_mm=1, up="z"), MeshSpec(ball, scale=2, shell_mm=0.3, translucency="alpha")]
+    specs = [
+        SlabSpec(chart, (2, 4 / 3, 0.5)),
+        SlabSpec(chart, (2, 4 / 3, 0.5), chart, 150, chart, 0.2),
+        MeshSpec(ball, height_mm=1, up="z"),
+        MeshSpec(ball, scale=2, shell_mm=0.3, translucency="alpha"),
+    ]
     for spec in specs:
         assert pickle.loads(pickle.dumps(spec)) == spec
         assert spec_from_json(spec.to_json()) == spec
@@ -42,20 +47,23 @@ def test_frozen_picklable_and_json_round_trip(chart, ball):
     assert "scale" not in specs[2].to_json() and specs[3].to_json()["scale"] == 2.0
 
 
-@pytest.mark.parametrize("spec, message", [
-    (lambda c, b: MeshSpec(b), "exactly one of --height-mm H"),
-    (lambda c, b: MeshSpec(b, height_mm=1, scale=1), "exactly one of --height-mm H"),
-    (lambda c, b: MeshSpec(b, height_mm=-1), "--height-mm must be positive"),
-    (lambda c, b: MeshSpec(b, height_mm=1, shell_mm=0), "--shell-mm must be a positive thickness"),
-    (lambda c, b: MeshSpec(b, height_mm=1, up="x"), "--up must be one of"),
-    (lambda c, b: MeshSpec(b, height_mm=1, dpi=0), "--dpi must be positive"),
-    (lambda c, b: MeshSpec(str(b) + ".missing", height_mm=1), "does not exist"),
-    (lambda c, b: SlabSpec(c, (2, 1, -1)), "--size-mm sizes must be three positive numbers"),
-    (lambda c, b: SlabSpec(str(c) + ".missing", (2, 1, 1)), "picture"),
-    (lambda c, b: SlabSpec(c, (2, 1, 1), translucency_depth_mm=0.2), "needs --translucency"),
-    (lambda c, b: SlabSpec(c, (2, 1, 1), translucency=c, translucency_depth_mm=-1), "positive depth"),
-    (lambda c, b: SlabSpec(c, (2, 1, 1), translucency="alpha"), "translucency mask alpha does not exist"),
-])
+@pytest.mark.parametrize(
+    "spec, message",
+    [
+        (lambda c, b: MeshSpec(b), "exactly one of --height-mm H"),
+        (lambda c, b: MeshSpec(b, height_mm=1, scale=1), "exactly one of --height-mm H"),
+        (lambda c, b: MeshSpec(b, height_mm=-1), "--height-mm must be positive"),
+        (lambda c, b: MeshSpec(b, height_mm=1, shell_mm=0), "--shell-mm must be a positive thickness"),
+        (lambda c, b: MeshSpec(b, height_mm=1, up="x"), "--up must be one of"),
+        (lambda c, b: MeshSpec(b, height_mm=1, dpi=0), "--dpi must be positive"),
+        (lambda c, b: MeshSpec(str(b) + ".missing", height_mm=1), "does not exist"),
+        (lambda c, b: SlabSpec(c, (2, 1, -1)), "--size-mm sizes must be three positive numbers"),
+        (lambda c, b: SlabSpec(str(c) + ".missing", (2, 1, 1)), "picture"),
+        (lambda c, b: SlabSpec(c, (2, 1, 1), translucency_depth_mm=0.2), "needs --translucency"),
+        (lambda c, b: SlabSpec(c, (2, 1, 1), translucency=c, translucency_depth_mm=-1), "positive depth"),
+        (lambda c, b: SlabSpec(c, (2, 1, 1), translucency="alpha"), "translucency mask alpha does not exist"),
+    ],
+)
 def test_one_line_errors(chart, ball, spec, message):
     with pytest.raises(ValueError, match=message) as err:
         spec(chart, ball).validate()

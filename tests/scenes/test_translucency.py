@@ -1,6 +1,7 @@
 """Tests of translucency constraints (inkopt.scenes.translucency, model.Translucency): slab masks, mesh alpha and
 texture-space masks, depth, the white core, scene.npz round trip, one-line errors, the CLI, and that the
 constraint survives quantization."""
+
 import numpy as np
 import pytest
 import trimesh
@@ -32,15 +33,16 @@ def _mask(h=20, w=30, s=0.8):
 
 def test_slab_constraint_region_depth_and_record():
     vox = 25.4 / 300
-    sc = build_slab(_pic(), None, (30 * vox, 20 * vox, 10 * vox), INKS, translucency=_mask(),
-                    translucency_depth_mm=4 * vox)
+    sc = build_slab(
+        _pic(), None, (30 * vox, 20 * vox, 10 * vox), INKS, translucency=_mask(), translucency_depth_mm=4 * vox
+    )
     nz, ny, nx = sc.volume.shape
     assert (nz, ny, nx) == (10, 20, 30)
     fixed = np.asarray(sc.fixed_share)  # dense form of the compact FixedShares
     assert fixed.shape == (10, 20, 30, len(INKS))
-    np.testing.assert_allclose(fixed[6:, :, :15, T], 0.8)           # the region, 4 layers from the top
+    np.testing.assert_allclose(fixed[6:, :, :15, T], 0.8)  # the region, 4 layers from the top
     assert np.all(fixed[:6, ..., T] == 0) and np.all(fixed[:, :, 15:, T] == 0)
-    assert np.all(np.delete(fixed, T, -1) == 0)                     # the optimiser picks the rest
+    assert np.all(np.delete(fixed, T, -1) == 0)  # the optimiser picks the rest
     # scene.npz round trip rebuilds the same fixed shares (evaluation and baselines read them so)
     rec = SceneRecord.from_arrays(sc.record().arrays())
     np.testing.assert_array_equal(rec.fixed_share(INKS, (nz, ny, nx)), fixed)
@@ -63,12 +65,15 @@ def test_no_transparent_ink_is_one_line_error():
         build_slab(_pic(), None, (2.54, 1.693, 0.5), InkTable.parse("vero-cmykw"), translucency=_mask())
 
 
-@pytest.mark.parametrize("mask, needle", [
-    (_mask(10, 15), "must be the same size"),
-    (_mask() + 0.5, "shares must lie in 0..1"),
-    (-_mask(), "shares must lie in 0..1"),
-    (np.zeros((20, 30, 3)), "grey"),
-])
+@pytest.mark.parametrize(
+    "mask, needle",
+    [
+        (_mask(10, 15), "must be the same size"),
+        (_mask() + 0.5, "shares must lie in 0..1"),
+        (-_mask(), "shares must lie in 0..1"),
+        (np.zeros((20, 30, 3)), "grey"),
+    ],
+)
 def test_bad_mask_arrays(mask, needle):
     with pytest.raises(ValueError, match=needle):
         build_slab(_pic(), None, (2.54, 1.693, 0.5), INKS, translucency=mask)
@@ -100,11 +105,12 @@ def _alpha_cube(tmp_path, side=1.0):
     uv[~top] = [0.25, 0.5]
     img = np.zeros((8, 8, 4), np.uint8)
     img[..., :3] = 200
-    img[:, :4, 3] = 51   # u < 0.5: alpha 0.2
+    img[:, :4, 3] = 51  # u < 0.5: alpha 0.2
     img[:, 4:, 3] = 255  # u >= 0.5: opaque
     mat = trimesh.visual.material.SimpleMaterial(image=Image.fromarray(img, "RGBA"))
-    tm = trimesh.Trimesh(box.vertices, box.faces, visual=trimesh.visual.TextureVisuals(uv=uv, material=mat),
-                         process=False)
+    tm = trimesh.Trimesh(
+        box.vertices, box.faces, visual=trimesh.visual.TextureVisuals(uv=uv, material=mat), process=False
+    )
     path = tmp_path / "cube.glb"
     path.write_bytes(tm.export(file_type="glb"))
     return path
@@ -113,15 +119,16 @@ def _alpha_cube(tmp_path, side=1.0):
 def test_mesh_alpha_depth_and_core(tmp_path):
     path = _alpha_cube(tmp_path)
     vox = 25.4 / 300
-    sc = build_mesh_scene(path, INKS, scale=1.0, up="z", shell_mm=2 * vox, translucency="alpha",
-                          translucency_depth_mm=4 * vox)
+    sc = build_mesh_scene(
+        path, INKS, scale=1.0, up="z", shell_mm=2 * vox, translucency="alpha", translucency_depth_mm=4 * vox
+    )
     g = sc.translucency.grid()
     inside = sc.vox.inside
     assert np.all(g[~inside] == 0)
     tex = sc.vox.texels
     ts = sc.translucency.texel_share(tex)
     up = tex.normal[:, 2] > 0.9
-    assert np.all(ts[up] == 0)                               # the opaque top face is unconstrained
+    assert np.all(ts[up] == 0)  # the opaque top face is unconstrained
     side = np.abs(tex.normal[:, 2]) < 0.1
     assert np.median(ts[side]) == pytest.approx(0.8, abs=0.01)
     # the region reaches 4 voxels deep: the centre of the cube (~6 voxels deep) is not constrained
@@ -129,7 +136,7 @@ def test_mesh_alpha_depth_and_core(tmp_path):
     assert g[nz // 2, ny // 2, nx // 2] == 0
     fixed = np.asarray(sc.fixed_share)  # dense form of the compact FixedShares
     reached_core = (g > 0) & ~sc.free & inside
-    assert reached_core.any()                                # depth 4 > shell 2: the region reaches the core
+    assert reached_core.any()  # depth 4 > shell 2: the region reaches the core
     np.testing.assert_allclose(fixed[reached_core][:, T], g[reached_core])
     np.testing.assert_allclose(fixed[reached_core][:, W], 1 - g[reached_core])  # core: the rest stays white
     free_reg = (g > 0) & sc.free
@@ -163,24 +170,45 @@ def test_slab_cli_constraint_and_errors(tmp_path, capsys):
     pytest.importorskip("inkopt._core")
     chart = charts.save(charts.colour_chart(24, 16), tmp_path / "chart.png")
     Image.fromarray((_mask(16, 24) * 255).round().astype(np.uint8)).save(tmp_path / "mask.png")
-    base = ["slab", str(chart), "--size-mm", "2.032x1.355x0.5", "--iterations", "1", "--spp", "1",
-            "--forward-spp", "1", "--eval-spp", "2", "--threads", "2"]
-    for extra, needle in [(["--translucency", str(tmp_path / "mask.png")], "needs a transparent ink"),
-                          (["--translucency", str(tmp_path / "none.png"), "--inks", "vero-cmykwt"], "does not exist"),
-                          (["--translucency", str(chart), "--inks", "vero-cmykwt", "--translucency-depth-mm", "-1"],
-                           "positive depth")]:
+    base = [
+        "slab",
+        str(chart),
+        "--size-mm",
+        "2.032x1.355x0.5",
+        "--iterations",
+        "1",
+        "--spp",
+        "1",
+        "--forward-spp",
+        "1",
+        "--eval-spp",
+        "2",
+        "--threads",
+        "2",
+    ]
+    for extra, needle in [
+        (["--translucency", str(tmp_path / "mask.png")], "needs a transparent ink"),
+        (["--translucency", str(tmp_path / "none.png"), "--inks", "vero-cmykwt"], "does not exist"),
+        (["--translucency", str(chart), "--inks", "vero-cmykwt", "--translucency-depth-mm", "-1"], "positive depth"),
+    ]:
         out = tmp_path / "bad"
         assert cli.main(base + ["--out", str(out)] + extra) == 2
         err = capsys.readouterr().err.strip()
         assert err.startswith("inkopt: error:") and needle in err and "\n" not in err
         assert not out.exists()
     Image.fromarray(np.zeros((10, 10), np.uint8)).save(tmp_path / "small.png")
-    assert cli.main(base + ["--out", str(tmp_path / "bad"), "--inks", "vero-cmykwt", "--translucency",
-                            str(tmp_path / "small.png")]) == 2
+    assert (
+        cli.main(
+            base
+            + ["--out", str(tmp_path / "bad"), "--inks", "vero-cmykwt", "--translucency", str(tmp_path / "small.png")]
+        )
+        == 2
+    )
     assert "same size" in capsys.readouterr().err
     out = tmp_path / "run"
-    assert cli.main(base + ["--out", str(out), "--inks", "vero-cmykwt", "--translucency",
-                            str(tmp_path / "mask.png")]) == 0
+    assert (
+        cli.main(base + ["--out", str(out), "--inks", "vero-cmykwt", "--translucency", str(tmp_path / "mask.png")]) == 0
+    )
     rd = RunDir(out)
     vol = rd.load_volume()
     rec = rd.load_scene()
@@ -209,8 +237,9 @@ def test_constraint_holds_through_quantization():
     for s in (0.8, 0.35):
         m = np.zeros((24, 24), np.float32)
         m[4:20, 2:12] = s
-        sc = build_slab(_pic(24, 24), None, (24 * vox, 24 * vox, 8 * vox), INKS, translucency=m,
-                        translucency_depth_mm=5 * vox)
+        sc = build_slab(
+            _pic(24, 24), None, (24 * vox, 24 * vox, 8 * vox), INKS, translucency=m, translucency_depth_mm=5 * vox
+        )
         fixed = np.asarray(sc.fixed_share)  # dense form of the compact FixedShares
         free = rng.dirichlet(np.ones(len(INKS)), size=shape)
         mix = (fixed + (1 - fixed.sum(-1, keepdims=True)) * free).astype(np.float32)
@@ -224,7 +253,7 @@ def test_constraint_holds_through_quantization():
         ix = np.minimum(((np.arange(X) + 0.5) * q.voxel_mm[0] / vox).astype(int), shape[2] - 1)
         reg = sc.translucency.grid()[np.ix_(iz, iy, ix)] > 0
         n = int(reg.sum())
-        want = mix[..., T][np.ix_(iz, iy, ix)][reg].mean()   # the required share plus the free part's own
+        want = mix[..., T][np.ix_(iz, iy, ix)][reg].mean()  # the required share plus the free part's own
         got = float((lab[reg] == T).mean())
         tol = 4 * np.sqrt(want * (1 - want) / n)
         assert abs(got - want) < tol, (s, got, want, tol, n)

@@ -4,6 +4,7 @@ its arguments and calling the library. No library module imports from here.
 Errors in the input (bad files, shapes, values) end with one line ``inkopt: error: ...`` on stderr and exit
 status 2; nothing half-written is left behind (outputs are written atomically).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -19,8 +20,9 @@ __all__ = ["UsageError", "build_parser", "main"]
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="inkopt", description="Gradient-based appearance optimization for "
-                                                           "full-colour inkjet 3D prints.")
+    p = argparse.ArgumentParser(
+        prog="inkopt", description="Gradient-based appearance optimization for full-colour inkjet 3D prints."
+    )
     p.add_argument("--version", action="version", version=f"inkopt {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     for name in SUBCOMMANDS:

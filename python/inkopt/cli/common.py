@@ -1,5 +1,6 @@
 """What the subcommands share: the usage error, the display-lighting options, the optimiser options of ``slab``
 and ``optimize``, the scene specs of their inputs (``scenes.spec``) and their one-line summaries."""
+
 from __future__ import annotations
 
 import sys
@@ -25,12 +26,21 @@ def parse_gamma(text: str) -> tuple[float, float, float]:
 
 def add_lighting_args(p, what: str = "render") -> None:
     """``--lighting uniform|FILE`` and ``--lighting-rotate DEG`` (``inkopt.lighting``)."""
-    p.add_argument("--lighting", default="uniform", metavar="uniform|FILE",
-                   help=f"display lighting to {what} under: uniform (radiance 1 from every direction, the default) "
-                        "or an equirectangular environment map of linear radiance (.hdr, .exr, or .npy (H, 2H, 3)); "
-                        "row 0 looks up (+z), column 0 starts at +x, longitude grows towards +y")
-    p.add_argument("--lighting-rotate", type=float, default=0.0, metavar="DEG",
-                   help="turn the map about z by DEG degrees, from +x towards +y (default 0)")
+    p.add_argument(
+        "--lighting",
+        default="uniform",
+        metavar="uniform|FILE",
+        help=f"display lighting to {what} under: uniform (radiance 1 from every direction, the default) "
+        "or an equirectangular environment map of linear radiance (.hdr, .exr, or .npy (H, 2H, 3)); "
+        "row 0 looks up (+z), column 0 starts at +x, longitude grows towards +y",
+    )
+    p.add_argument(
+        "--lighting-rotate",
+        type=float,
+        default=0.0,
+        metavar="DEG",
+        help="turn the map about z by DEG degrees, from +x towards +y (default 0)",
+    )
 
 
 def add_mesh_args(p, what: str = "") -> None:
@@ -42,9 +52,13 @@ def add_mesh_args(p, what: str = "") -> None:
     p.add_argument("--height-mm", type=float, metavar="H", help=f"{what}scale the object to this height (mm)")
     p.add_argument("--scale", type=float, metavar="S", help=f"{what}or scale it by S mm per model unit")
     p.add_argument("--up", choices=UP_AXES, default="y", help=f"{what}the file's up axis (default y, as OBJ/glTF)")
-    p.add_argument("--shell-mm", type=float, metavar="D",
-                   help=f"{what}optimise only voxels less than D mm below the surface; deeper ones are printed white "
-                        "(default: every voxel of the object is optimised)")
+    p.add_argument(
+        "--shell-mm",
+        type=float,
+        metavar="D",
+        help=f"{what}optimise only voxels less than D mm below the surface; deeper ones are printed white "
+        "(default: every voxel of the object is optimised)",
+    )
     p.add_argument("--dpi", type=float, default=OPT_DPI, help=f"optimisation grid resolution (default {OPT_DPI:g})")
 
 
@@ -52,22 +66,35 @@ def add_translucency_args(p, mesh: bool = False, both: bool = False) -> None:
     """``--translucency`` and ``--translucency-depth-mm`` (``inkopt.scenes.translucency``) of a slab, a mesh or
     (``both``) either."""
     if both:
-        p.add_argument("--translucency", metavar="MASK|alpha",
-                       help="translucent regions: a grey mask image (slab: of the picture's size; mesh: in texture "
-                            "space; grey level 0..1 = required share of transparent ink) or, for a mesh, 'alpha' "
-                            "(share = 1 - the texture's alpha); needs a transparent ink in --always")
+        p.add_argument(
+            "--translucency",
+            metavar="MASK|alpha",
+            help="translucent regions: a grey mask image (slab: of the picture's size; mesh: in texture "
+            "space; grey level 0..1 = required share of transparent ink) or, for a mesh, 'alpha' "
+            "(share = 1 - the texture's alpha); needs a transparent ink in --always",
+        )
     elif mesh:
-        p.add_argument("--translucency", metavar="alpha|MASK",
-                       help="translucent regions: 'alpha' (share of transparent ink = 1 - the texture's alpha) or a "
-                            "grey mask image in texture space (grey level 0..1 = share); needs a transparent ink")
+        p.add_argument(
+            "--translucency",
+            metavar="alpha|MASK",
+            help="translucent regions: 'alpha' (share of transparent ink = 1 - the texture's alpha) or a "
+            "grey mask image in texture space (grey level 0..1 = share); needs a transparent ink",
+        )
     else:
-        p.add_argument("--translucency", metavar="MASK",
-                       help="translucent regions: a grey mask image of the top picture's size (grey level 0..1 = "
-                            "required share of transparent ink under that pixel); needs a transparent ink "
-                            "(e.g. --inks vero-cmykwt)")
-    p.add_argument("--translucency-depth-mm", type=float, metavar="D",
-                   help="how deep below the surface the translucent regions reach (default: through the whole "
-                        + ("object)" if mesh or both else "slab)"))
+        p.add_argument(
+            "--translucency",
+            metavar="MASK",
+            help="translucent regions: a grey mask image of the top picture's size (grey level 0..1 = "
+            "required share of transparent ink under that pixel); needs a transparent ink "
+            "(e.g. --inks vero-cmykwt)",
+        )
+    p.add_argument(
+        "--translucency-depth-mm",
+        type=float,
+        metavar="D",
+        help="how deep below the surface the translucent regions reach (default: through the whole "
+        + ("object)" if mesh or both else "slab)"),
+    )
 
 
 def lighting_from_args(args):
@@ -81,50 +108,97 @@ def add_optimizer_args(p) -> None:
     from ..optim import SCENE_DEFAULTS, OptimizeConfig
 
     d, slab, mesh = OptimizeConfig(), SCENE_DEFAULTS["slab"], SCENE_DEFAULTS["mesh"]
-    p.add_argument("--inks", default="vero-cmykw",
-                   help="ink set: a preset (vero-cmykw, vero-cmykw+orange, vero-cmykwt), a comma list of ink names, "
-                        "or a JSON/TOML file of inks (default vero-cmykw)")
+    p.add_argument(
+        "--inks",
+        default="vero-cmykw",
+        help="ink set: a preset (vero-cmykw, vero-cmykw+orange, vero-cmykwt), a comma list of ink names, "
+        "or a JSON/TOML file of inks (default vero-cmykw)",
+    )
     p.add_argument("--iterations", type=int, default=d.iterations, help=f"(default {d.iterations})")
     p.add_argument("--spp", type=int, default=d.spp, help=f"samples per texel of the gradient pass (default {d.spp})")
-    p.add_argument("--forward-spp", type=int, default=d.forward_spp,
-                   help="samples per texel of the forward render the loss is evaluated at "
-                        f"(default {d.forward_spp}; 0: no forward renders after the first iteration, the loss is "
-                        "taken on the average of the gradient passes' own estimates: cheaper iterations, each worth "
-                        "less)")
-    p.add_argument("--gamma", default=",".join(f"{g:g}" for g in d.gamma),
-                   help="loss weights g1,g2,g3 of colour (dE76^2), SSIM and edge terms (default %(default)s)")
+    p.add_argument(
+        "--forward-spp",
+        type=int,
+        default=d.forward_spp,
+        help="samples per texel of the forward render the loss is evaluated at "
+        f"(default {d.forward_spp}; 0: no forward renders after the first iteration, the loss is "
+        "taken on the average of the gradient passes' own estimates: cheaper iterations, each worth "
+        "less)",
+    )
+    p.add_argument(
+        "--gamma",
+        default=",".join(f"{g:g}" for g in d.gamma),
+        help="loss weights g1,g2,g3 of colour (dE76^2), SSIM and edge terms (default %(default)s)",
+    )
     p.add_argument("--lr", type=float, help="step size (default: 2 for eg, 0.5 for adagrad, 0.1 for adam)")
-    p.add_argument("--smooth", type=float, metavar="VOXELS",
-                   help="width in voxels of the step's spatial smoothing under texels where the target is flat: "
-                        f"damps voxel-to-voxel mottle (default {slab['smooth']:g} on slabs, {mesh['smooth']:g} on "
-                        "meshes; 0: off)")
-    p.add_argument("--smooth-edge", type=float, default=d.smooth_edge, metavar="DE76",
-                   help="target-colour difference at which the smoothing between two voxels fades to 1/e, so that "
-                        f"it stops at the target's edges (default {d.smooth_edge:g}; 0: smooth everywhere, across "
-                        "edges too)")
-    p.add_argument("--adjoint-ema", type=float, metavar="DECAY",
-                   help="per-iteration decay of the running average of the prediction the loss is evaluated at "
-                        f"(default: {slab['adjoint_ema']:g} on slabs, {mesh['adjoint_ema']:g} on meshes, where a "
-                        "longer average lags enough to make the run oscillate; 0: this iteration's render only)")
-    p.add_argument("--decay", type=float, default=d.decay, metavar="FRACTION",
-                   help="step decay: over this last fraction of the iterations the step size halves three times, so "
-                        f"that the mixtures settle (default {d.decay:g}; 0: a constant step)")
-    p.add_argument("--optimizer", choices=("eg", "adam", "adagrad"), default=d.optimizer,
-                   help="eg: exponentiated gradient with momentum (default); adagrad: the paper's; adam")
-    p.add_argument("--param", choices=("softmax", "sigmoid"), default=d.param,
-                   help="variables -> mixture map (sigmoid = the paper's sigmoid + normalisation)")
-    p.add_argument("--init", default=d.init,
-                   help="white (97 %% white), random, surface or extrusion (start from that print-shop baseline of "
-                        "`inkopt evaluate`; builds or reuses its cached colour table), or a volume .npz (from an "
-                        "optimised run pass --lr 1: the step scale is set by the first gradients, ~2x smaller "
-                        "there)")
-    p.add_argument("--gradient", choices=("replay", "li1"), default=d.grad_method,
-                   help="unbiased path replay (default) or the paper's biased L_i = 1 approximation")
+    p.add_argument(
+        "--smooth",
+        type=float,
+        metavar="VOXELS",
+        help="width in voxels of the step's spatial smoothing under texels where the target is flat: "
+        f"damps voxel-to-voxel mottle (default {slab['smooth']:g} on slabs, {mesh['smooth']:g} on "
+        "meshes; 0: off)",
+    )
+    p.add_argument(
+        "--smooth-edge",
+        type=float,
+        default=d.smooth_edge,
+        metavar="DE76",
+        help="target-colour difference at which the smoothing between two voxels fades to 1/e, so that "
+        f"it stops at the target's edges (default {d.smooth_edge:g}; 0: smooth everywhere, across "
+        "edges too)",
+    )
+    p.add_argument(
+        "--adjoint-ema",
+        type=float,
+        metavar="DECAY",
+        help="per-iteration decay of the running average of the prediction the loss is evaluated at "
+        f"(default: {slab['adjoint_ema']:g} on slabs, {mesh['adjoint_ema']:g} on meshes, where a "
+        "longer average lags enough to make the run oscillate; 0: this iteration's render only)",
+    )
+    p.add_argument(
+        "--decay",
+        type=float,
+        default=d.decay,
+        metavar="FRACTION",
+        help="step decay: over this last fraction of the iterations the step size halves three times, so "
+        f"that the mixtures settle (default {d.decay:g}; 0: a constant step)",
+    )
+    p.add_argument(
+        "--optimizer",
+        choices=("eg", "adam", "adagrad"),
+        default=d.optimizer,
+        help="eg: exponentiated gradient with momentum (default); adagrad: the paper's; adam",
+    )
+    p.add_argument(
+        "--param",
+        choices=("softmax", "sigmoid"),
+        default=d.param,
+        help="variables -> mixture map (sigmoid = the paper's sigmoid + normalisation)",
+    )
+    p.add_argument(
+        "--init",
+        default=d.init,
+        help="white (97 %% white), random, surface or extrusion (start from that print-shop baseline of "
+        "`inkopt evaluate`; builds or reuses its cached colour table), or a volume .npz (from an "
+        "optimised run pass --lr 1: the step scale is set by the first gradients, ~2x smaller "
+        "there)",
+    )
+    p.add_argument(
+        "--gradient",
+        choices=("replay", "li1"),
+        default=d.grad_method,
+        help="unbiased path replay (default) or the paper's biased L_i = 1 approximation",
+    )
     p.add_argument("--seed", type=int, default=d.seed)
     p.add_argument("--checkpoint-every", type=int, default=d.checkpoint_every)
-    p.add_argument("--eval-spp", type=int, help="spp of the final evaluation renders, used exactly (default: "
-                   "adaptive, until the Monte Carlo noise adds less than 0.5 to the mean ΔE76 and SSIM's and "
-                   "the mottle's noise correction is accurate)")
+    p.add_argument(
+        "--eval-spp",
+        type=int,
+        help="spp of the final evaluation renders, used exactly (default: "
+        "adaptive, until the Monte Carlo noise adds less than 0.5 to the mean ΔE76 and SSIM's and "
+        "the mottle's noise correction is accurate)",
+    )
     p.add_argument("--threads", type=int, help="worker threads (default: all cores)")
     p.add_argument("--resume", action="store_true", help="continue from DIR/checkpoint.npz if present")
     add_lighting_args(p, "optimise and evaluate")
@@ -132,10 +206,13 @@ def add_optimizer_args(p) -> None:
 
 def add_ray_arg(p) -> None:
     """``--ray auto|ADDRESS`` of ``slab`` and ``optimize`` (``inkopt.distributed``)."""
-    p.add_argument("--ray", metavar="auto|ADDRESS",
-                   help="render texel shards on Ray workers, one per node, with results identical to a "
-                        "single-machine run: 'auto' starts a local instance, ADDRESS joins a cluster (pip install "
-                        "'inkopt[ray]')")
+    p.add_argument(
+        "--ray",
+        metavar="auto|ADDRESS",
+        help="render texel shards on Ray workers, one per node, with results identical to a "
+        "single-machine run: 'auto' starts a local instance, ADDRESS joins a cluster (pip install "
+        "'inkopt[ray]')",
+    )
 
 
 def ray_from_args(args) -> str | None:
@@ -150,12 +227,23 @@ def ray_from_args(args) -> str | None:
 def config_from_args(args):
     from ..optim import OptimizeConfig
 
-    cfg = OptimizeConfig(iterations=args.iterations, spp=args.spp, forward_spp=args.forward_spp,
-                         gamma=parse_gamma(args.gamma), lr=args.lr,
-                         optimizer=args.optimizer, param=args.param, init=args.init, seed=args.seed,
-                         grad_method=args.gradient, checkpoint_every=args.checkpoint_every, smooth=args.smooth,
-                         smooth_edge=args.smooth_edge, decay=args.decay,
-                         adjoint_ema=args.adjoint_ema)
+    cfg = OptimizeConfig(
+        iterations=args.iterations,
+        spp=args.spp,
+        forward_spp=args.forward_spp,
+        gamma=parse_gamma(args.gamma),
+        lr=args.lr,
+        optimizer=args.optimizer,
+        param=args.param,
+        init=args.init,
+        seed=args.seed,
+        grad_method=args.gradient,
+        checkpoint_every=args.checkpoint_every,
+        smooth=args.smooth,
+        smooth_edge=args.smooth_edge,
+        decay=args.decay,
+        adjoint_ema=args.adjoint_ema,
+    )
     cfg.validate()
     return cfg
 
@@ -165,8 +253,14 @@ def slab_spec_from_args(args, top: str):
     from ..scenes.spec import SlabSpec
     from ..units import OPT_DPI, parse_size_mm
 
-    return SlabSpec(top, parse_size_mm(args.size_mm), args.bottom, getattr(args, "dpi", OPT_DPI),
-                    args.translucency, args.translucency_depth_mm)
+    return SlabSpec(
+        top,
+        parse_size_mm(args.size_mm),
+        args.bottom,
+        getattr(args, "dpi", OPT_DPI),
+        args.translucency,
+        args.translucency_depth_mm,
+    )
 
 
 def mesh_spec_from_args(args, path: str):
@@ -174,8 +268,16 @@ def mesh_spec_from_args(args, path: str):
     ``--dpi``, ``--up``, translucency)."""
     from ..scenes.spec import MeshSpec
 
-    return MeshSpec(path, args.height_mm, args.scale, args.shell_mm, args.dpi, args.up, args.translucency,
-                    args.translucency_depth_mm)
+    return MeshSpec(
+        path,
+        args.height_mm,
+        args.scale,
+        args.shell_mm,
+        args.dpi,
+        args.up,
+        args.translucency,
+        args.translucency_depth_mm,
+    )
 
 
 def run_from_args(args, spec):
@@ -190,13 +292,25 @@ def run_from_args(args, spec):
     ray = ray_from_args(args)
     lighting = lighting_from_args(args)
     scene = spec.build(inks)
-    return run_optimisation(scene, args.out, cfg, resume=args.resume, eval_spp=args.eval_spp, threads=args.threads,
-                            progress=sys.stderr.isatty(), lighting=lighting, ray=ray, log=stderr_log)
+    return run_optimisation(
+        scene,
+        args.out,
+        cfg,
+        resume=args.resume,
+        eval_spp=args.eval_spp,
+        threads=args.threads,
+        progress=sys.stderr.isatty(),
+        lighting=lighting,
+        ray=ray,
+        log=stderr_log,
+    )
 
 
 def print_run_summary(rep, init: str, extra: str = "") -> None:
     """The closing line of ``slab`` and ``optimize`` from their ``Report``."""
     m = rep.metrics
-    print(f"mean ΔE76 {rep.initial_delta_e76_mean:.2f} ({init} start) -> {m.delta_e76_mean:.2f} "
-          f"(p95 {m.delta_e76_p95:.2f}, ΔE2000 {m.delta_e2000_mean:.2f}, SSIM {m.ssim:.3f}) "
-          f"after {rep.iterations} iterations in {rep.seconds:.0f} s{extra}")
+    print(
+        f"mean ΔE76 {rep.initial_delta_e76_mean:.2f} ({init} start) -> {m.delta_e76_mean:.2f} "
+        f"(p95 {m.delta_e76_p95:.2f}, ΔE2000 {m.delta_e2000_mean:.2f}, SSIM {m.ssim:.3f}) "
+        f"after {rep.iterations} iterations in {rep.seconds:.0f} s{extra}"
+    )

@@ -2,6 +2,7 @@
 naive baselines against the target; writes DIR/evaluation.json and DIR/evaluation_<face>.png
 (``inkopt.evaluation.evaluate``).
 """
+
 from __future__ import annotations
 
 import json
@@ -18,11 +19,20 @@ def _evaluate_cmd(args) -> int:
     if args.method is not None:
         check_quantization(args.method)
     log = None if args.json else (lambda msg: print(msg, file=sys.stderr, flush=True))
-    ev = evaluate_run(args.dir, spp=args.spp, seed=args.seed, method=args.method, threads=args.threads,
-                      baselines=not args.no_baselines, refine=not args.nearest, patch_mm=args.patch_mm,
-                      lighting=lighting_from_args(args), log=log,
-                      translucency=False if args.no_translucency else None,
-                      translucency_compare=args.translucency_compare)
+    ev = evaluate_run(
+        args.dir,
+        spp=args.spp,
+        seed=args.seed,
+        method=args.method,
+        threads=args.threads,
+        baselines=not args.no_baselines,
+        refine=not args.nearest,
+        patch_mm=args.patch_mm,
+        lighting=lighting_from_args(args),
+        log=log,
+        translucency=False if args.no_translucency else None,
+        translucency_compare=args.translucency_compare,
+    )
     if args.json:
         print(json.dumps(ev.to_json()))
     else:
@@ -31,34 +41,56 @@ def _evaluate_cmd(args) -> int:
         how = "adaptive, " if ev.spp_adaptive else ""
         rotate = ev.lighting.get("lighting_rotate_deg")
         print(f"lighting: {ev.lighting['lighting']}" + (f", turned {rotate:g} degrees" if rotate else ""))
-        print(f"{ev.spp} spp per scene texel ({how}continuous result), {ev.seconds:.0f} s; wrote "
-              f"{args.dir}/evaluation.json" + "".join(f", {p}" for p in ev.pictures or []))
+        print(
+            f"{ev.spp} spp per scene texel ({how}continuous result), {ev.seconds:.0f} s; wrote "
+            f"{args.dir}/evaluation.json" + "".join(f", {p}" for p in ev.pictures or [])
+        )
     return 0
 
 
 def register_cli(sub) -> None:
-    p = sub.add_parser("evaluate", help="colour error and SSIM of a run, its printed version and the baselines",
-                       description="Render a run's continuous and quantized results and two naive baselines "
-                                   "(surface colouring, extrusion) and compare them with the target.")
+    p = sub.add_parser(
+        "evaluate",
+        help="colour error and SSIM of a run, its printed version and the baselines",
+        description="Render a run's continuous and quantized results and two naive baselines "
+        "(surface colouring, extrusion) and compare them with the target.",
+    )
     p.add_argument("dir", help="run directory holding volume.npz and scene.npz")
-    p.add_argument("--spp", type=int, default=DEFAULT_SPP,
-                   help=f"samples per scene texel, used exactly; printer texels share them (default: adaptive, "
-                        f"a {PILOT_SPP}-spp pilot and then as many as make the Monte Carlo noise add at most "
-                        f"{TARGET_NOISE_DE76:g} to each result's mean dE76 and keep SSIM's and the mottle's noise "
-                        f"correction accurate, up to {MAX_SPP})")
+    p.add_argument(
+        "--spp",
+        type=int,
+        default=DEFAULT_SPP,
+        help=f"samples per scene texel, used exactly; printer texels share them (default: adaptive, "
+        f"a {PILOT_SPP}-spp pilot and then as many as make the Monte Carlo noise add at most "
+        f"{TARGET_NOISE_DE76:g} to each result's mean dE76 and keep SSIM's and the mottle's noise "
+        f"correction accurate, up to {MAX_SPP})",
+    )
     p.add_argument("--seed", type=int, default=0, help="render seed (default 0)")
     p.add_argument("--method", help="quantization method (default: that of DIR/quantized.npz, else blue-noise)")
     p.add_argument("--threads", type=int, help="render threads (default: all cores)")
-    p.add_argument("--patch-mm", type=float, default=DEFAULT_PATCH_MM,
-                   help=f"thickness of the baselines' colour-chart patches (default {DEFAULT_PATCH_MM} mm)")
-    p.add_argument("--nearest", action="store_true",
-                   help="baselines: nearest colour-table entry instead of the blend of the 8 nearest")
+    p.add_argument(
+        "--patch-mm",
+        type=float,
+        default=DEFAULT_PATCH_MM,
+        help=f"thickness of the baselines' colour-chart patches (default {DEFAULT_PATCH_MM} mm)",
+    )
+    p.add_argument(
+        "--nearest",
+        action="store_true",
+        help="baselines: nearest colour-table entry instead of the blend of the 8 nearest",
+    )
     p.add_argument("--no-baselines", action="store_true", help="skip the baselines")
     p.add_argument("--json", action="store_true", help="print the evaluation as one JSON object, no progress")
-    p.add_argument("--translucency-compare", metavar="DIR2",
-                   help="also measure the translucency of DIR2 (an unconstrained run of the same target) on DIR's "
-                        "translucent regions, beside DIR's own")
-    p.add_argument("--no-translucency", action="store_true",
-                   help="skip the translucency figures (transmittance, lateral spread) of a constrained run")
+    p.add_argument(
+        "--translucency-compare",
+        metavar="DIR2",
+        help="also measure the translucency of DIR2 (an unconstrained run of the same target) on DIR's "
+        "translucent regions, beside DIR's own",
+    )
+    p.add_argument(
+        "--no-translucency",
+        action="store_true",
+        help="skip the translucency figures (transmittance, lateral spread) of a constrained run",
+    )
     add_lighting_args(p, "evaluate")
     p.set_defaults(func=_evaluate_cmd)

@@ -5,6 +5,7 @@
 than ``--printer`` holds is refused in one line before anything is written.
 ``--format 3mf`` is refused: lib3mf 2.5.0 cannot write volumetric composites (see ``inkopt.printing.export``).
 """
+
 from __future__ import annotations
 
 import json
@@ -17,8 +18,10 @@ from ..printing.profiles import PRINTER_PROFILES, printer_profile, resolution_mi
 from ..rundir import RunDir
 
 FORMATS = ("png-slices", "gcvf", "3mf")
-NO_3MF = ("3mf export is not available: lib3mf 2.5.0 cannot write volumetric composites "
-          "(VolumeDataComposite is not implemented); use --format png-slices or gcvf")
+NO_3MF = (
+    "3mf export is not available: lib3mf 2.5.0 cannot write volumetric composites "
+    "(VolumeDataComposite is not implemented); use --format png-slices or gcvf"
+)
 DEFAULT_PRINTER = {"png-slices": "generic", "gcvf": "j750"}
 
 
@@ -59,26 +62,39 @@ def _export_cmd(args) -> int:
     mismatch = resolution_mismatch(prof, q.voxel_mm)
     if mismatch:
         print(f"inkopt: warning: {mismatch}", file=sys.stderr)
-    used = ", ".join(f"{m['ink']} {'#%02X%02X%02X' % tuple(m['color'][:3])}"
-                     + (f" = {m['material']}" if m["material"] else "") for m in mats)
-    print(f"{man['layer_count']} slices of {man['image_size']['width']} x {man['image_size']['height']} px "
-          f"({man['dpi']['x']:.0f} x {man['dpi']['y']:.0f} DPI, {layers_um:.1f} um layers), "
-          f"{len(mats)} materials: {used}")
+    used = ", ".join(
+        f"{m['ink']} {'#{:02X}{:02X}{:02X}'.format(*m['color'][:3])}" + (f" = {m['material']}" if m["material"] else "")
+        for m in mats
+    )
+    print(
+        f"{man['layer_count']} slices of {man['image_size']['width']} x {man['image_size']['height']} px "
+        f"({man['dpi']['x']:.0f} x {man['dpi']['y']:.0f} DPI, {layers_um:.1f} um layers), "
+        f"{len(mats)} materials: {used}"
+    )
     print(f"wrote {out}")
     return 0
 
 
 def register_cli(sub) -> None:
-    p = sub.add_parser("export", help="printer input from DIR/quantized.npz (PNG slices or a GCVF package)",
-                       description="Write printer input from a run's quantized volume: one RGBA PNG per layer "
-                                   "(one colour per material) plus manifest.json, or a GrabCAD Voxel Print "
-                                   "package (.gcvf).")
+    p = sub.add_parser(
+        "export",
+        help="printer input from DIR/quantized.npz (PNG slices or a GCVF package)",
+        description="Write printer input from a run's quantized volume: one RGBA PNG per layer "
+        "(one colour per material) plus manifest.json, or a GrabCAD Voxel Print "
+        "package (.gcvf).",
+    )
     p.add_argument("dir", help="run directory holding quantized.npz")
-    p.add_argument("--format", default="png-slices",
-                   help="png-slices (default) or gcvf (GrabCAD Voxel Print zip); 3mf is not available")
+    p.add_argument(
+        "--format",
+        default="png-slices",
+        help="png-slices (default) or gcvf (GrabCAD Voxel Print zip); 3mf is not available",
+    )
     p.add_argument("--out", help="output folder (default DIR/slices) or .gcvf file (default DIR/slices.gcvf)")
-    p.add_argument("--printer", default=None,
-                   help=f"printer profile: material slots per job and material names: {', '.join(PRINTER_PROFILES)} "
-                        "(default generic = no limit; j750 for gcvf)")
+    p.add_argument(
+        "--printer",
+        default=None,
+        help=f"printer profile: material slots per job and material names: {', '.join(PRINTER_PROFILES)} "
+        "(default generic = no limit; j750 for gcvf)",
+    )
     p.add_argument("--palette", help='ink colours as JSON, inline or a file: {"cyan": "#00FFFF", ...}')
     p.set_defaults(func=_export_cmd)

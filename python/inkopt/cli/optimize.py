@@ -1,9 +1,17 @@
 """``inkopt optimize MESH``: optimise the inks of a textured 3D object (a ``scenes.spec.MeshSpec`` run by
 ``inkopt.run``)."""
+
 from __future__ import annotations
 
-from .common import (add_mesh_args, add_optimizer_args, add_ray_arg, add_translucency_args, mesh_spec_from_args,
-                     print_run_summary, run_from_args)
+from .common import (
+    add_mesh_args,
+    add_optimizer_args,
+    add_ray_arg,
+    add_translucency_args,
+    mesh_spec_from_args,
+    print_run_summary,
+    run_from_args,
+)
 
 
 def _optimize(args) -> int:
@@ -14,9 +22,12 @@ def _optimize(args) -> int:
 
 
 def register_cli(sub) -> None:
-    p = sub.add_parser("optimize", help="optimise the inks of a textured 3D object (OBJ, glTF/GLB, PLY)",
-                       description="Voxelize a textured mesh and optimise the ink mixture of every voxel so that "
-                                   "the printed object's surface matches its texture.")
+    p = sub.add_parser(
+        "optimize",
+        help="optimise the inks of a textured 3D object (OBJ, glTF/GLB, PLY)",
+        description="Voxelize a textured mesh and optimise the ink mixture of every voxel so that "
+        "the printed object's surface matches its texture.",
+    )
     p.add_argument("mesh", metavar="MESH", help="textured mesh: OBJ (+MTL +texture), glTF/GLB or PLY; must be solid")
     p.add_argument("--out", required=True, metavar="DIR", help="run directory (see docs/run-dir.md)")
     add_mesh_args(p)

@@ -1,6 +1,7 @@
 """``inkopt quantize DIR``: the run's continuous mixture (DIR/volume.npz) -> one ink per printer voxel
 (DIR/quantized.npz + DIR/quantized_labels.npy, a labels volume at printer resolution; docs/run-dir.md). The stage
 is ``inkopt.printing.stream.quantize_run`` (layer by layer; ``inkopt.printing.quantize``)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -27,14 +28,19 @@ def _quantize_cmd(args) -> int:
 
 
 def register_cli(sub) -> None:
-    p = sub.add_parser("quantize",
-                       help="one ink per printer voxel: DIR/volume.npz -> DIR/quantized.npz (+ quantized_labels.npy)",
-                       description="Quantize a run's optimised mixture to one ink per printer voxel (600 x 300 "
-                                   "DPI, 27 um layers by default) and write DIR/quantized.npz.")
+    p = sub.add_parser(
+        "quantize",
+        help="one ink per printer voxel: DIR/volume.npz -> DIR/quantized.npz (+ quantized_labels.npy)",
+        description="Quantize a run's optimised mixture to one ink per printer voxel (600 x 300 "
+        "DPI, 27 um layers by default) and write DIR/quantized.npz.",
+    )
     p.add_argument("dir", help="run directory holding volume.npz")
-    p.add_argument("--method", default="blue-noise",
-                   help="blue-noise (ordered dithering, default), random (the paper's independent draws) or "
-                        "error-diffusion (deterministic 3D vector error diffusion)")
+    p.add_argument(
+        "--method",
+        default="blue-noise",
+        help="blue-noise (ordered dithering, default), random (the paper's independent draws) or "
+        "error-diffusion (deterministic 3D vector error diffusion)",
+    )
     p.add_argument("--dpi", help="printer resolution XxY or XxYxZ dots per inch (default 600x300)")
     p.add_argument("--layer-um", type=float, help=f"layer thickness in um (default {DEFAULT_LAYER_UM:g})")
     p.add_argument("--seed", type=int, default=0, help="random draws / blue-noise tile offset (default 0)")

@@ -10,6 +10,7 @@ and scale the baseline mixture into the remaining share.
 
 Conventions (docs/conventions.md): arrays (z, y, x[, ink]); colours linear RGB; CIELAB via ``inkopt.color``.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -42,8 +43,9 @@ def _check(volume: Volume, table: ColourTable):
     if volume.inks is None:  # only the geometry and the ink table are used, not the medium
         raise ValueError(f"baselines need a volume with an ink table, got a {volume.form} volume")
     if tuple(table.ink_names) != tuple(volume.inks.names):
-        raise ValueError(f"colour table inks {list(table.ink_names)} differ from the volume's "
-                         f"{list(volume.inks.names)}")
+        raise ValueError(
+            f"colour table inks {list(table.ink_names)} differ from the volume's {list(volume.inks.names)}"
+        )
 
 
 def _finish(volume: Volume, fixed_share, out: np.ndarray) -> np.ndarray:
@@ -59,13 +61,20 @@ def _finish(volume: Volume, fixed_share, out: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(out, np.float32)
 
 
-def surface_baseline(volume: Volume, texels: Texels, target_rgb, fixed_share=None,
-                     table: ColourTable | None = None, refine: bool = True, progress: bool = False) -> np.ndarray:
+def surface_baseline(
+    volume: Volume,
+    texels: Texels,
+    target_rgb,
+    fixed_share=None,
+    table: ColourTable | None = None,
+    refine: bool = True,
+    progress: bool = False,
+) -> np.ndarray:
     """Mixture (z, y, x, N) float32: each scene texel's mapped mixture in its voxel, white elsewhere inside.
 
-    volume: the run's volume (grid, inks, g, ior; mixture or labels: its medium is not used); texels and their target_rgb (I, 3) linear;
-    fixed_share (z, y, x, N) or None: the run's constraints (``SceneRecord.fixed_share``), kept by the baseline.
-    table: default ``colour_table`` of the volume's inks.
+    volume: the run's volume (grid, inks, g, ior; mixture or labels: its medium is not used); texels and their
+    target_rgb (I, 3) linear; fixed_share (z, y, x, N) or None: the run's constraints (``SceneRecord.fixed_share``),
+    kept by the baseline. table: default ``colour_table`` of the volume's inks.
     """
     table = table or colour_table(volume.inks, volume.g, volume.ior, progress=progress)
     _check(volume, table)
@@ -81,9 +90,16 @@ def surface_baseline(volume: Volume, texels: Texels, target_rgb, fixed_share=Non
     return _finish(volume, fixed_share, out)
 
 
-def extrusion_baseline(volume: Volume, texels: Texels, target_rgb, fixed_share=None,
-                       table: ColourTable | None = None, refine: bool = True, progress: bool = False,
-                       chunk: int = 1 << 20) -> np.ndarray:
+def extrusion_baseline(
+    volume: Volume,
+    texels: Texels,
+    target_rgb,
+    fixed_share=None,
+    table: ColourTable | None = None,
+    refine: bool = True,
+    progress: bool = False,
+    chunk: int = 1 << 20,
+) -> np.ndarray:
     """Mixture (z, y, x, N) float32: every inside voxel takes the mapped mixture of its nearest scene texel
     (distance in mm from the voxel centre to the texel's face centre). Arguments as ``surface_baseline``."""
     table = table or colour_table(volume.inks, volume.g, volume.ior, progress=progress)
@@ -97,9 +113,9 @@ def extrusion_baseline(volume: Volume, texels: Texels, target_rgb, fixed_share=N
     vmm = np.asarray(volume.voxel_mm, np.float64)
     flat_out = out.reshape(-1, out.shape[-1])
     for a in range(0, len(flat), chunk):  # bounded temporary memory on big meshes
-        idx = np.stack(np.unravel_index(flat[a:a + chunk], volume.shape), 1)
+        idx = np.stack(np.unravel_index(flat[a : a + chunk], volume.shape), 1)
         _, near = tree.query((idx[:, ::-1] + 0.5) * vmm, workers=-1)
-        flat_out[flat[a:a + chunk]] = mix_t[near]
+        flat_out[flat[a : a + chunk]] = mix_t[near]
     return _finish(volume, fixed_share, out)
 
 

@@ -20,6 +20,7 @@
 
 Conventions (docs/conventions.md): mixtures (M, N); colours linear RGB; CIELAB via ``inkopt.color``.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -39,11 +40,11 @@ from ..model import InkTable, Texels, Volume
 from ..render import Renderer
 
 DEFAULT_PATCH_MM = 2.5
-DEFAULT_MAX_STDERR = 0.3      # ΔE76 standard error of each table colour
-MAX_TABLE_ENTRIES = 600       # default_step picks the finest step with at most this many mixtures
-PATCH_LATERAL = 8             # texels per side of a patch (periodic; 64 texels keep all threads busy)
-PATCH_LATERAL_MM = 0.25       # lateral voxel size of a patch (irrelevant for a homogeneous periodic medium)
-PATCH_PILOT_SPP = 16          # spp of the pilot render of every patch
+DEFAULT_MAX_STDERR = 0.3  # ΔE76 standard error of each table colour
+MAX_TABLE_ENTRIES = 600  # default_step picks the finest step with at most this many mixtures
+PATCH_LATERAL = 8  # texels per side of a patch (periodic; 64 texels keep all threads busy)
+PATCH_LATERAL_MM = 0.25  # lateral voxel size of a patch (irrelevant for a homogeneous periodic medium)
+PATCH_PILOT_SPP = 16  # spp of the pilot render of every patch
 MAX_PATCH_SPP = 8192
 REFINE_K = 8
 TABLE_VERSION = 2
@@ -65,6 +66,7 @@ def default_step(n_inks: int, max_entries: int = MAX_TABLE_ENTRIES) -> int:
     """The finest lattice step among 8, 6, 4, 3, 2 whose uniform lattice has at most ``max_entries`` mixtures
     (8 -> 495 for 5 inks; 6 -> 462 for 6 inks; 4 -> 330 for 8 inks); ``table_mixtures`` about doubles them."""
     from math import comb
+
     for step in (8, 6, 4, 3, 2):
         if comb(step + n_inks - 1, n_inks - 1) <= max_entries:
             return step
@@ -92,9 +94,22 @@ def cache_dir() -> Path:
 def table_key(inks: InkTable, g: float, ior: float, patch_mm: float, step: int, max_stderr: float) -> str:
     """Hex digest identifying a table (changes with anything that changes its colours)."""
     from .. import __version__
+
     h = hashlib.sha256()
-    h.update(repr((TABLE_VERSION, __version__, tuple(inks.names), round(float(g), 9), round(float(ior), 9),
-                   round(float(patch_mm), 9), int(step), round(float(max_stderr), 9))).encode())
+    h.update(
+        repr(
+            (
+                TABLE_VERSION,
+                __version__,
+                tuple(inks.names),
+                round(float(g), 9),
+                round(float(ior), 9),
+                round(float(patch_mm), 9),
+                int(step),
+                round(float(max_stderr), 9),
+            )
+        ).encode()
+    )
     # float32, as volume files store the ink table: a table built from InkTable.parse(...) is found again from a
     # volume loaded from disk
     h.update(np.ascontiguousarray(inks.sigma_s, np.float32).tobytes())
@@ -136,7 +151,7 @@ class ColourTable:
         if not refine or k < 2:
             _, idx = self._tree.query(lab_t, 1)
             return self.mixtures[idx][inv.reshape(-1)]
-        _, idx = self._tree.query(lab_t, k)                       # (U, k), nearest first
+        _, idx = self._tree.query(lab_t, k)  # (U, k), nearest first
         w = simplex_least_squares(self.lab[idx] - lab_t[:, None, :], iterations)
         out = np.einsum("uk,ukn->un", w, self.mixtures[idx].astype(np.float64))
         return out.astype(np.float32)[inv.reshape(-1)]
@@ -155,9 +170,17 @@ class ColourTable:
         return np.einsum("uk,ukc->uc", w, self.lab[idx])[inv.reshape(-1)]
 
     def to_arrays(self) -> dict:
-        return {"ink_names": np.array(self.ink_names), "mixtures": self.mixtures, "rgb": self.rgb,
-                "lab": self.lab, "stderr": self.stderr, "patch_mm": np.float64(self.patch_mm),
-                "step": np.int64(self.step), "key": np.array(self.key), "seconds": np.float64(self.seconds)}
+        return {
+            "ink_names": np.array(self.ink_names),
+            "mixtures": self.mixtures,
+            "rgb": self.rgb,
+            "lab": self.lab,
+            "stderr": self.stderr,
+            "patch_mm": np.float64(self.patch_mm),
+            "step": np.int64(self.step),
+            "key": np.array(self.key),
+            "seconds": np.float64(self.seconds),
+        }
 
 
 def simplex_least_squares(b: np.ndarray, iterations: int = 300) -> np.ndarray:
@@ -192,8 +215,17 @@ def _project_simplex(v: np.ndarray) -> np.ndarray:
     return np.maximum(v - theta[:, None], 0.0)
 
 
-def render_patches(mixtures, inks: InkTable, g: float, ior: float, patch_mm: float = DEFAULT_PATCH_MM,
-                   max_stderr: float = DEFAULT_MAX_STDERR, seed: int = 0, threads=None, progress: bool = False):
+def render_patches(
+    mixtures,
+    inks: InkTable,
+    g: float,
+    ior: float,
+    patch_mm: float = DEFAULT_PATCH_MM,
+    max_stderr: float = DEFAULT_MAX_STDERR,
+    seed: int = 0,
+    threads=None,
+    progress: bool = False,
+):
     """Render infinite homogeneous patches of ``mixtures`` (M, N): returns (rgb (M, 3), stderr (M,)).
 
     Each patch: a pilot of ``PATCH_PILOT_SPP`` spp on 64 texels, then (if its ΔE standard error exceeds
@@ -208,10 +240,17 @@ def render_patches(mixtures, inks: InkTable, g: float, ior: float, patch_mm: flo
     bar = None
     if progress and sys.stderr.isatty():
         from tqdm import tqdm
+
         bar = tqdm(total=len(mixtures), desc="colour table", unit="patch", leave=False)
     for j, row in enumerate(mixtures):  # a loop over table entries (hundreds), not voxels
-        vol = Volume.from_mixture(voxel_mm=[PATCH_LATERAL_MM, PATCH_LATERAL_MM, patch_mm], inks=inks, g=g, ior=ior,
-                     mixture=np.broadcast_to(row, (1, n_lat, n_lat, len(row))).copy(), boundary="periodic-xy")
+        vol = Volume.from_mixture(
+            voxel_mm=[PATCH_LATERAL_MM, PATCH_LATERAL_MM, patch_mm],
+            inks=inks,
+            g=g,
+            ior=ior,
+            mixture=np.broadcast_to(row, (1, n_lat, n_lat, len(row))).copy(),
+            boundary="periodic-xy",
+        )
         if texels is None:
             texels = Texels.for_volume(vol, ["top"])
         rnd = Renderer(vol, threads)
@@ -235,9 +274,17 @@ def render_patches(mixtures, inks: InkTable, g: float, ior: float, patch_mm: flo
     return rgb, err
 
 
-def colour_table(inks: InkTable, g: float | None = None, ior: float = 1.5, patch_mm: float = DEFAULT_PATCH_MM,
-                 step: int | None = None, max_stderr: float = DEFAULT_MAX_STDERR, cache: bool = True,
-                 threads=None, progress: bool = False) -> ColourTable:
+def colour_table(
+    inks: InkTable,
+    g: float | None = None,
+    ior: float = 1.5,
+    patch_mm: float = DEFAULT_PATCH_MM,
+    step: int | None = None,
+    max_stderr: float = DEFAULT_MAX_STDERR,
+    cache: bool = True,
+    threads=None,
+    progress: bool = False,
+) -> ColourTable:
     """The colour -> mixture table of an ink set (module docstring); loaded from the cache when present.
 
     g defaults to the ink table's g. ~5 min for the 970 CMYKW patches on 2 cores (once; then cached).
@@ -254,16 +301,26 @@ def colour_table(inks: InkTable, g: float | None = None, ior: float = 1.5, patch
         try:
             with np.load(path, allow_pickle=False) as d:
                 if tuple(str(n) for n in d["ink_names"]) == tuple(inks.names) and str(d["key"]) == key:
-                    return ColourTable(tuple(inks.names), d["mixtures"], d["rgb"], d["lab"], d["stderr"],
-                                       float(d["patch_mm"]), int(d["step"]), key, float(d["seconds"]),
-                                       cached=True)
+                    return ColourTable(
+                        tuple(inks.names),
+                        d["mixtures"],
+                        d["rgb"],
+                        d["lab"],
+                        d["stderr"],
+                        float(d["patch_mm"]),
+                        int(d["step"]),
+                        key,
+                        float(d["seconds"]),
+                        cached=True,
+                    )
         except (OSError, ValueError, KeyError):
             pass  # unreadable cache entry: rebuild and overwrite it
     t0 = time.perf_counter()
     mixtures = table_mixtures(len(inks), step)
     rgb, err = render_patches(mixtures, inks, g, ior, patch_mm, max_stderr, threads=threads, progress=progress)
-    table = ColourTable(tuple(inks.names), mixtures, rgb, linear_to_lab(rgb), err, float(patch_mm), step, key,
-                        time.perf_counter() - t0)
+    table = ColourTable(
+        tuple(inks.names), mixtures, rgb, linear_to_lab(rgb), err, float(patch_mm), step, key, time.perf_counter() - t0
+    )
     if cache:
         try:
             save_npz(path, table.to_arrays())

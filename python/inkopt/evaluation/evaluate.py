@@ -34,6 +34,7 @@ light spread per constrained region and for the whole object (and the compared r
 Writes DIR/evaluation.json and, for slabs, DIR/evaluation_<face>.png per textured face: target | optimized |
 quantized | surface | extrusion (sRGB).
 """
+
 from __future__ import annotations
 
 import time
@@ -113,11 +114,13 @@ class PrintedRenderer:
     """A labels volume set up once for rendering on its printer texels (texel map, renderer), then rendered any
     number of times and averaged onto the scene texels (adaptive evaluation renders it in several passes)."""
 
-    def __init__(self, qvol: Volume, scene: Texels, voxel_mm_scene, kind: str, threads=None,
-                 lighting: Lighting | None = None):
+    def __init__(
+        self, qvol: Volume, scene: Texels, voxel_mm_scene, kind: str, threads=None, lighting: Lighting | None = None
+    ):
         self.ptex = printer_texels(qvol, scene, kind)
-        self.to_scene, self.stand_in = map_texels(self.ptex, qvol.voxel_mm, scene, voxel_mm_scene,
-                                                  per_face=kind != "mesh")
+        self.to_scene, self.stand_in = map_texels(
+            self.ptex, qvol.voxel_mm, scene, voxel_mm_scene, per_face=kind != "mesh"
+        )
         self.n_scene = len(scene)
         self.renderer = Renderer(qvol, threads, lighting)
 
@@ -126,8 +129,9 @@ class PrintedRenderer:
         printer texels, and the printer spp used."""
         spp_p = max(1, int(np.ceil(spp * self.n_scene / len(self.ptex))))
         res = self.renderer.render(self.ptex, spp_p, seed, progress=progress)
-        rgb, var = average_to_scene(res.rgb.astype(np.float64), res.var_mean.astype(np.float64), self.to_scene,
-                                    self.stand_in, self.n_scene)
+        rgb, var = average_to_scene(
+            res.rgb.astype(np.float64), res.var_mean.astype(np.float64), self.to_scene, self.stand_in, self.n_scene
+        )
         return rgb, var, spp_p
 
 
@@ -147,10 +151,22 @@ def write_face_pictures(d: RunDir, rec: SceneRecord, results: dict) -> list[str]
 
 
 # ----------------------------------------------------------------------------------------------- the stage
-def evaluate_run(path, spp: int | None = DEFAULT_SPP, seed: int = 0, method: str | None = None, threads=None,
-                 baselines: bool = True, refine: bool = True, patch_mm: float = DEFAULT_PATCH_MM,
-                 table: ColourTable | None = None, write: bool = True, lighting: Lighting | str | None = None,
-                 log=None, translucency: bool | None = None, translucency_compare=None) -> Evaluation:
+def evaluate_run(
+    path,
+    spp: int | None = DEFAULT_SPP,
+    seed: int = 0,
+    method: str | None = None,
+    threads=None,
+    baselines: bool = True,
+    refine: bool = True,
+    patch_mm: float = DEFAULT_PATCH_MM,
+    table: ColourTable | None = None,
+    write: bool = True,
+    lighting: Lighting | str | None = None,
+    log=None,
+    translucency: bool | None = None,
+    translucency_compare=None,
+) -> Evaluation:
     """Evaluate run directory ``path`` (module docstring); returns the ``results.Evaluation`` (also written to
     DIR/evaluation.json with the face pictures when ``write``). ``spp``: None = adaptive (module docstring),
     else exactly that many samples per scene texel. ``method``: quantization method of ours (when
@@ -190,7 +206,7 @@ def evaluate_run(path, spp: int | None = DEFAULT_SPP, seed: int = 0, method: str
         return r.rgb, r.var_mean, n
 
     cont = measured("continuous", continuous, t0, None)
-    del renderer
+    renderer = None  # freed before the next renderer is built
     say(f"continuous: {len(stex)} texels x {cont.spp} spp in {cont.seconds:.1f} s")
     tr = None
     if translucency or (translucency is None and (rec.translucency is not None or translucency_compare)):
@@ -200,16 +216,21 @@ def evaluate_run(path, spp: int | None = DEFAULT_SPP, seed: int = 0, method: str
         qvol = d.load_quantized()
         q = qvol.quantization or Quantization()
         if method is not None and method != q.method:
-            raise ValueError(f"{d.quantized_path} was quantized with '{q.method}', not '{method}'; rerun 'inkopt "
-                             f"quantize {d} --method {method}' or omit --method")
+            raise ValueError(
+                f"{d.quantized_path} was quantized with '{q.method}', not '{method}'; rerun 'inkopt "
+                f"quantize {d} --method {method}' or omit --method"
+            )
     else:
         t0 = time.perf_counter()  # inkopt quantize's defaults, layer by layer as that command does
-        quantize_run(d, method=method or "blue-noise", dpi=DEFAULT_DPI, layer_um=DEFAULT_LAYER_UM, seed=0,
-                     upsample="nearest")
+        quantize_run(
+            d, method=method or "blue-noise", dpi=DEFAULT_DPI, layer_um=DEFAULT_LAYER_UM, seed=0, upsample="nearest"
+        )
         qvol = d.load_quantized()
         q = qvol.quantization
-        say(f"quantized {vol.shape} -> {qvol.shape} ({q.method}) in {time.perf_counter() - t0:.1f} s; "
-            f"wrote {d.quantized_path}")
+        say(
+            f"quantized {vol.shape} -> {qvol.shape} ({q.method}) in {time.perf_counter() - t0:.1f} s; "
+            f"wrote {d.quantized_path}"
+        )
     dpi = q.dpi or tuple(float(v) for v in dpi_of(qvol.voxel_mm))
     qkw = dict(method=q.method, seed=q.seed, upsample=q.upsample, dpi=tuple(dpi))
     printer_texels = 0
@@ -236,14 +257,22 @@ def evaluate_run(path, spp: int | None = DEFAULT_SPP, seed: int = 0, method: str
     if baselines:
         t0 = time.perf_counter()
         if table is None:
-            table = colour_table(vol.inks, vol.g, vol.ior, patch_mm=patch_mm, threads=threads,
-                                 progress=log is not None)
-        say(f"colour table: {len(table.lab)} patches of {table.patch_mm:g} mm, step 1/{table.step}, "
-            + ("(cached)" if table.cached else f"built in {table.seconds:.0f} s"))
-        floor["colour_table"] = {"entries": len(table.lab), "patch_mm": table.patch_mm, "step": table.step,
-                                 "max_stderr": float(table.stderr.max()), "refine": bool(refine),
-                                 "key": table.key, "cached": table.cached, "build_seconds": table.seconds,
-                                 "seconds": time.perf_counter() - t0}
+            table = colour_table(vol.inks, vol.g, vol.ior, patch_mm=patch_mm, threads=threads, progress=log is not None)
+        say(
+            f"colour table: {len(table.lab)} patches of {table.patch_mm:g} mm, step 1/{table.step}, "
+            + ("(cached)" if table.cached else f"built in {table.seconds:.0f} s")
+        )
+        floor["colour_table"] = {
+            "entries": len(table.lab),
+            "patch_mm": table.patch_mm,
+            "step": table.step,
+            "max_stderr": float(table.stderr.max()),
+            "refine": bool(refine),
+            "key": table.key,
+            "cached": table.cached,
+            "build_seconds": table.seconds,
+            "seconds": time.perf_counter() - t0,
+        }
         de = delta_e76(table.reachable_lab(target), loss.target_lab)
         floor["gamut_floor_delta_e76"] = float(de.mean())
         floor["gamut_floor_delta_e76_p95"] = float(np.percentile(de, 95))
@@ -253,12 +282,26 @@ def evaluate_run(path, spp: int | None = DEFAULT_SPP, seed: int = 0, method: str
             mix = fn(vol, stex, target, fixed, table, refine=refine)
             qb = quantize_volume(vol.with_mixture(mix), **qkw)
             base[name] = printed(name, qb)
-    ev = Evaluation(spp=cont.spp, seed=int(seed), texels=len(stex), kind=kind, spp_adaptive=spp is None,
-                    noise_target_delta_e76=TARGET_NOISE_DE76, noise_target_ssim_ratio=SSIM_NOISE_RATIO,
-                    spp_pilot=PILOT_SPP, spp_max=MAX_SPP, lighting=lighting.describe(), continuous=cont,
-                    quantization={**asdict(q), "dpi": list(dpi)}, printer_texels=printer_texels,
-                    quantized=quantized, seconds=time.perf_counter() - t_all, translucency=tr, **floor,
-                    baselines=base)
+    ev = Evaluation(
+        spp=cont.spp,
+        seed=int(seed),
+        texels=len(stex),
+        kind=kind,
+        spp_adaptive=spp is None,
+        noise_target_delta_e76=TARGET_NOISE_DE76,
+        noise_target_ssim_ratio=SSIM_NOISE_RATIO,
+        spp_pilot=PILOT_SPP,
+        spp_max=MAX_SPP,
+        lighting=lighting.describe(),
+        continuous=cont,
+        quantization={**asdict(q), "dpi": list(dpi)},
+        printer_texels=printer_texels,
+        quantized=quantized,
+        seconds=time.perf_counter() - t_all,
+        translucency=tr,
+        **floor,
+        baselines=base,
+    )
     if write:
         if rec.faces:
             ev.pictures = write_face_pictures(d, rec, colours)
@@ -273,21 +316,29 @@ def table_lines(ev: Evaluation) -> list[str]:
     def num(v):
         return nan if v is None else v
 
-    lines = [f"{'result':<20}{'dE76 mean':>10}{'dE76 p95':>10}{'dE2000':>9}{'SSIM':>8}{'noise':>8}"
-             f"{'rms w/o noise':>15}{'noise in mean':>14}{'mottle':>8}{'spp':>6}{'s':>7}"]
+    lines = [
+        f"{'result':<20}{'dE76 mean':>10}{'dE76 p95':>10}{'dE2000':>9}{'SSIM':>8}{'noise':>8}"
+        f"{'rms w/o noise':>15}{'noise in mean':>14}{'mottle':>8}{'spp':>6}{'s':>7}"
+    ]
     for name, r in ev.results():
         m = r.metrics
-        lines.append(f"{name:<20}{m.delta_e76_mean:>10.2f}{m.delta_e76_p95:>10.2f}"
-                     f"{m.delta_e2000_mean:>9.2f}{m.ssim:>8.3f}{num(m.delta_e76_noise):>8.2f}"
-                     f"{num(m.delta_e76_rms_denoised):>15.2f}{num(m.delta_e76_noise_contribution):>14.2f}"
-                     f"{num(m.mottle_l2):>8.2f}{r.spp:>6}{r.seconds:>7.1f}")
+        lines.append(
+            f"{name:<20}{m.delta_e76_mean:>10.2f}{m.delta_e76_p95:>10.2f}"
+            f"{m.delta_e2000_mean:>9.2f}{m.ssim:>8.3f}{num(m.delta_e76_noise):>8.2f}"
+            f"{num(m.delta_e76_rms_denoised):>15.2f}{num(m.delta_e76_noise_contribution):>14.2f}"
+            f"{num(m.mottle_l2):>8.2f}{r.spp:>6}{r.seconds:>7.1f}"
+        )
     c = ev.continuous.metrics
     if c.flat_texels:
-        lines.append(f"mottle: high-frequency L* power, (dL*)^2, on {c.flat_texels} texels where the target is "
-                     f"flat (target's own: {c.mottle_l2_target:.2f})")
+        lines.append(
+            f"mottle: high-frequency L* power, (dL*)^2, on {c.flat_texels} texels where the target is "
+            f"flat (target's own: {c.mottle_l2_target:.2f})"
+        )
     if ev.translucency is not None:
         lines += translucency_lines(ev.translucency)
     if ev.gamut_floor_delta_e76 is not None:
-        lines.append(f"gamut floor: mean dE76 from the target to the nearest colour the inks reach in a "
-                     f"{ev.colour_table['patch_mm']:g} mm patch: {ev.gamut_floor_delta_e76:.2f}")
+        lines.append(
+            f"gamut floor: mean dE76 from the target to the nearest colour the inks reach in a "
+            f"{ev.colour_table['patch_mm']:g} mm patch: {ev.gamut_floor_delta_e76:.2f}"
+        )
     return lines

@@ -10,6 +10,7 @@ minus the Monte Carlo noise's expected share: with v_j the variance of texel j's
 linear-RGB variance, ``color.linear_to_lab_jacobian``), E h_i² gains (1 - w_ii)² v_i + Σ_{j≠i} w_ij² v_j.
 ``mottle_l2_target`` is the target's own figure (no noise), ``flat_texels`` the count (figures None when 0).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
@@ -35,7 +36,7 @@ def highpass_power(loss: TexelLoss, lum: np.ndarray) -> np.ndarray:
 def highpass_noise(loss: TexelLoss, var_l: np.ndarray) -> np.ndarray:
     """E of the noise's part of h_i² for independent per-texel L* variances var_l (I,):
     (1 - w_ii)² v_i + Σ_{j≠i} w_ij² v_j = Σ_j w_ij² v_j + (1 - 2 w_ii) v_i (w_ii = 1 / wsum_i)."""
-    w2v = (loss.K.multiply(loss.K) @ var_l) / loss.wsum ** 2
+    w2v = (loss.K.multiply(loss.K) @ var_l) / loss.wsum**2
     return w2v + (1.0 - 2.0 / loss.wsum) * var_l
 
 
@@ -77,8 +78,13 @@ class Metrics:
     delta_e76_rms: float | None = None
     delta_e76_rms_denoised: float | None = None
 
-    NOISE_KEYS = ("delta_e76_noise", "delta_e76_noise_contribution", "delta_e76_mean_corrected", "delta_e76_rms",
-                  "delta_e76_rms_denoised")
+    NOISE_KEYS = (
+        "delta_e76_noise",
+        "delta_e76_noise_contribution",
+        "delta_e76_mean_corrected",
+        "delta_e76_rms",
+        "delta_e76_rms_denoised",
+    )
 
     def to_json(self) -> dict:
         """The figures by name; the noise figures only when they were estimated."""
@@ -86,7 +92,7 @@ class Metrics:
         return {k: v for k, v in d.items() if not (k in self.NOISE_KEYS and v is None)}
 
     @classmethod
-    def from_json(cls, d: dict) -> "Metrics":
+    def from_json(cls, d: dict) -> Metrics:
         """The metrics among the entries of ``d`` (other keys, e.g. a report's, are ignored)."""
         return cls(**{f.name: d[f.name] for f in fields(cls) if f.name in d})
 
@@ -105,10 +111,16 @@ def prediction_metrics(loss: TexelLoss, rgb, var_mean=None) -> Metrics:
     res = loss(rgb, var_mean)
     lab_t = loss.target_lab
     de = delta_e76(res.lab, lab_t)
-    out = {"delta_e76_mean": float(de.mean()), "delta_e76_p95": float(np.percentile(de, 95)),
-           "delta_e2000_mean": float(delta_e2000(res.lab, lab_t).mean()),
-           "ssim": float(loss.ssim_mean(rgb, var_mean)), "loss": res.value, "e1": res.e1, "e2": res.e2,
-           "e3": res.e3}
+    out = {
+        "delta_e76_mean": float(de.mean()),
+        "delta_e76_p95": float(np.percentile(de, 95)),
+        "delta_e2000_mean": float(delta_e2000(res.lab, lab_t).mean()),
+        "ssim": float(loss.ssim_mean(rgb, var_mean)),
+        "loss": res.value,
+        "e1": res.e1,
+        "e2": res.e2,
+        "e3": res.e3,
+    }
     out.update(mottle(loss, rgb, var_mean))
     if var_mean is not None:
         var = np.asarray(var_mean, np.float64)

@@ -41,6 +41,7 @@ remaining n - spp samples are rendered with an independent seed and pooled with 
 count). If the pooled estimate is still above either target (and below the cap), one more round. Seeds: pass k uses
 ``seed + k * SEED_STRIDE``; callers pass ``EVAL_SEED_OFFSET + seed``, disjoint from the optimisation's seeds.
 """
+
 from __future__ import annotations
 
 import math
@@ -52,15 +53,15 @@ from scipy.special import erf
 from ..color import LAB_NORM_SCALE, linear_to_lab, linear_to_lab_jacobian
 from ..loss import K2
 
-TARGET_NOISE_DE76 = 0.5   # wanted Monte Carlo contribution to the mean ΔE76
+TARGET_NOISE_DE76 = 0.5  # wanted Monte Carlo contribution to the mean ΔE76
 PILOT_SPP = 64
 MAX_SPP = 4096
-MAX_ROUNDS = 3            # passes after the pilot
-PLAN_MARGIN = 0.9         # plan for this fraction of the target
-SSIM_NOISE_RATIO = 0.1    # wanted noise variance / K2 for SSIM and mottle (module docstring)
+MAX_ROUNDS = 3  # passes after the pilot
+PLAN_MARGIN = 0.9  # plan for this fraction of the target
+SSIM_NOISE_RATIO = 0.1  # wanted noise variance / K2 for SSIM and mottle (module docstring)
 ESTIMATE_RANGE = (0.65, 1.35)  # estimated / true inflation, measured (module docstring)
 EVAL_SEED_OFFSET = 2**62  # evaluation seeds: 2**62 + seed, disjoint from the optimisation's (iteration_seeds)
-SEED_STRIDE = 2**40       # seed of pass k: seed + k * SEED_STRIDE
+SEED_STRIDE = 2**40  # seed of pass k: seed + k * SEED_STRIDE
 
 
 def chi3_mean(lam) -> np.ndarray:
@@ -96,7 +97,7 @@ class NoiseModel:
     ssim_ratio: float = 0.0
 
     @classmethod
-    def of(cls, rgb, var_mean, target_lab) -> "NoiseModel":
+    def of(cls, rgb, var_mean, target_lab) -> NoiseModel:
         lab = linear_to_lab(np.asarray(rgb, np.float64))
         d = lab - np.asarray(target_lab, np.float64)
         cov = lab_covariance(rgb, var_mean)
@@ -106,7 +107,7 @@ class NoiseModel:
         perp = np.where(n2 > 0, 0.5 * (tr - np.einsum("ik,ikl,il->i", u, cov, u)), tr / 3)
         dist2 = np.maximum(n2 - 0.5 * tr, 0.0)
         w = dist2 / np.maximum(dist2 + tr, 1e-300)
-        v = np.diagonal(cov, axis1=1, axis2=2) * LAB_NORM_SCALE ** 2
+        v = np.diagonal(cov, axis1=1, axis2=2) * LAB_NORM_SCALE**2
         ratio = float(v.mean(0).max() / K2) if len(v) else 0.0
         return cls(np.sqrt(dist2), np.maximum(w * perp + (1 - w) * tr / 3, 0.0), ratio)
 
@@ -135,7 +136,7 @@ class NoiseModel:
             return int(spp_now)
         if self.contribution(spp_now / max_spp) > target:
             return int(max_spp)
-        lo, hi = int(spp_now), int(max_spp)          # contribution(lo) > target >= contribution(hi)
+        lo, hi = int(spp_now), int(max_spp)  # contribution(lo) > target >= contribution(hi)
         while hi - lo > max(1, lo // 64):
             mid = int(math.sqrt(lo * hi))
             mid = min(max(mid, lo + 1), hi - 1)
@@ -163,8 +164,16 @@ class AdaptiveResult:
     noise: float
 
 
-def adaptive_render(render, target_lab, seed: int, spp: int | None = None, pilot_spp: int = PILOT_SPP,
-                    target: float = TARGET_NOISE_DE76, max_spp: int = MAX_SPP, log=None) -> AdaptiveResult:
+def adaptive_render(
+    render,
+    target_lab,
+    seed: int,
+    spp: int | None = None,
+    pilot_spp: int = PILOT_SPP,
+    target: float = TARGET_NOISE_DE76,
+    max_spp: int = MAX_SPP,
+    log=None,
+) -> AdaptiveResult:
     """Render through ``render(spp, seed) -> (rgb (I, 3), var_mean (I, 3), weight)`` (``weight``: the pass's
     samples per texel as pooled, e.g. a printer render's own spp). With ``spp`` given: exactly one pass of
     ``spp`` (the user's choice is honoured). Else adaptively (module docstring)."""
@@ -179,8 +188,10 @@ def adaptive_render(render, target_lab, seed: int, spp: int | None = None, pilot
         want = model.spp_for(total, PLAN_MARGIN * target, max_spp, PLAN_MARGIN * SSIM_NOISE_RATIO)
         extra = want - total
         if log is not None:
-            log(f"  noise {model.contribution():.2f} dE76, SSIM noise ratio {model.ssim_ratio:.2f} at {total} spp "
-                f"(targets {target:g}, {SSIM_NOISE_RATIO:g}): {extra} more")
+            log(
+                f"  noise {model.contribution():.2f} dE76, SSIM noise ratio {model.ssim_ratio:.2f} at {total} spp "
+                f"(targets {target:g}, {SSIM_NOISE_RATIO:g}): {extra} more"
+            )
         r1, v1, w1 = render(extra, seed + k * SEED_STRIDE)
         r1, v1, w1 = np.asarray(r1, np.float64), np.asarray(v1, np.float64), float(w1)
         rgb = (w * rgb + w1 * r1) / (w + w1)

@@ -6,6 +6,7 @@
 ``from_json(data, where)`` reads one back, bringing a file of an older format version up to date
 (``io.upgrade_format``; a file without ``format_version`` is version 0, whose keys equal version 1's).
 """
+
 from __future__ import annotations
 
 import json
@@ -77,30 +78,65 @@ class Report:
     peak_rss_gb: float
     lighting: dict
 
-    _RUN = ("delta_e76_max", "iterations", "spp", "eval_spp", "spp_adaptive", "eval_spp_passes", "initial_eval_spp",
-            "initial_delta_e76_mean_corrected", "seconds", "seconds_iterations", "seconds_per_iteration", "time_split")
-    _SETTINGS = ("inks", "gamma", "lr", "optimizer", "param", "init", "seed", "decay", "smooth", "adjoint_ema",
-                 "gradient", "threads", "peak_rss_gb")
+    _RUN = (
+        "delta_e76_max",
+        "iterations",
+        "spp",
+        "eval_spp",
+        "spp_adaptive",
+        "eval_spp_passes",
+        "initial_eval_spp",
+        "initial_delta_e76_mean_corrected",
+        "seconds",
+        "seconds_iterations",
+        "seconds_per_iteration",
+        "time_split",
+    )
+    _SETTINGS = (
+        "inks",
+        "gamma",
+        "lr",
+        "optimizer",
+        "param",
+        "init",
+        "seed",
+        "decay",
+        "smooth",
+        "adjoint_ema",
+        "gradient",
+        "threads",
+        "peak_rss_gb",
+    )
 
     def to_json(self) -> dict:
-        return {"initial_delta_e76_mean": self.initial_delta_e76_mean, "initial_ssim": self.initial_ssim,
-                **self.metrics.to_json(), **{k: getattr(self, k) for k in self._RUN}, **self.scene,
-                **{k: getattr(self, k) for k in self._SETTINGS}, **self.lighting, FORMAT_KEY: REPORT_FORMAT}
+        return {
+            "initial_delta_e76_mean": self.initial_delta_e76_mean,
+            "initial_ssim": self.initial_ssim,
+            **self.metrics.to_json(),
+            **{k: getattr(self, k) for k in self._RUN},
+            **self.scene,
+            **{k: getattr(self, k) for k in self._SETTINGS},
+            **self.lighting,
+            FORMAT_KEY: REPORT_FORMAT,
+        }
 
     @classmethod
-    def from_json(cls, data: dict, where="report.json") -> "Report":
+    def from_json(cls, data: dict, where="report.json") -> Report:
         """A report from report.json's object (``where`` names the file in errors); entries that are neither
         figures, run facts, settings nor lighting are the scene's."""
         d = upgrade_format(data, kind="run report", where=where, current=REPORT_FORMAT, upgrades=_SAME_KEYS)
         d.pop(FORMAT_KEY)
         named = {f.name for f in fields(cls)} | {f.name for f in fields(Metrics)}
         own = {k: d.get(k) for k in ("initial_delta_e76_mean", "initial_ssim") + cls._RUN + cls._SETTINGS}
-        return cls(metrics=Metrics.from_json(d), **own,
-                   scene={k: v for k, v in d.items() if k not in named and not _is_lighting(k)},
-                   lighting={k: v for k, v in d.items() if _is_lighting(k)})
+        return cls(
+            metrics=Metrics.from_json(d),
+            **own,
+            scene={k: v for k, v in d.items() if k not in named and not _is_lighting(k)},
+            lighting={k: v for k, v in d.items() if _is_lighting(k)},
+        )
 
     @classmethod
-    def read(cls, path) -> "Report":
+    def read(cls, path) -> Report:
         """The report of a report.json file."""
         return cls.from_json(_read(path), where=path)
 
@@ -125,7 +161,7 @@ class Measured:
         return {**d, "seconds": self.seconds, "method": self.method}
 
     @classmethod
-    def from_json(cls, d: dict) -> "Measured":
+    def from_json(cls, d: dict) -> Measured:
         return cls(Metrics.from_json(d), d["spp"], d["spp_passes"], d["seconds"], d["method"], d.get("spp_printer"))
 
 
@@ -158,16 +194,24 @@ class Evaluation:
     baselines: dict | None = None  # name -> Measured
     pictures: list | None = None
 
-    _HEAD = ("spp", "seed", "texels", "kind", "spp_adaptive", "noise_target_delta_e76", "noise_target_ssim_ratio",
-             "spp_pilot", "spp_max")
+    _HEAD = (
+        "spp",
+        "seed",
+        "texels",
+        "kind",
+        "spp_adaptive",
+        "noise_target_delta_e76",
+        "noise_target_ssim_ratio",
+        "spp_pilot",
+        "spp_max",
+    )
     _FLOOR = ("colour_table", "gamut_floor_delta_e76", "gamut_floor_delta_e76_p95")
 
     def to_json(self) -> dict:
         d = {**{k: getattr(self, k) for k in self._HEAD}, **self.lighting, "continuous": self.continuous.to_json()}
         if self.translucency is not None:
             d["translucency"] = self.translucency
-        d.update(quantization=self.quantization, printer_texels=self.printer_texels,
-                 quantized=self.quantized.to_json())
+        d.update(quantization=self.quantization, printer_texels=self.printer_texels, quantized=self.quantized.to_json())
         d.update({k: getattr(self, k) for k in self._FLOOR if getattr(self, k) is not None})
         if self.baselines is not None:
             d["baselines"] = {k: v.to_json() for k, v in self.baselines.items()}
@@ -178,19 +222,25 @@ class Evaluation:
         return d
 
     @classmethod
-    def from_json(cls, data: dict, where="evaluation.json") -> "Evaluation":
+    def from_json(cls, data: dict, where="evaluation.json") -> Evaluation:
         d = upgrade_format(data, kind="evaluation", where=where, current=EVALUATION_FORMAT, upgrades=_SAME_KEYS)
         base = d.get("baselines")
-        return cls(**{k: d[k] for k in cls._HEAD}, lighting={k: v for k, v in d.items() if _is_lighting(k)},
-                   continuous=Measured.from_json(d["continuous"]), quantization=d["quantization"],
-                   printer_texels=d["printer_texels"], quantized=Measured.from_json(d["quantized"]),
-                   seconds=d["seconds"], translucency=d.get("translucency"),
-                   **{k: d.get(k) for k in cls._FLOOR},
-                   baselines=None if base is None else {k: Measured.from_json(v) for k, v in base.items()},
-                   pictures=d.get("pictures"))
+        return cls(
+            **{k: d[k] for k in cls._HEAD},
+            lighting={k: v for k, v in d.items() if _is_lighting(k)},
+            continuous=Measured.from_json(d["continuous"]),
+            quantization=d["quantization"],
+            printer_texels=d["printer_texels"],
+            quantized=Measured.from_json(d["quantized"]),
+            seconds=d["seconds"],
+            translucency=d.get("translucency"),
+            **{k: d.get(k) for k in cls._FLOOR},
+            baselines=None if base is None else {k: Measured.from_json(v) for k, v in base.items()},
+            pictures=d.get("pictures"),
+        )
 
     @classmethod
-    def read(cls, path) -> "Evaluation":
+    def read(cls, path) -> Evaluation:
         """The evaluation of an evaluation.json file."""
         return cls.from_json(_read(path), where=path)
 

@@ -24,6 +24,7 @@ for the whole object, always on the same texels (those of the constrained run's 
 Both are rendered at fixed ``spp`` (``DEFAULT_SPP``; the figures carry their standard errors). Regions with fewer
 than ``MIN_REGION_TEXELS`` texels are skipped; at most ``MAX_REGIONS`` (the largest) are reported.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -37,7 +38,7 @@ from ..rundir import SceneRecord
 
 DEFAULT_SPP = 64
 PROBE_SPP = 64
-PROBE_WIDTH = 256      # voxels along x (periodic); the probe is 2 voxels deep in y (periodic)
+PROBE_WIDTH = 256  # voxels along x (periodic); the probe is 2 voxels deep in y (periodic)
 MASK_SIGMA_A = 1000.0  # mm^-1: the knife edge's absorber (optical depth ~85 per 85 µm voxel)
 MAP_ROWS = 32
 MIN_REGION_TEXELS = 4
@@ -78,8 +79,17 @@ def transmittance(volume: Volume, texels: Texels, spp: int = DEFAULT_SPP, seed: 
     return y, var
 
 
-def knife_edge_spread(sigma_s: np.ndarray, sigma_a: np.ndarray, voxel_mm: float, g: float, ior: float,
-                      spp: int = PROBE_SPP, seed: int = 0, threads=None, width: int | None = None) -> dict:
+def knife_edge_spread(
+    sigma_s: np.ndarray,
+    sigma_a: np.ndarray,
+    voxel_mm: float,
+    g: float,
+    ior: float,
+    spp: int = PROBE_SPP,
+    seed: int = 0,
+    threads=None,
+    width: int | None = None,
+) -> dict:
     """E|Δx| (mm) of a layered probe: ``sigma_s``, ``sigma_a`` (L, 3) mm^-1, layer 0 the viewed surface;
     ``width`` voxels along x (default ``PROBE_WIDTH``)."""
     L, width = len(sigma_s), int(width or PROBE_WIDTH)
@@ -98,9 +108,12 @@ def knife_edge_spread(sigma_s: np.ndarray, sigma_a: np.ndarray, voxel_mm: float,
     if total <= 0:
         return {"spread_mm": float("nan"), "spread_stderr_mm": float("nan"), "probe_transmittance": 0.0}
     ratio = dark / total
-    var_ratio = ((1 - ratio) ** 2 * v[: width // 2].sum() + ratio**2 * v[width // 2:].sum()) / total**2
-    return {"spread_mm": float(half * ratio), "spread_stderr_mm": float(half * np.sqrt(var_ratio)),
-            "probe_transmittance": float(total / width)}
+    var_ratio = ((1 - ratio) ** 2 * v[: width // 2].sum() + ratio**2 * v[width // 2 :].sum()) / total**2
+    return {
+        "spread_mm": float(half * ratio),
+        "spread_stderr_mm": float(half * np.sqrt(var_ratio)),
+        "probe_transmittance": float(total / width),
+    }
 
 
 def face_group(rec: SceneRecord) -> np.ndarray:
@@ -157,9 +170,17 @@ def probe_medium(vol: Volume, near: np.ndarray, depth: np.ndarray, texel_sel: np
     return mix(mean, vol.inks)
 
 
-def measure(vol: Volume, rec: SceneRecord, region_rec: SceneRecord | None = None, spp: int = DEFAULT_SPP,
-            probe_spp: int = PROBE_SPP, seed: int = 0, threads=None, colours: np.ndarray | None = None,
-            target_lab: np.ndarray | None = None) -> dict:
+def measure(
+    vol: Volume,
+    rec: SceneRecord,
+    region_rec: SceneRecord | None = None,
+    spp: int = DEFAULT_SPP,
+    probe_spp: int = PROBE_SPP,
+    seed: int = 0,
+    threads=None,
+    colours: np.ndarray | None = None,
+    target_lab: np.ndarray | None = None,
+) -> dict:
     """Transmittance and spread of ``vol`` (a mixture volume of scene ``rec``) per region of ``region_rec``'s
     constraint (default ``rec``'s) and for the whole face group; with ``colours`` (I, 3) linear and ``target_lab``
     (I, 3), each region's mean ΔE76 too."""
@@ -177,12 +198,19 @@ def measure(vol: Volume, rec: SceneRecord, region_rec: SceneRecord | None = None
         near, depth = depth_layers(vol, rec.texels.subset(group))
     except MemoryError:
         near = None
-    share = (region_rec.translucency.texel_share(rec.texels) if region_rec.translucency is not None
-             else np.zeros(len(rec.texels), np.float32))
+    share = (
+        region_rec.translucency.texel_share(rec.texels)
+        if region_rec.translucency is not None
+        else np.zeros(len(rec.texels), np.float32)
+    )
 
     def figures(sel: np.ndarray) -> dict:
-        f = {"texels": int(len(sel)), "required_share": float(share[sel].mean()),
-             "transmittance": float(t_y[sel].mean()), "transmittance_stderr": float(np.sqrt(t_var[sel].sum()) / len(sel))}
+        f = {
+            "texels": int(len(sel)),
+            "required_share": float(share[sel].mean()),
+            "transmittance": float(t_y[sel].mean()),
+            "transmittance_stderr": float(np.sqrt(t_var[sel].sum()) / len(sel)),
+        }
         if de is not None:
             f["delta_e76_mean"] = float(de[sel].mean())
         if near is not None:
@@ -192,8 +220,13 @@ def measure(vol: Volume, rec: SceneRecord, region_rec: SceneRecord | None = None
             f["probe_layers"] = int(len(s_s))
         return f
 
-    return {"regions": [figures(r) for r in regions(region_rec, group)], "whole": figures(group),
-            "spp": int(spp), "probe_spp": int(probe_spp), "probe_width_mm": float(PROBE_WIDTH * vol.voxel_mm[0])}
+    return {
+        "regions": [figures(r) for r in regions(region_rec, group)],
+        "whole": figures(group),
+        "spp": int(spp),
+        "probe_spp": int(probe_spp),
+        "probe_width_mm": float(PROBE_WIDTH * vol.voxel_mm[0]),
+    }
 
 
 def table_lines(tr: dict) -> list[str]:
@@ -204,17 +237,27 @@ def table_lines(tr: dict) -> list[str]:
     for prefix, t in runs:
         items = [(f"region {k + 1}", r) for k, r in enumerate(t["regions"])] + [("whole", t["whole"])]
         for name, r in items:
-            lines.append(f"{(prefix + name):<24}{r['texels']:>8}{r['required_share']:>7.2f}"
-                         f"{r.get('delta_e76_mean', nan):>7.2f}{r['transmittance']:>9.3f} ±{r['transmittance_stderr']:.3f}"
-                         f"{r.get('spread_mm', nan):>7.3f} ±{r.get('spread_stderr_mm', nan):.3f}")
+            lines.append(
+                f"{(prefix + name):<24}{r['texels']:>8}{r['required_share']:>7.2f}"
+                f"{r.get('delta_e76_mean', nan):>7.2f}{r['transmittance']:>9.3f} ±{r['transmittance_stderr']:.3f}"
+                f"{r.get('spread_mm', nan):>7.3f} ±{r.get('spread_stderr_mm', nan):.3f}"
+            )
     return lines
 
 
 COLOUR_SPP = 256  # the per-region ΔE76 of both runs: one render each at this spp under the evaluation's lighting
 
 
-def evaluate_translucency(vol: Volume, rec: SceneRecord, compare=None, seed: int = 0, threads=None,
-                          lighting=None, spp: int = DEFAULT_SPP, log=None) -> dict:
+def evaluate_translucency(
+    vol: Volume,
+    rec: SceneRecord,
+    compare=None,
+    seed: int = 0,
+    threads=None,
+    lighting=None,
+    spp: int = DEFAULT_SPP,
+    log=None,
+) -> dict:
     """evaluation.json's ``translucency``: ``measure`` of the run (``vol``, ``rec``) and, with ``compare`` (the
     run directory of an unconstrained run of the same target), of that run on the same regions, each with its
     per-region ΔE76 from a ``COLOUR_SPP`` render under ``lighting``."""

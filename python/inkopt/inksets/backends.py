@@ -6,6 +6,7 @@ the budget) and :func:`run_candidate` builds the scene in the worker, so a task 
 any machine with inkopt and the same file paths (a shared filesystem for the target and DIR) can run it. Renders are
 bit-identical for any thread count, so every backend returns the same numbers for the same tasks.
 """
+
 from __future__ import annotations
 
 import os
@@ -15,11 +16,10 @@ from multiprocessing import get_context
 
 import numpy as np
 
-from ..optim.checkpoint import read_checkpoint
-from ..rundir import RunDir
-
 # the one Ray import and start, shared with --ray texel shards; RAY_INSTALL_HINT re-exported by inksets
 from ..distributed import RAY_INSTALL_HINT, connect_ray  # noqa: F401
+from ..optim.checkpoint import read_checkpoint
+from ..rundir import RunDir
 
 
 class _Capture:
@@ -49,11 +49,23 @@ def run_candidate(task: dict) -> dict:
     inks = InkTable.from_names(task["inks"])
     cfg = OptimizeConfig(**{**task["cfg"], "gamma": tuple(task["cfg"]["gamma"])})
     scene = _Capture(task["spec"].build(inks))
-    rep = run_optimisation(scene, task["out"], cfg, resume=task["resume"], eval_spp=task["eval_spp"],
-                           threads=task["threads"], log=lambda msg: None)
+    rep = run_optimisation(
+        scene,
+        task["out"],
+        cfg,
+        resume=task["resume"],
+        eval_spp=task["eval_spp"],
+        threads=task["threads"],
+        log=lambda msg: None,
+    )
     m = rep.metrics
-    out = {"loss": m.loss, "delta_e76_mean": m.delta_e76_mean, "delta_e2000_mean": m.delta_e2000_mean,
-           "ssim": m.ssim, "iterations": rep.iterations}
+    out = {
+        "loss": m.loss,
+        "delta_e76_mean": m.delta_e76_mean,
+        "delta_e2000_mean": m.delta_e2000_mean,
+        "ssim": m.ssim,
+        "iterations": rep.iterations,
+    }
     ck = read_checkpoint(RunDir(task["out"]).checkpoint_path)  # the whole run's training-loss history
     out["hist_loss"] = [float(v) for v in ck["hist_loss"]]
     out["texels"] = len(scene.texels)

@@ -1,4 +1,5 @@
 """selection.png: the target beside every candidate's final prediction, each with its figures."""
+
 from __future__ import annotations
 
 import math
@@ -36,8 +37,10 @@ def selection_figure(path: Path, rec, predictions) -> Path:
     cells = [("target", "", rec.target_rgb)]
     for c, rgb in predictions:
         inks = ",".join(c["inks"])
-        figures = (f"{c['iterations']} it, loss {c['loss']:.4g}\ndE76 {c['delta_e76_mean']:.2f}  dE2000 "
-                   f"{c['delta_e2000_mean']:.2f}  SSIM {c['ssim']:.3f}")
+        figures = (
+            f"{c['iterations']} it, loss {c['loss']:.4g}\ndE76 {c['delta_e76_mean']:.2f}  dE2000 "
+            f"{c['delta_e2000_mean']:.2f}  SSIM {c['ssim']:.3f}"
+        )
         cells.append((inks, figures, rgb))
     cols = min(COLUMNS, len(cells))
     rows = math.ceil(len(cells) / cols)

@@ -29,6 +29,7 @@ Work is counted in texel-samples: iterations x texels x (spp + forward spp), plu
 every rung (the final and the initial mixture, eval spp each). The search's state (``selection_state.json``) is
 saved atomically after every finished run, so ``resume`` continues an interrupted selection.
 """
+
 from __future__ import annotations
 
 import json
@@ -41,10 +42,10 @@ from pathlib import Path
 import numpy as np
 
 from ..io import FORMAT_KEY, load_npz, save_npz, upgrade_format, write_json
+from ..model import TRANSPARENT_INKS
 from ..model.inks import INK_LIBRARY
 from ..optim import OptimizeConfig
 from ..printing.profiles import printer_profile
-from ..model import TRANSPARENT_INKS
 from ..rundir import RunDir
 from ..scenes.spec import SceneSpec
 from .backends import Serial, config_dict, run_candidate, threads_per_run
@@ -68,7 +69,7 @@ def extrapolate_loss(hist, total: int, start: float = 0.5) -> float:
         return float(h[-1])
     best = (math.inf, float(h[-1]))
     for c in _EXPONENTS:
-        g = t ** -c
+        g = t**-c
         a, b = np.linalg.lstsq(np.stack([np.ones_like(g), g], 1), y, rcond=None)[0]
         if b < 0:
             a, b = y.mean(), 0.0
@@ -76,7 +77,7 @@ def extrapolate_loss(hist, total: int, start: float = 0.5) -> float:
             a, b = 0.0, float(g @ y / (g @ g))
         sse = float(((a + b * g - y) ** 2).sum())
         if sse < best[0]:
-            best = (sse, float(a + b * total ** -c))
+            best = (sse, float(a + b * total**-c))
     return best[1]
 
 
@@ -114,20 +115,25 @@ class Selection:
         if both:
             raise ValueError(f"ink(s) {','.join(both)} are in both --candidates and --always")
         if not 1 <= self.choose <= len(self.candidates):
-            raise ValueError(f"--choose {self.choose} needs at least {max(self.choose, 1)} candidates and at least "
-                             f"1; got {len(self.candidates)} ({','.join(self.candidates) or 'none'})")
+            raise ValueError(
+                f"--choose {self.choose} needs at least {max(self.choose, 1)} candidates and at least "
+                f"1; got {len(self.candidates)} ({','.join(self.candidates) or 'none'})"
+            )
         n = self.choose + len(self.always)
         prof = printer_profile(self.printer) if self.printer is not None else None
         if prof is not None and prof.max_materials is not None and n > prof.max_materials:
-            raise ValueError(f"--choose {self.choose} plus {len(self.always)} --always inks make {n} inks but "
-                             f"{prof.name} holds {prof.max_materials} materials per job; choose fewer or use "
-                             "a --printer with more material slots")
+            raise ValueError(
+                f"--choose {self.choose} plus {len(self.always)} --always inks make {n} inks but "
+                f"{prof.name} holds {prof.max_materials} materials per job; choose fewer or use "
+                "a --printer with more material slots"
+            )
         self.cfg.validate()
         if self.cfg.iterations < 1:
             raise ValueError("--iterations must be at least 1")
         if self.cfg.init == "white" and "white" not in self.always:
-            raise ValueError("--init white needs 'white' in --always (every set starts 97 % white); "
-                             "add it or use --init random")
+            raise ValueError(
+                "--init white needs 'white' in --always (every set starts 97 % white); add it or use --init random"
+            )
         if self.rung_eval_spp < 1 or self.eval_spp < 1:
             raise ValueError("evaluation spp must be at least 1")
         self._check_target()
@@ -152,10 +158,20 @@ class Selection:
         """What must match for ``resume`` (everything; the settings as the target's scene kind resolves them, so
         that searches started before a setting was left to the kind still resume)."""
         cfg = self.cfg.for_scene(self.target.kind)
-        return json.dumps({"target": self.target.to_json(), "candidates": self.candidates, "choose": self.choose,
-                           "always": self.always, "cfg": config_dict(cfg), "strategy": self.strategy,
-                           "eval_spp": self.final_eval_spp, "rung_eval_spp": self.rung_eval_spp, "rule": RULE},
-                          sort_keys=True)
+        return json.dumps(
+            {
+                "target": self.target.to_json(),
+                "candidates": self.candidates,
+                "choose": self.choose,
+                "always": self.always,
+                "cfg": config_dict(cfg),
+                "strategy": self.strategy,
+                "eval_spp": self.final_eval_spp,
+                "rung_eval_spp": self.rung_eval_spp,
+                "rule": RULE,
+            },
+            sort_keys=True,
+        )
 
     def _check_target(self) -> None:
         """The target's inputs, with every set's inks (each must honour the constraints: white for a mesh's
@@ -164,8 +180,9 @@ class Selection:
         from ..model import InkTable
 
         if self.target.translucency is not None and not set(TRANSPARENT_INKS) & set(self.always):
-            raise ValueError("--translucency needs a transparent ink ('transparent' or 'clear') in every set; add "
-                             "it to --always")
+            raise ValueError(
+                "--translucency needs a transparent ink ('transparent' or 'clear') in every set; add it to --always"
+            )
         sets = [InkTable.from_names(self.inks(s)) for s in self.subsets()]
         for inks in sets:
             self.target.validate(inks)
@@ -195,8 +212,10 @@ def _load_state(out: Path, sel: Selection, resume: bool) -> dict:
         return fresh
     state = json.loads(path.read_text())
     if state.get("key") != sel.key():
-        raise ValueError(f"{out} holds a selection made with different settings; rerun without --resume or "
-                         "with the original settings")
+        raise ValueError(
+            f"{out} holds a selection made with different settings; rerun without --resume or "
+            "with the original settings"
+        )
     return state
 
 
@@ -214,35 +233,48 @@ def run_selection(sel: Selection, out, backend=None, *, resume: bool = False, lo
     for k, budget in enumerate(budgets):
         last = k == len(budgets) - 1
         if k == len(state["rungs"]):
-            state["rungs"].append({"iterations": budget, "eval_spp": sel.final_eval_spp if last
-                                   else sel.rung_eval_spp, "results": {}})
+            state["rungs"].append(
+                {"iterations": budget, "eval_spp": sel.final_eval_spp if last else sel.rung_eval_spp, "results": {}}
+            )
         rung = state["rungs"][k]
         todo = [s for s in alive if set_name(s) not in rung["results"]]
         threads = threads_per_run(backend, len(todo))
         # every rung steps as the full run would (step decay planned for the full budget), so intermediate rungs
         # take constant steps and a final run is the same as brute force's run of that set
         cfg = {**config_dict(sel.cfg), "iterations": budget, "schedule_iterations": sel.cfg.iterations}
-        tasks = [{"spec": sel.target, "inks": sel.inks(s), "cfg": cfg,
-                  "out": str(out / "runs" / set_name(s)), "resume": resume or k > 0, "eval_spp": rung["eval_spp"],
-                  "threads": threads} for s in todo]
+        tasks = [
+            {
+                "spec": sel.target,
+                "inks": sel.inks(s),
+                "cfg": cfg,
+                "out": str(out / "runs" / set_name(s)),
+                "resume": resume or k > 0,
+                "eval_spp": rung["eval_spp"],
+                "threads": threads,
+            }
+            for s in todo
+        ]
         for s, res in zip(todo, backend.map(run_candidate, tasks)):
             name = set_name(s)
             save_npz(out / "predictions" / f"{name}.npz", {"rgb": res.pop("prediction")})
             start = done_iters.get(name, 0)
-            res["texel_samples"] = res["texels"] * ((budget - start) * (sel.cfg.spp + sel.cfg.forward_spp)
-                                                    + 2 * rung["eval_spp"])
+            res["texel_samples"] = res["texels"] * (
+                (budget - start) * (sel.cfg.spp + sel.cfg.forward_spp) + 2 * rung["eval_spp"]
+            )
             hist = res.pop("hist_loss")
             res["train_loss"] = hist[-1]
             res["predicted_loss"] = extrapolate_loss(hist, sel.cfg.iterations)
             rung["results"][name] = res
             write_json(out / STATE, state)
-            log(f"  {name}: {budget} iterations, loss {res['loss']:.5g}, ΔE76 {res['delta_e76_mean']:.2f}"
-                + ("" if last else f", predicted loss at {sel.cfg.iterations}: {res['predicted_loss']:.5g}"))
+            log(
+                f"  {name}: {budget} iterations, loss {res['loss']:.5g}, ΔE76 {res['delta_e76_mean']:.2f}"
+                + ("" if last else f", predicted loss at {sel.cfg.iterations}: {res['predicted_loss']:.5g}")
+            )
         for s in alive:
             done_iters[set_name(s)] = budget
         by = "loss" if last else "predicted_loss"  # the final figures, else the extrapolated training loss
         ranked = sorted(alive, key=lambda s: (rung["results"][set_name(s)][by], set_name(s)))
-        alive = ranked[:1] if last else ranked[:math.ceil(len(ranked) / 2)]
+        alive = ranked[:1] if last else ranked[: math.ceil(len(ranked) / 2)]
     return _finish(sel, out, state, alive[0], log)
 
 
@@ -254,13 +286,26 @@ def _finish(sel: Selection, out: Path, state: dict, winner, log) -> dict:
             work[name] = work.get(name, 0) + res["texel_samples"]
     names = {set_name(s): s for s in sel.subsets()}
     order = sorted(latest, key=lambda n: (-rung_of[n], latest[n]["loss"], n))
-    cands = [{"inks": sel.inks(names[n]), "iterations": latest[n]["iterations"], "loss": latest[n]["loss"],
-              "delta_e76_mean": latest[n]["delta_e76_mean"], "delta_e2000_mean": latest[n]["delta_e2000_mean"],
-              "ssim": latest[n]["ssim"], "texel_samples": work[n]} for n in order]
+    cands = [
+        {
+            "inks": sel.inks(names[n]),
+            "iterations": latest[n]["iterations"],
+            "loss": latest[n]["loss"],
+            "delta_e76_mean": latest[n]["delta_e76_mean"],
+            "delta_e2000_mean": latest[n]["delta_e2000_mean"],
+            "ssim": latest[n]["ssim"],
+            "texel_samples": work[n],
+        }
+        for n in order
+    ]
     wname = set_name(winner)
-    result = {"strategy": sel.strategy, "candidates": cands,
-              "winner": {"inks": sel.inks(winner), "loss": latest[wname]["loss"]},
-              "texel_samples": int(sum(work.values())), FORMAT_KEY: SELECTION_FORMAT}
+    result = {
+        "strategy": sel.strategy,
+        "candidates": cands,
+        "winner": {"inks": sel.inks(winner), "loss": latest[wname]["loss"]},
+        "texel_samples": int(sum(work.values())),
+        FORMAT_KEY: SELECTION_FORMAT,
+    }
     _copy_run(out / "runs" / wname, out / "winner")
     write_json(out / SELECTION, result)
     from .figures import selection_figure
@@ -268,8 +313,10 @@ def _finish(sel: Selection, out: Path, state: dict, winner, log) -> dict:
     rec = RunDir(out / "winner").load_scene()
     preds = [(c, load_npz(out / "predictions" / f"{n}.npz")["rgb"]) for c, n in zip(cands, order)]
     selection_figure(out / PICTURE, rec, preds)
-    log(f"winner: {','.join(result['winner']['inks'])} (loss {result['winner']['loss']:.5g}); "
-        f"{result['texel_samples']:.3g} texel-samples")
+    log(
+        f"winner: {','.join(result['winner']['inks'])} (loss {result['winner']['loss']:.5g}); "
+        f"{result['texel_samples']:.3g} texel-samples"
+    )
     return result
 
 
@@ -279,8 +326,9 @@ def load_selection(out) -> dict:
     path = Path(out) / SELECTION
     if not path.is_file():
         raise ValueError(f"{path} does not exist (the selection has not finished)")
-    return upgrade_format(json.loads(path.read_text()), kind="ink-set selection", where=path,
-                          current=SELECTION_FORMAT, upgrades={0: dict})
+    return upgrade_format(
+        json.loads(path.read_text()), kind="ink-set selection", where=path, current=SELECTION_FORMAT, upgrades={0: dict}
+    )
 
 
 def _copy_run(src: Path, dst: Path) -> None:

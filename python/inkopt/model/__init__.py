@@ -2,17 +2,42 @@
 (``volume``, its surface's shading normals in ``normals``, fixed ink shares in ``fixed``, the constraints
 they express in ``constraints``), a mesh's provenance (``provenance``) and the renderer's sensor elements, texels
 (``texels``)."""
+
 from .constraints import TRANSPARENT_INKS, Translucency, scene_fixed_shares, transparent_ink, white_fixed_shares
 from .fixed import FixedShares
 from .inks import DEFAULT_G, INK_LIBRARY, PRESETS, InkTable, mix, mix_grad
 from .normals import SurfaceNormals
 from .provenance import MeshInfo
 from .texels import FACE_ALIASES, FACE_NAMES, FACE_NORMALS, Texels, face_id
-from .volume import (BOUNDARIES, EMPTY, MAX_VOLUME_BYTES, Dense, Labels, Mixture, Quantization, Volume,
-                     VolumeError)
+from .volume import BOUNDARIES, EMPTY, MAX_VOLUME_BYTES, Dense, Labels, Mixture, Quantization, Volume, VolumeError
 
-__all__ = ["DEFAULT_G", "INK_LIBRARY", "PRESETS", "InkTable", "mix", "mix_grad", "FACE_ALIASES", "FACE_NAMES",
-           "FACE_NORMALS", "Texels", "face_id", "BOUNDARIES", "EMPTY", "MAX_VOLUME_BYTES", "Dense", "Labels",
-           "Mixture", "Quantization", "Volume", "VolumeError", "SurfaceNormals", "FixedShares",
-           "TRANSPARENT_INKS", "Translucency", "scene_fixed_shares", "transparent_ink", "white_fixed_shares",
-           "MeshInfo"]
+__all__ = [
+    "DEFAULT_G",
+    "INK_LIBRARY",
+    "PRESETS",
+    "InkTable",
+    "mix",
+    "mix_grad",
+    "FACE_ALIASES",
+    "FACE_NAMES",
+    "FACE_NORMALS",
+    "Texels",
+    "face_id",
+    "BOUNDARIES",
+    "EMPTY",
+    "MAX_VOLUME_BYTES",
+    "Dense",
+    "Labels",
+    "Mixture",
+    "Quantization",
+    "Volume",
+    "VolumeError",
+    "SurfaceNormals",
+    "FixedShares",
+    "TRANSPARENT_INKS",
+    "Translucency",
+    "scene_fixed_shares",
+    "transparent_ink",
+    "white_fixed_shares",
+    "MeshInfo",
+]

@@ -8,6 +8,7 @@
 :func:`scene_fixed_shares` combines the two from what a scene record stores (the free mask and the translucency),
 so every stage that rebuilds a run's constraints (optimisation, evaluation, baselines) gets the same shares.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -26,8 +27,10 @@ def white_fixed_shares(free: np.ndarray, inks: InkTable) -> FixedShares:
     """Fixed ink shares (z, y, x, N): 100 % white where ``free`` ((z, y, x) bool, kept by reference) is False,
     none where True. One-line ValueError if the ink set has no white."""
     if "white" not in inks.names:
-        raise ValueError(f"voxels that are not optimised (outside the object, the core below --shell-mm) are "
-                         f"printed white, but the ink set {list(inks.names)} has no 'white'")
+        raise ValueError(
+            f"voxels that are not optimised (outside the object, the core below --shell-mm) are "
+            f"printed white, but the ink set {list(inks.names)} has no 'white'"
+        )
     held = np.zeros(len(inks), np.float32)
     held[inks.index("white")] = 1.0
     return FixedShares(free, held)
@@ -38,8 +41,10 @@ def transparent_ink(inks: InkTable) -> str:
     for name in TRANSPARENT_INKS:
         if name in inks.names:
             return name
-    raise ValueError(f"--translucency needs a transparent ink ('transparent' or 'clear') in the ink set, but "
-                     f"{list(inks.names)} has none; use e.g. --inks vero-cmykwt")
+    raise ValueError(
+        f"--translucency needs a transparent ink ('transparent' or 'clear') in the ink set, but "
+        f"{list(inks.names)} has none; use e.g. --inks vero-cmykwt"
+    )
 
 
 @dataclass
@@ -97,10 +102,14 @@ class Translucency:
 
     def arrays(self) -> dict:
         """Its arrays in scene.npz (``translucency_*``)."""
-        return {"translucency_ink": np.array(self.ink), "translucency_shape": np.array(self.shape, np.int64),
-                "translucency_index": self.index, "translucency_share": self.share,
-                "translucency_depth_mm": np.float64(np.nan if self.depth_mm is None else self.depth_mm),
-                "translucency_source": np.array(self.source)}
+        return {
+            "translucency_ink": np.array(self.ink),
+            "translucency_shape": np.array(self.shape, np.int64),
+            "translucency_index": self.index,
+            "translucency_share": self.share,
+            "translucency_depth_mm": np.float64(np.nan if self.depth_mm is None else self.depth_mm),
+            "translucency_source": np.array(self.source),
+        }
 
     @classmethod
     def from_arrays(cls, d) -> Translucency | None:
@@ -108,12 +117,19 @@ class Translucency:
         if "translucency_index" not in d:
             return None
         depth = float(d["translucency_depth_mm"])
-        return cls(str(d["translucency_ink"]), tuple(np.asarray(d["translucency_shape"])), d["translucency_index"],
-                   d["translucency_share"], None if np.isnan(depth) else depth, str(d["translucency_source"]))
+        return cls(
+            str(d["translucency_ink"]),
+            tuple(np.asarray(d["translucency_shape"])),
+            d["translucency_index"],
+            d["translucency_share"],
+            None if np.isnan(depth) else depth,
+            str(d["translucency_source"]),
+        )
 
 
-def scene_fixed_shares(inks: InkTable, free: np.ndarray | None = None,
-                       translucency: Translucency | None = None) -> FixedShares | None:
+def scene_fixed_shares(
+    inks: InkTable, free: np.ndarray | None = None, translucency: Translucency | None = None
+) -> FixedShares | None:
     """A scene's fixed shares from its free mask ((z, y, x) bool: 100 % white wherever it is False; None: no white
     core) and its translucency constraint (or None); None if it has neither."""
     if free is not None:

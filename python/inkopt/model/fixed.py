@@ -9,6 +9,7 @@ one is needed (``np.asarray(fixed)``, ``.shape``), and gives rows (:meth:`at`), 
 without making it. It is the one form of fixed shares: scenes build it, ``optim.param`` takes it, and a dense
 array converts with :meth:`from_dense`.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -22,8 +23,9 @@ class FixedShares:
     ndim = 4
     dtype = np.dtype(np.float32)
 
-    def __init__(self, free: np.ndarray, held: np.ndarray, index: np.ndarray | None = None,
-                 rows: np.ndarray | None = None):
+    def __init__(
+        self, free: np.ndarray, held: np.ndarray, index: np.ndarray | None = None, rows: np.ndarray | None = None
+    ):
         self.free = np.asarray(free, bool)
         self.held = np.asarray(held, np.float32).reshape(-1)
         n = len(self.held)
@@ -33,8 +35,9 @@ class FixedShares:
             raise ValueError(f"free must be a (z, y, x) mask, got shape {self.free.shape}")
         if len(self.rows) != len(self.index):
             raise ValueError(f"{len(self.index)} indexed voxels but {len(self.rows)} rows")
-        if len(self.index) and (np.any(np.diff(self.index) <= 0) or self.index[0] < 0
-                                or self.index[-1] >= self.free.size):
+        if len(self.index) and (
+            np.any(np.diff(self.index) <= 0) or self.index[0] < 0 or self.index[-1] >= self.free.size
+        ):
             raise ValueError("fixed-share index must be strictly increasing voxel indices inside the grid")
 
     @classmethod

@@ -7,6 +7,7 @@ Mixtures mix scattering and absorption coefficients *linearly*:
 
 All inks share one Henyey-Greenstein phase function (g = 0.4 by default).
 """
+
 from __future__ import annotations
 
 import json
@@ -80,7 +81,7 @@ class InkTable:
         return np.divide(self.sigma_s, self.mu_t, out=np.ones_like(self.sigma_s), where=self.mu_t > 0)
 
     @classmethod
-    def from_mu_t_albedo(cls, names, mu_t, albedo, g: float = DEFAULT_G) -> "InkTable":
+    def from_mu_t_albedo(cls, names, mu_t, albedo, g: float = DEFAULT_G) -> InkTable:
         mu_t = np.asarray(mu_t, dtype=np.float64)
         albedo = np.asarray(albedo, dtype=np.float64)
         if np.any(albedo < 0) or np.any(albedo > 1):
@@ -88,16 +89,15 @@ class InkTable:
         return cls(tuple(n.lower() for n in names), mu_t * albedo, mu_t * (1.0 - albedo), g)
 
     @classmethod
-    def from_names(cls, names, g: float = DEFAULT_G) -> "InkTable":
+    def from_names(cls, names, g: float = DEFAULT_G) -> InkTable:
         names = [n.strip().lower() for n in names if n.strip()]
         unknown = [n for n in names if n not in INK_LIBRARY]
         if unknown:
             raise ValueError(f"unknown ink(s) {unknown}; known: {sorted(INK_LIBRARY)}")
-        return cls.from_mu_t_albedo(names, [INK_LIBRARY[n][0] for n in names],
-                                    [INK_LIBRARY[n][1] for n in names], g)
+        return cls.from_mu_t_albedo(names, [INK_LIBRARY[n][0] for n in names], [INK_LIBRARY[n][1] for n in names], g)
 
     @classmethod
-    def parse(cls, spec: str) -> "InkTable":
+    def parse(cls, spec: str) -> InkTable:
         """A preset name (``vero-cmykw``), a comma list of ink names, or a JSON/TOML file of inks.
 
         File format: ``{"g": 0.4, "inks": [{"name": "cyan", "mu_t": [9, 4.5, 7.5], "albedo": [...]}, ...]}``
@@ -119,21 +119,32 @@ class InkTable:
                 data = tomllib.loads(path.read_text())
             try:
                 inks = data["inks"]
-                return cls.from_mu_t_albedo([i["name"] for i in inks], [i["mu_t"] for i in inks],
-                                            [i["albedo"] for i in inks], float(data.get("g", DEFAULT_G)))
+                return cls.from_mu_t_albedo(
+                    [i["name"] for i in inks],
+                    [i["mu_t"] for i in inks],
+                    [i["albedo"] for i in inks],
+                    float(data.get("g", DEFAULT_G)),
+                )
             except (KeyError, TypeError) as exc:
                 raise ValueError(f"ink file {spec}: missing or malformed field {exc}") from None
         return cls.from_names(spec.split(","))
 
     def to_arrays(self) -> dict:
         """Arrays for a volume .npz file (see inkopt.model.volume)."""
-        return {"ink_names": np.array(self.names), "ink_sigma_s": self.sigma_s.astype(np.float32),
-                "ink_sigma_a": self.sigma_a.astype(np.float32)}
+        return {
+            "ink_names": np.array(self.names),
+            "ink_sigma_s": self.sigma_s.astype(np.float32),
+            "ink_sigma_a": self.sigma_a.astype(np.float32),
+        }
 
     @classmethod
-    def from_arrays(cls, data, g: float = DEFAULT_G) -> "InkTable":
-        return cls(tuple(str(n) for n in data["ink_names"]), np.asarray(data["ink_sigma_s"]),
-                   np.asarray(data["ink_sigma_a"]), g)
+    def from_arrays(cls, data, g: float = DEFAULT_G) -> InkTable:
+        return cls(
+            tuple(str(n) for n in data["ink_names"]),
+            np.asarray(data["ink_sigma_s"]),
+            np.asarray(data["ink_sigma_a"]),
+            g,
+        )
 
 
 def mix(mixture: np.ndarray, inks: InkTable) -> tuple[np.ndarray, np.ndarray]:
@@ -151,5 +162,6 @@ def mix_grad(grad_sigma_s: np.ndarray, grad_sigma_a: np.ndarray, inks: InkTable)
 
     Inputs (..., 3), output (..., N) float32.
     """
-    return (np.asarray(grad_sigma_s, np.float32) @ inks.sigma_s.T.astype(np.float32)
-            + np.asarray(grad_sigma_a, np.float32) @ inks.sigma_a.T.astype(np.float32))
+    return np.asarray(grad_sigma_s, np.float32) @ inks.sigma_s.T.astype(np.float32) + np.asarray(
+        grad_sigma_a, np.float32
+    ) @ inks.sigma_a.T.astype(np.float32)

@@ -6,6 +6,7 @@ temporary sibling file (so the written pages stay in the page cache, not in the 
 writable memory map), counting the labels on the way; ``commit`` renames it into place atomically.
 ``load_label_file`` maps it read-only (``numpy.load(mmap_mode="r")``): pages are read when touched.
 """
+
 from __future__ import annotations
 
 import os
@@ -29,8 +30,7 @@ class LabelFileWriter:
         fd, tmp = tempfile.mkstemp(prefix=self.path.name + ".", suffix=".tmp.npy", dir=self.path.parent)
         self._tmp = Path(tmp)
         self._fh = os.fdopen(fd, "wb")
-        np.lib.format.write_array_header_1_0(self._fh, {"descr": "|u1", "fortran_order": False,
-                                                        "shape": self.shape})
+        np.lib.format.write_array_header_1_0(self._fh, {"descr": "|u1", "fortran_order": False, "shape": self.shape})
         self.next = 0
         self.counts = np.zeros(256, np.int64)
 
@@ -68,6 +68,8 @@ def load_label_file(path, shape=None) -> np.ndarray:
     except Exception as exc:  # format errors: one line
         raise ValueError(f"{path} is not a readable .npy label file ({type(exc).__name__}: {exc})") from None
     if lab.dtype != np.uint8 or lab.ndim != 3 or (shape is not None and lab.shape != tuple(int(s) for s in shape)):
-        raise ValueError(f"{path} holds {lab.dtype} {lab.shape}, expected uint8 labels of shape "
-                         f"{tuple(shape) if shape is not None else '(Z, Y, X)'}")
+        raise ValueError(
+            f"{path} holds {lab.dtype} {lab.shape}, expected uint8 labels of shape "
+            f"{tuple(shape) if shape is not None else '(Z, Y, X)'}"
+        )
     return lab

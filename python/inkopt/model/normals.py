@@ -6,6 +6,7 @@ keeps ``index`` (K,) int64, the voxels' linear indices in the grid's C order of 
 and ``vectors`` (K, 3) float32 outward normals with (x, y, z) components: 20 bytes per surface voxel. The Rust core
 reads this form directly (``Scene(normal_index=, normal_vectors=)``).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -33,7 +34,7 @@ class SurfaceNormals:
             raise ValueError(f"normals: voxel indices must increase and lie in the grid {self.shape}")
 
     @classmethod
-    def from_dense(cls, dense: np.ndarray) -> "SurfaceNormals":
+    def from_dense(cls, dense: np.ndarray) -> SurfaceNormals:
         """From a (z, y, x, 3) array that is zero where there is no normal."""
         dense = np.asarray(dense, np.float32)
         if dense.ndim != 4 or dense.shape[-1] != 3:
@@ -43,7 +44,7 @@ class SurfaceNormals:
         return cls(dense.shape[:3], index, flat[index])
 
     @classmethod
-    def from_voxels(cls, shape, voxels: np.ndarray, vectors: np.ndarray) -> "SurfaceNormals":
+    def from_voxels(cls, shape, voxels: np.ndarray, vectors: np.ndarray) -> SurfaceNormals:
         """From (K, 3) voxel coordinates (z, y, x) in any order (no repeats) and their (K, 3) vectors."""
         index = np.ravel_multi_index(tuple(np.asarray(voxels, np.int64).T), tuple(shape))
         order = np.argsort(index, kind="stable")

@@ -4,6 +4,7 @@ A texel is one exposed voxel face (boxes, slabs) or one surface voxel with its s
 meshes). Texel order is part of every per-texel array (targets, predictions, adjoints): box faces in face-id
 order, each in C order of (z, y, x); mesh texels in C order of their voxels.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -66,11 +67,11 @@ class Texels:
     def position_mm(self, voxel_mm) -> np.ndarray:
         return self.pos_vox * np.asarray(voxel_mm, np.float64)
 
-    def subset(self, sel) -> "Texels":
+    def subset(self, sel) -> Texels:
         return Texels(self.voxel[sel], self.face[sel], self.normal[sel], self.centred)
 
     @classmethod
-    def box_faces(cls, shape, faces=None) -> "Texels":
+    def box_faces(cls, shape, faces=None) -> Texels:
         """Texels of the faces of a box volume of ``shape`` (z, y, x), in face-id order (all 6 by default)."""
         nz, ny, nx = shape
         faces = range(6) if faces is None else sorted({face_id(f) for f in faces})
@@ -88,11 +89,11 @@ class Texels:
         return cls(vox, fid, FACE_NORMALS[fid])
 
     @classmethod
-    def exposed_faces(cls, inside: np.ndarray, faces=None) -> "Texels":
+    def exposed_faces(cls, inside: np.ndarray, faces=None) -> Texels:
         """Every exposed face of an arbitrary ``inside`` mask (a face whose neighbour is outside or off-grid)."""
         pad = np.pad(inside, 1, constant_values=False)
         vox, fid = [], []
-        for f in (range(6) if faces is None else sorted({face_id(x) for x in faces})):
+        for f in range(6) if faces is None else sorted({face_id(x) for x in faces}):
             axis = 2 - f // 2
             step = 1 if f % 2 else -1
             nb = np.roll(pad, -step, axis=axis)[1:-1, 1:-1, 1:-1]
@@ -103,7 +104,7 @@ class Texels:
         return cls(np.concatenate(vox), fid, FACE_NORMALS[fid])
 
     @classmethod
-    def from_normals(cls, inside: np.ndarray, normals) -> "Texels":
+    def from_normals(cls, inside: np.ndarray, normals) -> Texels:
         """Mesh texels: one per surface voxel (an inside voxel with an outside 6-neighbour), in C order of
         (z, y, x); ``normal`` = the voxel's shading normal from ``normals`` (``SurfaceNormals``, or a dense
         (z, y, x, 3) array), and ``face`` = its exposed face most aligned with that normal."""
@@ -127,7 +128,7 @@ class Texels:
         return cls(faces.voxel[keep], faces.face[keep], n_keep, centred=True)
 
     @classmethod
-    def for_volume(cls, volume, faces=None) -> "Texels":
+    def for_volume(cls, volume, faces=None) -> Texels:
         """The default sensor of a volume: its exposed faces (periodic-xy: only -z and +z), or for a volume with
         shading normals (a voxelized mesh) one texel per surface voxel. ``faces`` restricts to some faces."""
         if volume.normals is not None and faces is None:
@@ -142,10 +143,18 @@ class Texels:
         return cls.exposed_faces(volume.inside_mask(), faces)
 
     def to_arrays(self) -> dict:
-        return {"texel_voxel": self.voxel, "texel_face": self.face, "texel_normal": self.normal,
-                "texel_centred": np.bool_(self.centred)}
+        return {
+            "texel_voxel": self.voxel,
+            "texel_face": self.face,
+            "texel_normal": self.normal,
+            "texel_centred": np.bool_(self.centred),
+        }
 
     @classmethod
-    def from_arrays(cls, data) -> "Texels":
-        return cls(data["texel_voxel"], data["texel_face"], data["texel_normal"],
-                   bool(data["texel_centred"]) if "texel_centred" in data else False)
+    def from_arrays(cls, data) -> Texels:
+        return cls(
+            data["texel_voxel"],
+            data["texel_face"],
+            data["texel_normal"],
+            bool(data["texel_centred"]) if "texel_centred" in data else False,
+        )

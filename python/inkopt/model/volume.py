@@ -20,6 +20,7 @@ beside it, ``model.labelfile``; shape ``labels_shape``): the labels are then mem
 carries ``format_version`` int64 (``VOLUME_FORMAT``); :func:`upgrade_volume` reads the older versions users may
 hold.
 """
+
 from __future__ import annotations
 
 import os
@@ -30,8 +31,8 @@ import numpy as np
 
 from ..io import FORMAT_KEY, FormatError, Streamed, load_npz, save_npz, upgrade_format
 from .inks import DEFAULT_G, InkTable, mix
-from .normals import SurfaceNormals
 from .labelfile import load_label_file
+from .normals import SurfaceNormals
 
 BOUNDARIES = ("box", "periodic-xy")
 # Memory the renderer may use for one volume; a volume above this is refused (bytes).
@@ -89,7 +90,7 @@ class Mixture:
             raise VolumeError(f"mixture must have shape (z, y, x, {len(self.inks)}), got {m.shape}")
         step = max(1, 2**22 // max(1, m[0].size))  # checked in slabs of layers: bounded temporaries
         for z in range(0, m.shape[0], step):
-            part = m[z:z + step]
+            part = m[z : z + step]
             if not np.all(np.isfinite(part)) or np.any(part < 0):
                 raise VolumeError("mixture must be finite and non-negative")
         self.mixture = m
@@ -116,7 +117,7 @@ class Labels:
             raise VolumeError(f"labels must be uint8 (z, y, x), got {lab.dtype} {lab.shape}")
         step = max(1, 2**24 // max(1, lab[0].size))  # checked in slabs of layers: bounded temporaries
         for z in range(0, lab.shape[0], step):
-            used = lab[z:z + step][lab[z:z + step] != EMPTY]
+            used = lab[z : z + step][lab[z : z + step] != EMPTY]
             if used.size and int(used.max()) >= len(self.inks):
                 raise VolumeError(f"labels use ink {int(used.max())} but the ink table has {len(self.inks)}")
         self.labels = lab
@@ -148,12 +149,15 @@ class Quantization:
         return out
 
     @classmethod
-    def from_arrays(cls, data) -> "Quantization | None":
+    def from_arrays(cls, data) -> Quantization | None:
         if "method" not in data:
             return None
-        return cls(str(data["method"]), int(data["seed"]) if "seed" in data else 0,
-                   tuple(float(v) for v in np.asarray(data["dpi"]).reshape(-1)) if "dpi" in data else None,
-                   str(data["upsample"]) if "upsample" in data else "nearest")
+        return cls(
+            str(data["method"]),
+            int(data["seed"]) if "seed" in data else 0,
+            tuple(float(v) for v in np.asarray(data["dpi"]).reshape(-1)) if "dpi" in data else None,
+            str(data["upsample"]) if "upsample" in data else "nearest",
+        )
 
 
 # ----------------------------------------------------------------------------------------- the volume
@@ -220,7 +224,7 @@ class Volume:
 
     @property
     def form(self) -> str:
-        """"dense", "mixture" or "labels"."""
+        """ "dense", "mixture" or "labels"."""
         return self.medium.form
 
     @property
@@ -254,8 +258,10 @@ class Volume:
                 raise VolumeError(f"normals are for a grid of shape {self.normals.shape}, the volume is {shp}")
         need = self.render_bytes()
         if need > MAX_VOLUME_BYTES:
-            raise VolumeError(f"volume {shp} needs {need / 2**30:.1f} GiB to render, more than the "
-                              f"{MAX_VOLUME_BYTES / 2**30:.1f} GiB allowed (INKOPT_MAX_VOLUME_BYTES)")
+            raise VolumeError(
+                f"volume {shp} needs {need / 2**30:.1f} GiB to render, more than the "
+                f"{MAX_VOLUME_BYTES / 2**30:.1f} GiB allowed (INKOPT_MAX_VOLUME_BYTES)"
+            )
 
     def render_bytes(self) -> int:
         """Memory the renderer needs for this medium (bytes): labels 1 per voxel; coefficients 24 per voxel
@@ -295,17 +301,17 @@ class Volume:
         a = np.empty_like(s)
         med = self.medium
         for lo in range(0, len(index), chunk):
-            ix = index[lo:lo + chunk]
+            ix = index[lo : lo + chunk]
             if isinstance(med, Dense):
-                s[lo:lo + chunk] = med.sigma_s.reshape(-1, 3)[ix]
-                a[lo:lo + chunk] = med.sigma_a.reshape(-1, 3)[ix]
+                s[lo : lo + chunk] = med.sigma_s.reshape(-1, 3)[ix]
+                a[lo : lo + chunk] = med.sigma_a.reshape(-1, 3)[ix]
             elif isinstance(med, Mixture):
-                s[lo:lo + chunk], a[lo:lo + chunk] = mix(med.mixture.reshape(-1, len(med.inks))[ix], med.inks)
+                s[lo : lo + chunk], a[lo : lo + chunk] = mix(med.mixture.reshape(-1, len(med.inks))[ix], med.inks)
             else:
                 lab = med.labels.reshape(-1)[ix]
                 full = lab != EMPTY
-                s[lo:lo + chunk] = np.where(full[:, None], med.inks.sigma_s[np.where(full, lab, 0)], 0)
-                a[lo:lo + chunk] = np.where(full[:, None], med.inks.sigma_a[np.where(full, lab, 0)], 0)
+                s[lo : lo + chunk] = np.where(full[:, None], med.inks.sigma_s[np.where(full, lab, 0)], 0)
+                a[lo : lo + chunk] = np.where(full[:, None], med.inks.sigma_a[np.where(full, lab, 0)], 0)
         return s, a
 
     def inside_mask(self) -> np.ndarray:
@@ -315,11 +321,11 @@ class Volume:
             return self.medium.labels != EMPTY
         return np.ones(self.shape, bool)
 
-    def with_medium(self, medium: Medium, **changes) -> "Volume":
+    def with_medium(self, medium: Medium, **changes) -> Volume:
         """The same geometry with another medium (and any other field ``changes``)."""
         return replace(self, medium=medium, **changes)
 
-    def with_mixture(self, mixture: np.ndarray) -> "Volume":
+    def with_mixture(self, mixture: np.ndarray) -> Volume:
         """The same geometry and inks with another mixture (z, y, x, N)."""
         return self.with_medium(Mixture(mixture, self.inks))
 
@@ -345,13 +351,19 @@ class Volume:
                     raise VolumeError("mixture must be finite and non-negative")
                 yield part
 
-        save_npz(path, {**self.geometry_arrays(), "mixture": Streamed(shape, np.float32, checked()),
-                        **inks.to_arrays()})
+        save_npz(
+            path, {**self.geometry_arrays(), "mixture": Streamed(shape, np.float32, checked()), **inks.to_arrays()}
+        )
 
     def geometry_arrays(self) -> dict:
         """Everything ``to_arrays`` writes but the medium's own arrays."""
-        out = {FORMAT_KEY: np.int64(VOLUME_FORMAT), "voxel_mm": self.voxel_mm, "g": np.float64(self.g),
-               "ior": np.float64(self.ior), "boundary": np.array(self.boundary)}
+        out = {
+            FORMAT_KEY: np.int64(VOLUME_FORMAT),
+            "voxel_mm": self.voxel_mm,
+            "g": np.float64(self.g),
+            "ior": np.float64(self.ior),
+            "boundary": np.array(self.boundary),
+        }
         if self.inside is not None:
             out["inside"] = self.inside
         if self.normals is not None:
@@ -396,11 +408,16 @@ class Volume:
                 labels = load_label_file(Path(path).parent / name, data.get("labels_shape"))
             except ValueError as exc:
                 raise VolumeError(str(exc)) from None
-        vol = cls(data["voxel_mm"], _medium_of(data.get("sigma_s"), data.get("sigma_a"), data.get("mixture"),
-                                               labels, inks), g=g,
-                  ior=float(data["ior"]) if "ior" in data else 1.5, inside=data.get("inside"),
-                  boundary=str(data["boundary"]) if "boundary" in data else "box",
-                  origin_mm=data.get("origin_mm"), quantization=Quantization.from_arrays(data))
+        vol = cls(
+            data["voxel_mm"],
+            _medium_of(data.get("sigma_s"), data.get("sigma_a"), data.get("mixture"), labels, inks),
+            g=g,
+            ior=float(data["ior"]) if "ior" in data else 1.5,
+            inside=data.get("inside"),
+            boundary=str(data["boundary"]) if "boundary" in data else "box",
+            origin_mm=data.get("origin_mm"),
+            quantization=Quantization.from_arrays(data),
+        )
         if "normal_index" in data:
             try:
                 vol.normals = SurfaceNormals(vol.shape, data["normal_index"], data["normal_vectors"])
@@ -416,15 +433,20 @@ def upgrade_volume(data: dict, where, quantized: bool = False) -> dict:
     ``format_version``) reads as version 1, except the pre-release layouts, refused in one line
     (``FormatError``): dense shading normals (``normals`` (z, y, x, 3)) and a quantized.npz holding its labels."""
     kind = "quantized volume" if quantized else "volume file"
-    again = f"run 'inkopt quantize {Path(where).parent}' again" if quantized else \
-        "write it again with this inkopt (e.g. rerun the optimisation)"
+    again = (
+        f"run 'inkopt quantize {Path(where).parent}' again"
+        if quantized
+        else "write it again with this inkopt (e.g. rerun the optimisation)"
+    )
 
     def from_0(d: dict) -> dict:
         if "normals" in d:
             raise FormatError(f"{where} stores dense shading normals, a pre-release layout; {again}")
         if quantized and "labels" in d:
-            raise FormatError(f"{where} holds its labels inside (a pre-release layout, now {Path(where).parent}/"
-                              f"quantized_labels.npy); {again}")
+            raise FormatError(
+                f"{where} holds its labels inside (a pre-release layout, now {Path(where).parent}/"
+                f"quantized_labels.npy); {again}"
+            )
         return d
 
     return upgrade_format(data, kind=kind, where=where, current=VOLUME_FORMAT, upgrades={0: from_0})

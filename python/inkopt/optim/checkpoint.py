@@ -13,6 +13,7 @@ smoothing with ``"smooth_where": "flat"``. The upgrade to version 1 writes those
 checkpoint resumes; one made before smoothing was limited to flat texels (guided smoothing without the mark)
 cannot continue the same run and is refused in one line.
 """
+
 from __future__ import annotations
 
 import json
@@ -69,8 +70,9 @@ def read_checkpoint(path: str | Path) -> dict:
     """The arrays of a checkpoint file, brought to the current format version (one-line ``FormatError`` for a
     version this inkopt does not read; ValueError for a missing or unreadable file)."""
     data = load_npz(path, "checkpoint")
-    return upgrade_format(data, kind="checkpoint", where=path, current=CHECKPOINT_FORMAT,
-                          upgrades={0: lambda d: _upgrade_0(d, path)})
+    return upgrade_format(
+        data, kind="checkpoint", where=path, current=CHECKPOINT_FORMAT, upgrades={0: lambda d: _upgrade_0(d, path)}
+    )
 
 
 def _upgrade_0(data: dict, where) -> dict:
@@ -78,12 +80,16 @@ def _upgrade_0(data: dict, where) -> dict:
     if "config_key" not in data:
         raise FormatError(f"{where} is not an inkopt checkpoint (no config_key); rerun without --resume")
     if any(k not in data for k in History.keys()):
-        raise FormatError(f"{where} was made by a pre-release inkopt without the whole per-iteration history; it "
-                          f"cannot be continued: rerun without --resume")
+        raise FormatError(
+            f"{where} was made by a pre-release inkopt without the whole per-iteration history; it "
+            f"cannot be continued: rerun without --resume"
+        )
     key = json.loads(str(data["config_key"]))
     if key.get("smooth") and key.get("smooth_edge") and key.get("smooth_where") != "flat":
-        raise FormatError(f"{where} was made by a pre-release inkopt that smoothed every voxel's step; it cannot "
-                          f"be continued: rerun without --resume")
+        raise FormatError(
+            f"{where} was made by a pre-release inkopt that smoothed every voxel's step; it cannot "
+            f"be continued: rerun without --resume"
+        )
     key.pop("smooth_where", None)
     key.setdefault("schedule_iterations", None)
     key.setdefault("decay", 0.0)

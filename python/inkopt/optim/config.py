@@ -1,4 +1,5 @@
 """Settings of an optimisation run (docs/method.md §6) and their checks."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -99,8 +100,9 @@ class OptimizeConfig:
         if not 0.0 <= self.smooth_edge < float("inf"):
             raise ValueError(f"smoothing edge must be >= 0 (dE76), got {self.smooth_edge}")
         if self.schedule_iterations is not None and self.schedule_iterations < self.iterations:
-            raise ValueError(f"schedule_iterations ({self.schedule_iterations}) must be at least iterations "
-                             f"({self.iterations})")
+            raise ValueError(
+                f"schedule_iterations ({self.schedule_iterations}) must be at least iterations ({self.iterations})"
+            )
         if not 0.0 <= self.decay < 1.0:
             raise ValueError(f"decay must lie in [0, 1) (a fraction of the iterations), got {self.decay}")
         if self.adjoint_ema is not None and not 0.0 <= self.adjoint_ema < 1.0:
@@ -112,8 +114,9 @@ class OptimizeConfig:
         if kind not in SCENE_DEFAULTS:
             raise ValueError(f"unknown scene kind '{kind}'; use one of {tuple(SCENE_DEFAULTS)}")
         # floats, so that the checkpoint key of an explicit integer (``--set smooth=3``) equals the default's
-        resolved = {k: float(v if getattr(self, k) is None else getattr(self, k))
-                    for k, v in SCENE_DEFAULTS[kind].items()}
+        resolved = {
+            k: float(v if getattr(self, k) is None else getattr(self, k)) for k, v in SCENE_DEFAULTS[kind].items()
+        }
         return replace(self, **resolved)
 
     @property

@@ -11,6 +11,7 @@ voxels' media are overwritten each iteration. Seeds are derived from (seed, iter
 renders and gradients are bit-identical for any thread count, so a run resumed from a checkpoint continues exactly
 as if it had not stopped.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -32,7 +33,6 @@ from .config import OptimizeConfig
 from .optimizers import make_optimizer, step_factor
 from .param import Parameterization, initial_free_mixture
 from .smooth import MAX_DEPTH, GradientSmoother, nearest_texels, texel_guide
-
 
 #: samples per texel of the first iteration's forward render of a run without forward passes (forward_spp 0)
 START_FORWARD_SPP = 16
@@ -58,10 +58,20 @@ class Optimization:
     resolved one.
     """
 
-    def __init__(self, base: Volume, texels: Texels, target_rgb: np.ndarray, cfg: OptimizeConfig, *, kind: str,
-                 fixed_share: FixedShares | None = None, threads: int | None = None,
-                 baseline: Callable[[str], np.ndarray] | None = None, lighting: Lighting | str | None = None,
-                 renderer_factory: Callable[..., Renderer] | None = None):
+    def __init__(
+        self,
+        base: Volume,
+        texels: Texels,
+        target_rgb: np.ndarray,
+        cfg: OptimizeConfig,
+        *,
+        kind: str,
+        fixed_share: FixedShares | None = None,
+        threads: int | None = None,
+        baseline: Callable[[str], np.ndarray] | None = None,
+        lighting: Lighting | str | None = None,
+        renderer_factory: Callable[..., Renderer] | None = None,
+    ):
         cfg = cfg.for_scene(kind)  # settings left to the scene kind ("slab" or "mesh": config.SCENE_DEFAULTS)
         cfg.validate()
         self.renderer_factory = renderer_factory or Renderer
@@ -84,19 +94,21 @@ class Optimization:
         if cfg.smooth > 0:
             guide = rows = None
             if cfg.smooth_edge > 0:  # guided: the free voxels under flat texels only, down to MAX_DEPTH
-                nearest, dist = nearest_texels(self.param.shape, self.param.free_index, texels.pos_vox, MAX_DEPTH,
-                                               threads=threads)
+                nearest, dist = nearest_texels(
+                    self.param.shape, self.param.free_index, texels.pos_vox, MAX_DEPTH, threads=threads
+                )
                 rows = np.flatnonzero((nearest >= 0) & self.loss.flat[nearest])
                 guide = texel_guide(self.loss.target_lab, nearest[rows], dist[rows])
                 del nearest, dist
-            self.smoother = GradientSmoother(self.param.shape, self.param.free_index, cfg.smooth, guide,
-                                             cfg.smooth_edge, rows, threads)
+            self.smoother = GradientSmoother(
+                self.param.shape, self.param.free_index, cfg.smooth, guide, cfg.smooth_edge, rows, threads
+            )
         self._renderer: Renderer | None = None
         self.iteration = 0
         self.history = History()
         self.c_avg: np.ndarray | None = None  # running average of the prediction (I, 3)
-        self.c_weight = 0.0                     # its effective number of samples per texel
-        self.c_var: np.ndarray | None = None    # the variance of the running average (I, 3)
+        self.c_weight = 0.0  # its effective number of samples per texel
+        self.c_var: np.ndarray | None = None  # the variance of the running average (I, 3)
         #: the last step's render statistics (``RenderResult.stats()``: paths, events, seconds, ...) per pass
         self.last_passes: dict = {}
 
@@ -130,22 +142,41 @@ class Optimization:
         d.pop("checkpoint_every")
         if not d["smooth"]:  # without smoothing its edge guide does nothing
             d.pop("smooth_edge")
-        d.update(shape=list(self.base.shape), inks=list(self.base.inks.names), texels=len(self.texels),
-                 free=self.param.n_free, problem=self._problem_digest, lighting=self.lighting.key())
+        d.update(
+            shape=list(self.base.shape),
+            inks=list(self.base.inks.names),
+            texels=len(self.texels),
+            free=self.param.n_free,
+            problem=self._problem_digest,
+            lighting=self.lighting.key(),
+        )
         return json.dumps(d, sort_keys=True)
 
     def save_checkpoint(self, path: Path) -> None:
-        extra = {} if self.c_avg is None else {"c_avg": self.c_avg, "c_weight": np.float64(self.c_weight),
-                                                "c_var": self.c_var}
-        write_checkpoint(path, {"x": self.x, "iteration": np.int64(self.iteration), **extra,
-                                "config_key": np.array(self.config_key()), **self.opt.state(),
-                                **self.history.arrays()})
+        extra = (
+            {}
+            if self.c_avg is None
+            else {"c_avg": self.c_avg, "c_weight": np.float64(self.c_weight), "c_var": self.c_var}
+        )
+        write_checkpoint(
+            path,
+            {
+                "x": self.x,
+                "iteration": np.int64(self.iteration),
+                **extra,
+                "config_key": np.array(self.config_key()),
+                **self.opt.state(),
+                **self.history.arrays(),
+            },
+        )
 
     def load_checkpoint(self, path: Path) -> None:
         d = read_checkpoint(path)
         if json.loads(str(d["config_key"])) != json.loads(self.config_key()):
-            raise ValueError(f"checkpoint {path} was made with different settings; rerun without --resume or "
-                             "with the original settings")
+            raise ValueError(
+                f"checkpoint {path} was made with different settings; rerun without --resume or "
+                "with the original settings"
+            )
         self.x = np.asarray(d["x"], np.float32)
         self.iteration = int(d["iteration"])
         self.opt.load(d)
@@ -173,8 +204,7 @@ class Optimization:
                     self._renderer.set_mixture(block, fs.at(block))
                 del held
             else:
-                self._renderer = self.renderer_factory(self.base.with_mixture(fs.dense()), self.threads,
-                                                       self.lighting)
+                self._renderer = self.renderer_factory(self.base.with_mixture(fs.dense()), self.threads, self.lighting)
         x = self.x if x is None else x
         for lo, hi in self.param.chunks():  # in pieces: no (F, N) temporaries for a big object
             self._renderer.set_mixture(self.param.free_index[lo:hi], self.param.free_rows(x[lo:hi], lo))
@@ -188,8 +218,7 @@ class Optimization:
     def _snapshot(self) -> tuple:
         """References to everything a step replaces (it never changes these arrays in place)."""
         o = self.opt
-        return (self.x, self.iteration, self.c_avg, self.c_var, self.c_weight, o.m, o.v, o.t,
-                len(self.history.loss))
+        return (self.x, self.iteration, self.c_avg, self.c_var, self.c_weight, o.m, o.v, o.t, len(self.history.loss))
 
     def _restore(self, snap: tuple) -> None:
         o = self.opt
@@ -212,8 +241,15 @@ class Optimization:
         lr = self.loss(c, self.c_var, all_terms=False)  # the terms it optimises; the evaluation has all
         de = float(delta_e76(lr.lab, self.loss.target_lab).mean())
         t2 = time.perf_counter()
-        gs, ga, gres = renderer.gradient(self.texels, lr.grad.astype(np.float32), cfg.spp, grad_seed,
-                                         cfg.include_specular, cfg.grad_method, grad_index=self.param.free_index)
+        gs, ga, gres = renderer.gradient(
+            self.texels,
+            lr.grad.astype(np.float32),
+            cfg.spp,
+            grad_seed,
+            cfg.include_specular,
+            cfg.grad_method,
+            grad_index=self.param.free_index,
+        )
         # The gradient pass's own estimate joins the average only now, after its gradient is taken, so the
         # adjoint never correlates with the noise of the gradient it multiplies.
         self._average(gres.rgb, gres.var_mean, cfg.spp, decay=not forward)
@@ -231,8 +267,18 @@ class Optimization:
         self.iteration += 1
         t4 = time.perf_counter()
         self.last_passes = {"forward": res.stats() if forward else None, "gradient": gres.stats()}
-        self.history.append(loss=lr.value, e1=lr.e1, e2=lr.e2, e3=lr.e3, delta_e76=de, seconds=t4 - t0,
-                            render_s=t1 - t0, gradient_s=t3 - t2, loss_s=t2 - t1, step_s=t4 - t3)
+        self.history.append(
+            loss=lr.value,
+            e1=lr.e1,
+            e2=lr.e2,
+            e3=lr.e3,
+            delta_e76=de,
+            seconds=t4 - t0,
+            render_s=t1 - t0,
+            gradient_s=t3 - t2,
+            loss_s=t2 - t1,
+            step_s=t4 - t3,
+        )
         return {"loss": lr.value, "delta_e76": de}
 
     def _average(self, rgb: np.ndarray, var: np.ndarray, spp: int, decay: bool) -> np.ndarray:
@@ -245,7 +291,7 @@ class Optimization:
         else:
             tot = w_old + spp
             self.c_avg = ((w_old * self.c_avg + spp * rgb) / tot).astype(np.float32)
-            self.c_var = ((w_old ** 2 * self.c_var + spp ** 2 * var) / tot ** 2).astype(np.float32)
+            self.c_var = ((w_old**2 * self.c_var + spp**2 * var) / tot**2).astype(np.float32)
             self.c_weight = tot
         return self.c_avg
 
@@ -264,6 +310,7 @@ class Optimization:
         bar = None
         if progress:
             from tqdm import tqdm
+
             bar = tqdm(total=self.cfg.iterations, initial=self.iteration, unit="it", desc="optimize")
         snap = None
         try:

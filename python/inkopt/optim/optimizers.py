@@ -1,13 +1,14 @@
 """Update rules on the optimisation variables x (F, N), one class per optimiser with named hyperparameters.
 
-Each has ``step(x, g) -> x'`` (which replaces its state arrays rather than changing them in place, so a snapshot
-of references restores an interrupted step exactly), ``state() -> dict`` and ``load(dict)`` (checkpoint arrays ``opt_m``, ``opt_v``,
-``opt_t``, the same keys for every optimiser so that checkpoints stay readable), and ``natural``: whether it wants
-the mirror-descent direction (``Parameterization.backward(natural=True)``) instead of dE/dx.
+Each has ``step(x, g) -> x'`` (which replaces its state arrays rather than changing them in place, so a snapshot of
+references restores an interrupted step exactly), ``state() -> dict`` and ``load(dict)`` (checkpoint arrays ``opt_m``,
+``opt_v``, ``opt_t``, the same keys for every optimiser so that checkpoints stay readable), and ``natural``: whether it
+wants the mirror-descent direction (``Parameterization.backward(natural=True)``) instead of dE/dx.
 
 The element-wise updates run over blocks of rows into the new arrays, so that a big object's step makes no
 (F, N) temporaries beyond its results (each block computes exactly what the whole-array expression would).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -61,7 +62,7 @@ class ExponentiatedGradient(_Moments):
             self.v[0] += (scale - self.v[0]) / self.t
         m_new = np.empty(self.m.shape, np.result_type(self.m, g))  # the dtypes of the whole-array expression
         x_new = np.empty(x.shape, np.result_type(x, m_new, self.v))
-        bias, scale = 1 - self.beta ** self.t, self.v[0] + 1e-30
+        bias, scale = 1 - self.beta**self.t, self.v[0] + 1e-30
         for b in _blocks(len(x)):
             m = self.beta * self.m[b] + (1 - self.beta) * g[b]
             m_new[b] = m
@@ -99,7 +100,7 @@ class Adam(_Moments):
     def step(self, x: np.ndarray, g: np.ndarray) -> np.ndarray:
         self.t += 1
         b1, b2 = self.beta1, self.beta2
-        c1, c2 = 1 - b1 ** self.t, 1 - b2 ** self.t
+        c1, c2 = 1 - b1**self.t, 1 - b2**self.t
         m_new = np.empty(self.m.shape, np.result_type(self.m, g))
         v_new = np.empty(self.v.shape, np.result_type(self.v, g))
         x_new = np.empty(x.shape, np.result_type(x, m_new, v_new))

@@ -5,6 +5,7 @@ Constraints are fixed ink shares: a voxel's mixture is ``fixed_share + (1 - sum(
 whose fixed share sums to 1 is not a variable at all (a white core below a shell, masks), and a share below 1 fixes
 part of the mixture (e.g. 80 % transparent ink in a translucent region, the rest optimised).
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable
@@ -13,7 +14,6 @@ import numpy as np
 
 from ..model import FixedShares, InkTable, Volume
 from .config import PARAMS
-
 
 BAD_SHARES = "fixed ink shares must be non-negative and sum to at most 1 per voxel"
 
@@ -31,8 +31,12 @@ class Parameterization:
             raise ValueError(f"unknown parameterisation '{kind}'")
         self.kind, self.threads = kind, threads
         fs = fixed_share
-        if np.any(fs.held < 0) or np.any(fs.rows < 0) or np.any(fs.rows.sum(-1) > 1 + 1e-5) or (
-                fs.held.sum() > 1 + 1e-5 and not fs.free.all()):
+        if (
+            np.any(fs.held < 0)
+            or np.any(fs.rows < 0)
+            or np.any(fs.rows.sum(-1) > 1 + 1e-5)
+            or (fs.held.sum() > 1 + 1e-5 and not fs.free.all())
+        ):
             raise ValueError(BAD_SHARES)
         self.fixed_share, self.n_inks = fs, fs.shape[-1]
         held_free = np.clip(1.0 - fs.held.sum(), 0.0, 1.0) > 1e-6  # the held row leaves room: variables too
@@ -115,12 +119,17 @@ class Parameterization:
         g = grad_rho.reshape(-1, self.n_inks)
         if len(g) != len(x):
             g = g[self.free_index]
-        share = self.share_f[lo:lo + len(x)]
+        share = self.share_f[lo : lo + len(x)]
         if self.kind == "softmax":  # p and the centring fused in the Rust core (``inkopt_core::simplex``)
             from .. import _core
 
-            return _core.softmax_backward(np.ascontiguousarray(x, np.float32), np.ascontiguousarray(g, np.float32),
-                                          np.ascontiguousarray(share, np.float32), bool(natural), self.threads)
+            return _core.softmax_backward(
+                np.ascontiguousarray(x, np.float32),
+                np.ascontiguousarray(g, np.float32),
+                np.ascontiguousarray(share, np.float32),
+                bool(natural),
+                self.threads,
+            )
         if natural:
             raise ValueError("the natural (exponentiated-gradient) direction needs the softmax parameterisation")
         g = g * share[:, None]
@@ -133,17 +142,18 @@ class Parameterization:
         row, in blocks (float64 temporaries of a block only)."""
         x = np.empty(np.shape(p), np.float32)
         for lo in range(0, len(x), 1 << 20):
-            q = np.clip(np.asarray(p[lo:lo + (1 << 20)], np.float64), 1e-6, 1.0)
+            q = np.clip(np.asarray(p[lo : lo + (1 << 20)], np.float64), 1e-6, 1.0)
             q /= q.sum(axis=1, keepdims=True)
-            x[lo:lo + (1 << 20)] = np.log(q) if self.kind == "softmax" else np.log(q / (1.0 - q + 1e-12))
+            x[lo : lo + (1 << 20)] = np.log(q) if self.kind == "softmax" else np.log(q / (1.0 - q + 1e-12))
         return x  # sigmoid: sigmoid(x) = p, and sum(p) = 1
 
 
 BASELINE_INITS = ("surface", "extrusion")
 
 
-def initial_free_mixture(inks: InkTable, param: Parameterization, init: str, seed: int,
-                         baseline: Callable[[str], np.ndarray] | None = None) -> np.ndarray:
+def initial_free_mixture(
+    inks: InkTable, param: Parameterization, init: str, seed: int, baseline: Callable[[str], np.ndarray] | None = None
+) -> np.ndarray:
     """The free part's starting mixture (F, N): 97 % white + the rest split over the other inks (paper), a seeded
     random mixture, a print-shop baseline ("surface" or "extrusion"; ``baseline(kind)``, given by the caller,
     returns its full (z, y, x, N) mixture), or the mixture of an earlier result file."""

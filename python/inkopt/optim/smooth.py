@@ -26,6 +26,7 @@ eigenvalues in [0, 1]: it never reverses or lengthens any spatial mode of the st
 (fixed shares, outside the object) are not neighbours: no flux crosses to them (Neumann boundary), and the sum
 of the step over a connected free region is kept.
 """
+
 from __future__ import annotations
 
 import math
@@ -58,8 +59,14 @@ DEPTH_DE = 5.0
 MAX_DEPTH = 10.0
 
 
-def nearest_texels(shape, index: np.ndarray, pos_vox: np.ndarray, max_dist: float = np.inf,
-                   chunk: int = 1 << 21, threads: int | None = None):
+def nearest_texels(
+    shape,
+    index: np.ndarray,
+    pos_vox: np.ndarray,
+    max_dist: float = np.inf,
+    chunk: int = 1 << 21,
+    threads: int | None = None,
+):
     """For voxels ``index`` (F,) (increasing linear indices into the grid ``shape`` (z, y, x)): the nearest
     texel (F,) int64 and the distance to it (F,) float32, in voxels; for voxels with no texel within
     ``max_dist``, -1 and inf. ``pos_vox`` (I, 3) texel positions (x, y, z) in voxel units (``Texels.pos_vox``).
@@ -69,15 +76,17 @@ def nearest_texels(shape, index: np.ndarray, pos_vox: np.ndarray, max_dist: floa
     k = np.empty(len(index), np.int64)
     dist = np.empty(len(index), np.float32)
     for s in range(0, len(index), chunk):
-        z, y, x = np.unravel_index(index[s:s + chunk], shape)
-        dist[s:s + chunk], k[s:s + chunk] = tree.query(np.stack([x, y, z], axis=1) + 0.5, workers=threads or -1,
-                                                       distance_upper_bound=max_dist)
+        z, y, x = np.unravel_index(index[s : s + chunk], shape)
+        dist[s : s + chunk], k[s : s + chunk] = tree.query(
+            np.stack([x, y, z], axis=1) + 0.5, workers=threads or -1, distance_upper_bound=max_dist
+        )
     k[k == tree.n] = -1
     return k, dist
 
 
-def texel_guide(target_lab: np.ndarray, nearest: np.ndarray, dist: np.ndarray,
-                depth_de: float = DEPTH_DE) -> np.ndarray:
+def texel_guide(
+    target_lab: np.ndarray, nearest: np.ndarray, dist: np.ndarray, depth_de: float = DEPTH_DE
+) -> np.ndarray:
     """(F, 4) float32 per voxel: the CIELAB target (``target_lab`` (I, 3)) of its nearest texel ``nearest`` (F,)
     and its distance ``dist`` (F,) to that texel (voxels) times ``depth_de`` (from :func:`nearest_texels`)."""
     out = np.empty((len(nearest), 4), np.float32)
@@ -88,8 +97,9 @@ def texel_guide(target_lab: np.ndarray, nearest: np.ndarray, dist: np.ndarray,
 
 class GradientSmoother:
     """Diffuses per-free-voxel arrays (F, N) over a set of the free voxels' 6-neighbourhood (the loop in the Rust
-    core, ``inkopt_core::smooth``: parallel, thread-count independent; two working copies of the set's values and
-    each voxel's neighbours and weights (48 bytes per voxel of the set) during a call; kept for the run: the set's rows and the guide, 8 + 16 bytes per voxel of the set).
+    core, ``inkopt_core::smooth``: parallel, thread-count independent; two working copies of the set's values and each
+    voxel's neighbours and weights (48 bytes per voxel of the set) during a call; kept for the run: the set's rows and
+    the guide, 8 + 16 bytes per voxel of the set).
 
     shape (z, y, x) of the grid; index (F,) int64: the free voxels' increasing linear indices
     (``Parameterization.free_index``; kept by reference); ``rows``: which of them are smoothed (e.g. those under
@@ -100,8 +110,16 @@ class GradientSmoother:
     cores (results do not depend on it).
     """
 
-    def __init__(self, shape, index: np.ndarray, sigma: float, guide: np.ndarray | None = None,
-                 edge: float = 0.0, rows: np.ndarray | None = None, threads: int | None = None):
+    def __init__(
+        self,
+        shape,
+        index: np.ndarray,
+        sigma: float,
+        guide: np.ndarray | None = None,
+        edge: float = 0.0,
+        rows: np.ndarray | None = None,
+        threads: int | None = None,
+    ):
         if not sigma > 0:
             raise ValueError(f"smoothing width must be positive, got {sigma}")
         if guide is not None and not edge > 0:
@@ -120,8 +138,16 @@ class GradientSmoother:
     def _diffuse(self, g: np.ndarray) -> np.ndarray:
         from .. import _core
 
-        return _core.smooth_rows(self.shape, self.index, np.ascontiguousarray(g, np.float32), self.steps, ALPHA,
-                                 self.guide, self.edge or 1.0, self.threads)
+        return _core.smooth_rows(
+            self.shape,
+            self.index,
+            np.ascontiguousarray(g, np.float32),
+            self.steps,
+            ALPHA,
+            self.guide,
+            self.edge or 1.0,
+            self.threads,
+        )
 
     def __call__(self, g: np.ndarray) -> np.ndarray:
         """The diffused copy of g (F, N) float32 (g itself is not changed; rows outside the set are copied)."""

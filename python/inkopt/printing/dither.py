@@ -3,6 +3,7 @@
 The default 32 x 32 x 32 array ships with the package (``inkopt/data``); other shapes are generated once and cached
 there when it is writable.
 """
+
 from __future__ import annotations
 
 import io
@@ -17,8 +18,9 @@ BLUE_NOISE_SIGMA = 1.5
 DATA_DIR = Path(__file__).resolve().parent.parent / "data"
 
 
-def void_and_cluster(shape=BLUE_NOISE_SHAPE, sigma: float = BLUE_NOISE_SIGMA, seed: int = 0,
-                     initial_fraction: float = 0.1) -> np.ndarray:
+def void_and_cluster(
+    shape=BLUE_NOISE_SHAPE, sigma: float = BLUE_NOISE_SIGMA, seed: int = 0, initial_fraction: float = 0.1
+) -> np.ndarray:
     """Blue-noise dither array by Ulichney's void-and-cluster algorithm on a periodic grid of any dimension.
 
     Energy of a pattern = periodic convolution of its "on" points with a Gaussian (``sigma`` in voxels, truncated
@@ -38,8 +40,8 @@ def void_and_cluster(shape=BLUE_NOISE_SHAPE, sigma: float = BLUE_NOISE_SIGMA, se
     r = int(np.ceil(3 * sigma))
     axes = [np.arange(-min(r, (s - 1) // 2), min(r, (s - 1) // 2) + 1) for s in shape]
     offs = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, d)
-    kern = np.exp(-np.sum(offs.astype(np.float64) ** 2, 1) / (2.0 * sigma ** 2))
-    strides = np.array([int(np.prod(shape[i + 1:])) for i in range(d)])
+    kern = np.exp(-np.sum(offs.astype(np.float64) ** 2, 1) / (2.0 * sigma**2))
+    strides = np.array([int(np.prod(shape[i + 1 :])) for i in range(d)])
 
     rng = np.random.default_rng(seed)
     m = max(1, int(round(initial_fraction * n)))
@@ -49,8 +51,8 @@ def void_and_cluster(shape=BLUE_NOISE_SHAPE, sigma: float = BLUE_NOISE_SIGMA, se
     k_full[tuple((offs % shp).T)] = kern
     energy = np.real(np.fft.ifftn(np.fft.fftn(ones.reshape(shape).astype(np.float64)) * np.fft.fftn(k_full)))
     energy = energy.ravel()
-    on = np.where(ones, energy, -np.inf)   # energy of "on" points, -inf elsewhere (argmax: tightest cluster)
-    off = np.where(ones, np.inf, energy)   # energy of "off" points, +inf elsewhere (argmin: largest void)
+    on = np.where(ones, energy, -np.inf)  # energy of "on" points, -inf elsewhere (argmax: tightest cluster)
+    off = np.where(ones, np.inf, energy)  # energy of "off" points, +inf elsewhere (argmin: largest void)
 
     def flip(p: int, to_on: bool) -> None:
         idx = ((np.array(np.unravel_index(p, shape)) + offs) % shp) @ strides

@@ -25,6 +25,7 @@ Not provided: a 3MF with the continuous mixture (3MF Volumetric extension, ``<co
 elements, but every method of ``VolumeDataComposite`` (SetBaseMaterialGroup, AddMaterialMapping,
 GetMaterialMapping[Count], GetBaseMaterialGroup) throws LIB3MF_ERROR_NOTIMPLEMENTED.
 """
+
 from __future__ import annotations
 
 import json
@@ -61,15 +62,27 @@ DEFAULT_PALETTE: dict[str, tuple[int, int, int]] = {
     "yellow2": (192, 192, 0),
 }
 # Fallback colours for ink names missing from the palette, taken in order (skipping colours already in use).
-SPARE_COLOURS = [(255, 0, 0), (0, 255, 0), (0, 0, 255), (128, 0, 0), (0, 128, 0), (0, 0, 128), (128, 128, 0),
-                 (128, 0, 128), (0, 128, 128), (64, 64, 64), (192, 192, 192)]
+SPARE_COLOURS = [
+    (255, 0, 0),
+    (0, 255, 0),
+    (0, 0, 255),
+    (128, 0, 0),
+    (0, 128, 0),
+    (0, 0, 128),
+    (128, 128, 0),
+    (128, 0, 128),
+    (0, 128, 128),
+    (64, 64, 64),
+    (192, 192, 192),
+]
+
 
 def _rgba(colour, what: str) -> tuple[int, int, int, int]:
     if isinstance(colour, str):
         h = colour.lstrip("#")
         if len(h) not in (6, 8) or any(ch not in "0123456789abcdefABCDEF" for ch in h):
             raise ValueError(f"{what}: colour '{colour}' is not #RRGGBB or #RRGGBBAA")
-        colour = [int(h[i:i + 2], 16) for i in range(0, len(h), 2)]
+        colour = [int(h[i : i + 2], 16) for i in range(0, len(h), 2)]
     c = [int(v) for v in colour]
     if len(c) == 3:
         c.append(255)
@@ -119,6 +132,7 @@ def _is_slice_folder(path: Path) -> bool:
 class Job:
     """A checked print job: labels, printer voxel size, ink names, per-label voxel counts (256 entries, 255 =
     empty), the indices of the inks used, the material limit and the printer profile (or None)."""
+
     labels: np.ndarray
     vp: np.ndarray
     names: list
@@ -155,12 +169,15 @@ def check_job(labels, voxel_mm_printer, ink_names, max_materials=None, printer=N
     if printer is None and isinstance(max_materials, str):
         printer = max_materials
     profile = printer_profile(printer) if printer is not None else None
-    limit = resolve_max_materials(max_materials) if max_materials is not None else \
-        (profile.max_materials if profile else None)
+    limit = (
+        resolve_max_materials(max_materials)
+        if max_materials is not None
+        else (profile.max_materials if profile else None)
+    )
     counts = np.zeros(256, np.int64)
     for k in range(labels.shape[0]):
         counts += np.bincount(labels[k].ravel(), minlength=256)
-    bad = np.flatnonzero(counts[len(names):EMPTY])
+    bad = np.flatnonzero(counts[len(names) : EMPTY])
     if bad.size:
         raise ValueError(f"labels use ink {len(names) + int(bad[0])} but only {len(names)} ink names are given")
     used = [i for i in range(len(names)) if counts[i] > 0]
@@ -176,7 +193,7 @@ def slice_lut(names, palette=None, background=(0, 0, 0, 0)):
     bg = _rgba(background, "background")
     lut = np.zeros((256, 4), np.uint8)
     lut[:] = bg
-    lut[:len(names)] = colours
+    lut[: len(names)] = colours
     return lut, colours, bg
 
 
@@ -187,16 +204,24 @@ def slice_image(lut, layer):
     return Image.fromarray(lut[layer[::-1, :]])
 
 
-def write_png_slices(labels, voxel_mm_printer, ink_names, out_dir, palette=None, max_materials=None,
-                     background=(0, 0, 0, 0), printer=None) -> dict:
+def write_png_slices(
+    labels,
+    voxel_mm_printer,
+    ink_names,
+    out_dir,
+    palette=None,
+    max_materials=None,
+    background=(0, 0, 0, 0),
+    printer=None,
+) -> dict:
     """Write one RGBA PNG per layer plus ``manifest.json`` into ``out_dir`` (layout: module docstring).
 
     labels            uint8 (Z, Y, X) ink index per printer voxel, 255 = empty
     voxel_mm_printer  (x, y, z) printer voxel size in mm (DPI = 25.4 / size; layer thickness = z)
     ink_names         N names, label i -> ink_names[i]
     palette           optional {ink name: (r, g, b) | "#rrggbb"} overriding ``DEFAULT_PALETTE``
-    max_materials     int, printer profile name (``profiles.PRINTER_PROFILES``) or None: refuse (ValueError) if the labels
-                      use more distinct inks
+    max_materials     int, printer profile name (``profiles.PRINTER_PROFILES``) or None: refuse (ValueError) if the
+                      labels use more distinct inks
     background        RGBA of empty voxels
     printer           printer profile key: its material limit and material names (manifest ``material``)
     An existing ``out_dir`` is replaced only if it is empty or an earlier slice folder (has our manifest).
@@ -214,24 +239,35 @@ def write_png_slices(labels, voxel_mm_printer, ink_names, out_dir, palette=None,
 
     dpi = job.dpi
     width = max(5, len(str(Z - 1)))
-    fname = "slice_{:0%dd}.png" % width
+    fname = f"slice_{{:0{width}d}}.png"
     manifest = {
-        "format": FORMAT, "version": 1, FORMAT_KEY: MANIFEST_FORMAT,
+        "format": FORMAT,
+        "version": 1,
+        FORMAT_KEY: MANIFEST_FORMAT,
         "dpi": {"x": round(dpi[0], 6), "y": round(dpi[1], 6)},
         "layer_thickness_um": round(vp[2] * 1000.0, 6),
         "voxel_mm": [float(v) for v in vp],
         "layer_count": Z,
         "image_size": {"width": X, "height": Y},
         "size_mm": [X * vp[0], Y * vp[1], Z * vp[2]],
-        "files": {"pattern": "slice_{index:0%dd}.png" % width, "first": fname.format(0), "last": fname.format(Z - 1)},
-        "orientation": {"slices": "slice 0 = bottom layer (z = 0), +z up",
-                        "columns": "column 0 = smallest x, x increases to the right",
-                        "rows": "row 0 = largest y (view from above, +y up)"},
+        "files": {"pattern": f"slice_{{index:0{width}d}}.png", "first": fname.format(0), "last": fname.format(Z - 1)},
+        "orientation": {
+            "slices": "slice 0 = bottom layer (z = 0), +z up",
+            "columns": "column 0 = smallest x, x increases to the right",
+            "rows": "row 0 = largest y (view from above, +y up)",
+        },
         "background": list(bg),
-        "materials": [{"index": i, "ink": names[i], "color": list(colours[i]),
-                       "hex": "#%02X%02X%02X" % colours[i][:3], "voxel_count": int(counts[i]),
-                       "material": job.material(i)}
-                      for i in range(len(names))],
+        "materials": [
+            {
+                "index": i,
+                "ink": names[i],
+                "color": list(colours[i]),
+                "hex": "#{:02X}{:02X}{:02X}".format(*colours[i][:3]),
+                "voxel_count": int(counts[i]),
+                "material": job.material(i),
+            }
+            for i in range(len(names))
+        ],
         "materials_used": len(used),
         "max_materials": job.limit,
         "printer": None if job.profile is None else {"key": job.profile.key, "name": job.profile.name},
@@ -291,8 +327,9 @@ def read_png_slices(folder):
         raise ValueError(f"{folder}: no readable manifest.json ({type(exc).__name__})") from None
     if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
         raise ValueError(f"{folder}: manifest format is not '{FORMAT}'")
-    manifest = upgrade_format(manifest, kind="slice manifest", where=folder / "manifest.json",
-                              current=MANIFEST_FORMAT, upgrades={0: dict})
+    manifest = upgrade_format(
+        manifest, kind="slice manifest", where=folder / "manifest.json", current=MANIFEST_FORMAT, upgrades={0: dict}
+    )
     Z, Y, X = manifest["layer_count"], manifest["image_size"]["height"], manifest["image_size"]["width"]
     pack = _pack_rgba
     keys = [pack(m["color"]) for m in manifest["materials"]] + [pack(manifest["background"])]
@@ -302,7 +339,7 @@ def read_png_slices(folder):
     width = len(manifest["files"]["first"]) - len("slice_.png")
     labels = np.empty((Z, Y, X), np.uint8)
     for k in range(Z):
-        path = folder / ("slice_%0*d.png" % (width, k))
+        path = folder / f"slice_{k:0{width}d}.png"
         with Image.open(path) as im:
             rgba = np.asarray(im.convert("RGBA"))
         if rgba.shape[:2] != (Y, X):

@@ -38,13 +38,14 @@ z-buffer image, STL mesh, XML configuration, a bounding-box file, zipped) and it
 (not written: its format is not described anywhere we found) are our choices; nor have we loaded a package into
 GrabCAD Print.
 """
+
 from __future__ import annotations
 
 import io
 import os
 import tempfile
-import zipfile
 import xml.etree.ElementTree as ET
+import zipfile
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -59,8 +60,12 @@ OUTLINE_MAX_CELLS = 2**24  # marching cubes on at most this many cells (float32:
 BACKGROUND = (0, 0, 0, 255)
 GCVF_PALETTE = {"black": "#282828"}  # the background is opaque black: move the black ink off it
 # GrabCAD material codes used by the reference builder for the printer profiles' material names
-GCVF_NAMES = {"VeroCyan-V": "VeroCY-V", "VeroMagenta-V": "VeroMGT-V", "VeroYellow-V": "VeroYL-V",
-              "VeroUltraWhite": "VUltraWhite"}
+GCVF_NAMES = {
+    "VeroCyan-V": "VeroCY-V",
+    "VeroMagenta-V": "VeroMGT-V",
+    "VeroYellow-V": "VeroYL-V",
+    "VeroUltraWhite": "VUltraWhite",
+}
 
 
 def _png(image, dpi) -> bytes:
@@ -155,15 +160,19 @@ def config_xml(job, colours, bg, dpi_int, layer_nm) -> bytes:
     mats = add(root, "MaterialList", BackGroundMaterialRGBA=" ".join(map(str, bg)))
     for i in job.used:
         vendor = job.material(i)
-        add(mats, "Material", Name=GCVF_NAMES.get(vendor, vendor or job.names[i]),
-            RGBA=" ".join(map(str, colours[i])), VoxelCount=int(job.counts[i]))
+        add(
+            mats,
+            "Material",
+            Name=GCVF_NAMES.get(vendor, vendor or job.names[i]),
+            RGBA=" ".join(map(str, colours[i])),
+            VoxelCount=int(job.counts[i]),
+        )
     ET.indent(root, space="    ")
     head = b'<?xml version="1.0" encoding="UTF-8"?>\n<!--  GCVF - GrabCad Voxel Print File  -  -->\n'
     return head + ET.tostring(root, encoding="utf-8") + b"\n"
 
 
-def write_gcvf(labels, voxel_mm_printer, ink_names, path, printer="j750", palette=None,
-               max_materials=None) -> dict:
+def write_gcvf(labels, voxel_mm_printer, ink_names, path, printer="j750", palette=None, max_materials=None) -> dict:
     """Write the GrabCAD Voxel Print package ``path`` (layout: module docstring); returns a summary dict.
 
     labels, voxel_mm_printer, ink_names, palette, max_materials: as ``export.write_png_slices``; ``printer``: the
@@ -207,9 +216,23 @@ def write_gcvf(labels, voxel_mm_printer, ink_names, path, printer="j750", palett
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
-    return {"path": str(path), "layer_count": Z, "image_size": {"width": X, "height": Y},
-            "dpi": {"x": dpi_int[0], "y": dpi_int[1]}, "layer_thickness_nm": layer_nm,
-            "materials": [{"ink": job.names[i], "material": job.material(i), "color": list(colours[i]),
-                           "voxel_count": int(job.counts[i])} for i in job.used],
-            "printer": job.profile.name if job.profile else None, "stl_triangles": len(mesh.faces),
-            "outline_block": [fx, fy, fz], "bytes": path.stat().st_size}
+    return {
+        "path": str(path),
+        "layer_count": Z,
+        "image_size": {"width": X, "height": Y},
+        "dpi": {"x": dpi_int[0], "y": dpi_int[1]},
+        "layer_thickness_nm": layer_nm,
+        "materials": [
+            {
+                "ink": job.names[i],
+                "material": job.material(i),
+                "color": list(colours[i]),
+                "voxel_count": int(job.counts[i]),
+            }
+            for i in job.used
+        ],
+        "printer": job.profile.name if job.profile else None,
+        "stl_triangles": len(mesh.faces),
+        "outline_block": [fx, fy, fz],
+        "bytes": path.stat().st_size,
+    }

@@ -17,6 +17,7 @@ Where the figures come from (say so for every new entry; check your machine's co
   VeroUltraWhite / VeroPureWhite, VeroClear / VeroUltraClear). An ink without a vendor material (orange,
   cyan2, ...) maps to None: load a material of your choice and map its colour in the printer's software.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -26,8 +27,14 @@ import numpy as np
 from ..units import dpi_of
 
 # inkopt ink name -> Stratasys material loaded for it (Vero "vivid" colour family)
-_VERO = {"cyan": "VeroCyan-V", "magenta": "VeroMagenta-V", "yellow": "VeroYellow-V", "black": "VeroBlack",
-         "white": "VeroUltraWhite"}
+_VERO = {
+    "cyan": "VeroCyan-V",
+    "magenta": "VeroMagenta-V",
+    "yellow": "VeroYellow-V",
+    "black": "VeroBlack",
+    "white": "VeroUltraWhite",
+}
+
 
 @dataclass(frozen=True)
 class PrinterProfile:
@@ -57,26 +64,53 @@ class PrinterProfile:
         return {**d, "materials": dict(self.materials)}
 
     @classmethod
-    def from_json(cls, d: dict) -> "PrinterProfile":
+    def from_json(cls, d: dict) -> PrinterProfile:
         dpi = d.get("dpi")
-        return cls(d["key"], d["name"], d.get("max_materials"), None if dpi is None else tuple(dpi),
-                   tuple(d.get("layer_um", ())), dict(d.get("materials", {})))
+        return cls(
+            d["key"],
+            d["name"],
+            d.get("max_materials"),
+            None if dpi is None else tuple(dpi),
+            tuple(d.get("layer_um", ())),
+            dict(d.get("materials", {})),
+        )
 
 
-PRINTER_PROFILES: dict[str, PrinterProfile] = {p.key: p for p in (
-    # six colour materials at once + support (Stratasys J750 spec sheet); 27 um voxel-print layers, 14 um HQ
-    PrinterProfile("j750", "Stratasys J750", 6, (600, 300), (27.0, 14.0),
-                   {**_VERO, "transparent": "VeroClear", "clear": "VeroClear"}),
-    # seven materials at once + support (Stratasys J850 spec sheet); same voxel grid as the J750
-    PrinterProfile("j850", "Stratasys J850", 7, (600, 300), (27.0, 14.0),
-                   {**_VERO, "transparent": "VeroUltraClear", "clear": "VeroUltraClear"}),
-    # five materials + support, 18.75 um layers (Stratasys J55 Prime spec sheet; not re-checked)
-    PrinterProfile("j55", "Stratasys J55 Prime", 5, (600, 300), (18.75,),
-                   {**_VERO, "transparent": "VeroUltraClear", "clear": "VeroUltraClear"}),
-    # C, M, Y, K, white, clear + support (Mimaki 3DUJ-553 brochure); no public voxel grid or ink names found
-    PrinterProfile("mimaki-3duj-553", "Mimaki 3DUJ-553", 6),
-    PrinterProfile("generic", "no material limit", None),
-)}
+PRINTER_PROFILES: dict[str, PrinterProfile] = {
+    p.key: p
+    for p in (
+        # six colour materials at once + support (Stratasys J750 spec sheet); 27 um voxel-print layers, 14 um HQ
+        PrinterProfile(
+            "j750",
+            "Stratasys J750",
+            6,
+            (600, 300),
+            (27.0, 14.0),
+            {**_VERO, "transparent": "VeroClear", "clear": "VeroClear"},
+        ),
+        # seven materials at once + support (Stratasys J850 spec sheet); same voxel grid as the J750
+        PrinterProfile(
+            "j850",
+            "Stratasys J850",
+            7,
+            (600, 300),
+            (27.0, 14.0),
+            {**_VERO, "transparent": "VeroUltraClear", "clear": "VeroUltraClear"},
+        ),
+        # five materials + support, 18.75 um layers (Stratasys J55 Prime spec sheet; not re-checked)
+        PrinterProfile(
+            "j55",
+            "Stratasys J55 Prime",
+            5,
+            (600, 300),
+            (18.75,),
+            {**_VERO, "transparent": "VeroUltraClear", "clear": "VeroUltraClear"},
+        ),
+        # C, M, Y, K, white, clear + support (Mimaki 3DUJ-553 brochure); no public voxel grid or ink names found
+        PrinterProfile("mimaki-3duj-553", "Mimaki 3DUJ-553", 6),
+        PrinterProfile("generic", "no material limit", None),
+    )
+}
 
 
 def printer_profile(name: str) -> PrinterProfile:
@@ -109,8 +143,10 @@ def too_many_inks(used: list[str], limit: int | None, printer: str | None = None
     if limit is None or len(used) <= limit:
         return None
     who = printer or "the printer"
-    return (f"the print uses {len(used)} inks ({', '.join(used)}) but {who} holds {limit} materials per job; "
-            f"use an ink set of at most {limit} inks or a printer with more material slots (--printer)")
+    return (
+        f"the print uses {len(used)} inks ({', '.join(used)}) but {who} holds {limit} materials per job; "
+        f"use an ink set of at most {limit} inks or a printer with more material slots (--printer)"
+    )
 
 
 def resolution_mismatch(profile: PrinterProfile, voxel_mm_printer) -> str | None:
@@ -123,6 +159,8 @@ def resolution_mismatch(profile: PrinterProfile, voxel_mm_printer) -> str | None
     layer_ok = any(abs(vp[2] * 1000 - t) < 0.05 for t in profile.layer_um or (vp[2] * 1000,))
     if np.allclose(dpi, profile.dpi, rtol=1e-3) and layer_ok:
         return None
-    return (f"the slices are {dpi[0]:.0f} x {dpi[1]:.0f} DPI with {vp[2] * 1000:.1f} um layers; {profile.name} "
-            f"prints {profile.dpi[0]} x {profile.dpi[1]} DPI with "
-            f"{' or '.join(f'{t:g}' for t in profile.layer_um)} um layers")
+    return (
+        f"the slices are {dpi[0]:.0f} x {dpi[1]:.0f} DPI with {vp[2] * 1000:.1f} um layers; {profile.name} "
+        f"prints {profile.dpi[0]} x {profile.dpi[1]} DPI with "
+        f"{' or '.join(f'{t:g}' for t in profile.layer_um)} um layers"
+    )

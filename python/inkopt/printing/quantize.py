@@ -37,11 +37,12 @@ diffusion adds the carried error of this and the next printer layer, 2 × Y × X
 
 Conventions (docs/conventions.md): arrays (z, y, x[, ink]); ``voxel_mm`` and ``dpi`` are (x, y, z).
 """
+
 from __future__ import annotations
 
 import numpy as np
 
-from ..model import EMPTY, MAX_VOLUME_BYTES, Quantization, SurfaceNormals, Volume
+from ..model import EMPTY, Quantization, SurfaceNormals, Volume
 from ..units import MM_PER_INCH, PRINTER_DPI, PRINTER_LAYER_UM
 from .dither import load_blue_noise
 
@@ -49,6 +50,7 @@ METHODS = ("blue-noise", "random", "error-diffusion")
 UPSAMPLE = ("nearest", "linear")
 DEFAULT_DPI = PRINTER_DPI
 DEFAULT_LAYER_UM = PRINTER_LAYER_UM
+
 
 # ----------------------------------------------------------------------------------------------- grids
 def printer_grid(shape_opt, voxel_mm_opt, dpi=(600, 300, None), layer_um: float = DEFAULT_LAYER_UM):
@@ -103,8 +105,18 @@ def check_quantization(method: str, upsample: str = "nearest") -> None:
         raise ValueError(f"unknown upsample '{upsample}'; use one of {list(UPSAMPLE)}")
 
 
-def quantize(mixture, voxel_mm, *, method: str = "blue-noise", dpi=DEFAULT_DPI, layer_um: float = DEFAULT_LAYER_UM,
-             inside=None, seed: int = 0, upsample: str = "nearest", out=None):
+def quantize(
+    mixture,
+    voxel_mm,
+    *,
+    method: str = "blue-noise",
+    dpi=DEFAULT_DPI,
+    layer_um: float = DEFAULT_LAYER_UM,
+    inside=None,
+    seed: int = 0,
+    upsample: str = "nearest",
+    out=None,
+):
     """One ink per printer voxel from a mixture on the optimisation grid.
 
     mixture  float (z, y, x, N), non-negative; rows are normalised to sum 1 (rows inside must have a positive sum)
@@ -137,6 +149,7 @@ def quantize(mixture, voxel_mm, *, method: str = "blue-noise", dpi=DEFAULT_DPI, 
         if inside.shape != (nz, ny, nx):
             raise ValueError(f"inside mask shape {inside.shape} differs from mixture shape {(nz, ny, nx)}")
     if source:
+
         def get(z: int):
             lay = np.asarray(m[z])
             return lay, _checked_total(lay, None if inside is None else inside[z])
@@ -147,6 +160,7 @@ def quantize(mixture, voxel_mm, *, method: str = "blue-noise", dpi=DEFAULT_DPI, 
 
         def get(z: int):
             return m[z], total[z]
+
     shape_p, vp = printer_grid((nz, ny, nx), voxel_mm, dpi=dpi, layer_um=layer_um)
     vo = np.asarray(voxel_mm, np.float64).reshape(-1)
     Z, Y, X = shape_p
@@ -163,11 +177,15 @@ def quantize(mixture, voxel_mm, *, method: str = "blue-noise", dpi=DEFAULT_DPI, 
         def thresholds(k):
             return tile[(k + oz) % tz][ty_idx, tx_idx]
     elif method == "random":
+
         def thresholds(k):
             return rng.random((Y, X), dtype=np.float32)
 
-    lin = None if upsample == "nearest" else [_linear(Z, vp[2], nz, vo[2]), _linear(Y, vp[1], ny, vo[1]),
-                                                _linear(X, vp[0], nx, vo[0])]
+    lin = (
+        None
+        if upsample == "nearest"
+        else [_linear(Z, vp[2], nz, vo[2]), _linear(Y, vp[1], ny, vo[1]), _linear(X, vp[0], nx, vo[0])]
+    )
     cache: dict[int, np.ndarray] = {}
 
     def layer_cum(z: int) -> np.ndarray:
@@ -241,8 +259,9 @@ def _diffuse(cum, inside_k, inside_next, error, k: int, out) -> None:
     w = cum[-1]
     mix = np.diff(cum, axis=0, prepend=np.zeros((1,) + w.shape, np.float32))
     mix /= np.where(w > 0, w, 1.0).astype(np.float32)
-    _core.diffuse_layer(np.ascontiguousarray(mix, np.float32), inside_k.view(np.uint8),
-                        inside_next.view(np.uint8), error, int(k), out)
+    _core.diffuse_layer(
+        np.ascontiguousarray(mix, np.float32), inside_k.view(np.uint8), inside_next.view(np.uint8), error, int(k), out
+    )
 
 
 def ink_fractions(labels, n_inks: int, shape_opt, voxel_mm_opt, voxel_mm_printer):
@@ -295,9 +314,16 @@ def upsample_normals(normals: SurfaceNormals, shape_p, vp, vo) -> SurfaceNormals
     return SurfaceNormals(shape_p, np.concatenate(index), np.concatenate(vectors))
 
 
-def quantize_volume(volume: Volume, *, method: str = "blue-noise", dpi=DEFAULT_DPI,
-                    layer_um: float = DEFAULT_LAYER_UM, seed: int = 0, upsample: str = "nearest",
-                    normals: bool = True) -> Volume:
+def quantize_volume(
+    volume: Volume,
+    *,
+    method: str = "blue-noise",
+    dpi=DEFAULT_DPI,
+    layer_um: float = DEFAULT_LAYER_UM,
+    seed: int = 0,
+    upsample: str = "nearest",
+    normals: bool = True,
+) -> Volume:
     """A labels Volume at printer resolution from a mixture Volume (``quantize`` above).
 
     dpi (x, y) or (x, y, z) printer DPI (z None/absent -> ``layer_um`` µm layers). Keeps inks, g, ior, boundary;
@@ -307,14 +333,32 @@ def quantize_volume(volume: Volume, *, method: str = "blue-noise", dpi=DEFAULT_D
     if volume.form != "mixture":
         raise ValueError(f"quantization needs a mixture volume, got a {volume.form} volume")
     check_quantization(method, upsample)
-    labels, vp = quantize(volume.mixture, volume.voxel_mm, method=method, dpi=tuple(dpi), layer_um=layer_um,
-                          inside=volume.inside, seed=int(seed), upsample=upsample)
+    labels, vp = quantize(
+        volume.mixture,
+        volume.voxel_mm,
+        method=method,
+        dpi=tuple(dpi),
+        layer_um=layer_um,
+        inside=volume.inside,
+        seed=int(seed),
+        upsample=upsample,
+    )
     nrm = None
     if normals and volume.normals is not None:
         nrm = upsample_normals(volume.normals, labels.shape, vp, volume.voxel_mm)
     q = Quantization(method, int(seed), tuple(float(v) for v in MM_PER_INCH / np.asarray(vp, np.float64)), upsample)
-    return Volume.from_labels(voxel_mm=vp, labels=labels, inks=volume.inks, g=volume.g, ior=volume.ior, inside=None,
-                  normals=nrm, boundary=volume.boundary, origin_mm=volume.origin_mm, quantization=q)
+    return Volume.from_labels(
+        voxel_mm=vp,
+        labels=labels,
+        inks=volume.inks,
+        g=volume.g,
+        ior=volume.ior,
+        inside=None,
+        normals=nrm,
+        boundary=volume.boundary,
+        origin_mm=volume.origin_mm,
+        quantization=q,
+    )
 
 
 def summary_lines(shape, vp, ink_names, q: Quantization | None, counts, seconds: float) -> list[str]:
@@ -324,10 +368,12 @@ def summary_lines(shape, vp, ink_names, q: Quantization | None, counts, seconds:
     Z, Y, X = shape
     q = q or Quantization()
     dpi = MM_PER_INCH / np.asarray(vp, np.float64)
-    out = [f"printer grid {X} x {Y} x {Z} (x, y, z) voxels of {vp[0] * 1000:.1f} x {vp[1] * 1000:.1f} x "
-           f"{vp[2] * 1000:.1f} um ({dpi[0]:.0f} x {dpi[1]:.0f} DPI, {vp[2] * 1000:.1f} um layers)",
-           f"{filled} ink voxels ({counts[EMPTY]} empty); method {q.method}, seed {q.seed}, upsample "
-           f"{q.upsample}; {seconds:.1f} s",
-           "inks: " + ", ".join(f"{n} {counts[i]} ({100.0 * counts[i] / max(filled, 1):.1f} %)"
-                                for i, n in enumerate(ink_names))]
+    out = [
+        f"printer grid {X} x {Y} x {Z} (x, y, z) voxels of {vp[0] * 1000:.1f} x {vp[1] * 1000:.1f} x "
+        f"{vp[2] * 1000:.1f} um ({dpi[0]:.0f} x {dpi[1]:.0f} DPI, {vp[2] * 1000:.1f} um layers)",
+        f"{filled} ink voxels ({counts[EMPTY]} empty); method {q.method}, seed {q.seed}, upsample "
+        f"{q.upsample}; {seconds:.1f} s",
+        "inks: "
+        + ", ".join(f"{n} {counts[i]} ({100.0 * counts[i] / max(filled, 1):.1f} %)" for i, n in enumerate(ink_names)),
+    ]
     return out

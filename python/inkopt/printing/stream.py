@@ -12,6 +12,7 @@ the inside mask, a few mixture layers and a few printer layers; a mesh's shading
 by ``quantize.upsample_normals`` (20 bytes per printer voxel inside a surface voxel). Labels and normals are
 identical to ``quantize_volume``'s in memory.
 """
+
 from __future__ import annotations
 
 import time
@@ -45,8 +46,11 @@ class MixtureSource:
         try:
             self._zip = zipfile.ZipFile(path)
             names = {n[:-4]: n for n in self._zip.namelist() if n.endswith(".npy")}
-            small = {k: np.lib.format.read_array(self._zip.open(n), allow_pickle=False)
-                     for k, n in names.items() if k not in HEAVY}
+            small = {
+                k: np.lib.format.read_array(self._zip.open(n), allow_pickle=False)
+                for k, n in names.items()
+                if k not in HEAVY
+            }
         except (OSError, zipfile.BadZipFile, ValueError) as exc:
             self.close()
             raise ValueError(f"{path} is not a readable .npz volume file ({type(exc).__name__}: {exc})") from None
@@ -110,8 +114,16 @@ class MixtureSource:
     def labels_meta(self, vp, q: Quantization) -> Volume:
         """A labels Volume with this file's inks, g, ior, boundary and origin on the printer grid ``vp``, for
         ``RunDir.quantized_writer`` (its one-voxel labels are a placeholder: the real ones go to the file)."""
-        return Volume.from_labels(vp, labels=np.zeros((1, 1, 1), np.uint8), inks=self.inks, g=self.g, ior=self.ior,
-                      boundary=self.boundary, origin_mm=self.origin_mm, quantization=q)
+        return Volume.from_labels(
+            vp,
+            labels=np.zeros((1, 1, 1), np.uint8),
+            inks=self.inks,
+            g=self.g,
+            ior=self.ior,
+            boundary=self.boundary,
+            origin_mm=self.origin_mm,
+            quantization=q,
+        )
 
     def close(self) -> None:
         for handle in (getattr(self, "_fh", None), self._zip):
@@ -129,8 +141,17 @@ def quantize_run(d: RunDir, *, method: str, dpi, layer_um: float, seed: int, ups
         quant = Quantization(method, int(seed), tuple(float(v) for v in MM_PER_INCH / vp), upsample)
         nrm = None if src.normals is None else upsample_normals(src.normals, shape_p, vp, src.voxel_mm)
         with d.quantized_writer(src.labels_meta(vp, quant), shape_p, normals=nrm) as w:
-            quantize(src, src.voxel_mm, method=method, dpi=tuple(dpi), layer_um=layer_um, inside=src.inside,
-                     seed=int(seed), upsample=upsample, out=w)
+            quantize(
+                src,
+                src.voxel_mm,
+                method=method,
+                dpi=tuple(dpi),
+                layer_um=layer_um,
+                inside=src.inside,
+                seed=int(seed),
+                upsample=upsample,
+                out=w,
+            )
         counts = w.counts
     finally:
         src.close()

@@ -9,6 +9,7 @@ new kind of scene is a new module here plus its settings in ``optim.config.SCENE
 settings it leaves to the kind).
 A scene is made from the user's inputs through its spec (``spec.SlabSpec``, ``spec.MeshSpec``: ``build(inks)``).
 """
+
 from __future__ import annotations
 
 from pathlib import Path

@@ -1,4 +1,5 @@
 """Input pictures on a face's texel grid: what a slab's pictures and its translucency mask share."""
+
 from __future__ import annotations
 
 import numpy as np

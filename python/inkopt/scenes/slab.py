@@ -8,6 +8,7 @@ texel grid (one texel per voxel face, 300 DPI by default) with anti-aliasing.
 Translucency (``translucency``: a mask of the top picture's size, ``scenes.translucency``): the voxels under the
 masked texels, down to ``translucency_depth_mm``, hold the mask's share of transparent ink as a fixed share.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -47,12 +48,12 @@ def load_picture(path: str | Path) -> np.ndarray:
 class SlabScene:
     """A slab ready to optimise (the ``Scene`` protocol of ``inkopt.scenes``)."""
 
-    volume: Volume            # mixture form, all white; gives geometry and inks
+    volume: Volume  # mixture form, all white; gives geometry and inks
     texels: Texels
-    target_rgb: np.ndarray    # (I, 3) float32 linear
-    faces: list[str]          # textured faces, texel order: "bottom" (if any) then "top"
-    pix: dict                 # face -> (H, W) int32 texel index per picture pixel
-    size_mm: tuple = ()       # (W, H, D)
+    target_rgb: np.ndarray  # (I, 3) float32 linear
+    faces: list[str]  # textured faces, texel order: "bottom" (if any) then "top"
+    pix: dict  # face -> (H, W) int32 texel index per picture pixel
+    size_mm: tuple = ()  # (W, H, D)
     translucency: Translucency | None = None
     kind = "slab"
 
@@ -62,27 +63,43 @@ class SlabScene:
         return self.record().fixed_share(self.volume.inks, self.volume.shape)
 
     def record(self) -> SceneRecord:
-        return SceneRecord("slab", self.texels, self.target_rgb, list(self.faces), dict(self.pix),
-                           translucency=self.translucency)
+        return SceneRecord(
+            "slab", self.texels, self.target_rgb, list(self.faces), dict(self.pix), translucency=self.translucency
+        )
 
     def describe(self) -> str:
         nz, ny, nx = self.volume.shape
-        return (f"slab {nx} x {ny} x {nz} voxels ({self.volume.voxel_mm[0] * 1000:.1f} µm), {len(self.texels)} "
-                f"texels, inks {','.join(self.volume.inks.names)}")
+        return (
+            f"slab {nx} x {ny} x {nz} voxels ({self.volume.voxel_mm[0] * 1000:.1f} µm), {len(self.texels)} "
+            f"texels, inks {','.join(self.volume.inks.names)}"
+        )
 
     def report_fields(self) -> dict:
-        return {"voxels": int(np.prod(self.volume.shape)), "texels": len(self.texels),
-                "size_mm": [float(v) for v in self.size_mm], **translucency_fields(self.translucency)}
+        return {
+            "voxels": int(np.prod(self.volume.shape)),
+            "texels": len(self.texels),
+            "size_mm": [float(v) for v in self.size_mm],
+            **translucency_fields(self.translucency),
+        }
 
     def write_pictures(self, out: RunDir, pred_rgb: np.ndarray, delta_e: np.ndarray) -> list[Path]:
         """DIR/face_F.png: target | prediction | ΔE76 heat map, per textured face."""
-        return [error_figure(out.face_picture_path(f), f, self.target_rgb, pred_rgb, delta_e, self.pix[f])
-                for f in self.faces]
+        return [
+            error_figure(out.face_picture_path(f), f, self.target_rgb, pred_rgb, delta_e, self.pix[f])
+            for f in self.faces
+        ]
 
 
-def build_slab(top: np.ndarray, bottom: np.ndarray | None, size_mm, inks: InkTable,
-               dpi: float = OPT_DPI, translucency: np.ndarray | None = None,
-               translucency_depth_mm: float | None = None, translucency_source: str = "") -> SlabScene:
+def build_slab(
+    top: np.ndarray,
+    bottom: np.ndarray | None,
+    size_mm,
+    inks: InkTable,
+    dpi: float = OPT_DPI,
+    translucency: np.ndarray | None = None,
+    translucency_depth_mm: float | None = None,
+    translucency_source: str = "",
+) -> SlabScene:
     """top, bottom: (H, W, 3) linear pictures; size_mm (W, H, D); translucency: (H, W) mask of transparent-ink
     shares in the top picture's pixels (``scenes.translucency``), down to ``translucency_depth_mm`` (None: the
     whole slab)."""
@@ -94,9 +111,11 @@ def build_slab(top: np.ndarray, bottom: np.ndarray | None, size_mm, inks: InkTab
             continue
         aspect = pic.shape[1] / pic.shape[0]
         if abs(aspect / (w_mm / h_mm) - 1.0) > ASPECT_TOLERANCE:
-            raise ValueError(f"the {name} picture is {pic.shape[1]}x{pic.shape[0]} px (aspect {aspect:.3f}) but "
-                             f"--size-mm gives {w_mm:g}x{h_mm:g} mm (aspect {w_mm / h_mm:.3f}); "
-                             f"use --size-mm {w_mm:g}x{w_mm / aspect:.4g}x{d_mm:g}")
+            raise ValueError(
+                f"the {name} picture is {pic.shape[1]}x{pic.shape[0]} px (aspect {aspect:.3f}) but "
+                f"--size-mm gives {w_mm:g}x{h_mm:g} mm (aspect {w_mm / h_mm:.3f}); "
+                f"use --size-mm {w_mm:g}x{w_mm / aspect:.4g}x{d_mm:g}"
+            )
     faces = ["bottom", "top"] if bottom is not None else ["top"]
     texels = Texels.box_faces((nz, ny, nx), faces)
     # Texel order: bottom face (if any) then top, each C order over (y, x).
@@ -114,13 +133,21 @@ def build_slab(top: np.ndarray, bottom: np.ndarray | None, size_mm, inks: InkTab
     vol = Volume.from_mixture(voxel_mm=(vox, vox, vox), mixture=mixture, inks=inks)
     tr = None
     if translucency is not None:
-        tr = slab_translucency(translucency, top.shape[:2], (nz, ny, nx), vox, inks, translucency_depth_mm,
-                               translucency_source)
+        tr = slab_translucency(
+            translucency, top.shape[:2], (nz, ny, nx), vox, inks, translucency_depth_mm, translucency_source
+        )
     return SlabScene(vol, texels, np.clip(target, 0.0, 1.0), faces, pix, tuple(size_mm), tr)
 
 
-def load_slab(top_path, bottom_path, size_mm, inks: InkTable, dpi: float = OPT_DPI, translucency=None,
-              translucency_depth_mm: float | None = None) -> SlabScene:
+def load_slab(
+    top_path,
+    bottom_path,
+    size_mm,
+    inks: InkTable,
+    dpi: float = OPT_DPI,
+    translucency=None,
+    translucency_depth_mm: float | None = None,
+) -> SlabScene:
     """A slab scene from picture files (``bottom_path`` may be None); size_mm (W, H, D); ``translucency``: a
     mask file (``scenes.translucency.load_mask``) or None."""
     mask = None

@@ -16,6 +16,7 @@ the texture's alpha channel) and ``translucency_depth_mm`` (None: through the wh
 back. Slabs are written with kind "image" and the inputs a spec leaves at None are left out, so the targets of
 selections made before translucency could be given read and compare the same.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -27,6 +28,7 @@ import numpy as np
 from ..model import InkTable, transparent_ink
 from ..units import OPT_DPI, voxel_mm
 from .translucency import ALPHA, check_depth
+
 
 def _check_file(path, what: str) -> None:
     if not Path(path).is_file():
@@ -70,8 +72,9 @@ class SlabSpec:
         from .slab import load_slab
 
         self.validate(inks)
-        return load_slab(self.top, self.bottom, self.size_mm, inks, self.dpi, self.translucency,
-                         self.translucency_depth_mm)
+        return load_slab(
+            self.top, self.bottom, self.size_mm, inks, self.dpi, self.translucency, self.translucency_depth_mm
+        )
 
     def to_json(self) -> dict:
         d = {"kind": "image", "top": self.top, "bottom": self.bottom, "size_mm": list(self.size_mm), "dpi": self.dpi}
@@ -120,12 +123,27 @@ class MeshSpec:
         from .mesh import build_mesh_scene
 
         self.validate(inks)
-        return build_mesh_scene(self.path, inks, self.height_mm, self.scale, self.shell_mm, self.dpi, self.up,
-                                self.translucency, self.translucency_depth_mm)
+        return build_mesh_scene(
+            self.path,
+            inks,
+            self.height_mm,
+            self.scale,
+            self.shell_mm,
+            self.dpi,
+            self.up,
+            self.translucency,
+            self.translucency_depth_mm,
+        )
 
     def to_json(self) -> dict:
-        d = {"kind": "mesh", "path": self.path, "height_mm": self.height_mm, "shell_mm": self.shell_mm,
-             "dpi": self.dpi, "up": self.up}
+        d = {
+            "kind": "mesh",
+            "path": self.path,
+            "height_mm": self.height_mm,
+            "shell_mm": self.shell_mm,
+            "dpi": self.dpi,
+            "up": self.up,
+        }
         if self.scale is not None:
             d["scale"] = self.scale
         return _with_translucency(d, self)
@@ -160,6 +178,13 @@ def spec_from_json(d: dict) -> SceneSpec:
     if kind in ("image", "slab"):
         return SlabSpec(d["top"], tuple(d["size_mm"]), d.get("bottom"), d.get("dpi", OPT_DPI), **tr)
     if kind == "mesh":
-        return MeshSpec(d["path"], d.get("height_mm"), d.get("scale"), d.get("shell_mm"), d.get("dpi", OPT_DPI),
-                        d.get("up", "y"), **tr)
+        return MeshSpec(
+            d["path"],
+            d.get("height_mm"),
+            d.get("scale"),
+            d.get("shell_mm"),
+            d.get("dpi", OPT_DPI),
+            d.get("up", "y"),
+            **tr,
+        )
     raise ValueError(f"unknown scene kind {kind!r}; expected 'image' (a slab) or 'mesh'")

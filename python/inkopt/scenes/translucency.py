@@ -19,6 +19,7 @@ core below ``--shell-mm``) and that a region reaches become ``s`` transparent + 
 The constraint is stored sparsely in scene.npz (``model.Translucency``), so evaluation and the baselines rebuild
 the same fixed shares.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -35,8 +36,15 @@ def translucency_fields(tr: Translucency | None) -> dict:
     """Report fields of a translucency constraint (none without one)."""
     if tr is None:
         return {}
-    return {"translucency": {"source": tr.source, "ink": tr.ink, "depth_mm": tr.depth_mm,
-                             "voxels": int(len(tr.index)), "mean_share": float(tr.share.mean())}}
+    return {
+        "translucency": {
+            "source": tr.source,
+            "ink": tr.ink,
+            "depth_mm": tr.depth_mm,
+            "voxels": int(len(tr.index)),
+            "mean_share": float(tr.share.mean()),
+        }
+    }
 
 
 def check_depth(depth_mm: float | None) -> float | None:
@@ -56,8 +64,9 @@ def check_mask(mask, name: str = "translucency mask") -> np.ndarray:
     bad = ~np.isfinite(a) | (a < 0) | (a > 1)
     if bad.any():
         i, j = np.argwhere(bad)[0]
-        raise ValueError(f"{name}: shares must lie in 0..1, got {a[i, j]:g} at row {i}, column {j} "
-                         f"({int(bad.sum())} values outside)")
+        raise ValueError(
+            f"{name}: shares must lie in 0..1, got {a[i, j]:g} at row {i}, column {j} ({int(bad.sum())} values outside)"
+        )
     return a
 
 
@@ -96,19 +105,28 @@ def share_constraint(inks: InkTable, shape, share: np.ndarray, depth_mm, source:
     return Translucency(transparent_ink(inks), shape, idx, share.reshape(-1)[idx], depth_mm, source)
 
 
-def slab_translucency(mask: np.ndarray, top_shape: tuple, shape, voxel_z_mm: float, inks: InkTable,
-                      depth_mm: float | None = None, source: str = "") -> Translucency | None:
+def slab_translucency(
+    mask: np.ndarray,
+    top_shape: tuple,
+    shape,
+    voxel_z_mm: float,
+    inks: InkTable,
+    depth_mm: float | None = None,
+    source: str = "",
+) -> Translucency | None:
     """The constraint of a slab of ``shape`` (z, y, x) from ``mask`` (H, W) in the top picture's pixels
     (``top_shape`` (H, W), which it must match)."""
     transparent_ink(inks)  # the one-line error first
     mask = check_mask(mask, f"translucency mask {source}".strip())
     if mask.shape != tuple(top_shape):
-        raise ValueError(f"translucency mask {source}: {mask.shape[1]}x{mask.shape[0]} px, but the top picture is "
-                         f"{top_shape[1]}x{top_shape[0]} px; they must be the same size".replace(" :", ":"))
+        raise ValueError(
+            f"translucency mask {source}: {mask.shape[1]}x{mask.shape[0]} px, but the top picture is "
+            f"{top_shape[1]}x{top_shape[0]} px; they must be the same size".replace(" :", ":")
+        )
     depth_mm = check_depth(depth_mm)
     nz, ny, nx = shape
     face = np.clip(resample(np.repeat(mask[..., None], 3, -1), ny, nx)[..., 0], 0.0, 1.0)[::-1]  # row 0 = max y
     layers = nz if depth_mm is None else int(np.clip(round(depth_mm / voxel_z_mm), 1, nz))
     share = np.zeros(shape, np.float32)
-    share[nz - layers:] = face
+    share[nz - layers :] = face
     return share_constraint(inks, shape, share, depth_mm, source)

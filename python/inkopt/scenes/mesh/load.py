@@ -11,6 +11,7 @@ Texture seams duplicate vertices; the mesh therefore keeps two views of one face
 (with ``uv``, for colour look-ups) and ``solid_vertices``/``solid_faces`` (vertices merged by position, for
 topology, distances and winding numbers). Both list the same faces in the same order.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -58,12 +59,12 @@ class TexturedMesh:
     def color_source(self) -> str:
         if self.texture is not None and self.uv is not None:
             return "texture"
-        return "vertex" if self.vertex_colors is not None else "face" if self.face_colors is not None \
-            else "constant"
+        return "vertex" if self.vertex_colors is not None else "face" if self.face_colors is not None else "constant"
 
     def solid_trimesh(self):
         """The seam-merged mesh as a ``trimesh.Trimesh`` (no colours)."""
         import trimesh
+
         return trimesh.Trimesh(self.solid_vertices, self.solid_faces, process=False)
 
     def colors_at(self, face_index: np.ndarray, bary: np.ndarray) -> np.ndarray:
@@ -105,8 +106,12 @@ def _bilinear(tex: np.ndarray, uv: np.ndarray) -> np.ndarray:
     x1, y1 = (x0 + 1) % w, (y0 + 1) % h
     if tex.ndim == 2:
         fx, fy = fx[:, 0], fy[:, 0]
-    return (tex[y0, x0] * (1 - fx) * (1 - fy) + tex[y0, x1] * fx * (1 - fy)
-            + tex[y1, x0] * (1 - fx) * fy + tex[y1, x1] * fx * fy)
+    return (
+        tex[y0, x0] * (1 - fx) * (1 - fy)
+        + tex[y0, x1] * fx * (1 - fy)
+        + tex[y1, x0] * (1 - fx) * fy
+        + tex[y1, x1] * fx * fy
+    )
 
 
 UP_AXES = ("y", "z")  # the up axes a mesh file may have
@@ -116,8 +121,9 @@ def check_placement(height_mm: float | None, scale: float | None, up: str = "y")
     """One-line ValueError unless exactly one of ``height_mm`` and ``scale`` is given, it is positive, and ``up``
     is one of ``UP_AXES``."""
     if (height_mm is None) == (scale is None):
-        raise ValueError("give exactly one of --height-mm H (the object's height in mm) and --scale S "
-                         "(mm per model unit)")
+        raise ValueError(
+            "give exactly one of --height-mm H (the object's height in mm) and --scale S (mm per model unit)"
+        )
     for flag, v in (("--height-mm", height_mm), ("--scale", scale)):
         if v is not None and not (np.isfinite(v) and v > 0):
             raise ValueError(f"{flag} must be positive, got {v}")
@@ -128,6 +134,7 @@ def check_placement(height_mm: float | None, scale: float | None, up: str = "y")
 def load_mesh(path, height_mm: float | None = None, scale: float | None = None, up: str = "y") -> TexturedMesh:
     """Load an OBJ (+MTL +texture), glTF/GLB or PLY file; see ``mesh_from_trimesh`` for the arguments."""
     import trimesh
+
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"mesh file {path} does not exist")
@@ -138,8 +145,9 @@ def load_mesh(path, height_mm: float | None = None, scale: float | None = None, 
     return mesh_from_trimesh(tm, height_mm=height_mm, scale=scale, up=up, source=str(path))
 
 
-def mesh_from_trimesh(tm, height_mm: float | None = None, scale: float | None = None, up: str = "y",
-                      source: str = "mesh") -> TexturedMesh:
+def mesh_from_trimesh(
+    tm, height_mm: float | None = None, scale: float | None = None, up: str = "y", source: str = "mesh"
+) -> TexturedMesh:
     """Convert a ``trimesh.Trimesh`` (or Scene) into a solid, scaled, z-up ``TexturedMesh``.
 
     Exactly one of ``height_mm`` (the bounding-box extent along the up axis becomes this many mm) and ``scale``
@@ -147,6 +155,7 @@ def mesh_from_trimesh(tm, height_mm: float | None = None, scale: float | None = 
     enclose a solid (open sheet, large holes).
     """
     import trimesh
+
     if isinstance(tm, trimesh.Scene):
         tm = tm.to_geometry() if hasattr(tm, "to_geometry") else tm.dump(concatenate=True)
     if not isinstance(tm, trimesh.Trimesh):
@@ -218,9 +227,10 @@ def _read_colours(tm, mesh: TexturedMesh) -> None:
 def winding_number(v: np.ndarray, f: np.ndarray, q: np.ndarray) -> np.ndarray:
     """Generalized winding number (libigl's fast approximation) at q (n, 3), chunked."""
     import igl
+
     out = np.empty(len(q), np.float64)
     for a in range(0, len(q), _CHUNK):
-        out[a:a + _CHUNK] = igl.fast_winding_number(v, f, np.ascontiguousarray(q[a:a + _CHUNK], np.float64))
+        out[a : a + _CHUNK] = igl.fast_winding_number(v, f, np.ascontiguousarray(q[a : a + _CHUNK], np.float64))
     return out
 
 
@@ -238,12 +248,14 @@ def _check_solid(mesh: TexturedMesh, tol: float = 0.15, need: float = 0.9) -> No
     eps = (0.01 * np.sqrt(area[ok]))[:, None]
     c = tri[ok].mean(1)
     w = winding_number(v, f, np.concatenate([c - eps * n, c + eps * n]))
-    w_in, w_out = w[: len(c)], w[len(c):]
+    w_in, w_out = w[: len(c)], w[len(c) :]
     good = (np.abs(w_in - 1) < tol) & (np.abs(w_out) < tol)
     frac = float(np.sum(area[ok] * good) / np.sum(area[ok]))
     if frac < need:
-        raise ValueError(f"{mesh.source}: the mesh does not enclose a solid: only {frac:.0%} of its surface has "
-                         f"winding number ~1 inside and ~0 outside (open sheet or large holes?)")
+        raise ValueError(
+            f"{mesh.source}: the mesh does not enclose a solid: only {frac:.0%} of its surface has "
+            f"winding number ~1 inside and ~0 outside (open sheet or large holes?)"
+        )
 
 
 def corner_normals(v: np.ndarray, f: np.ndarray, crease_deg: float = 60.0) -> np.ndarray:
@@ -251,6 +263,7 @@ def corner_normals(v: np.ndarray, f: np.ndarray, crease_deg: float = 60.0) -> np
     the normals of the faces around the corner's vertex that lie within ``crease_deg`` of the face's own
     normal (so cube edges stay sharp and a sphere is smooth)."""
     import trimesh
+
     tri = v[f]
     fn = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     fn /= np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-300)

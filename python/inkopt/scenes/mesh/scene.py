@@ -1,9 +1,9 @@
 """The scene of a textured 3D object (``inkopt optimize MESH``).
 
-Load the mesh (``load.load_mesh``: z up, standing on z = 0, scaled to ``height_mm`` or by ``scale`` mm per model
-unit) -> voxelize it on the optimisation grid (``voxelize.voxelize``, 300 DPI by default) -> a label ``Volume`` (white inside)
-with the object's ``inside`` mask, shading ``normals`` and ``origin_mm`` (box boundary), one texel per surface
-voxel whose target is the texture colour of the closest surface point.
+Load the mesh (``load.load_mesh``: z up, standing on z = 0, scaled to ``height_mm`` or by ``scale`` mm per model unit)
+-> voxelize it on the optimisation grid (``voxelize.voxelize``, 300 DPI by default) -> a label ``Volume`` (white inside)
+with the object's ``inside`` mask, shading ``normals`` and ``origin_mm`` (box boundary), one texel per surface voxel
+whose target is the texture colour of the closest surface point.
 
 Which voxels are variables: every inside voxel, or with ``shell_mm`` only those less than ``shell_mm`` below the
 surface (signed distance >= -shell_mm; surface voxels always). All other grid voxels, the deep core and the
@@ -19,6 +19,7 @@ Translucency (``translucency``: "alpha" for the texture's alpha channel, or a ma
 nearest texel's share of transparent ink as a fixed share; a white core voxel that a region reaches becomes that
 share of transparent and the rest white.
 """
+
 from __future__ import annotations
 
 import time
@@ -27,8 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...model import (EMPTY, FixedShares, InkTable, MeshInfo, Translucency, Volume, transparent_ink,
-                      white_fixed_shares)
+from ...model import EMPTY, FixedShares, InkTable, MeshInfo, Translucency, Volume, transparent_ink, white_fixed_shares
 from ...rundir import RunDir, SceneRecord
 from ...units import OPT_DPI, voxel_mm
 from ..translucency import ALPHA, check_depth, check_mask, load_mask, translucency_fields
@@ -90,27 +90,59 @@ class MeshScene:
 
     def record(self) -> SceneRecord:
         vox = self.vox
-        info = MeshInfo(self.mesh_path, float(self.mesh.mm_per_unit), self.height_mm, self.up, vox.origin_mm,
-                        vox.voxel_mm, vox.closest_mm, self.shell_mm)
-        return SceneRecord("mesh", vox.texels, vox.targets, free_mask=self.free, fixed=self.fixed_share, mesh=info,
-                           translucency=self.translucency)
+        info = MeshInfo(
+            self.mesh_path,
+            float(self.mesh.mm_per_unit),
+            self.height_mm,
+            self.up,
+            vox.origin_mm,
+            vox.voxel_mm,
+            vox.closest_mm,
+            self.shell_mm,
+        )
+        return SceneRecord(
+            "mesh",
+            vox.texels,
+            vox.targets,
+            free_mask=self.free,
+            fixed=self.fixed_share,
+            mesh=info,
+            translucency=self.translucency,
+        )
 
     def describe(self) -> str:
         nz, ny, nx = self.volume.shape
-        return (f"mesh {self.height_mm:.1f} mm high: grid {nx} x {ny} x {nz} voxels "
-                f"({self.volume.voxel_mm[0] * 1000:.1f} µm), {int(self.vox.inside.sum())} inside, "
-                f"{int(self.free.sum())} free, {len(self.texels)} texels; voxelized in {self.voxelize_seconds:.1f} s")
+        return (
+            f"mesh {self.height_mm:.1f} mm high: grid {nx} x {ny} x {nz} voxels "
+            f"({self.volume.voxel_mm[0] * 1000:.1f} µm), {int(self.vox.inside.sum())} inside, "
+            f"{int(self.free.sum())} free, {len(self.texels)} texels; voxelized in {self.voxelize_seconds:.1f} s"
+        )
 
     def report_fields(self) -> dict:
         nz, ny, nx = self.volume.shape
-        return {"voxels": int(nz * ny * nx), "grid_zyx": [nz, ny, nx], "inside_voxels": int(self.vox.inside.sum()),
-                "free_voxels": int(self.free.sum()), "texels": len(self.texels),
-                "voxelize_seconds": self.voxelize_seconds, "shell_mm": self.shell_mm, "height_mm": self.height_mm,
-                "mesh_scale": self.mesh.mm_per_unit, "mesh_path": self.mesh_path,
-                "voxel_mm": [float(v) for v in self.volume.voxel_mm], **translucency_fields(self.translucency)}
+        return {
+            "voxels": int(nz * ny * nx),
+            "grid_zyx": [nz, ny, nx],
+            "inside_voxels": int(self.vox.inside.sum()),
+            "free_voxels": int(self.free.sum()),
+            "texels": len(self.texels),
+            "voxelize_seconds": self.voxelize_seconds,
+            "shell_mm": self.shell_mm,
+            "height_mm": self.height_mm,
+            "mesh_scale": self.mesh.mm_per_unit,
+            "mesh_path": self.mesh_path,
+            "voxel_mm": [float(v) for v in self.volume.voxel_mm],
+            **translucency_fields(self.translucency),
+        }
 
-    def write_pictures(self, out: RunDir, pred_rgb: np.ndarray, delta_e: np.ndarray | None = None,
-                       views: int = 4, size: int | None = None) -> list[Path]:
+    def write_pictures(
+        self,
+        out: RunDir,
+        pred_rgb: np.ndarray,
+        delta_e: np.ndarray | None = None,
+        views: int = 4,
+        size: int | None = None,
+    ) -> list[Path]:
         """prediction.glb, target.glb (vertex colours baked from the texels: target and predicted linear RGB
         (I, 3)) and views.png (target row over prediction row, ``views`` azimuths, ``size`` pixels each)."""
         tx, vox = self.vox.texels, self.vox
@@ -132,9 +164,17 @@ def check_mesh_inputs(shell_mm: float | None, inks: InkTable | None = None) -> N
         raise ValueError(f"--shell-mm must be a positive thickness in mm, got {shell_mm}")
 
 
-def build_mesh_scene(mesh_path, inks: InkTable, height_mm: float | None = None, scale: float | None = None,
-                     shell_mm: float | None = None, dpi: float = OPT_DPI, up: str = "y", translucency=None,
-                     translucency_depth_mm: float | None = None) -> MeshScene:
+def build_mesh_scene(
+    mesh_path,
+    inks: InkTable,
+    height_mm: float | None = None,
+    scale: float | None = None,
+    shell_mm: float | None = None,
+    dpi: float = OPT_DPI,
+    up: str = "y",
+    translucency=None,
+    translucency_depth_mm: float | None = None,
+) -> MeshScene:
     """Load and voxelize ``mesh_path``; exactly one of ``height_mm`` and ``scale`` (mm per model unit).
     ``translucency``: None, "alpha" (the texture's alpha channel) or a mask (file or (H, W) array) in texture
     space; ``translucency_depth_mm``: its depth below the surface (None: the whole object)."""
@@ -143,8 +183,11 @@ def build_mesh_scene(mesh_path, inks: InkTable, height_mm: float | None = None, 
     if translucency is not None:
         transparent_ink(inks)
         translucency_depth_mm = check_depth(translucency_depth_mm)
-        mask = None if isinstance(translucency, str) and translucency == ALPHA else (
-            check_mask(translucency) if isinstance(translucency, np.ndarray) else load_mask(translucency))
+        mask = (
+            None
+            if isinstance(translucency, str) and translucency == ALPHA
+            else (check_mask(translucency) if isinstance(translucency, np.ndarray) else load_mask(translucency))
+        )
     t0 = time.perf_counter()
     mesh = load_mesh(mesh_path, height_mm=height_mm, scale=scale, up=up)
     vmm = voxel_mm(dpi)
@@ -166,7 +209,15 @@ def build_mesh_scene(mesh_path, inks: InkTable, height_mm: float | None = None, 
     # The base volume's medium is not the optimiser's (it takes geometry and inks from it, and the fixed shares
     # from ``fixed``): white labels inside, 1 byte per voxel, instead of a (z, y, x, N) mixture.
     labels = np.where(vox.inside, np.uint8(inks.index("white")), np.uint8(EMPTY))
-    vol = Volume.from_labels(voxel_mm=vox.voxel_mm, labels=labels, inks=inks, g=inks.g, inside=vox.inside,
-                 normals=vox.normals, boundary="box", origin_mm=vox.origin_mm)
+    vol = Volume.from_labels(
+        voxel_mm=vox.voxel_mm,
+        labels=labels,
+        inks=inks,
+        g=inks.g,
+        inside=vox.inside,
+        normals=vox.normals,
+        boundary="box",
+        origin_mm=vox.origin_mm,
+    )
     vox.sdf = None  # 4 bytes per grid voxel no longer needed
     return MeshScene(mesh, vox, vol, free, fixed, shell_mm, seconds, str(Path(mesh_path).resolve()), up, tr)

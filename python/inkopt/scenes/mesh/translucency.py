@@ -1,6 +1,7 @@
 """Translucency constraints of a voxelized mesh (``scenes.translucency`` describes the masks and the regions):
 the required share at each texel, from the texture's alpha channel or a mask in texture space, and the inside
 voxels within a depth of the surface that take their nearest texel's share."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -15,16 +16,19 @@ def mesh_texel_share(mesh, vox, mask: np.ndarray | None = None) -> np.ndarray:
     closest surface point, or ``mask`` (H, W) looked up there through the uv coordinates."""
     if mesh.uv is None or (mask is None and mesh.texture_alpha is None):
         what = "no uv coordinates" if mesh.uv is None else "a texture without an alpha channel"
-        raise ValueError(f"--translucency {'MASK' if mask is not None else ALPHA}: {mesh.source} has {what}; "
-                         f"give a texture with alpha or a mask in texture space")
+        raise ValueError(
+            f"--translucency {'MASK' if mask is not None else ALPHA}: {mesh.source} has {what}; "
+            f"give a texture with alpha or a mask in texture space"
+        )
     bary = barycentric(mesh.solid_vertices[mesh.solid_faces[vox.face_index]], vox.closest_mm)
     if mask is None:
         return (1.0 - mesh.alpha_at(vox.face_index, bary)).astype(np.float32)
     return np.clip(mesh.sample_at(check_mask(mask), vox.face_index, bary), 0.0, 1.0).astype(np.float32)
 
 
-def mesh_translucency(vox, texel_share: np.ndarray, inks: InkTable, depth_mm: float | None = None,
-                      source: str = "") -> Translucency | None:
+def mesh_translucency(
+    vox, texel_share: np.ndarray, inks: InkTable, depth_mm: float | None = None, source: str = ""
+) -> Translucency | None:
     """The constraint of a voxelized mesh (its ``sdf`` still present when ``depth_mm`` is given): inside voxels
     within ``depth_mm`` of the surface take their nearest texel's share ``texel_share`` (I,)."""
     from scipy.spatial import cKDTree

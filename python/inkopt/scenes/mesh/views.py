@@ -2,6 +2,7 @@
 
 Colours are linear RGB (I, 3) per texel; files are sRGB and written atomically.
 """
+
 from __future__ import annotations
 
 import io
@@ -27,6 +28,7 @@ def bake_vertex_colors(mesh, texel_pos_mm, texel_rgb_linear, k: int = 4, texel_n
     vertex. texel_pos_mm (I, 3) mm (x, y, z), e.g. ``VoxelizedObject.closest_mm``; texel_rgb_linear (I, 3);
     texel_normal (I, 3) optional: texels facing away from the vertex normal are ignored (thin parts)."""
     import trimesh
+
     verts, faces = _geometry(mesh)
     pos = np.asarray(texel_pos_mm, np.float64).reshape(-1, 3)
     rgb = np.asarray(texel_rgb_linear, np.float32).reshape(-1, 3)
@@ -88,6 +90,7 @@ def _raster(verts, faces, colours, view_dir, size, radius, shade) -> np.ndarray:
 
     def edge(u, w_, z):
         return (w_[:, 0] - u[:, 0]) * (z[:, 1] - u[:, 1]) - (z[:, 0] - u[:, 0]) * (w_[:, 1] - u[:, 1])
+
     l0, l1, l2 = edge(bb, cc, q) / area[t], edge(cc, a, q) / area[t], edge(a, bb, q) / area[t]
     hit = (l0 >= -1e-9) & (l1 >= -1e-9) & (l2 >= -1e-9)
     t, px, py, lam = t[hit], px[hit], py[hit], np.stack([l0, l1, l2], 1)[hit]
@@ -96,6 +99,7 @@ def _raster(verts, faces, colours, view_dir, size, radius, shade) -> np.ndarray:
     order = np.lexsort((-z, pid))
     first = order[np.r_[True, pid[order][1:] != pid[order][:-1]]]
     import trimesh
+
     vn = trimesh.Trimesh(verts, faces, process=False).vertex_normals
     light = (1 - shade) + shade * np.clip(vn @ d, 0, 1)
     out = np.ones((len(colours), size * size, 3), np.float32)
@@ -105,8 +109,17 @@ def _raster(verts, faces, colours, view_dir, size, radius, shade) -> np.ndarray:
     return out.reshape(len(colours), size, size, 3)
 
 
-def render_views(mesh, colors_target, colors_pred, path_png, views: int = 3, size: int = 320,
-                 elevation_deg: float = 20.0, shade: float = 0.35, supersample: int = 2) -> None:
+def render_views(
+    mesh,
+    colors_target,
+    colors_pred,
+    path_png,
+    views: int = 3,
+    size: int = 320,
+    elevation_deg: float = 20.0,
+    shade: float = 0.35,
+    supersample: int = 2,
+) -> None:
     """Write a PNG (2*size rows x views*size columns): row 0 the target, row 1 the prediction, one column per
     view (cameras spread evenly in azimuth, the first at (-x, -y), i.e. 45 deg left of the front view from -y,
     raised by ``elevation_deg``), orthographic, white background.

@@ -4,6 +4,7 @@ shading normals and target colours (the texture colour of each texel's closest s
 Conventions (docs/conventions.md): arrays are (z, y, x[, c]); positions, normals and ``voxel_mm`` are (x, y, z)
 in mm; colours are linear RGB.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -69,6 +70,7 @@ def _inside_sdf(vs, fs, origin, v, shape, band_mm):
     else per-voxel winding numbers and distances. Beyond the band, |sdf| = max(band, trilinear interpolation of
     the exact distances at the coarse block centres), off by at most half a coarse block's diagonal."""
     import igl
+
     unsigned = igl.SignedDistanceType.SIGNED_DISTANCE_TYPE_UNSIGNED
     nb = -(-np.array(shape) // _B1)  # coarse blocks (z, y, x)
     full = tuple(int(k) * _B1 for k in nb)
@@ -93,7 +95,7 @@ def _inside_sdf(vs, fs, origin, v, shape, band_mm):
     near_idx = np.flatnonzero(near1)
     step = max(1, _CHUNK // r**3)
     for a in range(0, len(near_idx), step):
-        sub = (bidx[near_idx[a:a + step], None, :] * r + sub_local[None]).reshape(-1, 3)  # sub-block zyx
+        sub = (bidx[near_idx[a : a + step], None, :] * r + sub_local[None]).reshape(-1, 3)  # sub-block zyx
         d2 = igl.signed_distance(centres(sub, _B2), vs, fs, unsigned, -(h2 + band_mm), h2 + band_mm)[0]
         d2 = np.where(np.isnan(d2), np.inf, np.abs(d2))
         fine = d2 <= h2  # the surface may cross: per-voxel winding numbers
@@ -126,7 +128,7 @@ def _inside_sdf(vs, fs, origin, v, shape, band_mm):
         k1 = min(k0 + slab, int(nb[0]))
         c0, c1 = max(k0 - 1, 0), min(k1 + 1, int(nb[0]))
         z = ndimage.zoom(d1[c0:c1], _B1, order=1, mode="nearest", grid_mode=True, output=np.float32)
-        z = z[(k0 - c0) * _B1:(k1 - c0) * _B1, : shape[1], : shape[2]]
+        z = z[(k0 - c0) * _B1 : (k1 - c0) * _B1, : shape[1], : shape[2]]
         zs = slice(k0 * _B1, min(k1 * _B1, shape[0]))
         z = z[: zs.stop - zs.start]
         part = sdf[zs]
@@ -135,9 +137,9 @@ def _inside_sdf(vs, fs, origin, v, shape, band_mm):
     return inside, sdf
 
 
-
-def voxelize(mesh: TexturedMesh, voxel_mm=DEFAULT_VOXEL_MM, pad: int = 1, band: float = 3.0,
-             crease_deg: float = 60.0) -> VoxelizedObject:
+def voxelize(
+    mesh: TexturedMesh, voxel_mm=DEFAULT_VOXEL_MM, pad: int = 1, band: float = 3.0, crease_deg: float = 60.0
+) -> VoxelizedObject:
     """Voxelize ``mesh`` on a grid of ``voxel_mm`` (scalar or (x, y, z)) with ``pad`` empty voxels around its
     bounding box (whose low corner is a voxel corner).
 
@@ -149,6 +151,7 @@ def voxelize(mesh: TexturedMesh, voxel_mm=DEFAULT_VOXEL_MM, pad: int = 1, band: 
     point's colour (``TexturedMesh.colors_at``). Needs ~5 bytes per grid voxel.
     """
     import igl
+
     v = np.broadcast_to(np.asarray(voxel_mm, np.float64), (3,)).copy()
     if not (np.all(np.isfinite(v)) and np.all(v > 0)):
         raise ValueError(f"voxel_mm must be positive, got {voxel_mm}")
@@ -181,6 +184,15 @@ def voxelize(mesh: TexturedMesh, voxel_mm=DEFAULT_VOXEL_MM, pad: int = 1, band: 
     if not np.array_equal(texels.voxel, idx):
         raise RuntimeError("Texels.from_normals lists other surface voxels than voxelize")
     normals = SurfaceNormals.from_voxels(shape, idx, texels.normal)  # as re-normalised there
-    return VoxelizedObject(inside=inside, sdf=sdf, voxel_mm=v, origin_mm=origin,
-                           texels=texels, targets=mesh.colors_at(fi, bary),
-                           closest_mm=closest, face_index=fi.astype(np.int64), normals=normals, band_mm=band_mm)
+    return VoxelizedObject(
+        inside=inside,
+        sdf=sdf,
+        voxel_mm=v,
+        origin_mm=origin,
+        texels=texels,
+        targets=mesh.colors_at(fi, bary),
+        closest_mm=closest,
+        face_index=fi.astype(np.int64),
+        normals=normals,
+        band_mm=band_mm,
+    )
