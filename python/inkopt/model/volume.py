@@ -3,7 +3,7 @@
 Conventions (docs/conventions.md): arrays are (z, y, x[, c]); ``voxel_mm``, ``origin_mm`` and normals are
 (x, y, z); coefficients in mm^-1; z = 0 is the bottom layer.
 
-Medium forms (exactly one per volume, ``Volume.medium``):
+Medium forms (``model.media``; exactly one per volume, ``Volume.medium``):
 
 - ``Dense``:   ``sigma_s``, ``sigma_a`` float32 (z, y, x, 3), mm^-1
 - ``Mixture``: ``mixture`` float32 (z, y, x, N), rows summing to 1, plus the ink table
@@ -32,132 +32,14 @@ import numpy as np
 from ..io import FORMAT_KEY, FormatError, Streamed, load_npz, save_npz, upgrade_format
 from .inks import DEFAULT_G, InkTable, mix
 from .labelfile import load_label_file
+from .media import EMPTY, Dense, Labels, Medium, Mixture, Quantization, VolumeError
 from .normals import SurfaceNormals
 
 BOUNDARIES = ("box", "periodic-xy")
 # Memory the renderer may use for one volume; a volume above this is refused (bytes).
 MAX_VOLUME_BYTES = int(os.environ.get("INKOPT_MAX_VOLUME_BYTES", 16 * 2**30))
-EMPTY = 255
 #: the format version volume files are written in (``format_version``; ``upgrade_volume`` reads older ones)
 VOLUME_FORMAT = 1
-
-
-class VolumeError(ValueError):
-    """A volume that cannot be rendered; the message is one line naming the problem."""
-
-
-# ----------------------------------------------------------------------------------------- medium forms
-@dataclass
-class Dense:
-    """Per-voxel coefficients (z, y, x, 3) float32 mm^-1."""
-
-    sigma_s: np.ndarray
-    sigma_a: np.ndarray
-    form = "dense"
-
-    def __post_init__(self):
-        for key in ("sigma_s", "sigma_a"):
-            arr = np.ascontiguousarray(getattr(self, key), dtype=np.float32)
-            if arr.ndim != 4 or arr.shape[3] != 3:
-                raise VolumeError(f"{key} must have shape (z, y, x, 3), got {arr.shape}")
-            if not np.all(np.isfinite(arr)):
-                raise VolumeError(f"{key} contains NaN or infinite values")
-            if np.any(arr < 0):
-                raise VolumeError(f"{key} contains negative coefficients")
-            setattr(self, key, arr)
-        if self.sigma_s.shape != self.sigma_a.shape:
-            raise VolumeError(f"sigma_s {self.sigma_s.shape} and sigma_a {self.sigma_a.shape} differ in shape")
-
-    @property
-    def shape(self):
-        return self.sigma_s.shape[:3]
-
-    def arrays(self) -> dict:
-        return {"sigma_s": self.sigma_s, "sigma_a": self.sigma_a}
-
-
-@dataclass
-class Mixture:
-    """Per-voxel ink shares (z, y, x, N) float32 of the ink table ``inks``."""
-
-    mixture: np.ndarray
-    inks: InkTable
-    form = "mixture"
-
-    def __post_init__(self):
-        m = np.ascontiguousarray(self.mixture, dtype=np.float32)
-        if m.ndim != 4 or m.shape[3] != len(self.inks):
-            raise VolumeError(f"mixture must have shape (z, y, x, {len(self.inks)}), got {m.shape}")
-        step = max(1, 2**22 // max(1, m[0].size))  # checked in slabs of layers: bounded temporaries
-        for z in range(0, m.shape[0], step):
-            part = m[z : z + step]
-            if not np.all(np.isfinite(part)) or np.any(part < 0):
-                raise VolumeError("mixture must be finite and non-negative")
-        self.mixture = m
-
-    @property
-    def shape(self):
-        return self.mixture.shape[:3]
-
-    def arrays(self) -> dict:
-        return {"mixture": self.mixture, **self.inks.to_arrays()}
-
-
-@dataclass
-class Labels:
-    """One ink index per voxel (z, y, x) uint8 of the ink table ``inks``; ``EMPTY`` = no ink."""
-
-    labels: np.ndarray
-    inks: InkTable
-    form = "labels"
-
-    def __post_init__(self):
-        lab = np.ascontiguousarray(self.labels)  # a read-only memory map (a label file) stays one
-        if lab.dtype != np.uint8 or lab.ndim != 3:
-            raise VolumeError(f"labels must be uint8 (z, y, x), got {lab.dtype} {lab.shape}")
-        step = max(1, 2**24 // max(1, lab[0].size))  # checked in slabs of layers: bounded temporaries
-        for z in range(0, lab.shape[0], step):
-            used = lab[z : z + step][lab[z : z + step] != EMPTY]
-            if used.size and int(used.max()) >= len(self.inks):
-                raise VolumeError(f"labels use ink {int(used.max())} but the ink table has {len(self.inks)}")
-        self.labels = lab
-
-    @property
-    def shape(self):
-        return self.labels.shape
-
-    def arrays(self) -> dict:
-        return {"labels": self.labels, **self.inks.to_arrays()}
-
-
-Medium = Dense | Mixture | Labels
-
-
-@dataclass(frozen=True)
-class Quantization:
-    """How a labels volume was made from a mixture (``inkopt.printing.quantize``); dpi is (x, y, z)."""
-
-    method: str = "blue-noise"
-    seed: int = 0
-    dpi: tuple[float, float, float] | None = None
-    upsample: str = "nearest"
-
-    def arrays(self) -> dict:
-        out = {"method": np.array(self.method), "seed": np.int64(self.seed), "upsample": np.array(self.upsample)}
-        if self.dpi is not None:
-            out["dpi"] = np.asarray(self.dpi, np.float64)
-        return out
-
-    @classmethod
-    def from_arrays(cls, data) -> Quantization | None:
-        if "method" not in data:
-            return None
-        return cls(
-            str(data["method"]),
-            int(data["seed"]) if "seed" in data else 0,
-            tuple(float(v) for v in np.asarray(data["dpi"]).reshape(-1)) if "dpi" in data else None,
-            str(data["upsample"]) if "upsample" in data else "nearest",
-        )
 
 
 # ----------------------------------------------------------------------------------------- the volume
