@@ -3,6 +3,7 @@ then an atomic rename), so an interrupted run never leaves a half-written result
 
 from __future__ import annotations
 
+import hashlib
 import io
 import json
 import os
@@ -156,3 +157,13 @@ def upgrade_format(data: dict, *, kind: str, where, current: int, upgrades: dict
         v += 1
     data[FORMAT_KEY] = current
     return data
+
+
+def file_digest(path: str | Path, chunk: int = 1 << 24) -> str:
+    """``"sha256:<hex>"`` of a file's bytes, read in chunks (a GB-sized labels file never whole in memory). Outputs
+    record the digest of the file they were made from, so that a stale output can be told from a current one."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while block := fh.read(chunk):
+            h.update(block)
+    return "sha256:" + h.hexdigest()
