@@ -157,9 +157,9 @@ def test_export_gcvf(tmp_path, capsys):
     path = tmp_path / "r" / "slices.gcvf"
     with zipfile.ZipFile(path) as zf:
         names = zf.namelist()
-    assert {"ConfigFile.xml", "model.stl", "zbuffer.png"} <= set(names)
+    assert {"ConfigFile.xml", "Mesh.stl", "Zbuffer.png", "MeshBbx.ktn"} <= set(names)
     assert sum(n.startswith("layer_") for n in names) == q.labels.shape[0]
-    assert "cyan #00FFFF = VeroCyan-V" in out and "orange #FF8000," not in out and f"wrote {path}" in out
+    assert "cyan #00FFFF = VeroCY-V" in out and "orange #FF8000," not in out and f"wrote {path}" in out
     code, out, err = run(capsys, "export", tmp_path / "r", "--format", "gcvf", "--printer", "j55")
     assert code == 2 and "6 inks" in err and "J55 Prime holds 5" in err and len(err.strip().splitlines()) == 1
 

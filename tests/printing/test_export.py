@@ -99,11 +99,11 @@ def test_manifest_names_printer_materials(tmp_path):
     inks = ["cyan", "magenta", "yellow", "black", "white", "orange"]
     man = write_png_slices(random_labels(n=6), VP, inks, tmp_path / "s", printer="j750")
     assert [m["material"] for m in man["materials"]] == [
-        "VeroCyan-V",
-        "VeroMagenta-V",
-        "VeroYellow-V",
+        "VeroCY-V",
+        "VeroMGT-V",
+        "VeroYL-V",
         "VeroBlack",
-        "VeroUltraWhite",
+        "VUltraWhite",
         None,
     ]
     assert man["printer"] == {"key": "j750", "name": "Stratasys J750"} and man["max_materials"] == 6

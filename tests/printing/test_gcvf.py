@@ -10,7 +10,7 @@ import pytest
 import trimesh
 from PIL import Image
 
-from inkopt.printing.gcvf import outline_mesh, write_gcvf
+from inkopt.printing.gcvf import STL_RECORD, outline_mesh, read_source_comment, write_gcvf
 
 VP = np.array([25.4 / 600, 25.4 / 300, 0.027])
 INKS = ["cyan", "magenta", "yellow", "black", "white", "orange"]
@@ -40,7 +40,7 @@ def test_package_structure_and_palette(tmp_path):
     summary = write_gcvf(lab, VP, INKS, tmp_path / "job.gcvf", printer="j750")
     files = read_package(tmp_path / "job.gcvf")
     assert sorted(files) == sorted(
-        [f"layer_{k}.png" for k in range(Z)] + ["ConfigFile.xml", "model.stl", "zbuffer.png"]
+        [f"layer_{k}.png" for k in range(Z)] + ["ConfigFile.xml", "Mesh.stl", "Zbuffer.png", "MeshBbx.ktn"]
     )
     assert files["ConfigFile.xml"].startswith(b'<?xml version="1.0" encoding="UTF-8"?>')
     root = ET.fromstring(files["ConfigFile.xml"])
@@ -79,12 +79,18 @@ def test_package_structure_and_palette(tmp_path):
 def test_stl_outline_matches_the_voxels(tmp_path):
     lab = ball_labels()
     write_gcvf(lab, VP, INKS, tmp_path / "job.gcvf")
-    mesh = trimesh.load(io.BytesIO(read_package(tmp_path / "job.gcvf")["model.stl"]), file_type="stl")
-    assert mesh.is_watertight and mesh.volume > 0
+    stl = read_package(tmp_path / "job.gcvf")["Mesh.stl"]
+    mesh = trimesh.load(io.BytesIO(stl), file_type="stl")
+    assert mesh.is_watertight and mesh.volume > 0, "outward normals"
+    assert stl.startswith(b"inkopt outline block 1 1 1 ")
+    stored = np.frombuffer(stl[84:], STL_RECORD)["normal"]
+    np.testing.assert_allclose(stored, mesh.face_normals, atol=1e-5)  # stored normals = winding normals
     occ = lab != 255
-    idx = np.argwhere(occ)[:, ::-1]  # (x, y, z) voxel indices
+    idx = np.argwhere(occ)[:, ::-1]  # (x, y, z) voxel indices, y = label row
     lo, hi = idx.min(0) * VP, (idx.max(0) + 1) * VP  # outer faces of the outermost voxels, mm
-    np.testing.assert_allclose(mesh.bounds, [lo, hi], atol=1e-6)  # marching cubes at 0.5: on the voxel faces
+    Y = lab.shape[1]
+    lo[1], hi[1] = (idx[:, 1].min() - Y) * VP[1], (idx[:, 1].max() + 1 - Y) * VP[1]  # y = -image row x pitch
+    np.testing.assert_allclose(mesh.bounds, [lo, hi], atol=1e-5)  # marching cubes at 0.5: on the voxel faces
     assert abs(mesh.volume / (occ.sum() * VP.prod()) - 1) < 0.1
     box = outline_mesh(np.ones((2, 3, 4), bool), VP)  # a box: exactly the voxels' extent
     np.testing.assert_allclose(box.bounds, [[0, 0, 0], [4 * VP[0], 3 * VP[1], 2 * VP[2]]], atol=1e-6)
@@ -93,14 +99,53 @@ def test_stl_outline_matches_the_voxels(tmp_path):
 def test_zbuffer_is_the_top_layer_seen_from_above(tmp_path):
     lab = ball_labels()
     write_gcvf(lab, VP, INKS, tmp_path / "job.gcvf")
-    with Image.open(io.BytesIO(read_package(tmp_path / "job.gcvf")["zbuffer.png"])) as im:
+    with Image.open(io.BytesIO(read_package(tmp_path / "job.gcvf")["Zbuffer.png"])) as im:
+        assert im.mode == "I;16" and "dpi" not in im.info
         zb = np.asarray(im).astype(int)
     occ = lab != 255
     want = np.zeros(occ.shape[1:], int)
     for k in range(occ.shape[0]):
-        want[occ[k]] = k + 1
+        want[occ[k]] = k
     assert zb.shape == occ.shape[1:]
     np.testing.assert_array_equal(zb, want[::-1, :])
+
+
+def test_parts_match_the_builders_packages(tmp_path):
+    """The two jobs whose Mesh.stl, Zbuffer.png and MeshBbx.ktn a public GCVF builder ships (gcvf.py's docstring):
+    a 200 x 100 px, 100-layer job filled everywhere and a 1000 x 500 px job occupying columns 2-999 and rows
+    1-499 (four layers here: the box's z only follows the layer count)."""
+    full = np.zeros((100, 100, 200), np.uint8)
+    write_gcvf(full, VP, INKS, tmp_path / "full.gcvf")
+    files = read_package(tmp_path / "full.gcvf")
+    assert len(files["MeshBbx.ktn"]) == 24
+    assert np.frombuffer(files["MeshBbx.ktn"], "<f4").tolist() == [0, 0, 0, 200, 100, 100]
+    with Image.open(io.BytesIO(files["Zbuffer.png"])) as im:
+        assert np.unique(np.asarray(im)).tolist() == [99]
+    mesh = trimesh.load(io.BytesIO(files["Mesh.stl"]), file_type="stl")
+    np.testing.assert_allclose(mesh.bounds, [[0, -100 * 25.4 / 300, 0], [200 * 25.4 / 600, 0, 2.7]], atol=1e-5)
+    wheel = np.full((4, 500, 1000), 255, np.uint8)
+    wheel[:, 1:500, 2:1000] = 4  # label rows 1..499 = image rows 0..498: the image's top row stays empty below
+    wheel = wheel[:, ::-1, :].copy()  # image rows 1..499 occupied
+    write_gcvf(wheel, VP, INKS, tmp_path / "wheel.gcvf")
+    assert np.frombuffer(read_package(tmp_path / "wheel.gcvf")["MeshBbx.ktn"], "<f4").tolist() == [
+        2,
+        1,
+        0,
+        1000,
+        500,
+        4,
+    ]
+
+
+def test_material_names_and_source_digest(tmp_path):
+    lab = ball_labels()
+    write_gcvf(lab, VP, INKS, tmp_path / "job.gcvf", materials={"White": "VeroPureWht"}, digest="sha256:0f")
+    root = ET.fromstring(read_package(tmp_path / "job.gcvf")["ConfigFile.xml"])
+    assert [text(m, "Name") for m in root.findall("MaterialList/Material")][4] == "VeroPureWht"
+    with zipfile.ZipFile(tmp_path / "job.gcvf") as zf:
+        assert read_source_comment(zf.comment)["digest"] == "sha256:0f"
+    with pytest.raises(ValueError, match="unknown ink 'teal'"):
+        write_gcvf(lab, VP, INKS, tmp_path / "b.gcvf", materials={"teal": "VeroCY-V"})
 
 
 def test_refusals_write_nothing(tmp_path):
@@ -117,11 +162,11 @@ def test_refusals_write_nothing(tmp_path):
     with pytest.raises(ValueError, match="not a GCVF package"):
         write_gcvf(lab[..., :3], VP, INKS, tmp_path / "notes.gcvf")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.gcvf"]
-    # seven inks fit a J850: its slot count in the XML, the clear ink named after its Vero material
+    # seven inks fit a J850; the XML keeps the profile's MaxNumberOfColors, the clear ink its Vero material
     write_gcvf(lab, VP, seven, tmp_path / "j850.gcvf", printer="j850")
     root = ET.fromstring(read_package(tmp_path / "j850.gcvf")["ConfigFile.xml"])
-    assert text(root, "MaxNumberOfColors") == "7"
-    assert [text(m, "Name") for m in root.findall("MaterialList/Material")][-2:] == ["orange", "VeroUltraClear"]
+    assert text(root, "MaxNumberOfColors") == "6"
+    assert [text(m, "Name") for m in root.findall("MaterialList/Material")][-2:] == ["orange", "VeroClear"]
     write_gcvf(lab[..., :2], VP, seven, tmp_path / "j850.gcvf", printer="j850")  # an old package is replaced
     assert (
         text(ET.fromstring(read_package(tmp_path / "j850.gcvf")["ConfigFile.xml"]), "SliceDimensions/SliceWidth") == "2"

@@ -18,13 +18,21 @@ def test_json_round_trip_and_keys():
     for key, prof in PRINTER_PROFILES.items():
         d = prof.to_json()
         assert PrinterProfile.from_json(json.loads(json.dumps(d))) == prof and d["key"] == key
-    assert set(PRINTER_PROFILES["j750"].to_json()) == {"key", "name", "max_materials", "dpi", "layer_um", "materials"}
+    assert set(PRINTER_PROFILES["j750"].to_json()) == {
+        "key",
+        "name",
+        "max_materials",
+        "dpi",
+        "layer_um",
+        "materials",
+        "gcvf_colors",
+    }
     assert set(PRINTER_PROFILES["generic"].to_json()) == {"key", "name", "max_materials", "materials"}
 
 
 def test_lookups():
     j = printer_profile(" J750 ")
-    assert j.key == "j750" and j.max_materials == 6 and j.material("Cyan") == "VeroCyan-V"
+    assert j.key == "j750" and j.max_materials == 6 and j.material("Cyan") == "VeroCY-V"
     assert material_name(j, "orange") is None and material_name(None, "cyan") is None
     assert resolve_max_materials("j55") == 5 and resolve_max_materials(3) == 3 and resolve_max_materials(None) is None
     with pytest.raises(ValueError, match="unknown printer 'j9000'"):

@@ -18,12 +18,8 @@ renamed into place):
 
 The printer's software maps colours to materials; a printer holds only a few model materials per job
 (``profiles.PRINTER_PROFILES``), so a job using more distinct inks than the limit is refused by ``check_job``
-before anything is written. ``gcvf.py`` packs the same slices as a GrabCAD Voxel Print package.
-
-Not provided: a 3MF with the continuous mixture (3MF Volumetric extension, ``<composite>`` of
-``<materialmapping>``). lib3mf 2.5.0 writes image stacks, functionfromimage3d, volumedata color and property
-elements, but every method of ``VolumeDataComposite`` (SetBaseMaterialGroup, AddMaterialMapping,
-GetMaterialMapping[Count], GetBaseMaterialGroup) throws LIB3MF_ERROR_NOTIMPLEMENTED.
+before anything is written. ``gcvf.py`` packs the same slices as a GrabCAD Voxel Print package, ``threemf.py``
+writes a 3MF with the Volumetric extension and ``package.py`` reads all three back.
 """
 
 from __future__ import annotations
@@ -33,7 +29,7 @@ import os
 import shutil
 import tempfile
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -131,7 +127,8 @@ def _is_slice_folder(path: Path) -> bool:
 @dataclass
 class Job:
     """A checked print job: labels, printer voxel size, ink names, per-label voxel counts (256 entries, 255 =
-    empty), the indices of the inks used, the material limit and the printer profile (or None)."""
+    empty), the indices of the inks used, the material limit, the printer profile (or None) and the user's
+    material names per ink (lower-case ink name -> name; they take precedence over the profile's)."""
 
     labels: np.ndarray
     vp: np.ndarray
@@ -140,22 +137,24 @@ class Job:
     used: list
     limit: int | None
     profile: PrinterProfile | None
+    overrides: dict = field(default_factory=dict)
 
     @property
     def dpi(self) -> tuple[float, float]:
         return MM_PER_INCH / self.vp[0], MM_PER_INCH / self.vp[1]
 
     def material(self, i: int) -> str | None:
-        """The printer's material name for ink ``i`` (None if unknown)."""
-        return material_name(self.profile, self.names[i])
+        """The printer's material name for ink ``i``: the user's, else the profile's, else None."""
+        return self.overrides.get(self.names[i].lower()) or material_name(self.profile, self.names[i])
 
 
-def check_job(labels, voxel_mm_printer, ink_names, max_materials=None, printer=None) -> Job:
+def check_job(labels, voxel_mm_printer, ink_names, max_materials=None, printer=None, materials=None) -> Job:
     """Check a job before anything is written (every problem is a one-line ValueError).
 
     ``printer`` is a ``profiles.PRINTER_PROFILES`` key (its limit and material names); ``max_materials`` an int or
-    a profile key overriding the limit (a key given there alone also names the printer). A job using more
-    distinct inks than the limit is refused with a line naming the inks and the limit.
+    a profile key overriding the limit (a key given there alone also names the printer); ``materials`` {ink name:
+    material name} overriding the profile's names. A job using more distinct inks than the limit is refused with
+    a line naming the inks and the limit.
     """
     labels = np.asarray(labels)
     if labels.ndim != 3 or labels.dtype != np.uint8 or min(labels.shape) < 1:
@@ -184,7 +183,12 @@ def check_job(labels, voxel_mm_printer, ink_names, max_materials=None, printer=N
     refusal = too_many_inks([names[i] for i in used], limit, profile.name if profile else None)
     if refusal:
         raise ValueError(refusal)
-    return Job(labels, vp, names, counts, used, limit, profile)
+    overrides = {str(k).strip().lower(): str(v).strip() for k, v in (materials or {}).items()}
+    unknown = sorted(set(overrides) - {n.lower() for n in names})
+    if unknown or not all(overrides.values()):
+        what = f"unknown ink '{unknown[0]}'" if unknown else "an empty name"
+        raise ValueError(f"material names: {what}; give INK=NAME for the inks {names}")
+    return Job(labels, vp, names, counts, used, limit, profile, overrides)
 
 
 def slice_lut(names, palette=None, background=(0, 0, 0, 0)):
@@ -213,6 +217,7 @@ def write_png_slices(
     max_materials=None,
     background=(0, 0, 0, 0),
     printer=None,
+    materials=None,
 ) -> dict:
     """Write one RGBA PNG per layer plus ``manifest.json`` into ``out_dir`` (layout: module docstring).
 
@@ -224,10 +229,11 @@ def write_png_slices(
                       labels use more distinct inks
     background        RGBA of empty voxels
     printer           printer profile key: its material limit and material names (manifest ``material``)
+    materials         optional {ink name: material name} overriding the profile's names
     An existing ``out_dir`` is replaced only if it is empty or an earlier slice folder (has our manifest).
     Returns the manifest (dict).
     """
-    job = check_job(labels, voxel_mm_printer, ink_names, max_materials, printer)
+    job = check_job(labels, voxel_mm_printer, ink_names, max_materials, printer, materials)
     lut, colours, bg = slice_lut(job.names, palette, background)
     labels, vp, names, counts, used = job.labels, job.vp, job.names, job.counts, job.used
     Z, Y, X = labels.shape

@@ -1,47 +1,58 @@
 """GrabCAD Voxel Print package (``.gcvf``): the file print labs load into GrabCAD Print for Stratasys voxel printing.
 
 ``write_gcvf`` writes one zip (atomically: a temporary file beside it, then renamed), streaming: one layer at a
-time is encoded (``labels`` may be a memory-mapped label file), the z-buffer and the outline's occupancy are
-accumulated on the way, and nothing but the current layers is held. The zip holds:
+time is encoded (``labels`` may be a memory-mapped label file), the z-buffer, the bounding box and the outline's
+occupancy are accumulated on the way, and nothing but the current layers is held. The zip holds, at its root:
 
 - ``layer_0.png`` ... ``layer_{Z-1}.png``: one opaque RGBA PNG per layer, slice 0 = bottom layer, numbered from 0
   without zero padding, every slice the same pixel size (the printer grid's X x Y), DPI in the pHYs chunk. Pixel
   orientation as in ``export.py`` (column 0 = smallest x, row 0 = largest y). Empty voxels are opaque black
   ``0 0 0 255`` (the background material of the configuration), so the black ink is drawn ``#282828`` by default;
-  every other ink keeps its ``export.DEFAULT_PALETTE`` colour (cyan ``0 255 255 255`` ... as in the reference).
+  every other ink keeps its ``export.DEFAULT_PALETTE`` colour (cyan ``0 255 255 255`` ... as in the builder).
 - ``ConfigFile.xml``: ``<GCVF>`` version 2 with ``<Resolution>`` (``XDpi``, ``YDpi``,
   ``SliceThicknessNanoMeter``), ``<SliceDimensions>`` (``SliceWidth``, ``SliceHeight``), ``<SliceRange>``
-  (``StartIndex`` 0, ``NumberOfSlices``), ``BitDepth`` 4, ``MaxNumberOfColors`` (the printer's material slots),
+  (``StartIndex`` 0, ``NumberOfSlices``), ``BitDepth`` 4, ``MaxNumberOfColors`` (the profile's ``gcvf_colors``: 6),
   ``DataSemantics`` Materials, ``CreationMode`` MODEL_ONLY, ``ImageFilePrefix`` layer_ and ``<MaterialList>``:
   ``BackGroundMaterialRGBA`` and one ``<Material>`` (``Name``, ``RGBA`` as "r g b a", ``VoxelCount``) per ink
-  used. ``Name`` is GrabCAD's short material code where the reference uses one (VeroCY-V, VeroMGT-V, VeroYL-V,
-  VUltraWhite), else the printer profile's material name (``profiles.py``), else the ink name (a material the
-  lab assigns by hand in GrabCAD Print).
-- ``model.stl``: the outline of the print (every non-empty voxel), binary STL in mm in the slices' frame (origin
-  at the corner of voxel (0, 0, 0), +x along image columns, +y towards row 0, +z up the stack), from marching
-  cubes on the printer-grid occupancy at level 0.5, i.e. on the voxel faces. Grids above ``OUTLINE_MAX_CELLS``
-  printer voxels (marching cubes on 10^9 voxels would need tens of GB) use blocks of fz x fy x fx printer voxels
-  instead (``outline_factors``: the smallest near-cubic blocks that bring the grid under the limit; about
-  0.1 mm for a 40 mm object): a block is occupied if any of its voxels is, so the outline encloses every printed
-  voxel and lies within one block of them.
-- ``zbuffer.png``: the z-buffer seen from above: a 16-bit grey PNG of the slices' pixel size and orientation whose
-  value is 1 + the index of the topmost occupied layer in that column (0 = nothing printed there).
+  used. ``Name`` is the user's material name for the ink, else the printer profile's (``profiles.py``: GrabCAD's
+  names, VeroCY-V ...), else the ink name (a material the lab assigns by hand in GrabCAD Print).
+- ``MeshBbx.ktn``: 24 bytes, six little-endian float32 (xmin, ymin, zmin, xmax, ymax, zmax) in printer voxels over
+  (image column, image row, layer) of the occupied voxels, max exclusive.
+- ``Zbuffer.png``: a 16-bit grey PNG of the slices' pixel size and row order whose value is the index of the
+  topmost occupied layer of that column, 0 where nothing is printed (no pHYs chunk).
+- ``Mesh.stl``: binary STL in mm of the outline of the print (every non-empty voxel), outward normals, in the
+  frame x = column x pitch_x, y = -row x pitch_y (origin at the image's top-left corner: the mesh lies in negative
+  y), z = layer x layer thickness. It comes from marching cubes on the printer-grid occupancy at level 0.5, i.e.
+  on the voxel faces. Grids above ``OUTLINE_MAX_CELLS`` printer voxels (marching cubes on 10^9 voxels would need
+  tens of GB) use blocks of fz x fy x fx printer voxels instead (``outline_factors``: the smallest near-cubic
+  blocks that bring the grid under the limit; about 0.1 mm for a 40 mm object): a block is occupied if any of its
+  voxels is, so the outline encloses every printed voxel and lies within one block of them. The 80-byte header
+  names the block (``BLOCK_TAG``), so that a reader knows how far the outline may stand off the voxels.
+- The zip's archive comment (which no printer software reads) records the file the package was made from:
+  ``{"inkopt": {"source": NAME, "digest": "sha256:..."}}`` (``source_comment``).
 
-Source followed: a public GCVF builder, the Node script ``buildGCVF.js`` (its repository unknown to us), for the
-zip layout at the root, ``ConfigFile.xml`` and every element, value and material code, the ``layer_N.png``
-naming and the opaque-black background; and OpenVCAD's ``GCVFExporter`` (C++ API docs,
-MacCurdyLab/OpenVCAD-Docs ``v2/_sources/cpp-api/libvcad-compilers-inkjet.rst.txt`` and
-matterassembly.org/OpenVCAD-Docs/v2/cpp-api/libvcad-compilers-inkjet.html) for the package's parts (PNG stack,
-z-buffer image, STL mesh, XML configuration, a bounding-box file, zipped) and its defaults 600 x 300 DPI and
-27000 nm. Not confirmed: we have not seen OpenVCAD's exporter source (``gcvf_exporter.cpp``), so the names
-``model.stl`` and ``zbuffer.png``, the z-buffer's encoding, what ``BitDepth`` means, and the bounding-box file
-(not written: its format is not described anywhere we found) are our choices; nor have we loaded a package into
-GrabCAD Print.
+Evidence. The zip layout, ``ConfigFile.xml`` (every element and value, the 6 colours, the material names of four
+inks), ``layer_N.png`` and the opaque-black background are read from a public GCVF builder, ``buildGCVF.js``
+(jackcrane/slice2vox, and its copy in jackcrane/pj-voxelprint-colorwheels-v3 ``4/``), which puts every file of a
+``gcvf_includes/`` folder at the zip's root beside the slices. That repository holds two such folders
+(``4/gcvf_includes``, ``4/wheel_gcvf_includes``, commit 07930c8a) with ``Mesh.stl``, ``Zbuffer.png`` and
+``MeshBbx.ktn``; read byte by byte they give the names, the ktn layout (a 200 x 100 px, 100-layer job filled
+everywhere: 0 0 0 200 100 100; a 1000 x 500 px job occupying columns 2-999 and rows 1-499: 2 1 0 1000 500 100),
+the z-buffer (16-bit grey, no pHYs, 99 in every occupied column of a 100-layer job, 0 elsewhere) and the STL's
+frame (binary, mm, x from 0 to 200 x 25.4/600, y from -100 x 25.4/300 to 0, z from 0 to 100 x 0.027, stored
+normals equal to the outward winding normals, attribute 0). OpenVCAD's ``GCVFExporter`` (C++ API docs,
+matterassembly.org/OpenVCAD-Docs/v2/cpp-api/libvcad-compilers-inkjet.html) lists the same parts and the defaults
+600 x 300 DPI and 27000 nm. Where they disagree: the builder names white ``VUltraWhite`` and writes
+``MaxNumberOfColors`` 6 always, OpenVCAD's examples name white ``VeroPureWht``; both are profile settings
+(``profiles.py``) and material names can be set per ink. The STL of those packages is the design mesh, ours the
+voxels' outline; what ``BitDepth`` 4 means is not documented anywhere we found (we copy it). No package written
+here has been loaded into GrabCAD Print.
 """
 
 from __future__ import annotations
 
 import io
+import json
 import os
 import tempfile
 import xml.etree.ElementTree as ET
@@ -55,17 +66,37 @@ import numpy as np
 from ..model import EMPTY
 from .export import check_job, slice_image, slice_lut
 
-CONFIG, STL, ZBUFFER, PREFIX = "ConfigFile.xml", "model.stl", "zbuffer.png", "layer_"
+CONFIG, STL, ZBUFFER, BBOX, PREFIX = "ConfigFile.xml", "Mesh.stl", "Zbuffer.png", "MeshBbx.ktn", "layer_"
+BLOCK_TAG = "inkopt outline block"  # STL header: f"{BLOCK_TAG} fx fy fz" (printer voxels per outline block)
 OUTLINE_MAX_CELLS = 2**24  # marching cubes on at most this many cells (float32: 64 MB)
 BACKGROUND = (0, 0, 0, 255)
 GCVF_PALETTE = {"black": "#282828"}  # the background is opaque black: move the black ink off it
-# GrabCAD material codes used by the reference builder for the printer profiles' material names
-GCVF_NAMES = {
-    "VeroCyan-V": "VeroCY-V",
-    "VeroMagenta-V": "VeroMGT-V",
-    "VeroYellow-V": "VeroYL-V",
-    "VeroUltraWhite": "VUltraWhite",
-}
+STL_RECORD = np.dtype([("normal", "<f4", 3), ("vertices", "<f4", (3, 3)), ("attr", "<u2")])
+
+
+def source_comment(source: str | None, digest: str | None) -> bytes:
+    """The archive comment recording the file a package was made from (empty without a digest)."""
+    if digest is None:
+        return b""
+    return json.dumps({"inkopt": {"source": source, "digest": digest}}, separators=(",", ":")).encode()
+
+
+def read_source_comment(comment: bytes) -> dict | None:
+    """{"source", "digest"} from an archive comment written by ``source_comment``, else None."""
+    try:
+        rec = json.loads(comment.decode())["inkopt"]
+        return {"source": rec.get("source"), "digest": str(rec["digest"])}
+    except (ValueError, KeyError, TypeError, AttributeError):
+        return None
+
+
+def stl_bytes(mesh, header: str) -> bytes:
+    """Binary STL of ``mesh`` (trimesh) with an ASCII ``header`` and each face's outward normal."""
+    tri = mesh.vertices[mesh.faces]
+    rec = np.zeros(len(mesh.faces), STL_RECORD)
+    rec["normal"], rec["vertices"] = mesh.face_normals, tri
+    head = header.encode("ascii")[:80].ljust(80, b" ")
+    return head + np.uint32(len(rec)).tobytes() + rec.tobytes()
 
 
 def _png(image, dpi) -> bytes:
@@ -153,17 +184,17 @@ def config_xml(job, colours, bg, dpi_int, layer_nm) -> bytes:
     add(root, "SliceDimensions", SliceWidth=X, SliceHeight=Y)
     add(root, "SliceRange", StartIndex=0, NumberOfSlices=Z)
     add(root, "BitDepth", 4)
-    add(root, "MaxNumberOfColors", job.limit if job.limit is not None else max(6, len(job.used)))
+    cap = job.profile.gcvf_colors if job.profile is not None and job.profile.gcvf_colors else None
+    add(root, "MaxNumberOfColors", cap or (job.limit if job.limit is not None else max(6, len(job.used))))
     add(root, "DataSemantics", "Materials")
     add(root, "CreationMode", "MODEL_ONLY")
     add(root, "ImageFilePrefix", PREFIX)
     mats = add(root, "MaterialList", BackGroundMaterialRGBA=" ".join(map(str, bg)))
     for i in job.used:
-        vendor = job.material(i)
         add(
             mats,
             "Material",
-            Name=GCVF_NAMES.get(vendor, vendor or job.names[i]),
+            Name=job.material(i) or job.names[i],
             RGBA=" ".join(map(str, colours[i])),
             VoxelCount=int(job.counts[i]),
         )
@@ -172,15 +203,27 @@ def config_xml(job, colours, bg, dpi_int, layer_nm) -> bytes:
     return head + ET.tostring(root, encoding="utf-8") + b"\n"
 
 
-def write_gcvf(labels, voxel_mm_printer, ink_names, path, printer="j750", palette=None, max_materials=None) -> dict:
+def write_gcvf(
+    labels,
+    voxel_mm_printer,
+    ink_names,
+    path,
+    printer="j750",
+    palette=None,
+    max_materials=None,
+    materials=None,
+    source=None,
+    digest=None,
+) -> dict:
     """Write the GrabCAD Voxel Print package ``path`` (layout: module docstring); returns a summary dict.
 
-    labels, voxel_mm_printer, ink_names, palette, max_materials: as ``export.write_png_slices``; ``printer``: the
-    profile whose material limit and names apply (default J750). A job using more inks than the printer holds,
-    a grid whose DPI is not a whole number, or an empty job is refused before anything is written; an existing
-    ``path`` is replaced only if it is a GCVF package.
+    labels, voxel_mm_printer, ink_names, palette, max_materials, materials: as ``export.write_png_slices``;
+    ``printer``: the profile whose material limit and names apply (default J750); ``source``, ``digest``: the
+    file the labels come from and its ``io.file_digest``, recorded in the archive comment. A job using more inks
+    than the printer holds, a grid whose DPI is not a whole number, or an empty job is refused before anything is
+    written; an existing ``path`` is replaced only if it is a GCVF package.
     """
-    job = check_job(labels, voxel_mm_printer, ink_names, max_materials, printer)
+    job = check_job(labels, voxel_mm_printer, ink_names, max_materials, printer, materials)
     if not job.used:
         raise ValueError("nothing to print: every voxel is empty")
     dpi_int = tuple(int(round(d)) for d in job.dpi)
@@ -196,7 +239,8 @@ def write_gcvf(labels, voxel_mm_printer, ink_names, path, printer="j750", palett
     Z, Y, X = job.labels.shape
     fz, fy, fx = outline_factors((Z, Y, X), job.vp)
     coarse = np.zeros((-(-Z // fz), -(-Y // fy), -(-X // fx)), bool)
-    top = np.zeros((Y, X), np.uint16)  # 1 + topmost occupied layer
+    top = np.zeros((Y, X), np.uint16)  # index of the topmost occupied layer (0 also where nothing is printed)
+    lo, hi = np.array([X, Y, Z]), np.zeros(3, np.int64)  # occupied box (x, label y, z), max exclusive
     workers = min(8, os.cpu_count() or 1)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
@@ -206,12 +250,23 @@ def write_gcvf(labels, voxel_mm_printer, ink_names, path, printer="j750", palett
             for k, data in enumerate(pngs):
                 zf.writestr(f"{PREFIX}{k}.png", data, compress_type=zipfile.ZIP_STORED)
                 occ = np.asarray(job.labels[k]) != EMPTY
-                top[occ] = k + 1
+                top[occ] = k
                 coarse[k // fz] |= _block_any(occ, fy, fx)
+                if occ.any():
+                    cols, rows = np.flatnonzero(occ.any(0)), np.flatnonzero(occ.any(1))
+                    lo = np.minimum(lo, [cols[0], rows[0], k])
+                    hi = np.maximum(hi, [cols[-1] + 1, rows[-1] + 1, k + 1])
             zf.writestr(CONFIG, config_xml(job, colours, bg, dpi_int, layer_nm), compress_type=zipfile.ZIP_DEFLATED)
-            zf.writestr(ZBUFFER, _png(Image.fromarray(top[::-1, :]), dpi_int), compress_type=zipfile.ZIP_STORED)
+            zb = io.BytesIO()
+            Image.fromarray(top[::-1, :]).save(zb, format="PNG", compress_level=6)
+            zf.writestr(ZBUFFER, zb.getvalue(), compress_type=zipfile.ZIP_STORED)
+            box = [lo[0], Y - hi[1], lo[2], hi[0], Y - lo[1], hi[2]]  # label y -> image row (row 0 = largest y)
+            zf.writestr(BBOX, np.asarray(box, "<f4").tobytes(), compress_type=zipfile.ZIP_STORED)
             mesh = outline_mesh(coarse, job.vp * np.array([fx, fy, fz]))
-            zf.writestr(STL, mesh.export(file_type="stl"), compress_type=zipfile.ZIP_DEFLATED)
+            mesh.apply_translation([0.0, -Y * job.vp[1], 0.0])  # origin at the image's top-left corner
+            stl = stl_bytes(mesh, f"{BLOCK_TAG} {fx} {fy} {fz}")
+            zf.writestr(STL, stl, compress_type=zipfile.ZIP_DEFLATED)
+            zf.comment = source_comment(source, digest)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
@@ -232,6 +287,7 @@ def write_gcvf(labels, voxel_mm_printer, ink_names, path, printer="j750", palett
             for i in job.used
         ],
         "printer": job.profile.name if job.profile else None,
+        "bounding_box_voxels": [int(v) for v in box],
         "stl_triangles": len(mesh.faces),
         "outline_block": [fx, fy, fz],
         "bytes": path.stat().st_size,

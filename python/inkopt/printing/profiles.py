@@ -13,9 +13,17 @@ Where the figures come from (say so for every new entry; check your machine's co
   support). These we know from the vendors' public spec sheets but could not re-check against a stored copy;
   neither could we the 14 um (J750/J850 high-quality mode) and 18.75 um (J55) layers. The Mimaki has no DPI
   here: we found no public figure for its voxel grid, so resolutions are not checked for it.
-- Material names: Stratasys's Vero colour family (VeroCyan-V, VeroMagenta-V, VeroYellow-V, VeroBlack,
-  VeroUltraWhite / VeroPureWhite, VeroClear / VeroUltraClear). An ink without a vendor material (orange,
-  cyan2, ...) maps to None: load a material of your choice and map its colour in the printer's software.
+- Material names: the names GrabCAD Print's voxel packages carry in ``ConfigFile.xml`` (``<Material><Name>``).
+  A public GCVF builder (jackcrane/pj-voxelprint-colorwheels-v3, ``4/buildGCVF.js``) names cyan, magenta, yellow
+  and white ``VeroCY-V``, ``VeroMGT-V``, ``VeroYL-V``, ``VUltraWhite``; OpenVCAD's pyvcad examples
+  (``GCVFCompiler`` with a ``channel_material_map``) name black ``VeroBlack``, clear ``VeroClear`` and white
+  ``VeroPureWht``. The two white names are two materials (VeroUltraWhite, VeroPureWhite); the profiles take the
+  builder's, whose packages were made for a real job, and ``--material white=VeroPureWht`` overrides it per ink.
+  An ink without a vendor material (orange, cyan2, ...) maps to None: load a material of your choice and map its
+  colour in the printer's software.
+- ``gcvf_colors``: the ``MaxNumberOfColors`` of a GCVF package. The builder writes 6 for every job; no source says
+  whether GrabCAD Print expects the machine's slot count there (7 on a J850), so it is a profile setting, 6 for
+  every Stratasys profile.
 """
 
 from __future__ import annotations
@@ -26,13 +34,15 @@ import numpy as np
 
 from ..units import dpi_of
 
-# inkopt ink name -> Stratasys material loaded for it (Vero "vivid" colour family)
+# inkopt ink name -> GrabCAD material name of the Stratasys material loaded for it (module docstring)
 _VERO = {
-    "cyan": "VeroCyan-V",
-    "magenta": "VeroMagenta-V",
-    "yellow": "VeroYellow-V",
+    "cyan": "VeroCY-V",
+    "magenta": "VeroMGT-V",
+    "yellow": "VeroYL-V",
     "black": "VeroBlack",
-    "white": "VeroUltraWhite",
+    "white": "VUltraWhite",
+    "transparent": "VeroClear",
+    "clear": "VeroClear",
 }
 
 
@@ -41,7 +51,8 @@ class PrinterProfile:
     """What a printer takes: ``key`` (its name in ``PRINTER_PROFILES``), ``name`` (for people), ``max_materials``
     model materials per job (None: no limit), ``dpi`` (x, y) of its voxel grid and ``layer_um`` its layer
     thicknesses in µm (None and () where no public figure is known: not checked), ``materials`` the vendor
-    material loaded for each inkopt ink name."""
+    material loaded for each inkopt ink name, ``gcvf_colors`` the ``MaxNumberOfColors`` its GCVF packages carry
+    (None: its material limit)."""
 
     key: str
     name: str
@@ -49,6 +60,7 @@ class PrinterProfile:
     dpi: tuple[int, int] | None = None
     layer_um: tuple[float, ...] = ()
     materials: dict = field(default_factory=dict)
+    gcvf_colors: int | None = None
 
     def material(self, ink: str) -> str | None:
         """The vendor material loaded for ``ink`` (case-insensitive), or None if unknown."""
@@ -61,7 +73,10 @@ class PrinterProfile:
             d["dpi"] = list(self.dpi)
         if self.layer_um:
             d["layer_um"] = list(self.layer_um)
-        return {**d, "materials": dict(self.materials)}
+        d["materials"] = dict(self.materials)
+        if self.gcvf_colors is not None:
+            d["gcvf_colors"] = self.gcvf_colors
+        return d
 
     @classmethod
     def from_json(cls, d: dict) -> PrinterProfile:
@@ -73,6 +88,7 @@ class PrinterProfile:
             None if dpi is None else tuple(dpi),
             tuple(d.get("layer_um", ())),
             dict(d.get("materials", {})),
+            d.get("gcvf_colors"),
         )
 
 
@@ -86,7 +102,8 @@ PRINTER_PROFILES: dict[str, PrinterProfile] = {
             6,
             (600, 300),
             (27.0, 14.0),
-            {**_VERO, "transparent": "VeroClear", "clear": "VeroClear"},
+            _VERO,
+            6,
         ),
         # seven materials at once + support (Stratasys J850 spec sheet); same voxel grid as the J750
         PrinterProfile(
@@ -95,7 +112,8 @@ PRINTER_PROFILES: dict[str, PrinterProfile] = {
             7,
             (600, 300),
             (27.0, 14.0),
-            {**_VERO, "transparent": "VeroUltraClear", "clear": "VeroUltraClear"},
+            _VERO,
+            6,
         ),
         # five materials + support, 18.75 um layers (Stratasys J55 Prime spec sheet; not re-checked)
         PrinterProfile(
@@ -104,7 +122,8 @@ PRINTER_PROFILES: dict[str, PrinterProfile] = {
             5,
             (600, 300),
             (18.75,),
-            {**_VERO, "transparent": "VeroUltraClear", "clear": "VeroUltraClear"},
+            _VERO,
+            6,
         ),
         # C, M, Y, K, white, clear + support (Mimaki 3DUJ-553 brochure); no public voxel grid or ink names found
         PrinterProfile("mimaki-3duj-553", "Mimaki 3DUJ-553", 6),
