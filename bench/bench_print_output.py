@@ -1,5 +1,6 @@
-"""Printer-resolution output of Spot at 40 mm: time and peak memory of ``inkopt quantize`` and ``inkopt export``
-(PNG slices and GCVF), each a separate process measured by ``/usr/bin/time -v``.
+"""Printer-resolution output of Spot at 40 mm: time and peak memory of ``inkopt quantize``, ``inkopt export`` (PNG
+slices, GCVF, the volumetric 3MF of the mixture and of the labels) and ``inkopt inspect`` (of the GCVF with
+``--run``, and of the labels 3MF), each a separate process measured by ``/usr/bin/time -v``.
 
     .venv/bin/python bench/bench_print_output.py [HEIGHT_MM=40] [--dir /tmp/inkopt_print_bench] [--reuse]
 
@@ -86,6 +87,10 @@ def main() -> dict:
     q = timed(["quantize", str(out)])
     e = timed(["export", str(out)])
     g = timed(["export", str(out), "--format", "gcvf"])
+    t = timed(["export", str(out), "--format", "3mf"])
+    tl = timed(["export", str(out), "--format", "3mf", "--labels"])
+    ig = timed(["inspect", str(out / "slices.gcvf"), "--run", str(out)])
+    it = timed(["inspect", str(out / "quantized.3mf")])
     import numpy as np
 
     d = RunDir(out)
@@ -106,11 +111,26 @@ def main() -> dict:
         "gcvf_seconds": g["seconds"],
         "gcvf_cpu_seconds": g["cpu_seconds"],
         "gcvf_peak_rss_gb": g["peak_rss_gb"],
+        **{
+            f"{name}_{key}": r[k]
+            for name, r in (("threemf", t), ("threemf_labels", tl), ("inspect_gcvf", ig), ("inspect_threemf", it))
+            for key, k in (("seconds", "seconds"), ("cpu_seconds", "cpu_seconds"), ("peak_rss_gb", "peak_rss_gb"))
+        },
         "labels_file_gb": d.quantized_labels_path.stat().st_size / 2**30,
         "slices_gb": sum(p.stat().st_size for p in d.slices_path.iterdir()) / 2**30,
         "gcvf_gb": d.gcvf_path.stat().st_size / 2**30,
-        "output": {"quantize": q["stdout"], "export": e["stdout"], "gcvf": g["stdout"]},
-        "targets": {"seconds": 120, "peak_rss_gb": 2},
+        "threemf_gb": d.threemf_path().stat().st_size / 2**30,
+        "threemf_labels_gb": d.threemf_path(labels=True).stat().st_size / 2**30,
+        "output": {
+            "quantize": q["stdout"],
+            "export": e["stdout"],
+            "gcvf": g["stdout"],
+            "threemf": t["stdout"],
+            "threemf_labels": tl["stdout"],
+            "inspect_gcvf": ig["stdout"],
+            "inspect_threemf": it["stdout"],
+        },
+        "targets": {"seconds": 120, "peak_rss_gb": 2, "inspect_peak_rss_gb": 1},
         **machine(),
         "note": "random mixture on every inside voxel (no optimisation); wall-clock times on a shared 2-core "
         "machine are upper bounds",

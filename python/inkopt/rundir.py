@@ -145,6 +145,7 @@ class RunDir:
     VOLUME, SCENE, CHECKPOINT, REPORT = "volume.npz", "scene.npz", "checkpoint.npz", "report.json"
     QUANTIZED, EVALUATION, SLICES, LOSS_PNG = "quantized.npz", "evaluation.json", "slices", "loss.png"
     QUANTIZED_LABELS, GCVF = "quantized_labels.npy", "slices.gcvf"
+    MIXTURE_3MF, LABELS_3MF = "mixture.3mf", "quantized.3mf"
     VIEWS_PNG, PREDICTION_GLB, TARGET_GLB = "views.png", "prediction.glb", "target.glb"
 
     def __init__(self, path):
@@ -206,6 +207,10 @@ class RunDir:
     def gcvf_path(self) -> Path:
         """slices.gcvf: the default GrabCAD Voxel Print package of ``inkopt export --format gcvf``."""
         return self.path / self.GCVF
+
+    def threemf_path(self, labels: bool = False) -> Path:
+        """mixture.3mf (the continuous mixture) or quantized.3mf (``labels``): ``inkopt export --format 3mf``."""
+        return self.path / (self.LABELS_3MF if labels else self.MIXTURE_3MF)
 
     @property
     def loss_picture_path(self) -> Path:

@@ -1,9 +1,11 @@
 """``inkopt export DIR``: printer input from DIR/quantized.npz (docs/run-dir.md).
 
 ``--format png-slices`` (default): one RGBA PNG per layer plus manifest.json (``inkopt.printing.export``);
-``--format gcvf``: the GrabCAD Voxel Print package, one zip (``inkopt.printing.gcvf``). A job using more inks
-than ``--printer`` holds is refused in one line before anything is written.
-``--format 3mf`` is refused: lib3mf 2.5.0 cannot write volumetric composites (see ``inkopt.printing.export``).
+``--format gcvf``: the GrabCAD Voxel Print package, one zip (``inkopt.printing.gcvf``); ``--format 3mf``: a 3MF
+with the Volumetric extension (``inkopt.printing.threemf``) of the continuous mixture (DIR/volume.npz, read one
+layer at a time), or with ``--labels`` of the quantized print. A job using more inks than ``--printer`` holds is
+refused in one line before anything is written. GCVF and 3MF record the digest of the file they are made from
+(quantized.npz, or volume.npz for the continuous 3MF) in their zip comment (``inkopt inspect --run`` checks it).
 """
 
 from __future__ import annotations
@@ -12,17 +14,60 @@ import json
 import sys
 from pathlib import Path
 
+from ..io import file_digest
 from ..printing.export import write_png_slices
 from ..printing.gcvf import write_gcvf
 from ..printing.profiles import PRINTER_PROFILES, printer_profile, resolution_mismatch
+from ..printing.stream import MixtureSource
+from ..printing.threemf import write_3mf_labels, write_3mf_mixture
 from ..rundir import RunDir
 
 FORMATS = ("png-slices", "gcvf", "3mf")
-NO_3MF = (
-    "3mf export is not available: lib3mf 2.5.0 cannot write volumetric composites "
-    "(VolumeDataComposite is not implemented); use --format png-slices or gcvf"
-)
-DEFAULT_PRINTER = {"png-slices": "generic", "gcvf": "j750"}
+DEFAULT_PRINTER = {"png-slices": "generic", "gcvf": "j750", "3mf": "generic"}
+
+
+def parse_materials(items) -> dict | None:
+    """``--material INK=NAME`` (repeatable) -> {ink: material name}."""
+    if not items:
+        return None
+    out = {}
+    for item in items:
+        ink, sep, name = str(item).partition("=")
+        if not sep or not ink.strip() or not name.strip():
+            raise ValueError(f"--material takes INK=NAME (e.g. white=VeroPureWht), got '{item}'")
+        out[ink.strip()] = name.strip()
+    return out
+
+
+def _export_3mf(args, d: RunDir, printer: str, palette, materials) -> int:
+    if args.labels:
+        out = Path(args.out) if args.out else d.threemf_path(labels=True)
+        q = d.load_quantized()
+        digest = file_digest(d.quantized_path)
+        man = write_3mf_labels(
+            q.labels, q.voxel_mm, q.inks.names, out, printer=printer, materials=materials, palette=palette,
+            source=d.quantized_path.name, digest=digest,
+        )  # fmt: skip
+    else:
+        out = Path(args.out) if args.out else d.threemf_path()
+        src = MixtureSource(d.volume_file())
+        try:
+            names = {n: printer_profile(printer).material(n) for n in src.inks.names}
+            names = {k: v for k, v in names.items() if v} | (materials or {})
+            digest = file_digest(d.volume_path)
+            man = write_3mf_mixture(
+                src, out, materials=names, palette=palette, source=d.volume_path.name, digest=digest
+            )
+        finally:
+            src.close()
+    used = ", ".join(f"{m['ink']} = {m['material']}" for m in man["materials"] if m["voxel_count"] > 0)
+    print(
+        f"{man['layer_count']} sheets of {man['image_size']['width']} x {man['image_size']['height']} voxels "
+        f"({' x '.join(f'{v * 1000:.1f}' for v in man['voxel_mm'])} um), {man['image_stacks']} image stacks, "
+        f"{man['mesh_triangles']} outline triangles; {'labels' if args.labels else 'mixture'} of {used}"
+    )
+    print(f"wrote {out}")
+    return 0
 
 
 def load_palette(text: str | None) -> dict | None:
@@ -43,20 +88,28 @@ def load_palette(text: str | None) -> dict | None:
 def _export_cmd(args) -> int:
     if args.format not in FORMATS:
         raise ValueError(f"unknown export format '{args.format}'; use one of {list(FORMATS)}")
-    if args.format == "3mf":
-        raise ValueError(NO_3MF)
+    if args.labels and args.format != "3mf":
+        raise ValueError("--labels goes with --format 3mf (slices and GCVF packages always hold the labels)")
     printer = str(args.printer or DEFAULT_PRINTER[args.format]).strip().lower()
     prof = printer_profile(printer)
     palette = load_palette(args.palette)
+    materials = parse_materials(args.material)
     d = RunDir(args.dir)
+    if args.format == "3mf":
+        return _export_3mf(args, d, printer, palette, materials)
     q = d.load_quantized()
     if args.format == "gcvf":
         out = Path(args.out) if args.out else d.gcvf_path
-        man = write_gcvf(q.labels, q.voxel_mm, q.inks.names, out, printer=printer, palette=palette)
+        man = write_gcvf(
+            q.labels, q.voxel_mm, q.inks.names, out, printer=printer, palette=palette, materials=materials,
+            source=d.quantized_path.name, digest=file_digest(d.quantized_path),
+        )  # fmt: skip
         layers_um = man["layer_thickness_nm"] / 1000
     else:
         out = Path(args.out) if args.out else d.slices_path
-        man = write_png_slices(q.labels, q.voxel_mm, q.inks.names, out, palette=palette, printer=printer)
+        man = write_png_slices(
+            q.labels, q.voxel_mm, q.inks.names, out, palette=palette, printer=printer, materials=materials
+        )
         layers_um = man["layer_thickness_um"]
     mats = [m for m in man["materials"] if m["voxel_count"] > 0]
     mismatch = resolution_mismatch(prof, q.voxel_mm)
@@ -78,18 +131,28 @@ def _export_cmd(args) -> int:
 def register_cli(sub) -> None:
     p = sub.add_parser(
         "export",
-        help="printer input from DIR/quantized.npz (PNG slices or a GCVF package)",
+        help="printer input: PNG slices, a GCVF package or a volumetric 3MF",
         description="Write printer input from a run's quantized volume: one RGBA PNG per layer "
         "(one colour per material) plus manifest.json, or a GrabCAD Voxel Print "
-        "package (.gcvf).",
+        "package (.gcvf); or a 3MF (Volumetric extension) of the continuous mixture or, with --labels, the "
+        "quantized print.",
     )
     p.add_argument("dir", help="run directory holding quantized.npz")
     p.add_argument(
         "--format",
         default="png-slices",
-        help="png-slices (default) or gcvf (GrabCAD Voxel Print zip); 3mf is not available",
+        help="png-slices (default), gcvf (GrabCAD Voxel Print zip) or 3mf (3MF Volumetric: DIR/mixture.3mf)",
     )
-    p.add_argument("--out", help="output folder (default DIR/slices) or .gcvf file (default DIR/slices.gcvf)")
+    p.add_argument("--labels", action="store_true", help="3mf: the quantized print (DIR/quantized.3mf)")
+    p.add_argument(
+        "--out", help="output folder (default DIR/slices) or file (default DIR/slices.gcvf, DIR/mixture.3mf)"
+    )
+    p.add_argument(
+        "--material",
+        action="append",
+        metavar="INK=NAME",
+        help="the printer's material name for an ink, overriding the profile's (repeatable), e.g. white=VeroPureWht",
+    )
     p.add_argument(
         "--printer",
         default=None,
