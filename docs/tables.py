@@ -255,6 +255,15 @@ def speed() -> str:
             ),
             f"`{po['command']}`",
         ],
+        [
+            "the same: export --format 3mf (mixture), --format 3mf --labels; inspect of the GCVF (--run) and of the "
+            "labels 3MF (each its own process)",
+            " / ".join(
+                f"{po[k + '_seconds']:.0f} s, {po[k + '_peak_rss_gb']:.2f} GB"
+                for k in ("threemf", "threemf_labels", "inspect_gcvf", "inspect_threemf")
+            ),
+            f"`{po['command']}`",
+        ],
     ]
     sources = [
         BENCH / n

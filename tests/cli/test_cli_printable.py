@@ -193,7 +193,10 @@ def test_export_refuses_more_inks_than_slots(tmp_path, capsys):
         (["quantize", "{tmp}/r", "--method", "floyd"], "unknown quantization method"),
         (["quantize", "{tmp}/r", "--dpi", "600"], "--dpi"),
         (["quantize", "{tmp}/r", "--dpi", "600x300x900", "--layer-um", "14"], "layer thickness once"),
-        (["export", "{tmp}/r", "--format", "3mf"], "lib3mf 2.5.0 cannot write volumetric composites"),
+        (["export", "{tmp}/r", "--format", "gcvf", "--labels"], "--labels goes with --format 3mf"),
+        (["export", "{tmp}/r", "--material", "white"], "--material takes INK=NAME"),
+        (["export", "{tmp}/r", "--format", "3mf", "--material", "teal=X"], "unknown ink 'teal'"),
+        (["inspect", "{tmp}/nope.gcvf"], "does not exist"),
         (["export", "{tmp}/r", "--format", "stl"], "unknown export format"),
         (["export", "{tmp}/r", "--printer", "x9"], "unknown printer"),
         (["export", "{tmp}/r", "--format", "gcvf", "--printer", "x9"], "unknown printer"),
@@ -222,3 +225,29 @@ def test_evaluate_cli_json(tmp_path, capsys):
     assert (tmp_path / "r" / "quantized.npz").is_file() and (tmp_path / "r" / "evaluation_top.png").is_file()
     code, out, err = run(capsys, "evaluate", tmp_path / "r", "--spp", "2", "--no-baselines")
     assert code == 0 and "dE76 mean" in out and "quantized" in out
+
+
+def test_export_3mf_and_inspect(tmp_path, capsys):
+    """export --format 3mf (mixture, --labels), gcvf with --material; inspect prints, --json, --preview; --run
+    refuses a package whose source changed since (quantize again with another seed)."""
+    make_run(tmp_path / "r")
+    assert run(capsys, "quantize", tmp_path / "r")[0] == 0
+    code, out, err = run(capsys, "export", tmp_path / "r", "--format", "3mf")
+    assert code == 0 and "mixture of cyan" in out and (tmp_path / "r" / "mixture.3mf").is_file(), err
+    code, out, err = run(capsys, "export", tmp_path / "r", "--format", "3mf", "--labels")
+    assert code == 0 and "labels of" in out and (tmp_path / "r" / "quantized.3mf").is_file(), err
+    code, out, err = run(capsys, "export", tmp_path / "r", "--format", "gcvf", "--material", "white=VeroPureWht")
+    assert code == 0 and "white #FFFFFF = VeroPureWht" in out, err
+    q = Volume.load(tmp_path / "r" / "quantized.npz")
+    for name in ("slices.gcvf", "quantized.3mf"):
+        code, out, err = run(capsys, "inspect", tmp_path / "r" / name, "--run", tmp_path / "r", "--json")
+        rep = json.loads(out)
+        assert code == 0 and rep["layers"] == q.labels.shape[0], err
+        assert sum(m["voxel_count"] for m in rep["materials"]) == int(np.sum(q.labels != 255))
+    code, out, err = run(capsys, "inspect", tmp_path / "r" / "mixture.3mf", "--run", tmp_path / "r")
+    assert code == 0 and "the parts agree" in out and "made from volume.npz sha256:" in out, err
+    code, out, _ = run(capsys, "inspect", tmp_path / "r" / "slices.gcvf", "--preview", tmp_path / "p.png")
+    assert code == 0 and (tmp_path / "p.png").is_file() and "VeroPureWht" in out
+    assert run(capsys, "quantize", tmp_path / "r", "--seed", "5")[0] == 0
+    code, out, err = run(capsys, "inspect", tmp_path / "r" / "slices.gcvf", "--run", tmp_path / "r")
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "is stale" in err and "export it again" in err

@@ -22,12 +22,14 @@ occupancy are accumulated on the way, and nothing but the current layers is held
   topmost occupied layer of that column, 0 where nothing is printed (no pHYs chunk).
 - ``Mesh.stl``: binary STL in mm of the outline of the print (every non-empty voxel), outward normals, in the
   frame x = column x pitch_x, y = -row x pitch_y (origin at the image's top-left corner: the mesh lies in negative
-  y), z = layer x layer thickness. It comes from marching cubes on the printer-grid occupancy at level 0.5, i.e.
-  on the voxel faces. Grids above ``OUTLINE_MAX_CELLS`` printer voxels (marching cubes on 10^9 voxels would need
-  tens of GB) use blocks of fz x fy x fx printer voxels instead (``outline_factors``: the smallest near-cubic
-  blocks that bring the grid under the limit; about 0.1 mm for a 40 mm object): a block is occupied if any of its
-  voxels is, so the outline encloses every printed voxel and lies within one block of them. The 80-byte header
-  names the block (``BLOCK_TAG``), so that a reader knows how far the outline may stand off the voxels.
+  y), z = layer x layer thickness. It comes from marching cubes on the printer-grid occupancy at level 0.5: on
+  the voxel faces, with the voxels' convex edges and corners cut (every voxel centre lies inside). Grids above
+  ``OUTLINE_MAX_CELLS`` printer voxels (marching cubes on 10^9 voxels would need tens of GB) use blocks of
+  fz x fy x fx printer voxels instead (``outline_factors``: the smallest near-cubic blocks that bring the grid
+  under the limit; about 0.1 mm for a 40 mm object): a block is occupied if any of its voxels or of its 26
+  neighbour blocks' voxels is (``block_outline``; without that margin the cut corners of a block would leave out
+  voxel centres), so the outline encloses every printed voxel and lies within two blocks of them. The 80-byte
+  header names the block (``BLOCK_TAG``), so that a reader knows how far the outline may stand off the voxels.
 - The zip's archive comment (which no printer software reads) records the file the package was made from:
   ``{"inkopt": {"source": NAME, "digest": "sha256:..."}}`` (``source_comment``).
 
@@ -129,6 +131,21 @@ def outline_mesh(occupied, voxel_mm_printer):
     # padded index i sits at (i - 0.5) voxels; marching_cubes winds the faces for (z, y, x) with the normals into
     # the lower values, so swapping the axes to (x, y, z) turns them outwards
     return trimesh.Trimesh(verts[:, ::-1] - 0.5 * vp, faces, process=True)
+
+
+def block_outline(coarse, voxel_mm_printer, factors):
+    """The outline mesh of a (Z', Y', X') block occupancy with blocks of ``factors`` (fz, fy, fx) printer voxels
+    of ``voxel_mm_printer`` (x, y, z) mm: blocks grown by one block in every direction unless they are single
+    voxels (module docstring), then ``outline_mesh``."""
+    fz, fy, fx = factors
+    if (fz, fy, fx) != (1, 1, 1):
+        from scipy.ndimage import binary_dilation
+
+        coarse = binary_dilation(np.pad(coarse, 1), np.ones((3, 3, 3), bool))
+        mesh = outline_mesh(coarse, np.asarray(voxel_mm_printer) * np.array([fx, fy, fz]))
+        mesh.apply_translation(-np.asarray(voxel_mm_printer) * np.array([fx, fy, fz]))  # the pad's block
+        return mesh
+    return outline_mesh(coarse, voxel_mm_printer)
 
 
 def outline_factors(shape, voxel_mm_printer, max_cells: int | None = None) -> tuple[int, int, int]:
@@ -262,7 +279,7 @@ def write_gcvf(
             zf.writestr(ZBUFFER, zb.getvalue(), compress_type=zipfile.ZIP_STORED)
             box = [lo[0], Y - hi[1], lo[2], hi[0], Y - lo[1], hi[2]]  # label y -> image row (row 0 = largest y)
             zf.writestr(BBOX, np.asarray(box, "<f4").tobytes(), compress_type=zipfile.ZIP_STORED)
-            mesh = outline_mesh(coarse, job.vp * np.array([fx, fy, fz]))
+            mesh = block_outline(coarse, job.vp, (fz, fy, fx))
             mesh.apply_translation([0.0, -Y * job.vp[1], 0.0])  # origin at the image's top-left corner
             stl = stl_bytes(mesh, f"{BLOCK_TAG} {fx} {fy} {fz}")
             zf.writestr(STL, stl, compress_type=zipfile.ZIP_DEFLATED)

@@ -5,9 +5,10 @@ and checks that the parts agree, raising ``PackageError`` (a one-line ``ValueErr
 every slice the pixel size the package declares, palette colours only (GCVF, slices), layer numbers 0..N-1
 without gaps and as many as declared, per-material voxel counts equal to the declared ones, and for GCVF the
 z-buffer (topmost layer index per column, 0 where empty), ``MeshBbx.ktn`` and ``Mesh.stl`` against the slices'
-occupied voxels (the STL's bounds within its outline block, named in its header by ``gcvf.BLOCK_TAG``, else one
-voxel). For a 3MF the voxels with a non-zero share sum are the printed ones; their sums must be 1 to within the
-8-bit rounding of the sheets, and the mesh's bounds must agree with them as the STL's do. Labels are the ink
+occupied voxels (the STL's bounds within two outline blocks, the block named in its header by
+``gcvf.BLOCK_TAG``, else within one voxel). For a 3MF the voxels with a non-zero share sum are the printed ones;
+their sums must be 1 to within the 8-bit rounding of the sheets, and the mesh's bounds must agree with them as
+the STL's do. Labels are the ink
 indices (255 = empty) in the frames the writers use: (Z, Y, X) with y = Y - 1 - image row.
 """
 
@@ -108,8 +109,9 @@ def _decoder(colours, background):
         pos = np.clip(np.searchsorted(keys, p), 0, len(keys) - 1)
         bad = keys[pos] != p
         if bad.any():
-            r, c = np.argwhere(bad)[0]
-            raise PackageError(f"{name}: pixel (row {r}, column {c}) has colour {list(rgba[r, c])}, not in the palette")
+            r, c = (int(v) for v in np.argwhere(bad)[0])
+            colour = [int(v) for v in rgba[r, c]]
+            raise PackageError(f"{name}: pixel (row {r}, column {c}) has colour {colour}, not in the palette")
         return vals[pos]
 
     return decode
@@ -153,11 +155,12 @@ def _check_counts(names, declared, counts, what: str) -> None:
 
 def _check_bounds(lo_mm, hi_mm, box, pitch, block, what: str) -> None:
     """Mesh bounds (mm) against the voxel box converted by ``pitch`` (x, y, z mm per column/row/layer, y < 0 for
-    GCVF's -row frame), within one outline block."""
+    GCVF's -row frame): within two outline blocks of ``block`` voxels, or one voxel without blocks."""
     want_lo = np.array(box[:3], float) * pitch
     want_hi = np.array(box[3:], float) * pitch
     want = np.sort(np.stack([want_lo, want_hi]), axis=0)
-    tol = np.abs(pitch) * np.asarray(block, float) + 1e-4
+    block = np.asarray(block, float)
+    tol = np.abs(pitch) * (2 * block if (block > 1).any() else block) + 1e-4
     got = np.stack([lo_mm, hi_mm])
     off = np.abs(got - want) > tol
     if off.any():
@@ -222,7 +225,7 @@ def _gcvf(path: Path, scan_args) -> tuple[PackageReport, _Scan]:
             zb = _image(zf.read(gcvf.ZBUFFER), gcvf.ZBUFFER, (W, H), mode=None).astype(np.int64)
             bad = zb != scan.top
             if bad.any():
-                r, c = np.argwhere(bad)[0]
+                r, c = (int(v) for v in np.argwhere(bad)[0])
                 raise PackageError(
                     f"{gcvf.ZBUFFER} at (row {r}, column {c}) is {zb[r, c]}; "
                     f"the topmost printed layer is {scan.top[r, c]}"
@@ -327,7 +330,7 @@ def _threemf(path: Path, scan_args) -> tuple[PackageReport, _Scan]:
             occ = total > 0
             off = occ & (np.abs(total - 1) > tol)
             if off.any():
-                r, c = np.argwhere(off)[0]
+                r, c = (int(v) for v in np.argwhere(off)[0])
                 raise PackageError(f"sheet {k}: the shares at (row {r}, column {c}) sum to {total[r, c]:.4f}, not 1")
             shares += sh[occ].sum(0)
             lab = np.where(occ, np.argmax(sh, 2), EMPTY).astype(np.uint8)

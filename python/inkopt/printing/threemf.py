@@ -10,15 +10,16 @@
   nearest, tile style clamp, value scale 1); a ``<v:volumedata>`` with a ``<v:composite>`` over the base materials,
   one ``<v:materialmapping>`` per ink reading its stack's ``red``, ``green``, ``blue`` or ``alpha`` channel; and
   the object (named ``OBJECT_NAME`` and its outline block), a ``<mesh v:volumeid=...>``: the outline of the
-  occupied voxels (``gcvf.outline_mesh``, in blocks above ``gcvf.OUTLINE_MAX_CELLS`` voxels) in mm with its
+  occupied voxels (``gcvf.block_outline``, in blocks above ``gcvf.OUTLINE_MAX_CELLS`` voxels) in mm with its
   origin at the grid's corner (x along columns, y along the grid's y, z up). Every mapping's ``transform`` is
   the object-to-UVW scale diag(1 / (X dx), 1 / (Y dy), 1 / (Z dz)).
 - ``3D/volumetric/inksG/sheetNNNNN.png``: 8-bit RGBA PNGs, sheet k = layer k (bottom first), row 0 = largest y (the
   spec puts row 0 at v = 1), column 0 = smallest x; channel c of group G holds ink 4 G + c's share x 255 (rounded),
   so the composite's ratio value_i / sum reproduces the mixture to 1/255. Empty voxels are 0 in every channel,
-  except inside an occupied block of a block outline (the outline encloses them, and the spec forbids a zero sum
-  inside the clipping surface): they take the shares of the nearest occupied voxel in their layer, or of the
-  nearest occupied layer of their block. So the voxels with shares are the voxels a consumer prints.
+  except inside the blocks of a block outline (the outline encloses them, and the spec forbids a zero sum inside
+  the clipping surface): they take the shares of the nearest printed voxel in their layer, or of the nearest
+  printed layer. The voxels with shares are then the voxels a consumer prints (the outline's margin included).
+  Reading the shares twice (a first pass for the outline) keeps memory to a few layers.
 - the OPC parts ``[Content_Types].xml``, ``_rels/.rels`` and ``3D/_rels/3dmodel.model.rels`` (one 3D-texture
   relationship per sheet), and the zip's archive comment: the source file's digest (``gcvf.source_comment``).
 
@@ -39,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from .export import check_job, ink_colours
-from .gcvf import _block_any, outline_factors, outline_mesh, source_comment
+from .gcvf import _block_any, block_outline, outline_factors, source_comment
 
 NS_CORE = "http://schemas.microsoft.com/3dmanufacturing/core/2015/02"
 NS_V = "http://schemas.3mf.io/3dmanufacturing/volumetric/2022/01"
@@ -198,30 +199,33 @@ def write_3mf(
     fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as fh, zipfile.ZipFile(fh, "w") as zf:
-            for k0 in range(0, Z, fz):  # one outline block of layers at a time
-                ks = range(k0, min(Z, k0 + fz))
-                occs = [np.asarray(occupied(k), bool) for k in ks]
-                block = np.zeros(coarse.shape[1:], bool)
-                for occ in occs:
-                    block |= _block_any(occ, fy, fx)
-                coarse[k0 // fz] = block
-                if not block.any():
-                    for k in ks:
-                        _put(zf, k, _sheets(np.zeros((Y, X, len(names)), np.float32), groups))
-                    continue
-                region = np.repeat(np.repeat(block, fy, 0), fx, 1)[:Y, :X]  # inside the outline's blocks
-                filled: dict[int, np.ndarray] = {}
-                for k, occ in zip(ks, occs, strict=True):
-                    if occ.any():
-                        sh = np.asarray(layers(k), np.float32)
-                        counts += sh[occ].sum(0)
-                        filled[k] = np.where(region[..., None], _fill_empty(sh, occ), 0.0)
-                for k in ks:  # a layer without printed voxels takes the nearest printed layer's shares
-                    src = filled[min(filled, key=lambda j: abs(j - k))]
-                    _put(zf, k, _sheets(src, groups))
+            for k in range(Z):  # first pass: which outline blocks hold printed voxels
+                coarse[k // fz] |= _block_any(np.asarray(occupied(k), bool), fy, fx)
             if not coarse.any():
                 raise ValueError("nothing to print: every voxel is empty")
-            mesh = outline_mesh(coarse, vp * np.array([fx, fy, fz]))
+            mesh = block_outline(coarse, vp, (fz, fy, fx))
+            region = coarse  # the blocks inside the outline (grown as block_outline grows them)
+            if (fz, fy, fx) != (1, 1, 1):
+                from scipy.ndimage import binary_dilation
+
+                region = binary_dilation(coarse, np.ones((3, 3, 3), bool))
+            pending, last = [], None
+            for k in range(Z):
+                occ = np.asarray(occupied(k), bool)
+                inside = np.repeat(np.repeat(region[k // fz], fy, 0), fx, 1)[:Y, :X]
+                if not occ.any():  # takes the nearest printed layer's shares below (or else above) it
+                    if last is None:
+                        pending.append((k, inside))
+                    else:
+                        _put(zf, k, _sheets(np.where(inside[..., None], last, 0.0), groups))
+                    continue
+                sh = np.asarray(layers(k), np.float32)
+                counts += sh[occ].sum(0)
+                last = _fill_empty(sh, occ) if (fz, fy, fx) != (1, 1, 1) else np.where(occ[..., None], sh, 0.0)
+                for j, ins in pending:
+                    _put(zf, j, _sheets(np.where(ins[..., None], last, 0.0), groups))
+                pending = []
+                _put(zf, k, _sheets(np.where(inside[..., None], last, 0.0), groups))
             with zf.open(MODEL, "w", force_zip64=True) as mf:
                 _model_xml(mf, base_names, colours, (Z, Y, X), vp, mesh, (fx, fy, fz))
             rels = [(REL_TEXTURE, sheet_path(g, k)) for g in range(groups) for k in range(Z)]
@@ -271,7 +275,7 @@ def write_3mf_labels(labels, voxel_mm_printer, ink_names, path, *, printer=None,
 def write_3mf_mixture(src, path, *, materials=None, **kw) -> dict:
     """The continuous mixture as a volumetric 3MF (``write_3mf``): ``src`` has ``shape`` (Z, Y, X, N), ``[k]``
     (Y, X, N) float shares, ``inside`` ((Z, Y, X) bool or None: every voxel), ``voxel_mm`` and ``inks.names``
-    (``stream.MixtureSource``, read one layer at a time, or a ``Volume`` with a mixture)."""
+    (a ``stream.MixtureSource``: the run's volume.npz read one layer at a time)."""
     Z, Y, X, _ = src.shape
     inside = src.inside
 
