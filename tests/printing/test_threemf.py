@@ -154,3 +154,21 @@ def test_mixture_round_trip(tmp_path):
     got = np.array([m["voxel_count"] for m in rep.materials])
     assert np.abs(got - want).max() <= inside.sum() * 0.5 / 255  # each share rounded to 1/255
     assert rep.bounding_box == [0, 0, 0, 7, 5, 3]  # label row 0 (image row 5) is outside
+
+
+def test_inspect_finds_shares_that_do_not_sum_to_one(tmp_path):
+    lab = labels()
+    write_3mf_labels(lab, VP, INKS, tmp_path / "a.3mf")
+    name = "3D/volumetric/inks1/sheet00002.png"
+    with zipfile.ZipFile(tmp_path / "a.3mf") as zi, zipfile.ZipFile(tmp_path / "b.3mf", "w") as zo:
+        for n in zi.namelist():
+            data = zi.read(n)
+            if n == name:
+                rgba = np.asarray(Image.open(io.BytesIO(data))).copy()
+                rgba[0, 0, 1] = 200  # a second ink in a voxel that is already wholly one ink
+                buf = io.BytesIO()
+                Image.fromarray(rgba).save(buf, format="PNG")
+                data = buf.getvalue()
+            zo.writestr(n, data)
+    with pytest.raises(ValueError, match=r"^sheet 2: the shares at \(row 0, column 0\) sum to 1.78\d*, not 1$"):
+        inspect_package(tmp_path / "b.3mf")

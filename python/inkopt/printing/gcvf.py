@@ -39,16 +39,17 @@ inks), ``layer_N.png`` and the opaque-black background are read from a public GC
 ``gcvf_includes/`` folder at the zip's root beside the slices. That repository holds two such folders
 (``4/gcvf_includes``, ``4/wheel_gcvf_includes``, commit 07930c8a) with ``Mesh.stl``, ``Zbuffer.png`` and
 ``MeshBbx.ktn``; read byte by byte they give the names, the ktn layout (a 200 x 100 px, 100-layer job filled
-everywhere: 0 0 0 200 100 100; a 1000 x 500 px job occupying columns 2-999 and rows 1-499: 2 1 0 1000 500 100),
-the z-buffer (16-bit grey, no pHYs, 99 in every occupied column of a 100-layer job, 0 elsewhere) and the STL's
-frame (binary, mm, x from 0 to 200 x 25.4/600, y from -100 x 25.4/300 to 0, z from 0 to 100 x 0.027, stored
-normals equal to the outward winding normals, attribute 0). OpenVCAD's ``GCVFExporter`` (C++ API docs,
-matterassembly.org/OpenVCAD-Docs/v2/cpp-api/libvcad-compilers-inkjet.html) lists the same parts and the defaults
-600 x 300 DPI and 27000 nm. Where they disagree: the builder names white ``VUltraWhite`` and writes
+everywhere: 0 0 0 200 100 100; a 1000 x 500 px job occupying columns 2-999 and rows 1-499: 2 1 0 1000 500 100), the
+z-buffer (16-bit grey, no pHYs, 99 in every occupied column of a 100-layer job, 0 elsewhere) and the STL's frame
+(binary, mm, x from 0 to 200 x 25.4/600, y from -100 x 25.4/300 to 0, z from 0 to 100 x 0.027, stored normals equal
+to the outward winding normals, attribute 0); this module, given the two jobs' occupancy, writes a ``MeshBbx.ktn``
+equal to theirs byte for byte and a ``Zbuffer.png`` equal pixel for pixel. OpenVCAD's ``GCVFExporter`` (C++ API
+docs, matterassembly.org/OpenVCAD-Docs/v2/cpp-api/libvcad-compilers-inkjet.html) lists the same parts and the
+defaults 600 x 300 DPI and 27000 nm. Where they disagree: the builder names white ``VUltraWhite`` and writes
 ``MaxNumberOfColors`` 6 always, OpenVCAD's examples name white ``VeroPureWht``; both are profile settings
 (``profiles.py``) and material names can be set per ink. The STL of those packages is the design mesh, ours the
-voxels' outline; what ``BitDepth`` 4 means is not documented anywhere we found (we copy it). No package written
-here has been loaded into GrabCAD Print.
+voxels' outline; what ``BitDepth`` 4 means is not documented anywhere we found (we copy it). No package written here
+has been loaded into GrabCAD Print.
 """
 
 from __future__ import annotations
