@@ -37,15 +37,7 @@ def _check_run(report, run: str) -> None:
 
 
 def _inspect_cmd(args) -> int:
-    import numpy as np
-
-    keep = ()
-    if args.preview:
-        from ..printing.package import PackageReport  # noqa: F401  (the report's layer count comes first)
-
-        first, _ = inspect_package(args.package)
-        keep = tuple(sorted({int(v) for v in np.linspace(0, first.layers - 1, PREVIEW_SLICES)}))
-    report, scan = inspect_package(args.package, keep_layers=keep)
+    report, scan = inspect_package(args.package, keep_layers=PREVIEW_SLICES if args.preview else ())
     if args.run:
         _check_run(report, args.run)
     if args.preview:

@@ -69,7 +69,9 @@ class _Scan:
         self.top = np.zeros((Y, X), np.uint16)
         self.top_label = np.full((Y, X), EMPTY, np.uint8)
         self.kept = {}
-        self.keep = set(keep)
+        if isinstance(keep, int):  # that many layers, evenly spaced from bottom to top
+            keep = np.unique(np.linspace(0, Z - 1, keep).round().astype(int)) if keep > 0 else ()
+        self.keep = {int(k) for k in keep}
         self.labels = np.empty((Z, Y, X), np.uint8) if labels else None
 
     def add(self, k: int, lab: np.ndarray) -> None:
@@ -352,8 +354,8 @@ def _threemf(path: Path, scan_args) -> tuple[PackageReport, _Scan]:
 def inspect_package(path, *, keep_layers=(), labels: bool = False):
     """Read and check the package ``path`` (module docstring). Returns ``(PackageReport, scan)``; ``scan`` holds
     ``top`` / ``top_label`` ((Y, X) in image rows), ``kept`` {layer: (Y, X) labels in image rows} for
-    ``keep_layers`` and, with ``labels``, ``labels`` (Z, Y, X) uint8 in the writers' frame (3MF: each printed
-    voxel's largest share)."""
+    ``keep_layers`` (layer indices, or a count of evenly spaced layers) and, with ``labels``, ``labels``
+    (Z, Y, X) uint8 in the writers' frame (3MF: each printed voxel's largest share)."""
     path = Path(path)
     args = (keep_layers, labels)
     if path.is_dir():
