@@ -73,15 +73,16 @@ def _tokens(line: str, where: str) -> list[str]:
 def parse(text: str, where: str = "CGATS file") -> CgatsTable:
     """The first data table of a CGATS.17 text; :class:`CgatsError` (one line) for a malformed file."""
     lines = text.replace("\r\n", "\n").replace("\r", "\n").split("\n")
-    first = next((ln.strip() for ln in lines if ln.strip() and not ln.lstrip().startswith("#")), "")
-    if not first:
+    first_at = next((i for i, ln in enumerate(lines) if ln.strip() and not ln.lstrip().startswith("#")), None)
+    if first_at is None:
         raise CgatsError(f"{where}: the file is empty")
+    first = lines[first_at].strip()
     header: dict[str, str] = {}
     fields: list[str] | None = None
     rows: list[list[str]] = []
     state = "header"
     declared_sets = None
-    for no, raw in enumerate(lines[1:] if first == lines[0].strip() else lines, start=2):
+    for no, raw in enumerate(lines[first_at + 1 :], start=first_at + 2):
         toks = _tokens(raw, f"{where} line {no}")
         if not toks:
             continue
