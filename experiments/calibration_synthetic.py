@@ -16,6 +16,8 @@ machine's load, and the Monte Carlo noise of the renders in ΔE76.
 
 import argparse
 import json
+import os
+import resource
 import subprocess
 import sys
 import time
@@ -69,9 +71,10 @@ def trial(seed: int, out: Path, spp: int, g_true: float) -> dict:
         for c, f in enumerate(("LAB_L", "LAB_A", "LAB_B")):
             row[col[f]] = float(round(noisy[k, c], 3))
     cgats.write(out / "measured.txt", table)
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), resource.getrusage(resource.RUSAGE_CHILDREN)
     log = run(["calibrate", str(out / "measured.txt"), "--out", str(out / "fitted.json")])
-    wall = time.perf_counter() - t0
+    wall, cpu1 = time.perf_counter() - t0, resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (cpu1.ru_utime - cpu0.ru_utime) + (cpu1.ru_stime - cpu0.ru_stime)
     rep = json.loads((out / "fitted.report.json").read_text())
     held = [k for k, p in enumerate(rep["patches"]) if p["held_out"]]
     hold_lab = np.array([rep["patches"][k]["holdout_lab"] for k in held])
@@ -89,9 +92,10 @@ def trial(seed: int, out: Path, spp: int, g_true: float) -> dict:
         "fit_mean_de2000": rep["fit_mean_delta_e2000"],
         "g_fitted": rep["g"],
         "calibrate_wall_s": wall,
+        "calibrate_cpu_s": cpu,
         "calibrate_fit_s": rep["seconds"],
         "model_evaluations": rep["iterations"],
-        "load_average_1min_after": float(__import__("os").getloadavg()[0]),
+        "load_average_1min_after": float(os.getloadavg()[0]),
         "render_s": render_s,
         "spp": spp,
         "mc_noise_de76_mean": float(mc_de.mean()),

@@ -46,8 +46,7 @@ class Patch:
     backing_mm: float
 
     def stack(self, names: tuple[str, ...]) -> Stack:
-        """The patch's :class:`Stack` over an ink table whose inks are ``names`` (a superset of the chart's is
-        fine only in the same order; callers pass the chart's names)."""
+        """The patch's :class:`Stack` over an ink table whose inks are the chart's, ``names``, in that order."""
         b = None if self.backing == NONE else names.index(self.backing)
         return Stack(tuple(self.shares), float(self.thickness_mm), b, float(self.backing_mm) if b is not None else 0.0)
 

@@ -41,8 +41,8 @@ class FitResult:
     message: str
 
 
-def _layers(chart: Chart, inks: InkTable):
-    """Per patch: (mixture (N,), thickness, backing index or None, backing mm)."""
+def _layers(chart: Chart):
+    """Per patch: (mixture (N,), thickness mm, backing ink index or None, backing mm)."""
     out = []
     for st in chart.stacks():
         out.append((np.asarray(st.mixture), st.thickness_mm, st.backing, st.backing_mm))
@@ -52,7 +52,7 @@ def _layers(chart: Chart, inks: InkTable):
 def predict_rgb(chart: Chart, inks: InkTable, quad_pts: int = QUAD_PTS) -> np.ndarray:
     """(P, 3) float64 linear-RGB reflectance of every patch of ``chart`` with ``inks`` (chart order)."""
     out = np.empty((len(chart), 3))
-    for p, (m, d, b, bmm) in enumerate(_layers(chart, inks)):
+    for p, (m, d, b, bmm) in enumerate(_layers(chart)):
         s, a = m @ inks.sigma_s, m @ inks.sigma_a
         for c in range(3):
             lay = [(s[c], a[c], d)] + ([(inks.sigma_s[b, c], inks.sigma_a[b, c], bmm)] if b is not None else [])
@@ -72,7 +72,7 @@ def _rgb_and_jacobian(chart: Chart, inks: InkTable):
     rgb = np.empty((len(chart), 3))
     jac = np.zeros((len(chart), 3, k))
     g = inks.g
-    for p, (m, d, b, bmm) in enumerate(_layers(chart, inks)):
+    for p, (m, d, b, bmm) in enumerate(_layers(chart)):
         s, a = m @ inks.sigma_s, m @ inks.sigma_a
         for c in range(3):
             back = [(inks.sigma_s[b, c], inks.sigma_a[b, c], bmm)] if b is not None else []
