@@ -95,3 +95,27 @@ def test_ink_files_old_and_new(tmp_path):
     with pytest.raises(ValueError, match="format version 9"):
         InkTable.parse(str(future))
     assert np.isfinite(InkTable.parse(str(old)).sigma_s).all()
+
+
+def test_instrument_file_matched_to_the_chart(measured, tmp_path, capsys):
+    """An i1Profiler-style export (SampleID, SAMPLE_NAME, Lab_L Lab_a Lab_b, in another order) with --chart."""
+    full = cgats.read(measured / "measured.txt")
+    lab = [r[-3:] for r in full.rows]
+    rows = [[str(k + 1), f"A{k + 1}", *v] for k, v in reversed(list(enumerate(lab)))]
+    inst = cgats.CgatsTable(["SampleID", "SAMPLE_NAME", "Lab_L", "Lab_a", "Lab_b"], rows, {"ORIGINATOR": "i1Profiler"})
+    cgats.write(tmp_path / "i1.txt", inst)
+    out = tmp_path / "i1.json"
+    chart = measured / "chart.txt"
+    assert (
+        main(["calibrate", str(tmp_path / "i1.txt"), "--chart", str(chart), "--out", str(out), "--holdout", "0"]) == 0
+    )
+    prov = read_ink_file(out)["provenance"]
+    assert prov["chart_digest"] == file_digest(chart) and prov["fit_mean_delta_e2000"] < 0.05
+    inst.rows = inst.rows[1:]
+    cgats.write(tmp_path / "short.txt", inst)
+    capsys.readouterr()
+    _fails(
+        ["calibrate", str(tmp_path / "short.txt"), "--chart", str(chart), "--out", str(out)],
+        capsys,
+        "has no measurement",
+    )

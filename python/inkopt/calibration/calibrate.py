@@ -17,6 +17,7 @@ from ..color import delta_e76, delta_e2000
 from ..io import file_digest
 from ..model import InkTable
 from ..model.inks import write_ink_file
+from .cgats import CgatsTable, canonical_field
 from .cgats import read as read_cgats
 from .chart import chart_from_table, check_identifiable, start_table
 from .fit import choose_holdout, fit_inks
@@ -34,6 +35,33 @@ def output_paths(out_inks) -> dict:
     return {"inks": p, "report": p.with_suffix(".report.json"), "picture": p.with_suffix(".swatches.png")}
 
 
+def is_measurement_field(name: str) -> bool:
+    c = canonical_field(name)
+    return c in ("LAB_L", "LAB_A", "LAB_B") or c.startswith("SPECTRAL_NM")
+
+
+def merge_measurements(chart: CgatsTable, measured: CgatsTable, where: str) -> CgatsTable:
+    """The chart's columns with the measurement columns of ``measured`` (an instrument's file), joined on
+    SAMPLE_ID; every patch of the chart must have been measured (ValueError naming the first that was not)."""
+    fields = [f for f in measured.fields if is_measurement_field(f)]
+    if not fields:
+        raise ValueError(f"{where}: no measurement columns (LAB_L LAB_A LAB_B or SPECTRAL_NM380 ... SPECTRAL_NM730)")
+    cols = [measured.fields.index(f) for f in fields]
+    if not measured.has("SAMPLE_ID"):
+        raise ValueError(f"{where}: no SAMPLE_ID column to match the chart's patches")
+    rows = dict(zip(measured.column("SAMPLE_ID"), measured.rows))
+    keep = [i for i, f in enumerate(chart.fields) if not is_measurement_field(f)]
+    if not chart.has("SAMPLE_ID"):
+        raise ValueError("the chart file has no SAMPLE_ID column")
+    out = []
+    for sid, r in zip(chart.column("SAMPLE_ID"), chart.rows):
+        m = rows.get(sid)
+        if m is None:
+            raise ValueError(f"{where}: patch {sid} of the chart has no measurement (no row with that SAMPLE_ID)")
+        out.append([r[i] for i in keep] + [m[c] for c in cols])
+    return CgatsTable([chart.fields[i] for i in keep] + fields, out, dict(chart.header), chart.source)
+
+
 def calibrate(
     measured,
     out_inks,
@@ -42,13 +70,17 @@ def calibrate(
     holdout: float = 0.2,
     seed: int = 0,
     fit_g: bool = True,
+    chart_file=None,
     log=print,
 ) -> CalibrationReport:
     """Fit the ink table of the chart file ``measured`` and write the ink file ``out_inks`` with its report and
-    picture (:func:`output_paths`). Returns the report."""
+    picture (:func:`output_paths`). With ``chart_file``, ``measured`` is an instrument's file that holds only
+    SAMPLE_ID and measurement columns, matched to the chart's patches by SAMPLE_ID. Returns the report."""
     paths = output_paths(out_inks)
     table = read_cgats(measured)
-    chart = chart_from_table(table, str(measured))
+    if chart_file is not None:
+        table = merge_measurements(read_cgats(chart_file), table, str(measured))
+    chart = chart_from_table(table, str(chart_file or measured))
     check_identifiable(chart)
     lab, kind = measured_lab(table, illuminant)
     start_inks = start_table(chart, InkTable.parse(start))
@@ -106,5 +138,6 @@ def calibrate(
     )
     swatch_figure(paths["picture"], report)
     report.to_json(paths["report"])
-    write_ink_file(paths["inks"], full.inks, {"made_by": "inkopt calibrate", **report.summary()})
+    extra = {} if chart_file is None else {"chart": str(chart_file), "chart_digest": file_digest(chart_file)}
+    write_ink_file(paths["inks"], full.inks, {"made_by": "inkopt calibrate", **report.summary(), **extra})
     return report

@@ -22,6 +22,7 @@ def _calibrate_cmd(args) -> int:
         holdout=float(args.holdout),
         seed=int(args.seed),
         fit_g=not args.fixed_g,
+        chart_file=args.chart,
     )
     print(f"fit: mean ΔE2000 {rep.fit_mean_delta_e2000:.2f}, p95 {rep.fit_p95_delta_e2000:.2f} over {len(rep.patches)}")
     if rep.holdout_count:
@@ -42,6 +43,11 @@ def register_cli(sub) -> None:
     )
     p.add_argument("measured", metavar="MEASURED.txt", help="the chart file (CGATS.17) with measurements filled in")
     p.add_argument("--out", required=True, metavar="INKS.json", help="the ink file to write")
+    p.add_argument(
+        "--chart",
+        metavar="CHART.txt",
+        help="the chart file, when MEASURED.txt is an instrument's file with only SAMPLE_ID and measurements",
+    )
     p.add_argument(
         "--start", default="vero-cmykw", help="starting ink table (preset, list or file; default vero-cmykw)"
     )
