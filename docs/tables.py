@@ -399,6 +399,40 @@ def extended_inks() -> str:
     )
 
 
+def calibration() -> str:
+    rows, sources = [], []
+    for name in ("calibration_synthetic.json", "calibration_synthetic_g03.json"):
+        path = STUDY / name
+        if not path.is_file():
+            continue
+        d, sources = load(path), sources + [path]
+        for t in d["trials"]:
+            rows.append(
+                [
+                    t["seed"],
+                    f"{t['g_true']:.2f} / {t['g_fitted']:.3f}",
+                    f"{f(t['holdout_mean_de2000_vs_measured'])} / {f(t['holdout_p95_de2000_vs_measured'])}",
+                    f"{f(t['holdout_mean_de2000_vs_truth'])} / {f(t['holdout_p95_de2000_vs_truth'])}",
+                    f(t["fit_mean_de2000"]),
+                    f(t["mc_noise_de76_mean"]),
+                    f"{t['calibrate_wall_s']:.0f} s / {t['calibrate_cpu_s']:.0f} s (load {t['load_average_1min_after']:.1f})",
+                ]
+            )
+    return table(
+        [
+            "trial",
+            "g true / fitted",
+            "held-out ΔE2000 mean / p95 (vs measured)",
+            "held-out ΔE2000 mean / p95 (vs noise-free)",
+            "fit mean ΔE2000",
+            "render noise ΔE76",
+            "calibrate wall / CPU time",
+        ],
+        rows,
+        sources,
+    )
+
+
 def select_inks() -> str:
     rows, sources = [], []
     for name in ("select_inks.json", "select_inks_astronaut160.json"):
@@ -545,6 +579,7 @@ TABLES = {
     "step-decay": step_decay,
     "spot-convergence": spot_convergence,
     "shell-mm": shell_mm,
+    "calibration": calibration,
 }
 
 

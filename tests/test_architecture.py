@@ -23,6 +23,7 @@ LAYERS = [
     {"optim"},
     {"printing"},
     {"evaluation"},
+    {"calibration"},
     {"run"},
     {"inksets"},
     {"cli", "__main__"},

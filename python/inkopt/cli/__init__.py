@@ -14,7 +14,19 @@ import sys
 from .. import __version__
 from .common import UsageError
 
-SUBCOMMANDS = ("render", "slab", "optimize", "quantize", "export", "inspect", "evaluate", "demo", "select_inks")
+SUBCOMMANDS = (
+    "render",
+    "slab",
+    "optimize",
+    "quantize",
+    "export",
+    "inspect",
+    "evaluate",
+    "demo",
+    "select_inks",
+    "calibration_chart",
+    "calibrate",
+)
 
 __all__ = ["UsageError", "build_parser", "main"]
 

@@ -16,7 +16,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ..io import upgrade_format, write_json
+
 DEFAULT_G = 0.4
+# Ink files: version 0 is the plain {"g", "inks"} object; version 1 adds "format_version" and an optional
+# "provenance" object (where a fitted table came from: ``inkopt calibrate``); both load alike.
+INK_FILE_FORMAT = 1
 
 # Paper's Table 2: name -> (mu_t RGB in mm^-1, albedo RGB).
 INK_LIBRARY: dict[str, tuple[tuple[float, float, float], tuple[float, float, float]]] = {
@@ -101,22 +106,14 @@ class InkTable:
         """A preset name (``vero-cmykw``), a comma list of ink names, or a JSON/TOML file of inks.
 
         File format: ``{"g": 0.4, "inks": [{"name": "cyan", "mu_t": [9, 4.5, 7.5], "albedo": [...]}, ...]}``
-        (TOML: ``g = 0.4`` and ``[[inks]]`` tables with the same keys).
+        (TOML: ``g = 0.4`` and ``[[inks]]`` tables with the same keys), optionally with ``format_version`` and a
+        ``provenance`` object (:func:`read_ink_file`), which the table does not need.
         """
         if spec in PRESETS:
             return cls.from_names(PRESETS[spec])
         path = Path(spec)
         if path.suffix.lower() in (".json", ".toml"):
-            if not path.is_file():
-                raise ValueError(f"ink file {spec} does not exist")
-            if path.suffix.lower() == ".json":
-                data = json.loads(path.read_text())
-            else:
-                try:
-                    import tomllib
-                except ModuleNotFoundError:  # Python 3.10
-                    import tomli as tomllib
-                data = tomllib.loads(path.read_text())
+            data = read_ink_file(path)
             try:
                 inks = data["inks"]
                 return cls.from_mu_t_albedo(
@@ -145,6 +142,44 @@ class InkTable:
             np.asarray(data["ink_sigma_a"]),
             g,
         )
+
+
+def read_ink_file(path) -> dict:
+    """An ink file (.json or .toml) as a dict at format version :data:`INK_FILE_FORMAT` (``g``, ``inks``, and
+    ``provenance`` if the file has one); ValueError (one line) for a missing or unreadable file."""
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"ink file {path} does not exist")
+    try:
+        if path.suffix.lower() == ".json":
+            data = json.loads(path.read_text())
+        else:
+            try:
+                import tomllib
+            except ModuleNotFoundError:  # Python 3.10
+                import tomli as tomllib
+            data = tomllib.loads(path.read_text())
+    except ValueError as exc:
+        raise ValueError(f"ink file {path} is not valid {path.suffix[1:].upper()}: {exc}") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"ink file {path} must hold an object with 'inks'")
+    return upgrade_format(data, kind="ink file", where=path, current=INK_FILE_FORMAT, upgrades={0: dict})
+
+
+def write_ink_file(path, inks: InkTable, provenance: dict | None = None) -> Path:
+    """Write ``inks`` as a JSON ink file (``--inks`` reads it), with ``provenance`` (a JSON object: where the
+    table came from) if given; atomic."""
+    data = {
+        "format_version": INK_FILE_FORMAT,
+        "g": float(inks.g),
+        "inks": [
+            {"name": n, "mu_t": [float(v) for v in inks.mu_t[k]], "albedo": [float(v) for v in inks.albedo[k]]}
+            for k, n in enumerate(inks.names)
+        ],
+    }
+    if provenance is not None:
+        data["provenance"] = provenance
+    return write_json(path, data)
 
 
 def mix(mixture: np.ndarray, inks: InkTable) -> tuple[np.ndarray, np.ndarray]:

@@ -1,0 +1,143 @@
+"""``inkopt calibrate``: measured chart -> fitted ink table, report and picture.
+
+Steps: read the CGATS.17 file (chart columns and measurements), check that it identifies every parameter, convert
+the measurements to CIELAB under the illuminant, draw the hold-out (``fit.choose_holdout``), fit without the
+held-out patches and predict them, then fit all patches (starting from the first fit's table) for the ink file.
+The ink file is today's JSON format plus ``provenance`` (the measurement file's digest, illuminant, start table,
+residual figures). Every output is checked for before anything is written and written atomically.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..color import delta_e76, delta_e2000
+from ..io import file_digest
+from ..model import InkTable
+from ..model.inks import write_ink_file
+from .cgats import CgatsTable, canonical_field
+from .cgats import read as read_cgats
+from .chart import chart_from_table, check_identifiable, start_table
+from .fit import choose_holdout, fit_inks
+from .measure import measured_lab
+from .report import CalibrationReport, PatchResidual, p95, swatch_figure
+
+
+def output_paths(out_inks) -> dict:
+    """The ink file and, beside it, ``<stem>.report.json`` and ``<stem>.swatches.png``."""
+    p = Path(out_inks)
+    if p.suffix.lower() != ".json":
+        raise ValueError(f"--out must name a .json ink file, got {out_inks}")
+    if not p.parent.is_dir():
+        raise ValueError(f"--out: folder {p.parent} does not exist")
+    return {"inks": p, "report": p.with_suffix(".report.json"), "picture": p.with_suffix(".swatches.png")}
+
+
+def is_measurement_field(name: str) -> bool:
+    c = canonical_field(name)
+    return c in ("LAB_L", "LAB_A", "LAB_B") or c.startswith("SPECTRAL_NM")
+
+
+def merge_measurements(chart: CgatsTable, measured: CgatsTable, where: str) -> CgatsTable:
+    """The chart's columns with the measurement columns of ``measured`` (an instrument's file), joined on
+    SAMPLE_ID; every patch of the chart must have been measured (ValueError naming the first that was not)."""
+    fields = [f for f in measured.fields if is_measurement_field(f)]
+    if not fields:
+        raise ValueError(f"{where}: no measurement columns (LAB_L LAB_A LAB_B or SPECTRAL_NM380 ... SPECTRAL_NM730)")
+    cols = [measured.fields.index(f) for f in fields]
+    if not measured.has("SAMPLE_ID"):
+        raise ValueError(f"{where}: no SAMPLE_ID column to match the chart's patches")
+    rows = dict(zip(measured.column("SAMPLE_ID"), measured.rows))
+    keep = [i for i, f in enumerate(chart.fields) if not is_measurement_field(f)]
+    if not chart.has("SAMPLE_ID"):
+        raise ValueError("the chart file has no SAMPLE_ID column")
+    out = []
+    for sid, r in zip(chart.column("SAMPLE_ID"), chart.rows):
+        m = rows.get(sid)
+        if m is None:
+            raise ValueError(f"{where}: patch {sid} of the chart has no measurement (no row with that SAMPLE_ID)")
+        out.append([r[i] for i in keep] + [m[c] for c in cols])
+    return CgatsTable([chart.fields[i] for i in keep] + fields, out, dict(chart.header), chart.source)
+
+
+def calibrate(
+    measured,
+    out_inks,
+    start: str = "vero-cmykw",
+    illuminant: str = "D50",
+    holdout: float = 0.2,
+    seed: int = 0,
+    fit_g: bool = True,
+    chart_file=None,
+    log=print,
+) -> CalibrationReport:
+    """Fit the ink table of the chart file ``measured`` and write the ink file ``out_inks`` with its report and
+    picture (:func:`output_paths`). With ``chart_file``, ``measured`` is an instrument's file that holds only
+    SAMPLE_ID and measurement columns, matched to the chart's patches by SAMPLE_ID. Returns the report."""
+    paths = output_paths(out_inks)
+    table = read_cgats(measured)
+    if chart_file is not None:
+        table = merge_measurements(read_cgats(chart_file), table, str(measured))
+    chart = chart_from_table(table, str(chart_file or measured))
+    check_identifiable(chart)
+    lab, kind = measured_lab(table, illuminant)
+    start_inks = start_table(chart, InkTable.parse(start))
+    held = choose_holdout(chart, holdout, seed)
+    keep = np.setdiff1d(np.arange(len(chart)), held)
+    log(f"{len(chart)} patches of {', '.join(chart.inks)} ({kind}, {illuminant.upper()}); {len(held)} held out")
+    iterations, seconds = 0, 0.0
+    hold_lab = None
+    first = start_inks
+    if len(held):
+        r = fit_inks(chart.subset(keep), lab[keep], start_inks, illuminant, fit_g=fit_g)
+        from .fit import predict_lab
+
+        hold_lab = predict_lab(chart.subset(held), r.inks, illuminant)
+        iterations, seconds, first = r.iterations, r.seconds, r.inks
+        log(f"fit without the held-out patches: {r.iterations} evaluations, {r.seconds:.1f} s")
+    full = fit_inks(chart, lab, first, illuminant, fit_g=fit_g)
+    log(f"fit of all patches: {full.iterations} evaluations, {full.seconds:.1f} s, g = {full.inks.g:.3f}")
+    de00 = delta_e2000(full.predicted_lab, lab)
+    de76 = delta_e76(full.predicted_lab, lab)
+    hold_de = delta_e2000(hold_lab, lab[held]) if hold_lab is not None else np.zeros(0)
+    hold_at = {int(i): k for k, i in enumerate(held)}
+    patches = []
+    for i, p in enumerate(chart.patches):
+        k = hold_at.get(i)
+        patches.append(
+            PatchResidual(
+                p.sample_id,
+                p.describe(chart.inks),
+                [float(v) for v in lab[i]],
+                [float(v) for v in full.predicted_lab[i]],
+                float(de76[i]),
+                float(de00[i]),
+                k is not None,
+                None if k is None else [float(v) for v in hold_lab[k]],
+                None if k is None else float(hold_de[k]),
+            )
+        )
+    report = CalibrationReport(
+        measurements=str(measured),
+        measurement_digest=file_digest(measured),
+        measurement_kind=kind,
+        illuminant=illuminant.upper(),
+        start=str(start),
+        ink_file=str(paths["inks"]),
+        g=float(full.inks.g),
+        fit_mean_delta_e2000=float(de00.mean()),
+        fit_p95_delta_e2000=p95(de00),
+        holdout_count=int(len(held)),
+        holdout_mean_delta_e2000=float(hold_de.mean()) if len(hold_de) else None,
+        holdout_p95_delta_e2000=p95(hold_de),
+        iterations=int(iterations + full.iterations),
+        seconds=float(seconds + full.seconds),
+        patches=patches,
+    )
+    swatch_figure(paths["picture"], report)
+    report.to_json(paths["report"])
+    extra = {} if chart_file is None else {"chart": str(chart_file), "chart_digest": file_digest(chart_file)}
+    write_ink_file(paths["inks"], full.inks, {"made_by": "inkopt calibrate", **report.summary(), **extra})
+    return report

@@ -1,0 +1,58 @@
+"""``inkopt calibrate MEASURED.txt --out INKS.json``: fit the ink table to a measured calibration chart and write
+an ink file that ``--inks`` takes, with INKS.report.json (every patch's residual, the held-out patches' ΔE2000)
+and INKS.swatches.png (``inkopt.calibration``, docs/calibration.md)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..calibration import calibrate
+from ..calibration.calibrate import output_paths
+
+
+def _calibrate_cmd(args) -> int:
+    if not (np.isfinite(args.holdout) and 0 <= args.holdout < 1):
+        raise ValueError(f"--holdout must lie in [0, 1), got {args.holdout}")
+    paths = output_paths(args.out)
+    rep = calibrate(
+        args.measured,
+        args.out,
+        start=args.start,
+        illuminant=args.illuminant,
+        holdout=float(args.holdout),
+        seed=int(args.seed),
+        fit_g=not args.fixed_g,
+        chart_file=args.chart,
+    )
+    print(f"fit: mean ΔE2000 {rep.fit_mean_delta_e2000:.2f}, p95 {rep.fit_p95_delta_e2000:.2f} over {len(rep.patches)}")
+    if rep.holdout_count:
+        print(
+            f"held out ({rep.holdout_count} patches, fitted without them): mean ΔE2000 "
+            f"{rep.holdout_mean_delta_e2000:.2f}, p95 {rep.holdout_p95_delta_e2000:.2f}"
+        )
+    print(f"wrote {paths['inks']} (use it with --inks), {paths['report']}, {paths['picture']}")
+    return 0
+
+
+def register_cli(sub) -> None:
+    p = sub.add_parser(
+        "calibrate",
+        help="fit the ink table to a measured calibration chart (docs/calibration.md)",
+        description="Read a chart file with measurements (CIELAB or spectral) and fit every ink's scattering and "
+        "absorption per channel and the shared g; write an ink file for --inks with a report and a picture.",
+    )
+    p.add_argument("measured", metavar="MEASURED.txt", help="the chart file (CGATS.17) with measurements filled in")
+    p.add_argument("--out", required=True, metavar="INKS.json", help="the ink file to write")
+    p.add_argument(
+        "--chart",
+        metavar="CHART.txt",
+        help="the chart file, when MEASURED.txt is an instrument's file with only SAMPLE_ID and measurements",
+    )
+    p.add_argument(
+        "--start", default="vero-cmykw", help="starting ink table (preset, list or file; default vero-cmykw)"
+    )
+    p.add_argument("--illuminant", default="D50", help="D50 (default, as instruments report) or D65")
+    p.add_argument("--holdout", type=float, default=0.2, help="share of patches held out to test the fit (default 0.2)")
+    p.add_argument("--seed", type=int, default=0, help="draw of the held-out patches (default 0)")
+    p.add_argument("--fixed-g", action="store_true", help="keep g at the starting table's value")
+    p.set_defaults(func=_calibrate_cmd)
