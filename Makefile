@@ -28,8 +28,8 @@ test: $(STAMP) lint
 
 # ruff (lint and format) for Python, rustfmt and clippy for Rust; `make test` runs it first
 lint: $(STAMP)
-	$(VENV)/bin/ruff check python tests bench experiments
-	$(VENV)/bin/ruff format --check python tests bench experiments
+	$(VENV)/bin/ruff check python tests bench experiments docs
+	$(VENV)/bin/ruff format --check python tests bench experiments docs
 	cargo fmt --all -- --check
 	cargo clippy --release --workspace --all-targets --quiet -- -D warnings
 

@@ -390,7 +390,7 @@ def translucency() -> str:
 def extended_inks() -> str:
     path = STUDY / "extended_inks.json"
     rows = []
-    for name, s in load(path)["sets"].items():
+    for s in load(path)["sets"].values():
         rows.append([f"`{s['inks']}`", f(s["gamut_floor_delta_e76"]), triple(s["continuous"]), triple(s["quantized"])])
     return table(
         ["ink set", "gamut floor ΔE76", "continuous ΔE76 / ΔE2000 / SSIM", "quantized ΔE76 / ΔE2000 / SSIM"],
@@ -415,7 +415,8 @@ def calibration() -> str:
                     f"{f(t['holdout_mean_de2000_vs_truth'])} / {f(t['holdout_p95_de2000_vs_truth'])}",
                     f(t["fit_mean_de2000"]),
                     f(t["mc_noise_de76_mean"]),
-                    f"{t['calibrate_wall_s']:.0f} s / {t['calibrate_cpu_s']:.0f} s (load {t['load_average_1min_after']:.1f})",
+                    f"{t['calibrate_wall_s']:.0f} s / {t['calibrate_cpu_s']:.0f} s"
+                    f" (load {t['load_average_1min_after']:.1f})",
                 ]
             )
     return table(
