@@ -60,6 +60,18 @@ def add_mesh_args(p, what: str = "") -> None:
         "(default: every voxel of the object is optimised)",
     )
     p.add_argument("--dpi", type=float, default=OPT_DPI, help=f"optimisation grid resolution (default {OPT_DPI:g})")
+    p.add_argument(
+        "--texture",
+        metavar="FILE",
+        help=f"{what}the texture image, looked up through the mesh's uv coordinates (replaces the one its "
+        "material names; for an OBJ without or with a broken MTL file)",
+    )
+    p.add_argument(
+        "--constant-color",
+        action="store_true",
+        help=f"{what}accept a mesh without texture, vertex or face colours: the target is its material's "
+        "colour (white without one); without this flag such a mesh is refused",
+    )
 
 
 def add_translucency_args(p, mesh: bool = False, both: bool = False) -> None:
@@ -265,7 +277,7 @@ def slab_spec_from_args(args, top: str):
 
 def mesh_spec_from_args(args, path: str):
     """The ``MeshSpec`` of ``path`` and the mesh options (``--height-mm`` or ``--scale``, ``--shell-mm``,
-    ``--dpi``, ``--up``, translucency)."""
+    ``--dpi``, ``--up``, translucency, ``--texture``, ``--constant-color``)."""
     from ..scenes.spec import MeshSpec
 
     return MeshSpec(
@@ -277,6 +289,8 @@ def mesh_spec_from_args(args, path: str):
         args.up,
         args.translucency,
         args.translucency_depth_mm,
+        args.texture,
+        args.constant_color,
     )
 
 

@@ -33,6 +33,7 @@ from ...rundir import RunDir, SceneRecord
 from ...units import OPT_DPI, voxel_mm
 from ..translucency import ALPHA, check_depth, check_mask, load_mask, translucency_fields
 from .load import TexturedMesh, load_mesh
+from .source import describe_colour_source
 from .translucency import mesh_texel_share, mesh_translucency
 from .views import bake_vertex_colors, render_views, write_glb
 from .voxelize import VoxelizedObject, voxelize
@@ -113,7 +114,8 @@ class MeshScene:
     def describe(self) -> str:
         nz, ny, nx = self.volume.shape
         return (
-            f"mesh {self.height_mm:.1f} mm high: grid {nx} x {ny} x {nz} voxels "
+            f"mesh {self.height_mm:.1f} mm high, target colour from {describe_colour_source(self.mesh)}: "
+            f"grid {nx} x {ny} x {nz} voxels "
             f"({self.volume.voxel_mm[0] * 1000:.1f} µm), {int(self.vox.inside.sum())} inside, "
             f"{int(self.free.sum())} free, {len(self.texels)} texels; voxelized in {self.voxelize_seconds:.1f} s"
         )
@@ -131,6 +133,7 @@ class MeshScene:
             "height_mm": self.height_mm,
             "mesh_scale": self.mesh.mm_per_unit,
             "mesh_path": self.mesh_path,
+            "colour_source": describe_colour_source(self.mesh),
             "voxel_mm": [float(v) for v in self.volume.voxel_mm],
             **translucency_fields(self.translucency),
         }
@@ -174,10 +177,13 @@ def build_mesh_scene(
     up: str = "y",
     translucency=None,
     translucency_depth_mm: float | None = None,
+    texture=None,
+    constant_color: bool = False,
 ) -> MeshScene:
     """Load and voxelize ``mesh_path``; exactly one of ``height_mm`` and ``scale`` (mm per model unit).
     ``translucency``: None, "alpha" (the texture's alpha channel) or a mask (file or (H, W) array) in texture
-    space; ``translucency_depth_mm``: its depth below the surface (None: the whole object)."""
+    space; ``translucency_depth_mm``: its depth below the surface (None: the whole object). ``texture``: an image
+    file replacing the mesh's texture; ``constant_color``: accept a mesh without colours (``load.load_mesh``)."""
     check_mesh_inputs(shell_mm, inks)
     mask = None
     if translucency is not None:
@@ -189,7 +195,7 @@ def build_mesh_scene(
             else (check_mask(translucency) if isinstance(translucency, np.ndarray) else load_mask(translucency))
         )
     t0 = time.perf_counter()
-    mesh = load_mesh(mesh_path, height_mm=height_mm, scale=scale, up=up)
+    mesh = load_mesh(mesh_path, height_mm=height_mm, scale=scale, up=up, texture=texture, constant_color=constant_color)
     vmm = voxel_mm(dpi)
     # The SDF is exact only within ``band`` voxels of the surface; the shell's and the translucent regions'
     # boundaries must lie inside it.
