@@ -1,11 +1,12 @@
 """The run driver: one optimisation run of any scene, from start (or resume) to report (docs/run-dir.md).
 
-``run_optimisation(scene, out_dir, cfg)``: write scene.npz, optimise with checkpoints (``resume`` continues
-exactly), save volume.npz, then the final figures: the optimised and the initial volume rendered with seeds from
-``2**62 + cfg.seed`` (never used by the optimisation) at ``eval_spp`` samples per texel if given, else adaptively
-(``evaluation.noise.adaptive_render``: enough that the Monte Carlo noise adds at most ~0.5 to the mean ΔE76 and
-SSIM's and the mottle's noise correction is accurate, at most 4096), compared with the target by
-``evaluation.metrics.prediction_metrics``; the scene's pictures, loss.png and report.json
+``run_optimisation(scene, out_dir, cfg)``: a fresh run (not a resume) first removes every output of an earlier run in
+``out_dir`` (``RunDir.remove_earlier_run``); write scene.npz, optimise with checkpoints (``resume`` continues exactly),
+save volume.npz (and remove the outputs derived from an earlier one), then the final figures: the optimised and the
+initial volume rendered with seeds from ``2**62 + cfg.seed`` (never used by the optimisation) at ``eval_spp`` samples
+per texel if given, else adaptively (``evaluation.noise.adaptive_render``: enough that the Monte Carlo noise adds at
+most ~0.5 to the mean ΔE76 and SSIM's and the mottle's noise correction is accurate, at most 4096), compared with the
+target by ``evaluation.metrics.prediction_metrics``; the scene's pictures, loss.png and report.json
 (``evaluation.results.Report``). The scene comes from user inputs through a spec (``scenes.spec``:
 ``SlabSpec(...).build(inks)``, ``MeshSpec(...).build(inks)``).
 """
@@ -79,12 +80,17 @@ def _optimise(scene, out_dir, cfg, resume, eval_spp, threads, progress, lighting
         kind=scene.kind,
     )
     rd = RunDir.create(out_dir)
-    if resume:
-        run.resume(rd.checkpoint_path, log)
+    if not (resume and run.resume(rd.checkpoint_path, log)):
+        gone = rd.remove_earlier_run()  # a fresh run: nothing of an earlier run may pair with the new result
+        if gone:
+            log(f"removed the outputs of an earlier run in {rd}: {', '.join(gone)}")
     rd.save_scene(scene.record())
     run.run(rd.checkpoint_path, progress=progress)
     run.release_renderer()  # not beside the writing of the result
     rd.save_volume_slabs(run.base, run.mixture_slabs(), run.base.inks)  # a slab of layers at a time
+    gone = rd.remove_stale()  # quantized volume, slices, evaluation made from an earlier volume.npz
+    if gone:
+        log(f"removed outputs made from the earlier volume.npz: {', '.join(gone)}")
 
     # Final figures with seeds unused by the optimisation, adaptive spp unless given; the start is reconstructed
     # from the configuration (identical to the first iterate whether or not the run was resumed). The run's own

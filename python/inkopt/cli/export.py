@@ -2,7 +2,9 @@
 
 ``--format png-slices`` (default): one RGBA PNG per layer plus manifest.json (``inkopt.printing.export``);
 ``--format gcvf``: the GrabCAD Voxel Print package, one zip (``inkopt.printing.gcvf``). A job using more inks
-than ``--printer`` holds is refused in one line before anything is written.
+than ``--printer`` holds, or a quantized volume made from another volume.npz than the run's
+(``RunDir.check_quantized_current``), is refused in one line before anything is written. The slice manifest records
+``volume_digest`` and ``quantized_digest``, the files the slices were made from.
 ``--format 3mf`` is refused: lib3mf 2.5.0 cannot write volumetric composites (see ``inkopt.printing.export``).
 """
 
@@ -15,7 +17,7 @@ from pathlib import Path
 from ..printing.export import write_png_slices
 from ..printing.gcvf import write_gcvf
 from ..printing.profiles import PRINTER_PROFILES, printer_profile, resolution_mismatch
-from ..rundir import RunDir
+from ..rundir import QUANTIZED_DIGEST, VOLUME_DIGEST, RunDir
 
 FORMATS = ("png-slices", "gcvf", "3mf")
 NO_3MF = (
@@ -50,13 +52,17 @@ def _export_cmd(args) -> int:
     palette = load_palette(args.palette)
     d = RunDir(args.dir)
     q = d.load_quantized()
+    d.check_quantized_current()
     if args.format == "gcvf":
         out = Path(args.out) if args.out else d.gcvf_path
         man = write_gcvf(q.labels, q.voxel_mm, q.inks.names, out, printer=printer, palette=palette)
         layers_um = man["layer_thickness_nm"] / 1000
     else:
         out = Path(args.out) if args.out else d.slices_path
-        man = write_png_slices(q.labels, q.voxel_mm, q.inks.names, out, palette=palette, printer=printer)
+        sources = {VOLUME_DIGEST: d.volume_digest(), QUANTIZED_DIGEST: d.quantized_digest()}
+        man = write_png_slices(
+            q.labels, q.voxel_mm, q.inks.names, out, palette=palette, printer=printer, sources=sources
+        )
         layers_um = man["layer_thickness_um"]
     mats = [m for m in man["materials"] if m["voxel_count"] > 0]
     mismatch = resolution_mismatch(prof, q.voxel_mm)

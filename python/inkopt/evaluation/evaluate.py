@@ -181,6 +181,7 @@ def evaluate_run(
     if spp is not None and spp < 1:
         raise ValueError(f"--spp must be at least 1, got {spp}")
     d = RunDir(path)
+    d.check_quantized_current()  # before any render: a stale quantized volume is refused in one line
     vol = d.load_volume()
     rec = d.load_scene()
     stex, kind = rec.texels, rec.kind
@@ -301,6 +302,8 @@ def evaluate_run(
         translucency=tr,
         **floor,
         baselines=base,
+        volume_digest=d.volume_digest(),
+        quantized_digest=d.quantized_digest(),
     )
     if write:
         if rec.faces:

@@ -170,7 +170,9 @@ class Evaluation:
     """An evaluation of a run (evaluation.json; ``evaluation.evaluate``'s module docstring says what each figure
     is). ``spp`` is the continuous result's; ``lighting``: ``Lighting.describe()``; ``quantization``: the
     quantized volume's settings; ``translucency``, ``colour_table``, the gamut floor, ``baselines`` and
-    ``pictures`` are None when not measured or written."""
+    ``pictures`` are None when not measured or written; ``volume_digest`` and ``quantized_digest``: the
+    ``io.file_digest`` of the volume.npz and quantized.npz evaluated (None in evaluations written before they were
+    recorded)."""
 
     spp: int
     seed: int
@@ -193,6 +195,8 @@ class Evaluation:
     gamut_floor_delta_e76_p95: float | None = None
     baselines: dict | None = None  # name -> Measured
     pictures: list | None = None
+    volume_digest: str | None = None  # io.file_digest of the volume.npz and quantized.npz evaluated
+    quantized_digest: str | None = None
 
     _HEAD = (
         "spp",
@@ -206,6 +210,7 @@ class Evaluation:
         "spp_max",
     )
     _FLOOR = ("colour_table", "gamut_floor_delta_e76", "gamut_floor_delta_e76_p95")
+    _SOURCES = ("volume_digest", "quantized_digest")
 
     def to_json(self) -> dict:
         d = {**{k: getattr(self, k) for k in self._HEAD}, **self.lighting, "continuous": self.continuous.to_json()}
@@ -218,6 +223,7 @@ class Evaluation:
         d["seconds"] = self.seconds
         if self.pictures is not None:
             d["pictures"] = self.pictures
+        d.update({k: getattr(self, k) for k in self._SOURCES if getattr(self, k) is not None})
         d[FORMAT_KEY] = EVALUATION_FORMAT
         return d
 
@@ -237,6 +243,7 @@ class Evaluation:
             **{k: d.get(k) for k in cls._FLOOR},
             baselines=None if base is None else {k: Measured.from_json(v) for k, v in base.items()},
             pictures=d.get("pictures"),
+            **{k: d.get(k) for k in cls._SOURCES},
         )
 
     @classmethod
