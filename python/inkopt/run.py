@@ -47,18 +47,32 @@ def run_optimisation(
     lighting: Lighting | str | None = None,
     ray: str | None = None,
     log=print,
+    log_every_s: float = 30.0,
 ) -> Report:
     """Optimise ``scene`` into run directory ``out_dir`` under the display ``lighting`` (default uniform; the
     final figures are rendered under it too); returns the report (also report.json). ``ray``: "auto" or a Ray
     cluster's address: every render is split into texel shards on Ray workers (``inkopt.distributed``; the
-    results are bit-identical), ``threads`` then being each worker's."""
+    results are bit-identical), ``threads`` then being each worker's. Without ``progress`` (no terminal), ``log``
+    gets a progress line at least every ``log_every_s`` seconds of the iterations."""
     with renderer_factory(ray, threads) as make_renderer:
         return _optimise(
-            scene, out_dir, cfg, resume, eval_spp, threads, progress, load_lighting(lighting), log, make_renderer
+            scene,
+            out_dir,
+            cfg,
+            resume,
+            eval_spp,
+            threads,
+            progress,
+            load_lighting(lighting),
+            log,
+            make_renderer,
+            log_every_s,
         )
 
 
-def _optimise(scene, out_dir, cfg, resume, eval_spp, threads, progress, lighting, log, make_renderer) -> Report:
+def _optimise(
+    scene, out_dir, cfg, resume, eval_spp, threads, progress, lighting, log, make_renderer, log_every_s
+) -> Report:
     t_start = time.perf_counter()
     log(scene.describe())
 
@@ -85,7 +99,8 @@ def _optimise(scene, out_dir, cfg, resume, eval_spp, threads, progress, lighting
         if gone:
             log(f"removed the outputs of an earlier run in {rd}: {', '.join(gone)}")
     rd.save_scene(scene.record())
-    run.run(rd.checkpoint_path, progress=progress)
+    run.invocation_start = t_start  # the whole run's time counts this invocation's set-up too
+    run.run(rd.checkpoint_path, progress=progress, log=log, log_every_s=log_every_s)
     run.release_renderer()  # not beside the writing of the result
     rd.save_volume_slabs(run.base, run.mixture_slabs(), run.base.inks)  # a slab of layers at a time
     gone = rd.remove_stale()  # quantized volume, slices, evaluation made from an earlier volume.npz
@@ -131,6 +146,7 @@ def _optimise(scene, out_dir, cfg, resume, eval_spp, threads, progress, lighting
         # this invocation's wall time (set-up, the iterations it ran, the evaluation); a resumed run's earlier
         # iterations are in the history, so seconds_iterations covers all of them
         seconds=time.perf_counter() - t_start,
+        seconds_total=run.wall_seconds(),
         seconds_iterations=float(np.sum(h.seconds)),
         seconds_per_iteration=float(np.sum(h.seconds) / n),
         time_split={k: float(np.sum(getattr(h, k)) / n) for k in ("render_s", "gradient_s", "loss_s", "step_s")},

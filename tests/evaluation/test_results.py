@@ -53,6 +53,7 @@ SLAB_REPORT_KEYS = {
     "peak_rss_gb",
     "seconds",
     "seconds_iterations",
+    "seconds_total",
     "seconds_per_iteration",
     "seed",
     "size_mm",

@@ -213,6 +213,14 @@ def add_optimizer_args(p) -> None:
     )
     p.add_argument("--threads", type=int, help="worker threads (default: all cores)")
     p.add_argument("--resume", action="store_true", help="continue from DIR/checkpoint.npz if present")
+    p.add_argument(
+        "--log-every",
+        type=float,
+        default=30.0,
+        metavar="SECONDS",
+        help="when stderr is not a terminal (a log file, a scheduler): a progress line (iteration, loss, ΔE76, "
+        "ETA) at least this often (default 30)",
+    )
     add_lighting_args(p, "optimise and evaluate")
 
 
@@ -301,6 +309,8 @@ def run_from_args(args, spec):
     from ..run import run_optimisation
 
     spec.validate()
+    if not (args.log_every >= 0):
+        raise ValueError(f"--log-every must be a number of seconds >= 0, got {args.log_every}")
     inks = InkTable.parse(args.inks)
     cfg = config_from_args(args)
     ray = ray_from_args(args)
@@ -317,14 +327,17 @@ def run_from_args(args, spec):
         lighting=lighting,
         ray=ray,
         log=stderr_log,
+        log_every_s=args.log_every,
     )
 
 
 def print_run_summary(rep, init: str, extra: str = "") -> None:
     """The closing line of ``slab`` and ``optimize`` from their ``Report``."""
     m = rep.metrics
+    total = rep.seconds_total or rep.seconds
+    whole = f" (whole run across resumes {total:.0f} s)" if total > rep.seconds + 1e-3 else ""  # resumed
     print(
         f"mean ΔE76 {rep.initial_delta_e76_mean:.2f} ({init} start) -> {m.delta_e76_mean:.2f} "
         f"(p95 {m.delta_e76_p95:.2f}, ΔE2000 {m.delta_e2000_mean:.2f}, SSIM {m.ssim:.3f}) "
-        f"after {rep.iterations} iterations in {rep.seconds:.0f} s{extra}"
+        f"after {rep.iterations} iterations in {rep.seconds:.0f} s{whole}{extra}"
     )

@@ -42,7 +42,8 @@ class Report:
     ``metrics``: the final mixture's figures; ``initial_*``: the starting mixture's; ``delta_e76_max``: the
     largest per-texel ΔE76; ``iterations``, ``spp`` (gradient pass); ``eval_spp`` (the final evaluation's samples
     per texel), ``spp_adaptive``, ``eval_spp_passes``, ``initial_eval_spp``; wall times in seconds
-    (``time_split``: per iteration, by phase); ``scene``: the scene's own entries (``Scene.report_fields``: sizes,
+    (``seconds``: this invocation's; ``seconds_total``: the whole run's across resumes, None in older reports;
+    ``time_split``: per iteration, by phase); ``scene``: the scene's own entries (``Scene.report_fields``: sizes,
     paths, translucency); the optimiser settings (``inks`` .. ``gradient``); ``threads``; ``peak_rss_gb`` (GiB);
     ``lighting``: ``Lighting.describe()``.
     """
@@ -77,6 +78,7 @@ class Report:
     threads: int | None
     peak_rss_gb: float
     lighting: dict
+    seconds_total: float | None = None
 
     _RUN = (
         "delta_e76_max",
@@ -88,6 +90,7 @@ class Report:
         "initial_eval_spp",
         "initial_delta_e76_mean_corrected",
         "seconds",
+        "seconds_total",
         "seconds_iterations",
         "seconds_per_iteration",
         "time_split",
