@@ -75,6 +75,8 @@ def _optimise(
 ) -> Report:
     t_start = time.perf_counter()
     log(scene.describe())
+    for note in scene.warnings:  # e.g. a mesh's small holes
+        log(f"warning: {note}")
 
     def baseline(kind: str) -> np.ndarray:  # a print-shop start (cfg.init "surface" or "extrusion")
         return baseline_mixture(

@@ -71,6 +71,10 @@ class SlabScene:
         """The translucency constraint's transparent shares, or None (built once)."""
         return self.record().fixed_share(self.volume.inks, self.volume.shape)
 
+    @property
+    def warnings(self) -> list[str]:
+        return []
+
     def record(self) -> SceneRecord:
         return SceneRecord(
             "slab", self.texels, self.target_rgb, list(self.faces), dict(self.pix), translucency=self.translucency

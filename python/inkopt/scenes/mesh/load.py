@@ -41,7 +41,8 @@ class TexturedMesh:
     baseColorFactor; 1 for OBJ, whose Kd is ignored when a map_Kd exists); ``vertex_colors`` (V, 3) float32
     sRGB; ``face_colors`` (F, 3) float32 sRGB; else the constant ``color`` (3,) float32 sRGB.
     ``texture_alpha``: the texture's alpha channel (H, W) float32 in [0, 1] if it has one (translucency);
-    ``texture_name``: the texture's file name(s) where the file names them ("" for embedded textures).
+    ``texture_name``: the texture's file name(s) where the file names them ("" for embedded textures);
+    ``warnings``: one-line notes about the input that the run logs (``_check_solid``: small holes).
     """
 
     vertices: np.ndarray
@@ -58,6 +59,7 @@ class TexturedMesh:
     source: str = ""
     texture_alpha: np.ndarray | None = None
     texture_name: str = ""
+    warnings: list = field(default_factory=list)  # one-line notes for the log (e.g. small holes closed over)
 
     @property
     def color_source(self) -> str:
@@ -297,6 +299,15 @@ def _check_solid(mesh: TexturedMesh, tol: float = 0.15, need: float = 0.9) -> No
         raise ValueError(
             f"{mesh.source}: the mesh does not enclose a solid: only {frac:.0%} of its surface has "
             f"winding number ~1 inside and ~0 outside (open sheet or large holes?)"
+        )
+    edges = np.sort(f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    _, count = np.unique(edges, axis=0, return_counts=True)
+    open_edges = int(np.sum(count == 1))
+    if open_edges:
+        mesh.warnings.append(
+            f"{mesh.source}: the surface has {open_edges} open edges (holes); the inside is taken from winding "
+            f"numbers ({frac:.1%} of the surface separates inside from outside), which closes small holes over: "
+            "check the mesh if that is not intended"
         )
 
 
