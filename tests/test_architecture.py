@@ -23,7 +23,7 @@ LAYERS = [
     {"optim"},
     {"printing"},
     {"evaluation"},
-    {"run"},
+    {"run", "estimate"},
     {"inksets"},
     {"cli", "__main__"},
 ]

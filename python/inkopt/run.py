@@ -15,10 +15,12 @@ from __future__ import annotations
 
 import resource
 import time
+from pathlib import Path
 
 import numpy as np
 
 from .distributed import renderer_factory
+from .estimate import ANNOUNCE_SECONDS, Estimate, estimate_run
 from .evaluation.baselines import baseline_mixture
 from .evaluation.metrics import delta_e76_map, prediction_metrics
 from .evaluation.noise import EVAL_SEED_OFFSET, adaptive_render
@@ -48,12 +50,15 @@ def run_optimisation(
     ray: str | None = None,
     log=print,
     log_every_s: float = 30.0,
-) -> Report:
+    dry_run: bool = False,
+) -> Report | Estimate:
     """Optimise ``scene`` into run directory ``out_dir`` under the display ``lighting`` (default uniform; the
     final figures are rendered under it too); returns the report (also report.json). ``ray``: "auto" or a Ray
     cluster's address: every render is split into texel shards on Ray workers (``inkopt.distributed``; the
     results are bit-identical), ``threads`` then being each worker's. Without ``progress`` (no terminal), ``log``
-    gets a progress line at least every ``log_every_s`` seconds of the iterations."""
+    gets a progress line at least every ``log_every_s`` seconds of the iterations. Before the iterations the run's
+    cost is estimated (``inkopt.estimate``) and logged when it exceeds ``estimate.ANNOUNCE_SECONDS``; with
+    ``dry_run`` only the estimate is made and returned, and nothing is written."""
     with renderer_factory(ray, threads) as make_renderer:
         return _optimise(
             scene,
@@ -67,12 +72,13 @@ def run_optimisation(
             log,
             make_renderer,
             log_every_s,
+            dry_run,
         )
 
 
 def _optimise(
-    scene, out_dir, cfg, resume, eval_spp, threads, progress, lighting, log, make_renderer, log_every_s
-) -> Report:
+    scene, out_dir, cfg, resume, eval_spp, threads, progress, lighting, log, make_renderer, log_every_s, dry_run
+) -> Report | Estimate:
     t_start = time.perf_counter()
     log(scene.describe())
     for note in scene.warnings:  # e.g. a mesh's small holes
@@ -95,12 +101,23 @@ def _optimise(
         renderer_factory=make_renderer,
         kind=scene.kind,
     )
+    shape = scene.volume.shape
+    box = int(np.prod(shape))
+    inside = box if scene.volume.inside is None else int(scene.volume.inside.sum())
+    if dry_run:  # read the checkpoint a resume would continue from, write nothing
+        checkpoint = RunDir(out_dir).checkpoint_path if Path(out_dir).is_dir() else None
+        if resume and checkpoint is not None and checkpoint.is_file():
+            run.load_checkpoint(checkpoint)
+        return estimate_run(run, inside, box, cfg.seed)
     rd = RunDir.create(out_dir)
     if not (resume and run.resume(rd.checkpoint_path, log)):
         gone = rd.remove_earlier_run()  # a fresh run: nothing of an earlier run may pair with the new result
         if gone:
             log(f"removed the outputs of an earlier run in {rd}: {', '.join(gone)}")
     rd.save_scene(scene.record())
+    estimate = estimate_run(run, inside, box, cfg.seed)
+    if estimate.seconds > ANNOUNCE_SECONDS:
+        log(estimate.line())
     run.invocation_start = t_start  # the whole run's time counts this invocation's set-up too
     run.run(rd.checkpoint_path, progress=progress, log=log, log_every_s=log_every_s)
     run.release_renderer()  # not beside the writing of the result
@@ -149,6 +166,7 @@ def _optimise(
         # iterations are in the history, so seconds_iterations covers all of them
         seconds=time.perf_counter() - t_start,
         seconds_total=run.wall_seconds(),
+        estimate=estimate.to_json(),
         seconds_iterations=float(np.sum(h.seconds)),
         seconds_per_iteration=float(np.sum(h.seconds) / n),
         time_split={k: float(np.sum(getattr(h, k)) / n) for k in ("render_s", "gradient_s", "loss_s", "step_s")},

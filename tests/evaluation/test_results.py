@@ -54,6 +54,7 @@ SLAB_REPORT_KEYS = {
     "seconds",
     "seconds_iterations",
     "seconds_total",
+    "estimate",
     "seconds_per_iteration",
     "seed",
     "size_mm",

@@ -61,3 +61,34 @@ def test_slab_logs_progress_lines_without_a_terminal(tmp_path):
     assert "whole run across resumes" in r2.stdout
     rep = json.loads((out / "report.json").read_text())
     assert rep["seconds_total"] >= first + rep["seconds"]
+
+
+def test_dry_run_prints_the_estimate_and_writes_nothing(tmp_path):
+    chart = charts.save(charts.colour_chart(24, 16), tmp_path / "chart.png")
+    out = tmp_path / "run"
+    args = ["slab", str(chart), "--size-mm", "2x1.333x0.5", "--out", str(out), "--iterations", "7", "--threads", "1"]
+    r = subprocess.run([sys.executable, "-m", "inkopt.cli", *args, "--dry-run"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith("estimate: 7 iterations x ") and "peak memory ~" in r.stdout and "disk ~" in r.stdout
+    assert len(r.stdout.strip().splitlines()) == 1 and not out.exists()
+
+
+def test_estimate_counts_the_iterations_left_and_is_recorded(tmp_path):
+    from inkopt.estimate import Estimate
+
+    chart = charts.save(charts.colour_chart(24, 16), tmp_path / "chart.png")
+    out = tmp_path / "run"
+    args = ["slab", str(chart), "--size-mm", "2x1.333x0.5", "--out", str(out), "--threads", "1"]
+    args += ["--spp", "1", "--forward-spp", "1", "--eval-spp", "2", "--checkpoint-every", "1"]
+    r = subprocess.run([sys.executable, "-m", "inkopt.cli", *args, "--iterations", "2"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    est = Estimate.from_json(json.loads((out / "report.json").read_text())["estimate"])
+    assert est.iterations == 2 and est.seconds == est.seconds_per_iteration * 2 and est.seconds_per_iteration > 0
+    # 24 x 16 x 6 voxels, 5 inks: volume (4 B per ink per voxel) and checkpoint (12 B per ink per voxel) bound
+    assert est.disk_bytes >= 16 * 5 * 24 * 16 * 6 and est.quantized_bytes > 6 * 24 * 16 * 6
+    r = subprocess.run(
+        [sys.executable, "-m", "inkopt.cli", *args, "--iterations", "5", "--resume", "--dry-run"],
+        capture_output=True,
+        text=True,
+    )
+    assert r.returncode == 0 and r.stdout.startswith("estimate: 3 iterations x "), r.stderr

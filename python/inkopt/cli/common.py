@@ -214,6 +214,12 @@ def add_optimizer_args(p) -> None:
     p.add_argument("--threads", type=int, help="worker threads (default: all cores)")
     p.add_argument("--resume", action="store_true", help="continue from DIR/checkpoint.npz if present")
     p.add_argument(
+        "--dry-run",
+        action="store_true",
+        help="build the scene, measure a short calibration and print only the run's estimated time, peak memory "
+        "and disk; write nothing",
+    )
+    p.add_argument(
         "--log-every",
         type=float,
         default=30.0,
@@ -304,7 +310,8 @@ def mesh_spec_from_args(args, path: str):
 
 def run_from_args(args, spec):
     """``slab`` and ``optimize``: check ``spec`` (before the ink set and the optimiser settings are read), build
-    its scene with ``--inks`` and optimise it into ``--out``; returns the run's ``Report``."""
+    its scene with ``--inks`` and optimise it into ``--out``; returns the run's ``Report`` (with ``--dry-run`` its
+    ``estimate.Estimate``, nothing written)."""
     from ..model import InkTable
     from ..run import run_optimisation
 
@@ -328,6 +335,7 @@ def run_from_args(args, spec):
         ray=ray,
         log=stderr_log,
         log_every_s=args.log_every,
+        dry_run=args.dry_run,
     )
 
 

@@ -43,9 +43,10 @@ class Report:
     largest per-texel ΔE76; ``iterations``, ``spp`` (gradient pass); ``eval_spp`` (the final evaluation's samples
     per texel), ``spp_adaptive``, ``eval_spp_passes``, ``initial_eval_spp``; wall times in seconds
     (``seconds``: this invocation's; ``seconds_total``: the whole run's across resumes, None in older reports;
-    ``time_split``: per iteration, by phase); ``scene``: the scene's own entries (``Scene.report_fields``: sizes,
-    paths, translucency); the optimiser settings (``inks`` .. ``gradient``); ``threads``; ``peak_rss_gb`` (GiB);
-    ``lighting``: ``Lighting.describe()``.
+    ``time_split``: per iteration, by phase; ``estimate``: the cost estimated before the iterations,
+    ``inkopt.estimate.Estimate.to_json()``, None in older reports); ``scene``: the scene's own entries
+    (``Scene.report_fields``: sizes, paths, translucency); the optimiser settings (``inks`` .. ``gradient``);
+    ``threads``; ``peak_rss_gb`` (GiB); ``lighting``: ``Lighting.describe()``.
     """
 
     metrics: Metrics
@@ -79,6 +80,7 @@ class Report:
     peak_rss_gb: float
     lighting: dict
     seconds_total: float | None = None
+    estimate: dict | None = None
 
     _RUN = (
         "delta_e76_max",
@@ -94,6 +96,7 @@ class Report:
         "seconds_iterations",
         "seconds_per_iteration",
         "time_split",
+        "estimate",
     )
     _SETTINGS = (
         "inks",
