@@ -28,7 +28,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .optim.loop import format_duration
+from .units import format_duration
 
 CALIBRATION_TEXELS = 256
 #: an estimate longer than this gets its line in the log before the run starts (seconds)

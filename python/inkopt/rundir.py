@@ -232,9 +232,10 @@ class RunDir:
         """face_<face>.png: a slab face's target | prediction | ΔE76 map."""
         return self.path / f"face_{face}.png"
 
-    def evaluation_picture_path(self, face: str) -> Path:
-        """evaluation_<face>.png: a slab face's target | optimized | quantized | baselines (``inkopt evaluate``)."""
-        return self.path / f"evaluation_{face}.png"
+    def evaluation_picture_path(self, face: str, stem: str = "evaluation") -> Path:
+        """<stem>_<face>.png: a slab face's target | optimized | quantized | baselines, or (face "views") a mesh's
+        rows of them seen from four sides (``inkopt evaluate``; ``stem``: the evaluation file's)."""
+        return self.path / f"{stem}_{face}.png"
 
     @property
     def views_picture_path(self) -> Path:
@@ -343,8 +344,9 @@ class RunDir:
     def read_report(self) -> dict:
         return json.loads(self._need(self.report_path, "the run has not finished").read_text())
 
-    def write_evaluation(self, ev: dict) -> Path:
-        return write_json(self.evaluation_path, ev, indent=1)
+    def write_evaluation(self, ev: dict, path: Path | None = None) -> Path:
+        """evaluation.json, or ``path`` (``inkopt evaluate --out``)."""
+        return write_json(self.evaluation_path if path is None else path, ev, indent=1)
 
     # ------------------------------------------------------------------ outputs tied to their inputs
     def volume_digest(self) -> str | None:

@@ -8,7 +8,8 @@ import sys
 import numpy as np
 
 from inkopt import charts
-from inkopt.optim.loop import ProgressLines, changed_settings, format_duration
+from inkopt.optim.loop import ProgressLines, changed_settings
+from inkopt.units import format_duration
 
 
 class Clock:

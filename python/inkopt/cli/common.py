@@ -109,6 +109,14 @@ def add_translucency_args(p, mesh: bool = False, both: bool = False) -> None:
     )
 
 
+def check_budget(max_spp, time_budget, spp_flag: str = "--max-spp", time_flag: str = "--time-budget") -> None:
+    """One-line ValueErrors for a sample cap below 1 or a time budget that is not positive."""
+    if max_spp is not None and max_spp < 1:
+        raise ValueError(f"{spp_flag} must be at least 1, got {max_spp}")
+    if time_budget is not None and not (time_budget > 0):
+        raise ValueError(f"{time_flag} must be a positive number of seconds, got {time_budget}")
+
+
 def lighting_from_args(args):
     from ..lighting import load_lighting
 
@@ -117,6 +125,7 @@ def lighting_from_args(args):
 
 def add_optimizer_args(p) -> None:
     """Options shared by `inkopt slab` and `inkopt optimize`."""
+    from ..evaluation.noise import MAX_SPP
     from ..optim import SCENE_DEFAULTS, OptimizeConfig
 
     d, slab, mesh = OptimizeConfig(), SCENE_DEFAULTS["slab"], SCENE_DEFAULTS["mesh"]
@@ -210,6 +219,20 @@ def add_optimizer_args(p) -> None:
         help="spp of the final evaluation renders, used exactly (default: "
         "adaptive, until the Monte Carlo noise adds less than 0.5 to the mean ΔE76 and SSIM's and "
         "the mottle's noise correction is accurate)",
+    )
+    p.add_argument(
+        "--eval-max-spp",
+        type=int,
+        default=MAX_SPP,
+        metavar="N",
+        help=f"cap of the adaptive final evaluation's samples per texel (default {MAX_SPP})",
+    )
+    p.add_argument(
+        "--eval-time-budget",
+        type=float,
+        metavar="SECONDS",
+        help="time budget of each adaptive final figure (the result's, the start's): it stops adding samples when "
+        "the time measured per sample says more would not fit (default: none)",
     )
     p.add_argument("--threads", type=int, help="worker threads (default: all cores)")
     p.add_argument("--resume", action="store_true", help="continue from DIR/checkpoint.npz if present")
@@ -318,6 +341,7 @@ def run_from_args(args, spec):
     spec.validate()
     if not (args.log_every >= 0):
         raise ValueError(f"--log-every must be a number of seconds >= 0, got {args.log_every}")
+    check_budget(args.eval_max_spp, args.eval_time_budget, "--eval-max-spp", "--eval-time-budget")
     inks = InkTable.parse(args.inks)
     cfg = config_from_args(args)
     ray = ray_from_args(args)
@@ -336,6 +360,8 @@ def run_from_args(args, spec):
         log=stderr_log,
         log_every_s=args.log_every,
         dry_run=args.dry_run,
+        eval_max_spp=args.eval_max_spp,
+        eval_time_budget=args.eval_time_budget,
     )
 
 

@@ -28,6 +28,7 @@ from ..lighting import Lighting, load_lighting
 from ..loss import TexelLoss
 from ..model import FixedShares, Texels, Volume, mix_grad
 from ..render import Renderer
+from ..units import format_duration
 from .checkpoint import History, read_checkpoint, write_checkpoint
 from .config import OptimizeConfig
 from .optimizers import make_optimizer, step_factor
@@ -106,6 +107,8 @@ class Optimization:
         self._renderer: Renderer | None = None
         self.iteration = 0
         self.history = History()
+        # the start's evaluated figures (the run driver's; kept in the checkpoints so a resume need not render it)
+        self.start_figures: dict | None = None
         # wall time of the run's earlier invocations (up to their last checkpoint) and this one's start
         self.wall_seconds_before, self.invocation_start = 0.0, time.perf_counter()
         self.c_avg: np.ndarray | None = None  # running average of the prediction (I, 3)
@@ -170,6 +173,7 @@ class Optimization:
                 **self.opt.state(),
                 **self.history.arrays(),
                 "wall_seconds": np.float64(self.wall_seconds()),
+                **({} if self.start_figures is None else {"start_figures": np.array(json.dumps(self.start_figures))}),
             },
         )
 
@@ -194,6 +198,7 @@ class Optimization:
         self.wall_seconds_before = (
             float(d["wall_seconds"]) if "wall_seconds" in d else float(np.sum(self.history.seconds))
         )
+        self.start_figures = json.loads(str(d["start_figures"])) if "start_figures" in d else None
         self.c_avg = np.asarray(d["c_avg"], np.float32) if "c_avg" in d else None
         self.c_weight = float(d["c_weight"]) if "c_weight" in d else 0.0
         self.c_var = np.asarray(d["c_var"], np.float32) if "c_var" in d else None
@@ -365,14 +370,6 @@ def changed_settings(old: dict, new: dict) -> str:
             what = names.get(k, k)
             out.append(what if k == "problem" else f"{what} {old.get(k)!r} -> {new.get(k)!r}")
     return ", ".join(out)
-
-
-def format_duration(seconds: float) -> str:
-    """ "1 h 02 min", "3 min 05 s" or "42 s"."""
-    s = int(round(max(seconds, 0.0)))
-    if s >= 3600:
-        return f"{s // 3600} h {s % 3600 // 60:02d} min"
-    return f"{s // 60} min {s % 60:02d} s" if s >= 60 else f"{s} s"
 
 
 class ProgressLines:
