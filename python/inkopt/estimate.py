@@ -15,8 +15,9 @@ state and a gradient pass's per-voxel arrays, plus the per-texel arrays of full 
 adjoint and the running average: ~64 bytes per texel).
 
 Disk: volume.npz at most 4 bytes per ink per inside voxel (compressed, often less), the checkpoint (uncompressed:
-variables and the two optimiser moments, 12 bytes per ink per free voxel, plus ~40 bytes per texel per iteration
-of history) and scene.npz (~40 bytes per texel); ``inkopt quantize`` adds one byte per printer voxel (600 x 300 DPI,
+variables and the two optimiser moments, 12 bytes per ink per free voxel; the running average and its variance, 24
+bytes per texel; ~80 bytes of history per iteration) and scene.npz (~40 bytes per texel: voxel, face, normal,
+target); ``inkopt quantize`` adds one byte per printer voxel (600 x 300 DPI,
 27 µm layers: ~6.3 per optimisation voxel of the object's box).
 """
 
@@ -122,7 +123,7 @@ def estimate_run(run, inside_voxels: int, box_voxels: int, seed: int = 0) -> Est
     per_iteration = fixed + per_texel * n_tex + step
     left = max(cfg.iterations - run.iteration, 0)
     n_inks = run.x.shape[1]
-    disk = 4 * n_inks * inside_voxels + 12 * n_inks * len(run.x) + 40 * n_tex * (1 + cfg.iterations // 100) + 40 * n_tex
+    disk = 4 * n_inks * inside_voxels + (12 * n_inks * len(run.x) + 24 * n_tex + 80 * cfg.iterations) + 40 * n_tex
     return Estimate(
         iterations=left,
         seconds_per_iteration=per_iteration,

@@ -1,0 +1,78 @@
+"""The ink-set selection rule on a 35-set search: candidates cyan, cyan2, magenta, magenta2, yellow, yellow2, orange
+choose 3, always black and white, on the astronaut photo (6 x 4 x 1 mm slab, 3337 texels), 40 iterations.
+
+Brute force runs every set to the full budget; each run's training-loss history (every iteration) and its loss at
+the final figures are recorded. Halving's runs resume and continue exactly, so a halving run of a set is a prefix of
+brute force's run of it, and its final runs are brute force's runs: any rung rule's outcome (its winner and its
+work) follows exactly from these records, without running it (``inkopt.inksets.search.simulate``). The records go
+to experiments/results/select_inks_35.json; tests/inksets/test_rung_rule.py replays the current rule on them.
+
+    .venv/bin/python experiments/select_inks_35.py [--iterations 40] [--workers 2] [--out bench-out/select_inks35]
+"""
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+from common import machine  # noqa: E402
+from common import write_study as write
+from select_inks import chart_picture  # noqa: E402
+
+from inkopt.inksets import Selection, make_backend, run_selection  # noqa: E402
+from inkopt.inksets.search import set_name  # noqa: E402
+from inkopt.optim import OptimizeConfig  # noqa: E402
+from inkopt.optim.checkpoint import read_checkpoint  # noqa: E402
+from inkopt.scenes.spec import SlabSpec  # noqa: E402
+
+CANDIDATES = "cyan,cyan2,magenta,magenta2,yellow,yellow2,orange"
+SIZE_MM = [6.0, 4.0, 1.0]
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--iterations", type=int, default=40)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--chart", default="astronaut")
+    ap.add_argument("--out", default="bench-out/select_inks35")
+    args = ap.parse_args()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    pic = chart_picture(args.chart, out)
+    target = SlabSpec(str(pic), tuple(SIZE_MM))
+    sel = Selection(target, CANDIDATES, 3, ["black", "white"], OptimizeConfig(iterations=args.iterations), "brute")
+    backend = make_backend(args.workers)
+    t0 = time.perf_counter()
+    try:
+        brute = run_selection(sel, out / "brute", backend, resume=True, log=lambda m: print(m, flush=True))
+    finally:
+        backend.close()
+    sets = {}
+    for c in brute["candidates"]:
+        name = set_name(c["inks"][:3])
+        ck = read_checkpoint(out / "brute" / "runs" / name / "checkpoint.npz")
+        sets[name] = {"inks": c["inks"], "loss": c["loss"], "hist_loss": [float(v) for v in ck["hist_loss"]]}
+    write(
+        f"select_inks_35{'' if args.chart == 'astronaut' else '_' + args.chart}.json",
+        {
+            "machine": machine(),
+            "chart": args.chart,
+            "candidates": CANDIDATES,
+            "choose": 3,
+            "always": ["black", "white"],
+            "size_mm": SIZE_MM,
+            "iterations": args.iterations,
+            "texels": 47 * 71,
+            "spp": sel.cfg.spp,
+            "forward_spp": sel.cfg.forward_spp,
+            "eval_spp": sel.eval_spp,
+            "seconds": time.perf_counter() - t0,
+            "winner": brute["winner"],
+            "sets": sets,
+        },
+    )
+
+
+if __name__ == "__main__":
+    main()
