@@ -7,7 +7,9 @@ brute force's run of it, and its final runs are brute force's runs: any rung rul
 work) follows exactly from these records, without running it (``inkopt.inksets.search.simulate``). The records go
 to experiments/results/select_inks_35.json; tests/inksets/test_rung_rule.py replays the current rule on them.
 
-    .venv/bin/python experiments/select_inks_35.py [--iterations 40] [--workers 2] [--out bench-out/select_inks35]
+    .venv/bin/python experiments/select_inks_35.py [--chart astronaut|colour] [--iterations 40] [--workers 2]
+        [--out bench-out/select_inks35]
+    .venv/bin/python experiments/select_inks_35.py --analyse     # rung plans replayed on the records: a table
 """
 
 import argparse
@@ -30,7 +32,39 @@ CANDIDATES = "cyan,cyan2,magenta,magenta2,yellow,yellow2,orange"
 SIZE_MM = [6.0, 4.0, 1.0]
 
 
+PLANS = {  # name -> plan for 35 sets at 40 iterations (iterations, sets kept after the rung)
+    "previous rule: 1, 2, 5, 10, 40 keeping half": [(1, 18), (2, 9), (5, 5), (10, 3), (40, 1)],
+    "current rule: 10, 20, 40 keeping 9, then 5": None,  # plan_rungs(35, 40)
+    "10, 40 keeping 4": [(10, 4), (40, 1)],
+}
+
+
+def analyse() -> None:
+    """Every plan of ``PLANS`` with both rankings, replayed on every record: the winner's place in brute force's
+    order, its loss gap and the work against brute force (a markdown table)."""
+    import json
+
+    from inkopt.inksets.search import extrapolate_loss, plan_rungs, rank_loss, rung_work, simulate
+
+    print("| record | plan | ranked by | winner's place | loss gap | work ratio |")
+    print("|---|---|---|---|---|---|")
+    for path in sorted((Path(__file__).resolve().parent / "results").glob("select_inks_35*.json")):
+        d = json.loads(path.read_text())
+        sets, total, per = d["sets"], d["iterations"], d["spp"] + d["forward_spp"]
+        order = sorted(sets, key=lambda n: sets[n]["loss"])
+        brute = len(sets) * rung_work(total, per, d["eval_spp"], True)
+        for name, plan in PLANS.items():
+            for how, rank in (("training loss", rank_loss), ("extrapolation", extrapolate_loss)):
+                w, work = simulate(sets, plan or plan_rungs(len(sets), total), total, per, 16, d["eval_spp"], rank)
+                gap = 100 * (sets[w]["loss"] / sets[order[0]]["loss"] - 1)
+                print(
+                    f"| {d['chart']} | {name} | {how} | {order.index(w) + 1} / 35 | {gap:.2f} % | {work / brute:.2f} |"
+                )
+
+
 def main():
+    if "--analyse" in sys.argv:
+        return analyse()
     ap = argparse.ArgumentParser()
     ap.add_argument("--iterations", type=int, default=40)
     ap.add_argument("--workers", type=int, default=2)

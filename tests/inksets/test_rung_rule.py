@@ -59,3 +59,12 @@ def test_extrapolation_ranks_worse_than_the_training_loss():
         return sorted(score, key=lambda n: (score[n], n)).index(best) + 1
 
     assert place(rank_loss) <= 3 < 10 < place(extrapolate_loss)
+
+
+def test_the_previous_rule_misses_on_the_colour_chart():
+    """The record that tells the rules apart: rungs of 1, 2, 5 and 10 of 40 iterations keeping half pick a set more
+    than 2 % behind brute force's winner on the colour chart, where the current rule finds the winner."""
+    d = json.loads((RESULTS / "select_inks_35_colour.json").read_text())
+    previous = [(1, 18), (2, 9), (5, 5), (10, 3), (40, 1)]
+    assert outcome(d, previous)[0] > 0.02
+    assert outcome(d, plan_rungs(35, d["iterations"]))[0] == 0

@@ -83,7 +83,8 @@ def extrapolate_loss(hist, total: int, start: float = 0.5) -> float:
 
 
 #: the first rung runs this fraction of the budget: long enough that the sets have left the white start's descent
-#: and their order settles (on the 35-set case a set's rank after 1/8 of the budget still moves by up to ~20 places)
+#: and their order has settled (on the recorded astronaut search the Spearman correlation of the training loss with
+#: the final loss over the 35 sets is 0.69 after 1 of 40 iterations, 0.82 after 5, 0.95 after 10)
 FIRST_RUNG = 0.25
 #: after the first rung, this fraction of the sets goes on (rounded up); after the middle rung, half of those
 FIRST_KEEP = 0.25
