@@ -10,6 +10,8 @@ to experiments/results/select_inks_35.json; tests/inksets/test_rung_rule.py repl
     .venv/bin/python experiments/select_inks_35.py [--chart astronaut|colour] [--iterations 40] [--workers 2]
         [--out bench-out/select_inks35]
     .venv/bin/python experiments/select_inks_35.py --analyse     # rung plans replayed on the records: a table
+    .venv/bin/python experiments/select_inks_35.py --chart colour --validate   # a real halving search against
+        its replay on the record (writes experiments/results/select_inks_35_colour_halving.json)
 """
 
 import argparse
@@ -62,6 +64,42 @@ def analyse() -> None:
                 )
 
 
+def validate(args, target, out: Path) -> None:
+    """A real halving search of the chart next to ``simulate``'s replay of the current plan on its brute-force
+    record: the same winner, loss and work are expected (halving's runs are prefixes of brute force's)."""
+    import json
+
+    from inkopt.inksets.search import plan_rungs, simulate
+
+    suffix = "" if args.chart == "astronaut" else "_" + args.chart
+    rec = json.loads((Path(__file__).resolve().parent / "results" / f"select_inks_35{suffix}.json").read_text())
+    sel = Selection(target, CANDIDATES, 3, ["black", "white"], OptimizeConfig(iterations=args.iterations), "halving")
+    backend = make_backend(args.workers)
+    t0 = time.perf_counter()
+    try:
+        res = run_selection(sel, out / "halving", backend, log=lambda m: print(m, flush=True))
+    finally:
+        backend.close()
+    per = rec["spp"] + rec["forward_spp"]
+    name, work = simulate(rec["sets"], plan_rungs(35, rec["iterations"]), rec["iterations"], per, 16, rec["eval_spp"])
+    data = {
+        "machine": machine(),
+        "chart": args.chart,
+        "seconds": time.perf_counter() - t0,
+        "halving_winner": res["winner"],
+        "halving_texel_samples": res["texel_samples"],
+        "replayed_winner": {"inks": rec["sets"][name]["inks"], "loss": rec["sets"][name]["loss"]},
+        "replayed_texel_samples": work * rec["texels"],
+        "brute_force_seconds": rec["seconds"],
+    }
+    data["identical"] = (
+        data["halving_winner"] == data["replayed_winner"]
+        and data["halving_texel_samples"] == data["replayed_texel_samples"]
+    )
+    print(data)
+    write(f"select_inks_35{suffix}_halving.json", data)
+
+
 def main():
     if "--analyse" in sys.argv:
         return analyse()
@@ -70,11 +108,14 @@ def main():
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--chart", default="astronaut")
     ap.add_argument("--out", default="bench-out/select_inks35")
+    ap.add_argument("--validate", action="store_true", help="run halving and compare it with its replay")
     args = ap.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     pic = chart_picture(args.chart, out)
     target = SlabSpec(str(pic), tuple(SIZE_MM))
+    if args.validate:
+        return validate(args, target, out)
     sel = Selection(target, CANDIDATES, 3, ["black", "white"], OptimizeConfig(iterations=args.iterations), "brute")
     backend = make_backend(args.workers)
     t0 = time.perf_counter()
