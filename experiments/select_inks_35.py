@@ -51,6 +51,8 @@ def analyse() -> None:
     print("| record | plan | ranked by | winner's place | loss gap | work ratio |")
     print("|---|---|---|---|---|---|")
     for path in sorted((Path(__file__).resolve().parent / "results").glob("select_inks_35*.json")):
+        if path.stem.endswith("_halving"):  # a --validate result, not a record
+            continue
         d = json.loads(path.read_text())
         sets, total, per = d["sets"], d["iterations"], d["spp"] + d["forward_spp"]
         order = sorted(sets, key=lambda n: sets[n]["loss"])
