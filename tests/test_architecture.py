@@ -24,7 +24,7 @@ LAYERS = [
     {"printing"},
     {"evaluation"},
     {"calibration"},
-    {"run"},
+    {"run", "estimate"},
     {"inksets"},
     {"cli", "__main__"},
 ]

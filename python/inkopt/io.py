@@ -81,14 +81,44 @@ def save_npz(path: str | Path, arrays: dict, compressed: bool = True) -> None:
         raise
 
 
+def _no_pickles(what: str, path) -> str:
+    """The one-line refusal of a file holding pickled Python objects (numpy's own advice, ``allow_pickle=True``,
+    would run code from the file)."""
+    return (
+        f"{what} {path} holds Python objects (pickled data), not a numeric array; save a number array with numpy.save"
+    )
+
+
+def load_array(path: str | Path, what: str = "array") -> np.ndarray:
+    """The array of a .npy file; a missing, unreadable or pickled file is a one-line ValueError naming ``what``."""
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"{what} {path} does not exist")
+    try:
+        a = np.load(path, allow_pickle=False)
+    except ValueError as exc:
+        if "allow_pickle" in str(exc):
+            raise ValueError(_no_pickles(what, path)) from None
+        raise ValueError(f"cannot read {what} {path}: {exc}") from None
+    except Exception as exc:
+        raise ValueError(f"cannot read {what} {path} ({type(exc).__name__}: {exc})") from None
+    if not isinstance(a, np.ndarray):
+        raise ValueError(f"{what} {path} is an .npz archive, not one .npy array")
+    return a
+
+
 def load_npz(path: str | Path, what: str = "file") -> dict:
-    """All arrays of an .npz as a dict; a missing or unreadable file is a one-line ValueError."""
+    """All arrays of an .npz as a dict; a missing, unreadable or pickled file is a one-line ValueError."""
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"{what} {path} does not exist")
     try:
         with np.load(path, allow_pickle=False) as z:
             return dict(z)
+    except ValueError as exc:
+        if "allow_pickle" in str(exc):
+            raise ValueError(_no_pickles(what, path)) from None
+        raise ValueError(f"{path} is not a readable .npz {what} ({type(exc).__name__}: {exc})") from None
     except Exception as exc:  # zipfile/format errors: one line
         raise ValueError(f"{path} is not a readable .npz {what} ({type(exc).__name__}: {exc})") from None
 

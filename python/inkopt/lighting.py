@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .io import load_array
+
 UNIFORM = "uniform"
 MAP_SUFFIXES = (".hdr", ".pic", ".exr", ".npy")
 
@@ -106,10 +108,7 @@ def read_map(path) -> np.ndarray:
     if not p.is_file():
         raise ValueError(f"cannot read lighting '{path}': no such file")
     if suffix == ".npy":
-        try:
-            a = np.load(p, allow_pickle=False)
-        except Exception as exc:
-            raise ValueError(f"cannot read lighting '{path}': {exc}") from None
+        a = load_array(p, "lighting map")
     else:
         cv2 = _cv2()
         a = cv2.imread(str(p), cv2.IMREAD_UNCHANGED | cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)

@@ -1,11 +1,14 @@
 """The run driver: one optimisation run of any scene, from start (or resume) to report (docs/run-dir.md).
 
-``run_optimisation(scene, out_dir, cfg)``: write scene.npz, optimise with checkpoints (``resume`` continues
-exactly), save volume.npz, then the final figures: the optimised and the initial volume rendered with seeds from
-``2**62 + cfg.seed`` (never used by the optimisation) at ``eval_spp`` samples per texel if given, else adaptively
-(``evaluation.noise.adaptive_render``: enough that the Monte Carlo noise adds at most ~0.5 to the mean ΔE76 and
-SSIM's and the mottle's noise correction is accurate, at most 4096), compared with the target by
-``evaluation.metrics.prediction_metrics``; the scene's pictures, loss.png and report.json
+``run_optimisation(scene, out_dir, cfg)``: a fresh run (not a resume) first removes every output of an earlier run in
+``out_dir`` (``RunDir.remove_earlier_run``); write scene.npz, estimate the cost (``inkopt.estimate``), measure the
+start's figures once (kept in the checkpoints, so a resume does not render the start again), optimise with
+checkpoints (``resume`` continues exactly), save volume.npz (and remove the outputs derived from an earlier one), then
+the result's figures. Figures are renders with seeds from ``2**62 + cfg.seed`` (never used by the optimisation) at
+``eval_spp`` samples per texel if given, else adaptively (``evaluation.noise.adaptive_render``: enough that the Monte
+Carlo noise adds at most ~0.5 to the mean ΔE76 and SSIM's and the mottle's noise correction is accurate, at most
+``eval_max_spp`` (4096) and within ``eval_time_budget``), compared with the target by
+``evaluation.metrics.prediction_metrics``; then the scene's pictures, loss.png and report.json
 (``evaluation.results.Report``). The scene comes from user inputs through a spec (``scenes.spec``:
 ``SlabSpec(...).build(inks)``, ``MeshSpec(...).build(inks)``).
 """
@@ -14,13 +17,15 @@ from __future__ import annotations
 
 import resource
 import time
+from pathlib import Path
 
 import numpy as np
 
 from .distributed import renderer_factory
+from .estimate import ANNOUNCE_SECONDS, Estimate, estimate_run
 from .evaluation.baselines import baseline_mixture
 from .evaluation.metrics import delta_e76_map, prediction_metrics
-from .evaluation.noise import EVAL_SEED_OFFSET, adaptive_render
+from .evaluation.noise import EVAL_SEED_OFFSET, MAX_SPP, adaptive_render
 from .evaluation.results import Report
 from .lighting import Lighting, load_lighting
 from .optim import Optimization, OptimizeConfig
@@ -46,20 +51,58 @@ def run_optimisation(
     lighting: Lighting | str | None = None,
     ray: str | None = None,
     log=print,
-) -> Report:
+    log_every_s: float = 30.0,
+    dry_run: bool = False,
+    eval_max_spp: int = MAX_SPP,
+    eval_time_budget: float | None = None,
+) -> Report | Estimate:
     """Optimise ``scene`` into run directory ``out_dir`` under the display ``lighting`` (default uniform; the
     final figures are rendered under it too); returns the report (also report.json). ``ray``: "auto" or a Ray
     cluster's address: every render is split into texel shards on Ray workers (``inkopt.distributed``; the
-    results are bit-identical), ``threads`` then being each worker's."""
+    results are bit-identical), ``threads`` then being each worker's. Without ``progress`` (no terminal), ``log``
+    gets a progress line at least every ``log_every_s`` seconds of the iterations. Before the iterations the run's
+    cost is estimated (``inkopt.estimate``) and logged when it exceeds ``estimate.ANNOUNCE_SECONDS``; with
+    ``dry_run`` only the estimate is made and returned, and nothing is written. ``eval_max_spp`` and
+    ``eval_time_budget`` (seconds) cap each adaptive figure's samples."""
     with renderer_factory(ray, threads) as make_renderer:
         return _optimise(
-            scene, out_dir, cfg, resume, eval_spp, threads, progress, load_lighting(lighting), log, make_renderer
+            scene,
+            out_dir,
+            cfg,
+            resume,
+            eval_spp,
+            threads,
+            progress,
+            load_lighting(lighting),
+            log,
+            make_renderer,
+            log_every_s,
+            dry_run,
+            eval_max_spp,
+            eval_time_budget,
         )
 
 
-def _optimise(scene, out_dir, cfg, resume, eval_spp, threads, progress, lighting, log, make_renderer) -> Report:
+def _optimise(
+    scene,
+    out_dir,
+    cfg,
+    resume,
+    eval_spp,
+    threads,
+    progress,
+    lighting,
+    log,
+    make_renderer,
+    log_every_s,
+    dry_run,
+    eval_max_spp,
+    eval_time_budget,
+) -> Report | Estimate:
     t_start = time.perf_counter()
     log(scene.describe())
+    for note in scene.warnings:  # e.g. a mesh's small holes
+        log(f"warning: {note}")
 
     def baseline(kind: str) -> np.ndarray:  # a print-shop start (cfg.init "surface" or "extrusion")
         return baseline_mixture(
@@ -78,33 +121,65 @@ def _optimise(scene, out_dir, cfg, resume, eval_spp, threads, progress, lighting
         renderer_factory=make_renderer,
         kind=scene.kind,
     )
+    shape = scene.volume.shape
+    box = int(np.prod(shape))
+    inside = box if scene.volume.inside is None else int(scene.volume.inside.sum())
+    if dry_run:  # read the checkpoint a resume would continue from, write nothing
+        checkpoint = RunDir(out_dir).checkpoint_path if Path(out_dir).is_dir() else None
+        if resume and checkpoint is not None and checkpoint.is_file():
+            run.load_checkpoint(checkpoint)
+        return estimate_run(run, inside, box, cfg.seed)
     rd = RunDir.create(out_dir)
-    if resume:
-        run.resume(rd.checkpoint_path, log)
+    if not (resume and run.resume(rd.checkpoint_path, log)):
+        gone = rd.remove_earlier_run()  # a fresh run: nothing of an earlier run may pair with the new result
+        if gone:
+            log(f"removed the outputs of an earlier run in {rd}: {', '.join(gone)}")
     rd.save_scene(scene.record())
-    run.run(rd.checkpoint_path, progress=progress)
-    run.release_renderer()  # not beside the writing of the result
-    rd.save_volume_slabs(run.base, run.mixture_slabs(), run.base.inks)  # a slab of layers at a time
+    estimate = estimate_run(run, inside, box, cfg.seed)
+    if estimate.seconds > ANNOUNCE_SECONDS:
+        log(estimate.line())
+    run.invocation_start = t_start  # the whole run's time counts this invocation's set-up too
 
-    # Final figures with seeds unused by the optimisation, adaptive spp unless given; the start is reconstructed
-    # from the configuration (identical to the first iterate whether or not the run was resumed). The run's own
-    # renderer (built again), set to the final then to the starting mixture (only the free voxels change: no
-    # grid-sized volume), renders exactly what a renderer built from the result volume would.
+    # Figures with seeds unused by the optimisation, adaptive spp unless given (at most ``eval_max_spp`` and
+    # ``eval_time_budget`` seconds per result). The run's own renderer, set to a mixture (only the free voxels
+    # change: no grid-sized volume), renders exactly what a renderer built from that volume would.
     spp = int(eval_spp) if eval_spp else None  # None: adaptive
     seed = EVAL_SEED_OFFSET + cfg.seed
-    renderer = run.renderer()
 
-    def render(n: int, s: int):
-        r = renderer.render(scene.texels, n, s, cfg.include_specular, progress)
-        return r.rgb, r.var_mean, n
+    def figures_of(x=None):
+        renderer = run.renderer(x)
 
-    res = adaptive_render(render, run.loss.target_lab, seed, spp, log=log)
-    metrics = prediction_metrics(run.loss, res.rgb, res.var)
-    run.renderer(run.initial_variables())
-    res0 = adaptive_render(render, run.loss.target_lab, seed, spp, log=log)
-    renderer = None  # the evaluation's renderer goes before the run's is released
+        def render(n: int, s: int):
+            r = renderer.render(scene.texels, n, s, cfg.include_specular, progress)
+            return r.rgb, r.var_mean, n
+
+        res = adaptive_render(
+            render, run.loss.target_lab, seed, spp, max_spp=eval_max_spp, log=log, time_budget=eval_time_budget
+        )
+        return res, prediction_metrics(run.loss, res.rgb, res.var)
+
+    def keep_start(res0, init) -> None:
+        run.start_figures = {
+            "delta_e76_mean": init.delta_e76_mean,
+            "ssim": init.ssim,
+            "delta_e76_mean_corrected": init.delta_e76_mean_corrected,
+            "eval_spp": res0.spp,
+        }
+
+    if run.start_figures is None and run.iteration == 0:  # measured once, before the first step, and then kept in
+        keep_start(*figures_of())  # the checkpoints, so that no resume renders the start again
+    run.run(rd.checkpoint_path, progress=progress, log=log, log_every_s=log_every_s)
+    run.release_renderer()  # not beside the writing of the result
+    rd.save_volume_slabs(run.base, run.mixture_slabs(), run.base.inks)  # a slab of layers at a time
+    gone = rd.remove_stale()  # quantized volume, slices, evaluation made from an earlier volume.npz
+    if gone:
+        log(f"removed outputs made from the earlier volume.npz: {', '.join(gone)}")
+
+    res, metrics = figures_of()
+    if run.start_figures is None:  # a checkpoint written before the start's figures were kept in it
+        keep_start(*figures_of(run.initial_variables()))
     run.release_renderer()
-    init = prediction_metrics(run.loss, res0.rgb, res0.var)
+    start = run.start_figures
     de = delta_e76_map(run.loss, res.rgb)
     scene.write_pictures(rd, res.rgb, de)
     loss_figure(rd.loss_picture_path, run.history.loss, run.history.delta_e76)
@@ -112,19 +187,21 @@ def _optimise(scene, out_dir, cfg, resume, eval_spp, threads, progress, lighting
     n = max(len(h.seconds), 1)
     report = Report(
         metrics=metrics,
-        initial_delta_e76_mean=init.delta_e76_mean,
-        initial_ssim=init.ssim,
-        initial_delta_e76_mean_corrected=init.delta_e76_mean_corrected,
+        initial_delta_e76_mean=start["delta_e76_mean"],
+        initial_ssim=start["ssim"],
+        initial_delta_e76_mean_corrected=start["delta_e76_mean_corrected"],
         delta_e76_max=float(de.max()),
         iterations=run.iteration,
         spp=cfg.spp,
         eval_spp=res.spp,
         spp_adaptive=spp is None,
         eval_spp_passes=res.passes,
-        initial_eval_spp=res0.spp,
+        initial_eval_spp=start["eval_spp"],
         # this invocation's wall time (set-up, the iterations it ran, the evaluation); a resumed run's earlier
         # iterations are in the history, so seconds_iterations covers all of them
         seconds=time.perf_counter() - t_start,
+        seconds_total=run.wall_seconds(),
+        estimate=estimate.to_json(),
         seconds_iterations=float(np.sum(h.seconds)),
         seconds_per_iteration=float(np.sum(h.seconds) / n),
         time_split={k: float(np.sum(getattr(h, k)) / n) for k in ("render_s", "gradient_s", "loss_s", "step_s")},

@@ -10,18 +10,26 @@ pictures, and the optimisation's constraints (``free_mask``, ``fixed_share``). L
 constraint (``model.Translucency``, stored sparsely), so every reader sees the same constraints however the file
 stores them. scene.npz carries ``format_version`` (``SCENE_FORMAT``); older versions are read through
 ``io.upgrade_format``.
+
+Outputs tied to their inputs: quantized.npz, the slice manifest and evaluation.json record ``volume_digest``
+(``io.file_digest`` of the volume.npz they were made from; the manifest and evaluation.json also
+``quantized_digest``). :meth:`RunDir.check_quantized_current` refuses a quantized volume made from another
+volume.npz (a :class:`StaleOutputError`), and a run removes what it makes stale: a fresh run every output of an
+earlier run in its folder (:meth:`RunDir.remove_earlier_run`), a run that writes a new volume.npz the derived
+outputs not made from it (:meth:`RunDir.remove_stale`).
 """
 
 from __future__ import annotations
 
 import json
+import shutil
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from .io import FORMAT_KEY, FormatError, load_npz, save_npz, upgrade_format, write_json
+from .io import FORMAT_KEY, FormatError, file_digest, load_npz, save_npz, upgrade_format, write_json
 from .model import FixedShares, InkTable, MeshInfo, Texels, Translucency, Volume, scene_fixed_shares
 from .model.labelfile import LabelFileWriter
 from .model.volume import upgrade_volume
@@ -30,6 +38,14 @@ from .model.volume import upgrade_volume
 FIXED_SHARE_MAX_ENTRIES = 50_000_000
 #: the format version scene.npz is written in (``format_version``)
 SCENE_FORMAT = 1
+
+
+#: the key under which an output records the digest of the volume.npz / quantized.npz it was made from
+VOLUME_DIGEST, QUANTIZED_DIGEST = "volume_digest", "quantized_digest"
+
+
+class StaleOutputError(ValueError):
+    """An output made from another version of the file it derives from (one line: what to run again)."""
 
 
 @dataclass
@@ -221,9 +237,10 @@ class RunDir:
         """face_<face>.png: a slab face's target | prediction | ΔE76 map."""
         return self.path / f"face_{face}.png"
 
-    def evaluation_picture_path(self, face: str) -> Path:
-        """evaluation_<face>.png: a slab face's target | optimized | quantized | baselines (``inkopt evaluate``)."""
-        return self.path / f"evaluation_{face}.png"
+    def evaluation_picture_path(self, face: str, stem: str = "evaluation") -> Path:
+        """<stem>_<face>.png: a slab face's target | optimized | quantized | baselines, or (face "views") a mesh's
+        rows of them seen from four sides (``inkopt evaluate``; ``stem``: the evaluation file's)."""
+        return self.path / f"{stem}_{face}.png"
 
     @property
     def views_picture_path(self) -> Path:
@@ -271,24 +288,28 @@ class RunDir:
         return SceneRecord.from_arrays(load_npz(p, "scene file"), str(p))
 
     # ------------------------------------------------------------------ printer labels
-    def save_quantized(self, vol: Volume) -> Path:
-        """quantized.npz (everything but the labels) + quantized_labels.npy (the labels, copied layer by layer)."""
-        with self.quantized_writer(vol, vol.shape) as w:
+    def save_quantized(self, vol: Volume, volume_digest: str | None = None) -> Path:
+        """quantized.npz (everything but the labels) + quantized_labels.npy (the labels, copied layer by layer);
+        ``volume_digest``: that of the volume.npz it was made from."""
+        with self.quantized_writer(vol, vol.shape, volume_digest=volume_digest) as w:
             for k in range(vol.shape[0]):
                 w[k] = vol.labels[k]
         return self.quantized_path
 
     @contextmanager
-    def quantized_writer(self, meta: Volume, shape, normals=None):
+    def quantized_writer(self, meta: Volume, shape, normals=None, volume_digest: str | None = None):
         """Write the quantized volume one printer layer at a time: ``with d.quantized_writer(meta, shape) as w:
         w[k] = layer`` (k = 0, 1, ...; ``model.labelfile.LabelFileWriter``). ``meta``: a labels Volume giving
         everything but the labels (voxel size, inks, settings; its own labels are ignored); ``normals``: the
         printer grid's ``SurfaceNormals`` or None. On success
         the labels file replaces quantized_labels.npy and then quantized.npz is written (the old quantized.npz is
-        removed first, so a crash never pairs an old quantized.npz with new labels)."""
+        removed first, so a crash never pairs an old quantized.npz with new labels). ``volume_digest``: the
+        ``io.file_digest`` of the volume.npz the labels are made from, recorded as ``volume_digest``."""
         arrays = {k: v for k, v in meta.to_arrays().items() if k != "labels"}
         if normals is not None:
             arrays.update(normal_index=normals.index, normal_vectors=normals.vectors)
+        if volume_digest is not None:
+            arrays[VOLUME_DIGEST] = np.array(volume_digest)
         w = LabelFileWriter(self.quantized_labels_path, shape)
         try:
             yield w
@@ -328,5 +349,88 @@ class RunDir:
     def read_report(self) -> dict:
         return json.loads(self._need(self.report_path, "the run has not finished").read_text())
 
-    def write_evaluation(self, ev: dict) -> Path:
-        return write_json(self.evaluation_path, ev, indent=1)
+    def write_evaluation(self, ev: dict, path: Path | None = None) -> Path:
+        """evaluation.json, or ``path`` (``inkopt evaluate --out``)."""
+        return write_json(self.evaluation_path if path is None else path, ev, indent=1)
+
+    # ------------------------------------------------------------------ outputs tied to their inputs
+    def volume_digest(self) -> str | None:
+        """``io.file_digest`` of volume.npz, None without one."""
+        return file_digest(self.volume_path) if self.volume_path.is_file() else None
+
+    def quantized_digest(self) -> str | None:
+        """``io.file_digest`` of quantized.npz, None without one."""
+        return file_digest(self.quantized_path) if self.quantized_path.is_file() else None
+
+    def _recorded(self, path: Path) -> str | None:
+        """The ``volume_digest`` an output records (quantized.npz, evaluation.json, a slice manifest), or None."""
+        try:
+            if path.suffix == ".npz":
+                with np.load(path, allow_pickle=False) as z:
+                    return str(z[VOLUME_DIGEST]) if VOLUME_DIGEST in z.files else None
+            return json.loads(path.read_text()).get(VOLUME_DIGEST)
+        except (OSError, ValueError, KeyError, AttributeError):
+            return None
+
+    def check_quantized_current(self) -> None:
+        """StaleOutputError unless quantized.npz was made from the current volume.npz: it records that file's
+        digest, or (a file written without one, by an older inkopt or a script) is not older than volume.npz.
+        Nothing to check without either file."""
+        if not (self.has_quantized() and self.volume_path.is_file()):
+            return
+        rec, again = self._recorded(self.quantized_path), f"run 'inkopt quantize {self.path}' again"
+        if rec is None and self.volume_path.stat().st_mtime > self.quantized_path.stat().st_mtime:
+            raise StaleOutputError(
+                f"{self.quantized_path} is older than volume.npz and does not record which volume.npz it was "
+                f"made from; {again}"
+            )
+        if rec is not None and rec != self.volume_digest():
+            raise StaleOutputError(
+                f"{self.quantized_path} was made from another volume.npz than the one in {self.path} (the run was "
+                f"redone or continued after quantizing); {again}"
+            )
+
+    def _derived(self) -> list[Path]:
+        """The outputs made from volume.npz: the quantized volume, its slices and package, evaluations."""
+        return [
+            self.quantized_path,
+            self.quantized_labels_path,
+            self.slices_path,
+            self.gcvf_path,
+            self.evaluation_path,
+            *sorted(self.path.glob("evaluation_*.png")),
+        ]
+
+    def _remove(self, paths) -> list[str]:
+        gone = []
+        for p in paths:
+            if p.is_dir() and (p / "manifest.json").is_file():  # only inkopt's own slice folder
+                shutil.rmtree(p)
+            elif p.is_file():
+                p.unlink()
+            else:
+                continue
+            gone.append(p.name)
+        return gone
+
+    def remove_earlier_run(self) -> list[str]:
+        """Before a fresh run (not a resume): remove every output of an earlier run in this folder (result,
+        checkpoint, report, pictures and everything derived from them), which the new run would make stale.
+        Returns the names removed."""
+        own = [self.volume_path, self.scene_path, self.checkpoint_path, self.report_path, self.loss_picture_path]
+        own += [self.views_picture_path, self.prediction_glb_path, self.target_glb_path]
+        return self._remove(own + sorted(self.path.glob("face_*.png")) + self._derived())
+
+    def remove_stale(self) -> list[str]:
+        """After volume.npz is written: remove the derived outputs that do not record its digest (the GCVF package
+        always: this class does not read packages). Returns the names removed."""
+        digest = self.volume_digest()
+        keep = set()
+        for p in (self.quantized_path, self.evaluation_path, self.slices_path / "manifest.json"):
+            if p.is_file() and self._recorded(p) == digest:
+                keep.add(p.parent if p.name == "manifest.json" else p)
+        if self.quantized_path in keep:
+            keep.add(self.quantized_labels_path)
+        if self.evaluation_path in keep:
+            keep.update(self.path.glob("evaluation_*.png"))
+        return self._remove(p for p in self._derived() if p not in keep)

@@ -49,3 +49,11 @@ def parse_size_mm(text: str) -> tuple[float, float, float]:
     if min(w, h, d) <= 0:
         raise ValueError(f"--size-mm sizes must be positive, got '{text}'")
     return w, h, d
+
+
+def format_duration(seconds: float) -> str:
+    """A wall time for people: "1 h 02 min", "3 min 05 s" or "42 s"."""
+    s = int(round(max(seconds, 0.0)))
+    if s >= 3600:
+        return f"{s // 3600} h {s % 3600 // 60:02d} min"
+    return f"{s // 60} min {s % 60:02d} s" if s >= 60 else f"{s} s"

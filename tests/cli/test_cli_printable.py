@@ -238,8 +238,9 @@ def test_export_3mf_and_inspect(tmp_path, capsys):
     assert code == 0 and "labels of" in out and (tmp_path / "r" / "quantized.3mf").is_file(), err
     code, out, err = run(capsys, "export", tmp_path / "r", "--format", "gcvf", "--material", "white=VeroPureWht")
     assert code == 0 and "white #FFFFFF = VeroPureWht" in out, err
+    assert run(capsys, "export", tmp_path / "r")[0] == 0
     q = Volume.load(tmp_path / "r" / "quantized.npz")
-    for name in ("slices.gcvf", "quantized.3mf"):
+    for name in ("slices.gcvf", "quantized.3mf", "slices"):
         code, out, err = run(capsys, "inspect", tmp_path / "r" / name, "--run", tmp_path / "r", "--json")
         rep = json.loads(out)
         assert code == 0 and rep["layers"] == q.labels.shape[0], err
@@ -249,5 +250,6 @@ def test_export_3mf_and_inspect(tmp_path, capsys):
     code, out, _ = run(capsys, "inspect", tmp_path / "r" / "slices.gcvf", "--preview", tmp_path / "p.png")
     assert code == 0 and (tmp_path / "p.png").is_file() and "VeroPureWht" in out
     assert run(capsys, "quantize", tmp_path / "r", "--seed", "5")[0] == 0
-    code, out, err = run(capsys, "inspect", tmp_path / "r" / "slices.gcvf", "--run", tmp_path / "r")
-    assert code == 2 and len(err.strip().splitlines()) == 1 and "is stale" in err and "export it again" in err
+    for name in ("slices.gcvf", "slices"):
+        code, out, err = run(capsys, "inspect", tmp_path / "r" / name, "--run", tmp_path / "r")
+        assert code == 2 and len(err.strip().splitlines()) == 1 and "is stale" in err and "export it again" in err

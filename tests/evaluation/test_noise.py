@@ -153,3 +153,24 @@ def test_ssim_ratio_matches_sampled_noise():
     # 400 draws x 2000 texels: the sampled mean variance's relative standard error is ~0.2 %; 5 % leaves room for
     # the delta method's curvature error at 1 % noise, but not for a wrong channel scale (1/100 vs 1/255: 6.5x)
     np.testing.assert_allclose(NoiseModel.of(c, var, linear_to_lab(t)).ssim_ratio, empirical, rtol=0.05)
+
+
+def test_time_budget_caps_the_samples_and_passes_say_their_time():
+    """A render that costs 10 ms per sample per texel and noise that would need well over 1000 spp: with a 3 s budget
+    the pilot (64 spp, 0.64 s) leaves room for 236 more, which is what is rendered; the result says it was capped,
+    and the log line gives the pass's expected time."""
+    t, c = synthetic(0.05)
+    now = [0.0]
+    render = fake_renderer(c, (0.1 * c) ** 2 * 1e6, [])
+
+    def timed(n, seed):
+        now[0] += 0.01 * n
+        return render(n, seed)
+
+    lines = []
+    ad = adaptive_render(timed, linear_to_lab(t), seed=0, time_budget=3.0, log=lines.append, clock=lambda: now[0])
+    assert ad.passes == [64, 236] and ad.spp == 300 and ad.capped and ad.noise > TARGET_NOISE_DE76
+    assert now[0] <= 3.0 + 1e-9
+    assert "236 more, ~2 s (capped)" in lines[0]
+    free = adaptive_render(timed, linear_to_lab(t), seed=0, clock=lambda: now[0])
+    assert free.spp > 1000  # without the budget it would have gone on

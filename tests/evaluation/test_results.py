@@ -53,6 +53,8 @@ SLAB_REPORT_KEYS = {
     "peak_rss_gb",
     "seconds",
     "seconds_iterations",
+    "seconds_total",
+    "estimate",
     "seconds_per_iteration",
     "seed",
     "size_mm",
@@ -64,6 +66,7 @@ SLAB_REPORT_KEYS = {
     "threads",
     "time_split",
     "voxels",
+    "colour_source",
 }
 
 
@@ -102,7 +105,12 @@ def test_report_keys_and_round_trip(run):
     assert set(data) == SLAB_REPORT_KEYS | {"format_version"} and data["format_version"] == 1
     rep = Report.read(run / "report.json")
     assert rep.to_json() == data and list(rep.to_json()) == list(data)  # the same keys in the same order
-    assert rep.scene == {"voxels": 24 * 16 * 6, "texels": 24 * 16, "size_mm": [2.0, 1.333, 0.5]}
+    assert rep.scene == {
+        "voxels": 24 * 16 * 6,
+        "texels": 24 * 16,
+        "size_mm": [2.0, 1.333, 0.5],
+        "colour_source": "top picture chart.png (24 x 16 px, RGB)",
+    }
     assert rep.lighting == {"lighting": "uniform", "lighting_rotate_deg": 0.0}
     assert rep.metrics.delta_e76_mean == data["delta_e76_mean"]
     old = {k: v for k, v in data.items() if k != "format_version"}  # as written before files carried a version

@@ -65,9 +65,10 @@ def test_outputs_keys_and_work(halving):
     assert res["winner"] == {"inks": res["candidates"][0]["inks"], "loss": res["candidates"][0]["loss"]}
     assert res["candidates"][0]["loss"] <= res["candidates"][1]["loss"]
     texels = 24 * 16
-    # work: iterations x (2 + 4) spp + two evaluation renders per rung (8 spp, then 16 on the last)
+    # work: iterations x (2 + 4) spp + the evaluation renders: the start and the result on the first rung (8 spp),
+    # the result only on the last (16 spp; the resumed run keeps its start's figures)
     assert res["candidates"][2]["texel_samples"] == texels * (2 * 6 + 2 * 8)
-    assert res["candidates"][0]["texel_samples"] == texels * (4 * 6 + 2 * 8 + 2 * 16)
+    assert res["candidates"][0]["texel_samples"] == texels * (4 * 6 + 2 * 8 + 16)
     assert res["texel_samples"] == sum(c["texel_samples"] for c in res["candidates"])
     assert (out / "selection.png").stat().st_size > 1000
 
@@ -118,15 +119,15 @@ def test_extrapolate_loss():
 
 
 def test_budgets_paper_setup():
-    """15 sets: rungs of 1/8 and 1/4 of the budget, then (no half-budget rung) the last 4 run the full budget;
-    work (iterations, evaluation renders at 16 and 256 spp) at most 40 % of brute force's."""
+    """15 sets: rungs of 1/4, 1/2 and the full budget keeping 4 then 2 sets; work (iterations, evaluation renders at
+    16 and 256 spp: the start's only on a fresh run) at most 40 % of brute force's."""
     sel = Selection(
         None, "cyan,cyan2,magenta,magenta2,yellow,yellow2", 4, ["black", "white"], OptimizeConfig(iterations=80)
     )
-    assert sel.budgets() == [10, 20, 80]
+    assert sel.plan() == [(20, 4), (40, 2), (80, 1)] and sel.budgets() == [20, 40, 80]
     assert Selection(None, "cyan,magenta,yellow", 2, [], OptimizeConfig(iterations=4)).budgets() == [2, 4]
     per_it = sel.cfg.spp + sel.cfg.forward_spp
-    work = 15 * (10 * per_it + 2 * 16) + 8 * (10 * per_it + 2 * 16) + 4 * (60 * per_it + 2 * 256)
+    work = 15 * (20 * per_it + 2 * 16) + 4 * (20 * per_it + 16) + 2 * (40 * per_it + 256)
     assert work / (15 * (80 * per_it + 2 * 256)) <= 0.40
 
 
@@ -273,16 +274,16 @@ def test_pool_equals_serial(chart, halving, tmp_path):
 
 @pytest.mark.slow
 def test_halving_fifteen_sets_pool_equals_serial(chart, tmp_path):
-    """The paper's 15 sets by halving (24 iterations: rungs of 3, 6, 24): 15, 8 then 4 sets, ranked between rungs
-    by the extrapolated training loss; a pool of 2 gives the same selection.json as serial execution."""
+    """The paper's 15 sets by halving (24 iterations: rungs of 6, 12, 24): 15, 4 then 2 sets, ranked between rungs
+    by the training loss; a pool of 2 gives the same selection.json as serial execution."""
     sel = lambda: selection(chart, candidates="cyan,cyan2,magenta,magenta2,yellow,yellow2", choose=4, iterations=24)  # noqa: E731
     res = run_selection(sel(), tmp_path / "serial", Serial(2), log=lambda m: None)
     state = json.loads((tmp_path / "serial" / "selection_state.json").read_text())
-    assert [(r["iterations"], len(r["results"])) for r in state["rungs"]] == [(3, 15), (6, 8), (24, 4)]
+    assert [(r["iterations"], len(r["results"])) for r in state["rungs"]] == [(6, 15), (12, 4), (24, 2)]
     for k in (0, 1):
-        ranked = sorted(state["rungs"][k]["results"].items(), key=lambda kv: (kv[1]["predicted_loss"], kv[0]))
+        ranked = sorted(state["rungs"][k]["results"].items(), key=lambda kv: (kv[1]["train_loss"], kv[0]))
         assert {n for n, _ in ranked[: len(state["rungs"][k + 1]["results"])]} == set(state["rungs"][k + 1]["results"])
-    assert [c["iterations"] for c in res["candidates"]] == [24] * 4 + [6] * 4 + [3] * 7
+    assert [c["iterations"] for c in res["candidates"]] == [24] * 2 + [12] * 2 + [6] * 11
     pool = Pool(2)
     try:
         assert run_selection(sel(), tmp_path / "pool", pool, log=lambda m: None) == res

@@ -208,8 +208,10 @@ def test_resume_continues_exactly(tmp_path, forward_spp, smooth):
     with pytest.raises(ValueError, match="different settings"):
         e.load_checkpoint(tmp_path / "ck.npz")
     f = run(scene, iterations=6, forward_spp=forward_spp, smooth=smooth, decay=0.25)
-    with pytest.raises(ValueError, match="different settings"):
+    with pytest.raises(ValueError, match=r"different settings \(decay 0.5 -> 0.25\)"):  # names what changed
         f.load_checkpoint(tmp_path / "ck.npz")
+    # the run's wall time carries over: the resumed run's count starts at the checkpoint's
+    assert c.wall_seconds() >= float(np.load(tmp_path / "ck.npz")["wall_seconds"]) > 0
 
 
 @pytest.mark.parametrize("kind", ["surface", "extrusion"])

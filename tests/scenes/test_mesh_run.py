@@ -57,6 +57,7 @@ REPORT_KEYS = (
     "voxelize_seconds",
     "peak_rss_gb",
     "shell_mm",
+    "colour_source",
 )
 
 

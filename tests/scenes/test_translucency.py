@@ -161,8 +161,10 @@ def test_mesh_texture_mask_and_errors(tmp_path):
         build_mesh_scene(path, InkTable.parse("vero-cmykw"), scale=1.0, translucency="alpha")
     sph = tmp_path / "ball.ply"
     trimesh.creation.icosphere(subdivisions=2, radius=0.5).export(sph)
-    with pytest.raises(ValueError, match="no uv coordinates"):
+    with pytest.raises(ValueError, match="no texture, vertex colours or face colours"):
         build_mesh_scene(sph, INKS, scale=1.0, translucency="alpha")
+    with pytest.raises(ValueError, match="no uv coordinates"):
+        build_mesh_scene(sph, INKS, scale=1.0, translucency="alpha", constant_color=True)
 
 
 # ------------------------------------------------------------------------------------------------ CLI

@@ -60,6 +60,18 @@ def add_mesh_args(p, what: str = "") -> None:
         "(default: every voxel of the object is optimised)",
     )
     p.add_argument("--dpi", type=float, default=OPT_DPI, help=f"optimisation grid resolution (default {OPT_DPI:g})")
+    p.add_argument(
+        "--texture",
+        metavar="FILE",
+        help=f"{what}the texture image, looked up through the mesh's uv coordinates (replaces the one its "
+        "material names; for an OBJ without or with a broken MTL file)",
+    )
+    p.add_argument(
+        "--constant-color",
+        action="store_true",
+        help=f"{what}accept a mesh without texture, vertex or face colours: the target is its material's "
+        "colour (white without one); without this flag such a mesh is refused",
+    )
 
 
 def add_translucency_args(p, mesh: bool = False, both: bool = False) -> None:
@@ -97,6 +109,14 @@ def add_translucency_args(p, mesh: bool = False, both: bool = False) -> None:
     )
 
 
+def check_budget(max_spp, time_budget, spp_flag: str = "--max-spp", time_flag: str = "--time-budget") -> None:
+    """One-line ValueErrors for a sample cap below 1 or a time budget that is not positive."""
+    if max_spp is not None and max_spp < 1:
+        raise ValueError(f"{spp_flag} must be at least 1, got {max_spp}")
+    if time_budget is not None and not (time_budget > 0):
+        raise ValueError(f"{time_flag} must be a positive number of seconds, got {time_budget}")
+
+
 def lighting_from_args(args):
     from ..lighting import load_lighting
 
@@ -105,6 +125,7 @@ def lighting_from_args(args):
 
 def add_optimizer_args(p) -> None:
     """Options shared by `inkopt slab` and `inkopt optimize`."""
+    from ..evaluation.noise import MAX_SPP
     from ..optim import SCENE_DEFAULTS, OptimizeConfig
 
     d, slab, mesh = OptimizeConfig(), SCENE_DEFAULTS["slab"], SCENE_DEFAULTS["mesh"]
@@ -199,8 +220,36 @@ def add_optimizer_args(p) -> None:
         "adaptive, until the Monte Carlo noise adds less than 0.5 to the mean ΔE76 and SSIM's and "
         "the mottle's noise correction is accurate)",
     )
+    p.add_argument(
+        "--eval-max-spp",
+        type=int,
+        default=MAX_SPP,
+        metavar="N",
+        help=f"cap of the adaptive final evaluation's samples per texel (default {MAX_SPP})",
+    )
+    p.add_argument(
+        "--eval-time-budget",
+        type=float,
+        metavar="SECONDS",
+        help="time budget of each adaptive final figure (the result's, the start's): it stops adding samples when "
+        "the time measured per sample says more would not fit (default: none)",
+    )
     p.add_argument("--threads", type=int, help="worker threads (default: all cores)")
     p.add_argument("--resume", action="store_true", help="continue from DIR/checkpoint.npz if present")
+    p.add_argument(
+        "--dry-run",
+        action="store_true",
+        help="build the scene, measure a short calibration and print only the run's estimated time, peak memory "
+        "and disk; write nothing",
+    )
+    p.add_argument(
+        "--log-every",
+        type=float,
+        default=30.0,
+        metavar="SECONDS",
+        help="when stderr is not a terminal (a log file, a scheduler): a progress line (iteration, loss, ΔE76, "
+        "ETA) at least this often (default 30)",
+    )
     add_lighting_args(p, "optimise and evaluate")
 
 
@@ -265,7 +314,7 @@ def slab_spec_from_args(args, top: str):
 
 def mesh_spec_from_args(args, path: str):
     """The ``MeshSpec`` of ``path`` and the mesh options (``--height-mm`` or ``--scale``, ``--shell-mm``,
-    ``--dpi``, ``--up``, translucency)."""
+    ``--dpi``, ``--up``, translucency, ``--texture``, ``--constant-color``)."""
     from ..scenes.spec import MeshSpec
 
     return MeshSpec(
@@ -277,16 +326,22 @@ def mesh_spec_from_args(args, path: str):
         args.up,
         args.translucency,
         args.translucency_depth_mm,
+        args.texture,
+        args.constant_color,
     )
 
 
 def run_from_args(args, spec):
     """``slab`` and ``optimize``: check ``spec`` (before the ink set and the optimiser settings are read), build
-    its scene with ``--inks`` and optimise it into ``--out``; returns the run's ``Report``."""
+    its scene with ``--inks`` and optimise it into ``--out``; returns the run's ``Report`` (with ``--dry-run`` its
+    ``estimate.Estimate``, nothing written)."""
     from ..model import InkTable
     from ..run import run_optimisation
 
     spec.validate()
+    if not (args.log_every >= 0):
+        raise ValueError(f"--log-every must be a number of seconds >= 0, got {args.log_every}")
+    check_budget(args.eval_max_spp, args.eval_time_budget, "--eval-max-spp", "--eval-time-budget")
     inks = InkTable.parse(args.inks)
     cfg = config_from_args(args)
     ray = ray_from_args(args)
@@ -303,14 +358,20 @@ def run_from_args(args, spec):
         lighting=lighting,
         ray=ray,
         log=stderr_log,
+        log_every_s=args.log_every,
+        dry_run=args.dry_run,
+        eval_max_spp=args.eval_max_spp,
+        eval_time_budget=args.eval_time_budget,
     )
 
 
 def print_run_summary(rep, init: str, extra: str = "") -> None:
     """The closing line of ``slab`` and ``optimize`` from their ``Report``."""
     m = rep.metrics
+    total = rep.seconds_total or rep.seconds
+    whole = f" (whole run across resumes {total:.0f} s)" if total > rep.seconds + 1e-3 else ""  # resumed
     print(
         f"mean ΔE76 {rep.initial_delta_e76_mean:.2f} ({init} start) -> {m.delta_e76_mean:.2f} "
         f"(p95 {m.delta_e76_p95:.2f}, ΔE2000 {m.delta_e2000_mean:.2f}, SSIM {m.ssim:.3f}) "
-        f"after {rep.iterations} iterations in {rep.seconds:.0f} s{extra}"
+        f"after {rep.iterations} iterations in {rep.seconds:.0f} s{whole}{extra}"
     )

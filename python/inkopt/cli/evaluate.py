@@ -12,12 +12,13 @@ from ..evaluation.colour_table import DEFAULT_PATCH_MM
 from ..evaluation.evaluate import DEFAULT_SPP, evaluate_run, table_lines
 from ..evaluation.noise import MAX_SPP, PILOT_SPP, TARGET_NOISE_DE76
 from ..printing.quantize import check_quantization
-from .common import add_lighting_args, lighting_from_args
+from .common import add_lighting_args, check_budget, lighting_from_args
 
 
 def _evaluate_cmd(args) -> int:
     if args.method is not None:
         check_quantization(args.method)
+    check_budget(args.max_spp, args.time_budget)
     log = None if args.json else (lambda msg: print(msg, file=sys.stderr, flush=True))
     ev = evaluate_run(
         args.dir,
@@ -32,6 +33,9 @@ def _evaluate_cmd(args) -> int:
         log=log,
         translucency=False if args.no_translucency else None,
         translucency_compare=args.translucency_compare,
+        max_spp=args.max_spp,
+        time_budget=args.time_budget,
+        out=args.out,
     )
     if args.json:
         print(json.dumps(ev.to_json()))
@@ -43,7 +47,7 @@ def _evaluate_cmd(args) -> int:
         print(f"lighting: {ev.lighting['lighting']}" + (f", turned {rotate:g} degrees" if rotate else ""))
         print(
             f"{ev.spp} spp per scene texel ({how}continuous result), {ev.seconds:.0f} s; wrote "
-            f"{args.dir}/evaluation.json" + "".join(f", {p}" for p in ev.pictures or [])
+            f"{args.out or f'{args.dir}/evaluation.json'}" + "".join(f", {p}" for p in ev.pictures or [])
         )
     return 0
 
@@ -64,6 +68,26 @@ def register_cli(sub) -> None:
         f"a {PILOT_SPP}-spp pilot and then as many as make the Monte Carlo noise add at most "
         f"{TARGET_NOISE_DE76:g} to each result's mean dE76 and keep SSIM's and the mottle's noise "
         f"correction accurate, up to {MAX_SPP})",
+    )
+    p.add_argument(
+        "--max-spp",
+        type=int,
+        default=MAX_SPP,
+        metavar="N",
+        help=f"cap of the adaptive samples per scene texel of each result (default {MAX_SPP})",
+    )
+    p.add_argument(
+        "--time-budget",
+        type=float,
+        metavar="SECONDS",
+        help="time for the adaptive renders together, shared out among the results (default: none); each "
+        "further pass is logged with its expected time",
+    )
+    p.add_argument(
+        "--out",
+        metavar="FILE.json",
+        help="write the evaluation here instead of DIR/evaluation.json (its pictures are named after it in DIR), "
+        "keeping earlier evaluations",
     )
     p.add_argument("--seed", type=int, default=0, help="render seed (default 0)")
     p.add_argument("--method", help="quantization method (default: that of DIR/quantized.npz, else blue-noise)")

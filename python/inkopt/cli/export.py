@@ -6,6 +6,8 @@ with the Volumetric extension (``inkopt.printing.threemf``) of the continuous mi
 layer at a time), or with ``--labels`` of the quantized print. A job using more inks than ``--printer`` holds is
 refused in one line before anything is written. GCVF and 3MF record the digest of the file they are made from
 (quantized.npz, or volume.npz for the continuous 3MF) in their zip comment (``inkopt inspect --run`` checks it).
+A quantized volume made from another volume.npz than the run's (``RunDir.check_quantized_current``) is refused
+in one line before anything is written; the slice manifest records ``volume_digest`` and ``quantized_digest``.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from ..printing.gcvf import write_gcvf
 from ..printing.profiles import PRINTER_PROFILES, printer_profile, resolution_mismatch
 from ..printing.stream import MixtureSource
 from ..printing.threemf import write_3mf_labels, write_3mf_mixture
-from ..rundir import RunDir
+from ..rundir import QUANTIZED_DIGEST, VOLUME_DIGEST, RunDir
 
 FORMATS = ("png-slices", "gcvf", "3mf")
 DEFAULT_PRINTER = {"png-slices": "generic", "gcvf": "j750", "3mf": "generic"}
@@ -43,6 +45,7 @@ def _export_3mf(args, d: RunDir, printer: str, palette, materials) -> int:
     if args.labels:
         out = Path(args.out) if args.out else d.threemf_path(labels=True)
         q = d.load_quantized()
+        d.check_quantized_current()
         digest = file_digest(d.quantized_path)
         man = write_3mf_labels(
             q.labels, q.voxel_mm, q.inks.names, out, printer=printer, materials=materials, palette=palette,
@@ -98,6 +101,7 @@ def _export_cmd(args) -> int:
     if args.format == "3mf":
         return _export_3mf(args, d, printer, palette, materials)
     q = d.load_quantized()
+    d.check_quantized_current()
     if args.format == "gcvf":
         out = Path(args.out) if args.out else d.gcvf_path
         man = write_gcvf(
@@ -107,8 +111,16 @@ def _export_cmd(args) -> int:
         layers_um = man["layer_thickness_nm"] / 1000
     else:
         out = Path(args.out) if args.out else d.slices_path
+        sources = {VOLUME_DIGEST: d.volume_digest(), QUANTIZED_DIGEST: d.quantized_digest()}
         man = write_png_slices(
-            q.labels, q.voxel_mm, q.inks.names, out, palette=palette, printer=printer, materials=materials
+            q.labels,
+            q.voxel_mm,
+            q.inks.names,
+            out,
+            palette=palette,
+            printer=printer,
+            materials=materials,
+            sources=sources,
         )
         layers_um = man["layer_thickness_um"]
     mats = [m for m in man["materials"] if m["voxel_count"] > 0]

@@ -16,6 +16,9 @@ from .common import (
 
 def _optimize(args) -> int:
     rep = run_from_args(args, mesh_spec_from_args(args, args.mesh))
+    if args.dry_run:
+        print(rep.line())
+        return 0
     print_run_summary(rep, args.init, f" (peak memory {rep.peak_rss_gb:.1f} GiB)")
     print(f"views: {args.out}/views.png, {args.out}/prediction.glb; report: {args.out}/report.json")
     return 0

@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 
+from ..io import load_array
 from .common import UsageError, add_lighting_args, lighting_from_args
 
 
@@ -20,10 +21,7 @@ def _render(args) -> int:
         raise UsageError("the volume has no texels on the chosen face(s)")
     adjoint = None
     if args.adjoint:
-        try:
-            adjoint = np.load(args.adjoint, allow_pickle=False)
-        except Exception as exc:
-            raise UsageError(f"cannot read adjoint {args.adjoint}: {exc}") from None
+        adjoint = load_array(args.adjoint, "adjoint")
         if adjoint.shape != (len(texels), 3):
             raise UsageError(f"adjoint has shape {adjoint.shape}, expected ({len(texels)}, 3) (texels x RGB)")
         if not np.all(np.isfinite(adjoint)):

@@ -14,6 +14,9 @@ from .common import (
 
 def _slab(args) -> int:
     rep = run_from_args(args, slab_spec_from_args(args, args.top))
+    if args.dry_run:
+        print(rep.line())
+        return 0
     print_run_summary(rep, args.init)
     print(f"pictures: {args.out}/face_*.png, {args.out}/loss.png; report: {args.out}/report.json")
     return 0

@@ -31,14 +31,16 @@ Translucency (``evaluation.translucency``): when the scene has a translucency co
 names an unconstrained run of the same target, ``translucency`` holds the diffuse transmittance and lateral
 light spread per constrained region and for the whole object (and the compared run's on the same regions).
 
-Writes DIR/evaluation.json and, for slabs, DIR/evaluation_<face>.png per textured face: target | optimized |
-quantized | surface | extrusion (sRGB).
+Writes DIR/evaluation.json (or ``out``) and, for slabs, DIR/evaluation_<face>.png per textured face: target |
+optimized | quantized | surface | extrusion (sRGB); for meshes DIR/evaluation_views.png, the same rows seen from
+four sides. ``max_spp`` and ``time_budget`` cap the adaptive renders.
 """
 
 from __future__ import annotations
 
 import time
 from dataclasses import asdict
+from pathlib import Path
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -136,18 +138,34 @@ class PrintedRenderer:
 
 
 # ----------------------------------------------------------------------------------------------- pictures
-def write_face_pictures(d: RunDir, rec: SceneRecord, results: dict) -> list[str]:
-    """DIR/evaluation_<face>.png (target | optimized | quantized | baselines) for every textured face of a slab;
+def write_face_pictures(d: RunDir, rec: SceneRecord, results: dict, stem: str = "evaluation") -> list[str]:
+    """DIR/<stem>_<face>.png (target | optimized | quantized | baselines) for every textured face of a slab;
     returns the file names."""
     items = [("target", results["target"]), ("optimized", results["continuous"]), ("quantized", results["quantized"])]
     items += [(k, results[k]) for k in ("surface", "extrusion") if k in results]
     names = []
     for face in rec.faces:
         if face in rec.pix:
-            path = d.evaluation_picture_path(face)
+            path = d.evaluation_picture_path(face, stem)
             write_png(path, panels(items, rec.pix[face]))
             names.append(path.name)
     return names
+
+
+def write_mesh_views(d: RunDir, rec: SceneRecord, results: dict, stem: str = "evaluation", say=None) -> list[str]:
+    """DIR/<stem>_views.png of a mesh run: target, optimized, quantized and baseline rows from four sides
+    (``scenes.mesh.views.result_views``); none (and a log line) when the mesh file cannot be read any more."""
+    from ..scenes.mesh.views import result_views
+
+    names = [("target", "target"), ("optimized", "continuous"), ("quantized", "quantized")]
+    names += [(k, k) for k in ("surface", "extrusion") if k in results]
+    path = d.evaluation_picture_path("views", stem)
+    try:
+        result_views(rec.mesh, rec.texels.normal, [(label, results[k]) for label, k in names], path)
+    except ValueError as exc:
+        (say or (lambda msg: None))(f"no views picture: {exc}")
+        return []
+    return [path.name]
 
 
 # ----------------------------------------------------------------------------------------------- the stage
@@ -166,6 +184,9 @@ def evaluate_run(
     log=None,
     translucency: bool | None = None,
     translucency_compare=None,
+    max_spp: int = MAX_SPP,
+    time_budget: float | None = None,
+    out=None,
 ) -> Evaluation:
     """Evaluate run directory ``path`` (module docstring); returns the ``results.Evaluation`` (also written to
     DIR/evaluation.json with the face pictures when ``write``). ``spp``: None = adaptive (module docstring),
@@ -175,12 +196,19 @@ def evaluate_run(
     ``lighting``: the display lighting every result is rendered under (``inkopt.lighting``; default uniform; the
     baselines' colour table stays a uniform-light property of the inks).
     ``log``: callable taking one progress line (default: silent). ``translucency``: measure translucency (None:
-    if the scene is constrained or ``translucency_compare``, an unconstrained run directory, is given)."""
+    if the scene is constrained or ``translucency_compare``, an unconstrained run directory, is given).
+    ``max_spp``: the adaptive renders' cap; ``time_budget``: seconds for all the adaptive renders together, shared
+    out evenly among the results still to render. ``out``: the evaluation file (default DIR/evaluation.json; its
+    pictures are named after it, e.g. ``out`` E.json: E_top.png, E_views.png), so earlier ones can be kept."""
     lighting = load_lighting(lighting)
     say = log or (lambda msg: None)
     if spp is not None and spp < 1:
         raise ValueError(f"--spp must be at least 1, got {spp}")
     d = RunDir(path)
+    out = d.evaluation_path if out is None else Path(out)
+    if out.suffix != ".json":
+        raise ValueError(f"--out must name a .json file, got {out}")
+    d.check_quantized_current()  # before any render: a stale quantized volume is refused in one line
     vol = d.load_volume()
     rec = d.load_scene()
     stex, kind = rec.texels, rec.kind
@@ -189,10 +217,15 @@ def evaluate_run(
     loss = TexelLoss(target, stex.pos_vox, sigma=1.5)
     colours = {"target": target}
     rseed = EVAL_SEED_OFFSET + int(seed)
+    todo = [2 + (2 if baselines else 0)]  # adaptive results still to render, for sharing the time budget
 
     def measured(name: str, render, seconds_from: float, method: str | None, spp_printer=None) -> Measured:
         """Adaptive (or fixed-spp) render of one result; its colours and figures."""
-        ad = adaptive_render(render, loss.target_lab, rseed, spp, log=say)
+        budget = None
+        if time_budget is not None:
+            budget = max(time_budget - (time.perf_counter() - t_all), 0.0) / max(todo[0], 1)
+        todo[0] -= 1
+        ad = adaptive_render(render, loss.target_lab, rseed, spp, max_spp=max_spp, log=say, time_budget=budget)
         colours[name] = ad.rgb
         m = prediction_metrics(loss, ad.rgb, ad.var)
         sp = None if spp_printer is None else spp_printer["spp"]
@@ -301,11 +334,16 @@ def evaluate_run(
         translucency=tr,
         **floor,
         baselines=base,
+        volume_digest=d.volume_digest(),
+        quantized_digest=d.quantized_digest(),
     )
     if write:
+        stem = out.stem
         if rec.faces:
-            ev.pictures = write_face_pictures(d, rec, colours)
-        d.write_evaluation(ev.to_json())
+            ev.pictures = write_face_pictures(d, rec, colours, stem)
+        elif rec.mesh is not None:
+            ev.pictures = write_mesh_views(d, rec, colours, stem, say)
+        d.write_evaluation(ev.to_json(), out)
     return ev
 
 

@@ -38,7 +38,9 @@ contribution at n samples is predicted from the pilot (D fixed, σ⊥ ∝ n^-1/2
 contribution is ≤ 0.9 × target (a margin for the pilot's own noise) and whose r is ≤ 0.9 × ``SSIM_NOISE_RATIO``
 is chosen, capped at ``MAX_SPP``; the
 remaining n - spp samples are rendered with an independent seed and pooled with the pilot (weights by sample
-count). If the pooled estimate is still above either target (and below the cap), one more round. Seeds: pass k uses
+count). If the pooled estimate is still above either target (and below the cap), one more round. A user's cap
+(``max_spp``) and time budget (``time_budget``: the samples that the time measured per sample so far says fit)
+stop it earlier; the result then says ``capped``. Seeds: pass k uses
 ``seed + k * SEED_STRIDE``; callers pass ``EVAL_SEED_OFFSET + seed``, disjoint from the optimisation's seeds.
 """
 
@@ -155,13 +157,15 @@ def noise_contribution(rgb, var_mean, target_lab) -> float:
 @dataclass
 class AdaptiveResult:
     """Pooled colours rgb (I, 3), variance of their means var (I, 3), total samples per texel spp (in the
-    caller's units), the passes' spp, and the estimated noise contribution of the pooled result."""
+    caller's units), the passes' spp, the estimated noise contribution of the pooled result, and ``capped``: the
+    samples stopped at ``max_spp`` or the time budget before the noise targets were met."""
 
     rgb: np.ndarray
     var: np.ndarray
     spp: int
     passes: list
     noise: float
+    capped: bool = False
 
 
 def adaptive_render(
@@ -173,30 +177,55 @@ def adaptive_render(
     target: float = TARGET_NOISE_DE76,
     max_spp: int = MAX_SPP,
     log=None,
+    time_budget: float | None = None,
+    clock=None,
 ) -> AdaptiveResult:
     """Render through ``render(spp, seed) -> (rgb (I, 3), var_mean (I, 3), weight)`` (``weight``: the pass's
     samples per texel as pooled, e.g. a printer render's own spp). With ``spp`` given: exactly one pass of
-    ``spp`` (the user's choice is honoured). Else adaptively (module docstring)."""
+    ``spp`` (the user's choice is honoured). Else adaptively (module docstring), at most ``max_spp`` samples and,
+    with ``time_budget`` (seconds, the pilot included), no more samples than the time measured per sample so far
+    says fit in it; each further pass is logged with its expected time. ``clock``: seconds (default
+    ``time.perf_counter``)."""
+    import time
+
+    from ..units import format_duration
+
+    clock = clock or time.perf_counter
+    t0 = clock()
     first = int(spp) if spp is not None else min(int(pilot_spp), int(max_spp))
     rgb, var, w = render(first, seed)
     rgb, var, w = np.asarray(rgb, np.float64), np.asarray(var, np.float64), float(w)
-    total, passes = first, [first]
+    total, passes, capped = first, [first], False
     model = NoiseModel.of(rgb, var, target_lab)
     for k in range(1, MAX_ROUNDS + 1):
-        if spp is not None or model.converged(target) or total >= max_spp:
+        if spp is not None or model.converged(target):
+            break
+        if total >= max_spp:
+            capped = True
             break
         want = model.spp_for(total, PLAN_MARGIN * target, max_spp, PLAN_MARGIN * SSIM_NOISE_RATIO)
+        capped = capped or want >= max_spp
+        per_spp = (clock() - t0) / total
         extra = want - total
+        if time_budget is not None:
+            fit = int((time_budget - (clock() - t0)) / max(per_spp, 1e-12) + 1e-6)  # not lost to rounding
+            if fit < extra:
+                extra, capped = max(fit, 0), True
+        if extra <= 0:
+            if log is not None:
+                log(f"  noise {model.contribution():.2f} dE76 at {total} spp: the time budget is spent")
+            break
         if log is not None:
             log(
                 f"  noise {model.contribution():.2f} dE76, SSIM noise ratio {model.ssim_ratio:.2f} at {total} spp "
-                f"(targets {target:g}, {SSIM_NOISE_RATIO:g}): {extra} more"
+                f"(targets {target:g}, {SSIM_NOISE_RATIO:g}): {extra} more, ~{format_duration(extra * per_spp)}"
+                + (" (capped)" if capped else "")
             )
         r1, v1, w1 = render(extra, seed + k * SEED_STRIDE)
         r1, v1, w1 = np.asarray(r1, np.float64), np.asarray(v1, np.float64), float(w1)
         rgb = (w * rgb + w1 * r1) / (w + w1)
         var = (w * w * var + w1 * w1 * v1) / (w + w1) ** 2
-        w, total = w + w1, want
+        w, total = w + w1, total + extra
         passes.append(extra)
         model = NoiseModel.of(rgb, var, target_lab)
-    return AdaptiveResult(rgb, var, int(total), passes, model.contribution())
+    return AdaptiveResult(rgb, var, int(total), passes, model.contribution(), capped and not model.converged(target))

@@ -42,9 +42,11 @@ class Report:
     ``metrics``: the final mixture's figures; ``initial_*``: the starting mixture's; ``delta_e76_max``: the
     largest per-texel ΔE76; ``iterations``, ``spp`` (gradient pass); ``eval_spp`` (the final evaluation's samples
     per texel), ``spp_adaptive``, ``eval_spp_passes``, ``initial_eval_spp``; wall times in seconds
-    (``time_split``: per iteration, by phase); ``scene``: the scene's own entries (``Scene.report_fields``: sizes,
-    paths, translucency); the optimiser settings (``inks`` .. ``gradient``); ``threads``; ``peak_rss_gb`` (GiB);
-    ``lighting``: ``Lighting.describe()``.
+    (``seconds``: this invocation's; ``seconds_total``: the whole run's across resumes, None in older reports;
+    ``time_split``: per iteration, by phase; ``estimate``: the cost estimated before the iterations,
+    ``inkopt.estimate.Estimate.to_json()``, None in older reports); ``scene``: the scene's own entries
+    (``Scene.report_fields``: sizes, paths, translucency); the optimiser settings (``inks`` .. ``gradient``);
+    ``threads``; ``peak_rss_gb`` (GiB); ``lighting``: ``Lighting.describe()``.
     """
 
     metrics: Metrics
@@ -77,6 +79,8 @@ class Report:
     threads: int | None
     peak_rss_gb: float
     lighting: dict
+    seconds_total: float | None = None
+    estimate: dict | None = None
 
     _RUN = (
         "delta_e76_max",
@@ -88,9 +92,11 @@ class Report:
         "initial_eval_spp",
         "initial_delta_e76_mean_corrected",
         "seconds",
+        "seconds_total",
         "seconds_iterations",
         "seconds_per_iteration",
         "time_split",
+        "estimate",
     )
     _SETTINGS = (
         "inks",
@@ -170,7 +176,9 @@ class Evaluation:
     """An evaluation of a run (evaluation.json; ``evaluation.evaluate``'s module docstring says what each figure
     is). ``spp`` is the continuous result's; ``lighting``: ``Lighting.describe()``; ``quantization``: the
     quantized volume's settings; ``translucency``, ``colour_table``, the gamut floor, ``baselines`` and
-    ``pictures`` are None when not measured or written."""
+    ``pictures`` are None when not measured or written; ``volume_digest`` and ``quantized_digest``: the
+    ``io.file_digest`` of the volume.npz and quantized.npz evaluated (None in evaluations written before they were
+    recorded)."""
 
     spp: int
     seed: int
@@ -193,6 +201,8 @@ class Evaluation:
     gamut_floor_delta_e76_p95: float | None = None
     baselines: dict | None = None  # name -> Measured
     pictures: list | None = None
+    volume_digest: str | None = None  # io.file_digest of the volume.npz and quantized.npz evaluated
+    quantized_digest: str | None = None
 
     _HEAD = (
         "spp",
@@ -206,6 +216,7 @@ class Evaluation:
         "spp_max",
     )
     _FLOOR = ("colour_table", "gamut_floor_delta_e76", "gamut_floor_delta_e76_p95")
+    _SOURCES = ("volume_digest", "quantized_digest")
 
     def to_json(self) -> dict:
         d = {**{k: getattr(self, k) for k in self._HEAD}, **self.lighting, "continuous": self.continuous.to_json()}
@@ -218,6 +229,7 @@ class Evaluation:
         d["seconds"] = self.seconds
         if self.pictures is not None:
             d["pictures"] = self.pictures
+        d.update({k: getattr(self, k) for k in self._SOURCES if getattr(self, k) is not None})
         d[FORMAT_KEY] = EVALUATION_FORMAT
         return d
 
@@ -237,6 +249,7 @@ class Evaluation:
             **{k: d.get(k) for k in cls._FLOOR},
             baselines=None if base is None else {k: Measured.from_json(v) for k, v in base.items()},
             pictures=d.get("pictures"),
+            **{k: d.get(k) for k in cls._SOURCES},
         )
 
     @classmethod

@@ -182,7 +182,8 @@ def measure(
     target_lab: np.ndarray | None = None,
 ) -> dict:
     """Transmittance and spread of ``vol`` (a mixture volume of scene ``rec``) per region of ``region_rec``'s
-    constraint (default ``rec``'s) and for the whole face group; with ``colours`` (I, 3) linear and ``target_lab``
+    constraint (default ``rec``'s) and for the whole face group, with the share ``rec``'s own constraint requires
+    there (``required_share``; None for a run without one); with ``colours`` (I, 3) linear and ``target_lab``
     (I, 3), each region's mean ΔE76 too."""
     from ..color import delta_e76, linear_to_lab
 
@@ -198,16 +199,13 @@ def measure(
         near, depth = depth_layers(vol, rec.texels.subset(group))
     except MemoryError:
         near = None
-    share = (
-        region_rec.translucency.texel_share(rec.texels)
-        if region_rec.translucency is not None
-        else np.zeros(len(rec.texels), np.float32)
-    )
+    # the share the measured run itself was required to hold (None: an unconstrained run has no requirement)
+    share = rec.translucency.texel_share(rec.texels) if rec.translucency is not None else None
 
     def figures(sel: np.ndarray) -> dict:
         f = {
             "texels": int(len(sel)),
-            "required_share": float(share[sel].mean()),
+            "required_share": None if share is None else float(share[sel].mean()),
             "transmittance": float(t_y[sel].mean()),
             "transmittance_stderr": float(np.sqrt(t_var[sel].sum()) / len(sel)),
         }
@@ -237,8 +235,9 @@ def table_lines(tr: dict) -> list[str]:
     for prefix, t in runs:
         items = [(f"region {k + 1}", r) for k, r in enumerate(t["regions"])] + [("whole", t["whole"])]
         for name, r in items:
+            req = "-" if r["required_share"] is None else f"{r['required_share']:.2f}"
             lines.append(
-                f"{(prefix + name):<24}{r['texels']:>8}{r['required_share']:>7.2f}"
+                f"{(prefix + name):<24}{r['texels']:>8}{req:>7}"
                 f"{r.get('delta_e76_mean', nan):>7.2f}{r['transmittance']:>9.3f} ±{r['transmittance_stderr']:.3f}"
                 f"{r.get('spread_mm', nan):>7.3f} ±{r.get('spread_stderr_mm', nan):.3f}"
             )

@@ -7,27 +7,23 @@ the final mixture rendered at the evaluation spp with the evaluation seed (``rep
 figure, at the same iteration count for all sets of a rung.
 
 - ``brute``: every subset runs ``iterations``; ranked by that loss.
-- ``halving`` (successive halving with learning-curve extrapolation): with r = ceil(log2(n)) rungs of budgets
-  iterations / 2^(r-1-k), every subset first runs the smallest budget and the better half (rounded up) continues
-  to the next, resuming from its checkpoint (a resumed run continues exactly). Two changes to the textbook rule,
-  both measured on the paper's setup (docs/select-inks.md, experiments/results/select_inks*.json):
+- ``halving`` (successive halving, ``plan_rungs``): of 5 or more sets, every set first runs a quarter of the
+  budget (``FIRST_RUNG``), a quarter of the sets (``FIRST_KEEP``, rounded up) go on to half the budget, half of
+  those to the full budget, where the final figures decide. Of 2-4 sets: half the budget, then the better half.
+  Intermediate rungs rank a set by its training loss at the rung's end (``rank_loss``: free, no rendering, and
+  low-noise, a running average of ~100 spp); a power-law extrapolation of the training loss to the full budget
+  (``extrapolate_loss``) ranked worse on the recorded searches and is not used. The first rung is long and cuts
+  deep, rather than many short rungs that each halve: after a few iterations the sets are still leaving the white
+  start, and a rung of 1 or 2 iterations ranks by little more than how fast a set leaves it. Runs resume and
+  continue exactly, so a rung's history is a prefix of brute force's run of the set and the final runs are brute
+  force's runs; ``simulate`` replays a plan on brute force's records exactly, which is how the rule is tested on
+  recorded 35-set searches (tests/inksets/test_rung_rule.py, docs/select-inks.md). The evaluation renders of
+  intermediate rungs (``rung_eval_spp``) only give their figures and pictures.
 
-  * intermediate rungs rank sets by their *predicted* loss at the full budget, not by their loss now: a power law
-    loss(t) = a + b t^-c (a, b >= 0) fitted to the second half of the set's training-loss history (the first half
-    is the descent from the white start, whose speed says little about where a set ends) and evaluated at
-    ``iterations`` (learning-curve extrapolation, as in hyperparameter search: Domhan et al. 2015). The training
-    loss is free (no rendering) and low-noise (a running average of ~100 spp);
-  * with r >= 3 the rung before the last is dropped: the survivors of the rung before it (4 of 15) all run the full
-    budget and the final evaluation (``eval_spp``) decides among them. The final sets' losses at the full budget
-    differ from any earlier estimate by several per cent (the optimiser oscillates), so the last cut is made on
-    the final figures only, among more sets; skipping the half-budget rung pays for it.
-
-  Its final runs are the same as brute force's runs of those sets. The evaluation renders of intermediate rungs
-  (``rung_eval_spp``) only give their figures and pictures.
-
-Work is counted in texel-samples: iterations x texels x (spp + forward spp), plus the two evaluation renders of
-every rung (the final and the initial mixture, eval spp each). The search's state (``selection_state.json``) is
-saved atomically after every finished run, so ``resume`` continues an interrupted selection.
+Work is counted in texel-samples (``rung_work``): iterations x texels x (spp + forward spp), plus the evaluation
+renders of every rung (the result, and on a set's first rung its start, eval spp each). The search's state
+(``selection_state.json``) is saved atomically after every finished run, so ``resume`` continues an interrupted
+selection.
 """
 
 from __future__ import annotations
@@ -53,7 +49,7 @@ from .backends import Serial, config_dict, run_candidate, threads_per_run
 STRATEGIES = ("halving", "brute")
 STATE, SELECTION, PICTURE = "selection_state.json", "selection.json", "selection.png"
 SELECTION_FORMAT = 1  # selection.json; version 0 (no format_version) has the same keys
-RULE = "halving: power-law extrapolation of the second half of the training loss; no half-budget rung"
+RULE = "halving: rungs of 1/4, 1/2 and the full budget keeping 1/4 then half; ranked by the training loss"
 _EXPONENTS = np.linspace(0.05, 3.0, 60)
 
 
@@ -61,7 +57,12 @@ def extrapolate_loss(hist, total: int, start: float = 0.5) -> float:
     """The loss a run with training-loss history ``hist`` (one value per iteration from the start) is predicted
     to reach at iteration ``total``: loss(t) = a + b t^-c fitted by least squares to the last ``1 - start`` of the
     history (a, b >= 0; c on a fixed grid in [0.05, 3], a, b in closed form: deterministic, no optimiser), the
-    fit's value at ``total``. Fewer than 3 points: the last value."""
+    fit's value at ``total``. Fewer than 3 points: the last value.
+
+    Not what the rungs rank by: on the recorded 35-set searches (experiments/results/select_inks_35*.json) it ranks
+    the sets worse than their last training loss does (the fit follows the history's wiggles), e.g. the best set
+    18th of 35 after 10 of 40 iterations, where the last training loss puts it 2nd. ``simulate(..., rank=...)``
+    compares the two."""
     h = np.asarray(hist, np.float64)
     s = int(len(h) * start)
     t, y = np.arange(s + 1, len(h) + 1, dtype=np.float64), h[s:]
@@ -79,6 +80,64 @@ def extrapolate_loss(hist, total: int, start: float = 0.5) -> float:
         if sse < best[0]:
             best = (sse, float(a + b * total**-c))
     return best[1]
+
+
+#: the first rung runs this fraction of the budget: long enough that the sets have left the white start's descent
+#: and their order has settled (on the recorded astronaut search the Spearman correlation of the training loss with
+#: the final loss over the 35 sets is 0.69 after 1 of 40 iterations, 0.82 after 5, 0.95 after 10)
+FIRST_RUNG = 0.25
+#: after the first rung, this fraction of the sets goes on (rounded up); after the middle rung, half of those
+FIRST_KEEP = 0.25
+
+
+def plan_rungs(n: int, total: int, strategy: str = "halving") -> list[tuple[int, int]]:
+    """(iterations, sets kept after it) per rung for ``n`` sets and a budget of ``total`` iterations.
+
+    ``brute`` (or one set): one rung, every set to ``total``. ``halving`` of up to 4 sets: half the budget, then
+    the better half (rounded up) to the full budget. Of 5 or more: three rungs, ``FIRST_RUNG`` x total, twice that
+    and total; every set runs the first, k1 = ceil(``FIRST_KEEP`` x n) (at least 2) go on to the second, k2 =
+    ceil(k1 / 2) to the full budget, where the final figures decide. The iterations run, in units of n x total:
+    FIRST_RUNG + FIRST_RUNG k1 / n + (1 - 2 FIRST_RUNG) k2 / n = 0.38 for 15 sets, 0.39 for 35 (plus the
+    evaluation renders)."""
+    if strategy == "brute" or n <= 1:
+        return [(int(total), 1)]
+    if n <= 4:
+        return [(max(1, round(total / 2)), math.ceil(n / 2)), (int(total), 1)]
+    k1 = max(2, math.ceil(FIRST_KEEP * n))
+    k2 = math.ceil(k1 / 2)
+    b0 = max(1, round(FIRST_RUNG * total))
+    b1 = max(b0, round(2 * FIRST_RUNG * total))
+    return [(b0, k1), (b1, k2), (int(total), 1)]
+
+
+def rank_loss(hist, total: int | None = None) -> float:
+    """What an intermediate rung ranks a set by: its training loss after the rung's last iteration (``hist``: one
+    value per iteration; ``total``, the full budget, is not used: see ``extrapolate_loss`` for why it is not
+    extrapolated). The training loss is taken on a running average of the renders, so it is already smoothed."""
+    return float(np.asarray(hist, np.float64)[-1])
+
+
+def rung_work(iterations: int, spp_per_iteration: int, eval_spp: int, fresh: bool) -> int:
+    """Samples per texel of one set's rung: ``iterations`` x (spp + forward spp), and the evaluation at
+    ``eval_spp`` of the result (and of the start when the run is ``fresh``: a resumed run keeps its start's
+    figures)."""
+    return int(iterations * spp_per_iteration + eval_spp * (2 if fresh else 1))
+
+
+def simulate(sets: dict, plan, total: int, spp_per_iteration: int, rung_eval_spp: int, eval_spp: int, rank=rank_loss):
+    """The outcome of a rung ``plan`` (``plan_rungs``) from brute force's records: ``sets`` maps a name to
+    ``{"hist_loss": [...] (``total`` values), "loss": final loss}``. Halving's runs resume and continue exactly, so
+    a rung's history is a prefix of brute force's and its final runs are brute force's runs: the outcome is exact.
+    ``rank(hist, total)``: what intermediate rungs rank by. Returns (winner's name, work in samples per texel)."""
+    alive, done, work = sorted(sets), {n: 0 for n in sets}, 0
+    for k, (budget, keep) in enumerate(plan):
+        last = k == len(plan) - 1
+        for n in alive:
+            work += rung_work(budget - done[n], spp_per_iteration, eval_spp if last else rung_eval_spp, done[n] == 0)
+            done[n] = budget
+        score = {n: sets[n]["loss"] if last else rank(sets[n]["hist_loss"][:budget], total) for n in alive}
+        alive = sorted(alive, key=lambda n: (score[n], n))[:keep]
+    return alive[0], work
 
 
 @dataclass
@@ -147,12 +206,11 @@ class Selection:
 
     def budgets(self) -> list[int]:
         """The iteration count of every rung (one rung for brute force)."""
-        n, total = len(self.subsets()), self.cfg.iterations
-        if self.strategy == "brute" or n == 1:
-            return [total]
-        r = math.ceil(math.log2(n))
-        b = [max(1, round(total / 2 ** (r - 1 - k))) for k in range(r)]
-        return b[:-2] + b[-1:] if r >= 3 else b
+        return [b for b, _ in self.plan()]
+
+    def plan(self) -> list[tuple[int, int]]:
+        """(iterations, sets kept after it) of every rung: ``plan_rungs``."""
+        return plan_rungs(len(self.subsets()), self.cfg.iterations, self.strategy)
 
     def key(self) -> str:
         """What must match for ``resume`` (everything; the settings as the target's scene kind resolves them, so
@@ -227,10 +285,14 @@ def run_selection(sel: Selection, out, backend=None, *, resume: bool = False, lo
     out.mkdir(parents=True, exist_ok=True)
     backend = backend or Serial()
     state = _load_state(out, sel, resume)
-    budgets, alive = sel.budgets(), sel.subsets()
-    log(f"{sel.strategy}: {len(alive)} ink sets, rungs of {budgets} iterations, {backend.name} execution")
+    plan, alive = sel.plan(), sel.subsets()
+    budgets = [b for b, _ in plan]
+    log(
+        f"{sel.strategy}: {len(alive)} ink sets, rungs of {budgets} iterations keeping "
+        f"{[keep for _, keep in plan]} sets, {backend.name} execution"
+    )
     done_iters: dict[str, int] = {}
-    for k, budget in enumerate(budgets):
+    for k, (budget, keep) in enumerate(plan):
         last = k == len(budgets) - 1
         if k == len(state["rungs"]):
             state["rungs"].append(
@@ -258,23 +320,23 @@ def run_selection(sel: Selection, out, backend=None, *, resume: bool = False, lo
             name = set_name(s)
             save_npz(out / "predictions" / f"{name}.npz", {"rgb": res.pop("prediction")})
             start = done_iters.get(name, 0)
-            res["texel_samples"] = res["texels"] * (
-                (budget - start) * (sel.cfg.spp + sel.cfg.forward_spp) + 2 * rung["eval_spp"]
+            res["texel_samples"] = res["texels"] * rung_work(
+                budget - start, sel.cfg.spp + sel.cfg.forward_spp, rung["eval_spp"], start == 0
             )
             hist = res.pop("hist_loss")
-            res["train_loss"] = hist[-1]
-            res["predicted_loss"] = extrapolate_loss(hist, sel.cfg.iterations)
+            res["train_loss"] = rank_loss(hist)
             rung["results"][name] = res
             write_json(out / STATE, state)
             log(
-                f"  {name}: {budget} iterations, loss {res['loss']:.5g}, ΔE76 {res['delta_e76_mean']:.2f}"
-                + ("" if last else f", predicted loss at {sel.cfg.iterations}: {res['predicted_loss']:.5g}")
+                f"  {name}: {budget} iterations, loss {res['loss']:.5g} at {rung['eval_spp']} spp, ΔE76 "
+                f"{res['delta_e76_mean']:.2f}"
+                + ("" if last else f"; training loss {res['train_loss']:.5g} (what this rung ranks by)")
             )
         for s in alive:
             done_iters[set_name(s)] = budget
-        by = "loss" if last else "predicted_loss"  # the final figures, else the extrapolated training loss
+        by = "loss" if last else "train_loss"  # the final figures, else the training loss
         ranked = sorted(alive, key=lambda s: (rung["results"][set_name(s)][by], set_name(s)))
-        alive = ranked[:1] if last else ranked[: math.ceil(len(ranked) / 2)]
+        alive = ranked[:keep]
     return _finish(sel, out, state, alive[0], log)
 
 

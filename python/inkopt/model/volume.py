@@ -141,8 +141,9 @@ class Volume:
         need = self.render_bytes()
         if need > MAX_VOLUME_BYTES:
             raise VolumeError(
-                f"volume {shp} needs {need / 2**30:.1f} GiB to render, more than the "
-                f"{MAX_VOLUME_BYTES / 2**30:.1f} GiB allowed (INKOPT_MAX_VOLUME_BYTES)"
+                f"volume {' x '.join(str(int(v)) for v in shp)} (z, y, x) needs {need / 2**30:.1f} GiB to render, "
+                f"more than the {MAX_VOLUME_BYTES / 2**30:.1f} GiB allowed (INKOPT_MAX_VOLUME_BYTES); use a coarser "
+                f"grid (--dpi) or a smaller object"
             )
 
     def render_bytes(self) -> int:

@@ -28,6 +28,7 @@ from ..lighting import Lighting, load_lighting
 from ..loss import TexelLoss
 from ..model import FixedShares, Texels, Volume, mix_grad
 from ..render import Renderer
+from ..units import format_duration
 from .checkpoint import History, read_checkpoint, write_checkpoint
 from .config import OptimizeConfig
 from .optimizers import make_optimizer, step_factor
@@ -106,6 +107,10 @@ class Optimization:
         self._renderer: Renderer | None = None
         self.iteration = 0
         self.history = History()
+        # the start's evaluated figures (the run driver's; kept in the checkpoints so a resume need not render it)
+        self.start_figures: dict | None = None
+        # wall time of the run's earlier invocations (up to their last checkpoint) and this one's start
+        self.wall_seconds_before, self.invocation_start = 0.0, time.perf_counter()
         self.c_avg: np.ndarray | None = None  # running average of the prediction (I, 3)
         self.c_weight = 0.0  # its effective number of samples per texel
         self.c_var: np.ndarray | None = None  # the variance of the running average (I, 3)
@@ -167,20 +172,33 @@ class Optimization:
                 "config_key": np.array(self.config_key()),
                 **self.opt.state(),
                 **self.history.arrays(),
+                "wall_seconds": np.float64(self.wall_seconds()),
+                **({} if self.start_figures is None else {"start_figures": np.array(json.dumps(self.start_figures))}),
             },
         )
 
+    def wall_seconds(self) -> float:
+        """The run's wall time so far across resumes: earlier invocations up to their last checkpoint, plus this
+        one since the Optimization was made."""
+        return self.wall_seconds_before + time.perf_counter() - self.invocation_start
+
     def load_checkpoint(self, path: Path) -> None:
         d = read_checkpoint(path)
-        if json.loads(str(d["config_key"])) != json.loads(self.config_key()):
+        old, new = json.loads(str(d["config_key"])), json.loads(self.config_key())
+        if old != new:
             raise ValueError(
-                f"checkpoint {path} was made with different settings; rerun without --resume or "
-                "with the original settings"
+                f"checkpoint {path} was made with different settings ({changed_settings(old, new)}); rerun "
+                "without --resume or with the original settings"
             )
         self.x = np.asarray(d["x"], np.float32)
         self.iteration = int(d["iteration"])
         self.opt.load(d)
         self.history = History.from_arrays(d)
+        # a checkpoint without the wall time: at least the iterations' own time
+        self.wall_seconds_before = (
+            float(d["wall_seconds"]) if "wall_seconds" in d else float(np.sum(self.history.seconds))
+        )
+        self.start_figures = json.loads(str(d["start_figures"])) if "start_figures" in d else None
         self.c_avg = np.asarray(d["c_avg"], np.float32) if "c_avg" in d else None
         self.c_weight = float(d["c_weight"]) if "c_weight" in d else 0.0
         self.c_var = np.asarray(d["c_var"], np.float32) if "c_var" in d else None
@@ -304,14 +322,18 @@ class Optimization:
         log(f"no checkpoint {checkpoint}; starting from scratch")
         return False
 
-    def run(self, checkpoint: Path | None = None, progress: bool = False) -> None:
+    def run(self, checkpoint: Path | None = None, progress: bool = False, log=None, log_every_s: float = 30.0) -> None:
         """Iterate up to ``cfg.iterations`` (continuing from ``self.iteration``), checkpointing every
-        ``cfg.checkpoint_every`` iterations and at the end (and on Ctrl-C, after the current iteration)."""
-        bar = None
+        ``cfg.checkpoint_every`` iterations and at the end (and on Ctrl-C, after the current iteration).
+        ``progress``: a tqdm bar (a terminal); else, with ``log``, a line (iteration, loss, ΔE76, ETA) after the
+        first iteration, whenever ``log_every_s`` seconds have passed since the last, and after the last."""
+        bar, lines = None, None
         if progress:
             from tqdm import tqdm
 
             bar = tqdm(total=self.cfg.iterations, initial=self.iteration, unit="it", desc="optimize")
+        elif log is not None:
+            lines = ProgressLines(self.cfg.iterations, self.iteration, log, log_every_s)
         snap = None
         try:
             while self.iteration < self.cfg.iterations:
@@ -323,6 +345,8 @@ class Optimization:
                 if bar is not None:
                     bar.set_postfix(loss=f"{info['loss']:.3g}", dE76=f"{info['delta_e76']:.2f}")
                     bar.update(1)
+                elif lines is not None:
+                    lines.update(self.iteration, info["loss"], info["delta_e76"])
         except KeyboardInterrupt:
             if snap is not None:  # interrupted inside a step: back to its start, so a resume repeats it exactly
                 self._restore(snap)
@@ -334,3 +358,38 @@ class Optimization:
                 bar.close()
         if checkpoint is not None:
             self.save_checkpoint(checkpoint)
+
+
+def changed_settings(old: dict, new: dict) -> str:
+    """The settings two checkpoint keys differ in, as "NAME OLD -> NEW, ..." ("problem": the target, texels or
+    constraints)."""
+    names = {"problem": "the target, texels or constraints (scene)"}
+    out = []
+    for k in sorted(set(old) | set(new)):
+        if old.get(k) != new.get(k):
+            what = names.get(k, k)
+            out.append(what if k == "problem" else f"{what} {old.get(k)!r} -> {new.get(k)!r}")
+    return ", ".join(out)
+
+
+class ProgressLines:
+    """Progress as log lines, for a log that is not a terminal (a file, a scheduler): "iteration i/N: loss L,
+    ΔE76 D, S s/iteration, ETA T" after the first iteration, then whenever ``every_s`` seconds have passed since
+    the last line, and after the last iteration. The ETA is this invocation's mean time per iteration times the
+    iterations left. ``clock``: seconds (monotonic)."""
+
+    def __init__(self, total: int, start: int, log, every_s: float = 30.0, clock=time.perf_counter):
+        self.total, self.start, self.log, self.every_s, self.clock = int(total), int(start), log, float(every_s), clock
+        self.t0 = self.last = clock()
+        self.first = True
+
+    def update(self, iteration: int, loss: float, delta_e76: float) -> None:
+        now = self.clock()
+        if not (self.first or iteration >= self.total or now - self.last >= self.every_s):
+            return
+        per = (now - self.t0) / max(iteration - self.start, 1)
+        self.log(
+            f"iteration {iteration}/{self.total}: loss {loss:.4g}, ΔE76 {delta_e76:.2f}, {per:.1f} s/iteration, "
+            f"ETA {format_duration(per * (self.total - iteration))}"
+        )
+        self.first, self.last = False, now

@@ -14,7 +14,8 @@ renamed into place):
 - ``manifest.json``: format, ``format_version`` (``MANIFEST_FORMAT``; a manifest without it is version 0, read
   as version 1), DPI (x, y), layer thickness (µm), layer count, image size, voxel size, orientation,
   the colour -> ink table with per-ink voxel counts and the printer's material name (``material``, null where
-  the profile names none), background, the material limit applied and the printer profile (``printer``).
+  the profile names none), background, the material limit applied and the printer profile (``printer``), and
+  the digests of the files the slices were made from (``volume_digest``, ``quantized_digest``) where given.
 
 The printer's software maps colours to materials; a printer holds only a few model materials per job
 (``profiles.PRINTER_PROFILES``), so a job using more distinct inks than the limit is refused by ``check_job``
@@ -218,6 +219,7 @@ def write_png_slices(
     background=(0, 0, 0, 0),
     printer=None,
     materials=None,
+    sources: dict | None = None,
 ) -> dict:
     """Write one RGBA PNG per layer plus ``manifest.json`` into ``out_dir`` (layout: module docstring).
 
@@ -230,6 +232,8 @@ def write_png_slices(
     background        RGBA of empty voxels
     printer           printer profile key: its material limit and material names (manifest ``material``)
     materials         optional {ink name: material name} overriding the profile's names
+    sources           {key: digest} copied into the manifest: the files the labels were made from
+                      (``volume_digest``, ``quantized_digest``; ``io.file_digest``)
     An existing ``out_dir`` is replaced only if it is empty or an earlier slice folder (has our manifest).
     Returns the manifest (dict).
     """
@@ -278,6 +282,7 @@ def write_png_slices(
         "max_materials": job.limit,
         "printer": None if job.profile is None else {"key": job.profile.key, "name": job.profile.name},
         "empty_voxel_count": int(counts[EMPTY]),
+        **{k: v for k, v in (sources or {}).items() if v is not None},
     }
 
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent))

@@ -268,7 +268,10 @@ def _slices(path: Path, scan_args) -> tuple[PackageReport, _Scan]:
         {"name": m.get("material") or m["ink"], "ink": m["ink"], "color": m["color"], "voxel_count": int(v)}
         for m, v in zip(mats, scan.counts, strict=True)
     ]
-    return PackageReport("png-slices", str(path), N, W, H, dpi, layer_um, materials, scan.box(), None), scan
+    # the manifest records the quantized file the slices were made from (``quantized_digest``)
+    digest = man.get("quantized_digest")
+    source = {"source": "quantized.npz", "digest": digest} if digest else None
+    return PackageReport("png-slices", str(path), N, W, H, dpi, layer_um, materials, scan.box(), source), scan
 
 
 def _mesh_bounds(fh) -> tuple[dict, np.ndarray, np.ndarray]:

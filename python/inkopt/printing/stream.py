@@ -135,12 +135,13 @@ def quantize_run(d: RunDir, *, method: str, dpi, layer_um: float, seed: int, ups
     """``inkopt quantize``: DIR/volume.npz -> DIR/quantized.npz + quantized_labels.npy (module docstring).
     Returns the summary lines (``quantize.summary_lines``)."""
     t0 = time.perf_counter()
+    digest = d.volume_digest()  # recorded in quantized.npz: export and evaluate refuse it once volume.npz changes
     src = MixtureSource(d.volume_file())
     try:
         shape_p, vp = printer_grid(src.shape[:3], src.voxel_mm, dpi=tuple(dpi), layer_um=layer_um)
         quant = Quantization(method, int(seed), tuple(float(v) for v in MM_PER_INCH / vp), upsample)
         nrm = None if src.normals is None else upsample_normals(src.normals, shape_p, vp, src.voxel_mm)
-        with d.quantized_writer(src.labels_meta(vp, quant), shape_p, normals=nrm) as w:
+        with d.quantized_writer(src.labels_meta(vp, quant), shape_p, normals=nrm, volume_digest=digest) as w:
             quantize(
                 src,
                 src.voxel_mm,

@@ -32,7 +32,11 @@ class Scene(Protocol):
         """What scene.npz stores: enough for evaluation and baselines to see the same constraints."""
 
     def describe(self) -> str:
-        """One line for the log: grid, voxel size, texels."""
+        """One line for the log: where the target colour comes from, grid, voxel size, texels."""
+
+    @property
+    def warnings(self) -> list[str]:
+        """One-line notes about the inputs that the run logs after ``describe()`` (e.g. a mesh's small holes)."""
 
     def report_fields(self) -> dict:
         """The scene's own entries of report.json (sizes, paths)."""

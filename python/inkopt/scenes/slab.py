@@ -22,20 +22,28 @@ from ..model import FixedShares, InkTable, Texels, Translucency, Volume, transpa
 from ..pictures import error_figure
 from ..rundir import RunDir, SceneRecord
 from ..units import OPT_DPI, voxel_mm
-from .picture import resample
+from .picture import picture_rgba, resample
 from .translucency import check_depth, load_mask, slab_translucency, translucency_fields
 
 ASPECT_TOLERANCE = 0.02  # relative mismatch of picture and face aspect ratios allowed (resampling rounding)
 
 
+def describe_picture(path: str | Path, face: str = "top") -> str:
+    """ "FACE picture NAME (W x H px, MODE)": the colour source of a slab face, for the log and report.json."""
+    from PIL import Image
+
+    with Image.open(path) as im:
+        return f"{face} picture {Path(path).name} ({im.size[0]} x {im.size[1]} px, {im.mode})"
+
+
 def load_picture(path: str | Path) -> np.ndarray:
-    """An image file -> (H, W, 3) float32 linear RGB. Alpha is composited over white."""
+    """An image file of any mode Pillow reads (``picture.picture_rgba``) -> (H, W, 3) float32 linear RGB. Alpha
+    is composited over white."""
     from PIL import Image, UnidentifiedImageError
 
     try:
         with Image.open(path) as im:
-            im = im.convert("RGBA")
-            arr = np.asarray(im, np.float32) / 255.0
+            arr = picture_rgba(im, f"picture {path}")
     except FileNotFoundError:
         raise ValueError(f"picture {path} does not exist") from None
     except (UnidentifiedImageError, OSError) as exc:
@@ -55,12 +63,17 @@ class SlabScene:
     pix: dict  # face -> (H, W) int32 texel index per picture pixel
     size_mm: tuple = ()  # (W, H, D)
     translucency: Translucency | None = None
+    colour_source: str = ""  # where the target colours come from, e.g. "picture top.png (1200 x 800 px, RGB)"
     kind = "slab"
 
     @cached_property
     def fixed_share(self) -> FixedShares | None:
         """The translucency constraint's transparent shares, or None (built once)."""
         return self.record().fixed_share(self.volume.inks, self.volume.shape)
+
+    @property
+    def warnings(self) -> list[str]:
+        return []
 
     def record(self) -> SceneRecord:
         return SceneRecord(
@@ -71,7 +84,7 @@ class SlabScene:
         nz, ny, nx = self.volume.shape
         return (
             f"slab {nx} x {ny} x {nz} voxels ({self.volume.voxel_mm[0] * 1000:.1f} µm), {len(self.texels)} "
-            f"texels, inks {','.join(self.volume.inks.names)}"
+            f"texels, target colour from {self.colour_source or 'arrays'}, inks {','.join(self.volume.inks.names)}"
         )
 
     def report_fields(self) -> dict:
@@ -79,6 +92,7 @@ class SlabScene:
             "voxels": int(np.prod(self.volume.shape)),
             "texels": len(self.texels),
             "size_mm": [float(v) for v in self.size_mm],
+            "colour_source": self.colour_source or "arrays",
             **translucency_fields(self.translucency),
         }
 
@@ -157,4 +171,7 @@ def load_slab(
         mask = load_mask(translucency)
     top = load_picture(top_path)
     bottom = load_picture(bottom_path) if bottom_path else None
-    return build_slab(top, bottom, size_mm, inks, dpi, mask, translucency_depth_mm, str(translucency or ""))
+    scene = build_slab(top, bottom, size_mm, inks, dpi, mask, translucency_depth_mm, str(translucency or ""))
+    named = [describe_picture(top_path, "top")] + ([describe_picture(bottom_path, "bottom")] if bottom_path else [])
+    scene.colour_source = ", ".join(named)
+    return scene

@@ -13,7 +13,7 @@ Both take a translucency constraint (``scenes.translucency``): ``translucency`` 
 the texture's alpha channel) and ``translucency_depth_mm`` (None: through the whole object).
 
 ``to_json()`` is the spec as a JSON object (the target of a selection's state file); ``spec_from_json`` reads it
-back. Slabs are written with kind "image" and the inputs a spec leaves at None are left out, so the targets of
+back. Slabs are written with kind "image" and the inputs a spec leaves at None (or off) are left out, so the targets of
 selections made before translucency could be given read and compare the same.
 """
 
@@ -86,7 +86,8 @@ class MeshSpec:
     """A textured mesh file ``path`` (OBJ, glTF/GLB, PLY) scaled to ``height_mm`` or by ``scale`` mm per model
     unit (exactly one), ``up`` its up axis ("y" or "z"), optimised within ``shell_mm`` of the surface (None:
     every inside voxel) on a grid at ``dpi``; ``translucency``: "alpha" or a grey mask file in texture space,
-    down to ``translucency_depth_mm`` below the surface."""
+    down to ``translucency_depth_mm`` below the surface; ``texture``: an image file replacing the file's texture;
+    ``constant_color``: a mesh without colours is accepted (its target is one colour)."""
 
     path: str
     height_mm: float | None = None
@@ -96,6 +97,8 @@ class MeshSpec:
     up: str = "y"
     translucency: str | None = None
     translucency_depth_mm: float | None = None
+    texture: str | None = None
+    constant_color: bool = False
     kind: ClassVar[str] = "mesh"
 
     def __post_init__(self):
@@ -106,6 +109,9 @@ class MeshSpec:
                 object.__setattr__(self, name, float(getattr(self, name)))
         if self.translucency is not None:
             object.__setattr__(self, "translucency", str(self.translucency))
+        if self.texture is not None:
+            object.__setattr__(self, "texture", str(self.texture))
+        object.__setattr__(self, "constant_color", bool(self.constant_color))
 
     def validate(self, inks: InkTable | None = None) -> None:
         """One-line ValueErrors for inputs that are wrong before the mesh is read; with ``inks``, also an ink set
@@ -117,6 +123,8 @@ class MeshSpec:
         voxel_mm(self.dpi)  # its one-line error for a dpi that is not positive
         _check_translucency(self.translucency, self.translucency_depth_mm, inks, mesh=True)
         _check_file(self.path, "mesh file")
+        if self.texture is not None:
+            _check_file(self.texture, "texture")
 
     def build(self, inks: InkTable):
         """The ``scenes.mesh.MeshScene`` of these inputs for ink set ``inks`` (loads and voxelizes the mesh)."""
@@ -133,6 +141,8 @@ class MeshSpec:
             self.up,
             self.translucency,
             self.translucency_depth_mm,
+            self.texture,
+            self.constant_color,
         )
 
     def to_json(self) -> dict:
@@ -146,6 +156,10 @@ class MeshSpec:
         }
         if self.scale is not None:
             d["scale"] = self.scale
+        if self.texture is not None:
+            d["texture"] = self.texture
+        if self.constant_color:
+            d["constant_color"] = True
         return _with_translucency(d, self)
 
 
@@ -186,5 +200,7 @@ def spec_from_json(d: dict) -> SceneSpec:
             d.get("dpi", OPT_DPI),
             d.get("up", "y"),
             **tr,
+            texture=d.get("texture"),
+            constant_color=bool(d.get("constant_color", False)),
         )
     raise ValueError(f"unknown scene kind {kind!r}; expected 'image' (a slab) or 'mesh'")

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..io import load_array
 from ..model import InkTable, Translucency, transparent_ink
 from .picture import resample
 
@@ -79,10 +80,7 @@ def load_mask(path) -> np.ndarray:
     if not p.is_file():
         raise ValueError(f"translucency mask {path} does not exist")
     if p.suffix.lower() == ".npy":
-        try:
-            a = np.load(p, allow_pickle=False)
-        except Exception as exc:
-            raise ValueError(f"cannot read translucency mask {path}: {exc}") from None
+        a = load_array(p, "translucency mask")
         return check_mask(a, f"translucency mask {path}")
     try:
         with Image.open(p) as im:

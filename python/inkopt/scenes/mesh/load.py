@@ -22,6 +22,8 @@ from PIL import Image
 from scipy import sparse
 
 from ...color import from_srgb8
+from ..picture import picture_rgba
+from .source import check_colour_source, check_obj_materials, load_texture
 
 _CHUNK = 1 << 19  # query points per libigl call (bounds the temporary memory to ~50 MB)
 
@@ -38,7 +40,9 @@ class TexturedMesh:
     convention: v = 0 at the image's bottom row; wrap mode repeat) and multiplied by ``tint`` (3,) linear (glTF
     baseColorFactor; 1 for OBJ, whose Kd is ignored when a map_Kd exists); ``vertex_colors`` (V, 3) float32
     sRGB; ``face_colors`` (F, 3) float32 sRGB; else the constant ``color`` (3,) float32 sRGB.
-    ``texture_alpha``: the texture's alpha channel (H, W) float32 in [0, 1] if it has one (translucency).
+    ``texture_alpha``: the texture's alpha channel (H, W) float32 in [0, 1] if it has one (translucency);
+    ``texture_name``: the texture's file name(s) where the file names them ("" for embedded textures);
+    ``warnings``: one-line notes about the input that the run logs (``_check_solid``: small holes).
     """
 
     vertices: np.ndarray
@@ -54,9 +58,13 @@ class TexturedMesh:
     mm_per_unit: float = 1.0
     source: str = ""
     texture_alpha: np.ndarray | None = None
+    texture_name: str = ""
+    warnings: list = field(default_factory=list)  # one-line notes for the log (e.g. small holes closed over)
 
     @property
     def color_source(self) -> str:
+        """ "texture", "vertex", "face" or "constant": the first colour the mesh has (``describe_colour_source``
+        names it for people)."""
         if self.texture is not None and self.uv is not None:
             return "texture"
         return "vertex" if self.vertex_colors is not None else "face" if self.face_colors is not None else "constant"
@@ -131,28 +139,61 @@ def check_placement(height_mm: float | None, scale: float | None, up: str = "y")
         raise ValueError(f"--up must be one of {list(UP_AXES)}, got {up!r}")
 
 
-def load_mesh(path, height_mm: float | None = None, scale: float | None = None, up: str = "y") -> TexturedMesh:
-    """Load an OBJ (+MTL +texture), glTF/GLB or PLY file; see ``mesh_from_trimesh`` for the arguments."""
+def load_mesh(
+    path,
+    height_mm: float | None = None,
+    scale: float | None = None,
+    up: str = "y",
+    texture=None,
+    constant_color: bool = False,
+) -> TexturedMesh:
+    """Load an OBJ (+MTL +texture), glTF/GLB or PLY file; see ``mesh_from_trimesh`` for the placement arguments.
+
+    The colour source is checked (``source``): a missing material library or texture, a texture without uv
+    coordinates, or (unless ``constant_color``) a constant target raise a one-line ValueError. ``texture``: an
+    image file that replaces the file's texture (looked up through the mesh's uv coordinates)."""
     import trimesh
 
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"mesh file {path} does not exist")
+    obj = check_obj_materials(path, texture is not None or constant_color) if path.suffix.lower() == ".obj" else None
+    override = load_texture(texture) if texture is not None else None
     try:
         tm = trimesh.load(str(path), force="mesh", process=False)
     except Exception as exc:  # parser errors of any kind: one line
         raise ValueError(f"{path} is not a readable mesh ({type(exc).__name__}: {exc})") from None
-    return mesh_from_trimesh(tm, height_mm=height_mm, scale=scale, up=up, source=str(path))
+    # An OBJ without a material library gets trimesh's grey placeholder texture: not a colour of the file.
+    placeholder = obj is not None and not obj.mtllibs
+    mesh = mesh_from_trimesh(tm, height_mm=height_mm, scale=scale, up=up, source=str(path), placeholder=placeholder)
+    if override is not None:
+        if mesh.uv is None:
+            raise ValueError(f"--texture {texture}: {path} has no texture coordinates (no uv / vt) to look it up")
+        mesh.texture, mesh.texture_alpha = override
+        mesh.tint = np.ones(3, np.float32)
+        mesh.texture_name = str(texture)
+    elif obj is not None and obj.textures:
+        mesh.texture_name = ", ".join(sorted({t.name for t in obj.textures}))
+    if constant_color and mesh.uv is None:  # a texture that cannot be looked up: the accepted constant instead
+        mesh.texture, mesh.texture_alpha = None, None
+    check_colour_source(mesh, constant_color, texture_named=obj is not None and bool(obj.textures))
+    return mesh
 
 
 def mesh_from_trimesh(
-    tm, height_mm: float | None = None, scale: float | None = None, up: str = "y", source: str = "mesh"
+    tm,
+    height_mm: float | None = None,
+    scale: float | None = None,
+    up: str = "y",
+    source: str = "mesh",
+    placeholder: bool = False,
 ) -> TexturedMesh:
     """Convert a ``trimesh.Trimesh`` (or Scene) into a solid, scaled, z-up ``TexturedMesh``.
 
     Exactly one of ``height_mm`` (the bounding-box extent along the up axis becomes this many mm) and ``scale``
     (mm per model unit). ``up`` is the file's up axis, "y" or "z". Raises ValueError for a mesh that does not
-    enclose a solid (open sheet, large holes).
+    enclose a solid (open sheet, large holes). ``placeholder``: the file's texture image is trimesh's stand-in
+    for a missing material (an OBJ without ``mtllib``), not a colour; it is ignored (the uv coordinates are kept).
     """
     import trimesh
 
@@ -179,7 +220,7 @@ def mesh_from_trimesh(
     verts = (verts - [(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2]]) * s
 
     mesh = TexturedMesh(verts, faces, verts, faces, mm_per_unit=s, source=source)
-    _read_colours(tm, mesh)
+    _read_colours(tm, mesh, placeholder)
     solid = trimesh.Trimesh(verts, faces, process=False)
     solid.merge_vertices(merge_tex=True, merge_norm=True)
     sf = np.array(solid.faces, np.int64)
@@ -199,7 +240,7 @@ def mesh_from_trimesh(
     return mesh
 
 
-def _read_colours(tm, mesh: TexturedMesh) -> None:
+def _read_colours(tm, mesh: TexturedMesh, placeholder: bool = False) -> None:
     vis = tm.visual
     kind = getattr(vis, "kind", None)
     if kind == "texture":
@@ -209,15 +250,18 @@ def _read_colours(tm, mesh: TexturedMesh) -> None:
             img = getattr(mat, "baseColorTexture", None)
         main = np.asarray(getattr(mat, "main_color", [255] * 4), np.float32)[:3] / 255.0
         uv = getattr(vis, "uv", None)
-        if img is not None and uv is not None and len(uv) == len(mesh.vertices):
-            mesh.texture = img.convert("RGB")
-            if img.mode in ("RGBA", "LA", "PA") or (img.mode == "P" and "transparency" in img.info):
-                mesh.texture_alpha = np.asarray(img.convert("RGBA"), np.float32)[..., 3] / 255.0
+        if uv is not None and len(uv) == len(mesh.vertices):
             mesh.uv = np.array(uv, np.float64)[:, :2]
+        if placeholder:
+            return  # constant white: the caller refuses it unless a constant colour is wanted
+        mesh.color = main.astype(np.float32)  # the material's colour, the target where no texture can be used
+        if img is not None:
+            rgba = picture_rgba(img, f"{mesh.source}: texture")
+            mesh.texture = Image.fromarray(np.round(rgba[..., :3] * 255).astype(np.uint8), "RGB")
+            if img.mode in ("RGBA", "LA", "PA") or (img.mode == "P" and "transparency" in img.info):
+                mesh.texture_alpha = rgba[..., 3].copy()
             if type(mat).__name__ == "PBRMaterial" and getattr(mat, "baseColorFactor", None) is not None:
                 mesh.tint = np.asarray(mat.baseColorFactor, np.float32)[:3] / 255.0
-        else:
-            mesh.color = main.astype(np.float32)
     elif kind == "vertex":
         mesh.vertex_colors = np.asarray(vis.vertex_colors, np.float32)[:, :3] / 255.0
     elif kind == "face":
@@ -255,6 +299,15 @@ def _check_solid(mesh: TexturedMesh, tol: float = 0.15, need: float = 0.9) -> No
         raise ValueError(
             f"{mesh.source}: the mesh does not enclose a solid: only {frac:.0%} of its surface has "
             f"winding number ~1 inside and ~0 outside (open sheet or large holes?)"
+        )
+    edges = np.sort(f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    _, count = np.unique(edges, axis=0, return_counts=True)
+    open_edges = int(np.sum(count == 1))
+    if open_edges:
+        mesh.warnings.append(
+            f"{mesh.source}: the surface has {open_edges} open edges (holes); the inside is taken from winding "
+            f"numbers ({frac:.1%} of the surface separates inside from outside), which closes small holes over: "
+            "check the mesh if that is not intended"
         )
 
 

@@ -28,11 +28,22 @@ from pathlib import Path
 
 import numpy as np
 
-from ...model import EMPTY, FixedShares, InkTable, MeshInfo, Translucency, Volume, transparent_ink, white_fixed_shares
+from ...model import (
+    EMPTY,
+    MAX_VOLUME_BYTES,
+    FixedShares,
+    InkTable,
+    MeshInfo,
+    Translucency,
+    Volume,
+    transparent_ink,
+    white_fixed_shares,
+)
 from ...rundir import RunDir, SceneRecord
 from ...units import OPT_DPI, voxel_mm
 from ..translucency import ALPHA, check_depth, check_mask, load_mask, translucency_fields
 from .load import TexturedMesh, load_mesh
+from .source import describe_colour_source
 from .translucency import mesh_texel_share, mesh_translucency
 from .views import bake_vertex_colors, render_views, write_glb
 from .voxelize import VoxelizedObject, voxelize
@@ -85,6 +96,11 @@ class MeshScene:
         return self.vox.targets
 
     @property
+    def warnings(self) -> list:
+        """One-line notes about the input for the log (the mesh's: ``TexturedMesh.warnings``)."""
+        return list(self.mesh.warnings)
+
+    @property
     def height_mm(self) -> float:
         return float(np.ptp(self.mesh.solid_vertices[:, 2]))
 
@@ -113,7 +129,8 @@ class MeshScene:
     def describe(self) -> str:
         nz, ny, nx = self.volume.shape
         return (
-            f"mesh {self.height_mm:.1f} mm high: grid {nx} x {ny} x {nz} voxels "
+            f"mesh {self.height_mm:.1f} mm high, target colour from {describe_colour_source(self.mesh)}: "
+            f"grid {nx} x {ny} x {nz} voxels "
             f"({self.volume.voxel_mm[0] * 1000:.1f} µm), {int(self.vox.inside.sum())} inside, "
             f"{int(self.free.sum())} free, {len(self.texels)} texels; voxelized in {self.voxelize_seconds:.1f} s"
         )
@@ -131,6 +148,7 @@ class MeshScene:
             "height_mm": self.height_mm,
             "mesh_scale": self.mesh.mm_per_unit,
             "mesh_path": self.mesh_path,
+            "colour_source": describe_colour_source(self.mesh),
             "voxel_mm": [float(v) for v in self.volume.voxel_mm],
             **translucency_fields(self.translucency),
         }
@@ -155,6 +173,31 @@ class MeshScene:
         return paths
 
 
+#: a lower bound of the memory per grid voxel while a mesh is voxelized and rendered (bytes): the SDF (4) and the
+#: inside mask (1) of the voxelization, the renderer's slot index (4)
+MIN_BYTES_PER_GRID_VOXEL = 9
+MAX_GRID_VOXELS = 2**31
+
+
+def check_grid_size(mesh: TexturedMesh, dpi: float) -> None:
+    """One-line ValueError, before voxelizing, for an object whose grid at ``dpi`` has more than 2^31 voxels or
+    needs more than ``model.MAX_VOLUME_BYTES`` (INKOPT_MAX_VOLUME_BYTES) by ``MIN_BYTES_PER_GRID_VOXEL``; it names
+    the object's size, the memory and the --dpi that would fit."""
+    size = np.ptp(mesh.solid_vertices, axis=0)  # (x, y, z) mm
+    n = np.maximum(np.ceil(size / voxel_mm(dpi)), 1).astype(np.float64)
+    voxels, need = float(np.prod(n)), float(np.prod(n)) * MIN_BYTES_PER_GRID_VOXEL
+    limit = min(MAX_VOLUME_BYTES, MAX_GRID_VOXELS * MIN_BYTES_PER_GRID_VOXEL)
+    if need <= limit:
+        return
+    fit = dpi * (limit / need) ** (1 / 3) * 0.95
+    raise ValueError(
+        f"{mesh.source}: {size[0]:.0f} x {size[1]:.0f} x {size[2]:.0f} mm at {dpi:g} DPI is a grid of "
+        f"{int(n[0])} x {int(n[1])} x {int(n[2])} voxels ({voxels:.2g}), which needs at least "
+        f"{need / 2**30:.0f} GiB (limit {limit / 2**30:.0f} GiB, INKOPT_MAX_VOLUME_BYTES and 2^31 voxels); use "
+        f"--dpi {np.floor(fit):.0f} or less, or a smaller --height-mm"
+    )
+
+
 def check_mesh_inputs(shell_mm: float | None, inks: InkTable | None = None) -> None:
     """One-line ValueErrors for a shell that is not a positive thickness and (with ``inks``) an ink set without
     white for the core, before the slow part."""
@@ -174,10 +217,13 @@ def build_mesh_scene(
     up: str = "y",
     translucency=None,
     translucency_depth_mm: float | None = None,
+    texture=None,
+    constant_color: bool = False,
 ) -> MeshScene:
     """Load and voxelize ``mesh_path``; exactly one of ``height_mm`` and ``scale`` (mm per model unit).
     ``translucency``: None, "alpha" (the texture's alpha channel) or a mask (file or (H, W) array) in texture
-    space; ``translucency_depth_mm``: its depth below the surface (None: the whole object)."""
+    space; ``translucency_depth_mm``: its depth below the surface (None: the whole object). ``texture``: an image
+    file replacing the mesh's texture; ``constant_color``: accept a mesh without colours (``load.load_mesh``)."""
     check_mesh_inputs(shell_mm, inks)
     mask = None
     if translucency is not None:
@@ -189,8 +235,9 @@ def build_mesh_scene(
             else (check_mask(translucency) if isinstance(translucency, np.ndarray) else load_mask(translucency))
         )
     t0 = time.perf_counter()
-    mesh = load_mesh(mesh_path, height_mm=height_mm, scale=scale, up=up)
+    mesh = load_mesh(mesh_path, height_mm=height_mm, scale=scale, up=up, texture=texture, constant_color=constant_color)
     vmm = voxel_mm(dpi)
+    check_grid_size(mesh, dpi)
     # The SDF is exact only within ``band`` voxels of the surface; the shell's and the translucent regions'
     # boundaries must lie inside it.
     band = 3.0

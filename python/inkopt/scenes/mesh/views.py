@@ -120,19 +120,36 @@ def render_views(
     shade: float = 0.35,
     supersample: int = 2,
 ) -> None:
-    """Write a PNG (2*size rows x views*size columns): row 0 the target, row 1 the prediction, one column per
-    view (cameras spread evenly in azimuth, the first at (-x, -y), i.e. 45 deg left of the front view from -y,
-    raised by ``elevation_deg``), orthographic, white background.
+    """Write a PNG (2*size rows x views*size columns): row 0 the target, row 1 the prediction
+    (``render_view_rows``)."""
+    rows = [("target", colors_target), ("prediction", colors_pred)]
+    render_view_rows(mesh, rows, path_png, views, size, elevation_deg, shade, supersample)
 
-    mesh: TexturedMesh (its seam-merged solid is drawn) or Trimesh. colors_*: per-vertex colours of that mesh:
+
+def render_view_rows(
+    mesh,
+    rows,
+    path_png,
+    views: int = 3,
+    size: int = 320,
+    elevation_deg: float = 20.0,
+    shade: float = 0.35,
+    supersample: int = 2,
+) -> None:
+    """Write a PNG (len(rows)*size rows x views*size columns): one row per (label, colours) of ``rows``, one
+    column per view (cameras spread evenly in azimuth, the first at (-x, -y), i.e. 45 deg left of the front view
+    from -y, raised by ``elevation_deg``), orthographic, white background, each row labelled.
+
+    mesh: TexturedMesh (its seam-merged solid is drawn) or Trimesh. colours: per-vertex colours of that mesh:
     float (V, 3) linear RGB, uint8 (V, 3|4) sRGB, or a Trimesh carrying vertex colours (e.g. from
     ``bake_vertex_colors``). ``shade`` in [0, 1] darkens by a head-light (1 - shade + shade cos) for shape cues.
     CPU only: a vectorised numpy z-buffer rasterizer with Gouraud colours, supersampled ``supersample``^2.
     """
-    if views < 1 or size < 8:
-        raise ValueError(f"need views >= 1 and size >= 8, got {views}, {size}")
+    if views < 1 or size < 8 or not rows:
+        raise ValueError(f"need views >= 1, size >= 8 and a row, got {views}, {size}, {len(rows)}")
     verts, faces = _geometry(mesh)
-    cols = [_vertex_rgb(colors_target, len(verts)), _vertex_rgb(colors_pred, len(verts))]
+    cols = [_vertex_rgb(c, len(verts)) for _, c in rows]
+    n = len(cols)
     radius = np.linalg.norm(verts - 0.5 * (verts.min(0) + verts.max(0)), axis=1).max()
     s = int(size * supersample)
     el = np.radians(elevation_deg)
@@ -141,12 +158,30 @@ def render_views(
         az = np.radians(-45.0 + 360.0 * i / views)
         view_dir = np.array([np.sin(az) * np.cos(el), -np.cos(az) * np.cos(el), np.sin(el)])
         img = _raster(verts, faces, cols, view_dir, s, radius, shade)
-        tiles.append(img.reshape(2, size, supersample, size, supersample, 3).mean((2, 4)))
-    grid = np.concatenate([np.concatenate([t[r] for t in tiles], 1) for r in range(2)], 0)
+        tiles.append(img.reshape(n, size, supersample, size, supersample, 3).mean((2, 4)))
+    grid = np.concatenate([np.concatenate([t[r] for t in tiles], 1) for r in range(n)], 0)
     im = Image.fromarray(to_srgb8(grid))
     draw = ImageDraw.Draw(im)
-    for r, label in enumerate(("target", "prediction")):
+    for r, (label, _) in enumerate(rows):
         draw.text((4, r * size + 4), label, fill=(0, 0, 0))
     buf = io.BytesIO()
     im.save(buf, format="PNG")
     atomic_write_bytes(path_png, buf.getvalue())
+
+
+EVALUATION_VIEW_SIZE = 240  # pixels per view in an evaluation's views picture (tests lower it)
+
+
+def result_views(info, texel_normal, results, path_png, views: int = 4, size: int | None = None) -> None:
+    """The views picture of an evaluation of a mesh run: the mesh of ``info`` (a ``model.MeshInfo``: the file,
+    scale and up axis the run used, so it sits where the texels do) with one row per (label, linear RGB (I, 3) per
+    texel) of ``results``, baked onto its vertices from the texels' closest surface points. Only the geometry is
+    read (the texture is not needed). ValueError (one line) if the mesh file cannot be read."""
+    from .load import load_mesh
+
+    mesh = load_mesh(info.mesh_path, scale=info.mesh_scale, up=info.up, constant_color=True)
+    rows = [
+        (label, bake_vertex_colors(mesh, info.texel_closest_mm, np.clip(rgb, 0, 1), texel_normal=texel_normal))
+        for label, rgb in results
+    ]
+    render_view_rows(mesh, rows, path_png, views=views, size=size or EVALUATION_VIEW_SIZE)

@@ -163,7 +163,10 @@ def voxelize(
     lo, hi = vs[fs].reshape(-1, 3).min(0), vs[fs].reshape(-1, 3).max(0)
     n_xyz = np.maximum(np.ceil((hi - lo) / v - 1e-9).astype(np.int64), 1) + 2 * int(pad)
     if np.prod(n_xyz) > 2**31:
-        raise ValueError(f"grid {tuple(n_xyz[::-1])} (z, y, x) has more than 2^31 voxels; use larger voxels")
+        raise ValueError(
+            f"grid {' x '.join(str(int(n)) for n in n_xyz[::-1])} (z, y, x) has more than 2^31 voxels; "
+            "use larger voxels"
+        )
     origin = lo - pad * v
     shape = tuple(int(s) for s in n_xyz[::-1])
     band_mm = float(band * v.max())

@@ -1,0 +1,135 @@
+"""What a run will cost before it starts: time, peak memory and disk, from the scene's counts and a short measured
+calibration (``estimate_run``), for the line ``inkopt slab`` / ``optimize`` log before a long job and for
+``--dry-run``, which prints only that line.
+
+Time: an iteration is a forward render (``forward_spp``) and a gradient pass (``spp``) over every texel, plus the
+step over the free voxels. The calibration times both passes of the run's own renderer on two random texel subsets
+(``CALIBRATION_TEXELS`` and twice that), so that the part that grows with the texels (``b`` per texel) is told from
+the part that does not (``a``: the gradient's per-voxel accumulation, the set-up of a pass): an iteration takes
+``a + b * texels`` plus the step's per-voxel work, timed on up to 65 536 free voxels and scaled to all of them (the
+step's smoothing is not included). The final
+evaluation (adaptive spp) is not in the estimate: the line says so.
+
+Memory: this process's peak resident memory after the calibration, which has built the renderer, the optimiser's
+state and a gradient pass's per-voxel arrays, plus the per-texel arrays of full passes (``rgb``, variances, the
+adjoint and the running average: ~64 bytes per texel).
+
+Disk: volume.npz at most 4 bytes per ink per inside voxel (compressed, often less), the checkpoint (uncompressed:
+variables and the two optimiser moments, 12 bytes per ink per free voxel; the running average and its variance, 24
+bytes per texel; ~80 bytes of history per iteration) and scene.npz (~40 bytes per texel: voxel, face, normal,
+target); ``inkopt quantize`` adds one byte per printer voxel (600 x 300 DPI,
+27 µm layers: ~6.3 per optimisation voxel of the object's box).
+"""
+
+from __future__ import annotations
+
+import resource
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from .units import format_duration
+
+CALIBRATION_TEXELS = 256
+#: an estimate longer than this gets its line in the log before the run starts (seconds)
+ANNOUNCE_SECONDS = 180.0
+#: printer voxels per optimisation voxel at the default 600 x 300 DPI and 27 µm layers on the 300 DPI grid
+PRINTER_PER_OPT_VOXEL = 2.0 * 1.0 * (25.4 / 300 / 0.027)
+
+
+@dataclass
+class Estimate:
+    """A run's expected cost: ``iterations`` left at ``seconds_per_iteration`` (``seconds``; without the final
+    evaluation), ``peak_gib`` (GiB), ``disk_bytes`` in the run directory and ``quantized_bytes`` added by
+    ``inkopt quantize``; ``calibration_seconds`` (what measuring it cost)."""
+
+    iterations: int
+    seconds_per_iteration: float
+    seconds: float
+    peak_gib: float
+    disk_bytes: int
+    quantized_bytes: int
+    calibration_seconds: float
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_json(cls, d: dict) -> Estimate:
+        return cls(**{k: d[k] for k in cls.__dataclass_fields__})
+
+    def line(self) -> str:
+        return (
+            f"estimate: {self.iterations} iterations x {self.seconds_per_iteration:.2g} s = "
+            f"{format_duration(self.seconds)} (+ the final evaluation), peak memory ~{self.peak_gib:.1f} GiB, disk "
+            f"~{_size(self.disk_bytes)} (+ {_size(self.quantized_bytes)} after inkopt quantize); measured in "
+            f"{self.calibration_seconds:.1f} s"
+        )
+
+
+def _size(n: float) -> str:
+    return f"{n / 1e9:.2f} GB" if n >= 1e8 else f"{n / 1e6:.1f} MB"
+
+
+def _peak_gib() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
+
+
+def _step_seconds(run, rows: int = 1 << 16) -> float:
+    """The step's per-voxel work (dE/dsigma -> dE/dx and the optimiser's update) timed on up to ``rows`` free
+    voxels with a throwaway optimiser, scaled to all of them (the smoothing of the step is not included)."""
+    from .model import mix_grad
+    from .optim.optimizers import make_optimizer
+
+    f = len(run.x)
+    n = min(f, rows)
+    if n == 0:
+        return 0.0
+    zeros = np.zeros((n, 3), np.float32)
+    opt = make_optimizer(run.cfg.optimizer, run.cfg.step_size, (n, run.x.shape[1]))
+    t = time.perf_counter()
+    g_x = run.param.backward(run.x[:n], mix_grad(zeros, zeros, run.base.inks), natural=run.opt.natural, lo=0)
+    opt.step(run.x[:n], g_x)
+    return (time.perf_counter() - t) * f / n
+
+
+def estimate_run(run, inside_voxels: int, box_voxels: int, seed: int = 0) -> Estimate:
+    """The cost of the iterations ``run`` (an ``optim.Optimization``, at its current iteration) has left, measured
+    on its own renderer (module docstring). ``inside_voxels``: the object's voxels; ``box_voxels``: its grid's."""
+    t0 = time.perf_counter()
+    cfg, tex = run.cfg, run.texels
+    n_tex = len(tex)
+    rng = np.random.default_rng(seed)
+    renderer = run.renderer()
+    sizes = [min(n_tex, CALIBRATION_TEXELS), min(n_tex, 2 * CALIBRATION_TEXELS)]
+    times = []
+    for n in sizes:
+        sub = tex.subset(np.sort(rng.choice(n_tex, n, replace=False)))
+        adjoint = rng.standard_normal((n, 3)).astype(np.float32)
+        t = time.perf_counter()
+        if cfg.forward_spp > 0:
+            renderer.render(sub, cfg.forward_spp, seed, cfg.include_specular)
+        renderer.gradient(
+            sub, adjoint, cfg.spp, seed + 1, cfg.include_specular, cfg.grad_method, grad_index=run.param.free_index
+        )
+        times.append(time.perf_counter() - t)
+    if sizes[1] > sizes[0]:
+        per_texel = max((times[1] - times[0]) / (sizes[1] - sizes[0]), 0.0)
+        fixed = max(times[0] - per_texel * sizes[0], 0.0)
+    else:  # the whole sensor was measured
+        per_texel, fixed = times[0] / max(sizes[0], 1), 0.0
+    step = _step_seconds(run)
+    per_iteration = fixed + per_texel * n_tex + step
+    left = max(cfg.iterations - run.iteration, 0)
+    n_inks = run.x.shape[1]
+    disk = 4 * n_inks * inside_voxels + (12 * n_inks * len(run.x) + 24 * n_tex + 80 * cfg.iterations) + 40 * n_tex
+    return Estimate(
+        iterations=left,
+        seconds_per_iteration=per_iteration,
+        seconds=per_iteration * left,
+        peak_gib=_peak_gib() + 64 * n_tex / 2**30,
+        disk_bytes=int(disk),
+        quantized_bytes=int(PRINTER_PER_OPT_VOXEL * box_voxels),
+        calibration_seconds=time.perf_counter() - t0,
+    )

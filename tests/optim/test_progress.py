@@ -1,0 +1,95 @@
+"""Progress as log lines when stderr is not a terminal, the whole run's time across resumes, and the names of the
+settings that make a checkpoint unresumable."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+
+from inkopt import charts
+from inkopt.optim.loop import ProgressLines, changed_settings
+from inkopt.units import format_duration
+
+
+class Clock:
+    def __init__(self):
+        self.t = 0.0
+
+    def __call__(self):
+        return self.t
+
+
+def test_a_line_at_least_every_30_s_with_an_eta():
+    clock, lines = Clock(), []
+    p = ProgressLines(total=100, start=10, log=lines.append, every_s=30, clock=clock)
+    for it in range(11, 101):  # 7 s per iteration
+        clock.t += 7.0
+        p.update(it, 0.5, 3.0)
+    assert lines[0] == "iteration 11/100: loss 0.5, ΔE76 3.00, 7.0 s/iteration, ETA 10 min 23 s"
+    assert lines[-1].startswith("iteration 100/100") and lines[-1].endswith("ETA 0 s")
+    its = [int(line.split()[1].split("/")[0]) for line in lines]
+    # after the first line, one as soon as 30 s have passed: every 5th iteration (35 s) -> never more than 35 s
+    assert all(7 * (b - a) <= 35 for a, b in zip(its, its[1:]))
+    assert len(lines) <= 2 + 90 * 7 / 30
+
+
+def test_format_duration():
+    assert [format_duration(s) for s in (42, 185, 3720)] == ["42 s", "3 min 05 s", "1 h 02 min"]
+
+
+def test_changed_settings_names_them():
+    old = {"lr": 0.5, "decay": 0.25, "problem": "ab", "lighting": "uniform"}
+    new = {"lr": 0.5, "decay": 0.5, "problem": "cd", "lighting": "uniform"}
+    assert changed_settings(old, new) == "decay 0.25 -> 0.5, the target, texels or constraints (scene)"
+
+
+def test_slab_logs_progress_lines_without_a_terminal(tmp_path):
+    chart = charts.save(charts.colour_chart(24, 16), tmp_path / "chart.png")
+    out = tmp_path / "run"
+    args = ["slab", str(chart), "--size-mm", "2x1.333x0.5", "--out", str(out), "--iterations", "3"]
+    args += ["--spp", "1", "--forward-spp", "2", "--eval-spp", "2", "--threads", "1", "--log-every", "0"]
+    r = subprocess.run([sys.executable, "-m", "inkopt.cli", *args], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    lines = [line for line in r.stderr.splitlines() if line.startswith("iteration ")]
+    assert [line.split(":")[0] for line in lines] == ["iteration 1/3", "iteration 2/3", "iteration 3/3"]
+    assert all("ETA" in line for line in lines)
+    first = float(np.load(out / "checkpoint.npz")["wall_seconds"])
+    r2 = subprocess.run(
+        [sys.executable, "-m", "inkopt.cli", *args[:7], "5", *args[8:], "--resume"], capture_output=True, text=True
+    )
+    assert r2.returncode == 0, r2.stderr
+    assert "whole run across resumes" in r2.stdout
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["seconds_total"] >= first + rep["seconds"]
+
+
+def test_dry_run_prints_the_estimate_and_writes_nothing(tmp_path):
+    chart = charts.save(charts.colour_chart(24, 16), tmp_path / "chart.png")
+    out = tmp_path / "run"
+    args = ["slab", str(chart), "--size-mm", "2x1.333x0.5", "--out", str(out), "--iterations", "7", "--threads", "1"]
+    r = subprocess.run([sys.executable, "-m", "inkopt.cli", *args, "--dry-run"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith("estimate: 7 iterations x ") and "peak memory ~" in r.stdout and "disk ~" in r.stdout
+    assert len(r.stdout.strip().splitlines()) == 1 and not out.exists()
+
+
+def test_estimate_counts_the_iterations_left_and_is_recorded(tmp_path):
+    from inkopt.estimate import Estimate
+
+    chart = charts.save(charts.colour_chart(24, 16), tmp_path / "chart.png")
+    out = tmp_path / "run"
+    args = ["slab", str(chart), "--size-mm", "2x1.333x0.5", "--out", str(out), "--threads", "1"]
+    args += ["--spp", "1", "--forward-spp", "1", "--eval-spp", "2", "--checkpoint-every", "1"]
+    r = subprocess.run([sys.executable, "-m", "inkopt.cli", *args, "--iterations", "2"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    est = Estimate.from_json(json.loads((out / "report.json").read_text())["estimate"])
+    assert est.iterations == 2 and est.seconds == est.seconds_per_iteration * 2 and est.seconds_per_iteration > 0
+    # 24 x 16 x 6 voxels, 5 inks: volume (4 B per ink per voxel) and checkpoint (12 B per ink per voxel) bound
+    assert est.disk_bytes >= 16 * 5 * 24 * 16 * 6 and est.quantized_bytes > 6 * 24 * 16 * 6
+    r = subprocess.run(
+        [sys.executable, "-m", "inkopt.cli", *args, "--iterations", "5", "--resume", "--dry-run"],
+        capture_output=True,
+        text=True,
+    )
+    assert r.returncode == 0 and r.stdout.startswith("estimate: 3 iterations x "), r.stderr

@@ -1,0 +1,140 @@
+"""Where a scene's target colour comes from: missing materials and textures, meshes without UVs or colours, and
+every image mode Pillow reads (16-bit grey, float grey, palette, CMYK, CIELAB, alpha) as the right colours."""
+
+import numpy as np
+import pytest
+import trimesh
+from PIL import Image
+
+from inkopt.cli import main
+from inkopt.scenes.mesh import load_mesh
+from inkopt.scenes.mesh.source import describe_colour_source
+from inkopt.scenes.picture import picture_rgba
+from inkopt.scenes.slab import load_picture
+
+
+def srgb_to_linear(v):
+    """IEC 61966-2-1 decoding, written out here (not inkopt's)."""
+    v = np.asarray(v, np.float64)
+    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
+
+
+RED = (200, 30, 30)
+
+
+def write_cube_obj(folder, mtllib="m.mtl", map_kd="tex.png", uv=True, write_mtl=True, texture=None):
+    """A unit cube OBJ in ``folder``: ``mtllib`` (None: no line), its MTL naming ``map_Kd`` (None: no line),
+    the texture tex.png (uniform RED, or the PIL image ``texture``)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    box = trimesh.creation.box((1, 1, 1))
+    lines = [f"mtllib {mtllib}"] if mtllib else []
+    lines += ["v {:g} {:g} {:g}".format(*p) for p in box.vertices]
+    if uv:
+        lines += [f"vt {p[0] + 0.5:g} {p[1] + 0.5:g}" for p in box.vertices]
+    lines += ["usemtl mat"] if mtllib else []
+    lines += ["f " + " ".join(f"{i}/{i}" if uv else f"{i}" for i in t) for t in box.faces + 1]
+    (folder / "m.obj").write_text("\n".join(lines) + "\n")
+    if write_mtl:
+        (folder / "m.mtl").write_text("newmtl mat\nKd 1 1 1\n" + (f"map_Kd {map_kd}\n" if map_kd else ""))
+    (texture or Image.new("RGB", (8, 8), RED)).save(folder / "tex.png")
+    return folder / "m.obj"
+
+
+@pytest.mark.parametrize(
+    "kw, match",
+    [
+        (dict(mtllib=None), r"names no material library \(no mtllib line\) but m.mtl is beside it"),
+        (dict(map_kd="nothere.png"), "names texture nothere.png, which does not exist"),
+        (dict(mtllib="other.mtl"), "names material library other.mtl, which does not exist"),
+        (dict(uv=False), r"has a texture but no texture coordinates"),
+        (dict(mtllib=None, write_mtl=False), "so the target would be the constant #FFFFFF"),
+        (dict(map_kd=None), "so the target would be the constant #FFFFFF"),
+    ],
+)
+def test_obj_colour_problems_are_refused(tmp_path, kw, match):
+    obj = write_cube_obj(tmp_path / "c", **kw)
+    with pytest.raises(ValueError, match=match) as e:
+        load_mesh(obj, height_mm=2.0)
+    assert "\n" not in str(e.value)
+
+
+def test_obj_fixes_named_in_the_errors(tmp_path):
+    ok = load_mesh(write_cube_obj(tmp_path / "ok"), height_mm=2.0)
+    assert describe_colour_source(ok) == "texture tex.png (8 x 8 px)"
+    obj = write_cube_obj(tmp_path / "nolib", mtllib=None)
+    m = load_mesh(obj, height_mm=2.0, texture=tmp_path / "ok" / "tex.png")  # --texture FILE
+    assert describe_colour_source(m).startswith("texture ") and m.texture_alpha is None
+    np.testing.assert_allclose(m.colors_at([0], [[1, 0, 0]]), [srgb_to_linear(np.array(RED) / 255)], atol=1e-5)
+    c = load_mesh(obj, height_mm=2.0, constant_color=True)  # trimesh's grey placeholder is not used
+    assert describe_colour_source(c) == "constant colour #FFFFFF" and c.texture_alpha is None
+    with pytest.raises(ValueError, match="no texture coordinates"):
+        load_mesh(write_cube_obj(tmp_path / "nouv", uv=False), height_mm=2.0, texture=tmp_path / "ok" / "tex.png")
+
+
+def test_uncoloured_ply_needs_the_flag(tmp_path):
+    path = tmp_path / "ball.ply"
+    trimesh.creation.icosphere(subdivisions=2, radius=0.5).export(path)
+    with pytest.raises(ValueError, match="no texture, vertex colours or face colours"):
+        load_mesh(path, scale=1.0)
+    assert load_mesh(path, scale=1.0, constant_color=True).color_source == "constant"
+
+
+def test_cli_refuses_obj_without_mtllib_in_one_line(tmp_path, capsys):
+    obj = write_cube_obj(tmp_path / "c", mtllib=None)
+    out = tmp_path / "run"
+    assert main(["optimize", str(obj), "--height-mm", "2", "--out", str(out), "--iterations", "1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("inkopt: error: ") and "mtllib m.mtl" in err[0]
+    assert not out.exists()
+
+
+# ------------------------------------------------------------------------------------------------ image modes
+def _modes():
+    """(image, expected sRGB (r, g, b, alpha) in 0..1 of pixel (0, 0)) for the modes Pillow reads."""
+    g16 = Image.fromarray(np.full((4, 6), 40000, np.uint16))
+    assert g16.mode == "I;16"
+    i32 = Image.fromarray(np.full((4, 6), 40000, np.int32))
+    f32 = Image.fromarray(np.full((4, 6), 0.25, np.float32))
+    pal = Image.new("P", (6, 4), 1)
+    pal.putpalette([0, 0, 0, 10, 200, 40] + [0] * 762)
+    la = Image.new("LA", (6, 4), (100, 128))
+    cmyk = Image.new("CMYK", (6, 4), (255, 0, 0, 0))  # full cyan, no profile: Pillow's inversion
+    one = Image.new("1", (6, 4), 1)
+    lab = Image.new("LAB", (6, 4), (255, 128, 128))  # L* = 100, a* = b* = 0: white
+    g = 40000 / 65535
+    return [
+        (g16, (g, g, g, 1)),
+        (i32, (g, g, g, 1)),
+        (f32, (0.25, 0.25, 0.25, 1)),
+        (pal, (10 / 255, 200 / 255, 40 / 255, 1)),
+        (la, (100 / 255, 100 / 255, 100 / 255, 128 / 255)),
+        (cmyk, (0, 1, 1, 1)),
+        (one, (1, 1, 1, 1)),
+        (lab, (1, 1, 1, 1)),
+    ]
+
+
+@pytest.mark.parametrize("im, want", _modes(), ids=lambda v: getattr(v, "mode", ""))
+def test_picture_modes(im, want):
+    got = picture_rgba(im)
+    assert got.shape == (4, 6, 4) and got.dtype == np.float32
+    np.testing.assert_allclose(got[0, 0], want, atol=1.5 / 255)
+
+
+def test_sixteen_bit_grey_png_is_grey_not_white(tmp_path):
+    path = tmp_path / "g16.png"
+    Image.fromarray(np.full((10, 15), 40000, np.uint16)).save(path)
+    lin = load_picture(path)
+    np.testing.assert_allclose(lin[0, 0], [srgb_to_linear(40000 / 65535)] * 3, rtol=1e-4)
+
+
+def test_out_of_range_grey_is_refused():
+    with pytest.raises(ValueError, match="outside 0..1"):
+        picture_rgba(Image.fromarray(np.full((2, 2), 3.0, np.float32)), "p.tif")
+
+
+def test_sixteen_bit_mesh_texture(tmp_path):
+    tex = Image.fromarray(np.full((8, 8), 40000, np.uint16))
+    m = load_mesh(write_cube_obj(tmp_path / "c", texture=tex), height_mm=2.0)
+    want = srgb_to_linear(round(40000 / 65535 * 255) / 255)
+    np.testing.assert_allclose(m.colors_at([0], [[1, 0, 0]]), [[want] * 3], atol=1e-5)
