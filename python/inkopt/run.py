@@ -22,10 +22,11 @@ from .evaluation.baselines import baseline_mixture
 from .evaluation.metrics import delta_e76_map, prediction_metrics
 from .evaluation.noise import EVAL_SEED_OFFSET, adaptive_render
 from .evaluation.results import Report
+from .io import file_digest
 from .lighting import Lighting, load_lighting
 from .optim import Optimization, OptimizeConfig
 from .pictures import loss_figure
-from .rundir import RunDir
+from .rundir import Predictions, RunDir
 from .scenes import Scene
 
 
@@ -107,6 +108,15 @@ def _optimise(scene, out_dir, cfg, resume, eval_spp, threads, progress, lighting
     init = prediction_metrics(run.loss, res0.rgb, res0.var)
     de = delta_e76_map(run.loss, res.rgb)
     scene.write_pictures(rd, res.rgb, de)
+    rd.save_predictions(
+        Predictions(
+            {"continuous": res.rgb},
+            "optimisation",
+            {"continuous": res.spp},
+            file_digest(rd.volume_path),
+            lighting.describe(),
+        )
+    )
     loss_figure(rd.loss_picture_path, run.history.loss, run.history.delta_e76)
     h = run.history
     n = max(len(h.seconds), 1)

@@ -30,6 +30,57 @@ from .model.volume import upgrade_volume
 FIXED_SHARE_MAX_ENTRIES = 50_000_000
 #: the format version scene.npz is written in (``format_version``)
 SCENE_FORMAT = 1
+#: the format version predictions.npz is written in (``format_version``)
+PREDICTIONS_FORMAT = 1
+
+
+@dataclass
+class Predictions:
+    """The contents of predictions.npz: predicted colours per scene texel.
+
+    rgb: result name ("continuous", "quantized", "surface", "extrusion") -> (I, 3) float32 linear RGB on the
+    scene's texels (the printed results rendered at printer resolution and averaged onto them, as ``inkopt
+    evaluate`` does); source: "optimisation" or "evaluation"; spp: samples per scene texel of each result;
+    volume_digest: ``io.file_digest`` of the volume.npz they were rendered from; lighting: the display lighting
+    (``Lighting.describe()``, stored as JSON).
+    """
+
+    rgb: dict[str, np.ndarray]
+    source: str
+    spp: dict[str, int]
+    volume_digest: str
+    lighting: dict
+
+    def arrays(self) -> dict:
+        names = list(self.rgb)
+        out = {
+            FORMAT_KEY: np.int64(PREDICTIONS_FORMAT),
+            "names": np.array(names),
+            "source": np.array(self.source),
+            "volume_digest": np.array(self.volume_digest),
+            "lighting": np.array(json.dumps(self.lighting)),
+            "spp": np.array([int(self.spp.get(n, 0)) for n in names], np.int64),
+        }
+        out.update({f"rgb_{n}": np.asarray(self.rgb[n], np.float32) for n in names})
+        return out
+
+    @classmethod
+    def from_arrays(cls, d, where: str = "predictions.npz") -> Predictions:
+        d = upgrade_format(d, kind="predictions file", where=where, current=PREDICTIONS_FORMAT, upgrades={})
+        names = [str(n) for n in np.asarray(d.get("names", [])).reshape(-1)]
+        missing = [
+            k for k in ("source", "volume_digest", "lighting", "spp", *(f"rgb_{n}" for n in names)) if k not in d
+        ]
+        if missing or not names:
+            raise ValueError(f"{where} lacks {', '.join(missing) or 'names'}; run 'inkopt evaluate' again")
+        spp = np.asarray(d["spp"]).reshape(-1)
+        return cls(
+            {n: np.asarray(d[f"rgb_{n}"], np.float32) for n in names},
+            str(d["source"]),
+            {n: int(v) for n, v in zip(names, spp)},
+            str(d["volume_digest"]),
+            json.loads(str(d["lighting"])),
+        )
 
 
 @dataclass
@@ -146,6 +197,7 @@ class RunDir:
     QUANTIZED, EVALUATION, SLICES, LOSS_PNG = "quantized.npz", "evaluation.json", "slices", "loss.png"
     QUANTIZED_LABELS, GCVF = "quantized_labels.npy", "slices.gcvf"
     VIEWS_PNG, PREDICTION_GLB, TARGET_GLB = "views.png", "prediction.glb", "target.glb"
+    PREDICTIONS, PROOF = "predictions.npz", "report.html"
 
     def __init__(self, path):
         self.path = Path(path)
@@ -232,6 +284,16 @@ class RunDir:
     @property
     def target_glb_path(self) -> Path:
         return self.path / self.TARGET_GLB
+
+    @property
+    def predictions_path(self) -> Path:
+        """predictions.npz: predicted colours per scene texel (``Predictions``)."""
+        return self.path / self.PREDICTIONS
+
+    @property
+    def proof_path(self) -> Path:
+        """report.html: the soft-proof page (``inkopt report``)."""
+        return self.path / self.PROOF
 
     def _need(self, path: Path, hint: str) -> Path:
         if not path.is_file():
@@ -325,3 +387,18 @@ class RunDir:
 
     def write_evaluation(self, ev: dict) -> Path:
         return write_json(self.evaluation_path, ev, indent=1)
+
+    def read_evaluation(self) -> dict | None:
+        """evaluation.json, or None if the run has not been evaluated."""
+        return json.loads(self.evaluation_path.read_text()) if self.evaluation_path.is_file() else None
+
+    # ------------------------------------------------------------------ predicted colours
+    def save_predictions(self, pred: Predictions) -> Path:
+        save_npz(self.predictions_path, pred.arrays())
+        return self.predictions_path
+
+    def load_predictions(self) -> Predictions | None:
+        """predictions.npz, or None if neither the optimisation nor ``inkopt evaluate`` wrote one."""
+        if not self.predictions_path.is_file():
+            return None
+        return Predictions.from_arrays(load_npz(self.predictions_path, "predictions file"), str(self.predictions_path))

@@ -14,7 +14,7 @@ import sys
 from .. import __version__
 from .common import UsageError
 
-SUBCOMMANDS = ("render", "slab", "optimize", "quantize", "export", "evaluate", "demo", "select_inks")
+SUBCOMMANDS = ("render", "slab", "optimize", "quantize", "export", "evaluate", "report", "demo", "select_inks")
 
 __all__ = ["UsageError", "build_parser", "main"]
 
