@@ -23,6 +23,7 @@ LAYERS = [
     {"optim"},
     {"printing"},
     {"evaluation"},
+    {"proof"},
     {"run"},
     {"inksets"},
     {"cli", "__main__"},

@@ -27,7 +27,7 @@ from .page import data_uri, mesh_section, page_html, slab_section
 ORDER = ("target", "continuous", "quantized", "surface", "extrusion")
 SHADE = 0.35  # head-light share of the 3D view's shading (as views.png)
 JPEG_QUALITY = 90
-SLAB_WIDTH_PX = 480  # a slab face is shown about this wide (whole pixels per texel)
+SLAB_WIDTH_PX = 400  # a slab face is shown about this wide (whole pixels per texel)
 
 
 @dataclass
@@ -153,7 +153,7 @@ def _mesh(rec, keys, rgb8, heat8, legend, scale):
 
 def _slab(rec, keys, rgb8, heat8, legend, scale):
     faces = []
-    for name in rec.faces:
+    for name in sorted(rec.faces, key=lambda f: f != "top"):  # the top face first
         if name not in rec.pix:
             continue
         pix = rec.pix[name]
