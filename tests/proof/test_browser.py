@@ -1,6 +1,6 @@
 """The soft-proof page in a real browser: headless Chromium (Debian's ``chromium``, or the one named by
 ``INKOPT_CHROMIUM``) driven by Playwright, with the network off. Skipped, with a message, where no browser or no
-Playwright is found; CI installs both (.ci/run)."""
+Playwright is found; CI installs both and requires them (.ci/run sets ``INKOPT_REQUIRE_BROWSER=1``)."""
 
 import io
 import os
@@ -10,11 +10,15 @@ import numpy as np
 import pytest
 from PIL import Image
 
-pw = pytest.importorskip("playwright.sync_api", reason="Playwright is not installed (pip install playwright)")
-
 BROWSER = os.environ.get("INKOPT_CHROMIUM") or next(
     (p for n in ("chromium", "chromium-browser", "google-chrome") if (p := shutil.which(n))), None
 )
+if os.environ.get("INKOPT_REQUIRE_BROWSER") == "1":  # CI: a missing browser is a failure, not a skip
+    import playwright.sync_api as pw
+
+    assert BROWSER is not None, "INKOPT_REQUIRE_BROWSER=1 but no Chromium found"
+else:
+    pw = pytest.importorskip("playwright.sync_api", reason="Playwright is not installed (pip install playwright)")
 pytestmark = pytest.mark.skipif(
     BROWSER is None,
     reason="no Chromium found (apt-get install chromium, or set INKOPT_CHROMIUM): browser tests skipped",
