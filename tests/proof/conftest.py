@@ -6,6 +6,9 @@ import pytest
 import trimesh
 
 from inkopt import charts, cli
+from inkopt.evaluation.colour_table import colour_table
+from inkopt.evaluation.evaluate import evaluate_run
+from inkopt.model import InkTable
 
 INKS = "cyan,magenta,white"  # three inks: the baselines' colour table is small
 
@@ -16,8 +19,8 @@ def _run(*argv):
 
 @pytest.fixture(scope="session")
 def mesh_run(tmp_path_factory):
-    """A 2 mm ball, cyan above its equator and magenta below, optimised briefly, evaluated (baselines included)
-    and reported."""
+    """A 2 mm ball, cyan above its equator and magenta below, optimised briefly, evaluated (baselines included,
+    from a 6-patch colour table) and reported."""
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("INKOPT_CACHE_DIR", str(tmp_path_factory.mktemp("cache")))
         mp.setattr("inkopt.scenes.mesh.scene.VIEW_SIZE", 64)
@@ -45,7 +48,8 @@ def mesh_run(tmp_path_factory):
             "--inks",
             INKS,
         )
-        _run("evaluate", run, "--spp", 8, "--patch-mm", 1.0)
+        table = colour_table(InkTable.parse(INKS), patch_mm=1.0, step=2, max_stderr=0.5)  # 6 patches
+        evaluate_run(run, spp=8, table=table)
         _run("report", run)
     return run
 

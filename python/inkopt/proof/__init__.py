@@ -19,6 +19,7 @@ import numpy as np
 from ..color import delta_e76, linear_to_lab
 from ..evaluation.results import Evaluation, Report
 from ..io import atomic_write_bytes, file_digest, load_npz
+from ..printing.stream import MixtureSource
 from ..rundir import RunDir
 from .bake import encode, heat_legend, heat_rgb8, heat_scale, mesh_atlas, srgb8
 from .figures import LABELS, describe_lighting, figures_html, ink_shares, settings_html
@@ -91,11 +92,7 @@ def write_proof(run, out=None) -> Proof:
         sections.append(("Loss curve", f'<img alt="loss curve" src="{uri}" style="max-width:100%">'))
     quant = ev.quantization if ev is not None else None
     counts = load_npz(d.quantized_path, "quantized volume")["label_counts"] if d.has_quantized() else None
-    vol = d.load_volume()
-    inside = vol.inside_mask()
-    mix_mean = vol.mixture[inside].mean(0) if inside.any() else None
-    del vol
-    sections.append(("Inks", ink_shares(list(report.inks), counts, mix_mean)))
+    sections.append(("Inks", ink_shares(list(report.inks), counts, mixture_mean(d.volume_file()))))
     sections.append(("Printer, settings and time", settings_html(report, ev, quant)))
     sections.append(("Files", _files(d, pred)))
 
@@ -116,6 +113,22 @@ def write_proof(run, out=None) -> Proof:
         bool(atlas is not None and atlas.downsampled),
         time.perf_counter() - t0,
     )
+
+
+def mixture_mean(path) -> np.ndarray | None:
+    """The mean ink shares (N,) float64 over the inside voxels of a mixture volume file, read one layer at a time
+    (a large object's mixture does not fit in memory twice); None if no voxel is inside."""
+    src = MixtureSource(path)
+    try:
+        total, count = np.zeros(src.shape[3]), 0
+        for z in range(src.shape[0]):
+            lay = src[z]
+            ins = src.inside[z] if src.inside is not None else np.ones(lay.shape[:2], bool)
+            total += lay[ins].sum(0, dtype=np.float64)
+            count += int(ins.sum())
+    finally:
+        src.close()
+    return total / count if count else None
 
 
 def _mesh(rec, keys, rgb8, heat8, legend, scale):
