@@ -31,11 +31,11 @@ def _table(head: list[str], rows: list[list[str]], cls: str) -> str:
 
 
 def _metric_row(name: str, m, spp) -> list[str]:
-    noise = f" ± {_num(m.delta_e76_noise)}" if m.delta_e76_noise is not None else ""
     return [
         escape(LABELS.get(name, name)),
-        f'<span class="fig" data-fig="{name}-de76">{_num(m.delta_e76_mean)}</span>{noise}',
+        f'<span class="fig" data-fig="{name}-de76">{_num(m.delta_e76_mean)}</span>',
         _num(m.delta_e76_mean_corrected),
+        _num(m.delta_e76_noise),
         _num(m.delta_e76_p95),
         _num(m.delta_e2000_mean),
         _num(m.ssim, ".3f"),
@@ -46,8 +46,9 @@ def _metric_row(name: str, m, spp) -> list[str]:
 
 FIGURE_HEAD = [
     "result",
-    "ΔE76 mean ± noise",
+    "ΔE76 mean",
     "ΔE76 mean, noise removed",
+    "render noise per texel (ΔE76)",
     "ΔE76 p95",
     "ΔE2000 mean",
     "SSIM",

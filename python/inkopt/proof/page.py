@@ -31,7 +31,7 @@ input[type=range]{width:260px}
 body.full3d{max-width:none;padding:0}body.full3d #view3d{position:fixed;inset:0;z-index:5;background:#fff;
 display:flex;flex-direction:column}body.full3d #stage3d{flex:1;height:auto;border:0}
 body.full3d #view3d .bar{padding:4px 10px}
-.face{display:inline-block;margin:0 20px 14px 0;vertical-align:top}.swipe{position:relative;display:inline-block}
+.face{display:inline-block;margin:0 20px 14px 0;vertical-align:top;width:max(var(--w),300px)}.swipe{position:relative;display:inline-block}
 .swipe img{display:block;image-rendering:pixelated;width:var(--w)}.swipe img.top{position:absolute;left:0;top:0}
 .swipe .line{display:block}.legend{display:flex;align-items:center;gap:6px;font-size:12.5px}
 .legend img{width:200px;height:10px;image-rendering:pixelated}
@@ -87,11 +87,11 @@ def slab_section(faces: list[dict], keys: list[str], legend_uri: str, scale: flo
     for f in faces:
         w = f["width"] * zoom
         out.append(
-            f"""<div class="face" id="face-{f["name"]}"><h3>{escape(f["name"])} face</h3>
+            f"""<div class="face" id="face-{f["name"]}" style="--w:{w}px"><h3>{escape(f["name"])} face</h3>
 <div class="bar"><label>left <select>{_options(keys, "target")}</select></label>
 <label>right <select>{_options(keys, second)}</select></label>
 <label><input type="checkbox"> ΔE76 heat map</label></div>
-<div class="swipe" style="--w:{w}px"><img class="layer" alt="left"><img class="layer top" alt="right">
+<div class="swipe"><img class="layer" alt="left"><img class="layer top" alt="right">
 <div class="line"></div></div>
 <div class="bar"><input type="range" min="0" max="100" value="50" aria-label="swipe position"></div></div>"""
         )
