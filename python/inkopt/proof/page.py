@@ -31,7 +31,8 @@ input[type=range]{width:260px}
 body.full3d{max-width:none;padding:0}body.full3d #view3d{position:fixed;inset:0;z-index:5;background:#fff;
 display:flex;flex-direction:column}body.full3d #stage3d{flex:1;height:auto;border:0}
 body.full3d #view3d .bar{padding:4px 10px}
-.face{display:inline-block;margin:0 20px 14px 0;vertical-align:top;width:max(var(--w),300px)}.swipe{position:relative;display:inline-block}
+.face{display:inline-block;margin:0 20px 14px 0;vertical-align:top;width:max(var(--w),300px)}
+.swipe{position:relative;display:inline-block}
 .swipe img{display:block;image-rendering:pixelated;width:var(--w)}.swipe img.top{position:absolute;left:0;top:0}
 .swipe .line{display:block}.legend{display:flex;align-items:center;gap:6px;font-size:12.5px}
 .legend img{width:200px;height:10px;image-rendering:pixelated}
