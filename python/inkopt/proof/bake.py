@@ -70,12 +70,12 @@ def mesh_atlas(vertices, faces, texel_pos_mm, texel_normal, voxel_mm: float, max
     tri = v[f]
     area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     edge_mm = float(np.sqrt(2.0 * area.mean()))  # side of a square holding two mean triangles
-    want = max(np.ceil(2.0 * edge_mm / voxel_mm), ATLAS_MIN // grid)
+    margin = 0.75  # pixels between a triangle's corner and its cell's border: linear filtering stays inside
+    want = max(np.ceil(2.0 * edge_mm / voxel_mm + 2 * margin), ATLAS_MIN // grid)
     cell = int(np.clip(want, MIN_CELL, max(MIN_CELL, max_size // grid)))
     if grid * cell > max(max_size, grid * MIN_CELL) or grid * cell > 8192:
         raise ValueError(f"the mesh has too many triangles ({nf}) for the report's texture; decimate it")
     size = grid * cell
-    margin = 0.75  # pixels between a triangle's corner and its cell's border: linear filtering stays inside
 
     # pixel -> (triangle, barycentrics): cell (cy, cx), lower-left half = triangle 2k, upper-right = 2k + 1
     py, px = np.divmod(np.arange(size * size, dtype=np.int64), size)
