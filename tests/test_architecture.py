@@ -24,6 +24,7 @@ LAYERS = [
     {"printing"},
     {"evaluation"},
     {"calibration"},
+    {"proof"},
     {"run", "estimate"},
     {"inksets"},
     {"cli", "__main__"},

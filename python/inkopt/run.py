@@ -27,10 +27,11 @@ from .evaluation.baselines import baseline_mixture
 from .evaluation.metrics import delta_e76_map, prediction_metrics
 from .evaluation.noise import EVAL_SEED_OFFSET, MAX_SPP, adaptive_render
 from .evaluation.results import Report
+from .io import file_digest
 from .lighting import Lighting, load_lighting
 from .optim import Optimization, OptimizeConfig
 from .pictures import loss_figure
-from .rundir import RunDir
+from .rundir import Predictions, RunDir
 from .scenes import Scene
 
 
@@ -182,6 +183,15 @@ def _optimise(
     start = run.start_figures
     de = delta_e76_map(run.loss, res.rgb)
     scene.write_pictures(rd, res.rgb, de)
+    rd.save_predictions(
+        Predictions(
+            {"continuous": res.rgb},
+            "optimisation",
+            {"continuous": res.spp},
+            file_digest(rd.volume_path),
+            lighting.describe(),
+        )
+    )
     loss_figure(rd.loss_picture_path, run.history.loss, run.history.delta_e76)
     h = run.history
     n = max(len(h.seconds), 1)

@@ -38,6 +38,57 @@ from .model.volume import upgrade_volume
 FIXED_SHARE_MAX_ENTRIES = 50_000_000
 #: the format version scene.npz is written in (``format_version``)
 SCENE_FORMAT = 1
+#: the format version predictions.npz is written in (``format_version``)
+PREDICTIONS_FORMAT = 1
+
+
+@dataclass
+class Predictions:
+    """The contents of predictions.npz: predicted colours per scene texel.
+
+    rgb: result name ("continuous", "quantized", "surface", "extrusion") -> (I, 3) float32 linear RGB on the
+    scene's texels (the printed results rendered at printer resolution and averaged onto them, as ``inkopt
+    evaluate`` does); source: "optimisation" or "evaluation"; spp: samples per scene texel of each result;
+    volume_digest: ``io.file_digest`` of the volume.npz they were rendered from; lighting: the display lighting
+    (``Lighting.describe()``, stored as JSON).
+    """
+
+    rgb: dict[str, np.ndarray]
+    source: str
+    spp: dict[str, int]
+    volume_digest: str
+    lighting: dict
+
+    def arrays(self) -> dict:
+        names = list(self.rgb)
+        out = {
+            FORMAT_KEY: np.int64(PREDICTIONS_FORMAT),
+            "names": np.array(names),
+            "source": np.array(self.source),
+            "volume_digest": np.array(self.volume_digest),
+            "lighting": np.array(json.dumps(self.lighting)),
+            "spp": np.array([int(self.spp.get(n, 0)) for n in names], np.int64),
+        }
+        out.update({f"rgb_{n}": np.asarray(self.rgb[n], np.float32) for n in names})
+        return out
+
+    @classmethod
+    def from_arrays(cls, d, where: str = "predictions.npz") -> Predictions:
+        d = upgrade_format(d, kind="predictions file", where=where, current=PREDICTIONS_FORMAT, upgrades={})
+        names = [str(n) for n in np.asarray(d.get("names", [])).reshape(-1)]
+        missing = [
+            k for k in ("source", "volume_digest", "lighting", "spp", *(f"rgb_{n}" for n in names)) if k not in d
+        ]
+        if missing or not names:
+            raise ValueError(f"{where} lacks {', '.join(missing) or 'names'}; run 'inkopt evaluate' again")
+        spp = np.asarray(d["spp"]).reshape(-1)
+        return cls(
+            {n: np.asarray(d[f"rgb_{n}"], np.float32) for n in names},
+            str(d["source"]),
+            {n: int(v) for n, v in zip(names, spp)},
+            str(d["volume_digest"]),
+            json.loads(str(d["lighting"])),
+        )
 
 
 #: the key under which an output records the digest of the volume.npz / quantized.npz it was made from
@@ -163,6 +214,7 @@ class RunDir:
     QUANTIZED_LABELS, GCVF = "quantized_labels.npy", "slices.gcvf"
     MIXTURE_3MF, LABELS_3MF = "mixture.3mf", "quantized.3mf"
     VIEWS_PNG, PREDICTION_GLB, TARGET_GLB = "views.png", "prediction.glb", "target.glb"
+    PREDICTIONS, PROOF = "predictions.npz", "report.html"
 
     def __init__(self, path):
         self.path = Path(path)
@@ -254,6 +306,16 @@ class RunDir:
     @property
     def target_glb_path(self) -> Path:
         return self.path / self.TARGET_GLB
+
+    @property
+    def predictions_path(self) -> Path:
+        """predictions.npz: predicted colours per scene texel (``Predictions``)."""
+        return self.path / self.PREDICTIONS
+
+    @property
+    def proof_path(self) -> Path:
+        """report.html: the soft-proof page (``inkopt report``)."""
+        return self.path / self.PROOF
 
     def _need(self, path: Path, hint: str) -> Path:
         if not path.is_file():
@@ -391,7 +453,8 @@ class RunDir:
             )
 
     def _derived(self) -> list[Path]:
-        """The outputs made from volume.npz: the quantized volume, its slices and package, evaluations."""
+        """The outputs made from volume.npz: the quantized volume, its slices and package, evaluations, the
+        predicted colours and the soft-proof page."""
         return [
             self.quantized_path,
             self.quantized_labels_path,
@@ -399,6 +462,8 @@ class RunDir:
             self.gcvf_path,
             self.evaluation_path,
             *sorted(self.path.glob("evaluation_*.png")),
+            self.predictions_path,
+            self.proof_path,
         ]
 
     def _remove(self, paths) -> list[str]:
@@ -426,7 +491,7 @@ class RunDir:
         always: this class does not read packages). Returns the names removed."""
         digest = self.volume_digest()
         keep = set()
-        for p in (self.quantized_path, self.evaluation_path, self.slices_path / "manifest.json"):
+        for p in (self.quantized_path, self.evaluation_path, self.predictions_path, self.slices_path / "manifest.json"):
             if p.is_file() and self._recorded(p) == digest:
                 keep.add(p.parent if p.name == "manifest.json" else p)
         if self.quantized_path in keep:
@@ -434,3 +499,18 @@ class RunDir:
         if self.evaluation_path in keep:
             keep.update(self.path.glob("evaluation_*.png"))
         return self._remove(p for p in self._derived() if p not in keep)
+
+    def read_evaluation(self) -> dict | None:
+        """evaluation.json, or None if the run has not been evaluated."""
+        return json.loads(self.evaluation_path.read_text()) if self.evaluation_path.is_file() else None
+
+    # ------------------------------------------------------------------ predicted colours
+    def save_predictions(self, pred: Predictions) -> Path:
+        save_npz(self.predictions_path, pred.arrays())
+        return self.predictions_path
+
+    def load_predictions(self) -> Predictions | None:
+        """predictions.npz, or None if neither the optimisation nor ``inkopt evaluate`` wrote one."""
+        if not self.predictions_path.is_file():
+            return None
+        return Predictions.from_arrays(load_npz(self.predictions_path, "predictions file"), str(self.predictions_path))

@@ -22,6 +22,7 @@ SUBCOMMANDS = (
     "export",
     "inspect",
     "evaluate",
+    "report",
     "demo",
     "select_inks",
     "calibration_chart",

@@ -31,9 +31,10 @@ Translucency (``evaluation.translucency``): when the scene has a translucency co
 names an unconstrained run of the same target, ``translucency`` holds the diffuse transmittance and lateral
 light spread per constrained region and for the whole object (and the compared run's on the same regions).
 
-Writes DIR/evaluation.json (or ``out``) and, for slabs, DIR/evaluation_<face>.png per textured face: target |
-optimized | quantized | surface | extrusion (sRGB); for meshes DIR/evaluation_views.png, the same rows seen from
-four sides. ``max_spp`` and ``time_budget`` cap the adaptive renders.
+Writes DIR/evaluation.json (or ``out``), DIR/predictions.npz (every result's colours per scene texel:
+``rundir.Predictions``) and, for slabs, DIR/evaluation_<face>.png per textured face: target | optimized | quantized
+| surface | extrusion (sRGB); for meshes DIR/evaluation_views.png, the same rows seen from four sides. ``max_spp``
+and ``time_budget`` cap the adaptive renders.
 """
 
 from __future__ import annotations
@@ -46,7 +47,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..color import delta_e76
-from ..io import write_png
+from ..io import file_digest, write_png
 from ..lighting import Lighting, load_lighting
 from ..loss import TexelLoss
 from ..model import Quantization, Texels, Volume
@@ -54,7 +55,7 @@ from ..pictures import panels
 from ..printing.quantize import DEFAULT_DPI, DEFAULT_LAYER_UM, quantize_volume
 from ..printing.stream import quantize_run
 from ..render import Renderer
-from ..rundir import RunDir, SceneRecord
+from ..rundir import Predictions, RunDir, SceneRecord
 from ..units import dpi_of
 from .baselines import BASELINES
 from .colour_table import DEFAULT_PATCH_MM, ColourTable, colour_table
@@ -344,6 +345,13 @@ def evaluate_run(
         elif rec.mesh is not None:
             ev.pictures = write_mesh_views(d, rec, colours, stem, say)
         d.write_evaluation(ev.to_json(), out)
+        names = ["continuous", "quantized", *(base or {})]
+        spp_of = {"continuous": cont.spp, "quantized": quantized.spp, **{k: m.spp for k, m in (base or {}).items()}}
+        d.save_predictions(
+            Predictions(
+                {n: colours[n] for n in names}, "evaluation", spp_of, file_digest(d.volume_path), lighting.describe()
+            )
+        )
     return ev
 
 

@@ -1,0 +1,195 @@
+"""The soft proof (``inkopt report RUN``): one self-contained HTML page that shows a run's object as it will
+print beside its target, for the people who decide whether to print it (docs/report.md).
+
+It reads the run directory only: report.json, scene.npz, predictions.npz (the colours per scene texel of the
+continuous result and, after ``inkopt evaluate``, of the printed result and the baselines), evaluation.json,
+quantized.npz's label counts, volume.npz's mixture, loss.png and, for meshes, the mesh file the run was made
+from. Nothing is rendered again, so writing the page takes seconds.
+"""
+
+from __future__ import annotations
+
+import base64
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..color import delta_e76, linear_to_lab
+from ..evaluation.results import Evaluation, Report
+from ..io import atomic_write_bytes, file_digest, load_npz
+from ..printing.stream import MixtureSource
+from ..rundir import RunDir
+from .bake import encode, heat_legend, heat_rgb8, heat_scale, mesh_atlas, srgb8
+from .figures import LABELS, describe_lighting, figures_html, ink_shares, settings_html
+from .page import data_uri, mesh_section, page_html, slab_section
+
+ORDER = ("target", "continuous", "quantized", "surface", "extrusion")
+SHADE = 0.35  # head-light share of the 3D view's shading (as views.png)
+JPEG_QUALITY = 90
+SLAB_WIDTH_PX = 400  # a slab face is shown about this wide (whole pixels per texel)
+
+
+@dataclass
+class Proof:
+    """What ``write_proof`` wrote: ``path``, its size in bytes, the results shown, the atlas size (meshes; 0 for
+    slabs), whether the textures are coarser than the texels, and the seconds it took."""
+
+    path: str
+    bytes: int
+    results: list
+    atlas: int
+    downsampled: bool
+    seconds: float
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_json(cls, d: dict) -> Proof:
+        return cls(**{k: d[k] for k in ("path", "bytes", "results", "atlas", "downsampled", "seconds")})
+
+
+def write_proof(run, out=None) -> Proof:
+    """Write the soft-proof page of run directory ``run`` to ``out`` (default RUN/report.html)."""
+    t0 = time.perf_counter()
+    d = RunDir(run)
+    report = Report.from_json(d.read_report(), where=str(d.report_path))
+    rec = d.load_scene()
+    pred = d.load_predictions()
+    if pred is None:
+        raise ValueError(f"{d.predictions_path} does not exist: run 'inkopt evaluate {d}' first")
+    if pred.volume_digest != file_digest(d.volume_file()):
+        raise ValueError(f"{d.predictions_path} was rendered from another volume.npz: run 'inkopt evaluate {d}' again")
+    evj = d.read_evaluation()
+    ev = (
+        Evaluation.from_json(evj, where=str(d.evaluation_path))
+        if evj is not None and pred.source == "evaluation"
+        else None
+    )
+    colours = {"target": rec.target_rgb, **pred.rgb}
+    keys = [k for k in ORDER if k in colours] + [k for k in colours if k not in ORDER]
+    for k in keys:
+        if colours[k].shape != rec.target_rgb.shape:
+            raise ValueError(f"{d.predictions_path} does not match {d.scene_path}: run 'inkopt evaluate {d}' again")
+    target_lab = linear_to_lab(rec.target_rgb)
+    de = {k: delta_e76(linear_to_lab(colours[k]), target_lab) for k in keys if k != "target"}
+    scale = heat_scale(list(de.values()))
+    rgb8 = {k: srgb8(colours[k]) for k in keys}
+    heat8 = {k: heat_rgb8(v, scale) for k, v in de.items()}
+    legend = data_uri(encode(heat_legend(scale)), "image/png")
+
+    atlas, data = None, {"shade": SHADE, "results": keys, "heat_scale": scale}
+    if rec.kind == "mesh":
+        atlas, view, data["mesh"] = _mesh(rec, keys, rgb8, heat8, legend, scale)
+    else:
+        view, data["slab"] = _slab(rec, keys, rgb8, heat8, legend, scale)
+
+    sections = [("Figures", figures_html(report, ev))]
+    if d.loss_picture_path.is_file():
+        uri = data_uri(d.loss_picture_path.read_bytes(), "image/png")
+        sections.append(("Loss curve", f'<img alt="loss curve" src="{uri}" style="max-width:100%">'))
+    quant = ev.quantization if ev is not None else None
+    counts = load_npz(d.quantized_path, "quantized volume")["label_counts"] if d.has_quantized() else None
+    sections.append(("Inks", ink_shares(list(report.inks), counts, mixture_mean(d.volume_file()))))
+    sections.append(("Printer, settings and time", settings_html(report, ev, quant)))
+    sections.append(("Files", _files(d, pred)))
+
+    what = f"mesh, {report.scene.get('height_mm', 0):.1f} mm high" if rec.kind == "mesh" else "slab"
+    shown = ", ".join(LABELS[k] for k in keys if k in LABELS)
+    light = describe_lighting(pred.lighting)
+    subtitle = f"{what}; inks {', '.join(report.inks)}; shown: {shown}; predicted under {light}. " + (
+        "" if ev is not None else "Not evaluated yet: run <code>inkopt evaluate</code> for the printed result."
+    )
+    html = page_html(f"inkopt soft proof: {d.path.resolve().name}", subtitle, data, view, sections, atlas is not None)
+    path = Path(out) if out is not None else d.proof_path
+    atomic_write_bytes(path, html.encode())
+    return Proof(
+        str(path),
+        len(html.encode()),
+        keys,
+        0 if atlas is None else atlas.size,
+        bool(atlas is not None and atlas.downsampled),
+        time.perf_counter() - t0,
+    )
+
+
+def mixture_mean(path) -> np.ndarray | None:
+    """The mean ink shares (N,) float64 over the inside voxels of a mixture volume file, read one layer at a time
+    (a large object's mixture does not fit in memory twice); None if no voxel is inside."""
+    src = MixtureSource(path)
+    try:
+        total, count = np.zeros(src.shape[3]), 0
+        for z in range(src.shape[0]):
+            lay = src[z]
+            ins = src.inside[z] if src.inside is not None else np.ones(lay.shape[:2], bool)
+            total += lay[ins].sum(0, dtype=np.float64)
+            count += int(ins.sum())
+    finally:
+        src.close()
+    return total / count if count else None
+
+
+def _mesh(rec, keys, rgb8, heat8, legend, scale):
+    from ..scenes.mesh.load import load_mesh
+
+    info = rec.mesh
+    if info is None or not Path(info.mesh_path).is_file():
+        where = "unknown" if info is None else info.mesh_path
+        raise ValueError(f"the report draws the mesh the run was made from, and {where} does not exist")
+    mesh = load_mesh(info.mesh_path, scale=info.mesh_scale, up=info.up)
+    atlas = mesh_atlas(
+        mesh.solid_vertices, mesh.solid_faces, info.texel_closest_mm, rec.texels.normal, float(info.voxel_mm[0])
+    )
+
+    def jpeg(img):
+        return data_uri(encode(atlas.picture(img), "JPEG", JPEG_QUALITY), "image/jpeg")
+
+    b64 = lambda a: base64.b64encode(np.ascontiguousarray(a, np.float32).tobytes()).decode()  # noqa: E731
+    data = {
+        "positions": b64(atlas.positions),
+        "normals": b64(atlas.normals),
+        "uv": b64(atlas.uv),
+        "textures": {k: jpeg(rgb8[k]) for k in keys},
+        "heat": {k: jpeg(v) for k, v in heat8.items()},
+    }
+    note = (
+        f"Colours: each scene texel (a {1000 * atlas.texel_mm:.0f} µm surface voxel) as predicted, printed results "
+        "rendered at printer resolution and averaged onto the texels; shaded by a head-light "
+        f"({100 * SHADE:.0f} %) for shape only. Texture {atlas.size} x {atlas.size} pixels, "
+        f"{1000 * atlas.pixel_mm:.0f} µm per pixel"
+        + (": coarser than the texels, so the picture is downsampled." if atlas.downsampled else ".")
+    )
+    return atlas, mesh_section(keys, legend, scale, note), data
+
+
+def _slab(rec, keys, rgb8, heat8, legend, scale):
+    faces = []
+    for name in sorted(rec.faces, key=lambda f: f != "top"):  # the top face first
+        if name not in rec.pix:
+            continue
+        pix = rec.pix[name]
+        faces.append(
+            {
+                "name": name,
+                "width": int(pix.shape[1]),
+                "height": int(pix.shape[0]),
+                "pictures": {k: data_uri(encode(rgb8[k][pix]), "image/png") for k in keys},
+                "heat": {k: data_uri(encode(v[pix]), "image/png") for k, v in heat8.items()},
+            }
+        )
+    if not faces:
+        raise ValueError("the slab's scene has no face pictures (scene.npz lacks pix_<face>)")
+    zoom = max(1, SLAB_WIDTH_PX // max(f["width"] for f in faces))
+    return slab_section(faces, keys, legend, scale, zoom), {"faces": faces}
+
+
+def _files(d: RunDir, pred) -> str:
+    rows = [f"<li>volume.npz: <code>{pred.volume_digest}</code></li>"]
+    rows.append(
+        f"<li>predictions.npz from the {pred.source}, "
+        + ", ".join(f"{k}: {v} spp" for k, v in pred.spp.items())
+        + "</li>"
+    )
+    return f"<ul>{''.join(rows)}</ul>"

@@ -1,0 +1,23 @@
+// The soft-proof page's slab faces: for every textured face, two results stacked with a swipe line between them
+// (the left one shown left of the line), and the ΔE76 heat maps.
+(function () {
+  const D = JSON.parse(document.getElementById('inkopt-data').textContent);
+  for (const face of (D.slab ? D.slab.faces : [])) {
+    const root = document.getElementById('face-' + face.name);
+    const [a, b] = root.querySelectorAll('img.layer');
+    const [pa, pb] = root.querySelectorAll('select');
+    const heat = root.querySelector('input[type=checkbox]');
+    const swipe = root.querySelector('input[type=range]');
+    const line = root.querySelector('.line');
+    const src = (key) => (heat.checked && face.heat[key] ? face.heat[key] : face.pictures[key]);
+    const draw = () => {
+      a.src = src(pa.value);
+      b.src = src(pb.value);
+      b.style.clipPath = `inset(0 0 0 ${swipe.value}%)`;
+      line.style.left = swipe.value + '%';
+      root.dataset.view = (heat.checked ? 'heat:' : '') + pa.value + '|' + pb.value;
+    };
+    for (const el of [pa, pb, heat, swipe]) el.addEventListener('input', draw);
+    draw();
+  }
+})();
