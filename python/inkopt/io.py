@@ -16,6 +16,19 @@ from pathlib import Path
 import numpy as np
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def publish(tmp: str | Path, path: str | Path, directory: bool = False) -> None:
+    """Move a finished temporary file (or folder) into place atomically, with the permissions a newly created
+    file (folder) of this user gets (``mkstemp``/``mkdtemp`` create them private: 0600 / 0700)."""
+    os.chmod(tmp, (0o777 if directory else 0o666) & ~_umask())
+    os.replace(tmp, path)
+
+
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -23,7 +36,7 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
-        os.replace(tmp, path)
+        publish(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
@@ -75,7 +88,7 @@ def save_npz(path: str | Path, arrays: dict, compressed: bool = True) -> None:
                                 _write_streamed(member, v)
                             else:
                                 np.lib.format.write_array(member, np.asanyarray(v), allow_pickle=False)
-        os.replace(tmp, path)
+        publish(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
@@ -197,3 +210,31 @@ def file_digest(path: str | Path, chunk: int = 1 << 24) -> str:
         while block := fh.read(chunk):
             h.update(block)
     return "sha256:" + h.hexdigest()
+
+
+def source_comment(source: str | None, digest: str | None) -> bytes:
+    """The zip archive comment of a printer package (GCVF, 3MF) recording the file it was made from:
+    ``{"inkopt": {"source": NAME, "digest": "sha256:..."}}`` (empty without a digest). Printer software ignores
+    archive comments."""
+    if digest is None:
+        return b""
+    return json.dumps({"inkopt": {"source": source, "digest": digest}}, separators=(",", ":")).encode()
+
+
+def read_source_comment(comment: bytes) -> dict | None:
+    """{"source", "digest"} from an archive comment written by ``source_comment``, else None."""
+    try:
+        rec = json.loads(comment.decode())["inkopt"]
+        return {"source": rec.get("source"), "digest": str(rec["digest"])}
+    except (ValueError, KeyError, TypeError, AttributeError):
+        return None
+
+
+def package_source(path: str | Path) -> dict | None:
+    """The source record of a printer package (a zip) at ``path``: ``read_source_comment`` of its archive comment,
+    None if it is not a readable zip or records none."""
+    try:
+        with zipfile.ZipFile(path) as zf:
+            return read_source_comment(zf.comment)
+    except (OSError, zipfile.BadZipFile):
+        return None

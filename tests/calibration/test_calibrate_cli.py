@@ -119,3 +119,13 @@ def test_instrument_file_matched_to_the_chart(measured, tmp_path, capsys):
         capsys,
         "has no measurement",
     )
+
+
+def test_a_new_chart_in_the_same_folder_removes_the_old_print(tmp_path, capsys):
+    """Writing another chart over an old one removes the old job's quantized print and packages, which would
+    otherwise print the old chart."""
+    assert main(["calibration-chart", "--inks", "cyan,white", "--out", str(tmp_path), "--patch-mm", "3"]) == 0
+    job = tmp_path / "job"
+    assert main(["quantize", str(job)]) == 0 and main(["export", str(job), "--format", "gcvf"]) == 0
+    assert main(["calibration-chart", "--inks", "magenta,white", "--out", str(tmp_path), "--patch-mm", "3"]) == 0
+    assert not (job / "quantized.npz").exists() and not (job / "slices.gcvf").exists()

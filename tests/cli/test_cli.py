@@ -244,3 +244,15 @@ def test_slab_survives_kill_9_and_resumes_exactly(tmp_path, chart):
     b = np.load(out / "volume.npz")["mixture"]
     np.testing.assert_array_equal(a, b)
     assert not list(out.glob("*.tmp*"))  # no temporary files left behind
+
+
+def test_eval_spp_below_one_is_refused(tmp_path, capsys):
+    """--eval-spp 0 is not silently taken as "adaptive": one line, exit 2, nothing written."""
+    from PIL import Image
+
+    Image.new("RGB", (12, 8), (200, 30, 30)).save(tmp_path / "p.png")
+    code = main(["slab", str(tmp_path / "p.png"), "--size-mm", "1.5x1x0.5", "--out", str(tmp_path / "r"),
+                 "--eval-spp", "0"])  # fmt: skip
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "--eval-spp must be at least 1" in err[0]
+    assert not (tmp_path / "r").exists()

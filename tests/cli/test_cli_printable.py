@@ -160,8 +160,12 @@ def test_export_gcvf(tmp_path, capsys):
     assert {"ConfigFile.xml", "Mesh.stl", "Zbuffer.png", "MeshBbx.ktn"} <= set(names)
     assert sum(n.startswith("layer_") for n in names) == q.labels.shape[0]
     assert "cyan #00FFFF = VeroCY-V" in out and "orange #FF8000," not in out and f"wrote {path}" in out
-    code, out, err = run(capsys, "export", tmp_path / "r", "--format", "gcvf", "--printer", "j55")
-    assert code == 2 and "6 inks" in err and "J55 Prime holds 5" in err and len(err.strip().splitlines()) == 1
+    for fmt in (["gcvf"], ["3mf"], ["3mf", "--labels"]):  # the continuous 3MF loads every ink of the table
+        code, out, err = run(capsys, "export", tmp_path / "r", "--format", *fmt, "--printer", "j55")
+        assert code == 2 and "6 inks" in err and "J55 Prime holds 5" in err and len(err.strip().splitlines()) == 1
+    assert not list((tmp_path / "r").glob("*.3mf"))
+    code, out, err = run(capsys, "export", tmp_path / "r", "--format", "3mf", "--labels", "--printer", "j850")
+    assert code == 0 and "warning:" not in err  # J850 prints 600 x 300 DPI at 27 um: the run's grid
 
 
 def test_export_refuses_more_inks_than_slots(tmp_path, capsys):

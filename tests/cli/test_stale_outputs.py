@@ -54,9 +54,12 @@ def test_quantized_and_slices_record_their_sources(tmp_path, capsys):
     man = json.loads((d / "slices" / "manifest.json").read_text())
     assert man["volume_digest"] == file_digest(d / "volume.npz")
     assert man["quantized_digest"] == file_digest(d / "quantized.npz")
+    for fmt in (["--format", "gcvf"], ["--format", "3mf"], ["--format", "3mf", "--labels"]):
+        assert run(capsys, "export", d, *fmt)[0] == 0
     assert rd.remove_stale() == []  # everything was made from this volume.npz: nothing goes
     make_run(d, seed=1)  # a resumed run writes a new volume.npz: what was made from the old one goes
-    assert rd.remove_stale() == ["quantized.npz", "quantized_labels.npy", "slices"]
+    gone = ["quantized.npz", "quantized_labels.npy", "slices", "slices.gcvf", "mixture.3mf", "quantized.3mf"]
+    assert rd.remove_stale() == gone
 
 
 def test_export_and_evaluate_refuse_a_stale_quantized_volume(tmp_path, capsys):
@@ -108,3 +111,15 @@ def test_a_new_run_removes_what_it_would_make_stale(tmp_path, capsys):
     left = {p.name for p in d.iterdir()}
     assert not left & {"quantized.npz", "quantized_labels.npy", "slices", "evaluation.json"}
     assert {"volume.npz", "report.json", "scene.npz"} <= left
+
+
+def test_inspect_refuses_a_package_of_a_stale_quantized_volume(tmp_path, capsys):
+    """A package made from quantized.npz is current only while quantized.npz is still made from volume.npz."""
+    d = tmp_path / "r"
+    make_run(d)
+    assert run(capsys, "quantize", d)[0] == 0
+    assert run(capsys, "export", d, "--format", "gcvf")[0] == 0
+    assert run(capsys, "inspect", d / "slices.gcvf", "--run", d)[0] == 0
+    make_run(d, seed=1)  # volume.npz rewritten by something that left the derived outputs in place
+    code, _, err = run(capsys, "inspect", d / "slices.gcvf", "--run", d)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "was made from another volume.npz" in err

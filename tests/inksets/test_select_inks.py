@@ -342,3 +342,16 @@ def test_cli_ray_pool_serial_identical_brute_six_candidates(chart, local_ray, tm
         out[how] = json.loads((tmp_path / how / "selection.json").read_text())
     assert len(out["serial"]["candidates"]) == 15
     assert out["serial"] == out["pool"] == out["ray"]
+
+
+@pytest.mark.parametrize("option", [["--dry-run"], ["--log-every", "5"], ["--eval-max-spp", "64"]])
+def test_select_inks_does_not_take_single_run_options(tmp_path, capsys, option):
+    """The options of one run's estimate, progress lines and evaluation budget are not offered by select-inks (which
+    runs many): argparse refuses them in one line, nothing is written."""
+    from inkopt.cli import main
+
+    argv = ["select-inks", "x.png", "--size-mm", "3x2x1", "--candidates", "cyan,magenta", "--choose", "1"]
+    with pytest.raises(SystemExit) as exc:
+        main([*argv, "--out", str(tmp_path / "s"), *option])
+    assert exc.value.code == 2 and option[0] in capsys.readouterr().err
+    assert not (tmp_path / "s").exists()

@@ -10,7 +10,8 @@ import pytest
 import trimesh
 from PIL import Image
 
-from inkopt.printing.gcvf import STL_RECORD, outline_mesh, read_source_comment, write_gcvf
+from inkopt.io import read_source_comment
+from inkopt.printing.gcvf import STL_RECORD, outline_mesh, write_gcvf
 
 VP = np.array([25.4 / 600, 25.4 / 300, 0.027])
 INKS = ["cyan", "magenta", "yellow", "black", "white", "orange"]

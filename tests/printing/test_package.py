@@ -12,6 +12,7 @@ from PIL import Image
 from inkopt.printing.export import write_png_slices
 from inkopt.printing.gcvf import write_gcvf
 from inkopt.printing.package import PackageError, PackageReport, inspect_package, preview
+from inkopt.printing.threemf import write_3mf_labels
 
 VP = np.array([25.4 / 600, 25.4 / 300, 0.027])
 INKS = ["cyan", "magenta", "yellow", "black", "white", "orange"]
@@ -145,3 +146,14 @@ def test_not_a_package(tmp_path):
         inspect_package(tmp_path / "x.gcvf")
     with pytest.raises(PackageError, match="does not exist"):
         inspect_package(tmp_path / "none.gcvf")
+
+
+def test_the_format_is_told_by_the_contents(tmp_path):
+    """A 3MF exported under any name (``export --out``) is read as a 3MF."""
+    import shutil
+
+    labels = np.zeros((2, 3, 4), np.uint8)
+    out = tmp_path / "a.3mf"
+    write_3mf_labels(labels, (25.4 / 600, 25.4 / 300, 0.027), ["white"], out)
+    shutil.copy(out, tmp_path / "renamed_3mf")
+    assert inspect_package(tmp_path / "renamed_3mf")[0].kind == "3mf"

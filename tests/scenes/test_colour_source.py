@@ -138,3 +138,13 @@ def test_sixteen_bit_mesh_texture(tmp_path):
     m = load_mesh(write_cube_obj(tmp_path / "c", texture=tex), height_mm=2.0)
     want = srgb_to_linear(round(40000 / 65535 * 255) / 255)
     np.testing.assert_allclose(m.colors_at([0], [[1, 0, 0]]), [[want] * 3], atol=1e-5)
+
+
+def test_mesh_spec_refuses_missing_material_files_before_the_mesh_is_read(tmp_path):
+    """select-inks checks its target's spec before any run: an OBJ's missing texture is refused there."""
+    from inkopt.scenes.spec import MeshSpec
+
+    obj = write_cube_obj(tmp_path / "c", map_kd="nothere.png")
+    with pytest.raises(ValueError, match="names texture nothere.png, which does not exist"):
+        MeshSpec(obj, height_mm=2.0).validate()
+    MeshSpec(obj, height_mm=2.0, constant_color=True).validate()  # the flag accepts it on purpose

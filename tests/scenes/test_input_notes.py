@@ -30,7 +30,8 @@ def test_a_400_mm_object_names_the_memory_and_the_dpi(tmp_path):
     dpi = int(msg.split("--dpi ")[1].split()[0])
     assert 0 < dpi < 300
     # the suggested resolution fits the limit the message states
-    from inkopt.scenes.mesh.scene import MAX_GRID_VOXELS, MIN_BYTES_PER_GRID_VOXEL, check_grid_size
+    from inkopt.model.volume import MAX_GRID_VOXELS
+    from inkopt.scenes.mesh.scene import MIN_BYTES_PER_GRID_VOXEL, check_grid_size
 
     check_grid_size(load_mesh(ball, height_mm=400.0, up="z"), dpi)
     assert (400 / (25.4 / dpi)) ** 3 <= MAX_GRID_VOXELS * MIN_BYTES_PER_GRID_VOXEL

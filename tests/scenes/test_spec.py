@@ -86,3 +86,18 @@ def test_build_equals_the_scene_modules(chart, ball):
     n = build_mesh_scene(ball, INKS, 1.0, None, 0.2, up="z")
     np.testing.assert_array_equal(m.target_rgb, n.target_rgb)
     np.testing.assert_array_equal(m.free, n.free)
+
+
+def test_a_slab_too_large_for_the_machine_is_refused_before_anything_is_read(tmp_path):
+    """A slab whose grid cannot fit: one line naming the grid, the memory and a --dpi that fits (which does)."""
+    from inkopt.model.volume import VolumeError
+    from inkopt.scenes.spec import SlabSpec
+
+    spec = SlabSpec(tmp_path / "missing.png", (3000, 2000, 1000))  # the size is checked before the file
+    with pytest.raises(VolumeError) as e:
+        spec.validate()
+    msg = str(e.value)
+    assert "\n" not in msg and "3000 x 2000 x 1000 mm at 300 DPI" in msg and "--size-mm" in msg
+    dpi = int(msg.split("--dpi ")[1].split()[0])
+    with pytest.raises(ValueError, match="does not exist"):  # at the suggested DPI only the missing picture is left
+        SlabSpec(tmp_path / "missing.png", (3000, 2000, 1000), dpi=dpi).validate()

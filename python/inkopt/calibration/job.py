@@ -101,6 +101,7 @@ def write_chart(out, chart: Chart, inks: InkTable, patch_mm: float = 10.0, heade
     out.mkdir(parents=True, exist_ok=True)
     job = RunDir.create(out / JOB_DIR)
     paths = {"job": job.save_volume(vol)}
+    job.remove_stale()  # an earlier chart's quantized print, slices and packages in the same folder
     paths["layout"] = write_png(out / LAYOUT_FILE, layout_picture(chart, rgb))
     paths["chart"] = write_cgats(out / CHART_FILE, chart.table(header=header))
     return paths

@@ -123,8 +123,9 @@ def lighting_from_args(args):
     return load_lighting(args.lighting, args.lighting_rotate)
 
 
-def add_optimizer_args(p) -> None:
-    """Options shared by `inkopt slab` and `inkopt optimize`."""
+def add_optimizer_args(p, single_run: bool = True) -> None:
+    """Options shared by `inkopt slab` and `inkopt optimize` (``single_run``) and, without the options of a single
+    run's evaluation budget, estimate and progress lines, `inkopt select-inks`."""
     from ..evaluation.noise import MAX_SPP
     from ..optim import SCENE_DEFAULTS, OptimizeConfig
 
@@ -220,37 +221,38 @@ def add_optimizer_args(p) -> None:
         "adaptive, until the Monte Carlo noise adds less than 0.5 to the mean ΔE76 and SSIM's and "
         "the mottle's noise correction is accurate)",
     )
-    p.add_argument(
-        "--eval-max-spp",
-        type=int,
-        default=MAX_SPP,
-        metavar="N",
-        help=f"cap of the adaptive final evaluation's samples per texel (default {MAX_SPP})",
-    )
-    p.add_argument(
-        "--eval-time-budget",
-        type=float,
-        metavar="SECONDS",
-        help="time budget of each adaptive final figure (the result's, the start's): it stops adding samples when "
-        "the time measured per sample says more would not fit (default: none)",
-    )
     p.add_argument("--threads", type=int, help="worker threads (default: all cores)")
     p.add_argument("--resume", action="store_true", help="continue from DIR/checkpoint.npz if present")
-    p.add_argument(
-        "--dry-run",
-        action="store_true",
-        help="build the scene, measure a short calibration and print only the run's estimated time, peak memory "
-        "and disk; write nothing",
-    )
-    p.add_argument(
-        "--log-every",
-        type=float,
-        default=30.0,
-        metavar="SECONDS",
-        help="when stderr is not a terminal (a log file, a scheduler): a progress line (iteration, loss, ΔE76, "
-        "ETA) at least this often (default 30)",
-    )
     add_lighting_args(p, "optimise and evaluate")
+    if single_run:  # a single run's evaluation budget, estimate and progress lines (not select-inks' many runs)
+        p.add_argument(
+            "--eval-max-spp",
+            type=int,
+            default=MAX_SPP,
+            metavar="N",
+            help=f"cap of the adaptive final evaluation's samples per texel (default {MAX_SPP})",
+        )
+        p.add_argument(
+            "--eval-time-budget",
+            type=float,
+            metavar="SECONDS",
+            help="time budget of each adaptive final figure (the result's, the start's): it stops adding samples when "
+            "the time measured per sample says more would not fit (default: none)",
+        )
+        p.add_argument(
+            "--dry-run",
+            action="store_true",
+            help="build the scene, measure a short calibration and print only the run's estimated time, peak memory "
+            "and disk; write nothing",
+        )
+        p.add_argument(
+            "--log-every",
+            type=float,
+            default=30.0,
+            metavar="SECONDS",
+            help="when stderr is not a terminal (a log file, a scheduler): a progress line (iteration, loss, ΔE76, "
+            "ETA) at least this often (default 30)",
+        )
 
 
 def add_ray_arg(p) -> None:
@@ -342,6 +344,8 @@ def run_from_args(args, spec):
     if not (args.log_every >= 0):
         raise ValueError(f"--log-every must be a number of seconds >= 0, got {args.log_every}")
     check_budget(args.eval_max_spp, args.eval_time_budget, "--eval-max-spp", "--eval-time-budget")
+    if args.eval_spp is not None and args.eval_spp < 1:
+        raise ValueError(f"--eval-spp must be at least 1 (leave it out for adaptive samples), got {args.eval_spp}")
     inks = InkTable.parse(args.inks)
     cfg = config_from_args(args)
     ray = ray_from_args(args)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import sys
+from pathlib import Path
 
 from ..evaluation.colour_table import DEFAULT_PATCH_MM
 from ..evaluation.evaluate import DEFAULT_SPP, evaluate_run, table_lines
@@ -47,7 +48,8 @@ def _evaluate_cmd(args) -> int:
         print(f"lighting: {ev.lighting['lighting']}" + (f", turned {rotate:g} degrees" if rotate else ""))
         print(
             f"{ev.spp} spp per scene texel ({how}continuous result), {ev.seconds:.0f} s; wrote "
-            f"{args.out or f'{args.dir}/evaluation.json'}" + "".join(f", {p}" for p in ev.pictures or [])
+            f"{args.out or f'{args.dir}/evaluation.json'}"
+            + "".join(f", {Path(args.dir) / p}" for p in ev.pictures or [])
         )
     return 0
 

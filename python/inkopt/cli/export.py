@@ -19,7 +19,7 @@ from pathlib import Path
 from ..io import file_digest
 from ..printing.export import write_png_slices
 from ..printing.gcvf import write_gcvf
-from ..printing.profiles import PRINTER_PROFILES, printer_profile, resolution_mismatch
+from ..printing.profiles import PRINTER_PROFILES, printer_profile, resolution_mismatch, too_many_inks
 from ..printing.stream import MixtureSource
 from ..printing.threemf import write_3mf_labels, write_3mf_mixture
 from ..rundir import QUANTIZED_DIGEST, VOLUME_DIGEST, RunDir
@@ -51,10 +51,16 @@ def _export_3mf(args, d: RunDir, printer: str, palette, materials) -> int:
             q.labels, q.voxel_mm, q.inks.names, out, printer=printer, materials=materials, palette=palette,
             source=d.quantized_path.name, digest=digest,
         )  # fmt: skip
+        if mismatch := resolution_mismatch(printer_profile(printer), q.voxel_mm):
+            print(f"inkopt: warning: {mismatch}", file=sys.stderr)
     else:
         out = Path(args.out) if args.out else d.threemf_path()
         src = MixtureSource(d.volume_file())
         try:
+            # every ink of the table may take a share anywhere in a continuous mixture: the job loads them all
+            prof = printer_profile(printer)
+            if refusal := too_many_inks(list(src.inks.names), prof.max_materials, prof.name):
+                raise ValueError(refusal)
             names = {n: printer_profile(printer).material(n) for n in src.inks.names}
             names = {k: v for k, v in names.items() if v} | (materials or {})
             digest = file_digest(d.volume_path)
@@ -157,7 +163,9 @@ def register_cli(sub) -> None:
     )
     p.add_argument("--labels", action="store_true", help="3mf: the quantized print (DIR/quantized.3mf)")
     p.add_argument(
-        "--out", help="output folder (default DIR/slices) or file (default DIR/slices.gcvf, DIR/mixture.3mf)"
+        "--out",
+        help="output folder (default DIR/slices) or file (default DIR/slices.gcvf, DIR/mixture.3mf, with --labels "
+        "DIR/quantized.3mf)",
     )
     p.add_argument(
         "--material",

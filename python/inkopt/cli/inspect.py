@@ -29,11 +29,14 @@ def _check_run(report, run: str) -> None:
     src = report.source
     if src is None:
         raise PackageError(f"{report.path} records no source file; it cannot be checked against {run}")
-    current = d.path / Path(str(src["source"])).name
-    if not current.is_file():
+    sources = {d.quantized_path.name: d.quantized_path, d.volume_path.name: d.volume_path}
+    current = sources.get(Path(str(src["source"])).name)
+    if current is None or not current.is_file():
         raise PackageError(f"{report.path} was made from {src['source']}, which {run} does not hold")
     if file_digest(current) != src["digest"]:
         raise PackageError(f"{report.path} is stale: {current} changed since it was written; export it again")
+    if current == d.quantized_path:
+        d.check_quantized_current()  # the quantized print itself must still be the run's current result
 
 
 def _inspect_cmd(args) -> int:

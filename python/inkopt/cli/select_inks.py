@@ -108,7 +108,7 @@ def register_cli(sub) -> None:
         metavar="auto|ADDRESS",
         help="run on Ray: 'auto' starts a local instance, ADDRESS joins a cluster (pip install 'inkopt[ray]')",
     )
-    add_optimizer_args(p)
+    add_optimizer_args(p, single_run=False)
     for a in p._actions:
         if a.dest == "inks":
             a.default, a.help = None, argparse.SUPPRESS

@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..io import publish
+
 
 class LabelFileWriter:
     """``w = LabelFileWriter(path, (Z, Y, X)); w[0] = layer0; w[1] = ...; w.commit()`` (or ``w.abort()``).
@@ -49,7 +51,7 @@ class LabelFileWriter:
             self.abort()
             raise ValueError(f"label stack incomplete: {self.next} of {self.shape[0]} layers written")
         self._fh.close()
-        os.replace(self._tmp, self.path)
+        publish(self._tmp, self.path)
         return self.path
 
     def abort(self) -> None:

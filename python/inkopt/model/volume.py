@@ -38,6 +38,30 @@ from .normals import SurfaceNormals
 BOUNDARIES = ("box", "periodic-xy")
 # Memory the renderer may use for one volume; a volume above this is refused (bytes).
 MAX_VOLUME_BYTES = int(os.environ.get("INKOPT_MAX_VOLUME_BYTES", 16 * 2**30))
+#: the most voxels one grid may have (the renderer indexes voxels with 32-bit integers)
+MAX_GRID_VOXELS = 2**31
+
+
+def check_grid_budget(what: str, size_mm, dpi: float, bytes_per_voxel: float, smaller: str) -> None:
+    """One-line VolumeError, before anything is built, for an object of ``size_mm`` (x, y, z) whose grid at ``dpi``
+    has more than ``MAX_GRID_VOXELS`` voxels or needs more than ``MAX_VOLUME_BYTES`` (INKOPT_MAX_VOLUME_BYTES) at
+    ``bytes_per_voxel`` (a lower bound of the memory per grid voxel). It names ``what``, the grid, the memory, the
+    --dpi that would fit and ``smaller`` (the option that makes the object smaller)."""
+    size = np.asarray(size_mm, np.float64)
+    n = np.maximum(np.ceil(size / (25.4 / dpi)), 1)
+    voxels, need = float(np.prod(n)), float(np.prod(n)) * bytes_per_voxel
+    limit = min(MAX_VOLUME_BYTES, MAX_GRID_VOXELS * bytes_per_voxel)
+    if need <= limit:
+        return
+    fit = dpi * (limit / need) ** (1 / 3) * 0.95
+    raise VolumeError(
+        f"{what}: {size[0]:.0f} x {size[1]:.0f} x {size[2]:.0f} mm at {dpi:g} DPI is a grid of "
+        f"{int(n[0])} x {int(n[1])} x {int(n[2])} voxels ({voxels:.2g}), which needs at least "
+        f"{need / 2**30:.0f} GiB (limit {limit / 2**30:.0f} GiB, INKOPT_MAX_VOLUME_BYTES and 2^31 voxels); use "
+        f"--dpi {np.floor(fit):.0f} or less, or a smaller {smaller}"
+    )
+
+
 #: the format version volume files are written in (``format_version``; ``upgrade_volume`` reads older ones)
 VOLUME_FORMAT = 1
 

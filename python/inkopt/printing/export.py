@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io import FORMAT_KEY, upgrade_format
+from ..io import FORMAT_KEY, publish, upgrade_format
 from ..model import EMPTY
 from ..units import MM_PER_INCH
 from .profiles import PrinterProfile, material_name, printer_profile, resolve_max_materials, too_many_inks
@@ -306,7 +306,7 @@ def write_png_slices(
         if out.exists():
             old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=out.parent))
             os.replace(out, old / "d")
-        os.replace(tmp, out)
+        publish(tmp, out, directory=True)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         if old is not None and (old / "d").exists() and not out.exists():

@@ -31,7 +31,7 @@ occupancy are accumulated on the way, and nothing but the current layers is held
   voxel centres), so the outline encloses every printed voxel and lies within two blocks of them. The 80-byte
   header names the block (``BLOCK_TAG``), so that a reader knows how far the outline may stand off the voxels.
 - The zip's archive comment (which no printer software reads) records the file the package was made from:
-  ``{"inkopt": {"source": NAME, "digest": "sha256:..."}}`` (``source_comment``).
+  ``{"inkopt": {"source": NAME, "digest": "sha256:..."}}`` (``io.source_comment``).
 
 Evidence. The zip layout, ``ConfigFile.xml`` (every element and value, the 6 colours, the material names of four
 inks), ``layer_N.png`` and the opaque-black background are read from a public GCVF builder, ``buildGCVF.js``
@@ -55,7 +55,6 @@ has been loaded into GrabCAD Print.
 from __future__ import annotations
 
 import io
-import json
 import os
 import tempfile
 import xml.etree.ElementTree as ET
@@ -66,6 +65,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..io import publish, source_comment
 from ..model import EMPTY
 from .export import check_job, slice_image, slice_lut
 
@@ -75,22 +75,6 @@ OUTLINE_MAX_CELLS = 2**24  # marching cubes on at most this many cells (float32:
 BACKGROUND = (0, 0, 0, 255)
 GCVF_PALETTE = {"black": "#282828"}  # the background is opaque black: move the black ink off it
 STL_RECORD = np.dtype([("normal", "<f4", 3), ("vertices", "<f4", (3, 3)), ("attr", "<u2")])
-
-
-def source_comment(source: str | None, digest: str | None) -> bytes:
-    """The archive comment recording the file a package was made from (empty without a digest)."""
-    if digest is None:
-        return b""
-    return json.dumps({"inkopt": {"source": source, "digest": digest}}, separators=(",", ":")).encode()
-
-
-def read_source_comment(comment: bytes) -> dict | None:
-    """{"source", "digest"} from an archive comment written by ``source_comment``, else None."""
-    try:
-        rec = json.loads(comment.decode())["inkopt"]
-        return {"source": rec.get("source"), "digest": str(rec["digest"])}
-    except (ValueError, KeyError, TypeError, AttributeError):
-        return None
 
 
 def stl_bytes(mesh, header: str) -> bytes:
@@ -285,7 +269,7 @@ def write_gcvf(
             stl = stl_bytes(mesh, f"{BLOCK_TAG} {fx} {fy} {fz}")
             zf.writestr(STL, stl, compress_type=zipfile.ZIP_DEFLATED)
             zf.comment = source_comment(source, digest)
-        os.replace(tmp, path)
+        publish(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise

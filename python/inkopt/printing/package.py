@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..io import read_source_comment, write_png
 from ..model import EMPTY
 from ..units import MM_PER_INCH
 from . import gcvf, threemf
@@ -241,7 +242,7 @@ def _gcvf(path: Path, scan_args) -> tuple[PackageReport, _Scan]:
             lo, hi, block = stl_bounds(zf.read(gcvf.STL))
             pitch = np.array([MM_PER_INCH / dpi[0], -MM_PER_INCH / dpi[1], layer_um / 1000])
             _check_bounds(lo, hi, box, pitch, block, gcvf.STL)
-        source = gcvf.read_source_comment(zf.comment)
+        source = read_source_comment(zf.comment)
     materials = [
         {"name": n, "color": c, "voxel_count": int(v)} for n, c, v in zip(mnames, rgba, scan.counts, strict=True)
     ]
@@ -346,7 +347,7 @@ def _threemf(path: Path, scan_args) -> tuple[PackageReport, _Scan]:
         # the mesh's y runs up the grid: image row r covers y from (H - r - 1) to (H - r) voxels
         ybox = [box[0], H - box[4], box[2], box[3], H - box[1], box[5]]
         _check_bounds(lo, hi, ybox, vox, block, "the 3MF mesh")
-        source = gcvf.read_source_comment(zf.comment)
+        source = read_source_comment(zf.comment)
     materials = [
         {"name": b[0], "color": b[1], "voxel_count": float(v)} for b, v in zip(res["base"], shares, strict=True)
     ]
@@ -365,15 +366,17 @@ def inspect_package(path, *, keep_layers=(), labels: bool = False):
         return _slices(path, args)
     if not path.is_file():
         raise PackageError(f"{path} does not exist")
-    if path.suffix.lower() == ".3mf":
-        return _threemf(path, args)
-    return _gcvf(path, args)
+    try:  # a 3MF holds its model at 3D/3dmodel.model, whatever the file is called
+        with zipfile.ZipFile(path) as zf:
+            is_3mf = "3D/3dmodel.model" in zf.namelist()
+    except (OSError, zipfile.BadZipFile):
+        raise PackageError(f"{path} is not a zip (a GCVF or 3MF package) nor a slice folder") from None
+    return _threemf(path, args) if is_3mf else _gcvf(path, args)
 
 
 def preview(report: PackageReport, scan: _Scan, colours, out) -> None:
     """A PNG of the top view (each column's topmost printed voxel) and the kept slices, side by side, each row
     drawn twice as high when the grid's y pitch is twice its x pitch (so the object keeps its proportions)."""
-    from PIL import Image
 
     lut = np.zeros((256, 3), np.uint8)
     lut[:] = 235  # empty: light grey
@@ -384,4 +387,4 @@ def preview(report: PackageReport, scan: _Scan, colours, out) -> None:
     pics = [np.repeat(lut[p], stretch, axis=0) for p in panels]
     gap = np.full((pics[0].shape[0], 4, 3), 255, np.uint8)
     row = np.concatenate([x for p in pics for x in (p, gap)][:-1], axis=1)
-    Image.fromarray(row).save(out)
+    write_png(out, row)

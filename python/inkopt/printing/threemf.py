@@ -21,7 +21,7 @@
   printed layer. The voxels with shares are then the voxels a consumer prints (the outline's margin included).
   Reading the shares twice (a first pass for the outline) keeps memory to a few layers.
 - the OPC parts ``[Content_Types].xml``, ``_rels/.rels`` and ``3D/_rels/3dmodel.model.rels`` (one 3D-texture
-  relationship per sheet), and the zip's archive comment: the source file's digest (``gcvf.source_comment``).
+  relationship per sheet), and the zip's archive comment: the source file's digest (``io.source_comment``).
 
 lib3mf 2.5.0 writes image stacks and volume data colour, but every method of its ``VolumeDataComposite`` throws
 LIB3MF_ERROR_NOTIMPLEMENTED and its colour element lacks the required ``channel``, so this module writes the XML
@@ -39,8 +39,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..io import publish, source_comment
 from .export import check_job, ink_colours
-from .gcvf import _block_any, block_outline, outline_factors, source_comment
+from .gcvf import _block_any, block_outline, outline_factors
 
 NS_CORE = "http://schemas.microsoft.com/3dmanufacturing/core/2015/02"
 NS_V = "http://schemas.3mf.io/3dmanufacturing/volumetric/2022/01"
@@ -233,7 +234,7 @@ def write_3mf(
             zf.writestr("_rels/.rels", _rels([(REL_MODEL, "/" + MODEL)]), compress_type=zipfile.ZIP_DEFLATED)
             zf.writestr("[Content_Types].xml", CONTENT_TYPES, compress_type=zipfile.ZIP_DEFLATED)
             zf.comment = source_comment(source, digest)
-        os.replace(tmp, path)
+        publish(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io import file_digest, load_npz, save_npz, write_json
+from ..io import file_digest, load_npz, package_source, save_npz, write_json
 from ..model import Volume
 from ..model.labelfile import LabelFileWriter
 from ..model.volume import upgrade_volume
@@ -311,6 +311,8 @@ class RunDir:
             self.quantized_labels_path,
             self.slices_path,
             self.gcvf_path,
+            self.threemf_path(),
+            self.threemf_path(labels=True),
             self.evaluation_path,
             *sorted(self.path.glob("evaluation_*.png")),
             self.predictions_path,
@@ -338,15 +340,23 @@ class RunDir:
         return self._remove(own + sorted(self.path.glob("face_*.png")) + self._derived())
 
     def remove_stale(self) -> list[str]:
-        """After volume.npz is written: remove the derived outputs that do not record its digest (the GCVF package
-        always: this class does not read packages). Returns the names removed."""
+        """After volume.npz is written: remove the derived outputs that do not record its digest. Printer packages
+        record theirs in the archive comment (``io.source_comment``): the continuous 3MF is kept if made from this
+        volume.npz, the GCVF and the labels 3MF if made from a quantized.npz that is kept. Returns the names
+        removed."""
         digest = self.volume_digest()
         keep = set()
         for p in (self.quantized_path, self.evaluation_path, self.predictions_path, self.slices_path / "manifest.json"):
             if p.is_file() and self._recorded(p) == digest:
                 keep.add(p.parent if p.name == "manifest.json" else p)
+        if (src := package_source(self.threemf_path())) and src["digest"] == digest:
+            keep.add(self.threemf_path())
         if self.quantized_path in keep:
             keep.add(self.quantized_labels_path)
+            quantized = self.quantized_digest()
+            for pkg in (self.gcvf_path, self.threemf_path(labels=True)):
+                if (src := package_source(pkg)) and src["digest"] == quantized:
+                    keep.add(pkg)
         if self.evaluation_path in keep:
             keep.update(self.path.glob("evaluation_*.png"))
         return self._remove(p for p in self._derived() if p not in keep)

@@ -26,6 +26,7 @@ from typing import ClassVar
 import numpy as np
 
 from ..model import InkTable, transparent_ink
+from ..model.volume import check_grid_budget
 from ..units import OPT_DPI, voxel_mm
 from .translucency import ALPHA, check_depth
 
@@ -62,6 +63,8 @@ class SlabSpec:
         if len(self.size_mm) != 3 or not all(np.isfinite(v) and v > 0 for v in self.size_mm):
             raise ValueError(f"--size-mm sizes must be three positive numbers W x H x D, got {self.size_mm}")
         voxel_mm(self.dpi)  # its one-line error for a dpi that is not positive
+        w, h, depth = self.size_mm  # a slab's grid holds its mixture (4 bytes per ink) and, rendered, σs and σa (24)
+        check_grid_budget(self.top, (w, h, depth), self.dpi, 24 + 4 * len(inks or ()), "--size-mm")
         _check_translucency(self.translucency, self.translucency_depth_mm, inks, mesh=False)
         _check_file(self.top, "picture")
         if self.bottom is not None:
@@ -125,6 +128,10 @@ class MeshSpec:
         _check_file(self.path, "mesh file")
         if self.texture is not None:
             _check_file(self.texture, "texture")
+        if Path(self.path).suffix.lower() == ".obj":  # its material library and texture files, named but missing
+            from .mesh.source import check_obj_materials
+
+            check_obj_materials(self.path, skip_files=self.texture is not None or self.constant_color)
 
     def build(self, inks: InkTable):
         """The ``scenes.mesh.MeshScene`` of these inputs for ink set ``inks`` (loads and voxelizes the mesh)."""

@@ -30,7 +30,6 @@ import numpy as np
 
 from ...model import (
     EMPTY,
-    MAX_VOLUME_BYTES,
     FixedShares,
     InkTable,
     MeshInfo,
@@ -39,6 +38,7 @@ from ...model import (
     transparent_ink,
     white_fixed_shares,
 )
+from ...model.volume import check_grid_budget
 from ...rundir import RunDir, SceneRecord
 from ...units import OPT_DPI, voxel_mm
 from ..translucency import ALPHA, check_depth, check_mask, load_mask, translucency_fields
@@ -176,26 +176,13 @@ class MeshScene:
 #: a lower bound of the memory per grid voxel while a mesh is voxelized and rendered (bytes): the SDF (4) and the
 #: inside mask (1) of the voxelization, the renderer's slot index (4)
 MIN_BYTES_PER_GRID_VOXEL = 9
-MAX_GRID_VOXELS = 2**31
 
 
 def check_grid_size(mesh: TexturedMesh, dpi: float) -> None:
-    """One-line ValueError, before voxelizing, for an object whose grid at ``dpi`` has more than 2^31 voxels or
-    needs more than ``model.MAX_VOLUME_BYTES`` (INKOPT_MAX_VOLUME_BYTES) by ``MIN_BYTES_PER_GRID_VOXEL``; it names
-    the object's size, the memory and the --dpi that would fit."""
+    """One-line error, before voxelizing, for a mesh whose grid at ``dpi`` does not fit
+    (``model.volume.check_grid_budget`` at ``MIN_BYTES_PER_GRID_VOXEL``)."""
     size = np.ptp(mesh.solid_vertices, axis=0)  # (x, y, z) mm
-    n = np.maximum(np.ceil(size / voxel_mm(dpi)), 1).astype(np.float64)
-    voxels, need = float(np.prod(n)), float(np.prod(n)) * MIN_BYTES_PER_GRID_VOXEL
-    limit = min(MAX_VOLUME_BYTES, MAX_GRID_VOXELS * MIN_BYTES_PER_GRID_VOXEL)
-    if need <= limit:
-        return
-    fit = dpi * (limit / need) ** (1 / 3) * 0.95
-    raise ValueError(
-        f"{mesh.source}: {size[0]:.0f} x {size[1]:.0f} x {size[2]:.0f} mm at {dpi:g} DPI is a grid of "
-        f"{int(n[0])} x {int(n[1])} x {int(n[2])} voxels ({voxels:.2g}), which needs at least "
-        f"{need / 2**30:.0f} GiB (limit {limit / 2**30:.0f} GiB, INKOPT_MAX_VOLUME_BYTES and 2^31 voxels); use "
-        f"--dpi {np.floor(fit):.0f} or less, or a smaller --height-mm"
-    )
+    check_grid_budget(mesh.source, size, dpi, MIN_BYTES_PER_GRID_VOXEL, "--height-mm")
 
 
 def check_mesh_inputs(shell_mm: float | None, inks: InkTable | None = None) -> None:
