@@ -34,6 +34,13 @@ light spread per constrained region and for the whole object (and the compared r
 Writes DIR/evaluation.json (or ``out``) and, for slabs, DIR/evaluation_<face>.png per textured face: target |
 optimized | quantized | surface | extrusion (sRGB); for meshes DIR/evaluation_views.png, the same rows seen from
 four sides. ``max_spp`` and ``time_budget`` cap the adaptive renders.
+
+Memory: one renderer exists at a time. The run's mixture is dropped once the continuous result (and translucency)
+is rendered; the printer texels and their map are set up once and serve the quantized result and both baselines
+(same printer grid and inside voxels); each baseline goes layer by layer from ``baselines.BaselineLayers``
+through ``printing.quantize.quantize`` into one printer label grid (1 byte per printer voxel), never as a whole
+(z, y, x, N) mixture; the texel loss and its figures come after the last render. The peak is then the larger of
+the continuous render and one printer renderer's build, below the optimisation's (docs/performance.md).
 """
 
 from __future__ import annotations
