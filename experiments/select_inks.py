@@ -2,9 +2,8 @@
 cyan2, magenta, magenta2, yellow, yellow2 choose 4, always black and white: 15 sets) on small slabs (6 x 4 x 1 mm
 at 300 DPI: 71 x 47 x 12 voxels, 3337 top-face texels). Both strategies run every set with the same settings and
 seed; halving's final runs are resumed and continue exactly, so its winner's loss equals brute force's run of the
-same set. Halving's rule (inkopt.inksets.search): rungs of 1/8 and 1/4 of the budget ranked by the extrapolated
-training loss, then the last 4 sets run the full budget (rung evaluations at 16 spp). Writes
-experiments/results/select_inks.json and prints a markdown table.
+same set. Halving's rule is ``inkopt.inksets.search.RULE`` (recorded in the results; rung evaluations at 16 spp).
+Writes experiments/results/select_inks.json and prints a markdown table.
 
     .venv/bin/python experiments/select_inks.py [--charts colour,astronaut] [--iterations 80] [--workers 2]
         [--out bench-out/select_inks] [--suffix _NAME]
@@ -28,6 +27,7 @@ from inkopt import charts  # noqa: E402
 from inkopt.inksets import Selection, make_backend, run_selection  # noqa: E402
 from inkopt.inksets.search import RULE  # noqa: E402
 from inkopt.optim import OptimizeConfig  # noqa: E402
+from inkopt.scenes.spec import SlabSpec  # noqa: E402
 
 CANDIDATES = "cyan,cyan2,magenta,magenta2,yellow,yellow2"
 PAPER_WINNER = ["cyan", "magenta", "magenta2", "yellow", "black", "white"]
@@ -74,7 +74,7 @@ def main():
     try:
         for name in args.charts.split(","):
             pic = chart_picture(name, out)
-            target = {"kind": "image", "top": str(pic), "bottom": None, "size_mm": SIZE_MM, "dpi": 300.0}
+            target = SlabSpec(str(pic), tuple(SIZE_MM), dpi=300.0)
             res, secs = {}, {}
             for strategy in ("brute", "halving"):
                 d = out / name / strategy

@@ -10,7 +10,10 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED_DATA = REPO.parent / "shared" / "data"
+# the shared data set when it is beside the checkout, else the copy the package ships for its demo (the same files)
 SPOT = SHARED_DATA / "spot" / "spot.obj"
+if not SPOT.is_file():
+    SPOT = REPO / "python" / "inkopt" / "data" / "spot" / "spot.obj"
 
 
 def central_differences(f, x, h=1e-3) -> np.ndarray:

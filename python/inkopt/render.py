@@ -87,7 +87,7 @@ class Renderer:
             **self._medium_arrays(volume),
         )
         if volume.inside is not None or volume.form == "labels":
-            kw["inside"] = np.ascontiguousarray(volume.inside_mask(), dtype=np.uint8)
+            kw["inside"] = np.ascontiguousarray(volume.inside_mask()).view(np.uint8)  # bool bytes are 0/1: no copy
         if volume.normals is not None:
             kw["normal_index"], kw["normal_vectors"] = volume.normals.index, volume.normals.vectors
         self._scene = _core.Scene(volume.shape, tuple(float(v) for v in volume.voxel_mm), **kw)

@@ -2,11 +2,13 @@
 directory."""
 
 import json
+import tracemalloc
 
 import numpy as np
 import pytest
 from PIL import Image
 
+import inkopt.evaluation.evaluate as evaluate_mod
 from inkopt.color import linear_to_srgb
 from inkopt.evaluation.baselines import extrusion_baseline, surface_baseline
 from inkopt.evaluation.evaluate import average_to_scene, evaluate_run, map_texels, printer_texels, table_lines
@@ -82,15 +84,15 @@ def test_panels_layout():
     assert np.any(img[:band] < 128)  # the label text
 
 
-def make_run(d, table, kind="surface"):
-    """A 24x16x6 slab with a 4-patch target on top; its mixture IS the surface (or extrusion) baseline."""
-    tex = Texels.box_faces(SHAPE, ["top"])
-    quad = (tex.voxel[:, 1] >= SHAPE[1] // 2) * 2 + (tex.voxel[:, 2] >= SHAPE[2] // 2)
+def make_run(d, table, kind="surface", shape=SHAPE):
+    """A slab (default 24x16x6) with a 4-patch target on top; its mixture IS the surface (or extrusion) baseline."""
+    tex = Texels.box_faces(shape, ["top"])
+    quad = (tex.voxel[:, 1] >= shape[1] // 2) * 2 + (tex.voxel[:, 2] >= shape[2] // 2)
     colours = np.array([[0.05, 0.3, 0.6], [0.6, 0.1, 0.3], [0.8, 0.8, 0.8], [0.2, 0.5, 0.8]])
     target = colours[quad].astype(np.float32)
-    ny, nx = SHAPE[1:]
+    ny, nx = shape[1:]
     pix = (np.arange(ny)[::-1, None] * nx + np.arange(nx)[None, :]).astype(np.int32)  # row 0 = largest y
-    fixed = np.zeros(SHAPE + (3,), np.float32)
+    fixed = np.zeros(shape + (3,), np.float32)
     scene = {
         **tex.to_arrays(),
         "target_rgb": target,
@@ -99,7 +101,7 @@ def make_run(d, table, kind="surface"):
         "faces": np.array(["top"]),
         "pix_top": pix,
     }
-    vol = Volume.from_mixture(voxel_mm=[V300] * 3, mixture=np.full(SHAPE + (3,), 1 / 3, np.float32), inks=INKS3)
+    vol = Volume.from_mixture(voxel_mm=[V300] * 3, mixture=np.full(shape + (3,), 1 / 3, np.float32), inks=INKS3)
     fn = surface_baseline if kind == "surface" else extrusion_baseline
     vol = vol.with_mixture(fn(vol, tex, target, fixed, table))
     d.mkdir(parents=True, exist_ok=True)
@@ -137,6 +139,39 @@ def test_evaluate_run_synthetic(tmp_path, table3):
     assert disk["spp"] == 8 and not disk["spp_adaptive"] and c["spp_passes"] == [8]  # explicit spp: exact
     floor = disk["gamut_floor_delta_e76"]  # the baselines reach the table's colours: none is better than the floor
     assert 0 <= floor <= min(b["delta_e76_mean_corrected"] for b in disk["baselines"].values()) + 1
+
+
+def test_printed_results_hold_no_grid_sized_float_array(tmp_path, table3, monkeypatch):
+    """From the first printer-resolution render to the last, the traced (numpy) memory holds one printer label
+    grid (1 byte per printer voxel), the renderer's inside mask (1 byte) and layer-sized temporaries: a
+    baseline's whole (z, y, x, N) float32 mixture (12 bytes per optimisation voxel, ~1.9 per printer voxel here)
+    or any printer-resolution float array (4 bytes per voxel and more) would break the bound below."""
+    shape = (100, 40, 40)  # deep, textured on top: the printer grid (1.0 M voxels) dominates the texels (3200)
+    vol, _ = make_run(tmp_path / "run", table3, "extrusion", shape)
+    start, end = [], []
+    use, loss = evaluate_mod.PrintedRenderer.use, evaluate_mod.TexelLoss
+
+    def first_use(self, labels_vol):  # the window opens at the first printer renderer ...
+        if labels_vol is not None and not start:
+            tracemalloc.reset_peak()
+            start.append(tracemalloc.get_traced_memory()[0])
+        return use(self, labels_vol)
+
+    def loss_after_renders(*a, **kw):  # ... and closes when the figures begin (the loss is texel-sized)
+        end.append(tracemalloc.get_traced_memory()[1])
+        return loss(*a, **kw)
+
+    monkeypatch.setattr(evaluate_mod.PrintedRenderer, "use", first_use)
+    monkeypatch.setattr(evaluate_mod, "TexelLoss", loss_after_renders)
+    tracemalloc.start()
+    try:
+        evaluate_run(tmp_path / "run", spp=1, table=table3, write=False)
+    finally:
+        tracemalloc.stop()
+    Z, Y, X = printer_grid(shape, [V300] * 3)[0]
+    layer = Y * X * (2 * 3 + 4) * 4  # quantize: two cached 3-ink cumulative layers, thresholds, labels (float32)
+    bound = 3 * Z * Y * X + layer + 0.25 * vol.mixture.nbytes  # 1 spare byte per printer voxel
+    assert len(start) == 1 and len(end) == 1 and end[0] - start[0] < bound, ((end[0] - start[0]) / 1e6, bound / 1e6)
 
 
 def test_evaluate_run_adaptive(tmp_path, table3):

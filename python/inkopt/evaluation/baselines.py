@@ -48,78 +48,108 @@ def _check(volume: Volume, table: ColourTable):
         )
 
 
-def _finish(volume: Volume, fixed_share, out: np.ndarray) -> np.ndarray:
-    """Apply the fixed ink shares (z, y, x, N) (or None) and zero the outside."""
-    if fixed_share is not None:
-        fixed = np.asarray(fixed_share, np.float32)
-        if fixed.shape != out.shape:
-            raise ValueError(f"fixed_share has shape {fixed.shape}, expected {out.shape}")
-        if np.any(fixed):
-            out = fixed + np.clip(1.0 - fixed.sum(-1, keepdims=True), 0.0, 1.0) * out
-    if volume.inside is not None:
-        out[~volume.inside] = 0.0
+class BaselineLayers:
+    """Baseline ``kind``'s mixture one (y, x, N) float32 layer at a time: ``[z]`` equals layer z of
+    ``baseline_mixture(kind, ...)`` bit for bit, without the (z, y, x, N) array (a layer source for
+    ``printing.quantize.quantize``, which asks for layers in increasing z). ``shape`` (z, y, x, N), ``dtype``.
+
+    Held: the per-texel mixtures (surface: per textured voxel), a k-d tree of the texel centres (extrusion) and
+    references to the volume's inside mask and ``fixed_share``; not the volume's medium (extrusion fills the
+    voxels of ``volume.inside_mask()``). Arguments as
+    ``surface_baseline``; ``kind`` "surface" or "extrusion"."""
+
+    def __init__(self, kind: str, volume: Volume, texels: Texels, target_rgb, fixed_share=None, table=None, **kw):
+        if kind not in BASELINES:
+            raise ValueError(f"unknown baseline '{kind}'; use one of {tuple(BASELINES)}")
+        refine, progress = kw.pop("refine", True), kw.pop("progress", False)
+        if kw:
+            raise TypeError(f"unexpected arguments {sorted(kw)}")
+        table = table or colour_table(volume.inks, volume.g, volume.ior, progress=progress)
+        _check(volume, table)
+        mix_t = table.lookup(_targets(texels, target_rgb), refine=refine)
+        n = len(volume.inks)
+        self.kind, self.shape, self.dtype = kind, tuple(volume.shape) + (n,), np.dtype(np.float32)
+        self.inside = volume.inside  # zeroed outside, as the volume's mask says
+        self.fill = self.inside if self.inside is not None or volume.form != "labels" else volume.inside_mask()
+        self.fixed = fixed_share
+        if fixed_share is not None and tuple(fixed_share.shape) != self.shape:
+            raise ValueError(f"fixed_share has shape {tuple(fixed_share.shape)}, expected {self.shape}")
+        if kind == "surface":
+            self.white = white_mixture(volume.inks, table)
+            flat = np.ravel_multi_index(tuple(texels.voxel.T), volume.shape)
+            vox, inv = np.unique(flat, return_inverse=True)
+            cnt = np.bincount(inv, minlength=len(vox)).astype(np.float64)
+            acc = np.stack([np.bincount(inv, mix_t[:, c], minlength=len(vox)) for c in range(n)], 1)
+            self.vox, self.vox_mix = vox, (acc / cnt[:, None]).astype(np.float32)  # sorted flat voxel indices
+        else:
+            self.mix_t = mix_t
+            self.tree = cKDTree(texels.position_mm(volume.voxel_mm))
+            self.vmm = np.asarray(volume.voxel_mm, np.float64)
+
+    def __getitem__(self, z: int) -> np.ndarray:
+        z = int(z)
+        if not 0 <= z < self.shape[0]:
+            raise IndexError(f"layer {z} outside 0..{self.shape[0] - 1}")
+        ny, nx, n = self.shape[1:]
+        inside = None if self.inside is None else self.inside[z]
+        if self.kind == "surface":
+            out = np.broadcast_to(self.white, (ny, nx, n)).copy()
+            lo, hi = np.searchsorted(self.vox, [z * ny * nx, (z + 1) * ny * nx])
+            out.reshape(-1, n)[self.vox[lo:hi] - z * ny * nx] = self.vox_mix[lo:hi]
+        else:
+            out = np.zeros((ny, nx, n), np.float32)
+            fill = None if self.fill is None else self.fill[z]
+            flat = np.arange(ny * nx) if fill is None else np.flatnonzero(fill.ravel())
+            if len(flat):
+                yx = np.stack(np.unravel_index(flat, (ny, nx)), 1)
+                pos = (np.column_stack([yx[:, ::-1], np.full(len(flat), z)]) + 0.5) * self.vmm
+                _, near = self.tree.query(pos, workers=-1)
+                out.reshape(-1, n)[flat] = self.mix_t[near]
+        fixed = None
+        if self.fixed is not None:
+            fixed = self.fixed.plane(z) if hasattr(self.fixed, "plane") else np.asarray(self.fixed[z], np.float32)
+        return _finish(inside, fixed, out)
+
+    def array(self) -> np.ndarray:
+        """The whole (z, y, x, N) float32 mixture (small volumes, tests)."""
+        return np.stack([self[z] for z in range(self.shape[0])]) if self.shape[0] else np.zeros(self.shape, np.float32)
+
+
+def _finish(inside, fixed, out: np.ndarray) -> np.ndarray:
+    """Apply a layer's fixed ink shares (y, x, N) (or None) and zero its outside (``inside`` (y, x) or None)."""
+    if fixed is not None and np.any(fixed):
+        fixed = np.asarray(fixed, np.float32)
+        out = fixed + np.clip(1.0 - fixed.sum(-1, keepdims=True), 0.0, 1.0) * out
+    if inside is not None:
+        out[~inside] = 0.0
     return np.ascontiguousarray(out, np.float32)
 
 
-def surface_baseline(
-    volume: Volume,
-    texels: Texels,
-    target_rgb,
-    fixed_share=None,
-    table: ColourTable | None = None,
-    refine: bool = True,
-    progress: bool = False,
-) -> np.ndarray:
+def surface_baseline(volume: Volume, texels: Texels, target_rgb, fixed_share=None, table=None, **kw) -> np.ndarray:
     """Mixture (z, y, x, N) float32: each scene texel's mapped mixture in its voxel, white elsewhere inside.
 
     volume: the run's volume (grid, inks, g, ior; mixture or labels: its medium is not used); texels and their
     target_rgb (I, 3) linear; fixed_share (z, y, x, N) or None: the run's constraints (``SceneRecord.fixed_share``),
-    kept by the baseline. table: default ``colour_table`` of the volume's inks.
+    kept by the baseline. table: default ``colour_table`` of the volume's inks. ``refine`` (default True): the
+    table's blend of its 8 nearest entries, else the nearest; ``progress``: the table build's progress bar.
     """
-    table = table or colour_table(volume.inks, volume.g, volume.ior, progress=progress)
-    _check(volume, table)
-    target = _targets(texels, target_rgb)
-    mix_t = table.lookup(target, refine=refine)
-    n = len(volume.inks)
-    out = np.broadcast_to(white_mixture(volume.inks, table), volume.shape + (n,)).copy()
-    flat = np.ravel_multi_index(tuple(texels.voxel.T), volume.shape)
-    vox, inv = np.unique(flat, return_inverse=True)
-    cnt = np.bincount(inv, minlength=len(vox)).astype(np.float64)
-    acc = np.stack([np.bincount(inv, mix_t[:, c], minlength=len(vox)) for c in range(n)], 1)
-    out.reshape(-1, n)[vox] = (acc / cnt[:, None]).astype(np.float32)
-    return _finish(volume, fixed_share, out)
+    return BaselineLayers("surface", volume, texels, target_rgb, _dense_fixed(fixed_share), table, **kw).array()
 
 
-def extrusion_baseline(
-    volume: Volume,
-    texels: Texels,
-    target_rgb,
-    fixed_share=None,
-    table: ColourTable | None = None,
-    refine: bool = True,
-    progress: bool = False,
-    chunk: int = 1 << 20,
-) -> np.ndarray:
+def extrusion_baseline(volume: Volume, texels: Texels, target_rgb, fixed_share=None, table=None, **kw) -> np.ndarray:
     """Mixture (z, y, x, N) float32: every inside voxel takes the mapped mixture of its nearest scene texel
     (distance in mm from the voxel centre to the texel's face centre). Arguments as ``surface_baseline``."""
-    table = table or colour_table(volume.inks, volume.g, volume.ior, progress=progress)
-    _check(volume, table)
-    target = _targets(texels, target_rgb)
-    mix_t = table.lookup(target, refine=refine)
-    tree = cKDTree(texels.position_mm(volume.voxel_mm))
-    inside = volume.inside_mask()
-    out = np.zeros(volume.shape + (len(volume.inks),), np.float32)
-    flat = np.flatnonzero(inside.ravel())
-    vmm = np.asarray(volume.voxel_mm, np.float64)
-    flat_out = out.reshape(-1, out.shape[-1])
-    for a in range(0, len(flat), chunk):  # bounded temporary memory on big meshes
-        idx = np.stack(np.unravel_index(flat[a : a + chunk], volume.shape), 1)
-        _, near = tree.query((idx[:, ::-1] + 0.5) * vmm, workers=-1)
-        flat_out[flat[a : a + chunk]] = mix_t[near]
-    return _finish(volume, fixed_share, out)
+    return BaselineLayers("extrusion", volume, texels, target_rgb, _dense_fixed(fixed_share), table, **kw).array()
 
 
-BASELINES = {"surface": surface_baseline, "extrusion": extrusion_baseline}
+def _dense_fixed(fixed_share):
+    """A fixed-share argument as ``BaselineLayers`` takes it: None, a ``FixedShares`` or a float32 array."""
+    if fixed_share is None or hasattr(fixed_share, "plane"):
+        return fixed_share
+    return np.asarray(fixed_share, np.float32)
+
+
+BASELINES = {"surface": surface_baseline, "extrusion": extrusion_baseline}  # kind -> full-array function
 
 
 def baseline_mixture(kind: str, volume: Volume, texels: Texels, target_rgb, fixed_share=None, **kw) -> np.ndarray:

@@ -35,6 +35,13 @@ Writes DIR/evaluation.json (or ``out``), DIR/predictions.npz (every result's col
 ``rundir.Predictions``) and, for slabs, DIR/evaluation_<face>.png per textured face: target | optimized | quantized
 | surface | extrusion (sRGB); for meshes DIR/evaluation_views.png, the same rows seen from four sides. ``max_spp``
 and ``time_budget`` cap the adaptive renders.
+
+Memory: one renderer exists at a time. The run's mixture is dropped once the continuous result (and translucency)
+is rendered; the printer texels and their map are set up once and serve the quantized result and both baselines
+(same printer grid and inside voxels); each baseline goes layer by layer from ``baselines.BaselineLayers``
+through ``printing.quantize.quantize`` into one printer label grid (1 byte per printer voxel), never as a whole
+(z, y, x, N) mixture; the texel loss and its figures come after the last render. The peak is then the larger of
+the continuous render and one printer renderer's build, below the optimisation's (docs/performance.md).
 """
 
 from __future__ import annotations
@@ -46,18 +53,18 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..color import delta_e76
+from ..color import delta_e76, linear_to_lab
 from ..io import file_digest, write_png
 from ..lighting import Lighting, load_lighting
 from ..loss import TexelLoss
 from ..model import Quantization, Texels, Volume
 from ..pictures import panels
-from ..printing.quantize import DEFAULT_DPI, DEFAULT_LAYER_UM, quantize_volume
+from ..printing.quantize import DEFAULT_DPI, DEFAULT_LAYER_UM, printer_grid, quantize
 from ..printing.stream import quantize_run
 from ..render import Renderer
 from ..rundir import Predictions, RunDir, SceneRecord
 from ..units import dpi_of
-from .baselines import BASELINES
+from .baselines import BASELINES, BaselineLayers
 from .colour_table import DEFAULT_PATCH_MM, ColourTable, colour_table
 from .metrics import prediction_metrics
 from .noise import EVAL_SEED_OFFSET, MAX_SPP, PILOT_SPP, SSIM_NOISE_RATIO, TARGET_NOISE_DE76, adaptive_render
@@ -114,18 +121,26 @@ def printer_texels(qvol: Volume, scene: Texels, kind: str) -> Texels:
 
 
 class PrintedRenderer:
-    """A labels volume set up once for rendering on its printer texels (texel map, renderer), then rendered any
-    number of times and averaged onto the scene texels (adaptive evaluation renders it in several passes)."""
+    """Printer texels of a labels grid set up once (texels, texel map) and rendered on any labels volume of that grid
+    (same shape, voxel size and inside voxels: the run's quantized volume and the baselines quantized like it),
+    averaged onto the scene texels; the adaptive evaluation renders each volume in several passes."""
 
-    def __init__(
-        self, qvol: Volume, scene: Texels, voxel_mm_scene, kind: str, threads=None, lighting: Lighting | None = None
-    ):
+    def __init__(self, qvol: Volume, scene: Texels, voxel_mm_scene, kind: str, threads=None, lighting=None):
         self.ptex = printer_texels(qvol, scene, kind)
         self.to_scene, self.stand_in = map_texels(
             self.ptex, qvol.voxel_mm, scene, voxel_mm_scene, per_face=kind != "mesh"
         )
-        self.n_scene = len(scene)
-        self.renderer = Renderer(qvol, threads, lighting)
+        self.n_scene, self.shape, self.threads, self.lighting = len(scene), qvol.shape, threads, lighting
+        self.renderer = None
+
+    def use(self, labels_vol: Volume | None) -> None:
+        """Render ``labels_vol`` from now on (a renderer of its own; the previous one is freed first), or free the
+        renderer (None)."""
+        self.renderer = None
+        if labels_vol is not None:
+            if labels_vol.shape != self.shape:
+                raise ValueError(f"labels grid {labels_vol.shape} differs from the printer texels' {self.shape}")
+            self.renderer = Renderer(labels_vol, self.threads, self.lighting)
 
     def __call__(self, spp: int, seed: int, progress: bool = False):
         """(rgb (I, 3), var_mean (I, 3)) on the scene texels from ``spp`` samples per scene texel, shared by its
@@ -215,22 +230,26 @@ def evaluate_run(
     stex, kind = rec.texels, rec.kind
     target = rec.target_rgb.astype(np.float64)
     t_all = time.perf_counter()
-    loss = TexelLoss(target, stex.pos_vox, sigma=1.5)
+    target_lab = linear_to_lab(target)  # as TexelLoss has it; the loss itself is built after the renders
     colours = {"target": target}
     rseed = EVAL_SEED_OFFSET + int(seed)
     todo = [2 + (2 if baselines else 0)]  # adaptive results still to render, for sharing the time budget
+    renders = {}  # name -> (AdaptiveResult, seconds, quantization method, printer spp)
 
-    def measured(name: str, render, seconds_from: float, method: str | None, spp_printer=None) -> Measured:
-        """Adaptive (or fixed-spp) render of one result; its colours and figures."""
+    def rendered(name: str, render, seconds_from: float, method: str | None, spp_printer=None, done=None):
+        """Adaptive (or fixed-spp) render of one result, kept for its figures. ``done`` (called once the renders
+        are over): frees the result's renderer."""
         budget = None
         if time_budget is not None:
             budget = max(time_budget - (time.perf_counter() - t_all), 0.0) / max(todo[0], 1)
         todo[0] -= 1
-        ad = adaptive_render(render, loss.target_lab, rseed, spp, max_spp=max_spp, log=say, time_budget=budget)
+        ad = adaptive_render(render, target_lab, rseed, spp, max_spp=max_spp, log=say, time_budget=budget)
+        if done is not None:
+            done()
         colours[name] = ad.rgb
-        m = prediction_metrics(loss, ad.rgb, ad.var)
         sp = None if spp_printer is None else spp_printer["spp"]
-        return Measured(m, ad.spp, ad.passes, time.perf_counter() - seconds_from, method, sp)
+        renders[name] = (ad, time.perf_counter() - seconds_from, method, sp)
+        return renders[name]
 
     t0 = time.perf_counter()
     renderer = Renderer(vol, threads, lighting)
@@ -239,55 +258,17 @@ def evaluate_run(
         r = renderer.render(stex, n, s, progress=log is not None)
         return r.rgb, r.var_mean, n
 
-    cont = measured("continuous", continuous, t0, None)
-    renderer = None  # freed before the next renderer is built
-    say(f"continuous: {len(stex)} texels x {cont.spp} spp in {cont.seconds:.1f} s")
+    def free_continuous():
+        nonlocal renderer
+        renderer = None  # freed before the figures and the next renderer
+
+    ad, seconds, _, _ = rendered("continuous", continuous, t0, None, done=free_continuous)
+    say(f"continuous: {len(stex)} texels x {ad.spp} spp in {seconds:.1f} s")
     tr = None
     if translucency or (translucency is None and (rec.translucency is not None or translucency_compare)):
         tr = evaluate_translucency(vol, rec, translucency_compare, rseed, threads, lighting, log=say)
 
-    if d.has_quantized():
-        qvol = d.load_quantized()
-        q = qvol.quantization or Quantization()
-        if method is not None and method != q.method:
-            raise ValueError(
-                f"{d.quantized_path} was quantized with '{q.method}', not '{method}'; rerun 'inkopt "
-                f"quantize {d} --method {method}' or omit --method"
-            )
-    else:
-        t0 = time.perf_counter()  # inkopt quantize's defaults, layer by layer as that command does
-        quantize_run(
-            d, method=method or "blue-noise", dpi=DEFAULT_DPI, layer_um=DEFAULT_LAYER_UM, seed=0, upsample="nearest"
-        )
-        qvol = d.load_quantized()
-        q = qvol.quantization
-        say(
-            f"quantized {vol.shape} -> {qvol.shape} ({q.method}) in {time.perf_counter() - t0:.1f} s; "
-            f"wrote {d.quantized_path}"
-        )
-    dpi = q.dpi or tuple(float(v) for v in dpi_of(qvol.voxel_mm))
-    qkw = dict(method=q.method, seed=q.seed, upsample=q.upsample, dpi=tuple(dpi))
-    printer_texels = 0
-
-    def printed(name: str, labels_vol: Volume) -> Measured:
-        nonlocal printer_texels
-        t0, info = time.perf_counter(), {"spp": 0}
-        printer = PrintedRenderer(labels_vol, stex, vol.voxel_mm, kind, threads, lighting)
-        printer_texels = len(printer.ptex)
-
-        def render(n: int, s: int):
-            rgb, var, spp_p = printer(n, s, progress=log is not None)
-            info["spp"] += spp_p
-            return rgb, var, spp_p
-
-        m = measured(name, render, t0, q.method, info)
-        say(f"{name}: {printer_texels} printer texels x {info['spp']} spp in {m.seconds:.1f} s")
-        return m
-
-    quantized = printed("quantized", qvol)
-    del qvol
-    floor = {}
-    base = None
+    floor, base, sources = {}, None, {}
     if baselines:
         t0 = time.perf_counter()
         if table is None:
@@ -307,15 +288,93 @@ def evaluate_run(
             "build_seconds": table.seconds,
             "seconds": time.perf_counter() - t0,
         }
-        de = delta_e76(table.reachable_lab(target), loss.target_lab)
+        de = delta_e76(table.reachable_lab(target), target_lab)
         floor["gamut_floor_delta_e76"] = float(de.mean())
         floor["gamut_floor_delta_e76_p95"] = float(np.percentile(de, 95))
-        base = {}
         fixed = rec.fixed_share(vol.inks, vol.shape)
-        for name, fn in BASELINES.items():
-            mix = fn(vol, stex, target, fixed, table, refine=refine)
-            qb = quantize_volume(vol.with_mixture(mix), **qkw)
-            base[name] = printed(name, qb)
+        # layer by layer: no (z, y, x, N) baseline mixture is ever whole
+        sources = {name: BaselineLayers(name, vol, stex, target, fixed, table, refine=refine) for name in BASELINES}
+    shape, vmm = vol.shape, vol.voxel_mm
+    vol = None  # the mixture is not needed any more: freed before the printer-resolution renders
+
+    if d.has_quantized():
+        qvol = d.load_quantized()
+        q = qvol.quantization or Quantization()
+        if method is not None and method != q.method:
+            raise ValueError(
+                f"{d.quantized_path} was quantized with '{q.method}', not '{method}'; rerun 'inkopt "
+                f"quantize {d} --method {method}' or omit --method"
+            )
+    else:
+        t0 = time.perf_counter()  # inkopt quantize's defaults, layer by layer as that command does
+        quantize_run(
+            d, method=method or "blue-noise", dpi=DEFAULT_DPI, layer_um=DEFAULT_LAYER_UM, seed=0, upsample="nearest"
+        )
+        qvol = d.load_quantized()
+        q = qvol.quantization
+        say(
+            f"quantized {shape} -> {qvol.shape} ({q.method}) in {time.perf_counter() - t0:.1f} s; "
+            f"wrote {d.quantized_path}"
+        )
+    dpi = tuple(q.dpi or tuple(float(v) for v in dpi_of(qvol.voxel_mm)))
+    t0 = time.perf_counter()
+    printer = PrintedRenderer(qvol, stex, vmm, kind, threads, lighting)  # texels and map shared by all printed
+
+    def printed(name: str, labels_vol: Volume, t0: float) -> None:
+        info = {"spp": 0}
+        printer.use(labels_vol)
+
+        def render(n: int, s: int):
+            rgb, var, spp_p = printer(n, s, progress=log is not None)
+            info["spp"] += spp_p
+            return rgb, var, spp_p
+
+        _, seconds, _, _ = rendered(name, render, t0, q.method, info, done=lambda: printer.use(None))
+        say(f"{name}: {len(printer.ptex)} printer texels x {info['spp']} spp in {seconds:.1f} s")
+
+    meta = dict(
+        voxel_mm=qvol.voxel_mm,
+        inks=qvol.inks,
+        g=qvol.g,
+        ior=qvol.ior,
+        normals=qvol.normals,
+        boundary=qvol.boundary,
+        origin_mm=qvol.origin_mm,
+        quantization=q,
+    )
+    printed("quantized", qvol, t0)
+    qvol = None  # its memory-mapped labels
+    if sources:
+        shape_p = printer_grid(shape, vmm, dpi=dpi)[0]
+        if shape_p != printer.shape:
+            raise ValueError(f"{d.quantized_path} has a printer grid of {printer.shape}, its settings give {shape_p}")
+        for name in list(sources):
+            t0 = time.perf_counter()  # quantized exactly like ours, into one printer-grid label array
+            src = sources.pop(name)
+            labels, _ = quantize(
+                src,
+                vmm,
+                method=q.method,
+                dpi=dpi,
+                inside=src.inside,
+                seed=q.seed,
+                upsample=q.upsample,
+                out=np.empty(shape_p, np.uint8),
+            )
+            src = None
+            printed(name, Volume.from_labels(labels=labels, **meta), t0)
+            labels = None
+    n_ptex, printer = len(printer.ptex), None
+    loss = TexelLoss(target, stex.pos_vox, sigma=1.5)  # the figures of every result, after all renders
+
+    def figures(name: str) -> Measured:
+        ad, seconds, method, sp = renders.pop(name)
+        return Measured(prediction_metrics(loss, ad.rgb, ad.var), ad.spp, ad.passes, seconds, method, sp)
+
+    cont, quantized = figures("continuous"), figures("quantized")
+    if baselines:
+        base = {name: figures(name) for name in BASELINES}
+    loss = None  # freed before the pictures
     ev = Evaluation(
         spp=cont.spp,
         seed=int(seed),
@@ -329,7 +388,7 @@ def evaluate_run(
         lighting=lighting.describe(),
         continuous=cont,
         quantization={**asdict(q), "dpi": list(dpi)},
-        printer_texels=printer_texels,
+        printer_texels=n_ptex,
         quantized=quantized,
         seconds=time.perf_counter() - t_all,
         translucency=tr,
