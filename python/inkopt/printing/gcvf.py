@@ -92,17 +92,19 @@ def _png(image, dpi) -> bytes:
     return buf.getvalue()
 
 
-def _check_target(path: Path) -> None:
+def check_package_target(path: Path, member: str = CONFIG, kind: str = "GCVF package", suffix: str = ".gcvf") -> None:
+    """One-line ValueError unless ``path`` may be written: not a folder, and if it exists a package of this
+    ``kind`` (a zip holding ``member``), which is replaced; any other file is refused, never overwritten."""
     if path.is_dir():
-        raise ValueError(f"{path} is a folder; give a .gcvf file name")
+        raise ValueError(f"{path} is a folder; give a {suffix} file name")
     if path.exists():
         try:
             with zipfile.ZipFile(path) as zf:
-                ok = CONFIG in zf.namelist()
+                ok = member in zf.namelist()
         except (OSError, zipfile.BadZipFile):
             ok = False
         if not ok:
-            raise ValueError(f"{path} exists and is not a GCVF package; refusing to replace it")
+            raise ValueError(f"{path} exists and is not a {kind}; refusing to replace it")
 
 
 def outline_mesh(occupied, voxel_mm_printer):
@@ -234,7 +236,7 @@ def write_gcvf(
     layer_nm = int(round(job.vp[2] * 1e6))
     lut, colours, bg = slice_lut(job.names, {**GCVF_PALETTE, **(palette or {})}, BACKGROUND)
     path = Path(path)
-    _check_target(path)
+    check_package_target(path)
 
     from PIL import Image
 

@@ -41,7 +41,7 @@ import numpy as np
 
 from ..io import publish, source_comment
 from .export import check_job, ink_colours
-from .gcvf import _block_any, block_outline, outline_factors
+from .gcvf import _block_any, block_outline, check_package_target, outline_factors
 
 NS_CORE = "http://schemas.microsoft.com/3dmanufacturing/core/2015/02"
 NS_V = "http://schemas.3mf.io/3dmanufacturing/volumetric/2022/01"
@@ -156,19 +156,6 @@ def _rels(targets) -> bytes:
     ).encode()
 
 
-def _check_target(path: Path) -> None:
-    if path.is_dir():
-        raise ValueError(f"{path} is a folder; give a .3mf file name")
-    if path.exists():
-        try:
-            with zipfile.ZipFile(path) as zf:
-                ok = MODEL in zf.namelist()
-        except (OSError, zipfile.BadZipFile):
-            ok = False
-        if not ok:
-            raise ValueError(f"{path} exists and is not a 3MF file; refusing to replace it")
-
-
 def write_3mf(
     layers, occupied, shape, voxel_mm, ink_names, path, *, materials=None, palette=None, source=None, digest=None
 ) -> dict:
@@ -192,7 +179,7 @@ def write_3mf(
     colours = ink_colours(names, palette)
     groups = -(-len(names) // 4)
     path = Path(path)
-    _check_target(path)
+    check_package_target(path, MODEL, "3MF file", ".3mf")
     fz, fy, fx = outline_factors((Z, Y, X), vp)
     coarse = np.zeros((-(-Z // fz), -(-Y // fy), -(-X // fx)), bool)
     counts = np.zeros(len(names), np.float64)
