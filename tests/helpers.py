@@ -70,3 +70,26 @@ def replay_matches_fd(vol, probes, spp=800, seeds=tuple(range(11, 23)), h=0.3, l
                 vals.append(float(np.sum(render(v2, tex, spp=spp, seed=seed, lighting=lighting).rgb * adj)))
             fd.append((vals[0] - vals[1]) / (2 * h))
         assert_same_mean(g, fd, rel_bias=0.02, false_alarm=1e-4, what=(z, y, x, c, which))
+
+
+def small_chart_scene(w=24, h=16, depth_mm=0.5, bottom=False):
+    """A small slab scene (``w`` x ``h`` voxels of 300 DPI, ``depth_mm`` deep) with a colour chart on top (and a
+    zebra chart below with ``bottom``), CMYKW inks."""
+    from inkopt import charts
+    from inkopt.color import srgb_to_linear
+    from inkopt.model import InkTable
+    from inkopt.scenes.slab import build_slab
+
+    top = charts.colour_chart(w * 4, h * 4)
+    lin = lambda im: srgb_to_linear(im / 255.0).astype(np.float32)
+    bot = lin(charts.zebra(w * 4, h * 4, (8, 4))) if bottom else None
+    vox = 25.4 / 300
+    return build_slab(lin(top), bot, (w * vox, h * vox, depth_mm), InkTable.parse("vero-cmykw"))
+
+
+def small_run(scene, **kw):
+    """An ``Optimization`` of ``scene`` on 2 threads: 30 iterations of 4 + 16 spp unless ``kw`` says otherwise."""
+    from inkopt.optim import Optimization, OptimizeConfig
+
+    cfg = OptimizeConfig(**{"iterations": 30, "spp": 4, "forward_spp": 16, **kw})
+    return Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, kind=scene.kind, threads=2)

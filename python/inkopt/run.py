@@ -34,6 +34,21 @@ from .pictures import loss_figure
 from .rundir import Predictions, RunDir
 from .scenes import Scene
 
+#: Shares of a run's time budget (``OptimizeConfig.time_budget``) given to the start's figures, the result's
+#: figures, and kept for writing the result (volume, pictures, predictions, report): the iterations get the rest,
+#: the step decay planned to end in time (``optim.stopping``). Not measured optima: the figures are informative
+#: and noise-corrected at any spp (their noise is reported), the quality is the iterations'.
+BUDGET_START_FIGURES, BUDGET_FINAL_FIGURES, BUDGET_WRITING = 0.03, 0.08, 0.04
+
+
+def figure_budgets(cfg: OptimizeConfig, eval_time_budget: float | None) -> tuple:
+    """(start's, result's) time budget of the adaptive figures in seconds, or None: the user's
+    ``eval_time_budget``, within the shares of the run's time budget if it has one."""
+    if cfg.time_budget is None:
+        return eval_time_budget, eval_time_budget
+    cap = float("inf") if eval_time_budget is None else eval_time_budget
+    return min(cap, BUDGET_START_FIGURES * cfg.time_budget), min(cap, BUDGET_FINAL_FIGURES * cfg.time_budget)
+
 
 def peak_rss_gb() -> float:
     """Peak resident memory of this process so far, GiB (Linux reports ru_maxrss in KiB)."""
@@ -56,6 +71,7 @@ def run_optimisation(
     dry_run: bool = False,
     eval_max_spp: int = MAX_SPP,
     eval_time_budget: float | None = None,
+    started: float | None = None,
 ) -> Report | Estimate:
     """Optimise ``scene`` into run directory ``out_dir`` under the display ``lighting`` (default uniform; the
     final figures are rendered under it too); returns the report (also report.json). ``ray``: "auto" or a Ray
@@ -64,7 +80,9 @@ def run_optimisation(
     gets a progress line at least every ``log_every_s`` seconds of the iterations. Before the iterations the run's
     cost is estimated (``inkopt.estimate``) and logged when it exceeds ``estimate.ANNOUNCE_SECONDS``; with
     ``dry_run`` only the estimate is made and returned, and nothing is written. ``eval_max_spp`` and
-    ``eval_time_budget`` (seconds) cap each adaptive figure's samples."""
+    ``eval_time_budget`` (seconds) cap each adaptive figure's samples. ``started``: when the job began
+    (``time.perf_counter()``, e.g. before the scene was built; default: now), the time ``cfg.time_budget`` and the
+    run's wall time count from."""
     with renderer_factory(ray, threads) as make_renderer:
         return _optimise(
             scene,
@@ -81,6 +99,7 @@ def run_optimisation(
             dry_run,
             eval_max_spp,
             eval_time_budget,
+            started,
         )
 
 
@@ -99,8 +118,9 @@ def _optimise(
     dry_run,
     eval_max_spp,
     eval_time_budget,
+    started,
 ) -> Report | Estimate:
-    t_start = time.perf_counter()
+    t_start = time.perf_counter() if started is None else started
     log(scene.describe())
     for note in scene.warnings:  # e.g. a mesh's small holes
         log(f"warning: {note}")
@@ -147,16 +167,16 @@ def _optimise(
     spp = int(eval_spp) if eval_spp else None  # None: adaptive
     seed = EVAL_SEED_OFFSET + cfg.seed
 
-    def figures_of(x=None):
+    start_budget, final_budget = figure_budgets(cfg, eval_time_budget)
+
+    def figures_of(x=None, budget=final_budget):
         renderer = run.renderer(x)
 
         def render(n: int, s: int):
             r = renderer.render(scene.texels, n, s, cfg.include_specular, progress)
             return r.rgb, r.var_mean, n
 
-        res = adaptive_render(
-            render, run.loss.target_lab, seed, spp, max_spp=eval_max_spp, log=log, time_budget=eval_time_budget
-        )
+        res = adaptive_render(render, run.loss.target_lab, seed, spp, max_spp=eval_max_spp, log=log, time_budget=budget)
         return res, prediction_metrics(run.loss, res.rgb, res.var)
 
     def keep_start(res0, init) -> None:
@@ -168,8 +188,9 @@ def _optimise(
         }
 
     if run.start_figures is None and run.iteration == 0:  # measured once, before the first step, and then kept in
-        keep_start(*figures_of())  # the checkpoints, so that no resume renders the start again
-    run.run(rd.checkpoint_path, progress=progress, log=log, log_every_s=log_every_s)
+        keep_start(*figures_of(budget=start_budget))  # the checkpoints, so no resume renders the start again
+    reserve = 0.0 if cfg.time_budget is None else (final_budget or 0.0) + BUDGET_WRITING * cfg.time_budget
+    run.run(rd.checkpoint_path, progress=progress, log=log, log_every_s=log_every_s, reserve=reserve)
     run.release_renderer()  # not beside the writing of the result
     rd.save_volume_slabs(run.base, run.mixture_slabs(), run.base.inks)  # a slab of layers at a time
     gone = rd.remove_stale()  # quantized volume, slices, evaluation made from an earlier volume.npz
@@ -178,7 +199,7 @@ def _optimise(
 
     res, metrics = figures_of()
     if run.start_figures is None:  # a checkpoint written before the start's figures were kept in it
-        keep_start(*figures_of(run.initial_variables()))
+        keep_start(*figures_of(run.initial_variables(), start_budget))
     run.release_renderer()
     start = run.start_figures
     de = delta_e76_map(run.loss, res.rgb)
@@ -212,6 +233,7 @@ def _optimise(
         seconds=time.perf_counter() - t_start,
         seconds_total=run.wall_seconds(),
         estimate=estimate.to_json(),
+        stop=run.schedule.describe(run.cfg),
         seconds_iterations=float(np.sum(h.seconds)),
         seconds_per_iteration=float(np.sum(h.seconds) / n),
         time_split={k: float(np.sum(getattr(h, k)) / n) for k in ("render_s", "gradient_s", "loss_s", "step_s")},

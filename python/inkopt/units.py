@@ -51,6 +51,21 @@ def parse_size_mm(text: str) -> tuple[float, float, float]:
     return w, h, d
 
 
+def parse_duration(text: str) -> float:
+    """Seconds of a duration as people write it: "1800", "90s", "30m", "1h", "1h30m", "2h15m30s"."""
+    import re
+
+    t = str(text).strip().lower().replace(" ", "")
+    m = re.fullmatch(r"(?:(\d+(?:\.\d+)?)h)?(?:(\d+(?:\.\d+)?)m(?:in)?)?(?:(\d+(?:\.\d+)?)s?)?", t)
+    if not t or m is None or not any(m.groups()):
+        raise ValueError(f"a duration must look like 1800, 90s, 30m or 1h30m, got '{text}'")
+    h, mi, s = (float(g) if g else 0.0 for g in m.groups())
+    seconds = 3600 * h + 60 * mi + s
+    if not seconds > 0:
+        raise ValueError(f"a duration must be positive, got '{text}'")
+    return seconds
+
+
 def format_duration(seconds: float) -> str:
     """A wall time for people: "1 h 02 min", "3 min 05 s" or "42 s"."""
     s = int(round(max(seconds, 0.0)))

@@ -157,8 +157,8 @@ def test_ssim_ratio_matches_sampled_noise():
 
 def test_time_budget_caps_the_samples_and_passes_say_their_time():
     """A render that costs 10 ms per sample per texel and noise that would need well over 1000 spp: with a 3 s budget
-    the pilot (64 spp, 0.64 s) leaves room for 236 more, which is what is rendered; the result says it was capped,
-    and the log line gives the pass's expected time."""
+    the pilot (a 4-spp probe that times the samples, then 60 more: 0.64 s) leaves room for 236 more, which is what
+    is rendered; the result says it was capped, and the log line gives the pass's expected time."""
     t, c = synthetic(0.05)
     now = [0.0]
     render = fake_renderer(c, (0.1 * c) ** 2 * 1e6, [])
@@ -169,8 +169,23 @@ def test_time_budget_caps_the_samples_and_passes_say_their_time():
 
     lines = []
     ad = adaptive_render(timed, linear_to_lab(t), seed=0, time_budget=3.0, log=lines.append, clock=lambda: now[0])
-    assert ad.passes == [64, 236] and ad.spp == 300 and ad.capped and ad.noise > TARGET_NOISE_DE76
+    assert ad.passes == [4, 60, 236] and ad.spp == 300 and ad.capped and ad.noise > TARGET_NOISE_DE76
     assert now[0] <= 3.0 + 1e-9
     assert "236 more, ~2 s (capped)" in lines[0]
     free = adaptive_render(timed, linear_to_lab(t), seed=0, clock=lambda: now[0])
     assert free.spp > 1000  # without the budget it would have gone on
+
+
+def test_time_budget_below_the_pilot_keeps_to_it():
+    """A budget smaller than the 64-spp pilot's time: the 4-spp probe times the samples and the pilot stops at what
+    fits (0.4 s at 10 ms per sample: 40 spp in all), and the result says it was capped."""
+    t, c = synthetic(0.05)
+    now = [0.0]
+    render = fake_renderer(c, (0.1 * c) ** 2 * 1e6, [])
+
+    def timed(n, seed):
+        now[0] += 0.01 * n
+        return render(n, seed)
+
+    ad = adaptive_render(timed, linear_to_lab(t), seed=0, time_budget=0.4, clock=lambda: now[0])
+    assert ad.passes == [4, 36] and ad.spp == 40 and ad.capped and now[0] <= 0.4 + 1e-9

@@ -3,6 +3,7 @@ plus ``format_version``, reads back into the same ``Report``, and files without 
 load or fail as ``io.upgrade_format`` says."""
 
 import json
+from dataclasses import replace
 
 import pytest
 
@@ -102,7 +103,9 @@ def run(tmp_path_factory):
 
 def test_report_keys_and_round_trip(run):
     data = json.loads((run / "report.json").read_text())
-    assert set(data) == SLAB_REPORT_KEYS | {"format_version"} and data["format_version"] == 1
+    # "stop" (why the run ended) is the one key added since the files carried a version
+    assert set(data) == SLAB_REPORT_KEYS | {"format_version", "stop"} and data["format_version"] == 1
+    assert data["stop"]["reason"] == "iterations" and data["stop"]["iterations"] == 2
     rep = Report.read(run / "report.json")
     assert rep.to_json() == data and list(rep.to_json()) == list(data)  # the same keys in the same order
     assert rep.scene == {
@@ -113,8 +116,8 @@ def test_report_keys_and_round_trip(run):
     }
     assert rep.lighting == {"lighting": "uniform", "lighting_rotate_deg": 0.0}
     assert rep.metrics.delta_e76_mean == data["delta_e76_mean"]
-    old = {k: v for k, v in data.items() if k != "format_version"}  # as written before files carried a version
-    assert Report.from_json(old) == rep
+    old = {k: v for k, v in data.items() if k not in ("format_version", "stop")}  # before files carried a version
+    assert Report.from_json(old) == replace(rep, stop=None)
 
 
 def test_newer_format_is_a_one_line_error(run, tmp_path):

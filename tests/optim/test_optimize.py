@@ -7,8 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 from helpers import central_differences as _fd
+from helpers import small_chart_scene
+from helpers import small_run as run
 
-from inkopt import charts
 from inkopt.color import srgb_to_linear
 from inkopt.evaluation.metrics import prediction_metrics
 from inkopt.model import FixedShares, InkTable, mix, mix_grad
@@ -132,20 +133,6 @@ def test_core_array_functions_keep_to_the_callers_threads():
         for a, b in zip(got, want):
             np.testing.assert_array_equal(a, b)
     assert _pool_threads(3) == 0  # no pool of a count nobody asked for
-
-
-def small_chart_scene(w=24, h=16, depth_mm=0.5, bottom=False):
-    top = charts.colour_chart(w * 4, h * 4)
-    lin = lambda im: srgb_to_linear(im / 255.0).astype(np.float32)
-    bot = lin(charts.zebra(w * 4, h * 4, (8, 4))) if bottom else None
-    vox = 25.4 / 300
-    return build_slab(lin(top), bot, (w * vox, h * vox, depth_mm), INKS)
-
-
-def run(scene, **kw):
-    cfg = OptimizeConfig(**{"iterations": 30, "spp": 4, "forward_spp": 16, **kw})
-    r = Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, kind=scene.kind, threads=2)
-    return r
 
 
 def test_optimisation_lowers_delta_e_far_below_white_start():

@@ -136,7 +136,12 @@ def add_optimizer_args(p, single_run: bool = True) -> None:
         help="ink set: a preset (vero-cmykw, vero-cmykw+orange, vero-cmykwt), a comma list of ink names, "
         "or a JSON/TOML file of inks (default vero-cmykw)",
     )
-    p.add_argument("--iterations", type=int, default=d.iterations, help=f"(default {d.iterations})")
+    p.add_argument(
+        "--iterations",
+        type=int,
+        default=d.iterations,
+        help=f"the most iterations (default {d.iterations}); the run stops earlier when done (--stop-gain)",
+    )
     p.add_argument("--spp", type=int, default=d.spp, help=f"samples per texel of the gradient pass (default {d.spp})")
     p.add_argument(
         "--forward-spp",
@@ -226,6 +231,21 @@ def add_optimizer_args(p, single_run: bool = True) -> None:
     add_lighting_args(p, "optimise and evaluate")
     if single_run:  # a single run's evaluation budget, estimate and progress lines (not select-inks' many runs)
         p.add_argument(
+            "--stop-gain",
+            type=float,
+            default=d.stop_gain,
+            metavar="DE76",
+            help="stop when done: once the training ΔE76 is not expected to fall by more than this over the next "
+            f"{d.stop_horizon} iterations, the step decay begins and the run ends after it (default "
+            f"{d.stop_gain:g}; 0: run all --iterations)",
+        )
+        p.add_argument(
+            "--time-budget",
+            metavar="DURATION",
+            help="finish the whole run (set-up, iterations, its figures) within this time, e.g. 30m, 1h30m, "
+            "1800: the step decay is placed so that the run ends by then (default: none)",
+        )
+        p.add_argument(
             "--eval-max-spp",
             type=int,
             default=MAX_SPP,
@@ -277,6 +297,7 @@ def ray_from_args(args) -> str | None:
 
 def config_from_args(args):
     from ..optim import OptimizeConfig
+    from ..units import parse_duration
 
     cfg = OptimizeConfig(
         iterations=args.iterations,
@@ -294,6 +315,9 @@ def config_from_args(args):
         smooth_edge=args.smooth_edge,
         decay=args.decay,
         adjoint_ema=args.adjoint_ema,
+        # select-inks compares its candidates at equal iterations: no stopping when done there
+        stop_gain=getattr(args, "stop_gain", 0.0),
+        time_budget=parse_duration(args.time_budget) if getattr(args, "time_budget", None) else None,
     )
     cfg.validate()
     return cfg
@@ -337,9 +361,12 @@ def run_from_args(args, spec):
     """``slab`` and ``optimize``: check ``spec`` (before the ink set and the optimiser settings are read), build
     its scene with ``--inks`` and optimise it into ``--out``; returns the run's ``Report`` (with ``--dry-run`` its
     ``estimate.Estimate``, nothing written)."""
+    import time
+
     from ..model import InkTable
     from ..run import run_optimisation
 
+    started = time.perf_counter()  # a time budget counts the scene's building (voxelization) too
     spec.validate()
     if not (args.log_every >= 0):
         raise ValueError(f"--log-every must be a number of seconds >= 0, got {args.log_every}")
@@ -366,6 +393,7 @@ def run_from_args(args, spec):
         dry_run=args.dry_run,
         eval_max_spp=args.eval_max_spp,
         eval_time_budget=args.eval_time_budget,
+        started=started,
     )
 
 
@@ -377,5 +405,11 @@ def print_run_summary(rep, init: str, extra: str = "") -> None:
     print(
         f"mean ΔE76 {rep.initial_delta_e76_mean:.2f} ({init} start) -> {m.delta_e76_mean:.2f} "
         f"(p95 {m.delta_e76_p95:.2f}, ΔE2000 {m.delta_e2000_mean:.2f}, SSIM {m.ssim:.3f}) "
-        f"after {rep.iterations} iterations in {rep.seconds:.0f} s{whole}{extra}"
+        f"after {rep.iterations} iterations{stopped(rep)} in {rep.seconds:.0f} s{whole}{extra}"
     )
+
+
+def stopped(rep) -> str:
+    """ " (converged)" or " (time budget)" when the run ended before its maximum, else ""."""
+    reason = (rep.stop or {}).get("reason")
+    return f" ({reason})" if reason in ("converged", "time budget") else ""

@@ -57,6 +57,9 @@ from ..loss import K2
 
 TARGET_NOISE_DE76 = 0.5  # wanted Monte Carlo contribution to the mean ΔE76
 PILOT_SPP = 64
+#: with a time budget, the first pass has this many samples per texel and times them, so that the rest of the pilot
+#: can keep to the budget too (a 64-spp pilot of a 40 mm object takes minutes)
+PROBE_SPP = 4
 MAX_SPP = 4096
 MAX_ROUNDS = 3  # passes after the pilot
 PLAN_MARGIN = 0.9  # plan for this fraction of the target
@@ -184,7 +187,8 @@ def adaptive_render(
     samples per texel as pooled, e.g. a printer render's own spp). With ``spp`` given: exactly one pass of
     ``spp`` (the user's choice is honoured). Else adaptively (module docstring), at most ``max_spp`` samples and,
     with ``time_budget`` (seconds, the pilot included), no more samples than the time measured per sample so far
-    says fit in it; each further pass is logged with its expected time. ``clock``: seconds (default
+    says fit in it (the pilot starts with a ``PROBE_SPP`` pass to time them); each further pass is logged with
+    its expected time. ``clock``: seconds (default
     ``time.perf_counter``)."""
     import time
 
@@ -193,11 +197,25 @@ def adaptive_render(
     clock = clock or time.perf_counter
     t0 = clock()
     first = int(spp) if spp is not None else min(int(pilot_spp), int(max_spp))
+    probe = spp is None and time_budget is not None and first > PROBE_SPP
+    if probe:  # a short first pass times the samples, so that the pilot too keeps to the budget
+        first = PROBE_SPP
     rgb, var, w = render(first, seed)
     rgb, var, w = np.asarray(rgb, np.float64), np.asarray(var, np.float64), float(w)
-    total, passes, capped = first, [first], False
+    total, passes, capped, k0 = first, [first], False, 1
+    if probe:
+        per_spp = (clock() - t0) / total
+        fit = int((time_budget - (clock() - t0)) / max(per_spp, 1e-12) + 1e-6)
+        extra = min(min(int(pilot_spp), int(max_spp)) - total, max(fit, 0))
+        capped = extra < min(int(pilot_spp), int(max_spp)) - total
+        if extra > 0:
+            r1, v1, w1 = render(extra, seed + SEED_STRIDE)
+            r1, v1, w1 = np.asarray(r1, np.float64), np.asarray(v1, np.float64), float(w1)
+            rgb, var = (w * rgb + w1 * r1) / (w + w1), (w * w * var + w1 * w1 * v1) / (w + w1) ** 2
+            w, total, k0 = w + w1, total + extra, 2
+            passes.append(extra)
     model = NoiseModel.of(rgb, var, target_lab)
-    for k in range(1, MAX_ROUNDS + 1):
+    for k in range(k0, MAX_ROUNDS + k0):
         if spp is not None or model.converged(target):
             break
         if total >= max_spp:

@@ -44,7 +44,9 @@ class Report:
     per texel), ``spp_adaptive``, ``eval_spp_passes``, ``initial_eval_spp``; wall times in seconds
     (``seconds``: this invocation's; ``seconds_total``: the whole run's across resumes, None in older reports;
     ``time_split``: per iteration, by phase; ``estimate``: the cost estimated before the iterations,
-    ``inkopt.estimate.Estimate.to_json()``, None in older reports); ``scene``: the scene's own entries
+    ``inkopt.estimate.Estimate.to_json()``, None in older reports); ``stop``: why the run ended where it did
+    (``optim.stopping.Schedule.describe``: converged, time budget or its maximum; None in older reports);
+    ``scene``: the scene's own entries
     (``Scene.report_fields``: sizes, paths, translucency); the optimiser settings (``inks`` .. ``gradient``);
     ``threads``; ``peak_rss_gb`` (GiB); ``lighting``: ``Lighting.describe()``.
     """
@@ -81,6 +83,7 @@ class Report:
     lighting: dict
     seconds_total: float | None = None
     estimate: dict | None = None
+    stop: dict | None = None
 
     _RUN = (
         "delta_e76_max",
@@ -97,6 +100,7 @@ class Report:
         "seconds_per_iteration",
         "time_split",
         "estimate",
+        "stop",
     )
     _SETTINGS = (
         "inks",

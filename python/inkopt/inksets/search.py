@@ -215,14 +215,16 @@ class Selection:
     def key(self) -> str:
         """What must match for ``resume`` (everything; the settings as the target's scene kind resolves them, so
         that searches started before a setting was left to the kind still resume)."""
-        cfg = self.cfg.for_scene(self.target.kind)
+        cfg = config_dict(self.cfg.for_scene(self.target.kind))
+        for name in ("stop_gain", "stop_horizon", "time_budget"):  # runs of a selection end at their budgets
+            cfg.pop(name)
         return json.dumps(
             {
                 "target": self.target.to_json(),
                 "candidates": self.candidates,
                 "choose": self.choose,
                 "always": self.always,
-                "cfg": config_dict(cfg),
+                "cfg": cfg,
                 "strategy": self.strategy,
                 "eval_spp": self.final_eval_spp,
                 "rung_eval_spp": self.rung_eval_spp,

@@ -74,6 +74,14 @@ class OptimizeConfig:
     #: continued later (``inkopt select-inks``' rungs) sets the full length here, so that every part steps as the
     #: one uninterrupted run would.
     schedule_iterations: int | None = None
+    #: Stop when done (``optim/stopping.py``): once the training ΔE76 is not expected to fall by more than
+    #: ``stop_gain`` over the next ``stop_horizon`` iterations, the step decay begins and the run ends after it;
+    #: ``iterations`` is then the maximum (0: run all ``iterations``).
+    stop_gain: float = 0.2
+    stop_horizon: int = 50
+    #: Seconds the whole run may take, set-up and final evaluation included (None: no deadline): the step decay is
+    #: placed so that the run ends by then (``optim/stopping.py``).
+    time_budget: float | None = None
 
     def validate(self) -> None:
         if self.iterations < 0:
@@ -105,6 +113,12 @@ class OptimizeConfig:
             )
         if not 0.0 <= self.decay < 1.0:
             raise ValueError(f"decay must lie in [0, 1) (a fraction of the iterations), got {self.decay}")
+        if not 0.0 <= self.stop_gain < float("inf"):
+            raise ValueError(f"stop gain must be >= 0 (dE76; 0: run every iteration), got {self.stop_gain}")
+        if self.stop_horizon < 1:
+            raise ValueError(f"stop horizon must be >= 1 iteration, got {self.stop_horizon}")
+        if self.time_budget is not None and not 0.0 < self.time_budget < float("inf"):
+            raise ValueError(f"time budget must be a positive number of seconds, got {self.time_budget}")
         if self.adjoint_ema is not None and not 0.0 <= self.adjoint_ema < 1.0:
             raise ValueError(f"adjoint_ema must lie in [0, 1), got {self.adjoint_ema}")
 

@@ -34,6 +34,7 @@ from .config import OptimizeConfig
 from .optimizers import make_optimizer, step_factor
 from .param import Parameterization, initial_free_mixture
 from .smooth import MAX_DEPTH, GradientSmoother, nearest_texels, texel_guide
+from .stopping import Schedule
 
 #: samples per texel of the first iteration's forward render of a run without forward passes (forward_spp 0)
 START_FORWARD_SPP = 16
@@ -107,6 +108,7 @@ class Optimization:
         self._renderer: Renderer | None = None
         self.iteration = 0
         self.history = History()
+        self.schedule = Schedule.for_config(cfg)  # where the run ends (the step decay is planned for it)
         # the start's evaluated figures (the run driver's; kept in the checkpoints so a resume need not render it)
         self.start_figures: dict | None = None
         # wall time of the run's earlier invocations (up to their last checkpoint) and this one's start
@@ -143,8 +145,8 @@ class Optimization:
         """What must match for a checkpoint to be resumable (not the iteration count): the settings, the grid,
         inks, texels, free voxels, a digest of the targets and fixed shares, and the lighting, as JSON."""
         d = asdict(self.cfg)
-        d.pop("iterations")
-        d.pop("checkpoint_every")
+        for name in ("iterations", "checkpoint_every", "stop_gain", "stop_horizon", "time_budget"):
+            d.pop(name)  # when the run ends, not how it steps: the schedule's plan is in the checkpoint
         if not d["smooth"]:  # without smoothing its edge guide does nothing
             d.pop("smooth_edge")
         d.update(
@@ -172,6 +174,7 @@ class Optimization:
                 "config_key": np.array(self.config_key()),
                 **self.opt.state(),
                 **self.history.arrays(),
+                **self.schedule.to_arrays(),
                 "wall_seconds": np.float64(self.wall_seconds()),
                 **({} if self.start_figures is None else {"start_figures": np.array(json.dumps(self.start_figures))}),
             },
@@ -194,6 +197,7 @@ class Optimization:
         self.iteration = int(d["iteration"])
         self.opt.load(d)
         self.history = History.from_arrays(d)
+        self.schedule.load(d, self.cfg)
         # a checkpoint without the wall time: at least the iterations' own time
         self.wall_seconds_before = (
             float(d["wall_seconds"]) if "wall_seconds" in d else float(np.sum(self.history.seconds))
@@ -277,7 +281,7 @@ class Optimization:
             g_rho = mix_grad(gs[lo:hi], ga[lo:hi], self.base.inks)
             g_x[lo:hi] = self.param.backward(self.x[lo:hi], g_rho, natural=self.opt.natural, lo=lo)
         del gs, ga
-        self.opt.lr = cfg.step_size * step_factor(self.iteration, cfg.schedule_length, cfg.decay)
+        self.opt.lr = cfg.step_size * step_factor(self.iteration, self.schedule.end, cfg.decay)
         x_new = self.opt.step(self.x, g_x).astype(np.float32, copy=False)
         if self.smoother is not None:  # the step, not the gradient: the optimiser's step scale stays its own
             x_new = self.x + self.smoother.apply(x_new - self.x)
@@ -322,30 +326,54 @@ class Optimization:
         log(f"no checkpoint {checkpoint}; starting from scratch")
         return False
 
-    def run(self, checkpoint: Path | None = None, progress: bool = False, log=None, log_every_s: float = 30.0) -> None:
-        """Iterate up to ``cfg.iterations`` (continuing from ``self.iteration``), checkpointing every
-        ``cfg.checkpoint_every`` iterations and at the end (and on Ctrl-C, after the current iteration).
-        ``progress``: a tqdm bar (a terminal); else, with ``log``, a line (iteration, loss, ΔE76, ETA) after the
-        first iteration, whenever ``log_every_s`` seconds have passed since the last, and after the last."""
+    def plan(self, reserve: float = 0.0) -> int:
+        """Plan the run's end for the next step (``stopping.Schedule.plan``: converged, time budget, maximum) and
+        return the iteration count the run stops at. ``reserve``: seconds the time budget keeps for after the
+        last iteration (the final evaluation and writing)."""
+        h = self.history
+        self.schedule.plan(self.cfg, self.iteration, h.delta_e76, h.seconds, self.wall_seconds(), reserve)
+        return min(self.cfg.iterations, self.schedule.end)
+
+    def run(
+        self,
+        checkpoint: Path | None = None,
+        progress: bool = False,
+        log=None,
+        log_every_s: float = 30.0,
+        reserve: float = 0.0,
+    ) -> None:
+        """Iterate until the planned end (:meth:`plan`: at most ``cfg.iterations``, earlier when converged or by
+        ``cfg.time_budget``, ``reserve`` seconds kept for after the iterations), continuing from
+        ``self.iteration``, checkpointing every ``cfg.checkpoint_every`` iterations and at the end (and on Ctrl-C,
+        after the current iteration). ``progress``: a tqdm bar (a terminal); else, with ``log``, a line
+        (iteration, loss, ΔE76, ETA) after the first iteration, whenever ``log_every_s`` seconds have passed since
+        the last, and after the last; and a line when the plan changes its reason (converged, time budget)."""
         bar, lines = None, None
+        end = self.plan(reserve)
         if progress:
             from tqdm import tqdm
 
-            bar = tqdm(total=self.cfg.iterations, initial=self.iteration, unit="it", desc="optimize")
+            bar = tqdm(total=end, initial=self.iteration, unit="it", desc="optimize")
         elif log is not None:
-            lines = ProgressLines(self.cfg.iterations, self.iteration, log, log_every_s)
-        snap = None
+            lines = ProgressLines(end, self.iteration, log, log_every_s)
+        snap, reason = None, self.schedule.reason
         try:
-            while self.iteration < self.cfg.iterations:
+            while self.iteration < end:
                 snap = self._snapshot()
                 info = self.step()
                 snap = None
+                end = self.plan(reserve)
                 if checkpoint is not None and self.iteration % self.cfg.checkpoint_every == 0:
                     self.save_checkpoint(checkpoint)
+                if self.schedule.reason != reason and log is not None:
+                    reason = self.schedule.reason
+                    log(self.plan_line())
                 if bar is not None:
+                    bar.total = end
                     bar.set_postfix(loss=f"{info['loss']:.3g}", dE76=f"{info['delta_e76']:.2f}")
                     bar.update(1)
                 elif lines is not None:
+                    lines.total = end
                     lines.update(self.iteration, info["loss"], info["delta_e76"])
         except KeyboardInterrupt:
             if snap is not None:  # interrupted inside a step: back to its start, so a resume repeats it exactly
@@ -358,6 +386,18 @@ class Optimization:
                 bar.close()
         if checkpoint is not None:
             self.save_checkpoint(checkpoint)
+
+    def plan_line(self) -> str:
+        """One line on the run's planned end and why."""
+        s, it = self.schedule, self.iteration
+        if s.reason == "converged":
+            return (
+                f"converged at iteration {s.converged_at}: at most {s.gain:.2f} ΔE76 more expected over "
+                f"{self.cfg.stop_horizon} iterations; the step decay runs to iteration {s.end}"
+            )
+        if s.reason == "time budget":
+            return f"the time budget ends the run at iteration {s.end} (now {it}), the step decay planned for it"
+        return f"the run ends at its maximum, {s.end} iterations"
 
 
 def changed_settings(old: dict, new: dict) -> str:
