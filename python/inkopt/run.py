@@ -72,6 +72,7 @@ def run_optimisation(
     eval_max_spp: int = MAX_SPP,
     eval_time_budget: float | None = None,
     started: float | None = None,
+    on_step=None,
 ) -> Report | Estimate:
     """Optimise ``scene`` into run directory ``out_dir`` under the display ``lighting`` (default uniform; the
     final figures are rendered under it too); returns the report (also report.json). ``ray``: "auto" or a Ray
@@ -82,7 +83,7 @@ def run_optimisation(
     ``dry_run`` only the estimate is made and returned, and nothing is written. ``eval_max_spp`` and
     ``eval_time_budget`` (seconds) cap each adaptive figure's samples. ``started``: when the job began
     (``time.perf_counter()``, e.g. before the scene was built; default: now), the time ``cfg.time_budget`` and the
-    run's wall time count from."""
+    run's wall time count from. ``on_step(optimization)``: called after every iteration (``Optimization.run``)."""
     with renderer_factory(ray, threads) as make_renderer:
         return _optimise(
             scene,
@@ -100,6 +101,7 @@ def run_optimisation(
             eval_max_spp,
             eval_time_budget,
             started,
+            on_step,
         )
 
 
@@ -119,6 +121,7 @@ def _optimise(
     eval_max_spp,
     eval_time_budget,
     started,
+    on_step,
 ) -> Report | Estimate:
     t_start = time.perf_counter() if started is None else started
     log(scene.describe())
@@ -190,7 +193,7 @@ def _optimise(
     if run.start_figures is None and run.iteration == 0:  # measured once, before the first step, and then kept in
         keep_start(*figures_of(budget=start_budget))  # the checkpoints, so no resume renders the start again
     reserve = 0.0 if cfg.time_budget is None else (final_budget or 0.0) + BUDGET_WRITING * cfg.time_budget
-    run.run(rd.checkpoint_path, progress=progress, log=log, log_every_s=log_every_s, reserve=reserve)
+    run.run(rd.checkpoint_path, progress=progress, log=log, log_every_s=log_every_s, reserve=reserve, on_step=on_step)
     run.release_renderer()  # not beside the writing of the result
     rd.save_volume_slabs(run.base, run.mixture_slabs(), run.base.inks)  # a slab of layers at a time
     gone = rd.remove_stale()  # quantized volume, slices, evaluation made from an earlier volume.npz

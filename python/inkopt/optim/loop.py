@@ -341,13 +341,15 @@ class Optimization:
         log=None,
         log_every_s: float = 30.0,
         reserve: float = 0.0,
+        on_step: Callable[[Optimization], None] | None = None,
     ) -> None:
         """Iterate until the planned end (:meth:`plan`: at most ``cfg.iterations``, earlier when converged or by
         ``cfg.time_budget``, ``reserve`` seconds kept for after the iterations), continuing from
         ``self.iteration``, checkpointing every ``cfg.checkpoint_every`` iterations and at the end (and on Ctrl-C,
         after the current iteration). ``progress``: a tqdm bar (a terminal); else, with ``log``, a line
         (iteration, loss, ΔE76, ETA) after the first iteration, whenever ``log_every_s`` seconds have passed since
-        the last, and after the last; and a line when the plan changes its reason (converged, time budget)."""
+        the last, and after the last; and a line when the plan changes its reason (converged, time budget).
+        ``on_step(self)``: called after every step (e.g. to keep snapshots of ``x``)."""
         bar, lines = None, None
         end = self.plan(reserve)
         if progress:
@@ -362,6 +364,8 @@ class Optimization:
                 snap = self._snapshot()
                 info = self.step()
                 snap = None
+                if on_step is not None:
+                    on_step(self)
                 end = self.plan(reserve)
                 if checkpoint is not None and self.iteration % self.cfg.checkpoint_every == 0:
                     self.save_checkpoint(checkpoint)

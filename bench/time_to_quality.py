@@ -1,0 +1,182 @@
+"""Time to quality: the noise-corrected mean ΔE76 of a run's result against the run's wall time, for Spot 20 mm,
+Spot 40 mm and the reference slab, with the defaults or a variant of the settings.
+
+    python bench/time_to_quality.py CASE NAME [--set KEY=VALUE ...] [--iterations N] [--snapshots 10,20,40]
+        [--snap-spp 64] [--out-root bench-out/ttq] [--threads 2]
+
+CASE: ``spot20``, ``spot40`` (Spot at 20 / 40 mm tall, mesh defaults) or ``reference`` (the reference slab,
+15 x 10 x 2.5 mm, colour chart on top, zebra below: ``experiments/printable_eval.py``'s). NAME names the variant
+(``default`` for the defaults); ``--set`` overrides ``OptimizeConfig`` fields (``--set init=extrusion
+forward_spp=0``). One run per invocation through the run driver (``inkopt.run.run_optimisation``, as ``inkopt
+optimize`` / ``slab`` run it: set-up, the start's figures, the iterations, the result's figures), into
+``OUT_ROOT/CASE/NAME``; ``--resume`` continues it from its checkpoint (a 300-iteration 40 mm reference takes hours).
+
+The variables are kept at the ``--snapshots`` iterations; after the run, each snapshot's mixture is rendered at
+``--snap-spp`` samples per texel (seeds disjoint from the optimisation's) and its ΔE76 corrected for the Monte Carlo
+noise (``evaluation.noise``; the noise's contribution is recorded beside it: the correction is accurate to ~30 % of
+it). A snapshot is a point on the run's trajectory, not a finished run (the step decay has not run there); the
+result (the run's end) is the run's own adaptive evaluation (report.json, noise-free unless capped).
+Wall times: ``seconds_job`` from the start (set-up, the start's figures, iterations), ``seconds_iterations`` the
+iterations' own. Writes the entry "CASE/NAME" of ``bench/results/time_to_quality.json``.
+"""
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+from common import RESULTS, machine, provenance, write
+
+from inkopt import charts
+from inkopt.evaluation.metrics import prediction_metrics
+from inkopt.evaluation.noise import EVAL_SEED_OFFSET
+from inkopt.model import InkTable
+from inkopt.optim import Optimization, OptimizeConfig
+from inkopt.run import run_optimisation
+from inkopt.scenes.spec import MeshSpec, SlabSpec
+
+ROOT = Path(__file__).resolve().parent.parent
+SPOT = ROOT.parent / "shared" / "data" / "spot" / "spot.obj"
+if not SPOT.is_file():
+    SPOT = ROOT / "python" / "inkopt" / "data" / "spot" / "spot.obj"
+VOX = 25.4 / 300
+RESULTS_FILE = "time_to_quality.json"
+
+
+def spec_of(case: str, out: Path):
+    if case.startswith("spot") and case[4:].isdigit():  # spot20, spot40 (any height in mm: spot6 to try it)
+        return MeshSpec(str(SPOT), height_mm=float(case[4:]))
+    if case == "reference":
+        top = charts.save(charts.colour_chart(708, 472), out / "reference_top.png")
+        bottom = charts.save(charts.zebra(177, 118), out / "reference_bottom.png")
+        return SlabSpec(str(top), (177 * VOX, 118 * VOX, 30 * VOX), str(bottom))
+    raise SystemExit(f"unknown case '{case}': use spot20, spot40 or reference")
+
+
+def parse_set(items) -> dict:
+    fields = OptimizeConfig.__dataclass_fields__
+    out = {}
+    for item in items:
+        key, _, value = item.partition("=")
+        if key not in fields:
+            raise SystemExit(f"--set {item}: unknown setting '{key}'")
+        try:
+            out[key] = json.loads(value)
+        except json.JSONDecodeError:
+            out[key] = value
+    return out
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("case")
+    ap.add_argument("name")
+    ap.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--iterations", type=int, default=OptimizeConfig().iterations)
+    ap.add_argument("--snapshots", default="10,20,30,45,60,90,120,180,240,300")
+    ap.add_argument("--snap-spp", type=int, default=64)
+    ap.add_argument("--eval-max-spp", type=int, default=1024)
+    ap.add_argument("--out-root", default="bench-out/ttq")
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--resume", action="store_true")
+    a = ap.parse_args()
+    out = Path(a.out_root) / a.case / a.name
+    out.mkdir(parents=True, exist_ok=True)
+    overrides = parse_set(a.set)
+    cfg = OptimizeConfig(**{"iterations": a.iterations, **overrides})
+    cfg.validate()
+    spec = spec_of(a.case, out.parent)
+    inks = InkTable.parse("vero-cmykw")
+    import time
+
+    t0 = time.perf_counter()
+    scene = spec.build(inks)
+    snaps = {int(s) for s in a.snapshots.split(",") if s}
+    times_path = out / "snapshot_times.json"
+    times = json.loads(times_path.read_text()) if a.resume and times_path.is_file() else {}
+
+    def keep(run: Optimization) -> None:
+        if run.iteration in snaps:
+            np.save(out / f"x_{run.iteration}.npy", run.x)
+            times[str(run.iteration)] = {
+                "seconds_job": run.wall_seconds(),
+                "seconds_iterations": float(np.sum(run.history.seconds)),
+                "training_delta_e76": run.history.delta_e76[-1],
+            }
+            times_path.write_text(json.dumps(times))
+
+    rep = run_optimisation(
+        scene,
+        out / "run",
+        cfg,
+        resume=a.resume,
+        threads=a.threads,
+        log=lambda m: print(m, file=sys.stderr, flush=True),
+        started=t0,
+        on_step=keep,
+        eval_max_spp=a.eval_max_spp,
+    )
+    # the snapshots' figures: one renderer of the run's problem, set to each snapshot's variables
+    run = Optimization(
+        scene.volume, scene.texels, scene.target_rgb, cfg, kind=scene.kind, fixed_share=scene.fixed_share, threads=2
+    )
+    points = []
+    for it in sorted(int(k) for k in times):
+        path = out / f"x_{it}.npy"
+        if not path.is_file():
+            continue
+        r = run.renderer(np.load(path)).render(scene.texels, a.snap_spp, EVAL_SEED_OFFSET + 17 + it)
+        m = prediction_metrics(run.loss, r.rgb, r.var_mean)
+        points.append(
+            {
+                "iteration": it,
+                **times[str(it)],
+                "delta_e76_mean_corrected": m.delta_e76_mean_corrected,
+                "delta_e76_noise_contribution": m.delta_e76_noise_contribution,
+                "delta_e2000_mean": m.delta_e2000_mean,
+                "ssim": m.ssim,
+            }
+        )
+        print(f"iteration {it}: ΔE76 {m.delta_e76_mean_corrected:.2f} (noise {m.delta_e76_noise_contribution:.2f})")
+    r = rep.to_json()
+    entry = {
+        "case": a.case,
+        "name": a.name,
+        "settings": overrides,
+        "max_iterations": a.iterations,
+        "snap_spp": a.snap_spp,
+        "snapshots": points,
+        "result": {
+            k: r[k]
+            for k in (
+                "iterations",
+                "stop",
+                "delta_e76_mean_corrected",
+                "delta_e76_noise_contribution",
+                "delta_e2000_mean",
+                "ssim",
+                "initial_delta_e76_mean_corrected",
+                "initial_ssim",
+                "eval_spp",
+                "initial_eval_spp",
+                "seconds",
+                "seconds_total",
+                "seconds_iterations",
+                "seconds_per_iteration",
+                "peak_rss_gb",
+            )
+        },
+        "machine": machine(),
+        **provenance(),
+    }
+    previous = RESULTS / RESULTS_FILE
+    results = json.loads(previous.read_text())["results"] if previous.is_file() else {}
+    results[f"{a.case}/{a.name}"] = entry
+    write(RESULTS_FILE, {"results": results})
+    print(json.dumps(entry["result"], indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
