@@ -181,3 +181,26 @@ def test_errors(table3):
         surface_baseline(vol, tex, target[:5], fixed, table3)
     with pytest.raises(ValueError, match="patch thickness"):
         colour_table(INKS3, patch_mm=0.0)
+
+
+def test_the_default_ink_sets_table_ships_with_the_package(tmp_path, monkeypatch):
+    """The default ink set's table is in the package (``colour_table.PACKAGED``) under the key the current code
+    gives it, so a first `--init extrusion` or `inkopt evaluate` need not spend minutes building it. When this
+    fails, the ink presets or the table's parameters changed: rebuild it (``colour_table(InkTable.parse(
+    "vero-cmykw"))`` with an empty ``INKOPT_CACHE_DIR``) and copy the cache's file into the package's
+    data/colour_tables/."""
+    from inkopt.evaluation import colour_table as ct
+
+    monkeypatch.setenv("INKOPT_CACHE_DIR", str(tmp_path))  # an empty cache: only the package has it
+    monkeypatch.setattr(ct, "render_patches", lambda *a, **k: pytest.fail("the table was built, not read"))
+    inks = InkTable.parse("vero-cmykw")
+    table = ct.colour_table(inks)
+    assert table.cached and table.ink_names == tuple(inks.names) and len(table.mixtures) > 500
+    # it is the table a build makes: its patches' colours agree with fresh renders within their standard errors
+    monkeypatch.undo()
+    rows = np.arange(0, len(table.mixtures), len(table.mixtures) // 6)
+    rgb, se = ct.render_patches(
+        table.mixtures[rows], inks, inks.g, 1.5, ct.DEFAULT_PATCH_MM, ct.DEFAULT_MAX_STDERR, seed=12
+    )
+    assert np.all(delta_e76(linear_to_lab(rgb), table.lab[rows]) <= 4 * np.hypot(se, table.stderr[rows]))
+    assert sorted(p.name for p in ct.PACKAGED.iterdir()) == [f"colour_table_{table.key}.npz"]  # nothing stale

@@ -91,6 +91,35 @@ def cache_dir() -> Path:
     return Path(base) / "inkopt"
 
 
+#: tables shipped with the package (the default ink set's), read like the cache: a first run need not build them
+PACKAGED = Path(__file__).resolve().parents[1] / "data" / "colour_tables"
+
+
+def _read_table(path: Path, inks: InkTable, key: str) -> ColourTable | None:
+    """The table stored at ``path`` if it is readable and made for ``inks`` with ``key``, else None (an unreadable
+    cache entry is rebuilt and overwritten)."""
+    if not path.is_file():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as d:
+            if tuple(str(n) for n in d["ink_names"]) == tuple(inks.names) and str(d["key"]) == key:
+                return ColourTable(
+                    tuple(inks.names),
+                    d["mixtures"],
+                    d["rgb"],
+                    d["lab"],
+                    d["stderr"],
+                    float(d["patch_mm"]),
+                    int(d["step"]),
+                    key,
+                    float(d["seconds"]),
+                    cached=True,
+                )
+    except (OSError, ValueError, KeyError):
+        pass
+    return None
+
+
 def table_key(inks: InkTable, g: float, ior: float, patch_mm: float, step: int, max_stderr: float) -> str:
     """Hex digest identifying a table (changes with anything that changes its colours)."""
     from .. import __version__
@@ -297,24 +326,10 @@ def colour_table(
         raise ValueError(f"max_stderr must be positive, got {max_stderr}")
     key = table_key(inks, g, ior, patch_mm, step, max_stderr)
     path = cache_dir() / f"colour_table_{key}.npz"
-    if cache and path.is_file():
-        try:
-            with np.load(path, allow_pickle=False) as d:
-                if tuple(str(n) for n in d["ink_names"]) == tuple(inks.names) and str(d["key"]) == key:
-                    return ColourTable(
-                        tuple(inks.names),
-                        d["mixtures"],
-                        d["rgb"],
-                        d["lab"],
-                        d["stderr"],
-                        float(d["patch_mm"]),
-                        int(d["step"]),
-                        key,
-                        float(d["seconds"]),
-                        cached=True,
-                    )
-        except (OSError, ValueError, KeyError):
-            pass  # unreadable cache entry: rebuild and overwrite it
+    for where in (path, PACKAGED / path.name) if cache else ():
+        table = _read_table(where, inks, key)
+        if table is not None:
+            return table
     t0 = time.perf_counter()
     mixtures = table_mixtures(len(inks), step)
     rgb, err = render_patches(mixtures, inks, g, ior, patch_mm, max_stderr, threads=threads, progress=progress)
