@@ -7,7 +7,8 @@ checkpoints (``resume`` continues exactly), save volume.npz (and remove the outp
 the result's figures. Figures are renders with seeds from ``2**62 + cfg.seed`` (never used by the optimisation) at
 ``eval_spp`` samples per texel if given, else adaptively (``evaluation.noise.adaptive_render``: enough that the Monte
 Carlo noise adds at most ~0.5 to the mean ΔE76 and SSIM's and the mottle's noise correction is accurate, at most
-``eval_max_spp`` (4096) and within ``eval_time_budget``), compared with the target by
+``eval_max_spp`` (4096) and within ``eval_time_budget``, or within ``FINAL_FIGURES_SHARE`` of the run's time when
+neither that nor a run time budget is given; the start's figures are one pilot pass), compared with the target by
 ``evaluation.metrics.prediction_metrics``; then the scene's pictures, loss.png and report.json
 (``evaluation.results.Report``). The scene comes from user inputs through a spec (``scenes.spec``:
 ``SlabSpec(...).build(inks)``, ``MeshSpec(...).build(inks)``).
@@ -25,7 +26,7 @@ from .distributed import renderer_factory
 from .estimate import ANNOUNCE_SECONDS, Estimate, estimate_run
 from .evaluation.baselines import baseline_mixture
 from .evaluation.metrics import delta_e76_map, prediction_metrics
-from .evaluation.noise import EVAL_SEED_OFFSET, MAX_SPP, adaptive_render
+from .evaluation.noise import EVAL_SEED_OFFSET, MAX_SPP, PILOT_SPP, adaptive_render
 from .evaluation.results import Report
 from .io import file_digest
 from .lighting import Lighting, load_lighting
@@ -39,6 +40,11 @@ from .scenes import Scene
 #: the step decay planned to end in time (``optim.stopping``). Not measured optima: the figures are informative
 #: and noise-corrected at any spp (their noise is reported), the quality is the iterations'.
 BUDGET_START_FIGURES, BUDGET_FINAL_FIGURES, BUDGET_WRITING = 0.03, 0.08, 0.04
+#: Without a budget, the result's figures add samples beyond the pilot only while they take at most this share of
+#: the run's time so far: on a mesh the noise-free figures of a run cost as much as its iterations (Spot 20 mm:
+#: ~550 spp, ~6 min, twice). The noise left is corrected for and reported; `inkopt evaluate` measures the
+#: printed result against the baselines without noise.
+FINAL_FIGURES_SHARE = 0.25
 
 
 def figure_budgets(cfg: OptimizeConfig, eval_time_budget: float | None) -> tuple:
@@ -172,15 +178,31 @@ def _optimise(
 
     start_budget, final_budget = figure_budgets(cfg, eval_time_budget)
 
-    def figures_of(x=None, budget=final_budget):
+    def figures_of(x=None, budget=final_budget, max_spp=eval_max_spp, pilot_in_budget=True):
         renderer = run.renderer(x)
 
         def render(n: int, s: int):
             r = renderer.render(scene.texels, n, s, cfg.include_specular, progress)
             return r.rgb, r.var_mean, n
 
-        res = adaptive_render(render, run.loss.target_lab, seed, spp, max_spp=eval_max_spp, log=log, time_budget=budget)
+        res = adaptive_render(
+            render,
+            run.loss.target_lab,
+            seed,
+            spp,
+            max_spp=max_spp,
+            log=log,
+            time_budget=budget,
+            pilot_in_budget=pilot_in_budget,
+        )
         return res, prediction_metrics(run.loss, res.rgb, res.var)
+
+    def final_figures():
+        """The result's figures: the user's samples or budget, the run's budget share, or (neither) samples up to
+        ``FINAL_FIGURES_SHARE`` of the run's time so far after a whole pilot."""
+        if spp is not None or final_budget is not None:
+            return figures_of()
+        return figures_of(budget=FINAL_FIGURES_SHARE * run.wall_seconds(), pilot_in_budget=False)
 
     def keep_start(res0, init) -> None:
         run.start_figures = {
@@ -191,7 +213,8 @@ def _optimise(
         }
 
     if run.start_figures is None and run.iteration == 0:  # measured once, before the first step, and then kept in
-        keep_start(*figures_of(budget=start_budget))  # the checkpoints, so no resume renders the start again
+        # the start's figures: one pilot (noise-corrected; `inkopt evaluate` measures the baselines noise-free)
+        keep_start(*figures_of(budget=start_budget, max_spp=min(eval_max_spp, PILOT_SPP)))
     reserve = 0.0 if cfg.time_budget is None else (final_budget or 0.0) + BUDGET_WRITING * cfg.time_budget
     run.run(rd.checkpoint_path, progress=progress, log=log, log_every_s=log_every_s, reserve=reserve, on_step=on_step)
     run.release_renderer()  # not beside the writing of the result
@@ -200,9 +223,9 @@ def _optimise(
     if gone:
         log(f"removed outputs made from the earlier volume.npz: {', '.join(gone)}")
 
-    res, metrics = figures_of()
+    res, metrics = final_figures()
     if run.start_figures is None:  # a checkpoint written before the start's figures were kept in it
-        keep_start(*figures_of(run.initial_variables(), start_budget))
+        keep_start(*figures_of(run.initial_variables(), start_budget, min(eval_max_spp, PILOT_SPP)))
     run.release_renderer()
     start = run.start_figures
     de = delta_e76_map(run.loss, res.rgb)

@@ -182,13 +182,15 @@ def adaptive_render(
     log=None,
     time_budget: float | None = None,
     clock=None,
+    pilot_in_budget: bool = True,
 ) -> AdaptiveResult:
     """Render through ``render(spp, seed) -> (rgb (I, 3), var_mean (I, 3), weight)`` (``weight``: the pass's
     samples per texel as pooled, e.g. a printer render's own spp). With ``spp`` given: exactly one pass of
     ``spp`` (the user's choice is honoured). Else adaptively (module docstring), at most ``max_spp`` samples and,
     with ``time_budget`` (seconds, the pilot included), no more samples than the time measured per sample so far
-    says fit in it (the pilot starts with a ``PROBE_SPP`` pass to time them); each further pass is logged with
-    its expected time. ``clock``: seconds (default
+    says fit in it (the pilot starts with a ``PROBE_SPP`` pass to time them; with ``pilot_in_budget`` False the
+    whole pilot is rendered and the budget bounds the passes after it); each further pass is logged with its
+    expected time. ``clock``: seconds (default
     ``time.perf_counter``)."""
     import time
 
@@ -197,7 +199,7 @@ def adaptive_render(
     clock = clock or time.perf_counter
     t0 = clock()
     first = int(spp) if spp is not None else min(int(pilot_spp), int(max_spp))
-    probe = spp is None and time_budget is not None and first > PROBE_SPP
+    probe = spp is None and time_budget is not None and pilot_in_budget and first > PROBE_SPP
     if probe:  # a short first pass times the samples, so that the pilot too keeps to the budget
         first = PROBE_SPP
     rgb, var, w = render(first, seed)
