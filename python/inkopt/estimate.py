@@ -41,7 +41,7 @@ PRINTER_PER_OPT_VOXEL = 2.0 * 1.0 * (25.4 / 300 / 0.027)
 @dataclass
 class Estimate:
     """A run's expected cost: ``iterations`` left at ``seconds_per_iteration`` (``seconds``; without the final
-    evaluation), ``peak_gib`` (GiB), ``disk_bytes`` in the run directory and ``quantized_bytes`` added by
+    evaluation; the most: a run stops earlier when done or by its time budget), ``peak_gib`` (GiB), ``disk_bytes`` in the run directory and ``quantized_bytes`` added by
     ``inkopt quantize``; ``calibration_seconds`` (what measuring it cost)."""
 
     iterations: int
@@ -61,7 +61,7 @@ class Estimate:
 
     def line(self) -> str:
         return (
-            f"estimate: {self.iterations} iterations x {self.seconds_per_iteration:.2g} s = "
+            f"estimate: up to {self.iterations} iterations x {self.seconds_per_iteration:.2g} s = "
             f"{format_duration(self.seconds)} (+ the final evaluation), peak memory ~{self.peak_gib:.1f} GiB, disk "
             f"~{_size(self.disk_bytes)} (+ {_size(self.quantized_bytes)} after inkopt quantize); measured in "
             f"{self.calibration_seconds:.1f} s"

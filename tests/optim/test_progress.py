@@ -70,7 +70,9 @@ def test_dry_run_prints_the_estimate_and_writes_nothing(tmp_path):
     args = ["slab", str(chart), "--size-mm", "2x1.333x0.5", "--out", str(out), "--iterations", "7", "--threads", "1"]
     r = subprocess.run([sys.executable, "-m", "inkopt.cli", *args, "--dry-run"], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
-    assert r.stdout.startswith("estimate: 7 iterations x ") and "peak memory ~" in r.stdout and "disk ~" in r.stdout
+    assert (
+        r.stdout.startswith("estimate: up to 7 iterations x ") and "peak memory ~" in r.stdout and "disk ~" in r.stdout
+    )
     assert len(r.stdout.strip().splitlines()) == 1 and not out.exists()
 
 
@@ -92,4 +94,4 @@ def test_estimate_counts_the_iterations_left_and_is_recorded(tmp_path):
         capture_output=True,
         text=True,
     )
-    assert r.returncode == 0 and r.stdout.startswith("estimate: 3 iterations x "), r.stderr
+    assert r.returncode == 0 and r.stdout.startswith("estimate: up to 3 iterations x "), r.stderr
