@@ -18,6 +18,11 @@ it). A snapshot is a point on the run's trajectory, not a finished run (the step
 result (the run's end) is the run's own adaptive evaluation (report.json, noise-free unless capped).
 Wall times: ``seconds_job`` from the start (set-up, the start's figures, iterations), ``seconds_iterations`` the
 iterations' own. Writes the entry "CASE/NAME" of ``bench/results/time_to_quality.json``.
+
+    python bench/time_to_quality.py --plot docs/time_to_quality.png
+
+draws every entry's snapshots and result (ΔE76 against minutes of the job), a panel per case, with the case's
+reference line where one is given (``REFERENCES``).
 """
 
 import argparse
@@ -68,7 +73,49 @@ def parse_set(items) -> dict:
     return out
 
 
+#: noise-free ΔE76 (corrected) of each case's long reference run, with where it is recorded
+REFERENCES = {
+    "spot20": (9.10, "300 iterations (experiments/results/mesh_convergence.json spot20_default_300)"),
+    "reference": (28.20, "450 iterations, 4x samples (experiments/results/reference_converged.json final_450)"),
+}
+
+
+def plot(path: str) -> int:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    results = json.loads((RESULTS / RESULTS_FILE).read_text())["results"]
+    cases = sorted({e["case"] for e in results.values()})
+    fig, axes = plt.subplots(1, len(cases), figsize=(5.5 * len(cases), 4.2), squeeze=False)
+    for ax, case in zip(axes[0], cases):
+        for _key, e in sorted(results.items()):
+            if e["case"] != case:
+                continue
+            pts = e["snapshots"]
+            t = [p["seconds_job"] / 60 for p in pts]
+            line = ax.plot(t, [p["delta_e76_mean_corrected"] for p in pts], "o-", ms=3, label=e["name"])[0]
+            r = e["result"]
+            ax.plot([r["seconds_total"] / 60], [r["delta_e76_mean_corrected"]], "*", ms=12, color=line.get_color())
+        if case in REFERENCES:
+            value, _ = REFERENCES[case]
+            ax.axhline(value, color="k", lw=0.8, ls="--", label="long reference")
+            ax.axhline(value + 1, color="k", lw=0.8, ls=":", label="reference + 1")
+        ax.set_title(case)
+        ax.set_xlabel("wall time of the job so far (min; snapshots: dots, result: star)")
+        ax.set_ylabel("mean ΔE76, noise-corrected")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    print(f"wrote {path}")
+    return 0
+
+
 def main() -> int:
+    if sys.argv[1:2] == ["--plot"]:
+        return plot(sys.argv[2])
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("case")
     ap.add_argument("name")
