@@ -9,10 +9,10 @@
 Stages, each timed (wall seconds; the machine's load average is recorded with them):
 
 1. coarse: the scene at ``--coarse-dpi`` (Spot at ``--height-mm``, or the demo slab: 6 x 4 x 1 mm, colour chart on
-   top, zebra below), built and optimised for ``--coarse-iterations`` from the default start (``Optimization``
-   directly: no evaluation of the coarse result, which a coarse-to-fine run does not need);
+   top, zebra below), built and optimised for ``--coarse-iterations`` from the default start (no evaluation of the
+   coarse result, which a coarse-to-fine run does not need);
 2. transfer: its mixture moved onto the 300-DPI scene's free voxels and written as a start volume
-   (``optim.transfer.write_transferred_volume``, ``--method``);
+   (``optim.transfer.coarse_start`` does 1 and 2; ``--method``);
 3. fine: ``run_optimisation`` of the 300-DPI scene from that start for ``--fine-iterations`` at step ``--fine-lr``
    (a warm start calibrates the step scale on its smaller gradients; docs/experiments.md);
 4. plain: ``run_optimisation`` of the 300-DPI scene from the default start for ``--plain-iterations``, by default
@@ -23,9 +23,10 @@ Stages, each timed (wall seconds; the machine's load average is recorded with th
 
 Every entry records the final figures of both runs (noise-free corrected mean ΔE76, ΔE2000, SSIM, mottle; the
 driver's adaptive evaluation), the start figures of the fine stage (the transferred start's quality), the training
-ΔE76 of every iteration with its cumulative wall time, and the command. ``--set`` applies to every stage
-(OptimizeConfig overrides, JSON values); seed 0 unless set. ``--out DIR`` keeps the run directories (default: a
-temporary folder).
+ΔE76 of every iteration with its cumulative wall time, and the command. ``--compare-starts SPP`` also renders the
+coarse result on its own scene and the transferred start of each method (after the transfer is timed) at SPP.
+``--set`` applies to every stage (OptimizeConfig overrides, JSON values); seed 0 unless set. ``--out DIR`` keeps
+the run directories (default: a temporary folder).
 """
 
 import argparse
@@ -45,10 +46,14 @@ from common import write_study as write
 from shell_compare import SPOT  # noqa: E402
 
 from inkopt import charts  # noqa: E402
-from inkopt.model import InkTable  # noqa: E402
-from inkopt.optim import Optimization, OptimizeConfig  # noqa: E402
+from inkopt.evaluation.metrics import prediction_metrics  # noqa: E402
+from inkopt.evaluation.noise import EVAL_SEED_OFFSET  # noqa: E402
+from inkopt.loss import TexelLoss  # noqa: E402
+from inkopt.model import InkTable, Volume  # noqa: E402
+from inkopt.optim import OptimizeConfig  # noqa: E402
 from inkopt.optim.checkpoint import read_checkpoint  # noqa: E402
-from inkopt.optim.transfer import write_transferred_volume  # noqa: E402
+from inkopt.optim.transfer import coarse_start, write_transferred_volume  # noqa: E402
+from inkopt.render import Renderer  # noqa: E402
 from inkopt.run import run_optimisation  # noqa: E402
 from inkopt.rundir import RunDir  # noqa: E402
 from inkopt.scenes.spec import MeshSpec, SlabSpec  # noqa: E402
@@ -85,44 +90,55 @@ def curve(run_dir: Path, offset_s: float = 0.0) -> dict:
     }
 
 
-def coarse_stage(a, inks, cfg, folder: Path, log) -> tuple:
-    """(the coarse result as a mixture volume, its timings and training curve)."""
+def coarse_stage(a, inks, cfg, fine, folder: Path, log) -> tuple:
+    """The coarse scene built and optimised and its result written as the fine run's start
+    (``optim.transfer.coarse_start``): (the start's path, the coarse result's path, timings and training curve)."""
     t0 = time.perf_counter()
     scene = spec_of(a, a.coarse_dpi, folder).build(inks)
     build_s = time.perf_counter() - t0
     log(f"coarse: {scene.describe()}")
-    t0 = time.perf_counter()
-    run = Optimization(
-        scene.volume,
-        scene.texels,
-        scene.target_rgb,
+    res = coarse_start(
+        scene,
+        fine,
         cfg,
-        kind=scene.kind,
-        fixed_share=scene.fixed_share,
+        folder / "start.npz",
         threads=a.threads,
+        method=a.method,
+        log=log,
+        coarse_path=folder / "coarse.npz",
     )
-    setup_s = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    run.run(log=log, log_every_s=60)
-    run_s = time.perf_counter() - t0
-    result = run.volume()
-    run.release_renderer()
-    h = run.history
     info = {
         "dpi": a.coarse_dpi,
         "grid_zyx": list(scene.volume.shape),
         "texels": len(scene.texels),
-        "iterations": run.iteration,
+        "iterations": res.iterations,
         "build_seconds": build_s,
-        "setup_seconds": setup_s,
-        "run_seconds": run_s,
-        "seconds_per_iteration": float(np.mean(h.seconds)) if h.seconds else None,
-        "training": {
-            "seconds": [round(float(v), 2) for v in np.cumsum(h.seconds)],
-            "delta_e76": [round(float(v), 3) for v in h.delta_e76],
-        },
+        "setup_seconds": res.setup_seconds,
+        "run_seconds": res.seconds,
+        "seconds_per_iteration": res.seconds / max(res.iterations, 1),
+        "training_delta_e76": [round(v, 3) for v in res.delta_e76],
     }
-    return result, info
+    return Path(res.path), folder / "coarse.npz", res.transfer_seconds, info
+
+
+def figures(scene, volume, spp: int, threads) -> dict:
+    """Noise-corrected mean ΔE76 and SSIM of ``volume`` against ``scene``'s targets, one render at ``spp`` with an
+    evaluation seed (a quick look at a start, not the driver's adaptive evaluation)."""
+    r = Renderer(volume, threads).render(scene.texels, spp, EVAL_SEED_OFFSET)
+    m = prediction_metrics(TexelLoss(scene.target_rgb, scene.texels.pos_vox), r.rgb, r.var_mean)
+    return {"delta_e76_mean_corrected": m.delta_e76_mean_corrected, "ssim": m.ssim, "spp": spp}
+
+
+def compare_starts(a, inks, src, fine, folder: Path) -> dict:
+    """``--compare-starts``: the coarse result on its own scene and each method's transferred start on the fine
+    scene, at ``--compare-starts`` spp."""
+    coarse_scene = spec_of(a, a.coarse_dpi, folder).build(inks)
+    out = {"coarse_result": figures(coarse_scene, src, a.compare_starts, a.threads)}
+    for method in ("linear", "nearest"):
+        path = write_transferred_volume(src, fine.volume, fine.fixed_share, folder / f"start_{method}.npz", method)
+        out[f"start_{method}"] = figures(fine, Volume.load(path), a.compare_starts, a.threads)
+    print("starts:", json.dumps(out), flush=True)
+    return out
 
 
 def plain_stage(a, fine, folder: Path, iterations: int, kw: dict) -> dict:
@@ -162,6 +178,7 @@ def main():
     ap.add_argument("--threads", type=int)
     ap.add_argument("--eval-spp", type=int, help="final figures at this spp (default: adaptive)")
     ap.add_argument("--out", help="folder for the run directories (default: a temporary one)")
+    ap.add_argument("--compare-starts", type=int, metavar="SPP", help="also render the starts of both methods")
     a = ap.parse_args()
     kw = {"seed": 0, **{k: json.loads(v) for k, v in (s.split("=", 1) for s in a.set)}}
     inks = InkTable.parse("vero-cmykw")
@@ -173,11 +190,9 @@ def main():
         fine = spec_of(a, 300.0, folder).build(inks)
         print(f"fine: {fine.describe()}", flush=True)
 
-        src, coarse = coarse_stage(a, inks, OptimizeConfig(iterations=a.coarse_iterations, **kw), folder, print)
-        t0 = time.perf_counter()
-        start = write_transferred_volume(src, fine.volume, fine.fixed_share, folder / "start.npz", a.method)
-        transfer_s = time.perf_counter() - t0
-        del src
+        cfg = OptimizeConfig(iterations=a.coarse_iterations, **kw)
+        start, coarse_path, transfer_s, coarse = coarse_stage(a, inks, cfg, fine, folder, print)
+        starts = compare_starts(a, inks, Volume.load(coarse_path), fine, folder) if a.compare_starts else None
         load["after_coarse"] = os.getloadavg()[0]
         before_fine = coarse["build_seconds"] + coarse["setup_seconds"] + coarse["run_seconds"] + transfer_s
         print(f"coarse stage and transfer: {before_fine:.1f} s (transfer {transfer_s:.1f} s)", flush=True)
@@ -206,6 +221,7 @@ def main():
         "settings": kw,
         "coarse": coarse,
         "transfer_seconds": transfer_s,
+        "starts": starts,
         "fine": fine_row,
         "coarse_to_fine_seconds": total,
         "plain": plain_row,

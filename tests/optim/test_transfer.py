@@ -119,3 +119,20 @@ def test_inks_must_match(tmp_path):
     with pytest.raises(ValueError, match="inks"):
         write_transferred_volume(src, fine.volume, None, tmp_path / "start.npz")
     assert not (tmp_path / "start.npz").exists()
+
+
+def test_coarse_start_runs_the_coarse_scene_and_writes_the_fine_start(tmp_path):
+    from inkopt.optim.transfer import CoarseStart, coarse_start
+
+    coarse, fine = slab(150), slab(300)
+    cfg = OptimizeConfig(iterations=2)
+    info = coarse_start(coarse, fine, cfg, tmp_path / "start.npz", threads=1, coarse_path=tmp_path / "coarse.npz")
+    assert info.iterations == 2 and len(info.delta_e76) == 2 and info.seconds > 0
+    assert CoarseStart.from_json(info.to_json()) == info
+    start = Volume.load(info.path)
+    assert start.shape == fine.volume.shape
+    white = start.mixture[..., 2].mean(axis=(1, 2))
+    assert white[-1] < 0.97 - 0.02 and white[-1] < white[0]  # the grey target: darker inks in the top layers
+    np.testing.assert_allclose(start_of(fine, None, info.path), start.mixture, atol=2e-6)
+    again = write_transferred_volume(tmp_path / "coarse.npz", fine.volume, None, tmp_path / "again.npz")
+    np.testing.assert_array_equal(Volume.load(again).mixture, start.mixture)  # the saved coarse result

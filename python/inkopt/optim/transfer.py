@@ -7,7 +7,8 @@ of the destination scene, and mapped to their free part exactly as a start from 
 (``param.free_part``: the destination's fixed shares, the white core and translucency constraints, stay what its
 scene fixes). :func:`write_transferred_volume` writes the result as a mixture volume file on the destination's grid,
 which a run takes as its start with ``OptimizeConfig(init=PATH)``; :func:`transferred_free_mixture` gives the
-free part (F, N) directly.
+free part (F, N) directly. :func:`coarse_start` is the whole first stage: optimise the coarse scene (no evaluation,
+no files but the start) and write its result as the start of the fine scene's run (a :class:`CoarseStart`).
 
 Memory: the source volume, the destination's free index (``Parameterization``), and per z slab of the destination
 grid (``SLAB_VOXELS`` voxels) its mixture and the resampling temporaries; never a (z, y, x, N) array of the
@@ -16,12 +17,16 @@ destination grid, so a 40 mm figurine's 61 M-voxel grid is written in slabs of a
 
 from __future__ import annotations
 
+import time
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ..model import FixedShares, Volume
 from ..model.resample import CHUNK, MixtureResampler
+from .config import OptimizeConfig
+from .loop import Optimization
 from .param import Parameterization, free_part
 
 #: destination voxels per written slab of layers (about 80 MB of float32 mixture at 5 inks)
@@ -109,3 +114,67 @@ def write_transferred_volume(
 
     base.save_with_mixture(path, slabs(), base.inks)
     return Path(path)
+
+
+@dataclass
+class CoarseStart:
+    """What :func:`coarse_start` did: the start volume file ``path``, the coarse run's ``iterations``, its wall
+    seconds (``setup_seconds``: parameterisation, loss, smoother; ``seconds``: the iterations), the transfer's
+    (``transfer_seconds``: resampling and writing the file) and its training mean ΔE76 per iteration."""
+
+    path: str
+    iterations: int
+    setup_seconds: float
+    seconds: float
+    transfer_seconds: float
+    delta_e76: list = field(default_factory=list)
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_json(cls, d: dict) -> CoarseStart:
+        return cls(**d)
+
+
+def coarse_start(
+    coarse,
+    fine,
+    cfg: OptimizeConfig,
+    path: str | Path,
+    *,
+    threads: int | None = None,
+    lighting=None,
+    method: str = "linear",
+    log=None,
+    coarse_path: str | Path | None = None,
+) -> CoarseStart:
+    """Optimise the scene ``coarse`` (the same object as ``fine`` on a coarser grid, e.g. its spec at half the DPI)
+    for ``cfg.iterations`` from ``cfg.init``, then write its result moved onto ``fine``'s grid (free voxels, fixed
+    shares) to ``path`` (:func:`write_transferred_volume`): the start of ``fine``'s run, ``OptimizeConfig(init=path)``.
+    ``log``: progress lines of the coarse iterations; ``coarse_path``: also save the coarse result there (a mixture
+    volume file on the coarse grid; not counted in ``transfer_seconds``)."""
+    t0 = time.perf_counter()
+    run = Optimization(
+        coarse.volume,
+        coarse.texels,
+        coarse.target_rgb,
+        cfg,
+        kind=coarse.kind,
+        fixed_share=coarse.fixed_share,
+        threads=threads,
+        lighting=lighting,
+    )
+    setup_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    run.run(log=log, log_every_s=60.0)
+    run_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    iterations, history = run.iteration, [float(v) for v in run.history.delta_e76]
+    result = run.volume()  # the coarse grid's mixture (an eighth of the fine grid's voxels at half the DPI)
+    del run  # the coarse run's renderer, loss and smoother, before the fine grid's slabs are made
+    write_transferred_volume(result, fine.volume, fine.fixed_share, path, method)
+    transfer_s = time.perf_counter() - t0
+    if coarse_path is not None:
+        result.save(coarse_path)
+    return CoarseStart(str(path), iterations, setup_s, run_s, transfer_s, history)
