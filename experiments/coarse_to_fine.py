@@ -46,6 +46,7 @@ from common import write_study as write
 from shell_compare import SPOT  # noqa: E402
 
 from inkopt import charts  # noqa: E402
+from inkopt.color import delta_e76, linear_to_lab  # noqa: E402
 from inkopt.evaluation.metrics import prediction_metrics  # noqa: E402
 from inkopt.evaluation.noise import EVAL_SEED_OFFSET  # noqa: E402
 from inkopt.loss import TexelLoss  # noqa: E402
@@ -121,22 +122,45 @@ def coarse_stage(a, inks, cfg, fine, folder: Path, log) -> tuple:
     return Path(res.path), folder / "coarse.npz", res.transfer_seconds, info
 
 
-def figures(scene, volume, spp: int, threads) -> dict:
+def figures(scene, volume, spp: int, threads, seed: int = EVAL_SEED_OFFSET) -> tuple:
     """Noise-corrected mean ΔE76 and SSIM of ``volume`` against ``scene``'s targets, one render at ``spp`` with an
-    evaluation seed (a quick look at a start, not the driver's adaptive evaluation)."""
-    r = Renderer(volume, threads).render(scene.texels, spp, EVAL_SEED_OFFSET)
+    evaluation seed (a quick look at a start, not the driver's adaptive evaluation), and the render (I, 3)."""
+    r = Renderer(volume, threads).render(scene.texels, spp, seed)
     m = prediction_metrics(TexelLoss(scene.target_rgb, scene.texels.pos_vox), r.rgb, r.var_mean)
-    return {"delta_e76_mean_corrected": m.delta_e76_mean_corrected, "ssim": m.ssim, "spp": spp}
+    return {"delta_e76_mean_corrected": m.delta_e76_mean_corrected, "ssim": m.ssim, "spp": spp}, r.rgb
+
+
+def nearest_gap(coarse_scene, coarse_rgb, fine, fine_rgb) -> float:
+    """Mean ΔE76 between each fine texel's colour and that of the nearest coarse texel (mm) facing the same way:
+    how far apart two per-texel colour sets of the two grids are (predictions: the transfer's change of the
+    appearance, plus the renders' noise; targets: the detail the coarse grid cannot hold)."""
+    from scipy.spatial import cKDTree
+
+    def mm(scene):
+        origin = 0.0 if scene.volume.origin_mm is None else scene.volume.origin_mm
+        return origin + scene.texels.position_mm(scene.volume.voxel_mm)
+
+    _, k = cKDTree(mm(coarse_scene)).query(mm(fine))
+    same = np.sum(fine.texels.normal * coarse_scene.texels.normal[k], axis=1) > 0.5
+    de = delta_e76(linear_to_lab(fine_rgb), linear_to_lab(coarse_rgb[k]))
+    return float(de[same].mean())
 
 
 def compare_starts(a, inks, src, fine, folder: Path) -> dict:
     """``--compare-starts``: the coarse result on its own scene and each method's transferred start on the fine
-    scene, at ``--compare-starts`` spp."""
+    scene, at ``--compare-starts`` spp; the gap between the fine start's and the coarse result's predictions,
+    between two renders of the linear start (the noise floor of that gap) and between the two scenes' targets
+    (``nearest_gap``)."""
     coarse_scene = spec_of(a, a.coarse_dpi, folder).build(inks)
-    out = {"coarse_result": figures(coarse_scene, src, a.compare_starts, a.threads)}
+    out = {"target_gap_delta_e76": nearest_gap(coarse_scene, coarse_scene.target_rgb, fine, fine.target_rgb)}
+    out["coarse_result"], coarse_rgb = figures(coarse_scene, src, a.compare_starts, a.threads)
     for method in ("linear", "nearest"):
         path = write_transferred_volume(src, fine.volume, fine.fixed_share, folder / f"start_{method}.npz", method)
-        out[f"start_{method}"] = figures(fine, Volume.load(path), a.compare_starts, a.threads)
+        row, rgb = figures(fine, Volume.load(path), a.compare_starts, a.threads)
+        out[f"start_{method}"] = {**row, "prediction_gap_delta_e76": nearest_gap(coarse_scene, coarse_rgb, fine, rgb)}
+        if method == "linear":  # the gap's noise floor: two renders of one start with independent seeds
+            _, again = figures(fine, Volume.load(path), a.compare_starts, a.threads, EVAL_SEED_OFFSET + 1)
+            out["noise_gap_delta_e76"] = nearest_gap(fine, again, fine, rgb)
     print("starts:", json.dumps(out), flush=True)
     return out
 
