@@ -8,11 +8,13 @@ of the destination scene, and mapped to their free part exactly as a start from 
 scene fixes). :func:`write_transferred_volume` writes the result as a mixture volume file on the destination's grid,
 which a run takes as its start with ``OptimizeConfig(init=PATH)``; :func:`transferred_free_mixture` gives the
 free part (F, N) directly. :func:`coarse_start` is the whole first stage: optimise the coarse scene (no evaluation,
-no files but the start) and write its result as the start of the fine scene's run (a :class:`CoarseStart`).
+no checkpoints) and write its result as the start of the fine scene's run (a :class:`CoarseStart`).
 
 Memory: the source volume, the destination's free index (``Parameterization``), and per z slab of the destination
 grid (``SLAB_VOXELS`` voxels) its mixture and the resampling temporaries; never a (z, y, x, N) array of the
-destination grid, so a 40 mm figurine's 61 M-voxel grid is written in slabs of a few MB each.
+destination grid, so a 40 mm figurine's 61 M-voxel grid is written in slabs of about 80 MB each. The run that
+starts from the file reads it whole (``param.initial_free_mixture``: 20 bytes per grid voxel at 5 inks, 1.2 GB
+for that figurine, during its set-up).
 """
 
 from __future__ import annotations
