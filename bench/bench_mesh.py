@@ -1,8 +1,10 @@
 """Benchmark of the mesh pipeline on Spot: voxelization time, seconds per optimisation iteration, peak memory.
 
     python bench/bench_mesh.py [HEIGHT_MM=40] [--iterations 3] [--spp 4] [--threads 2] [--shell-mm D] [--smooth S]
+        [--dpi 300]
 
-Writes bench/results/mesh_<height>mm.json (the folder is created if missing). Peak memory is the process's
+Writes bench/results/mesh_<height>mm.json (``--dpi`` other than 300: mesh_<height>mm_<dpi>dpi.json; the folder is
+created if missing). Peak memory is the process's
 resident-set high-water mark (getrusage), recorded after each stage; run one height per process.
 """
 
@@ -40,13 +42,16 @@ def main(argv=None) -> dict:
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--shell-mm", type=float)
     ap.add_argument("--inks", default="vero-cmykw")
+    ap.add_argument("--dpi", type=float, default=300.0, help="optimisation grid (a coarse-to-fine run's first stage)")
     ap.add_argument("--smooth", type=float, help="step smoothing width (default: the optimiser's default)")
     ap.add_argument("--out", help="JSON path (default bench/results/mesh_<height>mm.json)")
     args = ap.parse_args(argv)
 
     rss = {"start": peak_rss_gb()}
     t0 = time.perf_counter()
-    scene = build_mesh_scene(args.mesh, InkTable.parse(args.inks), height_mm=args.height_mm, shell_mm=args.shell_mm)
+    scene = build_mesh_scene(
+        args.mesh, InkTable.parse(args.inks), height_mm=args.height_mm, shell_mm=args.shell_mm, dpi=args.dpi
+    )
     build_s = time.perf_counter() - t0
     rss["after_voxelize"] = peak_rss_gb()
     cfg = OptimizeConfig(
@@ -85,6 +90,7 @@ def main(argv=None) -> dict:
     result = {
         "mesh": args.mesh,
         "height_mm": args.height_mm,
+        "dpi": args.dpi,
         "grid_zyx": [nz, ny, nx],
         "voxels": nz * ny * nx,
         "inside_voxels": int(scene.vox.inside.sum()),
@@ -118,7 +124,8 @@ def main(argv=None) -> dict:
         "note": "CPU may be shared with other processes: wall-clock times are upper bounds; "
         "cpu_seconds_per_iteration (user + system, all threads) is not affected",
     }
-    out = Path(args.out) if args.out else ROOT / "bench" / "results" / f"mesh_{args.height_mm:g}mm.json"
+    stem = f"mesh_{args.height_mm:g}mm" + ("" if args.dpi == 300 else f"_{args.dpi:g}dpi")
+    out = Path(args.out) if args.out else ROOT / "bench" / "results" / f"{stem}.json"
     atomic_write_bytes(out, (json.dumps({**result, **provenance()}, indent=2) + "\n").encode())
     print(
         json.dumps(

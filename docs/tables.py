@@ -479,6 +479,34 @@ def ray_shards() -> str:
     return table(["how", "seconds per iteration"], [[k, f(v)] for k, v in s.items()], [path])
 
 
+def coarse_to_fine() -> str:
+    path = STUDY / "coarse_to_fine.json"
+    rows = []
+    for key, e in load(path)["results"].items():
+        c2f, plain = e["fine"], e["plain"]
+        load_avg = e["load_average_1min"]
+        rows.append(
+            [
+                f"`{key}` ({e['scene']})",
+                f"{e['coarse']['iterations']} + {c2f['iterations']} ({e['coarse_to_fine_seconds']:.0f} s)",
+                f"{triple(c2f)} / {f(c2f['mottle_l2'])}",
+                f"{triple(plain)} / {f(plain['mottle_l2'])} ({plain['iterations']}, "
+                f"{plain['seconds_iterations']:.0f} s)",
+                f"{f(c2f['initial_delta_e76_mean_corrected'])} (white: {f(plain['initial_delta_e76_mean_corrected'])})",
+                f"{min(load_avg.values()):.1f}–{max(load_avg.values()):.1f}",
+            ]
+        )
+    header = [
+        "entry",
+        "coarse + fine iterations (time)",
+        "coarse to fine",
+        "plain 300 DPI (iterations, time)",
+        "fine stage's start ΔE76",
+        "load average",
+    ]
+    return table(header, rows, [path])
+
+
 def step_decay() -> str:
     names = [
         ("constant_200", "constant step, 200 it."),
@@ -581,6 +609,7 @@ TABLES = {
     "spot-convergence": spot_convergence,
     "shell-mm": shell_mm,
     "calibration": calibration,
+    "coarse-to-fine": coarse_to_fine,
 }
 
 

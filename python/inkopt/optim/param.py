@@ -156,7 +156,9 @@ def initial_free_mixture(
 ) -> np.ndarray:
     """The free part's starting mixture (F, N): 97 % white + the rest split over the other inks (paper), a seeded
     random mixture, a print-shop baseline ("surface" or "extrusion"; ``baseline(kind)``, given by the caller,
-    returns its full (z, y, x, N) mixture), or the mixture of an earlier result file."""
+    returns its full (z, y, x, N) mixture), or the mixture of an earlier result file on the same grid (its free
+    part: ``free_part``, so a run's own result starts a run of the same scene where it ended, fixed shares and
+    all)."""
     n, f = len(inks), param.n_free
     if init == "white":
         if "white" not in inks.names:
@@ -170,14 +172,27 @@ def initial_free_mixture(
         if baseline is None:
             raise ValueError(f"--init {init} needs the run's texels and targets")
         rho = np.asarray(baseline(init), np.float64).reshape(-1, n)[param.free_index]
-        fixed = 0.0 if param.fixed_f is None else param.fixed_f
-        share = param.share_f[:, None]
-        p = np.clip(rho - fixed, 0.0, None) / share
-        total = p.sum(1, keepdims=True)
-        return np.where(total > 0, p / np.where(total > 0, total, 1.0), 1.0 / n)
+        return free_part(rho, param.fixed_f, param.share_f)
     vol = Volume.load(init)
     if vol.form != "mixture" or vol.inks.names != inks.names:
         raise ValueError(f"--init {init}: needs a mixture volume with inks {list(inks.names)}")
     if vol.shape != param.shape:
-        raise ValueError(f"--init {init}: volume shape {vol.shape} differs from {param.shape}")
-    return vol.mixture.reshape(-1, n)[param.free_index].astype(np.float64)
+        raise ValueError(
+            f"--init {init}: volume shape {vol.shape} differs from {param.shape} (a result on another grid: "
+            "optim.transfer.write_transferred_volume moves it onto this one)"
+        )
+    rows, out = vol.mixture.reshape(-1, n), np.empty((f, n), np.float32)
+    for lo, hi in param.chunks():  # the whole mixture's free part, in pieces (no (F, N) float64 array)
+        fixed = None if param.fixed_f is None else param.fixed_f[lo:hi]
+        out[lo:hi] = free_part(rows[param.free_index[lo:hi]], fixed, param.share_f[lo:hi])
+    return out
+
+
+def free_part(rows: np.ndarray, fixed: np.ndarray | None, share: np.ndarray) -> np.ndarray:
+    """The free part p (K, N) float64 of whole mixtures ``rows`` (K, N) at free voxels with fixed shares ``fixed``
+    (K, N) (None: none) and free share ``share`` (K,): what ``Parameterization`` maps to ``fixed + share * p``.
+    ``(rows - fixed) / share`` clipped at 0 and normalised to sum 1; a row with nothing left is uniform."""
+    rho = np.asarray(rows, np.float64)
+    p = np.clip(rho - (0.0 if fixed is None else fixed), 0.0, None) / np.asarray(share)[:, None]
+    total = p.sum(1, keepdims=True)
+    return np.where(total > 0, p / np.where(total > 0, total, 1.0), 1.0 / rho.shape[1])

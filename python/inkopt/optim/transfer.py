@@ -1,0 +1,182 @@
+"""Coarse to fine: a result on one grid (e.g. a run at 150 DPI) as the start of a run of the same object on
+another grid (300 DPI).
+
+The mixture is moved in millimetres by ``model.resample.MixtureResampler`` ("linear": trilinear over the source's
+inside voxels; a voxel the source does not hold takes the nearest inside source voxel's mixture) to the free voxels
+of the destination scene, and mapped to their free part exactly as a start from a volume file is
+(``param.free_part``: the destination's fixed shares, the white core and translucency constraints, stay what its
+scene fixes). :func:`write_transferred_volume` writes the result as a mixture volume file on the destination's grid,
+which a run takes as its start with ``OptimizeConfig(init=PATH)``; :func:`transferred_free_mixture` gives the
+free part (F, N) directly. :func:`coarse_start` is the whole first stage: optimise the coarse scene (no evaluation,
+no checkpoints) and write its result as the start of the fine scene's run (a :class:`CoarseStart`).
+
+Memory: the source volume, the destination's free index (``Parameterization``), and per z slab of the destination
+grid (``SLAB_VOXELS`` voxels) its mixture and the resampling temporaries; never a (z, y, x, N) array of the
+destination grid, so a 40 mm figurine's 61 M-voxel grid is written in slabs of about 80 MB each. The run that
+starts from the file reads it whole (``param.initial_free_mixture``: 20 bytes per grid voxel at 5 inks, 1.2 GB
+for that figurine, during its set-up).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..model import FixedShares, Volume
+from ..model.resample import CHUNK, MixtureResampler
+from .config import OptimizeConfig
+from .loop import Optimization
+from .param import Parameterization, free_part
+
+#: destination voxels per written slab of layers (about 80 MB of float32 mixture at 5 inks)
+SLAB_VOXELS = 1 << 22
+
+
+def _source(source: Volume | str | Path) -> Volume:
+    vol = source if isinstance(source, Volume) else Volume.load(source)
+    vol.require_mixture("a coarse-to-fine start")
+    return vol
+
+
+def _check(src: Volume, base: Volume) -> None:
+    if base.inks is None or src.inks.names != base.inks.names:
+        have = list(src.inks.names)
+        want = None if base.inks is None else list(base.inks.names)
+        raise ValueError(f"the source mixture's inks {have} differ from the destination's {want}")
+
+
+def _free_slab(resampler, param: Parameterization, base: Volume, a: int, b: int, chunk: int) -> np.ndarray:
+    """The free part p (b - a, N) float64 of the free voxels a:b (``free_index`` order)."""
+    rows = resampler.on_grid(param.free_index[a:b], base.shape, base.voxel_mm, base.origin_mm, chunk)
+    fixed = None if param.fixed_f is None else param.fixed_f[a:b]
+    return free_part(rows, fixed, param.share_f[a:b])
+
+
+def transferred_free_mixture(
+    source: Volume | str | Path,
+    base: Volume,
+    fixed_share: FixedShares | None = None,
+    method: str = "linear",
+    chunk: int = CHUNK,
+) -> np.ndarray:
+    """The free part (F, N) float32 (rows summing to 1, ``Parameterization.free_index`` order) of the mixture of
+    ``source`` (a mixture volume or its file) moved onto the grid of ``base`` (the destination scene's volume:
+    shape, ``voxel_mm``, ``origin_mm``, inks) whose fixed shares are ``fixed_share`` (None: none)."""
+    src = _source(source)
+    _check(src, base)
+    fs = FixedShares.none(base.shape, len(base.inks)) if fixed_share is None else fixed_share
+    param = Parameterization("softmax", fs)
+    resampler = MixtureResampler(src, method)
+    out = np.empty((param.n_free, len(base.inks)), np.float32)
+    for a in range(0, param.n_free, chunk):
+        b = min(param.n_free, a + chunk)
+        out[a:b] = _free_slab(resampler, param, base, a, b, chunk)
+    return out
+
+
+def write_transferred_volume(
+    source: Volume | str | Path,
+    base: Volume,
+    fixed_share: FixedShares | None,
+    path: str | Path,
+    method: str = "linear",
+    chunk: int = CHUNK,
+    slab_voxels: int = SLAB_VOXELS,
+) -> Path:
+    """Write to ``path`` (atomically) a mixture volume file on the grid of ``base`` (its geometry: inside mask,
+    normals, origin, boundary) holding the fixed shares ``fixed_share`` (None: none) plus, at the free voxels, the
+    free part of ``source``'s mixture moved onto that grid (:func:`transferred_free_mixture`), ``slab_voxels``
+    destination voxels at a time. A run of the destination scene started from it (``OptimizeConfig(init=path)``)
+    starts from exactly that free part (up to the parameterisation's clipping at 1e-6)."""
+    src = _source(source)
+    _check(src, base)
+    fs = FixedShares.none(base.shape, len(base.inks)) if fixed_share is None else fixed_share
+    param = Parameterization("softmax", fs)
+    resampler = MixtureResampler(src, method)
+    nz, ny, nx = base.shape
+    plane, n = ny * nx, len(base.inks)
+    step = max(1, slab_voxels // max(plane, 1))
+
+    def slabs():
+        for z0 in range(0, nz, step):
+            z1 = min(nz, z0 + step)
+            rho = fs.at(np.arange(z0 * plane, z1 * plane, dtype=np.int64))
+            lo, hi = np.searchsorted(param.free_index, [z0 * plane, z1 * plane])
+            for a in range(lo, hi, chunk):
+                b = min(hi, a + chunk)
+                p = _free_slab(resampler, param, base, a, b, chunk)
+                whole = param.share_f[a:b, None] * p
+                if param.fixed_f is not None:
+                    whole += param.fixed_f[a:b]
+                rho[param.free_index[a:b] - z0 * plane] = whole
+            yield rho.reshape(z1 - z0, ny, nx, n)
+
+    base.save_with_mixture(path, slabs(), base.inks)
+    return Path(path)
+
+
+@dataclass
+class CoarseStart:
+    """What :func:`coarse_start` did: the start volume file ``path``, the coarse run's ``iterations``, its wall
+    seconds (``setup_seconds``: parameterisation, loss, smoother; ``seconds``: the iterations), the transfer's
+    (``transfer_seconds``: resampling and writing the file) and its training mean ΔE76 per iteration."""
+
+    path: str
+    iterations: int
+    setup_seconds: float
+    seconds: float
+    transfer_seconds: float
+    delta_e76: list = field(default_factory=list)
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_json(cls, d: dict) -> CoarseStart:
+        return cls(**d)
+
+
+def coarse_start(
+    coarse,
+    fine,
+    cfg: OptimizeConfig,
+    path: str | Path,
+    *,
+    threads: int | None = None,
+    lighting=None,
+    method: str = "linear",
+    log=None,
+    coarse_path: str | Path | None = None,
+) -> CoarseStart:
+    """Optimise the scene ``coarse`` (the same object as ``fine`` on a coarser grid, e.g. its spec at half the DPI)
+    for ``cfg.iterations`` from ``cfg.init``, then write its result moved onto ``fine``'s grid (free voxels, fixed
+    shares) to ``path`` (:func:`write_transferred_volume`): the start of ``fine``'s run, ``OptimizeConfig(init=path)``.
+    ``log``: progress lines of the coarse iterations; ``coarse_path``: also save the coarse result there (a mixture
+    volume file on the coarse grid; not counted in ``transfer_seconds``)."""
+    t0 = time.perf_counter()
+    run = Optimization(
+        coarse.volume,
+        coarse.texels,
+        coarse.target_rgb,
+        cfg,
+        kind=coarse.kind,
+        fixed_share=coarse.fixed_share,
+        threads=threads,
+        lighting=lighting,
+    )
+    setup_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    run.run(log=log, log_every_s=60.0)
+    run_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    iterations, history = run.iteration, [float(v) for v in run.history.delta_e76]
+    result = run.volume()  # the coarse grid's mixture (an eighth of the fine grid's voxels at half the DPI)
+    del run  # the coarse run's renderer, loss and smoother, before the fine grid's slabs are made
+    write_transferred_volume(result, fine.volume, fine.fixed_share, path, method)
+    transfer_s = time.perf_counter() - t0
+    if coarse_path is not None:
+        result.save(coarse_path)
+    return CoarseStart(str(path), iterations, setup_s, run_s, transfer_s, history)

@@ -1,0 +1,138 @@
+"""Coarse to fine (optim.transfer): a coarse result moved onto a finer scene's free voxels, written as the fine run's
+start, with the fine scene's fixed shares kept; and a start from a volume file maps its whole mixture to the free
+part, so a run's own result restarts it where it ended."""
+
+import numpy as np
+import pytest
+from helpers import SPOT
+
+from inkopt.model import FixedShares, InkTable, Volume
+from inkopt.optim import Optimization, OptimizeConfig, Parameterization
+from inkopt.optim.transfer import transferred_free_mixture, write_transferred_volume
+from inkopt.scenes.slab import build_slab
+
+INKS = InkTable.from_names(["cyan", "magenta", "white"])
+VOX = 25.4 / 300
+
+
+def slab(dpi: float, size=(16, 12, 6)):
+    """A slab of ``size`` 300-DPI voxels (x, y, z) at ``dpi``, a flat cyan target on top."""
+    img = np.full((12, 16, 3), 0.4, np.float32)
+    return build_slab(img, None, tuple(n * VOX for n in size), INKS, dpi)
+
+
+def constrained(shape) -> FixedShares:
+    """White bottom layer (no variables there) and 80 % cyan fixed in one corner column (a translucency-style
+    share with 20 % left free)."""
+    fixed = np.zeros(shape + (3,), np.float32)
+    fixed[0, ..., 2] = 1.0
+    fixed[1:, :3, :3, 0] = 0.8
+    return FixedShares.from_dense(fixed)
+
+
+def start_of(scene, fixed, path) -> np.ndarray:
+    run = Optimization(
+        scene.volume,
+        scene.texels,
+        scene.target_rgb,
+        OptimizeConfig(init=str(path), iterations=1),
+        kind=scene.kind,
+        fixed_share=fixed,
+    )
+    return run.initial_volume().mixture
+
+
+def test_a_run_restarts_from_its_own_result_with_fixed_shares(tmp_path):
+    """The saved whole mixture (fixed + free share x p) is mapped back to p, not taken as p."""
+    scene = slab(300)
+    fixed = constrained(scene.volume.shape)
+    param = Parameterization("softmax", fixed)
+    x = np.random.default_rng(0).normal(size=(param.n_free, 3)).astype(np.float32)
+    saved = param.mixture(x)
+    scene.volume.with_mixture(saved).save(tmp_path / "volume.npz")
+    np.testing.assert_allclose(start_of(scene, fixed, tmp_path / "volume.npz"), saved, atol=2e-6)
+
+
+def test_a_coarse_slab_result_starts_the_fine_run(tmp_path):
+    coarse, fine = slab(150), slab(300)
+    assert coarse.volume.shape == (3, 6, 8) and fine.volume.shape == (6, 12, 16)
+    rng = np.random.default_rng(1)
+    src = coarse.volume.with_mixture(rng.dirichlet(np.ones(3), size=coarse.volume.shape).astype(np.float32))
+    fixed = constrained(fine.volume.shape)
+    path = write_transferred_volume(src, fine.volume, fixed, tmp_path / "start.npz", chunk=7, slab_voxels=200)
+    got = Volume.load(path)
+    assert got.shape == fine.volume.shape and got.mixture.dtype == np.float32
+    # the same file without chunking
+    write_transferred_volume(src, fine.volume, fixed, tmp_path / "whole.npz")
+    np.testing.assert_array_equal(got.mixture, Volume.load(tmp_path / "whole.npz").mixture)
+    m = got.mixture
+    np.testing.assert_allclose(m.sum(-1), 1.0, atol=1e-6)
+    np.testing.assert_array_equal(m[0, ..., 2], 1.0)  # the fixed white layer
+    assert np.all(m[1:, :3, :3, 0] >= 0.8 - 1e-6)  # the fixed cyan share, the rest from the source
+    param = Parameterization("softmax", fixed)
+    p = transferred_free_mixture(src, fine.volume, fixed, chunk=5)
+    assert p.shape == (param.n_free, 3) and p.dtype == np.float32
+    whole = param.fixed_f + param.share_f[:, None] * p
+    np.testing.assert_allclose(m.reshape(-1, 3)[param.free_index], whole, atol=1e-6)
+    # an unconstrained fine voxel in the coarse grid's interior is the trilinear mean of its 8 coarse neighbours:
+    # fine voxel (2, 5, 7) has its centre at coarse index (0.75, 2.25, 3.25)
+    wz, wyx = {0: 0.25, 1: 0.75}, {0: 0.75, 1: 0.25}
+    near = sum(
+        wz[dz] * wyx[dy] * wyx[dx] * src.mixture[0 + dz, 2 + dy, 3 + dx]
+        for dz in (0, 1)
+        for dy in (0, 1)
+        for dx in (0, 1)
+    )
+    np.testing.assert_allclose(m[2, 5, 7], near, atol=1e-6)
+    # the fine run starts from it
+    np.testing.assert_allclose(start_of(fine, fixed, path), m, atol=2e-6)
+
+
+def test_a_coarse_mesh_result_covers_every_fine_free_voxel(tmp_path):
+    """Spot at 150 and 300 DPI (different origins and shells): a constant coarse mixture reaches every free voxel
+    of the fine grid, including the surface voxels the coarse grid does not hold."""
+    from inkopt.scenes.mesh import build_mesh_scene
+
+    if not SPOT.is_file():
+        pytest.skip(f"{SPOT} is not there")
+    inks = InkTable.parse("vero-cmykw")
+    coarse = build_mesh_scene(SPOT, inks, height_mm=3.0, dpi=150)
+    fine = build_mesh_scene(SPOT, inks, height_mm=3.0, dpi=300)
+    row = np.array([0.1, 0.2, 0.3, 0.05, 0.35], np.float32)
+    src = Volume.from_mixture(
+        coarse.volume.voxel_mm,
+        np.broadcast_to(row, coarse.volume.shape + (5,)).copy(),
+        inks,
+        inside=coarse.volume.inside,
+        origin_mm=coarse.volume.origin_mm,
+    )
+    path = write_transferred_volume(src, fine.volume, fine.fixed_share, tmp_path / "start.npz", slab_voxels=5000)
+    m = Volume.load(path).mixture
+    np.testing.assert_allclose(m[fine.free], np.broadcast_to(row, (int(fine.free.sum()), 5)), atol=1e-6)
+    np.testing.assert_array_equal(m[~fine.free], np.broadcast_to(np.eye(5)[4], (int((~fine.free).sum()), 5)))
+
+
+def test_inks_must_match(tmp_path):
+    coarse, fine = slab(150), slab(300)
+    other = InkTable.from_names(["yellow", "magenta", "white"])
+    src = Volume.from_mixture(coarse.volume.voxel_mm, coarse.volume.mixture, other)
+    with pytest.raises(ValueError, match="inks"):
+        write_transferred_volume(src, fine.volume, None, tmp_path / "start.npz")
+    assert not (tmp_path / "start.npz").exists()
+
+
+def test_coarse_start_runs_the_coarse_scene_and_writes_the_fine_start(tmp_path):
+    from inkopt.optim.transfer import CoarseStart, coarse_start
+
+    coarse, fine = slab(150), slab(300)
+    cfg = OptimizeConfig(iterations=2)
+    info = coarse_start(coarse, fine, cfg, tmp_path / "start.npz", threads=1, coarse_path=tmp_path / "coarse.npz")
+    assert info.iterations == 2 and len(info.delta_e76) == 2 and info.seconds > 0
+    assert CoarseStart.from_json(info.to_json()) == info
+    start = Volume.load(info.path)
+    assert start.shape == fine.volume.shape
+    white = start.mixture[..., 2].mean(axis=(1, 2))
+    assert white[-1] < 0.97 - 0.02 and white[-1] < white[0]  # the grey target: darker inks in the top layers
+    np.testing.assert_allclose(start_of(fine, None, info.path), start.mixture, atol=2e-6)
+    again = write_transferred_volume(tmp_path / "coarse.npz", fine.volume, None, tmp_path / "again.npz")
+    np.testing.assert_array_equal(Volume.load(again).mixture, start.mixture)  # the saved coarse result
