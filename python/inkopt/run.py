@@ -266,10 +266,10 @@ def _optimise(
         scene=scene.report_fields(),
         inks=list(scene.volume.inks.names),
         gamma=list(cfg.gamma),
-        lr=cfg.step_size,
+        lr=run.cfg.step_size,
         optimizer=cfg.optimizer,
         param=cfg.param,
-        init=cfg.init,
+        init=run.cfg.init,
         seed=cfg.seed,
         decay=cfg.decay,
         smooth=run.cfg.smooth,
@@ -281,3 +281,44 @@ def _optimise(
     )
     rd.write_report(report.to_json())
     return report
+
+
+#: share of a time budget the coarse stage of a coarse-to-fine run may take; the fine stage has the rest
+COARSE_BUDGET_SHARE = 0.6
+
+
+def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: float, *, resume=False, log=print, **kw):
+    """Coarse to fine: optimise ``spec``'s object first on a grid of ``coarse_dpi`` (a run of its own in
+    ``OUT/coarse/`` with ``cfg``'s settings: it stops when done, or within ``COARSE_BUDGET_SHARE`` of
+    ``cfg.time_budget``), move its result onto the grid of ``spec`` (``optim.transfer.write_transferred_volume``:
+    ``OUT/coarse/fine_start.npz``, fixed shares kept) and optimise from there (``cfg`` with that start, and a warm
+    start's step unless ``cfg.lr`` is set). A half-DPI iteration costs about a sixth of a full one on Spot
+    (docs/performance.md). ``resume`` continues whichever stage was under way; the time budget and the run's wall
+    time count from the job's start (``kw["started"]``). ``kw``: ``run_optimisation``'s other arguments. Returns the
+    fine run's report (``--dry-run``: its estimate, from a white start; nothing is written)."""
+    from dataclasses import replace
+
+    from .optim.transfer import write_transferred_volume
+
+    if not 0 < coarse_dpi < spec.dpi:
+        raise ValueError(f"--coarse-dpi must lie between 0 and the run's DPI ({spec.dpi:g}), got {coarse_dpi:g}")
+    kw.setdefault("started", time.perf_counter())
+    if kw.get("dry_run"):
+        return run_optimisation(spec.build(inks), out_dir, cfg, resume=resume, log=log, **kw)
+    rd = RunDir.create(out_dir)
+    coarse_dir, start = rd.path / "coarse", rd.path / "coarse" / "fine_start.npz"
+    fine_begun = resume and rd.checkpoint_path.is_file() and start.is_file()
+    if not fine_begun:
+        coarse = replace(spec, dpi=coarse_dpi).build(inks)
+        budget = None if cfg.time_budget is None else COARSE_BUDGET_SHARE * cfg.time_budget
+        log(f"coarse stage at {coarse_dpi:g} DPI into {coarse_dir}")
+        run_optimisation(
+            coarse, coarse_dir, replace(cfg, time_budget=budget), resume=resume, log=lambda m: log(f"  {m}"), **kw
+        )
+        del coarse
+    fine = spec.build(inks)
+    if not fine_begun:
+        t = time.perf_counter()
+        write_transferred_volume(RunDir(coarse_dir).load_volume(), fine.volume, fine.fixed_share, start)
+        log(f"coarse result moved onto the {spec.dpi:g}-DPI grid in {time.perf_counter() - t:.0f} s: {start}")
+    return run_optimisation(fine, out_dir, replace(cfg, init=str(start)), resume=resume, log=log, **kw)

@@ -371,6 +371,18 @@ def test_steps_in_blocks_of_rows_are_bit_identical(opt, monkeypatch):
         np.testing.assert_array_equal(blocks.opt.state()[k], v)
 
 
+def test_a_warm_start_takes_half_the_default_step():
+    """A start other than white or random steps at WARM_LR_FACTOR of the default, written out in the checkpoint key
+    (so a checkpoint made when the warm start took the full step is not resumed as if it were the same run); an
+    explicit lr is kept."""
+    from inkopt.optim.config import WARM_LR_FACTOR
+
+    assert OptimizeConfig(init="white").step_size == 2.0 and OptimizeConfig(init="random").step_size == 2.0
+    assert OptimizeConfig(init="extrusion").step_size == 2.0 * WARM_LR_FACTOR
+    assert OptimizeConfig(init="run/volume.npz", lr=1.5).step_size == 1.5
+    assert OptimizeConfig(init="surface", optimizer="adam").step_size == 0.1 * WARM_LR_FACTOR
+
+
 def test_step_decay_schedule():
     """The full step until the run's last `decay` fraction, then DECAY_HALVINGS halvings in equal stages."""
     from inkopt.optim.optimizers import DECAY_HALVINGS, step_factor
@@ -409,10 +421,13 @@ def test_settings_left_to_the_scene_kind():
     from inkopt.optim.smooth import diffusion_steps
 
     assert diffusion_steps(1.5) != diffusion_steps(3.0)
-    assert SCENE_DEFAULTS == {"slab": {"adjoint_ema": 0.8, "smooth": 1.5}, "mesh": {"adjoint_ema": 0.5, "smooth": 3.0}}
-    assert OptimizeConfig().adjoint_ema is None and OptimizeConfig().smooth is None
+    assert SCENE_DEFAULTS == {
+        "slab": {"adjoint_ema": 0.8, "smooth": 1.5, "init": "white"},
+        "mesh": {"adjoint_ema": 0.5, "smooth": 3.0, "init": "white"},
+    }
+    assert OptimizeConfig().adjoint_ema is None and OptimizeConfig().smooth is None and OptimizeConfig().init is None
     mesh = OptimizeConfig().for_scene("mesh")
-    assert (mesh.adjoint_ema, mesh.smooth) == (0.5, 3.0)
+    assert (mesh.adjoint_ema, mesh.smooth, mesh.init) == (0.5, 3.0, SCENE_DEFAULTS["mesh"]["init"])
     kept = OptimizeConfig(adjoint_ema=0.3, smooth=0.0).for_scene("mesh")
     assert (kept.adjoint_ema, kept.smooth) == (0.3, 0.0)
     with pytest.raises(ValueError, match="scene kind"):

@@ -205,11 +205,10 @@ def add_optimizer_args(p, single_run: bool = True) -> None:
     )
     p.add_argument(
         "--init",
-        default=d.init,
         help="white (97 %% white), random, surface or extrusion (start from that print-shop baseline of "
-        "`inkopt evaluate`; builds or reuses its cached colour table), or a volume .npz (from an "
-        "optimised run pass --lr 1: the step scale is set by the first gradients, ~2x smaller "
-        "there)",
+        "`inkopt evaluate`; builds or reuses its cached colour table), or a volume .npz (default: "
+        f"{slab['init']} on slabs, {mesh['init']} on meshes). A start other than white or random takes half "
+        "the default step (--lr)",
     )
     p.add_argument(
         "--gradient",
@@ -238,6 +237,13 @@ def add_optimizer_args(p, single_run: bool = True) -> None:
             help="stop when done: once the training ΔE76 is not expected to fall by more than this over the next "
             f"{d.stop_horizon} iterations, the step decay begins and the run ends after it (default "
             f"{d.stop_gain:g}; 0: run all --iterations)",
+        )
+        p.add_argument(
+            "--coarse-dpi",
+            type=float,
+            metavar="DPI",
+            help="coarse to fine: optimise first on a grid of this resolution (e.g. 150: an eighth of the voxels), "
+            "then at --dpi from its result (the coarse run is kept in DIR/coarse/; default: off)",
         )
         p.add_argument(
             "--time-budget",
@@ -364,7 +370,7 @@ def run_from_args(args, spec):
     import time
 
     from ..model import InkTable
-    from ..run import run_optimisation
+    from ..run import run_coarse_to_fine, run_optimisation
 
     started = time.perf_counter()  # a time budget counts the scene's building (voxelization) too
     spec.validate()
@@ -377,11 +383,7 @@ def run_from_args(args, spec):
     cfg = config_from_args(args)
     ray = ray_from_args(args)
     lighting = lighting_from_args(args)
-    scene = spec.build(inks)
-    return run_optimisation(
-        scene,
-        args.out,
-        cfg,
+    kw = dict(
         resume=args.resume,
         eval_spp=args.eval_spp,
         threads=args.threads,
@@ -395,6 +397,9 @@ def run_from_args(args, spec):
         eval_time_budget=args.eval_time_budget,
         started=started,
     )
+    if args.coarse_dpi:
+        return run_coarse_to_fine(spec, inks, args.out, cfg, args.coarse_dpi, **kw)
+    return run_optimisation(spec.build(inks), args.out, cfg, **kw)
 
 
 def print_run_summary(rep, init: str, extra: str = "") -> None:

@@ -19,7 +19,7 @@ def _optimize(args) -> int:
     if args.dry_run:
         print(rep.line())
         return 0
-    print_run_summary(rep, args.init, f" (peak memory {rep.peak_rss_gb:.1f} GiB)")
+    print_run_summary(rep, rep.init, f" (peak memory {rep.peak_rss_gb:.1f} GiB)")
     print(f"views: {args.out}/views.png, {args.out}/prediction.glb; report: {args.out}/report.json")
     return 0
 

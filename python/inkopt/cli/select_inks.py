@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 
 from .common import (
     add_mesh_args,
@@ -42,7 +43,9 @@ def _select(args) -> int:
         args.candidates,
         args.choose,
         args.always,
-        config_from_args(args),
+        # every candidate starts white unless --init says otherwise: a baseline start would build a colour table per
+        # candidate set (minutes each)
+        replace(config_from_args(args), init=args.init or "white"),
         args.strategy,
         args.eval_spp or 256,
         args.rung_eval_spp,

@@ -17,7 +17,7 @@ def _slab(args) -> int:
     if args.dry_run:
         print(rep.line())
         return 0
-    print_run_summary(rep, args.init)
+    print_run_summary(rep, rep.init)
     print(f"pictures: {args.out}/face_*.png, {args.out}/loss.png; report: {args.out}/report.json")
     return 0
 

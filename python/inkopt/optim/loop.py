@@ -30,7 +30,7 @@ from ..model import FixedShares, Texels, Volume, mix_grad
 from ..render import Renderer
 from ..units import format_duration
 from .checkpoint import History, read_checkpoint, write_checkpoint
-from .config import OptimizeConfig
+from .config import COLD_INITS, OptimizeConfig
 from .optimizers import make_optimizer, step_factor
 from .param import Parameterization, initial_free_mixture
 from .smooth import MAX_DEPTH, GradientSmoother, nearest_texels, texel_guide
@@ -149,6 +149,8 @@ class Optimization:
             d.pop(name)  # when the run ends, not how it steps: the schedule's plan is in the checkpoint
         if not d["smooth"]:  # without smoothing its edge guide does nothing
             d.pop("smooth_edge")
+        if d["lr"] is None and self.cfg.init not in COLD_INITS:  # a warm start's default step: written out
+            d["lr"] = self.cfg.step_size
         d.update(
             shape=list(self.base.shape),
             inks=list(self.base.inks.names),
