@@ -42,7 +42,8 @@ PRINTER_PER_OPT_VOXEL = 2.0 * 1.0 * (25.4 / 300 / 0.027)
 class Estimate:
     """A run's expected cost: ``iterations`` left at ``seconds_per_iteration`` (``seconds``; without the final
     evaluation; the most: a run stops earlier when done or by its time budget), ``peak_gib`` (GiB),
-    ``disk_bytes`` in the run directory and ``quantized_bytes`` added by ``inkopt quantize``; ``calibration_seconds`` (what measuring it cost)."""
+    ``disk_bytes`` in the run directory and ``quantized_bytes`` added by ``inkopt quantize``;
+    ``calibration_seconds`` (what measuring it cost)."""
 
     iterations: int
     seconds_per_iteration: float
