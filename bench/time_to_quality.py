@@ -38,7 +38,7 @@ from inkopt.evaluation.metrics import prediction_metrics
 from inkopt.evaluation.noise import EVAL_SEED_OFFSET
 from inkopt.model import InkTable
 from inkopt.optim import Optimization, OptimizeConfig
-from inkopt.run import run_optimisation
+from inkopt.run import run_coarse_to_fine, run_optimisation
 from inkopt.scenes.spec import MeshSpec, SlabSpec
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -127,6 +127,7 @@ def main() -> int:
     ap.add_argument("--out-root", default="bench-out/ttq")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--resume", action="store_true")
+    ap.add_argument("--coarse-dpi", type=float, help="coarse to fine (``inkopt.run.run_coarse_to_fine``)")
     a = ap.parse_args()
     out = Path(a.out_root) / a.case / a.name
     out.mkdir(parents=True, exist_ok=True)
@@ -138,7 +139,7 @@ def main() -> int:
     import time
 
     t0 = time.perf_counter()
-    scene = spec.build(inks)
+    scene = spec.build(inks)  # the fine scene (of a coarse-to-fine run too: its snapshots are the fine stage's)
     snaps = {int(s) for s in a.snapshots.split(",") if s}
     times_path = out / "snapshot_times.json"
     times = json.loads(times_path.read_text()) if a.resume and times_path.is_file() else {}
@@ -153,10 +154,7 @@ def main() -> int:
             }
             times_path.write_text(json.dumps(times))
 
-    rep = run_optimisation(
-        scene,
-        out / "run",
-        cfg,
+    kw = dict(
         resume=a.resume,
         threads=a.threads,
         log=lambda m: print(m, file=sys.stderr, flush=True),
@@ -164,9 +162,15 @@ def main() -> int:
         on_step=keep,
         eval_max_spp=a.eval_max_spp,
     )
+    if a.coarse_dpi:
+        rep = run_coarse_to_fine(spec, inks, out / "run", cfg, a.coarse_dpi, **kw)
+        rep_cfg = OptimizeConfig(**{**cfg.__dict__, "init": rep.init})
+    else:
+        rep = run_optimisation(scene, out / "run", cfg, **kw)
+        rep_cfg = cfg
     # the snapshots' figures: one renderer of the run's problem, set to each snapshot's variables
     run = Optimization(
-        scene.volume, scene.texels, scene.target_rgb, cfg, kind=scene.kind, fixed_share=scene.fixed_share, threads=2
+        scene.volume, scene.texels, scene.target_rgb, rep_cfg, kind=scene.kind, fixed_share=scene.fixed_share, threads=2
     )
     points = []
     for it in sorted(int(k) for k in times):
@@ -191,6 +195,7 @@ def main() -> int:
         "case": a.case,
         "name": a.name,
         "settings": overrides,
+        "coarse_dpi": a.coarse_dpi,
         "max_iterations": a.iterations,
         "snap_spp": a.snap_spp,
         "snapshots": points,

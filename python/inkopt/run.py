@@ -294,7 +294,8 @@ def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: flo
     ``OUT/coarse/fine_start.npz``, fixed shares kept) and optimise from there (``cfg`` with that start, and a warm
     start's step unless ``cfg.lr`` is set). A half-DPI iteration costs about a sixth of a full one on Spot
     (docs/performance.md). ``resume`` continues whichever stage was under way; the time budget and the run's wall
-    time count from the job's start (``kw["started"]``). ``kw``: ``run_optimisation``'s other arguments. Returns the
+    time count from the job's start (``kw["started"]``). ``kw``: ``run_optimisation``'s other arguments
+    (``on_step`` is called in the fine stage only). Returns the
     fine run's report (``--dry-run``: its estimate, from a white start; nothing is written)."""
     from dataclasses import replace
 
@@ -312,8 +313,9 @@ def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: flo
         coarse = replace(spec, dpi=coarse_dpi).build(inks)
         budget = None if cfg.time_budget is None else COARSE_BUDGET_SHARE * cfg.time_budget
         log(f"coarse stage at {coarse_dpi:g} DPI into {coarse_dir}")
+        ckw = {**kw, "on_step": None}  # the caller's per-step hook sees the fine stage only (another grid here)
         run_optimisation(
-            coarse, coarse_dir, replace(cfg, time_budget=budget), resume=resume, log=lambda m: log(f"  {m}"), **kw
+            coarse, coarse_dir, replace(cfg, time_budget=budget), resume=resume, log=lambda m: log(f"  {m}"), **ckw
         )
         del coarse
     fine = spec.build(inks)
