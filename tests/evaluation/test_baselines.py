@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from inkopt.color import delta_e76, linear_to_lab
-from inkopt.evaluation.baselines import extrusion_baseline, surface_baseline, white_mixture
+from inkopt.evaluation.baselines import BaselineLayers, extrusion_baseline, surface_baseline, white_mixture
 from inkopt.evaluation.colour_table import (
     ColourTable,
     colour_table,
@@ -204,3 +204,33 @@ def test_the_default_ink_sets_table_ships_with_the_package(tmp_path, monkeypatch
     )
     assert np.all(delta_e76(linear_to_lab(rgb), table.lab[rows]) <= 4 * np.hypot(se, table.stderr[rows]))
     assert sorted(p.name for p in ct.PACKAGED.iterdir()) == [f"colour_table_{table.key}.npz"]  # nothing stale
+
+
+def test_extrusion_of_centred_texels_takes_a_nearest_texel(table3):
+    """Mesh texels (at voxel centres): the distance transform gives every inside voxel a texel at the smallest
+    Euclidean distance in mm (any of equidistant ones), as a brute-force search over all texels finds it, on a
+    ball in an anisotropic grid."""
+    n = 12
+    vmm = np.array([0.05, 0.07, 0.03])  # x, y, z
+    c = (np.indices((n, n, n)).transpose(1, 2, 3, 0)[..., ::-1] + 0.5 - n / 2) * vmm  # xyz mm from the centre
+    inside = np.linalg.norm(c / vmm.max(), axis=-1) < 0.45 * n * vmm.min() / vmm.max()
+    normals = (c / np.maximum(np.linalg.norm(c, axis=-1, keepdims=True), 1e-9)).astype(np.float32)
+    vol = Volume.from_mixture(
+        voxel_mm=vmm, mixture=np.zeros((n, n, n, 3), np.float32), inks=INKS3, inside=inside, normals=normals
+    )
+    tex = Texels.from_normals(inside, normals)
+    assert tex.centred and len(tex) > 50
+    target = np.random.default_rng(0).random((len(tex), 3)).astype(np.float32)
+    src = BaselineLayers("extrusion", vol, tex, target, None, table3)
+    assert src.near is not None  # the distance-transform path
+    pos_t = tex.position_mm(vmm)
+    for z in range(n):
+        flat = np.flatnonzero(inside[z].ravel())
+        if not len(flat):
+            continue
+        yx = np.stack(np.unravel_index(flat, (n, n)), 1)
+        pos = (np.column_stack([yx[:, ::-1], np.full(len(flat), z)]) + 0.5) * vmm
+        dist = np.linalg.norm(pos[:, None] - pos_t[None], axis=2)
+        got = dist[np.arange(len(flat)), src.nearest_texels(z, flat)]
+        np.testing.assert_allclose(got, dist.min(1), rtol=1e-12, atol=1e-12)
+        np.testing.assert_array_equal(src[z][inside[z]], src.mix_t[src.nearest_texels(z, flat)])

@@ -11,8 +11,9 @@ from PIL import Image
 import inkopt.evaluation.evaluate as evaluate_mod
 from inkopt.color import linear_to_srgb
 from inkopt.evaluation.baselines import extrusion_baseline, surface_baseline
-from inkopt.evaluation.evaluate import average_to_scene, evaluate_run, map_texels, printer_texels, table_lines
+from inkopt.evaluation.evaluate import evaluate_run, table_lines
 from inkopt.evaluation.noise import MAX_SPP, PILOT_SPP, TARGET_NOISE_DE76
+from inkopt.evaluation.printed import PrintedRenderer, average_to_scene, map_texels, printer_texels
 from inkopt.evaluation.results import Evaluation
 from inkopt.io import save_npz
 from inkopt.model import InkTable, Quantization, Texels, Volume
@@ -230,3 +231,32 @@ def test_evaluate_mesh_kind(tmp_path, table3):
     assert q.normals is not None and len(printer_texels(q, tex, "mesh")) == ev["printer_texels"]
     assert all(np.isfinite(ev[k]["delta_e76_mean"]) for k in ("continuous", "quantized"))
     assert not list(d.glob("evaluation_*.png"))  # pictures only for slabs
+
+
+def test_printed_renderer_keeps_its_geometry_and_renders_like_a_new_one():
+    """The printer renderer is built once: a second labels volume swapped in renders bit for bit like a renderer
+    built for it, the walk counts are the swapped-in volume's, and a volume with other inside voxels is refused."""
+    shape = (8, 10, 12)
+    rng = np.random.default_rng(3)
+    inside = np.zeros(shape, bool)
+    inside[1:7, 2:9, 2:11] = True
+    a, b = (np.where(inside, rng.integers(0, 3, shape), 255).astype(np.uint8) for _ in range(2))
+    vols = [Volume.from_labels(voxel_mm=[V300] * 3, labels=lab, inks=INKS3) for lab in (a, b)]
+    scene = Texels.box_faces(shape, ["top"])
+    kept = PrintedRenderer(vols[0], scene, [V300] * 3, "slab", threads=2)
+    kept.use(vols[0])
+    kept(16, 7)
+    first = kept.events
+    kept.use(vols[1])
+    assert kept.builds == 1 and kept.events == 0
+    fresh = PrintedRenderer(vols[1], scene, [V300] * 3, "slab", threads=2)
+    fresh.use(vols[1])
+    for got, want in zip(kept(16, 7), fresh(16, 7)):
+        np.testing.assert_array_equal(got, want)
+    assert kept.events == fresh.events and kept.paths == fresh.paths > 0 and first > 0
+    other = a.copy()
+    other[3, 5, 5] = 255  # a hole: other inside voxels than the renderer's geometry
+    with pytest.raises(ValueError, match="inside voxels differ"):
+        kept.use(Volume.from_labels(voxel_mm=[V300] * 3, labels=other, inks=INKS3))
+    kept.use(None)
+    assert kept.renderer is None

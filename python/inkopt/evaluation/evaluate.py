@@ -37,8 +37,9 @@ Writes DIR/evaluation.json (or ``out``), DIR/predictions.npz (every result's col
 and ``time_budget`` cap the adaptive renders.
 
 Memory: one renderer exists at a time. The run's mixture is dropped once the continuous result (and translucency)
-is rendered; the printer texels and their map are set up once and serve the quantized result and both baselines
-(same printer grid and inside voxels); each baseline goes layer by layer from ``baselines.BaselineLayers``
+is rendered; the printer texels, their map and one printer renderer (``printed.PrintedRenderer``: geometry built
+once, each later result's labels swapped in) serve the quantized result and both baselines (same printer grid and
+inside voxels); each baseline goes layer by layer from ``baselines.BaselineLayers``
 through ``printing.quantize.quantize`` into one printer label grid (1 byte per printer voxel), never as a whole
 (z, y, x, N) mixture; the texel loss and its figures come after the last render. The peak is then the larger of
 the continuous render and one printer renderer's build, below the optimisation's (docs/performance.md).
@@ -51,13 +52,12 @@ from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ..color import delta_e76, linear_to_lab
 from ..io import file_digest, write_png
 from ..lighting import Lighting, load_lighting
 from ..loss import TexelLoss
-from ..model import Quantization, Texels, Volume
+from ..model import Quantization, Volume
 from ..pictures import panels
 from ..printing.quantize import DEFAULT_DPI, DEFAULT_LAYER_UM, printer_grid, quantize
 from ..printing.stream import quantize_run
@@ -68,6 +68,7 @@ from .baselines import BASELINES, BaselineLayers
 from .colour_table import DEFAULT_PATCH_MM, ColourTable, colour_table
 from .metrics import prediction_metrics
 from .noise import EVAL_SEED_OFFSET, MAX_SPP, PILOT_SPP, SSIM_NOISE_RATIO, TARGET_NOISE_DE76, adaptive_render
+from .printed import PrintedRenderer
 from .results import Evaluation, Measured
 from .translucency import evaluate_translucency
 from .translucency import table_lines as translucency_lines
@@ -75,82 +76,9 @@ from .translucency import table_lines as translucency_lines
 DEFAULT_SPP = None  # adaptive
 
 
-# ----------------------------------------------------------------------------------------------- texel maps
-def map_texels(printer: Texels, voxel_mm_printer, scene: Texels, voxel_mm_scene, per_face: bool = True):
-    """Scene texel (int64 (Ip,)) of each printer texel, and for every scene texel the printer texel that stands in
-    for it when none maps to it (int64 (I,), -1 where some do). Nearest face centre in mm, within the same face
-    id if ``per_face`` (slabs), else over all texels (meshes)."""
-    ps, pp = scene.position_mm(voxel_mm_scene), printer.position_mm(voxel_mm_printer)
-    to_scene = np.full(len(printer), -1, np.int64)
-    stand_in = np.full(len(scene), -1, np.int64)
-    groups = np.unique(scene.face) if per_face else [None]
-    for f in groups:
-        s_idx = np.flatnonzero(scene.face == f) if f is not None else np.arange(len(scene))
-        p_idx = np.flatnonzero(printer.face == f) if f is not None else np.arange(len(printer))
-        if len(p_idx) == 0:
-            raise ValueError(f"the quantized volume has no texels on face {int(f)} of the scene")
-        _, near = cKDTree(ps[s_idx]).query(pp[p_idx], workers=-1)
-        to_scene[p_idx] = s_idx[near]
-        cnt = np.bincount(near, minlength=len(s_idx))
-        empty = np.flatnonzero(cnt == 0)
-        if len(empty):
-            _, back = cKDTree(pp[p_idx]).query(ps[s_idx[empty]], workers=-1)
-            stand_in[s_idx[empty]] = p_idx[back]
-    if np.any(to_scene < 0):
-        raise ValueError("the quantized volume has texels on faces the scene does not texture")
-    return to_scene, stand_in
-
-
-def average_to_scene(rgb_p, var_p, to_scene, stand_in, n_scene: int):
-    """Per-scene-texel mean (I, 3) of printer texel colours, and the variance of that mean (I, 3)."""
-    cnt = np.bincount(to_scene, minlength=n_scene).astype(np.float64)
-    rgb = np.stack([np.bincount(to_scene, rgb_p[:, c], n_scene) for c in range(3)], 1)
-    var = np.stack([np.bincount(to_scene, var_p[:, c], n_scene) for c in range(3)], 1)
-    has = cnt > 0
-    rgb[has] /= cnt[has, None]
-    var[has] /= (cnt[has] ** 2)[:, None]
-    miss = np.flatnonzero(~has)
-    rgb[miss], var[miss] = rgb_p[stand_in[miss]], var_p[stand_in[miss]]
-    return rgb, var
-
-
-def printer_texels(qvol: Volume, scene: Texels, kind: str) -> Texels:
-    if kind == "mesh":
-        return Texels.for_volume(qvol)
-    return Texels.for_volume(qvol, sorted({int(f) for f in np.unique(scene.face)}))
-
-
-class PrintedRenderer:
-    """Printer texels of a labels grid set up once (texels, texel map) and rendered on any labels volume of that grid
-    (same shape, voxel size and inside voxels: the run's quantized volume and the baselines quantized like it),
-    averaged onto the scene texels; the adaptive evaluation renders each volume in several passes."""
-
-    def __init__(self, qvol: Volume, scene: Texels, voxel_mm_scene, kind: str, threads=None, lighting=None):
-        self.ptex = printer_texels(qvol, scene, kind)
-        self.to_scene, self.stand_in = map_texels(
-            self.ptex, qvol.voxel_mm, scene, voxel_mm_scene, per_face=kind != "mesh"
-        )
-        self.n_scene, self.shape, self.threads, self.lighting = len(scene), qvol.shape, threads, lighting
-        self.renderer = None
-
-    def use(self, labels_vol: Volume | None) -> None:
-        """Render ``labels_vol`` from now on (a renderer of its own; the previous one is freed first), or free the
-        renderer (None)."""
-        self.renderer = None
-        if labels_vol is not None:
-            if labels_vol.shape != self.shape:
-                raise ValueError(f"labels grid {labels_vol.shape} differs from the printer texels' {self.shape}")
-            self.renderer = Renderer(labels_vol, self.threads, self.lighting)
-
-    def __call__(self, spp: int, seed: int, progress: bool = False):
-        """(rgb (I, 3), var_mean (I, 3)) on the scene texels from ``spp`` samples per scene texel, shared by its
-        printer texels, and the printer spp used."""
-        spp_p = max(1, int(np.ceil(spp * self.n_scene / len(self.ptex))))
-        res = self.renderer.render(self.ptex, spp_p, seed, progress=progress)
-        rgb, var = average_to_scene(
-            res.rgb.astype(np.float64), res.var_mean.astype(np.float64), self.to_scene, self.stand_in, self.n_scene
-        )
-        return rgb, var, spp_p
+def per_path(walks: dict) -> float:
+    """Mean scattering and interface events per path of a result's renders (0 before any)."""
+    return walks["events"] / walks["paths"] if walks.get("paths") else 0.0
 
 
 # ----------------------------------------------------------------------------------------------- pictures
@@ -234,11 +162,12 @@ def evaluate_run(
     colours = {"target": target}
     rseed = EVAL_SEED_OFFSET + int(seed)
     todo = [2 + (2 if baselines else 0)]  # adaptive results still to render, for sharing the time budget
-    renders = {}  # name -> (AdaptiveResult, seconds, quantization method, printer spp)
+    renders = {}  # name -> (AdaptiveResult, seconds, quantization method, walks)
 
-    def rendered(name: str, render, seconds_from: float, method: str | None, spp_printer=None, done=None):
-        """Adaptive (or fixed-spp) render of one result, kept for its figures. ``done`` (called once the renders
-        are over): frees the result's renderer."""
+    def rendered(name: str, render, seconds_from: float, method: str | None, walks: dict, done=None):
+        """Adaptive (or fixed-spp) render of one result, kept for its figures. ``walks``: the render's counts
+        (``spp`` printer samples of a printed result, ``paths``, ``events``), filled in by ``render``. ``done``
+        (called once the renders are over): frees the result's renderer."""
         budget = None
         if time_budget is not None:
             budget = max(time_budget - (time.perf_counter() - t_all), 0.0) / max(todo[0], 1)
@@ -247,23 +176,25 @@ def evaluate_run(
         if done is not None:
             done()
         colours[name] = ad.rgb
-        sp = None if spp_printer is None else spp_printer["spp"]
-        renders[name] = (ad, time.perf_counter() - seconds_from, method, sp)
+        renders[name] = (ad, time.perf_counter() - seconds_from, method, walks)
         return renders[name]
 
     t0 = time.perf_counter()
     renderer = Renderer(vol, threads, lighting)
 
+    walks = {"paths": 0, "events": 0}
+
     def continuous(n: int, s: int):
         r = renderer.render(stex, n, s, progress=log is not None)
+        walks["paths"], walks["events"] = walks["paths"] + r.paths, walks["events"] + r.events
         return r.rgb, r.var_mean, n
 
     def free_continuous():
         nonlocal renderer
         renderer = None  # freed before the figures and the next renderer
 
-    ad, seconds, _, _ = rendered("continuous", continuous, t0, None, done=free_continuous)
-    say(f"continuous: {len(stex)} texels x {ad.spp} spp in {seconds:.1f} s")
+    ad, seconds, _, _ = rendered("continuous", continuous, t0, None, walks, done=free_continuous)
+    say(f"continuous: {len(stex)} texels x {ad.spp} spp in {seconds:.1f} s, {per_path(walks):.0f} events per path")
     tr = None
     if translucency or (translucency is None and (rec.translucency is not None or translucency_compare)):
         tr = evaluate_translucency(vol, rec, translucency_compare, rseed, threads, lighting, log=say)
@@ -322,15 +253,18 @@ def evaluate_run(
 
     def printed(name: str, labels_vol: Volume, t0: float) -> None:
         info = {"spp": 0}
-        printer.use(labels_vol)
+        printer.use(labels_vol)  # the first builds the printer renderer, the others swap in their labels
 
         def render(n: int, s: int):
             rgb, var, spp_p = printer(n, s, progress=log is not None)
-            info["spp"] += spp_p
+            info.update(spp=info["spp"] + spp_p, paths=printer.paths, events=printer.events)
             return rgb, var, spp_p
 
-        _, seconds, _, _ = rendered(name, render, t0, q.method, info, done=lambda: printer.use(None))
-        say(f"{name}: {len(printer.ptex)} printer texels x {info['spp']} spp in {seconds:.1f} s")
+        _, seconds, _, _ = rendered(name, render, t0, q.method, info)
+        say(
+            f"{name}: {len(printer.ptex)} printer texels x {info['spp']} spp in {seconds:.1f} s, "
+            f"{per_path(info):.0f} events per path"
+        )
 
     meta = dict(
         voxel_mm=qvol.voxel_mm,
@@ -364,12 +298,14 @@ def evaluate_run(
             src = None
             printed(name, Volume.from_labels(labels=labels, **meta), t0)
             labels = None
+    printer.use(None)  # freed before the figures
     n_ptex, printer = len(printer.ptex), None
     loss = TexelLoss(target, stex.pos_vox, sigma=1.5)  # the figures of every result, after all renders
 
     def figures(name: str) -> Measured:
-        ad, seconds, method, sp = renders.pop(name)
-        return Measured(prediction_metrics(loss, ad.rgb, ad.var), ad.spp, ad.passes, seconds, method, sp)
+        ad, seconds, method, walks = renders.pop(name)
+        m = prediction_metrics(loss, ad.rgb, ad.var)
+        return Measured(m, ad.spp, ad.passes, seconds, method, walks.get("spp"), per_path(walks))
 
     cont, quantized = figures("continuous"), figures("quantized")
     if baselines:

@@ -155,7 +155,9 @@ class Report:
 class Measured:
     """One result of an evaluation (the continuous mixture, the quantized print or a baseline): its ``metrics``,
     ``spp`` samples per scene texel in ``spp_passes``, ``seconds``, the quantization ``method`` (None for the
-    continuous result) and, for printed results, ``spp_printer``, the samples per printer texel."""
+    continuous result), for printed results ``spp_printer``, the samples per printer texel, and
+    ``events_per_path``: the renders' mean scattering and interface events per path, what a sample costs (None in
+    evaluations written before it was recorded)."""
 
     metrics: Metrics
     spp: int
@@ -163,16 +165,27 @@ class Measured:
     seconds: float
     method: str | None
     spp_printer: int | None = None
+    events_per_path: float | None = None
 
     def to_json(self) -> dict:
         d = {**self.metrics.to_json(), "spp": self.spp, "spp_passes": self.spp_passes}
         if self.spp_printer is not None:
             d["spp_printer"] = self.spp_printer
+        if self.events_per_path is not None:
+            d["events_per_path"] = self.events_per_path
         return {**d, "seconds": self.seconds, "method": self.method}
 
     @classmethod
     def from_json(cls, d: dict) -> Measured:
-        return cls(Metrics.from_json(d), d["spp"], d["spp_passes"], d["seconds"], d["method"], d.get("spp_printer"))
+        return cls(
+            Metrics.from_json(d),
+            d["spp"],
+            d["spp_passes"],
+            d["seconds"],
+            d["method"],
+            d.get("spp_printer"),
+            d.get("events_per_path"),
+        )
 
 
 @dataclass

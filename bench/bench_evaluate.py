@@ -1,0 +1,137 @@
+"""``inkopt evaluate`` of an optimised Spot run: wall time, CPU time and peak memory of the whole command (its own
+process, ``/usr/bin/time -v``), and per result (continuous, quantized, surface and extrusion baselines) its seconds,
+samples per scene texel, events per path and noise figures from the evaluation file.
+
+    .venv/bin/python bench/bench_evaluate.py HEIGHT_MM [--dir D] [--reuse] [--spp N] [--code CHECKOUT] [--name NAME]
+
+The run directory is made first unless ``--reuse`` finds one (each step its own process, timed, recorded as
+``setup``): ``inkopt optimize spot.obj --height-mm H --iterations 1 --eval-spp 16 --out D`` and ``inkopt quantize
+D``. Then ``inkopt evaluate D --out D/bench_evaluation.json`` (``--spp N``: fixed samples instead of the adaptive
+default; ``--time-budget``, ``--max-spp`` passed on). ``--code``: evaluate with another checkout's Python package
+(e.g. the commit before a change, with its own built ``_core``), so one run directory serves both. Writes
+bench/results/evaluate_<H>mm.json (``--name`` for another name). Wall-clock times on the shared 2-core machine are
+upper bounds; CPU seconds and events per path do not depend on the load.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "python"))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+SPOT = ROOT.parent / "shared" / "data" / "spot" / "spot.obj"
+RESULTS = ("continuous", "quantized", "surface", "extrusion")
+KEEP = (
+    "seconds",
+    "spp",
+    "spp_passes",
+    "spp_printer",
+    "events_per_path",
+    "delta_e76_mean",
+    "delta_e76_mean_corrected",
+    "delta_e76_noise_contribution",
+    "delta_e2000_mean",
+    "ssim",
+    "mottle_l2",
+)
+
+
+def timed(args: list[str], code: Path) -> dict:
+    """Run ``python -m inkopt.cli ARGS`` with ``code``/python first on the path under /usr/bin/time -v: seconds,
+    CPU seconds, peak RSS (GiB), the 1-minute load average before and after, stdout and stderr."""
+    load0 = os.getloadavg()[0]
+    proc = subprocess.run(
+        ["/usr/bin/time", "-v", sys.executable, "-m", "inkopt.cli", *args],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "PYTHONPATH": str(code / "python")},
+    )
+    if proc.returncode:
+        raise SystemExit(f"inkopt {' '.join(args)} failed:\n{proc.stdout}\n{proc.stderr}")
+    wall = re.search(r"Elapsed \(wall clock\) time \(h:mm:ss or m:ss\): (\S+)", proc.stderr).group(1)
+    secs = sum(float(p) * 60**i for i, p in enumerate(reversed(wall.split(":"))))
+    rss_kb = int(re.search(r"Maximum resident set size \(kbytes\): (\d+)", proc.stderr).group(1))
+    cpu = sum(float(re.search(rf"{k} time \(seconds\): (\S+)", proc.stderr).group(1)) for k in ("User", "System"))
+    log = proc.stderr[: proc.stderr.find("\tCommand being timed")].strip()
+    return {
+        "seconds": secs,
+        "cpu_seconds": cpu,
+        "peak_rss_gb": rss_kb / 2**20,
+        "load_average_before": load0,
+        "load_average_after": os.getloadavg()[0],
+        "stdout": proc.stdout.strip(),
+        "log": log,
+    }
+
+
+def main() -> dict:
+    from common import machine, write
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("height_mm", type=float)
+    ap.add_argument("--dir", help="run directory (default /tmp/inkopt_eval_bench_<H>mm)")
+    ap.add_argument("--reuse", action="store_true", help="keep an optimised and quantized run directory")
+    ap.add_argument("--mesh", default=str(SPOT))
+    ap.add_argument("--spp", type=int, help="fixed samples per scene texel (default: adaptive)")
+    ap.add_argument("--time-budget", type=float)
+    ap.add_argument("--max-spp", type=int)
+    ap.add_argument("--code", default=str(ROOT), help="checkout whose python/ package evaluates (default: this one)")
+    ap.add_argument("--name", help="results file name (default evaluate_<H>mm.json)")
+    args = ap.parse_args()
+    code = Path(args.code).resolve()
+    out = Path(args.dir or f"/tmp/inkopt_eval_bench_{args.height_mm:g}mm")
+    setup = {}
+    if not (args.reuse and (out / "quantized.npz").is_file()):
+        h = f"{args.height_mm:g}"
+        opt = ["optimize", args.mesh, "--height-mm", h, "--iterations", "1", "--eval-spp", "16", "--out", str(out)]
+        setup["optimize"] = {k: v for k, v in timed(opt, ROOT).items() if k != "log"}
+        setup["quantize"] = {k: v for k, v in timed(["quantize", str(out)], ROOT).items() if k != "log"}
+    ev_path = out / "bench_evaluation.json"
+    cmd = ["evaluate", str(out), "--out", str(ev_path)]
+    for flag, v in (("--spp", args.spp), ("--time-budget", args.time_budget), ("--max-spp", args.max_spp)):
+        if v is not None:
+            cmd += [flag, str(v)]
+    t = timed(cmd, code)
+    ev = json.loads(ev_path.read_text())
+    entries = {"continuous": ev["continuous"], "quantized": ev["quantized"], **(ev.get("baselines") or {})}
+    per = {name: {k: entries[name].get(k) for k in KEEP} for name in RESULTS if name in entries}
+    for r in per.values():  # what one sample per scene texel costs, comparable at any spp
+        r["seconds_per_spp"] = r["seconds"] / r["spp"]
+    code_commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=code, capture_output=True, text=True).stdout.strip()
+    res = {
+        "mesh": Path(args.mesh).name,
+        "height_mm": args.height_mm,
+        "texels": ev["texels"],
+        "printer_texels": ev["printer_texels"],
+        "spp_adaptive": ev["spp_adaptive"],
+        "evaluate_seconds": t["seconds"],
+        "evaluate_cpu_seconds": t["cpu_seconds"],
+        "evaluate_peak_rss_gb": t["peak_rss_gb"],
+        "load_average_before": t["load_average_before"],
+        "load_average_after": t["load_average_after"],
+        "results": per,
+        "colour_table_cached": (ev.get("colour_table") or {}).get("cached"),
+        "evaluated_by": str(code),
+        "evaluated_by_commit": code_commit or None,
+        "evaluate_command": " ".join(["inkopt", *cmd]),
+        "setup": setup,
+        "log": t["log"],
+        "targets": {"seconds": 600, "peak_rss_gb": 4},
+        **machine(),
+        "finished": time.strftime("%Y-%m-%d %H:%M"),
+    }
+    print(json.dumps({k: v for k, v in res.items() if k not in ("log", "setup")}, indent=1))
+    print("wrote", write(args.name or f"evaluate_{args.height_mm:g}mm.json", res))
+    return res
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,124 @@
+"""The printed results of an evaluation (``evaluate``): the printer-resolution texels of a label grid, their map onto
+the scene texels, and one renderer that serves every label volume of that grid (the run's quantized volume and the
+baselines quantized like it).
+
+A printer texel is a textured face of a printer voxel (meshes: one per printer surface voxel). Each is assigned to
+the scene texel of the same face whose face centre is nearest in mm (meshes: the nearest scene texel), i.e. the
+scene texel whose footprint contains it; a scene texel's colour is the mean of its printer texels (one that gets
+none takes its nearest printer texel). Conventions: docs/conventions.md.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..model import EMPTY, Texels, Volume
+from ..render import Renderer
+
+
+def map_texels(printer: Texels, voxel_mm_printer, scene: Texels, voxel_mm_scene, per_face: bool = True):
+    """Scene texel (int64 (Ip,)) of each printer texel, and for every scene texel the printer texel that stands in
+    for it when none maps to it (int64 (I,), -1 where some do). Nearest face centre in mm, within the same face
+    id if ``per_face`` (slabs), else over all texels (meshes)."""
+    ps, pp = scene.position_mm(voxel_mm_scene), printer.position_mm(voxel_mm_printer)
+    to_scene = np.full(len(printer), -1, np.int64)
+    stand_in = np.full(len(scene), -1, np.int64)
+    groups = np.unique(scene.face) if per_face else [None]
+    for f in groups:
+        s_idx = np.flatnonzero(scene.face == f) if f is not None else np.arange(len(scene))
+        p_idx = np.flatnonzero(printer.face == f) if f is not None else np.arange(len(printer))
+        if len(p_idx) == 0:
+            raise ValueError(f"the quantized volume has no texels on face {int(f)} of the scene")
+        _, near = cKDTree(ps[s_idx]).query(pp[p_idx], workers=-1)
+        to_scene[p_idx] = s_idx[near]
+        cnt = np.bincount(near, minlength=len(s_idx))
+        empty = np.flatnonzero(cnt == 0)
+        if len(empty):
+            _, back = cKDTree(pp[p_idx]).query(ps[s_idx[empty]], workers=-1)
+            stand_in[s_idx[empty]] = p_idx[back]
+    if np.any(to_scene < 0):
+        raise ValueError("the quantized volume has texels on faces the scene does not texture")
+    return to_scene, stand_in
+
+
+def average_to_scene(rgb_p, var_p, to_scene, stand_in, n_scene: int):
+    """Per-scene-texel mean (I, 3) of printer texel colours, and the variance of that mean (I, 3)."""
+    cnt = np.bincount(to_scene, minlength=n_scene).astype(np.float64)
+    rgb = np.stack([np.bincount(to_scene, rgb_p[:, c], n_scene) for c in range(3)], 1)
+    var = np.stack([np.bincount(to_scene, var_p[:, c], n_scene) for c in range(3)], 1)
+    has = cnt > 0
+    rgb[has] /= cnt[has, None]
+    var[has] /= (cnt[has] ** 2)[:, None]
+    miss = np.flatnonzero(~has)
+    rgb[miss], var[miss] = rgb_p[stand_in[miss]], var_p[stand_in[miss]]
+    return rgb, var
+
+
+def printer_texels(qvol: Volume, scene: Texels, kind: str) -> Texels:
+    if kind == "mesh":
+        return Texels.for_volume(qvol)
+    return Texels.for_volume(qvol, sorted({int(f) for f in np.unique(scene.face)}))
+
+
+def same_inside(a: Volume, b: Volume) -> bool:
+    """Whether two volumes of one grid have the same inside voxels (``Volume.inside_mask``), compared a layer at a
+    time (no grid-sized temporary)."""
+    if a.shape != b.shape:
+        return False
+
+    def layer(v: Volume, z: int) -> np.ndarray:
+        if v.inside is not None:
+            return v.inside[z]
+        return v.labels[z] != EMPTY if v.form == "labels" else np.ones(v.shape[1:], bool)
+
+    return all(np.array_equal(layer(a, z), layer(b, z)) for z in range(a.shape[0]))
+
+
+class PrintedRenderer:
+    """Printer texels of a labels grid set up once (texels, texel map) and rendered on any labels volume of that grid
+    (same shape, voxel size and inside voxels: the run's quantized volume and the baselines quantized like it),
+    averaged onto the scene texels; the adaptive evaluation renders each volume in several passes.
+
+    One renderer serves them all: its geometry (inside mask, distance fields, shading normals) is built for the
+    first labels volume and kept; a later one only replaces the medium (``Renderer.set_volume``), which renders
+    bit-identically to a renderer built for it. ``paths`` and ``events`` count the current volume's walks."""
+
+    def __init__(self, qvol: Volume, scene: Texels, voxel_mm_scene, kind: str, threads=None, lighting=None):
+        self.ptex = printer_texels(qvol, scene, kind)
+        self.to_scene, self.stand_in = map_texels(
+            self.ptex, qvol.voxel_mm, scene, voxel_mm_scene, per_face=kind != "mesh"
+        )
+        self.n_scene, self.shape, self.threads, self.lighting = len(scene), qvol.shape, threads, lighting
+        self.renderer, self.built_for, self.builds, self.paths, self.events = None, None, 0, 0, 0
+
+    def use(self, labels_vol: Volume | None) -> None:
+        """Render ``labels_vol`` from now on (its labels replace the previous volume's in the kept renderer), or
+        free the renderer (None). ``labels_vol`` must have the printer texels' grid and inside voxels."""
+        self.paths = self.events = 0
+        if labels_vol is None:
+            self.renderer = None
+            return
+        if labels_vol.shape != self.shape:
+            raise ValueError(f"labels grid {labels_vol.shape} differs from the printer texels' {self.shape}")
+        if self.renderer is None:
+            self.renderer = Renderer(labels_vol, self.threads, self.lighting)
+            self.built_for, self.builds = labels_vol, self.builds + 1
+            return
+        if not same_inside(labels_vol, self.built_for):
+            raise ValueError("a printed result's inside voxels differ from those of the printer renderer's volume")
+        self.renderer.set_volume(labels_vol)
+        # the core keeps its own copy of the labels: the renderer's volume goes back to the one its geometry was
+        # built for, so the caller's label grid is freed as soon as the caller drops it
+        self.renderer.volume = self.built_for
+
+    def __call__(self, spp: int, seed: int, progress: bool = False):
+        """(rgb (I, 3), var_mean (I, 3)) on the scene texels from ``spp`` samples per scene texel, shared by its
+        printer texels, and the printer spp used."""
+        spp_p = max(1, int(np.ceil(spp * self.n_scene / len(self.ptex))))
+        res = self.renderer.render(self.ptex, spp_p, seed, progress=progress)
+        self.paths, self.events = self.paths + res.paths, self.events + res.events
+        rgb, var = average_to_scene(
+            res.rgb.astype(np.float64), res.var_mean.astype(np.float64), self.to_scene, self.stand_in, self.n_scene
+        )
+        return rgb, var, spp_p
