@@ -507,6 +507,70 @@ def coarse_to_fine() -> str:
     return table(header, rows, [path])
 
 
+def time_to_quality() -> str:
+    path = BENCH / "time_to_quality.json"
+    rows = []
+    for key, e in load(path)["results"].items():
+        r, stop = e["result"], e["result"].get("stop") or {}
+        snaps = ", ".join(
+            f"{p['iteration']}: {f(p['delta_e76_mean_corrected'])} ({p['seconds_job'] / 60:.0f} min)"
+            for p in e["snapshots"]
+        )
+        settings = ", ".join(f"{k}={v}" for k, v in e["settings"].items() if k != "time_budget")
+        rows.append(
+            [
+                f"`{key}`",
+                (f"coarse {e['coarse_dpi']:g} DPI, " if e.get("coarse_dpi") else "") + (settings or "defaults"),
+                f"{r['iterations']} ({stop.get('reason', '–')})",
+                f"{f(r['delta_e76_mean_corrected'])} ± {f(r['delta_e76_noise_contribution'])} / "
+                f"{f(r['delta_e2000_mean'])} / {f(r['ssim'], 3)} ({r['eval_spp']} spp)",
+                f"{(r['seconds_total'] or r['seconds']) / 60:.1f} min",
+                f"{e['machine']['load_average_1min']:.1f}",
+                snaps,
+            ]
+        )
+    header = [
+        "entry",
+        "settings",
+        "iterations (why it stopped)",
+        "result: ΔE76 ± noise / ΔE2000 / SSIM",
+        "job time",
+        "load at the end",
+        f"snapshots at {e['snap_spp']} spp, iteration: ΔE76 (job time)",
+    ]
+    return table(header, rows, [path])
+
+
+def job() -> str:
+    path = BENCH / "job.json"
+    rows = []
+    for key, e in load(path)["results"].items():
+        st, r = e["stages"], e["report"]
+        rows.append(
+            [
+                f"`{key}`",
+                " ".join(e["optimize_options"]) or "defaults",
+                " / ".join(f"{st[k]['seconds'] / 60:.1f}" for k in ("optimize", "quantize", "export_gcvf")),
+                f"{e['seconds_total'] / 60:.1f} min",
+                f"{e['peak_rss_gb']:.2f} GiB",
+                f"{r['iterations']} ({(r.get('stop') or {}).get('reason', '–')})",
+                f"{f(r['delta_e76_mean_corrected'])} ± {f(r['delta_e76_noise_contribution'])} / {f(r['ssim'], 3)}",
+                f"{e['load_average_before']:.1f} / {e['load_average_after']:.1f}",
+            ]
+        )
+    header = [
+        "job",
+        "optimize options",
+        "optimize / quantize / export (min)",
+        "total",
+        "peak memory",
+        "iterations",
+        "run's own ΔE76 ± noise / SSIM",
+        "load before / after",
+    ]
+    return table(header, rows, [path])
+
+
 def step_decay() -> str:
     names = [
         ("constant_200", "constant step, 200 it."),
@@ -610,6 +674,8 @@ TABLES = {
     "shell-mm": shell_mm,
     "calibration": calibration,
     "coarse-to-fine": coarse_to_fine,
+    "time-to-quality": time_to_quality,
+    "job": job,
 }
 
 

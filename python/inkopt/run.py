@@ -313,7 +313,9 @@ def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: flo
         coarse = replace(spec, dpi=coarse_dpi).build(inks)
         budget = None if cfg.time_budget is None else COARSE_BUDGET_SHARE * cfg.time_budget
         log(f"coarse stage at {coarse_dpi:g} DPI into {coarse_dir}")
-        ckw = {**kw, "on_step": None}  # the caller's per-step hook sees the fine stage only (another grid here)
+        # the caller's per-step hook sees the fine stage only (another grid here); the coarse result's figures are
+        # one pilot pass (informative: the fine stage's are the run's)
+        ckw = {**kw, "on_step": None, "eval_spp": kw.get("eval_spp") or PILOT_SPP}
         run_optimisation(
             coarse, coarse_dir, replace(cfg, time_budget=budget), resume=resume, log=lambda m: log(f"  {m}"), **ckw
         )
