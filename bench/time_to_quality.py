@@ -28,6 +28,7 @@ reference line where one is given (``REFERENCES``).
 import argparse
 import json
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +37,7 @@ from common import RESULTS, machine, provenance, write
 from inkopt import charts
 from inkopt.evaluation.metrics import prediction_metrics
 from inkopt.evaluation.noise import EVAL_SEED_OFFSET
+from inkopt.evaluation.results import Report
 from inkopt.model import InkTable
 from inkopt.optim import Optimization, OptimizeConfig
 from inkopt.run import run_coarse_to_fine, run_optimisation
@@ -128,6 +130,7 @@ def main() -> int:
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--resume", action="store_true")
     ap.add_argument("--coarse-dpi", type=float, help="coarse to fine (``inkopt.run.run_coarse_to_fine``)")
+    ap.add_argument("--snapshots-only", action="store_true", help="the run is done: its report and snapshots")
     a = ap.parse_args()
     out = Path(a.out_root) / a.case / a.name
     out.mkdir(parents=True, exist_ok=True)
@@ -142,7 +145,7 @@ def main() -> int:
     scene = spec.build(inks)  # the fine scene (of a coarse-to-fine run too: its snapshots are the fine stage's)
     snaps = {int(s) for s in a.snapshots.split(",") if s}
     times_path = out / "snapshot_times.json"
-    times = json.loads(times_path.read_text()) if a.resume and times_path.is_file() else {}
+    times = json.loads(times_path.read_text()) if (a.resume or a.snapshots_only) and times_path.is_file() else {}
 
     def keep(run: Optimization) -> None:
         if run.iteration in snaps:
@@ -162,15 +165,22 @@ def main() -> int:
         on_step=keep,
         eval_max_spp=a.eval_max_spp,
     )
-    if a.coarse_dpi:
+    if a.snapshots_only:
+        rep = Report.read(out / "run" / "report.json")
+    elif a.coarse_dpi:
         rep = run_coarse_to_fine(spec, inks, out / "run", cfg, a.coarse_dpi, **kw)
-        rep_cfg = OptimizeConfig(**{**cfg.__dict__, "init": rep.init})
     else:
         rep = run_optimisation(scene, out / "run", cfg, **kw)
-        rep_cfg = cfg
-    # the snapshots' figures: one renderer of the run's problem, set to each snapshot's variables
+    # the snapshots' figures: one renderer of the run's problem (geometry and fixed shares; its start does not
+    # matter), set to each snapshot's variables
     run = Optimization(
-        scene.volume, scene.texels, scene.target_rgb, rep_cfg, kind=scene.kind, fixed_share=scene.fixed_share, threads=2
+        scene.volume,
+        scene.texels,
+        scene.target_rgb,
+        replace(cfg, init="white"),
+        kind=scene.kind,
+        fixed_share=scene.fixed_share,
+        threads=2,
     )
     points = []
     for it in sorted(int(k) for k in times):
