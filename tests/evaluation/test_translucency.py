@@ -86,8 +86,6 @@ def test_evaluate_constrained_beside_unconstrained(tmp_path, capsys, monkeypatch
         "2",
         "--inks",
         "vero-cmykwt",
-        "--init",
-        "white",  # the mesh default (extrusion) would build this ink set's colour table first (minutes)
     ]
     assert cli.main(base + ["--out", str(tmp_path / "free")]) == 0
     assert cli.main(base + ["--out", str(tmp_path / "tr"), "--translucency", str(tmp_path / "mask.png")]) == 0
@@ -160,8 +158,6 @@ def test_evaluate_mesh_alpha_region(tmp_path, capsys, monkeypatch):
         "2",
         "--inks",
         "vero-cmykwt",
-        "--init",
-        "white",  # the mesh default (extrusion) would build this ink set's colour table first (minutes)
     ]
     assert (
         cli.main(base + ["--out", str(tmp_path / "tr"), "--translucency", "alpha", "--translucency-depth-mm", "0.3"])

@@ -423,7 +423,7 @@ def test_settings_left_to_the_scene_kind():
     assert diffusion_steps(1.5) != diffusion_steps(3.0)
     assert SCENE_DEFAULTS == {
         "slab": {"adjoint_ema": 0.8, "smooth": 1.5, "init": "white"},
-        "mesh": {"adjoint_ema": 0.5, "smooth": 3.0, "init": "extrusion"},
+        "mesh": {"adjoint_ema": 0.5, "smooth": 3.0, "init": "white"},
     }
     assert OptimizeConfig().adjoint_ema is None and OptimizeConfig().smooth is None and OptimizeConfig().init is None
     mesh = OptimizeConfig().for_scene("mesh")

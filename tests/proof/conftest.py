@@ -47,8 +47,6 @@ def mesh_run(tmp_path_factory):
             8,
             "--inks",
             INKS,
-            "--init",
-            "white",  # not the mesh default (extrusion): its colour table would be the full one of these inks
         )
         table = colour_table(InkTable.parse(INKS), patch_mm=1.0, step=2, max_stderr=0.5)  # 6 patches
         evaluate_run(run, spp=8, table=table)

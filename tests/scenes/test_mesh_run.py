@@ -105,7 +105,7 @@ def optimize(mesh, out, *extra, iterations=3, spp=2, eval_spp=8):
 @pytest.fixture(scope="module")
 def ball_run(ball, tmp_path_factory):
     out = tmp_path_factory.mktemp("ballrun")
-    # from white (not the mesh default, the extrusion baseline): the test is that the optimiser lowers ΔE76 a lot
+    # from white, whatever the mesh default: the test is that the optimiser lowers ΔE76 a lot
     assert optimize(ball, out, "--lr", "2", "--init", "white", iterations=30, spp=2, eval_spp=32) == 0
     return out
 

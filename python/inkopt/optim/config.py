@@ -16,13 +16,13 @@ GRAD_METHODS = ("replay", "li1")
 #: final 18.0 / SSIM 0.806 below the start's 0.834; with 0.5 it falls steadily to 11.6 / SSIM 0.877).
 #: ``smooth``: slabs 1.5 (3 gained nothing on the demo slab); meshes 3: on Spot the flat regions' mottle grows
 #: with the iterations at 1.5 (10 mm, 60 iterations: 0.55 (ΔL*)²; 3: 0.25, ΔE76 and SSIM slightly better too).
-#: ``init``: slabs start white; meshes from the extrusion baseline, a print shop's answer that is already good on a
-#: mesh (Spot 20 mm: noise-free ΔE76 13.25, SSIM 0.930, against the white start's 27.7 / 0.895 and 300 iterations'
-#: 9.10 / 0.940), so that the optimiser only has to improve on it; from it, 20 iterations reached 11.4 where the
-#: white start's training curve was still far behind (bench/results/time_to_quality.json, docs/performance.md).
+#: ``init``: white on both. On meshes the extrusion baseline is a better start for a short run (Spot 20 mm: noise-free
+#: ΔE76 13.25, SSIM 0.930, against white's 27.7 / 0.895), but from it the runs measured so far improved more slowly
+#: (43 iterations: 11.0 against 60 iterations from white: 9.76; bench/results/time_to_quality.json), so
+#: ``--init extrusion`` is the choice for tight deadlines, not the default.
 SCENE_DEFAULTS = {
     "slab": {"adjoint_ema": 0.8, "smooth": 1.5, "init": "white"},
-    "mesh": {"adjoint_ema": 0.5, "smooth": 3.0, "init": "extrusion"},
+    "mesh": {"adjoint_ema": 0.5, "smooth": 3.0, "init": "white"},
 }
 #: starts that are already close to the target: a volume file's mixture or a print-shop baseline
 COLD_INITS = ("white", "random")
