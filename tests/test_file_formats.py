@@ -98,8 +98,8 @@ def _version_0_key(run: Optimization) -> str:
     """The config_key version-0 checkpoints hold: settings at their "off" value left out, guided smoothing
     marked."""
     d = asdict(run.cfg)
-    d.pop("iterations")
-    d.pop("checkpoint_every")
+    for name in ("iterations", "checkpoint_every", "stop_gain", "stop_horizon", "time_budget"):  # never in a key
+        d.pop(name)
     if d["schedule_iterations"] is None:
         d.pop("schedule_iterations")
     if not d["decay"]:
