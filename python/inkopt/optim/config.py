@@ -18,7 +18,8 @@ GRAD_METHODS = ("replay", "li1")
 #: with the iterations at 1.5 (10 mm, 60 iterations: 0.55 (ΔL*)²; 3: 0.25, ΔE76 and SSIM slightly better too).
 #: ``init``: white on both. On meshes the extrusion baseline is a better start for a short run (Spot 20 mm: noise-free
 #: ΔE76 13.25, SSIM 0.930, against white's 27.7 / 0.895), but from it the runs measured so far improved more slowly
-#: (43 iterations: 11.0 against 60 iterations from white: 9.76; bench/results/time_to_quality.json), so
+#: (43 iterations: 11.0, bench/results/time_to_quality.json; 60 iterations from white: 9.76,
+#: experiments/results/mesh_convergence.json), so
 #: ``--init extrusion`` is the choice for tight deadlines, not the default.
 SCENE_DEFAULTS = {
     "slab": {"adjoint_ema": 0.8, "smooth": 1.5, "init": "white"},
