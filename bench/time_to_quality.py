@@ -15,7 +15,9 @@ The variables are kept at the ``--snapshots`` iterations; after the run, each sn
 ``--snap-spp`` samples per texel (seeds disjoint from the optimisation's) and its ΔE76 corrected for the Monte Carlo
 noise (``evaluation.noise``; the noise's contribution is recorded beside it: the correction is accurate to ~30 % of
 it). A snapshot is a point on the run's trajectory, not a finished run (the step decay has not run there); the
-result (the run's end) is the run's own adaptive evaluation (report.json, noise-free unless capped).
+result (the run's end) is the run's own adaptive evaluation (report.json, noise-free unless capped); under a short
+time budget that evaluation has few samples, so the result is also rendered after the job (not timed) at
+``--final-spp`` samples per texel, seeds disjoint from the run's, and its figures kept as ``result_check``.
 Wall times: ``seconds_job`` from the start (set-up, the start's figures, iterations), ``seconds_iterations`` the
 iterations' own. Writes the entry "CASE/NAME" of ``bench/results/time_to_quality.json``.
 
@@ -131,6 +133,7 @@ def main() -> int:
     ap.add_argument("--resume", action="store_true")
     ap.add_argument("--coarse-dpi", type=float, help="coarse to fine (``inkopt.run.run_coarse_to_fine``)")
     ap.add_argument("--snapshots-only", action="store_true", help="the run is done: its report and snapshots")
+    ap.add_argument("--final-spp", type=int, default=256, help="samples per texel of the result's check render")
     a = ap.parse_args()
     out = Path(a.out_root) / a.case / a.name
     out.mkdir(parents=True, exist_ok=True)
@@ -200,6 +203,26 @@ def main() -> int:
             }
         )
         print(f"iteration {it}: ΔE76 {m.delta_e76_mean_corrected:.2f} (noise {m.delta_e76_noise_contribution:.2f})")
+    # the result's check render: the run's volume.npz as a start is exactly its mixture (up to the softmax's floor)
+    result = Optimization(
+        scene.volume,
+        scene.texels,
+        scene.target_rgb,
+        replace(cfg, init=str(out / "run" / "volume.npz")),
+        kind=scene.kind,
+        fixed_share=scene.fixed_share,
+        threads=2,
+    )
+    r = result.renderer(result.x).render(scene.texels, a.final_spp, EVAL_SEED_OFFSET + 11)
+    m = prediction_metrics(result.loss, r.rgb, r.var_mean)
+    check = {
+        "spp": a.final_spp,
+        "delta_e76_mean_corrected": m.delta_e76_mean_corrected,
+        "delta_e76_noise_contribution": m.delta_e76_noise_contribution,
+        "delta_e2000_mean": m.delta_e2000_mean,
+        "ssim": m.ssim,
+    }
+    del result, run
     r = rep.to_json()
     entry = {
         "case": a.case,
@@ -209,6 +232,7 @@ def main() -> int:
         "max_iterations": a.iterations,
         "snap_spp": a.snap_spp,
         "snapshots": points,
+        "result_check": check,
         "result": {
             k: r[k]
             for k in (

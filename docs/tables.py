@@ -517,6 +517,14 @@ def time_to_quality() -> str:
             for p in e["snapshots"]
         )
         settings = ", ".join(f"{k}={v}" for k, v in e["settings"].items() if k != "time_budget")
+        ck = e.get("result_check")
+        check = (
+            f"{f(ck['delta_e76_mean_corrected'])} ± {f(ck['delta_e76_noise_contribution'])} / "
+            f"{f(ck['delta_e2000_mean'])} / {f(ck['ssim'], 3)} ({ck['spp']} spp)"
+            if ck
+            else "–"
+        )
+        budget = e["settings"].get("time_budget")
         rows.append(
             [
                 f"`{key}`",
@@ -524,7 +532,8 @@ def time_to_quality() -> str:
                 f"{r['iterations']} ({stop.get('reason', '–')})",
                 f"{f(r['delta_e76_mean_corrected'])} ± {f(r['delta_e76_noise_contribution'])} / "
                 f"{f(r['delta_e2000_mean'])} / {f(r['ssim'], 3)} ({r['eval_spp']} spp)",
-                f"{(r['seconds_total'] or r['seconds']) / 60:.1f} min",
+                check,
+                f"{(r['seconds_total'] or r['seconds']) / 60:.1f} min" + (f" (of {budget / 60:g})" if budget else ""),
                 f"{e['machine']['load_average_1min']:.1f}",
                 snaps,
             ]
@@ -534,6 +543,7 @@ def time_to_quality() -> str:
         "settings",
         "iterations (why it stopped)",
         "result: ΔE76 ± noise / ΔE2000 / SSIM",
+        "result re-rendered after the job (not timed)",
         "job time",
         "load at the end",
         f"snapshots at {e['snap_spp']} spp, iteration: ΔE76 (job time)",

@@ -140,24 +140,24 @@ def test_the_loop_stops_when_converged_and_resumes_exactly(tmp_path):
     assert d.iteration == 40
 
 
-def test_slab_cli_time_budget_and_report(tmp_path):
-    """`inkopt slab --time-budget 6s` with a maximum far out of reach ends by the budget and says so."""
+@pytest.mark.parametrize("coarse", [None, "0"])
+def test_slab_cli_time_budget_and_report(tmp_path, coarse):
+    """`inkopt slab --time-budget 6s` with a maximum far out of reach ends by the budget and says so; with a budget
+    the run goes coarse to fine by default (the coarse stage in DIR/coarse/), `--coarse-dpi 0` runs plain."""
     from inkopt import charts
     from inkopt.cli import main
 
     chart = charts.save(charts.colour_chart(24, 16), tmp_path / "chart.png")
     out = tmp_path / "r"
     args = ["slab", str(chart), "--size-mm", "2x1.333x0.5", "--out", str(out), "--threads", "2"]
-    assert (
-        main(
-            args
-            + ["--iterations", "100000", "--time-budget", "6s", "--stop-gain", "0", "--spp", "1", "--forward-spp", "2"]
-        )
-        == 0
-    )
+    args += ["--iterations", "100000", "--time-budget", "6s", "--stop-gain", "0", "--spp", "1", "--forward-spp", "2"]
+    assert main(args + (["--coarse-dpi", coarse] if coarse else [])) == 0
     rep = json.loads((out / "report.json").read_text())
     assert rep["stop"]["reason"] == "time budget" and rep["stop"]["time_budget_s"] == 6.0
     assert 0 < rep["iterations"] < 100000
+    assert (out / "coarse" / "report.json").is_file() == (coarse is None)
+    if coarse is None:
+        assert rep["init"] == str(out / "coarse" / "fine_start.npz")
     # not a speed figure: a run that ignored the budget would take minutes; twice the budget leaves room for a
     # loaded machine's slow last iteration and the writing of the outputs
     assert rep["seconds"] < 12.0

@@ -243,7 +243,8 @@ def add_optimizer_args(p, single_run: bool = True) -> None:
             type=float,
             metavar="DPI",
             help="coarse to fine: optimise first on a grid of this resolution (e.g. 150: an eighth of the voxels), "
-            "then at --dpi from its result (the coarse run is kept in DIR/coarse/; default: off)",
+            "then at --dpi from its result (the coarse run is kept in DIR/coarse/; default: half of --dpi with "
+            "--time-budget, else off; 0: off)",
         )
         p.add_argument(
             "--time-budget",
@@ -370,7 +371,7 @@ def run_from_args(args, spec):
     import time
 
     from ..model import InkTable
-    from ..run import run_coarse_to_fine, run_optimisation
+    from ..run import DEADLINE_COARSE_FACTOR, run_coarse_to_fine, run_optimisation
 
     started = time.perf_counter()  # a time budget counts the scene's building (voxelization) too
     spec.validate()
@@ -397,8 +398,11 @@ def run_from_args(args, spec):
         eval_time_budget=args.eval_time_budget,
         started=started,
     )
-    if args.coarse_dpi:
-        return run_coarse_to_fine(spec, inks, args.out, cfg, args.coarse_dpi, **kw)
+    coarse_dpi = args.coarse_dpi
+    if coarse_dpi is None and cfg.time_budget is not None:
+        coarse_dpi = DEADLINE_COARSE_FACTOR * spec.dpi
+    if coarse_dpi:
+        return run_coarse_to_fine(spec, inks, args.out, cfg, coarse_dpi, **kw)
     return run_optimisation(spec.build(inks), args.out, cfg, **kw)
 
 
