@@ -6,10 +6,12 @@ records each stage's wall time and peak memory (``os.wait4``'s rusage of that pr
         [-- OPTIMIZE OPTIONS ...]
 
 Options after ``--`` go to ``inkopt optimize`` (e.g. ``-- --time-budget 25m``). The job's quality is the run's own
-report (report.json: the result's noise-corrected ΔE76, ΔE2000, SSIM and why the run stopped); the printed
-result against the baselines is ``inkopt evaluate RUN`` (not part of the job). Writes the entry NAME (default
-``spot{H}``) of bench/results/job.json with the load average before and after: the wall times are the machine's
-as it was.
+report (report.json: the result's noise-corrected ΔE76, ΔE2000, SSIM and why the run stopped) and, with
+``--check-spp N``, the result rendered again after the job at N samples per texel (``result_check``: a short
+budget leaves the run's own figures few samples); the printed result against the baselines is ``inkopt evaluate
+RUN`` (not part of the job). ``--check-only``: the job is done (its entry and run directory exist): add the
+check. Writes the entry NAME (default ``spot{H}``) of bench/results/job.json with the load average before and
+after: the wall times are the machine's as it was.
 """
 
 from __future__ import annotations
@@ -46,6 +48,20 @@ def stage(args: list[str], log: Path) -> dict:
     return {"seconds": seconds, "peak_rss_gb": usage.ru_maxrss / 2**20, "cpu_seconds": usage.ru_utime + usage.ru_stime}
 
 
+def check(a, run: Path, extra: list[str]) -> dict:
+    """The job's result re-rendered at ``--check-spp`` (default 256 with ``--check-only``), on its scene built
+    again as ``inkopt optimize`` built it (the mesh, its height and ``--dpi`` if the options give one)."""
+    from result_check import result_check
+
+    from inkopt.model import InkTable
+    from inkopt.optim import OptimizeConfig
+    from inkopt.scenes.spec import MeshSpec
+
+    dpi = float(extra[extra.index("--dpi") + 1]) if "--dpi" in extra else MeshSpec(a.mesh).dpi
+    scene = MeshSpec(a.mesh, height_mm=a.height_mm, dpi=dpi).build(InkTable.parse("vero-cmykw"))
+    return result_check(scene, OptimizeConfig(), run, a.check_spp or 256)
+
+
 def main() -> int:
     argv = sys.argv[1:]
     extra = argv[argv.index("--") + 1 :] if "--" in argv else []
@@ -55,10 +71,19 @@ def main() -> int:
     ap.add_argument("--mesh", default=str(SPOT))
     ap.add_argument("--dir")
     ap.add_argument("--name")
+    ap.add_argument("--check-spp", type=int, default=0, help="render the result again at N spp after the job")
+    ap.add_argument("--check-only", action="store_true")
     a = ap.parse_args(argv)
     name = a.name or f"spot{a.height_mm:g}"
     run = Path(a.dir or f"bench-out/job_{name}")
     run.parent.mkdir(parents=True, exist_ok=True)
+    previous = RESULTS / RESULTS_FILE
+    results = json.loads(previous.read_text())["results"] if previous.is_file() else {}
+    if a.check_only:
+        results[name]["result_check"] = check(a, run, results[name]["optimize_options"])
+        write(RESULTS_FILE, {"results": results})
+        print(json.dumps(results[name]["result_check"]))
+        return 0
     log = run.parent / f"{run.name}.log"
     log.write_bytes(b"")
     load_before = os.getloadavg()[0]
@@ -88,8 +113,9 @@ def main() -> int:
         **provenance(),
     }
     print(f"job: {total / 60:.1f} min, peak {entry['peak_rss_gb']:.2f} GiB; {json.dumps(entry['report'])}")
-    previous = RESULTS / RESULTS_FILE
-    results = json.loads(previous.read_text())["results"] if previous.is_file() else {}
+    if a.check_spp:
+        entry["result_check"] = check(a, run, extra)
+        print(f"result re-rendered: {json.dumps(entry['result_check'])}")
     results[name] = entry
     write(RESULTS_FILE, {"results": results})
     return 0

@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 from common import RESULTS, machine, provenance, write
+from result_check import result_check
 
 from inkopt import charts
 from inkopt.evaluation.metrics import prediction_metrics
@@ -203,26 +204,8 @@ def main() -> int:
             }
         )
         print(f"iteration {it}: ΔE76 {m.delta_e76_mean_corrected:.2f} (noise {m.delta_e76_noise_contribution:.2f})")
-    # the result's check render: the run's volume.npz as a start is exactly its mixture (up to the softmax's floor)
-    result = Optimization(
-        scene.volume,
-        scene.texels,
-        scene.target_rgb,
-        replace(cfg, init=str(out / "run" / "volume.npz")),
-        kind=scene.kind,
-        fixed_share=scene.fixed_share,
-        threads=2,
-    )
-    r = result.renderer(result.x).render(scene.texels, a.final_spp, EVAL_SEED_OFFSET + 11)
-    m = prediction_metrics(result.loss, r.rgb, r.var_mean)
-    check = {
-        "spp": a.final_spp,
-        "delta_e76_mean_corrected": m.delta_e76_mean_corrected,
-        "delta_e76_noise_contribution": m.delta_e76_noise_contribution,
-        "delta_e2000_mean": m.delta_e2000_mean,
-        "ssim": m.ssim,
-    }
-    del result, run
+    del run
+    check = result_check(scene, cfg, out / "run", a.final_spp)
     r = rep.to_json()
     entry = {
         "case": a.case,

@@ -507,6 +507,17 @@ def coarse_to_fine() -> str:
     return table(header, rows, [path])
 
 
+def check_cell(ck: dict | None, e2000: bool = False) -> str:
+    """A result re-rendered after its job (``bench/result_check.py``): ΔE76 ± noise [/ ΔE2000] / SSIM (spp)."""
+    if not ck:
+        return "–"
+    mid = f" / {f(ck['delta_e2000_mean'])}" if e2000 else ""
+    return (
+        f"{f(ck['delta_e76_mean_corrected'])} ± {f(ck['delta_e76_noise_contribution'])}{mid} / {f(ck['ssim'], 3)} "
+        f"({ck['spp']} spp)"
+    )
+
+
 def time_to_quality() -> str:
     path = BENCH / "time_to_quality.json"
     rows = []
@@ -517,13 +528,7 @@ def time_to_quality() -> str:
             for p in e["snapshots"]
         )
         settings = ", ".join(f"{k}={v}" for k, v in e["settings"].items() if k != "time_budget")
-        ck = e.get("result_check")
-        check = (
-            f"{f(ck['delta_e76_mean_corrected'])} ± {f(ck['delta_e76_noise_contribution'])} / "
-            f"{f(ck['delta_e2000_mean'])} / {f(ck['ssim'], 3)} ({ck['spp']} spp)"
-            if ck
-            else "–"
-        )
+        check = check_cell(e.get("result_check"), e2000=True)
         budget = e["settings"].get("time_budget")
         rows.append(
             [
@@ -565,6 +570,7 @@ def job() -> str:
                 f"{e['peak_rss_gb']:.2f} GiB",
                 f"{r['iterations']} ({(r.get('stop') or {}).get('reason', '–')})",
                 f"{f(r['delta_e76_mean_corrected'])} ± {f(r['delta_e76_noise_contribution'])} / {f(r['ssim'], 3)}",
+                check_cell(e.get("result_check")),
                 f"{e['load_average_before']:.1f} / {e['load_average_after']:.1f}",
             ]
         )
@@ -576,6 +582,7 @@ def job() -> str:
         "peak memory",
         "iterations",
         "run's own ΔE76 ± noise / SSIM",
+        "re-rendered after the job: ΔE76 ± noise / SSIM",
         "load before / after",
     ]
     return table(header, rows, [path])
