@@ -16,6 +16,8 @@ neither that nor a run time budget is given; the start's figures are one pilot p
 
 from __future__ import annotations
 
+import ctypes
+import gc
 import resource
 import time
 from pathlib import Path
@@ -59,6 +61,19 @@ def figure_budgets(cfg: OptimizeConfig, eval_time_budget: float | None) -> tuple
 def peak_rss_gb() -> float:
     """Peak resident memory of this process so far, GiB (Linux reports ru_maxrss in KiB)."""
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
+
+
+def release_freed_memory() -> None:
+    """Give the memory freed so far back to the operating system where the C library can (glibc's
+    ``malloc_trim``; elsewhere nothing): a finished stage's many small blocks, freed in many threads' heaps,
+    otherwise stay in the process under the next stage's peak (a 40 mm coarse stage and transfer left ~0.6 GiB,
+    docs/performance.md)."""
+    gc.collect()
+    try:
+        trim = ctypes.CDLL(None).malloc_trim
+    except (OSError, AttributeError, TypeError):  # not glibc (macOS, Windows, musl builds without it)
+        return
+    trim(0)
 
 
 def run_optimisation(
@@ -324,9 +339,11 @@ def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: flo
             coarse, coarse_dir, replace(cfg, time_budget=budget), resume=resume, log=lambda m: log(f"  {m}"), **ckw
         )
         del coarse
+        release_freed_memory()
     fine = spec.build(inks)
     if not fine_begun:
         t = time.perf_counter()
         write_transferred_volume(RunDir(coarse_dir).load_volume(), fine.volume, fine.fixed_share, start)
         log(f"coarse result moved onto the {spec.dpi:g}-DPI grid in {time.perf_counter() - t:.0f} s: {start}")
+        release_freed_memory()  # the fine stage's peak is the job's: nothing of the stages before it under it
     return run_optimisation(fine, out_dir, replace(cfg, init=str(start)), resume=resume, log=log, **kw)

@@ -285,13 +285,16 @@ def test_exponentiated_gradient_step_scale_is_frozen_after_warmup():
 
 @pytest.mark.parametrize("kind,cls", [("eg", ExponentiatedGradient), ("adagrad", AdaGrad), ("adam", Adam)])
 def test_optimizer_state_round_trips(kind, cls):
-    """state() / load() restore an optimiser exactly (what resume relies on), under the same checkpoint keys."""
+    """state() / load() restore an optimiser exactly (what resume relies on), under the same checkpoint keys; a step
+    returns a new array that neither its input nor the optimiser's state shares (the loop changes it in place)."""
     rng = np.random.default_rng(4)
     a, b = make_optimizer(kind, 0.5, (7, 4)), make_optimizer(kind, 0.5, (7, 4))
     assert isinstance(a, cls) and a.natural == (kind == "eg")
     x = rng.normal(size=(7, 4)).astype(np.float32)
     for _ in range(3):
-        x = a.step(x, rng.normal(size=(7, 4)).astype(np.float32))
+        x_new = a.step(x, g := rng.normal(size=(7, 4)).astype(np.float32))
+        assert not any(np.shares_memory(x_new, y) for y in (x, g, a.m, a.v))
+        x = x_new
     assert set(a.state()) == {"opt_m", "opt_v", "opt_t"}
     b.load(a.state())
     g = rng.normal(size=(7, 4)).astype(np.float32)

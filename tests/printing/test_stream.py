@@ -12,10 +12,11 @@ import trimesh
 from inkopt.io import FormatError, save_npz
 from inkopt.model import InkTable, Quantization, Volume
 from inkopt.model.labelfile import LabelFileWriter, load_label_file
+from inkopt.model.mixturefile import MixtureSource
 from inkopt.printing import gcvf
 from inkopt.printing.export import read_png_slices, write_png_slices
 from inkopt.printing.quantize import quantize, quantize_volume
-from inkopt.printing.stream import MixtureSource, quantize_run
+from inkopt.printing.stream import quantize_run
 from inkopt.rundir import RunDir
 
 V300 = 25.4 / 300

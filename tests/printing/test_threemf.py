@@ -15,9 +15,9 @@ import xmlschema
 from PIL import Image
 
 from inkopt.model import InkTable, Volume
+from inkopt.model.mixturefile import MixtureSource
 from inkopt.printing import gcvf
 from inkopt.printing.package import inspect_package
-from inkopt.printing.stream import MixtureSource
 from inkopt.printing.threemf import CHANNELS, MODEL, NS_CORE, NS_V, write_3mf_labels, write_3mf_mixture
 
 VP = np.array([25.4 / 600, 25.4 / 300, 0.027])

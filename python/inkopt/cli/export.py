@@ -17,10 +17,10 @@ import sys
 from pathlib import Path
 
 from ..io import file_digest
+from ..model.mixturefile import MixtureSource
 from ..printing.export import write_png_slices
 from ..printing.gcvf import write_gcvf
 from ..printing.profiles import PRINTER_PROFILES, printer_profile, resolution_mismatch, too_many_inks
-from ..printing.stream import MixtureSource
 from ..printing.threemf import write_3mf_labels, write_3mf_mixture
 from ..rundir import QUANTIZED_DIGEST, VOLUME_DIGEST, RunDir
 

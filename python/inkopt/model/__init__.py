@@ -1,7 +1,7 @@
 """The data model shared by every stage: inks and ink sets (``inks``), the voxel volume in its three medium forms
 (``volume``, its surface's shading normals in ``normals``, fixed ink shares in ``fixed``, the constraints
 they express in ``constraints``), a mesh's provenance (``provenance``) and the renderer's sensor elements, texels
-(``texels``)."""
+(``texels``); a mixture volume file read lazily, a layer or a block of voxels at a time (``mixturefile``)."""
 
 from .constraints import TRANSPARENT_INKS, Translucency, scene_fixed_shares, transparent_ink, white_fixed_shares
 from .fixed import FixedShares

@@ -284,9 +284,11 @@ class Optimization:
             g_x[lo:hi] = self.param.backward(self.x[lo:hi], g_rho, natural=self.opt.natural, lo=lo)
         del gs, ga
         self.opt.lr = cfg.step_size * step_factor(self.iteration, self.schedule.end, cfg.decay)
-        x_new = self.opt.step(self.x, g_x).astype(np.float32, copy=False)
+        x_new = self.opt.step(self.x, g_x).astype(np.float32, copy=False)  # a new array (optimizers.py)
+        del g_x  # freed before the smoothing, whose working arrays make the step's (and a run's) memory peak
         if self.smoother is not None:  # the step, not the gradient: the optimiser's step scale stays its own
-            x_new = self.x + self.smoother.apply(x_new - self.x)
+            step = self.smoother.apply(np.subtract(x_new, self.x, out=x_new))  # in place: x_new becomes the step
+            x_new = np.add(self.x, step, out=step)
         self.x = x_new
         self.iteration += 1
         t4 = time.perf_counter()

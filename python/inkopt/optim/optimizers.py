@@ -1,7 +1,8 @@
 """Update rules on the optimisation variables x (F, N), one class per optimiser with named hyperparameters.
 
-Each has ``step(x, g) -> x'`` (which replaces its state arrays rather than changing them in place, so a snapshot of
-references restores an interrupted step exactly), ``state() -> dict`` and ``load(dict)`` (checkpoint arrays ``opt_m``,
+Each has ``step(x, g) -> x'`` (x' a new array the optimiser keeps no reference to, which the loop may change in place;
+it replaces its state arrays rather than changing them in place, so a snapshot of references restores an
+interrupted step exactly), ``state() -> dict`` and ``load(dict)`` (checkpoint arrays ``opt_m``,
 ``opt_v``, ``opt_t``, the same keys for every optimiser so that checkpoints stay readable), and ``natural``: whether it
 wants the mirror-descent direction (``Parameterization.backward(natural=True)``) instead of dE/dx.
 

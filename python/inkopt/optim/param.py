@@ -12,7 +12,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..model import FixedShares, InkTable, Volume
+from ..model import FixedShares, InkTable
+from ..model.mixturefile import MixtureSource
 from .config import PARAMS
 
 BAD_SHARES = "fixed ink shares must be non-negative and sum to at most 1 per voxel"
@@ -173,18 +174,35 @@ def initial_free_mixture(
             raise ValueError(f"--init {init} needs the run's texels and targets")
         rho = np.asarray(baseline(init), np.float64).reshape(-1, n)[param.free_index]
         return free_part(rho, param.fixed_f, param.share_f)
-    vol = Volume.load(init)
-    if vol.form != "mixture" or vol.inks.names != inks.names:
-        raise ValueError(f"--init {init}: needs a mixture volume with inks {list(inks.names)}")
-    if vol.shape != param.shape:
-        raise ValueError(
-            f"--init {init}: volume shape {vol.shape} differs from {param.shape} (a result on another grid: "
-            "optim.transfer.write_transferred_volume moves it onto this one)"
-        )
-    rows, out = vol.mixture.reshape(-1, n), np.empty((f, n), np.float32)
-    for lo, hi in param.chunks():  # the whole mixture's free part, in pieces (no (F, N) float64 array)
-        fixed = None if param.fixed_f is None else param.fixed_f[lo:hi]
-        out[lo:hi] = free_part(rows[param.free_index[lo:hi]], fixed, param.share_f[lo:hi])
+    return file_free_mixture(init, inks, param)
+
+
+#: mixture voxels per block read from a start volume file (about 20 MB of float32 at 5 inks)
+BLOCK_VOXELS = 1 << 20
+
+
+def file_free_mixture(path, inks: InkTable, param: Parameterization, voxels: int = BLOCK_VOXELS) -> np.ndarray:
+    """The free part (F, N) float32 of the mixture volume file ``path`` (``--init FILE``: any mixture volume of
+    the grid ``param.shape`` with ``inks``, e.g. a run's volume.npz or a coarse-to-fine start) at ``param``'s free
+    voxels: ``free_part`` of its rows, read ``voxels`` grid voxels at a time (``MixtureSource.blocks``), so that
+    only a block of the file's mixture is in memory beside the result; bit for bit what ``free_part`` of the whole
+    ``Volume.load(path).mixture`` gives."""
+    n = len(inks)
+    with MixtureSource(path, f"--init {path}") as src:
+        if src.inks.names != inks.names:
+            raise ValueError(f"--init {path}: needs a mixture volume with inks {list(inks.names)}")
+        if tuple(src.shape[:3]) != param.shape:
+            raise ValueError(
+                f"--init {path}: volume shape {tuple(src.shape[:3])} differs from {param.shape} (a result on "
+                "another grid: optim.transfer.write_transferred_volume moves it onto this one)"
+            )
+        out = np.empty((param.n_free, n), np.float32)
+        ends = np.searchsorted(param.free_index, np.arange(0, int(np.prod(param.shape)), voxels)[1:])
+        lo = 0
+        for (v0, rows), hi in zip(src.blocks(voxels), [*ends, param.n_free], strict=True):
+            fixed = None if param.fixed_f is None else param.fixed_f[lo:hi]
+            out[lo:hi] = free_part(rows[param.free_index[lo:hi] - v0], fixed, param.share_f[lo:hi])
+            lo = hi
     return out
 
 

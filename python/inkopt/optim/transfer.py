@@ -13,8 +13,8 @@ no checkpoints) and write its result as the start of the fine scene's run (a :cl
 Memory: the source volume, the destination's free index (``Parameterization``), and per z slab of the destination
 grid (``SLAB_VOXELS`` voxels) its mixture and the resampling temporaries; never a (z, y, x, N) array of the
 destination grid, so a 40 mm figurine's 61 M-voxel grid is written in slabs of about 80 MB each. The run that
-starts from the file reads it whole (``param.initial_free_mixture``: 20 bytes per grid voxel at 5 inks, 1.2 GB
-for that figurine, during its set-up).
+starts from the file reads it in blocks of grid voxels too (``param.file_free_mixture``), keeping only the free
+voxels' free part (F, N).
 """
 
 from __future__ import annotations

@@ -130,8 +130,8 @@ def quantize(
     upsample "nearest" (enclosing voxel) or "linear" (trilinear between voxel centres, inside voxels only)
     out      None (a new array is returned) or anything taking ``out[k] = layer`` (Y, X) uint8 for k = 0, 1, ...
              in order (``model.labelfile.LabelFileWriter``: the labels go to a file one layer at a time)
-    ``mixture`` may also be a layer source (``stream.MixtureSource``): ``shape`` (z, y, x, N) and ``[z]`` giving
-    one (y, x, N) layer, asked for in increasing z; its layers are checked as they are read.
+    ``mixture`` may also be a layer source (``model.mixturefile.MixtureSource``): ``shape`` (z, y, x, N) and
+    ``[z]`` giving one (y, x, N) layer, asked for in increasing z; its layers are checked as they are read.
     Returns ``(labels uint8 (Z, Y, X) or out, voxel_mm_printer (3,) float64 (x, y, z))``; label = ink index,
     255 = empty.
     """

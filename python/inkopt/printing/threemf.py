@@ -263,7 +263,7 @@ def write_3mf_labels(labels, voxel_mm_printer, ink_names, path, *, printer=None,
 def write_3mf_mixture(src, path, *, materials=None, **kw) -> dict:
     """The continuous mixture as a volumetric 3MF (``write_3mf``): ``src`` has ``shape`` (Z, Y, X, N), ``[k]``
     (Y, X, N) float shares, ``inside`` ((Z, Y, X) bool or None: every voxel), ``voxel_mm`` and ``inks.names``
-    (a ``stream.MixtureSource``: the run's volume.npz read one layer at a time)."""
+    (a ``model.mixturefile.MixtureSource``: the run's volume.npz read one layer at a time)."""
     Z, Y, X, _ = src.shape
     inside = src.inside
 

@@ -19,7 +19,7 @@ import numpy as np
 from ..color import delta_e76, linear_to_lab
 from ..evaluation.results import Evaluation, Report
 from ..io import atomic_write_bytes, file_digest, load_npz
-from ..printing.stream import MixtureSource
+from ..model.mixturefile import MixtureSource
 from ..rundir import RunDir
 from .bake import encode, heat_legend, heat_rgb8, heat_scale, mesh_atlas, srgb8
 from .figures import LABELS, describe_lighting, figures_html, ink_shares, settings_html
