@@ -70,6 +70,16 @@ from .metrics import prediction_metrics
 from .noise import EVAL_SEED_OFFSET, MAX_SPP, PILOT_SPP, SSIM_NOISE_RATIO, TARGET_NOISE_DE76, adaptive_render
 from .printed import PrintedRenderer
 from .results import Evaluation, Measured
+from .sample import (
+    SAMPLE_SSIM_NOISE_RATIO,
+    SIGMA,
+    TexelSample,
+    differences,
+    per_texel,
+    sample_lines,
+    sample_size,
+    sampled_figures,
+)
 from .translucency import evaluate_translucency
 from .translucency import table_lines as translucency_lines
 
@@ -131,6 +141,8 @@ def evaluate_run(
     max_spp: int = MAX_SPP,
     time_budget: float | None = None,
     out=None,
+    texel_sample: int | None = None,
+    sample_windows: int | None = None,
 ) -> Evaluation:
     """Evaluate run directory ``path`` (module docstring); returns the ``results.Evaluation`` (also written to
     DIR/evaluation.json with the face pictures when ``write``). ``spp``: None = adaptive (module docstring),
@@ -143,7 +155,9 @@ def evaluate_run(
     if the scene is constrained or ``translucency_compare``, an unconstrained run directory, is given).
     ``max_spp``: the adaptive renders' cap; ``time_budget``: seconds for all the adaptive renders together, shared
     out evenly among the results still to render. ``out``: the evaluation file (default DIR/evaluation.json; its
-    pictures are named after it, e.g. ``out`` E.json: E_top.png, E_views.png), so earlier ones can be kept."""
+    pictures are named after it, e.g. ``out`` E.json: E_top.png, E_views.png), so earlier ones can be kept.
+    ``texel_sample``, ``sample_windows``: figures from a random sample of that many scene texels and SSIM windows
+    (``evaluation.sample``; ``sample.sample_size``: 0 texels renders every texel, None is the default)."""
     lighting = load_lighting(lighting)
     say = log or (lambda msg: None)
     if spp is not None and spp < 1:
@@ -162,6 +176,16 @@ def evaluate_run(
     colours = {"target": target}
     rseed = EVAL_SEED_OFFSET + int(seed)
     todo = [2 + (2 if baselines else 0)]  # adaptive results still to render, for sharing the time budget
+    texel_sample, sample_windows = sample_size(texel_sample, sample_windows, len(stex))
+    sample, rtex, rtarget_lab = None, stex, target_lab  # the texels rendered and their targets
+    ratio = SSIM_NOISE_RATIO if not texel_sample else SAMPLE_SSIM_NOISE_RATIO
+    if texel_sample:
+        sample = TexelSample.draw(stex, texel_sample, sample_windows, rseed)
+        rtex, rtarget_lab = stex.subset(sample.rendered), target_lab[sample.rendered]
+        say(
+            f"texel sample: {len(sample.points)} of {len(stex)} texels, {len(sample.centres)} SSIM windows; "
+            f"{len(rtex)} texels rendered"
+        )
     renders = {}  # name -> (AdaptiveResult, seconds, quantization method, walks)
 
     def rendered(name: str, render, seconds_from: float, method: str | None, walks: dict, done=None):
@@ -172,7 +196,7 @@ def evaluate_run(
         if time_budget is not None:
             budget = max(time_budget - (time.perf_counter() - t_all), 0.0) / max(todo[0], 1)
         todo[0] -= 1
-        ad = adaptive_render(render, target_lab, rseed, spp, max_spp=max_spp, log=say, time_budget=budget)
+        ad = adaptive_render(render, rtarget_lab, rseed, spp, max_spp=max_spp, log=say, time_budget=budget, ratio=ratio)
         if done is not None:
             done()
         colours[name] = ad.rgb
@@ -185,7 +209,7 @@ def evaluate_run(
     walks = {"paths": 0, "events": 0}
 
     def continuous(n: int, s: int):
-        r = renderer.render(stex, n, s, progress=log is not None)
+        r = renderer.render(rtex, n, s, progress=log is not None)
         walks["paths"], walks["events"] = walks["paths"] + r.paths, walks["events"] + r.events
         return r.rgb, r.var_mean, n
 
@@ -194,7 +218,7 @@ def evaluate_run(
         renderer = None  # freed before the figures and the next renderer
 
     ad, seconds, _, _ = rendered("continuous", continuous, t0, None, walks, done=free_continuous)
-    say(f"continuous: {len(stex)} texels x {ad.spp} spp in {seconds:.1f} s, {per_path(walks):.0f} events per path")
+    say(f"continuous: {len(rtex)} texels x {ad.spp} spp in {seconds:.1f} s, {per_path(walks):.0f} events per path")
     tr = None
     if translucency or (translucency is None and (rec.translucency is not None or translucency_compare)):
         tr = evaluate_translucency(vol, rec, translucency_compare, rseed, threads, lighting, log=say)
@@ -249,7 +273,8 @@ def evaluate_run(
         )
     dpi = tuple(q.dpi or tuple(float(v) for v in dpi_of(qvol.voxel_mm)))
     t0 = time.perf_counter()
-    printer = PrintedRenderer(qvol, stex, vmm, kind, threads, lighting)  # texels and map shared by all printed
+    subset = None if sample is None else sample.rendered
+    printer = PrintedRenderer(qvol, stex, vmm, kind, threads, lighting, subset)  # texels and map shared by all
 
     def printed(name: str, labels_vol: Volume, t0: float) -> None:
         info = {"spp": 0}
@@ -299,18 +324,28 @@ def evaluate_run(
             printed(name, Volume.from_labels(labels=labels, **meta), t0)
             labels = None
     printer.use(None)  # freed before the figures
-    n_ptex, printer = len(printer.ptex), None
-    loss = TexelLoss(target, stex.pos_vox, sigma=1.5)  # the figures of every result, after all renders
+    n_ptex, n_ptex_rendered, printer = printer.all_printer_texels, len(printer.ptex), None
+    # the figures of every result, after all renders (a sample's: on its rendered texels)
+    loss = TexelLoss(target if sample is None else target[sample.rendered], rtex.pos_vox, sigma=SIGMA)
+    values = {}  # a sample's per-texel values by result, for the paired differences
 
     def figures(name: str) -> Measured:
         ad, seconds, method, walks = renders.pop(name)
-        m = prediction_metrics(loss, ad.rgb, ad.var)
-        return Measured(m, ad.spp, ad.passes, seconds, method, walks.get("spp"), per_path(walks))
+        if sample is None:
+            m, err = prediction_metrics(loss, ad.rgb, ad.var), None
+        else:
+            values[name] = per_texel(loss, ad.rgb, ad.var, sample)
+            m, err = sampled_figures(loss, values[name], sample)
+        return Measured(m, ad.spp, ad.passes, seconds, method, walks.get("spp"), per_path(walks), err)
 
     cont, quantized = figures("continuous"), figures("quantized")
     if baselines:
         base = {name: figures(name) for name in BASELINES}
     loss = None  # freed before the pictures
+    diffs = None
+    if sample is not None:
+        pairs = [("continuous", "quantized")] + [("quantized", name) for name in (base or {})]
+        diffs = differences(values, pairs, sample)
     ev = Evaluation(
         spp=cont.spp,
         seed=int(seed),
@@ -318,7 +353,7 @@ def evaluate_run(
         kind=kind,
         spp_adaptive=spp is None,
         noise_target_delta_e76=TARGET_NOISE_DE76,
-        noise_target_ssim_ratio=SSIM_NOISE_RATIO,
+        noise_target_ssim_ratio=ratio,
         spp_pilot=PILOT_SPP,
         spp_max=MAX_SPP,
         lighting=lighting.describe(),
@@ -332,8 +367,13 @@ def evaluate_run(
         baselines=base,
         volume_digest=d.volume_digest(),
         quantized_digest=d.quantized_digest(),
+        texel_sample=None if sample is None else {**sample.to_json(), "printer_texels_rendered": n_ptex_rendered},
+        differences=diffs,
     )
-    if write:
+    if write and sample is not None:  # per-texel colours of the sampled texels only: no pictures, no predictions
+        say("texel sample: no pictures and no predictions.npz (they need every texel's colour)")
+        d.write_evaluation(ev.to_json(), out)
+    elif write:
         stem = out.stem
         if rec.faces:
             ev.pictures = write_face_pictures(d, rec, colours, stem)
@@ -369,6 +409,7 @@ def table_lines(ev: Evaluation) -> list[str]:
             f"{num(m.delta_e76_rms_denoised):>15.2f}{num(m.delta_e76_noise_contribution):>14.2f}"
             f"{num(m.mottle_l2):>8.2f}{r.spp:>6}{r.seconds:>7.1f}"
         )
+    lines += sample_lines(ev)
     c = ev.continuous.metrics
     if c.flat_texels:
         lines.append(
