@@ -22,14 +22,15 @@ FIGURES = ("delta_e76_mean", "delta_e76_mean_corrected", "delta_e2000_mean", "ss
 def test_draw_renders_every_window_whole():
     tex = Texels.box_faces((4, 30, 40), ["top", "front"])
     s = TexelSample.draw(tex, 300, 12, seed=7)
-    assert len(s.points) == 300 and len(np.unique(s.points)) == 300 and np.array_equal(s.centres, s.points[:12])
-    assert np.all(np.diff(s.rendered) > 0)
-    pos, rendered = tex.pos_vox, set(s.rendered.tolist())
-    for c in s.rendered[s.centres]:  # every texel within the window's Chebyshev radius is rendered
+    assert len(s.points) == 300 and np.all(np.diff(s.points) > 0) and np.all(np.diff(s.windows) > 0)
+    assert len(s.centres) == 12 and np.isin(s.centres, s.points).all()
+    assert np.array_equal(s.windows[s.centre_rows], s.centres)
+    pos, windows = tex.pos_vox, set(s.windows.tolist())
+    for c in s.centres:  # every texel within the window's Chebyshev radius is rendered
         near = np.flatnonzero(np.abs(pos - pos[c]).max(1) <= s.radius)
-        assert rendered.issuperset(near.tolist())
+        assert windows.issuperset(near.tolist())
     again = TexelSample.draw(tex, 300, 12, seed=7)
-    assert np.array_equal(again.rendered, s.rendered) and np.array_equal(again.points, s.points)
+    assert np.array_equal(again.windows, s.windows) and np.array_equal(again.points, s.points)
     assert sample_size(None, None, 1000)[0] == 0 and sample_size(None, None, 10**6)[0] > 0  # by size
     assert sample_size(10**9, 10**9, 500) == (500, 500)
     with pytest.raises(SampleError, match="at least 2"):
@@ -46,9 +47,10 @@ def test_window_values_at_centres_equal_the_full_loss():
     var = rng.uniform(0, 1e-4, (len(tex), 3))
     s = TexelSample.draw(tex, 200, 15, seed=1)
     full = TexelLoss(target, tex.pos_vox, sigma=1.5)
-    part = TexelLoss(target[s.rendered], tex.subset(s.rendered).pos_vox, sigma=1.5)
-    v = per_texel(part, rgb[s.rendered], var[s.rendered], s)
-    centres = s.rendered[s.centres]
+    part = TexelLoss(target[s.windows], tex.subset(s.windows).pos_vox, sigma=1.5)
+    w, p = s.windows, s.points
+    v = per_texel(part, (rgb[w], var[w]), (rgb[p], var[p]), full.target_lab[p], s)
+    centres = s.centres
     np.testing.assert_allclose(v["ssim"], full.ssim_map(rgb, var)[centres].mean(1), rtol=1e-12)
     p, _ = mottle_per_texel(full, rgb, var)
     flat = full.flat[centres]
@@ -117,7 +119,7 @@ def test_sampled_evaluation_agrees_with_the_full_one(tmp_path, table3):
     assert ev == json.loads(json.dumps(typed.to_json())) and ev["format_version"] == 2
     assert full.get("texel_sample") is None and "stderr" not in full["continuous"]
     t = ev["texel_sample"]
-    assert (t["population"], t["texels"], t["windows"]) == (2304, 600, 8) and t["rendered_texels"] < 2304
+    assert (t["population"], t["texels"], t["windows"]) == (2304, 600, 8) and t["window_texels"] < 2304
     assert ev["printer_texels"] == full["printer_texels"] > t["printer_texels_rendered"]
     assert "pictures" not in ev and not (tmp_path / "run" / "s_top.png").exists()
     for name in ("continuous", "quantized"):

@@ -175,32 +175,48 @@ def evaluate_run(
     target_lab = linear_to_lab(target)  # as TexelLoss has it; the loss itself is built after the renders
     colours = {"target": target}
     rseed = EVAL_SEED_OFFSET + int(seed)
-    todo = [2 + (2 if baselines else 0)]  # adaptive results still to render, for sharing the time budget
     texel_sample, sample_windows = sample_size(texel_sample, sample_windows, len(stex))
-    sample, rtex, rtarget_lab = None, stex, target_lab  # the texels rendered and their targets
-    ratio = SSIM_NOISE_RATIO if not texel_sample else SAMPLE_SSIM_NOISE_RATIO
+    # the texel groups rendered, each with its texels, their targets and noise targets (ΔE76, SSIM ratio)
+    sample, groups = None, [(stex, target_lab, TARGET_NOISE_DE76, SSIM_NOISE_RATIO)]
     if texel_sample:
         sample = TexelSample.draw(stex, texel_sample, sample_windows, rseed)
-        rtex, rtarget_lab = stex.subset(sample.rendered), target_lab[sample.rendered]
+        points, windows = (stex.subset(g) for g in sample.groups)
+        groups = [(points, target_lab[sample.points], TARGET_NOISE_DE76, np.inf)]
+        groups += [(windows, target_lab[sample.windows], np.inf, SAMPLE_SSIM_NOISE_RATIO)]
         say(
-            f"texel sample: {len(sample.points)} of {len(stex)} texels, {len(sample.centres)} SSIM windows; "
-            f"{len(rtex)} texels rendered"
+            f"texel sample: {len(sample.points)} of {len(stex)} texels; {len(sample.centres)} SSIM windows of "
+            f"{len(sample.windows)} texels"
         )
-    renders = {}  # name -> (AdaptiveResult, seconds, quantization method, walks)
+    todo = [(2 + (2 if baselines else 0)) * len(groups)]  # adaptive renders still to do, for the time budget
+    renders = {}  # name -> ([AdaptiveResult per group], seconds, quantization method, walks)
 
     def rendered(name: str, render, seconds_from: float, method: str | None, walks: dict, done=None):
-        """Adaptive (or fixed-spp) render of one result, kept for its figures. ``walks``: the render's counts
-        (``spp`` printer samples of a printed result, ``paths``, ``events``), filled in by ``render``. ``done``
-        (called once the renders are over): frees the result's renderer."""
-        budget = None
-        if time_budget is not None:
-            budget = max(time_budget - (time.perf_counter() - t_all), 0.0) / max(todo[0], 1)
-        todo[0] -= 1
-        ad = adaptive_render(render, rtarget_lab, rseed, spp, max_spp=max_spp, log=say, time_budget=budget, ratio=ratio)
+        """Adaptive (or fixed-spp) render of one result on each texel group (``render(spp, seed, group)``), kept
+        for its figures. ``walks``: the render's counts (``spp`` printer samples of a printed result's first group,
+        ``paths``, ``events``), filled in by ``render``. ``done`` (called once the renders are over): frees the
+        result's renderer."""
+        ads = []
+        for g, (_, lab, target_de, ratio) in enumerate(groups):
+            budget = None
+            if time_budget is not None:
+                budget = max(time_budget - (time.perf_counter() - t_all), 0.0) / max(todo[0], 1)
+            todo[0] -= 1
+            ad = adaptive_render(
+                lambda n, s, g=g: render(n, s, g),
+                lab,
+                rseed,
+                spp,
+                target=target_de,
+                max_spp=max_spp,
+                log=say,
+                time_budget=budget,
+                ratio=ratio,
+            )
+            ads.append(ad)
         if done is not None:
             done()
-        colours[name] = ad.rgb
-        renders[name] = (ad, time.perf_counter() - seconds_from, method, walks)
+        colours[name] = ads[0].rgb
+        renders[name] = (ads, time.perf_counter() - seconds_from, method, walks)
         return renders[name]
 
     t0 = time.perf_counter()
@@ -208,8 +224,8 @@ def evaluate_run(
 
     walks = {"paths": 0, "events": 0}
 
-    def continuous(n: int, s: int):
-        r = renderer.render(rtex, n, s, progress=log is not None)
+    def continuous(n: int, s: int, g: int):
+        r = renderer.render(groups[g][0], n, s, progress=log is not None)
         walks["paths"], walks["events"] = walks["paths"] + r.paths, walks["events"] + r.events
         return r.rgb, r.var_mean, n
 
@@ -217,8 +233,9 @@ def evaluate_run(
         nonlocal renderer
         renderer = None  # freed before the figures and the next renderer
 
-    ad, seconds, _, _ = rendered("continuous", continuous, t0, None, walks, done=free_continuous)
-    say(f"continuous: {len(rtex)} texels x {ad.spp} spp in {seconds:.1f} s, {per_path(walks):.0f} events per path")
+    ads, seconds, _, _ = rendered("continuous", continuous, t0, None, walks, done=free_continuous)
+    spps = " + ".join(f"{len(tx)} texels x {ad.spp} spp" for (tx, *_), ad in zip(groups, ads))
+    say(f"continuous: {spps} in {seconds:.1f} s, {per_path(walks):.0f} events per path")
     tr = None
     if translucency or (translucency is None and (rec.translucency is not None or translucency_compare)):
         tr = evaluate_translucency(vol, rec, translucency_compare, rseed, threads, lighting, log=say)
@@ -273,23 +290,21 @@ def evaluate_run(
         )
     dpi = tuple(q.dpi or tuple(float(v) for v in dpi_of(qvol.voxel_mm)))
     t0 = time.perf_counter()
-    subset = None if sample is None else sample.rendered
-    printer = PrintedRenderer(qvol, stex, vmm, kind, threads, lighting, subset)  # texels and map shared by all
+    sub = None if sample is None else sample.groups
+    printer = PrintedRenderer(qvol, stex, vmm, kind, threads, lighting, sub)  # texels and maps shared by all
 
     def printed(name: str, labels_vol: Volume, t0: float) -> None:
         info = {"spp": 0}
         printer.use(labels_vol)  # the first builds the printer renderer, the others swap in their labels
 
-        def render(n: int, s: int):
-            rgb, var, spp_p = printer(n, s, progress=log is not None)
-            info.update(spp=info["spp"] + spp_p, paths=printer.paths, events=printer.events)
+        def render(n: int, s: int, g: int):
+            rgb, var, spp_p = printer(n, s, progress=log is not None, group=g)
+            info.update(spp=info["spp"] + (spp_p if g == 0 else 0), paths=printer.paths, events=printer.events)
             return rgb, var, spp_p
 
-        _, seconds, _, _ = rendered(name, render, t0, q.method, info)
-        say(
-            f"{name}: {len(printer.ptex)} printer texels x {info['spp']} spp in {seconds:.1f} s, "
-            f"{per_path(info):.0f} events per path"
-        )
+        ads, seconds, _, _ = rendered(name, render, t0, q.method, info)
+        spps = " + ".join(f"{len(m[0])} printer texels x {ad.spp} spp" for m, ad in zip(printer.maps, ads))
+        say(f"{name}: {spps} in {seconds:.1f} s, {per_path(info):.0f} events per path")
 
     meta = dict(
         voxel_mm=qvol.voxel_mm,
@@ -324,19 +339,22 @@ def evaluate_run(
             printed(name, Volume.from_labels(labels=labels, **meta), t0)
             labels = None
     printer.use(None)  # freed before the figures
-    n_ptex, n_ptex_rendered, printer = printer.all_printer_texels, len(printer.ptex), None
-    # the figures of every result, after all renders (a sample's: on its rendered texels)
-    loss = TexelLoss(target if sample is None else target[sample.rendered], rtex.pos_vox, sigma=SIGMA)
+    n_ptex, n_ptex_rendered, printer = printer.all_printer_texels, printer.printer_texels_rendered, None
+    # the figures of every result, after all renders (a sample's: on its window texels)
+    loss = TexelLoss(target if sample is None else target[sample.windows], groups[-1][0].pos_vox, sigma=SIGMA)
     values = {}  # a sample's per-texel values by result, for the paired differences
 
     def figures(name: str) -> Measured:
-        ad, seconds, method, walks = renders.pop(name)
+        ads, seconds, method, walks = renders.pop(name)
+        ad, m, err, win = ads[0], None, None, {}
         if sample is None:
-            m, err = prediction_metrics(loss, ad.rgb, ad.var), None
+            m = prediction_metrics(loss, ad.rgb, ad.var)
         else:
-            values[name] = per_texel(loss, ad.rgb, ad.var, sample)
+            pts = (ad.rgb, ad.var)
+            values[name] = per_texel(loss, (ads[1].rgb, ads[1].var), pts, groups[0][1], sample)
             m, err = sampled_figures(loss, values[name], sample)
-        return Measured(m, ad.spp, ad.passes, seconds, method, walks.get("spp"), per_path(walks), err)
+            win = dict(spp_windows=ads[1].spp, spp_windows_passes=ads[1].passes)
+        return Measured(m, ad.spp, ad.passes, seconds, method, walks.get("spp"), per_path(walks), err, **win)
 
     cont, quantized = figures("continuous"), figures("quantized")
     if baselines:
@@ -353,7 +371,7 @@ def evaluate_run(
         kind=kind,
         spp_adaptive=spp is None,
         noise_target_delta_e76=TARGET_NOISE_DE76,
-        noise_target_ssim_ratio=ratio,
+        noise_target_ssim_ratio=groups[-1][3],
         spp_pilot=PILOT_SPP,
         spp_max=MAX_SPP,
         lighting=lighting.describe(),

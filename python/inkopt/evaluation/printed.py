@@ -111,19 +111,18 @@ class PrintedRenderer:
     bit-identically to a renderer built for it. ``paths`` and ``events`` count the current volume's walks."""
 
     def __init__(
-        self, qvol: Volume, scene: Texels, voxel_mm_scene, kind: str, threads=None, lighting=None, subset=None
+        self, qvol: Volume, scene: Texels, voxel_mm_scene, kind: str, threads=None, lighting=None, groups=None
     ):
-        """``subset``: sorted scene texel indices (int64 (S,)) to render (a texel sample), else all; the results'
-        rows are then those texels, in that order."""
-        self.ptex = printer_texels(qvol, scene, kind)
-        self.to_scene, self.stand_in = map_texels(
-            self.ptex, qvol.voxel_mm, scene, voxel_mm_scene, per_face=kind != "mesh"
-        )
-        self.all_printer_texels, n_scene = len(self.ptex), len(scene)
-        if subset is not None:
-            self.ptex, self.to_scene, self.stand_in = restrict(self.ptex, self.to_scene, self.stand_in, subset)
-            n_scene = len(subset)
-        self.n_scene, self.shape, self.threads, self.lighting = n_scene, qvol.shape, threads, lighting
+        """``groups``: texel groups to render, each sorted scene texel indices (int64 (S,)) (a texel sample's
+        points and windows), else one group of every texel; a group's results have its texels' rows, in order."""
+        ptex = printer_texels(qvol, scene, kind)
+        to_scene, stand_in = map_texels(ptex, qvol.voxel_mm, scene, voxel_mm_scene, per_face=kind != "mesh")
+        self.all_printer_texels = len(ptex)
+        if groups is None:
+            self.maps = [(ptex, to_scene, stand_in, len(scene))]
+        else:
+            self.maps = [(*restrict(ptex, to_scene, stand_in, g), len(g)) for g in groups]
+        self.shape, self.threads, self.lighting = qvol.shape, threads, lighting
         self.renderer, self.built_for, self.builds, self.paths, self.events = None, None, 0, 0, 0
 
     def use(self, labels_vol: Volume | None) -> None:
@@ -146,13 +145,19 @@ class PrintedRenderer:
         # built for, so the caller's label grid is freed as soon as the caller drops it
         self.renderer.volume = self.built_for
 
-    def __call__(self, spp: int, seed: int, progress: bool = False):
-        """(rgb (I, 3), var_mean (I, 3)) on the scene texels from ``spp`` samples per scene texel, shared by its
-        printer texels, and the printer spp used."""
-        spp_p = max(1, int(np.ceil(spp * self.n_scene / len(self.ptex))))
-        res = self.renderer.render(self.ptex, spp_p, seed, progress=progress)
+    @property
+    def printer_texels_rendered(self) -> int:
+        """Printer texels of all groups (a printer texel in two groups counts twice)."""
+        return sum(len(m[0]) for m in self.maps)
+
+    def __call__(self, spp: int, seed: int, progress: bool = False, group: int = 0):
+        """(rgb (I, 3), var_mean (I, 3)) on the scene texels of ``group`` from ``spp`` samples per scene texel,
+        shared by its printer texels, and the printer spp used."""
+        ptex, to_scene, stand_in, n_scene = self.maps[group]
+        spp_p = max(1, int(np.ceil(spp * n_scene / len(ptex))))
+        res = self.renderer.render(ptex, spp_p, seed, progress=progress)
         self.paths, self.events = self.paths + res.paths, self.events + res.events
         rgb, var = average_to_scene(
-            res.rgb.astype(np.float64), res.var_mean.astype(np.float64), self.to_scene, self.stand_in, self.n_scene
+            res.rgb.astype(np.float64), res.var_mean.astype(np.float64), to_scene, stand_in, n_scene
         )
         return rgb, var, spp_p

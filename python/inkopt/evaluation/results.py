@@ -162,7 +162,9 @@ class Measured:
     continuous result), for printed results ``spp_printer``, the samples per printer texel, and
     ``events_per_path``: the renders' mean scattering and interface events per path, what a sample costs (None in
     evaluations written before it was recorded); ``stderr``: figure name -> its sampling standard error when the
-    figures come from a texel sample (``evaluation.sample``; None when every texel was rendered)."""
+    figures come from a texel sample (``evaluation.sample``; None when every texel was rendered), and then
+    ``spp``, ``spp_passes`` and ``spp_printer`` are the sampled points' (the ΔE figures'), ``spp_windows`` and
+    ``spp_windows_passes`` the SSIM windows' samples per scene texel."""
 
     metrics: Metrics
     spp: int
@@ -172,6 +174,8 @@ class Measured:
     spp_printer: int | None = None
     events_per_path: float | None = None
     stderr: dict | None = None
+    spp_windows: int | None = None
+    spp_windows_passes: list | None = None
 
     def to_json(self) -> dict:
         d = {**self.metrics.to_json(), "spp": self.spp, "spp_passes": self.spp_passes}
@@ -180,7 +184,7 @@ class Measured:
         if self.events_per_path is not None:
             d["events_per_path"] = self.events_per_path
         if self.stderr is not None:
-            d["stderr"] = self.stderr
+            d.update(stderr=self.stderr, spp_windows=self.spp_windows, spp_windows_passes=self.spp_windows_passes)
         return {**d, "seconds": self.seconds, "method": self.method}
 
     @classmethod
@@ -194,6 +198,8 @@ class Measured:
             d.get("spp_printer"),
             d.get("events_per_path"),
             d.get("stderr"),
+            d.get("spp_windows"),
+            d.get("spp_windows_passes"),
         )
 
 

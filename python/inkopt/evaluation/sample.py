@@ -8,9 +8,12 @@ spread of the sampled values gives its standard error, so a large object need no
 
 **The sample** (``TexelSample.draw``, numpy's generator seeded with the evaluation seed): n scene texels drawn
 without replacement (the *points*); the first m of them in draw order (a simple random sample too) are window
-*centres*, rendered with every texel of their window. The rendered texels are the union (sorted); a window
-centre's window lies inside it, so its SSIM, e3 and mottle terms equal the full evaluation's for the same
-colours (the loss is built on the rendered texels only; the other texels' window values are not used).
+*centres*, each rendered with every texel of its window (the *window texels*, their union). The two groups are
+rendered apart, each adaptively to what its figures need (``evaluate``): the points until the noise adds at most
+``noise.TARGET_NOISE_DE76`` to the mean ΔE76, the window texels until SSIM's noise ratio is at most
+``SAMPLE_SSIM_NOISE_RATIO``. The loss is built on the window texels only; a centre's window lies inside them, so
+its SSIM, e3 and mottle terms equal the full evaluation's for the same colours (the other window texels' own
+window values are not used).
 
 **Estimates** (``sampled_figures``): the mean of the points' values (ΔE76, ΔE2000, noise terms, e1) or of the
 centres' (SSIM, e3; mottle over the flat centres), with standard error s / sqrt(k) · sqrt(1 - k / I) (s the
@@ -22,10 +25,13 @@ of each sampled texel is part of the spread, so the standard error covers it; wh
 noise's bias (its inflation of ΔE76, corrected by ``delta_e76_mean_corrected``, and the SSIM noise correction's
 residual), which the adaptive render keeps small: ΔE76 as in the full evaluation, SSIM to a noise ratio of
 ``SAMPLE_SSIM_NOISE_RATIO`` (a bias of ~0.004, small against the sampling error, at a third of the samples).
+The mottle's per-texel values are heavy-tailed (a few texels carry much of the mean), so a sample of ~100 windows
+often misses them and its standard error understates the error (docs/quality.md).
 
 **Paired differences** (``differences``): every result is rendered on the same sampled texels with the same seeds,
 so a difference between two results (ours against a baseline) is estimated texel by texel, and its standard
-error, from the spread of the per-texel differences, is much smaller than either figure's.
+error comes from the spread of the per-texel differences: much smaller than either figure's where the results'
+errors go together texel by texel (the sampling error of which texels were drawn cancels).
 """
 
 from __future__ import annotations
@@ -61,14 +67,14 @@ class SampleError(ValueError):
 
 @dataclass
 class TexelSample:
-    """A random sample of a scene's ``population`` texels (module docstring). ``rendered``: sorted scene texel
-    indices (int64 (R,)) to render; ``points`` (int64 (n,)) and ``centres`` (int64 (m,)): rows of ``rendered``
-    (draw order), the centres the points' first m."""
+    """A random sample of a scene's ``population`` texels (module docstring): ``points`` (int64 (n,), sorted scene
+    texel indices), ``centres`` (int64 (m,), the window centres, some of the points) and ``windows`` (int64 (W,),
+    sorted: every texel of the centres' windows). ``groups``: the two texel groups rendered, points and windows."""
 
     population: int
-    rendered: np.ndarray
     points: np.ndarray
     centres: np.ndarray
+    windows: np.ndarray
     seed: int
     radius: int
 
@@ -81,16 +87,24 @@ class TexelSample:
         radius = int(3.5 * sigma + 0.5)
         pos = texels.pos_vox
         near = cKDTree(pos).query_ball_point(pos[draw[:m]], radius + 1e-6, p=np.inf)
-        rendered = np.unique(np.concatenate([draw, *[np.asarray(w, np.int64) for w in near]]))
-        rows = np.searchsorted(rendered, draw)
-        return cls(population, rendered, rows, rows[:m], int(seed), radius)
+        windows = np.unique(np.concatenate([np.asarray(w, np.int64) for w in near]))
+        return cls(population, np.sort(draw), draw[:m].astype(np.int64), windows, int(seed), radius)
+
+    @property
+    def groups(self) -> list[np.ndarray]:
+        return [self.points, self.windows]
+
+    @property
+    def centre_rows(self) -> np.ndarray:
+        """The centres' rows in ``windows``."""
+        return np.searchsorted(self.windows, self.centres)
 
     def to_json(self) -> dict:
         return {
             "population": self.population,
             "texels": len(self.points),
             "windows": len(self.centres),
-            "rendered_texels": len(self.rendered),
+            "window_texels": len(self.windows),
             "window_radius": self.radius,
             "seed": self.seed,
         }
@@ -130,26 +144,26 @@ def quantile_se(x: np.ndarray, q: float, population: int) -> tuple[float, float]
     return float(np.percentile(x, q)), float((x[hi] - x[lo]) / 2 * fpc)
 
 
-def per_texel(loss: TexelLoss, rgb, var, sample: TexelSample) -> dict:
-    """The per-texel values of a result rendered on the sample's texels (``loss`` on those texels; rgb, var (R, 3)
-    linear and its variance): points' ``delta_e76``, ``delta_e2000``, ``noise`` (the colour's standard error,
-    ΔE), ``noise_contribution``, and centres' ``ssim`` (mean over L*a*b*), ``e3``, ``mottle`` and
+def per_texel(loss: TexelLoss, windows, points, target_lab, sample: TexelSample) -> dict:
+    """The per-texel values of a result rendered on the sample's texels: ``windows`` = (rgb, var) (W, 3) linear
+    and its variance on the window texels (``loss`` built on them), ``points`` = (rgb, var) (n, 3) on the points,
+    ``target_lab`` (n, 3) the points' targets. Points' ``delta_e76``, ``delta_e2000``, ``noise`` (the colour's
+    standard error, ΔE), ``noise_contribution``, and centres' ``ssim`` (mean over L*a*b*), ``e3``, ``mottle`` and
     ``mottle_target`` (NaN where the centre is not flat)."""
-    rgb, var = np.asarray(rgb, np.float64), np.asarray(var, np.float64)
-    lab = linear_to_lab(rgb)
-    pt, ct = sample.points, sample.centres
-    lab_p, lab_t = lab[pt], loss.target_lab[pt]
-    se = lab_stderr(rgb[pt], var[pt])
-    sob = loss.S @ (normalise_lab(lab) - loss.target_n)
+    rgb, var = (np.asarray(a, np.float64) for a in windows)
+    rgb_p, var_p = (np.asarray(a, np.float64) for a in points)
+    lab_p = linear_to_lab(rgb_p)
+    ct = sample.centre_rows
+    sob = loss.S @ (normalise_lab(linear_to_lab(rgb)) - loss.target_n)
     r = len(rgb)
     e3 = sum((sob[a * r + ct] ** 2).sum(1) for a in range(3)) * (100.0 / (3.0 * 4.0 * 32.0))
     p, p_target = mottle_per_texel(loss, rgb, var)
     flat = loss.flat[ct]
     return {
-        "delta_e76": delta_e76(lab_p, lab_t),
-        "delta_e2000": delta_e2000(lab_p, lab_t),
-        "noise": se,
-        "noise_contribution": NoiseModel.of(rgb[pt], var[pt], lab_t).per_texel(),
+        "delta_e76": delta_e76(lab_p, target_lab),
+        "delta_e2000": delta_e2000(lab_p, target_lab),
+        "noise": lab_stderr(rgb_p, var_p),
+        "noise_contribution": NoiseModel.of(rgb_p, var_p, target_lab).per_texel(),
         "ssim": loss.ssim_map(rgb, var)[ct].mean(1),
         "e3": e3,
         "mottle": np.where(flat, p[ct], np.nan),
@@ -227,8 +241,8 @@ def sample_lines(ev) -> list[str]:
         return []
     t = ev.texel_sample
     lines = [
-        f"texel sample: {t['texels']} of {t['population']} texels, {t['windows']} SSIM windows "
-        f"({t['rendered_texels']} texels rendered); figures +- their standard errors:"
+        f"texel sample: {t['texels']} of {t['population']} texels, {t['windows']} SSIM windows of "
+        f"{t['window_texels']} texels; figures +- their standard errors:"
     ]
     for name, r in ev.results():
         m, e = r.metrics, r.stderr or {}
