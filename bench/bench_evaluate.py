@@ -44,6 +44,7 @@ KEEP = (
     "delta_e2000_mean",
     "ssim",
     "mottle_l2",
+    "spp_windows",
 )
 
 
