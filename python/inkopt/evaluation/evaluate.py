@@ -27,6 +27,11 @@ scene texel, all passes), ``spp_passes``. With the baselines, ``gamut_floor_delt
 the ΔE76 from the target to the nearest colour a thick homogeneous patch of the inks reaches
 (``ColourTable.reachable_lab``).
 
+Large objects (above ``sample.AUTO_SAMPLE_TEXELS`` scene texels, or ``texel_sample``): every figure comes from a
+random sample of scene texels and SSIM windows (``evaluation.sample``), each result rendered on the same sampled
+texels with the same seeds, with each figure's standard error and the paired differences between results; no
+pictures and no predictions.npz then.
+
 Translucency (``evaluation.translucency``): when the scene has a translucency constraint or ``translucency_compare``
 names an unconstrained run of the same target, ``translucency`` holds the diffuse transmittance and lateral
 light spread per constrained region and for the whole object (and the compared run's on the same regions).
@@ -64,22 +69,13 @@ from ..printing.stream import quantize_run
 from ..render import Renderer
 from ..rundir import Predictions, RunDir, SceneRecord
 from ..units import dpi_of
+from . import sample as sampled
 from .baselines import BASELINES, BaselineLayers
 from .colour_table import DEFAULT_PATCH_MM, ColourTable, colour_table
 from .metrics import prediction_metrics
 from .noise import EVAL_SEED_OFFSET, MAX_SPP, PILOT_SPP, SSIM_NOISE_RATIO, TARGET_NOISE_DE76, adaptive_render
 from .printed import PrintedRenderer
 from .results import Evaluation, Measured
-from .sample import (
-    SAMPLE_SSIM_NOISE_RATIO,
-    SIGMA,
-    TexelSample,
-    differences,
-    per_texel,
-    sample_lines,
-    sample_size,
-    sampled_figures,
-)
 from .translucency import evaluate_translucency
 from .translucency import table_lines as translucency_lines
 
@@ -175,14 +171,14 @@ def evaluate_run(
     target_lab = linear_to_lab(target)  # as TexelLoss has it; the loss itself is built after the renders
     colours = {"target": target}
     rseed = EVAL_SEED_OFFSET + int(seed)
-    texel_sample, sample_windows = sample_size(texel_sample, sample_windows, len(stex))
+    texel_sample, sample_windows = sampled.sample_size(texel_sample, sample_windows, len(stex))
     # the texel groups rendered, each with its texels, their targets and noise targets (ΔE76, SSIM ratio)
     sample, groups = None, [(stex, target_lab, TARGET_NOISE_DE76, SSIM_NOISE_RATIO)]
     if texel_sample:
-        sample = TexelSample.draw(stex, texel_sample, sample_windows, rseed)
+        sample = sampled.TexelSample.draw(stex, texel_sample, sample_windows, rseed)
         points, windows = (stex.subset(g) for g in sample.groups)
         groups = [(points, target_lab[sample.points], TARGET_NOISE_DE76, np.inf)]
-        groups += [(windows, target_lab[sample.windows], np.inf, SAMPLE_SSIM_NOISE_RATIO)]
+        groups += [(windows, target_lab[sample.windows], np.inf, sampled.SAMPLE_SSIM_NOISE_RATIO)]
         say(
             f"texel sample: {len(sample.points)} of {len(stex)} texels; {len(sample.centres)} SSIM windows of "
             f"{len(sample.windows)} texels"
@@ -341,7 +337,7 @@ def evaluate_run(
     printer.use(None)  # freed before the figures
     n_ptex, n_ptex_rendered, printer = printer.all_printer_texels, printer.printer_texels_rendered, None
     # the figures of every result, after all renders (a sample's: on its window texels)
-    loss = TexelLoss(target if sample is None else target[sample.windows], groups[-1][0].pos_vox, sigma=SIGMA)
+    loss = TexelLoss(target if sample is None else target[sample.windows], groups[-1][0].pos_vox, sigma=sampled.SIGMA)
     values = {}  # a sample's per-texel values by result, for the paired differences
 
     def figures(name: str) -> Measured:
@@ -351,8 +347,8 @@ def evaluate_run(
             m = prediction_metrics(loss, ad.rgb, ad.var)
         else:
             pts = (ad.rgb, ad.var)
-            values[name] = per_texel(loss, (ads[1].rgb, ads[1].var), pts, groups[0][1], sample)
-            m, err = sampled_figures(loss, values[name], sample)
+            values[name] = sampled.per_texel(loss, (ads[1].rgb, ads[1].var), pts, groups[0][1], sample)
+            m, err = sampled.sampled_figures(loss, values[name], sample)
             win = dict(spp_windows=ads[1].spp, spp_windows_passes=ads[1].passes)
         return Measured(m, ad.spp, ad.passes, seconds, method, walks.get("spp"), per_path(walks), err, **win)
 
@@ -363,7 +359,7 @@ def evaluate_run(
     diffs = None
     if sample is not None:
         pairs = [("continuous", "quantized")] + [("quantized", name) for name in (base or {})]
-        diffs = differences(values, pairs, sample)
+        diffs = sampled.differences(values, pairs, sample)
     ev = Evaluation(
         spp=cont.spp,
         seed=int(seed),
@@ -427,7 +423,7 @@ def table_lines(ev: Evaluation) -> list[str]:
             f"{num(m.delta_e76_rms_denoised):>15.2f}{num(m.delta_e76_noise_contribution):>14.2f}"
             f"{num(m.mottle_l2):>8.2f}{r.spp:>6}{r.seconds:>7.1f}"
         )
-    lines += sample_lines(ev)
+    lines += sampled.sample_lines(ev)
     c = ev.continuous.metrics
     if c.flat_texels:
         lines.append(
