@@ -10,9 +10,18 @@ from slab_run import make_run
 
 from inkopt.cli import main
 from inkopt.evaluation.evaluate import evaluate_run
-from inkopt.evaluation.metrics import mottle_per_texel
+from inkopt.evaluation.metrics import mottle_per_texel, prediction_metrics
 from inkopt.evaluation.printed import average_to_scene, restrict
-from inkopt.evaluation.sample import SampleError, TexelSample, mean_se, per_texel, quantile_se, sample_size
+from inkopt.evaluation.sample import (
+    SampleError,
+    TexelSample,
+    differences,
+    mean_se,
+    per_texel,
+    quantile_se,
+    sample_size,
+    sampled_figures,
+)
 from inkopt.loss import TexelLoss
 from inkopt.model import Texels
 
@@ -62,6 +71,29 @@ def test_window_values_at_centres_equal_the_full_loss():
     sob = full.S @ (normalise_lab(linear_to_lab(rgb)) - full.target_n)
     e3 = sum((sob[a * n + centres] ** 2).sum(1) for a in range(3)) * 100.0 / (3 * 4 * 32)
     np.testing.assert_allclose(v["e3"], e3, rtol=1e-10)
+
+
+def test_a_sample_of_every_texel_gives_the_full_figures():
+    """Every texel drawn, every texel a window centre: the estimates equal ``prediction_metrics`` (no sampling
+    error: the standard errors of the means are 0), and a paired difference equals the difference of the figures."""
+    tex = Texels.box_faces((3, 12, 16), ["top", "front"])
+    rng = np.random.default_rng(4)
+    target, rgb, rgb2 = rng.uniform(0.05, 0.9, (3, len(tex), 3))
+    target[: len(tex) // 2] = 0.4  # a flat region, for the mottle
+    var = rng.uniform(0, 1e-4, (len(tex), 3))
+    s = TexelSample.draw(tex, len(tex), len(tex), seed=0)
+    assert len(s.points) == len(s.windows) == len(s.centres) == len(tex)
+    loss = TexelLoss(target, tex.pos_vox, sigma=1.5)
+    values = {k: per_texel(loss, (c, var), (c, var), loss.target_lab, s) for k, c in (("a", rgb), ("b", rgb2))}
+    est, err = sampled_figures(loss, values["a"], s)
+    full = prediction_metrics(loss, rgb, var)
+    for k, v in full.to_json().items():
+        assert np.isclose(getattr(est, k), v, rtol=1e-9, atol=1e-12), (k, getattr(est, k), v)
+    assert err["delta_e76_mean"] == 0 and err["ssim"] == 0
+    d = differences(values, [("a", "b")], s)["a - b"]
+    other = prediction_metrics(loss, rgb2, var)
+    for k in ("delta_e76_mean", "delta_e2000_mean", "ssim", "delta_e76_mean_corrected"):
+        assert np.isclose(d[k]["value"], getattr(full, k) - getattr(other, k), rtol=1e-9, atol=1e-12), k
 
 
 def test_standard_errors_cover_the_population_figure():
