@@ -2,13 +2,16 @@
 process, ``/usr/bin/time -v``), and per result (continuous, quantized, surface and extrusion baselines) its seconds,
 samples per scene texel, events per path and noise figures from the evaluation file.
 
-    .venv/bin/python bench/bench_evaluate.py HEIGHT_MM [--dir D] [--reuse] [--spp N] [--code CHECKOUT] [--name NAME]
+    .venv/bin/python bench/bench_evaluate.py HEIGHT_MM [--dir D] [--reuse] [--spp N] [--texel-sample N]
+        [--sample-windows M] [--code CHECKOUT] [--name NAME]
 
 The run directory is made first unless ``--reuse`` finds one (each step its own process, timed, recorded as
 ``setup``): ``inkopt optimize spot.obj --height-mm H --iterations 1 --eval-spp 16 --out D`` and ``inkopt quantize
 D``. Then ``inkopt evaluate D --out D/bench_evaluation.json`` (``--spp N``: fixed samples instead of the adaptive
-default; ``--time-budget``, ``--max-spp`` passed on). ``--code``: evaluate with another checkout's Python package
-(e.g. the commit before a change, with its own built ``_core``), so one run directory serves both. Writes
+default; ``--time-budget``, ``--max-spp``, ``--texel-sample``, ``--sample-windows`` passed on; with a texel
+sample each result also keeps its figures' standard errors, and the file the sample and the paired differences).
+``--code``: evaluate with another checkout's Python package (e.g. the commit before a change, with its own built
+``_core``), so one run directory serves both. Writes
 bench/results/evaluate_<H>mm.json (``--name`` for another name). Wall-clock times on the shared 2-core machine are
 upper bounds; CPU seconds and events per path do not depend on the load.
 """
@@ -41,6 +44,7 @@ KEEP = (
     "delta_e2000_mean",
     "ssim",
     "mottle_l2",
+    "spp_windows",
 )
 
 
@@ -83,6 +87,8 @@ def main() -> dict:
     ap.add_argument("--spp", type=int, help="fixed samples per scene texel (default: adaptive)")
     ap.add_argument("--time-budget", type=float)
     ap.add_argument("--max-spp", type=int)
+    ap.add_argument("--texel-sample", type=int, help="evaluate's --texel-sample (default: evaluate's default)")
+    ap.add_argument("--sample-windows", type=int)
     ap.add_argument("--code", default=str(ROOT), help="checkout whose python/ package evaluates (default: this one)")
     ap.add_argument("--name", help="results file name (default evaluate_<H>mm.json)")
     args = ap.parse_args()
@@ -96,15 +102,19 @@ def main() -> dict:
         setup["quantize"] = {k: v for k, v in timed(["quantize", str(out)], ROOT).items() if k != "log"}
     ev_path = out / "bench_evaluation.json"
     cmd = ["evaluate", str(out), "--out", str(ev_path)]
-    for flag, v in (("--spp", args.spp), ("--time-budget", args.time_budget), ("--max-spp", args.max_spp)):
+    passed = [("--spp", args.spp), ("--time-budget", args.time_budget), ("--max-spp", args.max_spp)]
+    passed += [("--texel-sample", args.texel_sample), ("--sample-windows", args.sample_windows)]
+    for flag, v in passed:
         if v is not None:
             cmd += [flag, str(v)]
     t = timed(cmd, code)
     ev = json.loads(ev_path.read_text())
     entries = {"continuous": ev["continuous"], "quantized": ev["quantized"], **(ev.get("baselines") or {})}
     per = {name: {k: entries[name].get(k) for k in KEEP} for name in RESULTS if name in entries}
-    for r in per.values():  # what one sample per scene texel costs, comparable at any spp
+    for name, r in per.items():  # what one sample per scene texel costs, comparable at any spp
         r["seconds_per_spp"] = r["seconds"] / r["spp"]
+        if entries[name].get("stderr") is not None:
+            r["stderr"] = {k: entries[name]["stderr"].get(k) for k in KEEP if k in entries[name]["stderr"]}
     code_commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=code, capture_output=True, text=True).stdout.strip()
     res = {
         "mesh": Path(args.mesh).name,
@@ -119,6 +129,8 @@ def main() -> dict:
         "load_average_after": t["load_average_after"],
         "results": per,
         "colour_table_cached": (ev.get("colour_table") or {}).get("cached"),
+        "texel_sample": ev.get("texel_sample"),
+        "differences": ev.get("differences"),
         "evaluated_by": str(code),
         "evaluated_by_commit": code_commit or None,
         "evaluate_command": " ".join(["inkopt", *cmd]),

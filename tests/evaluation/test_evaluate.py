@@ -7,10 +7,10 @@ import tracemalloc
 import numpy as np
 import pytest
 from PIL import Image
+from slab_run import make_run
 
 import inkopt.evaluation.evaluate as evaluate_mod
 from inkopt.color import linear_to_srgb
-from inkopt.evaluation.baselines import extrusion_baseline, surface_baseline
 from inkopt.evaluation.evaluate import evaluate_run, table_lines
 from inkopt.evaluation.noise import MAX_SPP, PILOT_SPP, TARGET_NOISE_DE76
 from inkopt.evaluation.printed import PrintedRenderer, average_to_scene, map_texels, printer_texels
@@ -85,37 +85,11 @@ def test_panels_layout():
     assert np.any(img[:band] < 128)  # the label text
 
 
-def make_run(d, table, kind="surface", shape=SHAPE):
-    """A slab (default 24x16x6) with a 4-patch target on top; its mixture IS the surface (or extrusion) baseline."""
-    tex = Texels.box_faces(shape, ["top"])
-    quad = (tex.voxel[:, 1] >= shape[1] // 2) * 2 + (tex.voxel[:, 2] >= shape[2] // 2)
-    colours = np.array([[0.05, 0.3, 0.6], [0.6, 0.1, 0.3], [0.8, 0.8, 0.8], [0.2, 0.5, 0.8]])
-    target = colours[quad].astype(np.float32)
-    ny, nx = shape[1:]
-    pix = (np.arange(ny)[::-1, None] * nx + np.arange(nx)[None, :]).astype(np.int32)  # row 0 = largest y
-    fixed = np.zeros(shape + (3,), np.float32)
-    scene = {
-        **tex.to_arrays(),
-        "target_rgb": target,
-        "kind": np.array("slab"),
-        "fixed_share": fixed,
-        "faces": np.array(["top"]),
-        "pix_top": pix,
-    }
-    vol = Volume.from_mixture(voxel_mm=[V300] * 3, mixture=np.full(shape + (3,), 1 / 3, np.float32), inks=INKS3)
-    fn = surface_baseline if kind == "surface" else extrusion_baseline
-    vol = vol.with_mixture(fn(vol, tex, target, fixed, table))
-    d.mkdir(parents=True, exist_ok=True)
-    vol.save(d / "volume.npz")
-    save_npz(d / "scene.npz", scene)
-    return vol, scene
-
-
 def test_evaluate_run_synthetic(tmp_path, table3):
     vol, scene = make_run(tmp_path / "run", table3, "extrusion")
     ev = evaluate_run(tmp_path / "run", spp=8, table=table3)
     disk = json.loads((tmp_path / "run" / "evaluation.json").read_text())
-    assert disk == json.loads(json.dumps(ev.to_json())) and disk["format_version"] == 1
+    assert disk == json.loads(json.dumps(ev.to_json())) and disk["format_version"] == 2
     assert Evaluation.read(tmp_path / "run" / "evaluation.json") == ev  # the typed round trip
     del disk["format_version"]  # a file written before files carried a version (0) reads the same
     assert Evaluation.from_json(disk) == ev

@@ -132,7 +132,10 @@ def test_evaluation_json_round_trip(run, capsys):
     assert main(["evaluate", str(run), "--spp", "2", "--no-baselines", "--threads", "2", "--json"]) == 0
     printed = json.loads(capsys.readouterr().out)
     ev = Evaluation.read(run / "evaluation.json")
-    assert ev.to_json() == printed and printed["format_version"] == 1
+    assert ev.to_json() == printed and printed["format_version"] == 2
     assert ev.baselines is None and ev.quantized.spp_printer > 0 and ev.continuous.spp_printer is None
+    assert ev.texel_sample is None and ev.differences is None and ev.continuous.stderr is None  # every texel
+    # a version-1 file (before texel samples) reads as the same evaluation
+    assert Evaluation.from_json({**printed, "format_version": 1}, where="x.json") == ev
     with pytest.raises(FormatError, match="evaluation of format version 7"):
         Evaluation.from_json({**printed, "format_version": 7}, where="x.json")

@@ -12,6 +12,7 @@ from pathlib import Path
 from ..evaluation.colour_table import DEFAULT_PATCH_MM
 from ..evaluation.evaluate import DEFAULT_SPP, evaluate_run, table_lines
 from ..evaluation.noise import MAX_SPP, PILOT_SPP, TARGET_NOISE_DE76
+from ..evaluation.sample import AUTO_SAMPLE_TEXELS, DEFAULT_SAMPLE_TEXELS, DEFAULT_SAMPLE_WINDOWS
 from ..printing.quantize import check_quantization
 from .common import add_lighting_args, check_budget, lighting_from_args
 
@@ -37,6 +38,8 @@ def _evaluate_cmd(args) -> int:
         max_spp=args.max_spp,
         time_budget=args.time_budget,
         out=args.out,
+        texel_sample=args.texel_sample,
+        sample_windows=args.sample_windows,
     )
     if args.json:
         print(json.dumps(ev.to_json()))
@@ -90,6 +93,21 @@ def register_cli(sub) -> None:
         metavar="FILE.json",
         help="write the evaluation here instead of DIR/evaluation.json (its pictures are named after it in DIR), "
         "keeping earlier evaluations",
+    )
+    p.add_argument(
+        "--texel-sample",
+        type=int,
+        metavar="N",
+        help=f"figures from a random sample of N scene texels (and --sample-windows SSIM windows), each with its "
+        f"standard error; 0 renders every texel (default: {DEFAULT_SAMPLE_TEXELS} above {AUTO_SAMPLE_TEXELS} "
+        f"texels, else every texel); no pictures then",
+    )
+    p.add_argument(
+        "--sample-windows",
+        type=int,
+        metavar="M",
+        help=f"SSIM and mottle windows of a texel sample, each a texel with every neighbour its window reaches "
+        f"(default {DEFAULT_SAMPLE_WINDOWS})",
     )
     p.add_argument("--seed", type=int, default=0, help="render seed (default 0)")
     p.add_argument("--method", help="quantization method (default: that of DIR/quantized.npz, else blue-noise)")

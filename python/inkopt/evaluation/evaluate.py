@@ -27,6 +27,11 @@ scene texel, all passes), ``spp_passes``. With the baselines, ``gamut_floor_delt
 the ΔE76 from the target to the nearest colour a thick homogeneous patch of the inks reaches
 (``ColourTable.reachable_lab``).
 
+Large objects (above ``sample.AUTO_SAMPLE_TEXELS`` scene texels, or ``texel_sample``): every figure comes from a
+random sample of scene texels and SSIM windows (``evaluation.sample``), each result rendered on the same sampled
+texels with the same seeds, with each figure's standard error and the paired differences between results; no
+pictures and no predictions.npz then.
+
 Translucency (``evaluation.translucency``): when the scene has a translucency constraint or ``translucency_compare``
 names an unconstrained run of the same target, ``translucency`` holds the diffuse transmittance and lateral
 light spread per constrained region and for the whole object (and the compared run's on the same regions).
@@ -64,6 +69,7 @@ from ..printing.stream import quantize_run
 from ..render import Renderer
 from ..rundir import Predictions, RunDir, SceneRecord
 from ..units import dpi_of
+from . import sample as sampled
 from .baselines import BASELINES, BaselineLayers
 from .colour_table import DEFAULT_PATCH_MM, ColourTable, colour_table
 from .metrics import prediction_metrics
@@ -131,6 +137,8 @@ def evaluate_run(
     max_spp: int = MAX_SPP,
     time_budget: float | None = None,
     out=None,
+    texel_sample: int | None = None,
+    sample_windows: int | None = None,
 ) -> Evaluation:
     """Evaluate run directory ``path`` (module docstring); returns the ``results.Evaluation`` (also written to
     DIR/evaluation.json with the face pictures when ``write``). ``spp``: None = adaptive (module docstring),
@@ -143,7 +151,9 @@ def evaluate_run(
     if the scene is constrained or ``translucency_compare``, an unconstrained run directory, is given).
     ``max_spp``: the adaptive renders' cap; ``time_budget``: seconds for all the adaptive renders together, shared
     out evenly among the results still to render. ``out``: the evaluation file (default DIR/evaluation.json; its
-    pictures are named after it, e.g. ``out`` E.json: E_top.png, E_views.png), so earlier ones can be kept."""
+    pictures are named after it, e.g. ``out`` E.json: E_top.png, E_views.png), so earlier ones can be kept.
+    ``texel_sample``, ``sample_windows``: figures from a random sample of that many scene texels and SSIM windows
+    (``evaluation.sample``; ``sample.sample_size``: 0 texels renders every texel, None is the default)."""
     lighting = load_lighting(lighting)
     say = log or (lambda msg: None)
     if spp is not None and spp < 1:
@@ -161,22 +171,48 @@ def evaluate_run(
     target_lab = linear_to_lab(target)  # as TexelLoss has it; the loss itself is built after the renders
     colours = {"target": target}
     rseed = EVAL_SEED_OFFSET + int(seed)
-    todo = [2 + (2 if baselines else 0)]  # adaptive results still to render, for sharing the time budget
-    renders = {}  # name -> (AdaptiveResult, seconds, quantization method, walks)
+    texel_sample, sample_windows = sampled.sample_size(texel_sample, sample_windows, len(stex))
+    # the texel groups rendered, each with its texels, their targets and noise targets (ΔE76, SSIM ratio)
+    sample, groups = None, [(stex, target_lab, TARGET_NOISE_DE76, SSIM_NOISE_RATIO)]
+    if texel_sample:
+        sample = sampled.TexelSample.draw(stex, texel_sample, sample_windows, rseed)
+        points, windows = (stex.subset(g) for g in sample.groups)
+        groups = [(points, target_lab[sample.points], TARGET_NOISE_DE76, np.inf)]
+        groups += [(windows, target_lab[sample.windows], np.inf, sampled.SAMPLE_SSIM_NOISE_RATIO)]
+        say(
+            f"texel sample: {len(sample.points)} of {len(stex)} texels; {len(sample.centres)} SSIM windows of "
+            f"{len(sample.windows)} texels"
+        )
+    todo = [(2 + (2 if baselines else 0)) * len(groups)]  # adaptive renders still to do, for the time budget
+    renders = {}  # name -> ([AdaptiveResult per group], seconds, quantization method, walks)
 
     def rendered(name: str, render, seconds_from: float, method: str | None, walks: dict, done=None):
-        """Adaptive (or fixed-spp) render of one result, kept for its figures. ``walks``: the render's counts
-        (``spp`` printer samples of a printed result, ``paths``, ``events``), filled in by ``render``. ``done``
-        (called once the renders are over): frees the result's renderer."""
-        budget = None
-        if time_budget is not None:
-            budget = max(time_budget - (time.perf_counter() - t_all), 0.0) / max(todo[0], 1)
-        todo[0] -= 1
-        ad = adaptive_render(render, target_lab, rseed, spp, max_spp=max_spp, log=say, time_budget=budget)
+        """Adaptive (or fixed-spp) render of one result on each texel group (``render(spp, seed, group)``), kept
+        for its figures. ``walks``: the render's counts (``spp`` printer samples of a printed result's first group,
+        ``paths``, ``events``), filled in by ``render``. ``done`` (called once the renders are over): frees the
+        result's renderer."""
+        ads = []
+        for g, (_, lab, target_de, ratio) in enumerate(groups):
+            budget = None
+            if time_budget is not None:
+                budget = max(time_budget - (time.perf_counter() - t_all), 0.0) / max(todo[0], 1)
+            todo[0] -= 1
+            ad = adaptive_render(
+                lambda n, s, g=g: render(n, s, g),
+                lab,
+                rseed,
+                spp,
+                target=target_de,
+                max_spp=max_spp,
+                log=say,
+                time_budget=budget,
+                ratio=ratio,
+            )
+            ads.append(ad)
         if done is not None:
             done()
-        colours[name] = ad.rgb
-        renders[name] = (ad, time.perf_counter() - seconds_from, method, walks)
+        colours[name] = ads[0].rgb
+        renders[name] = (ads, time.perf_counter() - seconds_from, method, walks)
         return renders[name]
 
     t0 = time.perf_counter()
@@ -184,8 +220,8 @@ def evaluate_run(
 
     walks = {"paths": 0, "events": 0}
 
-    def continuous(n: int, s: int):
-        r = renderer.render(stex, n, s, progress=log is not None)
+    def continuous(n: int, s: int, g: int):
+        r = renderer.render(groups[g][0], n, s, progress=log is not None)
         walks["paths"], walks["events"] = walks["paths"] + r.paths, walks["events"] + r.events
         return r.rgb, r.var_mean, n
 
@@ -193,8 +229,9 @@ def evaluate_run(
         nonlocal renderer
         renderer = None  # freed before the figures and the next renderer
 
-    ad, seconds, _, _ = rendered("continuous", continuous, t0, None, walks, done=free_continuous)
-    say(f"continuous: {len(stex)} texels x {ad.spp} spp in {seconds:.1f} s, {per_path(walks):.0f} events per path")
+    ads, seconds, _, _ = rendered("continuous", continuous, t0, None, walks, done=free_continuous)
+    spps = " + ".join(f"{len(tx)} texels x {ad.spp} spp" for (tx, *_), ad in zip(groups, ads))
+    say(f"continuous: {spps} in {seconds:.1f} s, {per_path(walks):.0f} events per path")
     tr = None
     if translucency or (translucency is None and (rec.translucency is not None or translucency_compare)):
         tr = evaluate_translucency(vol, rec, translucency_compare, rseed, threads, lighting, log=say)
@@ -249,22 +286,21 @@ def evaluate_run(
         )
     dpi = tuple(q.dpi or tuple(float(v) for v in dpi_of(qvol.voxel_mm)))
     t0 = time.perf_counter()
-    printer = PrintedRenderer(qvol, stex, vmm, kind, threads, lighting)  # texels and map shared by all printed
+    sub = None if sample is None else sample.groups
+    printer = PrintedRenderer(qvol, stex, vmm, kind, threads, lighting, sub)  # texels and maps shared by all
 
     def printed(name: str, labels_vol: Volume, t0: float) -> None:
         info = {"spp": 0}
         printer.use(labels_vol)  # the first builds the printer renderer, the others swap in their labels
 
-        def render(n: int, s: int):
-            rgb, var, spp_p = printer(n, s, progress=log is not None)
-            info.update(spp=info["spp"] + spp_p, paths=printer.paths, events=printer.events)
+        def render(n: int, s: int, g: int):
+            rgb, var, spp_p = printer(n, s, progress=log is not None, group=g)
+            info.update(spp=info["spp"] + (spp_p if g == 0 else 0), paths=printer.paths, events=printer.events)
             return rgb, var, spp_p
 
-        _, seconds, _, _ = rendered(name, render, t0, q.method, info)
-        say(
-            f"{name}: {len(printer.ptex)} printer texels x {info['spp']} spp in {seconds:.1f} s, "
-            f"{per_path(info):.0f} events per path"
-        )
+        ads, seconds, _, _ = rendered(name, render, t0, q.method, info)
+        spps = " + ".join(f"{len(m[0])} printer texels x {ad.spp} spp" for m, ad in zip(printer.maps, ads))
+        say(f"{name}: {spps} in {seconds:.1f} s, {per_path(info):.0f} events per path")
 
     meta = dict(
         voxel_mm=qvol.voxel_mm,
@@ -299,18 +335,31 @@ def evaluate_run(
             printed(name, Volume.from_labels(labels=labels, **meta), t0)
             labels = None
     printer.use(None)  # freed before the figures
-    n_ptex, printer = len(printer.ptex), None
-    loss = TexelLoss(target, stex.pos_vox, sigma=1.5)  # the figures of every result, after all renders
+    n_ptex, n_ptex_rendered, printer = printer.all_printer_texels, printer.printer_texels_rendered, None
+    # the figures of every result, after all renders (a sample's: on its window texels)
+    loss = TexelLoss(target if sample is None else target[sample.windows], groups[-1][0].pos_vox, sigma=sampled.SIGMA)
+    values = {}  # a sample's per-texel values by result, for the paired differences
 
     def figures(name: str) -> Measured:
-        ad, seconds, method, walks = renders.pop(name)
-        m = prediction_metrics(loss, ad.rgb, ad.var)
-        return Measured(m, ad.spp, ad.passes, seconds, method, walks.get("spp"), per_path(walks))
+        ads, seconds, method, walks = renders.pop(name)
+        ad, m, err, win = ads[0], None, None, {}
+        if sample is None:
+            m = prediction_metrics(loss, ad.rgb, ad.var)
+        else:
+            pts = (ad.rgb, ad.var)
+            values[name] = sampled.per_texel(loss, (ads[1].rgb, ads[1].var), pts, groups[0][1], sample)
+            m, err = sampled.sampled_figures(loss, values[name], sample)
+            win = dict(spp_windows=ads[1].spp, spp_windows_passes=ads[1].passes)
+        return Measured(m, ad.spp, ad.passes, seconds, method, walks.get("spp"), per_path(walks), err, **win)
 
     cont, quantized = figures("continuous"), figures("quantized")
     if baselines:
         base = {name: figures(name) for name in BASELINES}
     loss = None  # freed before the pictures
+    diffs = None
+    if sample is not None:
+        pairs = [("continuous", "quantized")] + [("quantized", name) for name in (base or {})]
+        diffs = sampled.differences(values, pairs, sample)
     ev = Evaluation(
         spp=cont.spp,
         seed=int(seed),
@@ -318,7 +367,7 @@ def evaluate_run(
         kind=kind,
         spp_adaptive=spp is None,
         noise_target_delta_e76=TARGET_NOISE_DE76,
-        noise_target_ssim_ratio=SSIM_NOISE_RATIO,
+        noise_target_ssim_ratio=groups[-1][3],
         spp_pilot=PILOT_SPP,
         spp_max=MAX_SPP,
         lighting=lighting.describe(),
@@ -332,8 +381,13 @@ def evaluate_run(
         baselines=base,
         volume_digest=d.volume_digest(),
         quantized_digest=d.quantized_digest(),
+        texel_sample=None if sample is None else {**sample.to_json(), "printer_texels_rendered": n_ptex_rendered},
+        differences=diffs,
     )
-    if write:
+    if write and sample is not None:  # per-texel colours of the sampled texels only: no pictures, no predictions
+        say("texel sample: no pictures and no predictions.npz (they need every texel's colour)")
+        d.write_evaluation(ev.to_json(), out)
+    elif write:
         stem = out.stem
         if rec.faces:
             ev.pictures = write_face_pictures(d, rec, colours, stem)
@@ -369,6 +423,7 @@ def table_lines(ev: Evaluation) -> list[str]:
             f"{num(m.delta_e76_rms_denoised):>15.2f}{num(m.delta_e76_noise_contribution):>14.2f}"
             f"{num(m.mottle_l2):>8.2f}{r.spp:>6}{r.seconds:>7.1f}"
         )
+    lines += sampled.sample_lines(ev)
     c = ev.continuous.metrics
     if c.flat_texels:
         lines.append(

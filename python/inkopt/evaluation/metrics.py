@@ -40,18 +40,24 @@ def highpass_noise(loss: TexelLoss, var_l: np.ndarray) -> np.ndarray:
     return w2v + (1.0 - 2.0 / loss.wsum) * var_l
 
 
-def mottle(loss: TexelLoss, rgb, var_mean=None) -> dict:
-    """``mottle_l2`` (noise-corrected when ``var_mean`` is given), ``mottle_l2_target``, ``flat_texels``."""
+def mottle_per_texel(loss: TexelLoss, rgb, var_mean=None) -> tuple[np.ndarray, np.ndarray]:
+    """h_i² (I,) of predictions ``rgb`` (I, 3) linear, minus the noise's expected share when ``var_mean`` is given,
+    and the target's h_i² (I,); every texel (the figure takes the flat ones)."""
     rgb = np.asarray(rgb, np.float64)
-    flat = flat_texels(loss)
-    n = int(flat.sum())
-    if n == 0:
-        return {"mottle_l2": None, "mottle_l2_target": None, "flat_texels": 0}
     p = highpass_power(loss, linear_to_lab(rgb)[:, 0])
     if var_mean is not None:
         jl = linear_to_lab_jacobian(rgb)[:, 0, :]
         p = p - highpass_noise(loss, np.einsum("ij,ij->i", jl * jl, np.asarray(var_mean, np.float64)))
-    pt = highpass_power(loss, loss.target_lab[:, 0])
+    return p, highpass_power(loss, loss.target_lab[:, 0])
+
+
+def mottle(loss: TexelLoss, rgb, var_mean=None) -> dict:
+    """``mottle_l2`` (noise-corrected when ``var_mean`` is given), ``mottle_l2_target``, ``flat_texels``."""
+    flat = flat_texels(loss)
+    n = int(flat.sum())
+    if n == 0:
+        return {"mottle_l2": None, "mottle_l2_target": None, "flat_texels": 0}
+    p, pt = mottle_per_texel(loss, rgb, var_mean)
     return {"mottle_l2": float(p[flat].mean()), "mottle_l2_target": float(pt[flat].mean()), "flat_texels": n}
 
 

@@ -183,6 +183,7 @@ def adaptive_render(
     time_budget: float | None = None,
     clock=None,
     pilot_in_budget: bool = True,
+    ratio: float = SSIM_NOISE_RATIO,
 ) -> AdaptiveResult:
     """Render through ``render(spp, seed) -> (rgb (I, 3), var_mean (I, 3), weight)`` (``weight``: the pass's
     samples per texel as pooled, e.g. a printer render's own spp). With ``spp`` given: exactly one pass of
@@ -191,7 +192,7 @@ def adaptive_render(
     says fit in it (the pilot starts with a ``PROBE_SPP`` pass to time them; with ``pilot_in_budget`` False the
     whole pilot is rendered and the budget bounds the passes after it); each further pass is logged with its
     expected time. ``clock``: seconds (default
-    ``time.perf_counter``)."""
+    ``time.perf_counter``). ``ratio``: the SSIM noise ratio target (default ``SSIM_NOISE_RATIO``)."""
     import time
 
     from ..units import format_duration
@@ -218,12 +219,12 @@ def adaptive_render(
             passes.append(extra)
     model = NoiseModel.of(rgb, var, target_lab)
     for k in range(k0, MAX_ROUNDS + k0):
-        if spp is not None or model.converged(target):
+        if spp is not None or model.converged(target, ratio):
             break
         if total >= max_spp:
             capped = True
             break
-        want = model.spp_for(total, PLAN_MARGIN * target, max_spp, PLAN_MARGIN * SSIM_NOISE_RATIO)
+        want = model.spp_for(total, PLAN_MARGIN * target, max_spp, PLAN_MARGIN * ratio)
         capped = capped or want >= max_spp
         per_spp = (clock() - t0) / total
         extra = want - total
@@ -238,7 +239,7 @@ def adaptive_render(
         if log is not None:
             log(
                 f"  noise {model.contribution():.2f} dE76, SSIM noise ratio {model.ssim_ratio:.2f} at {total} spp "
-                f"(targets {target:g}, {SSIM_NOISE_RATIO:g}): {extra} more, ~{format_duration(extra * per_spp)}"
+                f"(targets {target:g}, {ratio:g}): {extra} more, ~{format_duration(extra * per_spp)}"
                 + (" (capped)" if capped else "")
             )
         r1, v1, w1 = render(extra, seed + k * SEED_STRIDE)
@@ -248,4 +249,6 @@ def adaptive_render(
         w, total = w + w1, total + extra
         passes.append(extra)
         model = NoiseModel.of(rgb, var, target_lab)
-    return AdaptiveResult(rgb, var, int(total), passes, model.contribution(), capped and not model.converged(target))
+    return AdaptiveResult(
+        rgb, var, int(total), passes, model.contribution(), capped and not model.converged(target, ratio)
+    )

@@ -5,7 +5,10 @@ baselines quantized like it).
 A printer texel is a textured face of a printer voxel (meshes: one per printer surface voxel). Each is assigned to
 the scene texel of the same face whose face centre is nearest in mm (meshes: the nearest scene texel), i.e. the
 scene texel whose footprint contains it; a scene texel's colour is the mean of its printer texels (one that gets
-none takes its nearest printer texel). Conventions: docs/conventions.md.
+none takes its nearest printer texel). With a texel sample (``sample.TexelSample``), only the printer texels of the
+sampled scene texels (and the stand-ins of those that get none) are rendered: the map is made on all printer
+texels first, so a sampled scene texel's colour is exactly what the full render averages for it.
+Conventions: docs/conventions.md.
 """
 
 from __future__ import annotations
@@ -43,16 +46,39 @@ def map_texels(printer: Texels, voxel_mm_printer, scene: Texels, voxel_mm_scene,
 
 
 def average_to_scene(rgb_p, var_p, to_scene, stand_in, n_scene: int):
-    """Per-scene-texel mean (I, 3) of printer texel colours, and the variance of that mean (I, 3)."""
+    """Per-scene-texel mean (I, 3) of printer texel colours, and the variance of that mean (I, 3). Printer texels
+    with ``to_scene`` -1 (a sample's stand-ins of no sampled texel's own) only stand in."""
+    on = to_scene >= 0
+    if not on.all():
+        to_scene, rgb_on, var_on = to_scene[on], rgb_p[on], var_p[on]
+    else:
+        rgb_on, var_on = rgb_p, var_p
     cnt = np.bincount(to_scene, minlength=n_scene).astype(np.float64)
-    rgb = np.stack([np.bincount(to_scene, rgb_p[:, c], n_scene) for c in range(3)], 1)
-    var = np.stack([np.bincount(to_scene, var_p[:, c], n_scene) for c in range(3)], 1)
+    rgb = np.stack([np.bincount(to_scene, rgb_on[:, c], n_scene) for c in range(3)], 1)
+    var = np.stack([np.bincount(to_scene, var_on[:, c], n_scene) for c in range(3)], 1)
     has = cnt > 0
     rgb[has] /= cnt[has, None]
     var[has] /= (cnt[has] ** 2)[:, None]
     miss = np.flatnonzero(~has)
     rgb[miss], var[miss] = rgb_p[stand_in[miss]], var_p[stand_in[miss]]
     return rgb, var
+
+
+def restrict(ptex: Texels, to_scene, stand_in, subset):
+    """The printer texels of the scene texels ``subset`` (sorted int64 (S,)): those that map to them and the
+    stand-ins of those that get none; returns (printer texels, their row in ``subset`` (int64), the stand-in
+    (a row of the returned texels) of each ``subset`` texel, -1 where it has printer texels)."""
+    subset = np.asarray(subset, np.int64)
+    row = np.full(len(stand_in), -1, np.int64)
+    row[subset] = np.arange(len(subset))
+    mapped = np.flatnonzero(row[to_scene] >= 0)
+    standing = stand_in[subset]
+    keep = np.union1d(mapped, standing[standing >= 0])
+    new_index = np.full(len(to_scene), -1, np.int64)
+    new_index[keep] = np.arange(len(keep))
+    sub_to = row[to_scene[keep]]  # -1 for a stand-in that maps to an unsampled scene texel
+    sub_stand = np.where(standing >= 0, new_index[np.maximum(standing, 0)], -1)
+    return ptex.subset(keep), sub_to, sub_stand
 
 
 def printer_texels(qvol: Volume, scene: Texels, kind: str) -> Texels:
@@ -84,12 +110,19 @@ class PrintedRenderer:
     first labels volume and kept; a later one only replaces the medium (``Renderer.set_volume``), which renders
     bit-identically to a renderer built for it. ``paths`` and ``events`` count the current volume's walks."""
 
-    def __init__(self, qvol: Volume, scene: Texels, voxel_mm_scene, kind: str, threads=None, lighting=None):
-        self.ptex = printer_texels(qvol, scene, kind)
-        self.to_scene, self.stand_in = map_texels(
-            self.ptex, qvol.voxel_mm, scene, voxel_mm_scene, per_face=kind != "mesh"
-        )
-        self.n_scene, self.shape, self.threads, self.lighting = len(scene), qvol.shape, threads, lighting
+    def __init__(
+        self, qvol: Volume, scene: Texels, voxel_mm_scene, kind: str, threads=None, lighting=None, groups=None
+    ):
+        """``groups``: texel groups to render, each sorted scene texel indices (int64 (S,)) (a texel sample's
+        points and windows), else one group of every texel; a group's results have its texels' rows, in order."""
+        ptex = printer_texels(qvol, scene, kind)
+        to_scene, stand_in = map_texels(ptex, qvol.voxel_mm, scene, voxel_mm_scene, per_face=kind != "mesh")
+        self.all_printer_texels = len(ptex)
+        if groups is None:
+            self.maps = [(ptex, to_scene, stand_in, len(scene))]
+        else:
+            self.maps = [(*restrict(ptex, to_scene, stand_in, g), len(g)) for g in groups]
+        self.shape, self.threads, self.lighting = qvol.shape, threads, lighting
         self.renderer, self.built_for, self.builds, self.paths, self.events = None, None, 0, 0, 0
 
     def use(self, labels_vol: Volume | None) -> None:
@@ -112,13 +145,19 @@ class PrintedRenderer:
         # built for, so the caller's label grid is freed as soon as the caller drops it
         self.renderer.volume = self.built_for
 
-    def __call__(self, spp: int, seed: int, progress: bool = False):
-        """(rgb (I, 3), var_mean (I, 3)) on the scene texels from ``spp`` samples per scene texel, shared by its
-        printer texels, and the printer spp used."""
-        spp_p = max(1, int(np.ceil(spp * self.n_scene / len(self.ptex))))
-        res = self.renderer.render(self.ptex, spp_p, seed, progress=progress)
+    @property
+    def printer_texels_rendered(self) -> int:
+        """Printer texels of all groups (a printer texel in two groups counts twice)."""
+        return sum(len(m[0]) for m in self.maps)
+
+    def __call__(self, spp: int, seed: int, progress: bool = False, group: int = 0):
+        """(rgb (I, 3), var_mean (I, 3)) on the scene texels of ``group`` from ``spp`` samples per scene texel,
+        shared by its printer texels, and the printer spp used."""
+        ptex, to_scene, stand_in, n_scene = self.maps[group]
+        spp_p = max(1, int(np.ceil(spp * n_scene / len(ptex))))
+        res = self.renderer.render(ptex, spp_p, seed, progress=progress)
         self.paths, self.events = self.paths + res.paths, self.events + res.events
         rgb, var = average_to_scene(
-            res.rgb.astype(np.float64), res.var_mean.astype(np.float64), self.to_scene, self.stand_in, self.n_scene
+            res.rgb.astype(np.float64), res.var_mean.astype(np.float64), to_scene, stand_in, n_scene
         )
         return rgb, var, spp_p

@@ -4,7 +4,8 @@
 ``to_json()`` gives the file's JSON object, with the same keys as scripts read them (the figures of
 ``metrics.Metrics`` flat among the others, the scene's and the lighting's entries too) plus ``format_version``;
 ``from_json(data, where)`` reads one back, bringing a file of an older format version up to date
-(``io.upgrade_format``; a file without ``format_version`` is version 0, whose keys equal version 1's).
+(``io.upgrade_format``; a file without ``format_version`` is version 0, whose keys equal version 1's; an
+evaluation of version 1 has every key of version 2 but the texel sample's, which it did not use).
 """
 
 from __future__ import annotations
@@ -17,8 +18,11 @@ from ..io import FORMAT_KEY, upgrade_format
 from .metrics import Metrics
 
 REPORT_FORMAT = 1
-EVALUATION_FORMAT = 1
+EVALUATION_FORMAT = 2
 _SAME_KEYS = {0: dict}  # version 0 -> 1: the keys are the same, only format_version is added
+# evaluation version 1 -> 2: the texel sample's keys (``texel_sample``, ``differences``, a result's ``stderr``)
+# are new; a version-1 evaluation rendered every texel, which they say by their absence
+_EVALUATION_UPGRADES = {0: dict, 1: dict}
 
 
 def _read(path) -> dict:
@@ -157,7 +161,10 @@ class Measured:
     ``spp`` samples per scene texel in ``spp_passes``, ``seconds``, the quantization ``method`` (None for the
     continuous result), for printed results ``spp_printer``, the samples per printer texel, and
     ``events_per_path``: the renders' mean scattering and interface events per path, what a sample costs (None in
-    evaluations written before it was recorded)."""
+    evaluations written before it was recorded); ``stderr``: figure name -> its sampling standard error when the
+    figures come from a texel sample (``evaluation.sample``; None when every texel was rendered), and then
+    ``spp``, ``spp_passes`` and ``spp_printer`` are the sampled points' (the ΔE figures'), ``spp_windows`` and
+    ``spp_windows_passes`` the SSIM windows' samples per scene texel."""
 
     metrics: Metrics
     spp: int
@@ -166,6 +173,9 @@ class Measured:
     method: str | None
     spp_printer: int | None = None
     events_per_path: float | None = None
+    stderr: dict | None = None
+    spp_windows: int | None = None
+    spp_windows_passes: list | None = None
 
     def to_json(self) -> dict:
         d = {**self.metrics.to_json(), "spp": self.spp, "spp_passes": self.spp_passes}
@@ -173,6 +183,8 @@ class Measured:
             d["spp_printer"] = self.spp_printer
         if self.events_per_path is not None:
             d["events_per_path"] = self.events_per_path
+        if self.stderr is not None:
+            d.update(stderr=self.stderr, spp_windows=self.spp_windows, spp_windows_passes=self.spp_windows_passes)
         return {**d, "seconds": self.seconds, "method": self.method}
 
     @classmethod
@@ -185,6 +197,9 @@ class Measured:
             d["method"],
             d.get("spp_printer"),
             d.get("events_per_path"),
+            d.get("stderr"),
+            d.get("spp_windows"),
+            d.get("spp_windows_passes"),
         )
 
 
@@ -195,7 +210,9 @@ class Evaluation:
     quantized volume's settings; ``translucency``, ``colour_table``, the gamut floor, ``baselines`` and
     ``pictures`` are None when not measured or written; ``volume_digest`` and ``quantized_digest``: the
     ``io.file_digest`` of the volume.npz and quantized.npz evaluated (None in evaluations written before they were
-    recorded)."""
+    recorded). ``texel_sample``: the sample the figures come from (``evaluation.sample.TexelSample.to_json`` with
+    the printer texels rendered), None when every texel was rendered; ``differences``: then the paired differences
+    between results ("a - b" -> figure -> value and standard error, ``sample.differences``)."""
 
     spp: int
     seed: int
@@ -220,6 +237,8 @@ class Evaluation:
     pictures: list | None = None
     volume_digest: str | None = None  # io.file_digest of the volume.npz and quantized.npz evaluated
     quantized_digest: str | None = None
+    texel_sample: dict | None = None
+    differences: dict | None = None
 
     _HEAD = (
         "spp",
@@ -234,6 +253,7 @@ class Evaluation:
     )
     _FLOOR = ("colour_table", "gamut_floor_delta_e76", "gamut_floor_delta_e76_p95")
     _SOURCES = ("volume_digest", "quantized_digest")
+    _SAMPLE = ("texel_sample", "differences")
 
     def to_json(self) -> dict:
         d = {**{k: getattr(self, k) for k in self._HEAD}, **self.lighting, "continuous": self.continuous.to_json()}
@@ -246,13 +266,15 @@ class Evaluation:
         d["seconds"] = self.seconds
         if self.pictures is not None:
             d["pictures"] = self.pictures
-        d.update({k: getattr(self, k) for k in self._SOURCES if getattr(self, k) is not None})
+        d.update({k: getattr(self, k) for k in self._SOURCES + self._SAMPLE if getattr(self, k) is not None})
         d[FORMAT_KEY] = EVALUATION_FORMAT
         return d
 
     @classmethod
     def from_json(cls, data: dict, where="evaluation.json") -> Evaluation:
-        d = upgrade_format(data, kind="evaluation", where=where, current=EVALUATION_FORMAT, upgrades=_SAME_KEYS)
+        d = upgrade_format(
+            data, kind="evaluation", where=where, current=EVALUATION_FORMAT, upgrades=_EVALUATION_UPGRADES
+        )
         base = d.get("baselines")
         return cls(
             **{k: d[k] for k in cls._HEAD},
@@ -266,7 +288,7 @@ class Evaluation:
             **{k: d.get(k) for k in cls._FLOOR},
             baselines=None if base is None else {k: Measured.from_json(v) for k, v in base.items()},
             pictures=d.get("pictures"),
-            **{k: d.get(k) for k in cls._SOURCES},
+            **{k: d.get(k) for k in cls._SOURCES + cls._SAMPLE},
         )
 
     @classmethod
