@@ -232,7 +232,8 @@ def _optimise(
         keep_start(*figures_of(budget=start_budget, max_spp=min(eval_max_spp, PILOT_SPP)))
     reserve = 0.0 if cfg.time_budget is None else (final_budget or 0.0) + BUDGET_WRITING * cfg.time_budget
     run.run(rd.checkpoint_path, progress=progress, log=log, log_every_s=log_every_s, reserve=reserve, on_step=on_step)
-    run.release_renderer()  # not beside the writing of the result
+    run.release_renderer()  # not beside the writing of the result, nor beside the finishing smoothing
+    run.finish()  # the result: the last iterate smoothed (cfg.finish_smooth); the checkpoint keeps the iterate
     rd.save_volume_slabs(run.base, run.mixture_slabs(), run.base.inks)  # a slab of layers at a time
     gone = rd.remove_stale()  # quantized volume, slices, evaluation made from an earlier volume.npz
     if gone:
@@ -288,6 +289,7 @@ def _optimise(
         seed=cfg.seed,
         decay=cfg.decay,
         smooth=run.cfg.smooth,
+        finish_smooth=run.cfg.finish_smooth,
         adjoint_ema=run.cfg.adjoint_ema,
         gradient=cfg.grad_method,
         threads=threads,

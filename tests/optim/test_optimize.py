@@ -425,9 +425,10 @@ def test_settings_left_to_the_scene_kind():
 
     assert diffusion_steps(1.5) != diffusion_steps(3.0)
     assert SCENE_DEFAULTS == {
-        "slab": {"adjoint_ema": 0.8, "smooth": 1.5, "init": "white"},
-        "mesh": {"adjoint_ema": 0.5, "smooth": 3.0, "init": "white"},
+        "slab": {"adjoint_ema": 0.8, "smooth": 1.5, "init": "white", "finish_smooth": 0},
+        "mesh": {"adjoint_ema": 0.5, "smooth": 3.0, "init": "white", "finish_smooth": 1},
     }
+    assert OptimizeConfig(finish_smooth=2).for_scene("slab").finish_smooth == 2
     assert OptimizeConfig().adjoint_ema is None and OptimizeConfig().smooth is None and OptimizeConfig().init is None
     mesh = OptimizeConfig().for_scene("mesh")
     assert (mesh.adjoint_ema, mesh.smooth, mesh.init) == (0.5, 3.0, SCENE_DEFAULTS["mesh"]["init"])
@@ -457,3 +458,43 @@ def test_settings_left_to_the_scene_kind():
         assert (r.cfg.adjoint_ema, r.cfg.smooth, r.smoother.steps) == (ema, smooth, diffusion_steps(smooth))
         r.run()
         assert r.c_weight == pytest.approx(sum(20 * ema**k for k in range(8)), rel=1e-6)
+
+
+def test_finish_smooths_the_result_not_the_checkpoint(tmp_path):
+    """``finish`` applies ``finish_smooth`` passes of the step's smoothing operator to x: only the smoothed set's
+    rows change, each column's sum over them is kept (the diffusion moves mass, it makes none), their
+    voxel-to-voxel variation falls, and every pass is the operator once more. The checkpoint written at the run's
+    end keeps the unsmoothed iterate, and the number of passes is not part of the checkpoint key (it does not
+    change a step). 0 passes, or no smoothing, leave x alone."""
+    top = np.zeros((48, 64, 3), np.float32)  # two flat halves (a smoothed set) and an edge between them (not)
+    top[:, :32] = srgb_to_linear(np.array([0.8, 0.3, 0.2]))
+    top[:, 32:] = srgb_to_linear(np.array([0.2, 0.5, 0.8]))
+    vox = 25.4 / 300
+    scene = build_slab(top, None, (16 * vox, 12 * vox, 0.4), InkTable.parse("vero-cmykw"))
+    r = run(scene, iterations=6, smooth=1.5, finish_smooth=2)
+    ck = tmp_path / "checkpoint.npz"
+    r.run(ck)
+    before = r.x.copy()
+    rows = r.smoother.rows
+    assert rows is not None and 0 < len(rows) < r.param.n_free
+    once = r.smoother.apply(before.copy())
+    r.finish()
+    assert np.array_equal(r.x, r.smoother.apply(once.copy()))
+    outside = np.setdiff1d(np.arange(r.param.n_free), rows)
+    assert np.array_equal(r.x[outside], before[outside])
+    np.testing.assert_allclose(r.x[rows].sum(0), before[rows].sum(0), rtol=1e-4)
+    assert r.x[rows].var(0).sum() < before[rows].var(0).sum()
+
+    resumed = run(scene, iterations=6, smooth=1.5, finish_smooth=0)
+    assert resumed.config_key() == r.config_key()
+    assert resumed.resume(ck, log=lambda s: None)
+    assert np.array_equal(resumed.x, before)
+    resumed.finish()
+    assert np.array_equal(resumed.x, before)
+    plain = run(scene, iterations=1, smooth=0.0, finish_smooth=3)
+    plain.run()
+    x = plain.x.copy()
+    plain.finish()
+    assert plain.smoother is None and np.array_equal(plain.x, x)
+    with pytest.raises(ValueError, match="finishing smoothing"):
+        OptimizeConfig(finish_smooth=9).validate()

@@ -167,6 +167,14 @@ def add_optimizer_args(p, single_run: bool = True) -> None:
         "meshes; 0: off)",
     )
     p.add_argument(
+        "--finish-smooth",
+        type=int,
+        metavar="PASSES",
+        help="passes of that smoothing over the result after the last iteration, against the voxel-scale "
+        f"variation the iterations leave (default {slab['finish_smooth']} on slabs, {mesh['finish_smooth']} on "
+        "meshes; 0: off)",
+    )
+    p.add_argument(
         "--smooth-edge",
         type=float,
         default=d.smooth_edge,
@@ -319,6 +327,7 @@ def config_from_args(args):
         grad_method=args.gradient,
         checkpoint_every=args.checkpoint_every,
         smooth=args.smooth,
+        finish_smooth=args.finish_smooth,
         smooth_edge=args.smooth_edge,
         decay=args.decay,
         adjoint_ema=args.adjoint_ema,

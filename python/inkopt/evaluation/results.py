@@ -88,6 +88,7 @@ class Report:
     seconds_total: float | None = None
     estimate: dict | None = None
     stop: dict | None = None
+    finish_smooth: int | None = None  # passes of smoothing over the result (None: a report from before them)
 
     _RUN = (
         "delta_e76_max",
@@ -116,6 +117,7 @@ class Report:
         "seed",
         "decay",
         "smooth",
+        "finish_smooth",
         "adjoint_ema",
         "gradient",
         "threads",

@@ -145,8 +145,8 @@ class Optimization:
         """What must match for a checkpoint to be resumable (not the iteration count): the settings, the grid,
         inks, texels, free voxels, a digest of the targets and fixed shares, and the lighting, as JSON."""
         d = asdict(self.cfg)
-        for name in ("iterations", "checkpoint_every", "stop_gain", "stop_horizon", "time_budget"):
-            d.pop(name)  # when the run ends, not how it steps: the schedule's plan is in the checkpoint
+        for name in ("iterations", "checkpoint_every", "stop_gain", "stop_horizon", "time_budget", "finish_smooth"):
+            d.pop(name)  # when the run ends and what is done after it, not how it steps (the plan is checkpointed)
         if not d["smooth"]:  # without smoothing its edge guide does nothing
             d.pop("smooth_edge")
         if d["lr"] is None and self.cfg.init not in COLD_INITS:  # a warm start's default step: written out
@@ -394,6 +394,15 @@ class Optimization:
                 bar.close()
         if checkpoint is not None:
             self.save_checkpoint(checkpoint)
+
+    def finish(self) -> None:
+        """Smooth the result: ``cfg.finish_smooth`` passes of the step's smoothing operator over the variables x
+        (nothing without smoothing). Called once, after the iterations and their last checkpoint, so that the
+        checkpoint keeps the iterate a continued run steps on from."""
+        if self.smoother is None:
+            return
+        for _ in range(int(self.cfg.finish_smooth or 0)):
+            self.x = self.smoother.apply(self.x)
 
     def plan_line(self) -> str:
         """One line on the run's planned end and why."""
