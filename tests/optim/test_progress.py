@@ -8,7 +8,7 @@ import sys
 import numpy as np
 
 from inkopt import charts
-from inkopt.optim.loop import ProgressLines, changed_settings
+from inkopt.optim.progress import ProgressLines, changed_settings
 from inkopt.units import format_duration
 
 

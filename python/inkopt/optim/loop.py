@@ -28,11 +28,11 @@ from ..lighting import Lighting, load_lighting
 from ..loss import TexelLoss
 from ..model import FixedShares, Texels, Volume, mix_grad
 from ..render import Renderer
-from ..units import format_duration
 from .checkpoint import History, read_checkpoint, write_checkpoint
 from .config import COLD_INITS, OptimizeConfig
 from .optimizers import make_optimizer, step_factor
 from .param import Parameterization, initial_free_mixture
+from .progress import ProgressLines, changed_settings
 from .smooth import MAX_DEPTH, GradientSmoother, nearest_texels, texel_guide
 from .stopping import Schedule
 
@@ -415,38 +415,3 @@ class Optimization:
         if s.reason == "time budget":
             return f"the time budget ends the run at iteration {s.end} (now {it}), the step decay planned for it"
         return f"the run ends at its maximum, {s.end} iterations"
-
-
-def changed_settings(old: dict, new: dict) -> str:
-    """The settings two checkpoint keys differ in, as "NAME OLD -> NEW, ..." ("problem": the target, texels or
-    constraints)."""
-    names = {"problem": "the target, texels or constraints (scene)"}
-    out = []
-    for k in sorted(set(old) | set(new)):
-        if old.get(k) != new.get(k):
-            what = names.get(k, k)
-            out.append(what if k == "problem" else f"{what} {old.get(k)!r} -> {new.get(k)!r}")
-    return ", ".join(out)
-
-
-class ProgressLines:
-    """Progress as log lines, for a log that is not a terminal (a file, a scheduler): "iteration i/N: loss L,
-    ΔE76 D, S s/iteration, ETA T" after the first iteration, then whenever ``every_s`` seconds have passed since
-    the last line, and after the last iteration. The ETA is this invocation's mean time per iteration times the
-    iterations left. ``clock``: seconds (monotonic)."""
-
-    def __init__(self, total: int, start: int, log, every_s: float = 30.0, clock=time.perf_counter):
-        self.total, self.start, self.log, self.every_s, self.clock = int(total), int(start), log, float(every_s), clock
-        self.t0 = self.last = clock()
-        self.first = True
-
-    def update(self, iteration: int, loss: float, delta_e76: float) -> None:
-        now = self.clock()
-        if not (self.first or iteration >= self.total or now - self.last >= self.every_s):
-            return
-        per = (now - self.t0) / max(iteration - self.start, 1)
-        self.log(
-            f"iteration {iteration}/{self.total}: loss {loss:.4g}, ΔE76 {delta_e76:.2f}, {per:.1f} s/iteration, "
-            f"ETA {format_duration(per * (self.total - iteration))}"
-        )
-        self.first, self.last = False, now
