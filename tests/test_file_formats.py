@@ -98,8 +98,8 @@ def _version_0_key(run: Optimization) -> str:
     """The config_key version-0 checkpoints hold: settings at their "off" value left out, guided smoothing
     marked."""
     d = asdict(run.cfg)
-    for name in ("iterations", "checkpoint_every", "stop_gain", "stop_horizon", "time_budget"):  # never in a key
-        d.pop(name)
+    for name in ("iterations", "checkpoint_every", "stop_gain", "stop_horizon", "time_budget", "finish_smooth"):
+        d.pop(name)  # never in a key
     if d["schedule_iterations"] is None:
         d.pop("schedule_iterations")
     if not d["decay"]:

@@ -103,8 +103,9 @@ def run(tmp_path_factory):
 
 def test_report_keys_and_round_trip(run):
     data = json.loads((run / "report.json").read_text())
-    # "stop" (why the run ended) is the one key added since the files carried a version
-    assert set(data) == SLAB_REPORT_KEYS | {"format_version", "stop"} and data["format_version"] == 1
+    # "stop" (why the run ended) and "finish_smooth" are the keys added since the files carried a version
+    assert set(data) == SLAB_REPORT_KEYS | {"format_version", "stop", "finish_smooth"} and data["format_version"] == 1
+    assert data["finish_smooth"] == 0  # a slab's default
     assert data["stop"]["reason"] == "iterations" and data["stop"]["iterations"] == 2
     rep = Report.read(run / "report.json")
     assert rep.to_json() == data and list(rep.to_json()) == list(data)  # the same keys in the same order
