@@ -24,8 +24,8 @@ GRAD_METHODS = ("replay", "li1")
 #: ``finish_smooth``: meshes 1. A mesh result carries voxel-scale variation under flat texels that the loss barely
 #: sees (its curvature is small there) and that no later step removes: averaging the last 10-40 iterates of a
 #: coarse stage changed nothing, while one pass of the step's smoothing over a Spot 20 mm deadline result lowered
-#: the mottle 0.34 -> 0.13 (ΔL*)² and raised SSIM 0.909 -> 0.920 for +0.07 ΔE76 (256-spp renders;
-#: docs/experiments.md, "Finishing smoothing"). Slabs 0: not measured there.
+#: the mottle 0.34 -> 0.13 (ΔL*)² and raised SSIM 0.909 -> 0.920 for +0.07 ΔE76 (256-spp renders,
+#: experiments/results/finish_smooth.json; docs/experiments.md, "Finishing smoothing"). Slabs 0: not measured there.
 SCENE_DEFAULTS = {
     "slab": {"adjoint_ema": 0.8, "smooth": 1.5, "init": "white", "finish_smooth": 0},
     "mesh": {"adjoint_ema": 0.5, "smooth": 3.0, "init": "white", "finish_smooth": 1},
@@ -155,7 +155,8 @@ class OptimizeConfig:
         scene of ``kind`` ("slab" or "mesh")."""
         if kind not in SCENE_DEFAULTS:
             raise ValueError(f"unknown scene kind '{kind}'; use one of {tuple(SCENE_DEFAULTS)}")
-        # floats, so that the checkpoint key of an explicit integer (``--set smooth=3``) equals the default's
+        # in the default's type (float, int, str), so that the checkpoint key of an explicit integer (``--set
+        # smooth=3``) equals the default's
         resolved = {
             k: type(v)(v if getattr(self, k) is None else getattr(self, k)) for k, v in SCENE_DEFAULTS[kind].items()
         }
