@@ -29,32 +29,48 @@ FLAT_CHROMA_STD = 2.0
 
 
 # ----------------------------------------------------------------------------- neighbourhood operators
+#: texel rows of the window matrix built at a time (``gaussian_window``: its transient memory, ~60 MB)
+WINDOW_CHUNK_ROWS = 1 << 13
+
+
 def gaussian_window(pos_vox: np.ndarray, sigma: float):
     """Texel Gaussian window W = diag(1/n) K.
 
     K (I, I) CSR float64 is symmetric with K_ij = exp(-|p_i - p_j|^2 / (2 sigma^2)) for texels whose Chebyshev
     distance is <= radius = int(3.5 sigma + 0.5) (voxels), n (I,) = K @ 1 the window weight that falls on texels.
     On a flat face's interior W equals scikit-image's (truncate=3.5) Gaussian window. Returns (K, n, radius).
+    K is written into its final arrays ``WINDOW_CHUNK_ROWS`` rows at a time (columns sorted within each row), so
+    building it takes little more than K itself (12 bytes per entry, ~120 entries per texel on a face).
     """
     pos = np.asarray(pos_vox, np.float64)
     radius = int(3.5 * sigma + 0.5)
     n_tex = len(pos)
-    pairs = cKDTree(pos).query_pairs(radius + 1e-6, p=np.inf, output_type="ndarray")
-    i = np.ascontiguousarray(pairs[:, 0], dtype=np.int32)
-    j = np.ascontiguousarray(pairs[:, 1], dtype=np.int32)
+    reach = radius + 1e-6
+    tree = cKDTree(pos)
+    pairs = tree.query_pairs(reach, p=np.inf, output_type="ndarray")  # (i < j) pairs: each row's entry count
+    counts = np.bincount(pairs[:, 0], minlength=n_tex) + np.bincount(pairs[:, 1], minlength=n_tex) + 1
     del pairs
-    d2 = np.zeros(len(i))
-    for a in range(3):
-        col = np.ascontiguousarray(pos[:, a])
-        d = col[j]
-        d -= col[i]
-        d2 += d * d
-    w = np.exp(d2 * (-0.5 / (sigma * sigma)))
-    del d2, d
-    diag = np.arange(n_tex, dtype=np.int32)
-    rows, cols = np.concatenate([i, j, diag]), np.concatenate([j, i, diag])
-    del i, j
-    k = sp.coo_matrix((np.concatenate([w, w, np.ones(n_tex)]), (rows, cols)), shape=(n_tex, n_tex)).tocsr()
+    idx = np.int32 if int(counts.sum()) < np.iinfo(np.int32).max else np.int64
+    indptr = np.zeros(n_tex + 1, idx)
+    np.cumsum(counts, out=indptr[1:])
+    indices = np.empty(int(indptr[-1]), idx)
+    data = np.empty(int(indptr[-1]), np.float64)
+    scale = -0.5 / (sigma * sigma)
+    for s in range(0, n_tex, WINDOW_CHUNK_ROWS):
+        e = min(n_tex, s + WINDOW_CHUNK_ROWS)
+        m = cKDTree(pos[s:e]).sparse_distance_matrix(tree, reach, p=np.inf, output_type="ndarray")
+        order = np.argsort(m["i"] * n_tex + m["j"])  # by row, then column
+        row, col = m["i"][order] + s, m["j"][order]
+        del m, order
+        if len(row) != indptr[e] - indptr[s]:
+            raise RuntimeError("texel window: the neighbour search disagrees with its counts")
+        d2 = np.zeros(len(row))
+        for a in range(3):
+            d = pos[col, a] - pos[row, a]
+            d2 += d * d
+        indices[indptr[s] : indptr[e]] = col
+        data[indptr[s] : indptr[e]] = np.exp(d2 * scale)
+    k = sp.csr_matrix((data, indices, indptr), shape=(n_tex, n_tex))
     return k, np.asarray(k.sum(axis=1)).ravel(), radius
 
 
@@ -128,7 +144,8 @@ class TexelLoss:
     All three terms are evaluated unless the call says ``all_terms=False`` (the optimiser's training steps): then a
     term of weight 0 is reported as NaN and costs nothing (on the reference slab at the default γ = (1, 0, 0) the
     SSIM and edge terms were half of the loss's time).
-    Set-up builds sparse operators once (W: ~(2r+1)^2 entries per texel on a face, r = int(3.5 sigma + 0.5)).
+    The sparse operators (W: ~(2r+1)^2 entries per texel on a face, r = int(3.5 sigma + 0.5)) are built on first
+    use; ``release_operators`` frees them between uses.
     """
 
     def __init__(self, target_rgb, pos_vox, gamma=(1.0, 0.0, 0.0), sigma: float = 1.5):
@@ -151,10 +168,9 @@ class TexelLoss:
         self.target_rgb = target
         self.target_lab = linear_to_lab(target)
         self.target_n = normalise_lab(self.target_lab)
-        self.K, self.wsum, self.radius = gaussian_window(pos, self.sigma)
-        self._K2 = None  # K squared entrywise, built on first use (noise correction)
-        self.S = sobel_operators(pos)
-        self._ST = None  # S transposed, built on first use (the edge term's gradient)
+        self._pos = pos
+        self._K = self._K2 = self._S = self._ST = None  # the operators, built on first use (``release_operators``)
+        self._wsum = self._radius = None  # kept by ``release_operators`` (I floats)
         tn = self.target_n
         self._mu_t = self._window(tn)
         self._var_t = self._window(tn * tn) - self._mu_t**2
@@ -163,6 +179,45 @@ class TexelLoss:
         var = np.maximum(self._window(lab * lab) - self._window(lab) ** 2, 0.0)
         #: (I,) bool: texels whose target neighbourhood is flat (``FLAT_L_STD``, ``FLAT_CHROMA_STD``)
         self.flat = (np.sqrt(var[:, 0]) < FLAT_L_STD) & (np.sqrt(var[:, 1] + var[:, 2]) < FLAT_CHROMA_STD)
+
+    @property
+    def K(self) -> sp.csr_matrix:
+        """The window's weights (``gaussian_window``), (I, I) CSR float64; built on first use."""
+        if self._K is None:
+            self._K, self._wsum, self._radius = gaussian_window(self._pos, self.sigma)
+        return self._K
+
+    @property
+    def wsum(self) -> np.ndarray:
+        """(I,) float64: the window weight that falls on texels (``gaussian_window``'s n)."""
+        if self._wsum is None:
+            self.K  # noqa: B018 (builds the window)
+        return self._wsum
+
+    @property
+    def radius(self) -> int:
+        """The window's Chebyshev radius in voxels, int(3.5 sigma + 0.5)."""
+        if self._radius is None:
+            self.K  # noqa: B018 (builds the window)
+        return self._radius
+
+    @property
+    def S(self) -> sp.csr_matrix:
+        """The stacked Sobel operators (``sobel_operators``), (3I, I) CSR float64; built on first use."""
+        if self._S is None:
+            self._S = sobel_operators(self._pos)
+        return self._S
+
+    def release_operators(self) -> None:
+        """Free the sparse window and Sobel operators (~2.5 KB per texel with the noise correction's K squared:
+        0.95 GiB at 387 k texels); the next call that needs them builds them again, equal to the last. A
+        colour-only training step (``all_terms=False`` at γ2 = γ3 = 0) never reads them."""
+        self._K = self._K2 = self._S = self._ST = None
+
+    @property
+    def needs_operators(self) -> bool:
+        """Whether a training step (``all_terms=False``) reads the operators: γ2 > 0 or γ3 > 0."""
+        return bool(self.gamma[1] > 0 or self.gamma[2] > 0)
 
     def highpass(self, x: np.ndarray) -> np.ndarray:
         """(1 - W) x for x (I, k): each texel's value minus its windowed mean."""

@@ -87,6 +87,21 @@ def test_gaussian_window_rows_and_interior():
     assert loss.gaussian_window(pos[:10], 1.0)[2] == 4
 
 
+def test_gaussian_window_in_chunks_equals_the_dense_definition(monkeypatch):
+    """Built a few rows at a time (chunks that end mid-face, a box's edges and corners, a repeated texel
+    position), K equals the dense definition: exp(-d^2 / 2 sigma^2) wherever the Chebyshev distance is <= the
+    radius, columns sorted in each row."""
+    pos = Texels.box_faces((9, 7, 8)).pos_vox
+    pos = np.concatenate([pos, pos[:3]])  # texels at the same place are each other's neighbours
+    monkeypatch.setattr(loss, "WINDOW_CHUNK_ROWS", 37)
+    k, wsum, r = loss.gaussian_window(pos, 1.5)
+    diff = pos[:, None, :] - pos[None, :, :]
+    want = np.where(np.abs(diff).max(-1) <= r + 1e-6, np.exp(-(diff**2).sum(-1) / (2 * 1.5**2)), 0.0)
+    np.testing.assert_allclose(k.toarray(), want, rtol=1e-14, atol=0)
+    assert k.has_sorted_indices and k.nnz == np.count_nonzero(want)
+    np.testing.assert_allclose(wsum, want.sum(1), rtol=1e-12)
+
+
 # ----------------------------------------------------------------------------- the loss
 @pytest.mark.parametrize("sigma", [1.5, 1.0])
 def test_loss_gradient_finite_differences_box(sigma):
@@ -167,6 +182,25 @@ def test_training_call_skips_only_unweighted_terms(gamma):
         assert (got == getattr(full, name)) if g > 0 else np.isnan(got)
     with pytest.raises(ValueError, match="pred_var"):
         lf(pred, -var, all_terms=False)
+
+
+def test_released_operators_are_built_again_equal():
+    """release_operators frees the window and Sobel operators; the next full call builds them again and gives
+    the same value, terms and gradient bit for bit; the kept flat mask and window sums are unchanged."""
+    rng = _rng()
+    pos = Texels.box_faces((5, 4, 6)).pos_vox
+    target, pred = rng.uniform(0, 1, (len(pos), 3)), rng.uniform(0, 1, (len(pos), 3))
+    var = rng.uniform(0, 1e-4, pred.shape)
+    lf = loss.TexelLoss(target, pos, gamma=(1.0, 2.0, 3.0))
+    before, flat, wsum = lf(pred, var), lf.flat.copy(), lf.wsum.copy()
+    lf.release_operators()
+    assert lf._K is None and lf._K2 is None and lf._S is None and lf._ST is None
+    after = lf(pred, var)
+    assert (after.value, after.e1, after.e2, after.e3) == (before.value, before.e1, before.e2, before.e3)
+    np.testing.assert_array_equal(after.grad, before.grad)
+    np.testing.assert_array_equal(lf.flat, flat)
+    np.testing.assert_array_equal(lf.wsum, wsum)
+    assert lf.needs_operators and not loss.TexelLoss(target, pos).needs_operators
 
 
 def test_box_edges_and_bad_input():

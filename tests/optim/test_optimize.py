@@ -148,6 +148,19 @@ def test_optimisation_lowers_delta_e_far_below_white_start():
     assert h[-5:].mean() < 0.7 * h[:5].mean()
 
 
+@pytest.mark.parametrize("gamma", [(1.0, 0.0, 0.0), (1.0, 1.0, 0.0)])
+def test_colour_only_steps_free_the_loss_operators(gamma):
+    """The set-up and the iterations free the loss's sparse operators when no step reads them (γ2 = γ3 = 0), and
+    the steps do not build them again; with an SSIM term they are kept."""
+    scene = small_chart_scene()
+    r = run(scene, gamma=gamma, iterations=2)
+    assert (r.loss._K is None) == (gamma[1] == 0)
+    r.loss(Renderer(r.volume()).render(scene.texels, 4, 99).rgb)  # a full call, as the start's figures make
+    assert r.loss._K is not None
+    r.run()
+    assert (r.loss._K is None and r.loss._S is None) == (gamma[1] == 0)
+
+
 def test_without_forward_renders(monkeypatch):
     """forward_spp 0: only the first iteration renders forward (START_FORWARD_SPP); the loss is taken on the running
     average of the gradient passes' estimates, and 30 iterations still lower dE76 far below the white start."""
