@@ -3,12 +3,13 @@ calibration (``estimate_run``), for the line ``inkopt slab`` / ``optimize`` log 
 ``--dry-run``, which prints only that line.
 
 Time: an iteration is a forward render (``forward_spp``) and a gradient pass (``spp``) over every texel, plus the
-step over the free voxels. The calibration times both passes of the run's own renderer on two random texel subsets
-(``CALIBRATION_TEXELS`` and twice that), so that the part that grows with the texels (``b`` per texel) is told from
-the part that does not (``a``: the gradient's per-voxel accumulation, the set-up of a pass): an iteration takes
-``a + b * texels`` plus the step's per-voxel work, timed on up to 65 536 free voxels and scaled to all of them (the
-step's smoothing is not included). The final
-evaluation (adaptive spp) is not in the estimate: the line says so.
+step over the free voxels. The calibration times both passes of the run's own renderer on one texel (the part that
+does not grow with the texels, ``a``: the gradient's per-voxel buffer and its conversion, the set-up of a pass;
+over a second per pass at Spot 40 mm's 15.7 M free voxels) and then on random texel subsets, grown until the passes
+take ``MIN_TEXEL_SECONDS`` more than on one texel (or the subset is every texel), so that the part that grows with
+the texels (``b`` per texel) stands clear of ``a``'s jitter: an iteration takes ``a + b * texels`` plus the step's
+per-voxel work, timed on up to 65 536 free voxels and scaled to all of them (the step's smoothing is not
+included). The final evaluation (adaptive spp) is not in the estimate: the line says so.
 
 Memory: this process's peak resident memory after the calibration, which has built the renderer, the optimiser's
 state and a gradient pass's per-voxel arrays, plus the per-texel arrays of full passes (``rgb``, variances, the
@@ -32,6 +33,8 @@ import numpy as np
 from .units import format_duration
 
 CALIBRATION_TEXELS = 256
+#: the calibration's texel subset grows until its passes take this much longer than on one texel (seconds)
+MIN_TEXEL_SECONDS = 0.3
 #: an estimate longer than this gets its line in the log before the run starts (seconds)
 ANNOUNCE_SECONDS = 180.0
 #: printer voxels per optimisation voxel at the default 600 x 300 DPI and 27 µm layers on the 300 DPI grid
@@ -95,6 +98,24 @@ def _step_seconds(run, rows: int = 1 << 16) -> float:
     return (time.perf_counter() - t) * f / n
 
 
+def texel_passes_seconds(passes, n_tex: int) -> float:
+    """Seconds of the passes over all ``n_tex`` texels, from ``passes(n)`` (the measured seconds of the passes over
+    n random texels): ``a`` from one texel, ``b`` per texel from a subset grown from ``CALIBRATION_TEXELS`` (by the
+    slope so far, at least doubling, at most 16x a round) until its passes take ``MIN_TEXEL_SECONDS`` more than
+    one texel's (module docstring)."""
+    fixed = passes(1)
+    n = min(n_tex, CALIBRATION_TEXELS)
+    while True:
+        t = passes(n)
+        if n >= n_tex:  # every texel measured
+            return t
+        grown = t - fixed
+        if grown >= MIN_TEXEL_SECONDS:
+            return fixed + grown / n * n_tex
+        want = int(np.ceil(1.3 * MIN_TEXEL_SECONDS * n / max(grown, 1e-3)))
+        n = min(n_tex, max(2 * n, min(want, 16 * n)))
+
+
 def estimate_run(run, inside_voxels: int, box_voxels: int, seed: int = 0) -> Estimate:
     """The cost of the iterations ``run`` (an ``optim.Optimization``, at its current iteration) has left, measured
     on its own renderer (module docstring). ``inside_voxels``: the object's voxels; ``box_voxels``: its grid's."""
@@ -103,9 +124,8 @@ def estimate_run(run, inside_voxels: int, box_voxels: int, seed: int = 0) -> Est
     n_tex = len(tex)
     rng = np.random.default_rng(seed)
     renderer = run.renderer()
-    sizes = [min(n_tex, CALIBRATION_TEXELS), min(n_tex, 2 * CALIBRATION_TEXELS)]
-    times = []
-    for n in sizes:
+
+    def passes(n: int) -> float:  # seconds of a forward render and a gradient pass over n random texels
         sub = tex.subset(np.sort(rng.choice(n_tex, n, replace=False)))
         adjoint = rng.standard_normal((n, 3)).astype(np.float32)
         t = time.perf_counter()
@@ -114,14 +134,11 @@ def estimate_run(run, inside_voxels: int, box_voxels: int, seed: int = 0) -> Est
         renderer.gradient(
             sub, adjoint, cfg.spp, seed + 1, cfg.include_specular, cfg.grad_method, grad_index=run.param.free_index
         )
-        times.append(time.perf_counter() - t)
-    if sizes[1] > sizes[0]:
-        per_texel = max((times[1] - times[0]) / (sizes[1] - sizes[0]), 0.0)
-        fixed = max(times[0] - per_texel * sizes[0], 0.0)
-    else:  # the whole sensor was measured
-        per_texel, fixed = times[0] / max(sizes[0], 1), 0.0
+        return time.perf_counter() - t
+
+    whole = texel_passes_seconds(passes, n_tex)
     step = _step_seconds(run)
-    per_iteration = fixed + per_texel * n_tex + step
+    per_iteration = whole + step
     left = max(cfg.iterations - run.iteration, 0)
     n_inks = run.x.shape[1]
     disk = 4 * n_inks * inside_voxels + (12 * n_inks * len(run.x) + 24 * n_tex + 80 * cfg.iterations) + 40 * n_tex

@@ -6,6 +6,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 from inkopt import charts
 from inkopt.optim.progress import ProgressLines, changed_settings
@@ -95,3 +96,33 @@ def test_estimate_counts_the_iterations_left_and_is_recorded(tmp_path):
         text=True,
     )
     assert r.returncode == 0 and r.stdout.startswith("estimate: up to 3 iterations x "), r.stderr
+
+
+@pytest.mark.parametrize(
+    "fixed, per_texel, n_tex",
+    [
+        (1.3, 250e-6, 386_829),  # Spot 40 mm's fine stage: the fixed part dwarfs 512 texels' passes
+        (0.001, 70e-6, 40_000),  # a slab: hardly any fixed part
+        (0.05, 1e-4, 300),  # fewer texels than the first subset: all of them measured
+    ],
+)
+def test_calibration_extrapolates_the_texels_past_the_fixed_part(fixed, per_texel, n_tex):
+    """Passes taking fixed + per_texel n seconds, each with up to 30 ms of jitter (a shared machine's): the
+    calibration's whole-sensor figure is within 30 ms x n_tex / n of the truth, n being the subset it grew to
+    (its passes last >= MIN_TEXEL_SECONDS = 0.3 s beyond the fixed part, so within ~25 % here), and it never
+    measures more than 16x the subset it needed."""
+    from inkopt.estimate import MIN_TEXEL_SECONDS, texel_passes_seconds
+
+    rng = np.random.default_rng(5)
+    sizes = []
+
+    def passes(n):
+        sizes.append(n)
+        return fixed + per_texel * n + rng.uniform(0.0, 0.03)
+
+    got = texel_passes_seconds(passes, n_tex)
+    truth = fixed + per_texel * n_tex
+    n = sizes[-1]
+    assert abs(got - truth) <= 0.03 * n_tex / n + 0.03, (got, truth, sizes)
+    assert sizes[0] == 1 and (n == n_tex or per_texel * n >= MIN_TEXEL_SECONDS - 0.03)
+    assert n <= max(16 * MIN_TEXEL_SECONDS / per_texel, 256)
