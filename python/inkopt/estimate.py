@@ -64,8 +64,10 @@ class Estimate:
         return cls(**{k: d[k] for k in cls.__dataclass_fields__})
 
     def line(self) -> str:
+        each = self.seconds_per_iteration
+        each = f"{each:.2g}" if each < 10 else f"{each:.0f}"  # 2.2 s, 17 s, 237 s
         return (
-            f"estimate: up to {self.iterations} iterations x {self.seconds_per_iteration:.2g} s = "
+            f"estimate: up to {self.iterations} iterations x {each} s = "
             f"{format_duration(self.seconds)} (+ the final evaluation), peak memory ~{self.peak_gib:.1f} GiB, disk "
             f"~{_size(self.disk_bytes)} (+ {_size(self.quantized_bytes)} after inkopt quantize); measured in "
             f"{self.calibration_seconds:.1f} s"

@@ -202,6 +202,14 @@ class TexelLoss:
         return self._radius
 
     @property
+    def K2(self) -> sp.csr_matrix:
+        """K squared entrywise (the noise of windowed statistics), sharing K's indices; built on first use."""
+        if self._K2 is None:  # K has no explicit zeros, so its sparsity pattern is K2's
+            K = self.K
+            self._K2 = sp.csr_matrix((K.data * K.data, K.indices, K.indptr), shape=K.shape)
+        return self._K2
+
+    @property
     def S(self) -> sp.csr_matrix:
         """The stacked Sobel operators (``sobel_operators``), (3I, I) CSR float64; built on first use."""
         if self._S is None:
@@ -257,10 +265,7 @@ class TexelLoss:
             return None
         jac = linear_to_lab_jacobian(pred)  # (I, 3 lab, 3 rgb)
         v = np.einsum("ikj,ij->ik", jac * jac, var) * LAB_NORM_SCALE**2
-        if self._K2 is None:  # K's sparsity pattern shared, not copied (K has no explicit zeros)
-            K = self.K
-            self._K2 = sp.csr_matrix((K.data * K.data, K.indices, K.indptr), shape=K.shape)
-        return (self.K @ v) / self.wsum[:, None], (self._K2 @ v) / (self.wsum**2)[:, None]
+        return (self.K @ v) / self.wsum[:, None], (self.K2 @ v) / (self.wsum**2)[:, None]
 
     def _ssim_parts(self, cn: np.ndarray, noise=None):
         """SSIM terms. ``noise`` = (W v, W^2 v): with it, the prediction's windowed mean square and variance are

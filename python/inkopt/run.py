@@ -193,7 +193,7 @@ def _optimise(
 
     start_budget, final_budget = figure_budgets(cfg, eval_time_budget)
 
-    def figures_of(x=None, budget=final_budget, max_spp=eval_max_spp, pilot_in_budget=True):
+    def figures_of(x=None, budget=final_budget, max_spp=eval_max_spp, pilot_in_budget=True, keep_renderer=True):
         renderer = run.renderer(x)
 
         def render(n: int, s: int):
@@ -210,14 +210,17 @@ def _optimise(
             time_budget=budget,
             pilot_in_budget=pilot_in_budget,
         )
+        if not keep_renderer:  # its media are not needed beside the loss's window operators that the figures build
+            del renderer
+            run.release_renderer()
         return res, prediction_metrics(run.loss, res.rgb, res.var)
 
     def final_figures():
         """The result's figures: the user's samples or budget, the run's budget share, or (neither) samples up to
         ``FINAL_FIGURES_SHARE`` of the run's time so far after a whole pilot."""
         if spp is not None or final_budget is not None:
-            return figures_of()
-        return figures_of(budget=FINAL_FIGURES_SHARE * run.wall_seconds(), pilot_in_budget=False)
+            return figures_of(keep_renderer=False)
+        return figures_of(budget=FINAL_FIGURES_SHARE * run.wall_seconds(), pilot_in_budget=False, keep_renderer=False)
 
     def keep_start(res0, init) -> None:
         run.start_figures = {
@@ -241,8 +244,8 @@ def _optimise(
 
     res, metrics = final_figures()
     if run.start_figures is None:  # a checkpoint written before the start's figures were kept in it
-        keep_start(*figures_of(run.initial_variables(), start_budget, min(eval_max_spp, PILOT_SPP)))
-    run.release_renderer()
+        start_x = run.initial_variables()
+        keep_start(*figures_of(start_x, start_budget, min(eval_max_spp, PILOT_SPP), keep_renderer=False))
     start = run.start_figures
     de = delta_e76_map(run.loss, res.rgb)
     scene.write_pictures(rd, res.rgb, de)

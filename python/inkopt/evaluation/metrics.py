@@ -36,7 +36,7 @@ def highpass_power(loss: TexelLoss, lum: np.ndarray) -> np.ndarray:
 def highpass_noise(loss: TexelLoss, var_l: np.ndarray) -> np.ndarray:
     """E of the noise's part of h_i² for independent per-texel L* variances var_l (I,):
     (1 - w_ii)² v_i + Σ_{j≠i} w_ij² v_j = Σ_j w_ij² v_j + (1 - 2 w_ii) v_i (w_ii = 1 / wsum_i)."""
-    w2v = (loss.K.multiply(loss.K) @ var_l) / loss.wsum**2
+    w2v = (loss.K2 @ var_l) / loss.wsum**2
     return w2v + (1.0 - 2.0 / loss.wsum) * var_l
 
 
