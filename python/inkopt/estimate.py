@@ -63,14 +63,18 @@ class Estimate:
     def from_json(cls, d: dict) -> Estimate:
         return cls(**{k: d[k] for k in cls.__dataclass_fields__})
 
-    def line(self) -> str:
+    def line(self, time_budget: float | None = None) -> str:
+        """The log line; with the run's ``time_budget`` (seconds) shorter than the estimate, it says so."""
         each = self.seconds_per_iteration
         each = f"{each:.2g}" if each < 10 else f"{each:.0f}"  # 2.2 s, 17 s, 237 s
+        budget = ""
+        if time_budget is not None and self.seconds > time_budget:
+            budget = f"; the time budget ({format_duration(time_budget)}) ends the run sooner"
         return (
             f"estimate: up to {self.iterations} iterations x {each} s = "
             f"{format_duration(self.seconds)} (+ the final evaluation), peak memory ~{self.peak_gib:.1f} GiB, disk "
             f"~{_size(self.disk_bytes)} (+ {_size(self.quantized_bytes)} after inkopt quantize); measured in "
-            f"{self.calibration_seconds:.1f} s"
+            f"{self.calibration_seconds:.1f} s{budget}"
         )
 
 

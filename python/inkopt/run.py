@@ -182,7 +182,7 @@ def _optimise(
     rd.save_scene(scene.record())
     estimate = estimate_run(run, inside, box, cfg.seed)
     if estimate.seconds > ANNOUNCE_SECONDS:
-        log(estimate.line())
+        log(estimate.line(cfg.time_budget))
     run.invocation_start = t_start  # the whole run's time counts this invocation's set-up too
 
     # Figures with seeds unused by the optimisation, adaptive spp unless given (at most ``eval_max_spp`` and

@@ -75,6 +75,14 @@ def test_dry_run_prints_the_estimate_and_writes_nothing(tmp_path):
         r.stdout.startswith("estimate: up to 7 iterations x ") and "peak memory ~" in r.stdout and "disk ~" in r.stdout
     )
     assert len(r.stdout.strip().splitlines()) == 1 and not out.exists()
+    assert "time budget" not in r.stdout
+    r = subprocess.run(
+        [sys.executable, "-m", "inkopt.cli", *args, "--iterations", "100000", "--time-budget", "2s", "--dry-run"],
+        capture_output=True,
+        text=True,
+    )
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip().endswith("; the time budget (2 s) ends the run sooner"), r.stdout
 
 
 def test_estimate_counts_the_iterations_left_and_is_recorded(tmp_path):

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+from ..units import parse_duration
 from .common import (
     add_mesh_args,
     add_optimizer_args,
@@ -17,7 +18,7 @@ from .common import (
 def _optimize(args) -> int:
     rep = run_from_args(args, mesh_spec_from_args(args, args.mesh))
     if args.dry_run:
-        print(rep.line())
+        print(rep.line(parse_duration(args.time_budget) if args.time_budget else None))
         return 0
     print_run_summary(rep, rep.init, f" (peak memory {rep.peak_rss_gb:.1f} GiB)")
     print(f"views: {args.out}/views.png, {args.out}/prediction.glb; report: {args.out}/report.json")

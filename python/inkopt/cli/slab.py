@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from ..units import parse_duration
 from .common import (
     add_optimizer_args,
     add_ray_arg,
@@ -15,7 +16,7 @@ from .common import (
 def _slab(args) -> int:
     rep = run_from_args(args, slab_spec_from_args(args, args.top))
     if args.dry_run:
-        print(rep.line())
+        print(rep.line(parse_duration(args.time_budget) if args.time_budget else None))
         return 0
     print_run_summary(rep, rep.init)
     print(f"pictures: {args.out}/face_*.png, {args.out}/loss.png; report: {args.out}/report.json")
