@@ -170,7 +170,9 @@ class TexelLoss:
         self.target_n = normalise_lab(self.target_lab)
         self._pos = pos
         self._K = self._K2 = self._S = self._ST = None  # the operators, built on first use (``release_operators``)
-        self._wsum = self._radius = None  # kept by ``release_operators`` (I floats)
+        self._wsum = None  # kept by ``release_operators`` (I floats)
+        #: the window's Chebyshev radius in voxels (``gaussian_window``)
+        self.radius = int(3.5 * self.sigma + 0.5)
         tn = self.target_n
         self._mu_t = self._window(tn)
         self._var_t = self._window(tn * tn) - self._mu_t**2
@@ -184,7 +186,7 @@ class TexelLoss:
     def K(self) -> sp.csr_matrix:
         """The window's weights (``gaussian_window``), (I, I) CSR float64; built on first use."""
         if self._K is None:
-            self._K, self._wsum, self._radius = gaussian_window(self._pos, self.sigma)
+            self._K, self._wsum, _ = gaussian_window(self._pos, self.sigma)
         return self._K
 
     @property
@@ -193,13 +195,6 @@ class TexelLoss:
         if self._wsum is None:
             self.K  # noqa: B018 (builds the window)
         return self._wsum
-
-    @property
-    def radius(self) -> int:
-        """The window's Chebyshev radius in voxels, int(3.5 sigma + 0.5)."""
-        if self._radius is None:
-            self.K  # noqa: B018 (builds the window)
-        return self._radius
 
     @property
     def K2(self) -> sp.csr_matrix:
