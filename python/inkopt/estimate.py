@@ -3,12 +3,13 @@ calibration (``estimate_run``), for the line ``inkopt slab`` / ``optimize`` log 
 ``--dry-run``, which prints only that line.
 
 Time: an iteration is a forward render (``forward_spp``) and a gradient pass (``spp``) over every texel, plus the
-step over the free voxels. The calibration times both passes of the run's own renderer on one texel (the part that
-does not grow with the texels, ``a``: the gradient's per-voxel buffer and its conversion, the set-up of a pass;
-over a second per pass at Spot 40 mm's 15.7 M free voxels) and then on random texel subsets, grown until the passes
-take ``MIN_TEXEL_SECONDS`` more than on one texel (or the subset is every texel), so that the part that grows with
-the texels (``b`` per texel) stands clear of ``a``'s jitter: an iteration takes ``a + b * texels`` plus the step's
-per-voxel work, timed on up to 65 536 free voxels and scaled to all of them (the step's smoothing is not
+step over the free voxels. The calibration throws a first pass away (its one-off set-up), times both passes of the run's
+own renderer on one texel (the part that does not grow with the texels, ``a``: the gradient's per-voxel buffer and its
+conversion, the set-up of a pass; ~0.7 s for both at Spot 40 mm's 15.7 M free voxels) and then on random texel subsets,
+grown until the passes take ``MIN_TEXEL_SECONDS`` and ``FIXED_MULTIPLE`` x ``a`` more than on one texel (or the subset
+is every texel), so that the part that grows with the texels (``b`` per texel) stands clear of ``a``'s jitter; a stall
+only adds time, so every timing that decides is the smaller of two. An iteration takes ``a + b * texels`` plus the
+step's per-voxel work, timed on up to 65 536 free voxels and scaled to all of them (the step's smoothing is not
 included). The final evaluation (adaptive spp) is not in the estimate: the line says so.
 
 Memory: this process's peak resident memory after the calibration, which has built the renderer, the optimiser's
@@ -33,8 +34,13 @@ import numpy as np
 from .units import format_duration
 
 CALIBRATION_TEXELS = 256
+#: the calibration's texel subsets are this many runs of consecutive texels (``texel_runs``)
+SAMPLE_RUNS = 16
 #: the calibration's texel subset grows until its passes take this much longer than on one texel (seconds)
 MIN_TEXEL_SECONDS = 0.3
+#: ... and this many times the one-texel passes: their jitter (0.6 to 1.3 s at Spot 40 mm, from the per-voxel
+#: buffers' allocation) is then a quarter of the texels' part at most, ~10 % of the estimate at that size
+FIXED_MULTIPLE = 4.0
 #: an estimate longer than this gets its line in the log before the run starts (seconds)
 ANNOUNCE_SECONDS = 180.0
 #: printer voxels per optimisation voxel at the default 600 x 300 DPI and 27 µm layers on the 300 DPI grid
@@ -105,21 +111,43 @@ def _step_seconds(run, rows: int = 1 << 16) -> float:
 
 
 def texel_passes_seconds(passes, n_tex: int) -> float:
-    """Seconds of the passes over all ``n_tex`` texels, from ``passes(n)`` (the measured seconds of the passes over
-    n random texels): ``a`` from one texel, ``b`` per texel from a subset grown from ``CALIBRATION_TEXELS`` (by the
-    slope so far, at least doubling, at most 16x a round) until its passes take ``MIN_TEXEL_SECONDS`` more than
-    one texel's (module docstring)."""
-    fixed = passes(1)
+    """Seconds of the passes over all ``n_tex`` texels, from ``passes(n)`` (the measured seconds of the passes over n
+    random texels). A first pass is thrown away (its one-off set-up: thread pool, buffers built on first use); ``a`` is
+    the smaller of two one-texel passes; ``b`` per texel comes from a subset grown from ``CALIBRATION_TEXELS`` (by the
+    slope so far, at least doubling, at most 16x a round) until its passes take ``MIN_TEXEL_SECONDS`` and
+    ``FIXED_MULTIPLE`` x ``a`` more than one texel's. A stall only ever adds time: each size that passes that test is
+    timed twice and the smaller time kept (module docstring)."""
+    passes(1)
+    fixed = min(passes(1), passes(1))
+    enough = max(MIN_TEXEL_SECONDS, FIXED_MULTIPLE * fixed)
     n = min(n_tex, CALIBRATION_TEXELS)
     while True:
         t = passes(n)
         if n >= n_tex:  # every texel measured
             return t
+        if t - fixed >= enough:
+            t = min(t, passes(n))
+            if t - fixed >= enough:
+                return fixed + (t - fixed) / n * n_tex
         grown = t - fixed
-        if grown >= MIN_TEXEL_SECONDS:
-            return fixed + grown / n * n_tex
-        want = int(np.ceil(1.3 * MIN_TEXEL_SECONDS * n / max(grown, 1e-3)))
+        want = int(np.ceil(1.3 * enough * n / max(grown, 1e-3)))
         n = min(n_tex, max(2 * n, min(want, 16 * n)))
+
+
+def texel_runs(n_tex: int, n: int, rng: np.random.Generator, runs: int = SAMPLE_RUNS) -> np.ndarray:
+    """(n,) int64 sorted texel indices: ``runs`` runs of consecutive texels (fewer when n < 64 ``runs``: runs of at
+    least 64), one at a random place in each of as many equal stretches of the texel order. Consecutive texels are
+    neighbours on the surface, as in a full pass, where a path finds the media its neighbours' paths brought into
+    the caches; texels drawn one by one from the whole surface find them cold and take longer (~1.3x at Spot
+    40 mm)."""
+    n = min(n, n_tex)
+    runs = max(1, min(runs, n // 64))
+    edges = np.linspace(0, n_tex, runs + 1).astype(np.int64)
+    stretch = np.diff(edges)
+    lengths = stretch * n // n_tex  # < stretch when n < n_tex: room for one more in each run
+    lengths[: n - lengths.sum()] += 1
+    starts = edges[:-1] + (rng.random(runs) * (edges[1:] - edges[:-1] - lengths + 1)).astype(np.int64)
+    return np.concatenate([np.arange(s, s + m) for s, m in zip(starts, lengths)])
 
 
 def estimate_run(run, inside_voxels: int, box_voxels: int, seed: int = 0) -> Estimate:
@@ -131,8 +159,8 @@ def estimate_run(run, inside_voxels: int, box_voxels: int, seed: int = 0) -> Est
     rng = np.random.default_rng(seed)
     renderer = run.renderer()
 
-    def passes(n: int) -> float:  # seconds of a forward render and a gradient pass over n random texels
-        sub = tex.subset(np.sort(rng.choice(n_tex, n, replace=False)))
+    def passes(n: int) -> float:  # seconds of a forward render and a gradient pass over n texels
+        sub = tex.subset(texel_runs(n_tex, n, rng))
         adjoint = rng.standard_normal((n, 3)).astype(np.float32)
         t = time.perf_counter()
         if cfg.forward_spp > 0:
