@@ -182,8 +182,67 @@ fn fixed(x: f32, inv_quantum: f32) -> i64 {
     (x * inv_quantum).round() as i64
 }
 
-struct ReplayTally<'a, M: Medium> {
+/// How many adds `AddQueue` keeps in flight.
+const ADD_QUEUE: usize = 16;
+
+/// Adds into the shared gradient buffer, each carried out `ADD_QUEUE` adds after it is queued, its cache line
+/// fetched meanwhile. A replay adds once per voxel segment, at scattered places of a buffer of hundreds of MB,
+/// and a locked add waits for its line before anything after it may load: one add after the other, each add
+/// was a cache miss in series. Queued, the misses overlap. The sums are integers, so the order of the adds
+/// changes no bit of them. `flush` before the buffer is read.
+struct AddQueue<'a> {
     buf: &'a [AtomicI64],
+    at: [usize; ADD_QUEUE],
+    value: [i64; ADD_QUEUE],
+    /// Queued adds, and the ring position of the next one (the oldest once the ring is full).
+    len: usize,
+    next: usize,
+}
+
+impl<'a> AddQueue<'a> {
+    fn new(buf: &'a [AtomicI64]) -> Self {
+        AddQueue { buf, at: [0; ADD_QUEUE], value: [0; ADD_QUEUE], len: 0, next: 0 }
+    }
+
+    #[inline(always)]
+    fn add(&mut self, at: usize, value: i64) {
+        prefetch(&self.buf[at]);
+        let k = self.next;
+        if self.len == ADD_QUEUE {
+            self.buf[self.at[k]].fetch_add(self.value[k], Relaxed);
+        } else {
+            self.len += 1;
+        }
+        (self.at[k], self.value[k]) = (at, value);
+        self.next = (k + 1) % ADD_QUEUE;
+    }
+
+    fn flush(&mut self) {
+        for k in 0..self.len {
+            self.buf[self.at[k]].fetch_add(self.value[k], Relaxed);
+        }
+        (self.len, self.next) = (0, 0);
+    }
+}
+
+impl Drop for AddQueue<'_> {
+    fn drop(&mut self) {
+        debug_assert!(self.len == 0 || std::thread::panicking(), "gradient adds queued but never flushed");
+    }
+}
+
+#[inline(always)]
+fn prefetch<T>(x: &T) {
+    // SAFETY: a prefetch only hints the caches: it changes no state the program sees and cannot fault, and SSE
+    // is part of every x86_64 CPU.
+    #[cfg(target_arch = "x86_64")]
+    unsafe {
+        core::arch::x86_64::_mm_prefetch::<{ core::arch::x86_64::_MM_HINT_ET0 }>(x as *const T as *const i8)
+    };
+}
+
+struct ReplayTally<'q, 'a, M: Medium> {
+    q: &'q mut AddQueue<'a>,
     grads: &'a GradBuffers,
     c: usize,
     /// Weight in quanta.
@@ -191,38 +250,38 @@ struct ReplayTally<'a, M: Medium> {
     med: &'a M,
 }
 
-impl<M: Medium> Tally for ReplayTally<'_, M> {
+impl<M: Medium> Tally for ReplayTally<'_, '_, M> {
     #[inline(always)]
     fn segment(&mut self, j: usize, len: f32) {
         // -l for sigma_a, and the same -l for sigma_s, which the difference sums leave out.
         if let Some(k) = self.grads.slot(j) {
-            self.buf[(3 + self.c) * self.grads.n + k].fetch_sub(fixed(len, self.w), Relaxed);
+            self.q.add((3 + self.c) * self.grads.n + k, -fixed(len, self.w));
         }
     }
     #[inline(always)]
     fn scatter(&mut self, j: usize) {
         let s = self.med.sigma_s(j, self.c);
         if let (Some(k), true) = (self.grads.slot(j), s > 0.0) {
-            self.buf[self.c * self.grads.n + k].fetch_add(fixed(1.0 / s, self.w), Relaxed);
+            self.q.add(self.c * self.grads.n + k, fixed(1.0 / s, self.w));
         }
     }
 }
 
-struct Li1Tally<'a> {
-    buf: &'a [AtomicI64],
+struct Li1Tally<'q, 'a> {
+    q: &'q mut AddQueue<'a>,
     grads: &'a GradBuffers,
     c: usize,
     w: f32,
 }
 
-impl Tally for Li1Tally<'_> {
+impl Tally for Li1Tally<'_, '_> {
     #[inline(always)]
     fn segment(&mut self, j: usize, len: f32) {
         // -l for sigma_a, nothing for sigma_s: the difference sums get +l.
         if let Some(k) = self.grads.slot(j) {
             let (n, x) = (self.grads.n, fixed(len, self.w));
-            self.buf[(3 + self.c) * n + k].fetch_sub(x, Relaxed);
-            self.buf[self.c * n + k].fetch_add(x, Relaxed);
+            self.q.add((3 + self.c) * n + k, -x);
+            self.q.add(self.c * n + k, x);
         }
     }
     #[inline(always)]
@@ -253,7 +312,7 @@ pub fn backward<M: Medium>(
         .par_iter()
         .enumerate()
         .map(|(i, tex)| {
-            let buf = &grads.buf[..];
+            let mut q = AddQueue::new(&grads.buf);
             let mut m = Moments::new();
             let mut st = Stats { paths: 3 * opts.spp as u64, ..Stats::default() };
             let key = first_texel + i as u64;
@@ -264,7 +323,7 @@ pub fn backward<M: Medium>(
                     let r = match method {
                         GradMethod::Replay => trace(geo, med, tex, c, &mut rng, opts.include_specular, &mut NoTally),
                         GradMethod::Li1 => {
-                            let mut t = Li1Tally { buf, grads, c, w: adj * inv_spp * inv_q };
+                            let mut t = Li1Tally { q: &mut q, grads, c, w: adj * inv_spp * inv_q };
                             trace(geo, med, tex, c, &mut rng, opts.include_specular, &mut t)
                         }
                     };
@@ -272,13 +331,14 @@ pub fn backward<M: Medium>(
                     st.events += r.events as u64;
                     if method == GradMethod::Replay && r.value != 0.0 && adj != 0.0 {
                         let mut rng = PathRng::new(opts.seed, key, s, c as u32);
-                        let mut t = ReplayTally { buf, grads, c, w: adj * r.value * inv_spp * inv_q, med };
+                        let mut t = ReplayTally { q: &mut q, grads, c, w: adj * r.value * inv_spp * inv_q, med };
                         trace(geo, med, tex, c, &mut rng, opts.include_specular, &mut t);
                         st.replayed_paths += 1;
                         st.replayed_events += r.events as u64;
                     }
                 }
             }
+            q.flush();
             (m.estimate(opts.spp), st)
         })
         .collect();
@@ -289,7 +349,7 @@ pub fn backward<M: Medium>(
 /// Per-path weights (in quanta) of a packet gradient pass: path `job` of a chunk adds weight x (its tallies) to
 /// the gradient buffer, as `ReplayTally` / `Li1Tally` do for one path. A replay skips paths of weight 0.
 struct PacketTally<'a, M: Medium> {
-    buf: &'a [AtomicI64],
+    q: AddQueue<'a>,
     grads: &'a GradBuffers,
     med: &'a M,
     method: GradMethod,
@@ -304,16 +364,16 @@ impl<M: Medium> PathTally for PacketTally<'_, M> {
     }
     #[inline(always)]
     fn segment(&mut self, job: usize, c: usize, j: usize, len: f32) {
-        let (buf, grads, w) = (self.buf, self.grads, self.w[job]);
+        let (q, grads, w) = (&mut self.q, self.grads, self.w[job]);
         match self.method {
-            GradMethod::Replay => ReplayTally { buf, grads, c, w, med: self.med }.segment(j, len),
-            GradMethod::Li1 => Li1Tally { buf, grads, c, w }.segment(j, len),
+            GradMethod::Replay => ReplayTally { q, grads, c, w, med: self.med }.segment(j, len),
+            GradMethod::Li1 => Li1Tally { q, grads, c, w }.segment(j, len),
         }
     }
     #[inline(always)]
     fn scatter(&mut self, job: usize, c: usize, j: usize) {
         if self.method == GradMethod::Replay {
-            ReplayTally { buf: self.buf, grads: self.grads, c, w: self.w[job], med: self.med }.scatter(j);
+            ReplayTally { q: &mut self.q, grads: self.grads, c, w: self.w[job], med: self.med }.scatter(j);
         }
     }
 }
@@ -339,12 +399,11 @@ fn backward_packets<M: Medium>(
         .map(|(k, chunk)| {
             let first = k * PACKET_CHUNK;
             let key = first_texel + first as u64;
-            let buf = &grads.buf[..];
             let jobs = chunk.len() * 3 * spp;
             let adj = |job: usize| adjoint[first + job / (3 * spp)][job % (3 * spp) / spp];
             let mut values = vec![0.0f32; jobs];
             let mut st = Stats { paths: jobs as u64, ..Stats::default() };
-            let mut tally = PacketTally { buf, grads, med, method, w: vec![0.0; jobs] };
+            let mut tally = PacketTally { q: AddQueue::new(&grads.buf), grads, med, method, w: vec![0.0; jobs] };
             match method {
                 GradMethod::Li1 => {
                     tally.w = (0..jobs).map(|job| adj(job) * scale).collect();
@@ -358,9 +417,37 @@ fn backward_packets<M: Medium>(
                     st.replayed_events = trace_paths(geo, med, chunk, key, opts, &mut scratch, &mut tally);
                 }
             }
+            tally.q.flush();
             (estimates(&values, spp), st)
         })
         .collect();
     let stats = chunks.iter().fold(Stats::default(), |a, r| Stats::merge(a, r.1));
     (chunks.into_iter().flat_map(|r| r.0).collect(), stats)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Queued adds leave every slot with the sum of what was added to it, whether fewer or more adds than the
+    /// queue holds were made, over and over the same slots or not, and the queue is empty after `flush`.
+    #[test]
+    fn queued_adds_sum_as_direct_adds() {
+        for n_adds in [0, 1, ADD_QUEUE - 1, ADD_QUEUE, ADD_QUEUE + 1, 10 * ADD_QUEUE + 3] {
+            let buf: Vec<AtomicI64> = (0..37).map(|_| AtomicI64::new(0)).collect();
+            let mut want = [0i64; 37];
+            let mut q = AddQueue::new(&buf);
+            let mut x = 12345u64;
+            for _ in 0..n_adds {
+                x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                let (at, v) = ((x >> 33) as usize % 37, (x >> 20) as i64 % 1000 - 500);
+                want[at] += v;
+                q.add(at, v);
+            }
+            q.flush();
+            assert_eq!(q.len, 0);
+            let got: Vec<i64> = buf.iter().map(|a| a.load(Relaxed)).collect();
+            assert_eq!(got, want, "{n_adds} adds");
+        }
+    }
 }
