@@ -13,12 +13,14 @@
 //!   and the optimiser's kernels (`smooth`: the step preconditioner; `simplex`: the softmax of its variables).
 //! - [`spans`]: voxel sets stored per grid row, the storage both share (sparse media, gradient slots, the
 //!   smoothing's neighbour lookup).
+//! - [`cache`]: software prefetch (the gradient replay's queued adds).
 //!
-//! Layering: `spans` uses nothing in the crate; `transport` uses `spans`; `kernels` use `spans` and
+//! Layering: `cache` and `spans` use nothing in the crate; `transport` uses them; `kernels` use `spans` and
 //! `transport::medium::EMPTY` (the label of an empty voxel, which `diffuse` writes); nothing uses `kernels`.
 //! Inside `transport` each module uses only the modules listed before it in `transport`'s documentation. The
 //! test `tests/layering.rs` checks this order on the source, so the module graph has no circles.
 
+pub mod cache;
 pub mod kernels;
 pub mod spans;
 pub mod transport;

@@ -6,6 +6,7 @@ use std::path::Path;
 /// Modules from the bottom up: each may refer to those before it. `lib.rs` and the `mod.rs` files that only
 /// declare their children are above all of them; the tests in `src/tests` are not checked.
 const LAYERS: &[&str] = &[
+    "cache",
     "spans",
     "transport::sampling",
     "transport::rng",

@@ -6,6 +6,7 @@ use std::sync::atomic::{AtomicI64, Ordering::Relaxed};
 
 use rayon::prelude::*;
 
+use crate::cache::prefetch_write;
 use crate::spans::RowSpans;
 use crate::transport::estimate::{estimates, Moments, RenderOptions, Stats, TexelEstimate};
 use crate::transport::packet::{self, trace_paths, NoPathTally, PathTally};
@@ -206,7 +207,7 @@ impl<'a> AddQueue<'a> {
 
     #[inline(always)]
     fn add(&mut self, at: usize, value: i64) {
-        prefetch(&self.buf[at]);
+        prefetch_write(&self.buf[at]);
         let k = self.next;
         if self.len == ADD_QUEUE {
             self.buf[self.at[k]].fetch_add(self.value[k], Relaxed);
@@ -229,16 +230,6 @@ impl Drop for AddQueue<'_> {
     fn drop(&mut self) {
         debug_assert!(self.len == 0 || std::thread::panicking(), "gradient adds queued but never flushed");
     }
-}
-
-#[inline(always)]
-fn prefetch<T>(x: &T) {
-    // SAFETY: a prefetch only hints the caches: it changes no state the program sees and cannot fault, and SSE
-    // is part of every x86_64 CPU.
-    #[cfg(target_arch = "x86_64")]
-    unsafe {
-        core::arch::x86_64::_mm_prefetch::<{ core::arch::x86_64::_MM_HINT_ET0 }>(x as *const T as *const i8)
-    };
 }
 
 struct ReplayTally<'q, 'a, M: Medium> {

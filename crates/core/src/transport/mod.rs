@@ -1,7 +1,7 @@
 //! Light transport: Monte Carlo random walks of monochromatic paths through a voxel medium, their forward
 //! render and their gradients (path replay).
 //!
-//! Modules, each using only those listed before it (and `crate::spans`):
+//! Modules, each using only those listed before it (and `crate::spans`, `crate::cache`):
 //! - `sampling`: vectors, the Henyey-Greenstein phase function, Fresnel, reflection and refraction.
 //! - `rng`: counter-based random numbers (a path's numbers are a pure function of its key).
 //! - `light`: the `Light` trait (uniform light, environment maps).
