@@ -5,12 +5,13 @@ calibration (``estimate_run``), for the line ``inkopt slab`` / ``optimize`` log 
 Time: an iteration is a forward render (``forward_spp``) and a gradient pass (``spp``) over every texel, plus the
 step over the free voxels. The calibration throws a first pass away (its one-off set-up), times both passes of the run's
 own renderer on one texel (the part that does not grow with the texels, ``a``: the gradient's per-voxel buffer and its
-conversion, the set-up of a pass; ~0.7 s for both at Spot 40 mm's 15.7 M free voxels) and then on random texel subsets,
-grown until the passes take ``MIN_TEXEL_SECONDS`` and ``FIXED_MULTIPLE`` x ``a`` more than on one texel (or the subset
-is every texel), so that the part that grows with the texels (``b`` per texel) stands clear of ``a``'s jitter; a stall
-only adds time, so every timing that decides is the smaller of two. An iteration takes ``a + b * texels`` plus the
-step's per-voxel work, timed on up to 65 536 free voxels and scaled to all of them (the step's smoothing is not
-included). The final evaluation (adaptive spp) is not in the estimate: the line says so.
+conversion, the set-up of a pass; ~0.7 s for both at Spot 40 mm's 15.7 M free voxels) and then on texel subsets (16 runs
+of neighbouring texels, ``texel_runs``), grown until the passes take ``MIN_TEXEL_SECONDS`` and ``FIXED_MULTIPLE`` x
+``a`` more than on one texel (or the subset is every texel), so that the part that grows with the texels (``b`` per
+texel) stands clear of ``a``'s jitter; a stall only adds time, so every timing that decides is the smaller of two. An
+iteration takes ``a + b * texels`` plus the step's per-voxel work, timed on up to 65 536 free voxels and scaled to all
+of them (the step's smoothing is not included). The final evaluation (adaptive spp) is not in the estimate: the line
+says so.
 
 Memory: this process's peak resident memory after the calibration, which has built the renderer, the optimiser's
 state and a gradient pass's per-voxel arrays, plus the per-texel arrays of full passes (``rgb``, variances, the
@@ -112,7 +113,7 @@ def _step_seconds(run, rows: int = 1 << 16) -> float:
 
 def texel_passes_seconds(passes, n_tex: int) -> float:
     """Seconds of the passes over all ``n_tex`` texels, from ``passes(n)`` (the measured seconds of the passes over n
-    random texels). A first pass is thrown away (its one-off set-up: thread pool, buffers built on first use); ``a`` is
+    texels, ``texel_runs``). A first pass is thrown away (its one-off set-up: thread pool, buffers built on first use); ``a`` is
     the smaller of two one-texel passes; ``b`` per texel comes from a subset grown from ``CALIBRATION_TEXELS`` (by the
     slope so far, at least doubling, at most 16x a round) until its passes take ``MIN_TEXEL_SECONDS`` and
     ``FIXED_MULTIPLE`` x ``a`` more than one texel's. A stall only ever adds time: each size that passes that test is
