@@ -113,9 +113,9 @@ def _step_seconds(run, rows: int = 1 << 16) -> float:
 
 def texel_passes_seconds(passes, n_tex: int) -> float:
     """Seconds of the passes over all ``n_tex`` texels, from ``passes(n)`` (the measured seconds of the passes over n
-    texels, ``texel_runs``). A first pass is thrown away (its one-off set-up: thread pool, buffers built on first use); ``a`` is
-    the smaller of two one-texel passes; ``b`` per texel comes from a subset grown from ``CALIBRATION_TEXELS`` (by the
-    slope so far, at least doubling, at most 16x a round) until its passes take ``MIN_TEXEL_SECONDS`` and
+    texels, ``texel_runs``). A first pass is thrown away (its one-off set-up: thread pool, buffers built on first use);
+    ``a`` is the smaller of two one-texel passes; ``b`` per texel comes from a subset grown from ``CALIBRATION_TEXELS``
+    (by the slope so far, at least doubling, at most 16x a round) until its passes take ``MIN_TEXEL_SECONDS`` and
     ``FIXED_MULTIPLE`` x ``a`` more than one texel's. A stall only ever adds time: each size that passes that test is
     timed twice and the smaller time kept (module docstring)."""
     passes(1)
