@@ -72,3 +72,11 @@ def write(name: str, data: dict, folder: Path = RESULTS) -> Path:
 def write_study(name: str, data: dict) -> Path:
     """``write`` into experiments/results/."""
     return write(name, data, STUDY_RESULTS)
+
+
+def add_study_entry(name: str, key: str, entry: dict) -> Path:
+    """Set ``results[key]`` of experiments/results/``name`` (made if missing) to ``entry``, keeping the others."""
+    path = STUDY_RESULTS / name
+    out = json.loads(path.read_text()) if path.is_file() else {"results": {}}
+    out["results"][key] = entry
+    return write_study(name, out)

@@ -11,16 +11,13 @@ printed one at printer resolution.
 """
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-from common import STUDY_RESULTS as RESULTS  # noqa: E402
-from common import machine, provenance
-from common import write_study as write
+from common import add_study_entry, machine, provenance  # noqa: E402
 from shell_compare import SPOT  # noqa: E402
 
 from inkopt.color import delta_e76, delta_e2000, linear_to_lab  # noqa: E402
@@ -93,10 +90,7 @@ def main():
             f"ΔL* {r['delta_l']:+6.2f}  extrusion ΔE76 {e['delta_e76']:6.2f} ΔE2000 {e['delta_e2000']:6.2f} "
             f"ΔL* {e['delta_l']:+6.2f}  ΔE2000 difference {entry['delta_e2000_difference'][band]:+.3f}"
         )
-    path = RESULTS / "error_by_lightness.json"
-    out = json.loads(path.read_text()) if path.is_file() else {"results": {}}
-    out["results"][a.name] = entry
-    write("error_by_lightness.json", out)
+    add_study_entry("error_by_lightness.json", a.name, entry)
 
 
 if __name__ == "__main__":

@@ -11,7 +11,6 @@ job's ``RUN/coarse/fine_start.npz``). Run it alone on the machine: the seconds a
 """
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
@@ -19,9 +18,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-from common import STUDY_RESULTS as RESULTS  # noqa: E402
-from common import machine, provenance
-from common import write_study as write
+from common import add_study_entry, machine, provenance  # noqa: E402
 from shell_compare import SPOT  # noqa: E402
 
 from inkopt.model import InkTable  # noqa: E402
@@ -70,10 +67,7 @@ def main():
         f"({gradient['replayed_events'] / 1e6:.1f} M of {gradient['events'] / 1e6:.1f} M events replayed, "
         f"~{replay_ns:.0f} ns each)"
     )
-    path = RESULTS / "pass_cost.json"
-    out = json.loads(path.read_text()) if path.is_file() else {"results": {}}
-    out["results"][a.name] = entry
-    write("pass_cost.json", out)
+    add_study_entry("pass_cost.json", a.name, entry)
 
 
 if __name__ == "__main__":
