@@ -13,9 +13,10 @@ struct Span {
 }
 
 pub struct RowSpans {
-    /// Grid voxels, and voxels per row (x).
+    /// Grid voxels, and voxels per row (x) and per layer (y).
     n: usize,
     nx: usize,
+    ny: usize,
     /// 1 / nx, to find a voxel's row without an integer division.
     inv_nx: f64,
     spans: Vec<Span>,
@@ -62,6 +63,7 @@ impl RowSpans {
         let mut s = RowSpans {
             n,
             nx,
+            ny: n_xyz[1],
             inv_nx: 1.0 / nx as f64,
             spans,
             positions,
@@ -96,7 +98,17 @@ impl RowSpans {
         } else if (row + 1) * self.nx <= j {
             row += 1;
         }
-        let x = j - row * self.nx;
+        self.position_in_row(row, j - row * self.nx)
+    }
+
+    /// `position` of the in-grid voxel at (x, y, z) = v: its row without the division.
+    #[inline(always)]
+    pub fn position_at(&self, v: [i32; 3]) -> Option<usize> {
+        self.position_in_row(v[2] as usize * self.ny + v[1] as usize, v[0] as usize)
+    }
+
+    #[inline(always)]
+    fn position_in_row(&self, row: usize, x: usize) -> Option<usize> {
         let sp = self.spans[row];
         if x < sp.x0 as usize || x >= sp.x1 as usize {
             return None;

@@ -95,7 +95,7 @@ mod tests {
 
     fn rows() -> (Vec<f32>, Vec<f32>, Vec<f32>) {
         // 9 001 rows of 5 (more than two blocks, a partial last one), spread logits incl. large ones
-        let n = 5;
+        let n = 5usize;
         let r = 9001;
         let x: Vec<f32> = (0..r * n)
             .map(|i| ((i * 7919 % 1000) as f32 / 50.0 - 10.0) * if i % 11 == 0 { 9.0 } else { 1.0 })

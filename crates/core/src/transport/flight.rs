@@ -127,7 +127,7 @@ impl Tracker for Regular {
             if w.steps > MAX_STEPS {
                 return Event::Cut;
             }
-            let (st, albedo) = med.coeffs(self.j, c);
+            let (st, albedo) = med.coeffs_at(self.j, w.v, c);
             let axis = self.dda.next_axis();
             let t_next = self.dda.t_max[axis];
             let seg = t_next - self.t;

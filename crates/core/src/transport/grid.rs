@@ -137,13 +137,11 @@ fn nearest_plane(p: V3, d: V3, axes: Range<usize>, plane: impl Fn(usize) -> f32)
     let mut t = f32::INFINITY;
     let mut axis = axes.start;
     for a in axes {
-        if d[a] != 0.0 {
-            let ta = ((plane(a) - p[a]) * inv_d[a]).max(0.0);
-            if ta < t {
-                t = ta;
-                axis = a;
-            }
-        }
+        // Selects, not branches (the direction is random).
+        let ta = if d[a] != 0.0 { ((plane(a) - p[a]) * inv_d[a]).max(0.0) } else { f32::INFINITY };
+        let nearer = ta < t;
+        t = if nearer { ta } else { t };
+        axis = std::hint::select_unpredictable(nearer, a, axis);
     }
     (t, axis)
 }
@@ -205,19 +203,18 @@ pub(crate) struct Dda {
 impl Dda {
     #[inline(always)]
     pub fn new(geo: &Geometry, p: V3, d: V3, v: [i32; 3]) -> Self {
+        // Without branches on the direction's signs: after a scattering they are random, and three mispredicted
+        // branches per flight cost more than computing every case and selecting.
         let inv_d = inv(d);
         let mut dda = Dda { t_max: [f32::INFINITY; 3], t_delta: [f32::INFINITY; 3], step: [0; 3], dj: [0; 3] };
         for a in 0..3 {
             let s = geo.size[a];
-            if d[a] > 0.0 {
-                dda.step[a] = 1;
-                dda.t_max[a] = (((v[a] + 1) as f32 * s - p[a]) * inv_d[a]).max(0.0);
-                dda.t_delta[a] = s * inv_d[a];
-            } else if d[a] < 0.0 {
-                dda.step[a] = -1;
-                dda.t_max[a] = ((v[a] as f32 * s - p[a]) * inv_d[a]).max(0.0);
-                dda.t_delta[a] = -s * inv_d[a];
-            }
+            let (up, down) = (d[a] > 0.0, d[a] < 0.0);
+            let face = (v[a] + up as i32) as f32 * s;
+            let moving = up | down;
+            dda.step[a] = up as i32 - down as i32;
+            dda.t_max[a] = if moving { ((face - p[a]) * inv_d[a]).max(0.0) } else { f32::INFINITY };
+            dda.t_delta[a] = if moving { (s * inv_d[a]).abs() } else { f32::INFINITY };
             dda.dj[a] = dda.step[a] as isize * geo.stride[a];
         }
         dda
@@ -226,18 +223,11 @@ impl Dda {
     /// The axis of the next voxel boundary.
     #[inline(always)]
     pub fn next_axis(&self) -> usize {
+        // Selects, not branches: which boundary comes next is as random as the flight's direction.
         let m = &self.t_max;
-        if m[0] < m[1] {
-            if m[0] < m[2] {
-                0
-            } else {
-                2
-            }
-        } else if m[1] < m[2] {
-            1
-        } else {
-            2
-        }
+        let first = m[0] < m[1];
+        let (i, mi) = (if first { 0 } else { 1 }, if first { m[0] } else { m[1] });
+        std::hint::select_unpredictable(mi < m[2], i, 2)
     }
 
     /// Cross the boundary on `axis`: its distance moves on by one voxel.

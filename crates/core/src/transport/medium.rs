@@ -21,6 +21,12 @@ pub const EMPTY: u8 = 255;
 pub trait Medium: Sync {
     /// (sigma_t in mm^-1, albedo) of voxel `idx` in channel `c`.
     fn coeffs(&self, idx: usize, c: usize) -> (f32, f32);
+    /// `coeffs` of voxel `idx` at grid coordinates `v` (x, y, z) = its index's: a walk that tracks both saves a
+    /// medium stored per grid row the division that finds the row.
+    #[inline(always)]
+    fn coeffs_at(&self, idx: usize, _v: [i32; 3], c: usize) -> (f32, f32) {
+        self.coeffs(idx, c)
+    }
     /// sigma_s in mm^-1 of voxel `idx` in channel `c` (for gradients).
     fn sigma_s(&self, idx: usize, c: usize) -> f32 {
         let (t, a) = self.coeffs(idx, c);
@@ -300,6 +306,17 @@ impl Medium for SparseMedium {
     #[inline(always)]
     fn coeffs(&self, idx: usize, c: usize) -> (f32, f32) {
         match self.at.position(idx) {
+            None => (0.0, 1.0),
+            Some(s) => {
+                let [t, a] = self.coef[c * self.k + s];
+                (t, a)
+            }
+        }
+    }
+    #[inline(always)]
+    fn coeffs_at(&self, idx: usize, v: [i32; 3], c: usize) -> (f32, f32) {
+        debug_assert_eq!(self.at.position_at(v), self.at.position(idx));
+        match self.at.position_at(v) {
             None => (0.0, 1.0),
             Some(s) => {
                 let [t, a] = self.coef[c * self.k + s];

@@ -60,18 +60,17 @@ pub fn sin_cos_2pi(u: f32) -> (f32, f32) {
     let x2 = x * x;
     let s = x * (1.0 + x2 * (-1.0 / 6.0 + x2 * (1.0 / 120.0 + x2 * (-1.0 / 5040.0))));
     let c = 1.0 + x2 * (-0.5 + x2 * (1.0 / 24.0 + x2 * (-1.0 / 720.0 + x2 * (1.0 / 40320.0))));
-    // Rotate by k * pi/4.
+    // Rotate by k * pi/4: by pi/4 for odd k, then by q * pi/2 (q = k / 2 mod 4: a swap and sign flips), with
+    // selects and sign bits rather than a jump on the random octant (a mispredicted branch per scattering).
     let h = std::f32::consts::FRAC_1_SQRT_2;
-    match (k as i32) & 7 {
-        0 => (s, c),
-        1 => (h * (s + c), h * (c - s)),
-        2 => (c, -s),
-        3 => (h * (c - s), -h * (s + c)),
-        4 => (-s, -c),
-        5 => (-h * (s + c), h * (s - c)),
-        6 => (-c, s),
-        _ => (h * (s - c), h * (s + c)),
-    }
+    let k = k as i32;
+    let odd = k & 1 == 1;
+    let (s1, c1) = (if odd { h * (s + c) } else { s }, if odd { h * (c - s) } else { c });
+    let q = (k >> 1) & 3;
+    let (a, b) = if q & 1 == 1 { (c1, s1) } else { (s1, c1) };
+    // q = 0: (a, b); 1: (c1, -s1); 2: (-s1, -c1); 3: (-c1, s1).
+    let flip = |x: f32, neg: bool| f32::from_bits(x.to_bits() ^ ((neg as u32) << 31));
+    (flip(a, q >= 2), flip(b, q == 1 || q == 2))
 }
 
 /// New direction after HG scattering of direction d.

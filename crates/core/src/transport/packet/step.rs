@@ -81,9 +81,10 @@ impl Packet {
         let mut q = [p[0] + d[0] * t, p[1] + d[1] * t, p[2] + d[2] * t];
         let v = locate8(geo, &mut q);
         let j = ((v[2] * i32x8::splat(geo.n[1]) + v[1]) * i32x8::splat(geo.n[0]) + v[0]).to_array();
+        let va = v.map(|x| x.to_array());
         let (mut st, mut albedo, mut safe) = ([0.0f32; W], [0.0f32; W], [0.0f32; W]);
         for l in 0..W {
-            (st[l], albedo[l]) = med.coeffs(j[l] as usize, self.chan[l]);
+            (st[l], albedo[l]) = med.coeffs_at(j[l] as usize, [va[0][l], va[1][l], va[2][l]], self.chan[l]);
             if masked {
                 safe[l] = geo.safe_distance(j[l] as usize) as f32;
             }
