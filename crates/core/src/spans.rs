@@ -13,7 +13,7 @@ struct Span {
 }
 
 pub struct RowSpans {
-    /// Grid voxels, and voxels per row (x) and per layer (y).
+    /// Grid voxels, voxels per row (x), and rows per layer (y).
     n: usize,
     nx: usize,
     ny: usize,

@@ -21,8 +21,9 @@ pub const EMPTY: u8 = 255;
 pub trait Medium: Sync {
     /// (sigma_t in mm^-1, albedo) of voxel `idx` in channel `c`.
     fn coeffs(&self, idx: usize, c: usize) -> (f32, f32);
-    /// `coeffs` of voxel `idx` at grid coordinates `v` (x, y, z) = its index's: a walk that tracks both saves a
-    /// medium stored per grid row the division that finds the row.
+    /// `coeffs` of voxel `idx`, whose grid coordinates (x, y, z) are `v`: a walk that tracks both saves a medium
+    /// stored per grid row the division that finds the row. Contract: `v` is `idx`'s voxel (a medium may read
+    /// either; only debug builds check).
     #[inline(always)]
     fn coeffs_at(&self, idx: usize, _v: [i32; 3], c: usize) -> (f32, f32) {
         self.coeffs(idx, c)
@@ -296,6 +297,18 @@ impl SparseMedium {
         self.majorant = majorant_of(&self.coef, k);
     }
 
+    /// (sigma_t, albedo) at a stored position, vacuum at none.
+    #[inline(always)]
+    fn at_position(&self, position: Option<usize>, c: usize) -> (f32, f32) {
+        match position {
+            None => (0.0, 1.0),
+            Some(s) => {
+                let [t, a] = self.coef[c * self.k + s];
+                (t, a)
+            }
+        }
+    }
+
     /// Number of stored voxels (the listed ones and the vacuum between them in their rows).
     pub fn stored(&self) -> usize {
         self.k
@@ -305,24 +318,12 @@ impl SparseMedium {
 impl Medium for SparseMedium {
     #[inline(always)]
     fn coeffs(&self, idx: usize, c: usize) -> (f32, f32) {
-        match self.at.position(idx) {
-            None => (0.0, 1.0),
-            Some(s) => {
-                let [t, a] = self.coef[c * self.k + s];
-                (t, a)
-            }
-        }
+        self.at_position(self.at.position(idx), c)
     }
     #[inline(always)]
     fn coeffs_at(&self, idx: usize, v: [i32; 3], c: usize) -> (f32, f32) {
         debug_assert_eq!(self.at.position_at(v), self.at.position(idx));
-        match self.at.position_at(v) {
-            None => (0.0, 1.0),
-            Some(s) => {
-                let [t, a] = self.coef[c * self.k + s];
-                (t, a)
-            }
-        }
+        self.at_position(self.at.position_at(v), c)
     }
     fn len(&self) -> usize {
         self.at.grid()
