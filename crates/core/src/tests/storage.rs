@@ -372,6 +372,9 @@ fn gradient_slots_of_a_voxel_list_match_the_slot_map() {
     for j in 0..nv {
         let want = (map[j] != NO_GRADIENT).then_some(map[j] as usize);
         assert_eq!(spans.rank(j), want, "voxel {j}");
+        // The lookup by coordinates (the walk's) finds the position the lookup by index finds.
+        let v = [(j % n[0]) as i32, (j / n[0] % n[1]) as i32, (j / (n[0] * n[1])) as i32];
+        assert_eq!(spans.position_at(v), spans.position(j), "voxel {j} at {v:?}");
     }
     assert!(spans.lists(&index) && !spans.lists(&index[1..]));
     let geo = Geometry::new(n, [0.1; 3], Boundary::Box, 1.5, 0.4).unwrap();
