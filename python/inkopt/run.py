@@ -26,13 +26,13 @@ import numpy as np
 
 from .distributed import renderer_factory
 from .estimate import ANNOUNCE_SECONDS, Estimate, estimate_run
-from .evaluation.baselines import baseline_mixture
+from .evaluation.baselines import baseline_layers
 from .evaluation.metrics import delta_e76_map, prediction_metrics
 from .evaluation.noise import EVAL_SEED_OFFSET, MAX_SPP, PILOT_SPP, adaptive_render
 from .evaluation.results import Report
 from .io import file_digest
 from .lighting import Lighting, load_lighting
-from .optim import Optimization, OptimizeConfig
+from .optim import EXTRUSION_START_MM, Optimization, OptimizeConfig
 from .pictures import loss_figure
 from .rundir import Predictions, RunDir
 from .scenes import Scene
@@ -149,10 +149,8 @@ def _optimise(
     for note in scene.warnings:  # e.g. a mesh's small holes
         log(f"warning: {note}")
 
-    def baseline(kind: str) -> np.ndarray:  # a print-shop start (cfg.init "surface" or "extrusion")
-        return baseline_mixture(
-            kind, scene.volume, scene.texels, scene.target_rgb, scene.fixed_share, progress=progress
-        )
+    def baseline(kind: str):  # a print-shop start (cfg.init "surface" or "extrusion"), one z layer at a time
+        return baseline_layers(kind, scene.volume, scene.texels, scene.target_rgb, scene.fixed_share, progress=progress)
 
     run = Optimization(
         scene.volume,
@@ -309,6 +307,24 @@ COARSE_BUDGET_SHARE = 0.6
 #: equal budgets it ended lower than the plain run on the reference slab (3 min: 29.01 against 29.36 ΔE76) and on
 #: Spot 20 mm (8 min: 9.99 against 15.36) (bench/results/time_to_quality.json)
 DEADLINE_COARSE_FACTOR = 0.5
+
+
+def deadline_plan(spec, cfg: OptimizeConfig, log=print) -> tuple[float, OptimizeConfig]:
+    """How a run with a time budget and no ``--coarse-dpi`` goes: (coarse-stage DPI, 0 for none; the settings).
+    A mesh at least ``EXTRUSION_START_MM`` thick whose settings name no start (``cfg.init`` None) starts from the
+    extrusion baseline at its own DPI; every other run goes coarse to fine at ``DEADLINE_COARSE_FACTOR`` of its
+    DPI with its own start."""
+    from dataclasses import replace
+
+    if spec.kind == "mesh" and cfg.init is None:
+        thick = spec.mean_thickness_mm()
+        if thick >= EXTRUSION_START_MM:
+            log(
+                f"deadline: the mesh is {thick:.2f} mm thick (volume / area, at least {EXTRUSION_START_MM:g}): "
+                f"starting from the extrusion baseline at {spec.dpi:g} DPI, no coarse stage"
+            )
+            return 0.0, replace(cfg, init="extrusion")
+    return DEADLINE_COARSE_FACTOR * spec.dpi, cfg
 
 
 def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: float, *, resume=False, log=print, **kw):

@@ -259,3 +259,57 @@ def test_spot_20mm_quality(tmp_path):
     # the final's ΔE76 to 27.7 (Monte Carlo noise biases ΔE upward, more for the darker, optimised surface), so
     # the evaluation needs enough samples. The mean over 96 k texels has a statistical error of ~0.05.
     assert rep["delta_e76_mean"] < 0.88 * rep["initial_delta_e76_mean"]
+
+
+def test_mean_thickness_is_volume_over_area():
+    """``TexturedMesh.mean_thickness_mm``: a box's volume over its area exactly, whatever its up axis; a sphere's
+    and Spot's (whose texture seams split vertices) as trimesh computes them on the seam-merged solid."""
+    from inkopt.scenes.mesh.load import load_mesh, mesh_from_trimesh
+
+    a, b, c = 10.0, 20.0, 30.0
+    for up in ("y", "z"):
+        box = mesh_from_trimesh(trimesh.creation.box((a, b, c)), scale=1.0, up=up)
+        assert box.mean_thickness_mm() == pytest.approx(a * b * c / (2 * (a * b + b * c + c * a)), rel=1e-12)
+    sph = mesh_from_trimesh(_SPHERE, scale=3.0, up="z")
+    ref = _SPHERE.copy()
+    ref.apply_scale(3.0)
+    assert sph.mean_thickness_mm() == pytest.approx(ref.volume / ref.area, rel=1e-9)
+    spot = load_mesh(SPOT, height_mm=40.0)
+    solid = spot.solid_trimesh()
+    assert spot.mean_thickness_mm() == pytest.approx(abs(solid.volume) / solid.area, rel=1e-9)
+    assert load_mesh(SPOT, height_mm=20.0).mean_thickness_mm() == pytest.approx(spot.mean_thickness_mm() / 2)
+
+
+def test_deadline_plan_starts_thick_meshes_from_the_extrusion_baseline(ball):
+    """With a time budget and no --coarse-dpi: a mesh at least ``EXTRUSION_START_MM`` thick starts from the
+    extrusion baseline on its own grid; a thinner one, one whose start is given, and a slab go coarse to fine."""
+    from inkopt.optim import EXTRUSION_START_MM, OptimizeConfig
+    from inkopt.run import DEADLINE_COARSE_FACTOR, deadline_plan
+    from inkopt.scenes.spec import MeshSpec, SlabSpec
+
+    cfg = OptimizeConfig(time_budget=60.0)
+    r_thick = 3.0 * EXTRUSION_START_MM * 1.01  # a ball's volume / area is r / 3 (here within 0.1 %)
+    thick = MeshSpec(str(ball), scale=r_thick / RADIUS, up="z")
+    lines = []
+    dpi, got = deadline_plan(thick, cfg, log=lines.append)
+    assert dpi == 0 and got.init == "extrusion" and got.time_budget == 60.0
+    assert "starting from the extrusion baseline" in lines[0]
+    thin = MeshSpec(str(ball), scale=0.95 * 3.0 * EXTRUSION_START_MM / RADIUS, up="z")
+    assert deadline_plan(thin, cfg, log=lines.append) == (DEADLINE_COARSE_FACTOR * thin.dpi, cfg)
+    given = OptimizeConfig(time_budget=60.0, init="white")
+    assert deadline_plan(thick, given, log=lines.append) == (DEADLINE_COARSE_FACTOR * thick.dpi, given)
+    slab = SlabSpec("chart.png", (40.0, 40.0, 10.0))  # 5 mm thick by volume / area: slabs are not asked
+    assert deadline_plan(slab, cfg, log=lines.append) == (DEADLINE_COARSE_FACTOR * slab.dpi, cfg)
+    assert len(lines) == 1
+
+
+def test_thick_mesh_deadline_run_from_the_command_line(ball, tmp_path, capsys):
+    """`inkopt optimize` of a 6 mm-thick ball with a time budget: one stage from the extrusion baseline (no
+    DIR/coarse/), the report's start says so, the budget ends it."""
+    out = tmp_path / "r"
+    argv = ["--scale", "18", "--up", "z", "--dpi", "25", "--time-budget", "10s", "--forward-spp", "2"]
+    assert optimize(ball, out, *argv, iterations=100000, spp=1, eval_spp=4) == 0
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["init"] == "extrusion" and not (out / "coarse").exists()
+    assert rep["stop"]["reason"] == "time budget" and 0 < rep["iterations"] < 100000
+    assert "starting from the extrusion baseline" in capsys.readouterr().err

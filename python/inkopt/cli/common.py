@@ -127,7 +127,7 @@ def add_optimizer_args(p, single_run: bool = True) -> None:
     """Options shared by `inkopt slab` and `inkopt optimize` (``single_run``) and, without the options of a single
     run's evaluation budget, estimate and progress lines, `inkopt select-inks`."""
     from ..evaluation.noise import MAX_SPP
-    from ..optim import SCENE_DEFAULTS, OptimizeConfig
+    from ..optim import EXTRUSION_START_MM, SCENE_DEFAULTS, OptimizeConfig
 
     d, slab, mesh = OptimizeConfig(), SCENE_DEFAULTS["slab"], SCENE_DEFAULTS["mesh"]
     p.add_argument(
@@ -215,7 +215,8 @@ def add_optimizer_args(p, single_run: bool = True) -> None:
         "--init",
         help="white (97 %% white), random, surface or extrusion (start from that print-shop baseline of "
         "`inkopt evaluate`; builds or reuses its cached colour table), or a volume .npz (default: "
-        f"{slab['init']} on slabs, {mesh['init']} on meshes). A start other than white or random takes half "
+        f"{slab['init']} on slabs, {mesh['init']} on meshes; with --time-budget, extrusion on meshes at least "
+        f"{EXTRUSION_START_MM:g} mm thick (volume / area)). A start other than white or random takes half "
         "the default step (--lr)",
     )
     p.add_argument(
@@ -252,7 +253,7 @@ def add_optimizer_args(p, single_run: bool = True) -> None:
             metavar="DPI",
             help="coarse to fine: optimise first on a grid of this resolution (e.g. 150: an eighth of the voxels), "
             "then at --dpi from its result (the coarse run is kept in DIR/coarse/; default: half of --dpi with "
-            "--time-budget, else off; 0: off)",
+            "--time-budget unless a thick mesh starts from the extrusion baseline (--init), else off; 0: off)",
         )
         p.add_argument(
             "--time-budget",
@@ -380,7 +381,7 @@ def run_from_args(args, spec):
     import time
 
     from ..model import InkTable
-    from ..run import DEADLINE_COARSE_FACTOR, run_coarse_to_fine, run_optimisation
+    from ..run import deadline_plan, run_coarse_to_fine, run_optimisation
 
     started = time.perf_counter()  # a time budget counts the scene's building (voxelization) too
     spec.validate()
@@ -409,7 +410,7 @@ def run_from_args(args, spec):
     )
     coarse_dpi = args.coarse_dpi
     if coarse_dpi is None and cfg.time_budget is not None:
-        coarse_dpi = DEADLINE_COARSE_FACTOR * spec.dpi
+        coarse_dpi, cfg = deadline_plan(spec, cfg, log=stderr_log)
     if coarse_dpi:
         return run_coarse_to_fine(spec, inks, args.out, cfg, coarse_dpi, **kw)
     return run_optimisation(spec.build(inks), args.out, cfg, **kw)

@@ -188,6 +188,11 @@ def _dense_fixed(fixed_share):
 BASELINES = {"surface": surface_baseline, "extrusion": extrusion_baseline}  # kind -> full-array function
 
 
+def baseline_layers(kind: str, volume: Volume, texels: Texels, target_rgb, fixed_share=None, **kw) -> BaselineLayers:
+    """Baseline ``kind``'s mixture one z layer at a time (``BaselineLayers``); arguments as ``baseline_mixture``."""
+    return BaselineLayers(kind, volume, texels, target_rgb, _dense_fixed(fixed_share), **kw)
+
+
 def baseline_mixture(kind: str, volume: Volume, texels: Texels, target_rgb, fixed_share=None, **kw) -> np.ndarray:
     """The (z, y, x, N) mixture of baseline ``kind`` ("surface" or "extrusion")."""
     if kind not in BASELINES:

@@ -51,8 +51,9 @@ class Optimization:
 
     base: a mixture Volume giving the geometry and ink table (its mixture is ignored); texels and target_rgb
     (I, 3) linear; fixed_share: the (z, y, x, N) fixed ink shares (``model.FixedShares``) or None (none);
-    ``baseline(kind)`` -> (z, y, x, N) mixture of a print-shop baseline, needed only for ``cfg.init`` "surface"
-    or "extrusion" (the run driver supplies it);
+    ``baseline(kind)`` -> (z, y, x, N) mixture of a print-shop baseline (an array, or its layers:
+    ``evaluation.baselines.baseline_layers``), needed only for ``cfg.init`` "surface" or "extrusion" (the run
+    driver supplies it);
     ``lighting``: the display lighting the prediction is rendered under (``inkopt.lighting``; default uniform).
     ``renderer_factory(volume, threads, lighting)``: what renders (default ``Renderer``; e.g. texel shards on Ray,
     ``inkopt.distributed.RayShards.renderer``, with identical results). ``kind`` (required, keyword): the scene's

@@ -153,13 +153,13 @@ BASELINE_INITS = ("surface", "extrusion")
 
 
 def initial_free_mixture(
-    inks: InkTable, param: Parameterization, init: str, seed: int, baseline: Callable[[str], np.ndarray] | None = None
+    inks: InkTable, param: Parameterization, init: str, seed: int, baseline: Callable | None = None
 ) -> np.ndarray:
     """The free part's starting mixture (F, N): 97 % white + the rest split over the other inks (paper), a seeded
     random mixture, a print-shop baseline ("surface" or "extrusion"; ``baseline(kind)``, given by the caller,
-    returns its full (z, y, x, N) mixture), or the mixture of an earlier result file on the same grid (its free
-    part: ``free_part``, so a run's own result starts a run of the same scene where it ended, fixed shares and
-    all)."""
+    returns its (z, y, x, N) mixture as an array or layer by layer: ``layers_free_mixture``), or the mixture of
+    an earlier result file on the same grid (its free part: ``free_part``, so a run's own result starts a run of
+    the same scene where it ended, fixed shares and all)."""
     n, f = len(inks), param.n_free
     if init == "white":
         if "white" not in inks.names:
@@ -172,9 +172,27 @@ def initial_free_mixture(
     if init in BASELINE_INITS:
         if baseline is None:
             raise ValueError(f"--init {init} needs the run's texels and targets")
-        rho = np.asarray(baseline(init), np.float64).reshape(-1, n)[param.free_index]
-        return free_part(rho, param.fixed_f, param.share_f)
+        return layers_free_mixture(baseline(init), n, param)
     return file_free_mixture(init, inks, param)
+
+
+def layers_free_mixture(source, n: int, param: Parameterization) -> np.ndarray:
+    """The free part (F, N) float32 of a mixture given one z layer at a time: ``source[z]`` (Y, X, N) and
+    ``source.shape`` (Z, Y, X, N) (a print-shop baseline's ``BaselineLayers``, or a whole array), so that a big
+    object's start holds one layer of the baseline beside the result, not its (Z, Y, X, N) mixture."""
+    if tuple(source.shape) != (*param.shape, n):
+        raise ValueError(f"a start of shape {tuple(source.shape)}, expected {(*param.shape, n)}")
+    plane = param.shape[1] * param.shape[2]
+    out = np.empty((param.n_free, n), np.float32)
+    ends = np.searchsorted(param.free_index, np.arange(1, param.shape[0] + 1) * plane)
+    lo = 0
+    for z, hi in enumerate(ends):
+        if hi > lo:
+            rows = np.asarray(source[z]).reshape(-1, n)[param.free_index[lo:hi] - z * plane]
+            fixed = None if param.fixed_f is None else param.fixed_f[lo:hi]
+            out[lo:hi] = free_part(rows, fixed, param.share_f[lo:hi])
+        lo = hi
+    return out
 
 
 #: mixture voxels per block read from a start volume file (about 20 MB of float32 at 5 inks)

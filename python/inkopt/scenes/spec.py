@@ -152,6 +152,15 @@ class MeshSpec:
             self.constant_color,
         )
 
+    def mean_thickness_mm(self) -> float:
+        """The placed mesh's volume over its surface area in mm (``TexturedMesh.mean_thickness_mm``); loads the
+        mesh, does not voxelize it."""
+        from .mesh.load import load_mesh
+
+        self.validate()
+        mesh = load_mesh(self.path, self.height_mm, self.scale, self.up, self.texture, self.constant_color)
+        return mesh.mean_thickness_mm()
+
     def to_json(self) -> dict:
         d = {
             "kind": "mesh",

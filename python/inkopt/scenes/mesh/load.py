@@ -69,6 +69,16 @@ class TexturedMesh:
             return "texture"
         return "vertex" if self.vertex_colors is not None else "face" if self.face_colors is not None else "constant"
 
+    def mean_thickness_mm(self) -> float:
+        """The enclosed volume over the surface area, in mm: the solid's thickness scale (a sphere of radius r:
+        r / 3; a large plate of thickness t: t / 2). The volume by the divergence theorem over the outward-wound
+        triangles (exact for a closed surface; texture seams duplicate vertices but not geometry)."""
+        tri = self.vertices[self.faces]
+        cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        area = 0.5 * float(np.linalg.norm(cross, axis=1).sum())
+        volume = abs(float(np.einsum("ij,ij->", tri[:, 0], cross))) / 6.0
+        return volume / area if area > 0 else 0.0
+
     def solid_trimesh(self):
         """The seam-merged mesh as a ``trimesh.Trimesh`` (no colours)."""
         import trimesh
