@@ -21,9 +21,9 @@ from common import add_study_entry, machine, provenance  # noqa: E402
 from shell_compare import SPOT  # noqa: E402
 
 from inkopt.color import delta_e76, delta_e2000, linear_to_lab  # noqa: E402
+from inkopt.evaluation.baselines import baseline_mixture  # noqa: E402
 from inkopt.model import InkTable  # noqa: E402
 from inkopt.optim import Optimization, OptimizeConfig  # noqa: E402
-from inkopt.run import baseline_mixture  # noqa: E402
 from inkopt.scenes.spec import MeshSpec  # noqa: E402
 
 #: bands of the target's L* and C* (lower edge inclusive)
