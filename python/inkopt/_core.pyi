@@ -132,3 +132,20 @@ def softmax_backward(
     threads: int | None = None,
 ) -> NDArray[np.float32]:
     """Softmax backward map: x, g = dE/dp (rows, n) f32, scale (rows,) f32 -> c (natural) or dE/dx, (rows, n) f32."""
+
+def momentum_step(
+    x: NDArray[np.float32],
+    m: NDArray[np.float32],
+    g: NDArray[np.float32],
+    beta: float,
+    lr: float,
+    bias: float,
+    scale: float,
+    threads: int | None = None,
+) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    """m' = beta m + (1 - beta) g, x' = x - (lr (m' / bias)) / scale in f32, arrays (rows, n) f32 -> (x', m')."""
+
+def abs_order_statistics(
+    values: NDArray[np.float32], ranks: list[int], threads: int | None = None
+) -> list[float]:
+    """|values| (rows, n) f32 at the given 0-based ranks of their increasing order (exact; NaN if any is NaN)."""

@@ -104,7 +104,7 @@ def _step_seconds(run, rows: int = 1 << 16) -> float:
     if n == 0:
         return 0.0
     zeros = np.zeros((n, 3), np.float32)
-    opt = make_optimizer(run.cfg.optimizer, run.cfg.step_size, (n, run.x.shape[1]))
+    opt = make_optimizer(run.cfg.optimizer, run.cfg.step_size, (n, run.x.shape[1]), run.threads)
     t = time.perf_counter()
     g_x = run.param.backward(run.x[:n], mix_grad(zeros, zeros, run.base.inks), natural=run.opt.natural, lo=0)
     opt.step(run.x[:n], g_x)

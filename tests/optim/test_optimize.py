@@ -24,6 +24,7 @@ from inkopt.optim import (
     initial_free_mixture,
     make_optimizer,
 )
+from inkopt.optim.optimizers import abs_percentile
 from inkopt.render import Renderer
 from inkopt.scenes.slab import build_slab
 
@@ -294,6 +295,44 @@ def test_exponentiated_gradient_step_scale_is_frozen_after_warmup():
             np.testing.assert_allclose(opt.v[0], np.mean(scales), rtol=1e-5)
         np.testing.assert_allclose(x_new - x, -g / np.mean(scales), rtol=1e-4)  # beta = 0: m = g
         x = x_new
+
+
+def test_exponentiated_gradient_step_is_numpys_expression_bit_for_bit():
+    """The Rust step equals the numpy expression it replaces, in float32, bit for bit (over several warm-up and
+    later steps, for 1 and 2 threads): m' = beta m + (1 - beta) g, x' = x - lr (m' / bias) / s, s the running mean
+    of np.percentile(|g|, 99) over the warm-up."""
+    rng = np.random.default_rng(11)
+    shape = (70_001, 5)
+    x = (rng.normal(size=shape) * 3).astype(np.float32)
+    opts = [ExponentiatedGradient(lr=0.7, shape=shape, threads=k) for k in (1, 2)]
+    m, v = np.zeros(shape, np.float32), np.zeros(1, np.float32)
+    for t in range(1, 8):
+        g = (rng.normal(size=shape) * np.exp(rng.normal(size=shape))).astype(np.float32)
+        if t <= 5:
+            v = v.copy()
+            v[0] += (float(np.percentile(np.abs(g), 99.0)) - v[0]) / t
+        m = 0.8 * m + (1 - 0.8) * g
+        x_ref = x - 0.7 * (m / (1 - 0.8**t)) / (v[0] + 1e-30)
+        outs = [o.step(x, g) for o in opts]
+        for o, out in zip(opts, outs):
+            assert out.dtype == np.float32 and o.m.dtype == np.float32
+            np.testing.assert_array_equal(out, x_ref)
+            np.testing.assert_array_equal(o.m, m)
+            np.testing.assert_array_equal(o.v, v)
+        x = x_ref
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 5, 100, 101, 4999, 100_000])
+def test_abs_percentile_is_numpys(n):
+    """The step scale's percentile from two exact order statistics equals numpy's (linear method) bit for bit, ties,
+    zeros and signs included, for several percentiles."""
+    rng = np.random.default_rng(n)
+    g = (rng.normal(size=n) * np.exp(2 * rng.normal(size=n))).astype(np.float32)
+    g[rng.random(n) < 0.2] = 0.0
+    g[rng.random(n) < 0.2] = -1.5
+    g = g.reshape(-1, 1)
+    for q in (0.0, 1.0, 50.0, 99.0, 99.9, 100.0):
+        assert abs_percentile(g, q) == float(np.percentile(np.abs(g), q)), q
 
 
 @pytest.mark.parametrize("kind,cls", [("eg", ExponentiatedGradient), ("adagrad", AdaGrad), ("adam", Adam)])

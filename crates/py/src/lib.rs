@@ -24,6 +24,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(optimiser::smooth_rows, m)?)?;
     m.add_function(wrap_pyfunction!(optimiser::softmax_rows, m)?)?;
     m.add_function(wrap_pyfunction!(optimiser::softmax_backward, m)?)?;
+    m.add_function(wrap_pyfunction!(optimiser::momentum_step, m)?)?;
+    m.add_function(wrap_pyfunction!(optimiser::abs_order_statistics, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

@@ -1,6 +1,7 @@
-//! The optimiser's kernels: `smooth_rows` (the step preconditioner, `inkopt_core::kernels::smooth`) and
-//! `softmax_rows` / `softmax_backward` (the softmax parameterisation, `inkopt_core::kernels::simplex`), each run
-//! on a kept thread pool of the caller's size.
+//! The optimiser's kernels: `smooth_rows` (the step preconditioner, `inkopt_core::kernels::smooth`),
+//! `softmax_rows` / `softmax_backward` (the softmax parameterisation, `inkopt_core::kernels::simplex`) and
+//! `momentum_step` / `abs_order_statistics` (the exponentiated-gradient step, `inkopt_core::kernels::step`), each
+//! run on a kept thread pool of the caller's size.
 
 use std::sync::{Arc, Mutex};
 
@@ -107,4 +108,52 @@ pub(crate) fn softmax_backward<'py>(
     })?
     .map_err(err)?;
     Ok(Array2::from_shape_vec((rows, n), out).map_err(|e| err(e.to_string()))?.into_pyarray(py))
+}
+
+/// momentum_step(x, m, g, beta, lr, bias, scale, threads=None) -> (x_new, m_new): the exponentiated-gradient step
+/// m' = beta m + (1 - beta) g, x' = x - (lr (m' / bias)) / scale over float32 arrays of one shape (any; treated as
+/// flat), in f32 as numpy evaluates that expression (`inkopt_core::kernels::step`). New arrays; the GIL is
+/// released.
+#[pyfunction]
+#[pyo3(signature = (x, m, g, beta, lr, bias, scale, threads=None))]
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+pub(crate) fn momentum_step<'py>(
+    py: Python<'py>,
+    x: PyReadonlyArray2<f32>,
+    m: PyReadonlyArray2<f32>,
+    g: PyReadonlyArray2<f32>,
+    beta: f64,
+    lr: f64,
+    bias: f64,
+    scale: f32,
+    threads: Option<usize>,
+) -> PyResult<(Bound<'py, PyArray2<f32>>, Bound<'py, PyArray2<f32>>)> {
+    let (rows, n) = (x.shape()[0], x.shape()[1]);
+    check_shape(m.shape(), &[rows, n], "m")?;
+    check_shape(g.shape(), &[rows, n], "g")?;
+    let (xs, ms, gs) = (c_slice(&x, "x")?, c_slice(&m, "m")?, c_slice(&g, "g")?);
+    let (mut xo, mut mo) = (vec![0.0f32; rows * n], vec![0.0f32; rows * n]);
+    py.detach(|| {
+        run_on(threads, || {
+            inkopt_core::kernels::step::momentum_step(xs, ms, gs, beta, lr, bias, scale, &mut xo, &mut mo)
+        })
+    })?
+    .map_err(err)?;
+    let shape = |v| Array2::from_shape_vec((rows, n), v).map_err(|e| err(e.to_string()));
+    Ok((shape(xo)?.into_pyarray(py), shape(mo)?.into_pyarray(py)))
+}
+
+/// abs_order_statistics(values, ranks, threads=None) -> list of float: the entries of |values| (float32, any
+/// C-contiguous 2-D shape, taken flat) at the given 0-based ranks of their increasing order, exactly (NaN if a
+/// value is NaN; `inkopt_core::kernels::step`). No copy of the values is made; the GIL is released.
+#[pyfunction]
+#[pyo3(signature = (values, ranks, threads=None))]
+pub(crate) fn abs_order_statistics(
+    py: Python<'_>,
+    values: PyReadonlyArray2<f32>,
+    ranks: Vec<usize>,
+    threads: Option<usize>,
+) -> PyResult<Vec<f32>> {
+    let vs = c_slice(&values, "values")?;
+    py.detach(|| run_on(threads, || inkopt_core::kernels::step::abs_order_statistics(vs, &ranks)))?.map_err(err)
 }

@@ -93,7 +93,7 @@ class Optimization:
         self.param.fixed_share.digest(h)  # the dense array's bytes, a layer at a time
         self._problem_digest = h.hexdigest()[:16]
         self.x = self.param.variables_for(self._initial_free_mixture())
-        self.opt = make_optimizer(cfg.optimizer, cfg.step_size, self.x.shape)
+        self.opt = make_optimizer(cfg.optimizer, cfg.step_size, self.x.shape, threads)
         self.smoother = None
         if cfg.smooth > 0:
             guide = rows = None

@@ -6,8 +6,9 @@ interrupted step exactly), ``state() -> dict`` and ``load(dict)`` (checkpoint ar
 ``opt_v``, ``opt_t``, the same keys for every optimiser so that checkpoints stay readable), and ``natural``: whether it
 wants the mirror-descent direction (``Parameterization.backward(natural=True)``) instead of dE/dx.
 
-The element-wise updates run over blocks of rows into the new arrays, so that a big object's step makes no
-(F, N) temporaries beyond its results (each block computes exactly what the whole-array expression would).
+The element-wise updates make no (F, N) temporaries beyond their results: the exponentiated gradient's in the Rust
+core, AdaGrad's and Adam's over blocks of rows into the new arrays (each block computes exactly what the
+whole-array expression would). ``threads``: of the Rust kernels (default all cores; results do not depend on it).
 """
 
 from __future__ import annotations
@@ -22,13 +23,19 @@ def _blocks(n: int):
     return (slice(lo, lo + ROWS) for lo in range(0, max(n, 1), ROWS))
 
 
+def _rows(a) -> np.ndarray:
+    """a as a 2-D array of rows (its last axis the columns; a 1-D array as one column)."""
+    a = np.asarray(a)
+    return a.reshape(-1, a.shape[-1]) if a.ndim >= 2 else a.reshape(-1, 1)
+
+
 class _Moments:
     """First/second moment arrays and the step count, saved in checkpoints."""
 
     natural = False
 
-    def __init__(self, lr: float, shape, v_shape=None):
-        self.lr, self.t = float(lr), 0
+    def __init__(self, lr: float, shape, v_shape=None, threads: int | None = None):
+        self.lr, self.t, self.threads = float(lr), 0, threads
         self.m = np.zeros(shape, np.float32)
         self.v = np.zeros(shape if v_shape is None else v_shape, np.float32)
 
@@ -47,36 +54,63 @@ class ExponentiatedGradient(_Moments):
     iterations, then frozen (kept in ``v[0]``). The most influential voxels move by about ``lr`` per iteration;
     voxels that barely affect the surface (deep ones) move in proportion to their influence instead of
     random-walking on their gradient noise as under per-coordinate normalisation.
+
+    The update and the percentile run in the Rust core (``inkopt_core::kernels::step``, on ``threads`` threads,
+    default all cores), in float32 exactly as numpy evaluates ``x - lr * (m / bias) / s`` and ``np.percentile``:
+    without the whole-array temporaries of numpy (at Spot 40 mm's 78 M variables the numpy step took 0.8 s and the
+    percentile, which partitions a copy of |g|, 1.4 s).
     """
 
     natural = True
 
-    def __init__(self, lr: float, shape, beta: float = 0.8, warmup: int = 5, percentile: float = 99.0):
-        super().__init__(lr, shape, v_shape=(1,))
+    def __init__(
+        self,
+        lr: float,
+        shape,
+        beta: float = 0.8,
+        warmup: int = 5,
+        percentile: float = 99.0,
+        threads: int | None = None,
+    ):
+        super().__init__(lr, shape, v_shape=(1,), threads=threads)
         self.beta, self.warmup, self.percentile = beta, warmup, percentile
 
     def step(self, x: np.ndarray, g: np.ndarray) -> np.ndarray:
+        from .. import _core
+
         self.t += 1
+        x2, m2, g2 = (np.ascontiguousarray(_rows(a), np.float32) for a in (x, self.m, g))
         if self.t <= self.warmup:
-            scale = float(np.percentile(np.abs(g), self.percentile, overwrite_input=True)) if g.size else 0.0
+            scale = abs_percentile(g2, self.percentile, self.threads) if g2.size else 0.0
             self.v = self.v.copy()  # a new array: state is replaced, never changed in place
             self.v[0] += (scale - self.v[0]) / self.t
-        m_new = np.empty(self.m.shape, np.result_type(self.m, g))  # the dtypes of the whole-array expression
-        x_new = np.empty(x.shape, np.result_type(x, m_new, self.v))
         bias, scale = 1 - self.beta**self.t, self.v[0] + 1e-30
-        for b in _blocks(len(x)):
-            m = self.beta * self.m[b] + (1 - self.beta) * g[b]
-            m_new[b] = m
-            x_new[b] = x[b] - self.lr * (m / bias) / scale
-        self.m = m_new
-        return x_new
+        x_new, m_new = _core.momentum_step(x2, m2, g2, self.beta, self.lr, bias, float(scale), self.threads)
+        self.m = m_new.reshape(self.m.shape)
+        return x_new.reshape(np.shape(x))
+
+
+def abs_percentile(g: np.ndarray, q: float, threads: int | None = None) -> float:
+    """``np.percentile(np.abs(g), q)`` (its default, linear method, bit for bit) of a float32 array g (rows, n) with
+    at least one entry, from two exact order statistics (``_core.abs_order_statistics``) instead of a partitioned
+    copy of |g|."""
+    from .. import _core
+
+    n, qf = g.size, q / 100
+    virtual = n * qf + (1 + qf * (1 - 1 - 1)) - 1  # numpy's virtual index for alpha = beta = 1, in its order
+    lo = int(np.clip(np.floor(virtual), 0, n - 1))
+    hi = min(lo + 1, n - 1)
+    t = virtual - lo
+    a, b = (np.float32(v) for v in _core.abs_order_statistics(g, [lo, hi], threads))
+    d = np.float32(b - a)
+    return float(a + d * t) if t < 0.5 else float(b - d * (1 - t))
 
 
 class AdaGrad(_Moments):
     """AdaGrad (the paper): per-coordinate steps ``lr * g / sqrt(sum g²)``."""
 
-    def __init__(self, lr: float, shape, eps: float = 1e-8):
-        super().__init__(lr, shape)
+    def __init__(self, lr: float, shape, eps: float = 1e-8, threads: int | None = None):
+        super().__init__(lr, shape, threads=threads)
         self.eps = eps
 
     def step(self, x: np.ndarray, g: np.ndarray) -> np.ndarray:
@@ -94,8 +128,10 @@ class AdaGrad(_Moments):
 class Adam(_Moments):
     """Adam with bias correction."""
 
-    def __init__(self, lr: float, shape, beta1: float = 0.9, beta2: float = 0.999, eps: float = 1e-8):
-        super().__init__(lr, shape)
+    def __init__(
+        self, lr: float, shape, beta1: float = 0.9, beta2: float = 0.999, eps: float = 1e-8, threads: int | None = None
+    ):
+        super().__init__(lr, shape, threads=threads)
         self.beta1, self.beta2, self.eps = beta1, beta2, eps
 
     def step(self, x: np.ndarray, g: np.ndarray) -> np.ndarray:
@@ -138,8 +174,9 @@ def step_factor(iteration: int, iterations: int, decay: float, halvings: int = D
 OPTIMIZER_CLASSES = {"eg": ExponentiatedGradient, "adagrad": AdaGrad, "adam": Adam}
 
 
-def make_optimizer(kind: str, lr: float, shape):
-    """The optimiser named ``kind`` (``OptimizeConfig.optimizer``) with its default hyperparameters."""
+def make_optimizer(kind: str, lr: float, shape, threads: int | None = None):
+    """The optimiser named ``kind`` (``OptimizeConfig.optimizer``) with its default hyperparameters; ``threads``: of
+    its Rust kernels (default all cores; results do not depend on it)."""
     if kind not in OPTIMIZER_CLASSES:
         raise ValueError(f"unknown optimizer '{kind}'; use one of {tuple(OPTIMIZER_CLASSES)}")
-    return OPTIMIZER_CLASSES[kind](lr, shape)
+    return OPTIMIZER_CLASSES[kind](lr, shape, threads=threads)

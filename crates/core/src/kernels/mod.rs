@@ -5,10 +5,14 @@
 //! - `smooth` (optimiser): explicit diffusion of per-voxel values over a sparse voxel set, the step
 //!   preconditioner.
 //! - `simplex` (optimiser): the row-wise softmax of the optimiser's variables and its backward map.
+//! - `step` (optimiser): the exponentiated-gradient step over every variable and the order statistics of |g| that
+//!   set its scale.
 //!
-//! Each is a fixed-order computation per row or voxel, so results do not depend on the thread count. They use
-//! `crate::spans` (voxel sets by grid row) and, for `diffuse`, the empty-voxel label `transport::medium::EMPTY`.
+//! Each is a fixed-order computation per row, voxel or element (or exact counts), so results do not depend on the
+//! thread count. They use `crate::spans` (voxel sets by grid row) and, for `diffuse`, the empty-voxel label
+//! `transport::medium::EMPTY`.
 
 pub mod diffuse;
 pub mod simplex;
 pub mod smooth;
+pub mod step;
