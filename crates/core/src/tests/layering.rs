@@ -26,6 +26,7 @@ const LAYERS: &[&str] = &[
     "kernels::diffuse",
     "kernels::simplex",
     "kernels::smooth",
+    "kernels::step",
 ];
 
 /// Modules that only declare their children (and document them).
