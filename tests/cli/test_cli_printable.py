@@ -13,6 +13,7 @@ import pytest
 from inkopt.cli import main
 from inkopt.io import save_npz
 from inkopt.model import InkTable, Texels, Volume
+from inkopt.printing.dither import lightness_order
 from inkopt.printing.export import read_png_slices
 from inkopt.printing.quantize import _enclosing, printer_grid, quantize
 
@@ -61,7 +62,8 @@ def test_quantize_writes_renderable_labels(tmp_path, capsys):
     assert code == 0 and "printer grid 20 x 8 x 13" in out and "cyan" in out, out + err
     q = Volume.load(tmp_path / "r" / "quantized.npz")
     shape_p, vp = printer_grid(vol.shape, vol.voxel_mm)
-    labels, _ = quantize(vol.mixture, vol.voxel_mm)  # the defaults: blue-noise, seed 0, nearest
+    # the defaults: blue-noise with the inks lightest first, seed 0, nearest
+    labels, _ = quantize(vol.mixture, vol.voxel_mm, order=lightness_order(vol.inks, vol.g, vol.ior))
     np.testing.assert_array_equal(q.labels, labels)
     np.testing.assert_allclose(q.voxel_mm, vp)
     assert q.quantization.method == "blue-noise" and q.quantization.seed == 0

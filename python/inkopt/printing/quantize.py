@@ -11,7 +11,8 @@ to the printer grid and gives every printer voxel exactly one ink:
   ``c_{k-1} <= t < c_k``, ``c_k = rho_0 + ... + rho_k``. Every ink then occupies a band of threshold values
   whose share equals its mixture weight, and because the thresholds of neighbouring voxels are spread evenly,
   the local ink fractions match the mixture much more closely than independent draws (the error is pushed to
-  high spatial frequencies, which the scattering medium low-passes).
+  high spatial frequencies, which the scattering medium low-passes). The inks are summed lightest first
+  (``order``: ``dither.lightness_order``, which every caller here passes; it says why).
 - ``error-diffusion``: deterministic 3D vector error diffusion (``inkopt_core::diffuse``, in Rust). Printer
   voxels are visited layer by layer (z up), rows in y, each row serpentine in x (direction alternating with
   ``y + z``); each takes the ink with the largest component of its corrected mixture (mixture + carried error,
@@ -44,7 +45,7 @@ import numpy as np
 
 from ..model import EMPTY, Quantization, SurfaceNormals, Volume
 from ..units import MM_PER_INCH, PRINTER_DPI, PRINTER_LAYER_UM
-from .dither import load_blue_noise
+from .dither import lightness_order, load_blue_noise
 
 METHODS = ("blue-noise", "random", "error-diffusion")
 UPSAMPLE = ("nearest", "linear")
@@ -116,6 +117,7 @@ def quantize(
     seed: int = 0,
     upsample: str = "nearest",
     out=None,
+    order=None,
 ):
     """One ink per printer voxel from a mixture on the optimisation grid.
 
@@ -130,6 +132,9 @@ def quantize(
     upsample "nearest" (enclosing voxel) or "linear" (trilinear between voxel centres, inside voxels only)
     out      None (a new array is returned) or anything taking ``out[k] = layer`` (Y, X) uint8 for k = 0, 1, ...
              in order (``model.labelfile.LabelFileWriter``: the labels go to a file one layer at a time)
+    order    blue-noise only: the ink indices (N,) in the order their bands follow in the cumulative mixture
+             (``dither.lightness_order(inks, g, ior)``, as ``quantize_volume``, ``inkopt quantize`` and the
+             evaluation's baselines use); None: index order
     ``mixture`` may also be a layer source (``model.mixturefile.MixtureSource``): ``shape`` (z, y, x, N) and
     ``[z]`` giving one (y, x, N) layer, asked for in increasing z; its layers are checked as they are read.
     Returns ``(labels uint8 (Z, Y, X) or out, voxel_mm_printer (3,) float64 (x, y, z))``; label = ink index,
@@ -167,6 +172,12 @@ def quantize(
 
     enc = [_enclosing(Z, vp[2], nz, vo[2]), _enclosing(Y, vp[1], ny, vo[1]), _enclosing(X, vp[0], nx, vo[0])]
     rng = np.random.default_rng(seed)
+    perm = None  # the bands' ink order (blue noise), and its map from band to ink label
+    if method == "blue-noise" and order is not None:
+        perm = np.asarray(order, np.int64).reshape(-1)
+        if sorted(perm.tolist()) != list(range(n_inks)):
+            raise ValueError(f"order must be a permutation of the {n_inks} ink indices, got {perm.tolist()}")
+        band_ink = perm.astype(np.uint8)
     if method == "blue-noise":
         tile = load_blue_noise()
         tz, ty, tx = tile.shape
@@ -196,6 +207,8 @@ def quantize(
         lay = lay.astype(np.float64)
         w = np.ones((ny, nx)) if inside is None else inside[z].astype(np.float64)
         lay = lay * (w / np.where(t > 0, t, 1.0))[..., None]  # rows sum to 1 inside, 0 outside
+        if perm is not None:
+            lay = lay[..., perm]
         c = np.cumsum(lay, axis=2).astype(np.float32).transpose(2, 0, 1)  # (N, ny, nx)
         if lin is None:
             out = c[:, enc[1]][:, :, enc[2]]
@@ -235,6 +248,8 @@ def quantize(
         lab = np.zeros((Y, X), np.uint8)
         for n in range(n_inks - 1):
             lab += t >= c[n]
+        if perm is not None:
+            lab = band_ink[lab]
         if inside is not None:
             lab[~inside_p(k)] = EMPTY
         labels[k] = lab
@@ -342,6 +357,7 @@ def quantize_volume(
         inside=volume.inside,
         seed=int(seed),
         upsample=upsample,
+        order=lightness_order(volume.inks, volume.g, volume.ior),
     )
     nrm = None
     if normals and volume.normals is not None:

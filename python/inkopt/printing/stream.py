@@ -17,6 +17,7 @@ from ..model import Quantization
 from ..model.mixturefile import MixtureSource
 from ..rundir import RunDir
 from ..units import MM_PER_INCH
+from .dither import lightness_order
 from .quantize import printer_grid, quantize, summary_lines, upsample_normals
 
 
@@ -41,6 +42,7 @@ def quantize_run(d: RunDir, *, method: str, dpi, layer_um: float, seed: int, ups
                 seed=int(seed),
                 upsample=upsample,
                 out=w,
+                order=lightness_order(src.inks, src.g, src.ior),
             )
         counts = w.counts
     finally:
