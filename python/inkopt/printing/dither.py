@@ -117,25 +117,12 @@ def load_blue_noise(shape=BLUE_NOISE_SHAPE) -> np.ndarray:
     return ((ranks.astype(np.float64) + 0.5) / ranks.size).astype(np.float32)
 
 
-def lightness_order(inks, g: float, ior: float) -> np.ndarray:
-    """The ink indices (N,) int64 ordered by the luminance of a thick layer of each ink, lightest first: the order of
-    the inks in the cumulative mixture that ordered dithering compares with the thresholds (``quantize``).
-
-    Why: ink k takes the printer voxels whose threshold falls in its band of the cumulative mixture. The first and the
-    last band are a prefix and a suffix of the thresholds' order, each a blue-noise pattern of its own; the bands
-    between are differences of two such patterns, less evenly spread. Lightest first puts the two inks that contrast
-    most (white and black) at the two ends, each evenly dispersed, and makes the printed lightness a monotone function
-    of the threshold, so the halftone's lightness error keeps the dither array's blue-noise spectrum. In index order
-    (cyan, magenta, yellow, black, white) black took a middle band: on a Spot 40 mm result the flat texels' mottle of
-    the print was 1.1 (ΔL*)² against 0.05 in lightness order, SSIM 0.925 against 0.931 (docs/quality.md).
-
-    A thick layer's colour is the total diffuse reflectance of a semi-infinite medium in the dipole approximation
-    (Jensen et al. 2001): R = a'/2 (1 + exp(-4/3 A s)) exp(-s), s = sqrt(3 (1 - a')), with the reduced albedo
-    a' = sigma_s (1 - g) / (sigma_s (1 - g) + sigma_a) per channel and A = (1 + F_dr) / (1 - F_dr) from the
+def thick_layer_reflectance(inks, g: float, ior: float) -> np.ndarray:
+    """(N, 3) linear RGB: the total diffuse reflectance of a semi-infinite layer of each ink, in the dipole
+    approximation (Jensen et al. 2001): R = a'/2 (1 + exp(-4/3 A s)) exp(-s), s = sqrt(3 (1 - a')), with the reduced
+    albedo a' = sigma_s (1 - g) / (sigma_s (1 - g) + sigma_a) per channel and A = (1 + F_dr) / (1 - F_dr) from the
     boundary's relative index ``ior`` (F_dr by Egan and Hilgeman's fit); an ink that neither scatters nor absorbs
-    (clear) counts as R = 1. For the paper's inks: white, yellow, magenta, cyan, black, as the colour table's
-    rendered patches have them. Ties keep index order.
-    """
+    (clear) counts as R = 1."""
     ss = np.asarray(inks.sigma_s, np.float64) * (1.0 - float(g))
     ext = ss + np.asarray(inks.sigma_a, np.float64)
     a = np.divide(ss, ext, out=np.ones_like(ext), where=ext > 0)
@@ -143,5 +130,21 @@ def lightness_order(inks, g: float, ior: float) -> np.ndarray:
     f_dr = -1.440 / eta**2 + 0.710 / eta + 0.668 + 0.0636 * eta
     big_a = (1.0 + f_dr) / (1.0 - f_dr)
     s = np.sqrt(3.0 * (1.0 - a))
-    reflectance = a / 2.0 * (1.0 + np.exp(-4.0 / 3.0 * big_a * s)) * np.exp(-s)
-    return np.argsort(-(reflectance @ LUMINANCE), kind="stable")
+    return a / 2.0 * (1.0 + np.exp(-4.0 / 3.0 * big_a * s)) * np.exp(-s)
+
+
+def lightness_order(inks, g: float, ior: float) -> np.ndarray:
+    """The ink indices (N,) int64 ordered by the luminance of a thick layer of each ink (``thick_layer_reflectance``),
+    lightest first: the order of the inks in the cumulative mixture that ordered dithering compares with the
+    thresholds (``quantize``). Ties keep index order.
+
+    Why: ink k takes the printer voxels whose threshold falls in its band of the cumulative mixture. The first and the
+    last band are a prefix and a suffix of the thresholds' order, each a blue-noise pattern of its own; the bands
+    between are differences of two such patterns, less evenly spread. Lightest first puts the two inks that contrast
+    most (white and black) at the two ends, each evenly dispersed, and makes the printed lightness a monotone function
+    of the threshold, so the halftone's lightness error keeps the dither array's blue-noise spectrum. In index order
+    (cyan, magenta, yellow, black, white) black takes a middle band. Measured in docs/quality.md ("The inks' order in
+    the dither"). For the paper's inks: white, yellow, magenta, cyan, black, as the colour table's rendered patches
+    have them.
+    """
+    return np.argsort(-(thick_layer_reflectance(inks, g, ior) @ LUMINANCE), kind="stable")
