@@ -1,8 +1,9 @@
 """The inks' order in the blue-noise dither, measured without rendering: a run's mixture dithered with the inks in
-index order and lightest first (``printing.dither.lightness_order``), each printer voxel given its ink's thick-layer
-luminance (``dither.thick_layer_reflectance``), and the halftone's lightness error low-passed as scattering does: the
-RMS difference between the Gaussian-filtered (0.1 mm) luminance of the labels and of the nearest-upsampled mixture,
-over the printer voxels within 0.2 mm of the outside. Writes the entry NAME of experiments/results/dither_order.json.
+index order and lightest first (``printing.dither.lightness_order``), and for comparison by error diffusion and by
+random draws; each printer voxel given its ink's thick-layer luminance (``dither.thick_layer_reflectance``), the
+halftone's lightness error low-passed as scattering does: the RMS difference between the Gaussian-filtered (0.1
+mm) luminance of the labels and of the nearest-upsampled mixture, over the printer voxels within 0.2 mm of the
+outside. Writes the entry NAME of experiments/results/dither_order.json.
 
     .venv/bin/python experiments/dither_order.py NAME RUN [--layers LO:HI]
 
@@ -44,8 +45,14 @@ def main():
     entry = {**provenance(), "run": a.run, "layers": a.layers, "sigma_mm": SIGMA_MM, "near_mm": NEAR_MM}
     entry["ink_luminance"] = dict(zip(vol.inks.names, lum.tolist()))
     ref = None
-    for name, order in (("index", None), ("lightness", lightness_order(vol.inks, vol.g, vol.ior))):
-        lab, vp = quantize(mix, vol.voxel_mm, inside=inside, seed=0, order=order)
+    cases = (
+        ("index", "blue-noise", None),
+        ("lightness", "blue-noise", lightness_order(vol.inks, vol.g, vol.ior)),
+        ("error-diffusion", "error-diffusion", None),
+        ("random", "random", None),
+    )
+    for name, method, order in cases:
+        lab, vp = quantize(mix, vol.voxel_mm, method=method, inside=inside, seed=0, order=order)
         filled = lab != EMPTY
         sig = SIGMA_MM / np.asarray(vp)[::-1]
         if ref is None:  # the mixture's luminance on the printer grid, filtered; the voxels near the surface
@@ -58,10 +65,10 @@ def main():
             del m_lum
         low = ndimage.gaussian_filter(np.where(filled, lum[np.minimum(lab, len(lum) - 1)], 0), sig) / weight
         entry[name] = float(np.sqrt(np.mean((low - ref)[near] ** 2)))
-        print(f"{name}: RMS low-passed luminance error {entry[name]:.5f} over {int(near.sum())} voxels", flush=True)
+        print(f"{name} ({method}): RMS low-passed luminance error {entry[name]:.5f}", flush=True)
     entry["ratio"] = entry["lightness"] / entry["index"]
     entry["voxels"] = int(near.sum())
-    print(f"lightness / index: {entry['ratio']:.3f}")
+    print(f"lightness / index: {entry['ratio']:.3f} over {entry['voxels']} printer voxels")
     entry.update(machine())
     add_study_entry("dither_order.json", a.name, entry)
 
