@@ -18,7 +18,8 @@ from inkopt.evaluation.results import Evaluation
 from inkopt.io import save_npz
 from inkopt.model import InkTable, Quantization, Texels, Volume
 from inkopt.pictures import panels
-from inkopt.printing.quantize import _enclosing, printer_grid, quantize
+from inkopt.printing.dither import lightness_order
+from inkopt.printing.quantize import _enclosing, band_order, printer_grid, quantize
 
 V300 = 25.4 / 300
 INKS3 = InkTable.from_names(["cyan", "magenta", "white"])
@@ -162,20 +163,28 @@ def test_evaluate_run_adaptive(tmp_path, table3):
     assert any(line.startswith("gamut floor") for line in table_lines(typed))
 
 
-def test_evaluate_surface_run_and_method_mismatch(tmp_path, table3):
+@pytest.mark.parametrize(
+    "method,ink_order", [("random", "index"), ("blue-noise", "index"), ("blue-noise", "lightness")]
+)
+def test_evaluate_surface_run_and_method_mismatch(tmp_path, table3, method, ink_order):
+    """The baselines are dithered as the labels file says ours was (method, seed, and for blue noise the inks'
+    order, a file made in index order included): a run whose mixture is the surface baseline prints identically."""
     d = tmp_path / "run"
     make_run(d, table3, "surface")
     q = Volume.load(d / "volume.npz")
-    labels, vp = quantize(q.mixture, q.voxel_mm, method="random", seed=5)
-    Volume.from_labels(
-        voxel_mm=vp, labels=labels, inks=INKS3, quantization=Quantization("random", 5, tuple(25.4 / vp), "nearest")
-    ).save(d / "quantized.npz")
+    assert list(lightness_order(INKS3, q.g, q.ior)) != [0, 1, 2]  # the two orders differ for these inks
+    setting = Quantization(method, 5, None, "nearest", ink_order)
+    order = band_order(setting, INKS3, q.g, q.ior)
+    labels, vp = quantize(q.mixture, q.voxel_mm, method=method, seed=5, order=order)
+    setting = Quantization(method, 5, tuple(25.4 / vp), "nearest", ink_order)
+    Volume.from_labels(voxel_mm=vp, labels=labels, inks=INKS3, quantization=setting).save(d / "quantized.npz")
     ev = evaluate_run(d, spp=4, table=table3).to_json()
-    assert ev["quantization"]["method"] == "random" and ev["quantization"]["seed"] == 5
-    for k in ("delta_e76_mean", "ssim"):  # the surface baseline, quantized like ours (random, seed 5) = ours
+    assert ev["quantization"]["method"] == method and ev["quantization"]["seed"] == 5
+    for k in ("delta_e76_mean", "ssim"):  # the surface baseline, quantized like ours = ours
         assert ev["baselines"]["surface"][k] == ev["quantized"][k]
-    with pytest.raises(ValueError, match="quantized with 'random'"):
-        evaluate_run(d, spp=1, method="blue-noise", table=table3)
+    other = "blue-noise" if method == "random" else "random"
+    with pytest.raises(ValueError, match=f"quantized with '{method}'"):
+        evaluate_run(d, spp=1, method=other, table=table3)
 
 
 def test_evaluate_mesh_kind(tmp_path, table3):

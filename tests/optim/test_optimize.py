@@ -335,6 +335,18 @@ def test_abs_percentile_is_numpys(n):
         assert abs_percentile(g, q) == float(np.percentile(np.abs(g), q)), q
 
 
+@pytest.mark.parametrize("n,q", [(17_858_959, 99.0), (34_001, 99.9), (78_397_510, 99.0)])
+def test_abs_percentile_weight_is_numpys_at_large_sizes(n, q):
+    """The interpolation weight between the two order statistics is numpy's to the bit at sizes where an
+    algebraically equal index formula, n q + (1 - q) - 1, rounds differently from numpy's (n - 1) q (the first two;
+    the last is Spot 40 mm's 15.7 M voxels x 5 inks): |g| is 0 up to the lower rank and 1 above, so the percentile
+    is the weight itself."""
+    lo = int(np.floor((n - 1) * (q / 100)))
+    g = np.zeros((n, 1), np.float32)
+    g[lo + 1 :] = -1.0
+    assert abs_percentile(g, q) == float(np.percentile(np.abs(g), q))
+
+
 @pytest.mark.parametrize("kind,cls", [("eg", ExponentiatedGradient), ("adagrad", AdaGrad), ("adam", Adam)])
 def test_optimizer_state_round_trips(kind, cls):
     """state() / load() restore an optimiser exactly (what resume relies on), under the same checkpoint keys; a step

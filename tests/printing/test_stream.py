@@ -182,6 +182,16 @@ def test_quantization_metadata_roundtrip(tmp_path):
     d, vol = mixture_run(tmp_path / "r")
     q = quantize_volume(vol, method="random", seed=9, **{k: v for k, v in KW.items() if k != "seed"})
     d.save_quantized(q)
-    assert d.load_quantized().quantization == Quantization("random", 9, q.quantization.dpi, "nearest")
+    assert d.load_quantized().quantization == Quantization("random", 9, q.quantization.dpi, "nearest", "index")
     lab, _ = quantize(vol.mixture, vol.voxel_mm, method="random", seed=9, inside=vol.inside, dpi=(600, 300))
     np.testing.assert_array_equal(d.load_quantized().labels, lab)
+
+
+def test_quantization_record_says_the_ink_order():
+    """The labels file records the inks' order of blue-noise dithering; a file that does not say (written before the
+    order was recorded) was dithered in index order, and the evaluation's baselines then follow it."""
+    for order in ("lightness", "index"):
+        q = Quantization("blue-noise", 3, (600.0, 300.0, 940.7), "nearest", order)
+        assert Quantization.from_arrays(q.arrays()) == q
+    older = {k: v for k, v in Quantization().arrays().items() if k != "ink_order"}
+    assert Quantization.from_arrays(older).ink_order == "index"

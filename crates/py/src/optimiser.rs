@@ -111,9 +111,8 @@ pub(crate) fn softmax_backward<'py>(
 }
 
 /// momentum_step(x, m, g, beta, lr, bias, scale, threads=None) -> (x_new, m_new): the exponentiated-gradient step
-/// m' = beta m + (1 - beta) g, x' = x - (lr (m' / bias)) / scale over float32 arrays of one shape (any; treated as
-/// flat), in f32 as numpy evaluates that expression (`inkopt_core::kernels::step`). New arrays; the GIL is
-/// released.
+/// m' = beta m + (1 - beta) g, x' = x - (lr (m' / bias)) / scale over float32 arrays of one shape (rows, n), in
+/// f32 as numpy evaluates that expression (`inkopt_core::kernels::step`). New arrays; the GIL is released.
 #[pyfunction]
 #[pyo3(signature = (x, m, g, beta, lr, bias, scale, threads=None))]
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
@@ -143,8 +142,8 @@ pub(crate) fn momentum_step<'py>(
     Ok((shape(xo)?.into_pyarray(py), shape(mo)?.into_pyarray(py)))
 }
 
-/// abs_order_statistics(values, ranks, threads=None) -> list of float: the entries of |values| (float32, any
-/// C-contiguous 2-D shape, taken flat) at the given 0-based ranks of their increasing order, exactly (NaN if a
+/// abs_order_statistics(values, ranks, threads=None) -> list of float: the entries of |values| (float32 (rows, n),
+/// C-contiguous, taken flat) at the given 0-based ranks of their increasing order, exactly (NaN if a
 /// value is NaN; `inkopt_core::kernels::step`). No copy of the values is made; the GIL is released.
 #[pyfunction]
 #[pyo3(signature = (values, ranks, threads=None))]

@@ -64,8 +64,7 @@ from ..lighting import Lighting, load_lighting
 from ..loss import TexelLoss
 from ..model import Quantization, Volume
 from ..pictures import panels
-from ..printing.dither import lightness_order
-from ..printing.quantize import DEFAULT_DPI, DEFAULT_LAYER_UM, printer_grid, quantize
+from ..printing.quantize import DEFAULT_DPI, DEFAULT_LAYER_UM, band_order, printer_grid, quantize
 from ..printing.stream import quantize_run
 from ..render import Renderer
 from ..rundir import Predictions, RunDir, SceneRecord
@@ -331,7 +330,7 @@ def evaluate_run(
                 seed=q.seed,
                 upsample=q.upsample,
                 out=np.empty(shape_p, np.uint8),
-                order=lightness_order(meta["inks"], meta["g"], meta["ior"]),
+                order=band_order(q, meta["inks"], meta["g"], meta["ior"]),  # as ours was, from its file
             )
             src = None
             printed(name, Volume.from_labels(labels=labels, **meta), t0)

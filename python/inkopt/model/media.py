@@ -108,15 +108,19 @@ Medium = Dense | Mixture | Labels
 
 @dataclass(frozen=True)
 class Quantization:
-    """How a labels volume was made from a mixture (``inkopt.printing.quantize``); dpi is (x, y, z)."""
+    """How a labels volume was made from a mixture (``inkopt.printing.quantize``); dpi is (x, y, z). ``ink_order``:
+    the order of the inks' bands in blue-noise dithering, "lightness" (lightest first, ``dither.lightness_order``)
+    or "index" (the ink set's order; files that do not say were made so)."""
 
     method: str = "blue-noise"
     seed: int = 0
     dpi: tuple[float, float, float] | None = None
     upsample: str = "nearest"
+    ink_order: str = "lightness"
 
     def arrays(self) -> dict:
         out = {"method": np.array(self.method), "seed": np.int64(self.seed), "upsample": np.array(self.upsample)}
+        out["ink_order"] = np.array(self.ink_order)
         if self.dpi is not None:
             out["dpi"] = np.asarray(self.dpi, np.float64)
         return out
@@ -130,4 +134,5 @@ class Quantization:
             int(data["seed"]) if "seed" in data else 0,
             tuple(float(v) for v in np.asarray(data["dpi"]).reshape(-1)) if "dpi" in data else None,
             str(data["upsample"]) if "upsample" in data else "nearest",
+            str(data["ink_order"]) if "ink_order" in data else "index",
         )

@@ -26,7 +26,7 @@ def _blocks(n: int):
 def _rows(a) -> np.ndarray:
     """a as a 2-D array of rows (its last axis the columns; a 1-D array as one column)."""
     a = np.asarray(a)
-    return a.reshape(-1, a.shape[-1]) if a.ndim >= 2 else a.reshape(-1, 1)
+    return a.reshape(len(a) if a.size == 0 else -1, a.shape[-1]) if a.ndim >= 2 else a.reshape(-1, 1)
 
 
 class _Moments:
@@ -97,7 +97,7 @@ def abs_percentile(g: np.ndarray, q: float, threads: int | None = None) -> float
     from .. import _core
 
     n, qf = g.size, q / 100
-    virtual = n * qf + (1 + qf * (1 - 1 - 1)) - 1  # numpy's virtual index for alpha = beta = 1, in its order
+    virtual = (n - 1) * qf  # numpy's virtual index of the linear method, in its order of operations
     lo = int(np.clip(np.floor(virtual), 0, n - 1))
     hi = min(lo + 1, n - 1)
     t = virtual - lo

@@ -11,8 +11,9 @@ to the printer grid and gives every printer voxel exactly one ink:
   ``c_{k-1} <= t < c_k``, ``c_k = rho_0 + ... + rho_k``. Every ink then occupies a band of threshold values
   whose share equals its mixture weight, and because the thresholds of neighbouring voxels are spread evenly,
   the local ink fractions match the mixture much more closely than independent draws (the error is pushed to
-  high spatial frequencies, which the scattering medium low-passes). The inks are summed lightest first
-  (``order``: ``dither.lightness_order``, which every caller here passes; it says why).
+  high spatial frequencies, which the scattering medium low-passes). The inks are summed in the order ``order``
+  gives: lightest first (``dither.lightness_order``, which says why) for ``quantize_volume``, ``inkopt quantize``
+  and the evaluation's baselines, through ``band_order``; index order when None.
 - ``error-diffusion``: deterministic 3D vector error diffusion (``inkopt_core::diffuse``, in Rust). Printer
   voxels are visited layer by layer (z up), rows in y, each row serpentine in x (direction alternating with
   ``y + z``); each takes the ink with the largest component of its corrected mixture (mixture + carried error,
@@ -40,6 +41,8 @@ Conventions (docs/conventions.md): arrays (z, y, x[, ink]); ``voxel_mm`` and ``d
 """
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 
@@ -98,6 +101,16 @@ def _linear(n_p: int, vp: float, n_o: int, vo: float):
 
 
 # ----------------------------------------------------------------------------------------- quantization
+def band_order(q: Quantization, inks, g: float, ior: float):
+    """The ``order`` argument of :func:`quantize` that the settings ``q`` say: the inks lightest first
+    (``dither.lightness_order``) for blue noise with ``q.ink_order`` "lightness", else None (index order). Every
+    caller takes it from here, so ours and the evaluation's baselines are dithered alike, a labels file made in index
+    order included."""
+    if q.method == "blue-noise" and q.ink_order == "lightness":
+        return lightness_order(inks, g, ior)
+    return None
+
+
 def check_quantization(method: str, upsample: str = "nearest") -> None:
     """One-line ValueError for an unknown quantization ``method`` or ``upsample``."""
     if method not in METHODS:
@@ -133,8 +146,8 @@ def quantize(
     out      None (a new array is returned) or anything taking ``out[k] = layer`` (Y, X) uint8 for k = 0, 1, ...
              in order (``model.labelfile.LabelFileWriter``: the labels go to a file one layer at a time)
     order    blue-noise only: the ink indices (N,) in the order their bands follow in the cumulative mixture
-             (``dither.lightness_order(inks, g, ior)``, as ``quantize_volume``, ``inkopt quantize`` and the
-             evaluation's baselines use); None: index order
+             (``band_order``: lightest first, as ``quantize_volume``, ``inkopt quantize`` and the evaluation's
+             baselines use); None: index order
     ``mixture`` may also be a layer source (``model.mixturefile.MixtureSource``): ``shape`` (z, y, x, N) and
     ``[z]`` giving one (y, x, N) layer, asked for in increasing z; its layers are checked as they are read.
     Returns ``(labels uint8 (Z, Y, X) or out, voxel_mm_printer (3,) float64 (x, y, z))``; label = ink index,
@@ -348,6 +361,7 @@ def quantize_volume(
     if volume.form != "mixture":
         raise ValueError(f"quantization needs a mixture volume, got a {volume.form} volume")
     check_quantization(method, upsample)
+    q = Quantization(method, int(seed), None, upsample, "lightness" if method == "blue-noise" else "index")
     labels, vp = quantize(
         volume.mixture,
         volume.voxel_mm,
@@ -357,12 +371,12 @@ def quantize_volume(
         inside=volume.inside,
         seed=int(seed),
         upsample=upsample,
-        order=lightness_order(volume.inks, volume.g, volume.ior),
+        order=band_order(q, volume.inks, volume.g, volume.ior),
     )
     nrm = None
     if normals and volume.normals is not None:
         nrm = upsample_normals(volume.normals, labels.shape, vp, volume.voxel_mm)
-    q = Quantization(method, int(seed), tuple(float(v) for v in MM_PER_INCH / np.asarray(vp, np.float64)), upsample)
+    q = replace(q, dpi=tuple(float(v) for v in MM_PER_INCH / np.asarray(vp, np.float64)))
     return Volume.from_labels(
         voxel_mm=vp,
         labels=labels,
