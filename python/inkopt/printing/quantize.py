@@ -42,8 +42,6 @@ Conventions (docs/conventions.md): arrays (z, y, x[, ink]); ``voxel_mm`` and ``d
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 
 from ..model import EMPTY, Quantization, SurfaceNormals, Volume
@@ -101,6 +99,13 @@ def _linear(n_p: int, vp: float, n_o: int, vo: float):
 
 
 # ----------------------------------------------------------------------------------------- quantization
+def settings(method: str, seed: int, vp, upsample: str) -> Quantization:
+    """The record of a quantization made now on printer voxels of ``vp`` (x, y, z) mm: blue noise sums the inks
+    lightest first (``ink_order`` "lightness"), the other methods use no order ("index")."""
+    dpi = tuple(float(v) for v in MM_PER_INCH / np.asarray(vp, np.float64))
+    return Quantization(method, int(seed), dpi, upsample, "lightness" if method == "blue-noise" else "index")
+
+
 def band_order(q: Quantization, inks, g: float, ior: float):
     """The ``order`` argument of :func:`quantize` that the settings ``q`` say: the inks lightest first
     (``dither.lightness_order``) for blue noise with ``q.ink_order`` "lightness", else None (index order). Every
@@ -361,7 +366,9 @@ def quantize_volume(
     if volume.form != "mixture":
         raise ValueError(f"quantization needs a mixture volume, got a {volume.form} volume")
     check_quantization(method, upsample)
-    q = Quantization(method, int(seed), None, upsample, "lightness" if method == "blue-noise" else "index")
+    q = settings(
+        method, seed, printer_grid(volume.shape, volume.voxel_mm, dpi=tuple(dpi), layer_um=layer_um)[1], upsample
+    )
     labels, vp = quantize(
         volume.mixture,
         volume.voxel_mm,
@@ -376,7 +383,6 @@ def quantize_volume(
     nrm = None
     if normals and volume.normals is not None:
         nrm = upsample_normals(volume.normals, labels.shape, vp, volume.voxel_mm)
-    q = replace(q, dpi=tuple(float(v) for v in MM_PER_INCH / np.asarray(vp, np.float64)))
     return Volume.from_labels(
         voxel_mm=vp,
         labels=labels,

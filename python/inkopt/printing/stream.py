@@ -13,11 +13,9 @@ from __future__ import annotations
 
 import time
 
-from ..model import Quantization
 from ..model.mixturefile import MixtureSource
 from ..rundir import RunDir
-from ..units import MM_PER_INCH
-from .quantize import band_order, printer_grid, quantize, summary_lines, upsample_normals
+from .quantize import band_order, printer_grid, quantize, settings, summary_lines, upsample_normals
 
 
 def quantize_run(d: RunDir, *, method: str, dpi, layer_um: float, seed: int, upsample: str) -> list[str]:
@@ -28,8 +26,7 @@ def quantize_run(d: RunDir, *, method: str, dpi, layer_um: float, seed: int, ups
     src = MixtureSource(d.volume_file())
     try:
         shape_p, vp = printer_grid(src.shape[:3], src.voxel_mm, dpi=tuple(dpi), layer_um=layer_um)
-        order = "lightness" if method == "blue-noise" else "index"
-        quant = Quantization(method, int(seed), tuple(float(v) for v in MM_PER_INCH / vp), upsample, order)
+        quant = settings(method, seed, vp, upsample)
         nrm = None if src.normals is None else upsample_normals(src.normals, shape_p, vp, src.voxel_mm)
         with d.quantized_writer(src.labels_meta(vp, quant), shape_p, normals=nrm, volume_digest=digest) as w:
             quantize(
