@@ -128,6 +128,7 @@ def add_optimizer_args(p, single_run: bool = True) -> None:
     run's evaluation budget, estimate and progress lines, `inkopt select-inks`."""
     from ..evaluation.noise import MAX_SPP
     from ..optim import EXTRUSION_START_MM, SCENE_DEFAULTS, OptimizeConfig
+    from ..optim.config import WARM_LR_FACTOR
 
     d, slab, mesh = OptimizeConfig(), SCENE_DEFAULTS["slab"], SCENE_DEFAULTS["mesh"]
     p.add_argument(
@@ -157,7 +158,12 @@ def add_optimizer_args(p, single_run: bool = True) -> None:
         default=",".join(f"{g:g}" for g in d.gamma),
         help="loss weights g1,g2,g3 of colour (dE76^2), SSIM and edge terms (default %(default)s)",
     )
-    p.add_argument("--lr", type=float, help="step size (default: 2 for eg, 0.5 for adagrad, 0.1 for adam)")
+    p.add_argument(
+        "--lr",
+        type=float,
+        help="step size (default: 2 for eg, 0.5 for adagrad, 0.1 for adam; from a warm start (--init) and in a "
+        f"coarse-to-fine run's fine stage {WARM_LR_FACTOR:g} of that)",
+    )
     p.add_argument(
         "--smooth",
         type=float,
@@ -216,8 +222,8 @@ def add_optimizer_args(p, single_run: bool = True) -> None:
         help="white (97 %% white), random, surface or extrusion (start from that print-shop baseline of "
         "`inkopt evaluate`; builds or reuses its cached colour table), or a volume .npz (default: "
         f"{slab['init']} on slabs, {mesh['init']} on meshes; with --time-budget, extrusion on meshes at least "
-        f"{EXTRUSION_START_MM:g} mm thick (volume / area)). A start other than white or random takes half "
-        "the default step (--lr)",
+        f"{EXTRUSION_START_MM:g} mm thick (volume / area)). A start other than white or random takes "
+        f"{WARM_LR_FACTOR:g} of the default step (--lr)",
     )
     p.add_argument(
         "--gradient",

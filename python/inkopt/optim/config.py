@@ -45,9 +45,12 @@ COLD_INITS = ("white", "random")
 #: The default step of a warm start (any init but ``COLD_INITS``) relative to a cold one's: the exponentiated
 #: gradient's step scale is set by the first gradients, which are smaller near the optimum, so the nominal step
 #: moves a warm start's voxels as far as a cold start's and first undoes part of what the start had: Spot 20 mm
-#: from the extrusion baseline (13.25 noise-free) read 14.27 after 5 iterations and 13.53 after 10 at lr 2
-#: (docs/experiments.md).
-WARM_LR_FACTOR = 0.5
+#: from the extrusion baseline (13.25 noise-free) read 14.27 after 5 iterations and 13.53 after 10 at lr 2.
+#: A quarter rather than a half: the 27-minute Spot 40 mm job from the extrusion baseline printed 9.19 / 7.61 /
+#: 0.930 (ΔE76 corrected / ΔE2000 / SSIM) at lr 0.5 against 9.65 / 8.08 / 0.923 at lr 1, the extrusion baseline
+#: 10.78 / 8.40 / 0.928; the 7m45s Spot 20 mm job, whose fine stage starts warm, 10.03 / 9.24 / 0.930 against
+#: 10.13 / 9.25 / 0.925 (docs/experiments.md, "A warm start's step").
+WARM_LR_FACTOR = 0.25
 
 
 @dataclass
