@@ -56,7 +56,7 @@ WARM_LR_FACTOR = 0.25
 @dataclass
 class OptimizeConfig:
     #: with the step decay, the zebra chart and the astronaut photograph gain 0.3 and 0.55 mean ΔE76 from 200 to 300
-    #: iterations (experiments/results/convergence_{zebra,astronaut}.json); the reference slab's 300 take ~10 min
+    #: iterations (experiments/results/convergence_{zebra,astronaut}.json); the reference slab's 300 take ~4 min
     #: on 2 cores (experiments/results/printable.json)
     iterations: int = 300
     #: samples per texel of the gradient pass (unbiased at any spp; fewer is noisier)
