@@ -305,11 +305,15 @@ def test_deadline_plan_starts_thick_meshes_from_the_extrusion_baseline(ball):
 
 def test_thick_mesh_deadline_run_from_the_command_line(ball, tmp_path, capsys):
     """`inkopt optimize` of a 6 mm-thick ball with a time budget: one stage from the extrusion baseline (no
-    DIR/coarse/), the report's start says so, the budget ends it."""
+    DIR/coarse/) at a warm start's step, the report's start says so, the budget ends it (the stop rule is off:
+    at the warm step the toy ball would converge first)."""
+    from inkopt.optim.config import WARM_LR_FACTOR, default_lr
+
     out = tmp_path / "r"
     argv = ["--scale", "18", "--up", "z", "--dpi", "25", "--time-budget", "10s", "--forward-spp", "2"]
-    assert optimize(ball, out, *argv, iterations=100000, spp=1, eval_spp=4) == 0
+    assert optimize(ball, out, *argv, "--stop-gain", "0", iterations=100000, spp=1, eval_spp=4) == 0
     rep = json.loads((out / "report.json").read_text())
     assert rep["init"] == "extrusion" and not (out / "coarse").exists()
+    assert rep["lr"] == default_lr("eg") * WARM_LR_FACTOR
     assert rep["stop"]["reason"] == "time budget" and 0 < rep["iterations"] < 100000
     assert "starting from the extrusion baseline" in capsys.readouterr().err
