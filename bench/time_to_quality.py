@@ -78,11 +78,27 @@ def parse_set(items) -> dict:
     return out
 
 
-#: noise-free ΔE76 (corrected) of each case's long reference run, with where it is recorded
+#: each case's long reference run: (results file under the repository, path of keys to its entry); its noise-free
+#: ΔE76 (corrected) is the entry's ``delta_e76_mean_corrected`` (a time-to-quality entry's: its result's). A case
+#: whose run has not landed (its entry missing) draws no reference line.
 REFERENCES = {
-    "spot20": (9.10, "300 iterations (experiments/results/mesh_convergence.json spot20_default_300)"),
-    "reference": (28.20, "450 iterations, 4x samples (experiments/results/reference_converged.json final_450)"),
+    "spot20": ("experiments/results/mesh_convergence.json", ("results", "spot20_default_300")),
+    "spot40": (f"bench/results/{RESULTS_FILE}", ("results", "spot40/reference", "result")),
+    "reference": ("experiments/results/reference_converged.json", ("final_450",)),
 }
+
+
+def reference_value(case: str) -> float | None:
+    """The noise-free ΔE76 (corrected) of ``case``'s long reference run, or None (no run recorded)."""
+    if case not in REFERENCES:
+        return None
+    path, keys = REFERENCES[case]
+    entry = json.loads((ROOT / path).read_text())
+    for k in keys:
+        if k not in entry:
+            return None
+        entry = entry[k]
+    return float(entry["delta_e76_mean_corrected"])
 
 
 def plot(path: str) -> int:
@@ -103,8 +119,8 @@ def plot(path: str) -> int:
             line = ax.plot(t, [p["delta_e76_mean_corrected"] for p in pts], "o-", ms=3, label=e["name"])[0]
             r = e["result"]
             ax.plot([r["seconds_total"] / 60], [r["delta_e76_mean_corrected"]], "*", ms=12, color=line.get_color())
-        if case in REFERENCES:
-            value, _ = REFERENCES[case]
+        value = reference_value(case)
+        if value is not None:
             ax.axhline(value, color="k", lw=0.8, ls="--", label="long reference")
             ax.axhline(value + 1, color="k", lw=0.8, ls=":", label="reference + 1")
         ax.set_title(case)
