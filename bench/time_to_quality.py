@@ -23,8 +23,9 @@ iterations' own. Writes the entry "CASE/NAME" of ``bench/results/time_to_quality
 
     python bench/time_to_quality.py --plot docs/time_to_quality.png
 
-draws every entry's snapshots and result (ΔE76 against minutes of the job), a panel per case, with the case's
-reference line where one is given (``REFERENCES``).
+draws every entry's snapshots and result (ΔE76 against minutes of the job; the result from its re-render after
+the job where there is one; error bars: the noise correction's accuracy), a panel per case, with the case's
+reference line where its run is recorded (``REFERENCES``).
 """
 
 import argparse
@@ -39,7 +40,7 @@ from result_check import result_check
 
 from inkopt import charts
 from inkopt.evaluation.metrics import prediction_metrics
-from inkopt.evaluation.noise import EVAL_SEED_OFFSET
+from inkopt.evaluation.noise import ESTIMATE_RANGE, EVAL_SEED_OFFSET
 from inkopt.evaluation.results import Report
 from inkopt.model import InkTable
 from inkopt.optim import Optimization, OptimizeConfig
@@ -52,6 +53,9 @@ if not SPOT.is_file():
     SPOT = ROOT / "python" / "inkopt" / "data" / "spot" / "spot.obj"
 VOX = 25.4 / 300
 RESULTS_FILE = "time_to_quality.json"
+#: how closely a noise-corrected ΔE76 is known, as a fraction of the noise's contribution: the estimated
+#: contribution lies within ``ESTIMATE_RANGE`` of the true one (``evaluation.noise``)
+CORRECTION_ACCURACY = max(abs(1 - f) for f in ESTIMATE_RANGE)
 
 
 def spec_of(case: str, out: Path):
@@ -114,11 +118,28 @@ def plot(path: str) -> int:
         for _key, e in sorted(results.items()):
             if e["case"] != case:
                 continue
+            # error bars: the noise correction's accuracy (CORRECTION_ACCURACY of the noise's contribution)
             pts = e["snapshots"]
-            t = [p["seconds_job"] / 60 for p in pts]
-            line = ax.plot(t, [p["delta_e76_mean_corrected"] for p in pts], "o-", ms=3, label=e["name"])[0]
-            r = e["result"]
-            ax.plot([r["seconds_total"] / 60], [r["delta_e76_mean_corrected"]], "*", ms=12, color=line.get_color())
+            line = ax.errorbar(
+                [p["seconds_job"] / 60 for p in pts],
+                [p["delta_e76_mean_corrected"] for p in pts],
+                yerr=[CORRECTION_ACCURACY * p["delta_e76_noise_contribution"] for p in pts],
+                fmt="o-",
+                ms=3,
+                capsize=2,
+                label=e["name"],
+            ).lines[0]
+            # the result at the more samples: its re-render after the job where there is one
+            r = e.get("result_check") or e["result"]
+            ax.errorbar(
+                [e["result"]["seconds_total"] / 60],
+                [r["delta_e76_mean_corrected"]],
+                yerr=[CORRECTION_ACCURACY * r["delta_e76_noise_contribution"]],
+                fmt="*",
+                ms=12,
+                capsize=2,
+                color=line.get_color(),
+            )
         value = reference_value(case)
         if value is not None:
             ax.axhline(value, color="k", lw=0.8, ls="--", label="long reference")
