@@ -18,8 +18,11 @@ it). A snapshot is a point on the run's trajectory, not a finished run (the step
 result (the run's end) is the run's own adaptive evaluation (report.json, noise-free unless capped); under a short
 time budget that evaluation has few samples, so the result is also rendered after the job (not timed) at
 ``--final-spp`` samples per texel, seeds disjoint from the run's, and its figures kept as ``result_check``.
-Wall times: ``seconds_job`` from the start (set-up, the start's figures, iterations), ``seconds_iterations`` the
-iterations' own. Writes the entry "CASE/NAME" of ``bench/results/time_to_quality.json``.
+``--snap-spp 0`` leaves the snapshots' mixtures on disk unrendered (``--snapshots-only`` renders them later) and
+``--final-spp 0`` skips the check (a long run's own evaluation has more samples than the check would): a long
+reference then ends with its own evaluation. Wall times: ``seconds_job`` from the start (set-up, the start's
+figures, iterations), ``seconds_iterations`` the iterations' own. Writes the entry "CASE/NAME" of
+``bench/results/time_to_quality.json``.
 
     python bench/time_to_quality.py --plot docs/time_to_quality.png
 
@@ -164,14 +167,14 @@ def main() -> int:
     ap.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE")
     ap.add_argument("--iterations", type=int, default=OptimizeConfig().iterations)
     ap.add_argument("--snapshots", default="10,20,30,45,60,90,120,180,240,300")
-    ap.add_argument("--snap-spp", type=int, default=64)
+    ap.add_argument("--snap-spp", type=int, default=64, help="samples per texel of the snapshots (0: not rendered)")
     ap.add_argument("--eval-max-spp", type=int, default=1024)
     ap.add_argument("--out-root", default="bench-out/ttq")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--resume", action="store_true")
     ap.add_argument("--coarse-dpi", type=float, help="coarse to fine (``inkopt.run.run_coarse_to_fine``)")
     ap.add_argument("--snapshots-only", action="store_true", help="the run is done: its report and snapshots")
-    ap.add_argument("--final-spp", type=int, default=256, help="samples per texel of the result's check render")
+    ap.add_argument("--final-spp", type=int, default=256, help="samples per texel of the result's check (0: none)")
     a = ap.parse_args()
     out = Path(a.out_root) / a.case / a.name
     out.mkdir(parents=True, exist_ok=True)
@@ -212,37 +215,38 @@ def main() -> int:
         rep = run_coarse_to_fine(spec, inks, out / "run", cfg, a.coarse_dpi, **kw)
     else:
         rep = run_optimisation(scene, out / "run", cfg, **kw)
-    # the snapshots' figures: one renderer of the run's problem (geometry and fixed shares; its start does not
-    # matter), set to each snapshot's variables
-    run = Optimization(
-        scene.volume,
-        scene.texels,
-        scene.target_rgb,
-        replace(cfg, init="white"),
-        kind=scene.kind,
-        fixed_share=scene.fixed_share,
-        threads=2,
-    )
     points = []
-    for it in sorted(int(k) for k in times):
-        path = out / f"x_{it}.npy"
-        if not path.is_file():
-            continue
-        r = run.renderer(np.load(path)).render(scene.texels, a.snap_spp, EVAL_SEED_OFFSET + 17 + it)
-        m = prediction_metrics(run.loss, r.rgb, r.var_mean)
-        points.append(
-            {
-                "iteration": it,
-                **times[str(it)],
-                "delta_e76_mean_corrected": m.delta_e76_mean_corrected,
-                "delta_e76_noise_contribution": m.delta_e76_noise_contribution,
-                "delta_e2000_mean": m.delta_e2000_mean,
-                "ssim": m.ssim,
-            }
+    if a.snap_spp > 0:  # 0: the snapshots' mixtures stay on disk for a later --snapshots-only
+        # the snapshots' figures: one renderer of the run's problem (geometry and fixed shares; its start does not
+        # matter), set to each snapshot's variables
+        run = Optimization(
+            scene.volume,
+            scene.texels,
+            scene.target_rgb,
+            replace(cfg, init="white"),
+            kind=scene.kind,
+            fixed_share=scene.fixed_share,
+            threads=2,
         )
-        print(f"iteration {it}: ΔE76 {m.delta_e76_mean_corrected:.2f} (noise {m.delta_e76_noise_contribution:.2f})")
-    del run
-    check = result_check(scene, cfg, out / "run", a.final_spp)
+        for it in sorted(int(k) for k in times):
+            path = out / f"x_{it}.npy"
+            if not path.is_file():
+                continue
+            r = run.renderer(np.load(path)).render(scene.texels, a.snap_spp, EVAL_SEED_OFFSET + 17 + it)
+            m = prediction_metrics(run.loss, r.rgb, r.var_mean)
+            points.append(
+                {
+                    "iteration": it,
+                    **times[str(it)],
+                    "delta_e76_mean_corrected": m.delta_e76_mean_corrected,
+                    "delta_e76_noise_contribution": m.delta_e76_noise_contribution,
+                    "delta_e2000_mean": m.delta_e2000_mean,
+                    "ssim": m.ssim,
+                }
+            )
+            print(f"iteration {it}: ΔE76 {m.delta_e76_mean_corrected:.2f} (noise {m.delta_e76_noise_contribution:.2f})")
+        del run
+    check = result_check(scene, cfg, out / "run", a.final_spp) if a.final_spp > 0 else None
     r = rep.to_json()
     entry = {
         "case": a.case,
