@@ -24,11 +24,18 @@ reference then ends with its own evaluation. Wall times: ``seconds_job`` from th
 figures, iterations), ``seconds_iterations`` the iterations' own. Writes the entry "CASE/NAME" of
 ``bench/results/time_to_quality.json``.
 
+    python bench/time_to_quality.py CASE NAME --evaluate [--texel-sample 4000] [--sample-windows 400]
+
+evaluates a finished run's result as ``inkopt evaluate RUN --no-baselines`` does, on a texel sample (continuous
+and quantized: figures noise-free and each with its sampling standard error; the same sample and seeds for every
+run of a case, so two runs' figures compare), and keeps it as the entry's ``evaluation`` (``RUN/ttq_evaluation.json``
+is reused while it is of the current volume.npz). A long reference run is compared with a deadline's this way.
+
     python bench/time_to_quality.py --plot docs/time_to_quality.png
 
-draws every entry's snapshots and result (ΔE76 against minutes of the job; of the result's own figure and its
-re-render after the job, the less noisy; error bars: the noise correction's accuracy), a panel per case, with the case's
-reference line where its run is recorded (``REFERENCES``).
+draws every entry's snapshots and result (ΔE76 against minutes of the job; of the result's own figure, its
+re-render after the job and its evaluation, the least noisy: ``best_figure``; error bars: the noise correction's
+accuracy), a panel per case, with the case's reference line where its run is recorded (``REFERENCES``).
 """
 
 import argparse
@@ -45,6 +52,7 @@ from inkopt import charts
 from inkopt.evaluation.metrics import prediction_metrics
 from inkopt.evaluation.noise import ESTIMATE_RANGE, EVAL_SEED_OFFSET
 from inkopt.evaluation.results import Report
+from inkopt.io import file_digest
 from inkopt.model import InkTable
 from inkopt.optim import Optimization, OptimizeConfig
 from inkopt.run import run_coarse_to_fine, run_optimisation
@@ -86,13 +94,30 @@ def parse_set(items) -> dict:
 
 
 #: each case's long reference run: (results file under the repository, path of keys to its entry); its noise-free
-#: ΔE76 (corrected) is the entry's ``delta_e76_mean_corrected`` (a time-to-quality entry's: its result's). A case
-#: whose run has not landed (its entry missing) draws no reference line.
+#: ΔE76 (corrected) is the entry's ``delta_e76_mean_corrected`` (a time-to-quality entry's: ``best_figure``'s). A
+#: case whose run has not landed (its entry missing) draws no reference line.
 REFERENCES = {
     "spot20": ("experiments/results/mesh_convergence.json", ("results", "spot20_default_300")),
-    "spot40": (f"bench/results/{RESULTS_FILE}", ("results", "spot40/reference", "result")),
+    "spot40": (f"bench/results/{RESULTS_FILE}", ("results", "spot40/reference")),
     "reference": ("experiments/results/reference_converged.json", ("final_450",)),
 }
+#: the texel sample of ``--evaluate`` (``inkopt evaluate``'s --texel-sample and --sample-windows)
+EVAL_TEXELS, EVAL_WINDOWS = 4000, 400
+
+
+def best_figure(entry: dict) -> dict:
+    """Of a time-to-quality entry's figures of its result (the run's own, its re-render after the job, its
+    evaluation's continuous result), the one whose noise contributes least to its ΔE76."""
+    ev = (entry.get("evaluation") or {}).get("continuous")
+    figures = [entry["result"], entry.get("result_check"), ev]
+    return min(filter(None, figures), key=lambda x: x["delta_e76_noise_contribution"])
+
+
+def figure_error(fig: dict) -> float:
+    """How far a figure's ΔE76 may be off: the noise correction's accuracy and, for a sampled evaluation's, its
+    sampling standard error, combined as independent."""
+    se = (fig.get("stderr") or {}).get("delta_e76_mean_corrected") or 0.0
+    return float(np.hypot(CORRECTION_ACCURACY * fig["delta_e76_noise_contribution"], se))
 
 
 def reference_value(case: str) -> float | None:
@@ -105,7 +130,7 @@ def reference_value(case: str) -> float | None:
         if k not in entry:
             return None
         entry = entry[k]
-    return float(entry["delta_e76_mean_corrected"])
+    return float((best_figure(entry) if "result" in entry else entry)["delta_e76_mean_corrected"])
 
 
 def plot(path: str) -> int:
@@ -132,12 +157,11 @@ def plot(path: str) -> int:
                 capsize=2,
                 label=e["name"],
             ).lines[0]
-            # the result's figure of the two with the less noise: the run's own, or its re-render after the job
-            r = min(filter(None, (e["result"], e.get("result_check"))), key=lambda x: x["delta_e76_noise_contribution"])
+            r = best_figure(e)
             ax.errorbar(
                 [e["result"]["seconds_total"] / 60],
                 [r["delta_e76_mean_corrected"]],
-                yerr=[CORRECTION_ACCURACY * r["delta_e76_noise_contribution"]],
+                yerr=[figure_error(r)],
                 fmt="*",
                 ms=12,
                 capsize=2,
@@ -158,6 +182,40 @@ def plot(path: str) -> int:
     return 0
 
 
+def evaluate(case: str, name: str, run_dir: Path, texels: int, windows: int, threads: int) -> int:
+    """``--evaluate``: the entry "CASE/NAME" (its run finished) gets its result's sampled evaluation (module
+    docstring)."""
+    from inkopt.evaluation.evaluate import evaluate_run
+    from inkopt.evaluation.results import Evaluation
+
+    key, path = f"{case}/{name}", RESULTS / RESULTS_FILE
+    results = json.loads(path.read_text())["results"] if path.is_file() else {}
+    if key not in results:
+        raise SystemExit(f"no entry {key} in {path}: run it first")
+    out = run_dir / "ttq_evaluation.json"
+    digest = file_digest(run_dir / "volume.npz")
+    ev = Evaluation.read(out) if out.is_file() else None
+    sample = (ev.texel_sample or {}) if ev is not None else {}
+    if ev is None or ev.volume_digest != digest or (sample.get("texels"), sample.get("windows")) != (texels, windows):
+        log = lambda m: print(m, file=sys.stderr, flush=True)  # noqa: E731
+        ev = evaluate_run(
+            run_dir, baselines=False, threads=threads, log=log, out=out, texel_sample=texels, sample_windows=windows
+        )
+    d = ev.to_json()
+    keep = ("spp", "seconds", "texel_sample", "volume_digest")
+    results[key]["evaluation"] = {
+        "command": f"inkopt evaluate {run_dir} --no-baselines --texel-sample {texels} --sample-windows {windows}",
+        **{k: d[k] for k in keep},
+        "continuous": d["continuous"],
+        "quantized": d["quantized"],
+        "evaluated": {"machine": machine(), **provenance()},
+    }
+    write(RESULTS_FILE, {"results": results})
+    c = d["continuous"]
+    print(f"{key}: continuous ΔE76 {c['delta_e76_mean_corrected']:.2f} ± {c['stderr']['delta_e76_mean_corrected']:.2f}")
+    return 0
+
+
 def main() -> int:
     if sys.argv[1:2] == ["--plot"]:
         return plot(sys.argv[2])
@@ -175,8 +233,13 @@ def main() -> int:
     ap.add_argument("--coarse-dpi", type=float, help="coarse to fine (``inkopt.run.run_coarse_to_fine``)")
     ap.add_argument("--snapshots-only", action="store_true", help="the run is done: its report and snapshots")
     ap.add_argument("--final-spp", type=int, default=256, help="samples per texel of the result's check (0: none)")
+    ap.add_argument("--evaluate", action="store_true", help="the run is done: its result's sampled evaluation")
+    ap.add_argument("--texel-sample", type=int, default=EVAL_TEXELS)
+    ap.add_argument("--sample-windows", type=int, default=EVAL_WINDOWS)
     a = ap.parse_args()
     out = Path(a.out_root) / a.case / a.name
+    if a.evaluate:
+        return evaluate(a.case, a.name, out / "run", a.texel_sample, a.sample_windows, a.threads)
     out.mkdir(parents=True, exist_ok=True)
     overrides = parse_set(a.set)
     cfg = OptimizeConfig(**{"iterations": a.iterations, **overrides})
@@ -282,6 +345,13 @@ def main() -> int:
     }
     previous = RESULTS / RESULTS_FILE
     results = json.loads(previous.read_text())["results"] if previous.is_file() else {}
+    prev = results.get(f"{a.case}/{a.name}", {})
+    if a.snapshots_only:  # what this invocation did not measure again stays
+        entry["snapshots"] = entry["snapshots"] if a.snap_spp > 0 else prev.get("snapshots", [])
+        entry["result_check"] = check if a.final_spp > 0 else prev.get("result_check")
+    ev = prev.get("evaluation")
+    if ev is not None and ev["volume_digest"] == file_digest(out / "run" / "volume.npz"):
+        entry["evaluation"] = ev
     results[f"{a.case}/{a.name}"] = entry
     write(RESULTS_FILE, {"results": results})
     print(json.dumps(entry["result"], indent=1))

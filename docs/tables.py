@@ -529,6 +529,15 @@ def time_to_quality() -> str:
         )
         settings = ", ".join(f"{k}={v}" for k, v in e["settings"].items() if k != "time_budget")
         check = check_cell(e.get("result_check"), e2000=True)
+        ev = e.get("evaluation")
+        if ev:  # bench/time_to_quality.py --evaluate: continuous and printed on a texel sample
+            c, q = ev["continuous"], ev["quantized"]
+            sampled = (
+                f"sampled: {f(c['delta_e76_mean_corrected'])} ± {f(c['stderr']['delta_e76_mean_corrected'])} / "
+                f"{f(c['delta_e2000_mean'])} / {f(c['ssim'], 3)}, printed {f(q['delta_e76_mean_corrected'])} / "
+                f"{f(q['delta_e2000_mean'])} / {f(q['ssim'], 3)} ({ev['spp']} spp)"
+            )
+            check = sampled if check == "–" else f"{check}; {sampled}"
         budget = e["settings"].get("time_budget")
         rows.append(
             [
@@ -548,7 +557,7 @@ def time_to_quality() -> str:
         "settings",
         "iterations (why it stopped)",
         "result: ΔE76 ± noise / ΔE2000 / SSIM",
-        "result re-rendered after the job (not timed)",
+        "result re-rendered or evaluated after the job (not timed)",
         "job time",
         "load at the end",
         f"snapshots at {e['snap_spp']} spp, iteration: ΔE76 (job time)",
