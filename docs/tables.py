@@ -532,10 +532,12 @@ def time_to_quality() -> str:
         ev = e.get("evaluation")
         if ev:  # bench/time_to_quality.py --evaluate: continuous and printed on a texel sample
             c, q = ev["continuous"], ev["quantized"]
+            se = lambda m: f(m["stderr"]["delta_e76_mean_corrected"])  # noqa: E731
             sampled = (
-                f"sampled: {f(c['delta_e76_mean_corrected'])} ± {f(c['stderr']['delta_e76_mean_corrected'])} / "
-                f"{f(c['delta_e2000_mean'])} / {f(c['ssim'], 3)}, printed {f(q['delta_e76_mean_corrected'])} / "
-                f"{f(q['delta_e2000_mean'])} / {f(q['ssim'], 3)} ({ev['spp']} spp)"
+                f"sampled: {f(c['delta_e76_mean_corrected'])} ± {se(c)} / {f(c['delta_e2000_mean'])} / "
+                f"{f(c['ssim'], 3)} ({c['spp']} spp, noise {f(c['delta_e76_noise_contribution'])}); printed "
+                f"{f(q['delta_e76_mean_corrected'])} ± {se(q)} / {f(q['delta_e2000_mean'])} / {f(q['ssim'], 3)} "
+                f"(noise {f(q['delta_e76_noise_contribution'])})"
             )
             check = sampled if check == "–" else f"{check}; {sampled}"
         budget = e["settings"].get("time_budget")
