@@ -18,7 +18,10 @@ it). A snapshot is a point on the run's trajectory, not a finished run (the step
 result (the run's end) is the run's own adaptive evaluation (report.json, noise-free unless capped); under a short
 time budget that evaluation has few samples, so the result is also rendered after the job (not timed) at
 ``--final-spp`` samples per texel, seeds disjoint from the run's, and its figures kept as ``result_check``.
-``--snap-spp 0`` leaves the snapshots' mixtures on disk unrendered (``--snapshots-only`` renders them later) and
+``--snap-evaluate`` measures each snapshot as ``--evaluate`` (below) measures a result instead: its mixture written as
+the run directory OUT/snapshot_N, its figures noise-free on the texel sample (at 40 mm about the time of a 64-spp
+render of every texel, whose figures are good to ±1 ΔE76 there). ``--snap-spp 0`` leaves the snapshots' mixtures on
+disk unmeasured (``--snapshots-only`` measures them later) and
 ``--final-spp 0`` skips the check (a long run's own evaluation has more samples than the check would): a long
 reference then ends with its own evaluation. Wall times: ``seconds_job`` from the start (set-up, the start's
 figures, iterations), ``seconds_iterations`` the iterations' own. Writes the entry "CASE/NAME" of
@@ -29,8 +32,8 @@ figures, iterations), ``seconds_iterations`` the iterations' own. Writes the ent
 
 evaluates a finished run's result as ``inkopt evaluate RUN --no-baselines --time-budget S`` does, on a texel sample
 (the same sample and seeds for every run of a case, so two runs' figures compare; each figure with its sampling
-standard error), and keeps it as the entry's ``evaluation`` (``RUN/ttq_evaluation.json`` is reused while it is of
-the current volume.npz and sample). The continuous result needs less than its share of the time to be noise-free;
+standard error), and keeps it as the entry's ``evaluation`` (an earlier evaluation of the same
+volume.npz and settings is reused). The continuous result needs less than its share of the time to be noise-free;
 the printed one (at printer resolution, several times dearer) gets the rest, its noise corrected and reported. A
 long reference run is compared with a deadline's this way.
 
@@ -43,6 +46,7 @@ accuracy), a panel per case, with the case's reference line where its run is rec
 
 import argparse
 import json
+import shutil
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -59,6 +63,7 @@ from inkopt.io import file_digest
 from inkopt.model import InkTable
 from inkopt.optim import Optimization, OptimizeConfig
 from inkopt.run import run_coarse_to_fine, run_optimisation
+from inkopt.rundir import RunDir
 from inkopt.scenes.spec import MeshSpec, SlabSpec
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -150,12 +155,12 @@ def plot(path: str) -> int:
         for _key, e in sorted(results.items()):
             if e["case"] != case or e["name"] == "reference":  # a case's long reference run is its line
                 continue
-            # error bars: the noise correction's accuracy (CORRECTION_ACCURACY of the noise's contribution)
+            # error bars: the noise correction's accuracy and a sampled figure's standard error (figure_error)
             pts = e["snapshots"]
             line = ax.errorbar(
                 [p["seconds_job"] / 60 for p in pts],
                 [p["delta_e76_mean_corrected"] for p in pts],
-                yerr=[CORRECTION_ACCURACY * p["delta_e76_noise_contribution"] for p in pts],
+                yerr=[figure_error(p) for p in pts],
                 fmt="o-",
                 ms=3,
                 capsize=2,
@@ -186,21 +191,16 @@ def plot(path: str) -> int:
     return 0
 
 
-def evaluate(case: str, name: str, run_dir: Path, texels: int, windows: int, seconds: float, threads: int) -> int:
-    """``--evaluate``: the entry "CASE/NAME" (its run finished) gets its result's sampled evaluation (module
-    docstring)."""
+def sampled_evaluation(run_dir: Path, texels: int, windows: int, seconds: float, threads: int):
+    """``run_dir``'s result evaluated as ``inkopt evaluate RUN --no-baselines --texel-sample T --sample-windows W
+    --time-budget S`` does (``evaluation.Evaluation``), into RUN/ttq_evaluation_T_W_Ss.json; an earlier one of the
+    same volume.npz and settings is reused."""
     from inkopt.evaluation.evaluate import evaluate_run
     from inkopt.evaluation.results import Evaluation
 
-    key, path = f"{case}/{name}", RESULTS / RESULTS_FILE
-    results = json.loads(path.read_text())["results"] if path.is_file() else {}
-    if key not in results:
-        raise SystemExit(f"no entry {key} in {path}: run it first")
-    out = run_dir / "ttq_evaluation.json"
-    digest = file_digest(run_dir / "volume.npz")
+    out = run_dir / f"ttq_evaluation_{texels}_{windows}_{seconds:g}s.json"
     ev = Evaluation.read(out) if out.is_file() else None
-    sample = (ev.texel_sample or {}) if ev is not None else {}
-    if ev is None or ev.volume_digest != digest or (sample.get("texels"), sample.get("windows")) != (texels, windows):
+    if ev is None or ev.volume_digest != file_digest(run_dir / "volume.npz"):
         log = lambda m: print(m, file=sys.stderr, flush=True)  # noqa: E731
         ev = evaluate_run(
             run_dir,
@@ -212,19 +212,34 @@ def evaluate(case: str, name: str, run_dir: Path, texels: int, windows: int, sec
             sample_windows=windows,
             time_budget=seconds,
         )
+    return ev
+
+
+def evaluation_entry(ev, run_dir: Path, texels: int, windows: int, seconds: float) -> dict:
+    """What an entry keeps of a sampled evaluation (``sampled_evaluation``)."""
     d = ev.to_json()
-    keep = ("spp", "seconds", "texel_sample", "volume_digest")
-    results[key]["evaluation"] = {
+    return {
         "command": f"inkopt evaluate {run_dir} --no-baselines --texel-sample {texels} --sample-windows {windows} "
         f"--time-budget {seconds:g}",
-        **{k: d[k] for k in keep},
+        **{k: d[k] for k in ("spp", "seconds", "texel_sample", "volume_digest")},
         "continuous": d["continuous"],
         "quantized": d["quantized"],
         "evaluated": {"machine": machine(), **provenance()},
     }
+
+
+def evaluate(case: str, name: str, run_dir: Path, texels: int, windows: int, seconds: float, threads: int) -> int:
+    """``--evaluate``: the entry "CASE/NAME" (its run finished) gets its result's sampled evaluation (module
+    docstring)."""
+    key, path = f"{case}/{name}", RESULTS / RESULTS_FILE
+    results = json.loads(path.read_text())["results"] if path.is_file() else {}
+    if key not in results:
+        raise SystemExit(f"no entry {key} in {path}: run it first")
+    ev = sampled_evaluation(run_dir, texels, windows, seconds, threads)
+    results[key]["evaluation"] = evaluation_entry(ev, run_dir, texels, windows, seconds)
     write(RESULTS_FILE, {"results": results})
-    c = d["continuous"]
-    print(f"{key}: continuous ΔE76 {c['delta_e76_mean_corrected']:.2f} ± {c['stderr']['delta_e76_mean_corrected']:.2f}")
+    m, se = ev.continuous.metrics, ev.continuous.stderr
+    print(f"{key}: continuous ΔE76 {m.delta_e76_mean_corrected:.2f} ± {se['delta_e76_mean_corrected']:.2f}")
     return 0
 
 
@@ -249,6 +264,7 @@ def main() -> int:
     ap.add_argument("--texel-sample", type=int, default=EVAL_TEXELS)
     ap.add_argument("--sample-windows", type=int, default=EVAL_WINDOWS)
     ap.add_argument("--eval-time-budget", type=float, default=EVAL_SECONDS, help="seconds of --evaluate's renders")
+    ap.add_argument("--snap-evaluate", action="store_true", help="snapshots evaluated as --evaluate does instead")
     a = ap.parse_args()
     out = Path(a.out_root) / a.case / a.name
     if a.evaluate:
@@ -292,9 +308,9 @@ def main() -> int:
     else:
         rep = run_optimisation(scene, out / "run", cfg, **kw)
     points = []
-    if a.snap_spp > 0:  # 0: the snapshots' mixtures stay on disk for a later --snapshots-only
+    if a.snap_spp > 0 or a.snap_evaluate:  # else the snapshots' mixtures stay on disk for a later --snapshots-only
         # the snapshots' figures: one renderer of the run's problem (geometry and fixed shares; its start does not
-        # matter), set to each snapshot's variables
+        # matter), set to each snapshot's variables; or each snapshot's mixture as a run directory, evaluated
         run = Optimization(
             scene.volume,
             scene.texels,
@@ -304,12 +320,24 @@ def main() -> int:
             fixed_share=scene.fixed_share,
             threads=2,
         )
+        if a.snap_evaluate:
+            run.release_renderer()
         for it in sorted(int(k) for k in times):
             path = out / f"x_{it}.npy"
             if not path.is_file():
                 continue
-            r = run.renderer(np.load(path)).render(scene.texels, a.snap_spp, EVAL_SEED_OFFSET + 17 + it)
-            m = prediction_metrics(run.loss, r.rgb, r.var_mean)
+            extra = {}
+            if a.snap_evaluate:
+                d = out / f"snapshot_{it}"
+                if not (d / "volume.npz").is_file():
+                    d.mkdir(exist_ok=True)
+                    shutil.copyfile(out / "run" / "scene.npz", d / "scene.npz")
+                    RunDir(d).save_volume_slabs(run.base, run.param.mixture_slabs(np.load(path)), run.base.inks)
+                ev = sampled_evaluation(d, a.texel_sample, a.sample_windows, a.eval_time_budget, a.threads)
+                m, extra = ev.continuous.metrics, {"spp": ev.continuous.spp, "stderr": ev.continuous.stderr}
+            else:
+                r = run.renderer(np.load(path)).render(scene.texels, a.snap_spp, EVAL_SEED_OFFSET + 17 + it)
+                m = prediction_metrics(run.loss, r.rgb, r.var_mean)
             points.append(
                 {
                     "iteration": it,
@@ -318,6 +346,7 @@ def main() -> int:
                     "delta_e76_noise_contribution": m.delta_e76_noise_contribution,
                     "delta_e2000_mean": m.delta_e2000_mean,
                     "ssim": m.ssim,
+                    **extra,
                 }
             )
             print(f"iteration {it}: ΔE76 {m.delta_e76_mean_corrected:.2f} (noise {m.delta_e76_noise_contribution:.2f})")
@@ -360,7 +389,7 @@ def main() -> int:
     results = json.loads(previous.read_text())["results"] if previous.is_file() else {}
     prev = results.get(f"{a.case}/{a.name}", {})
     if a.snapshots_only:  # what this invocation did not measure again stays
-        entry["snapshots"] = entry["snapshots"] if a.snap_spp > 0 else prev.get("snapshots", [])
+        entry["snapshots"] = entry["snapshots"] if a.snap_spp > 0 or a.snap_evaluate else prev.get("snapshots", [])
         entry["result_check"] = check if a.final_spp > 0 else prev.get("result_check")
     ev = prev.get("evaluation")
     if ev is not None and ev["volume_digest"] == file_digest(out / "run" / "volume.npz"):

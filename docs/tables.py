@@ -523,8 +523,10 @@ def time_to_quality() -> str:
     rows = []
     for key, e in load(path)["results"].items():
         r, stop = e["result"], e["result"].get("stop") or {}
-        snaps = ", ".join(
-            f"{p['iteration']}: {f(p['delta_e76_mean_corrected'])} ({p['seconds_job'] / 60:.0f} min)"
+        snaps = ", ".join(  # a sampled snapshot's (bench/time_to_quality.py --snap-evaluate) ± its standard error
+            f"{p['iteration']}: {f(p['delta_e76_mean_corrected'])}"
+            + (f" ± {f(p['stderr']['delta_e76_mean_corrected'])}" if p.get("stderr") else "")
+            + f" ({p['seconds_job'] / 60:.0f} min)"
             for p in e["snapshots"]
         )
         settings = ", ".join(f"{k}={v}" for k, v in e["settings"].items() if k != "time_budget")
@@ -562,7 +564,7 @@ def time_to_quality() -> str:
         "result re-rendered or evaluated after the job (not timed)",
         "job time",
         "load at the end",
-        f"snapshots at {e['snap_spp']} spp, iteration: ΔE76 (job time)",
+        "snapshots (rendered at the entry's snap_spp, or sampled: ± standard error), iteration: ΔE76 (job time)",
     ]
     return table(header, rows, [path])
 
