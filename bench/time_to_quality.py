@@ -48,6 +48,7 @@ import argparse
 import json
 import shutil
 import sys
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -243,9 +244,75 @@ def evaluate(case: str, name: str, run_dir: Path, texels: int, windows: int, sec
     return 0
 
 
-def main() -> int:
-    if sys.argv[1:2] == ["--plot"]:
-        return plot(sys.argv[2])
+def measure_snapshots(a, out: Path, scene, cfg: OptimizeConfig, times: dict) -> list[dict]:
+    """The figures of the run's snapshots (``OUT/x_N.npy``, their times in ``times``): each rendered at
+    ``--snap-spp`` with one renderer of the run's problem (geometry and fixed shares; its start does not matter) set
+    to the snapshot's variables, or with ``--snap-evaluate`` written as the run directory OUT/snapshot_N and
+    evaluated on the texel sample (``sampled_evaluation``)."""
+    run = Optimization(
+        scene.volume,
+        scene.texels,
+        scene.target_rgb,
+        replace(cfg, init="white"),
+        kind=scene.kind,
+        fixed_share=scene.fixed_share,
+        threads=2,
+    )
+    if a.snap_evaluate:
+        run.release_renderer()
+    points = []
+    for it in sorted(int(k) for k in times):
+        path = out / f"x_{it}.npy"
+        if not path.is_file():
+            continue
+        extra = {}
+        if a.snap_evaluate:
+            d = out / f"snapshot_{it}"
+            if not (d / "volume.npz").is_file():
+                d.mkdir(exist_ok=True)
+                shutil.copyfile(out / "run" / "scene.npz", d / "scene.npz")
+                RunDir(d).save_volume_slabs(run.base, run.param.mixture_slabs(np.load(path)), run.base.inks)
+            ev = sampled_evaluation(d, a.texel_sample, a.sample_windows, a.eval_time_budget, a.threads)
+            m, extra = ev.continuous.metrics, {"spp": ev.continuous.spp, "stderr": ev.continuous.stderr}
+        else:
+            r = run.renderer(np.load(path)).render(scene.texels, a.snap_spp, EVAL_SEED_OFFSET + 17 + it)
+            m = prediction_metrics(run.loss, r.rgb, r.var_mean)
+        points.append(
+            {
+                "iteration": it,
+                **times[str(it)],
+                "delta_e76_mean_corrected": m.delta_e76_mean_corrected,
+                "delta_e76_noise_contribution": m.delta_e76_noise_contribution,
+                "delta_e2000_mean": m.delta_e2000_mean,
+                "ssim": m.ssim,
+                **extra,
+            }
+        )
+        print(f"iteration {it}: ΔE76 {m.delta_e76_mean_corrected:.2f} (noise {m.delta_e76_noise_contribution:.2f})")
+    return points
+
+
+#: the keys of a run's report.json that an entry keeps as its ``result``
+RESULT_KEYS = (
+    "iterations",
+    "stop",
+    "delta_e76_mean_corrected",
+    "delta_e76_noise_contribution",
+    "delta_e2000_mean",
+    "ssim",
+    "initial_delta_e76_mean_corrected",
+    "initial_ssim",
+    "eval_spp",
+    "initial_eval_spp",
+    "seconds",
+    "seconds_total",
+    "seconds_iterations",
+    "seconds_per_iteration",
+    "peak_rss_gb",
+)
+
+
+def parse_args():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("case")
     ap.add_argument("name")
@@ -265,7 +332,13 @@ def main() -> int:
     ap.add_argument("--sample-windows", type=int, default=EVAL_WINDOWS)
     ap.add_argument("--eval-time-budget", type=float, default=EVAL_SECONDS, help="seconds of --evaluate's renders")
     ap.add_argument("--snap-evaluate", action="store_true", help="snapshots evaluated as --evaluate does instead")
-    a = ap.parse_args()
+    return ap.parse_args()
+
+
+def main() -> int:
+    if sys.argv[1:2] == ["--plot"]:
+        return plot(sys.argv[2])
+    a = parse_args()
     out = Path(a.out_root) / a.case / a.name
     if a.evaluate:
         return evaluate(a.case, a.name, out / "run", a.texel_sample, a.sample_windows, a.eval_time_budget, a.threads)
@@ -275,8 +348,6 @@ def main() -> int:
     cfg.validate()
     spec = spec_of(a.case, out.parent)
     inks = InkTable.parse("vero-cmykw")
-    import time
-
     t0 = time.perf_counter()
     scene = spec.build(inks)  # the fine scene (of a coarse-to-fine run too: its snapshots are the fine stage's)
     snaps = {int(s) for s in a.snapshots.split(",") if s}
@@ -307,50 +378,8 @@ def main() -> int:
         rep = run_coarse_to_fine(spec, inks, out / "run", cfg, a.coarse_dpi, **kw)
     else:
         rep = run_optimisation(scene, out / "run", cfg, **kw)
-    points = []
-    if a.snap_spp > 0 or a.snap_evaluate:  # else the snapshots' mixtures stay on disk for a later --snapshots-only
-        # the snapshots' figures: one renderer of the run's problem (geometry and fixed shares; its start does not
-        # matter), set to each snapshot's variables; or each snapshot's mixture as a run directory, evaluated
-        run = Optimization(
-            scene.volume,
-            scene.texels,
-            scene.target_rgb,
-            replace(cfg, init="white"),
-            kind=scene.kind,
-            fixed_share=scene.fixed_share,
-            threads=2,
-        )
-        if a.snap_evaluate:
-            run.release_renderer()
-        for it in sorted(int(k) for k in times):
-            path = out / f"x_{it}.npy"
-            if not path.is_file():
-                continue
-            extra = {}
-            if a.snap_evaluate:
-                d = out / f"snapshot_{it}"
-                if not (d / "volume.npz").is_file():
-                    d.mkdir(exist_ok=True)
-                    shutil.copyfile(out / "run" / "scene.npz", d / "scene.npz")
-                    RunDir(d).save_volume_slabs(run.base, run.param.mixture_slabs(np.load(path)), run.base.inks)
-                ev = sampled_evaluation(d, a.texel_sample, a.sample_windows, a.eval_time_budget, a.threads)
-                m, extra = ev.continuous.metrics, {"spp": ev.continuous.spp, "stderr": ev.continuous.stderr}
-            else:
-                r = run.renderer(np.load(path)).render(scene.texels, a.snap_spp, EVAL_SEED_OFFSET + 17 + it)
-                m = prediction_metrics(run.loss, r.rgb, r.var_mean)
-            points.append(
-                {
-                    "iteration": it,
-                    **times[str(it)],
-                    "delta_e76_mean_corrected": m.delta_e76_mean_corrected,
-                    "delta_e76_noise_contribution": m.delta_e76_noise_contribution,
-                    "delta_e2000_mean": m.delta_e2000_mean,
-                    "ssim": m.ssim,
-                    **extra,
-                }
-            )
-            print(f"iteration {it}: ΔE76 {m.delta_e76_mean_corrected:.2f} (noise {m.delta_e76_noise_contribution:.2f})")
-        del run
+    # with --snap-spp 0 the snapshots' mixtures stay on disk for a later --snapshots-only
+    points = measure_snapshots(a, out, scene, cfg, times) if a.snap_spp > 0 or a.snap_evaluate else []
     check = result_check(scene, cfg, out / "run", a.final_spp) if a.final_spp > 0 else None
     r = rep.to_json()
     entry = {
@@ -362,26 +391,7 @@ def main() -> int:
         "snap_spp": a.snap_spp,
         "snapshots": points,
         "result_check": check,
-        "result": {
-            k: r[k]
-            for k in (
-                "iterations",
-                "stop",
-                "delta_e76_mean_corrected",
-                "delta_e76_noise_contribution",
-                "delta_e2000_mean",
-                "ssim",
-                "initial_delta_e76_mean_corrected",
-                "initial_ssim",
-                "eval_spp",
-                "initial_eval_spp",
-                "seconds",
-                "seconds_total",
-                "seconds_iterations",
-                "seconds_per_iteration",
-                "peak_rss_gb",
-            )
-        },
+        "result": {k: r[k] for k in RESULT_KEYS},
         "machine": machine(),
         **provenance(),
     }
