@@ -14,6 +14,8 @@ SHARED_DATA = REPO.parent / "shared" / "data"
 SPOT = SHARED_DATA / "spot" / "spot.obj"
 if not SPOT.is_file():
     SPOT = REPO / "python" / "inkopt" / "data" / "spot" / "spot.obj"
+#: the optimisation arguments of a CLI test's run: the fewest iterations and samples that exercise every stage
+FAST_RUN = ["--iterations", "2", "--spp", "1", "--forward-spp", "2", "--eval-spp", "4", "--threads", "2"]
 
 
 def central_differences(f, x, h=1e-3) -> np.ndarray:

@@ -6,6 +6,7 @@ import json
 from dataclasses import replace
 
 import pytest
+from helpers import FAST_RUN
 
 from inkopt import charts
 from inkopt.cli import main
@@ -84,16 +85,7 @@ def run(tmp_path_factory):
                 "2x1.333x0.5",
                 "--out",
                 str(d / "r"),
-                "--iterations",
-                "2",
-                "--spp",
-                "1",
-                "--forward-spp",
-                "2",
-                "--eval-spp",
-                "4",
-                "--threads",
-                "2",
+                *FAST_RUN,
             ]
         )
         == 0

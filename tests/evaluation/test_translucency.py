@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+from helpers import FAST_RUN
 from PIL import Image
 
 from inkopt import charts, cli
@@ -146,16 +147,7 @@ def test_evaluate_mesh_alpha_region(tmp_path, capsys, monkeypatch):
         "1",
         "--up",
         "z",
-        "--iterations",
-        "2",
-        "--spp",
-        "1",
-        "--forward-spp",
-        "2",
-        "--eval-spp",
-        "4",
-        "--threads",
-        "2",
+        *FAST_RUN,
         "--inks",
         "vero-cmykwt",
     ]

@@ -10,6 +10,7 @@ import json
 import numpy as np
 import pytest
 import trimesh
+from helpers import FAST_RUN
 
 from inkopt import charts
 from inkopt.cli import main
@@ -243,16 +244,7 @@ def test_cli_mesh_target(tmp_path, capsys, monkeypatch):
                 "1",
                 "--out",
                 str(out),
-                "--iterations",
-                "2",
-                "--spp",
-                "1",
-                "--forward-spp",
-                "2",
-                "--eval-spp",
-                "4",
-                "--threads",
-                "2",
+                *FAST_RUN,
             ]
         )
         == 0

@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+from helpers import FAST_RUN
 from PIL import Image
 
 from inkopt import charts
@@ -52,16 +53,7 @@ def test_mask_reaches_every_candidates_run(chart_and_mask, tmp_path, capsys):
                 "black,white,transparent",
                 "--out",
                 str(out),
-                "--iterations",
-                "2",
-                "--spp",
-                "1",
-                "--forward-spp",
-                "2",
-                "--eval-spp",
-                "4",
-                "--threads",
-                "2",
+                *FAST_RUN,
             ]
         )
         == 0
