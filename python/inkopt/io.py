@@ -9,7 +9,8 @@ import json
 import os
 import tempfile
 import zipfile
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -29,17 +30,27 @@ def publish(tmp: str | Path, path: str | Path, directory: bool = False) -> None:
     os.replace(tmp, path)
 
 
-def atomic_write_bytes(path: str | Path, data: bytes) -> None:
+@contextmanager
+def atomic_file(path: str | Path, suffix: str = ".tmp") -> Iterator:
+    """A binary file to write ``path``'s new content to: a temporary file (``suffix``) in the same folder that
+    replaces ``path`` when the block ends (``publish``); if the block raises or is interrupted, the temporary file
+    is removed and ``path`` stays as it was. Creates the folder."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=suffix, dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
+            yield fh
         publish(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def atomic_write_bytes(path: str | Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically (``atomic_file``)."""
+    with atomic_file(path) as fh:
+        fh.write(data)
 
 
 @dataclass
@@ -72,26 +83,18 @@ def _write_streamed(fh, a: Streamed) -> None:
 def save_npz(path: str | Path, arrays: dict, compressed: bool = True) -> None:
     """Write an .npz atomically. Values may be ``Streamed`` (written piece by piece; the file reads back as if
     the whole array had been given)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp.npz", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            if not any(isinstance(v, Streamed) for v in arrays.values()):
-                (np.savez_compressed if compressed else np.savez)(fh, **arrays)
-            else:  # what np.savez does, member by member, with the streamed ones written in parts
-                mode = zipfile.ZIP_DEFLATED if compressed else zipfile.ZIP_STORED
-                with zipfile.ZipFile(fh, "w", compression=mode, allowZip64=True) as zf:
-                    for name, v in arrays.items():
-                        with zf.open(name + ".npy", "w", force_zip64=True) as member:
-                            if isinstance(v, Streamed):
-                                _write_streamed(member, v)
-                            else:
-                                np.lib.format.write_array(member, np.asanyarray(v), allow_pickle=False)
-        publish(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_file(path, ".tmp.npz") as fh:
+        if not any(isinstance(v, Streamed) for v in arrays.values()):
+            (np.savez_compressed if compressed else np.savez)(fh, **arrays)
+        else:  # what np.savez does, member by member, with the streamed ones written in parts
+            mode = zipfile.ZIP_DEFLATED if compressed else zipfile.ZIP_STORED
+            with zipfile.ZipFile(fh, "w", compression=mode, allowZip64=True) as zf:
+                for name, v in arrays.items():
+                    with zf.open(name + ".npy", "w", force_zip64=True) as member:
+                        if isinstance(v, Streamed):
+                            _write_streamed(member, v)
+                        else:
+                            np.lib.format.write_array(member, np.asanyarray(v), allow_pickle=False)
 
 
 def _no_pickles(what: str, path) -> str:

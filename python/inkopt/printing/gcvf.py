@@ -56,7 +56,6 @@ from __future__ import annotations
 
 import io
 import os
-import tempfile
 import xml.etree.ElementTree as ET
 import zipfile
 from collections import deque
@@ -65,7 +64,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io import publish, source_comment
+from ..io import atomic_file, source_comment
 from ..model import EMPTY
 from .export import check_job, slice_image, slice_lut
 
@@ -246,35 +245,28 @@ def write_gcvf(
     top = np.zeros((Y, X), np.uint16)  # index of the topmost occupied layer (0 also where nothing is printed)
     lo, hi = np.array([X, Y, Z]), np.zeros(3, np.int64)  # occupied box (x, label y, z), max exclusive
     workers = min(8, os.cpu_count() or 1)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh, zipfile.ZipFile(fh, "w") as zf, ThreadPoolExecutor(workers) as pool:
-            pngs = _in_order(pool, lambda k: _png(slice_image(lut, job.labels[k]), dpi_int), Z, 4 * workers)
-            for k, data in enumerate(pngs):
-                zf.writestr(f"{PREFIX}{k}.png", data, compress_type=zipfile.ZIP_STORED)
-                occ = np.asarray(job.labels[k]) != EMPTY
-                top[occ] = k
-                coarse[k // fz] |= _block_any(occ, fy, fx)
-                if occ.any():
-                    cols, rows = np.flatnonzero(occ.any(0)), np.flatnonzero(occ.any(1))
-                    lo = np.minimum(lo, [cols[0], rows[0], k])
-                    hi = np.maximum(hi, [cols[-1] + 1, rows[-1] + 1, k + 1])
-            zf.writestr(CONFIG, config_xml(job, colours, bg, dpi_int, layer_nm), compress_type=zipfile.ZIP_DEFLATED)
-            zb = io.BytesIO()
-            Image.fromarray(top[::-1, :]).save(zb, format="PNG", compress_level=6)
-            zf.writestr(ZBUFFER, zb.getvalue(), compress_type=zipfile.ZIP_STORED)
-            box = [lo[0], Y - hi[1], lo[2], hi[0], Y - lo[1], hi[2]]  # label y -> image row (row 0 = largest y)
-            zf.writestr(BBOX, np.asarray(box, "<f4").tobytes(), compress_type=zipfile.ZIP_STORED)
-            mesh = block_outline(coarse, job.vp, (fz, fy, fx))
-            mesh.apply_translation([0.0, -Y * job.vp[1], 0.0])  # origin at the image's top-left corner
-            stl = stl_bytes(mesh, f"{BLOCK_TAG} {fx} {fy} {fz}")
-            zf.writestr(STL, stl, compress_type=zipfile.ZIP_DEFLATED)
-            zf.comment = source_comment(source, digest)
-        publish(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_file(path) as fh, zipfile.ZipFile(fh, "w") as zf, ThreadPoolExecutor(workers) as pool:
+        pngs = _in_order(pool, lambda k: _png(slice_image(lut, job.labels[k]), dpi_int), Z, 4 * workers)
+        for k, data in enumerate(pngs):
+            zf.writestr(f"{PREFIX}{k}.png", data, compress_type=zipfile.ZIP_STORED)
+            occ = np.asarray(job.labels[k]) != EMPTY
+            top[occ] = k
+            coarse[k // fz] |= _block_any(occ, fy, fx)
+            if occ.any():
+                cols, rows = np.flatnonzero(occ.any(0)), np.flatnonzero(occ.any(1))
+                lo = np.minimum(lo, [cols[0], rows[0], k])
+                hi = np.maximum(hi, [cols[-1] + 1, rows[-1] + 1, k + 1])
+        zf.writestr(CONFIG, config_xml(job, colours, bg, dpi_int, layer_nm), compress_type=zipfile.ZIP_DEFLATED)
+        zb = io.BytesIO()
+        Image.fromarray(top[::-1, :]).save(zb, format="PNG", compress_level=6)
+        zf.writestr(ZBUFFER, zb.getvalue(), compress_type=zipfile.ZIP_STORED)
+        box = [lo[0], Y - hi[1], lo[2], hi[0], Y - lo[1], hi[2]]  # label y -> image row (row 0 = largest y)
+        zf.writestr(BBOX, np.asarray(box, "<f4").tobytes(), compress_type=zipfile.ZIP_STORED)
+        mesh = block_outline(coarse, job.vp, (fz, fy, fx))
+        mesh.apply_translation([0.0, -Y * job.vp[1], 0.0])  # origin at the image's top-left corner
+        stl = stl_bytes(mesh, f"{BLOCK_TAG} {fx} {fy} {fz}")
+        zf.writestr(STL, stl, compress_type=zipfile.ZIP_DEFLATED)
+        zf.comment = source_comment(source, digest)
     return {
         "path": str(path),
         "layer_count": Z,

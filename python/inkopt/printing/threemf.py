@@ -32,14 +32,12 @@ lib3mf as a reader check. No volumetric consumer (slicer or printer driver) has 
 from __future__ import annotations
 
 import io
-import os
-import tempfile
 import zipfile
 from pathlib import Path
 
 import numpy as np
 
-from ..io import publish, source_comment
+from ..io import atomic_file, source_comment
 from .export import check_job, ink_colours
 from .gcvf import _block_any, block_outline, check_package_target, outline_factors
 
@@ -183,48 +181,41 @@ def write_3mf(
     fz, fy, fx = outline_factors((Z, Y, X), vp)
     coarse = np.zeros((-(-Z // fz), -(-Y // fy), -(-X // fx)), bool)
     counts = np.zeros(len(names), np.float64)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh, zipfile.ZipFile(fh, "w") as zf:
-            for k in range(Z):  # first pass: which outline blocks hold printed voxels
-                coarse[k // fz] |= _block_any(np.asarray(occupied(k), bool), fy, fx)
-            if not coarse.any():
-                raise ValueError("nothing to print: every voxel is empty")
-            mesh = block_outline(coarse, vp, (fz, fy, fx))
-            region = coarse  # the blocks inside the outline (grown as block_outline grows them)
-            if (fz, fy, fx) != (1, 1, 1):
-                from scipy.ndimage import binary_dilation
+    with atomic_file(path) as fh, zipfile.ZipFile(fh, "w") as zf:
+        for k in range(Z):  # first pass: which outline blocks hold printed voxels
+            coarse[k // fz] |= _block_any(np.asarray(occupied(k), bool), fy, fx)
+        if not coarse.any():
+            raise ValueError("nothing to print: every voxel is empty")
+        mesh = block_outline(coarse, vp, (fz, fy, fx))
+        region = coarse  # the blocks inside the outline (grown as block_outline grows them)
+        if (fz, fy, fx) != (1, 1, 1):
+            from scipy.ndimage import binary_dilation
 
-                region = binary_dilation(coarse, np.ones((3, 3, 3), bool))
-            pending, last = [], None
-            for k in range(Z):
-                occ = np.asarray(occupied(k), bool)
-                inside = np.repeat(np.repeat(region[k // fz], fy, 0), fx, 1)[:Y, :X]
-                if not occ.any():  # takes the nearest printed layer's shares below (or else above) it
-                    if last is None:
-                        pending.append((k, inside))
-                    else:
-                        _put(zf, k, _sheets(np.where(inside[..., None], last, 0.0), groups))
-                    continue
-                sh = np.asarray(layers(k), np.float32)
-                counts += sh[occ].sum(0)
-                last = _fill_empty(sh, occ) if (fz, fy, fx) != (1, 1, 1) else np.where(occ[..., None], sh, 0.0)
-                for j, ins in pending:
-                    _put(zf, j, _sheets(np.where(ins[..., None], last, 0.0), groups))
-                pending = []
-                _put(zf, k, _sheets(np.where(inside[..., None], last, 0.0), groups))
-            with zf.open(MODEL, "w", force_zip64=True) as mf:
-                _model_xml(mf, base_names, colours, (Z, Y, X), vp, mesh, (fx, fy, fz))
-            rels = [(REL_TEXTURE, sheet_path(g, k)) for g in range(groups) for k in range(Z)]
-            zf.writestr("3D/_rels/3dmodel.model.rels", _rels(rels), compress_type=zipfile.ZIP_DEFLATED)
-            zf.writestr("_rels/.rels", _rels([(REL_MODEL, "/" + MODEL)]), compress_type=zipfile.ZIP_DEFLATED)
-            zf.writestr("[Content_Types].xml", CONTENT_TYPES, compress_type=zipfile.ZIP_DEFLATED)
-            zf.comment = source_comment(source, digest)
-        publish(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+            region = binary_dilation(coarse, np.ones((3, 3, 3), bool))
+        pending, last = [], None
+        for k in range(Z):
+            occ = np.asarray(occupied(k), bool)
+            inside = np.repeat(np.repeat(region[k // fz], fy, 0), fx, 1)[:Y, :X]
+            if not occ.any():  # takes the nearest printed layer's shares below (or else above) it
+                if last is None:
+                    pending.append((k, inside))
+                else:
+                    _put(zf, k, _sheets(np.where(inside[..., None], last, 0.0), groups))
+                continue
+            sh = np.asarray(layers(k), np.float32)
+            counts += sh[occ].sum(0)
+            last = _fill_empty(sh, occ) if (fz, fy, fx) != (1, 1, 1) else np.where(occ[..., None], sh, 0.0)
+            for j, ins in pending:
+                _put(zf, j, _sheets(np.where(ins[..., None], last, 0.0), groups))
+            pending = []
+            _put(zf, k, _sheets(np.where(inside[..., None], last, 0.0), groups))
+        with zf.open(MODEL, "w", force_zip64=True) as mf:
+            _model_xml(mf, base_names, colours, (Z, Y, X), vp, mesh, (fx, fy, fz))
+        rels = [(REL_TEXTURE, sheet_path(g, k)) for g in range(groups) for k in range(Z)]
+        zf.writestr("3D/_rels/3dmodel.model.rels", _rels(rels), compress_type=zipfile.ZIP_DEFLATED)
+        zf.writestr("_rels/.rels", _rels([(REL_MODEL, "/" + MODEL)]), compress_type=zipfile.ZIP_DEFLATED)
+        zf.writestr("[Content_Types].xml", CONTENT_TYPES, compress_type=zipfile.ZIP_DEFLATED)
+        zf.comment = source_comment(source, digest)
     return {
         "path": str(path),
         "layer_count": Z,
