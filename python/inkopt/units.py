@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .errors import ParameterError
+
 MM_PER_INCH = 25.4
 #: resolution of the optimisation grid (dots per inch; voxels are cubes)
 OPT_DPI = 300.0
@@ -20,7 +22,7 @@ PRINTER_LAYER_UM = 27.0
 def voxel_mm(dpi: float = OPT_DPI) -> float:
     """Edge of a voxel (mm) of a grid of ``dpi`` dots per inch; a one-line ValueError unless ``dpi`` is positive."""
     if not (np.isfinite(dpi) and dpi > 0):
-        raise ValueError(f"--dpi must be positive, got {dpi}")
+        raise ParameterError(f"`dpi` must be positive, got {dpi}")
     return MM_PER_INCH / float(dpi)
 
 
@@ -36,7 +38,7 @@ def parse_dpi(text: str) -> tuple[float, ...]:
     except ValueError:
         vals = ()
     if len(vals) not in (2, 3) or not all(np.isfinite(v) and v > 0 for v in vals):
-        raise ValueError(f"--dpi must look like 600x300 or 600x300x940 (positive numbers), got '{text}'")
+        raise ParameterError(f"`dpi` must look like 600x300 or 600x300x940 (positive numbers), got '{text}'")
     return vals
 
 
@@ -45,9 +47,9 @@ def parse_size_mm(text: str) -> tuple[float, float, float]:
     try:
         w, h, d = (float(v) for v in text.lower().split("x"))
     except ValueError:
-        raise ValueError(f"--size-mm must look like 15x10x2.5 (width x height x depth in mm), got '{text}'") from None
+        raise ParameterError(f"`size_mm` must look like 15x10x2.5 (width x height x depth in mm), got '{text}'") from None
     if min(w, h, d) <= 0:
-        raise ValueError(f"--size-mm sizes must be positive, got '{text}'")
+        raise ParameterError(f"`size_mm` sizes must be positive, got '{text}'")
     return w, h, d
 
 

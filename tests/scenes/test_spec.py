@@ -55,7 +55,7 @@ def test_frozen_picklable_and_json_round_trip(chart, ball):
         (lambda c, b: MeshSpec(b, height_mm=-1), "--height-mm must be positive"),
         (lambda c, b: MeshSpec(b, height_mm=1, shell_mm=0), "--shell-mm must be a positive thickness"),
         (lambda c, b: MeshSpec(b, height_mm=1, up="x"), "--up must be one of"),
-        (lambda c, b: MeshSpec(b, height_mm=1, dpi=0), "--dpi must be positive"),
+        (lambda c, b: MeshSpec(b, height_mm=1, dpi=0), "dpi must be positive"),
         (lambda c, b: MeshSpec(str(b) + ".missing", height_mm=1), "does not exist"),
         (lambda c, b: SlabSpec(c, (2, 1, -1)), "--size-mm sizes must be three positive numbers"),
         (lambda c, b: SlabSpec(str(c) + ".missing", (2, 1, 1)), "picture"),

@@ -12,7 +12,8 @@ import importlib
 import sys
 
 from .. import __version__
-from .common import UsageError
+from ..errors import ParameterError
+from .common import UsageError, flag_of
 
 SUBCOMMANDS = (
     "render",
@@ -52,7 +53,8 @@ def main(argv=None) -> int:
         print("inkopt: interrupted", file=sys.stderr)
         return 130
     except (ValueError, OSError, KeyError) as exc:
-        msg = " ".join(str(exc).split()) or type(exc).__name__
+        text = exc.render(flag_of) if isinstance(exc, ParameterError) else str(exc)
+        msg = " ".join(text.split()) or type(exc).__name__
         print(f"inkopt: error: {msg}", file=sys.stderr)
         return 2
     except MemoryError:

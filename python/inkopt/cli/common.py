@@ -10,6 +10,15 @@ class UsageError(ValueError):
     """A problem with the user's input; reported as one line, exit status 2."""
 
 
+#: Library parameters whose flag is not ``--`` + the name with dashes (``inkopt.errors.ParameterError``).
+FLAGS: dict[str, str] = {}
+
+
+def flag_of(name: str) -> str:
+    """The command line's flag of a library parameter (``eval_spp`` -> ``--eval-spp``)."""
+    return FLAGS.get(name) or "--" + name.replace("_", "-")
+
+
 def stderr_log(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
