@@ -47,7 +47,9 @@ def parse_size_mm(text: str) -> tuple[float, float, float]:
     try:
         w, h, d = (float(v) for v in text.lower().split("x"))
     except ValueError:
-        raise ParameterError(f"`size_mm` must look like 15x10x2.5 (width x height x depth in mm), got '{text}'") from None
+        raise ParameterError(
+            f"`size_mm` must look like 15x10x2.5 (width x height x depth in mm), got '{text}'"
+        ) from None
     if min(w, h, d) <= 0:
         raise ParameterError(f"`size_mm` sizes must be positive, got '{text}'")
     return w, h, d
