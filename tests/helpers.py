@@ -94,4 +94,18 @@ def small_run(scene, **kw):
     from inkopt.optim import Optimization, OptimizeConfig
 
     cfg = OptimizeConfig(**{"iterations": 30, "spp": 4, "forward_spp": 16, **kw})
-    return Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, kind=scene.kind, threads=2)
+    return Optimization(scene, cfg.for_scene(scene.kind), threads=2)
+
+
+def with_fixed_shares(scene, fixed_share):
+    """``scene`` as the optimiser reads it (``optim.Optimization``: kind, volume, texels, targets) with other fixed
+    ink shares (a ``model.FixedShares``)."""
+    from types import SimpleNamespace
+
+    return SimpleNamespace(
+        kind=scene.kind,
+        volume=scene.volume,
+        texels=scene.texels,
+        target_rgb=scene.target_rgb,
+        fixed_share=fixed_share,
+    )

@@ -91,7 +91,7 @@ def _optimization(**kw):
     top = srgb_to_linear(colour_chart(24, 16) / 255.0).astype(np.float32)
     scene = build_slab(top, None, (6 * vox, 4 * vox, 0.2), INKS)
     cfg = OptimizeConfig(**{"iterations": 2, "spp": 1, "forward_spp": 2, **kw})
-    return Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, kind="slab", threads=2)
+    return Optimization(scene, cfg.for_scene("slab"), threads=2)
 
 
 def _version_0_key(run: Optimization) -> str:

@@ -1,17 +1,18 @@
 """The run driver: one optimisation run of any scene, from start (or resume) to report (docs/run-dir.md).
 
-``run_optimisation(scene, out_dir, cfg)``: a fresh run (not a resume) first removes every output of an earlier run in
-``out_dir`` (``RunDir.remove_earlier_run``); write scene.npz, estimate the cost (``inkopt.estimate``), measure the
-start's figures once (kept in the checkpoints, so a resume does not render the start again), optimise with
-checkpoints (``resume`` continues exactly), save volume.npz (and remove the outputs derived from an earlier one), then
-the result's figures. Figures are renders with seeds from ``2**62 + cfg.seed`` (never used by the optimisation) at
-``eval_spp`` samples per texel if given, else adaptively (``evaluation.noise.adaptive_render``: enough that the Monte
-Carlo noise adds at most ~0.5 to the mean ΔE76 and SSIM's and the mottle's noise correction is accurate, at most
-``eval_max_spp`` (4096) and within ``eval_time_budget``, or within ``FINAL_FIGURES_SHARE`` of the run's time when
-neither that nor a run time budget is given; the start's figures are one pilot pass), compared with the target by
-``evaluation.metrics.prediction_metrics``; then the scene's pictures, loss.png and report.json
-(``evaluation.results.Report``). The scene comes from user inputs through a spec (``scenes.spec``:
-``SlabSpec(...).build(inks)``, ``MeshSpec(...).build(inks)``).
+``run_optimisation(scene, out_dir, cfg, options)``: the settings ``cfg`` (``OptimizeConfig``) are resolved once for the
+scene's kind; ``options`` (``RunOptions``) say how the run is carried out. A fresh run (not a resume) first removes
+every output of an earlier run in ``out_dir`` (``RunDir.remove_earlier_run``); write scene.npz, estimate the cost
+(``inkopt.estimate``), measure the start's figures once (kept in the checkpoints, so a resume does not render the start
+again), optimise with checkpoints (``options.resume`` continues exactly), save volume.npz (and remove the outputs
+derived from an earlier one), then the result's figures. Figures are renders with seeds from ``2**62 + cfg.seed`` (never
+used by the optimisation) at ``options.eval_spp`` samples per texel if given, else adaptively
+(``evaluation.noise.adaptive_render``: enough that the Monte Carlo noise adds at most ~0.5 to the mean ΔE76 and SSIM's
+and the mottle's noise correction is accurate, at most ``eval_max_spp`` (4096) and within ``eval_time_budget``, or
+within ``FINAL_FIGURES_SHARE`` of the run's time when neither that nor a run time budget is given; the start's figures
+are one pilot pass), compared with the target by ``evaluation.metrics.prediction_metrics``; then the scene's pictures,
+loss.png and report.json (``evaluation.results.Report``). The scene comes from user inputs through a spec
+(``scenes.spec``: ``scenes.build_scene(SlabSpec(...), inks)``, ``scenes.build_scene(MeshSpec(...), inks)``).
 """
 
 from __future__ import annotations
@@ -20,11 +21,14 @@ import ctypes
 import gc
 import resource
 import time
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from .distributed import renderer_factory
+from .errors import ParameterError
 from .estimate import ANNOUNCE_SECONDS, Estimate, estimate_run
 from .evaluation.baselines import baseline_layers
 from .evaluation.metrics import delta_e76_map, prediction_metrics
@@ -35,7 +39,7 @@ from .lighting import Lighting, load_lighting
 from .optim import EXTRUSION_START_MM, Optimization, OptimizeConfig
 from .pictures import loss_figure
 from .rundir import Predictions, RunDir
-from .scenes import Scene
+from .scenes import Scene, build_scene
 
 #: Shares of a run's time budget (``OptimizeConfig.time_budget``) given to the start's figures, the result's
 #: figures, and kept for writing the result (volume, pictures, predictions, report): the iterations get the rest,
@@ -76,190 +80,255 @@ def release_freed_memory() -> None:
     trim(0)
 
 
-def run_optimisation(
-    scene: Scene,
-    out_dir,
-    cfg: OptimizeConfig,
-    *,
-    resume: bool = False,
-    eval_spp: int | None = None,
-    threads: int | None = None,
-    progress: bool = False,
-    lighting: Lighting | str | None = None,
-    ray: str | None = None,
-    log=print,
-    log_every_s: float = 30.0,
-    dry_run: bool = False,
-    eval_max_spp: int = MAX_SPP,
-    eval_time_budget: float | None = None,
-    started: float | None = None,
-    on_step=None,
-) -> Report | Estimate:
-    """Optimise ``scene`` into run directory ``out_dir`` under the display ``lighting`` (default uniform; the
-    final figures are rendered under it too); returns the report (also report.json). ``ray``: "auto" or a Ray
-    cluster's address: every render is split into texel shards on Ray workers (``inkopt.distributed``; the
-    results are bit-identical), ``threads`` then being each worker's. Without ``progress`` (no terminal), ``log``
-    gets a progress line at least every ``log_every_s`` seconds of the iterations. Before the iterations the run's
-    cost is estimated (``inkopt.estimate``) and logged when it exceeds ``estimate.ANNOUNCE_SECONDS``; with
-    ``dry_run`` only the estimate is made and returned, and nothing is written. ``eval_max_spp`` and
-    ``eval_time_budget`` (seconds) cap each adaptive figure's samples. ``started``: when the job began
-    (``time.perf_counter()``, e.g. before the scene was built; default: now), the time ``cfg.time_budget`` and the
-    run's wall time count from. ``on_step(optimization)``: called after every iteration (``Optimization.run``)."""
-    with renderer_factory(ray, threads) as make_renderer:
-        return _optimise(
-            scene,
-            out_dir,
-            cfg,
-            resume,
-            eval_spp,
-            threads,
-            progress,
-            load_lighting(lighting),
-            log,
-            make_renderer,
-            log_every_s,
-            dry_run,
-            eval_max_spp,
-            eval_time_budget,
-            started,
-            on_step,
-        )
+@dataclass(frozen=True)
+class RunOptions:
+    """How one run is carried out (what it optimises is ``OptimizeConfig``'s).
+
+    ``resume``: continue from the run directory's checkpoint if there is one. ``eval_spp``: samples per texel of
+    the figures, used exactly (None: adaptive, at most ``eval_max_spp`` and ``eval_time_budget`` seconds per
+    figure). ``threads``: the renderer's (with ``ray``, each worker's). ``progress``: a progress bar (a terminal);
+    without it ``log`` gets a progress line at least every ``log_every_s`` seconds of the iterations. ``lighting``:
+    the display lighting (``inkopt.lighting``; default uniform), the final figures are rendered under it too.
+    ``ray``: "auto" or a Ray cluster's address: every render is split into texel shards on Ray workers
+    (``inkopt.distributed``; bit-identical results). ``dry_run``: only estimate the run (nothing is written).
+    ``started``: when the job began (``time.perf_counter()``, e.g. before the scene was built; default: when the
+    run starts), the time ``cfg.time_budget`` and the run's wall time count from. ``on_step(optimization)``:
+    called after every iteration (``Optimization.run``)."""
+
+    resume: bool = False
+    eval_spp: int | None = None
+    eval_max_spp: int = MAX_SPP
+    eval_time_budget: float | None = None
+    threads: int | None = None
+    progress: bool = False
+    lighting: Lighting | str | None = None
+    ray: str | None = None
+    log: Callable[[str], None] = print
+    log_every_s: float = 30.0
+    dry_run: bool = False
+    started: float | None = None
+    on_step: Callable | None = None
+
+    def validate(self) -> None:
+        """One-line errors naming the option, before any work."""
+        if self.eval_spp is not None and self.eval_spp < 1:
+            raise ParameterError(
+                f"`eval_spp` must be at least 1 (leave it out for adaptive samples), got {self.eval_spp}"
+            )
+        if self.eval_max_spp < 1:
+            raise ParameterError(f"`eval_max_spp` must be at least 1, got {self.eval_max_spp}")
+        if self.eval_time_budget is not None and not self.eval_time_budget > 0:
+            raise ParameterError(
+                f"`eval_time_budget` must be a positive number of seconds, got {self.eval_time_budget}"
+            )
+        if not self.log_every_s >= 0:
+            raise ParameterError(f"`log_every` must be a number of seconds >= 0, got {self.log_every_s}")
 
 
-def _optimise(
-    scene,
-    out_dir,
-    cfg,
-    resume,
-    eval_spp,
-    threads,
-    progress,
-    lighting,
-    log,
-    make_renderer,
-    log_every_s,
-    dry_run,
-    eval_max_spp,
-    eval_time_budget,
-    started,
-    on_step,
-) -> Report | Estimate:
-    t_start = time.perf_counter() if started is None else started
+@dataclass
+class _Job:
+    """One invocation of a run: the scene, its settings resolved for the scene's kind, the options, the display
+    lighting, the optimisation and (unless a dry run) its run directory."""
+
+    scene: Scene
+    cfg: OptimizeConfig
+    options: RunOptions
+    lighting: Lighting
+    run: Optimization
+    rd: RunDir | None = None
+
+
+def run_optimisation(scene: Scene, out_dir, cfg: OptimizeConfig, options: RunOptions = RunOptions()):
+    """Optimise ``scene`` into run directory ``out_dir`` with settings ``cfg`` (resolved here for the scene's
+    kind, once) as ``options`` say; returns the ``Report`` (also report.json), or with ``options.dry_run`` the
+    ``Estimate`` (nothing written). Before the iterations the run's cost is estimated (``inkopt.estimate``) and
+    logged when it exceeds ``estimate.ANNOUNCE_SECONDS``."""
+    options.validate()
+    cfg = cfg.for_scene(scene.kind)
+    if options.started is None:
+        options = replace(options, started=time.perf_counter())
+    with renderer_factory(options.ray, options.threads) as make_renderer:
+        job = _start(scene, cfg, options, make_renderer)
+        if options.dry_run:
+            return _dry_run(job, out_dir)
+        estimate = _prepare(job, out_dir)
+        figures = _Figures(job)
+        if job.run.start_figures is None and job.run.iteration == 0:
+            # measured once, before the first step, then kept in the checkpoints: one pilot (noise-corrected;
+            # `inkopt evaluate` measures the baselines noise-free)
+            job.run.keep_start_figures(figures.start())
+        _iterate(job, figures.final_budget)
+        res, metrics = figures.final()
+        if job.run.start_figures is None:  # a checkpoint written before the start's figures were kept in it
+            job.run.keep_start_figures(figures.start(job.run.initial_variables()))
+        de = _write_result_files(job, res)
+        report = _report(job, res, metrics, de, estimate)
+        job.rd.write_report(report.to_json())
+        return report
+
+
+def _start(scene: Scene, cfg: OptimizeConfig, options: RunOptions, make_renderer) -> _Job:
+    """Log the scene and its warnings and set up its optimisation."""
+    log = options.log
     log(scene.describe())
     for note in scene.warnings:  # e.g. a mesh's small holes
         log(f"warning: {note}")
+    lighting = load_lighting(options.lighting)
 
     def baseline(kind: str):  # a print-shop start (cfg.init "surface" or "extrusion"), one z layer at a time
-        return baseline_layers(kind, scene.volume, scene.texels, scene.target_rgb, scene.fixed_share, progress=progress)
+        return baseline_layers(
+            kind, scene.volume, scene.texels, scene.target_rgb, scene.fixed_share, progress=options.progress
+        )
 
     run = Optimization(
-        scene.volume,
-        scene.texels,
-        scene.target_rgb,
+        scene,
         cfg,
-        fixed_share=scene.fixed_share,
-        threads=threads,
+        threads=options.threads,
         baseline=baseline,
         lighting=lighting,
         renderer_factory=make_renderer,
-        kind=scene.kind,
+        started=options.started,  # the whole run's time counts this invocation's set-up too
     )
-    shape = scene.volume.shape
-    box = int(np.prod(shape))
-    inside = box if scene.volume.inside is None else int(scene.volume.inside.sum())
-    if dry_run:  # read the checkpoint a resume would continue from, write nothing
-        checkpoint = RunDir(out_dir).checkpoint_path if Path(out_dir).is_dir() else None
-        if resume and checkpoint is not None and checkpoint.is_file():
-            run.load_checkpoint(checkpoint)
-        return estimate_run(run, inside, box, cfg.seed)
-    rd = RunDir.create(out_dir)
-    if not (resume and run.resume(rd.checkpoint_path, log)):
+    return _Job(scene, cfg, options, lighting, run)
+
+
+def _voxel_counts(job: _Job) -> tuple[int, int]:
+    """(inside voxels, grid voxels) of the scene's volume."""
+    vol = job.scene.volume
+    box = int(np.prod(vol.shape))
+    return (box if vol.inside is None else int(vol.inside.sum())), box
+
+
+def _dry_run(job: _Job, out_dir) -> Estimate:
+    """The estimate of the iterations a run would do, from the checkpoint a resume would continue from; writes
+    nothing."""
+    checkpoint = RunDir(out_dir).checkpoint_path if Path(out_dir).is_dir() else None
+    if job.options.resume and checkpoint is not None and checkpoint.is_file():
+        job.run.load_checkpoint(checkpoint)
+    return estimate_run(job.run, *_voxel_counts(job), job.cfg.seed)
+
+
+def _prepare(job: _Job, out_dir) -> Estimate:
+    """The run directory: resumed from its checkpoint, or cleared of an earlier run's outputs; scene.npz written;
+    the run's cost estimated (and logged when long)."""
+    log, run = job.options.log, job.run
+    job.rd = rd = RunDir.create(out_dir)
+    if not (job.options.resume and run.resume(rd.checkpoint_path, log)):
         gone = rd.remove_earlier_run()  # a fresh run: nothing of an earlier run may pair with the new result
         if gone:
             log(f"removed the outputs of an earlier run in {rd}: {', '.join(gone)}")
-    rd.save_scene(scene.record())
-    estimate = estimate_run(run, inside, box, cfg.seed)
+    rd.save_scene(job.scene.record())
+    estimate = estimate_run(run, *_voxel_counts(job), job.cfg.seed)
     if estimate.seconds > ANNOUNCE_SECONDS:
-        log(estimate.line(cfg.time_budget))
-    run.invocation_start = t_start  # the whole run's time counts this invocation's set-up too
+        log(estimate.line(job.cfg.time_budget))
+    return estimate
 
-    # Figures with seeds unused by the optimisation, adaptive spp unless given (at most ``eval_max_spp`` and
-    # ``eval_time_budget`` seconds per result). The run's own renderer, set to a mixture (only the free voxels
-    # change: no grid-sized volume), renders exactly what a renderer built from that volume would.
-    spp = int(eval_spp) if eval_spp else None  # None: adaptive
-    seed = EVAL_SEED_OFFSET + cfg.seed
 
-    start_budget, final_budget = figure_budgets(cfg, eval_time_budget)
+class _Figures:
+    """A run's figures: renders with seeds unused by the optimisation (``EVAL_SEED_OFFSET + seed``), the user's
+    samples per texel or adaptive ones (at most ``eval_max_spp`` and ``eval_time_budget`` seconds per result). The
+    run's own renderer, set to a mixture (only the free voxels change: no grid-sized volume), renders exactly what
+    a renderer built from that volume would."""
 
-    def figures_of(x=None, budget=final_budget, max_spp=eval_max_spp, pilot_in_budget=True, keep_renderer=True):
+    def __init__(self, job: _Job):
+        self.job = job
+        self.spp = int(job.options.eval_spp) if job.options.eval_spp else None  # None: adaptive
+        self.seed = EVAL_SEED_OFFSET + job.cfg.seed
+        self.start_budget, self.final_budget = figure_budgets(job.cfg, job.options.eval_time_budget)
+
+    def _of(self, x, budget, max_spp: int, pilot_in_budget: bool = True, keep_renderer: bool = True):
+        """(``AdaptiveResult``, ``Metrics``) of the mixture of variables ``x`` (None: the current ones)."""
+        run, opts = self.job.run, self.job.options
         renderer = run.renderer(x)
+        texels, specular = self.job.scene.texels, self.job.cfg.include_specular
 
         def render(n: int, s: int):
-            r = renderer.render(scene.texels, n, s, cfg.include_specular, progress)
+            r = renderer.render(texels, n, s, specular, opts.progress)
             return r.rgb, r.var_mean, n
 
         res = adaptive_render(
             render,
             run.loss.target_lab,
-            seed,
-            spp,
+            self.seed,
+            self.spp,
             max_spp=max_spp,
-            log=log,
+            log=opts.log,
             time_budget=budget,
             pilot_in_budget=pilot_in_budget,
         )
         if not keep_renderer:  # its media are not needed beside the loss's window operators that the figures build
-            del renderer
+            del renderer, render
             run.release_renderer()
         return res, prediction_metrics(run.loss, res.rgb, res.var)
 
-    def final_figures():
-        """The result's figures: the user's samples or budget, the run's budget share, or (neither) samples up to
-        ``FINAL_FIGURES_SHARE`` of the run's time so far after a whole pilot."""
-        if spp is not None or final_budget is not None:
-            return figures_of(keep_renderer=False)
-        return figures_of(budget=FINAL_FIGURES_SHARE * run.wall_seconds(), pilot_in_budget=False, keep_renderer=False)
-
-    def keep_start(res0, init) -> None:
-        run.start_figures = {
-            "delta_e76_mean": init.delta_e76_mean,
-            "ssim": init.ssim,
-            "delta_e76_mean_corrected": init.delta_e76_mean_corrected,
-            "eval_spp": res0.spp,
+    def start(self, x=None) -> dict:
+        """The start's figures (one pilot pass at most) as ``Optimization.keep_start_figures`` keeps them; ``x``:
+        the start's variables when the run is no longer at its start (its renderer is released after)."""
+        max_spp = min(self.job.options.eval_max_spp, PILOT_SPP)
+        res, m = self._of(x, self.start_budget, max_spp, keep_renderer=x is None)
+        return {
+            "delta_e76_mean": m.delta_e76_mean,
+            "ssim": m.ssim,
+            "delta_e76_mean_corrected": m.delta_e76_mean_corrected,
+            "eval_spp": res.spp,
         }
 
-    if run.start_figures is None and run.iteration == 0:  # measured once, before the first step, and then kept in
-        # the start's figures: one pilot (noise-corrected; `inkopt evaluate` measures the baselines noise-free)
-        keep_start(*figures_of(budget=start_budget, max_spp=min(eval_max_spp, PILOT_SPP)))
+    def final(self):
+        """The result's figures: the user's samples or budget, the run's budget share, or (neither) samples up to
+        ``FINAL_FIGURES_SHARE`` of the run's time so far after a whole pilot."""
+        max_spp = self.job.options.eval_max_spp
+        if self.spp is not None or self.final_budget is not None:
+            return self._of(None, self.final_budget, max_spp, keep_renderer=False)
+        budget = FINAL_FIGURES_SHARE * self.job.run.wall_seconds()
+        return self._of(None, budget, max_spp, pilot_in_budget=False, keep_renderer=False)
+
+
+def _iterate(job: _Job, final_budget: float | None) -> None:
+    """The iterations (checkpointed), the result's finishing smoothing and volume.npz; outputs made from an
+    earlier volume.npz are removed."""
+    run, opts, cfg, rd = job.run, job.options, job.cfg, job.rd
     reserve = 0.0 if cfg.time_budget is None else (final_budget or 0.0) + BUDGET_WRITING * cfg.time_budget
-    run.run(rd.checkpoint_path, progress=progress, log=log, log_every_s=log_every_s, reserve=reserve, on_step=on_step)
+    run.run(
+        rd.checkpoint_path,
+        progress=opts.progress,
+        log=opts.log,
+        log_every_s=opts.log_every_s,
+        reserve=reserve,
+        on_step=opts.on_step,
+    )
     run.release_renderer()  # not beside the writing of the result, nor beside the finishing smoothing
     run.finish()  # the result: the last iterate smoothed (cfg.finish_smooth); the checkpoint keeps the iterate
     rd.save_volume_slabs(run.base, run.mixture_slabs(), run.base.inks)  # a slab of layers at a time
     gone = rd.remove_stale()  # quantized volume, slices, evaluation made from an earlier volume.npz
     if gone:
-        log(f"removed outputs made from the earlier volume.npz: {', '.join(gone)}")
+        opts.log(f"removed outputs made from the earlier volume.npz: {', '.join(gone)}")
 
-    res, metrics = final_figures()
-    if run.start_figures is None:  # a checkpoint written before the start's figures were kept in it
-        start_x = run.initial_variables()
-        keep_start(*figures_of(start_x, start_budget, min(eval_max_spp, PILOT_SPP), keep_renderer=False))
-    start = run.start_figures
+
+def _write_result_files(job: _Job, res) -> np.ndarray:
+    """The scene's pictures, predictions.npz and loss.png of the result's render ``res``; returns its per-texel
+    ΔE76 (I,)."""
+    run, rd = job.run, job.rd
     de = delta_e76_map(run.loss, res.rgb)
-    scene.write_pictures(rd, res.rgb, de)
-    rd.save_predictions(
-        Predictions(
-            {"continuous": res.rgb},
-            "optimisation",
-            {"continuous": res.spp},
-            file_digest(rd.volume_path),
-            lighting.describe(),
-        )
+    job.scene.write_pictures(rd, res.rgb, de)
+    predictions = Predictions(
+        {"continuous": res.rgb},
+        "optimisation",
+        {"continuous": res.spp},
+        file_digest(rd.volume_path),
+        job.lighting.describe(),
     )
+    rd.save_predictions(predictions)
     loss_figure(rd.loss_picture_path, run.history.loss, run.history.delta_e76)
+    return de
+
+
+def _report(job: _Job, res, metrics, de: np.ndarray, estimate: Estimate) -> Report:
+    """report.json's contents: the result's figures ``metrics`` (render ``res``, per-texel ΔE76 ``de``), the
+    start's, the run's times and settings."""
+    run, cfg, start = job.run, job.cfg, job.run.start_figures
     h = run.history
     n = max(len(h.seconds), 1)
-    report = Report(
+    return Report(
         metrics=metrics,
         initial_delta_e76_mean=start["delta_e76_mean"],
         initial_ssim=start["ssim"],
@@ -268,37 +337,44 @@ def _optimise(
         iterations=run.iteration,
         spp=cfg.spp,
         eval_spp=res.spp,
-        spp_adaptive=spp is None,
+        spp_adaptive=job.options.eval_spp is None,
         eval_spp_passes=res.passes,
         initial_eval_spp=start["eval_spp"],
         # this invocation's wall time (set-up, the iterations it ran, the evaluation); a resumed run's earlier
         # iterations are in the history, so seconds_iterations covers all of them
-        seconds=time.perf_counter() - t_start,
+        seconds=time.perf_counter() - job.options.started,
         seconds_total=run.wall_seconds(),
         estimate=estimate.to_json(),
-        stop=run.schedule.describe(run.cfg),
+        stop=run.schedule.describe(cfg),
         seconds_iterations=float(np.sum(h.seconds)),
         seconds_per_iteration=float(np.sum(h.seconds) / n),
         time_split={k: float(np.sum(getattr(h, k)) / n) for k in ("render_s", "gradient_s", "loss_s", "step_s")},
-        scene=scene.report_fields(),
-        inks=list(scene.volume.inks.names),
+        scene=job.scene.report_fields(),
+        inks=list(job.scene.volume.inks.names),
         gamma=list(cfg.gamma),
-        lr=run.cfg.step_size,
+        lr=cfg.step_size,
         optimizer=cfg.optimizer,
         param=cfg.param,
-        init=run.cfg.init,
+        init=cfg.init,
         seed=cfg.seed,
         decay=cfg.decay,
-        smooth=run.cfg.smooth,
-        finish_smooth=run.cfg.finish_smooth,
-        adjoint_ema=run.cfg.adjoint_ema,
+        smooth=cfg.smooth,
+        finish_smooth=cfg.finish_smooth,
+        adjoint_ema=cfg.adjoint_ema,
         gradient=cfg.grad_method,
-        threads=threads,
+        threads=job.options.threads,
         peak_rss_gb=peak_rss_gb(),
-        lighting=lighting.describe(),
+        lighting=job.lighting.describe(),
     )
-    rd.write_report(report.to_json())
-    return report
+
+
+def mesh_thickness_mm(spec) -> float:
+    """The volume over the surface area (mm) of a ``MeshSpec``'s placed mesh (``TexturedMesh.mean_thickness_mm``);
+    loads the mesh, does not voxelize it."""
+    from .scenes.mesh import load_spec_mesh
+
+    spec.validate()
+    return load_spec_mesh(spec).mean_thickness_mm()
 
 
 #: share of a time budget the coarse stage of a coarse-to-fine run may take; the fine stage has the rest
@@ -314,10 +390,8 @@ def deadline_plan(spec, cfg: OptimizeConfig, log=print) -> tuple[float, Optimize
     A mesh at least ``EXTRUSION_START_MM`` thick whose settings name no start (``cfg.init`` None) starts from the
     extrusion baseline at its own DPI; every other run goes coarse to fine at ``DEADLINE_COARSE_FACTOR`` of its
     DPI with its own start."""
-    from dataclasses import replace
-
     if spec.kind == "mesh" and cfg.init is None:
-        thick = spec.mean_thickness_mm()
+        thick = mesh_thickness_mm(spec)
         if thick >= EXTRUSION_START_MM:
             log(
                 f"deadline: the mesh is {thick:.2f} mm thick (volume / area, at least {EXTRUSION_START_MM:g}): "
@@ -327,44 +401,47 @@ def deadline_plan(spec, cfg: OptimizeConfig, log=print) -> tuple[float, Optimize
     return DEADLINE_COARSE_FACTOR * spec.dpi, cfg
 
 
-def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: float, *, resume=False, log=print, **kw):
+def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: float, options: RunOptions = RunOptions()):
     """Coarse to fine: optimise ``spec``'s object first on a grid of ``coarse_dpi`` (a run of its own in
     ``OUT/coarse/`` with ``cfg``'s settings: it stops when done, or within ``COARSE_BUDGET_SHARE`` of
     ``cfg.time_budget``), move its result onto the grid of ``spec`` (``optim.transfer.write_transferred_volume``:
     ``OUT/coarse/fine_start.npz``, fixed shares kept) and optimise from there (``cfg`` with that start, and a warm
     start's step unless ``cfg.lr`` is set). A half-DPI iteration costs about a sixth of a full one on Spot
-    (docs/performance.md). ``resume`` continues whichever stage was under way; the time budget and the run's wall
-    time count from the job's start (``kw["started"]``). ``kw``: ``run_optimisation``'s other arguments
-    (``on_step`` is called in the fine stage only). Returns the
-    fine run's report (``--dry-run``: its estimate, from a white start; nothing is written)."""
-    from dataclasses import replace
-
+    (docs/performance.md). ``options.resume`` continues whichever stage was under way; the time budget and the
+    run's wall time count from the job's start (``options.started``); ``options.on_step`` is called in the fine
+    stage only. Returns the fine run's report (``dry_run``: its estimate, from a white start; nothing is
+    written)."""
     from .optim.transfer import write_transferred_volume
 
     if not 0 < coarse_dpi < spec.dpi:
-        raise ValueError(f"--coarse-dpi must lie between 0 and the run's DPI ({spec.dpi:g}), got {coarse_dpi:g}")
-    kw.setdefault("started", time.perf_counter())
-    if kw.get("dry_run"):
-        return run_optimisation(spec.build(inks), out_dir, cfg, resume=resume, log=log, **kw)
+        raise ParameterError(f"`coarse_dpi` must lie between 0 and the run's DPI ({spec.dpi:g}), got {coarse_dpi:g}")
+    if options.started is None:
+        options = replace(options, started=time.perf_counter())
+    if options.dry_run:
+        return run_optimisation(build_scene(spec, inks), out_dir, cfg, options)
     rd = RunDir.create(out_dir)
     coarse_dir, start = rd.path / "coarse", rd.path / "coarse" / "fine_start.npz"
-    fine_begun = resume and rd.checkpoint_path.is_file() and start.is_file()
+    fine_begun = options.resume and rd.checkpoint_path.is_file() and start.is_file()
     if not fine_begun:
-        coarse = replace(spec, dpi=coarse_dpi).build(inks)
-        budget = None if cfg.time_budget is None else COARSE_BUDGET_SHARE * cfg.time_budget
-        log(f"coarse stage at {coarse_dpi:g} DPI into {coarse_dir}")
-        # the caller's per-step hook sees the fine stage only (another grid here); the coarse result's figures are
-        # one pilot pass (informative: the fine stage's are the run's)
-        ckw = {**kw, "on_step": None, "eval_spp": kw.get("eval_spp") or PILOT_SPP}
-        run_optimisation(
-            coarse, coarse_dir, replace(cfg, time_budget=budget), resume=resume, log=lambda m: log(f"  {m}"), **ckw
-        )
-        del coarse
-        release_freed_memory()
-    fine = spec.build(inks)
+        _coarse_stage(spec, inks, coarse_dir, cfg, coarse_dpi, options)
+    fine = build_scene(spec, inks)
     if not fine_begun:
         t = time.perf_counter()
         write_transferred_volume(RunDir(coarse_dir).load_volume(), fine.volume, fine.fixed_share, start)
-        log(f"coarse result moved onto the {spec.dpi:g}-DPI grid in {time.perf_counter() - t:.0f} s: {start}")
+        options.log(f"coarse result moved onto the {spec.dpi:g}-DPI grid in {time.perf_counter() - t:.0f} s: {start}")
         release_freed_memory()  # the fine stage's peak is the job's: nothing of the stages before it under it
-    return run_optimisation(fine, out_dir, replace(cfg, init=str(start)), resume=resume, log=log, **kw)
+    return run_optimisation(fine, out_dir, replace(cfg, init=str(start)), options)
+
+
+def _coarse_stage(spec, inks, coarse_dir, cfg: OptimizeConfig, coarse_dpi: float, options: RunOptions) -> None:
+    """The coarse run of ``run_coarse_to_fine`` in ``coarse_dir``: ``spec`` at ``coarse_dpi``, within
+    ``COARSE_BUDGET_SHARE`` of the time budget; its figures are one pilot pass (informative: the fine stage's are
+    the run's); the caller's per-step hook sees the fine stage only (another grid here)."""
+    coarse = build_scene(replace(spec, dpi=coarse_dpi), inks)
+    budget = None if cfg.time_budget is None else COARSE_BUDGET_SHARE * cfg.time_budget
+    log = options.log
+    log(f"coarse stage at {coarse_dpi:g} DPI into {coarse_dir}")
+    coarse_options = replace(options, on_step=None, eval_spp=options.eval_spp or PILOT_SPP, log=lambda m: log(f"  {m}"))
+    run_optimisation(coarse, coarse_dir, replace(cfg, time_budget=budget), coarse_options)
+    del coarse
+    release_freed_memory()

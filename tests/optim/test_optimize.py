@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from helpers import central_differences as _fd
-from helpers import small_chart_scene
+from helpers import small_chart_scene, with_fixed_shares
 from helpers import small_run as run
 
 from inkopt.color import srgb_to_linear
@@ -232,12 +232,8 @@ def test_start_from_a_baseline(kind, monkeypatch):
     fixed[0, ..., 1] = 1.0  # bottom layer fixed white
     start = lambda k: baselines.baseline_mixture(k, scene.volume, scene.texels, scene.target_rgb, fixed, table=table)
     r = Optimization(
-        scene.volume,
-        scene.texels,
-        scene.target_rgb,
-        OptimizeConfig(init=kind, iterations=1),
-        kind=scene.kind,
-        fixed_share=FixedShares.from_dense(fixed),
+        with_fixed_shares(scene, FixedShares.from_dense(fixed)),
+        OptimizeConfig(init=kind, iterations=1).for_scene(scene.kind),
         baseline=start,
     )
     make = baselines.surface_baseline if kind == "surface" else baselines.extrusion_baseline
@@ -371,8 +367,7 @@ def test_one_renderer_per_run():
     r = run(scene, iterations=2)
     r.run()
     first = r._renderer
-    r.cfg.iterations = 3
-    r.run()
+    r.step()
     assert r._renderer is first
 
 
@@ -397,7 +392,7 @@ def test_the_loop_smooths_the_optimisers_step():
     runs = {}
     for smooth in (0.0, 1.0):
         cfg = OptimizeConfig(iterations=1, spp=4, forward_spp=16, smooth=smooth)
-        r = Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, kind=scene.kind, threads=2)
+        r = Optimization(scene, cfg.for_scene(scene.kind), threads=2)
         x0 = r.x.copy()
         r.run()
         runs[smooth] = (x0, r)
@@ -502,20 +497,15 @@ def test_settings_left_to_the_scene_kind():
         OptimizeConfig().for_scene("torus")
     scene = small_chart_scene(12, 8, 0.3)
     cfg = OptimizeConfig(iterations=8, spp=4, forward_spp=16)
-    runs = {
-        kind: Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, threads=2, kind=kind)
-        for kind in ("slab", "mesh")
-    }
+    runs = {kind: Optimization(scene, cfg.for_scene(kind), threads=2) for kind in ("slab", "mesh")}
     assert runs["slab"].config_key() != runs["mesh"].config_key()
     # checkpoints made when 0.8 and 1.5 were every scene's defaults still resume on slabs; an integer spelling of a
     # setting (``--set smooth=3``) gives the default's key
-    old = Optimization(
-        scene.volume, scene.texels, scene.target_rgb, replace(cfg, adjoint_ema=0.8, smooth=1.5), threads=2, kind="slab"
-    )
+    old = Optimization(scene, replace(cfg, adjoint_ema=0.8, smooth=1.5).for_scene("slab"), threads=2)
     assert old.config_key() == runs["slab"].config_key()
-    spelled = Optimization(
-        scene.volume, scene.texels, scene.target_rgb, replace(cfg, smooth=3, adjoint_ema=0.5), threads=2, kind="mesh"
-    )
+    spelled = Optimization(scene, replace(cfg, smooth=3, adjoint_ema=0.5).for_scene("mesh"), threads=2)
+    with pytest.raises(ValueError, match="resolved"):  # one configuration: the run reads the settings it is given
+        Optimization(scene, cfg, threads=2)
     assert spelled.config_key() == runs["mesh"].config_key()
     for kind, r in runs.items():
         ema, smooth = SCENE_DEFAULTS[kind]["adjoint_ema"], SCENE_DEFAULTS[kind]["smooth"]

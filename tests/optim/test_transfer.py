@@ -4,7 +4,7 @@ part, so a run's own result restarts it where it ended."""
 
 import numpy as np
 import pytest
-from helpers import SPOT
+from helpers import SPOT, with_fixed_shares
 
 from inkopt.model import FixedShares, InkTable, Volume
 from inkopt.optim import Optimization, OptimizeConfig, Parameterization
@@ -32,12 +32,7 @@ def constrained(shape) -> FixedShares:
 
 def start_of(scene, fixed, path) -> np.ndarray:
     run = Optimization(
-        scene.volume,
-        scene.texels,
-        scene.target_rgb,
-        OptimizeConfig(init=str(path), iterations=1),
-        kind=scene.kind,
-        fixed_share=fixed,
+        with_fixed_shares(scene, fixed), OptimizeConfig(init=str(path), iterations=1).for_scene(scene.kind)
     )
     return run.initial_volume().mixture
 
@@ -92,12 +87,13 @@ def test_a_coarse_mesh_result_covers_every_fine_free_voxel(tmp_path):
     """Spot at 150 and 300 DPI (different origins and shells): a constant coarse mixture reaches every free voxel
     of the fine grid, including the surface voxels the coarse grid does not hold."""
     from inkopt.scenes.mesh import build_mesh_scene
+    from inkopt.scenes.spec import MeshSpec
 
     if not SPOT.is_file():
         pytest.skip(f"{SPOT} is not there")
     inks = InkTable.parse("vero-cmykw")
-    coarse = build_mesh_scene(SPOT, inks, height_mm=3.0, dpi=150)
-    fine = build_mesh_scene(SPOT, inks, height_mm=3.0, dpi=300)
+    coarse = build_mesh_scene(MeshSpec(SPOT, height_mm=3.0, dpi=150), inks)
+    fine = build_mesh_scene(MeshSpec(SPOT, height_mm=3.0, dpi=300), inks)
     row = np.array([0.1, 0.2, 0.3, 0.05, 0.35], np.float32)
     src = Volume.from_mixture(
         coarse.volume.voxel_mm,

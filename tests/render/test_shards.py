@@ -91,20 +91,13 @@ def test_ray_shards_equal_one_machine():
 
     scene = chart_scene()
     cfg = OptimizeConfig(iterations=3, spp=2, forward_spp=4)
-    plain = Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, kind=scene.kind, threads=2)
+    cfg = cfg.for_scene(scene.kind)
+    plain = Optimization(scene, cfg, threads=2)
     plain.run()
     shards = RayShards("auto", workers=2, threads=1, num_cpus=2)
     try:
         assert [hi - lo for lo, hi in shards.renderer(scene.volume)._bounds(len(scene.texels))] == [48, 48]
-        sharded = Optimization(
-            scene.volume,
-            scene.texels,
-            scene.target_rgb,
-            cfg,
-            kind=scene.kind,
-            threads=2,
-            renderer_factory=shards.renderer,
-        )
+        sharded = Optimization(scene, cfg, threads=2, renderer_factory=shards.renderer)
         sharded.run()
         np.testing.assert_array_equal(sharded.x, plain.x)
         assert sharded.history.loss == plain.history.loss
@@ -123,22 +116,21 @@ def test_ray_shards_equal_one_machine_on_a_mesh(tmp_path):
 
     from inkopt.distributed import RayShards
     from inkopt.scenes.mesh import build_mesh_scene
+    from inkopt.scenes.spec import MeshSpec
 
     sph = trimesh.creation.icosphere(subdivisions=3, radius=0.6)
     colours = np.where(sph.vertices[:, 2:3] > 0, [[0, 200, 230, 255]], [[230, 0, 160, 255]]).astype(np.uint8)
     trimesh.Trimesh(sph.vertices, sph.faces, vertex_colors=colours, process=False).export(tmp_path / "ball.ply")
-    scene = build_mesh_scene(tmp_path / "ball.ply", InkTable.parse("vero-cmykw"), scale=1.0, up="z", shell_mm=0.2)
+    spec = MeshSpec(tmp_path / "ball.ply", scale=1.0, up="z", shell_mm=0.2)
+    scene = build_mesh_scene(spec, InkTable.parse("vero-cmykw"))
     assert 0 < scene.free.sum() < scene.vox.inside.sum()
-    cfg = OptimizeConfig(iterations=2, spp=2, forward_spp=4)
-    args = (scene.volume, scene.vox.texels, scene.vox.targets, cfg)
-    plain = Optimization(*args, kind="mesh", fixed_share=scene.fixed_share, threads=2)
+    cfg = OptimizeConfig(iterations=2, spp=2, forward_spp=4).for_scene("mesh")
+    plain = Optimization(scene, cfg, threads=2)
     plain.run()
     assert plain.history.loss[-1] != plain.history.loss[0]
     shards = RayShards("auto", workers=2, threads=1, num_cpus=2)
     try:
-        sharded = Optimization(
-            *args, kind="mesh", fixed_share=scene.fixed_share, threads=2, renderer_factory=shards.renderer
-        )
+        sharded = Optimization(scene, cfg, threads=2, renderer_factory=shards.renderer)
         sharded.run()
         np.testing.assert_array_equal(sharded.x, plain.x)
         assert sharded.history.loss == plain.history.loss

@@ -6,8 +6,10 @@ import pytest
 import trimesh
 
 from inkopt.cli import main
+from inkopt.cli.common import flag_of
 from inkopt.model import InkTable
 from inkopt.scenes.mesh import build_mesh_scene, load_mesh
+from inkopt.scenes.spec import MeshSpec
 
 INKS = InkTable.parse("vero-cmykw")
 
@@ -23,8 +25,9 @@ def coloured_ball(path, drop_faces=0):
 def test_a_400_mm_object_names_the_memory_and_the_dpi(tmp_path):
     ball = coloured_ball(tmp_path / "ball.ply")
     with pytest.raises(ValueError) as e:
-        build_mesh_scene(ball, INKS, height_mm=400.0, up="z")
-    msg = str(e.value)
+        build_mesh_scene(MeshSpec(ball, height_mm=400.0, up="z"), INKS)
+    msg = e.value.render(flag_of)  # as the command line prints it
+    assert "height_mm" in str(e.value) and "--height-mm" in msg
     assert "\n" not in msg and "np.int64" not in msg
     assert "400 x 400 x 400 mm at 300 DPI" in msg and "GiB" in msg and "--dpi" in msg
     dpi = int(msg.split("--dpi ")[1].split()[0])
@@ -54,5 +57,5 @@ def test_a_mesh_with_a_small_hole_is_noted(tmp_path):
     assert whole.warnings == []
     holed = load_mesh(coloured_ball(tmp_path / "holed.ply", drop_faces=1), scale=1.0, up="z")
     assert len(holed.warnings) == 1 and "3 open edges" in holed.warnings[0]
-    scene = build_mesh_scene(tmp_path / "holed.ply", INKS, scale=1.0, up="z")
+    scene = build_mesh_scene(MeshSpec(tmp_path / "holed.ply", scale=1.0, up="z"), INKS)
     assert scene.warnings == holed.warnings

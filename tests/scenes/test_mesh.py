@@ -169,9 +169,9 @@ def test_spot_loads_and_voxelizes():
 
 def test_argument_errors():
     sph = trimesh.creation.icosphere(subdivisions=2)
-    with pytest.raises(ValueError, match="exactly one of --height-mm H .* and --scale S"):
+    with pytest.raises(ValueError, match="exactly one of height_mm H .* and scale S"):
         mesh_from_trimesh(sph)
-    with pytest.raises(ValueError, match="exactly one of --height-mm H .* and --scale S"):
+    with pytest.raises(ValueError, match="exactly one of height_mm H .* and scale S"):
         mesh_from_trimesh(sph, height_mm=5, scale=1)
     with pytest.raises(ValueError, match="does not exist"):
         load_mesh("/nonexistent/mesh.obj", height_mm=5)

@@ -9,9 +9,11 @@ import pytest
 import trimesh
 
 from inkopt import charts
+from inkopt.cli.common import flag_of
+from inkopt.errors import ParameterError
 from inkopt.model import InkTable
-from inkopt.scenes.mesh import build_mesh_scene
-from inkopt.scenes.slab import load_slab
+from inkopt.scenes import build_scene
+from inkopt.scenes.slab import build_slab, load_picture
 from inkopt.scenes.spec import MeshSpec, SlabSpec, spec_from_json
 
 INKS = InkTable.parse("vero-cmykw")
@@ -50,24 +52,28 @@ def test_frozen_picklable_and_json_round_trip(chart, ball):
 @pytest.mark.parametrize(
     "spec, message",
     [
-        (lambda c, b: MeshSpec(b), "exactly one of --height-mm H"),
-        (lambda c, b: MeshSpec(b, height_mm=1, scale=1), "exactly one of --height-mm H"),
-        (lambda c, b: MeshSpec(b, height_mm=-1), "--height-mm must be positive"),
-        (lambda c, b: MeshSpec(b, height_mm=1, shell_mm=0), "--shell-mm must be a positive thickness"),
-        (lambda c, b: MeshSpec(b, height_mm=1, up="x"), "--up must be one of"),
+        (lambda c, b: MeshSpec(b), "exactly one of height_mm H"),
+        (lambda c, b: MeshSpec(b, height_mm=1, scale=1), "exactly one of height_mm H"),
+        (lambda c, b: MeshSpec(b, height_mm=-1), "height_mm must be positive"),
+        (lambda c, b: MeshSpec(b, height_mm=1, shell_mm=0), "shell_mm must be a positive thickness"),
+        (lambda c, b: MeshSpec(b, height_mm=1, up="x"), "up must be one of"),
         (lambda c, b: MeshSpec(b, height_mm=1, dpi=0), "dpi must be positive"),
         (lambda c, b: MeshSpec(str(b) + ".missing", height_mm=1), "does not exist"),
-        (lambda c, b: SlabSpec(c, (2, 1, -1)), "--size-mm sizes must be three positive numbers"),
+        (lambda c, b: SlabSpec(c, (2, 1, -1)), "size_mm sizes must be three positive numbers"),
         (lambda c, b: SlabSpec(str(c) + ".missing", (2, 1, 1)), "picture"),
-        (lambda c, b: SlabSpec(c, (2, 1, 1), translucency_depth_mm=0.2), "needs --translucency"),
+        (lambda c, b: SlabSpec(c, (2, 1, 1), translucency_depth_mm=0.2), "needs translucency"),
         (lambda c, b: SlabSpec(c, (2, 1, 1), translucency=c, translucency_depth_mm=-1), "positive depth"),
         (lambda c, b: SlabSpec(c, (2, 1, 1), translucency="alpha"), "translucency mask alpha does not exist"),
     ],
 )
 def test_one_line_errors(chart, ball, spec, message):
+    """In Python the errors name the parameters; on the command line the same errors name their flags."""
     with pytest.raises(ValueError, match=message) as err:
         spec(chart, ball).validate()
     assert "\n" not in str(err.value)
+    if isinstance(err.value, ParameterError) and err.value.parameters:
+        flags = err.value.render(flag_of)
+        assert all(flag_of(name) in flags for name in err.value.parameters) and "_" not in flags.split()[0]
 
 
 def test_ink_set_checks(chart, ball):
@@ -77,15 +83,18 @@ def test_ink_set_checks(chart, ball):
         MeshSpec(ball, height_mm=1).validate(InkTable.parse("cyan,magenta,yellow,black"))
 
 
-def test_build_equals_the_scene_modules(chart, ball):
-    a = SlabSpec(chart, (2, 4 / 3, 0.5), chart).build(INKS)
-    b = load_slab(chart, chart, (2, 4 / 3, 0.5), INKS)
+def test_build_scene_reads_the_spec(chart, ball):
+    """``build_scene`` builds a slab from the spec's picture files as ``build_slab`` does from the pictures, and a
+    mesh spec into a mesh scene with its shell; a bad spec is refused before anything is read."""
+    a = build_scene(SlabSpec(chart, (2, 4 / 3, 0.5), chart), INKS)
+    pic = load_picture(chart)
+    b = build_slab(pic, pic, (2, 4 / 3, 0.5), INKS)
     np.testing.assert_array_equal(a.target_rgb, b.target_rgb)
-    assert a.volume.shape == b.volume.shape and a.faces == b.faces
-    m = MeshSpec(ball, height_mm=1, up="z", shell_mm=0.2).build(INKS)
-    n = build_mesh_scene(ball, INKS, 1.0, None, 0.2, up="z")
-    np.testing.assert_array_equal(m.target_rgb, n.target_rgb)
-    np.testing.assert_array_equal(m.free, n.free)
+    assert a.volume.shape == b.volume.shape and a.faces == b.faces and "chart.png" in a.describe()
+    m = build_scene(MeshSpec(ball, height_mm=1, up="z", shell_mm=0.2), INKS)
+    assert m.kind == "mesh" and 0 < m.free.sum() < m.vox.inside.sum()
+    with pytest.raises(ValueError, match="shell_mm"):
+        build_scene(MeshSpec(str(ball) + ".missing", height_mm=1, shell_mm=-1), INKS)
 
 
 def test_a_slab_too_large_for_the_machine_is_refused_before_anything_is_read(tmp_path):
@@ -97,6 +106,7 @@ def test_a_slab_too_large_for_the_machine_is_refused_before_anything_is_read(tmp
     with pytest.raises(VolumeError) as e:
         spec.validate()
     msg = str(e.value)
+    msg = e.value.render(flag_of)  # as the command line prints it
     assert "\n" not in msg and "3000 x 2000 x 1000 mm at 300 DPI" in msg and "--size-mm" in msg
     dpi = int(msg.split("--dpi ")[1].split()[0])
     with pytest.raises(ValueError, match="does not exist"):  # at the suggested DPI only the missing picture is left

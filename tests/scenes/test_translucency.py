@@ -13,6 +13,7 @@ from inkopt.model import InkTable, Volume
 from inkopt.rundir import RunDir, SceneRecord
 from inkopt.scenes.mesh import build_mesh_scene
 from inkopt.scenes.slab import build_slab
+from inkopt.scenes.spec import MeshSpec
 from inkopt.scenes.translucency import load_mask
 
 INKS = InkTable.parse("vero-cmykwt")
@@ -119,9 +120,8 @@ def _alpha_cube(tmp_path, side=1.0):
 def test_mesh_alpha_depth_and_core(tmp_path):
     path = _alpha_cube(tmp_path)
     vox = 25.4 / 300
-    sc = build_mesh_scene(
-        path, INKS, scale=1.0, up="z", shell_mm=2 * vox, translucency="alpha", translucency_depth_mm=4 * vox
-    )
+    spec = MeshSpec(path, scale=1.0, up="z", shell_mm=2 * vox, translucency="alpha", translucency_depth_mm=4 * vox)
+    sc = build_mesh_scene(spec, INKS)
     g = sc.translucency.grid()
     inside = sc.vox.inside
     assert np.all(g[~inside] == 0)
@@ -151,20 +151,21 @@ def test_mesh_alpha_depth_and_core(tmp_path):
 
 def test_mesh_texture_mask_and_errors(tmp_path):
     path = _alpha_cube(tmp_path)
-    m = np.zeros((8, 8), np.float32)
-    m[:, 4:] = 0.6  # the top face's texels
-    sc = build_mesh_scene(path, INKS, scale=1.0, up="z", translucency=m)
+    m = np.zeros((8, 8), np.uint8)
+    m[:, 4:] = 153  # the top face's texels: a share of 153 / 255 = 0.6
+    Image.fromarray(m).save(tmp_path / "mask.png")
+    sc = build_mesh_scene(MeshSpec(path, scale=1.0, up="z", translucency=tmp_path / "mask.png"), INKS)
     ts = sc.translucency.texel_share(sc.vox.texels)
     up = sc.vox.texels.normal[:, 2] > 0.9
     assert np.all(ts[up] == pytest.approx(0.6)) and np.median(ts[~up]) == 0
     with pytest.raises(ValueError, match="transparent ink"):
-        build_mesh_scene(path, InkTable.parse("vero-cmykw"), scale=1.0, translucency="alpha")
+        build_mesh_scene(MeshSpec(path, scale=1.0, translucency="alpha"), InkTable.parse("vero-cmykw"))
     sph = tmp_path / "ball.ply"
     trimesh.creation.icosphere(subdivisions=2, radius=0.5).export(sph)
     with pytest.raises(ValueError, match="no texture, vertex colours or face colours"):
-        build_mesh_scene(sph, INKS, scale=1.0, translucency="alpha")
+        build_mesh_scene(MeshSpec(sph, scale=1.0, translucency="alpha"), INKS)
     with pytest.raises(ValueError, match="no uv coordinates"):
-        build_mesh_scene(sph, INKS, scale=1.0, translucency="alpha", constant_color=True)
+        build_mesh_scene(MeshSpec(sph, scale=1.0, translucency="alpha", constant_color=True), INKS)
 
 
 # ------------------------------------------------------------------------------------------------ CLI

@@ -8,6 +8,7 @@ import numpy as np
 
 from ..calibration import calibrate
 from ..calibration.calibrate import output_paths
+from .common import add_seed_arg
 
 
 def _calibrate_cmd(args) -> int:
@@ -53,6 +54,6 @@ def register_cli(sub) -> None:
     )
     p.add_argument("--illuminant", default="D50", help="D50 (default, as instruments report) or D65")
     p.add_argument("--holdout", type=float, default=0.2, help="share of patches held out to test the fit (default 0.2)")
-    p.add_argument("--seed", type=int, default=0, help="draw of the held-out patches (default 0)")
+    add_seed_arg(p, "draw of the held-out patches")
     p.add_argument("--fixed-g", action="store_true", help="keep g at the starting table's value")
     p.set_defaults(func=_calibrate_cmd)

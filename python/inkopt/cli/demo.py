@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .common import add_threads_arg
+
 DEMO_TABLE_STEP = 4  # the baselines' colour table at 1/4 steps of ink share (70 patches: seconds, not minutes)
 DEMO_EVAL_SPP = 128  # samples per texel of the demo's evaluations (the noise is said on the page)
 
@@ -22,7 +24,8 @@ def _demo(args) -> int:
     from ..optim import OptimizeConfig
     from ..proof import write_proof
     from ..render import render
-    from ..run import run_optimisation
+    from ..run import RunOptions, run_optimisation
+    from ..scenes import build_scene
     from ..scenes.spec import MeshSpec, SlabSpec
     from ..units import voxel_mm
 
@@ -64,24 +67,20 @@ def _demo(args) -> int:
     print(
         f"[2/3] optimising a 6 x 4 x 1 mm slab: {top.name} on top, {bottom.name} below, {cfg.iterations} iterations ..."
     )
-    scene = SlabSpec(top, (6.0, 4.0, 1.0), bottom).build(inks)
-    progress = sys.stderr.isatty()
-    run = out / "slab"
-    rep = run_optimisation(
-        scene, run, cfg, progress=progress, log=say, resume=True, eval_spp=DEMO_EVAL_SPP, threads=args.threads
+    scene = build_scene(SlabSpec(top, (6.0, 4.0, 1.0), bottom), inks)
+    options = RunOptions(
+        resume=True, eval_spp=DEMO_EVAL_SPP, threads=args.threads, progress=sys.stderr.isatty(), log=say
     )
-    finish(run, rep)
+    run = out / "slab"
+    finish(run, run_optimisation(scene, run, cfg, options))
 
     # 3. Optimise Spot, a textured mesh, at a small size.
     with resources.as_file(resources.files("inkopt").joinpath("data", "spot", "spot.obj")) as spot:
         cfg = OptimizeConfig(iterations=args.mesh_iterations, seed=0)
         print(f"[3/3] optimising Spot, {args.mesh_height_mm:g} mm high, {cfg.iterations} iterations ...")
-        scene = MeshSpec(spot, height_mm=args.mesh_height_mm).build(inks)
+        scene = build_scene(MeshSpec(spot, height_mm=args.mesh_height_mm), inks)
         run = out / "spot"
-        rep = run_optimisation(
-            scene, run, cfg, progress=progress, log=say, resume=True, eval_spp=DEMO_EVAL_SPP, threads=args.threads
-        )
-        finish(run, rep)
+        finish(run, run_optimisation(scene, run, cfg, options))
     print("open in a browser (3D view, swipe, ΔE76 maps, figures): " + "  ".join(pages))
     return 0
 
@@ -94,5 +93,5 @@ def register_cli(sub) -> None:
     p.add_argument("--iterations", type=int, default=100, help="iterations of the slab (default 100)")
     p.add_argument("--mesh-iterations", type=int, default=40, help="iterations of the mesh (default 40)")
     p.add_argument("--mesh-height-mm", type=float, default=6.0, help="height of the mesh (default 6 mm)")
-    p.add_argument("--threads", type=int, help="worker threads (default: all cores)")
+    add_threads_arg(p)
     p.set_defaults(func=_demo)

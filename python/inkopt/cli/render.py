@@ -7,7 +7,7 @@ import json
 import numpy as np
 
 from ..io import load_array
-from .common import UsageError, add_lighting_args, lighting_from_args
+from .common import UsageError, add_lighting_args, add_seed_arg, add_threads_arg, lighting_from_args
 
 
 def _render(args) -> int:
@@ -90,7 +90,7 @@ def register_cli(sub) -> None:
     )
     r.add_argument("file", help="volume .npz (see inkopt.model.volume for the format)")
     r.add_argument("--spp", type=int, default=16, help="samples per texel and channel (default 16)")
-    r.add_argument("--seed", type=int, default=0)
+    add_seed_arg(r, "render seed")
     r.add_argument("--face", help="only texels of this face: top, bottom, left, right, front, back (or +z, -x, ...)")
     r.add_argument("--json", action="store_true", help="print one JSON object on stdout, no progress bar")
     r.add_argument("--out", help="write per-texel positions, normals, linear RGB (and gradients) to this .npz")
@@ -102,6 +102,6 @@ def register_cli(sub) -> None:
         help="gradient estimator: unbiased path replay (default) or the biased one-pass L_i = 1",
     )
     r.add_argument("--no-specular", action="store_true", help="exclude the specular reflection of the environment")
-    r.add_argument("--threads", type=int, help="worker threads (default: all cores; results do not depend on it)")
+    add_threads_arg(r)
     add_lighting_args(r)
     r.set_defaults(func=_render)

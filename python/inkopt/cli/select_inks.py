@@ -2,32 +2,24 @@
 
 from __future__ import annotations
 
-import argparse
 from dataclasses import replace
 
-from .common import (
-    add_mesh_args,
-    add_optimizer_args,
-    add_translucency_args,
-    config_from_args,
-    mesh_spec_from_args,
-    slab_spec_from_args,
-    stderr_log,
-)
+from .common import UsageError, add_inks_arg, add_mesh_args, add_ray_arg, add_translucency_args, stderr_log
+from .runargs import add_optimizer_args, config_from_args, mesh_spec_from_args, slab_spec_from_args
 
 
 def _target(args):
     """The target's spec: a slab (``--size-mm``) or a mesh (``--height-mm`` or ``--scale``)."""
     mesh = args.height_mm is not None or args.scale is not None
     if (args.size_mm is None) == (not mesh):
-        raise ValueError(
+        raise UsageError(
             "give exactly one of --size-mm WxHxD (TARGET is a picture: a slab) and --height-mm H "
             "(TARGET is a textured mesh; or --scale S)"
         )
     if mesh:
         return mesh_spec_from_args(args, args.target)
     if args.shell_mm is not None:
-        raise ValueError("--shell-mm is for a mesh target; a slab is optimised through its whole depth")
+        raise UsageError("--shell-mm is for a mesh target; a slab is optimised through its whole depth")
     return slab_spec_from_args(args, args.target)
 
 
@@ -35,9 +27,9 @@ def _select(args) -> int:
     from ..inksets import Selection, make_backend, run_selection
 
     if args.inks is not None:
-        raise ValueError("select-inks takes the inks from --candidates and --always, not --inks")
+        raise UsageError("select-inks takes the inks from --candidates and --always, not --inks")
     if str(args.lighting).lower() != "uniform" or args.lighting_rotate:
-        raise ValueError("select-inks ranks ink sets under uniform light only; --lighting is not supported here")
+        raise UsageError("select-inks ranks ink sets under uniform light only; --lighting is not supported here")
     sel = Selection(
         _target(args),
         args.candidates,
@@ -106,13 +98,7 @@ def register_cli(sub) -> None:
     )
     ex = p.add_mutually_exclusive_group()
     ex.add_argument("--workers", type=int, help="runs at once in a local process pool")
-    ex.add_argument(
-        "--ray",
-        metavar="auto|ADDRESS",
-        help="run on Ray: 'auto' starts a local instance, ADDRESS joins a cluster (pip install 'inkopt[ray]')",
-    )
-    add_optimizer_args(p, single_run=False)
-    for a in p._actions:
-        if a.dest == "inks":
-            a.default, a.help = None, argparse.SUPPRESS
+    add_ray_arg(ex, "run on Ray")
+    add_inks_arg(p, hidden=True)
+    add_optimizer_args(p)
     p.set_defaults(func=_select)

@@ -2,25 +2,13 @@
 
 from __future__ import annotations
 
-from ..units import parse_duration
-from .common import (
-    add_optimizer_args,
-    add_ray_arg,
-    add_translucency_args,
-    print_run_summary,
-    run_from_args,
-    slab_spec_from_args,
-)
+from .runargs import add_run_args, run_command, slab_spec_from_args
 
 
 def _slab(args) -> int:
-    rep = run_from_args(args, slab_spec_from_args(args, args.top))
-    if args.dry_run:
-        print(rep.line(parse_duration(args.time_budget) if args.time_budget else None))
-        return 0
-    print_run_summary(rep, rep.init)
-    print(f"pictures: {args.out}/face_*.png, {args.out}/loss.png; report: {args.out}/report.json")
-    return 0
+    return run_command(
+        args, slab_spec_from_args(args, args.top), f"pictures: {args.out}/face_*.png, {args.out}/loss.png"
+    )
 
 
 def register_cli(sub) -> None:
@@ -33,8 +21,5 @@ def register_cli(sub) -> None:
     p.add_argument("top", metavar="TOP_IMAGE", help="picture of the top face (sRGB)")
     p.add_argument("--bottom", metavar="IMAGE", help="picture of the bottom face (seen from below, like a page's back)")
     p.add_argument("--size-mm", required=True, help="WxHxD in mm, e.g. 15x10x2.5 (must match the picture's aspect)")
-    p.add_argument("--out", required=True, metavar="DIR", help="run directory (see docs/run-dir.md)")
-    add_translucency_args(p)
-    add_optimizer_args(p)
-    add_ray_arg(p)
+    add_run_args(p, translucency="slab")
     p.set_defaults(func=_slab)

@@ -44,20 +44,16 @@ def run_candidate(task: dict) -> dict:
     every iteration from the start) and the final prediction (I, 3)."""
     from ..model import InkTable
     from ..optim import OptimizeConfig
-    from ..run import run_optimisation
+    from ..run import RunOptions, run_optimisation
+    from ..scenes import build_scene
 
     inks = InkTable.from_names(task["inks"])
     cfg = OptimizeConfig(**{**task["cfg"], "gamma": tuple(task["cfg"]["gamma"])})
-    scene = _Capture(task["spec"].build(inks))
-    rep = run_optimisation(
-        scene,
-        task["out"],
-        cfg,
-        resume=task["resume"],
-        eval_spp=task["eval_spp"],
-        threads=task["threads"],
-        log=lambda msg: None,
+    scene = _Capture(build_scene(task["spec"], inks))
+    options = RunOptions(
+        resume=task["resume"], eval_spp=task["eval_spp"], threads=task["threads"], log=lambda msg: None
     )
+    rep = run_optimisation(scene, task["out"], cfg, options)
     m = rep.metrics
     out = {
         "loss": m.loss,

@@ -10,13 +10,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import ParameterError
 from .inks import InkTable
 
 EMPTY = 255  # the label of a voxel without ink
 
 
-class VolumeError(ValueError):
-    """A volume that cannot be rendered; the message is one line naming the problem."""
+class VolumeError(ParameterError):
+    """A volume that cannot be rendered or held; the message is one line naming the problem (and the parameters
+    that would change it, in backticks: ``errors.ParameterError``)."""
 
 
 # ----------------------------------------------------------------------------------------- medium forms

@@ -46,7 +46,7 @@ def check_grid_budget(what: str, size_mm, dpi: float, bytes_per_voxel: float, sm
     """One-line VolumeError, before anything is built, for an object of ``size_mm`` (x, y, z) whose grid at ``dpi``
     has more than ``MAX_GRID_VOXELS`` voxels or needs more than ``MAX_VOLUME_BYTES`` (INKOPT_MAX_VOLUME_BYTES) at
     ``bytes_per_voxel`` (a lower bound of the memory per grid voxel). It names ``what``, the grid, the memory, the
-    --dpi that would fit and ``smaller`` (the option that makes the object smaller)."""
+    ``dpi`` that would fit and ``smaller`` (the parameter that makes the object smaller)."""
     size = np.asarray(size_mm, np.float64)
     n = np.maximum(np.ceil(size / (25.4 / dpi)), 1)
     voxels, need = float(np.prod(n)), float(np.prod(n)) * bytes_per_voxel
@@ -58,7 +58,7 @@ def check_grid_budget(what: str, size_mm, dpi: float, bytes_per_voxel: float, sm
         f"{what}: {size[0]:.0f} x {size[1]:.0f} x {size[2]:.0f} mm at {dpi:g} DPI is a grid of "
         f"{int(n[0])} x {int(n[1])} x {int(n[2])} voxels ({voxels:.2g}), which needs at least "
         f"{need / 2**30:.0f} GiB (limit {limit / 2**30:.0f} GiB, INKOPT_MAX_VOLUME_BYTES and 2^31 voxels); use "
-        f"--dpi {np.floor(fit):.0f} or less, or a smaller {smaller}"
+        f"`dpi` {np.floor(fit):.0f} or less, or a smaller `{smaller}`"
     )
 
 
@@ -167,7 +167,7 @@ class Volume:
             raise VolumeError(
                 f"volume {' x '.join(str(int(v)) for v in shp)} (z, y, x) needs {need / 2**30:.1f} GiB to render, "
                 f"more than the {MAX_VOLUME_BYTES / 2**30:.1f} GiB allowed (INKOPT_MAX_VOLUME_BYTES); use a coarser "
-                f"grid (--dpi) or a smaller object"
+                f"grid (`dpi`) or a smaller object"
             )
 
     def render_bytes(self) -> int:

@@ -53,8 +53,12 @@ COLD_INITS = ("white", "random")
 WARM_LR_FACTOR = 0.25
 
 
-@dataclass
+@dataclass(frozen=True)
 class OptimizeConfig:
+    """Every setting of an optimisation run (frozen). Settings left to the scene kind are None until
+    ``for_scene(kind)`` resolves them; ``Optimization`` takes a resolved config only (``resolved``), so a run has one
+    configuration, read-only."""
+
     #: with the step decay, the zebra chart and the astronaut photograph gain 0.3 and 0.55 mean ΔE76 from 200 to 300
     #: iterations (experiments/results/convergence_{zebra,astronaut}.json); the reference slab's 300 take ~4 min
     #: on 2 cores (experiments/results/printable.json)
@@ -174,6 +178,14 @@ class OptimizeConfig:
             k: type(v)(v if getattr(self, k) is None else getattr(self, k)) for k, v in SCENE_DEFAULTS[kind].items()
         }
         return replace(self, **resolved)
+
+    @property
+    def resolved(self) -> bool:
+        """Whether the settings left to the scene kind are set, in their defaults' types (``for_scene``)."""
+        return all(
+            type(getattr(self, k)) is type(v)  # noqa: E721 (int 3 and float 3.0 give different checkpoint keys)
+            for k, v in SCENE_DEFAULTS["slab"].items()
+        )
 
     @property
     def schedule_length(self) -> int:

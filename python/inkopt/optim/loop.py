@@ -26,8 +26,9 @@ import numpy as np
 from ..color import delta_e76
 from ..lighting import Lighting, load_lighting
 from ..loss import TexelLoss
-from ..model import FixedShares, Texels, Volume, mix_grad
+from ..model import FixedShares, Volume, mix_grad
 from ..render import Renderer
+from ..scenes import Scene
 from .checkpoint import History, read_checkpoint, write_checkpoint
 from .config import COLD_INITS, OptimizeConfig
 from .optimizers import make_optimizer, step_factor
@@ -47,42 +48,41 @@ def iteration_seeds(seed: int, it: int) -> tuple[int, int]:
 
 
 class Optimization:
-    """An optimisation run over a volume's mixture.
+    """An optimisation run over a scene's mixture.
 
-    base: a mixture Volume giving the geometry and ink table (its mixture is ignored); texels and target_rgb
-    (I, 3) linear; fixed_share: the (z, y, x, N) fixed ink shares (``model.FixedShares``) or None (none);
-    ``baseline(kind)`` -> (z, y, x, N) mixture of a print-shop baseline (an array, or its layers:
-    ``evaluation.baselines.baseline_layers``), needed only for ``cfg.init`` "surface" or "extrusion" (the run
-    driver supplies it);
-    ``lighting``: the display lighting the prediction is rendered under (``inkopt.lighting``; default uniform).
-    ``renderer_factory(volume, threads, lighting)``: what renders (default ``Renderer``; e.g. texel shards on Ray,
-    ``inkopt.distributed.RayShards.renderer``, with identical results). ``kind`` (required, keyword): the scene's
-    kind ("slab" or "mesh"), which sets what ``cfg`` leaves to it (``OptimizeConfig.for_scene``); ``self.cfg`` is the
-    resolved one.
+    ``scene``: what is optimised (``scenes.Scene``: its base ``volume`` gives the geometry and ink table (its
+    medium is ignored), ``texels``, ``target_rgb`` (I, 3) linear and ``fixed_share``, the (z, y, x, N) fixed ink
+    shares, ``model.FixedShares`` or None). ``cfg``: the run's settings, resolved for the scene's kind
+    (``OptimizeConfig.for_scene``), read as they are. ``baseline(kind)`` -> (z, y, x, N) mixture of a print-shop
+    baseline (an array, or its layers: ``evaluation.baselines.baseline_layers``), needed only for ``cfg.init``
+    "surface" or "extrusion" (the run driver supplies it); ``lighting``: the display lighting the prediction is
+    rendered under (``inkopt.lighting``; default uniform). ``renderer_factory(volume, threads, lighting)``: what
+    renders (default ``Renderer``; e.g. texel shards on Ray, ``inkopt.distributed.RayShards.renderer``, with
+    identical results). ``started``: when this invocation began (``time.perf_counter()``; default now), from which
+    the run's wall time counts.
     """
 
     def __init__(
         self,
-        base: Volume,
-        texels: Texels,
-        target_rgb: np.ndarray,
+        scene: Scene,
         cfg: OptimizeConfig,
         *,
-        kind: str,
-        fixed_share: FixedShares | None = None,
         threads: int | None = None,
         baseline: Callable[[str], np.ndarray] | None = None,
         lighting: Lighting | str | None = None,
         renderer_factory: Callable[..., Renderer] | None = None,
+        started: float | None = None,
     ):
-        cfg = cfg.for_scene(kind)  # settings left to the scene kind ("slab" or "mesh": config.SCENE_DEFAULTS)
+        if not cfg.resolved:
+            raise ValueError(f"the settings must be resolved for a {scene.kind} first: cfg.for_scene({scene.kind!r})")
         cfg.validate()
+        base, texels, fixed_share = scene.volume, scene.texels, scene.fixed_share
         self.renderer_factory = renderer_factory or Renderer
         self.lighting = load_lighting(lighting)
         if base.inks is None:
             raise ValueError("the volume needs an ink table")
         self.base, self.texels, self.cfg, self.threads, self.baseline = base, texels, cfg, threads, baseline
-        self.target = np.asarray(target_rgb, np.float32)
+        self.target = np.asarray(scene.target_rgb, np.float32)
         if fixed_share is None:
             fixed_share = FixedShares.none(base.shape, len(base.inks))
         self.param = Parameterization(cfg.param, fixed_share, threads)
@@ -94,32 +94,45 @@ class Optimization:
         self._problem_digest = h.hexdigest()[:16]
         self.x = self.param.variables_for(self._initial_free_mixture())
         self.opt = make_optimizer(cfg.optimizer, cfg.step_size, self.x.shape, threads)
-        self.smoother = None
-        if cfg.smooth > 0:
-            guide = rows = None
-            if cfg.smooth_edge > 0:  # guided: the free voxels under flat texels only, down to MAX_DEPTH
-                nearest, dist = nearest_texels(
-                    self.param.shape, self.param.free_index, texels.pos_vox, MAX_DEPTH, threads=threads
-                )
-                rows = np.flatnonzero((nearest >= 0) & self.loss.flat[nearest])
-                guide = texel_guide(self.loss.target_lab, nearest[rows], dist[rows])
-                del nearest, dist
-            self.smoother = GradientSmoother(
-                self.param.shape, self.param.free_index, cfg.smooth, guide, cfg.smooth_edge, rows, threads
-            )
+        self.smoother = self._smoother()
         self._renderer: Renderer | None = None
         self.iteration = 0
         self.history = History()
         self.schedule = Schedule.for_config(cfg)  # where the run ends (the step decay is planned for it)
-        # the start's evaluated figures (the run driver's; kept in the checkpoints so a resume need not render it)
+        # the start's evaluated figures (``keep_start_figures``; kept in the checkpoints so a resume need not
+        # render the start again)
         self.start_figures: dict | None = None
         # wall time of the run's earlier invocations (up to their last checkpoint) and this one's start
-        self.wall_seconds_before, self.invocation_start = 0.0, time.perf_counter()
+        self.wall_seconds_before = 0.0
+        self.invocation_start = time.perf_counter() if started is None else started
         self.c_avg: np.ndarray | None = None  # running average of the prediction (I, 3)
         self.c_weight = 0.0  # its effective number of samples per texel
         self.c_var: np.ndarray | None = None  # the variance of the running average (I, 3)
         #: the last step's render statistics (``RenderResult.stats()``: paths, events, seconds, ...) per pass
         self.last_passes: dict = {}
+
+    def _smoother(self) -> GradientSmoother | None:
+        """The step's spatial preconditioner (``cfg.smooth``; None when off), guided by the target's flat texels
+        down to ``MAX_DEPTH`` when ``cfg.smooth_edge`` is set."""
+        cfg, threads = self.cfg, self.threads
+        if not cfg.smooth > 0:
+            return None
+        guide = rows = None
+        if cfg.smooth_edge > 0:  # guided: the free voxels under flat texels only, down to MAX_DEPTH
+            nearest, dist = nearest_texels(
+                self.param.shape, self.param.free_index, self.texels.pos_vox, MAX_DEPTH, threads=threads
+            )
+            rows = np.flatnonzero((nearest >= 0) & self.loss.flat[nearest])
+            guide = texel_guide(self.loss.target_lab, nearest[rows], dist[rows])
+            del nearest, dist  # not beside the smoother's own arrays
+        return GradientSmoother(
+            self.param.shape, self.param.free_index, cfg.smooth, guide, cfg.smooth_edge, rows, threads
+        )
+
+    def keep_start_figures(self, figures: dict) -> None:
+        """Keep the start's evaluated figures (``delta_e76_mean``, ``ssim``, ``delta_e76_mean_corrected``,
+        ``eval_spp``) with the run: they are written into every later checkpoint."""
+        self.start_figures = dict(figures)
 
     def _release_unread_operators(self) -> None:
         """Free the loss's sparse operators when no step reads them (colour only: ~1 GiB at Spot 40 mm's 387 k

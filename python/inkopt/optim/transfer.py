@@ -157,16 +157,7 @@ def coarse_start(
     ``log``: progress lines of the coarse iterations; ``coarse_path``: also save the coarse result there (a mixture
     volume file on the coarse grid; not counted in ``transfer_seconds``)."""
     t0 = time.perf_counter()
-    run = Optimization(
-        coarse.volume,
-        coarse.texels,
-        coarse.target_rgb,
-        cfg,
-        kind=coarse.kind,
-        fixed_share=coarse.fixed_share,
-        threads=threads,
-        lighting=lighting,
-    )
+    run = Optimization(coarse, cfg.for_scene(coarse.kind), threads=threads, lighting=lighting)
     setup_s = time.perf_counter() - t0
     t0 = time.perf_counter()
     run.run(log=log, log_every_s=60.0)

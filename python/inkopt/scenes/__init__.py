@@ -7,7 +7,8 @@ It knows how to store itself (``record()`` -> the run directory's ``SceneRecord`
 the report, and which pictures show a prediction of it. The run driver (``inkopt.run``) needs nothing else, so a
 new kind of scene is a new module here plus its settings in ``optim.config.SCENE_DEFAULTS`` (the optimiser
 settings it leaves to the kind).
-A scene is made from the user's inputs through its spec (``spec.SlabSpec``, ``spec.MeshSpec``: ``build(inks)``).
+A scene is made from the user's inputs through its spec (``spec.SlabSpec``, ``spec.MeshSpec``):
+``build_scene(spec, inks)``.
 """
 
 from __future__ import annotations
@@ -17,8 +18,9 @@ from typing import Protocol
 
 import numpy as np
 
-from ..model import FixedShares, Texels, Volume
+from ..model import FixedShares, InkTable, Texels, Volume
 from ..rundir import RunDir, SceneRecord
+from .spec import SceneSpec
 
 
 class Scene(Protocol):
@@ -43,3 +45,16 @@ class Scene(Protocol):
 
     def write_pictures(self, out: RunDir, pred_rgb: np.ndarray, delta_e: np.ndarray) -> list[Path]:
         """Pictures of a prediction (I, 3) linear with per-texel ΔE76 (I,) in run directory ``out``."""
+
+
+def build_scene(spec: SceneSpec, inks: InkTable) -> Scene:
+    """The scene of ``spec``'s inputs for ink set ``inks``: the spec is checked first (``spec.validate(inks)``:
+    one-line errors before anything slow), then built by its kind's builder (a mesh is loaded and voxelized)."""
+    spec.validate(inks)
+    if spec.kind == "mesh":
+        from .mesh import build_mesh_scene  # the mesh modules only when a mesh is given
+
+        return build_mesh_scene(spec, inks)
+    from .slab import build_slab_scene
+
+    return build_slab_scene(spec, inks)

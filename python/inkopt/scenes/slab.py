@@ -18,11 +18,13 @@ from pathlib import Path
 import numpy as np
 
 from ..color import srgb_to_linear
+from ..errors import ParameterError
 from ..model import FixedShares, InkTable, Texels, Translucency, Volume, transparent_ink
 from ..pictures import error_figure
 from ..rundir import RunDir, SceneRecord
 from ..units import OPT_DPI, voxel_mm
 from .picture import picture_rgba, resample
+from .spec import SlabSpec
 from .translucency import check_depth, load_mask, slab_translucency, translucency_fields
 
 ASPECT_TOLERANCE = 0.02  # relative mismatch of picture and face aspect ratios allowed (resampling rounding)
@@ -125,10 +127,10 @@ def build_slab(
             continue
         aspect = pic.shape[1] / pic.shape[0]
         if abs(aspect / (w_mm / h_mm) - 1.0) > ASPECT_TOLERANCE:
-            raise ValueError(
+            raise ParameterError(
                 f"the {name} picture is {pic.shape[1]}x{pic.shape[0]} px (aspect {aspect:.3f}) but "
-                f"--size-mm gives {w_mm:g}x{h_mm:g} mm (aspect {w_mm / h_mm:.3f}); "
-                f"use --size-mm {w_mm:g}x{w_mm / aspect:.4g}x{d_mm:g}"
+                f"`size_mm` gives {w_mm:g}x{h_mm:g} mm (aspect {w_mm / h_mm:.3f}); "
+                f"use `size_mm` {w_mm:g}x{w_mm / aspect:.4g}x{d_mm:g}"
             )
     faces = ["bottom", "top"] if bottom is not None else ["top"]
     texels = Texels.box_faces((nz, ny, nx), faces)
@@ -153,25 +155,20 @@ def build_slab(
     return SlabScene(vol, texels, np.clip(target, 0.0, 1.0), faces, pix, tuple(size_mm), tr)
 
 
-def load_slab(
-    top_path,
-    bottom_path,
-    size_mm,
-    inks: InkTable,
-    dpi: float = OPT_DPI,
-    translucency=None,
-    translucency_depth_mm: float | None = None,
-) -> SlabScene:
-    """A slab scene from picture files (``bottom_path`` may be None); size_mm (W, H, D); ``translucency``: a
-    mask file (``scenes.translucency.load_mask``) or None."""
+def build_slab_scene(spec: SlabSpec, inks: InkTable) -> SlabScene:
+    """The slab scene of ``spec`` (``scenes.spec.SlabSpec``: picture files, size, grid, translucency mask file)
+    for ink set ``inks``."""
     mask = None
-    if translucency is not None:
+    if spec.translucency is not None:
         transparent_ink(inks)
-        check_depth(translucency_depth_mm)
-        mask = load_mask(translucency)
-    top = load_picture(top_path)
-    bottom = load_picture(bottom_path) if bottom_path else None
-    scene = build_slab(top, bottom, size_mm, inks, dpi, mask, translucency_depth_mm, str(translucency or ""))
-    named = [describe_picture(top_path, "top")] + ([describe_picture(bottom_path, "bottom")] if bottom_path else [])
+        check_depth(spec.translucency_depth_mm)
+        mask = load_mask(spec.translucency)
+    top = load_picture(spec.top)
+    bottom = load_picture(spec.bottom) if spec.bottom else None
+    tr_source = spec.translucency or ""
+    scene = build_slab(top, bottom, spec.size_mm, inks, spec.dpi, mask, spec.translucency_depth_mm, tr_source)
+    named = [describe_picture(spec.top, "top")]
+    if spec.bottom:
+        named.append(describe_picture(spec.bottom, "bottom"))
     scene.colour_source = ", ".join(named)
     return scene

@@ -2,8 +2,9 @@
 ``Scene`` for any ink set.
 
 A spec holds paths and numbers only (no arrays), so it travels in a few hundred bytes to a worker process or a Ray
-task, which calls ``spec.build(inks)`` there; the command line (``slab``, ``optimize``, ``select-inks``, ``demo``),
-the run driver and the ink-set search build their scenes through it alike.
+task, which builds its scene there (``scenes.build_scene(spec, inks)``: the spec is checked, then
+``scenes.slab.build_slab_scene`` or ``scenes.mesh.build_mesh_scene`` take it whole); the command line (``slab``,
+``optimize``, ``select-inks``, ``demo``), the run driver and the ink-set search build their scenes through it alike.
 
 - ``SlabSpec``: pictures on a slab (``scenes.slab``): the top picture, an optional bottom one, the size (W, H, D) mm.
 - ``MeshSpec``: a textured mesh (``scenes.mesh``) scaled to ``height_mm`` or by ``scale`` mm per model unit,
@@ -25,6 +26,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from ..errors import ParameterError
 from ..model import InkTable, transparent_ink
 from ..model.volume import check_grid_budget
 from ..units import OPT_DPI, voxel_mm
@@ -61,23 +63,14 @@ class SlabSpec:
         """One-line ValueErrors for inputs that are wrong before any file is read (sizes, dpi, depth, missing
         files); with ``inks``, also an ink set that cannot honour the constraints."""
         if len(self.size_mm) != 3 or not all(np.isfinite(v) and v > 0 for v in self.size_mm):
-            raise ValueError(f"--size-mm sizes must be three positive numbers W x H x D, got {self.size_mm}")
+            raise ParameterError(f"`size_mm` sizes must be three positive numbers W x H x D, got {self.size_mm}")
         voxel_mm(self.dpi)  # its one-line error for a dpi that is not positive
         w, h, depth = self.size_mm  # a slab's grid holds its mixture (4 bytes per ink) and, rendered, σs and σa (24)
-        check_grid_budget(self.top, (w, h, depth), self.dpi, 24 + 4 * len(inks or ()), "--size-mm")
+        check_grid_budget(self.top, (w, h, depth), self.dpi, 24 + 4 * len(inks or ()), "size_mm")
         _check_translucency(self.translucency, self.translucency_depth_mm, inks, mesh=False)
         _check_file(self.top, "picture")
         if self.bottom is not None:
             _check_file(self.bottom, "picture")
-
-    def build(self, inks: InkTable):
-        """The ``scenes.slab.SlabScene`` of these inputs for ink set ``inks``."""
-        from .slab import load_slab
-
-        self.validate(inks)
-        return load_slab(
-            self.top, self.bottom, self.size_mm, inks, self.dpi, self.translucency, self.translucency_depth_mm
-        )
 
     def to_json(self) -> dict:
         d = {"kind": "image", "top": self.top, "bottom": self.bottom, "size_mm": list(self.size_mm), "dpi": self.dpi}
@@ -119,7 +112,7 @@ class MeshSpec:
     def validate(self, inks: InkTable | None = None) -> None:
         """One-line ValueErrors for inputs that are wrong before the mesh is read; with ``inks``, also an ink set
         that cannot honour the constraints (the white core, translucency)."""
-        from .mesh import check_mesh_inputs, check_placement  # the mesh modules only when a mesh is given
+        from .mesh.checks import check_mesh_inputs, check_placement  # the mesh modules only when a mesh is given
 
         check_placement(self.height_mm, self.scale, self.up)
         check_mesh_inputs(self.shell_mm, inks)
@@ -132,34 +125,6 @@ class MeshSpec:
             from .mesh.source import check_obj_materials
 
             check_obj_materials(self.path, skip_files=self.texture is not None or self.constant_color)
-
-    def build(self, inks: InkTable):
-        """The ``scenes.mesh.MeshScene`` of these inputs for ink set ``inks`` (loads and voxelizes the mesh)."""
-        from .mesh import build_mesh_scene
-
-        self.validate(inks)
-        return build_mesh_scene(
-            self.path,
-            inks,
-            self.height_mm,
-            self.scale,
-            self.shell_mm,
-            self.dpi,
-            self.up,
-            self.translucency,
-            self.translucency_depth_mm,
-            self.texture,
-            self.constant_color,
-        )
-
-    def mean_thickness_mm(self) -> float:
-        """The placed mesh's volume over its surface area in mm (``TexturedMesh.mean_thickness_mm``); loads the
-        mesh, does not voxelize it."""
-        from .mesh.load import load_mesh
-
-        self.validate()
-        mesh = load_mesh(self.path, self.height_mm, self.scale, self.up, self.texture, self.constant_color)
-        return mesh.mean_thickness_mm()
 
     def to_json(self) -> dict:
         d = {
@@ -185,7 +150,7 @@ SceneSpec = SlabSpec | MeshSpec
 def _check_translucency(translucency, depth_mm, inks, mesh: bool) -> None:
     if translucency is None:
         if depth_mm is not None:
-            raise ValueError("--translucency-depth-mm needs --translucency")
+            raise ParameterError("`translucency_depth_mm` needs `translucency`")
         return
     check_depth(depth_mm)
     if inks is not None:
@@ -206,15 +171,15 @@ def spec_from_json(d: dict) -> SceneSpec:
     kind = d.get("kind")
     tr = {"translucency": d.get("translucency"), "translucency_depth_mm": d.get("translucency_depth_mm")}
     if kind in ("image", "slab"):
-        return SlabSpec(d["top"], tuple(d["size_mm"]), d.get("bottom"), d.get("dpi", OPT_DPI), **tr)
+        return SlabSpec(d["top"], tuple(d["size_mm"]), bottom=d.get("bottom"), dpi=d.get("dpi", OPT_DPI), **tr)
     if kind == "mesh":
         return MeshSpec(
             d["path"],
-            d.get("height_mm"),
-            d.get("scale"),
-            d.get("shell_mm"),
-            d.get("dpi", OPT_DPI),
-            d.get("up", "y"),
+            height_mm=d.get("height_mm"),
+            scale=d.get("scale"),
+            shell_mm=d.get("shell_mm"),
+            dpi=d.get("dpi", OPT_DPI),
+            up=d.get("up", "y"),
             **tr,
             texture=d.get("texture"),
             constant_color=bool(d.get("constant_color", False)),

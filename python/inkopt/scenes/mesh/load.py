@@ -23,6 +23,7 @@ from scipy import sparse
 
 from ...color import from_srgb8
 from ..picture import picture_rgba
+from .checks import check_placement
 from .source import check_colour_source, check_obj_materials, load_texture
 
 _CHUNK = 1 << 19  # query points per libigl call (bounds the temporary memory to ~50 MB)
@@ -130,23 +131,6 @@ def _bilinear(tex: np.ndarray, uv: np.ndarray) -> np.ndarray:
         + tex[y1, x0] * (1 - fx) * fy
         + tex[y1, x1] * fx * fy
     )
-
-
-UP_AXES = ("y", "z")  # the up axes a mesh file may have
-
-
-def check_placement(height_mm: float | None, scale: float | None, up: str = "y") -> None:
-    """One-line ValueError unless exactly one of ``height_mm`` and ``scale`` is given, it is positive, and ``up``
-    is one of ``UP_AXES``."""
-    if (height_mm is None) == (scale is None):
-        raise ValueError(
-            "give exactly one of --height-mm H (the object's height in mm) and --scale S (mm per model unit)"
-        )
-    for flag, v in (("--height-mm", height_mm), ("--scale", scale)):
-        if v is not None and not (np.isfinite(v) and v > 0):
-            raise ValueError(f"{flag} must be positive, got {v}")
-    if up not in UP_AXES:
-        raise ValueError(f"--up must be one of {list(UP_AXES)}, got {up!r}")
 
 
 def load_mesh(

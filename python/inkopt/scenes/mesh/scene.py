@@ -40,8 +40,10 @@ from ...model import (
 )
 from ...model.volume import check_grid_budget
 from ...rundir import RunDir, SceneRecord
-from ...units import OPT_DPI, voxel_mm
-from ..translucency import ALPHA, check_depth, check_mask, load_mask, translucency_fields
+from ...units import voxel_mm
+from ..spec import MeshSpec
+from ..translucency import ALPHA, check_depth, load_mask, translucency_fields
+from .checks import check_mesh_inputs
 from .load import TexturedMesh, load_mesh
 from .source import describe_colour_source
 from .translucency import mesh_texel_share, mesh_translucency
@@ -182,62 +184,47 @@ def check_grid_size(mesh: TexturedMesh, dpi: float) -> None:
     """One-line error, before voxelizing, for a mesh whose grid at ``dpi`` does not fit
     (``model.volume.check_grid_budget`` at ``MIN_BYTES_PER_GRID_VOXEL``)."""
     size = np.ptp(mesh.solid_vertices, axis=0)  # (x, y, z) mm
-    check_grid_budget(mesh.source, size, dpi, MIN_BYTES_PER_GRID_VOXEL, "--height-mm")
+    check_grid_budget(mesh.source, size, dpi, MIN_BYTES_PER_GRID_VOXEL, "height_mm")
 
 
-def check_mesh_inputs(shell_mm: float | None, inks: InkTable | None = None) -> None:
-    """One-line ValueErrors for a shell that is not a positive thickness and (with ``inks``) an ink set without
-    white for the core, before the slow part."""
-    if inks is not None and "white" not in inks.names:
-        white_fixed_shares(np.ones((1, 1, 1), bool), inks)  # its one-line error
-    if shell_mm is not None and not (np.isfinite(shell_mm) and shell_mm > 0):
-        raise ValueError(f"--shell-mm must be a positive thickness in mm, got {shell_mm}")
+def load_spec_mesh(spec: MeshSpec) -> TexturedMesh:
+    """The placed, textured mesh of ``spec`` (``load.load_mesh``), not voxelized."""
+    return load_mesh(
+        spec.path,
+        height_mm=spec.height_mm,
+        scale=spec.scale,
+        up=spec.up,
+        texture=spec.texture,
+        constant_color=spec.constant_color,
+    )
 
 
-def build_mesh_scene(
-    mesh_path,
-    inks: InkTable,
-    height_mm: float | None = None,
-    scale: float | None = None,
-    shell_mm: float | None = None,
-    dpi: float = OPT_DPI,
-    up: str = "y",
-    translucency=None,
-    translucency_depth_mm: float | None = None,
-    texture=None,
-    constant_color: bool = False,
-) -> MeshScene:
-    """Load and voxelize ``mesh_path``; exactly one of ``height_mm`` and ``scale`` (mm per model unit).
-    ``translucency``: None, "alpha" (the texture's alpha channel) or a mask (file or (H, W) array) in texture
-    space; ``translucency_depth_mm``: its depth below the surface (None: the whole object). ``texture``: an image
-    file replacing the mesh's texture; ``constant_color``: accept a mesh without colours (``load.load_mesh``)."""
-    check_mesh_inputs(shell_mm, inks)
-    mask = None
-    if translucency is not None:
+def build_mesh_scene(spec: MeshSpec, inks: InkTable) -> MeshScene:
+    """Load and voxelize the mesh of ``spec`` (``scenes.spec.MeshSpec``: file, placement, shell, grid,
+    translucency: "alpha", the texture's alpha channel, or a mask file in texture space, down to its depth below
+    the surface, the whole object without one) for ink set ``inks``."""
+    check_mesh_inputs(spec.shell_mm, inks)
+    mask, depth_mm = None, None
+    if spec.translucency is not None:
         transparent_ink(inks)
-        translucency_depth_mm = check_depth(translucency_depth_mm)
-        mask = (
-            None
-            if isinstance(translucency, str) and translucency == ALPHA
-            else (check_mask(translucency) if isinstance(translucency, np.ndarray) else load_mask(translucency))
-        )
+        depth_mm = check_depth(spec.translucency_depth_mm)
+        mask = None if spec.translucency == ALPHA else load_mask(spec.translucency)
     t0 = time.perf_counter()
-    mesh = load_mesh(mesh_path, height_mm=height_mm, scale=scale, up=up, texture=texture, constant_color=constant_color)
-    vmm = voxel_mm(dpi)
-    check_grid_size(mesh, dpi)
+    mesh = load_spec_mesh(spec)
+    vmm = voxel_mm(spec.dpi)
+    check_grid_size(mesh, spec.dpi)
     # The SDF is exact only within ``band`` voxels of the surface; the shell's and the translucent regions'
     # boundaries must lie inside it.
     band = 3.0
-    for d in (shell_mm, translucency_depth_mm if translucency is not None else None):
+    for d in (spec.shell_mm, depth_mm):
         band = band if d is None else max(band, np.ceil(d / vmm) + 2.0)
     vox = voxelize(mesh, voxel_mm=vmm, band=band)
     seconds = time.perf_counter() - t0
-    free = free_voxels(vox, shell_mm)
+    free = free_voxels(vox, spec.shell_mm)
     fixed = white_fixed_shares(free, inks)
     tr = None
-    if translucency is not None:  # before the SDF is dropped
-        source = ALPHA if mask is None else str(translucency if not isinstance(translucency, np.ndarray) else "mask")
-        tr = mesh_translucency(vox, mesh_texel_share(mesh, vox, mask), inks, translucency_depth_mm, source)
+    if spec.translucency is not None:  # before the SDF is dropped
+        tr = mesh_translucency(vox, mesh_texel_share(mesh, vox, mask), inks, depth_mm, spec.translucency)
         if tr is not None:
             fixed = tr.applied(fixed, inks)
     # The base volume's medium is not the optimiser's (it takes geometry and inks from it, and the fixed shares
@@ -254,4 +241,5 @@ def build_mesh_scene(
         origin_mm=vox.origin_mm,
     )
     vox.sdf = None  # 4 bytes per grid voxel no longer needed
-    return MeshScene(mesh, vox, vol, free, fixed, shell_mm, seconds, str(Path(mesh_path).resolve()), up, tr)
+    path = str(Path(spec.path).resolve())
+    return MeshScene(mesh, vox, vol, free, fixed, spec.shell_mm, seconds, path, spec.up, tr)
