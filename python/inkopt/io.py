@@ -16,6 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .errors import ParameterError
+
 
 def _umask() -> int:
     mask = os.umask(0)
@@ -167,8 +169,9 @@ def save_figure(path: str | Path, fig, dpi: int = 110) -> Path:
 FORMAT_KEY = "format_version"
 
 
-class FormatError(ValueError):
-    """A file of a format version this inkopt cannot read (one line: the file, its version, what to do)."""
+class FormatError(ParameterError):
+    """A file of a format version this inkopt cannot read (one line: the file, its version, what to do; parameters
+    it names are in backticks, ``errors.ParameterError``)."""
 
 
 def format_version_of(data) -> int:

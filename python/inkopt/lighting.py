@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .errors import ParameterError
 from .io import load_array
 
 UNIFORM = "uniform"
@@ -148,12 +149,12 @@ def load_lighting(spec=None, rotate_deg: float = 0.0) -> Lighting:
     :class:`Lighting` (returned, rotated by ``rotate_deg`` more)."""
     rotate_deg = float(rotate_deg)
     if not np.isfinite(rotate_deg):
-        raise ValueError(f"--lighting-rotate must be a finite angle in degrees, got {rotate_deg}")
+        raise ParameterError(f"`lighting_rotate` must be a finite angle in degrees, got {rotate_deg}")
     if isinstance(spec, Lighting):
         env = None if spec.map is None else check_map(spec.map, f"lighting '{spec.source}'")
         return Lighting(env, spec.rotate_deg + rotate_deg, spec.source)
     if spec is None or str(spec) == UNIFORM:
         if rotate_deg != 0.0:
-            raise ValueError("--lighting-rotate turns a map; it has no meaning with uniform lighting")
+            raise ParameterError("`lighting_rotate` turns a map; it has no meaning with uniform lighting")
         return Lighting()
     return Lighting(read_map(spec), rotate_deg, Path(spec).name)

@@ -122,7 +122,7 @@ class RunOptions:
                 f"`eval_time_budget` must be a positive number of seconds, got {self.eval_time_budget}"
             )
         if not self.log_every_s >= 0:
-            raise ParameterError(f"`log_every` must be a number of seconds >= 0, got {self.log_every_s}")
+            raise ParameterError(f"`log_every_s` must be a number of seconds >= 0, got {self.log_every_s}")
 
 
 @dataclass

@@ -139,7 +139,7 @@ def test_slab_bad_input(tmp_path, chart):
         (["slab", str(chart), "--size-mm", "2x1.333x0.5", "--inks", "cyan,unobtainium"], "unknown ink"),
         (["slab", str(chart), "--size-mm", "2x1.333x0.5", "--gamma", "1,2"], "gamma"),
         (["slab", str(chart), "--size-mm", "2x1.333x0.5", "--decay", "1"], "decay"),
-        (["slab", str(chart), "--size-mm", "2x1.333x0.5", "--adjoint-ema", "1"], "adjoint_ema"),
+        (["slab", str(chart), "--size-mm", "2x1.333x0.5", "--adjoint-ema", "1"], "--adjoint-ema must lie"),
     ]
     for args, needle in cases:
         out = tmp_path / "run"

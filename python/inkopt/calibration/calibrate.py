@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..color import delta_e76, delta_e2000
+from ..errors import ParameterError
 from ..io import file_digest
 from ..model import InkTable
 from ..model.inks import write_ink_file
@@ -29,9 +30,9 @@ def output_paths(out_inks) -> dict:
     """The ink file and, beside it, ``<stem>.report.json`` and ``<stem>.swatches.png``."""
     p = Path(out_inks)
     if p.suffix.lower() != ".json":
-        raise ValueError(f"--out must name a .json ink file, got {out_inks}")
+        raise ParameterError(f"`out_inks` must name a .json ink file, got {out_inks}")
     if not p.parent.is_dir():
-        raise ValueError(f"--out: folder {p.parent} does not exist")
+        raise ParameterError(f"`out_inks`: folder {p.parent} does not exist")
     return {"inks": p, "report": p.with_suffix(".report.json"), "picture": p.with_suffix(".swatches.png")}
 
 

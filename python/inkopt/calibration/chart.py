@@ -14,6 +14,7 @@ from itertools import combinations
 
 import numpy as np
 
+from ..errors import ParameterError
 from ..model import InkTable
 from .cgats import CgatsError, CgatsTable
 from .stack import Stack
@@ -30,7 +31,7 @@ BACKING_MM = 2.0
 MIX_MM = 1.0
 
 
-class ChartError(ValueError):
+class ChartError(ParameterError):
     """A chart that cannot be read or cannot identify the inks' parameters (one line)."""
 
 
@@ -230,7 +231,7 @@ def start_table(chart: Chart, start: InkTable) -> InkTable:
         else:
             raise ChartError(
                 f"unknown ink '{n}' in the chart: not in the starting ink table {list(start.names)} nor in "
-                "the ink library; give --start an ink file that has it"
+                "the ink library; give `start` an ink file that has it"
             )
     return InkTable.from_mu_t_albedo(chart.inks, mu_t, albedo, start.g)
 

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import ParameterError
 from ..model import InkTable
 from .chart import Chart
 from .measure import rgb_to_lab, rgb_to_lab_jacobian
@@ -173,7 +174,7 @@ def choose_holdout(chart: Chart, fraction: float, seed: int = 0) -> np.ndarray:
     from .chart import ChartError, check_identifiable
 
     if not 0 <= fraction < 1:
-        raise ValueError(f"--holdout must lie in [0, 1), got {fraction}")
+        raise ParameterError(f"`holdout` must lie in [0, 1), got {fraction}")
     want = int(round(fraction * len(chart)))
     order = np.random.default_rng(seed).permutation(len(chart))
     held: list[int] = []

@@ -94,7 +94,7 @@ def write_chart(out, chart: Chart, inks: InkTable, patch_mm: float = 10.0, heade
     from .fit import predict_rgb
 
     if not (np.isfinite(patch_mm) and 2.0 <= patch_mm <= 100.0):
-        raise ChartError(f"--patch-mm must lie in [2, 100] mm, got {patch_mm:g}")
+        raise ChartError(f"`patch_mm` must lie in [2, 100] mm, got {patch_mm:g}")
     vol = chart_volume(chart, inks, patch_mm)
     rgb = predict_rgb(chart, inks)
     out = Path(out)

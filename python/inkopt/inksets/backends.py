@@ -18,6 +18,7 @@ import numpy as np
 
 # the one Ray import and start, shared with --ray texel shards; RAY_INSTALL_HINT re-exported by inksets
 from ..distributed import RAY_INSTALL_HINT, connect_ray  # noqa: F401
+from ..errors import ParameterError
 from ..optim.checkpoint import read_checkpoint
 from ..rundir import RunDir
 
@@ -136,7 +137,7 @@ class Ray(Serial):
 def make_backend(workers: int | None = None, ray: str | None = None, threads: int | None = None):
     """Serial (no options), a process pool (``workers``) or Ray (``ray``: "auto" or a cluster address)."""
     if workers is not None and workers < 1:
-        raise ValueError(f"--workers must be at least 1, got {workers}")
+        raise ParameterError(f"`workers` must be at least 1, got {workers}")
     if ray:
         return Ray(ray, workers)
     if workers and workers > 1:

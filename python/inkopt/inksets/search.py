@@ -37,12 +37,14 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import ParameterError
 from ..io import FORMAT_KEY, load_npz, save_npz, upgrade_format, write_json
 from ..model import TRANSPARENT_INKS
 from ..model.inks import INK_LIBRARY
 from ..optim import OptimizeConfig
 from ..printing.profiles import printer_profile
 from ..rundir import RunDir
+from ..scenes import build_scene
 from ..scenes.spec import SceneSpec
 from .backends import Serial, config_dict, run_candidate, threads_per_run
 
@@ -164,34 +166,34 @@ class Selection:
         """One-line ValueErrors for everything that can be checked before any work starts."""
         if self.strategy not in STRATEGIES:
             raise ValueError(f"unknown strategy '{self.strategy}'; use one of {list(STRATEGIES)}")
-        for what, names in (("--candidates", self.candidates), ("--always", self.always)):
+        for what, names in (("`candidates`", self.candidates), ("`always`", self.always)):
             if len(set(names)) != len(names):
-                raise ValueError(f"{what} lists an ink twice: {','.join(names)}")
+                raise ParameterError(f"{what} lists an ink twice: {','.join(names)}")
         unknown = [n for n in self.candidates + self.always if n not in INK_LIBRARY]
         if unknown:
             raise ValueError(f"unknown ink(s) {','.join(unknown)}; known: {','.join(sorted(INK_LIBRARY))}")
         both = [n for n in self.candidates if n in self.always]
         if both:
-            raise ValueError(f"ink(s) {','.join(both)} are in both --candidates and --always")
+            raise ParameterError(f"ink(s) {','.join(both)} are in both `candidates` and `always`")
         if not 1 <= self.choose <= len(self.candidates):
-            raise ValueError(
-                f"--choose {self.choose} needs at least {max(self.choose, 1)} candidates and at least "
+            raise ParameterError(
+                f"`choose` {self.choose} needs at least {max(self.choose, 1)} candidates and at least "
                 f"1; got {len(self.candidates)} ({','.join(self.candidates) or 'none'})"
             )
         n = self.choose + len(self.always)
         prof = printer_profile(self.printer) if self.printer is not None else None
         if prof is not None and prof.max_materials is not None and n > prof.max_materials:
-            raise ValueError(
-                f"--choose {self.choose} plus {len(self.always)} --always inks make {n} inks but "
+            raise ParameterError(
+                f"`choose` {self.choose} plus {len(self.always)} `always` inks make {n} inks but "
                 f"{prof.name} holds {prof.max_materials} materials per job; choose fewer or use "
-                "a --printer with more material slots"
+                "a `printer` with more material slots"
             )
         self.cfg.validate()
         if self.cfg.iterations < 1:
-            raise ValueError("--iterations must be at least 1")
+            raise ParameterError("`iterations` must be at least 1")
         if self.cfg.init == "white" and "white" not in self.always:
-            raise ValueError(
-                "--init white needs 'white' in --always (every set starts 97 % white); add it or use --init random"
+            raise ParameterError(
+                "`init` white needs 'white' in `always` (every set starts 97 % white); add it or use `init` random"
             )
         if self.rung_eval_spp < 1 or self.eval_spp < 1:
             raise ValueError("evaluation spp must be at least 1")
@@ -240,14 +242,14 @@ class Selection:
         from ..model import InkTable
 
         if self.target.translucency is not None and not set(TRANSPARENT_INKS) & set(self.always):
-            raise ValueError(
-                "--translucency needs a transparent ink ('transparent' or 'clear') in every set; add it to --always"
+            raise ParameterError(
+                "`translucency` needs a transparent ink ('transparent' or 'clear') in every set; add it to `always`"
             )
         sets = [InkTable.from_names(self.inks(s)) for s in self.subsets()]
         for inks in sets:
             self.target.validate(inks)
         if self.target.kind == "slab":
-            self.target.build(sets[0])
+            build_scene(self.target, sets[0])
 
     @property
     def final_eval_spp(self) -> int:
@@ -272,8 +274,8 @@ def _load_state(out: Path, sel: Selection, resume: bool) -> dict:
         return fresh
     state = json.loads(path.read_text())
     if state.get("key") != sel.key():
-        raise ValueError(
-            f"{out} holds a selection made with different settings; rerun without --resume or "
+        raise ParameterError(
+            f"{out} holds a selection made with different settings; rerun without `resume` or "
             "with the original settings"
         )
     return state

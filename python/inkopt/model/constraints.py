@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import ParameterError
 from .fixed import FixedShares
 from .inks import InkTable
 from .texels import Texels
@@ -27,8 +28,8 @@ def white_fixed_shares(free: np.ndarray, inks: InkTable) -> FixedShares:
     """Fixed ink shares (z, y, x, N): 100 % white where ``free`` ((z, y, x) bool, kept by reference) is False,
     none where True. One-line ValueError if the ink set has no white."""
     if "white" not in inks.names:
-        raise ValueError(
-            f"voxels that are not optimised (outside the object, the core below --shell-mm) are "
+        raise ParameterError(
+            f"voxels that are not optimised (outside the object, the core below `shell_mm`) are "
             f"printed white, but the ink set {list(inks.names)} has no 'white'"
         )
     held = np.zeros(len(inks), np.float32)
@@ -41,9 +42,9 @@ def transparent_ink(inks: InkTable) -> str:
     for name in TRANSPARENT_INKS:
         if name in inks.names:
             return name
-    raise ValueError(
-        f"--translucency needs a transparent ink ('transparent' or 'clear') in the ink set, but "
-        f"{list(inks.names)} has none; use e.g. --inks vero-cmykwt"
+    raise ParameterError(
+        f"`translucency` needs a transparent ink ('transparent' or 'clear') in the ink set, but "
+        f"{list(inks.names)} has none; use e.g. `inks` vero-cmykwt"
     )
 
 

@@ -80,17 +80,17 @@ def read_checkpoint(path: str | Path) -> dict:
 def _upgrade_0(data: dict, where) -> dict:
     """Version 0 -> 1: the settings a version-0 ``config_key`` leaves out, written out (module docstring)."""
     if "config_key" not in data:
-        raise FormatError(f"{where} is not an inkopt checkpoint (no config_key); rerun without --resume")
+        raise FormatError(f"{where} is not an inkopt checkpoint (no config_key); rerun without `resume`")
     if any(k not in data for k in History.keys()):
         raise FormatError(
             f"{where} was made by a pre-release inkopt without the whole per-iteration history; it "
-            f"cannot be continued: rerun without --resume"
+            f"cannot be continued: rerun without `resume`"
         )
     key = json.loads(str(data["config_key"]))
     if key.get("smooth") and key.get("smooth_edge") and key.get("smooth_where") != "flat":
         raise FormatError(
             f"{where} was made by a pre-release inkopt that smoothed every voxel's step; it cannot "
-            f"be continued: rerun without --resume"
+            f"be continued: rerun without `resume`"
         )
     key.pop("smooth_where", None)
     key.setdefault("schedule_iterations", None)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
+from ..errors import ParameterError
+
 PARAMS = ("sigmoid", "softmax")
 OPTIMIZERS = ("eg", "adam", "adagrad")
 GRAD_METHODS = ("replay", "li1")
@@ -128,52 +130,52 @@ class OptimizeConfig:
 
     def validate(self) -> None:
         if self.iterations < 0:
-            raise ValueError(f"iterations must be >= 0, got {self.iterations}")
+            raise ParameterError(f"`iterations` must be >= 0, got {self.iterations}")
         if self.spp < 1:
-            raise ValueError(f"spp must be >= 1, got {self.spp}")
+            raise ParameterError(f"`spp` must be >= 1, got {self.spp}")
         if self.forward_spp < 0:
-            raise ValueError(f"forward spp must be >= 0, got {self.forward_spp}")
+            raise ParameterError(f"`forward_spp` must be >= 0, got {self.forward_spp}")
         if self.param not in PARAMS:
-            raise ValueError(f"unknown parameterisation '{self.param}'; use one of {PARAMS}")
+            raise ParameterError(f"unknown `param` '{self.param}'; use one of {PARAMS}")
         if self.optimizer not in OPTIMIZERS:
-            raise ValueError(f"unknown optimizer '{self.optimizer}'; use one of {OPTIMIZERS}")
+            raise ParameterError(f"unknown `optimizer` '{self.optimizer}'; use one of {OPTIMIZERS}")
         if self.grad_method not in GRAD_METHODS:
-            raise ValueError(f"unknown gradient method '{self.grad_method}'; use one of {GRAD_METHODS}")
+            raise ParameterError(f"unknown `grad_method` '{self.grad_method}'; use one of {GRAD_METHODS}")
         if self.optimizer == "eg" and self.param != "softmax":
-            raise ValueError("the exponentiated-gradient optimizer works on the softmax parameterisation")
+            raise ParameterError("the exponentiated-gradient `optimizer` works on the softmax `param` only")
         if self.lr is not None and not self.lr > 0:
-            raise ValueError(f"learning rate must be positive, got {self.lr}")
+            raise ParameterError(f"`lr` (the step size) must be positive, got {self.lr}")
         if self.checkpoint_every < 1:
-            raise ValueError("checkpoint_every must be >= 1")
+            raise ParameterError("`checkpoint_every` must be >= 1")
         # at most 4 voxels: 2 x 32 diffusion passes per iteration, already blurry
         if self.smooth is not None and not 0.0 <= self.smooth <= 4.0:
-            raise ValueError(f"smoothing width must lie in [0, 4] voxels, got {self.smooth}")
+            raise ParameterError(f"`smooth` (the smoothing width) must lie in [0, 4] voxels, got {self.smooth}")
         if self.finish_smooth is not None and not 0 <= self.finish_smooth <= 8:
-            raise ValueError(f"finishing smoothing passes must lie in 0..8, got {self.finish_smooth}")
+            raise ParameterError(f"`finish_smooth` passes must lie in 0..8, got {self.finish_smooth}")
         if not 0.0 <= self.smooth_edge < float("inf"):
-            raise ValueError(f"smoothing edge must be >= 0 (dE76), got {self.smooth_edge}")
+            raise ParameterError(f"`smooth_edge` must be >= 0 (dE76), got {self.smooth_edge}")
         if self.schedule_iterations is not None and self.schedule_iterations < self.iterations:
-            raise ValueError(
-                f"schedule_iterations ({self.schedule_iterations}) must be at least iterations ({self.iterations})"
+            raise ParameterError(
+                f"`schedule_iterations` ({self.schedule_iterations}) must be at least `iterations` ({self.iterations})"
             )
         if not 0.0 <= self.decay < 1.0:
-            raise ValueError(f"decay must lie in [0, 1) (a fraction of the iterations), got {self.decay}")
+            raise ParameterError(f"`decay` must lie in [0, 1) (a fraction of the iterations), got {self.decay}")
         if not 0.0 <= self.stop_gain < float("inf"):
-            raise ValueError(f"stop gain must be >= 0 (dE76; 0: run every iteration), got {self.stop_gain}")
+            raise ParameterError(f"`stop_gain` must be >= 0 (dE76; 0: run every iteration), got {self.stop_gain}")
         if self.stop_horizon < 1:
-            raise ValueError(f"stop horizon must be >= 1 iteration, got {self.stop_horizon}")
+            raise ParameterError(f"`stop_horizon` must be >= 1 iteration, got {self.stop_horizon}")
         if self.time_budget is not None and not 0.0 < self.time_budget < float("inf"):
-            raise ValueError(f"time budget must be a positive number of seconds, got {self.time_budget}")
+            raise ParameterError(f"`time_budget` must be a positive number of seconds, got {self.time_budget}")
         if self.adjoint_ema is not None and not 0.0 <= self.adjoint_ema < 1.0:
-            raise ValueError(f"adjoint_ema must lie in [0, 1), got {self.adjoint_ema}")
+            raise ParameterError(f"`adjoint_ema` must lie in [0, 1), got {self.adjoint_ema}")
 
     def for_scene(self, kind: str) -> OptimizeConfig:
         """This config with the settings it leaves to the scene (those of ``SCENE_DEFAULTS`` that are None) set for a
         scene of ``kind`` ("slab" or "mesh")."""
         if kind not in SCENE_DEFAULTS:
             raise ValueError(f"unknown scene kind '{kind}'; use one of {tuple(SCENE_DEFAULTS)}")
-        # in the default's type (float, int, str), so that the checkpoint key of an explicit integer (``--set
-        # smooth=3``) equals the default's
+        # in the default's type (float, int, str), so that the checkpoint key of an explicit integer (``smooth=3``)
+        # equals the default's
         resolved = {
             k: type(v)(v if getattr(self, k) is None else getattr(self, k)) for k, v in SCENE_DEFAULTS[kind].items()
         }

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ..color import delta_e76
+from ..errors import ParameterError
 from ..lighting import Lighting, load_lighting
 from ..loss import TexelLoss
 from ..model import FixedShares, Volume, mix_grad
@@ -212,9 +213,9 @@ class Optimization:
         d = read_checkpoint(path)
         old, new = json.loads(str(d["config_key"])), json.loads(self.config_key())
         if old != new:
-            raise ValueError(
+            raise ParameterError(
                 f"checkpoint {path} was made with different settings ({changed_settings(old, new)}); rerun "
-                "without --resume or with the original settings"
+                "without `resume` or with the original settings"
             )
         self.x = np.asarray(d["x"], np.float32)
         self.iteration = int(d["iteration"])

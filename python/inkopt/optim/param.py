@@ -12,6 +12,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from ..errors import ParameterError
 from ..model import FixedShares, InkTable
 from ..model.mixturefile import MixtureSource
 from .config import PARAMS
@@ -163,7 +164,7 @@ def initial_free_mixture(
     n, f = len(inks), param.n_free
     if init == "white":
         if "white" not in inks.names:
-            raise ValueError("--init white needs a 'white' ink in the ink set; use --init random")
+            raise ParameterError("`init` white needs a 'white' ink in the ink set; use `init` random")
         row = np.full(n, 0.03 / max(n - 1, 1), np.float64)
         row[inks.index("white")] = 0.97 if n > 1 else 1.0
         return np.broadcast_to(row, (f, n))  # one row for every voxel: a read-only view, no (F, N) array
@@ -171,7 +172,7 @@ def initial_free_mixture(
         return np.random.default_rng(seed).dirichlet(np.ones(n), size=f)
     if init in BASELINE_INITS:
         if baseline is None:
-            raise ValueError(f"--init {init} needs the run's texels and targets")
+            raise ParameterError(f"`init` {init} needs the run's texels and targets")
         return layers_free_mixture(baseline(init), n, param)
     return file_free_mixture(init, inks, param)
 
@@ -206,12 +207,12 @@ def file_free_mixture(path, inks: InkTable, param: Parameterization, voxels: int
     only a block of the file's mixture is in memory beside the result; bit for bit what ``free_part`` of the whole
     ``Volume.load(path).mixture`` gives."""
     n = len(inks)
-    with MixtureSource(path, f"--init {path}") as src:
+    with MixtureSource(path, f"init {path}") as src:
         if src.inks.names != inks.names:
-            raise ValueError(f"--init {path}: needs a mixture volume with inks {list(inks.names)}")
+            raise ParameterError(f"`init` {path}: needs a mixture volume with inks {list(inks.names)}")
         if tuple(src.shape[:3]) != param.shape:
-            raise ValueError(
-                f"--init {path}: volume shape {tuple(src.shape[:3])} differs from {param.shape} (a result on "
+            raise ParameterError(
+                f"`init` {path}: volume shape {tuple(src.shape[:3])} differs from {param.shape} (a result on "
                 "another grid: optim.transfer.write_transferred_volume moves it onto this one)"
             )
         out = np.empty((param.n_free, n), np.float32)

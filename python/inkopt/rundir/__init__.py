@@ -54,6 +54,16 @@ class StaleOutputError(ValueError):
     """An output made from another version of the file it derives from (one line: what to run again)."""
 
 
+class _RunFile:
+    """A file of every run under one name: ``RunDir(d).x_path`` is ``d / name`` (whether or not it exists yet)."""
+
+    def __init__(self, name: str, doc: str):
+        self.name, self.__doc__ = name, doc
+
+    def __get__(self, rd, owner=None):
+        return self if rd is None else rd.path / self.name
+
+
 class RunDir:
     """A run directory. ``RunDir(path)`` requires it to exist; ``RunDir.create(path)`` makes it.
 
@@ -85,56 +95,25 @@ class RunDir:
         return str(self.path)
 
     # ------------------------------------------------------------------ names
-    @property
-    def volume_path(self) -> Path:
-        """volume.npz: the optimised mixture."""
-        return self.path / self.VOLUME
-
-    @property
-    def scene_path(self) -> Path:
-        """scene.npz: texels, targets, constraints (:class:`SceneRecord`)."""
-        return self.path / self.SCENE
-
-    @property
-    def checkpoint_path(self) -> Path:
-        """checkpoint.npz: the optimiser's state for an exact resume (``optim.checkpoint``)."""
-        return self.path / self.CHECKPOINT
-
-    @property
-    def report_path(self) -> Path:
-        return self.path / self.REPORT
-
-    @property
-    def quantized_path(self) -> Path:
-        """quantized.npz: the printer labels volume without its labels (those are in quantized_labels.npy)."""
-        return self.path / self.QUANTIZED
-
-    @property
-    def quantized_labels_path(self) -> Path:
-        return self.path / self.QUANTIZED_LABELS
-
-    @property
-    def evaluation_path(self) -> Path:
-        return self.path / self.EVALUATION
-
-    @property
-    def slices_path(self) -> Path:
-        """slices/: the default folder of ``inkopt export``'s PNG slices."""
-        return self.path / self.SLICES
-
-    @property
-    def gcvf_path(self) -> Path:
-        """slices.gcvf: the default GrabCAD Voxel Print package of ``inkopt export --format gcvf``."""
-        return self.path / self.GCVF
+    volume_path = _RunFile(VOLUME, "volume.npz: the optimised mixture.")
+    scene_path = _RunFile(SCENE, "scene.npz: texels, targets, constraints (:class:`SceneRecord`).")
+    checkpoint_path = _RunFile(CHECKPOINT, "checkpoint.npz: the optimiser's state for an exact resume.")
+    report_path = _RunFile(REPORT, "report.json: the run's figures, times and settings.")
+    quantized_path = _RunFile(QUANTIZED, "quantized.npz: the printer labels volume without its labels.")
+    quantized_labels_path = _RunFile(QUANTIZED_LABELS, "quantized_labels.npy: the printer labels (z, y, x) uint8.")
+    evaluation_path = _RunFile(EVALUATION, "evaluation.json: ``inkopt evaluate``'s figures.")
+    slices_path = _RunFile(SLICES, "slices/: the default folder of ``inkopt export``'s PNG slices.")
+    gcvf_path = _RunFile(GCVF, "slices.gcvf: the default GrabCAD Voxel Print package of ``inkopt export``.")
+    loss_picture_path = _RunFile(LOSS_PNG, "loss.png: the training loss and ΔE76 per iteration.")
+    views_picture_path = _RunFile(VIEWS_PNG, "views.png: a mesh's target and predicted views.")
+    prediction_glb_path = _RunFile(PREDICTION_GLB, "prediction.glb: the mesh with the predicted colours.")
+    target_glb_path = _RunFile(TARGET_GLB, "target.glb: the mesh with the target colours.")
+    predictions_path = _RunFile(PREDICTIONS, "predictions.npz: predicted colours per scene texel.")
+    proof_path = _RunFile(PROOF, "report.html: the soft-proof page (``inkopt report``).")
 
     def threemf_path(self, labels: bool = False) -> Path:
         """mixture.3mf (the continuous mixture) or quantized.3mf (``labels``): ``inkopt export --format 3mf``."""
         return self.path / (self.LABELS_3MF if labels else self.MIXTURE_3MF)
-
-    @property
-    def loss_picture_path(self) -> Path:
-        """loss.png: the training loss and ΔE76 per iteration."""
-        return self.path / self.LOSS_PNG
 
     def face_picture_path(self, face: str) -> Path:
         """face_<face>.png: a slab face's target | prediction | ΔE76 map."""
@@ -144,29 +123,6 @@ class RunDir:
         """<stem>_<face>.png: a slab face's target | optimized | quantized | baselines, or (face "views") a mesh's
         rows of them seen from four sides (``inkopt evaluate``; ``stem``: the evaluation file's)."""
         return self.path / f"{stem}_{face}.png"
-
-    @property
-    def views_picture_path(self) -> Path:
-        """views.png: a mesh's target and predicted views."""
-        return self.path / self.VIEWS_PNG
-
-    @property
-    def prediction_glb_path(self) -> Path:
-        return self.path / self.PREDICTION_GLB
-
-    @property
-    def target_glb_path(self) -> Path:
-        return self.path / self.TARGET_GLB
-
-    @property
-    def predictions_path(self) -> Path:
-        """predictions.npz: predicted colours per scene texel (``Predictions``)."""
-        return self.path / self.PREDICTIONS
-
-    @property
-    def proof_path(self) -> Path:
-        """report.html: the soft-proof page (``inkopt report``)."""
-        return self.path / self.PROOF
 
     def _need(self, path: Path, hint: str) -> Path:
         if not path.is_file():

@@ -26,11 +26,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import ParameterError
 from ..io import load_array
 from ..model import InkTable, Translucency, transparent_ink
 from .picture import resample
 
-ALPHA = "alpha"  # --translucency alpha: the mesh texture's alpha channel
+ALPHA = "alpha"  # translucency "alpha": the mesh texture's alpha channel
 
 
 def translucency_fields(tr: Translucency | None) -> dict:
@@ -50,7 +51,7 @@ def translucency_fields(tr: Translucency | None) -> dict:
 
 def check_depth(depth_mm: float | None) -> float | None:
     if depth_mm is not None and not (np.isfinite(depth_mm) and depth_mm > 0):
-        raise ValueError(f"--translucency-depth-mm must be a positive depth in mm, got {depth_mm}")
+        raise ParameterError(f"`translucency_depth_mm` must be a positive depth in mm, got {depth_mm}")
     return None if depth_mm is None else float(depth_mm)
 
 

@@ -22,6 +22,7 @@ from PIL import Image
 from scipy import sparse
 
 from ...color import from_srgb8
+from ...errors import ParameterError
 from ..picture import picture_rgba
 from .checks import check_placement
 from .source import check_colour_source, check_obj_materials, load_texture
@@ -162,7 +163,7 @@ def load_mesh(
     mesh = mesh_from_trimesh(tm, height_mm=height_mm, scale=scale, up=up, source=str(path), placeholder=placeholder)
     if override is not None:
         if mesh.uv is None:
-            raise ValueError(f"--texture {texture}: {path} has no texture coordinates (no uv / vt) to look it up")
+            raise ParameterError(f"`texture` {texture}: {path} has no texture coordinates (no uv / vt) to look it up")
         mesh.texture, mesh.texture_alpha = override
         mesh.tint = np.ones(3, np.float32)
         mesh.texture_name = str(texture)

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ...errors import ParameterError
 from ...model import (
     EMPTY,
     FixedShares,
@@ -60,7 +61,7 @@ def free_voxels(vox: VoxelizedObject, shell_mm: float | None = None) -> np.ndarr
     if shell_mm is None:
         return vox.inside.copy()
     if not (np.isfinite(shell_mm) and shell_mm > 0):
-        raise ValueError(f"--shell-mm must be a positive thickness in mm, got {shell_mm}")
+        raise ParameterError(f"`shell_mm` must be a positive thickness in mm, got {shell_mm}")
     free = vox.inside & (vox.sdf >= -np.float32(shell_mm))
     free[tuple(vox.texels.voxel.T)] = True
     return free

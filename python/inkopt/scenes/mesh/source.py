@@ -23,7 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-FIX = "name the texture with --texture FILE, or pass --constant-color to accept a uniform colour"
+from ...errors import ParameterError
+
+FIX = "name the texture with `texture` FILE, or pass `constant_color` to accept a uniform colour"
 
 
 @dataclass(frozen=True)
@@ -63,7 +65,7 @@ def check_obj_materials(path, skip_files: bool = False) -> ObjMaterials:
     if not libs:
         beside = sorted(folder.glob("*.mtl"), key=lambda p: (p.stem != path.stem, p.name))
         if beside:
-            raise ValueError(
+            raise ParameterError(
                 f"{path} names no material library (no mtllib line) but {beside[0].name} is beside it: add the "
                 f"line 'mtllib {beside[0].name}' to the OBJ, or {FIX}"
             )
@@ -72,7 +74,7 @@ def check_obj_materials(path, skip_files: bool = False) -> ObjMaterials:
     for rest in libs:
         name, lib = _named_file(rest, folder)
         if not lib.is_file():
-            raise ValueError(
+            raise ParameterError(
                 f"{path} names material library {name}, which does not exist in {folder}: put it there, or {FIX}"
             )
         mtllibs.append(lib)
@@ -80,7 +82,7 @@ def check_obj_materials(path, skip_files: bool = False) -> ObjMaterials:
         for m in re.finditer(r"^[ \t]*map_Kd[ \t]+(.+?)[ \t\r]*$", text, re.M):
             tname, tex = _named_file(m.group(1), lib.parent)
             if not tex.is_file():
-                raise ValueError(
+                raise ParameterError(
                     f"{lib} names texture {tname}, which does not exist in {lib.parent}: put it there, or {FIX}"
                 )
             textures.append(tex)
@@ -110,12 +112,12 @@ def check_colour_source(mesh, constant_color: bool = False, texture_named: bool 
     ``constant_color``, whose target is one constant colour. ``texture_named``: the file names a texture (an
     OBJ's ``map_Kd``), so a constant source means its uv coordinates are missing."""
     if (mesh.texture is not None or texture_named) and mesh.uv is None:
-        raise ValueError(
+        raise ParameterError(
             f"{mesh.source} has a texture but no texture coordinates (no uv / vt): export it with its UVs, or pass "
-            f"--constant-color to accept a uniform colour"
+            f"`constant_color` to accept a uniform colour"
         )
     if mesh.color_source == "constant" and not constant_color:
-        raise ValueError(
+        raise ParameterError(
             f"{mesh.source} has no texture, vertex colours or face colours, so the target would be the constant "
             f"{_hex(mesh.color)}: {FIX}"
         )

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...errors import ParameterError
 from ...model import InkTable, Translucency, transparent_ink
 from ..translucency import ALPHA, check_depth, check_mask, share_constraint
 from .load import barycentric
@@ -16,8 +17,8 @@ def mesh_texel_share(mesh, vox, mask: np.ndarray | None = None) -> np.ndarray:
     closest surface point, or ``mask`` (H, W) looked up there through the uv coordinates."""
     if mesh.uv is None or (mask is None and mesh.texture_alpha is None):
         what = "no uv coordinates" if mesh.uv is None else "a texture without an alpha channel"
-        raise ValueError(
-            f"--translucency {'MASK' if mask is not None else ALPHA}: {mesh.source} has {what}; "
+        raise ParameterError(
+            f"`translucency` {'MASK' if mask is not None else ALPHA}: {mesh.source} has {what}; "
             f"give a texture with alpha or a mask in texture space"
         )
     bary = barycentric(mesh.solid_vertices[mesh.solid_faces[vox.face_index]], vox.closest_mm)
