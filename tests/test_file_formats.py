@@ -156,13 +156,13 @@ def test_pre_release_checkpoints_are_refused(tmp_path):
     save_npz(path, {**arrays, "config_key": np.array(json.dumps(key, sort_keys=True))})
     with pytest.raises(FormatError) as e:
         _optimization().load_checkpoint(path)
-    _one_line(e, "pre-release", "rerun without --resume")
+    _one_line(e, "pre-release", "rerun without resume")
     save_npz(
         path, {k: v for k, v in arrays.items() if k != "hist_step_s"} | {"config_key": np.array(_version_0_key(a))}
     )  # before the history had every timing
     with pytest.raises(FormatError) as e:
         _optimization().load_checkpoint(path)
-    _one_line(e, "pre-release", "rerun without --resume")
+    _one_line(e, "pre-release", "rerun without resume")
 
 
 def test_slice_manifest_versions(tmp_path):

@@ -55,5 +55,5 @@ def test_holdout_keeps_the_chart_identifiable():
     assert 0 < len(held) <= round(0.5 * len(CHART))
     check_identifiable(CHART.subset(np.setdiff1d(np.arange(len(CHART)), held)))
     assert len(choose_holdout(CHART, 0.0)) == 0
-    with pytest.raises(ValueError, match="--holdout"):
+    with pytest.raises(ValueError, match="holdout must lie"):
         choose_holdout(CHART, 1.0)

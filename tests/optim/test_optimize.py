@@ -180,7 +180,7 @@ def test_without_forward_renders(monkeypatch):
     assert end.delta_e76_mean < 0.75 * start.delta_e76_mean, (start, end)
     # the average's weight tends to spp / (1 - adjoint_ema): 4 / 0.1 = 40 samples per texel
     assert abs(r.c_weight - 40.0) < 2.0, r.c_weight
-    with pytest.raises(ValueError, match="forward spp"):
+    with pytest.raises(ValueError, match="forward_spp"):
         OptimizeConfig(forward_spp=-1).validate()
 
 
@@ -550,5 +550,5 @@ def test_finish_smooths_the_result_not_the_checkpoint(tmp_path):
     x = plain.x.copy()
     plain.finish()
     assert plain.smoother is None and np.array_equal(plain.x, x)
-    with pytest.raises(ValueError, match="finishing smoothing"):
+    with pytest.raises(ValueError, match="finish_smooth"):
         OptimizeConfig(finish_smooth=9).validate()

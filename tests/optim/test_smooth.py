@@ -82,7 +82,7 @@ def test_kernel_width_and_voxel_scale_damping():
 def test_settings_are_checked():
     with pytest.raises(ValueError, match="smoothing"):
         OptimizeConfig(smooth=-1).validate()
-    with pytest.raises(ValueError, match="smoothing edge"):
+    with pytest.raises(ValueError, match="smooth_edge"):
         OptimizeConfig(smooth_edge=-1).validate()
     with pytest.raises(ValueError, match="smoothing"):
         GradientSmoother((2, 2, 2), np.arange(8), 0.0)

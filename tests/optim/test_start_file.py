@@ -100,10 +100,10 @@ def test_bad_start_files_are_refused_in_one_line(tmp_path):
     Volume.from_mixture(VOX, np.full(SHAPE + (3,), 1 / 3, np.float32), three).save(tmp_path / "inks.npz")
     cases["inks.npz"] = r"needs a mixture volume with inks \['cyan', 'magenta', 'yellow', 'white'\]"
     Volume.from_labels(VOX, np.zeros(SHAPE, np.uint8), INKS).save(tmp_path / "labels.npz")
-    cases["labels.npz"] = "holds a labels volume; --init .* needs a mixture volume"
+    cases["labels.npz"] = "holds a labels volume; init .* needs a mixture volume"
     s, a = vol.coefficients()
     save_npz(tmp_path / "dense.npz", Volume.from_coefficients(VOX, s, a).to_arrays())
-    cases["dense.npz"] = "holds a dense volume; --init .* needs a mixture volume"
+    cases["dense.npz"] = "holds a dense volume; init .* needs a mixture volume"
     bad = vol.mixture.copy()
     bad[4, 6, 8, 1] = -0.5  # the last voxel: found in the last block
     np.savez(tmp_path / "negative.npz", **{**vol.to_arrays(), "mixture": bad})

@@ -207,7 +207,7 @@ def file_free_mixture(path, inks: InkTable, param: Parameterization, voxels: int
     only a block of the file's mixture is in memory beside the result; bit for bit what ``free_part`` of the whole
     ``Volume.load(path).mixture`` gives."""
     n = len(inks)
-    with MixtureSource(path, f"init {path}") as src:
+    with MixtureSource(path, f"`init` {path}") as src:
         if src.inks.names != inks.names:
             raise ParameterError(f"`init` {path}: needs a mixture volume with inks {list(inks.names)}")
         if tuple(src.shape[:3]) != param.shape:
