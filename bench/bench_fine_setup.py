@@ -40,10 +40,11 @@ def main(argv=None) -> dict:
     from common import RESULTS, machine, provenance, write
 
     from inkopt.cli import build_parser
-    from inkopt.cli.common import config_from_args, mesh_spec_from_args
+    from inkopt.cli.runargs import config_from_args, mesh_spec_from_args
     from inkopt.model import InkTable
     from inkopt.optim import Optimization
     from inkopt.run import peak_rss_gb
+    from inkopt.scenes import build_scene
 
     argv = sys.argv[1:] if argv is None else list(argv)
     extra = argv[argv.index("--") + 1 :] if "--" in argv else ["--coarse-dpi", "150", "--time-budget", "27m"]
@@ -63,18 +64,10 @@ def main(argv=None) -> dict:
     rss, now, seconds = {"start": peak_rss_gb()}, {}, {}
 
     t = time.perf_counter()
-    scene = mesh_spec_from_args(args, args.mesh).build(inks)
+    scene = build_scene(mesh_spec_from_args(args, args.mesh), inks)
     seconds["scene"], rss["after_scene"], now["after_scene"] = time.perf_counter() - t, peak_rss_gb(), rss_gb()
     t = time.perf_counter()
-    run = Optimization(
-        scene.volume,
-        scene.texels,
-        scene.target_rgb,
-        replace(cfg, init=a.start),
-        fixed_share=scene.fixed_share,
-        threads=args.threads,
-        kind=scene.kind,
-    )
+    run = Optimization(scene, replace(cfg, init=a.start).for_scene(scene.kind), threads=args.threads)
     seconds["optimization"], rss["after_optimization"] = time.perf_counter() - t, peak_rss_gb()
     now["after_optimization"] = rss_gb()
     t = time.perf_counter()

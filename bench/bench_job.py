@@ -55,10 +55,11 @@ def check(a, run: Path, extra: list[str]) -> dict:
 
     from inkopt.model import InkTable
     from inkopt.optim import OptimizeConfig
+    from inkopt.scenes import build_scene
     from inkopt.scenes.spec import MeshSpec
 
     dpi = float(extra[extra.index("--dpi") + 1]) if "--dpi" in extra else MeshSpec(a.mesh).dpi
-    scene = MeshSpec(a.mesh, height_mm=a.height_mm, dpi=dpi).build(InkTable.parse("vero-cmykw"))
+    scene = build_scene(MeshSpec(a.mesh, height_mm=a.height_mm, dpi=dpi), InkTable.parse("vero-cmykw"))
     return result_check(scene, OptimizeConfig(), run, a.check_spp or 256)
 
 

@@ -33,6 +33,7 @@ def main(argv=None) -> dict:
     from inkopt.optim import Optimization, OptimizeConfig
     from inkopt.run import peak_rss_gb
     from inkopt.scenes.mesh import build_mesh_scene
+    from inkopt.scenes.spec import MeshSpec
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("height_mm", type=float, nargs="?", default=40.0)
@@ -50,7 +51,7 @@ def main(argv=None) -> dict:
     rss = {"start": peak_rss_gb()}
     t0 = time.perf_counter()
     scene = build_mesh_scene(
-        args.mesh, InkTable.parse(args.inks), height_mm=args.height_mm, shell_mm=args.shell_mm, dpi=args.dpi
+        MeshSpec(args.mesh, height_mm=args.height_mm, shell_mm=args.shell_mm, dpi=args.dpi), InkTable.parse(args.inks)
     )
     build_s = time.perf_counter() - t0
     rss["after_voxelize"] = peak_rss_gb()
@@ -58,15 +59,7 @@ def main(argv=None) -> dict:
         iterations=args.iterations, spp=args.spp, **({} if args.smooth is None else {"smooth": args.smooth})
     )
     t0 = time.perf_counter()
-    run = Optimization(
-        scene.volume,
-        scene.vox.texels,
-        scene.vox.targets,
-        cfg,
-        fixed_share=scene.fixed_share,
-        threads=args.threads,
-        kind="mesh",
-    )
+    run = Optimization(scene, cfg.for_scene(scene.kind), threads=args.threads)
     setup_s = time.perf_counter() - t0
     rss["after_setup"] = peak_rss_gb()
     import resource

@@ -48,7 +48,7 @@ def main():
     t_g = time.perf_counter() - t0
     cfg = OptimizeConfig(iterations=a.iterations, spp=a.spp, forward_spp=fwd, grad_method=a.method)
     t0 = time.perf_counter()
-    run = Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, kind="slab", threads=a.threads)
+    run = Optimization(scene, cfg.for_scene(scene.kind), threads=a.threads)
     setup = time.perf_counter() - t0
     run.run()
     h = run.history

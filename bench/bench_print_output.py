@@ -30,9 +30,10 @@ def build(out: Path, height_mm: float, mesh: str) -> None:
     from inkopt.model import InkTable
     from inkopt.rundir import RunDir
     from inkopt.scenes.mesh import build_mesh_scene
+    from inkopt.scenes.spec import MeshSpec
 
     inks = InkTable.parse("vero-cmykw")
-    scene = build_mesh_scene(mesh, inks, height_mm=height_mm)
+    scene = build_mesh_scene(MeshSpec(mesh, height_mm=height_mm), inks)
     vol = scene.volume
     mix = np.zeros(vol.shape + (len(inks),), np.float32)
     mix[..., inks.index("white")] = 1.0

@@ -33,6 +33,7 @@ def main(argv=None) -> dict:
     from inkopt.optim.transfer import write_transferred_volume
     from inkopt.run import peak_rss_gb
     from inkopt.scenes.mesh import build_mesh_scene
+    from inkopt.scenes.spec import MeshSpec
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("height_mm", type=float, nargs="?", default=40.0)
@@ -41,7 +42,7 @@ def main(argv=None) -> dict:
     a = ap.parse_args(argv)
     inks = InkTable.parse("vero-cmykw")
     rss = {"start": peak_rss_gb()}
-    coarse = build_mesh_scene(SPOT, inks, height_mm=a.height_mm, dpi=a.coarse_dpi)
+    coarse = build_mesh_scene(MeshSpec(SPOT, height_mm=a.height_mm, dpi=a.coarse_dpi), inks)
     mix = np.zeros(coarse.volume.shape + (len(inks),), np.float32)
     mix[coarse.volume.inside] = np.random.default_rng(0).dirichlet(np.ones(len(inks)), int(coarse.volume.inside.sum()))
     src = Volume.from_mixture(
@@ -49,7 +50,7 @@ def main(argv=None) -> dict:
     )
     del coarse, mix
     rss["after_coarse"] = peak_rss_gb()
-    fine = build_mesh_scene(SPOT, inks, height_mm=a.height_mm)
+    fine = build_mesh_scene(MeshSpec(SPOT, height_mm=a.height_mm), inks)
     rss["after_fine_scene"] = peak_rss_gb()
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()

@@ -130,7 +130,10 @@ def optimisation_snapshot() -> dict:
     out = {}
     for opt in ("eg", "adam"):
         cfg = OptimizeConfig(iterations=3, spp=2, forward_spp=4, optimizer=opt, seed=5, gamma=(1.0, 1.0, 1.0))
-        run = Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, kind="slab", threads=None)
+        if hasattr(OptimizeConfig, "resolved"):  # the scene and its settings resolved for its kind
+            run = Optimization(scene, cfg.for_scene(scene.kind), threads=None)
+        else:  # the package's earlier layouts: the scene's arrays and its kind
+            run = Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, kind="slab", threads=None)
         run.run()
         out[f"opt_{opt}_mixture"] = run.mixture()
         out[f"opt_{opt}_loss"] = np.array(run.history.loss)

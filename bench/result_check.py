@@ -24,13 +24,7 @@ def result_check(scene, cfg: OptimizeConfig, run_dir: Path, spp: int, threads: i
     floor of 1e-6) on ``scene`` (the run's own, built again): noise-corrected mean ΔE76 with its noise contribution,
     mean ΔE2000, SSIM, at ``spp`` samples per texel."""
     run = Optimization(
-        scene.volume,
-        scene.texels,
-        scene.target_rgb,
-        replace(cfg, init=str(Path(run_dir) / "volume.npz")),
-        kind=scene.kind,
-        fixed_share=scene.fixed_share,
-        threads=threads,
+        scene, replace(cfg, init=str(Path(run_dir) / "volume.npz")).for_scene(scene.kind), threads=threads
     )
     r = run.renderer(run.x).render(scene.texels, spp, CHECK_SEED)
     m = prediction_metrics(run.loss, r.rgb, r.var_mean)

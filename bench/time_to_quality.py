@@ -63,8 +63,9 @@ from inkopt.evaluation.results import Report
 from inkopt.io import file_digest
 from inkopt.model import InkTable
 from inkopt.optim import Optimization, OptimizeConfig
-from inkopt.run import run_coarse_to_fine, run_optimisation
+from inkopt.run import RunOptions, run_coarse_to_fine, run_optimisation
 from inkopt.rundir import RunDir
+from inkopt.scenes import build_scene
 from inkopt.scenes.spec import MeshSpec, SlabSpec
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -84,7 +85,7 @@ def spec_of(case: str, out: Path):
     if case == "reference":
         top = charts.save(charts.colour_chart(708, 472), out / "reference_top.png")
         bottom = charts.save(charts.zebra(177, 118), out / "reference_bottom.png")
-        return SlabSpec(str(top), (177 * VOX, 118 * VOX, 30 * VOX), str(bottom))
+        return SlabSpec(str(top), (177 * VOX, 118 * VOX, 30 * VOX), bottom=str(bottom))
     raise SystemExit(f"unknown case '{case}': use spot20, spot40 or reference")
 
 
@@ -249,15 +250,7 @@ def measure_snapshots(a, out: Path, scene, cfg: OptimizeConfig, times: dict) -> 
     ``--snap-spp`` with one renderer of the run's problem (geometry and fixed shares; its start does not matter) set
     to the snapshot's variables, or with ``--snap-evaluate`` written as the run directory OUT/snapshot_N and
     evaluated on the texel sample (``sampled_evaluation``)."""
-    run = Optimization(
-        scene.volume,
-        scene.texels,
-        scene.target_rgb,
-        replace(cfg, init="white"),
-        kind=scene.kind,
-        fixed_share=scene.fixed_share,
-        threads=2,
-    )
+    run = Optimization(scene, replace(cfg, init="white").for_scene(scene.kind), threads=2)
     if a.snap_evaluate:
         run.release_renderer()
     points = []
@@ -349,7 +342,7 @@ def main() -> int:
     spec = spec_of(a.case, out.parent)
     inks = InkTable.parse("vero-cmykw")
     t0 = time.perf_counter()
-    scene = spec.build(inks)  # the fine scene (of a coarse-to-fine run too: its snapshots are the fine stage's)
+    scene = build_scene(spec, inks)  # the fine scene (of a coarse-to-fine run too: its snapshots are the fine stage's)
     snaps = {int(s) for s in a.snapshots.split(",") if s}
     times_path = out / "snapshot_times.json"
     times = json.loads(times_path.read_text()) if (a.resume or a.snapshots_only) and times_path.is_file() else {}
@@ -364,7 +357,7 @@ def main() -> int:
             }
             times_path.write_text(json.dumps(times))
 
-    kw = dict(
+    options = RunOptions(
         resume=a.resume,
         threads=a.threads,
         log=lambda m: print(m, file=sys.stderr, flush=True),
@@ -375,9 +368,9 @@ def main() -> int:
     if a.snapshots_only:
         rep = Report.read(out / "run" / "report.json")
     elif a.coarse_dpi:
-        rep = run_coarse_to_fine(spec, inks, out / "run", cfg, a.coarse_dpi, **kw)
+        rep = run_coarse_to_fine(spec, inks, out / "run", cfg, a.coarse_dpi, options)
     else:
-        rep = run_optimisation(scene, out / "run", cfg, **kw)
+        rep = run_optimisation(scene, out / "run", cfg, options)
     # with --snap-spp 0 the snapshots' mixtures stay on disk for a later --snapshots-only
     points = measure_snapshots(a, out, scene, cfg, times) if a.snap_spp > 0 or a.snap_evaluate else []
     check = result_check(scene, cfg, out / "run", a.final_spp) if a.final_spp > 0 else None

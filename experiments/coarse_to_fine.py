@@ -55,8 +55,9 @@ from inkopt.optim import OptimizeConfig  # noqa: E402
 from inkopt.optim.checkpoint import read_checkpoint  # noqa: E402
 from inkopt.optim.transfer import coarse_start, write_transferred_volume  # noqa: E402
 from inkopt.render import Renderer  # noqa: E402
-from inkopt.run import run_optimisation  # noqa: E402
+from inkopt.run import RunOptions, run_optimisation  # noqa: E402
 from inkopt.rundir import RunDir  # noqa: E402
+from inkopt.scenes import build_scene  # noqa: E402
 from inkopt.scenes.spec import MeshSpec, SlabSpec  # noqa: E402
 
 FIGURES = (
@@ -78,7 +79,7 @@ def spec_of(a, dpi: float, folder: Path):
     if a.slab == "demo":
         top = charts.save(charts.colour_chart(288, 192), folder / "chart.png")
         bottom = charts.save(charts.zebra(71, 47), folder / "zebra.png")
-        return SlabSpec(top, (6.0, 4.0, 1.0), bottom, dpi=dpi)
+        return SlabSpec(top, (6.0, 4.0, 1.0), bottom=bottom, dpi=dpi)
     return MeshSpec(SPOT, height_mm=a.height_mm, dpi=dpi)
 
 
@@ -95,7 +96,7 @@ def coarse_stage(a, inks, cfg, fine, folder: Path, log) -> tuple:
     """The coarse scene built and optimised and its result written as the fine run's start
     (``optim.transfer.coarse_start``): (the start's path, the coarse result's path, timings and training curve)."""
     t0 = time.perf_counter()
-    scene = spec_of(a, a.coarse_dpi, folder).build(inks)
+    scene = build_scene(spec_of(a, a.coarse_dpi, folder), inks)
     build_s = time.perf_counter() - t0
     log(f"coarse: {scene.describe()}")
     res = coarse_start(
@@ -151,7 +152,7 @@ def compare_starts(a, inks, src, fine, folder: Path) -> dict:
     scene, at ``--compare-starts`` spp; the gap between the fine start's and the coarse result's predictions,
     between two renders of the linear start (the noise floor of that gap) and between the two scenes' targets
     (``nearest_gap``)."""
-    coarse_scene = spec_of(a, a.coarse_dpi, folder).build(inks)
+    coarse_scene = build_scene(spec_of(a, a.coarse_dpi, folder), inks)
     out = {"target_gap_delta_e76": nearest_gap(coarse_scene, coarse_scene.target_rgb, fine, fine.target_rgb)}
     out["coarse_result"], coarse_rgb = figures(coarse_scene, src, a.compare_starts, a.threads)
     for method in ("linear", "nearest"):
@@ -168,7 +169,8 @@ def compare_starts(a, inks, src, fine, folder: Path) -> dict:
 def plain_stage(a, fine, folder: Path, iterations: int, kw: dict) -> dict:
     """The plain 300-DPI run of ``iterations`` from the default start: its figures and training curve."""
     cfg = OptimizeConfig(iterations=iterations, **kw)
-    rep = run_optimisation(fine, folder / "plain", cfg, threads=a.threads, eval_spp=a.eval_spp, log=lambda s: None)
+    options = RunOptions(threads=a.threads, eval_spp=a.eval_spp, log=lambda s: None)
+    rep = run_optimisation(fine, folder / "plain", cfg, options)
     row = {k: v for k, v in rep.to_json().items() if k in FIGURES}
     row["training"] = curve(folder / "plain")
     de = row["delta_e76_mean_corrected"]
@@ -211,7 +213,7 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(a.out or tmp)
         folder.mkdir(parents=True, exist_ok=True)
-        fine = spec_of(a, 300.0, folder).build(inks)
+        fine = build_scene(spec_of(a, 300.0, folder), inks)
         print(f"fine: {fine.describe()}", flush=True)
 
         cfg = OptimizeConfig(iterations=a.coarse_iterations, **kw)
@@ -222,7 +224,8 @@ def main():
         print(f"coarse stage and transfer: {before_fine:.1f} s (transfer {transfer_s:.1f} s)", flush=True)
 
         cfg = OptimizeConfig(iterations=a.fine_iterations, init=str(start), lr=a.fine_lr, **kw)
-        rep = run_optimisation(fine, folder / "fine", cfg, threads=a.threads, eval_spp=a.eval_spp, log=quiet)
+        options = RunOptions(threads=a.threads, eval_spp=a.eval_spp, log=quiet)
+        rep = run_optimisation(fine, folder / "fine", cfg, options)
         fine_row = {k: v for k, v in rep.to_json().items() if k in FIGURES}
         fine_row["training"] = curve(folder / "fine", before_fine)
         total = before_fine + fine_row["seconds_iterations"]

@@ -26,7 +26,8 @@ from common import write_study as write
 from inkopt import charts  # noqa: E402
 from inkopt.model import InkTable  # noqa: E402
 from inkopt.optim import OptimizeConfig  # noqa: E402
-from inkopt.run import run_optimisation  # noqa: E402
+from inkopt.run import RunOptions, run_optimisation  # noqa: E402
+from inkopt.scenes import build_scene  # noqa: E402
 from inkopt.scenes.spec import SlabSpec  # noqa: E402
 
 # name -> (iterations, OptimizeConfig overrides), all with a constant step (decay 0; the default decay is 0.25);
@@ -119,7 +120,10 @@ def main():
             iterations, kw = settings[name]
             cfg = OptimizeConfig(**{"iterations": iterations, "seed": 0, **kw})
             rep = run_optimisation(
-                SlabSpec(top, size, bottom).build(inks), tmp / name, cfg, threads=a.threads, log=lambda s: None
+                build_scene(SlabSpec(top, size, bottom=bottom), inks),
+                tmp / name,
+                cfg,
+                RunOptions(threads=a.threads, log=lambda s: None),
             ).to_json()
             row = {"iterations": iterations, **kw, **{k: rep[k] for k in KEYS}}
             if rep["smooth"]:

@@ -24,6 +24,7 @@ from inkopt.color import delta_e76, delta_e2000, linear_to_lab  # noqa: E402
 from inkopt.evaluation.baselines import baseline_mixture  # noqa: E402
 from inkopt.model import InkTable  # noqa: E402
 from inkopt.optim import Optimization, OptimizeConfig  # noqa: E402
+from inkopt.scenes import build_scene  # noqa: E402
 from inkopt.scenes.spec import MeshSpec  # noqa: E402
 
 #: bands of the target's L* and C* (lower edge inclusive)
@@ -39,7 +40,7 @@ def main():
     ap.add_argument("--spp", type=int, default=64)
     ap.add_argument("--threads", type=int, default=2)
     a = ap.parse_args()
-    scene = MeshSpec(SPOT, height_mm=a.height_mm).build(InkTable.parse("vero-cmykw"))
+    scene = build_scene(MeshSpec(SPOT, height_mm=a.height_mm), InkTable.parse("vero-cmykw"))
 
     def baseline(kind):
         return baseline_mixture(kind, scene.volume, scene.texels, scene.target_rgb, scene.fixed_share)
@@ -52,16 +53,7 @@ def main():
     entry = {**provenance(), "volume": a.volume, "height_mm": a.height_mm, "spp": a.spp, "texels": len(target)}
     for name, init in (("result", a.volume), ("extrusion", "extrusion")):
         cfg = OptimizeConfig(init=init, iterations=1).for_scene("mesh")
-        run = Optimization(
-            scene.volume,
-            scene.texels,
-            scene.target_rgb,
-            cfg,
-            fixed_share=scene.fixed_share,
-            threads=a.threads,
-            baseline=baseline,
-            kind="mesh",
-        )
+        run = Optimization(scene, cfg, threads=a.threads, baseline=baseline)
         lab = linear_to_lab(run.renderer().render(scene.texels, a.spp, 12345, cfg.include_specular).rgb)
         run.release_renderer()
         e76, e00 = delta_e76(lab, target), delta_e2000(lab, target)

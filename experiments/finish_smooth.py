@@ -25,7 +25,8 @@ from shell_compare import SPOT  # noqa: E402
 from inkopt.model import InkTable  # noqa: E402
 from inkopt.optim import OptimizeConfig  # noqa: E402
 from inkopt.optim.loop import Optimization  # noqa: E402
-from inkopt.run import run_optimisation  # noqa: E402
+from inkopt.run import RunOptions, run_optimisation  # noqa: E402
+from inkopt.scenes import build_scene  # noqa: E402
 from inkopt.scenes.spec import MeshSpec  # noqa: E402
 
 KEYS = ("delta_e76_mean_corrected", "delta_e2000_mean", "ssim", "mottle_l2", "eval_spp")
@@ -40,9 +41,9 @@ def main():
     ap.add_argument("--spp", type=int, default=256)
     a = ap.parse_args()
     inks = InkTable.parse("vero-cmykw")
-    scene = MeshSpec(SPOT, height_mm=a.height_mm).build(inks)
+    scene = build_scene(MeshSpec(SPOT, height_mm=a.height_mm), inks)
     cfg = OptimizeConfig(iterations=0, init=a.volume, lr=1.0).for_scene("mesh")
-    run = Optimization(scene.volume, scene.texels, scene.target_rgb, cfg, kind="mesh", fixed_share=scene.fixed_share)
+    run = Optimization(scene, cfg)
     x0, rows = run.x.copy(), {}
     with tempfile.TemporaryDirectory() as tmp:
         for k in (int(p) for p in a.passes.split(",")):
@@ -52,7 +53,8 @@ def main():
             path = Path(tmp) / f"passes{k}.npz"
             scene.volume.save_with_mixture(path, run.param.mixture_slabs(x), inks)
             figures = OptimizeConfig(iterations=0, init=str(path), lr=1.0, finish_smooth=0)
-            rep = run_optimisation(scene, Path(tmp) / f"run{k}", figures, eval_spp=a.spp, log=lambda s: None)
+            options = RunOptions(eval_spp=a.spp, log=lambda s: None)
+            rep = run_optimisation(scene, Path(tmp) / f"run{k}", figures, options)
             rows[str(k)] = {key: rep.to_json()[key] for key in KEYS}
             print(k, " ".join(f"{key}={v:.4g}" for key, v in rows[str(k)].items()), flush=True)
     path = RESULTS / "finish_smooth.json"

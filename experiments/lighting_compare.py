@@ -65,8 +65,9 @@ def main() -> int:
     from inkopt.model import InkTable
     from inkopt.optim import OptimizeConfig
     from inkopt.pictures import panels
-    from inkopt.run import run_optimisation
+    from inkopt.run import RunOptions, run_optimisation
     from inkopt.rundir import RunDir
+    from inkopt.scenes import build_scene
     from inkopt.scenes.spec import SlabSpec
     from inkopt.units import OPT_DPI
 
@@ -85,13 +86,10 @@ def main() -> int:
         cfg = OptimizeConfig(iterations=a.iterations, seed=a.seed)
         if not (d / "report.json").is_file():
             run_optimisation(
-                SlabSpec(chart, size).build(inks),
+                build_scene(SlabSpec(chart, size), inks),
                 d,
                 cfg,
-                eval_spp=a.eval_spp,
-                threads=a.threads,
-                lighting=light,
-                log=lambda m: None,
+                RunOptions(eval_spp=a.eval_spp, threads=a.threads, lighting=light, log=lambda m: None),
             )
         runs[name] = d
     table, colours = {}, {}

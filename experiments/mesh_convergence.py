@@ -34,8 +34,9 @@ from shell_compare import SPOT  # noqa: E402
 from inkopt.model import InkTable  # noqa: E402
 from inkopt.optim import OptimizeConfig  # noqa: E402
 from inkopt.optim.checkpoint import read_checkpoint  # noqa: E402
-from inkopt.run import run_optimisation  # noqa: E402
+from inkopt.run import RunOptions, run_optimisation  # noqa: E402
 from inkopt.rundir import RunDir  # noqa: E402
+from inkopt.scenes import build_scene  # noqa: E402
 from inkopt.scenes.spec import MeshSpec  # noqa: E402
 
 KEYS = (
@@ -67,8 +68,9 @@ def main():
     cfg = OptimizeConfig(**{"iterations": a.iterations, "seed": 0, **kw})
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(a.out or tmp)
-        scene = MeshSpec(SPOT, height_mm=a.height_mm).build(InkTable.parse("vero-cmykw"))
-        rep = run_optimisation(scene, d, cfg, threads=a.threads, resume=a.out is not None, log=lambda s: None).to_json()
+        scene = build_scene(MeshSpec(SPOT, height_mm=a.height_mm), InkTable.parse("vero-cmykw"))
+        options = RunOptions(threads=a.threads, resume=a.out is not None, log=lambda s: None)
+        rep = run_optimisation(scene, d, cfg, options).to_json()
         ck = read_checkpoint(RunDir(d).checkpoint_path)
         train = [round(float(v), 3) for v in ck["hist_delta_e76"]]
     row = {

@@ -23,6 +23,7 @@ from shell_compare import SPOT  # noqa: E402
 
 from inkopt.model import InkTable  # noqa: E402
 from inkopt.optim import Optimization, OptimizeConfig  # noqa: E402
+from inkopt.scenes import build_scene  # noqa: E402
 from inkopt.scenes.spec import MeshSpec  # noqa: E402
 
 
@@ -34,11 +35,9 @@ def main():
     ap.add_argument("--spp", type=int, default=4)
     ap.add_argument("--threads", type=int, default=2)
     a = ap.parse_args()
-    scene = MeshSpec(SPOT, height_mm=a.height_mm).build(InkTable.parse("vero-cmykw"))
+    scene = build_scene(MeshSpec(SPOT, height_mm=a.height_mm), InkTable.parse("vero-cmykw"))
     cfg = OptimizeConfig(init=a.start, iterations=1).for_scene("mesh")
-    run = Optimization(
-        scene.volume, scene.texels, scene.target_rgb, cfg, fixed_share=scene.fixed_share, threads=a.threads, kind="mesh"
-    )
+    run = Optimization(scene, cfg, threads=a.threads)
     renderer = run.renderer()
     adjoint = np.random.default_rng(0).standard_normal((len(scene.texels), 3)).astype(np.float32)
     t = time.perf_counter()

@@ -56,9 +56,7 @@ def main():
     cfg = OptimizeConfig(iterations=args.iterations, spp=8, forward_spp=16)
 
     def timed(factory=None):
-        opt = Optimization(
-            scene.volume, scene.texels, scene.target_rgb, cfg, kind="slab", threads=2, renderer_factory=factory
-        )
+        opt = Optimization(scene, cfg.for_scene(scene.kind), threads=2, renderer_factory=factory)
         opt.run()
         return opt, float(np.mean(opt.history.seconds[1:]))  # the first iteration builds the renderers
 

@@ -32,6 +32,7 @@ def main(argv=None) -> dict:
     from inkopt.model import InkTable, mix
     from inkopt.render import Renderer
     from inkopt.scenes.mesh import build_mesh_scene
+    from inkopt.scenes.spec import MeshSpec
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("height_mm", type=float, nargs="?", default=20.0)
@@ -39,7 +40,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--threads", type=int, default=2)
     args = ap.parse_args(argv)
 
-    sc = build_mesh_scene(SPOT, InkTable.parse("vero-cmykw"), height_mm=args.height_mm)
+    sc = build_mesh_scene(MeshSpec(SPOT, height_mm=args.height_mm), InkTable.parse("vero-cmykw"))
     vol, inks, tex = sc.volume, sc.volume.inks, sc.texels
     free = np.flatnonzero(sc.free)
     rows = np.full((len(free), len(inks)), 0.03 / (len(inks) - 1), np.float32)

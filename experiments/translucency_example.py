@@ -67,9 +67,10 @@ def main() -> int:
     from inkopt.optim import OptimizeConfig
     from inkopt.pictures import panels
     from inkopt.render import Renderer
-    from inkopt.run import run_optimisation
+    from inkopt.run import RunOptions, run_optimisation
     from inkopt.rundir import RunDir
-    from inkopt.scenes.slab import load_slab
+    from inkopt.scenes.slab import build_slab_scene
+    from inkopt.scenes.spec import SlabSpec
     from inkopt.units import OPT_DPI
 
     out = Path(a.out)
@@ -85,16 +86,13 @@ def main() -> int:
     for name, d in runs.items():
         if (d / "report.json").is_file():
             continue
-        scene = load_slab(
-            out / "orange.png", None, size, inks, translucency=out / "pulp.png" if name == "constrained" else None
-        )
+        translucency = out / "pulp.png" if name == "constrained" else None
+        scene = build_slab_scene(SlabSpec(out / "orange.png", size, translucency=translucency), inks)
         run_optimisation(
             scene,
             d,
             OptimizeConfig(iterations=a.iterations, seed=a.seed),
-            eval_spp=a.eval_spp,
-            threads=a.threads,
-            log=lambda m: print(m, flush=True),
+            RunOptions(eval_spp=a.eval_spp, threads=a.threads, log=lambda m: print(m, flush=True)),
         )
     optimise_s = time.perf_counter() - t0
     ev = {
