@@ -79,18 +79,13 @@ class Renderer:
         from . import _core
 
         self.volume = volume
-        kw = dict(
-            boundary=volume.boundary,
-            ior=float(volume.ior),
-            g=float(volume.g),
-            threads=threads,
-            **self._medium_arrays(volume),
-        )
+        kw = dict(boundary=volume.boundary, ior=float(volume.ior), g=float(volume.g), threads=threads)
         if volume.inside is not None or volume.form == "labels":
             kw["inside"] = np.ascontiguousarray(volume.inside_mask()).view(np.uint8)  # bool bytes are 0/1: no copy
         if volume.normals is not None:
             kw["normal_index"], kw["normal_vectors"] = volume.normals.index, volume.normals.vectors
-        self._scene = _core.Scene(volume.shape, tuple(float(v) for v in volume.voxel_mm), **kw)
+        voxel_mm = tuple(float(v) for v in volume.voxel_mm)
+        self._scene = _core.Scene(volume.shape, voxel_mm, self._medium(volume), **kw)
         self._labels = volume.form == "labels"
         self.lighting = Lighting()
         self.set_lighting(lighting)
@@ -102,28 +97,27 @@ class Renderer:
         self.lighting = light
 
     @staticmethod
-    def _medium_arrays(volume: Volume) -> dict:
-        """The core's medium arguments: labels with the ink table; the inside voxels' coefficients (sparse: 4
-        bytes per grid voxel + 24 per inside voxel) when the volume has an inside mask; else dense coefficients."""
+    def _medium(volume: Volume):
+        """The core's medium (``_core.Medium``): labels with the ink table; the inside voxels' coefficients
+        (sparse: 4 bytes per grid voxel + 24 per inside voxel) when the volume has an inside mask; else dense
+        coefficients."""
+        from ._core import Medium
+
         if volume.form == "labels":
-            return dict(
-                labels=volume.labels,
-                ink_sigma_s=volume.inks.sigma_s.astype(np.float32),
-                ink_sigma_a=volume.inks.sigma_a.astype(np.float32),
-            )
+            inks = volume.inks
+            return Medium.labels(volume.labels, inks.sigma_s.astype(np.float32), inks.sigma_a.astype(np.float32))
         if volume.inside is not None:
             index = np.flatnonzero(volume.inside)
-            s, a = volume.coefficients_at(index)
-            return dict(medium_index=index, sigma_s=s, sigma_a=a)
+            return Medium.sparse(index, *volume.coefficients_at(index))
         s, a = volume.coefficients()
-        return dict(sigma_s=np.ascontiguousarray(s, np.float32), sigma_a=np.ascontiguousarray(a, np.float32))
+        return Medium.dense(np.ascontiguousarray(s, np.float32), np.ascontiguousarray(a, np.float32))
 
     def set_volume(self, volume: Volume) -> None:
         """Render ``volume`` from now on: same grid, boundary, ior, g, inside mask and normals as the volume this
         renderer was built for (not checked beyond the shape); only the medium is replaced."""
         if volume.shape != self.volume.shape:
             raise ValueError(f"set_volume: shape {volume.shape} differs from the renderer's {self.volume.shape}")
-        self._scene.set_medium(**self._medium_arrays(volume))
+        self._scene.set_medium(self._medium(volume))
         self.volume = volume
         self._labels = volume.form == "labels"
 
@@ -140,9 +134,10 @@ class Renderer:
             vol = self.volume
             if vol.inside is None:
                 raise ValueError("set_mixture on a label volume needs an inside mask")
+            from ._core import Medium
+
             inside = np.flatnonzero(vol.inside)
-            cs, ca = vol.coefficients_at(inside)
-            self._scene.set_medium(medium_index=inside, sigma_s=cs, sigma_a=ca)
+            self._scene.set_medium(Medium.sparse(inside, *vol.coefficients_at(inside)))
             self._labels = False
         s, a = mix(mixture, inks)
         self._scene.set_voxels(
@@ -167,6 +162,8 @@ class Renderer:
         method: str = "replay",
         first_texel: int = 0,
     ) -> RenderResult:
+        from ._core import Texels as CoreTexels
+
         if spp < 1:
             raise ValueError(f"spp must be at least 1, got {spp}")
         n = len(texels)
@@ -181,13 +178,13 @@ class Renderer:
         t0 = time.perf_counter()
         for a in range(0, n, CHUNK):
             b = min(a + CHUNK, n)
-            args = (texels.voxel[a:b], texels.face[a:b], texels.normal[a:b])
+            chunk = CoreTexels(texels.voxel[a:b], texels.face[a:b], texels.normal[a:b])
             kw = dict(spp=int(spp), seed=int(seed), first_texel=first_texel + a, include_specular=include_specular)
             if adjoint is None:
-                m, v, st = self._scene.render(*args, **kw)
+                m, v, st = self._scene.render(chunk, **kw)
             else:
                 m, v, st = self._scene.backward(
-                    *args, np.ascontiguousarray(adjoint[a:b], np.float32), **kw, method=method
+                    chunk, np.ascontiguousarray(adjoint[a:b], np.float32), **kw, method=method
                 )
             rgb[a:b], var[a:b] = m, v
             for k in totals:
