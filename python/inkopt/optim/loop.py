@@ -27,7 +27,7 @@ from ..color import delta_e76
 from ..lighting import Lighting, load_lighting
 from ..loss import TexelLoss
 from ..model import FixedShares, Texels, Volume, mix_grad
-from ..render import Renderer
+from ..render import Renderer, RendererFactory, TexelRenderer
 from .checkpoint import History, read_checkpoint, write_checkpoint
 from .config import COLD_INITS, OptimizeConfig
 from .optimizers import make_optimizer, step_factor
@@ -73,7 +73,7 @@ class Optimization:
         threads: int | None = None,
         baseline: Callable[[str], np.ndarray] | None = None,
         lighting: Lighting | str | None = None,
-        renderer_factory: Callable[..., Renderer] | None = None,
+        renderer_factory: RendererFactory | None = None,
     ):
         cfg = cfg.for_scene(kind)  # settings left to the scene kind ("slab" or "mesh": config.SCENE_DEFAULTS)
         cfg.validate()
@@ -107,7 +107,7 @@ class Optimization:
             self.smoother = GradientSmoother(
                 self.param.shape, self.param.free_index, cfg.smooth, guide, cfg.smooth_edge, rows, threads
             )
-        self._renderer: Renderer | None = None
+        self._renderer: TexelRenderer | None = None
         self.iteration = 0
         self.history = History()
         self.schedule = Schedule.for_config(cfg)  # where the run ends (the step decay is planned for it)
@@ -218,7 +218,7 @@ class Optimization:
         self.c_var = np.asarray(d["c_var"], np.float32) if "c_var" in d else None
 
     # -------------------------------------------------------------- one step
-    def renderer(self, x: np.ndarray | None = None) -> Renderer:
+    def renderer(self, x: np.ndarray | None = None) -> TexelRenderer:
         """The run's renderer, set to the mixture of variables ``x`` (F, N) (default: the current ones; e.g.
         :meth:`initial_variables` to render the start without a grid-sized volume). It is built once from the
         fixed shares (an object with an inside mask: the base volume, whose medium is then replaced at every
