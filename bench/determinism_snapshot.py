@@ -17,35 +17,35 @@ import numpy as np
 from inkopt import _core
 
 
-def _scene(shape, voxel_mm, rng, *, boundary="box", mask=None, normals=None, labels=False):
-    nz, ny, nx = shape
-    kw = dict(boundary=boundary, ior=1.5, g=0.4, threads=None)
+def _medium(shape, rng, labels):
+    """A random medium of ``shape`` (z, y, x): labels of 5 inks with their table, or dense coefficients."""
     if labels:
-        kw.update(
-            labels=rng.integers(0, 5, size=shape).astype(np.uint8),
-            ink_sigma_s=np.array(
-                [[8.6, 3.1, 7.3], [2.4, 0.3, 9.0], [2.2, 3.7, 2.8], [1.7, 1.9, 2.2], [6.0, 9.0, 24.0]], np.float32
-            )
+        return _core.Medium.labels(
+            rng.integers(0, 5, size=shape).astype(np.uint8),
+            np.array([[8.6, 3.1, 7.3], [2.4, 0.3, 9.0], [2.2, 3.7, 2.8], [1.7, 1.9, 2.2], [6.0, 9.0, 24.0]], np.float32)
             * np.float32(0.999),
-            ink_sigma_a=np.array(
+            np.array(
                 [[0.4, 1.4, 0.2], [0.1, 2.7, 1.0], [0.01, 0.02, 16.0], [3.2, 3.6, 4.2], [0.005, 0.003, 0.02]],
                 np.float32,
             ),
         )
-    else:
-        kw.update(
-            sigma_s=rng.uniform(0.5, 12.0, size=shape + (3,)).astype(np.float32),
-            sigma_a=rng.uniform(0.0, 2.0, size=shape + (3,)).astype(np.float32),
-        )
+    return _core.Medium.dense(
+        rng.uniform(0.5, 12.0, size=shape + (3,)).astype(np.float32),
+        rng.uniform(0.0, 2.0, size=shape + (3,)).astype(np.float32),
+    )
+
+
+def _scene(shape, voxel_mm, rng, *, boundary="box", mask=None, normals=None, labels=False):
+    kw = dict(boundary=boundary, ior=1.5, g=0.4, threads=None)
     if mask is not None:
         kw["inside"] = mask.astype(np.uint8)
     if normals is not None:
         kw["normals"] = normals
-    return _core.Scene(shape, voxel_mm, **kw)
+    return _core.Scene(shape, voxel_mm, _medium(shape, rng, labels), **kw)
 
 
-def _texels(mask, faces=range(6)):
-    """Every exposed face of ``mask`` (z, y, x): (voxel (I, 3) int32, face (I,) u8, normal (I, 3) f32)."""
+def _texels(mask, faces=range(6)) -> _core.Texels:
+    """Every exposed face of ``mask`` (z, y, x), with its face normal."""
     normals = np.array([[-1, 0, 0], [1, 0, 0], [0, -1, 0], [0, 1, 0], [0, 0, -1], [0, 0, 1]], np.float32)
     pad = np.pad(mask, 1)
     vox, fid = [], []
@@ -56,7 +56,7 @@ def _texels(mask, faces=range(6)):
         vox.append(v)
         fid.append(np.full(len(v), f, np.uint8))
     fid = np.concatenate(fid)
-    return np.ascontiguousarray(np.concatenate(vox), np.int32), fid, normals[fid]
+    return _core.Texels(np.ascontiguousarray(np.concatenate(vox), np.int32), fid, normals[fid])
 
 
 def core_snapshot() -> dict:
@@ -83,15 +83,15 @@ def core_snapshot() -> dict:
         mask = kw.get("mask")
         sc = _scene(shape, kw.pop("voxel_mm"), rng, **kw)
         m = mask if mask is not None else np.ones(shape, bool)
-        tv, tf, tn = _texels(m, faces if faces is not None else range(6))
+        tex = _texels(m, faces if faces is not None else range(6))
         for spec in (True, False):
-            mean, var, st = sc.render(tv, tf, tn, spp=6, seed=7, include_specular=spec)
+            mean, var, st = sc.render(tex, spp=6, seed=7, include_specular=spec)
             out[f"{name}_render_spec{int(spec)}"] = np.concatenate([mean, var], 1)
             out[f"{name}_events_spec{int(spec)}"] = np.array([st["paths"], st["events"]], np.int64)
-        adj = rng.normal(size=(len(tv), 3)).astype(np.float32)
+        adj = rng.normal(size=(len(tex), 3)).astype(np.float32)
         for method in ("replay", "li1"):
             sc.zero_grad(float(np.abs(adj).max()), None)
-            mean, var, st = sc.backward(tv, tf, tn, adj, spp=5, seed=11, include_specular=True, method=method)
+            mean, var, st = sc.backward(tex, adj, spp=5, seed=11, include_specular=True, method=method)
             gs, ga = sc.take_grad()
             out[f"{name}_grad_{method}"] = np.stack([gs, ga])
             out[f"{name}_grad_{method}_est"] = np.concatenate([mean, var], 1)
@@ -99,7 +99,7 @@ def core_snapshot() -> dict:
         sel = np.flatnonzero(m.reshape(-1))[::2]
         idx.reshape(-1)[sel] = np.arange(len(sel), dtype=np.int32)
         sc.zero_grad(float(np.abs(adj).max()), idx)
-        sc.backward(tv, tf, tn, adj, spp=5, seed=13, include_specular=True, method="replay")
+        sc.backward(tex, adj, spp=5, seed=13, include_specular=True, method="replay")
         out[f"{name}_grad_sparse"] = np.stack(sc.take_grad())
     return out
 

@@ -54,8 +54,7 @@ def main(argv=None) -> dict:
     dense = _core.Scene(
         vol.shape,
         tuple(float(v) for v in vol.voxel_mm),
-        sigma_s=dense_s,
-        sigma_a=dense_a,
+        _core.Medium.dense(dense_s, dense_a),
         inside=vol.inside.astype(np.uint8),
         normal_index=vol.normals.index,
         normal_vectors=vol.normals.vectors,
@@ -65,10 +64,11 @@ def main(argv=None) -> dict:
     slot_map = np.full(vol.shape, -1, np.int32)
     slot_map.reshape(-1)[free] = np.arange(len(free), dtype=np.int32)
     adj = np.random.default_rng(0).normal(size=(len(tex), 3)).astype(np.float32)
+    core_tex = _core.Texels(tex.voxel, tex.face, tex.normal)
     times = {k: [] for k in ("render_dense", "render_sparse", "gradient_slot_map", "gradient_voxel_list")}
     for rep in range(args.reps):
         t = time.perf_counter()
-        d_rgb = dense.render(tex.voxel, tex.face, tex.normal, spp=4, seed=rep, first_texel=0, include_specular=True)[0]
+        d_rgb = dense.render(core_tex, spp=4, seed=rep, first_texel=0, include_specular=True)[0]
         times["render_dense"].append(time.perf_counter() - t)
         t = time.perf_counter()
         s_rgb = sparse.render(tex, 4, rep).rgb

@@ -1,6 +1,6 @@
 """The type stub python/inkopt/_core.pyi against the compiled module: the same public names, and for every callable
-the same parameters (names in order, positional or keyword-only, defaults), so the stub cannot drift from the
-bindings in crates/py."""
+the same parameters (names in order, positional or keyword-only, defaults), methods static or not, so the stub
+cannot drift from the bindings in crates/py."""
 
 import ast
 import inspect
@@ -74,22 +74,32 @@ def test_stub_functions_match_the_module():
         assert _same(stub, real), f"{fn.name}: stub {stub} != module {real}"
 
 
+def _decorated(fn: ast.FunctionDef, name: str) -> bool:
+    return any(isinstance(d, ast.Name) and d.id == name for d in fn.decorator_list)
+
+
 @pytest.mark.parametrize("cls", [n for n in _stub().body if isinstance(n, ast.ClassDef)], ids=lambda c: c.name)
 def test_stub_classes_match_the_module(cls):
     real_cls = getattr(_core, cls.name)
     assert _docstring_ok(cls), f"{cls.name}: one-line docstring"
     members = {n.name: n for n in cls.body if isinstance(n, ast.FunctionDef)}
-    assert set(members) - {"__new__"} == _public(vars(real_cls)), f"{cls.name}: members differ"
-    new = members.pop("__new__")
-    assert _docstring_ok(new), f"{cls.name}.__new__: one-line docstring"
-    stub, real = _stub_params(new, skip_first=True), _real_params(real_cls, skip_self=False)
-    assert _same(stub, real), f"{cls.name}(): stub {stub} != module {real}"
+    assert _public(members) == _public(vars(real_cls)), f"{cls.name}: members differ"
+    new = members.pop("__new__", None)
+    if new is None:  # built by its static methods only
+        with pytest.raises(TypeError, match="cannot create"):
+            real_cls()
+    else:
+        assert _docstring_ok(new), f"{cls.name}.__new__: one-line docstring"
+        stub, real = _stub_params(new, skip_first=True), _real_params(real_cls, skip_self=False)
+        assert _same(stub, real), f"{cls.name}(): stub {stub} != module {real}"
     for name, fn in members.items():
         assert _docstring_ok(fn), f"{cls.name}.{name}: one-line docstring"
         attr = inspect.getattr_static(real_cls, name)
-        is_property = any(isinstance(d, ast.Name) and d.id == "property" for d in fn.decorator_list)
+        is_property, is_static = _decorated(fn, "property"), _decorated(fn, "staticmethod")
         assert is_property == inspect.isgetsetdescriptor(attr), f"{cls.name}.{name}: property in one, not the other"
+        assert is_static == isinstance(attr, staticmethod), f"{cls.name}.{name}: static in one, not the other"
         if is_property:
             continue
-        stub, real = _stub_params(fn, skip_first=True), _real_params(getattr(real_cls, name), skip_self=True)
+        stub = _stub_params(fn, skip_first=not is_static)
+        real = _real_params(getattr(real_cls, name), skip_self=not is_static)
         assert _same(stub, real), f"{cls.name}.{name}: stub {stub} != module {real}"

@@ -1,5 +1,6 @@
 """Type stub of ``inkopt._core``, the Rust core's bindings (``crates/py``): the ``Scene`` class (render and
-gradients) and the printing and optimiser kernels.
+gradients), its argument classes ``Medium`` (dense, sparse or label form) and ``Texels``, and the printing and
+optimiser kernels.
 
 Array conventions: grids are (z, y, x[, c]) C-contiguous arrays; texel voxels are (z, y, x); normals, directions
 and voxel sizes are (x, y, z); lengths in mm, coefficients in mm^-1, radiance linear RGB. Bad input raises
@@ -11,6 +12,34 @@ from numpy.typing import NDArray
 
 __version__: str
 
+class Medium:
+    """A scene's medium as references to the caller's arrays, checked once; built by dense, sparse or labels."""
+
+    @staticmethod
+    def dense(sigma_s: NDArray[np.float32], sigma_a: NDArray[np.float32]) -> Medium:
+        """Coefficients of every grid voxel: sigma_s, sigma_a (Z,Y,X,3) f32 C-contiguous, mm^-1."""
+
+    @staticmethod
+    def sparse(index: NDArray[np.int64], sigma_s: NDArray[np.float32], sigma_a: NDArray[np.float32]) -> Medium:
+        """Voxels index (K,) i64 (strictly increasing linear zyx; the rest vacuum) with (K,3) f32 mm^-1 each."""
+
+    @staticmethod
+    def labels(labels: NDArray[np.uint8], ink_sigma_s: NDArray[np.float32], ink_sigma_a: NDArray[np.float32]) -> Medium:
+        """One ink per voxel, labels (Z,Y,X) u8 (255: vacuum), and the ink table (N,3) f32 mm^-1 each."""
+
+    @property
+    def form(self) -> str:
+        """ "dense", "sparse" or "labels"."""
+
+class Texels:
+    """Texels of a render or gradient pass, converted and checked once (28 bytes per texel)."""
+
+    def __new__(cls, voxel: NDArray[np.int32], face: NDArray[np.uint8], normal: NDArray[np.float32]) -> Texels:
+        """voxel (I,3) i32 zyx, face (I,) u8 (0..5), normal (I,3) f32 xyz outward (made unit)."""
+
+    def __len__(self) -> int:
+        """The number of texels."""
+
 class Scene:
     """A voxel scene (geometry, medium, light, thread pool) that renders texel lists and accumulates gradients."""
 
@@ -18,13 +47,8 @@ class Scene:
         cls,
         shape: tuple[int, int, int],
         voxel_mm: tuple[float, float, float],
+        medium: Medium,
         *,
-        sigma_s: NDArray[np.float32] | None = None,
-        sigma_a: NDArray[np.float32] | None = None,
-        medium_index: NDArray[np.int64] | None = None,
-        labels: NDArray[np.uint8] | None = None,
-        ink_sigma_s: NDArray[np.float32] | None = None,
-        ink_sigma_a: NDArray[np.float32] | None = None,
         inside: NDArray[np.uint8] | None = None,
         normals: NDArray[np.float32] | None = None,
         normal_index: NDArray[np.int64] | None = None,
@@ -34,23 +58,12 @@ class Scene:
         g: float = 0.4,
         threads: int | None = None,
     ) -> Scene:
-        """Grid shape (z,y,x) of voxel_mm (x,y,z) mm voxels; medium (Z,Y,X,3) f32, (K,) i64 + (K,3) f32, or labels."""
+        """Grid shape (z,y,x) of voxel_mm (x,y,z) mm voxels and its medium; normals dense or sparse (index, vectors)."""
 
-    def set_medium(
-        self,
-        *,
-        sigma_s: NDArray[np.float32] | None = None,
-        sigma_a: NDArray[np.float32] | None = None,
-        medium_index: NDArray[np.int64] | None = None,
-        labels: NDArray[np.uint8] | None = None,
-        ink_sigma_s: NDArray[np.float32] | None = None,
-        ink_sigma_a: NDArray[np.float32] | None = None,
-    ) -> None:
-        """Replace the medium (the constructor's forms, mm^-1), keeping geometry, thread pool and gradient buffers."""
+    def set_medium(self, medium: Medium) -> None:
+        """Replace the medium (in place if of the same form and voxels), keeping geometry, pool and gradient buffers."""
 
-    def set_voxels(
-        self, index: NDArray[np.int64], sigma_s: NDArray[np.float32], sigma_a: NDArray[np.float32]
-    ) -> None:
+    def set_voxels(self, index: NDArray[np.int64], sigma_s: NDArray[np.float32], sigma_a: NDArray[np.float32]) -> None:
         """Overwrite voxels index (K,) i64 (linear zyx) of a dense/sparse medium with (K, 3) f32 mm^-1, in place."""
 
     def set_light(self, map: NDArray[np.float32] | None = None, rotate_deg: float = 0.0) -> None:
@@ -61,17 +74,9 @@ class Scene:
         """Threads of the scene's pool."""
 
     def render(
-        self,
-        texel_voxel: NDArray[np.int32],
-        texel_face: NDArray[np.uint8],
-        texel_normal: NDArray[np.float32],
-        *,
-        spp: int,
-        seed: int,
-        first_texel: int = 0,
-        include_specular: bool = True,
+        self, texels: Texels, *, spp: int, seed: int, first_texel: int = 0, include_specular: bool = True
     ) -> tuple[NDArray[np.float32], NDArray[np.float32], dict[str, int]]:
-        """Texels voxel (I,3) i32 zyx, face (I,) u8, normal (I,3) f32 xyz -> mean, var_mean (I,3) f32, stats dict."""
+        """Render texels (the first has index first_texel) -> mean, var_mean (I,3) f32 linear RGB, stats dict."""
 
     def zero_grad(
         self, max_abs_adjoint: float, grad_index: NDArray[np.int32] | NDArray[np.int64] | None = None
@@ -80,9 +85,7 @@ class Scene:
 
     def backward(
         self,
-        texel_voxel: NDArray[np.int32],
-        texel_face: NDArray[np.uint8],
-        texel_normal: NDArray[np.float32],
+        texels: Texels,
         adjoint: NDArray[np.float32],
         *,
         spp: int,
@@ -145,7 +148,5 @@ def momentum_step(
 ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
     """m' = beta m + (1 - beta) g, x' = x - (lr (m' / bias)) / scale in f32, arrays (rows, n) f32 -> (x', m')."""
 
-def abs_order_statistics(
-    values: NDArray[np.float32], ranks: list[int], threads: int | None = None
-) -> list[float]:
+def abs_order_statistics(values: NDArray[np.float32], ranks: list[int], threads: int | None = None) -> list[float]:
     """|values| (rows, n) f32 at the given 0-based ranks of their increasing order (exact; NaN if any is NaN)."""

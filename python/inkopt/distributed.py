@@ -2,9 +2,9 @@
 bit-identical to the same pass in one process.
 
 :class:`RayShards` connects to Ray and starts the workers (actors): by default one per node, with as many threads
-as the node has CPUs. ``RayShards.renderer(volume, threads, lighting)`` is a drop-in for
-:class:`inkopt.render.Renderer` (same ``render``, ``gradient``, ``set_volume``, ``set_mixture``, ``set_lighting``),
-so it serves as ``Optimization``'s ``renderer_factory``. Each worker builds its own renderer once from the volume
+as the node has CPUs. ``RayShards.renderer(volume, threads, lighting)`` builds a :class:`ShardedRenderer`, a
+:class:`inkopt.render.TexelRenderer` as :class:`inkopt.render.Renderer` is, so it serves as ``Optimization``'s
+``renderer_factory``. Each worker builds its own renderer once from the volume
 (shipped once through Ray's object store) and renders a contiguous range of the texels, in proportion to its
 threads.
 
@@ -24,20 +24,35 @@ from __future__ import annotations
 
 import contextlib
 import time
+from collections.abc import Iterator
+from dataclasses import replace
 
 import numpy as np
 
-from .render import Renderer, RenderResult, fixed_to_float
+from .errors import ParameterError
+from .lighting import Lighting, load_lighting
+from .model import Texels, Volume
+from .render import (
+    PassSettings,
+    Renderer,
+    RendererFactory,
+    RenderResult,
+    TexelRenderer,
+    adjoint_array,
+    check_same_grid,
+    fixed_to_float,
+)
 
-RAY_INSTALL_HINT = "--ray needs Ray: pip install 'inkopt[ray]' (or pip install 'ray[default]')"
+#: The error of a ``ray`` address given without Ray installed (a ParameterError's template).
+RAY_INSTALL_HINT = "`ray` needs Ray: pip install 'inkopt[ray]' (or pip install 'ray[default]')"
 
 
 def import_ray():
-    """The ray module, or a ValueError with the one-line install hint."""
+    """The ray module, or a ParameterError (of ``ray``) with the one-line install hint."""
     try:
         import ray
     except ImportError:
-        raise ValueError(RAY_INSTALL_HINT) from None
+        raise ParameterError(RAY_INSTALL_HINT) from None
     return ray
 
 
@@ -74,13 +89,17 @@ class _ShardWorker:
     def set_lighting(self, lighting) -> None:
         self.renderer.set_lighting(lighting)
 
-    def render(self, texels, lo, hi, spp, seed, include_specular):
-        r = self.renderer.render(texels.subset(slice(lo, hi)), spp, seed, include_specular, first_texel=lo)
+    def render(self, texels, lo: int, hi: int, settings: PassSettings):
+        """The texels ``lo:hi`` of the pass (``settings.first_texel``: the index of ``texels[lo]``): (rgb,
+        var_mean, totals)."""
+        r = self.renderer.render_pass(texels.subset(slice(lo, hi)), settings)
         return r.rgb, r.var_mean, _totals(r)
 
-    def gradient(self, texels, lo, hi, adjoint, max_abs, spp, seed, include_specular, method, grad_index):
+    def gradient(self, texels, lo: int, hi: int, adjoint, max_abs: float, settings: PassSettings, grad_index):
+        """The texels ``lo:hi`` of the gradient pass (``settings.first_texel``: the index of ``texels[lo]``; their
+        adjoints; the whole pass's largest |adjoint| ``max_abs``): (sum_s, sum_a, quantum, rgb, var_mean, totals)."""
         gs, ga, q, r = self.renderer.gradient_fixed(
-            texels.subset(slice(lo, hi)), adjoint, spp, seed, include_specular, method, grad_index, lo, max_abs
+            texels.subset(slice(lo, hi)), adjoint, settings, grad_index, max_abs
         )
         return gs, ga, q, r.rgb, r.var_mean, _totals(r)
 
@@ -114,12 +133,14 @@ class RayShards:
             ]
         else:
             if workers < 1:
-                raise ValueError(f"workers must be at least 1, got {workers}")
+                raise ParameterError(f"`workers` must be at least 1, got {workers}")
             cpus = int(ray.cluster_resources().get("CPU", 1))
             self.threads = [threads or max(1, cpus // workers)] * workers
             self.actors = [actor.options(num_cpus=t, scheduling_strategy="SPREAD").remote(t) for t in self.threads]
 
-    def renderer(self, volume, threads: int | None = None, lighting=None) -> ShardedRenderer:
+    def renderer(
+        self, volume: Volume, threads: int | None = None, lighting: Lighting | str | None = None
+    ) -> ShardedRenderer:
         """A renderer of ``volume`` on these workers (``threads`` is ignored: each worker has its own)."""
         return ShardedRenderer(self, volume, lighting)
 
@@ -131,13 +152,12 @@ class RayShards:
             self._ray.shutdown()
 
 
-class ShardedRenderer:
-    """:class:`~inkopt.render.Renderer`'s interface over the workers of a :class:`RayShards`; results are
-    bit-identical to a ``Renderer``'s for the same volume, texels, seeds and lighting."""
+class ShardedRenderer(TexelRenderer):
+    """A :class:`~inkopt.render.TexelRenderer` over the workers of a :class:`RayShards`; results are bit-identical
+    to a :class:`~inkopt.render.Renderer`'s for the same volume, texels, seeds and lighting. ``progress`` is
+    ignored."""
 
-    def __init__(self, shards: RayShards, volume, lighting=None):
-        from .lighting import load_lighting
-
+    def __init__(self, shards: RayShards, volume: Volume, lighting: Lighting | str | None = None):
         self._shards, self._ray = shards, shards._ray
         self.volume, self.lighting = volume, load_lighting(lighting)
         self._refs: dict = {}
@@ -148,23 +168,20 @@ class ShardedRenderer:
     def threads(self) -> int:
         return sum(self._shards.threads)
 
-    def set_volume(self, volume) -> None:
-        """As ``Renderer.set_volume``: the whole volume goes out to every worker."""
-        if volume.shape != self.volume.shape:
-            raise ValueError(f"set_volume: shape {volume.shape} differs from the renderer's {self.volume.shape}")
+    def set_volume(self, volume: Volume) -> None:
+        """:meth:`TexelRenderer.set_volume`: the whole volume goes out to every worker."""
+        check_same_grid(volume, self.volume)
         ref = self._ray.put(volume)
         self._pending += [a.set_volume.remote(ref) for a in self._shards.actors]
         self.volume = volume
 
-    def set_mixture(self, index, rows) -> None:
-        """As ``Renderer.set_mixture``: the rows (K x N float32) go out through the object store once for all
-        workers; the index (the optimiser passes the same array every iteration) only the first time."""
-        rows_ref = self._ray.put(np.ascontiguousarray(rows, np.float32))
+    def set_mixture(self, index: np.ndarray, mixture: np.ndarray) -> None:
+        """:meth:`TexelRenderer.set_mixture`: the mixtures (K x N float32) go out through the object store once for
+        all workers; the index (the optimiser passes the same array every iteration) only the first time."""
+        rows_ref = self._ray.put(np.ascontiguousarray(mixture, np.float32))
         self._pending += [a.set_mixture.remote(self._ref(index), rows_ref) for a in self._shards.actors]
 
-    def set_lighting(self, lighting) -> None:
-        from .lighting import load_lighting
-
+    def set_lighting(self, lighting: Lighting | str | None) -> None:
         self.lighting = load_lighting(lighting)
         self._pending += [a.set_lighting.remote(self.lighting) for a in self._shards.actors]
 
@@ -189,46 +206,33 @@ class ShardedRenderer:
         self._ray.get(pending)
         return self._ray.get(calls)
 
-    def render(
-        self, texels, spp: int = 16, seed: int = 0, include_specular: bool = True, progress: bool = False
-    ) -> RenderResult:
-        if spp < 1:
-            raise ValueError(f"spp must be at least 1, got {spp}")
-        t0 = time.perf_counter()
-        tex = self._ref(texels)
+    def render_pass(self, texels: Texels, settings: PassSettings, progress: bool = False) -> RenderResult:
+        t0, tex = time.perf_counter(), self._ref(texels)
+        first = settings.first_texel
         outs = self._gather(
             [
-                a.render.remote(tex, lo, hi, int(spp), int(seed), include_specular)
+                a.render.remote(tex, lo, hi, replace(settings, first_texel=first + lo))
                 for a, (lo, hi) in zip(self._shards.actors, self._bounds(len(texels)))
             ]
         )
-        return self._result(outs, spp, t0)
+        return self._result(outs, settings.spp, t0)
 
-    def gradient(
+    def gradient_pass(
         self,
-        texels,
+        texels: Texels,
         adjoint: np.ndarray,
-        spp: int = 16,
-        seed: int = 1,
-        include_specular: bool = True,
-        method: str = "replay",
-        progress: bool = False,
+        settings: PassSettings,
         grad_index: np.ndarray | None = None,
-    ):
-        """As ``Renderer.gradient``: the workers' fixed-point sums are added in int64 and converted once."""
-        if spp < 1:
-            raise ValueError(f"spp must be at least 1, got {spp}")
-        adjoint = np.asarray(adjoint, np.float32)
-        if adjoint.shape != (len(texels), 3):
-            raise ValueError(f"adjoint must have shape ({len(texels)}, 3), got {adjoint.shape}")
-        t0 = time.perf_counter()
+        progress: bool = False,
+    ) -> tuple[np.ndarray, np.ndarray, RenderResult]:
+        """:meth:`TexelRenderer.gradient_pass`: the workers' fixed-point sums are added in int64 and converted
+        once."""
+        adjoint, t0 = adjoint_array(adjoint, len(texels)), time.perf_counter()
         max_abs = float(np.abs(adjoint).max(initial=0.0))
-        tex, gi = self._ref(texels), None if grad_index is None else self._ref(grad_index)
+        tex, gi, first = self._ref(texels), None if grad_index is None else self._ref(grad_index), settings.first_texel
         outs = self._gather(
             [
-                a.gradient.remote(
-                    tex, lo, hi, adjoint[lo:hi], max_abs, int(spp), int(seed), include_specular, method, gi
-                )
+                a.gradient.remote(tex, lo, hi, adjoint[lo:hi], max_abs, replace(settings, first_texel=first + lo), gi)
                 for a, (lo, hi) in zip(self._shards.actors, self._bounds(len(texels)))
             ]
         )
@@ -239,7 +243,7 @@ class ShardedRenderer:
             gs += o[0]  # int64 array sums wrap, as the core's wrapping_add does
             ga += o[1]
         q = quanta.pop()
-        return fixed_to_float(gs, q), fixed_to_float(ga, q), self._result([o[3:] for o in outs], spp, t0)
+        return fixed_to_float(gs, q), fixed_to_float(ga, q), self._result([o[3:] for o in outs], settings.spp, t0)
 
     @staticmethod
     def _result(outs, spp: int, t0: float) -> RenderResult:
@@ -250,7 +254,7 @@ class ShardedRenderer:
 
 
 @contextlib.contextmanager
-def renderer_factory(ray: str | None = None, threads: int | None = None):
+def renderer_factory(ray: str | None = None, threads: int | None = None) -> Iterator[RendererFactory]:
     """``Renderer`` (no ``ray``), or ``RayShards(ray, threads=threads).renderer`` for the duration of the block
     (Ray started for it is shut down at the end)."""
     if not ray:

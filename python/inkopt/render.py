@@ -13,18 +13,28 @@ Gradients (``Renderer.gradient``): given per-texel adjoints de/dc (I, 3), the de
 de/dsigma_a (z, y, x, 3) by path replay backpropagation (unbiased, ``method="replay"``) or the paper's biased
 one-pass approximation (``method="li1"``: radiance along the adjoint path approximated by 1, whatever the
 lighting; only sigma_a receives gradient under it).
+
+:class:`TexelRenderer` is what every renderer offers (render, gradient, set_volume, set_mixture, set_lighting);
+:class:`Renderer` implements it in this process, :class:`inkopt.distributed.ShardedRenderer` over texel shards on
+Ray workers, bit-identically.
 """
 
 from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
+from .errors import ParameterError
 from .lighting import Lighting, load_lighting
 from .model import Texels, Volume, mix
+
+if TYPE_CHECKING:
+    from . import _core
 
 # Texels per call into the core; a call re-enters Python only to update the progress bar.
 CHUNK = 4096
@@ -65,10 +75,137 @@ class RenderResult:
         }
 
 
-class Renderer:
-    """A volume prepared for rendering: geometry (grid, inside mask and its safe distances, shading normals,
-    boundary) and the thread pool are set up once; the medium can be replaced (:meth:`set_volume`) without
-    rebuilding them, as the optimiser does every iteration.
+@dataclass(frozen=True)
+class PassSettings:
+    """The settings of one render or gradient pass: ``spp`` samples per texel and channel (at least 1), random
+    numbers keyed by (``seed``, texel index, sample), with or without the specular reflection of the light
+    (``include_specular``), a gradient pass's ``method`` ("replay" or "li1"), and the index of the pass's first
+    texel in the whole list (``first_texel``: a shard of a longer list renders as in the list)."""
+
+    spp: int
+    seed: int
+    include_specular: bool = True
+    method: str = "replay"
+    first_texel: int = 0
+
+    def __post_init__(self):
+        if self.spp < 1:
+            raise ParameterError(f"`spp` must be at least 1, got {self.spp}")
+
+    def core_kwargs(self, offset: int) -> dict:
+        """The core's keyword arguments for the texels from ``offset`` in this pass's list on."""
+        return dict(
+            spp=int(self.spp),
+            seed=int(self.seed),
+            first_texel=int(self.first_texel) + offset,
+            include_specular=self.include_specular,
+        )
+
+
+def adjoint_array(adjoint: np.ndarray, texels: int) -> np.ndarray:
+    """``adjoint`` as a C-contiguous (texels, 3) float32 array; a ParameterError for another shape."""
+    adjoint = np.ascontiguousarray(adjoint, np.float32)
+    if adjoint.shape != (texels, 3):
+        raise ParameterError(f"`adjoint` must have shape ({texels}, 3), got {adjoint.shape}")
+    return adjoint
+
+
+def check_same_grid(volume: Volume, current: Volume) -> None:
+    """A ParameterError unless ``volume`` has the grid shape of ``current`` (the volume a renderer was built for)."""
+    if volume.shape != current.shape:
+        raise ParameterError(f"`volume` has shape {volume.shape}, the renderer's has {current.shape}")
+
+
+class TexelRenderer(Protocol):
+    """What renders the texels of one volume and their gradients: :class:`Renderer` in this process,
+    :class:`inkopt.distributed.ShardedRenderer` over texel shards on Ray workers, with bit-identical results.
+    ``volume``: the volume it renders (its geometry; after :meth:`set_mixture` no longer its medium);
+    ``lighting``: how it is lit. An implementation supplies the passes on a :class:`PassSettings`
+    (:meth:`render_pass`, :meth:`gradient_pass`); :meth:`render` and :meth:`gradient`, the callers' signatures,
+    are declared here once."""
+
+    volume: Volume
+    lighting: Lighting
+
+    @property
+    def threads(self) -> int:
+        """Worker threads rendering (over all workers). Results do not depend on it."""
+        ...
+
+    def set_lighting(self, lighting: Lighting | str | None) -> None:
+        """Light the volume by ``lighting`` from now on (None / "uniform", a map file, or a Lighting)."""
+        ...
+
+    def set_volume(self, volume: Volume) -> None:
+        """Render ``volume`` from now on: same grid, boundary, ior, g, inside mask and normals as the volume this
+        renderer was built for (not checked beyond the shape); only the medium is replaced."""
+        ...
+
+    def set_mixture(self, index: np.ndarray, mixture: np.ndarray) -> None:
+        """Give the voxels ``index`` ((K,) flat (z, y, x) indices) the mixtures ``mixture`` ((K, N), the volume's
+        inks), in place: the optimiser's per-iteration update of the free voxels, with no grid-sized array. The
+        other voxels keep their medium; :attr:`volume` still describes the geometry but no longer the medium. A
+        renderer of a label volume (with an inside mask) first turns its medium into the inside voxels'
+        coefficients (each its label's ink), so a big object's base can be labels (1 byte per voxel)."""
+        ...
+
+    def render_pass(self, texels: Texels, settings: PassSettings, progress: bool = False) -> RenderResult:
+        """:meth:`render` of ``texels``, the first of them with index ``settings.first_texel``."""
+        ...
+
+    def gradient_pass(
+        self,
+        texels: Texels,
+        adjoint: np.ndarray,
+        settings: PassSettings,
+        grad_index: np.ndarray | None = None,
+        progress: bool = False,
+    ) -> tuple[np.ndarray, np.ndarray, RenderResult]:
+        """:meth:`gradient` of ``texels``, the first of them with index ``settings.first_texel``."""
+        ...
+
+    def render(
+        self, texels: Texels, spp: int = 16, seed: int = 0, include_specular: bool = True, progress: bool = False
+    ) -> RenderResult:
+        """Forward render of ``texels`` (see the module docstring) with ``spp`` samples per texel; random numbers
+        are keyed by (seed, texel index, sample). ``progress``: a progress bar on a terminal, if the renderer has
+        one."""
+        return self.render_pass(texels, PassSettings(spp, seed, include_specular), progress)
+
+    def gradient(
+        self,
+        texels: Texels,
+        adjoint: np.ndarray,
+        spp: int = 16,
+        seed: int = 1,
+        include_specular: bool = True,
+        method: str = "replay",
+        progress: bool = False,
+        grad_index: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, np.ndarray, RenderResult]:
+        """Gradient of e with respect to the coefficients, given ``adjoint`` = de/dc (I, 3) in texel order.
+
+        Returns (grad_sigma_s, grad_sigma_a, result): (z, y, x, 3) float32 each, and the pass's own forward
+        estimate. With ``grad_index`` only some voxels' gradients are kept, returned as (F, 3) per slot (memory
+        proportional to F, not the grid): either (z, y, x) int32, a slot per voxel (-1 for none), or (F,) int64,
+        strictly increasing flat (z, y, x) indices of the voxels of slots 0..F-1 (the optimiser's free voxels; no
+        grid-sized array).
+        Use a different seed from the forward render whose image produced the adjoint, so that the gradient of a
+        nonlinear loss is not correlated with the image noise.
+        """
+        settings = PassSettings(spp, seed, include_specular, method)
+        return self.gradient_pass(texels, adjoint, settings, grad_index, progress)
+
+
+#: What builds a renderer: ``factory(volume, threads, lighting)``, as :class:`Renderer` and
+#: :meth:`inkopt.distributed.RayShards.renderer` do.
+RendererFactory = Callable[[Volume, int | None, Lighting | str | None], TexelRenderer]
+
+
+class Renderer(TexelRenderer):
+    """A volume prepared for rendering in this process: geometry (grid, inside mask and its safe distances,
+    shading normals, boundary) and the thread pool are set up once; the medium can be replaced
+    (:meth:`set_volume`, :meth:`set_mixture`) without rebuilding them, as the optimiser does every iteration.
 
     ``threads``: worker threads (default: all cores). Results do not depend on it.
     ``lighting``: None or "uniform" (radiance 1 from every direction), a map file or a
@@ -79,70 +216,56 @@ class Renderer:
         from . import _core
 
         self.volume = volume
-        kw = dict(
-            boundary=volume.boundary,
-            ior=float(volume.ior),
-            g=float(volume.g),
-            threads=threads,
-            **self._medium_arrays(volume),
-        )
+        kw = dict(boundary=volume.boundary, ior=float(volume.ior), g=float(volume.g), threads=threads)
         if volume.inside is not None or volume.form == "labels":
             kw["inside"] = np.ascontiguousarray(volume.inside_mask()).view(np.uint8)  # bool bytes are 0/1: no copy
         if volume.normals is not None:
             kw["normal_index"], kw["normal_vectors"] = volume.normals.index, volume.normals.vectors
-        self._scene = _core.Scene(volume.shape, tuple(float(v) for v in volume.voxel_mm), **kw)
+        voxel_mm = tuple(float(v) for v in volume.voxel_mm)
+        self._scene = _core.Scene(volume.shape, voxel_mm, self._medium(volume), **kw)
         self._labels = volume.form == "labels"
         self.lighting = Lighting()
         self.set_lighting(lighting)
 
     def set_lighting(self, lighting: Lighting | str | None) -> None:
-        """Light the volume by ``lighting`` from now on (None / "uniform", a map file, or a Lighting)."""
         light = load_lighting(lighting)
         self._scene.set_light(light.map, float(light.rotate_deg))
         self.lighting = light
 
     @staticmethod
-    def _medium_arrays(volume: Volume) -> dict:
-        """The core's medium arguments: labels with the ink table; the inside voxels' coefficients (sparse: 4
-        bytes per grid voxel + 24 per inside voxel) when the volume has an inside mask; else dense coefficients."""
+    def _medium(volume: Volume) -> _core.Medium:
+        """The core's medium (``_core.Medium``): labels with the ink table; the inside voxels' coefficients
+        (sparse: 4 bytes per grid voxel + 24 per inside voxel) when the volume has an inside mask; else dense
+        coefficients."""
+        from ._core import Medium
+
         if volume.form == "labels":
-            return dict(
-                labels=volume.labels,
-                ink_sigma_s=volume.inks.sigma_s.astype(np.float32),
-                ink_sigma_a=volume.inks.sigma_a.astype(np.float32),
-            )
+            inks = volume.inks
+            return Medium.labels(volume.labels, inks.sigma_s.astype(np.float32), inks.sigma_a.astype(np.float32))
         if volume.inside is not None:
             index = np.flatnonzero(volume.inside)
-            s, a = volume.coefficients_at(index)
-            return dict(medium_index=index, sigma_s=s, sigma_a=a)
+            return Medium.sparse(index, *volume.coefficients_at(index))
         s, a = volume.coefficients()
-        return dict(sigma_s=np.ascontiguousarray(s, np.float32), sigma_a=np.ascontiguousarray(a, np.float32))
+        return Medium.dense(np.ascontiguousarray(s, np.float32), np.ascontiguousarray(a, np.float32))
 
     def set_volume(self, volume: Volume) -> None:
-        """Render ``volume`` from now on: same grid, boundary, ior, g, inside mask and normals as the volume this
-        renderer was built for (not checked beyond the shape); only the medium is replaced."""
-        if volume.shape != self.volume.shape:
-            raise ValueError(f"set_volume: shape {volume.shape} differs from the renderer's {self.volume.shape}")
-        self._scene.set_medium(**self._medium_arrays(volume))
+        check_same_grid(volume, self.volume)
+        self._scene.set_medium(self._medium(volume))
         self.volume = volume
         self._labels = volume.form == "labels"
 
     def set_mixture(self, index: np.ndarray, mixture: np.ndarray) -> None:
-        """Give the voxels ``index`` ((K,) flat (z, y, x) indices) the mixtures ``mixture`` ((K, N), the volume's
-        inks), in place: the optimiser's per-iteration update of the free voxels, with no grid-sized array. The
-        other voxels keep their medium; :attr:`volume` still describes the geometry but no longer the medium. A
-        renderer of a label volume (with an inside mask) first turns its medium into the inside voxels'
-        coefficients (each its label's ink), so a big object's base can be labels (1 byte per voxel)."""
         inks = self.volume.inks
         if inks is None:
             raise ValueError("set_mixture needs a volume with an ink table")
         if self._labels:  # a label medium takes coefficients from now on: its inside voxels', per ink label
+            from ._core import Medium
+
             vol = self.volume
             if vol.inside is None:
                 raise ValueError("set_mixture on a label volume needs an inside mask")
             inside = np.flatnonzero(vol.inside)
-            cs, ca = vol.coefficients_at(inside)
-            self._scene.set_medium(medium_index=inside, sigma_s=cs, sigma_a=ca)
+            self._scene.set_medium(Medium.sparse(inside, *vol.coefficients_at(inside)))
             self._labels = False
         s, a = mix(mixture, inks)
         self._scene.set_voxels(
@@ -156,19 +279,12 @@ class Renderer:
         return self._scene.threads
 
     def _run(
-        self,
-        texels: Texels,
-        spp: int,
-        seed: int,
-        include_specular: bool,
-        progress: bool,
-        desc: str,
-        adjoint: np.ndarray | None = None,
-        method: str = "replay",
-        first_texel: int = 0,
+        self, texels: Texels, settings: PassSettings, adjoint: np.ndarray | None = None, progress: bool = False
     ) -> RenderResult:
-        if spp < 1:
-            raise ValueError(f"spp must be at least 1, got {spp}")
+        """A render pass over ``texels`` (a gradient pass with ``adjoint``, (I, 3) float32), ``CHUNK`` texels per
+        call into the core."""
+        from ._core import Texels as CoreTexels
+
         n = len(texels)
         rgb = np.zeros((n, 3), np.float32)
         var = np.zeros((n, 3), np.float32)
@@ -177,62 +293,38 @@ class Renderer:
         if progress and n > CHUNK and sys.stderr.isatty():
             from tqdm import tqdm
 
-            bar = tqdm(total=n * spp, unit="texel-spp", unit_scale=True, desc=desc, leave=False)
+            desc = "render" if adjoint is None else "gradient"
+            bar = tqdm(total=n * settings.spp, unit="texel-spp", unit_scale=True, desc=desc, leave=False)
         t0 = time.perf_counter()
         for a in range(0, n, CHUNK):
             b = min(a + CHUNK, n)
-            args = (texels.voxel[a:b], texels.face[a:b], texels.normal[a:b])
-            kw = dict(spp=int(spp), seed=int(seed), first_texel=first_texel + a, include_specular=include_specular)
+            chunk = CoreTexels(texels.voxel[a:b], texels.face[a:b], texels.normal[a:b])
+            kw = settings.core_kwargs(a)
             if adjoint is None:
-                m, v, st = self._scene.render(*args, **kw)
+                m, v, st = self._scene.render(chunk, **kw)
             else:
-                m, v, st = self._scene.backward(
-                    *args, np.ascontiguousarray(adjoint[a:b], np.float32), **kw, method=method
-                )
+                m, v, st = self._scene.backward(chunk, adjoint[a:b], **kw, method=settings.method)
             rgb[a:b], var[a:b] = m, v
             for k in totals:
                 totals[k] += st[k]
             if bar is not None:
-                bar.update((b - a) * spp)
+                bar.update((b - a) * settings.spp)
         if bar is not None:
             bar.close()
-        return RenderResult(rgb, var, int(spp), time.perf_counter() - t0, **totals)
+        return RenderResult(rgb, var, int(settings.spp), time.perf_counter() - t0, **totals)
 
-    def render(
-        self,
-        texels: Texels,
-        spp: int = 16,
-        seed: int = 0,
-        include_specular: bool = True,
-        progress: bool = False,
-        first_texel: int = 0,
-    ) -> RenderResult:
-        """Forward render of ``texels``; see module docstring. Random numbers are keyed by (seed, texel index,
-        sample); ``first_texel`` is the index of ``texels[0]`` (a shard of a longer list renders as in the list)."""
-        return self._run(texels, spp, seed, include_specular, progress, "render", first_texel=first_texel)
+    def render_pass(self, texels: Texels, settings: PassSettings, progress: bool = False) -> RenderResult:
+        return self._run(texels, settings, None, progress)
 
-    def gradient(
+    def gradient_pass(
         self,
         texels: Texels,
         adjoint: np.ndarray,
-        spp: int = 16,
-        seed: int = 1,
-        include_specular: bool = True,
-        method: str = "replay",
-        progress: bool = False,
+        settings: PassSettings,
         grad_index: np.ndarray | None = None,
-    ):
-        """Gradient of e with respect to the coefficients, given ``adjoint`` = de/dc (I, 3) in texel order.
-
-        Returns (grad_sigma_s, grad_sigma_a, result): (z, y, x, 3) float32 each, and the pass's own forward
-        estimate. With ``grad_index`` only some voxels' gradients are kept, returned as (F, 3) per slot (memory
-        proportional to F, not the grid): either (z, y, x) int32, a slot per voxel (-1 for none), or (F,) int64,
-        strictly increasing flat (z, y, x) indices of the voxels of slots 0..F-1 (the optimiser's free voxels; no
-        grid-sized array).
-        Use a different seed from the forward render whose image produced the adjoint, so that the gradient of a
-        nonlinear loss is not correlated with the image noise.
-        """
-        res = self._backward(texels, adjoint, spp, seed, include_specular, method, progress, grad_index)
+        progress: bool = False,
+    ) -> tuple[np.ndarray, np.ndarray, RenderResult]:
+        res = self._backward(texels, adjoint, settings, grad_index, progress)
         gs, ga = self._scene.take_grad()
         return gs, ga, res
 
@@ -240,47 +332,37 @@ class Renderer:
         self,
         texels: Texels,
         adjoint: np.ndarray,
-        spp: int = 16,
-        seed: int = 1,
-        include_specular: bool = True,
-        method: str = "replay",
+        settings: PassSettings,
         grad_index: np.ndarray | None = None,
-        first_texel: int = 0,
         max_abs_adjoint: float | None = None,
-    ):
-        """:meth:`gradient` of a shard of texels (``texels[0]`` has index ``first_texel``), as raw fixed-point sums:
-        (sum_s, sum_a, quantum, result), int64 arrays shaped like :meth:`gradient`'s. The shards of one pass, each
-        given the whole pass's ``max_abs_adjoint`` (default: this shard's), add up (int64, wrapping) to the pass's
-        sums, and :func:`fixed_to_float` of those is :meth:`gradient`'s result, bit for bit."""
-        res = self._backward(
-            texels, adjoint, spp, seed, include_specular, method, False, grad_index, first_texel, max_abs_adjoint
-        )
+    ) -> tuple[np.ndarray, np.ndarray, float, RenderResult]:
+        """:meth:`gradient` of a shard of texels (``texels[0]`` has index ``settings.first_texel``), as raw
+        fixed-point sums: (sum_s, sum_a, quantum, result), int64 arrays shaped like :meth:`gradient`'s. The shards of
+        one pass, each given the whole pass's ``max_abs_adjoint`` (default: this shard's), add up (int64, wrapping)
+        to the pass's sums, and :func:`fixed_to_float` of those is :meth:`gradient`'s result, bit for bit."""
+        res = self._backward(texels, adjoint, settings, grad_index, False, max_abs_adjoint)
         gs, ga, quantum = self._scene.take_grad_fixed()
         return gs, ga, quantum, res
 
     def _backward(
         self,
-        texels,
-        adjoint,
-        spp,
-        seed,
-        include_specular,
-        method,
-        progress,
-        grad_index,
-        first_texel=0,
-        max_abs_adjoint=None,
+        texels: Texels,
+        adjoint: np.ndarray,
+        settings: PassSettings,
+        grad_index: np.ndarray | None,
+        progress: bool,
+        max_abs_adjoint: float | None = None,
     ) -> RenderResult:
-        adjoint = np.asarray(adjoint, np.float32)
-        if adjoint.shape != (len(texels), 3):
-            raise ValueError(f"adjoint must have shape ({len(texels)}, 3), got {adjoint.shape}")
+        """The gradient pass into the core's buffers (fixed-point quantum from ``max_abs_adjoint``, default the
+        largest |adjoint|), left there for ``take_grad`` or ``take_grad_fixed``."""
+        adjoint = adjoint_array(adjoint, len(texels))
         if grad_index is not None:
             grad_index = np.asarray(grad_index)
             grad_index = np.ascontiguousarray(grad_index, np.int64 if grad_index.ndim == 1 else np.int32)
         if max_abs_adjoint is None:
             max_abs_adjoint = float(np.abs(adjoint).max(initial=0.0))
         self._scene.zero_grad(float(max_abs_adjoint), grad_index)
-        return self._run(texels, spp, seed, include_specular, progress, "gradient", adjoint, method, first_texel)
+        return self._run(texels, settings, adjoint, progress)
 
 
 def fixed_to_float(fixed_sum: np.ndarray, quantum: float) -> np.ndarray:

@@ -67,7 +67,9 @@ def test_volume_files_and_renders(tmp_path):
     from inkopt import _core
 
     s, sa = vol.coefficients()
-    sc = _core.Scene(vol.shape, (0.1, 0.1, 0.1), sigma_s=s, sigma_a=sa, inside=inside.astype(np.uint8), normals=dense)
+    sc = _core.Scene(
+        vol.shape, (0.1, 0.1, 0.1), _core.Medium.dense(s, sa), inside=inside.astype(np.uint8), normals=dense
+    )
     b = Renderer(back)
     b._scene = sc
     np.testing.assert_array_equal(a, b.render(tex, 8, 3).rgb)

@@ -204,18 +204,18 @@ def test_masked_volumes_store_only_their_inside_and_render_as_the_dense_form():
     assert vol.render_bytes() == 4 * n + 24 * k + 2 * n
     s, a = vol.coefficients()
     s, a = (np.where(inside[..., None], x, 0).astype(np.float32) for x in (s, a))
-    dense = _core.Scene(shape, (VOX,) * 3, sigma_s=s, sigma_a=a, inside=inside.astype(np.uint8))
+    dense = _core.Scene(shape, (VOX,) * 3, _core.Medium.dense(s, a), inside=inside.astype(np.uint8))
     tex = Texels.for_volume(vol)
     adj = rng.normal(size=(len(tex), 3)).astype(np.float32)
-    args = (tex.voxel, tex.face, tex.normal)
-    want = dense.render(*args, spp=4, seed=3, first_texel=0, include_specular=True)
+    core_tex = _core.Texels(tex.voxel, tex.face, tex.normal)
+    want = dense.render(core_tex, spp=4, seed=3, first_texel=0, include_specular=True)
     for outside_mix in (mixture, np.zeros_like(mixture)):  # what lies outside the mask does not matter
         r = Renderer(vol.with_mixture(np.where(inside[..., None], mixture, outside_mix)))
         got = r.render(tex, spp=4, seed=3)
         np.testing.assert_array_equal(got.rgb, want[0])
         np.testing.assert_array_equal(got.var_mean, want[1])
     dense.zero_grad(float(np.abs(adj).max()), None)
-    dense.backward(*args, adj, spp=3, seed=4, first_texel=0, include_specular=True, method="replay")
+    dense.backward(core_tex, adj, spp=3, seed=4, first_texel=0, include_specular=True, method="replay")
     gs, ga, _ = r.gradient(tex, adj, spp=3, seed=4)
     for g, w in zip((gs, ga), dense.take_grad()):
         np.testing.assert_array_equal(g, w)
@@ -246,6 +246,8 @@ def test_coefficients_at_matches_the_dense_coefficients(form):
 def test_set_volume_renders_like_a_fresh_renderer(masked):
     """One renderer for a whole optimisation: replacing the medium gives bit-identically the render and gradient
     of a renderer built for the new volume (geometry, safe distances and thread pool are kept)."""
+    from inkopt import _core
+
     rng = np.random.default_rng(8)
     inks = InkTable.parse("vero-cmykw")
     shape = (6, 7, 8)
@@ -275,7 +277,7 @@ def test_set_volume_renders_like_a_fresh_renderer(masked):
     bad = np.ascontiguousarray(s, np.float32).copy()
     bad[1, 2, 3, 1] = -1.0
     with pytest.raises(ValueError, match="voxel .* channel 1 are negative"):
-        reused._scene.set_medium(sigma_s=bad, sigma_a=np.ascontiguousarray(a_, np.float32))
+        reused._scene.set_medium(_core.Medium.dense(bad, np.ascontiguousarray(a_, np.float32)))
     np.testing.assert_array_equal(reused.render(tex, spp=4, seed=3).rgb, r2.rgb)
 
 

@@ -10,7 +10,7 @@ from inkopt import charts
 from inkopt.color import srgb_to_linear
 from inkopt.model import InkTable
 from inkopt.optim import Optimization, OptimizeConfig
-from inkopt.render import Renderer, fixed_to_float
+from inkopt.render import PassSettings, Renderer, fixed_to_float
 from inkopt.scenes.slab import build_slab
 
 pytest.importorskip("inkopt._core")
@@ -46,14 +46,12 @@ def test_shards_in_one_process_equal_one_pass(sparse):
     gs, ga, gres = r.gradient(tex, adj, 4, 8, grad_index=gi)
     parts = [
         (
-            r.render(tex.subset(slice(a, b)), 4, 7, first_texel=a),
+            r.render_pass(tex.subset(slice(a, b)), PassSettings(4, 7, first_texel=a)),
             r.gradient_fixed(
                 tex.subset(slice(a, b)),
                 adj[a:b],
-                4,
-                8,
+                PassSettings(4, 8, first_texel=a),
                 grad_index=gi,
-                first_texel=a,
                 max_abs_adjoint=float(np.abs(adj).max()),
             ),
         )
@@ -137,3 +135,25 @@ def test_ray_shards_equal_one_machine_on_a_mesh(tmp_path):
         np.testing.assert_array_equal(sharded.c_avg, plain.c_avg)
     finally:
         shards.close()
+
+
+@pytest.mark.parametrize("impl", ["Renderer", "ShardedRenderer"])
+def test_renderers_implement_the_protocol(impl):
+    """Both renderers are TexelRenderers: each protocol method's parameters (names, kinds, defaults) begin their
+    own, so a caller typed against the protocol can use either."""
+    import inspect
+
+    from inkopt import distributed, render
+
+    cls = getattr(render, impl, None) or getattr(distributed, impl)
+    assert render.TexelRenderer in cls.__mro__
+    for name, member in vars(render.TexelRenderer).items():
+        if name.startswith("_") or not callable(member):
+            continue
+        want = list(inspect.signature(member).parameters.values())
+        got = list(inspect.signature(getattr(cls, name)).parameters.values())
+        assert [(p.name, p.kind, p.default) for p in got[: len(want)]] == [(p.name, p.kind, p.default) for p in want], (
+            f"{impl}.{name}"
+        )
+        assert all(p.default is not inspect.Parameter.empty for p in got[len(want) :]), f"{impl}.{name}: extras"
+        assert inspect.getdoc(getattr(cls, name)), f"{impl}.{name}: no docstring, not even the protocol's"

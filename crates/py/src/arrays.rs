@@ -1,12 +1,10 @@
 //! Shared argument handling of the bindings: the ValueError of bad input, C-order slices of numpy arrays, shape
-//! checks, texel lists, render options, and the (mean, var_mean, stats) triple a render or gradient pass
+//! checks, render options, and the (mean, var_mean, stats) triple a render or gradient pass
 //! returns.
 
-use inkopt_core::{face_normal, Geometry, RenderOptions, Stats, Texel, TexelEstimate};
+use inkopt_core::{RenderOptions, Stats, TexelEstimate};
 use numpy::ndarray::{Array2, Dimension};
-use numpy::{
-    Element, IntoPyArray, PyArray2, PyReadonlyArray, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods,
-};
+use numpy::{Element, IntoPyArray, PyArray2, PyReadonlyArray, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -31,43 +29,6 @@ pub(crate) fn check_shape(dims: &[usize], want: &[usize], name: &str) -> PyResul
         return Err(err(format!("{name} has shape {dims:?}, expected {want:?}")));
     }
     Ok(())
-}
-
-/// The texels of a render or gradient pass from the Python arrays: voxel (I, 3) int32 (z, y, x), face (I,) uint8
-/// (0..5: -x, +x, -y, +y, -z, +z), normal (I, 3) float32 (x, y, z), each normal made unit; a ValueError for a
-/// texel on a voxel outside the object or a normal that does not face out of its face.
-pub(crate) fn texels(
-    geo: &Geometry,
-    voxel: &PyReadonlyArray2<i32>,
-    face: &PyReadonlyArray1<u8>,
-    normal: &PyReadonlyArray2<f32>,
-) -> PyResult<Vec<Texel>> {
-    let i = face.len();
-    if voxel.shape() != [i, 3] || normal.shape() != [i, 3] {
-        return Err(err("texel arrays must be voxel (I,3), face (I,), normal (I,3)"));
-    }
-    let (v, f, n) = (c_slice(voxel, "texel_voxel")?, c_slice(face, "texel_face")?, c_slice(normal, "texel_normal")?);
-    let mut out = Vec::with_capacity(i);
-    for k in 0..i {
-        let vox = [v[3 * k + 2], v[3 * k + 1], v[3 * k]];
-        if f[k] > 5 {
-            return Err(err(format!("texel {k} has face id {} (must be 0..5)", f[k])));
-        }
-        if !geo.is_inside(vox) {
-            return Err(err(format!(
-                "texel {k} lies on voxel (z,y,x)={:?}, which is not inside the object",
-                [v[3 * k], v[3 * k + 1], v[3 * k + 2]]
-            )));
-        }
-        let nrm = [n[3 * k], n[3 * k + 1], n[3 * k + 2]];
-        let len = (nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2]).sqrt();
-        let fnrm = face_normal(f[k]);
-        if !(len > 0.5 && len < 2.0) || (nrm[0] * fnrm[0] + nrm[1] * fnrm[1] + nrm[2] * fnrm[2]) <= 0.0 {
-            return Err(err(format!("texel {k} normal {nrm:?} is not a unit vector facing out of face {}", f[k])));
-        }
-        out.push(Texel { voxel: vox, face: f[k], normal: [nrm[0] / len, nrm[1] / len, nrm[2] / len] });
-    }
-    Ok(out)
 }
 
 /// The options of a render or gradient pass; a ValueError for spp = 0.

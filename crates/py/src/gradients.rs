@@ -2,12 +2,12 @@
 //! signatures and docstrings are in `scene`): fixed-point gradient buffers per voxel or per slot of a
 //! `grad_index`, filled by path replay (or the `L_i = 1` pass) and returned as numpy arrays.
 
-use inkopt_core::{backward as core_backward, GradBuffers, GradMethod, NO_GRADIENT};
+use inkopt_core::{backward as core_backward, GradBuffers, GradMethod, RenderOptions, Texel, NO_GRADIENT};
 use numpy::ndarray::{Array2, Array4};
 use numpy::{Element, IntoPyArray, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
-use crate::arrays::{c_slice, check_shape, err, options, pack, texels, Packed};
+use crate::arrays::{c_slice, check_shape, err, pack, Packed};
 use crate::medium::with_medium;
 use crate::state::Scene;
 
@@ -75,22 +75,16 @@ pub(crate) fn zero_grad(
     done.map_err(err)
 }
 
-/// `Scene.backward`.
+/// `Scene.backward` on checked texels, the first with index `first_texel`.
 pub(crate) fn backward<'py>(
     scene: &Scene,
     py: Python<'py>,
-    texel_voxel: PyReadonlyArray2<i32>,
-    texel_face: PyReadonlyArray1<u8>,
-    texel_normal: PyReadonlyArray2<f32>,
-    adjoint: PyReadonlyArray2<f32>,
-    spp: u32,
-    seed: u64,
+    texels: &[Texel],
     first_texel: u64,
-    include_specular: bool,
+    adjoint: PyReadonlyArray2<f32>,
+    opts: &RenderOptions,
     method: &str,
 ) -> PyResult<Packed<'py>> {
-    let texels = texels(&scene.geo, &texel_voxel, &texel_face, &texel_normal)?;
-    let opts = options(spp, seed, include_specular)?;
     let method = match method {
         "replay" => GradMethod::Replay,
         "li1" => GradMethod::Li1,
@@ -110,7 +104,7 @@ pub(crate) fn backward<'py>(
     let (est, stats) = py.detach(|| {
         scene.pool.install(|| {
             with_medium!(&scene.medium, m =>
-            core_backward(&scene.geo, m, &texels, first_texel, &adj, &opts, method, grads))
+            core_backward(&scene.geo, m, texels, first_texel, &adj, opts, method, grads))
         })
     });
     pack(py, &est, &stats)

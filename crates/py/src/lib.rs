@@ -1,11 +1,12 @@
-//! Thin PyO3 bindings of inkopt-core, the module `inkopt._core`: the `Scene` class (render and gradients) and
-//! the printing and optimiser kernels as functions. Array conventions are the Python package's: (z, y, x[, c])
-//! arrays, texel voxels (z, y, x), normals and voxel sizes (x, y, z). The type stub `python/inkopt/_core.pyi`
-//! lists the Python API.
+//! Thin PyO3 bindings of inkopt-core, the module `inkopt._core`: the `Scene` class (render and gradients), its
+//! argument classes `Medium` and `Texels`, and the printing and optimiser kernels as functions. Array conventions
+//! are the Python package's: (z, y, x[, c]) arrays, texel voxels (z, y, x), normals and voxel sizes (x, y, z).
+//! The type stub `python/inkopt/_core.pyi` lists the Python API.
 //!
-//! Files: `state` (the `Scene` class's fields), `scene` (its Python methods: construction, media, light, render), `medium` (the scene's medium from
-//! arrays), `gradients` (the gradient methods of `Scene`), `printing` (error diffusion), `optimiser` (smoothing
-//! and softmax kernels on kept thread pools), `arrays` (argument checks and conversions shared by all).
+//! Files: `state` (the `Scene` class's fields), `scene` (its Python methods: construction, media, light, render),
+//! `medium` (the `Medium` class and the scene's medium built from it), `texels` (the `Texels` class),
+//! `gradients` (the gradient methods of `Scene`), `printing` (error diffusion), `optimiser` (smoothing and softmax
+//! kernels on kept thread pools), `arrays` (argument checks and conversions shared by all).
 
 use pyo3::prelude::*;
 
@@ -16,10 +17,13 @@ mod optimiser;
 mod printing;
 mod scene;
 mod state;
+mod texels;
 
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<state::Scene>()?;
+    m.add_class::<medium::Medium>()?;
+    m.add_class::<texels::Texels>()?;
     m.add_function(wrap_pyfunction!(printing::diffuse_layer, m)?)?;
     m.add_function(wrap_pyfunction!(optimiser::smooth_rows, m)?)?;
     m.add_function(wrap_pyfunction!(optimiser::softmax_rows, m)?)?;

@@ -1,8 +1,12 @@
-//! The medium of a `Scene` from the Python arrays: dense, sparse or label form, and the macro that runs a
-//! generic core function on whichever form the scene holds.
+//! The `Medium` class (a scene's medium as the caller's arrays: dense, sparse or label form, checked once when it
+//! is built), the core medium a scene holds, and the macro that runs a generic core function on whichever form
+//! the scene holds.
 
 use inkopt_core::{DenseMedium, LabelMedium, SparseMedium};
-use numpy::{PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArrayDyn, PyUntypedArrayMethods};
+use numpy::ndarray::Dimension;
+use numpy::{
+    Element, PyArray, PyArray1, PyArray2, PyArray3, PyArray4, PyArrayMethods, PyReadonlyArray, PyUntypedArrayMethods,
+};
 use pyo3::prelude::*;
 
 use crate::arrays::{c_slice, check_shape, err};
@@ -28,55 +32,145 @@ macro_rules! with_medium {
 }
 pub(crate) use with_medium;
 
-/// The medium of a (z, y, x) = `shape` grid: dense sigma_s and sigma_a (z, y, x, 3) float32; sparse: those of
-/// the voxels `medium_index` only, (K, 3) each; or labels (z, y, x) uint8 with an ink table ink_sigma_s,
-/// ink_sigma_a (N, 3) float32.
-pub(crate) fn medium_from(
-    shape: [usize; 3],
-    sigma_s: Option<PyReadonlyArrayDyn<f32>>,
-    sigma_a: Option<PyReadonlyArrayDyn<f32>>,
-    medium_index: Option<PyReadonlyArray1<i64>>,
-    labels: Option<PyReadonlyArray3<u8>>,
-    ink_sigma_s: Option<PyReadonlyArray2<f32>>,
-    ink_sigma_a: Option<PyReadonlyArray2<f32>>,
-) -> PyResult<MediumKind> {
-    let [nz, ny, nx] = shape;
-    match (sigma_s, sigma_a, labels) {
-        (Some(s), Some(a), None) => {
-            let (s_, a_) = (c_slice(&s, "sigma_s")?, c_slice(&a, "sigma_a")?);
-            match medium_index {
-                None => {
-                    check_shape(s.shape(), &[nz, ny, nx, 3], "sigma_s")?;
-                    check_shape(a.shape(), &[nz, ny, nx, 3], "sigma_a")?;
-                    Ok(MediumKind::Dense(DenseMedium::from_interleaved(s_, a_).map_err(err)?))
-                }
-                Some(ix) => {
-                    check_shape(s.shape(), &[ix.len(), 3], "sigma_s")?;
-                    check_shape(a.shape(), &[ix.len(), 3], "sigma_a")?;
-                    let ix = c_slice(&ix, "medium_index")?;
-                    Ok(MediumKind::Sparse(SparseMedium::new([nx, ny, nz], ix, s_, a_).map_err(err)?))
-                }
+/// A medium for `Scene(...)` and `Scene.set_medium`, built by `Medium.dense`, `Medium.sparse` or `Medium.labels`.
+/// It holds references to the caller's arrays (no copy; the scene copies them into its own form when it takes
+/// the medium), their dtypes, shapes and layout checked when it is built; the grid is checked by the scene.
+#[pyclass(module = "inkopt._core", frozen)]
+pub(crate) struct Medium(Form);
+
+enum Form {
+    Dense { sigma_s: Py<PyArray4<f32>>, sigma_a: Py<PyArray4<f32>> },
+    Sparse { index: Py<PyArray1<i64>>, sigma_s: Py<PyArray2<f32>>, sigma_a: Py<PyArray2<f32>> },
+    Labels { labels: Py<PyArray3<u8>>, ink_sigma_s: Py<PyArray2<f32>>, ink_sigma_a: Py<PyArray2<f32>> },
+}
+
+/// The array as a C-ordered reference; a ValueError naming `name` for another layout or a shape that is not
+/// `want` (None: any extent on that axis).
+fn checked<T: Element, D: Dimension>(
+    a: Bound<'_, PyArray<T, D>>,
+    name: &str,
+    want: &[Option<usize>],
+) -> PyResult<Py<PyArray<T, D>>> {
+    let dims = a.shape();
+    if dims.len() != want.len() || dims.iter().zip(want).any(|(d, w)| w.is_some_and(|w| w != *d)) {
+        let want: Vec<String> = want.iter().map(|w| w.map_or("_".into(), |w| w.to_string())).collect();
+        return Err(err(format!("{name} has shape {dims:?}, expected ({})", want.join(", "))));
+    }
+    if !a.is_c_contiguous() {
+        return Err(err(format!("{name} must be C-contiguous (np.ascontiguousarray)")));
+    }
+    Ok(a.unbind())
+}
+
+/// A read-only view of a held array.
+fn view<'py, T: Element, D: Dimension>(a: &Py<PyArray<T, D>>, py: Python<'py>) -> PyResult<PyReadonlyArray<'py, T, D>> {
+    a.bind(py).try_readonly().map_err(|e| err(e.to_string()))
+}
+
+#[pymethods]
+impl Medium {
+    /// Medium.dense(sigma_s, sigma_a): coefficients of every grid voxel, (Z, Y, X, 3) float32 each, mm^-1.
+    #[staticmethod]
+    fn dense(sigma_s: Bound<'_, PyArray4<f32>>, sigma_a: Bound<'_, PyArray4<f32>>) -> PyResult<Self> {
+        let d = sigma_s.shape();
+        let want = [Some(d[0]), Some(d[1]), Some(d[2]), Some(3)];
+        let sigma_s = checked(sigma_s, "sigma_s", &want)?;
+        Ok(Medium(Form::Dense { sigma_s, sigma_a: checked(sigma_a, "sigma_a", &want)? }))
+    }
+
+    /// Medium.sparse(index, sigma_s, sigma_a): the coefficients of the voxels `index` (K,) int64 (strictly
+    /// increasing linear (z, y, x) indices; every other voxel is vacuum), (K, 3) float32 each, mm^-1: 24 bytes per
+    /// voxel of each grid row's span of them.
+    #[staticmethod]
+    fn sparse(
+        index: Bound<'_, PyArray1<i64>>,
+        sigma_s: Bound<'_, PyArray2<f32>>,
+        sigma_a: Bound<'_, PyArray2<f32>>,
+    ) -> PyResult<Self> {
+        let k = Some(index.len());
+        let index = checked(index, "index", &[None])?;
+        let (sigma_s, sigma_a) =
+            (checked(sigma_s, "sigma_s", &[k, Some(3)])?, checked(sigma_a, "sigma_a", &[k, Some(3)])?);
+        Ok(Medium(Form::Sparse { index, sigma_s, sigma_a }))
+    }
+
+    /// Medium.labels(labels, ink_sigma_s, ink_sigma_a): one ink per voxel, (Z, Y, X) uint8 (255: vacuum), and
+    /// the ink table, (N, 3) float32 each, mm^-1.
+    #[staticmethod]
+    fn labels(
+        labels: Bound<'_, PyArray3<u8>>,
+        ink_sigma_s: Bound<'_, PyArray2<f32>>,
+        ink_sigma_a: Bound<'_, PyArray2<f32>>,
+    ) -> PyResult<Self> {
+        let n = Some(ink_sigma_s.shape()[0]);
+        let labels = checked(labels, "labels", &[None, None, None])?;
+        let ink_sigma_s = checked(ink_sigma_s, "ink_sigma_s", &[n, Some(3)])?;
+        Ok(Medium(Form::Labels {
+            labels,
+            ink_sigma_s,
+            ink_sigma_a: checked(ink_sigma_a, "ink_sigma_a", &[n, Some(3)])?,
+        }))
+    }
+
+    /// The medium's form: "dense", "sparse" or "labels".
+    #[getter]
+    fn form(&self) -> &'static str {
+        match self.0 {
+            Form::Dense { .. } => "dense",
+            Form::Sparse { .. } => "sparse",
+            Form::Labels { .. } => "labels",
+        }
+    }
+}
+
+impl Medium {
+    /// The core medium of a (z, y, x) = `shape` grid (a copy of the arrays in the core's form); a ValueError for
+    /// arrays of another grid.
+    pub(crate) fn build(&self, py: Python<'_>, shape: [usize; 3]) -> PyResult<MediumKind> {
+        let [nz, ny, nx] = shape;
+        match &self.0 {
+            Form::Dense { sigma_s, sigma_a } => {
+                let (s, a) = (view(sigma_s, py)?, view(sigma_a, py)?);
+                check_shape(s.shape(), &[nz, ny, nx, 3], "sigma_s")?;
+                let m = DenseMedium::from_interleaved(c_slice(&s, "sigma_s")?, c_slice(&a, "sigma_a")?);
+                Ok(MediumKind::Dense(m.map_err(err)?))
+            }
+            Form::Sparse { index, sigma_s, sigma_a } => {
+                let (ix, s, a) = (view(index, py)?, view(sigma_s, py)?, view(sigma_a, py)?);
+                let (ix, s, a) = (c_slice(&ix, "index")?, c_slice(&s, "sigma_s")?, c_slice(&a, "sigma_a")?);
+                Ok(MediumKind::Sparse(SparseMedium::new([nx, ny, nz], ix, s, a).map_err(err)?))
+            }
+            Form::Labels { labels, ink_sigma_s, ink_sigma_a } => {
+                let (l, is, ia) = (view(labels, py)?, view(ink_sigma_s, py)?, view(ink_sigma_a, py)?);
+                check_shape(l.shape(), &[nz, ny, nx], "labels")?;
+                let l = c_slice(&l, "labels")?.to_vec();
+                let m = LabelMedium::new(l, c_slice(&is, "ink_sigma_s")?, c_slice(&ia, "ink_sigma_a")?);
+                Ok(MediumKind::Labels(m.map_err(err)?))
             }
         }
-        (None, None, Some(l)) => {
-            if medium_index.is_some() {
-                return Err(err("medium_index goes with sigma_s and sigma_a, not labels"));
+    }
+
+    /// Overwrite `kind` with this medium in place when it has the same form and stores the same voxels (a
+    /// dense medium of the `shape` grid, or a sparse one of the same index): no second copy of a big medium at
+    /// the peak. Whether it did; a ValueError (nothing written) for bad coefficients or a dense medium of
+    /// another grid.
+    pub(crate) fn refill(&self, py: Python<'_>, kind: &mut MediumKind, shape: [usize; 3]) -> PyResult<bool> {
+        let [nz, ny, nx] = shape;
+        match (kind, &self.0) {
+            (MediumKind::Dense(m), Form::Dense { sigma_s, sigma_a }) => {
+                let (s, a) = (view(sigma_s, py)?, view(sigma_a, py)?);
+                check_shape(s.shape(), &[nz, ny, nx, 3], "sigma_s")?;
+                m.refill(c_slice(&s, "sigma_s")?, c_slice(&a, "sigma_a")?).map_err(err)?;
             }
-            check_shape(l.shape(), &[nz, ny, nx], "labels")?;
-            let (is, ia) = match (ink_sigma_s, ink_sigma_a) {
-                (Some(is), Some(ia)) => (is, ia),
-                _ => return Err(err("a label volume needs ink_sigma_s and ink_sigma_a")),
-            };
-            for (t, name) in [(&is, "ink_sigma_s"), (&ia, "ink_sigma_a")] {
-                if t.shape().len() != 2 || t.shape()[1] != 3 {
-                    return Err(err(format!("{name} has shape {:?}, expected (n_inks, 3)", t.shape())));
+            (MediumKind::Sparse(m), Form::Sparse { index, sigma_s, sigma_a }) => {
+                if !m.stores(c_slice(&view(index, py)?, "index")?) {
+                    return Ok(false);
                 }
+                let (s, a) = (view(sigma_s, py)?, view(sigma_a, py)?);
+                m.refill(c_slice(&s, "sigma_s")?, c_slice(&a, "sigma_a")?).map_err(err)?;
             }
-            let l = c_slice(&l, "labels")?.to_vec();
-            Ok(MediumKind::Labels(
-                LabelMedium::new(l, c_slice(&is, "ink_sigma_s")?, c_slice(&ia, "ink_sigma_a")?).map_err(err)?,
-            ))
+            _ => return Ok(false),
         }
-        _ => Err(err("give either sigma_s and sigma_a, or labels with an ink table")),
+        Ok(true)
     }
 }

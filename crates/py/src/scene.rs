@@ -1,42 +1,33 @@
 //! The `Scene` class: a voxel scene built once (geometry, medium, light, thread pool) that renders texel lists
-//! and accumulates gradients. `set_medium` swaps the medium and keeps the geometry (safe distances), thread
+//! (`Texels`) and accumulates gradients; its media come as `Medium` objects. `set_medium` swaps the medium and keeps the geometry (safe distances), thread
 //! pool and gradient buffers, for optimisers that render a new medium every iteration (`set_voxels` overwrites
 //! only some voxels); `set_light` lights it by a uniform light or an environment map. The gradient methods'
 //! work is in `gradients`. The GIL is released while rendering.
 
 use inkopt_core::{render, Boundary, EnvMap, Geometry, UniformLight};
-use numpy::{
-    PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4, PyReadonlyArrayDyn, PyUntypedArrayMethods,
-};
+use numpy::{PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
-use crate::arrays::{c_slice, check_shape, err, options, pack, texels, Packed};
+use crate::arrays::{c_slice, check_shape, err, options, pack, Packed};
 use crate::gradients;
-use crate::medium::{medium_from, with_medium, MediumKind};
+use crate::medium::{with_medium, Medium, MediumKind};
 use crate::state::Scene;
+use crate::texels::Texels;
 
 #[pymethods]
 impl Scene {
-    /// Scene(shape_zyx, voxel_mm_xyz, *, sigma_s=None, sigma_a=None, medium_index=None, labels=None,
-    /// ink_sigma_s=None, ink_sigma_a=None, inside=None, normals=None, normal_index=None, normal_vectors=None,
-    /// boundary="box", ior=1.5, g=0.4, threads=None). Medium: dense (`sigma_s`, `sigma_a` (Z, Y, X, 3) f32),
-    /// sparse (`medium_index` (K,) i64 strictly increasing linear indices of the voxels that are not vacuum, with
-    /// `sigma_s`, `sigma_a` (K, 3) f32: 24 bytes per voxel of each row's span of them), or labels. Shading normals:
-    /// dense (`normals` (Z, Y, X, 3) f32) or sparse (`normal_index` (K,) i64 increasing linear indices,
-    /// `normal_vectors` (K, 3) f32).
+    /// Scene(shape_zyx, voxel_mm_xyz, medium, *, inside=None, normals=None, normal_index=None,
+    /// normal_vectors=None, boundary="box", ior=1.5, g=0.4, threads=None). `medium`: a `Medium` of this grid.
+    /// Shading normals: dense (`normals` (Z, Y, X, 3) f32) or sparse (`normal_index` (K,) i64 increasing linear
+    /// indices, `normal_vectors` (K, 3) f32).
     #[new]
-    #[pyo3(signature = (shape, voxel_mm, *, sigma_s=None, sigma_a=None, medium_index=None, labels=None,
-                        ink_sigma_s=None, ink_sigma_a=None, inside=None, normals=None, normal_index=None,
+    #[pyo3(signature = (shape, voxel_mm, medium, *, inside=None, normals=None, normal_index=None,
                         normal_vectors=None, boundary="box", ior=1.5, g=0.4, threads=None))]
     fn new(
+        py: Python<'_>,
         shape: (usize, usize, usize),
         voxel_mm: (f32, f32, f32),
-        sigma_s: Option<PyReadonlyArrayDyn<f32>>,
-        sigma_a: Option<PyReadonlyArrayDyn<f32>>,
-        medium_index: Option<PyReadonlyArray1<i64>>,
-        labels: Option<PyReadonlyArray3<u8>>,
-        ink_sigma_s: Option<PyReadonlyArray2<f32>>,
-        ink_sigma_a: Option<PyReadonlyArray2<f32>>,
+        medium: PyRef<'_, Medium>,
         inside: Option<PyReadonlyArray3<u8>>,
         normals: Option<PyReadonlyArray4<f32>>,
         normal_index: Option<PyReadonlyArray1<i64>>,
@@ -53,7 +44,7 @@ impl Scene {
             other => return Err(err(format!("unknown boundary '{other}'; use 'box' or 'periodic-xy'"))),
         };
         let mut geo = Geometry::new([nx, ny, nz], [voxel_mm.0, voxel_mm.1, voxel_mm.2], bnd, ior, g).map_err(err)?;
-        let medium = medium_from([nz, ny, nx], sigma_s, sigma_a, medium_index, labels, ink_sigma_s, ink_sigma_a)?;
+        let medium = medium.build(py, [nz, ny, nx])?;
         if let Some(m) = inside {
             check_shape(m.shape(), &[nz, ny, nx], "inside")?;
             geo = geo.with_inside(c_slice(&m, "inside")?.to_vec()).map_err(err)?;
@@ -83,37 +74,14 @@ impl Scene {
         Ok(Scene { geo, medium, pool, grads: None, sparse: false, shape: [nz, ny, nx] })
     }
 
-    /// set_medium(*, sigma_s=None, sigma_a=None, medium_index=None, labels=None, ink_sigma_s=None,
-    /// ink_sigma_a=None): replace the medium (the same arguments as the constructor's) and keep the geometry
-    /// (grid, boundary, ior, g, inside mask and its safe distances, normals), the thread pool and any gradient
-    /// buffers. A dense medium replaced by a dense one, or a sparse one by a sparse one of the same voxels, is
-    /// overwritten in place (no second copy at the peak).
-    #[pyo3(signature = (*, sigma_s=None, sigma_a=None, medium_index=None, labels=None, ink_sigma_s=None,
-                        ink_sigma_a=None))]
-    fn set_medium(
-        &mut self,
-        sigma_s: Option<PyReadonlyArrayDyn<f32>>,
-        sigma_a: Option<PyReadonlyArrayDyn<f32>>,
-        medium_index: Option<PyReadonlyArray1<i64>>,
-        labels: Option<PyReadonlyArray3<u8>>,
-        ink_sigma_s: Option<PyReadonlyArray2<f32>>,
-        ink_sigma_a: Option<PyReadonlyArray2<f32>>,
-    ) -> PyResult<()> {
-        let [nz, ny, nx] = self.shape;
-        match (&mut self.medium, &sigma_s, &sigma_a, &medium_index, &labels) {
-            (MediumKind::Dense(m), Some(s), Some(a), None, None) => {
-                check_shape(s.shape(), &[nz, ny, nx, 3], "sigma_s")?;
-                check_shape(a.shape(), &[nz, ny, nx, 3], "sigma_a")?;
-                return m.refill(c_slice(s, "sigma_s")?, c_slice(a, "sigma_a")?).map_err(err);
-            }
-            (MediumKind::Sparse(m), Some(s), Some(a), Some(ix), None) if m.stores(c_slice(ix, "medium_index")?) => {
-                check_shape(s.shape(), &[ix.len(), 3], "sigma_s")?;
-                check_shape(a.shape(), &[ix.len(), 3], "sigma_a")?;
-                return m.refill(c_slice(s, "sigma_s")?, c_slice(a, "sigma_a")?).map_err(err);
-            }
-            _ => {}
+    /// set_medium(medium): replace the medium by `medium` (a `Medium` of this grid) and keep the geometry (grid,
+    /// boundary, ior, g, inside mask and its safe distances, normals), the thread pool and any gradient buffers.
+    /// A dense medium replaced by a dense one, or a sparse one by a sparse one of the same voxels, is overwritten
+    /// in place (no second copy at the peak).
+    fn set_medium(&mut self, py: Python<'_>, medium: PyRef<'_, Medium>) -> PyResult<()> {
+        if !medium.refill(py, &mut self.medium, self.shape)? {
+            self.medium = medium.build(py, self.shape)?;
         }
-        self.medium = medium_from(self.shape, sigma_s, sigma_a, medium_index, labels, ink_sigma_s, ink_sigma_a)?;
         Ok(())
     }
 
@@ -166,24 +134,23 @@ impl Scene {
         self.pool.current_num_threads()
     }
 
-    /// render(texel_voxel (I,3) int32 zyx, texel_face (I,) uint8, texel_normal (I,3) float32 xyz, *, spp, seed,
-    /// first_texel=0, include_specular=True) -> (mean (I,3) f32, var_mean (I,3) f32, stats dict)
-    #[pyo3(signature = (texel_voxel, texel_face, texel_normal, *, spp, seed, first_texel=0, include_specular=true))]
+    /// render(texels, *, spp, seed, first_texel=0, include_specular=True) -> (mean (I,3) f32, var_mean (I,3) f32,
+    /// stats dict). Random numbers are keyed by (seed, texel index, sample); `first_texel` is the index of the
+    /// first of `texels`.
+    #[pyo3(signature = (texels, *, spp, seed, first_texel=0, include_specular=true))]
     fn render<'py>(
         &self,
         py: Python<'py>,
-        texel_voxel: PyReadonlyArray2<i32>,
-        texel_face: PyReadonlyArray1<u8>,
-        texel_normal: PyReadonlyArray2<f32>,
+        texels: PyRef<'_, Texels>,
         spp: u32,
         seed: u64,
         first_texel: u64,
         include_specular: bool,
     ) -> PyResult<Packed<'py>> {
-        let texels = texels(&self.geo, &texel_voxel, &texel_face, &texel_normal)?;
+        let texels = texels.on(&self.geo)?;
         let opts = options(spp, seed, include_specular)?;
         let (est, stats) = py.detach(|| {
-            self.pool.install(|| with_medium!(&self.medium, m => render(&self.geo, m, &texels, first_texel, &opts)))
+            self.pool.install(|| with_medium!(&self.medium, m => render(&self.geo, m, texels, first_texel, &opts)))
         });
         pack(py, &est, &stats)
     }
@@ -206,16 +173,13 @@ impl Scene {
         gradients::zero_grad(self, py, max_abs_adjoint, grad_index)
     }
 
-    /// backward(texel_voxel, texel_face, texel_normal, adjoint (I,3) f32, *, spp, seed, first_texel=0,
-    /// include_specular=True, method="replay") -> (mean, var_mean, stats): accumulates adjoint . dc/dsigma.
-    #[pyo3(signature = (texel_voxel, texel_face, texel_normal, adjoint, *, spp, seed, first_texel=0,
-                        include_specular=true, method="replay"))]
+    /// backward(texels, adjoint (I,3) f32, *, spp, seed, first_texel=0, include_specular=True, method="replay")
+    /// -> (mean, var_mean, stats), as render's: accumulates adjoint . dc/dsigma into the buffers of zero_grad.
+    #[pyo3(signature = (texels, adjoint, *, spp, seed, first_texel=0, include_specular=true, method="replay"))]
     fn backward<'py>(
         &mut self,
         py: Python<'py>,
-        texel_voxel: PyReadonlyArray2<i32>,
-        texel_face: PyReadonlyArray1<u8>,
-        texel_normal: PyReadonlyArray2<f32>,
+        texels: PyRef<'_, Texels>,
         adjoint: PyReadonlyArray2<f32>,
         spp: u32,
         seed: u64,
@@ -223,19 +187,9 @@ impl Scene {
         include_specular: bool,
         method: &str,
     ) -> PyResult<Packed<'py>> {
-        gradients::backward(
-            self,
-            py,
-            texel_voxel,
-            texel_face,
-            texel_normal,
-            adjoint,
-            spp,
-            seed,
-            first_texel,
-            include_specular,
-            method,
-        )
+        let texels = texels.on(&self.geo)?;
+        let opts = options(spp, seed, include_specular)?;
+        gradients::backward(self, py, texels, first_texel, adjoint, &opts, method)
     }
 
     /// The accumulated gradients (d e/d sigma_s, d e/d sigma_a): (z, y, x, 3) float32 each, or (F, 3) per slot

@@ -28,7 +28,7 @@ from ..errors import ParameterError
 from ..lighting import Lighting, load_lighting
 from ..loss import TexelLoss
 from ..model import FixedShares, Volume, mix_grad
-from ..render import Renderer
+from ..render import Renderer, RendererFactory, TexelRenderer
 from ..scenes import Scene
 from .checkpoint import History, read_checkpoint, write_checkpoint
 from .config import COLD_INITS, OptimizeConfig
@@ -71,7 +71,7 @@ class Optimization:
         threads: int | None = None,
         baseline: Callable[[str], np.ndarray] | None = None,
         lighting: Lighting | str | None = None,
-        renderer_factory: Callable[..., Renderer] | None = None,
+        renderer_factory: RendererFactory | None = None,
         started: float | None = None,
     ):
         if not cfg.resolved:
@@ -96,7 +96,7 @@ class Optimization:
         self.x = self.param.variables_for(self._initial_free_mixture())
         self.opt = make_optimizer(cfg.optimizer, cfg.step_size, self.x.shape, threads)
         self.smoother = self._smoother()
-        self._renderer: Renderer | None = None
+        self._renderer: TexelRenderer | None = None
         self.iteration = 0
         self.history = History()
         self.schedule = Schedule.for_config(cfg)  # where the run ends (the step decay is planned for it)
@@ -232,7 +232,7 @@ class Optimization:
         self.c_var = np.asarray(d["c_var"], np.float32) if "c_var" in d else None
 
     # -------------------------------------------------------------- one step
-    def renderer(self, x: np.ndarray | None = None) -> Renderer:
+    def renderer(self, x: np.ndarray | None = None) -> TexelRenderer:
         """The run's renderer, set to the mixture of variables ``x`` (F, N) (default: the current ones; e.g.
         :meth:`initial_variables` to render the start without a grid-sized volume). It is built once from the
         fixed shares (an object with an inside mask: the base volume, whose medium is then replaced at every
