@@ -9,7 +9,7 @@ adding-doubling, and the Monte Carlo renderer as its reference); ``fit`` minimis
 and ``calibrate`` write the ink file, its report and picture.
 """
 
-from .calibrate import calibrate
+from .calibrate import CalibrateOptions, calibrate
 from .cgats import CgatsError, CgatsTable
 from .chart import Chart, ChartError, Patch, chart_from_table, check_identifiable, design_chart
 from .fit import FitResult, fit_inks, predict_lab, predict_rgb
@@ -19,6 +19,7 @@ from .report import CalibrationReport, PatchResidual
 from .stack import Stack, reflectance_ad, reflectance_mc
 
 __all__ = [
+    "CalibrateOptions",
     "CalibrationReport",
     "CgatsError",
     "CgatsTable",

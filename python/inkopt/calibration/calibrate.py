@@ -9,6 +9,7 @@ residual figures). Every output is checked for before anything is written and wr
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -20,8 +21,8 @@ from ..model import InkTable
 from ..model.inks import write_ink_file
 from .cgats import CgatsTable, canonical_field
 from .cgats import read as read_cgats
-from .chart import chart_from_table, check_identifiable, start_table
-from .fit import choose_holdout, fit_inks
+from .chart import Chart, chart_from_table, check_identifiable, start_table
+from .fit import FitResult, choose_holdout, fit_inks
 from .measure import measured_lab
 from .report import CalibrationReport, PatchResidual, p95, swatch_figure
 
@@ -63,82 +64,123 @@ def merge_measurements(chart: CgatsTable, measured: CgatsTable, where: str) -> C
     return CgatsTable([chart.fields[i] for i in keep] + fields, out, dict(chart.header), chart.source)
 
 
+@dataclass(frozen=True)
+class CalibrateOptions:
+    """How a fit is made: ``start`` the starting ink table (a preset, list or ink file), ``illuminant`` of the
+    measurements ("D50" or "D65"), ``holdout`` the share of patches held out to test the fit (drawn with ``seed``),
+    ``fit_g`` whether the shared g is fitted (else kept at the start's)."""
+
+    start: str = "vero-cmykw"
+    illuminant: str = "D50"
+    holdout: float = 0.2
+    seed: int = 0
+    fit_g: bool = True
+
+    def validate(self) -> None:
+        if not (np.isfinite(self.holdout) and 0 <= self.holdout < 1):
+            raise ParameterError(f"`holdout` must lie in [0, 1), got {self.holdout}")
+
+
+@dataclass(frozen=True)
+class _Fit:
+    """The fits of ``calibrate``: the chart, its measured CIELAB (P, 3), the held-out patches' indices and their
+    predictions by the fit without them ((H, 3) or None), and the fit of all patches (``fit.FitResult``) with the
+    first fit's evaluations and seconds."""
+
+    chart: Chart
+    lab: np.ndarray
+    kind: str
+    held: np.ndarray
+    hold_lab: np.ndarray | None
+    full: FitResult
+    iterations: int
+    seconds: float
+
+
 def calibrate(
-    measured,
-    out_inks,
-    start: str = "vero-cmykw",
-    illuminant: str = "D50",
-    holdout: float = 0.2,
-    seed: int = 0,
-    fit_g: bool = True,
-    chart_file=None,
-    log=print,
+    measured, out_inks, options: CalibrateOptions = CalibrateOptions(), chart_file=None, log=print
 ) -> CalibrationReport:
     """Fit the ink table of the chart file ``measured`` and write the ink file ``out_inks`` with its report and
     picture (:func:`output_paths`). With ``chart_file``, ``measured`` is an instrument's file that holds only
     SAMPLE_ID and measurement columns, matched to the chart's patches by SAMPLE_ID. Returns the report."""
+    options.validate()
     paths = output_paths(out_inks)
     table = read_cgats(measured)
     if chart_file is not None:
         table = merge_measurements(read_cgats(chart_file), table, str(measured))
     chart = chart_from_table(table, str(chart_file or measured))
     check_identifiable(chart)
+    fit = _fit(chart, table, options, log)
+    report = _report(fit, measured, options, paths)
+    swatch_figure(paths["picture"], report)
+    report.to_json(paths["report"])
+    extra = {} if chart_file is None else {"chart": str(chart_file), "chart_digest": file_digest(chart_file)}
+    write_ink_file(paths["inks"], fit.full.inks, {"made_by": "inkopt calibrate", **report.summary(), **extra})
+    return report
+
+
+def _fit(chart, table: CgatsTable, options: CalibrateOptions, log) -> _Fit:
+    """Fit without the held-out patches and predict them, then fit all patches from the first fit's table."""
+    from .fit import predict_lab
+
+    illuminant = options.illuminant
     lab, kind = measured_lab(table, illuminant)
-    start_inks = start_table(chart, InkTable.parse(start))
-    held = choose_holdout(chart, holdout, seed)
+    start_inks = start_table(chart, InkTable.parse(options.start))
+    held = choose_holdout(chart, options.holdout, options.seed)
     keep = np.setdiff1d(np.arange(len(chart)), held)
     log(f"{len(chart)} patches of {', '.join(chart.inks)} ({kind}, {illuminant.upper()}); {len(held)} held out")
-    iterations, seconds = 0, 0.0
-    hold_lab = None
-    first = start_inks
+    iterations, seconds, hold_lab, first = 0, 0.0, None, start_inks
     if len(held):
-        r = fit_inks(chart.subset(keep), lab[keep], start_inks, illuminant, fit_g=fit_g)
-        from .fit import predict_lab
-
+        r = fit_inks(chart.subset(keep), lab[keep], start_inks, illuminant, fit_g=options.fit_g)
         hold_lab = predict_lab(chart.subset(held), r.inks, illuminant)
         iterations, seconds, first = r.iterations, r.seconds, r.inks
         log(f"fit without the held-out patches: {r.iterations} evaluations, {r.seconds:.1f} s")
-    full = fit_inks(chart, lab, first, illuminant, fit_g=fit_g)
+    full = fit_inks(chart, lab, first, illuminant, fit_g=options.fit_g)
     log(f"fit of all patches: {full.iterations} evaluations, {full.seconds:.1f} s, g = {full.inks.g:.3f}")
-    de00 = delta_e2000(full.predicted_lab, lab)
-    de76 = delta_e76(full.predicted_lab, lab)
-    hold_de = delta_e2000(hold_lab, lab[held]) if hold_lab is not None else np.zeros(0)
-    hold_at = {int(i): k for k, i in enumerate(held)}
+    return _Fit(chart, lab, kind, held, hold_lab, full, iterations, seconds)
+
+
+def _residuals(fit: _Fit) -> tuple[list[PatchResidual], np.ndarray, np.ndarray]:
+    """Every patch's residual, the fit's ΔE2000 (P,) and the held-out patches' (H,)."""
+    lab, pred = fit.lab, fit.full.predicted_lab
+    de00, de76 = delta_e2000(pred, lab), delta_e76(pred, lab)
+    hold_de = delta_e2000(fit.hold_lab, lab[fit.held]) if fit.hold_lab is not None else np.zeros(0)
+    hold_at = {int(i): k for k, i in enumerate(fit.held)}
     patches = []
-    for i, p in enumerate(chart.patches):
+    for i, p in enumerate(fit.chart.patches):
         k = hold_at.get(i)
         patches.append(
             PatchResidual(
                 p.sample_id,
-                p.describe(chart.inks),
+                p.describe(fit.chart.inks),
                 [float(v) for v in lab[i]],
-                [float(v) for v in full.predicted_lab[i]],
+                [float(v) for v in pred[i]],
                 float(de76[i]),
                 float(de00[i]),
                 k is not None,
-                None if k is None else [float(v) for v in hold_lab[k]],
+                None if k is None else [float(v) for v in fit.hold_lab[k]],
                 None if k is None else float(hold_de[k]),
             )
         )
-    report = CalibrationReport(
+    return patches, de00, hold_de
+
+
+def _report(fit: _Fit, measured, options: CalibrateOptions, paths: dict) -> CalibrationReport:
+    patches, de00, hold_de = _residuals(fit)
+    return CalibrationReport(
         measurements=str(measured),
         measurement_digest=file_digest(measured),
-        measurement_kind=kind,
-        illuminant=illuminant.upper(),
-        start=str(start),
+        measurement_kind=fit.kind,
+        illuminant=options.illuminant.upper(),
+        start=str(options.start),
         ink_file=str(paths["inks"]),
-        g=float(full.inks.g),
+        g=float(fit.full.inks.g),
         fit_mean_delta_e2000=float(de00.mean()),
         fit_p95_delta_e2000=p95(de00),
-        holdout_count=int(len(held)),
+        holdout_count=int(len(fit.held)),
         holdout_mean_delta_e2000=float(hold_de.mean()) if len(hold_de) else None,
         holdout_p95_delta_e2000=p95(hold_de),
-        iterations=int(iterations + full.iterations),
-        seconds=float(seconds + full.seconds),
+        iterations=int(fit.iterations + fit.full.iterations),
+        seconds=float(fit.seconds + fit.full.seconds),
         patches=patches,
     )
-    swatch_figure(paths["picture"], report)
-    report.to_json(paths["report"])
-    extra = {} if chart_file is None else {"chart": str(chart_file), "chart_digest": file_digest(chart_file)}
-    write_ink_file(paths["inks"], full.inks, {"made_by": "inkopt calibrate", **report.summary(), **extra})
-    return report

@@ -4,27 +4,16 @@ and INKS.swatches.png (``inkopt.calibration``, docs/calibration.md)."""
 
 from __future__ import annotations
 
-import numpy as np
-
 from ..calibration import calibrate
-from ..calibration.calibrate import output_paths
+from ..calibration.calibrate import CalibrateOptions, output_paths
 from .common import add_seed_arg
 
 
 def _calibrate_cmd(args) -> int:
-    if not (np.isfinite(args.holdout) and 0 <= args.holdout < 1):
-        raise ValueError(f"--holdout must lie in [0, 1), got {args.holdout}")
+    options = CalibrateOptions(args.start, args.illuminant, float(args.holdout), int(args.seed), not args.fixed_g)
+    options.validate()
     paths = output_paths(args.out)
-    rep = calibrate(
-        args.measured,
-        args.out,
-        start=args.start,
-        illuminant=args.illuminant,
-        holdout=float(args.holdout),
-        seed=int(args.seed),
-        fit_g=not args.fixed_g,
-        chart_file=args.chart,
-    )
+    rep = calibrate(args.measured, args.out, options, chart_file=args.chart)
     print(f"fit: mean ΔE2000 {rep.fit_mean_delta_e2000:.2f}, p95 {rep.fit_p95_delta_e2000:.2f} over {len(rep.patches)}")
     if rep.holdout_count:
         print(
