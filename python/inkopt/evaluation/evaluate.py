@@ -73,7 +73,7 @@ from . import sample as sampled
 from .baselines import BASELINES, BaselineLayers
 from .colour_table import DEFAULT_PATCH_MM, ColourTable, colour_table
 from .metrics import prediction_metrics
-from .noise import EVAL_SEED_OFFSET, MAX_SPP, PILOT_SPP, SSIM_NOISE_RATIO, TARGET_NOISE_DE76, adaptive_render
+from .noise import EVAL_SEED_OFFSET, MAX_SPP, PILOT_SPP, SSIM_NOISE_RATIO, TARGET_NOISE_DE76, Sampling, adaptive_render
 from .printed import PrintedRenderer
 from .results import Evaluation, Measured
 from .translucency import evaluate_translucency
@@ -197,17 +197,8 @@ def evaluate_run(
             if time_budget is not None:
                 budget = max(time_budget - (time.perf_counter() - t_all), 0.0) / max(todo[0], 1)
             todo[0] -= 1
-            ad = adaptive_render(
-                lambda n, s, g=g: render(n, s, g),
-                lab,
-                rseed,
-                spp,
-                target=target_de,
-                max_spp=max_spp,
-                log=say,
-                time_budget=budget,
-                ratio=ratio,
-            )
+            sampling = Sampling(rseed, spp, max_spp, budget, target=target_de, ratio=ratio)
+            ad = adaptive_render(lambda n, s, g=g: render(n, s, g), lab, sampling, log=say)
             ads.append(ad)
         if done is not None:
             done()
