@@ -10,7 +10,9 @@ from PIL import Image
 from slab_run import make_run
 
 import inkopt.evaluation.evaluate as evaluate_mod
+from inkopt.cli.common import flag_of
 from inkopt.color import linear_to_srgb
+from inkopt.errors import ParameterError
 from inkopt.evaluation.evaluate import evaluate_run
 from inkopt.evaluation.noise import MAX_SPP, PILOT_SPP, TARGET_NOISE_DE76
 from inkopt.evaluation.options import EvaluateOptions
@@ -185,8 +187,9 @@ def test_evaluate_surface_run_and_method_mismatch(tmp_path, table3, method, ink_
     for k in ("delta_e76_mean", "ssim"):  # the surface baseline, quantized like ours = ours
         assert ev["baselines"]["surface"][k] == ev["quantized"][k]
     other = "blue-noise" if method == "random" else "random"
-    with pytest.raises(ValueError, match=f"quantized with '{method}'"):
+    with pytest.raises(ParameterError, match=f"quantized with '{method}'") as exc:
         evaluate_run(d, EvaluateOptions(spp=1, method=other, table=table3))
+    assert f"not --method '{other}'" in exc.value.render(flag_of)  # the command line names its flag
 
 
 def test_evaluate_mesh_kind(tmp_path, table3):
