@@ -198,22 +198,22 @@ def sampled_evaluation(run_dir: Path, texels: int, windows: int, seconds: float,
     --time-budget S`` does (``evaluation.Evaluation``), into RUN/ttq_evaluation_T_W_Ss.json; an earlier one of the
     same volume.npz and settings is reused."""
     from inkopt.evaluation.evaluate import evaluate_run
+    from inkopt.evaluation.options import EvaluateOptions
     from inkopt.evaluation.results import Evaluation
 
     out = run_dir / f"ttq_evaluation_{texels}_{windows}_{seconds:g}s.json"
     ev = Evaluation.read(out) if out.is_file() else None
     if ev is None or ev.volume_digest != file_digest(run_dir / "volume.npz"):
         log = lambda m: print(m, file=sys.stderr, flush=True)  # noqa: E731
-        ev = evaluate_run(
-            run_dir,
+        options = EvaluateOptions(
             baselines=False,
             threads=threads,
-            log=log,
             out=out,
             texel_sample=texels,
             sample_windows=windows,
             time_budget=seconds,
         )
+        ev = evaluate_run(run_dir, options, log)
     return ev
 
 

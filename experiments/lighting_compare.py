@@ -61,6 +61,7 @@ def main() -> int:
 
     from inkopt import charts
     from inkopt.evaluation.evaluate import evaluate_run
+    from inkopt.evaluation.options import EvaluateOptions
     from inkopt.lighting import load_lighting, write_map
     from inkopt.model import InkTable
     from inkopt.optim import OptimizeConfig
@@ -95,9 +96,8 @@ def main() -> int:
     table, colours = {}, {}
     for run_name, d in runs.items():
         for light_name, light in lights.items():
-            ev = evaluate_run(
-                d, spp=a.eval_spp, baselines=False, threads=a.threads, lighting=light, write=False
-            ).to_json()
+            options = EvaluateOptions(spp=a.eval_spp, baselines=False, threads=a.threads, lighting=light, write=False)
+            ev = evaluate_run(d, options).to_json()
             table[f"optimised_{run_name}/seen_{light_name}"] = {
                 k: {
                     m: ev[k][m]

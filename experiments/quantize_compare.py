@@ -29,6 +29,7 @@ from common import write_study as write
 
 from inkopt import charts  # noqa: E402
 from inkopt.evaluation.evaluate import evaluate_run  # noqa: E402
+from inkopt.evaluation.options import EvaluateOptions  # noqa: E402
 from inkopt.printing.quantize import METHODS, quantize_volume  # noqa: E402
 from inkopt.rundir import RunDir  # noqa: E402
 
@@ -102,7 +103,7 @@ def main():
             q = quantize_volume(vol, method=method, upsample=a.upsample)
             tq = time.perf_counter() - t0
             RunDir(d).save_quantized(q)
-            ev = evaluate_run(d, spp=None, method=method, baselines=False, write=False).to_json()
+            ev = evaluate_run(d, EvaluateOptions(method=method, baselines=False, write=False)).to_json()
             res["continuous"] = {k: ev["continuous"].get(k) for k in KEYS}
             res[method] = {
                 **{k: ev["quantized"].get(k) for k in KEYS},

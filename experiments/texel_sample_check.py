@@ -23,6 +23,7 @@ from common import machine  # noqa: E402
 from common import write_study as write
 
 from inkopt.evaluation.evaluate import evaluate_run  # noqa: E402
+from inkopt.evaluation.options import EvaluateOptions  # noqa: E402
 
 FIGURES = ("delta_e76_mean", "delta_e76_mean_corrected", "delta_e2000_mean", "delta_e76_p95", "ssim", "mottle_l2")
 PAIRED = ("delta_e76_mean", "delta_e76_mean_corrected", "delta_e2000_mean", "ssim")
@@ -43,22 +44,24 @@ def main() -> None:
     ap.add_argument("--name")
     args = ap.parse_args()
     t0 = time.perf_counter()
-    full = evaluate_run(args.run, spp=args.spp, texel_sample=0, threads=args.threads, write=False).to_json()
+    full = evaluate_run(
+        args.run, EvaluateOptions(spp=args.spp, texel_sample=0, threads=args.threads, write=False)
+    ).to_json()
     full_seconds = time.perf_counter() - t0
     f = rows(full)
     z = {name: {k: [] for k in FIGURES} for name in f}
     zp, runs = {}, []
     for seed in range(args.seeds):
         t0 = time.perf_counter()
-        ev = evaluate_run(
-            args.run,
+        options = EvaluateOptions(
             spp=args.spp,
             seed=seed,
             texel_sample=args.texel_sample,
             sample_windows=args.sample_windows,
             threads=args.threads,
             write=False,
-        ).to_json()
+        )
+        ev = evaluate_run(args.run, options).to_json()
         runs.append({"seed": seed, "seconds": time.perf_counter() - t0, "texel_sample": ev["texel_sample"]})
         for name, r in rows(ev).items():
             for k in FIGURES:

@@ -62,6 +62,7 @@ def main() -> int:
     from PIL import Image
 
     from inkopt.evaluation.evaluate import evaluate_run
+    from inkopt.evaluation.options import EvaluateOptions
     from inkopt.evaluation.translucency import back_light
     from inkopt.model import InkTable
     from inkopt.optim import OptimizeConfig
@@ -98,11 +99,13 @@ def main() -> int:
     ev = {
         name: evaluate_run(
             d,
-            spp=a.eval_spp,
-            baselines=False,
-            threads=a.threads,
-            translucency=name == "constrained",
-            translucency_compare=runs["unconstrained"] if name == "constrained" else None,
+            EvaluateOptions(
+                spp=a.eval_spp,
+                baselines=False,
+                threads=a.threads,
+                translucency=name == "constrained",
+                translucency_compare=runs["unconstrained"] if name == "constrained" else None,
+            ),
         ).to_json()
         for name, d in runs.items()
     }

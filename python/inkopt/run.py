@@ -32,7 +32,7 @@ from .errors import ParameterError
 from .estimate import ANNOUNCE_SECONDS, Estimate, estimate_run
 from .evaluation.baselines import baseline_layers
 from .evaluation.metrics import delta_e76_map, prediction_metrics
-from .evaluation.noise import EVAL_SEED_OFFSET, MAX_SPP, PILOT_SPP, adaptive_render
+from .evaluation.noise import EVAL_SEED_OFFSET, MAX_SPP, PILOT_SPP, Sampling, adaptive_render
 from .evaluation.results import Report
 from .io import file_digest
 from .lighting import Lighting, load_lighting
@@ -249,12 +249,10 @@ class _Figures:
         res = adaptive_render(
             render,
             run.loss.target_lab,
-            self.seed,
-            self.spp,
-            max_spp=max_spp,
+            Sampling(
+                seed=self.seed, spp=self.spp, max_spp=max_spp, time_budget=budget, pilot_in_budget=pilot_in_budget
+            ),
             log=opts.log,
-            time_budget=budget,
-            pilot_in_budget=pilot_in_budget,
         )
         if not keep_renderer:  # its media are not needed beside the loss's window operators that the figures build
             del renderer, render

@@ -210,6 +210,9 @@ def test_export_refuses_more_inks_than_slots(tmp_path, capsys):
         (["evaluate", "{tmp}/nope"], "does not exist"),
         (["evaluate", "{tmp}/r", "--method", "floyd"], "unknown quantization method"),
         (["evaluate", "{tmp}/r", "--spp", "0"], "--spp"),
+        (["evaluate", "{tmp}/r", "--time-budget", "0"], "--time-budget must be a positive number of seconds"),
+        (["evaluate", "{tmp}/r", "--texel-sample", "1"], "--texel-sample must be 0 (every texel) or at least 2"),
+        (["evaluate", "{tmp}/r", "--patch-mm", "-1"], "--patch-mm must be a positive thickness"),
     ],
 )
 def test_bad_input_exits_2_with_one_line(tmp_path, capsys, argv, message):

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from inkopt.color import delta_e76, linear_to_lab
+from inkopt.errors import ParameterError
 from inkopt.evaluation.baselines import BaselineLayers, extrusion_baseline, surface_baseline, white_mixture
 from inkopt.evaluation.colour_table import (
     ColourTable,
@@ -179,7 +180,7 @@ def test_errors(table3):
         surface_baseline(vol, tex, target, fixed, other)
     with pytest.raises(ValueError, match="target_rgb"):
         surface_baseline(vol, tex, target[:5], fixed, table3)
-    with pytest.raises(ValueError, match="patch thickness"):
+    with pytest.raises(ParameterError, match="patch_mm must be a positive thickness"):
         colour_table(INKS3, patch_mm=0.0)
 
 

@@ -10,9 +10,13 @@ from PIL import Image
 from slab_run import make_run
 
 import inkopt.evaluation.evaluate as evaluate_mod
+from inkopt.cli.common import flag_of
 from inkopt.color import linear_to_srgb
-from inkopt.evaluation.evaluate import evaluate_run, table_lines
+from inkopt.errors import ParameterError
+from inkopt.evaluation.evaluate import evaluate_run
 from inkopt.evaluation.noise import MAX_SPP, PILOT_SPP, TARGET_NOISE_DE76
+from inkopt.evaluation.options import EvaluateOptions
+from inkopt.evaluation.outputs import table_lines
 from inkopt.evaluation.printed import PrintedRenderer, average_to_scene, map_texels, printer_texels
 from inkopt.evaluation.results import Evaluation
 from inkopt.io import save_npz
@@ -88,7 +92,7 @@ def test_panels_layout():
 
 def test_evaluate_run_synthetic(tmp_path, table3):
     vol, scene = make_run(tmp_path / "run", table3, "extrusion")
-    ev = evaluate_run(tmp_path / "run", spp=8, table=table3)
+    ev = evaluate_run(tmp_path / "run", EvaluateOptions(spp=8, table=table3))
     disk = json.loads((tmp_path / "run" / "evaluation.json").read_text())
     assert disk == json.loads(json.dumps(ev.to_json())) and disk["format_version"] == 2
     assert Evaluation.read(tmp_path / "run" / "evaluation.json") == ev  # the typed round trip
@@ -141,7 +145,7 @@ def test_printed_results_hold_no_grid_sized_float_array(tmp_path, table3, monkey
     monkeypatch.setattr(evaluate_mod, "TexelLoss", loss_after_renders)
     tracemalloc.start()
     try:
-        evaluate_run(tmp_path / "run", spp=1, table=table3, write=False)
+        evaluate_run(tmp_path / "run", EvaluateOptions(spp=1, table=table3, write=False))
     finally:
         tracemalloc.stop()
     Z, Y, X = printer_grid(shape, [V300] * 3)[0]
@@ -154,7 +158,7 @@ def test_evaluate_run_adaptive(tmp_path, table3):
     """Default spp: every result is rendered until its estimated noise contribution is below the target (or the
     cap), pilot first, and the figures say so."""
     make_run(tmp_path / "run", table3, "surface")
-    typed = evaluate_run(tmp_path / "run", table=table3, write=False)
+    typed = evaluate_run(tmp_path / "run", EvaluateOptions(table=table3, write=False))
     ev = typed.to_json()
     assert ev["spp_adaptive"] and ev["spp"] == ev["continuous"]["spp"]
     for m in (ev["continuous"], ev["quantized"], *ev["baselines"].values()):
@@ -178,13 +182,14 @@ def test_evaluate_surface_run_and_method_mismatch(tmp_path, table3, method, ink_
     labels, vp = quantize(q.mixture, q.voxel_mm, method=method, seed=5, order=order)
     setting = Quantization(method, 5, tuple(25.4 / vp), "nearest", ink_order)
     Volume.from_labels(voxel_mm=vp, labels=labels, inks=INKS3, quantization=setting).save(d / "quantized.npz")
-    ev = evaluate_run(d, spp=4, table=table3).to_json()
+    ev = evaluate_run(d, EvaluateOptions(spp=4, table=table3)).to_json()
     assert ev["quantization"]["method"] == method and ev["quantization"]["seed"] == 5
     for k in ("delta_e76_mean", "ssim"):  # the surface baseline, quantized like ours = ours
         assert ev["baselines"]["surface"][k] == ev["quantized"][k]
     other = "blue-noise" if method == "random" else "random"
-    with pytest.raises(ValueError, match=f"quantized with '{method}'"):
-        evaluate_run(d, spp=1, method=other, table=table3)
+    with pytest.raises(ParameterError, match=f"quantized with '{method}'") as exc:
+        evaluate_run(d, EvaluateOptions(spp=1, method=other, table=table3))
+    assert f"not --method '{other}'" in exc.value.render(flag_of)  # the command line names its flag
 
 
 def test_evaluate_mesh_kind(tmp_path, table3):
@@ -209,7 +214,7 @@ def test_evaluate_mesh_kind(tmp_path, table3):
             "fixed_share": np.zeros(mix.shape, np.float32),
         },
     )
-    ev = evaluate_run(d, spp=2, table=table3).to_json()
+    ev = evaluate_run(d, EvaluateOptions(spp=2, table=table3)).to_json()
     q = Volume.load(d / "quantized.npz")
     assert q.normals is not None and len(printer_texels(q, tex, "mesh")) == ev["printer_texels"]
     assert all(np.isfinite(ev[k]["delta_e76_mean"]) for k in ("continuous", "quantized"))

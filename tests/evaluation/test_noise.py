@@ -11,6 +11,7 @@ from inkopt.evaluation.noise import (
     SSIM_NOISE_RATIO,
     TARGET_NOISE_DE76,
     NoiseModel,
+    Sampling,
     adaptive_render,
     chi3_mean,
 )
@@ -82,7 +83,7 @@ def test_adaptive_render_reaches_target_and_is_near_noise_free():
     truth = delta_e76(linear_to_lab(c), lab_t)
     var1 = 64 * (0.1 * c) ** 2
     calls = []
-    ad = adaptive_render(fake_renderer(c, var1, calls), lab_t, seed=7)
+    ad = adaptive_render(fake_renderer(c, var1, calls), lab_t, Sampling(seed=7))
     assert ad.noise <= TARGET_NOISE_DE76
     assert ad.spp == sum(ad.passes) and len(calls) == len(ad.passes) >= 2
     assert len({s for _, s in calls}) == len(calls)  # independent seeds
@@ -105,7 +106,7 @@ def test_adaptive_render_samples_until_ssim_noise_is_small():
     var1 = 64 * (0.08 * c) ** 2
     pilot = NoiseModel.of(c, var1 / 64, lab_t)
     assert pilot.contribution() <= TARGET_NOISE_DE76 and pilot.ssim_ratio > 2 * SSIM_NOISE_RATIO
-    ad = adaptive_render(fake_renderer(c, var1, []), lab_t, seed=3)
+    ad = adaptive_render(fake_renderer(c, var1, []), lab_t, Sampling(seed=3))
     final = NoiseModel.of(ad.rgb, ad.var, lab_t)
     assert final.ssim_ratio <= SSIM_NOISE_RATIO < NoiseModel.of(ad.rgb, 2 * ad.var, lab_t).ssim_ratio
     # r is the largest channel's mean per-texel variance of normalised L*a*b* over K2, ∝ 1/spp
@@ -115,10 +116,10 @@ def test_adaptive_render_samples_until_ssim_noise_is_small():
 def test_explicit_spp_is_exact_and_cap_holds():
     t, c = synthetic(0.05)
     calls = []
-    ad = adaptive_render(fake_renderer(c, (0.1 * c) ** 2 * 64, calls), linear_to_lab(t), seed=0, spp=32)
+    ad = adaptive_render(fake_renderer(c, (0.1 * c) ** 2 * 64, calls), linear_to_lab(t), Sampling(spp=32))
     assert calls == [(32, 0)] and ad.spp == 32
     calls = []
-    ad = adaptive_render(fake_renderer(c, (0.1 * c) ** 2 * 1e6, calls), linear_to_lab(t), seed=0, max_spp=256)
+    ad = adaptive_render(fake_renderer(c, (0.1 * c) ** 2 * 1e6, calls), linear_to_lab(t), Sampling(max_spp=256))
     assert ad.spp == 256 and ad.noise > TARGET_NOISE_DE76 and calls[0][0] == 64
 
 
@@ -168,11 +169,11 @@ def test_time_budget_caps_the_samples_and_passes_say_their_time():
         return render(n, seed)
 
     lines = []
-    ad = adaptive_render(timed, linear_to_lab(t), seed=0, time_budget=3.0, log=lines.append, clock=lambda: now[0])
+    ad = adaptive_render(timed, linear_to_lab(t), Sampling(time_budget=3.0), log=lines.append, clock=lambda: now[0])
     assert ad.passes == [4, 60, 236] and ad.spp == 300 and ad.capped and ad.noise > TARGET_NOISE_DE76
     assert now[0] <= 3.0 + 1e-9
     assert "236 more, ~2 s (capped)" in lines[0]
-    free = adaptive_render(timed, linear_to_lab(t), seed=0, clock=lambda: now[0])
+    free = adaptive_render(timed, linear_to_lab(t), clock=lambda: now[0])
     assert free.spp > 1000  # without the budget it would have gone on
 
 
@@ -187,5 +188,26 @@ def test_time_budget_below_the_pilot_keeps_to_it():
         now[0] += 0.01 * n
         return render(n, seed)
 
-    ad = adaptive_render(timed, linear_to_lab(t), seed=0, time_budget=0.4, clock=lambda: now[0])
+    ad = adaptive_render(timed, linear_to_lab(t), Sampling(time_budget=0.4), clock=lambda: now[0])
     assert ad.passes == [4, 36] and ad.spp == 40 and ad.capped and now[0] <= 0.4 + 1e-9
+
+
+@pytest.mark.parametrize(
+    "kw,name",
+    [
+        ({"spp": 0}, "spp"),
+        ({"max_spp": 0}, "max_spp"),
+        ({"pilot_spp": 0}, "pilot_spp"),
+        ({"time_budget": -1}, "time_budget"),
+        ({"time_budget": float("nan")}, "time_budget"),
+        ({"target": 0}, "target"),
+        ({"ratio": -1.0}, "ratio"),
+    ],
+)
+def test_sampling_names_the_bad_parameter(kw, name):
+    from inkopt.errors import ParameterError
+
+    with pytest.raises(ParameterError) as exc:
+        Sampling(**kw)
+    assert exc.value.parameters == (name,)
+    Sampling(time_budget=0.0, target=float("inf"), ratio=float("inf"))  # no budget left, no target: allowed

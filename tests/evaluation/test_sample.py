@@ -11,6 +11,7 @@ from slab_run import make_run
 from inkopt.cli import main
 from inkopt.evaluation.evaluate import evaluate_run
 from inkopt.evaluation.metrics import mottle_per_texel, prediction_metrics
+from inkopt.evaluation.options import EvaluateOptions
 from inkopt.evaluation.printed import average_to_scene, restrict
 from inkopt.evaluation.sample import (
     SampleError,
@@ -144,9 +145,11 @@ def test_sampled_evaluation_agrees_with_the_full_one(tmp_path, table3):
     """A slab's figures from 600 of its 2304 texels (8 windows) lie within 4 standard errors of the full
     evaluation's at the same spp; results rendered alike give a difference of exactly 0 (same texels, same seeds)."""
     make_run(tmp_path / "run", table3, "extrusion", shape=(3, 48, 48))
-    full = evaluate_run(tmp_path / "run", spp=16, table=table3, texel_sample=0, out=tmp_path / "full.json").to_json()
+    full = evaluate_run(
+        tmp_path / "run", EvaluateOptions(spp=16, table=table3, texel_sample=0, out=tmp_path / "full.json")
+    ).to_json()
     sampled = dict(texel_sample=600, sample_windows=8, out=tmp_path / "s.json")
-    typed = evaluate_run(tmp_path / "run", spp=16, table=table3, **sampled)
+    typed = evaluate_run(tmp_path / "run", EvaluateOptions(spp=16, table=table3, **sampled))
     ev = json.loads((tmp_path / "s.json").read_text())
     assert ev == json.loads(json.dumps(typed.to_json())) and ev["format_version"] == 2
     assert full.get("texel_sample") is None and "stderr" not in full["continuous"]

@@ -10,7 +10,7 @@ from helpers import FAST_RUN
 from PIL import Image
 
 from inkopt import charts, cli
-from inkopt.evaluation.translucency import back_light, knife_edge_spread, transmittance
+from inkopt.evaluation.translucency import TranslucencyRenders, back_light, knife_edge_spread, transmittance
 from inkopt.model import Texels, Volume
 
 pytest.importorskip("inkopt._core")
@@ -47,16 +47,17 @@ def test_transmittance_of_non_scattering_slab(sigma_a):
     assert abs(y.mean() - slab_t(sigma_a, L * VOX)) < 4 * se + 2e-3
 
 
+FAST_PROBE = TranslucencyRenders(probe_spp=16, threads=2)
+
+
 def test_knife_edge_known_cases():
     """No scattering: the view ray goes straight through, E|dx| = 0 and the probe transmits the Fresnel value.
     Scattering spreads light sideways, more through a thicker slab; a strongly scattering (white) slab passes less
     light than a clear one."""
-    clear = knife_edge_spread(np.zeros((6, 3)), np.full((6, 3), 1e-4), VOX, 0.4, 1.5, spp=16, threads=2)
+    clear = knife_edge_spread(np.zeros((6, 3)), np.full((6, 3), 1e-4), VOX, 0.4, 1.5, FAST_PROBE)
     assert clear["spread_mm"] == 0.0 and clear["probe_transmittance"] == pytest.approx(slab_t(0, 0), abs=0.01)
-    thin = knife_edge_spread(np.full((4, 3), 9.0), np.full((4, 3), 0.01), VOX, 0.4, 1.5, spp=16, threads=2, width=128)
-    thick = knife_edge_spread(
-        np.full((12, 3), 9.0), np.full((12, 3), 0.01), VOX, 0.4, 1.5, spp=16, threads=2, width=128
-    )
+    thin = knife_edge_spread(np.full((4, 3), 9.0), np.full((4, 3), 0.01), VOX, 0.4, 1.5, FAST_PROBE, width=128)
+    thick = knife_edge_spread(np.full((12, 3), 9.0), np.full((12, 3), 0.01), VOX, 0.4, 1.5, FAST_PROBE, width=128)
     assert thin["spread_mm"] > 5 * thin["spread_stderr_mm"]
     diff, se = thick["spread_mm"] - thin["spread_mm"], np.hypot(thick["spread_stderr_mm"], thin["spread_stderr_mm"])
     assert diff > 4 * se

@@ -8,6 +8,7 @@ import trimesh
 from inkopt import charts, cli
 from inkopt.evaluation.colour_table import colour_table
 from inkopt.evaluation.evaluate import evaluate_run
+from inkopt.evaluation.options import EvaluateOptions
 from inkopt.model import InkTable
 
 INKS = "cyan,magenta,white"  # three inks: the baselines' colour table is small
@@ -49,7 +50,7 @@ def mesh_run(tmp_path_factory):
             INKS,
         )
         table = colour_table(InkTable.parse(INKS), patch_mm=1.0, step=2, max_stderr=0.5)  # 6 patches
-        evaluate_run(run, spp=8, table=table)
+        evaluate_run(run, EvaluateOptions(spp=8, table=table))
         _run("report", run)
     return run
 

@@ -20,6 +20,7 @@ def _demo(args) -> int:
     from .. import charts
     from ..evaluation.colour_table import colour_table
     from ..evaluation.evaluate import evaluate_run
+    from ..evaluation.options import EvaluateOptions
     from ..model import InkTable, Texels, Volume
     from ..optim import OptimizeConfig
     from ..proof import write_proof
@@ -50,7 +51,7 @@ def _demo(args) -> int:
     pages = []
 
     def finish(run: Path, rep) -> None:
-        ev = evaluate_run(run, spp=DEMO_EVAL_SPP, threads=args.threads, table=table)
+        ev = evaluate_run(run, EvaluateOptions(spp=DEMO_EVAL_SPP, threads=args.threads, table=table))
         p = write_proof(run)
         pages.append(p.path)
         q = ev.quantized.metrics

@@ -35,6 +35,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..color import lab_stderr, linear_to_lab
+from ..errors import ParameterError
 from ..io import save_npz
 from ..model import InkTable, Texels, Volume
 from ..render import Renderer
@@ -262,7 +263,6 @@ def render_patches(
     the two passes (independent seeds) are pooled per texel.
     """
     mixtures = np.asarray(mixtures, np.float32)
-    n_lat = PATCH_LATERAL
     texels = None
     rgb = np.zeros((len(mixtures), 3))
     err = np.zeros(len(mixtures))
@@ -277,30 +277,35 @@ def render_patches(
             inks=inks,
             g=g,
             ior=ior,
-            mixture=np.broadcast_to(row, (1, n_lat, n_lat, len(row))).copy(),
+            mixture=np.broadcast_to(row, (1, PATCH_LATERAL, PATCH_LATERAL, len(row))).copy(),
             boundary="periodic-xy",
         )
         if texels is None:
             texels = Texels.for_volume(vol, ["top"])
-        rnd = Renderer(vol, threads)
-        r0 = rnd.render(texels, PATCH_PILOT_SPP, seed=2 * j + seed * 1_000_003)
-        m, v = r0.rgb.astype(np.float64), r0.var_mean.astype(np.float64)
-        mean = m.mean(0)
-        se = lab_stderr(mean, v.sum(0) / len(texels) ** 2)
-        if se > max_stderr:
-            spp1 = int(min(MAX_PATCH_SPP, np.ceil(PATCH_PILOT_SPP * ((se / max_stderr) ** 2 * 1.2 - 1.0))))
-            r1 = rnd.render(texels, max(spp1, 1), seed=2 * j + 1 + seed * 1_000_003)
-            n0, n1 = PATCH_PILOT_SPP, r1.spp
-            m = (n0 * m + n1 * r1.rgb) / (n0 + n1)
-            v = (n0 * n0 * v + n1 * n1 * r1.var_mean) / (n0 + n1) ** 2
-            mean = m.mean(0)
-            se = lab_stderr(mean, v.sum(0) / len(texels) ** 2)
-        rgb[j], err[j] = mean, se
+        rgb[j], err[j] = _patch_colour(Renderer(vol, threads), texels, 2 * j + seed * 1_000_003, max_stderr)
         if bar is not None:
             bar.update()
     if bar is not None:
         bar.close()
     return rgb, err
+
+
+def _patch_colour(rnd: Renderer, texels: Texels, seed: int, max_stderr: float) -> tuple[np.ndarray, float]:
+    """One patch's mean colour (3,) linear RGB and its ΔE standard error: the pilot with ``seed``, and a second
+    pass with ``seed + 1`` when the pilot's error exceeds ``max_stderr`` (``render_patches``)."""
+    r0 = rnd.render(texels, PATCH_PILOT_SPP, seed=seed)
+    m, v = r0.rgb.astype(np.float64), r0.var_mean.astype(np.float64)
+    mean = m.mean(0)
+    se = lab_stderr(mean, v.sum(0) / len(texels) ** 2)
+    if se > max_stderr:
+        spp1 = int(min(MAX_PATCH_SPP, np.ceil(PATCH_PILOT_SPP * ((se / max_stderr) ** 2 * 1.2 - 1.0))))
+        r1 = rnd.render(texels, max(spp1, 1), seed=seed + 1)
+        n0, n1 = PATCH_PILOT_SPP, r1.spp
+        m = (n0 * m + n1 * r1.rgb) / (n0 + n1)
+        v = (n0 * n0 * v + n1 * n1 * r1.var_mean) / (n0 + n1) ** 2
+        mean = m.mean(0)
+        se = lab_stderr(mean, v.sum(0) / len(texels) ** 2)
+    return mean, se
 
 
 def colour_table(
@@ -321,9 +326,9 @@ def colour_table(
     g = inks.g if g is None else float(g)
     step = default_step(len(inks)) if step is None else int(step)
     if not (np.isfinite(patch_mm) and patch_mm > 0):
-        raise ValueError(f"patch thickness must be positive (mm), got {patch_mm}")
+        raise ParameterError(f"`patch_mm` must be a positive thickness in mm, got {patch_mm}")
     if not max_stderr > 0:
-        raise ValueError(f"max_stderr must be positive, got {max_stderr}")
+        raise ParameterError(f"`max_stderr` must be positive, got {max_stderr}")
     key = table_key(inks, g, ior, patch_mm, step, max_stderr)
     path = cache_dir() / f"colour_table_{key}.npz"
     for where in (path, PACKAGED / path.name) if cache else ():

@@ -1,11 +1,12 @@
 """Evaluation of a run directory (docs/run-dir.md): how close do the continuous result, the printed (quantized)
 result and the naive baselines come to the target?
 
-``evaluate_run(DIR)`` renders, on the same render seeds (``EVAL_SEED_OFFSET + seed``, never used by an
-optimisation), each result with enough samples that the Monte Carlo noise adds at most ~0.5 to its mean ΔE76 and
-SSIM's and the mottle's noise correction is accurate (``evaluation.noise.adaptive_render``: a 64-spp pilot, the
-noise contribution and SSIM noise ratio estimated from it, the rest rendered
-with independent seeds and pooled; at most 4096 spp). An explicit ``spp`` renders exactly that many instead:
+``evaluate_run(DIR, options)`` (``options.EvaluateOptions``) renders, on the same render seeds
+(``EVAL_SEED_OFFSET + seed``, never used by an optimisation), each result with enough samples that the Monte Carlo
+noise adds at most ~0.5 to its mean ΔE76 and SSIM's and the mottle's noise correction is accurate
+(``evaluation.noise.adaptive_render``: a 64-spp pilot, the noise contribution and SSIM noise ratio estimated from
+it, the rest rendered with independent seeds and pooled; at most 4096 spp). An explicit ``spp`` renders exactly
+that many instead:
 
 - ``continuous``: DIR/volume.npz on the scene texels at ``spp`` samples per texel;
 - ``quantized``: DIR/quantized.npz (made with default settings first if missing) on its own printer-grid
@@ -41,6 +42,11 @@ Writes DIR/evaluation.json (or ``out``), DIR/predictions.npz (every result's col
 | surface | extrusion (sRGB); for meshes DIR/evaluation_views.png, the same rows seen from four sides. ``max_spp``
 and ``time_budget`` cap the adaptive renders.
 
+The stage is a pipeline of named steps over one ``Evaluating`` (what the steps share: the run, its scene, the
+options, the texel groups, the render seed and time shares, each result's renders): the continuous result (and
+translucency, and the baselines' layer sources) while the run's mixture is loaded, then the printed results on one
+printer renderer, then the figures of every result, the ``Evaluation`` and its files.
+
 Memory: one renderer exists at a time. The run's mixture is dropped once the continuous result (and translucency)
 is rendered; the printer texels, their map and one printer renderer (``printed.PrintedRenderer``: geometry built
 once, each later result's labels swapped in) serve the quantized result and both baselines (same printer grid and
@@ -53,17 +59,18 @@ the continuous render and one printer renderer's build, below the optimisation's
 from __future__ import annotations
 
 import time
-from dataclasses import asdict
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ..color import delta_e76, linear_to_lab
-from ..io import file_digest, write_png
+from ..errors import ParameterError
+from ..io import file_digest
 from ..lighting import Lighting, load_lighting
 from ..loss import TexelLoss
 from ..model import Quantization, Volume
-from ..pictures import panels
 from ..printing.quantize import DEFAULT_DPI, DEFAULT_LAYER_UM, band_order, printer_grid, quantize
 from ..printing.stream import quantize_run
 from ..render import Renderer
@@ -71,237 +78,228 @@ from ..rundir import Predictions, RunDir, SceneRecord
 from ..units import dpi_of
 from . import sample as sampled
 from .baselines import BASELINES, BaselineLayers
-from .colour_table import DEFAULT_PATCH_MM, ColourTable, colour_table
+from .colour_table import ColourTable, colour_table
 from .metrics import prediction_metrics
-from .noise import EVAL_SEED_OFFSET, MAX_SPP, PILOT_SPP, SSIM_NOISE_RATIO, TARGET_NOISE_DE76, adaptive_render
+from .noise import EVAL_SEED_OFFSET, MAX_SPP, PILOT_SPP, TARGET_NOISE_DE76, Sampling
+from .options import EvaluateOptions
+from .outputs import write_face_pictures, write_mesh_views
 from .printed import PrintedRenderer
+from .renders import (
+    ContinuousSource,
+    PrintedSource,
+    Rendered,
+    TexelGroup,
+    TimeShares,
+    events_per_path,
+    render_result,
+    texel_groups,
+)
 from .results import Evaluation, Measured
 from .translucency import evaluate_translucency
-from .translucency import table_lines as translucency_lines
-
-DEFAULT_SPP = None  # adaptive
 
 
-def per_path(walks: dict) -> float:
-    """Mean scattering and interface events per path of a result's renders (0 before any)."""
-    return walks["events"] / walks["paths"] if walks.get("paths") else 0.0
+def _silent(msg: str) -> None:
+    """The default log: nothing."""
 
 
-# ----------------------------------------------------------------------------------------------- pictures
-def write_face_pictures(d: RunDir, rec: SceneRecord, results: dict, stem: str = "evaluation") -> list[str]:
-    """DIR/<stem>_<face>.png (target | optimized | quantized | baselines) for every textured face of a slab;
-    returns the file names."""
-    items = [("target", results["target"]), ("optimized", results["continuous"]), ("quantized", results["quantized"])]
-    items += [(k, results[k]) for k in ("surface", "extrusion") if k in results]
-    names = []
-    for face in rec.faces:
-        if face in rec.pix:
-            path = d.evaluation_picture_path(face, stem)
-            write_png(path, panels(items, rec.pix[face]))
-            names.append(path.name)
-    return names
+@dataclass
+class Evaluating:
+    """What the steps of one evaluation share: the run directory ``d`` and its scene ``rec``, the ``options``, the
+    ``lighting``, the log ``say`` (``progress``: whether the renders show progress bars), the targets (I, 3)
+    linear and CIELAB, the texel ``sample`` (None: every texel) and the texel ``groups`` rendered, the renders'
+    ``sampling`` (seed, spp, cap) and time ``shares`` (from the evaluation's start); filled in as the steps go:
+    each rendered result's colours on the first group (``colours``, with the target) and renders (``renders``, by
+    result name), the translucency figures and the colour table's and gamut floor's (``floor``)."""
+
+    d: RunDir
+    rec: SceneRecord
+    options: EvaluateOptions
+    lighting: Lighting
+    say: Callable[[str], None]
+    progress: bool
+    target: np.ndarray
+    target_lab: np.ndarray
+    sample: sampled.TexelSample | None
+    groups: list[TexelGroup]
+    sampling: Sampling
+    shares: TimeShares
+    colours: dict = field(default_factory=dict)
+    renders: dict[str, Rendered] = field(default_factory=dict)
+    translucency: dict | None = None
+    floor: dict = field(default_factory=dict)
+
+    @classmethod
+    def open(cls, path, options: EvaluateOptions, log) -> Evaluating:
+        """The run directory ``path`` checked (a stale quantized volume is refused before any render), its scene
+        read and the texel sample drawn."""
+        lighting = load_lighting(options.lighting)
+        d = RunDir(path)
+        d.check_quantized_current()
+        rec = d.load_scene()
+        target = rec.target_rgb.astype(np.float64)
+        target_lab = linear_to_lab(target)  # as TexelLoss has it; the loss itself is built after the renders
+        seed = EVAL_SEED_OFFSET + int(options.seed)
+        sample = sampled.draw_sample(rec.texels, options.texel_sample, options.sample_windows, seed, log)
+        groups = texel_groups(rec.texels, target_lab, sample)
+        renders = (2 + (2 if options.baselines else 0)) * len(groups)  # adaptive renders, for the time budget
+        return cls(
+            d=d,
+            rec=rec,
+            options=options,
+            lighting=lighting,
+            say=log or _silent,
+            progress=log is not None,
+            target=target,
+            target_lab=target_lab,
+            sample=sample,
+            groups=groups,
+            sampling=Sampling(seed, options.spp, options.max_spp),
+            shares=TimeShares(options.time_budget, time.perf_counter(), renders),
+            colours={"target": target},
+        )
+
+    def render(self, name: str, source, started: float, method: str | None) -> Rendered:
+        """Result ``name`` rendered through ``source`` on every texel group (``renders.render_result``), kept for
+        its figures; ``started``: when its work began, ``method``: its quantization method."""
+        ads = render_result(source, self.groups, self.sampling, self.shares, self.say)
+        self.colours[name] = ads[0].rgb
+        spp_printer, per_path = source.spp_printer, events_per_path(source)
+        self.renders[name] = Rendered(ads, time.perf_counter() - started, method, spp_printer, per_path)
+        return self.renders[name]
 
 
-def write_mesh_views(d: RunDir, rec: SceneRecord, results: dict, stem: str = "evaluation", say=None) -> list[str]:
-    """DIR/<stem>_views.png of a mesh run: target, optimized, quantized and baseline rows from four sides
-    (``scenes.mesh.views.result_views``); none (and a log line) when the mesh file cannot be read any more."""
-    from ..scenes.mesh.views import result_views
+@dataclass(frozen=True)
+class _Grid:
+    """The optimisation grid of the run: ``shape`` (z, y, x) and ``voxel_mm`` (x, y, z)."""
 
-    names = [("target", "target"), ("optimized", "continuous"), ("quantized", "quantized")]
-    names += [(k, k) for k in ("surface", "extrusion") if k in results]
-    path = d.evaluation_picture_path("views", stem)
-    try:
-        result_views(rec.mesh, rec.texels.normal, [(label, results[k]) for label, k in names], path)
-    except ValueError as exc:
-        (say or (lambda msg: None))(f"no views picture: {exc}")
-        return []
-    return [path.name]
+    shape: tuple
+    voxel_mm: np.ndarray
+
+
+@dataclass(frozen=True)
+class _Printed:
+    """The printed results' grid: the quantization settings and printer DPI, the printer texels of the whole
+    object and those rendered (a texel sample's)."""
+
+    quantization: Quantization
+    dpi: tuple
+    printer_texels: int
+    printer_texels_rendered: int
 
 
 # ----------------------------------------------------------------------------------------------- the stage
-def evaluate_run(
-    path,
-    spp: int | None = DEFAULT_SPP,
-    seed: int = 0,
-    method: str | None = None,
-    threads=None,
-    baselines: bool = True,
-    refine: bool = True,
-    patch_mm: float = DEFAULT_PATCH_MM,
-    table: ColourTable | None = None,
-    write: bool = True,
-    lighting: Lighting | str | None = None,
-    log=None,
-    translucency: bool | None = None,
-    translucency_compare=None,
-    max_spp: int = MAX_SPP,
-    time_budget: float | None = None,
-    out=None,
-    texel_sample: int | None = None,
-    sample_windows: int | None = None,
-) -> Evaluation:
-    """Evaluate run directory ``path`` (module docstring); returns the ``results.Evaluation`` (also written to
-    DIR/evaluation.json with the face pictures when ``write``). ``spp``: None = adaptive (module docstring),
-    else exactly that many samples per scene texel. ``method``: quantization method of ours (when
-    quantized.npz is missing) and of the baselines; None = that of quantized.npz, else blue-noise.
-    table: the baselines' colour table (default ``colour_table(inks, g, ior, patch_mm)``, cached).
-    ``lighting``: the display lighting every result is rendered under (``inkopt.lighting``; default uniform; the
-    baselines' colour table stays a uniform-light property of the inks).
-    ``log``: callable taking one progress line (default: silent). ``translucency``: measure translucency (None:
-    if the scene is constrained or ``translucency_compare``, an unconstrained run directory, is given).
-    ``max_spp``: the adaptive renders' cap; ``time_budget``: seconds for all the adaptive renders together, shared
-    out evenly among the results still to render. ``out``: the evaluation file (default DIR/evaluation.json; its
-    pictures are named after it, e.g. ``out`` E.json: E_top.png, E_views.png), so earlier ones can be kept.
-    ``texel_sample``, ``sample_windows``: figures from a random sample of that many scene texels and SSIM windows
-    (``evaluation.sample``; ``sample.sample_size``: 0 texels renders every texel, None is the default)."""
-    lighting = load_lighting(lighting)
-    say = log or (lambda msg: None)
-    if spp is not None and spp < 1:
-        raise ValueError(f"--spp must be at least 1, got {spp}")
-    d = RunDir(path)
-    out = d.evaluation_path if out is None else Path(out)
-    if out.suffix != ".json":
-        raise ValueError(f"--out must name a .json file, got {out}")
-    d.check_quantized_current()  # before any render: a stale quantized volume is refused in one line
-    vol = d.load_volume()
-    rec = d.load_scene()
-    stex, kind = rec.texels, rec.kind
-    target = rec.target_rgb.astype(np.float64)
-    t_all = time.perf_counter()
-    target_lab = linear_to_lab(target)  # as TexelLoss has it; the loss itself is built after the renders
-    colours = {"target": target}
-    rseed = EVAL_SEED_OFFSET + int(seed)
-    texel_sample, sample_windows = sampled.sample_size(texel_sample, sample_windows, len(stex))
-    # the texel groups rendered, each with its texels, their targets and noise targets (ΔE76, SSIM ratio)
-    sample, groups = None, [(stex, target_lab, TARGET_NOISE_DE76, SSIM_NOISE_RATIO)]
-    if texel_sample:
-        sample = sampled.TexelSample.draw(stex, texel_sample, sample_windows, rseed)
-        points, windows = (stex.subset(g) for g in sample.groups)
-        groups = [(points, target_lab[sample.points], TARGET_NOISE_DE76, np.inf)]
-        groups += [(windows, target_lab[sample.windows], np.inf, sampled.SAMPLE_SSIM_NOISE_RATIO)]
-        say(
-            f"texel sample: {len(sample.points)} of {len(stex)} texels; {len(sample.centres)} SSIM windows of "
-            f"{len(sample.windows)} texels"
-        )
-    todo = [(2 + (2 if baselines else 0)) * len(groups)]  # adaptive renders still to do, for the time budget
-    renders = {}  # name -> ([AdaptiveResult per group], seconds, quantization method, walks)
+def evaluate_run(path, options: EvaluateOptions | None = None, log=None) -> Evaluation:
+    """Evaluate run directory ``path`` (module docstring) as ``options`` say (default ``EvaluateOptions()``);
+    returns the ``results.Evaluation`` (also written to ``options.out`` with the pictures and predictions.npz when
+    ``options.write``). ``log``: callable taking one progress line (default: silent; with one, the renders show
+    progress bars)."""
+    options = options or EvaluateOptions()
+    ev = Evaluating.open(path, options, log)
+    grid, sources = _mixture_results(ev)  # the run's mixture is freed on return
+    printed = _printed_results(ev, grid, sources)
+    measured, diffs = _figures(ev)
+    evaluation = _evaluation(ev, printed, measured, diffs)
+    if options.write:
+        _write(ev, evaluation)
+    return evaluation
 
-    def rendered(name: str, render, seconds_from: float, method: str | None, walks: dict, done=None):
-        """Adaptive (or fixed-spp) render of one result on each texel group (``render(spp, seed, group)``), kept
-        for its figures. ``walks``: the render's counts (``spp`` printer samples of a printed result's first group,
-        ``paths``, ``events``), filled in by ``render``. ``done`` (called once the renders are over): frees the
-        result's renderer."""
-        ads = []
-        for g, (_, lab, target_de, ratio) in enumerate(groups):
-            budget = None
-            if time_budget is not None:
-                budget = max(time_budget - (time.perf_counter() - t_all), 0.0) / max(todo[0], 1)
-            todo[0] -= 1
-            ad = adaptive_render(
-                lambda n, s, g=g: render(n, s, g),
-                lab,
-                rseed,
-                spp,
-                target=target_de,
-                max_spp=max_spp,
-                log=say,
-                time_budget=budget,
-                ratio=ratio,
-            )
-            ads.append(ad)
-        if done is not None:
-            done()
-        colours[name] = ads[0].rgb
-        renders[name] = (ads, time.perf_counter() - seconds_from, method, walks)
-        return renders[name]
 
-    t0 = time.perf_counter()
-    renderer = Renderer(vol, threads, lighting)
+def _mixture_results(ev: Evaluating) -> tuple[_Grid, dict]:
+    """What needs the run's mixture: the continuous result, the translucency figures and the baselines' layer
+    sources (by name; none without baselines). The mixture is dropped on return, before the printer-resolution
+    renders."""
+    vol = ev.d.load_volume()
+    _render_continuous(ev, vol)
+    o = ev.options
+    if o.translucency or (o.translucency is None and (ev.rec.translucency is not None or o.translucency_compare)):
+        compare, seed = o.translucency_compare, ev.sampling.seed
+        ev.translucency = evaluate_translucency(vol, ev.rec, compare, seed, o.threads, ev.lighting, log=ev.say)
+    sources = _baseline_sources(ev, vol) if o.baselines else {}
+    return _Grid(vol.shape, vol.voxel_mm), sources
 
-    walks = {"paths": 0, "events": 0}
 
-    def continuous(n: int, s: int, g: int):
-        r = renderer.render(groups[g][0], n, s, progress=log is not None)
-        walks["paths"], walks["events"] = walks["paths"] + r.paths, walks["events"] + r.events
-        return r.rgb, r.var_mean, n
+def _render_continuous(ev: Evaluating, vol: Volume) -> None:
+    """The continuous result: ``vol`` on the scene texels; its renderer is freed on return."""
+    started = time.perf_counter()
+    source = ContinuousSource(Renderer(vol, ev.options.threads, ev.lighting), ev.groups, ev.progress)
+    rendered = ev.render("continuous", source, started, None)
+    spps = " + ".join(f"{len(g.texels)} texels x {ad.spp} spp" for g, ad in zip(ev.groups, rendered.ads))
+    ev.say(f"continuous: {spps} in {rendered.seconds:.1f} s, {rendered.events_per_path:.0f} events per path")
 
-    def free_continuous():
-        nonlocal renderer
-        renderer = None  # freed before the figures and the next renderer
 
-    ads, seconds, _, _ = rendered("continuous", continuous, t0, None, walks, done=free_continuous)
-    spps = " + ".join(f"{len(tx)} texels x {ad.spp} spp" for (tx, *_), ad in zip(groups, ads))
-    say(f"continuous: {spps} in {seconds:.1f} s, {per_path(walks):.0f} events per path")
-    tr = None
-    if translucency or (translucency is None and (rec.translucency is not None or translucency_compare)):
-        tr = evaluate_translucency(vol, rec, translucency_compare, rseed, threads, lighting, log=say)
+def _baseline_sources(ev: Evaluating, vol: Volume) -> dict[str, BaselineLayers]:
+    """The colour table (``options.table`` or built), its entry and the gamut floor (``ev.floor``), and each
+    baseline's mixture layer by layer: no (z, y, x, N) baseline mixture is ever whole."""
+    started, o = time.perf_counter(), ev.options
+    table = o.table
+    if table is None:
+        table = colour_table(vol.inks, vol.g, vol.ior, patch_mm=o.patch_mm, threads=o.threads, progress=ev.progress)
+    ev.say(
+        f"colour table: {len(table.lab)} patches of {table.patch_mm:g} mm, step 1/{table.step}, "
+        + ("(cached)" if table.cached else f"built in {table.seconds:.0f} s")
+    )
+    ev.floor = _gamut_floor(ev, table, started)
+    fixed = ev.rec.fixed_share(vol.inks, vol.shape)
+    return {
+        name: BaselineLayers(name, vol, ev.rec.texels, ev.target, fixed, table, refine=o.refine) for name in BASELINES
+    }
 
-    floor, base, sources = {}, None, {}
-    if baselines:
-        t0 = time.perf_counter()
-        if table is None:
-            table = colour_table(vol.inks, vol.g, vol.ior, patch_mm=patch_mm, threads=threads, progress=log is not None)
-        say(
-            f"colour table: {len(table.lab)} patches of {table.patch_mm:g} mm, step 1/{table.step}, "
-            + ("(cached)" if table.cached else f"built in {table.seconds:.0f} s")
-        )
-        floor["colour_table"] = {
-            "entries": len(table.lab),
-            "patch_mm": table.patch_mm,
-            "step": table.step,
-            "max_stderr": float(table.stderr.max()),
-            "refine": bool(refine),
-            "key": table.key,
-            "cached": table.cached,
-            "build_seconds": table.seconds,
-            "seconds": time.perf_counter() - t0,
-        }
-        de = delta_e76(table.reachable_lab(target), target_lab)
-        floor["gamut_floor_delta_e76"] = float(de.mean())
-        floor["gamut_floor_delta_e76_p95"] = float(np.percentile(de, 95))
-        fixed = rec.fixed_share(vol.inks, vol.shape)
-        # layer by layer: no (z, y, x, N) baseline mixture is ever whole
-        sources = {name: BaselineLayers(name, vol, stex, target, fixed, table, refine=refine) for name in BASELINES}
-    shape, vmm = vol.shape, vol.voxel_mm
-    vol = None  # the mixture is not needed any more: freed before the printer-resolution renders
 
+def _gamut_floor(ev: Evaluating, table: ColourTable, started: float) -> dict:
+    """evaluation.json's ``colour_table`` and the gamut floor: the ΔE76 from each target to the nearest colour the
+    inks reach (mean and 95th percentile)."""
+    entry = {
+        "entries": len(table.lab),
+        "patch_mm": table.patch_mm,
+        "step": table.step,
+        "max_stderr": float(table.stderr.max()),
+        "refine": bool(ev.options.refine),
+        "key": table.key,
+        "cached": table.cached,
+        "build_seconds": table.seconds,
+        "seconds": time.perf_counter() - started,
+    }
+    de = delta_e76(table.reachable_lab(ev.target), ev.target_lab)
+    return {
+        "colour_table": entry,
+        "gamut_floor_delta_e76": float(de.mean()),
+        "gamut_floor_delta_e76_p95": float(np.percentile(de, 95)),
+    }
+
+
+def _quantized_volume(ev: Evaluating, shape: tuple) -> tuple[Volume, Quantization]:
+    """DIR/quantized.npz and its settings; made first with ``inkopt quantize``'s defaults (and ``options.method``)
+    when missing. A method other than ``options.method`` is refused."""
+    d, method = ev.d, ev.options.method
     if d.has_quantized():
         qvol = d.load_quantized()
         q = qvol.quantization or Quantization()
         if method is not None and method != q.method:
-            raise ValueError(
-                f"{d.quantized_path} was quantized with '{q.method}', not '{method}'; rerun 'inkopt "
-                f"quantize {d} --method {method}' or omit --method"
+            raise ParameterError(
+                f"{d.quantized_path} was quantized with '{q.method}', not `method` '{method}'; quantize the run "
+                f"again with '{method}' or leave `method` out"
             )
-    else:
-        t0 = time.perf_counter()  # inkopt quantize's defaults, layer by layer as that command does
-        quantize_run(
-            d, method=method or "blue-noise", dpi=DEFAULT_DPI, layer_um=DEFAULT_LAYER_UM, seed=0, upsample="nearest"
-        )
-        qvol = d.load_quantized()
-        q = qvol.quantization
-        say(
-            f"quantized {shape} -> {qvol.shape} ({q.method}) in {time.perf_counter() - t0:.1f} s; "
-            f"wrote {d.quantized_path}"
-        )
+        return qvol, q
+    t0 = time.perf_counter()  # inkopt quantize's defaults, layer by layer as that command does
+    quantize_run(
+        d, method=method or "blue-noise", dpi=DEFAULT_DPI, layer_um=DEFAULT_LAYER_UM, seed=0, upsample="nearest"
+    )
+    qvol = d.load_quantized()
+    q = qvol.quantization
+    ev.say(
+        f"quantized {shape} -> {qvol.shape} ({q.method}) in {time.perf_counter() - t0:.1f} s; wrote {d.quantized_path}"
+    )
+    return qvol, q
+
+
+def _printed_results(ev: Evaluating, grid: _Grid, sources: dict) -> _Printed:
+    """The quantized result and the baselines (``sources``, emptied as they are quantized) on one printer
+    renderer: its printer texels and their map are made once for all (``printed.PrintedRenderer``)."""
+    qvol, q = _quantized_volume(ev, grid.shape)
     dpi = tuple(q.dpi or tuple(float(v) for v in dpi_of(qvol.voxel_mm)))
     t0 = time.perf_counter()
-    sub = None if sample is None else sample.groups
-    printer = PrintedRenderer(qvol, stex, vmm, kind, threads, lighting, sub)  # texels and maps shared by all
-
-    def printed(name: str, labels_vol: Volume, t0: float) -> None:
-        info = {"spp": 0}
-        printer.use(labels_vol)  # the first builds the printer renderer, the others swap in their labels
-
-        def render(n: int, s: int, g: int):
-            rgb, var, spp_p = printer(n, s, progress=log is not None, group=g)
-            info.update(spp=info["spp"] + (spp_p if g == 0 else 0), paths=printer.paths, events=printer.events)
-            return rgb, var, spp_p
-
-        ads, seconds, _, _ = rendered(name, render, t0, q.method, info)
-        spps = " + ".join(f"{len(m[0])} printer texels x {ad.spp} spp" for m, ad in zip(printer.maps, ads))
-        say(f"{name}: {spps} in {seconds:.1f} s, {per_path(info):.0f} events per path")
-
+    sub = None if ev.sample is None else ev.sample.groups
+    printer = PrintedRenderer(qvol, ev.rec.texels, grid.voxel_mm, ev.rec.kind, ev.options.threads, ev.lighting, sub)
     meta = dict(
         voxel_mm=qvol.voxel_mm,
         inks=qvol.inks,
@@ -312,130 +310,122 @@ def evaluate_run(
         origin_mm=qvol.origin_mm,
         quantization=q,
     )
-    printed("quantized", qvol, t0)
-    qvol = None  # its memory-mapped labels
+    _render_printed(ev, printer, "quantized", qvol, t0, q.method)
+    del qvol  # its memory-mapped labels
     if sources:
-        shape_p = printer_grid(shape, vmm, dpi=dpi)[0]
-        if shape_p != printer.shape:
-            raise ValueError(f"{d.quantized_path} has a printer grid of {printer.shape}, its settings give {shape_p}")
-        for name in list(sources):
-            t0 = time.perf_counter()  # quantized exactly like ours, into one printer-grid label array
-            src = sources.pop(name)
-            labels, _ = quantize(
-                src,
-                vmm,
-                method=q.method,
-                dpi=dpi,
-                inside=src.inside,
-                seed=q.seed,
-                upsample=q.upsample,
-                out=np.empty(shape_p, np.uint8),
-                order=band_order(q, meta["inks"], meta["g"], meta["ior"]),  # as ours was, from its file
-            )
-            src = None
-            printed(name, Volume.from_labels(labels=labels, **meta), t0)
-            labels = None
+        _render_baselines(ev, printer, sources, grid, dpi, meta)
     printer.use(None)  # freed before the figures
-    n_ptex, n_ptex_rendered, printer = printer.all_printer_texels, printer.printer_texels_rendered, None
-    # the figures of every result, after all renders (a sample's: on its window texels)
-    loss = TexelLoss(target if sample is None else target[sample.windows], groups[-1][0].pos_vox, sigma=sampled.SIGMA)
+    return _Printed(q, dpi, printer.all_printer_texels, printer.printer_texels_rendered)
+
+
+def _render_printed(ev: Evaluating, printer: PrintedRenderer, name: str, labels_vol: Volume, t0: float, method: str):
+    """Printed result ``name``: ``labels_vol`` on the printer texels (the first builds the printer renderer, the
+    others swap in their labels)."""
+    printer.use(labels_vol)
+    rendered = ev.render(name, PrintedSource(printer, ev.progress), t0, method)
+    spps = " + ".join(f"{len(m[0])} printer texels x {ad.spp} spp" for m, ad in zip(printer.maps, rendered.ads))
+    ev.say(f"{name}: {spps} in {rendered.seconds:.1f} s, {rendered.events_per_path:.0f} events per path")
+
+
+def _render_baselines(ev: Evaluating, printer: PrintedRenderer, sources: dict, grid: _Grid, dpi: tuple, meta: dict):
+    """Each baseline quantized exactly like ours (method, seed, DPI, upsampling and ink order of quantized.npz's
+    settings ``meta["quantization"]``) into one printer-grid label array, then rendered like it."""
+    q, shape, vmm = meta["quantization"], grid.shape, grid.voxel_mm
+    shape_p = printer_grid(shape, vmm, dpi=dpi)[0]
+    if shape_p != printer.shape:
+        raise ValueError(f"{ev.d.quantized_path} has a printer grid of {printer.shape}, its settings give {shape_p}")
+    for name in list(sources):
+        t0 = time.perf_counter()  # quantized exactly like ours, into one printer-grid label array
+        src = sources.pop(name)
+        labels, _ = quantize(
+            src,
+            vmm,
+            method=q.method,
+            dpi=dpi,
+            inside=src.inside,
+            seed=q.seed,
+            upsample=q.upsample,
+            out=np.empty(shape_p, np.uint8),
+            order=band_order(q, meta["inks"], meta["g"], meta["ior"]),  # as ours was, from its file
+        )
+        del src
+        _render_printed(ev, printer, name, Volume.from_labels(labels=labels, **meta), t0, q.method)
+        del labels
+
+
+def _figures(ev: Evaluating) -> tuple[dict[str, Measured], dict | None]:
+    """Every rendered result's figures (by name, in render order), after all renders; with a texel sample (figures
+    on its window texels) also the paired differences between results."""
+    sample = ev.sample
+    target = ev.target if sample is None else ev.target[sample.windows]
+    loss = TexelLoss(target, ev.groups[-1].texels.pos_vox, sigma=sampled.SIGMA)
     values = {}  # a sample's per-texel values by result, for the paired differences
+    measured = {name: _measured(ev, loss, ev.renders.pop(name), values, name) for name in list(ev.renders)}
+    if sample is None:
+        return measured, None
+    pairs = [("continuous", "quantized")] + [("quantized", name) for name in measured if name in BASELINES]
+    return measured, sampled.differences(values, pairs, sample)
 
-    def figures(name: str) -> Measured:
-        ads, seconds, method, walks = renders.pop(name)
-        ad, m, err, win = ads[0], None, None, {}
-        if sample is None:
-            m = prediction_metrics(loss, ad.rgb, ad.var)
-        else:
-            pts = (ad.rgb, ad.var)
-            values[name] = sampled.per_texel(loss, (ads[1].rgb, ads[1].var), pts, groups[0][1], sample)
-            m, err = sampled.sampled_figures(loss, values[name], sample)
-            win = dict(spp_windows=ads[1].spp, spp_windows_passes=ads[1].passes)
-        return Measured(m, ad.spp, ad.passes, seconds, method, walks.get("spp"), per_path(walks), err, **win)
 
-    cont, quantized = figures("continuous"), figures("quantized")
-    if baselines:
-        base = {name: figures(name) for name in BASELINES}
-    loss = None  # freed before the pictures
-    diffs = None
-    if sample is not None:
-        pairs = [("continuous", "quantized")] + [("quantized", name) for name in (base or {})]
-        diffs = sampled.differences(values, pairs, sample)
-    ev = Evaluation(
+def _measured(ev: Evaluating, loss: TexelLoss, rendered: Rendered, values: dict, name: str) -> Measured:
+    """One result's figures from its renders (a sample's: its per-texel values are kept in ``values``)."""
+    r, ad = rendered, rendered.ads[0]
+    if ev.sample is None:
+        m = prediction_metrics(loss, ad.rgb, ad.var)
+        return Measured(m, ad.spp, ad.passes, r.seconds, r.method, r.spp_printer, r.events_per_path)
+    win = r.ads[1]
+    values[name] = sampled.per_texel(loss, (win.rgb, win.var), (ad.rgb, ad.var), ev.groups[0].target_lab, ev.sample)
+    m, err = sampled.sampled_figures(loss, values[name], ev.sample)
+    return Measured(
+        m, ad.spp, ad.passes, r.seconds, r.method, r.spp_printer, r.events_per_path, err, win.spp, win.passes
+    )
+
+
+def _evaluation(ev: Evaluating, printed: _Printed, measured: dict, diffs: dict | None) -> Evaluation:
+    """The ``Evaluation`` of the figures."""
+    cont, quantized = measured.pop("continuous"), measured.pop("quantized")
+    rendered = printed.printer_texels_rendered
+    sample = None if ev.sample is None else {**ev.sample.to_json(), "printer_texels_rendered": rendered}
+    return Evaluation(
         spp=cont.spp,
-        seed=int(seed),
-        texels=len(stex),
-        kind=kind,
-        spp_adaptive=spp is None,
+        seed=int(ev.options.seed),
+        texels=len(ev.rec.texels),
+        kind=ev.rec.kind,
+        spp_adaptive=ev.options.spp is None,
         noise_target_delta_e76=TARGET_NOISE_DE76,
-        noise_target_ssim_ratio=groups[-1][3],
+        noise_target_ssim_ratio=ev.groups[-1].ssim_ratio,
         spp_pilot=PILOT_SPP,
         spp_max=MAX_SPP,
-        lighting=lighting.describe(),
+        lighting=ev.lighting.describe(),
         continuous=cont,
-        quantization={**asdict(q), "dpi": list(dpi)},
-        printer_texels=n_ptex,
+        quantization={**asdict(printed.quantization), "dpi": list(printed.dpi)},
+        printer_texels=printed.printer_texels,
         quantized=quantized,
-        seconds=time.perf_counter() - t_all,
-        translucency=tr,
-        **floor,
-        baselines=base,
-        volume_digest=d.volume_digest(),
-        quantized_digest=d.quantized_digest(),
-        texel_sample=None if sample is None else {**sample.to_json(), "printer_texels_rendered": n_ptex_rendered},
+        seconds=time.perf_counter() - ev.shares.started,
+        translucency=ev.translucency,
+        **ev.floor,
+        baselines=measured if ev.options.baselines else None,
+        volume_digest=ev.d.volume_digest(),
+        quantized_digest=ev.d.quantized_digest(),
+        texel_sample=sample,
         differences=diffs,
     )
-    if write and sample is not None:  # per-texel colours of the sampled texels only: no pictures, no predictions
-        say("texel sample: no pictures and no predictions.npz (they need every texel's colour)")
-        d.write_evaluation(ev.to_json(), out)
-    elif write:
-        stem = out.stem
-        if rec.faces:
-            ev.pictures = write_face_pictures(d, rec, colours, stem)
-        elif rec.mesh is not None:
-            ev.pictures = write_mesh_views(d, rec, colours, stem, say)
-        d.write_evaluation(ev.to_json(), out)
-        names = ["continuous", "quantized", *(base or {})]
-        spp_of = {"continuous": cont.spp, "quantized": quantized.spp, **{k: m.spp for k, m in (base or {}).items()}}
-        d.save_predictions(
-            Predictions(
-                {n: colours[n] for n in names}, "evaluation", spp_of, file_digest(d.volume_path), lighting.describe()
-            )
-        )
-    return ev
 
 
-def table_lines(ev: Evaluation) -> list[str]:
-    """A plain-text table of an evaluation."""
-    nan = float("nan")
-
-    def num(v):
-        return nan if v is None else v
-
-    lines = [
-        f"{'result':<20}{'dE76 mean':>10}{'dE76 p95':>10}{'dE2000':>9}{'SSIM':>8}{'noise':>8}"
-        f"{'rms w/o noise':>15}{'noise in mean':>14}{'mottle':>8}{'spp':>6}{'s':>7}"
-    ]
-    for name, r in ev.results():
-        m = r.metrics
-        lines.append(
-            f"{name:<20}{m.delta_e76_mean:>10.2f}{m.delta_e76_p95:>10.2f}"
-            f"{m.delta_e2000_mean:>9.2f}{m.ssim:>8.3f}{num(m.delta_e76_noise):>8.2f}"
-            f"{num(m.delta_e76_rms_denoised):>15.2f}{num(m.delta_e76_noise_contribution):>14.2f}"
-            f"{num(m.mottle_l2):>8.2f}{r.spp:>6}{r.seconds:>7.1f}"
-        )
-    lines += sampled.sample_lines(ev)
-    c = ev.continuous.metrics
-    if c.flat_texels:
-        lines.append(
-            f"mottle: high-frequency L* power, (dL*)^2, on {c.flat_texels} texels where the target is "
-            f"flat (target's own: {c.mottle_l2_target:.2f})"
-        )
-    if ev.translucency is not None:
-        lines += translucency_lines(ev.translucency)
-    if ev.gamut_floor_delta_e76 is not None:
-        lines.append(
-            f"gamut floor: mean dE76 from the target to the nearest colour the inks reach in a "
-            f"{ev.colour_table['patch_mm']:g} mm patch: {ev.gamut_floor_delta_e76:.2f}"
-        )
-    return lines
+def _write(ev: Evaluating, evaluation: Evaluation) -> None:
+    """The evaluation file and, with every texel rendered, the pictures (named after it) and predictions.npz."""
+    d, rec = ev.d, ev.rec
+    out = d.evaluation_path if ev.options.out is None else Path(ev.options.out)
+    if ev.sample is not None:  # per-texel colours of the sampled texels only: no pictures, no predictions
+        ev.say("texel sample: no pictures and no predictions.npz (they need every texel's colour)")
+        d.write_evaluation(evaluation.to_json(), out)
+        return
+    if rec.faces:
+        evaluation.pictures = write_face_pictures(d, rec, ev.colours, out.stem)
+    elif rec.mesh is not None:
+        evaluation.pictures = write_mesh_views(d, rec, ev.colours, out.stem, ev.say)
+    d.write_evaluation(evaluation.to_json(), out)
+    results = {"continuous": evaluation.continuous, "quantized": evaluation.quantized, **(evaluation.baselines or {})}
+    spp_of = {name: m.spp for name, m in results.items()}
+    colours = {name: ev.colours[name] for name in spp_of}
+    d.save_predictions(Predictions(colours, "evaluation", spp_of, file_digest(d.volume_path), ev.lighting.describe()))

@@ -47,13 +47,16 @@ stop it earlier; the result then says ``capped``. Seeds: pass k uses
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.special import erf
 
 from ..color import LAB_NORM_SCALE, linear_to_lab, linear_to_lab_jacobian
+from ..errors import ParameterError
 from ..loss import K2
+from ..units import format_duration
 
 TARGET_NOISE_DE76 = 0.5  # wanted Monte Carlo contribution to the mean ΔE76
 PILOT_SPP = 64
@@ -171,84 +174,134 @@ class AdaptiveResult:
     capped: bool = False
 
 
-def adaptive_render(
-    render,
-    target_lab,
-    seed: int,
-    spp: int | None = None,
-    pilot_spp: int = PILOT_SPP,
-    target: float = TARGET_NOISE_DE76,
-    max_spp: int = MAX_SPP,
-    log=None,
-    time_budget: float | None = None,
-    clock=None,
-    pilot_in_budget: bool = True,
-    ratio: float = SSIM_NOISE_RATIO,
-) -> AdaptiveResult:
+@dataclass(frozen=True)
+class Sampling:
+    """The samples of one render through ``adaptive_render``: ``seed`` of its first pass (pass k: ``seed + k *
+    SEED_STRIDE``); ``spp`` samples per texel in exactly one pass, or None: adaptive (module docstring), a pilot of
+    ``pilot_spp`` and then passes until the noise contribution is at most ``target`` ΔE76 and the SSIM noise ratio
+    at most ``ratio`` (either inf: no such target), at most ``max_spp`` samples and, with ``time_budget`` (seconds,
+    the pilot included unless ``pilot_in_budget`` is False), no more than the time measured per sample says fit."""
+
+    seed: int = 0
+    spp: int | None = None
+    max_spp: int = MAX_SPP
+    time_budget: float | None = None
+    pilot_spp: int = PILOT_SPP
+    pilot_in_budget: bool = True
+    target: float = TARGET_NOISE_DE76
+    ratio: float = SSIM_NOISE_RATIO
+
+    def __post_init__(self):
+        for name in ("spp", "max_spp", "pilot_spp"):
+            value = getattr(self, name)
+            if value is not None and not value >= 1:
+                raise ParameterError(f"`{name}` must be at least 1, got {value}")
+        if self.time_budget is not None and not self.time_budget >= 0:
+            raise ParameterError(f"`time_budget` must be a number of seconds >= 0, got {self.time_budget}")
+        for name in ("target", "ratio"):
+            if not getattr(self, name) > 0:
+                raise ParameterError(f"`{name}` must be positive, got {getattr(self, name)}")
+
+
+@dataclass
+class _Pool:
+    """Passes pooled by their weights (samples per texel as the render counts them): colours ``rgb`` (I, 3) and
+    the variance of their means ``var`` (I, 3), float64; ``total`` samples per texel and each pass's ``passes``."""
+
+    rgb: np.ndarray
+    var: np.ndarray
+    weight: float
+    total: int
+    passes: list
+
+    @classmethod
+    def first(cls, render, spp: int, seed: int) -> _Pool:
+        rgb, var, w = render(spp, seed)
+        return cls(np.asarray(rgb, np.float64), np.asarray(var, np.float64), float(w), spp, [spp])
+
+    def add(self, render, spp: int, seed: int) -> None:
+        r1, v1, w1 = render(spp, seed)
+        r1, v1, w1 = np.asarray(r1, np.float64), np.asarray(v1, np.float64), float(w1)
+        w = self.weight
+        self.rgb = (w * self.rgb + w1 * r1) / (w + w1)
+        self.var = (w * w * self.var + w1 * w1 * v1) / (w + w1) ** 2
+        self.weight, self.total = w + w1, self.total + spp
+        self.passes.append(spp)
+
+
+def _fit(sampling: Sampling, clock, t0: float, per_spp: float) -> int:
+    """Samples per texel that fit in what is left of the time budget at ``per_spp`` seconds each (not lost to
+    rounding)."""
+    return int((sampling.time_budget - (clock() - t0)) / max(per_spp, 1e-12) + 1e-6)
+
+
+def _pilot(render, sampling: Sampling, clock, t0: float) -> tuple[_Pool, bool, int]:
+    """The first pass (``spp``, or the pilot); with a time budget that bounds the pilot, a ``PROBE_SPP`` pass that
+    times the samples and then the rest of the pilot that fits. Returns the pool, whether the budget cut the pilot,
+    and the index of the next pass."""
+    s = sampling
+    pilot = min(int(s.pilot_spp), int(s.max_spp))
+    first = int(s.spp) if s.spp is not None else pilot
+    probe = s.spp is None and s.time_budget is not None and s.pilot_in_budget and first > PROBE_SPP
+    if probe:
+        first = PROBE_SPP
+    pool = _Pool.first(render, first, s.seed)
+    if not probe:
+        return pool, False, 1
+    extra = min(pilot - pool.total, max(_fit(s, clock, t0, (clock() - t0) / pool.total), 0))
+    capped = extra < pilot - pool.total
+    if extra <= 0:
+        return pool, capped, 1
+    pool.add(render, extra, s.seed + SEED_STRIDE)
+    return pool, capped, 2
+
+
+def _next_pass(model: NoiseModel, pool: _Pool, sampling: Sampling, capped: bool, clock, t0: float, log):
+    """Samples per texel of the next pass (0 or less: none fit in the time budget) and whether the samples are
+    capped; logs the pass with its expected time."""
+    s = sampling
+    want = model.spp_for(pool.total, PLAN_MARGIN * s.target, s.max_spp, PLAN_MARGIN * s.ratio)
+    capped = capped or want >= s.max_spp
+    per_spp = (clock() - t0) / pool.total
+    extra = want - pool.total
+    if s.time_budget is not None:
+        fit = _fit(s, clock, t0, per_spp)
+        if fit < extra:
+            extra, capped = max(fit, 0), True
+    if log is not None and extra <= 0:
+        log(f"  noise {model.contribution():.2f} dE76 at {pool.total} spp: the time budget is spent")
+    elif log is not None:
+        log(
+            f"  noise {model.contribution():.2f} dE76, SSIM noise ratio {model.ssim_ratio:.2f} at {pool.total} spp "
+            f"(targets {s.target:g}, {s.ratio:g}): {extra} more, ~{format_duration(extra * per_spp)}"
+            + (" (capped)" if capped else "")
+        )
+    return extra, capped
+
+
+def adaptive_render(render, target_lab, sampling: Sampling = Sampling(), log=None, clock=None) -> AdaptiveResult:
     """Render through ``render(spp, seed) -> (rgb (I, 3), var_mean (I, 3), weight)`` (``weight``: the pass's
-    samples per texel as pooled, e.g. a printer render's own spp). With ``spp`` given: exactly one pass of
-    ``spp`` (the user's choice is honoured). Else adaptively (module docstring), at most ``max_spp`` samples and,
-    with ``time_budget`` (seconds, the pilot included), no more samples than the time measured per sample so far
-    says fit in it (the pilot starts with a ``PROBE_SPP`` pass to time them; with ``pilot_in_budget`` False the
-    whole pilot is rendered and the budget bounds the passes after it); each further pass is logged with its
-    expected time. ``clock``: seconds (default
-    ``time.perf_counter``). ``ratio``: the SSIM noise ratio target (default ``SSIM_NOISE_RATIO``)."""
-    import time
-
-    from ..units import format_duration
-
+    samples per texel as pooled, e.g. a printer render's own spp) the samples ``sampling`` asks for: exactly its
+    ``spp`` in one pass (the user's choice is honoured), else adaptively against ``target_lab`` (I, 3) CIELAB
+    (module docstring); each further pass is logged with its expected time through ``log``. ``clock``: seconds
+    (default ``time.perf_counter``)."""
     clock = clock or time.perf_counter
     t0 = clock()
-    first = int(spp) if spp is not None else min(int(pilot_spp), int(max_spp))
-    probe = spp is None and time_budget is not None and pilot_in_budget and first > PROBE_SPP
-    if probe:  # a short first pass times the samples, so that the pilot too keeps to the budget
-        first = PROBE_SPP
-    rgb, var, w = render(first, seed)
-    rgb, var, w = np.asarray(rgb, np.float64), np.asarray(var, np.float64), float(w)
-    total, passes, capped, k0 = first, [first], False, 1
-    if probe:
-        per_spp = (clock() - t0) / total
-        fit = int((time_budget - (clock() - t0)) / max(per_spp, 1e-12) + 1e-6)
-        extra = min(min(int(pilot_spp), int(max_spp)) - total, max(fit, 0))
-        capped = extra < min(int(pilot_spp), int(max_spp)) - total
-        if extra > 0:
-            r1, v1, w1 = render(extra, seed + SEED_STRIDE)
-            r1, v1, w1 = np.asarray(r1, np.float64), np.asarray(v1, np.float64), float(w1)
-            rgb, var = (w * rgb + w1 * r1) / (w + w1), (w * w * var + w1 * w1 * v1) / (w + w1) ** 2
-            w, total, k0 = w + w1, total + extra, 2
-            passes.append(extra)
-    model = NoiseModel.of(rgb, var, target_lab)
+    s = sampling
+    pool, capped, k0 = _pilot(render, s, clock, t0)
+    model = NoiseModel.of(pool.rgb, pool.var, target_lab)
     for k in range(k0, MAX_ROUNDS + k0):
-        if spp is not None or model.converged(target, ratio):
+        if s.spp is not None or model.converged(s.target, s.ratio):
             break
-        if total >= max_spp:
+        if pool.total >= s.max_spp:
             capped = True
             break
-        want = model.spp_for(total, PLAN_MARGIN * target, max_spp, PLAN_MARGIN * ratio)
-        capped = capped or want >= max_spp
-        per_spp = (clock() - t0) / total
-        extra = want - total
-        if time_budget is not None:
-            fit = int((time_budget - (clock() - t0)) / max(per_spp, 1e-12) + 1e-6)  # not lost to rounding
-            if fit < extra:
-                extra, capped = max(fit, 0), True
+        extra, capped = _next_pass(model, pool, s, capped, clock, t0, log)
         if extra <= 0:
-            if log is not None:
-                log(f"  noise {model.contribution():.2f} dE76 at {total} spp: the time budget is spent")
             break
-        if log is not None:
-            log(
-                f"  noise {model.contribution():.2f} dE76, SSIM noise ratio {model.ssim_ratio:.2f} at {total} spp "
-                f"(targets {target:g}, {ratio:g}): {extra} more, ~{format_duration(extra * per_spp)}"
-                + (" (capped)" if capped else "")
-            )
-        r1, v1, w1 = render(extra, seed + k * SEED_STRIDE)
-        r1, v1, w1 = np.asarray(r1, np.float64), np.asarray(v1, np.float64), float(w1)
-        rgb = (w * rgb + w1 * r1) / (w + w1)
-        var = (w * w * var + w1 * w1 * v1) / (w + w1) ** 2
-        w, total = w + w1, total + extra
-        passes.append(extra)
-        model = NoiseModel.of(rgb, var, target_lab)
+        pool.add(render, extra, s.seed + k * SEED_STRIDE)
+        model = NoiseModel.of(pool.rgb, pool.var, target_lab)
+    converged = model.converged(s.target, s.ratio)
     return AdaptiveResult(
-        rgb, var, int(total), passes, model.contribution(), capped and not model.converged(target, ratio)
+        pool.rgb, pool.var, int(pool.total), pool.passes, model.contribution(), capped and not converged
     )

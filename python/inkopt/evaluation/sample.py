@@ -43,6 +43,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..color import delta_e76, delta_e2000, lab_stderr, linear_to_lab, normalise_lab
+from ..errors import ParameterError
 from ..loss import E1_WEIGHT_SCALE, TexelLoss
 from ..model import Texels
 from .metrics import Metrics, mottle_per_texel
@@ -61,8 +62,8 @@ QUANTILE = 95.0
 PAIRED = ("delta_e76_mean", "delta_e76_mean_corrected", "delta_e2000_mean", "ssim", "mottle_l2")
 
 
-class SampleError(ValueError):
-    """A texel sample that cannot be drawn (bad sizes)."""
+class SampleError(ParameterError):
+    """A texel sample that cannot be drawn (bad sizes: ``texel_sample``, ``sample_windows``)."""
 
 
 @dataclass
@@ -118,11 +119,26 @@ def sample_size(texels: int | None, windows: int | None, population: int) -> tup
         texels = DEFAULT_SAMPLE_TEXELS if population > AUTO_SAMPLE_TEXELS else 0
     windows = DEFAULT_SAMPLE_WINDOWS if windows is None else windows
     if texels < 0 or texels == 1:
-        raise SampleError(f"--texel-sample must be 0 (every texel) or at least 2 texels, got {texels}")
+        raise SampleError(f"`texel_sample` must be 0 (every texel) or at least 2 texels, got {texels}")
     if texels and windows < 2:
-        raise SampleError(f"--sample-windows must be at least 2, got {windows}")
+        raise SampleError(f"`sample_windows` must be at least 2, got {windows}")
     n = min(int(texels), population)
     return n, min(int(windows), n)
+
+
+def draw_sample(texels: Texels, n: int | None, windows: int | None, seed: int, log=None) -> TexelSample | None:
+    """The sample of ``n`` texels and ``windows`` SSIM windows of ``texels`` (``sample_size``: None, the defaults
+    for its size) drawn with ``seed`` and announced through ``log``, or None when every texel is rendered."""
+    n, windows = sample_size(n, windows, len(texels))
+    if not n:
+        return None
+    sample = TexelSample.draw(texels, n, windows, seed)
+    if log is not None:
+        log(
+            f"texel sample: {len(sample.points)} of {len(texels)} texels; {len(sample.centres)} SSIM windows of "
+            f"{len(sample.windows)} texels"
+        )
+    return sample
 
 
 def mean_se(x: np.ndarray, population: int) -> tuple[float, float]:

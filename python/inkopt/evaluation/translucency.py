@@ -27,6 +27,8 @@ than ``MIN_REGION_TEXELS`` texels are skipped; at most ``MAX_REGIONS`` (the larg
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from scipy import ndimage
 
@@ -45,6 +47,17 @@ MIN_REGION_TEXELS = 4
 MAX_REGIONS = 8
 MAX_GRID_VOXELS = 30_000_000  # the probe's depth assignment needs ~30 bytes per grid voxel
 LUMA = np.array([0.2126, 0.7152, 0.0722])
+
+
+@dataclass(frozen=True)
+class TranslucencyRenders:
+    """The renders of the translucency figures: ``spp`` samples per texel of the transmittance, ``probe_spp`` of
+    each knife-edge probe, their ``seed`` and render ``threads`` (None: all cores)."""
+
+    spp: int = DEFAULT_SPP
+    probe_spp: int = PROBE_SPP
+    seed: int = 0
+    threads: int | None = None
 
 
 def back_light(axis: int, rows: int = MAP_ROWS) -> Lighting:
@@ -85,13 +98,11 @@ def knife_edge_spread(
     voxel_mm: float,
     g: float,
     ior: float,
-    spp: int = PROBE_SPP,
-    seed: int = 0,
-    threads=None,
+    renders: TranslucencyRenders = TranslucencyRenders(),
     width: int | None = None,
 ) -> dict:
     """E|Δx| (mm) of a layered probe: ``sigma_s``, ``sigma_a`` (L, 3) mm^-1, layer 0 the viewed surface;
-    ``width`` voxels along x (default ``PROBE_WIDTH``)."""
+    ``width`` voxels along x (default ``PROBE_WIDTH``), rendered at ``renders.probe_spp``."""
     L, width = len(sigma_s), int(width or PROBE_WIDTH)
     ss = np.zeros((L + 1, 2, width, 3), np.float32)
     sa = np.full((L + 1, 2, width, 3), 1e-4, np.float32)
@@ -100,7 +111,7 @@ def knife_edge_spread(
     sa[0, :, : width // 2] = MASK_SIGMA_A
     vol = Volume.from_coefficients((voxel_mm,) * 3, sigma_s=ss, sigma_a=sa, g=g, ior=ior, boundary="periodic-xy")
     tex = Texels.box_faces(vol.shape, ["top"])
-    r = Renderer(vol, threads, back_light(5)).render(tex, spp, seed)
+    r = Renderer(vol, renders.threads, back_light(5)).render(tex, renders.probe_spp, renders.seed)
     y = (r.rgb.astype(np.float64) @ LUMA).reshape(2, width).sum(0)
     v = (r.var_mean.astype(np.float64) @ LUMA**2).reshape(2, width).sum(0)
     dark, total = y[: width // 2].sum(), y.sum()
@@ -170,14 +181,48 @@ def probe_medium(vol: Volume, near: np.ndarray, depth: np.ndarray, texel_sel: np
     return mix(mean, vol.inks)
 
 
+@dataclass(frozen=True)
+class _Measurements:
+    """What the figures of every region of ``measure`` come from: the run's mixture volume, the measured face
+    group (texel indices), each texel's transmittance ``t_y`` and its variance (I,) (0 outside the group), ΔE76
+    (I,) or None, the nearest texel and depth of every voxel (None: too large a grid for the probes), the share the
+    run's own constraint requires per texel (None: an unconstrained run) and the renders."""
+
+    vol: Volume
+    group: np.ndarray
+    t_y: np.ndarray
+    t_var: np.ndarray
+    de: np.ndarray | None
+    near: np.ndarray | None
+    depth: np.ndarray | None
+    share: np.ndarray | None
+    renders: TranslucencyRenders
+
+    def figures(self, sel: np.ndarray) -> dict:
+        """The figures of the texels ``sel`` (indices, in the face group): transmittance, required share, ΔE76 and
+        the knife-edge spread of their mean medium."""
+        f = {
+            "texels": int(len(sel)),
+            "required_share": None if self.share is None else float(self.share[sel].mean()),
+            "transmittance": float(self.t_y[sel].mean()),
+            "transmittance_stderr": float(np.sqrt(self.t_var[sel].sum()) / len(sel)),
+        }
+        if self.de is not None:
+            f["delta_e76_mean"] = float(self.de[sel].mean())
+        if self.near is not None:
+            local = np.searchsorted(self.group, sel)
+            s_s, s_a = probe_medium(self.vol, self.near, self.depth, local)
+            vol = self.vol
+            f.update(knife_edge_spread(s_s, s_a, float(vol.voxel_mm[0]), vol.g, vol.ior, self.renders))
+            f["probe_layers"] = int(len(s_s))
+        return f
+
+
 def measure(
     vol: Volume,
     rec: SceneRecord,
     region_rec: SceneRecord | None = None,
-    spp: int = DEFAULT_SPP,
-    probe_spp: int = PROBE_SPP,
-    seed: int = 0,
-    threads=None,
+    renders: TranslucencyRenders = TranslucencyRenders(),
     colours: np.ndarray | None = None,
     target_lab: np.ndarray | None = None,
 ) -> dict:
@@ -191,38 +236,22 @@ def measure(
     if len(region_rec.texels) != len(rec.texels) or not np.array_equal(region_rec.texels.voxel, rec.texels.voxel):
         raise ValueError("the runs compared for translucency have different texels (not the same target and size)")
     group = face_group(rec)
-    y, var = transmittance(vol, rec.texels.subset(group), spp, seed, threads)
+    y, var = transmittance(vol, rec.texels.subset(group), renders.spp, renders.seed, renders.threads)
     t_y, t_var = np.zeros(len(rec.texels)), np.zeros(len(rec.texels))
     t_y[group], t_var[group] = y, var
     de = None if colours is None else delta_e76(linear_to_lab(colours), target_lab)
     try:
         near, depth = depth_layers(vol, rec.texels.subset(group))
     except MemoryError:
-        near = None
+        near = depth = None
     # the share the measured run itself was required to hold (None: an unconstrained run has no requirement)
     share = rec.translucency.texel_share(rec.texels) if rec.translucency is not None else None
-
-    def figures(sel: np.ndarray) -> dict:
-        f = {
-            "texels": int(len(sel)),
-            "required_share": None if share is None else float(share[sel].mean()),
-            "transmittance": float(t_y[sel].mean()),
-            "transmittance_stderr": float(np.sqrt(t_var[sel].sum()) / len(sel)),
-        }
-        if de is not None:
-            f["delta_e76_mean"] = float(de[sel].mean())
-        if near is not None:
-            local = np.searchsorted(group, sel)
-            s_s, s_a = probe_medium(vol, near, depth, local)
-            f.update(knife_edge_spread(s_s, s_a, float(vol.voxel_mm[0]), vol.g, vol.ior, probe_spp, seed, threads))
-            f["probe_layers"] = int(len(s_s))
-        return f
-
+    at = _Measurements(vol, group, t_y, t_var, de, near, depth, share, renders)
     return {
-        "regions": [figures(r) for r in regions(region_rec, group)],
-        "whole": figures(group),
-        "spp": int(spp),
-        "probe_spp": int(probe_spp),
+        "regions": [at.figures(r) for r in regions(region_rec, group)],
+        "whole": at.figures(group),
+        "spp": int(renders.spp),
+        "probe_spp": int(renders.probe_spp),
         "probe_width_mm": float(PROBE_WIDTH * vol.voxel_mm[0]),
     }
 
@@ -271,7 +300,8 @@ def evaluate_translucency(
     def one(v: Volume, r: SceneRecord) -> dict:
         t0 = time.perf_counter()
         colours = Renderer(v, threads, lighting).render(r.texels, COLOUR_SPP, seed).rgb.astype(np.float64)
-        m = measure(v, r, rec, spp, PROBE_SPP, seed, threads, colours, target_lab)  # module value at call time
+        renders = TranslucencyRenders(spp, PROBE_SPP, seed, threads)  # PROBE_SPP: the module's value at call time
+        m = measure(v, r, rec, renders, colours, target_lab)
         m["seconds"] = time.perf_counter() - t0
         return m
 
