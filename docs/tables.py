@@ -4,13 +4,15 @@
     python docs/tables.py --check    # exit 1 (and name them) when a document's tables are stale
 
 A table sits between ``<!-- table:NAME -->`` and ``<!-- /table:NAME -->``; NAME is a key of ``TABLES``, whose
-function reads the results files (bench/results/, experiments/results/) and returns the markdown. Every table
-ends with the files it was generated from. Standard library only.
+function reads the results files (bench/results/, experiments/results/), or the source file that defines the
+figures (the ink table), and returns the markdown. Every table ends with the files it was generated from. Standard
+library only: source files are parsed (``ast``), not imported.
 """
 
 from __future__ import annotations
 
 import argparse
+import ast
 import json
 import re
 import sys
@@ -19,6 +21,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 BENCH = REPO / "bench" / "results"
 STUDY = REPO / "experiments" / "results"
+INKS = REPO / "python" / "inkopt" / "model" / "inks.py"
 ROOT = REPO  # where the documents are (DOCS) and their names in messages are relative to
 DOCS = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))]
 MARKER = re.compile(r"(<!-- table:([\w-]+) -->\n)(.*?)(<!-- /table:\2 -->)", re.S)
@@ -687,6 +690,29 @@ def shell_mm() -> str:
     )
 
 
+def source_constant(path: Path, name: str):
+    """The literal assigned to ``name`` at the top level of the Python file ``path`` (parsed, not imported)."""
+    for node in ast.parse(path.read_text()).body:
+        targets = [node.target] if isinstance(node, ast.AnnAssign) else getattr(node, "targets", [])
+        if any(isinstance(t, ast.Name) and t.id == name for t in targets) and node.value is not None:
+            try:
+                return ast.literal_eval(node.value)
+            except ValueError:
+                break
+    raise SystemExit(f"{path.relative_to(REPO)}: no top-level literal assignment to {name}")
+
+
+def ink_library() -> str:
+    """docs/method.md's ink table: ``INK_LIBRARY`` and ``DEFAULT_G`` of python/inkopt/model/inks.py."""
+    lib, g = source_constant(INKS, "INK_LIBRARY"), source_constant(INKS, "DEFAULT_G")
+    rows = [[name, *(f"{x:g}" for x in mu_t), *(f"{x:g}" for x in albedo)] for name, (mu_t, albedo) in lib.items()]
+    lead = (
+        "Extinction σt in mm⁻¹ and albedo α per R, G, B (σs = α σt, σa = (1 − α) σt); Henyey–Greenstein "
+        f"g = {g:g} for all (`model/inks.py`, `INK_LIBRARY`, `DEFAULT_G`):\n\n"
+    )
+    return lead + table(["ink", "σt R", "σt G", "σt B", "α R", "α G", "α B"], rows, [INKS])
+
+
 TABLES = {
     "headline": headline,
     "quality": quality,
@@ -706,6 +732,7 @@ TABLES = {
     "coarse-to-fine": coarse_to_fine,
     "time-to-quality": time_to_quality,
     "job": job,
+    "ink-library": ink_library,
 }
 
 
