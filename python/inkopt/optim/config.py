@@ -65,8 +65,11 @@ class OptimizeConfig:
     #: function of C (CIELAB is steep near black): evaluated at a few-spp estimate its expectation is biased, for
     #: dark colours even in sign (docs/experiments.md), so the adjoint gets more samples than the gradient.
     #: 0: no forward renders after the first iteration; the adjoint is evaluated at the running average of the
-    #: earlier gradient passes' estimates (iterations ~2.5x cheaper, about equal quality at equal time:
-    #: experiments/results/convergence_demo.json, entries ``forward0_*``).
+    #: earlier gradient passes' estimates: cheaper iterations, each worth less. On the demo slab about equal quality
+    #: at equal time (400 such iterations in 84 s against 300 of the default in 86 s:
+    #: experiments/results/convergence_demo.json, entries ``forward0_ema0.9_400`` and ``nosmooth_300``); on Spot
+    #: 20 mm worse at equal time (bench/results/time_to_quality.json, ``spot20/extrusion_lr1_fwd0_budget55m``
+    #: against ``spot20/extrusion_lr1_budget55m``).
     forward_spp: int = 16
     #: loss weights (colour, SSIM, edges). Colour only by default: the SSIM term evaluated on a Monte Carlo
     #: estimate is biased towards lower contrast (the estimate's noise inflates its local variance), which on a
@@ -93,7 +96,8 @@ class OptimizeConfig:
     #: photograph and the reference slab it improves every noise-free figure over 0.7 and no smoothing, 3 gains
     #: nothing more there (experiments/results/convergence_*.json); 3 on meshes (Spot's flat-region mottle halves,
     #: experiments/results/mesh_convergence.json). Smoothing everywhere instead of under flat texels only
-    #: cost the photograph ~0.9 mean ΔE76, widening the set by 4 voxels around flat texels ~0.5.
+    #: cost the photograph ~0.9 mean ΔE76, widening the set by 4 voxels around flat texels ~0.5
+    #: (experiments/results/convergence_astronaut.json, ``smooth0.7_everywhere_200``, ``smooth1.5_dilate4_200``).
     smooth: float | None = None
     #: Passes of the smoothing operator of ``smooth`` (same width and guide) applied to the result after the last
     #: iteration (the variables x, not a step): removes the voxel-scale variation in flat regions that the
@@ -191,5 +195,5 @@ class OptimizeConfig:
 
 def default_lr(optimizer: str) -> float:
     """Step sizes in logit units (eg: of the most influential voxels) that converge in ~200-300 iterations on
-    the test charts (see bench/)."""
+    the test charts (experiments/results/convergence_*.json)."""
     return {"eg": 2.0, "adagrad": 0.5, "adam": 0.1}[optimizer]
