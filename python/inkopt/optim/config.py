@@ -16,8 +16,9 @@ GRAD_METHODS = ("replay", "li1")
 #: final 18.0 / SSIM 0.806 below the start's 0.834; with 0.5 it falls steadily to 11.6 / SSIM 0.877).
 #: ``smooth``: slabs 1.5 (3 gained nothing on the demo slab); meshes 3: on Spot the flat regions' mottle grows
 #: with the iterations at 1.5 (10 mm, 60 iterations: 0.55 (ΔL*)²; 3: 0.25, ΔE76 and SSIM slightly better too).
-#: ``init``: white on both. On meshes the extrusion baseline is a better start for a short run (Spot 20 mm: noise-free
-#: ΔE76 13.25, SSIM 0.930, against white's 27.7 / 0.895), but from it the runs measured so far improved more slowly
+#: ``init``: white on both. On meshes the extrusion baseline is a better start for a short run (Spot 20 mm: its start
+#: read 14.1 noise-corrected ΔE76 at 33 spp, bench/results/time_to_quality.json ``spot20/extrusion_lr1_budget55m``,
+#: against white's noise-free 27.7), but from it the runs measured so far improved more slowly
 #: (43 iterations: 11.0, bench/results/time_to_quality.json; 60 iterations from white: 9.76,
 #: experiments/results/mesh_convergence.json), so white stays the default; deadline runs on thick meshes start from
 #: the extrusion baseline (``EXTRUSION_START_MM``).
@@ -45,7 +46,8 @@ COLD_INITS = ("white", "random")
 #: The default step of a warm start (any init but ``COLD_INITS``) relative to a cold one's: the exponentiated
 #: gradient's step scale is set by the first gradients, which are smaller near the optimum, so the nominal step
 #: moves a warm start's voxels as far as a cold start's and first undoes part of what the start had: Spot 20 mm
-#: from the extrusion baseline (13.25 noise-free) read 14.27 after 5 iterations and 13.53 after 10 at lr 2.
+#: from the extrusion baseline got worse over its first iterations at lr 2 (a run stopped, not in a results file:
+#: docs/experiments.md, "Deadlines on Spot 20 mm").
 #: A quarter rather than a half: the 27-minute Spot 40 mm job from the extrusion baseline printed 9.19 / 7.61 /
 #: 0.930 (ΔE76 corrected / ΔE2000 / SSIM) at lr 0.5 against 9.65 / 8.08 / 0.923 at lr 1, the extrusion baseline
 #: 10.78 / 8.40 / 0.928; the 7m45s Spot 20 mm job, whose fine stage starts warm, 10.03 / 9.24 / 0.930 against
