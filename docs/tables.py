@@ -4,13 +4,15 @@
     python docs/tables.py --check    # exit 1 (and name them) when a document's tables are stale
 
 A table sits between ``<!-- table:NAME -->`` and ``<!-- /table:NAME -->``; NAME is a key of ``TABLES``, whose
-function reads the results files (bench/results/, experiments/results/) and returns the markdown. Every table
-ends with the files it was generated from. Standard library only.
+function reads the results files (bench/results/, experiments/results/), or the source file that defines the
+figures (the ink table), and returns the markdown. Every table ends with the files it was generated from. Standard
+library only: source files are parsed (``ast``), not imported.
 """
 
 from __future__ import annotations
 
 import argparse
+import ast
 import json
 import re
 import sys
@@ -19,6 +21,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 BENCH = REPO / "bench" / "results"
 STUDY = REPO / "experiments" / "results"
+INKS = REPO / "python" / "inkopt" / "model" / "inks.py"
 ROOT = REPO  # where the documents are (DOCS) and their names in messages are relative to
 DOCS = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))]
 MARKER = re.compile(r"(<!-- table:([\w-]+) -->\n)(.*?)(<!-- /table:\2 -->)", re.S)
@@ -38,6 +41,12 @@ def table(header: list[str], rows: list[list], sources: list[Path]) -> str:
 
 def f(x, digits: int = 2) -> str:
     return "–" if x is None else f"{x:.{digits}f}"
+
+
+def code(d: dict) -> str:
+    """The commit of the code a results entry measured (short; "+" when its checkout had uncommitted changes)."""
+    commit = d.get("commit") or ""
+    return f"`{commit[:7]}`" + (" + changes" if "uncommitted" in commit else "") if commit else "–"
 
 
 def triple(m: dict) -> str:
@@ -214,38 +223,45 @@ def speed() -> str:
             f"**{r['events_per_s'] / 1e6:.1f} M collisions/s** on {r['threads']} threads "
             f"({r1['events_per_s'] / 1e6:.1f} M on 1), {r['texel_samples_per_s'] / 1e6:.1f} M texel-samples/s",
             f"`{r['command']}` (`--threads 1`)",
+            code(r),
         ],
         [
             "gradient pass (path replay) over forward pass, equal spp",
             f"**{o16['gradient_over_forward']:.1f} ×**",
             f"`{o16['command']}`",
+            code(o16),
         ],
         [
             f"one iteration, reference slab, two faces, gradient {o16['spp']} spp",
             f"{o16['seconds_per_iteration']:.1f} s ({split(o16)})",
             f"`{o16['command']}`",
+            code(o16),
         ],
         [
             f"one iteration with the defaults (gradient {o4['spp']} spp, forward {o4['forward_spp']} spp)",
             f"**{o4['seconds_per_iteration']:.1f} s** ({split(o4)})",
             f"`{o4['command']}`",
+            code(o4),
         ],
         [
             f"Spot 20 mm ({m20['voxels'] / 1e6:.1f} M grid voxels, {m20['inside_voxels'] / 1e6:.1f} M inside, "
             f"{m20['texels'] / 1e3:.0f} k texels)",
             mesh(m20),
             f"`{m20['command']}`",
+            code(m20),
         ],
         [
             f"Spot 40 mm ({m40['voxels'] / 1e6:.1f} M grid voxels, {m40['inside_voxels'] / 1e6:.1f} M inside, "
             f"{m40['texels'] / 1e3:.0f} k texels)",
             mesh(m40),
             f"`{m40['command']}`",
+            code(m40),
         ],
         [
             f"printer-resolution label volume ({lab['voxels'] / 1e6:.0f} M voxels), render, top face, 1 spp",
             f"{lab['seconds']:.1f} s, {lab['peak_rss_gb']:.2f} GB peak",
             f"`{lab['command']}`",
+            code(lab),
         ],
         [
             f"Spot 40 mm printer output ({po['printer_voxels'] / 1e6:.0f} M printer voxels): quantize, export, "
@@ -254,6 +270,7 @@ def speed() -> str:
                 f"{po[k + '_seconds']:.0f} s, {po[k + '_peak_rss_gb']:.2f} GB" for k in ("quantize", "export", "gcvf")
             ),
             f"`{po['command']}`",
+            code(po),
         ],
         [
             "the same: export --format 3mf (mixture), --format 3mf --labels; inspect of the GCVF (--run) and of the "
@@ -263,6 +280,7 @@ def speed() -> str:
                 for k in ("threemf", "threemf_labels", "inspect_gcvf", "inspect_threemf")
             ),
             f"`{po['command']}`",
+            code(po),
         ],
     ]
     sources = [
@@ -278,7 +296,7 @@ def speed() -> str:
             "print_output.json",
         )
     ]
-    return table(["what", "figure", "command"], rows, sources)
+    return table(["what", "figure", "command", "code measured"], rows, sources)
 
 
 def mesh_scaling() -> str:
@@ -307,6 +325,7 @@ def mesh_scaling() -> str:
                 f"{m['seconds_per_iteration']:.1f} ({s['render_s']:.1f} / {s['gradient_s']:.1f} / {rest:.1f})",
                 f"{m['cpu_seconds_per_iteration']:.0f}",
                 f"{m['peak_rss_gb']:.2f} GB",
+                code(m),
             ]
         )
     return table(
@@ -319,6 +338,7 @@ def mesh_scaling() -> str:
             "s per iteration (render / gradient / rest)",
             "CPU s per iteration",
             "peak memory",
+            "code measured",
         ],
         rows,
         sources,
@@ -518,10 +538,22 @@ def check_cell(ck: dict | None, e2000: bool = False) -> str:
     )
 
 
-def time_to_quality() -> str:
+#: the entries of bench/results/time_to_quality.json and job.json that ran what the defaults do now (the tables
+#: "time-to-quality-defaults" and "job-defaults"; the full tables keep every entry)
+DEFAULT_RUNS = ("reference/c2f150_budget3m_warm025", "spot40/extrusion_budget27m", "spot40/reference")
+DEFAULT_JOBS = ("spot20_budget7m45s_warm025", "spot40_budget27m_lr05")
+
+
+def entries(path: Path, keys: tuple[str, ...] | None) -> list[tuple[str, dict]]:
+    """The results of ``path`` in file order, or only ``keys`` (in that order; KeyError naming a missing one)."""
+    res = load(path)["results"]
+    return list(res.items()) if keys is None else [(k, res[k]) for k in keys]
+
+
+def time_to_quality(keys: tuple[str, ...] | None = None) -> str:
     path = BENCH / "time_to_quality.json"
     rows = []
-    for key, e in load(path)["results"].items():
+    for key, e in entries(path, keys):
         r, stop = e["result"], e["result"].get("stop") or {}
         snaps = ", ".join(  # a sampled snapshot's (bench/time_to_quality.py --snap-evaluate) ± its standard error
             f"{p['iteration']}: {f(p['delta_e76_mean_corrected'])}"
@@ -569,10 +601,10 @@ def time_to_quality() -> str:
     return table(header, rows, [path])
 
 
-def job() -> str:
+def job(keys: tuple[str, ...] | None = None) -> str:
     path = BENCH / "job.json"
     rows = []
-    for key, e in load(path)["results"].items():
+    for key, e in entries(path, keys):
         st, r = e["stages"], e["report"]
         rows.append(
             [
@@ -687,6 +719,104 @@ def shell_mm() -> str:
     )
 
 
+def source_constant(path: Path, name: str):
+    """The literal assigned to ``name`` at the top level of the Python file ``path`` (parsed, not imported)."""
+    for node in ast.parse(path.read_text()).body:
+        targets = [node.target] if isinstance(node, ast.AnnAssign) else getattr(node, "targets", [])
+        if any(isinstance(t, ast.Name) and t.id == name for t in targets) and node.value is not None:
+            try:
+                return ast.literal_eval(node.value)
+            except ValueError:
+                break
+    raise SystemExit(f"{path.relative_to(REPO)}: no top-level literal assignment to {name}")
+
+
+def ink_library() -> str:
+    """docs/method.md's ink table: ``INK_LIBRARY`` and ``DEFAULT_G`` of python/inkopt/model/inks.py."""
+    lib, g = source_constant(INKS, "INK_LIBRARY"), source_constant(INKS, "DEFAULT_G")
+    rows = [[name, *(f"{x:g}" for x in mu_t), *(f"{x:g}" for x in albedo)] for name, (mu_t, albedo) in lib.items()]
+    lead = (
+        "Extinction σt in mm⁻¹ and albedo α per R, G, B (σs = α σt, σa = (1 − α) σt); Henyey–Greenstein "
+        f"g = {g:g} for all (`model/inks.py`, `INK_LIBRARY`, `DEFAULT_G`):\n\n"
+    )
+    return lead + table(["ink", "σt R", "σt G", "σt B", "α R", "α G", "α B"], rows, [INKS])
+
+
+def evaluation_cost() -> str:
+    """Where a sampled evaluation of Spot 40 mm spends its time, result by result, with its figures."""
+    path = BENCH / "evaluate_40mm_sampled_lightness.json"
+    d, rows = load(path), []
+    ts = d["texel_sample"]
+
+    def pm(m: dict, key: str, digits: int = 2) -> str:
+        return f"{f(m[key], digits)} ± {f(m['stderr'][key], digits)}"
+
+    for name, m in d["results"].items():
+        rows.append(
+            [
+                name,
+                f"{m['spp']} / {m['spp_windows']}",
+                f"{m['seconds']:.0f}",
+                f"{m['events_per_path']:.0f}",
+                pm(m, "delta_e76_mean_corrected"),
+                pm(m, "delta_e2000_mean"),
+                pm(m, "ssim", 3),
+            ]
+        )
+    lead = (
+        f"`{d['command']}` (`{d['evaluate_command']}`, code {code(d)}, load {d['load_average_before']:.1f} at the "
+        f"start, {d['load_average_after']:.1f} at the end): {ts['texels']} of {ts['population']} texels and "
+        f"{ts['windows']} SSIM windows of {ts['window_texels']} texels; the whole command "
+        f"**{d['evaluate_seconds']:.0f} s wall, {d['evaluate_cpu_seconds']:.0f} CPU s, "
+        f"{d['evaluate_peak_rss_gb']:.2f} GiB peak**.\n\n"
+    )
+    header = [
+        "result",
+        "spp (sampled texels / SSIM windows)",
+        "seconds",
+        "events per path",
+        "ΔE76 (noise-corrected)",
+        "ΔE2000",
+        "SSIM",
+    ]
+    return lead + table(header, rows, [path])
+
+
+def pass_cost() -> str:
+    """One 4-spp forward render and gradient pass over every texel, from white and from a fine stage's start."""
+    path = STUDY / "pass_cost.json"
+    rows = []
+    for key, e in load(path)["results"].items():
+        if not key.endswith("_queued"):  # the entries before the queued adds are history (docs/experiments.md)
+            continue
+        fw, gr = e["forward"], e["gradient"]
+        rows.append(
+            [
+                f"`{key}`",
+                f"{e['height_mm']:g} mm, " + ("white" if e["start"] == "white" else "a coarse-to-fine job's start"),
+                f"{e['events_per_path']:.1f}",
+                f"{fw['seconds']:.1f} s",
+                f"{gr['seconds']:.1f} s ({gr['seconds'] / fw['seconds']:.1f} ×)",
+                f"{gr['replayed_events'] / 1e6:.1f} M of {gr['events'] / 1e6:.1f} M",
+                f"~{e['forward_ns_per_event']:.0f} ns",
+                f"~{e['replay_ns_per_replayed_event']:.0f} ns",
+                code(e),
+            ]
+        )
+    header = [
+        "entry",
+        "start",
+        "events per path",
+        "forward",
+        "gradient pass (× forward)",
+        "replayed events",
+        "per forward event",
+        "replay per replayed event",
+        "code measured",
+    ]
+    return table(header, rows, [path])
+
+
 TABLES = {
     "headline": headline,
     "quality": quality,
@@ -705,7 +835,12 @@ TABLES = {
     "calibration": calibration,
     "coarse-to-fine": coarse_to_fine,
     "time-to-quality": time_to_quality,
+    "time-to-quality-defaults": lambda: time_to_quality(DEFAULT_RUNS),
     "job": job,
+    "job-defaults": lambda: job(DEFAULT_JOBS),
+    "ink-library": ink_library,
+    "evaluation-cost": evaluation_cost,
+    "pass-cost": pass_cost,
 }
 
 

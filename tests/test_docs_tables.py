@@ -45,3 +45,40 @@ def test_an_unknown_table_is_an_error(tmp_path, monkeypatch):
     monkeypatch.setattr(tables, "ROOT", tmp_path)
     with pytest.raises(SystemExit, match="unknown table 'nope'"):
         tables.main(["--check"])
+
+
+def test_the_ink_table_is_read_from_the_code():
+    """docs/method.md's ink table is ``INK_LIBRARY`` as the package defines it (parsed, not imported, by tables.py)."""
+    from inkopt.model.inks import DEFAULT_G, INK_LIBRARY
+
+    tables = _tables()
+    assert tables.source_constant(tables.INKS, "INK_LIBRARY") == INK_LIBRARY
+    assert tables.source_constant(tables.INKS, "DEFAULT_G") == DEFAULT_G
+    text = tables.ink_library()
+    for name, (mu_t, albedo) in INK_LIBRARY.items():
+        assert f"| {name} | " + " | ".join(f"{x:g}" for x in (*mu_t, *albedo)) + " |" in text
+
+
+def test_a_changed_ink_makes_the_page_stale(tmp_path, monkeypatch):
+    tables = _tables()
+    doc = tmp_path / "doc.md"
+    doc.write_text("<!-- table:ink-library -->\n<!-- /table:ink-library -->\n")
+    monkeypatch.setattr(tables, "DOCS", [doc])
+    monkeypatch.setattr(tables, "ROOT", tmp_path)
+    assert tables.main([]) == 0 and tables.main(["--check"]) == 0
+    inks = tmp_path / "inks.py"
+    inks.write_text(tables.INKS.read_text().replace('"cyan": ((9.0, 4.5, 7.5)', '"cyan": ((9.5, 4.5, 7.5)'))
+    monkeypatch.setattr(tables, "INKS", inks)
+    monkeypatch.setattr(tables, "REPO", tmp_path)
+    assert tables.main(["--check"]) == 1
+
+
+def test_a_constant_that_is_not_a_literal_is_an_error(tmp_path, monkeypatch):
+    tables = _tables()
+    src = tmp_path / "mod.py"
+    src.write_text("A = 1\nB = f(2)\n")
+    monkeypatch.setattr(tables, "REPO", tmp_path)
+    assert tables.source_constant(src, "A") == 1
+    for name in ("B", "C"):
+        with pytest.raises(SystemExit, match=f"no top-level literal assignment to {name}"):
+            tables.source_constant(src, name)

@@ -5,7 +5,7 @@ calibration (``estimate_run``), for the line ``inkopt slab`` / ``optimize`` log 
 Time: an iteration is a forward render (``forward_spp``) and a gradient pass (``spp``) over every texel, plus the
 step over the free voxels. The calibration throws a first pass away (its one-off set-up), times both passes of the run's
 own renderer on one texel (the part that does not grow with the texels, ``a``: the gradient's per-voxel buffer and its
-conversion, the set-up of a pass; ~0.7 s for both at Spot 40 mm's 15.7 M free voxels) and then on texel subsets (16 runs
+conversion, the set-up of a pass; they grow with the free voxels) and then on texel subsets (16 runs
 of neighbouring texels, ``texel_runs``), grown until the passes take ``MIN_TEXEL_SECONDS`` and ``FIXED_MULTIPLE`` x
 ``a`` more than on one texel (or the subset is every texel), so that the part that grows with the texels (``b`` per
 texel) stands clear of ``a``'s jitter; a stall only adds time, so every timing that decides is the smaller of two. An
@@ -39,8 +39,8 @@ CALIBRATION_TEXELS = 256
 SAMPLE_RUNS = 16
 #: the calibration's texel subset grows until its passes take this much longer than on one texel (seconds)
 MIN_TEXEL_SECONDS = 0.3
-#: ... and this many times the one-texel passes: their jitter (0.6 to 1.3 s at Spot 40 mm, from the per-voxel
-#: buffers' allocation) is then a quarter of the texels' part at most, ~10 % of the estimate at that size
+#: ... and this many times the one-texel passes: their jitter (the per-voxel buffers' allocation) is then a quarter
+#: of the texels' part at most (docs/experiments.md, "The run estimate's calibration")
 FIXED_MULTIPLE = 4.0
 #: an estimate longer than this gets its line in the log before the run starts (seconds)
 ANNOUNCE_SECONDS = 180.0
@@ -139,8 +139,8 @@ def texel_runs(n_tex: int, n: int, rng: np.random.Generator, runs: int = SAMPLE_
     """(n,) int64 sorted texel indices: ``runs`` runs of consecutive texels (fewer when n < 64 ``runs``: runs of at
     least 64), one at a random place in each of as many equal stretches of the texel order. Consecutive texels are
     neighbours on the surface, as in a full pass, where a path finds the media its neighbours' paths brought into
-    the caches; texels drawn one by one from the whole surface find them cold and take longer (~1.3x at Spot
-    40 mm)."""
+    the caches; texels drawn one by one from the whole surface find them cold and take longer (docs/experiments.md,
+    "The run estimate's calibration")."""
     n = min(n, n_tex)
     runs = max(1, min(runs, n // 64))
     edges = np.linspace(0, n_tex, runs + 1).astype(np.int64)

@@ -6,10 +6,10 @@ edges, get their mean), white everywhere else inside. ``extrusion_baseline``: ev
 mapped mixture of its nearest scene texel (Euclidean distance in mm between the voxel centre and the texel's
 face centre), so a slab textured on top and bottom is filled from the top in its upper half and from the bottom
 in its lower half. Mesh texels sit at voxel centres: their nearest texel comes from the exact Euclidean distance
-transform of the grid (seconds for Spot 40 mm; a k-d tree search from deep inside the body visits most of the
-surface, ~10 min there); other texels (face centres) from a k-d tree. Between equidistant texels either
-may be taken. Where the scene fixes an ink share (``fixed_share``, e.g. a translucent core), both keep it
-and scale the baseline mixture into the remaining share.
+transform of the grid (12 s for Spot 40 mm's mixture, where a k-d tree search from deep inside the body visits
+most of the surface and would take ~10 min: bench/results/extrusion_nearest_40mm.json); other texels (face
+centres) from a k-d tree. Between equidistant texels either may be taken. Where the scene fixes an ink share
+(``fixed_share``, e.g. a translucent core), both keep it and scale the baseline mixture into the remaining share.
 
 Conventions (docs/conventions.md): arrays (z, y, x[, ink]); colours linear RGB; CIELAB via ``inkopt.color``.
 """

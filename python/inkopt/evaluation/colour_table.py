@@ -5,18 +5,20 @@
   chart rather than a per-object one) for the mixtures of ``table_mixtures``: a simplex lattice of the ink set
   (step 1/8 for up to 5 inks, see ``default_step``) plus its "tint" warp u*u/|u|^2, which adds small shares
   (1/50, 1/38, ...) where colour changes fastest with the mixture (the first 1/8 of black or of a colourant in
-  white moves ΔE by 10-30); 970 mixtures for CMYKW. Measured on 100 random CMYKW mixtures (refined look-up,
-  rendered back): ΔE76 mean 1.0, p95 3.3; the uniform 1/8 lattice alone gave 2.8 / 14, a uniform 1/12 lattice
-  (1820 mixtures) 1.8 / 9.7. Each patch is seen from its top face under the renderer's uniform white environment
-  (specular reflection included, as in evaluation), rendered adaptively until the standard error of its CIELAB
-  colour is below ``max_stderr`` (0.3 ΔE76 by default). The table is cached on disk (``$INKOPT_CACHE_DIR``, else
+  white moves ΔE by 10-30); 970 mixtures for CMYKW. The warp makes a random mixture's colour come back from the
+  look-up several times closer than the plain 1/8 lattice does, and closer than a finer uniform lattice with
+  more patches (a one-off check, its figures in docs/experiments.md, "Evaluation time and memory"). Each patch is
+  seen from its top face under the renderer's uniform white environment (specular reflection included, as in
+  evaluation), rendered adaptively until the standard error of its CIELAB colour is below ``max_stderr`` (0.3
+  ΔE76 by default). The table is cached on disk (``$INKOPT_CACHE_DIR``, else
   ``$XDG_CACHE_HOME/inkopt``, else ``~/.cache/inkopt``), keyed by a hash of the ink table, g, ior, patch
-  thickness, lattice step, error target and the inkopt version; written atomically. Building it takes ~5 min on
-  2 cores for CMYKW (once).
+  thickness, lattice step, error target and the inkopt version; written atomically. The default ink set's table
+  ships with the package (``PACKAGED``), so only another set's is built (once; then cached).
 - ``ColourTable.lookup`` maps a target colour to a mixture: by default (``refine=True``) a convex blend of the
   k = 8 entries nearest in CIELAB, with the weights minimising the ΔE76 between the target and the blend of the
   entries' colours (simplex-constrained least squares, i.e. assuming colour is locally linear in the mixture);
-  ``refine=False`` takes the mixture of the single nearest entry (ΔE76; 2.6 / 8.5 in the test above).
+  ``refine=False`` takes the mixture of the single nearest entry (less accurate: the lattice's spacing adds to the
+  error).
 
 Conventions (docs/conventions.md): mixtures (M, N); colours linear RGB; CIELAB via ``inkopt.color``.
 """
@@ -190,7 +192,7 @@ class ColourTable:
         """CIELAB (I, 3) of the colour nearest each target (I, 3 linear) that a thick homogeneous patch reaches:
         the refined look-up's predicted colour, the convex blend of the k nearest entries' colours closest to
         the target (an in-gamut target is reached exactly; the distance of an out-of-gamut one is to the local
-        hull of the table, not to the lattice points, whose spacing would add ~2.6 ΔE76)."""
+        hull of the table, not to the lattice points, whose spacing would add to it)."""
         lab_t = linear_to_lab(np.asarray(target_rgb, np.float64))
         uniq, inv = np.unique(lab_t, axis=0, return_inverse=True)
         k = int(min(k, len(self.lab)))
@@ -321,7 +323,7 @@ def colour_table(
 ) -> ColourTable:
     """The colour -> mixture table of an ink set (module docstring); loaded from the cache when present.
 
-    g defaults to the ink table's g. ~5 min for the 970 CMYKW patches on 2 cores (once; then cached).
+    g defaults to the ink table's g. Built once per key, then read from the cache (or the package's copy).
     """
     g = inks.g if g is None else float(g)
     step = default_step(len(inks)) if step is None else int(step)

@@ -53,7 +53,7 @@ once, each later result's labels swapped in) serve the quantized result and both
 inside voxels); each baseline goes layer by layer from ``baselines.BaselineLayers``
 through ``printing.quantize.quantize`` into one printer label grid (1 byte per printer voxel), never as a whole
 (z, y, x, N) mixture; the texel loss and its figures come after the last render. The peak is then the larger of
-the continuous render and one printer renderer's build, below the optimisation's (docs/performance.md).
+the continuous render and one printer renderer's build (docs/performance.md, "Evaluation memory").
 """
 
 from __future__ import annotations

@@ -28,10 +28,11 @@ error is far below the noise, and overestimates for very noisy dark colours (the
 statistics (``TexelLoss``, ``metrics.mottle``); that correction is accurate only while the noise variance is small
 against SSIM's constant K2 = 0.03² (normalised L*a*b*): SSIM is a ratio of noisy local variances (Jensen), the
 corrected variance is clamped at 0, and the delta method misses the Lab transform's curvature (σ⁴ terms). Measured
-(``bench/ssim_noise_bias.py``; the demo slab's and Spot 20 mm's optimised results): with r = the largest channel's
-mean per-texel noise variance / K2, SSIM reads 0.017 / 0.029 low at r = 1.2 / 0.8 (64 spp), 0.0035 at r = 0.30
-(demo, 256 spp), nothing measurable at r = 0.075 (1024 spp), and Spot's mottle 0.13 (ΔL*)² high at 64 spp. So the
-adaptive rule also asks r ≤ ``SSIM_NOISE_RATIO`` = 0.1 (~0.002 SSIM; r ∝ 1/spp).
+(``experiments/ssim_noise_bias.py``, ``experiments/results/ssim_noise_bias_{demo,spot20mm}.json``; the demo slab's
+and Spot 20 mm's optimised results): with r = the largest channel's mean per-texel noise variance / K2, SSIM
+reads 0.017 / 0.029 low at r = 1.2 / 0.8 (64 spp), 0.0035 at r = 0.30 (demo, 256 spp), nothing measurable at
+r = 0.075 (1024 spp), and Spot's mottle 0.13 (ΔL*)² high at 64 spp. So the adaptive rule also asks
+r ≤ ``SSIM_NOISE_RATIO`` = 0.1 (~0.002 SSIM; r ∝ 1/spp).
 
 **Adaptive samples** (``adaptive_render``): a pilot of ``PILOT_SPP`` samples per texel; Σ scales as 1/spp, so the
 contribution at n samples is predicted from the pilot (D fixed, σ⊥ ∝ n^-1/2) and the smallest n whose predicted

@@ -24,7 +24,8 @@ delta method (SE of the mean of ΔE² / (2 RMS)); ``flat_texels`` the flat centr
 of each sampled texel is part of the spread, so the standard error covers it; what it does not cover is the
 noise's bias (its inflation of ΔE76, corrected by ``delta_e76_mean_corrected``, and the SSIM noise correction's
 residual), which the adaptive render keeps small: ΔE76 as in the full evaluation, SSIM to a noise ratio of
-``SAMPLE_SSIM_NOISE_RATIO`` (a bias of ~0.004, small against the sampling error, at a third of the samples).
+``SAMPLE_SSIM_NOISE_RATIO`` (a bias of ~0.004, small against the sampling error, at a third of the samples; the
+measurement is ``evaluation.noise``'s).
 The mottle's per-texel values are heavy-tailed (a few texels carry much of the mean), so a sample of ~100 windows
 often misses them and its standard error understates the error (docs/quality.md).
 

@@ -18,8 +18,9 @@ GRAD_METHODS = ("replay", "li1")
 #: final 18.0 / SSIM 0.806 below the start's 0.834; with 0.5 it falls steadily to 11.6 / SSIM 0.877).
 #: ``smooth``: slabs 1.5 (3 gained nothing on the demo slab); meshes 3: on Spot the flat regions' mottle grows
 #: with the iterations at 1.5 (10 mm, 60 iterations: 0.55 (ΔL*)²; 3: 0.25, ΔE76 and SSIM slightly better too).
-#: ``init``: white on both. On meshes the extrusion baseline is a better start for a short run (Spot 20 mm: noise-free
-#: ΔE76 13.25, SSIM 0.930, against white's 27.7 / 0.895), but from it the runs measured so far improved more slowly
+#: ``init``: white on both. On meshes the extrusion baseline is a better start for a short run (Spot 20 mm: its start
+#: read 14.1 noise-corrected ΔE76 at 33 spp, bench/results/time_to_quality.json ``spot20/extrusion_lr1_budget55m``,
+#: against white's noise-free 27.7), but from it the runs measured so far improved more slowly
 #: (43 iterations: 11.0, bench/results/time_to_quality.json; 60 iterations from white: 9.76,
 #: experiments/results/mesh_convergence.json), so white stays the default; deadline runs on thick meshes start from
 #: the extrusion baseline (``EXTRUSION_START_MM``).
@@ -47,7 +48,8 @@ COLD_INITS = ("white", "random")
 #: The default step of a warm start (any init but ``COLD_INITS``) relative to a cold one's: the exponentiated
 #: gradient's step scale is set by the first gradients, which are smaller near the optimum, so the nominal step
 #: moves a warm start's voxels as far as a cold start's and first undoes part of what the start had: Spot 20 mm
-#: from the extrusion baseline (13.25 noise-free) read 14.27 after 5 iterations and 13.53 after 10 at lr 2.
+#: from the extrusion baseline got worse over its first iterations at lr 2 (a run stopped, not in a results file:
+#: docs/experiments.md, "Deadlines on Spot 20 mm").
 #: A quarter rather than a half: the 27-minute Spot 40 mm job from the extrusion baseline printed 9.19 / 7.61 /
 #: 0.930 (ΔE76 corrected / ΔE2000 / SSIM) at lr 0.5 against 9.65 / 8.08 / 0.923 at lr 1, the extrusion baseline
 #: 10.78 / 8.40 / 0.928; the 7m45s Spot 20 mm job, whose fine stage starts warm, 10.03 / 9.24 / 0.930 against
@@ -71,8 +73,11 @@ class OptimizeConfig:
     #: function of C (CIELAB is steep near black): evaluated at a few-spp estimate its expectation is biased, for
     #: dark colours even in sign (docs/experiments.md), so the adjoint gets more samples than the gradient.
     #: 0: no forward renders after the first iteration; the adjoint is evaluated at the running average of the
-    #: earlier gradient passes' estimates (iterations ~2.5x cheaper, about equal quality at equal time:
-    #: experiments/results/convergence_demo.json, entries ``forward0_*``).
+    #: earlier gradient passes' estimates: cheaper iterations, each worth less. On the demo slab about equal quality
+    #: at equal time (400 such iterations in 84 s against 300 of the default in 86 s:
+    #: experiments/results/convergence_demo.json, entries ``forward0_ema0.9_400`` and ``nosmooth_300``); on Spot
+    #: 20 mm worse at equal time (bench/results/time_to_quality.json, ``spot20/extrusion_lr1_fwd0_budget55m``
+    #: against ``spot20/extrusion_lr1_budget55m``).
     forward_spp: int = 16
     #: loss weights (colour, SSIM, edges). Colour only by default: the SSIM term evaluated on a Monte Carlo
     #: estimate is biased towards lower contrast (the estimate's noise inflates its local variance), which on a
@@ -99,7 +104,8 @@ class OptimizeConfig:
     #: photograph and the reference slab it improves every noise-free figure over 0.7 and no smoothing, 3 gains
     #: nothing more there (experiments/results/convergence_*.json); 3 on meshes (Spot's flat-region mottle halves,
     #: experiments/results/mesh_convergence.json). Smoothing everywhere instead of under flat texels only
-    #: cost the photograph ~0.9 mean ΔE76, widening the set by 4 voxels around flat texels ~0.5.
+    #: cost the photograph ~0.9 mean ΔE76, widening the set by 4 voxels around flat texels ~0.5
+    #: (experiments/results/convergence_astronaut.json, ``smooth0.7_everywhere_200``, ``smooth1.5_dilate4_200``).
     smooth: float | None = None
     #: Passes of the smoothing operator of ``smooth`` (same width and guide) applied to the result after the last
     #: iteration (the variables x, not a step): removes the voxel-scale variation in flat regions that the
@@ -205,5 +211,5 @@ class OptimizeConfig:
 
 def default_lr(optimizer: str) -> float:
     """Step sizes in logit units (eg: of the most influential voxels) that converge in ~200-300 iterations on
-    the test charts (see bench/)."""
+    the test charts (experiments/results/convergence_*.json)."""
     return {"eg": 2.0, "adagrad": 0.5, "adam": 0.1}[optimizer]

@@ -57,8 +57,8 @@ class ExponentiatedGradient(_Moments):
 
     The update and the percentile run in the Rust core (``inkopt_core::kernels::step``, on ``threads`` threads,
     default all cores), in float32 exactly as numpy evaluates ``x - lr * (m / bias) / s`` and ``np.percentile``:
-    without the whole-array temporaries of numpy (at Spot 40 mm's 78 M variables the numpy step took 0.8 s and the
-    percentile, which partitions a copy of |g|, 1.4 s).
+    without the whole-array temporaries of numpy or the copy of |g| that its percentile partitions (the timings
+    that moved them: docs/experiments.md, "Speed and memory").
     """
 
     natural = True

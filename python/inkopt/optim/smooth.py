@@ -5,19 +5,20 @@
 Why: the loss sees a voxel's mixture only through light that has scattered over several voxels, so its curvature
 is small at voxel-scale spatial frequencies, while a few-spp gradient puts as much noise there as anywhere. Plain
 steps therefore let the mixture random-walk at those frequencies: the mottle (in flat regions the
-prediction carries ~1 (ΔL*)² of texel-scale power that the target has no trace of). Diffusing the step damps each
+prediction carries ~1 (ΔL*)² of texel-scale power that the target has no trace of: Spot 20 mm without smoothing,
+experiments/results/shell_mm.json, ``none+smooth0`` and ``1+smooth0``). Diffusing the step damps each
 spatial frequency by its heat-kernel factor: the noise injected at voxel scale shrinks by that factor, while the
 low frequencies (the colour of a region) move at the full step.
 
 What is diffused is the step the optimiser chose (new x - x), not the gradient: diffusing the gradient also
-lowered the exponentiated-gradient step scale (the 99th percentile of |g|, which the voxel-scale noise sets) by
-~25 %, i.e. made every step larger, and on the zebra chart cost 0.03 SSIM (docs/experiments.md).
+lowers the exponentiated-gradient step scale (the 99th percentile of |g|, which the voxel-scale noise sets), i.e.
+makes every step larger, and it cost the zebra chart SSIM (docs/experiments.md, "Step smoothing").
 
 Guided by the target: the diffusion between two voxels is weighted by exp(-|guide_r - guide_q|² / edge²), the
 guide being each voxel's nearest texel's target CIELAB and its depth below that texel (``DEPTH_DE`` ΔE76 per
 voxel), so steps are smoothed within a region of one colour, mostly side by side under the surface, but not across
-the target's edges, where the optimum changes sharply (unguided, the zebra chart lost 0.08 SSIM), and only a little
-from one depth to the next.
+the target's edges, where the optimum changes sharply (unguided, the zebra chart lost SSIM: docs/experiments.md),
+and only a little from one depth to the next.
 
 Steps: ``d <- d + a * sum_nb w (d_nb - d)`` with a = 1/8, repeated an even number of times ``k = 2 ceil(sigma² /
 (4 a))``, so the kernel's variance along each axis is 2 a k >= sigma² (voxel units). One step's eigenvalues lie in

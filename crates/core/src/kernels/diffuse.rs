@@ -277,7 +277,7 @@ mod tests {
 
     #[test]
     fn speed() {
-        // 2.5 M printer voxels, 5 inks: well under a second in release builds (measured ~0.1 s)
+        // 2.5 M printer voxels, 5 inks: a loose bound, release builds only, that catches a loop gone slow
         let shape = LayerShape { n: 5, ny: 118, nx: 354 };
         let nz = 60;
         let mix = uniform(shape, nz, &[0.1, 0.2, 0.3, 0.15, 0.25]);

@@ -12,8 +12,8 @@
 //! The order statistics of |g| come from a two-pass radix selection on the bit patterns of |g| (the patterns of
 //! non-negative floats sort as the floats do): a histogram of their upper 16 bits finds the bucket holding each
 //! asked-for rank, a histogram of the lower 16 bits inside that bucket the value. No copy of g is made (numpy's
-//! percentile partitions a full copy of |g|: 1.4 s at Spot 40 mm's 78 M variables), and the counts are exact, so the
-//! result is the same for any thread count.
+//! percentile partitions a full copy of |g|), and the counts are exact, so the result is the same for any thread
+//! count.
 
 use rayon::prelude::*;
 

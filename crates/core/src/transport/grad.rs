@@ -34,9 +34,9 @@ pub enum GradMethod {
 /// rounded to a multiple of `quantum` and added to an `AtomicI64` (relaxed `fetch_add`: the sums are only read
 /// after the pass). Integer sums do not depend on their order, so the gradient is bit-identical for any thread
 /// count and work split (float sums are not). One shared buffer rather than one per thread: half the memory
-/// with 2 threads (48 bytes per slot), at no measured cost in speed. The quantum is set per
-/// pass from the largest adjoint, 2^-32 of it: far below f32 resolution for any realistic voxel total, with
-/// +-2^31 adjoint-units of headroom per voxel.
+/// with 2 threads (48 bytes per slot; its speed against per-thread buffers: docs/experiments.md, "Speed and
+/// memory"). The quantum is set per pass from the largest adjoint, 2^-32 of it: far below f32 resolution for any
+/// realistic voxel total, with +-2^31 adjoint-units of headroom per voxel.
 ///
 /// An optional index map restricts gradients to some voxels (e.g. the free voxels of a shell): `map[j]` is the
 /// slot of voxel j, or `NO_GRADIENT`; the buffers then hold only the mapped voxels. `with_voxels` gives the slots

@@ -25,8 +25,8 @@ impl Tally for NoTally {
 /// Paths that are still going after this many collisions are cut (value 0). At albedo 0.9997 the chance to
 /// survive 2e6 collisions is exp(-600): the cut never biases a physical medium.
 pub(crate) const MAX_EVENTS: u32 = 2_000_000;
-/// Weights below this play Russian roulette. 1.0 would be analog absorption; on the reference slab 0.5 gives
-/// 30 % less variance per path at 1.6x the collisions (+11 % efficiency), more on dark colours.
+/// Weights below this play Russian roulette. 1.0 would be analog absorption; 0.5 walks longer paths for less
+/// variance per path, a gain in efficiency that grows on dark colours (docs/experiments.md, "Speed and memory").
 pub(crate) const RR_THRESHOLD: f32 = 0.5;
 /// Steps (flights and voxel crossings) after which a walk is cut (value 0): a guard that ends every walk.
 pub(crate) const MAX_STEPS: u64 = 50_000_000;
