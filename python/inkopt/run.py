@@ -47,9 +47,9 @@ from .scenes import Scene, build_scene
 #: and noise-corrected at any spp (their noise is reported), the quality is the iterations'.
 BUDGET_START_FIGURES, BUDGET_FINAL_FIGURES, BUDGET_WRITING = 0.03, 0.08, 0.04
 #: Without a budget, the result's figures add samples beyond the pilot only while they take at most this share of
-#: the run's time so far: on a mesh the noise-free figures of a run cost as much as its iterations (Spot 20 mm:
-#: ~550 spp, ~6 min, twice). The noise left is corrected for and reported; `inkopt evaluate` measures the
-#: printed result against the baselines without noise.
+#: the run's time so far: on a mesh noise-free figures take hundreds of samples per texel where an iteration renders
+#: 20 (Spot 20 mm: 553 spp, experiments/results/mesh_convergence.json, entry ``spot20_smooth3_60``). The noise left
+#: is corrected for and reported; `inkopt evaluate` measures the printed result against the baselines without noise.
 FINAL_FIGURES_SHARE = 0.25
 
 
@@ -70,8 +70,9 @@ def peak_rss_gb() -> float:
 def release_freed_memory() -> None:
     """Give the memory freed so far back to the operating system where the C library can (glibc's
     ``malloc_trim``; elsewhere nothing): a finished stage's many small blocks, freed in many threads' heaps,
-    otherwise stay in the process under the next stage's peak (a 40 mm coarse stage and transfer left ~0.6 GiB,
-    docs/performance.md)."""
+    otherwise stay in the process under the next stage's peak (a 40 mm coarse-to-fine job cut to 1 + 1 iterations
+    peaked at 4.07 GiB without it, 3.72 GiB with it: bench/results/c2f_memory.json, entries ``spot40_c2f_after`` and
+    ``spot40_c2f_after_trim``)."""
     gc.collect()
     try:
         trim = ctypes.CDLL(None).malloc_trim
@@ -404,8 +405,9 @@ def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: flo
     ``OUT/coarse/`` with ``cfg``'s settings: it stops when done, or within ``COARSE_BUDGET_SHARE`` of
     ``cfg.time_budget``), move its result onto the grid of ``spec`` (``optim.transfer.write_transferred_volume``:
     ``OUT/coarse/fine_start.npz``, fixed shares kept) and optimise from there (``cfg`` with that start, and a warm
-    start's step unless ``cfg.lr`` is set). A half-DPI iteration costs about a sixth of a full one on Spot
-    (docs/performance.md). ``options.resume`` continues whichever stage was under way; the time budget and the
+    start's step unless ``cfg.lr`` is set). A half-DPI grid has a quarter of the texels: on Spot 20 mm an
+    iteration took 5.9 CPU s at 150 DPI (bench/results/mesh_20mm_150dpi.json) against 22 at 300 DPI with newer code
+    (bench/results/mesh_20mm.json). ``options.resume`` continues whichever stage was under way; the time budget and the
     run's wall time count from the job's start (``options.started``); ``options.on_step`` is called in the fine
     stage only. Returns the fine run's report (``dry_run``: its estimate, from a white start; nothing is
     written)."""
