@@ -264,3 +264,33 @@ def test_checks_find_what_they_look_for(tmp_path):
     assert not ISSUE.search("a[#0]") and not DATE.search("spp 2026")
     assert OUTSIDE.search("see ../shared/method.md") and OUTSIDE.search("(method.md section 4)")
     assert not OUTSIDE.search("docs/method.md section 4") and not OUTSIDE.search("../shared/data/spot")
+
+
+MAX_FUNCTION_LINES = 80  # a longer function is a sign that it does several steps: name them
+MAX_PARAMETERS = 9  # more, and the arguments travel as a typed bundle (a frozen dataclass) instead
+#: functions allowed past those limits, each with the reason it stays whole ("module.py:function": reason)
+LONG_FUNCTIONS: dict[str, str] = {}
+
+
+def _functions(path):
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            a = node.args
+            params = [*a.posonlyargs, *a.args, *a.kwonlyargs, *filter(None, (a.vararg, a.kwarg))]
+            params = [p for p in params if p.arg not in ("self", "cls")]
+            yield node.name, node.end_lineno - node.lineno + 1, len(params)
+
+
+def test_functions_are_short_and_take_few_parameters():
+    """No function of python/inkopt is longer than ``MAX_FUNCTION_LINES`` or takes more than ``MAX_PARAMETERS``
+    parameters unless ``LONG_FUNCTIONS`` says why; the allow-list names only functions that need it."""
+    seen, bad = set(), []
+    for path in sorted(PKG.rglob("*.py")):
+        for name, lines, params in _functions(path):
+            key = f"{path.relative_to(PKG)}:{name}"
+            if lines > MAX_FUNCTION_LINES or params > MAX_PARAMETERS:
+                seen.add(key)
+                if key not in LONG_FUNCTIONS:
+                    bad.append(f"{key}: {lines} lines, {params} parameters")
+    assert not bad, bad
+    assert not set(LONG_FUNCTIONS) - seen, f"no longer needed: {sorted(set(LONG_FUNCTIONS) - seen)}"
