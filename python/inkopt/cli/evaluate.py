@@ -13,13 +13,14 @@ from ..evaluation.colour_table import DEFAULT_PATCH_MM
 from ..evaluation.evaluate import DEFAULT_SPP, evaluate_run, table_lines
 from ..evaluation.noise import MAX_SPP, PILOT_SPP, TARGET_NOISE_DE76
 from ..evaluation.sample import AUTO_SAMPLE_TEXELS, DEFAULT_SAMPLE_TEXELS, DEFAULT_SAMPLE_WINDOWS
+from ..model import Quantization
 from ..printing.quantize import check_quantization
 from .common import add_lighting_args, check_budget, lighting_from_args
 
 
 def _evaluate_cmd(args) -> int:
     if args.method is not None:
-        check_quantization(args.method)
+        check_quantization(Quantization(args.method))
     check_budget(args.max_spp, args.time_budget)
     log = None if args.json else (lambda msg: print(msg, file=sys.stderr, flush=True))
     ev = evaluate_run(
