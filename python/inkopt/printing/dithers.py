@@ -169,7 +169,7 @@ def dither_class(method: str) -> type[Dither]:
 
 def _lightness(inks, g: float, ior: float) -> np.ndarray:
     if inks is None:
-        raise ParameterError("`ink_order` 'lightness' needs the mixture's ink table; give one or use 'index'")
+        raise ValueError("ink_order 'lightness' needs the mixture's ink table; give one or use 'index'")
     return lightness_order(inks, g, ior)
 
 

@@ -54,13 +54,13 @@ __all__ = [
 
 
 def check_quantization(q: Quantization) -> None:
-    """One-line ParameterError for settings no quantization follows: an unknown ``method``, ``upsample`` or
-    ``ink_order``, a ``dpi`` that is not 2 or 3 positive numbers, a ``layer_um`` that is not positive, or the layer
-    thickness given twice (a z ``dpi`` and ``layer_um``)."""
+    """One-line ParameterError for settings no quantization follows: an unknown ``method`` or ``upsample``, a
+    ``dpi`` that is not 2 or 3 positive numbers, a ``layer_um`` that is not positive, or the layer thickness given
+    twice (a z ``dpi`` and ``layer_um``); a ValueError for an unknown ``ink_order`` (a record's, from a file)."""
     dither_class(q.method)
     upsampler_class(q.upsample)
-    if q.ink_order not in INK_ORDERS:
-        raise ParameterError(f"unknown `ink_order` '{q.ink_order}'; use one of {list(INK_ORDERS)}")
+    if q.ink_order not in INK_ORDERS:  # no flag sets it: a plain ValueError
+        raise ValueError(f"unknown ink_order '{q.ink_order}'; use one of {list(INK_ORDERS)}")
     dpi = () if q.dpi is None else q.dpi
     if q.dpi is not None and (
         len(dpi) not in (2, 3)
