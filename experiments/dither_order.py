@@ -21,9 +21,10 @@ from scipy import ndimage
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
 from common import add_study_entry, machine, provenance  # noqa: E402
 
-from inkopt.model import EMPTY  # noqa: E402
-from inkopt.printing.dither import LUMINANCE, lightness_order, thick_layer_reflectance  # noqa: E402
-from inkopt.printing.quantize import _enclosing, quantize  # noqa: E402
+from inkopt.model import EMPTY, Quantization  # noqa: E402
+from inkopt.printing.dither import LUMINANCE, thick_layer_reflectance  # noqa: E402
+from inkopt.printing.grid import _enclosing  # noqa: E402
+from inkopt.printing.quantize import MixtureLayers, quantize  # noqa: E402
 from inkopt.rundir import RunDir  # noqa: E402
 
 SIGMA_MM = 0.1
@@ -46,13 +47,14 @@ def main():
     entry["ink_luminance"] = dict(zip(vol.inks.names, lum.tolist()))
     ref = None
     cases = (
-        ("index", "blue-noise", None),
-        ("lightness", "blue-noise", lightness_order(vol.inks, vol.g, vol.ior)),
-        ("error-diffusion", "error-diffusion", None),
-        ("random", "random", None),
+        ("index", "blue-noise", "index"),
+        ("lightness", "blue-noise", "lightness"),
+        ("error-diffusion", "error-diffusion", "index"),
+        ("random", "random", "index"),
     )
-    for name, method, order in cases:
-        lab, vp = quantize(mix, vol.voxel_mm, method=method, inside=inside, seed=0, order=order)
+    layers = MixtureLayers(mix, vol.voxel_mm, inside, vol.inks, vol.g, vol.ior)
+    for name, method, ink_order in cases:
+        lab, vp = quantize(layers, Quantization(method, 0, ink_order=ink_order))
         filled = lab != EMPTY
         sig = SIGMA_MM / np.asarray(vp)[::-1]
         if ref is None:  # the mixture's luminance on the printer grid, filtered; the voxels near the surface

@@ -30,7 +30,9 @@ from common import write_study as write
 from inkopt import charts  # noqa: E402
 from inkopt.evaluation.evaluate import evaluate_run  # noqa: E402
 from inkopt.evaluation.options import EvaluateOptions  # noqa: E402
-from inkopt.printing.quantize import METHODS, quantize_volume  # noqa: E402
+from inkopt.model import Quantization  # noqa: E402
+from inkopt.printing.dithers import METHODS  # noqa: E402
+from inkopt.printing.quantize import quantize_volume  # noqa: E402
 from inkopt.rundir import RunDir  # noqa: E402
 
 KEYS = ("delta_e76_mean", "delta_e76_mean_corrected", "delta_e2000_mean", "ssim", "mottle_l2")
@@ -100,7 +102,7 @@ def main():
         }
         for method in a.methods.split(","):
             t0 = time.perf_counter()
-            q = quantize_volume(vol, method=method, upsample=a.upsample)
+            q = quantize_volume(vol, Quantization(method, upsample=a.upsample))
             tq = time.perf_counter() - t0
             RunDir(d).save_quantized(q)
             ev = evaluate_run(d, EvaluateOptions(method=method, baselines=False, write=False)).to_json()

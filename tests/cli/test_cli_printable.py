@@ -12,10 +12,10 @@ import pytest
 
 from inkopt.cli import main
 from inkopt.io import save_npz
-from inkopt.model import InkTable, Texels, Volume
-from inkopt.printing.dither import lightness_order
+from inkopt.model import InkTable, Quantization, Texels, Volume
 from inkopt.printing.export import read_png_slices
-from inkopt.printing.quantize import _enclosing, printer_grid, quantize
+from inkopt.printing.grid import _enclosing, printer_grid
+from inkopt.printing.quantize import quantize
 
 V300 = 25.4 / 300
 ROOT = Path(__file__).resolve().parents[2]
@@ -63,7 +63,7 @@ def test_quantize_writes_renderable_labels(tmp_path, capsys):
     q = Volume.load(tmp_path / "r" / "quantized.npz")
     shape_p, vp = printer_grid(vol.shape, vol.voxel_mm)
     # the defaults: blue-noise with the inks lightest first, seed 0, nearest
-    labels, _ = quantize(vol.mixture, vol.voxel_mm, order=lightness_order(vol.inks, vol.g, vol.ior))
+    labels, _ = quantize(vol, Quantization("blue-noise", 0, ink_order="lightness"))
     np.testing.assert_array_equal(q.labels, labels)
     np.testing.assert_allclose(q.voxel_mm, vp)
     assert q.quantization.method == "blue-noise" and q.quantization.seed == 0
@@ -100,7 +100,7 @@ def test_quantize_options(tmp_path, capsys):
     )
     assert code == 0, err
     q = Volume.load(tmp_path / "r" / "quantized.npz")
-    labels, vp = quantize(vol.mixture, vol.voxel_mm, method="random", dpi=(300, 300, 600), seed=4, upsample="linear")
+    labels, vp = quantize(vol, Quantization("random", 4, (300, 300, 600), "linear"))
     np.testing.assert_array_equal(q.labels, labels)
     assert q.quantization.method == "random" and q.quantization.upsample == "linear"
     code, _, _ = run(capsys, "quantize", tmp_path / "r", "--layer-um", "14")
@@ -196,7 +196,7 @@ def test_export_refuses_more_inks_than_slots(tmp_path, capsys):
     [
         (["quantize", "{tmp}/nope"], "does not exist"),
         (["quantize", "{tmp}/empty"], "volume.npz does not exist"),
-        (["quantize", "{tmp}/r", "--method", "floyd"], "unknown quantization method"),
+        (["quantize", "{tmp}/r", "--method", "floyd"], "unknown quantization --method 'floyd'"),
         (["quantize", "{tmp}/r", "--dpi", "600"], "--dpi"),
         (["quantize", "{tmp}/r", "--dpi", "600x300x900", "--layer-um", "14"], "layer thickness once"),
         (["export", "{tmp}/r", "--format", "gcvf", "--labels"], "--labels goes with --format 3mf"),
@@ -208,7 +208,7 @@ def test_export_refuses_more_inks_than_slots(tmp_path, capsys):
         (["export", "{tmp}/r", "--format", "gcvf", "--printer", "x9"], "unknown printer"),
         (["export", "{tmp}/r", "--palette", "{bad"], "--palette"),
         (["evaluate", "{tmp}/nope"], "does not exist"),
-        (["evaluate", "{tmp}/r", "--method", "floyd"], "unknown quantization method"),
+        (["evaluate", "{tmp}/r", "--method", "floyd"], "unknown quantization --method 'floyd'"),
         (["evaluate", "{tmp}/r", "--spp", "0"], "--spp"),
         (["evaluate", "{tmp}/r", "--time-budget", "0"], "--time-budget must be a positive number of seconds"),
         (["evaluate", "{tmp}/r", "--texel-sample", "1"], "--texel-sample must be 0 (every texel) or at least 2"),

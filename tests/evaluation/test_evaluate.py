@@ -23,7 +23,7 @@ from inkopt.io import save_npz
 from inkopt.model import InkTable, Quantization, Texels, Volume
 from inkopt.pictures import panels
 from inkopt.printing.dither import lightness_order
-from inkopt.printing.quantize import _enclosing, band_order, printer_grid, quantize
+from inkopt.printing.quantize import _enclosing, printer_grid, quantize
 
 V300 = 25.4 / 300
 INKS3 = InkTable.from_names(["cyan", "magenta", "white"])
@@ -177,9 +177,7 @@ def test_evaluate_surface_run_and_method_mismatch(tmp_path, table3, method, ink_
     make_run(d, table3, "surface")
     q = Volume.load(d / "volume.npz")
     assert list(lightness_order(INKS3, q.g, q.ior)) != [0, 1, 2]  # the two orders differ for these inks
-    setting = Quantization(method, 5, None, "nearest", ink_order)
-    order = band_order(setting, INKS3, q.g, q.ior)
-    labels, vp = quantize(q.mixture, q.voxel_mm, method=method, seed=5, order=order)
+    labels, vp = quantize(q, Quantization(method, 5, None, "nearest", ink_order))
     setting = Quantization(method, 5, tuple(25.4 / vp), "nearest", ink_order)
     Volume.from_labels(voxel_mm=vp, labels=labels, inks=INKS3, quantization=setting).save(d / "quantized.npz")
     ev = evaluate_run(d, EvaluateOptions(spp=4, table=table3)).to_json()

@@ -1,4 +1,4 @@
-"""Tests of quantize(method="error-diffusion"): 3D vector error diffusion on the printer grid (Rust core in
+"""Tests of quantize_mix(method="error-diffusion"): 3D vector error diffusion on the printer grid (Rust core in
 crates/core/src/kernels/diffuse.rs, which has its own unit tests)."""
 
 import hashlib
@@ -9,10 +9,9 @@ import sys
 import numpy as np
 import pytest
 from numpy.lib.stride_tricks import sliding_window_view
-from printing.test_quantize import V300, lowpass_error, smooth_mixture
+from printing.test_quantize import V300, lowpass_error, quantize_mix, smooth_mixture
 
 from inkopt import _core
-from inkopt.printing.quantize import quantize
 
 ED = "error-diffusion"
 ISO = dict(dpi=(300, 300, 300))  # printer grid = optimisation grid (V300 voxels): windows in known voxels
@@ -60,8 +59,8 @@ def test_window_counts_sure_bound_and_spread(p0):
     n = 20
     p = np.array([p0, 1 - p0], np.float32)
     mix = np.broadcast_to(p, (n, n, n, 2))
-    lab, _ = quantize(mix, (V300,) * 3, method=ED, **ISO)
-    lab_r, _ = quantize(mix, (V300,) * 3, method="random", seed=0, **ISO)
+    lab, _ = quantize_mix(mix, (V300,) * 3, method=ED, **ISO)
+    lab_r, _ = quantize_mix(mix, (V300,) * 3, method="random", seed=0, **ISO)
     assert lab.shape == (n, n, n)
     for k in (2, 3, 4, 6):
         bound = 0.5 * min(crossing_weight(k, 4, 4, 4), crossing_weight(k, 4, 5, 4))  # both sweep parities
@@ -84,13 +83,13 @@ def test_four_inks_beat_random_and_blue_noise_low_pass():
     vo = (V300,) * 3
     err = {}
     for method in ("random", "blue-noise", ED):
-        lab, vp = quantize(mix, vo, method=method, seed=0)
+        lab, vp = quantize_mix(mix, vo, method=method, seed=0)
         err[method] = lowpass_error(lab, mix, vo, vp)
     assert err[ED] < 0.8 * err["blue-noise"] < 0.3 * err["random"], err
 
 
 def labels_hash(mix, **kw) -> str:
-    return hashlib.sha256(quantize(mix, (V300,) * 3, method=ED, **kw)[0].tobytes()).hexdigest()
+    return hashlib.sha256(quantize_mix(mix, (V300,) * 3, method=ED, **kw)[0].tobytes()).hexdigest()
 
 
 def test_deterministic_seed_free_and_thread_independent():
@@ -121,17 +120,17 @@ def test_outside_is_empty_and_isolated(upsample):
     mix = rng.dirichlet(np.ones(3), size=shape).astype(np.float32)
     inside = np.ones(shape, bool)
     inside[:, :, 5] = False
-    a, vp = quantize(mix, (V300,) * 3, method=ED, inside=inside, upsample=upsample, **ISO)
+    a, vp = quantize_mix(mix, (V300,) * 3, method=ED, inside=inside, upsample=upsample, **ISO)
     assert np.all(a[:, :, 5] == 255) and np.all(a[:, :, :5] != 255) and np.all(a[:, :, 6:] != 255)
     mix2 = mix.copy()
     mix2[:, :, 6:] = rng.dirichlet(np.ones(3), size=(6, 8, 5))  # other right block, other outside rows
     mix2[:, :, 5] = [1.0, 0.0, 0.0]
-    b, _ = quantize(mix2, (V300,) * 3, method=ED, inside=inside, upsample=upsample, **ISO)
+    b, _ = quantize_mix(mix2, (V300,) * 3, method=ED, inside=inside, upsample=upsample, **ISO)
     if upsample == "nearest":  # linear upsampling blends the right block into the gap's neighbours: skip them
         np.testing.assert_array_equal(a[:, :, :5], b[:, :, :5])
     inside3 = inside.copy()
     inside3[:, :, 6:] = False
-    c, _ = quantize(mix, (V300,) * 3, method=ED, inside=inside3, upsample=upsample, **ISO)
+    c, _ = quantize_mix(mix, (V300,) * 3, method=ED, inside=inside3, upsample=upsample, **ISO)
     np.testing.assert_array_equal(a[:, :, :5], c[:, :, :5])
     assert np.all(c[:, :, 5:] == 255)
 
@@ -140,7 +139,7 @@ def test_outside_is_empty_and_isolated(upsample):
 def test_one_ink_everywhere(upsample):
     mix = np.zeros((4, 5, 6, 4), np.float32)
     mix[..., 2] = 1.0
-    lab, _ = quantize(mix, (V300,) * 3, method=ED, upsample=upsample)
+    lab, _ = quantize_mix(mix, (V300,) * 3, method=ED, upsample=upsample)
     assert np.all(lab == 2)
 
 
@@ -153,7 +152,7 @@ def test_linear_upsampling_follows_the_ramp():
     ramp = np.linspace(0.0, 1.0, nx)
     mix = np.zeros((20, 20, nx, 2), np.float32)
     mix[..., 0], mix[..., 1] = ramp, 1 - ramp
-    lab, vp = quantize(mix, (V300,) * 3, method=ED, upsample="linear")
+    lab, vp = quantize_mix(mix, (V300,) * 3, method=ED, upsample="linear")
     frac0 = (lab == 0).mean(axis=(0, 1))
     xc = np.clip((np.arange(lab.shape[2]) + 0.5) * vp[0] / V300 - 0.5, 0, nx - 1)
     expect = np.interp(xc, np.arange(nx), ramp)
@@ -168,7 +167,7 @@ def test_speed():
 
     mix = np.random.default_rng(6).dirichlet(np.ones(5), size=(30, 118, 177)).astype(np.float32)
     t = time.perf_counter()
-    lab, _ = quantize(mix, (V300,) * 3, method=ED)
+    lab, _ = quantize_mix(mix, (V300,) * 3, method=ED)
     assert lab.shape == (94, 118, 354)
     assert time.perf_counter() - t < 15.0
 

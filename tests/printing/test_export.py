@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from inkopt.model import Quantization
 from inkopt.printing.export import DEFAULT_PALETTE, ink_colours, read_png_slices, write_png_slices
 from inkopt.printing.profiles import PRINTER_PROFILES
-from inkopt.printing.quantize import quantize
+from inkopt.printing.quantize import MixtureLayers, quantize
 
 VP = np.array([25.4 / 600, 25.4 / 300, 0.027])
 INKS = ["cyan", "magenta", "yellow", "black", "white"]
@@ -67,7 +68,7 @@ def test_quantize_then_export_roundtrip(tmp_path):
     mix = np.random.default_rng(1).dirichlet(np.ones(5), size=(6, 10, 12)).astype(np.float32)
     inside = np.ones(mix.shape[:3], bool)
     inside[:, :2] = False
-    lab, vp = quantize(mix, (25.4 / 300,) * 3, inside=inside)
+    lab, vp = quantize(MixtureLayers(mix, (25.4 / 300,) * 3, inside), Quantization(ink_order="index"))
     man = write_png_slices(lab, vp, INKS, tmp_path / "s", max_materials="j750")
     assert man["layer_count"] == lab.shape[0] and man["materials_used"] == 5
     np.testing.assert_array_equal(read_png_slices(tmp_path / "s")[0], lab)

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 from scipy.ndimage import gaussian_filter
 
-from inkopt.model import InkTable
+from inkopt.errors import ParameterError
+from inkopt.model import InkTable, Quantization, Volume
 from inkopt.printing.dither import (
     BLUE_NOISE_SHAPE,
     DATA_DIR,
@@ -16,9 +17,25 @@ from inkopt.printing.dither import (
     load_blue_noise,
     void_and_cluster,
 )
-from inkopt.printing.quantize import METHODS, ink_fractions, printer_grid, quantize
+from inkopt.printing.dithers import DITHERS, METHODS, Thresholds
+from inkopt.printing.quantize import (
+    MixtureLayers,
+    check_quantization,
+    ink_fractions,
+    printer_grid,
+    quantize,
+    quantize_volume,
+    record,
+)
 
 V300 = 25.4 / 300
+
+
+def quantize_mix(mix, vo=(V300,) * 3, *, inside=None, inks=None, **settings):
+    """``quantize`` of a bare mixture array on voxels of ``vo`` (x, y, z) mm by ``Quantization(**settings)``; blue
+    noise sums the inks in index order unless ``ink_order`` says otherwise (lightest first needs ``inks``)."""
+    settings.setdefault("ink_order", "index")
+    return quantize(MixtureLayers(mix, vo, inside, inks), Quantization(**settings))
 
 
 def nearest_index(n_p, vp, n_o, vo):
@@ -71,7 +88,7 @@ def test_shapes_one_ink_and_inside(method, upsample):
     mix *= rng.uniform(0.5, 2.0, shape)[..., None]  # rows need not sum to 1
     inside = rng.random(shape) < 0.7
     mix[~inside] = 0.0  # zero rows are allowed outside
-    labels, vp = quantize(mix, (V300, V300, V300), method=method, upsample=upsample, inside=inside, seed=3)
+    labels, vp = quantize_mix(mix, (V300, V300, V300), method=method, upsample=upsample, inside=inside, seed=3)
     assert labels.dtype == np.uint8
     assert labels.shape == printer_grid(shape, (V300,) * 3)[0]
     expect_empty = ~upsample_nearest(inside, np.full(3, V300), vp)
@@ -83,9 +100,9 @@ def test_shapes_one_ink_and_inside(method, upsample):
 def test_determinism_and_seed():
     mix = np.random.default_rng(2).dirichlet(np.ones(3), size=(6, 8, 8)).astype(np.float32)
     for method in ("random", "blue-noise"):
-        a, _ = quantize(mix, (V300,) * 3, method=method, seed=7)
-        b, _ = quantize(mix, (V300,) * 3, method=method, seed=7)
-        c, _ = quantize(mix, (V300,) * 3, method=method, seed=8)
+        a, _ = quantize_mix(mix, (V300,) * 3, method=method, seed=7)
+        b, _ = quantize_mix(mix, (V300,) * 3, method=method, seed=7)
+        c, _ = quantize_mix(mix, (V300,) * 3, method=method, seed=8)
         np.testing.assert_array_equal(a, b)
         assert np.mean(a != c) > 0.1
 
@@ -96,7 +113,7 @@ def test_pure_inks_are_exact():
     mix[2:, :, :, 1], mix[2:, :, :, 2] = 0.0, 1.0
     for method in METHODS:
         for up in ("nearest", "linear"):
-            lab, vp = quantize(mix, (V300,) * 3, method=method, upsample=up)
+            lab, vp = quantize_mix(mix, (V300,) * 3, method=method, upsample=up)
             assert set(np.unique(lab).tolist()) == {1, 2}
             if up == "nearest":
                 expect = upsample_nearest(np.argmax(mix, -1).astype(np.uint8), np.full(3, V300), vp)
@@ -106,24 +123,80 @@ def test_pure_inks_are_exact():
 def test_bad_input():
     mix = np.full((2, 2, 2, 2), 0.5, np.float32)
     with pytest.raises(ValueError, match="method"):
-        quantize(mix, (V300,) * 3, method="floyd")
+        quantize_mix(mix, (V300,) * 3, method="floyd")
     with pytest.raises(ValueError, match="upsample"):
-        quantize(mix, (V300,) * 3, upsample="cubic")
+        quantize_mix(mix, (V300,) * 3, upsample="cubic")
     with pytest.raises(ValueError, match="non-negative"):
-        quantize(-mix, (V300,) * 3)
+        quantize_mix(-mix, (V300,) * 3)
     with pytest.raises(ValueError, match="positive sum"):
-        quantize(np.zeros_like(mix), (V300,) * 3)
+        quantize_mix(np.zeros_like(mix), (V300,) * 3)
     with pytest.raises(ValueError, match="inside"):
-        quantize(mix, (V300,) * 3, inside=np.ones((2, 2, 3), bool))
+        quantize_mix(mix, (V300,) * 3, inside=np.ones((2, 2, 3), bool))
     with pytest.raises(ValueError, match="shape"):
-        quantize(mix[0], (V300,) * 3)
+        quantize_mix(mix[0], (V300,) * 3)
+
+
+def test_settings_are_checked_with_their_names():
+    """Every bad setting is a one-line ParameterError naming the setting (the command line renders it as a flag)."""
+    cases = [
+        (Quantization("floyd"), ("method",), "unknown quantization method 'floyd'"),
+        (Quantization(upsample="cubic"), ("upsample",), "unknown upsample 'cubic'"),
+        (Quantization(dpi=(600,)), ("dpi",), "2 or 3 positive numbers"),
+        (Quantization(dpi=(600, -300)), ("dpi",), "2 or 3 positive numbers"),
+        (Quantization(layer_um=0.0), ("layer_um",), "must be positive"),
+        (Quantization(dpi=(600, 300, 900), layer_um=14.0), ("dpi", "layer_um"), "layer thickness once"),
+    ]
+    for q, names, message in cases:
+        with pytest.raises(ParameterError, match=message) as e:
+            check_quantization(q)
+        assert e.value.parameters == names
+    with pytest.raises(ValueError, match="unknown ink_order 'darkest'"):  # a record's, from a file: no flag
+        check_quantization(Quantization(ink_order="darkest"))
+    for q in (Quantization(), Quantization("random", dpi=(600, 300, None), layer_um=14.0)):
+        check_quantization(q)
+
+
+def test_record_says_how_the_labels_were_made():
+    """A labels volume keeps the settings with the printer voxels' dpi (x, y, z) and no layer thickness; a dither
+    that does not order the inks records index order."""
+    mix = np.full((2, 3, 4, 3), 1 / 3, np.float32)
+    vol = Volume.from_mixture((V300,) * 3, mix, InkTable.from_names(["cyan", "magenta", "white"]))
+    for method in METHODS:
+        q = Quantization(method, np.int64(4), [600, 300], "linear", "lightness", 14.0)
+        made = quantize_volume(vol, q).quantization
+        ink_order = "lightness" if DITHERS[method].ordered else "index"
+        assert made == Quantization(method, 4, (600.0, 300.0, 25.4 / 0.014), "linear", ink_order)
+        assert made == record(q, np.array([25.4 / 600, 25.4 / 300, 0.014])) and type(made.seed) is int
+        assert made == Quantization.from_arrays(made.arrays())
+        assert made.to_json() == dict(method=method, seed=4, dpi=list(made.dpi), upsample="linear", ink_order=ink_order)
+
+
+class FirstBand(Thresholds):
+    """A toy dither: every threshold 0, so each voxel takes the first ink with a positive share."""
+
+    help = "the first ink present"
+
+    def thresholds(self, k):
+        return np.zeros(self.grid.shape[1:], np.float32)
+
+
+def test_a_new_dither_is_one_class_and_one_entry(monkeypatch):
+    monkeypatch.setitem(DITHERS, "first-band", FirstBand)
+    mix = np.zeros((3, 4, 5, 3), np.float32)
+    mix[..., 1], mix[..., 2] = 0.5, 0.5
+    mix[0, 0, 0] = [0.2, 0.0, 0.8]
+    check_quantization(Quantization("first-band"))
+    lab, vp = quantize_mix(mix, method="first-band")
+    expect = upsample_nearest(np.where(mix[..., 0] > 0, 0, 1).astype(np.uint8), np.full(3, V300), vp)
+    np.testing.assert_array_equal(lab, expect)
+    assert record(Quantization("first-band"), vp).ink_order == "index"
 
 
 # ------------------------------------------------------------------------------------------ statistics
 def test_ink_fractions_against_bruteforce():
     rng = np.random.default_rng(4)
     shape, n = (3, 4, 5), 3
-    lab, vp = quantize(rng.dirichlet(np.ones(n), size=shape).astype(np.float32), (V300,) * 3, method="random")
+    lab, vp = quantize_mix(rng.dirichlet(np.ones(n), size=shape).astype(np.float32), (V300,) * 3, method="random")
     lab[0, 0, :3] = 255
     frac, cnt = ink_fractions(lab, n, shape, (V300,) * 3, vp)
     Z, Y, X = lab.shape
@@ -145,7 +218,7 @@ def test_random_matches_mixture_binomially():
     rng = np.random.default_rng(5)
     shape, n = (12, 30, 30), 4
     mix = rng.dirichlet(np.full(n, 2.0), size=shape).astype(np.float32)
-    lab, vp = quantize(mix, (V300,) * 3, method="random", seed=11)
+    lab, vp = quantize_mix(mix, (V300,) * 3, method="random", seed=11)
     frac, m = ink_fractions(lab, n, shape, (V300,) * 3, vp)
     p = mix.astype(np.float64) / mix.sum(-1, keepdims=True, dtype=np.float64)
     for k in range(n):
@@ -169,11 +242,11 @@ def test_blue_noise_exact_on_whole_tiles():
     shape = (8, 32, 32)  # printer grid (32, 32, 64) with 108 um optimisation layers and 27 um printer layers
     vo = (V300, V300, 0.108)
     mix = np.broadcast_to(p, shape + (4,))
-    lab, vp = quantize(mix, vo, method="blue-noise", seed=3)
+    lab, vp = quantize_mix(mix, vo, method="blue-noise", seed=3)
     assert lab.shape == (32, 32, 64) and BLUE_NOISE_SHAPE == (32, 32, 32)
     got = np.bincount(lab.ravel(), minlength=4) / lab.size
     assert np.all(np.abs(got - p) <= 2 / 32768), got - p
-    lab_r, _ = quantize(mix, vo, method="random", seed=3)
+    lab_r, _ = quantize_mix(mix, vo, method="random", seed=3)
     got_r = np.bincount(lab_r.ravel(), minlength=4) / lab.size
     assert np.any(np.abs(got_r - p) > 2 / 32768)
 
@@ -199,22 +272,23 @@ def test_lightness_order_keeps_fractions_and_flattens_the_lightness():
     """Summing the inks lightest first changes which voxels take which ink, not how many (the whole-tile bound of
     test_blue_noise_exact_on_whole_tiles holds), and the printed lightness, low-passed as scattering does (0.1 mm
     Gaussian), varies less than in index order, where black takes a middle band of thresholds: measured 0.54x on
-    whole tiles of this grey; asserted < 0.7x. A wrong order is refused."""
+    whole tiles of this grey; asserted < 0.7x. Lightest first needs the ink table."""
     inks = InkTable.parse("vero-cmykw")
-    order = lightness_order(inks, 0.4, 1.5)
     p = np.array([0.05, 0.1, 0.1, 0.15, 0.6], np.float32)  # cyan, magenta, yellow, black, white
     shape, vo = (8, 32, 32), (V300, V300, 0.108)
     mix = np.broadcast_to(p, shape + (5,))
     luminance = np.array([0.29, 0.23, 0.82, 0.12, 0.96])  # a thick layer of each ink (dither.lightness_order)
     spread = {}
-    for name, o in (("index", None), ("lightness", order)):
-        lab, vp = quantize(mix, vo, seed=0, order=o)
+    for name in ("index", "lightness"):
+        lab, vp = quantize_mix(mix, vo, inks=inks, seed=0, ink_order=name)
         got = np.bincount(lab.ravel(), minlength=5) / lab.size
         assert np.all(np.abs(got - p) <= 2 / 32768), (name, got - p)
         spread[name] = gaussian_filter(luminance[lab], 0.1 / vp[::-1], mode="wrap").std()
     assert spread["lightness"] < 0.7 * spread["index"], spread
-    with pytest.raises(ValueError, match="permutation"):
-        quantize(mix, vo, order=[0, 1, 2, 3, 3])
+    with pytest.raises(ValueError, match="ink_order 'lightness' needs the mixture's ink table"):
+        quantize_mix(mix, vo, ink_order="lightness")
+    with pytest.raises(ValueError, match="mixture of 5 inks, but the ink table has 3"):
+        quantize_mix(mix, vo, inks=InkTable.from_names(["cyan", "magenta", "white"]))
 
 
 def lowpass_error(labels, mixture, vo, vp, sigma_mm=0.1):
@@ -238,7 +312,7 @@ def test_blue_noise_beats_random():
     vo = (V300,) * 3
     res = {}
     for method in ("random", "blue-noise"):
-        lab, vp = quantize(mix, vo, method=method, seed=0)
+        lab, vp = quantize_mix(mix, vo, method=method, seed=0)
         frac, _ = ink_fractions(lab, n, shape, vo, vp)
         res[method] = (lowpass_error(lab, mix, vo, vp), np.sqrt(np.mean((frac - mix) ** 2)))
     assert res["blue-noise"][0] < 0.5 * res["random"][0], res
@@ -253,7 +327,7 @@ def test_linear_upsample_interpolates_and_ignores_outside():
     mix = np.zeros((10, 20, nx, 2), np.float32)
     mix[..., 0] = ramp
     mix[..., 1] = 1 - ramp
-    lab, vp = quantize(mix, (V300,) * 3, method="random", upsample="linear", seed=1)
+    lab, vp = quantize_mix(mix, (V300,) * 3, method="random", upsample="linear", seed=1)
     frac0 = (lab == 0).mean(axis=(0, 1))
     xc = np.clip((np.arange(lab.shape[2]) + 0.5) * vp[0] / V300 - 0.5, 0, nx - 1)
     expect = np.interp(xc, np.arange(nx), ramp)
@@ -265,7 +339,7 @@ def test_linear_upsample_interpolates_and_ignores_outside():
     mix2 = np.zeros_like(mix)
     mix2[..., 1] = 1.0
     mix2[inside] = [1.0, 0.0]
-    lab2, _ = quantize(mix2, (V300,) * 3, method="blue-noise", upsample="linear", inside=inside)
+    lab2, _ = quantize_mix(mix2, (V300,) * 3, method="blue-noise", upsample="linear", inside=inside)
     assert set(np.unique(lab2).tolist()) == {0, 255}
 
 
@@ -284,7 +358,7 @@ def test_memory_is_layerwise():
     ]:
         tracemalloc.start()
         try:
-            lab, _ = quantize(mix, (V300,) * 3, method=method, upsample=up)
+            lab, _ = quantize_mix(mix, (V300,) * 3, method=method, upsample=up)
             peak = tracemalloc.get_traced_memory()[1]
         finally:
             tracemalloc.stop()

@@ -45,8 +45,8 @@ def mixture_run(path, shape=(6, 9, 11), inside=True, normals=False):
 )
 def test_streaming_run_equals_in_memory_quantization(tmp_path, method, upsample):
     d, vol = mixture_run(tmp_path / "r")
-    lines = quantize_run(d, method=method, upsample=upsample, **KW)
-    expect = quantize_volume(vol, method=method, upsample=upsample, **KW)
+    lines = quantize_run(d, Quantization(method, upsample=upsample, **KW))
+    expect = quantize_volume(vol, Quantization(method, upsample=upsample, **KW))
     raw = np.load(d.quantized_path)
     assert "labels" not in raw.files and str(raw["labels_file"]) == d.quantized_labels_path.name
     assert int(raw["format_version"]) == 1
@@ -63,9 +63,9 @@ def test_streaming_run_equals_in_memory_quantization(tmp_path, method, upsample)
 
 def test_normals_stream_like_in_memory_and_the_same_files(tmp_path):
     d, vol = mixture_run(tmp_path / "m", normals=True)
-    quantize_run(d, method="blue-noise", upsample="nearest", **KW)
+    quantize_run(d, Quantization(**KW))
     q = d.load_quantized()
-    expect = quantize_volume(vol, **KW)
+    expect = quantize_volume(vol, Quantization(**KW))
     assert q.normals is not None and q.normals.shape == q.shape and len(q.normals.index) > 0
     np.testing.assert_array_equal(q.normals.index, expect.normals.index)
     np.testing.assert_array_equal(q.normals.vectors, expect.normals.vectors)
@@ -103,7 +103,7 @@ def test_bad_layer_is_refused_and_leaves_no_file(tmp_path):
     bad[4, 2, 3] = 0.0
     vol.with_mixture(bad).save(d.volume_path)
     with pytest.raises(ValueError, match="positive sum"):
-        quantize_run(d, method="blue-noise", upsample="nearest", **KW)
+        quantize_run(d, Quantization(**KW))
     assert not d.has_quantized() and sorted(p.name for p in d.path.iterdir()) == ["volume.npz"]
 
 
@@ -111,7 +111,7 @@ def test_quantized_files_of_each_version(tmp_path):
     """Today's quantized.npz without format_version (version 0) loads; the pre-release layout with the labels
     inside is refused in one line that says to quantize again; a file written now carries version 1."""
     d, vol = mixture_run(tmp_path / "r")
-    q = quantize_volume(vol, **KW)
+    q = quantize_volume(vol, Quantization(**KW))
     d.save_quantized(q)
     assert int(np.load(d.quantized_path)["format_version"]) == 1
     np.testing.assert_array_equal(Volume.load(d.quantized_path).labels, q.labels)
@@ -150,7 +150,7 @@ def test_label_file_writer(tmp_path):
 
 def test_export_from_a_memory_mapped_label_file(tmp_path):
     d, vol = mixture_run(tmp_path / "r")
-    quantize_run(d, method="blue-noise", upsample="nearest", **KW)
+    quantize_run(d, Quantization(**KW))
     q = d.load_quantized()
     write_png_slices(q.labels, q.voxel_mm, q.inks.names, tmp_path / "s")
     np.testing.assert_array_equal(read_png_slices(tmp_path / "s")[0], q.labels)
@@ -180,10 +180,10 @@ def test_gcvf_block_outline_encloses_every_voxel(tmp_path, monkeypatch):
 
 def test_quantization_metadata_roundtrip(tmp_path):
     d, vol = mixture_run(tmp_path / "r")
-    q = quantize_volume(vol, method="random", seed=9, **{k: v for k, v in KW.items() if k != "seed"})
+    q = quantize_volume(vol, Quantization("random", 9, (600, 300), layer_um=27.0))
     d.save_quantized(q)
     assert d.load_quantized().quantization == Quantization("random", 9, q.quantization.dpi, "nearest", "index")
-    lab, _ = quantize(vol.mixture, vol.voxel_mm, method="random", seed=9, inside=vol.inside, dpi=(600, 300))
+    lab, _ = quantize(vol, Quantization("random", 9, (600, 300)))
     np.testing.assert_array_equal(d.load_quantized().labels, lab)
 
 

@@ -1,27 +1,27 @@
 """``inkopt quantize DIR``: the run's continuous mixture (DIR/volume.npz) -> one ink per printer voxel
 (DIR/quantized.npz + DIR/quantized_labels.npy, a labels volume at printer resolution; docs/run-dir.md). The stage
-is ``inkopt.printing.stream.quantize_run`` (layer by layer; ``inkopt.printing.quantize``)."""
+is ``inkopt.printing.stream.quantize_run`` (layer by layer; ``inkopt.printing.quantize``); the arguments become one
+``model.Quantization``."""
 
 from __future__ import annotations
 
-import numpy as np
-
-from ..printing.quantize import DEFAULT_DPI, DEFAULT_LAYER_UM, check_quantization
+from ..model import Quantization
+from ..printing.dithers import DITHERS
+from ..printing.grid import DEFAULT_LAYER_UM, UPSAMPLERS
 from ..printing.stream import quantize_run
 from ..rundir import RunDir
 from ..units import parse_dpi
 
 
+def quantization_of(args) -> Quantization:
+    """The settings the arguments give (checked by ``printing.quantize.check_quantization``)."""
+    dpi = None if args.dpi is None else parse_dpi(args.dpi)
+    return Quantization(args.method, args.seed, dpi, args.upsample, layer_um=args.layer_um)
+
+
 def _quantize_cmd(args) -> int:
     d = RunDir(args.dir)
-    check_quantization(args.method, args.upsample)
-    if args.dpi is not None and args.layer_um is not None and len(parse_dpi(args.dpi)) == 3:
-        raise ValueError("give the layer thickness once: --dpi XxYxZ or --layer-um, not both")
-    dpi = parse_dpi(args.dpi) if args.dpi is not None else DEFAULT_DPI
-    layer = DEFAULT_LAYER_UM if args.layer_um is None else float(args.layer_um)
-    if not (np.isfinite(layer) and layer > 0):
-        raise ValueError(f"--layer-um must be positive, got {args.layer_um}")
-    for line in quantize_run(d, method=args.method, dpi=dpi, layer_um=layer, seed=args.seed, upsample=args.upsample):
+    for line in quantize_run(d, quantization_of(args)):
         print(line)
     print(f"wrote {d.quantized_path} and {d.quantized_labels_path}")
     return 0
@@ -35,14 +35,14 @@ def register_cli(sub) -> None:
         "DPI, 27 um layers by default) and write DIR/quantized.npz.",
     )
     p.add_argument("dir", help="run directory holding volume.npz")
-    p.add_argument(
-        "--method",
-        default="blue-noise",
-        help="blue-noise (ordered dithering, default), random (the paper's independent draws) or "
-        "error-diffusion (deterministic 3D vector error diffusion)",
-    )
+    default = Quantization()
+    methods = [f"{name} ({cls.help}{', default' if name == default.method else ''})" for name, cls in DITHERS.items()]
+    p.add_argument("--method", default=default.method, help=", ".join(methods[:-1]) + " or " + methods[-1])
     p.add_argument("--dpi", help="printer resolution XxY or XxYxZ dots per inch (default 600x300)")
     p.add_argument("--layer-um", type=float, help=f"layer thickness in um (default {DEFAULT_LAYER_UM:g})")
-    p.add_argument("--seed", type=int, default=0, help="random draws / blue-noise tile offset (default 0)")
-    p.add_argument("--upsample", default="nearest", help="nearest (default) or linear mixture upsampling")
+    p.add_argument(
+        "--seed", type=int, default=default.seed, help=f"random draws / blue-noise tile offset (default {default.seed})"
+    )
+    upsample = [name + " (default)" if name == default.upsample else name for name in UPSAMPLERS]
+    p.add_argument("--upsample", default=default.upsample, help=" or ".join(upsample) + " mixture upsampling")
     p.set_defaults(func=_quantize_cmd)

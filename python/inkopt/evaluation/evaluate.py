@@ -60,7 +60,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -71,7 +71,7 @@ from ..io import file_digest
 from ..lighting import Lighting, load_lighting
 from ..loss import TexelLoss
 from ..model import Quantization, Volume
-from ..printing.quantize import DEFAULT_DPI, DEFAULT_LAYER_UM, band_order, printer_grid, quantize
+from ..printing.quantize import MixtureLayers, printer_grid, quantize
 from ..printing.stream import quantize_run
 from ..render import Renderer
 from ..rundir import Predictions, RunDir, SceneRecord
@@ -281,9 +281,7 @@ def _quantized_volume(ev: Evaluating, shape: tuple) -> tuple[Volume, Quantizatio
             )
         return qvol, q
     t0 = time.perf_counter()  # inkopt quantize's defaults, layer by layer as that command does
-    quantize_run(
-        d, method=method or "blue-noise", dpi=DEFAULT_DPI, layer_um=DEFAULT_LAYER_UM, seed=0, upsample="nearest"
-    )
+    quantize_run(d, Quantization() if method is None else Quantization(method))
     qvol = d.load_quantized()
     q = qvol.quantization
     ev.say(
@@ -338,15 +336,9 @@ def _render_baselines(ev: Evaluating, printer: PrintedRenderer, sources: dict, g
         t0 = time.perf_counter()  # quantized exactly like ours, into one printer-grid label array
         src = sources.pop(name)
         labels, _ = quantize(
-            src,
-            vmm,
-            method=q.method,
-            dpi=dpi,
-            inside=src.inside,
-            seed=q.seed,
-            upsample=q.upsample,
+            MixtureLayers(src, vmm, src.inside, meta["inks"], meta["g"], meta["ior"]),
+            replace(q, dpi=dpi),  # as ours was, from its file (its inks' order included)
             out=np.empty(shape_p, np.uint8),
-            order=band_order(q, meta["inks"], meta["g"], meta["ior"]),  # as ours was, from its file
         )
         del src
         _render_printed(ev, printer, name, Volume.from_labels(labels=labels, **meta), t0, q.method)
@@ -398,7 +390,7 @@ def _evaluation(ev: Evaluating, printed: _Printed, measured: dict, diffs: dict |
         spp_max=MAX_SPP,
         lighting=ev.lighting.describe(),
         continuous=cont,
-        quantization={**asdict(printed.quantization), "dpi": list(printed.dpi)},
+        quantization={**printed.quantization.to_json(), "dpi": list(printed.dpi)},
         printer_texels=printed.printer_texels,
         quantized=quantized,
         seconds=time.perf_counter() - ev.shares.started,

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from ..errors import ParameterError
 from ..lighting import Lighting
+from ..model import Quantization
 from ..printing.quantize import check_quantization
 from .colour_table import DEFAULT_PATCH_MM, ColourTable
 from .noise import MAX_SPP
@@ -67,7 +68,7 @@ class EvaluateOptions:
         if self.time_budget is not None and not self.time_budget > 0:
             raise ParameterError(f"`time_budget` must be a positive number of seconds, got {self.time_budget}")
         if self.method is not None:
-            check_quantization(self.method)
+            check_quantization(Quantization(self.method))
         if not (math.isfinite(self.patch_mm) and self.patch_mm > 0):
             raise ParameterError(f"`patch_mm` must be a positive thickness in mm, got {self.patch_mm}")
         if self.texel_sample is not None and (self.texel_sample < 0 or self.texel_sample == 1):

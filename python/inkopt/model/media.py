@@ -110,15 +110,30 @@ Medium = Dense | Mixture | Labels
 
 @dataclass(frozen=True)
 class Quantization:
-    """How a labels volume was made from a mixture (``inkopt.printing.quantize``); dpi is (x, y, z). ``ink_order``:
-    the order of the inks' bands in blue-noise dithering, "lightness" (lightest first, ``dither.lightness_order``)
-    or "index" (the ink set's order; files that do not say were made so)."""
+    """The settings of a quantization (``inkopt.printing.quantize``): the one form they travel in, from the command
+    line to the dither, and, kept in a labels volume, the record of how it was made.
+
+    method     the dither's name (``printing.dithers.DITHERS``: "blue-noise", "random", "error-diffusion")
+    seed       the dither's random state (``numpy.random.default_rng(seed)``)
+    dpi        printer resolution (x, y) or (x, y, z) dots per inch; None: 600 x 300 (``units.PRINTER_DPI``). A record
+               holds (x, y, z), the printer voxels' own (``printing.quantize.record``); an old file may hold None
+    upsample   "nearest" or "linear" (``printing.grid.UPSAMPLERS``)
+    ink_order  the order of the inks' bands where the dither orders them (blue noise): "lightness" (lightest first,
+               ``dither.lightness_order``) or "index" (the ink set's order; files that do not say were made so)
+    layer_um   layer thickness in µm where ``dpi`` has no z entry; None: 27 (``units.PRINTER_LAYER_UM``). Not
+               recorded: a record's ``dpi`` holds z
+    ``printing.quantize.check_quantization`` checks them; a labels volume file stores a record's ``arrays``."""
 
     method: str = "blue-noise"
     seed: int = 0
-    dpi: tuple[float, float, float] | None = None
+    dpi: tuple[float, ...] | None = None
     upsample: str = "nearest"
     ink_order: str = "lightness"
+    layer_um: float | None = None
+
+    def __post_init__(self):
+        if self.dpi is not None:  # a tuple (lists and arrays compare and hash as settings do)
+            object.__setattr__(self, "dpi", tuple(None if v is None else float(v) for v in self.dpi))
 
     def arrays(self) -> dict:
         out = {"method": np.array(self.method), "seed": np.int64(self.seed), "upsample": np.array(self.upsample)}
@@ -126,6 +141,18 @@ class Quantization:
         if self.dpi is not None:
             out["dpi"] = np.asarray(self.dpi, np.float64)
         return out
+
+    def to_json(self) -> dict:
+        """The recorded settings as JSON values (``method``, ``seed``, ``dpi`` list or None, ``upsample``,
+        ``ink_order``): what evaluation.json says of its labels volume."""
+        dpi = None if self.dpi is None else list(self.dpi)
+        return {
+            "method": self.method,
+            "seed": self.seed,
+            "dpi": dpi,
+            "upsample": self.upsample,
+            "ink_order": self.ink_order,
+        }
 
     @classmethod
     def from_arrays(cls, data) -> Quantization | None:

@@ -14,11 +14,11 @@ The volume file (``.npz``) stores the medium's arrays under those names; the ink
 ``g`` (default 0.4), ``ior`` (default 1.5), ``inside`` bool (z, y, x) (default: the whole box), outward shading
 normals of the surface voxels as ``normal_index`` (K,) int64 linear indices and ``normal_vectors`` (K, 3) float32
 (x, y, z) (``model.normals.SurfaceNormals``), ``boundary`` ("box" or "periodic-xy"), ``origin_mm`` (3,) (x, y, z
-of voxel (0, 0, 0)'s low corner; meshes), and for quantized volumes the ``Quantization`` settings ``method``,
-``seed``, ``dpi`` (3,) (x, y, z), ``upsample``. Instead of ``labels`` a file may name ``labels_file`` (a .npy
-beside it, ``model.labelfile``; shape ``labels_shape``): the labels are then memory-mapped read-only. Every file
-carries ``format_version`` int64 (``VOLUME_FORMAT``); :func:`upgrade_volume` reads the older versions users may
-hold.
+of voxel (0, 0, 0)'s low corner; meshes), and for quantized volumes the ``Quantization`` record ``method``,
+``seed``, ``dpi`` (3,) (x, y, z), ``upsample``, ``ink_order``. Instead of ``labels`` a file may name
+``labels_file`` (a .npy beside it, ``model.labelfile``; shape ``labels_shape``): the labels are then memory-mapped
+read-only. Every file carries ``format_version`` int64 (``VOLUME_FORMAT``); :func:`upgrade_volume` reads the older
+versions users may hold.
 """
 
 from __future__ import annotations

@@ -1,0 +1,188 @@
+"""The quantization methods: one ink per printer voxel, a printer layer at a time (``printing.quantize``).
+
+Each method is one class implementing ``Dither``, and ``DITHERS`` maps its name (``Quantization.method``) to it;
+adding a method is one class and one entry there. A dither is made once per quantization (its random state, its
+carried error) and asked for the printer layers in increasing z. Each layer comes as its cumulative mixture
+``cum`` (N, Y, X) float32, ``c_k = rho_0 + ... + rho_k`` over the inks in band order, whose last entry is the inside
+weight (``printing.grid``: the upsampling that made it).
+
+- ``blue-noise`` (default, ``BlueNoise``) and ``random`` (``RandomDraws``) share one inverse-CDF rule with a
+  threshold ``t`` in [0, 1) per printer voxel (``Thresholds``): the voxel gets ink ``k`` with
+  ``c_{k-1} <= t < c_k``. Uniform random numbers make it an exact draw from the mixture (the paper's method, white
+  noise); a blue-noise array makes it ordered dithering.
+- ``error-diffusion`` (``ErrorDiffusion``): deterministic 3D vector error diffusion (``inkopt_core::diffuse``).
+
+Blue noise sums the inks in the order ``Quantization.ink_order`` says (``INK_ORDERS``; ``band_order``), lightest
+first by default (``dither.lightness_order`` says why); the other methods in index order.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar, Protocol
+
+import numpy as np
+
+from ..errors import ParameterError
+from ..model import EMPTY, Quantization
+from .dither import lightness_order, load_blue_noise
+from .grid import PrinterGrid
+
+
+class Dither(Protocol):
+    """One quantization method. ``Dither(q, grid, n_inks, order)`` starts a quantization with the settings ``q`` on
+    the printer grid ``grid`` of ``n_inks`` inks whose bands follow ``order`` ((N,) ink indices, or None: index
+    order; ``band_order``); ``layer`` then gives each printer layer's labels, asked for in increasing k."""
+
+    #: one line of what it does (``inkopt quantize --help``)
+    help: ClassVar[str]
+    #: whether its bands follow ``Quantization.ink_order`` (else index order, and its record says "index")
+    ordered: ClassVar[bool]
+
+    def __init__(self, q: Quantization, grid: PrinterGrid, n_inks: int, order: np.ndarray | None) -> None: ...
+
+    def layer(self, k: int, cum: np.ndarray, weight: np.ndarray | None) -> np.ndarray:
+        """Printer layer k's labels, uint8 (Y, X) (ink index; ``EMPTY`` outside, ``grid.inside(k)``), from its
+        cumulative mixture ``cum`` (N, Y, X) float32 in band order; ``weight`` (Y, X): the interpolated inside
+        weight that the rows sum to (linear upsampling), None where they are normalised (nearest)."""
+        ...
+
+
+class Thresholds:
+    """Inverse-CDF dithering: each printer voxel's threshold ``t`` in [0, 1) picks the ink whose band
+    [c_{k-1}, c_k) of the cumulative mixture holds it, so every ink takes a share of the thresholds equal to its
+    weight. A subclass says where the thresholds come from (``thresholds``); ``self.rng`` is
+    ``numpy.random.default_rng(q.seed)``."""
+
+    help: ClassVar[str] = ""
+    ordered: ClassVar[bool] = False
+
+    def __init__(self, q: Quantization, grid: PrinterGrid, n_inks: int, order: np.ndarray | None) -> None:
+        self.grid, self.n_inks = grid, n_inks
+        self.rng = np.random.default_rng(q.seed)
+        # the bands' map from band to ink label (None: band k is ink k)
+        self.band_ink = None if order is None else np.asarray(order, np.int64).reshape(-1).astype(np.uint8)
+
+    def thresholds(self, k: int) -> np.ndarray:
+        """Printer layer k's thresholds, float32 (Y, X) in [0, 1)."""
+        raise NotImplementedError
+
+    def layer(self, k: int, cum: np.ndarray, weight: np.ndarray | None) -> np.ndarray:
+        t = self.thresholds(k)
+        if weight is not None:
+            t = t * weight  # normalise by the interpolated inside weight (t * w >= c_n  <=>  t >= c_n / w)
+        lab = np.zeros(self.grid.shape[1:], np.uint8)
+        for n in range(self.n_inks - 1):
+            lab += t >= cum[n]
+        if self.band_ink is not None:
+            lab = self.band_ink[lab]
+        if self.grid.masked:
+            lab[~self.grid.inside(k)] = EMPTY
+        return lab
+
+
+class BlueNoise(Thresholds):
+    """Ordered dithering: the thresholds are a 3D blue-noise array (void-and-cluster, ``dither.load_blue_noise``)
+    tiled periodically over the printer grid at a toroidal offset drawn from the seed. Because the thresholds of
+    neighbouring voxels are spread evenly, the local ink fractions match the mixture much more closely than
+    independent draws (the error is pushed to high spatial frequencies, which the scattering medium low-passes)."""
+
+    help = "ordered dithering"
+    ordered = True
+
+    def __init__(self, q: Quantization, grid: PrinterGrid, n_inks: int, order: np.ndarray | None) -> None:
+        super().__init__(q, grid, n_inks, order)
+        self.tile = load_blue_noise()
+        _, Y, X = grid.shape
+        tz, ty, tx = self.tile.shape
+        self.oz, oy, ox = (int(v) for v in self.rng.integers(0, self.tile.shape))
+        self.ty_idx = ((np.arange(Y) + oy) % ty)[:, None]
+        self.tx_idx = ((np.arange(X) + ox) % tx)[None, :]
+
+    def thresholds(self, k: int) -> np.ndarray:
+        return self.tile[(k + self.oz) % self.tile.shape[0]][self.ty_idx, self.tx_idx]
+
+
+class RandomDraws(Thresholds):
+    """The paper's method: each printer voxel draws its ink independently with the (upsampled) mixture as the
+    probability distribution, one layer after the other (so the result does not depend on any chunking). Adds
+    white noise."""
+
+    help = "the paper's independent draws"
+
+    def thresholds(self, k: int) -> np.ndarray:
+        return self.rng.random(self.grid.shape[1:], dtype=np.float32)
+
+
+class ErrorDiffusion:
+    """Deterministic 3D vector error diffusion (``inkopt_core::diffuse``, in Rust). Printer voxels are visited layer
+    by layer (z up), rows in y, each row serpentine in x (direction alternating with ``y + z``); each takes the ink
+    with the largest component of its corrected mixture (mixture + carried error, i.e. the nearest one-hot vector)
+    and passes the residual (corrected mixture - one-hot) to unvisited neighbours: 7/8 in its layer with
+    Floyd–Steinberg's proportions (49, 21, 35, 7)/128, 1/8 to the next layer (8/128 straight down, 2/128 to each of
+    that voxel's four xy neighbours; the weights and the measurements that chose them are in
+    crates/core/src/kernels/diffuse.rs). Weights are renormalised over neighbours inside the object; outside voxels
+    neither take nor pass error. The ink counts of any window differ from its summed mixture only by the residuals
+    crossing its boundary (each bounded: within [-1/2, 1/2] for two inks). The seed is unused. Memory: the carried
+    error of this and the next printer layer, 2 × Y × X × N float32."""
+
+    help = "deterministic 3D vector error diffusion"
+    ordered = False
+
+    def __init__(self, q: Quantization, grid: PrinterGrid, n_inks: int, order: np.ndarray | None) -> None:
+        self.grid = grid
+        _, Y, X = grid.shape
+        self.error = np.zeros((2, Y, X, n_inks), np.float32)
+
+    def layer(self, k: int, cum: np.ndarray, weight: np.ndarray | None) -> np.ndarray:
+        """Error-diffuses printer layer k in Rust; ``cum``'s last entry is the inside weight its mixture is
+        divided by (``weight`` is the same under linear upsampling, and ignored)."""
+        from .. import _core
+
+        w = cum[-1]
+        mix = np.diff(cum, axis=0, prepend=np.zeros((1,) + w.shape, np.float32))
+        mix /= np.where(w > 0, w, 1.0).astype(np.float32)
+        lab = np.empty(self.grid.shape[1:], np.uint8)
+        inside_k, inside_next = self.grid.inside(k), self.grid.inside(k + 1)
+        _core.diffuse_layer(
+            np.ascontiguousarray(mix, np.float32),
+            inside_k.view(np.uint8),
+            inside_next.view(np.uint8),
+            self.error,
+            k,
+            lab,
+        )
+        return lab
+
+
+#: the quantization methods by name (``Quantization.method``, ``inkopt quantize --method``)
+DITHERS: dict[str, type[Dither]] = {"blue-noise": BlueNoise, "random": RandomDraws, "error-diffusion": ErrorDiffusion}
+METHODS = tuple(DITHERS)
+
+
+def dither_class(method: str) -> type[Dither]:
+    """The dither called ``method``; a one-line ParameterError for an unknown one."""
+    try:
+        return DITHERS[method]
+    except KeyError:
+        raise ParameterError(f"unknown quantization `method` '{method}'; use one of {list(DITHERS)}") from None
+
+
+def _lightness(inks, g: float, ior: float) -> np.ndarray:
+    if inks is None:
+        raise ValueError("ink_order 'lightness' needs the mixture's ink table; give one or use 'index'")
+    return lightness_order(inks, g, ior)
+
+
+#: the inks' orders in an ordered dither's bands by name (``Quantization.ink_order``): (inks, g, ior) -> (N,) ink
+#: indices, or None for index order
+INK_ORDERS = {"lightness": _lightness, "index": lambda inks, g, ior: None}
+
+
+def band_order(q: Quantization, inks, g: float, ior: float) -> np.ndarray | None:
+    """The inks' order in the cumulative mixture that the settings ``q`` say for ``inks`` (an ``InkTable``, or None
+    for index order only) with the medium's ``g`` and ``ior``: ``q.ink_order``'s for an ordered dither (blue
+    noise; lightest first by default), else None (index order). Every quantization takes it from here, so ours and
+    the evaluation's baselines are dithered alike, a labels file made in index order included."""
+    if not dither_class(q.method).ordered:
+        return None
+    return INK_ORDERS[q.ink_order](inks, g, ior)
