@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import sys
+from functools import partial
 from pathlib import Path
 
 from ..errors import ParameterError
@@ -53,22 +54,23 @@ def load_palette(text: str | None) -> dict | None:
     return pal
 
 
-def _write_mixture(fmt: Format, d: RunDir, out: Path, settings: dict) -> dict:
-    """The run's continuous mixture (volume.npz, read one layer at a time) in ``fmt``."""
+def _write_mixture(fmt: Format, d: RunDir, out: Path, make_job) -> dict:
+    """The run's continuous mixture (volume.npz, read one layer at a time) in ``fmt``; ``make_job(voxels,
+    provenance=...)`` gives the ``PrintJob``."""
     with MixtureSource(d.volume_file()) as src:
-        provenance = Provenance(d.volume_path.name, file_digest(d.volume_path))
-        return fmt.write(PrintJob(MixtureVoxels(src), provenance=provenance, **settings), out)
+        job = make_job(MixtureVoxels(src), provenance=Provenance(d.volume_path.name, file_digest(d.volume_path)))
+        return fmt.write(job, out)
 
 
-def _write_labels(fmt: Format, d: RunDir, out: Path, settings: dict) -> dict:
+def _write_labels(fmt: Format, d: RunDir, out: Path, make_job) -> dict:
     """The run's quantized print (quantized.npz, checked to be current) in ``fmt``; warns when its grid is not
-    the printer's."""
+    what the job's printer prints."""
     q = d.load_quantized()
     d.check_quantized_current()
     provenance = Provenance(d.quantized_path.name, file_digest(d.quantized_path), d.volume_digest())
-    job = PrintJob(LabelVoxels(q.labels, q.voxel_mm, q.inks.names), provenance=provenance, **settings)
+    job = make_job(LabelVoxels(q.labels, q.voxel_mm, q.inks.names), provenance=provenance)
     summary = fmt.write(job, out)
-    if mismatch := resolution_mismatch(settings["printer"], q.voxel_mm):
+    if mismatch := resolution_mismatch(job.printer, q.voxel_mm):
         print(f"inkopt: warning: {mismatch}", file=sys.stderr)
     return summary
 
@@ -78,15 +80,16 @@ def _export_cmd(args) -> int:
     if args.labels and not fmt.takes_mixture:
         mixtures = " or ".join(f.name for f in FORMATS.values() if f.takes_mixture)
         raise ParameterError(f"`labels` goes with `format` {mixtures} (the other formats always hold the labels)")
-    settings = {
-        "printer": printer_profile(str(args.printer or fmt.default_printer).strip().lower()),
-        "palette": load_palette(args.palette),
-        "materials": parse_materials(args.material) or {},
-    }
+    make_job = partial(
+        PrintJob,
+        printer=printer_profile(args.printer or fmt.default_printer),
+        palette=load_palette(args.palette),
+        materials=parse_materials(args.material) or {},
+    )
     d = RunDir(args.dir)
     mixture = fmt.takes_mixture and not args.labels
     out = Path(args.out) if args.out else fmt.run_output(d, mixture)
-    summary = (_write_mixture if mixture else _write_labels)(fmt, d, out, settings)
+    summary = (_write_mixture if mixture else _write_labels)(fmt, d, out, make_job)
     print(fmt.describe(summary))
     print(f"wrote {out}")
     return 0
