@@ -175,13 +175,13 @@ def test_palette_and_bad_input(tmp_path):
         ink_colours(["cyan"], palette={"cyan": (0, 255, 255, 128)})
     with pytest.raises(ValueError, match="already used"):
         ink_colours(["black"], background=(0, 0, 0, 255))
-    with pytest.raises(ParameterError, match="labels use ink 5"):
+    with pytest.raises(ValueError, match="labels use ink 5"):
         write_png_slices(job(np.full((2, 2, 2), 5, np.uint8)), tmp_path / "a")
-    with pytest.raises(ParameterError, match="uint8"):
+    with pytest.raises(ValueError, match="uint8"):
         job(np.zeros((2, 2, 2), np.int32))
-    with pytest.raises(ParameterError, match=r"^voxel_mm must be 3 positive sizes"):
+    with pytest.raises(ValueError, match=r"^voxel_mm must be 3 positive sizes"):
         LabelVoxels(np.zeros((2, 2, 2), np.uint8), (1, 0, 1), INKS)
-    with pytest.raises(ParameterError, match="inks must be 1..254 unique names"):
+    with pytest.raises(ValueError, match="inks must be 1..254 unique names"):
         LabelVoxels(np.zeros((2, 2, 2), np.uint8), VP, ["cyan", "cyan"])
     with pytest.raises(ParameterError, match=r"^materials names unknown ink 'teal'; the inks are \['cyan'"):
         job(np.zeros((2, 2, 2), np.uint8), materials={"teal": "X"})

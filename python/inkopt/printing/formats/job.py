@@ -26,10 +26,12 @@ if TYPE_CHECKING:
     from ...model.mixturefile import MixtureSource
 
 
+# The voxels' own checks (labels, voxel_mm, inks) are plain ValueErrors: those come from files (quantized.npz,
+# volume.npz), not from the command line's flags, so they are not rendered as flags.
 def _voxel_mm(voxel_mm) -> np.ndarray:
     vp = np.asarray(voxel_mm, np.float64).reshape(-1)
     if vp.shape != (3,) or not np.all(np.isfinite(vp)) or np.any(vp <= 0):
-        raise ParameterError(f"`voxel_mm` must be 3 positive sizes (x, y, z) in mm, got {vp}")
+        raise ValueError(f"voxel_mm must be 3 positive sizes (x, y, z) in mm, got {vp}")
     return vp
 
 
@@ -46,12 +48,10 @@ class LabelVoxels:
     def __post_init__(self):
         labels = np.asarray(self.labels)
         if labels.ndim != 3 or labels.dtype != np.uint8 or min(labels.shape) < 1:
-            raise ParameterError(
-                f"`labels` must be a non-empty uint8 (Z, Y, X) array, got {labels.dtype} {labels.shape}"
-            )
+            raise ValueError(f"labels must be a non-empty uint8 (Z, Y, X) array, got {labels.dtype} {labels.shape}")
         names = tuple(str(n) for n in self.inks)
         if not names or len(set(names)) != len(names) or len(names) >= EMPTY:
-            raise ParameterError(f"`inks` must be 1..{EMPTY - 1} unique names, got {list(names)}")
+            raise ValueError(f"inks must be 1..{EMPTY - 1} unique names, got {list(names)}")
         object.__setattr__(self, "labels", labels)
         object.__setattr__(self, "voxel_mm", _voxel_mm(self.voxel_mm))
         object.__setattr__(self, "inks", names)
@@ -188,7 +188,7 @@ def tally(job: PrintJob) -> InkCounts:
         counts += np.bincount(voxels.labels[k].ravel(), minlength=256)
     bad = np.flatnonzero(counts[len(names) : EMPTY])
     if bad.size:
-        raise ParameterError(f"`labels` use ink {len(names) + int(bad[0])} but only {len(names)} ink names are given")
+        raise ValueError(f"labels use ink {len(names) + int(bad[0])} but only {len(names)} ink names are given")
     used = tuple(i for i in range(len(names)) if counts[i] > 0)
     job.check_slots(names[i] for i in used)
     return InkCounts(counts, used)
