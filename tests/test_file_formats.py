@@ -14,7 +14,8 @@ from inkopt.color import srgb_to_linear
 from inkopt.io import FormatError, save_npz
 from inkopt.model import InkTable, MeshInfo, Texels, Volume
 from inkopt.optim import Optimization, OptimizeConfig
-from inkopt.printing.export import read_png_slices, write_png_slices
+from inkopt.printing.formats.job import LabelVoxels, PrintJob
+from inkopt.printing.formats.png_slices import read_png_slices, write_png_slices
 from inkopt.rundir import RunDir, SceneRecord
 from inkopt.scenes.slab import build_slab
 
@@ -168,7 +169,7 @@ def test_pre_release_checkpoints_are_refused(tmp_path):
 def test_slice_manifest_versions(tmp_path):
     lab = np.random.default_rng(1).integers(0, 5, (3, 4, 5)).astype(np.uint8)
     out = tmp_path / "slices"
-    man = write_png_slices(lab, (25.4 / 600, 25.4 / 300, 0.027), list(INKS.names), out)
+    man = write_png_slices(PrintJob(LabelVoxels(lab, (25.4 / 600, 25.4 / 300, 0.027), INKS.names)), out)
     assert man["format_version"] == 1 and man["version"] == 1  # "version": the key scripts already read
     labels, back = read_png_slices(out)
     np.testing.assert_array_equal(labels, lab)

@@ -13,7 +13,7 @@ import pytest
 from inkopt.cli import main
 from inkopt.io import save_npz
 from inkopt.model import InkTable, Quantization, Texels, Volume
-from inkopt.printing.export import read_png_slices
+from inkopt.printing.formats.png_slices import read_png_slices
 from inkopt.printing.grid import _enclosing, printer_grid
 from inkopt.printing.quantize import quantize
 
@@ -206,7 +206,9 @@ def test_export_refuses_more_inks_than_slots(tmp_path, capsys):
         (["export", "{tmp}/r", "--format", "stl"], "unknown export format"),
         (["export", "{tmp}/r", "--printer", "x9"], "unknown printer"),
         (["export", "{tmp}/r", "--format", "gcvf", "--printer", "x9"], "unknown printer"),
-        (["export", "{tmp}/r", "--palette", "{bad"], "--palette"),
+        (["export", "{tmp}/r", "--palette", "{bad"], "--palette is neither a JSON object"),
+        (["export", "{tmp}/r", "--palette", "[1]"], "--palette must be a JSON object"),
+        (["inspect", "{tmp}/r"], "r/manifest.json is missing or malformed"),
         (["evaluate", "{tmp}/nope"], "does not exist"),
         (["evaluate", "{tmp}/r", "--method", "floyd"], "unknown quantization --method 'floyd'"),
         (["evaluate", "{tmp}/r", "--spp", "0"], "--spp"),

@@ -1,4 +1,4 @@
-"""Tests of inkopt.printing.gcvf: the GrabCAD Voxel Print package opened as a zip, its XML parsed, its slices
+"""Tests of inkopt.printing.formats.gcvf: the GrabCAD Voxel Print package opened as a zip, its XML parsed, its slices
 decoded through the XML palette, its STL loaded with trimesh and its z-buffer checked against the labels."""
 
 import io
@@ -11,10 +11,18 @@ import trimesh
 from PIL import Image
 
 from inkopt.io import read_source_comment
-from inkopt.printing.gcvf import STL_RECORD, outline_mesh, write_gcvf
+from inkopt.printing.formats.gcvf import STL_RECORD, write_gcvf
+from inkopt.printing.formats.job import LabelVoxels, PrintJob, Provenance
+from inkopt.printing.formats.outline import outline_mesh
+from inkopt.printing.profiles import printer_profile
 
 VP = np.array([25.4 / 600, 25.4 / 300, 0.027])
 INKS = ["cyan", "magenta", "yellow", "black", "white", "orange"]
+
+
+def job(labels, inks=INKS, printer="j750", voxel_mm=VP, **kw) -> PrintJob:
+    """A label job for ``printer`` (a profile key; J750, the command line's default for GCVF)."""
+    return PrintJob(LabelVoxels(labels, voxel_mm, inks), printer_profile(printer), **kw)
 
 
 def ball_labels(shape=(9, 12, 20), n=6, seed=0):
@@ -38,7 +46,7 @@ def text(el, tag):
 def test_package_structure_and_palette(tmp_path):
     lab = ball_labels()
     Z, Y, X = lab.shape
-    summary = write_gcvf(lab, VP, INKS, tmp_path / "job.gcvf", printer="j750")
+    summary = write_gcvf(job(lab), tmp_path / "job.gcvf")
     files = read_package(tmp_path / "job.gcvf")
     assert sorted(files) == sorted(
         [f"layer_{k}.png" for k in range(Z)] + ["ConfigFile.xml", "Mesh.stl", "Zbuffer.png", "MeshBbx.ktn"]
@@ -79,7 +87,7 @@ def test_package_structure_and_palette(tmp_path):
 
 def test_stl_outline_matches_the_voxels(tmp_path):
     lab = ball_labels()
-    write_gcvf(lab, VP, INKS, tmp_path / "job.gcvf")
+    write_gcvf(job(lab), tmp_path / "job.gcvf")
     stl = read_package(tmp_path / "job.gcvf")["Mesh.stl"]
     mesh = trimesh.load(io.BytesIO(stl), file_type="stl")
     assert mesh.is_watertight and mesh.volume > 0, "outward normals"
@@ -99,7 +107,7 @@ def test_stl_outline_matches_the_voxels(tmp_path):
 
 def test_zbuffer_is_the_top_layer_seen_from_above(tmp_path):
     lab = ball_labels()
-    write_gcvf(lab, VP, INKS, tmp_path / "job.gcvf")
+    write_gcvf(job(lab), tmp_path / "job.gcvf")
     with Image.open(io.BytesIO(read_package(tmp_path / "job.gcvf")["Zbuffer.png"])) as im:
         assert im.mode == "I;16" and "dpi" not in im.info
         zb = np.asarray(im).astype(int)
@@ -116,7 +124,7 @@ def test_parts_match_the_builders_packages(tmp_path):
     a 200 x 100 px, 100-layer job filled everywhere and a 1000 x 500 px job occupying columns 2-999 and rows
     1-499 (four layers here: the box's z only follows the layer count)."""
     full = np.zeros((100, 100, 200), np.uint8)
-    write_gcvf(full, VP, INKS, tmp_path / "full.gcvf")
+    write_gcvf(job(full), tmp_path / "full.gcvf")
     files = read_package(tmp_path / "full.gcvf")
     assert len(files["MeshBbx.ktn"]) == 24
     assert np.frombuffer(files["MeshBbx.ktn"], "<f4").tolist() == [0, 0, 0, 200, 100, 100]
@@ -127,7 +135,7 @@ def test_parts_match_the_builders_packages(tmp_path):
     wheel = np.full((4, 500, 1000), 255, np.uint8)
     wheel[:, 1:500, 2:1000] = 4  # label rows 1..499 = image rows 0..498: the image's top row stays empty below
     wheel = wheel[:, ::-1, :].copy()  # image rows 1..499 occupied
-    write_gcvf(wheel, VP, INKS, tmp_path / "wheel.gcvf")
+    write_gcvf(job(wheel), tmp_path / "wheel.gcvf")
     assert np.frombuffer(read_package(tmp_path / "wheel.gcvf")["MeshBbx.ktn"], "<f4").tolist() == [
         2,
         1,
@@ -140,35 +148,37 @@ def test_parts_match_the_builders_packages(tmp_path):
 
 def test_material_names_and_source_digest(tmp_path):
     lab = ball_labels()
-    write_gcvf(lab, VP, INKS, tmp_path / "job.gcvf", materials={"White": "VeroPureWht"}, digest="sha256:0f")
+    write_gcvf(
+        job(lab, materials={"White": "VeroPureWht"}, provenance=Provenance(digest="sha256:0f")), tmp_path / "job.gcvf"
+    )
     root = ET.fromstring(read_package(tmp_path / "job.gcvf")["ConfigFile.xml"])
     assert [text(m, "Name") for m in root.findall("MaterialList/Material")][4] == "VeroPureWht"
     with zipfile.ZipFile(tmp_path / "job.gcvf") as zf:
         assert read_source_comment(zf.comment)["digest"] == "sha256:0f"
     with pytest.raises(ValueError, match="unknown ink 'teal'"):
-        write_gcvf(lab, VP, INKS, tmp_path / "b.gcvf", materials={"teal": "VeroCY-V"})
+        job(lab, materials={"teal": "VeroCY-V"})
 
 
 def test_refusals_write_nothing(tmp_path):
     seven = INKS + ["transparent"]
     lab = np.arange(7, dtype=np.uint8).reshape(1, 1, 7)
     with pytest.raises(ValueError, match=r"uses 7 inks \(cyan, .*, transparent\) but Stratasys J750 holds 6") as e:
-        write_gcvf(lab, VP, seven, tmp_path / "a.gcvf")
+        write_gcvf(job(lab, seven), tmp_path / "a.gcvf")
     assert "\n" not in str(e.value)
     with pytest.raises(ValueError, match="whole-number DPI"):
-        write_gcvf(lab[..., :3], (0.045, 0.09, 0.027), INKS, tmp_path / "b.gcvf")
+        write_gcvf(job(lab[..., :3], voxel_mm=(0.045, 0.09, 0.027)), tmp_path / "b.gcvf")
     with pytest.raises(ValueError, match="nothing to print"):
-        write_gcvf(np.full((2, 2, 2), 255, np.uint8), VP, INKS, tmp_path / "c.gcvf")
+        write_gcvf(job(np.full((2, 2, 2), 255, np.uint8)), tmp_path / "c.gcvf")
     (tmp_path / "notes.gcvf").write_text("precious")
     with pytest.raises(ValueError, match="not a GCVF package"):
-        write_gcvf(lab[..., :3], VP, INKS, tmp_path / "notes.gcvf")
+        write_gcvf(job(lab[..., :3]), tmp_path / "notes.gcvf")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.gcvf"]
     # seven inks fit a J850; the XML keeps the profile's MaxNumberOfColors, the clear ink its Vero material
-    write_gcvf(lab, VP, seven, tmp_path / "j850.gcvf", printer="j850")
+    write_gcvf(job(lab, seven, "j850"), tmp_path / "j850.gcvf")
     root = ET.fromstring(read_package(tmp_path / "j850.gcvf")["ConfigFile.xml"])
     assert text(root, "MaxNumberOfColors") == "6"
     assert [text(m, "Name") for m in root.findall("MaterialList/Material")][-2:] == ["orange", "VeroClear"]
-    write_gcvf(lab[..., :2], VP, seven, tmp_path / "j850.gcvf", printer="j850")  # an old package is replaced
+    write_gcvf(job(lab[..., :2], seven, "j850"), tmp_path / "j850.gcvf")  # an old package is replaced
     assert (
         text(ET.fromstring(read_package(tmp_path / "j850.gcvf")["ConfigFile.xml"]), "SliceDimensions/SliceWidth") == "2"
     )

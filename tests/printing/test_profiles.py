@@ -1,16 +1,19 @@
-"""Printer profiles (inkopt.printing.profiles): typed, JSON round trip, lookups and the resolution check."""
+"""Printer profiles (inkopt.printing.profiles): typed, JSON round trip, lookups, the material-slot check and the
+resolution check."""
 
 import json
 
 import pytest
 
+from inkopt.cli.common import flag_of
+from inkopt.errors import ParameterError
 from inkopt.printing.profiles import (
     PRINTER_PROFILES,
     PrinterProfile,
+    check_slots,
     material_name,
     printer_profile,
     resolution_mismatch,
-    resolve_max_materials,
 )
 
 
@@ -34,7 +37,6 @@ def test_lookups():
     j = printer_profile(" J750 ")
     assert j.key == "j750" and j.max_materials == 6 and j.material("Cyan") == "VeroCY-V"
     assert material_name(j, "orange") is None and material_name(None, "cyan") is None
-    assert resolve_max_materials("j55") == 5 and resolve_max_materials(3) == 3 and resolve_max_materials(None) is None
     with pytest.raises(ValueError, match="unknown printer 'j9000'"):
         printer_profile("j9000")
 
@@ -46,3 +48,15 @@ def test_resolution_mismatch():
     msg = resolution_mismatch(j, (25.4 / 300, 25.4 / 300, 0.027))
     assert "300 x 300 DPI" in msg and "Stratasys J750 prints 600 x 300 DPI" in msg
     assert resolution_mismatch(printer_profile("mimaki-3duj-553"), (1.0, 1.0, 1.0)) is None  # no grid known
+
+
+def test_check_slots_names_the_printer_parameter():
+    check_slots(["cyan", "white"], 2, "j750")
+    check_slots(["cyan", "white", "black"], None)
+    with pytest.raises(ParameterError) as e:
+        check_slots(["cyan", "white", "black"], 2, "Stratasys J55 Prime")
+    msg = str(e.value)
+    assert msg.startswith("the print uses 3 inks (cyan, white, black) but Stratasys J55 Prime holds 2 materials")
+    assert msg.endswith("(printer)") and e.value.render(flag_of).endswith("(--printer)")
+    with pytest.raises(ParameterError, match="but the printer holds 1"):
+        check_slots(["cyan", "white"], 1)

@@ -13,8 +13,9 @@ from inkopt.io import FormatError, save_npz
 from inkopt.model import InkTable, Quantization, Volume
 from inkopt.model.labelfile import LabelFileWriter, load_label_file
 from inkopt.model.mixturefile import MixtureSource
-from inkopt.printing import gcvf
-from inkopt.printing.export import read_png_slices, write_png_slices
+from inkopt.printing.formats import gcvf, outline
+from inkopt.printing.formats.job import LabelVoxels, PrintJob
+from inkopt.printing.formats.png_slices import read_png_slices, write_png_slices
 from inkopt.printing.quantize import quantize, quantize_volume
 from inkopt.printing.stream import quantize_run
 from inkopt.rundir import RunDir
@@ -152,7 +153,7 @@ def test_export_from_a_memory_mapped_label_file(tmp_path):
     d, vol = mixture_run(tmp_path / "r")
     quantize_run(d, Quantization(**KW))
     q = d.load_quantized()
-    write_png_slices(q.labels, q.voxel_mm, q.inks.names, tmp_path / "s")
+    write_png_slices(PrintJob(LabelVoxels(q.labels, q.voxel_mm, q.inks.names)), tmp_path / "s")
     np.testing.assert_array_equal(read_png_slices(tmp_path / "s")[0], q.labels)
 
 
@@ -160,10 +161,10 @@ def test_gcvf_block_outline_encloses_every_voxel(tmp_path, monkeypatch):
     z, y, x = np.indices((30, 20, 40))
     lab = np.where((x - 20) ** 2 / 300 + (y - 10) ** 2 / 80 + (z - 15) ** 2 / 200 < 1, 1, 255).astype(np.uint8)
     vp = np.array([25.4 / 600, 25.4 / 300, 0.027])
-    monkeypatch.setattr(gcvf, "OUTLINE_MAX_CELLS", 2000)
-    f = gcvf.outline_factors(lab.shape, vp, 2000)
+    monkeypatch.setattr(outline, "OUTLINE_MAX_CELLS", 2000)
+    f = outline.outline_factors(lab.shape, vp, 2000)
     assert np.prod(-(-np.array(lab.shape) // f)) <= 2000 and max(f) > 1
-    summary = gcvf.write_gcvf(lab, vp, ["cyan", "white"], tmp_path / "j.gcvf")
+    summary = gcvf.write_gcvf(PrintJob(LabelVoxels(lab, vp, ["cyan", "white"])), tmp_path / "j.gcvf")
     assert summary["outline_block"] == [f[2], f[1], f[0]]
     with zipfile.ZipFile(tmp_path / "j.gcvf") as zf:
         mesh = trimesh.load(io.BytesIO(zf.read(gcvf.STL)), file_type="stl")

@@ -1,6 +1,6 @@
-"""Tests of inkopt.printing.threemf: the volumetric elements validated against the 3MF Volumetric extension's XSD
-(tests/printing/data), the file opened by lib3mf 2.5.0, the sheets sampled as the spec says (UVW of a voxel centre
--> row, column, sheet) and read back by inkopt.printing.package."""
+"""Tests of inkopt.printing.formats.threemf: the volumetric elements validated against the 3MF Volumetric
+extension's XSD (tests/printing/data), the file opened by lib3mf 2.5.0, the sheets sampled as the spec says (UVW of
+a voxel centre -> row, column, sheet) and read back by its checker."""
 
 import io
 import xml.etree.ElementTree as ET
@@ -16,13 +16,19 @@ from PIL import Image
 
 from inkopt.model import InkTable, Volume
 from inkopt.model.mixturefile import MixtureSource
-from inkopt.printing import gcvf
-from inkopt.printing.package import inspect_package
-from inkopt.printing.threemf import CHANNELS, MODEL, NS_CORE, NS_V, write_3mf_labels, write_3mf_mixture
+from inkopt.printing.formats import inspect_package, outline
+from inkopt.printing.formats.job import LabelVoxels, MixtureVoxels, PrintJob, Provenance
+from inkopt.printing.formats.threemf import CHANNELS, MODEL, NS_CORE, NS_V, write_3mf
+from inkopt.printing.profiles import printer_profile
 
 VP = np.array([25.4 / 600, 25.4 / 300, 0.027])
 INKS = ["cyan", "magenta", "yellow", "black", "white", "orange"]
 XSD = Path(__file__).parent / "data" / "volumetric.xsd"
+
+
+def job(labels, printer=None, **kw) -> PrintJob:
+    """A label job; ``printer`` a profile key."""
+    return PrintJob(LabelVoxels(labels, VP, INKS), None if printer is None else printer_profile(printer), **kw)
 
 
 def labels(shape=(5, 8, 12), seed=0):
@@ -38,7 +44,7 @@ def model(path):
 
 
 def test_volumetric_elements_validate_against_the_spec_schema(tmp_path):
-    write_3mf_labels(labels(), VP, INKS, tmp_path / "a.3mf", printer="j750")
+    write_3mf(job(labels(), "j750"), tmp_path / "a.3mf")
     root, _ = model(tmp_path / "a.3mf")
     schema = xmlschema.XMLSchema(XSD)
     top = [el for el in root.find("{*}resources") if el.tag.startswith(f"{{{NS_V}}}")]
@@ -55,7 +61,7 @@ def test_volumetric_elements_validate_against_the_spec_schema(tmp_path):
 
 def test_lib3mf_reads_the_file(tmp_path):
     lab = labels()
-    s = write_3mf_labels(lab, VP, INKS, tmp_path / "a.3mf", printer="j750")
+    s = write_3mf(job(lab, "j750"), tmp_path / "a.3mf")
     m = lib3mf.get_wrapper().CreateModel()
     m.QueryReader("3mf").ReadFromFile(str(tmp_path / "a.3mf"))
     it = m.GetMeshObjects()
@@ -77,7 +83,7 @@ def test_sheets_sampled_at_voxel_centres_give_the_voxels_ink(tmp_path):
     floor(w Z)) at every printed voxel's centre finds that voxel's ink, 255 in its channel and 0 elsewhere."""
     lab = labels()
     Z, Y, X = lab.shape
-    write_3mf_labels(lab, VP, INKS, tmp_path / "a.3mf")
+    write_3mf(job(lab), tmp_path / "a.3mf")
     root, pngs = model(tmp_path / "a.3mf")
     res = root.find("{*}resources")
     sheets = {
@@ -107,15 +113,15 @@ def test_sheets_sampled_at_voxel_centres_give_the_voxels_ink(tmp_path):
 
 def test_labels_round_trip_and_block_outline(tmp_path, monkeypatch):
     lab = labels()
-    s = write_3mf_labels(lab, VP, INKS, tmp_path / "a.3mf", digest="sha256:ab")
+    s = write_3mf(job(lab, provenance=Provenance(digest="sha256:ab")), tmp_path / "a.3mf")
     rep, scan = inspect_package(tmp_path / "a.3mf", labels=True)
     np.testing.assert_array_equal(scan.labels, lab)
     assert [m["voxel_count"] for m in rep.materials] == [np.sum(lab == i) for i in range(len(INKS))]
     assert rep.dpi == pytest.approx((600, 300)) and rep.layer_um == pytest.approx(27)
     assert rep.source == {"source": None, "digest": "sha256:ab"} and s["outline_block"] == [1, 1, 1]
     # a block outline: the mesh encloses every printed voxel, and every voxel centre inside it has shares
-    monkeypatch.setattr(gcvf, "OUTLINE_MAX_CELLS", 40)
-    s = write_3mf_labels(lab, VP, INKS, tmp_path / "b.3mf")
+    monkeypatch.setattr(outline, "OUTLINE_MAX_CELLS", 40)
+    s = write_3mf(job(lab), tmp_path / "b.3mf")
     assert s["outline_block"] != [1, 1, 1]
     root, pngs = model(tmp_path / "b.3mf")
     verts = [[float(v.get(a)) for a in "xyz"] for v in root.iter(f"{{{NS_CORE}}}vertex")]
@@ -142,12 +148,12 @@ def test_mixture_round_trip(tmp_path):
     inside[:, 0] = False
     vol = Volume.from_mixture(voxel_mm=[25.4 / 300] * 3, mixture=mix, inks=inks, inside=inside)
     vol.save(tmp_path / "volume.npz")
-    src = MixtureSource(tmp_path / "volume.npz")
-    try:
-        s = write_3mf_mixture(src, tmp_path / "m.3mf", materials={"white": "VeroPureWht"})
-    finally:
-        src.close()
-    assert s["image_stacks"] == 2 and s["materials"][4]["material"] == "VeroPureWht"
+    with MixtureSource(tmp_path / "volume.npz") as src:
+        s = write_3mf(PrintJob(MixtureVoxels(src), materials={"white": "VeroPureWht"}), tmp_path / "m.3mf")
+        with pytest.raises(ValueError, match="uses 5 inks"):  # a mixture loads every ink of the table
+            write_3mf(PrintJob(MixtureVoxels(src), printer_profile("generic"), max_materials=4), tmp_path / "n.3mf")
+    assert s["image_stacks"] == 2 and s["materials"][4]["material"] == "VeroPureWht" and s["content"] == "mixture"
+    assert not (tmp_path / "n.3mf").exists()
     rep, _ = inspect_package(tmp_path / "m.3mf")
     assert [m["name"] for m in rep.materials] == ["cyan", "magenta", "yellow", "black", "VeroPureWht"]
     want = mix[inside].sum(0)
@@ -158,7 +164,7 @@ def test_mixture_round_trip(tmp_path):
 
 def test_inspect_finds_shares_that_do_not_sum_to_one(tmp_path):
     lab = labels()
-    write_3mf_labels(lab, VP, INKS, tmp_path / "a.3mf")
+    write_3mf(job(lab), tmp_path / "a.3mf")
     name = "3D/volumetric/inks1/sheet00002.png"
     with zipfile.ZipFile(tmp_path / "a.3mf") as zi, zipfile.ZipFile(tmp_path / "b.3mf", "w") as zo:
         for n in zi.namelist():

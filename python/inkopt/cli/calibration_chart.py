@@ -7,16 +7,14 @@ from __future__ import annotations
 from ..calibration.chart import design_chart
 from ..calibration.job import write_chart
 from ..model import InkTable
-from ..printing.profiles import printer_profile, too_many_inks
+from ..printing.profiles import check_slots, printer_profile
 
 
 def _chart_cmd(args) -> int:
     inks = InkTable.parse(args.inks)
     if args.printer is not None:
         prof = printer_profile(args.printer)
-        msg = too_many_inks(list(inks.names), prof.max_materials, prof.key)
-        if msg:
-            raise ValueError(msg)
+        check_slots(list(inks.names), prof.max_materials, prof.key)
     chart = design_chart(inks.names)
     header = {"ORIGINATOR": "inkopt calibration-chart", "DESCRIPTOR": f"calibration chart for {args.inks}"}
     if args.printer is not None:

@@ -12,7 +12,7 @@ class UsageError(ValueError):
 
 
 #: Library parameters whose flag is not ``--`` + the name with dashes (``inkopt.errors.ParameterError``).
-FLAGS = {"grad_method": "--gradient", "out_inks": "--out", "log_every_s": "--log-every"}
+FLAGS = {"grad_method": "--gradient", "out_inks": "--out", "log_every_s": "--log-every", "materials": "--material"}
 
 
 def flag_of(name: str) -> str:

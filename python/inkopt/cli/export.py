@@ -1,31 +1,29 @@
 """``inkopt export DIR``: printer input from DIR/quantized.npz (docs/run-dir.md).
 
-``--format png-slices`` (default): one RGBA PNG per layer plus manifest.json (``inkopt.printing.export``);
-``--format gcvf``: the GrabCAD Voxel Print package, one zip (``inkopt.printing.gcvf``); ``--format 3mf``: a 3MF
-with the Volumetric extension (``inkopt.printing.threemf``) of the continuous mixture (DIR/volume.npz, read one
-layer at a time), or with ``--labels`` of the quantized print. A job using more inks than ``--printer`` holds is
-refused in one line before anything is written. GCVF and 3MF record the digest of the file they are made from
-(quantized.npz, or volume.npz for the continuous 3MF) in their zip comment (``inkopt inspect --run`` checks it).
-A quantized volume made from another volume.npz than the run's (``RunDir.check_quantized_current``) is refused
-in one line before anything is written; the slice manifest records ``volume_digest`` and ``quantized_digest``.
+``--format`` names one of ``inkopt.printing.formats.FORMATS``: ``png-slices`` (default), one RGBA PNG per layer plus
+manifest.json; ``gcvf``, the GrabCAD Voxel Print package, one zip; ``3mf``, a 3MF with the Volumetric extension of
+the continuous mixture (DIR/volume.npz, read one layer at a time), or with ``--labels`` of the quantized print. A
+job using more inks than ``--printer`` holds is refused in one line before anything is written. GCVF and 3MF
+record the digest of the file they are made from (quantized.npz, or volume.npz for the continuous 3MF) in their
+zip comment (``inkopt inspect --run`` checks it). A quantized volume made from another volume.npz than the run's
+(``RunDir.check_quantized_current``) is refused in one line before anything is written; the slice manifest
+records ``volume_digest`` and ``quantized_digest``.
 """
 
 from __future__ import annotations
 
 import json
 import sys
+from functools import partial
 from pathlib import Path
 
+from ..errors import ParameterError
 from ..io import file_digest
 from ..model.mixturefile import MixtureSource
-from ..printing.export import write_png_slices
-from ..printing.gcvf import write_gcvf
-from ..printing.profiles import PRINTER_PROFILES, printer_profile, resolution_mismatch, too_many_inks
-from ..printing.threemf import write_3mf_labels, write_3mf_mixture
-from ..rundir import QUANTIZED_DIGEST, VOLUME_DIGEST, RunDir
-
-FORMATS = ("png-slices", "gcvf", "3mf")
-DEFAULT_PRINTER = {"png-slices": "generic", "gcvf": "j750", "3mf": "generic"}
+from ..printing.formats import FORMATS, Format, format_named
+from ..printing.formats.job import LabelVoxels, MixtureVoxels, PrintJob, Provenance
+from ..printing.profiles import PRINTER_PROFILES, printer_profile, resolution_mismatch
+from ..rundir import RunDir
 
 
 def parse_materials(items) -> dict | None:
@@ -36,47 +34,9 @@ def parse_materials(items) -> dict | None:
     for item in items:
         ink, sep, name = str(item).partition("=")
         if not sep or not ink.strip() or not name.strip():
-            raise ValueError(f"--material takes INK=NAME (e.g. white=VeroPureWht), got '{item}'")
+            raise ParameterError(f"`material` takes INK=NAME (e.g. white=VeroPureWht), got '{item}'")
         out[ink.strip()] = name.strip()
     return out
-
-
-def _export_3mf(args, d: RunDir, printer: str, palette, materials) -> int:
-    if args.labels:
-        out = Path(args.out) if args.out else d.threemf_path(labels=True)
-        q = d.load_quantized()
-        d.check_quantized_current()
-        digest = file_digest(d.quantized_path)
-        man = write_3mf_labels(
-            q.labels, q.voxel_mm, q.inks.names, out, printer=printer, materials=materials, palette=palette,
-            source=d.quantized_path.name, digest=digest,
-        )  # fmt: skip
-        if mismatch := resolution_mismatch(printer_profile(printer), q.voxel_mm):
-            print(f"inkopt: warning: {mismatch}", file=sys.stderr)
-    else:
-        out = Path(args.out) if args.out else d.threemf_path()
-        src = MixtureSource(d.volume_file())
-        try:
-            # every ink of the table may take a share anywhere in a continuous mixture: the job loads them all
-            prof = printer_profile(printer)
-            if refusal := too_many_inks(list(src.inks.names), prof.max_materials, prof.name):
-                raise ValueError(refusal)
-            names = {n: printer_profile(printer).material(n) for n in src.inks.names}
-            names = {k: v for k, v in names.items() if v} | (materials or {})
-            digest = file_digest(d.volume_path)
-            man = write_3mf_mixture(
-                src, out, materials=names, palette=palette, source=d.volume_path.name, digest=digest
-            )
-        finally:
-            src.close()
-    used = ", ".join(f"{m['ink']} = {m['material']}" for m in man["materials"] if m["voxel_count"] > 0)
-    print(
-        f"{man['layer_count']} sheets of {man['image_size']['width']} x {man['image_size']['height']} voxels "
-        f"({' x '.join(f'{v * 1000:.1f}' for v in man['voxel_mm'])} um), {man['image_stacks']} image stacks, "
-        f"{man['mesh_triangles']} outline triangles; {'labels' if args.labels else 'mixture'} of {used}"
-    )
-    print(f"wrote {out}")
-    return 0
 
 
 def load_palette(text: str | None) -> dict | None:
@@ -88,60 +48,49 @@ def load_palette(text: str | None) -> dict | None:
         raw = path.read_text() if path.is_file() else text
         pal = json.loads(raw)
     except (OSError, ValueError) as exc:
-        raise ValueError(f"--palette is neither a JSON object nor a readable JSON file ({exc})") from None
+        raise ParameterError(f"`palette` is neither a JSON object nor a readable JSON file ({exc})") from None
     if not isinstance(pal, dict):
-        raise ValueError("--palette must be a JSON object {ink name: colour}")
+        raise ParameterError("`palette` must be a JSON object {ink name: colour}")
     return pal
 
 
-def _export_cmd(args) -> int:
-    if args.format not in FORMATS:
-        raise ValueError(f"unknown export format '{args.format}'; use one of {list(FORMATS)}")
-    if args.labels and args.format != "3mf":
-        raise ValueError("--labels goes with --format 3mf (slices and GCVF packages always hold the labels)")
-    printer = str(args.printer or DEFAULT_PRINTER[args.format]).strip().lower()
-    prof = printer_profile(printer)
-    palette = load_palette(args.palette)
-    materials = parse_materials(args.material)
-    d = RunDir(args.dir)
-    if args.format == "3mf":
-        return _export_3mf(args, d, printer, palette, materials)
+def _write_mixture(fmt: Format, d: RunDir, out: Path, make_job) -> dict:
+    """The run's continuous mixture (volume.npz, read one layer at a time) in ``fmt``; ``make_job(voxels,
+    provenance=...)`` gives the ``PrintJob``."""
+    with MixtureSource(d.volume_file()) as src:
+        job = make_job(MixtureVoxels(src), provenance=Provenance(d.volume_path.name, file_digest(d.volume_path)))
+        return fmt.write(job, out)
+
+
+def _write_labels(fmt: Format, d: RunDir, out: Path, make_job) -> dict:
+    """The run's quantized print (quantized.npz, checked to be current) in ``fmt``; warns when its grid is not
+    what the job's printer prints."""
     q = d.load_quantized()
     d.check_quantized_current()
-    if args.format == "gcvf":
-        out = Path(args.out) if args.out else d.gcvf_path
-        man = write_gcvf(
-            q.labels, q.voxel_mm, q.inks.names, out, printer=printer, palette=palette, materials=materials,
-            source=d.quantized_path.name, digest=file_digest(d.quantized_path),
-        )  # fmt: skip
-        layers_um = man["layer_thickness_nm"] / 1000
-    else:
-        out = Path(args.out) if args.out else d.slices_path
-        sources = {VOLUME_DIGEST: d.volume_digest(), QUANTIZED_DIGEST: d.quantized_digest()}
-        man = write_png_slices(
-            q.labels,
-            q.voxel_mm,
-            q.inks.names,
-            out,
-            palette=palette,
-            printer=printer,
-            materials=materials,
-            sources=sources,
-        )
-        layers_um = man["layer_thickness_um"]
-    mats = [m for m in man["materials"] if m["voxel_count"] > 0]
-    mismatch = resolution_mismatch(prof, q.voxel_mm)
-    if mismatch:
+    provenance = Provenance(d.quantized_path.name, file_digest(d.quantized_path), d.volume_digest())
+    job = make_job(LabelVoxels(q.labels, q.voxel_mm, q.inks.names), provenance=provenance)
+    summary = fmt.write(job, out)
+    if mismatch := resolution_mismatch(job.printer, q.voxel_mm):
         print(f"inkopt: warning: {mismatch}", file=sys.stderr)
-    used = ", ".join(
-        f"{m['ink']} {'#{:02X}{:02X}{:02X}'.format(*m['color'][:3])}" + (f" = {m['material']}" if m["material"] else "")
-        for m in mats
+    return summary
+
+
+def _export_cmd(args) -> int:
+    fmt = format_named(args.format)
+    if args.labels and not fmt.takes_mixture:
+        mixtures = " or ".join(f.name for f in FORMATS.values() if f.takes_mixture)
+        raise ParameterError(f"`labels` goes with `format` {mixtures} (the other formats always hold the labels)")
+    make_job = partial(
+        PrintJob,
+        printer=printer_profile(args.printer or fmt.default_printer),
+        palette=load_palette(args.palette),
+        materials=parse_materials(args.material) or {},
     )
-    print(
-        f"{man['layer_count']} slices of {man['image_size']['width']} x {man['image_size']['height']} px "
-        f"({man['dpi']['x']:.0f} x {man['dpi']['y']:.0f} DPI, {layers_um:.1f} um layers), "
-        f"{len(mats)} materials: {used}"
-    )
+    d = RunDir(args.dir)
+    mixture = fmt.takes_mixture and not args.labels
+    out = Path(args.out) if args.out else fmt.run_output(d, mixture)
+    summary = (_write_mixture if mixture else _write_labels)(fmt, d, out, make_job)
+    print(fmt.describe(summary))
     print(f"wrote {out}")
     return 0
 

@@ -1,5 +1,5 @@
 """``inkopt inspect PACKAGE``: a .gcvf, a PNG-slice folder or a .3mf read back and checked
-(``inkopt.printing.package``): layers, slice size, DPI and layer thickness, materials with voxel counts and the
+(``inkopt.printing.formats``): layers, slice size, DPI and layer thickness, materials with voxel counts and the
 bounding box, or one line naming the first disagreement between its parts (exit 2). ``--run DIR`` also refuses
 a package whose recorded source digest is not that of the run's current file; ``--preview OUT.png`` draws the
 top view and a few slices; ``--json`` prints the report as JSON.
@@ -11,7 +11,8 @@ import json
 from pathlib import Path
 
 from ..io import file_digest
-from ..printing.package import PackageError, inspect_package, preview
+from ..printing.formats import inspect_package
+from ..printing.formats.inspection import PackageError, preview
 from ..rundir import RunDir
 
 PREVIEW_SLICES = 4

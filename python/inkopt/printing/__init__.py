@@ -1,3 +1,4 @@
-"""Printing: one ink per printer voxel (``quantize``, with blue-noise dither arrays from ``dither``), printer
-input files (``export``: PNG slice stacks; ``gcvf``: GrabCAD Voxel Print packages) and printer profiles
-(``profiles``: material slots, resolutions, material names)."""
+"""Printing: one ink per printer voxel (``quantize``, with blue-noise dither arrays from ``dither``; ``stream``: a
+run's mixture quantized one layer at a time), printer output formats with their writers, checkers and registry
+(``formats``: PNG slice stacks, GrabCAD Voxel Print packages, volumetric 3MF) and printer profiles (``profiles``:
+material slots, resolutions, material names)."""

@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import ParameterError
 from ..units import dpi_of
 
 # inkopt ink name -> GrabCAD material name of the Stratasys material loaded for it (module docstring)
@@ -145,26 +146,15 @@ def material_name(profile: PrinterProfile | None, ink: str) -> str | None:
     return None if profile is None else profile.material(ink)
 
 
-def resolve_max_materials(max_materials) -> int | None:
-    """An int limit, a ``PRINTER_PROFILES`` key (its limit), or None (no limit)."""
-    if max_materials is None:
-        return None
-    if isinstance(max_materials, str):
-        return printer_profile(max_materials).max_materials
-    n = int(max_materials)
-    if n < 1:
-        raise ValueError(f"max_materials must be at least 1, got {max_materials}")
-    return n
-
-
-def too_many_inks(used: list[str], limit: int | None, printer: str | None = None) -> str | None:
-    """The one-line refusal when a job uses more inks than ``limit`` (None if it fits)."""
+def check_slots(used: list[str], limit: int | None, printer: str | None = None) -> None:
+    """A one-line ``ParameterError`` when a job uses more inks (``used``, their names) than ``limit`` materials
+    (None: no limit) of the printer named ``printer``."""
     if limit is None or len(used) <= limit:
-        return None
+        return
     who = printer or "the printer"
-    return (
+    raise ParameterError(
         f"the print uses {len(used)} inks ({', '.join(used)}) but {who} holds {limit} materials per job; "
-        f"use an ink set of at most {limit} inks or a printer with more material slots (--printer)"
+        f"use an ink set of at most {limit} inks or a printer with more material slots (`printer`)"
     )
 
 

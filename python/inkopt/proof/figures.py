@@ -9,7 +9,7 @@ from html import escape
 import numpy as np
 
 from ..evaluation.results import Evaluation, Measured, Report
-from ..printing.export import ink_colours
+from ..printing.formats.slices import ink_colours
 
 LABELS = {
     "target": "target",

@@ -1,5 +1,6 @@
-"""Tests of inkopt.printing.package: GCVF packages and slice folders written, read back (same labels, counts and
-box) and then broken one part at a time: each break is found and named in one line."""
+"""Tests of the formats' checkers (inkopt.printing.formats: inspect_package, the registry's format_of, and
+formats.inspection): GCVF packages and slice folders written, read back (same labels, counts and box) and then
+broken one part at a time: each break is found and named in one line."""
 
 import io
 import json
@@ -9,13 +10,18 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from inkopt.printing.export import write_png_slices
-from inkopt.printing.gcvf import write_gcvf
-from inkopt.printing.package import PackageError, PackageReport, inspect_package, preview
-from inkopt.printing.threemf import write_3mf_labels
+from inkopt.printing.formats import FORMATS, format_of, inspect_package
+from inkopt.printing.formats.inspection import PackageError, PackageReport, preview
+from inkopt.printing.formats.job import LabelVoxels, PrintJob, Provenance
+from inkopt.printing.profiles import printer_profile
 
 VP = np.array([25.4 / 600, 25.4 / 300, 0.027])
 INKS = ["cyan", "magenta", "yellow", "black", "white", "orange"]
+
+
+def job(labels, inks=INKS, **kw) -> PrintJob:
+    """A J750 label job."""
+    return PrintJob(LabelVoxels(labels, VP, inks), printer_profile("j750"), **kw)
 
 
 def labels(shape=(6, 10, 14), seed=0):
@@ -51,7 +57,7 @@ def png(arr) -> bytes:
 @pytest.fixture
 def package(tmp_path):
     lab = labels()
-    write_gcvf(lab, VP, INKS, tmp_path / "job.gcvf", digest="sha256:01", source="quantized.npz")
+    FORMATS["gcvf"].write(job(lab, provenance=Provenance("quantized.npz", "sha256:01")), tmp_path / "job.gcvf")
     return lab, tmp_path / "job.gcvf"
 
 
@@ -72,7 +78,7 @@ def test_gcvf_round_trip(package, tmp_path):
 
 def test_slices_round_trip(tmp_path):
     lab = labels()
-    write_png_slices(lab, VP, INKS, tmp_path / "s", printer="j750")
+    FORMATS["png-slices"].write(job(lab), tmp_path / "s")
     rep, scan = inspect_package(tmp_path / "s", labels=True)
     np.testing.assert_array_equal(scan.labels, lab)
     assert rep.kind == "png-slices" and rep.bounding_box == box_of(lab) and rep.source is None
@@ -142,8 +148,12 @@ def test_gcvf_foreign_colour_ktn_zbuffer_and_stl(package, tmp_path):
 
 def test_not_a_package(tmp_path):
     (tmp_path / "x.gcvf").write_text("no zip")
-    with pytest.raises(PackageError, match="is not a zip"):
+    with pytest.raises(PackageError, match=r"x.gcvf is no printer package inkopt reads \(png-slices, gcvf, 3mf\)$"):
         inspect_package(tmp_path / "x.gcvf")
+    with zipfile.ZipFile(tmp_path / "y.gcvf", "w") as zf:
+        zf.writestr("readme.txt", "no package")
+    with pytest.raises(PackageError, match="no printer package"):
+        inspect_package(tmp_path / "y.gcvf")
     with pytest.raises(PackageError, match="does not exist"):
         inspect_package(tmp_path / "none.gcvf")
 
@@ -154,6 +164,7 @@ def test_the_format_is_told_by_the_contents(tmp_path):
 
     labels = np.zeros((2, 3, 4), np.uint8)
     out = tmp_path / "a.3mf"
-    write_3mf_labels(labels, (25.4 / 600, 25.4 / 300, 0.027), ["white"], out)
+    FORMATS["3mf"].write(job(labels, ["white"]), out)
     shutil.copy(out, tmp_path / "renamed_3mf")
     assert inspect_package(tmp_path / "renamed_3mf")[0].kind == "3mf"
+    assert format_of(tmp_path / "renamed_3mf") is FORMATS["3mf"]

@@ -1,0 +1,24 @@
+"""Zip packages (GCVF, 3MF): telling one by a member it must hold, and the check before one is (re)written."""
+
+from __future__ import annotations
+
+import zipfile
+from pathlib import Path
+
+
+def zip_holds(path: Path, member: str) -> bool:
+    """Whether ``path`` is a readable zip holding ``member``."""
+    try:
+        with zipfile.ZipFile(path) as zf:
+            return member in zf.namelist()
+    except (OSError, zipfile.BadZipFile):
+        return False
+
+
+def check_target(path: Path, member: str, kind: str, suffix: str) -> None:
+    """One-line ValueError unless ``path`` may be written: not a folder, and if it exists a package of this
+    ``kind`` (a zip holding ``member``), which is replaced; any other file is refused, never overwritten."""
+    if path.is_dir():
+        raise ValueError(f"{path} is a folder; give a {suffix} file name")
+    if path.exists() and not zip_holds(path, member):
+        raise ValueError(f"{path} exists and is not a {kind}; refusing to replace it")
