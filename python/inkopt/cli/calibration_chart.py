@@ -8,6 +8,7 @@ from ..calibration.chart import design_chart
 from ..calibration.job import write_chart
 from ..model import InkTable
 from ..printing.profiles import check_slots, printer_profile
+from .common import add_inks_arg
 
 
 def _chart_cmd(args) -> int:
@@ -36,7 +37,7 @@ def register_cli(sub) -> None:
         description="Write DIR/chart.txt (CGATS.17, measurement columns empty), DIR/job/ (printable with "
         "inkopt quantize and export) and DIR/layout.png (each patch's SAMPLE_ID where it is printed).",
     )
-    p.add_argument("--inks", required=True, help="the inks to calibrate: a preset, comma list or ink file (with white)")
+    add_inks_arg(p, required=True)
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--printer", help="printer profile: refuse an ink set it cannot hold")
     p.add_argument("--patch-mm", type=float, default=10.0, help="patch edge in mm (default 10)")

@@ -143,18 +143,19 @@ def ray_from_args(args) -> str | None:
     return args.ray
 
 
-def add_inks_arg(p, hidden: bool = False) -> None:
-    """``--inks``: a preset, a comma list of ink names or an ink file (``model.InkTable.parse``); ``hidden``: taken
-    but not shown (a subcommand that refuses it in words of its own)."""
+def add_inks_arg(p, hidden: bool = False, required: bool = False) -> None:
+    """``--inks``: a preset, a comma list of ink names or an ink file (``model.InkTable.parse``), vero-cmykw unless
+    ``required``; ``hidden``: taken but not shown (a subcommand that refuses it in words of its own)."""
     import argparse
 
+    what = "ink set: a preset (vero-cmykw, vero-cmykw+orange, vero-cmykwt), a comma list of ink names, or a JSON/TOML "
     p.add_argument(
         "--inks",
-        default=None if hidden else "vero-cmykw",
+        default=None if hidden or required else "vero-cmykw",
+        required=required,
         help=argparse.SUPPRESS
         if hidden
-        else "ink set: a preset (vero-cmykw, vero-cmykw+orange, vero-cmykwt), a comma list of ink names, "
-        "or a JSON/TOML file of inks (default vero-cmykw)",
+        else what + ("file of inks" if required else "file of inks (default vero-cmykw)"),
     )
 
 

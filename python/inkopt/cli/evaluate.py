@@ -15,7 +15,7 @@ from ..evaluation.noise import MAX_SPP, PILOT_SPP, TARGET_NOISE_DE76
 from ..evaluation.options import EvaluateOptions
 from ..evaluation.outputs import table_lines
 from ..evaluation.sample import AUTO_SAMPLE_TEXELS, DEFAULT_SAMPLE_TEXELS, DEFAULT_SAMPLE_WINDOWS
-from .common import add_lighting_args, lighting_from_args
+from .common import add_lighting_args, add_seed_arg, add_threads_arg, lighting_from_args
 
 #: the options of ``inkopt evaluate`` after DIR, in the order of its help: (flag, add_argument keywords)
 OPTIONS = (
@@ -73,9 +73,7 @@ OPTIONS = (
             f"(default {DEFAULT_SAMPLE_WINDOWS})",
         ),
     ),
-    ("--seed", dict(type=int, default=0, help="render seed (default 0)")),
     ("--method", dict(help="quantization method (default: that of DIR/quantized.npz, else blue-noise)")),
-    ("--threads", dict(type=int, help="render threads (default: all cores)")),
     (
         "--patch-mm",
         dict(
@@ -158,5 +156,7 @@ def register_cli(sub) -> None:
     p.add_argument("dir", help="run directory holding volume.npz and scene.npz")
     for flag, kw in OPTIONS:
         p.add_argument(flag, **kw)
+    add_seed_arg(p, "render seed")
+    add_threads_arg(p, "render threads")
     add_lighting_args(p, "evaluate")
     p.set_defaults(func=_evaluate_cmd)

@@ -11,6 +11,7 @@ from ..printing.grid import DEFAULT_LAYER_UM, UPSAMPLERS
 from ..printing.stream import quantize_run
 from ..rundir import RunDir
 from ..units import parse_dpi
+from .common import add_seed_arg
 
 
 def quantization_of(args) -> Quantization:
@@ -40,9 +41,7 @@ def register_cli(sub) -> None:
     p.add_argument("--method", default=default.method, help=", ".join(methods[:-1]) + " or " + methods[-1])
     p.add_argument("--dpi", help="printer resolution XxY or XxYxZ dots per inch (default 600x300)")
     p.add_argument("--layer-um", type=float, help=f"layer thickness in um (default {DEFAULT_LAYER_UM:g})")
-    p.add_argument(
-        "--seed", type=int, default=default.seed, help=f"random draws / blue-noise tile offset (default {default.seed})"
-    )
+    add_seed_arg(p, "random draws / blue-noise tile offset")
     upsample = [name + " (default)" if name == default.upsample else name for name in UPSAMPLERS]
     p.add_argument("--upsample", default=default.upsample, help=" or ".join(upsample) + " mixture upsampling")
     p.set_defaults(func=_quantize_cmd)

@@ -237,28 +237,34 @@ def add_single_run_args(p) -> None:
     )
 
 
+#: the ``OptimizeConfig`` fields whose option has the field's name (``--forward-spp`` -> ``forward_spp``)
+CONFIG_OPTIONS = (
+    "iterations",
+    "spp",
+    "forward_spp",
+    "lr",
+    "optimizer",
+    "param",
+    "init",
+    "seed",
+    "checkpoint_every",
+    "smooth",
+    "finish_smooth",
+    "smooth_edge",
+    "decay",
+    "adjoint_ema",
+)
+
+
 def config_from_args(args):
     """The ``OptimizeConfig`` of the parsed options (checked)."""
     from ..optim import OptimizeConfig
     from ..units import parse_duration
 
     cfg = OptimizeConfig(
-        iterations=args.iterations,
-        spp=args.spp,
-        forward_spp=args.forward_spp,
+        **{name: getattr(args, name) for name in CONFIG_OPTIONS},
         gamma=parse_gamma(args.gamma),
-        lr=args.lr,
-        optimizer=args.optimizer,
-        param=args.param,
-        init=args.init,
-        seed=args.seed,
         grad_method=args.gradient,
-        checkpoint_every=args.checkpoint_every,
-        smooth=args.smooth,
-        finish_smooth=args.finish_smooth,
-        smooth_edge=args.smooth_edge,
-        decay=args.decay,
-        adjoint_ema=args.adjoint_ema,
         # select-inks compares its candidates at equal iterations: no stopping when done there
         stop_gain=getattr(args, "stop_gain", 0.0),
         time_budget=parse_duration(args.time_budget) if getattr(args, "time_budget", None) else None,
