@@ -138,7 +138,8 @@ def _mesh(rec, keys, rgb8, heat8, legend, scale):
     if info is None or not Path(info.mesh_path).is_file():
         where = "unknown" if info is None else info.mesh_path
         raise ValueError(f"the report draws the mesh the run was made from, and {where} does not exist")
-    mesh = load_mesh(info.mesh_path, scale=info.mesh_scale, up=info.up)
+    # the geometry only (the colours are the run's): a mesh coloured by a replacement texture or a constant is drawn too
+    mesh = load_mesh(info.mesh_path, scale=info.mesh_scale, up=info.up, constant_color=True)
     atlas = mesh_atlas(
         mesh.solid_vertices, mesh.solid_faces, info.texel_closest_mm, rec.texels.normal, float(info.voxel_mm[0])
     )
