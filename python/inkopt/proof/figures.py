@@ -217,7 +217,9 @@ def _object_items(scene: dict) -> list[tuple[str, str]]:
 
 
 def describe_lighting(d: dict) -> str:
-    """A line (text) for ``Lighting.describe()``'s fields."""
+    """A line (text) for ``Lighting.describe()``'s fields (an edited file's other value: as it is)."""
+    if not isinstance(d, dict):
+        return str(d)
     src = d.get("lighting", "uniform")
     if src == "uniform":
         return "uniform white light from every direction"

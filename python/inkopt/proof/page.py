@@ -178,7 +178,9 @@ def content_security_policy(script_hashes, style_hashes) -> str:
     )
 
 
-def page_html(title: str, subtitle: Markup, data: dict, view: Markup, sections: list[tuple[str, Markup]], mesh: bool):
+def page_html(
+    title: str, subtitle: Markup, data: dict, view: Markup, sections: list[tuple[str, Markup]], mesh: bool
+) -> Markup:
     """The whole page (``Markup``): ``data`` (pictures and geometry for the scripts) as JSON, the view section,
     then the (heading, HTML) sections."""
     s = scripts(data, mesh)
