@@ -1,15 +1,24 @@
 """Fixtures of the soft-proof tests: a small evaluated mesh run (a two-coloured ball) and a small evaluated slab
-run, each made once per test session through the command line, with their pages."""
+run, each made once per test session through the command line, with their pages; the same with script planted in
+every user string the command line takes (``hostile_*_run``: payloads.py), and then in every field of their files
+(``planted_runs``)."""
+
+import itertools
+import json
+import shutil
 
 import numpy as np
 import pytest
 import trimesh
+from PIL import Image
+from proof.payloads import FILE_PAYLOADS, PAYLOADS
 
 from inkopt import charts, cli
 from inkopt.evaluation.colour_table import colour_table
 from inkopt.evaluation.evaluate import evaluate_run
 from inkopt.evaluation.options import EvaluateOptions
 from inkopt.model import InkTable
+from inkopt.rundir import RunDir
 
 INKS = "cyan,magenta,white"  # three inks: the baselines' colour table is small
 
@@ -67,3 +76,118 @@ def slab_run(tmp_path_factory):
     _run("evaluate", run, "--spp", 8, "--no-baselines")
     _run("report", run)
     return run
+
+
+def _hostile_inputs(root):
+    """An ink file whose inks cyan, magenta and yellow are named by payloads (white is white) and an
+    environment map (uniform radiance 1) whose file name is one."""
+    inks = [("cyan", PAYLOADS[0]), ("magenta", PAYLOADS[1]), ("yellow", PAYLOADS[2]), ("white", "white")]
+    lib = InkTable.parse("cyan,magenta,yellow,white")
+    table = {
+        "inks": [{"name": n, "mu_t": list(lib.mu_t[i]), "albedo": list(lib.albedo[i])} for i, (_, n) in enumerate(inks)]
+    }
+    ink_file = root / "hostile inks.json"
+    ink_file.write_text(json.dumps(table))
+    light = root / f"{FILE_PAYLOADS[1]}.npy"
+    np.save(light, np.ones((8, 16, 3), np.float32))
+    return ink_file, light
+
+
+@pytest.fixture(scope="session")
+def hostile_slab_run(tmp_path_factory):
+    """slab_run's slab with payloads in its ink names, lighting file name, picture file name and run directory
+    name; evaluated (no baselines) and reported."""
+    root = tmp_path_factory.mktemp("hostileslab")
+    ink_file, light = _hostile_inputs(root)
+    chart = charts.save(charts.colour_chart(48, 32), root / f"{FILE_PAYLOADS[0]}.png")
+    run = root / f"run{FILE_PAYLOADS[1]}"
+    common = ["--inks", ink_file, "--lighting", light]
+    _run(
+        "slab", chart, "--size-mm", "2x1.333x0.5", "--out", run, "--iterations", 2, "--spp", 2, "--eval-spp", 4, *common
+    )
+    _run("evaluate", run, "--spp", 4, "--no-baselines", "--lighting", light)
+    _run("report", run)
+    return run
+
+
+@pytest.fixture(scope="session")
+def hostile_mesh_run(tmp_path_factory):
+    """A 2 mm ball (an OBJ with uv coordinates) with payloads in its file name, its texture's file name, its ink
+    names, lighting file name and run directory name; evaluated (no baselines) and reported."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("INKOPT_CACHE_DIR", str(tmp_path_factory.mktemp("cache")))
+        mp.setattr("inkopt.scenes.mesh.scene.VIEW_SIZE", 64)
+        root = tmp_path_factory.mktemp("hostilemesh")
+        ink_file, light = _hostile_inputs(root)
+        mesh = root / f"{FILE_PAYLOADS[0]}.obj"
+        _write_uv_ball(mesh)
+        texture = root / f"{FILE_PAYLOADS[2]}.png"
+        half = np.zeros((16, 32, 3), np.uint8)
+        Image.fromarray(np.concatenate([half + [0, 200, 230], half + [230, 0, 160]]).astype(np.uint8)).save(texture)
+        run = root / f"run{FILE_PAYLOADS[2]}"
+        args = ["--scale", 1, "--up", "z", "--texture", texture, "--out", run, "--iterations", 2, "--spp", 2]
+        _run("optimize", mesh, *args, "--eval-spp", 4, "--inks", ink_file, "--lighting", light)
+        _run("evaluate", run, "--spp", 4, "--no-baselines", "--lighting", light)
+        _run("report", run)
+    return run
+
+
+def _write_uv_ball(path):
+    """A unit icosphere as an OBJ with spherical uv coordinates (v = 1 at the top)."""
+    sph = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
+    v = sph.vertices
+    uv = np.stack(
+        [0.5 + np.arctan2(v[:, 1], v[:, 0]) / (2 * np.pi), 0.5 + np.arcsin(np.clip(v[:, 2], -1, 1)) / np.pi], 1
+    )
+    lines = [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in v] + [f"vt {a:.6f} {b:.6f}" for a, b in uv]
+    lines += [f"f {a}/{a} {b}/{b} {c}/{c}" for a, b, c in sph.faces + 1]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _planted(value, payloads):
+    """``value`` (a JSON value) with every leaf replaced by the next of ``payloads`` (an endless iterator)."""
+    if isinstance(value, dict):
+        return {k: v if k == "format_version" else _planted(v, payloads) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_planted(v, payloads) for v in value]
+    return next(payloads)
+
+
+def plant_fields(src, dst, source: bool):
+    """A copy ``dst`` of run directory ``src`` with a payload in every field of its files that the page reads:
+    every value of report.json and evaluation.json (a baseline named by a payload added), a result named by a
+    payload and the lighting in predictions.npz (and its ``source``, which then hides the evaluation, when
+    ``source``), a slab's face names in scene.npz. Returns ``dst``."""
+    shutil.copytree(src, dst)
+    d = RunDir(dst)
+    loop = itertools.cycle(PAYLOADS)
+    report = json.loads(d.report_path.read_text())
+    d.report_path.write_text(json.dumps(_planted(report, loop)))
+    ev = json.loads(d.evaluation_path.read_text())
+    ev["baselines"] = {FILE_PAYLOADS[0]: ev["quantized"]}
+    d.evaluation_path.write_text(json.dumps(_planted(ev, loop)))
+    pred = d.load_predictions()
+    pred.rgb[FILE_PAYLOADS[2]] = pred.rgb["continuous"]
+    pred.spp[FILE_PAYLOADS[2]] = 1
+    pred.lighting = {"lighting": PAYLOADS[1], "lighting_rotate_deg": PAYLOADS[2]}
+    if source:
+        pred.source = PAYLOADS[3]
+    d.save_predictions(pred)
+    rec = d.load_scene()
+    if rec.kind == "slab":
+        rec.faces = [FILE_PAYLOADS[1] if f == "top" else f for f in rec.faces]
+        rec.pix = {FILE_PAYLOADS[1] if f == "top" else f: p for f, p in rec.pix.items()}
+        d.save_scene(rec)
+    assert cli.main(["report", str(dst)]) == 0
+    return dst
+
+
+@pytest.fixture(scope="session")
+def planted_runs(hostile_slab_run, hostile_mesh_run, tmp_path_factory):
+    """The hostile runs with a payload in every field of their files (``plant_fields``): the slab's
+    predictions.npz keeps its source (the page shows the evaluation), the mesh's does not."""
+    root = tmp_path_factory.mktemp("planted")
+    return {
+        "slab": plant_fields(hostile_slab_run, root / "slab", source=False),
+        "mesh": plant_fields(hostile_mesh_run, root / "mesh", source=True),
+    }

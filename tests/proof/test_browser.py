@@ -9,6 +9,7 @@ import shutil
 import numpy as np
 import pytest
 from PIL import Image
+from proof.payloads import FILE_PAYLOADS
 
 BROWSER = os.environ.get("INKOPT_CHROMIUM") or next(
     (p for n in ("chromium", "chromium-browser", "google-chrome") if (p := shutil.which(n))), None
@@ -35,16 +36,30 @@ def browser():
         b.close()
 
 
+# every Content-Security-Policy violation (a script, style, image or connection the page's policy refused)
+WATCH_CSP = """window.__csp = [];
+document.addEventListener('securitypolicyviolation', (e) =>
+  window.__csp.push(e.violatedDirective + ' ' + (e.blockedURI || '').slice(0, 40) + ' ' + (e.sample || '')));"""
+
+
 def _open(browser, path, hash_=""):
-    """A page opened offline, and the list its console errors and uncaught exceptions go to."""
+    """A page opened offline, and the list its console errors, uncaught exceptions, failed requests and dialogs
+    (alert, confirm, ...: dismissed) go to; ``_problems`` adds the policy's violations."""
     ctx = browser.new_context(offline=True, viewport={"width": 900, "height": 700})
     page = ctx.new_page()
     errors = []
     page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
     page.on("pageerror", lambda e: errors.append(str(e)))
     page.on("requestfailed", lambda r: errors.append(f"request failed: {r.url[:60]}"))
+    page.on("dialog", lambda d: (errors.append(f"dialog {d.type}: {d.message}"), d.dismiss()))
+    page.add_init_script(WATCH_CSP)
     page.goto(path.as_uri() + hash_)
     return page, errors
+
+
+def _problems(page, errors) -> list[str]:
+    """The console errors, failed requests and dialogs so far, and the policy's violations."""
+    return errors + [f"CSP violation: {v}" for v in page.evaluate("window.__csp")]
 
 
 def _pixels(page, selector) -> np.ndarray:
@@ -65,6 +80,7 @@ def test_mesh_page_draws_and_switches(browser, mesh_run):
     page.wait_for_selector("#view3d[data-ready='1']", timeout=20000)
     _settle(page)
     assert page.evaluate("document.body.classList.contains('full3d')")
+    assert page.locator("#stage3d .needs").is_hidden()  # the note shown where the view does not start
     box = page.locator("#stage3d").bounding_box()
     assert box["width"] >= 880 and box["height"] >= 500  # most of the 900 x 700 window
     a = _pixels(page, "#stage3d")
@@ -80,7 +96,7 @@ def test_mesh_page_draws_and_switches(browser, mesh_run):
     h = _pixels(page, "#stage3d")
     assert page.evaluate("document.body.dataset.view") == "heat:surface"
     assert np.abs(h - t)[drawn].mean() > 5 and np.abs(a - t)[drawn].mean() > 1
-    assert not errors, errors
+    assert not _problems(page, errors), _problems(page, errors)
 
 
 def test_pages_show_the_runs_figures(browser, mesh_run, slab_run):
@@ -93,7 +109,7 @@ def test_pages_show_the_runs_figures(browser, mesh_run, slab_run):
         _settle(page)
         text = page.inner_text("table.figures")
         assert f"{ev['continuous']['delta_e76_mean']:.2f}" in text and f"{ev['quantized']['ssim']:.3f}" in text
-        assert not errors, errors
+        assert not _problems(page, errors), _problems(page, errors)
 
 
 def test_slab_page_swipes(browser, slab_run):
@@ -111,4 +127,68 @@ def test_slab_page_swipes(browser, slab_run):
     c = _pixels(page, "#face-top .swipe")
     assert face.get_attribute("data-view") == "heat:target|quantized"
     assert np.abs(a - b).mean() > 0.5 and np.abs(b - c).mean() > 5
-    assert not errors, errors
+    assert not _problems(page, errors), _problems(page, errors)
+
+
+def _hostile_run(which, request):
+    if which.startswith("planted-"):
+        return request.getfixturevalue("planted_runs")[which.split("-")[1]]
+    return request.getfixturevalue(which)
+
+
+@pytest.mark.parametrize("which", ["hostile_slab_run", "hostile_mesh_run", "planted-slab", "planted-mesh"])
+def test_planted_script_does_not_run(browser, which, request):
+    """The pages of test_hostile.py in Chromium: no dialog opens, no element a payload would make exists, the
+    policy refuses nothing (nothing tried to run) and the view works: the 3D view draws and shows the result named
+    by a payload, the slab's pictures load."""
+    run = _hostile_run(which, request)
+    page, errors = _open(browser, run / "report.html")
+    _settle(page)
+    if page.locator("#view3d").count():
+        page.wait_for_selector("#view3d[data-ready='1']", timeout=20000)
+        drawn = np.any(np.abs(_pixels(page, "#stage3d") - 255) > 8, axis=2)
+        assert drawn.mean() > 0.01, drawn.mean()
+        if which.startswith("planted"):
+            page.select_option("#pick3d", FILE_PAYLOADS[2])
+            page.select_option("#other3d", "")
+            _settle(page)
+            assert page.evaluate("document.body.dataset.view") == FILE_PAYLOADS[2]
+    else:
+        assert page.evaluate("[...document.images].every(i => i.complete && i.naturalWidth > 0)")
+        face = page.locator(".face").first
+        assert face.get_attribute("data-view") == "target|quantized"
+        assert face.evaluate("e => e.style.getPropertyValue('--w')") == "384px"  # 24 texels x 16
+    page.wait_for_timeout(300)  # events of elements a payload made (load, error, toggle) have fired
+    assert page.evaluate("document.querySelectorAll('[pwn], pwn').length") == 0
+    assert not _problems(page, errors), _problems(page, errors)
+
+
+def test_policy_refuses_script_that_got_in(browser, slab_run, tmp_path):
+    """The policy is the second line: markup inserted into a written page (an inline script, an event handler, a
+    data: script, a style attribute) does not run, and the browser reports each as a violation."""
+    text = (slab_run / "report.html").read_text()
+    planted = (
+        "<script>alert(1)</script><img src=x onerror=alert(2)><script src='data:text/javascript,alert(3)'></script>"
+        "<p id=styled style='color:red'>x</p>"
+    )
+    path = tmp_path / "report.html"
+    path.write_text(text.replace("</body>", planted + "</body>"))
+    page, errors = _open(browser, path)
+    _settle(page)
+    assert not [e for e in errors if e.startswith("dialog")]
+    seen = " ".join(page.evaluate("window.__csp"))
+    assert all(d in seen for d in ("script-src-elem", "script-src-attr", "style-src-attr")), seen
+    assert page.evaluate("getComputedStyle(document.getElementById('styled')).color") != "rgb(255, 0, 0)"
+
+
+def test_view_that_cannot_start_says_so(browser, mesh_run, tmp_path):
+    """Where the browser does not run the view (here: the vendored modules altered, so that their integrity and
+    the policy refuse them), the stage says what the view needs after a few seconds."""
+    text = (mesh_run / "report.html").read_text()
+    path = tmp_path / "report.html"
+    path.write_text(
+        text.replace('"three":"data:text/javascript;base64,', '"three":"data:text/javascript;base64,Ly8K', 1)
+    )
+    page, errors = _open(browser, path)
+    page.wait_for_selector("#stage3d .needs", state="visible", timeout=10000)
+    assert not page.evaluate("document.getElementById('view3d').dataset.ready")

@@ -23,6 +23,7 @@ from ..model.mixturefile import MixtureSource
 from ..rundir import RunDir
 from .bake import encode, heat_legend, heat_rgb8, heat_scale, mesh_atlas, srgb8
 from .figures import LABELS, describe_lighting, figures_html, ink_shares, settings_html
+from .markup import html
 from .page import data_uri, mesh_section, page_html, slab_section
 
 ORDER = ("target", "continuous", "quantized", "surface", "extrusion")
@@ -89,29 +90,37 @@ def write_proof(run, out=None) -> Proof:
     sections = [("Figures", figures_html(report, ev))]
     if d.loss_picture_path.is_file():
         uri = data_uri(d.loss_picture_path.read_bytes(), "image/png")
-        sections.append(("Loss curve", f'<img alt="loss curve" src="{uri}" style="max-width:100%">'))
+        sections.append(("Loss curve", html('<img class="loss" alt="loss curve" src="{}">', uri)))
     quant = ev.quantization if ev is not None else None
     counts = load_npz(d.quantized_path, "quantized volume")["label_counts"] if d.has_quantized() else None
     sections.append(("Inks", ink_shares(list(report.inks), counts, mixture_mean(d.volume_file()))))
     sections.append(("Printer, settings and time", settings_html(report, ev, quant)))
-    sections.append(("Files", _files(d, pred)))
+    sections.append(("Files", _files(pred)))
 
-    what = f"mesh, {report.scene.get('height_mm', 0):.1f} mm high" if rec.kind == "mesh" else "slab"
-    shown = ", ".join(LABELS[k] for k in keys if k in LABELS)
-    light = describe_lighting(pred.lighting)
-    subtitle = f"{what}; inks {', '.join(report.inks)}; shown: {shown}; predicted under {light}. " + (
-        "" if ev is not None else "Not evaluated yet: run <code>inkopt evaluate</code> for the printed result."
-    )
-    html = page_html(f"inkopt soft proof: {d.path.resolve().name}", subtitle, data, view, sections, atlas is not None)
+    subtitle = _subtitle(report, rec.kind, keys, describe_lighting(pred.lighting), ev is not None)
+    page = page_html(f"inkopt soft proof: {d.path.resolve().name}", subtitle, data, view, sections, atlas is not None)
     path = Path(out) if out is not None else d.proof_path
-    atomic_write_bytes(path, html.encode())
+    atomic_write_bytes(path, page.encode())
     return Proof(
         str(path),
-        len(html.encode()),
+        len(page.encode()),
         keys,
         0 if atlas is None else atlas.size,
         bool(atlas is not None and atlas.downsampled),
         time.perf_counter() - t0,
+    )
+
+
+def _subtitle(report: Report, kind: str, keys: list[str], light: str, evaluated: bool):
+    """What the page shows, in a line: the object, the inks, the results and the lighting."""
+    what = html("mesh, {:.1f} mm high", report.scene.get("height_mm", 0)) if kind == "mesh" else "slab"
+    return html(
+        "{}; inks {}; shown: {}; predicted under {}. {}",
+        what,
+        ", ".join(str(n) for n in report.inks),
+        ", ".join(LABELS[k] for k in keys if k in LABELS),
+        light,
+        "" if evaluated else html("Not evaluated yet: run <code>inkopt evaluate</code> for the printed result."),
     )
 
 
@@ -138,7 +147,8 @@ def _mesh(rec, keys, rgb8, heat8, legend, scale):
     if info is None or not Path(info.mesh_path).is_file():
         where = "unknown" if info is None else info.mesh_path
         raise ValueError(f"the report draws the mesh the run was made from, and {where} does not exist")
-    mesh = load_mesh(info.mesh_path, scale=info.mesh_scale, up=info.up)
+    # the geometry only (the colours are the run's): a mesh coloured by a replacement texture or a constant is drawn too
+    mesh = load_mesh(info.mesh_path, scale=info.mesh_scale, up=info.up, constant_color=True)
     atlas = mesh_atlas(
         mesh.solid_vertices, mesh.solid_faces, info.texel_closest_mm, rec.texels.normal, float(info.voxel_mm[0])
     )
@@ -182,14 +192,13 @@ def _slab(rec, keys, rgb8, heat8, legend, scale):
     if not faces:
         raise ValueError("the slab's scene has no face pictures (scene.npz lacks pix_<face>)")
     zoom = max(1, SLAB_WIDTH_PX // max(f["width"] for f in faces))
-    return slab_section(faces, keys, legend, scale, zoom), {"faces": faces}
+    return slab_section(faces, keys, legend, scale), {"faces": faces, "zoom": zoom}
 
 
-def _files(d: RunDir, pred) -> str:
-    rows = [f"<li>volume.npz: <code>{pred.volume_digest}</code></li>"]
-    rows.append(
-        f"<li>predictions.npz from the {pred.source}, "
-        + ", ".join(f"{k}: {v} spp" for k, v in pred.spp.items())
-        + "</li>"
+def _files(pred):
+    return html(
+        "<ul><li>volume.npz: <code>{}</code></li><li>predictions.npz from the {}, {}</li></ul>",
+        pred.volume_digest,
+        pred.source,
+        ", ".join(f"{k}: {v} spp" for k, v in pred.spp.items()),
     )
-    return f"<ul>{''.join(rows)}</ul>"

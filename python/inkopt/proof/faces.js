@@ -1,9 +1,11 @@
 // The soft-proof page's slab faces: for every textured face, two results stacked with a swipe line between them
-// (the left one shown left of the line), and the ΔE76 heat maps.
+// (the left one shown left of the line), and the ΔE76 heat maps. Each face is shown `zoom` times its texel
+// picture's width (set here: the page's policy allows no style attributes).
 (function () {
   const D = JSON.parse(document.getElementById('inkopt-data').textContent);
   for (const face of (D.slab ? D.slab.faces : [])) {
     const root = document.getElementById('face-' + face.name);
+    root.style.setProperty('--w', face.width * D.slab.zoom + 'px');
     const [a, b] = root.querySelectorAll('img.layer');
     const [pa, pb] = root.querySelectorAll('select');
     const heat = root.querySelector('input[type=checkbox]');

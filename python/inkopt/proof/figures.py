@@ -1,15 +1,17 @@
 """The soft-proof page's tables, as HTML: the figures of every result with their noise, the inks and their
 shares, the printer and layer settings, the times and the display lighting. Every value comes from the run's own
-files (report.json, evaluation.json, quantized.npz, volume.npz)."""
+files (report.json, evaluation.json, quantized.npz, volume.npz), which anyone may have edited: all markup is made
+by ``markup.html``, which escapes them."""
 
 from __future__ import annotations
 
-from html import escape
+from pathlib import PurePath
 
 import numpy as np
 
 from ..evaluation.results import Evaluation, Measured, Report
 from ..printing.formats.slices import ink_colours
+from .markup import Markup, html, join
 
 LABELS = {
     "target": "target",
@@ -21,26 +23,34 @@ LABELS = {
 
 
 def _num(v, fmt: str = ".2f") -> str:
-    return "–" if v is None or (isinstance(v, float) and not np.isfinite(v)) else format(v, fmt)
+    """``v`` formatted, "–" for None or a non-finite float, and a value that does not take ``fmt`` (a string in
+    an edited file) as text."""
+    if v is None or (isinstance(v, float) and not np.isfinite(v)):
+        return "–"
+    try:
+        return format(v, fmt)
+    except (TypeError, ValueError):
+        return str(v)
 
 
-def _table(head: list[str], rows: list[list[str]], cls: str) -> str:
-    th = "".join(f"<th>{escape(h)}</th>" for h in head)
-    body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in r) + "</tr>" for r in rows)
-    return f'<table class="{cls}"><thead><tr>{th}</tr></thead><tbody>{body}</tbody></table>'
+def _table(head: list[str], rows: list[list], cls: str) -> Markup:
+    """A table of text or ``Markup`` cells."""
+    th = join(html("<th>{}</th>", h) for h in head)
+    body = join(html("<tr>{}</tr>", join(html("<td>{}</td>", c) for c in r)) for r in rows)
+    return html('<table class="{}"><thead><tr>{}</tr></thead><tbody>{}</tbody></table>', cls, th, body)
 
 
-def _metric_row(name: str, m, spp) -> list[str]:
+def _metric_row(name: str, m, spp) -> list:
     return [
-        escape(LABELS.get(name, name)),
-        f'<span class="fig" data-fig="{name}-de76">{_num(m.delta_e76_mean)}</span>',
+        LABELS.get(name, name),
+        html('<span class="fig" data-fig="{}-de76">{}</span>', name, _num(m.delta_e76_mean)),
         _num(m.delta_e76_mean_corrected),
         _num(m.delta_e76_noise),
         _num(m.delta_e76_p95),
         _num(m.delta_e2000_mean),
         _num(m.ssim, ".3f"),
         _num(m.mottle_l2),
-        str(spp),
+        spp,
     ]
 
 
@@ -57,37 +67,49 @@ FIGURE_HEAD = [
 ]
 
 
-def figures_html(report: Report, ev: Evaluation | None) -> str:
+def figures_html(report: Report, ev: Evaluation | None) -> Markup:
     """The figures table: from evaluation.json when the run was evaluated, else the optimisation's own."""
     if ev is not None:
         rows = [_metric_row(k, m.metrics, m.spp) for k, m in _evaluated(ev)]
         note = (
-            f"<code>inkopt evaluate</code>: {ev.texels} texels; samples chosen so that the Monte Carlo noise adds at "
-            f"most {ev.noise_target_delta_e76:g} to the mean ΔE76 (at most {ev.spp_max} spp)"
+            html(
+                "<code>inkopt evaluate</code>: {} texels; samples chosen so that the Monte Carlo noise adds at most "
+                "{} to the mean ΔE76 (at most {} spp)",
+                ev.texels,
+                _num(ev.noise_target_delta_e76, "g"),
+                ev.spp_max,
+            )
             if ev.spp_adaptive
-            else f"<code>inkopt evaluate --spp {ev.spp}</code>: {ev.texels} texels"
+            else html("<code>inkopt evaluate --spp {}</code>: {} texels", ev.spp, ev.texels)
         )
         if ev.gamut_floor_delta_e76 is not None:
-            note += f"; gamut floor (nearest colour the inks reach): mean ΔE76 {ev.gamut_floor_delta_e76:.2f}"
+            note = html(
+                "{}; gamut floor (nearest colour the inks reach): mean ΔE76 {}", note, _num(ev.gamut_floor_delta_e76)
+            )
     else:
         rows = [_metric_row("continuous", report.metrics, report.eval_spp)]
-        note = (
+        note = html(
             "the optimisation's final render; run <code>inkopt evaluate</code> for the printed result and the baselines"
         )
     m = report.metrics
-    extra = (
-        f"Start (all-white or the chosen initialisation): mean ΔE76 {_num(report.initial_delta_e76_mean)}, SSIM "
-        f"{_num(report.initial_ssim, '.3f')}. Mottle: high-frequency L* power on {m.flat_texels} texels where the "
-        f"target is flat (the target's own: {_num(m.mottle_l2_target)})."
+    return html(
+        '{table}<p class="note">{note}. Start (all-white or the chosen initialisation): mean ΔE76 {start}, SSIM '
+        "{ssim}. Mottle: high-frequency L* power on {flat} texels where the target is flat (the target's own: "
+        "{mottle}).</p>",
+        table=_table(FIGURE_HEAD, rows, "figures"),
+        note=note,
+        start=_num(report.initial_delta_e76_mean),
+        ssim=_num(report.initial_ssim, ".3f"),
+        flat=m.flat_texels,
+        mottle=_num(m.mottle_l2_target),
     )
-    return _table(FIGURE_HEAD, rows, "figures") + f'<p class="note">{note}. {extra}</p>'
 
 
 def _evaluated(ev: Evaluation) -> list[tuple[str, Measured]]:
     return [("continuous", ev.continuous), ("quantized", ev.quantized), *(ev.baselines or {}).items()]
 
 
-def ink_shares(names, label_counts=None, mixture_mean=None) -> str:
+def ink_shares(names, label_counts=None, mixture_mean=None) -> Markup:
     """The inks table: each ink's colour, its mean share in the optimised mixture (inside voxels) and its share
     of the printed voxels (from quantized.npz's label counts)."""
     colours = ink_colours(list(names))
@@ -97,64 +119,109 @@ def ink_shares(names, label_counts=None, mixture_mean=None) -> str:
         c = np.asarray(label_counts, np.float64)[: len(names)]
         printed = c / max(c.sum(), 1.0)
     for i, n in enumerate(names):
-        r, g, b = colours[i][:3]
-        rows.append(
-            [
-                f'<span class="swatch" style="background:rgb({r},{g},{b})"></span>{escape(n)}',
-                "–" if mixture_mean is None else f"{100 * mixture_mean[i]:.1f} %",
-                "–" if printed is None else f"{100 * printed[i]:.1f} %",
-            ]
-        )
+        rows.append([html("{}{}", _swatch(colours[i]), n), _percent(mixture_mean, i), _percent(printed, i)])
     return _table(["ink", "share, optimised", "share of printed voxels"], rows, "inks")
 
 
-def settings_html(report: Report, ev: Evaluation | None, quantization: dict | None) -> str:
+def _percent(shares, i: int) -> str:
+    """Share ``i`` of ``shares`` as a percentage; "–" without one (no array, or fewer inks than report.json)."""
+    return "–" if shares is None or i >= len(shares) else f"{100 * shares[i]:.1f} %"
+
+
+def _swatch(rgba) -> Markup:
+    """A colour square as SVG: its colour is a presentation attribute, not a style attribute, which the page's
+    policy refuses."""
+    r, g, b = (int(v) for v in rgba[:3])
+    return html(
+        '<svg class="swatch" viewBox="0 0 1 1" aria-hidden="true"><rect width="1" height="1" fill="rgb({},{},{})"/>'
+        "</svg>",
+        r,
+        g,
+        b,
+    )
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _scaled(v, factor: float):
+    """``factor * v`` for a number, else ``v`` as it is (a string in an edited file is shown as text)."""
+    return factor * v if _is_number(v) else v
+
+
+def _item(v, i: int):
+    """``v[i]`` of a list, else None."""
+    return v[i] if isinstance(v, list) and len(v) > i else None
+
+
+def settings_html(report: Report, ev: Evaluation | None, quantization: dict | None) -> Markup:
     """Printer, layer and run settings, times and the display lighting, as a definition list."""
-    items = []
-    scene = report.scene
-    if "height_mm" in scene:
-        items.append(("object", f"mesh {scene['height_mm']:.1f} mm high, {scene.get('texels', '?')} surface texels"))
-    elif "size_mm" in scene:
-        items.append(("object", "slab " + " x ".join(f"{v:g}" for v in scene["size_mm"]) + " mm"))
-    if "voxel_mm" in scene:
-        items.append(("optimisation grid", f"{1000 * scene['voxel_mm'][0]:.1f} µm voxels"))
-    if quantization:
-        dpi = quantization.get("dpi") or []
-        if len(dpi) == 3:
-            items.append(
-                (
-                    "printer resolution",
-                    f"{dpi[0]:g} x {dpi[1]:g} DPI, layers {25400 / dpi[2]:.1f} µm ({dpi[2]:g} DPI in z)",
-                )
-            )
-        items.append(
-            (
-                "halftoning",
-                f"{quantization.get('method')}, seed {quantization.get('seed')}, {quantization.get('upsample')}",
-            )
-        )
-    else:
-        items.append(("printer resolution", "not quantized yet (run <code>inkopt quantize</code>)"))
+    items = _object_items(report.scene) + _printer_items(quantization)
     items.append(
         (
             "optimisation",
-            f"{report.iterations} iterations, {report.optimizer} step {report.lr:g}, {report.spp} spp per gradient, "
-            f"init {escape(str(report.init))}, seed {report.seed}",
+            html(
+                "{} iterations, {} step {}, {} spp per gradient, init {}, seed {}",
+                report.iterations,
+                report.optimizer,
+                _num(report.lr, "g"),
+                report.spp,
+                report.init,
+                report.seed,
+            ),
         )
     )
-    t = f"{report.seconds:.0f} s in all ({report.seconds_per_iteration:.2f} s per iteration)"
+    t = html("{:.0f} s in all ({:.2f} s per iteration)", report.seconds, report.seconds_per_iteration)
     if ev is not None:
-        t += f"; evaluation {ev.seconds:.0f} s"
+        t = html("{}; evaluation {:.0f} s", t, ev.seconds)
     items.append(("time", t))
     light = ev.lighting if ev is not None else report.lighting
-    items.append(("display lighting", escape(describe_lighting(light))))
-    return "<dl>" + "".join(f"<dt>{escape(k)}</dt><dd>{v}</dd>" for k, v in items) + "</dl>"
+    items.append(("display lighting", describe_lighting(light)))
+    return html("<dl>{}</dl>", join(html("<dt>{}</dt><dd>{}</dd>", k, v) for k, v in items))
+
+
+def _printer_items(quantization: dict | None) -> list[tuple[str, str]]:
+    """The printer resolution and the halftoning (evaluation.json's quantization settings)."""
+    if not quantization:
+        return [("printer resolution", html("not quantized yet (run <code>inkopt quantize</code>)"))]
+    items = []
+    dpi = quantization.get("dpi") or []
+    if isinstance(dpi, list) and len(dpi) == 3:
+        layer = 25400 / dpi[2] if _is_number(dpi[2]) and dpi[2] else dpi[2]
+        resolution = html("{:g} x {:g} DPI, layers {:.1f} µm ({:g} DPI in z)", dpi[0], dpi[1], layer, dpi[2])
+        items.append(("printer resolution", resolution))
+    method, seed, upsample = (quantization.get(k) for k in ("method", "seed", "upsample"))
+    items.append(("halftoning", html("{}, seed {}, {}", method, seed, upsample)))
+    return items
+
+
+def _object_items(scene: dict) -> list[tuple[str, str]]:
+    """The object's size, the files its target came from and its optimisation grid (report.json's scene
+    entries)."""
+    items = []
+    if "height_mm" in scene:
+        items.append(
+            ("object", html("mesh {:.1f} mm high, {} surface texels", scene["height_mm"], scene.get("texels", "?")))
+        )
+    elif "size_mm" in scene:
+        size = scene["size_mm"] if isinstance(scene["size_mm"], list) else [scene["size_mm"]]
+        items.append(("object", html("slab {} mm", " x ".join(_num(v, "g") for v in size))))
+    if scene.get("mesh_path"):
+        items.append(("mesh file", PurePath(str(scene["mesh_path"])).name))
+    if scene.get("colour_source"):
+        items.append(("target colours", scene["colour_source"]))
+    if "voxel_mm" in scene:
+        items.append(("optimisation grid", html("{:.1f} µm voxels", _scaled(_item(scene["voxel_mm"], 0), 1000))))
+    return items
 
 
 def describe_lighting(d: dict) -> str:
-    """A line for ``Lighting.describe()``'s fields."""
+    """A line (text) for ``Lighting.describe()``'s fields (an edited file's other value: as it is)."""
+    if not isinstance(d, dict):
+        return str(d)
     src = d.get("lighting", "uniform")
     if src == "uniform":
         return "uniform white light from every direction"
     rot = d.get("lighting_rotate_deg", 0.0)
-    return f"environment map {src}" + (f", rotated {rot:g}°" if rot else "")
+    return f"environment map {src}" + (f", rotated {_num(rot, 'g')}°" if rot else "")
