@@ -42,6 +42,7 @@ from .render import (
     check_same_grid,
     fixed_to_float,
 )
+from .threads import check_threads
 
 #: The error of a ``ray`` address given without Ray installed (a ParameterError's template).
 RAY_INSTALL_HINT = "`ray` needs Ray: pip install 'inkopt[ray]' (or pip install 'ray[default]')"
@@ -116,6 +117,7 @@ class RayShards:
     def __init__(
         self, address: str = "auto", workers: int | None = None, threads: int | None = None, num_cpus: int | None = None
     ):
+        threads = check_threads(threads)  # before Ray starts
         ray, self._started = connect_ray(address, num_cpus)
         self._ray = ray
         nodes = [n for n in ray.nodes() if n.get("Alive") and n["Resources"].get("CPU", 0) >= 1]

@@ -1,5 +1,9 @@
 """Atomic file output: every file inkopt writes appears whole or not at all (temporary file in the same folder,
-then an atomic rename), so an interrupted run never leaves a half-written result behind."""
+then an atomic rename), so an interrupted run never leaves a half-written result behind.
+
+Around it: the temporary files' one naming scheme (``temporary_file``, ``is_temporary``; ``remove_temporaries``
+clears those a killed process left), the check that an output replaces only a file of its own kind
+(``check_output``), and a damaged file told from a stale one (``DamagedFileError``, ``damage_of``)."""
 
 from __future__ import annotations
 
@@ -7,9 +11,11 @@ import hashlib
 import io
 import json
 import os
+import re
+import shutil
 import tempfile
 import zipfile
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,20 +38,59 @@ def publish(tmp: str | Path, path: str | Path, directory: bool = False) -> None:
     os.replace(tmp, path)
 
 
-@contextmanager
-def atomic_file(path: str | Path, suffix: str = ".tmp") -> Iterator:
-    """A binary file to write ``path``'s new content to: a temporary file (``suffix``) in the same folder that
-    replaces ``path`` when the block ends (``publish``); if the block raises or is interrupted, the temporary file
-    is removed and ``path`` stays as it was. Creates the folder."""
+#: the names of inkopt's temporary files and folders: ``NAME.XXXXXXXX.tmp`` plus an optional extension (``.npz``,
+#: ``.npy``: ``temporary_file``), and ``.NAME.XXXXXXXX.tmp`` / ``.old`` folders (a slice folder being replaced); the
+#: eight characters are ``tempfile``'s random ones
+TEMPORARY_NAME = re.compile(r"^.+\.[a-z0-9_]{8}\.(?:tmp(?:\.[a-z]+)?|old)$")
+
+
+def temporary_file(path: str | Path, suffix: str = ".tmp") -> tuple[int, Path]:
+    """A new private temporary file beside ``path`` for its next content: (an open descriptor, its path), named
+    ``NAME.XXXXXXXX`` + ``suffix`` (".tmp", ".tmp.npz", ...: a name ``is_temporary`` knows). Creates the folder."""
+    if not suffix.startswith(".tmp"):
+        raise ValueError(f"a temporary file's suffix starts with .tmp, got {suffix!r}")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=suffix, dir=path.parent)
+    return fd, Path(tmp)
+
+
+def is_temporary(path: str | Path) -> bool:
+    """Whether ``path`` is named as inkopt's temporary files and folders are (``TEMPORARY_NAME``)."""
+    return TEMPORARY_NAME.match(Path(path).name) is not None
+
+
+def remove_temporaries(folder: str | Path, skip: Callable[[Path], bool] = lambda p: False) -> tuple[int, int]:
+    """Remove the temporary files and folders (``is_temporary``) in ``folder`` and its subfolders but those
+    ``skip`` names, left by a process killed while writing; returns (how many, their bytes). Only for a folder no
+    other process writes into at the time (a run folder under its lock)."""
+    count = size = 0
+    with os.scandir(folder) as entries:
+        for e in entries:
+            path = Path(e.path)
+            if is_temporary(path):
+                is_dir = e.is_dir(follow_symlinks=False)
+                size += sum(f.stat().st_size for f in path.rglob("*") if f.is_file()) if is_dir else e.stat().st_size
+                shutil.rmtree(path, ignore_errors=True) if is_dir else path.unlink(missing_ok=True)
+                count += 1
+            elif e.is_dir(follow_symlinks=False) and not skip(path):
+                n, b = remove_temporaries(path, skip)
+                count, size = count + n, size + b
+    return count, size
+
+
+@contextmanager
+def atomic_file(path: str | Path, suffix: str = ".tmp") -> Iterator:
+    """A binary file to write ``path``'s new content to: a temporary file (``temporary_file``, ``suffix``) in the
+    same folder that replaces ``path`` when the block ends (``publish``); if the block raises or is interrupted,
+    the temporary file is removed and ``path`` stays as it was. Creates the folder."""
+    fd, tmp = temporary_file(path, suffix)
     try:
         with os.fdopen(fd, "wb") as fh:
             yield fh
         publish(tmp, path)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        tmp.unlink(missing_ok=True)
         raise
 
 
@@ -244,3 +289,72 @@ def package_source(path: str | Path) -> dict | None:
             return read_source_comment(zf.comment)
     except (OSError, zipfile.BadZipFile):
         return None
+
+
+# ------------------------------------------------------------------ outputs and the files they replace
+def check_output(path: str | Path, ours: Callable[[Path], bool], what: str, folder: bool = False) -> Path:
+    """``path`` as a ``Path`` if an output may be written there, else a one-line ValueError naming it. An output
+    never replaces what its command did not write: ``path`` must be absent, or a file (``folder``: a folder) that
+    ``ours(path)`` recognises by its content as ``what``, the command's own earlier output, which is replaced."""
+    path = Path(path)
+    if not path.exists():
+        return path
+    if path.is_dir() != folder:
+        kind, name = ("a folder", "file") if path.is_dir() else ("a file", "folder")
+        raise ValueError(f"{path} is {kind}, not {what}; give a {name} name")
+    if not ours(path):
+        raise ValueError(f"{path} exists and is not {what}; refusing to replace it")
+    return path
+
+
+def read_head(path: str | Path, size: int = 1 << 16) -> bytes:
+    """The first ``size`` bytes of a file (b"" if it cannot be read): enough to recognise a file by its content."""
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(size)
+    except OSError:
+        return b""
+
+
+def read_json_object(path: str | Path, limit: int = 1 << 24) -> dict | None:
+    """The JSON object in a file of at most ``limit`` bytes, None if it is not one (missing, larger, unreadable)."""
+    try:
+        if Path(path).stat().st_size > limit:
+            return None
+        data = json.loads(Path(path).read_bytes())
+    except (OSError, ValueError):
+        return None
+    return data if isinstance(data, dict) else None
+
+
+# ------------------------------------------------------------------ damaged files
+class DamagedFileError(ValueError):
+    """A file that cannot be read any more (truncated, partly overwritten, changed since it was written): one line
+    naming it, what is wrong and what to run again."""
+
+
+def damaged(path, reason: str, remedy: str = "rerun the command that wrote it") -> DamagedFileError:
+    """The one-line error of a damaged file: ``PATH is damaged (cannot be read: REASON); REMEDY``."""
+    return DamagedFileError(f"{path} is damaged (cannot be read: {reason}); {remedy}")
+
+
+def damage_of(path: str | Path, thorough: bool = True) -> str | None:
+    """Why the file ``path`` cannot be read as its suffix says, or None if it can. .npz: a zip archive (its table
+    of contents, at its end: a truncated file fails) whose every member reads back with its checksum (``thorough``:
+    the whole file is read, one member at a time); .npy: a header and as many bytes as it declares; .json: one JSON
+    value; other files: only that they can be opened."""
+    path = Path(path)
+    try:
+        if path.suffix == ".npz":
+            with zipfile.ZipFile(path) as zf:
+                bad = zf.testzip() if thorough else None
+            return None if bad is None else f"member {bad} fails its checksum"
+        if path.suffix == ".npy":
+            np.load(path, mmap_mode="r", allow_pickle=False)
+        elif path.suffix == ".json":
+            json.loads(path.read_bytes())
+        else:
+            path.open("rb").close()
+    except Exception as exc:  # zip, zlib, format and decoding errors alike: the reason in one line
+        return " ".join(f"{type(exc).__name__}: {exc}".split())
+    return None

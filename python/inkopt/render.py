@@ -32,6 +32,7 @@ import numpy as np
 from .errors import ParameterError
 from .lighting import Lighting, load_lighting
 from .model import Texels, Volume, mix
+from .threads import check_threads
 
 if TYPE_CHECKING:
     from . import _core
@@ -215,6 +216,7 @@ class Renderer(TexelRenderer):
     def __init__(self, volume: Volume, threads: int | None = None, lighting: Lighting | str | None = None):
         from . import _core
 
+        threads = check_threads(threads)  # before the core starts a pool of that many threads
         self.volume = volume
         kw = dict(boundary=volume.boundary, ior=float(volume.ior), g=float(volume.g), threads=threads)
         if volume.inside is not None or volume.form == "labels":

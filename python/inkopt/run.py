@@ -148,7 +148,8 @@ def run_optimisation(scene: Scene, out_dir, cfg: OptimizeConfig, options: RunOpt
     cfg = cfg.for_scene(scene.kind)
     if options.started is None:
         options = replace(options, started=time.perf_counter())
-    with renderer_factory(options.ray, options.threads) as make_renderer:
+    folder = RunDir.locked(out_dir, options.log, write=not options.dry_run)  # one job at a time writes into it
+    with folder, renderer_factory(options.ray, options.threads) as make_renderer:
         job = _start(scene, cfg, options, make_renderer)
         if options.dry_run:
             return _dry_run(job, out_dir)
@@ -420,17 +421,19 @@ def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: flo
     if options.dry_run:
         return run_optimisation(build_scene(spec, inks), out_dir, cfg, options)
     rd = RunDir.create(out_dir)
-    coarse_dir, start = rd.path / "coarse", rd.path / "coarse" / "fine_start.npz"
-    fine_begun = options.resume and rd.checkpoint_path.is_file() and start.is_file()
-    if not fine_begun:
-        _coarse_stage(spec, inks, coarse_dir, cfg, coarse_dpi, options)
-    fine = build_scene(spec, inks)
-    if not fine_begun:
-        t = time.perf_counter()
-        write_transferred_volume(RunDir(coarse_dir).load_volume(), fine.volume, fine.fixed_share, start)
-        options.log(f"coarse result moved onto the {spec.dpi:g}-DPI grid in {time.perf_counter() - t:.0f} s: {start}")
-        release_freed_memory()  # the fine stage's peak is the job's: nothing of the stages before it under it
-    return run_optimisation(fine, out_dir, replace(cfg, init=str(start)), options)
+    with rd.lock(options.log):  # the whole job's, the fine run's taken again inside it
+        coarse_dir, start = rd.path / "coarse", rd.path / "coarse" / "fine_start.npz"
+        fine_begun = options.resume and rd.checkpoint_path.is_file() and start.is_file()
+        if not fine_begun:
+            _coarse_stage(spec, inks, coarse_dir, cfg, coarse_dpi, options)
+        fine = build_scene(spec, inks)
+        if not fine_begun:
+            t = time.perf_counter()
+            write_transferred_volume(RunDir(coarse_dir).load_volume(), fine.volume, fine.fixed_share, start)
+            t = time.perf_counter() - t
+            options.log(f"coarse result moved onto the {spec.dpi:g}-DPI grid in {t:.0f} s: {start}")
+            release_freed_memory()  # the fine stage's peak is the job's: nothing of the stages before it under it
+        return run_optimisation(fine, out_dir, replace(cfg, init=str(start)), options)
 
 
 def _coarse_stage(spec, inks, coarse_dir, cfg: OptimizeConfig, coarse_dpi: float, options: RunOptions) -> None:

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import sys
 
+from ..errors import ParameterError
+
 
 class UsageError(ValueError):
     """A problem with the user's input; reported as one line, exit status 2."""
@@ -159,9 +161,26 @@ def add_inks_arg(p, hidden: bool = False, required: bool = False) -> None:
     )
 
 
+def thread_count(text: str) -> int:
+    """``--threads``' type: a whole number checked by ``threads.check_threads`` while the arguments are parsed,
+    before any work (argparse reports a bad one after the flag's name)."""
+    import argparse
+
+    from ..threads import check_threads
+
+    try:
+        return check_threads(int(text))
+    except ParameterError as exc:  # out of range: the message without its subject, which argparse names
+        raise argparse.ArgumentTypeError(exc.render(lambda name: "").strip()) from None
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a whole number of threads, got {text!r}") from None
+
+
 def add_threads_arg(p, what: str = "worker threads") -> None:
-    """``--threads N``: the renderer's threads (results do not depend on them)."""
-    p.add_argument("--threads", type=int, metavar="N", help=f"{what} (default: all cores; results do not depend on it)")
+    """``--threads N``: the renderer's threads (results do not depend on them; 1 to 4 per core)."""
+    p.add_argument(
+        "--threads", type=thread_count, metavar="N", help=f"{what} (default: all cores; results do not depend on it)"
+    )
 
 
 def add_seed_arg(p, what: str) -> None:

@@ -1,12 +1,12 @@
 """``inkopt evaluate DIR``: ΔE76, ΔE2000 and SSIM of the continuous result, the quantized (printed) result and the
 naive baselines against the target; writes DIR/evaluation.json and DIR/evaluation_<face>.png
-(``inkopt.evaluation.evaluate``).
+(``inkopt.evaluation.evaluate``). An existing file at ``--out`` is replaced only if it is an evaluation
+(``RunDir.evaluation_target``); it holds the run folder's lock (``RunDir.lock``) while it works.
 """
 
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 from ..evaluation.colour_table import DEFAULT_PATCH_MM
@@ -15,7 +15,8 @@ from ..evaluation.noise import MAX_SPP, PILOT_SPP, TARGET_NOISE_DE76
 from ..evaluation.options import EvaluateOptions
 from ..evaluation.outputs import table_lines
 from ..evaluation.sample import AUTO_SAMPLE_TEXELS, DEFAULT_SAMPLE_TEXELS, DEFAULT_SAMPLE_WINDOWS
-from .common import add_lighting_args, add_seed_arg, add_threads_arg, lighting_from_args
+from ..rundir import RunDir
+from .common import add_lighting_args, add_seed_arg, add_threads_arg, lighting_from_args, stderr_log
 
 #: the options of ``inkopt evaluate`` after DIR, in the order of its help: (flag, add_argument keywords)
 OPTIONS = (
@@ -129,8 +130,11 @@ def options_from_args(args) -> EvaluateOptions:
 
 def _evaluate_cmd(args) -> int:
     options = options_from_args(args)
-    log = None if args.json else (lambda msg: print(msg, file=sys.stderr, flush=True))
-    ev = evaluate_run(args.dir, options, log)
+    log = None if args.json else stderr_log
+    d = RunDir(args.dir)
+    d.evaluation_target(args.out)  # before any render: another kind of file at --out is never replaced
+    with d.lock(stderr_log):  # its pictures and predictions.npz go into the run folder whatever --out says
+        ev = evaluate_run(args.dir, options, log)
     if args.json:
         print(json.dumps(ev.to_json()))
         return 0

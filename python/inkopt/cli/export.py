@@ -7,7 +7,8 @@ job using more inks than ``--printer`` holds is refused in one line before anyth
 record the digest of the file they are made from (quantized.npz, or volume.npz for the continuous 3MF) in their
 zip comment (``inkopt inspect --run`` checks it). A quantized volume made from another volume.npz than the run's
 (``RunDir.check_quantized_current``) is refused in one line before anything is written; the slice manifest
-records ``volume_digest`` and ``quantized_digest``.
+records ``volume_digest`` and ``quantized_digest``. An existing output is replaced only if it is a package of the
+same format (``io.check_output``); writing into the run folder holds its lock (``RunDir.lock``).
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from ..printing.formats import FORMATS, Format, format_named
 from ..printing.formats.job import LabelVoxels, MixtureVoxels, PrintJob, Provenance
 from ..printing.profiles import PRINTER_PROFILES, printer_profile, resolution_mismatch
 from ..rundir import RunDir
+from .common import stderr_log
 
 
 def parse_materials(items) -> dict | None:
@@ -89,7 +91,8 @@ def _export_cmd(args) -> int:
     d = RunDir(args.dir)
     mixture = fmt.takes_mixture and not args.labels
     out = Path(args.out) if args.out else fmt.run_output(d, mixture)
-    summary = (_write_mixture if mixture else _write_labels)(fmt, d, out, make_job)
+    with d.lock_for(out, stderr_log):  # an output in the run folder: one job at a time writes there
+        summary = (_write_mixture if mixture else _write_labels)(fmt, d, out, make_job)
     print(fmt.describe(summary))
     print(f"wrote {out}")
     return 0

@@ -1,7 +1,7 @@
 """``inkopt quantize DIR``: the run's continuous mixture (DIR/volume.npz) -> one ink per printer voxel
 (DIR/quantized.npz + DIR/quantized_labels.npy, a labels volume at printer resolution; docs/run-dir.md). The stage
 is ``inkopt.printing.stream.quantize_run`` (layer by layer; ``inkopt.printing.quantize``); the arguments become one
-``model.Quantization``."""
+``model.Quantization``. The run folder's lock (``RunDir.lock``) is held while it writes."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from ..printing.grid import DEFAULT_LAYER_UM, UPSAMPLERS
 from ..printing.stream import quantize_run
 from ..rundir import RunDir
 from ..units import parse_dpi
-from .common import add_seed_arg
+from .common import add_seed_arg, stderr_log
 
 
 def quantization_of(args) -> Quantization:
@@ -22,7 +22,10 @@ def quantization_of(args) -> Quantization:
 
 def _quantize_cmd(args) -> int:
     d = RunDir(args.dir)
-    for line in quantize_run(d, quantization_of(args)):
+    q = quantization_of(args)
+    with d.lock(stderr_log):
+        lines = quantize_run(d, q)
+    for line in lines:
         print(line)
     print(f"wrote {d.quantized_path} and {d.quantized_labels_path}")
     return 0

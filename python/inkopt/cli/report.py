@@ -1,12 +1,17 @@
-"""``inkopt report RUN``: the soft-proof page of a run (``inkopt.proof``)."""
+"""``inkopt report RUN``: the soft-proof page of a run (``inkopt.proof``). An existing file at the output is replaced
+only if it is an earlier page (``proof.proof_target``); writing into the run folder holds its lock."""
 
 from __future__ import annotations
+
+from .common import stderr_log
 
 
 def _report(args) -> int:
     from ..proof import write_proof
+    from ..rundir import RunDir
 
-    p = write_proof(args.run, args.out)
+    with RunDir(args.run).lock_for(args.out, stderr_log):
+        p = write_proof(args.run, args.out)
     note = " (textures downsampled)" if p.downsampled else ""
     print(f"wrote {p.path}: {p.bytes / 1e6:.1f} MB, {', '.join(p.results)}{note}, in {p.seconds:.1f} s")
     return 0

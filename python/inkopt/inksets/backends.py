@@ -21,6 +21,7 @@ from ..distributed import RAY_INSTALL_HINT, connect_ray  # noqa: F401
 from ..errors import ParameterError
 from ..optim.checkpoint import read_checkpoint
 from ..rundir import RunDir
+from ..threads import check_threads
 
 
 class _Capture:
@@ -82,7 +83,7 @@ class Serial:
     name = "serial"
 
     def __init__(self, threads: int | None = None):
-        self.cpus = threads or os.cpu_count() or 1
+        self.cpus = check_threads(threads) or os.cpu_count() or 1
         self.workers = 1
 
     def map(self, fn, tasks: list):
@@ -138,6 +139,7 @@ def make_backend(workers: int | None = None, ray: str | None = None, threads: in
     """Serial (no options), a process pool (``workers``) or Ray (``ray``: "auto" or a cluster address)."""
     if workers is not None and workers < 1:
         raise ParameterError(f"`workers` must be at least 1, got {workers}")
+    check_threads(threads)
     if ray:
         return Ray(ray, workers)
     if workers and workers > 1:

@@ -2,37 +2,41 @@
 one layer at a time and read back memory-mapped (docs/run-dir.md: ``quantized_labels.npy``).
 
 ``LabelFileWriter`` writes the .npy header and then each layer with an ordinary sequential ``write`` into a
-temporary sibling file (so the written pages stay in the page cache, not in the process's memory, unlike a
-writable memory map), counting the labels on the way; ``commit`` renames it into place atomically.
+temporary sibling file (``io.temporary_file``; so the written pages stay in the page cache, not in the process's
+memory, unlike a writable memory map), counting the labels and hashing the file's bytes on the way (``digest``,
+equal to ``io.file_digest`` of the file, without reading it back); ``commit`` renames it into place atomically.
 ``load_label_file`` maps it read-only (``numpy.load(mmap_mode="r")``): pages are read when touched.
 """
 
 from __future__ import annotations
 
+import hashlib
+import io
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from ..io import publish
+from ..io import publish, temporary_file
 
 
 class LabelFileWriter:
     """``w = LabelFileWriter(path, (Z, Y, X)); w[0] = layer0; w[1] = ...; w.commit()`` (or ``w.abort()``).
 
-    Layers must come in order 0, 1, ..., Z - 1; ``counts`` (256,) int64 counts every label value written."""
+    Layers must come in order 0, 1, ..., Z - 1; ``counts`` (256,) int64 counts every label value written;
+    ``digest``: ``"sha256:<hex>"`` of the file's bytes (header and every layer written so far)."""
 
     def __init__(self, path, shape):
         self.path = Path(path)
         self.shape = tuple(int(s) for s in shape)
         if len(self.shape) != 3 or min(self.shape) < 1:
             raise ValueError(f"a label stack needs 3 positive sizes (Z, Y, X), got {self.shape}")
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=self.path.name + ".", suffix=".tmp.npy", dir=self.path.parent)
-        self._tmp = Path(tmp)
+        fd, self._tmp = temporary_file(self.path, ".tmp.npy")
         self._fh = os.fdopen(fd, "wb")
-        np.lib.format.write_array_header_1_0(self._fh, {"descr": "|u1", "fortran_order": False, "shape": self.shape})
+        self._hash = hashlib.sha256()
+        header = io.BytesIO()
+        np.lib.format.write_array_header_1_0(header, {"descr": "|u1", "fortran_order": False, "shape": self.shape})
+        self._write(header.getvalue())
         self.next = 0
         self.counts = np.zeros(256, np.int64)
 
@@ -42,9 +46,17 @@ class LabelFileWriter:
         lay = np.ascontiguousarray(layer, np.uint8)
         if lay.shape != self.shape[1:]:
             raise ValueError(f"label layer {k} has shape {lay.shape}, expected {self.shape[1:]}")
-        self._fh.write(memoryview(lay).cast("B"))
+        self._write(memoryview(lay).cast("B"))
         self.counts += np.bincount(lay.ravel(), minlength=256)
         self.next += 1
+
+    def _write(self, data) -> None:
+        self._fh.write(data)
+        self._hash.update(data)
+
+    @property
+    def digest(self) -> str:
+        return "sha256:" + self._hash.hexdigest()
 
     def commit(self) -> Path:
         if self.next != self.shape[0]:

@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..threads import check_threads
+
 #: rows per block of the element-wise updates
 ROWS = 1 << 18
 
@@ -35,7 +37,7 @@ class _Moments:
     natural = False
 
     def __init__(self, lr: float, shape, v_shape=None, threads: int | None = None):
-        self.lr, self.t, self.threads = float(lr), 0, threads
+        self.lr, self.t, self.threads = float(lr), 0, check_threads(threads)
         self.m = np.zeros(shape, np.float32)
         self.v = np.zeros(shape if v_shape is None else v_shape, np.float32)
 

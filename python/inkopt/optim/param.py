@@ -15,6 +15,7 @@ import numpy as np
 from ..errors import ParameterError
 from ..model import FixedShares, InkTable
 from ..model.mixturefile import MixtureSource
+from ..threads import check_threads
 from .config import PARAMS
 
 BAD_SHARES = "fixed ink shares must be non-negative and sum to at most 1 per voxel"
@@ -31,7 +32,7 @@ class Parameterization:
     def __init__(self, kind: str, fixed_share: FixedShares, threads: int | None = None):
         if kind not in PARAMS:
             raise ValueError(f"unknown parameterisation '{kind}'")
-        self.kind, self.threads = kind, threads
+        self.kind, self.threads = kind, check_threads(threads)
         fs = fixed_share
         if (
             np.any(fs.held < 0)

@@ -35,6 +35,8 @@ import math
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..threads import check_threads
+
 ALPHA = 0.125
 
 
@@ -79,7 +81,7 @@ def nearest_texels(
     for s in range(0, len(index), chunk):
         z, y, x = np.unravel_index(index[s : s + chunk], shape)
         dist[s : s + chunk], k[s : s + chunk] = tree.query(
-            np.stack([x, y, z], axis=1) + 0.5, workers=threads or -1, distance_upper_bound=max_dist
+            np.stack([x, y, z], axis=1) + 0.5, workers=check_threads(threads) or -1, distance_upper_bound=max_dist
         )
     k[k == tree.n] = -1
     return k, dist
@@ -134,7 +136,7 @@ class GradientSmoother:
         self.guide = None if guide is None else np.ascontiguousarray(guide, np.float32)
         if self.guide is not None and len(self.guide) != n:
             raise ValueError(f"the guide has {len(self.guide)} rows for a set of {n} voxels")
-        self.edge, self.threads = float(edge), threads
+        self.edge, self.threads = float(edge), check_threads(threads)
 
     def _diffuse(self, g: np.ndarray) -> np.ndarray:
         from .. import _core

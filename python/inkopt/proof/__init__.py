@@ -18,7 +18,7 @@ import numpy as np
 
 from ..color import delta_e76, linear_to_lab
 from ..evaluation.results import Evaluation, Report
-from ..io import atomic_write_bytes, file_digest, load_npz
+from ..io import atomic_write_bytes, check_output, load_npz, read_head
 from ..model.mixturefile import MixtureSource
 from ..rundir import RunDir
 from .bake import encode, heat_legend, heat_rgb8, heat_scale, mesh_atlas, srgb8
@@ -30,6 +30,19 @@ ORDER = ("target", "continuous", "quantized", "surface", "extrusion")
 SHADE = 0.35  # head-light share of the 3D view's shading (as views.png)
 JPEG_QUALITY = 90
 SLAB_WIDTH_PX = 400  # a slab face is shown about this wide (whole pixels per texel)
+#: what marks a page written by ``inkopt report``: the generator tag in its head (``page.page_html``)
+GENERATOR = b'<meta name="generator" content="inkopt report">'
+
+
+def is_proof_page(path) -> bool:
+    """Whether the file ``path`` is a soft-proof page written by ``inkopt report`` (by its generator tag)."""
+    return GENERATOR in read_head(path)
+
+
+def proof_target(d: RunDir, out=None) -> Path:
+    """Where the page goes: RUN/report.html or ``out``, checked by ``io.check_output``: a file there is replaced
+    only if it is an earlier soft-proof page, never a run's file, a picture or anything else."""
+    return check_output(d.proof_path if out is None else out, is_proof_page, "a soft-proof page of 'inkopt report'")
 
 
 @dataclass
@@ -56,13 +69,16 @@ def write_proof(run, out=None) -> Proof:
     """Write the soft-proof page of run directory ``run`` to ``out`` (default RUN/report.html)."""
     t0 = time.perf_counter()
     d = RunDir(run)
+    path = proof_target(d, out)
     report = Report.from_json(d.read_report(), where=str(d.report_path))
     rec = d.load_scene()
     pred = d.load_predictions()
     if pred is None:
         raise ValueError(f"{d.predictions_path} does not exist: run 'inkopt evaluate {d}' first")
-    if pred.volume_digest != file_digest(d.volume_file()):
-        raise ValueError(f"{d.predictions_path} was rendered from another volume.npz: run 'inkopt evaluate {d}' again")
+    d.check_volume_unchanged(
+        pred.volume_digest,
+        f"{d.predictions_path} was rendered from another volume.npz: run 'inkopt evaluate {d}' again",
+    )
     evj = d.read_evaluation()
     ev = (
         Evaluation.from_json(evj, where=str(d.evaluation_path))
@@ -99,7 +115,6 @@ def write_proof(run, out=None) -> Proof:
 
     subtitle = _subtitle(report, rec.kind, keys, describe_lighting(pred.lighting), ev is not None)
     page = page_html(f"inkopt soft proof: {d.path.resolve().name}", subtitle, data, view, sections, atlas is not None)
-    path = Path(out) if out is not None else d.proof_path
     atomic_write_bytes(path, page.encode())
     return Proof(
         str(path),

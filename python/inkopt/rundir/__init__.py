@@ -13,45 +13,66 @@ stores them. scene.npz carries ``format_version`` (``SCENE_FORMAT``); older vers
 
 Outputs tied to their inputs: quantized.npz, the slice manifest and evaluation.json record ``volume_digest``
 (``io.file_digest`` of the volume.npz they were made from; the manifest and evaluation.json also
-``quantized_digest``). :meth:`RunDir.check_quantized_current` refuses a quantized volume made from another
-volume.npz (a :class:`StaleOutputError`), and a run removes what it makes stale: a fresh run every output of an
-earlier run in its folder (:meth:`RunDir.remove_earlier_run`), a run that writes a new volume.npz the derived
-outputs not made from it (:meth:`RunDir.remove_stale`).
+``quantized_digest``), and quantized.npz records ``labels_digest``, that of its labels file (computed as the layers
+are written). :meth:`RunDir.check_quantized_current` refuses a quantized volume made from another volume.npz (a
+:class:`StaleOutputError`) and labels that are not the ones written with it; a file that cannot be read is damaged
+(``io.DamagedFileError``), never taken for a stale one. A run removes what it makes stale: a fresh run every
+output of an earlier run in its folder (:meth:`RunDir.remove_earlier_run`), a run that writes a new volume.npz the
+derived outputs not made from it (:meth:`RunDir.remove_stale`).
+
+One job at a time writes into a run folder: every command that writes into one holds :meth:`RunDir.lock` (a lock
+file, ``rundir.lock``), and taking it removes the temporary files a killed job left (``io.remove_temporaries``).
 """
 
 from __future__ import annotations
 
-import json
 import shutil
-from contextlib import contextmanager
+from contextlib import nullcontext
 from pathlib import Path
 
 import numpy as np
 
-from ..io import file_digest, load_npz, package_source, save_npz, write_json
+from ..io import (
+    check_output,
+    damage_of,
+    damaged,
+    file_digest,
+    load_npz,
+    package_source,
+    read_json_object,
+    remove_temporaries,
+    save_npz,
+    write_json,
+)
 from ..model import Volume
-from ..model.labelfile import LabelFileWriter
-from ..model.volume import upgrade_volume
+from .lock import LOCK_NAME, RunDirBusy, RunLock
+from .quantized import LABELS_DIGEST, QUANTIZED_DIGEST, VOLUME_DIGEST, QuantizedFiles, StaleOutputError
 from .records import FIXED_SHARE_MAX_ENTRIES, PREDICTIONS_FORMAT, SCENE_FORMAT, Predictions, SceneRecord
 
 __all__ = [
     "FIXED_SHARE_MAX_ENTRIES",
+    "LABELS_DIGEST",
     "PREDICTIONS_FORMAT",
     "QUANTIZED_DIGEST",
     "SCENE_FORMAT",
     "VOLUME_DIGEST",
     "Predictions",
     "RunDir",
+    "RunDirBusy",
     "SceneRecord",
     "StaleOutputError",
 ]
 
-#: the key under which an output records the digest of the volume.npz / quantized.npz it was made from
-VOLUME_DIGEST, QUANTIZED_DIGEST = "volume_digest", "quantized_digest"
+#: what to do about a damaged volume.npz
+_REDO_RUN = "rerun the optimisation that wrote it ('inkopt slab' or 'inkopt optimize')"
+#: the keys only an evaluation (evaluation.json or ``inkopt evaluate --out``) holds
+_EVALUATION_KEYS = ("continuous", "quantized", "printer_texels", "spp")
 
 
-class StaleOutputError(ValueError):
-    """An output made from another version of the file it derives from (one line: what to run again)."""
+def is_evaluation_file(path) -> bool:
+    """Whether ``path`` holds an evaluation written by ``inkopt evaluate`` (a JSON object with its keys)."""
+    data = read_json_object(path)
+    return data is not None and all(k in data for k in _EVALUATION_KEYS)
 
 
 class _RunFile:
@@ -64,7 +85,7 @@ class _RunFile:
         return self if rd is None else rd.path / self.name
 
 
-class RunDir:
+class RunDir(QuantizedFiles):
     """A run directory. ``RunDir(path)`` requires it to exist; ``RunDir.create(path)`` makes it.
 
     Every file and folder of a run has a named accessor (``*_path``: where it is, whether or not it exists yet)
@@ -75,21 +96,58 @@ class RunDir:
     QUANTIZED_LABELS, GCVF = "quantized_labels.npy", "slices.gcvf"
     MIXTURE_3MF, LABELS_3MF = "mixture.3mf", "quantized.3mf"
     VIEWS_PNG, PREDICTION_GLB, TARGET_GLB = "views.png", "prediction.glb", "target.glb"
-    PREDICTIONS, PROOF = "predictions.npz", "report.html"
+    PREDICTIONS, PROOF, LOCK = "predictions.npz", "report.html", LOCK_NAME
 
     def __init__(self, path):
         self.path = Path(path)
         if not self.path.is_dir():
             raise ValueError(f"run directory {self.path} does not exist")
+        self._labels_checked = None  # the labels file found to match its digest: (inode, size, mtime, digest)
+        self._made = False  # made by ``create``: removed again if its lock is released with nothing in it
 
     @classmethod
     def create(cls, path) -> RunDir:
-        """Make the folder (if needed) and remove the temporary files of an earlier process that was killed while
-        writing (``inkopt.io`` writes ``NAME.XXXX.tmp[.npz]`` and renames it into place)."""
+        """Make the folder (if needed)."""
+        made = not Path(path).exists()
         Path(path).mkdir(parents=True, exist_ok=True)
-        for stale in [*Path(path).glob("*.tmp"), *Path(path).glob("*.tmp.npz")]:
-            stale.unlink(missing_ok=True)
-        return cls(path)
+        rd = cls(path)
+        rd._made = made
+        return rd
+
+    # ------------------------------------------------------------------ one job at a time
+    def lock(self, log=None) -> RunLock:
+        """The folder's lock (``rundir.lock``), taken by ``with d.lock(log):`` around every write into it: another
+        running job's lock refuses the folder in one line (``RunDirBusy``), a killed job's is taken over (``log``
+        gets a line). Once taken, the temporary files of killed jobs are removed (:meth:`remove_temporaries`); a
+        folder ``create`` made is removed again if the job leaves nothing in it (it failed before writing)."""
+        return RunLock(self.path, log, on_acquire=lambda: self.remove_temporaries(log), on_release=self._unmake)
+
+    def _unmake(self) -> None:
+        if self._made and not any(self.path.iterdir()):
+            self.path.rmdir()
+
+    @classmethod
+    def locked(cls, path, log=None, write: bool = True):
+        """The lock (:meth:`lock`) of run folder ``path``, made if needed; when the caller will not ``write`` (a
+        dry run), a block that holds nothing and makes no folder."""
+        return cls.create(path).lock(log) if write else nullcontext()
+
+    def lock_for(self, out, log=None):
+        """:meth:`lock` if ``out`` (an output path; None: the command's default output in this folder) lies in
+        this run folder, else a block that holds nothing (an output elsewhere does not write into the run)."""
+        inside = out is None or Path(out).resolve().is_relative_to(self.path.resolve())
+        return self.lock(log) if inside else nullcontext()
+
+    def remove_temporaries(self, log=None) -> int:
+        """Remove the temporary files (``io.is_temporary``) a killed job left in the folder and its subfolders
+        (not in a run folder inside it, e.g. a coarse-to-fine run's coarse/: it has a lock of its own); only under
+        the lock. Returns how many; ``log`` gets a line when there were any."""
+        count, size = remove_temporaries(
+            self.path, skip=lambda p: (p / self.SCENE).is_file() or (p / LOCK_NAME).exists()
+        )
+        if count and log is not None:
+            log(f"removed {count} temporary file(s) of an interrupted command from {self.path} ({size / 1e6:.1f} MB)")
+        return count
 
     def __str__(self) -> str:
         return str(self.path)
@@ -141,11 +199,19 @@ class RunDir:
 
     def load_volume(self) -> Volume:
         """The optimised mixture volume (volume.npz)."""
-        p = self._need(self.volume_path, "run 'inkopt slab' or 'inkopt optimize' first")
+        p = self.volume_file()
         vol = Volume.load(p)
         if vol.form != "mixture":
             raise ValueError(f"{p} holds a {vol.form} volume; this step needs a mixture volume")
         return vol
+
+    def volume_file(self) -> Path:
+        """The path of volume.npz, checked to exist and to be whole (its table of contents reads: a truncated file
+        is damaged, ``io.DamagedFileError``), for stages that read it lazily."""
+        p = self._need(self.volume_path, "run 'inkopt slab' or 'inkopt optimize' first")
+        if reason := damage_of(p, thorough=False):
+            raise damaged(p, reason, _REDO_RUN)
+        return p
 
     # ------------------------------------------------------------------ the scene
     def save_scene(self, rec: SceneRecord) -> Path:
@@ -156,71 +222,30 @@ class RunDir:
         p = self._need(self.scene_path, "run 'inkopt slab' or 'inkopt optimize' first")
         return SceneRecord.from_arrays(load_npz(p, "scene file"), str(p))
 
-    # ------------------------------------------------------------------ printer labels
-    def save_quantized(self, vol: Volume, volume_digest: str | None = None) -> Path:
-        """quantized.npz (everything but the labels) + quantized_labels.npy (the labels, copied layer by layer);
-        ``volume_digest``: that of the volume.npz it was made from."""
-        with self.quantized_writer(vol, vol.shape, volume_digest=volume_digest) as w:
-            for k in range(vol.shape[0]):
-                w[k] = vol.labels[k]
-        return self.quantized_path
-
-    @contextmanager
-    def quantized_writer(self, meta: Volume, shape, normals=None, volume_digest: str | None = None):
-        """Write the quantized volume one printer layer at a time: ``with d.quantized_writer(meta, shape) as w:
-        w[k] = layer`` (k = 0, 1, ...; ``model.labelfile.LabelFileWriter``). ``meta``: a labels Volume giving
-        everything but the labels (voxel size, inks, settings; its own labels are ignored); ``normals``: the
-        printer grid's ``SurfaceNormals`` or None. On success
-        the labels file replaces quantized_labels.npy and then quantized.npz is written (the old quantized.npz is
-        removed first, so a crash never pairs an old quantized.npz with new labels). ``volume_digest``: the
-        ``io.file_digest`` of the volume.npz the labels are made from, recorded as ``volume_digest``."""
-        arrays = {k: v for k, v in meta.to_arrays().items() if k != "labels"}
-        if normals is not None:
-            arrays.update(normal_index=normals.index, normal_vectors=normals.vectors)
-        if volume_digest is not None:
-            arrays[VOLUME_DIGEST] = np.array(volume_digest)
-        w = LabelFileWriter(self.quantized_labels_path, shape)
-        try:
-            yield w
-            self.quantized_path.unlink(missing_ok=True)
-            w.commit()
-        except BaseException:
-            w.abort()
-            raise
-        save_npz(
-            self.quantized_path,
-            {
-                **arrays,
-                "labels_file": np.array(self.QUANTIZED_LABELS),
-                "labels_shape": np.asarray(w.shape, np.int64),
-                "label_counts": w.counts,
-            },
-        )
-
-    def volume_file(self) -> Path:
-        """The path of volume.npz (checked to exist), for stages that read it lazily."""
-        return self._need(self.volume_path, "run 'inkopt slab' or 'inkopt optimize' first")
-
-    def has_quantized(self) -> bool:
-        return self.quantized_path.is_file()
-
-    def load_quantized(self) -> Volume:
-        p = self._need(self.quantized_path, f"run 'inkopt quantize {self.path}' first")
-        vol = Volume.from_arrays(upgrade_volume(load_npz(p, "quantized volume"), p, quantized=True), p)
-        if vol.form != "labels":
-            raise ValueError(f"{p} holds a {vol.form} volume, not printer labels")
-        return vol
-
     # ------------------------------------------------------------------ reports
     def write_report(self, report: dict) -> Path:
         return write_json(self.report_path, report)
 
     def read_report(self) -> dict:
-        return json.loads(self._need(self.report_path, "the run has not finished").read_text())
+        return self._read_json(self._need(self.report_path, "the run has not finished"), "rerun the optimisation")
+
+    def _read_json(self, path: Path, remedy: str) -> dict:
+        """A JSON object inkopt wrote; one that cannot be read is damaged (``io.DamagedFileError``)."""
+        data = read_json_object(path)
+        if data is None:
+            raise damaged(path, damage_of(path) or "not a JSON object", remedy)
+        return data
+
+    def evaluation_target(self, path=None) -> Path:
+        """Where an evaluation goes: evaluation.json, or ``path`` (``inkopt evaluate --out``), checked by
+        ``io.check_output``: a file there is replaced only if it is an evaluation (``is_evaluation_file``)."""
+        target = self.evaluation_path if path is None else Path(path)
+        return check_output(target, is_evaluation_file, "an evaluation written by 'inkopt evaluate'")
 
     def write_evaluation(self, ev: dict, path: Path | None = None) -> Path:
-        """evaluation.json, or ``path`` (``inkopt evaluate --out``)."""
-        return write_json(self.evaluation_path if path is None else path, ev, indent=1)
+        """evaluation.json, or ``path`` (``inkopt evaluate --out``); another kind of file there is refused
+        (:meth:`evaluation_target`)."""
+        return write_json(self.evaluation_target(path), ev, indent=1)
 
     # ------------------------------------------------------------------ outputs tied to their inputs
     def volume_digest(self) -> str | None:
@@ -232,32 +257,25 @@ class RunDir:
         return file_digest(self.quantized_path) if self.quantized_path.is_file() else None
 
     def _recorded(self, path: Path) -> str | None:
-        """The ``volume_digest`` an output records (quantized.npz, evaluation.json, a slice manifest), or None."""
+        """The ``volume_digest`` an output records (quantized.npz, evaluation.json, a slice manifest), or None
+        (none recorded, or the file cannot be read)."""
+        if path.suffix != ".npz":
+            return (read_json_object(path) or {}).get(VOLUME_DIGEST)
         try:
-            if path.suffix == ".npz":
-                with np.load(path, allow_pickle=False) as z:
-                    return str(z[VOLUME_DIGEST]) if VOLUME_DIGEST in z.files else None
-            return json.loads(path.read_text()).get(VOLUME_DIGEST)
-        except (OSError, ValueError, KeyError, AttributeError):
+            with np.load(path, allow_pickle=False) as z:
+                return str(z[VOLUME_DIGEST]) if VOLUME_DIGEST in z.files else None
+        except Exception:  # zip and format errors alike: an unreadable output records nothing
             return None
 
-    def check_quantized_current(self) -> None:
-        """StaleOutputError unless quantized.npz was made from the current volume.npz: it records that file's
-        digest, or (a file written without one, by an older inkopt or a script) is not older than volume.npz.
-        Nothing to check without either file."""
-        if not (self.has_quantized() and self.volume_path.is_file()):
+    def check_volume_unchanged(self, recorded: str, stale: str) -> None:
+        """``StaleOutputError(stale)`` unless ``recorded`` (the digest an output records of the volume.npz it was
+        made from) is volume.npz's; a volume.npz that cannot be read is damaged (``io.DamagedFileError``), which
+        is said first: its digest differs too."""
+        if recorded == self.volume_digest():
             return
-        rec, again = self._recorded(self.quantized_path), f"run 'inkopt quantize {self.path}' again"
-        if rec is None and self.volume_path.stat().st_mtime > self.quantized_path.stat().st_mtime:
-            raise StaleOutputError(
-                f"{self.quantized_path} is older than volume.npz and does not record which volume.npz it was "
-                f"made from; {again}"
-            )
-        if rec is not None and rec != self.volume_digest():
-            raise StaleOutputError(
-                f"{self.quantized_path} was made from another volume.npz than the one in {self.path} (the run was "
-                f"redone or continued after quantizing); {again}"
-            )
+        if reason := damage_of(self.volume_file()):
+            raise damaged(self.volume_path, reason, _REDO_RUN)
+        raise StaleOutputError(stale)
 
     def _derived(self) -> list[Path]:
         """The outputs made from volume.npz: the quantized volume, its slices and package, evaluations, the
@@ -319,7 +337,9 @@ class RunDir:
 
     def read_evaluation(self) -> dict | None:
         """evaluation.json, or None if the run has not been evaluated."""
-        return json.loads(self.evaluation_path.read_text()) if self.evaluation_path.is_file() else None
+        if not self.evaluation_path.is_file():
+            return None
+        return self._read_json(self.evaluation_path, f"run 'inkopt evaluate {self.path}' again")
 
     # ------------------------------------------------------------------ predicted colours
     def save_predictions(self, pred: Predictions) -> Path:

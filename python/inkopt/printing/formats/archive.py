@@ -5,6 +5,8 @@ from __future__ import annotations
 import zipfile
 from pathlib import Path
 
+from ...io import check_output
+
 
 def zip_holds(path: Path, member: str) -> bool:
     """Whether ``path`` is a readable zip holding ``member``."""
@@ -16,9 +18,7 @@ def zip_holds(path: Path, member: str) -> bool:
 
 
 def check_target(path: Path, member: str, kind: str, suffix: str) -> None:
-    """One-line ValueError unless ``path`` may be written: not a folder, and if it exists a package of this
-    ``kind`` (a zip holding ``member``), which is replaced; any other file is refused, never overwritten."""
-    if path.is_dir():
-        raise ValueError(f"{path} is a folder; give a {suffix} file name")
-    if path.exists() and not zip_holds(path, member):
-        raise ValueError(f"{path} exists and is not a {kind}; refusing to replace it")
+    """One-line ValueError unless ``path`` may be written (``io.check_output``): not a folder, and if it exists a
+    package of this ``kind`` (a zip holding ``member``), which is replaced; any other file is refused, never
+    overwritten."""
+    check_output(path, lambda p: zip_holds(p, member), f"a {kind} ({suffix})")

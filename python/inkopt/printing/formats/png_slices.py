@@ -34,7 +34,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ...io import FORMAT_KEY, publish, upgrade_format
+from ...io import FORMAT_KEY, check_output, publish, upgrade_format
 from ...model import EMPTY
 from ...rundir import QUANTIZED_DIGEST, VOLUME_DIGEST
 from .inspection import PackageError, PackageReport, Scan, check_counts, decoder, layer_files, read_image
@@ -148,8 +148,7 @@ def write_png_slices(job: PrintJob, out_dir, background=(0, 0, 0, 0)) -> dict:
     tallied = tally(job)
     lut, colours, bg = slice_lut(job.inks, job.palette, background)
     out = Path(out_dir)
-    if out.exists() and not (out.is_dir() and _is_slice_folder(out)):
-        raise ValueError(f"{out} exists and is not an inkopt slice folder; refusing to replace it")
+    check_output(out, _is_slice_folder, "an inkopt slice folder", folder=True)
     out.parent.mkdir(parents=True, exist_ok=True)
     width = max(5, len(str(job.voxels.shape[0] - 1)))
     manifest = _manifest(job, tallied, colours, bg, width)
