@@ -25,3 +25,14 @@ def test_command_line_prints_flags(capsys, tmp_path):
     err = capsys.readouterr().err
     assert code == 2 and err.startswith("inkopt: error: --size-mm must look like") and err.count("\n") == 1
     assert not (tmp_path / "run").exists()
+
+
+def test_usage_errors_are_one_line_too(capsys):
+    """argparse's own errors (a missing argument, a value its type refuses) end in one line and exit status 2."""
+    import pytest
+
+    for argv in (["slab"], ["slab", "top.png", "--size-mm", "1x1x1", "--out", "r", "--threads", "0"]):
+        with pytest.raises(SystemExit) as e:
+            main(argv)
+        err = capsys.readouterr().err
+        assert e.value.code == 2 and err.startswith("inkopt slab: error: ") and err.count("\n") == 1, err

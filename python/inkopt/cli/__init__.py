@@ -33,8 +33,16 @@ SUBCOMMANDS = (
 __all__ = ["UsageError", "build_parser", "main"]
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse whose usage errors (a missing argument, a value its type refuses) are one line too, like every other
+    error: ``inkopt CMD: error: ... (see inkopt CMD --help)``, exit status 2."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = _Parser(
         prog="inkopt", description="Gradient-based appearance optimization for full-colour inkjet 3D prints."
     )
     p.add_argument("--version", action="version", version=f"inkopt {__version__}")
