@@ -1,5 +1,7 @@
 """Errors that name parameters: the library's message names its parameters, the command line's names its flags."""
 
+import pytest
+
 from inkopt.cli import main
 from inkopt.cli.common import flag_of
 from inkopt.errors import ParameterError
@@ -29,8 +31,6 @@ def test_command_line_prints_flags(capsys, tmp_path):
 
 def test_usage_errors_are_one_line_too(capsys):
     """argparse's own errors (a missing argument, a value its type refuses) end in one line and exit status 2."""
-    import pytest
-
     for argv in (["slab"], ["slab", "top.png", "--size-mm", "1x1x1", "--out", "r", "--threads", "0"]):
         with pytest.raises(SystemExit) as e:
             main(argv)
