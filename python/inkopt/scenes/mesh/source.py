@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import ParameterError
+from ...images import open_image
 
 FIX = "name the texture with `texture` FILE, or pass `constant_color` to accept a uniform colour"
 
@@ -90,18 +91,14 @@ def check_obj_materials(path, skip_files: bool = False) -> ObjMaterials:
 
 
 def load_texture(path):
-    """``--texture FILE``: (PIL RGB image of the sRGB colours, (H, W) float32 alpha or None where opaque)."""
-    from PIL import Image, UnidentifiedImageError
+    """``texture``, an image file: (PIL RGB image of the sRGB colours, (H, W) float32 alpha or None where opaque).
+    One-line ValueError (``images.ImageError``) for a missing, unreadable or too large file."""
+    from PIL import Image
 
     from ..picture import picture_rgba
 
-    try:
-        with Image.open(path) as im:
-            rgba = picture_rgba(im, f"texture {path}")
-    except FileNotFoundError:
-        raise ValueError(f"texture {path} does not exist") from None
-    except (UnidentifiedImageError, OSError) as exc:
-        raise ValueError(f"cannot read texture {path}: {exc}") from None
+    with open_image(path, f"texture {path}") as im:
+        rgba = picture_rgba(im, f"texture {path}")
     rgb = Image.fromarray(np.round(rgba[..., :3] * 255).astype(np.uint8), "RGB")
     alpha = rgba[..., 3] if np.any(rgba[..., 3] < 1) else None
     return rgb, alpha
