@@ -25,7 +25,7 @@ from ..pictures import error_figure
 from ..rundir import RunDir, SceneRecord
 from ..units import OPT_DPI, voxel_mm
 from .picture import picture_rgba, resample
-from .spec import SlabSpec
+from .spec import SlabSpec, check_slab_size
 from .translucency import check_depth, load_mask, slab_translucency, translucency_fields
 
 ASPECT_TOLERANCE = 0.02  # relative mismatch of picture and face aspect ratios allowed (resampling rounding)
@@ -112,6 +112,7 @@ def build_slab(
     """top, bottom: (H, W, 3) linear pictures; size_mm (W, H, D); translucency: (H, W) mask of transparent-ink
     shares in the top picture's pixels (``scenes.translucency``), down to ``translucency_depth_mm`` (None: the
     whole slab)."""
+    check_slab_size(size_mm, dpi)
     w_mm, h_mm, d_mm = size_mm
     vox = voxel_mm(dpi)
     nx, ny, nz = (max(1, int(round(v / vox))) for v in (w_mm, h_mm, d_mm))
