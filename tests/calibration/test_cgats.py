@@ -77,6 +77,21 @@ def test_lab_columns_and_round_trip(tmp_path):
     assert kind == "lab" and lab.tolist() == [[50.0, 10.0, -20.0]]
 
 
+def test_backslashes_are_themselves(tmp_path):
+    """CGATS has no escapes: a Windows path reads and writes back as it is, quoted or not."""
+    t = CgatsTable(["SAMPLE_ID", "PATH"], [["1", "C:\\data\\a.txt"], ["2", "\\"]])
+    back = cgats.read(cgats.write(tmp_path / "p.txt", t))
+    assert back.rows == t.rows
+    bare = cgats.parse("CGATS.17\nBEGIN_DATA_FORMAT\nA B\nEND_DATA_FORMAT\nBEGIN_DATA\n1 C:\\x\\y\nEND_DATA\n")
+    assert bare.rows == [["1", "C:\\x\\y"]]
+
+
+def test_a_table_without_rows_has_no_measurements():
+    t = cgats.parse("CGATS.17\nBEGIN_DATA_FORMAT\nSAMPLE_ID LAB_L LAB_A LAB_B\nEND_DATA_FORMAT\nBEGIN_DATA\nEND_DATA\n")
+    with pytest.raises(MeasurementError, match="^the measurements have no rows"):
+        measured_lab(t, "D50")
+
+
 def test_field_spellings():
     assert canonical_field("SampleID") == "SAMPLE_ID"
     assert canonical_field("Lab_L") == "LAB_L"
@@ -95,6 +110,7 @@ def test_field_spellings():
             "NUMBER_OF_SETS",
         ),
         ('CGATS.17\nBEGIN_DATA_FORMAT\nA\nEND_DATA_FORMAT\nBEGIN_DATA\n"1\nEND_DATA\n', "line 6"),
+        ("\nBEGIN_DATA_FORMAT\nA\nEND_DATA_FORMAT\nBEGIN_DATA\n1\nEND_DATA\n", "line 2: the file must start with the"),
     ],
 )
 def test_malformed_files_are_one_line_errors(text, needle):

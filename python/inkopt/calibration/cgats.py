@@ -62,9 +62,13 @@ def canonical_field(name: str) -> str:
     return up
 
 
+_STRUCTURE = {"BEGIN_DATA_FORMAT", "END_DATA_FORMAT", "BEGIN_DATA", "END_DATA", "NUMBER_OF_SETS", "NUMBER_OF_FIELDS"}
+
+
 def _tokens(line: str, where: str) -> list[str]:
     lex = shlex.shlex(line, posix=True)
     lex.whitespace_split, lex.commenters = True, "#"
+    lex.escape = ""  # CGATS has no escapes: a backslash is itself (a Windows path), also in a quoted string
     try:
         return list(lex)
     except ValueError as exc:
@@ -78,6 +82,11 @@ def parse(text: str, where: str = "CGATS file") -> CgatsTable:
     if first_at is None:
         raise CgatsError(f"{where}: the file is empty")
     first = lines[first_at].strip()
+    if first.split()[0].upper() in _STRUCTURE:
+        raise CgatsError(
+            f"{where} line {first_at + 1}: the file must start with the name of its format (CGATS.17, or CTI3 for "
+            f"ArgyllCMS), got {first.split()[0]}"
+        )
     header: dict[str, str] = {}
     fields: list[str] | None = None
     rows: list[list[str]] = []

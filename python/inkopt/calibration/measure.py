@@ -228,6 +228,8 @@ def measured_lab(table: CgatsTable, illuminant: str = "D50") -> tuple[np.ndarray
     if not table.has("SAMPLE_ID"):
         raise MeasurementError("the measurements have no SAMPLE_ID column")
     ids = table.column("SAMPLE_ID")
+    if not ids:
+        raise MeasurementError("the measurements have no rows (nothing between BEGIN_DATA and END_DATA)")
     spec = spectral_fields(table)
     if spec:
         return _spectral_lab(table, spec, ids, illuminant), "spectral"
