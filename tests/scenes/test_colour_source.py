@@ -23,18 +23,18 @@ RED = (200, 30, 30)
 
 
 def write_cube_obj(
-    folder, mtllib="m.mtl", map_kd="tex.png", uv=True, write_mtl=True, texture=None, usemtl="mat", head=()
+    folder, mtllib="m.mtl", map_kd="tex.png", uv=True, write_mtl=True, texture=None, usemtl="mat", head=(), sep=" "
 ):
-    """A unit cube OBJ in ``folder``: ``mtllib`` (None: no line), ``usemtl`` before the faces (None: no line),
-    the lines ``head`` at the top; its MTL defines material "mat" naming ``map_Kd`` (None: no line); the texture
-    tex.png (uniform RED, or the PIL image ``texture``)."""
+    """A unit cube OBJ in ``folder``: ``mtllib`` (None: no line), ``usemtl`` before the faces (None: no line;
+    ``sep`` between the keyword and the name), the lines ``head`` at the top; its MTL defines material "mat"
+    naming ``map_Kd`` (None: no line); the texture tex.png (uniform RED, or the PIL image ``texture``)."""
     folder.mkdir(parents=True, exist_ok=True)
     box = trimesh.creation.box((1, 1, 1))
     lines = list(head) + ([f"mtllib {mtllib}"] if mtllib else [])
     lines += ["v {:g} {:g} {:g}".format(*p) for p in box.vertices]
     if uv:
         lines += [f"vt {p[0] + 0.5:g} {p[1] + 0.5:g}" for p in box.vertices]
-    lines += [f"usemtl {usemtl}"] if mtllib and usemtl else []
+    lines += [f"usemtl{sep}{usemtl}"] if mtllib and usemtl else []
     lines += ["f " + " ".join(f"{i}/{i}" if uv else f"{i}" for i in t) for t in box.faces + 1]
     (folder / "m.obj").write_text("\n".join(lines) + "\n")
     if write_mtl:
@@ -80,7 +80,8 @@ JUNK = "root:x:0:0:root:/root:/bin/bash\n"  # what /etc/passwd holds: neither a 
             {"x.mtl": "newmtl x\n"},
             r"names 2 material libraries \(x.mtl, m.mtl\), but only",
         ),
-        (dict(head=["# written without mtllib"]), {}, r"12 of its 12 faces have no material the mesh reader could"),
+        (dict(head=["# written without mtllib"]), {}, r"mentions 'mtllib' on line 1, before its mtllib statement"),
+        (dict(sep="\t"), {}, r"12 of its 12 faces have no material the mesh reader could resolve"),  # reads 'usemtl
         (dict(map_kd="-s 1 1 1 tex.png"), {}, r"could not read texture .*tex.png of material mat \(map_Kd options"),
     ],
 )
@@ -96,6 +97,24 @@ def test_obj_materials_trimesh_would_replace_are_refused(tmp_path, kw, files, ma
     m = load_mesh(obj, height_mm=2.0, texture=tmp_path / "c" / "tex.png")
     assert describe_colour_source(m) == f"texture {tmp_path / 'c' / 'tex.png'} (8 x 8 px)"
     assert describe_colour_source(load_mesh(obj, height_mm=2.0, constant_color=True)) == "constant colour #FFFFFF"
+
+
+def test_textured_and_untextured_materials_keep_their_colours(tmp_path):
+    """An OBJ whose faces use a textured material and an untextured one (Kd only): trimesh packs both into one
+    atlas; each face keeps its material's colour exactly (red texture, blue Kd) and the atlas's transparent
+    padding is no alpha channel of the file's."""
+    obj = write_cube_obj(tmp_path / "c")
+    lines = obj.read_text().splitlines()
+    first_face = next(i for i, ln in enumerate(lines) if ln.startswith("f "))
+    lines.insert(first_face + 6, "usemtl plain")
+    obj.write_text("\n".join(lines) + "\n")
+    (tmp_path / "c" / "m.mtl").write_text("newmtl mat\nKd 1 1 1\nmap_Kd tex.png\nnewmtl plain\nKd 0 0 1\n")
+    m = load_mesh(obj, height_mm=2.0)
+    assert m.texture_alpha is None and describe_colour_source(m).startswith("texture tex.png (")
+    got = m.colors_at(np.arange(len(m.faces)), np.full((len(m.faces), 3), 1 / 3))
+    red, blue = srgb_to_linear(np.array(RED) / 255), np.array([0.0, 0.0, 1.0])
+    is_red = np.abs(got - red).max(1) < 1e-3
+    assert is_red.sum() == 6 and np.abs(got[~is_red] - blue).max() < 1e-3
 
 
 def test_texture_line_names_the_texture_used(tmp_path):

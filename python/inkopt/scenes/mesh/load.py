@@ -27,7 +27,7 @@ from ...errors import ParameterError
 from ...images import check_pixels, decode_pixels
 from ..picture import picture_rgba
 from .checks import check_placement
-from .source import check_colour_source, check_obj_materials, check_resolved, load_texture
+from .source import check_colour_source, check_obj_materials, check_resolved, has_alpha, load_texture, uniform_tiles
 
 _CHUNK = 1 << 19  # query points per libigl call (bounds the temporary memory to ~50 MB)
 
@@ -158,12 +158,16 @@ def load_mesh(
     obj = check_obj_materials(path, accept) if path.suffix.lower() == ".obj" else None
     override = load_texture(texture) if texture is not None else None
     scene = _read(trimesh.load_scene, path, str(path), process=False)
-    lost, names = check_resolved(scene, str(path), obj, accept)
+    resolved = check_resolved(scene, str(path), obj, accept)
+    if obj is not None:
+        uniform_tiles(scene)
     tm = _read(scene.to_mesh, path)
     # trimesh's grey placeholder texture (an OBJ without a material library, or faces whose material it could not
     # resolve, accepted with `texture` or `constant_color`) is not a colour of the file.
-    placeholder = obj is not None and (not obj.mtllibs or lost)
+    placeholder = obj is not None and (not obj.mtllibs or resolved.placeholder)
     mesh = mesh_from_trimesh(tm, height_mm=height_mm, scale=scale, up=up, source=str(path), placeholder=placeholder)
+    if not resolved.alpha:  # an atlas's padding is transparent: no alpha of the file's
+        mesh.texture_alpha = None
     if override is not None:
         if mesh.uv is None:
             raise ParameterError(f"`texture` {texture}: {path} has no texture coordinates (no uv / vt) to look it up")
@@ -171,7 +175,7 @@ def load_mesh(
         mesh.tint = np.ones(3, np.float32)
         mesh.texture_name = str(texture)
     elif mesh.texture is not None:
-        mesh.texture_name = names
+        mesh.texture_name = resolved.names
     if constant_color and mesh.uv is None:  # a texture that cannot be looked up: the accepted constant instead
         mesh.texture, mesh.texture_alpha = None, None
     check_colour_source(mesh, constant_color, texture_named=obj is not None and bool(obj.textures))
@@ -275,7 +279,7 @@ def _read_colours(tm, mesh: TexturedMesh, placeholder: bool = False) -> None:
             decode_pixels(img, name)
             rgba = picture_rgba(img, name)
             mesh.texture = Image.fromarray(np.round(rgba[..., :3] * 255).astype(np.uint8), "RGB")
-            if img.mode in ("RGBA", "LA", "PA") or (img.mode == "P" and "transparency" in img.info):
+            if has_alpha(img):
                 mesh.texture_alpha = rgba[..., 3].copy()
             if type(mat).__name__ == "PBRMaterial" and getattr(mat, "baseColorFactor", None) is not None:
                 mesh.tint = np.asarray(mat.baseColorFactor, np.float32)[:3] / 255.0

@@ -115,6 +115,7 @@ def check_obj_materials(path, skip_files: bool = False) -> ObjMaterials:
             f"{path} names {len(libs)} material libraries ({_listed(libs)}), but only the first is read: merge "
             f"them into one .mtl file, or {FIX}"
         )
+    _check_first_mention(path, text)
     name, lib = _named_file(libs[0], folder)
     if not lib.is_file():
         raise ParameterError(
@@ -127,6 +128,19 @@ def check_obj_materials(path, skip_files: bool = False) -> ObjMaterials:
             f"mtllib line at the OBJ's .mtl file, or {FIX}"
         )
     return ObjMaterials([lib], _used_textures(path, text, lib, materials), has_uv)
+
+
+def _check_first_mention(path: Path, text: str) -> None:
+    """trimesh takes the first "mtllib" anywhere in the file (a comment, a name) for the statement: one-line
+    ValueError where that is not the first ``mtllib`` statement."""
+    stmt = re.search(r"^[ \t]*(mtllib)[ \t]", text, re.M)
+    first = text.find("mtllib")
+    if stmt is not None and first != stmt.start(1):
+        line = text.count("\n", 0, first) + 1
+        raise ParameterError(
+            f"{path} mentions 'mtllib' on line {line}, before its mtllib statement, and the mesh reader takes that "
+            f"mention for the statement: remove it, or {FIX}"
+        )
 
 
 def _used_textures(path: Path, text: str, lib: Path, materials: dict) -> dict[str, Path]:
@@ -166,20 +180,39 @@ def _used_textures(path: Path, text: str, lib: Path, materials: dict) -> dict[st
     return textures
 
 
-def check_resolved(scene, source: str, obj: ObjMaterials | None, accept: bool = False) -> tuple[bool, str]:
+@dataclass(frozen=True)
+class Resolved:
+    """What trimesh made of a mesh file's materials (``check_resolved``): ``placeholder`` some face group of an OBJ
+    got trimesh's grey placeholder texture (not a colour of the file: the caller ignores the texture); ``names``
+    the file names of the textures the mesh uses, comma-separated ("" for embedded ones); ``alpha`` whether one of
+    them has an alpha channel (an atlas trimesh packs from several has one for its padding, which is no alpha of
+    the file's)."""
+
+    placeholder: bool = False
+    names: str = ""
+    alpha: bool = False
+
+
+def has_alpha(img) -> bool:
+    """Whether a PIL image carries an alpha channel (RGBA, LA, PA, or a palette with a transparent entry)."""
+    return img.mode in ("RGBA", "LA", "PA") or (img.mode == "P" and "transparency" in img.info)
+
+
+def _image(mat):
+    img = getattr(mat, "image", None)
+    return getattr(mat, "baseColorTexture", None) if img is None else img
+
+
+def check_resolved(scene, source: str, obj: ObjMaterials | None, accept: bool = False) -> Resolved:
     """What trimesh made of a mesh file's materials (``scene``: its ``trimesh.Scene`` before the geometries are
-    joined): ``(placeholder, names)``. ``placeholder``: some face group of an OBJ got trimesh's placeholder texture
-    (it is not a colour of the file: the caller ignores the texture); ``names``: the file names of the textures
-    the mesh uses, comma-separated ("" for embedded textures). One-line ValueError, unless ``accept`` (``texture``
-    or ``constant_color`` given), for a placeholder of an OBJ that names a material library and for a used
-    material's texture that trimesh could not read."""
-    lost, total, names = 0, 0, []
+    joined; ``Resolved``). One-line ValueError, unless ``accept`` (``texture`` or ``constant_color`` given), for a
+    placeholder of an OBJ that names a material library and for a used material's texture that trimesh could not
+    read."""
+    lost, total, names, alpha = 0, 0, [], False
     for geom in scene.geometry.values():
         total += len(getattr(geom, "faces", ()))
         mat = getattr(getattr(geom, "visual", None), "material", None)
-        img = getattr(mat, "image", None)
-        if img is None:
-            img = getattr(mat, "baseColorTexture", None)
+        img = _image(mat)
         wanted = obj.textures.get(getattr(mat, "name", None)) if obj is not None else None
         if img is None and wanted is not None and not accept:
             raise ParameterError(
@@ -191,14 +224,36 @@ def check_resolved(scene, source: str, obj: ObjMaterials | None, accept: bool = 
         file_path = img.info.get("file_path")
         if obj is not None and file_path is None:
             lost += len(geom.faces)
-        elif file_path:
+            continue
+        alpha |= has_alpha(img)
+        if file_path:
             names.append(Path(str(file_path).replace("\\", "/")).name)
     if lost and obj.mtllibs and not accept:
         raise ParameterError(
             f"{source}: {lost} of its {total} faces have no material the mesh reader could resolve (it would give "
             f"them a grey placeholder texture): check the mtllib and usemtl lines, or {FIX}"
         )
-    return lost > 0, ", ".join(sorted(set(names)))
+    return Resolved(lost > 0, ", ".join(sorted(set(names))), alpha)
+
+
+def uniform_tiles(scene, size: int = 8) -> None:
+    """Give every untextured material of an OBJ with a textured one a uniform ``size`` x ``size`` image of its
+    colour (Kd), in place. trimesh packs the materials of a mesh with several into one atlas, an untextured one as
+    a tile of a few pixels without padding whose colour the bilinear look-up blends with the atlas's transparent
+    black around it (a blue Kd came out 25 % darker on some faces); an image is packed like a texture, padded."""
+    from PIL import Image
+    from trimesh.visual.material import SimpleMaterial
+
+    geoms = list(scene.geometry.values())
+    if len(geoms) < 2 or not any(_image(getattr(g.visual, "material", None)) is not None for g in geoms):
+        return
+    for g in geoms:
+        mat = getattr(g.visual, "material", None)
+        if type(mat) is SimpleMaterial and mat.image is None and getattr(g.visual, "uv", None) is not None:
+            colour = tuple(int(v) for v in np.asarray(mat.main_color)[:3])
+            g.visual.material = SimpleMaterial(
+                image=Image.new("RGB", (size, size), colour), diffuse=mat.diffuse, name=mat.name
+            )
 
 
 def load_texture(path):
