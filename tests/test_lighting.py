@@ -79,6 +79,22 @@ def test_unreadable_lighting(tmp_path):
         load_lighting("uniform", 90)
 
 
+@pytest.mark.parametrize("suffix", [".hdr", ".exr"])
+def test_map_headers_give_the_size(tmp_path, suffix):
+    from inkopt.lighting import _map_size
+
+    assert _map_size(write_map(tmp_path / f"m{suffix}", np.ones((6, 12, 3), np.float32))) == (12, 6)
+
+
+def test_huge_maps_are_refused_before_decoding(tmp_path):
+    """A Radiance header declaring 20000 x 10000 pixels (a few bytes of data): refused by its header, in one line
+    naming the file, its pixel count and the limit."""
+    path = tmp_path / "bomb.hdr"
+    path.write_bytes(b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 10000 +X 20000\n" + b"\x02\x02\x4e\x20" * 4)
+    with pytest.raises(ValueError, match=r"^lighting '.*bomb.hdr' has 20000 x 10000 px, 200,000,000 pixels, more"):
+        load_lighting(path)
+
+
 def _lobe_map(axis, h=32):
     """Radiance 1 + 4 max(0, d . axis)^2 over the sphere (cell centres)."""
     theta = (np.arange(h) + 0.5) * np.pi / h

@@ -17,12 +17,15 @@ from __future__ import annotations
 import hashlib
 import io
 import os
+import re
+import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from .errors import ParameterError
+from .images import MAX_IMAGE_PIXELS, check_pixels
 from .io import load_array
 
 UNIFORM = "uniform"
@@ -95,9 +98,35 @@ def check_map(env, name: str = "map") -> np.ndarray:
 def _cv2():
     os.environ.setdefault("OPENCV_IO_ENABLE_OPENEXR", "1")  # read before cv2 is first imported
     os.environ.setdefault("OPENCV_LOG_LEVEL", "ERROR")
+    # OpenCV's own pixel limit (2**30 by default) set to inkopt's, for a header _map_size cannot read
+    os.environ.setdefault("OPENCV_IO_MAX_IMAGE_PIXELS", str(MAX_IMAGE_PIXELS))
     import cv2
 
     return cv2
+
+
+_EXR_MAGIC = b"\x76\x2f\x31\x01"
+_EXR_WINDOW = b"dataWindow\0box2i\0"
+
+
+def _map_size(path: Path) -> tuple[int, int] | None:
+    """(W, H) px of a Radiance .hdr/.pic or OpenEXR file as its header declares it, or None where the first 64 KiB
+    do not say. Radiance: text lines, a blank line, then the resolution line (``-Y H +X W``); OpenEXR: the
+    ``dataWindow`` attribute (name, type ``box2i``, a 4-byte size, then xmin, ymin, xmax, ymax as int32)."""
+    with open(path, "rb") as f:
+        head = f.read(1 << 16)
+    if head.startswith(b"#?"):
+        m = re.search(rb"\n\n([-+])([XY]) +(\d+) +([-+])([XY]) +(\d+)", head.replace(b"\r\n", b"\n"))
+        if m:
+            first, second = int(m.group(3)), int(m.group(6))
+            return (second, first) if m.group(2) == b"Y" else (first, second)
+    elif head.startswith(_EXR_MAGIC) and _EXR_WINDOW in head:
+        try:
+            x0, y0, x1, y1 = struct.unpack_from("<4i", head, head.index(_EXR_WINDOW) + len(_EXR_WINDOW) + 4)
+        except struct.error:
+            return None
+        return max(0, x1 - x0 + 1), max(0, y1 - y0 + 1)
+    return None
 
 
 def read_map(path) -> np.ndarray:
@@ -111,6 +140,9 @@ def read_map(path) -> np.ndarray:
     if suffix == ".npy":
         a = load_array(p, "lighting map")
     else:
+        size = _map_size(p)
+        if size is not None:
+            check_pixels(size, f"lighting '{path}'")  # before OpenCV decodes it
         cv2 = _cv2()
         a = cv2.imread(str(p), cv2.IMREAD_UNCHANGED | cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
         if a is None:

@@ -129,3 +129,62 @@ def test_a_new_chart_in_the_same_folder_removes_the_old_print(tmp_path, capsys):
     assert main(["quantize", str(job)]) == 0 and main(["export", str(job), "--format", "gcvf"]) == 0
     assert main(["calibration-chart", "--inks", "magenta,white", "--out", str(tmp_path), "--patch-mm", "3"]) == 0
     assert not (job / "quantized.npz").exists() and not (job / "slices.gcvf").exists()
+
+
+def test_argyll_ti3_with_the_chart(measured, tmp_path):
+    """An ArgyllCMS .ti3 of the chart (XYZ on the 0-100 scale, D50; spectral keywords carried along) matched to
+    the chart by SAMPLE_ID reads back as the CIELAB it was made from."""
+    import colour
+
+    from inkopt.calibration.calibrate import merge_measurements
+    from inkopt.calibration.measure import measured_lab, white_xy
+
+    lab_true, _ = measured_lab(cgats.read(measured / "measured.txt"), "D50")
+    xyz = colour.Lab_to_XYZ(lab_true, white_xy("D50")) * 100
+    rows = [[str(k + 1), f"A{k + 1}", *(float(round(v, 4)) for v in x)] for k, x in enumerate(xyz)]
+    ti3 = cgats.CgatsTable(
+        ["SAMPLE_ID", "SAMPLE_LOC", "XYZ_X", "XYZ_Y", "XYZ_Z"], rows[::-1], {"SPECTRAL_NORM": "100"}, "CTI3"
+    )
+    cgats.write(tmp_path / "m.ti3", ti3)
+    merged = merge_measurements(cgats.read(measured / "chart.txt"), cgats.read(tmp_path / "m.ti3"), "m.ti3")
+    assert merged.header["SPECTRAL_NORM"] == "100"
+    lab, kind = measured_lab(merged, "D50")
+    assert kind == "xyz"
+    np.testing.assert_allclose(lab, lab_true, atol=2e-3)
+
+
+def test_a_sample_id_measured_twice_is_refused(measured, tmp_path, capsys):
+    inst = cgats.read(measured / "measured.txt")
+    keep = [i for i, f in enumerate(inst.fields) if f in ("SAMPLE_ID", "LAB_L", "LAB_A", "LAB_B")]
+    rows = [[r[i] for i in keep] for r in inst.rows]
+    rows.append(list(rows[2]))
+    cgats.write(tmp_path / "twice.txt", cgats.CgatsTable([inst.fields[i] for i in keep], rows))
+    out = tmp_path / "x.json"
+    argv = ["calibrate", str(tmp_path / "twice.txt"), "--chart", str(measured / "chart.txt"), "--out", str(out)]
+    _fails(argv, capsys, f"twice.txt: SAMPLE_ID {rows[2][0]} appears twice (data rows 3 and {len(rows)})")
+    assert not out.exists()
+
+
+def test_an_unwritable_out_folder_is_refused_before_the_fit(measured, tmp_path, capsys, monkeypatch):
+    """A folder that takes no new file: refused at once, not after the fit (the probe file is made there)."""
+    import os
+    import tempfile
+
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o555)
+    if os.geteuid() == 0:  # root writes anywhere: the folder refuses the probe as it would refuse a user
+
+        def refuse(*args, dir=None, **kw):
+            raise PermissionError(13, "Permission denied", str(dir))
+
+        monkeypatch.setattr(tempfile, "mkstemp", refuse)
+    try:
+        _fails(
+            ["calibrate", str(measured / "measured.txt"), "--out", str(ro / "x.json")],
+            capsys,
+            f"--out: cannot write in folder {ro} (Permission denied)",
+        )
+    finally:
+        ro.chmod(0o755)
+    assert list(ro.iterdir()) == []

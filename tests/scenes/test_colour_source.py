@@ -22,16 +22,19 @@ def srgb_to_linear(v):
 RED = (200, 30, 30)
 
 
-def write_cube_obj(folder, mtllib="m.mtl", map_kd="tex.png", uv=True, write_mtl=True, texture=None):
-    """A unit cube OBJ in ``folder``: ``mtllib`` (None: no line), its MTL naming ``map_Kd`` (None: no line),
-    the texture tex.png (uniform RED, or the PIL image ``texture``)."""
+def write_cube_obj(
+    folder, mtllib="m.mtl", map_kd="tex.png", uv=True, write_mtl=True, texture=None, usemtl="mat", head=(), sep=" "
+):
+    """A unit cube OBJ in ``folder``: ``mtllib`` (None: no line), ``usemtl`` before the faces (None: no line;
+    ``sep`` between the keyword and the name), the lines ``head`` at the top; its MTL defines material "mat"
+    naming ``map_Kd`` (None: no line); the texture tex.png (uniform RED, or the PIL image ``texture``)."""
     folder.mkdir(parents=True, exist_ok=True)
     box = trimesh.creation.box((1, 1, 1))
-    lines = [f"mtllib {mtllib}"] if mtllib else []
+    lines = list(head) + ([f"mtllib {mtllib}"] if mtllib else [])
     lines += ["v {:g} {:g} {:g}".format(*p) for p in box.vertices]
     if uv:
         lines += [f"vt {p[0] + 0.5:g} {p[1] + 0.5:g}" for p in box.vertices]
-    lines += ["usemtl mat"] if mtllib else []
+    lines += [f"usemtl{sep}{usemtl}"] if mtllib and usemtl else []
     lines += ["f " + " ".join(f"{i}/{i}" if uv else f"{i}" for i in t) for t in box.faces + 1]
     (folder / "m.obj").write_text("\n".join(lines) + "\n")
     if write_mtl:
@@ -56,6 +59,87 @@ def test_obj_colour_problems_are_refused(tmp_path, kw, match):
     with pytest.raises(ValueError, match=match) as e:
         load_mesh(obj, height_mm=2.0)
     assert "\n" not in str(e.value)
+
+
+JUNK = "root:x:0:0:root:/root:/bin/bash\n"  # what /etc/passwd holds: neither a material library nor an image
+
+
+@pytest.mark.parametrize(
+    "kw, files, match",
+    [
+        (dict(usemtl="Other"), {}, r"uses material Other \(usemtl\), which .*m.mtl does not define \(it defines mat\)"),
+        (dict(mtllib="junk.txt"), {"junk.txt": JUNK}, r"names material library .*junk.txt, which defines no material"),
+        (
+            dict(map_kd="junk.txt"),
+            {"junk.txt": JUNK},
+            r"cannot read texture .*junk.txt \(map_Kd of material mat in m.mtl\)",
+        ),
+        (dict(usemtl=None), {}, r"gives its faces no material \(m.mtl defines mat\)"),
+        (
+            dict(head=["mtllib x.mtl"]),
+            {"x.mtl": "newmtl x\n"},
+            r"names 2 material libraries \(x.mtl, m.mtl\), but only",
+        ),
+        (dict(head=["# written without mtllib"]), {}, r"mentions 'mtllib' on line 1, before its mtllib statement"),
+        (dict(sep="\t"), {}, r"12 of its 12 faces have no material the mesh reader could resolve"),  # reads 'usemtl
+        (dict(map_kd="-s 1 1 1 tex.png"), {}, r"could not read texture .*tex.png of material mat \(map_Kd options"),
+    ],
+)
+def test_obj_materials_trimesh_would_replace_are_refused(tmp_path, kw, files, match):
+    """Each of these gets trimesh's grey 2 x 2 placeholder texture (or no texture) without a word: an error naming
+    the file, the material and the fix; accepted with a texture or a constant colour given."""
+    obj = write_cube_obj(tmp_path / "c", **kw)
+    for name, text in files.items():
+        (tmp_path / "c" / name).write_text(text)
+    with pytest.raises(ValueError, match=match) as e:
+        load_mesh(obj, height_mm=2.0)
+    assert "\n" not in str(e.value) and "`texture` FILE" in e.value.template
+    m = load_mesh(obj, height_mm=2.0, texture=tmp_path / "c" / "tex.png")
+    assert describe_colour_source(m) == f"texture {tmp_path / 'c' / 'tex.png'} (8 x 8 px)"
+    assert describe_colour_source(load_mesh(obj, height_mm=2.0, constant_color=True)) == "constant colour #FFFFFF"
+
+
+def test_textured_and_untextured_materials_keep_their_colours(tmp_path):
+    """An OBJ whose faces use a textured material and an untextured one (Kd only): trimesh packs both into one
+    atlas; each face keeps its material's colour exactly (red texture, blue Kd) and the atlas's transparent
+    padding is no alpha channel of the file's."""
+    obj = write_cube_obj(tmp_path / "c")
+    lines = obj.read_text().splitlines()
+    first_face = next(i for i, ln in enumerate(lines) if ln.startswith("f "))
+    lines.insert(first_face + 6, "usemtl plain")
+    obj.write_text("\n".join(lines) + "\n")
+    (tmp_path / "c" / "m.mtl").write_text("newmtl mat\nKd 1 1 1\nmap_Kd tex.png\nnewmtl plain\nKd 0 0 1\n")
+    m = load_mesh(obj, height_mm=2.0)
+    assert m.texture_alpha is None and describe_colour_source(m).startswith("texture tex.png (")
+    got = m.colors_at(np.arange(len(m.faces)), np.full((len(m.faces), 3), 1 / 3))
+    red, blue = srgb_to_linear(np.array(RED) / 255), np.array([0.0, 0.0, 1.0])
+    is_red = np.abs(got - red).max(1) < 1e-3
+    assert is_red.sum() == 6 and np.abs(got[~is_red] - blue).max() < 1e-3
+
+
+def test_texture_line_names_the_texture_used(tmp_path):
+    """The log line gives the file and the size of the texture the target is made from, not trimesh's stand-in."""
+    from helpers import SPOT
+
+    for name in ("spot.obj", "spot.mtl", "spot_texture.png"):
+        (tmp_path / name).write_bytes((SPOT.parent / name).read_bytes())
+    assert describe_colour_source(load_mesh(tmp_path / "spot.obj", height_mm=4.0)) == (
+        "texture spot_texture.png (1024 x 1024 px)"
+    )
+    obj = tmp_path / "wrongname.obj"
+    obj.write_text((tmp_path / "spot.obj").read_text().replace("mtllib spot.mtl", "mtllib wrongname.mtl"))
+    (tmp_path / "wrongname.mtl").write_text("newmtl SomethingElse\nKd 1 1 1\nmap_Kd spot_texture.png\n")
+    with pytest.raises(ValueError, match="uses material Default_OBJ .usemtl., which .*wrongname.mtl does not define"):
+        load_mesh(obj, height_mm=4.0)
+
+
+def test_obj_texture_bomb_is_refused_by_name(tmp_path):
+    from test_images import bomb_png
+
+    obj = write_cube_obj(tmp_path / "c")
+    (tmp_path / "c" / "tex.png").write_bytes(bomb_png(20000, 20000))
+    with pytest.raises(ValueError, match=r"texture .*tex.png \(map_Kd of material mat in m.mtl\) has 400,000,000 pix"):
+        load_mesh(obj, height_mm=2.0)
 
 
 def test_obj_fixes_named_in_the_errors(tmp_path):

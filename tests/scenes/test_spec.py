@@ -60,6 +60,12 @@ def test_frozen_picklable_and_json_round_trip(chart, ball):
         (lambda c, b: MeshSpec(b, height_mm=1, dpi=0), "dpi must be positive"),
         (lambda c, b: MeshSpec(str(b) + ".missing", height_mm=1), "does not exist"),
         (lambda c, b: SlabSpec(c, (2, 1, -1)), "size_mm sizes must be three positive numbers"),
+        (lambda c, b: SlabSpec(c, (6, 4, 1e-9)), r"size_mm 6x4x1e-09 mm: the depth 1e-09 mm is less than one voxel"),
+        (lambda c, b: SlabSpec(c, (0.05, 4, 1), dpi=300), r"the width 0.05 mm is less than one voxel \(0.08467 mm at"),
+        (
+            lambda c, b: SlabSpec(c, (2, 1, 0.2), dpi=100),
+            r"the depth 0.2 mm is less than one voxel \(0.254 mm at 100 DPI",
+        ),
         (lambda c, b: SlabSpec(str(c) + ".missing", (2, 1, 1)), "picture"),
         (lambda c, b: SlabSpec(c, (2, 1, 1), translucency_depth_mm=0.2), "needs translucency"),
         (lambda c, b: SlabSpec(c, (2, 1, 1), translucency=c, translucency_depth_mm=-1), "positive depth"),
@@ -74,6 +80,17 @@ def test_one_line_errors(chart, ball, spec, message):
     if isinstance(err.value, ParameterError) and err.value.parameters:
         flags = err.value.render(flag_of)
         assert all(flag_of(name) in flags for name in err.value.parameters) and "_" not in flags.split()[0]
+
+
+def test_a_slab_side_of_one_voxel_is_enough(chart):
+    """The grid holds round(side / voxel) voxels a side: one voxel is the thinnest slab (arrays too)."""
+    from inkopt.units import voxel_mm
+
+    SlabSpec(chart, (2, 4 / 3, voxel_mm(300))).validate()
+    pic = load_picture(chart)
+    assert build_slab(pic, None, (2, 4 / 3, voxel_mm(300)), INKS).volume.shape[0] == 1
+    with pytest.raises(ValueError, match="less than one voxel"):
+        build_slab(pic, None, (2, 4 / 3, 0.01), INKS)
 
 
 def test_ink_set_checks(chart, ball):

@@ -4,11 +4,14 @@ Steps: read the CGATS.17 file (chart columns and measurements), check that it id
 the measurements to CIELAB under the illuminant, draw the hold-out (``fit.choose_holdout``), fit without the
 held-out patches and predict them, then fit all patches (starting from the first fit's table) for the ink file.
 The ink file is today's JSON format plus ``provenance`` (the measurement file's digest, illuminant, start table,
-residual figures). Every output is checked for before anything is written and written atomically.
+residual figures). Every output is checked for (and its folder for taking a new file) before anything is read or
+written, and written atomically.
 """
 
 from __future__ import annotations
 
+import os
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,35 +26,61 @@ from .cgats import CgatsTable, canonical_field
 from .cgats import read as read_cgats
 from .chart import Chart, chart_from_table, check_identifiable, start_table
 from .fit import FitResult, choose_holdout, fit_inks
-from .measure import measured_lab
+from .measure import LAB_FIELDS, MEASUREMENT_KEYWORDS, XYZ_FIELDS, measured_lab
 from .report import CalibrationReport, PatchResidual, p95, swatch_figure
 
 
 def output_paths(out_inks) -> dict:
-    """The ink file and, beside it, ``<stem>.report.json`` and ``<stem>.swatches.png``."""
+    """The ink file and, beside it, ``<stem>.report.json`` and ``<stem>.swatches.png``; one-line error unless the
+    folder exists and takes a new file (a probe file is made and removed there, so a fit of a minute or more
+    does not end in a write error)."""
     p = Path(out_inks)
     if p.suffix.lower() != ".json":
         raise ParameterError(f"`out_inks` must name a .json ink file, got {out_inks}")
     if not p.parent.is_dir():
         raise ParameterError(f"`out_inks`: folder {p.parent} does not exist")
+    if p.is_dir():
+        raise ParameterError(f"`out_inks` {out_inks} is a folder; name the .json ink file to write")
+    try:
+        fd, probe = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".probe", dir=p.parent)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise ParameterError(f"`out_inks`: cannot write in folder {p.parent} ({exc.strerror or exc})") from None
     return {"inks": p, "report": p.with_suffix(".report.json"), "picture": p.with_suffix(".swatches.png")}
 
 
 def is_measurement_field(name: str) -> bool:
     c = canonical_field(name)
-    return c in ("LAB_L", "LAB_A", "LAB_B") or c.startswith("SPECTRAL_NM")
+    return c in (*LAB_FIELDS, *XYZ_FIELDS) or c.startswith("SPECTRAL_NM")
+
+
+def _rows_by_id(table: CgatsTable, where: str) -> dict:
+    """SAMPLE_ID -> row of an instrument's file; a SAMPLE_ID that appears twice is an error (which row would be
+    the patch's measurement?)."""
+    rows: dict = {}
+    for no, (sid, r) in enumerate(zip(table.column("SAMPLE_ID"), table.rows), start=1):
+        if sid in rows:
+            raise ValueError(f"{where}: SAMPLE_ID {sid} appears twice (data rows {rows[sid][0]} and {no}); keep one")
+        rows[sid] = (no, r)
+    return {sid: r for sid, (_, r) in rows.items()}
 
 
 def merge_measurements(chart: CgatsTable, measured: CgatsTable, where: str) -> CgatsTable:
     """The chart's columns with the measurement columns of ``measured`` (an instrument's file), joined on
-    SAMPLE_ID; every patch of the chart must have been measured (ValueError naming the first that was not)."""
+    SAMPLE_ID, and the measured file's header keywords that say how to read them (``MEASUREMENT_KEYWORDS``);
+    every patch of the chart must have been measured (ValueError naming the first that was not), and no SAMPLE_ID
+    measured twice."""
     fields = [f for f in measured.fields if is_measurement_field(f)]
     if not fields:
-        raise ValueError(f"{where}: no measurement columns (LAB_L LAB_A LAB_B or SPECTRAL_NM380 ... SPECTRAL_NM730)")
+        raise ValueError(
+            f"{where}: no measurement columns (LAB_L LAB_A LAB_B, XYZ_X XYZ_Y XYZ_Z, or SPECTRAL_NM380 ... "
+            "SPECTRAL_NM730 / SPEC_380 ... SPEC_730)"
+        )
     cols = [measured.fields.index(f) for f in fields]
     if not measured.has("SAMPLE_ID"):
         raise ValueError(f"{where}: no SAMPLE_ID column to match the chart's patches")
-    rows = dict(zip(measured.column("SAMPLE_ID"), measured.rows))
+    rows = _rows_by_id(measured, where)
     keep = [i for i, f in enumerate(chart.fields) if not is_measurement_field(f)]
     if not chart.has("SAMPLE_ID"):
         raise ValueError("the chart file has no SAMPLE_ID column")
@@ -61,7 +90,9 @@ def merge_measurements(chart: CgatsTable, measured: CgatsTable, where: str) -> C
         if m is None:
             raise ValueError(f"{where}: patch {sid} of the chart has no measurement (no row with that SAMPLE_ID)")
         out.append([r[i] for i in keep] + [m[c] for c in cols])
-    return CgatsTable([chart.fields[i] for i in keep] + fields, out, dict(chart.header), chart.source)
+    header = {k: v for k, v in chart.header.items() if k.upper() not in MEASUREMENT_KEYWORDS}
+    header.update({k: v for k, v in measured.header.items() if k.upper() in MEASUREMENT_KEYWORDS})
+    return CgatsTable([chart.fields[i] for i in keep] + fields, out, header, chart.source)
 
 
 @dataclass(frozen=True)

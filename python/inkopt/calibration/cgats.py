@@ -7,7 +7,7 @@ and one row per sample between ``BEGIN_DATA`` and ``END_DATA``. Fields are separ
 starts a comment outside quoted strings. The first line names the format (``CGATS.17``, or ``CTI3`` for
 ArgyllCMS's .ti3 files); it is not checked beyond being present. Field names are kept as written;
 :func:`canonical_field` maps the spellings of instruments' software to one name (``SampleID`` -> ``SAMPLE_ID``,
-``Lab_L`` -> ``LAB_L``, ``nm380`` / ``SPECTRAL_NM_380`` -> ``SPECTRAL_NM380``).
+``Lab_L`` -> ``LAB_L``, ``nm380`` / ``SPECTRAL_NM_380`` / ArgyllCMS's ``SPEC_380`` -> ``SPECTRAL_NM380``).
 """
 
 from __future__ import annotations
@@ -46,11 +46,12 @@ class CgatsTable:
 
 
 _ALIASES = {"SAMPLEID": "SAMPLE_ID", "SAMPLE_ID": "SAMPLE_ID", "ID": "SAMPLE_ID"}
-_SPECTRAL = re.compile(r"^(?:SPECTRAL_NM_?|SPECTRAL_|NM_?|R)(\d{3})$")
+_SPECTRAL = re.compile(r"^(?:SPECTRAL_NM_?|SPECTRAL_|SPEC_|NM_?|R)(\d{3})$")
 
 
 def canonical_field(name: str) -> str:
-    """Upper case, and the common spellings of the sample id, CIELAB and spectral fields mapped to
+    """Upper case, and the common spellings of the sample id, CIELAB and spectral fields (``nm380``,
+    ``SPECTRAL_NM_380``, ``SPEC_380``, ``R380``) mapped to
     ``SAMPLE_ID``, ``LAB_L``/``LAB_A``/``LAB_B`` and ``SPECTRAL_NM<λ>``."""
     up = name.strip().upper()
     if up in _ALIASES:
@@ -61,9 +62,13 @@ def canonical_field(name: str) -> str:
     return up
 
 
+_STRUCTURE = {"BEGIN_DATA_FORMAT", "END_DATA_FORMAT", "BEGIN_DATA", "END_DATA", "NUMBER_OF_SETS", "NUMBER_OF_FIELDS"}
+
+
 def _tokens(line: str, where: str) -> list[str]:
     lex = shlex.shlex(line, posix=True)
     lex.whitespace_split, lex.commenters = True, "#"
+    lex.escape = ""  # CGATS has no escapes: a backslash is itself (a Windows path), also in a quoted string
     try:
         return list(lex)
     except ValueError as exc:
@@ -77,6 +82,11 @@ def parse(text: str, where: str = "CGATS file") -> CgatsTable:
     if first_at is None:
         raise CgatsError(f"{where}: the file is empty")
     first = lines[first_at].strip()
+    if first.split()[0].upper() in _STRUCTURE:
+        raise CgatsError(
+            f"{where} line {first_at + 1}: the file must start with the name of its format (CGATS.17, or CTI3 for "
+            f"ArgyllCMS), got {first.split()[0]}"
+        )
     header: dict[str, str] = {}
     fields: list[str] | None = None
     rows: list[list[str]] = []

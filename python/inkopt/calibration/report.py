@@ -33,7 +33,7 @@ class PatchResidual:
 @dataclass
 class CalibrationReport:
     """calibration.json: where the measurements came from (``measurements``: path, ``measurement_digest``,
-    ``measurement_kind`` "lab" or "spectral", ``illuminant``), the starting table's name, the fit's figures
+    ``measurement_kind`` "lab", "xyz" or "spectral", ``illuminant``), the starting table's name, the fit's figures
     (mean and p95 ΔE2000 over the fitted patches, held-out mean and p95 ΔE2000 and how many, g, iterations,
     seconds) and every patch's :class:`PatchResidual`."""
 

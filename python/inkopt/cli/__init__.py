@@ -42,9 +42,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(
-        prog="inkopt", description="Gradient-based appearance optimization for full-colour inkjet 3D prints."
-    )
+    p = _Parser(prog="inkopt", description="Gradient-based appearance optimization for full-colour inkjet 3D prints.")
     p.add_argument("--version", action="version", version=f"inkopt {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     for name in SUBCOMMANDS:

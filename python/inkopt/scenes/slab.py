@@ -19,12 +19,13 @@ import numpy as np
 
 from ..color import srgb_to_linear
 from ..errors import ParameterError
+from ..images import open_image
 from ..model import FixedShares, InkTable, Texels, Translucency, Volume, transparent_ink
 from ..pictures import error_figure
 from ..rundir import RunDir, SceneRecord
 from ..units import OPT_DPI, voxel_mm
 from .picture import picture_rgba, resample
-from .spec import SlabSpec
+from .spec import SlabSpec, check_slab_size
 from .translucency import check_depth, load_mask, slab_translucency, translucency_fields
 
 ASPECT_TOLERANCE = 0.02  # relative mismatch of picture and face aspect ratios allowed (resampling rounding)
@@ -32,24 +33,16 @@ ASPECT_TOLERANCE = 0.02  # relative mismatch of picture and face aspect ratios a
 
 def describe_picture(path: str | Path, face: str = "top") -> str:
     """ "FACE picture NAME (W x H px, MODE)": the colour source of a slab face, for the log and report.json."""
-    from PIL import Image
-
-    with Image.open(path) as im:
+    with open_image(path, f"picture {path}", decode=False) as im:
         return f"{face} picture {Path(path).name} ({im.size[0]} x {im.size[1]} px, {im.mode})"
 
 
 def load_picture(path: str | Path) -> np.ndarray:
     """An image file of any mode Pillow reads (``picture.picture_rgba``) -> (H, W, 3) float32 linear RGB. Alpha
-    is composited over white."""
-    from PIL import Image, UnidentifiedImageError
-
-    try:
-        with Image.open(path) as im:
-            arr = picture_rgba(im, f"picture {path}")
-    except FileNotFoundError:
-        raise ValueError(f"picture {path} does not exist") from None
-    except (UnidentifiedImageError, OSError) as exc:
-        raise ValueError(f"cannot read picture {path}: {exc}") from None
+    is composited over white. One-line ValueError (``images.ImageError``) for a missing, unreadable or too large
+    file."""
+    with open_image(path, f"picture {path}") as im:
+        arr = picture_rgba(im, f"picture {path}")
     rgb, alpha = arr[..., :3], arr[..., 3:]
     return srgb_to_linear(rgb * alpha + (1.0 - alpha)).astype(np.float32)
 
@@ -119,6 +112,7 @@ def build_slab(
     """top, bottom: (H, W, 3) linear pictures; size_mm (W, H, D); translucency: (H, W) mask of transparent-ink
     shares in the top picture's pixels (``scenes.translucency``), down to ``translucency_depth_mm`` (None: the
     whole slab)."""
+    check_slab_size(size_mm, dpi)
     w_mm, h_mm, d_mm = size_mm
     vox = voxel_mm(dpi)
     nx, ny, nz = (max(1, int(round(v / vox))) for v in (w_mm, h_mm, d_mm))

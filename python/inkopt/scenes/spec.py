@@ -33,6 +33,21 @@ from ..units import OPT_DPI, voxel_mm
 from .translucency import ALPHA, check_depth
 
 
+def check_slab_size(size_mm, dpi: float = OPT_DPI) -> None:
+    """One-line error unless ``size_mm`` is three positive numbers W, H, D (mm), each at least one voxel of the grid
+    at ``dpi``: the grid holds round(side / voxel) voxels a side, and a thinner side would silently become one
+    voxel, thicker than asked."""
+    if len(size_mm) != 3 or not all(np.isfinite(v) and v > 0 for v in size_mm):
+        raise ParameterError(f"`size_mm` sizes must be three positive numbers W x H x D, got {tuple(size_mm)}")
+    vox = voxel_mm(dpi)
+    for side, v in zip(("width", "height", "depth"), size_mm):
+        if v < vox * (1 - 1e-9):
+            raise ParameterError(
+                f"`size_mm` {'x'.join(f'{s:g}' for s in size_mm)} mm: the {side} {v:g} mm is less than one voxel "
+                f"({vox:.4g} mm at {dpi:g} DPI); every side must be at least one voxel"
+            )
+
+
 def _check_file(path, what: str) -> None:
     if not Path(path).is_file():
         raise ValueError(f"{what} {path} does not exist")
@@ -62,9 +77,7 @@ class SlabSpec:
     def validate(self, inks: InkTable | None = None) -> None:
         """One-line ValueErrors for inputs that are wrong before any file is read (sizes, dpi, depth, missing
         files); with ``inks``, also an ink set that cannot honour the constraints."""
-        if len(self.size_mm) != 3 or not all(np.isfinite(v) and v > 0 for v in self.size_mm):
-            raise ParameterError(f"`size_mm` sizes must be three positive numbers W x H x D, got {self.size_mm}")
-        voxel_mm(self.dpi)  # its one-line error for a dpi that is not positive
+        check_slab_size(self.size_mm, self.dpi)  # and the one-line error of a dpi that is not positive
         w, h, depth = self.size_mm  # a slab's grid holds its mixture (4 bytes per ink) and, rendered, σs and σa (24)
         check_grid_budget(self.top, (w, h, depth), self.dpi, 24 + 4 * len(inks or ()), "size_mm")
         _check_translucency(self.translucency, self.translucency_depth_mm, inks, mesh=False)

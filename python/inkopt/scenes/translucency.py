@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ParameterError
+from ..images import open_image
 from ..io import load_array
 from ..model import InkTable, Translucency, transparent_ink
 from .picture import resample
@@ -75,24 +76,19 @@ def check_mask(mask, name: str = "translucency mask") -> np.ndarray:
 def load_mask(path) -> np.ndarray:
     """A mask file -> (H, W) float32 shares in [0, 1]: the grey level of an image (8-bit / 255, 16-bit / 65535,
     float images as they are) or a float .npy array."""
-    from PIL import Image, UnidentifiedImageError
-
     p = Path(path)
     if not p.is_file():
         raise ValueError(f"translucency mask {path} does not exist")
     if p.suffix.lower() == ".npy":
         a = load_array(p, "translucency mask")
         return check_mask(a, f"translucency mask {path}")
-    try:
-        with Image.open(p) as im:
-            if im.mode in ("I", "I;16", "I;16B", "I;16L"):
-                a = np.asarray(im, np.float64) / 65535.0
-            elif im.mode == "F":
-                a = np.asarray(im, np.float64)
-            else:
-                a = np.asarray(im.convert("L"), np.float64) / 255.0
-    except (UnidentifiedImageError, OSError) as exc:
-        raise ValueError(f"cannot read translucency mask {path}: {' '.join(str(exc).split())}") from None
+    with open_image(p, f"translucency mask {path}") as im:
+        if im.mode in ("I", "I;16", "I;16B", "I;16L"):
+            a = np.asarray(im, np.float64) / 65535.0
+        elif im.mode == "F":
+            a = np.asarray(im, np.float64)
+        else:
+            a = np.asarray(im.convert("L"), np.float64) / 255.0
     return check_mask(a, f"translucency mask {path}")
 
 

@@ -10,12 +10,12 @@ ink indices (255 = empty) in the frames the writers use: (Z, Y, X) with y = Y - 
 
 from __future__ import annotations
 
-import io
 import re
 from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from ...images import ImageError, open_image
 from ...io import write_png
 from ...model import EMPTY
 from .slices import pack_rgba
@@ -110,17 +110,17 @@ def decoder(colours, background):
 
 
 def read_image(data_or_path, name: str, size, mode="RGBA") -> np.ndarray:
-    """A PNG (bytes or a path) as an array (converted to ``mode`` unless None), checked to be ``size`` (W, H)."""
-    from PIL import Image
-
+    """A PNG (bytes or a path) as an array (converted to ``mode`` unless None), checked to be ``size`` (W, H) and to
+    hold at most ``images.MAX_IMAGE_PIXELS`` pixels before its pixels are decoded (``images.open_image``)."""
     try:
-        with Image.open(io.BytesIO(data_or_path) if isinstance(data_or_path, bytes) else data_or_path) as im:
-            arr = np.asarray(im.convert(mode) if mode and im.mode != mode else im)
-    except OSError as exc:
-        raise PackageError(f"{name}: not a readable PNG ({exc})") from None
-    if (arr.shape[1], arr.shape[0]) != tuple(size):
-        raise PackageError(f"{name} is {arr.shape[1]} x {arr.shape[0]} px; the package declares {size[0]} x {size[1]}")
-    return arr
+        with open_image(data_or_path, name, decode=False) as im:
+            w, h = im.size
+        if (w, h) != tuple(size):
+            raise PackageError(f"{name} is {w} x {h} px; the package declares {size[0]} x {size[1]}")
+        with open_image(data_or_path, name) as im:
+            return np.asarray(im.convert(mode) if mode and im.mode != mode else im)
+    except ImageError as exc:
+        raise PackageError(str(exc)) from None
 
 
 def layer_files(names, pattern: str, declared: int, what: str) -> list[str]:

@@ -14,6 +14,7 @@ topology, distances and winding numbers). Both list the same faces in the same o
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -23,9 +24,10 @@ from scipy import sparse
 
 from ...color import from_srgb8
 from ...errors import ParameterError
+from ...images import check_pixels, decode_pixels
 from ..picture import picture_rgba
 from .checks import check_placement
-from .source import check_colour_source, check_obj_materials, load_texture
+from .source import check_colour_source, check_obj_materials, check_resolved, has_alpha, load_texture, uniform_tiles
 
 _CHUNK = 1 << 19  # query points per libigl call (bounds the temporary memory to ~50 MB)
 
@@ -152,27 +154,47 @@ def load_mesh(
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"mesh file {path} does not exist")
-    obj = check_obj_materials(path, texture is not None or constant_color) if path.suffix.lower() == ".obj" else None
+    accept = texture is not None or constant_color
+    obj = check_obj_materials(path, accept) if path.suffix.lower() == ".obj" else None
     override = load_texture(texture) if texture is not None else None
-    try:
-        tm = trimesh.load(str(path), force="mesh", process=False)
-    except Exception as exc:  # parser errors of any kind: one line
-        raise ValueError(f"{path} is not a readable mesh ({type(exc).__name__}: {exc})") from None
-    # An OBJ without a material library gets trimesh's grey placeholder texture: not a colour of the file.
-    placeholder = obj is not None and not obj.mtllibs
+    scene = _read(trimesh.load_scene, path, str(path), process=False)
+    resolved = check_resolved(scene, str(path), obj, accept)
+    if obj is not None:
+        uniform_tiles(scene)
+    tm = _read(scene.to_mesh, path)
+    # trimesh's grey placeholder texture (an OBJ without a material library, or faces whose material it could not
+    # resolve, accepted with `texture` or `constant_color`) is not a colour of the file.
+    placeholder = obj is not None and (not obj.mtllibs or resolved.placeholder)
     mesh = mesh_from_trimesh(tm, height_mm=height_mm, scale=scale, up=up, source=str(path), placeholder=placeholder)
+    if not resolved.alpha:  # an atlas's padding is transparent: no alpha of the file's
+        mesh.texture_alpha = None
     if override is not None:
         if mesh.uv is None:
             raise ParameterError(f"`texture` {texture}: {path} has no texture coordinates (no uv / vt) to look it up")
         mesh.texture, mesh.texture_alpha = override
         mesh.tint = np.ones(3, np.float32)
         mesh.texture_name = str(texture)
-    elif obj is not None and obj.textures:
-        mesh.texture_name = ", ".join(sorted({t.name for t in obj.textures}))
+    elif mesh.texture is not None:
+        mesh.texture_name = resolved.names
     if constant_color and mesh.uv is None:  # a texture that cannot be looked up: the accepted constant instead
         mesh.texture, mesh.texture_alpha = None, None
     check_colour_source(mesh, constant_color, texture_named=obj is not None and bool(obj.textures))
     return mesh
+
+
+def _read(call, path: Path, *args, **kwargs):
+    """``call(*args, **kwargs)`` of trimesh's reader; its errors of any kind as one line naming ``path``. Pillow's
+    warning for a texture of more than its pixel limit is silenced: the texture is refused, with its name, before
+    it is decoded (``_read_colours``)."""
+    from PIL import Image
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            return call(*args, **kwargs)
+    except Exception as exc:  # parser errors of any kind: one line
+        text = " ".join(str(exc).split())
+        raise ValueError(f"{path} is not a readable mesh ({type(exc).__name__}: {text})") from None
 
 
 def mesh_from_trimesh(
@@ -251,9 +273,13 @@ def _read_colours(tm, mesh: TexturedMesh, placeholder: bool = False) -> None:
             return  # constant white: the caller refuses it unless a constant colour is wanted
         mesh.color = main.astype(np.float32)  # the material's colour, the target where no texture can be used
         if img is not None:
-            rgba = picture_rgba(img, f"{mesh.source}: texture")
+            fp = img.info.get("file_path")
+            name = f"texture {fp} of {mesh.source}" if fp else f"the texture of {mesh.source}"
+            check_pixels(img.size, name)  # trimesh opened it; nothing is decoded yet
+            decode_pixels(img, name)
+            rgba = picture_rgba(img, name)
             mesh.texture = Image.fromarray(np.round(rgba[..., :3] * 255).astype(np.uint8), "RGB")
-            if img.mode in ("RGBA", "LA", "PA") or (img.mode == "P" and "transparency" in img.info):
+            if has_alpha(img):
                 mesh.texture_alpha = rgba[..., 3].copy()
             if type(mat).__name__ == "PBRMaterial" and getattr(mat, "baseColorFactor", None) is not None:
                 mesh.tint = np.asarray(mat.baseColorFactor, np.float32)[:3] / 255.0
