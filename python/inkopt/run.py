@@ -40,6 +40,7 @@ from .optim import EXTRUSION_START_MM, Optimization, OptimizeConfig
 from .pictures import loss_figure
 from .rundir import Predictions, RunDir
 from .scenes import Scene, build_scene
+from .units import voxel_mm
 
 #: Shares of a run's time budget (``OptimizeConfig.time_budget``) given to the start's figures, the result's
 #: figures, and kept for writing the result (volume, pictures, predictions, report): the iterations get the rest,
@@ -388,8 +389,8 @@ DEADLINE_COARSE_FACTOR = 0.5
 def deadline_plan(spec, cfg: OptimizeConfig, log=print) -> tuple[float, OptimizeConfig]:
     """How a run with a time budget and no ``--coarse-dpi`` goes: (coarse-stage DPI, 0 for none; the settings).
     A mesh at least ``EXTRUSION_START_MM`` thick whose settings name no start (``cfg.init`` None) starts from the
-    extrusion baseline at its own DPI; every other run goes coarse to fine at ``DEADLINE_COARSE_FACTOR`` of its
-    DPI with its own start."""
+    extrusion baseline at its own DPI; a slab thinner than one voxel of the coarse grid has no coarse stage; every
+    other run goes coarse to fine at ``DEADLINE_COARSE_FACTOR`` of its DPI with its own start."""
     if spec.kind == "mesh" and cfg.init is None:
         thick = mesh_thickness_mm(spec)
         if thick >= EXTRUSION_START_MM:
@@ -398,7 +399,11 @@ def deadline_plan(spec, cfg: OptimizeConfig, log=print) -> tuple[float, Optimize
                 f"starting from the extrusion baseline at {spec.dpi:g} DPI, no coarse stage"
             )
             return 0.0, replace(cfg, init="extrusion")
-    return DEADLINE_COARSE_FACTOR * spec.dpi, cfg
+    coarse_dpi = DEADLINE_COARSE_FACTOR * spec.dpi
+    if spec.kind == "slab" and min(spec.size_mm) < voxel_mm(coarse_dpi):  # the coarse grid cannot hold it
+        log(f"deadline: the slab is thinner than one voxel at {coarse_dpi:g} DPI: no coarse stage")
+        return 0.0, cfg
+    return coarse_dpi, cfg
 
 
 def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: float, options: RunOptions = RunOptions()):

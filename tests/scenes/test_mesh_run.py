@@ -282,7 +282,8 @@ def test_mean_thickness_is_volume_over_area():
 
 def test_deadline_plan_starts_thick_meshes_from_the_extrusion_baseline(ball):
     """With a time budget and no --coarse-dpi: a mesh at least ``EXTRUSION_START_MM`` thick starts from the
-    extrusion baseline on its own grid; a thinner one, one whose start is given, and a slab go coarse to fine."""
+    extrusion baseline on its own grid; a thinner one, one whose start is given, and a slab go coarse to fine, unless the slab is thinner than a voxel of
+    the coarse grid."""
     from inkopt.optim import EXTRUSION_START_MM, OptimizeConfig
     from inkopt.run import DEADLINE_COARSE_FACTOR, deadline_plan
     from inkopt.scenes.spec import MeshSpec, SlabSpec
@@ -301,6 +302,8 @@ def test_deadline_plan_starts_thick_meshes_from_the_extrusion_baseline(ball):
     slab = SlabSpec("chart.png", (40.0, 40.0, 10.0))  # 5 mm thick by volume / area: slabs are not asked
     assert deadline_plan(slab, cfg, log=lines.append) == (DEADLINE_COARSE_FACTOR * slab.dpi, cfg)
     assert len(lines) == 1
+    sheet = SlabSpec("chart.png", (40.0, 40.0, 0.1))  # one voxel at 300 DPI, less than one at the coarse 150
+    assert deadline_plan(sheet, cfg, log=lines.append) == (0.0, cfg) and "no coarse stage" in lines[-1]
 
 
 def test_thick_mesh_deadline_run_from_the_command_line(ball, tmp_path, capsys):
