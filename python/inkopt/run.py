@@ -3,16 +3,17 @@
 ``run_optimisation(scene, out_dir, cfg, options)``: the settings ``cfg`` (``OptimizeConfig``) are resolved once for the
 scene's kind; ``options`` (``RunOptions``) say how the run is carried out. A fresh run (not a resume) first removes
 every output of an earlier run in ``out_dir`` (``RunDir.remove_earlier_run``); write scene.npz, estimate the cost
-(``inkopt.estimate``), measure the start's figures once (kept in the checkpoints, so a resume does not render the start
-again), optimise with checkpoints (``options.resume`` continues exactly), save volume.npz (and remove the outputs
-derived from an earlier one), then the result's figures. Figures are renders with seeds from ``2**62 + cfg.seed`` (never
-used by the optimisation) at ``options.eval_spp`` samples per texel if given, else adaptively
+(``inkopt.estimate``), measure the start's figures and the extrusion baseline's once (kept in the checkpoints, so a
+resume does not render them again), optimise with checkpoints (``options.resume`` continues exactly), save volume.npz
+(and remove the outputs derived from an earlier one), then the result's figures, checked against the baseline's
+(``evaluation.guard``: a warning if worse beyond their noise). Figures: renders with seeds from ``2**62 + cfg.seed``
+(never used by the optimisation) at ``options.eval_spp`` samples per texel if given, else adaptively
 (``evaluation.noise.adaptive_render``: enough that the Monte Carlo noise adds at most ~0.5 to the mean ΔE76 and SSIM's
 and the mottle's noise correction is accurate, at most ``eval_max_spp`` (4096) and within ``eval_time_budget``, or
-within ``FINAL_FIGURES_SHARE`` of the run's time when neither that nor a run time budget is given; the start's figures
-are one pilot pass), compared with the target by ``evaluation.metrics.prediction_metrics``; then the scene's pictures,
-loss.png and report.json (``evaluation.results.Report``). The scene comes from user inputs through a spec
-(``scenes.spec``: ``scenes.build_scene(SlabSpec(...), inks)``, ``scenes.build_scene(MeshSpec(...), inks)``).
+within ``FINAL_FIGURES_SHARE`` of the run's time when neither that nor a run time budget is given; the start's and the
+baseline's figures are one pilot pass each), compared with the target by ``evaluation.metrics.prediction_metrics``; then
+the scene's pictures, loss.png and report.json (``evaluation.results.Report``). The scene comes from user inputs through
+a spec (``scenes.spec``: ``scenes.build_scene(SlabSpec(...), inks)``, ``scenes.build_scene(MeshSpec(...), inks)``).
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ from .distributed import renderer_factory
 from .errors import ParameterError
 from .estimate import ANNOUNCE_SECONDS, Estimate, estimate_run
 from .evaluation.baselines import baseline_layers
+from .evaluation.guard import BaselineCheck, check_baseline, keep_baseline_figures, kept_figures
 from .evaluation.metrics import delta_e76_map, prediction_metrics
 from .evaluation.noise import EVAL_SEED_OFFSET, MAX_SPP, PILOT_SPP, Sampling, adaptive_render
 from .evaluation.results import Report
@@ -42,8 +44,9 @@ from .rundir import Predictions, RunDir
 from .scenes import Scene, build_scene
 from .units import voxel_mm
 
-#: Shares of a run's time budget (``OptimizeConfig.time_budget``) given to the start's figures, the result's
-#: figures, and kept for writing the result (volume, pictures, predictions, report): the iterations get the rest,
+#: Shares of a run's time budget (``OptimizeConfig.time_budget``) given to the start's figures (as much again to the
+#: baseline's: ``evaluation.guard``), the result's figures, and kept for writing the result (volume, pictures,
+#: predictions, report): the iterations get the rest,
 #: the step decay planned to end in time (``optim.stopping``). Not measured optima: the figures are informative
 #: and noise-corrected at any spp (their noise is reported), the quality is the iterations'.
 BUDGET_START_FIGURES, BUDGET_FINAL_FIGURES, BUDGET_WRITING = 0.03, 0.08, 0.04
@@ -95,7 +98,8 @@ class RunOptions:
     (``inkopt.distributed``; bit-identical results). ``dry_run``: only estimate the run (nothing is written).
     ``started``: when the job began (``time.perf_counter()``, e.g. before the scene was built; default: when the
     run starts), the time ``cfg.time_budget`` and the run's wall time count from. ``on_step(optimization)``:
-    called after every iteration (``Optimization.run``)."""
+    called after every iteration (``Optimization.run``). ``baseline_guard``: measure the extrusion baseline's
+    figures at the start and check the result against them (``evaluation.guard``)."""
 
     resume: bool = False
     eval_spp: int | None = None
@@ -110,6 +114,7 @@ class RunOptions:
     dry_run: bool = False
     started: float | None = None
     on_step: Callable | None = None
+    baseline_guard: bool = True
 
     def validate(self) -> None:
         """One-line errors naming the option, before any work."""
@@ -160,12 +165,15 @@ def run_optimisation(scene: Scene, out_dir, cfg: OptimizeConfig, options: RunOpt
             # measured once, before the first step, then kept in the checkpoints: one pilot (noise-corrected;
             # `inkopt evaluate` measures the baselines noise-free)
             job.run.keep_start_figures(figures.start())
+        if options.baseline_guard:  # the extrusion baseline's figures, measured once like the start's
+            keep_baseline_figures(job.run, lambda x: figures.start(x, keep_renderer=True), options.log)
         _iterate(job, figures.final_budget)
         res, metrics = figures.final()
         if job.run.start_figures is None:  # a checkpoint written before the start's figures were kept in it
             job.run.keep_start_figures(figures.start(job.run.initial_variables()))
+        check = check_baseline(job.run, metrics, options.log)  # the warning when worse than the baseline
         de = _write_result_files(job, res)
-        report = _report(job, res, metrics, de, estimate)
+        report = _report(job, res, metrics, de, estimate, check)
         job.rd.write_report(report.to_json())
         return report
 
@@ -262,17 +270,14 @@ class _Figures:
             run.release_renderer()
         return res, prediction_metrics(run.loss, res.rgb, res.var)
 
-    def start(self, x=None) -> dict:
-        """The start's figures (one pilot pass at most) as ``Optimization.keep_start_figures`` keeps them; ``x``:
-        the start's variables when the run is no longer at its start (its renderer is released after)."""
+    def start(self, x=None, keep_renderer: bool | None = None) -> dict:
+        """The start's figures (one pilot pass at most) as ``Optimization.keep_start_figures`` keeps them
+        (``evaluation.guard.kept_figures``); ``x``: other variables than the current ones (the start's when the run
+        is no longer at its start, a baseline's); the renderer is kept if ``keep_renderer`` (None: without ``x``)."""
         max_spp = min(self.job.options.eval_max_spp, PILOT_SPP)
-        res, m = self._of(x, self.start_budget, max_spp, keep_renderer=x is None)
-        return {
-            "delta_e76_mean": m.delta_e76_mean,
-            "ssim": m.ssim,
-            "delta_e76_mean_corrected": m.delta_e76_mean_corrected,
-            "eval_spp": res.spp,
-        }
+        keep = x is None if keep_renderer is None else keep_renderer
+        res, m = self._of(x, self.start_budget, max_spp, keep_renderer=keep)
+        return kept_figures(m, res.spp, len(self.job.scene.texels))
 
     def final(self):
         """The result's figures: the user's samples or budget, the run's budget share, or (neither) samples up to
@@ -323,9 +328,9 @@ def _write_result_files(job: _Job, res) -> np.ndarray:
     return de
 
 
-def _report(job: _Job, res, metrics, de: np.ndarray, estimate: Estimate) -> Report:
+def _report(job: _Job, res, metrics, de: np.ndarray, estimate: Estimate, check: BaselineCheck | None) -> Report:
     """report.json's contents: the result's figures ``metrics`` (render ``res``, per-texel ΔE76 ``de``), the
-    start's, the run's times and settings."""
+    start's, the baseline's (``check``; None: not measured), the run's times and settings."""
     run, cfg, start = job.run, job.cfg, job.run.start_figures
     h = run.history
     n = max(len(h.seconds), 1)
@@ -354,18 +359,14 @@ def _report(job: _Job, res, metrics, de: np.ndarray, estimate: Estimate) -> Repo
         inks=list(job.scene.volume.inks.names),
         gamma=list(cfg.gamma),
         lr=cfg.step_size,
-        optimizer=cfg.optimizer,
-        param=cfg.param,
-        init=cfg.init,
-        seed=cfg.seed,
-        decay=cfg.decay,
-        smooth=cfg.smooth,
-        finish_smooth=cfg.finish_smooth,
+        **{k: getattr(cfg, k) for k in ("optimizer", "param", "init", "seed", "decay", "smooth", "finish_smooth")},
         adjoint_ema=cfg.adjoint_ema,
         gradient=cfg.grad_method,
         threads=job.options.threads,
         peak_rss_gb=peak_rss_gb(),
         lighting=job.lighting.describe(),
+        baseline=None if check is None else check.to_json(),
+        beats_baseline=None if check is None else check.beats,
     )
 
 
@@ -444,12 +445,14 @@ def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: flo
 def _coarse_stage(spec, inks, coarse_dir, cfg: OptimizeConfig, coarse_dpi: float, options: RunOptions) -> None:
     """The coarse run of ``run_coarse_to_fine`` in ``coarse_dir``: ``spec`` at ``coarse_dpi``, within
     ``COARSE_BUDGET_SHARE`` of the time budget; its figures are one pilot pass (informative: the fine stage's are
-    the run's); the caller's per-step hook sees the fine stage only (another grid here)."""
+    the run's, its baseline guard too); the caller's per-step hook sees the fine stage only (another grid here)."""
     coarse = build_scene(replace(spec, dpi=coarse_dpi), inks)
     budget = None if cfg.time_budget is None else COARSE_BUDGET_SHARE * cfg.time_budget
     log = options.log
     log(f"coarse stage at {coarse_dpi:g} DPI into {coarse_dir}")
-    coarse_options = replace(options, on_step=None, eval_spp=options.eval_spp or PILOT_SPP, log=lambda m: log(f"  {m}"))
+    coarse_options = replace(
+        options, on_step=None, eval_spp=options.eval_spp or PILOT_SPP, log=lambda m: log(f"  {m}"), baseline_guard=False
+    )
     run_optimisation(coarse, coarse_dir, replace(cfg, time_budget=budget), coarse_options)
     del coarse
     release_freed_memory()

@@ -65,10 +65,15 @@ def test_the_start_is_rendered_once_per_run(tmp_path, monkeypatch, capsys):
     argv = ["slab", str(chart), "--size-mm", "2x1.333x0.5", "--out", str(tmp_path / "r"), "--spp", "1"]
     argv += ["--forward-spp", "1", "--eval-spp", "2", "--threads", "1"]
     assert main(argv + ["--iterations", "2"]) == 0
-    assert len(calls) == 2  # the start, then the result
+    assert len(calls) == 3  # the start, the extrusion baseline (evaluation.guard), then the result
     rep1 = json.loads((tmp_path / "r" / "report.json").read_text())
     assert main(argv + ["--iterations", "4", "--resume"]) == 0
-    assert len(calls) == 3  # the resumed run renders only its result: the start's figures come from the checkpoint
+    assert len(calls) == 4  # the resumed run renders only its result: the start's (and baseline's) figures come
+    # from the checkpoint
     rep2 = json.loads((tmp_path / "r" / "report.json").read_text())
     for k in ("initial_delta_e76_mean", "initial_ssim", "initial_eval_spp"):
         assert rep2[k] == rep1[k]
+    assert (
+        rep2["baseline"]["extrusion"]["delta_e76_mean_corrected"]
+        == rep1["baseline"]["extrusion"]["delta_e76_mean_corrected"]
+    )

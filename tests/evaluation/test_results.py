@@ -95,8 +95,10 @@ def run(tmp_path_factory):
 
 def test_report_keys_and_round_trip(run):
     data = json.loads((run / "report.json").read_text())
-    # "stop" (why the run ended) and "finish_smooth" are the keys added since the files carried a version
-    assert set(data) == SLAB_REPORT_KEYS | {"format_version", "stop", "finish_smooth"} and data["format_version"] == 1
+    # "stop" (why the run ended), "finish_smooth" and the baseline guard's "baseline" and "beats_baseline" are the
+    # keys added since the files carried a version
+    added = {"format_version", "stop", "finish_smooth", "baseline", "beats_baseline"}
+    assert set(data) == SLAB_REPORT_KEYS | added and data["format_version"] == 1
     assert data["finish_smooth"] == 0  # a slab's default
     assert data["stop"]["reason"] == "iterations" and data["stop"]["iterations"] == 2
     rep = Report.read(run / "report.json")
@@ -111,6 +113,8 @@ def test_report_keys_and_round_trip(run):
     assert rep.metrics.delta_e76_mean == data["delta_e76_mean"]
     old = {k: v for k, v in data.items() if k not in ("format_version", "stop")}  # before files carried a version
     assert Report.from_json(old) == replace(rep, stop=None)
+    unguarded = {k: v for k, v in data.items() if k not in ("baseline", "beats_baseline")}  # before the guard
+    assert Report.from_json(unguarded) == replace(rep, baseline=None, beats_baseline=None)
 
 
 def test_newer_format_is_a_one_line_error(run, tmp_path):

@@ -126,6 +126,8 @@ def test_outputs_and_quality(ball_run):
     # near 75; 30 iterations at the old default step 0.5 still reach 53).
     assert rep["initial_delta_e76_mean"] > 60
     assert rep["delta_e76_mean"] < rep["initial_delta_e76_mean"] - 20
+    # the extrusion baseline's figures, measured at the start with the run's samples (evaluation.guard)
+    assert rep["baseline"]["extrusion"]["eval_spp"] == 32 and isinstance(rep["beats_baseline"], bool)
 
 
 def test_volume_and_scene_files(ball_run):
@@ -207,6 +209,7 @@ def test_resume_continues_exactly(ball, tmp_path):
     ha, hb = (np.load(d / "checkpoint.npz")["hist_loss"] for d in (a, b))
     np.testing.assert_array_equal(ha, hb)
     assert ra["delta_e76_mean"] == rb["delta_e76_mean"]
+    assert ra["baseline"] == rb["baseline"]  # kept in the checkpoint: the same figures after a resume
     secs = np.load(a / "checkpoint.npz")["hist_seconds"]  # the iterations of both invocations
     assert len(secs) == 3 and ra["seconds_iterations"] == pytest.approx(float(secs.sum()))
     assert optimize(ball, a, "--resume", "--seed", "5", iterations=4) == 2  # other settings: refused
@@ -317,6 +320,8 @@ def test_thick_mesh_deadline_run_from_the_command_line(ball, tmp_path, capsys):
     assert optimize(ball, out, *argv, "--stop-gain", "0", iterations=100000, spp=1, eval_spp=4) == 0
     rep = json.loads((out / "report.json").read_text())
     assert rep["init"] == "extrusion" and not (out / "coarse").exists()
+    # the start is the guard's baseline: its figures are the start's, not a second render
+    assert rep["baseline"]["extrusion"]["delta_e76_mean_corrected"] == rep["initial_delta_e76_mean_corrected"]
     assert rep["lr"] == default_lr("eg") * WARM_LR_FACTOR
     assert rep["stop"]["reason"] == "time budget" and 0 < rep["iterations"] < 100000
     assert "starting from the extrusion baseline" in capsys.readouterr().err

@@ -367,14 +367,23 @@ def run_command(args, spec, outputs: str, show_memory: bool = False) -> int:
 
 
 def print_run_summary(rep, init: str, extra: str = "") -> None:
-    """The closing line of ``slab`` and ``optimize`` from their ``Report``."""
+    """The closing line of ``slab`` and ``optimize`` from their ``Report``, with the result against the baseline
+    the run measured (``evaluation.guard``; its noise-corrected mean ΔE76) when it measured one."""
     m = rep.metrics
     total = rep.seconds_total or rep.seconds
     whole = f" (whole run across resumes {total:.0f} s)" if total > rep.seconds + 1e-3 else ""  # resumed
+    against = ""
+    for kind, b in (rep.baseline or {}).items():  # one kind: the guard's
+        diff, tol = b["difference_delta_e76"], b["tolerance_delta_e76"]
+        verdict = "better" if diff < -tol else "within the noise" if rep.beats_baseline else f"WORSE: try --init {kind}"
+        against = (
+            f"; corrected ΔE76 {m.delta_e76_mean_corrected:.2f} ± {b['result_delta_e76_error']:.2f} against the {kind} "
+            f"baseline's {b['delta_e76_mean_corrected']:.2f} ± {b['delta_e76_error']:.2f}: {verdict}"
+        )
     print(
         f"mean ΔE76 {rep.initial_delta_e76_mean:.2f} ({init} start) -> {m.delta_e76_mean:.2f} "
         f"(p95 {m.delta_e76_p95:.2f}, ΔE2000 {m.delta_e2000_mean:.2f}, SSIM {m.ssim:.3f}) "
-        f"after {rep.iterations} iterations{stopped(rep)} in {rep.seconds:.0f} s{whole}{extra}"
+        f"after {rep.iterations} iterations{stopped(rep)} in {rep.seconds:.0f} s{whole}{extra}{against}"
     )
 
 

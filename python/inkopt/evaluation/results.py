@@ -52,7 +52,10 @@ class Report:
     (``optim.stopping.Schedule.describe``: converged, time budget or its maximum; None in older reports);
     ``scene``: the scene's own entries
     (``Scene.report_fields``: sizes, paths, translucency); the optimiser settings (``inks`` .. ``gradient``);
-    ``threads``; ``peak_rss_gb`` (GiB); ``lighting``: ``Lighting.describe()``.
+    ``threads``; ``peak_rss_gb`` (GiB); ``lighting``: ``Lighting.describe()``. ``baseline``: the print-shop
+    baseline the result is checked against, kind -> its figures at the run's start and the comparison
+    (``evaluation.guard.BaselineCheck.to_json``); ``beats_baseline``: False when the result is worse than it beyond
+    the figures' noise (both None when the run did not measure the baseline, and in older reports).
     """
 
     metrics: Metrics
@@ -89,6 +92,8 @@ class Report:
     estimate: dict | None = None
     stop: dict | None = None
     finish_smooth: int | None = None  # passes of smoothing over the result (None: a report from before them)
+    baseline: dict | None = None
+    beats_baseline: bool | None = None
 
     _RUN = (
         "delta_e76_max",
@@ -106,6 +111,8 @@ class Report:
         "time_split",
         "estimate",
         "stop",
+        "baseline",
+        "beats_baseline",
     )
     _SETTINGS = (
         "inks",

@@ -7,7 +7,10 @@ Arrays (format version 1): ``format_version`` int64; ``x`` (F, N) float32, the v
 prediction ``c_avg``, ``c_var`` (I, 3) float32 and ``c_weight`` (absent before the first iteration); and the
 per-iteration history ``hist_*`` (float64, one entry per iteration from the start); the planned end of the run
 ``schedule_end``, ``schedule_reason``, ``schedule_converged_at`` (-1: not yet), ``schedule_gain`` (NaN: none),
-``schedule_frozen`` (``optim.stopping.Schedule``; absent in a checkpoint of a run planned for its full length).
+``schedule_frozen`` (``optim.stopping.Schedule``; absent in a checkpoint of a run planned for its full length);
+``wall_seconds``; the evaluated figures of the start ``start_figures`` and of print-shop baselines
+``baseline_figures`` (baseline kind -> figures), each a JSON object in a str array (absent until measured; the
+driver measures them once, ``Optimization.keep_start_figures``, so a resume does not render them again).
 
 A file without ``format_version`` (version 0) has the same arrays; its ``config_key`` leaves out the settings at
 their "off" value (no ``schedule_iterations``, ``decay`` 0, ``smooth`` 0, uniform lighting) and marks guided

@@ -100,9 +100,10 @@ class Optimization:
         self.iteration = 0
         self.history = History()
         self.schedule = Schedule.for_config(cfg)  # where the run ends (the step decay is planned for it)
-        # the start's evaluated figures (``keep_start_figures``; kept in the checkpoints so a resume need not
-        # render the start again)
+        # the start's and a print-shop baseline's evaluated figures (``keep_start_figures``,
+        # ``keep_baseline_figures``; kept in the checkpoints so a resume need not render them again)
         self.start_figures: dict | None = None
+        self.baseline_figures: dict | None = None  # baseline kind -> figures
         # wall time of the run's earlier invocations (up to their last checkpoint) and this one's start
         self.wall_seconds_before = 0.0
         self.invocation_start = time.perf_counter() if started is None else started
@@ -135,18 +136,24 @@ class Optimization:
         ``eval_spp``) with the run: they are written into every later checkpoint."""
         self.start_figures = dict(figures)
 
+    def keep_baseline_figures(self, kind: str, figures: dict) -> None:
+        """Keep print-shop baseline ``kind``'s evaluated figures (as ``keep_start_figures``'s) with the run."""
+        self.baseline_figures = {**(self.baseline_figures or {}), kind: dict(figures)}
+
     def _release_unread_operators(self) -> None:
         """Free the loss's sparse operators when no step reads them (colour only: ~1 GiB at Spot 40 mm's 387 k
         texels); a figure's full loss call builds them again."""
         if not self.loss.needs_operators:
             self.loss.release_operators()
 
-    def _initial_free_mixture(self) -> np.ndarray:
-        return initial_free_mixture(self.base.inks, self.param, self.cfg.init, self.cfg.seed, self.baseline)
+    def _initial_free_mixture(self, init: str | None = None) -> np.ndarray:
+        init = self.cfg.init if init is None else init
+        return initial_free_mixture(self.base.inks, self.param, init, self.cfg.seed, self.baseline)
 
-    def initial_variables(self) -> np.ndarray:
-        """The run's starting variables x (F, N) (recomputed from the configuration: same after a resume)."""
-        return self.param.variables_for(self._initial_free_mixture())
+    def initial_variables(self, init: str | None = None) -> np.ndarray:
+        """The run's starting variables x (F, N) (recomputed from the configuration: same after a resume), or
+        those of the start ``init`` names (e.g. "extrusion": what a run started from that baseline renders)."""
+        return self.param.variables_for(self._initial_free_mixture(init))
 
     def initial_volume(self) -> Volume:
         """The run's starting point as a volume (the whole grid's mixture: see :meth:`renderer` for a render)."""
@@ -184,11 +191,10 @@ class Optimization:
         return json.dumps(d, sort_keys=True)
 
     def save_checkpoint(self, path: Path) -> None:
-        extra = (
-            {}
-            if self.c_avg is None
-            else {"c_avg": self.c_avg, "c_weight": np.float64(self.c_weight), "c_var": self.c_var}
-        )
+        kept = {"start_figures": self.start_figures, "baseline_figures": self.baseline_figures}  # JSON objects
+        extra = {k: np.array(json.dumps(v)) for k, v in kept.items() if v}
+        if self.c_avg is not None:
+            extra.update(c_avg=self.c_avg, c_weight=np.float64(self.c_weight), c_var=self.c_var)
         write_checkpoint(
             path,
             {
@@ -200,7 +206,6 @@ class Optimization:
                 **self.history.arrays(),
                 **self.schedule.to_arrays(),
                 "wall_seconds": np.float64(self.wall_seconds()),
-                **({} if self.start_figures is None else {"start_figures": np.array(json.dumps(self.start_figures))}),
             },
         )
 
@@ -227,6 +232,7 @@ class Optimization:
             float(d["wall_seconds"]) if "wall_seconds" in d else float(np.sum(self.history.seconds))
         )
         self.start_figures = json.loads(str(d["start_figures"])) if "start_figures" in d else None
+        self.baseline_figures = json.loads(str(d["baseline_figures"])) if "baseline_figures" in d else None
         self.c_avg = np.asarray(d["c_avg"], np.float32) if "c_avg" in d else None
         self.c_weight = float(d["c_weight"]) if "c_weight" in d else 0.0
         self.c_var = np.asarray(d["c_var"], np.float32) if "c_var" in d else None
