@@ -1,5 +1,5 @@
 """Peak memory of a coarse-to-fine mesh job cut to one iteration per stage: ``inkopt optimize MESH --height-mm H
---coarse-dpi 150 --iterations 1 --eval-spp 4`` in this process (``run.run_coarse_to_fine``: the coarse run, the
+--coarse-dpi 150 --iterations 1 --eval-spp 4`` in this process (``coarse.run_coarse_to_fine``: the coarse run, the
 transfer, the fine run with its estimate, start figures, one iteration, checkpoint, volume, final figures and
 pictures), so that its memory is the job's without the job's hours.
 

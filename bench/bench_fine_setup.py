@@ -1,5 +1,5 @@
 """Peak memory of the fine stage's set-up of a coarse-to-fine mesh run: the 300-DPI scene of Spot, the fine
-``Optimization`` started from a transferred start volume (``--init`` that file, as ``run.run_coarse_to_fine`` does),
+``Optimization`` started from a transferred start volume (``--init`` that file, as ``coarse.run_coarse_to_fine`` does),
 then its renderer set to the start; it stops before the first iteration (``--step``: after one).
 
     python bench/bench_fine_setup.py START.npz [HEIGHT_MM=40] [--mesh spot.obj] [--step] [--name NAME]

@@ -57,13 +57,14 @@ from common import RESULTS, machine, provenance, write
 from result_check import result_check
 
 from inkopt import charts
+from inkopt.coarse import run_coarse_to_fine
 from inkopt.evaluation.metrics import prediction_metrics
 from inkopt.evaluation.noise import ESTIMATE_RANGE, EVAL_SEED_OFFSET
 from inkopt.evaluation.results import Report
 from inkopt.io import file_digest
 from inkopt.model import InkTable
 from inkopt.optim import Optimization, OptimizeConfig
-from inkopt.run import RunOptions, run_coarse_to_fine, run_optimisation
+from inkopt.run import RunOptions, run_optimisation
 from inkopt.rundir import RunDir
 from inkopt.scenes import build_scene
 from inkopt.scenes.spec import MeshSpec, SlabSpec
@@ -317,7 +318,7 @@ def parse_args():
     ap.add_argument("--out-root", default="bench-out/ttq")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--resume", action="store_true")
-    ap.add_argument("--coarse-dpi", type=float, help="coarse to fine (``inkopt.run.run_coarse_to_fine``)")
+    ap.add_argument("--coarse-dpi", type=float, help="coarse to fine (``inkopt.coarse.run_coarse_to_fine``)")
     ap.add_argument("--snapshots-only", action="store_true", help="the run is done: its report and snapshots")
     ap.add_argument("--final-spp", type=int, default=256, help="samples per texel of the result's check (0: none)")
     ap.add_argument("--evaluate", action="store_true", help="the run is done: its result's sampled evaluation")

@@ -25,7 +25,7 @@ LAYERS = [
     {"evaluation"},
     {"calibration"},
     {"proof"},
-    {"run", "estimate"},
+    {"run", "estimate", "coarse"},
     {"inksets"},
     {"cli", "__main__"},
 ]

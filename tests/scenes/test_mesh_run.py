@@ -287,8 +287,8 @@ def test_deadline_plan_starts_thick_meshes_from_the_extrusion_baseline(ball):
     """With a time budget and no --coarse-dpi: a mesh at least ``EXTRUSION_START_MM`` thick starts from the
     extrusion baseline on its own grid; a thinner one, one whose start is given, and a slab go coarse to fine,
     unless the slab is thinner than a voxel of the coarse grid."""
+    from inkopt.coarse import DEADLINE_COARSE_FACTOR, deadline_plan
     from inkopt.optim import EXTRUSION_START_MM, OptimizeConfig
-    from inkopt.run import DEADLINE_COARSE_FACTOR, deadline_plan
     from inkopt.scenes.spec import MeshSpec, SlabSpec
 
     cfg = OptimizeConfig(time_budget=60.0)

@@ -335,8 +335,9 @@ def run_from_args(args, spec):
     ``estimate.Estimate``, nothing written)."""
     import time
 
+    from ..coarse import deadline_plan, run_coarse_to_fine
     from ..model import InkTable
-    from ..run import deadline_plan, run_coarse_to_fine, run_optimisation
+    from ..run import run_optimisation
     from ..scenes import build_scene
 
     started = time.perf_counter()  # a time budget counts the scene's building (voxelization) too

@@ -53,7 +53,11 @@ def run_candidate(task: dict) -> dict:
     cfg = OptimizeConfig(**{**task["cfg"], "gamma": tuple(task["cfg"]["gamma"])})
     scene = _Capture(build_scene(task["spec"], inks))
     options = RunOptions(
-        resume=task["resume"], eval_spp=task["eval_spp"], threads=task["threads"], log=lambda msg: None
+        resume=task["resume"],
+        eval_spp=task["eval_spp"],
+        threads=task["threads"],
+        log=lambda msg: None,
+        baseline_guard=False,  # the subsets are ranked against each other, not against a baseline
     )
     rep = run_optimisation(scene, task["out"], cfg, options)
     m = rep.metrics

@@ -33,9 +33,9 @@ SCENE_DEFAULTS = {
     "slab": {"adjoint_ema": 0.8, "smooth": 1.5, "init": "white", "finish_smooth": 0},
     "mesh": {"adjoint_ema": 0.5, "smooth": 3.0, "init": "white", "finish_smooth": 1},
 }
-#: A run with a time budget goes coarse to fine from white (``run.DEADLINE_COARSE_FACTOR``), except on a mesh at
+#: A run with a time budget goes coarse to fine from white (``coarse.DEADLINE_COARSE_FACTOR``), except on a mesh at
 #: least this thick (``MeshSpec.mean_thickness_mm``: volume over surface area, mm), which starts from the extrusion
-#: baseline on its own grid with no coarse stage (``run.deadline_plan``). Spot 40 mm (2.98 mm thick), the 27-minute
+#: baseline on its own grid with no coarse stage (``coarse.deadline_plan``). Spot 40 mm (2.98 mm thick), the 27-minute
 #: job's print against the baselines (noise-free ΔE76 / ΔE2000 / SSIM, ``inkopt evaluate``): 9.67 / 8.10 / 0.923
 #: from the extrusion start, 10.61 / 9.50 / 0.924 coarse to fine from white, the extrusion baseline 10.82 / 8.43 /
 #: 0.937. Spot 20 mm (1.49 mm) the other way round (256-spp renders of the results): from the extrusion start 11.12

@@ -1,0 +1,106 @@
+"""Jobs of more than one run and the plan of a deadline: coarse to fine (``run_coarse_to_fine``: a coarse run of the
+object, its result moved onto the fine grid as the fine run's start) and ``deadline_plan``, how a run with a time
+budget and no coarse grid given goes (a thick mesh from the extrusion baseline on its own grid, every other run
+coarse to fine at half its DPI)."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+from .errors import ParameterError
+from .evaluation.noise import PILOT_SPP
+from .optim import EXTRUSION_START_MM, OptimizeConfig
+from .run import RunOptions, release_freed_memory, run_optimisation
+from .rundir import RunDir
+from .scenes import build_scene
+from .units import voxel_mm
+
+
+def mesh_thickness_mm(spec) -> float:
+    """The volume over the surface area (mm) of a ``MeshSpec``'s placed mesh (``TexturedMesh.mean_thickness_mm``);
+    loads the mesh, does not voxelize it."""
+    from .scenes.mesh import load_spec_mesh
+
+    spec.validate()
+    return load_spec_mesh(spec).mean_thickness_mm()
+
+
+#: share of a time budget the coarse stage of a coarse-to-fine run may take; the fine stage has the rest
+COARSE_BUDGET_SHARE = 0.6
+#: a run with a time budget goes coarse to fine by default, the coarse grid at this fraction of the run's DPI: at
+#: equal budgets it ended lower than the plain run on the reference slab (3 min: 29.01 against 29.36 ΔE76) and on
+#: Spot 20 mm (8 min: 9.99 against 15.36) (bench/results/time_to_quality.json)
+DEADLINE_COARSE_FACTOR = 0.5
+
+
+def deadline_plan(spec, cfg: OptimizeConfig, log=print) -> tuple[float, OptimizeConfig]:
+    """How a run with a time budget and no ``--coarse-dpi`` goes: (coarse-stage DPI, 0 for none; the settings).
+    A mesh at least ``EXTRUSION_START_MM`` thick whose settings name no start (``cfg.init`` None) starts from the
+    extrusion baseline at its own DPI; a slab thinner than one voxel of the coarse grid has no coarse stage; every
+    other run goes coarse to fine at ``DEADLINE_COARSE_FACTOR`` of its DPI with its own start."""
+    if spec.kind == "mesh" and cfg.init is None:
+        thick = mesh_thickness_mm(spec)
+        if thick >= EXTRUSION_START_MM:
+            log(
+                f"deadline: the mesh is {thick:.2f} mm thick (volume / area, at least {EXTRUSION_START_MM:g}): "
+                f"starting from the extrusion baseline at {spec.dpi:g} DPI, no coarse stage"
+            )
+            return 0.0, replace(cfg, init="extrusion")
+    coarse_dpi = DEADLINE_COARSE_FACTOR * spec.dpi
+    if spec.kind == "slab" and min(spec.size_mm) < voxel_mm(coarse_dpi):  # the coarse grid cannot hold it
+        log(f"deadline: the slab is thinner than one voxel at {coarse_dpi:g} DPI: no coarse stage")
+        return 0.0, cfg
+    return coarse_dpi, cfg
+
+
+def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: float, options: RunOptions | None = None):
+    """Coarse to fine: optimise ``spec``'s object first on a grid of ``coarse_dpi`` (a run of its own in
+    ``OUT/coarse/`` with ``cfg``'s settings: it stops when done, or within ``COARSE_BUDGET_SHARE`` of
+    ``cfg.time_budget``), move its result onto the grid of ``spec`` (``optim.transfer.write_transferred_volume``:
+    ``OUT/coarse/fine_start.npz``, fixed shares kept) and optimise from there (``cfg`` with that start, and a warm
+    start's step unless ``cfg.lr`` is set). A half-DPI grid has a quarter of the texels: on Spot 20 mm an
+    iteration took 5.9 CPU s at 150 DPI (bench/results/mesh_20mm_150dpi.json) against 22 at 300 DPI with newer code
+    (bench/results/mesh_20mm.json). ``options.resume`` continues whichever stage was under way; the time budget and the
+    run's wall time count from the job's start (``options.started``); ``options.on_step`` is called in the fine
+    stage only. Returns the fine run's report (``dry_run``: its estimate, from a white start; nothing is
+    written)."""
+    from .optim.transfer import write_transferred_volume
+
+    options = options or RunOptions()
+    if not 0 < coarse_dpi < spec.dpi:
+        raise ParameterError(f"`coarse_dpi` must lie between 0 and the run's DPI ({spec.dpi:g}), got {coarse_dpi:g}")
+    if options.started is None:
+        options = replace(options, started=time.perf_counter())
+    if options.dry_run:
+        return run_optimisation(build_scene(spec, inks), out_dir, cfg, options)
+    rd = RunDir.create(out_dir)
+    with rd.lock(options.log):  # the whole job's, the fine run's taken again inside it
+        coarse_dir, start = rd.path / "coarse", rd.path / "coarse" / "fine_start.npz"
+        fine_begun = options.resume and rd.checkpoint_path.is_file() and start.is_file()
+        if not fine_begun:
+            _coarse_stage(spec, inks, coarse_dir, cfg, coarse_dpi, options)
+        fine = build_scene(spec, inks)
+        if not fine_begun:
+            t = time.perf_counter()
+            write_transferred_volume(RunDir(coarse_dir).load_volume(), fine.volume, fine.fixed_share, start)
+            t = time.perf_counter() - t
+            options.log(f"coarse result moved onto the {spec.dpi:g}-DPI grid in {t:.0f} s: {start}")
+            release_freed_memory()  # the fine stage's peak is the job's: nothing of the stages before it under it
+        return run_optimisation(fine, out_dir, replace(cfg, init=str(start)), options)
+
+
+def _coarse_stage(spec, inks, coarse_dir, cfg: OptimizeConfig, coarse_dpi: float, options: RunOptions) -> None:
+    """The coarse run of ``run_coarse_to_fine`` in ``coarse_dir``: ``spec`` at ``coarse_dpi``, within
+    ``COARSE_BUDGET_SHARE`` of the time budget; its figures are one pilot pass (informative: the fine stage's are
+    the run's, its baseline guard too); the caller's per-step hook sees the fine stage only (another grid here)."""
+    coarse = build_scene(replace(spec, dpi=coarse_dpi), inks)
+    budget = None if cfg.time_budget is None else COARSE_BUDGET_SHARE * cfg.time_budget
+    log = options.log
+    log(f"coarse stage at {coarse_dpi:g} DPI into {coarse_dir}")
+    coarse_options = replace(
+        options, on_step=None, eval_spp=options.eval_spp or PILOT_SPP, log=lambda m: log(f"  {m}"), baseline_guard=False
+    )
+    run_optimisation(coarse, coarse_dir, replace(cfg, time_budget=budget), coarse_options)
+    del coarse
+    release_freed_memory()
