@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import io
 import re
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -23,6 +25,18 @@ from .slices import pack_rgba
 
 class PackageError(ValueError):
     """A package whose parts disagree (or that cannot be read); the message is one line."""
+
+
+@contextmanager
+def about(path) -> Iterator[None]:
+    """A checker's errors naming the package: a PackageError raised in the block as ``"{path}: {message}"``, and
+    memory running out as one line naming ``path``."""
+    try:
+        yield
+    except PackageError as exc:
+        raise PackageError(f"{path}: {exc}") from None
+    except MemoryError:
+        raise PackageError(f"{path}: too large to check in this machine's memory") from None
 
 
 @dataclass
@@ -61,13 +75,16 @@ class Scan:
     def __init__(self, Z, Y, X, n, keep=(), labels=False):
         self.counts = np.zeros(n, np.float64)
         self.lo, self.hi = np.array([X, Y, Z]), np.zeros(3, np.int64)
-        self.top = np.zeros((Y, X), np.uint16)
-        self.top_label = np.full((Y, X), EMPTY, np.uint8)
         self.kept = {}
         if isinstance(keep, int):  # that many layers, evenly spaced from bottom to top
             keep = np.unique(np.linspace(0, Z - 1, keep).round().astype(int)) if keep > 0 else ()
         self.keep = {int(k) for k in keep}
-        self.labels = np.empty((Z, Y, X), np.uint8) if labels else None
+        try:
+            self.top = np.zeros((Y, X), np.uint16)
+            self.top_label = np.full((Y, X), EMPTY, np.uint8)
+            self.labels = np.empty((Z, Y, X), np.uint8) if labels else None
+        except MemoryError:
+            raise PackageError(f"{Z} layers of {X} x {Y} px do not fit in memory") from None
 
     def add(self, k: int, lab: np.ndarray) -> None:
         """``lab``: (Y, X) labels in image rows (row 0 = top of the image)."""

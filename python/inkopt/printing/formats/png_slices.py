@@ -37,7 +37,7 @@ from typing import TYPE_CHECKING
 from ...io import FORMAT_KEY, publish, upgrade_format
 from ...model import EMPTY
 from ...rundir import QUANTIZED_DIGEST, VOLUME_DIGEST
-from .inspection import PackageError, PackageReport, Scan, check_counts, decoder, layer_files, read_image
+from .inspection import PackageError, PackageReport, Scan, about, check_counts, decoder, layer_files, read_image
 from .job import InkCounts, PrintJob, tally
 from .slices import slice_image, slice_lut, slices_line
 
@@ -201,8 +201,11 @@ def read_png_slices(folder):
 
 
 def check_png_slices(path: Path, keep_layers=(), labels: bool = False) -> tuple[PackageReport, Scan]:
-    """Read the slice folder ``path`` back and check it (``inspection``); its report and scan."""
-    man, scan = _scan(path, keep_layers, labels)
+    """Read the slice folder ``path`` back and check it (``inspection``); its report and scan. Errors name
+    ``path``."""
+    with about(path):
+        man, scan = _scan(path, keep_layers, labels)
+        box = scan.box()
     materials = [
         {"name": m.get("material") or m["ink"], "ink": m["ink"], "color": m["color"], "voxel_count": int(v)}
         for m, v in zip(man["materials"], scan.counts, strict=True)
@@ -212,7 +215,7 @@ def check_png_slices(path: Path, keep_layers=(), labels: bool = False) -> tuple[
     source = {"source": "quantized.npz", "digest": digest} if digest else None
     dpi, layer_um = (man["dpi"]["x"], man["dpi"]["y"]), man["layer_thickness_um"]
     N, W, H = man["layer_count"], man["image_size"]["width"], man["image_size"]["height"]
-    report = PackageReport(PngSlices.name, str(path), N, W, H, dpi, layer_um, materials, scan.box(), source)
+    report = PackageReport(PngSlices.name, str(path), N, W, H, dpi, layer_um, materials, box, source)
     return report, scan
 
 
