@@ -164,7 +164,7 @@ class InkTable:
         )
 
 
-_UNSAFE_IN_NAMES = set('/\\:')  # ink names name files and folders (ink-set runs): no separators, no drives
+_UNSAFE_IN_NAMES = set("/\\:")  # ink names name files and folders (ink-set runs): no separators, no drives
 
 
 def ink_name_problem(name) -> str | None:
