@@ -261,5 +261,5 @@ def package_source(path: str | Path) -> dict | None:
     try:
         with zipfile.ZipFile(path) as zf:
             return read_source_comment(zf.comment)
-    except (OSError, zipfile.BadZipFile):
+    except ZIP_READ_ERRORS:
         return None

@@ -266,3 +266,29 @@ def test_writers_refuse_names_that_break_their_xml():
         job(labels(), ["../x", *INKS[1:]])
     with pytest.raises(ValueError, match=r"materials names 'Vero\\x02', a name with a control character"):
         job(labels(), materials={"cyan": "Vero\x02"})
+
+
+def test_memory_running_out_names_the_member(package, monkeypatch):
+    """A member too large for this machine's memory (a 4 GiB member under a 3 GB cap) names the member and its
+    size, not "the volume"."""
+    _, path = package
+
+    def no_memory(self, name, pwd=None):
+        raise MemoryError
+
+    monkeypatch.setattr(zipfile.ZipFile, "read", no_memory)
+    with pytest.raises(
+        PackageError, match=r"job.gcvf: ConfigFile.xml \(\d+\.\d KiB \(\d+ bytes\) uncompressed\) does "
+    ):
+        inspect_package(path)
+
+
+def test_slices_that_are_no_png_are_refused_before_their_declared_size_is_used(package, tmp_path):
+    _, path = package
+    huge = edit_config(b"<SliceWidth>14<", b"<SliceWidth>2000000000<")
+    rewrite(path, tmp_path / "a.gcvf", lambda n, d: b"no png" if n == "layer_0.png" else huge(n, d))
+    with pytest.raises(PackageError, match=r"a.gcvf: layer_0.png is not a PNG$"):
+        inspect_package(tmp_path / "a.gcvf")
+    rewrite(path, tmp_path / "b.gcvf", huge)
+    with pytest.raises(PackageError, match=r"b.gcvf: layer_0.png is 14 x 10 px; the package declares 2000000000 x 10$"):
+        inspect_package(tmp_path / "b.gcvf")

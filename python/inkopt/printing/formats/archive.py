@@ -5,13 +5,15 @@ from __future__ import annotations
 import zipfile
 from pathlib import Path
 
+from ...io import ZIP_READ_ERRORS
+
 
 def zip_holds(path: Path, member: str) -> bool:
     """Whether ``path`` is a readable zip holding ``member``."""
     try:
         with zipfile.ZipFile(path) as zf:
             return member in zf.namelist()
-    except (OSError, zipfile.BadZipFile):
+    except (*ZIP_READ_ERRORS, MemoryError):
         return False
 
 

@@ -29,12 +29,15 @@ class PackageError(ValueError):
 
 @contextmanager
 def about(path) -> Iterator[None]:
-    """A checker's errors naming the package: a PackageError raised in the block as ``"{path}: {message}"``, and
+    """A checker's errors naming the package: a ValueError raised in the block (a PackageError, or what an image
+    decoder raises) as the one-line PackageError ``"{path}: {message}"`` unless it names ``path`` already, and
     memory running out as one line naming ``path``."""
     try:
         yield
-    except PackageError as exc:
-        raise PackageError(f"{path}: {exc}") from None
+    except ValueError as exc:
+        if str(path) in str(exc) and not isinstance(exc, PackageError):
+            raise
+        raise PackageError(f"{path}: {' '.join(str(exc).split())}") from None
     except MemoryError:
         raise PackageError(f"{path}: too large to check in this machine's memory") from None
 
@@ -66,6 +69,11 @@ class PackageReport:
         return cls(**{**d, "dpi": None if d.get("dpi") is None else tuple(d["dpi"])})
 
 
+#: the most pixels per slice a package may declare (a J750 tray at 600 x 300 DPI is 5.3e7): the per-pixel arrays
+#: of a scan are allocated from the declared size before any slice is decoded
+MAX_SLICE_PIXELS = 2**28
+
+
 class Scan:
     """Per-layer accumulation of a package read back: ``counts`` per material, the printed voxels' box, ``top``
     (the topmost printed layer per image pixel) and ``top_label`` (its label), ``kept`` {layer: (Y, X) labels in
@@ -79,6 +87,8 @@ class Scan:
         if isinstance(keep, int):  # that many layers, evenly spaced from bottom to top
             keep = np.unique(np.linspace(0, Z - 1, keep).round().astype(int)) if keep > 0 else ()
         self.keep = {int(k) for k in keep}
+        if X * Y > MAX_SLICE_PIXELS:
+            raise PackageError(f"slices of {X} x {Y} px are more than the {MAX_SLICE_PIXELS} pixels inkopt reads")
         try:
             self.top = np.zeros((Y, X), np.uint16)
             self.top_label = np.full((Y, X), EMPTY, np.uint8)

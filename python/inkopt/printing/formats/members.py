@@ -16,26 +16,14 @@ its size.
 
 from __future__ import annotations
 
-import lzma
 import re
 import zipfile
-import zlib
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 
+from ...io import ZIP_READ_ERRORS
 from .inspection import PackageError
 
-#: what reading a zip member may raise besides MemoryError
-READ_ERRORS = (
-    OSError,
-    EOFError,
-    ValueError,
-    RuntimeError,
-    NotImplementedError,
-    zipfile.BadZipFile,
-    zlib.error,
-    lzma.LZMAError,
-)
 _DRIVE = re.compile(r"[A-Za-z]:")
 
 
@@ -85,14 +73,14 @@ def size_text(n: int) -> str:
 
 @contextmanager
 def reading(name: str, size: int | None = None) -> Iterator[None]:
-    """Errors of reading member ``name`` (``READ_ERRORS``, MemoryError) as one-line PackageErrors naming it and its
+    """Errors of reading member ``name`` (``ZIP_READ_ERRORS``, MemoryError) as one-line PackageErrors naming it and its
     declared uncompressed ``size``."""
     what = name if size is None else f"{name} ({size_text(size)} uncompressed)"
     try:
         yield
     except MemoryError:
         raise PackageError(f"{what} does not fit in memory") from None
-    except READ_ERRORS as exc:
+    except ZIP_READ_ERRORS as exc:
         if isinstance(exc, PackageError):
             raise
         raise PackageError(f"{what} cannot be read ({type(exc).__name__}: {' '.join(str(exc).split())})") from None
@@ -104,7 +92,7 @@ def open_zip(path) -> Iterator[zipfile.ZipFile]:
     is a one-line PackageError."""
     try:
         zf = zipfile.ZipFile(path)
-    except (*READ_ERRORS, MemoryError) as exc:
+    except (*ZIP_READ_ERRORS, MemoryError) as exc:
         raise PackageError(f"not a readable zip ({type(exc).__name__}: {' '.join(str(exc).split())})") from None
     with zf:
         check_names(raw_names(zf))
@@ -144,9 +132,11 @@ def png_size(head: bytes) -> tuple[int, int] | None:
 
 
 def check_png_size(zf, name: str, size) -> None:
-    """The zip member ``name``, a PNG, is ``size`` (W, H) pixels by its header: checked before a package's
-    declared size is trusted to allocate per-pixel arrays (a member that is no PNG is left to ``read_image``)."""
+    """The zip member ``name`` is a PNG of ``size`` (W, H) pixels by its header: checked before a package's
+    declared size is trusted to allocate per-pixel arrays."""
     with reading(name), zf.open(name) as fh:
         got = png_size(fh.read(24))
-    if got is not None and got != tuple(size):
+    if got is None:
+        raise PackageError(f"{name} is not a PNG")
+    if got != tuple(size):
         raise PackageError(f"{name} is {got[0]} x {got[1]} px; the package declares {size[0]} x {size[1]}")
