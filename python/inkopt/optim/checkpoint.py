@@ -119,8 +119,9 @@ def check_state(d: dict, where, shapes: dict) -> None:
             raise bad(f"holds {key} {a.dtype} {a.shape}, not finite numbers of shape {tuple(shape)}")
     for key, (kinds, least, most) in _SCALARS.items():
         a = np.asarray(d.get(key, 0))
-        ok = a.ndim == 0 and a.dtype.kind in kinds and (key == "schedule_gain" or np.isfinite(a))
-        if not ok or (least is not None and a < least) or (most is not None and a > most):
+        v = float(a) if a.ndim == 0 and a.dtype.kind in kinds else np.nan
+        ok = (key == "schedule_gain" and a.ndim == 0 and a.dtype.kind in kinds) or np.isfinite(v)
+        if not ok or (least is not None and v < least) or (most is not None and v > most):
             raise bad(f"holds {key} {a.dtype} {a.shape} {a.reshape(-1)[:1]}")
     for key in History.keys():
         a = np.asarray(d[key])
@@ -146,7 +147,12 @@ def _upgrade_0(data: dict, where) -> dict:
             f"{where} was made by a pre-release inkopt without the whole per-iteration history; it "
             f"cannot be continued: rerun without `resume`"
         )
-    key = json.loads(str(data["config_key"]))
+    try:
+        key = json.loads(str(data["config_key"]))
+        if not isinstance(key, dict):
+            raise ValueError("not a JSON object")
+    except (ValueError, RecursionError) as exc:
+        raise FormatError(f"{where}: its config_key is damaged ({exc}); rerun without `resume`") from None
     if key.get("smooth") and key.get("smooth_edge") and key.get("smooth_where") != "flat":
         raise FormatError(
             f"{where} was made by a pre-release inkopt that smoothed every voxel's step; it cannot "
