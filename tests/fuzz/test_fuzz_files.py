@@ -385,12 +385,13 @@ def packages(files):
     lab = np.random.default_rng(1).integers(0, 3, (3, 4, 5)).astype(np.uint8)
     lab[0, 0] = 255
     job = PrintJob(LabelVoxels(lab, [25.4 / 600, 25.4 / 300, 0.027], INKS.names[:3]), printer_profile("j750"))
+    FORMATS["png-slices"].write(job, files.root / "slices")
     out = {}
     for kind in ("gcvf", "3mf"):
         path = files.root / f"good.{kind}"
         FORMATS[kind].write(job, path)
         with zipfile.ZipFile(path) as zf:
-            out[kind] = (path, [(n, zf.read(n)) for n in zf.namelist()])
+            out[kind] = (path, Short((n, zf.read(n)) for n in zf.namelist()))
     return out
 
 
@@ -478,7 +479,7 @@ def test_packages(files, packages, data):
         buf = io.BytesIO()
         with warnings.catch_warnings(), zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
             warnings.simplefilter("ignore")  # repeated names
-            for name, body in data.draw(mutated_members(Short(members))):
+            for name, body in data.draw(mutated_members(members)):
                 zf.writestr(name, body)
         raw = buf.getvalue()
         with zipfile.ZipFile(buf) as zf:
@@ -489,3 +490,16 @@ def test_packages(files, packages, data):
     report = clean(inspect_package, path)
     if not isinstance(report, Exception):
         assert report[0].layers >= 1 and len(report[0].bounding_box) == 6
+
+
+@fuzz(100)
+@given(data=st.data())
+def test_slice_manifests(files, packages, data):
+    """A PNG slice folder whose manifest.json has its values mutated."""
+    folder = files.root / "slices"
+    manifest = json.loads((folder / "manifest.json").read_text())
+    (folder / "manifest.json").write_text(json.dumps(data.draw(mutated_json(manifest))))
+    try:
+        clean(inspect_package, folder)
+    finally:
+        (folder / "manifest.json").write_text(json.dumps(manifest))

@@ -6,7 +6,8 @@
 
 Every writer takes one ``job.PrintJob`` (the voxels, printer profile, material names, palette and provenance) and
 an output path; every checker reads a package back one layer at a time (``inspection``). What they share lives
-once: ink colours and slice images (``slices``), the outline mesh (``outline``), zip targets (``archive``).
+once: ink colours and slice images (``slices``), the outline mesh (``outline``), zip targets (``archive``), zip
+member names and reads within a bound (``members``).
 ``FORMATS`` maps each format's name to its ``Format``; a new format is one module with a ``Format`` class and
 one line here (and its default output file in ``rundir.RunDir``).
 """

@@ -29,10 +29,11 @@ occupancy are accumulated on the way, and nothing but the current layers is held
 - The zip's archive comment (which no printer software reads) records the file the package was made from:
   ``{"inkopt": {"source": NAME, "digest": "sha256:..."}}`` (``io.source_comment``).
 
-``check_gcvf`` reads a package back one layer at a time and checks that its parts agree (``inspection``): the
-slices against the configuration's palette, size, layer count and voxel counts, and the z-buffer, ``MeshBbx.ktn``
-and ``Mesh.stl`` against the slices' printed voxels (the STL's bounds within two outline blocks, the block named
-in its header, else within one voxel).
+``check_gcvf`` refuses member names a printer's software would unpack outside its folder (``members``), reads
+each member within a bound of its declared size, reads the package back one layer at a time and checks that its
+parts agree (``inspection``): the slices against the configuration's palette, size, layer count and voxel counts,
+and the z-buffer, ``MeshBbx.ktn`` and ``Mesh.stl`` (read a few thousand triangles at a time) against the slices'
+printed voxels (the STL's bounds within two outline blocks, the block named in its header, else within one voxel).
 
 Evidence. The zip layout, ``ConfigFile.xml`` (every element and value, the 6 colours, the material names of four
 inks), ``layer_N.png`` and the opaque-black background are read from a public GCVF builder, ``buildGCVF.js``

@@ -4,8 +4,9 @@ Each format's ``check`` reads its package layer by layer into a ``Scan`` (memory
 and the preview's slices) and raises ``PackageError`` (a one-line ``ValueError``) at the first disagreement between
 its parts: every slice the pixel size the package declares (``read_image``), palette colours only (``decoder``),
 layer numbers 0..N-1 without gaps and as many as declared (``layer_files``), per-material voxel counts equal to the
-declared ones (``check_counts``) and a mesh's bounds against the printed voxels (``check_bounds``). Labels are the
-ink indices (255 = empty) in the frames the writers use: (Z, Y, X) with y = Y - 1 - image row.
+declared ones (``check_counts``) and a mesh's bounds against the printed voxels (``check_bounds``); ``about``
+makes every error of a check one line naming the package. Labels are the ink indices (255 = empty) in the frames
+the writers use: (Z, Y, X) with y = Y - 1 - image row.
 """
 
 from __future__ import annotations

@@ -39,7 +39,7 @@ from ...model import EMPTY
 from ...rundir import QUANTIZED_DIGEST, VOLUME_DIGEST
 from .inspection import PackageError, PackageReport, Scan, about, check_counts, decoder, layer_files, read_image
 from .job import InkCounts, PrintJob, tally
-from .slices import slice_image, slice_lut, slices_line
+from .slices import rgba, slice_image, slice_lut, slices_line
 
 if TYPE_CHECKING:
     from ...rundir import RunDir
@@ -162,17 +162,35 @@ def write_png_slices(job: PrintJob, out_dir, background=(0, 0, 0, 0)) -> dict:
     return manifest
 
 
+def _check_manifest(man) -> None:
+    """A ValueError unless ``man`` holds every key a reader needs with a value of its kind: counts 1 .. 2^31 - 1,
+    positive DPI and layer thickness, RGBA colours, 1 .. 254 materials with an ink name and a voxel count."""
+    if not isinstance(man, dict) or man.get("format") != MANIFEST_ID:
+        raise ValueError(f"format is not {MANIFEST_ID}")
+    counts = [man["layer_count"], man["image_size"]["width"], man["image_size"]["height"]]
+    if not all(isinstance(v, int) and not isinstance(v, bool) and 1 <= v < 2**31 for v in counts):
+        raise ValueError(f"layer_count and image_size must be counts 1 .. 2^31 - 1, got {counts}")
+    sizes = [man["dpi"]["x"], man["dpi"]["y"], man["layer_thickness_um"]]
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and 0 < v < float("inf") for v in sizes):
+        raise ValueError(f"dpi and layer_thickness_um must be positive numbers, got {sizes}")
+    rgba(man["background"], "background")
+    mats = man["materials"]
+    if not isinstance(mats, list) or not 1 <= len(mats) < EMPTY:
+        raise ValueError(f"materials must be a list of 1 .. {EMPTY - 1} materials")
+    for m in mats:
+        rgba(m["color"], f"material {m['ink']!r}")
+        if not isinstance(m["ink"], str) or not isinstance(m["voxel_count"], int) or m["voxel_count"] < 0:
+            raise ValueError(f"material {m['ink']!r} needs an ink name and a voxel count")
+
+
 def _load_manifest(folder: Path) -> dict:
     """manifest.json of a slice folder, brought to ``MANIFEST_FORMAT``, with every key a reader needs."""
     try:
         man = json.loads((folder / MANIFEST).read_text())
-        if not isinstance(man, dict) or man.get("format") != MANIFEST_ID:
-            raise ValueError(f"format is not {MANIFEST_ID}")
-        _ = [man["layer_count"], man["image_size"]["width"], man["image_size"]["height"], man["background"]]
-        _ += [man["dpi"]["x"], man["dpi"]["y"], man["layer_thickness_um"]]
-        _ += [(m["ink"], m["color"], m["voxel_count"]) for m in man["materials"]]  # every key a reader needs
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise PackageError(f"{folder}/{MANIFEST} is missing or malformed ({type(exc).__name__}: {exc})") from None
+        _check_manifest(man)
+    except (OSError, ValueError, KeyError, TypeError, RecursionError) as exc:
+        text = " ".join(str(exc).split())
+        raise PackageError(f"{folder}/{MANIFEST} is missing or malformed ({type(exc).__name__}: {text})") from None
     where = folder / MANIFEST
     return upgrade_format(man, kind="slice manifest", where=where, current=MANIFEST_FORMAT, upgrades={0: dict})
 
@@ -183,7 +201,7 @@ def _scan(folder: Path, keep_layers=(), labels: bool = False) -> tuple[dict, Sca
     N, W, H = man["layer_count"], man["image_size"]["width"], man["image_size"]["height"]
     mats = man["materials"]
     files = layer_files([p.name for p in folder.iterdir()], r"slice_(\d+)\.png", N, MANIFEST)
-    decode = decoder([m["color"] for m in mats], man["background"])
+    decode = decoder([rgba(m["color"], m["ink"]) for m in mats], rgba(man["background"], "background"))
     scan = Scan(N, H, W, len(mats), keep_layers, labels)
     for k, name in enumerate(files):
         scan.add(k, decode(name, read_image(folder / name, name, (W, H))))

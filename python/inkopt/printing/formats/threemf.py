@@ -24,7 +24,9 @@ file beside it, then renamed), one layer at a time:
 - the OPC parts ``[Content_Types].xml``, ``_rels/.rels`` and ``3D/_rels/3dmodel.model.rels`` (one 3D-texture
   relationship per sheet), and the zip's archive comment: the source file's digest (``io.source_comment``).
 
-``check_3mf`` reads a file back one sheet at a time: the voxels with a non-zero share sum are the printed ones,
+``check_3mf`` refuses unsafe member names and image sheets the package does not hold (``members``), checks
+every number of the model it uses (counts, the mappings' transform, vertices) and reads the file back one sheet
+at a time: the voxels with a non-zero share sum are the printed ones,
 their sums must be 1 to within the 8-bit rounding of the sheets, and the mesh's bounds must agree with them as a
 GCVF's STL's do (``inspection``).
 
@@ -178,9 +180,10 @@ def _number(el, attr: str, kind=float):
         v = kind(raw)
     except (TypeError, ValueError, OverflowError):
         v = None
-    if v is None or not np.isfinite(v) or (kind is int and not 1 <= v < 2**31):
+    if v is None or (kind is int and not 1 <= v < 2**31) or not np.isfinite(v):
         what = "a finite number" if kind is float else "a count 1 .. 2^31 - 1"
-        raise PackageError(f"{MODEL}: <{el.tag.rsplit('}', 1)[-1]}> has {attr}={raw!r}, not {what}")
+        shown = raw if raw is None or len(raw) <= 40 else raw[:37] + "..."
+        raise PackageError(f"{MODEL}: <{el.tag.rsplit('}', 1)[-1]}> has {attr}={shown!r}, not {what}")
     return v
 
 
