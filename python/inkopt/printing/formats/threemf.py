@@ -39,6 +39,7 @@ lib3mf as a reader check. No volumetric consumer (slicer or printer driver) has 
 from __future__ import annotations
 
 import io
+import math
 import re
 import xml.etree.ElementTree as ET
 import zipfile
@@ -56,7 +57,7 @@ from .job import LabelVoxels, PrintJob, tally
 from .members import check_names, check_png_size, name_problem, open_zip, png_limit, raw_names, read_member, reading
 from .outline import block_any, block_outline, coarse_grid, grown, outline_factors
 from .slices import ink_colours
-from .threemf_xml import CHANNELS, MODEL, model_xml, sheet_path, write_opc
+from .threemf_xml import CHANNELS, MODEL, NS_CORE, model_xml, sheet_path, write_opc
 
 if TYPE_CHECKING:
     from ...rundir import RunDir
@@ -180,7 +181,7 @@ def _number(el, attr: str, kind=float):
         v = kind(raw)
     except (TypeError, ValueError, OverflowError):
         v = None
-    if v is None or (kind is int and not 1 <= v < 2**31) or not np.isfinite(v):
+    if v is None or (kind is int and not 1 <= v < 2**31) or not math.isfinite(v):
         what = "a finite number" if kind is float else "a count 1 .. 2^31 - 1"
         shown = raw if raw is None or len(raw) <= 40 else raw[:37] + "..."
         raise PackageError(f"{MODEL}: <{el.tag.rsplit('}', 1)[-1]}> has {attr}={shown!r}, not {what}")
@@ -205,27 +206,45 @@ def _resource(res: dict, tag: str, el, stack):
     return stack
 
 
+_MESH_LISTS = {f"{{{NS_CORE}}}vertices", f"{{{NS_CORE}}}triangles"}
+
+
+def _bounds(lo: np.ndarray, hi: np.ndarray, points: list) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) widened by ``points`` ((x, y, z) lists)."""
+    if not points:
+        return lo, hi
+    p = np.asarray(points)
+    if not np.all(np.isfinite(p)):
+        raise PackageError(f"{MODEL}: a vertex has a coordinate that is not a finite number")
+    return np.minimum(lo, p.min(0)), np.maximum(hi, p.max(0))
+
+
 def _mesh_bounds(fh) -> tuple[dict, np.ndarray, np.ndarray]:
-    """Stream 3dmodel.model: the resources (without the mesh, whose vertices and triangles are dropped as they are
-    read) as a small tree and the mesh's bounds."""
+    """Stream 3dmodel.model: the resources (without the mesh, whose vertices and triangles are dropped in batches
+    as they are read: memory for a few thousand, not the whole mesh) as a small tree and the mesh's bounds."""
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     res: dict = {"base": [], "stacks": {}, "functions": {}, "mappings": [], "object_name": ""}
-    stack, parent = None, None
+    stack, parent, points = None, None, []
     try:
         for event, el in ET.iterparse(fh, events=("start", "end")):
-            tag = el.tag.rsplit("}", 1)[-1]
             if event == "start":
-                parent = el if tag in ("vertices", "triangles") else parent
-            elif tag in ("vertex", "triangle"):
-                if tag == "vertex":
-                    p = np.array([_number(el, a) for a in "xyz"])
-                    lo, hi = np.minimum(lo, p), np.maximum(hi, p)
-                if parent is not None and len(parent) and parent[-1] is el:
-                    parent.remove(el)  # memory: a few elements, not the whole mesh
-            else:
+                parent = el if el.tag in _MESH_LISTS else parent
+                continue
+            tag = el.tag.rsplit("}", 1)[-1]
+            if tag == "vertex":
+                try:
+                    points.append([float(el.get("x")), float(el.get("y")), float(el.get("z"))])
+                except (TypeError, ValueError):
+                    [_number(el, a) for a in "xyz"]  # the one-line error naming the attribute
+                if len(points) >= 1 << 16:
+                    lo, hi, points = *_bounds(lo, hi, points), []
+            elif tag != "triangle":
                 stack = _resource(res, tag, el, stack)
+            if parent is not None and len(parent) >= 1 << 12:
+                del parent[:]  # the parsed events keep their own elements
     except ET.ParseError as exc:
         raise PackageError(f"{MODEL} is not well-formed XML ({exc})") from None
+    lo, hi = _bounds(lo, hi, points)
     if not np.all(np.isfinite(lo)):
         raise PackageError(f"{MODEL}: the mesh has no vertices")
     return res, lo, hi
@@ -270,8 +289,13 @@ def _sheet_member(zf, path) -> str:
     """The zip member of an image sheet's part name ``path`` ("/3D/..."), which the package must hold."""
     name = str(path)[1:] if str(path).startswith("/") else str(path)
     problem = name_problem(name) if path is not None else "is missing"
-    if problem or name not in zf.namelist():
-        raise PackageError(f"{MODEL}: image sheet {path!r} {problem or 'is not in the package'}")
+    if not problem:
+        try:
+            zf.getinfo(name)  # a dict look-up: a package holds thousands of sheets
+        except KeyError:
+            problem = "is not in the package"
+    if problem:
+        raise PackageError(f"{MODEL}: image sheet {path!r} {problem}")
     return name
 
 
