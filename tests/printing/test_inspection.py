@@ -292,3 +292,18 @@ def test_slices_that_are_no_png_are_refused_before_their_declared_size_is_used(p
     rewrite(path, tmp_path / "b.gcvf", huge)
     with pytest.raises(PackageError, match=r"b.gcvf: layer_0.png is 14 x 10 px; the package declares 2000000000 x 10$"):
         inspect_package(tmp_path / "b.gcvf")
+
+
+def test_a_broken_png_chunk_is_one_line(package, tmp_path):
+    """A slice whose IDAT chunk declares the wrong length (the decoder raises SyntaxError, no OSError)."""
+    _, path = package
+
+    def shorten_idat(name, data):
+        if name != "layer_1.png":
+            return data
+        at = data.index(b"IDAT") - 4
+        return data[:at] + (4).to_bytes(4, "big") + data[at + 4 :]
+
+    rewrite(path, tmp_path / "a.gcvf", shorten_idat)
+    with pytest.raises(PackageError, match=r"a.gcvf: layer_1.png: not a readable PNG \(SyntaxError: broken PNG file"):
+        inspect_package(tmp_path / "a.gcvf")

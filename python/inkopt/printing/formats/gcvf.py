@@ -82,10 +82,9 @@ from .inspection import (
     check_counts,
     decoder,
     layer_files,
-    read_image,
 )
 from .job import InkCounts, PrintJob, tally
-from .members import check_names, check_png_size, open_zip, png_limit, raw_names, read_member, reading
+from .members import check_names, check_png_size, open_zip, raw_names, read_member, read_png, reading
 from .outline import block_any, block_outline, coarse_grid, outline_factors
 from .slices import rgba, slice_image, slice_lut, slices_line
 
@@ -348,8 +347,7 @@ def _check_parts(zf, cfg: _Config, scan: Scan, box: list) -> None:
     """The z-buffer, ``MeshBbx.ktn`` and ``Mesh.stl`` (where present) against the slices' printed voxels."""
     names = set(zf.namelist())
     if ZBUFFER in names:
-        data = read_member(zf, ZBUFFER, png_limit(cfg.W, cfg.H))
-        zb = read_image(data, ZBUFFER, (cfg.W, cfg.H), mode=None)
+        zb = read_png(zf, ZBUFFER, (cfg.W, cfg.H), mode=None)
         if zb.ndim != 2:
             raise PackageError(f"{ZBUFFER} has {zb.shape[2]} channels; a z-buffer is one grey channel")
         bad = zb.astype(np.int64) != scan.top
@@ -383,7 +381,7 @@ def check_gcvf(path: Path, keep_layers=(), labels: bool = False) -> tuple[Packag
         decode = decoder(cfg.rgba, cfg.background)
         scan = Scan(cfg.N, cfg.H, cfg.W, len(cfg.names), keep_layers, labels)
         for k, name in enumerate(files):
-            scan.add(k, decode(name, read_image(read_member(zf, name, png_limit(cfg.W, cfg.H)), name, (cfg.W, cfg.H))))
+            scan.add(k, decode(name, read_png(zf, name, (cfg.W, cfg.H))))
         check_counts(cfg.names, cfg.declared, scan.counts, CONFIG)
         box = scan.box()
         _check_parts(zf, cfg, scan, box)

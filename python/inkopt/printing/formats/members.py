@@ -17,12 +17,14 @@ its size.
 from __future__ import annotations
 
 import re
+import struct
 import zipfile
+import zlib
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 
 from ...io import ZIP_READ_ERRORS
-from .inspection import PackageError
+from .inspection import PackageError, read_image
 
 _DRIVE = re.compile(r"[A-Za-z]:")
 
@@ -140,3 +142,22 @@ def check_png_size(zf, name: str, size) -> None:
         raise PackageError(f"{name} is not a PNG")
     if got != tuple(size):
         raise PackageError(f"{name} is {got[0]} x {got[1]} px; the package declares {size[0]} x {size[1]}")
+
+
+def decode_png(source, name: str, size, mode="RGBA"):
+    """``inspection.read_image`` of ``source`` (bytes or a path), with what an image decoder raises on a corrupt
+    PNG besides OSError (a broken chunk, a truncated stream, a decompression bomb) as a one-line PackageError
+    naming ``name``."""
+    from PIL import Image
+
+    broken = (SyntaxError, EOFError, struct.error, IndexError, TypeError, zlib.error, Image.DecompressionBombError)
+    try:
+        return read_image(source, name, size, mode)
+    except broken as exc:
+        raise PackageError(f"{name}: not a readable PNG ({type(exc).__name__}: {' '.join(str(exc).split())})") from None
+
+
+def read_png(zf: zipfile.ZipFile, name: str, size, mode="RGBA", label: str | None = None):
+    """The PNG member ``name`` of ``size`` (W, H) pixels as an array (``decode_png``), read within ``png_limit``;
+    ``label`` names it in errors (default ``name``)."""
+    return decode_png(read_member(zf, name, png_limit(*size)), label or name, size, mode)

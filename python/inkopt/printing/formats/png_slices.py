@@ -37,8 +37,9 @@ from typing import TYPE_CHECKING
 from ...io import FORMAT_KEY, publish, upgrade_format
 from ...model import EMPTY
 from ...rundir import QUANTIZED_DIGEST, VOLUME_DIGEST
-from .inspection import PackageError, PackageReport, Scan, about, check_counts, decoder, layer_files, read_image
+from .inspection import PackageError, PackageReport, Scan, about, check_counts, decoder, layer_files
 from .job import InkCounts, PrintJob, tally
+from .members import decode_png
 from .slices import rgba, slice_image, slice_lut, slices_line
 
 if TYPE_CHECKING:
@@ -204,7 +205,7 @@ def _scan(folder: Path, keep_layers=(), labels: bool = False) -> tuple[dict, Sca
     decode = decoder([rgba(m["color"], m["ink"]) for m in mats], rgba(man["background"], "background"))
     scan = Scan(N, H, W, len(mats), keep_layers, labels)
     for k, name in enumerate(files):
-        scan.add(k, decode(name, read_image(folder / name, name, (W, H))))
+        scan.add(k, decode(name, decode_png(folder / name, name, (W, H))))
     check_counts([m["ink"] for m in mats], [m["voxel_count"] for m in mats], scan.counts, MANIFEST)
     return man, scan
 

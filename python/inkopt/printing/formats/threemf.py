@@ -52,9 +52,9 @@ from ...io import atomic_file, read_source_comment, source_comment
 from ...model import EMPTY
 from ...units import MM_PER_INCH
 from .archive import check_target, zip_holds
-from .inspection import PackageError, PackageReport, Scan, about, check_bounds, read_image
+from .inspection import PackageError, PackageReport, Scan, about, check_bounds
 from .job import LabelVoxels, PrintJob, tally
-from .members import check_names, check_png_size, name_problem, open_zip, png_limit, raw_names, read_member, reading
+from .members import check_names, check_png_size, name_problem, open_zip, raw_names, read_png, reading
 from .outline import block_any, block_outline, coarse_grid, grown, outline_factors
 from .slices import ink_colours
 from .threemf_xml import CHANNELS, MODEL, NS_CORE, model_xml, sheet_path, write_opc
@@ -308,7 +308,7 @@ def _read_shares(zf, k: int, stacks, maps, W: int, H: int) -> np.ndarray:
         p = st["sheets"][k]
         if p not in sheets:
             name = _sheet_member(zf, p)
-            sheets[p] = read_image(read_member(zf, name, png_limit(W, H)), p, (W, H)).astype(np.float32) / 255
+            sheets[p] = read_png(zf, name, (W, H), label=p).astype(np.float32) / 255
         sh[:, :, i] = sheets[p][:, :, CHANNELS.index(ch)]
     total = sh.sum(2)
     off = (total > 0) & (np.abs(total - 1) > n * 0.5 / 255 + 1e-6)
