@@ -10,11 +10,13 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import lzma
 import os
 import re
 import shutil
 import tempfile
 import zipfile
+import zlib
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -170,6 +172,20 @@ def load_array(path: str | Path, what: str = "array") -> np.ndarray:
     return a
 
 
+#: what reading a zip (an .npz, a printer package) or one of its members may raise besides MemoryError: a bad
+#: CRC, corrupt compressed data, an unsupported compression method or zip version, encryption, a truncated file
+ZIP_READ_ERRORS = (
+    OSError,
+    EOFError,
+    ValueError,
+    RuntimeError,
+    NotImplementedError,
+    zipfile.BadZipFile,
+    zlib.error,
+    lzma.LZMAError,
+)
+
+
 def load_npz(path: str | Path, what: str = "file") -> dict:
     """All arrays of an .npz as a dict; a missing, unreadable or pickled file is a one-line ValueError."""
     path = Path(path)
@@ -234,7 +250,10 @@ def upgrade_format(data: dict, *, kind: str, where, current: int, upgrades: dict
     older one without an upgrade, is a one-line ``FormatError`` naming ``where`` and the ``kind`` of file. The
     result carries ``format_version = current``.
     """
-    v = format_version_of(data)
+    try:
+        v = format_version_of(data)
+    except (TypeError, ValueError, OverflowError):
+        raise FormatError(f"{where}: its {FORMAT_KEY} is not a whole number (a damaged {kind})") from None
     if v > current:
         raise FormatError(
             f"{where} is a {kind} of format version {v}; this inkopt reads versions up to {current} (update inkopt)"
@@ -287,7 +306,7 @@ def package_source(path: str | Path) -> dict | None:
     try:
         with zipfile.ZipFile(path) as zf:
             return read_source_comment(zf.comment)
-    except (OSError, zipfile.BadZipFile):
+    except ZIP_READ_ERRORS:
         return None
 
 

@@ -18,7 +18,8 @@ from inkopt.model import InkTable, Volume
 from inkopt.model.mixturefile import MixtureSource
 from inkopt.printing.formats import inspect_package, outline
 from inkopt.printing.formats.job import LabelVoxels, MixtureVoxels, PrintJob, Provenance
-from inkopt.printing.formats.threemf import CHANNELS, MODEL, NS_CORE, NS_V, write_3mf
+from inkopt.printing.formats.threemf import write_3mf
+from inkopt.printing.formats.threemf_xml import CHANNELS, MODEL, NS_CORE, NS_V
 from inkopt.printing.profiles import printer_profile
 
 VP = np.array([25.4 / 600, 25.4 / 300, 0.027])
@@ -176,5 +177,5 @@ def test_inspect_finds_shares_that_do_not_sum_to_one(tmp_path):
                 Image.fromarray(rgba).save(buf, format="PNG")
                 data = buf.getvalue()
             zo.writestr(n, data)
-    with pytest.raises(ValueError, match=r"^sheet 2: the shares at \(row 0, column 0\) sum to 1.78\d*, not 1$"):
+    with pytest.raises(ValueError, match=r"\.3mf: sheet 2: the shares at \(row 0, column 0\) sum to 1.78\d*, not 1$"):
         inspect_package(tmp_path / "b.3mf")

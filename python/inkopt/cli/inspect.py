@@ -13,16 +13,19 @@ from pathlib import Path
 from ..io import file_digest
 from ..printing.formats import inspect_package
 from ..printing.formats.inspection import PackageError, preview
+from ..printing.formats.slices import rgba
 from ..rundir import RunDir
 
 PREVIEW_SLICES = 4
 
 
 def _colour(c) -> tuple[int, int, int]:
-    if isinstance(c, str):
-        h = c.lstrip("#")
-        return tuple(int(h[i : i + 2], 16) for i in (0, 2, 4))
-    return tuple(int(v) for v in c[:3])
+    """A material's preview colour: its RGBA numbers or "#RRGGBB" (a 3MF's display colour), grey if it is
+    neither (a display colour is not checked: no part depends on it)."""
+    try:
+        return rgba(c, "colour")[:3]
+    except (ValueError, TypeError):
+        return (128, 128, 128)
 
 
 def _check_run(report, run: str) -> None:

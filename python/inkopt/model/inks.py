@@ -56,6 +56,9 @@ class InkTable:
 
     def __post_init__(self):
         n = len(self.names)
+        for name in self.names:
+            if problem := ink_name_problem(name):
+                raise ValueError(f"ink name {name!r} {problem}")
         for key in ("sigma_s", "sigma_a"):
             arr = np.asarray(getattr(self, key), dtype=np.float64)
             if arr.shape != (n, 3):
@@ -87,9 +90,16 @@ class InkTable:
 
     @classmethod
     def from_mu_t_albedo(cls, names, mu_t, albedo, g: float = DEFAULT_G) -> InkTable:
+        """``names`` (N,) str; ``mu_t`` (N, 3) mm^-1 and ``albedo`` (N, 3) in [0, 1], R, G, B per ink."""
+        names = tuple(names)
+        if bad := [n for n in names if not isinstance(n, str)]:
+            raise ValueError(f"ink name {bad[0]!r} is not a string")
         mu_t = np.asarray(mu_t, dtype=np.float64)
         albedo = np.asarray(albedo, dtype=np.float64)
-        if np.any(albedo < 0) or np.any(albedo > 1):
+        for what, arr in (("mu_t", mu_t), ("albedo", albedo)):
+            if arr.shape != (len(names), 3):
+                raise ValueError(f"ink {what} must be 3 numbers (R, G, B) for each of {len(names)} inks")
+        if not np.all((albedo >= 0) & (albedo <= 1)):
             raise ValueError("ink albedo must lie in [0, 1]")
         return cls(tuple(n.lower() for n in names), mu_t * albedo, mu_t * (1.0 - albedo), g)
 
@@ -113,18 +123,28 @@ class InkTable:
             return cls.from_names(PRESETS[spec])
         path = Path(spec)
         if path.suffix.lower() in (".json", ".toml"):
-            data = read_ink_file(path)
-            try:
-                inks = data["inks"]
-                return cls.from_mu_t_albedo(
-                    [i["name"] for i in inks],
-                    [i["mu_t"] for i in inks],
-                    [i["albedo"] for i in inks],
-                    float(data.get("g", DEFAULT_G)),
-                )
-            except (KeyError, TypeError) as exc:
-                raise ValueError(f"ink file {spec}: missing or malformed field {exc}") from None
+            return cls.from_file(path)
         return cls.from_names(spec.split(","))
+
+    @classmethod
+    def from_file(cls, path) -> InkTable:
+        """The ink table of a JSON/TOML ink file (``parse``); anything wrong with it is a one-line ValueError
+        naming the file."""
+        data = read_ink_file(path)
+        try:
+            inks = data["inks"]
+            if not isinstance(inks, list) or not all(isinstance(i, dict) for i in inks):
+                raise TypeError("'inks' must be a list of objects with name, mu_t and albedo")
+            g = data.get("g", DEFAULT_G)
+            if isinstance(g, bool) or not isinstance(g, (int, float)):
+                raise TypeError(f"'g' must be a number, got {g!r}")
+            return cls.from_mu_t_albedo(
+                [i["name"] for i in inks], [i["mu_t"] for i in inks], [i["albedo"] for i in inks], float(g)
+            )
+        except KeyError as exc:
+            raise ValueError(f"ink file {path}: missing field {exc}") from None
+        except (TypeError, ValueError, OverflowError) as exc:
+            raise ValueError(f"ink file {path}: {exc}") from None
 
     def to_arrays(self) -> dict:
         """Arrays for a volume .npz file (see inkopt.model.volume)."""
@@ -144,6 +164,23 @@ class InkTable:
         )
 
 
+_UNSAFE_IN_NAMES = set("/\\:")  # ink names name files and folders (ink-set runs): no separators, no drives
+
+
+def ink_name_problem(name) -> str | None:
+    """What makes ``name`` no ink name (a phrase), or None: a non-empty string without control characters,
+    path separators or drive colons, and not "." or ".." (ink names become file and folder names)."""
+    if not isinstance(name, str):
+        return "is not a string"
+    if not name.strip() or name.strip() in (".", ".."):
+        return "is empty" if not name.strip() else "is a folder name"
+    if any(ord(c) < 32 or ord(c) == 127 for c in name):
+        return "holds a control character"
+    if _UNSAFE_IN_NAMES & set(name):
+        return "holds '/', '\\' or ':'"
+    return None
+
+
 def read_ink_file(path) -> dict:
     """An ink file (.json or .toml) as a dict at format version :data:`INK_FILE_FORMAT` (``g``, ``inks``, and
     ``provenance`` if the file has one); ValueError (one line) for a missing or unreadable file."""
@@ -159,6 +196,8 @@ def read_ink_file(path) -> dict:
             except ModuleNotFoundError:  # Python 3.10
                 import tomli as tomllib
             data = tomllib.loads(path.read_text())
+    except RecursionError:
+        raise ValueError(f"ink file {path} is nested too deeply to read") from None
     except ValueError as exc:
         raise ValueError(f"ink file {path} is not valid {path.suffix[1:].upper()}: {exc}") from None
     if not isinstance(data, dict):

@@ -13,14 +13,17 @@ writes one) cannot be read in z order from the stream: it is read whole on first
 from __future__ import annotations
 
 import zipfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
+from ..errors import ParameterError
+from ..io import ZIP_READ_ERRORS
 from .inks import DEFAULT_G, InkTable
 from .media import VolumeError
-from .normals import SurfaceNormals
-from .volume import Quantization, Volume, upgrade_volume
+from .volume import Quantization, Volume, check_kinds, file_normals, naming_file, upgrade_volume
 
 HEAVY = ("mixture", "normals")  # members not loaded at once (dense normals: a pre-release layout, refused)
 
@@ -39,7 +42,7 @@ class MixtureSource:
     Bad files are one-line ``VolumeError``s (``FormatError`` for a format version it cannot read)."""
 
     def __init__(self, path, what: str = "this step"):
-        self.path, self._zip, self._whole = path, None, None
+        self.path, self._zip, self._fh, self._whole = path, None, None, None
         if not Path(path).is_file():
             raise VolumeError(f"volume file {path} does not exist")
         try:
@@ -50,47 +53,54 @@ class MixtureSource:
                 for k, n in names.items()
                 if k not in HEAVY
             }
-        except (OSError, zipfile.BadZipFile, ValueError) as exc:
-            self.close()
-            raise VolumeError(f"{path} is not a readable .npz volume file ({type(exc).__name__}: {exc})") from None
-        try:
             small = upgrade_volume({**small, **dict.fromkeys(set(HEAVY) & set(names))}, path)
-        except ValueError:
+            check_kinds(small, path)
+            if "mixture" not in names:
+                form = "labels" if "labels" in names or "labels_file" in names else "dense"
+                raise VolumeError(f"{path} holds a {form} volume; {what} needs a mixture volume")
+            self._read_small(small)
+            self._member = names["mixture"]
+            self._open()
+            if len(self.shape) != 4 or self.shape[3] != len(self.inks) or self.dtype.kind not in "fiu":
+                raise VolumeError(f"{path}: mixture of {self.dtype} {self.shape} does not fit {len(self.inks)} inks")
+            self.normals = None
+            if "normal_index" in small:
+                self.normals = file_normals(self.shape[:3], small)
+        except BaseException as exc:
             self.close()
+            if isinstance(exc, (*ZIP_READ_ERRORS, TypeError, KeyError, IndexError, OverflowError)):
+                raise self._error(exc) from None
             raise
-        if "mixture" not in names:
-            self.close()
-            form = "labels" if "labels" in names or "labels_file" in names else "dense"
-            raise VolumeError(f"{path} holds a {form} volume; {what} needs a mixture volume")
-        try:
-            self.g = float(small["g"]) if "g" in small else DEFAULT_G
-            self.voxel_mm = np.asarray(small["voxel_mm"], np.float64).reshape(-1)
-            self.inks = InkTable.from_arrays(small, self.g)
-        except (KeyError, ValueError) as exc:
-            self.close()
-            raise VolumeError(f"{path}: bad volume file ({type(exc).__name__}: {exc})") from None
+
+    def _read_small(self, small: dict) -> None:
+        """The file's small arrays as this source's attributes (``inside`` checked against ``voxel_mm``'s grid
+        when the mixture's shape is known, in ``_open``)."""
+        self.g = float(small["g"]) if "g" in small else DEFAULT_G
+        self.voxel_mm = np.asarray(small["voxel_mm"], np.float64).reshape(-1)
+        if self.voxel_mm.shape != (3,) or not np.all(np.isfinite(self.voxel_mm)) or np.any(self.voxel_mm <= 0):
+            raise VolumeError(f"{self.path}: voxel_mm must be 3 positive sizes (x, y, z) in mm")
+        self.inks = InkTable.from_arrays(small, self.g)
         self.ior = float(small["ior"]) if "ior" in small else 1.5
         self.boundary = str(small["boundary"]) if "boundary" in small else "box"
-        self.origin_mm = small.get("origin_mm")
+        self.origin_mm = None if "origin_mm" not in small else np.asarray(small["origin_mm"], np.float64).reshape(3)
+        if self.origin_mm is not None and not np.all(np.isfinite(self.origin_mm)):
+            raise VolumeError(f"{self.path}: origin_mm must be finite (x, y, z) in mm")
         self.inside = np.asarray(small["inside"], bool) if "inside" in small else None
-        self._member = names["mixture"]
+
+    def _error(self, exc: BaseException) -> Exception:
+        """What reading the file raised, as one line naming it."""
+        if isinstance(exc, ParameterError) or not isinstance(exc, ZIP_READ_ERRORS):
+            return naming_file(exc, self.path)
+        text = " ".join(str(exc).split())
+        return VolumeError(f"{self.path} is not a readable .npz volume file ({type(exc).__name__}: {text})")
+
+    @contextmanager
+    def _reading(self) -> Iterator[None]:
+        """Errors of reading the mixture member (a bad CRC, corrupt data) as one line naming the file."""
         try:
-            self._open()
-        except (OSError, zipfile.BadZipFile, ValueError) as exc:
-            self.close()
-            raise VolumeError(f"{path}: unreadable mixture ({type(exc).__name__}: {exc})") from None
-        if len(self.shape) != 4 or self.shape[3] != len(self.inks) or self.dtype.hasobject:
-            self.close()
-            raise VolumeError(f"{path}: mixture of shape {self.shape} does not fit {len(self.inks)} inks")
-        self.normals = None
-        try:
-            if "normal_index" in small:
-                self.normals = SurfaceNormals(self.shape[:3], small["normal_index"], small["normal_vectors"])
-            if self.normals is not None and self.normals.shape != tuple(self.shape[:3]):
-                raise ValueError(f"normals for a grid of {self.normals.shape}, the mixture is {self.shape[:3]}")
-        except (KeyError, ValueError) as exc:
-            self.close()
-            raise VolumeError(f"{path}: bad shading normals ({exc})") from None
+            yield
+        except (*ZIP_READ_ERRORS, TypeError) as exc:
+            raise self._error(exc) from None
 
     def __enter__(self) -> MixtureSource:
         return self
@@ -101,6 +111,8 @@ class MixtureSource:
     def _open(self) -> None:
         self._fh = self._zip.open(self._member)
         self.shape, self._fortran, self.dtype = _read_header(self._fh)
+        if self.inside is not None and self.inside.shape != tuple(self.shape[:3]):
+            raise VolumeError(f"{self.path}: inside mask {self.inside.shape} differs from the mixture's grid")
         self._next = 0
         self._kept: dict[int, np.ndarray] = {}
 
@@ -114,7 +126,8 @@ class MixtureSource:
     def _fortran_whole(self) -> np.ndarray:
         """The whole mixture of a Fortran-order member (read once, kept)."""
         if self._whole is None:
-            self._whole = np.lib.format.read_array(self._zip.open(self._member), allow_pickle=False)
+            with self._reading():
+                self._whole = np.lib.format.read_array(self._zip.open(self._member), allow_pickle=False)
         return self._whole
 
     def __getitem__(self, z: int) -> np.ndarray:
@@ -124,18 +137,26 @@ class MixtureSource:
         if not 0 <= z < self.shape[0]:
             raise IndexError(f"layer {z} outside 0..{self.shape[0] - 1}")
         if self._fortran:
-            return np.ascontiguousarray(self._fortran_whole()[z])
-        if z < self._next:
-            self._fh.close()
-            self._open()
-        n = int(np.prod(self.shape[1:])) * self.dtype.itemsize
-        while self._next <= z:
-            data = self._read(n)
-            self._next += 1
-        lay = np.frombuffer(data, self.dtype).reshape(self.shape[1:])
+            return self._checked(np.ascontiguousarray(self._fortran_whole()[z]), z)
+        with self._reading():
+            if z < self._next:
+                self._fh.close()
+                self._open()
+            n = int(np.prod(self.shape[1:])) * self.dtype.itemsize
+            while self._next <= z:
+                data = self._read(n)
+                self._next += 1
+        lay = self._checked(np.frombuffer(data, self.dtype).reshape(self.shape[1:]), z)
         if len(self._kept) >= 2:
             self._kept.pop(min(self._kept))
         self._kept[z] = lay
+        return lay
+
+    def _checked(self, lay: np.ndarray, z: int) -> np.ndarray:
+        """Layer ``z``, checked as ``Mixture`` checks the whole (finite and non-negative as float32)."""
+        as_read = np.asarray(lay, np.float32)
+        if not np.all(np.isfinite(as_read)) or np.any(as_read < 0):
+            raise VolumeError(f"{self.path}: mixture must be finite and non-negative (layer {z})")
         return lay
 
     def blocks(self, voxels: int = 1 << 20):
@@ -147,8 +168,9 @@ class MixtureSource:
         if voxels < 1:
             raise ValueError(f"blocks of at least one voxel, got {voxels}")
         total, n = int(np.prod(self.shape[:3])), int(self.shape[3])
-        self._fh.close()
-        self._open()
+        with self._reading():
+            self._fh.close()
+            self._open()
         self._next = self.shape[0]  # the layer reader's position is lost: its next layer reopens the member
         flat = None if not self._fortran else self._fortran_whole().reshape(-1, n)  # a C-order copy
         for v0 in range(0, total, voxels):
@@ -156,7 +178,8 @@ class MixtureSource:
             if flat is not None:
                 rows = flat[v0 : v0 + k].astype(np.float32, copy=False)
             else:
-                raw = np.frombuffer(self._read(k * n * self.dtype.itemsize), self.dtype)
+                with self._reading():
+                    raw = np.frombuffer(self._read(k * n * self.dtype.itemsize), self.dtype)
                 rows = raw.astype(np.float32, copy=False).reshape(k, n)
             if not np.all(np.isfinite(rows)) or np.any(rows < 0):
                 raise VolumeError(f"{self.path}: mixture must be finite and non-negative")

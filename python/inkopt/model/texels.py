@@ -152,9 +152,18 @@ class Texels:
 
     @classmethod
     def from_arrays(cls, data) -> Texels:
-        return cls(
-            data["texel_voxel"],
-            data["texel_face"],
-            data["texel_normal"],
-            bool(data["texel_centred"]) if "texel_centred" in data else False,
-        )
+        """The texels of a file's arrays; other than integer voxel indices, face ids 0..5 and finite normals is a
+        ValueError."""
+        voxel, face, normal = (np.asarray(data[k]) for k in ("texel_voxel", "texel_face", "texel_normal"))
+        with np.errstate(over="ignore", invalid="ignore"):
+            normal = normal.astype(np.float32) if normal.dtype.kind in "fiu" else normal
+        if (
+            voxel.dtype.kind not in "iu"
+            or face.dtype.kind not in "iu"
+            or not np.all((voxel >= 0) & (voxel < 2**31))
+            or not np.all((face >= 0) & (face <= 5))
+            or normal.dtype.kind != "f"
+            or not np.all(np.isfinite(normal))
+        ):
+            raise ValueError("texel arrays must be voxel indices (z, y, x), face ids 0..5 and finite normals")
+        return cls(voxel, face, normal, bool(data["texel_centred"]) if "texel_centred" in data else False)

@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import ParameterError
 from ..io import FORMAT_KEY, FormatError, Streamed, load_npz, save_npz, upgrade_format
 from .inks import DEFAULT_G, InkTable, mix
 from .labelfile import load_label_file
@@ -146,6 +147,8 @@ class Volume:
             raise VolumeError(f"g must lie in (-1, 1), got {self.g}")
         if not (np.isfinite(self.ior) and self.ior > 0):
             raise VolumeError(f"ior must be positive, got {self.ior}")
+        if self.origin_mm is not None and not np.all(np.isfinite(self.origin_mm)):
+            raise VolumeError(f"origin_mm must be finite (x, y, z) in mm, got {self.origin_mm}")
         shp = self.shape
         if min(shp) < 1:
             raise VolumeError(f"volume shape {shp} is empty")
@@ -296,9 +299,18 @@ class Volume:
     @classmethod
     def from_arrays(cls, data: dict, path: str | Path) -> Volume:
         """The volume of a volume file's arrays ``data`` (current format version), read from ``path`` (which
-        names it in errors and locates a ``labels_file``)."""
+        names it in errors and locates a ``labels_file``). Arrays that make no volume (missing, of the wrong
+        dtype or shape, non-finite) are a one-line VolumeError naming ``path``."""
+        try:
+            return cls._from_arrays(data, path)
+        except (TypeError, ValueError, KeyError, IndexError, OverflowError) as exc:
+            raise naming_file(exc, path) from None
+
+    @classmethod
+    def _from_arrays(cls, data: dict, path: str | Path) -> Volume:
         if "voxel_mm" not in data:
             raise VolumeError(f"{path}: missing array 'voxel_mm' (3 voxel sizes x, y, z in mm)")
+        check_kinds(data, path)
         g = float(data["g"]) if "g" in data else DEFAULT_G
         inks = None
         if "ink_names" in data:
@@ -327,11 +339,52 @@ class Volume:
         )
         if "normal_index" in data:
             try:
-                vol.normals = SurfaceNormals(vol.shape, data["normal_index"], data["normal_vectors"])
+                vol.normals = file_normals(vol.shape, data)
             except (KeyError, ValueError) as exc:
                 raise VolumeError(f"{path}: bad normals: {exc}") from None
             vol.validate()
         return vol
+
+
+#: the dtype kinds (``numpy.dtype.kind``) each array of a volume file may have, and what they are called
+ARRAY_KINDS = {
+    **dict.fromkeys(
+        ("voxel_mm", "g", "ior", "origin_mm", "sigma_s", "sigma_a", "mixture", "ink_sigma_s", "ink_sigma_a", "dpi")
+        + ("normal_vectors",),
+        ("fiu", "numbers"),
+    ),
+    **dict.fromkeys(("normal_index", "seed", "labels_shape", "label_counts"), ("iu", "integers")),
+    **dict.fromkeys(("ink_names", "boundary", "method", "upsample", "ink_order", "labels_file"), ("U", "text")),
+    "inside": ("biu", "a mask"),
+    "labels": ("u", "uint8 labels"),
+}
+
+
+def check_kinds(data: dict, path) -> None:
+    """One-line VolumeError naming ``path`` for an array of a volume file's ``data`` whose dtype is not what the
+    file stores there (``ARRAY_KINDS``: complex voxel sizes, text coefficients, fractional indices, ...)."""
+    for key, (kinds, what) in ARRAY_KINDS.items():
+        if data.get(key) is not None and np.asarray(data[key]).dtype.kind not in kinds:
+            raise VolumeError(f"{path}: array '{key}' is {np.asarray(data[key]).dtype}; a volume file holds {what}")
+
+
+def file_normals(shape, data: dict) -> SurfaceNormals:
+    """The shading normals of a file's arrays ``normal_index`` and ``normal_vectors`` for a grid of ``shape``;
+    vectors that are not finite (as float32) are a ValueError."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        normals = SurfaceNormals(shape, data["normal_index"], data["normal_vectors"])
+    if not np.all(np.isfinite(normals.vectors)):
+        raise ValueError("normals: vectors must be finite")
+    return normals
+
+
+def naming_file(exc: Exception, path, error: type[ParameterError] = VolumeError) -> Exception:
+    """``exc``, raised reading the file ``path``, as a one-line ``error`` that names it (a ParameterError naming
+    it already is kept)."""
+    if isinstance(exc, ParameterError) and str(path) in str(exc):
+        return exc
+    text = exc.template if isinstance(exc, ParameterError) else f"malformed arrays ({type(exc).__name__}: {exc})"
+    return error(f"{path}: {' '.join(text.split())}")
 
 
 def upgrade_volume(data: dict, where, quantized: bool = False) -> dict:

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import ParameterError
 from ..io import FORMAT_KEY, FormatError, load_npz, save_npz, upgrade_format
 
 CHECKPOINT_FORMAT = 1
@@ -80,6 +81,66 @@ def read_checkpoint(path: str | Path) -> dict:
     )
 
 
+#: a checkpoint's scalars: their dtype kinds and least and greatest values (None: any finite value; NaN allowed
+#: for the gain); the running average's weight (samples per texel) far below what overflows its update
+_SCALARS = {
+    "iteration": ("iu", 0, None),
+    "opt_t": ("iu", 0, None),
+    "c_weight": ("fiu", 0, 1e15),
+    "wall_seconds": ("fiu", 0, None),
+    "schedule_end": ("iu", 0, None),
+    "schedule_converged_at": ("iu", -1, None),
+    "schedule_gain": ("fiu", None, None),
+    "schedule_frozen": ("biu", None, None),
+}
+#: entries present together or not at all: the running average, the planned end
+_TOGETHER = (
+    ("c_avg", "c_var", "c_weight"),
+    ("schedule_end", "schedule_reason", "schedule_converged_at", "schedule_gain", "schedule_frozen"),
+)
+
+
+def check_state(d: dict, where, shapes: dict) -> None:
+    """One-line ParameterError naming the checkpoint ``where`` unless its arrays ``d`` can restore a run: each
+    array of ``shapes`` ({name: shape}: the run's own variables, optimiser moments and running average, which may
+    be absent) of that shape, real and finite as float32 (the average non-negative); the scalars (``_SCALARS``)
+    real, finite and within their bounds; the history one real entry per iteration; ``config_key``,
+    ``schedule_reason`` and ``start_figures`` text, the first and last JSON."""
+
+    def bad(what: str) -> ParameterError:
+        return ParameterError(f"checkpoint {where} {what}: a damaged file; rerun without `resume`")
+
+    missing = [k for k in ("x", "iteration", "config_key", "opt_m", "opt_v", "opt_t", *History.keys()) if k not in d]
+    missing += [k for keys in _TOGETHER if any(k in d for k in keys) for k in keys if k not in d]
+    if missing:
+        raise bad(f"lacks {', '.join(missing)}")
+    for key, shape in shapes.items():
+        a = np.asarray(d.get(key, np.zeros(shape, np.float32)))
+        with np.errstate(over="ignore", invalid="ignore"):
+            real = a.dtype.kind in "fiu" and a.shape == tuple(shape) and np.all(np.isfinite(a.astype(np.float32)))
+        if not real or (key in ("c_avg", "c_var") and np.any(a < 0)):
+            raise bad(f"holds {key} {a.dtype} {a.shape}, not finite numbers of shape {tuple(shape)}")
+    for key, (kinds, least, most) in _SCALARS.items():
+        a = np.asarray(d.get(key, 0))
+        v = float(a) if a.ndim == 0 and a.dtype.kind in kinds else np.nan
+        ok = (key == "schedule_gain" and a.ndim == 0 and a.dtype.kind in kinds) or np.isfinite(v)
+        if not ok or (least is not None and v < least) or (most is not None and v > most):
+            raise bad(f"holds {key} {a.dtype} {a.shape} {a.reshape(-1)[:1]}")
+    for key in History.keys():
+        a = np.asarray(d[key])
+        if a.dtype.kind not in "fiu" or a.shape != (int(d["iteration"]),) or np.any(np.isinf(a)):
+            raise bad(f"holds {key} {a.dtype} {a.shape}, not one number per iteration")
+    for key in ("config_key", "schedule_reason", "start_figures"):
+        if key in d and (np.asarray(d[key]).dtype.kind != "U" or np.ndim(d[key]) != 0):
+            raise bad(f"holds {key} as {np.asarray(d[key]).dtype} {np.shape(d[key])}, not text")
+    try:
+        if not isinstance(json.loads(str(d["config_key"])), dict):
+            raise ValueError("not an object")
+        json.loads(str(d.get("start_figures", "null")))
+    except (ValueError, RecursionError) as exc:
+        raise bad(f"holds text that is no JSON object ({' '.join(str(exc).split())})") from None
+
+
 def _upgrade_0(data: dict, where) -> dict:
     """Version 0 -> 1: the settings a version-0 ``config_key`` leaves out, written out (module docstring)."""
     if "config_key" not in data:
@@ -89,7 +150,12 @@ def _upgrade_0(data: dict, where) -> dict:
             f"{where} was made by a pre-release inkopt without the whole per-iteration history; it "
             f"cannot be continued: rerun without `resume`"
         )
-    key = json.loads(str(data["config_key"]))
+    try:
+        key = json.loads(str(data["config_key"]))
+        if not isinstance(key, dict):
+            raise ValueError("not a JSON object")
+    except (ValueError, RecursionError) as exc:
+        raise FormatError(f"{where}: its config_key is damaged ({exc}); rerun without `resume`") from None
     if key.get("smooth") and key.get("smooth_edge") and key.get("smooth_where") != "flat":
         raise FormatError(
             f"{where} was made by a pre-release inkopt that smoothed every voxel's step; it cannot "

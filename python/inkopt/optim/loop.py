@@ -30,7 +30,7 @@ from ..loss import TexelLoss
 from ..model import FixedShares, Volume, mix_grad
 from ..render import Renderer, RendererFactory, TexelRenderer
 from ..scenes import Scene
-from .checkpoint import History, read_checkpoint, write_checkpoint
+from .checkpoint import History, check_state, read_checkpoint, write_checkpoint
 from .config import COLD_INITS, OptimizeConfig
 from .optimizers import make_optimizer, step_factor
 from .param import Parameterization, initial_free_mixture
@@ -216,6 +216,9 @@ class Optimization:
 
     def load_checkpoint(self, path: Path) -> None:
         d = read_checkpoint(path)
+        per_texel = (len(self.texels), 3)
+        shapes = {"x": self.x.shape, "opt_m": self.opt.m.shape, "opt_v": self.opt.v.shape}
+        check_state(d, path, {**shapes, "c_avg": per_texel, "c_var": per_texel})  # all or nothing is restored
         old, new = json.loads(str(d["config_key"])), json.loads(self.config_key())
         if old != new:
             raise ParameterError(

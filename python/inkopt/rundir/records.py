@@ -8,8 +8,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import ParameterError
 from ..io import FORMAT_KEY, FormatError, upgrade_format
 from ..model import FixedShares, InkTable, MeshInfo, Texels, Translucency, scene_fixed_shares
+from ..model.volume import naming_file
 
 #: scene.npz stores the dense (z, y, x, N) fixed_share only below this many entries (else: free_mask only)
 FIXED_SHARE_MAX_ENTRIES = 50_000_000
@@ -91,11 +93,17 @@ class SceneRecord:
     translucency: Translucency | None = None
 
     def __post_init__(self):
+        if np.asarray(self.target_rgb).dtype.kind not in "fiu":
+            raise ValueError(f"scene target_rgb is {np.asarray(self.target_rgb).dtype}, not numbers")
         self.target_rgb = np.asarray(self.target_rgb, np.float32)
         if self.target_rgb.shape != (len(self.texels), 3) or len(self.texels) == 0:
             raise ValueError(
                 f"scene target_rgb has shape {self.target_rgb.shape}, expected ({len(self.texels)}, 3) with texels"
             )
+        if not np.all(np.isfinite(self.target_rgb)):
+            raise ValueError("scene target_rgb holds non-finite colours")
+        if self.free_mask is not None and np.ndim(self.free_mask) != 3:
+            raise ValueError(f"scene free_mask has shape {np.shape(self.free_mask)}, expected (z, y, x)")
 
     def fixed_share(self, inks: InkTable, shape=None) -> FixedShares | None:
         """The (z, y, x, N) fixed ink shares: as stored, or rebuilt from ``free_mask`` (100 % white wherever the
@@ -137,7 +145,14 @@ class SceneRecord:
     @classmethod
     def from_arrays(cls, d, where: str = "scene.npz") -> SceneRecord:
         """The record of scene.npz's arrays ``d`` (any format version this inkopt reads; ``where`` names the file
-        in errors)."""
+        in errors: arrays that make no record are one line naming it)."""
+        try:
+            return cls._from_arrays(d, where)
+        except (TypeError, ValueError, KeyError, IndexError, OverflowError) as exc:
+            raise naming_file(exc, where, ParameterError) from None
+
+    @classmethod
+    def _from_arrays(cls, d, where: str) -> SceneRecord:
         d = upgrade_format(
             d, kind="scene file", where=where, current=SCENE_FORMAT, upgrades={0: lambda a: _scene_from_0(a, where)}
         )

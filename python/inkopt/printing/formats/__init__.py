@@ -6,13 +6,15 @@
 
 Every writer takes one ``job.PrintJob`` (the voxels, printer profile, material names, palette and provenance) and
 an output path; every checker reads a package back one layer at a time (``inspection``). What they share lives
-once: ink colours and slice images (``slices``), the outline mesh (``outline``), zip targets (``archive``).
+once: ink colours and slice images (``slices``), the outline mesh (``outline``), zip targets (``archive``), zip
+member names and reads within a bound (``members``).
 ``FORMATS`` maps each format's name to its ``Format``; a new format is one module with a ``Format`` class and
 one line here (and its default output file in ``rundir.RunDir``).
 """
 
 from __future__ import annotations
 
+import zipfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
@@ -68,13 +70,17 @@ def format_named(name: str) -> Format:
 
 
 def format_of(path) -> Format:
-    """The format of the package at ``path``, told by its contents (not its name); a PackageError if none."""
+    """The format of the package at ``path``, told by its contents, else a zip by its suffix (whose checker then
+    names what it lacks); a PackageError if none."""
     path = Path(path)
     if not path.exists():
         raise PackageError(f"{path} does not exist")
     for fmt in FORMATS.values():
         if fmt.recognises(path):
             return fmt
+    named = [f for f in FORMATS.values() if f.suffix and f.suffix == path.suffix.lower()]
+    if named and zipfile.is_zipfile(path):  # a zip named as a format's: its checker names the part it lacks
+        return named[0]
     raise PackageError(f"{path} is no printer package inkopt reads ({', '.join(FORMATS)})")
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import zipfile
 from pathlib import Path
 
-from ...io import check_output
+from ...io import ZIP_READ_ERRORS, check_output
 
 
 def zip_holds(path: Path, member: str) -> bool:
@@ -13,7 +13,7 @@ def zip_holds(path: Path, member: str) -> bool:
     try:
         with zipfile.ZipFile(path) as zf:
             return member in zf.namelist()
-    except (OSError, zipfile.BadZipFile):
+    except (*ZIP_READ_ERRORS, MemoryError):
         return False
 
 

@@ -29,10 +29,11 @@ occupancy are accumulated on the way, and nothing but the current layers is held
 - The zip's archive comment (which no printer software reads) records the file the package was made from:
   ``{"inkopt": {"source": NAME, "digest": "sha256:..."}}`` (``io.source_comment``).
 
-``check_gcvf`` reads a package back one layer at a time and checks that its parts agree (``inspection``): the
-slices against the configuration's palette, size, layer count and voxel counts, and the z-buffer, ``MeshBbx.ktn``
-and ``Mesh.stl`` against the slices' printed voxels (the STL's bounds within two outline blocks, the block named
-in its header, else within one voxel).
+``check_gcvf`` refuses member names a printer's software would unpack outside its folder (``members``), reads
+each member within a bound of its declared size, reads the package back one layer at a time and checks that its
+parts agree (``inspection``): the slices against the configuration's palette, size, layer count and voxel counts,
+and the z-buffer, ``MeshBbx.ktn`` and ``Mesh.stl`` (read a few thousand triangles at a time) against the slices'
+printed voxels (the STL's bounds within two outline blocks, the block named in its header, else within one voxel).
 
 Evidence. The zip layout, ``ConfigFile.xml`` (every element and value, the 6 colours, the material names of four
 inks), ``layer_N.png`` and the opaque-black background are read from a public GCVF builder, ``buildGCVF.js``
@@ -72,10 +73,20 @@ from ...io import atomic_file, read_source_comment, source_comment
 from ...model import EMPTY
 from ...units import MM_PER_INCH
 from .archive import check_target, zip_holds
-from .inspection import PackageError, PackageReport, Scan, check_bounds, check_counts, decoder, layer_files, read_image
+from .inspection import (
+    PackageError,
+    PackageReport,
+    Scan,
+    about,
+    check_bounds,
+    check_counts,
+    decoder,
+    layer_files,
+)
 from .job import InkCounts, PrintJob, tally
+from .members import check_names, check_png_size, open_zip, raw_names, read_member, read_png, reading
 from .outline import block_any, block_outline, coarse_grid, outline_factors
-from .slices import slice_image, slice_lut, slices_line
+from .slices import rgba, slice_image, slice_lut, slices_line
 
 if TYPE_CHECKING:
     from ...rundir import RunDir
@@ -84,6 +95,7 @@ CONFIG, STL, ZBUFFER, BBOX, PREFIX = "ConfigFile.xml", "Mesh.stl", "Zbuffer.png"
 BLOCK_TAG = "inkopt outline block"  # STL header: f"{BLOCK_TAG} fx fy fz" (printer voxels per outline block)
 BACKGROUND = (0, 0, 0, 255)
 GCVF_PALETTE = {"black": "#282828"}  # the background is opaque black: move the black ink off it
+CONFIG_LIMIT = 16 * 2**20  # the most bytes a ConfigFile.xml holds (one <Material> per ink: a few KiB)
 STL_RECORD = np.dtype([("normal", "<f4", 3), ("vertices", "<f4", (3, 3)), ("attr", "<u2")])
 
 
@@ -224,6 +236,7 @@ def write_gcvf(job: PrintJob, path) -> dict:
         zf.writestr(CONFIG, config, compress_type=zipfile.ZIP_DEFLATED)
         box, triangles = _write_parts(zf, job, occupancy)
         zf.comment = source_comment(job.provenance.source, job.provenance.digest)
+        check_names(raw_names(zf))  # never put a package in place that would unpack outside its folder
     Z, Y, X = job.voxels.shape
     return {
         "path": str(path),
@@ -248,17 +261,28 @@ def write_gcvf(job: PrintJob, path) -> dict:
     }
 
 
-def stl_bounds(data: bytes) -> tuple[np.ndarray, np.ndarray, tuple[int, int, int]]:
-    """(min, max) of a binary STL's vertices (mm) and the outline block its header names ((1, 1, 1) if none)."""
-    if len(data) < 84:
+def stl_bounds(fh, size: int) -> tuple[np.ndarray, np.ndarray, tuple[int, int, int]]:
+    """(min, max) of the vertices (mm) of the binary STL read from ``fh`` (``size`` bytes), a few thousand
+    triangles at a time, and the outline block its header names ((1, 1, 1) if none)."""
+    head = fh.read(84)
+    if len(head) < 84:
         raise PackageError(f"{STL} is not a binary STL")
-    n = int(np.frombuffer(data[80:84], "<u4")[0])
-    if len(data) != 84 + 50 * n:
-        raise PackageError(f"{STL} declares {n} triangles but holds {(len(data) - 84) / 50:g}")
-    v = np.frombuffer(data, STL_RECORD, count=n, offset=84)["vertices"].reshape(-1, 3)
-    m = re.match(rf"{BLOCK_TAG} (\d+) (\d+) (\d+)", data[:80].decode("ascii", "replace"))
+    n = int.from_bytes(head[80:84], "little")
+    if size != 84 + 50 * n:
+        raise PackageError(f"{STL} declares {n} triangles but holds {(size - 84) / 50:g}")
+    if n == 0:
+        raise PackageError(f"{STL} holds no triangles")
+    lo, hi = np.full(3, np.inf, np.float32), np.full(3, -np.inf, np.float32)
+    for k in range(0, n, 1 << 16):
+        want = 50 * min(1 << 16, n - k)
+        data = fh.read(want)
+        v = np.frombuffer(data, STL_RECORD)["vertices"].reshape(-1, 3) if len(data) == want else None
+        if v is None or not np.all(np.isfinite(v)):
+            raise PackageError(f"{STL}: triangle {k} onwards is truncated or holds a non-finite vertex")
+        lo, hi = np.minimum(lo, v.min(0)), np.maximum(hi, v.max(0))
+    m = re.match(rf"{BLOCK_TAG} (\d+) (\d+) (\d+)", head[:80].decode("ascii", "replace"))
     block = tuple(int(g) for g in m.groups()) if m else (1, 1, 1)
-    return v.min(0), v.max(0), block
+    return lo, hi, block
 
 
 @dataclass(frozen=True)
@@ -272,77 +296,99 @@ class _Config:
     dpi: tuple[float, float]
     layer_um: float
     prefix: str
-    background: list
+    background: tuple
     names: list
     rgba: list
     declared: list
 
+    def __post_init__(self):
+        for what, v in (("SliceWidth", self.W), ("SliceHeight", self.H), ("NumberOfSlices", self.N)):
+            if not 1 <= v < 2**31:
+                raise ValueError(f"{what} is {v}, not 1 .. 2^31 - 1")
+        for what, v in (("XDpi", self.dpi[0]), ("YDpi", self.dpi[1]), ("SliceThicknessNanoMeter", self.layer_um)):
+            if not (np.isfinite(v) and v > 0):
+                raise ValueError(f"{what} is {v}, not a positive number")
+        if not 1 <= len(self.names) < EMPTY:
+            raise ValueError(f"the MaterialList holds {len(self.names)} materials, not 1 .. {EMPTY - 1}")
+        if min(self.declared) < 0:
+            raise ValueError(f"a VoxelCount is {min(self.declared)}")
+
 
 def _read_config(zf) -> _Config:
     try:
-        root = ET.fromstring(zf.read(CONFIG))
-        num = lambda tag: int(root.findtext(tag))  # noqa: E731
-        size = (num("SliceDimensions/SliceWidth"), num("SliceDimensions/SliceHeight"), num("SliceRange/NumberOfSlices"))
-        dpi = (float(root.findtext("Resolution/XDpi")), float(root.findtext("Resolution/YDpi")))
-        layer_um = num("Resolution/SliceThicknessNanoMeter") / 1000
+        root = ET.fromstring(read_member(zf, CONFIG, CONFIG_LIMIT))
+        text = lambda el, tag: (el.findtext(tag) or "").strip()  # noqa: E731
+        size = [int(text(root, t)) for t in ("SliceDimensions/SliceWidth", "SliceDimensions/SliceHeight")]
+        res = [float(text(root, f"Resolution/{t}")) for t in ("XDpi", "YDpi", "SliceThicknessNanoMeter")]
         mats = root.findall("MaterialList/Material")
-        rgba = [[int(v) for v in m.findtext("RGBA").split()] for m in mats]
-        declared = [int(m.findtext("VoxelCount")) for m in mats]
-        bg = [int(v) for v in root.findtext("MaterialList/BackGroundMaterialRGBA").split()]
-    except (ET.ParseError, TypeError, ValueError, AttributeError) as exc:
+        bg = rgba(text(root, "MaterialList/BackGroundMaterialRGBA").split(), "BackGroundMaterialRGBA")
+        cfg = _Config(
+            *size,
+            int(text(root, "SliceRange/NumberOfSlices")),
+            tuple(res[:2]),
+            res[2] / 1000,
+            text(root, "ImageFilePrefix") or PREFIX,
+            bg,
+            [text(m, "Name") or f"material {i + 1}" for i, m in enumerate(mats)],
+            [rgba(text(m, "RGBA").split(), f"material {i + 1}'s RGBA") for i, m in enumerate(mats)],
+            [int(text(m, "VoxelCount")) for m in mats],
+        )
+        start = int(text(root, "SliceRange/StartIndex") or 0)
+    except (ET.ParseError, ValueError, OverflowError) as exc:
+        if isinstance(exc, PackageError):
+            raise
         raise PackageError(f"{CONFIG} is incomplete or malformed ({type(exc).__name__}: {exc})") from None
-    start = root.findtext("SliceRange/StartIndex")
-    if start is not None and int(start) != 0:
+    if start != 0:
         raise PackageError(f"{CONFIG}: StartIndex is {start}, not 0")
-    prefix = root.findtext("ImageFilePrefix") or PREFIX
-    names = [m.findtext("Name") for m in mats]
-    return _Config(*size, dpi, layer_um, prefix, bg, names, rgba, declared)
+    return cfg
 
 
 def _check_parts(zf, cfg: _Config, scan: Scan, box: list) -> None:
     """The z-buffer, ``MeshBbx.ktn`` and ``Mesh.stl`` (where present) against the slices' printed voxels."""
     names = set(zf.namelist())
     if ZBUFFER in names:
-        zb = read_image(zf.read(ZBUFFER), ZBUFFER, (cfg.W, cfg.H), mode=None).astype(np.int64)
-        bad = zb != scan.top
+        zb = read_png(zf, ZBUFFER, (cfg.W, cfg.H), mode=None)
+        if zb.ndim != 2:
+            raise PackageError(f"{ZBUFFER} has {zb.shape[2]} channels; a z-buffer is one grey channel")
+        bad = zb.astype(np.int64) != scan.top
         if bad.any():
             r, c = (int(v) for v in np.argwhere(bad)[0])
             raise PackageError(
                 f"{ZBUFFER} at (row {r}, column {c}) is {zb[r, c]}; the topmost printed layer is {scan.top[r, c]}"
             )
     if BBOX in names:
-        raw = zf.read(BBOX)
+        raw = read_member(zf, BBOX, 1024)
         ktn = np.frombuffer(raw, "<f4").tolist() if len(raw) == 24 else None
         if ktn != [float(v) for v in box]:
             raise PackageError(f"{BBOX} holds {ktn}; the printed voxels' box is {box}")
     if STL in names:
-        lo, hi, block = stl_bounds(zf.read(STL))
+        info = zf.getinfo(STL)
+        with reading(STL, info.file_size), zf.open(info) as fh:
+            lo, hi, block = stl_bounds(fh, info.file_size)
         pitch = np.array([MM_PER_INCH / cfg.dpi[0], -MM_PER_INCH / cfg.dpi[1], cfg.layer_um / 1000])
         check_bounds(lo, hi, box, pitch, block, STL)
 
 
 def check_gcvf(path: Path, keep_layers=(), labels: bool = False) -> tuple[PackageReport, Scan]:
-    """Read the GCVF package ``path`` back and check that its parts agree (module docstring); its report and
-    scan (``inspection.Scan``)."""
-    try:
-        zf = zipfile.ZipFile(path)
-    except (OSError, zipfile.BadZipFile) as exc:
-        raise PackageError(f"{path} is not a zip ({exc})") from None
-    with zf:
+    """Read the GCVF package ``path`` back and check that its member names are safe (``members``) and that its
+    parts agree (module docstring); its report and scan (``inspection.Scan``). Errors name ``path``."""
+    with about(path), open_zip(path) as zf:
         if CONFIG not in zf.namelist():
-            raise PackageError(f"{path} has no {CONFIG}")
+            raise PackageError(f"no {CONFIG} in the package (a GCVF holds its configuration there)")
         cfg = _read_config(zf)
         files = layer_files(zf.namelist(), re.escape(cfg.prefix) + r"(\d+)\.png", cfg.N, CONFIG)
+        check_png_size(zf, files[0], (cfg.W, cfg.H))
         decode = decoder(cfg.rgba, cfg.background)
         scan = Scan(cfg.N, cfg.H, cfg.W, len(cfg.names), keep_layers, labels)
         for k, name in enumerate(files):
-            scan.add(k, decode(name, read_image(zf.read(name), name, (cfg.W, cfg.H))))
+            scan.add(k, decode(name, read_png(zf, name, (cfg.W, cfg.H))))
         check_counts(cfg.names, cfg.declared, scan.counts, CONFIG)
         box = scan.box()
         _check_parts(zf, cfg, scan, box)
         source = read_source_comment(zf.comment)
     materials = [
-        {"name": n, "color": c, "voxel_count": int(v)} for n, c, v in zip(cfg.names, cfg.rgba, scan.counts, strict=True)
+        {"name": n, "color": list(c), "voxel_count": int(v)}
+        for n, c, v in zip(cfg.names, cfg.rgba, scan.counts, strict=True)
     ]
     report = PackageReport(Gcvf.name, str(path), cfg.N, cfg.W, cfg.H, cfg.dpi, cfg.layer_um, materials, box, source)
     return report, scan

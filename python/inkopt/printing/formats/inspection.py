@@ -4,13 +4,16 @@ Each format's ``check`` reads its package layer by layer into a ``Scan`` (memory
 and the preview's slices) and raises ``PackageError`` (a one-line ``ValueError``) at the first disagreement between
 its parts: every slice the pixel size the package declares (``read_image``), palette colours only (``decoder``),
 layer numbers 0..N-1 without gaps and as many as declared (``layer_files``), per-material voxel counts equal to the
-declared ones (``check_counts``) and a mesh's bounds against the printed voxels (``check_bounds``). Labels are the
-ink indices (255 = empty) in the frames the writers use: (Z, Y, X) with y = Y - 1 - image row.
+declared ones (``check_counts``) and a mesh's bounds against the printed voxels (``check_bounds``); ``about``
+makes every error of a check one line naming the package. Labels are the ink indices (255 = empty) in the frames
+the writers use: (Z, Y, X) with y = Y - 1 - image row.
 """
 
 from __future__ import annotations
 
 import re
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -23,6 +26,21 @@ from .slices import pack_rgba
 
 class PackageError(ValueError):
     """A package whose parts disagree (or that cannot be read); the message is one line."""
+
+
+@contextmanager
+def about(path) -> Iterator[None]:
+    """A checker's errors naming the package: a ValueError raised in the block (a PackageError, or what an image
+    decoder raises) as the one-line PackageError ``"{path}: {message}"`` unless it names ``path`` already, and
+    memory running out as one line naming ``path``."""
+    try:
+        yield
+    except ValueError as exc:
+        if str(path) in str(exc) and not isinstance(exc, PackageError):
+            raise
+        raise PackageError(f"{path}: {' '.join(str(exc).split())}") from None
+    except MemoryError:
+        raise PackageError(f"{path}: too large to check in this machine's memory") from None
 
 
 @dataclass
@@ -52,6 +70,11 @@ class PackageReport:
         return cls(**{**d, "dpi": None if d.get("dpi") is None else tuple(d["dpi"])})
 
 
+#: the most pixels per slice a package may declare (a J750 tray at 600 x 300 DPI is 5.3e7): the per-pixel arrays
+#: of a scan are allocated from the declared size before any slice is decoded
+MAX_SLICE_PIXELS = 2**28
+
+
 class Scan:
     """Per-layer accumulation of a package read back: ``counts`` per material, the printed voxels' box, ``top``
     (the topmost printed layer per image pixel) and ``top_label`` (its label), ``kept`` {layer: (Y, X) labels in
@@ -61,13 +84,18 @@ class Scan:
     def __init__(self, Z, Y, X, n, keep=(), labels=False):
         self.counts = np.zeros(n, np.float64)
         self.lo, self.hi = np.array([X, Y, Z]), np.zeros(3, np.int64)
-        self.top = np.zeros((Y, X), np.uint16)
-        self.top_label = np.full((Y, X), EMPTY, np.uint8)
         self.kept = {}
         if isinstance(keep, int):  # that many layers, evenly spaced from bottom to top
             keep = np.unique(np.linspace(0, Z - 1, keep).round().astype(int)) if keep > 0 else ()
         self.keep = {int(k) for k in keep}
-        self.labels = np.empty((Z, Y, X), np.uint8) if labels else None
+        if X * Y > MAX_SLICE_PIXELS:
+            raise PackageError(f"slices of {X} x {Y} px are more than the {MAX_SLICE_PIXELS} pixels inkopt reads")
+        try:
+            self.top = np.zeros((Y, X), np.uint16)
+            self.top_label = np.full((Y, X), EMPTY, np.uint8)
+            self.labels = np.empty((Z, Y, X), np.uint8) if labels else None
+        except MemoryError:
+            raise PackageError(f"{Z} layers of {X} x {Y} px do not fit in memory") from None
 
     def add(self, k: int, lab: np.ndarray) -> None:
         """``lab``: (Y, X) labels in image rows (row 0 = top of the image)."""

@@ -19,6 +19,7 @@ import numpy as np
 
 from ...errors import ParameterError
 from ...model import EMPTY
+from ...model.inks import ink_name_problem
 from ...units import MM_PER_INCH
 from ..profiles import PrinterProfile, check_slots, material_name
 
@@ -52,6 +53,9 @@ class LabelVoxels:
         names = tuple(str(n) for n in self.inks)
         if not names or len(set(names)) != len(names) or len(names) >= EMPTY:
             raise ValueError(f"inks must be 1..{EMPTY - 1} unique names, got {list(names)}")
+        for name in names:  # they name materials in the packages' XML
+            if problem := ink_name_problem(name):
+                raise ValueError(f"ink name {name!r} {problem}")
         object.__setattr__(self, "labels", labels)
         object.__setattr__(self, "voxel_mm", _voxel_mm(self.voxel_mm))
         object.__setattr__(self, "inks", names)
@@ -142,8 +146,10 @@ class PrintJob:
         names = self.voxels.inks
         overrides = {str(k).strip().lower(): str(v).strip() for k, v in (self.materials or {}).items()}
         unknown = sorted(set(overrides) - {n.lower() for n in names})
-        if unknown or not all(overrides.values()):
+        control = [v for v in overrides.values() if any(ord(c) < 32 or ord(c) == 127 for c in v)]
+        if unknown or control or not all(overrides.values()):
             what = f"unknown ink '{unknown[0]}'" if unknown else "an empty name"
+            what = f"{control[0]!r}, a name with a control character" if control and not unknown else what
             raise ParameterError(f"`materials` names {what}; the inks are {list(names)}")
         object.__setattr__(self, "materials", overrides)
 

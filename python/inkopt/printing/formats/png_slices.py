@@ -37,9 +37,10 @@ from typing import TYPE_CHECKING
 from ...io import FORMAT_KEY, check_output, publish, upgrade_format
 from ...model import EMPTY
 from ...rundir import QUANTIZED_DIGEST, VOLUME_DIGEST
-from .inspection import PackageError, PackageReport, Scan, check_counts, decoder, layer_files, read_image
+from .inspection import PackageError, PackageReport, Scan, about, check_counts, decoder, layer_files
 from .job import InkCounts, PrintJob, tally
-from .slices import slice_image, slice_lut, slices_line
+from .members import decode_png
+from .slices import rgba, slice_image, slice_lut, slices_line
 
 if TYPE_CHECKING:
     from ...rundir import RunDir
@@ -161,17 +162,35 @@ def write_png_slices(job: PrintJob, out_dir, background=(0, 0, 0, 0)) -> dict:
     return manifest
 
 
+def _check_manifest(man) -> None:
+    """A ValueError unless ``man`` holds every key a reader needs with a value of its kind: counts 1 .. 2^31 - 1,
+    positive DPI and layer thickness, RGBA colours, 1 .. 254 materials with an ink name and a voxel count."""
+    if not isinstance(man, dict) or man.get("format") != MANIFEST_ID:
+        raise ValueError(f"format is not {MANIFEST_ID}")
+    counts = [man["layer_count"], man["image_size"]["width"], man["image_size"]["height"]]
+    if not all(isinstance(v, int) and not isinstance(v, bool) and 1 <= v < 2**31 for v in counts):
+        raise ValueError(f"layer_count and image_size must be counts 1 .. 2^31 - 1, got {counts}")
+    sizes = [man["dpi"]["x"], man["dpi"]["y"], man["layer_thickness_um"]]
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and 0 < v < float("inf") for v in sizes):
+        raise ValueError(f"dpi and layer_thickness_um must be positive numbers, got {sizes}")
+    rgba(man["background"], "background")
+    mats = man["materials"]
+    if not isinstance(mats, list) or not 1 <= len(mats) < EMPTY:
+        raise ValueError(f"materials must be a list of 1 .. {EMPTY - 1} materials")
+    for m in mats:
+        rgba(m["color"], f"material {m['ink']!r}")
+        if not isinstance(m["ink"], str) or not isinstance(m["voxel_count"], int) or m["voxel_count"] < 0:
+            raise ValueError(f"material {m['ink']!r} needs an ink name and a voxel count")
+
+
 def _load_manifest(folder: Path) -> dict:
     """manifest.json of a slice folder, brought to ``MANIFEST_FORMAT``, with every key a reader needs."""
     try:
         man = json.loads((folder / MANIFEST).read_text())
-        if not isinstance(man, dict) or man.get("format") != MANIFEST_ID:
-            raise ValueError(f"format is not {MANIFEST_ID}")
-        _ = [man["layer_count"], man["image_size"]["width"], man["image_size"]["height"], man["background"]]
-        _ += [man["dpi"]["x"], man["dpi"]["y"], man["layer_thickness_um"]]
-        _ += [(m["ink"], m["color"], m["voxel_count"]) for m in man["materials"]]  # every key a reader needs
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise PackageError(f"{folder}/{MANIFEST} is missing or malformed ({type(exc).__name__}: {exc})") from None
+        _check_manifest(man)
+    except (OSError, ValueError, KeyError, TypeError, RecursionError) as exc:
+        text = " ".join(str(exc).split())
+        raise PackageError(f"{folder}/{MANIFEST} is missing or malformed ({type(exc).__name__}: {text})") from None
     where = folder / MANIFEST
     return upgrade_format(man, kind="slice manifest", where=where, current=MANIFEST_FORMAT, upgrades={0: dict})
 
@@ -182,10 +201,10 @@ def _scan(folder: Path, keep_layers=(), labels: bool = False) -> tuple[dict, Sca
     N, W, H = man["layer_count"], man["image_size"]["width"], man["image_size"]["height"]
     mats = man["materials"]
     files = layer_files([p.name for p in folder.iterdir()], r"slice_(\d+)\.png", N, MANIFEST)
-    decode = decoder([m["color"] for m in mats], man["background"])
+    decode = decoder([rgba(m["color"], m["ink"]) for m in mats], rgba(man["background"], "background"))
     scan = Scan(N, H, W, len(mats), keep_layers, labels)
     for k, name in enumerate(files):
-        scan.add(k, decode(name, read_image(folder / name, name, (W, H))))
+        scan.add(k, decode(name, decode_png(folder / name, name, (W, H))))
     check_counts([m["ink"] for m in mats], [m["voxel_count"] for m in mats], scan.counts, MANIFEST)
     return man, scan
 
@@ -200,8 +219,11 @@ def read_png_slices(folder):
 
 
 def check_png_slices(path: Path, keep_layers=(), labels: bool = False) -> tuple[PackageReport, Scan]:
-    """Read the slice folder ``path`` back and check it (``inspection``); its report and scan."""
-    man, scan = _scan(path, keep_layers, labels)
+    """Read the slice folder ``path`` back and check it (``inspection``); its report and scan. Errors name
+    ``path``."""
+    with about(path):
+        man, scan = _scan(path, keep_layers, labels)
+        box = scan.box()
     materials = [
         {"name": m.get("material") or m["ink"], "ink": m["ink"], "color": m["color"], "voxel_count": int(v)}
         for m, v in zip(man["materials"], scan.counts, strict=True)
@@ -211,7 +233,7 @@ def check_png_slices(path: Path, keep_layers=(), labels: bool = False) -> tuple[
     source = {"source": "quantized.npz", "digest": digest} if digest else None
     dpi, layer_um = (man["dpi"]["x"], man["dpi"]["y"]), man["layer_thickness_um"]
     N, W, H = man["layer_count"], man["image_size"]["width"], man["image_size"]["height"]
-    report = PackageReport(PngSlices.name, str(path), N, W, H, dpi, layer_um, materials, scan.box(), source)
+    report = PackageReport(PngSlices.name, str(path), N, W, H, dpi, layer_um, materials, box, source)
     return report, scan
 
 

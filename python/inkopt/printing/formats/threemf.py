@@ -24,7 +24,9 @@ file beside it, then renamed), one layer at a time:
 - the OPC parts ``[Content_Types].xml``, ``_rels/.rels`` and ``3D/_rels/3dmodel.model.rels`` (one 3D-texture
   relationship per sheet), and the zip's archive comment: the source file's digest (``io.source_comment``).
 
-``check_3mf`` reads a file back one sheet at a time: the voxels with a non-zero share sum are the printed ones,
+``check_3mf`` refuses unsafe member names and image sheets the package does not hold (``members``), checks
+every number of the model it uses (counts, the mappings' transform, vertices) and reads the file back one sheet
+at a time: the voxels with a non-zero share sum are the printed ones,
 their sums must be 1 to within the 8-bit rounding of the sheets, and the mesh's bounds must agree with them as a
 GCVF's STL's do (``inspection``).
 
@@ -37,6 +39,7 @@ lib3mf as a reader check. No volumetric consumer (slicer or printer driver) has 
 from __future__ import annotations
 
 import io
+import math
 import re
 import xml.etree.ElementTree as ET
 import zipfile
@@ -49,33 +52,15 @@ from ...io import atomic_file, read_source_comment, source_comment
 from ...model import EMPTY
 from ...units import MM_PER_INCH
 from .archive import check_target, zip_holds
-from .inspection import PackageError, PackageReport, Scan, check_bounds, read_image
+from .inspection import PackageError, PackageReport, Scan, about, check_bounds
 from .job import LabelVoxels, PrintJob, tally
+from .members import check_names, check_png_size, name_problem, open_zip, raw_names, read_png, reading
 from .outline import block_any, block_outline, coarse_grid, grown, outline_factors
 from .slices import ink_colours
+from .threemf_xml import CHANNELS, MODEL, NS_CORE, model_xml, sheet_path, write_opc
 
 if TYPE_CHECKING:
     from ...rundir import RunDir
-
-NS_CORE = "http://schemas.microsoft.com/3dmanufacturing/core/2015/02"
-NS_V = "http://schemas.3mf.io/3dmanufacturing/volumetric/2022/01"
-REL_MODEL = "http://schemas.microsoft.com/3dmanufacturing/2013/01/3dmodel"
-REL_TEXTURE = "http://schemas.microsoft.com/3dmanufacturing/2013/01/3dtexture"
-MODEL = "3D/3dmodel.model"
-CHANNELS = ("red", "green", "blue", "alpha")
-OBJECT_NAME = "inkopt print, outline block"  # + " fx fy fz" (voxels per outline block)
-CONTENT_TYPES = (
-    '<?xml version="1.0" encoding="UTF-8"?>\n'
-    '<Types xmlns="http://schemas.openxmlformats.org/package/2006/content-types">'
-    '<Default Extension="rels" ContentType="application/vnd.openxmlformats-package.relationships+xml"/>'
-    '<Default Extension="model" ContentType="application/vnd.ms-package.3dmanufacturing-3dmodel+xml"/>'
-    '<Default Extension="png" ContentType="image/png"/></Types>\n'
-)
-
-
-def sheet_path(group: int, k: int) -> str:
-    """The part name of sheet ``k`` of ink group ``group``."""
-    return f"/3D/volumetric/inks{group}/sheet{k:05d}.png"
 
 
 def _fill_empty(shares: np.ndarray, occ: np.ndarray) -> np.ndarray:
@@ -137,81 +122,6 @@ def _write_sheets(zf, voxels, region, factors, groups: int) -> np.ndarray:
     return counts
 
 
-def _fmt(v: float) -> str:
-    return np.format_float_positional(float(v), precision=9, trim="-")
-
-
-def _xml(text: str) -> str:
-    return str(text).replace("&", "&amp;").replace('"', "&quot;").replace("<", "&lt;").replace(">", "&gt;")
-
-
-def _resources_xml(w, names, colours, shape, voxel_mm) -> tuple[int, int]:
-    """The base materials, image stacks, functions and volume data; returns the (volume, object) ids."""
-    Z, Y, X = shape
-    groups = -(-len(names) // 4)
-    scale = [1 / (X * voxel_mm[0]), 1 / (Y * voxel_mm[1]), 1 / (Z * voxel_mm[2])]
-    transform = " ".join(_fmt(v) for v in (scale[0], 0, 0, 0, scale[1], 0, 0, 0, scale[2], 0, 0, 0))
-    w(b'<basematerials id="1">\n')
-    for name, c in zip(names, colours, strict=True):
-        w(f'<base name="{_xml(name)}" displaycolor="#{c[0]:02X}{c[1]:02X}{c[2]:02X}"/>\n'.encode())
-    w(b"</basematerials>\n")
-    for g in range(groups):
-        w(f'<v:image3d id="{2 + 2 * g}" name="inks{g}">\n'.encode())
-        w(f'<v:imagestack rowcount="{Y}" columncount="{X}" sheetcount="{Z}">\n'.encode())
-        w("".join(f'<v:imagesheet path="{sheet_path(g, k)}"/>\n' for k in range(Z)).encode())
-        w(b"</v:imagestack>\n</v:image3d>\n")
-        w(
-            f'<v:functionfromimage3d id="{3 + 2 * g}" image3did="{2 + 2 * g}" filter="nearest" '
-            f'tilestyleu="clamp" tilestylev="clamp" tilestylew="clamp"/>\n'.encode()
-        )
-    vol = 2 + 2 * groups
-    w(f'<v:volumedata id="{vol}">\n<v:composite basematerialid="1">\n'.encode())
-    for i in range(len(names)):
-        w(
-            f'<v:materialmapping functionid="{3 + 2 * (i // 4)}" channel="{CHANNELS[i % 4]}" '
-            f'transform="{transform}"/>\n'.encode()
-        )
-    w(b"</v:composite>\n</v:volumedata>\n")
-    return vol, vol + 1
-
-
-def _model_xml(fh, names, colours, shape, voxel_mm, mesh, block) -> None:
-    """Write 3D/3dmodel.model to the open binary ``fh`` (module docstring)."""
-    w = fh.write
-    w(
-        f'<?xml version="1.0" encoding="UTF-8"?>\n<model xmlns="{NS_CORE}" xmlns:v="{NS_V}" unit="millimeter" '
-        f'xml:lang="en-US" recommendedextensions="v">\n<resources>\n'.encode()
-    )
-    vol, obj = _resources_xml(w, names, colours, shape, voxel_mm)
-    name = f"{OBJECT_NAME} {' '.join(map(str, block))}"
-    w(f'<object id="{obj}" type="model" name="{name}">\n<mesh v:volumeid="{vol}">\n<vertices>\n'.encode())
-    verts = np.asarray(mesh.vertices, np.float64)
-    for a in range(0, len(verts), 1 << 16):
-        w("".join(f'<vertex x="{x:.6f}" y="{y:.6f}" z="{z:.6f}"/>\n' for x, y, z in verts[a : a + (1 << 16)]).encode())
-    w(b"</vertices>\n<triangles>\n")
-    faces = np.asarray(mesh.faces, np.int64)
-    for a in range(0, len(faces), 1 << 16):
-        w("".join(f'<triangle v1="{i}" v2="{j}" v3="{k}"/>\n' for i, j, k in faces[a : a + (1 << 16)]).encode())
-    w(b"</triangles>\n</mesh>\n</object>\n</resources>\n")
-    w(f'<build>\n<item objectid="{obj}"/>\n</build>\n</model>\n'.encode())
-
-
-def _rels(targets) -> bytes:
-    body = "".join(f'<Relationship Type="{t}" Target="{p}" Id="rel{i}"/>' for i, (t, p) in enumerate(targets, start=1))
-    return (
-        '<?xml version="1.0" encoding="UTF-8"?>\n<Relationships '
-        f'xmlns="http://schemas.openxmlformats.org/package/2006/relationships">{body}</Relationships>\n'
-    ).encode()
-
-
-def _write_opc(zf, groups: int, Z: int) -> None:
-    """The OPC parts: the model's relationships (one per sheet), the package's and the content types."""
-    rels = [(REL_TEXTURE, sheet_path(g, k)) for g in range(groups) for k in range(Z)]
-    zf.writestr("3D/_rels/3dmodel.model.rels", _rels(rels), compress_type=zipfile.ZIP_DEFLATED)
-    zf.writestr("_rels/.rels", _rels([(REL_MODEL, "/" + MODEL)]), compress_type=zipfile.ZIP_DEFLATED)
-    zf.writestr("[Content_Types].xml", CONTENT_TYPES, compress_type=zipfile.ZIP_DEFLATED)
-
-
 def write_3mf(job: PrintJob, path) -> dict:
     """Write ``job``'s voxels as the volumetric 3MF ``path`` (layout: module docstring); returns a summary dict.
 
@@ -243,9 +153,10 @@ def write_3mf(job: PrintJob, path) -> dict:
         region = coarse if factors == (1, 1, 1) else grown(coarse)  # the blocks inside the outline
         counts = _write_sheets(zf, voxels, region, factors, groups)
         with zf.open(MODEL, "w", force_zip64=True) as mf:
-            _model_xml(mf, base_names, colours, shape, vp, mesh, factors[::-1])
-        _write_opc(zf, groups, shape[0])
+            model_xml(mf, base_names, colours, shape, vp, mesh, factors[::-1])
+        write_opc(zf, groups, shape[0])
         zf.comment = source_comment(job.provenance.source, job.provenance.digest)
+        check_names(raw_names(zf))  # never put a package in place that would unpack outside its folder
     return {
         "path": str(path),
         "layer_count": shape[0],
@@ -263,45 +174,129 @@ def write_3mf(job: PrintJob, path) -> dict:
     }
 
 
+def _number(el, attr: str, kind=float):
+    """Attribute ``attr`` of ``el`` as a finite ``kind`` (float, or int for counts of at least 1)."""
+    raw = el.get(attr)
+    try:
+        v = kind(raw)
+    except (TypeError, ValueError, OverflowError):
+        v = None
+    if v is None or (kind is int and not 1 <= v < 2**31) or not math.isfinite(v):
+        what = "a finite number" if kind is float else "a count 1 .. 2^31 - 1"
+        shown = raw if raw is None or len(raw) <= 40 else raw[:37] + "..."
+        raise PackageError(f"{MODEL}: <{el.tag.rsplit('}', 1)[-1]}> has {attr}={shown!r}, not {what}")
+    return v
+
+
+def _resource(res: dict, tag: str, el, stack):
+    """Record the resource ``el`` (its ``tag`` without the namespace) in ``res``; the image stack last read."""
+    if tag == "base":
+        res["base"].append((el.get("name"), el.get("displaycolor")))
+    elif tag == "imagestack":
+        stack = {k: _number(el, k, int) for k in ("rowcount", "columncount", "sheetcount")}
+        stack["sheets"] = [s.get("path") for s in el]
+    elif tag == "image3d":
+        res["stacks"][el.get("id")], stack = stack, None
+    elif tag == "functionfromimage3d":
+        res["functions"][el.get("id")] = el.get("image3did")
+    elif tag == "materialmapping":
+        res["mappings"].append((el.get("functionid"), el.get("channel"), el.get("transform")))
+    elif tag == "object":
+        res["object_name"] = el.get("name") or ""
+    return stack
+
+
+_MESH_LISTS = {f"{{{NS_CORE}}}vertices", f"{{{NS_CORE}}}triangles"}
+
+
+def _bounds(lo: np.ndarray, hi: np.ndarray, points: list) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) widened by ``points`` ((x, y, z) lists)."""
+    if not points:
+        return lo, hi
+    p = np.asarray(points)
+    if not np.all(np.isfinite(p)):
+        raise PackageError(f"{MODEL}: a vertex has a coordinate that is not a finite number")
+    return np.minimum(lo, p.min(0)), np.maximum(hi, p.max(0))
+
+
 def _mesh_bounds(fh) -> tuple[dict, np.ndarray, np.ndarray]:
-    """Stream 3dmodel.model: the resources (without the mesh) as a small tree and the mesh's bounds."""
+    """Stream 3dmodel.model: the resources (without the mesh, whose vertices and triangles are dropped in batches
+    as they are read: memory for a few thousand, not the whole mesh) as a small tree and the mesh's bounds."""
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     res: dict = {"base": [], "stacks": {}, "functions": {}, "mappings": [], "object_name": ""}
-    stack = None
-    for _, el in ET.iterparse(fh, events=("end",)):
-        tag = el.tag.rsplit("}", 1)[-1]
-        if tag == "vertex":
-            p = np.array([float(el.get(a)) for a in "xyz"])
-            lo, hi = np.minimum(lo, p), np.maximum(hi, p)
-        elif tag == "base":
-            res["base"].append((el.get("name"), el.get("displaycolor")))
-        elif tag == "imagestack":
-            stack = {k: int(el.get(k)) for k in ("rowcount", "columncount", "sheetcount")}
-            stack["sheets"] = [s.get("path") for s in el]
-        elif tag == "image3d":
-            res["stacks"][el.get("id")] = stack
-        elif tag == "functionfromimage3d":
-            res["functions"][el.get("id")] = el.get("image3did")
-        elif tag == "materialmapping":
-            res["mappings"].append((el.get("functionid"), el.get("channel"), el.get("transform")))
-        elif tag == "object":
-            res["object_name"] = el.get("name") or ""
-        if tag in ("vertex", "triangle"):
-            el.clear()
+    stack, parent, points = None, None, []
+    try:
+        for event, el in ET.iterparse(fh, events=("start", "end")):
+            if event == "start":
+                parent = el if el.tag in _MESH_LISTS else parent
+                continue
+            tag = el.tag.rsplit("}", 1)[-1]
+            if tag == "vertex":
+                try:
+                    points.append([float(el.get("x")), float(el.get("y")), float(el.get("z"))])
+                except (TypeError, ValueError):
+                    [_number(el, a) for a in "xyz"]  # the one-line error naming the attribute
+                if len(points) >= 1 << 16:
+                    lo, hi, points = *_bounds(lo, hi, points), []
+            elif tag != "triangle":
+                stack = _resource(res, tag, el, stack)
+            if parent is not None and len(parent) >= 1 << 12:
+                del parent[:]  # the parsed events keep their own elements
+    except ET.ParseError as exc:
+        raise PackageError(f"{MODEL} is not well-formed XML ({exc})") from None
+    lo, hi = _bounds(lo, hi, points)
+    if not np.all(np.isfinite(lo)):
+        raise PackageError(f"{MODEL}: the mesh has no vertices")
     return res, lo, hi
 
 
 def _stacks(res: dict) -> tuple[list, int, int, int]:
     """Each mapping's image stack and their common (H, W, N); stacks of other sizes are a PackageError."""
     maps, n = res["mappings"], len(res["base"])
-    if not maps or len(maps) != n:
-        raise PackageError(f"the composite has {len(maps)} material mappings for {n} base materials")
-    stacks = [res["stacks"][res["functions"][f]] for f, _, _ in maps]
+    if not 1 <= n < EMPTY or len(maps) != n:
+        raise PackageError(f"the composite has {len(maps)} material mappings for {n} base materials (1 .. 254)")
+    stacks = []
+    for f, channel, _ in maps:
+        st = res["stacks"].get(res["functions"].get(f))
+        if st is None:
+            raise PackageError(f"{MODEL}: the material mapping of function {f!r} reads no image stack")
+        if channel not in CHANNELS:
+            raise PackageError(f"{MODEL}: a material mapping reads channel {channel!r}, not one of {list(CHANNELS)}")
+        stacks.append(st)
     H, W, N = (stacks[0][k] for k in ("rowcount", "columncount", "sheetcount"))
     for st in stacks:
         if (st["rowcount"], st["columncount"], st["sheetcount"], len(st["sheets"])) != (H, W, N, N):
-            raise PackageError(f"image stacks differ in size or sheet count: {st} vs {W} x {H} x {N}")
+            raise PackageError(
+                f"image stacks differ in size or sheet count: {st['columncount']} x {st['rowcount']} x "
+                f"{st['sheetcount']} ({len(st['sheets'])} sheets) vs {W} x {H} x {N}"
+            )
     return stacks, H, W, N
+
+
+def _voxel_mm(transform, W: int, H: int, N: int) -> np.ndarray:
+    """(x, y, z) mm of a voxel from a mapping's object-to-UVW ``transform`` (12 numbers, a positive diagonal)."""
+    try:
+        t = np.array([float(v) for v in str(transform).split()])
+    except ValueError:
+        t = np.zeros(0)
+    vox = 1 / (t[[0, 4, 8]] * [W, H, N]) if t.shape == (12,) and np.all(t[[0, 4, 8]] > 0) else np.zeros(3)
+    if not (np.all(np.isfinite(vox)) and np.all(vox > 0)):
+        raise PackageError(f"{MODEL}: the material mapping's transform {transform!r} is not a positive scale")
+    return vox
+
+
+def _sheet_member(zf, path) -> str:
+    """The zip member of an image sheet's part name ``path`` ("/3D/..."), which the package must hold."""
+    name = str(path)[1:] if str(path).startswith("/") else str(path)
+    problem = name_problem(name) if path is not None else "is missing"
+    if not problem:
+        try:
+            zf.getinfo(name)  # a dict look-up: a package holds thousands of sheets
+        except KeyError:
+            problem = "is not in the package"
+    if problem:
+        raise PackageError(f"{MODEL}: image sheet {path!r} {problem}")
+    return name
 
 
 def _read_shares(zf, k: int, stacks, maps, W: int, H: int) -> np.ndarray:
@@ -312,7 +307,8 @@ def _read_shares(zf, k: int, stacks, maps, W: int, H: int) -> np.ndarray:
     for i, (st, (_, ch, _)) in enumerate(zip(stacks, maps, strict=True)):
         p = st["sheets"][k]
         if p not in sheets:
-            sheets[p] = read_image(zf.read(p.lstrip("/")), p, (W, H)).astype(np.float32) / 255
+            name = _sheet_member(zf, p)
+            sheets[p] = read_png(zf, name, (W, H), label=p).astype(np.float32) / 255
         sh[:, :, i] = sheets[p][:, :, CHANNELS.index(ch)]
     total = sh.sum(2)
     off = (total > 0) & (np.abs(total - 1) > n * 0.5 / 255 + 1e-6)
@@ -322,20 +318,23 @@ def _read_shares(zf, k: int, stacks, maps, W: int, H: int) -> np.ndarray:
     return sh
 
 
+def _read_model(zf) -> tuple[dict, np.ndarray, np.ndarray]:
+    if MODEL not in zf.namelist():
+        raise PackageError(f"no {MODEL} in the package (a 3MF holds its model there)")
+    info = zf.getinfo(MODEL)
+    with reading(MODEL, info.file_size), zf.open(info) as fh:
+        return _mesh_bounds(fh)
+
+
 def check_3mf(path: Path, keep_layers=(), labels: bool = False) -> tuple[PackageReport, Scan]:
-    """Read the volumetric 3MF ``path`` back and check it (module docstring); its report and scan, whose labels
-    are each printed voxel's largest share."""
-    try:
-        zf = zipfile.ZipFile(path)
-        with zf.open(MODEL) as fh:
-            res, lo, hi = _mesh_bounds(fh)
-    except (OSError, KeyError, zipfile.BadZipFile, ET.ParseError) as exc:
-        raise PackageError(f"{path} is not a readable 3MF ({type(exc).__name__}: {exc})") from None
-    with zf:
+    """Read the volumetric 3MF ``path`` back and check its member names (``members``) and its parts (module
+    docstring); its report and scan, whose labels are each printed voxel's largest share. Errors name ``path``."""
+    with about(path), open_zip(path) as zf:
+        res, lo, hi = _read_model(zf)
         stacks, H, W, N = _stacks(res)
         maps, n = res["mappings"], len(res["base"])
-        scale = [float(v) for v in maps[0][2].split()]
-        vox = 1 / (np.array([scale[0], scale[4], scale[8]]) * [W, H, N])
+        vox = _voxel_mm(maps[0][2], W, H, N)
+        check_png_size(zf, _sheet_member(zf, stacks[0]["sheets"][0]), (W, H))
         scan = Scan(N, H, W, n, keep_layers, labels)
         shares = np.zeros(n, np.float64)
         for k in range(N):
