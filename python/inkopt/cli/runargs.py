@@ -311,22 +311,13 @@ def slab_spec_from_args(args, top: str):
 
 
 def mesh_spec_from_args(args, path: str):
-    """The ``MeshSpec`` of ``path`` and the mesh options (``--height-mm`` or ``--scale``, ``--shell-mm``,
-    ``--dpi``, ``--up``, translucency, ``--texture``, ``--constant-color``)."""
+    """The ``MeshSpec`` of ``path`` and the mesh options, each named as the spec's field (``--height-mm`` or
+    ``--scale``, ``--shell-mm``, ``--dpi``, ``--up``, translucency, ``--texture``, ``--constant-color``)."""
+    from dataclasses import fields
+
     from ..scenes.spec import MeshSpec
 
-    return MeshSpec(
-        path,
-        height_mm=args.height_mm,
-        scale=args.scale,
-        shell_mm=args.shell_mm,
-        dpi=args.dpi,
-        up=args.up,
-        translucency=args.translucency,
-        translucency_depth_mm=args.translucency_depth_mm,
-        texture=args.texture,
-        constant_color=args.constant_color,
-    )
+    return MeshSpec(path, **{f.name: getattr(args, f.name) for f in fields(MeshSpec) if f.name != "path"})
 
 
 def run_from_args(args, spec):
