@@ -68,6 +68,11 @@ def snapshot(d):
         (["report", "{d}", "--out", "{d}/face_top.png"], "face_top.png", "a soft-proof page"),
         (["evaluate", "{d}", "--out", "{d}/report.json", "--spp", "2"], "report.json", "an evaluation"),
         (["evaluate", "{d}", "--out", "{d}/scene.json", "--spp", "2"], "scene.json", "an evaluation"),
+        (
+            ["evaluate", "{d}", "--out", "{d}/face.json", "--spp", "2"],
+            "face_top.png",
+            "not a picture of the evaluation",
+        ),
         (["export", "{d}", "--format", "gcvf", "--out", "{d}/volume.npz"], "volume.npz", "a GCVF package"),
         (["export", "{d}", "--out", "{d}/report.json"], "report.json", "an inkopt slice folder"),
     ],

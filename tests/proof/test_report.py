@@ -114,3 +114,19 @@ def test_atlas_shows_the_nearest_facing_texel():
     assert np.all(d[np.arange(len(got)), got] <= best + reach)
     assert np.mean(got == d.argmin(1)) > 0.9
     assert (atlas.texel >= 0).mean() > 0.9 and atlas.positions.shape == (3 * len(sph.faces), 3)
+
+
+def test_an_evaluation_of_an_earlier_quantization_is_refused(slab_run, tmp_path):
+    """Quantized again after the evaluation: the page would show the earlier print's figures beside the new ink
+    shares, so the report is refused in one line until the run is evaluated again."""
+    import shutil
+
+    run = tmp_path / "run"
+    shutil.copytree(slab_run, run)
+    assert RunDir(run).read_evaluation() is not None
+    assert subprocess.run(INKOPT + ["quantize", str(run), "--seed", "5"], capture_output=True).returncode == 0
+    r = subprocess.run(
+        INKOPT + ["report", str(run), "--out", str(tmp_path / "page.html")], capture_output=True, text=True
+    )
+    assert r.returncode == 2 and "another quantized.npz" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "page.html").exists()

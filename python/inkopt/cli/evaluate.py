@@ -13,7 +13,7 @@ from ..evaluation.colour_table import DEFAULT_PATCH_MM
 from ..evaluation.evaluate import evaluate_run
 from ..evaluation.noise import MAX_SPP, PILOT_SPP, TARGET_NOISE_DE76
 from ..evaluation.options import EvaluateOptions
-from ..evaluation.outputs import table_lines
+from ..evaluation.outputs import picture_names, table_lines
 from ..evaluation.sample import AUTO_SAMPLE_TEXELS, DEFAULT_SAMPLE_TEXELS, DEFAULT_SAMPLE_WINDOWS
 from ..rundir import RunDir
 from .common import add_lighting_args, add_seed_arg, add_threads_arg, lighting_from_args, stderr_log
@@ -133,6 +133,7 @@ def _evaluate_cmd(args) -> int:
     log = None if args.json else stderr_log
     d = RunDir(args.dir)
     d.evaluation_target(args.out)  # before any render: another kind of file at --out is never replaced
+    d.evaluation_picture_targets(args.out, picture_names(d.load_scene()))  # nor a picture named after it
     with d.lock(stderr_log):  # its pictures and predictions.npz go into the run folder whatever --out says
         ev = evaluate_run(args.dir, options, log)
     if args.json:

@@ -82,7 +82,7 @@ from .colour_table import ColourTable, colour_table
 from .metrics import prediction_metrics
 from .noise import EVAL_SEED_OFFSET, MAX_SPP, PILOT_SPP, TARGET_NOISE_DE76, Sampling
 from .options import EvaluateOptions
-from .outputs import write_face_pictures, write_mesh_views
+from .outputs import picture_names, write_face_pictures, write_mesh_views
 from .printed import PrintedRenderer
 from .renders import (
     ContinuousSource,
@@ -412,6 +412,7 @@ def _write(ev: Evaluating, evaluation: Evaluation) -> None:
         ev.say("texel sample: no pictures and no predictions.npz (they need every texel's colour)")
         d.write_evaluation(evaluation.to_json(), out)
         return
+    d.evaluation_picture_targets(out, picture_names(rec))  # nothing here replaces a picture it did not write
     if rec.faces:
         evaluation.pictures = write_face_pictures(d, rec, ev.colours, out.stem)
     elif rec.mesh is not None:

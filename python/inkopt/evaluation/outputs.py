@@ -11,6 +11,13 @@ from .results import Evaluation
 from .translucency import table_lines as translucency_lines
 
 
+def picture_names(rec: SceneRecord) -> list[str]:
+    """What an evaluation's pictures are named after: a slab's pictured faces, or "views" for a mesh."""
+    if rec.faces:
+        return [face for face in rec.faces if face in rec.pix]
+    return ["views"] if rec.mesh is not None else []
+
+
 def write_face_pictures(d: RunDir, rec: SceneRecord, results: dict, stem: str = "evaluation") -> list[str]:
     """DIR/<stem>_<face>.png (target | optimized | quantized | baselines) for every textured face of a slab;
     returns the file names."""

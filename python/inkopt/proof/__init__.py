@@ -20,7 +20,7 @@ from ..color import delta_e76, linear_to_lab
 from ..evaluation.results import Evaluation, Report
 from ..io import atomic_write_bytes, check_output, load_npz, read_head
 from ..model.mixturefile import MixtureSource
-from ..rundir import RunDir
+from ..rundir import RunDir, StaleOutputError
 from .bake import encode, heat_legend, heat_rgb8, heat_scale, mesh_atlas, srgb8
 from .figures import LABELS, describe_lighting, figures_html, ink_shares, settings_html
 from .markup import html
@@ -85,6 +85,11 @@ def write_proof(run, out=None) -> Proof:
         if evj is not None and pred.source == "evaluation"
         else None
     )
+    if ev is not None and ev.quantized_digest is not None and ev.quantized_digest != d.quantized_digest():
+        raise StaleOutputError(
+            f"{d.evaluation_path} was made from another quantized.npz (the run was quantized again since): run "
+            f"'inkopt evaluate {d}' again"
+        )
     colours = {"target": rec.target_rgb, **pred.rgb}
     keys = [k for k in ORDER if k in colours] + [k for k in colours if k not in ORDER]
     for k in keys:

@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import ParameterError
 from ..io import (
     check_output,
     damage_of,
@@ -241,6 +242,22 @@ class RunDir(QuantizedFiles):
         ``io.check_output``: a file there is replaced only if it is an evaluation (``is_evaluation_file``)."""
         target = self.evaluation_path if path is None else Path(path)
         return check_output(target, is_evaluation_file, "an evaluation written by 'inkopt evaluate'")
+
+    def evaluation_picture_targets(self, path, names) -> list[Path]:
+        """The pictures an evaluation at ``path`` (None: evaluation.json) writes beside it, ``<stem>_<name>.png`` for
+        each of ``names`` (a slab's faces, "views"), checked: a file there is replaced only if the evaluation file
+        at ``path`` lists it among its pictures (an earlier evaluation of that name wrote it); another file (the
+        run's own face_top.png for ``path`` face.json, a photo) is refused in one line."""
+        target = self.evaluation_path if path is None else Path(path)
+        ours = set((read_json_object(target) or {}).get("pictures") or []) if is_evaluation_file(target) else set()
+        paths = [self.evaluation_picture_path(name, target.stem) for name in names]
+        for p in paths:
+            if p.exists() and p.name not in ours:
+                raise ParameterError(
+                    f"{p} exists and is not a picture of the evaluation {target.name}; refusing to replace it "
+                    "(name the evaluation otherwise with `out`)"
+                )
+        return paths
 
     def write_evaluation(self, ev: dict, path: Path | None = None) -> Path:
         """evaluation.json, or ``path`` (``inkopt evaluate --out``); another kind of file there is refused
