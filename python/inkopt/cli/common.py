@@ -49,7 +49,6 @@ def add_mesh_args(p, what: str = "") -> None:
     """The inputs of a mesh scene (``scenes.spec.MeshSpec``): ``--height-mm`` or ``--scale``, ``--up``,
     ``--shell-mm`` and ``--dpi``; ``what`` prefixes their help (e.g. "mesh: ")."""
     from ..scenes.mesh import UP_AXES
-    from ..units import OPT_DPI
 
     p.add_argument("--height-mm", type=float, metavar="H", help=f"{what}scale the object to this height (mm)")
     p.add_argument("--scale", type=float, metavar="S", help=f"{what}or scale it by S mm per model unit")
@@ -61,7 +60,7 @@ def add_mesh_args(p, what: str = "") -> None:
         help=f"{what}optimise only voxels less than D mm below the surface; deeper ones are printed white "
         "(default: every voxel of the object is optimised)",
     )
-    p.add_argument("--dpi", type=float, default=OPT_DPI, help=f"optimisation grid resolution (default {OPT_DPI:g})")
+    add_dpi_arg(p)
     p.add_argument(
         "--texture",
         metavar="FILE",
@@ -143,6 +142,13 @@ def ray_from_args(args) -> str | None:
 
         import_ray()
     return args.ray
+
+
+def add_dpi_arg(p) -> None:
+    """``--dpi``: the optimisation grid's resolution (cubic voxels)."""
+    from ..units import OPT_DPI
+
+    p.add_argument("--dpi", type=float, default=OPT_DPI, help=f"optimisation grid resolution (default {OPT_DPI:g})")
 
 
 def add_inks_arg(p, hidden: bool = False, required: bool = False) -> None:

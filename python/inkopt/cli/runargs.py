@@ -298,13 +298,13 @@ def run_options_from_args(args, started: float):
 def slab_spec_from_args(args, top: str):
     """The ``SlabSpec`` of ``top`` and the slab options (``--size-mm``, ``--bottom``, ``--dpi``, translucency)."""
     from ..scenes.spec import SlabSpec
-    from ..units import OPT_DPI, parse_size_mm
+    from ..units import parse_size_mm
 
     return SlabSpec(
         top,
         parse_size_mm(args.size_mm),
         bottom=args.bottom,
-        dpi=getattr(args, "dpi", OPT_DPI),
+        dpi=args.dpi,
         translucency=args.translucency,
         translucency_depth_mm=args.translucency_depth_mm,
     )

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from .common import add_dpi_arg
 from .runargs import add_run_args, run_command, slab_spec_from_args
 
 
@@ -21,5 +22,6 @@ def register_cli(sub) -> None:
     p.add_argument("top", metavar="TOP_IMAGE", help="picture of the top face (sRGB)")
     p.add_argument("--bottom", metavar="IMAGE", help="picture of the bottom face (seen from below, like a page's back)")
     p.add_argument("--size-mm", required=True, help="WxHxD in mm, e.g. 15x10x2.5 (must match the picture's aspect)")
+    add_dpi_arg(p)
     add_run_args(p, translucency="slab")
     p.set_defaults(func=_slab)
