@@ -3,7 +3,7 @@ process, ``/usr/bin/time -v``), and per result (continuous, quantized, surface a
 samples per scene texel, events per path and noise figures from the evaluation file.
 
     .venv/bin/python bench/bench_evaluate.py HEIGHT_MM [--dir D] [--reuse] [--spp N] [--texel-sample N]
-        [--sample-windows M] [--code CHECKOUT] [--name NAME]
+        [--sample-windows M] [--code CHECKOUT] [--name NAME] [--versus OTHER.json]
 
 The run directory is made first unless ``--reuse`` finds one (each step its own process, timed, recorded as
 ``setup``): ``inkopt optimize spot.obj --height-mm H --iterations 1 --eval-spp 16 --out D`` and ``inkopt quantize
@@ -11,7 +11,10 @@ D``. Then ``inkopt evaluate D --out D/bench_evaluation.json`` (``--spp N``: fixe
 default; ``--time-budget``, ``--max-spp``, ``--texel-sample``, ``--sample-windows`` passed on; with a texel
 sample each result also keeps its figures' standard errors, and the file the sample and the paired differences).
 ``--code``: evaluate with another checkout's Python package (e.g. the commit before a change, with its own built
-``_core``), so one run directory serves both. Writes
+``_core``), so one run directory serves both. ``sampling_choice``: every texel or a texel sample and the times the
+evaluation predicted for both (``evaluation.choice``), beside the continuous result's measured seconds.
+``--versus``: another results file of this bench (e.g. a larger object's, measured in the same session): its
+wall and CPU seconds and this evaluation's ratios to them (``versus``). Writes
 bench/results/evaluate_<H>mm.json (``--name`` for another name). Wall-clock times on the shared 2-core machine are
 upper bounds; CPU seconds and events per path do not depend on the load.
 """
@@ -76,6 +79,20 @@ def timed(args: list[str], code: Path) -> dict:
     }
 
 
+def versus(res: dict, other: Path) -> dict:
+    """This evaluation's wall and CPU seconds as ratios of those of ``other`` (a results file of this bench)."""
+    o = json.loads(other.read_text())
+    return {
+        "file": other.name,
+        "height_mm": o["height_mm"],
+        "texels": o["texels"],
+        "evaluate_seconds": o["evaluate_seconds"],
+        "evaluate_cpu_seconds": o["evaluate_cpu_seconds"],
+        "seconds_ratio": res["evaluate_seconds"] / o["evaluate_seconds"],
+        "cpu_seconds_ratio": res["evaluate_cpu_seconds"] / o["evaluate_cpu_seconds"],
+    }
+
+
 def main() -> dict:
     from common import machine, write
 
@@ -91,6 +108,7 @@ def main() -> dict:
     ap.add_argument("--sample-windows", type=int)
     ap.add_argument("--code", default=str(ROOT), help="checkout whose python/ package evaluates (default: this one)")
     ap.add_argument("--name", help="results file name (default evaluate_<H>mm.json)")
+    ap.add_argument("--versus", help="another results file of this bench to give this one's time as a ratio of")
     args = ap.parse_args()
     code = Path(args.code).resolve()
     out = Path(args.dir or f"/tmp/inkopt_eval_bench_{args.height_mm:g}mm")
@@ -131,6 +149,7 @@ def main() -> dict:
         "colour_table_cached": (ev.get("colour_table") or {}).get("cached"),
         "texel_sample": ev.get("texel_sample"),
         "differences": ev.get("differences"),
+        "sampling_choice": ev.get("sampling_choice"),
         "evaluated_by": str(code),
         "evaluated_by_commit": code_commit or None,
         "evaluate_command": " ".join(["inkopt", *cmd]),
@@ -140,6 +159,8 @@ def main() -> dict:
         **machine(),
         "finished": time.strftime("%Y-%m-%d %H:%M"),
     }
+    if args.versus:
+        res["versus"] = versus(res, Path(args.versus))
     print(json.dumps({k: v for k, v in res.items() if k not in ("log", "setup")}, indent=1))
     print("wrote", write(args.name or f"evaluate_{args.height_mm:g}mm.json", res))
     return res

@@ -18,7 +18,8 @@ and SSIM noise ratio ``noise.SSIM_NOISE_RATIO``), the sample's points need (ΔE7
 (``sample.SAMPLE_SSIM_NOISE_RATIO``); a fixed ``spp`` is used as it is. Every texel costs I x spp_full
 texel-samples, the sample n x spp_points + W x spp_windows, W the texels of its windows counted on the sample
 drawn. The printed results and the baselines are rendered on the same texels with their own samples and are taken
-to scale alike, so the predicted seconds are the continuous result's.
+to scale alike, so the predicted seconds are the continuous result's. The choice itself depends on counts of
+texel-samples only, not on the machine's speed or load (the pilot's seconds per texel-sample scale both alike).
 
 **Choice** (``choose_sampling``): the sample when it is predicted to take at most 1 / ``SAMPLE_MIN_GAIN`` of the
 full render's time and draws fewer texels than there are, else every texel. The margin is there because the

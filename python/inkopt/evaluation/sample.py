@@ -6,9 +6,10 @@ texel's Gaussian window (SSIM, the edge term e3, the mottle; ``loss.gaussian_win
 Chebyshev distance ``radius`` = int(3.5 sigma + 0.5) voxels). A simple random sample estimates each one, and the
 spread of the sampled values gives its standard error, so a large object need not be rendered whole.
 
-**The sample** (``TexelSample.draw``, numpy's generator seeded with the evaluation seed): n scene texels drawn
-without replacement (the *points*); the first m of them in draw order (a simple random sample too) are window
-*centres*, each rendered with every texel of its window (the *window texels*, their union). The two groups are
+**The sample** (``TexelSample.draw``, numpy's generator seeded with the evaluation seed): n scene texels (the
+user's ``texel_sample``, or as many as ``evaluation.choice`` asks for a given accuracy) drawn without
+replacement (the *points*); the first m of them in draw order (a simple random sample too) are window *centres*,
+each rendered with every texel of its window (the *window texels*, their union). The two groups are
 rendered apart, each adaptively to what its figures need (``evaluate``): the points until the noise adds at most
 ``noise.TARGET_NOISE_DE76`` to the mean ΔE76, the window texels until SSIM's noise ratio is at most
 ``SAMPLE_SSIM_NOISE_RATIO``. The loss is built on the window texels only; a centre's window lies inside them, so
