@@ -7,9 +7,10 @@ samples per scene texel, events per path and noise figures from the evaluation f
 
 The run directory is made first unless ``--reuse`` finds one (each step its own process, timed, recorded as
 ``setup``): ``inkopt optimize spot.obj --height-mm H --iterations 1 --eval-spp 16 --out D`` and ``inkopt quantize
-D``. Then ``inkopt evaluate D --out D/bench_evaluation.json`` (``--spp N``: fixed samples instead of the adaptive
-default; ``--time-budget``, ``--max-spp``, ``--texel-sample``, ``--sample-windows`` passed on; with a texel
-sample each result also keeps its figures' standard errors, and the file the sample and the paired differences).
+D``. Then ``inkopt evaluate D --out D/bench_evaluation.json``, its log written to D/bench_evaluate.log as it
+runs (``--spp N``: fixed samples instead of the adaptive default; ``--time-budget``, ``--max-spp``,
+``--texel-sample``, ``--sample-windows`` passed on; with a texel sample each result also keeps its figures'
+standard errors, and the file the sample and the paired differences).
 ``--code``: evaluate with another checkout's Python package (e.g. the commit before a change, with its own built
 ``_core``), so one run directory serves both. ``sampling_choice``: every texel or a texel sample and the times the
 evaluation predicted for both (``evaluation.choice``), beside the continuous result's measured seconds.
@@ -27,6 +28,7 @@ import os
 import re
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -51,23 +53,28 @@ KEEP = (
 )
 
 
-def timed(args: list[str], code: Path) -> dict:
+def timed(args: list[str], code: Path, log_file: Path | None = None) -> dict:
     """Run ``python -m inkopt.cli ARGS`` with ``code``/python first on the path under /usr/bin/time -v: seconds,
-    CPU seconds, peak RSS (GiB), the 1-minute load average before and after, stdout and stderr."""
+    CPU seconds, peak RSS (GiB), the 1-minute load average before and after, stdout and stderr (written to
+    ``log_file`` as it runs, when given, so that a long evaluation can be followed)."""
     load0 = os.getloadavg()[0]
-    proc = subprocess.run(
-        ["/usr/bin/time", "-v", sys.executable, "-m", "inkopt.cli", *args],
-        capture_output=True,
-        text=True,
-        env={**os.environ, "PYTHONPATH": str(code / "python")},
-    )
+    with tempfile.TemporaryFile("w+") if log_file is None else open(log_file, "w+") as err:
+        proc = subprocess.run(
+            ["/usr/bin/time", "-v", sys.executable, "-m", "inkopt.cli", *args],
+            stdout=subprocess.PIPE,
+            stderr=err,
+            text=True,
+            env={**os.environ, "PYTHONPATH": str(code / "python")},
+        )
+        err.seek(0)
+        stderr = err.read()
     if proc.returncode:
-        raise SystemExit(f"inkopt {' '.join(args)} failed:\n{proc.stdout}\n{proc.stderr}")
-    wall = re.search(r"Elapsed \(wall clock\) time \(h:mm:ss or m:ss\): (\S+)", proc.stderr).group(1)
+        raise SystemExit(f"inkopt {' '.join(args)} failed:\n{proc.stdout}\n{stderr}")
+    wall = re.search(r"Elapsed \(wall clock\) time \(h:mm:ss or m:ss\): (\S+)", stderr).group(1)
     secs = sum(float(p) * 60**i for i, p in enumerate(reversed(wall.split(":"))))
-    rss_kb = int(re.search(r"Maximum resident set size \(kbytes\): (\d+)", proc.stderr).group(1))
-    cpu = sum(float(re.search(rf"{k} time \(seconds\): (\S+)", proc.stderr).group(1)) for k in ("User", "System"))
-    log = proc.stderr[: proc.stderr.find("\tCommand being timed")].strip()
+    rss_kb = int(re.search(r"Maximum resident set size \(kbytes\): (\d+)", stderr).group(1))
+    cpu = sum(float(re.search(rf"{k} time \(seconds\): (\S+)", stderr).group(1)) for k in ("User", "System"))
+    log = stderr[: stderr.find("\tCommand being timed")].strip()
     return {
         "seconds": secs,
         "cpu_seconds": cpu,
@@ -125,7 +132,7 @@ def main() -> dict:
     for flag, v in passed:
         if v is not None:
             cmd += [flag, str(v)]
-    t = timed(cmd, code)
+    t = timed(cmd, code, out / "bench_evaluate.log")
     ev = json.loads(ev_path.read_text())
     entries = {"continuous": ev["continuous"], "quantized": ev["quantized"], **(ev.get("baselines") or {})}
     per = {name: {k: entries[name].get(k) for k in KEEP} for name in RESULTS if name in entries}
