@@ -3,7 +3,7 @@ process, ``/usr/bin/time -v``), and per result (continuous, quantized, surface a
 samples per scene texel, events per path and noise figures from the evaluation file.
 
     .venv/bin/python bench/bench_evaluate.py HEIGHT_MM [--dir D] [--reuse] [--spp N] [--texel-sample N]
-        [--sample-windows M] [--code CHECKOUT] [--name NAME] [--versus OTHER.json]
+        [--sample-windows M] [--code CHECKOUT] [--name NAME] [--versus OTHER.json ...] [--only-versus R.json]
 
 The run directory is made first unless ``--reuse`` finds one (each step its own process, timed, recorded as
 ``setup``): ``inkopt optimize spot.obj --height-mm H --iterations 1 --eval-spp 16 --out D`` and ``inkopt quantize
@@ -14,8 +14,10 @@ standard errors, and the file the sample and the paired differences).
 ``--code``: evaluate with another checkout's Python package (e.g. the commit before a change, with its own built
 ``_core``), so one run directory serves both. ``sampling_choice``: every texel or a texel sample and the times the
 evaluation predicted for both (``evaluation.choice``), beside the continuous result's measured seconds.
-``--versus``: another results file of this bench (e.g. a larger object's, measured in the same session): its
-wall and CPU seconds and this evaluation's ratios to them (``versus``). Writes
+``--versus`` (repeatable): another results file of this bench (e.g. a larger object's, measured in the same
+session, or the same run's evaluated by other code): its wall and CPU seconds, this evaluation's ratios to them
+and, for the same run, the figures side by side with their standard errors and z (``versus``);
+``--only-versus RESULTS.json`` adds those to a results file without evaluating. Writes
 bench/results/evaluate_<H>mm.json (``--name`` for another name). Wall-clock times on the shared 2-core machine are
 upper bounds; CPU seconds and events per path do not depend on the load.
 """
@@ -24,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import re
 import subprocess
@@ -86,10 +89,15 @@ def timed(args: list[str], code: Path, log_file: Path | None = None) -> dict:
     }
 
 
+COMPARED = ("delta_e76_mean", "delta_e76_mean_corrected", "delta_e2000_mean", "ssim")
+
+
 def versus(res: dict, other: Path) -> dict:
-    """This evaluation's wall and CPU seconds as ratios of those of ``other`` (a results file of this bench)."""
+    """This evaluation's wall and CPU seconds as ratios of those of ``other`` (a results file of this bench) and,
+    when both evaluated the same run (same texels), each result's figures side by side: both values, their
+    standard errors (0 for every texel rendered) and z = (this - other) / the errors combined."""
     o = json.loads(other.read_text())
-    return {
+    out = {
         "file": other.name,
         "height_mm": o["height_mm"],
         "texels": o["texels"],
@@ -98,6 +106,26 @@ def versus(res: dict, other: Path) -> dict:
         "seconds_ratio": res["evaluate_seconds"] / o["evaluate_seconds"],
         "cpu_seconds_ratio": res["evaluate_cpu_seconds"] / o["evaluate_cpu_seconds"],
     }
+    if o["texels"] != res["texels"]:
+        return out
+    figures = {}
+    for name, r in res["results"].items():
+        q = o["results"].get(name)
+        if q is None:
+            continue
+        figures[name] = {}
+        for k in COMPARED:
+            se_a, se_b = (x.get("stderr", {}).get(k) or 0.0 for x in (r, q))
+            se = math.hypot(se_a, se_b)
+            z = (r[k] - q[k]) / se if se > 0 else None
+            figures[name][k] = {"this": r[k], "stderr": se_a, "other": q[k], "other_stderr": se_b, "z": z}
+    return {**out, "figures": figures}
+
+
+def add_versus(res: dict, others: list[str]) -> None:
+    """``res["versus"]``: a ``versus`` entry for each of the ``others`` results files (none: unchanged)."""
+    if others:
+        res["versus"] = [versus(res, Path(f)) for f in others]
 
 
 def main() -> dict:
@@ -115,8 +143,20 @@ def main() -> dict:
     ap.add_argument("--sample-windows", type=int)
     ap.add_argument("--code", default=str(ROOT), help="checkout whose python/ package evaluates (default: this one)")
     ap.add_argument("--name", help="results file name (default evaluate_<H>mm.json)")
-    ap.add_argument("--versus", help="another results file of this bench to give this one's time as a ratio of")
+    ap.add_argument(
+        "--versus",
+        action="append",
+        default=[],
+        help="another results file of this bench to compare with (repeatable): time ratios, and figures of one run",
+    )
+    ap.add_argument("--only-versus", metavar="RESULTS.json", help="evaluate nothing: add --versus to this file")
     args = ap.parse_args()
+    if args.only_versus:
+        res = json.loads(Path(args.only_versus).read_text())
+        add_versus(res, args.versus)
+        print(json.dumps(res["versus"], indent=1))
+        print("wrote", write(Path(args.only_versus).name, res))
+        return res
     code = Path(args.code).resolve()
     out = Path(args.dir or f"/tmp/inkopt_eval_bench_{args.height_mm:g}mm")
     setup = {}
@@ -166,8 +206,7 @@ def main() -> dict:
         **machine(),
         "finished": time.strftime("%Y-%m-%d %H:%M"),
     }
-    if args.versus:
-        res["versus"] = versus(res, Path(args.versus))
+    add_versus(res, args.versus)
     print(json.dumps({k: v for k, v in res.items() if k not in ("log", "setup")}, indent=1))
     print("wrote", write(args.name or f"evaluate_{args.height_mm:g}mm.json", res))
     return res
