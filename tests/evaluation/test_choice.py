@@ -61,7 +61,7 @@ def test_small_scene_renders_every_texel_large_one_a_sample():
     big = predict(cost, sheet(400), None, seed=3)
     n = cost.sample_texels(160_000)
     assert big.sample is not None and len(big.sample.points) == n and len(big.sample.centres) == 100
-    assert big.sample_seconds * SAMPLE_MIN_GAIN <= big.full_seconds
+    assert big.sample_seconds * SAMPLE_MIN_GAIN <= big.full_seconds and small.to_json()["sample"]["window_texels"] > 0
     per = cost.seconds / (cost.texels * cost.spp)
     assert big.full_seconds == pytest.approx(160_000 * cost.spp_full * per)
     w = len(big.sample.windows)

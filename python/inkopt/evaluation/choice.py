@@ -105,12 +105,14 @@ class CostModel:
 @dataclass(frozen=True)
 class SamplingChoice:
     """Every texel (``sample`` None) or a texel sample, and why: ``forced`` by ``texel_sample``, else predicted from
-    the pilot's ``cost`` (``full_seconds`` and ``sample_seconds``: the continuous result's predicted render times)."""
+    the pilot's ``cost`` (``full_seconds`` and ``sample_seconds``: the continuous result's predicted render times;
+    ``window_texels``: those of the sample drawn for the prediction, whether taken or not)."""
 
     sample: TexelSample | None
     forced: bool
     cost: CostModel | None = None
     population: int = 0
+    window_texels: int = 0
     full_seconds: float | None = None
     sample_seconds: float | None = None
 
@@ -123,7 +125,7 @@ class SamplingChoice:
         d = {"choice": self.name, "forced": self.forced}
         if self.cost is None:
             return d
-        c, s = self.cost, self.sample
+        c = self.cost
         return {
             **d,
             "target_stderr_delta_e76": TARGET_STDERR_DE76,
@@ -133,7 +135,7 @@ class SamplingChoice:
             "every_texel": {"texels": self.population, "spp": c.spp_full, "seconds": self.full_seconds},
             "sample": {
                 "texels": c.sample_texels(self.population),
-                "window_texels": None if s is None else len(s.windows),
+                "window_texels": self.window_texels,
                 "spp": c.spp_points,
                 "spp_windows": c.spp_windows,
                 "seconds": self.sample_seconds,
@@ -163,7 +165,7 @@ def predict(cost: CostModel, texels: Texels, windows: int | None, seed: int) -> 
     full = population * cost.spp_full * per
     part = (n * cost.spp_points + len(sample.windows) * cost.spp_windows) * per
     take = n < population and part * SAMPLE_MIN_GAIN <= full
-    return SamplingChoice(sample if take else None, False, cost, population, full, part)
+    return SamplingChoice(sample if take else None, False, cost, population, len(sample.windows), full, part)
 
 
 def pilot(render: PilotRender, texels: Texels, target_lab, spp: int | None, max_spp: int, seed: int) -> CostModel:
