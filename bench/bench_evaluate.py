@@ -9,7 +9,7 @@ The run directory is made first unless ``--reuse`` finds one (each step its own 
 ``setup``): ``inkopt optimize spot.obj --height-mm H --iterations 1 --eval-spp 16 --out D`` and ``inkopt quantize
 D``. Then ``inkopt evaluate D --out D/bench_evaluation.json``, its log written to D/bench_evaluate.log as it
 runs (``--spp N``: fixed samples instead of the adaptive default; ``--time-budget``, ``--max-spp``,
-``--texel-sample``, ``--sample-windows`` passed on; with a texel sample each result also keeps its figures'
+``--texel-sample``, ``--sample-windows``, ``--seed`` passed on; with a texel sample each result also keeps its figures'
 standard errors, and the file the sample and the paired differences).
 ``--code``: evaluate with another checkout's Python package (e.g. the commit before a change, with its own built
 ``_core``), so one run directory serves both. ``sampling_choice``: every texel or a texel sample and the times the
@@ -141,6 +141,7 @@ def main() -> dict:
     ap.add_argument("--max-spp", type=int)
     ap.add_argument("--texel-sample", type=int, help="evaluate's --texel-sample (default: evaluate's default)")
     ap.add_argument("--sample-windows", type=int)
+    ap.add_argument("--seed", type=int, help="evaluate's --seed: another texel sample and other render seeds")
     ap.add_argument("--code", default=str(ROOT), help="checkout whose python/ package evaluates (default: this one)")
     ap.add_argument("--name", help="results file name (default evaluate_<H>mm.json)")
     ap.add_argument(
@@ -168,7 +169,7 @@ def main() -> dict:
     ev_path = out / "bench_evaluation.json"
     cmd = ["evaluate", str(out), "--out", str(ev_path)]
     passed = [("--spp", args.spp), ("--time-budget", args.time_budget), ("--max-spp", args.max_spp)]
-    passed += [("--texel-sample", args.texel_sample), ("--sample-windows", args.sample_windows)]
+    passed += [("--texel-sample", args.texel_sample), ("--sample-windows", args.sample_windows), ("--seed", args.seed)]
     for flag, v in passed:
         if v is not None:
             cmd += [flag, str(v)]

@@ -14,8 +14,9 @@ noise bias (~0.002); the rule does not equalise it, each figure's standard error
 **Cost** (``CostModel``). The continuous result is rendered on ``PILOT_TEXELS`` random texels (at most a quarter of
 them) at ``noise.PILOT_SPP`` samples (with a fixed ``spp``, at most that many): the seconds per texel-sample, s,
 and, as ``noise.adaptive_render`` plans them (``NoiseModel.spp_for``), the samples every texel needs (ΔE76 noise
-and SSIM noise ratio ``noise.SSIM_NOISE_RATIO``), the sample's points need (ΔE76 noise) and its windows need
-(``sample.SAMPLE_SSIM_NOISE_RATIO``); a fixed ``spp`` is used as it is. Every texel costs I x spp_full
+and SSIM noise ratio ``noise.SSIM_NOISE_RATIO``), which the sample's points get too (``renders.texel_groups``: the
+same noise bias), and the samples its windows need (``sample.SAMPLE_SSIM_NOISE_RATIO``); a fixed ``spp`` is used
+as it is. Every texel costs I x spp_full
 texel-samples, the sample n x spp_points + W x spp_windows, W the texels of its windows counted on the sample
 drawn. The printed results and the baselines are rendered on the same texels with their own samples and are taken
 to scale alike, so the predicted seconds are the continuous result's. The choice itself depends on counts of
@@ -90,9 +91,8 @@ class CostModel:
         model = NoiseModel.of(rgb, var, target_lab)
         target = PLAN_MARGIN * TARGET_NOISE_DE76
         full = model.spp_for(spp, target, max_spp, PLAN_MARGIN * SSIM_NOISE_RATIO)
-        points = model.spp_for(spp, target, max_spp, math.inf)
         windows = model.spp_for(spp, math.inf, max_spp, PLAN_MARGIN * SAMPLE_SSIM_NOISE_RATIO)
-        return cls(len(rgb), spp, seconds, std, full, points, windows)
+        return cls(len(rgb), spp, seconds, std, full, full, windows)  # the points as every texel
 
     def sample_texels(self, population: int, target: float = TARGET_STDERR_DE76) -> int:
         """Points whose standard error of the mean ΔE76 is ``target`` (finite-population corrected), at least

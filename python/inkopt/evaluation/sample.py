@@ -10,9 +10,11 @@ spread of the sampled values gives its standard error, so a large object need no
 user's ``texel_sample``, or as many as ``evaluation.choice`` asks for a given accuracy) drawn without
 replacement (the *points*); the first m of them in draw order (a simple random sample too) are window *centres*,
 each rendered with every texel of its window (the *window texels*, their union). The two groups are
-rendered apart, each adaptively to what its figures need (``evaluate``): the points until the noise adds at most
-``noise.TARGET_NOISE_DE76`` to the mean ΔE76, the window texels until SSIM's noise ratio is at most
-``SAMPLE_SSIM_NOISE_RATIO``. The loss is built on the window texels only; a centre's window lies inside them, so
+rendered apart, each adaptively (``evaluate``): the points as every texel would be (the noise adds at most
+``noise.TARGET_NOISE_DE76`` to the mean ΔE76 and SSIM's noise ratio is at most ``noise.SSIM_NOISE_RATIO``), so that
+their render noise biases the figures it is not corrected out of (ΔE2000, the 95th percentile) and leaves in the
+corrected mean ΔE76 the same residual as rendering every texel; the window texels until SSIM's noise ratio is at
+most ``SAMPLE_SSIM_NOISE_RATIO``. The loss is built on the window texels only; a centre's window lies inside them, so
 its SSIM, e3 and mottle terms equal the full evaluation's for the same colours (the other window texels' own
 window values are not used).
 
