@@ -241,7 +241,8 @@ def _mixture_results(ev: Evaluating) -> tuple[_Grid, dict]:
 
 
 def _render_continuous(ev: Evaluating, vol: Volume) -> None:
-    """The continuous result: ``vol`` on the scene texels; its renderer is freed on return."""
+    """The continuous result: ``vol`` on the scene texels, after the choice of its texels (``Evaluating.settle``,
+    whose pilot its seconds include); its renderer is freed on return."""
     started = time.perf_counter()
     renderer = Renderer(vol, ev.options.threads, ev.lighting)
     ev.settle(renderer)
