@@ -14,7 +14,7 @@ from ..evaluation.evaluate import evaluate_run
 from ..evaluation.noise import MAX_SPP, PILOT_SPP, TARGET_NOISE_DE76
 from ..evaluation.options import EvaluateOptions
 from ..evaluation.outputs import picture_names, table_lines
-from ..evaluation.sample import AUTO_SAMPLE_TEXELS, DEFAULT_SAMPLE_TEXELS, DEFAULT_SAMPLE_WINDOWS
+from ..evaluation.sample import DEFAULT_SAMPLE_WINDOWS
 from ..rundir import RunDir
 from .common import add_lighting_args, add_seed_arg, add_threads_arg, lighting_from_args, stderr_log
 
@@ -60,9 +60,10 @@ OPTIONS = (
         dict(
             type=int,
             metavar="N",
-            help=f"figures from a random sample of N scene texels (and --sample-windows SSIM windows), each with "
-            f"its standard error; 0 renders every texel (default: {DEFAULT_SAMPLE_TEXELS} above "
-            f"{AUTO_SAMPLE_TEXELS} texels, else every texel); no pictures then",
+            help="figures from a random sample of N scene texels (and --sample-windows SSIM windows), each with its "
+            "standard error, and no pictures or predictions.npz; 0 renders every texel (default: whichever a short "
+            "pilot predicts to be clearly faster at the same accuracy of the mean dE76, logged and recorded as "
+            "sampling_choice; the sample then has the texels whose standard error is that accuracy)",
         ),
     ),
     (

@@ -28,10 +28,12 @@ scene texel, all passes), ``spp_passes``. With the baselines, ``gamut_floor_delt
 the ΔE76 from the target to the nearest colour a thick homogeneous patch of the inks reaches
 (``ColourTable.reachable_lab``).
 
-Large objects (above ``sample.AUTO_SAMPLE_TEXELS`` scene texels, or ``texel_sample``): every figure comes from a
-random sample of scene texels and SSIM windows (``evaluation.sample``), each result rendered on the same sampled
-texels with the same seeds, with each figure's standard error and the paired differences between results; no
-pictures and no predictions.npz then.
+Every texel or a texel sample (``evaluation.choice``): a short pilot of the continuous result on a few texels
+predicts the time of both at the same accuracy of the mean ΔE76, and the evaluation takes the sample when it is
+clearly faster (``texel_sample`` forces either). With a sample, every figure comes from a random sample of scene
+texels and SSIM windows (``evaluation.sample``), each result rendered on the same sampled texels with the same
+seeds, with each figure's standard error and the paired differences between results; no pictures and no
+predictions.npz then (they need every texel: ``texel_sample`` 0).
 
 Translucency (``evaluation.translucency``): when the scene has a translucency constraint or ``translucency_compare``
 names an unconstrained run of the same target, ``translucency`` holds the diffuse transmittance and lateral
@@ -61,6 +63,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -78,6 +81,7 @@ from ..rundir import Predictions, RunDir, SceneRecord
 from ..units import dpi_of
 from . import sample as sampled
 from .baselines import BASELINES, BaselineLayers
+from .choice import SamplingChoice, choose_sampling
 from .colour_table import ColourTable, colour_table
 from .metrics import prediction_metrics
 from .noise import EVAL_SEED_OFFSET, MAX_SPP, PILOT_SPP, TARGET_NOISE_DE76, Sampling
@@ -102,14 +106,21 @@ def _silent(msg: str) -> None:
     """The default log: nothing."""
 
 
+def _pilot_render(renderer: Renderer, texels, spp: int, seed: int) -> tuple:
+    """The colours (k, 3) and variances of their means (k, 3) of ``texels`` rendered at ``spp`` with ``seed``."""
+    r = renderer.render(texels, spp, seed)
+    return r.rgb, r.var_mean
+
+
 @dataclass
 class Evaluating:
     """What the steps of one evaluation share: the run directory ``d`` and its scene ``rec``, the ``options``, the
     ``lighting``, the log ``say`` (``progress``: whether the renders show progress bars), the targets (I, 3)
-    linear and CIELAB, the texel ``sample`` (None: every texel) and the texel ``groups`` rendered, the renders'
-    ``sampling`` (seed, spp, cap) and time ``shares`` (from the evaluation's start); filled in as the steps go:
-    each rendered result's colours on the first group (``colours``, with the target) and renders (``renders``, by
-    result name), the translucency figures and the colour table's and gamut floor's (``floor``)."""
+    linear and CIELAB, the renders' ``sampling`` (seed, spp, cap) and time ``shares`` (from the evaluation's
+    start); filled in as the steps go: the ``choice`` of every texel or a texel ``sample`` (None: every texel) and
+    the texel ``groups`` rendered (``settle``), each rendered result's colours on the first group (``colours``,
+    with the target) and renders (``renders``, by result name), the translucency figures and the colour table's and
+    gamut floor's (``floor``)."""
 
     d: RunDir
     rec: SceneRecord
@@ -119,10 +130,11 @@ class Evaluating:
     progress: bool
     target: np.ndarray
     target_lab: np.ndarray
-    sample: sampled.TexelSample | None
-    groups: list[TexelGroup]
     sampling: Sampling
     shares: TimeShares
+    choice: SamplingChoice | None = None
+    sample: sampled.TexelSample | None = None
+    groups: list[TexelGroup] = field(default_factory=list)
     colours: dict = field(default_factory=dict)
     renders: dict[str, Rendered] = field(default_factory=dict)
     translucency: dict | None = None
@@ -130,18 +142,14 @@ class Evaluating:
 
     @classmethod
     def open(cls, path, options: EvaluateOptions, log) -> Evaluating:
-        """The run directory ``path`` checked (a stale quantized volume is refused before any render), its scene
-        read and the texel sample drawn."""
+        """The run directory ``path`` checked (a stale quantized volume is refused before any render) and its scene
+        read."""
         lighting = load_lighting(options.lighting)
         d = RunDir(path)
         d.check_quantized_current()
         rec = d.load_scene()
         target = rec.target_rgb.astype(np.float64)
         target_lab = linear_to_lab(target)  # as TexelLoss has it; the loss itself is built after the renders
-        seed = EVAL_SEED_OFFSET + int(options.seed)
-        sample = sampled.draw_sample(rec.texels, options.texel_sample, options.sample_windows, seed, log)
-        groups = texel_groups(rec.texels, target_lab, sample)
-        renders = (2 + (2 if options.baselines else 0)) * len(groups)  # adaptive renders, for the time budget
         return cls(
             d=d,
             rec=rec,
@@ -151,12 +159,26 @@ class Evaluating:
             progress=log is not None,
             target=target,
             target_lab=target_lab,
-            sample=sample,
-            groups=groups,
-            sampling=Sampling(seed, options.spp, options.max_spp),
-            shares=TimeShares(options.time_budget, time.perf_counter(), renders),
+            sampling=Sampling(EVAL_SEED_OFFSET + int(options.seed), options.spp, options.max_spp),
+            shares=TimeShares(options.time_budget, time.perf_counter(), 0),
             colours={"target": target},
         )
+
+    def settle(self, renderer: Renderer) -> None:
+        """Every texel or a texel sample (``choice.choose_sampling``, a pilot through ``renderer`` unless the options
+        force it), logged, and the texel groups every result is rendered on."""
+        pilot = partial(_pilot_render, renderer)
+        self.choice = choose_sampling(pilot, self.rec.texels, self.target_lab, self.options, self.sampling.seed)
+        self.sample = s = self.choice.sample
+        self.say(self.choice.describe())
+        if s is not None:
+            self.say(
+                f"texel sample: {len(s.points)} of {s.population} texels; {len(s.centres)} SSIM windows of "
+                f"{len(s.windows)} texels; no pictures and no predictions.npz (they need every texel: texel_sample "
+                "0, on the command line --texel-sample 0)"
+            )
+        self.groups = texel_groups(self.rec.texels, self.target_lab, s)
+        self.shares.left = (2 + (2 if self.options.baselines else 0)) * len(self.groups)  # for the time budget
 
     def render(self, name: str, source, started: float, method: str | None) -> Rendered:
         """Result ``name`` rendered through ``source`` on every texel group (``renders.render_result``), kept for
@@ -219,9 +241,12 @@ def _mixture_results(ev: Evaluating) -> tuple[_Grid, dict]:
 
 
 def _render_continuous(ev: Evaluating, vol: Volume) -> None:
-    """The continuous result: ``vol`` on the scene texels; its renderer is freed on return."""
+    """The continuous result: ``vol`` on the scene texels, after the choice of its texels (``Evaluating.settle``,
+    whose pilot its seconds include); its renderer is freed on return."""
     started = time.perf_counter()
-    source = ContinuousSource(Renderer(vol, ev.options.threads, ev.lighting), ev.groups, ev.progress)
+    renderer = Renderer(vol, ev.options.threads, ev.lighting)
+    ev.settle(renderer)
+    source = ContinuousSource(renderer, ev.groups, ev.progress)
     rendered = ev.render("continuous", source, started, None)
     spps = " + ".join(f"{len(g.texels)} texels x {ad.spp} spp" for g, ad in zip(ev.groups, rendered.ads))
     ev.say(f"continuous: {spps} in {rendered.seconds:.1f} s, {rendered.events_per_path:.0f} events per path")
@@ -401,6 +426,7 @@ def _evaluation(ev: Evaluating, printed: _Printed, measured: dict, diffs: dict |
         quantized_digest=ev.d.quantized_digest(),
         texel_sample=sample,
         differences=diffs,
+        sampling_choice=ev.choice.to_json(),
     )
 
 
@@ -409,7 +435,6 @@ def _write(ev: Evaluating, evaluation: Evaluation) -> None:
     d, rec = ev.d, ev.rec
     out = d.evaluation_path if ev.options.out is None else Path(ev.options.out)
     if ev.sample is not None:  # per-texel colours of the sampled texels only: no pictures, no predictions
-        ev.say("texel sample: no pictures and no predictions.npz (they need every texel's colour)")
         d.write_evaluation(evaluation.to_json(), out)
         return
     d.evaluation_picture_targets(out, picture_names(rec))  # nothing here replaces a picture it did not write

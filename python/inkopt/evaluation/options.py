@@ -36,7 +36,8 @@ class EvaluateOptions:
     ``translucency``: measure the translucency figures (None: when the scene is constrained or
     ``translucency_compare``, the run directory of an unconstrained run of the same target, is given).
     ``texel_sample``, ``sample_windows``: figures from a random sample of that many scene texels and SSIM windows
-    (``evaluation.sample``; ``sample.sample_size``: 0 texels renders every texel, None is the default).
+    (``evaluation.sample``; 0 texels renders every texel; None: every texel or a sample, whichever
+    ``evaluation.choice`` predicts to be faster at the same accuracy; windows None: ``sample.DEFAULT_SAMPLE_WINDOWS``).
 
     Output: ``out``, the evaluation file (None: DIR/evaluation.json; its pictures are named after it, e.g. E.json:
     E_top.png, E_views.png), so that earlier ones can be kept; ``write``: write it, the pictures and

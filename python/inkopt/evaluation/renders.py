@@ -34,12 +34,13 @@ class TexelGroup:
 
 def texel_groups(texels: Texels, target_lab: np.ndarray, sample: TexelSample | None) -> list[TexelGroup]:
     """Every texel in one group, or a sample's points (for the ΔE figures) and window texels (for SSIM and the
-    mottle), each group rendered to its own figures' noise target (``evaluation.sample``)."""
+    mottle), the points to every texel's noise targets (so their noise biases the figures as much as rendering every
+    texel would), the windows to their own SSIM target (``evaluation.sample``)."""
     if sample is None:
         return [TexelGroup(texels, target_lab, TARGET_NOISE_DE76, SSIM_NOISE_RATIO)]
     points, windows = (texels.subset(g) for g in sample.groups)
     return [
-        TexelGroup(points, target_lab[sample.points], TARGET_NOISE_DE76, np.inf),
+        TexelGroup(points, target_lab[sample.points], TARGET_NOISE_DE76, SSIM_NOISE_RATIO),
         TexelGroup(windows, target_lab[sample.windows], np.inf, SAMPLE_SSIM_NOISE_RATIO),
     ]
 

@@ -221,7 +221,9 @@ class Evaluation:
     ``io.file_digest`` of the volume.npz and quantized.npz evaluated (None in evaluations written before they were
     recorded). ``texel_sample``: the sample the figures come from (``evaluation.sample.TexelSample.to_json`` with
     the printer texels rendered), None when every texel was rendered; ``differences``: then the paired differences
-    between results ("a - b" -> figure -> value and standard error, ``sample.differences``)."""
+    between results ("a - b" -> figure -> value and standard error, ``sample.differences``); ``sampling_choice``:
+    why every texel or a sample was rendered (``evaluation.choice.SamplingChoice.to_json``: forced, or both
+    predicted times; None in evaluations written before it was recorded)."""
 
     spp: int
     seed: int
@@ -248,6 +250,7 @@ class Evaluation:
     quantized_digest: str | None = None
     texel_sample: dict | None = None
     differences: dict | None = None
+    sampling_choice: dict | None = None  # evaluation.choice.SamplingChoice.to_json
 
     _HEAD = (
         "spp",
@@ -262,7 +265,7 @@ class Evaluation:
     )
     _FLOOR = ("colour_table", "gamut_floor_delta_e76", "gamut_floor_delta_e76_p95")
     _SOURCES = ("volume_digest", "quantized_digest")
-    _SAMPLE = ("texel_sample", "differences")
+    _SAMPLE = ("texel_sample", "differences", "sampling_choice")
 
     def to_json(self) -> dict:
         d = {**{k: getattr(self, k) for k in self._HEAD}, **self.lighting, "continuous": self.continuous.to_json()}

@@ -6,12 +6,15 @@ texel's Gaussian window (SSIM, the edge term e3, the mottle; ``loss.gaussian_win
 Chebyshev distance ``radius`` = int(3.5 sigma + 0.5) voxels). A simple random sample estimates each one, and the
 spread of the sampled values gives its standard error, so a large object need not be rendered whole.
 
-**The sample** (``TexelSample.draw``, numpy's generator seeded with the evaluation seed): n scene texels drawn
-without replacement (the *points*); the first m of them in draw order (a simple random sample too) are window
-*centres*, each rendered with every texel of its window (the *window texels*, their union). The two groups are
-rendered apart, each adaptively to what its figures need (``evaluate``): the points until the noise adds at most
-``noise.TARGET_NOISE_DE76`` to the mean ΔE76, the window texels until SSIM's noise ratio is at most
-``SAMPLE_SSIM_NOISE_RATIO``. The loss is built on the window texels only; a centre's window lies inside them, so
+**The sample** (``TexelSample.draw``, numpy's generator seeded with the evaluation seed): n scene texels (the
+user's ``texel_sample``, or as many as ``evaluation.choice`` asks for a given accuracy) drawn without
+replacement (the *points*); the first m of them in draw order (a simple random sample too) are window *centres*,
+each rendered with every texel of its window (the *window texels*, their union). The two groups are
+rendered apart, each adaptively (``evaluate``): the points as every texel would be (the noise adds at most
+``noise.TARGET_NOISE_DE76`` to the mean ΔE76 and SSIM's noise ratio is at most ``noise.SSIM_NOISE_RATIO``), so that
+their render noise biases the figures it is not corrected out of (ΔE2000, the 95th percentile) and leaves in the
+corrected mean ΔE76 the same residual as rendering every texel; the window texels until SSIM's noise ratio is at
+most ``SAMPLE_SSIM_NOISE_RATIO``. The loss is built on the window texels only; a centre's window lies inside them, so
 its SSIM, e3 and mottle terms equal the full evaluation's for the same colours (the other window texels' own
 window values are not used).
 
@@ -50,9 +53,6 @@ from ..model import Texels
 from .metrics import Metrics, mottle_per_texel
 from .noise import NoiseModel
 
-#: above this many scene texels ``inkopt evaluate`` samples by default (docs/quality.md)
-AUTO_SAMPLE_TEXELS = 100_000
-DEFAULT_SAMPLE_TEXELS = 4000  # points (ΔE figures)
 DEFAULT_SAMPLE_WINDOWS = 100  # window centres (SSIM, e3, mottle), the first of the points
 #: the adaptive render's SSIM noise ratio target with a sample (``noise.SSIM_NOISE_RATIO`` without): SSIM read
 #: 0.0035 low at r = 0.30 (noise.py's measurements), a sixth of the sampling error of the default windows
@@ -112,12 +112,10 @@ class TexelSample:
         }
 
 
-def sample_size(texels: int | None, windows: int | None, population: int) -> tuple[int, int]:
-    """(points, windows) of a texel sample from the user's choice: ``texels`` 0 = none (every texel rendered), None
-    = ``DEFAULT_SAMPLE_TEXELS`` above ``AUTO_SAMPLE_TEXELS`` texels, else none; ``windows`` None =
-    ``DEFAULT_SAMPLE_WINDOWS``. Each at most the population (windows at most the points)."""
-    if texels is None:
-        texels = DEFAULT_SAMPLE_TEXELS if population > AUTO_SAMPLE_TEXELS else 0
+def sample_size(texels: int, windows: int | None, population: int) -> tuple[int, int]:
+    """(points, windows) of a texel sample of ``texels`` points (0: none, every texel rendered; ``evaluation.choice``
+    picks it when the user does not) and ``windows`` SSIM windows (None: ``DEFAULT_SAMPLE_WINDOWS``), each at most
+    the population (windows at most the points)."""
     windows = DEFAULT_SAMPLE_WINDOWS if windows is None else windows
     if texels < 0 or texels == 1:
         raise SampleError(f"`texel_sample` must be 0 (every texel) or at least 2 texels, got {texels}")
@@ -125,21 +123,6 @@ def sample_size(texels: int | None, windows: int | None, population: int) -> tup
         raise SampleError(f"`sample_windows` must be at least 2, got {windows}")
     n = min(int(texels), population)
     return n, min(int(windows), n)
-
-
-def draw_sample(texels: Texels, n: int | None, windows: int | None, seed: int, log=None) -> TexelSample | None:
-    """The sample of ``n`` texels and ``windows`` SSIM windows of ``texels`` (``sample_size``: None, the defaults
-    for its size) drawn with ``seed`` and announced through ``log``, or None when every texel is rendered."""
-    n, windows = sample_size(n, windows, len(texels))
-    if not n:
-        return None
-    sample = TexelSample.draw(texels, n, windows, seed)
-    if log is not None:
-        log(
-            f"texel sample: {len(sample.points)} of {len(texels)} texels; {len(sample.centres)} SSIM windows of "
-            f"{len(sample.windows)} texels"
-        )
-    return sample
 
 
 def mean_se(x: np.ndarray, population: int) -> tuple[float, float]:
