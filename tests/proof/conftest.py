@@ -79,9 +79,9 @@ def slab_run(tmp_path_factory):
 
 
 def _hostile_inputs(root):
-    """An ink file whose inks cyan, magenta and yellow are named by payloads (white is white) and an
-    environment map (uniform radiance 1) whose file name is one."""
-    inks = [("cyan", PAYLOADS[0]), ("magenta", PAYLOADS[1]), ("yellow", PAYLOADS[2]), ("white", "white")]
+    """An ink file whose inks cyan, magenta and yellow are named by payloads (white is white; ink names hold no
+    '/', as file names do not) and an environment map (uniform radiance 1) whose file name is one."""
+    inks = [("cyan", FILE_PAYLOADS[0]), ("magenta", FILE_PAYLOADS[2]), ("yellow", FILE_PAYLOADS[3]), ("white", "white")]
     lib = InkTable.parse("cyan,magenta,yellow,white")
     table = {
         "inks": [{"name": n, "mu_t": list(lib.mu_t[i]), "albedo": list(lib.albedo[i])} for i, (_, n) in enumerate(inks)]
@@ -144,10 +144,14 @@ def _write_uv_ball(path):
     path.write_text("\n".join(lines) + "\n")
 
 
+#: fields a page does not show but checks first (the file's version, the digests of the files it was made from)
+KEPT = ("format_version", "volume_digest", "quantized_digest")
+
+
 def _planted(value, payloads):
     """``value`` (a JSON value) with every leaf replaced by the next of ``payloads`` (an endless iterator)."""
     if isinstance(value, dict):
-        return {k: v if k == "format_version" else _planted(v, payloads) for k, v in value.items()}
+        return {k: v if k in KEPT else _planted(v, payloads) for k, v in value.items()}
     if isinstance(value, list):
         return [_planted(v, payloads) for v in value]
     return next(payloads)

@@ -96,7 +96,7 @@ def test_hostile_slab_page(hostile_slab_run):
     page = check_page(hostile_slab_run / "report.html")
     text = _text(page)
     assert f"inkopt soft proof: run{FILE_PAYLOADS[1]}" in text  # title and heading
-    assert f"inks {PAYLOADS[0]}, {PAYLOADS[1]}, {PAYLOADS[2]}, white;" in text
+    assert f"inks {FILE_PAYLOADS[0]}, {FILE_PAYLOADS[2]}, {FILE_PAYLOADS[3]}, white;" in text
     assert f"predicted under environment map {FILE_PAYLOADS[1]}.npy" in text
     assert f"top picture {FILE_PAYLOADS[0]}.png" in text
 
@@ -106,7 +106,7 @@ def test_hostile_mesh_page(hostile_mesh_run):
     page = check_page(hostile_mesh_run / "report.html")
     text = _text(page)
     assert f"inkopt soft proof: run{FILE_PAYLOADS[2]}" in text
-    assert f"inks {PAYLOADS[0]}, {PAYLOADS[1]}, {PAYLOADS[2]}, white;" in text
+    assert f"inks {FILE_PAYLOADS[0]}, {FILE_PAYLOADS[2]}, {FILE_PAYLOADS[3]}, white;" in text
     assert f"mesh file{FILE_PAYLOADS[0]}.obj" in text and f"{FILE_PAYLOADS[2]}.png" in text
     assert f"environment map {FILE_PAYLOADS[1]}.npy" in text
 
