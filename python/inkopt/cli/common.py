@@ -110,14 +110,6 @@ def add_translucency_args(p, mesh: bool = False, both: bool = False) -> None:
     )
 
 
-def check_budget(max_spp, time_budget, spp_flag: str = "--max-spp", time_flag: str = "--time-budget") -> None:
-    """One-line ValueErrors for a sample cap below 1 or a time budget that is not positive."""
-    if max_spp is not None and max_spp < 1:
-        raise ValueError(f"{spp_flag} must be at least 1, got {max_spp}")
-    if time_budget is not None and not (time_budget > 0):
-        raise ValueError(f"{time_flag} must be a positive number of seconds, got {time_budget}")
-
-
 def lighting_from_args(args):
     from ..lighting import load_lighting
 
