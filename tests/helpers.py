@@ -7,6 +7,8 @@ and every developer machine lay it out.
 from pathlib import Path
 
 import numpy as np
+import trimesh
+from PIL import Image
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED_DATA = REPO.parent / "shared" / "data"
@@ -109,3 +111,33 @@ def with_fixed_shares(scene, fixed_share):
         target_rgb=scene.target_rgb,
         fixed_share=fixed_share,
     )
+
+
+def srgb_to_linear(v):
+    """IEC 61966-2-1 decoding, written out here (not inkopt's)."""
+    v = np.asarray(v, np.float64)
+    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
+
+
+RED = (200, 30, 30)
+
+
+def write_cube_obj(
+    folder, mtllib="m.mtl", map_kd="tex.png", uv=True, write_mtl=True, texture=None, usemtl="mat", head=(), sep=" "
+):
+    """A unit cube OBJ in ``folder``: ``mtllib`` (None: no line), ``usemtl`` before the faces (None: no line;
+    ``sep`` between the keyword and the name), the lines ``head`` at the top; its MTL defines material "mat"
+    naming ``map_Kd`` (None: no line); the texture tex.png (uniform RED, or the PIL image ``texture``)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    box = trimesh.creation.box((1, 1, 1))
+    lines = list(head) + ([f"mtllib {mtllib}"] if mtllib else [])
+    lines += ["v {:g} {:g} {:g}".format(*p) for p in box.vertices]
+    if uv:
+        lines += [f"vt {p[0] + 0.5:g} {p[1] + 0.5:g}" for p in box.vertices]
+    lines += [f"usemtl{sep}{usemtl}"] if mtllib and usemtl else []
+    lines += ["f " + " ".join(f"{i}/{i}" if uv else f"{i}" for i in t) for t in box.faces + 1]
+    (folder / "m.obj").write_text("\n".join(lines) + "\n")
+    if write_mtl:
+        (folder / "m.mtl").write_text("newmtl mat\nKd 1 1 1\n" + (f"map_Kd {map_kd}\n" if map_kd else ""))
+    (texture or Image.new("RGB", (8, 8), RED)).save(folder / "tex.png")
+    return folder / "m.obj"

@@ -4,6 +4,7 @@ every image mode Pillow reads (16-bit grey, float grey, palette, CMYK, CIELAB, a
 import numpy as np
 import pytest
 import trimesh
+from helpers import RED, srgb_to_linear, write_cube_obj
 from PIL import Image
 
 from inkopt.cli import main
@@ -11,36 +12,6 @@ from inkopt.scenes.mesh import load_mesh
 from inkopt.scenes.mesh.source import describe_colour_source
 from inkopt.scenes.picture import picture_rgba
 from inkopt.scenes.slab import load_picture
-
-
-def srgb_to_linear(v):
-    """IEC 61966-2-1 decoding, written out here (not inkopt's)."""
-    v = np.asarray(v, np.float64)
-    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
-
-
-RED = (200, 30, 30)
-
-
-def write_cube_obj(
-    folder, mtllib="m.mtl", map_kd="tex.png", uv=True, write_mtl=True, texture=None, usemtl="mat", head=(), sep=" "
-):
-    """A unit cube OBJ in ``folder``: ``mtllib`` (None: no line), ``usemtl`` before the faces (None: no line;
-    ``sep`` between the keyword and the name), the lines ``head`` at the top; its MTL defines material "mat"
-    naming ``map_Kd`` (None: no line); the texture tex.png (uniform RED, or the PIL image ``texture``)."""
-    folder.mkdir(parents=True, exist_ok=True)
-    box = trimesh.creation.box((1, 1, 1))
-    lines = list(head) + ([f"mtllib {mtllib}"] if mtllib else [])
-    lines += ["v {:g} {:g} {:g}".format(*p) for p in box.vertices]
-    if uv:
-        lines += [f"vt {p[0] + 0.5:g} {p[1] + 0.5:g}" for p in box.vertices]
-    lines += [f"usemtl{sep}{usemtl}"] if mtllib and usemtl else []
-    lines += ["f " + " ".join(f"{i}/{i}" if uv else f"{i}" for i in t) for t in box.faces + 1]
-    (folder / "m.obj").write_text("\n".join(lines) + "\n")
-    if write_mtl:
-        (folder / "m.mtl").write_text("newmtl mat\nKd 1 1 1\n" + (f"map_Kd {map_kd}\n" if map_kd else ""))
-    (texture or Image.new("RGB", (8, 8), RED)).save(folder / "tex.png")
-    return folder / "m.obj"
 
 
 @pytest.mark.parametrize(

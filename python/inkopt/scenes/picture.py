@@ -1,7 +1,18 @@
 """Input pictures: every image mode Pillow reads as sRGB colours with alpha, and resampling onto a face's texel
-grid (what a slab's pictures, a mesh's texture and a slab's translucency mask share)."""
+grid (what a slab's pictures, a mesh's texture and a slab's translucency mask share).
+
+Colour spaces: an RGB picture with an embedded ICC profile other than sRGB (Adobe RGB, Display P3, ProPhoto, a
+camera's or scanner's profile) is converted through its profile to sRGB by LittleCMS (Pillow's ImageCms), relative
+colorimetric, so that its numbers are not read as sRGB numbers; colours outside sRGB's gamut are clipped to it
+(8 bits a channel). A profile counts as sRGB when it maps every colour of a 17^3 grid to itself within one level,
+so the many files that embed an sRGB profile are read exactly as before. CMYK with a profile and CIELAB take the same
+path; RGB without a profile is sRGB. Greyscale profiles are not applied (grey is read as sRGB grey).
+"""
 
 from __future__ import annotations
+
+import io
+from functools import lru_cache
 
 import numpy as np
 
@@ -33,6 +44,8 @@ def picture_rgba(im, name: str = "picture") -> np.ndarray:
         im = _to_srgb(im, im.info["icc_profile"], name)
     elif mode == "LAB":
         im = _to_srgb(im, None, name)
+    elif rgb_profile(im, name) is not None:
+        im = rgb_to_srgb(im, name)
     try:
         rgba = im.convert("RGBA")
     except (ValueError, OSError) as exc:
@@ -42,8 +55,6 @@ def picture_rgba(im, name: str = "picture") -> np.ndarray:
 
 def _to_srgb(im, icc: bytes | None, name: str):
     """``im`` through its ICC profile ``icc`` (None: CIELAB) to an sRGB PIL image (LittleCMS)."""
-    import io
-
     from PIL import ImageCms
 
     try:
@@ -51,6 +62,69 @@ def _to_srgb(im, icc: bytes | None, name: str):
         return ImageCms.profileToProfile(im, src, ImageCms.createProfile("sRGB"), outputMode="RGB")
     except (ImageCms.PyCMSError, OSError, ValueError) as exc:
         raise ValueError(f"{name}: its {im.mode} colours cannot be converted to sRGB ({exc}); save it as RGB") from None
+
+
+# Modes whose colours an RGB profile describes (a palette's entries are RGB).
+_RGB_MODES = ("RGB", "RGBA", "RGBX", "RGBa", "P", "PA")
+
+
+def rgb_profile(im, name: str = "picture") -> str | None:
+    """The description of ``im``'s embedded RGB ICC profile when it is not sRGB (e.g. "Display P3"), else None
+    (no profile, an sRGB one, or a mode other than RGB or palette). One-line ValueError naming ``name`` for a
+    profile LittleCMS cannot read."""
+    icc = im.info.get("icc_profile")
+    if not icc or im.mode not in _RGB_MODES:
+        return None
+    try:
+        described = _profile_description(bytes(icc))
+    except ValueError as exc:
+        raise ValueError(f"{name}: its embedded ICC profile cannot be read ({exc}); save it as sRGB") from None
+    return described
+
+
+@lru_cache(maxsize=16)
+def _profile_description(icc: bytes) -> str | None:
+    """None for an sRGB profile (every colour of a 17^3 grid maps to itself within one level), else the profile's
+    description; ValueError for a profile that is not an RGB profile LittleCMS reads."""
+    from PIL import Image, ImageCms
+
+    try:
+        profile = ImageCms.ImageCmsProfile(io.BytesIO(icc))
+        space = profile.profile.xcolor_space.strip()
+        if space != "RGB":
+            raise ValueError(f"a {space} profile on RGB pixels")
+        levels = np.minimum(np.arange(17) * 16, 255).astype(np.uint8)
+        grid = np.stack(np.meshgrid(levels, levels, levels, indexing="ij"), -1).reshape(17, 289, 3)
+        out = ImageCms.profileToProfile(Image.fromarray(grid, "RGB"), profile, ImageCms.createProfile("sRGB"))
+        description = ImageCms.getProfileDescription(profile).strip() or "an unnamed profile"
+    except (ImageCms.PyCMSError, OSError, TypeError) as exc:
+        raise ValueError(" ".join(str(exc).split()) or type(exc).__name__) from None
+    deviation = np.abs(np.asarray(out, np.int16) - grid.astype(np.int16)).max()
+    return None if deviation <= 1 else description
+
+
+def rgb_to_srgb(im, name: str):
+    """An RGB or palette image with an embedded profile -> a PIL image in sRGB (LittleCMS, relative colorimetric:
+    colours outside sRGB are clipped to its gamut): RGBA with the alpha unchanged where some pixel is not opaque,
+    else RGB. One-line ValueError naming ``name`` for a profile LittleCMS cannot apply."""
+    from PIL import ImageCms
+
+    rgba = im.convert("RGBA")
+    try:
+        src = ImageCms.ImageCmsProfile(io.BytesIO(bytes(im.info["icc_profile"])))
+        out = ImageCms.profileToProfile(
+            rgba.convert("RGB"),
+            src,
+            ImageCms.createProfile("sRGB"),
+            renderingIntent=ImageCms.Intent.RELATIVE_COLORIMETRIC,
+            outputMode="RGB",
+        )
+    except (ImageCms.PyCMSError, OSError, ValueError) as exc:
+        raise ValueError(f"{name}: its RGB colours cannot be converted to sRGB ({exc}); save it as sRGB") from None
+    alpha = rgba.getchannel("A")
+    if alpha.getextrema() != (255, 255):
+        out.putalpha(alpha)
+    return out
 
 
 def resample(picture: np.ndarray, ny: int, nx: int) -> np.ndarray:

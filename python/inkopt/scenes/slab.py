@@ -24,7 +24,7 @@ from ..model import FixedShares, InkTable, Texels, Translucency, Volume, transpa
 from ..pictures import error_figure
 from ..rundir import RunDir, SceneRecord
 from ..units import OPT_DPI, voxel_mm
-from .picture import picture_rgba, resample
+from .picture import picture_rgba, resample, rgb_profile
 from .spec import SlabSpec, check_slab_size
 from .translucency import check_depth, load_mask, slab_translucency, translucency_fields
 
@@ -34,7 +34,9 @@ ASPECT_TOLERANCE = 0.02  # relative mismatch of picture and face aspect ratios a
 def describe_picture(path: str | Path, face: str = "top") -> str:
     """ "FACE picture NAME (W x H px, MODE)": the colour source of a slab face, for the log and report.json."""
     with open_image(path, f"picture {path}", decode=False) as im:
-        return f"{face} picture {Path(path).name} ({im.size[0]} x {im.size[1]} px, {im.mode})"
+        profile = rgb_profile(im, f"picture {path}")
+        mode = im.mode + (f", converted to sRGB from ICC profile {profile}" if profile else "")
+        return f"{face} picture {Path(path).name} ({im.size[0]} x {im.size[1]} px, {mode})"
 
 
 def load_picture(path: str | Path) -> np.ndarray:

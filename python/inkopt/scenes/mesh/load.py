@@ -27,7 +27,15 @@ from ...errors import ParameterError
 from ...images import check_pixels, decode_pixels
 from ..picture import picture_rgba
 from .checks import check_placement
-from .source import check_colour_source, check_obj_materials, check_resolved, has_alpha, load_texture, uniform_tiles
+from .source import (
+    check_colour_source,
+    check_obj_materials,
+    check_resolved,
+    has_alpha,
+    load_texture,
+    srgb_textures,
+    uniform_tiles,
+)
 
 _CHUNK = 1 << 19  # query points per libigl call (bounds the temporary memory to ~50 MB)
 
@@ -46,6 +54,7 @@ class TexturedMesh:
     sRGB; ``face_colors`` (F, 3) float32 sRGB; else the constant ``color`` (3,) float32 sRGB.
     ``texture_alpha``: the texture's alpha channel (H, W) float32 in [0, 1] if it has one (translucency);
     ``texture_name``: the texture's file name(s) where the file names them ("" for embedded textures);
+    ``texture_profiles``: the descriptions of the non-sRGB ICC profiles its texture was converted from;
     ``warnings``: one-line notes about the input that the run logs (``_check_solid``: small holes).
     """
 
@@ -63,6 +72,7 @@ class TexturedMesh:
     source: str = ""
     texture_alpha: np.ndarray | None = None
     texture_name: str = ""
+    texture_profiles: tuple = ()
     warnings: list = field(default_factory=list)  # one-line notes for the log (e.g. small holes closed over)
 
     @property
@@ -159,6 +169,7 @@ def load_mesh(
     override = load_texture(texture) if texture is not None else None
     scene = _read(trimesh.load_scene, path, str(path), process=False)
     resolved = check_resolved(scene, str(path), obj, accept)
+    profiles = srgb_textures(scene)
     if obj is not None:
         uniform_tiles(scene)
     tm = _read(scene.to_mesh, path)
@@ -171,11 +182,13 @@ def load_mesh(
     if override is not None:
         if mesh.uv is None:
             raise ParameterError(f"`texture` {texture}: {path} has no texture coordinates (no uv / vt) to look it up")
-        mesh.texture, mesh.texture_alpha = override
+        mesh.texture, mesh.texture_alpha, profile = override
         mesh.tint = np.ones(3, np.float32)
         mesh.texture_name = str(texture)
+        mesh.texture_profiles = (profile,) if profile else ()
     elif mesh.texture is not None:
         mesh.texture_name = resolved.names
+        mesh.texture_profiles = profiles
     if constant_color and mesh.uv is None:  # a texture that cannot be looked up: the accepted constant instead
         mesh.texture, mesh.texture_alpha = None, None
     check_colour_source(mesh, constant_color, texture_named=obj is not None and bool(obj.textures))

@@ -20,6 +20,9 @@ placeholder texture with alpha, without a word. So these are errors naming the f
 - no texture, vertex or face colours at all (a constant target), unless the user accepts a constant colour on
   purpose (``constant_color``).
 
+Textures with an embedded RGB ICC profile other than sRGB are converted to sRGB before trimesh joins the materials
+(``srgb_textures``; ``scenes.picture``), and ``describe_colour_source`` names the profile.
+
 ``texture``, an image file, names the texture directly (any image mode, ``scenes.picture.picture_rgba``); it
 replaces the material's and needs the mesh's uv coordinates. ``describe_colour_source`` says in one phrase which
 source a loaded mesh uses, with the size of the texture actually used (the first log line and report.json's
@@ -236,6 +239,33 @@ def check_resolved(scene, source: str, obj: ObjMaterials | None, accept: bool = 
     return Resolved(lost > 0, ", ".join(sorted(set(names))), alpha)
 
 
+def srgb_textures(scene) -> tuple[str, ...]:
+    """Replace, in place, every material texture of ``scene`` (a ``trimesh.Scene`` before its geometries are
+    joined, after ``check_resolved``) that carries a non-sRGB RGB ICC profile by its sRGB conversion, so that the
+    joined mesh's texture (an atlas where there are several) holds sRGB numbers. Returns the converted profiles'
+    descriptions, sorted and without repeats. One-line ValueError for an unreadable profile or texture."""
+    from ...images import check_pixels, decode_pixels
+    from ..picture import rgb_profile, rgb_to_srgb
+
+    converted = set()
+    for geom in scene.geometry.values():
+        mat = getattr(getattr(geom, "visual", None), "material", None)
+        img = _image(mat)
+        if img is None:
+            continue
+        name = f"texture {img.info.get('file_path') or '(embedded)'}"
+        profile = rgb_profile(img, name)
+        if profile is None:
+            continue
+        check_pixels(img.size, name)
+        decode_pixels(img, name)
+        out = rgb_to_srgb(img, name)
+        out.info["file_path"] = img.info.get("file_path")
+        setattr(mat, "image" if getattr(mat, "image", None) is not None else "baseColorTexture", out)
+        converted.add(profile)
+    return tuple(sorted(converted))
+
+
 def uniform_tiles(scene, size: int = 8) -> None:
     """Give every untextured material of an OBJ with a textured one a uniform ``size`` x ``size`` image of its
     colour (Kd), in place. trimesh packs the materials of a mesh with several into one atlas, an untextured one as
@@ -257,17 +287,19 @@ def uniform_tiles(scene, size: int = 8) -> None:
 
 
 def load_texture(path):
-    """``texture``, an image file: (PIL RGB image of the sRGB colours, (H, W) float32 alpha or None where opaque).
-    One-line ValueError (``images.ImageError``) for a missing, unreadable or too large file."""
+    """``texture``, an image file: (PIL RGB image of the sRGB colours, (H, W) float32 alpha or None where opaque,
+    the description of the ICC profile it was converted from or None). One-line ValueError
+    (``images.ImageError``) for a missing, unreadable or too large file."""
     from PIL import Image
 
-    from ..picture import picture_rgba
+    from ..picture import picture_rgba, rgb_profile
 
     with open_image(path, f"texture {path}") as im:
+        profile = rgb_profile(im, f"texture {path}")
         rgba = picture_rgba(im, f"texture {path}")
     rgb = Image.fromarray(np.round(rgba[..., :3] * 255).astype(np.uint8), "RGB")
     alpha = rgba[..., 3] if np.any(rgba[..., 3] < 1) else None
-    return rgb, alpha
+    return rgb, alpha, profile
 
 
 def check_colour_source(mesh, constant_color: bool = False, texture_named: bool = False) -> None:
@@ -296,7 +328,9 @@ def describe_colour_source(mesh) -> str:
     if src == "texture":
         w, h = mesh.texture.size
         alpha = ", with alpha" if mesh.texture_alpha is not None else ""
-        return f"texture {mesh.texture_name or '(embedded)'} ({w} x {h} px{alpha})"
+        profile = f", converted to sRGB from ICC profile {', '.join(mesh.texture_profiles)}"
+        profile = profile if mesh.texture_profiles else ""
+        return f"texture {mesh.texture_name or '(embedded)'} ({w} x {h} px{alpha}{profile})"
     if src in ("vertex", "face"):
         return f"{src} colours"
     return f"constant colour {_hex(mesh.color)}"
