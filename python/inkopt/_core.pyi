@@ -32,8 +32,7 @@ class Medium:
         core_sigma_s: NDArray[np.float32],
         core_sigma_a: NDArray[np.float32],
     ) -> Medium:
-        """A band and a core: inside (Z,Y,X) u8; band voxels index (K,) i64 (increasing linear zyx, inside) with
-        (K,3) f32 mm^-1 each; every other inside voxel the core's (3,) f32 mm^-1; outside vacuum."""
+        """Band voxels index (K,) i64 of inside (Z,Y,X) u8 with (K,3) f32, other inside voxels the core's (3,) f32."""
 
     @staticmethod
     def labels(labels: NDArray[np.uint8], ink_sigma_s: NDArray[np.float32], ink_sigma_a: NDArray[np.float32]) -> Medium:
