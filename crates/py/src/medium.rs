@@ -138,7 +138,8 @@ impl Medium {
             check_shape(a.shape(), &[3], name)?;
             Ok([v[0], v[1], v[2]])
         };
-        let (core_sigma_s, core_sigma_a) = (three(&core_sigma_s, "core_sigma_s")?, three(&core_sigma_a, "core_sigma_a")?);
+        let (core_sigma_s, core_sigma_a) =
+            (three(&core_sigma_s, "core_sigma_s")?, three(&core_sigma_a, "core_sigma_a")?);
         Ok(Medium(Form::Band { inside, band, core_sigma_s, core_sigma_a }))
     }
 

@@ -5,7 +5,10 @@
 //! work is in `gradients`. The GIL is released while rendering.
 
 use inkopt_core::{render, Boundary, EnvMap, Geometry, UniformLight};
-use numpy::{IntoPyArray, PyArray1, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4, PyUntypedArrayMethods};
+use numpy::{
+    IntoPyArray, PyArray1, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4,
+    PyUntypedArrayMethods,
+};
 use pyo3::prelude::*;
 
 use crate::arrays::{c_slice, check_shape, err, options, pack, Packed};

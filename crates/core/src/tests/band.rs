@@ -67,8 +67,11 @@ impl Object {
     }
 }
 
+/// A render's (mean, var_mean) bits per texel, its events, and the path-replay gradient (d/d sigma_s, d/d sigma_a).
+type Passes = (Vec<[u32; 6]>, u64, (Vec<f32>, Vec<f32>));
+
 /// Render and path-replay gradient bits of a medium on `threads` threads.
-fn passes<M: Medium>(geo: &Geometry, m: &M, threads: usize) -> (Vec<[u32; 6]>, u64, (Vec<f32>, Vec<f32>)) {
+fn passes<M: Medium>(geo: &Geometry, m: &M, threads: usize) -> Passes {
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
     pool.install(|| {
         let texels = box_texels(geo.n.map(|v| v as usize), &[0, 1, 2, 3, 4, 5]);

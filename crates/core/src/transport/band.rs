@@ -198,7 +198,11 @@ fn check_index(index: &[i64], n: usize) -> Result<(), String> {
         return Err(format!("index entry {e} is voxel {}, outside the grid of {n} voxels", index[e]));
     }
     if let Some(e) = (1..index.len()).find(|&e| index[e] <= index[e - 1]) {
-        return Err(format!("index must be strictly increasing; entry {e} is voxel {} after {}", index[e], index[e - 1]));
+        return Err(format!(
+            "index must be strictly increasing; entry {e} is voxel {} after {}",
+            index[e],
+            index[e - 1]
+        ));
     }
     Ok(())
 }
