@@ -71,10 +71,10 @@ def main(argv=None) -> dict:
     results = {}
     for rep in range(args.repeats):
         for name, r in renderers.items():
-            w, c, res = timed(lambda r=r: r.render(tex, spp=args.spp, seed=rep))
+            w, c, res = timed(lambda r=r, rep=rep: r.render(tex, spp=args.spp, seed=rep))
             times[name]["render"].append(w)
             times[name]["render_cpu"].append(c)
-            w, c, g = timed(lambda r=r: r.gradient(tex, adj, spp=args.spp, seed=rep))
+            w, c, g = timed(lambda r=r, rep=rep: r.gradient(tex, adj, spp=args.spp, seed=rep))
             times[name]["gradient"].append(w)
             times[name]["gradient_cpu"].append(c)
             results.setdefault(rep, []).append((res.rgb.tobytes(), g[0].tobytes(), g[1].tobytes()))
