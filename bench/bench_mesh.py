@@ -76,6 +76,7 @@ def main(argv=None) -> dict:
             file=sys.stderr,
         )
     rss["after_iterations"] = peak_rss_gb()
+    media = medium_bytes(scene.volume)  # after the peak is read: its layer temporaries are not the run's
     cpu1 = resource.getrusage(resource.RUSAGE_SELF)
     cpu_s = (cpu1.ru_utime + cpu1.ru_stime - cpu0.ru_utime - cpu0.ru_stime) / max(args.iterations, 1)
     h = run.history
@@ -111,6 +112,9 @@ def main(argv=None) -> dict:
             k: float(sum(p[k]["events"] for p in passes if p[k]) / max(sum(p[k]["paths"] for p in passes if p[k]), 1))
             for k in ("forward", "gradient")
         },
+        "band_voxels": None if scene.volume.band is None else len(scene.volume.band.index),
+        # bytes the core's medium holds in each form (sizes of its arrays, from the inside mask and the band)
+        "medium_bytes": media,
         "peak_rss_gb": rss["after_iterations"],
         "peak_rss_gb_by_stage": rss,
         "machine": {"cpu": platform.processor() or platform.machine(), "python": platform.python_version()},
@@ -137,6 +141,36 @@ def main(argv=None) -> dict:
         )
     )
     return result
+
+
+def medium_bytes(volume) -> dict:
+    """Bytes of the core's medium for ``volume`` (inside mask and optional band) in the sparse form (16 per grid row,
+    24 per voxel of each row's span from its first to its last inside voxel, 1 bit per such voxel) and, with a band,
+    the band form (24 per band voxel, 12 per run of band or core voxels in a row, 4 per row); counted a layer at a
+    time."""
+    import numpy as np
+
+    nz, ny, nx = volume.shape
+    span = runs = 0
+    band = None if volume.band is None else volume.band.index
+    for z in range(nz):
+        ins = volume.inside[z]
+        cols = np.arange(nx)
+        first = np.where(ins.any(1), np.argmax(ins, 1), nx)
+        last = np.where(ins.any(1), nx - np.argmax(ins[:, ::-1], 1), nx)
+        span += int((last - first).sum())
+        if band is not None:
+            cls = ins.astype(np.int8)
+            lo, hi = np.searchsorted(band, [z * ny * nx, (z + 1) * ny * nx])
+            cls.reshape(-1)[band[lo:hi] - z * ny * nx] = 2
+            starts = (cls != 0) & ((cols == 0) | (np.roll(cls, 1, axis=1) != cls))
+            runs += int(starts.sum())
+    rows = nz * ny
+    out = {"sparse": 16 * rows + 24 * span + span // 8}
+    if band is not None:
+        out["band"] = 24 * len(band) + 12 * runs + 4 * (rows + 1)
+        out["band_runs"] = runs
+    return out
 
 
 if __name__ == "__main__":

@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 __version__: str
 
 class Medium:
-    """A scene's medium as references to the caller's arrays, checked once; built by dense, sparse or labels."""
+    """A scene's medium as references to the caller's arrays, checked once; built by dense, sparse, band or labels."""
 
     @staticmethod
     def dense(sigma_s: NDArray[np.float32], sigma_a: NDArray[np.float32]) -> Medium:
@@ -24,12 +24,23 @@ class Medium:
         """Voxels index (K,) i64 (strictly increasing linear zyx; the rest vacuum) with (K,3) f32 mm^-1 each."""
 
     @staticmethod
+    def band(
+        inside: NDArray[np.uint8],
+        index: NDArray[np.int64],
+        sigma_s: NDArray[np.float32],
+        sigma_a: NDArray[np.float32],
+        core_sigma_s: NDArray[np.float32],
+        core_sigma_a: NDArray[np.float32],
+    ) -> Medium:
+        """Band voxels index (K,) i64 of inside (Z,Y,X) u8 with (K,3) f32, other inside voxels the core's (3,) f32."""
+
+    @staticmethod
     def labels(labels: NDArray[np.uint8], ink_sigma_s: NDArray[np.float32], ink_sigma_a: NDArray[np.float32]) -> Medium:
         """One ink per voxel, labels (Z,Y,X) u8 (255: vacuum), and the ink table (N,3) f32 mm^-1 each."""
 
     @property
     def form(self) -> str:
-        """ "dense", "sparse" or "labels"."""
+        """ "dense", "sparse", "band" or "labels"."""
 
 class Texels:
     """Texels of a render or gradient pass, converted and checked once (28 bytes per texel)."""
@@ -64,7 +75,10 @@ class Scene:
         """Replace the medium (in place if of the same form and voxels), keeping geometry, pool and gradient buffers."""
 
     def set_voxels(self, index: NDArray[np.int64], sigma_s: NDArray[np.float32], sigma_a: NDArray[np.float32]) -> None:
-        """Overwrite voxels index (K,) i64 (linear zyx) of a dense/sparse medium with (K, 3) f32 mm^-1, in place."""
+        """Overwrite voxels index (K,) i64 (linear zyx) of a dense/sparse medium (or a band medium's band) with (K, 3) f32 mm^-1, in place."""
+
+    def in_band(self, index: NDArray[np.int64]) -> NDArray[np.bool_]:
+        """(K,) bool: whether each voxel of index (K,) i64 is in the band of a band medium."""
 
     def set_light(self, map: NDArray[np.float32] | None = None, rotate_deg: float = 0.0) -> None:
         """Light by an equirectangular map (H, 2H, 3) f32 linear radiance turned rotate_deg about z; None: uniform 1."""

@@ -225,7 +225,7 @@ class Renderer(TexelRenderer):
             kw["normal_index"], kw["normal_vectors"] = volume.normals.index, volume.normals.vectors
         voxel_mm = tuple(float(v) for v in volume.voxel_mm)
         self._scene = _core.Scene(volume.shape, voxel_mm, self._medium(volume), **kw)
-        self._labels = volume.form == "labels"
+        self._labels = volume.form == "labels" and volume.band is None
         self.lighting = Lighting()
         self.set_lighting(lighting)
 
@@ -236,11 +236,19 @@ class Renderer(TexelRenderer):
 
     @staticmethod
     def _medium(volume: Volume) -> _core.Medium:
-        """The core's medium (``_core.Medium``): labels with the ink table; the inside voxels' coefficients
-        (sparse: 4 bytes per grid voxel + 24 per inside voxel) when the volume has an inside mask; else dense
-        coefficients."""
+        """The core's medium (``_core.Medium``): with a band (``Volume.band``), the band's coefficients and the
+        core's (24 bytes per band voxel, nothing per core voxel); labels with the ink table; the inside voxels'
+        coefficients (sparse: 24 bytes per voxel of each grid row's span of them) when the volume has an inside
+        mask; else dense coefficients."""
         from ._core import Medium
 
+        if volume.band is not None:
+            # Mixed as a row of a batch: a one-row product takes another BLAS path whose float32 sums may round
+            # differently, and the core must read exactly what the sparse form's batched rows hold.
+            core_s, core_a = mix(np.stack([volume.band.core] * 2), volume.inks)
+            inside = np.ascontiguousarray(volume.inside).view(np.uint8)  # bool bytes are 0/1: no copy
+            band = volume.band.index
+            return Medium.band(inside, band, *volume.coefficients_at(band), core_s[0], core_a[0])
         if volume.form == "labels":
             inks = volume.inks
             return Medium.labels(volume.labels, inks.sigma_s.astype(np.float32), inks.sigma_a.astype(np.float32))
@@ -254,7 +262,7 @@ class Renderer(TexelRenderer):
         check_same_grid(volume, self.volume)
         self._scene.set_medium(self._medium(volume))
         self.volume = volume
-        self._labels = volume.form == "labels"
+        self._labels = volume.form == "labels" and volume.band is None
 
     def set_mixture(self, index: np.ndarray, mixture: np.ndarray) -> None:
         inks = self.volume.inks
@@ -269,12 +277,28 @@ class Renderer(TexelRenderer):
             inside = np.flatnonzero(vol.inside)
             self._scene.set_medium(Medium.sparse(inside, *vol.coefficients_at(inside)))
             self._labels = False
+        if self.volume.band is not None:
+            index, mixture = self._band_rows(index, mixture)
         s, a = mix(mixture, inks)
         self._scene.set_voxels(
             np.ascontiguousarray(index, np.int64),
             np.ascontiguousarray(s, np.float32),
             np.ascontiguousarray(a, np.float32),
         )
+
+    def _band_rows(self, index: np.ndarray, mixture: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The entries of ``index`` (K,) and ``mixture`` (K, N) in the band; a ValueError for a core voxel given a
+        mixture other than the core's (the band medium holds one core mixture), the core's are dropped."""
+        index = np.ascontiguousarray(index, np.int64)
+        ours = self._scene.in_band(index)
+        if ours.all():
+            return index, mixture
+        core = self.volume.band.core
+        rest = np.asarray(mixture)[~ours]
+        if not np.array_equal(rest, np.broadcast_to(core, rest.shape)):
+            j = int(index[~ours][np.flatnonzero(np.any(rest != core, axis=1))[0]])
+            raise ValueError(f"voxel {j} is in the core (one mixture {core.tolist()}) or outside the object")
+        return index[ours], np.asarray(mixture)[ours]
 
     @property
     def threads(self) -> int:

@@ -25,6 +25,7 @@ pub mod kernels;
 pub mod spans;
 pub mod transport;
 
+pub use transport::band::BandMedium;
 pub use transport::estimate::{RenderOptions, Stats, TexelEstimate};
 pub use transport::grad::{backward, GradBuffers, GradMethod, NO_GRADIENT};
 pub use transport::light::EnvMap;

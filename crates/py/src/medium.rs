@@ -1,22 +1,24 @@
-//! The `Medium` class (a scene's medium as the caller's arrays: dense, sparse or label form, checked once when it
-//! is built), the core medium a scene holds, and the macro that runs a generic core function on whichever form
+//! The `Medium` class (a scene's medium as the caller's arrays: dense, sparse, band or label form, checked once
+//! when it is built), the core medium a scene holds, and the macro that runs a generic core function on whichever form
 //! the scene holds.
 
-use inkopt_core::{DenseMedium, LabelMedium, SparseMedium};
+use inkopt_core::{BandMedium, DenseMedium, LabelMedium, SparseMedium};
 use numpy::ndarray::Dimension;
 use numpy::{
-    Element, PyArray, PyArray1, PyArray2, PyArray3, PyArray4, PyArrayMethods, PyReadonlyArray, PyUntypedArrayMethods,
+    Element, PyArray, PyArray1, PyArray2, PyArray3, PyArray4, PyArrayMethods, PyReadonlyArray, PyReadonlyArray1,
+    PyUntypedArrayMethods,
 };
 use pyo3::prelude::*;
 
 use crate::arrays::{c_slice, check_shape, err};
 
-/// The three forms of a scene's medium. A scene holds one, so the size difference between the variants costs
+/// The four forms of a scene's medium. A scene holds one, so the size difference between the variants costs
 /// nothing worth a box (an extra indirection on every render call).
 #[allow(clippy::large_enum_variant)]
 pub(crate) enum MediumKind {
     Dense(DenseMedium),
     Sparse(SparseMedium),
+    Band(BandMedium),
     Labels(LabelMedium),
 }
 
@@ -26,13 +28,15 @@ macro_rules! with_medium {
         match $medium {
             $crate::medium::MediumKind::Dense($m) => $body,
             $crate::medium::MediumKind::Sparse($m) => $body,
+            $crate::medium::MediumKind::Band($m) => $body,
             $crate::medium::MediumKind::Labels($m) => $body,
         }
     };
 }
 pub(crate) use with_medium;
 
-/// A medium for `Scene(...)` and `Scene.set_medium`, built by `Medium.dense`, `Medium.sparse` or `Medium.labels`.
+/// A medium for `Scene(...)` and `Scene.set_medium`, built by `Medium.dense`, `Medium.sparse`, `Medium.band` or
+/// `Medium.labels`.
 /// It holds references to the caller's arrays (no copy; the scene copies them into its own form when it takes
 /// the medium), their dtypes, shapes and layout checked when it is built; the grid is checked by the scene.
 #[pyclass(module = "inkopt._core", frozen)]
@@ -40,8 +44,30 @@ pub(crate) struct Medium(Form);
 
 enum Form {
     Dense { sigma_s: Py<PyArray4<f32>>, sigma_a: Py<PyArray4<f32>> },
-    Sparse { index: Py<PyArray1<i64>>, sigma_s: Py<PyArray2<f32>>, sigma_a: Py<PyArray2<f32>> },
+    Sparse(Sparse),
+    Band { inside: Py<PyArray3<u8>>, band: Sparse, core_sigma_s: [f32; 3], core_sigma_a: [f32; 3] },
     Labels { labels: Py<PyArray3<u8>>, ink_sigma_s: Py<PyArray2<f32>>, ink_sigma_a: Py<PyArray2<f32>> },
+}
+
+/// Listed voxels' coefficients: `index` (K,) int64, `sigma_s` and `sigma_a` (K, 3) float32.
+struct Sparse {
+    index: Py<PyArray1<i64>>,
+    sigma_s: Py<PyArray2<f32>>,
+    sigma_a: Py<PyArray2<f32>>,
+}
+
+impl Sparse {
+    fn checked(
+        index: Bound<'_, PyArray1<i64>>,
+        sigma_s: Bound<'_, PyArray2<f32>>,
+        sigma_a: Bound<'_, PyArray2<f32>>,
+    ) -> PyResult<Self> {
+        let k = Some(index.len());
+        let index = checked(index, "index", &[None])?;
+        let (sigma_s, sigma_a) =
+            (checked(sigma_s, "sigma_s", &[k, Some(3)])?, checked(sigma_a, "sigma_a", &[k, Some(3)])?);
+        Ok(Sparse { index, sigma_s, sigma_a })
+    }
 }
 
 /// The array as a C-ordered reference; a ValueError naming `name` for another layout or a shape that is not
@@ -87,11 +113,34 @@ impl Medium {
         sigma_s: Bound<'_, PyArray2<f32>>,
         sigma_a: Bound<'_, PyArray2<f32>>,
     ) -> PyResult<Self> {
-        let k = Some(index.len());
-        let index = checked(index, "index", &[None])?;
-        let (sigma_s, sigma_a) =
-            (checked(sigma_s, "sigma_s", &[k, Some(3)])?, checked(sigma_a, "sigma_a", &[k, Some(3)])?);
-        Ok(Medium(Form::Sparse { index, sigma_s, sigma_a }))
+        Ok(Medium(Form::Sparse(Sparse::checked(index, sigma_s, sigma_a)?)))
+    }
+
+    /// Medium.band(inside, index, sigma_s, sigma_a, core_sigma_s, core_sigma_a): an object as a band and a core.
+    /// `inside` (Z, Y, X) uint8 (non-zero: inside; read when a scene takes the medium, not kept); the band's voxels
+    /// `index` (K,) int64 (strictly increasing linear (z, y, x) indices of inside voxels) with their coefficients
+    /// (K, 3) float32 each; every other inside voxel has the core's `core_sigma_s`, `core_sigma_a` (3,) float32;
+    /// outside voxels are vacuum; mm^-1. 24 bytes per band voxel, 12 per run of band or core voxels in a grid
+    /// row and 4 per row; renders exactly as the sparse or dense form holding the same coefficients.
+    #[staticmethod]
+    fn band(
+        inside: Bound<'_, PyArray3<u8>>,
+        index: Bound<'_, PyArray1<i64>>,
+        sigma_s: Bound<'_, PyArray2<f32>>,
+        sigma_a: Bound<'_, PyArray2<f32>>,
+        core_sigma_s: PyReadonlyArray1<'_, f32>,
+        core_sigma_a: PyReadonlyArray1<'_, f32>,
+    ) -> PyResult<Self> {
+        let inside = checked(inside, "inside", &[None, None, None])?;
+        let band = Sparse::checked(index, sigma_s, sigma_a)?;
+        let three = |a: &PyReadonlyArray1<'_, f32>, name: &str| -> PyResult<[f32; 3]> {
+            let v = a.as_array();
+            check_shape(a.shape(), &[3], name)?;
+            Ok([v[0], v[1], v[2]])
+        };
+        let (core_sigma_s, core_sigma_a) =
+            (three(&core_sigma_s, "core_sigma_s")?, three(&core_sigma_a, "core_sigma_a")?);
+        Ok(Medium(Form::Band { inside, band, core_sigma_s, core_sigma_a }))
     }
 
     /// Medium.labels(labels, ink_sigma_s, ink_sigma_a): one ink per voxel, (Z, Y, X) uint8 (255: vacuum), and
@@ -112,12 +161,13 @@ impl Medium {
         }))
     }
 
-    /// The medium's form: "dense", "sparse" or "labels".
+    /// The medium's form: "dense", "sparse", "band" or "labels".
     #[getter]
     fn form(&self) -> &'static str {
         match self.0 {
             Form::Dense { .. } => "dense",
-            Form::Sparse { .. } => "sparse",
+            Form::Sparse(_) => "sparse",
+            Form::Band { .. } => "band",
             Form::Labels { .. } => "labels",
         }
     }
@@ -135,10 +185,19 @@ impl Medium {
                 let m = DenseMedium::from_interleaved(c_slice(&s, "sigma_s")?, c_slice(&a, "sigma_a")?);
                 Ok(MediumKind::Dense(m.map_err(err)?))
             }
-            Form::Sparse { index, sigma_s, sigma_a } => {
+            Form::Sparse(Sparse { index, sigma_s, sigma_a }) => {
                 let (ix, s, a) = (view(index, py)?, view(sigma_s, py)?, view(sigma_a, py)?);
                 let (ix, s, a) = (c_slice(&ix, "index")?, c_slice(&s, "sigma_s")?, c_slice(&a, "sigma_a")?);
                 Ok(MediumKind::Sparse(SparseMedium::new([nx, ny, nz], ix, s, a).map_err(err)?))
+            }
+            Form::Band { inside, band: Sparse { index, sigma_s, sigma_a }, core_sigma_s, core_sigma_a } => {
+                let m = view(inside, py)?;
+                check_shape(m.shape(), &[nz, ny, nx], "inside")?;
+                let (ix, s, a) = (view(index, py)?, view(sigma_s, py)?, view(sigma_a, py)?);
+                let (ix, s, a) = (c_slice(&ix, "index")?, c_slice(&s, "sigma_s")?, c_slice(&a, "sigma_a")?);
+                let core = (*core_sigma_s, *core_sigma_a);
+                let m = BandMedium::new([nx, ny, nz], c_slice(&m, "inside")?, ix, s, a, core);
+                Ok(MediumKind::Band(m.map_err(err)?))
             }
             Form::Labels { labels, ink_sigma_s, ink_sigma_a } => {
                 let (l, is, ia) = (view(labels, py)?, view(ink_sigma_s, py)?, view(ink_sigma_a, py)?);
@@ -162,7 +221,7 @@ impl Medium {
                 check_shape(s.shape(), &[nz, ny, nx, 3], "sigma_s")?;
                 m.refill(c_slice(&s, "sigma_s")?, c_slice(&a, "sigma_a")?).map_err(err)?;
             }
-            (MediumKind::Sparse(m), Form::Sparse { index, sigma_s, sigma_a }) => {
+            (MediumKind::Sparse(m), Form::Sparse(Sparse { index, sigma_s, sigma_a })) => {
                 if !m.stores(c_slice(&view(index, py)?, "index")?) {
                     return Ok(false);
                 }

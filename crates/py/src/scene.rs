@@ -5,7 +5,10 @@
 //! work is in `gradients`. The GIL is released while rendering.
 
 use inkopt_core::{render, Boundary, EnvMap, Geometry, UniformLight};
-use numpy::{PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4, PyUntypedArrayMethods};
+use numpy::{
+    IntoPyArray, PyArray1, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4,
+    PyUntypedArrayMethods,
+};
 use pyo3::prelude::*;
 
 use crate::arrays::{c_slice, check_shape, err, options, pack, Packed};
@@ -85,8 +88,8 @@ impl Scene {
         Ok(())
     }
 
-    /// set_voxels(index, sigma_s, sigma_a): overwrite the coefficients of some voxels of a dense or sparse
-    /// medium (a sparse one must store them) in place
+    /// set_voxels(index, sigma_s, sigma_a): overwrite the coefficients of some voxels of a dense, sparse or band
+    /// medium (a sparse one must store them, a band one hold them in its band: the core has one mixture) in place
     /// (the optimiser's free voxels, every iteration) and recompute the majorant. `index` (K,) int64: linear
     /// voxel indices of the (z, y, x) grid (a voxel listed twice takes its last values); `sigma_s`, `sigma_a`
     /// (K, 3) float32, mm^-1. All checked before anything is written. The GIL is released.
@@ -105,7 +108,18 @@ impl Scene {
         match &mut self.medium {
             MediumKind::Dense(m) => py.detach(|| pool.install(|| m.set_voxels(ix, s, a))).map_err(err),
             MediumKind::Sparse(m) => py.detach(|| pool.install(|| m.set_voxels(ix, s, a))).map_err(err),
+            MediumKind::Band(m) => py.detach(|| pool.install(|| m.set_voxels(ix, s, a))).map_err(err),
             MediumKind::Labels(_) => Err(err("set_voxels needs coefficients (sigma_s, sigma_a), not labels")),
+        }
+    }
+
+    /// in_band(index) -> (K,) bool: whether each voxel of `index` (K,) int64 (linear (z, y, x) indices) is in a
+    /// band medium's band (what its `set_voxels` takes; a core or outside voxel is not). Only for a band medium.
+    fn in_band<'py>(&self, py: Python<'py>, index: PyReadonlyArray1<i64>) -> PyResult<Bound<'py, PyArray1<bool>>> {
+        let ix = c_slice(&index, "index")?;
+        match &self.medium {
+            MediumKind::Band(m) => Ok(m.in_band(ix).into_pyarray(py)),
+            _ => Err(err("in_band needs a band medium")),
         }
     }
 

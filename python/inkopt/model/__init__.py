@@ -6,6 +6,7 @@ they express in ``constraints``), a mesh's provenance (``provenance``) and the r
 from .constraints import TRANSPARENT_INKS, Translucency, scene_fixed_shares, transparent_ink, white_fixed_shares
 from .fixed import FixedShares
 from .inks import DEFAULT_G, INK_LIBRARY, PRESETS, InkTable, mix, mix_grad
+from .media import Band
 from .normals import SurfaceNormals
 from .provenance import MeshInfo
 from .texels import FACE_ALIASES, FACE_NAMES, FACE_NORMALS, Texels, face_id
@@ -26,6 +27,7 @@ __all__ = [
     "BOUNDARIES",
     "EMPTY",
     "MAX_VOLUME_BYTES",
+    "Band",
     "Dense",
     "Labels",
     "Mixture",

@@ -1,5 +1,6 @@
-"""The three forms of a volume's medium (``Dense`` coefficients, an ink ``Mixture``, ink ``Labels``) and the
-quantization settings of a labels volume; ``Volume`` (``model.volume``) holds one medium on its grid.
+"""The three forms of a volume's medium (``Dense`` coefficients, an ink ``Mixture``, ink ``Labels``), an object's
+``Band`` (the voxels near its surface that may differ from its one core mixture) and the quantization settings of a
+labels volume; ``Volume`` (``model.volume``) holds one medium on its grid, and a band where it has one.
 
 Conventions (docs/conventions.md): arrays are (z, y, x[, c]); coefficients in mm^-1.
 """
@@ -106,6 +107,43 @@ class Labels:
 
 
 Medium = Dense | Mixture | Labels
+
+
+@dataclass(frozen=True)
+class Band:
+    """An object as a band and a core: the inside voxels ``index`` ((K,) int64, strictly increasing flat (z, y, x)
+    indices: the optimiser's free voxels and the fixed ones whose shares are not the core's) may hold any mixture;
+    every other inside voxel holds ``core`` ((N,) float32 ink shares). The renderer then stores coefficients only
+    for the band (``_core.Medium.band``: 24 bytes per band voxel) and one pair per channel for the core."""
+
+    index: np.ndarray
+    core: np.ndarray
+
+    def __post_init__(self):
+        index = np.ascontiguousarray(self.index, np.int64).reshape(-1)
+        if len(index) > 1 and np.any(np.diff(index) <= 0):
+            raise VolumeError("a band's index must be strictly increasing voxel indices")
+        object.__setattr__(self, "index", index)
+        object.__setattr__(self, "core", np.ascontiguousarray(self.core, np.float32).reshape(-1))
+
+    @classmethod
+    def of_fixed(cls, inside: np.ndarray, fixed) -> Band:
+        """The band of an object whose inside voxels ((z, y, x) bool) are free or hold fixed shares ``fixed``
+        (``model.fixed.FixedShares``: ``held`` in every voxel that is not free, except its indexed rows): the
+        inside voxels that are free or indexed, and ``held`` as the core."""
+        flat = inside.reshape(-1)
+        free = np.flatnonzero(fixed.free.reshape(-1) & flat)
+        rows = fixed.index[flat[fixed.index]]
+        return cls(np.union1d(free, rows) if len(rows) else free, fixed.held)
+
+    def check(self, inside: np.ndarray, n_inks: int) -> None:
+        """One-line VolumeError unless the band lies inside ``inside`` ((z, y, x) bool) and ``core`` has ``n_inks``
+        finite non-negative shares."""
+        if len(self.core) != n_inks or not np.all(np.isfinite(self.core)) or np.any(self.core < 0):
+            raise VolumeError(f"a band's core must be {n_inks} finite non-negative ink shares, got {self.core}")
+        flat = inside.reshape(-1)
+        if len(self.index) and (self.index[0] < 0 or self.index[-1] >= flat.size or not flat[self.index].all()):
+            raise VolumeError("a band's voxels must lie inside the object")
 
 
 @dataclass(frozen=True)

@@ -33,7 +33,7 @@ from ..errors import ParameterError
 from ..io import FORMAT_KEY, FormatError, Streamed, load_npz, save_npz, upgrade_format
 from .inks import DEFAULT_G, InkTable, mix
 from .labelfile import load_label_file
-from .media import EMPTY, Dense, Labels, Medium, Mixture, Quantization, VolumeError
+from .media import EMPTY, Band, Dense, Labels, Medium, Mixture, Quantization, VolumeError
 from .normals import SurfaceNormals
 
 BOUNDARIES = ("box", "periodic-xy")
@@ -85,6 +85,9 @@ class Volume:
     boundary: str = "box"
     origin_mm: np.ndarray | None = None
     quantization: Quantization | None = None
+    #: the object as a band and one core mixture (``media.Band``; needs ``inside`` and an ink table): the renderer
+    #: stores only the band's coefficients and renders every other inside voxel with the core's mixture
+    band: Band | None = None
 
     def __post_init__(self):
         self.voxel_mm = np.asarray(self.voxel_mm, dtype=np.float64).reshape(-1)
@@ -165,6 +168,10 @@ class Volume:
                 raise VolumeError(str(exc)) from None
             if self.normals.shape != shp:
                 raise VolumeError(f"normals are for a grid of shape {self.normals.shape}, the volume is {shp}")
+        if self.band is not None:
+            if self.inside is None or self.inks is None:
+                raise VolumeError("a volume with a band needs an inside mask and an ink table")
+            self.band.check(self.inside, len(self.inks))
         need = self.render_bytes()
         if need > MAX_VOLUME_BYTES:
             raise VolumeError(
@@ -175,10 +182,13 @@ class Volume:
 
     def render_bytes(self) -> int:
         """Memory the renderer needs for this medium (bytes): labels 1 per voxel; coefficients 24 per voxel
-        (sigma_t, albedo f32 x 3 channels), or with an inside mask 4 per voxel (slot) + 24 per inside voxel; the
-        mask and its safe distances 2 per voxel; 20 per shading normal."""
+        (sigma_t, albedo f32 x 3 channels), or with an inside mask 4 per voxel (slot) + 24 per inside voxel, or with
+        a band 24 per band voxel and ~16 per grid row; the mask and its safe distances 2 per voxel; 20 per shading
+        normal."""
         n = int(np.prod(self.shape, dtype=np.int64))
-        if self.form == "labels":
+        if self.band is not None:
+            need = 24 * len(self.band.index) + 16 * (n // self.shape[2])
+        elif self.form == "labels":
             need = n
         elif self.inside is not None:
             need = 4 * n + 24 * int(np.count_nonzero(self.inside))
@@ -232,8 +242,9 @@ class Volume:
         return np.ones(self.shape, bool)
 
     def with_medium(self, medium: Medium, **changes) -> Volume:
-        """The same geometry with another medium (and any other field ``changes``)."""
-        return replace(self, medium=medium, **changes)
+        """The same geometry with another medium (and any other field ``changes``); no band unless ``changes``
+        gives one (another medium need not hold the band's core)."""
+        return replace(self, medium=medium, **{"band": None, **changes})
 
     def with_mixture(self, mixture: np.ndarray) -> Volume:
         """The same geometry and inks with another mixture (z, y, x, N)."""

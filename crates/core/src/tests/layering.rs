@@ -13,6 +13,7 @@ const LAYERS: &[&str] = &[
     "transport::light",
     "transport::normals",
     "transport::medium",
+    "transport::band",
     "transport::scene",
     "transport::path",
     "transport::grid",

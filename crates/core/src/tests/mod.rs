@@ -2,11 +2,12 @@
 //! and free flights with closed forms), `samplers` (the samplers and walks against each other), `gradients`
 //! (gradients against finite differences), `light` (environment maps), `determinism` (thread counts, chunking,
 //! media forms), `geometry` (safe distances and balls), `smooth` (the step preconditioner against a plain
-//! implementation), `storage` (in-place updates and compact storage against the plain forms, bit for bit),
-//! `layering` (the module layering, on the source). Tolerances are multiples of the estimator's own standard
+//! implementation), `storage` (in-place updates and compact storage against the plain forms, bit for bit), `band`
+//! (the band medium against them), `layering` (the module layering, on the source). Tolerances are multiples of the estimator's own standard
 //! error (computed from the samples), never fixed image values.
 
 mod analytic;
+mod band;
 mod determinism;
 mod geometry;
 mod gradients;

@@ -229,7 +229,7 @@ fn sparse_normals_match_the_dense_formula() {
 }
 
 /// (sigma_t, albedo) bits of every voxel and channel of any medium, and its majorants.
-fn lookup_bits<M: Medium>(m: &M) -> (Vec<(u32, u32)>, [u32; 3]) {
+pub(super) fn lookup_bits<M: Medium>(m: &M) -> (Vec<(u32, u32)>, [u32; 3]) {
     let bits = (0..3)
         .flat_map(|c| (0..m.len()).map(move |j| (c, j)))
         .map(|(c, j)| {

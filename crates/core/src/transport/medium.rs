@@ -6,6 +6,8 @@
 //!   figurine whose inside is a quarter of its bounding grid this is about a third of the dense form, and a
 //!   lookup reads the same values, so renders are bit-identical.
 //! - `LabelMedium`: one ink label per voxel and an ink table, 1 byte per voxel (quantized volumes).
+//! - `BandMedium` (in `band`): a band of voxels near the surface with their own coefficients, one homogeneous
+//!   core, no array per grid voxel.
 //!
 //! Coefficients are stored per channel in planar arrays (all voxels of R, then G, then B) as interleaved
 //! (sigma_t, albedo) pairs, the two numbers the random walk needs, so one lookup is one load.
@@ -192,7 +194,7 @@ impl Medium for LabelMedium {
 
 /// Check interleaved (entry, channel) coefficient arrays of `k` entries: lengths, and every pair finite and
 /// non-negative. `name(q)` names entry q in the error.
-fn check_coefficients(
+pub(crate) fn check_coefficients(
     k: usize,
     sigma_s: &[f32],
     sigma_a: &[f32],
@@ -214,7 +216,7 @@ fn check_coefficients(
 
 /// The largest sigma_t of each channel over planar coefficients of `k` entries per channel (in parallel: max is
 /// exact in any order).
-fn majorant_of(coef: &[[f32; 2]], k: usize) -> [f32; 3] {
+pub(crate) fn majorant_of(coef: &[[f32; 2]], k: usize) -> [f32; 3] {
     use rayon::prelude::*;
     std::array::from_fn(|c| {
         coef[c * k..(c + 1) * k]

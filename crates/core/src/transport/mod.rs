@@ -7,6 +7,7 @@
 //! - `light`: the `Light` trait (uniform light, environment maps).
 //! - `normals`: sparse shading normals.
 //! - `medium`: the `Medium` trait and its dense, sparse and label forms.
+//! - `band`: the band medium (a band near the surface stored per voxel, one homogeneous core).
 //! - `scene`: the grid geometry (size, boundary, inside mask, safe and empty distances), texels.
 //! - `path`: a path's walk state, its value, the `Tally` that receives its segments, the walk's limits.
 //! - `grid`: locating points, voxel traversal (DDA), exit distances, the periodic wrap, empty jumps.
@@ -17,6 +18,7 @@
 //! - `render`: parallel drivers of the forward render.
 //! - `grad`: the gradient pass and its fixed-point buffers.
 
+pub mod band;
 pub mod estimate;
 pub(crate) mod flight;
 pub mod grad;

@@ -31,6 +31,7 @@ import numpy as np
 from ...errors import ParameterError
 from ...model import (
     EMPTY,
+    Band,
     FixedShares,
     InkTable,
     MeshInfo,
@@ -240,6 +241,7 @@ def build_mesh_scene(spec: MeshSpec, inks: InkTable) -> MeshScene:
         normals=vox.normals,
         boundary="box",
         origin_mm=vox.origin_mm,
+        band=None if spec.shell_mm is None else Band.of_fixed(vox.inside, fixed),  # a core below the shell
     )
     vox.sdf = None  # 4 bytes per grid voxel no longer needed
     path = str(Path(spec.path).resolve())
