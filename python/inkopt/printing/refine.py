@@ -74,9 +74,19 @@ def refine_seeds(seed: int, it: int) -> tuple[int, int]:
 class PrintedRefinement:
     """The refinement's state over a mixture volume ``vol`` (a ``Volume`` with a mixture and inks): variables of its
     free voxels, the loss, the optimiser, the continuous renderer (geometry built once) and the printer texels' map
-    (made on the first quantization). ``step()`` does one iteration; ``volume()`` is the current mixture."""
+    (made on the first quantization). ``step()`` does one iteration; ``volume()`` is the current mixture. ``lr``:
+    the step (default ``REFINE_STEP``); ``spp``: the printed render's samples per scene texel and the gradient
+    pass's per texel (default ``REFINE_SPP``, ``GRADIENT_SPP``)."""
 
-    def __init__(self, vol: Volume, target: PrintedLoss, q: Quantization, threads: int | None = None):
+    def __init__(
+        self,
+        vol: Volume,
+        target: PrintedLoss,
+        q: Quantization,
+        threads: int | None = None,
+        lr: float = REFINE_STEP,
+        spp: tuple[int, int] = (REFINE_SPP, GRADIENT_SPP),
+    ):
         mix = vol.require_mixture("the printed refinement").mixture
         self.base, self.target, self.q, self.threads = vol, target, replace(q, refine=0), threads
         fs = target.fixed_share or FixedShares.none(vol.shape, len(vol.inks))
@@ -84,7 +94,8 @@ class PrintedRefinement:
         rows = np.asarray(mix, np.float32).reshape(-1, len(vol.inks))[self.param.free_index]
         self.x = self.param.variables_for(free_part(rows, self.param.fixed_f, self.param.share_f))
         self.loss = TexelLoss(np.asarray(target.target_rgb, np.float32), target.texels.pos_vox, gamma=target.gamma)
-        self.opt = make_optimizer("eg", REFINE_STEP, self.x.shape, threads)
+        self.opt = make_optimizer("eg", lr, self.x.shape, threads)
+        self.spp = spp
         self.smoother = None
         if target.smooth > 0:
             self.smoother = GradientSmoother(self.param.shape, self.param.free_index, target.smooth, threads=threads)
@@ -92,7 +103,7 @@ class PrintedRefinement:
         self.printer: Renderer | None = None
         self.maps = None
         self.iteration = 0
-        #: per iteration: the printed prediction's loss and mean ΔE76 (at REFINE_SPP, noise included), seconds
+        #: per iteration: the printed prediction's loss and mean ΔE76 (at ``spp[0]``, noise included), seconds
         self.history: list[dict] = []
 
     def volume(self) -> Volume:
@@ -112,7 +123,7 @@ class PrintedRefinement:
             self.printer.set_volume(labels)
         ptex, to_scene, stand_in = self.maps
         n = len(self.target.texels)
-        res = self.printer.render(ptex, max(1, int(np.ceil(REFINE_SPP * n / len(ptex)))), seed)
+        res = self.printer.render(ptex, max(1, int(np.ceil(self.spp[0] * n / len(ptex)))), seed)
         return average_to_scene(res.rgb.astype(np.float64), res.var_mean.astype(np.float64), to_scene, stand_in, n)
 
     def step(self) -> dict:
@@ -125,7 +136,7 @@ class PrintedRefinement:
         for lo, hi in self.param.chunks():
             self.continuous.set_mixture(self.param.free_index[lo:hi], self.param.free_rows(self.x[lo:hi], lo))
         gs, ga, _ = self.continuous.gradient(
-            self.target.texels, lr.grad.astype(np.float32), GRADIENT_SPP, grad_seed, grad_index=self.param.free_index
+            self.target.texels, lr.grad.astype(np.float32), self.spp[1], grad_seed, grad_index=self.param.free_index
         )
         g_x = np.empty_like(self.x)
         for lo, hi in self.param.chunks():
