@@ -211,12 +211,17 @@ def printed_refine() -> str:
         return f(m.get(key), digits) + ("" if se is None else f" ± {f(se, digits)}")
 
     def diff(e: dict, a: str, b: str) -> str:
-        """ΔE76 (corrected) / SSIM of the paired difference a - b, each ± its standard error."""
-        pair = (e.get("differences") or {}).get(f"{a} - {b}")
-        if a == b or not pair:
+        """ΔE76 (corrected) / SSIM of a - b: the paired difference ± its standard error on a texel sample, the
+        difference of the noise-free figures where every texel was rendered."""
+        pair, res = (e.get("differences") or {}).get(f"{a} - {b}"), e["results"]
+        keys = (("delta_e76_mean_corrected", 2), ("ssim", 3))
+        if a == b or b not in res or "seconds_to_make" not in res[a]:
             return ""
-        cells = [(pair[k], d) for k, d in (("delta_e76_mean_corrected", 2), ("ssim", 3))]
-        return " / ".join(f"{v['value']:+.{d}f} ± {f(v['stderr'], d)}" for v, d in cells)
+        if pair:
+            return " / ".join(f"{pair[k]['value']:+.{d}f} ± {f(pair[k]['stderr'], d)}" for k, d in keys)
+        if res[a].get("stderr") is None:
+            return " / ".join(f"{res[a][k] - res[b][k]:+.{d}f}" for k, d in keys)
+        return ""
 
     rows = []
     for case, e in load(path)["results"].items():
