@@ -12,8 +12,8 @@ experiments/results/printed_refine.json.
 
 ``--control``: also the same steps with the loss on the continuous render (``control-N``: their blue-noise print)
 and the refined mixtures rendered continuous (``refine-N continuous``), with the paired differences refine-N -
-control-N and refine-N - refine-N continuous. ``--methods``: other quantizations, each METHOD or METHOD:UPSAMPLE
-(e.g. ``blue-noise:linear``).
+control-N and refine-N - refine-N continuous; ``--control-only``: the control without the refinement.
+``--methods``: other quantizations, each METHOD or METHOD:UPSAMPLE (e.g. ``blue-noise:linear``).
 """
 
 import argparse
@@ -62,9 +62,10 @@ class ContinuousRefinement(PrintedRefinement):
         return res.rgb.astype(np.float64), res.var_mean.astype(np.float64)
 
 
-def candidates(vol, rd, refine: list[int], methods: list[str], control: bool, threads, log, settings=None):
+def candidates(vol, rd, refine: list[int], methods: list[str], control, threads, log, settings=None):
     """(name -> (labels volume, seconds to make it, extra record), name -> refined mixture volume rendered
-    continuous (with the control only)); refinements share one run of the largest count."""
+    continuous (with the control only)); refinements share one run of the largest count. ``control``: False, True
+    (the refinement and its control) or "only" (the control alone)."""
     out, mixtures = {}, {}
     t0 = time.perf_counter()
     out["blue-noise"] = (quantize_volume(vol, Quantization()), time.perf_counter() - t0, {})
@@ -72,7 +73,8 @@ def candidates(vol, rd, refine: list[int], methods: list[str], control: bool, th
         m, _, up = spec.partition(":")
         t0 = time.perf_counter()
         out[spec] = (quantize_volume(vol, Quantization(m, upsample=up or "nearest")), time.perf_counter() - t0, {})
-    kinds = [("refine", PrintedRefinement)] + ([("control", ContinuousRefinement)] if control else [])
+    kinds = [("refine", PrintedRefinement)] if control != "only" else []
+    kinds += [("control", ContinuousRefinement)] if control else []
     for label, cls in kinds if refine else []:
         ref = cls(vol, run_target(rd, vol), Quantization(refine=max(refine)), threads, *(settings or ()))
         while ref.iteration < max(refine):
@@ -83,7 +85,7 @@ def candidates(vol, rd, refine: list[int], methods: list[str], control: bool, th
                 labels = quantize_volume(ref.volume(), Quantization())
                 seconds = sum(h["seconds"] for h in ref.history) + time.perf_counter() - t0
                 out[f"{label}-{ref.iteration}"] = (labels, seconds, {"history": list(ref.history)})
-                if control and label == "refine":
+                if control is True and label == "refine":
                     mixtures[f"refine-{ref.iteration} continuous"] = ref.volume()
     return out, mixtures
 
@@ -95,6 +97,7 @@ def main():
     ap.add_argument("--refine", default="3,6")
     ap.add_argument("--methods", default="")
     ap.add_argument("--control", action="store_true", help="also the control (ContinuousRefinement)")
+    ap.add_argument("--control-only", action="store_true", help="the control without the refinement")
     ap.add_argument("--texel-sample", type=int, default=None)
     ap.add_argument("--step", type=float, default=REFINE_STEP, help="the refinement's step (printing.refine)")
     ap.add_argument("--spp", type=int, default=REFINE_SPP, help="its printed render's and gradient pass's spp")
@@ -112,7 +115,8 @@ def main():
     print(f"one optimisation iteration's passes: {per_it:.1f} s", flush=True)
     settings = (a.step, (a.spp, a.spp))
     say = lambda s: print(s, flush=True)  # noqa: E731
-    made, mixtures = candidates(vol, ev.d, refine, methods, a.control, a.threads, say, settings)
+    control = "only" if a.control_only else a.control
+    made, mixtures = candidates(vol, ev.d, refine, methods, control, a.threads, say, settings)
     for name, mv in mixtures.items():  # refined mixtures, continuous: on the same texel groups as the first
         t0 = time.perf_counter()
         ev.render(name, ContinuousSource(Renderer(mv, a.threads), ev.groups, False), t0, None)
@@ -147,7 +151,7 @@ def main():
     if ev.sample is not None:
         pairs = [(n, "continuous") for n in made] + [(n, "blue-noise") for n in made if n != "blue-noise"]
         pairs += [(n, f"{n} continuous") for n in made if f"{n} continuous" in values]
-        pairs += [(f"refine-{n[8:]}", n) for n in made if n.startswith("control-")]
+        pairs += [(f"refine-{n[8:]}", n) for n in made if n.startswith("control-") and f"refine-{n[8:]}" in made]
         entry["differences"] = sampled.differences(values, pairs, ev.sample)
         for k, v in entry["differences"].items():
             print(k, {f: (round(d["value"], 4), round(d["stderr"], 4)) for f, d in v.items() if d["value"] is not None})

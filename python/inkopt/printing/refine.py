@@ -89,7 +89,9 @@ class PrintedRefinement:
     ):
         mix = vol.require_mixture("the printed refinement").mixture
         self.base, self.target, self.q, self.threads = vol, target, replace(q, refine=0), threads
-        fs = target.fixed_share or FixedShares.none(vol.shape, len(vol.inks))
+        fs = target.fixed_share
+        if fs is None:
+            fs = FixedShares.none(vol.shape, len(vol.inks))
         self.param = Parameterization("softmax", fs, threads)
         rows = np.asarray(mix, np.float32).reshape(-1, len(vol.inks))[self.param.free_index]
         self.x = self.param.variables_for(free_part(rows, self.param.fixed_f, self.param.share_f))
