@@ -201,6 +201,53 @@ def quantize_methods() -> str:
     )
 
 
+def printed_refine() -> str:
+    """The halftone's cost and the candidates that keep it (experiments/printed_refine.py): figures ± their sampling
+    standard errors, the paired differences against the continuous result and against blue noise, the cost."""
+    path = STUDY / "printed_refine.json"
+
+    def pm(m: dict, key: str, digits: int = 2) -> str:
+        se = (m.get("stderr") or {}).get(key)
+        return f(m.get(key), digits) + ("" if se is None else f" ± {f(se, digits)}")
+
+    def diff(e: dict, a: str, b: str) -> str:
+        """ΔE76 (corrected) / SSIM of a - b: the paired difference ± its standard error on a texel sample, the
+        difference of the noise-free figures where every texel was rendered."""
+        pair, res = (e.get("differences") or {}).get(f"{a} - {b}"), e["results"]
+        keys = (("delta_e76_mean_corrected", 2), ("ssim", 3))
+        if a == b or b not in res or "seconds_to_make" not in res[a]:
+            return ""
+        if pair:
+            return " / ".join(f"{pair[k]['value']:+.{d}f} ± {f(pair[k]['stderr'], d)}" for k, d in keys)
+        if res[a].get("stderr") is None:
+            return " / ".join(f"{res[a][k] - res[b][k]:+.{d}f}" for k, d in keys)
+        return ""
+
+    rows = []
+    for case, e in load(path)["results"].items():
+        for i, (name, m) in enumerate(e["results"].items()):
+            cost = ""
+            if "seconds_to_make" in m:
+                cost = f"{m['seconds_to_make']:.0f} s ({m['cost_iterations']:.1f} it.)"
+            vs_c, vs_b = diff(e, name, "continuous"), diff(e, name, "blue-noise")
+            rows.append(
+                [
+                    case if i == 0 else "",
+                    name,
+                    pm(m, "delta_e76_mean_corrected"),
+                    pm(m, "delta_e2000_mean"),
+                    pm(m, "ssim", 3),
+                    pm(m, "mottle_l2"),
+                    vs_c,
+                    vs_b,
+                    cost,
+                ]
+            )
+    header = ["case", "result", "ΔE76 (corrected)", "ΔE2000", "SSIM", "mottle (ΔL*)²"]
+    header += ["− continuous: ΔE76 / SSIM", "− blue noise: ΔE76 / SSIM", "cost (one iteration's passes)"]
+    return table(header, rows, [path])
+
+
 def speed() -> str:
     r, r1 = load(BENCH / "render.json"), load(BENCH / "render_threads1.json")
     o16, o4 = load(BENCH / "optimize_replay_spp16.json"), load(BENCH / "optimize_replay_spp4.json")
@@ -822,6 +869,7 @@ TABLES = {
     "quality": quality,
     "quality-extrusion-start": quality_extrusion_start,
     "quantize-methods": quantize_methods,
+    "printed-refine": printed_refine,
     "speed": speed,
     "mesh-scaling": mesh_scaling,
     "lighting": lighting,

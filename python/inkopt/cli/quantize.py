@@ -17,14 +17,14 @@ from .common import add_seed_arg, stderr_log
 def quantization_of(args) -> Quantization:
     """The settings the arguments give (checked by ``printing.quantize.check_quantization``)."""
     dpi = None if args.dpi is None else parse_dpi(args.dpi)
-    return Quantization(args.method, args.seed, dpi, args.upsample, layer_um=args.layer_um)
+    return Quantization(args.method, args.seed, dpi, args.upsample, layer_um=args.layer_um, refine=args.refine)
 
 
 def _quantize_cmd(args) -> int:
     d = RunDir(args.dir)
     q = quantization_of(args)
     with d.lock(stderr_log):
-        lines = quantize_run(d, q)
+        lines = quantize_run(d, q, log=stderr_log)
     for line in lines:
         print(line)
     print(f"wrote {d.quantized_path} and {d.quantized_labels_path}")
@@ -47,4 +47,12 @@ def register_cli(sub) -> None:
     add_seed_arg(p, "random draws / blue-noise tile offset")
     upsample = [name + " (default)" if name == default.upsample else name for name in UPSAMPLERS]
     p.add_argument("--upsample", default=default.upsample, help=" or ".join(upsample) + " mixture upsampling")
+    p.add_argument(
+        "--refine",
+        type=int,
+        default=default.refine,
+        metavar="N",
+        help=f"N final iterations with the loss taken on the dithered labels' render (default {default.refine}; "
+        "each costs about one print render at 16 spp and a gradient pass; docs/quality.md)",
+    )
     p.set_defaults(func=_quantize_cmd)

@@ -160,6 +160,10 @@ class Quantization:
                ``dither.lightness_order``) or "index" (the ink set's order; files that do not say were made so)
     layer_um   layer thickness in µm where ``dpi`` has no z entry; None: 27 (``units.PRINTER_LAYER_UM``). Not
                recorded: a record's ``dpi`` holds z
+    refine     iterations of the refinement on the printed prediction before the dither (``printing.refine``: the
+               run's loss taken on the quantized labels' render; 0: none). A run's quantization does them
+               (``printing.stream.quantize_run``: they need the run's scene); ``quantize`` dithers the mixture it
+               is given and ignores it
     ``printing.quantize.check_quantization`` checks them; a labels volume file stores a record's ``arrays``."""
 
     method: str = "blue-noise"
@@ -168,6 +172,7 @@ class Quantization:
     upsample: str = "nearest"
     ink_order: str = "lightness"
     layer_um: float | None = None
+    refine: int = 0
 
     def __post_init__(self):
         if self.dpi is not None:  # a tuple (lists and arrays compare and hash as settings do)
@@ -178,18 +183,22 @@ class Quantization:
         out["ink_order"] = np.array(self.ink_order)
         if self.dpi is not None:
             out["dpi"] = np.asarray(self.dpi, np.float64)
+        if self.refine:
+            out["refine"] = np.int64(self.refine)
         return out
 
     def to_json(self) -> dict:
         """The recorded settings as JSON values (``method``, ``seed``, ``dpi`` list or None, ``upsample``,
-        ``ink_order``): what evaluation.json says of its labels volume."""
+        ``ink_order``, and ``refine`` where it is not 0): what evaluation.json says of its labels volume."""
         dpi = None if self.dpi is None else list(self.dpi)
+        refined = {"refine": self.refine} if self.refine else {}
         return {
             "method": self.method,
             "seed": self.seed,
             "dpi": dpi,
             "upsample": self.upsample,
             "ink_order": self.ink_order,
+            **refined,
         }
 
     @classmethod
@@ -202,4 +211,5 @@ class Quantization:
             tuple(float(v) for v in np.asarray(data["dpi"]).reshape(-1)) if "dpi" in data else None,
             str(data["upsample"]) if "upsample" in data else "nearest",
             str(data["ink_order"]) if "ink_order" in data else "index",
+            refine=int(data["refine"]) if "refine" in data else 0,
         )

@@ -6,7 +6,9 @@ The run's mixture volume file (volume.npz) is read one (y, x, N) layer at a time
 label file (``RunDir.quantized_writer``: quantized.npz + quantized_labels.npy, docs/run-dir.md), so memory holds
 the inside mask, a few mixture layers and a few printer layers; a mesh's shading normals go to the printer grid
 by ``grid.upsample_normals`` (20 bytes per printer voxel inside a surface voxel). Labels and normals are
-identical to ``quantize_volume``'s in memory.
+identical to ``quantize_volume``'s in memory. With ``q.refine`` iterations of the refinement on the printed
+prediction (``refine``), the mixture is refined in memory first (the run's scene, loss weights and smoothing width
+from scene.npz and report.json) and the refined mixture is dithered.
 """
 
 from __future__ import annotations
@@ -18,14 +20,35 @@ from ..model.mixturefile import MixtureSource
 from ..rundir import RunDir
 from .grid import PrinterGrid, upsample_normals
 from .quantize import check_quantization, quantize, record, summary_lines
+from .refine import PrintedLoss, refine_mixture
 
 
-def quantize_run(d: RunDir, q: Quantization) -> list[str]:
+def run_target(d: RunDir, vol) -> PrintedLoss:
+    """What a run's printed refinement compares with: its scene (scene.npz: texels, targets, fixed shares) and its
+    loss weights and smoothing width (report.json; the scene kind's defaults' where a report does not say)."""
+    rec, report = d.load_scene(), d.read_report()
+    return PrintedLoss(
+        texels=rec.texels,
+        target_rgb=rec.target_rgb,
+        kind=rec.kind,
+        gamma=tuple(report.get("gamma", (1.0, 0.0, 0.0))),
+        smooth=float(report.get("smooth") or 0.0),
+        fixed_share=rec.fixed_share(vol.inks, vol.shape),
+    )
+
+
+def quantize_run(d: RunDir, q: Quantization, threads: int | None = None, log=None) -> list[str]:
     """``inkopt quantize``: DIR/volume.npz -> DIR/quantized.npz + quantized_labels.npy by the settings ``q``
-    (module docstring). Returns the summary lines (``quantize.summary_lines``)."""
+    (module docstring), after ``q.refine`` iterations of the printed refinement (``threads``: its render threads;
+    ``log``: its line per iteration). Returns the summary lines (``quantize.summary_lines``)."""
     check_quantization(q)  # before any file is read
     t0 = time.perf_counter()
     digest = d.volume_digest()  # recorded in quantized.npz: export and evaluate refuse it once volume.npz changes
+    refined = None
+    if q.refine:
+        vol = d.load_volume()
+        refined, _ = refine_mixture(vol, run_target(d, vol), q, threads, log)
+        del vol
     with MixtureSource(d.volume_file()) as src:
         grid = PrinterGrid.of(src.shape[:3], src.voxel_mm, q)
         made = record(q, grid.voxel_mm)
@@ -33,6 +56,6 @@ def quantize_run(d: RunDir, q: Quantization) -> list[str]:
         with d.quantized_writer(
             src.labels_meta(grid.voxel_mm, made), grid.shape, normals=nrm, volume_digest=digest
         ) as w:
-            quantize(src, q, out=w)
+            quantize(src if refined is None else refined, q, out=w)
         counts = w.counts
     return summary_lines(grid.shape, grid.voxel_mm, src.inks.names, made, counts, time.perf_counter() - t0)
