@@ -148,6 +148,12 @@ MESHES = {
 }
 
 
+ADAPTATIONS = {
+    "mtl_plain_paths": "the material library's Windows texture paths (.\\x.jpg) rewritten as plain file names",
+    "collada_to_glb": f"converted from COLLADA to GLB by trimesh with pycollada {SOURCES['pycollada']['version']}",
+}
+
+
 def sha256(path: Path) -> str:
     h = hashlib.sha256()
     with open(path, "rb") as fh:
@@ -236,7 +242,10 @@ def licences_text(names: list[str], copyright_files: dict) -> str:
             f"- files: {', '.join(m['files'])}",
             f"- licence: {m['licence']}",
             f"- author: {m['author']}",
-            f"- changed: {m.get('adapt') or 'nothing'}",
+            f"- texture: {m['texture']} (passed as --texture: the OBJ names no material library)"
+            if m.get("texture")
+            else "- texture: the file's own material",
+            f"- changed: {ADAPTATIONS[m['adapt']] if m.get('adapt') else 'nothing'}",
             "",
         ]
     for pkg, text in copyright_files.items():

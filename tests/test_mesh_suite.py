@@ -32,7 +32,7 @@ def test_manifest_is_well_formed():
         assert m["source"] in suite.SOURCES and suite.SOURCES[m["source"]]["registry"] == "debian", name
         assert m["files"] and len({f.rsplit("/", 1)[-1] for f in m["files"]}) == len(m["files"]), name
         assert all(m[k].strip() for k in ("format", "licence", "author", "tests")), name
-        assert m.get("adapt") in (None, "mtl_plain_paths", "collada_to_glb"), name
+        assert m.get("adapt") in (None, *suite.ADAPTATIONS), name
         if m.get("texture"):
             assert m["texture"] in [f.rsplit("/", 1)[-1] for f in m["files"]], name
         formats.add(m["format"].split()[0])
