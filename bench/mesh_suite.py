@@ -37,6 +37,7 @@ import importlib.util
 import json
 import os
 import re
+import shlex
 import shutil
 import subprocess
 import sys
@@ -288,15 +289,17 @@ def figures(entry: dict, stderr: dict | None) -> dict:
     return out
 
 
-def run_cell(mesh: str, height: float, budget: str, cache: Path, eval_args: list[str]) -> dict:
-    """Optimise, quantize and evaluate one cell in ``cache``/runs/MESH_Hmm_BUDGET; its results entry."""
+def run_cell(mesh: str, height: float, budget: str, cache: Path, extra: tuple[list[str], list[str]]) -> dict:
+    """Optimise, quantize and evaluate one cell in ``cache``/runs/MESH_Hmm_BUDGET; its results entry. ``extra``:
+    further arguments of ``optimize`` and of ``evaluate`` (none for the suite's cells)."""
+    opt_args, eval_args = extra
     path = mesh_file(mesh, cache)
     if not path.is_file():
         raise SystemExit(f"{path} is missing: run `python bench/mesh_suite.py fetch` first")
     out = cache / "runs" / f"{mesh}_{height:g}mm_{budget}"
     out.mkdir(parents=True, exist_ok=True)
     log = out / "suite.log"
-    settings = ["--height-mm", f"{height:g}", *budget_args(budget)]
+    settings = ["--height-mm", f"{height:g}", *budget_args(budget), *opt_args]
     if MESHES[mesh].get("texture"):
         settings += ["--texture", MESHES[mesh]["texture"]]
     args = ["optimize", str(path), "--out", str(out), *settings]
@@ -329,7 +332,7 @@ def run_cell(mesh: str, height: float, budget: str, cache: Path, eval_args: list
     }
 
 
-def run(cache: Path, results: Path, cells: list[tuple[str, float, str]], eval_args: list[str]) -> None:
+def run(cache: Path, results: Path, cells: list[tuple[str, float, str]], extra: tuple[list[str], list[str]]) -> None:
     """Run every cell not yet in ``results`` (MESH/Hmm/BUDGET), writing the file after each."""
     data = json.loads(results.read_text()) if results.is_file() else {"cells": {}}
     for mesh, height, budget in cells:
@@ -338,7 +341,7 @@ def run(cache: Path, results: Path, cells: list[tuple[str, float, str]], eval_ar
             print(f"{key}: done before, skipped")
             continue
         print(f"{key}: optimize, quantize, evaluate ...", flush=True)
-        cell = run_cell(mesh, height, budget, cache, eval_args)
+        cell = run_cell(mesh, height, budget, cache, extra)
         data["cells"][key] = {**cell, **provenance()}
         data.update(provenance())
         results.parent.mkdir(parents=True, exist_ok=True)
@@ -379,7 +382,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--results", type=Path, default=RESULTS, help=f"results JSON (default {RESULTS})")
     ap.add_argument("--doc", type=Path, default=DOC, help="table: the document with the markers")
     ap.add_argument("--table-name", default="mesh-suite", help="table: the markers' name (default mesh-suite)")
-    ap.add_argument("--eval-spp", type=int, default=None, help="run: evaluate at this many spp (default adaptive)")
+    more = "run: further %s arguments, written --%s-args='--spp 8' (default none)"
+    ap.add_argument("--optimize-args", default="", help=more % ("optimize", "optimize"))
+    ap.add_argument("--evaluate-args", default="", help=more % ("evaluate", "evaluate"))
     a = ap.parse_args(argv)
     meshes = [m for m in a.meshes.split(",") if m]
     unknown = [m for m in meshes if m not in MESHES]
@@ -390,8 +395,8 @@ def main(argv: list[str] | None = None) -> int:
     elif a.step == "run":
         sizes = [float(s) for s in a.sizes.split(",")]
         budgets = [b for b in a.budgets.split(",") if b and budget_args(b)]
-        eval_args = ["--spp", str(a.eval_spp)] if a.eval_spp else []
-        run(a.cache, a.results, [(m, s, b) for m in meshes for s in sizes for b in budgets], eval_args)
+        extra = (shlex.split(a.optimize_args), shlex.split(a.evaluate_args))
+        run(a.cache, a.results, [(m, s, b) for m in meshes for s in sizes for b in budgets], extra)
     else:
         table(a.results, a.doc, a.table_name)
     return 0

@@ -1,5 +1,5 @@
 """bench/mesh_suite.py: its manifest is well formed, and ``run`` and ``table`` go end to end on a tiny synthetic
-mesh standing in for a download (3 mm, 2 iterations, 8 spp evaluation; no network), so the suite's script cannot
+mesh standing in for a download (3 mm, 2 iterations, the fewest samples; no network), so the suite's script cannot
 rot while its real runs take hours."""
 
 import importlib.util
@@ -8,7 +8,7 @@ import re
 
 import numpy as np
 import pytest
-from helpers import REPO, write_cube_obj
+from helpers import FAST_RUN, REPO, write_cube_obj
 from PIL import Image
 
 
@@ -77,9 +77,12 @@ def test_run_and_table_end_to_end(tmp_path, monkeypatch):
     monkeypatch.setitem(suite.MESHES, "cube", entry)
     results = tmp_path / "suite.json"
     argv = ["run", "--cache", str(tmp_path), "--meshes", "cube", "--sizes", "3", "--budgets", "2it"]
-    assert suite.main([*argv, "--results", str(results), "--eval-spp", "8"]) == 0
+    fast = " ".join(FAST_RUN[2:])  # the fewest samples (the budget gives the iterations)
+    assert suite.main([*argv, "--results", str(results), f"--optimize-args={fast}", "--evaluate-args=--spp 8"]) == 0
     cell = json.loads(results.read_text())["cells"]["cube/3mm/2it"]
-    assert cell["iterations"] == 2 and cell["height_mm"] == 3 and cell["optimize_args"][-2:] == ["--texture", "tex.png"]
+    assert cell["iterations"] == 2 and cell["height_mm"] == 3
+    assert cell["optimize_args"][:4] == ["--height-mm", "3", "--iterations", "2"]
+    assert cell["optimize_args"][-2:] == ["--texture", "tex.png"]
     assert set(cell["results"]) == {"continuous", "printed", "surface", "extrusion"}
     for fig in cell["results"].values():
         assert 0 < fig["delta_e76_corrected"] < 100 and -1 <= fig["ssim"] <= 1 and fig["delta_e2000"] > 0
