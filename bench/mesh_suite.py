@@ -21,12 +21,12 @@ in the cell's run folder is not repeated. ``table`` writes docs/tables.py's ``me
 between ``<!-- table:mesh-suite -->`` markers.
 
 Results keys (kept stable): ``cells`` -> "MESH/Hmm/BUDGET" -> ``mesh``, ``height_mm``, ``budget``,
-``optimize_args`` (list of str), ``texels``, ``iterations``, ``optimize_seconds``, ``quantize_seconds``,
-``evaluate_seconds``, ``sampled`` (bool: figures from a texel sample), ``gamut_floor_delta_e76``,
-``load_average_before``, ``load_average_after``, ``finished``, and ``results`` -> "continuous" | "printed" |
-"surface" | "extrusion" -> ``delta_e76_corrected``, ``delta_e2000``, ``ssim``, ``mottle_l2`` and ``stderr`` (the
-same keys; null where every texel was rendered: those figures carry no sampling error, and the ΔE76 is corrected
-for the Monte Carlo noise).
+``optimize_args``, ``evaluate_args`` (lists of str), ``texels``, ``iterations``, ``optimize_seconds``,
+``seconds_per_iteration``, ``quantize_seconds``, ``evaluate_seconds``, ``sampled`` (bool: figures from a texel
+sample), ``gamut_floor_delta_e76``, ``load_average_before``, ``load_average_after``, ``finished``, ``commit``,
+``command``, and ``results`` -> "continuous" | "printed" | "surface" | "extrusion" -> ``delta_e76_corrected``,
+``delta_e2000``, ``ssim``, ``mottle_l2`` and ``stderr`` (the same keys; null where every texel was rendered: those
+figures carry no sampling error, and the ΔE76 is corrected for the Monte Carlo noise).
 """
 
 from __future__ import annotations
@@ -317,6 +317,7 @@ def run_cell(mesh: str, height: float, budget: str, cache: Path, extra: tuple[li
         "height_mm": height,
         "budget": budget,
         "optimize_args": settings,
+        "evaluate_args": eval_args,
         "texels": ev.get("texels"),
         "iterations": report.get("iterations"),
         "optimize_seconds": round(t_opt, 1) if t_opt is not None else report.get("seconds_total"),

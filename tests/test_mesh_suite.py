@@ -82,7 +82,7 @@ def test_run_and_table_end_to_end(tmp_path, monkeypatch):
     cell = json.loads(results.read_text())["cells"]["cube/3mm/2it"]
     assert cell["iterations"] == 2 and cell["height_mm"] == 3
     assert cell["optimize_args"][:4] == ["--height-mm", "3", "--iterations", "2"]
-    assert cell["optimize_args"][-2:] == ["--texture", "tex.png"]
+    assert cell["optimize_args"][-2:] == ["--texture", "tex.png"] and cell["evaluate_args"] == ["--spp", "8"]
     assert set(cell["results"]) == {"continuous", "printed", "surface", "extrusion"}
     for fig in cell["results"].values():
         assert 0 < fig["delta_e76_corrected"] < 100 and -1 <= fig["ssim"] <= 1 and fig["delta_e2000"] > 0
