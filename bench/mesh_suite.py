@@ -108,7 +108,7 @@ MESHES = {
         "format": "OBJ",
         "licence": "BSD-3-clause (Debian copyright of assimp-testmodels)",
         "author": "ASSIMP test models (spider.obj)",
-        "tests": "thin parts (legs; 0.55 mm mean thickness at 10 mm high); photo textures (rock, wood)",
+        "tests": "thin parts (legs; 0.55 mm mean thickness at 10 mm high); dark photo textures (wood, rock)",
     },
     "eyeball": {
         "source": "neverball-common",
