@@ -117,7 +117,7 @@ MESHES = {
         "format": "OBJ",
         "licence": "GPL-2+ (Debian copyright of neverball-common)",
         "author": "Robert Kooima and the Neverball contributors",
-        "tests": "sphere; pastel colours (cream, pale pink veins, a soft blue iris band)",
+        "tests": "sphere; pastel colours (cream and peach, pale red veins) and a dark blue-green iris",
     },
     "orange": {
         "source": "neverball-common",
