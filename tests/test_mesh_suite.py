@@ -1,0 +1,99 @@
+"""bench/mesh_suite.py: its manifest is well formed, and ``run`` and ``table`` go end to end on a tiny synthetic
+mesh standing in for a download (3 mm, 2 iterations, the fewest samples; no network), so the suite's script cannot
+rot while its real runs take hours."""
+
+import importlib.util
+import json
+import re
+
+import numpy as np
+import pytest
+from helpers import FAST_RUN, REPO, write_cube_obj
+from PIL import Image
+
+
+def _suite():
+    spec = importlib.util.spec_from_file_location("mesh_suite", REPO / "bench" / "mesh_suite.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_manifest_is_well_formed():
+    suite = _suite()
+    assert len(suite.MESHES) >= 6
+    for name, src in suite.SOURCES.items():
+        assert src["registry"] in ("debian", "pypi"), name
+        assert re.fullmatch(r"[0-9a-f]{64}", src["sha256"]), name
+        assert src["version"] and (src["licence_file"] or src["registry"] == "pypi"), name
+    formats = set()
+    for name, m in suite.MESHES.items():
+        assert re.fullmatch(r"[a-z]+", name)
+        assert m["source"] in suite.SOURCES and suite.SOURCES[m["source"]]["registry"] == "debian", name
+        assert m["files"] and len({f.rsplit("/", 1)[-1] for f in m["files"]}) == len(m["files"]), name
+        assert all(m[k].strip() for k in ("format", "licence", "author", "tests")), name
+        assert m.get("adapt") in (None, *suite.ADAPTATIONS), name
+        if m.get("texture"):
+            assert m["texture"] in [f.rsplit("/", 1)[-1] for f in m["files"]], name
+        formats.add(m["format"].split()[0])
+    assert formats == {"glTF", "OBJ"}
+    text = suite.licences_text(list(suite.MESHES), {"neverball-common": "Files: *\nLicense: GPL-2+"})
+    assert all(f"## {name}" in text for name in suite.MESHES) and "License: GPL-2+" in text
+
+
+def test_budgets_and_mesh_files():
+    suite = _suite()
+    assert suite.budget_args("short") == ["--time-budget", "5m"]
+    assert suite.budget_args("3it") == ["--iterations", "3"]
+    with pytest.raises(SystemExit, match="unknown budget"):
+        suite.budget_args("forever")
+    assert suite.mesh_file("duck", suite.CACHE).name == "duck.glb"
+    assert suite.mesh_file("spider", suite.CACHE).name == "spider.obj"
+
+
+def test_mtl_paths_are_made_plain(tmp_path):
+    suite = _suite()
+    (tmp_path / "s.mtl").write_text("newmtl a\nmap_Kd .\\wal.jpg\nnewmtl b\nmap_Kd ./wood.jpg\nmap_Kd keep.jpg\n")
+    suite.adapt("spider", tmp_path, tmp_path)
+    assert (tmp_path / "s.mtl").read_text() == "newmtl a\nmap_Kd wal.jpg\nnewmtl b\nmap_Kd wood.jpg\nmap_Kd keep.jpg\n"
+
+
+def test_run_and_table_end_to_end(tmp_path, monkeypatch):
+    """A textured cube named through ``texture`` (as the neverball meshes are): run writes its cell with the four
+    results' figures, a second run skips it without calling inkopt, and table puts it into a document."""
+    suite = _suite()
+    ramp = np.full((16, 16, 3), 200, np.uint8)  # a pastel ramp from light blue to light pink
+    ramp[..., 0] = np.linspace(150, 250, 16)[None, :]
+    write_cube_obj(tmp_path / "meshes" / "cube", mtllib=None, write_mtl=False, texture=Image.fromarray(ramp))
+    entry = {
+        "source": "neverball-common",
+        "files": ["x/m.obj", "x/tex.png"],
+        "texture": "tex.png",
+        "format": "OBJ",
+        "licence": "test",
+        "author": "test",
+        "tests": "the script",
+    }
+    monkeypatch.setitem(suite.MESHES, "cube", entry)
+    results = tmp_path / "suite.json"
+    argv = ["run", "--cache", str(tmp_path), "--meshes", "cube", "--sizes", "3", "--budgets", "2it"]
+    fast = " ".join(FAST_RUN[2:])  # the fewest samples (the budget gives the iterations)
+    assert suite.main([*argv, "--results", str(results), f"--optimize-args={fast}", "--evaluate-args=--spp 8"]) == 0
+    cell = json.loads(results.read_text())["cells"]["cube/3mm/2it"]
+    assert cell["iterations"] == 2 and cell["height_mm"] == 3
+    assert cell["optimize_args"][:4] == ["--height-mm", "3", "--iterations", "2"]
+    assert cell["optimize_args"][-2:] == ["--texture", "tex.png"] and cell["evaluate_args"] == ["--spp", "8"]
+    assert set(cell["results"]) == {"continuous", "printed", "surface", "extrusion"}
+    for fig in cell["results"].values():
+        assert 0 < fig["delta_e76_corrected"] < 100 and -1 <= fig["ssim"] <= 1 and fig["delta_e2000"] > 0
+    monkeypatch.setattr(suite, "inkopt", lambda *a: pytest.fail("a finished cell is run again"))
+    assert suite.main([*argv, "--results", str(results)]) == 0
+
+    doc = tmp_path / "doc.md"
+    doc.write_text("# x\n<!-- table:mesh-suite -->\nold\n<!-- /table:mesh-suite -->\nafter\n")
+    assert suite.main(["table", "--results", str(results), "--doc", str(doc)]) == 0
+    text = doc.read_text()
+    row = next(line for line in text.splitlines() if line.startswith("| cube |"))
+    printed = cell["results"]["printed"]["delta_e76_corrected"]
+    assert "| 3 | 2it | 2 it," in row and f"{printed:.2f}" in row
+    assert "old" not in text and text.endswith("<!-- /table:mesh-suite -->\nafter\n")
