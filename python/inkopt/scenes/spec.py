@@ -136,6 +136,8 @@ class MeshSpec:
         check_placement(self.height_mm, self.scale, self.up)
         check_mesh_inputs(self.shell_mm, inks)
         parse_core(self.core) if inks is None else core_shares(self.core, inks)
+        if self.shell_mm is None and self.core != DEFAULT_CORE:
+            raise ParameterError(f"`core` {self.core} fills the voxels below `shell_mm`, but every voxel is free")
         voxel_mm(self.dpi)  # its one-line error for a dpi that is not positive
         _check_translucency(self.translucency, self.translucency_depth_mm, inks, mesh=True)
         _check_file(self.path, "mesh file")
