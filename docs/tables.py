@@ -843,10 +843,11 @@ def core_depth() -> str:
                 f(ev["delta_e2000_mean"]),
                 _gap(ev, "delta_e2000"),
                 f(ev["ssim"], 3),
+                "–" if r.get("step_scale") is None else f"{r['step_scale']:.2e}",
             ]
         )
     header = ["setting", "band", "core", "free voxels", "s / it.", "events / path", "ΔE76 corr."]
-    header += ["ΔE76 − all free", "ΔE2000", "ΔE2000 − all free", "SSIM"]
+    header += ["ΔE76 − all free", "ΔE2000", "ΔE2000 − all free", "SSIM", "step scale s"]
     return table(header, rows, [path])
 
 

@@ -126,6 +126,7 @@ def _lab_de(loss, rgb, fn) -> np.ndarray:
 
 def cell_entry(a, d: Path, ev: dict, core: str | None, seed: int) -> dict:
     rep = json.loads((d / "report.json").read_text())
+    ck = np.load(d / "checkpoint.npz")
     keep = ("free_voxels", "inside_voxels", "seconds_per_iteration", "peak_rss_gb", "iterations", "time_split")
     return {
         **{k: rep.get(k) for k in keep},
@@ -133,7 +134,8 @@ def cell_entry(a, d: Path, ev: dict, core: str | None, seed: int) -> dict:
         "core": core,
         "core_shares": rep.get("core_shares"),
         "evaluation": ev,
-        "training_delta_e76": [round(float(v), 3) for v in np.load(d / "checkpoint.npz")["hist_delta_e76"]],
+        "training_delta_e76": [round(float(v), 3) for v in ck["hist_delta_e76"]],
+        "step_scale": float(ck["opt_v"][0]),  # the exponentiated-gradient step's frozen scale s (lr / s moves)
         "evaluation_texels": len(np.load(d / f"core_eval_{a.eval_spp}spp.npz")["rgb"]),
         "settings": {"height_mm": a.height_mm, "dpi": a.dpi, "iterations": a.iterations, "seed": seed},
         **machine(),
@@ -168,7 +170,7 @@ def main():
         if not (d / "report.json").is_file():
             optimize(a, d, None if depth == "free" else depth, c, seed)
         ev = evaluate(a, d, None if cell == "free" else ref)
-        entry = cell_entry(a, d, ev, core if c is None else f"{core} ({c})", seed)
+        entry = cell_entry(a, d, ev, core if c in (None, core) else f"{core} ({c})", seed)
         if cell == "free":
             deep = entry["deep_mixture"] = deep_mixture(d)
         key = f"spot{a.height_mm:g}mm_{a.dpi:g}dpi_{a.iterations}it/{cell}"
