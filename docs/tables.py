@@ -833,8 +833,9 @@ def core_depth() -> str:
         rows.append(
             [
                 setting.replace("_", ", "),
-                "every voxel" if cell == "free" else f"{r['shell_mm']:g} mm",
-                "–" if cell == "free" else f"`{r['core']}`",
+                ("every voxel" if r["shell_mm"] is None else f"{r['shell_mm']:g} mm")
+                + (f", seed {r['settings']['seed']}" if r.get("settings", {}).get("seed") else ""),
+                "–" if r["shell_mm"] is None else f"`{r['core']}`",
                 f"{r['free_voxels'] / 1e3:.0f} k",
                 f(r["seconds_per_iteration"], 1),
                 f(ev.get("events_per_path"), 1),
