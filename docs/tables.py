@@ -921,6 +921,52 @@ def pass_cost() -> str:
     return table(header, rows, [path])
 
 
+def _gap(ev: dict, name: str) -> str:
+    """A cell's paired difference from every voxel free and its standard error."""
+    v = ev.get(f"{name}_minus_free")
+    return "–" if v is None else f"{v:+.2f} ± {ev[f'{name}_minus_free_stderr']:.2f}"
+
+
+def core_depth() -> str:
+    """experiments/core_depth.py: band depth x core against every voxel free, at equal iterations, paired."""
+    path = STUDY / "core_depth.json"
+    rows = []
+    for key, r in load(path)["results"].items():
+        setting, cell = key.split("/")
+        ev = r["evaluation"]
+        rows.append(
+            [
+                setting.replace("_", ", "),
+                ("every voxel" if r["shell_mm"] is None else f"{r['shell_mm']:g} mm")
+                + (f", seed {r['settings']['seed']}" if r.get("settings", {}).get("seed") else ""),
+                "–" if r["shell_mm"] is None else f"`{r['core']}`",
+                f"{r['free_voxels'] / 1e3:.0f} k",
+                f(r["seconds_per_iteration"], 1),
+                f(ev.get("events_per_path"), 1),
+                f(ev["delta_e76_mean_corrected"]),
+                _gap(ev, "delta_e76"),
+                f(ev["delta_e2000_mean"]),
+                _gap(ev, "delta_e2000"),
+                f(ev["ssim"], 3),
+                "–" if r.get("step_scale") is None else f"{r['step_scale']:.2e}",
+            ]
+        )
+    header = ["setting", "band", "core", "free voxels", "s / it.", "events / path", "ΔE76 corr."]
+    header += ["ΔE76 − all free", "ΔE2000", "ΔE2000 − all free", "SSIM", "step scale s"]
+    return table(header, rows, [path])
+
+
+def core_deep_mixture() -> str:
+    """The every-voxel-free result's mean mixture below each depth (experiments/core_depth.py)."""
+    path = STUDY / "core_depth.json"
+    rows = []
+    for key, r in load(path)["results"].items():
+        for depth, m in (r.get("deep_mixture") or {}).items():
+            mix = ", ".join(f"{k} {v:.3f}" for k, v in m["mixture"].items())
+            rows.append([key.split("/")[0].replace("_", ", "), f"{depth} mm", f"{m['voxels']:,}", mix])
+    return table(["setting", "deeper than", "voxels", "mean shares"], rows, [path])
+
+
 TABLES = {
     "headline": headline,
     "quality": quality,
@@ -937,6 +983,8 @@ TABLES = {
     "step-decay": step_decay,
     "spot-convergence": spot_convergence,
     "shell-mm": shell_mm,
+    "core-depth": core_depth,
+    "core-deep-mixture": core_deep_mixture,
     "calibration": calibration,
     "coarse-to-fine": coarse_to_fine,
     "time-to-quality": time_to_quality,

@@ -104,3 +104,34 @@ def test_parameterisation_of_fixed_shares(kind):
     assert plain.fixed_f is None and np.array_equal(plain.free_index, np.flatnonzero(free))
     with pytest.raises(ValueError, match="sum to at most 1"):
         Parameterization(kind, FixedShares(free, np.full(len(INKS), 0.5, np.float32)))
+
+
+def test_core_shares():
+    """The named cores and explicit shares as (N,) rows over the ink set (renormalised within 1e-3), and their
+    one-line errors naming `core`."""
+    from inkopt.errors import ParameterError
+    from inkopt.model.fixed import START_WHITE, core_shares
+
+    np.testing.assert_array_equal(core_shares("white", INKS), np.eye(len(INKS), dtype=np.float32)[W])
+    start = core_shares("start", INKS)
+    assert start[W] == np.float32(START_WHITE) and abs(start.sum() - 1) < 1e-6
+    np.testing.assert_allclose(np.delete(start, W), (1 - START_WHITE) / (len(INKS) - 1), rtol=1e-6)
+    row = core_shares("white = 0.7, black=0.3004", INKS)
+    assert row.dtype == np.float32 and abs(row.sum() - 1) < 1e-6 and row[INKS.index("black")] > 0.3
+    assert np.count_nonzero(row) == 2
+    for bad in ("grey", "white=0.5,white=0.5", "cyan", "white=x", "white=0.5,black=0.4", "white=1,nope=0"):
+        with pytest.raises(ParameterError, match="core") as err:
+            core_shares(bad, INKS)
+        assert err.value.parameters == ("core",) and "\n" not in str(err.value)
+
+
+def test_a_core_mixture_is_what_scene_records_rebuild():
+    """A scene record without the dense fixed shares rebuilds them from the free mask and the core's row."""
+    from inkopt.model.fixed import core_shares
+
+    free = np.random.default_rng(3).random((4, 5, 6)) < 0.5
+    core = core_shares("start", INKS)
+    fixed = scene_fixed_shares(INKS, free, None, core)
+    np.testing.assert_array_equal(fixed.dense()[~free], np.broadcast_to(core, (int((~free).sum()), len(INKS))))
+    assert not fixed.dense()[free].any()
+    np.testing.assert_array_equal(scene_fixed_shares(INKS, free).dense(), white_fixed_shares(free, INKS).dense())

@@ -197,6 +197,44 @@ def test_shell_fixes_deep_voxels(ball, tmp_path):
     np.testing.assert_array_equal(SceneRecord.from_arrays(no_dense).fixed_share(vol.inks), scene["fixed_share"])
 
 
+def _sphere_sdf(vol: Volume) -> np.ndarray:
+    """(z, y, x) mm: the exact sphere's signed distance at the voxel centres of ``vol`` (its own grid)."""
+    nz, ny, nx = vol.shape
+    zz, yy, xx = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")
+    pos = np.asarray(vol.origin_mm) + (np.stack([xx, yy, zz], -1) + 0.5) * vol.voxel_mm
+    return np.linalg.norm(pos - CENTRE, axis=-1) - RADIUS
+
+
+def test_core_mixture_below_the_shell_is_recorded_and_printed(ball, tmp_path):
+    """``--core`` shares fill the voxels below the shell, scene.npz and report.json record them, a record without
+    the dense fixed shares rebuilds them, and ``inkopt quantize`` prints the deep printer voxels in those shares."""
+    shell, core = 0.3, {"white": 0.6, "black": 0.4}
+    arg = ",".join(f"{k}={v}" for k, v in core.items())
+    assert optimize(ball, tmp_path, "--shell-mm", str(shell), "--core", arg, iterations=2) == 0
+    vol = Volume.load(tmp_path / "volume.npz")
+    scene = dict(np.load(tmp_path / "scene.npz"))
+    rep = json.loads((tmp_path / "report.json").read_text())
+    row = np.zeros(len(vol.inks), np.float32)
+    for k, v in core.items():
+        row[vol.inks.index(k)] = v
+    deep = _sphere_sdf(vol) < -shell - 0.005
+    assert deep.sum() > 1000 and rep["core"] == arg and rep["core_shares"] == pytest.approx(core)
+    np.testing.assert_array_equal(scene["core_share"], row)
+    np.testing.assert_allclose(vol.mixture[deep], np.broadcast_to(row, (int(deep.sum()), len(row))), atol=1e-7)
+    no_dense = {k: v for k, v in scene.items() if k != "fixed_share"}  # as stored for large objects
+    np.testing.assert_array_equal(SceneRecord.from_arrays(no_dense).fixed_share(vol.inks), scene["fixed_share"])
+    assert cli.main(["quantize", str(tmp_path)]) == 0
+    from inkopt.rundir import RunDir
+
+    labels = RunDir(tmp_path).load_quantized()
+    deep_p = _sphere_sdf(labels) < -shell - 0.05  # printer voxels well inside the core
+    got = np.asarray(labels.labels)[deep_p]
+    n = len(got)
+    assert n > 5000 and set(np.unique(got)) == {vol.inks.index(k) for k in core}
+    for k, v in core.items():  # blue-noise thresholds: the shares within a binomial's 5 standard errors
+        assert abs(np.mean(got == vol.inks.index(k)) - v) < 5 * np.sqrt(v * (1 - v) / n), k
+
+
 def test_resume_continues_exactly(ball, tmp_path):
     a, b = tmp_path / "a", tmp_path / "b"
     assert optimize(ball, a, iterations=2, eval_spp=2) == 0

@@ -39,6 +39,7 @@ def test_frozen_picklable_and_json_round_trip(chart, ball):
         SlabSpec(chart, (2, 4 / 3, 0.5), chart, 150, chart, 0.2),
         MeshSpec(ball, height_mm=1, up="z"),
         MeshSpec(ball, scale=2, shell_mm=0.3, translucency="alpha"),
+        MeshSpec(ball, height_mm=1, shell_mm=1, core="white=0.9,black=0.1"),
     ]
     for spec in specs:
         assert pickle.loads(pickle.dumps(spec)) == spec
@@ -47,6 +48,7 @@ def test_frozen_picklable_and_json_round_trip(chart, ball):
             spec.dpi = 1.0
     assert specs[0].to_json()["kind"] == "image" and "translucency" not in specs[0].to_json()
     assert "scale" not in specs[2].to_json() and specs[3].to_json()["scale"] == 2.0
+    assert "core" not in specs[2].to_json() and specs[4].to_json()["core"] == "white=0.9,black=0.1"
 
 
 @pytest.mark.parametrize(
@@ -59,6 +61,11 @@ def test_frozen_picklable_and_json_round_trip(chart, ball):
         (lambda c, b: MeshSpec(b, height_mm=1, up="x"), "up must be one of"),
         (lambda c, b: MeshSpec(b, height_mm=1, dpi=0), "dpi must be positive"),
         (lambda c, b: MeshSpec(str(b) + ".missing", height_mm=1), "does not exist"),
+        (lambda c, b: MeshSpec(b, height_mm=1, shell_mm=1, core="grey"), "core must be one of"),
+        (lambda c, b: MeshSpec(b, height_mm=1, core="start"), "core start fills the voxels below shell_mm"),
+        (lambda c, b: MeshSpec(b, height_mm=1, shell_mm=1, core="white=0.9,white=0.1"), "core must be one of"),
+        (lambda c, b: MeshSpec(b, height_mm=1, shell_mm=1, core="white=1.1,black=-0.1"), "core must be one of"),
+        (lambda c, b: MeshSpec(b, height_mm=1, shell_mm=1, core="white=0.8,black=0.1"), "core shares must sum to 1"),
         (lambda c, b: SlabSpec(c, (2, 1, -1)), "size_mm sizes must be three positive numbers"),
         (lambda c, b: SlabSpec(c, (6, 4, 1e-9)), r"size_mm 6x4x1e-09 mm: the depth 1e-09 mm is less than one voxel"),
         (lambda c, b: SlabSpec(c, (0.05, 4, 1), dpi=300), r"the width 0.05 mm is less than one voxel \(0.08467 mm at"),
@@ -98,6 +105,8 @@ def test_ink_set_checks(chart, ball):
         SlabSpec(chart, (2, 4 / 3, 0.5), translucency=chart).validate(INKS)
     with pytest.raises(ValueError, match="white"):
         MeshSpec(ball, height_mm=1).validate(InkTable.parse("cyan,magenta,yellow,black"))
+    with pytest.raises(ValueError, match="core names ink 'transparent', not in the ink set"):
+        MeshSpec(ball, height_mm=1, shell_mm=1, core="white=0.5,transparent=0.5").validate(InkTable.parse("vero-cmykw"))
 
 
 def test_build_scene_reads_the_spec(chart, ball):

@@ -48,6 +48,7 @@ def add_lighting_args(p, what: str = "render") -> None:
 def add_mesh_args(p, what: str = "") -> None:
     """The inputs of a mesh scene (``scenes.spec.MeshSpec``): ``--height-mm`` or ``--scale``, ``--up``,
     ``--shell-mm`` and ``--dpi``; ``what`` prefixes their help (e.g. "mesh: ")."""
+    from ..model.fixed import DEFAULT_CORE
     from ..scenes.mesh import UP_AXES
 
     p.add_argument("--height-mm", type=float, metavar="H", help=f"{what}scale the object to this height (mm)")
@@ -57,8 +58,16 @@ def add_mesh_args(p, what: str = "") -> None:
         "--shell-mm",
         type=float,
         metavar="D",
-        help=f"{what}optimise only voxels less than D mm below the surface; deeper ones are printed white "
+        help=f"{what}optimise only voxels less than D mm below the surface; deeper ones are printed as --core "
         "(default: every voxel of the object is optimised)",
+    )
+    p.add_argument(
+        "--core",
+        default=DEFAULT_CORE,
+        metavar="white|start|INK=SHARE,...",
+        help=f"{what}the fixed mixture of the voxels below --shell-mm: white, start (97 %% white, the rest split "
+        f"over the other inks, as the optimiser's start) or ink shares summing to 1, e.g. white=0.9,black=0.1 "
+        f"(default {DEFAULT_CORE})",
     )
     add_dpi_arg(p)
     p.add_argument(

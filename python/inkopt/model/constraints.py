@@ -129,12 +129,16 @@ class Translucency:
 
 
 def scene_fixed_shares(
-    inks: InkTable, free: np.ndarray | None = None, translucency: Translucency | None = None
+    inks: InkTable,
+    free: np.ndarray | None = None,
+    translucency: Translucency | None = None,
+    core: np.ndarray | None = None,
 ) -> FixedShares | None:
-    """A scene's fixed shares from its free mask ((z, y, x) bool: 100 % white wherever it is False; None: no white
-    core) and its translucency constraint (or None); None if it has neither."""
+    """A scene's fixed shares from its free mask ((z, y, x) bool: the core's shares ``core`` ((N,) float32; None:
+    100 % white) wherever it is False; None: no core) and its translucency constraint (or None); None if it has
+    neither."""
     if free is not None:
-        fixed = white_fixed_shares(free, inks)
+        fixed = white_fixed_shares(free, inks) if core is None else FixedShares(free, core)
     elif translucency is not None:
         fixed = FixedShares.none(translucency.shape, len(inks))
     else:

@@ -93,3 +93,62 @@ class FixedShares:
         """Feed the dense array's bytes (C order) to the hash ``h``, one layer at a time."""
         for z in range(self.free.shape[0]):
             h.update(np.ascontiguousarray(self.plane(z)).data)
+
+
+#: the named core mixtures of a mesh below its band of free voxels (``core_shares``): "white" 100 % white; "start"
+#: the optimiser's white start (``START_WHITE`` white, the rest split evenly over the other inks)
+CORE_NAMES = ("white", "start")
+#: a mesh's core when none is given
+DEFAULT_CORE = "white"
+#: the white share of the optimiser's white start (``init`` white) and of the "start" core
+START_WHITE = 0.97
+
+
+def parse_core(core: str) -> dict[str, float] | None:
+    """The explicit shares {ink name: share} of a core "ink=share,ink=share,..." (each ink once, shares >= 0
+    summing to 1 within 1e-3, renormalised), or None for a name of ``CORE_NAMES``. One-line ParameterError naming
+    `core` otherwise. The names are checked against an ink set by ``core_shares``."""
+    from ..errors import ParameterError
+
+    if core in CORE_NAMES:
+        return None
+    shares: dict[str, float] = {}
+    for item in str(core).split(","):
+        name, eq, value = (v.strip() for v in item.partition("="))
+        try:
+            share = float(value) if eq else float("nan")
+        except ValueError:
+            share = float("nan")
+        if not name or name in shares or not (np.isfinite(share) and share >= 0):
+            raise ParameterError(
+                f"`core` must be one of {list(CORE_NAMES)} or ink shares like white=0.9,black=0.1 (each ink once, "
+                f"shares >= 0), got {core!r}"
+            )
+        shares[name] = share
+    total = sum(shares.values())
+    if abs(total - 1.0) > 1e-3:
+        raise ParameterError(f"`core` shares must sum to 1, got {total:.6g} in {core!r}")
+    return {k: v / total for k, v in shares.items()}
+
+
+def core_shares(core: str, inks) -> np.ndarray:
+    """(N,) float32: the ink shares of the core ``core`` (``parse_core``) for the ink set ``inks`` (an
+    ``InkTable``): "white" 100 % white, "start" the optimiser's white start, or the explicit shares (unnamed inks
+    0). One-line ParameterError naming `core` for an ink the set does not hold (or no white for a named core)."""
+    from ..errors import ParameterError
+
+    names = list(inks.names)
+    shares = parse_core(core)
+    out = np.zeros(len(names), np.float64)
+    if shares is None:
+        if "white" not in names:
+            raise ParameterError(f"`core` {core} needs a 'white' ink, but the ink set {names} has none")
+        if core == "start" and len(names) > 1:
+            out[:] = (1.0 - START_WHITE) / (len(names) - 1)
+        out[names.index("white")] = START_WHITE if core == "start" and len(names) > 1 else 1.0
+        return out.astype(np.float32)
+    for name, share in shares.items():
+        if name not in names:
+            raise ParameterError(f"`core` names ink {name!r}, not in the ink set {names}")
+        out[names.index(name)] = share
+    return out.astype(np.float32)

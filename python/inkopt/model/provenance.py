@@ -24,6 +24,7 @@ class MeshInfo:
     voxel_mm: np.ndarray  # (3,)
     texel_closest_mm: np.ndarray  # (I, 3) closest surface point of each texel
     shell_mm: float | None
+    core_share: np.ndarray | None = None  # (N,) float32 the core's ink shares (None: 100 % white)
 
     def arrays(self) -> dict:
         """Its arrays in scene.npz."""
@@ -36,6 +37,7 @@ class MeshInfo:
             "voxel_mm": self.voxel_mm,
             "texel_closest_mm": self.texel_closest_mm,
             "shell_mm": np.float64(np.nan if self.shell_mm is None else self.shell_mm),
+            **({} if self.core_share is None else {"core_share": np.asarray(self.core_share, np.float32)}),
         }
 
     @classmethod
@@ -51,4 +53,5 @@ class MeshInfo:
             np.asarray(d["voxel_mm"]),
             np.asarray(d["texel_closest_mm"]),
             None if np.isnan(shell) else shell,
+            np.asarray(d["core_share"], np.float32) if "core_share" in d else None,
         )

@@ -112,7 +112,8 @@ class SceneRecord:
         fixed = self.fixed
         if fixed is None:
             free = None if self.free_mask is None else np.asarray(self.free_mask, bool)
-            fixed = scene_fixed_shares(inks, free, self.translucency)
+            core = None if self.mesh is None else self.mesh.core_share
+            fixed = scene_fixed_shares(inks, free, self.translucency, core)
         if fixed is not None and (
             fixed.shape[-1] != len(inks) or (shape is not None and fixed.shape[:3] != tuple(shape))
         ):

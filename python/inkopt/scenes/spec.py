@@ -8,7 +8,8 @@ task, which builds its scene there (``scenes.build_scene(spec, inks)``: the spec
 
 - ``SlabSpec``: pictures on a slab (``scenes.slab``): the top picture, an optional bottom one, the size (W, H, D) mm.
 - ``MeshSpec``: a textured mesh (``scenes.mesh``) scaled to ``height_mm`` or by ``scale`` mm per model unit,
-  optimised within ``shell_mm`` of its surface (None: everywhere inside).
+  optimised within ``shell_mm`` of its surface (None: everywhere inside), the core below it printed as the fixed
+  mixture ``core`` (``model.fixed.core_shares``).
 
 Both take a translucency constraint (``scenes.translucency``): ``translucency`` a mask file (meshes also "alpha",
 the texture's alpha channel) and ``translucency_depth_mm`` (None: through the whole object).
@@ -28,6 +29,7 @@ import numpy as np
 
 from ..errors import ParameterError
 from ..model import InkTable, transparent_ink
+from ..model.fixed import DEFAULT_CORE, core_shares, parse_core
 from ..model.volume import check_grid_budget
 from ..units import OPT_DPI, voxel_mm
 from .translucency import ALPHA, check_depth
@@ -94,9 +96,11 @@ class SlabSpec:
 class MeshSpec:
     """A textured mesh file ``path`` (OBJ, glTF/GLB, PLY) scaled to ``height_mm`` or by ``scale`` mm per model
     unit (exactly one), ``up`` its up axis ("y" or "z"), optimised within ``shell_mm`` of the surface (None:
-    every inside voxel) on a grid at ``dpi``; ``translucency``: "alpha" or a grey mask file in texture space,
-    down to ``translucency_depth_mm`` below the surface; ``texture``: an image file replacing the file's texture;
-    ``constant_color``: a mesh without colours is accepted (its target is one colour)."""
+    every inside voxel) on a grid at ``dpi``; ``core``: the fixed mixture of the voxels below the shell ("white",
+    "start" or ink shares "white=0.9,black=0.1"; ``model.fixed.core_shares``); ``translucency``: "alpha" or a grey
+    mask file in texture space, down to ``translucency_depth_mm`` below the surface; ``texture``: an image file
+    replacing the file's texture; ``constant_color``: a mesh without colours is accepted (its target is one
+    colour)."""
 
     path: str
     height_mm: float | None = None
@@ -108,6 +112,7 @@ class MeshSpec:
     translucency_depth_mm: float | None = None
     texture: str | None = None
     constant_color: bool = False
+    core: str = DEFAULT_CORE
     kind: ClassVar[str] = "mesh"
 
     def __post_init__(self):
@@ -121,6 +126,7 @@ class MeshSpec:
         if self.texture is not None:
             object.__setattr__(self, "texture", str(self.texture))
         object.__setattr__(self, "constant_color", bool(self.constant_color))
+        object.__setattr__(self, "core", str(self.core))
 
     def validate(self, inks: InkTable | None = None) -> None:
         """One-line ValueErrors for inputs that are wrong before the mesh is read; with ``inks``, also an ink set
@@ -129,6 +135,9 @@ class MeshSpec:
 
         check_placement(self.height_mm, self.scale, self.up)
         check_mesh_inputs(self.shell_mm, inks)
+        parse_core(self.core) if inks is None else core_shares(self.core, inks)
+        if self.shell_mm is None and self.core != DEFAULT_CORE:
+            raise ParameterError(f"`core` {self.core} fills the voxels below `shell_mm`, but every voxel is free")
         voxel_mm(self.dpi)  # its one-line error for a dpi that is not positive
         _check_translucency(self.translucency, self.translucency_depth_mm, inks, mesh=True)
         _check_file(self.path, "mesh file")
@@ -154,6 +163,8 @@ class MeshSpec:
             d["texture"] = self.texture
         if self.constant_color:
             d["constant_color"] = True
+        if self.core != "white":  # written only where it differs from the white core of specs without one
+            d["core"] = self.core
         return _with_translucency(d, self)
 
 
@@ -196,5 +207,6 @@ def spec_from_json(d: dict) -> SceneSpec:
             **tr,
             texture=d.get("texture"),
             constant_color=bool(d.get("constant_color", False)),
+            core=d.get("core", "white"),
         )
     raise ValueError(f"unknown scene kind {kind!r}; expected 'image' (a slab) or 'mesh'")

@@ -7,12 +7,13 @@ whose target is the texture colour of the closest surface point.
 
 Which voxels are variables: every inside voxel, or with ``shell_mm`` only those less than ``shell_mm`` below the
 surface (signed distance >= -shell_mm; surface voxels always). All other grid voxels, the deep core and the
-voxels outside the object, get a fixed share of 100 % white: the core is printed white, and outside voxels (which
+voxels outside the object, hold the fixed mixture ``core`` (``model.fixed.core_shares``: 100 % white by default,
+the optimiser's white start, or given ink shares): the core is printed as that mixture, and outside voxels (which
 the renderer ignores) are not variables, so the optimiser's memory scales with the free voxels.
 
 ``scene.npz`` (``rundir.SceneRecord``) holds ``free_mask`` (z, y, x) bool (the voxels that were variables);
-the dense fixed shares only for small objects, since they equal ``one_hot(white) * ~free_mask`` plus the
-translucency constraint, which it stores sparsely.
+the dense fixed shares only for small objects, since they equal ``core * ~free_mask`` (the core's shares are
+``MeshInfo.core_share``) plus the translucency constraint, which it stores sparsely.
 
 Translucency (``translucency``: "alpha" for the texture's alpha channel, or a mask in texture space;
 ``scenes.translucency``): inside voxels within ``translucency_depth_mm`` of the surface (None: all) hold their
@@ -38,8 +39,8 @@ from ...model import (
     Translucency,
     Volume,
     transparent_ink,
-    white_fixed_shares,
 )
+from ...model.fixed import DEFAULT_CORE, core_shares
 from ...model.volume import check_grid_budget
 from ...rundir import RunDir, SceneRecord
 from ...units import voxel_mm
@@ -89,6 +90,7 @@ class MeshScene:
     mesh_path: str = ""
     up: str = "y"
     translucency: Translucency | None = None
+    core: str = DEFAULT_CORE
     kind = "mesh"
 
     @property
@@ -119,6 +121,7 @@ class MeshScene:
             vox.voxel_mm,
             vox.closest_mm,
             self.shell_mm,
+            self.fixed_share.held,
         )
         return SceneRecord(
             "mesh",
@@ -149,6 +152,8 @@ class MeshScene:
             "texels": len(self.texels),
             "voxelize_seconds": self.voxelize_seconds,
             "shell_mm": self.shell_mm,
+            "core": self.core,
+            "core_shares": {n: float(v) for n, v in zip(self.volume.inks.names, self.fixed_share.held) if v > 0},
             "height_mm": self.height_mm,
             "mesh_scale": self.mesh.mm_per_unit,
             "mesh_path": self.mesh_path,
@@ -223,7 +228,8 @@ def build_mesh_scene(spec: MeshSpec, inks: InkTable) -> MeshScene:
     vox = voxelize(mesh, voxel_mm=vmm, band=band)
     seconds = time.perf_counter() - t0
     free = free_voxels(vox, spec.shell_mm)
-    fixed = white_fixed_shares(free, inks)
+    core = core_shares(spec.core, inks)
+    fixed = FixedShares(free, core)
     tr = None
     if spec.translucency is not None:  # before the SDF is dropped
         tr = mesh_translucency(vox, mesh_texel_share(mesh, vox, mask), inks, depth_mm, spec.translucency)
@@ -245,4 +251,4 @@ def build_mesh_scene(spec: MeshSpec, inks: InkTable) -> MeshScene:
     )
     vox.sdf = None  # 4 bytes per grid voxel no longer needed
     path = str(Path(spec.path).resolve())
-    return MeshScene(mesh, vox, vol, free, fixed, spec.shell_mm, seconds, path, spec.up, tr)
+    return MeshScene(mesh, vox, vol, free, fixed, spec.shell_mm, seconds, path, spec.up, tr, spec.core)
