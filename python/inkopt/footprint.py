@@ -86,12 +86,15 @@ MEMORY_ENV = "INKOPT_MEMORY_GB"
 @dataclass(frozen=True)
 class MeshShape:
     """A placed mesh's measures: ``box_mm`` (x, y, z) its bounding box, ``area_mm2``, ``volume_mm3``, ``texel_factor``
-    the area-weighted mean of max(|n_x|, |n_y|, |n_z|) over its faces (texels per area in voxel faces)."""
+    the area-weighted mean of max(|n_x|, |n_y|, |n_z|) over its faces (texels per area in voxel faces);
+    ``mesh_bytes``: what the loaded mesh holds (its arrays, its texture and the float32 copy of it its colour
+    look-ups make), whatever its scale."""
 
     box_mm: tuple[float, float, float]
     area_mm2: float
     volume_mm3: float
     texel_factor: float
+    mesh_bytes: float = 0.0
 
     @property
     def height_mm(self) -> float:
@@ -110,14 +113,18 @@ def mesh_shape(mesh) -> MeshShape:
     normals = np.abs(np.asarray(tm.face_normals, np.float64))
     factor = float(areas @ normals.max(axis=1) / max(areas.sum(), 1e-300))
     box = tuple(float(v) for v in np.ptp(mesh.solid_vertices, axis=0))
-    return MeshShape(box, float(tm.area), abs(float(tm.volume)), factor)
+    arrays = (mesh.vertices, mesh.faces, mesh.solid_vertices, mesh.solid_faces, mesh.uv, mesh.texture_alpha)
+    held = sum(a.nbytes for a in arrays if a is not None)
+    if mesh.texture is not None:
+        held += mesh.texture.width * mesh.texture.height * (3 + 12)  # RGB bytes, and float32 RGB while looked up
+    return MeshShape(box, float(tm.area), abs(float(tm.volume)), factor, float(held))
 
 
 @dataclass(frozen=True)
 class Footprint:
     """A job's expected counts and what they cost. ``kind``: "mesh" or "slab"; ``grid`` (x, y, z) voxels at ``dpi``;
     ``grid_voxels``, ``inside_voxels``, ``free_voxels``, ``texels``; ``n_inks``; ``band``: the voxelization's exact
-    signed-distance band (voxels; meshes)."""
+    signed-distance band (voxels; meshes); ``mesh_bytes``: the loaded mesh's (``MeshShape``)."""
 
     kind: str
     dpi: float
@@ -128,6 +135,7 @@ class Footprint:
     texels: int
     n_inks: int
     band: float = DEFAULT_BAND
+    mesh_bytes: float = 0.0
 
     def peak_bytes(self) -> float:
         """The expected peak resident memory (bytes): the larger of the voxelization's and the run's (module
@@ -142,7 +150,7 @@ class Footprint:
             + RUN_FREE_BYTES * self.free_voxels
             + RUN_TEXEL_BYTES * self.texels
         )
-        return BASE_BYTES + max(voxelize, run)
+        return BASE_BYTES + self.mesh_bytes + max(voxelize, run)
 
     def fits(self, limit_bytes: float) -> bool:
         """Whether the job's peak is at most ``limit_bytes`` and its grid within the renderer's 2^31 voxels."""
@@ -163,19 +171,6 @@ class Footprint:
     def quantized_bytes(self) -> int:
         """What ``inkopt quantize`` adds: a byte per printer voxel of the grid."""
         return int(PRINTER_PER_OPT_VOXEL * self.grid_voxels)
-
-    def to_json(self) -> dict:
-        return {
-            "kind": self.kind,
-            "dpi": self.dpi,
-            "grid": list(self.grid),
-            "grid_voxels": self.grid_voxels,
-            "inside_voxels": self.inside_voxels,
-            "free_voxels": self.free_voxels,
-            "texels": self.texels,
-            "peak_gib": self.peak_bytes() / 2**30,
-            "seconds_per_iteration": self.seconds_per_iteration(),
-        }
 
     def line(
         self,
@@ -231,7 +226,8 @@ def mesh_footprint(shape: MeshShape, dpi: float, shell_mm: float | None, n_inks:
     if shell_mm is not None:
         shell = inside * (1.0 - (1.0 - min(shell_mm / r, 1.0)) ** 3)
         free = min(max(shell, texels), inside)
-    return Footprint("mesh", dpi, grid, grid_voxels, round(inside), round(free), round(texels), n_inks, band)
+    counts = (grid_voxels, round(inside), round(free), round(texels))
+    return Footprint("mesh", dpi, grid, *counts, n_inks, band, shape.mesh_bytes)
 
 
 def mesh_band(voxel: float, *depths_mm) -> float:
