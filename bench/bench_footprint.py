@@ -1,7 +1,7 @@
 """The footprint's estimates (``inkopt.footprint``: counts, peak memory, seconds per iteration from the mesh alone)
 against what happens, on Spot.
 
-    python bench/bench_footprint.py counts                 # against the recorded bench/results/mesh_*mm.json counts
+    python bench/bench_footprint.py counts                 # against bench/results/mesh_*mm.json and the runs below
     python bench/bench_footprint.py dry 100 200            # `inkopt optimize --dry-run`: its seconds and peak memory
     python bench/bench_footprint.py run 40 --dir D [-- OPTIONS]   # a real run (--iterations 2 unless OPTIONS say)
     python bench/bench_footprint.py timed 40 --dir D --time-log LOG   # a run made under /usr/bin/time -v
@@ -80,6 +80,20 @@ def counts() -> dict:
             "measured_code": rec.get("commit"),
         }
     return {"counts": {"rows": rows}}
+
+
+def reestimate(entries: dict) -> None:
+    """Each recorded run's (``run_<H>mm``) estimate by the current footprint, beside the one recorded with it
+    (``estimated_now``, ``ratio_now``)."""
+    for name, rec in entries.items():
+        if name.startswith("run_") and "peak_rss_gb" in rec:
+            fp = _footprint(float(name[4:-2]))
+            now = {"peak_gib": fp.peak_bytes() / 2**30, "seconds_per_iteration": fp.seconds_per_iteration()}
+            rec["estimated_now"] = now
+            rec["ratio_now"] = {
+                "peak": now["peak_gib"] / rec["peak_rss_gb"],
+                "seconds_per_iteration": now["seconds_per_iteration"] / rec["seconds_per_iteration"],
+            }
 
 
 def dry(heights: list[float]) -> dict:
@@ -170,6 +184,8 @@ def main() -> None:
     data = json.loads(path.read_text()) if path.is_file() else {"entries": {}}
     for name, rec in entries.items():
         data["entries"][name] = {**rec, **provenance(), "machine": machine()}
+    if args.mode == "counts":
+        reestimate(data["entries"])
     data.update(provenance())  # the last writer's
     write(RESULTS_FILE, data)
     print(json.dumps(entries, indent=1)[:4000])

@@ -18,11 +18,11 @@ Counts of a mesh at voxel size h (mm) from its area A, volume V (trimesh), bound
 On Spot at 6-60 mm these land within 0.1 % (grid, inside), 1.5 % (texels) and 1 % (free with a 0.5-2 mm shell)
 of the voxelized counts (tests/test_footprint.py; docs/performance.md, "Estimates before allocation").
 
-Memory: the larger of two stages' peaks, each ``BASE_BYTES`` plus bytes per grid voxel, inside voxel, free voxel and
-texel (the constants below say where each comes from). Time: the measured cost of an iteration's passes per texel,
-growing like texels^``TEXEL_EXPONENT``, plus the step's cost per free voxel, both from Spot on 2 cores
-(bench/results/mesh_20mm.json and mesh_40mm.json); the machine's speed on the day, a shell's deeper paths (a
-pure-white core) and an optimised start's longer paths are not in it.
+Memory: the largest of three stages' peaks (voxelization, a step, the figures), each ``BASE_BYTES`` and the mesh
+plus bytes per grid voxel, inside voxel, free voxel and texel (the constants below say where each comes from).
+Time: the measured cost of an iteration's passes per texel, growing like texels^``TEXEL_EXPONENT``, plus the step's
+cost per free voxel, both from Spot on 2 cores (bench/results/mesh_20mm.json and mesh_40mm.json); the machine's
+speed on the day, a shell's deeper paths (a pure-white core) and an optimised start's longer paths are not in it.
 """
 
 from __future__ import annotations
@@ -51,16 +51,23 @@ VOXELIZE_TEXEL_BYTES = 2330.0
 #: translucent layer widens it): bench/results/mesh_20mm_shell1.json, mesh_20mm_shell0.5.json (within 8 %)
 VOXELIZE_BAND_TEXEL_BYTES = 300.0
 DEFAULT_BAND = 3
-#: the run, by what the code stores (docs/performance.md, "Memory, by what the code stores"): per grid voxel the
-#: inside and free masks, the base's labels and the core's distance byte; per inside voxel the core's sparse sigma_t
-#: and albedo; per free voxel the variables, momentum, their replacements, index and share, the gradient
+#: the run holds, by what the code stores (docs/performance.md, "Memory, by what the code stores"), per grid voxel
+#: the inside and free masks, the base's labels and the core's distance byte, and per inside voxel the core's sparse
+#: sigma_t and albedo; then it peaks in one of two stages:
 RUN_GRID_BYTES = 4.0
 RUN_INSIDE_BYTES = 24.0
-RUN_FREE_BYTES = 100.0
-#: per texel: the loss's SSIM and Sobel operators while the figures are made (~2.5 KB), the texels' arrays and
-#: what the allocator keeps of freed per-texel buffers: the peaks of bench/results/mesh_20mm.json and
-#: mesh_40mm.json less the terms above and ``BASE_BYTES`` leave 3.5 and 2.3 KB per texel
-RUN_TEXEL_BYTES = 3000.0
+#: - a step: per free voxel the variables, momentum, their replacements, index, share and gradient (100 B) and the
+#:   core's fixed-point gradient sums (48 B); with them Spot 40 mm's iterations come to 2.87 GiB against the
+#:   2.94 GiB bench/results/mesh_40mm.json measured (no figures there); per texel the passes' arrays (rgb,
+#:   variances, adjoint, running average, target, normal: ~128 B);
+STEP_FREE_BYTES = 148.0
+STEP_TEXEL_BYTES = 128.0
+#: - the figures (the start's, the baseline's, the result's): per free voxel the variables and momentum (40 B) and
+#:   per texel the loss's SSIM and Sobel operators (~2.5 KB), the figures' renders and what the allocator keeps
+#:   of them: 6.6 KB from the peak of a whole run of Spot 20 mm (bench/results/footprint_spot.json, run_20mm,
+#:   0.82 GiB), which puts Spot 40 mm within 5 % of its whole run's peak (run_40mm there)
+FIGURES_FREE_BYTES = 40.0
+FIGURES_TEXEL_BYTES = 6600.0
 #: seconds per iteration of the passes (4-spp gradient, 16-spp forward, the loss) at ``TEXELS_REF`` texels, from
 #: white on 2 cores: 11.19 s on Spot 20 mm (bench/results/mesh_20mm.json, render + gradient + loss)
 PASS_SECONDS_REF = 11.19
@@ -74,8 +81,8 @@ STEP_SECONDS_PER_FREE = 1.65e-7
 #: (experiments/results/printable.json, entry reference, report.seconds_iterations)
 SLAB_SECONDS_PER_TEXEL = 254.0 / 300 / 41772
 #: a slab's bytes per voxel: its (z, y, x, N) mixture (4 N), the dense sigma_s and sigma_a (24) and the free
-#: voxel's state (``RUN_FREE_BYTES``), the N = 5 of the default ink set's mixture included here
-SLAB_VOXEL_BYTES = 4 * 5 + 24 + RUN_FREE_BYTES
+#: voxel's state in a step (``STEP_FREE_BYTES``), the N = 5 of the default ink set's mixture included here
+SLAB_VOXEL_BYTES = 4 * 5 + 24 + STEP_FREE_BYTES
 #: share of the machine's available memory a job may plan to use (the estimate's own error and the other
 #: processes' growth stay free)
 MEMORY_MARGIN = 0.8
@@ -138,19 +145,16 @@ class Footprint:
     mesh_bytes: float = 0.0
 
     def peak_bytes(self) -> float:
-        """The expected peak resident memory (bytes): the larger of the voxelization's and the run's (module
-        docstring)."""
+        """The expected peak resident memory (bytes): the largest of the voxelization's, a step's and the figures'
+        (module docstring)."""
         if self.kind == "slab":
-            return BASE_BYTES + SLAB_VOXEL_BYTES * self.grid_voxels + RUN_TEXEL_BYTES * self.texels
+            return BASE_BYTES + SLAB_VOXEL_BYTES * self.grid_voxels + FIGURES_TEXEL_BYTES * self.texels
         per_texel = VOXELIZE_TEXEL_BYTES + VOXELIZE_BAND_TEXEL_BYTES * max(self.band - DEFAULT_BAND, 0.0)
         voxelize = VOXELIZE_GRID_BYTES * self.grid_voxels + per_texel * self.texels
-        run = (
-            RUN_GRID_BYTES * self.grid_voxels
-            + RUN_INSIDE_BYTES * self.inside_voxels
-            + RUN_FREE_BYTES * self.free_voxels
-            + RUN_TEXEL_BYTES * self.texels
-        )
-        return BASE_BYTES + self.mesh_bytes + max(voxelize, run)
+        held = RUN_GRID_BYTES * self.grid_voxels + RUN_INSIDE_BYTES * self.inside_voxels
+        step = STEP_FREE_BYTES * self.free_voxels + STEP_TEXEL_BYTES * self.texels
+        figures = FIGURES_FREE_BYTES * self.free_voxels + FIGURES_TEXEL_BYTES * self.texels
+        return BASE_BYTES + self.mesh_bytes + max(voxelize, held + max(step, figures))
 
     def fits(self, limit_bytes: float) -> bool:
         """Whether the job's peak is at most ``limit_bytes`` and its grid within the renderer's 2^31 voxels."""
