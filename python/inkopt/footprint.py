@@ -68,6 +68,10 @@ STEP_TEXEL_BYTES = 128.0
 #:   0.82 GiB), which puts Spot 40 mm within 5 % of its whole run's peak (run_40mm there)
 FIGURES_FREE_BYTES = 40.0
 FIGURES_TEXEL_BYTES = 6600.0
+#: a run with a shell (a pure-white core below the free voxels) peaked at 2.0x (Spot 20 mm, 0.5 and 1 mm shells) and
+#: 2.5x (60 mm, 2 mm) what these terms give its run stage (bench/results/mesh_20mm_shell0.5.json, _shell1,
+#: mesh_60mm_shell2.json, older code; its paths go deeper): the larger factor is taken, as a measured bound
+SHELL_RUN_FACTOR = 2.5
 #: seconds per iteration of the passes (4-spp gradient, 16-spp forward, the loss) at ``TEXELS_REF`` texels, from
 #: white on 2 cores: 11.19 s on Spot 20 mm (bench/results/mesh_20mm.json, render + gradient + loss)
 PASS_SECONDS_REF = 11.19
@@ -131,7 +135,8 @@ def mesh_shape(mesh) -> MeshShape:
 class Footprint:
     """A job's expected counts and what they cost. ``kind``: "mesh" or "slab"; ``grid`` (x, y, z) voxels at ``dpi``;
     ``grid_voxels``, ``inside_voxels``, ``free_voxels``, ``texels``; ``n_inks``; ``band``: the voxelization's exact
-    signed-distance band (voxels; meshes); ``mesh_bytes``: the loaded mesh's (``MeshShape``)."""
+    signed-distance band (voxels; meshes); ``mesh_bytes``: the loaded mesh's (``MeshShape``); ``shell``: only a
+    shell below the surface is free."""
 
     kind: str
     dpi: float
@@ -143,6 +148,7 @@ class Footprint:
     n_inks: int
     band: float = DEFAULT_BAND
     mesh_bytes: float = 0.0
+    shell: bool = False
 
     def peak_bytes(self) -> float:
         """The expected peak resident memory (bytes): the largest of the voxelization's, a step's and the figures'
@@ -154,7 +160,8 @@ class Footprint:
         held = RUN_GRID_BYTES * self.grid_voxels + RUN_INSIDE_BYTES * self.inside_voxels
         step = STEP_FREE_BYTES * self.free_voxels + STEP_TEXEL_BYTES * self.texels
         figures = FIGURES_FREE_BYTES * self.free_voxels + FIGURES_TEXEL_BYTES * self.texels
-        return BASE_BYTES + self.mesh_bytes + max(voxelize, held + max(step, figures))
+        run = (held + max(step, figures)) * (SHELL_RUN_FACTOR if self.shell else 1.0)
+        return BASE_BYTES + self.mesh_bytes + max(voxelize, run)
 
     def fits(self, limit_bytes: float) -> bool:
         """Whether the job's peak is at most ``limit_bytes`` and its grid within the renderer's 2^31 voxels."""
@@ -231,7 +238,7 @@ def mesh_footprint(shape: MeshShape, dpi: float, shell_mm: float | None, n_inks:
         shell = inside * (1.0 - (1.0 - min(shell_mm / r, 1.0)) ** 3)
         free = min(max(shell, texels), inside)
     counts = (grid_voxels, round(inside), round(free), round(texels))
-    return Footprint("mesh", dpi, grid, *counts, n_inks, band, shape.mesh_bytes)
+    return Footprint("mesh", dpi, grid, *counts, n_inks, band, shape.mesh_bytes, shell_mm is not None)
 
 
 def mesh_band(voxel: float, *depths_mm) -> float:
