@@ -160,3 +160,21 @@ def _run_args(monkeypatch, tmp_path, extra):
     rep, budget = runargs.run_from_args(args, runargs.mesh_spec_from_args(args, args.mesh))
     assert rep == "REPORT" and budget == seen["cfg"].time_budget
     return seen["cfg"], logged
+
+
+def test_a_slab_beyond_the_memory_is_refused_naming_the_size_that_fits(monkeypatch, capsys, tmp_path):
+    from PIL import Image
+
+    from inkopt.footprint import slab_footprint
+
+    Image.new("RGB", (40, 40), (200, 50, 50)).save(tmp_path / "p.png")
+    monkeypatch.setattr(footprint, "available_bytes", lambda: 2.0**30)
+    monkeypatch.delenv(footprint.MEMORY_ENV, raising=False)
+    out = tmp_path / "run"
+    assert main(["slab", str(tmp_path / "p.png"), "--size-mm", "100x100x10", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and not out.exists(), err
+    side = float(re.search(r"largest --size-mm that fits is ([0-9.]+)x", err[0]).group(1))
+    limit = 0.8 * 2.0**30
+    assert slab_footprint((side, side, 10.0), 300.0, 1, 5).peak_bytes() <= limit
+    assert slab_footprint((side * 1.05, side * 1.05, 10.0), 300.0, 1, 5).peak_bytes() > limit
