@@ -5,6 +5,7 @@ against what happens, on Spot.
     python bench/bench_footprint.py dry 100 200            # `inkopt optimize --dry-run`: its seconds and peak memory
     python bench/bench_footprint.py run 40 --dir D [-- OPTIONS]   # a real run (--iterations 2 unless OPTIONS say)
     python bench/bench_footprint.py timed 40 --dir D --time-log LOG   # a run made under /usr/bin/time -v
+    python bench/bench_footprint.py watch 40 --pid PID --stage TEXT --run-command CMD   # a run under way: its peak so far
 
 Each mode writes its entries into bench/results/footprint_spot.json (``entries``: ``counts``, ``dry_<H>mm``,
 ``run_<H>mm``) with
@@ -160,12 +161,39 @@ def timed(height: float, run_dir: str, time_log: str) -> dict:
     return {f"run_{height:g}mm": rec}
 
 
+def watch(height: float, pid: int, stage: str, command: str) -> dict:
+    """A run under way (process ``pid``, ``command``) that will not finish in time: its peak resident memory so far
+    (VmHWM) and CPU seconds from /proc, in ``stage``, against the footprint's peak."""
+    import subprocess as sp
+
+    status = dict(line.split(":", 1) for line in Path(f"/proc/{pid}/status").read_text().splitlines())
+    stat = Path(f"/proc/{pid}/stat").read_text().split()
+    peak = int(status["VmHWM"].split()[0]) / 2**20
+    fp = _footprint(height)
+    est = {"peak_gib": fp.peak_bytes() / 2**30, "seconds_per_iteration": fp.seconds_per_iteration()}
+    return {
+        f"run_{height:g}mm": {
+            "partial": True,
+            "run_command": command,
+            "stage_reached": stage,
+            "peak_rss_gb_so_far": peak,
+            "cpu_seconds_so_far": (int(stat[13]) + int(stat[14])) / os.sysconf("SC_CLK_TCK"),
+            "wall_seconds_so_far": int(sp.check_output(["ps", "-o", "etimes=", "-p", str(pid)])),
+            "estimated": est,
+            "ratio_estimated_to_measured": {"peak": est["peak_gib"] / peak},
+        }
+    }
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("mode", choices=("counts", "dry", "run", "timed"))
+    ap.add_argument("mode", choices=("counts", "dry", "run", "timed", "watch"))
     ap.add_argument("heights", type=float, nargs="*")
     ap.add_argument("--dir", help="run directory (run, timed)")
     ap.add_argument("--time-log", help="timed: the stderr of `/usr/bin/time -v inkopt optimize ...`")
+    ap.add_argument("--pid", type=int, help="watch: the run's process")
+    ap.add_argument("--stage", default="", help="watch: how far the run has come")
+    ap.add_argument("--run-command", default="", help="watch: the run's command line")
     argv = sys.argv[1:]
     extra = argv[argv.index("--") + 1 :] if "--" in argv else []
     args = ap.parse_args(argv[: argv.index("--")] if "--" in argv else argv)
@@ -174,6 +202,8 @@ def main() -> None:
         entries = counts()
     elif args.mode == "dry":
         entries = dry(args.heights or [100.0, 200.0])
+    elif args.mode == "watch":
+        entries = watch(args.heights[0], args.pid, args.stage, args.run_command)
     elif not args.dir or len(args.heights) != 1:
         raise SystemExit(f"{args.mode}: one height and --dir")
     elif args.mode == "timed":
