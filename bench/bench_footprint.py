@@ -5,7 +5,7 @@ against what happens, on Spot.
     python bench/bench_footprint.py dry 100 200            # `inkopt optimize --dry-run`: its seconds and peak memory
     python bench/bench_footprint.py run 40 --dir D [-- OPTIONS]   # a real run (--iterations 2 unless OPTIONS say)
     python bench/bench_footprint.py timed 40 --dir D --time-log LOG   # a run made under /usr/bin/time -v
-    python bench/bench_footprint.py watch 40 --pid PID --stage TEXT --run-command CMD   # a run under way: its peak so far
+    python bench/bench_footprint.py watch 40 --pid PID --stage TEXT --run-command CMD   # a run under way: peak so far
 
 Each mode writes its entries into bench/results/footprint_spot.json (``entries``: ``counts``, ``dry_<H>mm``,
 ``run_<H>mm``) with
