@@ -25,7 +25,7 @@ LAYERS = [
     {"evaluation"},
     {"calibration"},
     {"proof"},
-    {"run", "estimate", "coarse"},
+    {"run", "estimate", "footprint", "coarse"},
     {"inksets"},
     {"cli", "__main__"},
 ]

@@ -1,7 +1,8 @@
 """Jobs of more than one run and the plan of a deadline: coarse to fine (``run_coarse_to_fine``: a coarse run of the
-object, its result moved onto the fine grid as the fine run's start) and ``deadline_plan``, how a run with a time
+object, its result moved onto the fine grid as the fine run's start), ``deadline_plan``, how a run with a time
 budget and no coarse grid given goes (a thick mesh from the extrusion baseline on its own grid, every other run
-coarse to fine at half its DPI)."""
+coarse to fine at half its DPI), and ``default_time_budget``, the deadline of a run given neither a time budget nor
+a number of iterations."""
 
 from __future__ import annotations
 
@@ -32,6 +33,29 @@ COARSE_BUDGET_SHARE = 0.6
 #: equal budgets it ended lower than the plain run on the reference slab (3 min: 29.01 against 29.36 ΔE76) and on
 #: Spot 20 mm (8 min: 9.99 against 15.36) (bench/results/time_to_quality.json)
 DEADLINE_COARSE_FACTOR = 0.5
+
+
+#: a run given neither a time budget nor iterations gets the time of this many of its iterations (at its full grid,
+#: from white) as its deadline. Deadline jobs of about that size reached within 1 ΔE76 of 300 iterations: Spot
+#: 20 mm in 7 min 45 s, 40 iterations of its 11.6 s (bench/results/job.json, spot20_budget7m45s_warm025, against
+#: bench/results/mesh_20mm.json), Spot 40 mm in 27 min, 27.6 of its 58.8 s (bench/results/time_to_quality.json,
+#: spot40/extrusion_budget27m, against mesh_40mm.json); from white at the full grid the same target takes ~60
+#: iterations and the curve's knee (50 more iterations gain < 0.2 ΔE76) lies near 180 (spot40/reference there;
+#: docs/performance.md, "A time plan by default")
+PLAN_ITERATIONS = 40
+#: the shortest such deadline: the reference slab's 3 minutes reached within 1 ΔE76 of its 450-iteration result
+#: (time_to_quality.json, reference/c2f150_budget3m_warm025), where 40 of its 0.85-s iterations are less than its
+#: set-up and figures
+PLAN_MIN_SECONDS = 180.0
+
+
+def default_time_budget(seconds_per_iteration: float) -> float:
+    """The deadline (seconds) of a run given neither a time budget nor iterations, from its estimated
+    ``seconds_per_iteration`` at its full grid from white: ``PLAN_ITERATIONS`` of them, at least
+    ``PLAN_MIN_SECONDS``."""
+    if not (seconds_per_iteration >= 0 and seconds_per_iteration < float("inf")):
+        raise ParameterError(f"`seconds_per_iteration` must be a finite time, got {seconds_per_iteration}")
+    return max(PLAN_ITERATIONS * seconds_per_iteration, PLAN_MIN_SECONDS)
 
 
 def deadline_plan(spec, cfg: OptimizeConfig, log=print) -> tuple[float, OptimizeConfig]:

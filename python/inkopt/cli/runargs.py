@@ -17,6 +17,7 @@ from .common import (
     ray_from_args,
     stderr_log,
 )
+from .jobplan import plan_job
 
 
 def parse_gamma(text: str) -> tuple[float, float, float]:
@@ -53,8 +54,9 @@ def add_optimizer_args(p) -> None:
     p.add_argument(
         "--iterations",
         type=int,
-        default=d.iterations,
-        help=f"the most iterations (default {d.iterations}); the run stops earlier when done (--stop-gain)",
+        help=f"the most iterations; the run stops earlier when done (--stop-gain). Default {d.iterations} with "
+        "--time-budget; with neither, slab and optimize plan their time: the time of 40 iterations at the run's "
+        "estimated cost, at least 3 minutes (docs/performance.md, 'A time plan by default')",
     )
     _add_sampling_args(p, d)
     _add_step_args(p, d)
@@ -224,8 +226,15 @@ def add_single_run_args(p) -> None:
     p.add_argument(
         "--dry-run",
         action="store_true",
-        help="build the scene, measure a short calibration and print only the run's estimated time, peak memory "
-        "and disk; write nothing",
+        help="print only the run's estimated time, peak memory and disk and write nothing: a mesh's from its "
+        "size (the mesh is loaded, not voxelized), a slab's from a short calibration of its scene",
+    )
+    p.add_argument(
+        "--memory-gb",
+        type=float,
+        metavar="GIB",
+        help="the memory the job may use: a job estimated to need more is refused before anything large is "
+        "built (default: $INKOPT_MEMORY_GB, else 80%% of the available memory)",
     )
     p.add_argument(
         "--log-every",
@@ -261,8 +270,11 @@ def config_from_args(args):
     from ..optim import OptimizeConfig
     from ..units import parse_duration
 
+    given = {name: getattr(args, name) for name in CONFIG_OPTIONS}
+    if given["iterations"] is None:  # the default maximum (a single run without --time-budget plans its time)
+        given["iterations"] = OptimizeConfig().iterations
     cfg = OptimizeConfig(
-        **{name: getattr(args, name) for name in CONFIG_OPTIONS},
+        **given,
         gamma=parse_gamma(args.gamma),
         grad_method=args.gradient,
         # select-inks compares its candidates at equal iterations: no stopping when done there
@@ -321,9 +333,11 @@ def mesh_spec_from_args(args, path: str):
 
 
 def run_from_args(args, spec):
-    """``slab`` and ``optimize``: check ``spec`` (before the ink set and the optimiser settings are read), build
-    its scene with ``--inks`` and optimise it into ``--out``; returns the run's ``Report`` (with ``--dry-run`` its
-    ``estimate.Estimate``, nothing written)."""
+    """``slab`` and ``optimize``: check ``spec`` (before the ink set and the optimiser settings are read) and that
+    its job fits the memory (``footprint``: a mesh is loaded, not voxelized), plan its time when neither
+    ``--time-budget`` nor ``--iterations`` is given (the first log line says so), build its scene with ``--inks``
+    and optimise it into ``--out``. Returns (the run's ``Report``, or with ``--dry-run`` an estimate with a
+    ``line(time_budget)``, nothing written; the run's time budget in seconds or None)."""
     import time
 
     from ..coarse import deadline_plan, run_coarse_to_fine
@@ -335,23 +349,25 @@ def run_from_args(args, spec):
     spec.validate()
     options = run_options_from_args(args, started)
     inks = InkTable.parse(args.inks)
-    cfg = config_from_args(args)
+    cfg, options, dry = plan_job(args, spec, len(inks), config_from_args(args), options)
+    if dry is not None:
+        return dry, cfg.time_budget
     coarse_dpi = args.coarse_dpi
     if coarse_dpi is None and cfg.time_budget is not None:
-        coarse_dpi, cfg = deadline_plan(spec, cfg, log=stderr_log)
+        coarse_dpi, cfg = deadline_plan(spec, cfg, log=options.log)
     if coarse_dpi:
-        return run_coarse_to_fine(spec, inks, args.out, cfg, coarse_dpi, options)
-    return run_optimisation(build_scene(spec, inks), args.out, cfg, options)
+        return run_coarse_to_fine(spec, inks, args.out, cfg, coarse_dpi, options), cfg.time_budget
+    return run_optimisation(build_scene(spec, inks), args.out, cfg, options), cfg.time_budget
 
 
 def run_command(args, spec, outputs: str, show_memory: bool = False) -> int:
     """Run ``spec`` as ``slab`` and ``optimize`` do and print the closing lines: the summary and where its
     ``outputs`` are (``--dry-run``: the estimate's line only)."""
-    from ..units import parse_duration
-
-    rep = run_from_args(args, spec)
+    rep, time_budget = run_from_args(args, spec)
     if args.dry_run:
-        print(rep.line(parse_duration(args.time_budget) if args.time_budget else None))
+        print(rep.line(time_budget))
+        if getattr(rep, "refusal", None) is not None:  # the job would be refused: the one-line error, status 2
+            raise rep.refusal
         return 0
     print_run_summary(rep, rep.init, f" (peak memory {rep.peak_rss_gb:.1f} GiB)" if show_memory else "")
     print(f"{outputs}; report: {args.out}/report.json")

@@ -1,0 +1,225 @@
+"""The footprint's estimates (``inkopt.footprint``: counts, peak memory, seconds per iteration from the mesh alone)
+against what happens, on Spot.
+
+    python bench/bench_footprint.py counts                 # against bench/results/mesh_*mm.json and the runs below
+    python bench/bench_footprint.py dry 100 200            # `inkopt optimize --dry-run`: its seconds and peak memory
+    python bench/bench_footprint.py run 40 --dir D [-- OPTIONS]   # a real run (--iterations 2 unless OPTIONS say)
+    python bench/bench_footprint.py timed 40 --dir D --time-log LOG   # a run made under /usr/bin/time -v
+    python bench/bench_footprint.py watch 40 --pid PID --stage TEXT --run-command CMD   # a run under way: peak so far
+
+Each mode writes its entries into bench/results/footprint_spot.json (``entries``: ``counts``, ``dry_<H>mm``,
+``run_<H>mm``) with
+the command, the commit and the load average before and after; every command runs in its own process, measured by
+``os.wait4`` (peak resident memory and CPU seconds of that process). A run's seconds per iteration is report.json's
+``seconds_iterations`` over its iterations; its CPU seconds per iteration are not separable from the set-up and
+figures, so the load average says how far the wall time is the machine's.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from common import RESULTS, machine, provenance, write
+
+ROOT = Path(__file__).resolve().parents[1]
+SPOT = ROOT.parent / "shared" / "data" / "spot" / "spot.obj"
+if not SPOT.is_file():
+    SPOT = ROOT / "python" / "inkopt" / "data" / "spot" / "spot.obj"
+RESULTS_FILE = "footprint_spot.json"
+
+
+def _process(args: list[str], log: Path) -> dict:
+    """Run ``python -m inkopt.cli ARGS`` (stdout and stderr to ``log``): exit status, wall and CPU seconds, peak
+    RSS (GiB)."""
+    t = time.perf_counter()
+    with open(log, "wb") as f:
+        proc = subprocess.Popen([sys.executable, "-m", "inkopt.cli", *args], stdout=f, stderr=f)
+        _, status, usage = os.wait4(proc.pid, 0)
+    return {
+        "exit_status": os.waitstatus_to_exitcode(status),
+        "seconds": time.perf_counter() - t,
+        "cpu_seconds": usage.ru_utime + usage.ru_stime,
+        "peak_rss_gb": usage.ru_maxrss / 2**20,
+        "output": log.read_text().strip().splitlines(),
+    }
+
+
+def _footprint(height: float, shell_mm=None):
+    from inkopt.footprint import spec_footprint
+    from inkopt.scenes.spec import MeshSpec
+
+    return spec_footprint(MeshSpec(str(SPOT), height_mm=height, shell_mm=shell_mm), 5)[0]
+
+
+def counts() -> dict:
+    """The footprint's counts and peak against every bench/results/mesh_*mm.json (voxelized Spot)."""
+    rows = {}
+    for path in sorted(RESULTS.glob("mesh_*mm*.json")):
+        rec = json.loads(path.read_text())
+        if rec.get("dpi", 300.0) != 300.0:
+            continue
+        fp = _footprint(rec["height_mm"], rec.get("shell_mm"))
+        measured = {k: rec[k] for k in ("voxels", "inside_voxels", "free_voxels", "texels")}
+        est = {"voxels": fp.grid_voxels, "inside_voxels": fp.inside_voxels, "free_voxels": fp.free_voxels}
+        est["texels"] = fp.texels
+        rows[path.name] = {
+            "measured": measured,
+            "estimated": est,
+            "relative_error": {k: est[k] / measured[k] - 1.0 for k in measured},
+            "peak_gib": {"measured": rec["peak_rss_gb"], "estimated": fp.peak_bytes() / 2**30},
+            "seconds_per_iteration": {
+                "measured": rec["seconds_per_iteration"],
+                "estimated": fp.seconds_per_iteration(),
+            },
+            "measured_code": rec.get("commit"),
+        }
+    return {"counts": {"rows": rows}}
+
+
+def reestimate(entries: dict) -> None:
+    """Each recorded run's (``run_<H>mm``) estimate by the current footprint, beside the one recorded with it
+    (``estimated_now``, ``ratio_now``)."""
+    for name, rec in entries.items():
+        if name.startswith("run_") and "peak_rss_gb" in rec:
+            fp = _footprint(float(name[4:-2]))
+            now = {"peak_gib": fp.peak_bytes() / 2**30, "seconds_per_iteration": fp.seconds_per_iteration()}
+            rec["estimated_now"] = now
+            rec["ratio_now"] = {
+                "peak": now["peak_gib"] / rec["peak_rss_gb"],
+                "seconds_per_iteration": now["seconds_per_iteration"] / rec["seconds_per_iteration"],
+            }
+
+
+def dry(heights: list[float]) -> dict:
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for h in heights:
+            args = ["optimize", str(SPOT), "--height-mm", f"{h:g}", "--dry-run", "--out", f"{tmp}/run"]
+            out[f"dry_{h:g}mm"] = {"load_before": os.getloadavg()[0], **_process(args, Path(tmp) / "log")}
+            out[f"dry_{h:g}mm"]["load_after"] = os.getloadavg()[0]
+    return out
+
+
+def run(height: float, run_dir: str, options: list[str]) -> dict:
+    if "--iterations" not in options and "--time-budget" not in options:
+        options = ["--iterations", "2", *options]
+    fp = _footprint(height)
+    args = ["optimize", str(SPOT), "--height-mm", f"{height:g}", "--out", run_dir, *options]
+    before = os.getloadavg()[0]
+    rec = _process(args, Path(run_dir + ".log"))
+    report = json.loads((Path(run_dir) / "report.json").read_text())
+    per = report["seconds_iterations"] / max(report["iterations"], 1)
+    rec.update(
+        load_before=before,
+        load_after=os.getloadavg()[0],
+        seconds_per_iteration=per,
+        iterations=report["iterations"],
+        estimated={"peak_gib": fp.peak_bytes() / 2**30, "seconds_per_iteration": fp.seconds_per_iteration()},
+    )
+    rec["ratio_estimated_to_measured"] = {
+        "peak": rec["estimated"]["peak_gib"] / rec["peak_rss_gb"],
+        "seconds_per_iteration": rec["estimated"]["seconds_per_iteration"] / per,
+    }
+    return {f"run_{height:g}mm": rec}
+
+
+def timed(height: float, run_dir: str, time_log: str) -> dict:
+    """A run made outside this script under ``/usr/bin/time -v`` (``time_log``: its stderr, the run's log with
+    time's lines at the end): its peak RSS and CPU seconds from time's lines, its seconds per iteration from
+    report.json, against the footprint's."""
+    import re
+
+    text = Path(time_log).read_text()
+    rss_kb = int(re.search(r"Maximum resident set size \(kbytes\): (\d+)", text).group(1))
+    user = float(re.search(r"User time \(seconds\): ([0-9.]+)", text).group(1))
+    system = float(re.search(r"System time \(seconds\): ([0-9.]+)", text).group(1))
+    command = re.search(r'Command being timed: "(.*)"', text).group(1)
+    report = json.loads((Path(run_dir) / "report.json").read_text())
+    per = report["seconds_iterations"] / max(report["iterations"], 1)
+    fp = _footprint(height)
+    rec = {
+        "run_command": command,
+        "peak_rss_gb": rss_kb / 2**20,
+        "cpu_seconds": user + system,
+        "seconds": report["seconds"],
+        "seconds_per_iteration": per,
+        "iterations": report["iterations"],
+        "estimated": {"peak_gib": fp.peak_bytes() / 2**30, "seconds_per_iteration": fp.seconds_per_iteration()},
+        "run_estimate": report.get("estimate"),
+    }
+    rec["ratio_estimated_to_measured"] = {
+        "peak": rec["estimated"]["peak_gib"] / rec["peak_rss_gb"],
+        "seconds_per_iteration": rec["estimated"]["seconds_per_iteration"] / per,
+    }
+    return {f"run_{height:g}mm": rec}
+
+
+def watch(height: float, pid: int, stage: str, command: str) -> dict:
+    """A run under way (process ``pid``, ``command``) that will not finish in time: its peak resident memory so far
+    (VmHWM) and CPU seconds from /proc, in ``stage``, against the footprint's peak."""
+    import subprocess as sp
+
+    status = dict(line.split(":", 1) for line in Path(f"/proc/{pid}/status").read_text().splitlines())
+    stat = Path(f"/proc/{pid}/stat").read_text().split()
+    peak = int(status["VmHWM"].split()[0]) / 2**20
+    fp = _footprint(height)
+    est = {"peak_gib": fp.peak_bytes() / 2**30, "seconds_per_iteration": fp.seconds_per_iteration()}
+    return {
+        f"run_{height:g}mm": {
+            "partial": True,
+            "run_command": command,
+            "stage_reached": stage,
+            "peak_rss_gb_so_far": peak,
+            "cpu_seconds_so_far": (int(stat[13]) + int(stat[14])) / os.sysconf("SC_CLK_TCK"),
+            "wall_seconds_so_far": int(sp.check_output(["ps", "-o", "etimes=", "-p", str(pid)])),
+            "estimated": est,
+            "ratio_estimated_to_measured": {"peak": est["peak_gib"] / peak},
+        }
+    }
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("mode", choices=("counts", "dry", "run", "timed", "watch"))
+    ap.add_argument("heights", type=float, nargs="*")
+    ap.add_argument("--dir", help="run directory (run, timed)")
+    ap.add_argument("--time-log", help="timed: the stderr of `/usr/bin/time -v inkopt optimize ...`")
+    ap.add_argument("--pid", type=int, help="watch: the run's process")
+    ap.add_argument("--stage", default="", help="watch: how far the run has come")
+    ap.add_argument("--run-command", default="", help="watch: the run's command line")
+    argv = sys.argv[1:]
+    extra = argv[argv.index("--") + 1 :] if "--" in argv else []
+    args = ap.parse_args(argv[: argv.index("--")] if "--" in argv else argv)
+    sys.path.insert(0, str(ROOT / "python"))
+    if args.mode == "counts":
+        entries = counts()
+    elif args.mode == "dry":
+        entries = dry(args.heights or [100.0, 200.0])
+    elif args.mode == "watch":
+        entries = watch(args.heights[0], args.pid, args.stage, args.run_command)
+    elif not args.dir or len(args.heights) != 1:
+        raise SystemExit(f"{args.mode}: one height and --dir")
+    elif args.mode == "timed":
+        entries = timed(args.heights[0], args.dir, args.time_log)
+    else:
+        entries = run(args.heights[0], args.dir, extra)
+    path = RESULTS / RESULTS_FILE
+    data = json.loads(path.read_text()) if path.is_file() else {"entries": {}}
+    for name, rec in entries.items():
+        data["entries"][name] = {**rec, **provenance(), "machine": machine()}
+    if args.mode == "counts":
+        reestimate(data["entries"])
+    data.update(provenance())  # the last writer's
+    write(RESULTS_FILE, data)
+    print(json.dumps(entries, indent=1)[:4000])
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,79 @@
+"""What a single run (``slab``, ``optimize``) settles before anything large is built: its footprint from its size
+(``inkopt.footprint``: a mesh is loaded, not voxelized), the refusal of a job beyond the memory it may use
+(``--memory-gb``), the time plan of a run given neither ``--time-budget`` nor ``--iterations``, and a dry run
+answered from the footprint."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+
+def plan_job(args, spec, n_inks: int, cfg, options):
+    """Check that the job of ``spec`` (checked) with ``n_inks`` inks fits the memory (a one-line ParameterError
+    naming the largest size that fits; a dry run keeps it for after its estimate) and give a run without
+    ``--time-budget`` or ``--iterations`` its time plan (logged before the run's first line). Returns (``cfg``,
+    ``options``, a dry run's answer or None): the answer for a mesh's dry run and for any job that does not fit."""
+    from ..errors import ParameterError
+    from ..footprint import check_spec_fits, memory_limit, spec_footprint
+
+    limit = memory_limit(args.memory_gb)
+    fp, shape = spec_footprint(spec, n_inks)
+    refusal = None
+    try:
+        check_spec_fits(spec, fp, shape, limit)
+    except ParameterError as exc:
+        if not args.dry_run:
+            raise
+        refusal = exc  # a dry run prints its estimate first
+    planned = args.iterations is None and cfg.time_budget is None
+    if planned:
+        budget, line = _time_plan(fp)
+        cfg = replace(cfg, time_budget=budget)
+        options = replace(options, log=_first_line(options.log, line))
+    dry = None
+    if args.dry_run and (spec.kind == "mesh" or refusal is not None):
+        dry = _FootprintDryRun(fp, cfg.iterations, limit, refusal, planned)
+    return cfg, options, dry
+
+
+def _first_line(log, line: str):
+    """``log`` that writes ``line`` before its first message: a run's first log line, while a one-line error
+    before anything is logged stays one line."""
+    pending = [line]
+
+    def out(msg: str) -> None:
+        while pending:
+            log(pending.pop())
+        log(msg)
+
+    return out
+
+
+def _time_plan(fp) -> tuple[float, str]:
+    """The time budget of a run given neither ``--time-budget`` nor ``--iterations`` (``coarse.default_time_budget``
+    from the footprint's seconds per iteration) and the line that says so."""
+    from ..coarse import PLAN_ITERATIONS, PLAN_MIN_SECONDS, default_time_budget
+    from ..units import format_duration
+
+    each = fp.seconds_per_iteration()
+    budget = default_time_budget(each)
+    why = f"{PLAN_ITERATIONS} iterations' time at the estimated {each:.3g} s each"
+    if budget > PLAN_ITERATIONS * each:
+        why = f"at least {format_duration(PLAN_MIN_SECONDS)}; {why} is less"
+    return budget, (
+        f"time plan: {format_duration(budget)} (no --time-budget or --iterations given; {why}, the deadline "
+        "that reached within 1 ΔE76 of 300 iterations on Spot and the reference slab, docs/performance.md; "
+        "--time-budget or --iterations to choose)"
+    )
+
+
+class _FootprintDryRun:
+    """A dry run from the footprint (a mesh's, or a job that does not fit): its line for ``iterations`` against the
+    memory ``limit``; ``refusal``: the error the run would end with (None: it fits); ``planned``: its time budget is
+    the time plan."""
+
+    def __init__(self, fp, iterations: int, limit, refusal=None, planned: bool = False):
+        self.fp, self.iterations, self.limit, self.refusal, self.planned = fp, iterations, limit, refusal, planned
+
+    def line(self, time_budget: float | None = None) -> str:
+        return self.fp.line(self.iterations, time_budget, self.limit, "time plan" if self.planned else "time budget")

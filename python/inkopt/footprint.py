@@ -1,0 +1,400 @@
+"""What a job needs before anything large is built: its grid's counts from the loaded mesh alone (no voxelization) or
+from a slab's size, the peak memory, seconds per iteration and disk those counts need (``Footprint``), the memory the
+machine can give (``memory_limit``) and the one-line refusal of a job beyond it that names the largest height (or
+DPI) that fits (``check_fits``).
+
+Counts of a mesh at voxel size h (mm) from its area A, volume V (trimesh), bounding box and face normals:
+
+- grid voxels: ceil(box / h) + 2 a side (voxelization pads one empty voxel each side): exact;
+- inside voxels: V / h^3;
+- texels (inside voxels with an outside face neighbour): the sum over faces of area x max(|n_x|, |n_y|, |n_z|) / h^2
+  (a digital plane of normal n has one such voxel per h^2 / max|n_i| of its area), times (1 - h / 2r)^2: their
+  centres lie about half a voxel deep, where a ball with the object's volume-to-area ratio (radius r = 3 V / A)
+  has that share of its area;
+- free voxels: every inside voxel, or with ``shell_mm`` d those within d of the surface, estimated as the shell of
+  that ball: V (1 - (1 - d / r)^3) / h^3, which is A d to first order and less where the surface curves inwards;
+  at least the texels, at most the inside voxels.
+
+On Spot at 6-60 mm these land within 0.1 % (grid, inside), 1.5 % (texels) and 1 % (free with a 0.5-2 mm shell)
+of the voxelized counts (tests/test_footprint.py; docs/performance.md, "Estimates before allocation").
+
+Memory: the largest of three stages' peaks (voxelization, a step, the figures), each ``BASE_BYTES`` and the mesh
+plus bytes per grid voxel, inside voxel, free voxel and texel (the constants below say where each comes from).
+Time: the measured cost of an iteration's passes per texel, growing like texels^``TEXEL_EXPONENT``, plus the step's
+cost per free voxel, both from Spot on 2 cores (bench/results/mesh_20mm.json and mesh_40mm.json); the machine's
+speed on the day, a shell's deeper paths (a pure-white core) and an optimised start's longer paths are not in it.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .errors import ParameterError
+from .estimate import PRINTER_PER_OPT_VOXEL
+from .model.volume import MAX_GRID_VOXELS
+from .units import format_duration, voxel_mm
+
+#: the interpreter, numpy, the extension and the ink tables before a scene is built: the 'start' peak of
+#: bench/results/mesh_*mm.json is 0.066-0.070 GiB
+BASE_BYTES = 0.07 * 2**30
+#: voxelization (the mesh's stage before the run), fitted to the 'after_voxelize' peaks of bench/results/mesh_10mm,
+#: 20mm, 40mm and 60mm.json (less 'start') within 10 %: per grid voxel the winding-number inside mask and the
+#: signed distances (4 B of float32 plus the mask's byte, freed in blocks), per texel its closest points, faces,
+#: normals and colours and the near-surface queries' temporaries
+VOXELIZE_GRID_BYTES = 4.1
+VOXELIZE_TEXEL_BYTES = 2330.0
+#: ... and per texel for each voxel the signed distance must be exact beyond the default band of 3 (a shell or a
+#: translucent layer widens it): bench/results/mesh_20mm_shell1.json, mesh_20mm_shell0.5.json (within 8 %)
+VOXELIZE_BAND_TEXEL_BYTES = 300.0
+DEFAULT_BAND = 3
+#: the run holds, by what the code stores (docs/performance.md, "Memory, by what the code stores"), per grid voxel
+#: the inside and free masks, the base's labels and the core's distance byte, and per inside voxel the core's sparse
+#: sigma_t and albedo; then it peaks in one of two stages:
+RUN_GRID_BYTES = 4.0
+RUN_INSIDE_BYTES = 24.0
+#: - a step: per free voxel the variables, momentum, their replacements, index, share and gradient (100 B) and the
+#:   core's fixed-point gradient sums (48 B); with them Spot 40 mm's iterations come to 2.87 GiB against the
+#:   2.94 GiB bench/results/mesh_40mm.json measured (no figures there); per texel the passes' arrays (rgb,
+#:   variances, adjoint, running average, target, normal: ~128 B);
+STEP_FREE_BYTES = 148.0
+STEP_TEXEL_BYTES = 128.0
+#: - the figures (the start's, the baseline's, the result's): per free voxel the variables and momentum (40 B) and
+#:   per texel the loss's SSIM and Sobel operators (~2.5 KB), the figures' renders and what the allocator keeps
+#:   of them: 6.6 KB from the peak of a whole run of Spot 20 mm (bench/results/footprint_spot.json, run_20mm,
+#:   0.82 GiB), which puts Spot 40 mm within 5 % of its whole run's peak (run_40mm there)
+FIGURES_FREE_BYTES = 40.0
+FIGURES_TEXEL_BYTES = 6600.0
+#: a run with a shell (a pure-white core below the free voxels) peaked at 2.0x (Spot 20 mm, 0.5 and 1 mm shells) and
+#: 2.5x (60 mm, 2 mm) what these terms give its run stage (bench/results/mesh_20mm_shell0.5.json, _shell1,
+#: mesh_60mm_shell2.json, older code; its paths go deeper): the larger factor is taken, as a measured bound
+SHELL_RUN_FACTOR = 2.5
+#: seconds per iteration of the passes (4-spp gradient, 16-spp forward, the loss) at ``TEXELS_REF`` texels, from
+#: white on 2 cores: 11.19 s on Spot 20 mm (bench/results/mesh_20mm.json, render + gradient + loss)
+PASS_SECONDS_REF = 11.19
+TEXELS_REF = 96002
+#: their growth with the texels: 56.24 s at 386 829 texels (bench/results/mesh_40mm.json, same code):
+#: log(56.24 / 11.19) / log(386829 / 96002)
+TEXEL_EXPONENT = 1.159
+#: the step per free voxel: 2.59 s over 15.68 M free voxels (bench/results/mesh_40mm.json)
+STEP_SECONDS_PER_FREE = 1.65e-7
+#: a slab's passes per texel: 254 s for 300 iterations of the reference slab's 41 772 texels
+#: (experiments/results/printable.json, entry reference, report.seconds_iterations)
+SLAB_SECONDS_PER_TEXEL = 254.0 / 300 / 41772
+#: a slab's bytes per voxel: its (z, y, x, N) mixture (4 N), the dense sigma_s and sigma_a (24) and the free
+#: voxel's state in a step (``STEP_FREE_BYTES``), the N = 5 of the default ink set's mixture included here
+SLAB_VOXEL_BYTES = 4 * 5 + 24 + STEP_FREE_BYTES
+#: share of the machine's available memory a job may plan to use (the estimate's own error and the other
+#: processes' growth stay free)
+MEMORY_MARGIN = 0.8
+#: the environment variable that sets the memory a job may use (GiB) instead of the available memory
+MEMORY_ENV = "INKOPT_MEMORY_GB"
+
+
+@dataclass(frozen=True)
+class MeshShape:
+    """A placed mesh's measures: ``box_mm`` (x, y, z) its bounding box, ``area_mm2``, ``volume_mm3``, ``texel_factor``
+    the area-weighted mean of max(|n_x|, |n_y|, |n_z|) over its faces (texels per area in voxel faces);
+    ``mesh_bytes``: what the loaded mesh holds (its arrays, its texture and the float32 copy of it its colour
+    look-ups make), whatever its scale."""
+
+    box_mm: tuple[float, float, float]
+    area_mm2: float
+    volume_mm3: float
+    texel_factor: float
+    mesh_bytes: float = 0.0
+
+    @property
+    def height_mm(self) -> float:
+        return self.box_mm[2]
+
+    def scaled(self, factor: float) -> MeshShape:
+        """The same shape ``factor`` times as large."""
+        box = tuple(float(b * factor) for b in self.box_mm)
+        return replace(self, box_mm=box, area_mm2=self.area_mm2 * factor**2, volume_mm3=self.volume_mm3 * factor**3)
+
+
+def mesh_shape(mesh) -> MeshShape:
+    """The ``MeshShape`` of a loaded ``TexturedMesh`` (its seam-merged solid)."""
+    tm = mesh.solid_trimesh()
+    areas = np.asarray(tm.area_faces, np.float64)
+    normals = np.abs(np.asarray(tm.face_normals, np.float64))
+    factor = float(areas @ normals.max(axis=1) / max(areas.sum(), 1e-300))
+    box = tuple(float(v) for v in np.ptp(mesh.solid_vertices, axis=0))
+    arrays = (mesh.vertices, mesh.faces, mesh.solid_vertices, mesh.solid_faces, mesh.uv, mesh.texture_alpha)
+    held = sum(a.nbytes for a in arrays if a is not None)
+    if mesh.texture is not None:
+        held += mesh.texture.width * mesh.texture.height * (3 + 12)  # RGB bytes, and float32 RGB while looked up
+    return MeshShape(box, float(tm.area), abs(float(tm.volume)), factor, float(held))
+
+
+@dataclass(frozen=True)
+class Footprint:
+    """A job's expected counts and what they cost. ``kind``: "mesh" or "slab"; ``grid`` (x, y, z) voxels at ``dpi``;
+    ``grid_voxels``, ``inside_voxels``, ``free_voxels``, ``texels``; ``n_inks``; ``band``: the voxelization's exact
+    signed-distance band (voxels; meshes); ``mesh_bytes``: the loaded mesh's (``MeshShape``); ``shell``: only a
+    shell below the surface is free."""
+
+    kind: str
+    dpi: float
+    grid: tuple[int, int, int]
+    grid_voxels: int
+    inside_voxels: int
+    free_voxels: int
+    texels: int
+    n_inks: int
+    band: float = DEFAULT_BAND
+    mesh_bytes: float = 0.0
+    shell: bool = False
+
+    def peak_bytes(self) -> float:
+        """The expected peak resident memory (bytes): the largest of the voxelization's, a step's and the figures'
+        (module docstring)."""
+        if self.kind == "slab":
+            return BASE_BYTES + SLAB_VOXEL_BYTES * self.grid_voxels + FIGURES_TEXEL_BYTES * self.texels
+        per_texel = VOXELIZE_TEXEL_BYTES + VOXELIZE_BAND_TEXEL_BYTES * max(self.band - DEFAULT_BAND, 0.0)
+        voxelize = VOXELIZE_GRID_BYTES * self.grid_voxels + per_texel * self.texels
+        held = RUN_GRID_BYTES * self.grid_voxels + RUN_INSIDE_BYTES * self.inside_voxels
+        step = STEP_FREE_BYTES * self.free_voxels + STEP_TEXEL_BYTES * self.texels
+        figures = FIGURES_FREE_BYTES * self.free_voxels + FIGURES_TEXEL_BYTES * self.texels
+        run = (held + max(step, figures)) * (SHELL_RUN_FACTOR if self.shell else 1.0)
+        return BASE_BYTES + self.mesh_bytes + max(voxelize, run)
+
+    def fits(self, limit_bytes: float) -> bool:
+        """Whether the job's peak is at most ``limit_bytes`` and its grid within the renderer's 2^31 voxels."""
+        return self.peak_bytes() <= limit_bytes and self.grid_voxels <= MAX_GRID_VOXELS
+
+    def seconds_per_iteration(self) -> float:
+        """The expected seconds of one iteration from white on 2 cores (module docstring)."""
+        if self.kind == "slab":
+            return SLAB_SECONDS_PER_TEXEL * self.texels + STEP_SECONDS_PER_FREE * self.free_voxels
+        passes = PASS_SECONDS_REF * (self.texels / TEXELS_REF) ** TEXEL_EXPONENT
+        return passes + STEP_SECONDS_PER_FREE * self.free_voxels
+
+    def disk_bytes(self, iterations: int) -> int:
+        """The run directory's bytes (``estimate`` module docstring: volume.npz, the checkpoint, scene.npz)."""
+        n = self.n_inks
+        return int(4 * n * self.inside_voxels + 12 * n * self.free_voxels + 64 * self.texels + 80 * iterations)
+
+    def quantized_bytes(self) -> int:
+        """What ``inkopt quantize`` adds: a byte per printer voxel of the grid."""
+        return int(PRINTER_PER_OPT_VOXEL * self.grid_voxels)
+
+    def line(
+        self,
+        iterations: int,
+        time_budget: float | None = None,
+        limit: MemoryLimit | None = None,
+        budget_name="time budget",
+    ) -> str:
+        """The dry run's line: the counts, the peak memory (against ``limit``), the time of up to ``iterations``
+        (ended sooner by ``time_budget`` seconds when shorter, named ``budget_name``) and the disk."""
+        each = self.seconds_per_iteration()
+        total = each * iterations
+        budget = ""
+        if time_budget is not None and total > time_budget:
+            budget = f"; the {budget_name} ({format_duration(time_budget)}) ends the run sooner"
+        room = f" of {limit.bytes / 2**30:.1f} GiB {limit.source}" if limit is not None else ""
+        nx, ny, nz = self.grid
+        counts = (
+            f"grid {nx} x {ny} x {nz} ({_count(self.grid_voxels)} voxels), {_count(self.inside_voxels)} inside, "
+            f"{_count(self.free_voxels)} free, {_count(self.texels)} texels"
+        )
+        return (
+            f"estimate from the {self.kind}'s size ({counts}): peak memory ~{self.peak_bytes() / 2**30:.1f} GiB{room}; "
+            f"up to {iterations} iterations x {_seconds(each)} s = {format_duration(total)} (+ the final evaluation; "
+            f"2 cores, from white){budget}; disk ~{_size(self.disk_bytes(iterations))} "
+            f"(+ {_size(self.quantized_bytes())} after inkopt quantize)"
+        )
+
+
+def _count(n: float) -> str:
+    return f"{n / 1e6:.1f} M" if n >= 1e6 else f"{n / 1e3:.0f} k" if n >= 1e4 else f"{n:.0f}"
+
+
+def _seconds(s: float) -> str:
+    return f"{s:.2g}" if s < 10 else f"{s:.0f}"
+
+
+def _size(n: float) -> str:
+    return f"{n / 1e9:.2f} GB" if n >= 1e8 else f"{n / 1e6:.1f} MB"
+
+
+def mesh_footprint(shape: MeshShape, dpi: float, shell_mm: float | None, n_inks: int, band: float = 3.0) -> Footprint:
+    """The ``Footprint`` of a mesh of ``shape`` voxelized at ``dpi`` (free within ``shell_mm`` of the surface, or
+    every inside voxel), ``n_inks`` inks, ``band`` voxels of exact signed distance (module docstring)."""
+    h = voxel_mm(dpi)
+    grid = tuple(int(max(math.ceil(b / h - 1e-9), 1)) + 2 for b in shape.box_mm)
+    grid_voxels = grid[0] * grid[1] * grid[2]
+    inside = shape.volume_mm3 / h**3
+    r = 3.0 * shape.volume_mm3 / max(shape.area_mm2, 1e-300)  # the equal-ratio ball's radius (mm)
+    # the texels' centres lie about half a voxel deep, where that ball has (1 - h / 2r)^2 of its area
+    texels = min(shape.texel_factor * shape.area_mm2 / h**2 * max(1.0 - 0.5 * h / r, 0.0) ** 2, inside)
+    free = inside
+    if shell_mm is not None:
+        shell = inside * (1.0 - (1.0 - min(shell_mm / r, 1.0)) ** 3)
+        free = min(max(shell, texels), inside)
+    counts = (grid_voxels, round(inside), round(free), round(texels))
+    return Footprint("mesh", dpi, grid, *counts, n_inks, band, shape.mesh_bytes, shell_mm is not None)
+
+
+def mesh_band(voxel: float, *depths_mm) -> float:
+    """The voxelization's band of exact signed distance (voxels) for a shell or translucent depth (mm), as
+    ``scenes.mesh.build_mesh_scene`` sets it."""
+    band = float(DEFAULT_BAND)
+    for d in depths_mm:
+        band = band if d is None else max(band, math.ceil(d / voxel) + 2.0)
+    return band
+
+
+def slab_footprint(size_mm, dpi: float, faces: int, n_inks: int) -> Footprint:
+    """The ``Footprint`` of a slab of ``size_mm`` (W, H, D) at ``dpi`` with ``faces`` pictures (1 or 2)."""
+    h = voxel_mm(dpi)
+    nx, ny, nz = (max(1, int(round(v / h))) for v in size_mm)
+    voxels = nx * ny * nz
+    return Footprint("slab", dpi, (nx, ny, nz), voxels, voxels, voxels, nx * ny * faces, n_inks, 0.0)
+
+
+@dataclass(frozen=True)
+class MemoryLimit:
+    """The memory a job may use: ``bytes`` and where the figure comes from (``source``, for the messages)."""
+
+    bytes: float
+    source: str
+
+
+def available_bytes() -> float:
+    """This machine's available memory (bytes): /proc/meminfo's MemAvailable, less the room left below a cgroup's
+    memory.max when one is set; where /proc is missing, the free pages (``os.sysconf``)."""
+    try:
+        with open("/proc/meminfo") as f:
+            fields = dict(line.split(":", 1) for line in f)
+        avail = float(fields["MemAvailable"].split()[0]) * 1024
+    except (OSError, KeyError, ValueError):
+        return float(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    try:
+        with open("/sys/fs/cgroup/memory.max") as f:
+            cap = f.read().strip()
+        with open("/sys/fs/cgroup/memory.current") as f:
+            used = float(f.read().strip())
+        if cap != "max":
+            avail = min(avail, float(cap) - used)
+    except (OSError, ValueError):
+        pass
+    return avail
+
+
+def memory_limit(memory_gb: float | None = None) -> MemoryLimit:
+    """The memory a job may use: ``memory_gb`` (GiB) when given, else ``INKOPT_MEMORY_GB``, else
+    ``MEMORY_MARGIN`` of the available memory (``available_bytes``)."""
+    if memory_gb is None and os.environ.get(MEMORY_ENV):
+        try:
+            memory_gb = float(os.environ[MEMORY_ENV])
+        except ValueError:
+            raise ParameterError(f"{MEMORY_ENV} must be a number of GiB, got '{os.environ[MEMORY_ENV]}'") from None
+        source = f"({MEMORY_ENV})"
+    else:
+        source = "(`memory_gb`)"
+    if memory_gb is not None:
+        if not (math.isfinite(memory_gb) and memory_gb > 0):
+            raise ParameterError(f"`memory_gb` must be a positive number of GiB, got {memory_gb:g}")
+        return MemoryLimit(memory_gb * 2**30, source)
+    return MemoryLimit(MEMORY_MARGIN * available_bytes(), f"({MEMORY_MARGIN:.0%} of the available memory)")
+
+
+def _largest(fits, hi: float, steps: int = 40) -> float:
+    """The largest x in (0, hi] with ``fits(x)`` (monotone: true below some x), by halving from ``hi`` until one
+    fits and then bisection; 0 when none above hi / 2^steps fits."""
+    lo = hi
+    for _ in range(steps):
+        if fits(lo):
+            break
+        lo /= 2.0
+    else:
+        return 0.0
+    top = min(2.0 * lo, hi)
+    for _ in range(steps if lo < hi else 0):
+        mid = 0.5 * (lo + top)
+        lo, top = (mid, top) if fits(mid) else (lo, mid)
+    return lo
+
+
+def largest_mesh_height(shape: MeshShape, dpi: float, shell_mm, n_inks: int, band: float, limit: float) -> float:
+    """The largest height (mm) at which a mesh of ``shape`` fits ``limit`` bytes at ``dpi`` (0: none)."""
+
+    def fits(height: float) -> bool:
+        fp = mesh_footprint(shape.scaled(height / shape.height_mm), dpi, shell_mm, n_inks, band)
+        return fp.fits(limit)
+
+    return _largest(fits, shape.height_mm)
+
+
+def largest_dpi(footprint_at, dpi: float, limit: float) -> float:
+    """The largest DPI up to ``dpi`` at which ``footprint_at(dpi)`` fits ``limit`` bytes (0: none)."""
+    return _largest(lambda d: footprint_at(d).fits(limit), dpi)
+
+
+def check_fits(fp: Footprint, limit: MemoryLimit, what: str, larger: str, size: str, dpi: float) -> None:
+    """One-line ParameterError when ``fp``'s peak exceeds ``limit``: it names ``what`` (the input), the peak, the
+    limit, the largest ``size`` (text) of the parameter ``larger`` (e.g. height_mm) and the largest ``dpi`` that
+    fit."""
+    need = fp.peak_bytes()
+    if fp.fits(limit.bytes):
+        return
+    nx, ny, nz = fp.grid
+    over = f"more than the {limit.bytes / 2**30:.1f} GiB it may use {limit.source}"
+    if need <= limit.bytes:
+        over = "within memory, but its grid has more than the renderer's 2^31 voxels"
+    raise ParameterError(
+        f"{what}: the job needs ~{need / 2**30:.1f} GiB at its peak (grid {nx} x {ny} x {nz}, "
+        f"{_count(fp.inside_voxels)} inside, {_count(fp.free_voxels)} free, {_count(fp.texels)} texels at "
+        f"{fp.dpi:g} DPI), {over}; the largest "
+        f"`{larger}` that fits is {size}, or `dpi` {math.floor(dpi)} at this size"
+    )
+
+
+def _down(x: float) -> str:
+    """``x`` rounded down to 3 significant digits (a size that still fits)."""
+    if x <= 0:
+        return "none"
+    digits = max(0, 2 - math.floor(math.log10(x)))
+    return f"{math.floor(x * 10**digits) / 10**digits:.{digits}f}"
+
+
+def spec_footprint(spec, n_inks: int, mesh=None) -> tuple[Footprint, MeshShape | None]:
+    """The ``Footprint`` of a scene spec (``scenes.spec.SlabSpec`` or ``MeshSpec``, checked) for ``n_inks`` inks and,
+    for a mesh, its ``MeshShape``; loads a mesh (``mesh``: one already loaded), never voxelizes it."""
+    if spec.kind == "slab":
+        return slab_footprint(spec.size_mm, spec.dpi, 1 if spec.bottom is None else 2, n_inks), None
+    if mesh is None:
+        from .scenes.mesh import load_spec_mesh
+
+        mesh = load_spec_mesh(spec)
+    shape = mesh_shape(mesh)
+    band = mesh_band(voxel_mm(spec.dpi), spec.shell_mm, spec.translucency_depth_mm if spec.translucency else None)
+    return mesh_footprint(shape, spec.dpi, spec.shell_mm, n_inks, band), shape
+
+
+def check_spec_fits(spec, fp: Footprint, shape: MeshShape | None, limit: MemoryLimit) -> None:
+    """One-line ParameterError (``check_fits``) when the job of ``spec`` (its ``fp`` and, for a mesh, ``shape`` from
+    ``spec_footprint``) needs more than ``limit``, naming the largest size (``height_mm``, ``scale`` or
+    ``size_mm``) and DPI that fit."""
+    if fp.fits(limit.bytes):
+        return
+    n = fp.n_inks
+    if spec.kind == "slab":
+        w, h, d = spec.size_mm
+        faces = 1 if spec.bottom is None else 2
+        f = _largest(lambda k: slab_footprint((k * w, k * h, d), spec.dpi, faces, n).fits(limit.bytes), 1.0)
+        dpi = largest_dpi(lambda x: slab_footprint(spec.size_mm, x, faces, n), spec.dpi, limit.bytes)
+        check_fits(fp, limit, spec.top, "size_mm", f"{_down(f * w)}x{_down(f * h)}x{d:g}", dpi)
+        return
+    height = largest_mesh_height(shape, spec.dpi, spec.shell_mm, n, fp.band, limit.bytes)
+    larger, size = "height_mm", _down(height)
+    if spec.height_mm is None:  # placed by scale: the scale that gives that height
+        larger, size = "scale", _down(spec.scale * height / shape.height_mm)
+    dpi = largest_dpi(lambda x: mesh_footprint(shape, x, spec.shell_mm, n, fp.band), spec.dpi, limit.bytes)
+    check_fits(fp, limit, spec.path, larger, size, dpi)
