@@ -26,12 +26,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from common import RESULTS, machine, provenance, write
+from common import RESULTS, SPOT, machine, provenance, write
 
 ROOT = Path(__file__).resolve().parents[1]
-SPOT = ROOT.parent / "shared" / "data" / "spot" / "spot.obj"
-if not SPOT.is_file():
-    SPOT = ROOT / "python" / "inkopt" / "data" / "spot" / "spot.obj"
 RESULTS_FILE = "footprint_spot.json"
 
 

@@ -19,6 +19,10 @@ from inkopt.model import InkTable, Volume
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "bench" / "results"
 STUDY_RESULTS = ROOT / "experiments" / "results"
+# Spot: the shared data set when it is beside the checkout, else the copy the package ships (the same files)
+SPOT = ROOT.parent / "shared" / "data" / "spot" / "spot.obj"
+if not SPOT.is_file():
+    SPOT = ROOT / "python" / "inkopt" / "data" / "spot" / "spot.obj"
 
 
 def reference_slab(seed: int = 0) -> Volume:

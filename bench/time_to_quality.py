@@ -53,7 +53,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from common import RESULTS, machine, provenance, write
+from common import RESULTS, SPOT, machine, provenance, write
 from result_check import result_check
 
 from inkopt import charts
@@ -70,9 +70,6 @@ from inkopt.scenes import build_scene
 from inkopt.scenes.spec import MeshSpec, SlabSpec
 
 ROOT = Path(__file__).resolve().parent.parent
-SPOT = ROOT.parent / "shared" / "data" / "spot" / "spot.obj"
-if not SPOT.is_file():
-    SPOT = ROOT / "python" / "inkopt" / "data" / "spot" / "spot.obj"
 VOX = 25.4 / 300
 RESULTS_FILE = "time_to_quality.json"
 #: how closely a noise-corrected ΔE76 is known, as a fraction of the noise's contribution: the estimated

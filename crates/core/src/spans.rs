@@ -4,6 +4,20 @@
 //! not listed). Positions run in grid order. Used by `SparseMedium` (coefficients per position) and by the
 //! gradient buffers (slots = a listed voxel's rank, for the optimiser's free voxels: no map per grid voxel).
 
+/// The grid row (z * ny + y) of linear voxel index `j` in rows of `nx` voxels, `inv_nx` = 1 / nx: j / nx by a float
+/// reciprocal (no integer division in the walk's lookups), corrected by one where rounding crossed a row boundary.
+#[inline(always)]
+pub(crate) fn row_of(j: usize, nx: usize, inv_nx: f64) -> usize {
+    let row = (j as f64 * inv_nx) as usize;
+    if row * nx > j {
+        row - 1
+    } else if (row + 1) * nx <= j {
+        row + 1
+    } else {
+        row
+    }
+}
+
 /// One (z, y) row: voxels x0..x1 are stored, voxel x at position `off + x`.
 #[derive(Clone, Copy)]
 struct Span {
@@ -91,13 +105,7 @@ impl RowSpans {
     /// The stored position of voxel j, if its row's span holds it.
     #[inline(always)]
     pub fn position(&self, j: usize) -> Option<usize> {
-        // j / nx by a float reciprocal, corrected by one where rounding crossed a row boundary.
-        let mut row = (j as f64 * self.inv_nx) as usize;
-        if row * self.nx > j {
-            row -= 1;
-        } else if (row + 1) * self.nx <= j {
-            row += 1;
-        }
+        let row = row_of(j, self.nx, self.inv_nx);
         self.position_in_row(row, j - row * self.nx)
     }
 

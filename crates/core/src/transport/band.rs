@@ -7,6 +7,7 @@
 //! coefficients or the core's, so it returns exactly what a dense medium holding the same coefficients returns
 //! and renders and gradients are bit-identical to the dense and sparse forms.
 
+use crate::spans::row_of;
 use crate::transport::medium::{check_coefficients, extinction_albedo, majorant_of, Medium};
 
 /// `Run::start` of a core run.
@@ -97,13 +98,7 @@ impl BandMedium {
     /// What voxel j is (j in the grid).
     #[inline(always)]
     pub fn class(&self, j: usize) -> Class {
-        // j / nx by a float reciprocal, corrected by one where rounding crossed a row boundary.
-        let mut row = (j as f64 * self.inv_nx) as usize;
-        if row * self.nx > j {
-            row -= 1;
-        } else if (row + 1) * self.nx <= j {
-            row += 1;
-        }
+        let row = row_of(j, self.nx, self.inv_nx);
         self.class_in_row(row, j - row * self.nx)
     }
 
