@@ -47,6 +47,18 @@ def test_scaled_shape_scales_the_counts():
     assert large.peak_bytes() > small.peak_bytes() and large.seconds_per_iteration() > small.seconds_per_iteration()
 
 
+def test_a_shell_costs_its_band_not_the_volume():
+    """With a shell the core's medium exists only for the band (``BandMedium``): Spot 60 mm with a 1 mm shell measured
+    3.75 GiB through its iterations (bench/results/mesh_60mm_shell1_band.json) and must not be estimated above what
+    every voxel free needs; growing the height grows a shell job less than an every-voxel-free one."""
+    shape = mesh_shape(load_spec_mesh(MeshSpec(str(SPOT), height_mm=10.0))).scaled(6.0)
+    free, shell = (mesh_footprint(shape, 300.0, d, 5, band=12.0 if d else 3.0) for d in (None, 1.0))
+    assert shell.free_voxels < 0.3 * free.free_voxels
+    assert shell.peak_bytes() < free.peak_bytes()
+    big_free, big_shell = (mesh_footprint(shape.scaled(2.0), 300.0, d, 5, band=12.0 if d else 3.0) for d in (None, 1.0))
+    assert big_shell.peak_bytes() / shell.peak_bytes() < big_free.peak_bytes() / free.peak_bytes()
+
+
 def _refuse(monkeypatch, capsys, tmp_path, extra=()):
     """Run optimize of Spot 40 mm with 1 GiB available (80 % may be used) and voxelize patched to fail: the
     one-line error and the output folder."""

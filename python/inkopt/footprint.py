@@ -68,10 +68,12 @@ STEP_TEXEL_BYTES = 128.0
 #:   0.82 GiB), which puts Spot 40 mm within 5 % of its whole run's peak (run_40mm there)
 FIGURES_FREE_BYTES = 40.0
 FIGURES_TEXEL_BYTES = 6600.0
-#: a run with a shell (a pure-white core below the free voxels) peaked at 2.0x (Spot 20 mm, 0.5 and 1 mm shells) and
-#: 2.5x (60 mm, 2 mm) what these terms give its run stage (bench/results/mesh_20mm_shell0.5.json, _shell1,
-#: mesh_60mm_shell2.json, older code; its paths go deeper): the larger factor is taken, as a measured bound
-SHELL_RUN_FACTOR = 2.5
+#: a run with a shell stores the core's medium only for its band (the free voxels: ``BandMedium``), so its held
+#: per-inside term counts the free voxels; its iterations then peaked at 1.49x (Spot 40 mm) and 1.40x (60 mm, both
+#: 1 mm shells) what the held and step terms give (bench/results/mesh_40mm_shell1_band.json,
+#: mesh_60mm_shell1_band.json: the renderer's set-up copies the inside mask and indexes the core voxels it skips):
+#: the larger factor, rounded up, bounds a shell run's step stage (held and step terms)
+SHELL_STEP_FACTOR = 1.5
 #: seconds per iteration of the passes (4-spp gradient, 16-spp forward, the loss) at ``TEXELS_REF`` texels, from
 #: white on 2 cores: 11.19 s on Spot 20 mm (bench/results/mesh_20mm.json, render + gradient + loss)
 PASS_SECONDS_REF = 11.19
@@ -157,10 +159,13 @@ class Footprint:
             return BASE_BYTES + SLAB_VOXEL_BYTES * self.grid_voxels + FIGURES_TEXEL_BYTES * self.texels
         per_texel = VOXELIZE_TEXEL_BYTES + VOXELIZE_BAND_TEXEL_BYTES * max(self.band - DEFAULT_BAND, 0.0)
         voxelize = VOXELIZE_GRID_BYTES * self.grid_voxels + per_texel * self.texels
-        held = RUN_GRID_BYTES * self.grid_voxels + RUN_INSIDE_BYTES * self.inside_voxels
-        step = STEP_FREE_BYTES * self.free_voxels + STEP_TEXEL_BYTES * self.texels
-        figures = FIGURES_FREE_BYTES * self.free_voxels + FIGURES_TEXEL_BYTES * self.texels
-        run = (held + max(step, figures)) * (SHELL_RUN_FACTOR if self.shell else 1.0)
+        medium_voxels = self.free_voxels if self.shell else self.inside_voxels
+        held = RUN_GRID_BYTES * self.grid_voxels + RUN_INSIDE_BYTES * medium_voxels
+        step = (held + STEP_FREE_BYTES * self.free_voxels + STEP_TEXEL_BYTES * self.texels) * (
+            SHELL_STEP_FACTOR if self.shell else 1.0
+        )
+        figures = held + FIGURES_FREE_BYTES * self.free_voxels + FIGURES_TEXEL_BYTES * self.texels
+        run = max(step, figures)
         return BASE_BYTES + self.mesh_bytes + max(voxelize, run)
 
     def fits(self, limit_bytes: float) -> bool:
