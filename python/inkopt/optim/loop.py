@@ -252,7 +252,7 @@ class Optimization:
             fs = self.param.fixed_share
             if self.base.inside is not None:
                 self._renderer = self.renderer_factory(self.base, self.threads, self.lighting)
-                held = self._held_voxels()
+                held = self.param.held_index(self.base)
                 for block in np.array_split(held, max(1, len(held) >> 20)):  # ~1 M voxels at a time
                     self._renderer.set_mixture(block, fs.at(block))
                 del held
@@ -262,17 +262,6 @@ class Optimization:
         for lo, hi in self.param.chunks():  # in pieces: no (F, N) temporaries for a big object
             self._renderer.set_mixture(self.param.free_index[lo:hi], self.param.free_rows(x[lo:hi], lo))
         return self._renderer
-
-    def _held_voxels(self) -> np.ndarray:
-        """Flat indices ((K,) int64) of the inside voxels that are not variables and whose fixed shares the renderer
-        is given once: with a band (``Volume.band``) only the band's, since its core holds the core's mixture
-        already; else every one."""
-        band = self.base.band
-        if band is not None:
-            return np.setdiff1d(band.index, self.param.free_index, assume_unique=True)
-        held = self.base.inside.copy()
-        held.reshape(-1)[self.param.free_index] = False
-        return np.flatnonzero(held)
 
     def release_renderer(self) -> None:
         """Drop the run's renderer (its medium: 24 B per inside voxel); a later :meth:`step` or :meth:`renderer`

@@ -66,6 +66,16 @@ class Parameterization:
     def n_free(self) -> int:
         return len(self.free_index)
 
+    def held_index(self, base) -> np.ndarray:
+        """Flat indices ((K,) int64) of the inside voxels of ``base`` (a ``Volume`` with an inside mask) that are not
+        variables and whose fixed shares a renderer of it is given once: with a band (``Volume.band``) only the
+        band's, since its core holds the core's mixture already; else every one."""
+        if base.band is not None:
+            return np.setdiff1d(base.band.index, self.free_index, assume_unique=True)
+        held = base.inside.copy()
+        held.reshape(-1)[self.free_index] = False
+        return np.flatnonzero(held)
+
     def chunks(self, rows: int = 1 << 20):
         """Row ranges (lo, hi) covering the F free voxels, ``rows`` at a time: the per-voxel arithmetic of a big
         object in pieces, so that its temporaries are a few MB instead of several (F, N) arrays. Every operation
