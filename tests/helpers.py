@@ -141,3 +141,14 @@ def write_cube_obj(
         (folder / "m.mtl").write_text("newmtl mat\nKd 1 1 1\n" + (f"map_Kd {map_kd}\n" if map_kd else ""))
     (texture or Image.new("RGB", (8, 8), RED)).save(folder / "tex.png")
     return folder / "m.obj"
+
+
+def load_file_module(path, name: str):
+    """The module of a Python file outside the package (a bench script, docs/tables.py, another test file), loaded
+    under ``name``."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(name, path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod

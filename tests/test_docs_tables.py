@@ -1,19 +1,16 @@
 """The tables of measured figures in README.md and docs/ are the ones docs/tables.py generates from the results
 files (run ``python docs/tables.py`` after changing a results file or a table)."""
 
-import importlib.util
 from pathlib import Path
 
 import pytest
+from helpers import load_file_module
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def _tables():
-    spec = importlib.util.spec_from_file_location("docs_tables", ROOT / "docs" / "tables.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_file_module(ROOT / "docs" / "tables.py", "docs_tables")
 
 
 def test_documents_hold_the_generated_tables():

@@ -2,21 +2,17 @@
 mesh standing in for a download (3 mm, 2 iterations, the fewest samples; no network), so the suite's script cannot
 rot while its real runs take hours."""
 
-import importlib.util
 import json
 import re
 
 import numpy as np
 import pytest
-from helpers import FAST_RUN, REPO, write_cube_obj
+from helpers import FAST_RUN, REPO, load_file_module, write_cube_obj
 from PIL import Image
 
 
 def _suite():
-    spec = importlib.util.spec_from_file_location("mesh_suite", REPO / "bench" / "mesh_suite.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_file_module(REPO / "bench" / "mesh_suite.py", "mesh_suite")
 
 
 def test_manifest_is_well_formed():

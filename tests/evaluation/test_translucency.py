@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 import pytest
-from helpers import FAST_RUN
+from helpers import FAST_RUN, load_file_module
 from PIL import Image
 
 from inkopt import charts, cli
@@ -130,14 +130,9 @@ def test_evaluate_mesh_alpha_region(tmp_path, capsys, monkeypatch):
     """A 1 mm cube whose texture alpha asks for 80 % transparent ink on five faces: evaluate finds the region (all
     but the opaque top face), every texel axis gets its own back light, and the region transmits more than the
     unconstrained run's."""
-    import importlib.util
     from pathlib import Path
 
-    spec = importlib.util.spec_from_file_location(
-        "scene_tr", Path(__file__).parents[1] / "scenes" / "test_translucency.py"
-    )
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = load_file_module(Path(__file__).parents[1] / "scenes" / "test_translucency.py", "scene_tr")
     monkeypatch.setattr("inkopt.evaluation.translucency.PROBE_SPP", 16)
     monkeypatch.setattr("inkopt.evaluation.translucency.PROBE_WIDTH", 96)
     cube = mod._alpha_cube(tmp_path)
