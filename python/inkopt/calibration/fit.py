@@ -29,7 +29,8 @@ G_STEP = 1e-4
 
 @dataclass
 class FitResult:
-    """A fitted table and how it got there: ``inks`` (the chart's ink order), ``predicted_lab`` (P, 3) of the
+    """A fitted table and how it got there: ``inks`` (the chart's ink order; a ``SpectralInkTable`` from the
+    spectral path of ``calibrate``), ``predicted_lab`` (P, 3) of the
     fitted patches, ``iterations`` (model evaluations with derivatives), ``seconds``, ``cost`` (half the sum of
     squared Lab differences), ``converged`` and the optimiser's ``message``."""
 
