@@ -116,7 +116,7 @@ def spectral_fields(table: CgatsTable) -> list[tuple[int, str]]:
     out = []
     for f in table.fields:
         c = canonical_field(f)
-        if c.startswith("SPECTRAL_NM"):
+        if c.startswith("SPECTRAL_NM") and c[len("SPECTRAL_NM") :].isdigit():
             out.append((int(c[len("SPECTRAL_NM") :]), c))
     return sorted(out)
 

@@ -12,7 +12,8 @@ thicknesses over white and three alone per ink, which also covers bands where an
 patches over white still change with σa there).
 
 Measurements reach the table's grid by band averaging (:func:`band_average`): the measured spectrum,
-interpolated linearly onto 1 nm, averaged over each band (halfway to the neighbouring band centres).
+interpolated linearly onto 1 nm, averaged over each band (halfway to the neighbouring band centres, within the
+measured range).
 """
 
 from __future__ import annotations
@@ -45,15 +46,18 @@ class SpectralFitResult:
 
 def band_average(wavelengths_nm, reflectance, grid_nm) -> np.ndarray:
     """Measured reflectance (P, W) at ``wavelengths_nm`` (W,) -> (P, B) on the band grid ``grid_nm`` (B,): each
-    band's mean of the spectrum interpolated linearly onto 1 nm over the band (:func:`band_edges`). ValueError when
-    a band reaches beyond the measured range."""
+    band's mean of the spectrum interpolated linearly onto 1 nm over the band (``model.spectral.band_edges``),
+    over its measured part where the band reaches beyond the measured range (400-700 nm measured: the first and
+    last 20 nm bands average 400-410 and 690-700 nm). ValueError for a band centre outside the measured range."""
     wl = np.asarray(wavelengths_nm, np.float64)
     refl = np.atleast_2d(np.asarray(reflectance, np.float64))
-    lo, hi = band_edges(grid_nm)
-    if lo[0] < wl[0] - 1e-6 or hi[-1] > wl[-1] + 1e-6:
+    grid = np.asarray(grid_nm, np.float64)
+    if grid[0] < wl[0] - 1e-6 or grid[-1] > wl[-1] + 1e-6:
         raise ValueError(
-            f"the table's bands reach {lo[0]:g}-{hi[-1]:g} nm, beyond the measured {wl[0]:g}-{wl[-1]:g} nm"
+            f"the table's bands {grid[0]:g}-{grid[-1]:g} nm lie beyond the measured {wl[0]:g}-{wl[-1]:g} nm"
         )
+    lo, hi = band_edges(grid)
+    lo, hi = np.maximum(lo, wl[0]), np.minimum(hi, wl[-1])
     out = np.empty((refl.shape[0], len(lo)))
     for b, (a, z) in enumerate(zip(lo, hi)):
         pts = np.linspace(a, z, max(2, int(np.ceil(z - a)) + 1))
