@@ -19,8 +19,7 @@ noise-free reflectance at 380-730 nm every 10 nm. Fitted on the rest of the char
 Predictions under D50 and A: the spectral table's band reflectance integrated under the light (ASTM E308 on its
 bands); the RGB table's linear RGB (a) adapted by Bradford from D65 to the light's white (what
 ``calibration.measure.rgb_to_lab`` does for D50) and (b) upsampled to a reflectance spectrum with the
-Mallett-Yuksel basis, then integrated like a spectrum. Also: how closely the paper's table's spectral form
-(``SpectralInkTable.from_rgb``) reproduces the RGB table's colours of the chart under D65.
+Mallett-Yuksel basis, then integrated like a spectrum.
 
     OPENBLAS_NUM_THREADS=1 nice -n 5 .venv/bin/python experiments/spectral_calibration.py [--noise 0,0.005]
         [--band-nm 20|10] [--name spectral_calibration]
@@ -165,18 +164,6 @@ def calibrate_once(chart: Chart, measured: np.ndarray, keep: np.ndarray, sets: d
     }
 
 
-def upsampling_check() -> dict:
-    """The paper's table: its RGB colours of the chart under D65 against its spectral form's, 20 and 10 nm."""
-    paper = InkTable.parse("vero-cmykw")
-    chart = design_chart(paper.names)
-    rgb_lab = rgb_to_lab(predict_rgb(chart, paper), "D65")
-    out = {}
-    for name, grid in (("20nm", WAVELENGTHS_20NM), ("10nm", WAVELENGTHS_10NM)):
-        spec = SpectralInkTable.from_rgb(paper, grid)
-        out[name] = stats(delta_e2000(spectral_to_lab(grid, predict_reflectance(chart, spec), "D65"), rgb_lab))
-    return out
-
-
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--noise", default="0,0.005", help="relative Gaussian noise levels of the measurements")
@@ -217,9 +204,7 @@ def main():
         "mixtures": a.mixtures,
         "bands": len(grid),
         "runs": runs,
-        "upsampling_de2000_d65_vs_rgb": upsampling_check(),
     }
-    print(f"upsampling: {summary['upsampling_de2000_d65_vs_rgb']}")
     print(f"wrote {write(a.name + '.json', summary)}")
 
 
