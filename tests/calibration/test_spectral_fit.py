@@ -10,7 +10,8 @@ from hypothesis import strategies as st
 
 from inkopt.calibration import cgats
 from inkopt.calibration.chart import chart_from_table, design_chart
-from inkopt.calibration.measure import MeasurementError, measured_reflectance
+from inkopt.calibration.fit import predict_rgb
+from inkopt.calibration.measure import MeasurementError, measured_reflectance, rgb_to_lab, spectral_to_lab
 from inkopt.calibration.report import CalibrationReport
 from inkopt.calibration.spectral import (
     _from_x,
@@ -19,9 +20,11 @@ from inkopt.calibration.spectral import (
     band_average,
     fit_spectral_inks,
     predict_reflectance,
+    spectral_form,
     spectral_start,
 )
 from inkopt.cli import main
+from inkopt.color import delta_e2000
 from inkopt.model import InkTable
 from inkopt.model.inks import read_ink_file
 from inkopt.model.spectral import WAVELENGTHS_20NM, SpectralInkTable, load_ink_table
@@ -92,6 +95,31 @@ def test_spectral_start_from_rgb_or_spectral_tables():
     spec = spectral_start(CHART, cyan, GRID)  # cyan resampled, white from the library
     np.testing.assert_allclose(spec.sigma_a[0], np.interp(GRID, cyan.wavelengths_nm, cyan.sigma_a[0]))
     np.testing.assert_allclose(spec.sigma_s[1], rgb.sigma_s[1])
+
+
+def _d65_miss(chart, rgb: InkTable, spectral: SpectralInkTable) -> np.ndarray:
+    """ΔE2000 (P,) under D65 between the RGB table's colours of ``chart`` and the spectral table's."""
+    ref = rgb_to_lab(predict_rgb(chart, rgb), "D65")
+    return delta_e2000(spectral_to_lab(spectral.wavelengths_nm, predict_reflectance(chart, spectral), "D65"), ref)
+
+
+def test_spectral_form_reproduces_the_rgb_colours_better_than_the_linear_one():
+    grid = np.arange(400.0, 701.0, 30.0)  # 11 bands: a quick fit
+    fit = spectral_form(INKS, grid, max_iterations=12)
+    linear = _d65_miss(CHART, INKS, SpectralInkTable.from_rgb(INKS, grid))
+    fitted = _d65_miss(CHART, INKS, fit.inks)
+    assert fitted.mean() < 0.5 * linear.mean() and fitted.max() < linear.max()
+    assert fit.inks.g == INKS.g
+    with pytest.raises(ValueError, match="are not the table's"):
+        spectral_form(InkTable.parse("white,cyan"), grid, CHART)
+
+
+def test_stored_library_spectra_reproduce_the_rgb_table():
+    """The presets' spectral form (data/ink_spectra_20nm.json, experiments/spectral_library.py) against the RGB
+    table on the CMYKW chart: the figures docs/inks.md gives, within 0.05 ΔE2000."""
+    vero = InkTable.parse("vero-cmykw")
+    miss = _d65_miss(design_chart(vero.names), vero, load_ink_table("vero-cmykw@spectral"))
+    assert miss.mean() < 1.43 + 0.05 and miss.max() < 3.80 + 0.05
 
 
 @pytest.fixture(scope="module")

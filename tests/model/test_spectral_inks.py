@@ -10,8 +10,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from inkopt.model import InkTable
-from inkopt.model.inks import INK_FILE_FORMAT, read_ink_file, write_ink_file
+from inkopt.model.inks import INK_FILE_FORMAT, INK_LIBRARY, read_ink_file, write_ink_file
 from inkopt.model.spectral import (
+    LIBRARY_SPECTRA,
     WAVELENGTHS_10NM,
     WAVELENGTHS_20NM,
     SpectralInkTable,
@@ -55,13 +56,23 @@ def test_from_rgb_keeps_flat_inks_flat_and_rgb_order():
     assert spec.names == VERO.names and spec.g == VERO.g
 
 
-def test_presets_and_spectral_suffixes():
+def test_presets_and_spectral_suffixes(tmp_path):
     assert isinstance(load_ink_table("vero-cmykw"), InkTable)
     t = load_ink_table("vero-cmykw@spectral")
-    assert isinstance(t, SpectralInkTable) and t.bands == 16 and t.names == VERO.names
-    assert load_ink_table("cyan,white@spectral10").bands == 31
+    assert isinstance(t, SpectralInkTable) and t.bands == 16 and t.names == VERO.names and t.g == VERO.g
+    np.testing.assert_array_equal(t.wavelengths_nm, WAVELENGTHS_20NM)
+    ten = load_ink_table("cyan,white@spectral10")
+    assert ten.bands == 31 and ten.names == ("cyan", "white")
+    # the rows are the stored library's, whatever the set
+    np.testing.assert_array_equal(load_ink_table("white,cyan@spectral").sigma_a[1], t.sigma_a[t.index("cyan")])
+    for band_nm, path in LIBRARY_SPECTRA.items():
+        assert set(load_ink_table(str(path)).names) == set(INK_LIBRARY), band_nm
     with pytest.raises(ValueError, match="unknown ink"):
         load_ink_table("vero-cmykw@spectra")
+    mine = tmp_path / "mine.json"
+    write_ink_file(mine, InkTable(VERO.names, VERO.sigma_s * 1.1, VERO.sigma_a, VERO.g))
+    with pytest.raises(ValueError, match="ink 'cyan' is not the ink library's 'cyan'.*spectral_form"):
+        load_ink_table(f"{mine}@spectral")
 
 
 def test_spectral_file_round_trip_and_rgb_refusal(tmp_path):

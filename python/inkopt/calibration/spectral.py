@@ -26,7 +26,7 @@ import numpy as np
 from ..model import InkTable
 from ..model.spectral import SpectralInkTable, band_edges
 from .chart import Chart, start_table
-from .fit import G_BOUNDS, SIGMA_BOUNDS, _rgb_and_jacobian, predict_rgb
+from .fit import G_BOUNDS, SIGMA_BOUNDS, _rgb_and_jacobian, predict_rgb, solve
 
 
 @dataclass
@@ -127,7 +127,6 @@ def fit_spectral_inks(
     """Fit ``start`` (chart order, its bands the grid) to ``measured`` (P, B) reflectance of ``chart``'s patches
     on that grid (:func:`band_average`), minimising the squared relative differences over every ink's log σs and
     log σa per band and g (trust-region least squares with bounds). ``fit_g=False`` keeps g at the start's."""
-    from scipy.optimize import least_squares
 
     measured = np.asarray(measured, np.float64)
     if measured.shape != (len(chart), start.bands):
@@ -150,25 +149,26 @@ def fit_spectral_inks(
             evaluations[0] += 1
         return cache[key]
 
-    k = 2 * len(names) * len(wl)
-    lo = np.concatenate([np.full(k, np.log(SIGMA_BOUNDS[0])), [G_BOUNDS[0]]])
-    hi = np.concatenate([np.full(k, np.log(SIGMA_BOUNDS[1])), [G_BOUNDS[1]]])
-    x0 = _to_x(start)
-    if not fit_g:
-        lo[-1], hi[-1] = x0[-1] - 1e-9, x0[-1] + 1e-9
-    res = least_squares(
-        lambda x: model(x)[0],
-        x0,
-        jac=lambda x: model(x)[1],
-        bounds=(lo, hi),
-        method="trf",
-        x_scale="jac",
-        max_nfev=max_iterations,
-        ftol=1e-10,
-        xtol=1e-8,
-        gtol=1e-10,
-    )
+    res = solve(model, _to_x(start), fit_g, max_iterations)
     inks = _from_x(res.x, names, wl)
     predicted = predict_reflectance(chart, inks)
     seconds = time.perf_counter() - t0
     return SpectralFitResult(inks, predicted, evaluations[0], seconds, float(res.cost), res.status > 0, res.message)
+
+
+def spectral_form(inks: InkTable, grid_nm, chart: Chart | None = None, max_iterations: int = 40) -> SpectralFitResult:
+    """Spectra for an RGB table that reproduce its colours: every patch of ``chart`` (default: the calibration
+    chart of ``inks``, ``chart.design_chart``; its inks must be the table's, in its order) predicted by the RGB
+    table (linear RGB reflectance), upsampled to a reflectance spectrum on ``grid_nm`` (B,) with the
+    Mallett-Yuksel basis (``model.spectral.rgb_basis``: its colour under D65 is that RGB), and a spectral table
+    fitted to those spectra band by band (:func:`fit_spectral_inks`, g kept), starting from the table's linear
+    spectral form (``SpectralInkTable.from_rgb``)."""
+    from ..model.spectral import rgb_basis
+    from .chart import design_chart
+
+    chart = design_chart(inks.names) if chart is None else chart
+    if tuple(chart.inks) != tuple(inks.names):
+        raise ValueError(f"the chart's inks {list(chart.inks)} are not the table's {list(inks.names)}")
+    grid = np.asarray(grid_nm, np.float64)
+    target = predict_rgb(chart, inks) @ rgb_basis(grid)
+    return fit_spectral_inks(chart, target, SpectralInkTable.from_rgb(inks, grid), max_iterations, fit_g=False)

@@ -9,10 +9,13 @@ Ink files hold RGB or spectral tables in one format (``model.inks.INK_FILE_FORMA
 file adds ``"wavelengths_nm"`` (band centres) and gives every ink ``"sigma_s"`` and ``"sigma_a"`` per band in
 mm^-1 (:func:`write_spectral_ink_file`); :func:`load_ink_table` reads either kind and the spectral presets.
 
-The built-in (paper's) table is RGB. Its spectral form (:meth:`SpectralInkTable.from_rgb`, the presets
-``<preset>@spectral``) upsamples every σs and σa with the Mallett & Yuksel (2019) sRGB basis: smooth,
-non-negative spectra, flat where the RGB triple is flat. That the inks' true spectra look like this is an
-assumption until a lab calibrates its inks spectrally (``inkopt calibrate`` on spectral measurements).
+The built-in (paper's) table is RGB. Its spectral form (``<preset>@spectral``, :func:`library_spectra`) is a
+spectral table fitted so that the RGB table's colours of the library's calibration chart, upsampled to spectra
+with the Mallett & Yuksel (2019) sRGB basis, are reproduced (``calibration.spectral.spectral_form``, stored in
+``data/ink_spectra_*.json`` by experiments/spectral_library.py; the 10 nm form is the 20 nm one interpolated),
+starting from the linear upsampling of every σs and σa with that basis (:meth:`SpectralInkTable.from_rgb`).
+That the inks' true spectra look like this is an assumption until a lab calibrates its inks spectrally
+(``inkopt calibrate`` on spectral measurements).
 """
 
 from __future__ import annotations
@@ -28,12 +31,17 @@ from .inks import DEFAULT_G, INK_FILE_FORMAT, InkTable, ink_name_problem, read_i
 #: channels the renderer carries per path group (R, G, B)
 GROUP = 3
 #: The default band grid: 16 bands, 400-700 nm every 20 nm. Ink spectra are smooth (absorption bands 50-100 nm
-#: wide), the CIE observer is negligible outside 400-700 nm for reflective colour, and ASTM E308 integrates 20 nm
+#: wide), the CIE observer under D65 gives light outside 400-700 nm 0.2 % of X, Y, Z, ASTM E308 integrates 20 nm
 #: bands as they are; 10 nm (``WAVELENGTHS_10NM``, 31 bands) is what instruments measure and costs twice as much.
 WAVELENGTHS_20NM = np.arange(400.0, 701.0, 20.0)
 WAVELENGTHS_10NM = np.arange(400.0, 701.0, 10.0)
-#: ``<RGB preset or ink list>@<suffix>``: the table's spectral form on that grid (:func:`load_ink_table`)
-SPECTRAL_SUFFIXES = {"spectral": WAVELENGTHS_20NM, "spectral10": WAVELENGTHS_10NM}
+#: ``<RGB preset or ink list>@<suffix>``: the library inks' spectral form, bands that many nm apart
+#: (:func:`load_ink_table`, :func:`library_spectra`)
+SPECTRAL_SUFFIXES = {"spectral": 20.0, "spectral10": 10.0}
+_DATA = Path(__file__).resolve().parents[1] / "data"
+#: The ink library's spectral form per band width (nm), fitted to reproduce the RGB table's colours
+#: (experiments/spectral_library.py, docs/inks.md); spectral ink files.
+LIBRARY_SPECTRA = {20.0: _DATA / "ink_spectra_20nm.json", 10.0: _DATA / "ink_spectra_10nm.json"}
 
 
 @dataclass(frozen=True)
@@ -152,13 +160,34 @@ def band_edges(wavelengths_nm) -> tuple[np.ndarray, np.ndarray]:
     return lo, np.concatenate([mids, [wl[-1] + (wl[-1] - wl[-2]) / 2]])
 
 
+def library_spectra(inks: InkTable, band_nm: float = 20.0) -> SpectralInkTable:
+    """The spectral form of library inks (``model.inks.INK_LIBRARY``, with the library's coefficients) on bands
+    ``band_nm`` (20 or 10) apart over 400-700 nm, from :data:`LIBRARY_SPECTRA`; ValueError for an ink that is not
+    the library's (its spectra were never fitted: ``calibration.spectral.spectral_form`` fits them)."""
+    from .inks import INK_LIBRARY
+
+    if band_nm not in LIBRARY_SPECTRA:
+        raise ValueError(f"band_nm must be one of {sorted(LIBRARY_SPECTRA)}, got {band_nm}")
+    for k, name in enumerate(inks.names):
+        lib = INK_LIBRARY.get(name)
+        if lib is None or not np.allclose([inks.mu_t[k], inks.albedo[k]], lib, rtol=1e-9, atol=1e-12):
+            raise ValueError(
+                f"ink '{name}' is not the ink library's '{name}': the spectral form (@spectral) exists for library "
+                "inks only; calibration.spectral.spectral_form fits one for other inks"
+            )
+    path = LIBRARY_SPECTRA[band_nm]
+    table = spectral_from_data(read_ink_file(path), path)
+    rows = [table.index(n) for n in inks.names]
+    return SpectralInkTable(inks.names, table.wavelengths_nm, table.sigma_s[rows], table.sigma_a[rows], inks.g)
+
+
 def load_ink_table(spec: str) -> InkTable | SpectralInkTable:
     """An RGB or spectral ink table: what ``InkTable.parse`` takes (a preset, a comma list of library inks, an
-    ink file), a spectral ink file (:func:`write_spectral_ink_file`), or ``<preset or list>@spectral`` (20 nm
-    grid) / ``@spectral10`` (10 nm grid): the RGB table's spectral form (:meth:`SpectralInkTable.from_rgb`)."""
+    ink file), a spectral ink file (:func:`write_spectral_ink_file`), or ``<preset or list of library
+    inks>@spectral`` (20 nm bands) / ``@spectral10`` (10 nm): their spectral form (:func:`library_spectra`)."""
     base, at, suffix = str(spec).rpartition("@")
     if at and suffix.lower() in SPECTRAL_SUFFIXES:
-        return SpectralInkTable.from_rgb(InkTable.parse(base), SPECTRAL_SUFFIXES[suffix.lower()])
+        return library_spectra(InkTable.parse(base), SPECTRAL_SUFFIXES[suffix.lower()])
     path = Path(spec)
     if path.suffix.lower() in (".json", ".toml"):
         data = read_ink_file(path)
