@@ -3,9 +3,12 @@
 Steps: read the CGATS.17 file (chart columns and measurements), check that it identifies every parameter, convert
 the measurements to CIELAB under the illuminant, draw the hold-out (``fit.choose_holdout``), fit without the
 held-out patches and predict them, then fit all patches (starting from the first fit's table) for the ink file.
-The ink file is today's JSON format plus ``provenance`` (the measurement file's digest, illuminant, start table,
-residual figures). Every output is checked for (and its folder for taking a new file) before anything is read or
-written, and written atomically.
+Spectral measurements are fitted spectrally (``calibration.spectral``: reflectance per band on a 20 or 10 nm grid
+over 400-700 nm, a spectral ink file) unless ``spectral=False`` asks for the CIELAB fit of an RGB table; CIELAB and
+XYZ measurements always take the CIELAB fit. The reports' figures are CIELAB under the illuminant either way.
+The ink file carries ``provenance`` (the measurement file's digest, illuminant, start table, residual figures).
+Every output is checked for (and its folder for taking a new file) before anything is read or written, and
+written atomically.
 """
 
 from __future__ import annotations
@@ -20,13 +23,19 @@ import numpy as np
 from ..color import delta_e76, delta_e2000
 from ..errors import ParameterError
 from ..io import file_digest
-from ..model import InkTable
 from ..model.inks import write_ink_file
+from ..model.spectral import (
+    WAVELENGTHS_10NM,
+    WAVELENGTHS_20NM,
+    SpectralInkTable,
+    load_ink_table,
+    write_spectral_ink_file,
+)
 from .cgats import CgatsTable, canonical_field
 from .cgats import read as read_cgats
 from .chart import Chart, chart_from_table, check_identifiable, start_table
 from .fit import FitResult, choose_holdout, fit_inks
-from .measure import LAB_FIELDS, MEASUREMENT_KEYWORDS, XYZ_FIELDS, measured_lab
+from .measure import LAB_FIELDS, MEASUREMENT_KEYWORDS, XYZ_FIELDS, measured_lab, measured_reflectance, spectral_to_lab
 from .report import CalibrationReport, PatchResidual, p95, swatch_figure
 
 
@@ -95,21 +104,34 @@ def merge_measurements(chart: CgatsTable, measured: CgatsTable, where: str) -> C
     return CgatsTable([chart.fields[i] for i in keep] + fields, out, header, chart.source)
 
 
+BAND_GRIDS = {20.0: WAVELENGTHS_20NM, 10.0: WAVELENGTHS_10NM}
+
+
 @dataclass(frozen=True)
 class CalibrateOptions:
     """How a fit is made: ``start`` the starting ink table (a preset, list or ink file), ``illuminant`` of the
     measurements ("D50" or "D65"), ``holdout`` the share of patches held out to test the fit (drawn with ``seed``),
-    ``fit_g`` whether the shared g is fitted (else kept at the start's)."""
+    ``fit_g`` whether the shared g is fitted (else kept at the start's), ``spectral`` whether spectral
+    measurements are fitted spectrally (else reduced to CIELAB for an RGB table), on bands ``band_nm`` apart over
+    400-700 nm (20: 16 bands, or 10: 31 bands)."""
 
     start: str = "vero-cmykw"
     illuminant: str = "D50"
     holdout: float = 0.2
     seed: int = 0
     fit_g: bool = True
+    spectral: bool = True
+    band_nm: float = 20.0
 
     def validate(self) -> None:
         if not (np.isfinite(self.holdout) and 0 <= self.holdout < 1):
             raise ParameterError(f"`holdout` must lie in [0, 1), got {self.holdout}")
+        if self.band_nm not in BAND_GRIDS:
+            raise ParameterError(f"`band_nm` must be one of {sorted(BAND_GRIDS)}, got {self.band_nm:g}")
+
+    def grid(self) -> np.ndarray:
+        """(B,) nm: the spectral table's band centres."""
+        return BAND_GRIDS[self.band_nm]
 
 
 @dataclass(frozen=True)
@@ -146,17 +168,31 @@ def calibrate(
     swatch_figure(paths["picture"], report)
     report.to_json(paths["report"])
     extra = {} if chart_file is None else {"chart": str(chart_file), "chart_digest": file_digest(chart_file)}
-    write_ink_file(paths["inks"], fit.full.inks, {"made_by": "inkopt calibrate", **report.summary(), **extra})
+    provenance = {"made_by": "inkopt calibrate", **report.summary(), **extra}
+    if isinstance(fit.full.inks, SpectralInkTable):
+        write_spectral_ink_file(paths["inks"], fit.full.inks, provenance)
+    else:
+        write_ink_file(paths["inks"], fit.full.inks, provenance)
     return report
 
 
 def _fit(chart, table: CgatsTable, options: CalibrateOptions, log) -> _Fit:
-    """Fit without the held-out patches and predict them, then fit all patches from the first fit's table."""
+    """Fit without the held-out patches and predict them, then fit all patches from the first fit's table: the
+    spectral fit (:func:`_fit_spectral`) for spectral measurements unless ``options.spectral`` is off, else the
+    CIELAB fit."""
     from .fit import predict_lab
 
     illuminant = options.illuminant
     lab, kind = measured_lab(table, illuminant)
-    start_inks = start_table(chart, InkTable.parse(options.start))
+    if kind == "spectral" and options.spectral:
+        return _fit_spectral(chart, table, lab, options, log)
+    start = load_ink_table(options.start)
+    if isinstance(start, SpectralInkTable):
+        raise ParameterError(
+            f"`start` {options.start} is a spectral ink table; a CIELAB fit ({kind} measurements) starts from an "
+            "RGB one"
+        )
+    start_inks = start_table(chart, start)
     held = choose_holdout(chart, options.holdout, options.seed)
     keep = np.setdiff1d(np.arange(len(chart)), held)
     log(f"{len(chart)} patches of {', '.join(chart.inks)} ({kind}, {illuminant.upper()}); {len(held)} held out")
@@ -169,6 +205,35 @@ def _fit(chart, table: CgatsTable, options: CalibrateOptions, log) -> _Fit:
     full = fit_inks(chart, lab, first, illuminant, fit_g=options.fit_g)
     log(f"fit of all patches: {full.iterations} evaluations, {full.seconds:.1f} s, g = {full.inks.g:.3f}")
     return _Fit(chart, lab, kind, held, hold_lab, full, iterations, seconds)
+
+
+def _fit_spectral(chart, table: CgatsTable, lab: np.ndarray, options: CalibrateOptions, log) -> _Fit:
+    """The spectral path of :func:`_fit`: measured reflectance band-averaged onto the options' grid, a per-band
+    fit without the held-out patches (their CIELAB predicted from the predicted spectra), then of all patches."""
+    from .spectral import band_average, fit_spectral_inks, predict_reflectance, spectral_start
+
+    grid = options.grid()
+    wl, refl = measured_reflectance(table)
+    try:
+        measured = band_average(wl, refl, grid)
+    except ValueError as exc:
+        raise ParameterError(f"`band_nm` {options.band_nm:g}: {exc}") from None
+    first = spectral_start(chart, load_ink_table(options.start), grid)
+    held = choose_holdout(chart, options.holdout, options.seed)
+    keep = np.setdiff1d(np.arange(len(chart)), held)
+    ill = options.illuminant
+    log(f"{len(chart)} patches of {', '.join(chart.inks)} (spectral, {len(grid)} bands); {len(held)} held out")
+    iterations, seconds, hold_lab = 0, 0.0, None
+    if len(held):
+        r = fit_spectral_inks(chart.subset(keep), measured[keep], first, fit_g=options.fit_g)
+        hold_lab = spectral_to_lab(grid, predict_reflectance(chart.subset(held), r.inks), ill)
+        iterations, seconds, first = r.iterations, r.seconds, r.inks
+        log(f"fit without the held-out patches: {r.iterations} evaluations, {r.seconds:.1f} s")
+    s = fit_spectral_inks(chart, measured, first, fit_g=options.fit_g)
+    log(f"fit of all patches: {s.iterations} evaluations, {s.seconds:.1f} s, g = {s.inks.g:.3f}")
+    pred_lab = spectral_to_lab(grid, s.predicted, ill)
+    full = FitResult(s.inks, pred_lab, s.iterations, s.seconds, s.cost, s.converged, s.message)
+    return _Fit(chart, lab, "spectral", held, hold_lab, full, iterations, seconds)
 
 
 def _residuals(fit: _Fit) -> tuple[list[PatchResidual], np.ndarray, np.ndarray]:
@@ -198,6 +263,7 @@ def _residuals(fit: _Fit) -> tuple[list[PatchResidual], np.ndarray, np.ndarray]:
 
 def _report(fit: _Fit, measured, options: CalibrateOptions, paths: dict) -> CalibrationReport:
     patches, de00, hold_de = _residuals(fit)
+    spectral = isinstance(fit.full.inks, SpectralInkTable)
     return CalibrationReport(
         measurements=str(measured),
         measurement_digest=file_digest(measured),
@@ -214,4 +280,6 @@ def _report(fit: _Fit, measured, options: CalibrateOptions, paths: dict) -> Cali
         iterations=int(fit.iterations + fit.full.iterations),
         seconds=float(fit.seconds + fit.full.seconds),
         patches=patches,
+        model="spectral" if spectral else "rgb",
+        wavelengths_nm=[float(w) for w in fit.full.inks.wavelengths_nm] if spectral else None,
     )

@@ -46,7 +46,7 @@ class CgatsTable:
 
 
 _ALIASES = {"SAMPLEID": "SAMPLE_ID", "SAMPLE_ID": "SAMPLE_ID", "ID": "SAMPLE_ID"}
-_SPECTRAL = re.compile(r"^(?:SPECTRAL_NM_?|SPECTRAL_|SPEC_|NM_?|R)(\d{3})$")
+_SPECTRAL = re.compile(r"^(?:SPECTRAL_NM_?|SPECTRAL_|SPEC_|NM_?|R)(\d{3,4})$")
 
 
 def canonical_field(name: str) -> str:

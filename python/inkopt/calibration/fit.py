@@ -29,7 +29,8 @@ G_STEP = 1e-4
 
 @dataclass
 class FitResult:
-    """A fitted table and how it got there: ``inks`` (the chart's ink order), ``predicted_lab`` (P, 3) of the
+    """A fitted table and how it got there: ``inks`` (the chart's ink order; a ``SpectralInkTable`` from the
+    spectral path of ``calibrate``), ``predicted_lab`` (P, 3) of the
     fitted patches, ``iterations`` (model evaluations with derivatives), ``seconds``, ``cost`` (half the sum of
     squared Lab differences), ``converged`` and the optimiser's ``message``."""
 
@@ -111,6 +112,30 @@ def _from_x(x: np.ndarray, names) -> InkTable:
     return InkTable(tuple(names), s, a, float(x[-1]))
 
 
+def solve(model, x0: np.ndarray, fit_g: bool, max_iterations: int):
+    """Least squares over x = [log σ (K - 1 values), g] from ``x0`` (K,): ``model(x)`` -> (residuals (M,),
+    Jacobian (M, K)); σ within ``SIGMA_BOUNDS``, g within ``G_BOUNDS`` (held at x0's with ``fit_g=False``).
+    Trust-region reflective (``scipy.optimize.least_squares``); returns its result."""
+    from scipy.optimize import least_squares
+
+    lo = np.concatenate([np.full(len(x0) - 1, np.log(SIGMA_BOUNDS[0])), [G_BOUNDS[0]]])
+    hi = np.concatenate([np.full(len(x0) - 1, np.log(SIGMA_BOUNDS[1])), [G_BOUNDS[1]]])
+    if not fit_g:
+        lo[-1], hi[-1] = x0[-1] - 1e-9, x0[-1] + 1e-9
+    return least_squares(
+        lambda x: model(x)[0],
+        x0,
+        jac=lambda x: model(x)[1],
+        bounds=(lo, hi),
+        method="trf",
+        x_scale="jac",
+        max_nfev=max_iterations,
+        ftol=1e-10,
+        xtol=1e-8,
+        gtol=1e-10,
+    )
+
+
 def fit_inks(
     chart: Chart,
     measured_lab: np.ndarray,
@@ -121,7 +146,6 @@ def fit_inks(
 ) -> FitResult:
     """Fit ``start`` (chart order) to ``measured_lab`` (P, 3, CIELAB under ``illuminant``) of ``chart``'s
     patches. ``fit_g=False`` keeps g at the start's value."""
-    from scipy.optimize import least_squares
 
     measured_lab = np.asarray(measured_lab, np.float64)
     if measured_lab.shape != (len(chart), 3):
@@ -146,23 +170,7 @@ def fit_inks(
             evaluations[0] += 1
         return cache[key]
 
-    lo = np.concatenate([np.full(6 * len(names), np.log(SIGMA_BOUNDS[0])), [G_BOUNDS[0]]])
-    hi = np.concatenate([np.full(6 * len(names), np.log(SIGMA_BOUNDS[1])), [G_BOUNDS[1]]])
-    x0 = _to_x(start)
-    if not fit_g:
-        lo[-1], hi[-1] = x0[-1] - 1e-9, x0[-1] + 1e-9
-    res = least_squares(
-        lambda x: model(x)[0],
-        x0,
-        jac=lambda x: model(x)[1],
-        bounds=(lo, hi),
-        method="trf",
-        x_scale="jac",
-        max_nfev=max_iterations,
-        ftol=1e-10,
-        xtol=1e-8,
-        gtol=1e-10,
-    )
+    res = solve(model, _to_x(start), fit_g, max_iterations)
     inks = _from_x(res.x, names)
     lab = predict_lab(chart, inks, illuminant)
     return FitResult(inks, lab, evaluations[0], time.perf_counter() - t0, float(res.cost), res.status > 0, res.message)

@@ -116,7 +116,7 @@ def spectral_fields(table: CgatsTable) -> list[tuple[int, str]]:
     out = []
     for f in table.fields:
         c = canonical_field(f)
-        if c.startswith("SPECTRAL_NM"):
+        if c.startswith("SPECTRAL_NM") and c[len("SPECTRAL_NM") :].isdigit():
             out.append((int(c[len("SPECTRAL_NM") :]), c))
     return sorted(out)
 
@@ -172,8 +172,25 @@ def spectral_wavelengths(table: CgatsTable, spec: list[tuple[int, str]]) -> np.n
 
 
 def _spectral_lab(table: CgatsTable, spec, ids, illuminant: str) -> np.ndarray:
-    """CIELAB of the spectral columns: reflectance divided by the header's ``SPECTRAL_NORM`` (ArgyllCMS: 100,
-    percent) where it gives one, else read as percent when the table's largest value exceeds ``PERCENT_ABOVE``."""
+    """CIELAB of the spectral columns (:func:`measured_reflectance`) under ``illuminant``."""
+    wl, refl = measured_reflectance(table, spec, ids)
+    return spectral_to_lab(wl, refl, illuminant)
+
+
+def measured_reflectance(table: CgatsTable, spec=None, ids=None) -> tuple[np.ndarray, np.ndarray]:
+    """The spectral columns' wavelengths (W,) nm (:func:`spectral_wavelengths`) and reflectance (P, W) float64 as
+    fractions: divided by the header's ``SPECTRAL_NORM`` (ArgyllCMS: 100, percent) where it gives one, else read
+    as percent when the table's largest value exceeds ``PERCENT_ABOVE``. MeasurementError for a table without
+    spectral columns or with values outside [0, 1.5] (-0.01 allowed for noise)."""
+    spec = spectral_fields(table) if spec is None else spec
+    if not spec:
+        raise MeasurementError("the measurements have no spectral columns (SPECTRAL_NM380 ... / SPEC_380 ...)")
+    if ids is None:
+        if not table.has("SAMPLE_ID"):
+            raise MeasurementError("the measurements have no SAMPLE_ID column")
+        ids = table.column("SAMPLE_ID")
+    if not ids:
+        raise MeasurementError("the measurements have no rows (nothing between BEGIN_DATA and END_DATA)")
     wl = spectral_wavelengths(table, spec)
     refl = np.stack([_numbers(table.column(c), c, ids) for _, c in spec], axis=1)
     norm = _header_number(table, "SPECTRAL_NORM")
@@ -183,7 +200,7 @@ def _spectral_lab(table: CgatsTable, spec, ids, illuminant: str) -> np.ndarray:
     bad = np.flatnonzero((refl < -0.01).any(1) | (refl > 1.5).any(1))
     if len(bad):
         raise MeasurementError(f"patch {ids[bad[0]]}: spectral reflectance outside [0, 1.5] (or [0, 150] %)")
-    return spectral_to_lab(wl, refl, illuminant)
+    return wl, refl
 
 
 def file_white(table: CgatsTable) -> np.ndarray:

@@ -35,7 +35,8 @@ class CalibrationReport:
     """calibration.json: where the measurements came from (``measurements``: path, ``measurement_digest``,
     ``measurement_kind`` "lab", "xyz" or "spectral", ``illuminant``), the starting table's name, the fit's figures
     (mean and p95 ΔE2000 over the fitted patches, held-out mean and p95 ΔE2000 and how many, g, iterations,
-    seconds) and every patch's :class:`PatchResidual`."""
+    seconds), every patch's :class:`PatchResidual`, and the table fitted: ``model`` "rgb" (CIELAB fit) or
+    "spectral" (per-band reflectance fit, ``calibration.spectral``) with its band centres ``wavelengths_nm``."""
 
     measurements: str
     measurement_digest: str
@@ -53,6 +54,8 @@ class CalibrationReport:
     seconds: float
     patches: list[PatchResidual] = field(default_factory=list)
     format_version: int = REPORT_FORMAT
+    model: str = "rgb"
+    wavelengths_nm: list[float] | None = None
 
     def summary(self) -> dict:
         """The figures without the patches (the ink file's provenance carries them)."""

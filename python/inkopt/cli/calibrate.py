@@ -10,7 +10,15 @@ from .common import add_seed_arg
 
 
 def _calibrate_cmd(args) -> int:
-    options = CalibrateOptions(args.start, args.illuminant, float(args.holdout), int(args.seed), not args.fixed_g)
+    options = CalibrateOptions(
+        args.start,
+        args.illuminant,
+        float(args.holdout),
+        int(args.seed),
+        not args.fixed_g,
+        spectral=not args.rgb,
+        band_nm=float(args.band_nm),
+    )
     options.validate()
     paths = output_paths(args.out)
     rep = calibrate(args.measured, args.out, options, chart_file=args.chart)
@@ -20,7 +28,8 @@ def _calibrate_cmd(args) -> int:
             f"held out ({rep.holdout_count} patches, fitted without them): mean ΔE2000 "
             f"{rep.holdout_mean_delta_e2000:.2f}, p95 {rep.holdout_p95_delta_e2000:.2f}"
         )
-    print(f"wrote {paths['inks']} (use it with --inks), {paths['report']}, {paths['picture']}")
+    kind = f"a spectral ink table, {len(rep.wavelengths_nm)} bands" if rep.model == "spectral" else "an RGB ink table"
+    print(f"wrote {paths['inks']} ({kind}), {paths['report']}, {paths['picture']}")
     return 0
 
 
@@ -28,8 +37,9 @@ def register_cli(sub) -> None:
     p = sub.add_parser(
         "calibrate",
         help="fit the ink table to a measured calibration chart (docs/calibration.md)",
-        description="Read a chart file with measurements (CIELAB or spectral) and fit every ink's scattering and "
-        "absorption per channel and the shared g; write an ink file for --inks with a report and a picture.",
+        description="Read a chart file with measurements (CIELAB, XYZ or spectral) and fit every ink's scattering "
+        "and absorption and the shared g: per wavelength band to spectral measurements (a spectral ink table), per "
+        "R, G, B channel to CIELAB ones (an RGB ink table); write the ink file with a report and a picture.",
     )
     p.add_argument("measured", metavar="MEASURED.txt", help="the chart file (CGATS.17) with measurements filled in")
     p.add_argument("--out", required=True, metavar="INKS.json", help="the ink file to write")
@@ -45,4 +55,16 @@ def register_cli(sub) -> None:
     p.add_argument("--holdout", type=float, default=0.2, help="share of patches held out to test the fit (default 0.2)")
     add_seed_arg(p, "draw of the held-out patches")
     p.add_argument("--fixed-g", action="store_true", help="keep g at the starting table's value")
+    p.add_argument(
+        "--rgb",
+        action="store_true",
+        help="fit an RGB ink table to the measurements' CIELAB under --illuminant even when they are spectral",
+    )
+    p.add_argument(
+        "--band-nm",
+        type=float,
+        default=20.0,
+        choices=(20.0, 10.0),
+        help="band width of a spectral fit over 400-700 nm: 20 (16 bands, default) or 10 (31 bands)",
+    )
     p.set_defaults(func=_calibrate_cmd)

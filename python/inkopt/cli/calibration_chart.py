@@ -22,7 +22,7 @@ def _chart_cmd(args) -> int:
         header["PRINTER"] = prof.key
     paths = write_chart(args.out, chart, inks, float(args.patch_mm), header)
     print(f"{len(chart)} patches of {', '.join(inks.names)}")
-    print(f"wrote {paths['chart']} (fill in LAB_L LAB_A LAB_B or spectral columns), {paths['layout']}")
+    print(f"wrote {paths['chart']} (fill in LAB_L LAB_A LAB_B, or spectral columns: a spectral fit), {paths['layout']}")
     job = paths["job"].parent
     print(
         f"print it: inkopt quantize {job} && inkopt export {job}" + (f" --printer {prof.key}" if args.printer else "")

@@ -20,8 +20,10 @@ from ..io import upgrade_format, write_json
 
 DEFAULT_G = 0.4
 # Ink files: version 0 is the plain {"g", "inks"} object; version 1 adds "format_version" and an optional
-# "provenance" object (where a fitted table came from: ``inkopt calibrate``); both load alike.
-INK_FILE_FORMAT = 1
+# "provenance" object (where a fitted table came from: ``inkopt calibrate``); version 2 adds spectral tables (a
+# "wavelengths_nm" list and per ink "sigma_s"/"sigma_a" per band, ``model.spectral``). RGB files of every version
+# load alike.
+INK_FILE_FORMAT = 2
 
 # Paper's Table 2: name -> (mu_t RGB in mm^-1, albedo RGB).
 INK_LIBRARY: dict[str, tuple[tuple[float, float, float], tuple[float, float, float]]] = {
@@ -130,7 +132,17 @@ class InkTable:
     def from_file(cls, path) -> InkTable:
         """The ink table of a JSON/TOML ink file (``parse``); anything wrong with it is a one-line ValueError
         naming the file."""
-        data = read_ink_file(path)
+        return cls.from_data(read_ink_file(path), path)
+
+    @classmethod
+    def from_data(cls, data: dict, path) -> InkTable:
+        """The RGB ink table of an ink file's content ``data`` (:func:`read_ink_file`); ``path`` names the file in
+        errors. A spectral file is refused (``model.spectral.load_ink_table`` reads both kinds)."""
+        if "wavelengths_nm" in data:
+            raise ValueError(
+                f"ink file {path} holds a spectral ink table (wavelengths_nm), not an RGB one: load it with "
+                "inkopt.model.spectral.load_ink_table where spectral tables are taken"
+            )
         try:
             inks = data["inks"]
             if not isinstance(inks, list) or not all(isinstance(i, dict) for i in inks):
@@ -182,8 +194,9 @@ def ink_name_problem(name) -> str | None:
 
 
 def read_ink_file(path) -> dict:
-    """An ink file (.json or .toml) as a dict at format version :data:`INK_FILE_FORMAT` (``g``, ``inks``, and
-    ``provenance`` if the file has one); ValueError (one line) for a missing or unreadable file."""
+    """An ink file (.json or .toml) as a dict at format version :data:`INK_FILE_FORMAT` (``g``, ``inks``,
+    ``wavelengths_nm`` if it is spectral and ``provenance`` if the file has one); ValueError (one line) for a
+    missing or unreadable file."""
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"ink file {path} does not exist")
@@ -202,7 +215,7 @@ def read_ink_file(path) -> dict:
         raise ValueError(f"ink file {path} is not valid {path.suffix[1:].upper()}: {exc}") from None
     if not isinstance(data, dict):
         raise ValueError(f"ink file {path} must hold an object with 'inks'")
-    return upgrade_format(data, kind="ink file", where=path, current=INK_FILE_FORMAT, upgrades={0: dict})
+    return upgrade_format(data, kind="ink file", where=path, current=INK_FILE_FORMAT, upgrades={0: dict, 1: dict})
 
 
 def write_ink_file(path, inks: InkTable, provenance: dict | None = None) -> Path:
