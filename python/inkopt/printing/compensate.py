@@ -1,0 +1,194 @@
+"""Share pre-compensation of a halftone: the dithered print of an ink at share p looks like its continuous mixture at a
+smaller share, so the dither is given a larger one.
+
+Why: a printer voxel (42 x 85 x 27 µm at 600 x 300 DPI) is not small against the inks' mean free paths (yellow
+absorbs blue at 16 /mm, white scatters it at 24 /mm), so light that scatters in the base ink's voxels passes the
+grains of an absorbing ink less often than the same ink spread evenly through the mixture would make it absorb (the
+"package effect"). The print is then lighter and less saturated than its mixture: on the duck at 10 mm the
+blue-noise print is ΔE76 1.04 from its mixture on average, Δb* −1.0, and 0.40 on a printer grid twice as fine
+(``experiments/halftone_cause.py``, docs/quality.md "Keeping what the optimiser found").
+
+The correction is measured on flat patches: for each ink but the base (the first in band order, the lightest:
+white), patches of the base with a share p of the ink, dithered on the printer grid and rendered from the top, are
+matched to continuous patches of the same two inks; the continuous share whose colour is nearest in CIELAB is the
+dithered patch's effective share ``p_eff(p)``. ``ShareCompensation.apply`` inverts it per ink: the dither gets the
+share p' with ``p_eff(p') = p``, and the base ink the rest (inks are treated one at a time against the base: the
+mixtures an optimiser finds are mostly the base).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import os
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from ..color import lab_stderr, linear_to_lab
+from ..io import atomic_write_bytes
+from ..model import InkTable, Quantization, Texels, Volume
+from ..render import Renderer
+from .dither import lightness_order
+from .dithers import band_order
+
+#: nominal shares whose dithered patches are measured (0 and 1 are exact: one ink everywhere)
+DITHERED_SHARES = (0.02, 0.05, 0.1, 0.2, 0.3, 0.45, 0.6, 0.8)
+#: continuous shares of the curve each dithered colour is matched on
+CONTINUOUS_SHARES = (0.0, 0.005, 0.01, 0.02, 0.03, 0.045, 0.06, 0.08, 0.1, 0.13, 0.16, 0.2, 0.25, 0.3)
+CONTINUOUS_SHARES = CONTINUOUS_SHARES + (0.35, 0.4, 0.45, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0)
+PATCH_LATERAL = 32  # printer voxels per side of a dithered patch: the blue-noise tile's period, so it wraps exactly
+PATCH_MM = 2.5  # patch thickness, as the colour table's
+PATCH_SPP = 64  # samples per texel of a dithered patch (1024 texels)
+
+
+@dataclass(frozen=True)
+class ShareCompensation:
+    """The measured effective shares of an ink set's dithered patches.
+
+    base      the base ink's index (the rest of every corrected row goes to it)
+    shares    (K,) float64 nominal shares, increasing, 0 and 1 included
+    effective (N, K) float64 per ink, the continuous share that its dithered patch at ``shares`` looks like
+              (increasing; the base ink's row is ``shares``)
+    stderr    (N, K) ΔE76 standard error of each dithered patch's colour (0 at the ends)
+    """
+
+    base: int
+    shares: np.ndarray
+    effective: np.ndarray
+    stderr: np.ndarray
+
+    def apply(self, mix: np.ndarray) -> np.ndarray:
+        """The pre-compensated rows of ``mix`` (..., N) (rows summing to 1, or 0 outside), same shape, float64:
+        every ink but the base takes the share whose dither looks like its share in ``mix``, the base the rest;
+        where the non-base shares would sum above 1, they are scaled to 1 (no base)."""
+        mix = np.asarray(mix, np.float64)
+        out = np.empty_like(mix)
+        for i in range(mix.shape[-1]):
+            if i != self.base:
+                out[..., i] = np.interp(mix[..., i], self.effective[i], self.shares)
+        others = np.delete(np.arange(mix.shape[-1]), self.base)
+        total = mix.sum(-1)
+        s = out[..., others].sum(-1)
+        over = s > total
+        out[..., others] *= np.where(over, total / np.where(over, s, 1.0), 1.0)[..., None]
+        out[..., self.base] = np.maximum(total - out[..., others].sum(-1), 0.0)
+        return out
+
+
+def patch_labels(row, inks: InkTable, q: Quantization, g: float, ior: float) -> Volume:
+    """A periodic-xy patch of the mixture ``row`` (N,) dithered by ``q`` on its printer grid: 32 x 32 printer voxels
+    (the blue-noise tile) by ``PATCH_MM`` thick, a labels ``Volume``."""
+    from .grid import PrinterGrid
+    from .quantize import quantize
+
+    vp = PrinterGrid.of((1, 1, 1), (1.0, 1.0, 1.0), q).voxel_mm  # the printer voxel (x, y, z) mm of ``q``
+    nz = max(1, int(round(PATCH_MM / vp[2])))
+    mix = np.broadcast_to(np.asarray(row, np.float32), (nz, PATCH_LATERAL, PATCH_LATERAL, len(inks))).copy()
+    vol = Volume.from_mixture(voxel_mm=vp, mixture=mix, inks=inks, g=g, ior=ior, boundary="periodic-xy")
+    labels, vpp = quantize(vol, replace(q, compensate=False))
+    return Volume.from_labels(vpp, labels, inks, g=g, ior=ior, boundary="periodic-xy")
+
+
+def _top_colour(vol: Volume, spp: int, seed: int, threads) -> tuple[np.ndarray, float]:
+    """Mean colour (3,) linear RGB of a patch's top face and its ΔE76 standard error."""
+    texels = Texels.for_volume(vol, ["top"])
+    res = Renderer(vol, threads).render(texels, spp, seed)
+    mean = res.rgb.astype(np.float64).mean(0)
+    return mean, float(lab_stderr(mean, res.var_mean.astype(np.float64).sum(0) / len(texels) ** 2))
+
+
+def _curve_share(lab: np.ndarray, curve: np.ndarray, shares: np.ndarray) -> float:
+    """The share at the point of the polyline ``curve`` (K, 3) CIELAB (at ``shares`` (K,)) nearest to ``lab``."""
+    a, b = curve[:-1], curve[1:]
+    ab = b - a
+    t = np.clip(np.sum((lab - a) * ab, 1) / np.maximum(np.sum(ab * ab, 1), 1e-12), 0.0, 1.0)
+    d = np.sum((a + t[:, None] * ab - lab) ** 2, 1)
+    j = int(np.argmin(d))
+    return float(shares[j] + t[j] * (shares[j + 1] - shares[j]))
+
+
+def measure_compensation(inks: InkTable, q: Quantization, g: float, ior: float, base: int, threads=None, log=None):
+    """The ``ShareCompensation`` of ``inks`` dithered by ``q`` against the ``base`` ink (module docstring):
+    ``DITHERED_SHARES`` dithered patches and ``CONTINUOUS_SHARES`` continuous ones per ink, each rendered at
+    ``PATCH_SPP`` spp on its 1024 top texels with a seed of its own. About 2 s per patch on 2 cores."""
+    n = len(inks)
+    shares = np.array((0.0,) + DITHERED_SHARES + (1.0,))
+    eff = np.tile(shares, (n, 1))
+    err = np.zeros((n, len(shares)))
+    cs = np.array(CONTINUOUS_SHARES)
+    seed = 1
+    for i in (i for i in range(n) if i != base):
+        curve = []
+        for p in cs:
+            row = np.zeros(n)
+            row[i], row[base] = p, 1.0 - p
+            vol = Volume.from_mixture(
+                voxel_mm=(0.25, 0.25, PATCH_MM), mixture=row.reshape(1, 1, 1, n).repeat(8, 1).repeat(8, 2),
+                inks=inks, g=g, ior=ior, boundary="periodic-xy",
+            )  # fmt: skip
+            curve.append(linear_to_lab(_top_colour(vol, 4 * PATCH_SPP, seed, threads)[0]))
+            seed += 1
+        curve = np.array(curve)
+        for k, p in enumerate(DITHERED_SHARES, start=1):
+            row = np.zeros(n)
+            row[i], row[base] = p, 1.0 - p
+            rgb, err[i, k] = _top_colour(patch_labels(row, inks, q, g, ior), PATCH_SPP, seed, threads)
+            eff[i, k] = _curve_share(linear_to_lab(rgb), curve, cs)
+            seed += 1
+        eff[i] = np.maximum.accumulate(eff[i])
+        if log is not None:
+            log(f"  {inks.names[i]}: dithered " + ", ".join(f"{p:g} -> {e:.3f}" for p, e in zip(shares, eff[i])))
+    return ShareCompensation(base, shares, eff, err)
+
+
+def compensation_key(inks: InkTable, q: Quantization, g: float, ior: float) -> str:
+    """A hash of what a compensation depends on: the inks' coefficients, g, ior, the dither and its printer grid."""
+    h = hashlib.sha256()
+    for a in (inks.sigma_a, inks.sigma_s):
+        h.update(np.ascontiguousarray(a, np.float64).tobytes())
+    h.update(repr((float(g), float(ior), q.method, q.ink_order, q.dpi, q.layer_um, DITHERED_SHARES)).encode())
+    h.update(repr((CONTINUOUS_SHARES, PATCH_LATERAL, PATCH_MM, PATCH_SPP)).encode())
+    return h.hexdigest()[:16]
+
+
+_MEMORY: dict[str, ShareCompensation] = {}
+
+
+def cache_path(key: str) -> Path:
+    """Where the compensation of ``key`` is cached: ``$INKOPT_CACHE_DIR``, else ``$XDG_CACHE_HOME/inkopt``, else
+    ``~/.cache/inkopt`` (the colour table's cache)."""
+    if os.environ.get("INKOPT_CACHE_DIR"):
+        root = Path(os.environ["INKOPT_CACHE_DIR"])
+    else:
+        root = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "inkopt"
+    return root / f"compensation_{key}.npz"
+
+
+def share_compensation(inks: InkTable | None, q: Quantization, g: float, ior: float, threads=None, log=None):
+    """The ``ShareCompensation`` of ``inks`` dithered by ``q`` (its base: the first ink of the dither's band order,
+    else the lightest), from this process's memory, the disk cache (``cache_path``) or measured
+    (``measure_compensation``, about a minute for five inks) and cached (atomically; a read-only cache is skipped)."""
+    if inks is None:
+        raise ValueError("a compensated quantization needs the mixture's ink table")
+    key = compensation_key(inks, q, g, ior)
+    if key in _MEMORY:
+        return _MEMORY[key]
+    path = cache_path(key)
+    if path.is_file():
+        with np.load(path, allow_pickle=False) as z:
+            comp = ShareCompensation(int(z["base"]), z["shares"], z["effective"], z["stderr"])
+    else:
+        order = band_order(q, inks, g, ior)
+        base = int((lightness_order(inks, g, ior) if order is None else order)[0])
+        comp = measure_compensation(inks, q, g, ior, base, threads, log)
+        buf = io.BytesIO()
+        np.savez(buf, base=comp.base, shares=comp.shares, effective=comp.effective, stderr=comp.stderr)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            atomic_write_bytes(path, buf.getvalue())
+        except OSError:
+            pass  # a read-only cache: measured again next time
+    _MEMORY[key] = comp
+    return comp
