@@ -3,10 +3,11 @@ mixture rendered once and each quantization variant's print rendered at the same
 continuous CIELAB difference split into its mean over the sample (the bias, ± its standard error) and its
 noise-corrected spread (E|d|² minus both renders' Monte Carlo variance), plus the bias in bins of the texel's share
 of each ink (where the print is lighter or less saturated than its mixture). A variant is
-``METHOD[:UPSAMPLE][@DPI]`` (e.g. ``blue-noise``, ``blue-noise@1200x600x1881`` for a printer grid twice as fine in
-every axis, ``random``, ``blue-noise+comp`` with the shares pre-compensated): if the bias shrinks on a finer grid, it comes from the size of the printer voxels (the
-grains of one ink absorb less than the same ink spread through the mixture), not from the dither's order. Writes
-the entry NAME of experiments/results/halftone_cause.json.
+``METHOD[:UPSAMPLE][@DPI][+comp][~mm]`` (e.g. ``blue-noise``, ``blue-noise@1200x600x1881`` for a printer grid twice
+as fine in every axis, ``random``, ``blue-noise+comp`` with the shares pre-compensated, ``blue-noise~mm`` with a
+blue-noise array whose energy is isotropic in mm rather than in printer voxels): if the bias shrinks on a finer
+grid, it comes from the size of the printer voxels (the grains of one ink absorb less than the same ink spread
+through the mixture), not from the dither's order. Writes the entry NAME of experiments/results/halftone_cause.json.
 
     .venv/bin/python experiments/halftone_cause.py NAME RUN VARIANT [VARIANT ...] [--texels 1500] [--spp 512]
 
@@ -17,6 +18,7 @@ import argparse
 import sys
 import time
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
 
@@ -27,7 +29,10 @@ from inkopt.color import linear_to_lab  # noqa: E402
 from inkopt.evaluation.noise import lab_covariance  # noqa: E402
 from inkopt.evaluation.printed import PrintedRenderer  # noqa: E402
 from inkopt.model import Quantization  # noqa: E402
+from inkopt.printing import dithers  # noqa: E402
 from inkopt.printing.compensate import share_compensation  # noqa: E402
+from inkopt.printing.dither import BLUE_NOISE_SHAPE, BLUE_NOISE_SIGMA, load_blue_noise, void_and_cluster  # noqa: E402
+from inkopt.printing.grid import PrinterGrid  # noqa: E402
 from inkopt.printing.quantize import quantize_volume  # noqa: E402
 from inkopt.render import Renderer  # noqa: E402
 from inkopt.rundir import RunDir  # noqa: E402
@@ -37,8 +42,18 @@ SEED = 2**62 + 7
 SHARE_EDGES = [0.0, 0.05, 0.15, 0.3, 0.5, 1.01]
 
 
+def physical_tile(q: Quantization) -> np.ndarray:
+    """A 32^3 blue-noise threshold array whose void-and-cluster energy is isotropic in mm on ``q``'s printer voxels:
+    per axis sigma = 1.5 x (the voxels' geometric mean size) / (the axis's voxel size)."""
+    vp = PrinterGrid.of((1, 1, 1), (1.0, 1.0, 1.0), q).voxel_mm[::-1]  # (z, y, x) mm
+    ranks = void_and_cluster(BLUE_NOISE_SHAPE, tuple(BLUE_NOISE_SIGMA * np.prod(vp) ** (1 / 3) / vp))
+    return ((ranks.astype(np.float64) + 0.5) / ranks.size).astype(np.float32)
+
+
 def quantization(spec: str) -> Quantization:
-    """``METHOD[:UPSAMPLE][@DPI][+comp]`` -> the settings (``+comp``: shares compensated, ``printing.compensate``)."""
+    """``METHOD[:UPSAMPLE][@DPI][+comp][~mm]`` -> the settings (``+comp``: shares compensated,
+    ``printing.compensate``; ``~mm``, read by ``main``: blue noise isotropic in mm, ``physical_tile``)."""
+    spec = spec.replace("~mm", "")
     spec, plus, _ = spec.partition("+comp")
     head, _, dpi = spec.partition("@")
     method, _, up = head.partition(":")
@@ -88,8 +103,10 @@ def main():
         q = quantization(spec)
         if q.compensate:
             share_compensation(vol.inks, q, vol.g, vol.ior, a.threads, print)
+        tile = physical_tile(q) if "~mm" in spec else load_blue_noise()
         t0 = time.perf_counter()
-        labels = quantize_volume(vol, q)
+        with mock.patch.object(dithers, "load_blue_noise", lambda tile=tile: tile):
+            labels = quantize_volume(vol, q)
         printer = PrintedRenderer(labels, rec.texels, vol.voxel_mm, rec.kind, a.threads, None, [pick])
         printer.use(labels)
         p_rgb, p_var, _ = printer(a.spp, SEED + 1)

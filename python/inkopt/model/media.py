@@ -195,7 +195,8 @@ class Quantization:
 
     def to_json(self) -> dict:
         """The recorded settings as JSON values (``method``, ``seed``, ``dpi`` list or None, ``upsample``,
-        ``ink_order``, and ``refine`` and ``compensate`` where they are not 0 / false): what evaluation.json says of its labels volume."""
+        ``ink_order``, and ``refine`` and ``compensate`` where they are not 0 / false): what evaluation.json says of
+        its labels volume."""
         dpi = None if self.dpi is None else list(self.dpi)
         refined = {"refine": self.refine} if self.refine else {}
         refined.update({"compensate": True} if self.compensate else {})

@@ -144,11 +144,15 @@ def measure_compensation(inks: InkTable, q: Quantization, g: float, ior: float, 
 
 
 def compensation_key(inks: InkTable, q: Quantization, g: float, ior: float) -> str:
-    """A hash of what a compensation depends on: the inks' coefficients, g, ior, the dither and its printer grid."""
+    """A hash of what a compensation depends on: the inks' coefficients, g, ior, the dither, its printer voxel (µm,
+    rounded to 0.01) and the measurement's settings."""
+    from .grid import PrinterGrid
+
+    vp_um = tuple(np.round(PrinterGrid.of((1, 1, 1), (1.0, 1.0, 1.0), q).voxel_mm * 1000.0, 2).tolist())
     h = hashlib.sha256()
     for a in (inks.sigma_a, inks.sigma_s):
         h.update(np.ascontiguousarray(a, np.float64).tobytes())
-    h.update(repr((float(g), float(ior), q.method, q.ink_order, q.dpi, q.layer_um, DITHERED_SHARES)).encode())
+    h.update(repr((float(g), float(ior), q.method, q.ink_order, vp_um, DITHERED_SHARES)).encode())
     h.update(repr((CONTINUOUS_SHARES, PATCH_LATERAL, PATCH_MM, PATCH_SPP)).encode())
     return h.hexdigest()[:16]
 
@@ -182,6 +186,8 @@ def share_compensation(inks: InkTable | None, q: Quantization, g: float, ior: fl
     else:
         order = band_order(q, inks, g, ior)
         base = int((lightness_order(inks, g, ior) if order is None else order)[0])
+        if log is not None:
+            log(f"share compensation of {', '.join(inks.names)} on this printer grid: measuring (cached in {path})")
         comp = measure_compensation(inks, q, g, ior, base, threads, log)
         buf = io.BytesIO()
         np.savez(buf, base=comp.base, shares=comp.shares, effective=comp.effective, stderr=comp.stderr)

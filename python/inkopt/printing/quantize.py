@@ -58,8 +58,8 @@ __all__ = [
 def check_quantization(q: Quantization) -> None:
     """One-line ParameterError for settings no quantization follows: an unknown ``method`` or ``upsample``, a
     ``dpi`` that is not 2 or 3 positive numbers, a ``layer_um`` that is not positive, or the layer thickness given
-    twice (a z ``dpi`` and ``layer_um``), a ``refine`` that is not a whole number >= 0; a ValueError for an
-    unknown ``ink_order`` (a record's, from a file)."""
+    twice (a z ``dpi`` and ``layer_um``), a ``refine`` that is not a whole number >= 0, a ``compensate`` that is
+    not a bool; a ValueError for an unknown ``ink_order`` (a record's, from a file)."""
     dither_class(q.method)
     upsampler_class(q.upsample)
     if q.ink_order not in INK_ORDERS:  # no flag sets it: a plain ValueError
@@ -78,6 +78,8 @@ def check_quantization(q: Quantization) -> None:
             raise ParameterError("give the layer thickness once: `dpi` XxYxZ or `layer_um`, not both")
     if not (isinstance(q.refine, (int, np.integer)) and q.refine >= 0):
         raise ParameterError(f"`refine` must be a whole number of iterations >= 0, got {q.refine}")
+    if not isinstance(q.compensate, (bool, np.bool_)):
+        raise ParameterError(f"`compensate` must be true or false, got {q.compensate!r}")
 
 
 def _positive(v) -> bool:
