@@ -10,46 +10,59 @@ from inkopt.printing import compensate as C
 from inkopt.printing import quantize as Q
 from inkopt.printing.quantize import MixtureLayers, check_quantization, ink_fractions, quantize
 
-SHARES = np.array([0.0, 0.1, 0.3, 0.6, 1.0])
+SHARES = np.array([0.1, 0.3, 0.6])
 
 
-def scaled(base: int, n: int, factor: float) -> C.ShareCompensation:
-    """A compensation whose every ink but ``base`` looks like ``factor`` times its share when dithered (up to 1)."""
-    eff = np.tile(SHARES, (n, 1))
-    for i in range(n):
-        if i != base:
-            eff[i] = np.minimum(SHARES * factor, 1.0)
-            eff[i, -1] = 1.0
-    return C.ShareCompensation(base, SHARES, eff, np.zeros_like(eff))
+def scaled(base: int, n: int, k: float) -> C.ShareCompensation:
+    """A compensation with the package factor ``k`` for every ink but ``base``."""
+    ks = np.full(n, float(k))
+    ks[base] = 0.0
+    measured = np.array([C.ShareCompensation(base, ks, ks, SHARES, None, None).effective(SHARES, i) for i in range(n)])
+    return C.ShareCompensation(base, ks, np.zeros(n), SHARES, measured, np.zeros_like(measured))
 
 
 def test_apply_inverts_the_effective_share_and_gives_the_base_the_rest():
-    comp = scaled(base=2, n=3, factor=0.8)
+    comp = scaled(base=2, n=3, k=0.25)
     mix = np.array([[0.08, 0.0, 0.92], [0.04, 0.16, 0.8], [0.0, 0.0, 1.0], [0.0, 0.0, 0.0]])
     out = comp.apply(mix)
-    np.testing.assert_allclose(out[0], [0.1, 0.0, 0.9])
-    np.testing.assert_allclose(out[1], [0.05, 0.2, 0.75])
+    np.testing.assert_allclose(out.sum(-1), [1, 1, 1, 0])
     np.testing.assert_allclose(out[2], [0.0, 0.0, 1.0])
     np.testing.assert_allclose(out[3], [0.0, 0.0, 0.0])  # outside rows stay empty
-    # the effective share of the corrected row is the mixture's own
-    for i in (0, 1):
-        np.testing.assert_allclose(np.interp(out[1, i], comp.shares, comp.effective[i]), mix[1, i])
+    # the effective share of each corrected share is the mixture's own, and the correction raises it
+    for r in (0, 1):
+        for i in (0, 1):
+            np.testing.assert_allclose(comp.effective(out[r, i], i), mix[r, i], atol=1e-12)
+            assert out[r, i] >= mix[r, i]
+    assert out[0, 0] > 0.08 * 1.2  # at small shares the dither needs 1 + k times the share
 
 
 def test_apply_scales_non_base_inks_that_would_exceed_the_row():
-    comp = scaled(base=0, n=3, factor=0.5)
-    out = comp.apply(np.array([[0.1, 0.5, 0.4]]))  # 1.0 + 0.8 > 1
+    comp = scaled(base=0, n=3, k=1.0)
+    out = comp.apply(np.array([[0.1, 0.5, 0.4]]))  # 2 * 0.5 / 1.5 + 2 * 0.4 / 1.4 > 1
     np.testing.assert_allclose(out.sum(-1), 1.0)
     assert out[0, 0] == 0.0
-    inv = [np.interp(v, comp.effective[1], comp.shares) for v in (0.5, 0.4)]
-    np.testing.assert_allclose(out[0, 1] / out[0, 2], inv[0] / inv[1])
+    np.testing.assert_allclose(out[0, 1] / out[0, 2], (2 * 0.5 / 1.5) / (2 * 0.4 / 1.4))
 
 
 def test_identity_compensation_leaves_rows_unchanged():
-    comp = scaled(base=4, n=5, factor=1.0)
+    comp = scaled(base=4, n=5, k=0.0)
     rng = np.random.default_rng(0)
     mix = rng.dirichlet(np.ones(5) * 0.5, size=200)
     np.testing.assert_allclose(comp.apply(mix), mix, atol=1e-12)
+
+
+def test_fit_k_recovers_the_factor_within_its_standard_error():
+    rng = np.random.default_rng(1)
+    p = np.array(C.DITHERED_SHARES)
+    s = np.full(len(p), 0.01)
+    ks = []
+    for _ in range(200):
+        e = p / (1 + 0.3 * (1 - p)) + rng.normal(0, 0.01, len(p))
+        ks.append(C.fit_k(p, e, s))
+    k, se = np.array(ks).T
+    # the fitted factors scatter about 0.3 as their standard error says (200 fits: the mean within 5 of its errors)
+    assert abs(k.mean() - 0.3) < 5 * se.mean() / np.sqrt(len(k))
+    assert 0.7 < k.std() / se.mean() < 1.3
 
 
 def test_patch_labels_hold_the_share_of_each_ink():
@@ -67,8 +80,9 @@ def test_patch_labels_hold_the_share_of_each_ink():
 def test_curve_share_projects_onto_the_polyline():
     curve = np.array([[0.0, 0, 0], [10.0, 0, 0], [10.0, 10, 0]])
     shares = np.array([0.0, 0.5, 1.0])
-    assert C._curve_share(np.array([5.0, 1.0, 0.0]), curve, shares) == pytest.approx(0.25)
-    assert C._curve_share(np.array([12.0, 5.0, 0.0]), curve, shares) == pytest.approx(0.75)
+    share, slope, j = C._curve_share(np.array([5.0, 1.0, 0.0]), curve, shares)
+    assert (share, slope, j) == (pytest.approx(0.25), pytest.approx(20.0), 0)
+    assert C._curve_share(np.array([12.0, 5.0, 0.0]), curve, shares)[0] == pytest.approx(0.75)
 
 
 def test_measured_compensation_of_a_strong_absorber_is_below_its_share(monkeypatch):
@@ -83,32 +97,25 @@ def test_measured_compensation_of_a_strong_absorber_is_below_its_share(monkeypat
         g=0.4,
     )
     comp = C.measure_compensation(inks, Quantization(), inks.g, 1.5, base=0)
-    assert comp.shares.tolist() == [0.0, 0.3, 1.0]
-    # the share's standard error from the colour's: ΔE per unit share on the continuous curve about 0.3
-    curve = []
-    for p in (0.25, 0.35):
-        vol = C.Volume.from_mixture(
-            voxel_mm=(0.25, 0.25, C.PATCH_MM),
-            mixture=np.broadcast_to(np.array([1 - p, p, 0.0], np.float32), (1, 8, 8, 3)).copy(),
-            inks=inks, g=inks.g, ior=1.5, boundary="periodic-xy",
-        )  # fmt: skip
-        curve.append(C.linear_to_lab(C._top_colour(vol, 1024, 99, None)[0]))
-    slope = np.linalg.norm(curve[1] - curve[0]) / 0.1
-    se_yellow = comp.stderr[1, 1] / slope
-    assert comp.effective[1, 1] < 0.3 - 5 * se_yellow, (comp.effective[1], se_yellow)
-    assert comp.effective[1, 1] > 0.15  # and not absurdly far
-    assert comp.stderr[2, 1] > 0  # every ink but the base is measured
+    assert comp.shares.tolist() == [0.3]
+    # the matched share's own standard error (the colours' over the curve's slope)
+    se = comp.share_stderr[1, 0]
+    assert 0 < se < 0.02
+    assert comp.measured[1, 0] < 0.3 - 5 * se, (comp.measured[1], se)
+    assert comp.measured[1, 0] > 0.15  # and not absurdly far
+    assert comp.k[1] > 5 * comp.k_stderr[1] and comp.k[0] == 0.0
+    assert comp.share_stderr[2, 0] > 0  # every ink but the base is measured
 
 
 def test_quantize_uses_the_compensation(monkeypatch):
     inks = InkTable.parse("vero-cmykw")
-    comp = scaled(base=4, n=5, factor=0.8)
+    comp = scaled(base=4, n=5, k=0.25)
     monkeypatch.setattr(Q, "share_compensation", lambda *a, **k: comp)
     mix = np.zeros((6, 8, 8, 5), np.float32)
     mix[..., 2], mix[..., 4] = 0.24, 0.76
     vo = (25.4 / 300,) * 3
     src = MixtureLayers(mix, vo, None, inks)
-    for flag, want in ((False, 0.24), (True, 0.3)):
+    for flag, want in ((False, 0.24), (True, 0.24 * 1.25 / (1 + 0.25 * 0.24))):
         labels, vp = quantize(src, Quantization(compensate=flag))
         frac, _ = ink_fractions(labels, 5, mix.shape[:3], vo, vp)
         # blue noise over the whole volume: within 1 % of the share it was given
@@ -132,14 +139,15 @@ def test_share_compensation_is_cached_on_disk(monkeypatch, tmp_path):
 
     def fake(inks_, q, g, ior, base, threads=None, log=None):
         calls.append(base)
-        return scaled(base, len(inks_), 0.9)
+        return scaled(base, len(inks_), 0.1)
 
     monkeypatch.setattr(C, "measure_compensation", fake)
     a = C.share_compensation(inks, Quantization(), inks.g, 1.5)
     monkeypatch.setattr(C, "_MEMORY", {})
     b = C.share_compensation(inks, Quantization(), inks.g, 1.5)
     assert calls == [4]  # white, the lightest, is the base; measured once, then read from the disk cache
-    np.testing.assert_array_equal(a.effective, b.effective)
+    np.testing.assert_array_equal(a.k, b.k)
+    np.testing.assert_array_equal(a.measured, b.measured)
     assert list(tmp_path.glob("compensation_*.npz"))
     with pytest.raises(ValueError, match="ink table"):
         C.share_compensation(None, Quantization(), 0.4, 1.5)

@@ -11,9 +11,11 @@ blue-noise print is ΔE76 1.04 from its mixture on average, Δb* −1.0, and 0.4
 The correction is measured on flat patches: for each ink but the base (the first in band order, the lightest:
 white), patches of the base with a share p of the ink, dithered on the printer grid and rendered from the top, are
 matched to continuous patches of the same two inks; the continuous share whose colour is nearest in CIELAB is the
-dithered patch's effective share ``p_eff(p)``. ``ShareCompensation.apply`` inverts it per ink: the dither gets the
-share p' with ``p_eff(p') = p``, and the base ink the rest (inks are treated one at a time against the base: the
-mixtures an optimiser finds are mostly the base).
+dithered patch's effective share. One factor k per ink models them, ``p_eff = p / (1 + k (1 - p))`` (fitted with
+the patches' standard errors: the model pools the patches, so an ink without a package effect gets k near 0 instead
+of each patch's noise). ``ShareCompensation.apply`` inverts it per ink: the dither gets the share p' with
+``p_eff(p') = p``, and the base ink the rest (inks are treated one at a time against the base: the mixtures an
+optimiser finds are mostly the base).
 """
 
 from __future__ import annotations
@@ -41,33 +43,46 @@ CONTINUOUS_SHARES = CONTINUOUS_SHARES + (0.35, 0.4, 0.45, 0.5, 0.6, 0.7, 0.8, 0.
 PATCH_LATERAL = 32  # printer voxels per side of a dithered patch: the blue-noise tile's period, so it wraps exactly
 PATCH_MM = 2.5  # patch thickness, as the colour table's
 PATCH_SPP = 64  # samples per texel of a dithered patch (1024 texels)
+FORMAT = 2  # of the cached file (part of its key)
 
 
 @dataclass(frozen=True)
 class ShareCompensation:
-    """The measured effective shares of an ink set's dithered patches.
+    """How an ink set's dithered inks look against their base ink: per ink i, a dithered share p looks like the
+    continuous share ``p / (1 + k_i (1 - p))`` (``effective``; k_i > 0: the package effect, fitted to the measured
+    patches by weighted least squares, ``fit_k``).
 
-    base      the base ink's index (the rest of every corrected row goes to it)
-    shares    (K,) float64 nominal shares, increasing, 0 and 1 included
-    effective (N, K) float64 per ink, the continuous share that its dithered patch at ``shares`` looks like
-              (increasing; the base ink's row is ``shares``)
-    stderr    (N, K) ΔE76 standard error of each dithered patch's colour (0 at the ends)
+    base          the base ink's index (the rest of every corrected row goes to it)
+    k             (N,) float64 the package factor of each ink (0 for the base)
+    k_stderr      (N,) float64 its standard error from the patches' Monte Carlo noise
+    shares        (K,) float64 the nominal shares of the measured dithered patches
+    measured      (N, K) float64 the continuous share each patch was matched to (the base's row: ``shares``)
+    share_stderr  (N, K) float64 its standard error (the colours' ΔE76 standard error over the curve's slope)
     """
 
     base: int
+    k: np.ndarray
+    k_stderr: np.ndarray
     shares: np.ndarray
-    effective: np.ndarray
-    stderr: np.ndarray
+    measured: np.ndarray
+    share_stderr: np.ndarray
+
+    def effective(self, p, i: int) -> np.ndarray:
+        """The continuous share that ink ``i`` dithered at share ``p`` (array, in [0, 1]) looks like."""
+        p = np.asarray(p, np.float64)
+        return p / (1.0 + self.k[i] * (1.0 - p))
 
     def apply(self, mix: np.ndarray) -> np.ndarray:
         """The pre-compensated rows of ``mix`` (..., N) (rows summing to 1, or 0 outside), same shape, float64:
-        every ink but the base takes the share whose dither looks like its share in ``mix``, the base the rest;
-        where the non-base shares would sum above 1, they are scaled to 1 (no base)."""
+        every ink but the base takes the share p' whose dither looks like its share p in ``mix``,
+        p' = p (1 + k) / (1 + k p), the base the rest; where the non-base shares would sum above 1, they are scaled
+        to 1 (no base)."""
         mix = np.asarray(mix, np.float64)
         out = np.empty_like(mix)
         for i in range(mix.shape[-1]):
             if i != self.base:
-                out[..., i] = np.interp(mix[..., i], self.effective[i], self.shares)
+                p = mix[..., i]
+                out[..., i] = p * (1.0 + self.k[i]) / (1.0 + self.k[i] * p)
         others = np.delete(np.arange(mix.shape[-1]), self.base)
         total = mix.sum(-1)
         s = out[..., others].sum(-1)
@@ -75,6 +90,24 @@ class ShareCompensation:
         out[..., others] *= np.where(over, total / np.where(over, s, 1.0), 1.0)[..., None]
         out[..., self.base] = np.maximum(total - out[..., others].sum(-1), 0.0)
         return out
+
+    def arrays(self) -> dict:
+        """The fields as arrays (the cached file's)."""
+        fields = ("base", "k", "k_stderr", "shares", "measured", "share_stderr")
+        return {f: np.asarray(getattr(self, f)) for f in fields}
+
+
+def fit_k(shares: np.ndarray, measured: np.ndarray, stderr: np.ndarray) -> tuple[float, float]:
+    """The package factor k minimising sum(((p / (1 + k (1 - p)) - e) / s)^2) over the patches (p, e, s) of one
+    ink, in [-0.5, 5], and its standard error (from the model's slope in k at the optimum)."""
+    from scipy.optimize import minimize_scalar
+
+    p, e, s = (np.asarray(a, np.float64) for a in (shares, measured, stderr))
+    w = 1.0 / np.maximum(s, 1e-6) ** 2
+    res = minimize_scalar(lambda k: np.sum(w * (p / (1 + k * (1 - p)) - e) ** 2), bounds=(-0.5, 5.0), method="bounded")
+    k = float(res.x)
+    slope = -p * (1 - p) / (1 + k * (1 - p)) ** 2
+    return k, float(1.0 / np.sqrt(max(np.sum(w * slope * slope), 1e-300)))
 
 
 def patch_labels(row, inks: InkTable, q: Quantization, g: float, ior: float) -> Volume:
@@ -99,48 +132,63 @@ def _top_colour(vol: Volume, spp: int, seed: int, threads) -> tuple[np.ndarray, 
     return mean, float(lab_stderr(mean, res.var_mean.astype(np.float64).sum(0) / len(texels) ** 2))
 
 
-def _curve_share(lab: np.ndarray, curve: np.ndarray, shares: np.ndarray) -> float:
-    """The share at the point of the polyline ``curve`` (K, 3) CIELAB (at ``shares`` (K,)) nearest to ``lab``."""
+def _curve_share(lab: np.ndarray, curve: np.ndarray, shares: np.ndarray) -> tuple[float, float, int]:
+    """The share at the point of the polyline ``curve`` (K, 3) CIELAB (at ``shares`` (K,)) nearest to ``lab``, the
+    curve's slope there (ΔE76 per unit share) and the index of its segment."""
     a, b = curve[:-1], curve[1:]
     ab = b - a
     t = np.clip(np.sum((lab - a) * ab, 1) / np.maximum(np.sum(ab * ab, 1), 1e-12), 0.0, 1.0)
     d = np.sum((a + t[:, None] * ab - lab) ** 2, 1)
     j = int(np.argmin(d))
-    return float(shares[j] + t[j] * (shares[j + 1] - shares[j]))
+    slope = float(np.linalg.norm(ab[j]) / (shares[j + 1] - shares[j]))
+    return float(shares[j] + t[j] * (shares[j + 1] - shares[j])), slope, j
+
+
+def _continuous_curve(inks: InkTable, i: int, base: int, g: float, ior: float, seed: int, threads):
+    """CIELAB (K, 3) and ΔE76 standard errors (K,) of continuous patches of ink ``i`` in ``base`` at
+    ``CONTINUOUS_SHARES`` (64 texels at 4 x ``PATCH_SPP`` spp each, seeds from ``seed``)."""
+    n = len(inks)
+    lab, err = [], []
+    for j, p in enumerate(CONTINUOUS_SHARES):
+        row = np.zeros(n)
+        row[i], row[base] = p, 1.0 - p
+        vol = Volume.from_mixture(
+            voxel_mm=(0.25, 0.25, PATCH_MM), mixture=row.reshape(1, 1, 1, n).repeat(8, 1).repeat(8, 2),
+            inks=inks, g=g, ior=ior, boundary="periodic-xy",
+        )  # fmt: skip
+        rgb, se = _top_colour(vol, 4 * PATCH_SPP, seed + j, threads)
+        lab.append(linear_to_lab(rgb))
+        err.append(se)
+    return np.array(lab), np.array(err)
 
 
 def measure_compensation(inks: InkTable, q: Quantization, g: float, ior: float, base: int, threads=None, log=None):
-    """The ``ShareCompensation`` of ``inks`` dithered by ``q`` against the ``base`` ink (module docstring):
-    ``DITHERED_SHARES`` dithered patches and ``CONTINUOUS_SHARES`` continuous ones per ink, each rendered at
-    ``PATCH_SPP`` spp on its 1024 top texels with a seed of its own. About 2 s per patch on 2 cores."""
+    """The ``ShareCompensation`` of ``inks`` dithered by ``q`` against the ``base`` ink (module docstring): per ink
+    ``CONTINUOUS_SHARES`` continuous patches (``_continuous_curve``) and ``DITHERED_SHARES`` dithered ones (1024
+    top texels at ``PATCH_SPP`` spp), each with a seed of its own; each dithered colour matched to its nearest
+    point of the continuous curve, and k fitted (``fit_k``). About 1 s per patch on 2 cores."""
     n = len(inks)
-    shares = np.array((0.0,) + DITHERED_SHARES + (1.0,))
-    eff = np.tile(shares, (n, 1))
-    err = np.zeros((n, len(shares)))
+    shares = np.array(DITHERED_SHARES)
+    measured = np.tile(shares, (n, 1))
+    share_se = np.zeros((n, len(shares)))
+    k, k_se = np.zeros(n), np.zeros(n)
     cs = np.array(CONTINUOUS_SHARES)
     seed = 1
     for i in (i for i in range(n) if i != base):
-        curve = []
-        for p in cs:
+        curve, curve_se = _continuous_curve(inks, i, base, g, ior, seed, threads)
+        seed += len(cs)
+        for m, p in enumerate(shares):
             row = np.zeros(n)
             row[i], row[base] = p, 1.0 - p
-            vol = Volume.from_mixture(
-                voxel_mm=(0.25, 0.25, PATCH_MM), mixture=row.reshape(1, 1, 1, n).repeat(8, 1).repeat(8, 2),
-                inks=inks, g=g, ior=ior, boundary="periodic-xy",
-            )  # fmt: skip
-            curve.append(linear_to_lab(_top_colour(vol, 4 * PATCH_SPP, seed, threads)[0]))
+            rgb, se = _top_colour(patch_labels(row, inks, q, g, ior), PATCH_SPP, seed, threads)
+            measured[i, m], slope, j = _curve_share(linear_to_lab(rgb), curve, cs)
+            share_se[i, m] = np.hypot(se, curve_se[j : j + 2].mean()) / max(slope, 1e-9)
             seed += 1
-        curve = np.array(curve)
-        for k, p in enumerate(DITHERED_SHARES, start=1):
-            row = np.zeros(n)
-            row[i], row[base] = p, 1.0 - p
-            rgb, err[i, k] = _top_colour(patch_labels(row, inks, q, g, ior), PATCH_SPP, seed, threads)
-            eff[i, k] = _curve_share(linear_to_lab(rgb), curve, cs)
-            seed += 1
-        eff[i] = np.maximum.accumulate(eff[i])
+        k[i], k_se[i] = fit_k(shares, measured[i], share_se[i])
         if log is not None:
-            log(f"  {inks.names[i]}: dithered " + ", ".join(f"{p:g} -> {e:.3f}" for p, e in zip(shares, eff[i])))
-    return ShareCompensation(base, shares, eff, err)
+            pairs = ", ".join(f"{p:g} -> {e:.3f}" for p, e in zip(shares, measured[i]))
+            log(f"  {inks.names[i]}: k {k[i]:.3f} ± {k_se[i]:.3f} (dithered share -> continuous: {pairs})")
+    return ShareCompensation(base, k, k_se, shares, measured, share_se)
 
 
 def compensation_key(inks: InkTable, q: Quantization, g: float, ior: float) -> str:
@@ -152,7 +200,7 @@ def compensation_key(inks: InkTable, q: Quantization, g: float, ior: float) -> s
     h = hashlib.sha256()
     for a in (inks.sigma_a, inks.sigma_s):
         h.update(np.ascontiguousarray(a, np.float64).tobytes())
-    h.update(repr((float(g), float(ior), q.method, q.ink_order, vp_um, DITHERED_SHARES)).encode())
+    h.update(repr((FORMAT, float(g), float(ior), q.method, q.ink_order, vp_um, DITHERED_SHARES)).encode())
     h.update(repr((CONTINUOUS_SHARES, PATCH_LATERAL, PATCH_MM, PATCH_SPP)).encode())
     return h.hexdigest()[:16]
 
@@ -182,7 +230,7 @@ def share_compensation(inks: InkTable | None, q: Quantization, g: float, ior: fl
     path = cache_path(key)
     if path.is_file():
         with np.load(path, allow_pickle=False) as z:
-            comp = ShareCompensation(int(z["base"]), z["shares"], z["effective"], z["stderr"])
+            comp = ShareCompensation(**{f: z[f] for f in z.files if f != "base"}, base=int(z["base"]))
     else:
         order = band_order(q, inks, g, ior)
         base = int((lightness_order(inks, g, ior) if order is None else order)[0])
@@ -190,7 +238,7 @@ def share_compensation(inks: InkTable | None, q: Quantization, g: float, ior: fl
             log(f"share compensation of {', '.join(inks.names)} on this printer grid: measuring (cached in {path})")
         comp = measure_compensation(inks, q, g, ior, base, threads, log)
         buf = io.BytesIO()
-        np.savez(buf, base=comp.base, shares=comp.shares, effective=comp.effective, stderr=comp.stderr)
+        np.savez(buf, **comp.arrays())
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
             atomic_write_bytes(path, buf.getvalue())
