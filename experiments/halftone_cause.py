@@ -3,9 +3,10 @@ mixture rendered once and each quantization variant's print rendered at the same
 continuous CIELAB difference split into its mean over the sample (the bias, ± its standard error) and its
 noise-corrected spread (E|d|² minus both renders' Monte Carlo variance), plus the bias in bins of the texel's share
 of each ink (where the print is lighter or less saturated than its mixture). A variant is
-``METHOD[:UPSAMPLE][@DPI][+comp][~mm]`` (e.g. ``blue-noise``, ``blue-noise@1200x600x1881`` for a printer grid twice
+``METHOD[:UPSAMPLE][@DPI][+comp][~mm|~2d]`` (e.g. ``blue-noise``, ``blue-noise@1200x600x1881`` for a printer grid twice
 as fine in every axis, ``random``, ``blue-noise+comp`` with the shares pre-compensated, ``blue-noise~mm`` with a
-blue-noise array whose energy is isotropic in mm rather than in printer voxels): if the bias shrinks on a finer
+blue-noise array whose energy is isotropic in mm rather than in printer voxels, ``~2d`` with 2D blue-noise layers,
+``layered_tile``): if the bias shrinks on a finer
 grid, it comes from the size of the printer voxels (the grains of one ink absorb less than the same ink spread
 through the mixture), not from the dither's order. Writes the entry NAME of experiments/results/halftone_cause.json.
 
@@ -50,10 +51,18 @@ def physical_tile(q: Quantization) -> np.ndarray:
     return ((ranks.astype(np.float64) + 0.5) / ranks.size).astype(np.float32)
 
 
+def layered_tile() -> np.ndarray:
+    """A 32^3 threshold array of 2D blue-noise layers (void-and-cluster in (y, x), one seed per layer): every
+    printer layer, the top face's slice, is blue noise of its own, the layers independent of each other."""
+    z, y, x = BLUE_NOISE_SHAPE
+    ranks = np.stack([void_and_cluster((y, x), seed=k) for k in range(z)])
+    return ((ranks.astype(np.float64) + 0.5) / (y * x)).astype(np.float32)
+
+
 def quantization(spec: str) -> Quantization:
     """``METHOD[:UPSAMPLE][@DPI][+comp][~mm]`` -> the settings (``+comp``: shares compensated,
-    ``printing.compensate``; ``~mm``, read by ``main``: blue noise isotropic in mm, ``physical_tile``)."""
-    spec = spec.replace("~mm", "")
+    ``printing.compensate``; ``~mm`` and ``~2d``, read by ``main``: ``physical_tile``, ``layered_tile``)."""
+    spec = spec.replace("~mm", "").replace("~2d", "")
     spec, plus, _ = spec.partition("+comp")
     head, _, dpi = spec.partition("@")
     method, _, up = head.partition(":")
@@ -103,7 +112,7 @@ def main():
         q = quantization(spec)
         if q.compensate:
             share_compensation(vol.inks, q, vol.g, vol.ior, a.threads, print)
-        tile = physical_tile(q) if "~mm" in spec else load_blue_noise()
+        tile = physical_tile(q) if "~mm" in spec else layered_tile() if "~2d" in spec else load_blue_noise()
         t0 = time.perf_counter()
         with mock.patch.object(dithers, "load_blue_noise", lambda tile=tile: tile):
             labels = quantize_volume(vol, q)

@@ -33,7 +33,9 @@ from ..io import atomic_write_bytes
 from ..model import InkTable, Quantization, Texels, Volume
 from ..render import Renderer
 from .dither import lightness_order
-from .dithers import band_order
+from .dithers import band_order, dither_class
+from .grid import PrinterGrid, upsampler_class
+from .layers import CumulativeLayers, MixtureLayers
 
 #: nominal shares whose dithered patches are measured (0 and 1 are exact: one ink everywhere)
 DITHERED_SHARES = (0.02, 0.05, 0.1, 0.2, 0.3, 0.45, 0.6, 0.8)
@@ -111,17 +113,20 @@ def fit_k(shares: np.ndarray, measured: np.ndarray, stderr: np.ndarray) -> tuple
 
 
 def patch_labels(row, inks: InkTable, q: Quantization, g: float, ior: float) -> Volume:
-    """A periodic-xy patch of the mixture ``row`` (N,) dithered by ``q`` on its printer grid: 32 x 32 printer voxels
-    (the blue-noise tile) by ``PATCH_MM`` thick, a labels ``Volume``."""
-    from .grid import PrinterGrid
-    from .quantize import quantize
-
+    """A periodic-xy patch of the mixture ``row`` (N,) dithered by ``q`` (without compensation) on its printer grid:
+    32 x 32 printer voxels (the blue-noise tile) by ``PATCH_MM`` thick, a labels ``Volume``. The mixture is given on
+    the printer grid itself, so the upsampling is the identity and the dither sees ``row`` in every voxel, as
+    ``quantize.quantize`` would."""
+    q = replace(q, compensate=False)
     vp = PrinterGrid.of((1, 1, 1), (1.0, 1.0, 1.0), q).voxel_mm  # the printer voxel (x, y, z) mm of ``q``
-    nz = max(1, int(round(PATCH_MM / vp[2])))
-    mix = np.broadcast_to(np.asarray(row, np.float32), (nz, PATCH_LATERAL, PATCH_LATERAL, len(inks))).copy()
-    vol = Volume.from_mixture(voxel_mm=vp, mixture=mix, inks=inks, g=g, ior=ior, boundary="periodic-xy")
-    labels, vpp = quantize(vol, replace(q, compensate=False))
-    return Volume.from_labels(vpp, labels, inks, g=g, ior=ior, boundary="periodic-xy")
+    shape = (max(1, int(round(PATCH_MM / vp[2]))), PATCH_LATERAL, PATCH_LATERAL)
+    mix = np.broadcast_to(np.asarray(row, np.float32), shape + (len(inks),))
+    grid = PrinterGrid.of(shape, vp, q)
+    order = band_order(q, inks, g, ior)
+    dither = dither_class(q.method)(q, grid, len(inks), order)
+    layers = CumulativeLayers(MixtureLayers(mix, vp, None, inks, g, ior), upsampler_class(q.upsample)(grid), order)
+    labels = np.stack([dither.layer(k, *layers.printer_layer(k)) for k in range(grid.shape[0])])
+    return Volume.from_labels(grid.voxel_mm, labels, inks, g=g, ior=ior, boundary="periodic-xy")
 
 
 def _top_colour(vol: Volume, spp: int, seed: int, threads) -> tuple[np.ndarray, float]:
@@ -194,8 +199,6 @@ def measure_compensation(inks: InkTable, q: Quantization, g: float, ior: float, 
 def compensation_key(inks: InkTable, q: Quantization, g: float, ior: float) -> str:
     """A hash of what a compensation depends on: the inks' coefficients, g, ior, the dither, its printer voxel (µm,
     rounded to 0.01) and the measurement's settings."""
-    from .grid import PrinterGrid
-
     vp_um = tuple(np.round(PrinterGrid.of((1, 1, 1), (1.0, 1.0, 1.0), q).voxel_mm * 1000.0, 2).tolist())
     h = hashlib.sha256()
     for a in (inks.sigma_a, inks.sigma_s):
