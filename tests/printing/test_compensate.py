@@ -151,3 +151,28 @@ def test_share_compensation_is_cached_on_disk(monkeypatch, tmp_path):
     assert list(tmp_path.glob("compensation_*.npz"))
     with pytest.raises(ValueError, match="ink table"):
         C.share_compensation(None, Quantization(), 0.4, 1.5)
+
+
+def test_compensated_run_streams_like_memory_and_records_it(tmp_path, monkeypatch):
+    """``inkopt quantize --compensate``: the run's labels file equals the in-memory compensated quantization, says
+    ``compensate`` in its record and in the summary, and differs from the uncompensated labels."""
+    from inkopt.cli import main
+    from inkopt.printing.quantize import quantize_volume
+    from inkopt.rundir import RunDir
+
+    monkeypatch.setenv("INKOPT_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(C, "_MEMORY", {})
+    monkeypatch.setattr(C, "measure_compensation", lambda inks, q, g, ior, base, *a, **k: scaled(base, len(inks), 0.3))
+    inks = InkTable.parse("vero-cmykw")
+    rng = np.random.default_rng(2)
+    vol = C.Volume.from_mixture(voxel_mm=(25.4 / 300,) * 3, mixture=rng.dirichlet(np.ones(5), (5, 7, 9)), inks=inks)
+    d = RunDir.create(tmp_path / "r")
+    d.save_volume(vol)
+    assert main(["quantize", str(d.path), "--compensate", "--seed", "3"]) == 0
+    got = d.load_quantized()
+    expect = quantize_volume(vol, Quantization(seed=3, compensate=True))
+    np.testing.assert_array_equal(got.labels, expect.labels)
+    assert got.quantization.compensate is True and got.quantization == expect.quantization
+    assert not np.array_equal(got.labels, quantize_volume(vol, Quantization(seed=3)).labels)
+    assert main(["quantize", str(d.path), "--no-compensate", "--seed", "3"]) == 0
+    assert d.load_quantized().quantization.compensate is False

@@ -37,7 +37,7 @@ from .dithers import band_order, dither_class
 from .grid import PrinterGrid, upsampler_class
 from .layers import CumulativeLayers, MixtureLayers
 
-#: nominal shares whose dithered patches are measured (0 and 1 are exact: one ink everywhere)
+#: nominal shares whose dithered patches are measured (k is fitted to them)
 DITHERED_SHARES = (0.02, 0.05, 0.1, 0.2, 0.3, 0.45, 0.6, 0.8)
 #: continuous shares of the curve each dithered colour is matched on
 CONTINUOUS_SHARES = (0.0, 0.005, 0.01, 0.02, 0.03, 0.045, 0.06, 0.08, 0.1, 0.13, 0.16, 0.2, 0.25, 0.3)
