@@ -217,10 +217,16 @@ def printed_refine() -> str:
         keys = (("delta_e76_mean_corrected", 2), ("delta_e2000_mean", 2), ("ssim", 3), ("mottle_l2", 2))
         if a == b or b not in res or "seconds_to_make" not in res[a]:
             return ""
-        if pair:
-            return " / ".join(f"{pair[k]['value']:+.{d}f} ± {f(pair[k]['stderr'], d)}" for k, d in keys)
-        if res[a].get("stderr") is None:
-            return " / ".join(f"{res[a][k] - res[b][k]:+.{d}f}" for k, d in keys)
+
+        def one(k: str, d: int) -> str:
+            if pair:
+                v = pair.get(k) or {}
+                return "–" if v.get("value") is None else f"{v['value']:+.{d}f} ± {f(v['stderr'], d)}"
+            x, y = res[a].get(k), res[b].get(k)
+            return "–" if x is None or y is None else f"{x - y:+.{d}f}"
+
+        if pair or res[a].get("stderr") is None:
+            return " / ".join(one(k, d) for k, d in keys)
         return ""
 
     rows = []

@@ -43,11 +43,11 @@ def main():
     a = ap.parse_args()
     opts = EvaluateOptions(baselines=False, threads=a.threads, write=False)
     ev = E.Evaluating.open(a.run, opts, lambda s: print(s, flush=True))
-    if ev.sample is None:
-        raise SystemExit("this study reads a texel sample's SSIM windows; the run was evaluated on every texel")
     ev.progress = False
     vol = ev.d.load_volume()
-    E._render_continuous(ev, vol)
+    E._render_continuous(ev, vol)  # chooses the texel sample
+    if ev.sample is None:
+        raise SystemExit("this study reads a texel sample's SSIM windows; the run was evaluated on every texel")
     methods = [m for m in a.methods.split(",") if m]
     made, _ = printed_refine.candidates(vol, ev.d, [], methods, False, a.threads, print)
     printer = None
