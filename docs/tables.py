@@ -211,16 +211,22 @@ def printed_refine() -> str:
         return f(m.get(key), digits) + ("" if se is None else f" ± {f(se, digits)}")
 
     def diff(e: dict, a: str, b: str) -> str:
-        """ΔE76 (corrected) / SSIM of a - b: the paired difference ± its standard error on a texel sample, the
-        difference of the noise-free figures where every texel was rendered."""
+        """ΔE76 (corrected) / ΔE2000 / SSIM / mottle of a - b: the paired difference ± its standard error on a texel
+        sample, the difference of the noise-free figures where every texel was rendered."""
         pair, res = (e.get("differences") or {}).get(f"{a} - {b}"), e["results"]
-        keys = (("delta_e76_mean_corrected", 2), ("ssim", 3))
+        keys = (("delta_e76_mean_corrected", 2), ("delta_e2000_mean", 2), ("ssim", 3), ("mottle_l2", 2))
         if a == b or b not in res or "seconds_to_make" not in res[a]:
             return ""
-        if pair:
-            return " / ".join(f"{pair[k]['value']:+.{d}f} ± {f(pair[k]['stderr'], d)}" for k, d in keys)
-        if res[a].get("stderr") is None:
-            return " / ".join(f"{res[a][k] - res[b][k]:+.{d}f}" for k, d in keys)
+
+        def one(k: str, d: int) -> str:
+            if pair:
+                v = pair.get(k) or {}
+                return "–" if v.get("value") is None else f"{v['value']:+.{d}f} ± {f(v['stderr'], d)}"
+            x, y = res[a].get(k), res[b].get(k)
+            return "–" if x is None or y is None else f"{x - y:+.{d}f}"
+
+        if pair or res[a].get("stderr") is None:
+            return " / ".join(one(k, d) for k, d in keys)
         return ""
 
     rows = []
@@ -244,7 +250,31 @@ def printed_refine() -> str:
                 ]
             )
     header = ["case", "result", "ΔE76 (corrected)", "ΔE2000", "SSIM", "mottle (ΔL*)²"]
-    header += ["− continuous: ΔE76 / SSIM", "− blue noise: ΔE76 / SSIM", "cost (one iteration's passes)"]
+    what = "ΔE76 / ΔE2000 / SSIM / mottle"
+    header += [f"− continuous: {what}", f"− blue noise: {what}", "cost (one iteration's passes)"]
+    return table(header, rows, [path])
+
+
+def halftone_cause() -> str:
+    """The print against its mixture per quantization variant (experiments/halftone_cause.py): the bias (mean
+    ΔL*, Δa*, Δb* ± standard errors, its ΔE76) and the noise-corrected texel-to-texel spread without it."""
+    path = STUDY / "halftone_cause.json"
+    rows = []
+    for case, e in load(path)["results"].items():
+        for i, (variant, v) in enumerate(e["variants"].items()):
+            a = v["all"]
+            rows.append(
+                [
+                    f"{case} ({e['texels']} texels, {e['spp']} spp)" if i == 0 else "",
+                    variant,
+                    f"{a['mean_dL']:+.2f} ± {a['se_dL']:.2f}",
+                    f"{a['mean_da']:+.2f}",
+                    f"{a['mean_db']:+.2f} ± {a['se_db']:.2f}",
+                    f(a["bias_dE76"]),
+                    f(a["rms_corrected_less_bias"]),
+                ]
+            )
+    header = ["case", "variant", "ΔL*", "Δa*", "Δb*", "bias ΔE76", "spread ΔE76 RMS (corrected, less the bias)"]
     return table(header, rows, [path])
 
 
@@ -973,6 +1003,7 @@ TABLES = {
     "quality-extrusion-start": quality_extrusion_start,
     "quantize-methods": quantize_methods,
     "printed-refine": printed_refine,
+    "halftone-cause": halftone_cause,
     "speed": speed,
     "mesh-scaling": mesh_scaling,
     "lighting": lighting,

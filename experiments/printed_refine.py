@@ -13,7 +13,9 @@ experiments/results/printed_refine.json.
 ``--control``: also the same steps with the loss on the continuous render (``control-N``: their blue-noise print)
 and the refined mixtures rendered continuous (``refine-N continuous``), with the paired differences refine-N -
 control-N and refine-N - refine-N continuous; ``--control-only``: the control without the refinement.
-``--methods``: other quantizations, each METHOD or METHOD:UPSAMPLE (e.g. ``blue-noise:linear``).
+``--methods``: other quantizations, each METHOD[:UPSAMPLE][+comp] (e.g. ``blue-noise:linear``; ``+comp``: the shares
+pre-compensated for the halftone, ``printing.compensate``; its seconds are those of a cached compensation when one
+is cached, else they include measuring it).
 """
 
 import argparse
@@ -69,10 +71,12 @@ def candidates(vol, rd, refine: list[int], methods: list[str], control, threads,
     out, mixtures = {}, {}
     t0 = time.perf_counter()
     out["blue-noise"] = (quantize_volume(vol, Quantization()), time.perf_counter() - t0, {})
-    for spec in methods:  # METHOD or METHOD:UPSAMPLE
-        m, _, up = spec.partition(":")
+    for spec in methods:  # METHOD[:UPSAMPLE][+comp]
+        head, comp, _ = spec.partition("+comp")
+        m, _, up = head.partition(":")
         t0 = time.perf_counter()
-        out[spec] = (quantize_volume(vol, Quantization(m, upsample=up or "nearest")), time.perf_counter() - t0, {})
+        q = Quantization(m, upsample=up or "nearest", compensate=bool(comp))
+        out[spec] = (quantize_volume(vol, q), time.perf_counter() - t0, {})
     kinds = [("refine", PrintedRefinement)] if control != "only" else []
     kinds += [("control", ContinuousRefinement)] if control else []
     for label, cls in kinds if refine else []:

@@ -5,6 +5,9 @@ is ``inkopt.printing.stream.quantize_run`` (layer by layer; ``inkopt.printing.qu
 
 from __future__ import annotations
 
+import argparse
+from dataclasses import replace
+
 from ..model import Quantization
 from ..printing.dithers import DITHERS
 from ..printing.grid import DEFAULT_LAYER_UM, UPSAMPLERS
@@ -17,7 +20,8 @@ from .common import add_seed_arg, stderr_log
 def quantization_of(args) -> Quantization:
     """The settings the arguments give (checked by ``printing.quantize.check_quantization``)."""
     dpi = None if args.dpi is None else parse_dpi(args.dpi)
-    return Quantization(args.method, args.seed, dpi, args.upsample, layer_um=args.layer_um, refine=args.refine)
+    q = Quantization(args.method, args.seed, dpi, args.upsample, layer_um=args.layer_um, refine=args.refine)
+    return replace(q, compensate=args.compensate)
 
 
 def _quantize_cmd(args) -> int:
@@ -54,5 +58,13 @@ def register_cli(sub) -> None:
         metavar="N",
         help=f"N final iterations with the loss taken on the dithered labels' render (default {default.refine}; "
         "each costs about one print render at 16 spp and a gradient pass; docs/quality.md)",
+    )
+    p.add_argument(
+        "--compensate",
+        action=argparse.BooleanOptionalAction,
+        default=default.compensate,
+        help="give the dither each ink's share pre-compensated for the halftone (a dithered ink looks lighter than "
+        "its mixture; measured once per ink set and printer grid on flat patches, about a minute, then cached; "
+        "docs/quality.md)",
     )
     p.set_defaults(func=_quantize_cmd)

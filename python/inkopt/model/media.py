@@ -164,6 +164,9 @@ class Quantization:
                run's loss taken on the quantized labels' render; 0: none). A run's quantization does them
                (``printing.stream.quantize_run``: they need the run's scene); ``quantize`` dithers the mixture it
                is given and ignores it
+    compensate whether the dither is given each ink's share pre-compensated for the halftone's package effect
+               (``printing.compensate``: measured once per ink set and printer grid, then cached); files that do
+               not say were made without
     ``printing.quantize.check_quantization`` checks them; a labels volume file stores a record's ``arrays``."""
 
     method: str = "blue-noise"
@@ -173,6 +176,7 @@ class Quantization:
     ink_order: str = "lightness"
     layer_um: float | None = None
     refine: int = 0
+    compensate: bool = False
 
     def __post_init__(self):
         if self.dpi is not None:  # a tuple (lists and arrays compare and hash as settings do)
@@ -185,13 +189,17 @@ class Quantization:
             out["dpi"] = np.asarray(self.dpi, np.float64)
         if self.refine:
             out["refine"] = np.int64(self.refine)
+        if self.compensate:
+            out["compensate"] = np.bool_(True)
         return out
 
     def to_json(self) -> dict:
         """The recorded settings as JSON values (``method``, ``seed``, ``dpi`` list or None, ``upsample``,
-        ``ink_order``, and ``refine`` where it is not 0): what evaluation.json says of its labels volume."""
+        ``ink_order``, and ``refine`` and ``compensate`` where they are not 0 / false): what evaluation.json says of
+        its labels volume."""
         dpi = None if self.dpi is None else list(self.dpi)
         refined = {"refine": self.refine} if self.refine else {}
+        refined.update({"compensate": True} if self.compensate else {})
         return {
             "method": self.method,
             "seed": self.seed,
@@ -212,4 +220,5 @@ class Quantization:
             str(data["upsample"]) if "upsample" in data else "nearest",
             str(data["ink_order"]) if "ink_order" in data else "index",
             refine=int(data["refine"]) if "refine" in data else 0,
+            compensate=bool(data["compensate"]) if "compensate" in data else False,
         )

@@ -22,14 +22,15 @@ DATA_DIR = Path(__file__).resolve().parent.parent / "data"
 
 
 def void_and_cluster(
-    shape=BLUE_NOISE_SHAPE, sigma: float = BLUE_NOISE_SIGMA, seed: int = 0, initial_fraction: float = 0.1
+    shape=BLUE_NOISE_SHAPE, sigma=BLUE_NOISE_SIGMA, seed: int = 0, initial_fraction: float = 0.1
 ) -> np.ndarray:
     """Blue-noise dither array by Ulichney's void-and-cluster algorithm on a periodic grid of any dimension.
 
-    Energy of a pattern = periodic convolution of its "on" points with a Gaussian (``sigma`` in voxels, truncated
-    at 3 sigma). Phase 0 relaxes a random initial pattern (``initial_fraction`` on, ``default_rng(seed)``) by
-    moving the tightest cluster into the largest void until stable; phase 1 ranks its points by repeatedly
-    removing the tightest cluster; phase 2 ranks the rest by repeatedly filling the largest void (the
+    Energy of a pattern = periodic convolution of its "on" points with a Gaussian (``sigma`` in voxels, one number
+    or one per axis, truncated at 3 sigma). Phase 0 relaxes a random initial pattern (``initial_fraction`` on,
+    ``default_rng(seed)``) by moving the tightest cluster into the largest void until stable; phase 1 ranks its
+    points by repeatedly removing the tightest cluster; phase 2 ranks the rest by repeatedly filling the largest
+    void (the
     "tightest cluster of zeros" of Ulichney's phase 3 is the same voxel, since the energies of the ones and the
     zeros add up to a constant). Deterministic for a given (shape, sigma, seed); ties go to the lowest index.
     Returns the ranks, int64 array of ``shape``, a permutation of 0..n-1; every prefix ``rank < k`` is a
@@ -40,10 +41,14 @@ def void_and_cluster(
         raise ValueError(f"blue-noise shape must have sizes >= 2, got {shape}")
     n, d = int(np.prod(shape)), len(shape)
     shp = np.array(shape)
-    r = int(np.ceil(3 * sigma))
-    axes = [np.arange(-min(r, (s - 1) // 2), min(r, (s - 1) // 2) + 1) for s in shape]
+    sig = np.broadcast_to(np.asarray(sigma, np.float64), (d,))  # one sigma per axis (an anisotropic energy)
+    r = [int(np.ceil(3 * v)) for v in sig]
+    axes = [np.arange(-min(ri, (s - 1) // 2), min(ri, (s - 1) // 2) + 1) for ri, s in zip(r, shape)]
     offs = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, d)
-    kern = np.exp(-np.sum(offs.astype(np.float64) ** 2, 1) / (2.0 * sigma**2))
+    if np.ndim(sigma) == 0:
+        kern = np.exp(-np.sum(offs.astype(np.float64) ** 2, 1) / (2.0 * float(sigma) ** 2))
+    else:
+        kern = np.exp(-np.sum((offs / sig) ** 2, 1) / 2.0)
     strides = np.array([int(np.prod(shape[i + 1 :])) for i in range(d)])
 
     rng = np.random.default_rng(seed)

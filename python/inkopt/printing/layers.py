@@ -101,10 +101,11 @@ class CumulativeLayers:
     """The printer layers' cumulative mixtures of ``source`` for a dither: each optimisation layer's rows
     normalised (1 inside, 0 outside), their inks in band ``order`` ((N,) ink indices, None: index order), summed
     cumulatively and upsampled in x and y by ``upsampler`` (``printing.grid.UPSAMPLERS``); the two optimisation
-    layers asked for last are kept, since printer layers come in increasing z."""
+    layers asked for last are kept, since printer layers come in increasing z. ``compensation``: None, or a
+    ``printing.compensate.ShareCompensation`` applied to the normalised rows before they are ordered."""
 
-    def __init__(self, source: MixtureLayers, upsampler, order: np.ndarray | None):
-        self.source, self.upsampler = source, upsampler
+    def __init__(self, source: MixtureLayers, upsampler, order: np.ndarray | None, compensation=None):
+        self.source, self.upsampler, self.compensation = source, upsampler, compensation
         self.order = None if order is None else np.asarray(order, np.int64).reshape(-1)
         self.cache: dict[int, np.ndarray] = {}
 
@@ -117,6 +118,8 @@ class CumulativeLayers:
         inside = self.source.inside
         w = np.ones(lay.shape[:2]) if inside is None else inside[z].astype(np.float64)
         lay = lay * (w / np.where(t > 0, t, 1.0))[..., None]  # rows sum to 1 inside, 0 outside
+        if self.compensation is not None:
+            lay = self.compensation.apply(lay)
         if self.order is not None:
             lay = lay[..., self.order]
         cum = np.cumsum(lay, axis=2).astype(np.float32).transpose(2, 0, 1)  # (N, ny, nx)

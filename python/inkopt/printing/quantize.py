@@ -7,8 +7,9 @@ labels volume keeps of them). It is a pipeline of named steps, one printer layer
 1. the mixture as layers (``layers.MixtureLayers``: an array, a mixture volume or a volume file read lazily);
 2. the printer grid over it and its inside mask (``grid.PrinterGrid``: ``q.dpi``, ``q.layer_um``);
 3. the inks' order in the bands (``dithers.band_order``: ``q.ink_order`` where the dither orders them);
-4. the dither (``dithers.DITHERS[q.method]``: blue-noise dithering, random draws or 3D error diffusion);
-5. per printer layer, the cumulative mixture upsampled to it (``layers.CumulativeLayers``, ``grid.UPSAMPLERS
+4. where ``q.compensate``, each ink's share pre-compensated for the halftone (``compensate.share_compensation``);
+5. the dither (``dithers.DITHERS[q.method]``: blue-noise dithering, random draws or 3D error diffusion);
+6. per printer layer, the cumulative mixture upsampled to it (``layers.CumulativeLayers``, ``grid.UPSAMPLERS
    [q.upsample]``), then the dither's labels (255 = ``EMPTY`` outside).
 
 ``quantize_volume`` makes a labels ``Volume`` in memory, ``stream.quantize_run`` a run's labels file
@@ -26,6 +27,7 @@ import numpy as np
 from ..errors import ParameterError
 from ..model import EMPTY, Quantization, Volume
 from ..units import MM_PER_INCH
+from .compensate import share_compensation
 from .dithers import INK_ORDERS, band_order, dither_class
 from .grid import (
     DEFAULT_DPI,
@@ -56,8 +58,8 @@ __all__ = [
 def check_quantization(q: Quantization) -> None:
     """One-line ParameterError for settings no quantization follows: an unknown ``method`` or ``upsample``, a
     ``dpi`` that is not 2 or 3 positive numbers, a ``layer_um`` that is not positive, or the layer thickness given
-    twice (a z ``dpi`` and ``layer_um``), a ``refine`` that is not a whole number >= 0; a ValueError for an
-    unknown ``ink_order`` (a record's, from a file)."""
+    twice (a z ``dpi`` and ``layer_um``), a ``refine`` that is not a whole number >= 0, a ``compensate`` that is
+    not a bool; a ValueError for an unknown ``ink_order`` (a record's, from a file)."""
     dither_class(q.method)
     upsampler_class(q.upsample)
     if q.ink_order not in INK_ORDERS:  # no flag sets it: a plain ValueError
@@ -76,6 +78,8 @@ def check_quantization(q: Quantization) -> None:
             raise ParameterError("give the layer thickness once: `dpi` XxYxZ or `layer_um`, not both")
     if not (isinstance(q.refine, (int, np.integer)) and q.refine >= 0):
         raise ParameterError(f"`refine` must be a whole number of iterations >= 0, got {q.refine}")
+    if not isinstance(q.compensate, (bool, np.bool_)):
+        raise ParameterError(f"`compensate` must be true or false, got {q.compensate!r}")
 
 
 def _positive(v) -> bool:
@@ -96,8 +100,8 @@ def quantize(volume, q: Quantization, out=None):
 
     volume  a mixture ``Volume``, a ``model.mixturefile.MixtureSource`` or ``MixtureLayers`` (a bare array or
             layer source with its voxel size, inside mask and inks)
-    q       the settings (``check_quantization``); a blue-noise quantization in ``q.ink_order`` "lightness" needs
-            the volume's inks
+    q       the settings (``check_quantization``); a blue-noise quantization in ``q.ink_order`` "lightness" and a
+            compensated one (``q.compensate``: ``printing.compensate``) need the volume's inks
     out     None (a new array is returned) or anything taking ``out[k] = layer`` (Y, X) uint8 for k = 0, 1, ...
             in order (``model.labelfile.LabelFileWriter``: the labels go to a file one layer at a time)
     Returns ``(labels uint8 (Z, Y, X) or out, voxel_mm_printer (3,) float64 (x, y, z))``; label = ink index,
@@ -108,7 +112,8 @@ def quantize(volume, q: Quantization, out=None):
     grid = PrinterGrid.of(source.shape[:3], source.voxel_mm, q, inside=source.inside)
     order = band_order(q, source.inks, source.g, source.ior)
     dither = dither_class(q.method)(q, grid, source.shape[3], order)
-    layers = CumulativeLayers(source, upsampler_class(q.upsample)(grid), order)
+    comp = share_compensation(source.inks, q, source.g, source.ior) if q.compensate else None
+    layers = CumulativeLayers(source, upsampler_class(q.upsample)(grid), order, comp)
     labels = np.empty(grid.shape, np.uint8) if out is None else out
     for k in range(grid.shape[0]):
         labels[k] = dither.layer(k, *layers.printer_layer(k))
@@ -182,7 +187,7 @@ def summary_lines(shape, vp, ink_names, q: Quantization | None, counts, seconds:
         f"printer grid {X} x {Y} x {Z} (x, y, z) voxels of {vp[0] * 1000:.1f} x {vp[1] * 1000:.1f} x "
         f"{vp[2] * 1000:.1f} um ({dpi[0]:.0f} x {dpi[1]:.0f} DPI, {vp[2] * 1000:.1f} um layers)",
         f"{filled} ink voxels ({counts[EMPTY]} empty); method {q.method}, seed {q.seed}, upsample "
-        f"{q.upsample}; {seconds:.1f} s",
+        f"{q.upsample}{', shares compensated' if q.compensate else ''}; {seconds:.1f} s",
         "inks: "
         + ", ".join(f"{n} {counts[i]} ({100.0 * counts[i] / max(filled, 1):.1f} %)" for i, n in enumerate(ink_names)),
     ]

@@ -8,7 +8,8 @@ the inside mask, a few mixture layers and a few printer layers; a mesh's shading
 by ``grid.upsample_normals`` (20 bytes per printer voxel inside a surface voxel). Labels and normals are
 identical to ``quantize_volume``'s in memory. With ``q.refine`` iterations of the refinement on the printed
 prediction (``refine``), the mixture is refined in memory first (the run's scene, loss weights and smoothing width
-from scene.npz and report.json) and the refined mixture is dithered.
+from scene.npz and report.json) and the refined mixture is dithered. With ``q.compensate`` the share compensation
+(``compensate``) is measured first where no cached one fits.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import time
 from ..model import Quantization
 from ..model.mixturefile import MixtureSource
 from ..rundir import RunDir
+from .compensate import share_compensation
 from .grid import PrinterGrid, upsample_normals
 from .quantize import check_quantization, quantize, record, summary_lines
 from .refine import PrintedLoss, refine_mixture
@@ -53,6 +55,8 @@ def quantize_run(d: RunDir, q: Quantization, threads: int | None = None, log=Non
         grid = PrinterGrid.of(src.shape[:3], src.voxel_mm, q)
         made = record(q, grid.voxel_mm)
         nrm = None if src.normals is None else upsample_normals(src.normals, grid)
+        if q.compensate:  # measured (about a minute) or read from the cache before the labels file is opened
+            share_compensation(src.inks, q, src.g, src.ior, threads, log)
         with d.quantized_writer(
             src.labels_meta(grid.voxel_mm, made), grid.shape, normals=nrm, volume_digest=digest
         ) as w:

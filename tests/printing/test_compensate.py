@@ -1,0 +1,178 @@
+"""Tests of inkopt.printing.compensate: the share pre-compensation of the halftone (its inverse map, its measurement on
+flat patches, its use by ``quantize`` and its record)."""
+
+import numpy as np
+import pytest
+
+from inkopt.errors import ParameterError
+from inkopt.model import InkTable, Quantization
+from inkopt.printing import compensate as C
+from inkopt.printing import quantize as Q
+from inkopt.printing.quantize import MixtureLayers, check_quantization, ink_fractions, quantize
+
+SHARES = np.array([0.1, 0.3, 0.6])
+
+
+def scaled(base: int, n: int, k: float) -> C.ShareCompensation:
+    """A compensation with the package factor ``k`` for every ink but ``base``."""
+    ks = np.full(n, float(k))
+    ks[base] = 0.0
+    measured = np.array([C.ShareCompensation(base, ks, ks, SHARES, None, None).effective(SHARES, i) for i in range(n)])
+    return C.ShareCompensation(base, ks, np.zeros(n), SHARES, measured, np.zeros_like(measured))
+
+
+def test_apply_inverts_the_effective_share_and_gives_the_base_the_rest():
+    comp = scaled(base=2, n=3, k=0.25)
+    mix = np.array([[0.08, 0.0, 0.92], [0.04, 0.16, 0.8], [0.0, 0.0, 1.0], [0.0, 0.0, 0.0]])
+    out = comp.apply(mix)
+    np.testing.assert_allclose(out.sum(-1), [1, 1, 1, 0])
+    np.testing.assert_allclose(out[2], [0.0, 0.0, 1.0])
+    np.testing.assert_allclose(out[3], [0.0, 0.0, 0.0])  # outside rows stay empty
+    # the effective share of each corrected share is the mixture's own, and the correction raises it
+    for r in (0, 1):
+        for i in (0, 1):
+            np.testing.assert_allclose(comp.effective(out[r, i], i), mix[r, i], atol=1e-12)
+            assert out[r, i] >= mix[r, i]
+    assert out[0, 0] > 0.08 * 1.2  # at small shares the dither needs 1 + k times the share
+
+
+def test_apply_scales_non_base_inks_that_would_exceed_the_row():
+    comp = scaled(base=0, n=3, k=1.0)
+    out = comp.apply(np.array([[0.1, 0.5, 0.4]]))  # 2 * 0.5 / 1.5 + 2 * 0.4 / 1.4 > 1
+    np.testing.assert_allclose(out.sum(-1), 1.0)
+    assert out[0, 0] == 0.0
+    np.testing.assert_allclose(out[0, 1] / out[0, 2], (2 * 0.5 / 1.5) / (2 * 0.4 / 1.4))
+
+
+def test_identity_compensation_leaves_rows_unchanged():
+    comp = scaled(base=4, n=5, k=0.0)
+    rng = np.random.default_rng(0)
+    mix = rng.dirichlet(np.ones(5) * 0.5, size=200)
+    np.testing.assert_allclose(comp.apply(mix), mix, atol=1e-12)
+
+
+def test_fit_k_recovers_the_factor_within_its_standard_error():
+    rng = np.random.default_rng(1)
+    p = np.array(C.DITHERED_SHARES)
+    s = np.full(len(p), 0.01)
+    ks = []
+    for _ in range(200):
+        e = p / (1 + 0.3 * (1 - p)) + rng.normal(0, 0.01, len(p))
+        ks.append(C.fit_k(p, e, s))
+    k, se = np.array(ks).T
+    # the fitted factors scatter about 0.3 as their standard error says (200 fits: the mean within 5 of its errors)
+    assert abs(k.mean() - 0.3) < 5 * se.mean() / np.sqrt(len(k))
+    assert 0.7 < k.std() / se.mean() < 1.3
+
+
+def test_patch_labels_hold_the_share_of_each_ink():
+    inks = InkTable.parse("vero-cmykw")
+    row = np.array([0.0, 0.0, 0.3, 0.0, 0.7])
+    vol = C.patch_labels(row, inks, Quantization(), inks.g, 1.5)
+    lab = vol.labels
+    assert vol.boundary == "periodic-xy" and lab.shape[1:] == (C.PATCH_LATERAL, C.PATCH_LATERAL)
+    # blue noise gives a whole 32 x 32 x 32 tile the share to within one voxel of its 32768
+    assert lab.shape[0] >= 32
+    assert abs((lab[:32] == 2).mean() - 0.3) <= 1.0 / 32768 + 1e-9
+    assert set(np.unique(lab)) == {2, 4}
+
+
+def test_curve_share_projects_onto_the_polyline():
+    curve = np.array([[0.0, 0, 0], [10.0, 0, 0], [10.0, 10, 0]])
+    shares = np.array([0.0, 0.5, 1.0])
+    share, slope, j = C._curve_share(np.array([5.0, 1.0, 0.0]), curve, shares)
+    assert (share, slope, j) == (pytest.approx(0.25), pytest.approx(20.0), 0)
+    assert C._curve_share(np.array([12.0, 5.0, 0.0]), curve, shares)[0] == pytest.approx(0.75)
+
+
+def test_measured_compensation_of_a_strong_absorber_is_below_its_share(monkeypatch):
+    """A yellow-like ink (absorbing blue at 16 /mm) in a white-like scatterer: its dithered patch at share 0.3 looks
+    like a smaller continuous share (the package effect), by more than five standard errors of the share."""
+    monkeypatch.setattr(C, "DITHERED_SHARES", (0.3,))
+    monkeypatch.setattr(C, "CONTINUOUS_SHARES", (0.0, 0.1, 0.2, 0.25, 0.3, 0.35, 0.4, 0.6, 1.0))
+    inks = InkTable(
+        names=("white", "yellow", "grey"),
+        sigma_a=np.array([[0.005, 0.003, 0.024], [0.007, 0.019, 16.15], [0.1, 0.1, 0.1]]),
+        sigma_s=np.array([[6.0, 9.0, 24.0], [2.2, 3.7, 2.9], [6.0, 9.0, 24.0]]),
+        g=0.4,
+    )
+    comp = C.measure_compensation(inks, Quantization(), inks.g, 1.5, base=0)
+    assert comp.shares.tolist() == [0.3]
+    # the matched share's own standard error (the colours' over the curve's slope)
+    se = comp.share_stderr[1, 0]
+    assert 0 < se < 0.02
+    assert comp.measured[1, 0] < 0.3 - 5 * se, (comp.measured[1], se)
+    assert comp.measured[1, 0] > 0.15  # and not absurdly far
+    assert comp.k[1] > 5 * comp.k_stderr[1] and comp.k[0] == 0.0
+    assert comp.share_stderr[2, 0] > 0  # every ink but the base is measured
+
+
+def test_quantize_uses_the_compensation(monkeypatch):
+    inks = InkTable.parse("vero-cmykw")
+    comp = scaled(base=4, n=5, k=0.25)
+    monkeypatch.setattr(Q, "share_compensation", lambda *a, **k: comp)
+    mix = np.zeros((6, 8, 8, 5), np.float32)
+    mix[..., 2], mix[..., 4] = 0.24, 0.76
+    vo = (25.4 / 300,) * 3
+    src = MixtureLayers(mix, vo, None, inks)
+    for flag, want in ((False, 0.24), (True, 0.24 * 1.25 / (1 + 0.25 * 0.24))):
+        labels, vp = quantize(src, Quantization(compensate=flag))
+        frac, _ = ink_fractions(labels, 5, mix.shape[:3], vo, vp)
+        # blue noise over the whole volume: within 1 % of the share it was given
+        assert abs(frac[..., 2].mean() - want) < 0.01, (flag, frac[..., 2].mean())
+
+
+def test_compensate_is_recorded_and_checked():
+    q = Quantization(compensate=True)
+    assert Quantization.from_arrays(q.arrays()).compensate is True
+    assert Quantization.from_arrays(Quantization().arrays()).compensate is False
+    assert q.to_json()["compensate"] is True
+    with pytest.raises(ParameterError, match="compensate must be true or false"):
+        check_quantization(Quantization(compensate="yes"))
+
+
+def test_share_compensation_is_cached_on_disk(monkeypatch, tmp_path):
+    monkeypatch.setenv("INKOPT_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(C, "_MEMORY", {})
+    inks = InkTable.parse("vero-cmykw")
+    calls = []
+
+    def fake(inks_, q, g, ior, base, threads=None, log=None):
+        calls.append(base)
+        return scaled(base, len(inks_), 0.1)
+
+    monkeypatch.setattr(C, "measure_compensation", fake)
+    a = C.share_compensation(inks, Quantization(), inks.g, 1.5)
+    monkeypatch.setattr(C, "_MEMORY", {})
+    b = C.share_compensation(inks, Quantization(), inks.g, 1.5)
+    assert calls == [4]  # white, the lightest, is the base; measured once, then read from the disk cache
+    np.testing.assert_array_equal(a.k, b.k)
+    np.testing.assert_array_equal(a.measured, b.measured)
+    assert list(tmp_path.glob("compensation_*.npz"))
+    with pytest.raises(ValueError, match="ink table"):
+        C.share_compensation(None, Quantization(), 0.4, 1.5)
+
+
+def test_compensated_run_streams_like_memory_and_records_it(tmp_path, monkeypatch):
+    """``inkopt quantize --compensate``: the run's labels file equals the in-memory compensated quantization, says
+    ``compensate`` in its record and in the summary, and differs from the uncompensated labels."""
+    from inkopt.cli import main
+    from inkopt.printing.quantize import quantize_volume
+    from inkopt.rundir import RunDir
+
+    monkeypatch.setenv("INKOPT_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(C, "_MEMORY", {})
+    monkeypatch.setattr(C, "measure_compensation", lambda inks, q, g, ior, base, *a, **k: scaled(base, len(inks), 0.3))
+    inks = InkTable.parse("vero-cmykw")
+    rng = np.random.default_rng(2)
+    vol = C.Volume.from_mixture(voxel_mm=(25.4 / 300,) * 3, mixture=rng.dirichlet(np.ones(5), (5, 7, 9)), inks=inks)
+    d = RunDir.create(tmp_path / "r")
+    d.save_volume(vol)
+    assert main(["quantize", str(d.path), "--compensate", "--seed", "3"]) == 0
+    got = d.load_quantized()
+    expect = quantize_volume(vol, Quantization(seed=3, compensate=True))
+    np.testing.assert_array_equal(got.labels, expect.labels)
+    assert got.quantization.compensate is True and got.quantization == expect.quantization
+    assert not np.array_equal(got.labels, quantize_volume(vol, Quantization(seed=3)).labels)
+    assert main(["quantize", str(d.path), "--no-compensate", "--seed", "3"]) == 0
+    assert d.load_quantized().quantization.compensate is False
