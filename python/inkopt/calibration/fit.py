@@ -19,7 +19,7 @@ from ..errors import ParameterError
 from ..model import InkTable
 from .chart import Chart
 from .measure import rgb_to_lab, rgb_to_lab_jacobian
-from .stack import IOR, QUAD_PTS, channel_reflectance
+from .stack import IOR, QUAD_PTS, channel_reflectance, one_blas_thread
 
 SIGMA_BOUNDS = (1e-5, 500.0)  # mm^-1
 G_BOUNDS = (0.0, 0.9)
@@ -51,6 +51,7 @@ def _layers(chart: Chart):
     return out
 
 
+@one_blas_thread
 def predict_rgb(chart: Chart, inks: InkTable, quad_pts: int = QUAD_PTS) -> np.ndarray:
     """(P, 3) float64 linear-RGB reflectance of every patch of ``chart`` with ``inks`` (chart order)."""
     out = np.empty((len(chart), 3))
@@ -66,6 +67,7 @@ def predict_lab(chart: Chart, inks: InkTable, illuminant: str) -> np.ndarray:
     return rgb_to_lab(predict_rgb(chart, inks), illuminant)
 
 
+@one_blas_thread
 def _rgb_and_jacobian(chart: Chart, inks: InkTable):
     """(P, 3) reflectance and its derivatives (P, 3, K) with respect to x = [log σs (N, 3), log σa (N, 3), g]
     flattened (σs block first, each in (ink, channel) C order)."""

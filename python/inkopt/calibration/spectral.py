@@ -27,6 +27,7 @@ from ..model import InkTable
 from ..model.spectral import SpectralInkTable, band_edges
 from .chart import Chart, start_table
 from .fit import G_BOUNDS, SIGMA_BOUNDS, _rgb_and_jacobian, predict_rgb, solve
+from .stack import one_blas_thread
 
 
 @dataclass
@@ -82,6 +83,7 @@ def spectral_start(chart: Chart, start: InkTable | SpectralInkTable, grid_nm) ->
     return SpectralInkTable(chart.inks, grid, s, a, start.g)
 
 
+@one_blas_thread
 def predict_reflectance(chart: Chart, inks: SpectralInkTable) -> np.ndarray:
     """(P, B) float64 reflectance of every patch of ``chart`` on the bands of ``inks`` (chart order)."""
     out = np.empty((len(chart), inks.bands))
@@ -90,6 +92,7 @@ def predict_reflectance(chart: Chart, inks: SpectralInkTable) -> np.ndarray:
     return out
 
 
+@one_blas_thread
 def _reflectance_and_jacobian(chart: Chart, inks: SpectralInkTable):
     """(P, B) reflectance and its derivatives (P, B, K) with respect to x = [log σs (N, B), log σa (N, B), g]
     flattened (σs block first, each in (ink, band) C order): each group of three bands by the channel fit's
