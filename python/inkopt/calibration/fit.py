@@ -116,18 +116,33 @@ def _from_x(x: np.ndarray, names) -> InkTable:
 
 def solve(model, x0: np.ndarray, fit_g: bool, max_iterations: int):
     """Least squares over x = [log σ (K - 1 values), g] from ``x0`` (K,): ``model(x)`` -> (residuals (M,),
-    Jacobian (M, K)); σ within ``SIGMA_BOUNDS``, g within ``G_BOUNDS`` (held at x0's with ``fit_g=False``).
-    Trust-region reflective (``scipy.optimize.least_squares``); returns its result."""
+    Jacobian (M, K)), evaluated once per x; σ within ``SIGMA_BOUNDS``, g within ``G_BOUNDS`` (held at x0's with
+    ``fit_g=False``). Trust-region reflective (``scipy.optimize.least_squares``); returns its result and the
+    number of model evaluations."""
     from scipy.optimize import least_squares
 
     lo = np.concatenate([np.full(len(x0) - 1, np.log(SIGMA_BOUNDS[0])), [G_BOUNDS[0]]])
     hi = np.concatenate([np.full(len(x0) - 1, np.log(SIGMA_BOUNDS[1])), [G_BOUNDS[1]]])
     if not fit_g:
         lo[-1], hi[-1] = x0[-1] - 1e-9, x0[-1] + 1e-9
-    return least_squares(
-        lambda x: model(x)[0],
+    cache: dict = {}
+    evaluations = [0]
+
+    def evaluated(x):
+        key = x.tobytes()
+        if key not in cache:
+            cache.clear()
+            residuals, jac = model(x)
+            if not fit_g:
+                jac[:, -1] = 0.0
+            cache[key] = (residuals, jac)
+            evaluations[0] += 1
+        return cache[key]
+
+    res = least_squares(
+        lambda x: evaluated(x)[0],
         x0,
-        jac=lambda x: model(x)[1],
+        jac=lambda x: evaluated(x)[1],
         bounds=(lo, hi),
         method="trf",
         x_scale="jac",
@@ -136,6 +151,7 @@ def solve(model, x0: np.ndarray, fit_g: bool, max_iterations: int):
         xtol=1e-8,
         gtol=1e-10,
     )
+    return res, evaluations[0]
 
 
 def fit_inks(
@@ -154,28 +170,17 @@ def fit_inks(
         raise ValueError(f"measured_lab must be ({len(chart)}, 3), got {measured_lab.shape}")
     t0 = time.perf_counter()
     names = chart.inks
-    cache: dict = {}
-    evaluations = [0]
 
     def model(x):
-        key = x.tobytes()
-        if key not in cache:
-            cache.clear()
-            inks = _from_x(x, names)
-            rgb, jr = _rgb_and_jacobian(chart, inks)
-            jl = rgb_to_lab_jacobian(rgb, illuminant)
-            lab = rgb_to_lab(rgb, illuminant)
-            jac = np.einsum("pij,pjk->pik", jl, jr).reshape(-1, jr.shape[-1])
-            if not fit_g:
-                jac[:, -1] = 0.0
-            cache[key] = ((lab - measured_lab).ravel(), jac)
-            evaluations[0] += 1
-        return cache[key]
+        rgb, jr = _rgb_and_jacobian(chart, _from_x(x, names))
+        jl = rgb_to_lab_jacobian(rgb, illuminant)
+        jac = np.einsum("pij,pjk->pik", jl, jr).reshape(-1, jr.shape[-1])
+        return (rgb_to_lab(rgb, illuminant) - measured_lab).ravel(), jac
 
-    res = solve(model, _to_x(start), fit_g, max_iterations)
+    res, evaluations = solve(model, _to_x(start), fit_g, max_iterations)
     inks = _from_x(res.x, names)
     lab = predict_lab(chart, inks, illuminant)
-    return FitResult(inks, lab, evaluations[0], time.perf_counter() - t0, float(res.cost), res.status > 0, res.message)
+    return FitResult(inks, lab, evaluations, time.perf_counter() - t0, float(res.cost), res.status > 0, res.message)
 
 
 def choose_holdout(chart: Chart, fraction: float, seed: int = 0) -> np.ndarray:

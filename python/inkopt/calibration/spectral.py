@@ -137,26 +137,16 @@ def fit_spectral_inks(
     weight = 1.0 / np.maximum(measured, 1e-3)
     t0 = time.perf_counter()
     names, wl = chart.inks, start.wavelengths_nm
-    cache: dict = {}
-    evaluations = [0]
 
     def model(x):
-        key = x.tobytes()
-        if key not in cache:
-            cache.clear()
-            refl, jac = _reflectance_and_jacobian(chart, _from_x(x, names, wl))
-            jac = (jac * weight[..., None]).reshape(-1, jac.shape[-1])
-            if not fit_g:
-                jac[:, -1] = 0.0
-            cache[key] = (((refl - measured) * weight).ravel(), jac)
-            evaluations[0] += 1
-        return cache[key]
+        refl, jac = _reflectance_and_jacobian(chart, _from_x(x, names, wl))
+        return ((refl - measured) * weight).ravel(), (jac * weight[..., None]).reshape(-1, jac.shape[-1])
 
-    res = solve(model, _to_x(start), fit_g, max_iterations)
+    res, evaluations = solve(model, _to_x(start), fit_g, max_iterations)
     inks = _from_x(res.x, names, wl)
     predicted = predict_reflectance(chart, inks)
     seconds = time.perf_counter() - t0
-    return SpectralFitResult(inks, predicted, evaluations[0], seconds, float(res.cost), res.status > 0, res.message)
+    return SpectralFitResult(inks, predicted, evaluations, seconds, float(res.cost), res.status > 0, res.message)
 
 
 def spectral_form(inks: InkTable, grid_nm, chart: Chart | None = None, max_iterations: int = 40) -> SpectralFitResult:
