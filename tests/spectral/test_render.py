@@ -71,8 +71,9 @@ def smooth_table() -> SpectralInkTable:
     """Six bands of made-up smooth spectra for the five Vero inks (an assumption of the test, not a calibration)."""
     wl = np.linspace(410.0, 690.0, 6)
     x = (wl - 400.0) / 300.0
-    sigma_a = np.array([0.2 + 3.0 * x**2, 0.3 + 3.0 * np.sin(np.pi * x) ** 2, 3.0 * (1 - x) ** 2 + 0.1, 4.0 + 0 * x, 0.02 + 0 * x])
-    sigma_s = np.array([1.0 + x, 1.2 + 0 * x, 1.5 - x, 0.5 + 0 * x, 8.0 - 2.0 * x])
+    flat = np.ones_like(x)
+    sigma_a = np.array([0.2 + 3.0 * x**2, 0.3 + 3.0 * np.sin(np.pi * x) ** 2, 3.0 * (1 - x) ** 2 + 0.1, 4.0 * flat, 0.02 * flat])
+    sigma_s = np.array([1.0 + x, 1.2 * flat, 1.5 - x, 0.5 * flat, 8.0 - 2.0 * x])
     return SpectralInkTable(INKS.names, wl, sigma_s, sigma_a, INKS.g)
 
 

@@ -113,7 +113,8 @@ class SpectralRenderer(TexelRenderer):
         for res, bands in zip(results, self._bands):
             values[:, bands] = res.rgb[:, : len(bands)]
             var[:, bands] = res.var_mean[:, : len(bands)]
-        total = {k: sum(getattr(r, k) for r in results) for k in ("paths", "events", "replayed_paths", "replayed_events")}
+        counts = ("paths", "events", "replayed_paths", "replayed_events")
+        total = {k: sum(getattr(r, k) for r in results) for k in counts}
         return RenderResult(values, var, int(settings.spp), sum(r.seconds for r in results), **total)
 
     def render_pass(self, texels: Texels, settings: PassSettings, progress: bool = False) -> RenderResult:
