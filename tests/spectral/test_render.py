@@ -72,7 +72,8 @@ def smooth_table() -> SpectralInkTable:
     wl = np.linspace(410.0, 690.0, 6)
     x = (wl - 400.0) / 300.0
     flat = np.ones_like(x)
-    sigma_a = np.array([0.2 + 3.0 * x**2, 0.3 + 3.0 * np.sin(np.pi * x) ** 2, 3.0 * (1 - x) ** 2 + 0.1, 4.0 * flat, 0.02 * flat])
+    bump = np.sin(np.pi * x) ** 2
+    sigma_a = np.array([0.2 + 3.0 * x**2, 0.3 + 3.0 * bump, 3.0 * (1 - x) ** 2 + 0.1, 4.0 * flat, 0.02 * flat])
     sigma_s = np.array([1.0 + x, 1.2 * flat, 1.5 - x, 0.5 * flat, 8.0 - 2.0 * x])
     return SpectralInkTable(INKS.names, wl, sigma_s, sigma_a, INKS.g)
 
