@@ -4,23 +4,16 @@ render within the standard error; each band of a slab matches adding-doubling wi
 
 import numpy as np
 import pytest
+from spectral_helpers import INKS, rgb_as_bands, smooth_table
 
 from inkopt.errors import ParameterError
 from inkopt.lighting import Lighting
-from inkopt.model import InkTable, Texels, Volume
+from inkopt.model import Texels, Volume
 from inkopt.model.spectral import SpectralInkTable
 from inkopt.render import Renderer
 from inkopt.spectral.render import SpectralRenderer, group_seed
 
-INKS = InkTable.parse("vero-cmykw")
 VOX = 0.0847
-
-
-def rgb_as_bands(inks: InkTable, repeat: int = 1) -> SpectralInkTable:
-    """The RGB table as a band table, each channel ``repeat`` bands wide, bands in wavelength order (B, G, R)."""
-    order = np.repeat([2, 1, 0], repeat)
-    wl = np.linspace(400.0, 700.0, 3 * repeat)
-    return SpectralInkTable(inks.names, wl, inks.sigma_s[:, order], inks.sigma_a[:, order], inks.g)
 
 
 def random_volume(shape=(6, 7, 8), seed=0) -> Volume:
@@ -65,17 +58,6 @@ def test_flat_bands_agree_with_rgb_within_the_standard_error():
     assert np.all(np.abs(diff) < 4.5 * se), (diff, se)
     # the groups' noise is independent: bands of one channel in different groups do not agree bit for bit
     assert not np.array_equal(spec.rgb[:, 0], spec.rgb[:, 3])
-
-
-def smooth_table() -> SpectralInkTable:
-    """Six bands of made-up smooth spectra for the five Vero inks (an assumption of the test, not a calibration)."""
-    wl = np.linspace(410.0, 690.0, 6)
-    x = (wl - 400.0) / 300.0
-    flat = np.ones_like(x)
-    bump = np.sin(np.pi * x) ** 2
-    sigma_a = np.array([0.2 + 3.0 * x**2, 0.3 + 3.0 * bump, 3.0 * (1 - x) ** 2 + 0.1, 4.0 * flat, 0.02 * flat])
-    sigma_s = np.array([1.0 + x, 1.2 * flat, 1.5 - x, 0.5 * flat, 8.0 - 2.0 * x])
-    return SpectralInkTable(INKS.names, wl, sigma_s, sigma_a, INKS.g)
 
 
 def test_bands_match_adding_doubling_on_a_slab():
