@@ -9,6 +9,7 @@ the loss is the mean, or the worst, of the loss under each.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 
 import numpy as np
@@ -240,6 +241,13 @@ class TexelLoss:
         0.95 GiB at 387 k texels); the next call that needs them builds them again, equal to the last. A
         colour-only training step (``all_terms=False`` at γ2 = γ3 = 0) never reads them."""
         self._K = self._K2 = self._S = self._ST = None
+
+    def under(self, light: int) -> TexelLoss:
+        """This loss under its colour map ``light`` alone (the target's statistics and operators shared, not
+        copied): the figures under one light."""
+        view = copy.copy(self)
+        view.colours = (self.colours[light],)
+        return view
 
     @property
     def needs_operators(self) -> bool:
