@@ -11,7 +11,7 @@ from inkopt.lighting import Lighting
 from inkopt.model import Texels, Volume
 from inkopt.model.spectral import SpectralInkTable
 from inkopt.render import Renderer
-from inkopt.spectral.render import SpectralRenderer, group_seed
+from inkopt.spectral.render import SpectralRenderer, group_seed, group_spp
 
 VOX = 0.0847
 
@@ -93,3 +93,29 @@ def test_refusals():
     dense = Volume.from_coefficients((VOX,) * 3, np.ones((2, 2, 2, 3), np.float32), np.ones((2, 2, 2, 3), np.float32))
     with pytest.raises(ParameterError, match="volume's inks None"):
         SpectralRenderer(dense, table)
+
+
+def test_group_samples():
+    assert group_spp(7, None, 6) == [7] * 6
+    assert group_spp(7, np.ones(1), 1) == [7]
+    got = group_spp(8, np.array([1.0, 3.0, 0.001]), 3)
+    assert got == [6, 18, 1]
+
+
+def test_weighted_groups_stay_unbiased():
+    """Weighted samples per group (9 bands flat within RGB channels): each band's texel mean within 4.5 standard
+    errors of the RGB render's, and each band's variance that of its own sample count."""
+    vol = random_volume(seed=3)
+    tex = Texels.for_volume(vol, ["top"])
+    spec = SpectralRenderer(vol, rgb_as_bands(INKS, 3), threads=2, weights=np.array([1.0, 2.0, 0.5]))
+    res = spec.render(tex, spp=32, seed=5)
+    rgb = Renderer(vol, threads=2).render(tex, spp=64, seed=1005)
+    channel = np.repeat([2, 1, 0], 3)
+    diff = res.rgb.astype(np.float64).mean(axis=0) - rgb.mean_rgb[channel]
+    se = np.sqrt(res.var_mean.astype(np.float64).sum(axis=0) / len(tex) ** 2 + rgb.mean_rgb_stderr[channel] ** 2)
+    assert np.all(np.abs(diff) < 4.5 * se), (diff, se)
+    # each group's variance is that of its own samples: against an equal-samples render, var ~ 32 / spp_g
+    equal = SpectralRenderer(vol, rgb_as_bands(INKS, 3), threads=2).render(tex, spp=32, seed=5)
+    spp = np.repeat(group_spp(32, spec.weights, 3), 3)
+    ratio = res.var_mean.astype(np.float64).mean(axis=0) / equal.var_mean.astype(np.float64).mean(axis=0)
+    np.testing.assert_allclose(ratio, 32.0 / spp, rtol=0.25)

@@ -7,6 +7,12 @@ independent, group 0 keeps the pass's seed (a 3-band table renders exactly as th
 every group is bit-identical for any thread count. A group's fourth-or-later band slot repeats its last band
 (traced, its value dropped, its adjoint 0). Gradients replay each group's paths with the group's adjoints.
 
+Samples per group: a pass of ``spp`` samples gives every group ``spp`` samples unless the renderer has group
+``weights``; then the pass's G x spp samples are shared out in proportion to the weights (Neyman allocation:
+weight = the square root of the group's share of the colour's variance, :func:`group_spp`), at least one each, so
+bands that barely reach the colour (the spectrum's ends) cost little. Each band's estimate stays unbiased and its
+variance (``var_mean``) is its own.
+
 The light's spectrum does not enter transport (``spectral.lights``); what does is the geometric lighting, which
 must be grey (the same radiance in R, G and B: the uniform light or a grey map such as the calibration's upper
 hemisphere): an RGB environment map has no spectrum.
@@ -38,6 +44,15 @@ def group_seed(seed: int, group: int) -> int:
     return int.from_bytes(digest, "little") >> 1
 
 
+def group_spp(spp: int, weights: np.ndarray | None, groups: int) -> list[int]:
+    """Samples per texel of each of ``groups`` band groups in a pass of ``spp``: ``spp`` each without ``weights``,
+    else round(G spp w_g / sum w) and at least 1."""
+    if weights is None or groups == 1:
+        return [int(spp)] * groups
+    w = np.asarray(weights, np.float64)
+    return [max(1, int(round(groups * spp * x / w.sum()))) for x in w]
+
+
 def with_inks(volume: Volume, inks: InkTable) -> Volume:
     """``volume`` with its mixture or labels read with another ink table of the same inks (a band group)."""
     med = volume.medium
@@ -61,7 +76,8 @@ def check_grey(lighting: Lighting) -> Lighting:
 class SpectralRenderer(TexelRenderer):
     """Renders band values (I, B) of ``volume`` (a mixture or labels of ``table``'s inks; the volume's own ink
     table gives only the names) with ``table``: one renderer per band group, built by ``factory(volume, threads,
-    lighting)`` (default :class:`~inkopt.render.Renderer`). ``lighting`` must be grey (:func:`check_grey`)."""
+    lighting)`` (default :class:`~inkopt.render.Renderer`). ``lighting`` must be grey (:func:`check_grey`).
+    ``weights`` (G,) > 0: how a pass's samples are shared among the groups (:func:`group_spp`; None: equally)."""
 
     def __init__(
         self,
@@ -70,6 +86,7 @@ class SpectralRenderer(TexelRenderer):
         threads: int | None = None,
         lighting: Lighting | str | None = None,
         factory: RendererFactory | None = None,
+        weights=None,
     ):
         if volume.inks is None or tuple(volume.inks.names) != tuple(table.names):
             have = None if volume.inks is None else list(volume.inks.names)
@@ -79,6 +96,9 @@ class SpectralRenderer(TexelRenderer):
         self.lighting = check_grey(load_lighting(lighting))
         self._bands = table.group_bands()
         self._groups = table.band_groups()
+        self.weights = None if weights is None else np.asarray(weights, np.float64)
+        if self.weights is not None and (self.weights.shape != (len(self._groups),) or not np.all(self.weights > 0)):
+            raise ParameterError(f"`weights` must be {len(self._groups)} positive numbers, one per band group")
         make = factory or Renderer
         self._renderers = [make(with_inks(volume, g), threads, self.lighting) for g in self._groups]
 
@@ -119,11 +139,13 @@ class SpectralRenderer(TexelRenderer):
 
     def render_pass(self, texels: Texels, settings: PassSettings, progress: bool = False) -> RenderResult:
         """Band values (I, B) float32 and their variances: each group rendered with its :func:`group_seed`."""
-        results = [
-            r.render_pass(texels, replace(settings, seed=group_seed(settings.seed, k)), progress)
-            for k, r in enumerate(self._renderers)
-        ]
+        results = [r.render_pass(texels, self._settings(settings, k), progress) for k, r in enumerate(self._renderers)]
         return self._gather(results, settings)
+
+    def _settings(self, settings: PassSettings, group: int) -> PassSettings:
+        """Group ``group``'s pass: its seed (:func:`group_seed`) and samples (:func:`group_spp`)."""
+        spp = group_spp(settings.spp, self.weights, len(self._groups))[group]
+        return replace(settings, seed=group_seed(settings.seed, group), spp=spp)
 
     def gradient_pass(
         self,
@@ -143,7 +165,7 @@ class SpectralRenderer(TexelRenderer):
         for k, (r, bands) in enumerate(zip(self._renderers, self._bands)):
             adj = np.zeros((len(texels), GROUP), np.float32)
             adj[:, : len(bands)] = adjoint[:, bands]
-            s, a, res = r.gradient_pass(texels, adj, replace(settings, seed=group_seed(settings.seed, k)), grad_index)
+            s, a, res = r.gradient_pass(texels, adj, self._settings(settings, k), grad_index)
             if gs is None:
                 gs = np.empty(s.shape[:-1] + (self.bands,), np.float32)
                 ga = np.empty_like(gs)

@@ -29,11 +29,13 @@ RGB_LIGHT = "D65"
 @dataclass(frozen=True)
 class Viewing:
     """``table``: the spectral ink table (None: the RGB path); ``lights``: what the print is seen under (empty: D65);
-    ``combine``: "mean" or "worst" of the loss under several lights."""
+    ``combine``: "mean" or "worst" of the loss under several lights; ``weighted``: a pass's samples shared among the
+    band groups by :meth:`group_weights` (False: equally)."""
 
     table: SpectralInkTable | None = None
     lights: tuple[Light, ...] = ()
     combine: str = "mean"
+    weighted: bool = True
 
     def __post_init__(self):
         object.__setattr__(self, "lights", tuple(self.lights))
@@ -68,7 +70,18 @@ class Viewing:
         table = self.table
         if table is None:
             return inner
-        return lambda volume, threads, lighting: SpectralRenderer(volume, table, threads, lighting, inner)
+        w = self.group_weights()
+        return lambda volume, threads, lighting: SpectralRenderer(volume, table, threads, lighting, inner, w)
+
+    def group_weights(self) -> np.ndarray | None:
+        """(G,) the band groups' sample weights (``spectral.render.group_spp``; None unless ``weighted``): the square
+        root of each group's share of the CIELAB variance of a mid grey (reflectance 0.18 in every band) summed over
+        the lights, every band's variance taken equal."""
+        if not self.weighted:
+            return None
+        grey = np.full(self.table.bands, 0.18)
+        per_band = sum(np.sum(c.lab_jacobian(grey) ** 2, axis=0) for c in self.colours())
+        return np.sqrt([per_band[list(b)].sum() for b in self.table.group_bands()])
 
     def key(self) -> str | None:
         """What identifies a spectral viewing in a checkpoint's key (None on the RGB path: its key is unchanged)."""
