@@ -1,7 +1,7 @@
 """Spectral against RGB optimisation on the reference slab: cost per iteration at equal colour noise.
 
     nice -n 5 .venv/bin/python bench/bench_spectral.py [--bands 16] [--spp 16] [--iterations 3] [--threads 2]
-        [--equal-groups]
+        [--equal-groups] [--spot-mm 20]
 
 The spectral table is made here from the Vero RGB table by a simple rule (an assumption of this benchmark, not the
 documented spectral Vero table): each ink's sigma_s and sigma_a per channel placed at 465 (B), 540 (G) and 610 nm
@@ -17,7 +17,8 @@ optimiser's do (``Viewing.group_weights``), or equally with ``--equal-groups``.
 2. Cost: ``--iterations`` optimisation iterations (forward + loss + gradient + step) of each at those samples,
    RGB and spectral alternating twice in one process; seconds per iteration, median over each kind's iterations.
 
-Writes bench/results/spectral_cost.json.
+``--spot-mm H``: the same on Spot scaled to H mm (its scene's start mixture for the noise renders) instead of the
+reference slab. Writes bench/results/spectral_cost.json (Spot: spectral_cost_spot<H>mm.json).
 """
 
 import argparse
@@ -29,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import machine, reference_slab, write  # noqa: E402
+from common import SPOT, machine, reference_slab, write  # noqa: E402
 
 from inkopt import charts  # noqa: E402
 from inkopt.color import RGB, srgb_to_linear  # noqa: E402
@@ -37,7 +38,9 @@ from inkopt.model import InkTable  # noqa: E402
 from inkopt.model.spectral import SpectralInkTable  # noqa: E402
 from inkopt.optim import Optimization, OptimizeConfig  # noqa: E402
 from inkopt.render import Renderer  # noqa: E402
+from inkopt.scenes import build_scene  # noqa: E402
 from inkopt.scenes.slab import build_slab  # noqa: E402
+from inkopt.scenes.spec import MeshSpec  # noqa: E402
 from inkopt.spectral.lights import named_light  # noqa: E402
 from inkopt.spectral.render import SpectralRenderer, group_spp  # noqa: E402
 from inkopt.spectral.viewing import Viewing  # noqa: E402
@@ -52,6 +55,17 @@ def spectral_from_rgb(inks: InkTable, bands: int) -> SpectralInkTable:
     order = np.argsort(CHANNEL_NM)
     at = lambda sig: np.array([np.interp(wl, CHANNEL_NM[order], row[order]) for row in sig])
     return SpectralInkTable(inks.names, wl, at(inks.sigma_s), at(inks.sigma_a), inks.g)
+
+
+def bench_scene(spot_mm: float | None):
+    """(volume of the noise renders, scene): the reference slab with its chart and zebra, or Spot at ``spot_mm``."""
+    if spot_mm is not None:
+        scene = build_scene(MeshSpec(str(SPOT), height_mm=spot_mm), InkTable.parse("vero-cmykw"))
+        return scene.volume, scene
+    lin = lambda im: srgb_to_linear(im / 255.0).astype(np.float32)
+    top, bottom = lin(charts.colour_chart(708, 472)), lin(charts.zebra(177, 118))
+    vol = reference_slab()
+    return vol, build_slab(top, bottom, (177 * 25.4 / 300, 118 * 25.4 / 300, 30 * 25.4 / 300), vol.inks)
 
 
 def colour_noise(renderer, texels, spp: int, cmap) -> float:
@@ -75,11 +89,9 @@ def main():
     ap.add_argument("--iterations", type=int, default=3)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--equal-groups", action="store_true", help="every band group the pass's spp")
+    ap.add_argument("--spot-mm", type=float, help="Spot at this height instead of the reference slab")
     a = ap.parse_args()
-    lin = lambda im: srgb_to_linear(im / 255.0).astype(np.float32)
-    top, bottom = lin(charts.colour_chart(708, 472)), lin(charts.zebra(177, 118))
-    vol = reference_slab()
-    scene = build_slab(top, bottom, (177 * 25.4 / 300, 118 * 25.4 / 300, 30 * 25.4 / 300), vol.inks)
+    vol, scene = bench_scene(a.spot_mm)
     table = spectral_from_rgb(vol.inks, a.bands)
     d65 = named_light("D65").colour_map(table.wavelengths_nm)
     tex = scene.texels
@@ -100,7 +112,7 @@ def main():
         secs["spectral"] += iteration_seconds(scene, cfg_spec, a.threads, viewing, a.iterations)
     per_it = {k: float(np.median(v)) for k, v in secs.items()}
     out = {
-        "slab": "reference slab 177x118x30 voxels, colour chart on top, zebra below",
+        "scene": f"Spot {a.spot_mm:g} mm" if a.spot_mm else "reference slab 177x118x30 voxels, chart top, zebra below",
         "texels": len(tex),
         "bands": a.bands,
         "band_groups": len(table.group_bands()),
@@ -123,7 +135,7 @@ def main():
         f"{noise_spec:.3f} at spp {spp_spec}; s/iteration rgb {per_it['rgb']:.2f}, spectral {per_it['spectral']:.2f}"
         f" ({out['spectral_over_rgb']:.2f}x)"
     )
-    print("wrote", write("spectral_cost.json", out))
+    print("wrote", write(f"spectral_cost_spot{a.spot_mm:g}mm.json" if a.spot_mm else "spectral_cost.json", out))
 
 
 if __name__ == "__main__":
