@@ -8,7 +8,7 @@ from spectral_helpers import INKS, rgb_as_bands, smooth_table
 
 from inkopt.errors import ParameterError
 from inkopt.lighting import Lighting
-from inkopt.model import Texels, Volume
+from inkopt.model import InkTable, Texels, Volume
 from inkopt.model.spectral import SpectralInkTable
 from inkopt.render import Renderer
 from inkopt.spectral.render import SpectralRenderer, group_seed, group_spp
@@ -119,3 +119,15 @@ def test_weighted_groups_stay_unbiased():
     spp = np.repeat(group_spp(32, spec.weights, 3), 3)
     ratio = res.var_mean.astype(np.float64).mean(axis=0) / equal.var_mean.astype(np.float64).mean(axis=0)
     np.testing.assert_allclose(ratio, 32.0 / spp, rtol=0.25)
+
+
+def test_label_volumes_render_as_the_rgb_renderer():
+    """A labels volume (a mesh scene's base) with a 3-band table whose bands are the RGB channels: bit for bit."""
+    labels = np.random.default_rng(6).integers(0, len(INKS), (5, 6, 7)).astype(np.uint8)
+    vol = Volume.from_labels((VOX,) * 3, labels, INKS)
+    tex = Texels.for_volume(vol)
+    table = rgb_as_bands(INKS)  # bands B, G, R: group 0 traces them as channels 0, 1, 2
+    got = SpectralRenderer(vol, table, threads=2).render(tex, spp=4, seed=2)
+    order = InkTable(INKS.names, INKS.sigma_s[:, [2, 1, 0]].copy(), INKS.sigma_a[:, [2, 1, 0]].copy(), INKS.g)
+    want = Renderer(Volume.from_labels((VOX,) * 3, labels, order), threads=1).render(tex, spp=4, seed=2)
+    np.testing.assert_array_equal(got.rgb, want.rgb)
