@@ -9,8 +9,10 @@ benchmark's rule (bench/bench_spectral.py ``spectral_from_rgb``: the Vero RGB co
 linear in wavelength, 16 bands over 400-700 nm): an assumption, not a calibration.
 
     nice -n 5 .venv/bin/python experiments/spectral_lights.py [--iterations 150] [--spp 8] [--eval-spp 2048]
+        [--seed 0]
 
-Writes experiments/results/spectral_lights.json and prints the table.
+Writes experiments/results/spectral_lights.json (``--seed S`` other than 0: spectral_lights_seed<S>.json) and
+prints the table.
 """
 
 import argparse
@@ -44,6 +46,7 @@ def main():
     ap.add_argument("--spp", type=int, default=8)
     ap.add_argument("--eval-spp", type=int, default=2048)
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--seed", type=int, default=0, help="the optimisations' seed (OptimizeConfig.seed)")
     a = ap.parse_args()
     inks = InkTable.parse("vero-cmykw")
     table = spectral_from_rgb(inks, 16)
@@ -52,8 +55,8 @@ def main():
     d65, a_light = named_light("D65"), named_light("A")
     both = Viewing(table, (d65, a_light))
     scorer = both.loss(scene.target_rgb, scene.texels.pos_vox, (1.0, 0.0, 0.0))
-    cfg = OptimizeConfig(iterations=a.iterations, spp=a.spp, forward_spp=a.spp).for_scene(scene.kind)
-    out = {"iterations": a.iterations, "spp": a.spp, "eval_spp": a.eval_spp, "texels": len(scene.texels)}
+    cfg = OptimizeConfig(iterations=a.iterations, spp=a.spp, forward_spp=a.spp, seed=a.seed).for_scene(scene.kind)
+    out = {"iterations": a.iterations, "spp": a.spp, "eval_spp": a.eval_spp, "seed": a.seed, "texels": len(scene.texels)}
     t0 = time.perf_counter()
     for name, viewing in (("D65", Viewing(table, (d65,))), ("D65,A", both)):
         run = Optimization(scene, cfg, threads=a.threads, viewing=viewing)
@@ -70,7 +73,7 @@ def main():
             f"{fig['inconstancy_delta_e2000_mean']['D65-A']:.2f}"
         )
     out.update(wall_s=time.perf_counter() - t0, threads=a.threads, **machine())
-    print("wrote", write("spectral_lights.json", out))
+    print("wrote", write(f"spectral_lights_seed{a.seed}.json" if a.seed else "spectral_lights.json", out))
 
 
 if __name__ == "__main__":
