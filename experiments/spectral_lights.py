@@ -56,7 +56,8 @@ def main():
     both = Viewing(table, (d65, a_light))
     scorer = both.loss(scene.target_rgb, scene.texels.pos_vox, (1.0, 0.0, 0.0))
     cfg = OptimizeConfig(iterations=a.iterations, spp=a.spp, forward_spp=a.spp, seed=a.seed).for_scene(scene.kind)
-    out = {"iterations": a.iterations, "spp": a.spp, "eval_spp": a.eval_spp, "seed": a.seed, "texels": len(scene.texels)}
+    out = {"iterations": a.iterations, "spp": a.spp, "eval_spp": a.eval_spp, "seed": a.seed}
+    out["texels"] = len(scene.texels)
     t0 = time.perf_counter()
     for name, viewing in (("D65", Viewing(table, (d65,))), ("D65,A", both)):
         run = Optimization(scene, cfg, threads=a.threads, viewing=viewing)
