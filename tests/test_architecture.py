@@ -18,7 +18,7 @@ LAYERS = [
     {"model"},
     {"rundir"},
     {"render", "distributed"},
-    {"loss"},
+    {"loss", "spectral"},
     {"scenes"},
     {"optim"},
     {"printing"},

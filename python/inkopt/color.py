@@ -7,8 +7,12 @@ RGB (1, 1, 1) maps to exactly L*a*b* = (100, 0, 0). ``M`` is scikit-image's sRGB
 moves a* and b* by at most ~3e-3 (tests compare to scikit-image after adapting between the two whites).
 Normalised L*a*b* (for the SSIM and Sobel terms): L*/100, (a* + 128)/255, (b* + 128)/255.
 
-All conversions accept any array of shape (..., 3), compute in float64 and return float64, except the 8-bit
-file helpers at the end (``to_srgb8``, ``from_srgb8``).
+A :class:`ColourMap` generalises linear RGB -> XYZ to any C linear channels (a spectral prediction's bands under
+a light: ``inkopt.spectral.lights``), CIELAB relative to the map's white; :data:`RGB` is linear sRGB, and the
+``linear_to_*`` functions are it.
+
+All conversions accept any array of shape (..., 3) (a colour map's: (..., C)), compute in float64 and return float64,
+except the 8-bit file helpers at the end (``to_srgb8``, ``from_srgb8``).
 """
 
 from __future__ import annotations
@@ -52,7 +56,7 @@ def linear_to_srgb(rgb) -> np.ndarray:
 
 def linear_to_xyz(rgb) -> np.ndarray:
     """Linear RGB (..., 3) -> CIE XYZ (..., 3), Y of white = 1."""
-    return _rgb(rgb) @ RGB_TO_XYZ.T
+    return RGB.xyz(rgb)
 
 
 def _f(t: np.ndarray) -> np.ndarray:
@@ -62,6 +66,63 @@ def _f(t: np.ndarray) -> np.ndarray:
 def _fprime(t: np.ndarray) -> np.ndarray:
     c = np.cbrt(np.maximum(t, _EPS))
     return np.where(t > _EPS, 1.0 / (3.0 * c * c), 1.0 / (3.0 * _DELTA**2))
+
+
+class ColourMap:
+    """What turns a prediction's channel values into colour: ``matrix`` (3, C) float64 maps C linear channel values
+    (RGB: C = 3; spectral bands: C = B) to CIE XYZ; CIELAB is taken relative to ``white`` = ``matrix @ 1`` (the
+    colour of a perfect white, normalised to Y = 1 by whoever builds the matrix). ``name`` says which light or
+    space (for reports). :data:`RGB` is linear sRGB (D65); ``inkopt.spectral.lights`` builds one per light for a
+    band grid. Every method takes any array of shape (..., C) and computes in float64."""
+
+    def __init__(self, matrix, name: str = "sRGB"):
+        m = np.array(matrix, dtype=np.float64)
+        if m.ndim != 2 or m.shape[0] != 3 or m.shape[1] < 1 or not np.all(np.isfinite(m)):
+            raise ValueError(f"a colour map's matrix must be a finite (3, C) array, got shape {m.shape}")
+        white = m.sum(axis=1)
+        if not np.all(white > 0):
+            raise ValueError(f"a colour map's white {white.tolist()} must be positive")
+        m.setflags(write=False)
+        self.matrix, self.white, self.name = m, white, str(name)
+
+    @property
+    def channels(self) -> int:
+        return int(self.matrix.shape[1])
+
+    def _values(self, arr, name: str = "values") -> np.ndarray:
+        a = np.asarray(arr, dtype=np.float64)
+        if a.ndim < 1 or a.shape[-1] != self.channels:
+            raise ValueError(f"{name} must have shape (..., {self.channels}), got {a.shape}")
+        return a
+
+    def xyz(self, values) -> np.ndarray:
+        """Channel values (..., C) -> CIE XYZ (..., 3), Y of white = 1."""
+        return self._values(values) @ self.matrix.T
+
+    def lab(self, values) -> np.ndarray:
+        """Channel values (..., C) -> CIELAB (..., 3) relative to :attr:`white`."""
+        return _f(self.xyz(values) / self.white) @ _LAB_D.T + _LAB_OFFSET
+
+    def lab_jacobian(self, values) -> np.ndarray:
+        """d lab / d values, shape (..., 3, C): element [..., k, j] = d lab_k / d value_j."""
+        t = self.xyz(values) / self.white
+        a = (_fprime(t) / self.white)[..., :, None] * self.matrix  # d f(t_m) / d value_j
+        return np.matmul(_LAB_D, a)
+
+    def lab_vjp(self, values, g_lab) -> np.ndarray:
+        """Vector-Jacobian product: g[..., j] = sum_k g_lab[..., k] * d lab_k / d value_j, shape (..., C)."""
+        t = self.xyz(values) / self.white
+        return ((_rgb(g_lab, "g_lab") @ _LAB_D) * _fprime(t) / self.white) @ self.matrix
+
+    def lab_stderr(self, values, var_mean) -> np.ndarray:
+        """Standard error (ΔE76) of the CIELAB colour of means ``values`` (..., C) with variances ``var_mean``
+        (channels independent): sqrt(trace(J diag(var) J^T)), J = d lab / d values."""
+        jac = self.lab_jacobian(values)
+        return np.sqrt(np.einsum("...kj,...j->...", jac * jac, var_mean))
+
+
+#: linear sRGB (D65): the renderer's RGB channels; its white is WHITE_XYZ
+RGB = ColourMap(RGB_TO_XYZ, "sRGB")
 
 
 def xyz_to_lab(xyz) -> np.ndarray:
@@ -77,15 +138,12 @@ def linear_to_lab(rgb) -> np.ndarray:
 
 def linear_to_lab_jacobian(rgb) -> np.ndarray:
     """d lab / d rgb, shape (..., 3, 3): element [..., k, j] = d lab_k / d rgb_j."""
-    t = linear_to_xyz(rgb) / WHITE_XYZ
-    a = (_fprime(t) / WHITE_XYZ)[..., :, None] * RGB_TO_XYZ  # d f(t_m) / d rgb_j
-    return np.matmul(_LAB_D, a)
+    return RGB.lab_jacobian(_rgb(rgb))
 
 
 def linear_to_lab_vjp(rgb, g_lab) -> np.ndarray:
     """Vector-Jacobian product: g_rgb[..., j] = sum_k g_lab[..., k] * d lab_k / d rgb_j, shape (..., 3)."""
-    t = linear_to_xyz(rgb) / WHITE_XYZ
-    return ((_rgb(g_lab, "g_lab") @ _LAB_D) * _fprime(t) / WHITE_XYZ) @ RGB_TO_XYZ
+    return RGB.lab_vjp(_rgb(rgb), g_lab)
 
 
 def normalise_lab(lab) -> np.ndarray:
@@ -108,8 +166,7 @@ def delta_e2000(lab1, lab2) -> np.ndarray:
 def lab_stderr(rgb, var_mean) -> np.ndarray:
     """Standard error (ΔE76) of the CIELAB colour of means rgb (..., 3) with variances var_mean (channels
     independent): sqrt(trace(J diag(var) J^T)), J = d lab / d rgb."""
-    jac = linear_to_lab_jacobian(rgb)
-    return np.sqrt(np.einsum("...kj,...j->...", jac * jac, var_mean))
+    return RGB.lab_stderr(_rgb(rgb), var_mean)
 
 
 # ----------------------------------------------------------------------------- 8-bit files

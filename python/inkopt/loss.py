@@ -1,19 +1,22 @@
 """The perceptual loss E(C, T) over texels (docs/method.md §5) with analytic gradients.
 
-Predictions and targets are linear RGB (I, 3) per texel; the terms are computed in CIELAB (``inkopt.color``):
-E1 mean ΔE76², E2 texel SSIM on normalised L*a*b* with a Gaussian window restricted to texels, E3 3D Sobel on
-normalised L*a*b*.
+Targets are linear RGB (I, 3) per texel; predictions are C linear channels per texel turned into CIELAB by a
+colour map (``inkopt.color.ColourMap``: linear sRGB by default; a spectral prediction's B bands under a light,
+``inkopt.spectral.lights``); the terms are computed in CIELAB: E1 mean ΔE76², E2 texel SSIM on normalised L*a*b*
+with a Gaussian window restricted to texels, E3 3D Sobel on normalised L*a*b*. With several colour maps (lights)
+the loss is the mean, or the worst, of the loss under each.
 """
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from .color import LAB_NORM_SCALE, linear_to_lab, linear_to_lab_jacobian, linear_to_lab_vjp, normalise_lab
+from .color import LAB_NORM_SCALE, RGB, ColourMap, linear_to_lab, normalise_lab
 
 K1 = 0.01**2
 K2 = 0.03**2
@@ -29,6 +32,8 @@ FLAT_CHROMA_STD = 2.0
 
 
 # ----------------------------------------------------------------------------- neighbourhood operators
+#: how a loss over several lights combines the loss under each
+COMBINE = ("mean", "worst")
 #: texel rows of the window matrix built at a time (``gaussian_window``: its transient memory, ~60 MB)
 WINDOW_CHUNK_ROWS = 1 << 13
 
@@ -115,7 +120,8 @@ def sobel_operators(pos_vox: np.ndarray, tol: float = 1e-6) -> sp.csr_matrix:
 @dataclass
 class LossResult:
     """value = E; e1, e2, e3 the three terms (e2, e3 NaN when not evaluated: ``all_terms=False`` at weight 0);
-    grad (I, 3) float64 = dE/d pred (linear RGB); lab (I, 3) float64 CIELAB of the prediction."""
+    grad (I, C) float64 = dE/d pred (the prediction's channels); lab (I, 3) float64 CIELAB of the prediction (under
+    the first colour map)."""
 
     value: float
     e1: float
@@ -131,7 +137,11 @@ class TexelLoss:
 
     target_rgb (I, 3) linear RGB targets; pos_vox (I, 3) texel positions (x, y, z) in voxel units
     (``Texels.pos_vox``); gamma = (g1, g2, g3) >= 0 with a positive sum; sigma the SSIM Gaussian window's
-    standard deviation in voxels.
+    standard deviation in voxels. ``colours``: the colour maps of the prediction's C channels (default linear
+    sRGB, ``color.RGB``), one per light; with several, ``combine`` "mean" (E is the mean of E under each: its terms
+    and gradient are the means) or "worst" (E is the largest, its gradient that light's). The target's CIELAB is
+    the same under every light (``linear_to_lab(target_rgb)``): the print should look like the texture to a viewer
+    adapted to the light.
 
     - E1 = (1/I) sum_i dE76_i^2 (squared CIELAB distance).
     - E2 = 1 - (1/(3I)) sum_i sum_{L,a,b} SSIM_i on normalised L*a*b*. We divide by 3 (the channel count)
@@ -148,7 +158,15 @@ class TexelLoss:
     use; ``release_operators`` frees them between uses.
     """
 
-    def __init__(self, target_rgb, pos_vox, gamma=(1.0, 0.0, 0.0), sigma: float = 1.5):
+    def __init__(
+        self,
+        target_rgb,
+        pos_vox,
+        gamma=(1.0, 0.0, 0.0),
+        sigma: float = 1.5,
+        colours: tuple[ColourMap, ...] | None = None,
+        combine: str = "mean",
+    ):
         target = np.asarray(target_rgb, np.float64)
         pos = np.asarray(pos_vox, np.float64)
         if target.ndim != 2 or target.shape[1] != 3 or len(target) == 0:
@@ -162,6 +180,13 @@ class TexelLoss:
             raise ValueError(f"gamma must be 3 non-negative weights with a positive sum, got {gamma}")
         if not (np.isfinite(sigma) and sigma > 0):
             raise ValueError(f"sigma must be a positive number of voxels, got {sigma}")
+        colours = (RGB,) if colours is None else tuple(colours)
+        if not colours or len({c.channels for c in colours}) != 1:
+            raise ValueError("colours must be one or more colour maps of one channel count")
+        if combine not in COMBINE:
+            raise ValueError(f"combine must be one of {', '.join(COMBINE)}, got {combine!r}")
+        #: the prediction's colour maps (one per light), its channel count and how the lights combine
+        self.colours, self.channels, self.combine = colours, colours[0].channels, combine
         self.gamma = g
         self.sigma = float(sigma)
         self.n = len(target)
@@ -217,6 +242,13 @@ class TexelLoss:
         colour-only training step (``all_terms=False`` at γ2 = γ3 = 0) never reads them."""
         self._K = self._K2 = self._S = self._ST = None
 
+    def under(self, light: int) -> TexelLoss:
+        """This loss under its colour map ``light`` alone (the target's statistics and operators shared, not
+        copied): the figures under one light."""
+        view = copy.copy(self)
+        view.colours = (self.colours[light],)
+        return view
+
     @property
     def needs_operators(self) -> bool:
         """Whether a training step (``all_terms=False``) reads the operators: γ2 > 0 or γ3 > 0."""
@@ -236,8 +268,8 @@ class TexelLoss:
 
     def _check(self, pred_rgb) -> np.ndarray:
         p = np.asarray(pred_rgb, np.float64)
-        if p.shape != (self.n, 3):
-            raise ValueError(f"pred_rgb must have shape ({self.n}, 3), got {p.shape}")
+        if p.shape != (self.n, self.channels):
+            raise ValueError(f"pred_rgb must have shape ({self.n}, {self.channels}), got {p.shape}")
         if not np.all(np.isfinite(p)):
             raise ValueError("pred_rgb contains NaN or infinite values")
         return p
@@ -249,16 +281,17 @@ class TexelLoss:
             return None
         var = np.asarray(pred_var, np.float64)
         if var.shape != pred.shape or not np.all(np.isfinite(var)) or np.any(var < 0):
-            raise ValueError(f"pred_var must be a non-negative (I, 3) array like pred_rgb, got {var.shape}")
+            raise ValueError(f"pred_var must be a non-negative (I, C) array like pred_rgb, got {var.shape}")
         return var
 
-    def _noise(self, pred: np.ndarray, pred_var) -> tuple[np.ndarray, np.ndarray] | None:
+    def _noise(self, pred: np.ndarray, pred_var, cmap: ColourMap | None = None) -> tuple[np.ndarray, np.ndarray] | None:
         """Noise of a Monte Carlo prediction in the windowed statistics: (W v, sum_j W_ij^2 v_j) with v the
-        variance of each texel's normalised L*a*b* (delta method from the linear-RGB variance ``pred_var``)."""
+        variance of each texel's normalised L*a*b* (delta method from the channels' variance ``pred_var``) under
+        ``cmap`` (default the first colour map)."""
         var = self._check_var(pred, pred_var)
         if var is None:
             return None
-        jac = linear_to_lab_jacobian(pred)  # (I, 3 lab, 3 rgb)
+        jac = (cmap or self.colours[0]).lab_jacobian(pred)  # (I, 3 lab, C)
         v = np.einsum("ikj,ij->ik", jac * jac, var) * LAB_NORM_SCALE**2
         return (self.K @ v) / self.wsum[:, None], (self.K2 @ v) / (self.wsum**2)[:, None]
 
@@ -282,22 +315,23 @@ class TexelLoss:
         b2 = var_x + self._var_t + K2
         return (a1 * a2) / (b1 * b2), mx, a1, b1, a2, b2
 
-    def ssim_map(self, pred_rgb, pred_var=None) -> np.ndarray:
-        """Per-texel, per-channel SSIM (I, 3) on normalised L*, a*, b*. ``pred_var`` (I, 3): the variance of a
-        Monte Carlo prediction (``RenderResult.var_mean``): its noise is removed from the statistics, so the
-        value estimates the SSIM of the noise-free prediction instead of being biased low."""
+    def ssim_map(self, pred_rgb, pred_var=None, light: int = 0) -> np.ndarray:
+        """Per-texel, per-channel SSIM (I, 3) on normalised L*, a*, b* under colour map ``light``. ``pred_var``
+        (I, C): the variance of a Monte Carlo prediction (``RenderResult.var_mean``): its noise is removed from the
+        statistics, so the value estimates the SSIM of the noise-free prediction instead of being biased low."""
         pred = self._check(pred_rgb)
-        cn = normalise_lab(linear_to_lab(pred))
-        return self._ssim_parts(cn, self._noise(pred, pred_var))[0]
+        cmap = self.colours[light]
+        cn = normalise_lab(cmap.lab(pred))
+        return self._ssim_parts(cn, self._noise(pred, pred_var, cmap))[0]
 
-    def ssim_mean(self, pred_rgb, pred_var=None) -> float:
+    def ssim_mean(self, pred_rgb, pred_var=None, light: int = 0) -> float:
         """Mean SSIM over texels and the three normalised L*a*b* channels (= 1 - E2); see ``ssim_map``."""
-        return float(self.ssim_map(pred_rgb, pred_var).mean())
+        return float(self.ssim_map(pred_rgb, pred_var, light).mean())
 
-    def _value_with_noise(self, pred_rgb, noise) -> float:
-        """The loss value with a fixed noise correction (for gradient checks)."""
+    def _value_with_noise(self, pred_rgb, noise, light: int = 0) -> float:
+        """The loss value under colour map ``light`` with a fixed noise correction (for gradient checks)."""
         pred = self._check(pred_rgb)
-        lab = linear_to_lab(pred)
+        lab = self.colours[light].lab(pred)
         dlab = lab - self.target_lab
         cn = normalise_lab(lab)
         ssim = self._ssim_parts(cn, noise)[0]
@@ -308,18 +342,31 @@ class TexelLoss:
         return (g1 * E1_WEIGHT_SCALE * e1 + g2 * e2 + g3 * e3) / self.gamma.sum()
 
     def __call__(self, pred_rgb, pred_var=None, *, all_terms: bool = True) -> LossResult:
-        """Loss and gradient at ``pred_rgb``; ``pred_var`` (I, 3) corrects the SSIM term for Monte Carlo noise;
-        ``all_terms=False``: terms of weight 0 are not evaluated (NaN in the result)."""
+        """Loss and gradient at ``pred_rgb`` (I, C); ``pred_var`` (I, C) corrects the SSIM term for Monte Carlo
+        noise; ``all_terms=False``: terms of weight 0 are not evaluated (NaN in the result). Several colour maps:
+        combined by ``combine`` (the result's ``lab`` is under the first)."""
         pred = self._check(pred_rgb)
+        if len(self.colours) == 1:
+            return self._under(pred, pred_var, all_terms, self.colours[0])
+        each = [self._under(pred, pred_var, all_terms, c) for c in self.colours]
+        if self.combine == "worst":
+            worst = max(each, key=lambda r: r.value)
+            return LossResult(worst.value, worst.e1, worst.e2, worst.e3, worst.grad, each[0].lab)
+        k = len(each)
+        terms = [sum(getattr(r, t) for r in each) / k for t in ("value", "e1", "e2", "e3")]
+        return LossResult(*terms, grad=sum(r.grad for r in each) / k, lab=each[0].lab)
+
+    def _under(self, pred: np.ndarray, pred_var, all_terms: bool, cmap: ColourMap) -> LossResult:
+        """The loss and its gradient under one colour map (see ``__call__``)."""
         n = self.n
         g1, g2, g3 = self.gamma
-        lab = linear_to_lab(pred)
+        lab = cmap.lab(pred)
         dlab = lab - self.target_lab
         e1 = float(np.sum(dlab * dlab) / n)
         cn = normalise_lab(lab)
         e2 = e3 = float("nan")
         if all_terms or g2 > 0:
-            ssim, mx, a1, b1, a2, b2 = self._ssim_parts(cn, self._noise(pred, pred_var))
+            ssim, mx, a1, b1, a2, b2 = self._ssim_parts(cn, self._noise(pred, pred_var, cmap))
             e2 = float(1.0 - ssim.mean())
         else:
             self._check_var(pred, pred_var)  # unused, but a bad variance is still an error
@@ -345,5 +392,5 @@ class TexelLoss:
                 self._ST = self.S.T.tocsr()
             g_n += (2.0 * g3 * c3) * (self._ST @ sob)
         g_lab += g_n * LAB_NORM_SCALE
-        grad = linear_to_lab_vjp(pred, g_lab / gs)
+        grad = cmap.lab_vjp(pred, g_lab / gs)
         return LossResult(value=float(value), e1=e1, e2=e2, e3=e3, grad=grad, lab=lab)

@@ -42,6 +42,7 @@ from .optim import Optimization, OptimizeConfig
 from .pictures import loss_figure
 from .rundir import Predictions, RunDir
 from .scenes import Scene
+from .spectral.viewing import Viewing
 
 #: Shares of a run's time budget (``OptimizeConfig.time_budget``) given to the start's figures (as much again to the
 #: baseline's: ``evaluation.guard``), the result's figures, and kept for writing the result (volume, pictures,
@@ -93,6 +94,8 @@ class RunOptions:
     figure). ``threads``: the renderer's (with ``ray``, each worker's). ``progress``: a progress bar (a terminal);
     without it ``log`` gets a progress line at least every ``log_every_s`` seconds of the iterations. ``lighting``:
     the display lighting (``inkopt.lighting``; default uniform), the final figures are rendered under it too.
+    ``viewing``: spectral or RGB and the lights (``spectral.viewing.Viewing``; default the RGB path, the only one
+    this driver's figures and files take: a spectral table is optimised through ``optim.Optimization`` directly).
     ``ray``: "auto" or a Ray cluster's address: every render is split into texel shards on Ray workers
     (``inkopt.distributed``; bit-identical results). ``dry_run``: only estimate the run (nothing is written).
     ``started``: when the job began (``time.perf_counter()``, e.g. before the scene was built; default: when the
@@ -107,6 +110,7 @@ class RunOptions:
     threads: int | None = None
     progress: bool = False
     lighting: Lighting | str | None = None
+    viewing: Viewing | None = None
     ray: str | None = None
     log: Callable[[str], None] = print
     log_every_s: float = 30.0
@@ -121,6 +125,8 @@ class RunOptions:
             raise ParameterError(
                 f"`eval_spp` must be at least 1 (leave it out for adaptive samples), got {self.eval_spp}"
             )
+        if self.viewing is not None and self.viewing.spectral:
+            raise ParameterError("`inks`: a spectral ink table is optimised through optim.Optimization, not a run")
         if self.eval_max_spp < 1:
             raise ParameterError(f"`eval_max_spp` must be at least 1, got {self.eval_max_spp}")
         if self.eval_time_budget is not None and not self.eval_time_budget > 0:
@@ -197,6 +203,7 @@ def _start(scene: Scene, cfg: OptimizeConfig, options: RunOptions, make_renderer
         baseline=baseline,
         lighting=lighting,
         renderer_factory=make_renderer,
+        viewing=options.viewing,
         started=options.started,  # the whole run's time counts this invocation's set-up too
     )
     return _Job(scene, cfg, options, lighting, run)

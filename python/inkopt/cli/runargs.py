@@ -42,7 +42,42 @@ def add_run_args(p, translucency: str) -> None:
     add_inks_arg(p)
     add_optimizer_args(p)
     add_single_run_args(p)
+    add_light_args(p)
     add_ray_arg(p)
+
+
+def add_light_args(p) -> None:
+    """``--illuminant NAME|FILE.csv`` or ``--illuminants A,B``: the lights the print is seen under
+    (``spectral.lights``, ``spectral.viewing``)."""
+    from ..spectral.lights import NAMED
+
+    g = p.add_mutually_exclusive_group()
+    names = "|".join(NAMED)
+    g.add_argument(
+        "--illuminant",
+        metavar=f"{names}|FILE.csv",
+        help="the light the print is seen under (CIE 1931 2° observer; a file: rows of nm, relative power). "
+        "Default D65, the white of linear sRGB: with an RGB ink table the run is the RGB one; another light needs "
+        "a spectral ink table (docs/spectral.md)",
+    )
+    g.add_argument(
+        "--illuminants",
+        metavar="D65,A",
+        help="several lights: the loss is the mean of the loss under each (a spectral ink table; docs/spectral.md)",
+    )
+
+
+def viewing_from_args(args):
+    """The run's ``spectral.viewing.Viewing`` from ``--illuminant`` / ``--illuminants`` (the RGB path when neither
+    is given or the light is D65; the ink table from ``--inks`` is an RGB table)."""
+    from ..spectral.lights import load_light, parse_lights
+    from ..spectral.viewing import Viewing
+
+    if getattr(args, "illuminants", None):
+        return Viewing(lights=parse_lights(args.illuminants))
+    if getattr(args, "illuminant", None):
+        return Viewing(lights=(load_light(args.illuminant),))
+    return Viewing()
 
 
 def add_optimizer_args(p) -> None:
@@ -297,6 +332,7 @@ def run_options_from_args(args, started: float):
         threads=args.threads,
         progress=sys.stderr.isatty(),
         lighting=lighting_from_args(args),
+        viewing=viewing_from_args(args),
         ray=ray_from_args(args),
         log=stderr_log,
         log_every_s=args.log_every,

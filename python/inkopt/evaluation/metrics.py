@@ -17,7 +17,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from ..color import delta_e76, delta_e2000, lab_stderr, linear_to_lab, linear_to_lab_jacobian
+from ..color import delta_e76, delta_e2000
 from ..loss import FLAT_CHROMA_STD, FLAT_L_STD, TexelLoss  # noqa: F401 (the thresholds, re-exported)
 from .noise import NoiseModel
 
@@ -41,12 +41,14 @@ def highpass_noise(loss: TexelLoss, var_l: np.ndarray) -> np.ndarray:
 
 
 def mottle_per_texel(loss: TexelLoss, rgb, var_mean=None) -> tuple[np.ndarray, np.ndarray]:
-    """h_i² (I,) of predictions ``rgb`` (I, 3) linear, minus the noise's expected share when ``var_mean`` is given,
-    and the target's h_i² (I,); every texel (the figure takes the flat ones)."""
+    """h_i² (I,) of predictions ``rgb`` (I, C) (the loss's first colour map: linear RGB unless spectral), minus the
+    noise's expected share when ``var_mean`` is given, and the target's h_i² (I,); every texel (the figure takes the
+    flat ones)."""
     rgb = np.asarray(rgb, np.float64)
-    p = highpass_power(loss, linear_to_lab(rgb)[:, 0])
+    cmap = loss.colours[0]
+    p = highpass_power(loss, cmap.lab(rgb)[:, 0])
     if var_mean is not None:
-        jl = linear_to_lab_jacobian(rgb)[:, 0, :]
+        jl = cmap.lab_jacobian(rgb)[:, 0, :]
         p = p - highpass_noise(loss, np.einsum("ij,ij->i", jl * jl, np.asarray(var_mean, np.float64)))
     return p, highpass_power(loss, loss.target_lab[:, 0])
 
@@ -104,7 +106,8 @@ class Metrics:
 
 
 def prediction_metrics(loss: TexelLoss, rgb, var_mean=None) -> Metrics:
-    """Figures of predictions ``rgb`` (I, 3) linear against ``loss``'s target (I, 3) linear.
+    """Figures of predictions ``rgb`` (I, C) against ``loss``'s target (I, 3) linear, in CIELAB by the loss's first
+    colour map (linear RGB, or a spectral prediction's bands under a light: ``TexelLoss.under``).
 
     Always: ``delta_e76_mean``, ``delta_e76_p95``, ``delta_e2000_mean``, ``ssim`` (mean texel SSIM), the loss's
     ``loss``, ``e1``, ``e2``, ``e3`` at its weights, and the mottle (module docstring). With ``var_mean`` (I, 3),
@@ -130,9 +133,9 @@ def prediction_metrics(loss: TexelLoss, rgb, var_mean=None) -> Metrics:
     out.update(mottle(loss, rgb, var_mean))
     if var_mean is not None:
         var = np.asarray(var_mean, np.float64)
-        se = lab_stderr(rgb, var)
+        se = loss.colours[0].lab_stderr(rgb, var)
         out["delta_e76_noise"] = float(se.mean())
-        contrib = NoiseModel.of(rgb, var, lab_t).contribution()
+        contrib = NoiseModel.of(rgb, var, lab_t, loss.colours[0]).contribution()
         out["delta_e76_noise_contribution"] = contrib
         out["delta_e76_mean_corrected"] = float(de.mean()) - contrib
         out["delta_e76_rms"] = float(np.sqrt(np.mean(de * de)))
@@ -141,5 +144,5 @@ def prediction_metrics(loss: TexelLoss, rgb, var_mean=None) -> Metrics:
 
 
 def delta_e76_map(loss: TexelLoss, rgb) -> np.ndarray:
-    """Per-texel ΔE76 (I,) of predictions ``rgb`` (I, 3) linear against ``loss``'s target."""
-    return delta_e76(linear_to_lab(rgb), loss.target_lab)
+    """Per-texel ΔE76 (I,) of predictions ``rgb`` (I, C) (the loss's first colour map) against its target."""
+    return delta_e76(loss.colours[0].lab(rgb), loss.target_lab)

@@ -54,7 +54,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import erf
 
-from ..color import LAB_NORM_SCALE, linear_to_lab, linear_to_lab_jacobian
+from ..color import LAB_NORM_SCALE, RGB, ColourMap
 from ..errors import ParameterError
 from ..loss import K2
 from ..units import format_duration
@@ -89,9 +89,10 @@ def chi3_excess(lam) -> np.ndarray:
     return np.where(lam < 1e-4, small, np.where(lam > 40.0, 1.0 / np.maximum(lam, 40.0), mid))
 
 
-def lab_covariance(rgb, var_mean) -> np.ndarray:
-    """CIELAB covariance (I, 3, 3) of colour estimates rgb (I, 3) with per-channel variances var_mean (I, 3)."""
-    jac = linear_to_lab_jacobian(np.asarray(rgb, np.float64))
+def lab_covariance(rgb, var_mean, cmap: ColourMap = RGB) -> np.ndarray:
+    """CIELAB covariance (I, 3, 3) of colour estimates rgb (I, C) with per-channel variances var_mean (I, C), the
+    channels' colour map ``cmap`` (default linear sRGB)."""
+    jac = cmap.lab_jacobian(np.asarray(rgb, np.float64))
     return np.einsum("ikj,ij,ilj->ikl", jac, np.asarray(var_mean, np.float64), jac)
 
 
@@ -106,10 +107,11 @@ class NoiseModel:
     ssim_ratio: float = 0.0
 
     @classmethod
-    def of(cls, rgb, var_mean, target_lab) -> NoiseModel:
-        lab = linear_to_lab(np.asarray(rgb, np.float64))
+    def of(cls, rgb, var_mean, target_lab, cmap: ColourMap = RGB) -> NoiseModel:
+        """The model of estimates ``rgb`` (I, C) of variances ``var_mean`` (I, C) under colour map ``cmap``."""
+        lab = cmap.lab(np.asarray(rgb, np.float64))
         d = lab - np.asarray(target_lab, np.float64)
-        cov = lab_covariance(rgb, var_mean)
+        cov = lab_covariance(rgb, var_mean, cmap)
         n2 = np.sum(d * d, 1)
         tr = np.trace(cov, axis1=1, axis2=2)
         u = d / np.sqrt(np.maximum(n2, 1e-300))[:, None]

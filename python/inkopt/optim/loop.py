@@ -26,10 +26,10 @@ import numpy as np
 from ..color import delta_e76
 from ..errors import ParameterError
 from ..lighting import Lighting, load_lighting
-from ..loss import TexelLoss
 from ..model import FixedShares, Volume, mix_grad
 from ..render import Renderer, RendererFactory, TexelRenderer
 from ..scenes import Scene
+from ..spectral.viewing import Viewing
 from .checkpoint import History, check_state, read_checkpoint, write_checkpoint
 from .config import COLD_INITS, OptimizeConfig
 from .optimizers import make_optimizer, step_factor
@@ -60,7 +60,8 @@ class Optimization:
     rendered under (``inkopt.lighting``; default uniform). ``renderer_factory(volume, threads, lighting)``: what
     renders (default ``Renderer``; e.g. texel shards on Ray, ``inkopt.distributed.RayShards.renderer``, with
     identical results). ``started``: when this invocation began (``time.perf_counter()``; default now), from which
-    the run's wall time counts.
+    the run's wall time counts. ``viewing``: spectral or RGB and the lights (``spectral.viewing.Viewing``; default
+    RGB): a spectral table's prediction is its B bands (``c_avg`` (I, B)), its loss taken under the lights.
     """
 
     def __init__(
@@ -73,12 +74,14 @@ class Optimization:
         lighting: Lighting | str | None = None,
         renderer_factory: RendererFactory | None = None,
         started: float | None = None,
+        viewing: Viewing | None = None,
     ):
         if not cfg.resolved:
             raise ValueError(f"the settings must be resolved for a {scene.kind} first: cfg.for_scene({scene.kind!r})")
         cfg.validate()
         base, texels, fixed_share = scene.volume, scene.texels, scene.fixed_share
-        self.renderer_factory = renderer_factory or Renderer
+        self.viewing = viewing or Viewing()
+        self.renderer_factory = self.viewing.renderer_factory(renderer_factory or Renderer)
         self.lighting = load_lighting(lighting)
         if base.inks is None:
             raise ValueError("the volume needs an ink table")
@@ -87,7 +90,7 @@ class Optimization:
         if fixed_share is None:
             fixed_share = FixedShares.none(base.shape, len(base.inks))
         self.param = Parameterization(cfg.param, fixed_share, threads)
-        self.loss = TexelLoss(self.target, texels.pos_vox, gamma=cfg.gamma)
+        self.loss = self.viewing.loss(self.target, texels.pos_vox, cfg.gamma)
         self._release_unread_operators()
         # what the run optimises towards and under which constraints: part of the checkpoint key
         h = hashlib.sha256(self.target.tobytes())
@@ -107,9 +110,9 @@ class Optimization:
         # wall time of the run's earlier invocations (up to their last checkpoint) and this one's start
         self.wall_seconds_before = 0.0
         self.invocation_start = time.perf_counter() if started is None else started
-        self.c_avg: np.ndarray | None = None  # running average of the prediction (I, 3)
+        self.c_avg: np.ndarray | None = None  # running average of the prediction (I, C)
         self.c_weight = 0.0  # its effective number of samples per texel
-        self.c_var: np.ndarray | None = None  # the variance of the running average (I, 3)
+        self.c_var: np.ndarray | None = None  # the variance of the running average (I, C)
         #: the last step's render statistics (``RenderResult.stats()``: paths, events, seconds, ...) per pass
         self.last_passes: dict = {}
 
@@ -141,8 +144,7 @@ class Optimization:
         self.baseline_figures = {**(self.baseline_figures or {}), kind: dict(figures)}
 
     def _release_unread_operators(self) -> None:
-        """Free the loss's sparse operators when no step reads them (colour only: ~1 GiB at Spot 40 mm's 387 k
-        texels); a figure's full loss call builds them again."""
+        """Free the loss's sparse operators when no step reads them (~1 GiB at Spot 40 mm); a full call rebuilds."""
         if not self.loss.needs_operators:
             self.loss.release_operators()
 
@@ -188,6 +190,7 @@ class Optimization:
             problem=self._problem_digest,
             lighting=self.lighting.key(),
         )
+        d.update({"viewing": self.viewing.key()} if self.viewing.spectral else {})  # the RGB path's key is unchanged
         return json.dumps(d, sort_keys=True)
 
     def save_checkpoint(self, path: Path) -> None:
@@ -216,7 +219,7 @@ class Optimization:
 
     def load_checkpoint(self, path: Path) -> None:
         d = read_checkpoint(path)
-        per_texel = (len(self.texels), 3)
+        per_texel = (len(self.texels), self.loss.channels)
         shapes = {"x": self.x.shape, "opt_m": self.opt.m.shape, "opt_v": self.opt.v.shape}
         check_state(d, path, {**shapes, "c_avg": per_texel, "c_var": per_texel})  # all or nothing is restored
         old, new = json.loads(str(d["config_key"])), json.loads(self.config_key())
@@ -309,7 +312,7 @@ class Optimization:
         t3 = time.perf_counter()
         g_x = np.empty_like(self.x)
         for lo, hi in self.param.chunks():  # dE/dsigma -> dE/drho -> dE/dx in pieces (bit-identical)
-            g_rho = mix_grad(gs[lo:hi], ga[lo:hi], self.base.inks)
+            g_rho = mix_grad(gs[lo:hi], ga[lo:hi], self.viewing.table or self.base.inks)  # per band or channel
             g_x[lo:hi] = self.param.backward(self.x[lo:hi], g_rho, natural=self.opt.natural, lo=lo)
         del gs, ga
         self.opt.lr = cfg.step_size * step_factor(self.iteration, self.schedule.end, cfg.decay)
@@ -426,9 +429,8 @@ class Optimization:
             self.save_checkpoint(checkpoint)
 
     def finish(self) -> None:
-        """Smooth the result: ``cfg.finish_smooth`` passes of the step's smoothing operator over the variables x
-        (nothing without smoothing). Called once, after the iterations and their last checkpoint, so that the
-        checkpoint keeps the iterate a continued run steps on from."""
+        """Smooth the result: ``cfg.finish_smooth`` passes of the step's smoothing over x (none without smoothing),
+        once, after the iterations and their last checkpoint (which keeps the iterate a continued run steps from)."""
         if self.smoother is None:
             return
         for _ in range(int(self.cfg.finish_smooth or 0)):

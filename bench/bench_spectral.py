@@ -1,0 +1,142 @@
+"""Spectral against RGB optimisation on the reference slab: cost per iteration at equal colour noise.
+
+    nice -n 5 .venv/bin/python bench/bench_spectral.py [--bands 16] [--spp 16] [--iterations 3] [--threads 2]
+        [--equal-groups] [--spot-mm 20]
+
+The spectral table is made here from the Vero RGB table by a simple rule (an assumption of this benchmark, not the
+documented spectral Vero table): each ink's sigma_s and sigma_a per channel placed at 465 (B), 540 (G) and 610 nm
+(R), interpolated linearly in wavelength between them and held constant beyond, sampled at ``--bands`` centres over
+400-700 nm. The RGB run uses the RGB table. The spectral renders share their samples among the band groups as the
+optimiser's do (``Viewing.group_weights``), or equally with ``--equal-groups``.
+
+1. Colour noise: the reference slab scene's texels rendered once by each at the pilot ``--spp``; the noise is each
+   texel's CIELAB standard error (ΔE76, delta method: ``lab_stderr``) under D65, its RMS over texels (RGB: CIELAB
+   of linear sRGB; spectral: the bands' colour map under D65). The spectral samples per texel that give the RGB
+   noise at ``--spp``: spp x (noise_spectral / noise_rgb)^2 rounded up (the noise's square falls as 1/spp), then
+   measured again at that spp.
+2. Cost: ``--iterations`` optimisation iterations (forward + loss + gradient + step) of each at those samples,
+   RGB and spectral alternating twice in one process; seconds per iteration, median over each kind's iterations.
+
+``--spot-mm H``: the same on Spot scaled to H mm (its scene's start mixture for the noise renders) instead of the
+reference slab. Writes bench/results/spectral_cost.json (Spot: spectral_cost_spot<H>mm.json).
+"""
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import SPOT, machine, reference_slab, write  # noqa: E402
+
+from inkopt import charts  # noqa: E402
+from inkopt.color import RGB, srgb_to_linear  # noqa: E402
+from inkopt.model import InkTable  # noqa: E402
+from inkopt.model.spectral import SpectralInkTable  # noqa: E402
+from inkopt.optim import Optimization, OptimizeConfig  # noqa: E402
+from inkopt.render import Renderer  # noqa: E402
+from inkopt.scenes import build_scene  # noqa: E402
+from inkopt.scenes.slab import build_slab  # noqa: E402
+from inkopt.scenes.spec import MeshSpec  # noqa: E402
+from inkopt.spectral.lights import named_light  # noqa: E402
+from inkopt.spectral.render import SpectralRenderer, group_spp  # noqa: E402
+from inkopt.spectral.viewing import Viewing  # noqa: E402
+
+#: where each RGB channel's coefficients are placed (nm): R, G, B
+CHANNEL_NM = np.array([610.0, 540.0, 465.0])
+
+
+def spectral_from_rgb(inks: InkTable, bands: int) -> SpectralInkTable:
+    """The benchmark's spectral table: each ink's R, G, B coefficients at ``CHANNEL_NM``, linear in between."""
+    wl = np.linspace(400.0, 700.0, bands)
+    order = np.argsort(CHANNEL_NM)
+    at = lambda sig: np.array([np.interp(wl, CHANNEL_NM[order], row[order]) for row in sig])
+    return SpectralInkTable(inks.names, wl, at(inks.sigma_s), at(inks.sigma_a), inks.g)
+
+
+def bench_scene(spot_mm: float | None):
+    """(volume of the noise renders, scene): the reference slab with its chart and zebra, or Spot at ``spot_mm``."""
+    if spot_mm is not None:
+        scene = build_scene(MeshSpec(str(SPOT), height_mm=spot_mm), InkTable.parse("vero-cmykw"))
+        return scene.volume, scene
+    lin = lambda im: srgb_to_linear(im / 255.0).astype(np.float32)
+    top, bottom = lin(charts.colour_chart(708, 472)), lin(charts.zebra(177, 118))
+    vol = reference_slab()
+    return vol, build_slab(top, bottom, (177 * 25.4 / 300, 118 * 25.4 / 300, 30 * 25.4 / 300), vol.inks)
+
+
+def colour_noise(renderer, texels, spp: int, cmap) -> float:
+    """The RMS over texels of the CIELAB standard error (ΔE76) of one render of ``spp`` samples per texel."""
+    res = renderer.render(texels, spp, seed=7)
+    return float(np.sqrt(np.mean(cmap.lab_stderr(res.rgb, res.var_mean) ** 2)))
+
+
+def iteration_seconds(scene, cfg, threads, viewing, iterations: int) -> list[float]:
+    run = Optimization(scene, cfg.for_scene(scene.kind), threads=threads, viewing=viewing)
+    run.renderer()  # built before the clock starts (set-up is not an iteration's cost)
+    for _ in range(iterations):
+        run.step()
+    return list(run.history.seconds)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--bands", type=int, default=16)
+    ap.add_argument("--spp", type=int, default=16)
+    ap.add_argument("--iterations", type=int, default=3)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--equal-groups", action="store_true", help="every band group the pass's spp")
+    ap.add_argument("--spot-mm", type=float, help="Spot at this height instead of the reference slab")
+    a = ap.parse_args()
+    vol, scene = bench_scene(a.spot_mm)
+    table = spectral_from_rgb(vol.inks, a.bands)
+    d65 = named_light("D65").colour_map(table.wavelengths_nm)
+    tex = scene.texels
+    noise_rgb = colour_noise(Renderer(vol, a.threads), tex, a.spp, RGB)
+    viewing = Viewing(table, (named_light("D65"),), weighted=not a.equal_groups)
+    weights = viewing.group_weights()
+    spectral = SpectralRenderer(vol, table, a.threads, weights=weights)
+    noise_spec_pilot = colour_noise(spectral, tex, a.spp, d65)
+    spp_spec = max(1, math.ceil(a.spp * (noise_spec_pilot / noise_rgb) ** 2))
+    noise_spec = colour_noise(spectral, tex, spp_spec, d65)
+    del spectral
+    cfg_rgb = OptimizeConfig(iterations=a.iterations, spp=a.spp, forward_spp=a.spp)
+    cfg_spec = OptimizeConfig(iterations=a.iterations, spp=spp_spec, forward_spp=spp_spec)
+    secs = {"rgb": [], "spectral": []}
+    t0 = time.perf_counter()
+    for _ in range(2):  # alternating, so a change of the machine's load falls on both
+        secs["rgb"] += iteration_seconds(scene, cfg_rgb, a.threads, None, a.iterations)
+        secs["spectral"] += iteration_seconds(scene, cfg_spec, a.threads, viewing, a.iterations)
+    per_it = {k: float(np.median(v)) for k, v in secs.items()}
+    out = {
+        "scene": f"Spot {a.spot_mm:g} mm" if a.spot_mm else "reference slab 177x118x30 voxels, chart top, zebra below",
+        "texels": len(tex),
+        "bands": a.bands,
+        "band_groups": len(table.group_bands()),
+        "group_spp": group_spp(spp_spec, weights, len(table.group_bands())),
+        "spectral_table": "Vero RGB coefficients at 610/540/465 nm, linear in wavelength (bench rule)",
+        "rgb_spp": a.spp,
+        "noise_dE76_rgb": noise_rgb,
+        "noise_dE76_spectral_at_rgb_spp": noise_spec_pilot,
+        "spectral_spp_equal_noise": spp_spec,
+        "noise_dE76_spectral": noise_spec,
+        "seconds_per_iteration": per_it,
+        "iteration_seconds": secs,
+        "spectral_over_rgb": per_it["spectral"] / per_it["rgb"],
+        "threads": a.threads,
+        "wall_s": time.perf_counter() - t0,
+        **machine(),
+    }
+    print(
+        f"noise ΔE76: rgb {noise_rgb:.3f} at spp {a.spp}; spectral {noise_spec_pilot:.3f} at spp {a.spp}, "
+        f"{noise_spec:.3f} at spp {spp_spec}; s/iteration rgb {per_it['rgb']:.2f}, spectral {per_it['spectral']:.2f}"
+        f" ({out['spectral_over_rgb']:.2f}x)"
+    )
+    print("wrote", write(f"spectral_cost_spot{a.spot_mm:g}mm.json" if a.spot_mm else "spectral_cost.json", out))
+
+
+if __name__ == "__main__":
+    main()

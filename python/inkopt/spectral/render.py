@@ -1,0 +1,176 @@
+"""Band renders of a spectral ink table through the RGB core: three bands at a time as a path's three "channels".
+
+The core traces each channel of a texel's samples independently (a path carries one channel; its random numbers
+are keyed by (seed, texel, sample, channel)), so a table of B bands renders as ceil(B / 3) RGB-shaped tables
+(``SpectralInkTable.band_groups``), group k with seed :func:`group_seed` (seed, k): the groups' noise is
+independent, group 0 keeps the pass's seed (a 3-band table renders exactly as the RGB renderer renders it), and
+every group is bit-identical for any thread count. A group's fourth-or-later band slot repeats its last band
+(traced, its value dropped, its adjoint 0). Gradients replay each group's paths with the group's adjoints.
+
+Samples per group: a pass of ``spp`` samples gives every group ``spp`` samples unless the renderer has group
+``weights``; then the pass's G x spp samples are shared out in proportion to the weights (Neyman allocation:
+weight = the square root of the group's share of the colour's variance, :func:`group_spp`), at least one each, so
+bands that barely reach the colour (the spectrum's ends) cost little. Each band's estimate stays unbiased and its
+variance (``var_mean``) is its own.
+
+The light's spectrum does not enter transport (``spectral.lights``); what does is the geometric lighting, which
+must be grey (the same radiance in R, G and B: the uniform light or a grey map such as the calibration's upper
+hemisphere): an RGB environment map has no spectrum.
+
+:class:`SpectralRenderer` keeps one core renderer per group (each its own geometry and medium: memory x groups);
+it is a :class:`~inkopt.render.TexelRenderer` whose "rgb" arrays hold B band values per texel.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import replace
+
+import numpy as np
+
+from ..errors import ParameterError
+from ..lighting import Lighting, load_lighting
+from ..model import InkTable, Labels, Mixture, Texels, Volume
+from ..model.spectral import GROUP, SpectralInkTable
+from ..render import PassSettings, Renderer, RendererFactory, RenderResult, TexelRenderer
+
+
+def group_seed(seed: int, group: int) -> int:
+    """The seed of band group ``group`` in a pass of seed ``seed``: ``seed`` itself for group 0, else a hash of
+    (seed, group) in [0, 2^63)."""
+    if group == 0:
+        return int(seed)
+    digest = hashlib.blake2b(f"{int(seed)}:{int(group)}".encode(), digest_size=8).digest()
+    return int.from_bytes(digest, "little") >> 1
+
+
+def group_spp(spp: int, weights: np.ndarray | None, groups: int) -> list[int]:
+    """Samples per texel of each of ``groups`` band groups in a pass of ``spp``: ``spp`` each without ``weights``,
+    else round(G spp w_g / sum w) and at least 1."""
+    if weights is None or groups == 1:
+        return [int(spp)] * groups
+    w = np.asarray(weights, np.float64)
+    return [max(1, int(round(groups * spp * x / w.sum()))) for x in w]
+
+
+def with_inks(volume: Volume, inks: InkTable) -> Volume:
+    """``volume`` with its mixture or labels read with another ink table of the same inks (a band group)."""
+    med = volume.medium
+    if isinstance(med, Mixture):
+        return volume.with_medium(Mixture(med.mixture, inks))
+    if isinstance(med, Labels):
+        return volume.with_medium(Labels(med.labels, inks))
+    raise ParameterError("`volume` must hold a mixture or labels to be rendered with a spectral ink table")
+
+
+def check_grey(lighting: Lighting) -> Lighting:
+    """``lighting`` if its radiance is the same in R, G and B; a ParameterError naming `lighting` otherwise."""
+    env = lighting.map
+    if env is not None and not (np.array_equal(env[..., 0], env[..., 1]) and np.array_equal(env[..., 0], env[..., 2])):
+        raise ParameterError(
+            "`lighting` must be grey (equal R, G, B) with a spectral ink table: the light's spectrum is the illuminant"
+        )
+    return lighting
+
+
+class SpectralRenderer(TexelRenderer):
+    """Renders band values (I, B) of ``volume`` (a mixture or labels of ``table``'s inks; the volume's own ink
+    table gives only the names) with ``table``: one renderer per band group, built by ``factory(volume, threads,
+    lighting)`` (default :class:`~inkopt.render.Renderer`). ``lighting`` must be grey (:func:`check_grey`).
+    ``weights`` (G,) > 0: how a pass's samples are shared among the groups (:func:`group_spp`; None: equally)."""
+
+    def __init__(
+        self,
+        volume: Volume,
+        table: SpectralInkTable,
+        threads: int | None = None,
+        lighting: Lighting | str | None = None,
+        factory: RendererFactory | None = None,
+        weights=None,
+    ):
+        if volume.inks is None or tuple(volume.inks.names) != tuple(table.names):
+            have = None if volume.inks is None else list(volume.inks.names)
+            raise ParameterError(f"`inks` {list(table.names)} must be the volume's inks {have}, in order")
+        self.table = table
+        self.volume = volume
+        self.lighting = check_grey(load_lighting(lighting))
+        self._bands = table.group_bands()
+        # C-contiguous coefficients: the core's label medium takes the ink table's arrays as they are
+        contiguous = lambda g: InkTable(g.names, np.ascontiguousarray(g.sigma_s), np.ascontiguousarray(g.sigma_a), g.g)
+        self._groups = [contiguous(g) for g in table.band_groups()]
+        self.weights = None if weights is None else np.asarray(weights, np.float64)
+        if self.weights is not None and (self.weights.shape != (len(self._groups),) or not np.all(self.weights > 0)):
+            raise ParameterError(f"`weights` must be {len(self._groups)} positive numbers, one per band group")
+        make = factory or Renderer
+        self._renderers = [make(with_inks(volume, g), threads, self.lighting) for g in self._groups]
+
+    @property
+    def threads(self) -> int:
+        return self._renderers[0].threads
+
+    @property
+    def bands(self) -> int:
+        return self.table.bands
+
+    def set_lighting(self, lighting: Lighting | str | None) -> None:
+        light = check_grey(load_lighting(lighting))
+        for r in self._renderers:
+            r.set_lighting(light)
+        self.lighting = light
+
+    def set_volume(self, volume: Volume) -> None:
+        for r, g in zip(self._renderers, self._groups):
+            r.set_volume(with_inks(volume, g))
+        self.volume = volume
+
+    def set_mixture(self, index: np.ndarray, mixture: np.ndarray) -> None:
+        for r in self._renderers:
+            r.set_mixture(index, mixture)
+
+    def _gather(self, results: list[RenderResult], settings: PassSettings) -> RenderResult:
+        """The groups' results as one: (I, B) band values and variances, counts and seconds summed."""
+        n = len(results[0].rgb)
+        values = np.empty((n, self.bands), np.float32)
+        var = np.empty((n, self.bands), np.float32)
+        for res, bands in zip(results, self._bands):
+            values[:, bands] = res.rgb[:, : len(bands)]
+            var[:, bands] = res.var_mean[:, : len(bands)]
+        counts = ("paths", "events", "replayed_paths", "replayed_events")
+        total = {k: sum(getattr(r, k) for r in results) for k in counts}
+        return RenderResult(values, var, int(settings.spp), sum(r.seconds for r in results), **total)
+
+    def render_pass(self, texels: Texels, settings: PassSettings, progress: bool = False) -> RenderResult:
+        """Band values (I, B) float32 and their variances: each group rendered with its :func:`group_seed`."""
+        results = [r.render_pass(texels, self._settings(settings, k), progress) for k, r in enumerate(self._renderers)]
+        return self._gather(results, settings)
+
+    def _settings(self, settings: PassSettings, group: int) -> PassSettings:
+        """Group ``group``'s pass: its seed (:func:`group_seed`) and samples (:func:`group_spp`)."""
+        spp = group_spp(settings.spp, self.weights, len(self._groups))[group]
+        return replace(settings, seed=group_seed(settings.seed, group), spp=spp)
+
+    def gradient_pass(
+        self,
+        texels: Texels,
+        adjoint: np.ndarray,
+        settings: PassSettings,
+        grad_index: np.ndarray | None = None,
+        progress: bool = False,
+    ) -> tuple[np.ndarray, np.ndarray, RenderResult]:
+        """``adjoint`` (I, B) = de/d band values -> (de/dsigma_s, de/dsigma_a) shaped like the RGB renderer's
+        with B bands in the last axis (float32), and the pass's own band estimate; each group replays its paths."""
+        adjoint = np.asarray(adjoint, np.float32)
+        if adjoint.shape != (len(texels), self.bands):
+            raise ParameterError(f"`adjoint` must have shape ({len(texels)}, {self.bands}), got {adjoint.shape}")
+        gs = ga = None
+        results = []
+        for k, (r, bands) in enumerate(zip(self._renderers, self._bands)):
+            adj = np.zeros((len(texels), GROUP), np.float32)
+            adj[:, : len(bands)] = adjoint[:, bands]
+            s, a, res = r.gradient_pass(texels, adj, self._settings(settings, k), grad_index)
+            if gs is None:
+                gs = np.empty(s.shape[:-1] + (self.bands,), np.float32)
+                ga = np.empty_like(gs)
+            gs[..., bands], ga[..., bands] = s[..., : len(bands)], a[..., : len(bands)]
+            results.append(res)
+        return gs, ga, self._gather(results, settings)

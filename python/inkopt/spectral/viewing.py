@@ -1,0 +1,104 @@
+"""Spectral or RGB: how a run's prediction becomes colour, chosen from its ink table and its lights.
+
+A run with an RGB ink table and no light, or D65 (the white of linear sRGB, docs/conventions.md), takes the RGB path
+unchanged: three channels, CIELAB of linear sRGB. A spectral ink table renders its bands
+(:class:`~inkopt.spectral.render.SpectralRenderer`) and takes its colour under each light asked
+(``spectral.lights``; D65 when none is); several lights combine by their mean or worst loss. An RGB table has no
+spectrum, so any other light needs a spectral table.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..color import RGB, ColourMap
+from ..errors import ParameterError
+from ..loss import COMBINE, TexelLoss
+from ..model.spectral import SpectralInkTable
+from ..render import RendererFactory
+from .lights import Light, named_light
+from .render import SpectralRenderer
+
+#: the light of the RGB path (linear sRGB's white)
+RGB_LIGHT = "D65"
+
+
+@dataclass(frozen=True)
+class Viewing:
+    """``table``: the spectral ink table (None: the RGB path); ``lights``: what the print is seen under (empty: D65);
+    ``combine``: "mean" or "worst" of the loss under several lights; ``weighted``: a pass's samples shared among the
+    band groups by :meth:`group_weights` (False: equally)."""
+
+    table: SpectralInkTable | None = None
+    lights: tuple[Light, ...] = ()
+    combine: str = "mean"
+    weighted: bool = True
+
+    def __post_init__(self):
+        object.__setattr__(self, "lights", tuple(self.lights))
+        if self.combine not in COMBINE:
+            raise ParameterError(f"`combine` must be one of {', '.join(COMBINE)}, got {self.combine!r}")
+        if self.table is None and any(light.name != RGB_LIGHT for light in self.lights):
+            names = ",".join(light.name for light in self.lights)
+            raise ParameterError(f"`illuminants` {names}: a light other than {RGB_LIGHT} needs a spectral ink table")
+        if len({light.name for light in self.lights}) != len(self.lights):
+            raise ParameterError("`illuminants` names a light twice")
+
+    @property
+    def spectral(self) -> bool:
+        return self.table is not None
+
+    def seen_under(self) -> tuple[Light, ...]:
+        """The lights the colour is taken under: the ones asked, or D65."""
+        return self.lights or (named_light(RGB_LIGHT),)
+
+    def colours(self) -> tuple[ColourMap, ...]:
+        """One colour map per light: linear sRGB on the RGB path, else the table's bands under each light."""
+        if self.table is None:
+            return (RGB,)
+        return tuple(light.colour_map(self.table.wavelengths_nm) for light in self.seen_under())
+
+    def loss(self, target_rgb, pos_vox, gamma) -> TexelLoss:
+        """The run's loss (``TexelLoss``) of targets (I, 3) linear RGB under :meth:`colours`, combined as asked."""
+        return TexelLoss(target_rgb, pos_vox, gamma, colours=self.colours(), combine=self.combine)
+
+    def renderer_factory(self, inner: RendererFactory) -> RendererFactory:
+        """What renders a run: ``inner`` on the RGB path, else band renders through ``inner`` per group."""
+        table = self.table
+        if table is None:
+            return inner
+        w = self.group_weights()
+        return lambda volume, threads, lighting: SpectralRenderer(volume, table, threads, lighting, inner, w)
+
+    def group_weights(self) -> np.ndarray | None:
+        """(G,) the band groups' sample weights (``spectral.render.group_spp``; None unless ``weighted``): the square
+        root of each group's share of the CIELAB variance of a mid grey (reflectance 0.18 in every band) summed over
+        the lights, every band's variance taken equal."""
+        if not self.weighted:
+            return None
+        grey = np.full(self.table.bands, 0.18)
+        per_band = sum(np.sum(c.lab_jacobian(grey) ** 2, axis=0) for c in self.colours())
+        return np.sqrt([per_band[list(b)].sum() for b in self.table.group_bands()])
+
+    def key(self) -> str | None:
+        """What identifies a spectral viewing in a checkpoint's key (None on the RGB path: its key is unchanged)."""
+        if self.table is None:
+            return None
+        h = hashlib.sha256()
+        t = self.table
+        for arr in (t.wavelengths_nm, t.sigma_s, t.sigma_a, np.array([t.g])):
+            h.update(np.ascontiguousarray(arr, np.float64).tobytes())
+        for light in self.seen_under():
+            h.update(light.name.encode())
+            h.update(np.ascontiguousarray(light.on_grid()).tobytes())
+        return f"{self.combine}:{h.hexdigest()[:16]}"
+
+    def describe(self) -> dict:
+        """Report fields: spectral or RGB, the bands, the lights and how they combine."""
+        d = {"colour": "spectral" if self.spectral else "rgb", "illuminants": [x.name for x in self.seen_under()]}
+        if self.table is not None:
+            d.update(bands=self.table.bands, combine=self.combine)
+        return d
