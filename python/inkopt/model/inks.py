@@ -62,7 +62,7 @@ class InkTable:
             if problem := ink_name_problem(name):
                 raise ValueError(f"ink name {name!r} {problem}")
         for key in ("sigma_s", "sigma_a"):
-            arr = np.asarray(getattr(self, key), dtype=np.float64)
+            arr = np.ascontiguousarray(getattr(self, key), dtype=np.float64)  # the core takes its arrays as they are
             if arr.shape != (n, 3):
                 raise ValueError(f"ink table {key} must have shape ({n}, 3), got {arr.shape}")
             if not np.all(np.isfinite(arr)) or np.any(arr < 0):

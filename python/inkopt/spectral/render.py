@@ -95,9 +95,7 @@ class SpectralRenderer(TexelRenderer):
         self.volume = volume
         self.lighting = check_grey(load_lighting(lighting))
         self._bands = table.group_bands()
-        # C-contiguous coefficients: the core's label medium takes the ink table's arrays as they are
-        contiguous = lambda g: InkTable(g.names, np.ascontiguousarray(g.sigma_s), np.ascontiguousarray(g.sigma_a), g.g)
-        self._groups = [contiguous(g) for g in table.band_groups()]
+        self._groups = table.band_groups()
         self.weights = None if weights is None else np.asarray(weights, np.float64)
         if self.weights is not None and (self.weights.shape != (len(self._groups),) or not np.all(self.weights > 0)):
             raise ParameterError(f"`weights` must be {len(self._groups)} positive numbers, one per band group")
