@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from PIL import Image
 
@@ -244,8 +244,21 @@ def _write(folder: Path, files: dict) -> Path:
     return folder / "m.obj"
 
 
+#: an OBJ without vt lines, one material textured and one not: trimesh's atlas gives every face uv of its own, which
+#: looked the faces up in the wrong cells (black and red where red and blue were meant)
+NO_VT_TWO_MATERIALS = {
+    "m.obj": "mtllib m.mtl\n"
+    + "".join(f"v {x} {y} {z}\n" for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5))
+    + "usemtl other\nf 2 4 1\nf 5 2 1\nf 1 4 3\nf 3 5 1\nf 2 8 4\nf 6 2 5\n"
+    + "usemtl mat\nf 6 8 2\nf 4 8 3\nf 7 5 3\nf 3 8 7\nf 7 6 5\nf 8 6 7\n",
+    "m.mtl": "newmtl other\nKd 0 0 1\nmap_Kd small.png\nnewmtl mat\nKd 0 0 1\n",
+    "other.mtl": "\n",
+}
+
+
 @FAST
 @given(obj_files())
+@example(files=NO_VT_TWO_MATERIALS)
 def test_obj_material_resolution(files):
     """Either one clean error, or a mesh whose target is its real texture: red at every face of a textured
     material, its Kd (blue) at every face of an untextured one, a texture of a file's size (or an atlas of them),

@@ -177,6 +177,8 @@ def load_mesh(
     # resolve, accepted with `texture` or `constant_color`) is not a colour of the file.
     placeholder = obj is not None and (not obj.mtllibs or resolved.placeholder)
     mesh = mesh_from_trimesh(tm, height_mm=height_mm, scale=scale, up=up, source=str(path), placeholder=placeholder)
+    if obj is not None and not obj.has_uv:  # an OBJ without vt lines: uv trimesh made for an atlas are not the file's
+        mesh.uv = None
     if not resolved.alpha:  # an atlas's padding is transparent: no alpha of the file's
         mesh.texture_alpha = None
     if override is not None:
