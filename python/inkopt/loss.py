@@ -29,18 +29,95 @@ FLAT_CHROMA_STD = 2.0
 
 
 # ----------------------------------------------------------------------------- neighbourhood operators
-#: texel rows of the window matrix built at a time (``gaussian_window``: its transient memory, ~60 MB)
+#: texel rows of the window built or applied at a time (``gaussian_window``, ``WindowOperator``: transient memory)
 WINDOW_CHUNK_ROWS = 1 << 13
+
+
+class WindowOperator:
+    """The texel window's weights K (I, I) float64, stored as CSR structure (``indptr`` (I + 1,), ``indices``, int32
+    or int64, columns sorted in each row) and per entry a ``code`` (uint8 or uint16) into ``values`` (float64): a
+    window weight depends only on the squared distance, which takes few distinct values on the voxel lattice, so K
+    takes 5-6 bytes per entry instead of 12 and K squared (``squared``: the same codes into ``values`` squared)
+    none of its own. ``codes`` None: ``values`` holds one weight per entry (positions off any lattice).
+
+    ``K @ x`` (x (I,) or (I, k)) and ``row_sums`` are computed ``WINDOW_CHUNK_ROWS`` rows at a time, each row as a
+    CSR matrix with these entries computes it (``csr_matvec(s)``, ``np.add.reduceat``), so results are bit-identical
+    to ``tocsr()``'s."""
+
+    def __init__(self, indptr: np.ndarray, indices: np.ndarray, codes: np.ndarray | None, values: np.ndarray):
+        self.indptr, self.indices, self.codes, self.values = indptr, indices, codes, values
+        n = len(indptr) - 1
+        self.shape = (n, n)
+
+    @property
+    def nnz(self) -> int:
+        return int(self.indptr[-1])
+
+    @property
+    def squared(self) -> WindowOperator:
+        """K squared entrywise (the noise of windowed statistics): the same structure, no copy of it."""
+        return WindowOperator(self.indptr, self.indices, self.codes, self.values * self.values)
+
+    def _rows(self, s: int, e: int) -> sp.csr_matrix:
+        """Rows s:e as a CSR matrix (e - s, I)."""
+        a, b = int(self.indptr[s]), int(self.indptr[e])
+        data = self.values[a:b] if self.codes is None else self.values[self.codes[a:b]]
+        return sp.csr_matrix((data, self.indices[a:b], self.indptr[s : e + 1] - a), shape=(e - s, self.shape[1]))
+
+    def __matmul__(self, x) -> np.ndarray:
+        x = np.asarray(x)
+        out = np.empty((self.shape[0], *x.shape[1:]), np.result_type(x.dtype, np.float64))
+        for s in range(0, self.shape[0], WINDOW_CHUNK_ROWS):
+            e = min(self.shape[0], s + WINDOW_CHUNK_ROWS)
+            out[s:e] = self._rows(s, e) @ x
+        return out
+
+    def row_sums(self) -> np.ndarray:
+        """(I,) float64 K @ 1, summed as ``csr_matrix.sum(axis=1)`` sums (every row has its diagonal entry)."""
+        out = np.empty(self.shape[0])
+        for s in range(0, self.shape[0], WINDOW_CHUNK_ROWS):
+            e = min(self.shape[0], s + WINDOW_CHUNK_ROWS)
+            rows = self._rows(s, e)
+            out[s:e] = np.add.reduceat(rows.data, rows.indptr[:-1])
+        return out
+
+    def tocsr(self) -> sp.csr_matrix:
+        """The whole of K as a CSR matrix (small problems, tests)."""
+        return self._rows(0, self.shape[0])
+
+    def toarray(self) -> np.ndarray:
+        return self.tocsr().toarray()
+
+
+class _Codes:
+    """Codes of float64 values into a table that grows as new values come (``table``: in the order they came)."""
+
+    def __init__(self):
+        self.values = np.empty(0)  # the table
+        self._keys, self._code = np.empty(0), np.empty(0, np.int64)  # the table sorted, and each key's code
+
+    def of(self, x: np.ndarray) -> np.ndarray:
+        """(len(x),) int64 codes of the values ``x`` (new ones added to the table)."""
+        at = np.searchsorted(self._keys, x)
+        known = at < len(self._keys)
+        known[known] = self._keys[at[known]] == x[known]
+        if not known.all():
+            self.values = np.concatenate([self.values, np.unique(x[~known])])
+            order = np.argsort(self.values, kind="stable")
+            self._keys, self._code = self.values[order], order
+            at = np.searchsorted(self._keys, x)
+        return self._code[at]
 
 
 def gaussian_window(pos_vox: np.ndarray, sigma: float):
     """Texel Gaussian window W = diag(1/n) K.
 
-    K (I, I) CSR float64 is symmetric with K_ij = exp(-|p_i - p_j|^2 / (2 sigma^2)) for texels whose Chebyshev
-    distance is <= radius = int(3.5 sigma + 0.5) (voxels), n (I,) = K @ 1 the window weight that falls on texels.
-    On a flat face's interior W equals scikit-image's (truncate=3.5) Gaussian window. Returns (K, n, radius).
+    K (I, I) (``WindowOperator``) is symmetric with K_ij = exp(-|p_i - p_j|^2 / (2 sigma^2)) for texels whose
+    Chebyshev distance is <= radius = int(3.5 sigma + 0.5) (voxels), n (I,) = K @ 1 the window weight that falls on
+    texels. On a flat face's interior W equals scikit-image's (truncate=3.5) Gaussian window. Returns (K, n, radius).
     K is written into its final arrays ``WINDOW_CHUNK_ROWS`` rows at a time (columns sorted within each row), so
-    building it takes little more than K itself (12 bytes per entry, ~120 entries per texel on a face).
+    building it takes little more than K itself (~5 bytes per entry, ~120 entries per texel on a face; 9 while it
+    is built).
     """
     pos = np.asarray(pos_vox, np.float64)
     radius = int(3.5 * sigma + 0.5)
@@ -53,9 +130,9 @@ def gaussian_window(pos_vox: np.ndarray, sigma: float):
     idx = np.int32 if int(counts.sum()) < np.iinfo(np.int32).max else np.int64
     indptr = np.zeros(n_tex + 1, idx)
     np.cumsum(counts, out=indptr[1:])
+    del counts
     indices = np.empty(int(indptr[-1]), idx)
-    data = np.empty(int(indptr[-1]), np.float64)
-    scale = -0.5 / (sigma * sigma)
+    codes, table = np.empty(int(indptr[-1]), np.uint32), _Codes()
     for s in range(0, n_tex, WINDOW_CHUNK_ROWS):
         e = min(n_tex, s + WINDOW_CHUNK_ROWS)
         m = cKDTree(pos[s:e]).sparse_distance_matrix(tree, reach, p=np.inf, output_type="ndarray")
@@ -69,9 +146,16 @@ def gaussian_window(pos_vox: np.ndarray, sigma: float):
             d = pos[col, a] - pos[row, a]
             d2 += d * d
         indices[indptr[s] : indptr[e]] = col
-        data[indptr[s] : indptr[e]] = np.exp(d2 * scale)
-    k = sp.csr_matrix((data, indices, indptr), shape=(n_tex, n_tex))
-    return k, np.asarray(k.sum(axis=1)).ravel(), radius
+        codes[indptr[s] : indptr[e]] = table.of(d2)
+    values = np.exp(table.values * (-0.5 / (sigma * sigma)))
+    for small in (np.uint8, np.uint16):
+        if len(values) <= np.iinfo(small).max + 1:
+            codes = codes.astype(small)
+            break
+    else:  # positions off any lattice: one weight per entry
+        codes, values = None, values[codes]
+    k = WindowOperator(indptr, indices, codes, values)
+    return k, k.row_sums(), radius
 
 
 def sobel_operators(pos_vox: np.ndarray, tol: float = 1e-6) -> sp.csr_matrix:
@@ -183,8 +267,8 @@ class TexelLoss:
         self.flat = (np.sqrt(var[:, 0]) < FLAT_L_STD) & (np.sqrt(var[:, 1] + var[:, 2]) < FLAT_CHROMA_STD)
 
     @property
-    def K(self) -> sp.csr_matrix:
-        """The window's weights (``gaussian_window``), (I, I) CSR float64; built on first use."""
+    def K(self) -> WindowOperator:
+        """The window's weights (``gaussian_window``), (I, I) float64; built on first use."""
         if self._K is None:
             self._K, self._wsum, _ = gaussian_window(self._pos, self.sigma)
         return self._K
@@ -197,11 +281,10 @@ class TexelLoss:
         return self._wsum
 
     @property
-    def K2(self) -> sp.csr_matrix:
-        """K squared entrywise (the noise of windowed statistics), sharing K's indices; built on first use."""
-        if self._K2 is None:  # K has no explicit zeros, so its sparsity pattern is K2's
-            K = self.K
-            self._K2 = sp.csr_matrix((K.data * K.data, K.indices, K.indptr), shape=K.shape)
+    def K2(self) -> WindowOperator:
+        """K squared entrywise (the noise of windowed statistics), sharing K's structure; built on first use."""
+        if self._K2 is None:
+            self._K2 = self.K.squared
         return self._K2
 
     @property
@@ -212,9 +295,9 @@ class TexelLoss:
         return self._S
 
     def release_operators(self) -> None:
-        """Free the sparse window and Sobel operators (~2.5 KB per texel with the noise correction's K squared:
-        0.95 GiB at 387 k texels); the next call that needs them builds them again, equal to the last. A
-        colour-only training step (``all_terms=False`` at γ2 = γ3 = 0) never reads them."""
+        """Free the window and Sobel operators (~0.8 KB per texel: the window's ~120 entries of 5 bytes, its
+        square sharing them, the Sobel operators' ~17 entries of 12 bytes); the next call that needs them builds
+        them again, equal to the last. A colour-only training step (``all_terms=False`` at γ2 = γ3 = 0) never reads them."""
         self._K = self._K2 = self._S = self._ST = None
 
     @property

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 from skimage import color as skcolor
 from skimage.color.colorconv import _illuminants
 from skimage.metrics import structural_similarity
@@ -78,7 +79,7 @@ def test_gaussian_window_rows_and_interior():
     centre = 15 * 30 + 15
     np.testing.assert_allclose(wsum[centre], g1.sum() ** 2)
     np.testing.assert_allclose((k.toarray() - k.toarray().T), 0.0)
-    row = (k[centre].toarray() / wsum[centre]).reshape(shape)[10:21, 10:21]
+    row = (k.toarray()[centre] / wsum[centre]).reshape(shape)[10:21, 10:21]
     np.testing.assert_allclose(row, np.outer(g1, g1) / g1.sum() ** 2)
     assert wsum[0] < wsum[centre]  # corner texels see less of the window
     # skimage's window for Gaussian SSIM: win_size = 2 * int(3.5 * sigma + 0.5) + 1
@@ -98,7 +99,7 @@ def test_gaussian_window_in_chunks_equals_the_dense_definition(monkeypatch):
     diff = pos[:, None, :] - pos[None, :, :]
     want = np.where(np.abs(diff).max(-1) <= r + 1e-6, np.exp(-(diff**2).sum(-1) / (2 * 1.5**2)), 0.0)
     np.testing.assert_allclose(k.toarray(), want, rtol=1e-14, atol=0)
-    assert k.has_sorted_indices and k.nnz == np.count_nonzero(want)
+    assert k.tocsr().has_sorted_indices and k.nnz == np.count_nonzero(want)
     np.testing.assert_allclose(wsum, want.sum(1), rtol=1e-12)
 
 
@@ -263,3 +264,23 @@ def test_noise_corrected_loss_gradient():
         f = lambda p, noise=noise: lf._value_with_noise(p, noise)
         num[i] = (f(pred + e) - f(pred - e)) / (2 * h)
     np.testing.assert_allclose(g, num, rtol=1e-4, atol=1e-9)
+
+
+@pytest.mark.parametrize("jitter", [0.0, 1e-3])
+def test_window_operator_products_equal_its_csr_bit_for_bit(monkeypatch, jitter):
+    """K's products (vectors, several columns, K squared) and row sums, taken a few rows at a time from the coded
+    weights, equal those of the CSR matrix with the same entries bit for bit; positions off the lattice (jitter)
+    give one weight per entry (more than 2^16 distinct weights)."""
+    rng = _rng()
+    pos = Texels.box_faces((9, 7, 8)).pos_vox if jitter == 0 else _flat_face(40, 40)[0]
+    pos = pos + jitter * rng.standard_normal(pos.shape)
+    monkeypatch.setattr(loss, "WINDOW_CHUNK_ROWS", 37 if jitter == 0 else 512)
+    k, wsum, _ = loss.gaussian_window(pos, 1.5)
+    assert (k.codes is None) == (jitter > 0) and (jitter > 0 or k.codes.dtype == np.uint8)
+    c = k.tocsr()
+    np.testing.assert_array_equal(wsum, np.asarray(c.sum(axis=1)).ravel())
+    x = rng.standard_normal((len(pos), 9))
+    np.testing.assert_array_equal(k @ x, c @ x)
+    np.testing.assert_array_equal(k @ x[:, 0], c @ x[:, 0])
+    c2 = sp.csr_matrix((c.data * c.data, c.indices, c.indptr), shape=c.shape)
+    np.testing.assert_array_equal(k.squared @ x, c2 @ x)
