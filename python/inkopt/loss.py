@@ -297,7 +297,8 @@ class TexelLoss:
     def release_operators(self) -> None:
         """Free the window and Sobel operators (~0.8 KB per texel: the window's ~120 entries of 5 bytes, its
         square sharing them, the Sobel operators' ~17 entries of 12 bytes); the next call that needs them builds
-        them again, equal to the last. A colour-only training step (``all_terms=False`` at γ2 = γ3 = 0) never reads them."""
+        them again, equal to the last. A colour-only training step (``all_terms=False`` at γ2 = γ3 = 0) never
+        reads them."""
         self._K = self._K2 = self._S = self._ST = None
 
     @property
