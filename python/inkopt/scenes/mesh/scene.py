@@ -64,7 +64,9 @@ def free_voxels(vox: VoxelizedObject, shell_mm: float | None = None) -> np.ndarr
         return vox.inside.copy()
     if not (np.isfinite(shell_mm) and shell_mm > 0):
         raise ParameterError(f"`shell_mm` must be a positive thickness in mm, got {shell_mm}")
-    free = vox.inside & (vox.sdf >= -np.float32(shell_mm))
+    free = np.empty_like(vox.inside)
+    for z in range(0, free.shape[0], 32):  # a slab of layers at a time: no grid-sized temporary
+        free[z : z + 32] = vox.inside[z : z + 32] & (vox.sdf[z : z + 32] >= -np.float32(shell_mm))
     free[tuple(vox.texels.voxel.T)] = True
     return free
 
