@@ -1,7 +1,9 @@
 """Peak memory of a mesh run's per-texel and per-grid-voxel stages, each in its own process, for two code trees in
 one session (before / after a change), on Spot.
 
-    python bench/bench_stages.py 40 [--shell-mm 1] [--code main=/work/main/python --code new=python]
+    python bench/bench_stages.py 40 [--shell-mm 1] [--code main=MAIN/python --code new=python]
+
+(MAIN: a checkout of the code before the change; without --code, only this tree's, labelled new.)
 
 Stages (each a fresh process, its peak resident memory by ``os.wait4``, less the same process's memory before the
 stage, so the interpreter and libraries are not counted):
@@ -99,9 +101,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("height_mm", type=float)
     ap.add_argument("--shell-mm", type=float)
-    ap.add_argument("--code", action="append", help="LABEL=PYTHON_DIR (default main=/work/main/python, new=python)")
+    ap.add_argument("--code", action="append", help="LABEL=PYTHON_DIR, repeated (default new=this tree's python)")
     args = ap.parse_args()
-    codes = dict(c.split("=", 1) for c in (args.code or ["main=/work/main/python", f"new={ROOT / 'python'}"]))
+    codes = dict(c.split("=", 1) for c in (args.code or [f"new={ROOT / 'python'}"]))
     shell = "none" if args.shell_mm is None else f"{args.shell_mm:g}"
     name = f"{args.height_mm:g}mm" + ("" if args.shell_mm is None else f"_shell{args.shell_mm:g}")
     entries = {}
