@@ -18,7 +18,7 @@ LAYERS = [
     {"model"},
     {"rundir"},
     {"render", "distributed"},
-    {"loss", "spectral"},
+    {"neighbourhood", "loss", "spectral"},
     {"scenes"},
     {"optim"},
     {"printing"},

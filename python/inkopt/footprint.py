@@ -41,15 +41,15 @@ from .units import format_duration, voxel_mm
 #: the interpreter, numpy, the extension and the ink tables before a scene is built: the 'start' peak of
 #: bench/results/mesh_*mm.json is 0.066-0.070 GiB
 BASE_BYTES = 0.07 * 2**30
-#: voxelization (the mesh's stage before the run), fitted to the 'after_voxelize' peaks of bench/results/mesh_10mm,
-#: 20mm, 40mm and 60mm.json (less 'start') within 10 %: per grid voxel the winding-number inside mask and the
-#: signed distances (4 B of float32 plus the mask's byte, freed in blocks), per texel its closest points, faces,
-#: normals and colours and the near-surface queries' temporaries
-VOXELIZE_GRID_BYTES = 4.1
-VOXELIZE_TEXEL_BYTES = 2330.0
-#: ... and per texel for each voxel the signed distance must be exact beyond the default band of 3 (a shell or a
-#: translucent layer widens it): bench/results/mesh_20mm_shell1.json, mesh_20mm_shell0.5.json (within 8 %)
-VOXELIZE_BAND_TEXEL_BYTES = 300.0
+#: voxelization and the scene's masks (the mesh's stage before the run), by what the code stores: per grid voxel the
+#: inside mask (1 B), the signed distances (float32, 4 B) and the free mask (1 B), all at the grid's own shape and
+#: filled a slab or a chunk at a time; the near-surface queries' chunks (``voxelize._NEAR_VOXELS``: a fixed size,
+#: whatever the object or the exact-distance band) and per texel its closest points, faces, normals, colours and
+#: exposed faces, fitted to the voxelization stage of bench/results/stages_spot.json, 20mm_shell1_new and
+#: 40mm_shell1_new (0.137 and 0.571 GiB less 5 B per grid voxel: 0.05 GiB + 700 B per texel)
+VOXELIZE_GRID_BYTES = 6.0
+VOXELIZE_FIXED_BYTES = 0.05 * 2**30
+VOXELIZE_TEXEL_BYTES = 700.0
 DEFAULT_BAND = 3
 #: the run holds, by what the code stores (docs/performance.md, "Memory, by what the code stores"), per grid voxel
 #: the inside and free masks, the base's labels and the core's distance byte, and per inside voxel the core's sparse
@@ -63,11 +63,13 @@ RUN_INSIDE_BYTES = 24.0
 STEP_FREE_BYTES = 148.0
 STEP_TEXEL_BYTES = 128.0
 #: - the figures (the start's, the baseline's, the result's): per free voxel the variables and momentum (40 B) and
-#:   per texel the loss's SSIM and Sobel operators (~2.5 KB), the figures' renders and what the allocator keeps
-#:   of them: 6.6 KB from the peak of a whole run of Spot 20 mm (bench/results/footprint_spot.json, run_20mm,
-#:   0.82 GiB), which puts Spot 40 mm within 5 % of its whole run's peak (run_40mm there)
+#:   per texel the loss's SSIM window (~120 entries of 5 B, its square sharing them) and Sobel operators (~17 entries
+#:   of 12 B), the metrics' temporaries, the figures' renders and what the allocator keeps of them: the 6.6 KB
+#:   fitted to the peak of a whole run of Spot 20 mm (bench/results/footprint_spot.json, run_20mm, 0.82 GiB) less
+#:   the 1.8 KB the loss's side no longer takes since its window is coded (4.0 -> 2.2 KB per texel:
+#:   bench/results/stages_spot.json, 20mm_shell1_main and _new)
 FIGURES_FREE_BYTES = 40.0
-FIGURES_TEXEL_BYTES = 6600.0
+FIGURES_TEXEL_BYTES = 4800.0
 #: a run with a shell stores the core's medium only for its band (the free voxels: ``BandMedium``), so its held
 #: per-inside term counts the free voxels; its iterations then peaked at 1.49x (Spot 40 mm) and 1.40x (60 mm, both
 #: 1 mm shells) what the held and step terms give (bench/results/mesh_40mm_shell1_band.json,
@@ -157,8 +159,7 @@ class Footprint:
         (module docstring)."""
         if self.kind == "slab":
             return BASE_BYTES + SLAB_VOXEL_BYTES * self.grid_voxels + FIGURES_TEXEL_BYTES * self.texels
-        per_texel = VOXELIZE_TEXEL_BYTES + VOXELIZE_BAND_TEXEL_BYTES * max(self.band - DEFAULT_BAND, 0.0)
-        voxelize = VOXELIZE_GRID_BYTES * self.grid_voxels + per_texel * self.texels
+        voxelize = VOXELIZE_GRID_BYTES * self.grid_voxels + VOXELIZE_FIXED_BYTES + VOXELIZE_TEXEL_BYTES * self.texels
         medium_voxels = self.free_voxels if self.shell else self.inside_voxels
         held = RUN_GRID_BYTES * self.grid_voxels + RUN_INSIDE_BYTES * medium_voxels
         step = (held + STEP_FREE_BYTES * self.free_voxels + STEP_TEXEL_BYTES * self.texels) * (

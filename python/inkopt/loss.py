@@ -14,9 +14,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.spatial import cKDTree
 
 from .color import LAB_NORM_SCALE, RGB, ColourMap, linear_to_lab, normalise_lab
+from .neighbourhood import WindowOperator, gaussian_window, sobel_operators
 
 K1 = 0.01**2
 K2 = 0.03**2
@@ -31,89 +31,8 @@ FLAT_L_STD = 1.0
 FLAT_CHROMA_STD = 2.0
 
 
-# ----------------------------------------------------------------------------- neighbourhood operators
 #: how a loss over several lights combines the loss under each
 COMBINE = ("mean", "worst")
-#: texel rows of the window matrix built at a time (``gaussian_window``: its transient memory, ~60 MB)
-WINDOW_CHUNK_ROWS = 1 << 13
-
-
-def gaussian_window(pos_vox: np.ndarray, sigma: float):
-    """Texel Gaussian window W = diag(1/n) K.
-
-    K (I, I) CSR float64 is symmetric with K_ij = exp(-|p_i - p_j|^2 / (2 sigma^2)) for texels whose Chebyshev
-    distance is <= radius = int(3.5 sigma + 0.5) (voxels), n (I,) = K @ 1 the window weight that falls on texels.
-    On a flat face's interior W equals scikit-image's (truncate=3.5) Gaussian window. Returns (K, n, radius).
-    K is written into its final arrays ``WINDOW_CHUNK_ROWS`` rows at a time (columns sorted within each row), so
-    building it takes little more than K itself (12 bytes per entry, ~120 entries per texel on a face).
-    """
-    pos = np.asarray(pos_vox, np.float64)
-    radius = int(3.5 * sigma + 0.5)
-    n_tex = len(pos)
-    reach = radius + 1e-6
-    tree = cKDTree(pos)
-    pairs = tree.query_pairs(reach, p=np.inf, output_type="ndarray")  # (i < j) pairs: each row's entry count
-    counts = np.bincount(pairs[:, 0], minlength=n_tex) + np.bincount(pairs[:, 1], minlength=n_tex) + 1
-    del pairs
-    idx = np.int32 if int(counts.sum()) < np.iinfo(np.int32).max else np.int64
-    indptr = np.zeros(n_tex + 1, idx)
-    np.cumsum(counts, out=indptr[1:])
-    indices = np.empty(int(indptr[-1]), idx)
-    data = np.empty(int(indptr[-1]), np.float64)
-    scale = -0.5 / (sigma * sigma)
-    for s in range(0, n_tex, WINDOW_CHUNK_ROWS):
-        e = min(n_tex, s + WINDOW_CHUNK_ROWS)
-        m = cKDTree(pos[s:e]).sparse_distance_matrix(tree, reach, p=np.inf, output_type="ndarray")
-        order = np.argsort(m["i"] * n_tex + m["j"])  # by row, then column
-        row, col = m["i"][order] + s, m["j"][order]
-        del m, order
-        if len(row) != indptr[e] - indptr[s]:
-            raise RuntimeError("texel window: the neighbour search disagrees with its counts")
-        d2 = np.zeros(len(row))
-        for a in range(3):
-            d = pos[col, a] - pos[row, a]
-            d2 += d * d
-        indices[indptr[s] : indptr[e]] = col
-        data[indptr[s] : indptr[e]] = np.exp(d2 * scale)
-    k = sp.csr_matrix((data, indices, indptr), shape=(n_tex, n_tex))
-    return k, np.asarray(k.sum(axis=1)).ravel(), radius
-
-
-def sobel_operators(pos_vox: np.ndarray, tol: float = 1e-6) -> sp.csr_matrix:
-    """Stacked 3D Sobel operators S = [S_x; S_y; S_z], shape (3I, I) CSR float64 (row a*I + i: axis a, texel i).
-
-    The kernel of axis a at integer offset o in {-1,0,1}^3 is d(o_a) s(o_b) s(o_c) with d = (-1, 0, 1),
-    s = (1, 2, 1). Neighbours are texels at exactly that lattice offset (within ``tol``); texels across a box
-    edge (offsets of 0.5) are not neighbours. Border handling ("replicate the centre"): the kernel weight of a
-    missing neighbour goes to the centre texel, so each row sums to 0 (a constant field has no edges). On a
-    flat face's interior, the in-plane operators equal 2x the 2D Sobel operator (the two missing out-of-plane
-    layers cancel) and the normal-axis operator is 0.
-    """
-    pos = np.asarray(pos_vox, np.float64)
-    n_tex = len(pos)
-    pairs = cKDTree(pos).query_pairs(1.0 + tol, p=np.inf, output_type="ndarray")
-    off = pos[pairs[:, 1]] - pos[pairs[:, 0]]
-    r = np.rint(off)
-    keep = np.all(np.abs(off - r) <= tol, axis=1) & np.any(r != 0, axis=1)
-    i, j, r = pairs[keep, 0], pairs[keep, 1], r[keep].astype(np.int64)
-    dtap = np.array([-1.0, 0.0, 1.0])
-    stap = np.array([1.0, 2.0, 1.0])
-    rows, cols, vals = [], [], []
-    for a in range(3):
-        b, c = [x for x in range(3) if x != a]
-        w = dtap[r[:, a] + 1] * stap[r[:, b] + 1] * stap[r[:, c] + 1]  # weight of j in row i; row j gets -w
-        nz = w != 0
-        wi, ii, jj = w[nz], i[nz], j[nz]
-        centre = -(np.bincount(ii, wi, n_tex) - np.bincount(jj, wi, n_tex))
-        rows += [a * n_tex + ii, a * n_tex + jj, a * n_tex + np.arange(n_tex)]
-        cols += [jj, ii, np.arange(n_tex)]
-        vals += [wi, -wi, centre]
-    s = sp.coo_matrix(
-        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * n_tex, n_tex)
-    ).tocsr()
-    s.sum_duplicates()
-    s.eliminate_zeros()
-    return s
 
 
 # ----------------------------------------------------------------------------- the loss
@@ -208,8 +127,8 @@ class TexelLoss:
         self.flat = (np.sqrt(var[:, 0]) < FLAT_L_STD) & (np.sqrt(var[:, 1] + var[:, 2]) < FLAT_CHROMA_STD)
 
     @property
-    def K(self) -> sp.csr_matrix:
-        """The window's weights (``gaussian_window``), (I, I) CSR float64; built on first use."""
+    def K(self) -> WindowOperator:
+        """The window's weights (``gaussian_window``), (I, I) float64; built on first use."""
         if self._K is None:
             self._K, self._wsum, _ = gaussian_window(self._pos, self.sigma)
         return self._K
@@ -222,11 +141,10 @@ class TexelLoss:
         return self._wsum
 
     @property
-    def K2(self) -> sp.csr_matrix:
-        """K squared entrywise (the noise of windowed statistics), sharing K's indices; built on first use."""
-        if self._K2 is None:  # K has no explicit zeros, so its sparsity pattern is K2's
-            K = self.K
-            self._K2 = sp.csr_matrix((K.data * K.data, K.indices, K.indptr), shape=K.shape)
+    def K2(self) -> WindowOperator:
+        """K squared entrywise (the noise of windowed statistics), sharing K's structure; built on first use."""
+        if self._K2 is None:
+            self._K2 = self.K.squared
         return self._K2
 
     @property
@@ -237,9 +155,10 @@ class TexelLoss:
         return self._S
 
     def release_operators(self) -> None:
-        """Free the sparse window and Sobel operators (~2.5 KB per texel with the noise correction's K squared:
-        0.95 GiB at 387 k texels); the next call that needs them builds them again, equal to the last. A
-        colour-only training step (``all_terms=False`` at γ2 = γ3 = 0) never reads them."""
+        """Free the window and Sobel operators (~0.8 KB per texel: the window's ~120 entries of 5 bytes, its
+        square sharing them, the Sobel operators' ~17 entries of 12 bytes); the next call that needs them builds
+        them again, equal to the last. A colour-only training step (``all_terms=False`` at γ2 = γ3 = 0) never
+        reads them."""
         self._K = self._K2 = self._S = self._ST = None
 
     def under(self, light: int) -> TexelLoss:

@@ -64,7 +64,7 @@ def test_checkerboard_power_is_known(face):
 
 def highpass_cov(loss, var_l):
     """Exact covariance (I, I) of h = (I - W) L for independent per-texel L* variances var_l."""
-    a = np.eye(loss.n) - (loss.K / loss.wsum[:, None]).toarray()
+    a = np.eye(loss.n) - loss.K.toarray() / loss.wsum[:, None]
     return (a * var_l) @ a.T
 
 

@@ -2,11 +2,12 @@
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 from skimage import color as skcolor
 from skimage.color.colorconv import _illuminants
 from skimage.metrics import structural_similarity
 
-from inkopt import color, loss
+from inkopt import color, loss, neighbourhood
 from inkopt.model import Texels
 
 SKI_WHITE = np.array(_illuminants["D65"]["2"])
@@ -59,7 +60,7 @@ def test_ssim_matches_skimage_on_flat_face_interior():
 
 def test_sobel_of_ramp_is_constant_on_flat_face():
     pos, shape = _flat_face(20, 30)
-    s = loss.sobel_operators(pos)
+    s = neighbourhood.sobel_operators(pos)
     n = len(pos)
     ramp = 0.3 * pos[:, 0] - 2.0
     sx, sy, sz = (s @ ramp).reshape(3, *shape)
@@ -73,18 +74,18 @@ def test_sobel_of_ramp_is_constant_on_flat_face():
 
 def test_gaussian_window_rows_and_interior():
     pos, shape = _flat_face(30, 30)
-    k, wsum, r = loss.gaussian_window(pos, 1.5)
+    k, wsum, r = neighbourhood.gaussian_window(pos, 1.5)
     g1 = np.exp(-(np.arange(-5, 6) ** 2) / (2 * 1.5**2))
     centre = 15 * 30 + 15
     np.testing.assert_allclose(wsum[centre], g1.sum() ** 2)
     np.testing.assert_allclose((k.toarray() - k.toarray().T), 0.0)
-    row = (k[centre].toarray() / wsum[centre]).reshape(shape)[10:21, 10:21]
+    row = (k.toarray()[centre] / wsum[centre]).reshape(shape)[10:21, 10:21]
     np.testing.assert_allclose(row, np.outer(g1, g1) / g1.sum() ** 2)
     assert wsum[0] < wsum[centre]  # corner texels see less of the window
     # skimage's window for Gaussian SSIM: win_size = 2 * int(3.5 * sigma + 0.5) + 1
     for sig in (1.0, 1.5, 2.0, 0.5):
-        assert loss.gaussian_window(pos[:10], sig)[2] == int(3.5 * sig + 0.5)
-    assert loss.gaussian_window(pos[:10], 1.0)[2] == 4
+        assert neighbourhood.gaussian_window(pos[:10], sig)[2] == int(3.5 * sig + 0.5)
+    assert neighbourhood.gaussian_window(pos[:10], 1.0)[2] == 4
 
 
 def test_gaussian_window_in_chunks_equals_the_dense_definition(monkeypatch):
@@ -93,12 +94,12 @@ def test_gaussian_window_in_chunks_equals_the_dense_definition(monkeypatch):
     radius, columns sorted in each row."""
     pos = Texels.box_faces((9, 7, 8)).pos_vox
     pos = np.concatenate([pos, pos[:3]])  # texels at the same place are each other's neighbours
-    monkeypatch.setattr(loss, "WINDOW_CHUNK_ROWS", 37)
-    k, wsum, r = loss.gaussian_window(pos, 1.5)
+    monkeypatch.setattr(neighbourhood, "WINDOW_CHUNK_ROWS", 37)
+    k, wsum, r = neighbourhood.gaussian_window(pos, 1.5)
     diff = pos[:, None, :] - pos[None, :, :]
     want = np.where(np.abs(diff).max(-1) <= r + 1e-6, np.exp(-(diff**2).sum(-1) / (2 * 1.5**2)), 0.0)
     np.testing.assert_allclose(k.toarray(), want, rtol=1e-14, atol=0)
-    assert k.has_sorted_indices and k.nnz == np.count_nonzero(want)
+    assert k.tocsr().has_sorted_indices and k.nnz == np.count_nonzero(want)
     np.testing.assert_allclose(wsum, want.sum(1), rtol=1e-12)
 
 
@@ -206,7 +207,7 @@ def test_released_operators_are_built_again_equal():
 def test_box_edges_and_bad_input():
     pos = Texels.box_faces((4, 5, 6)).pos_vox
     n = len(pos)
-    s = loss.sobel_operators(pos)
+    s = neighbourhood.sobel_operators(pos)
     # no Sobel link across a box edge (those texels are 0.5 apart per axis)
     rows, cols = (s != 0).nonzero()
     off = pos[cols] - pos[rows % n]
@@ -263,3 +264,23 @@ def test_noise_corrected_loss_gradient():
         f = lambda p, noise=noise: lf._value_with_noise(p, noise)
         num[i] = (f(pred + e) - f(pred - e)) / (2 * h)
     np.testing.assert_allclose(g, num, rtol=1e-4, atol=1e-9)
+
+
+@pytest.mark.parametrize("jitter", [0.0, 1e-3])
+def test_window_operator_products_equal_its_csr_bit_for_bit(monkeypatch, jitter):
+    """K's products (vectors, several columns, K squared) and row sums, taken a few rows at a time from the coded
+    weights, equal those of the CSR matrix with the same entries bit for bit; positions off the lattice (jitter)
+    give one weight per entry (more than 2^16 distinct weights)."""
+    rng = _rng()
+    pos = Texels.box_faces((9, 7, 8)).pos_vox if jitter == 0 else _flat_face(40, 40)[0]
+    pos = pos + jitter * rng.standard_normal(pos.shape)
+    monkeypatch.setattr(neighbourhood, "WINDOW_CHUNK_ROWS", 37 if jitter == 0 else 512)
+    k, wsum, _ = neighbourhood.gaussian_window(pos, 1.5)
+    assert (k.codes is None) == (jitter > 0) and (jitter > 0 or k.codes.dtype == np.uint8)
+    c = k.tocsr()
+    np.testing.assert_array_equal(wsum, np.asarray(c.sum(axis=1)).ravel())
+    x = rng.standard_normal((len(pos), 9))
+    np.testing.assert_array_equal(k @ x, c @ x)
+    np.testing.assert_array_equal(k @ x[:, 0], c @ x[:, 0])
+    c2 = sp.csr_matrix((c.data * c.data, c.indices, c.indptr), shape=c.shape)
+    np.testing.assert_array_equal(k.squared @ x, c2 @ x)

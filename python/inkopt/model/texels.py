@@ -30,6 +30,25 @@ def face_id(name: str | int) -> int:
     raise ValueError(f"unknown face '{name}'; use one of {list(FACE_ALIASES)} or {list(FACE_NAMES)}")
 
 
+#: z layers of a mask searched at a time for exposed faces (``Texels.exposed_faces``)
+EXPOSED_SLAB = 32
+
+
+def _neighbours(inside: np.ndarray, f: int, z0: int, z1: int) -> np.ndarray:
+    """(z1 - z0, y, x) bool: for each voxel of layers z0:z1 of ``inside``, whether its neighbour across face ``f``
+    is inside (False off the grid)."""
+    axis, step = 2 - f // 2, 1 if f % 2 else -1
+    out = np.zeros((z1 - z0, *inside.shape[1:]), bool)
+    if axis == 0:
+        lo, hi = max(z0 + step, 0), min(z1 + step, inside.shape[0])
+        out[lo - z0 - step : hi - z0 - step] = inside[lo:hi]
+        return out
+    src, dst = [slice(None)] * 3, [slice(None)] * 3
+    src[axis], dst[axis] = (slice(1, None), slice(0, -1)) if step == 1 else (slice(0, -1), slice(1, None))
+    out[tuple(dst)] = inside[z0:z1][tuple(src)]
+    return out
+
+
 @dataclass
 class Texels:
     """Surface texels: the sensor elements of the renderer (docs/conventions.md, "Faces and texels").
@@ -90,18 +109,21 @@ class Texels:
 
     @classmethod
     def exposed_faces(cls, inside: np.ndarray, faces=None) -> Texels:
-        """Every exposed face of an arbitrary ``inside`` mask (a face whose neighbour is outside or off-grid)."""
-        pad = np.pad(inside, 1, constant_values=False)
-        vox, fid = [], []
-        for f in range(6) if faces is None else sorted({face_id(x) for x in faces}):
-            axis = 2 - f // 2
-            step = 1 if f % 2 else -1
-            nb = np.roll(pad, -step, axis=axis)[1:-1, 1:-1, 1:-1]
-            v = np.argwhere(inside & ~nb)
-            vox.append(v)
-            fid.append(np.full(len(v), f, np.uint8))
-        fid = np.concatenate(fid)
-        return cls(np.concatenate(vox), fid, FACE_NORMALS[fid])
+        """Every exposed face of an arbitrary ``inside`` mask (a face whose neighbour is outside or off-grid), face by
+        face, each in C order of (z, y, x); found ``EXPOSED_SLAB`` z layers at a time (a few bytes per voxel of a
+        slab, not of the grid)."""
+        inside = np.asarray(inside, bool)
+        fids = list(range(6)) if faces is None else sorted({face_id(x) for x in faces})
+        vox: dict[int, list] = {f: [] for f in fids}
+        for z0 in range(0, inside.shape[0], EXPOSED_SLAB):
+            z1 = min(inside.shape[0], z0 + EXPOSED_SLAB)
+            for f in fids:
+                v = np.argwhere(inside[z0:z1] & ~_neighbours(inside, f, z0, z1))
+                v[:, 0] += z0
+                vox[f].append(v)
+        fid = np.concatenate([np.full(sum(len(v) for v in vox[f]), f, np.uint8) for f in fids])
+        voxels = np.concatenate([v for f in fids for v in vox[f]]) if fids else np.empty((0, 3), np.int64)
+        return cls(voxels, fid, FACE_NORMALS[fid])
 
     @classmethod
     def from_normals(cls, inside: np.ndarray, normals) -> Texels:

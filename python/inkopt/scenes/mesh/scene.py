@@ -64,7 +64,9 @@ def free_voxels(vox: VoxelizedObject, shell_mm: float | None = None) -> np.ndarr
         return vox.inside.copy()
     if not (np.isfinite(shell_mm) and shell_mm > 0):
         raise ParameterError(f"`shell_mm` must be a positive thickness in mm, got {shell_mm}")
-    free = vox.inside & (vox.sdf >= -np.float32(shell_mm))
+    free = np.empty_like(vox.inside)
+    for z in range(0, free.shape[0], 32):  # a slab of layers at a time: no grid-sized temporary
+        free[z : z + 32] = vox.inside[z : z + 32] & (vox.sdf[z : z + 32] >= -np.float32(shell_mm))
     free[tuple(vox.texels.voxel.T)] = True
     return free
 
@@ -235,6 +237,7 @@ def build_mesh_scene(spec: MeshSpec, inks: InkTable) -> MeshScene:
         tr = mesh_translucency(vox, mesh_texel_share(mesh, vox, mask), inks, depth_mm, spec.translucency)
         if tr is not None:
             fixed = tr.applied(fixed, inks)
+    vox.sdf = None  # 4 bytes per grid voxel no longer needed (before the volume's arrays are made)
     # The base volume's medium is not the optimiser's (it takes geometry and inks from it, and the fixed shares
     # from ``fixed``): white labels inside, 1 byte per voxel, instead of a (z, y, x, N) mixture.
     labels = np.where(vox.inside, np.uint8(inks.index("white")), np.uint8(EMPTY))
@@ -249,6 +252,5 @@ def build_mesh_scene(spec: MeshSpec, inks: InkTable) -> MeshScene:
         origin_mm=vox.origin_mm,
         band=None if spec.shell_mm is None else Band.of_fixed(vox.inside, fixed),  # a core below the shell
     )
-    vox.sdf = None  # 4 bytes per grid voxel no longer needed
     path = str(Path(spec.path).resolve())
     return MeshScene(mesh, vox, vol, free, fixed, spec.shell_mm, seconds, path, spec.up, tr, spec.core)

@@ -14,7 +14,7 @@ from scipy import ndimage
 
 from ...model import SurfaceNormals, Texels
 from ...units import voxel_mm as _voxel_mm
-from .load import _CHUNK, TexturedMesh, barycentric, corner_normals, winding_number
+from .load import TexturedMesh, barycentric, corner_normals, winding_number
 
 DEFAULT_VOXEL_MM = _voxel_mm()
 
@@ -59,6 +59,15 @@ class VoxelizedObject:
 
 
 _B1, _B2 = 8, 2  # coarse block and sub-block edge (voxels)
+#: voxels of near-surface coarse blocks queried at a time (``_inside_sdf``: ~100 bytes each while queried)
+_NEAR_VOXELS = 1 << 20
+
+
+def _on_grid(vox: np.ndarray, shape) -> tuple[np.ndarray, np.ndarray]:
+    """The voxels (n, 3) (z, y, x) that lie on the grid of ``shape`` (blocks overhang its high ends), and (n,) bool
+    which they were."""
+    on = np.all(vox < np.asarray(shape), axis=1)
+    return vox[on], on
 
 
 def _inside_sdf(vs, fs, origin, v, shape, band_mm):
@@ -73,7 +82,6 @@ def _inside_sdf(vs, fs, origin, v, shape, band_mm):
 
     unsigned = igl.SignedDistanceType.SIGNED_DISTANCE_TYPE_UNSIGNED
     nb = -(-np.array(shape) // _B1)  # coarse blocks (z, y, x)
-    full = tuple(int(k) * _B1 for k in nb)
     diag = np.linalg.norm(v)
     h1, h2 = 0.5 * (_B1 - 1) * diag, 0.5 * (_B2 - 1) * diag  # block centre to its farthest voxel centre
 
@@ -85,15 +93,20 @@ def _inside_sdf(vs, fs, origin, v, shape, band_mm):
     near1 = d1 <= h1 + band_mm
     blk_in = np.zeros(len(bidx), bool)
     blk_in[~near1] = winding_number(vs, fs, centres(bidx[~near1], _B1)) > 0.5
-    inside = np.repeat(np.repeat(np.repeat(blk_in.reshape(tuple(nb)), _B1, 0), _B1, 1), _B1, 2)
-    sdf = np.where(inside, np.float32(-band_mm), np.float32(band_mm))
+    # the grid's arrays at its own shape, filled one coarse layer at a time (no padded copy)
+    inside, sdf = np.empty(shape, bool), np.empty(shape, np.float32)
+    blk = blk_in.reshape(tuple(nb))
+    for kz in range(int(nb[0])):
+        layer = np.repeat(np.repeat(blk[kz], _B1, 0), _B1, 1)[: shape[1], : shape[2]]
+        inside[kz * _B1 : (kz + 1) * _B1] = layer
+        sdf[kz * _B1 : (kz + 1) * _B1] = np.where(layer, np.float32(-band_mm), np.float32(band_mm))
     flat_in, flat_sdf = inside.reshape(-1), sdf.reshape(-1)
 
     r = _B1 // _B2
     sub_local = np.stack(np.meshgrid(*[np.arange(r)] * 3, indexing="ij"), -1).reshape(-1, 3)
     vox_local = np.stack(np.meshgrid(*[np.arange(_B2)] * 3, indexing="ij"), -1).reshape(-1, 3)
     near_idx = np.flatnonzero(near1)
-    step = max(1, _CHUNK // r**3)
+    step = max(1, _NEAR_VOXELS // _B1**3)
     for a in range(0, len(near_idx), step):
         sub = (bidx[near_idx[a : a + step], None, :] * r + sub_local[None]).reshape(-1, 3)  # sub-block zyx
         d2 = igl.signed_distance(centres(sub, _B2), vs, fs, unsigned, -(h2 + band_mm), h2 + band_mm)[0]
@@ -103,24 +116,21 @@ def _inside_sdf(vs, fs, origin, v, shape, band_mm):
         sgn = np.zeros(len(sub), bool)
         sgn[one] = winding_number(vs, fs, centres(sub[one], _B2)) > 0.5
         need_d = d2 <= h2 + band_mm
-        vox = (sub[need_d, None, :] * _B2 + vox_local[None]).reshape(-1, 3)
-        lin = np.ravel_multi_index(tuple(vox.T), full)
+        vox, on = _on_grid((sub[need_d, None, :] * _B2 + vox_local[None]).reshape(-1, 3), shape)
+        lin = np.ravel_multi_index(tuple(vox.T), shape)
         p = centres(vox, 1)
         d = igl.signed_distance(p, vs, fs, unsigned, -band_mm, band_mm)[0]
         d = np.where(np.isnan(d), band_mm, np.clip(np.abs(d), 1e-6, band_mm)).astype(np.float32)  # sdf != 0
-        ins = np.repeat(sgn[need_d], _B2**3)
-        fine_v = np.repeat(fine[need_d], _B2**3)
+        ins = np.repeat(sgn[need_d], _B2**3)[on]
+        fine_v = np.repeat(fine[need_d], _B2**3)[on]
         ins[fine_v] = winding_number(vs, fs, p[fine_v]) > 0.5
         flat_in[lin] = ins
         flat_sdf[lin] = np.where(ins, -d, d)
-        far_sub = sub[~need_d]  # whole sub-block beyond the band: one sign
-        vox = (far_sub[:, None, :] * _B2 + vox_local[None]).reshape(-1, 3)
-        lin = np.ravel_multi_index(tuple(vox.T), full)
-        ins = np.repeat(sgn[~need_d], _B2**3)
+        vox, on = _on_grid((sub[~need_d, None, :] * _B2 + vox_local[None]).reshape(-1, 3), shape)  # one sign each
+        lin = np.ravel_multi_index(tuple(vox.T), shape)
+        ins = np.repeat(sgn[~need_d], _B2**3)[on]
         flat_in[lin] = ins
         flat_sdf[lin] = np.where(ins, -band_mm, band_mm)
-    inside = np.ascontiguousarray(inside[: shape[0], : shape[1], : shape[2]])
-    sdf = np.ascontiguousarray(sdf[: shape[0], : shape[1], : shape[2]])
     # far field: slab by slab (bounded memory), linear interpolation of the coarse-centre distances
     d1 = d1.reshape(tuple(nb)).astype(np.float32)
     slab = 16
@@ -137,6 +147,14 @@ def _inside_sdf(vs, fs, origin, v, shape, band_mm):
     return inside, sdf
 
 
+def _surface_voxels(inside: np.ndarray) -> np.ndarray:
+    """(I, 3) int32 (z, y, x) of the surface voxels (inside, with a 6-neighbour outside or off the grid) in C order,
+    from the exposed faces (found a few layers at a time: ``Texels.exposed_faces``)."""
+    faces = Texels.exposed_faces(inside)
+    flat = np.unique(np.ravel_multi_index(tuple(faces.voxel.T.astype(np.int64)), inside.shape))
+    return np.stack(np.unravel_index(flat, inside.shape), axis=1).astype(np.int32)
+
+
 def voxelize(
     mesh: TexturedMesh, voxel_mm=DEFAULT_VOXEL_MM, pad: int = 1, band: float = 3.0, crease_deg: float = 60.0
 ) -> VoxelizedObject:
@@ -148,7 +166,7 @@ def voxelize(
     ``band`` voxels (of the largest edge). Texel normals are the closest triangle's smooth normal
     (``corner_normals`` interpolated barycentrically at the closest point): more robust than the gradient of
     the voxel SDF, which is noisy at one-voxel resolution and undefined on thin parts. Targets: the closest
-    point's colour (``TexturedMesh.colors_at``). Needs ~5 bytes per grid voxel.
+    point's colour (``TexturedMesh.colors_at``). Needs ~5 bytes per grid voxel and ~0.1 GB for the queries.
     """
     import igl
 
@@ -176,8 +194,7 @@ def voxelize(
         raise ValueError(f"{mesh.source}: no voxel centre lies inside the mesh; the voxels are too coarse")
 
     # ---- texels: surface voxels, closest points, normals, faces, colours
-    surface = inside & ~ndimage.binary_erosion(inside, ndimage.generate_binary_structure(3, 1), border_value=0)
-    idx = np.argwhere(surface).astype(np.int32)  # C order of (z, y, x)
+    idx = _surface_voxels(inside)
     centres = origin + (idx[:, ::-1] + 0.5) * v
     _, fi, closest = igl.point_mesh_squared_distance(centres, vs, fs)
     bary = barycentric(vs[fs[fi]], closest)
