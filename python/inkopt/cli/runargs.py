@@ -67,17 +67,17 @@ def add_light_args(p) -> None:
     )
 
 
-def viewing_from_args(args):
-    """The run's ``spectral.viewing.Viewing`` from ``--illuminant`` / ``--illuminants`` (the RGB path when neither
-    is given or the light is D65; the ink table from ``--inks`` is an RGB table)."""
+def viewing_from_args(args, table=None):
+    """The run's ``spectral.viewing.Viewing`` from ``--illuminant`` / ``--illuminants`` and the spectral ink table
+    ``table`` of ``--inks`` (None: an RGB table; the RGB path when no light or D65 is asked)."""
     from ..spectral.lights import load_light, parse_lights
     from ..spectral.viewing import Viewing
 
     if getattr(args, "illuminants", None):
-        return Viewing(lights=parse_lights(args.illuminants))
+        return Viewing(table, lights=parse_lights(args.illuminants))
     if getattr(args, "illuminant", None):
-        return Viewing(lights=(load_light(args.illuminant),))
-    return Viewing()
+        return Viewing(table, lights=(load_light(args.illuminant),))
+    return Viewing(table)
 
 
 def add_optimizer_args(p) -> None:
@@ -320,8 +320,9 @@ def config_from_args(args):
     return cfg
 
 
-def run_options_from_args(args, started: float):
-    """The ``run.RunOptions`` of ``slab``'s and ``optimize``'s parsed options (checked; Ray's presence too)."""
+def run_options_from_args(args, started: float, table=None):
+    """The ``run.RunOptions`` of ``slab``'s and ``optimize``'s parsed options (checked; Ray's presence too);
+    ``table``: the spectral ink table of ``--inks`` (None: an RGB table)."""
     from ..run import RunOptions
 
     options = RunOptions(
@@ -332,7 +333,7 @@ def run_options_from_args(args, started: float):
         threads=args.threads,
         progress=sys.stderr.isatty(),
         lighting=lighting_from_args(args),
-        viewing=viewing_from_args(args),
+        viewing=viewing_from_args(args, table),
         ray=ray_from_args(args),
         log=stderr_log,
         log_every_s=args.log_every,
@@ -377,14 +378,14 @@ def run_from_args(args, spec):
     import time
 
     from ..coarse import deadline_plan, run_coarse_to_fine
-    from ..model import InkTable
     from ..run import run_optimisation
     from ..scenes import build_scene
+    from ..spectral.inks import run_inks
 
     started = time.perf_counter()  # a time budget counts the scene's building (voxelization) too
     spec.validate()
-    options = run_options_from_args(args, started)
-    inks = InkTable.parse(args.inks)
+    inks, table = run_inks(args.inks)  # the scene's RGB table; a spectral one renders the run's bands
+    options = run_options_from_args(args, started, table)
     cfg, options, dry = plan_job(args, spec, len(inks), config_from_args(args), options)
     if dry is not None:
         return dry, cfg.time_budget
@@ -429,6 +430,15 @@ def print_run_summary(rep, init: str, extra: str = "") -> None:
         f"(p95 {m.delta_e76_p95:.2f}, ΔE2000 {m.delta_e2000_mean:.2f}, SSIM {m.ssim:.3f}) "
         f"after {rep.iterations} iterations{stopped(rep)} in {rep.seconds:.0f} s{whole}{extra}{against}"
     )
+    if rep.viewing is not None:  # a spectral run: the figures above are under its first light
+        print(under_lights(rep.viewing))
+
+
+def under_lights(v: dict) -> str:
+    """The line of a spectral run's figures under each light (``evaluation.lights.light_figures``'s dict)."""
+    each = ", ".join(f"{n} {m['delta_e2000_mean']:.2f}" for n, m in v["by_light"].items())
+    moves = "".join(f"; colour inconstancy {k} {d:.2f} ΔE2000" for k, d in v["inconstancy_delta_e2000_mean"].items())
+    return f"figures under {v['headline']}; mean ΔE2000 under each light: {each} (worst {v['worst_light']}){moves}"
 
 
 def stopped(rep) -> str:
