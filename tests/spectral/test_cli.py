@@ -95,3 +95,24 @@ def test_spectral_table_refused_where_not_taken(tmp_path, capsys):
 def test_rgb_table_other_light_says_spectral(tmp_path, capsys, picture):
     code = main(["slab", picture, "--size-mm", "1.5x1x0.5", "--out", str(tmp_path / "r"), "--illuminant", "A"])
     assert code == 2 and "--inks vero-cmykw@spectral" in capsys.readouterr().err
+
+
+def test_combine_worst_is_the_runs_identity(tmp_path, capsys, picture):
+    out = tmp_path / "r"
+    args = [
+        "slab",
+        picture,
+        "--size-mm",
+        "1.5x1x0.5",
+        "--out",
+        str(out),
+        *FAST_RUN,
+        *SPECTRAL,
+        "--illuminants",
+        "D65,A",
+    ]
+    assert main([*args, "--combine", "worst"]) == 0
+    assert json.loads((out / "report.json").read_text())["viewing"]["combine"] == "worst"
+    capsys.readouterr()
+    assert main([*args, "--resume"]) == 2  # the mean of the lights is another run
+    assert "different settings (viewing" in capsys.readouterr().err

@@ -63,7 +63,15 @@ def add_light_args(p) -> None:
     g.add_argument(
         "--illuminants",
         metavar="D65,A",
-        help="several lights: the loss is the mean of the loss under each (a spectral ink table; docs/spectral.md)",
+        help="several lights: the loss is the mean (or --combine worst) of the loss under each (a spectral ink table; "
+        "docs/spectral.md)",
+    )
+    p.add_argument(
+        "--combine",
+        choices=("mean", "worst"),
+        default="mean",
+        help="how the loss under several lights (--illuminants) combines: their mean (default) or the worst light's "
+        "(each iteration steps on the light whose loss is largest)",
     )
 
 
@@ -74,7 +82,7 @@ def viewing_from_args(args, table=None):
     from ..spectral.viewing import Viewing
 
     if getattr(args, "illuminants", None):
-        return Viewing(table, lights=parse_lights(args.illuminants))
+        return Viewing(table, lights=parse_lights(args.illuminants), combine=args.combine)
     if getattr(args, "illuminant", None):
         return Viewing(table, lights=(load_light(args.illuminant),))
     return Viewing(table)
