@@ -39,6 +39,7 @@ from .evaluation.noise import EVAL_SEED_OFFSET, MAX_SPP, PILOT_SPP, Sampling, ad
 from .evaluation.results import Report
 from .io import file_digest
 from .lighting import Lighting, load_lighting
+from .model.spectral import write_spectral_ink_file
 from .optim import Optimization, OptimizeConfig
 from .pictures import loss_figure
 from .rundir import Predictions, RunDir
@@ -338,6 +339,8 @@ def _write_result_files(job: _Job, res) -> np.ndarray:
         job.lighting.describe(),
     )
     rd.save_predictions(predictions)
+    if run.viewing.spectral:  # what `inkopt evaluate` renders the run's bands with
+        write_spectral_ink_file(rd.spectral_inks_path, run.viewing.table)
     loss_figure(rd.loss_picture_path, run.history.loss, run.history.delta_e76)
     return de
 
