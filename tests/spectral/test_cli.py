@@ -116,3 +116,13 @@ def test_combine_worst_is_the_runs_identity(tmp_path, capsys, picture):
     capsys.readouterr()
     assert main([*args, "--resume"]) == 2  # the mean of the lights is another run
     assert "different settings (viewing" in capsys.readouterr().err
+
+
+def test_spectral_coarse_to_fine(tmp_path, picture):
+    """Coarse to fine carries the viewing into both stages: each keeps the table and reports by light."""
+    out = tmp_path / "r"
+    args = ["slab", picture, "--size-mm", "1.5x1x0.5", "--out", str(out), *FAST_RUN, *SPECTRAL, "--illuminant", "A"]
+    assert main([*args, "--coarse-dpi", "150"]) == 0
+    for d in (out, out / "coarse"):
+        assert json.loads((d / "report.json").read_text())["viewing"]["illuminants"] == ["A"]
+        assert (d / "spectral_inks.json").is_file()
