@@ -97,7 +97,7 @@ class RunOptions:
     without it ``log`` gets a progress line at least every ``log_every_s`` seconds of the iterations. ``lighting``:
     the display lighting (``inkopt.lighting``; default uniform), the final figures are rendered under it too.
     ``viewing``: spectral or RGB and the lights (``spectral.viewing.Viewing``; default the RGB path). A spectral
-    run's headline figures are under its first light, report.json's ``lights`` holds them under each light, its
+    run's headline figures are under its first light, report.json's ``viewing`` holds them under each light, its
     pictures and predictions.npz show it under the first light as sRGB (``Viewing.display``).
     ``ray``: "auto" or a Ray cluster's address: every render is split into texel shards on Ray workers
     (``inkopt.distributed``; bit-identical results). ``dry_run``: only estimate the run (nothing is written).
@@ -282,7 +282,7 @@ class _Figures:
         if not keep_renderer:  # its media are not needed beside the loss's window operators that the figures build
             del renderer, render
             run.release_renderer()
-        return res, prediction_metrics(run.loss.under(0), res.rgb, res.var)  # under the first light
+        return res, prediction_metrics(run.loss, res.rgb, res.var)  # CIELAB under the first light
 
     def start(self, x=None, keep_renderer: bool | None = None) -> dict:
         """The start's figures (one pilot pass at most) as ``Optimization.keep_start_figures`` keeps them
@@ -390,7 +390,7 @@ def _report(job: _Job, res, metrics, de: np.ndarray, estimate: Estimate, check: 
 
 def _lights_report(run: Optimization, res) -> dict | None:
     """report.json's ``viewing`` of a spectral run (None on the RGB path): ``Viewing.describe()``, the headline
-    light, and ``lights``: the result's figures under each light (``evaluation.lights.light_figures``)."""
+    light, and the result's figures under each light (``evaluation.lights.light_figures``)."""
     if not run.viewing.spectral:
         return None
     names = tuple(light.name for light in run.viewing.seen_under())
