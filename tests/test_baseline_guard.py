@@ -46,9 +46,9 @@ def renders(monkeypatch):
     """The figures' renders of the runs in the test, one entry (their ``Sampling``) each."""
     calls, real = [], run_module.adaptive_render
 
-    def counted(render, target_lab, sampling, log=None):
+    def counted(render, target_lab, sampling, log=None, **kw):
         calls.append(sampling)
-        return real(render, target_lab, sampling, log=log)
+        return real(render, target_lab, sampling, log=log, **kw)
 
     monkeypatch.setattr(run_module, "adaptive_render", counted)
     return calls

@@ -162,7 +162,7 @@ def estimate_run(run, inside_voxels: int, box_voxels: int, seed: int = 0) -> Est
 
     def passes(n: int) -> float:  # seconds of a forward render and a gradient pass over n texels
         sub = tex.subset(texel_runs(n_tex, n, rng))
-        adjoint = rng.standard_normal((n, 3)).astype(np.float32)
+        adjoint = rng.standard_normal((n, run.loss.channels)).astype(np.float32)  # bands: spectral
         t = time.perf_counter()
         if cfg.forward_spp > 0:
             renderer.render(sub, cfg.forward_spp, seed, cfg.include_specular)

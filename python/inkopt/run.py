@@ -33,11 +33,13 @@ from .errors import ParameterError
 from .estimate import ANNOUNCE_SECONDS, Estimate, estimate_run
 from .evaluation.baselines import baseline_layers
 from .evaluation.guard import BaselineCheck, check_baseline, keep_baseline_figures, kept_figures
+from .evaluation.lights import light_figures
 from .evaluation.metrics import delta_e76_map, prediction_metrics
 from .evaluation.noise import EVAL_SEED_OFFSET, MAX_SPP, PILOT_SPP, Sampling, adaptive_render
 from .evaluation.results import Report
 from .io import file_digest
 from .lighting import Lighting, load_lighting
+from .model.spectral import write_spectral_ink_file
 from .optim import Optimization, OptimizeConfig
 from .pictures import loss_figure
 from .rundir import Predictions, RunDir
@@ -94,8 +96,9 @@ class RunOptions:
     figure). ``threads``: the renderer's (with ``ray``, each worker's). ``progress``: a progress bar (a terminal);
     without it ``log`` gets a progress line at least every ``log_every_s`` seconds of the iterations. ``lighting``:
     the display lighting (``inkopt.lighting``; default uniform), the final figures are rendered under it too.
-    ``viewing``: spectral or RGB and the lights (``spectral.viewing.Viewing``; default the RGB path, the only one
-    this driver's figures and files take: a spectral table is optimised through ``optim.Optimization`` directly).
+    ``viewing``: spectral or RGB and the lights (``spectral.viewing.Viewing``; default the RGB path). A spectral
+    run's headline figures are under its first light, report.json's ``viewing`` holds them under each light, its
+    pictures and predictions.npz show it under the first light as sRGB (``Viewing.display``).
     ``ray``: "auto" or a Ray cluster's address: every render is split into texel shards on Ray workers
     (``inkopt.distributed``; bit-identical results). ``dry_run``: only estimate the run (nothing is written).
     ``started``: when the job began (``time.perf_counter()``, e.g. before the scene was built; default: when the
@@ -125,8 +128,6 @@ class RunOptions:
             raise ParameterError(
                 f"`eval_spp` must be at least 1 (leave it out for adaptive samples), got {self.eval_spp}"
             )
-        if self.viewing is not None and self.viewing.spectral:
-            raise ParameterError("`inks`: a spectral ink table is optimised through optim.Optimization, not a run")
         if self.eval_max_spp < 1:
             raise ParameterError(f"`eval_max_spp` must be at least 1, got {self.eval_max_spp}")
         if self.eval_time_budget is not None and not self.eval_time_budget > 0:
@@ -187,6 +188,12 @@ def _start(scene: Scene, cfg: OptimizeConfig, options: RunOptions, make_renderer
     """Log the scene and its warnings and set up its optimisation."""
     log = options.log
     log(scene.describe())
+    if options.viewing is not None and options.viewing.spectral:
+        d = options.viewing.describe()
+        log(
+            f"spectral: {d['bands']} bands, seen under {', '.join(d['illuminants'])} (loss: {d['combine']}); the "
+            f"figures are under {d['illuminants'][0]}, report.json's viewing.by_light under each light"
+        )
     for note in scene.warnings:  # e.g. a mesh's small holes
         log(f"warning: {note}")
     lighting = load_lighting(options.lighting)
@@ -270,11 +277,12 @@ class _Figures:
                 seed=self.seed, spp=self.spp, max_spp=max_spp, time_budget=budget, pilot_in_budget=pilot_in_budget
             ),
             log=opts.log,
+            cmap=run.loss.colours[0],  # a spectral run's headline light
         )
         if not keep_renderer:  # its media are not needed beside the loss's window operators that the figures build
             del renderer, render
             run.release_renderer()
-        return res, prediction_metrics(run.loss, res.rgb, res.var)
+        return res, prediction_metrics(run.loss, res.rgb, res.var)  # CIELAB under the first light
 
     def start(self, x=None, keep_renderer: bool | None = None) -> dict:
         """The start's figures (one pilot pass at most) as ``Optimization.keep_start_figures`` keeps them
@@ -321,15 +329,18 @@ def _write_result_files(job: _Job, res) -> np.ndarray:
     ΔE76 (I,)."""
     run, rd = job.run, job.rd
     de = delta_e76_map(run.loss, res.rgb)
-    job.scene.write_pictures(rd, res.rgb, de)
+    shown = run.viewing.display(res.rgb)  # a spectral run: sRGB of the first light's colour (the RGB path: as is)
+    job.scene.write_pictures(rd, shown, de)
     predictions = Predictions(
-        {"continuous": res.rgb},
+        {"continuous": shown},
         "optimisation",
         {"continuous": res.spp},
         file_digest(rd.volume_path),
         job.lighting.describe(),
     )
     rd.save_predictions(predictions)
+    if run.viewing.spectral:  # what `inkopt evaluate` renders the run's bands with
+        write_spectral_ink_file(rd.spectral_inks_path, run.viewing.table)
     loss_figure(rd.loss_picture_path, run.history.loss, run.history.delta_e76)
     return de
 
@@ -373,4 +384,14 @@ def _report(job: _Job, res, metrics, de: np.ndarray, estimate: Estimate, check: 
         lighting=job.lighting.describe(),
         baseline=None if check is None else check.to_json(),
         beats_baseline=None if check is None else check.beats,
+        viewing=_lights_report(run, res),
     )
+
+
+def _lights_report(run: Optimization, res) -> dict | None:
+    """report.json's ``viewing`` of a spectral run (None on the RGB path): ``Viewing.describe()``, the headline
+    light, and the result's figures under each light (``evaluation.lights.light_figures``)."""
+    if not run.viewing.spectral:
+        return None
+    names = tuple(light.name for light in run.viewing.seen_under())
+    return {**run.viewing.describe(), "headline": names[0], **light_figures(run.loss, res.rgb, res.var, names)}

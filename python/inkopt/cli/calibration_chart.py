@@ -6,13 +6,12 @@ from __future__ import annotations
 
 from ..calibration.chart import design_chart
 from ..calibration.job import write_chart
-from ..model import InkTable
 from ..printing.profiles import check_slots, printer_profile
-from .common import add_inks_arg
+from .common import add_inks_arg, rgb_inks
 
 
 def _chart_cmd(args) -> int:
-    inks = InkTable.parse(args.inks)
+    inks = rgb_inks(args.inks, "calibration-chart")
     if args.printer is not None:
         prof = printer_profile(args.printer)
         check_slots(list(inks.names), prof.max_materials, prof.key)

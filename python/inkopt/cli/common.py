@@ -153,11 +153,15 @@ def add_dpi_arg(p) -> None:
 
 
 def add_inks_arg(p, hidden: bool = False, required: bool = False) -> None:
-    """``--inks``: a preset, a comma list of ink names or an ink file (``model.InkTable.parse``), vero-cmykw unless
+    """``--inks``: a preset, a comma list of ink names or an ink file (``model.spectral.load_ink_table``: RGB, or
+    spectral with ``<preset>@spectral`` or a spectral ink file), vero-cmykw unless
     ``required``; ``hidden``: taken but not shown (a subcommand that refuses it in words of its own)."""
     import argparse
 
-    what = "ink set: a preset (vero-cmykw, vero-cmykw+orange, vero-cmykwt), a comma list of ink names, or a JSON/TOML "
+    what = (
+        "ink set: a preset (vero-cmykw, vero-cmykw+orange, vero-cmykwt), its spectral form (vero-cmykw@spectral, "
+        f"{SPECTRAL_COMMANDS} only), a comma list of ink names, or a JSON/TOML (RGB or spectral) "
+    )
     p.add_argument(
         "--inks",
         default=None if hidden or required else "vero-cmykw",
@@ -166,6 +170,24 @@ def add_inks_arg(p, hidden: bool = False, required: bool = False) -> None:
         if hidden
         else what + ("file of inks" if required else "file of inks (default vero-cmykw)"),
     )
+
+
+#: the commands that take a spectral ink table (``--inks X@spectral`` or a spectral ink file)
+SPECTRAL_COMMANDS = "slab and optimize"
+
+
+def rgb_inks(spec: str, command: str):
+    """The RGB ``model.InkTable`` of ``--inks`` ``spec`` for ``command``, which cannot use a spectral table: a
+    spectral one is refused in one line naming the commands that can."""
+    from ..model import InkTable
+    from ..model.spectral import load_ink_table
+
+    table = load_ink_table(spec)
+    if not isinstance(table, InkTable):
+        raise ParameterError(
+            f"`inks` {spec} is a spectral ink table, which {command} does not take; {SPECTRAL_COMMANDS} do"
+        )
+    return table
 
 
 def thread_count(text: str) -> int:

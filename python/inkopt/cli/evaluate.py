@@ -15,8 +15,10 @@ from ..evaluation.noise import MAX_SPP, PILOT_SPP, TARGET_NOISE_DE76
 from ..evaluation.options import EvaluateOptions
 from ..evaluation.outputs import picture_names, table_lines
 from ..evaluation.sample import DEFAULT_SAMPLE_WINDOWS
+from ..evaluation.spectral import evaluate_lights, run_viewing
 from ..rundir import RunDir
-from .common import add_lighting_args, add_seed_arg, add_threads_arg, lighting_from_args, stderr_log
+from .common import UsageError, add_lighting_args, add_seed_arg, add_threads_arg, lighting_from_args, stderr_log
+from .lights import under_lights
 
 #: the options of ``inkopt evaluate`` after DIR, in the order of its help: (flag, add_argument keywords)
 OPTIONS = (
@@ -133,6 +135,8 @@ def _evaluate_cmd(args) -> int:
     options = options_from_args(args)
     log = None if args.json else stderr_log
     d = RunDir(args.dir)
+    if args.illuminants is not None or (d.report_path.is_file() and run_viewing(d) is not None):
+        return _evaluate_lights(args, d, options, log)
     d.evaluation_target(args.out)  # before any render: another kind of file at --out is never replaced
     d.evaluation_picture_targets(args.out, picture_names(d.load_scene()))  # nor a picture named after it
     with d.lock(stderr_log):  # its pictures and predictions.npz go into the run folder whatever --out says
@@ -152,6 +156,26 @@ def _evaluate_cmd(args) -> int:
     return 0
 
 
+def _evaluate_lights(args, d: RunDir, options: EvaluateOptions, log) -> int:
+    """A spectral run: its continuous result under each light (``evaluation.spectral``)."""
+    if args.out is not None:
+        raise UsageError("--out: a spectral run's evaluation is DIR/evaluation_lights.json")
+    with d.lock(stderr_log):
+        out = evaluate_lights(args.dir, options, args.illuminants, log)
+    if args.json:
+        print(json.dumps(out))
+        return 0
+    c = out["continuous"]
+    print(under_lights({**c, "headline": out["viewing"]["headline"]}))
+    for name, m in c["by_light"].items():
+        print(f"  {name}: ΔE76 {m['delta_e76_mean']:.2f}, ΔE2000 {m['delta_e2000_mean']:.2f}, SSIM {m['ssim']:.3f}")
+    print(
+        f"{c['spp']} spp per scene texel (continuous result; the printed result and the baselines are not rendered "
+        f"spectrally yet), {out['seconds']:.0f} s; wrote {d.evaluation_lights_path}"
+    )
+    return 0
+
+
 def register_cli(sub) -> None:
     p = sub.add_parser(
         "evaluate",
@@ -165,4 +189,10 @@ def register_cli(sub) -> None:
     add_seed_arg(p, "render seed")
     add_threads_arg(p, "render threads")
     add_lighting_args(p, "evaluate")
+    p.add_argument(
+        "--illuminants",
+        metavar="D65,A",
+        help="a spectral run: its figures under these lights (default: the run's), the worst light and the colour "
+        "inconstancy between the first and each other (evaluation_lights.json; docs/spectral.md)",
+    )
     p.set_defaults(func=_evaluate_cmd)

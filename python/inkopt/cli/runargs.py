@@ -18,6 +18,7 @@ from .common import (
     stderr_log,
 )
 from .jobplan import plan_job
+from .lights import add_light_args, under_lights, viewing_from_args
 
 
 def parse_gamma(text: str) -> tuple[float, float, float]:
@@ -44,40 +45,6 @@ def add_run_args(p, translucency: str) -> None:
     add_single_run_args(p)
     add_light_args(p)
     add_ray_arg(p)
-
-
-def add_light_args(p) -> None:
-    """``--illuminant NAME|FILE.csv`` or ``--illuminants A,B``: the lights the print is seen under
-    (``spectral.lights``, ``spectral.viewing``)."""
-    from ..spectral.lights import NAMED
-
-    g = p.add_mutually_exclusive_group()
-    names = "|".join(NAMED)
-    g.add_argument(
-        "--illuminant",
-        metavar=f"{names}|FILE.csv",
-        help="the light the print is seen under (CIE 1931 2° observer; a file: rows of nm, relative power). "
-        "Default D65, the white of linear sRGB: with an RGB ink table the run is the RGB one; another light needs "
-        "a spectral ink table (docs/spectral.md)",
-    )
-    g.add_argument(
-        "--illuminants",
-        metavar="D65,A",
-        help="several lights: the loss is the mean of the loss under each (a spectral ink table; docs/spectral.md)",
-    )
-
-
-def viewing_from_args(args):
-    """The run's ``spectral.viewing.Viewing`` from ``--illuminant`` / ``--illuminants`` (the RGB path when neither
-    is given or the light is D65; the ink table from ``--inks`` is an RGB table)."""
-    from ..spectral.lights import load_light, parse_lights
-    from ..spectral.viewing import Viewing
-
-    if getattr(args, "illuminants", None):
-        return Viewing(lights=parse_lights(args.illuminants))
-    if getattr(args, "illuminant", None):
-        return Viewing(lights=(load_light(args.illuminant),))
-    return Viewing()
 
 
 def add_optimizer_args(p) -> None:
@@ -320,8 +287,9 @@ def config_from_args(args):
     return cfg
 
 
-def run_options_from_args(args, started: float):
-    """The ``run.RunOptions`` of ``slab``'s and ``optimize``'s parsed options (checked; Ray's presence too)."""
+def run_options_from_args(args, started: float, table=None):
+    """The ``run.RunOptions`` of ``slab``'s and ``optimize``'s parsed options (checked; Ray's presence too);
+    ``table``: the spectral ink table of ``--inks`` (None: an RGB table)."""
     from ..run import RunOptions
 
     options = RunOptions(
@@ -332,7 +300,7 @@ def run_options_from_args(args, started: float):
         threads=args.threads,
         progress=sys.stderr.isatty(),
         lighting=lighting_from_args(args),
-        viewing=viewing_from_args(args),
+        viewing=viewing_from_args(args, table),
         ray=ray_from_args(args),
         log=stderr_log,
         log_every_s=args.log_every,
@@ -377,14 +345,14 @@ def run_from_args(args, spec):
     import time
 
     from ..coarse import deadline_plan, run_coarse_to_fine
-    from ..model import InkTable
     from ..run import run_optimisation
     from ..scenes import build_scene
+    from ..spectral.inks import run_inks
 
     started = time.perf_counter()  # a time budget counts the scene's building (voxelization) too
     spec.validate()
-    options = run_options_from_args(args, started)
-    inks = InkTable.parse(args.inks)
+    inks, table = run_inks(args.inks)  # the scene's RGB table; a spectral one renders the run's bands
+    options = run_options_from_args(args, started, table)
     cfg, options, dry = plan_job(args, spec, len(inks), config_from_args(args), options)
     if dry is not None:
         return dry, cfg.time_budget
@@ -429,6 +397,8 @@ def print_run_summary(rep, init: str, extra: str = "") -> None:
         f"(p95 {m.delta_e76_p95:.2f}, ΔE2000 {m.delta_e2000_mean:.2f}, SSIM {m.ssim:.3f}) "
         f"after {rep.iterations} iterations{stopped(rep)} in {rep.seconds:.0f} s{whole}{extra}{against}"
     )
+    if rep.viewing is not None:  # a spectral run: the figures above are under its first light
+        print(under_lights(rep.viewing))
 
 
 def stopped(rep) -> str:

@@ -282,17 +282,20 @@ def _next_pass(model: NoiseModel, pool: _Pool, sampling: Sampling, capped: bool,
     return extra, capped
 
 
-def adaptive_render(render, target_lab, sampling: Sampling = Sampling(), log=None, clock=None) -> AdaptiveResult:
+def adaptive_render(
+    render, target_lab, sampling: Sampling = Sampling(), log=None, clock=None, cmap: ColourMap = RGB
+) -> AdaptiveResult:
     """Render through ``render(spp, seed) -> (rgb (I, 3), var_mean (I, 3), weight)`` (``weight``: the pass's
     samples per texel as pooled, e.g. a printer render's own spp) the samples ``sampling`` asks for: exactly its
     ``spp`` in one pass (the user's choice is honoured), else adaptively against ``target_lab`` (I, 3) CIELAB
     (module docstring); each further pass is logged with its expected time through ``log``. ``clock``: seconds
-    (default ``time.perf_counter``)."""
+    (default ``time.perf_counter``). ``cmap``: the colour map of the render's C channels (a spectral render's
+    bands under its first light; default linear sRGB, C = 3)."""
     clock = clock or time.perf_counter
     t0 = clock()
     s = sampling
     pool, capped, k0 = _pilot(render, s, clock, t0)
-    model = NoiseModel.of(pool.rgb, pool.var, target_lab)
+    model = NoiseModel.of(pool.rgb, pool.var, target_lab, cmap)
     for k in range(k0, MAX_ROUNDS + k0):
         if s.spp is not None or model.converged(s.target, s.ratio):
             break
@@ -303,7 +306,7 @@ def adaptive_render(render, target_lab, sampling: Sampling = Sampling(), log=Non
         if extra <= 0:
             break
         pool.add(render, extra, s.seed + k * SEED_STRIDE)
-        model = NoiseModel.of(pool.rgb, pool.var, target_lab)
+        model = NoiseModel.of(pool.rgb, pool.var, target_lab, cmap)
     converged = model.converged(s.target, s.ratio)
     return AdaptiveResult(
         pool.rgb, pool.var, int(pool.total), pool.passes, model.contribution(), capped and not converged

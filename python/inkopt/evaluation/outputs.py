@@ -19,17 +19,18 @@ def picture_names(rec: SceneRecord) -> list[str]:
 
 
 def write_face_pictures(d: RunDir, rec: SceneRecord, results: dict, stem: str = "evaluation") -> list[str]:
-    """DIR/<stem>_<face>.png (target | optimized | quantized | baselines) for every textured face of a slab;
-    returns the file names."""
-    items = [("target", results["target"]), ("optimized", results["continuous"]), ("quantized", results["quantized"])]
-    items += [(k, results[k]) for k in ("surface", "extrusion") if k in results]
-    names = []
+    """DIR/<stem>_<face>.png (target | optimized | quantized | baselines: those in ``results``) for every textured
+    face of a slab; returns the file names."""
+    names = [("target", "target"), ("optimized", "continuous"), ("quantized", "quantized")]
+    names += [(k, k) for k in ("surface", "extrusion")]
+    items = [(label, results[k]) for label, k in names if k in results]  # those given
+    written = []
     for face in rec.faces:
         if face in rec.pix:
             path = d.evaluation_picture_path(face, stem)
             write_png(path, panels(items, rec.pix[face]))
-            names.append(path.name)
-    return names
+            written.append(path.name)
+    return written
 
 
 def write_mesh_views(d: RunDir, rec: SceneRecord, results: dict, stem: str = "evaluation", say=None) -> list[str]:
@@ -38,10 +39,10 @@ def write_mesh_views(d: RunDir, rec: SceneRecord, results: dict, stem: str = "ev
     from ..scenes.mesh.views import result_views
 
     names = [("target", "target"), ("optimized", "continuous"), ("quantized", "quantized")]
-    names += [(k, k) for k in ("surface", "extrusion") if k in results]
+    names += [(k, k) for k in ("surface", "extrusion")]
     path = d.evaluation_picture_path("views", stem)
     try:
-        result_views(rec.mesh, rec.texels.normal, [(label, results[k]) for label, k in names], path)
+        result_views(rec.mesh, rec.texels.normal, [(label, results[k]) for label, k in names if k in results], path)
     except ValueError as exc:
         if say is not None:
             say(f"no views picture: {exc}")

@@ -55,7 +55,9 @@ class Report:
     ``threads``; ``peak_rss_gb`` (GiB); ``lighting``: ``Lighting.describe()``. ``baseline``: the print-shop
     baseline the result is checked against, kind -> its figures at the run's start and the comparison
     (``evaluation.guard.BaselineCheck.to_json``); ``beats_baseline``: False when the result is worse than it beyond
-    the figures' noise (both None when the run did not measure the baseline, and in older reports).
+    the figures' noise (both None when the run did not measure the baseline, and in older reports). ``viewing``:
+    a spectral run's lights (``spectral.viewing.Viewing.describe``), its headline light (the one ``metrics`` are
+    under) and its figures under each light (``evaluation.lights.light_figures``); None on the RGB path.
     """
 
     metrics: Metrics
@@ -94,6 +96,7 @@ class Report:
     finish_smooth: int | None = None  # passes of smoothing over the result (None: a report from before them)
     baseline: dict | None = None
     beats_baseline: bool | None = None
+    viewing: dict | None = None
 
     _RUN = (
         "delta_e76_max",
@@ -140,6 +143,7 @@ class Report:
             **self.scene,
             **{k: getattr(self, k) for k in self._SETTINGS},
             **self.lighting,
+            **({} if self.viewing is None else {"viewing": self.viewing}),
             FORMAT_KEY: REPORT_FORMAT,
         }
 
@@ -154,6 +158,7 @@ class Report:
         return cls(
             metrics=Metrics.from_json(d),
             **own,
+            viewing=d.get("viewing"),
             scene={k: v for k, v in d.items() if k not in named and not _is_lighting(k)},
             lighting={k: v for k, v in d.items() if _is_lighting(k)},
         )

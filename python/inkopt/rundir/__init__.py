@@ -98,6 +98,7 @@ class RunDir(QuantizedFiles):
     MIXTURE_3MF, LABELS_3MF = "mixture.3mf", "quantized.3mf"
     VIEWS_PNG, PREDICTION_GLB, TARGET_GLB = "views.png", "prediction.glb", "target.glb"
     PREDICTIONS, PROOF, LOCK = "predictions.npz", "report.html", LOCK_NAME
+    SPECTRAL_INKS, EVALUATION_LIGHTS = "spectral_inks.json", "evaluation_lights.json"
 
     def __init__(self, path):
         self.path = Path(path)
@@ -169,6 +170,8 @@ class RunDir(QuantizedFiles):
     target_glb_path = _RunFile(TARGET_GLB, "target.glb: the mesh with the target colours.")
     predictions_path = _RunFile(PREDICTIONS, "predictions.npz: predicted colours per scene texel.")
     proof_path = _RunFile(PROOF, "report.html: the soft-proof page (``inkopt report``).")
+    spectral_inks_path = _RunFile(SPECTRAL_INKS, "spectral_inks.json: a spectral run's ink table.")
+    evaluation_lights_path = _RunFile(EVALUATION_LIGHTS, "evaluation_lights.json: a spectral run's figures by light.")
 
     def threemf_path(self, labels: bool = False) -> Path:
         """mixture.3mf (the continuous mixture) or quantized.3mf (``labels``): ``inkopt export --format 3mf``."""
@@ -305,6 +308,7 @@ class RunDir(QuantizedFiles):
             self.threemf_path(),
             self.threemf_path(labels=True),
             self.evaluation_path,
+            self.evaluation_lights_path,
             *sorted(self.path.glob("evaluation_*.png")),
             self.predictions_path,
             self.proof_path,
@@ -327,7 +331,7 @@ class RunDir(QuantizedFiles):
         checkpoint, report, pictures and everything derived from them), which the new run would make stale.
         Returns the names removed."""
         own = [self.volume_path, self.scene_path, self.checkpoint_path, self.report_path, self.loss_picture_path]
-        own += [self.views_picture_path, self.prediction_glb_path, self.target_glb_path]
+        own += [self.views_picture_path, self.prediction_glb_path, self.target_glb_path, self.spectral_inks_path]
         return self._remove(own + sorted(self.path.glob("face_*.png")) + self._derived())
 
     def remove_stale(self) -> list[str]:
@@ -337,7 +341,8 @@ class RunDir(QuantizedFiles):
         removed."""
         digest = self.volume_digest()
         keep = set()
-        for p in (self.quantized_path, self.evaluation_path, self.predictions_path, self.slices_path / "manifest.json"):
+        derived = (self.quantized_path, self.evaluation_path, self.evaluation_lights_path, self.predictions_path)
+        for p in (*derived, self.slices_path / "manifest.json"):
             if p.is_file() and self._recorded(p) == digest:
                 keep.add(p.parent if p.name == "manifest.json" else p)
         if (src := package_source(self.threemf_path())) and src["digest"] == digest:

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..color import RGB, ColourMap
+from ..color import RGB, RGB_TO_XYZ, WHITE_XYZ, ColourMap
 from ..errors import ParameterError
 from ..loss import COMBINE, TexelLoss
 from ..model.spectral import SpectralInkTable
@@ -43,7 +43,10 @@ class Viewing:
             raise ParameterError(f"`combine` must be one of {', '.join(COMBINE)}, got {self.combine!r}")
         if self.table is None and any(light.name != RGB_LIGHT for light in self.lights):
             names = ",".join(light.name for light in self.lights)
-            raise ParameterError(f"`illuminants` {names}: a light other than {RGB_LIGHT} needs a spectral ink table")
+            raise ParameterError(
+                f"`illuminants` {names}: a light other than {RGB_LIGHT} needs a spectral ink table "
+                "(e.g. `inks` vero-cmykw@spectral)"
+            )
         if len({light.name for light in self.lights}) != len(self.lights):
             raise ParameterError("`illuminants` names a light twice")
 
@@ -96,9 +99,36 @@ class Viewing:
             h.update(np.ascontiguousarray(light.on_grid()).tobytes())
         return f"{self.combine}:{h.hexdigest()[:16]}"
 
+    def display(self, values) -> np.ndarray:
+        """Predictions ``values`` (I, C) as linear sRGB (I, 3) float64 for pictures: the RGB path's as they are;
+        a spectral prediction's bands under the first light (:meth:`seen_under`) as CIE XYZ relative to that
+        light's white, carried to sRGB's D65 white by the Bradford chromatic adaptation transform
+        (:func:`adaptation_matrix`), then to linear sRGB (may leave [0, 1] for colours outside sRGB)."""
+        values = np.asarray(values, np.float64)
+        if self.table is None:
+            return values
+        cmap = self.colours()[0]
+        return cmap.xyz(values) @ (np.linalg.inv(RGB_TO_XYZ) @ adaptation_matrix(cmap.white)).T
+
     def describe(self) -> dict:
         """Report fields: spectral or RGB, the bands, the lights and how they combine."""
         d = {"colour": "spectral" if self.spectral else "rgb", "illuminants": [x.name for x in self.seen_under()]}
         if self.table is not None:
-            d.update(bands=self.table.bands, combine=self.combine)
+            d.update(bands=self.table.bands, combine=self.combine, pictures=f"under {d['illuminants'][0]}, {CAT}")
         return d
+
+
+#: how a spectral run's pictures carry the first light's white to sRGB's (:meth:`Viewing.display`)
+CAT = "Bradford chromatic adaptation to D65"
+
+
+def adaptation_matrix(white_xyz) -> np.ndarray:
+    """(3, 3): XYZ under a light of white ``white_xyz`` (3,) (Y = 1) -> the corresponding XYZ under linear sRGB's
+    D65 white (``color.WHITE_XYZ``), the Bradford von Kries transform (colour-science)."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        from colour.adaptation import matrix_chromatic_adaptation_VonKries
+
+    return np.asarray(matrix_chromatic_adaptation_VonKries(white_xyz, WHITE_XYZ, transform="Bradford"), np.float64)

@@ -1,0 +1,54 @@
+"""The lights a print is seen under on the command line (``--illuminant``, ``--illuminants``, ``--combine``) for
+``slab`` and ``optimize``, the run's ``spectral.viewing.Viewing`` built from them, and the line of a spectral run's
+figures under each light (``slab``, ``optimize``, ``evaluate``)."""
+
+from __future__ import annotations
+
+
+def add_light_args(p) -> None:
+    """``--illuminant NAME|FILE.csv`` or ``--illuminants A,B``: the lights the print is seen under
+    (``spectral.lights``, ``spectral.viewing``)."""
+    from ..spectral.lights import NAMED
+
+    g = p.add_mutually_exclusive_group()
+    names = "|".join(NAMED)
+    g.add_argument(
+        "--illuminant",
+        metavar=f"{names}|FILE.csv",
+        help="the light the print is seen under (CIE 1931 2° observer; a file: rows of nm, relative power). "
+        "Default D65, the white of linear sRGB: with an RGB ink table the run is the RGB one; another light needs "
+        "a spectral ink table (docs/spectral.md)",
+    )
+    g.add_argument(
+        "--illuminants",
+        metavar="D65,A",
+        help="several lights: the loss is the mean (or --combine worst) of the loss under each (a spectral ink table; "
+        "docs/spectral.md)",
+    )
+    p.add_argument(
+        "--combine",
+        choices=("mean", "worst"),
+        default="mean",
+        help="how the loss under several lights (--illuminants) combines: their mean (default) or the worst light's "
+        "(each iteration steps on the light whose loss is largest)",
+    )
+
+
+def viewing_from_args(args, table=None):
+    """The run's ``spectral.viewing.Viewing`` from ``--illuminant`` / ``--illuminants`` and the spectral ink table
+    ``table`` of ``--inks`` (None: an RGB table; the RGB path when no light or D65 is asked)."""
+    from ..spectral.lights import load_light, parse_lights
+    from ..spectral.viewing import Viewing
+
+    if getattr(args, "illuminants", None):
+        return Viewing(table, lights=parse_lights(args.illuminants), combine=args.combine)
+    if getattr(args, "illuminant", None):
+        return Viewing(table, lights=(load_light(args.illuminant),))
+    return Viewing(table)
+
+
+def under_lights(v: dict) -> str:
+    """The line of a spectral run's figures under each light (``evaluation.lights.light_figures``'s dict)."""
+    each = ", ".join(f"{n} {m['delta_e2000_mean']:.2f}" for n, m in v["by_light"].items())
+    moves = "".join(f"; colour inconstancy {k} {d:.2f} ΔE2000" for k, d in v["inconstancy_delta_e2000_mean"].items())
+    return f"figures under {v['headline']}; mean ΔE2000 under each light: {each} (worst {v['worst_light']}){moves}"
