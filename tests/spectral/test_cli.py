@@ -63,6 +63,9 @@ def test_spectral_slab_runs_under_two_lights(tmp_path, capsys, picture):
     with np.load(out / "predictions.npz") as p:
         assert p["rgb_continuous"].shape == (len(np.load(out / "scene.npz")["target_rgb"]), 3)  # sRGB, as RGB runs keep
     assert main(["report", str(out)]) == 0
+    capsys.readouterr()
+    assert main(["render", str(out / "volume.npz"), "--spp", "1", "--json"]) == 0  # its stored RGB table, said so
+    assert "is a spectral run's volume; render uses the RGB ink table" in capsys.readouterr().err
     # the lights are part of the run's identity: a resume under others is refused in one line
     capsys.readouterr()
     assert main([*args, "--illuminants", "D65", "--resume"]) == 2

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 
 from ..io import load_array
-from .common import UsageError, add_lighting_args, add_seed_arg, add_threads_arg, lighting_from_args
+from ..rundir import RunDir
+from .common import UsageError, add_lighting_args, add_seed_arg, add_threads_arg, lighting_from_args, stderr_log
 
 
 def _render(args) -> int:
@@ -16,6 +18,11 @@ def _render(args) -> int:
     from ..render import Renderer
 
     vol = Volume.load(args.file)
+    if (Path(args.file).parent / RunDir.SPECTRAL_INKS).is_file():  # a spectral run's volume keeps an RGB table
+        stderr_log(
+            f"note: {args.file} is a spectral run's volume; render uses the RGB ink table stored in it "
+            "(inkopt evaluate RUN --illuminants renders it spectrally under lights)"
+        )
     texels = Texels.for_volume(vol, [args.face] if args.face else None)
     if len(texels) == 0:
         raise UsageError("the volume has no texels on the chosen face(s)")
