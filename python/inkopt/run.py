@@ -173,6 +173,7 @@ def run_optimisation(scene: Scene, out_dir, cfg: OptimizeConfig, options: RunOpt
             job.run.keep_start_figures(figures.start())
         if options.baseline_guard:  # the extrusion baseline's figures, measured once like the start's
             keep_baseline_figures(job.run, lambda x: figures.start(x, keep_renderer=True), options.log)
+        job.run.release_unread_operators()  # the figures' window is not held through the first render
         _iterate(job, figures.final_budget)
         res, metrics = figures.final()
         if job.run.start_figures is None:  # a checkpoint written before the start's figures were kept in it

@@ -91,7 +91,7 @@ class Optimization:
             fixed_share = FixedShares.none(base.shape, len(base.inks))
         self.param = Parameterization(cfg.param, fixed_share, threads)
         self.loss = self.viewing.loss(self.target, texels.pos_vox, cfg.gamma)
-        self._release_unread_operators()
+        self.release_unread_operators()
         # what the run optimises towards and under which constraints: part of the checkpoint key
         h = hashlib.sha256(self.target.tobytes())
         self.param.fixed_share.digest(h)  # the dense array's bytes, a layer at a time
@@ -143,7 +143,7 @@ class Optimization:
         """Keep print-shop baseline ``kind``'s evaluated figures (as ``keep_start_figures``'s) with the run."""
         self.baseline_figures = {**(self.baseline_figures or {}), kind: dict(figures)}
 
-    def _release_unread_operators(self) -> None:
+    def release_unread_operators(self) -> None:
         """Free the loss's sparse operators when no step reads them (~1 GiB at Spot 40 mm); a full call rebuilds."""
         if not self.loss.needs_operators:
             self.loss.release_operators()
@@ -387,7 +387,7 @@ class Optimization:
         the last, and after the last; and a line when the plan changes its reason (converged, time budget).
         ``on_step(self)``: called after every step (e.g. to keep snapshots of ``x``)."""
         bar, lines = None, None
-        self._release_unread_operators()  # a full loss call (the start's figures) built them again
+        self.release_unread_operators()  # a full loss call (the start's figures) built them again
         end = self.plan(reserve)
         if progress:
             from tqdm import tqdm
