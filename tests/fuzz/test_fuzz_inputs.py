@@ -27,7 +27,7 @@ from inkopt.calibration.cgats import CgatsError, CgatsTable
 from inkopt.calibration.measure import MeasurementError, measured_lab
 from inkopt.color import from_srgb8
 from inkopt.scenes.mesh import load_mesh
-from inkopt.scenes.mesh.source import check_obj_materials
+from inkopt.scenes.mesh.source import MATERIAL_COLOURS, check_obj_materials
 
 FAST = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
@@ -256,9 +256,28 @@ NO_VT_TWO_MATERIALS = {
 }
 
 
+#: two untextured materials: trimesh's atlas of their colours, a tile each, blended with its black surround
+TWO_UNTEXTURED = {
+    "m.obj": "mtllib m.mtl\n"
+    + "".join(f"v {x} {y} {z}\n" for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5))
+    + "".join(f"vt {u} {v}\n" for u in (0, 1) for v in (0, 0, 1, 1)[::2] for _ in (0, 1))
+    + "usemtl other\n"
+    + "".join(
+        f"f {a}/{a} {b}/{b} {c}/{c}\n" for a, b, c in ((2, 4, 1), (5, 2, 1), (1, 4, 3), (3, 5, 1), (2, 8, 4), (6, 2, 5))
+    )
+    + "usemtl mat\n"
+    + "".join(
+        f"f {a}/{a} {b}/{b} {c}/{c}\n" for a, b, c in ((6, 8, 2), (4, 8, 3), (7, 5, 3), (3, 8, 7), (7, 6, 5), (8, 6, 7))
+    ),
+    "m.mtl": "newmtl other\nKd 0 0 1\nnewmtl mat\nKd 0 0 1\n",
+    "other.mtl": "\n",
+}
+
+
 @FAST
 @given(obj_files())
 @example(files=NO_VT_TWO_MATERIALS)
+@example(files=TWO_UNTEXTURED)
 def test_obj_material_resolution(files):
     """Either one clean error, or a mesh whose target is its real texture: red at every face of a textured
     material, its Kd (blue) at every face of an untextured one, a texture of a file's size (or an atlas of them),
@@ -273,7 +292,7 @@ def test_obj_material_resolution(files):
             return
     assert mesh.color_source == "texture", mesh.color_source  # nothing else colours these files
     assert mesh.texture.size != (2, 2) and mesh.texture_name
-    assert set(mesh.texture_name.split(", ")) <= {"tex.png", "small.png"}
+    assert set(mesh.texture_name.split(", ")) <= {"tex.png", "small.png", MATERIAL_COLOURS}
     assert mesh.texture_alpha is None  # none of the files has alpha; an atlas's transparent padding is not
     f = np.arange(len(mesh.faces))
     colours = mesh.colors_at(f, np.full((len(f), 3), 1 / 3))

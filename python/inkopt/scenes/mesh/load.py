@@ -28,6 +28,7 @@ from ...images import check_pixels, decode_pixels
 from ..picture import picture_rgba
 from .checks import check_placement
 from .source import (
+    MATERIAL_COLOURS,
     check_colour_source,
     check_obj_materials,
     check_resolved,
@@ -189,7 +190,8 @@ def load_mesh(
         mesh.texture_name = str(texture)
         mesh.texture_profiles = (profile,) if profile else ()
     elif mesh.texture is not None:
-        mesh.texture_name = resolved.names
+        # no file behind the atlas: the tiles of several untextured materials
+        mesh.texture_name = resolved.names or MATERIAL_COLOURS
         mesh.texture_profiles = profiles
     if constant_color and mesh.uv is None:  # a texture that cannot be looked up: the accepted constant instead
         mesh.texture, mesh.texture_alpha = None, None

@@ -40,6 +40,8 @@ import numpy as np
 from ...errors import ParameterError
 from ...images import ImageError, ImageTooLargeError, open_image
 
+#: the texture name of an atlas made of untextured materials' colours alone (``uniform_tiles``)
+MATERIAL_COLOURS = "material colours (Kd)"
 FIX = "name the texture with `texture` FILE, or pass `constant_color` to accept a uniform colour"
 
 
@@ -267,7 +269,7 @@ def srgb_textures(scene) -> tuple[str, ...]:
 
 
 def uniform_tiles(scene, size: int = 8) -> None:
-    """Give every untextured material of an OBJ with a textured one a uniform ``size`` x ``size`` image of its
+    """Give every untextured material of an OBJ with several materials a uniform ``size`` x ``size`` image of its
     colour (Kd), in place. trimesh packs the materials of a mesh with several into one atlas, an untextured one as
     a tile of a few pixels without padding whose colour the bilinear look-up blends with the atlas's transparent
     black around it (a blue Kd came out 25 % darker on some faces); an image is packed like a texture, padded."""
@@ -275,7 +277,7 @@ def uniform_tiles(scene, size: int = 8) -> None:
     from trimesh.visual.material import SimpleMaterial
 
     geoms = list(scene.geometry.values())
-    if len(geoms) < 2 or not any(_image(getattr(g.visual, "material", None)) is not None for g in geoms):
+    if len(geoms) < 2:
         return
     for g in geoms:
         mat = getattr(g.visual, "material", None)
