@@ -77,6 +77,7 @@ def main(argv=None) -> dict:
         t0 = time.perf_counter()
         target = run.loss.target_rgb
         prediction_metrics(run.loss, target, np.full_like(target, 1e-4))
+        run.release_unread_operators()  # as a run does after its start's figures
         figure_s = time.perf_counter() - t0
         rss["after_figure_metrics"] = peak_rss_gb()
         print(f"figure metrics in {figure_s:.1f} s; peaks so far (GiB) {rss}", file=sys.stderr, flush=True)
