@@ -4,6 +4,7 @@ Shared data (test meshes) is found relative to the repository: ``../shared`` bes
 and every developer machine lay it out.
 """
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +18,25 @@ SPOT = SHARED_DATA / "spot" / "spot.obj"
 if not SPOT.is_file():
     SPOT = REPO / "python" / "inkopt" / "data" / "spot" / "spot.obj"
 #: the optimisation arguments of a CLI test's run: the fewest iterations and samples that exercise every stage
+#: property tests run fixed (derandomized) examples, the same every run, unless INKOPT_FUZZ_EXAMPLES=N asks for N
+#: random ones (a search for new failures, outside CI)
+FUZZ_RANDOM = int(os.environ.get("INKOPT_FUZZ_EXAMPLES", "0"))
+
+
+def fuzz(examples: int):
+    """hypothesis settings of a property test: ``examples`` derandomized examples (or ``FUZZ_RANDOM`` random
+    ones), no deadline, no example database."""
+    from hypothesis import HealthCheck, settings
+
+    return settings(
+        max_examples=FUZZ_RANDOM or examples,
+        deadline=None,
+        derandomize=not FUZZ_RANDOM,
+        database=None,
+        suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow, HealthCheck.data_too_large],
+    )
+
+
 FAST_RUN = ["--iterations", "2", "--spp", "1", "--forward-spp", "2", "--eval-spp", "4", "--threads", "2"]
 
 

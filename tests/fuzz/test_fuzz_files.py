@@ -12,7 +12,6 @@ examples per property instead.
 
 import io
 import json
-import os
 import warnings
 import xml.etree.ElementTree as ET
 import zipfile
@@ -21,7 +20,8 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from helpers import fuzz
+from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 from PIL import Image
@@ -34,18 +34,7 @@ from inkopt.printing.formats.job import LabelVoxels, PrintJob
 from inkopt.printing.profiles import printer_profile
 from inkopt.rundir import RunDir, SceneRecord
 
-RANDOM = int(os.environ.get("INKOPT_FUZZ_EXAMPLES", "0"))
 INKS = InkTable.parse("vero-cmykw")
-
-
-def fuzz(examples: int):
-    return settings(
-        max_examples=RANDOM or examples,
-        deadline=None,
-        derandomize=not RANDOM,
-        database=None,
-        suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow, HealthCheck.data_too_large],
-    )
 
 
 def clean(read, path, *args, named=()):

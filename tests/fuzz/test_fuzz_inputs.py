@@ -7,8 +7,8 @@ a correct result or one clean error (a ValueError or OSError with a one-line mes
 - an OBJ's material resolution (``scenes.mesh.source`` and ``load_mesh``) on small generated OBJ and MTL files:
   a mesh that loads shows the colours of its real textures, never trimesh's grey placeholder.
 
-Each test's example count (``settings``) keeps the whole file to a few seconds, so it runs in the default
-selection.
+Each test's example count (``helpers.fuzz``: the same examples every run) keeps the whole file to a few seconds,
+so it runs in the default selection.
 """
 
 import tempfile
@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
-from hypothesis import HealthCheck, example, given, settings
+from helpers import fuzz
+from hypothesis import example, given
 from hypothesis import strategies as st
 from PIL import Image
 
@@ -29,7 +30,7 @@ from inkopt.color import from_srgb8
 from inkopt.scenes.mesh import load_mesh
 from inkopt.scenes.mesh.source import MATERIAL_COLOURS, check_obj_materials
 
-FAST = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+FAST = fuzz(150)
 
 
 def clean(exc: BaseException, names: str = "") -> None:
@@ -142,13 +143,13 @@ def test_cgats_structured_files(text):
     read_measurements(text)
 
 
-@settings(max_examples=100, deadline=None)
+@fuzz(100)
 @given(st.text(st.characters(codec="utf-8"), max_size=300))
 def test_cgats_arbitrary_text(text):
     read_measurements(text)
 
 
-@settings(max_examples=50, deadline=None)
+@fuzz(50)
 @given(st.binary(max_size=200))
 def test_cgats_arbitrary_bytes(data):
     with tempfile.TemporaryDirectory() as d:
@@ -167,7 +168,7 @@ VALUE = st.one_of(
 )
 
 
-@settings(max_examples=100, deadline=None)
+@fuzz(100)
 @given(st.lists(NAME, min_size=1, max_size=4, unique_by=str.upper), st.data())
 def test_cgats_write_then_read(fields, data):
     """A table the writer accepts reads back with the same fields and the values it wrote; values it cannot
@@ -300,7 +301,7 @@ def test_obj_material_resolution(files):
     assert off.max() < 0.02, colours[np.argmax(off)]  # a textured material's red, an untextured one's Kd blue
 
 
-@settings(max_examples=100, deadline=None)
+@fuzz(100)
 @given(st.text(st.characters(codec="utf-8"), max_size=200))
 def test_obj_statements_of_arbitrary_text(text):
     """The statement reader on any text: its materials, or one clean error (junk is not an OBJ's colour)."""

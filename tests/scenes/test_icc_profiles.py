@@ -5,8 +5,8 @@ changes nothing; an unreadable profile is one line naming the file."""
 import colour
 import numpy as np
 import pytest
-from helpers import srgb_to_linear, write_cube_obj
-from hypothesis import given, settings
+from helpers import fuzz, srgb_to_linear, write_cube_obj
+from hypothesis import given
 from hypothesis import strategies as st
 from iccprofiles import rgb_profile as make_profile
 from PIL import Image
@@ -95,7 +95,7 @@ def test_mesh_texture_is_read_through_its_profile(tmp_path, override):
     assert "converted to sRGB from ICC profile Display P3" in describe_colour_source(m)
 
 
-@settings(max_examples=60, deadline=None)
+@fuzz(60)
 @given(st.data())
 def test_damaged_profiles_give_one_clean_error_or_a_conversion(data):
     """Any byte of a valid profile replaced, or the profile cut short: one line naming the file, or colours."""
