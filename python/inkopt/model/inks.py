@@ -47,26 +47,23 @@ PRESETS: dict[str, list[str]] = {
 }
 
 
-@dataclass(frozen=True)
-class InkTable:
-    """N inks. ``sigma_s`` and ``sigma_a`` are (N, 3) float64 arrays in mm^-1 (R, G, B)."""
+class InkCoefficients:
+    """What ink tables share (``InkTable``: RGB channels, ``model.spectral.SpectralInkTable``: wavelength bands):
+    ``names`` and ``sigma_s``, ``sigma_a`` (N, channels) in mm^-1, one Henyey-Greenstein ``g``."""
 
-    names: tuple[str, ...]
-    sigma_s: np.ndarray
-    sigma_a: np.ndarray
-    g: float = DEFAULT_G
-
-    def __post_init__(self):
+    def _check(self, channels: int, what: str) -> None:
+        """One-line ValueError for a bad name, coefficient array or g; the arrays stored as C-contiguous float64
+        (the core takes its arrays as they are)."""
         n = len(self.names)
         for name in self.names:
             if problem := ink_name_problem(name):
                 raise ValueError(f"ink name {name!r} {problem}")
         for key in ("sigma_s", "sigma_a"):
-            arr = np.ascontiguousarray(getattr(self, key), dtype=np.float64)  # the core takes its arrays as they are
-            if arr.shape != (n, 3):
-                raise ValueError(f"ink table {key} must have shape ({n}, 3), got {arr.shape}")
+            arr = np.ascontiguousarray(getattr(self, key), dtype=np.float64)
+            if arr.shape != (n, channels):
+                raise ValueError(f"{what} {key} must have shape ({n}, {channels}), got {arr.shape}")
             if not np.all(np.isfinite(arr)) or np.any(arr < 0):
-                raise ValueError(f"ink table {key} must be finite and non-negative")
+                raise ValueError(f"{what} {key} must be finite and non-negative")
             object.__setattr__(self, key, arr)
         if len(set(self.names)) != n or n == 0:
             raise ValueError("ink names must be non-empty and unique")
@@ -81,6 +78,19 @@ class InkTable:
             return self.names.index(name.lower())
         except ValueError:
             raise ValueError(f"ink '{name}' is not in this ink set {list(self.names)}") from None
+
+
+@dataclass(frozen=True)
+class InkTable(InkCoefficients):
+    """N inks. ``sigma_s`` and ``sigma_a`` are (N, 3) float64 arrays in mm^-1 (R, G, B)."""
+
+    names: tuple[str, ...]
+    sigma_s: np.ndarray
+    sigma_a: np.ndarray
+    g: float = DEFAULT_G
+
+    def __post_init__(self):
+        self._check(3, "ink table")
 
     @property
     def mu_t(self) -> np.ndarray:

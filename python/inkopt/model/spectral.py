@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io import write_json
-from .inks import DEFAULT_G, INK_FILE_FORMAT, InkTable, ink_name_problem, read_ink_file
+from .inks import DEFAULT_G, INK_FILE_FORMAT, InkCoefficients, InkTable, ink_name_problem, read_ink_file
 
 #: channels the renderer carries per path group (R, G, B)
 GROUP = 3
@@ -45,7 +45,7 @@ LIBRARY_SPECTRA = {20.0: _DATA / "ink_spectra_20nm.json", 10.0: _DATA / "ink_spe
 
 
 @dataclass(frozen=True)
-class SpectralInkTable:
+class SpectralInkTable(InkCoefficients):
     """N inks over B wavelength bands. ``wavelengths_nm`` (B,) float64, strictly increasing band centres in nm;
     ``sigma_s`` and ``sigma_a`` (N, B) float64 in mm^-1; one Henyey-Greenstein ``g`` for every ink and band."""
 
@@ -56,35 +56,12 @@ class SpectralInkTable:
     g: float = DEFAULT_G
 
     def __post_init__(self):
-        names = tuple(self.names)
-        object.__setattr__(self, "names", names)
-        for name in names:
-            if problem := ink_name_problem(name):
-                raise ValueError(f"ink name {name!r} {problem}")
-        if len(set(names)) != len(names) or not names:
-            raise ValueError("ink names must be non-empty and unique")
+        object.__setattr__(self, "names", tuple(self.names))
         wl = np.asarray(self.wavelengths_nm, dtype=np.float64)
         if wl.ndim != 1 or wl.size < 1 or not np.all(np.isfinite(wl)) or np.any(np.diff(wl) <= 0):
             raise ValueError("wavelengths_nm must be a non-empty, strictly increasing list of finite numbers")
         object.__setattr__(self, "wavelengths_nm", wl)
-        for key in ("sigma_s", "sigma_a"):
-            arr = np.asarray(getattr(self, key), dtype=np.float64)
-            if arr.shape != (len(names), wl.size):
-                raise ValueError(f"spectral ink table {key} must have shape ({len(names)}, {wl.size}), got {arr.shape}")
-            if not np.all(np.isfinite(arr)) or np.any(arr < 0):
-                raise ValueError(f"spectral ink table {key} must be finite and non-negative")
-            object.__setattr__(self, key, arr)
-        if not -1.0 < self.g < 1.0:
-            raise ValueError(f"Henyey-Greenstein g must lie in (-1, 1), got {self.g}")
-
-    def __len__(self) -> int:
-        return len(self.names)
-
-    def index(self, name: str) -> int:
-        try:
-            return self.names.index(name.lower())
-        except ValueError:
-            raise ValueError(f"ink '{name}' is not in this ink set {list(self.names)}") from None
+        self._check(wl.size, "spectral ink table")
 
     @classmethod
     def from_rgb(cls, inks: InkTable, wavelengths_nm=WAVELENGTHS_20NM) -> SpectralInkTable:
