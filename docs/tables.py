@@ -997,6 +997,163 @@ def core_deep_mixture() -> str:
     return table(["setting", "deeper than", "voxels", "mean shares"], rows, [path])
 
 
+def _pm(pair, digits: int = 2) -> str:
+    """'mean ± se' of a [mean, se] pair."""
+    return f(pair[0], digits) + ("" if pair[1] is None else " ± " + f(pair[1], digits))
+
+
+FIGURES = STUDY / "figure_disagreement.json"
+RESULT_NAMES = {"continuous": "continuous", "quantized": "printed", "extrusion": "extrusion"}
+
+
+def figure_terms() -> str:
+    """experiments/figure_disagreement.py: per mesh and result the corrected means and their CIE76 / CIEDE2000
+    terms on one texel sample."""
+    rows = []
+    for name, entry in load(FIGURES)["results"].items():
+        g = entry["groups"]["all"]
+        for r, shown in RESULT_NAMES.items():
+            v = {k: x[0] for k, x in g[r].items()}
+            rows.append(
+                [
+                    name.split("_")[0],
+                    shown,
+                    _pm(g[r]["de76_corrected"]),
+                    _pm(g[r]["de2000_corrected"]),
+                    f(v["de76_corrected"] / v["de2000_corrected"]),
+                ]
+                + [f(v[k]) for k in ("abs_dL76", "abs_dC76", "abs_dH76", "abs_dL_SL", "abs_dC_SC", "abs_dH_SH", "SC")]
+                + [f"{f(v['noise76_model'])} / {f(v['noise76_sim'])}", f(v["noise2000_sim"])]
+            )
+    header = [
+        "mesh",
+        "result",
+        "ΔE76 corr.",
+        "ΔE2000 corr.",
+        "ΔE76 / ΔE2000",
+        r"ΔL\*",
+        r"ΔC\*ab",
+        r"ΔH\*ab",
+        "ΔL'/SL",
+        "ΔC'/SC",
+        "ΔH'/SH",
+        "SC",
+        "noise in ΔE76: model / sim",
+        "noise in ΔE2000: sim",
+    ]
+    return table(header, rows, [FIGURES])
+
+
+def figure_verdicts() -> str:
+    """experiments/figure_disagreement.py: each result's paired difference from the extrusion baseline, with the
+    target's chroma and the gamut floor."""
+    rows = []
+    for name, entry in load(FIGURES)["results"].items():
+        g = entry["groups"]["all"]
+        t = {k: x[0] for k, x in g["target"].items()}
+        out = entry["groups"].get("out of gamut", {"share": 0.0})["share"]
+        floor = f"{f(t['gamut_de76'])} ({f(t['gamut_abs_dC76'])}) / {f(t['gamut_de2000'])}"
+        for r in ("continuous", "quantized"):
+            d = g[f"{r} - extrusion"]
+            rows.append(
+                [
+                    name.split("_")[0],
+                    f(t["chroma"], 1),
+                    f"{out * 100:.1f} %",
+                    floor,
+                    RESULT_NAMES[r],
+                    _pm(d["de76_corrected"]),
+                    _pm(d["de2000_corrected"]),
+                    _pm(d["e1_corrected"], 0),
+                ]
+            )
+    header = [
+        "mesh",
+        r"target C\*ab",
+        "out of gamut",
+        r"gamut floor ΔE76 (its ΔC\*ab) / ΔE2000",
+        "result − extrusion",
+        "ΔE76 corr.",
+        "ΔE2000 corr.",
+        "ΔE76² (the loss's E1)",
+    ]
+    return table(header, rows, [FIGURES])
+
+
+def loss_de2000() -> str:
+    """experiments/loss_de2000.py: today's loss against the ΔE2000-weighted colour term, paired."""
+    path = STUDY / "loss_de2000.json"
+    rows, names = [], []
+    for name, entry in load(path)["results"].items():
+        names.append(f"`{name}`")
+        arms = {
+            "delta_e76_squared": "mean ΔE76² (today's loss)",
+            "de2000_weighted": "ΔE2000-weighted",
+            "weighted - default": "weighted − today's (paired)",
+        }
+        for key, shown in arms.items():
+            rows.append([shown, _pm(entry[key]["de76_corrected"]), _pm(entry[key]["de2000"])])
+    return table([f"result ({', '.join(names)})", "ΔE76 corr.", "ΔE2000"], rows, [path])
+
+
+def _mpm(s: dict) -> str:
+    """'mean / p95 / max' of a ΔE summary."""
+    return " / ".join(f(s[k]) for k in ("mean", "p95", "max"))
+
+
+def spectral_calibration() -> str:
+    """experiments/spectral_calibration.py: held-out ΔE2000 of the spectral and the RGB calibration, per noise."""
+    path = STUDY / "spectral_calibration.json"
+    d = load(path)
+    sets = {"chart_holdout": f"chart ({d['held_out_chart']} patches)", "mixtures": f"random mixtures ({d['mixtures']})"}
+    rows = []
+    for run, r in d["runs"].items():
+        noise = float(run.removeprefix("noise_"))
+        for key, held in r["held_out"].items():
+            where, light = key.rsplit("_", 1)
+            rows.append(
+                [
+                    f"{noise * 100:g} %",
+                    sets[where],
+                    light,
+                    _mpm(held["spectral"]),
+                    _mpm(held["rgb_bradford"]),
+                    _mpm(held["rgb_upsampled"]),
+                ]
+            )
+    header = [
+        "noise",
+        "held-out set",
+        "light",
+        f"spectral table ({d['bands']} bands)",
+        "RGB table, Bradford",
+        "RGB table, upsampled",
+    ]
+    return table(header, rows, [path])
+
+
+def spectral_library() -> str:
+    """experiments/spectral_library.py: how closely the spectral forms of the ink library reproduce its RGB table."""
+    path = STUDY / "spectral_library.json"
+    rows = [
+        [r["bands"], r["made"]]
+        + [
+            _mpm(r[k])
+            for k in ("library_chart_fitted", "library_chart_linear", "cmykw_chart_fitted", "cmykw_chart_linear")
+        ]
+        for r in load(path)["results"].values()
+    ]
+    header = [
+        "bands",
+        "made",
+        "library chart (352 patches), fitted form",
+        "linear form",
+        "CMYKW chart (87), fitted form",
+        "linear form",
+    ]
+    return table(header, rows, [path])
+
+
 TABLES = {
     "headline": headline,
     "quality": quality,
@@ -1016,6 +1173,11 @@ TABLES = {
     "shell-mm": shell_mm,
     "core-depth": core_depth,
     "core-deep-mixture": core_deep_mixture,
+    "figure-terms": figure_terms,
+    "figure-verdicts": figure_verdicts,
+    "loss-de2000": loss_de2000,
+    "spectral-calibration": spectral_calibration,
+    "spectral-library": spectral_library,
     "calibration": calibration,
     "coarse-to-fine": coarse_to_fine,
     "time-to-quality": time_to_quality,

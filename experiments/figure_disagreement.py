@@ -6,7 +6,7 @@ patch of the inks reaches (the evaluation's colour table, ``ColourTable.reachabl
 Writes the entry MESH of experiments/results/figure_disagreement.json.
 
     nice -n 5 .venv/bin/python experiments/figure_disagreement.py RUN_DIR --name MESH [--texels 1500] [--spp 512]
-    .venv/bin/python experiments/figure_disagreement.py --table     # the docs' tables from the results file
+    .venv/bin/python docs/tables.py     # the docs' tables (figure-terms, figure-verdicts) from the results file
 
 RUN_DIR is a suite run (bench/mesh_suite.py) with scene.npz, volume.npz and quantized.npz; it is copied to a
 temporary directory first, so nothing is written into it. Every result is rendered on the same sampled texels with
@@ -22,7 +22,6 @@ errors of means over the sampled texels (the render noise of each texel is part 
 """
 
 import argparse
-import json
 import shutil
 import sys
 import tempfile
@@ -250,63 +249,15 @@ def print_table(name: str, groups: dict) -> None:
         )
 
 
-def _cell(pair, fmt="{:.2f}") -> str:
-    """'mean ± se' of a [mean, se] pair."""
-    return fmt.format(pair[0]) + ("" if pair[1] is None else " ± " + fmt.format(pair[1]))
-
-
-def markdown_tables(results: dict) -> str:
-    """The docs' tables (docs/quality.md, "Which figure the optimiser serves") from the results file's entries: per
-    mesh and result the corrected means and their terms; the paired differences from extrusion."""
-    rows = [
-        r"| mesh | result | ΔE76 corr. | ΔE2000 corr. | ΔE76 / ΔE2000 | ΔL\* | ΔC\*ab | ΔH\*ab | ΔL'/SL | ΔC'/SC "
-        "| ΔH'/SH | SC | noise in ΔE76: model / sim | noise in ΔE2000: sim |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
-    ]
-    diffs = [
-        r"| mesh | target C\*ab | out of gamut | gamut floor ΔE76 (its ΔC\*ab) / ΔE2000 | result − extrusion "
-        "| ΔE76 corr. | ΔE2000 corr. | ΔE76² (the loss's E1) |",
-        "|---|---|---|---|---|---|---|---|",
-    ]
-    for name, entry in results.items():
-        g = entry["groups"]["all"]
-        for r in ("continuous", "quantized", "extrusion"):
-            v = {k: x[0] for k, x in g[r].items()}
-            rows.append(
-                f"| {name} | {'printed' if r == 'quantized' else r} | {_cell(g[r]['de76_corrected'])} | "
-                f"{_cell(g[r]['de2000_corrected'])} | {v['de76_corrected'] / v['de2000_corrected']:.2f} | "
-                f"{v['abs_dL76']:.2f} | {v['abs_dC76']:.2f} | {v['abs_dH76']:.2f} | {v['abs_dL_SL']:.2f} | "
-                f"{v['abs_dC_SC']:.2f} | {v['abs_dH_SH']:.2f} | {v['SC']:.2f} | {v['noise76_model']:.2f} / "
-                f"{v['noise76_sim']:.2f} | {v['noise2000_sim']:.2f} |"
-            )
-        t = {k: x[0] for k, x in g["target"].items()}
-        out = entry["groups"].get("out of gamut", {"share": 0.0})["share"]
-        for r in ("continuous", "quantized"):
-            d = g[f"{r} - extrusion"]
-            diffs.append(
-                f"| {name} | {t['chroma']:.1f} | {out * 100:.1f} % | {t['gamut_de76']:.2f} ({t['gamut_abs_dC76']:.2f}) "
-                f"/ {t['gamut_de2000']:.2f} | {'printed' if r == 'quantized' else r} | {_cell(d['de76_corrected'])} | "
-                f"{_cell(d['de2000_corrected'])} | {_cell(d['e1_corrected'], '{:.0f}')} |"
-            )
-    return "\n".join(rows) + "\n\n" + "\n".join(diffs)
-
-
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("run", type=Path, nargs="?", help="a suite run directory (omit with --table)")
-    ap.add_argument("--name")
+    ap.add_argument("run", type=Path, help="a suite run directory")
+    ap.add_argument("--name", required=True)
     ap.add_argument("--texels", type=int, default=1500)
     ap.add_argument("--spp", type=int, default=512)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--table", action="store_true", help="print the docs' tables from the results file and stop")
     a = ap.parse_args()
-    if a.table:
-        path = Path(__file__).resolve().parent / "results" / "figure_disagreement.json"
-        print(markdown_tables(json.loads(path.read_text())["results"]))
-        return
-    if a.run is None or a.name is None:
-        ap.error("a run directory and --name are needed (or --table)")
     entry = {**provenance(), "run": str(a.run), "texels_sampled": a.texels, "spp": a.spp, "seed": a.seed}
     data = render_results(a.run, a.texels, a.spp, a.threads, a.seed)
     entry["population"] = data["population"]
