@@ -23,7 +23,9 @@ worker returns rgb and variance of its texels for both passes (2 x 24 bytes per 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import time
+from collections import Counter
 from collections.abc import Iterator
 from dataclasses import replace
 
@@ -104,6 +106,29 @@ class _ShardWorker:
         )
         return gs, ga, q, r.rgb, r.var_mean, _totals(r)
 
+    def peak_rss_gb(self) -> float:
+        """This worker process's peak resident memory so far, GiB (Linux's ru_maxrss is in KiB)."""
+        import resource
+
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
+
+
+def payload_bytes(obj) -> int:
+    """The bytes ``obj`` carries between processes: its arrays' and byte strings' lengths, in tuples, lists, dicts
+    and dataclasses (a Volume, Texels, Lighting); 8 for a scalar or another small object (Ray's framing is not
+    counted)."""
+    if isinstance(obj, np.ndarray):
+        return int(obj.nbytes)
+    if isinstance(obj, (bytes, bytearray, memoryview)):
+        return len(obj)
+    if isinstance(obj, (list, tuple)):
+        return sum(payload_bytes(o) for o in obj)
+    if isinstance(obj, dict):
+        return sum(payload_bytes(o) for o in obj.values())
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return sum(payload_bytes(getattr(obj, f.name)) for f in dataclasses.fields(obj))
+    return 8
+
 
 def _totals(r: RenderResult) -> dict:
     return dict(paths=r.paths, events=r.events, replayed_paths=r.replayed_paths, replayed_events=r.replayed_events)
@@ -146,6 +171,10 @@ class RayShards:
         """A renderer of ``volume`` on these workers (``threads`` is ignored: each worker has its own)."""
         return ShardedRenderer(self, volume, lighting)
 
+    def peak_rss_gb(self) -> list[float]:
+        """Each worker's peak resident memory so far, GiB (pages of the object store it reads count too)."""
+        return self._ray.get([a.peak_rss_gb.remote() for a in self.actors])
+
     def close(self) -> None:
         for a in self.actors:
             self._ray.kill(a)
@@ -163,7 +192,12 @@ class ShardedRenderer(TexelRenderer):
         self._shards, self._ray = shards, shards._ray
         self.volume, self.lighting = volume, load_lighting(lighting)
         self._refs: dict = {}
-        ref = self._ray.put(volume)
+        #: bytes moved so far, by what: "out:volume", "out:mixture", "out:index", "out:texels", "out:adjoint",
+        #: "out:lighting" (what the driver puts or sends, once per object: a node fetches it once), "back:render"
+        #: (rgb and variance) and "back:gradient" (what the workers return), and "dense:gradient" (what the
+        #: gradients would be as raw int64 arrays, a slot per free voxel per worker)
+        self.traffic: Counter = Counter()
+        ref = self._put("volume", volume)
         self._pending = [a.load.remote(ref, self.lighting) for a in shards.actors]
 
     @property
@@ -173,28 +207,34 @@ class ShardedRenderer(TexelRenderer):
     def set_volume(self, volume: Volume) -> None:
         """:meth:`TexelRenderer.set_volume`: the whole volume goes out to every worker."""
         check_same_grid(volume, self.volume)
-        ref = self._ray.put(volume)
+        ref = self._put("volume", volume)
         self._pending += [a.set_volume.remote(ref) for a in self._shards.actors]
         self.volume = volume
 
     def set_mixture(self, index: np.ndarray, mixture: np.ndarray) -> None:
         """:meth:`TexelRenderer.set_mixture`: the mixtures (K x N float32) go out through the object store once for
         all workers; the index (the optimiser passes the same array every iteration) only the first time."""
-        rows_ref = self._ray.put(np.ascontiguousarray(mixture, np.float32))
-        self._pending += [a.set_mixture.remote(self._ref(index), rows_ref) for a in self._shards.actors]
+        rows_ref = self._put("mixture", np.ascontiguousarray(mixture, np.float32))
+        self._pending += [a.set_mixture.remote(self._ref(index, "index"), rows_ref) for a in self._shards.actors]
 
     def set_lighting(self, lighting: Lighting | str | None) -> None:
         self.lighting = load_lighting(lighting)
+        self.traffic["out:lighting"] += payload_bytes(self.lighting)
         self._pending += [a.set_lighting.remote(self.lighting) for a in self._shards.actors]
 
-    def _ref(self, obj):
-        """An object-store reference to ``obj`` (texels, a gradient index), put once while the same object is
-        passed again."""
+    def _put(self, what: str, obj):
+        """``obj`` put into the object store, its bytes counted as ``out:<what>``."""
+        self.traffic["out:" + what] += payload_bytes(obj)
+        return self._ray.put(obj)
+
+    def _ref(self, obj, what: str):
+        """An object-store reference to ``obj`` (texels, a gradient index), put (and counted as ``out:<what>``)
+        once while the same object is passed again."""
         hit = self._refs.get(id(obj))
         if hit is None or hit[0] is not obj:
             if len(self._refs) > 8:
                 self._refs.clear()
-            hit = self._refs[id(obj)] = (obj, self._ray.put(obj))
+            hit = self._refs[id(obj)] = (obj, self._put(what, obj))
         return hit[1]
 
     def _bounds(self, n: int) -> list[tuple[int, int]]:
@@ -209,7 +249,7 @@ class ShardedRenderer(TexelRenderer):
         return self._ray.get(calls)
 
     def render_pass(self, texels: Texels, settings: PassSettings, progress: bool = False) -> RenderResult:
-        t0, tex = time.perf_counter(), self._ref(texels)
+        t0, tex = time.perf_counter(), self._ref(texels, "texels")
         first = settings.first_texel
         outs = self._gather(
             [
@@ -231,13 +271,17 @@ class ShardedRenderer(TexelRenderer):
         once."""
         adjoint, t0 = adjoint_array(adjoint, len(texels)), time.perf_counter()
         max_abs = float(np.abs(adjoint).max(initial=0.0))
-        tex, gi, first = self._ref(texels), None if grad_index is None else self._ref(grad_index), settings.first_texel
+        gi = None if grad_index is None else self._ref(grad_index, "index")
+        tex, first = self._ref(texels, "texels"), settings.first_texel
+        self.traffic["out:adjoint"] += adjoint.nbytes
         outs = self._gather(
             [
                 a.gradient.remote(tex, lo, hi, adjoint[lo:hi], max_abs, replace(settings, first_texel=first + lo), gi)
                 for a, (lo, hi) in zip(self._shards.actors, self._bounds(len(texels)))
             ]
         )
+        self.traffic["back:gradient"] += sum(payload_bytes(o[:2]) for o in outs)
+        self.traffic["dense:gradient"] += sum(payload_bytes(o[:2]) for o in outs)
         quanta = {o[2] for o in outs}
         assert len(quanta) == 1, f"shards used different fixed-point quanta {quanta}"
         gs, ga = np.array(outs[0][0], np.int64), np.array(outs[0][1], np.int64)
@@ -247,8 +291,9 @@ class ShardedRenderer(TexelRenderer):
         q = quanta.pop()
         return fixed_to_float(gs, q), fixed_to_float(ga, q), self._result([o[3:] for o in outs], settings.spp, t0)
 
-    @staticmethod
-    def _result(outs, spp: int, t0: float) -> RenderResult:
+    def _result(self, outs, spp: int, t0: float) -> RenderResult:
+        """The pass's result from the workers' (rgb, var_mean, totals), their bytes counted as ``back:render``."""
+        self.traffic["back:render"] += sum(payload_bytes(o[:2]) for o in outs)
         totals = {k: sum(o[2][k] for o in outs) for k in outs[0][2]}
         rgb = np.concatenate([o[0] for o in outs]).astype(np.float32)
         var = np.concatenate([o[1] for o in outs]).astype(np.float32)
