@@ -11,13 +11,17 @@ threads.
 Why the result does not depend on the split: random numbers are keyed by (seed, texel index, sample), and a
 worker renders its range with the texels' global indices (``first_texel``); forward results are per texel, so
 they are concatenated. Gradients are accumulated in fixed point (multiples of a quantum set from the largest
-adjoint of the whole pass, which every worker is given); workers return the raw int64 sums
-(``Renderer.gradient_fixed``), which are added here in integer arithmetic and converted once, as the core does.
+adjoint of the whole pass, which every worker is given); workers return the int64 sums
+(``Renderer.gradient_fixed``) of the slots their paths touched (:class:`TouchedSlots`), which are added here in
+integer arithmetic and converted once, as the core does.
 
 Per iteration, the driver puts the free voxels' mixtures (F x N float32; their int64 index only once) into the
 object store, which every node fetches once, and each worker its slice of the adjoints (12 bytes per texel); each
-worker returns rgb and variance of its texels for both passes (2 x 24 bytes per texel) and the gradient sums
-(2 x 3 x int64 = 48 bytes per gradient slot, i.e. per free voxel).
+worker returns rgb and variance of its texels for both passes (2 x 24 bytes per texel) and its touched slots: a
+bitmap or gaps for which, and 6 sums each in the narrowest integer dtype that holds them (instead of 48 bytes per
+free voxel). A worker's texels are a contiguous range of the list; a mesh's texels are in (z, y, x) order, so a
+range is a slab of the object and its paths touch the slots of that slab and its neighbourhood.
+``ShardedRenderer.traffic`` counts the bytes.
 """
 
 from __future__ import annotations
@@ -27,7 +31,7 @@ import dataclasses
 import time
 from collections import Counter
 from collections.abc import Iterator
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -100,11 +104,14 @@ class _ShardWorker:
 
     def gradient(self, texels, lo: int, hi: int, adjoint, max_abs: float, settings: PassSettings, grad_index):
         """The texels ``lo:hi`` of the gradient pass (``settings.first_texel``: the index of ``texels[lo]``; their
-        adjoints; the whole pass's largest |adjoint| ``max_abs``): (sum_s, sum_a, quantum, rgb, var_mean, totals)."""
+        adjoints; the whole pass's largest |adjoint| ``max_abs``): (touched, quantum, rgb, var_mean, totals), the
+        fixed-point sums as :class:`TouchedSlots`."""
         gs, ga, q, r = self.renderer.gradient_fixed(
             texels.subset(slice(lo, hi)), adjoint, settings, grad_index, max_abs
         )
-        return gs, ga, q, r.rgb, r.var_mean, _totals(r)
+        touched = TouchedSlots.of(gs, ga)
+        del gs, ga
+        return touched, q, r.rgb, r.var_mean, _totals(r)
 
     def peak_rss_gb(self) -> float:
         """This worker process's peak resident memory so far, GiB (Linux's ru_maxrss is in KiB)."""
@@ -128,6 +135,80 @@ def payload_bytes(obj) -> int:
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
         return sum(payload_bytes(getattr(obj, f.name)) for f in dataclasses.fields(obj))
     return 8
+
+
+def _narrowest(values: np.ndarray, dtypes) -> np.ndarray:
+    """``values`` (integers) in the first of ``dtypes`` that holds every one of them exactly."""
+    if values.size == 0:
+        return values.astype(dtypes[0])
+    lo, hi = int(values.min()), int(values.max())
+    for dtype in dtypes:
+        info = np.iinfo(dtype)
+        if info.min <= lo and hi <= info.max:
+            return values.astype(dtype, copy=False)
+    raise ValueError(f"integers {lo}..{hi} fit none of {dtypes}")
+
+
+@dataclass(frozen=True)
+class TouchedSlots:
+    """The gradient slots a shard's paths touched and their fixed-point sums, exactly: what a worker returns
+    instead of its two raw (F, 3) int64 arrays, in which most slots are zero when its texels see only part of
+    the object.
+
+    shape    the raw arrays' shape: (F, 3) (a slot per free voxel) or (z, y, x, 3)
+    first    the first touched slot (0 when none is)
+    count    how many slots are touched (a slot is touched when any of its 6 sums is not 0)
+    where    which: ``bitmap`` True: ``np.packbits`` of the touched flags of slots first .. last (uint8); else the
+             gaps between consecutive touched slots ((count - 1,), the narrowest unsigned dtype); whichever is
+             shorter
+    sums     6 arrays (count,): sigma_s's sums of channels 0, 1, 2, then sigma_a's, each in the narrowest signed
+             integer dtype that holds its values
+    """
+
+    shape: tuple
+    first: int
+    count: int
+    bitmap: bool
+    where: np.ndarray
+    sums: tuple
+
+    @classmethod
+    def of(cls, sum_s: np.ndarray, sum_a: np.ndarray) -> TouchedSlots:
+        """The touched slots of raw fixed-point sums ``sum_s``, ``sum_a`` (int64, (..., 3), same shape)."""
+        s, a = np.asarray(sum_s, np.int64).reshape(-1, 3), np.asarray(sum_a, np.int64).reshape(-1, 3)
+        flags = (s != 0).any(axis=1) | (a != 0).any(axis=1)
+        idx = np.flatnonzero(flags)
+        first = int(idx[0]) if len(idx) else 0
+        span = int(idx[-1]) - first + 1 if len(idx) else 0
+        gaps = _narrowest(np.diff(idx), (np.uint8, np.uint16, np.uint32, np.uint64))
+        bitmap = (span + 7) // 8 < gaps.nbytes
+        where = np.packbits(flags[first : first + span]) if bitmap else gaps
+        signed = (np.int8, np.int16, np.int32, np.int64)
+        sums = tuple(_narrowest(m[idx, c], signed) for m in (s, a) for c in range(3))
+        return cls(tuple(np.shape(sum_s)), first, len(idx), bool(bitmap), where, sums)
+
+    def indices(self) -> np.ndarray:
+        """The touched slots, (count,) int64, increasing."""
+        if self.count == 0:
+            return np.empty(0, np.int64)
+        if self.bitmap:
+            span = len(self.where) * 8
+            return np.flatnonzero(np.unpackbits(self.where, count=span)).astype(np.int64) + self.first
+        return self.first + np.concatenate([[0], np.cumsum(self.where, dtype=np.int64)])
+
+    def add_to(self, sum_s: np.ndarray, sum_a: np.ndarray) -> None:
+        """Add these sums into ``sum_s``, ``sum_a`` (int64 arrays of :attr:`shape`, C-contiguous) in place, wrapping
+        as the core's sums do."""
+        idx = self.indices()
+        for k, m in enumerate((sum_s.reshape(-1, 3), sum_a.reshape(-1, 3))):
+            for c in range(3):
+                m[idx, c] += self.sums[3 * k + c].astype(np.int64)
+
+    def dense(self) -> tuple[np.ndarray, np.ndarray]:
+        """The raw arrays (sum_s, sum_a), int64 of :attr:`shape`."""
+        s, a = np.zeros(self.shape, np.int64), np.zeros(self.shape, np.int64)
+        self.add_to(s, a)
+        return s, a
 
 
 def _totals(r: RenderResult) -> dict:
@@ -229,12 +310,14 @@ class ShardedRenderer(TexelRenderer):
 
     def _ref(self, obj, what: str):
         """An object-store reference to ``obj`` (texels, a gradient index), put (and counted as ``out:<what>``)
-        once while the same object is passed again."""
-        hit = self._refs.get(id(obj))
-        if hit is None or hit[0] is not obj:
+        once while the same object, or a view of the same memory (the optimiser passes the same slices of one
+        free-voxel index every iteration), is passed again; neither is changed in place between passes."""
+        key = _identity(obj)
+        hit = self._refs.get(key)
+        if hit is None:
             if len(self._refs) > 8:
                 self._refs.clear()
-            hit = self._refs[id(obj)] = (obj, self._put(what, obj))
+            hit = self._refs[key] = (obj, self._put(what, obj))  # holding obj keeps its memory from reuse
         return hit[1]
 
     def _bounds(self, n: int) -> list[tuple[int, int]]:
@@ -280,16 +363,15 @@ class ShardedRenderer(TexelRenderer):
                 for a, (lo, hi) in zip(self._shards.actors, self._bounds(len(texels)))
             ]
         )
-        self.traffic["back:gradient"] += sum(payload_bytes(o[:2]) for o in outs)
-        self.traffic["dense:gradient"] += sum(payload_bytes(o[:2]) for o in outs)
-        quanta = {o[2] for o in outs}
+        self.traffic["back:gradient"] += sum(payload_bytes(o[0]) for o in outs)
+        self.traffic["dense:gradient"] += sum(2 * 8 * int(np.prod(o[0].shape)) for o in outs)
+        quanta = {o[1] for o in outs}
         assert len(quanta) == 1, f"shards used different fixed-point quanta {quanta}"
-        gs, ga = np.array(outs[0][0], np.int64), np.array(outs[0][1], np.int64)
-        for o in outs[1:]:
-            gs += o[0]  # int64 array sums wrap, as the core's wrapping_add does
-            ga += o[1]
+        gs, ga = np.zeros(outs[0][0].shape, np.int64), np.zeros(outs[0][0].shape, np.int64)
+        for o in outs:
+            o[0].add_to(gs, ga)  # int64 array sums wrap, as the core's wrapping_add does
         q = quanta.pop()
-        return fixed_to_float(gs, q), fixed_to_float(ga, q), self._result([o[3:] for o in outs], settings.spp, t0)
+        return fixed_to_float(gs, q), fixed_to_float(ga, q), self._result([o[2:] for o in outs], settings.spp, t0)
 
     def _result(self, outs, spp: int, t0: float) -> RenderResult:
         """The pass's result from the workers' (rgb, var_mean, totals), their bytes counted as ``back:render``."""
@@ -298,6 +380,15 @@ class ShardedRenderer(TexelRenderer):
         rgb = np.concatenate([o[0] for o in outs]).astype(np.float32)
         var = np.concatenate([o[1] for o in outs]).astype(np.float32)
         return RenderResult(rgb, var, int(spp), time.perf_counter() - t0, **totals)
+
+
+def _identity(obj) -> tuple:
+    """A key of ``obj``: for an array, its memory (owner, address, shape, strides, dtype), so that the same slice
+    of one array taken again has the same key; else the object's identity."""
+    if isinstance(obj, np.ndarray):
+        owner = obj if obj.base is None else obj.base
+        return (id(owner), obj.__array_interface__["data"][0], obj.shape, obj.strides, obj.dtype.str)
+    return (id(obj),)
 
 
 @contextlib.contextmanager
