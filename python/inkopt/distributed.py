@@ -27,11 +27,10 @@ range is a slab of the object and its paths touch the slots of that slab and its
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import time
 from collections import Counter
 from collections.abc import Iterator
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 
@@ -48,6 +47,7 @@ from .render import (
     check_same_grid,
     fixed_to_float,
 )
+from .shardwire import BandObject, TouchedSlots, payload_bytes
 from .threads import check_threads
 
 #: The error of a ``ray`` address given without Ray installed (a ParameterError's template).
@@ -120,97 +120,6 @@ class _ShardWorker:
         return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
 
 
-def payload_bytes(obj) -> int:
-    """The bytes ``obj`` carries between processes: its arrays' and byte strings' lengths, in tuples, lists, dicts
-    and dataclasses (a Volume, Texels, Lighting); 8 for a scalar or another small object (Ray's framing is not
-    counted)."""
-    if isinstance(obj, np.ndarray):
-        return int(obj.nbytes)
-    if isinstance(obj, (bytes, bytearray, memoryview)):
-        return len(obj)
-    if isinstance(obj, (list, tuple)):
-        return sum(payload_bytes(o) for o in obj)
-    if isinstance(obj, dict):
-        return sum(payload_bytes(o) for o in obj.values())
-    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        return sum(payload_bytes(getattr(obj, f.name)) for f in dataclasses.fields(obj))
-    return 8
-
-
-def _narrowest(values: np.ndarray, dtypes) -> np.ndarray:
-    """``values`` (integers) in the first of ``dtypes`` that holds every one of them exactly."""
-    if values.size == 0:
-        return values.astype(dtypes[0])
-    lo, hi = int(values.min()), int(values.max())
-    for dtype in dtypes:
-        info = np.iinfo(dtype)
-        if info.min <= lo and hi <= info.max:
-            return values.astype(dtype, copy=False)
-    raise ValueError(f"integers {lo}..{hi} fit none of {dtypes}")
-
-
-@dataclass(frozen=True)
-class TouchedSlots:
-    """The gradient slots a shard's paths touched and their fixed-point sums, exactly: what a worker returns
-    instead of its two raw (F, 3) int64 arrays, in which most slots are zero when its texels see only part of
-    the object.
-
-    shape    the raw arrays' shape: (F, 3) (a slot per free voxel) or (z, y, x, 3)
-    first    the first touched slot (0 when none is)
-    count    how many slots are touched (a slot is touched when any of its 6 sums is not 0)
-    where    which: ``bitmap`` True: ``np.packbits`` of the touched flags of slots first .. last (uint8); else the
-             gaps between consecutive touched slots ((count - 1,), the narrowest unsigned dtype); whichever is
-             shorter
-    sums     6 arrays (count,): sigma_s's sums of channels 0, 1, 2, then sigma_a's, each in the narrowest signed
-             integer dtype that holds its values
-    """
-
-    shape: tuple
-    first: int
-    count: int
-    bitmap: bool
-    where: np.ndarray
-    sums: tuple
-
-    @classmethod
-    def of(cls, sum_s: np.ndarray, sum_a: np.ndarray) -> TouchedSlots:
-        """The touched slots of raw fixed-point sums ``sum_s``, ``sum_a`` (int64, (..., 3), same shape)."""
-        s, a = np.asarray(sum_s, np.int64).reshape(-1, 3), np.asarray(sum_a, np.int64).reshape(-1, 3)
-        flags = (s != 0).any(axis=1) | (a != 0).any(axis=1)
-        idx = np.flatnonzero(flags)
-        first = int(idx[0]) if len(idx) else 0
-        span = int(idx[-1]) - first + 1 if len(idx) else 0
-        gaps = _narrowest(np.diff(idx), (np.uint8, np.uint16, np.uint32, np.uint64))
-        bitmap = (span + 7) // 8 < gaps.nbytes
-        where = np.packbits(flags[first : first + span]) if bitmap else gaps
-        signed = (np.int8, np.int16, np.int32, np.int64)
-        sums = tuple(_narrowest(m[idx, c], signed) for m in (s, a) for c in range(3))
-        return cls(tuple(np.shape(sum_s)), first, len(idx), bool(bitmap), where, sums)
-
-    def indices(self) -> np.ndarray:
-        """The touched slots, (count,) int64, increasing."""
-        if self.count == 0:
-            return np.empty(0, np.int64)
-        if self.bitmap:
-            span = len(self.where) * 8
-            return np.flatnonzero(np.unpackbits(self.where, count=span)).astype(np.int64) + self.first
-        return self.first + np.concatenate([[0], np.cumsum(self.where, dtype=np.int64)])
-
-    def add_to(self, sum_s: np.ndarray, sum_a: np.ndarray) -> None:
-        """Add these sums into ``sum_s``, ``sum_a`` (int64 arrays of :attr:`shape`, C-contiguous) in place, wrapping
-        as the core's sums do."""
-        idx = self.indices()
-        for k, m in enumerate((sum_s.reshape(-1, 3), sum_a.reshape(-1, 3))):
-            for c in range(3):
-                m[idx, c] += self.sums[3 * k + c].astype(np.int64)
-
-    def dense(self) -> tuple[np.ndarray, np.ndarray]:
-        """The raw arrays (sum_s, sum_a), int64 of :attr:`shape`."""
-        s, a = np.zeros(self.shape, np.int64), np.zeros(self.shape, np.int64)
-        self.add_to(s, a)
-        return s, a
-
-
 def _totals(r: RenderResult) -> dict:
     return dict(paths=r.paths, events=r.events, replayed_paths=r.replayed_paths, replayed_events=r.replayed_events)
 
@@ -278,7 +187,7 @@ class ShardedRenderer(TexelRenderer):
         #: (rgb and variance) and "back:gradient" (what the workers return), and "dense:gradient" (what the
         #: gradients would be as raw int64 arrays, a slot per free voxel per worker)
         self.traffic: Counter = Counter()
-        ref = self._put("volume", volume)
+        ref = self._put("volume", _shipped(volume))
         self._pending = [a.load.remote(ref, self.lighting) for a in shards.actors]
 
     @property
@@ -288,7 +197,7 @@ class ShardedRenderer(TexelRenderer):
     def set_volume(self, volume: Volume) -> None:
         """:meth:`TexelRenderer.set_volume`: the whole volume goes out to every worker."""
         check_same_grid(volume, self.volume)
-        ref = self._put("volume", volume)
+        ref = self._put("volume", _shipped(volume))
         self._pending += [a.set_volume.remote(ref) for a in self._shards.actors]
         self.volume = volume
 
@@ -380,6 +289,12 @@ class ShardedRenderer(TexelRenderer):
         rgb = np.concatenate([o[0] for o in outs]).astype(np.float32)
         var = np.concatenate([o[1] for o in outs]).astype(np.float32)
         return RenderResult(rgb, var, int(spp), time.perf_counter() - t0, **totals)
+
+
+def _shipped(volume: Volume) -> Volume | BandObject:
+    """What a worker is sent of ``volume``: a band volume as a :class:`BandObject` (no grid-sized array), else the
+    volume."""
+    return BandObject.of(volume) if BandObject.fits(volume) else volume
 
 
 def _identity(obj) -> tuple:
