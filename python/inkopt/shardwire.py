@@ -8,6 +8,7 @@ carries.
 from __future__ import annotations
 
 import dataclasses
+import zlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -56,8 +57,10 @@ class TouchedSlots:
     where    which: ``bitmap`` True: ``np.packbits`` of the touched flags of slots first .. last (uint8); else the
              gaps between consecutive touched slots ((count - 1,), the narrowest unsigned dtype); whichever is
              shorter
-    sums     6 arrays (count,): sigma_s's sums of channels 0, 1, 2, then sigma_a's, each in the narrowest signed
-             integer dtype that holds its values
+    dtypes   the dtypes of the 6 columns of sums (sigma_s's channels 0, 1, 2, then sigma_a's), each the narrowest
+             signed integer dtype that holds its column's values
+    sums     the columns, each (count,) of its dtype, byte-shuffled (a column's lowest bytes, then its next, ...:
+             the high bytes of fixed-point sums repeat) and compressed with zlib (``level``, lossless)
     """
 
     shape: tuple
@@ -65,11 +68,13 @@ class TouchedSlots:
     count: int
     bitmap: bool
     where: np.ndarray
-    sums: tuple
+    dtypes: tuple
+    sums: bytes
 
     @classmethod
-    def of(cls, sum_s: np.ndarray, sum_a: np.ndarray) -> TouchedSlots:
-        """The touched slots of raw fixed-point sums ``sum_s``, ``sum_a`` (int64, (..., 3), same shape)."""
+    def of(cls, sum_s: np.ndarray, sum_a: np.ndarray, level: int = 1) -> TouchedSlots:
+        """The touched slots of raw fixed-point sums ``sum_s``, ``sum_a`` (int64, (..., 3), same shape); ``level``:
+        zlib's (1: fast; 6 saves ~1.5 % more on Spot's sums at 1.3x the time)."""
         s, a = np.asarray(sum_s, np.int64).reshape(-1, 3), np.asarray(sum_a, np.int64).reshape(-1, 3)
         flags = (s != 0).any(axis=1) | (a != 0).any(axis=1)
         idx = np.flatnonzero(flags)
@@ -79,8 +84,22 @@ class TouchedSlots:
         bitmap = (span + 7) // 8 < gaps.nbytes
         where = np.packbits(flags[first : first + span]) if bitmap else gaps
         signed = (np.int8, np.int16, np.int32, np.int64)
-        sums = tuple(_narrowest(m[idx, c], signed) for m in (s, a) for c in range(3))
-        return cls(tuple(np.shape(sum_s)), first, len(idx), bool(bitmap), where, sums)
+        cols = [_narrowest(m[idx, c], signed) for m in (s, a) for c in range(3)]
+        planes = b"".join(np.ascontiguousarray(c.view(np.uint8).reshape(-1, c.itemsize).T).tobytes() for c in cols)
+        packed = zlib.compress(planes, level)
+        return cls(
+            tuple(np.shape(sum_s)), first, len(idx), bool(bitmap), where, tuple(c.dtype.str for c in cols), packed
+        )
+
+    def columns(self) -> list[np.ndarray]:
+        """The 6 columns of sums, (count,) each in its dtype (see the class)."""
+        raw, out, at = zlib.decompress(self.sums), [], 0
+        for dtype in self.dtypes:
+            size = np.dtype(dtype).itemsize
+            planes = np.frombuffer(raw, np.uint8, self.count * size, at).reshape(size, self.count)
+            out.append(np.ascontiguousarray(planes.T).view(dtype).reshape(-1))
+            at += self.count * size
+        return out
 
     def indices(self) -> np.ndarray:
         """The touched slots, (count,) int64, increasing."""
@@ -94,10 +113,10 @@ class TouchedSlots:
     def add_to(self, sum_s: np.ndarray, sum_a: np.ndarray) -> None:
         """Add these sums into ``sum_s``, ``sum_a`` (int64 arrays of :attr:`shape`, C-contiguous) in place, wrapping
         as the core's sums do."""
-        idx = self.indices()
+        idx, cols = self.indices(), self.columns()
         for k, m in enumerate((sum_s.reshape(-1, 3), sum_a.reshape(-1, 3))):
             for c in range(3):
-                m[idx, c] += self.sums[3 * k + c].astype(np.int64)
+                m[idx, c] += cols[3 * k + c].astype(np.int64)
 
     def dense(self) -> tuple[np.ndarray, np.ndarray]:
         """The raw arrays (sum_s, sum_a), int64 of :attr:`shape`."""
