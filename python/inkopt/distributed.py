@@ -54,6 +54,11 @@ from .threads import check_threads
 RAY_INSTALL_HINT = "`ray` needs Ray: pip install 'inkopt[ray]' (or pip install 'ray[default]')"
 
 
+#: objects a ShardedRenderer keeps put in the object store while they are passed again: the texels, the gradient
+#: index, and the optimiser's slices of the free-voxel index (one per million free voxels: 11 for Spot 60 mm)
+REFS_KEPT = 64
+
+
 def import_ray():
     """The ray module, or a ParameterError (of ``ray``) with the one-line install hint."""
     try:
@@ -224,8 +229,8 @@ class ShardedRenderer(TexelRenderer):
         key = _identity(obj)
         hit = self._refs.get(key)
         if hit is None:
-            if len(self._refs) > 8:
-                self._refs.clear()
+            while len(self._refs) >= REFS_KEPT:
+                del self._refs[next(iter(self._refs))]  # the oldest
             hit = self._refs[key] = (obj, self._put(what, obj))  # holding obj keeps its memory from reuse
         return hit[1]
 
