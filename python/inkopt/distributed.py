@@ -4,9 +4,9 @@ bit-identical to the same pass in one process.
 :class:`RayShards` connects to Ray and starts the workers (actors): by default one per node, with as many threads
 as the node has CPUs. ``RayShards.renderer(volume, threads, lighting)`` builds a :class:`ShardedRenderer`, a
 :class:`inkopt.render.TexelRenderer` as :class:`inkopt.render.Renderer` is, so it serves as ``Optimization``'s
-``renderer_factory``. Each worker builds its own renderer once from the volume
-(shipped once through Ray's object store) and renders a contiguous range of the texels, in proportion to its
-threads.
+``renderer_factory``. Each worker builds its own renderer once from the volume (shipped once through Ray's object
+store; a band volume as a :class:`inkopt.shardwire.BandObject`, with no grid-sized array) and renders a
+contiguous range of the texels, in proportion to its threads.
 
 Why the result does not depend on the split: random numbers are keyed by (seed, texel index, sample), and a
 worker renders its range with the texels' global indices (``first_texel``); forward results are per texel, so
@@ -200,7 +200,7 @@ class ShardedRenderer(TexelRenderer):
         return sum(self._shards.threads)
 
     def set_volume(self, volume: Volume) -> None:
-        """:meth:`TexelRenderer.set_volume`: the whole volume goes out to every worker."""
+        """:meth:`TexelRenderer.set_volume`: the volume (a band volume as a BandObject) goes out to every worker."""
         check_same_grid(volume, self.volume)
         ref = self._put("volume", _shipped(volume))
         self._pending += [a.set_volume.remote(ref) for a in self._shards.actors]
