@@ -28,9 +28,11 @@ from inkopt.scenes.slab import build_slab  # noqa: E402
 
 
 def bytes_per_iteration(opt: Optimization, workers: int, nodes: int) -> dict:
-    """What one iteration moves (inkopt.distributed): the mixture of the free voxels out (once per node: int32 index
-    + N float32 shares), the adjoints out (12 bytes per texel), per-texel rgb + variance back for two passes,
-    and per worker the int64 gradient sums (2 x 3 x 8 bytes per free voxel)."""
+    """An upper bound of what one iteration moves, from the formulas of the raw-int64 design: the mixture of the
+    free voxels out (once per node: int32 index + N float32 shares), the adjoints out (12 bytes per texel),
+    per-texel rgb + variance back for two passes, and per worker the int64 gradient sums (2 x 3 x 8 bytes per free
+    voxel). Workers now return only their touched slots, compressed; ``bench/bench_ray.py`` counts the bytes
+    actually moved (docs/ray.md)."""
     n_tex, free, n_inks = len(opt.texels), opt.param.n_free, len(opt.base.inks)
     return {
         "mixture_out_per_node": free * (4 * n_inks + 4),

@@ -17,7 +17,7 @@ LAYERS = [
     {"units", "color", "errors", "io", "threads", "images", "pictures", "charts", "lighting", "_core", "__init__"},
     {"model"},
     {"rundir"},
-    {"render", "distributed"},
+    {"render", "distributed", "shardwire"},
     {"neighbourhood", "loss", "spectral"},
     {"scenes"},
     {"optim"},

@@ -4,26 +4,31 @@ bit-identical to the same pass in one process.
 :class:`RayShards` connects to Ray and starts the workers (actors): by default one per node, with as many threads
 as the node has CPUs. ``RayShards.renderer(volume, threads, lighting)`` builds a :class:`ShardedRenderer`, a
 :class:`inkopt.render.TexelRenderer` as :class:`inkopt.render.Renderer` is, so it serves as ``Optimization``'s
-``renderer_factory``. Each worker builds its own renderer once from the volume
-(shipped once through Ray's object store) and renders a contiguous range of the texels, in proportion to its
-threads.
+``renderer_factory``. Each worker builds its own renderer once from the volume (shipped once through Ray's object
+store; a band volume as a :class:`inkopt.shardwire.BandObject`, with no grid-sized array) and renders a
+contiguous range of the texels, in proportion to its threads.
 
 Why the result does not depend on the split: random numbers are keyed by (seed, texel index, sample), and a
 worker renders its range with the texels' global indices (``first_texel``); forward results are per texel, so
 they are concatenated. Gradients are accumulated in fixed point (multiples of a quantum set from the largest
-adjoint of the whole pass, which every worker is given); workers return the raw int64 sums
-(``Renderer.gradient_fixed``), which are added here in integer arithmetic and converted once, as the core does.
+adjoint of the whole pass, which every worker is given); workers return the int64 sums
+(``Renderer.gradient_fixed``) of the slots their paths touched (:class:`TouchedSlots`), which are added here in
+integer arithmetic and converted once, as the core does.
 
 Per iteration, the driver puts the free voxels' mixtures (F x N float32; their int64 index only once) into the
 object store, which every node fetches once, and each worker its slice of the adjoints (12 bytes per texel); each
-worker returns rgb and variance of its texels for both passes (2 x 24 bytes per texel) and the gradient sums
-(2 x 3 x int64 = 48 bytes per gradient slot, i.e. per free voxel).
+worker returns rgb and variance of its texels for both passes (2 x 24 bytes per texel) and its touched slots: a
+bitmap or gaps for which, and 6 sums each in the narrowest integer dtype that holds them (instead of 48 bytes per
+free voxel). A worker's texels are a contiguous range of the list; a mesh's texels are in (z, y, x) order, so a
+range is a slab of the object and its paths touch the slots of that slab and its neighbourhood.
+``ShardedRenderer.traffic`` counts the bytes.
 """
 
 from __future__ import annotations
 
 import contextlib
 import time
+from collections import Counter
 from collections.abc import Iterator
 from dataclasses import replace
 
@@ -42,10 +47,16 @@ from .render import (
     check_same_grid,
     fixed_to_float,
 )
+from .shardwire import BandObject, TouchedSlots, payload_bytes
 from .threads import check_threads
 
 #: The error of a ``ray`` address given without Ray installed (a ParameterError's template).
 RAY_INSTALL_HINT = "`ray` needs Ray: pip install 'inkopt[ray]' (or pip install 'ray[default]')"
+
+
+#: objects a ShardedRenderer keeps put in the object store while they are passed again: the texels, the gradient
+#: index, and the optimiser's slices of the free-voxel index (one per million free voxels: 11 for Spot 60 mm)
+REFS_KEPT = 64
 
 
 def import_ray():
@@ -98,11 +109,20 @@ class _ShardWorker:
 
     def gradient(self, texels, lo: int, hi: int, adjoint, max_abs: float, settings: PassSettings, grad_index):
         """The texels ``lo:hi`` of the gradient pass (``settings.first_texel``: the index of ``texels[lo]``; their
-        adjoints; the whole pass's largest |adjoint| ``max_abs``): (sum_s, sum_a, quantum, rgb, var_mean, totals)."""
+        adjoints; the whole pass's largest |adjoint| ``max_abs``): (touched, quantum, rgb, var_mean, totals), the
+        fixed-point sums as :class:`TouchedSlots`."""
         gs, ga, q, r = self.renderer.gradient_fixed(
             texels.subset(slice(lo, hi)), adjoint, settings, grad_index, max_abs
         )
-        return gs, ga, q, r.rgb, r.var_mean, _totals(r)
+        touched = TouchedSlots.of(gs, ga)
+        del gs, ga
+        return touched, q, r.rgb, r.var_mean, _totals(r)
+
+    def peak_rss_gb(self) -> float:
+        """This worker process's peak resident memory so far, GiB (Linux's ru_maxrss is in KiB)."""
+        import resource
+
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
 
 
 def _totals(r: RenderResult) -> dict:
@@ -146,6 +166,10 @@ class RayShards:
         """A renderer of ``volume`` on these workers (``threads`` is ignored: each worker has its own)."""
         return ShardedRenderer(self, volume, lighting)
 
+    def peak_rss_gb(self) -> list[float]:
+        """Each worker's peak resident memory so far, GiB (pages of the object store it reads count too)."""
+        return self._ray.get([a.peak_rss_gb.remote() for a in self.actors])
+
     def close(self) -> None:
         for a in self.actors:
             self._ray.kill(a)
@@ -163,7 +187,12 @@ class ShardedRenderer(TexelRenderer):
         self._shards, self._ray = shards, shards._ray
         self.volume, self.lighting = volume, load_lighting(lighting)
         self._refs: dict = {}
-        ref = self._ray.put(volume)
+        #: bytes moved so far, by what: "out:volume", "out:mixture", "out:index", "out:texels", "out:adjoint",
+        #: "out:lighting" (what the driver puts or sends, once per object: a node fetches it once), "back:render"
+        #: (rgb and variance) and "back:gradient" (what the workers return), and "dense:gradient" (what the
+        #: gradients would be as raw int64 arrays, a slot per free voxel per worker)
+        self.traffic: Counter = Counter()
+        ref = self._put("volume", _shipped(volume))
         self._pending = [a.load.remote(ref, self.lighting) for a in shards.actors]
 
     @property
@@ -171,30 +200,38 @@ class ShardedRenderer(TexelRenderer):
         return sum(self._shards.threads)
 
     def set_volume(self, volume: Volume) -> None:
-        """:meth:`TexelRenderer.set_volume`: the whole volume goes out to every worker."""
+        """:meth:`TexelRenderer.set_volume`: the volume (a band volume as a BandObject) goes out to every worker."""
         check_same_grid(volume, self.volume)
-        ref = self._ray.put(volume)
+        ref = self._put("volume", _shipped(volume))
         self._pending += [a.set_volume.remote(ref) for a in self._shards.actors]
         self.volume = volume
 
     def set_mixture(self, index: np.ndarray, mixture: np.ndarray) -> None:
         """:meth:`TexelRenderer.set_mixture`: the mixtures (K x N float32) go out through the object store once for
         all workers; the index (the optimiser passes the same array every iteration) only the first time."""
-        rows_ref = self._ray.put(np.ascontiguousarray(mixture, np.float32))
-        self._pending += [a.set_mixture.remote(self._ref(index), rows_ref) for a in self._shards.actors]
+        rows_ref = self._put("mixture", np.ascontiguousarray(mixture, np.float32))
+        self._pending += [a.set_mixture.remote(self._ref(index, "index"), rows_ref) for a in self._shards.actors]
 
     def set_lighting(self, lighting: Lighting | str | None) -> None:
         self.lighting = load_lighting(lighting)
+        self.traffic["out:lighting"] += payload_bytes(self.lighting)
         self._pending += [a.set_lighting.remote(self.lighting) for a in self._shards.actors]
 
-    def _ref(self, obj):
-        """An object-store reference to ``obj`` (texels, a gradient index), put once while the same object is
-        passed again."""
-        hit = self._refs.get(id(obj))
-        if hit is None or hit[0] is not obj:
-            if len(self._refs) > 8:
-                self._refs.clear()
-            hit = self._refs[id(obj)] = (obj, self._ray.put(obj))
+    def _put(self, what: str, obj):
+        """``obj`` put into the object store, its bytes counted as ``out:<what>``."""
+        self.traffic["out:" + what] += payload_bytes(obj)
+        return self._ray.put(obj)
+
+    def _ref(self, obj, what: str):
+        """An object-store reference to ``obj`` (texels, a gradient index), put (and counted as ``out:<what>``)
+        once while the same object, or a view of the same memory (the optimiser passes the same slices of one
+        free-voxel index every iteration), is passed again; neither is changed in place between passes."""
+        key = _identity(obj)
+        hit = self._refs.get(key)
+        if hit is None:
+            while len(self._refs) >= REFS_KEPT:
+                del self._refs[next(iter(self._refs))]  # the oldest
+            hit = self._refs[key] = (obj, self._put(what, obj))  # holding obj keeps its memory from reuse
         return hit[1]
 
     def _bounds(self, n: int) -> list[tuple[int, int]]:
@@ -209,7 +246,7 @@ class ShardedRenderer(TexelRenderer):
         return self._ray.get(calls)
 
     def render_pass(self, texels: Texels, settings: PassSettings, progress: bool = False) -> RenderResult:
-        t0, tex = time.perf_counter(), self._ref(texels)
+        t0, tex = time.perf_counter(), self._ref(texels, "texels")
         first = settings.first_texel
         outs = self._gather(
             [
@@ -231,28 +268,47 @@ class ShardedRenderer(TexelRenderer):
         once."""
         adjoint, t0 = adjoint_array(adjoint, len(texels)), time.perf_counter()
         max_abs = float(np.abs(adjoint).max(initial=0.0))
-        tex, gi, first = self._ref(texels), None if grad_index is None else self._ref(grad_index), settings.first_texel
+        gi = None if grad_index is None else self._ref(grad_index, "index")
+        tex, first = self._ref(texels, "texels"), settings.first_texel
+        self.traffic["out:adjoint"] += adjoint.nbytes
         outs = self._gather(
             [
                 a.gradient.remote(tex, lo, hi, adjoint[lo:hi], max_abs, replace(settings, first_texel=first + lo), gi)
                 for a, (lo, hi) in zip(self._shards.actors, self._bounds(len(texels)))
             ]
         )
-        quanta = {o[2] for o in outs}
+        self.traffic["back:gradient"] += sum(payload_bytes(o[0]) for o in outs)
+        self.traffic["dense:gradient"] += sum(2 * 8 * int(np.prod(o[0].shape)) for o in outs)
+        quanta = {o[1] for o in outs}
         assert len(quanta) == 1, f"shards used different fixed-point quanta {quanta}"
-        gs, ga = np.array(outs[0][0], np.int64), np.array(outs[0][1], np.int64)
-        for o in outs[1:]:
-            gs += o[0]  # int64 array sums wrap, as the core's wrapping_add does
-            ga += o[1]
+        gs, ga = np.zeros(outs[0][0].shape, np.int64), np.zeros(outs[0][0].shape, np.int64)
+        for o in outs:
+            o[0].add_to(gs, ga)  # int64 array sums wrap, as the core's wrapping_add does
         q = quanta.pop()
-        return fixed_to_float(gs, q), fixed_to_float(ga, q), self._result([o[3:] for o in outs], settings.spp, t0)
+        return fixed_to_float(gs, q), fixed_to_float(ga, q), self._result([o[2:] for o in outs], settings.spp, t0)
 
-    @staticmethod
-    def _result(outs, spp: int, t0: float) -> RenderResult:
+    def _result(self, outs, spp: int, t0: float) -> RenderResult:
+        """The pass's result from the workers' (rgb, var_mean, totals), their bytes counted as ``back:render``."""
+        self.traffic["back:render"] += sum(payload_bytes(o[:2]) for o in outs)
         totals = {k: sum(o[2][k] for o in outs) for k in outs[0][2]}
         rgb = np.concatenate([o[0] for o in outs]).astype(np.float32)
         var = np.concatenate([o[1] for o in outs]).astype(np.float32)
         return RenderResult(rgb, var, int(spp), time.perf_counter() - t0, **totals)
+
+
+def _shipped(volume: Volume) -> Volume | BandObject:
+    """What a worker is sent of ``volume``: a band volume as a :class:`BandObject` (no grid-sized array), else the
+    volume."""
+    return BandObject.of(volume) if BandObject.fits(volume) else volume
+
+
+def _identity(obj) -> tuple:
+    """A key of ``obj``: for an array, its memory (owner, address, shape, strides, dtype), so that the same slice
+    of one array taken again has the same key; else the object's identity."""
+    if isinstance(obj, np.ndarray):
+        owner = obj if obj.base is None else obj.base
+        return (id(owner), obj.__array_interface__["data"][0], obj.shape, obj.strides, obj.dtype.str)
+    return (id(obj),)
 
 
 @contextlib.contextmanager

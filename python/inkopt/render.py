@@ -219,12 +219,14 @@ class Renderer(TexelRenderer):
         threads = check_threads(threads)  # before the core starts a pool of that many threads
         self.volume = volume
         kw = dict(boundary=volume.boundary, ior=float(volume.ior), g=float(volume.g), threads=threads)
-        if volume.inside is not None or volume.form == "labels":
-            kw["inside"] = np.ascontiguousarray(volume.inside_mask()).view(np.uint8)  # bool bytes are 0/1: no copy
+        inside = _inside_bytes(volume)
+        if inside is not None:
+            kw["inside"] = inside
         if volume.normals is not None:
             kw["normal_index"], kw["normal_vectors"] = volume.normals.index, volume.normals.vectors
         voxel_mm = tuple(float(v) for v in volume.voxel_mm)
-        self._scene = _core.Scene(volume.shape, voxel_mm, self._medium(volume), **kw)
+        self._scene = _core.Scene(volume.shape, voxel_mm, self._medium(volume, inside), **kw)
+        del inside
         self._labels = volume.form == "labels" and volume.band is None
         self.lighting = Lighting()
         self.set_lighting(lighting)
@@ -235,18 +237,18 @@ class Renderer(TexelRenderer):
         self.lighting = light
 
     @staticmethod
-    def _medium(volume: Volume) -> _core.Medium:
+    def _medium(volume: Volume, inside: np.ndarray | None = None) -> _core.Medium:
         """The core's medium (``_core.Medium``): with a band (``Volume.band``), the band's coefficients and the
-        core's (24 bytes per band voxel, nothing per core voxel); labels with the ink table; the inside voxels'
-        coefficients (sparse: 24 bytes per voxel of each grid row's span of them) when the volume has an inside
-        mask; else dense coefficients."""
+        core's (24 bytes per band voxel, nothing per core voxel; ``inside``: the mask as ``_inside_bytes`` gives
+        it, if already made); labels with the ink table; the inside voxels' coefficients (sparse: 24 bytes per
+        voxel of each grid row's span of them) when the volume has an inside mask; else dense coefficients."""
         from ._core import Medium
 
         if volume.band is not None:
             # Mixed as a row of a batch: a one-row product takes another BLAS path whose float32 sums may round
             # differently, and the core must read exactly what the sparse form's batched rows hold.
             core_s, core_a = mix(np.stack([volume.band.core] * 2), volume.inks)
-            inside = np.ascontiguousarray(volume.inside).view(np.uint8)  # bool bytes are 0/1: no copy
+            inside = _inside_bytes(volume) if inside is None else inside
             band = volume.band.index
             return Medium.band(inside, band, *volume.coefficients_at(band), core_s[0], core_a[0])
         if volume.form == "labels":
@@ -389,6 +391,17 @@ class Renderer(TexelRenderer):
             max_abs_adjoint = float(np.abs(adjoint).max(initial=0.0))
         self._scene.zero_grad(float(max_abs_adjoint), grad_index)
         return self._run(texels, settings, adjoint, progress)
+
+
+def _inside_bytes(volume: Volume) -> np.ndarray | None:
+    """The inside mask (z, y, x) as uint8 0/1 (a Volume's bool bytes: no copy), or None for a volume without one;
+    a volume that makes its own (``shardwire.BandObject``, a Ray worker's band volume) makes it."""
+    make = getattr(volume, "inside_bytes", None)
+    if make is not None:
+        return make()
+    if volume.inside is not None or volume.form == "labels":
+        return np.ascontiguousarray(volume.inside_mask()).view(np.uint8)
+    return None
 
 
 def fixed_to_float(fixed_sum: np.ndarray, quantum: float) -> np.ndarray:
