@@ -131,3 +131,31 @@ def test_label_volumes_render_as_the_rgb_renderer():
     order = InkTable(INKS.names, INKS.sigma_s[:, [2, 1, 0]].copy(), INKS.sigma_a[:, [2, 1, 0]].copy(), INKS.g)
     want = Renderer(Volume.from_labels((VOX,) * 3, labels, order), threads=1).render(tex, spp=4, seed=2)
     np.testing.assert_array_equal(got.rgb, want.rgb)
+
+
+def test_printed_renderer_renders_bands_as_the_rgb_one():
+    """The printer texels of a labels grid (``evaluation.printed.PrintedRenderer``) rendered through band renders of
+    a 3-band table whose bands are the RGB channels: the same scene-texel averages bit for bit, for the first labels
+    volume and for one swapped in; the swapped-in volume is released by every group's renderer."""
+    from inkopt.evaluation.printed import PrintedRenderer
+
+    rng = np.random.default_rng(8)
+    a, b = (rng.integers(0, len(INKS), (6, 8, 10)).astype(np.uint8) for _ in range(2))
+    scene = Texels.for_volume(Volume.from_labels((2 * VOX,) * 3, a[::2, ::2, ::2].copy(), INKS), [5])
+    table = rgb_as_bands(INKS)
+    order = InkTable(INKS.names, INKS.sigma_s[:, [2, 1, 0]].copy(), INKS.sigma_a[:, [2, 1, 0]].copy(), INKS.g)
+    spec_factory = lambda v, threads, lighting: SpectralRenderer(v, table, threads, lighting)  # noqa: E731
+    spec = PrintedRenderer(
+        Volume.from_labels((VOX,) * 3, a, INKS), scene, (2 * VOX,) * 3, "slab", 2, None, None, factory=spec_factory
+    )
+    rgb = PrintedRenderer(Volume.from_labels((VOX,) * 3, a, order), scene, (2 * VOX,) * 3, "slab", 1)
+    for labels in (a, b):
+        spec.use(Volume.from_labels((VOX,) * 3, labels, INKS))
+        rgb.use(Volume.from_labels((VOX,) * 3, labels, order))
+        got, want = spec(4, 3), rgb(4, 3)
+        assert got[0].shape == (len(scene), 3) and got[2] == want[2]
+        np.testing.assert_array_equal(got[0], want[0])
+        np.testing.assert_array_equal(got[1], want[1])
+    assert all(r.volume.labels is a for r in spec.renderer._renderers)  # b is not held
+    with pytest.raises(TypeError, match="unexpected"):
+        PrintedRenderer(Volume.from_labels((VOX,) * 3, a, INKS), scene, (2 * VOX,) * 3, "slab", other=1)

@@ -107,6 +107,18 @@ class SpectralRenderer(TexelRenderer):
         return self._renderers[0].threads
 
     @property
+    def volume(self) -> Volume:
+        return self._volume
+
+    @volume.setter
+    def volume(self, volume: Volume) -> None:
+        """The volume the renderer describes; every group's renderer is given it too (read with the group's inks),
+        so a caller that points it back at the volume the geometry was built for frees the one it replaced."""
+        self._volume = volume
+        for r, g in zip(getattr(self, "_renderers", ()), getattr(self, "_groups", ())):
+            r.volume = with_inks(volume, g)
+
+    @property
     def bands(self) -> int:
         return self.table.bands
 
