@@ -4,6 +4,7 @@ lights on request, pictures under the first light; an RGB run asked for other li
 
 import json
 
+import numpy as np
 import pytest
 from helpers import FAST_RUN
 from PIL import Image
@@ -13,7 +14,10 @@ from inkopt.cli import main
 
 @pytest.fixture(scope="module")
 def spectral_run(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("spectral_eval")
+    return make_spectral_run(tmp_path_factory.mktemp("spectral_eval"))
+
+
+def make_spectral_run(tmp):
     Image.new("RGB", (12, 8), (40, 160, 90)).save(tmp / "p.png")
     out = tmp / "r"
     args = ["slab", str(tmp / "p.png"), "--size-mm", "1.5x1x0.5", "--out", str(out), *FAST_RUN]
@@ -82,3 +86,64 @@ def test_rgb_run_refuses_other_lights(tmp_path, capsys):
     assert main(["evaluate", str(out), "--illuminants", "D65,A"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "is an RGB run" in err[0] and "--inks vero-cmykw@spectral" in err[0], err
+
+
+def test_predictions_keep_the_band_values(tmp_path, capsys):
+    """predictions.npz of a spectral run holds every result's band values and the lights' band matrices: each
+    result's sRGB is its bands under the first light, and its ΔE2000 under each light recomputed from the stored
+    bands is evaluate's (float32 storage)."""
+    from inkopt.color import ColourMap, delta_e2000, linear_to_lab
+    from inkopt.rundir import RunDir
+    from inkopt.spectral.lights import named_light
+    from inkopt.spectral.viewing import display_under
+
+    spectral_run = make_spectral_run(tmp_path)
+    d = RunDir(spectral_run)
+    run_pred = d.load_predictions()
+    assert run_pred.source == "optimisation" and set(run_pred.bands.values) == {"continuous"}
+    capsys.readouterr()
+    assert main(["evaluate", str(spectral_run), "--spp", "4", "--threads", "2", "--json"]) == 0
+    ev = json.loads(capsys.readouterr().out)
+    pred = d.load_predictions()
+    b = pred.bands
+    assert pred.source == "evaluation" and set(b.values) == set(pred.rgb) == {
+        "continuous",
+        "quantized",
+        "surface",
+        "extrusion",
+    }
+    assert list(b.lights) == ["D65", "A"] and b.wavelengths_nm.shape == (16,)
+    np.testing.assert_allclose(b.lights["A"], named_light("A").colour_map(b.wavelengths_nm).matrix)
+    target_lab = linear_to_lab(d.load_scene().target_rgb.astype(np.float64))
+    for name, values in b.values.items():
+        assert values.dtype == np.float32 and values.shape == (len(target_lab), 16)
+        d65 = ColourMap(b.lights["D65"], "D65")
+        np.testing.assert_allclose(pred.rgb[name], display_under(d65, values), rtol=1e-5, atol=1e-6)
+        for light, m in b.lights.items():
+            de = delta_e2000(ColourMap(m, light).lab(values), target_lab).mean()
+            assert de == pytest.approx(ev[name]["by_light"][light]["delta_e2000_mean"], abs=1e-3)
+
+
+def test_rgb_predictions_stay_version_1(tmp_path):
+    """A predictions file without band values is written as before (version 1, the same arrays); a damaged band
+    block is one line naming the file."""
+    from inkopt.io import FORMAT_KEY
+    from inkopt.rundir import BandValues, Predictions
+
+    rgb = {"continuous": np.zeros((5, 3), np.float32)}
+    arrays = Predictions(rgb, "evaluation", {"continuous": 4}, "abc", {"lighting": "uniform"}).arrays()
+    assert int(arrays[FORMAT_KEY]) == 1
+    assert set(arrays) == {FORMAT_KEY, "names", "source", "volume_digest", "lighting", "spp", "rgb_continuous"}
+    bands = BandValues({"continuous": np.ones((5, 4), np.float32)}, np.arange(4.0), {"D65": np.ones((3, 4))})
+    full = Predictions(rgb, "evaluation", {"continuous": 4}, "abc", {}, bands).arrays()
+    assert int(full[FORMAT_KEY]) == 2
+    back = Predictions.from_arrays(full)
+    np.testing.assert_array_equal(back.bands.values["continuous"], 1.0)
+    assert Predictions.from_arrays(arrays).bands is None
+    for broken in ({"light_matrices": np.ones((1, 3, 5))}, {"bands_continuous": np.ones((5, 3))}):
+        with pytest.raises(ValueError, match="predictions.npz"):
+            Predictions.from_arrays({**full, **broken})
+    short = dict(full)
+    del short["bands_continuous"]
+    with pytest.raises(ValueError, match="lacks bands_continuous"):
+        Predictions.from_arrays(short)

@@ -17,8 +17,11 @@ evaluation_lights.json holds ``viewing``; one entry per result (``continuous``, 
 ``extrusion``: ``light_figures``' keys with ``spp``, ``spp_passes``, ``seconds``, and for the printed ones
 ``method`` and ``spp_printer``); ``print_beats_baselines`` (per light, whether the print's mean ΔE2000 is below
 each baseline's); ``quantization``, ``printer_texels``, ``seconds`` and the digests of the volume.npz and
-quantized.npz it was made from. The pictures (the target beside every result shown as sRGB under the first
-light, ``Viewing.display``) go to evaluation_lights_<face>.png (meshes: evaluation_lights_views.png).
+quantized.npz it was made from. predictions.npz (``rundir.Predictions``, source "evaluation") holds every result as
+sRGB under the first light and as band values with the lights' band matrices (``rundir.BandValues``), so the
+soft-proof page can show any light without rendering again. The pictures (the target beside every result shown
+as sRGB under the first light, ``Viewing.display``) go to evaluation_lights_<face>.png (meshes:
+evaluation_lights_views.png).
 """
 
 from __future__ import annotations
@@ -26,12 +29,14 @@ from __future__ import annotations
 import time
 from dataclasses import replace
 
+import numpy as np
+
 from ..errors import ParameterError
-from ..io import write_json
+from ..io import file_digest, write_json
 from ..model.inks import read_ink_file
 from ..model.spectral import spectral_from_data
 from ..render import Renderer
-from ..rundir import VOLUME_DIGEST, RunDir
+from ..rundir import VOLUME_DIGEST, BandValues, Predictions, RunDir
 from ..spectral.lights import parse_lights
 from ..spectral.viewing import Viewing
 from .baselines import BASELINES
@@ -87,8 +92,23 @@ def evaluate_lights(path, options: EvaluateOptions, lights: str | None = None, l
     if options.write:
         write_json(d.evaluation_lights_path, out)
         bands = {name: ev.colours[name] for name in results}
-        _pictures(d, ev.rec, {name: viewing.display(v) for name, v in bands.items()}, log)
+        shown = {name: viewing.display(v) for name, v in bands.items()}
+        _pictures(d, ev.rec, shown, log)
+        spp = {name: r["spp"] for name, r in results.items()}
+        band_values = bands_of(viewing, bands)
+        digest, lighting = file_digest(d.volume_path), ev.lighting.describe()
+        d.save_predictions(Predictions(shown, "evaluation", spp, digest, lighting, band_values))
     return out
+
+
+def bands_of(viewing: Viewing, values) -> BandValues | None:
+    """A spectral viewing's predictions ``values`` ((I, B) band values, or {result name: (I, B)}; "continuous" for
+    one array) with its grid and lights (``rundir.BandValues``); None on the RGB path."""
+    if not viewing.spectral:
+        return None
+    values = values if isinstance(values, dict) else {"continuous": values}
+    values = {k: np.asarray(v, np.float32) for k, v in values.items()}
+    return BandValues(values, viewing.table.wavelengths_nm, viewing.light_matrices())
 
 
 def _result_figures(loss, rendered: Rendered, names: tuple[str, ...]) -> dict:
