@@ -236,3 +236,21 @@ def spectral_mesh_run(tmp_path_factory):
         _run("optimize", mesh, *args, "--inks", "vero-cmykw@spectral", "--illuminants", "D65,A")
         _run("report", run)
     return run
+
+
+#: the light names ``planted_spectral_run`` gives predictions.npz: payloads and a name JavaScript objects hold
+PLANTED_LIGHTS = (*PAYLOADS[:3], "__proto__")
+
+
+@pytest.fixture(scope="session")
+def planted_spectral_run(spectral_slab_run, tmp_path_factory):
+    """spectral_slab_run with predictions.npz's stored lights renamed ``PLANTED_LIGHTS``, reported."""
+    run = tmp_path_factory.mktemp("plantedlights") / "run"
+    shutil.copytree(spectral_slab_run, run)
+    d = RunDir(run)
+    pred = d.load_predictions()
+    matrices = list(pred.bands.lights.values())  # the evaluation's three, the first again for the fourth
+    pred.bands.lights = {n: matrices[i % len(matrices)] for i, n in enumerate(PLANTED_LIGHTS)}
+    d.save_predictions(pred)
+    _run("report", run)
+    return run

@@ -244,3 +244,18 @@ def test_spectral_mesh_page_switches_the_light(browser, spectral_mesh_run):
     assert page.evaluate("document.body.dataset.light") == "1"
     assert np.abs(a - b)[drawn].mean() > 1, np.abs(a - b)[drawn].mean()
     assert not _problems(page, errors), _problems(page, errors)
+
+
+def test_planted_light_names_do_not_run(browser, planted_spectral_run):
+    """Lights named by payloads: switching to each shows its pictures and table, and nothing a payload would make
+    exists or ran."""
+    page, errors = _open(browser, planted_spectral_run / "report.html")
+    _settle(page)
+    for i in range(6):
+        page.select_option("#light", str(i))
+        _settle(page)
+        assert page.locator(f"div[data-light-table='{i}']").is_visible()
+        assert page.evaluate("[...document.images].every(i => i.complete && i.naturalWidth > 0)")
+    page.wait_for_timeout(300)
+    assert page.evaluate("document.querySelectorAll('[pwn], pwn').length") == 0
+    assert not _problems(page, errors), _problems(page, errors)

@@ -67,3 +67,16 @@ def test_mesh_page_switches_textures(spectral_mesh_run):
     by = data["mesh"]["by_light"]
     assert len(by) == 2 and set(by[1]["textures"]) == {"continuous"} and set(by[1]["heat"]) == {"continuous"}
     assert by[1]["textures"]["continuous"] != data["mesh"]["textures"]["continuous"]
+
+
+def test_planted_light_names_stay_text(planted_spectral_run):
+    """predictions.npz's light names replaced by payloads (and a name JavaScript objects hold): the page shows
+    them as text, its data and options carry them as data, and its scripts admit nothing else."""
+    from proof.conftest import PLANTED_LIGHTS
+
+    page, data = _data(planted_spectral_run)
+    assert data["lights"] == [*PLANTED_LIGHTS, "D65", "A"]
+    text = _text(page)
+    assert all(f"under {n}: ΔE" in text for n in PLANTED_LIGHTS)
+    options = [a.get("value") for t, a in page.tags if t == "option"]
+    assert [o for o in options if o.isdigit()] == [str(i) for i in range(6)]
