@@ -159,3 +159,37 @@ def test_printed_renderer_renders_bands_as_the_rgb_one():
     assert all(r.volume.labels is a for r in spec.renderer._renderers)  # b is not held
     with pytest.raises(TypeError, match="unexpected"):
         PrintedRenderer(Volume.from_labels((VOX,) * 3, a, INKS), scene, (2 * VOX,) * 3, "slab", other=1)
+
+
+@pytest.mark.parametrize("labels", [False, True])
+def test_shared_renderer_is_the_per_group_one(labels):
+    """``shared``: one renderer whose medium each group swaps in renders, and replays, bit for bit as one renderer
+    per group, also after ``set_volume``; it refuses in-place medium updates."""
+    table = smooth_table()  # 6 bands: two groups
+    rng = np.random.default_rng(3)
+    if labels:
+        vols = [Volume.from_labels((VOX,) * 3, rng.integers(0, len(INKS), (5, 6, 7)).astype(np.uint8), INKS)]
+        vols.append(Volume.from_labels((VOX,) * 3, rng.integers(0, len(INKS), (5, 6, 7)).astype(np.uint8), INKS))
+    else:
+        vols = [random_volume((5, 6, 7), seed=3), random_volume((5, 6, 7), seed=4)]
+    tex = Texels.for_volume(vols[0])
+    w = np.linspace(1.0, 2.0, len(table.band_groups()))
+    each, one = (
+        SpectralRenderer(vols[0], table, 2, weights=w),
+        SpectralRenderer(vols[0], table, 2, weights=w, shared=True),
+    )
+    assert len(one._renderers) == 1 and len(each._renderers) == len(table.band_groups())
+    for vol in vols:
+        each.set_volume(vol)
+        one.set_volume(vol)
+        for _ in range(2):  # twice: the shared renderer starts the second pass on the last group's medium
+            a, b = each.render(tex, spp=3, seed=5), one.render(tex, spp=3, seed=5)
+            np.testing.assert_array_equal(a.rgb, b.rgb)
+            np.testing.assert_array_equal(a.var_mean, b.var_mean)
+    if not labels:  # gradients are taken of mixtures
+        adj = rng.normal(size=(len(tex), table.bands)).astype(np.float32)
+        ga, gb = each.gradient(tex, adj, spp=2, seed=1), one.gradient(tex, adj, spp=2, seed=1)
+        for x, y in zip(ga[:2], gb[:2]):
+            np.testing.assert_array_equal(x, y)
+    with pytest.raises(ParameterError, match="shared"):
+        one.set_mixture(np.array([0]), np.full((1, len(INKS)), 0.25, np.float32))

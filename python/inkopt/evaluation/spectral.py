@@ -74,7 +74,7 @@ def evaluate_lights(path, options: EvaluateOptions, lights: str | None = None, l
     viewing = Viewing(table, parse_lights(lights or ",".join(run["illuminants"])))
     ev = Evaluating.open(path, replace(options, texel_sample=0, translucency=False), log)
     loss = viewing.loss(ev.target, ev.rec.texels.pos_vox, FIGURE_GAMMA)
-    ev.factory, ev.cmap = viewing.renderer_factory(Renderer), loss.colours[0]
+    ev.factory, ev.cmap = viewing.renderer_factory(Renderer, shared=True), loss.colours[0]  # geometry held once
     ev.say(f"spectral: {table.bands} bands under {', '.join(n.name for n in viewing.seen_under())}; every texel")
     grid, sources = _mixture_results(ev)  # the continuous result and the baselines' layer sources
     printed = _printed_results(ev, grid, sources)  # the quantized result and the baselines on printer texels

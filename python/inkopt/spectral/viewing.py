@@ -68,13 +68,14 @@ class Viewing:
         """The run's loss (``TexelLoss``) of targets (I, 3) linear RGB under :meth:`colours`, combined as asked."""
         return TexelLoss(target_rgb, pos_vox, gamma, colours=self.colours(), combine=self.combine)
 
-    def renderer_factory(self, inner: RendererFactory) -> RendererFactory:
-        """What renders a run: ``inner`` on the RGB path, else band renders through ``inner`` per group."""
+    def renderer_factory(self, inner: RendererFactory, shared: bool = False) -> RendererFactory:
+        """What renders a run: ``inner`` on the RGB path, else band renders through ``inner`` per group (``shared``:
+        one ``inner`` renderer for all groups, ``SpectralRenderer``'s ``shared``)."""
         table = self.table
         if table is None:
             return inner
         w = self.group_weights()
-        return lambda volume, threads, lighting: SpectralRenderer(volume, table, threads, lighting, inner, w)
+        return lambda volume, threads, lighting: SpectralRenderer(volume, table, threads, lighting, inner, w, shared)
 
     def group_weights(self) -> np.ndarray | None:
         """(G,) the band groups' sample weights (``spectral.render.group_spp``; None unless ``weighted``): the square
