@@ -3,16 +3,18 @@ the command line (``inkopt slab|optimize``, ``inkopt evaluate``, ``inkopt report
 
 Slab (default): the colour chart on a 2.71 x 1.78 x 1 mm slab (as experiments/spectral_lights.py), inks
 ``vero-cmykw@spectral``, optimised for D65 and A (the mean of their losses). ``--spot-mm H``: Spot
-(python/inkopt/data/spot) H mm high instead. The run is evaluated with ``inkopt evaluate RUN --spp N`` (every result
-rendered band by band at N samples per scene texel with the evaluation's seeds; the baselines from the cached
-colour table of the volume's RGB inks) under D65, A and F11, and its soft-proof page written; the page's size is
-also measured without its light switch (the same predictions without band values) to give the growth per light.
+(python/inkopt/data/spot) H mm high instead (``--dpi D``: on a D DPI optimisation grid). The run is evaluated with
+``inkopt evaluate RUN --spp N --texel-sample 0`` (every result rendered band by band on every texel at N samples per
+scene texel with the evaluation's seeds; the baselines from the cached colour table of the volume's RGB inks) under
+D65, A and F11, and its soft-proof page written; the page's size is also measured without its light switch (the same
+predictions without band values) to give the growth per light.
 
-    nice -n 5 .venv/bin/python experiments/spectral_evaluate.py [--spot-mm 10] [--iterations 40] [--spp 8]
-        [--eval-spp 256] [--work DIR]
+    nice -n 5 .venv/bin/python experiments/spectral_evaluate.py [--spot-mm 10] [--dpi 75] [--iterations 40]
+        [--spp 8] [--eval-spp 256] [--work DIR]
 
-Writes experiments/results/spectral_evaluate_slab.json (``--spot-mm H``: spectral_evaluate_spot<H>mm.json) with the
-table per light, the commands, the times and the machine's load, and prints the table.
+Writes experiments/results/spectral_evaluate_slab.json (``--spot-mm H``: spectral_evaluate_spot<H>mm.json, with
+``--dpi D`` spectral_evaluate_spot<H>mm_<D>dpi.json): the table per light, the commands, the times and the
+machine's load; prints the table.
 """
 
 import argparse
@@ -71,6 +73,7 @@ def _page_growth(run: Path) -> dict:
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--spot-mm", type=float, default=None, help="Spot this high instead of the slab")
+    ap.add_argument("--dpi", type=float, default=None, help="Spot's optimisation grid (default 300 DPI)")
     ap.add_argument("--iterations", type=int, default=40)
     ap.add_argument("--spp", type=int, default=8)
     ap.add_argument("--eval-spp", type=int, default=256)
@@ -79,7 +82,7 @@ def main():
     a = ap.parse_args()
     work = Path(a.work)
     work.mkdir(parents=True, exist_ok=True)
-    name = "slab" if a.spot_mm is None else f"spot{a.spot_mm:g}mm"
+    name = "slab" if a.spot_mm is None else f"spot{a.spot_mm:g}mm" + (f"_{a.dpi:g}dpi" if a.dpi else "")
     run = work / name
     shutil.rmtree(run, ignore_errors=True)
     common = ["--out", run, "--iterations", a.iterations, "--spp", a.spp, "--threads", a.threads]
@@ -88,8 +91,19 @@ def main():
         chart = charts.save(charts.colour_chart(128, 84), work / "chart.png")
         make = ["slab", chart, "--size-mm", "2.71x1.78x1", *common]
     else:
-        make = ["optimize", SPOT, "--height-mm", a.spot_mm, *common]
-    evaluate = ["evaluate", run, "--spp", a.eval_spp, "--threads", a.threads, "--illuminants", LIGHTS]
+        make = ["optimize", SPOT, "--height-mm", a.spot_mm, *common, *(["--dpi", a.dpi] if a.dpi else [])]
+    evaluate = [
+        "evaluate",
+        run,
+        "--spp",
+        a.eval_spp,
+        "--texel-sample",
+        0,
+        "--threads",
+        a.threads,
+        "--illuminants",
+        LIGHTS,
+    ]
     seconds = {"optimise": _run(make), "evaluate": _run(evaluate), "report": _run(["report", run])}
     ev = json.loads((run / "evaluation_lights.json").read_text())
     table = {

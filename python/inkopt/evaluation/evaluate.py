@@ -103,7 +103,7 @@ from .translucency import evaluate_translucency
 
 
 def _pilot_render(renderer: Renderer, texels, spp: int, seed: int) -> tuple:
-    """The colours (k, 3) and variances of their means (k, 3) of ``texels`` rendered at ``spp`` with ``seed``."""
+    """The colours (k, C) and variances of their means (k, C) of ``texels`` rendered at ``spp`` with ``seed``."""
     r = renderer.render(texels, spp, seed)
     return r.rgb, r.var_mean
 
@@ -166,8 +166,8 @@ class Evaluating:
     def settle(self, renderer: Renderer) -> None:
         """Every texel or a texel sample (``choice.choose_sampling``, a pilot through ``renderer`` unless the options
         force it), logged, and the texel groups every result is rendered on."""
-        pilot = partial(_pilot_render, renderer)
-        self.choice = choose_sampling(pilot, self.rec.texels, self.target_lab, self.options, self.sampling.seed)
+        pilot, seed = partial(_pilot_render, renderer), self.sampling.seed
+        self.choice = choose_sampling(pilot, self.rec.texels, self.target_lab, self.options, seed, self.cmap)
         self.sample = s = self.choice.sample
         self.say(self.choice.describe())
         if s is not None:

@@ -9,9 +9,12 @@ defaults first if missing) and the ``surface`` and ``extrusion`` baselines (chos
 volume's inks, as a print shop without a spectral model would, and quantized exactly like the print) on the printer
 texels, averaged onto the scene texels (``printed.PrintedRenderer``). Every result is rendered with the evaluation's
 seeds (``noise.EVAL_SEED_OFFSET + seed``), at the options' samples per texel or adaptively against the target
-under the first light, on every texel (no texel sample), and scored under each light asked (default: the run's) by
+under the first light, and scored under each light asked (default: the run's) by
 ``evaluation.lights.light_figures``: ΔE76, ΔE2000, SSIM per light, the worst light and the colour inconstancy
-between the first light and each other.
+between the first light and each other. Every texel or a texel sample, chosen as for RGB runs
+(``choice.choose_sampling``, its pilot's colours under the first light): with a sample every figure under every
+light comes from the sampled texels with its standard error, and the paired differences between the results are
+given per light (``differences``); no pictures and no predictions.npz then.
 
 evaluation_lights.json holds ``viewing``; one entry per result (``continuous``, ``quantized``, ``surface``,
 ``extrusion``: ``light_figures``' keys with ``spp``, ``spp_passes``, ``seconds``, and for the printed ones
@@ -31,14 +34,17 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..color import delta_e2000
 from ..errors import ParameterError
 from ..io import file_digest, write_json
+from ..loss import TexelLoss
 from ..model.inks import read_ink_file
 from ..model.spectral import spectral_from_data
 from ..render import Renderer
 from ..rundir import VOLUME_DIGEST, BandValues, Predictions, RunDir
 from ..spectral.lights import parse_lights
 from ..spectral.viewing import Viewing
+from . import sample as sampled
 from .baselines import BASELINES
 from .evaluate import Evaluating, _mixture_results, _printed_results
 from .lights import light_figures
@@ -59,8 +65,7 @@ def evaluate_lights(path, options: EvaluateOptions, lights: str | None = None, l
     """Figures of spectral run ``path``'s results under ``lights`` ("D65,A"; None: the run's), rendered as
     ``options`` say (``spp``, ``max_spp``, ``time_budget``, ``seed``, ``threads``, ``lighting``, ``method``,
     ``baselines``, ``patch_mm``, ``refine``); written to evaluation_lights.json, predictions.npz and pictures unless
-    ``options.write`` is False. Every texel is rendered (``texel_sample`` > 0 is refused). Returns the JSON object
-    (module docstring)."""
+    ``options.write`` is False (with a texel sample: the JSON only). Returns the JSON object (module docstring)."""
     d = RunDir(path)
     run = run_viewing(d)
     if run is None:
@@ -68,18 +73,19 @@ def evaluate_lights(path, options: EvaluateOptions, lights: str | None = None, l
             f"`illuminants`: {d} is an RGB run; figures under other lights need a run with a spectral ink table "
             "(`inks` vero-cmykw@spectral)"
         )
-    if options.texel_sample:
-        raise ParameterError("`texel_sample`: a spectral run's evaluation renders every texel (leave it out, or 0)")
     table = spectral_from_data(read_ink_file(d.spectral_inks_path), d.spectral_inks_path)
     viewing = Viewing(table, parse_lights(lights or ",".join(run["illuminants"])))
-    ev = Evaluating.open(path, replace(options, texel_sample=0, translucency=False), log)
-    loss = viewing.loss(ev.target, ev.rec.texels.pos_vox, FIGURE_GAMMA)
-    ev.factory, ev.cmap = viewing.renderer_factory(Renderer, shared=True), loss.colours[0]  # geometry held once
-    ev.say(f"spectral: {table.bands} bands under {', '.join(n.name for n in viewing.seen_under())}; every texel")
+    ev = Evaluating.open(path, replace(options, translucency=False), log)
+    names = tuple(light.name for light in viewing.seen_under())
+    ev.factory, ev.cmap = viewing.renderer_factory(Renderer, shared=True), viewing.colours()[0]  # geometry once
+    ev.say(f"spectral: {table.bands} bands under {', '.join(names)}")
     grid, sources = _mixture_results(ev)  # the continuous result and the baselines' layer sources
     printed = _printed_results(ev, grid, sources)  # the quantized result and the baselines on printer texels
-    names = tuple(light.name for light in viewing.seen_under())
-    results = {name: _result_figures(loss, r, names) for name, r in ev.renders.items()}
+    if ev.sample is None:
+        loss, diffs = viewing.loss(ev.target, ev.rec.texels.pos_vox, FIGURE_GAMMA), None
+        results = {name: _result_figures(loss, r, names) for name, r in ev.renders.items()}
+    else:
+        results, diffs = _sampled_results(ev, viewing, names)
     out = {
         "viewing": {**viewing.describe(), "headline": names[0]},
         **results,
@@ -89,9 +95,13 @@ def evaluate_lights(path, options: EvaluateOptions, lights: str | None = None, l
         "seconds": time.perf_counter() - ev.shares.started,
         VOLUME_DIGEST: d.volume_digest(),
         "quantized_digest": d.quantized_digest(),
+        "sampling_choice": ev.choice.to_json(),
     }
+    if ev.sample is not None:
+        out.update(texel_sample=ev.sample.to_json(), differences=diffs)
     if options.write:
         write_json(d.evaluation_lights_path, out)
+    if options.write and ev.sample is None:
         bands = {name: ev.colours[name] for name in results}
         shown = {name: viewing.display(v) for name, v in bands.items()}
         _pictures(d, ev.rec, shown, log)
@@ -112,15 +122,53 @@ def bands_of(viewing: Viewing, values) -> BandValues | None:
     return BandValues(values, viewing.table.wavelengths_nm, viewing.light_matrices())
 
 
-def _result_figures(loss, rendered: Rendered, names: tuple[str, ...]) -> dict:
-    """One result's ``light_figures`` with its samples (``spp`` per scene texel, ``spp_passes``), seconds and, for a
-    printed result, its quantization method and printer samples per texel (``spp_printer``)."""
+def _result_figures(loss, rendered: Rendered, names: tuple[str, ...], figures: dict | None = None) -> dict:
+    """One result's ``light_figures`` (or ``figures``, a sample's) with its samples (``spp`` per scene texel,
+    ``spp_passes``), seconds and, for a printed result, its quantization method and printer samples per texel
+    (``spp_printer``)."""
     ad = rendered.ads[0]
-    out = {**light_figures(loss, ad.rgb, ad.var, names), "spp": ad.spp, "spp_passes": ad.passes}
-    out["seconds"] = rendered.seconds
+    figures = light_figures(loss, ad.rgb, ad.var, names) if figures is None else figures
+    out = {**figures, "spp": ad.spp, "spp_passes": ad.passes, "seconds": rendered.seconds}
     if rendered.method is not None:
         out.update(method=rendered.method, spp_printer=rendered.spp_printer)
     return out
+
+
+def _sampled_results(ev: Evaluating, viewing: Viewing, names: tuple[str, ...]) -> tuple[dict, dict]:
+    """With a texel sample (``evaluation.sample``): every result's figures under each light from its sampled
+    texels (``sample.sampled_figures`` on each light's view of the loss, ``TexelLoss.under``), each with its
+    standard error (``by_light[light]["stderr"]``), the colour inconstancy on the points with its standard error
+    (``inconstancy_stderr``); and per light the paired differences between the results (``sample.differences``)."""
+    s = ev.sample
+    loss = TexelLoss(
+        ev.target[s.windows], ev.groups[-1].texels.pos_vox, FIGURE_GAMMA, sampled.SIGMA, colours=viewing.colours()
+    )
+    values = [{} for _ in names]  # per light: result -> per-texel values
+    results = {}
+    for name, rendered in ev.renders.items():
+        ad, win = rendered.ads
+        by_light = {}
+        for k, light in enumerate(names):
+            view = loss.under(k)
+            values[k][name] = sampled.per_texel(view, (win.rgb, win.var), (ad.rgb, ad.var), ev.groups[0].target_lab, s)
+            m, err = sampled.sampled_figures(view, values[k][name], s)
+            by_light[light] = {**m.to_json(), "stderr": err}
+        labs = [c.lab(ad.rgb) for c in loss.colours]
+        moves = {
+            f"{names[0]}-{names[k]}": sampled.mean_se(delta_e2000(labs[0], labs[k]), s.population)
+            for k in range(1, len(names))
+        }
+        worst = max(names, key=lambda n: by_light[n]["delta_e2000_mean"])
+        figures = {
+            "by_light": by_light,
+            "worst_light": worst,
+            "worst_delta_e2000_mean": by_light[worst]["delta_e2000_mean"],
+            "inconstancy_delta_e2000_mean": {k: v[0] for k, v in moves.items()},
+            "inconstancy_stderr": {k: v[1] for k, v in moves.items()},
+        }
+        results[name] = {**_result_figures(loss, rendered, names, figures), "spp_windows": win.spp}
+    pairs = [("continuous", "quantized")] + [("quantized", b) for b in BASELINES if b in ev.renders]
+    return results, {light: sampled.differences(values[k], pairs, s) for k, light in enumerate(names)}
 
 
 def print_beats_baselines(results: dict, names: tuple[str, ...]) -> dict:
