@@ -84,8 +84,10 @@ def test_texel_sample_agrees_with_every_texel(tmp_path, capsys):
     capsys.readouterr()
     before = (run / "predictions.npz").read_bytes()
     args = ["evaluate", str(run), "--spp", "16", "--threads", "2", "--json"]
-    assert main([*args, "--texel-sample", "120", "--sample-windows", "30"]) == 0
-    sampled = json.loads(capsys.readouterr().out)
+    assert main([*args[:-1], "--texel-sample", "120", "--sample-windows", "30"]) == 0
+    out = capsys.readouterr().out
+    assert "under A: the print" in out and "paired difference" in out
+    sampled = json.loads((run / "evaluation_lights.json").read_text())
     assert (run / "predictions.npz").read_bytes() == before
     assert sampled["texel_sample"]["texels"] == 120 and sampled["sampling_choice"]["forced"]
     assert set(sampled["differences"]) == {"D65", "A"} and "quantized - extrusion" in sampled["differences"]["A"]

@@ -171,14 +171,20 @@ def _evaluate_lights(args, d: RunDir, options: EvaluateOptions, log) -> int:
         print(f"{r}: {under_lights({**out[r], 'headline': headline})}")
     for light, beats in out["print_beats_baselines"].items():
         q = out["quantized"]["by_light"][light]["delta_e2000_mean"]
-        vs = ", ".join(
-            f"{'beats' if won else 'does not beat'} {b} ({out[b]['by_light'][light]['delta_e2000_mean']:.2f})"
-            for b, won in beats.items()
-        )
+        vs = ", ".join(f"{'beats' if won else 'does not beat'} {_versus(out, light, b)}" for b, won in beats.items())
         print(f"under {light}: the print (mean ΔE2000 {q:.2f}) {vs}")
     spp, secs = out["continuous"]["spp"], out["seconds"]
     print(f"{spp} spp per scene texel (continuous result), {secs:.0f} s; wrote {d.evaluation_lights_path}")
     return 0
+
+
+def _versus(out: dict, light: str, baseline: str) -> str:
+    """A baseline's mean ΔE2000 under ``light`` and, with a texel sample, the print's paired difference to it."""
+    text = f"{baseline} ({out[baseline]['by_light'][light]['delta_e2000_mean']:.2f}"
+    diff = (out.get("differences") or {}).get(light, {}).get(f"quantized - {baseline}", {}).get("delta_e2000_mean")
+    if diff and diff.get("value") is not None and diff.get("stderr") is not None:
+        text += f"; paired difference {diff['value']:+.2f} ± {diff['stderr']:.2f}"
+    return text + ")"
 
 
 def register_cli(sub) -> None:
