@@ -182,6 +182,7 @@ def test_shared_renderer_is_the_per_group_one(labels):
     for vol in vols:
         each.set_volume(vol)
         one.set_volume(vol)
+        one.volume = vols[0]  # as evaluation.printed does: the description only, not what is rendered
         for _ in range(2):  # twice: the shared renderer starts the second pass on the last group's medium
             a, b = each.render(tex, spp=3, seed=5), one.render(tex, spp=3, seed=5)
             np.testing.assert_array_equal(a.rgb, b.rgb)
@@ -193,3 +194,28 @@ def test_shared_renderer_is_the_per_group_one(labels):
             np.testing.assert_array_equal(x, y)
     with pytest.raises(ParameterError, match="shared"):
         one.set_mixture(np.array([0]), np.full((1, len(INKS)), 0.25, np.float32))
+
+
+def test_printed_renderer_shared_bands_swap_every_volume():
+    """``PrintedRenderer`` with shared band renders of a 6-band table (two groups) renders each labels volume it is
+    given, bit for bit as with one renderer per group: a second volume is not rendered with the first's medium."""
+    from inkopt.evaluation.printed import PrintedRenderer
+
+    rng = np.random.default_rng(9)
+    a, b = (rng.integers(0, len(INKS), (6, 8, 10)).astype(np.uint8) for _ in range(2))
+    scene = Texels.for_volume(Volume.from_labels((2 * VOX,) * 3, a[::2, ::2, ::2].copy(), INKS), [5])
+    table = smooth_table()
+
+    def printer(shared):
+        make = lambda v, threads, lighting: SpectralRenderer(v, table, threads, lighting, shared=shared)  # noqa: E731
+        return PrintedRenderer(Volume.from_labels((VOX,) * 3, a, INKS), scene, (2 * VOX,) * 3, "slab", 2, factory=make)
+
+    one, each = printer(True), printer(False)
+    got = []
+    for labels in (a, b):
+        one.use(Volume.from_labels((VOX,) * 3, labels, INKS))
+        each.use(Volume.from_labels((VOX,) * 3, labels, INKS))
+        x, y = one(4, 3), each(4, 3)
+        np.testing.assert_array_equal(x[0], y[0])
+        got.append(x[0])
+    assert np.abs(got[0] - got[1]).max() > 0.01  # the two volumes differ

@@ -96,6 +96,7 @@ class SpectralRenderer(TexelRenderer):
             have = None if volume.inks is None else list(volume.inks.names)
             raise ParameterError(f"`inks` {list(table.names)} must be the volume's inks {have}, in order")
         self.table = table
+        self._source = volume  # whose medium the groups render (``shared``: swapped in from it)
         self.volume = volume
         self.lighting = check_grey(load_lighting(lighting))
         self._bands = table.group_bands()
@@ -119,7 +120,8 @@ class SpectralRenderer(TexelRenderer):
     @volume.setter
     def volume(self, volume: Volume) -> None:
         """The volume the renderer describes; every group's renderer is given it too (read with the group's inks),
-        so a caller that points it back at the volume the geometry was built for frees the one it replaced."""
+        so a caller that points it back at the volume the geometry was built for frees the one it replaced (a
+        ``shared`` renderer keeps the volume of the last ``set_volume``: it swaps each group's medium in from it)."""
         self._volume = volume
         if getattr(self, "shared", False):
             self._renderers[0].volume = with_inks(volume, self._groups[self._current])
@@ -135,7 +137,7 @@ class SpectralRenderer(TexelRenderer):
                 continue
             r = self._renderers[0]
             if self._current != k:
-                r.set_volume(with_inks(self._volume, self._groups[k]))
+                r.set_volume(with_inks(self._source, self._groups[k]))
                 self._current = k
             yield k, r
 
@@ -150,6 +152,7 @@ class SpectralRenderer(TexelRenderer):
         self.lighting = light
 
     def set_volume(self, volume: Volume) -> None:
+        self._source = volume
         for r, g in zip(self._renderers, self._groups[self._current :] if self.shared else self._groups):
             r.set_volume(with_inks(volume, g))
         self.volume = volume
