@@ -10,7 +10,7 @@ D65, A and F11, and its soft-proof page written; the page's size is also measure
 predictions without band values) to give the growth per light.
 
     nice -n 5 .venv/bin/python experiments/spectral_evaluate.py [--spot-mm 10] [--dpi 75] [--iterations 40]
-        [--spp 8] [--eval-spp 256] [--work DIR]
+        [--spp 8] [--eval-spp 256] [--work DIR] [--reuse]
 
 Writes experiments/results/spectral_evaluate_slab.json (``--spot-mm H``: spectral_evaluate_spot<H>mm.json, with
 ``--dpi D`` spectral_evaluate_spot<H>mm_<D>dpi.json): the table per light, the commands, the times and the
@@ -79,12 +79,15 @@ def main():
     ap.add_argument("--eval-spp", type=int, default=256)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--work", default="spectral_evaluate_runs", help="folder of the run directory")
+    ap.add_argument("--reuse", action="store_true", help="evaluate the run already in --work (same settings) again")
     a = ap.parse_args()
     work = Path(a.work)
     work.mkdir(parents=True, exist_ok=True)
     name = "slab" if a.spot_mm is None else f"spot{a.spot_mm:g}mm" + (f"_{a.dpi:g}dpi" if a.dpi else "")
     run = work / name
-    shutil.rmtree(run, ignore_errors=True)
+    reuse = a.reuse and (run / "volume.npz").is_file()
+    if not reuse:
+        shutil.rmtree(run, ignore_errors=True)
     common = ["--out", run, "--iterations", a.iterations, "--spp", a.spp, "--threads", a.threads]
     common += ["--inks", "vero-cmykw@spectral", "--illuminants", "D65,A"]
     if a.spot_mm is None:
@@ -104,7 +107,8 @@ def main():
         "--illuminants",
         LIGHTS,
     ]
-    seconds = {"optimise": _run(make), "evaluate": _run(evaluate), "report": _run(["report", run])}
+    seconds = {"optimise": None if reuse else _run(make)}
+    seconds.update(evaluate=_run(evaluate), report=_run(["report", run]))
     ev = json.loads((run / "evaluation_lights.json").read_text())
     table = {
         light: {r: ev[r]["by_light"][light]["delta_e2000_mean"] for r in RESULTS if r in ev}
@@ -113,6 +117,7 @@ def main():
     noise = {r: ev[r]["by_light"]["D65"]["delta_e76_noise"] for r in RESULTS if r in ev}
     out = {
         "scene": name,
+        "optimisation_reused": reuse,
         "commands": ["inkopt " + " ".join(str(x) for x in c) for c in (make, evaluate, ["report", run])],
         "delta_e2000_mean": table,
         "delta_e76_noise_per_texel_d65": noise,
