@@ -37,6 +37,7 @@ from .evaluation.lights import light_figures
 from .evaluation.metrics import delta_e76_map, prediction_metrics
 from .evaluation.noise import EVAL_SEED_OFFSET, MAX_SPP, PILOT_SPP, Sampling, adaptive_render
 from .evaluation.results import Report
+from .evaluation.spectral import bands_of
 from .io import file_digest
 from .lighting import Lighting, load_lighting
 from .model.spectral import write_spectral_ink_file
@@ -338,6 +339,7 @@ def _write_result_files(job: _Job, res) -> np.ndarray:
         {"continuous": res.spp},
         file_digest(rd.volume_path),
         job.lighting.describe(),
+        bands_of(run.viewing, res.rgb),
     )
     rd.save_predictions(predictions)
     if run.viewing.spectral:  # what `inkopt evaluate` renders the run's bands with

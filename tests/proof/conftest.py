@@ -195,3 +195,62 @@ def planted_runs(hostile_slab_run, hostile_mesh_run, tmp_path_factory):
         "slab": plant_fields(hostile_slab_run, root / "slab", source=False),
         "mesh": plant_fields(hostile_mesh_run, root / "mesh", source=True),
     }
+
+
+def _payload_light(root) -> str:
+    """A light file (flat power, 380-780 nm) whose name is a payload; its name is how the page shows it."""
+    path = root / f"{FILE_PAYLOADS[0]}.csv"
+    path.write_text("\n".join(f"{nm},1" for nm in range(380, 790, 10)) + "\n")
+    return str(path)
+
+
+@pytest.fixture(scope="session")
+def spectral_slab_run(tmp_path_factory):
+    """A colour chart slab with the library's spectral inks, optimised for D65 and a light file named by a payload,
+    evaluated under D65, that file and F11 (no baselines) and reported: the page offers those lights and A."""
+    root = tmp_path_factory.mktemp("spectralslab")
+    chart = charts.save(charts.colour_chart(24, 16), root / "chart.png")
+    run = root / "run"
+    light = _payload_light(root)
+    args = ["--size-mm", "2x1.333x0.5", "--out", run, "--iterations", 2, "--spp", 2, "--eval-spp", 4]
+    _run("slab", chart, *args, "--inks", "vero-cmykw@spectral", "--illuminants", f"D65,{light}")
+    _run("evaluate", run, "--spp", 4, "--no-baselines", "--illuminants", f"D65,{light},F11")
+    _run("report", run)
+    return run
+
+
+@pytest.fixture(scope="session")
+def spectral_mesh_run(tmp_path_factory):
+    """mesh_run's two-coloured ball with the library's spectral inks under D65 and A, not evaluated (the page
+    shows the optimisation's continuous result under each light)."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("INKOPT_CACHE_DIR", str(tmp_path_factory.mktemp("cache")))
+        mp.setattr("inkopt.scenes.mesh.scene.VIEW_SIZE", 64)
+        root = tmp_path_factory.mktemp("spectralmesh")
+        sph = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
+        col = np.where(sph.vertices[:, 2:3] > 0, [[0, 200, 230, 255]], [[230, 0, 160, 255]]).astype(np.uint8)
+        mesh = root / "ball.ply"
+        trimesh.Trimesh(sph.vertices, sph.faces, vertex_colors=col, process=False).export(mesh)
+        run = root / "run"
+        args = ["--scale", 1, "--up", "z", "--out", run, "--iterations", 2, "--spp", 2, "--eval-spp", 4]
+        _run("optimize", mesh, *args, "--inks", "vero-cmykw@spectral", "--illuminants", "D65,A")
+        _run("report", run)
+    return run
+
+
+#: the light names ``planted_spectral_run`` gives predictions.npz: payloads and a name JavaScript objects hold
+PLANTED_LIGHTS = (*PAYLOADS[:3], "__proto__")
+
+
+@pytest.fixture(scope="session")
+def planted_spectral_run(spectral_slab_run, tmp_path_factory):
+    """spectral_slab_run with predictions.npz's stored lights renamed ``PLANTED_LIGHTS``, reported."""
+    run = tmp_path_factory.mktemp("plantedlights") / "run"
+    shutil.copytree(spectral_slab_run, run)
+    d = RunDir(run)
+    pred = d.load_predictions()
+    matrices = list(pred.bands.lights.values())  # the evaluation's three, the first again for the fourth
+    pred.bands.lights = {n: matrices[i % len(matrices)] for i, n in enumerate(PLANTED_LIGHTS)}
+    d.save_predictions(pred)
+    _run("report", run)
+    return run

@@ -192,3 +192,70 @@ def test_view_that_cannot_start_says_so(browser, mesh_run, tmp_path):
     page, errors = _open(browser, path)
     page.wait_for_selector("#stage3d .needs", state="visible", timeout=10000)
     assert not page.evaluate("document.getElementById('view3d').dataset.ready")
+
+
+def test_spectral_slab_page_switches_the_light(browser, spectral_slab_run):
+    """The light selector changes every face's pictures and shows that light's figures table only; the heat map
+    follows the light too; nothing is refused or fails."""
+    page, errors = _open(browser, spectral_slab_run / "report.html")
+    _settle(page)
+    face = page.locator("#face-top")
+    face.locator("select").nth(1).select_option("continuous")
+    face.locator("input[type=range]").fill("0")  # the right picture (the continuous result) everywhere
+    _settle(page)
+    a, src = _pixels(page, "#face-top .swipe"), face.locator("img.top").get_attribute("src")
+    assert (
+        page.locator("div[data-light-table='0']").is_visible() and page.locator("div[data-light-table='3']").is_hidden()
+    )
+    page.select_option("#light", "3")  # A
+    _settle(page)
+    b = _pixels(page, "#face-top .swipe")
+    assert face.get_attribute("data-light") == "3" and page.evaluate("document.body.dataset.light") == "3"
+    assert (
+        page.locator("div[data-light-table='3']").is_visible() and page.locator("div[data-light-table='0']").is_hidden()
+    )
+    assert face.locator("img.top").get_attribute("src") != src
+    assert np.abs(a - b).mean() > 0.5, np.abs(a - b).mean()  # adapted to each light's white: a small change
+    face.locator("input[type=checkbox]").check()
+    _settle(page)
+    h3 = _pixels(page, "#face-top .swipe")
+    page.select_option("#light", "0")
+    _settle(page)
+    h0 = _pixels(page, "#face-top .swipe")
+    assert np.abs(h3 - h0).mean() > 0.5, np.abs(h3 - h0).mean()
+    assert page.evaluate("[...document.images].every(i => i.complete && i.naturalWidth > 0)")
+    assert page.evaluate("document.querySelectorAll('[pwn], pwn').length") == 0
+    assert not _problems(page, errors), _problems(page, errors)
+
+
+def test_spectral_mesh_page_switches_the_light(browser, spectral_mesh_run):
+    """The 3D view draws the continuous result under D65 and redraws it under A when the light changes."""
+    page, errors = _open(browser, spectral_mesh_run / "report.html")
+    page.wait_for_selector("#view3d[data-ready='1']", timeout=20000)
+    page.select_option("#other3d", "")
+    page.select_option("#pick3d", "continuous")
+    _settle(page)
+    a = _pixels(page, "#stage3d")
+    drawn = np.any(np.abs(a - 255) > 8, axis=2)
+    assert drawn.mean() > 0.02, drawn.mean()
+    page.select_option("#light", "1")
+    _settle(page)
+    b = _pixels(page, "#stage3d")
+    assert page.evaluate("document.body.dataset.light") == "1"
+    assert np.abs(a - b)[drawn].mean() > 1, np.abs(a - b)[drawn].mean()
+    assert not _problems(page, errors), _problems(page, errors)
+
+
+def test_planted_light_names_do_not_run(browser, planted_spectral_run):
+    """Lights named by payloads: switching to each shows its pictures and table, and nothing a payload would make
+    exists or ran."""
+    page, errors = _open(browser, planted_spectral_run / "report.html")
+    _settle(page)
+    for i in range(6):
+        page.select_option("#light", str(i))
+        _settle(page)
+        assert page.locator(f"div[data-light-table='{i}']").is_visible()
+        assert page.evaluate("[...document.images].every(i => i.complete && i.naturalWidth > 0)")
+    page.wait_for_timeout(300)
+    assert page.evaluate("document.querySelectorAll('[pwn], pwn').length") == 0
+    assert not _problems(page, errors), _problems(page, errors)

@@ -73,6 +73,8 @@ def check_page(path) -> Page:
         assert tag in TAGS, tag
         assert "pwn" not in attrs and not any(a.startswith("on") for a in attrs), (tag, attrs)
     types = [a.get("type") for a, _ in page.scripts]
+    if types[-1:] == [None] and len(types) in (3, 4):  # a spectral run's light selector (lights.js) comes last
+        types = types[:-1]
     assert types in (["application/json", None], ["application/json", "importmap", "module"]), types
     policy = page.policy()
     assert policy["default-src"] == ["'none'"] and policy["script-src-attr"] == ["'none'"]

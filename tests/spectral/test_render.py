@@ -131,3 +131,91 @@ def test_label_volumes_render_as_the_rgb_renderer():
     order = InkTable(INKS.names, INKS.sigma_s[:, [2, 1, 0]].copy(), INKS.sigma_a[:, [2, 1, 0]].copy(), INKS.g)
     want = Renderer(Volume.from_labels((VOX,) * 3, labels, order), threads=1).render(tex, spp=4, seed=2)
     np.testing.assert_array_equal(got.rgb, want.rgb)
+
+
+def test_printed_renderer_renders_bands_as_the_rgb_one():
+    """The printer texels of a labels grid (``evaluation.printed.PrintedRenderer``) rendered through band renders of
+    a 3-band table whose bands are the RGB channels: the same scene-texel averages bit for bit, for the first labels
+    volume and for one swapped in; the swapped-in volume is released by every group's renderer."""
+    from inkopt.evaluation.printed import PrintedRenderer
+
+    rng = np.random.default_rng(8)
+    a, b = (rng.integers(0, len(INKS), (6, 8, 10)).astype(np.uint8) for _ in range(2))
+    scene = Texels.for_volume(Volume.from_labels((2 * VOX,) * 3, a[::2, ::2, ::2].copy(), INKS), [5])
+    table = rgb_as_bands(INKS)
+    order = InkTable(INKS.names, INKS.sigma_s[:, [2, 1, 0]].copy(), INKS.sigma_a[:, [2, 1, 0]].copy(), INKS.g)
+    spec_factory = lambda v, threads, lighting: SpectralRenderer(v, table, threads, lighting)  # noqa: E731
+    spec = PrintedRenderer(
+        Volume.from_labels((VOX,) * 3, a, INKS), scene, (2 * VOX,) * 3, "slab", 2, None, None, factory=spec_factory
+    )
+    rgb = PrintedRenderer(Volume.from_labels((VOX,) * 3, a, order), scene, (2 * VOX,) * 3, "slab", 1)
+    for labels in (a, b):
+        spec.use(Volume.from_labels((VOX,) * 3, labels, INKS))
+        rgb.use(Volume.from_labels((VOX,) * 3, labels, order))
+        got, want = spec(4, 3), rgb(4, 3)
+        assert got[0].shape == (len(scene), 3) and got[2] == want[2]
+        np.testing.assert_array_equal(got[0], want[0])
+        np.testing.assert_array_equal(got[1], want[1])
+    assert all(r.volume.labels is a for r in spec.renderer._renderers)  # b is not held
+    with pytest.raises(TypeError, match="unexpected"):
+        PrintedRenderer(Volume.from_labels((VOX,) * 3, a, INKS), scene, (2 * VOX,) * 3, "slab", other=1)
+
+
+@pytest.mark.parametrize("labels", [False, True])
+def test_shared_renderer_is_the_per_group_one(labels):
+    """``shared``: one renderer whose medium each group swaps in renders, and replays, bit for bit as one renderer
+    per group, also after ``set_volume``; it refuses in-place medium updates."""
+    table = smooth_table()  # 6 bands: two groups
+    rng = np.random.default_rng(3)
+    if labels:
+        vols = [Volume.from_labels((VOX,) * 3, rng.integers(0, len(INKS), (5, 6, 7)).astype(np.uint8), INKS)]
+        vols.append(Volume.from_labels((VOX,) * 3, rng.integers(0, len(INKS), (5, 6, 7)).astype(np.uint8), INKS))
+    else:
+        vols = [random_volume((5, 6, 7), seed=3), random_volume((5, 6, 7), seed=4)]
+    tex = Texels.for_volume(vols[0])
+    w = np.linspace(1.0, 2.0, len(table.band_groups()))
+    each, one = (
+        SpectralRenderer(vols[0], table, 2, weights=w),
+        SpectralRenderer(vols[0], table, 2, weights=w, shared=True),
+    )
+    assert len(one._renderers) == 1 and len(each._renderers) == len(table.band_groups())
+    for vol in vols:
+        each.set_volume(vol)
+        one.set_volume(vol)
+        one.volume = vols[0]  # as evaluation.printed does: the description only, not what is rendered
+        for _ in range(2):  # twice: the shared renderer starts the second pass on the last group's medium
+            a, b = each.render(tex, spp=3, seed=5), one.render(tex, spp=3, seed=5)
+            np.testing.assert_array_equal(a.rgb, b.rgb)
+            np.testing.assert_array_equal(a.var_mean, b.var_mean)
+    if not labels:  # gradients are taken of mixtures
+        adj = rng.normal(size=(len(tex), table.bands)).astype(np.float32)
+        ga, gb = each.gradient(tex, adj, spp=2, seed=1), one.gradient(tex, adj, spp=2, seed=1)
+        for x, y in zip(ga[:2], gb[:2]):
+            np.testing.assert_array_equal(x, y)
+    with pytest.raises(ParameterError, match="shared"):
+        one.set_mixture(np.array([0]), np.full((1, len(INKS)), 0.25, np.float32))
+
+
+def test_printed_renderer_shared_bands_swap_every_volume():
+    """``PrintedRenderer`` with shared band renders of a 6-band table (two groups) renders each labels volume it is
+    given, bit for bit as with one renderer per group: a second volume is not rendered with the first's medium."""
+    from inkopt.evaluation.printed import PrintedRenderer
+
+    rng = np.random.default_rng(9)
+    a, b = (rng.integers(0, len(INKS), (6, 8, 10)).astype(np.uint8) for _ in range(2))
+    scene = Texels.for_volume(Volume.from_labels((2 * VOX,) * 3, a[::2, ::2, ::2].copy(), INKS), [5])
+    table = smooth_table()
+
+    def printer(shared):
+        make = lambda v, threads, lighting: SpectralRenderer(v, table, threads, lighting, shared=shared)  # noqa: E731
+        return PrintedRenderer(Volume.from_labels((VOX,) * 3, a, INKS), scene, (2 * VOX,) * 3, "slab", 2, factory=make)
+
+    one, each = printer(True), printer(False)
+    got = []
+    for labels in (a, b):
+        one.use(Volume.from_labels((VOX,) * 3, labels, INKS))
+        each.use(Volume.from_labels((VOX,) * 3, labels, INKS))
+        x, y = one(4, 3), each(4, 3)
+        np.testing.assert_array_equal(x[0], y[0])
+        got.append(x[0])
+    assert np.abs(got[0] - got[1]).max() > 0.01  # the two volumes differ

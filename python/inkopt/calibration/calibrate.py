@@ -35,7 +35,15 @@ from .cgats import CgatsTable, canonical_field
 from .cgats import read as read_cgats
 from .chart import Chart, chart_from_table, check_identifiable, start_table
 from .fit import FitResult, choose_holdout, fit_inks
-from .measure import LAB_FIELDS, MEASUREMENT_KEYWORDS, XYZ_FIELDS, measured_lab, measured_reflectance, spectral_to_lab
+from .measure import (
+    LAB_FIELDS,
+    MEASUREMENT_KEYWORDS,
+    XYZ_FIELDS,
+    illuminant_name,
+    measured_lab,
+    measured_reflectance,
+    spectral_to_lab,
+)
 from .report import CalibrationReport, PatchResidual, p95, swatch_figure
 
 
@@ -110,10 +118,11 @@ BAND_GRIDS = {20.0: WAVELENGTHS_20NM, 10.0: WAVELENGTHS_10NM}
 @dataclass(frozen=True)
 class CalibrateOptions:
     """How a fit is made: ``start`` the starting ink table (a preset, list or ink file), ``illuminant`` of the
-    measurements ("D50" or "D65"), ``holdout`` the share of patches held out to test the fit (drawn with ``seed``),
-    ``fit_g`` whether the shared g is fitted (else kept at the start's), ``spectral`` whether spectral
-    measurements are fitted spectrally (else reduced to CIELAB for an RGB table), on bands ``band_nm`` apart over
-    400-700 nm (20: 16 bands, or 10: 31 bands)."""
+    measurements ("D50" or "D65"; spectral measurements: any light ``spectral.lights.load_light`` takes),
+    ``holdout`` the share of patches held out to test the fit (drawn with ``seed``), ``fit_g`` whether the shared
+    g is fitted (else kept at the start's), ``spectral`` whether spectral measurements are fitted spectrally (else
+    reduced to CIELAB for an RGB table), on bands ``band_nm`` apart over 400-700 nm (20: 16 bands, or 10: 31
+    bands)."""
 
     start: str = "vero-cmykw"
     illuminant: str = "D50"
@@ -195,7 +204,9 @@ def _fit(chart, table: CgatsTable, options: CalibrateOptions, log) -> _Fit:
     start_inks = start_table(chart, start)
     held = choose_holdout(chart, options.holdout, options.seed)
     keep = np.setdiff1d(np.arange(len(chart)), held)
-    log(f"{len(chart)} patches of {', '.join(chart.inks)} ({kind}, {illuminant.upper()}); {len(held)} held out")
+    log(
+        f"{len(chart)} patches of {', '.join(chart.inks)} ({kind}, {illuminant_name(illuminant)}); {len(held)} held out"
+    )
     iterations, seconds, hold_lab, first = 0, 0.0, None, start_inks
     if len(held):
         r = fit_inks(chart.subset(keep), lab[keep], start_inks, illuminant, fit_g=options.fit_g)
@@ -268,7 +279,7 @@ def _report(fit: _Fit, measured, options: CalibrateOptions, paths: dict) -> Cali
         measurements=str(measured),
         measurement_digest=file_digest(measured),
         measurement_kind=fit.kind,
-        illuminant=options.illuminant.upper(),
+        illuminant=illuminant_name(options.illuminant),
         start=str(options.start),
         ink_file=str(paths["inks"]),
         g=float(fit.full.inks.g),

@@ -13,15 +13,21 @@ XYZ_Z`` on the 0-100 scale, as ArgyllCMS's .ti3 files hold them), relative to th
 A prediction is the renderer's linear RGB (sRGB primaries, D65 white, ``inkopt.color``): its XYZ, adapted from
 that white to the illuminant's by Bradford, then CIELAB relative to the illuminant's white (a perfect white
 reflector has L* = 100 in both frames).
+The illuminant is D50 or D65 (colour-science's tables and chromaticities, as instruments report) or, for spectral
+measurements only, any light of ``spectral.lights``: a named one (A, F11, LED-B3) or a FILE.csv of (nm, relative
+power) rows, whose white is that of a perfect reflector under it. CIELAB and XYZ measurements were taken under
+the instrument's illuminant, so only D50 and D65 are taken with them.
 """
 
 from __future__ import annotations
 
 import warnings
+from functools import lru_cache
 
 import numpy as np
 
 from ..color import RGB_TO_XYZ, WHITE_XYZ
+from ..errors import ParameterError
 from .cgats import CgatsTable
 
 ILLUMINANTS = ("D50", "D65")
@@ -58,9 +64,54 @@ def _check_illuminant(name: str) -> str:
     return up
 
 
+def illuminant_name(name: str) -> str:
+    """An illuminant as reports name it: D50 or D65 (any case), a named light of ``spectral.lights`` (any case,
+    spelled as there: "A", "F11", "LED-B3"), else the light file's path as given."""
+    from ..spectral.lights import NAMED
+
+    up = str(name).upper()
+    return up if up in ILLUMINANTS else {k.upper(): k for k in NAMED}.get(up, str(name))
+
+
+def illuminant_sd(illuminant: str):
+    """The illuminant's ``colour.SpectralDistribution``: colour-science's D50 or D65 table as it is, else the light
+    of ``spectral.lights.load_light`` (a named light or a FILE.csv of nm, relative power rows) on its 1 nm grid
+    (360-830 nm), as the renderer's colour maps see it. A ParameterError naming `illuminant` for an unknown name or
+    a bad file."""
+    colour = _colour()
+    name = illuminant_name(illuminant)
+    if name in ILLUMINANTS:
+        return colour.SDS_ILLUMINANTS[name]
+    from ..spectral.lights import GRID_NM, load_light
+
+    return colour.SpectralDistribution(dict(zip(GRID_NM, load_light(name).on_grid())), name=name)
+
+
 def white_xy(illuminant: str) -> np.ndarray:
-    """Chromaticity (2,) of the illuminant for the 2° observer."""
-    return np.asarray(_colour().CCS_ILLUMINANTS[OBSERVER][_check_illuminant(illuminant)], np.float64)
+    """Chromaticity (2,) of the illuminant for the 2° observer: colour-science's tabulated one for D50 and D65,
+    else that of a perfect white reflector under the light (:func:`illuminant_sd`, ASTM E308 integration)."""
+    colour = _colour()
+    name = illuminant_name(illuminant)
+    if name in ILLUMINANTS:
+        return np.asarray(colour.CCS_ILLUMINANTS[OBSERVER][name], np.float64)
+    return _light_white_xy(name).copy()
+
+
+@lru_cache(maxsize=8)
+def _light_white_xy(name: str) -> np.ndarray:
+    """:func:`white_xy` of a light other than D50 and D65, computed once per name in a process (a fit asks for it
+    at every evaluation)."""
+    return _white_xy_of(illuminant_sd(name))
+
+
+def _white_xy_of(sd_ill) -> np.ndarray:
+    """The chromaticity (2,) of a perfect white reflector (reflectance 1 over 360-830 nm) under ``sd_ill``."""
+    colour = _colour()
+    flat = colour.SpectralDistribution(dict(zip(np.arange(360.0, 831.0), np.ones(471))))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        xyz = colour.sd_to_XYZ(flat, colour.MSDS_CMFS[OBSERVER], sd_ill)
+    return np.asarray(colour.XYZ_to_xy(xyz), np.float64)
 
 
 def rgb_to_xyz_matrix(illuminant: str) -> np.ndarray:
@@ -241,7 +292,6 @@ def measured_lab(table: CgatsTable, illuminant: str = "D50") -> tuple[np.ndarray
     table has. Spectral columns win (they are integrated under the chosen illuminant; a LAB column may have been
     computed under another); LAB columns are taken as under ``illuminant``; XYZ columns (ArgyllCMS's .ti3) are
     converted from the file's white (``_xyz_lab``)."""
-    illuminant = _check_illuminant(illuminant)
     if not table.has("SAMPLE_ID"):
         raise MeasurementError("the measurements have no SAMPLE_ID column")
     ids = table.column("SAMPLE_ID")
@@ -250,6 +300,12 @@ def measured_lab(table: CgatsTable, illuminant: str = "D50") -> tuple[np.ndarray
     spec = spectral_fields(table)
     if spec:
         return _spectral_lab(table, spec, ids, illuminant), "spectral"
+    if illuminant_name(illuminant) not in ILLUMINANTS:
+        raise ParameterError(
+            f"`illuminant` {illuminant}: CIELAB and XYZ measurements are under the instrument's illuminant, one of "
+            f"{', '.join(ILLUMINANTS)}; another light needs spectral measurements"
+        )
+    illuminant = _check_illuminant(illuminant)
     if all(table.has(f) for f in LAB_FIELDS):
         lab, kind = np.stack([_numbers(table.column(f), f, ids) for f in LAB_FIELDS], axis=1), "lab"
     elif all(table.has(f) for f in XYZ_FIELDS):
@@ -274,7 +330,8 @@ def spectral_to_lab(wavelengths_nm, reflectance, illuminant: str) -> np.ndarray:
     whole nm: other bands (ArgyllCMS's 3.3 nm) are first interpolated linearly onto whole nm."""
     colour = _colour()
     cmfs = colour.MSDS_CMFS[OBSERVER]
-    sd_ill = colour.SDS_ILLUMINANTS[_check_illuminant(illuminant)]
+    sd_ill = illuminant_sd(illuminant)
+    white = white_xy(illuminant) if illuminant_name(illuminant) in ILLUMINANTS else _white_xy_of(sd_ill)
     wl = np.asarray(wavelengths_nm, np.float64)
     reflectance = np.asarray(reflectance, np.float64)
     step = wl[1] - wl[0]
@@ -288,5 +345,5 @@ def spectral_to_lab(wavelengths_nm, reflectance, illuminant: str) -> np.ndarray:
         for k, r in enumerate(reflectance):
             sd = colour.SpectralDistribution(dict(zip(np.round(wl, 6), r)))
             xyz = colour.sd_to_XYZ(sd, cmfs, sd_ill) / 100.0
-            out[k] = colour.XYZ_to_Lab(xyz, white_xy(illuminant))
+            out[k] = colour.XYZ_to_Lab(xyz, white)
     return out

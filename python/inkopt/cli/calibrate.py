@@ -51,7 +51,13 @@ def register_cli(sub) -> None:
     p.add_argument(
         "--start", default="vero-cmykw", help="starting ink table (preset, list or file; default vero-cmykw)"
     )
-    p.add_argument("--illuminant", default="D50", help="D50 (default, as instruments report) or D65")
+    p.add_argument(
+        "--illuminant",
+        default="D50",
+        metavar="D50|D65|A|F11|LED-B3|FILE.csv",
+        help="the light the figures (and an RGB fit) are under: D50 (default, as instruments report) or D65; with "
+        "spectral measurements also A, F11, LED-B3 or a light file of nm, relative power rows (docs/spectral.md)",
+    )
     p.add_argument("--holdout", type=float, default=0.2, help="share of patches held out to test the fit (default 0.2)")
     add_seed_arg(p, "draw of the held-out patches")
     p.add_argument("--fixed-g", action="store_true", help="keep g at the starting table's value")

@@ -157,7 +157,7 @@ def _evaluate_cmd(args) -> int:
 
 
 def _evaluate_lights(args, d: RunDir, options: EvaluateOptions, log) -> int:
-    """A spectral run: its continuous result under each light (``evaluation.spectral``)."""
+    """A spectral run: its results under each light (``evaluation.spectral``)."""
     if args.out is not None:
         raise UsageError("--out: a spectral run's evaluation is DIR/evaluation_lights.json")
     with d.lock(stderr_log):
@@ -165,15 +165,26 @@ def _evaluate_lights(args, d: RunDir, options: EvaluateOptions, log) -> int:
     if args.json:
         print(json.dumps(out))
         return 0
-    c = out["continuous"]
-    print(under_lights({**c, "headline": out["viewing"]["headline"]}))
-    for name, m in c["by_light"].items():
-        print(f"  {name}: ΔE76 {m['delta_e76_mean']:.2f}, ΔE2000 {m['delta_e2000_mean']:.2f}, SSIM {m['ssim']:.3f}")
-    print(
-        f"{c['spp']} spp per scene texel (continuous result; the printed result and the baselines are not rendered "
-        f"spectrally yet), {out['seconds']:.0f} s; wrote {d.evaluation_lights_path}"
-    )
+    headline = out["viewing"]["headline"]
+    results = [r for r in ("continuous", "quantized", "surface", "extrusion") if r in out]
+    for r in results:
+        print(f"{r}: {under_lights({**out[r], 'headline': headline})}")
+    for light, beats in out["print_beats_baselines"].items():
+        q = out["quantized"]["by_light"][light]["delta_e2000_mean"]
+        vs = ", ".join(f"{'beats' if won else 'does not beat'} {_versus(out, light, b)}" for b, won in beats.items())
+        print(f"under {light}: the print (mean ΔE2000 {q:.2f}) {vs}")
+    spp, secs = out["continuous"]["spp"], out["seconds"]
+    print(f"{spp} spp per scene texel (continuous result), {secs:.0f} s; wrote {d.evaluation_lights_path}")
     return 0
+
+
+def _versus(out: dict, light: str, baseline: str) -> str:
+    """A baseline's mean ΔE2000 under ``light`` and, with a texel sample, the print's paired difference to it."""
+    text = f"{baseline} ({out[baseline]['by_light'][light]['delta_e2000_mean']:.2f}"
+    diff = (out.get("differences") or {}).get(light, {}).get(f"quantized - {baseline}", {}).get("delta_e2000_mean")
+    if diff and diff.get("value") is not None and diff.get("stderr") is not None:
+        text += f"; paired difference {diff['value']:+.2f} ± {diff['stderr']:.2f}"
+    return text + ")"
 
 
 def register_cli(sub) -> None:

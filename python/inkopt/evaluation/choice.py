@@ -37,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..color import delta_e76, linear_to_lab
+from ..color import RGB, delta_e76, linear_to_lab
 from ..model import Texels
 from .noise import (
     ESTIMATE_RANGE,
@@ -80,15 +80,16 @@ class CostModel:
         return self.seconds / max(self.texels * self.spp, 1)
 
     @classmethod
-    def of_pilot(cls, rgb, var, target_lab, seconds: float, spp: int, fixed_spp: int | None, max_spp: int):
-        """The cost model of a pilot render (rgb, var (k, 3) linear, its targets (k, 3) CIELAB) at ``spp``;
-        ``fixed_spp``: the evaluation's fixed samples (None: adaptive, capped at ``max_spp``)."""
+    def of_pilot(cls, rgb, var, target_lab, seconds: float, spp: int, fixed_spp: int | None, max_spp: int, cmap=RGB):
+        """The cost model of a pilot render (rgb, var (k, C) channel values of colour map ``cmap``, default linear
+        sRGB; its targets (k, 3) CIELAB) at ``spp``; ``fixed_spp``: the evaluation's fixed samples (None: adaptive,
+        capped at ``max_spp``)."""
         rgb, var = np.asarray(rgb, np.float64), np.asarray(var, np.float64)
-        de = delta_e76(linear_to_lab(rgb), target_lab)
+        de = delta_e76(linear_to_lab(rgb) if cmap is RGB else cmap.lab(rgb), target_lab)
         std = float(de.std(ddof=1)) if len(de) > 1 else 0.0
         if fixed_spp is not None:
             return cls(len(rgb), spp, seconds, std, fixed_spp, fixed_spp, fixed_spp)
-        model = NoiseModel.of(rgb, var, target_lab)
+        model = NoiseModel.of(rgb, var, target_lab, cmap)
         target = PLAN_MARGIN * TARGET_NOISE_DE76
         full = model.spp_for(spp, target, max_spp, PLAN_MARGIN * SSIM_NOISE_RATIO)
         windows = model.spp_for(spp, math.inf, max_spp, PLAN_MARGIN * SAMPLE_SSIM_NOISE_RATIO)
@@ -168,20 +169,22 @@ def predict(cost: CostModel, texels: Texels, windows: int | None, seed: int) -> 
     return SamplingChoice(sample if take else None, False, cost, population, len(sample.windows), full, part)
 
 
-def pilot(render: PilotRender, texels: Texels, target_lab, spp: int | None, max_spp: int, seed: int) -> CostModel:
+def pilot(
+    render: PilotRender, texels: Texels, target_lab, spp: int | None, max_spp: int, seed: int, cmap=RGB
+) -> CostModel:
     """``CostModel`` of a pilot render through ``render`` on ``PILOT_TEXELS`` random texels of ``texels`` (at most a
     quarter, at least 2), targets ``target_lab`` (I, 3) CIELAB; ``spp``: the evaluation's fixed samples (None:
-    adaptive)."""
+    adaptive); ``cmap``: the colour map of the render's channels."""
     k = min(len(texels), max(2, min(PILOT_TEXELS, len(texels) // 4)))
     rows = np.sort(np.random.default_rng([int(seed), PILOT_SEED_PASS]).choice(len(texels), k, replace=False))
     pilot_spp = PILOT_SPP if spp is None else min(int(spp), PILOT_SPP)
     t0 = time.perf_counter()
     rgb, var = render(texels.subset(rows), pilot_spp, int(seed) + PILOT_SEED_PASS * SEED_STRIDE)
     seconds = time.perf_counter() - t0
-    return CostModel.of_pilot(rgb, var, np.asarray(target_lab)[rows], seconds, pilot_spp, spp, max_spp)
+    return CostModel.of_pilot(rgb, var, np.asarray(target_lab)[rows], seconds, pilot_spp, spp, max_spp, cmap)
 
 
-def choose_sampling(render: PilotRender, texels: Texels, target_lab, options, seed: int) -> SamplingChoice:
+def choose_sampling(render: PilotRender, texels: Texels, target_lab, options, seed: int, cmap=RGB) -> SamplingChoice:
     """Every texel or a texel sample as ``options`` (``EvaluateOptions``: ``texel_sample``, ``sample_windows``,
     ``spp``, ``max_spp``) ask: forced by ``texel_sample``, else predicted from a pilot through ``render`` (module
     docstring). ``seed``: the evaluation's render seed (the sample is drawn with it)."""
@@ -189,5 +192,5 @@ def choose_sampling(render: PilotRender, texels: Texels, target_lab, options, se
     if o.texel_sample is not None:
         n, m = sample_size(o.texel_sample, o.sample_windows, len(texels))
         return SamplingChoice(TexelSample.draw(texels, n, m, seed) if n else None, True)
-    cost = pilot(render, texels, target_lab, o.spp, o.max_spp, seed)
+    cost = pilot(render, texels, target_lab, o.spp, o.max_spp, seed, cmap)
     return predict(cost, texels, o.sample_windows, seed)

@@ -68,7 +68,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..color import delta_e76, linear_to_lab
+from ..color import RGB, ColourMap, delta_e76, linear_to_lab
 from ..errors import ParameterError
 from ..io import file_digest
 from ..lighting import Lighting, load_lighting
@@ -76,7 +76,7 @@ from ..loss import TexelLoss
 from ..model import Quantization, Volume
 from ..printing.quantize import MixtureLayers, printer_grid, quantize
 from ..printing.stream import quantize_run
-from ..render import Renderer
+from ..render import Renderer, RendererFactory
 from ..rundir import Predictions, RunDir, SceneRecord
 from ..units import dpi_of
 from . import sample as sampled
@@ -102,12 +102,8 @@ from .results import Evaluation, Measured
 from .translucency import evaluate_translucency
 
 
-def _silent(msg: str) -> None:
-    """The default log: nothing."""
-
-
 def _pilot_render(renderer: Renderer, texels, spp: int, seed: int) -> tuple:
-    """The colours (k, 3) and variances of their means (k, 3) of ``texels`` rendered at ``spp`` with ``seed``."""
+    """The colours (k, C) and variances of their means (k, C) of ``texels`` rendered at ``spp`` with ``seed``."""
     r = renderer.render(texels, spp, seed)
     return r.rgb, r.var_mean
 
@@ -117,10 +113,11 @@ class Evaluating:
     """What the steps of one evaluation share: the run directory ``d`` and its scene ``rec``, the ``options``, the
     ``lighting``, the log ``say`` (``progress``: whether the renders show progress bars), the targets (I, 3)
     linear and CIELAB, the renders' ``sampling`` (seed, spp, cap) and time ``shares`` (from the evaluation's
-    start); filled in as the steps go: the ``choice`` of every texel or a texel ``sample`` (None: every texel) and
-    the texel ``groups`` rendered (``settle``), each rendered result's colours on the first group (``colours``,
-    with the target) and renders (``renders``, by result name), the translucency figures and the colour table's and
-    gamut floor's (``floor``)."""
+    start), what renders a volume (``factory``: ``Renderer``, or a spectral run's band renders) and the colour map
+    of its C channels (``cmap``); filled in as the steps go: the ``choice`` of every texel or a texel ``sample``
+    (None: every texel) and the texel ``groups`` rendered (``settle``), each rendered result's colours on the first
+    group (``colours``, with the target) and renders (``renders``, by result name), the translucency figures and
+    the colour table's and gamut floor's (``floor``)."""
 
     d: RunDir
     rec: SceneRecord
@@ -132,6 +129,8 @@ class Evaluating:
     target_lab: np.ndarray
     sampling: Sampling
     shares: TimeShares
+    factory: RendererFactory = Renderer
+    cmap: ColourMap = RGB
     choice: SamplingChoice | None = None
     sample: sampled.TexelSample | None = None
     groups: list[TexelGroup] = field(default_factory=list)
@@ -155,7 +154,7 @@ class Evaluating:
             rec=rec,
             options=options,
             lighting=lighting,
-            say=log or _silent,
+            say=log or (lambda msg: None),  # the default log: nothing
             progress=log is not None,
             target=target,
             target_lab=target_lab,
@@ -167,8 +166,8 @@ class Evaluating:
     def settle(self, renderer: Renderer) -> None:
         """Every texel or a texel sample (``choice.choose_sampling``, a pilot through ``renderer`` unless the options
         force it), logged, and the texel groups every result is rendered on."""
-        pilot = partial(_pilot_render, renderer)
-        self.choice = choose_sampling(pilot, self.rec.texels, self.target_lab, self.options, self.sampling.seed)
+        pilot, seed = partial(_pilot_render, renderer), self.sampling.seed
+        self.choice = choose_sampling(pilot, self.rec.texels, self.target_lab, self.options, seed, self.cmap)
         self.sample = s = self.choice.sample
         self.say(self.choice.describe())
         if s is not None:
@@ -183,7 +182,7 @@ class Evaluating:
     def render(self, name: str, source, started: float, method: str | None) -> Rendered:
         """Result ``name`` rendered through ``source`` on every texel group (``renders.render_result``), kept for
         its figures; ``started``: when its work began, ``method``: its quantization method."""
-        ads = render_result(source, self.groups, self.sampling, self.shares, self.say)
+        ads = render_result(source, self.groups, self.sampling, self.shares, self.say, self.cmap)
         self.colours[name] = ads[0].rgb
         spp_printer, per_path = source.spp_printer, events_per_path(source)
         self.renders[name] = Rendered(ads, time.perf_counter() - started, method, spp_printer, per_path)
@@ -244,7 +243,7 @@ def _render_continuous(ev: Evaluating, vol: Volume) -> None:
     """The continuous result: ``vol`` on the scene texels, after the choice of its texels (``Evaluating.settle``,
     whose pilot its seconds include); its renderer is freed on return."""
     started = time.perf_counter()
-    renderer = Renderer(vol, ev.options.threads, ev.lighting)
+    renderer = ev.factory(vol, ev.options.threads, ev.lighting)
     ev.settle(renderer)
     source = ContinuousSource(renderer, ev.groups, ev.progress)
     rendered = ev.render("continuous", source, started, None)
@@ -322,7 +321,8 @@ def _printed_results(ev: Evaluating, grid: _Grid, sources: dict) -> _Printed:
     dpi = tuple(q.dpi or tuple(float(v) for v in dpi_of(qvol.voxel_mm)))
     t0 = time.perf_counter()
     sub = None if ev.sample is None else ev.sample.groups
-    printer = PrintedRenderer(qvol, ev.rec.texels, grid.voxel_mm, ev.rec.kind, ev.options.threads, ev.lighting, sub)
+    how = dict(threads=ev.options.threads, lighting=ev.lighting, groups=sub, factory=ev.factory)
+    printer = PrintedRenderer(qvol, ev.rec.texels, grid.voxel_mm, ev.rec.kind, **how)
     meta = dict(
         voxel_mm=qvol.voxel_mm,
         inks=qvol.inks,

@@ -63,10 +63,15 @@ class PrintedRenderer:
     bit-identically to a renderer built for it. ``paths`` and ``events`` count the current volume's walks."""
 
     def __init__(
-        self, qvol: Volume, scene: Texels, voxel_mm_scene, kind: str, threads=None, lighting=None, groups=None
+        self, qvol: Volume, scene: Texels, voxel_mm_scene, kind: str, threads=None, lighting=None, groups=None, **kw
     ):
         """``groups``: texel groups to render, each sorted scene texel indices (int64 (S,)) (a texel sample's
-        points and windows), else one group of every texel; a group's results have its texels' rows, in order."""
+        points and windows), else one group of every texel; a group's results have its texels' rows, in order.
+        ``factory`` (keyword): what builds the renderer, ``factory(volume, threads, lighting)`` (default
+        ``Renderer``; a spectral run's band renders, whose results hold B band values per texel)."""
+        self.factory = kw.pop("factory", None) or Renderer
+        if kw:
+            raise TypeError(f"unexpected arguments {sorted(kw)}")
         ptex = printer_texels(qvol, scene, kind)
         to_scene, stand_in = map_texels(ptex, qvol.voxel_mm, scene, voxel_mm_scene, per_face=kind != "mesh")
         self.all_printer_texels = len(ptex)
@@ -87,7 +92,7 @@ class PrintedRenderer:
         if labels_vol.shape != self.shape:
             raise ValueError(f"labels grid {labels_vol.shape} differs from the printer texels' {self.shape}")
         if self.renderer is None:
-            self.renderer = Renderer(labels_vol, self.threads, self.lighting)
+            self.renderer = self.factory(labels_vol, self.threads, self.lighting)
             self.built_for, self.builds = labels_vol, self.builds + 1
             return
         if not same_inside(labels_vol, self.built_for):
@@ -103,8 +108,8 @@ class PrintedRenderer:
         return sum(len(m[0]) for m in self.maps)
 
     def __call__(self, spp: int, seed: int, progress: bool = False, group: int = 0):
-        """(rgb (I, 3), var_mean (I, 3)) on the scene texels of ``group`` from ``spp`` samples per scene texel,
-        shared by its printer texels, and the printer spp used."""
+        """(rgb (I, C), var_mean (I, C)) (C = 3, or the bands of a spectral factory) on the scene texels of
+        ``group`` from ``spp`` samples per scene texel, shared by its printer texels, and the printer spp used."""
         ptex, to_scene, stand_in, n_scene = self.maps[group]
         spp_p = max(1, int(np.ceil(spp * n_scene / len(ptex))))
         res = self.renderer.render(ptex, spp_p, seed, progress=progress)

@@ -14,6 +14,7 @@ from functools import partial
 
 import numpy as np
 
+from ..color import RGB, ColourMap
 from ..model import Texels
 from ..render import Renderer
 from .noise import SSIM_NOISE_RATIO, TARGET_NOISE_DE76, AdaptiveResult, Sampling, adaptive_render
@@ -113,15 +114,19 @@ class Rendered:
     events_per_path: float
 
 
-def render_result(source, groups: list[TexelGroup], sampling: Sampling, shares: TimeShares, log: Callable) -> list:
+def render_result(
+    source, groups: list[TexelGroup], sampling: Sampling, shares: TimeShares, log: Callable, cmap: ColourMap = RGB
+) -> list:
     """``source`` rendered adaptively on each group (``sampling`` with the group's noise targets and its share of
-    the time budget); one ``AdaptiveResult`` per group."""
+    the time budget; ``cmap``: the colour map of the source's C channels, a spectral render's bands under the first
+    light); one ``AdaptiveResult`` per group."""
     return [
         adaptive_render(
             partial(source, group=g),
             group.target_lab,
             replace(sampling, target=group.noise_target, ratio=group.ssim_ratio, time_budget=shares.next()),
             log=log,
+            cmap=cmap,
         )
         for g, group in enumerate(groups)
     ]

@@ -46,7 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..color import delta_e76, delta_e2000, lab_stderr, linear_to_lab, normalise_lab
+from ..color import RGB, delta_e76, delta_e2000, lab_stderr, linear_to_lab, normalise_lab
 from ..errors import ParameterError
 from ..loss import E1_WEIGHT_SCALE, TexelLoss
 from ..model import Texels
@@ -145,16 +145,20 @@ def quantile_se(x: np.ndarray, q: float, population: int) -> tuple[float, float]
 
 
 def per_texel(loss: TexelLoss, windows, points, target_lab, sample: TexelSample) -> dict:
-    """The per-texel values of a result rendered on the sample's texels: ``windows`` = (rgb, var) (W, 3) linear
-    and its variance on the window texels (``loss`` built on them), ``points`` = (rgb, var) (n, 3) on the points,
+    """The per-texel values of a result rendered on the sample's texels: ``windows`` = (rgb, var) (W, C) channel
+    values of the loss's first colour map (linear sRGB, or a spectral render's bands under one light: ``loss`` a
+    single light's view, ``TexelLoss.under``) and their variance on the window texels (``loss`` built on them),
+    ``points`` = (rgb, var) (n, C) on the points,
     ``target_lab`` (n, 3) the points' targets. Points' ``delta_e76``, ``delta_e2000``, ``noise`` (the colour's
     standard error, ΔE), ``noise_contribution``, and centres' ``ssim`` (mean over L*a*b*), ``e3``, ``mottle`` and
     ``mottle_target`` (NaN where the centre is not flat)."""
     rgb, var = (np.asarray(a, np.float64) for a in windows)
     rgb_p, var_p = (np.asarray(a, np.float64) for a in points)
-    lab_p = linear_to_lab(rgb_p)
+    cmap = loss.colours[0]
+    to_lab = linear_to_lab if cmap is RGB else cmap.lab  # the RGB path exactly as before
+    lab_p = to_lab(rgb_p)
     ct = sample.centre_rows
-    sob = loss.S @ (normalise_lab(linear_to_lab(rgb)) - loss.target_n)
+    sob = loss.S @ (normalise_lab(to_lab(rgb)) - loss.target_n)
     r = len(rgb)
     e3 = sum((sob[a * r + ct] ** 2).sum(1) for a in range(3)) * (100.0 / (3.0 * 4.0 * 32.0))
     p, p_target = mottle_per_texel(loss, rgb, var)
@@ -162,8 +166,8 @@ def per_texel(loss: TexelLoss, windows, points, target_lab, sample: TexelSample)
     return {
         "delta_e76": delta_e76(lab_p, target_lab),
         "delta_e2000": delta_e2000(lab_p, target_lab),
-        "noise": lab_stderr(rgb_p, var_p),
-        "noise_contribution": NoiseModel.of(rgb_p, var_p, target_lab).per_texel(),
+        "noise": lab_stderr(rgb_p, var_p) if cmap is RGB else cmap.lab_stderr(rgb_p, var_p),
+        "noise_contribution": NoiseModel.of(rgb_p, var_p, target_lab, cmap).per_texel(),
         "ssim": loss.ssim_map(rgb, var)[ct].mean(1),
         "e3": e3,
         "mottle": np.where(flat, p[ct], np.nan),

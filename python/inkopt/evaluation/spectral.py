@@ -1,31 +1,56 @@
-"""``inkopt evaluate`` of a spectral run: the continuous result's figures under each light.
+"""``inkopt evaluate`` of a spectral run: its continuous result, its printed result and the baselines under each
+light.
 
 A spectral run (``run.run_optimisation`` with a spectral ``Viewing``) leaves its ink table in the run directory
-(spectral_inks.json) and its lights in report.json (``viewing``). Its result is rendered band by band
-(``spectral.render.SpectralRenderer``) with seeds the optimisation never used (``noise.EVAL_SEED_OFFSET + seed``),
-at the options' samples per texel or adaptively against the target under the first light, and scored under each
-light asked (default: the run's) by ``evaluation.lights.light_figures``: ΔE76, ΔE2000, SSIM per light, the worst
-light and the colour inconstancy between the first light and each other. The figures go to
-evaluation_lights.json (with the volume.npz digest they were made from) and the pictures (the target beside the
-result shown as sRGB under the first light, ``Viewing.display``) to evaluation_lights_<face>.png.
+(spectral_inks.json) and its lights in report.json (``viewing``). The evaluation is ``evaluate.evaluate_run``'s
+pipeline with the band renders of that table (``spectral.render.SpectralRenderer``) in place of the RGB renderer:
+the continuous result on the scene texels; the printed result (quantized.npz, made with ``inkopt quantize``'s
+defaults first if missing) and the ``surface`` and ``extrusion`` baselines (chosen from the RGB colour table of the
+volume's inks, as a print shop without a spectral model would, and quantized exactly like the print) on the printer
+texels, averaged onto the scene texels (``printed.PrintedRenderer``). Every result is rendered with the evaluation's
+seeds (``noise.EVAL_SEED_OFFSET + seed``), at the options' samples per texel or adaptively against the target
+under the first light, and scored under each light asked (default: the run's) by
+``evaluation.lights.light_figures``: ΔE76, ΔE2000, SSIM per light, the worst light and the colour inconstancy
+between the first light and each other. Every texel or a texel sample, chosen as for RGB runs
+(``choice.choose_sampling``, its pilot's colours under the first light): with a sample every figure under every
+light comes from the sampled texels with its standard error, and the paired differences between the results are
+given per light (``differences``); no pictures and no predictions.npz then.
+
+evaluation_lights.json holds ``viewing``; one entry per result (``continuous``, ``quantized``, ``surface``,
+``extrusion``: ``light_figures``' keys with ``spp``, ``spp_passes``, ``seconds``, and for the printed ones
+``method`` and ``spp_printer``); ``print_beats_baselines`` (per light, whether the print's mean ΔE2000 is below
+each baseline's); ``quantization``, ``printer_texels``, ``seconds`` and the digests of the volume.npz and
+quantized.npz it was made from. predictions.npz (``rundir.Predictions``, source "evaluation") holds every result as
+sRGB under the first light and as band values with the lights' band matrices (``rundir.BandValues``), so the
+soft-proof page can show any light without rendering again. The pictures (the target beside every result shown
+as sRGB under the first light, ``Viewing.display``) go to evaluation_lights_<face>.png (meshes:
+evaluation_lights_views.png).
 """
 
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
+import numpy as np
+
+from ..color import delta_e2000
 from ..errors import ParameterError
-from ..io import write_json
+from ..io import file_digest, write_json
+from ..loss import TexelLoss
 from ..model.inks import read_ink_file
 from ..model.spectral import spectral_from_data
 from ..render import Renderer
-from ..rundir import VOLUME_DIGEST, RunDir
+from ..rundir import VOLUME_DIGEST, BandValues, Predictions, RunDir
 from ..spectral.lights import parse_lights
 from ..spectral.viewing import Viewing
+from . import sample as sampled
+from .baselines import BASELINES
+from .evaluate import Evaluating, _mixture_results, _printed_results
 from .lights import light_figures
-from .noise import EVAL_SEED_OFFSET, Sampling, adaptive_render
 from .options import EvaluateOptions
 from .outputs import picture_names, write_face_pictures, write_mesh_views
+from .renders import Rendered
 
 #: the loss weights the figures' TexelLoss is built with (the figures do not depend on them)
 FIGURE_GAMMA = (1.0, 0.0, 0.0)
@@ -37,11 +62,10 @@ def run_viewing(d: RunDir) -> dict | None:
 
 
 def evaluate_lights(path, options: EvaluateOptions, lights: str | None = None, log=None) -> dict:
-    """Figures of spectral run ``path``'s continuous result under ``lights`` ("D65,A"; None: the run's), rendered
-    as ``options`` say (``spp``, ``max_spp``, ``time_budget``, ``seed``, ``threads``, ``lighting``); written to
-    evaluation_lights.json and pictures unless ``options.write`` is False. Returns the JSON object: ``viewing``,
-    ``continuous`` (``light_figures``' dict with ``spp``, ``spp_passes``, ``seconds``), ``volume_digest``."""
-    t0 = time.perf_counter()
+    """Figures of spectral run ``path``'s results under ``lights`` ("D65,A"; None: the run's), rendered as
+    ``options`` say (``spp``, ``max_spp``, ``time_budget``, ``seed``, ``threads``, ``lighting``, ``method``,
+    ``baselines``, ``patch_mm``, ``refine``); written to evaluation_lights.json, predictions.npz and pictures unless
+    ``options.write`` is False (with a texel sample: the JSON only). Returns the JSON object (module docstring)."""
     d = RunDir(path)
     run = run_viewing(d)
     if run is None:
@@ -51,33 +75,117 @@ def evaluate_lights(path, options: EvaluateOptions, lights: str | None = None, l
         )
     table = spectral_from_data(read_ink_file(d.spectral_inks_path), d.spectral_inks_path)
     viewing = Viewing(table, parse_lights(lights or ",".join(run["illuminants"])))
-    rec, vol = d.load_scene(), d.load_volume()
-    loss = viewing.loss(rec.target_rgb.astype("float64"), rec.texels.pos_vox, FIGURE_GAMMA)
-    renderer = viewing.renderer_factory(Renderer)(vol, options.threads, options.lighting)
-    del vol
-
-    def render(n: int, s: int):
-        r = renderer.render(rec.texels, n, s)
-        return r.rgb, r.var_mean, n
-
-    sampling = Sampling(EVAL_SEED_OFFSET + int(options.seed), options.spp, options.max_spp, options.time_budget)
-    res = adaptive_render(render, loss.target_lab, sampling, log=log, cmap=loss.colours[0])
+    ev = Evaluating.open(path, replace(options, translucency=False), log)
     names = tuple(light.name for light in viewing.seen_under())
+    ev.factory, ev.cmap = viewing.renderer_factory(Renderer, shared=True), viewing.colours()[0]  # geometry once
+    ev.say(f"spectral: {table.bands} bands under {', '.join(names)}")
+    grid, sources = _mixture_results(ev)  # the continuous result and the baselines' layer sources
+    printed = _printed_results(ev, grid, sources)  # the quantized result and the baselines on printer texels
+    if ev.sample is None:
+        loss, diffs = viewing.loss(ev.target, ev.rec.texels.pos_vox, FIGURE_GAMMA), None
+        results = {name: _result_figures(loss, r, names) for name, r in ev.renders.items()}
+    else:
+        results, diffs = _sampled_results(ev, viewing, names)
     out = {
         "viewing": {**viewing.describe(), "headline": names[0]},
-        "continuous": {**light_figures(loss, res.rgb, res.var, names), "spp": res.spp, "spp_passes": res.passes},
-        "seconds": time.perf_counter() - t0,
+        **results,
+        "print_beats_baselines": print_beats_baselines(results, names),
+        "quantization": {**printed.quantization.to_json(), "dpi": list(printed.dpi)},
+        "printer_texels": printed.printer_texels,
+        "seconds": time.perf_counter() - ev.shares.started,
         VOLUME_DIGEST: d.volume_digest(),
+        "quantized_digest": d.quantized_digest(),
+        "sampling_choice": ev.choice.to_json(),
     }
+    if ev.sample is not None:
+        out.update(texel_sample=ev.sample.to_json(), differences=diffs)
     if options.write:
         write_json(d.evaluation_lights_path, out)
-        _pictures(d, rec, viewing.display(res.rgb), log)
+    if options.write and ev.sample is None:
+        bands = {name: ev.colours[name] for name in results}
+        shown = {name: viewing.display(v) for name, v in bands.items()}
+        _pictures(d, ev.rec, shown, log)
+        spp = {name: r["spp"] for name, r in results.items()}
+        band_values = bands_of(viewing, bands)
+        digest, lighting = file_digest(d.volume_path), ev.lighting.describe()
+        d.save_predictions(Predictions(shown, "evaluation", spp, digest, lighting, band_values))
     return out
 
 
-def _pictures(d: RunDir, rec, shown, log) -> None:
-    """The target beside the result (I, 3) linear sRGB: a slab's faces or a mesh's views."""
-    results = {"target": rec.target_rgb, "continuous": shown}
+def bands_of(viewing: Viewing, values) -> BandValues | None:
+    """A spectral viewing's predictions ``values`` ((I, B) band values, or {result name: (I, B)}; "continuous" for
+    one array) with its grid and lights (``rundir.BandValues``); None on the RGB path."""
+    if not viewing.spectral:
+        return None
+    values = values if isinstance(values, dict) else {"continuous": values}
+    values = {k: np.asarray(v, np.float32) for k, v in values.items()}
+    return BandValues(values, viewing.table.wavelengths_nm, viewing.light_matrices())
+
+
+def _result_figures(loss, rendered: Rendered, names: tuple[str, ...], figures: dict | None = None) -> dict:
+    """One result's ``light_figures`` (or ``figures``, a sample's) with its samples (``spp`` per scene texel,
+    ``spp_passes``), seconds and, for a printed result, its quantization method and printer samples per texel
+    (``spp_printer``)."""
+    ad = rendered.ads[0]
+    figures = light_figures(loss, ad.rgb, ad.var, names) if figures is None else figures
+    out = {**figures, "spp": ad.spp, "spp_passes": ad.passes, "seconds": rendered.seconds}
+    if rendered.method is not None:
+        out.update(method=rendered.method, spp_printer=rendered.spp_printer)
+    return out
+
+
+def _sampled_results(ev: Evaluating, viewing: Viewing, names: tuple[str, ...]) -> tuple[dict, dict]:
+    """With a texel sample (``evaluation.sample``): every result's figures under each light from its sampled
+    texels (``sample.sampled_figures`` on each light's view of the loss, ``TexelLoss.under``), each with its
+    standard error (``by_light[light]["stderr"]``), the colour inconstancy on the points with its standard error
+    (``inconstancy_stderr``); and per light the paired differences between the results (``sample.differences``)."""
+    s = ev.sample
+    loss = TexelLoss(
+        ev.target[s.windows], ev.groups[-1].texels.pos_vox, FIGURE_GAMMA, sampled.SIGMA, colours=viewing.colours()
+    )
+    values = [{} for _ in names]  # per light: result -> per-texel values
+    results = {}
+    for name, rendered in ev.renders.items():
+        ad, win = rendered.ads
+        by_light = {}
+        for k, light in enumerate(names):
+            view = loss.under(k)
+            values[k][name] = sampled.per_texel(view, (win.rgb, win.var), (ad.rgb, ad.var), ev.groups[0].target_lab, s)
+            m, err = sampled.sampled_figures(view, values[k][name], s)
+            by_light[light] = {**m.to_json(), "stderr": err}
+        labs = [c.lab(ad.rgb) for c in loss.colours]
+        moves = {
+            f"{names[0]}-{names[k]}": sampled.mean_se(delta_e2000(labs[0], labs[k]), s.population)
+            for k in range(1, len(names))
+        }
+        worst = max(names, key=lambda n: by_light[n]["delta_e2000_mean"])
+        figures = {
+            "by_light": by_light,
+            "worst_light": worst,
+            "worst_delta_e2000_mean": by_light[worst]["delta_e2000_mean"],
+            "inconstancy_delta_e2000_mean": {k: v[0] for k, v in moves.items()},
+            "inconstancy_stderr": {k: v[1] for k, v in moves.items()},
+        }
+        results[name] = {**_result_figures(loss, rendered, names, figures), "spp_windows": win.spp}
+    pairs = [("continuous", "quantized")] + [("quantized", b) for b in BASELINES if b in ev.renders]
+    return results, {light: sampled.differences(values[k], pairs, s) for k, light in enumerate(names)}
+
+
+def print_beats_baselines(results: dict, names: tuple[str, ...]) -> dict:
+    """Per light: for each baseline present, whether the printed (quantized) result's mean ΔE2000 is lower than
+    the baseline's ({light: {"surface": bool, "extrusion": bool}}; empty without the baselines)."""
+    if "quantized" not in results or not any(b in results for b in BASELINES):
+        return {}
+
+    def de(name, light):
+        return results[name]["by_light"][light]["delta_e2000_mean"]
+
+    return {n: {b: bool(de("quantized", n) < de(b, n)) for b in BASELINES if b in results} for n in names}
+
+
+def _pictures(d: RunDir, rec, shown: dict, log) -> None:
+    """The target beside the results ``shown`` (by name, (I, 3) linear sRGB): a slab's faces or a mesh's views."""
+    results = {"target": rec.target_rgb, **shown}
     if "views" in picture_names(rec):
         write_mesh_views(d, rec, results, stem="evaluation_lights", say=log)
     else:

@@ -41,16 +41,17 @@ def map_texels(printer: Texels, voxel_mm_printer, scene: Texels, voxel_mm_scene,
 
 
 def average_to_scene(rgb_p, var_p, to_scene, stand_in, n_scene: int):
-    """Per-scene-texel mean (I, 3) of printer texel colours, and the variance of that mean (I, 3). Printer texels
-    with ``to_scene`` -1 (a sample's stand-ins of no sampled texel's own) only stand in."""
+    """Per-scene-texel mean (I, C) of printer texel colours (P, C) (C = 3, or a spectral render's bands), and the
+    variance of that mean (I, C). Printer texels with ``to_scene`` -1 (a sample's stand-ins of no sampled texel's
+    own) only stand in."""
     on = to_scene >= 0
     if not on.all():
         to_scene, rgb_on, var_on = to_scene[on], rgb_p[on], var_p[on]
     else:
         rgb_on, var_on = rgb_p, var_p
     cnt = np.bincount(to_scene, minlength=n_scene).astype(np.float64)
-    rgb = np.stack([np.bincount(to_scene, rgb_on[:, c], n_scene) for c in range(3)], 1)
-    var = np.stack([np.bincount(to_scene, var_on[:, c], n_scene) for c in range(3)], 1)
+    rgb = np.stack([np.bincount(to_scene, rgb_on[:, c], n_scene) for c in range(rgb_p.shape[1])], 1)
+    var = np.stack([np.bincount(to_scene, var_on[:, c], n_scene) for c in range(rgb_p.shape[1])], 1)
     has = cnt > 0
     rgb[has] /= cnt[has, None]
     var[has] /= (cnt[has] ** 2)[:, None]

@@ -20,9 +20,10 @@ from ..color import delta_e76, linear_to_lab
 from ..evaluation.results import Evaluation, Report
 from ..io import atomic_write_bytes, check_output, load_npz, read_head
 from ..model.mixturefile import MixtureSource
-from ..rundir import RunDir, StaleOutputError
+from ..rundir import VOLUME_DIGEST, RunDir, StaleOutputError
 from .bake import encode, heat_legend, heat_rgb8, heat_scale, mesh_atlas, srgb8
 from .figures import LABELS, describe_lighting, figures_html, ink_shares, settings_html
+from .lights import light_bar, light_figures_html, light_views
 from .markup import html
 from .page import data_uri, mesh_section, page_html, slab_section
 
@@ -95,20 +96,29 @@ def write_proof(run, out=None) -> Proof:
     for k in keys:
         if colours[k].shape != rec.target_rgb.shape:
             raise ValueError(f"{d.predictions_path} does not match {d.scene_path}: run 'inkopt evaluate {d}' again")
-    target_lab = linear_to_lab(rec.target_rgb)
-    de = {k: delta_e76(linear_to_lab(colours[k]), target_lab) for k in keys if k != "target"}
-    scale = heat_scale(list(de.values()))
-    rgb8 = {k: srgb8(colours[k]) for k in keys}
-    heat8 = {k: heat_rgb8(v, scale) for k, v in de.items()}
+    lv = None if pred.bands is None else light_views(pred.bands, rec.target_rgb, keys)
+    if lv is None:
+        target_lab = linear_to_lab(rec.target_rgb)
+        shown = [(colours, {k: delta_e76(linear_to_lab(colours[k]), target_lab) for k in keys if k != "target"})]
+    else:  # a spectral run: each light's colours and ΔE from the stored band values, the first light's first
+        shown = list(zip(lv.colours, lv.de76))
+    scale = heat_scale([v for _, de in shown for v in de.values()])
+    baked = [
+        ({k: srgb8(c[k]) for k in keys if k in c}, {k: heat_rgb8(v, scale) for k, v in de.items()}) for c, de in shown
+    ]
     legend = data_uri(encode(heat_legend(scale)), "image/png")
 
     atlas, data = None, {"shade": SHADE, "results": keys, "heat_scale": scale}
+    if lv is not None:
+        data["lights"] = list(lv.names)
     if rec.kind == "mesh":
-        atlas, view, data["mesh"] = _mesh(rec, keys, rgb8, heat8, legend, scale)
+        atlas, view, data["mesh"] = _mesh(rec, keys, baked, legend, scale)
     else:
-        view, data["slab"] = _slab(rec, keys, rgb8, heat8, legend, scale)
+        view, data["slab"] = _slab(rec, keys, baked, legend, scale)
+    if lv is not None:
+        view = html("{}{}", light_bar(lv.names), view)
 
-    sections = [("Figures", figures_html(report, ev))]
+    sections = [("Figures", figures_html(report, ev) if lv is None else light_figures_html(lv, _lights_eval(d)))]
     if d.loss_picture_path.is_file():
         uri = data_uri(d.loss_picture_path.read_bytes(), "image/png")
         sections.append(("Loss curve", html('<img class="loss" alt="loss curve" src="{}">', uri)))
@@ -118,7 +128,8 @@ def write_proof(run, out=None) -> Proof:
     sections.append(("Printer, settings and time", settings_html(report, ev, quant)))
     sections.append(("Files", _files(pred)))
 
-    subtitle = _subtitle(report, rec.kind, keys, describe_lighting(pred.lighting), ev is not None)
+    evaluated = ev is not None or (lv is not None and pred.source == "evaluation")
+    subtitle = _subtitle(report, rec.kind, keys, describe_lighting(pred.lighting), evaluated)
     page = page_html(f"inkopt soft proof: {d.path.resolve().name}", subtitle, data, view, sections, atlas is not None)
     atomic_write_bytes(path, page.encode())
     return Proof(
@@ -160,7 +171,28 @@ def mixture_mean(path) -> np.ndarray | None:
     return total / count if count else None
 
 
-def _mesh(rec, keys, rgb8, heat8, legend, scale):
+def _lights_eval(d: RunDir) -> dict | None:
+    """evaluation_lights.json if it was made from the run's volume.npz, else None."""
+    if not d.evaluation_lights_path.is_file():
+        return None
+    got = d._read_json(d.evaluation_lights_path, f"run 'inkopt evaluate {d.path}' again")
+    return got if isinstance(got, dict) and got.get(VOLUME_DIGEST) == d.volume_digest() else None
+
+
+def _by_light(baked, keys, picture) -> list[dict]:
+    """The pictures of every light after the first (``baked``: (rgb8, heat8) per light; ``picture``: an image
+    (..., 3) uint8 per scene texel -> data URI): [{}] for the first, whose are the page's own, then
+    {"pictures"|"textures", "heat"} per light (the target's picture is the same under every light)."""
+    return [{}] + [
+        {
+            "pictures": {k: picture(rgb8[k]) for k in keys if k != "target"},
+            "heat": {k: picture(v) for k, v in heat8.items()},
+        }
+        for rgb8, heat8 in baked[1:]
+    ]
+
+
+def _mesh(rec, keys, baked, legend, scale):
     from ..scenes.mesh.load import load_mesh
 
     info = rec.mesh
@@ -177,6 +209,7 @@ def _mesh(rec, keys, rgb8, heat8, legend, scale):
         return data_uri(encode(atlas.picture(img), "JPEG", JPEG_QUALITY), "image/jpeg")
 
     b64 = lambda a: base64.b64encode(np.ascontiguousarray(a, np.float32).tobytes()).decode()  # noqa: E731
+    rgb8, heat8 = baked[0]
     data = {
         "positions": b64(atlas.positions),
         "normals": b64(atlas.normals),
@@ -184,6 +217,10 @@ def _mesh(rec, keys, rgb8, heat8, legend, scale):
         "textures": {k: jpeg(rgb8[k]) for k in keys},
         "heat": {k: jpeg(v) for k, v in heat8.items()},
     }
+    if len(baked) > 1:
+        data["by_light"] = [
+            {"textures": b.get("pictures", {}), "heat": b.get("heat", {})} for b in _by_light(baked, keys, jpeg)
+        ]
     note = (
         f"Colours: each scene texel (a {1000 * atlas.texel_mm:.0f} µm surface voxel) as predicted, printed results "
         "rendered at printer resolution and averaged onto the texels; shaded by a head-light "
@@ -194,7 +231,8 @@ def _mesh(rec, keys, rgb8, heat8, legend, scale):
     return atlas, mesh_section(keys, legend, scale, note), data
 
 
-def _slab(rec, keys, rgb8, heat8, legend, scale):
+def _slab(rec, keys, baked, legend, scale):
+    rgb8, heat8 = baked[0]
     faces = []
     for name in sorted(rec.faces, key=lambda f: f != "top"):  # the top face first
         if name not in rec.pix:
@@ -209,6 +247,8 @@ def _slab(rec, keys, rgb8, heat8, legend, scale):
                 "heat": {k: data_uri(encode(v[pix]), "image/png") for k, v in heat8.items()},
             }
         )
+        if len(baked) > 1:
+            faces[-1]["by_light"] = _by_light(baked, keys, lambda img, pix=pix: data_uri(encode(img[pix]), "image/png"))
     if not faces:
         raise ValueError("the slab's scene has no face pictures (scene.npz lacks pix_<face>)")
     zoom = max(1, SLAB_WIDTH_PX // max(f["width"] for f in faces))

@@ -139,7 +139,7 @@ class Scripts:
 def scripts(data: dict, mesh: bool) -> Scripts:
     """The data block (``data`` as JSON, read by the scripts with JSON.parse) and the view's scripts: for meshes
     the import map of the vendored three.js (with their integrity, so that the policy admits them by hash) and
-    viewer3d.js as a module, else faces.js."""
+    viewer3d.js as a module, else faces.js; with ``lights`` in ``data`` (a spectral run) also lights.js."""
     blob = script_json({"format_version": PAGE_FORMAT, **data})
     out = [raw_text_element("script", blob, type="application/json", id="inkopt-data")]
     hashes = []
@@ -157,6 +157,10 @@ def scripts(data: dict, mesh: bool) -> Scripts:
         faces = _asset("faces.js")
         out.append(raw_text_element("script", faces))
         hashes.append(sha256_digest(faces))
+    if data.get("lights"):  # a spectral run's light selector
+        lights = _asset("lights.js")
+        out.append(raw_text_element("script", lights))
+        hashes.append(sha256_digest(lights))
     return Scripts(join(out), tuple(hashes))
 
 

@@ -12,6 +12,9 @@ const other = document.getElementById('other3d');
 const heat = document.getElementById('heat3d');
 const swipe = document.getElementById('swipe3d');
 const line = document.getElementById('line3d');
+// a spectral run's light selector (valued by the light's index): textures under light i > 0 are M.by_light[i]
+const light = document.getElementById('light');
+const lightIndex = () => (light && Array.isArray(M.by_light) ? Number(light.value) : 0);
 
 function floats(b64) {
   const s = atob(b64);
@@ -54,10 +57,16 @@ void main() {
 
 const loader = new THREE.TextureLoader();
 const materials = {};
+function uriOf(key, isHeat) {
+  const i = lightIndex();
+  const set = i > 0 ? M.by_light[i] : null;
+  const what = isHeat ? 'heat' : 'textures';
+  return (set && set[what] && set[what][key]) || M[what][key];
+}
 function material(key, isHeat) {
-  const id = (isHeat ? 'heat:' : '') + key;
+  const id = lightIndex() + ':' + (isHeat ? 'heat:' : '') + key;
   if (!materials[id]) {
-    const uri = isHeat ? M.heat[key] : M.textures[key];
+    const uri = uriOf(key, isHeat);
     const tex = loader.load(uri, () => draw());
     tex.colorSpace = THREE.NoColorSpace;
     tex.generateMipmaps = false;
@@ -91,9 +100,10 @@ function resize() {
   draw();
 }
 
-function heatKey(key) { return heat.checked && M.heat[key] ? [key, true] : [key, false]; }
+function heatKey(key) { return heat.checked && uriOf(key, true) ? [key, true] : [key, false]; }
 
 function draw() {
+  document.body.dataset.light = String(lightIndex());
   const w = Math.max(stage.clientWidth, 1), h = Math.max(stage.clientHeight, 1);
   const [a, ah] = heatKey(pick.value);
   const right = other.value;
@@ -128,7 +138,7 @@ function full() {
   resize();
 }
 
-for (const el of [pick, other, heat, swipe]) el.addEventListener('input', () => draw());
+for (const el of [pick, other, heat, swipe, light]) if (el) el.addEventListener('input', () => draw());
 new ResizeObserver(() => resize()).observe(stage);
 window.addEventListener('hashchange', full);
 full();

@@ -48,9 +48,10 @@ from ..io import (
 from ..model import Volume
 from .lock import LOCK_NAME, RunDirBusy, RunLock
 from .quantized import LABELS_DIGEST, QUANTIZED_DIGEST, VOLUME_DIGEST, QuantizedFiles, StaleOutputError
-from .records import FIXED_SHARE_MAX_ENTRIES, PREDICTIONS_FORMAT, SCENE_FORMAT, Predictions, SceneRecord
+from .records import FIXED_SHARE_MAX_ENTRIES, PREDICTIONS_FORMAT, SCENE_FORMAT, BandValues, Predictions, SceneRecord
 
 __all__ = [
+    "BandValues",
     "FIXED_SHARE_MAX_ENTRIES",
     "LABELS_DIGEST",
     "PREDICTIONS_FORMAT",

@@ -17,8 +17,54 @@ from ..model.volume import naming_file
 FIXED_SHARE_MAX_ENTRIES = 50_000_000
 #: the format version scene.npz is written in (``format_version``)
 SCENE_FORMAT = 1
-#: the format version predictions.npz is written in (``format_version``)
-PREDICTIONS_FORMAT = 1
+#: the format version predictions.npz is read up to (``format_version``): 2 adds a spectral run's band values; a file
+#: without them is written as version 1, as before
+PREDICTIONS_FORMAT = 2
+
+
+@dataclass
+class BandValues:
+    """A spectral run's predictions as band reflectances, so that they can be shown under any light later.
+
+    values: result name -> (I, B) float32 band values per scene texel (the rows of ``Predictions.rgb``);
+    wavelengths_nm: (B,) float64 band centres; lights: light name -> (3, B) float64, the band matrix of its colour
+    map (``spectral.lights.band_matrix``: band values -> CIE XYZ, Y of a white reflector 1), for the lights the
+    run or its evaluation asked (a light file's spectrum may no longer be at hand).
+    """
+
+    values: dict[str, np.ndarray]
+    wavelengths_nm: np.ndarray
+    lights: dict[str, np.ndarray]
+
+    def arrays(self) -> dict:
+        out = {
+            "band_names": np.array(list(self.values)),
+            "wavelengths_nm": np.asarray(self.wavelengths_nm, np.float64),
+            "light_names": np.array(list(self.lights)),
+            "light_matrices": np.stack([np.asarray(m, np.float64) for m in self.lights.values()]),
+        }
+        out.update({f"bands_{n}": np.asarray(v, np.float32) for n, v in self.values.items()})
+        return out
+
+    @classmethod
+    def from_arrays(cls, d, where: str) -> BandValues | None:
+        """The band values of predictions.npz's arrays ``d`` (None: an RGB run's file)."""
+        if "band_names" not in d:
+            return None
+        names = [str(n) for n in np.asarray(d["band_names"]).reshape(-1)]
+        missing = [k for k in ("wavelengths_nm", "light_names", "light_matrices", *(f"bands_{n}" for n in names))]
+        missing = [k for k in missing if k not in d]
+        if missing:
+            raise ValueError(f"{where} lacks {', '.join(missing)}; run 'inkopt evaluate' again")
+        lights = [str(n) for n in np.asarray(d["light_names"]).reshape(-1)]
+        nm = np.asarray(d["wavelengths_nm"], np.float64).reshape(-1)
+        mats = np.asarray(d["light_matrices"], np.float64)
+        if mats.shape != (len(lights), 3, len(nm)) or not lights:
+            raise ValueError(f"{where}: light_matrices has shape {mats.shape}, expected ({len(lights)}, 3, {len(nm)})")
+        values = {n: np.asarray(d[f"bands_{n}"], np.float32) for n in names}
+        if any(v.ndim != 2 or v.shape[1] != len(nm) for v in values.values()):
+            raise ValueError(f"{where}: band values do not have {len(nm)} bands")
+        return cls(values, nm, dict(zip(lights, mats)))
 
 
 @dataclass
@@ -29,7 +75,8 @@ class Predictions:
     scene's texels (the printed results rendered at printer resolution and averaged onto them, as ``inkopt
     evaluate`` does); source: "optimisation" or "evaluation"; spp: samples per scene texel of each result;
     volume_digest: ``io.file_digest`` of the volume.npz they were rendered from; lighting: the display lighting
-    (``Lighting.describe()``, stored as JSON).
+    (``Lighting.describe()``, stored as JSON); bands: a spectral run's band values (``BandValues``; ``rgb`` then
+    holds them as sRGB under the first light), else None (then the file is format version 1).
     """
 
     rgb: dict[str, np.ndarray]
@@ -37,11 +84,12 @@ class Predictions:
     spp: dict[str, int]
     volume_digest: str
     lighting: dict
+    bands: BandValues | None = None
 
     def arrays(self) -> dict:
         names = list(self.rgb)
         out = {
-            FORMAT_KEY: np.int64(PREDICTIONS_FORMAT),
+            FORMAT_KEY: np.int64(1 if self.bands is None else PREDICTIONS_FORMAT),
             "names": np.array(names),
             "source": np.array(self.source),
             "volume_digest": np.array(self.volume_digest),
@@ -49,11 +97,14 @@ class Predictions:
             "spp": np.array([int(self.spp.get(n, 0)) for n in names], np.int64),
         }
         out.update({f"rgb_{n}": np.asarray(self.rgb[n], np.float32) for n in names})
+        if self.bands is not None:
+            out.update(self.bands.arrays())
         return out
 
     @classmethod
     def from_arrays(cls, d, where: str = "predictions.npz") -> Predictions:
-        d = upgrade_format(d, kind="predictions file", where=where, current=PREDICTIONS_FORMAT, upgrades={})
+        upgrades = {1: lambda a: a}  # version 2 only adds the optional band values
+        d = upgrade_format(d, kind="predictions file", where=where, current=PREDICTIONS_FORMAT, upgrades=upgrades)
         names = [str(n) for n in np.asarray(d.get("names", [])).reshape(-1)]
         missing = [
             k for k in ("source", "volume_digest", "lighting", "spp", *(f"rgb_{n}" for n in names)) if k not in d
@@ -67,6 +118,7 @@ class Predictions:
             {n: int(v) for n, v in zip(names, spp)},
             str(d["volume_digest"]),
             json.loads(str(d["lighting"])),
+            BandValues.from_arrays(d, where),
         )
 
 

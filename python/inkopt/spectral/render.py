@@ -77,7 +77,10 @@ class SpectralRenderer(TexelRenderer):
     """Renders band values (I, B) of ``volume`` (a mixture or labels of ``table``'s inks; the volume's own ink
     table gives only the names) with ``table``: one renderer per band group, built by ``factory(volume, threads,
     lighting)`` (default :class:`~inkopt.render.Renderer`). ``lighting`` must be grey (:func:`check_grey`).
-    ``weights`` (G,) > 0: how a pass's samples are shared among the groups (:func:`group_spp`; None: equally)."""
+    ``weights`` (G,) > 0: how a pass's samples are shared among the groups (:func:`group_spp`; None: equally).
+    ``shared``: one renderer for every group, each group's medium swapped in before its pass (``set_volume``, which
+    renders bit-identically to a renderer built for it): the geometry is held once instead of G times, for
+    evaluations; its medium cannot be updated in place (``set_mixture``)."""
 
     def __init__(
         self,
@@ -87,11 +90,13 @@ class SpectralRenderer(TexelRenderer):
         lighting: Lighting | str | None = None,
         factory: RendererFactory | None = None,
         weights=None,
+        shared: bool = False,
     ):
         if volume.inks is None or tuple(volume.inks.names) != tuple(table.names):
             have = None if volume.inks is None else list(volume.inks.names)
             raise ParameterError(f"`inks` {list(table.names)} must be the volume's inks {have}, in order")
         self.table = table
+        self._source = volume  # whose medium the groups render (``shared``: swapped in from it)
         self.volume = volume
         self.lighting = check_grey(load_lighting(lighting))
         self._bands = table.group_bands()
@@ -100,11 +105,41 @@ class SpectralRenderer(TexelRenderer):
         if self.weights is not None and (self.weights.shape != (len(self._groups),) or not np.all(self.weights > 0)):
             raise ParameterError(f"`weights` must be {len(self._groups)} positive numbers, one per band group")
         make = factory or Renderer
-        self._renderers = [make(with_inks(volume, g), threads, self.lighting) for g in self._groups]
+        self.shared, self._current = bool(shared), 0
+        built = self._groups[:1] if self.shared else self._groups
+        self._renderers = [make(with_inks(volume, g), threads, self.lighting) for g in built]
 
     @property
     def threads(self) -> int:
         return self._renderers[0].threads
+
+    @property
+    def volume(self) -> Volume:
+        return self._volume
+
+    @volume.setter
+    def volume(self, volume: Volume) -> None:
+        """The volume the renderer describes; every group's renderer is given it too (read with the group's inks),
+        so a caller that points it back at the volume the geometry was built for frees the one it replaced (a
+        ``shared`` renderer keeps the volume of the last ``set_volume``: it swaps each group's medium in from it)."""
+        self._volume = volume
+        if getattr(self, "shared", False):
+            self._renderers[0].volume = with_inks(volume, self._groups[self._current])
+            return
+        for r, g in zip(getattr(self, "_renderers", ()), getattr(self, "_groups", ())):
+            r.volume = with_inks(volume, g)
+
+    def _each(self):
+        """(group index, its renderer) for every band group; a shared renderer is given the group's medium first."""
+        for k in range(len(self._groups)):
+            if not self.shared:
+                yield k, self._renderers[k]
+                continue
+            r = self._renderers[0]
+            if self._current != k:
+                r.set_volume(with_inks(self._source, self._groups[k]))
+                self._current = k
+            yield k, r
 
     @property
     def bands(self) -> int:
@@ -117,11 +152,14 @@ class SpectralRenderer(TexelRenderer):
         self.lighting = light
 
     def set_volume(self, volume: Volume) -> None:
-        for r, g in zip(self._renderers, self._groups):
+        self._source = volume
+        for r, g in zip(self._renderers, self._groups[self._current :] if self.shared else self._groups):
             r.set_volume(with_inks(volume, g))
         self.volume = volume
 
     def set_mixture(self, index: np.ndarray, mixture: np.ndarray) -> None:
+        if self.shared:
+            raise ParameterError("`shared` band renders swap each group's medium in: they cannot update it in place")
         for r in self._renderers:
             r.set_mixture(index, mixture)
 
@@ -139,7 +177,7 @@ class SpectralRenderer(TexelRenderer):
 
     def render_pass(self, texels: Texels, settings: PassSettings, progress: bool = False) -> RenderResult:
         """Band values (I, B) float32 and their variances: each group rendered with its :func:`group_seed`."""
-        results = [r.render_pass(texels, self._settings(settings, k), progress) for k, r in enumerate(self._renderers)]
+        results = [r.render_pass(texels, self._settings(settings, k), progress) for k, r in self._each()]
         return self._gather(results, settings)
 
     def _settings(self, settings: PassSettings, group: int) -> PassSettings:
@@ -162,7 +200,7 @@ class SpectralRenderer(TexelRenderer):
             raise ParameterError(f"`adjoint` must have shape ({len(texels)}, {self.bands}), got {adjoint.shape}")
         gs = ga = None
         results = []
-        for k, (r, bands) in enumerate(zip(self._renderers, self._bands)):
+        for (k, r), bands in zip(self._each(), self._bands):
             adj = np.zeros((len(texels), GROUP), np.float32)
             adj[:, : len(bands)] = adjoint[:, bands]
             s, a, res = r.gradient_pass(texels, adj, self._settings(settings, k), grad_index)

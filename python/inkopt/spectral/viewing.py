@@ -68,13 +68,14 @@ class Viewing:
         """The run's loss (``TexelLoss``) of targets (I, 3) linear RGB under :meth:`colours`, combined as asked."""
         return TexelLoss(target_rgb, pos_vox, gamma, colours=self.colours(), combine=self.combine)
 
-    def renderer_factory(self, inner: RendererFactory) -> RendererFactory:
-        """What renders a run: ``inner`` on the RGB path, else band renders through ``inner`` per group."""
+    def renderer_factory(self, inner: RendererFactory, shared: bool = False) -> RendererFactory:
+        """What renders a run: ``inner`` on the RGB path, else band renders through ``inner`` per group (``shared``:
+        one ``inner`` renderer for all groups, ``SpectralRenderer``'s ``shared``)."""
         table = self.table
         if table is None:
             return inner
         w = self.group_weights()
-        return lambda volume, threads, lighting: SpectralRenderer(volume, table, threads, lighting, inner, w)
+        return lambda volume, threads, lighting: SpectralRenderer(volume, table, threads, lighting, inner, w, shared)
 
     def group_weights(self) -> np.ndarray | None:
         """(G,) the band groups' sample weights (``spectral.render.group_spp``; None unless ``weighted``): the square
@@ -107,8 +108,12 @@ class Viewing:
         values = np.asarray(values, np.float64)
         if self.table is None:
             return values
-        cmap = self.colours()[0]
-        return cmap.xyz(values) @ (np.linalg.inv(RGB_TO_XYZ) @ adaptation_matrix(cmap.white)).T
+        return display_under(self.colours()[0], values)
+
+    def light_matrices(self) -> dict[str, np.ndarray]:
+        """{light name: (3, B) float64 band matrix of its colour map} for :meth:`seen_under` (a spectral viewing;
+        ``rundir.BandValues.lights``)."""
+        return {c.name: np.array(c.matrix) for c in self.colours()}
 
     def describe(self) -> dict:
         """Report fields: spectral or RGB, the bands, the lights and how they combine."""
@@ -116,6 +121,13 @@ class Viewing:
         if self.table is not None:
             d.update(bands=self.table.bands, combine=self.combine, pictures=f"under {d['illuminants'][0]}, {CAT}")
         return d
+
+
+def display_under(cmap: ColourMap, values) -> np.ndarray:
+    """Band values ``values`` (I, B) under colour map ``cmap`` (a light's, ``Light.colour_map``) as linear sRGB
+    (I, 3) float64: CIE XYZ relative to the light's white, carried to sRGB's D65 white by the Bradford chromatic
+    adaptation transform (:func:`adaptation_matrix`); may leave [0, 1] for colours outside sRGB."""
+    return cmap.xyz(values) @ (np.linalg.inv(RGB_TO_XYZ) @ adaptation_matrix(cmap.white)).T
 
 
 #: how a spectral run's pictures carry the first light's white to sRGB's (:meth:`Viewing.display`)
