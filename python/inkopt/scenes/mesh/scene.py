@@ -57,16 +57,15 @@ VIEW_SIZE = 320  # pixels per view in views.png (tests lower it)
 
 
 def free_voxels(vox: VoxelizedObject, shell_mm: float | None = None) -> np.ndarray:
-    """(z, y, x) bool: the voxels the optimiser may change. All inside voxels, or with ``shell_mm`` (mm, > 0)
-    those with sdf >= -shell_mm, plus every texel voxel (so a shell thinner than half a voxel still frees the
-    surface)."""
+    """(z, y, x) bool: the voxels the optimiser may change. All inside voxels, or with ``shell_mm`` (mm, > 0, less
+    than the voxelization's exact-distance band ``vox.depth.band_mm``) those at most ``shell_mm`` below the surface
+    (``NearDepth.within``), plus every texel voxel (so a shell thinner than half a voxel still frees the surface)."""
     if shell_mm is None:
         return vox.inside.copy()
     if not (np.isfinite(shell_mm) and shell_mm > 0):
         raise ParameterError(f"`shell_mm` must be a positive thickness in mm, got {shell_mm}")
-    free = np.empty_like(vox.inside)
-    for z in range(0, free.shape[0], 32):  # a slab of layers at a time: no grid-sized temporary
-        free[z : z + 32] = vox.inside[z : z + 32] & (vox.sdf[z : z + 32] >= -np.float32(shell_mm))
+    free = np.zeros(vox.inside.shape, bool)
+    free.reshape(-1)[vox.depth.within(shell_mm)] = True
     free[tuple(vox.texels.voxel.T)] = True
     return free
 
@@ -75,7 +74,7 @@ def free_voxels(vox: VoxelizedObject, shell_mm: float | None = None) -> np.ndarr
 class MeshScene:
     """A voxelized object ready to optimise.
 
-    mesh: the loaded mesh (mm, z up); vox: its voxelization (``sdf`` dropped); volume: a label Volume giving the
+    mesh: the loaded mesh (mm, z up); vox: its voxelization (``depth`` dropped); volume: a label Volume giving the
     geometry (inside, normals, box boundary, origin_mm) and inks (white labels inside; the optimiser takes its
     fixed shares from ``fixed_share``); free: (z, y, x) bool variables; fixed_share: the (z, y, x, N) fixed ink
     shares (:class:`~inkopt.model.FixedShares`).
@@ -222,8 +221,8 @@ def build_mesh_scene(spec: MeshSpec, inks: InkTable) -> MeshScene:
     mesh = load_spec_mesh(spec)
     vmm = voxel_mm(spec.dpi)
     check_grid_size(mesh, spec.dpi)
-    # The SDF is exact only within ``band`` voxels of the surface; the shell's and the translucent regions'
-    # boundaries must lie inside it.
+    # Depths below the surface are exact and kept only within ``band`` voxels of it; the shell's and the translucent
+    # regions' boundaries must lie inside it.
     band = 3.0
     for d in (spec.shell_mm, depth_mm):
         band = band if d is None else max(band, np.ceil(d / vmm) + 2.0)
@@ -233,11 +232,11 @@ def build_mesh_scene(spec: MeshSpec, inks: InkTable) -> MeshScene:
     core = core_shares(spec.core, inks)
     fixed = FixedShares(free, core)
     tr = None
-    if spec.translucency is not None:  # before the SDF is dropped
+    if spec.translucency is not None:  # before the depths are dropped
         tr = mesh_translucency(vox, mesh_texel_share(mesh, vox, mask), inks, depth_mm, spec.translucency)
         if tr is not None:
             fixed = tr.applied(fixed, inks)
-    vox.sdf = None  # 4 bytes per grid voxel no longer needed (before the volume's arrays are made)
+    vox.depth = None  # the near voxels' depths are no longer needed (before the volume's arrays are made)
     # The base volume's medium is not the optimiser's (it takes geometry and inks from it, and the fixed shares
     # from ``fixed``): white labels inside, 1 byte per voxel, instead of a (z, y, x, N) mixture.
     labels = np.where(vox.inside, np.uint8(inks.index("white")), np.uint8(EMPTY))
