@@ -31,7 +31,6 @@ import numpy as np
 
 from ...errors import ParameterError
 from ...model import (
-    EMPTY,
     Band,
     FixedShares,
     InkTable,
@@ -41,6 +40,7 @@ from ...model import (
     transparent_ink,
 )
 from ...model.fixed import DEFAULT_CORE, core_shares
+from ...model.media import InsideLabels
 from ...model.volume import check_grid_budget
 from ...rundir import RunDir, SceneRecord
 from ...units import voxel_mm
@@ -238,12 +238,10 @@ def build_mesh_scene(spec: MeshSpec, inks: InkTable) -> MeshScene:
             fixed = tr.applied(fixed, inks)
     vox.depth = None  # the near voxels' depths are no longer needed (before the volume's arrays are made)
     # The base volume's medium is not the optimiser's (it takes geometry and inks from it, and the fixed shares
-    # from ``fixed``): white labels inside, 1 byte per voxel, instead of a (z, y, x, N) mixture.
-    labels = np.where(vox.inside, np.uint8(inks.index("white")), np.uint8(EMPTY))
-    vol = Volume.from_labels(
-        voxel_mm=vox.voxel_mm,
-        labels=labels,
-        inks=inks,
+    # from ``fixed``): white labels inside, read from the inside mask (nothing per voxel of its own).
+    vol = Volume(
+        vox.voxel_mm,
+        InsideLabels(vox.inside, inks.index("white"), inks),
         g=inks.g,
         inside=vox.inside,
         normals=vox.normals,
