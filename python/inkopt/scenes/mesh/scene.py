@@ -183,9 +183,9 @@ class MeshScene:
         return paths
 
 
-#: a lower bound of the memory per grid voxel while a mesh is voxelized and rendered (bytes): the SDF (4) and the
-#: inside mask (1) of the voxelization, the renderer's slot index (4)
-MIN_BYTES_PER_GRID_VOXEL = 9
+#: a lower bound of the memory per grid voxel while a mesh is voxelized and rendered (bytes): the inside and free
+#: masks (1 each) and the core's signed-distance byte
+MIN_BYTES_PER_GRID_VOXEL = 3
 
 
 def check_grid_size(mesh: TexturedMesh, dpi: float) -> None:
