@@ -164,10 +164,10 @@ class Band:
         """The band of an object whose inside voxels ((z, y, x) bool) are free or hold fixed shares ``fixed``
         (``model.fixed.FixedShares``: ``held`` in every voxel that is not free, except its indexed rows): the
         inside voxels that are free or indexed, and ``held`` as the core."""
-        flat, free_flat = inside.reshape(-1), fixed.free.reshape(-1)
-        step = 1 << 24  # voxels at a time: no grid-sized temporary
+        flat, mask = inside.reshape(-1), fixed.mask
+        step = mask.STEP  # voxels at a time: no grid-sized temporary
         free = np.concatenate(
-            [np.flatnonzero(free_flat[a : a + step] & flat[a : a + step]) + a for a in range(0, flat.size, step)]
+            [np.flatnonzero(mask.range(a, a + step) & flat[a : a + step]) + a for a in range(0, flat.size, step)]
             or [np.empty(0, np.int64)]
         )
         rows = fixed.index[flat[fixed.index]]

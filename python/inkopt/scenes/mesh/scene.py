@@ -76,14 +76,14 @@ class MeshScene:
 
     mesh: the loaded mesh (mm, z up); vox: its voxelization (``depth`` dropped); volume: a label Volume giving the
     geometry (inside, normals, box boundary, origin_mm) and inks (white labels inside; the optimiser takes its
-    fixed shares from ``fixed_share``); free: (z, y, x) bool variables; fixed_share: the (z, y, x, N) fixed ink
-    shares (:class:`~inkopt.model.FixedShares`).
+    fixed shares from ``fixed_share``); fixed_share: the (z, y, x, N) fixed ink shares
+    (:class:`~inkopt.model.FixedShares`), whose free mask (a bit per voxel) says which voxels are variables
+    (``free``).
     """
 
     mesh: TexturedMesh
     vox: VoxelizedObject
     volume: Volume
-    free: np.ndarray
     fixed_share: FixedShares
     shell_mm: float | None
     voxelize_seconds: float
@@ -93,6 +93,11 @@ class MeshScene:
     translucency: Translucency | None = None
     core: str = DEFAULT_CORE
     kind = "mesh"
+
+    @property
+    def free(self) -> np.ndarray:
+        """(z, y, x) bool: the voxels that are variables (unpacked from ``fixed_share``'s bits: a new array)."""
+        return self.fixed_share.free
 
     @property
     def texels(self):
@@ -140,7 +145,7 @@ class MeshScene:
             f"mesh {self.height_mm:.1f} mm high, target colour from {describe_colour_source(self.mesh)}: "
             f"grid {nx} x {ny} x {nz} voxels "
             f"({self.volume.voxel_mm[0] * 1000:.1f} µm), {int(self.vox.inside.sum())} inside, "
-            f"{int(self.free.sum())} free, {len(self.texels)} texels; voxelized in {self.voxelize_seconds:.1f} s"
+            f"{self.fixed_share.mask.count} free, {len(self.texels)} texels; voxelized in {self.voxelize_seconds:.1f} s"
         )
 
     def report_fields(self) -> dict:
@@ -149,7 +154,7 @@ class MeshScene:
             "voxels": int(nz * ny * nx),
             "grid_zyx": [nz, ny, nx],
             "inside_voxels": int(self.vox.inside.sum()),
-            "free_voxels": int(self.free.sum()),
+            "free_voxels": self.fixed_share.mask.count,
             "texels": len(self.texels),
             "voxelize_seconds": self.voxelize_seconds,
             "shell_mm": self.shell_mm,
@@ -228,9 +233,8 @@ def build_mesh_scene(spec: MeshSpec, inks: InkTable) -> MeshScene:
         band = band if d is None else max(band, np.ceil(d / vmm) + 2.0)
     vox = voxelize(mesh, voxel_mm=vmm, band=band)
     seconds = time.perf_counter() - t0
-    free = free_voxels(vox, spec.shell_mm)
     core = core_shares(spec.core, inks)
-    fixed = FixedShares(free, core)
+    fixed = FixedShares(free_voxels(vox, spec.shell_mm), core)  # the free mask kept as bits
     tr = None
     if spec.translucency is not None:  # before the depths are dropped
         tr = mesh_translucency(vox, mesh_texel_share(mesh, vox, mask), inks, depth_mm, spec.translucency)
@@ -250,4 +254,4 @@ def build_mesh_scene(spec: MeshSpec, inks: InkTable) -> MeshScene:
         band=None if spec.shell_mm is None else Band.of_fixed(vox.inside, fixed),  # a core below the shell
     )
     path = str(Path(spec.path).resolve())
-    return MeshScene(mesh, vox, vol, free, fixed, spec.shell_mm, seconds, path, spec.up, tr, spec.core)
+    return MeshScene(mesh, vox, vol, fixed, spec.shell_mm, seconds, path, spec.up, tr, spec.core)
