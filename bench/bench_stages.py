@@ -1,7 +1,7 @@
 """Peak memory of a mesh run's per-texel and per-grid-voxel stages, each in its own process, for two code trees in
 one session (before / after a change), on Spot.
 
-    python bench/bench_stages.py 40 [--shell-mm 1] [--code main=MAIN/python --code new=python] [--run]
+    python bench/bench_stages.py 40 [--shell-mm 1] [--code main=MAIN/python --code new=python] [--run] [--tag T]
 
 (MAIN: a checkout of the code before the change; without --code, only this tree's, labelled new.)
 
@@ -18,8 +18,8 @@ With ``--run``, also a run's stages: ``bench_mesh.py H --shell-mm D --iterations
 (this tree's benchmark, the tree's package) in its own process: peak resident memory after the scene, the
 set-up, the figures and one iteration, the scene's and set-up's wall and CPU seconds, CPU seconds per iteration.
 
-Writes the entries ``<H>mm[_shell<D>]_<label>`` of bench/results/stages_spot.json (with the command, the commit and
-the load average before and after each stage).
+Writes the entries ``<H>mm[_shell<D>]_<label>[_<T>]`` of bench/results/stages_spot.json (with the command, the
+commit and the load average before and after each stage).
 """
 
 from __future__ import annotations
@@ -120,6 +120,7 @@ def main() -> None:
     ap.add_argument("--shell-mm", type=float)
     ap.add_argument("--code", action="append", help="LABEL=PYTHON_DIR, repeated (default new=this tree's python)")
     ap.add_argument("--run", action="store_true", help="also a run's stages through one iteration (bench_mesh.py)")
+    ap.add_argument("--tag", default="", help="suffix of the entries' names (another session's measurements)")
     args = ap.parse_args()
     codes = dict(c.split("=", 1) for c in (args.code or [f"new={ROOT / 'python'}"]))
     shell = "none" if args.shell_mm is None else f"{args.shell_mm:g}"
@@ -132,7 +133,8 @@ def main() -> None:
             grid, n_texels = (int(x) for x in vox.pop("fields"))
             fig = _stage(code, _FIGURES, [texels])
             fig["ssim"], fig["e3"], fig["mottle_l2"] = (float(x) for x in fig.pop("fields"))
-            entries[f"{name}_{label}"] = {
+            key = f"{name}_{label}" + (f"_{args.tag}" if args.tag else "")
+            entries[key] = {
                 "code": code,
                 "grid_voxels": grid,
                 "texels": n_texels,
@@ -141,8 +143,8 @@ def main() -> None:
                 "figure_metrics_bytes_per_texel": fig["stage_peak_gb"] * 2**30 / n_texels,
             }
             if args.run:
-                entries[f"{name}_{label}"]["run"] = _run(code, args.height_mm, args.shell_mm, f"{tmp}/{label}.json")
-            print(label, json.dumps(entries[f"{name}_{label}"]), flush=True)
+                entries[key]["run"] = _run(code, args.height_mm, args.shell_mm, f"{tmp}/{label}.json")
+            print(label, json.dumps(entries[key]), flush=True)
     path = RESULTS / RESULTS_FILE
     data = json.loads(path.read_text()) if path.is_file() else {"entries": {}}
     for key, rec in entries.items():
