@@ -2,7 +2,7 @@
 against what happens, on Spot.
 
     python bench/bench_footprint.py counts                 # against bench/results/mesh_*mm.json and the runs below
-    python bench/bench_footprint.py dry 100 200            # `inkopt optimize --dry-run`: its seconds and peak memory
+    python bench/bench_footprint.py dry 100 200 [-- --shell-mm 1]   # `inkopt optimize --dry-run`: seconds, peak
     python bench/bench_footprint.py run 40 --dir D [-- OPTIONS]   # a real run (--iterations 2 unless OPTIONS say)
     python bench/bench_footprint.py timed 40 --dir D --time-log LOG   # a run made under /usr/bin/time -v
     python bench/bench_footprint.py watch 40 --pid PID --stage TEXT --run-command CMD   # a run under way: peak so far
@@ -94,13 +94,17 @@ def reestimate(entries: dict) -> None:
             }
 
 
-def dry(heights: list[float]) -> dict:
+def dry(heights: list[float], extra: list[str]) -> dict:
+    """``inkopt optimize --dry-run`` of Spot at each height with the options ``extra`` (a ``--shell-mm D`` names the
+    entries ``dry_<H>mm_shell<D>``)."""
     out = {}
+    shell = f"_shell{float(extra[extra.index('--shell-mm') + 1]):g}" if "--shell-mm" in extra[:-1] else ""
     with tempfile.TemporaryDirectory() as tmp:
         for h in heights:
-            args = ["optimize", str(SPOT), "--height-mm", f"{h:g}", "--dry-run", "--out", f"{tmp}/run"]
-            out[f"dry_{h:g}mm"] = {"load_before": os.getloadavg()[0], **_process(args, Path(tmp) / "log")}
-            out[f"dry_{h:g}mm"]["load_after"] = os.getloadavg()[0]
+            args = ["optimize", str(SPOT), "--height-mm", f"{h:g}", "--dry-run", "--out", f"{tmp}/run", *extra]
+            key = f"dry_{h:g}mm{shell}"
+            out[key] = {"load_before": os.getloadavg()[0], **_process(args, Path(tmp) / "log")}
+            out[key]["load_after"] = os.getloadavg()[0]
     return out
 
 
@@ -198,7 +202,7 @@ def main() -> None:
     if args.mode == "counts":
         entries = counts()
     elif args.mode == "dry":
-        entries = dry(args.heights or [100.0, 200.0])
+        entries = dry(args.heights or [100.0, 200.0], extra)
     elif args.mode == "watch":
         entries = watch(args.heights[0], args.pid, args.stage, args.run_command)
     elif not args.dir or len(args.heights) != 1:

@@ -1,7 +1,7 @@
 """Benchmark of the mesh pipeline on Spot: voxelization time, seconds per optimisation iteration, peak memory.
 
     python bench/bench_mesh.py [HEIGHT_MM=40] [--iterations 3] [--spp 4] [--threads 2] [--shell-mm D] [--smooth S]
-        [--dpi 300] [--figure-metrics] [--out JSON]
+        [--dpi 300] [--figure-metrics] [--code PYTHON_DIR] [--out JSON]
 
 Writes bench/results/mesh_<height>mm.json (``--dpi`` other than 300: mesh_<height>mm_<dpi>dpi.json; the folder is
 created if missing). Peak memory is the process's
@@ -18,7 +18,9 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "python"))
+# --code DIR: the package measured (another tree's python/, as bench_stages.py compares two); default this tree's
+_CODE = sys.argv[sys.argv.index("--code") + 1] if "--code" in sys.argv[:-1] else str(ROOT / "python")
+sys.path.insert(0, _CODE)
 sys.path.insert(0, str(ROOT / "bench"))
 
 SPOT = Path(__file__).resolve().parents[2] / "shared" / "data" / "spot" / "spot.obj"  # ../shared beside the repo
@@ -46,6 +48,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--dpi", type=float, default=300.0, help="optimisation grid (a coarse-to-fine run's first stage)")
     ap.add_argument("--smooth", type=float, help="step smoothing width (default: the optimiser's default)")
     ap.add_argument("--out", help="JSON path (default bench/results/mesh_<height>mm.json)")
+    ap.add_argument("--code", default=_CODE, help="python/ directory whose inkopt is measured (default this tree's)")
     ap.add_argument(
         "--figure-metrics",
         action="store_true",
@@ -55,13 +58,21 @@ def main(argv=None) -> dict:
     )
     args = ap.parse_args(argv)
 
+    import resource
+
+    def cpu_s() -> float:  # user + system seconds of this process, all threads
+        r = resource.getrusage(resource.RUSAGE_SELF)
+        return r.ru_utime + r.ru_stime
+
     rss = {"start": peak_rss_gb()}
+    cpu = {"start": cpu_s()}
     t0 = time.perf_counter()
     scene = build_mesh_scene(
         MeshSpec(args.mesh, height_mm=args.height_mm, shell_mm=args.shell_mm, dpi=args.dpi), InkTable.parse(args.inks)
     )
     build_s = time.perf_counter() - t0
     rss["after_voxelize"] = peak_rss_gb()
+    cpu["after_voxelize"] = cpu_s()
     cfg = OptimizeConfig(
         iterations=args.iterations, spp=args.spp, **({} if args.smooth is None else {"smooth": args.smooth})
     )
@@ -69,6 +80,7 @@ def main(argv=None) -> dict:
     run = Optimization(scene, cfg.for_scene(scene.kind), threads=args.threads)
     setup_s = time.perf_counter() - t0
     rss["after_setup"] = peak_rss_gb()
+    cpu["after_setup"] = cpu_s()
     print(f"set-up done: {scene.describe()}; peaks so far (GiB) {rss}", file=sys.stderr, flush=True)
     figure_s = None
     if args.figure_metrics:  # as the start's figures, before the iterations
@@ -81,8 +93,6 @@ def main(argv=None) -> dict:
         figure_s = time.perf_counter() - t0
         rss["after_figure_metrics"] = peak_rss_gb()
         print(f"figure metrics in {figure_s:.1f} s; peaks so far (GiB) {rss}", file=sys.stderr, flush=True)
-    import resource
-
     cpu0 = resource.getrusage(resource.RUSAGE_SELF)
     passes = []
     for i in range(args.iterations):
@@ -113,6 +123,11 @@ def main(argv=None) -> dict:
         "voxelize_seconds": scene.voxelize_seconds,
         "build_seconds": build_s,
         "setup_seconds": setup_s,
+        # CPU seconds (user + system, all threads) of loading and voxelizing (with the scene's other arrays) and of
+        # the optimiser's set-up
+        "build_cpu_seconds": cpu["after_voxelize"] - cpu["start"],
+        "setup_cpu_seconds": cpu["after_setup"] - cpu["after_voxelize"],
+        "code": str(Path(args.code).resolve()),
         "iterations": args.iterations,
         "spp": args.spp,
         "threads": args.threads,

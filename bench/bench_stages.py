@@ -1,7 +1,7 @@
 """Peak memory of a mesh run's per-texel and per-grid-voxel stages, each in its own process, for two code trees in
 one session (before / after a change), on Spot.
 
-    python bench/bench_stages.py 40 [--shell-mm 1] [--code main=MAIN/python --code new=python]
+    python bench/bench_stages.py 40 [--shell-mm 1] [--code main=MAIN/python --code new=python] [--run] [--tag T]
 
 (MAIN: a checkout of the code before the change; without --code, only this tree's, labelled new.)
 
@@ -14,8 +14,12 @@ stage, so the interpreter and libraries are not counted):
   operators and ``evaluation.metrics.prediction_metrics`` of a noisy prediction with its variance (the target plus
   Gaussian noise of 0.02, variance 1e-4: the operators' sizes do not depend on the values).
 
-Writes the entries ``<H>mm[_shell<D>]_<label>`` of bench/results/stages_spot.json (with the command, the commit and
-the load average before and after each stage).
+With ``--run``, also a run's stages: ``bench_mesh.py H --shell-mm D --iterations 1 --figure-metrics --code DIR``
+(this tree's benchmark, the tree's package) in its own process: peak resident memory after the scene, the
+set-up, the figures and one iteration, the scene's and set-up's wall and CPU seconds, CPU seconds per iteration.
+
+Writes the entries ``<H>mm[_shell<D>]_<label>[_<T>]`` of bench/results/stages_spot.json (with the command, the
+commit and the load average before and after each stage).
 """
 
 from __future__ import annotations
@@ -97,11 +101,26 @@ def _stage(code: str, script: str, args: list[str]) -> dict:
     }
 
 
+def _run(code: str, height_mm: float, shell_mm: float | None, out: str) -> dict:
+    """A run's stages of ``code``'s package through one iteration (``bench_mesh.py``): the fields compared."""
+    cmd = [sys.executable, str(ROOT / "bench" / "bench_mesh.py"), f"{height_mm:g}", "--iterations", "1"]
+    cmd += ["--figure-metrics", "--code", code, "--out", out]
+    cmd += [] if shell_mm is None else ["--shell-mm", f"{shell_mm:g}"]
+    load = os.getloadavg()[0]
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+    rec = json.loads(Path(out).read_text())
+    keys = ("peak_rss_gb_by_stage", "build_seconds", "build_cpu_seconds", "setup_seconds", "setup_cpu_seconds")
+    keys += ("figure_metrics_seconds", "seconds_per_iteration", "cpu_seconds_per_iteration", "free_voxels")
+    return {**{k: rec[k] for k in keys}, "load_before": load, "load_after": os.getloadavg()[0]}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("height_mm", type=float)
     ap.add_argument("--shell-mm", type=float)
     ap.add_argument("--code", action="append", help="LABEL=PYTHON_DIR, repeated (default new=this tree's python)")
+    ap.add_argument("--run", action="store_true", help="also a run's stages through one iteration (bench_mesh.py)")
+    ap.add_argument("--tag", default="", help="suffix of the entries' names (another session's measurements)")
     args = ap.parse_args()
     codes = dict(c.split("=", 1) for c in (args.code or [f"new={ROOT / 'python'}"]))
     shell = "none" if args.shell_mm is None else f"{args.shell_mm:g}"
@@ -114,7 +133,8 @@ def main() -> None:
             grid, n_texels = (int(x) for x in vox.pop("fields"))
             fig = _stage(code, _FIGURES, [texels])
             fig["ssim"], fig["e3"], fig["mottle_l2"] = (float(x) for x in fig.pop("fields"))
-            entries[f"{name}_{label}"] = {
+            key = f"{name}_{label}" + (f"_{args.tag}" if args.tag else "")
+            entries[key] = {
                 "code": code,
                 "grid_voxels": grid,
                 "texels": n_texels,
@@ -122,7 +142,9 @@ def main() -> None:
                 "figure_metrics": fig,
                 "figure_metrics_bytes_per_texel": fig["stage_peak_gb"] * 2**30 / n_texels,
             }
-            print(label, json.dumps(entries[f"{name}_{label}"]), flush=True)
+            if args.run:
+                entries[key]["run"] = _run(code, args.height_mm, args.shell_mm, f"{tmp}/{label}.json")
+            print(label, json.dumps(entries[key]), flush=True)
     path = RESULTS / RESULTS_FILE
     data = json.loads(path.read_text()) if path.is_file() else {"entries": {}}
     for key, rec in entries.items():

@@ -42,19 +42,23 @@ from .units import format_duration, voxel_mm
 #: bench/results/mesh_*mm.json is 0.066-0.070 GiB
 BASE_BYTES = 0.07 * 2**30
 #: voxelization and the scene's masks (the mesh's stage before the run), by what the code stores: per grid voxel the
-#: inside mask (1 B), the signed distances (float32, 4 B) and the free mask (1 B), all at the grid's own shape and
-#: filled a slab or a chunk at a time; the near-surface queries' chunks (``voxelize._NEAR_VOXELS``: a fixed size,
-#: whatever the object or the exact-distance band) and per texel its closest points, faces, normals, colours and
-#: exposed faces, fitted to the voxelization stage of bench/results/stages_spot.json, 20mm_shell1_new and
-#: 40mm_shell1_new (0.137 and 0.571 GiB less 5 B per grid voxel: 0.05 GiB + 700 B per texel)
-VOXELIZE_GRID_BYTES = 6.0
-VOXELIZE_FIXED_BYTES = 0.05 * 2**30
-VOXELIZE_TEXEL_BYTES = 700.0
+#: inside mask (1 B) and the free mask, as bytes and as the bits it is packed into (1.125 B), all at the grid's own
+#: shape and filled a slab or a chunk at a time; per texel its closest points, faces, normals, colours and exposed
+#: faces, and the exact depths of the inside voxels within the band below it (``voxelize.NearDepth``, 12 B per near
+#: voxel and their chunks while they are joined, ``VOXELIZE_NEAR_BYTES`` per texel and voxel of the band: Spot 20 mm
+#: has 0.89 near voxels per texel and band voxel at a 1 mm shell, band 14) with the near-surface queries' chunks,
+#: fitted to the scene stage of bench/results/stages_spot.json, 40mm_shell1_new_s58 and 60mm_shell1_new_s58
+#: (run.peak_rss_gb_by_stage.after_voxelize 0.426 and 0.992 GiB less the base, the mesh and 2.125 B per grid voxel:
+#: 626 B per texel at band 14, nothing fixed)
+VOXELIZE_GRID_BYTES = 2.125
+VOXELIZE_FIXED_BYTES = 0.0
+VOXELIZE_NEAR_BYTES = 24 * 0.9
+VOXELIZE_TEXEL_BYTES = 626.0 - VOXELIZE_NEAR_BYTES * 14
 DEFAULT_BAND = 3
 #: the run holds, by what the code stores (docs/performance.md, "Memory, by what the code stores"), per grid voxel
-#: the inside and free masks, the base's labels and the core's distance byte, and per inside voxel the core's sparse
+#: the inside mask, the free mask's bits and the core's distance byte, and per inside voxel the core's sparse
 #: sigma_t and albedo; then it peaks in one of two stages:
-RUN_GRID_BYTES = 4.0
+RUN_GRID_BYTES = 2.125
 RUN_INSIDE_BYTES = 24.0
 #: - a step: per free voxel the variables, momentum, their replacements, index, share and gradient (100 B) and the
 #:   core's fixed-point gradient sums (48 B); with them Spot 40 mm's iterations come to 2.87 GiB against the
@@ -71,11 +75,12 @@ STEP_TEXEL_BYTES = 128.0
 FIGURES_FREE_BYTES = 40.0
 FIGURES_TEXEL_BYTES = 4800.0
 #: a run with a shell stores the core's medium only for its band (the free voxels: ``BandMedium``), so its held
-#: per-inside term counts the free voxels; its iterations then peaked at 1.49x (Spot 40 mm) and 1.40x (60 mm, both
-#: 1 mm shells) what the held and step terms give (bench/results/mesh_40mm_shell1_band.json,
-#: mesh_60mm_shell1_band.json: the renderer's set-up copies the inside mask and indexes the core voxels it skips):
-#: the larger factor, rounded up, bounds a shell run's step stage (held and step terms)
-SHELL_STEP_FACTOR = 1.5
+#: per-inside term counts the free voxels; its iterations then peaked at 1.59x (Spot 40 mm) and 1.45x (60 mm, both
+#: 1 mm shells) what the held and step terms give (bench/results/stages_spot.json, 40mm_shell1_new_s58 and
+#: 60mm_shell1_new_s58, run.peak_rss_gb_by_stage.after_iterations less the base and the mesh: the renderer's
+#: set-up indexes the core voxels it skips, the step's temporaries): the larger factor, rounded up, bounds a shell
+#: run's step stage (held and step terms)
+SHELL_STEP_FACTOR = 1.6
 #: seconds per iteration of the passes (4-spp gradient, 16-spp forward, the loss) at ``TEXELS_REF`` texels, from
 #: white on 2 cores: 11.19 s on Spot 20 mm (bench/results/mesh_20mm.json, render + gradient + loss)
 PASS_SECONDS_REF = 11.19
@@ -159,7 +164,8 @@ class Footprint:
         (module docstring)."""
         if self.kind == "slab":
             return BASE_BYTES + SLAB_VOXEL_BYTES * self.grid_voxels + FIGURES_TEXEL_BYTES * self.texels
-        voxelize = VOXELIZE_GRID_BYTES * self.grid_voxels + VOXELIZE_FIXED_BYTES + VOXELIZE_TEXEL_BYTES * self.texels
+        per_texel = VOXELIZE_TEXEL_BYTES + VOXELIZE_NEAR_BYTES * self.band
+        voxelize = VOXELIZE_GRID_BYTES * self.grid_voxels + VOXELIZE_FIXED_BYTES + per_texel * self.texels
         medium_voxels = self.free_voxels if self.shell else self.inside_voxels
         held = RUN_GRID_BYTES * self.grid_voxels + RUN_INSIDE_BYTES * medium_voxels
         step = (held + STEP_FREE_BYTES * self.free_voxels + STEP_TEXEL_BYTES * self.texels) * (

@@ -37,7 +37,7 @@ def test_compact_shares_are_the_dense_array():
     free, tr = _scene(rng)
     want = _dense(free, tr)
     fs = tr.applied(white_fixed_shares(free, INKS), INKS)
-    assert fs.shape == want.shape and fs.free is free  # the mask is kept by reference
+    assert fs.shape == want.shape and np.array_equal(fs.free, free)  # the mask, kept as bits
     np.testing.assert_array_equal(fs.dense(), want)
     np.testing.assert_array_equal(np.asarray(fs), want)
     ix = rng.permutation(free.size)[:50]
@@ -135,3 +135,20 @@ def test_a_core_mixture_is_what_scene_records_rebuild():
     np.testing.assert_array_equal(fixed.dense()[~free], np.broadcast_to(core, (int((~free).sum()), len(INKS))))
     assert not fixed.dense()[free].any()
     np.testing.assert_array_equal(scene_fixed_shares(INKS, free).dense(), white_fixed_shares(free, INKS).dense())
+
+
+@pytest.mark.parametrize("step", [8, 16, 1 << 24])  # slabs smaller than the mask, and one slab
+def test_packed_mask_reads_back_the_mask(monkeypatch, step):
+    from inkopt.model.fixed import PackedMask
+
+    monkeypatch.setattr(PackedMask, "STEP", step)
+    rng = np.random.default_rng(3)
+    mask = rng.random((3, 5, 7)) < 0.4  # 105 voxels: not a multiple of 8
+    pm = PackedMask(mask)
+    assert pm.shape == mask.shape and pm.size == mask.size and pm.count == int(mask.sum())
+    assert pm.bits.nbytes == 14 and not pm.all() and PackedMask(np.ones((2, 3, 5), bool)).all()
+    np.testing.assert_array_equal(pm.dense(), mask)
+    np.testing.assert_array_equal(pm.nonzero(), np.flatnonzero(mask))
+    idx = rng.integers(0, mask.size, 50)
+    np.testing.assert_array_equal(pm.at(idx), mask.reshape(-1)[idx])
+    np.testing.assert_array_equal(pm.range(96, 200), mask.reshape(-1)[96:])

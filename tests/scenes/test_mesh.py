@@ -21,25 +21,34 @@ def sphere():
     return sph, voxelize(mesh_from_trimesh(sph, scale=1.0, up="z"))
 
 
-def test_sphere_volume_and_sdf(sphere):
+def test_sphere_volume_and_depth(sphere):
     sph, vo = sphere
     assert vo.voxel_mm == pytest.approx([25.4 / 300] * 3)
     vol = vo.inside.sum() * np.prod(vo.voxel_mm)
     assert vol == pytest.approx(sph.volume, rel=0.01)  # 0.02 % in practice; 47 voxels across
-    # analytic sphere SDF (the icosphere's faces lie within ~2 um of the sphere): exact within the band,
-    # correctly signed everywhere
+    # analytic sphere SDF (the icosphere's faces lie within ~2 um of the sphere): the inside mask is its sign, the
+    # near depths are exact for the inside voxels less than the band deep, and listed for no other voxel
     nz, ny, nx = vo.shape
     zz, yy, xx = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")
     pos = vo.origin_mm + (np.stack([xx, yy, zz], -1) + 0.5) * vo.voxel_mm
-    true = np.linalg.norm(pos - [0, 0, 2.0], axis=-1) - 2.0
-    band = np.abs(true) < vo.band_mm - 0.01
-    assert np.abs(vo.sdf[band] - true[band]).max() < 0.005
+    true = (np.linalg.norm(pos - [0, 0, 2.0], axis=-1) - 2.0).reshape(-1)
     clear = np.abs(true) > 0.005
-    assert np.all((vo.sdf[clear] < 0) == (true[clear] < 0))
-    assert np.all(vo.inside == (vo.sdf < 0))
-    # far field: interpolated from exact distances every 8 voxels, off by at most half that block's diagonal
-    assert np.abs(vo.sdf - true).max() < 0.5 * 8 * np.linalg.norm(vo.voxel_mm)
-    assert vo.sdf.dtype == np.float32 and vo.inside.dtype == bool
+    assert np.all(vo.inside.reshape(-1)[clear] == (true[clear] < 0))
+    dp = vo.depth
+    assert dp.index.dtype == np.int64 and dp.mm.dtype == np.float32 and vo.inside.dtype == bool
+    assert len(np.unique(dp.index)) == len(dp.index) and vo.inside.reshape(-1)[dp.index].all()
+    assert np.abs(dp.mm - (-true[dp.index])).max() < 0.005
+    assert np.all((dp.mm > 0) & (dp.mm < vo.band_mm))
+    listed = np.zeros(true.size, bool)
+    listed[dp.index] = True
+    deep_enough = vo.inside.reshape(-1) & (-true < vo.band_mm - 0.01)
+    assert np.all(listed[deep_enough])
+    assert not listed[vo.inside.reshape(-1) & (-true > vo.band_mm + 0.01)].any()
+    # within: the voxels at most that deep; a depth beyond the band is refused
+    sel = dp.within(0.2)
+    assert np.array_equal(np.sort(sel), np.sort(dp.index[dp.mm <= np.float32(0.2)]))
+    with pytest.raises(ValueError, match="band"):
+        dp.within(vo.band_mm)
 
 
 def test_sphere_texels_and_normals(sphere):

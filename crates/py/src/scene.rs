@@ -50,7 +50,7 @@ impl Scene {
         let medium = medium.build(py, [nz, ny, nx])?;
         if let Some(m) = inside {
             check_shape(m.shape(), &[nz, ny, nx], "inside")?;
-            geo = geo.with_inside(c_slice(&m, "inside")?.to_vec()).map_err(err)?;
+            geo = geo.with_inside(c_slice(&m, "inside")?).map_err(err)?; // read in place, not copied
         }
         if let Some(nrm) = &normals {
             check_shape(nrm.shape(), &[nz, ny, nx, 3], "normals")?;

@@ -89,7 +89,7 @@ class Translucency:
         rows = fixed.at(index)
         pos = np.searchsorted(index, self.index)
         rows[pos] = self._constrain(rows[pos], inks)
-        return FixedShares(fixed.free, fixed.held, index, rows)
+        return FixedShares(fixed.mask, fixed.held, index, rows)
 
     def _constrain(self, rows: np.ndarray, inks: InkTable) -> np.ndarray:
         """The constrained voxels' fixed shares (K, N) float32 from their unconstrained ones (changed in place)."""

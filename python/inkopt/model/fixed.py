@@ -3,11 +3,11 @@
 A mesh run fixes 100 % white in every voxel that is not a variable (outside the object, the core below
 ``--shell-mm``) and, with a translucency constraint, a share of transparent ink in some voxels. As a dense float32
 array that is 20 bytes per grid voxel (1.2 GB for a 40 mm figurine), almost all of it one repeated row.
-:class:`FixedShares` keeps the same shares as a ``free`` mask (the voxels without a fixed share), the one row the
-others hold, and the rows of the few voxels that differ (``index``, ``rows``). It behaves as the dense array where
-one is needed (``np.asarray(fixed)``, ``.shape``), and gives rows (:meth:`at`), planes and the dense bytes' hash
-without making it. It is the one form of fixed shares: scenes build it, ``optim.param`` takes it, and a dense
-array converts with :meth:`from_dense`.
+:class:`FixedShares` keeps the same shares as a ``free`` mask (the voxels without a fixed share; a bit per voxel,
+:class:`PackedMask`), the one row the others hold, and the rows of the few voxels that differ (``index``,
+``rows``). It behaves as the dense array where one is needed (``np.asarray(fixed)``, ``.shape``), and gives rows
+(:meth:`at`), planes and the dense bytes' hash without making it. It is the one form of fixed shares: scenes build
+it, ``optim.param`` takes it, and a dense array converts with :meth:`from_dense`.
 """
 
 from __future__ import annotations
@@ -15,30 +15,82 @@ from __future__ import annotations
 import numpy as np
 
 
+class PackedMask:
+    """A (z, y, x) bool mask as bits: ``bits`` (ceil(V / 8),) uint8, ``np.packbits`` of its C-order flattening
+    (1 bit per voxel), packed and read a slab at a time."""
+
+    #: voxels packed or unpacked at a time (a multiple of 8: slabs start on byte boundaries)
+    STEP = 1 << 24
+
+    def __init__(self, mask: np.ndarray):
+        mask = np.asarray(mask, bool)
+        if mask.ndim != 3:
+            raise ValueError(f"free must be a (z, y, x) mask, got shape {mask.shape}")
+        self.shape = tuple(int(s) for s in mask.shape)
+        flat = mask.reshape(-1)
+        self.bits = np.empty(-(-flat.size // 8), np.uint8)
+        for a in range(0, flat.size, self.STEP):
+            self.bits[a // 8 : (a + self.STEP + 7) // 8] = np.packbits(flat[a : a + self.STEP])
+        #: voxels in the mask
+        self.count = sum(int(np.count_nonzero(self.range(a, a + self.STEP))) for a in range(0, self.size, self.STEP))
+
+    @property
+    def size(self) -> int:
+        return int(np.prod(self.shape, dtype=np.int64))
+
+    def all(self) -> bool:
+        return self.count == self.size
+
+    def at(self, index: np.ndarray) -> np.ndarray:
+        """(K,) bool: the mask at the flat (z, y, x) indices ``index`` ((K,) int64)."""
+        index = np.asarray(index, np.int64)
+        return ((self.bits[index >> 3] >> (7 - (index & 7)).astype(np.uint8)) & 1).astype(bool)
+
+    def range(self, a: int, b: int) -> np.ndarray:
+        """(min(b, V) - a,) bool: the flat voxels a:b (a a multiple of 8)."""
+        b = min(b, self.size)
+        return np.unpackbits(self.bits[a // 8 : (b + 7) // 8], count=b - a).astype(bool)
+
+    def dense(self) -> np.ndarray:
+        """The (z, y, x) bool mask (1 byte per voxel, a new array)."""
+        out = np.empty(self.shape, bool)
+        flat = out.reshape(-1)
+        for a in range(0, flat.size, self.STEP):
+            flat[a : a + self.STEP] = self.range(a, a + self.STEP)
+        return out
+
+    def nonzero(self) -> np.ndarray:
+        """(count,) int64 sorted flat indices of the voxels in the mask, a slab at a time."""
+        parts = [np.flatnonzero(self.range(a, a + self.STEP)) + a for a in range(0, self.size, self.STEP)]
+        return np.concatenate(parts or [np.empty(0, np.int64)]).astype(np.int64, copy=False)
+
+
 class FixedShares:
-    """Fixed ink shares (z, y, x, N) float32: voxels where ``free`` ((z, y, x) bool, kept by reference) is False
-    hold ``held`` ((N,) float32), those where it is True none, except the voxels ``index`` ((K,) int64, strictly
-    increasing flat (z, y, x) indices), which hold ``rows`` ((K, N) float32)."""
+    """Fixed ink shares (z, y, x, N) float32: voxels where the ``free`` mask ((z, y, x) bool, or a ``PackedMask``;
+    kept as ``mask``, a bit per voxel) is False hold ``held`` ((N,) float32), those where it is True none, except
+    the voxels ``index`` ((K,) int64, strictly increasing flat (z, y, x) indices), which hold ``rows`` ((K, N)
+    float32). ``free`` makes the dense mask when asked (1 byte per voxel, a new array)."""
 
     ndim = 4
     dtype = np.dtype(np.float32)
 
-    def __init__(
-        self, free: np.ndarray, held: np.ndarray, index: np.ndarray | None = None, rows: np.ndarray | None = None
-    ):
-        self.free = np.asarray(free, bool)
+    def __init__(self, free, held: np.ndarray, index: np.ndarray | None = None, rows: np.ndarray | None = None):
+        self.mask = free if isinstance(free, PackedMask) else PackedMask(free)
         self.held = np.asarray(held, np.float32).reshape(-1)
         n = len(self.held)
         self.index = np.zeros(0, np.int64) if index is None else np.asarray(index, np.int64).reshape(-1)
         self.rows = np.zeros((0, n), np.float32) if rows is None else np.asarray(rows, np.float32).reshape(-1, n)
-        if self.free.ndim != 3:
-            raise ValueError(f"free must be a (z, y, x) mask, got shape {self.free.shape}")
         if len(self.rows) != len(self.index):
             raise ValueError(f"{len(self.index)} indexed voxels but {len(self.rows)} rows")
         if len(self.index) and (
-            np.any(np.diff(self.index) <= 0) or self.index[0] < 0 or self.index[-1] >= self.free.size
+            np.any(np.diff(self.index) <= 0) or self.index[0] < 0 or self.index[-1] >= self.mask.size
         ):
             raise ValueError("fixed-share index must be strictly increasing voxel indices inside the grid")
+
+    @property
+    def free(self) -> np.ndarray:
+        """(z, y, x) bool: the voxels without a fixed share (unpacked from ``mask``: a new array)."""
+        return self.mask.dense()
 
     @classmethod
     def none(cls, shape, n_inks: int) -> FixedShares:
@@ -61,12 +113,12 @@ class FixedShares:
 
     @property
     def shape(self) -> tuple:
-        return self.free.shape + (len(self.held),)
+        return self.mask.shape + (len(self.held),)
 
     def at(self, index: np.ndarray) -> np.ndarray:
         """(K, N) float32: the shares of the voxels ``index`` ((K,) flat indices), as the dense array holds them."""
         index = np.asarray(index, np.int64)
-        out = np.where(self.free.reshape(-1)[index][:, None], np.float32(0), self.held[None, :]).astype(np.float32)
+        out = np.where(self.mask.at(index)[:, None], np.float32(0), self.held[None, :]).astype(np.float32)
         if len(self.index):
             pos = np.searchsorted(self.index, index).clip(0, len(self.index) - 1)
             hit = self.index[pos] == index
@@ -75,7 +127,7 @@ class FixedShares:
 
     def plane(self, z: int) -> np.ndarray:
         """(y, x, N) float32: layer z of the dense array."""
-        ny, nx = self.free.shape[1:]
+        ny, nx = self.mask.shape[1:]
         return self.at(np.arange(z * ny * nx, (z + 1) * ny * nx, dtype=np.int64)).reshape(ny, nx, -1)
 
     def dense(self) -> np.ndarray:
@@ -91,7 +143,7 @@ class FixedShares:
 
     def digest(self, h) -> None:
         """Feed the dense array's bytes (C order) to the hash ``h``, one layer at a time."""
-        for z in range(self.free.shape[0]):
+        for z in range(self.mask.shape[0]):
             h.update(np.ascontiguousarray(self.plane(z)).data)
 
 

@@ -102,8 +102,41 @@ class Labels:
     def shape(self):
         return self.labels.shape
 
+    def labels_at(self, index: np.ndarray) -> np.ndarray:
+        """(K,) uint8 labels of the voxels ``index`` ((K,) int64 flat (z, y, x) indices)."""
+        return self.labels.reshape(-1)[index]
+
     def arrays(self) -> dict:
         return {"labels": self.labels, **self.inks.to_arrays()}
+
+
+class InsideLabels(Labels):
+    """``Labels`` of one ink ``label`` on every voxel of ``inside`` ((z, y, x) bool, kept by reference) and
+    ``EMPTY`` elsewhere, with no label array of its own: an object's base medium (white inside) costs nothing per
+    voxel. ``labels`` makes the dense (z, y, x) uint8 array when asked (1 byte per voxel, not kept)."""
+
+    def __init__(self, inside: np.ndarray, label: int, inks: InkTable):
+        self.inside = np.asarray(inside, bool)
+        self.label = int(label)
+        self.inks = inks
+        if self.inside.ndim != 3:
+            raise VolumeError(f"an inside mask must be (z, y, x), got shape {self.inside.shape}")
+        if not 0 <= self.label < len(inks):
+            raise VolumeError(f"label {self.label} is not an ink of the table's {len(inks)}")
+
+    @property
+    def labels(self) -> np.ndarray:
+        return np.where(self.inside, np.uint8(self.label), np.uint8(EMPTY))
+
+    @property
+    def shape(self):
+        return self.inside.shape
+
+    def labels_at(self, index: np.ndarray) -> np.ndarray:
+        return np.where(self.inside.reshape(-1)[index], np.uint8(self.label), np.uint8(EMPTY))
+
+    def __repr__(self) -> str:
+        return f"InsideLabels(ink {self.label} on {self.inside.shape} inside, {len(self.inks)} inks)"
 
 
 Medium = Dense | Mixture | Labels
@@ -131,10 +164,10 @@ class Band:
         """The band of an object whose inside voxels ((z, y, x) bool) are free or hold fixed shares ``fixed``
         (``model.fixed.FixedShares``: ``held`` in every voxel that is not free, except its indexed rows): the
         inside voxels that are free or indexed, and ``held`` as the core."""
-        flat, free_flat = inside.reshape(-1), fixed.free.reshape(-1)
-        step = 1 << 24  # voxels at a time: no grid-sized temporary
+        flat, mask = inside.reshape(-1), fixed.mask
+        step = mask.STEP  # voxels at a time: no grid-sized temporary
         free = np.concatenate(
-            [np.flatnonzero(free_flat[a : a + step] & flat[a : a + step]) + a for a in range(0, flat.size, step)]
+            [np.flatnonzero(mask.range(a, a + step) & flat[a : a + step]) + a for a in range(0, flat.size, step)]
             or [np.empty(0, np.int64)]
         )
         rows = fixed.index[flat[fixed.index]]

@@ -228,7 +228,7 @@ class Volume:
             elif isinstance(med, Mixture):
                 s[lo : lo + chunk], a[lo : lo + chunk] = mix(med.mixture.reshape(-1, len(med.inks))[ix], med.inks)
             else:
-                lab = med.labels.reshape(-1)[ix]
+                lab = med.labels_at(ix)
                 full = lab != EMPTY
                 s[lo : lo + chunk] = np.where(full[:, None], med.inks.sigma_s[np.where(full, lab, 0)], 0)
                 a[lo : lo + chunk] = np.where(full[:, None], med.inks.sigma_a[np.where(full, lab, 0)], 0)

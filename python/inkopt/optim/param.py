@@ -38,16 +38,18 @@ class Parameterization:
             np.any(fs.held < 0)
             or np.any(fs.rows < 0)
             or np.any(fs.rows.sum(-1) > 1 + 1e-5)
-            or (fs.held.sum() > 1 + 1e-5 and not fs.free.all())
+            or (fs.held.sum() > 1 + 1e-5 and not fs.mask.all())
         ):
             raise ValueError(BAD_SHARES)
         self.fixed_share, self.n_inks = fs, fs.shape[-1]
         held_free = np.clip(1.0 - fs.held.sum(), 0.0, 1.0) > 1e-6  # the held row leaves room: variables too
-        candidate = np.ones(fs.free.shape, bool) if held_free else fs.free.copy()
-        candidate.reshape(-1)[fs.index] = np.clip(1.0 - fs.rows.sum(-1), 0.0, 1.0) > 1e-6
-        #: flat (z, y, x) indices of the free voxels (F,) int64 (the renderer's gradient slots are in this order)
-        self.free_index = np.flatnonzero(candidate)
-        del candidate
+        room = np.clip(1.0 - fs.rows.sum(-1), 0.0, 1.0) > 1e-6  # indexed voxels whose rows leave room
+        # the free (or, with room in the held row, all) voxels not indexed, and the indexed ones with room
+        base = np.arange(fs.mask.size, dtype=np.int64) if held_free else fs.mask.nonzero()
+        #: flat (z, y, x) indices of the free voxels (F,) int64, increasing (the renderer's gradient slots are in
+        #: this order)
+        self.free_index = np.union1d(base[~np.isin(base, fs.index)], fs.index[room]) if len(fs.index) else base
+        del base
         #: the free voxels' free share (F,) and fixed shares (F, N) (None: all zero), made in pieces
         self.share_f = np.empty(len(self.free_index), np.float32)
         any_fixed = False

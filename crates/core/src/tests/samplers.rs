@@ -189,7 +189,7 @@ fn jumps_across_empty_space_leave_renders_unchanged() {
         |m: &[u8], v: f32| -> Vec<f32> { (0..3 * m.len()).map(|i| if m[i / 3] == 0 { 0.0 } else { v }).collect() };
     let med = |m: &[u8]| DenseMedium::from_interleaved(&coeffs(m, 20.0), &coeffs(m, 0.5)).unwrap();
     let (med_both, med_lower) = (med(&both), med(&lower));
-    let geo = |m: &[u8]| Geometry::new(n, [0.05; 3], Boundary::Box, 1.5, 0.4).unwrap().with_inside(m.to_vec()).unwrap();
+    let geo = |m: &[u8]| Geometry::new(n, [0.05; 3], Boundary::Box, 1.5, 0.4).unwrap().with_inside(m).unwrap();
     let jumps = geo(&both);
     assert!(jumps.brick_empty.as_ref().unwrap().iter().any(|&e| e >= 2), "the gap should hold empty bricks");
     let mut stepped = geo(&both);

@@ -99,21 +99,27 @@ impl Geometry {
         self.n.iter().map(|&k| k as usize).product()
     }
 
-    pub fn with_inside(mut self, inside: Vec<u8>) -> Result<Self, String> {
+    /// Sets the inside mask (non-zero = inside; x fastest, one byte per voxel, read and not kept) and computes the
+    /// safe and empty distances from it. Works in three bytes per voxel besides the mask: the result and two
+    /// erosion buffers.
+    pub fn with_inside(mut self, inside: impl AsRef<[u8]>) -> Result<Self, String> {
         use rayon::prelude::*;
+        let inside = inside.as_ref();
         if inside.len() != self.voxel_count() {
             return Err("inside mask size differs from the grid".into());
         }
         let n = [self.n[0] as usize, self.n[1] as usize, self.n[2] as usize];
-        let safe = safe_distances(&inside, n);
-        let mut dist: Vec<i8> = safe.par_iter().map(|&s| if s > 0 { s as i8 } else { -1 }).collect();
-        drop(safe);
+        // safe distances turned into the signed byte in place (same size and alignment: no second array)
+        let mut dist: Vec<i8> =
+            safe_distances(inside, n).into_iter().map(|s| if s > 0 { s as i8 } else { -1 }).collect();
         // On periodic axes a flight leaving the grid re-enters on the other side: no empty distances (every outside
         // voxel -1, "next to the object") and no jumps there.
         if self.boundary == Boundary::Box {
-            let empty = empty_distances(&inside, n);
-            dist.par_iter_mut().zip(&empty).filter(|(d, _)| **d < 0).for_each(|(d, &e)| *d = -(e as i8));
-            self.brick_empty = Some(brick_empty_distances(&inside, n));
+            // each erosion an outside voxel survives deepens its -1 by one (inside voxels are never in the set):
+            // `empty_distances` counted into `dist` directly
+            let outside = inside.par_iter().map(|&m| (m == 0) as u8).collect();
+            erode_counting(outside, n, 1, SAFE_CAP, &mut dist, |d, c| *d -= c as i8);
+            self.brick_empty = Some(brick_empty_distances(inside, n));
         }
         self.dist = Some(dist);
         Ok(self)
@@ -241,21 +247,36 @@ pub fn empty_distances(inside: &[u8], n: [usize; 3]) -> Vec<u8> {
 /// For a set (1 = in it, 0 = not), the number of successive erosions by the 3 x 3 x 3 cube each voxel survives
 /// (its Chebyshev distance to the nearest voxel not in the set), capped at `cap`; beyond the grid is in the set
 /// if `border` is 1.
-fn erosion_depths(mut cur: Vec<u8>, n: [usize; 3], border: u8, cap: u8) -> Vec<u8> {
+fn erosion_depths(cur: Vec<u8>, n: [usize; 3], border: u8, cap: u8) -> Vec<u8> {
+    let mut depth = cur.clone();
+    erode_counting(cur, n, border, cap, &mut depth, |d, c| *d += c);
+    depth
+}
+
+/// Erodes the set `cur` (1 = in it) by the 3 x 3 x 3 cube up to `cap` - 1 times (beyond the grid is in the set if
+/// `border` is 1), calling `count(acc[j], c)` after each erosion with voxel j's membership c (0 or 1); stops once
+/// the set is empty.
+fn erode_counting<T: Send>(
+    mut cur: Vec<u8>,
+    n: [usize; 3],
+    border: u8,
+    cap: u8,
+    acc: &mut [T],
+    count: impl Fn(&mut T, u8) + Sync,
+) {
     use rayon::prelude::*;
     let plane = n[0] * n[1];
-    let mut depth = cur.clone();
     let mut tmp = vec![0u8; cur.len()];
     for _ in 1..cap {
         for a in 0..3 {
             erode_axis(&cur, &mut tmp, n, a, border);
             std::mem::swap(&mut cur, &mut tmp);
         }
-        let any = depth
+        let any = acc
             .par_chunks_mut(plane)
             .zip(cur.par_chunks(plane))
             .map(|(s, c)| {
-                s.iter_mut().zip(c).for_each(|(s, &c)| *s += c);
+                s.iter_mut().zip(c).for_each(|(s, &c)| count(s, c));
                 c.iter().any(|&c| c != 0)
             })
             .reduce(|| false, |x, y| x || y);
@@ -263,7 +284,6 @@ fn erosion_depths(mut cur: Vec<u8>, n: [usize; 3], border: u8, cap: u8) -> Vec<u
             break;
         }
     }
-    depth
 }
 
 /// out = cur eroded along axis a by one voxel (a voxel stays only if both neighbours on that axis are in the set;

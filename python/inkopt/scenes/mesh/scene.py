@@ -31,7 +31,6 @@ import numpy as np
 
 from ...errors import ParameterError
 from ...model import (
-    EMPTY,
     Band,
     FixedShares,
     InkTable,
@@ -41,6 +40,7 @@ from ...model import (
     transparent_ink,
 )
 from ...model.fixed import DEFAULT_CORE, core_shares
+from ...model.media import InsideLabels
 from ...model.volume import check_grid_budget
 from ...rundir import RunDir, SceneRecord
 from ...units import voxel_mm
@@ -57,16 +57,15 @@ VIEW_SIZE = 320  # pixels per view in views.png (tests lower it)
 
 
 def free_voxels(vox: VoxelizedObject, shell_mm: float | None = None) -> np.ndarray:
-    """(z, y, x) bool: the voxels the optimiser may change. All inside voxels, or with ``shell_mm`` (mm, > 0)
-    those with sdf >= -shell_mm, plus every texel voxel (so a shell thinner than half a voxel still frees the
-    surface)."""
+    """(z, y, x) bool: the voxels the optimiser may change. All inside voxels, or with ``shell_mm`` (mm, > 0, less
+    than the voxelization's exact-distance band ``vox.depth.band_mm``) those at most ``shell_mm`` below the surface
+    (``NearDepth.within``), plus every texel voxel (so a shell thinner than half a voxel still frees the surface)."""
     if shell_mm is None:
         return vox.inside.copy()
     if not (np.isfinite(shell_mm) and shell_mm > 0):
         raise ParameterError(f"`shell_mm` must be a positive thickness in mm, got {shell_mm}")
-    free = np.empty_like(vox.inside)
-    for z in range(0, free.shape[0], 32):  # a slab of layers at a time: no grid-sized temporary
-        free[z : z + 32] = vox.inside[z : z + 32] & (vox.sdf[z : z + 32] >= -np.float32(shell_mm))
+    free = np.zeros(vox.inside.shape, bool)
+    free.reshape(-1)[vox.depth.within(shell_mm)] = True
     free[tuple(vox.texels.voxel.T)] = True
     return free
 
@@ -75,16 +74,16 @@ def free_voxels(vox: VoxelizedObject, shell_mm: float | None = None) -> np.ndarr
 class MeshScene:
     """A voxelized object ready to optimise.
 
-    mesh: the loaded mesh (mm, z up); vox: its voxelization (``sdf`` dropped); volume: a label Volume giving the
+    mesh: the loaded mesh (mm, z up); vox: its voxelization (``depth`` dropped); volume: a label Volume giving the
     geometry (inside, normals, box boundary, origin_mm) and inks (white labels inside; the optimiser takes its
-    fixed shares from ``fixed_share``); free: (z, y, x) bool variables; fixed_share: the (z, y, x, N) fixed ink
-    shares (:class:`~inkopt.model.FixedShares`).
+    fixed shares from ``fixed_share``); fixed_share: the (z, y, x, N) fixed ink shares
+    (:class:`~inkopt.model.FixedShares`), whose free mask (a bit per voxel) says which voxels are variables
+    (``free``).
     """
 
     mesh: TexturedMesh
     vox: VoxelizedObject
     volume: Volume
-    free: np.ndarray
     fixed_share: FixedShares
     shell_mm: float | None
     voxelize_seconds: float
@@ -94,6 +93,11 @@ class MeshScene:
     translucency: Translucency | None = None
     core: str = DEFAULT_CORE
     kind = "mesh"
+
+    @property
+    def free(self) -> np.ndarray:
+        """(z, y, x) bool: the voxels that are variables (unpacked from ``fixed_share``'s bits: a new array)."""
+        return self.fixed_share.free
 
     @property
     def texels(self):
@@ -141,7 +145,7 @@ class MeshScene:
             f"mesh {self.height_mm:.1f} mm high, target colour from {describe_colour_source(self.mesh)}: "
             f"grid {nx} x {ny} x {nz} voxels "
             f"({self.volume.voxel_mm[0] * 1000:.1f} µm), {int(self.vox.inside.sum())} inside, "
-            f"{int(self.free.sum())} free, {len(self.texels)} texels; voxelized in {self.voxelize_seconds:.1f} s"
+            f"{self.fixed_share.mask.count} free, {len(self.texels)} texels; voxelized in {self.voxelize_seconds:.1f} s"
         )
 
     def report_fields(self) -> dict:
@@ -150,7 +154,7 @@ class MeshScene:
             "voxels": int(nz * ny * nx),
             "grid_zyx": [nz, ny, nx],
             "inside_voxels": int(self.vox.inside.sum()),
-            "free_voxels": int(self.free.sum()),
+            "free_voxels": self.fixed_share.mask.count,
             "texels": len(self.texels),
             "voxelize_seconds": self.voxelize_seconds,
             "shell_mm": self.shell_mm,
@@ -184,9 +188,9 @@ class MeshScene:
         return paths
 
 
-#: a lower bound of the memory per grid voxel while a mesh is voxelized and rendered (bytes): the SDF (4) and the
-#: inside mask (1) of the voxelization, the renderer's slot index (4)
-MIN_BYTES_PER_GRID_VOXEL = 9
+#: a lower bound of the memory per grid voxel while a mesh is voxelized and rendered (bytes): the inside and free
+#: masks (1 each) and the core's signed-distance byte
+MIN_BYTES_PER_GRID_VOXEL = 3
 
 
 def check_grid_size(mesh: TexturedMesh, dpi: float) -> None:
@@ -222,29 +226,26 @@ def build_mesh_scene(spec: MeshSpec, inks: InkTable) -> MeshScene:
     mesh = load_spec_mesh(spec)
     vmm = voxel_mm(spec.dpi)
     check_grid_size(mesh, spec.dpi)
-    # The SDF is exact only within ``band`` voxels of the surface; the shell's and the translucent regions'
-    # boundaries must lie inside it.
+    # Depths below the surface are exact and kept only within ``band`` voxels of it; the shell's and the translucent
+    # regions' boundaries must lie inside it.
     band = 3.0
     for d in (spec.shell_mm, depth_mm):
         band = band if d is None else max(band, np.ceil(d / vmm) + 2.0)
     vox = voxelize(mesh, voxel_mm=vmm, band=band)
     seconds = time.perf_counter() - t0
-    free = free_voxels(vox, spec.shell_mm)
     core = core_shares(spec.core, inks)
-    fixed = FixedShares(free, core)
+    fixed = FixedShares(free_voxels(vox, spec.shell_mm), core)  # the free mask kept as bits
     tr = None
-    if spec.translucency is not None:  # before the SDF is dropped
+    if spec.translucency is not None:  # before the depths are dropped
         tr = mesh_translucency(vox, mesh_texel_share(mesh, vox, mask), inks, depth_mm, spec.translucency)
         if tr is not None:
             fixed = tr.applied(fixed, inks)
-    vox.sdf = None  # 4 bytes per grid voxel no longer needed (before the volume's arrays are made)
+    vox.depth = None  # the near voxels' depths are no longer needed (before the volume's arrays are made)
     # The base volume's medium is not the optimiser's (it takes geometry and inks from it, and the fixed shares
-    # from ``fixed``): white labels inside, 1 byte per voxel, instead of a (z, y, x, N) mixture.
-    labels = np.where(vox.inside, np.uint8(inks.index("white")), np.uint8(EMPTY))
-    vol = Volume.from_labels(
-        voxel_mm=vox.voxel_mm,
-        labels=labels,
-        inks=inks,
+    # from ``fixed``): white labels inside, read from the inside mask (nothing per voxel of its own).
+    vol = Volume(
+        vox.voxel_mm,
+        InsideLabels(vox.inside, inks.index("white"), inks),
         g=inks.g,
         inside=vox.inside,
         normals=vox.normals,
@@ -253,4 +254,4 @@ def build_mesh_scene(spec: MeshSpec, inks: InkTable) -> MeshScene:
         band=None if spec.shell_mm is None else Band.of_fixed(vox.inside, fixed),  # a core below the shell
     )
     path = str(Path(spec.path).resolve())
-    return MeshScene(mesh, vox, vol, free, fixed, spec.shell_mm, seconds, path, spec.up, tr, spec.core)
+    return MeshScene(mesh, vox, vol, fixed, spec.shell_mm, seconds, path, spec.up, tr, spec.core)

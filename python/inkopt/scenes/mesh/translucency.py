@@ -30,15 +30,17 @@ def mesh_texel_share(mesh, vox, mask: np.ndarray | None = None) -> np.ndarray:
 def mesh_translucency(
     vox, texel_share: np.ndarray, inks: InkTable, depth_mm: float | None = None, source: str = ""
 ) -> Translucency | None:
-    """The constraint of a voxelized mesh (its ``sdf`` still present when ``depth_mm`` is given): inside voxels
+    """The constraint of a voxelized mesh (its ``depth`` still present when ``depth_mm`` is given): inside voxels
     within ``depth_mm`` of the surface take their nearest texel's share ``texel_share`` (I,)."""
     from scipy.spatial import cKDTree
 
     transparent_ink(inks)
     depth_mm = check_depth(depth_mm)
-    sel = vox.inside.copy()
-    if depth_mm is not None:
-        sel &= vox.sdf >= -np.float32(depth_mm)
+    if depth_mm is None:
+        sel = vox.inside.copy()
+    else:
+        sel = np.zeros(vox.inside.shape, bool)
+        sel.reshape(-1)[vox.depth.within(depth_mm)] = True
     sel[tuple(vox.texels.voxel.T)] = True
     share = np.zeros(vox.inside.shape, np.float32)
     if np.any(texel_share > 0):

@@ -10,7 +10,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 
 from ...model import SurfaceNormals, Texels
 from ...units import voxel_mm as _voxel_mm
@@ -19,16 +18,35 @@ from .load import TexturedMesh, barycentric, corner_normals, winding_number
 DEFAULT_VOXEL_MM = _voxel_mm()
 
 
-@dataclass
+@dataclass(frozen=True)
+class NearDepth:
+    """Inside voxels near the surface and their distance below it.
+
+    index (K,) int64 flat (z, y, x) indices of the inside voxels whose centre lies less than ``band_mm`` below the
+    surface (block order, each voxel once); mm (K,) float32 that distance, exact (point-to-mesh), in
+    [1e-6, band_mm). 12 bytes per near voxel (K ~ band depth x surface voxels).
+    """
+
+    index: np.ndarray
+    mm: np.ndarray
+    band_mm: float
+
+    def within(self, depth_mm: float) -> np.ndarray:
+        """(M,) int64 flat indices of the inside voxels at most ``depth_mm`` (< ``band_mm``) below the surface
+        (float32 comparison: the voxels whose signed distance is >= -depth_mm)."""
+        if not depth_mm < self.band_mm:
+            raise ValueError(f"depth {depth_mm} mm reaches the exact-distance band's {self.band_mm} mm")
+        return self.index[self.mm <= np.float32(depth_mm)]
+
+
 @dataclass
 class VoxelizedObject:
     """A mesh on the voxel grid.
 
     inside     (z, y, x) bool       voxel centre inside (generalized winding number > 0.5)
-    sdf        (z, y, x) float32    signed distance of the voxel centre to the surface, mm, negative inside
-                                    (never 0): exact where |sdf| < band_mm; beyond, correctly signed with
-                                    |sdf| >= band_mm interpolated from exact distances every 8 voxels (off by
-                                    at most 4 voxel diagonals, 0.59 mm at 300 DPI)
+    depth      ``NearDepth``: the exact distance below the surface (mm) of the inside voxels less than
+               ``band_mm`` deep (the only distances the scene reads: shell and translucency depths lie within the
+               band), a few bytes per near voxel instead of 4 per grid voxel; None once dropped
     voxel_mm   (3,) float64 (x, y, z);  origin_mm (3,) float64 (x, y, z) of voxel (0, 0, 0)'s low corner
     texels     Texels: surface voxels (inside, a 6-neighbour outside or off-grid) in C order of (z, y, x);
                face = the exposed face most aligned with the normal; normal = see ``voxelize``
@@ -39,7 +57,7 @@ class VoxelizedObject:
     """
 
     inside: np.ndarray
-    sdf: np.ndarray
+    depth: NearDepth | None
     voxel_mm: np.ndarray
     origin_mm: np.ndarray
     texels: Texels
@@ -59,7 +77,7 @@ class VoxelizedObject:
 
 
 _B1, _B2 = 8, 2  # coarse block and sub-block edge (voxels)
-#: voxels of near-surface coarse blocks queried at a time (``_inside_sdf``: ~100 bytes each while queried)
+#: voxels of near-surface coarse blocks queried at a time (``_inside_depth``: ~100 bytes each while queried)
 _NEAR_VOXELS = 1 << 20
 
 
@@ -70,14 +88,14 @@ def _on_grid(vox: np.ndarray, shape) -> tuple[np.ndarray, np.ndarray]:
     return vox[on], on
 
 
-def _inside_sdf(vs, fs, origin, v, shape, band_mm):
-    """inside (z, y, x) bool and sdf (z, y, x) float32 mm on the grid (see ``voxelize``), in two levels.
+def _inside_depth(vs, fs, origin, v, shape, band_mm) -> tuple[np.ndarray, NearDepth]:
+    """inside (z, y, x) bool on the grid and the near inside voxels' depths (``NearDepth``; see ``voxelize``), in
+    two levels.
 
     A block whose centre is farther from the surface than from any of its voxel centres (h) holds voxel centres
     of one side only. Coarse 8^3 blocks beyond h + band: one winding-number query at the centre. In the others,
     2^3 sub-blocks: beyond h + band one query; beyond h one query for the sign plus exact per-voxel distances;
-    else per-voxel winding numbers and distances. Beyond the band, |sdf| = max(band, trilinear interpolation of
-    the exact distances at the coarse block centres), off by at most half a coarse block's diagonal."""
+    else per-voxel winding numbers and distances. Only the inside mask is grid-sized (1 byte per voxel)."""
     import igl
 
     unsigned = igl.SignedDistanceType.SIGNED_DISTANCE_TYPE_UNSIGNED
@@ -93,20 +111,20 @@ def _inside_sdf(vs, fs, origin, v, shape, band_mm):
     near1 = d1 <= h1 + band_mm
     blk_in = np.zeros(len(bidx), bool)
     blk_in[~near1] = winding_number(vs, fs, centres(bidx[~near1], _B1)) > 0.5
-    # the grid's arrays at its own shape, filled one coarse layer at a time (no padded copy)
-    inside, sdf = np.empty(shape, bool), np.empty(shape, np.float32)
+    del d1
+    # the grid's mask at its own shape, filled one coarse layer at a time (no padded copy)
+    inside = np.empty(shape, bool)
     blk = blk_in.reshape(tuple(nb))
     for kz in range(int(nb[0])):
-        layer = np.repeat(np.repeat(blk[kz], _B1, 0), _B1, 1)[: shape[1], : shape[2]]
-        inside[kz * _B1 : (kz + 1) * _B1] = layer
-        sdf[kz * _B1 : (kz + 1) * _B1] = np.where(layer, np.float32(-band_mm), np.float32(band_mm))
-    flat_in, flat_sdf = inside.reshape(-1), sdf.reshape(-1)
+        inside[kz * _B1 : (kz + 1) * _B1] = np.repeat(np.repeat(blk[kz], _B1, 0), _B1, 1)[: shape[1], : shape[2]]
+    flat_in = inside.reshape(-1)
 
     r = _B1 // _B2
     sub_local = np.stack(np.meshgrid(*[np.arange(r)] * 3, indexing="ij"), -1).reshape(-1, 3)
     vox_local = np.stack(np.meshgrid(*[np.arange(_B2)] * 3, indexing="ij"), -1).reshape(-1, 3)
     near_idx = np.flatnonzero(near1)
     step = max(1, _NEAR_VOXELS // _B1**3)
+    near_lin, near_mm = [], []
     for a in range(0, len(near_idx), step):
         sub = (bidx[near_idx[a : a + step], None, :] * r + sub_local[None]).reshape(-1, 3)  # sub-block zyx
         d2 = igl.signed_distance(centres(sub, _B2), vs, fs, unsigned, -(h2 + band_mm), h2 + band_mm)[0]
@@ -120,31 +138,22 @@ def _inside_sdf(vs, fs, origin, v, shape, band_mm):
         lin = np.ravel_multi_index(tuple(vox.T), shape)
         p = centres(vox, 1)
         d = igl.signed_distance(p, vs, fs, unsigned, -band_mm, band_mm)[0]
-        d = np.where(np.isnan(d), band_mm, np.clip(np.abs(d), 1e-6, band_mm)).astype(np.float32)  # sdf != 0
+        d = np.where(np.isnan(d), band_mm, np.clip(np.abs(d), 1e-6, band_mm)).astype(np.float32)
         ins = np.repeat(sgn[need_d], _B2**3)[on]
         fine_v = np.repeat(fine[need_d], _B2**3)[on]
         ins[fine_v] = winding_number(vs, fs, p[fine_v]) > 0.5
         flat_in[lin] = ins
-        flat_sdf[lin] = np.where(ins, -d, d)
+        keep = ins & (d < np.float32(band_mm))  # inside and less than the band deep
+        near_lin.append(lin[keep])
+        near_mm.append(d[keep])
         vox, on = _on_grid((sub[~need_d, None, :] * _B2 + vox_local[None]).reshape(-1, 3), shape)  # one sign each
-        lin = np.ravel_multi_index(tuple(vox.T), shape)
-        ins = np.repeat(sgn[~need_d], _B2**3)[on]
-        flat_in[lin] = ins
-        flat_sdf[lin] = np.where(ins, -band_mm, band_mm)
-    # far field: slab by slab (bounded memory), linear interpolation of the coarse-centre distances
-    d1 = d1.reshape(tuple(nb)).astype(np.float32)
-    slab = 16
-    for k0 in range(0, int(nb[0]), slab):
-        k1 = min(k0 + slab, int(nb[0]))
-        c0, c1 = max(k0 - 1, 0), min(k1 + 1, int(nb[0]))
-        z = ndimage.zoom(d1[c0:c1], _B1, order=1, mode="nearest", grid_mode=True, output=np.float32)
-        z = z[(k0 - c0) * _B1 : (k1 - c0) * _B1, : shape[1], : shape[2]]
-        zs = slice(k0 * _B1, min(k1 * _B1, shape[0]))
-        z = z[: zs.stop - zs.start]
-        part = sdf[zs]
-        far = np.abs(part) >= band_mm
-        part[far] = np.copysign(np.maximum(z[far], band_mm), part[far])
-    return inside, sdf
+        flat_in[np.ravel_multi_index(tuple(vox.T), shape)] = np.repeat(sgn[~need_d], _B2**3)[on]
+    depth = NearDepth(
+        np.concatenate(near_lin or [np.empty(0, np.int64)]).astype(np.int64, copy=False),
+        np.concatenate(near_mm or [np.empty(0, np.float32)]),
+        band_mm,
+    )
+    return inside, depth
 
 
 def _surface_voxels(inside: np.ndarray) -> np.ndarray:
@@ -162,11 +171,12 @@ def voxelize(
     bounding box (whose low corner is a voxel corner).
 
     Inside = generalized winding number > 0.5 at the voxel centre (robust to small holes and seams), queried
-    per voxel only near the surface and once per block elsewhere (``_inside_sdf``); |sdf| is exact within
-    ``band`` voxels (of the largest edge). Texel normals are the closest triangle's smooth normal
-    (``corner_normals`` interpolated barycentrically at the closest point): more robust than the gradient of
-    the voxel SDF, which is noisy at one-voxel resolution and undefined on thin parts. Targets: the closest
-    point's colour (``TexturedMesh.colors_at``). Needs ~5 bytes per grid voxel and ~0.1 GB for the queries.
+    per voxel only near the surface and once per block elsewhere (``_inside_depth``); the depth below the surface
+    is exact, and kept, for the inside voxels less than ``band`` voxels (of the largest edge) deep. Texel normals
+    are the closest triangle's smooth normal (``corner_normals`` interpolated barycentrically at the closest
+    point): more robust than the gradient of a voxel SDF, which is noisy at one-voxel resolution and undefined on
+    thin parts. Targets: the closest point's colour (``TexturedMesh.colors_at``). Needs 1 byte per grid voxel, 12
+    per near voxel and ~0.1 GB for the queries.
     """
     import igl
 
@@ -189,7 +199,7 @@ def voxelize(
     shape = tuple(int(s) for s in n_xyz[::-1])
     band_mm = float(band * v.max())
 
-    inside, sdf = _inside_sdf(vs, fs, origin, v, shape, band_mm)
+    inside, depth = _inside_depth(vs, fs, origin, v, shape, band_mm)
     if not inside.any():
         raise ValueError(f"{mesh.source}: no voxel centre lies inside the mesh; the voxels are too coarse")
 
@@ -206,7 +216,7 @@ def voxelize(
     normals = SurfaceNormals.from_voxels(shape, idx, texels.normal)  # as re-normalised there
     return VoxelizedObject(
         inside=inside,
-        sdf=sdf,
+        depth=depth,
         voxel_mm=v,
         origin_mm=origin,
         texels=texels,
