@@ -12,9 +12,10 @@ invocations).
 A cell is "free" (every voxel free) or "D:C", either with "@S" for the run's seed S (default 0; "free@1": the
 all-free run's spread between seeds, the yardstick of "within noise"): band depth D mm and core C, one of
 ``white``, ``start`` (the optimiser's 97 % white start), ``deep`` (the mean mixture of the every-voxel-free result's
-voxels deeper than ``--deep-mm``, measured from the "free" cell's run of the same settings, which therefore runs
-first), ``grey`` (``GREY``) or explicit shares ``ink=share+ink=share`` ("+" for ","). The runs' own final figures
-are cut short (``--eval-spp 8``); the study's are its own paired renders. Runs whose report.json exists are not
+voxels deeper than ``--deep-mm``: from the "free" cell when it is among the cells, which then runs first, else the
+``deep_mixture`` the results file records for the "free" cell of the same settings), ``grey`` (``GREY``) or explicit
+shares ``ink=share+ink=share`` ("+" for ","). The runs' own final figures are cut short (``--eval-spp 8``); the
+study's are its own paired renders, which need the "free" cell's render. Runs whose report.json exists are not
 re-run, renders whose file (core_eval_SPPspp.npz) exists are not redone (delete them to redo). The "free" cell also
 records the mean mixture of its voxels deeper than 0.25, 0.5, 1, 1.5 and 2 mm (``deep_mixture``): what the
 optimiser settles to below a band.
@@ -71,6 +72,16 @@ def core_arg(core: str, deep: dict | None, deep_mm: float) -> str:
     mix = {k: round(v, 4) for k, v in deep[f"{deep_mm:g}"]["mixture"].items() if round(v, 4) > 0}
     mix["white"] = round(mix.get("white", 0.0) + 1.0 - sum(mix.values()), 4)
     return ",".join(f"{k}={v:g}" for k, v in mix.items())
+
+
+def stored_deep_mixture(a) -> dict | None:
+    """The ``deep_mixture`` recorded for the "free" cell of ``a``'s settings in the results file, or None."""
+    from common import STUDY_RESULTS
+
+    path = STUDY_RESULTS / RESULT
+    key = f"spot{a.height_mm:g}mm_{a.dpi:g}dpi_{a.iterations}it/free"
+    entry = json.loads(path.read_text())["results"].get(key, {}) if path.is_file() else {}
+    return entry.get("deep_mixture")
 
 
 def optimize(a, d: Path, depth: str | None, core: str | None, seed: int) -> None:
@@ -160,7 +171,7 @@ def main():
     ap.add_argument("--cells", default="free,1:white,1:start,1:deep,0.5:deep,2:deep,0.25:deep,1:grey")
     a = ap.parse_args()
     prefix = Path(a.out) / f"spot{a.height_mm:g}_{a.dpi:g}dpi_{a.iterations}it"
-    deep, ref = None, Path(f"{prefix}_free")
+    deep, ref = stored_deep_mixture(a), Path(f"{prefix}_free")
     for cell in a.cells.split(","):
         setting, _, seed = cell.partition("@")
         depth, _, core = setting.partition(":")
