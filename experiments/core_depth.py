@@ -41,9 +41,11 @@ EVAL_SEED = 2**61 + 7  # the figures' render seed, the same for every cell (pair
 
 
 def deep_mixture(run_dir: Path, depths_mm=DEPTHS_MM) -> dict:
-    """{depth mm: {"voxels": n, "mixture": {ink: mean share}}}: the mean mixture of a result's inside voxels
-    deeper than each depth (Euclidean distance from the voxel centre to the nearest outside voxel's centre, minus
-    half a voxel: the depth of ``--shell-mm`` to within half a voxel)."""
+    """{depth mm: {"voxels": n, "mixture": {ink: mean share}, "white_percentiles": {"5": share, ..., "95": share}}}:
+    the mean mixture of a result's inside voxels deeper than each depth (Euclidean distance from the voxel centre to
+    the nearest outside voxel's centre, minus half a voxel: the depth of ``--shell-mm`` to within half a voxel) and
+    the 5th, 25th, 50th, 75th and 95th percentiles of their white share (with a white ink): how far the mean is from
+    the typical deep voxel."""
     from scipy.ndimage import distance_transform_edt
 
     from inkopt.rundir import RunDir
@@ -57,6 +59,9 @@ def deep_mixture(run_dir: Path, depths_mm=DEPTHS_MM) -> dict:
         sel = inside & (depth > d)
         mean = m[sel].astype(np.float64).mean(0) if sel.any() else np.zeros(m.shape[-1])
         out[f"{d:g}"] = {"voxels": int(sel.sum()), "mixture": {n: float(v) for n, v in zip(vol.inks.names, mean)}}
+        if "white" in vol.inks.names and sel.any():
+            white = m[sel][:, list(vol.inks.names).index("white")].astype(np.float64)
+            out[f"{d:g}"]["white_percentiles"] = {f"{q}": float(np.percentile(white, q)) for q in (5, 25, 50, 75, 95)}
     return out
 
 
