@@ -1,7 +1,7 @@
 """Benchmark of the mesh pipeline on Spot: voxelization time, seconds per optimisation iteration, peak memory.
 
-    python bench/bench_mesh.py [HEIGHT_MM=40] [--iterations 3] [--spp 4] [--threads 2] [--shell-mm D] [--smooth S]
-        [--dpi 300] [--figure-metrics] [--code PYTHON_DIR] [--out JSON]
+    python bench/bench_mesh.py [HEIGHT_MM=40] [--iterations 3] [--spp 4] [--threads 2] [--shell-mm D] [--core C]
+        [--smooth S] [--dpi 300] [--figure-metrics] [--code PYTHON_DIR] [--out JSON]
 
 Writes bench/results/mesh_<height>mm.json (``--dpi`` other than 300: mesh_<height>mm_<dpi>dpi.json; the folder is
 created if missing). Peak memory is the process's
@@ -44,6 +44,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--spp", type=int, default=4)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--shell-mm", type=float)
+    ap.add_argument("--core", help="the fixed mixture below --shell-mm (as inkopt optimize --core; default: white)")
     ap.add_argument("--inks", default="vero-cmykw")
     ap.add_argument("--dpi", type=float, default=300.0, help="optimisation grid (a coarse-to-fine run's first stage)")
     ap.add_argument("--smooth", type=float, help="step smoothing width (default: the optimiser's default)")
@@ -67,9 +68,9 @@ def main(argv=None) -> dict:
     rss = {"start": peak_rss_gb()}
     cpu = {"start": cpu_s()}
     t0 = time.perf_counter()
-    scene = build_mesh_scene(
-        MeshSpec(args.mesh, height_mm=args.height_mm, shell_mm=args.shell_mm, dpi=args.dpi), InkTable.parse(args.inks)
-    )
+    core = {} if args.core is None else {"core": args.core}
+    spec = MeshSpec(args.mesh, height_mm=args.height_mm, shell_mm=args.shell_mm, dpi=args.dpi, **core)
+    scene = build_mesh_scene(spec, InkTable.parse(args.inks))
     build_s = time.perf_counter() - t0
     rss["after_voxelize"] = peak_rss_gb()
     cpu["after_voxelize"] = cpu_s()
@@ -120,6 +121,7 @@ def main(argv=None) -> dict:
         "free_voxels": int(scene.free.sum()),
         "texels": len(scene.vox.texels),
         "shell_mm": args.shell_mm,
+        "core": None if args.shell_mm is None else spec.core,
         "voxelize_seconds": scene.voxelize_seconds,
         "build_seconds": build_s,
         "setup_seconds": setup_s,

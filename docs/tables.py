@@ -969,7 +969,7 @@ def core_depth() -> str:
                 setting.replace("_", ", "),
                 ("every voxel" if r["shell_mm"] is None else f"{r['shell_mm']:g} mm")
                 + (f", seed {r['settings']['seed']}" if r.get("settings", {}).get("seed") else ""),
-                "–" if r["shell_mm"] is None else f"`{r['core']}`",
+                "–" if r["shell_mm"] is None else f"`{r['core'].split(' (')[0]}`",  # "deep (shares)": its name
                 f"{r['free_voxels'] / 1e3:.0f} k",
                 f(r["seconds_per_iteration"], 1),
                 f(ev.get("events_per_path"), 1),
@@ -993,8 +993,11 @@ def core_deep_mixture() -> str:
     for key, r in load(path)["results"].items():
         for depth, m in (r.get("deep_mixture") or {}).items():
             mix = ", ".join(f"{k} {v:.3f}" for k, v in m["mixture"].items())
-            rows.append([key.split("/")[0].replace("_", ", "), f"{depth} mm", f"{m['voxels']:,}", mix])
-    return table(["setting", "deeper than", "voxels", "mean shares"], rows, [path])
+            pct = m.get("white_percentiles")
+            white = "–" if pct is None else " / ".join(f"{100 * v:.1f}" for v in pct.values())
+            rows.append([key.split("/")[0].replace("_", ", "), f"{depth} mm", f"{m['voxels']:,}", mix, white])
+    header = ["setting", "deeper than", "voxels", "mean shares", "white share, percentiles 5/25/50/75/95 (%)"]
+    return table(header, rows, [path])
 
 
 def _pm(pair, digits: int = 2) -> str:

@@ -12,9 +12,10 @@ invocations).
 A cell is "free" (every voxel free) or "D:C", either with "@S" for the run's seed S (default 0; "free@1": the
 all-free run's spread between seeds, the yardstick of "within noise"): band depth D mm and core C, one of
 ``white``, ``start`` (the optimiser's 97 % white start), ``deep`` (the mean mixture of the every-voxel-free result's
-voxels deeper than ``--deep-mm``, measured from the "free" cell's run of the same settings, which therefore runs
-first), ``grey`` (``GREY``) or explicit shares ``ink=share+ink=share`` ("+" for ","). The runs' own final figures
-are cut short (``--eval-spp 8``); the study's are its own paired renders. Runs whose report.json exists are not
+voxels deeper than ``--deep-mm``: from the "free" cell when it is among the cells, which then runs first, else the
+``deep_mixture`` the results file records for the "free" cell of the same settings), ``grey`` (``GREY``) or explicit
+shares ``ink=share+ink=share`` ("+" for ","). The runs' own final figures are cut short (``--eval-spp 8``); the
+study's are its own paired renders, which need the "free" cell's render. Runs whose report.json exists are not
 re-run, renders whose file (core_eval_SPPspp.npz) exists are not redone (delete them to redo). The "free" cell also
 records the mean mixture of its voxels deeper than 0.25, 0.5, 1, 1.5 and 2 mm (``deep_mixture``): what the
 optimiser settles to below a band.
@@ -40,9 +41,11 @@ EVAL_SEED = 2**61 + 7  # the figures' render seed, the same for every cell (pair
 
 
 def deep_mixture(run_dir: Path, depths_mm=DEPTHS_MM) -> dict:
-    """{depth mm: {"voxels": n, "mixture": {ink: mean share}}}: the mean mixture of a result's inside voxels
-    deeper than each depth (Euclidean distance from the voxel centre to the nearest outside voxel's centre, minus
-    half a voxel: the depth of ``--shell-mm`` to within half a voxel)."""
+    """{depth mm: {"voxels": n, "mixture": {ink: mean share}, "white_percentiles": {"5": share, ..., "95": share}}}:
+    the mean mixture of a result's inside voxels deeper than each depth (Euclidean distance from the voxel centre to
+    the nearest outside voxel's centre, minus half a voxel: the depth of ``--shell-mm`` to within half a voxel) and
+    the 5th, 25th, 50th, 75th and 95th percentiles of their white share (with a white ink): how far the mean is from
+    the typical deep voxel."""
     from scipy.ndimage import distance_transform_edt
 
     from inkopt.rundir import RunDir
@@ -56,6 +59,9 @@ def deep_mixture(run_dir: Path, depths_mm=DEPTHS_MM) -> dict:
         sel = inside & (depth > d)
         mean = m[sel].astype(np.float64).mean(0) if sel.any() else np.zeros(m.shape[-1])
         out[f"{d:g}"] = {"voxels": int(sel.sum()), "mixture": {n: float(v) for n, v in zip(vol.inks.names, mean)}}
+        if "white" in vol.inks.names and sel.any():
+            white = m[sel][:, list(vol.inks.names).index("white")].astype(np.float64)
+            out[f"{d:g}"]["white_percentiles"] = {f"{q}": float(np.percentile(white, q)) for q in (5, 25, 50, 75, 95)}
     return out
 
 
@@ -71,6 +77,16 @@ def core_arg(core: str, deep: dict | None, deep_mm: float) -> str:
     mix = {k: round(v, 4) for k, v in deep[f"{deep_mm:g}"]["mixture"].items() if round(v, 4) > 0}
     mix["white"] = round(mix.get("white", 0.0) + 1.0 - sum(mix.values()), 4)
     return ",".join(f"{k}={v:g}" for k, v in mix.items())
+
+
+def stored_deep_mixture(a) -> dict | None:
+    """The ``deep_mixture`` recorded for the "free" cell of ``a``'s settings in the results file, or None."""
+    from common import STUDY_RESULTS
+
+    path = STUDY_RESULTS / RESULT
+    key = f"spot{a.height_mm:g}mm_{a.dpi:g}dpi_{a.iterations}it/free"
+    entry = json.loads(path.read_text())["results"].get(key, {}) if path.is_file() else {}
+    return entry.get("deep_mixture")
 
 
 def optimize(a, d: Path, depth: str | None, core: str | None, seed: int) -> None:
@@ -160,7 +176,7 @@ def main():
     ap.add_argument("--cells", default="free,1:white,1:start,1:deep,0.5:deep,2:deep,0.25:deep,1:grey")
     a = ap.parse_args()
     prefix = Path(a.out) / f"spot{a.height_mm:g}_{a.dpi:g}dpi_{a.iterations}it"
-    deep, ref = None, Path(f"{prefix}_free")
+    deep, ref = stored_deep_mixture(a), Path(f"{prefix}_free")
     for cell in a.cells.split(","):
         setting, _, seed = cell.partition("@")
         depth, _, core = setting.partition(":")
