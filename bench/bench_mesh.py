@@ -24,6 +24,8 @@ sys.path.insert(0, _CODE)
 sys.path.insert(0, str(ROOT / "bench"))
 
 SPOT = Path(__file__).resolve().parents[2] / "shared" / "data" / "spot" / "spot.obj"  # ../shared beside the repo
+if not SPOT.is_file():  # a clone without ../shared: the copy the package ships
+    SPOT = ROOT / "python" / "inkopt" / "data" / "spot" / "spot.obj"
 
 
 def main(argv=None) -> dict:

@@ -5,7 +5,7 @@ import json
 
 import numpy as np
 import pytest
-from helpers import REPO, load_file_module
+from helpers import REPO, SPOT, load_file_module
 
 from inkopt.model import InkTable
 from inkopt.model.fixed import core_shares
@@ -69,7 +69,8 @@ def test_bench_mesh_passes_its_core_to_the_scene(tmp_path, monkeypatch):
 
     monkeypatch.setattr(mesh, "build_mesh_scene", spy)
     out = tmp_path / "mesh.json"
-    args = ["4", "--dpi", "60", "--shell-mm", "0.5", "--core", "white=0.9,black=0.1", "--iterations", "1"]
+    args = ["4", "--mesh", str(SPOT), "--dpi", "60", "--shell-mm", "0.5", "--core", "white=0.9,black=0.1"]
+    args += ["--iterations", "1"]
     result = bench.main([*args, "--spp", "1", "--threads", "1", "--out", str(out)])
     names = list(InkTable.parse("vero-cmykw").names)
     expect = np.zeros(len(names), np.float32)
