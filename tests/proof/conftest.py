@@ -27,6 +27,15 @@ def _run(*argv):
     assert cli.main([str(a) for a in argv]) == 0
 
 
+def _ball(root):
+    """A 2 mm ball's PLY in ``root``: cyan above its equator, magenta below (vertex colours)."""
+    sph = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
+    col = np.where(sph.vertices[:, 2:3] > 0, [[0, 200, 230, 255]], [[230, 0, 160, 255]]).astype(np.uint8)
+    mesh = root / "ball.ply"
+    trimesh.Trimesh(sph.vertices, sph.faces, vertex_colors=col, process=False).export(mesh)
+    return mesh
+
+
 @pytest.fixture(scope="session")
 def mesh_run(tmp_path_factory):
     """A 2 mm ball, cyan above its equator and magenta below, optimised briefly, evaluated (baselines included,
@@ -35,10 +44,7 @@ def mesh_run(tmp_path_factory):
         mp.setenv("INKOPT_CACHE_DIR", str(tmp_path_factory.mktemp("cache")))
         mp.setattr("inkopt.scenes.mesh.scene.VIEW_SIZE", 64)
         root = tmp_path_factory.mktemp("proofmesh")
-        sph = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
-        col = np.where(sph.vertices[:, 2:3] > 0, [[0, 200, 230, 255]], [[230, 0, 160, 255]]).astype(np.uint8)
-        mesh = root / "ball.ply"
-        trimesh.Trimesh(sph.vertices, sph.faces, vertex_colors=col, process=False).export(mesh)
+        mesh = _ball(root)
         run = root / "run"
         _run(
             "optimize",
@@ -227,10 +233,7 @@ def spectral_mesh_run(tmp_path_factory):
         mp.setenv("INKOPT_CACHE_DIR", str(tmp_path_factory.mktemp("cache")))
         mp.setattr("inkopt.scenes.mesh.scene.VIEW_SIZE", 64)
         root = tmp_path_factory.mktemp("spectralmesh")
-        sph = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
-        col = np.where(sph.vertices[:, 2:3] > 0, [[0, 200, 230, 255]], [[230, 0, 160, 255]]).astype(np.uint8)
-        mesh = root / "ball.ply"
-        trimesh.Trimesh(sph.vertices, sph.faces, vertex_colors=col, process=False).export(mesh)
+        mesh = _ball(root)
         run = root / "run"
         args = ["--scale", 1, "--up", "z", "--out", run, "--iterations", 2, "--spp", 2, "--eval-spp", 4]
         _run("optimize", mesh, *args, "--inks", "vero-cmykw@spectral", "--illuminants", "D65,A")
