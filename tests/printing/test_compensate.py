@@ -1,6 +1,8 @@
 """Tests of inkopt.printing.compensate: the share pre-compensation of the halftone (its inverse map, its measurement on
 flat patches, its use by ``quantize`` and its record)."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -176,3 +178,61 @@ def test_compensated_run_streams_like_memory_and_records_it(tmp_path, monkeypatc
     assert not np.array_equal(got.labels, quantize_volume(vol, Quantization(seed=3)).labels)
     assert main(["quantize", str(d.path), "--no-compensate", "--seed", "3"]) == 0
     assert d.load_quantized().quantization.compensate is False
+
+
+def mixed(base: int, n: int, k: float, kappa: np.ndarray) -> C.ShareCompensation:
+    """``scaled`` with the factors ``kappa`` (N, N) of each ink against the other inks."""
+    return replace(scaled(base, n, k), kappa=np.asarray(kappa, np.float64))
+
+
+def test_effective_rows_without_kappa_is_the_single_ink_model():
+    comp = scaled(base=4, n=5, k=0.3)
+    rng = np.random.default_rng(2)
+    rows = rng.dirichlet(np.ones(5), size=50)
+    eff = comp.effective_rows(rows)
+    np.testing.assert_allclose(eff.sum(-1), 1.0)
+    for i in range(4):  # every other ink counted as base: p / (1 + k (1 - p))
+        np.testing.assert_allclose(eff[:, i], comp.effective(rows[:, i], i), atol=1e-12)
+
+
+def test_apply_with_kappa_inverts_the_mixed_model():
+    kappa = np.array([[0, 0.5, -0.2, 0, 0], [0.1, 0, 0.3, 0.2, 0], [0.2, 0.1, 0, -0.1, 0], [0, 0, 0.4, 0, 0], [0] * 5])
+    comp = mixed(base=4, n=5, k=0.3, kappa=kappa)
+    rng = np.random.default_rng(3)
+    rows = rng.dirichlet(np.ones(5) * 0.4, size=300) * np.array([0.3, 0.3, 0.3, 0.3, 1.0])
+    rows[:, 4] += 1.0 - rows.sum(-1)  # mostly base, as an optimiser's rows are
+    rows = np.concatenate([rows, np.zeros((1, 5))])  # an outside row
+    out = comp.apply(rows)
+    np.testing.assert_allclose(out.sum(-1), rows.sum(-1), atol=1e-12)
+    np.testing.assert_allclose(comp.effective_rows(out), rows, atol=1e-10)
+    # a factor against another ink lower than against the base asks for less of the ink where that ink is present
+    one = np.array([[0.0, 0.0, 0.1, 0.3, 0.6]])
+    assert comp.apply(one)[0, 2] < scaled(4, 5, 0.3).apply(one)[0, 2]
+    # kappa equal to k everywhere: the closed form of the single-ink model
+    same = mixed(base=4, n=5, k=0.3, kappa=np.full((5, 5), 0.3))
+    np.testing.assert_allclose(same.apply(rows), scaled(4, 5, 0.3).apply(rows), atol=1e-10)
+
+
+def test_fit_kappa_recovers_pair_factors_within_their_standard_errors():
+    comp = scaled(base=3, n=4, k=0.3)
+    truth = np.array([[0, 0.1, 0.5, 0], [0.2, 0, 0.0, 0], [0.05, 0.3, 0, 0], [0, 0, 0, 0]])
+    rows = []
+    for i, j in ((0, 1), (0, 2), (1, 2)):
+        for pi, pj in C.PAIR_SHARES:
+            r = np.zeros(4)
+            r[i], r[j], r[3] = pi, pj, 1 - pi - pj
+            rows.append(r)
+    rows = np.array(rows)
+    exact = mixed(3, 4, 0.3, truth).effective_rows(rows)
+    se = np.where(rows > 0, 0.004, 0.0)
+    se[:, 3] = 0.0
+    rng = np.random.default_rng(4)
+    z = []
+    for _ in range(100):
+        kappa, kse = C.fit_kappa(comp, rows, exact + rng.normal(0, 1, rows.shape) * se, se)
+        z.append(((kappa - truth) / kse)[[0, 0, 1, 1, 2, 2], [1, 2, 0, 2, 0, 1]])
+    z = np.array(z)
+    # the fitted factors scatter about the truth as their standard errors say
+    assert np.all(np.abs(z.mean(0)) < 5 / np.sqrt(len(z))), z.mean(0)
+    assert np.all((0.7 < z.std(0)) & (z.std(0) < 1.3)), z.std(0)
+    assert kse[3, 0] == np.inf and kappa[3].tolist() == [0, 0, 0, 0]  # the base has no factors
