@@ -13,7 +13,8 @@ experiments/results/printed_refine.json.
 ``--control``: also the same steps with the loss on the continuous render (``control-N``: their blue-noise print)
 and the refined mixtures rendered continuous (``refine-N continuous``), with the paired differences refine-N -
 control-N and refine-N - refine-N continuous; ``--control-only``: the control without the refinement.
-``--methods``: other quantizations, each METHOD[:UPSAMPLE][+comp[1][tP]] (e.g. ``blue-noise:linear``; ``+comp``: the
+``--methods``: other quantizations, each METHOD[:UPSAMPLE][/ORDER][+comp[1][tP]] (e.g. ``blue-noise:linear``,
+``blue-noise/tint-first``: the inks' order in the bands, ``Quantization.ink_order``; ``+comp``: the
 shares pre-compensated for the halftone, ``printing.compensate``; ``+comp1``: with each ink's factor against the base
 alone, the other inks counted as base; ``t0.05``: the correction tapered below a share of 0.05; its seconds are those
 of a cached compensation when one is cached, else they include measuring it).
@@ -70,15 +71,18 @@ class ContinuousRefinement(PrintedRefinement):
 
 
 def quantization(spec: str) -> tuple[Quantization, dict]:
-    """``METHOD[:UPSAMPLE][+comp[1][tP]]`` -> (the settings, the compensation's changes for ``compensation_variant``):
+    """``METHOD[:UPSAMPLE][/ORDER][+comp[1][tP]]`` -> (the settings, the compensation's changes for
+    ``compensation_variant``; ``ORDER``: ``Quantization.ink_order``, e.g. ``tint-first``):
     ``+comp`` the shares compensated (``printing.compensate``, its full model), ``+comp1`` with each ink's factor
     against the base alone (``kappa`` None: the other inks counted as base), ``tP`` (e.g. ``+compt0.05``) with the
     correction tapered below the share P (``ShareCompensation.taper``); no ``+comp``: uncompensated."""
     head, comp, tail = spec.partition("+comp")
+    head, _, order = head.partition("/")
     m, _, up = head.partition(":")
     single, _, taper = tail.partition("t")
     changes = ({"kappa": None} if single == "1" else {}) | ({"taper": float(taper)} if taper else {})
-    return Quantization(m, upsample=up or "nearest", compensate=bool(comp)), changes
+    q = Quantization(m, upsample=up or "nearest", ink_order=order or "lightness", compensate=bool(comp))
+    return q, changes
 
 
 @contextlib.contextmanager
@@ -96,7 +100,7 @@ def candidates(vol, rd, refine: list[int], methods: list[str], control, threads,
     out, mixtures = {}, {}
     t0 = time.perf_counter()
     out["blue-noise"] = (quantize_volume(vol, Quantization()), time.perf_counter() - t0, {})
-    for spec in methods:  # METHOD[:UPSAMPLE][+comp[1][tP]]
+    for spec in methods:  # METHOD[:UPSAMPLE][/ORDER][+comp[1][tP]]
         q, changes = quantization(spec)
         t0 = time.perf_counter()
         with compensation_variant(changes):

@@ -136,6 +136,7 @@ def test_compensate_is_recorded_and_checked():
 def test_share_compensation_is_cached_on_disk(monkeypatch, tmp_path):
     monkeypatch.setenv("INKOPT_CACHE_DIR", str(tmp_path))
     monkeypatch.setattr(C, "_MEMORY", {})
+    monkeypatch.setattr(C, "PACKAGED", tmp_path / "packaged")  # none shipped
     inks = InkTable.parse("vero-cmykw")
     calls = []
 
@@ -236,3 +237,26 @@ def test_fit_kappa_recovers_pair_factors_within_their_standard_errors():
     assert np.all(np.abs(z.mean(0)) < 5 / np.sqrt(len(z))), z.mean(0)
     assert np.all((0.7 < z.std(0)) & (z.std(0) < 1.3)), z.std(0)
     assert kse[3, 0] == np.inf and kappa[3].tolist() == [0, 0, 0, 0]  # the base has no factors
+
+
+def test_the_default_inks_compensation_is_shipped_and_current(monkeypatch, tmp_path):
+    """The package holds the compensation of the default inks on the default printer grid under the key the current
+    settings give (a change of the measurement or its settings needs a new file), read without measuring; it holds
+    the factors against other inks, and its yellow is the strong absorber (k > 5 standard errors)."""
+    monkeypatch.setenv("INKOPT_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(C, "_MEMORY", {})
+    monkeypatch.setattr(C, "measure_compensation", lambda *a, **k: pytest.fail("measured"))
+    inks = InkTable.parse("vero-cmykw")
+    key = C.compensation_key(inks, Quantization(), inks.g, 1.5)
+    assert (C.PACKAGED / f"compensation_{key}.npz").is_file()
+    comp = C.share_compensation(inks, Quantization(), inks.g, 1.5)
+    assert comp.kappa is not None and comp.kappa.shape == (5, 5) and comp.base == 4
+    assert comp.k[2] > 5 * comp.k_stderr[2] and np.all(np.isfinite(comp.kappa_stderr[:4, :4][~np.eye(4, dtype=bool)]))
+    assert not list(tmp_path.iterdir())  # nothing measured or written
+
+
+def test_float32_ink_tables_share_the_key():
+    """A run's ink table (float32 coefficients, as read from its files) has the key of the table it came from."""
+    inks = InkTable.parse("vero-cmykw")
+    f32 = replace(inks, sigma_a=inks.sigma_a.astype(np.float32), sigma_s=inks.sigma_s.astype(np.float32))
+    assert C.compensation_key(f32, Quantization(), inks.g, 1.5) == C.compensation_key(inks, Quantization(), 0.4, 1.5)

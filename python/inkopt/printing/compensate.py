@@ -355,14 +355,16 @@ def compensation_key(inks: InkTable, q: Quantization, g: float, ior: float) -> s
     rounded to 0.01) and the measurement's settings."""
     vp_um = tuple(np.round(PrinterGrid.of((1, 1, 1), (1.0, 1.0, 1.0), q).voxel_mm * 1000.0, 2).tolist())
     h = hashlib.sha256()
-    for a in (inks.sigma_a, inks.sigma_s):
-        h.update(np.ascontiguousarray(a, np.float64).tobytes())
+    for a in (inks.sigma_a, inks.sigma_s):  # as float32: an ink table read from a run's files has them so
+        h.update(np.ascontiguousarray(a, np.float32).tobytes())
     h.update(repr((FORMAT, float(g), float(ior), q.method, q.ink_order, vp_um, DITHERED_SHARES)).encode())
     h.update(repr((CONTINUOUS_SHARES, PATCH_LATERAL, PATCH_MM, PATCH_SPP, PAIR_SHARES, PAIR_STEP, PAIR_SPP)).encode())
     return h.hexdigest()[:16]
 
 
 _MEMORY: dict[str, ShareCompensation] = {}
+#: compensations shipped with the package (the default inks' on the default printer grid), read before the cache
+PACKAGED = Path(__file__).resolve().parents[1] / "data" / "compensation"
 
 
 def cache_path(key: str) -> Path:
@@ -376,21 +378,22 @@ def cache_path(key: str) -> Path:
 
 
 def share_compensation(inks: InkTable | None, q: Quantization, g: float, ior: float, threads=None, log=None):
-    """The ``ShareCompensation`` of ``inks`` dithered by ``q`` (its base: the first ink of the dither's band order,
-    else the lightest), from this process's memory, the disk cache (``cache_path``) or measured
-    (``measure_compensation``, about a minute for five inks) and cached (atomically; a read-only cache is skipped)."""
+    """The ``ShareCompensation`` of ``inks`` dithered by ``q`` (its base: the lightest ink, whatever the bands'
+    order), from this process's memory, the package's copy (``PACKAGED``), the disk cache (``cache_path``) or
+    measured (``measure_compensation``, about two minutes for five inks) and cached (atomically; a read-only cache is
+    skipped)."""
     if inks is None:
         raise ValueError("a compensated quantization needs the mixture's ink table")
     key = compensation_key(inks, q, g, ior)
     if key in _MEMORY:
         return _MEMORY[key]
     path = cache_path(key)
-    if path.is_file():
-        with np.load(path, allow_pickle=False) as z:
+    stored = next((p for p in (PACKAGED / path.name, path) if p.is_file()), None)
+    if stored is not None:
+        with np.load(stored, allow_pickle=False) as z:
             comp = ShareCompensation(**{f: z[f] for f in z.files if f != "base"}, base=int(z["base"]))
     else:
-        order = band_order(q, inks, g, ior)
-        base = int((lightness_order(inks, g, ior) if order is None else order)[0])
+        base = int(lightness_order(inks, g, ior)[0])
         if log is not None:
             log(f"share compensation of {', '.join(inks.names)} on this printer grid: measuring (cached in {path})")
         comp = measure_compensation(inks, q, g, ior, base, threads, log)
