@@ -278,6 +278,52 @@ def halftone_cause() -> str:
     return table(header, rows, [path])
 
 
+def halftone_ssim_channels() -> str:
+    """SSIM per CIELAB channel and its factors (experiments/halftone_ssim_channels.py): per result the mean SSIM of
+    L*, a*, b* over the texel sample's window centres and the mean b* there, and per paired comparison the b*
+    channel's SSIM, its luminance and contrast-structure factors and the print's windowed b* standard deviation
+    (× 255: b* units), each ± its standard error over the centres."""
+    path = STUDY / "halftone_ssim_channels.json"
+    rows = []
+    for case, e in load(path)["results"].items():
+        terms = e.get("term_differences") or {}
+        for name, d in e["differences"].items():
+            t = terms.get(name)
+            cell = lambda k, s=1.0, dg=3, t=t: (  # noqa: E731  (the b* channel's entry of term k)
+                "–" if t is None else f"{t[k]['value'][2] * s:+.{dg}f} ± {t[k]['stderr'][2] * s:.{dg}f}"
+            )
+            a, b = name.split(" - ")
+            ssim = " / ".join(f"{v:+.3f} ± {se:.3f}" for v, se in zip(d["value"], d["stderr"]))
+            mean_b = f"{e['results'][a]['mean_lab'][2]:.2f} vs {e['results'][b]['mean_lab'][2]:.2f}"
+            rows.append(
+                [case, name, ssim, cell("luminance", dg=4), cell("contrast_structure"), cell("std", s=255.0, dg=2)]
+                + [mean_b]
+            )
+    header = ["case", "difference", "SSIM L* / a* / b*", "b*: luminance factor", "b*: contrast-structure factor"]
+    header += ["b*: windowed std (b* units)", "mean b* at the centres"]
+    return table(header, rows, [path])
+
+
+def compensation_factors() -> str:
+    """The shipped compensation of the default inks (python/inkopt/data/compensation): per ink its package factor k
+    against the base and kappa against each other ink, ± their standard errors."""
+    import numpy as np
+
+    (path,) = sorted((REPO / "python" / "inkopt" / "data" / "compensation").glob("compensation_*.npz"))
+    names = ("cyan", "magenta", "yellow", "black", "white")  # vero-cmykw, the default inks, in their order
+    with np.load(path) as z:
+        k, kse, kap, kapse, base = z["k"], z["k_stderr"], z["kappa"], z["kappa_stderr"], int(z["base"])
+    rows = []
+    for i, n in enumerate(names):
+        if i == base:
+            continue
+        cells = [f"{k[i]:.3f} ± {kse[i]:.3f}"]
+        cells += ["–" if j == i else f"{kap[i, j]:+.3f} ± {kapse[i, j]:.3f}" for j in range(len(names)) if j != base]
+        rows.append([n, *cells])
+    header = ["ink", f"k (against {names[base]})"] + [f"κ against {n}" for j, n in enumerate(names) if j != base]
+    return table(header, rows, [path])
+
+
 def speed() -> str:
     r, r1 = load(BENCH / "render.json"), load(BENCH / "render_threads1.json")
     o16, o4 = load(BENCH / "optimize_replay_spp16.json"), load(BENCH / "optimize_replay_spp4.json")
@@ -1164,6 +1210,8 @@ TABLES = {
     "quantize-methods": quantize_methods,
     "printed-refine": printed_refine,
     "halftone-cause": halftone_cause,
+    "halftone-ssim-channels": halftone_ssim_channels,
+    "compensation-factors": compensation_factors,
     "speed": speed,
     "mesh-scaling": mesh_scaling,
     "lighting": lighting,
