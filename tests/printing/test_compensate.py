@@ -92,6 +92,7 @@ def test_measured_compensation_of_a_strong_absorber_is_below_its_share(monkeypat
     like a smaller continuous share (the package effect), by more than five standard errors of the share."""
     monkeypatch.setattr(C, "DITHERED_SHARES", (0.3,))
     monkeypatch.setattr(C, "CONTINUOUS_SHARES", (0.0, 0.1, 0.2, 0.25, 0.3, 0.35, 0.4, 0.6, 1.0))
+    monkeypatch.setattr(C, "PAIR_SHARES", ((0.1, 0.1),))
     inks = InkTable(
         names=("white", "yellow", "grey"),
         sigma_a=np.array([[0.005, 0.003, 0.024], [0.007, 0.019, 16.15], [0.1, 0.1, 0.1]]),
@@ -107,6 +108,10 @@ def test_measured_compensation_of_a_strong_absorber_is_below_its_share(monkeypat
     assert comp.measured[1, 0] > 0.15  # and not absurdly far
     assert comp.k[1] > 5 * comp.k_stderr[1] and comp.k[0] == 0.0
     assert comp.share_stderr[2, 0] > 0  # every ink but the base is measured
+    # the pair's patch: both inks' effective shares measured with errors, and their factors fitted
+    assert comp.mixed_rows.tolist() == [[0.8, 0.1, 0.1]] and np.all(comp.mixed_stderr[0, 1:] > 0)
+    assert np.isfinite(comp.kappa_stderr[1, 2]) and np.isfinite(comp.kappa_stderr[2, 1])
+    assert 0.05 < comp.mixed_effective[0, 1] < 0.1 - 3 * comp.mixed_stderr[0, 1]  # yellow's package effect there too
 
 
 def test_quantize_uses_the_compensation(monkeypatch):
