@@ -170,6 +170,7 @@ def test_compensated_run_streams_like_memory_and_records_it(tmp_path, monkeypatc
 
     monkeypatch.setenv("INKOPT_CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.setattr(C, "_MEMORY", {})
+    monkeypatch.setattr(C, "PACKAGED", tmp_path / "packaged")
     monkeypatch.setattr(C, "measure_compensation", lambda inks, q, g, ior, base, *a, **k: scaled(base, len(inks), 0.3))
     inks = InkTable.parse("vero-cmykw")
     rng = np.random.default_rng(2)
@@ -184,6 +185,12 @@ def test_compensated_run_streams_like_memory_and_records_it(tmp_path, monkeypatc
     assert not np.array_equal(got.labels, quantize_volume(vol, Quantization(seed=3)).labels)
     assert main(["quantize", str(d.path), "--no-compensate", "--seed", "3"]) == 0
     assert d.load_quantized().quantization.compensate is False
+    # the inks' order in the bands: a flag of its own, recorded, the compensation measured for that order
+    assert main(["quantize", str(d.path), "--compensate", "--ink-order", "tint-first"]) == 0
+    got = d.load_quantized()
+    expect = quantize_volume(vol, Quantization(ink_order="tint-first", compensate=True))
+    assert got.quantization.ink_order == "tint-first" and got.quantization == expect.quantization
+    np.testing.assert_array_equal(got.labels, expect.labels)
 
 
 def mixed(base: int, n: int, k: float, kappa: np.ndarray) -> C.ShareCompensation:
