@@ -278,6 +278,45 @@ def halftone_cause() -> str:
     return table(header, rows, [path])
 
 
+SIDE_MESHES = ("spot20", "duck10", "orange10", "spider10", "coin10", "box10", "eyeball10", "checker10")
+
+
+def halftone_side_by_side() -> str:
+    """The compensation's variants side by side per mesh (experiments/printed_refine.py entries MESH_side, and
+    MESH_comp from the session that measured the single-ink model, whose ``blue-noise+comp`` is ``+comp1``; the same
+    texel sample, seeds and blue-noise figures): each variant − blue noise and − the continuous result, paired ±
+    their standard errors."""
+    path = STUDY / "printed_refine.json"
+    res = load(path)["results"]
+
+    def pd(e: dict, a: str, b: str, k: str, d: int) -> str:
+        v = ((e.get("differences") or {}).get(f"{a} - {b}") or {}).get(k) or {}
+        return "–" if v.get("value") is None else f"{v['value']:+.{d}f} ± {v['stderr']:.{d}f}"
+
+    rows = []
+    for mesh in SIDE_MESHES:
+        first = True
+        side = res.get(f"{mesh}_side") or {"results": {}}
+        for key, rename in ((f"{mesh}_comp", {"blue-noise+comp": "blue-noise+comp1"}), (f"{mesh}_side", {})):
+            e = res.get(key)
+            if key.endswith("_comp") and "blue-noise+comp1" in side["results"]:
+                continue  # measured again beside the others
+            for name in [n for n in (e or {}).get("results", {}) if n.startswith("blue-noise+") or "/" in n]:
+                vs_b = " / ".join(pd(e, name, "blue-noise", k, d) for k, d in SIDE_KEYS)
+                vs_c = " / ".join(pd(e, name, "continuous", k, d) for k, d in SIDE_KEYS)
+                rows.append([mesh if first else "", rename.get(name, name), vs_b, vs_c])
+                first = False
+        e = res.get(f"{mesh}_side")
+        if e is not None:
+            vs_c = " / ".join(pd(e, "blue-noise", "continuous", k, d) for k, d in SIDE_KEYS)
+            rows.append(["", "blue-noise", "", vs_c])
+    what = "ΔE76 / ΔE2000 / SSIM / mottle"
+    return table(["mesh", "result", f"− blue noise: {what}", f"− continuous: {what}"], rows, [path])
+
+
+SIDE_KEYS = (("delta_e76_mean_corrected", 2), ("delta_e2000_mean", 2), ("ssim", 3), ("mottle_l2", 2))
+
+
 def halftone_ssim_channels() -> str:
     """SSIM per CIELAB channel and its factors (experiments/halftone_ssim_channels.py): per result the mean SSIM of
     L*, a*, b* over the texel sample's window centres and the mean b* there, and per paired comparison the b*
@@ -1211,6 +1250,7 @@ TABLES = {
     "printed-refine": printed_refine,
     "halftone-cause": halftone_cause,
     "halftone-ssim-channels": halftone_ssim_channels,
+    "halftone-side-by-side": halftone_side_by_side,
     "compensation-factors": compensation_factors,
     "speed": speed,
     "mesh-scaling": mesh_scaling,

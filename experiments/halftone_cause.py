@@ -3,14 +3,14 @@ mixture rendered once and each quantization variant's print rendered at the same
 continuous CIELAB difference split into its mean over the sample (the bias, ± its standard error) and its
 noise-corrected spread (E|d|² minus both renders' Monte Carlo variance), plus the bias in bins of the texel's share
 of each ink (where the print is lighter or less saturated than its mixture). A variant is
-``METHOD[:UPSAMPLE][/ORDER][@DPI][+comp[1][tP]][~mm|~2d]`` (e.g. ``blue-noise``, ``blue-noise@1200x600x1881`` for
-a printer grid twice as fine in every axis, ``random``, ``blue-noise/tint-first`` with the inks' bands in that
-``Quantization.ink_order``, ``blue-noise+comp`` with the shares pre-compensated (``+comp1``: each ink's factor
-against the base alone; ``t0.05``: tapered below a share of 0.05), ``blue-noise~mm`` with a blue-noise array whose
-energy is isotropic in mm rather than in printer voxels, ``~2d`` with 2D blue-noise layers, ``layered_tile``): if the
-bias shrinks on a finer grid, it comes from the size of the printer voxels (the grains of one ink absorb less than
-the same ink spread
-through the mixture), not from the dither's order. Writes the entry NAME of experiments/results/halftone_cause.json.
+``METHOD[:UPSAMPLE][/ORDER][@DPI][+comp[1][tP]][~mm|~2d]`` (e.g. ``blue-noise``, ``blue-noise@1200x600x1881`` for a
+printer grid twice as fine in every axis, ``random``, ``blue-noise/tint-first`` with the inks' bands in that
+``Quantization.ink_order``, ``blue-noise+comp`` with the shares pre-compensated with the pair factors (``+comp1``: each
+ink's factor against the base alone, what ``--compensate`` does; ``t0.05``: tapered below a share of 0.05),
+``blue-noise~mm`` with a blue-noise array whose energy is isotropic in mm rather than in printer voxels, ``~2d`` with 2D
+blue-noise layers, ``layered_tile``): if the bias shrinks on a finer grid, it comes from the size of the printer voxels
+(the grains of one ink absorb less than the same ink spread through the mixture), not from the dither's order. Writes
+the entry NAME of experiments/results/halftone_cause.json.
 
     .venv/bin/python experiments/halftone_cause.py NAME RUN VARIANT [VARIANT ...] [--texels 1500] [--spp 512]
 

@@ -14,10 +14,11 @@ experiments/results/printed_refine.json.
 and the refined mixtures rendered continuous (``refine-N continuous``), with the paired differences refine-N -
 control-N and refine-N - refine-N continuous; ``--control-only``: the control without the refinement.
 ``--methods``: other quantizations, each METHOD[:UPSAMPLE][/ORDER][+comp[1][tP]] (e.g. ``blue-noise:linear``,
-``blue-noise/tint-first``: the inks' order in the bands, ``Quantization.ink_order``; ``+comp``: the
-shares pre-compensated for the halftone, ``printing.compensate``; ``+comp1``: with each ink's factor against the base
-alone, the other inks counted as base; ``t0.05``: the correction tapered below a share of 0.05; its seconds are those
-of a cached compensation when one is cached, else they include measuring it).
+``blue-noise/tint-first``: the inks' order in the bands, ``Quantization.ink_order``; ``+comp``: the shares
+pre-compensated for the halftone, ``printing.compensate``, with its factors against other inks; ``+comp1``: with each
+ink's factor against the base alone, the other inks counted as base (what ``--compensate`` does); ``t0.05``: the
+correction tapered below a share of 0.05; its seconds are those of a cached compensation when one is cached, else they
+include measuring it).
 """
 
 import argparse
@@ -73,14 +74,15 @@ class ContinuousRefinement(PrintedRefinement):
 def quantization(spec: str) -> tuple[Quantization, dict]:
     """``METHOD[:UPSAMPLE][/ORDER][+comp[1][tP]]`` -> (the settings, the compensation's changes for
     ``compensation_variant``; ``ORDER``: ``Quantization.ink_order``, e.g. ``tint-first``):
-    ``+comp`` the shares compensated (``printing.compensate``, its full model), ``+comp1`` with each ink's factor
-    against the base alone (``kappa`` None: the other inks counted as base), ``tP`` (e.g. ``+compt0.05``) with the
-    correction tapered below the share P (``ShareCompensation.taper``); no ``+comp``: uncompensated."""
+    ``+comp`` the shares compensated with the factors against other inks (``ShareCompensation.pairs``), ``+comp1``
+    with each ink's factor against the base alone (the other inks counted as base: what ``Quantization.compensate``
+    applies), ``tP`` (e.g. ``+compt0.05``) with the correction tapered below the share P
+    (``ShareCompensation.taper``); no ``+comp``: uncompensated."""
     head, comp, tail = spec.partition("+comp")
     head, _, order = head.partition("/")
     m, _, up = head.partition(":")
     single, _, taper = tail.partition("t")
-    changes = ({"kappa": None} if single == "1" else {}) | ({"taper": float(taper)} if taper else {})
+    changes = {"pairs": single != "1"} | ({"taper": float(taper)} if taper else {})
     q = Quantization(m, upsample=up or "nearest", ink_order=order or "lightness", compensate=bool(comp))
     return q, changes
 

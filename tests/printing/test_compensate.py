@@ -194,8 +194,8 @@ def test_compensated_run_streams_like_memory_and_records_it(tmp_path, monkeypatc
 
 
 def mixed(base: int, n: int, k: float, kappa: np.ndarray) -> C.ShareCompensation:
-    """``scaled`` with the factors ``kappa`` (N, N) of each ink against the other inks."""
-    return replace(scaled(base, n, k), kappa=np.asarray(kappa, np.float64))
+    """``scaled`` with the factors ``kappa`` (N, N) of each ink against the other inks, applied."""
+    return replace(scaled(base, n, k), kappa=np.asarray(kappa, np.float64), pairs=True)
 
 
 def test_effective_rows_without_kappa_is_the_single_ink_model():
@@ -221,6 +221,8 @@ def test_apply_with_kappa_inverts_the_mixed_model():
     # a factor against another ink lower than against the base asks for less of the ink where that ink is present
     one = np.array([[0.0, 0.0, 0.1, 0.3, 0.6]])
     assert comp.apply(one)[0, 2] < scaled(4, 5, 0.3).apply(one)[0, 2]
+    # not applied unless ``pairs``: the single-ink model's closed form
+    np.testing.assert_array_equal(replace(comp, pairs=False).apply(rows), scaled(4, 5, 0.3).apply(rows))
     # kappa equal to k everywhere: the closed form of the single-ink model
     same = mixed(base=4, n=5, k=0.3, kappa=np.full((5, 5), 0.3))
     np.testing.assert_allclose(same.apply(rows), scaled(4, 5, 0.3).apply(rows), atol=1e-10)
@@ -272,3 +274,13 @@ def test_float32_ink_tables_share_the_key():
     inks = InkTable.parse("vero-cmykw")
     f32 = replace(inks, sigma_a=inks.sigma_a.astype(np.float32), sigma_s=inks.sigma_s.astype(np.float32))
     assert C.compensation_key(f32, Quantization(), inks.g, 1.5) == C.compensation_key(inks, Quantization(), 0.4, 1.5)
+
+
+def test_taper_scales_the_correction_below_its_share():
+    comp = scaled(base=2, n=3, k=0.3)
+    mix = np.array([[0.01, 0.2, 0.79], [0.05, 0.1, 0.85]])
+    full, tapered = comp.apply(mix), replace(comp, taper=0.05).apply(mix)
+    np.testing.assert_allclose(tapered.sum(-1), 1.0)
+    np.testing.assert_allclose(tapered[0, 0] - mix[0, 0], (full[0, 0] - mix[0, 0]) * 0.2)  # 0.01 / 0.05
+    np.testing.assert_allclose(tapered[:, 1], full[:, 1])  # at or above the taper share: the whole correction
+    np.testing.assert_allclose(tapered[1, 0], full[1, 0])

@@ -8,14 +8,15 @@ grains of an absorbing ink less often than the same ink spread evenly through th
 blue-noise print is ΔE76 1.04 from its mixture on average, Δb* −1.0, and 0.40 on a printer grid twice as fine
 (``experiments/halftone_cause.py``, docs/quality.md "Keeping what the optimiser found").
 
-The correction is measured on flat patches: for each ink but the base (the first in band order, the lightest:
-white), patches of the base with a share p of the ink, dithered on the printer grid and rendered from the top, are
-matched to continuous patches of the same two inks; the continuous share whose colour is nearest in CIELAB is the
-dithered patch's effective share. One factor k per ink models them, ``p_eff = p / (1 + k (1 - p))`` (fitted with
-the patches' standard errors: the model pools the patches, so an ink without a package effect gets k near 0 instead
-of each patch's noise). ``ShareCompensation.apply`` inverts it per ink: the dither gets the share p' with
-``p_eff(p') = p``, and the base ink the rest (inks are treated one at a time against the base: the mixtures an
-optimiser finds are mostly the base).
+The correction is measured on flat patches: for each ink but the base (the lightest: white), patches of the base
+with a share p of the ink, dithered on the printer grid and rendered from the top, are matched to continuous patches
+of the same two inks; the continuous share whose colour is nearest in CIELAB is the dithered patch's effective share.
+One factor k per ink models them, ``p_eff = p / (1 + k (1 - p))`` (fitted with the patches' standard errors: the
+model pools the patches, so an ink without a package effect gets k near 0 instead of each patch's noise).
+``ShareCompensation.apply`` inverts it per ink: the dither gets the share p' with ``p_eff(p') = p``, and the base
+ink the rest. Where inks mix, each ink's factor against each other ink (``kappa``) is measured too, on patches of
+two non-base inks in the base (``measure_mixed``, ``fit_kappa``); it is kept with the compensation and applied only
+where ``pairs`` is set: on the meshes measured it corrected less than each ink fitted alone (docs/quality.md).
 """
 
 from __future__ import annotations
@@ -73,6 +74,9 @@ class ShareCompensation:
     mixed_effective, mixed_stderr  (M, N) float64 the continuous rows they look like and the shares' standard errors
     taper         a share (0: none) below which an ink's correction is scaled by share / taper (a setting, not
                   measured)
+    pairs         whether ``kappa`` is applied (a setting, default off: on the duck, the spider and Spot 20 mm the
+                  correction with it gained less ΔE76 and ΔE2000 than each ink fitted alone against the base;
+                  docs/quality.md, "Where inks mix")
     """
 
     base: int
@@ -87,6 +91,7 @@ class ShareCompensation:
     mixed_effective: np.ndarray | None = None
     mixed_stderr: np.ndarray | None = None
     taper: float = 0.0
+    pairs: bool = False
 
     def effective(self, p, i: int) -> np.ndarray:
         """The continuous share that ink ``i`` dithered at share ``p`` (array, in [0, 1]) in the base alone looks
@@ -96,10 +101,11 @@ class ShareCompensation:
 
     def factors(self) -> np.ndarray:
         """(N, N) float64: entry (i, j) the package factor of ink i against ink j's share, k_i against the base
-        (j = base), ``kappa`` against another ink (without ``kappa``: k_i, every other ink acting as the base);
+        (j = base), ``kappa`` against another ink where ``pairs`` (else k_i, every other ink acting as the base);
         the diagonal and the base's row are 0."""
         n = len(self.k)
-        f = np.repeat(np.asarray(self.k, np.float64)[:, None], n, 1) if self.kappa is None else np.array(self.kappa)
+        single = self.kappa is None or not self.pairs
+        f = np.repeat(np.asarray(self.k, np.float64)[:, None], n, 1) if single else np.array(self.kappa)
         f[:, self.base] = self.k
         np.fill_diagonal(f, 0.0)
         f[self.base] = 0.0
@@ -118,10 +124,10 @@ class ShareCompensation:
         """The pre-compensated rows of ``mix`` (..., N) (rows summing to 1, or 0 outside), same shape, float64:
         every ink but the base takes the share p' whose dither looks like its share p in ``mix`` (``effective_rows``
         of the result equals ``mix``; without ``kappa`` p' = p (1 + k) / (1 + k p)), the base the rest; where the
-        non-base shares would sum above 1, they are scaled to 1 (no base)."""
+        non-base shares would sum above 1, they are scaled to 1 (no base); below ``taper`` the correction shrinks."""
         mix = np.asarray(mix, np.float64)
         total = mix.sum(-1)
-        if self.kappa is None:
+        if self.kappa is None or not self.pairs:
             out = np.empty_like(mix)
             for i in range(mix.shape[-1]):
                 if i != self.base:
