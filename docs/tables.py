@@ -201,6 +201,12 @@ def quantize_methods() -> str:
     )
 
 
+#: entries measured before the compensation had factors against other inks: their ``+comp`` is the single-ink
+#: model, ``+comp1`` in the later entries
+BEFORE_PAIRS = ("duck10", "duck10_comp_interp", "spot20_interp", "spot20")
+SINGLE_INK = {"blue-noise+comp": "blue-noise+comp1"}
+
+
 def printed_refine() -> str:
     """The halftone's cost and the candidates that keep it (experiments/printed_refine.py): figures ± their sampling
     standard errors, the paired differences against the continuous result and against blue noise, the cost."""
@@ -236,10 +242,11 @@ def printed_refine() -> str:
             if "seconds_to_make" in m:
                 cost = f"{m['seconds_to_make']:.0f} s ({m['cost_iterations']:.1f} it.)"
             vs_c, vs_b = diff(e, name, "continuous"), diff(e, name, "blue-noise")
+            single = case.endswith(("_comp", "_comp_interp"))  # measured before the pair factors: single-ink
             rows.append(
                 [
                     case if i == 0 else "",
-                    name,
+                    SINGLE_INK.get(name, name) if single else name,
                     pm(m, "delta_e76_mean_corrected"),
                     pm(m, "delta_e2000_mean"),
                     pm(m, "ssim", 3),
@@ -266,7 +273,7 @@ def halftone_cause() -> str:
             rows.append(
                 [
                     f"{case} ({e['texels']} texels, {e['spp']} spp)" if i == 0 else "",
-                    variant,
+                    SINGLE_INK.get(variant, variant) if case in BEFORE_PAIRS else variant,
                     f"{a['mean_dL']:+.2f} ± {a['se_dL']:.2f}",
                     f"{a['mean_da']:+.2f}",
                     f"{a['mean_db']:+.2f} ± {a['se_db']:.2f}",
@@ -282,10 +289,10 @@ SIDE_MESHES = ("spot20", "duck10", "orange10", "spider10", "coin10", "box10", "e
 
 
 def halftone_side_by_side() -> str:
-    """The compensation's variants side by side per mesh (experiments/printed_refine.py entries MESH_side, and
-    MESH_comp from the session that measured the single-ink model, whose ``blue-noise+comp`` is ``+comp1``; the same
-    texel sample, seeds and blue-noise figures): each variant − blue noise and − the continuous result, paired ±
-    their standard errors."""
+    """The compensation's variants side by side per mesh (experiments/printed_refine.py entries MESH_side and
+    MESH_side1, and MESH_comp from the session that measured the single-ink model, whose ``blue-noise+comp`` is
+    ``+comp1``; the same texel sample, seeds and blue-noise figures): each variant − blue noise and − the continuous
+    result, paired ± their standard errors."""
     path = STUDY / "printed_refine.json"
     res = load(path)["results"]
 
@@ -297,7 +304,8 @@ def halftone_side_by_side() -> str:
     for mesh in SIDE_MESHES:
         first = True
         side = res.get(f"{mesh}_side") or {"results": {}}
-        for key, rename in ((f"{mesh}_comp", {"blue-noise+comp": "blue-noise+comp1"}), (f"{mesh}_side", {})):
+        keys = ((f"{mesh}_comp", {"blue-noise+comp": "blue-noise+comp1"}), (f"{mesh}_side", {}), (f"{mesh}_side1", {}))
+        for key, rename in keys:
             e = res.get(key)
             if key.endswith("_comp") and "blue-noise+comp1" in side["results"]:
                 continue  # measured again beside the others
