@@ -342,8 +342,9 @@ def halftone_ssim_channels() -> str:
             a, b = name.split(" - ")
             ssim = " / ".join(f"{v:+.3f} ± {se:.3f}" for v, se in zip(d["value"], d["stderr"]))
             mean_b = f"{e['results'][a]['mean_lab'][2]:.2f} vs {e['results'][b]['mean_lab'][2]:.2f}"
+            shown = f"{SINGLE_INK.get(a, a)} - {b}" if case in BEFORE_PAIRS else name
             rows.append(
-                [case, name, ssim, cell("luminance", dg=4), cell("contrast_structure"), cell("std", s=255.0, dg=2)]
+                [case, shown, ssim, cell("luminance", dg=4), cell("contrast_structure"), cell("std", s=255.0, dg=2)]
                 + [mean_b]
             )
     header = ["case", "difference", "SSIM L* / a* / b*", "b*: luminance factor", "b*: contrast-structure factor"]
