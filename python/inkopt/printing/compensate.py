@@ -243,7 +243,8 @@ def measure_compensation(inks: InkTable, q: Quantization, g: float, ior: float, 
     """The ``ShareCompensation`` of ``inks`` dithered by ``q`` against the ``base`` ink (module docstring): per ink
     ``CONTINUOUS_SHARES`` continuous patches (``_continuous_curve``) and ``DITHERED_SHARES`` dithered ones (1024
     top texels at ``PATCH_SPP`` spp), each with a seed of its own; each dithered colour matched to its nearest
-    point of the continuous curve, and k fitted (``fit_k``). About 1 s per patch on 2 cores."""
+    point of the continuous curve, and k fitted (``fit_k``); then the factors against other inks (``measure_mixed``,
+    kept with ``pairs`` off). About 1 s per patch on 2 cores."""
     n = len(inks)
     shares = np.array(DITHERED_SHARES)
     measured = np.tile(shares, (n, 1))
