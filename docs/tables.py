@@ -201,6 +201,12 @@ def quantize_methods() -> str:
     )
 
 
+#: entries measured before the compensation had factors against other inks: their ``+comp`` is the single-ink
+#: model, ``+comp1`` in the later entries
+BEFORE_PAIRS = ("duck10", "duck10_comp_interp", "spot20_interp", "spot20")
+SINGLE_INK = {"blue-noise+comp": "blue-noise+comp1"}
+
+
 def printed_refine() -> str:
     """The halftone's cost and the candidates that keep it (experiments/printed_refine.py): figures ± their sampling
     standard errors, the paired differences against the continuous result and against blue noise, the cost."""
@@ -236,10 +242,11 @@ def printed_refine() -> str:
             if "seconds_to_make" in m:
                 cost = f"{m['seconds_to_make']:.0f} s ({m['cost_iterations']:.1f} it.)"
             vs_c, vs_b = diff(e, name, "continuous"), diff(e, name, "blue-noise")
+            single = case.endswith(("_comp", "_comp_interp"))  # measured before the pair factors: single-ink
             rows.append(
                 [
                     case if i == 0 else "",
-                    name,
+                    SINGLE_INK.get(name, name) if single else name,
                     pm(m, "delta_e76_mean_corrected"),
                     pm(m, "delta_e2000_mean"),
                     pm(m, "ssim", 3),
@@ -266,7 +273,7 @@ def halftone_cause() -> str:
             rows.append(
                 [
                     f"{case} ({e['texels']} texels, {e['spp']} spp)" if i == 0 else "",
-                    variant,
+                    SINGLE_INK.get(variant, variant) if case in BEFORE_PAIRS else variant,
                     f"{a['mean_dL']:+.2f} ± {a['se_dL']:.2f}",
                     f"{a['mean_da']:+.2f}",
                     f"{a['mean_db']:+.2f} ± {a['se_db']:.2f}",
@@ -275,6 +282,93 @@ def halftone_cause() -> str:
                 ]
             )
     header = ["case", "variant", "ΔL*", "Δa*", "Δb*", "bias ΔE76", "spread ΔE76 RMS (corrected, less the bias)"]
+    return table(header, rows, [path])
+
+
+SIDE_MESHES = ("spot20", "duck10", "orange10", "spider10", "coin10", "box10", "eyeball10", "checker10")
+
+
+def halftone_side_by_side() -> str:
+    """The compensation's variants side by side per mesh (experiments/printed_refine.py entries MESH_side and
+    MESH_side1, and MESH_comp from the session that measured the single-ink model, whose ``blue-noise+comp`` is
+    ``+comp1``; the same texel sample, seeds and blue-noise figures): each variant − blue noise and − the continuous
+    result, paired ± their standard errors."""
+    path = STUDY / "printed_refine.json"
+    res = load(path)["results"]
+
+    def pd(e: dict, a: str, b: str, k: str, d: int) -> str:
+        v = ((e.get("differences") or {}).get(f"{a} - {b}") or {}).get(k) or {}
+        return "–" if v.get("value") is None else f"{v['value']:+.{d}f} ± {v['stderr']:.{d}f}"
+
+    rows = []
+    for mesh in SIDE_MESHES:
+        first = True
+        side = res.get(f"{mesh}_side") or {"results": {}}
+        keys = ((f"{mesh}_comp", {"blue-noise+comp": "blue-noise+comp1"}), (f"{mesh}_side", {}), (f"{mesh}_side1", {}))
+        for key, rename in keys:
+            e = res.get(key)
+            if key.endswith("_comp") and "blue-noise+comp1" in side["results"]:
+                continue  # measured again beside the others
+            for name in [n for n in (e or {}).get("results", {}) if n.startswith("blue-noise+") or "/" in n]:
+                vs_b = " / ".join(pd(e, name, "blue-noise", k, d) for k, d in SIDE_KEYS)
+                vs_c = " / ".join(pd(e, name, "continuous", k, d) for k, d in SIDE_KEYS)
+                rows.append([mesh if first else "", rename.get(name, name), vs_b, vs_c])
+                first = False
+        e = res.get(f"{mesh}_side")
+        if e is not None:
+            vs_c = " / ".join(pd(e, "blue-noise", "continuous", k, d) for k, d in SIDE_KEYS)
+            rows.append(["", "blue-noise", "", vs_c])
+    what = "ΔE76 / ΔE2000 / SSIM / mottle"
+    return table(["mesh", "result", f"− blue noise: {what}", f"− continuous: {what}"], rows, [path])
+
+
+SIDE_KEYS = (("delta_e76_mean_corrected", 2), ("delta_e2000_mean", 2), ("ssim", 3), ("mottle_l2", 2))
+
+
+def halftone_ssim_channels() -> str:
+    """SSIM per CIELAB channel and its factors (experiments/halftone_ssim_channels.py): per result the mean SSIM of
+    L*, a*, b* over the texel sample's window centres and the mean b* there, and per paired comparison the b*
+    channel's SSIM, its luminance and contrast-structure factors and the print's windowed b* standard deviation
+    (× 255: b* units), each ± its standard error over the centres."""
+    path = STUDY / "halftone_ssim_channels.json"
+    rows = []
+    for case, e in load(path)["results"].items():
+        terms = e.get("term_differences") or {}
+        for name, d in e["differences"].items():
+            t = terms.get(name)
+            cell = lambda k, s=1.0, dg=3, t=t: (  # noqa: E731  (the b* channel's entry of term k)
+                "–" if t is None else f"{t[k]['value'][2] * s:+.{dg}f} ± {t[k]['stderr'][2] * s:.{dg}f}"
+            )
+            a, b = name.split(" - ")
+            ssim = " / ".join(f"{v:+.3f} ± {se:.3f}" for v, se in zip(d["value"], d["stderr"]))
+            mean_b = f"{e['results'][a]['mean_lab'][2]:.2f} vs {e['results'][b]['mean_lab'][2]:.2f}"
+            shown = f"{SINGLE_INK.get(a, a)} - {b}" if case in BEFORE_PAIRS else name
+            rows.append(
+                [case, shown, ssim, cell("luminance", dg=4), cell("contrast_structure"), cell("std", s=255.0, dg=2)]
+                + [mean_b]
+            )
+    header = ["case", "difference", "SSIM L* / a* / b*", "b*: luminance factor", "b*: contrast-structure factor"]
+    header += ["b*: windowed std (b* units)", "mean b* at the centres"]
+    return table(header, rows, [path])
+
+
+def compensation_factors() -> str:
+    """The shipped compensation of the default inks (python/inkopt/data/compensation): per ink its package factor k
+    against the base and kappa against each other ink, ± their standard errors."""
+    import numpy as np
+
+    (path,) = sorted((REPO / "python" / "inkopt" / "data" / "compensation").glob("compensation_*.npz"))
+    names = ("cyan", "magenta", "yellow", "black", "white")  # vero-cmykw, the default inks, in their order
+    with np.load(path) as z:
+        k, kse, kap, kapse, base = z["k"], z["k_stderr"], z["kappa"], z["kappa_stderr"], int(z["base"])
+    rows = []
+    for i, n in enumerate(names):
+        if i == base:
+            continue
+        cells = [f"{k[i]:.3f} ± {kse[i]:.3f}"]
+        cells += ["–" if j == i else f"{kap[i, j]:+.3f} ± {kapse[i, j]:.3f}" for j in range(len(names)) if j != base]
+        rows.append([n, *cells])
+    header = ["ink", f"k (against {names[base]})"] + [f"κ against {n}" for j, n in enumerate(names) if j != base]
     return table(header, rows, [path])
 
 
@@ -1164,6 +1258,9 @@ TABLES = {
     "quantize-methods": quantize_methods,
     "printed-refine": printed_refine,
     "halftone-cause": halftone_cause,
+    "halftone-ssim-channels": halftone_ssim_channels,
+    "halftone-side-by-side": halftone_side_by_side,
+    "compensation-factors": compensation_factors,
     "speed": speed,
     "mesh-scaling": mesh_scaling,
     "lighting": lighting,

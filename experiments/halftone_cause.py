@@ -3,12 +3,14 @@ mixture rendered once and each quantization variant's print rendered at the same
 continuous CIELAB difference split into its mean over the sample (the bias, ± its standard error) and its
 noise-corrected spread (E|d|² minus both renders' Monte Carlo variance), plus the bias in bins of the texel's share
 of each ink (where the print is lighter or less saturated than its mixture). A variant is
-``METHOD[:UPSAMPLE][@DPI][+comp][~mm|~2d]`` (e.g. ``blue-noise``, ``blue-noise@1200x600x1881`` for a printer grid twice
-as fine in every axis, ``random``, ``blue-noise+comp`` with the shares pre-compensated, ``blue-noise~mm`` with a
-blue-noise array whose energy is isotropic in mm rather than in printer voxels, ``~2d`` with 2D blue-noise layers,
-``layered_tile``): if the bias shrinks on a finer
-grid, it comes from the size of the printer voxels (the grains of one ink absorb less than the same ink spread
-through the mixture), not from the dither's order. Writes the entry NAME of experiments/results/halftone_cause.json.
+``METHOD[:UPSAMPLE][/ORDER][@DPI][+comp[1][tP]][~mm|~2d]`` (e.g. ``blue-noise``, ``blue-noise@1200x600x1881`` for a
+printer grid twice as fine in every axis, ``random``, ``blue-noise/tint-first`` with the inks' bands in that
+``Quantization.ink_order``, ``blue-noise+comp`` with the shares pre-compensated with the pair factors (``+comp1``: each
+ink's factor against the base alone, what ``--compensate`` does; ``t0.05``: tapered below a share of 0.05),
+``blue-noise~mm`` with a blue-noise array whose energy is isotropic in mm rather than in printer voxels, ``~2d`` with 2D
+blue-noise layers, ``layered_tile``): if the bias shrinks on a finer grid, it comes from the size of the printer voxels
+(the grains of one ink absorb less than the same ink spread through the mixture), not from the dither's order. Writes
+the entry NAME of experiments/results/halftone_cause.json.
 
     .venv/bin/python experiments/halftone_cause.py NAME RUN VARIANT [VARIANT ...] [--texels 1500] [--spp 512]
 
@@ -24,6 +26,8 @@ from unittest import mock
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import printed_refine  # noqa: E402
 from common import add_study_entry, machine, provenance  # noqa: E402
 
 from inkopt.color import linear_to_lab  # noqa: E402
@@ -60,13 +64,15 @@ def layered_tile() -> np.ndarray:
 
 
 def quantization(spec: str) -> Quantization:
-    """``METHOD[:UPSAMPLE][@DPI][+comp][~mm]`` -> the settings (``+comp``: shares compensated,
+    """``METHOD[:UPSAMPLE][@DPI][+comp[1][tP]][~mm]`` -> the settings (``+comp...``: shares compensated,
     ``printing.compensate``; ``~mm`` and ``~2d``, read by ``main``: ``physical_tile``, ``layered_tile``)."""
     spec = spec.replace("~mm", "").replace("~2d", "")
-    spec, plus, _ = spec.partition("+comp")
+    spec, plus, _ = spec.partition("+comp")  # its model's variant: ``printed_refine.quantization``
     head, _, dpi = spec.partition("@")
+    head, _, order = head.partition("/")
     method, _, up = head.partition(":")
-    return Quantization(method, dpi=parse_dpi(dpi) if dpi else None, upsample=up or "nearest", compensate=bool(plus))
+    dpi = parse_dpi(dpi) if dpi else None
+    return Quantization(method, 0, dpi, up or "nearest", order or "lightness", compensate=bool(plus))
 
 
 def stats(d_lab: np.ndarray, noise: np.ndarray) -> dict:
@@ -114,7 +120,8 @@ def main():
             share_compensation(vol.inks, q, vol.g, vol.ior, a.threads, print)
         tile = physical_tile(q) if "~mm" in spec else layered_tile() if "~2d" in spec else load_blue_noise()
         t0 = time.perf_counter()
-        with mock.patch.object(dithers, "load_blue_noise", lambda tile=tile: tile):
+        variant = printed_refine.compensation_variant(printed_refine.quantization(spec.split("~")[0])[1])
+        with mock.patch.object(dithers, "load_blue_noise", lambda tile=tile: tile), variant:
             labels = quantize_volume(vol, q)
         printer = PrintedRenderer(labels, rec.texels, vol.voxel_mm, rec.kind, a.threads, None, [pick])
         printer.use(labels)

@@ -13,15 +13,21 @@ experiments/results/printed_refine.json.
 ``--control``: also the same steps with the loss on the continuous render (``control-N``: their blue-noise print)
 and the refined mixtures rendered continuous (``refine-N continuous``), with the paired differences refine-N -
 control-N and refine-N - refine-N continuous; ``--control-only``: the control without the refinement.
-``--methods``: other quantizations, each METHOD[:UPSAMPLE][+comp] (e.g. ``blue-noise:linear``; ``+comp``: the shares
-pre-compensated for the halftone, ``printing.compensate``; its seconds are those of a cached compensation when one
-is cached, else they include measuring it).
+``--methods``: other quantizations, each METHOD[:UPSAMPLE][/ORDER][+comp[1][tP]] (e.g. ``blue-noise:linear``,
+``blue-noise/tint-first``: the inks' order in the bands, ``Quantization.ink_order``; ``+comp``: the shares
+pre-compensated for the halftone, ``printing.compensate``, with its factors against other inks; ``+comp1``: with each
+ink's factor against the base alone, the other inks counted as base (what ``--compensate`` does); ``t0.05``: the
+correction tapered below a share of 0.05; its seconds are those of a cached compensation when one is cached, else they
+include measuring it).
 """
 
 import argparse
+import contextlib
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
 
@@ -35,6 +41,7 @@ from inkopt.evaluation.printed import PrintedRenderer  # noqa: E402
 from inkopt.evaluation.renders import ContinuousSource  # noqa: E402
 from inkopt.loss import TexelLoss  # noqa: E402
 from inkopt.model import Quantization  # noqa: E402
+from inkopt.printing import quantize as Q  # noqa: E402
 from inkopt.printing.quantize import quantize_volume  # noqa: E402
 from inkopt.printing.refine import REFINE_SPP, REFINE_STEP, PrintedRefinement  # noqa: E402
 from inkopt.printing.stream import run_target  # noqa: E402
@@ -64,6 +71,30 @@ class ContinuousRefinement(PrintedRefinement):
         return res.rgb.astype(np.float64), res.var_mean.astype(np.float64)
 
 
+def quantization(spec: str) -> tuple[Quantization, dict]:
+    """``METHOD[:UPSAMPLE][/ORDER][+comp[1][tP]]`` -> (the settings, the compensation's changes for
+    ``compensation_variant``; ``ORDER``: ``Quantization.ink_order``, e.g. ``tint-first``):
+    ``+comp`` the shares compensated with the factors against other inks (``ShareCompensation.pairs``), ``+comp1``
+    with each ink's factor against the base alone (the other inks counted as base: what ``Quantization.compensate``
+    applies), ``tP`` (e.g. ``+compt0.05``) with the correction tapered below the share P
+    (``ShareCompensation.taper``); no ``+comp``: uncompensated."""
+    head, comp, tail = spec.partition("+comp")
+    head, _, order = head.partition("/")
+    m, _, up = head.partition(":")
+    single, _, taper = tail.partition("t")
+    changes = {"pairs": single != "1"} | ({"taper": float(taper)} if taper else {})
+    q = Quantization(m, upsample=up or "nearest", ink_order=order or "lightness", compensate=bool(comp))
+    return q, changes
+
+
+@contextlib.contextmanager
+def compensation_variant(changes: dict):
+    """Within it, ``quantize`` uses the measured compensation with ``changes`` (fields of ``ShareCompensation``)."""
+    full = Q.share_compensation
+    with mock.patch.object(Q, "share_compensation", lambda *a, **k: replace(full(*a, **k), **changes)):
+        yield
+
+
 def candidates(vol, rd, refine: list[int], methods: list[str], control, threads, log, settings=None):
     """(name -> (labels volume, seconds to make it, extra record), name -> refined mixture volume rendered
     continuous (with the control only)); refinements share one run of the largest count. ``control``: False, True
@@ -71,12 +102,11 @@ def candidates(vol, rd, refine: list[int], methods: list[str], control, threads,
     out, mixtures = {}, {}
     t0 = time.perf_counter()
     out["blue-noise"] = (quantize_volume(vol, Quantization()), time.perf_counter() - t0, {})
-    for spec in methods:  # METHOD[:UPSAMPLE][+comp]
-        head, comp, _ = spec.partition("+comp")
-        m, _, up = head.partition(":")
+    for spec in methods:  # METHOD[:UPSAMPLE][/ORDER][+comp[1][tP]]
+        q, changes = quantization(spec)
         t0 = time.perf_counter()
-        q = Quantization(m, upsample=up or "nearest", compensate=bool(comp))
-        out[spec] = (quantize_volume(vol, q), time.perf_counter() - t0, {})
+        with compensation_variant(changes):
+            out[spec] = (quantize_volume(vol, q), time.perf_counter() - t0, {})
     kinds = [("refine", PrintedRefinement)] if control != "only" else []
     kinds += [("control", ContinuousRefinement)] if control else []
     for label, cls in kinds if refine else []:

@@ -3,6 +3,7 @@ directory."""
 
 import json
 import tracemalloc
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -188,6 +189,30 @@ def test_evaluate_surface_run_and_method_mismatch(tmp_path, table3, method, ink_
     with pytest.raises(ParameterError, match=f"quantized with '{method}'") as exc:
         evaluate_run(d, EvaluateOptions(spp=1, method=other, table=table3))
     assert f"not --method '{other}'" in exc.value.render(flag_of)  # the command line names its flag
+
+
+def test_baselines_are_dithered_without_our_share_compensation(tmp_path, table3, monkeypatch):
+    """A run quantized with the share compensation (our method's step): its print is dithered compensated, the
+    print-shop baselines as a print shop would, by plain blue noise (every other setting as ours)."""
+    d = tmp_path / "run"
+    make_run(d, table3, "surface")
+    q = Volume.load(d / "volume.npz")
+    ours = Quantization("blue-noise", 5, None, "nearest", "lightness", compensate=True)
+    seen = []
+
+    def recording(volume, settings, out=None):
+        seen.append(settings)
+        return quantize(volume, replace(settings, compensate=False), out)  # no compensation measured here
+
+    labels, vp = recording(q, ours)
+    record = replace(ours, dpi=tuple(25.4 / vp))
+    Volume.from_labels(voxel_mm=vp, labels=labels, inks=INKS3, quantization=record).save(d / "quantized.npz")
+    monkeypatch.setattr(evaluate_mod, "quantize", recording)
+    ev = evaluate_run(d, EvaluateOptions(spp=2, table=table3)).to_json()
+    assert ev["quantization"]["compensate"] is True  # the print's record says it was compensated
+    baselines = seen[1:]
+    assert len(baselines) == 2 and all(not s.compensate for s in baselines)
+    assert all(replace(s, compensate=True) == replace(record, dpi=s.dpi) for s in baselines)
 
 
 def test_evaluate_mesh_kind(tmp_path, table3):

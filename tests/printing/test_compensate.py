@@ -1,6 +1,8 @@
 """Tests of inkopt.printing.compensate: the share pre-compensation of the halftone (its inverse map, its measurement on
 flat patches, its use by ``quantize`` and its record)."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -90,6 +92,7 @@ def test_measured_compensation_of_a_strong_absorber_is_below_its_share(monkeypat
     like a smaller continuous share (the package effect), by more than five standard errors of the share."""
     monkeypatch.setattr(C, "DITHERED_SHARES", (0.3,))
     monkeypatch.setattr(C, "CONTINUOUS_SHARES", (0.0, 0.1, 0.2, 0.25, 0.3, 0.35, 0.4, 0.6, 1.0))
+    monkeypatch.setattr(C, "PAIR_SHARES", ((0.1, 0.1),))
     inks = InkTable(
         names=("white", "yellow", "grey"),
         sigma_a=np.array([[0.005, 0.003, 0.024], [0.007, 0.019, 16.15], [0.1, 0.1, 0.1]]),
@@ -105,6 +108,10 @@ def test_measured_compensation_of_a_strong_absorber_is_below_its_share(monkeypat
     assert comp.measured[1, 0] > 0.15  # and not absurdly far
     assert comp.k[1] > 5 * comp.k_stderr[1] and comp.k[0] == 0.0
     assert comp.share_stderr[2, 0] > 0  # every ink but the base is measured
+    # the pair's patch: both inks' effective shares measured with errors, and their factors fitted
+    assert comp.mixed_rows.tolist() == [[0.8, 0.1, 0.1]] and np.all(comp.mixed_stderr[0, 1:] > 0)
+    assert np.isfinite(comp.kappa_stderr[1, 2]) and np.isfinite(comp.kappa_stderr[2, 1])
+    assert 0.05 < comp.mixed_effective[0, 1] < 0.1 - 3 * comp.mixed_stderr[0, 1]  # yellow's package effect there too
 
 
 def test_quantize_uses_the_compensation(monkeypatch):
@@ -134,6 +141,7 @@ def test_compensate_is_recorded_and_checked():
 def test_share_compensation_is_cached_on_disk(monkeypatch, tmp_path):
     monkeypatch.setenv("INKOPT_CACHE_DIR", str(tmp_path))
     monkeypatch.setattr(C, "_MEMORY", {})
+    monkeypatch.setattr(C, "PACKAGED", tmp_path / "packaged")  # none shipped
     inks = InkTable.parse("vero-cmykw")
     calls = []
 
@@ -162,6 +170,7 @@ def test_compensated_run_streams_like_memory_and_records_it(tmp_path, monkeypatc
 
     monkeypatch.setenv("INKOPT_CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.setattr(C, "_MEMORY", {})
+    monkeypatch.setattr(C, "PACKAGED", tmp_path / "packaged")
     monkeypatch.setattr(C, "measure_compensation", lambda inks, q, g, ior, base, *a, **k: scaled(base, len(inks), 0.3))
     inks = InkTable.parse("vero-cmykw")
     rng = np.random.default_rng(2)
@@ -176,3 +185,102 @@ def test_compensated_run_streams_like_memory_and_records_it(tmp_path, monkeypatc
     assert not np.array_equal(got.labels, quantize_volume(vol, Quantization(seed=3)).labels)
     assert main(["quantize", str(d.path), "--no-compensate", "--seed", "3"]) == 0
     assert d.load_quantized().quantization.compensate is False
+    # the inks' order in the bands: a flag of its own, recorded, the compensation measured for that order
+    assert main(["quantize", str(d.path), "--compensate", "--ink-order", "tint-first"]) == 0
+    got = d.load_quantized()
+    expect = quantize_volume(vol, Quantization(ink_order="tint-first", compensate=True))
+    assert got.quantization.ink_order == "tint-first" and got.quantization == expect.quantization
+    np.testing.assert_array_equal(got.labels, expect.labels)
+
+
+def mixed(base: int, n: int, k: float, kappa: np.ndarray) -> C.ShareCompensation:
+    """``scaled`` with the factors ``kappa`` (N, N) of each ink against the other inks, applied."""
+    return replace(scaled(base, n, k), kappa=np.asarray(kappa, np.float64), pairs=True)
+
+
+def test_effective_rows_without_kappa_is_the_single_ink_model():
+    comp = scaled(base=4, n=5, k=0.3)
+    rng = np.random.default_rng(2)
+    rows = rng.dirichlet(np.ones(5), size=50)
+    eff = comp.effective_rows(rows)
+    np.testing.assert_allclose(eff.sum(-1), 1.0)
+    for i in range(4):  # every other ink counted as base: p / (1 + k (1 - p))
+        np.testing.assert_allclose(eff[:, i], comp.effective(rows[:, i], i), atol=1e-12)
+
+
+def test_apply_with_kappa_inverts_the_mixed_model():
+    kappa = np.array([[0, 0.5, -0.2, 0, 0], [0.1, 0, 0.3, 0.2, 0], [0.2, 0.1, 0, -0.1, 0], [0, 0, 0.4, 0, 0], [0] * 5])
+    comp = mixed(base=4, n=5, k=0.3, kappa=kappa)
+    rng = np.random.default_rng(3)
+    rows = rng.dirichlet(np.ones(5) * 0.4, size=300) * np.array([0.3, 0.3, 0.3, 0.3, 1.0])
+    rows[:, 4] += 1.0 - rows.sum(-1)  # mostly base, as an optimiser's rows are
+    rows = np.concatenate([rows, np.zeros((1, 5))])  # an outside row
+    out = comp.apply(rows)
+    np.testing.assert_allclose(out.sum(-1), rows.sum(-1), atol=1e-12)
+    np.testing.assert_allclose(comp.effective_rows(out), rows, atol=1e-10)
+    # a factor against another ink lower than against the base asks for less of the ink where that ink is present
+    one = np.array([[0.0, 0.0, 0.1, 0.3, 0.6]])
+    assert comp.apply(one)[0, 2] < scaled(4, 5, 0.3).apply(one)[0, 2]
+    # not applied unless ``pairs``: the single-ink model's closed form
+    np.testing.assert_array_equal(replace(comp, pairs=False).apply(rows), scaled(4, 5, 0.3).apply(rows))
+    # kappa equal to k everywhere: the closed form of the single-ink model
+    same = mixed(base=4, n=5, k=0.3, kappa=np.full((5, 5), 0.3))
+    np.testing.assert_allclose(same.apply(rows), scaled(4, 5, 0.3).apply(rows), atol=1e-10)
+
+
+def test_fit_kappa_recovers_pair_factors_within_their_standard_errors():
+    comp = scaled(base=3, n=4, k=0.3)
+    truth = np.array([[0, 0.1, 0.5, 0], [0.2, 0, 0.0, 0], [0.05, 0.3, 0, 0], [0, 0, 0, 0]])
+    rows = []
+    for i, j in ((0, 1), (0, 2), (1, 2)):
+        for pi, pj in C.PAIR_SHARES:
+            r = np.zeros(4)
+            r[i], r[j], r[3] = pi, pj, 1 - pi - pj
+            rows.append(r)
+    rows = np.array(rows)
+    exact = mixed(3, 4, 0.3, truth).effective_rows(rows)
+    se = np.where(rows > 0, 0.004, 0.0)
+    se[:, 3] = 0.0
+    rng = np.random.default_rng(4)
+    z = []
+    for _ in range(100):
+        kappa, kse = C.fit_kappa(comp, rows, exact + rng.normal(0, 1, rows.shape) * se, se)
+        z.append(((kappa - truth) / kse)[[0, 0, 1, 1, 2, 2], [1, 2, 0, 2, 0, 1]])
+    z = np.array(z)
+    # the fitted factors scatter about the truth as their standard errors say
+    assert np.all(np.abs(z.mean(0)) < 5 / np.sqrt(len(z))), z.mean(0)
+    assert np.all((0.7 < z.std(0)) & (z.std(0) < 1.3)), z.std(0)
+    assert kse[3, 0] == np.inf and kappa[3].tolist() == [0, 0, 0, 0]  # the base has no factors
+
+
+def test_the_default_inks_compensation_is_shipped_and_current(monkeypatch, tmp_path):
+    """The package holds the compensation of the default inks on the default printer grid under the key the current
+    settings give (a change of the measurement or its settings needs a new file), read without measuring; it holds
+    the factors against other inks, and its yellow is the strong absorber (k > 5 standard errors)."""
+    monkeypatch.setenv("INKOPT_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(C, "_MEMORY", {})
+    monkeypatch.setattr(C, "measure_compensation", lambda *a, **k: pytest.fail("measured"))
+    inks = InkTable.parse("vero-cmykw")
+    key = C.compensation_key(inks, Quantization(), inks.g, 1.5)
+    assert (C.PACKAGED / f"compensation_{key}.npz").is_file()
+    comp = C.share_compensation(inks, Quantization(), inks.g, 1.5)
+    assert comp.kappa is not None and comp.kappa.shape == (5, 5) and comp.base == 4
+    assert comp.k[2] > 5 * comp.k_stderr[2] and np.all(np.isfinite(comp.kappa_stderr[:4, :4][~np.eye(4, dtype=bool)]))
+    assert not list(tmp_path.iterdir())  # nothing measured or written
+
+
+def test_float32_ink_tables_share_the_key():
+    """A run's ink table (float32 coefficients, as read from its files) has the key of the table it came from."""
+    inks = InkTable.parse("vero-cmykw")
+    f32 = replace(inks, sigma_a=inks.sigma_a.astype(np.float32), sigma_s=inks.sigma_s.astype(np.float32))
+    assert C.compensation_key(f32, Quantization(), inks.g, 1.5) == C.compensation_key(inks, Quantization(), 0.4, 1.5)
+
+
+def test_taper_scales_the_correction_below_its_share():
+    comp = scaled(base=2, n=3, k=0.3)
+    mix = np.array([[0.01, 0.2, 0.79], [0.05, 0.1, 0.85]])
+    full, tapered = comp.apply(mix), replace(comp, taper=0.05).apply(mix)
+    np.testing.assert_allclose(tapered.sum(-1), 1.0)
+    np.testing.assert_allclose(tapered[0, 0] - mix[0, 0], (full[0, 0] - mix[0, 0]) * 0.2)  # 0.01 / 0.05
+    np.testing.assert_allclose(tapered[:, 1], full[:, 1])  # at or above the taper share: the whole correction
+    np.testing.assert_allclose(tapered[1, 0], full[1, 0])

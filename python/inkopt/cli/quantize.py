@@ -9,7 +9,7 @@ import argparse
 from dataclasses import replace
 
 from ..model import Quantization
-from ..printing.dithers import DITHERS
+from ..printing.dithers import DITHERS, INK_ORDERS
 from ..printing.grid import DEFAULT_LAYER_UM, UPSAMPLERS
 from ..printing.stream import quantize_run
 from ..rundir import RunDir
@@ -20,7 +20,7 @@ from .common import add_seed_arg, stderr_log
 def quantization_of(args) -> Quantization:
     """The settings the arguments give (checked by ``printing.quantize.check_quantization``)."""
     dpi = None if args.dpi is None else parse_dpi(args.dpi)
-    q = Quantization(args.method, args.seed, dpi, args.upsample, layer_um=args.layer_um, refine=args.refine)
+    q = Quantization(args.method, args.seed, dpi, args.upsample, args.ink_order, args.layer_um, args.refine)
     return replace(q, compensate=args.compensate)
 
 
@@ -60,11 +60,19 @@ def register_cli(sub) -> None:
         "each costs about one print render at 16 spp and a gradient pass; docs/quality.md)",
     )
     p.add_argument(
+        "--ink-order",
+        choices=list(INK_ORDERS),
+        default=default.ink_order,
+        help=f"the inks' order in blue noise's bands (default {default.ink_order}: lightest first; tint-first: the "
+        "second lightest ink, yellow, before white, its voxels spread more evenly where it mixes with darker inks; "
+        "index: the ink set's order; docs/quality.md)",
+    )
+    p.add_argument(
         "--compensate",
         action=argparse.BooleanOptionalAction,
         default=default.compensate,
         help="give the dither each ink's share pre-compensated for the halftone (a dithered ink looks lighter than "
-        "its mixture; measured once per ink set and printer grid on flat patches, about a minute, then cached; "
-        "docs/quality.md)",
+        "its mixture; the default inks' factors ship with inkopt, another ink set or printer grid is measured once "
+        "on flat patches, about two minutes, then cached; default off; docs/quality.md)",
     )
     p.set_defaults(func=_quantize_cmd)

@@ -15,8 +15,8 @@ that many instead:
   samples. Each printer texel is assigned to the scene texel of the same face whose face centre is nearest in mm
   (meshes: the nearest scene texel), i.e. the scene texel whose footprint contains it, and the printer texels of
   a scene texel are averaged (a scene texel that gets none takes its nearest printer texel);
-- ``baselines``: ``surface`` and ``extrusion`` (``evaluation.baselines``) quantized exactly like ours (same method,
-  seed, DPI, upsampling) and rendered like ``quantized``.
+- ``baselines``: ``surface`` and ``extrusion`` (``evaluation.baselines``) dithered as a print shop would: like ours
+  (same method, seed, DPI, upsampling) but without the share compensation, and rendered like ``quantized``.
 
 Each result is compared with the scene's ``target_rgb`` by ``metrics.prediction_metrics``: ΔE76 mean and 95th
 percentile, CIEDE2000 mean, mean SSIM (sigma 1.5 voxels, on the scene texels), ``delta_e76_noise``, the mean
@@ -351,8 +351,8 @@ def _render_printed(ev: Evaluating, printer: PrintedRenderer, name: str, labels_
 
 
 def _render_baselines(ev: Evaluating, printer: PrintedRenderer, sources: dict, grid: _Grid, dpi: tuple, meta: dict):
-    """Each baseline quantized exactly like ours (method, seed, DPI, upsampling and ink order of quantized.npz's
-    settings ``meta["quantization"]``) into one printer-grid label array, then rendered like it."""
+    """Each baseline quantized like ours (method, seed, DPI, upsampling and ink order of quantized.npz's settings
+    ``meta["quantization"]``), never share-compensated (our method's step), into one printer-grid label array."""
     q, shape, vmm = meta["quantization"], grid.shape, grid.voxel_mm
     shape_p = printer_grid(shape, vmm, dpi=dpi)[0]
     if shape_p != printer.shape:
@@ -362,7 +362,7 @@ def _render_baselines(ev: Evaluating, printer: PrintedRenderer, sources: dict, g
         src = sources.pop(name)
         labels, _ = quantize(
             MixtureLayers(src, vmm, src.inside, meta["inks"], meta["g"], meta["ior"]),
-            replace(q, dpi=dpi),  # as ours was, from its file (its inks' order included)
+            replace(q, dpi=dpi, compensate=False),  # as ours was (its inks' order included), uncompensated
             out=np.empty(shape_p, np.uint8),
         )
         del src

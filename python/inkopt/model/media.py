@@ -194,7 +194,8 @@ class Quantization:
                holds (x, y, z), the printer voxels' own (``printing.quantize.record``); an old file may hold None
     upsample   "nearest" or "linear" (``printing.grid.UPSAMPLERS``)
     ink_order  the order of the inks' bands where the dither orders them (blue noise): "lightness" (lightest first,
-               ``dither.lightness_order``) or "index" (the ink set's order; files that do not say were made so)
+               ``dither.lightness_order``), "tint-first" (the second lightest before the lightest,
+               ``printing.dithers``) or "index" (the ink set's order; files that do not say were made so)
     layer_um   layer thickness in µm where ``dpi`` has no z entry; None: 27 (``units.PRINTER_LAYER_UM``). Not
                recorded: a record's ``dpi`` holds z
     refine     iterations of the refinement on the printed prediction before the dither (``printing.refine``: the

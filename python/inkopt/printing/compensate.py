@@ -8,14 +8,15 @@ grains of an absorbing ink less often than the same ink spread evenly through th
 blue-noise print is ΔE76 1.04 from its mixture on average, Δb* −1.0, and 0.40 on a printer grid twice as fine
 (``experiments/halftone_cause.py``, docs/quality.md "Keeping what the optimiser found").
 
-The correction is measured on flat patches: for each ink but the base (the first in band order, the lightest:
-white), patches of the base with a share p of the ink, dithered on the printer grid and rendered from the top, are
-matched to continuous patches of the same two inks; the continuous share whose colour is nearest in CIELAB is the
-dithered patch's effective share. One factor k per ink models them, ``p_eff = p / (1 + k (1 - p))`` (fitted with
-the patches' standard errors: the model pools the patches, so an ink without a package effect gets k near 0 instead
-of each patch's noise). ``ShareCompensation.apply`` inverts it per ink: the dither gets the share p' with
-``p_eff(p') = p``, and the base ink the rest (inks are treated one at a time against the base: the mixtures an
-optimiser finds are mostly the base).
+The correction is measured on flat patches: for each ink but the base (the lightest: white), patches of the base
+with a share p of the ink, dithered on the printer grid and rendered from the top, are matched to continuous patches
+of the same two inks; the continuous share whose colour is nearest in CIELAB is the dithered patch's effective share.
+One factor k per ink models them, ``p_eff = p / (1 + k (1 - p))`` (fitted with the patches' standard errors: the
+model pools the patches, so an ink without a package effect gets k near 0 instead of each patch's noise).
+``ShareCompensation.apply`` inverts it per ink: the dither gets the share p' with ``p_eff(p') = p``, and the base
+ink the rest. Where inks mix, each ink's factor against each other ink (``kappa``) is measured too, on patches of
+two non-base inks in the base (``measure_mixed``, ``fit_kappa``); it is kept with the compensation and applied only
+where ``pairs`` is set: on the meshes measured it corrected less than each ink fitted alone (docs/quality.md).
 """
 
 from __future__ import annotations
@@ -45,7 +46,13 @@ CONTINUOUS_SHARES = CONTINUOUS_SHARES + (0.35, 0.4, 0.45, 0.5, 0.6, 0.7, 0.8, 0.
 PATCH_LATERAL = 32  # printer voxels per side of a dithered patch: the blue-noise tile's period, so it wraps exactly
 PATCH_MM = 2.5  # patch thickness, as the colour table's
 PATCH_SPP = 64  # samples per texel of a dithered patch (1024 texels)
-FORMAT = 2  # of the cached file (part of its key)
+#: shares (p_i, p_j) of the measured patches of two non-base inks i < j in the base (every pair): equal small shares,
+#: and one ink small in much of the other (Spot's yellow in magenta or black)
+PAIR_SHARES = ((0.1, 0.1), (0.05, 0.3), (0.3, 0.05))
+PAIR_STEP = 0.04  # the share step of the continuous patches a mixed patch's effective shares are solved on
+PAIR_SPP = 4 * PATCH_SPP  # samples per texel of a mixed dithered patch (its continuous ones: 4 times as many)
+MIXED_FIELDS = ("kappa", "kappa_stderr", "mixed_rows", "mixed_effective", "mixed_stderr")
+FORMAT = 3  # of the cached file (part of its key)
 
 
 @dataclass(frozen=True)
@@ -60,6 +67,16 @@ class ShareCompensation:
     shares        (K,) float64 the nominal shares of the measured dithered patches
     measured      (N, K) float64 the continuous share each patch was matched to (the base's row: ``shares``)
     share_stderr  (N, K) float64 its standard error (the colours' ΔE76 standard error over the curve's slope)
+    kappa         (N, N) float64 or None: the package factor of ink i against ink j's share (``fit_kappa``, from
+                  patches of two non-base inks in the base); None: k_i, every other ink acting as the base
+    kappa_stderr  (N, N) float64 its standard error (inf where no patch holds the pair)
+    mixed_rows    (M, N) float64 the nominal rows of the measured mixed patches
+    mixed_effective, mixed_stderr  (M, N) float64 the continuous rows they look like and the shares' standard errors
+    taper         a share (0: none) below which an ink's correction is scaled by share / taper (a setting, not
+                  measured)
+    pairs         whether ``kappa`` is applied (a setting, default off: on the duck, the spider and Spot 20 mm the
+                  correction with it gained less ΔE76 and ΔE2000 than each ink fitted alone against the base;
+                  docs/quality.md, "Where inks mix")
     """
 
     base: int
@@ -68,34 +85,89 @@ class ShareCompensation:
     shares: np.ndarray
     measured: np.ndarray
     share_stderr: np.ndarray
+    kappa: np.ndarray | None = None
+    kappa_stderr: np.ndarray | None = None
+    mixed_rows: np.ndarray | None = None
+    mixed_effective: np.ndarray | None = None
+    mixed_stderr: np.ndarray | None = None
+    taper: float = 0.0
+    pairs: bool = False
 
     def effective(self, p, i: int) -> np.ndarray:
-        """The continuous share that ink ``i`` dithered at share ``p`` (array, in [0, 1]) looks like."""
+        """The continuous share that ink ``i`` dithered at share ``p`` (array, in [0, 1]) in the base alone looks
+        like."""
         p = np.asarray(p, np.float64)
         return p / (1.0 + self.k[i] * (1.0 - p))
 
+    def factors(self) -> np.ndarray:
+        """(N, N) float64: entry (i, j) the package factor of ink i against ink j's share, k_i against the base
+        (j = base), ``kappa`` against another ink where ``pairs`` (else k_i, every other ink acting as the base);
+        the diagonal and the base's row are 0."""
+        n = len(self.k)
+        single = self.kappa is None or not self.pairs
+        f = np.repeat(np.asarray(self.k, np.float64)[:, None], n, 1) if single else np.array(self.kappa)
+        f[:, self.base] = self.k
+        np.fill_diagonal(f, 0.0)
+        f[self.base] = 0.0
+        return f
+
+    def effective_rows(self, rows) -> np.ndarray:
+        """The continuous rows (..., N) float64 that dithered ``rows`` (..., N) look like: every ink but the base
+        ``p_i / (1 + sum_j f_ij p_j)`` (``factors``; j runs over the other inks and the base), the base the
+        rest."""
+        rows = np.asarray(rows, np.float64)
+        out = rows / (1.0 + rows @ self.factors().T)
+        out[..., self.base] = rows.sum(-1) - np.delete(out, self.base, -1).sum(-1)
+        return out
+
     def apply(self, mix: np.ndarray) -> np.ndarray:
         """The pre-compensated rows of ``mix`` (..., N) (rows summing to 1, or 0 outside), same shape, float64:
-        every ink but the base takes the share p' whose dither looks like its share p in ``mix``,
-        p' = p (1 + k) / (1 + k p), the base the rest; where the non-base shares would sum above 1, they are scaled
-        to 1 (no base)."""
+        every ink but the base takes the share p' whose dither looks like its share p in ``mix`` (``effective_rows``
+        of the result equals ``mix``; without ``kappa`` p' = p (1 + k) / (1 + k p)), the base the rest; where the
+        non-base shares would sum above 1, they are scaled to 1 (no base); below ``taper`` the correction shrinks."""
         mix = np.asarray(mix, np.float64)
-        out = np.empty_like(mix)
-        for i in range(mix.shape[-1]):
-            if i != self.base:
-                p = mix[..., i]
-                out[..., i] = p * (1.0 + self.k[i]) / (1.0 + self.k[i] * p)
-        others = np.delete(np.arange(mix.shape[-1]), self.base)
         total = mix.sum(-1)
+        if self.kappa is None or not self.pairs:
+            out = np.empty_like(mix)
+            for i in range(mix.shape[-1]):
+                if i != self.base:
+                    p = mix[..., i]
+                    out[..., i] = p * (1.0 + self.k[i]) / (1.0 + self.k[i] * p)
+        else:
+            out = self._inverse(mix, total)
+        others = np.delete(np.arange(mix.shape[-1]), self.base)
+        if self.taper > 0:  # below the taper share, the correction in proportion to the share
+            p = mix[..., others]
+            out[..., others] = p + (out[..., others] - p) * np.minimum(p / self.taper, 1.0)
         s = out[..., others].sum(-1)
         over = s > total
         out[..., others] *= np.where(over, total / np.where(over, s, 1.0), 1.0)[..., None]
         out[..., self.base] = np.maximum(total - out[..., others].sum(-1), 0.0)
         return out
 
+    def _inverse(self, mix: np.ndarray, total: np.ndarray) -> np.ndarray:
+        """The non-base shares p' (..., N) with ``effective_rows(p')`` = ``mix`` (the base's column: 0), by the
+        fixed point p'_i = p_i (1 + sum_j f_ij p'_j) with the base's share total - sum p' (at least 0); its map's
+        slope is about the largest factor times the share (< 0.4), so 60 steps reach float64 rounding."""
+        f = self.factors()
+        f_base = f[:, self.base].copy()
+        f[:, self.base] = 0.0
+        t = mix.copy()
+        t[..., self.base] = 0.0
+        p = t.copy()
+        for _ in range(60):
+            w = np.maximum(total - p.sum(-1), 0.0)
+            new = t * (1.0 + p @ f.T + w[..., None] * f_base)
+            done = np.max(np.abs(new - p), initial=0.0) < 1e-13
+            p = new
+            if done:
+                break
+        return p
+
     def arrays(self) -> dict:
-        """The fields as arrays (the cached file's)."""
+        """The fields as arrays (the cached file's; the mixed patches' where measured)."""
         fields = ("base", "k", "k_stderr", "shares", "measured", "share_stderr")
+        fields += tuple(f for f in MIXED_FIELDS if getattr(self, f) is not None)
         return {f: np.asarray(getattr(self, f)) for f in fields}
 
 
@@ -171,7 +243,8 @@ def measure_compensation(inks: InkTable, q: Quantization, g: float, ior: float, 
     """The ``ShareCompensation`` of ``inks`` dithered by ``q`` against the ``base`` ink (module docstring): per ink
     ``CONTINUOUS_SHARES`` continuous patches (``_continuous_curve``) and ``DITHERED_SHARES`` dithered ones (1024
     top texels at ``PATCH_SPP`` spp), each with a seed of its own; each dithered colour matched to its nearest
-    point of the continuous curve, and k fitted (``fit_k``). About 1 s per patch on 2 cores."""
+    point of the continuous curve, and k fitted (``fit_k``); then the factors against other inks (``measure_mixed``,
+    kept with ``pairs`` off). About 1 s per patch on 2 cores."""
     n = len(inks)
     shares = np.array(DITHERED_SHARES)
     measured = np.tile(shares, (n, 1))
@@ -193,7 +266,95 @@ def measure_compensation(inks: InkTable, q: Quantization, g: float, ior: float, 
         if log is not None:
             pairs = ", ".join(f"{p:g} -> {e:.3f}" for p, e in zip(shares, measured[i]))
             log(f"  {inks.names[i]}: k {k[i]:.3f} ± {k_se[i]:.3f} (dithered share -> continuous: {pairs})")
-    return ShareCompensation(base, k, k_se, shares, measured, share_se)
+    comp = ShareCompensation(base, k, k_se, shares, measured, share_se)
+    return measure_mixed(comp, inks, q, g, ior, seed, threads, log)
+
+
+def _mixture_patch(row, inks: InkTable, g: float, ior: float) -> Volume:
+    """A periodic-xy continuous patch of the mixture ``row`` (N,): 8 x 8 voxels of 0.25 mm, ``PATCH_MM`` thick."""
+    n = len(inks)
+    mixture = np.asarray(row, np.float64).reshape(1, 1, 1, n).repeat(8, 1).repeat(8, 2)
+    return Volume.from_mixture((0.25, 0.25, PATCH_MM), mixture, inks, g=g, ior=ior, boundary="periodic-xy")
+
+
+def mixed_effective(row, comp: ShareCompensation, inks, q, g, ior, seed: int, threads=None):
+    """The continuous shares (N,) that the dither of ``row`` (N,) looks like, and their standard errors (N,) (0 for
+    inks not in ``row``; the base: the rest): its top colour linearised about the continuous row ``c0`` that
+    ``comp`` predicts, from continuous patches at ``c0`` and at ``c0`` with ``PAIR_STEP`` more of each ink present
+    (less base; one seed for all of them, so their differences carry little noise), solved in least squares:
+    lab(dithered) = lab(c0) + J (e - c0). The standard errors are those of the two colours (each CIELAB
+    coordinate taken with a third of the ΔE76 variance) through (J^T J)^-1 J^T; J's own noise is left out."""
+    row = np.asarray(row, np.float64)
+    present = [i for i in range(len(row)) if i != comp.base and row[i] > 0]
+    lab_d, se_d = _top_colour(patch_labels(row, inks, q, g, ior), PAIR_SPP, seed, threads)
+    lab_d = linear_to_lab(lab_d)
+    c0 = comp.effective_rows(row)
+    rgb0, se0 = _top_colour(_mixture_patch(c0, inks, g, ior), 4 * PAIR_SPP, seed + 1, threads)
+    lab0 = linear_to_lab(rgb0)
+    jac = np.empty((3, len(present)))
+    for m, i in enumerate(present):
+        c = c0.copy()
+        c[i] += PAIR_STEP
+        c[comp.base] -= PAIR_STEP
+        jac[:, m] = (linear_to_lab(_top_colour(_mixture_patch(c, inks, g, ior), 4 * PAIR_SPP, seed + 1, threads)[0])
+                     - lab0) / PAIR_STEP  # fmt: skip
+    delta, *_ = np.linalg.lstsq(jac, lab_d - lab0, rcond=None)
+    cov = np.linalg.pinv(jac.T @ jac) * (se_d**2 + se0**2) / 3.0
+    eff, se = c0.copy(), np.zeros_like(c0)
+    eff[present] += delta
+    se[present] = np.sqrt(np.diag(cov))
+    eff[comp.base] = row.sum() - np.delete(eff, comp.base).sum()
+    return eff, se
+
+
+def fit_kappa(comp: ShareCompensation, rows: np.ndarray, eff: np.ndarray, se: np.ndarray):
+    """The package factors (N, N) of each ink against each other non-base ink and their standard errors, by
+    weighted linear least squares per ink i over the mixed patches (M rows (M, N), measured effective shares
+    ``eff`` ± ``se``) that hold it: p_i / e_i - 1 - k_i w = sum_j kappa_ij p_j (``effective_rows``), with k_i
+    (against the base, share w) fixed at the base patches' fit. An ink pair no patch holds keeps kappa_ij = k_i
+    and a standard error of inf."""
+    n, b = len(comp.k), comp.base
+    kappa = np.repeat(np.asarray(comp.k, np.float64)[:, None], n, 1)
+    kappa_se = np.full((n, n), np.inf)
+    for i in range(n):
+        m = (rows[:, i] > 0) & (eff[:, i] > 0) if i != b else np.zeros(len(rows), bool)
+        cols = [j for j in range(n) if j not in (i, b) and np.any(rows[m, j] > 0)]
+        if not cols:
+            continue
+        p, e = rows[m, i], eff[m, i]
+        y = p / e - 1.0 - comp.k[i] * rows[m, b]
+        w = 1.0 / np.maximum(p / (e * e) * se[m, i], 1e-9) ** 2
+        x = rows[m][:, cols]
+        cov = np.linalg.pinv(x.T @ (w[:, None] * x))
+        kappa[i, cols] = cov @ (x.T @ (w * y))
+        kappa_se[i, cols] = np.sqrt(np.diag(cov))
+    np.fill_diagonal(kappa, 0.0)
+    kappa[b] = 0.0
+    return kappa, kappa_se
+
+
+def measure_mixed(comp: ShareCompensation, inks, q, g, ior, seed: int, threads=None, log=None):
+    """``comp`` with its factors against other inks (``fit_kappa``) measured on patches of every pair of non-base
+    inks at ``PAIR_SHARES`` in the base (``mixed_effective``; about 2 s per patch on 2 cores)."""
+    n, b = len(inks), comp.base
+    inks_nb = [i for i in range(n) if i != b]
+    rows = []
+    for a, i in enumerate(inks_nb):
+        for j in inks_nb[a + 1 :]:
+            for pi, pj in PAIR_SHARES:
+                row = np.zeros(n)
+                row[i], row[j], row[b] = pi, pj, 1.0 - pi - pj
+                rows.append(row)
+    rows = np.array(rows)
+    eff, se = np.zeros_like(rows), np.zeros_like(rows)
+    for m, row in enumerate(rows):
+        eff[m], se[m] = mixed_effective(row, comp, inks, q, g, ior, seed + 2 * m, threads)
+    kappa, kappa_se = fit_kappa(comp, rows, eff, se)
+    if log is not None:
+        for i in inks_nb:
+            pairs = ", ".join(f"{inks.names[j]} {kappa[i, j]:.3f} ± {kappa_se[i, j]:.3f}" for j in inks_nb if j != i)
+            log(f"  {inks.names[i]} against the other inks: {pairs} (against {inks.names[b]}: {comp.k[i]:.3f})")
+    return replace(comp, kappa=kappa, kappa_stderr=kappa_se, mixed_rows=rows, mixed_effective=eff, mixed_stderr=se)
 
 
 def compensation_key(inks: InkTable, q: Quantization, g: float, ior: float) -> str:
@@ -201,14 +362,16 @@ def compensation_key(inks: InkTable, q: Quantization, g: float, ior: float) -> s
     rounded to 0.01) and the measurement's settings."""
     vp_um = tuple(np.round(PrinterGrid.of((1, 1, 1), (1.0, 1.0, 1.0), q).voxel_mm * 1000.0, 2).tolist())
     h = hashlib.sha256()
-    for a in (inks.sigma_a, inks.sigma_s):
-        h.update(np.ascontiguousarray(a, np.float64).tobytes())
+    for a in (inks.sigma_a, inks.sigma_s):  # as float32: an ink table read from a run's files has them so
+        h.update(np.ascontiguousarray(a, np.float32).tobytes())
     h.update(repr((FORMAT, float(g), float(ior), q.method, q.ink_order, vp_um, DITHERED_SHARES)).encode())
-    h.update(repr((CONTINUOUS_SHARES, PATCH_LATERAL, PATCH_MM, PATCH_SPP)).encode())
+    h.update(repr((CONTINUOUS_SHARES, PATCH_LATERAL, PATCH_MM, PATCH_SPP, PAIR_SHARES, PAIR_STEP, PAIR_SPP)).encode())
     return h.hexdigest()[:16]
 
 
 _MEMORY: dict[str, ShareCompensation] = {}
+#: compensations shipped with the package (the default inks' on the default printer grid), read before the cache
+PACKAGED = Path(__file__).resolve().parents[1] / "data" / "compensation"
 
 
 def cache_path(key: str) -> Path:
@@ -222,21 +385,22 @@ def cache_path(key: str) -> Path:
 
 
 def share_compensation(inks: InkTable | None, q: Quantization, g: float, ior: float, threads=None, log=None):
-    """The ``ShareCompensation`` of ``inks`` dithered by ``q`` (its base: the first ink of the dither's band order,
-    else the lightest), from this process's memory, the disk cache (``cache_path``) or measured
-    (``measure_compensation``, about a minute for five inks) and cached (atomically; a read-only cache is skipped)."""
+    """The ``ShareCompensation`` of ``inks`` dithered by ``q`` (its base: the lightest ink, whatever the bands'
+    order), from this process's memory, the package's copy (``PACKAGED``), the disk cache (``cache_path``) or
+    measured (``measure_compensation``, about two minutes for five inks) and cached (atomically; a read-only cache is
+    skipped)."""
     if inks is None:
         raise ValueError("a compensated quantization needs the mixture's ink table")
     key = compensation_key(inks, q, g, ior)
     if key in _MEMORY:
         return _MEMORY[key]
     path = cache_path(key)
-    if path.is_file():
-        with np.load(path, allow_pickle=False) as z:
+    stored = next((p for p in (PACKAGED / path.name, path) if p.is_file()), None)
+    if stored is not None:
+        with np.load(stored, allow_pickle=False) as z:
             comp = ShareCompensation(**{f: z[f] for f in z.files if f != "base"}, base=int(z["base"]))
     else:
-        order = band_order(q, inks, g, ior)
-        base = int((lightness_order(inks, g, ior) if order is None else order)[0])
+        base = int(lightness_order(inks, g, ior)[0])
         if log is not None:
             log(f"share compensation of {', '.join(inks.names)} on this printer grid: measuring (cached in {path})")
         comp = measure_compensation(inks, q, g, ior, base, threads, log)

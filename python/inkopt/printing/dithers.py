@@ -173,9 +173,17 @@ def _lightness(inks, g: float, ior: float) -> np.ndarray:
     return lightness_order(inks, g, ior)
 
 
+def _tint_first(inks, g: float, ior: float) -> np.ndarray:
+    """Lightest first, but the second lightest ink (the paper's inks: yellow) before the lightest (white): the
+    light tint then takes the thresholds' prefix, a blue-noise pattern of its own, where in a mixture with darker
+    inks it would take a middle band; the two light inks together still precede the dark ones."""
+    order = _lightness(inks, g, ior)
+    return np.concatenate([order[1:2], order[:1], order[2:]])
+
+
 #: the inks' orders in an ordered dither's bands by name (``Quantization.ink_order``): (inks, g, ior) -> (N,) ink
 #: indices, or None for index order
-INK_ORDERS = {"lightness": _lightness, "index": lambda inks, g, ior: None}
+INK_ORDERS = {"lightness": _lightness, "index": lambda inks, g, ior: None, "tint-first": _tint_first}
 
 
 def band_order(q: Quantization, inks, g: float, ior: float) -> np.ndarray | None:
