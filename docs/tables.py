@@ -871,9 +871,9 @@ def suite_cell(m: dict) -> str:
 
 
 def mesh_suite(path: Path = BENCH / "mesh_suite.json") -> str:
-    """bench/mesh_suite.py's cells (one row each, in file order): the four results' figures, the printed result's
-    lead over the extrusion baseline and its cost over the continuous one in ΔE76, the gamut floor, the run's
-    iterations and times, and the machine's load."""
+    """bench/mesh_suite.py's cells (one row each, in file order; a variant's budget column names it): the four
+    results' figures, the printed result's lead over the extrusion baseline and its cost over the continuous one in
+    ΔE76, the gamut floor, the run's iterations and times, and the machine's load."""
     d, rows = load(path), []
     for c in d["cells"].values():
         r = c["results"]
@@ -882,7 +882,7 @@ def mesh_suite(path: Path = BENCH / "mesh_suite.json") -> str:
             [
                 c["mesh"],
                 f"{c['height_mm']:g}",
-                c["budget"],
+                c["budget"] + (f" + {c['variant']}" if c.get("variant") else ""),
                 f"{c['iterations']} it, {c['optimize_seconds'] / 60:.1f} + {c['evaluate_seconds'] / 60:.1f} min",
                 suite_cell(cont),
                 suite_cell(p),
