@@ -24,8 +24,10 @@ MESH/Hmm/BUDGET+NAME, in run folders MESH_Hmm_BUDGET_NAME, beside the defaults' 
 docs/tables.py's ``mesh_suite`` table of a results file between ``<!-- table:mesh-suite -->`` markers.
 
 Results keys (kept stable): ``cells`` -> "MESH/Hmm/BUDGET[+VARIANT]" -> ``mesh``, ``height_mm``, ``budget``,
-``variant`` (its name; null or absent for the defaults' cells), ``optimize_args``, ``evaluate_args`` (lists of str),
-``texels``, ``iterations``, ``optimize_seconds``, ``seconds_per_iteration``, ``quantize_seconds``,
+``variant`` (its name; null or absent for the defaults' cells), ``derived_from`` (the run whose last iterate a
+derived variant's result is, made by ``mesh_suite_paired.py checkpoint``; its ``optimize_args`` then only name the
+variant), ``finish_smooth`` (the result's finishing smoothing passes), ``optimize_args``, ``evaluate_args`` (lists
+of str), ``texels``, ``iterations``, ``optimize_seconds``, ``seconds_per_iteration``, ``quantize_seconds``,
 ``evaluate_seconds``, ``sampled`` (bool: figures from a texel sample), ``gamut_floor_delta_e76``,
 ``load_average_before``, ``load_average_after``, ``finished``, ``commit``, ``command``, and ``results`` ->
 "continuous" | "printed" | "surface" | "extrusion" -> ``delta_e76_corrected``, ``delta_e2000``, ``ssim``,
@@ -346,6 +348,9 @@ def run_cell(mesh: str, height: float, budget: str, cache: Path, extra: Extra) -
         "height_mm": height,
         "budget": budget,
         "variant": extra.variant,
+        # a result made from another run's last iterate (bench/mesh_suite_paired.py checkpoint), not optimised here
+        "derived_from": report.get("finish_smooth_from"),
+        "finish_smooth": report.get("finish_smooth"),
         "optimize_args": settings,
         "evaluate_args": eval_args,
         "texels": ev.get("texels"),
@@ -392,14 +397,16 @@ def tables_module():
 
 
 def table(results: Path, doc: Path, name: str = "mesh-suite") -> None:
-    """Replace the table between ``<!-- table:NAME -->`` markers of ``doc`` by the mesh suite table of ``results``."""
+    """Replace the table between ``<!-- table:NAME -->`` markers of ``doc`` by the mesh suite table of ``results``:
+    its defaults' cells for "mesh-suite", its variants' for a NAME ending in "-variants", every cell otherwise."""
     text = doc.read_text()
     begin, end = f"<!-- table:{name} -->\n", f"<!-- /table:{name} -->"
     if begin not in text or end not in text:
         raise SystemExit(f"{doc} has no {begin.strip()} ... {end} markers")
     head, rest = text.split(begin, 1)
     tail = rest.split(end, 1)[1]
-    doc.write_text(head + begin + tables_module().mesh_suite(results) + end + tail)
+    variants = True if name.endswith("-variants") else False if name == "mesh-suite" else None
+    doc.write_text(head + begin + tables_module().mesh_suite(results, variants) + end + tail)
     print(f"wrote the table of {results} into {doc}")
 
 

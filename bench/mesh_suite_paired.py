@@ -5,6 +5,7 @@ fixed number of samples per texel, as ``inkopt evaluate`` renders them (``experi
 Writes the entry NAME of bench/results/mesh_suite_paired.json.
 
     nice -n 10 python bench/mesh_suite_paired.py NAME LABEL=SOURCE [LABEL=SOURCE ...] [--texels 3000] [--spp 512]
+    python bench/mesh_suite_paired.py checkpoint RUN DEST PASSES [TEXTURE]   # RUN's last iterate, PASSES smoothings
 
 SOURCE is a suite run folder (its volume.npz and quantized.npz), or ``RUN:fine_start`` (the volume its coarse stage
 handed to the fine stage, ``RUN/coarse/fine_start.npz``), or ``RUN:unsmoothed`` (the last iterate of the
@@ -38,9 +39,11 @@ COPIED = ("scene.npz", "report.json", "volume.npz")
 VALUES = ("de76_corrected", "de2000_corrected", "de76", "de2000")
 
 
-def unsmoothed_volume(run: Path, out: Path) -> None:
-    """Write to ``out`` the volume of ``run``'s checkpoint iterate (the result before its finishing smoothing): the
-    run's volume.npz with the free voxels' mixtures of the checkpoint's variables ``x`` (F, N)."""
+def checkpoint_volume(run: Path, out: Path, passes: int = 0, texture: str | None = None) -> None:
+    """Write to ``out`` the volume of ``run``'s checkpoint iterate (its last iterate: the result before its
+    finishing smoothing) after ``passes`` passes of the mesh defaults' step smoothing (``Optimization.finish``'s
+    operator, guided by the target: ``texture`` where the mesh names none). The run's volume.npz with the free
+    voxels' mixtures of the checkpoint's variables ``x`` (F, N)."""
     from inkopt.model import Volume
     from inkopt.optim import OptimizeConfig
     from inkopt.optim.checkpoint import read_checkpoint
@@ -49,16 +52,30 @@ def unsmoothed_volume(run: Path, out: Path) -> None:
     from inkopt.scenes.spec import MeshSpec
 
     report = json.loads((run / "report.json").read_text())
-    vol = Volume.load(run / "volume.npz")
-    inks = vol.inks
-    spec = MeshSpec(report["mesh_path"], height_mm=report["height_mm"], constant_color=True)
+    inks = Volume.load(run / "volume.npz").inks
+    spec = MeshSpec(report["mesh_path"], height_mm=report["height_mm"], texture=texture, constant_color=not passes)
     scene = build_scene(spec, inks)
     cfg = OptimizeConfig(iterations=0, init=str(run / "volume.npz"), lr=1.0).for_scene("mesh")
     opt = Optimization(scene, cfg)
     x = read_checkpoint(run / "checkpoint.npz")["x"]
     if x.shape != opt.x.shape:
         raise SystemExit(f"{run}/checkpoint.npz holds x {x.shape}, the scene's variables are {opt.x.shape}")
+    for _ in range(passes):
+        x = opt.smoother.apply(x)
     scene.volume.save_with_mixture(out, opt.param.mixture_slabs(x), inks)
+
+
+def checkpoint_run(run: Path, dest: Path, passes: int = 0, texture: str | None = None) -> None:
+    """A run folder ``dest`` holding ``run``'s last iterate after ``passes`` finishing passes
+    (``checkpoint_volume``) with ``run``'s scene.npz and report.json (the report's ``finish_smooth`` set to
+    ``passes``, ``finish_smooth_from`` naming ``run``), for ``inkopt quantize`` and ``inkopt evaluate``: what
+    ``--finish-smooth PASSES`` returns after the same iterations."""
+    dest.mkdir(parents=True, exist_ok=False)
+    shutil.copy2(run / "scene.npz", dest / "scene.npz")
+    checkpoint_volume(run, dest / "volume.npz", passes, texture)
+    report = json.loads((run / "report.json").read_text())
+    report.update(finish_smooth=passes, finish_smooth_from=str(run))
+    (dest / "report.json").write_text(json.dumps(report, indent=2) + "\n")
 
 
 def candidate_run(source: str, tmp: Path) -> Path:
@@ -75,7 +92,7 @@ def candidate_run(source: str, tmp: Path) -> Path:
     if part == "fine_start":
         shutil.copy2(run / "coarse" / "fine_start.npz", dest / "volume.npz")
     elif part == "unsmoothed":
-        unsmoothed_volume(run, dest / "volume.npz")
+        checkpoint_volume(run, dest / "volume.npz")
     else:
         raise SystemExit(f"unknown part {part!r} of {source}: fine_start or unsmoothed")
     cmd = [sys.executable, "-m", "inkopt", "quantize", str(dest)]
@@ -124,6 +141,10 @@ def summary_line(results: dict) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["checkpoint"]:  # checkpoint RUN DEST PASSES [TEXTURE]: the run folder of checkpoint_run
+        checkpoint_run(Path(argv[1]), Path(argv[2]), int(argv[3]), argv[4] if len(argv) > 4 else None)
+        return 0
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("name", help="the entry's name in the results file")
     ap.add_argument("candidates", nargs="+", help="LABEL=SOURCE (module docstring); the first is the reference")

@@ -91,11 +91,15 @@ def test_run_and_table_end_to_end(tmp_path, monkeypatch):
     doc = tmp_path / "doc.md"
     doc.write_text("# x\n<!-- table:mesh-suite -->\nold\n<!-- /table:mesh-suite -->\nafter\n")
     assert suite.main(["table", "--results", str(results), "--doc", str(doc)]) == 0
+    assert "| cube |" not in doc.read_text()  # the defaults' table: the variant's cell is not one of them
+    doc.write_text("# x\n<!-- table:mesh-suite-variants -->\nold\n<!-- /table:mesh-suite-variants -->\nafter\n")
+    table = ["table", "--results", str(results), "--doc", str(doc), "--table-name", "mesh-suite-variants"]
+    assert suite.main(table) == 0
     text = doc.read_text()
     row = next(line for line in text.splitlines() if line.startswith("| cube |"))
     printed = cell["results"]["printed"]["delta_e76_corrected"]
     assert "| 3 | 2it + fast | 2 it," in row and f"{printed:.2f}" in row
-    assert "old" not in text and text.endswith("<!-- /table:mesh-suite -->\nafter\n")
+    assert "old" not in text and text.endswith("<!-- /table:mesh-suite-variants -->\nafter\n")
 
 
 def test_a_variant_is_named_and_keyed_apart():
