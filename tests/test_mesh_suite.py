@@ -85,6 +85,11 @@ def test_run_and_table_end_to_end(tmp_path, monkeypatch):
     assert set(cell["results"]) == {"continuous", "printed", "surface", "extrusion"}
     for fig in cell["results"].values():
         assert 0 < fig["delta_e76_corrected"] < 100 and -1 <= fig["ssim"] <= 1 and fig["delta_e2000"] > 0
+    # a derived variant's volume: the run's last iterate after its one finishing pass is the run's own result
+    paired = load_file_module(REPO / "bench" / "mesh_suite_paired.py", "mesh_suite_paired")
+    run = tmp_path / "runs" / "cube_3mm_2it_fast"
+    paired.checkpoint_volume(run, tmp_path / "again.npz", 1, str(tmp_path / "meshes" / "cube" / "tex.png"))
+    assert np.array_equal(np.load(tmp_path / "again.npz")["mixture"], np.load(run / "volume.npz")["mixture"])
     monkeypatch.setattr(suite, "inkopt", lambda *a: pytest.fail("a finished cell is run again"))
     assert suite.main([*argv, "--results", str(results), *variant]) == 0
 
