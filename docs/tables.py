@@ -964,19 +964,22 @@ def suite_cell(m: dict) -> str:
     return " / ".join([pm("delta_e76_corrected", 2), pm("delta_e2000", 2), pm("ssim", 3), pm("mottle_l2", 2)])
 
 
-def mesh_suite(path: Path = BENCH / "mesh_suite.json") -> str:
-    """bench/mesh_suite.py's cells (one row each, in file order): the four results' figures, the printed result's
-    lead over the extrusion baseline and its cost over the continuous one in ΔE76, the gamut floor, the run's
-    iterations and times, and the machine's load."""
+def mesh_suite(path: Path = BENCH / "mesh_suite.json", variants: bool | None = None) -> str:
+    """bench/mesh_suite.py's cells (one row each, in file order; a variant's budget column names it; ``variants``
+    False: the defaults' cells only, True: the variants' only, None: all): the four results' figures, the printed
+    result's lead over the extrusion baseline and its cost over the continuous one in ΔE76, the gamut floor, the
+    run's iterations and times, and the machine's load."""
     d, rows = load(path), []
     for c in d["cells"].values():
+        if variants is not None and bool(c.get("variant")) != variants:
+            continue
         r = c["results"]
         p, x, cont = r["printed"], r["extrusion"], r["continuous"]
         rows.append(
             [
                 c["mesh"],
                 f"{c['height_mm']:g}",
-                c["budget"],
+                c["budget"] + (f" + {c['variant']}" if c.get("variant") else ""),
                 f"{c['iterations']} it, {c['optimize_seconds'] / 60:.1f} + {c['evaluate_seconds'] / 60:.1f} min",
                 suite_cell(cont),
                 suite_cell(p),
@@ -1289,7 +1292,14 @@ TABLES = {
     "pass-cost": pass_cost,
     "mesh-suite-smoke": lambda: mesh_suite(BENCH / "mesh_suite_smoke.json"),
     # the suite's real budgets: a table once bench/mesh_suite.py has written their results
-    **({"mesh-suite": mesh_suite} if (BENCH / "mesh_suite.json").is_file() else {}),
+    **(
+        {
+            "mesh-suite": lambda: mesh_suite(variants=False),
+            "mesh-suite-variants": lambda: mesh_suite(variants=True),
+        }
+        if (BENCH / "mesh_suite.json").is_file()
+        else {}
+    ),
 }
 
 

@@ -74,22 +74,46 @@ def test_run_and_table_end_to_end(tmp_path, monkeypatch):
     results = tmp_path / "suite.json"
     argv = ["run", "--cache", str(tmp_path), "--meshes", "cube", "--sizes", "3", "--budgets", "2it"]
     fast = " ".join(FAST_RUN[2:])  # the fewest samples (the budget gives the iterations)
-    assert suite.main([*argv, "--results", str(results), f"--optimize-args={fast}", "--evaluate-args=--spp 8"]) == 0
-    cell = json.loads(results.read_text())["cells"]["cube/3mm/2it"]
-    assert cell["iterations"] == 2 and cell["height_mm"] == 3
+    variant = [f"--optimize-args={fast}", "--evaluate-args=--spp 8", "--variant", "fast"]
+    assert suite.main([*argv, "--results", str(results), *variant]) == 0
+    cells = json.loads(results.read_text())["cells"]
+    assert list(cells) == ["cube/3mm/2it+fast"] and (tmp_path / "runs" / "cube_3mm_2it_fast" / "report.json").is_file()
+    cell = cells["cube/3mm/2it+fast"]
+    assert cell["iterations"] == 2 and cell["height_mm"] == 3 and cell["variant"] == "fast"
     assert cell["optimize_args"][:4] == ["--height-mm", "3", "--iterations", "2"]
     assert cell["optimize_args"][-2:] == ["--texture", "tex.png"] and cell["evaluate_args"] == ["--spp", "8"]
     assert set(cell["results"]) == {"continuous", "printed", "surface", "extrusion"}
     for fig in cell["results"].values():
         assert 0 < fig["delta_e76_corrected"] < 100 and -1 <= fig["ssim"] <= 1 and fig["delta_e2000"] > 0
+    # a derived variant's volume: the run's last iterate after its one finishing pass is the run's own result
+    paired = load_file_module(REPO / "bench" / "mesh_suite_paired.py", "mesh_suite_paired")
+    run = tmp_path / "runs" / "cube_3mm_2it_fast"
+    paired.checkpoint_volume(run, tmp_path / "again.npz", 1, str(tmp_path / "meshes" / "cube" / "tex.png"))
+    assert np.array_equal(np.load(tmp_path / "again.npz")["mixture"], np.load(run / "volume.npz")["mixture"])
     monkeypatch.setattr(suite, "inkopt", lambda *a: pytest.fail("a finished cell is run again"))
-    assert suite.main([*argv, "--results", str(results)]) == 0
+    assert suite.main([*argv, "--results", str(results), *variant]) == 0
 
     doc = tmp_path / "doc.md"
     doc.write_text("# x\n<!-- table:mesh-suite -->\nold\n<!-- /table:mesh-suite -->\nafter\n")
     assert suite.main(["table", "--results", str(results), "--doc", str(doc)]) == 0
+    assert "| cube |" not in doc.read_text()  # the defaults' table: the variant's cell is not one of them
+    doc.write_text("# x\n<!-- table:mesh-suite-variants -->\nold\n<!-- /table:mesh-suite-variants -->\nafter\n")
+    table = ["table", "--results", str(results), "--doc", str(doc), "--table-name", "mesh-suite-variants"]
+    assert suite.main(table) == 0
     text = doc.read_text()
     row = next(line for line in text.splitlines() if line.startswith("| cube |"))
     printed = cell["results"]["printed"]["delta_e76_corrected"]
-    assert "| 3 | 2it | 2 it," in row and f"{printed:.2f}" in row
-    assert "old" not in text and text.endswith("<!-- /table:mesh-suite -->\nafter\n")
+    assert "| 3 | 2it + fast | 2 it," in row and f"{printed:.2f}" in row
+    assert "old" not in text and text.endswith("<!-- /table:mesh-suite-variants -->\nafter\n")
+
+
+def test_a_variant_is_named_and_keyed_apart():
+    """Further arguments without a variant's name are refused (they would change a default's cell); a variant's
+    key and run folder are its own."""
+    suite = _suite()
+    with pytest.raises(SystemExit, match="--variant NAME"):
+        suite.Extra.of(["--finish-smooth", "0"], [])
+    with pytest.raises(SystemExit, match="folder name"):
+        suite.Extra.of(["--finish-smooth", "0"], [], "../x")
+    assert suite.cell_key("duck", 10.0, "short", None) == "duck/10mm/short"
+    assert suite.cell_key("duck", 10.0, "short", "nofinish") == "duck/10mm/short+nofinish"
