@@ -24,6 +24,7 @@ const LAYERS: &[&str] = &[
     "transport::packet::step",
     "transport::render",
     "transport::grad",
+    "transport::hero",
     "kernels::diffuse",
     "kernels::simplex",
     "kernels::smooth",

@@ -17,12 +17,15 @@
 //! - `packet`: eight paths per core in SIMD lanes (`packet::step` is its vector step and uses `packet`).
 //! - `render`: parallel drivers of the forward render.
 //! - `grad`: the gradient pass and its fixed-point buffers.
+//! - `hero`: hero-channel paths (one path serves the three channels; the spectral band groups), their render
+//!   and gradient pass.
 
 pub mod band;
 pub mod estimate;
 pub(crate) mod flight;
 pub mod grad;
 pub(crate) mod grid;
+pub mod hero;
 pub mod light;
 pub mod medium;
 pub mod normals;

@@ -1,0 +1,379 @@
+//! Hero-channel transport: one path serves all three channels of the medium (a spectral table's band group).
+//!
+//! Sample s of a texel has hero channel h = s mod 3: its distances are sampled with channel h's extinction
+//! (regular tracking, `flight::Regular`), its directions and interface events as every channel's (they do not
+//! depend on the channel). Each channel j's value is the one-sample balance heuristic over the three channels'
+//! samplers, f_j(x) / sum_k c_k p_k(x), with c_k the share of the texel's samples whose hero is k
+//! (`hero_shares`: 1/3 each when spp is a multiple of 3). Along a path, with implicit absorption,
+//! f_j = p_j x prod albedo_j(x_i) and p_k = prod sigma_t,k(x_i) exp(-tau_k) (common factors dropped), so a path
+//! carries, per channel, its albedos' product a_j and its density relative to the others, p_k, updated by
+//! sigma_t,k / sigma_t,h at a collision and exp(-(tau_k - tau_h)) over a flight (the optical depths from the
+//! segments the tracker reports); channel j's value is a_j p_j / sum_k c_k p_k, at most a_j / c_j (3 a_j): the
+//! weight cannot explode where the channels' extinctions differ. Russian roulette plays on the largest channel
+//! value and scales every channel by the same factor, so each stays unbiased.
+//!
+//! Gradients by path replay: E[d f_j / mix] = d integral f_j, and d log f_j is k_v / sigma_s,j - l_v (sigma_s of
+//! voxel v) and -l_v (sigma_a), channel j's own coefficients only; a replayed path adds to the three channels'
+//! slots with weights adjoint_j x value_j. Random numbers are keyed by (seed, texel, sample, hero), values
+//! summed per texel in sample order, gradients in fixed point: bit-identical for any thread count.
+
+use rayon::prelude::*;
+
+use crate::transport::estimate::{Moments, RenderOptions, Stats, TexelEstimate};
+use crate::transport::flight::{Event, Regular, Tracker};
+use crate::transport::grad::{fixed, AddQueue, GradBuffers};
+use crate::transport::grid::{cross, empty_jump, facing_normal, voxel_exit};
+use crate::transport::path::{NoTally, Tally, Walk, MAX_EVENTS, MAX_STEPS, RR_THRESHOLD};
+use crate::transport::rng::{PathRng, Uniforms};
+use crate::transport::sampling::hg_sample;
+use crate::transport::scene::{Geometry, Medium, Texel};
+use crate::transport::trace::{camera_ray, interface, Start};
+
+/// The hero channel of sample `sample`: 0, 1, 2, 0, 1, ...
+#[inline(always)]
+pub fn hero_of(sample: u32) -> usize {
+    (sample % 3) as usize
+}
+
+/// The share of `spp` samples whose hero is each channel (the balance heuristic's weights c_k; sum 1).
+pub fn hero_shares(spp: u32) -> [f32; 3] {
+    std::array::from_fn(|k| ((spp as usize + 2 - k) / 3) as f32 / spp as f32)
+}
+
+/// One hero path's values (radiance reaching the texel per channel) and its number of collisions.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct HeroValue {
+    pub value: [f32; 3],
+    pub events: u32,
+}
+
+/// What a hero path carries per channel k: `p[k]`, the path's density under channel k's sampler up to a factor
+/// common to the channels, and `a[k]`, the product of its albedos and the roulette's factors.
+#[derive(Clone, Copy)]
+struct Carried {
+    p: [f32; 3],
+    a: [f32; 3],
+}
+
+impl Carried {
+    /// Channel values so far: a_j p_j / sum_k c_k p_k.
+    #[inline(always)]
+    fn values(&self, share: &[f32; 3]) -> [f32; 3] {
+        let q = share[0] * self.p[0] + share[1] * self.p[1] + share[2] * self.p[2];
+        std::array::from_fn(|j| if self.a[j] == 0.0 || self.p[j] == 0.0 { 0.0 } else { self.a[j] * self.p[j] / q })
+    }
+
+    /// A flight's transmittances relative to the hero's: p_k *= exp(-dtau_k); dtau is reset.
+    #[inline(always)]
+    fn fly(&mut self, dtau: &mut [f32; 3]) {
+        for k in 0..3 {
+            self.p[k] *= (-dtau[k]).exp();
+            dtau[k] = 0.0;
+        }
+        self.normalise();
+    }
+
+    /// A collision in voxel j: p_k *= sigma_t,k / sigma_t,h, a_k *= albedo_k.
+    #[inline(always)]
+    fn collide<M: Medium>(&mut self, med: &M, j: usize, h: usize) {
+        let st_h = med.coeffs(j, h).0;
+        for k in 0..3 {
+            let (st, albedo) = med.coeffs(j, k);
+            self.p[k] *= st / st_h;
+            self.a[k] *= albedo;
+        }
+        self.normalise();
+    }
+
+    /// Scale the densities so their largest is 1 (the values do not change; no under- or overflow).
+    #[inline(always)]
+    fn normalise(&mut self) {
+        let m = self.p[0].max(self.p[1]).max(self.p[2]);
+        if m > 0.0 && m.is_finite() {
+            self.p = self.p.map(|x| x / m);
+        }
+    }
+
+    /// Russian roulette on the largest channel value: below `RR_THRESHOLD` the path survives with probability
+    /// value / threshold (one uniform) and every channel's weight is divided by it. False: the path ends.
+    #[inline(always)]
+    fn survive<U: Uniforms>(&mut self, share: &[f32; 3], rng: &mut U) -> bool {
+        let v = self.values(share);
+        let top = v[0].max(v[1]).max(v[2]);
+        if top >= RR_THRESHOLD {
+            return true;
+        }
+        if rng.next_f32() * RR_THRESHOLD < top {
+            let f = RR_THRESHOLD / top;
+            self.a = self.a.map(|x| x * f);
+            true
+        } else {
+            false
+        }
+    }
+}
+
+/// Sums the channels' optical depths minus the hero's over the segments the tracker reports, and passes the
+/// segments and collisions on to `inner` (a gradient replay's tally).
+struct HeroTally<'t, 'm, M: Medium, T: Tally> {
+    med: &'m M,
+    h: usize,
+    dtau: [f32; 3],
+    inner: &'t mut T,
+}
+
+impl<M: Medium, T: Tally> Tally for HeroTally<'_, '_, M, T> {
+    #[inline(always)]
+    fn segment(&mut self, j: usize, len: f32) {
+        let th = self.med.coeffs(j, self.h).0;
+        for k in 0..3 {
+            if k != self.h {
+                self.dtau[k] += (self.med.coeffs(j, k).0 - th) * len;
+            }
+        }
+        self.inner.segment(j, len);
+    }
+    #[inline(always)]
+    fn scatter(&mut self, j: usize) {
+        self.inner.scatter(j);
+    }
+}
+
+/// How a flight outside the object ended.
+enum Outside {
+    /// It entered the object (the walk is in the medium).
+    Entered,
+    /// It left the grid: the light is reached.
+    Escaped,
+    /// It took more than `MAX_STEPS` steps.
+    Cut,
+}
+
+/// Trace one hero path of channel `h` for `texel`; `share`: `hero_shares` of the pass. `tally` receives its
+/// segments and collisions (a replay's).
+#[allow(clippy::too_many_arguments)]
+pub fn trace_hero<M: Medium, T: Tally>(
+    geo: &Geometry,
+    med: &M,
+    texel: &Texel,
+    h: usize,
+    share: &[f32; 3],
+    rng: &mut PathRng,
+    include_specular: bool,
+    tally: &mut T,
+) -> HeroValue {
+    let (mut s, weight) = match camera_ray(geo, texel, include_specular, rng) {
+        Start::Medium(p, d, v, weight) => (Walk { p, d, v, weight, in_medium: true, events: 0, steps: 0 }, weight),
+        Start::Outside(p, d, v) => (Walk { p, d, v, weight: 1.0, in_medium: false, events: 0, steps: 0 }, 1.0),
+        Start::Done(_) => return HeroValue::default(),
+    };
+    let mut car = Carried { p: [1.0; 3], a: [weight; 3] };
+    let mut ht = HeroTally { med, h, dtau: [0.0; 3], inner: tally };
+    let mut tracker = Regular::new();
+    let cut = |events| HeroValue { value: [0.0; 3], events };
+    loop {
+        if s.in_medium {
+            if !through_medium(geo, med, share, &mut s, &mut car, &mut tracker, rng, &mut ht) {
+                return cut(s.events);
+            }
+            continue;
+        }
+        match outside(geo, &mut s, rng) {
+            Outside::Entered => {}
+            Outside::Cut => return cut(s.events),
+            Outside::Escaped => {
+                let v = car.values(share);
+                let value = std::array::from_fn(|c| v[c] * geo.light.radiance(s.d, c));
+                return HeroValue { value, events: s.events };
+            }
+        }
+    }
+}
+
+/// The walk inside the object from state `s` until it leaves (true) or ends with value 0 (false).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn through_medium<M: Medium, T: Tally>(
+    geo: &Geometry,
+    med: &M,
+    share: &[f32; 3],
+    s: &mut Walk,
+    car: &mut Carried,
+    tracker: &mut Regular,
+    rng: &mut PathRng,
+    ht: &mut HeroTally<'_, '_, M, T>,
+) -> bool {
+    let h = ht.h;
+    tracker.start(geo, s, rng);
+    loop {
+        match tracker.next(geo, med, h, s, rng, ht) {
+            Event::Cut => return false,
+            Event::Collision(j, _) => {
+                car.fly(&mut ht.dtau);
+                s.events += 1;
+                car.collide(med, j, h);
+                if !car.survive(share, rng) || s.events > MAX_EVENTS {
+                    return false;
+                }
+                ht.inner.scatter(j);
+                let (u1, u2) = rng.next_f32_pair();
+                s.d = hg_sample(s.d, geo.g, u1, u2);
+                tracker.start(geo, s, rng);
+            }
+            Event::Surface { axis, step, nb, n_sh } => {
+                car.fly(&mut ht.dtau);
+                let (nd, transmitted) = interface(s.d, facing_normal(axis, step), n_sh, geo.ior, rng.next_f32());
+                s.d = nd;
+                if transmitted {
+                    s.v = nb;
+                    s.in_medium = false;
+                    return true;
+                }
+                tracker.redirect(geo, s);
+            }
+        }
+    }
+}
+
+/// The straight flight outside the object (as `trace::walk`'s): voxel by voxel next to it, across empty balls
+/// away from it, until it refracts into the object or leaves the grid.
+#[inline(always)]
+fn outside(geo: &Geometry, s: &mut Walk, rng: &mut PathRng) -> Outside {
+    let eta_in = 1.0 / geo.ior;
+    loop {
+        s.steps += 1;
+        if !geo.in_grid(s.v) {
+            return Outside::Escaped;
+        }
+        if s.steps > MAX_STEPS {
+            return Outside::Cut;
+        }
+        if let Some((p, v)) = empty_jump(geo, s.p, s.d, s.v) {
+            (s.p, s.v) = (p, v);
+            continue;
+        }
+        let (t, axis) = voxel_exit(geo, s.p, s.d, s.v);
+        let (nb, step) = cross(geo, &mut s.p, s.d, t, axis, s.v);
+        if geo.is_inside(nb) {
+            let n_geo = facing_normal(axis, step);
+            let n_sh = geo.shading_normal(nb).unwrap_or(n_geo);
+            let (nd, transmitted) = interface(s.d, n_geo, n_sh, eta_in, rng.next_f32());
+            s.d = nd;
+            if transmitted {
+                s.v = nb;
+                s.in_medium = true;
+                return Outside::Entered;
+            }
+        } else {
+            s.v = nb;
+        }
+    }
+}
+
+/// Forward render with hero paths: `opts.spp` paths per texel, each serving the three channels (as `render`,
+/// whose per-channel estimates these are, with `spp` paths per texel instead of 3 spp).
+pub fn render_hero<M: Medium>(
+    geo: &Geometry,
+    med: &M,
+    texels: &[Texel],
+    first_texel: u64,
+    opts: &RenderOptions,
+) -> (Vec<TexelEstimate>, Stats) {
+    let share = hero_shares(opts.spp);
+    let results: Vec<(TexelEstimate, Stats)> = texels
+        .par_iter()
+        .enumerate()
+        .map(|(i, tex)| {
+            let mut m = Moments::new();
+            let mut st = Stats { paths: opts.spp as u64, ..Stats::default() };
+            for s in 0..opts.spp {
+                let h = hero_of(s);
+                let mut rng = PathRng::new(opts.seed, first_texel + i as u64, s, h as u32);
+                let r = trace_hero(geo, med, tex, h, &share, &mut rng, opts.include_specular, &mut NoTally);
+                (0..3).for_each(|c| m.add(c, r.value[c]));
+                st.events += r.events as u64;
+            }
+            (m.estimate(opts.spp), st)
+        })
+        .collect();
+    let stats = results.iter().fold(Stats::default(), |a, r| Stats::merge(a, r.1));
+    (results.into_iter().map(|r| r.0).collect(), stats)
+}
+
+/// A replayed hero path's gradient adds: weight `w[c]` (in quanta) for channel c, as `grad`'s replay tally.
+struct HeroReplay<'q, 'a, M: Medium> {
+    q: &'q mut AddQueue<'a>,
+    grads: &'a GradBuffers,
+    w: [f32; 3],
+    med: &'a M,
+}
+
+impl<M: Medium> Tally for HeroReplay<'_, '_, M> {
+    #[inline(always)]
+    fn segment(&mut self, j: usize, len: f32) {
+        if let Some(k) = self.grads.slot(j) {
+            for c in 0..3 {
+                if self.w[c] != 0.0 {
+                    self.q.add((3 + c) * self.grads.n + k, -fixed(len, self.w[c]));
+                }
+            }
+        }
+    }
+    #[inline(always)]
+    fn scatter(&mut self, j: usize) {
+        if let Some(k) = self.grads.slot(j) {
+            for c in 0..3 {
+                let s = self.med.sigma_s(j, c);
+                if self.w[c] != 0.0 && s > 0.0 {
+                    self.q.add(c * self.grads.n + k, fixed(1.0 / s, self.w[c]));
+                }
+            }
+        }
+    }
+}
+
+/// Gradient pass with hero paths (path replay): as `grad::backward` with `GradMethod::Replay`, each path's
+/// value per channel times that channel's adjoint weighting its replay.
+pub fn backward_hero<M: Medium>(
+    geo: &Geometry,
+    med: &M,
+    texels: &[Texel],
+    first_texel: u64,
+    adjoint: &[[f32; 3]],
+    opts: &RenderOptions,
+    grads: &GradBuffers,
+) -> (Vec<TexelEstimate>, Stats) {
+    assert_eq!(texels.len(), adjoint.len());
+    assert_eq!(grads.n_voxels, med.len());
+    let share = hero_shares(opts.spp);
+    let scale = 1.0 / opts.spp as f32 * (1.0 / grads.quantum) as f32;
+    let results: Vec<(TexelEstimate, Stats)> = texels
+        .par_iter()
+        .enumerate()
+        .map(|(i, tex)| {
+            let mut q = AddQueue::new(&grads.buf);
+            let mut m = Moments::new();
+            let mut st = Stats { paths: opts.spp as u64, ..Stats::default() };
+            let key = first_texel + i as u64;
+            for s in 0..opts.spp {
+                let h = hero_of(s);
+                let mut rng = PathRng::new(opts.seed, key, s, h as u32);
+                let r = trace_hero(geo, med, tex, h, &share, &mut rng, opts.include_specular, &mut NoTally);
+                (0..3).for_each(|c| m.add(c, r.value[c]));
+                st.events += r.events as u64;
+                let w: [f32; 3] = std::array::from_fn(|c| adjoint[i][c] * r.value[c] * scale);
+                if w.iter().any(|&x| x != 0.0) {
+                    let mut rng = PathRng::new(opts.seed, key, s, h as u32);
+                    let mut t = HeroReplay { q: &mut q, grads, w, med };
+                    trace_hero(geo, med, tex, h, &share, &mut rng, opts.include_specular, &mut t);
+                    st.replayed_paths += 1;
+                    st.replayed_events += r.events as u64;
+                }
+            }
+            q.flush();
+            (m.estimate(opts.spp), st)
+        })
+        .collect();
+    let stats = results.iter().fold(Stats::default(), |a, r| Stats::merge(a, r.1));
+    (results.into_iter().map(|r| r.0).collect(), stats)
+}
