@@ -25,6 +25,8 @@ const LAYERS: &[&str] = &[
     "transport::render",
     "transport::grad",
     "transport::hero",
+    "transport::hero_lanes",
+    "transport::hero_pass",
     "kernels::diffuse",
     "kernels::simplex",
     "kernels::smooth",

@@ -1,14 +1,15 @@
 //! Hero-channel transport: one path serves all three channels of the medium (a spectral table's band group).
 //!
-//! Sample s of a texel has hero channel h = s mod 3: its distances are sampled with channel h's extinction
-//! (regular tracking, `flight::Regular`), its directions and interface events as every channel's (they do not
-//! depend on the channel). Each channel j's value is the one-sample balance heuristic over the three channels'
-//! samplers, f_j(x) / sum_k c_k p_k(x), with c_k the share of the texel's samples whose hero is k
-//! (`hero_shares`: 1/3 each when spp is a multiple of 3). Along a path, with implicit absorption,
+//! Each sample of a texel has a hero channel h (`hero_of`: stratified, 0, 1, 2 in each full triple of samples,
+//! uniformly random for the samples after the last triple, so every sample's hero is each channel with
+//! probability 1/3): its distances are sampled with channel h's extinction (regular tracking, `flight::Regular`),
+//! its directions and interface events as every channel's (they do not depend on the channel). Each channel j's
+//! value is the one-sample balance heuristic over the three channels' samplers, f_j(x) / ((1/3) sum_k p_k(x)),
+//! unbiased per sample and per triple of samples. Along a path, with implicit absorption,
 //! f_j = p_j x prod albedo_j(x_i) and p_k = prod sigma_t,k(x_i) exp(-tau_k) (common factors dropped), so a path
 //! carries, per channel, its albedos' product a_j and its density relative to the others, p_k, updated by
 //! sigma_t,k / sigma_t,h at a collision and exp(-(tau_k - tau_h)) over a flight (the optical depths from the
-//! segments the tracker reports); channel j's value is a_j p_j / sum_k c_k p_k, at most a_j / c_j (3 a_j): the
+//! segments the tracker reports); channel j's value is 3 a_j p_j / sum_k p_k, at most 3 a_j: the
 //! weight cannot explode where the channels' extinctions differ. Russian roulette plays on the largest channel
 //! value and scales every channel by the same factor, so each stays unbiased.
 //!
@@ -17,27 +18,22 @@
 //! slots with weights adjoint_j x value_j. Random numbers are keyed by (seed, texel, sample, hero), values
 //! summed per texel in sample order, gradients in fixed point: bit-identical for any thread count.
 
-use rayon::prelude::*;
-
-use crate::transport::estimate::{Moments, RenderOptions, Stats, TexelEstimate};
 use crate::transport::flight::{Event, Regular, Tracker};
-use crate::transport::grad::{fixed, AddQueue, GradBuffers};
 use crate::transport::grid::{cross, empty_jump, facing_normal, voxel_exit};
-use crate::transport::path::{NoTally, Tally, Walk, MAX_EVENTS, MAX_STEPS, RR_THRESHOLD};
+use crate::transport::path::{Tally, Walk, MAX_EVENTS, MAX_STEPS, RR_THRESHOLD};
 use crate::transport::rng::{PathRng, Uniforms};
 use crate::transport::sampling::hg_sample;
 use crate::transport::scene::{Geometry, Medium, Texel};
 use crate::transport::trace::{camera_ray, interface, Start};
 
-/// The hero channel of sample `sample`: 0, 1, 2, 0, 1, ...
+/// The hero channel of sample `sample` of `spp` for `texel`: `sample` mod 3 in the full triples of samples,
+/// after them a uniform choice keyed by (seed, texel, sample) (a stream no path uses: channel key 3).
 #[inline(always)]
-pub fn hero_of(sample: u32) -> usize {
-    (sample % 3) as usize
-}
-
-/// The share of `spp` samples whose hero is each channel (the balance heuristic's weights c_k; sum 1).
-pub fn hero_shares(spp: u32) -> [f32; 3] {
-    std::array::from_fn(|k| ((spp as usize + 2 - k) / 3) as f32 / spp as f32)
+pub fn hero_of(seed: u64, texel: u64, sample: u32, spp: u32) -> usize {
+    if sample < spp - spp % 3 {
+        return (sample % 3) as usize;
+    }
+    (PathRng::new(seed, texel, sample, 3).next_u64() % 3) as usize
 }
 
 /// One hero path's values (radiance reaching the texel per channel) and its number of collisions.
@@ -56,10 +52,10 @@ struct Carried {
 }
 
 impl Carried {
-    /// Channel values so far: a_j p_j / sum_k c_k p_k.
+    /// Channel values so far: a_j p_j / ((1/3) sum_k p_k).
     #[inline(always)]
-    fn values(&self, share: &[f32; 3]) -> [f32; 3] {
-        let q = share[0] * self.p[0] + share[1] * self.p[1] + share[2] * self.p[2];
+    fn values(&self) -> [f32; 3] {
+        let q = (self.p[0] + self.p[1] + self.p[2]) * (1.0 / 3.0);
         std::array::from_fn(|j| if self.a[j] == 0.0 || self.p[j] == 0.0 { 0.0 } else { self.a[j] * self.p[j] / q })
     }
 
@@ -97,8 +93,8 @@ impl Carried {
     /// Russian roulette on the largest channel value: below `RR_THRESHOLD` the path survives with probability
     /// value / threshold (one uniform) and every channel's weight is divided by it. False: the path ends.
     #[inline(always)]
-    fn survive<U: Uniforms>(&mut self, share: &[f32; 3], rng: &mut U) -> bool {
-        let v = self.values(share);
+    fn survive<U: Uniforms>(&mut self, rng: &mut U) -> bool {
+        let v = self.values();
         let top = v[0].max(v[1]).max(v[2]);
         if top >= RR_THRESHOLD {
             return true;
@@ -149,7 +145,7 @@ enum Outside {
     Cut,
 }
 
-/// Trace one hero path of channel `h` for `texel`; `share`: `hero_shares` of the pass. `tally` receives its
+/// Trace one hero path of hero channel `h` for `texel`. `tally` receives its
 /// segments and collisions (a replay's).
 #[allow(clippy::too_many_arguments)]
 pub fn trace_hero<M: Medium, T: Tally>(
@@ -157,7 +153,6 @@ pub fn trace_hero<M: Medium, T: Tally>(
     med: &M,
     texel: &Texel,
     h: usize,
-    share: &[f32; 3],
     rng: &mut PathRng,
     include_specular: bool,
     tally: &mut T,
@@ -173,7 +168,7 @@ pub fn trace_hero<M: Medium, T: Tally>(
     let cut = |events| HeroValue { value: [0.0; 3], events };
     loop {
         if s.in_medium {
-            if !through_medium(geo, med, share, &mut s, &mut car, &mut tracker, rng, &mut ht) {
+            if !through_medium(geo, med, &mut s, &mut car, &mut tracker, rng, &mut ht) {
                 return cut(s.events);
             }
             continue;
@@ -182,7 +177,7 @@ pub fn trace_hero<M: Medium, T: Tally>(
             Outside::Entered => {}
             Outside::Cut => return cut(s.events),
             Outside::Escaped => {
-                let v = car.values(share);
+                let v = car.values();
                 let value = std::array::from_fn(|c| v[c] * geo.light.radiance(s.d, c));
                 return HeroValue { value, events: s.events };
             }
@@ -196,7 +191,6 @@ pub fn trace_hero<M: Medium, T: Tally>(
 fn through_medium<M: Medium, T: Tally>(
     geo: &Geometry,
     med: &M,
-    share: &[f32; 3],
     s: &mut Walk,
     car: &mut Carried,
     tracker: &mut Regular,
@@ -212,7 +206,7 @@ fn through_medium<M: Medium, T: Tally>(
                 car.fly(&mut ht.dtau);
                 s.events += 1;
                 car.collide(med, j, h);
-                if !car.survive(share, rng) || s.events > MAX_EVENTS {
+                if !car.survive(rng) || s.events > MAX_EVENTS {
                     return false;
                 }
                 ht.inner.scatter(j);
@@ -268,112 +262,4 @@ fn outside(geo: &Geometry, s: &mut Walk, rng: &mut PathRng) -> Outside {
             s.v = nb;
         }
     }
-}
-
-/// Forward render with hero paths: `opts.spp` paths per texel, each serving the three channels (as `render`,
-/// whose per-channel estimates these are, with `spp` paths per texel instead of 3 spp).
-pub fn render_hero<M: Medium>(
-    geo: &Geometry,
-    med: &M,
-    texels: &[Texel],
-    first_texel: u64,
-    opts: &RenderOptions,
-) -> (Vec<TexelEstimate>, Stats) {
-    let share = hero_shares(opts.spp);
-    let results: Vec<(TexelEstimate, Stats)> = texels
-        .par_iter()
-        .enumerate()
-        .map(|(i, tex)| {
-            let mut m = Moments::new();
-            let mut st = Stats { paths: opts.spp as u64, ..Stats::default() };
-            for s in 0..opts.spp {
-                let h = hero_of(s);
-                let mut rng = PathRng::new(opts.seed, first_texel + i as u64, s, h as u32);
-                let r = trace_hero(geo, med, tex, h, &share, &mut rng, opts.include_specular, &mut NoTally);
-                (0..3).for_each(|c| m.add(c, r.value[c]));
-                st.events += r.events as u64;
-            }
-            (m.estimate(opts.spp), st)
-        })
-        .collect();
-    let stats = results.iter().fold(Stats::default(), |a, r| Stats::merge(a, r.1));
-    (results.into_iter().map(|r| r.0).collect(), stats)
-}
-
-/// A replayed hero path's gradient adds: weight `w[c]` (in quanta) for channel c, as `grad`'s replay tally.
-struct HeroReplay<'q, 'a, M: Medium> {
-    q: &'q mut AddQueue<'a>,
-    grads: &'a GradBuffers,
-    w: [f32; 3],
-    med: &'a M,
-}
-
-impl<M: Medium> Tally for HeroReplay<'_, '_, M> {
-    #[inline(always)]
-    fn segment(&mut self, j: usize, len: f32) {
-        if let Some(k) = self.grads.slot(j) {
-            for c in 0..3 {
-                if self.w[c] != 0.0 {
-                    self.q.add((3 + c) * self.grads.n + k, -fixed(len, self.w[c]));
-                }
-            }
-        }
-    }
-    #[inline(always)]
-    fn scatter(&mut self, j: usize) {
-        if let Some(k) = self.grads.slot(j) {
-            for c in 0..3 {
-                let s = self.med.sigma_s(j, c);
-                if self.w[c] != 0.0 && s > 0.0 {
-                    self.q.add(c * self.grads.n + k, fixed(1.0 / s, self.w[c]));
-                }
-            }
-        }
-    }
-}
-
-/// Gradient pass with hero paths (path replay): as `grad::backward` with `GradMethod::Replay`, each path's
-/// value per channel times that channel's adjoint weighting its replay.
-pub fn backward_hero<M: Medium>(
-    geo: &Geometry,
-    med: &M,
-    texels: &[Texel],
-    first_texel: u64,
-    adjoint: &[[f32; 3]],
-    opts: &RenderOptions,
-    grads: &GradBuffers,
-) -> (Vec<TexelEstimate>, Stats) {
-    assert_eq!(texels.len(), adjoint.len());
-    assert_eq!(grads.n_voxels, med.len());
-    let share = hero_shares(opts.spp);
-    let scale = 1.0 / opts.spp as f32 * (1.0 / grads.quantum) as f32;
-    let results: Vec<(TexelEstimate, Stats)> = texels
-        .par_iter()
-        .enumerate()
-        .map(|(i, tex)| {
-            let mut q = AddQueue::new(&grads.buf);
-            let mut m = Moments::new();
-            let mut st = Stats { paths: opts.spp as u64, ..Stats::default() };
-            let key = first_texel + i as u64;
-            for s in 0..opts.spp {
-                let h = hero_of(s);
-                let mut rng = PathRng::new(opts.seed, key, s, h as u32);
-                let r = trace_hero(geo, med, tex, h, &share, &mut rng, opts.include_specular, &mut NoTally);
-                (0..3).for_each(|c| m.add(c, r.value[c]));
-                st.events += r.events as u64;
-                let w: [f32; 3] = std::array::from_fn(|c| adjoint[i][c] * r.value[c] * scale);
-                if w.iter().any(|&x| x != 0.0) {
-                    let mut rng = PathRng::new(opts.seed, key, s, h as u32);
-                    let mut t = HeroReplay { q: &mut q, grads, w, med };
-                    trace_hero(geo, med, tex, h, &share, &mut rng, opts.include_specular, &mut t);
-                    st.replayed_paths += 1;
-                    st.replayed_events += r.events as u64;
-                }
-            }
-            q.flush();
-            (m.estimate(opts.spp), st)
-        })
-        .collect();
-    let stats = results.iter().fold(Stats::default(), |a, r| Stats::merge(a, r.1));
-    (results.into_iter().map(|r| r.0).collect(), stats)
 }
