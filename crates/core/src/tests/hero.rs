@@ -199,20 +199,26 @@ fn hero_gradient_matches_finite_differences() {
 #[test]
 fn hero_total_gradient_matches_a_uniform_shift() {
     // The gradient summed over voxels against the derivative of shifting every voxel's sigma_a or sigma_s of one
-    // channel together, for the lanes (mask-free slab) and the scalar walk (the same slab with a mask): a systematic error in the tallied lengths or collisions fails it. 8 seeds,
-    // Student's t (5.41 at 1e-4 two-sided) plus 1 % for the O(h^2) bias.
+    // channel together, for the lanes (mask-free slab; a masked box with a notch: safe balls and the scalar walk
+    // near the surface) and the scalar walk alone (a masked periodic slab): a systematic error in the tallied
+    // lengths or collisions fails it. 8 seeds, Student's t (5.41 at 1e-4 two-sided) plus 1 % for the O(h^2) bias.
     let n = [6usize, 6, 6];
     let nv = 216;
     let plain = Geometry::new(n, [0.05; 3], Boundary::PeriodicXY, 1.5, 0.3).unwrap();
     let masked =
         Geometry::new(n, [0.05; 3], Boundary::PeriodicXY, 1.5, 0.3).unwrap().with_inside(vec![1u8; nv]).unwrap();
+    let mut notch = vec![1u8; nv];
+    notch[..36].iter_mut().step_by(2).for_each(|x| *x = 0);
+    let boxed = Geometry::new(n, [0.05; 3], Boundary::Box, 1.5, 0.3).unwrap().with_inside(notch).unwrap();
     let texels = top_texels(n);
     let adj: Vec<[f32; 3]> = (0..texels.len()).map(|i| [0.5, 1.0, -0.3 - 0.01 * i as f32]).collect();
     let base = [
         (0..3 * nv).map(|i| 4.0 + ((i * 13) % 9) as f32).collect::<Vec<f32>>(),
         (0..3 * nv).map(|i| 0.2 + ((i * 7) % 4) as f32 * 0.6).collect(),
     ];
-    for (geo, which, c) in [(&plain, 1usize, 1usize), (&plain, 0, 2), (&masked, 1, 0), (&masked, 0, 2)] {
+    let cases =
+        [(&plain, 1usize, 1usize), (&plain, 0, 2), (&masked, 1, 0), (&masked, 0, 2), (&boxed, 1, 2), (&boxed, 0, 0)];
+    for (geo, which, c) in cases {
         let (mut grads, mut fds) = (vec![], vec![]);
         for seed in 1..9u64 {
             let opts = RenderOptions { spp: 240, seed, include_specular: true };
@@ -233,7 +239,7 @@ fn hero_total_gradient_matches_a_uniform_shift() {
             let fm = hero_objective(geo, &shifted(-h), &texels, &adj, &opts);
             fds.push((fp - fm) / (2.0 * h as f64));
         }
-        let what = format!("masked {} shift {which} channel {c}", geo.masked());
+        let what = format!("masked {} {:?} shift {which} channel {c}", geo.masked(), geo.boundary);
         assert_gradient_matches_fd(&grads, &fds, 5.41, 0.01, 1e-4, &what);
     }
 }

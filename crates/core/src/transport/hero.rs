@@ -46,15 +46,15 @@ pub struct HeroValue {
 /// What a hero path carries per channel k: `p[k]`, the path's density under channel k's sampler up to a factor
 /// common to the channels, and `a[k]`, the product of its albedos and the roulette's factors.
 #[derive(Clone, Copy)]
-struct Carried {
-    p: [f32; 3],
-    a: [f32; 3],
+pub(crate) struct Carried {
+    pub p: [f32; 3],
+    pub a: [f32; 3],
 }
 
 impl Carried {
     /// Channel values so far: a_j p_j / ((1/3) sum_k p_k).
     #[inline(always)]
-    fn values(&self) -> [f32; 3] {
+    pub(crate) fn values(&self) -> [f32; 3] {
         let q = (self.p[0] + self.p[1] + self.p[2]) * (1.0 / 3.0);
         std::array::from_fn(|j| if self.a[j] == 0.0 || self.p[j] == 0.0 { 0.0 } else { self.a[j] * self.p[j] / q })
     }
@@ -145,9 +145,27 @@ enum Outside {
     Cut,
 }
 
-/// Trace one hero path of hero channel `h` for `texel`. `tally` receives its
-/// segments and collisions (a replay's).
-#[allow(clippy::too_many_arguments)]
+/// How a walk inside the object ended.
+enum Inside {
+    /// It left the object (the walk is outside).
+    Left,
+    /// The path ends with value 0 (roulette, or cut).
+    Ended,
+    /// It scattered in a voxel at least 2 voxels from the surface (only when asked: `stop_deep`).
+    Deep,
+}
+
+/// How a hero walk ended.
+pub(crate) enum HeroEnd {
+    /// The path ended with these values.
+    Done(HeroValue),
+    /// It scattered (state updated) in a voxel at least 2 voxels from the object's surface, where the lanes'
+    /// delta tracking takes over (only when `stop_deep`).
+    Deep,
+}
+
+/// Trace one hero path of hero channel `h` for `texel`. `tally` receives its segments and collisions (a
+/// replay's).
 pub fn trace_hero<M: Medium, T: Tally>(
     geo: &Geometry,
     med: &M,
@@ -163,55 +181,81 @@ pub fn trace_hero<M: Medium, T: Tally>(
         Start::Done(_) => return HeroValue::default(),
     };
     let mut car = Carried { p: [1.0; 3], a: [weight; 3] };
+    match walk_hero(geo, med, h, &mut s, &mut car, rng, tally, false) {
+        HeroEnd::Done(r) => r,
+        HeroEnd::Deep => unreachable!("the walk stops at deep voxels only when asked"),
+    }
+}
+
+/// The walk of hero path (state `s`, carried `car`, hero channel `h`) until it ends, or with `stop_deep` until
+/// it scatters in a voxel at least 2 voxels from the surface (`HeroEnd::Deep`; `s` and `car` updated).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(crate) fn walk_hero<M: Medium, T: Tally, U: Uniforms>(
+    geo: &Geometry,
+    med: &M,
+    h: usize,
+    s: &mut Walk,
+    car: &mut Carried,
+    rng: &mut U,
+    tally: &mut T,
+    stop_deep: bool,
+) -> HeroEnd {
     let mut ht = HeroTally { med, h, dtau: [0.0; 3], inner: tally };
     let mut tracker = Regular::new();
-    let cut = |events| HeroValue { value: [0.0; 3], events };
+    let cut = |events| HeroEnd::Done(HeroValue { value: [0.0; 3], events });
     loop {
         if s.in_medium {
-            if !through_medium(geo, med, &mut s, &mut car, &mut tracker, rng, &mut ht) {
-                return cut(s.events);
+            match through_medium(geo, med, s, car, &mut tracker, rng, &mut ht, stop_deep) {
+                Inside::Left => {}
+                Inside::Ended => return cut(s.events),
+                Inside::Deep => return HeroEnd::Deep,
             }
             continue;
         }
-        match outside(geo, &mut s, rng) {
+        match outside(geo, s, rng) {
             Outside::Entered => {}
             Outside::Cut => return cut(s.events),
             Outside::Escaped => {
                 let v = car.values();
                 let value = std::array::from_fn(|c| v[c] * geo.light.radiance(s.d, c));
-                return HeroValue { value, events: s.events };
+                return HeroEnd::Done(HeroValue { value, events: s.events });
             }
         }
     }
 }
 
-/// The walk inside the object from state `s` until it leaves (true) or ends with value 0 (false).
+/// The walk inside the object from state `s` until it leaves, ends, or (`stop_deep`) scatters deep inside.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn through_medium<M: Medium, T: Tally>(
+fn through_medium<M: Medium, T: Tally, U: Uniforms>(
     geo: &Geometry,
     med: &M,
     s: &mut Walk,
     car: &mut Carried,
     tracker: &mut Regular,
-    rng: &mut PathRng,
+    rng: &mut U,
     ht: &mut HeroTally<'_, '_, M, T>,
-) -> bool {
+    stop_deep: bool,
+) -> Inside {
     let h = ht.h;
     tracker.start(geo, s, rng);
     loop {
         match tracker.next(geo, med, h, s, rng, ht) {
-            Event::Cut => return false,
+            Event::Cut => return Inside::Ended,
             Event::Collision(j, _) => {
                 car.fly(&mut ht.dtau);
                 s.events += 1;
                 car.collide(med, j, h);
                 if !car.survive(rng) || s.events > MAX_EVENTS {
-                    return false;
+                    return Inside::Ended;
                 }
                 ht.inner.scatter(j);
                 let (u1, u2) = rng.next_f32_pair();
                 s.d = hg_sample(s.d, geo.g, u1, u2);
+                if stop_deep && geo.safe_distance(j) >= 2 {
+                    return Inside::Deep;
+                }
                 tracker.start(geo, s, rng);
             }
             Event::Surface { axis, step, nb, n_sh } => {
@@ -221,7 +265,7 @@ fn through_medium<M: Medium, T: Tally>(
                 if transmitted {
                     s.v = nb;
                     s.in_medium = false;
-                    return true;
+                    return Inside::Left;
                 }
                 tracker.redirect(geo, s);
             }
@@ -232,7 +276,7 @@ fn through_medium<M: Medium, T: Tally>(
 /// The straight flight outside the object (as `trace::walk`'s): voxel by voxel next to it, across empty balls
 /// away from it, until it refracts into the object or leaves the grid.
 #[inline(always)]
-fn outside(geo: &Geometry, s: &mut Walk, rng: &mut PathRng) -> Outside {
+fn outside<U: Uniforms>(geo: &Geometry, s: &mut Walk, rng: &mut U) -> Outside {
     let eta_in = 1.0 / geo.ior;
     loop {
         s.steps += 1;

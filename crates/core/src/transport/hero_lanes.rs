@@ -1,5 +1,8 @@
-//! Hero paths eight at a time in mask-free grids (boxes, periodic slabs): delta tracking in SIMD lanes, as
-//! `packet`, each lane a hero path carrying the three channels.
+//! Hero paths eight at a time (mask-free grids and masked boxes, as `packet`): delta tracking in SIMD lanes,
+//! each lane a hero path carrying the three channels. In masked boxes a lane delta-tracks only inside a safe
+//! ball (every voxel within it is inside the object) and runs `hero`'s scalar walk (regular tracking) near the
+//! surface and outside the object until it scatters deep inside again; both track the same estimator, so a
+//! path switches between them at any flight.
 //!
 //! Every lane flies at one majorant, the largest of the three channels' (`Medium::majorant`), and a tentative
 //! collision at x is real with probability sigma_t,h(x) / majorant (h the lane's hero channel). The channels'
@@ -22,13 +25,15 @@ use wide::{f32x8, i32x8, u32x8, CmpGe, CmpLt};
 
 use crate::transport::estimate::RenderOptions;
 use crate::transport::grid::{
-    component, facing_normal, grid_exit8, grid_face_point, locate8, locate_box, span, tally_segments, wrap_coord,
+    component, facing_normal, grid_exit8, grid_face_point, locate8, locate_box, safe_radius8, span, tally_segments,
+    wrap_coord,
 };
-use crate::transport::hero::{hero_of, trace_hero};
+use crate::transport::hero::{hero_of, trace_hero, walk_hero, Carried, HeroEnd};
 use crate::transport::packet::step::hg8;
 use crate::transport::packet::PathTally;
-use crate::transport::path::{Tally, MAX_EVENTS, MAX_STEPS, RR_THRESHOLD};
+use crate::transport::path::{Tally, Walk, MAX_EVENTS, MAX_STEPS, RR_THRESHOLD};
 use crate::transport::rng::{path_key, uniform8, LaneRng, PathRng};
+use crate::transport::sampling::{add, scale};
 use crate::transport::scene::{Boundary, Geometry, Medium, Texel};
 use crate::transport::trace::{camera_ray, interface, Start};
 
@@ -79,6 +84,8 @@ struct Lanes {
 struct Events {
     exits: i32,
     ended: i32,
+    /// Lanes that scattered into a voxel next to the object's surface (masked volumes): the scalar walk.
+    shallow: i32,
     collided: i32,
     t: [f32; W],
     j: [i32; W],
@@ -111,9 +118,50 @@ impl Lanes {
             (self.p[a][l], self.d[a][l]) = (p[a], d[a]);
         }
         self.t[l] = 0.0;
-        let (t_exit, axis) = grid_exit8(geo, p.map(f32x8::splat), d.map(f32x8::splat));
-        self.t_exit[l] = t_exit.to_array()[0];
-        self.axis[l] = axis.to_array()[0];
+        if geo.masked() {
+            let v = locate_box(geo, p);
+            let s = f32x8::splat(geo.safe_distance(geo.index(v)) as f32);
+            self.t_exit[l] = safe_radius8(geo, p.map(f32x8::splat), v.map(i32x8::splat), s).to_array()[0];
+        } else {
+            let (t_exit, axis) = grid_exit8(geo, p.map(f32x8::splat), d.map(f32x8::splat));
+            self.t_exit[l] = t_exit.to_array()[0];
+            self.axis[l] = axis.to_array()[0];
+        }
+    }
+
+    /// Continue lane l's path (job `job`) with the scalar walk from p in voxel v: its values if it ended, else
+    /// (None) the lane is flying in the deep interior again.
+    #[allow(clippy::too_many_arguments)]
+    fn walk<M: Medium, P: PathTally>(
+        &mut self,
+        geo: &Geometry,
+        med: &M,
+        l: usize,
+        job: usize,
+        (p, d, v): ([f32; 3], [f32; 3], [i32; 3]),
+        in_medium: bool,
+        tally: &mut P,
+    ) -> Option<[f32; 3]> {
+        let mut rng = LaneRng { k_lo: self.k_lo[l], k_hi: self.k_hi[l], draw: self.draw[l] };
+        let mut w = Walk { p, d, v, weight: 0.0, in_medium, events: self.events[l], steps: self.steps[l] as u64 };
+        let mut car = Carried { p: std::array::from_fn(|c| self.pr[c][l]), a: std::array::from_fn(|c| self.a[c][l]) };
+        let mut jt = JobTally { inner: tally, job };
+        let end = walk_hero(geo, med, self.hero[l], &mut w, &mut car, &mut rng, &mut jt, true);
+        self.draw[l] = rng.draw;
+        match end {
+            HeroEnd::Done(r) => {
+                self.events[l] = r.events;
+                Some(r.value)
+            }
+            HeroEnd::Deep => {
+                (self.events[l], self.steps[l]) = (w.events, w.steps.min(u32::MAX as u64) as u32);
+                for c in 0..3 {
+                    (self.pr[c][l], self.a[c][l]) = (car.p[c], car.a[c]);
+                }
+                self.start_flight(geo, l, w.p, w.d);
+                None
+            }
+        }
     }
 
     /// Lane l's channel values: 3 a_j p_j / sum_k p_k.
@@ -145,12 +193,16 @@ impl Lanes {
         let v = locate8(geo, &mut q);
         let j = ((v[2] * i32x8::splat(geo.n[1]) + v[1]) * i32x8::splat(geo.n[0]) + v[0]).to_array();
         let va = v.map(|x| x.to_array());
-        let (mut st, mut albedo, mut st_h) = ([[0.0f32; W]; 3], [[0.0f32; W]; 3], [0.0f32; W]);
+        let masked = geo.masked();
+        let (mut st, mut albedo, mut st_h, mut safe) = ([[0.0f32; W]; 3], [[0.0f32; W]; 3], [0.0f32; W], [0.0f32; W]);
         for l in 0..W {
             for c in 0..3 {
                 (st[c][l], albedo[c][l]) = med.coeffs_at(j[l] as usize, [va[0][l], va[1][l], va[2][l]], c);
             }
             st_h[l] = st[self.hero[l]][l];
+            if masked {
+                safe[l] = geo.safe_distance(j[l] as usize) as f32;
+            }
         }
         let st_h = f32x8::from(st_h);
         let flying = live & !exit;
@@ -174,9 +226,16 @@ impl Lanes {
         let nd = hg8(d, geo.g, u_phase1, u_phase2);
         let p2 = [scatter.blend(q[0], p[0]), scatter.blend(q[1], p[1]), scatter.blend(q[2], p[2])];
         let d2 = [scatter.blend(nd[0], d[0]), scatter.blend(nd[1], d[1]), scatter.blend(nd[2], d[2])];
-        let (te, ax) = grid_exit8(geo, p2, d2);
-        self.t_exit = scatter.blend(te, t_exit).into();
-        self.axis = cast::<f32x8, i32x8>(scatter).blend(ax, i32x8::from(self.axis)).into();
+        let mut shallow = 0;
+        if masked {
+            let safe = f32x8::from(safe);
+            shallow = (scatter & safe.cmp_lt(f32x8::splat(2.0))).move_mask();
+            self.t_exit = scatter.blend(safe_radius8(geo, q, v, safe), t_exit).into();
+        } else {
+            let (te, ax) = grid_exit8(geo, p2, d2);
+            self.t_exit = scatter.blend(te, t_exit).into();
+            self.axis = cast::<f32x8, i32x8>(scatter).blend(ax, i32x8::from(self.axis)).into();
+        }
         self.p = p2.map(<[f32; W]>::from);
         self.d = d2.map(<[f32; W]>::from);
         self.t = scatter.blend(f32x8::ZERO, t).into();
@@ -187,6 +246,7 @@ impl Lanes {
         Events {
             exits: (exit & !too_long).move_mask(),
             ended: ((dead | too_long) & live).move_mask(),
+            shallow: shallow & !too_long.move_mask(),
             collided: accept.move_mask(),
             t: t.into(),
             j,
@@ -222,7 +282,8 @@ impl Lanes {
 
 /// Trace the hero paths of `texels` (those the tally wants; job = texel x spp + sample) and write their values
 /// to `values`, laid out [texel][channel][sample] (3 spp per texel). `first_key`: the texel index of
-/// `texels[0]` in the random-number keys. Mask-free grids only. Returns the number of collisions.
+/// `texels[0]` in the random-number keys. Mask-free grids and masked boxes (`packet::supported`). Returns the
+/// number of collisions.
 pub(crate) fn trace_hero_lanes<M: Medium, P: PathTally>(
     geo: &Geometry,
     med: &M,
@@ -232,7 +293,7 @@ pub(crate) fn trace_hero_lanes<M: Medium, P: PathTally>(
     values: &mut [f32],
     tally: &mut P,
 ) -> u64 {
-    assert!(!geo.masked());
+    assert!(supported(geo));
     let spp = opts.spp as usize;
     let jobs = texels.len() * spp;
     assert_eq!(values.len(), 3 * jobs);
@@ -271,12 +332,28 @@ pub(crate) fn trace_hero_lanes<M: Medium, P: PathTally>(
                 }
             }
         }
-        let mut bits = ev.ended | ev.exits;
+        let mut bits = ev.ended | ev.exits | ev.shallow;
         while bits != 0 {
             let l = bits.trailing_zeros() as usize;
             bits &= bits - 1;
             let job = ln.job[l].expect("a live lane");
-            let ended = if ev.ended >> l & 1 == 1 { Some([0.0; 3]) } else { at_face(geo, &mut ln, l, ev.u_fresnel[l]) };
+            let ended = if ev.ended >> l & 1 == 1 {
+                Some([0.0; 3])
+            } else if geo.masked() {
+                // A shallow collision (the lane is at it), or the edge of the safe ball: the scalar walk from there.
+                let d = [ln.d[0][l], ln.d[1][l], ln.d[2][l]];
+                let mut p = [ln.p[0][l], ln.p[1][l], ln.p[2][l]];
+                if ev.exits >> l & 1 == 1 {
+                    p = add(p, scale(d, ln.t_exit[l]));
+                    if geo.safe_distance(geo.index(locate_box(geo, p))) >= 2 {
+                        ln.start_flight(geo, l, p, d);
+                        continue;
+                    }
+                }
+                ln.walk(geo, med, l, job, (p, d, locate_box(geo, p)), true, tally)
+            } else {
+                at_face(geo, &mut ln, l, ev.u_fresnel[l])
+            };
             if let Some(v) = ended {
                 put(values, spp, job, v);
                 events += ln.events[l] as u64;
@@ -285,6 +362,11 @@ pub(crate) fn trace_hero_lanes<M: Medium, P: PathTally>(
         }
     }
     events
+}
+
+/// Whether `trace_hero_lanes` handles this geometry (mask-free volumes, and masked boxes).
+pub(crate) fn supported(geo: &Geometry) -> bool {
+    !geo.masked() || geo.boundary == Boundary::Box
 }
 
 /// Lane l's flight reached the grid's face: Fresnel reflection (a new flight; None) or out to the light (the
@@ -367,21 +449,39 @@ fn refill<M: Medium, P: PathTally>(
         let (ti, s) = (job / spp, (job % spp) as u32);
         let h = hero_of(opts.seed, first_key + ti as u64, s, opts.spp);
         let mut rng = LaneRng::new(path_key(opts.seed, first_key + ti as u64, s, h as u32));
-        match camera_ray(geo, &texels[ti], opts.include_specular, &mut rng) {
-            Start::Done(_) => put(values, spp, job, [0.0; 3]),
-            Start::Medium(p, d, _, w) => {
-                (ln.k_lo[l], ln.k_hi[l], ln.draw[l]) = (rng.k_lo, rng.k_hi, CAMERA_DRAWS);
-                (ln.events[l], ln.steps[l], ln.hero[l], ln.job[l]) = (0, 0, h, Some(job));
-                for c in 0..3 {
-                    (ln.pr[c][l], ln.a[c][l]) = (1.0, w);
-                }
+        let start = camera_ray(geo, &texels[ti], opts.include_specular, &mut rng);
+        (ln.k_lo[l], ln.k_hi[l], ln.draw[l]) = (rng.k_lo, rng.k_hi, CAMERA_DRAWS);
+        (ln.events[l], ln.steps[l], ln.hero[l]) = (0, 0, h);
+        let weight = match start {
+            Start::Medium(.., w) => w,
+            _ => 1.0,
+        };
+        for c in 0..3 {
+            (ln.pr[c][l], ln.a[c][l]) = (1.0, weight);
+        }
+        let ended = match start {
+            Start::Done(_) => Some([0.0; 3]),
+            Start::Medium(p, d, v, _) if geo.masked() => ln.walk(geo, med, l, job, (p, d, v), true, tally),
+            Start::Outside(p, d, v) if geo.masked() => ln.walk(geo, med, l, job, (p, d, v), false, tally),
+            Start::Medium(p, d, _, _) => {
                 ln.start_flight(geo, l, p, d);
+                None
+            }
+            Start::Outside(_, d, v) if !geo.in_grid(v) => Some(std::array::from_fn(|c| geo.light.radiance(d, c))),
+            Start::Outside(..) => {
+                *events += scalar(geo, med, texels, first_key, opts, job, values, tally);
+                continue;
+            }
+        };
+        match ended {
+            Some(v) => {
+                put(values, spp, job, v);
+                *events += ln.events[l] as u64;
+            }
+            None => {
+                ln.job[l] = Some(job);
                 return;
             }
-            Start::Outside(_, d, v) if !geo.in_grid(v) => {
-                put(values, spp, job, std::array::from_fn(|c| geo.light.radiance(d, c)))
-            }
-            Start::Outside(..) => *events += scalar(geo, med, texels, first_key, opts, job, values, tally),
         }
     }
 }

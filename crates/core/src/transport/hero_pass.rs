@@ -1,6 +1,6 @@
 //! Drivers of the hero-path render and gradient pass (`hero`: the scalar walk and the estimator; `hero_lanes`:
-//! eight paths at a time). Mask-free grids run the lanes, `PACKET_CHUNK` texels per work item; masked grids the
-//! scalar walk, one texel per work item. Each texel's path values are summed in sample order and gradients in
+//! eight paths at a time). Mask-free grids and masked boxes run the lanes, `PACKET_CHUNK` texels per work item;
+//! masked periodic slabs the scalar walk, one texel per work item. Each texel's path values are summed in sample order and gradients in
 //! fixed point (`grad::GradBuffers`), so results are bit-identical for any thread count and work split.
 
 use rayon::prelude::*;
@@ -8,7 +8,7 @@ use rayon::prelude::*;
 use crate::transport::estimate::{estimates, Moments, RenderOptions, Stats, TexelEstimate};
 use crate::transport::grad::{fixed, AddQueue, GradBuffers};
 use crate::transport::hero::{hero_of, trace_hero};
-use crate::transport::hero_lanes::trace_hero_lanes;
+use crate::transport::hero_lanes::{supported, trace_hero_lanes};
 use crate::transport::packet::{NoPathTally, PathTally};
 use crate::transport::path::{NoTally, Tally};
 use crate::transport::render::PACKET_CHUNK;
@@ -24,7 +24,7 @@ pub fn render_hero<M: Medium>(
     first_texel: u64,
     opts: &RenderOptions,
 ) -> (Vec<TexelEstimate>, Stats) {
-    if !geo.masked() {
+    if supported(geo) {
         return lanes_pass(geo, med, texels, first_texel, opts, None);
     }
     let results: Vec<(TexelEstimate, Stats)> = texels
@@ -160,7 +160,7 @@ pub fn backward_hero<M: Medium>(
 ) -> (Vec<TexelEstimate>, Stats) {
     assert_eq!(texels.len(), adjoint.len());
     assert_eq!(grads.n_voxels, med.len());
-    if !geo.masked() {
+    if supported(geo) {
         return lanes_pass(geo, med, texels, first_texel, opts, Some((adjoint, grads)));
     }
     let scale = 1.0 / opts.spp as f32 * (1.0 / grads.quantum) as f32;
