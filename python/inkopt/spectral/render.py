@@ -188,9 +188,11 @@ class SpectralRenderer(TexelRenderer):
         return self._gather(results, settings)
 
     def _settings(self, settings: PassSettings, group: int) -> PassSettings:
-        """Group ``group``'s pass: its seed (:func:`group_seed`), samples (:func:`group_spp`) and ``hero``."""
+        """Group ``group``'s pass: its seed (:func:`group_seed`), samples (:func:`group_spp`) and ``hero`` (hero paths
+        have "replay" gradients only: the "li1" method's passes trace one path per band)."""
         spp = group_spp(settings.spp, self.weights, len(self._groups))[group]
-        return replace(settings, seed=group_seed(settings.seed, group), spp=spp, hero=self.hero)
+        hero = self.hero and settings.method == "replay"
+        return replace(settings, seed=group_seed(settings.seed, group), spp=spp, hero=hero)
 
     def gradient_pass(
         self,

@@ -31,13 +31,14 @@ class Viewing:
     """``table``: the spectral ink table (None: the RGB path); ``lights``: what the print is seen under (empty: D65);
     ``combine``: "mean" or "worst" of the loss under several lights; ``weighted``: a pass's samples shared among the
     band groups by :meth:`group_weights` (False: equally); ``hero``: each band group's paths carry its three bands
-    (``SpectralRenderer``'s ``hero``)."""
+    (``SpectralRenderer``'s ``hero``; False: one path per band and sample, about 1.6x the cost at equal noise on the
+    reference slab, docs/spectral.md "Cost")."""
 
     table: SpectralInkTable | None = None
     lights: tuple[Light, ...] = ()
     combine: str = "mean"
     weighted: bool = True
-    hero: bool = False
+    hero: bool = True
 
     def __post_init__(self):
         object.__setattr__(self, "lights", tuple(self.lights))

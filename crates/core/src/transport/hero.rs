@@ -13,13 +13,18 @@
 //! weight cannot explode where the channels' extinctions differ. Russian roulette plays on the largest channel
 //! value and scales every channel by the same factor, so each stays unbiased.
 //!
+//! The lanes (`hero_lanes`) run this walk near surfaces (`walk_hero` with `stop_deep`) and for paths that start
+//! inside the grid (`trace_job`).
+//!
 //! Gradients by path replay: E[d f_j / mix] = d integral f_j, and d log f_j is k_v / sigma_s,j - l_v (sigma_s of
 //! voxel v) and -l_v (sigma_a), channel j's own coefficients only; a replayed path adds to the three channels'
 //! slots with weights adjoint_j x value_j. Random numbers are keyed by (seed, texel, sample, hero), values
 //! summed per texel in sample order, gradients in fixed point: bit-identical for any thread count.
 
+use crate::transport::estimate::RenderOptions;
 use crate::transport::flight::{Event, Regular, Tracker};
 use crate::transport::grid::{cross, empty_jump, facing_normal, voxel_exit};
+use crate::transport::packet::PathTally;
 use crate::transport::path::{Tally, Walk, MAX_EVENTS, MAX_STEPS, RR_THRESHOLD};
 use crate::transport::rng::{PathRng, Uniforms};
 use crate::transport::sampling::hg_sample;
@@ -306,4 +311,55 @@ fn outside<U: Uniforms>(geo: &Geometry, s: &mut Walk, rng: &mut U) -> Outside {
             s.v = nb;
         }
     }
+}
+
+/// One hero path's view of a `PathTally` (segments and collisions of job `job`; the channel is unused).
+pub(crate) struct JobTally<'a, P: PathTally> {
+    pub inner: &'a mut P,
+    pub job: usize,
+}
+
+impl<P: PathTally> Tally for JobTally<'_, P> {
+    const ACTIVE: bool = P::ACTIVE;
+    #[inline(always)]
+    fn segment(&mut self, j: usize, len: f32) {
+        self.inner.segment(self.job, 0, j, len);
+    }
+    #[inline(always)]
+    fn scatter(&mut self, j: usize) {
+        self.inner.scatter(self.job, 0, j);
+    }
+}
+
+/// Write job `job`'s channel values into the [texel][channel][sample] layout.
+#[inline(always)]
+pub(crate) fn put(values: &mut [f32], spp: usize, job: usize, v: [f32; 3]) {
+    let (ti, s) = (job / spp, job % spp);
+    for c in 0..3 {
+        values[(3 * ti + c) * spp + s] = v[c];
+    }
+}
+
+/// Job `job` (texel x spp + sample) of a `PathTally` pass by the scalar hero walk (`trace_hero`, keyed as the
+/// scalar renderer keys it), its values written into `values` ([texel][channel][sample]); its collisions.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn trace_job<M: Medium, P: PathTally>(
+    geo: &Geometry,
+    med: &M,
+    texels: &[Texel],
+    first_key: u64,
+    opts: &RenderOptions,
+    job: usize,
+    values: &mut [f32],
+    tally: &mut P,
+) -> u64 {
+    let spp = opts.spp as usize;
+    let (ti, s) = (job / spp, (job % spp) as u32);
+    let key = first_key + ti as u64;
+    let h = hero_of(opts.seed, key, s, opts.spp);
+    let mut rng = PathRng::new(opts.seed, key, s, h as u32);
+    let mut jt = JobTally { inner: tally, job };
+    let r = trace_hero(geo, med, &texels[ti], h, &mut rng, opts.include_specular, &mut jt);
+    put(values, spp, job, r.value);
+    r.events as u64
 }

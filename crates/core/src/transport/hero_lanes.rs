@@ -28,11 +28,11 @@ use crate::transport::grid::{
     component, facing_normal, grid_exit8, grid_face_point, locate8, locate_box, safe_radius8, span, tally_segments,
     wrap_coord,
 };
-use crate::transport::hero::{hero_of, trace_hero, walk_hero, Carried, HeroEnd};
+use crate::transport::hero::{hero_of, put, trace_job, walk_hero, Carried, HeroEnd, JobTally};
 use crate::transport::packet::step::hg8;
 use crate::transport::packet::PathTally;
 use crate::transport::path::{Tally, Walk, MAX_EVENTS, MAX_STEPS, RR_THRESHOLD};
-use crate::transport::rng::{path_key, uniform8, LaneRng, PathRng};
+use crate::transport::rng::{path_key, uniform8, LaneRng};
 use crate::transport::sampling::{add, scale};
 use crate::transport::scene::{Boundary, Geometry, Medium, Texel};
 use crate::transport::trace::{camera_ray, interface, Start};
@@ -42,24 +42,6 @@ const W: usize = 8;
 const CAMERA_DRAWS: u32 = 3;
 /// Uniforms drawn per lane per step: free flight, accept test, roulette or Fresnel, two for the phase function.
 const STEP_DRAWS: u32 = 5;
-
-/// One hero path's view of a `PathTally` (segments and collisions of job `job`; the channel is unused).
-struct JobTally<'a, P: PathTally> {
-    inner: &'a mut P,
-    job: usize,
-}
-
-impl<P: PathTally> Tally for JobTally<'_, P> {
-    const ACTIVE: bool = P::ACTIVE;
-    #[inline(always)]
-    fn segment(&mut self, j: usize, len: f32) {
-        self.inner.segment(self.job, 0, j, len);
-    }
-    #[inline(always)]
-    fn scatter(&mut self, j: usize) {
-        self.inner.scatter(self.job, 0, j);
-    }
-}
 
 /// Eight hero paths in flight (structure of arrays): the flight from p along d (t flown, t_exit at the grid's
 /// face on `axis`), per channel the relative densities `pr` and albedo products `a`, the random stream.
@@ -303,7 +285,7 @@ pub(crate) fn trace_hero_lanes<M: Medium, P: PathTally>(
         let mut events = 0;
         for job in 0..jobs {
             if tally.wanted(job) {
-                events += scalar(geo, med, texels, first_key, opts, job, values, tally);
+                events += trace_job(geo, med, texels, first_key, opts, job, values, tally);
             }
         }
         return events;
@@ -390,38 +372,6 @@ fn at_face(geo: &Geometry, ln: &mut Lanes, l: usize, u: f32) -> Option<[f32; 3]>
     None
 }
 
-/// Write job `job`'s channel values into the [texel][channel][sample] layout.
-#[inline(always)]
-fn put(values: &mut [f32], spp: usize, job: usize, v: [f32; 3]) {
-    let (ti, s) = (job / spp, job % spp);
-    for c in 0..3 {
-        values[(3 * ti + c) * spp + s] = v[c];
-    }
-}
-
-/// Job `job` by the scalar hero walk (`hero::trace_hero`, keyed as the scalar renderer keys it); its collisions.
-#[allow(clippy::too_many_arguments)]
-fn scalar<M: Medium, P: PathTally>(
-    geo: &Geometry,
-    med: &M,
-    texels: &[Texel],
-    first_key: u64,
-    opts: &RenderOptions,
-    job: usize,
-    values: &mut [f32],
-    tally: &mut P,
-) -> u64 {
-    let spp = opts.spp as usize;
-    let (ti, s) = (job / spp, (job % spp) as u32);
-    let key = first_key + ti as u64;
-    let h = hero_of(opts.seed, key, s, opts.spp);
-    let mut rng = PathRng::new(opts.seed, key, s, h as u32);
-    let mut jt = JobTally { inner: tally, job };
-    let r = trace_hero(geo, med, &texels[ti], h, &mut rng, opts.include_specular, &mut jt);
-    put(values, spp, job, r.value);
-    r.events as u64
-}
-
 /// Give lane l the next wanted path that starts flying in the medium; paths that end before (a camera ray
 /// that does not refract, or that reflects out of the grid) are written directly.
 #[allow(clippy::too_many_arguments)]
@@ -469,7 +419,7 @@ fn refill<M: Medium, P: PathTally>(
             }
             Start::Outside(_, d, v) if !geo.in_grid(v) => Some(std::array::from_fn(|c| geo.light.radiance(d, c))),
             Start::Outside(..) => {
-                *events += scalar(geo, med, texels, first_key, opts, job, values, tally);
+                *events += trace_job(geo, med, texels, first_key, opts, job, values, tally);
                 continue;
             }
         };
