@@ -31,14 +31,14 @@ class Viewing:
     """``table``: the spectral ink table (None: the RGB path); ``lights``: what the print is seen under (empty: D65);
     ``combine``: "mean" or "worst" of the loss under several lights; ``weighted``: a pass's samples shared among the
     band groups by :meth:`group_weights` (False: equally); ``hero``: each band group's paths carry its three bands
-    (``SpectralRenderer``'s ``hero``; False: one path per band and sample, about 1.6x the cost at equal noise on the
-    reference slab, docs/spectral.md "Cost")."""
+    (``SpectralRenderer``'s ``hero``; off by default: 0.64x the band paths' cost at equal noise on the reference
+    slab but 8x on Spot 20 mm, whose hero noise is 4x the band paths', docs/spectral.md "Cost")."""
 
     table: SpectralInkTable | None = None
     lights: tuple[Light, ...] = ()
     combine: str = "mean"
     weighted: bool = True
-    hero: bool = True
+    hero: bool = False
 
     def __post_init__(self):
         object.__setattr__(self, "lights", tuple(self.lights))
