@@ -1,7 +1,7 @@
 """Spectral against RGB optimisation on the reference slab: cost per iteration at equal colour noise.
 
     nice -n 5 .venv/bin/python bench/bench_spectral.py [--bands 16] [--spp 16] [--iterations 3] [--threads 2]
-        [--equal-groups] [--spot-mm 20]
+        [--equal-groups] [--spot-mm 20] [--no-hero]
 
 The spectral table is made here from the Vero RGB table by a simple rule (an assumption of this benchmark, not the
 documented spectral Vero table): each ink's sigma_s and sigma_a per channel placed at 465 (B), 540 (G) and 610 nm
@@ -16,6 +16,10 @@ optimiser's do (``Viewing.group_weights``), or equally with ``--equal-groups``.
    measured again at that spp.
 2. Cost: ``--iterations`` optimisation iterations (forward + loss + gradient + step) of each at those samples,
    RGB and spectral alternating twice in one process; seconds per iteration, median over each kind's iterations.
+
+Two spectral renderers: one path per band and sample (the keys without "hero"), and hero paths, each carrying a
+band group's three bands (``Viewing.hero``; the ``hero_*`` keys, and "hero" in the per-iteration seconds), both with
+the same group weights, measured alike (``--no-hero``: the first only).
 
 ``--spot-mm H``: the same on Spot scaled to H mm (its scene's start mixture for the noise renders) instead of the
 reference slab. Writes bench/results/spectral_cost.json (Spot: spectral_cost_spot<H>mm.json).
@@ -82,6 +86,20 @@ def iteration_seconds(scene, cfg, threads, viewing, iterations: int) -> list[flo
     return list(run.history.seconds)
 
 
+def hero_keys(noise: dict, per_it: dict, weights, groups: int) -> dict:
+    """The hero-path renderer's result keys (none without it)."""
+    if "hero" not in noise:
+        return {}
+    pilot, spp, at = noise["hero"]
+    return {
+        "hero_group_spp": group_spp(spp, weights, groups),
+        "noise_dE76_hero_at_rgb_spp": pilot,
+        "hero_spp_equal_noise": spp,
+        "noise_dE76_hero": at,
+        "hero_over_rgb": per_it["hero"] / per_it["rgb"],
+    }
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--bands", type=int, default=16)
@@ -90,51 +108,58 @@ def main():
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--equal-groups", action="store_true", help="every band group the pass's spp")
     ap.add_argument("--spot-mm", type=float, help="Spot at this height instead of the reference slab")
+    ap.add_argument("--no-hero", action="store_true", help="leave out the hero-path spectral renderer")
     a = ap.parse_args()
     vol, scene = bench_scene(a.spot_mm)
     table = spectral_from_rgb(vol.inks, a.bands)
     d65 = named_light("D65").colour_map(table.wavelengths_nm)
     tex = scene.texels
     noise_rgb = colour_noise(Renderer(vol, a.threads), tex, a.spp, RGB)
-    viewing = Viewing(table, (named_light("D65"),), weighted=not a.equal_groups)
-    weights = viewing.group_weights()
-    spectral = SpectralRenderer(vol, table, a.threads, weights=weights)
-    noise_spec_pilot = colour_noise(spectral, tex, a.spp, d65)
-    spp_spec = max(1, math.ceil(a.spp * (noise_spec_pilot / noise_rgb) ** 2))
-    noise_spec = colour_noise(spectral, tex, spp_spec, d65)
-    del spectral
+    kinds = {"spectral": Viewing(table, (named_light("D65"),), weighted=not a.equal_groups)}
+    if not a.no_hero:
+        kinds["hero"] = Viewing(table, (named_light("D65"),), weighted=not a.equal_groups, hero=True)
+    weights = kinds["spectral"].group_weights()
+    noise = {}
+    for name, viewing in kinds.items():
+        spectral = SpectralRenderer(vol, table, a.threads, weights=weights, hero=viewing.hero)
+        pilot = colour_noise(spectral, tex, a.spp, d65)
+        spp = max(1, math.ceil(a.spp * (pilot / noise_rgb) ** 2))
+        noise[name] = (pilot, spp, colour_noise(spectral, tex, spp, d65))
+        del spectral
     cfg_rgb = OptimizeConfig(iterations=a.iterations, spp=a.spp, forward_spp=a.spp)
-    cfg_spec = OptimizeConfig(iterations=a.iterations, spp=spp_spec, forward_spp=spp_spec)
-    secs = {"rgb": [], "spectral": []}
+    cfgs = {k: OptimizeConfig(iterations=a.iterations, spp=n[1], forward_spp=n[1]) for k, n in noise.items()}
+    secs = {"rgb": [], **{k: [] for k in kinds}}
     t0 = time.perf_counter()
-    for _ in range(2):  # alternating, so a change of the machine's load falls on both
+    for _ in range(2):  # alternating, so a change of the machine's load falls on all
         secs["rgb"] += iteration_seconds(scene, cfg_rgb, a.threads, None, a.iterations)
-        secs["spectral"] += iteration_seconds(scene, cfg_spec, a.threads, viewing, a.iterations)
+        for k, viewing in kinds.items():
+            secs[k] += iteration_seconds(scene, cfgs[k], a.threads, viewing, a.iterations)
     per_it = {k: float(np.median(v)) for k, v in secs.items()}
     out = {
         "scene": f"Spot {a.spot_mm:g} mm" if a.spot_mm else "reference slab 177x118x30 voxels, chart top, zebra below",
         "texels": len(tex),
         "bands": a.bands,
         "band_groups": len(table.group_bands()),
-        "group_spp": group_spp(spp_spec, weights, len(table.group_bands())),
+        "group_spp": group_spp(noise["spectral"][1], weights, len(table.group_bands())),
         "spectral_table": "Vero RGB coefficients at 610/540/465 nm, linear in wavelength (bench rule)",
         "rgb_spp": a.spp,
         "noise_dE76_rgb": noise_rgb,
-        "noise_dE76_spectral_at_rgb_spp": noise_spec_pilot,
-        "spectral_spp_equal_noise": spp_spec,
-        "noise_dE76_spectral": noise_spec,
+        "noise_dE76_spectral_at_rgb_spp": noise["spectral"][0],
+        "spectral_spp_equal_noise": noise["spectral"][1],
+        "noise_dE76_spectral": noise["spectral"][2],
         "seconds_per_iteration": per_it,
         "iteration_seconds": secs,
         "spectral_over_rgb": per_it["spectral"] / per_it["rgb"],
+        **hero_keys(noise, per_it, weights, len(table.group_bands())),
         "threads": a.threads,
         "wall_s": time.perf_counter() - t0,
         **machine(),
     }
-    print(
-        f"noise ΔE76: rgb {noise_rgb:.3f} at spp {a.spp}; spectral {noise_spec_pilot:.3f} at spp {a.spp}, "
-        f"{noise_spec:.3f} at spp {spp_spec}; s/iteration rgb {per_it['rgb']:.2f}, spectral {per_it['spectral']:.2f}"
-        f" ({out['spectral_over_rgb']:.2f}x)"
-    )
+    for k, (pilot, spp, at) in noise.items():
+        print(
+            f"noise ΔE76: rgb {noise_rgb:.3f} at spp {a.spp}; {k} {pilot:.3f} at spp {a.spp}, {at:.3f} at spp {spp}; "
+            f"s/iteration rgb {per_it['rgb']:.2f}, {k} {per_it[k]:.2f} ({per_it[k] / per_it['rgb']:.2f}x)"
+        )
     print("wrote", write(f"spectral_cost_spot{a.spot_mm:g}mm.json" if a.spot_mm else "spectral_cost.json", out))
 
 

@@ -88,9 +88,16 @@ class Scene:
         """Threads of the scene's pool."""
 
     def render(
-        self, texels: Texels, *, spp: int, seed: int, first_texel: int = 0, include_specular: bool = True
+        self,
+        texels: Texels,
+        *,
+        spp: int,
+        seed: int,
+        first_texel: int = 0,
+        include_specular: bool = True,
+        hero: bool = False,
     ) -> tuple[NDArray[np.float32], NDArray[np.float32], dict[str, int]]:
-        """Render texels (the first has index first_texel) -> mean, var_mean (I,3) f32 linear RGB, stats dict."""
+        """Render texels (first: index first_texel) -> mean, var_mean (I,3) f32, stats; hero: paths carry 3 channels."""
 
     def zero_grad(
         self, max_abs_adjoint: float, grad_index: NDArray[np.int32] | NDArray[np.int64] | None = None
@@ -107,8 +114,9 @@ class Scene:
         first_texel: int = 0,
         include_specular: bool = True,
         method: str = "replay",
+        hero: bool = False,
     ) -> tuple[NDArray[np.float32], NDArray[np.float32], dict[str, int]]:
-        """Accumulate adjoint (I,3) f32 . d colour / d sigma ("replay" or "li1"); returns the pass's own render."""
+        """Accumulate adjoint (I,3) f32 . d colour / d sigma ("replay", "li1"; hero: replay); returns its own render."""
 
     def take_grad(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
         """d e/d sigma_s, d e/d sigma_a: (z,y,x,3) f32 each, or (F,3) per slot; frees the buffers."""

@@ -81,26 +81,31 @@ class PassSettings:
     """The settings of one render or gradient pass: ``spp`` samples per texel and channel (at least 1), random
     numbers keyed by (``seed``, texel index, sample), with or without the specular reflection of the light
     (``include_specular``), a gradient pass's ``method`` ("replay" or "li1"), and the index of the pass's first
-    texel in the whole list (``first_texel``: a shard of a longer list renders as in the list)."""
+    texel in the whole list (``first_texel``: a shard of a longer list renders as in the list). ``hero``: ``spp``
+    paths per texel, each serving the three channels (hero-channel sampling, "replay" gradients only; the
+    spectral band groups) instead of ``spp`` per channel."""
 
     spp: int
     seed: int
     include_specular: bool = True
     method: str = "replay"
     first_texel: int = 0
+    hero: bool = False
 
     def __post_init__(self):
         if self.spp < 1:
             raise ParameterError(f"`spp` must be at least 1, got {self.spp}")
 
     def core_kwargs(self, offset: int) -> dict:
-        """The core's keyword arguments for the texels from ``offset`` in this pass's list on."""
-        return dict(
+        """The core's keyword arguments for the texels from ``offset`` in this pass's list on (``hero`` only when
+        asked)."""
+        kw = dict(
             spp=int(self.spp),
             seed=int(self.seed),
             first_texel=int(self.first_texel) + offset,
             include_specular=self.include_specular,
         )
+        return kw | {"hero": True} if self.hero else kw
 
 
 def adjoint_array(adjoint: np.ndarray, texels: int) -> np.ndarray:

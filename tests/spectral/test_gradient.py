@@ -4,6 +4,7 @@ with common random numbers (``helpers.assert_same_mean``: Student-t bound over 1
 probe, plus 2 % for the difference quotient's O(h^2) bias)."""
 
 import numpy as np
+import pytest
 from helpers import assert_same_mean
 from spectral_helpers import INKS, smooth_table
 
@@ -13,7 +14,9 @@ from inkopt.spectral.render import SpectralRenderer
 from inkopt.spectral.viewing import Viewing
 
 
-def test_spectral_share_gradient_matches_finite_differences():
+@pytest.mark.parametrize("hero", [False, True])
+def test_spectral_share_gradient_matches_finite_differences(hero):
+    """Per band path (hero False) and hero paths carrying a group's three bands (hero True)."""
     table = smooth_table()
     rng = np.random.default_rng(4)
     m = (0.3 + rng.dirichlet(np.ones(5), size=(4, 2, 2))).astype(np.float32)
@@ -28,13 +31,13 @@ def test_spectral_share_gradient_matches_finite_differences():
     for z, n in ((3, 0), (1, 4)):
         g, fd = [], []
         for seed in range(11, 23):
-            gs, ga, _ = SpectralRenderer(vol, table, threads=2).gradient(tex, adj, spp=2000, seed=seed)
+            gs, ga, _ = SpectralRenderer(vol, table, threads=2, hero=hero).gradient(tex, adj, spp=2000, seed=seed)
             g.append(float(mix_grad(gs, ga, table)[z, :, :, n].sum()))  # the layer's voxels share one change
             vals = []
             for sign in (1, -1):
                 m2 = m.copy()
                 m2[z, :, :, n] += sign * h
-                r = SpectralRenderer(vol.with_mixture(m2), table, threads=2).render(tex, spp=2000, seed=seed)
+                r = SpectralRenderer(vol.with_mixture(m2), table, threads=2, hero=hero).render(tex, spp=2000, seed=seed)
                 vals.append(float(np.sum(r.rgb * adj)))
             fd.append((vals[0] - vals[1]) / (2 * h))
         assert abs(np.mean(fd)) > 0

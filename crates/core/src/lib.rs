@@ -28,6 +28,7 @@ pub mod transport;
 pub use transport::band::BandMedium;
 pub use transport::estimate::{RenderOptions, Stats, TexelEstimate};
 pub use transport::grad::{backward, GradBuffers, GradMethod, NO_GRADIENT};
+pub use transport::hero_pass::{backward_hero, render_hero};
 pub use transport::light::EnvMap;
 pub use transport::render::render;
 pub use transport::scene::{

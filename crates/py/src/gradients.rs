@@ -2,7 +2,9 @@
 //! signatures and docstrings are in `scene`): fixed-point gradient buffers per voxel or per slot of a
 //! `grad_index`, filled by path replay (or the `L_i = 1` pass) and returned as numpy arrays.
 
-use inkopt_core::{backward as core_backward, GradBuffers, GradMethod, RenderOptions, Texel, NO_GRADIENT};
+use inkopt_core::{
+    backward as core_backward, backward_hero, GradBuffers, GradMethod, RenderOptions, Texel, NO_GRADIENT,
+};
 use numpy::ndarray::{Array2, Array4};
 use numpy::{Element, IntoPyArray, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
 use pyo3::prelude::*;
@@ -75,7 +77,8 @@ pub(crate) fn zero_grad(
     done.map_err(err)
 }
 
-/// `Scene.backward` on checked texels, the first with index `first_texel`.
+/// `Scene.backward` on checked texels, the first with index `first_texel`; `hero`: hero paths (replay only).
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn backward<'py>(
     scene: &Scene,
     py: Python<'py>,
@@ -84,12 +87,16 @@ pub(crate) fn backward<'py>(
     adjoint: PyReadonlyArray2<f32>,
     opts: &RenderOptions,
     method: &str,
+    hero: bool,
 ) -> PyResult<Packed<'py>> {
     let method = match method {
         "replay" => GradMethod::Replay,
         "li1" => GradMethod::Li1,
         other => return Err(err(format!("unknown gradient method '{other}'; use 'replay' or 'li1'"))),
     };
+    if hero && method != GradMethod::Replay {
+        return Err(err("hero paths have the 'replay' gradient method only"));
+    }
     if adjoint.shape() != [texels.len(), 3] {
         return Err(err(format!("adjoint has shape {:?}, expected ({}, 3)", adjoint.shape(), texels.len())));
     }
@@ -103,8 +110,11 @@ pub(crate) fn backward<'py>(
     let grads = scene.grads.as_ref().unwrap();
     let (est, stats) = py.detach(|| {
         scene.pool.install(|| {
-            with_medium!(&scene.medium, m =>
-            core_backward(&scene.geo, m, texels, first_texel, &adj, opts, method, grads))
+            with_medium!(&scene.medium, m => if hero {
+                backward_hero(&scene.geo, m, texels, first_texel, &adj, opts, grads)
+            } else {
+                core_backward(&scene.geo, m, texels, first_texel, &adj, opts, method, grads)
+            })
         })
     });
     pack(py, &est, &stats)

@@ -4,7 +4,7 @@
 //! only some voxels); `set_light` lights it by a uniform light or an environment map. The gradient methods'
 //! work is in `gradients`. The GIL is released while rendering.
 
-use inkopt_core::{render, Boundary, EnvMap, Geometry, UniformLight};
+use inkopt_core::{render, render_hero, Boundary, EnvMap, Geometry, UniformLight};
 use numpy::{
     IntoPyArray, PyArray1, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4,
     PyUntypedArrayMethods,
@@ -148,10 +148,11 @@ impl Scene {
         self.pool.current_num_threads()
     }
 
-    /// render(texels, *, spp, seed, first_texel=0, include_specular=True) -> (mean (I,3) f32, var_mean (I,3) f32,
-    /// stats dict). Random numbers are keyed by (seed, texel index, sample); `first_texel` is the index of the
-    /// first of `texels`.
-    #[pyo3(signature = (texels, *, spp, seed, first_texel=0, include_specular=true))]
+    /// render(texels, *, spp, seed, first_texel=0, include_specular=True, hero=False) -> (mean (I,3) f32,
+    /// var_mean (I,3) f32, stats dict). Random numbers are keyed by (seed, texel index, sample); `first_texel` is
+    /// the index of the first of `texels`. `hero`: spp paths per texel each serving the three channels (hero
+    /// channel sample mod 3, balance heuristic; `inkopt_core::transport::hero`) instead of spp per channel.
+    #[pyo3(signature = (texels, *, spp, seed, first_texel=0, include_specular=true, hero=false))]
     fn render<'py>(
         &self,
         py: Python<'py>,
@@ -160,11 +161,18 @@ impl Scene {
         seed: u64,
         first_texel: u64,
         include_specular: bool,
+        hero: bool,
     ) -> PyResult<Packed<'py>> {
         let texels = texels.on(&self.geo)?;
         let opts = options(spp, seed, include_specular)?;
         let (est, stats) = py.detach(|| {
-            self.pool.install(|| with_medium!(&self.medium, m => render(&self.geo, m, texels, first_texel, &opts)))
+            self.pool.install(|| {
+                with_medium!(&self.medium, m => if hero {
+                    render_hero(&self.geo, m, texels, first_texel, &opts)
+                } else {
+                    render(&self.geo, m, texels, first_texel, &opts)
+                })
+            })
         });
         pack(py, &est, &stats)
     }
@@ -187,9 +195,10 @@ impl Scene {
         gradients::zero_grad(self, py, max_abs_adjoint, grad_index)
     }
 
-    /// backward(texels, adjoint (I,3) f32, *, spp, seed, first_texel=0, include_specular=True, method="replay")
-    /// -> (mean, var_mean, stats), as render's: accumulates adjoint . dc/dsigma into the buffers of zero_grad.
-    #[pyo3(signature = (texels, adjoint, *, spp, seed, first_texel=0, include_specular=true, method="replay"))]
+    /// backward(texels, adjoint (I,3) f32, *, spp, seed, first_texel=0, include_specular=True, method="replay",
+    /// hero=False) -> (mean, var_mean, stats), as render's: accumulates adjoint . dc/dsigma into the buffers of
+    /// zero_grad. `hero`: hero paths as render's (method "replay" only).
+    #[pyo3(signature = (texels, adjoint, *, spp, seed, first_texel=0, include_specular=true, method="replay", hero=false))]
     fn backward<'py>(
         &mut self,
         py: Python<'py>,
@@ -200,10 +209,11 @@ impl Scene {
         first_texel: u64,
         include_specular: bool,
         method: &str,
+        hero: bool,
     ) -> PyResult<Packed<'py>> {
         let texels = texels.on(&self.geo)?;
         let opts = options(spp, seed, include_specular)?;
-        gradients::backward(self, py, texels, first_texel, adjoint, &opts, method)
+        gradients::backward(self, py, texels, first_texel, adjoint, &opts, method, hero)
     }
 
     /// The accumulated gradients (d e/d sigma_s, d e/d sigma_a): (z, y, x, 3) float32 each, or (F, 3) per slot

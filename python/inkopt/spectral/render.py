@@ -13,6 +13,11 @@ weight = the square root of the group's share of the colour's variance, :func:`g
 bands that barely reach the colour (the spectrum's ends) cost little. Each band's estimate stays unbiased and its
 variance (``var_mean``) is its own.
 
+``hero``: each group's paths carry its three bands at once (the core's hero-channel paths: ``spp`` paths per texel
+serve the group's three bands, the hero band sample mod 3, the balance heuristic over the three bands' samplers,
+``PassSettings.hero``) instead of one path per band and sample; a group's bands are then correlated (one path),
+each stays unbiased with its own variance.
+
 The light's spectrum does not enter transport (``spectral.lights``); what does is the geometric lighting, which
 must be grey (the same radiance in R, G and B: the uniform light or a grey map such as the calibration's upper
 hemisphere): an RGB environment map has no spectrum.
@@ -80,7 +85,8 @@ class SpectralRenderer(TexelRenderer):
     ``weights`` (G,) > 0: how a pass's samples are shared among the groups (:func:`group_spp`; None: equally).
     ``shared``: one renderer for every group, each group's medium swapped in before its pass (``set_volume``, which
     renders bit-identically to a renderer built for it): the geometry is held once instead of G times, for
-    evaluations; its medium cannot be updated in place (``set_mixture``)."""
+    evaluations; its medium cannot be updated in place (``set_mixture``). ``hero``: hero-channel paths per group
+    (see the module's documentation)."""
 
     def __init__(
         self,
@@ -91,6 +97,7 @@ class SpectralRenderer(TexelRenderer):
         factory: RendererFactory | None = None,
         weights=None,
         shared: bool = False,
+        hero: bool = False,
     ):
         if volume.inks is None or tuple(volume.inks.names) != tuple(table.names):
             have = None if volume.inks is None else list(volume.inks.names)
@@ -105,7 +112,7 @@ class SpectralRenderer(TexelRenderer):
         if self.weights is not None and (self.weights.shape != (len(self._groups),) or not np.all(self.weights > 0)):
             raise ParameterError(f"`weights` must be {len(self._groups)} positive numbers, one per band group")
         make = factory or Renderer
-        self.shared, self._current = bool(shared), 0
+        self.shared, self._current, self.hero = bool(shared), 0, bool(hero)
         built = self._groups[:1] if self.shared else self._groups
         self._renderers = [make(with_inks(volume, g), threads, self.lighting) for g in built]
 
@@ -181,9 +188,11 @@ class SpectralRenderer(TexelRenderer):
         return self._gather(results, settings)
 
     def _settings(self, settings: PassSettings, group: int) -> PassSettings:
-        """Group ``group``'s pass: its seed (:func:`group_seed`) and samples (:func:`group_spp`)."""
+        """Group ``group``'s pass: its seed (:func:`group_seed`), samples (:func:`group_spp`) and ``hero`` (hero paths
+        have "replay" gradients only: the "li1" method's passes trace one path per band)."""
         spp = group_spp(settings.spp, self.weights, len(self._groups))[group]
-        return replace(settings, seed=group_seed(settings.seed, group), spp=spp)
+        hero = self.hero and settings.method == "replay"
+        return replace(settings, seed=group_seed(settings.seed, group), spp=spp, hero=hero)
 
     def gradient_pass(
         self,

@@ -30,12 +30,15 @@ RGB_LIGHT = "D65"
 class Viewing:
     """``table``: the spectral ink table (None: the RGB path); ``lights``: what the print is seen under (empty: D65);
     ``combine``: "mean" or "worst" of the loss under several lights; ``weighted``: a pass's samples shared among the
-    band groups by :meth:`group_weights` (False: equally)."""
+    band groups by :meth:`group_weights` (False: equally); ``hero``: each band group's paths carry its three bands
+    (``SpectralRenderer``'s ``hero``; off by default: 0.64x the band paths' cost at equal noise on the reference
+    slab but 8x on Spot 20 mm, whose hero noise is 4x the band paths', docs/spectral.md "Cost")."""
 
     table: SpectralInkTable | None = None
     lights: tuple[Light, ...] = ()
     combine: str = "mean"
     weighted: bool = True
+    hero: bool = False
 
     def __post_init__(self):
         object.__setattr__(self, "lights", tuple(self.lights))
@@ -75,7 +78,10 @@ class Viewing:
         if table is None:
             return inner
         w = self.group_weights()
-        return lambda volume, threads, lighting: SpectralRenderer(volume, table, threads, lighting, inner, w, shared)
+        hero = self.hero
+        return lambda volume, threads, lighting: SpectralRenderer(
+            volume, table, threads, lighting, inner, w, shared, hero
+        )
 
     def group_weights(self) -> np.ndarray | None:
         """(G,) the band groups' sample weights (``spectral.render.group_spp``; None unless ``weighted``): the square
@@ -98,7 +104,7 @@ class Viewing:
         for light in self.seen_under():
             h.update(light.name.encode())
             h.update(np.ascontiguousarray(light.on_grid()).tobytes())
-        return f"{self.combine}:{h.hexdigest()[:16]}"
+        return f"{self.combine}:{h.hexdigest()[:16]}" + (":hero" if self.hero else "")
 
     def display(self, values) -> np.ndarray:
         """Predictions ``values`` (I, C) as linear sRGB (I, 3) float64 for pictures: the RGB path's as they are;

@@ -11,6 +11,7 @@ mod band;
 mod determinism;
 mod geometry;
 mod gradients;
+mod hero;
 mod layering;
 mod light;
 mod samplers;

@@ -43,12 +43,12 @@ pub enum GradMethod {
 /// of a list of voxels (slot = entry) without a map per grid voxel (`RowSpans`: a few MB for any object).
 pub struct GradBuffers {
     /// Voxels in the grid.
-    n_voxels: usize,
+    pub(crate) n_voxels: usize,
     /// Gradient slots (= n_voxels without a map).
-    n: usize,
+    pub(crate) n: usize,
     map: SlotMap,
-    quantum: f64,
-    buf: Vec<AtomicI64>,
+    pub(crate) quantum: f64,
+    pub(crate) buf: Vec<AtomicI64>,
 }
 
 enum SlotMap {
@@ -116,7 +116,7 @@ impl GradBuffers {
     }
 
     #[inline(always)]
-    fn slot(&self, j: usize) -> Option<usize> {
+    pub(crate) fn slot(&self, j: usize) -> Option<usize> {
         match &self.map {
             SlotMap::All => Some(j),
             SlotMap::Dense(m) => {
@@ -179,7 +179,7 @@ impl GradBuffers {
 }
 
 #[inline(always)]
-fn fixed(x: f32, inv_quantum: f32) -> i64 {
+pub(crate) fn fixed(x: f32, inv_quantum: f32) -> i64 {
     (x * inv_quantum).round() as i64
 }
 
@@ -191,7 +191,7 @@ const ADD_QUEUE: usize = 16;
 /// and a locked add waits for its line before anything after it may load: one add after the other, each add
 /// was a cache miss in series. Queued, the misses overlap. The sums are integers, so the order of the adds
 /// changes no bit of them. `flush` before the buffer is read.
-struct AddQueue<'a> {
+pub(crate) struct AddQueue<'a> {
     buf: &'a [AtomicI64],
     at: [usize; ADD_QUEUE],
     value: [i64; ADD_QUEUE],
@@ -201,12 +201,12 @@ struct AddQueue<'a> {
 }
 
 impl<'a> AddQueue<'a> {
-    fn new(buf: &'a [AtomicI64]) -> Self {
+    pub(crate) fn new(buf: &'a [AtomicI64]) -> Self {
         AddQueue { buf, at: [0; ADD_QUEUE], value: [0; ADD_QUEUE], len: 0, next: 0 }
     }
 
     #[inline(always)]
-    fn add(&mut self, at: usize, value: i64) {
+    pub(crate) fn add(&mut self, at: usize, value: i64) {
         prefetch_write(&self.buf[at]);
         let k = self.next;
         if self.len == ADD_QUEUE {
@@ -218,7 +218,7 @@ impl<'a> AddQueue<'a> {
         self.next = (k + 1) % ADD_QUEUE;
     }
 
-    fn flush(&mut self) {
+    pub(crate) fn flush(&mut self) {
         for k in 0..self.len {
             self.buf[self.at[k]].fetch_add(self.value[k], Relaxed);
         }

@@ -17,12 +17,19 @@
 //! - `packet`: eight paths per core in SIMD lanes (`packet::step` is its vector step and uses `packet`).
 //! - `render`: parallel drivers of the forward render.
 //! - `grad`: the gradient pass and its fixed-point buffers.
+//! - `hero`: hero-channel paths (one path serves the three channels; the spectral band groups): the estimator
+//!   and its scalar walk.
+//! - `hero_lanes`: hero paths eight at a time in mask-free grids (null-collision delta tracking in SIMD lanes).
+//! - `hero_pass`: the hero paths' render and gradient drivers.
 
 pub mod band;
 pub mod estimate;
 pub(crate) mod flight;
 pub mod grad;
 pub(crate) mod grid;
+pub mod hero;
+pub(crate) mod hero_lanes;
+pub mod hero_pass;
 pub mod light;
 pub mod medium;
 pub mod normals;
