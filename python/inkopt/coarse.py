@@ -117,7 +117,9 @@ def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: flo
 def _coarse_stage(spec, inks, coarse_dir, cfg: OptimizeConfig, coarse_dpi: float, options: RunOptions) -> None:
     """The coarse run of ``run_coarse_to_fine`` in ``coarse_dir``: ``spec`` at ``coarse_dpi``, within
     ``COARSE_BUDGET_SHARE`` of the time budget; its figures are one pilot pass (informative: the fine stage's are
-    the run's, its baseline guard too); the caller's per-step hook sees the fine stage only (another grid here)."""
+    the run's, its baseline guard too); the caller's per-step hook sees the fine stage only (another grid here).
+    The coarse result is not smoothed at its end (``finish_smooth`` 0): it is the fine stage's start, not an answer,
+    and a pass on the coarse grid blurs twice as far as the fine result's own (docs/quality.md, "The duck's margin")."""
     coarse = build_scene(replace(spec, dpi=coarse_dpi), inks)
     budget = None if cfg.time_budget is None else COARSE_BUDGET_SHARE * cfg.time_budget
     log = options.log
@@ -125,6 +127,6 @@ def _coarse_stage(spec, inks, coarse_dir, cfg: OptimizeConfig, coarse_dpi: float
     coarse_options = replace(
         options, on_step=None, eval_spp=options.eval_spp or PILOT_SPP, log=lambda m: log(f"  {m}"), baseline_guard=False
     )
-    run_optimisation(coarse, coarse_dir, replace(cfg, time_budget=budget), coarse_options)
+    run_optimisation(coarse, coarse_dir, replace(cfg, time_budget=budget, finish_smooth=0), coarse_options)
     del coarse
     release_freed_memory()

@@ -177,8 +177,8 @@ def test_parse_duration_refuses(text):
 
 
 def test_coarse_to_fine_from_the_command_line(tmp_path, capsys):
-    """`inkopt slab --coarse-dpi 150`: a coarse run in DIR/coarse/, its result moved onto the 300-DPI grid as the
-    start of the fine run (whose report names it), and a resume of the finished job does not redo the coarse
+    """`inkopt slab --coarse-dpi 150`: a coarse run in DIR/coarse/, its result moved unsmoothed onto the 300-DPI grid as
+    the start of the fine run (whose report names it), and a resume of the finished job does not redo the coarse
     stage."""
     from inkopt import charts
     from inkopt.cli import main
@@ -186,11 +186,13 @@ def test_coarse_to_fine_from_the_command_line(tmp_path, capsys):
     chart = charts.save(charts.colour_chart(48, 32), tmp_path / "chart.png")
     out = tmp_path / "r"
     args = ["slab", str(chart), "--size-mm", "4.064x2.709x0.5", "--out", str(out), "--threads", "2"]
-    args += ["--iterations", "3", "--spp", "1", "--forward-spp", "2", "--eval-spp", "4", "--coarse-dpi", "150"]
+    args += ["--iterations", "3", "--spp", "1", "--forward-spp", "2", "--eval-spp", "4", "--finish-smooth", "1"]
+    args += ["--coarse-dpi", "150"]
     assert main(args) == 0
     coarse = json.loads((out / "coarse" / "report.json").read_text())
     fine = json.loads((out / "report.json").read_text())
     assert coarse["voxels"] * 8 == fine["voxels"] and coarse["iterations"] == 3
+    assert coarse["finish_smooth"] == 0 and fine["finish_smooth"] == 1  # the fine stage's start is not smoothed
     assert fine["init"] == str(out / "coarse" / "fine_start.npz") and fine["iterations"] == 3
     capsys.readouterr()
     assert main(args + ["--resume"]) == 0
