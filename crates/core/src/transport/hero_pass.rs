@@ -7,7 +7,7 @@ use rayon::prelude::*;
 
 use crate::transport::estimate::{estimates, Moments, RenderOptions, Stats, TexelEstimate};
 use crate::transport::grad::{fixed, AddQueue, GradBuffers};
-use crate::transport::hero::{hero_of, trace_hero};
+use crate::transport::hero::{hero_of, trace_hero, HeroValue};
 use crate::transport::hero_lanes::{supported, trace_hero_lanes};
 use crate::transport::packet::{NoPathTally, PathTally};
 use crate::transport::path::{NoTally, Tally};
@@ -35,17 +35,35 @@ pub fn render_hero<M: Medium>(
             let mut st = Stats { paths: opts.spp as u64, ..Stats::default() };
             let key = first_texel + i as u64;
             for s in 0..opts.spp {
-                let h = hero_of(opts.seed, key, s, opts.spp);
-                let mut rng = PathRng::new(opts.seed, key, s, h as u32);
-                let r = trace_hero(geo, med, tex, h, &mut rng, opts.include_specular, &mut NoTally);
-                (0..3).for_each(|c| m.add(c, r.value[c]));
-                st.events += r.events as u64;
+                scalar_sample(geo, med, tex, key, s, opts, &mut m, &mut st);
             }
             (m.estimate(opts.spp), st)
         })
         .collect();
     let stats = results.iter().fold(Stats::default(), |a, r| Stats::merge(a, r.1));
     (results.into_iter().map(|r| r.0).collect(), stats)
+}
+
+/// One sample `s` of texel `key` by the scalar hero walk, added to the texel's moments and stats: (its hero, its
+/// value); a replay restarts the same random numbers from (seed, key, s, hero).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn scalar_sample<M: Medium>(
+    geo: &Geometry,
+    med: &M,
+    tex: &Texel,
+    key: u64,
+    s: u32,
+    opts: &RenderOptions,
+    m: &mut Moments,
+    st: &mut Stats,
+) -> (usize, HeroValue) {
+    let h = hero_of(opts.seed, key, s, opts.spp);
+    let mut rng = PathRng::new(opts.seed, key, s, h as u32);
+    let r = trace_hero(geo, med, tex, h, &mut rng, opts.include_specular, &mut NoTally);
+    (0..3).for_each(|c| m.add(c, r.value[c]));
+    st.events += r.events as u64;
+    (h, r)
 }
 
 /// A replayed hero path's gradient adds: weight `w[c]` (in quanta) for channel c, as `grad`'s replay tally
@@ -173,11 +191,7 @@ pub fn backward_hero<M: Medium>(
             let mut st = Stats { paths: opts.spp as u64, ..Stats::default() };
             let key = first_texel + i as u64;
             for s in 0..opts.spp {
-                let h = hero_of(opts.seed, key, s, opts.spp);
-                let mut rng = PathRng::new(opts.seed, key, s, h as u32);
-                let r = trace_hero(geo, med, tex, h, &mut rng, opts.include_specular, &mut NoTally);
-                (0..3).for_each(|c| m.add(c, r.value[c]));
-                st.events += r.events as u64;
+                let (h, r) = scalar_sample(geo, med, tex, key, s, opts, &mut m, &mut st);
                 let w: [f32; 3] = std::array::from_fn(|c| adjoint[i][c] * r.value[c] * scale);
                 if w != [0.0; 3] {
                     let mut rng = PathRng::new(opts.seed, key, s, h as u32);
