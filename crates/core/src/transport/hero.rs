@@ -23,13 +23,13 @@
 
 use crate::transport::estimate::RenderOptions;
 use crate::transport::flight::{Event, Regular, Tracker};
-use crate::transport::grid::{cross, empty_jump, facing_normal, voxel_exit};
+use crate::transport::grid::facing_normal;
 use crate::transport::packet::PathTally;
-use crate::transport::path::{Tally, Walk, MAX_EVENTS, MAX_STEPS, RR_THRESHOLD};
+use crate::transport::path::{Tally, Walk, MAX_EVENTS, RR_THRESHOLD};
 use crate::transport::rng::{PathRng, Uniforms};
 use crate::transport::sampling::hg_sample;
 use crate::transport::scene::{Geometry, Medium, Texel};
-use crate::transport::trace::{camera_ray, interface, Start};
+use crate::transport::trace::{camera_ray, interface, outside, Outside, Start};
 
 /// The hero channel of sample `sample` of `spp` for `texel`: `sample` mod 3 in the full triples of samples,
 /// after them a uniform choice keyed by (seed, texel, sample) (a stream no path uses: channel key 3).
@@ -138,16 +138,6 @@ impl<M: Medium, T: Tally> Tally for HeroTally<'_, '_, M, T> {
     fn scatter(&mut self, j: usize) {
         self.inner.scatter(j);
     }
-}
-
-/// How a flight outside the object ended.
-enum Outside {
-    /// It entered the object (the walk is in the medium).
-    Entered,
-    /// It left the grid: the light is reached.
-    Escaped,
-    /// It took more than `MAX_STEPS` steps.
-    Cut,
 }
 
 /// How a walk inside the object ended.
@@ -274,41 +264,6 @@ fn through_medium<M: Medium, T: Tally, U: Uniforms>(
                 }
                 tracker.redirect(geo, s);
             }
-        }
-    }
-}
-
-/// The straight flight outside the object (as `trace::walk`'s): voxel by voxel next to it, across empty balls
-/// away from it, until it refracts into the object or leaves the grid.
-#[inline(always)]
-fn outside<U: Uniforms>(geo: &Geometry, s: &mut Walk, rng: &mut U) -> Outside {
-    let eta_in = 1.0 / geo.ior;
-    loop {
-        s.steps += 1;
-        if !geo.in_grid(s.v) {
-            return Outside::Escaped;
-        }
-        if s.steps > MAX_STEPS {
-            return Outside::Cut;
-        }
-        if let Some((p, v)) = empty_jump(geo, s.p, s.d, s.v) {
-            (s.p, s.v) = (p, v);
-            continue;
-        }
-        let (t, axis) = voxel_exit(geo, s.p, s.d, s.v);
-        let (nb, step) = cross(geo, &mut s.p, s.d, t, axis, s.v);
-        if geo.is_inside(nb) {
-            let n_geo = facing_normal(axis, step);
-            let n_sh = geo.shading_normal(nb).unwrap_or(n_geo);
-            let (nd, transmitted) = interface(s.d, n_geo, n_sh, eta_in, rng.next_f32());
-            s.d = nd;
-            if transmitted {
-                s.v = nb;
-                s.in_medium = true;
-                return Outside::Entered;
-            }
-        } else {
-            s.v = nb;
         }
     }
 }

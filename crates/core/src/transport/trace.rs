@@ -150,7 +150,6 @@ pub(crate) fn walk<K: Tracker, M: Medium, T: Tally, U: Uniforms>(
     tally: &mut T,
     stop_deep: bool,
 ) -> WalkEnd {
-    let eta_in = 1.0 / geo.ior;
     let mut s = *w;
     let cut = |s: &Walk| WalkEnd::Done(PathValue { value: 0.0, events: s.events });
     loop {
@@ -187,35 +186,58 @@ pub(crate) fn walk<K: Tracker, M: Medium, T: Tally, U: Uniforms>(
                 }
             }
         } else {
-            loop {
-                s.steps += 1;
-                if !geo.in_grid(s.v) {
-                    return WalkEnd::Done(PathValue { value: s.weight * geo.light.radiance(s.d, c), events: s.events });
+            match outside(geo, &mut s, rng) {
+                Outside::Entered => {}
+                Outside::Escaped => {
+                    return WalkEnd::Done(PathValue { value: s.weight * geo.light.radiance(s.d, c), events: s.events })
                 }
-                if s.steps > MAX_STEPS {
-                    return cut(&s);
-                }
-                if let Some((p, v)) = empty_jump(geo, s.p, s.d, s.v) {
-                    (s.p, s.v) = (p, v);
-                    continue;
-                }
-                let (t, axis) = voxel_exit(geo, s.p, s.d, s.v);
-                let (nb, step) = cross(geo, &mut s.p, s.d, t, axis, s.v);
-                if geo.is_inside(nb) {
-                    // Entering voxel nb: the incident side is outside, nb's face normal points back at v.
-                    let n_geo = facing_normal(axis, step);
-                    let n_sh = geo.shading_normal(nb).unwrap_or(n_geo);
-                    let (nd, transmitted) = interface(s.d, n_geo, n_sh, eta_in, rng.next_f32());
-                    s.d = nd;
-                    if transmitted {
-                        s.v = nb;
-                        s.in_medium = true;
-                        break;
-                    }
-                } else {
-                    s.v = nb;
-                }
+                Outside::Cut => return cut(&s),
             }
+        }
+    }
+}
+
+/// How a flight outside the object ended.
+pub(crate) enum Outside {
+    /// It entered the object (the walk is in the medium).
+    Entered,
+    /// It left the grid: the light is reached.
+    Escaped,
+    /// It took more than `MAX_STEPS` steps.
+    Cut,
+}
+
+/// The straight flight outside the object (`walk`'s and the hero walk's): voxel by voxel next to it, across empty
+/// balls away from it, until it refracts into the object or leaves the grid.
+#[inline(always)]
+pub(crate) fn outside<U: Uniforms>(geo: &Geometry, s: &mut Walk, rng: &mut U) -> Outside {
+    let eta_in = 1.0 / geo.ior;
+    loop {
+        s.steps += 1;
+        if !geo.in_grid(s.v) {
+            return Outside::Escaped;
+        }
+        if s.steps > MAX_STEPS {
+            return Outside::Cut;
+        }
+        if let Some((p, v)) = empty_jump(geo, s.p, s.d, s.v) {
+            (s.p, s.v) = (p, v);
+            continue;
+        }
+        let (t, axis) = voxel_exit(geo, s.p, s.d, s.v);
+        let (nb, step) = cross(geo, &mut s.p, s.d, t, axis, s.v);
+        if geo.is_inside(nb) {
+            let n_geo = facing_normal(axis, step);
+            let n_sh = geo.shading_normal(nb).unwrap_or(n_geo);
+            let (nd, transmitted) = interface(s.d, n_geo, n_sh, eta_in, rng.next_f32());
+            s.d = nd;
+            if transmitted {
+                s.v = nb;
+                s.in_medium = true;
+                return Outside::Entered;
+            }
+        } else {
+            s.v = nb;
         }
     }
 }
