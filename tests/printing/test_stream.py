@@ -4,6 +4,7 @@ and GCVF's block outline."""
 
 import io
 import zipfile
+import zlib
 
 import numpy as np
 import pytest
@@ -191,6 +192,19 @@ def test_label_layers_read_layers_slices_and_refuse_damage(tmp_path):
     with pytest.raises(ValueError, match="layer 3 is damaged") as e:
         LabelLayers(tmp_path / "layer")[3]
     assert "\n" not in str(e.value)
+
+    class OneByteTooMany(LabelLayersWriter):  # layer 3 inflates to one byte more than a layer holds
+        def _layer(self, lay):
+            self.offsets.append(self.written)
+            self._write(zlib.compress(lay.tobytes() + bytes(len(self.offsets) == 4), 1))
+
+    w = OneByteTooMany(tmp_path / "long", lab.shape)
+    for k in range(lab.shape[0]):
+        w[k] = lab[k]
+    w.commit()
+    np.testing.assert_array_equal(LabelLayers(tmp_path / "long")[2], lab[2])
+    with pytest.raises(ValueError, match="layer 3 is damaged .it does not inflate to 204 bytes"):
+        LabelLayers(tmp_path / "long")[3]
 
 
 def test_both_label_file_forms_export_the_same_packages(tmp_path):

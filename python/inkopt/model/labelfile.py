@@ -224,12 +224,14 @@ class LabelLayers:
             data = os.pread(fd, end - start, start)
         finally:
             os.close(fd)
-        try:
-            raw = zlib.decompress(data)
+        size = self.shape[1] * self.shape[2]
+        inflate = zlib.decompressobj()
+        try:  # inflated at most one byte past the layer's size: a damaged layer never fills the memory
+            raw = inflate.decompress(data, size + 1)
         except zlib.error as exc:
             raise ValueError(f"{self.path}: layer {k} is damaged ({exc})") from None
-        if len(raw) != self.shape[1] * self.shape[2]:
-            raise ValueError(f"{self.path}: layer {k} holds {len(raw)} bytes, expected {self.shape[1] * self.shape[2]}")
+        if len(raw) != size or not inflate.eof:
+            raise ValueError(f"{self.path}: layer {k} is damaged (it does not inflate to {size} bytes)")
         lay = np.frombuffer(raw, np.uint8).reshape(self.shape[1:])
         with self._lock:
             if len(self._cache) >= 2:
