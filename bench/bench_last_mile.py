@@ -5,6 +5,7 @@ the grid's counts (grid, inside and free voxels, texels, printer voxels and prin
 
     python bench/bench_last_mile.py run RUN_DIR HEIGHT_MM [--code CHECKOUT] [--name NAME] [--eval-spp N]
     python bench/bench_last_mile.py extrapolate A.json B.json [--to-mm 100] [--name NAME]
+    python bench/bench_last_mile.py size LABELS.npy --name NAME.json [--note TEXT]
 
 ``run``: RUN_DIR is an optimised run (e.g. ``inkopt optimize spot.obj --height-mm 40 --shell-mm 1 --iterations 1
 --out RUN_DIR``); its earlier last-mile outputs are removed first. ``--code``: the checkout whose Python package
@@ -16,6 +17,10 @@ bench/results/last_mile_<H>mm.json (``--name`` for another name).
 written as a + b × printer voxels (exact through both points) and give them at ``--to-mm`` (printer voxels
 scaled by the size ratio cubed from the larger one). Wall-clock times on the shared 2-core machine are upper
 bounds; CPU seconds, memory and bytes do not depend on the load.
+
+``size``: an existing version-1 labels file (quantized_labels.npy) written again as version 2 (a temporary file
+beside this checkout's bench-out/): both sizes, the CPU seconds of writing and of reading it back whole, whether
+the labels read back are the same, and bytes per printed printer voxel.
 """
 
 from __future__ import annotations
@@ -198,6 +203,51 @@ def main_extrapolate(args) -> dict:
     return res
 
 
+def main_size(args) -> dict:
+    import tempfile
+    import time
+
+    import numpy as np
+    from common import machine, write
+
+    from inkopt.model.labelfile import LabelLayersWriter, load_label_file
+
+    src = Path(args.labels).resolve()
+    lab = load_label_file(src)
+    (ROOT / "bench-out").mkdir(exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=ROOT / "bench-out") as tmp:
+        path = Path(tmp) / "labels.layers"
+        t0 = time.process_time()
+        w = LabelLayersWriter(path, lab.shape)
+        for k in range(lab.shape[0]):
+            w[k] = lab[k]
+        w.commit()
+        t1 = time.process_time()
+        back = load_label_file(path)
+        t2 = time.process_time()
+        same = bool(np.array_equal(back, lab))
+        size = path.stat().st_size
+    printed = int(w.counts[:255].sum())
+    res = {
+        "labels_file": str(src),
+        "shape_zyx": list(lab.shape),
+        "printer_voxels": int(lab.size),
+        "printed_printer_voxels": printed,
+        "version1_bytes": src.stat().st_size,
+        "version2_bytes": size,
+        "ratio": src.stat().st_size / size,
+        "version2_bytes_per_printed_voxel": size / printed,
+        "write_cpu_seconds": t1 - t0,
+        "read_cpu_seconds": t2 - t1,
+        "labels_identical": same,
+        "note": args.note,
+        **machine(),
+    }
+    print(res)
+    print("wrote", write(args.name, res))
+    return res
+
+
 def main() -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -211,8 +261,12 @@ def main() -> dict:
     e.add_argument("results", nargs=2)
     e.add_argument("--to-mm", type=float, default=100.0)
     e.add_argument("--name")
+    z = sub.add_parser("size")
+    z.add_argument("labels")
+    z.add_argument("--name", required=True)
+    z.add_argument("--note", default="")
     args = ap.parse_args()
-    return main_run(args) if args.cmd == "run" else main_extrapolate(args)
+    return {"run": main_run, "extrapolate": main_extrapolate, "size": main_size}[args.cmd](args)
 
 
 if __name__ == "__main__":
