@@ -4,6 +4,7 @@ memory, bytes written (the file system's output blocks) and the size of what it 
 the grid's counts (grid, inside and free voxels, texels, printer voxels and printed printer voxels).
 
     python bench/bench_last_mile.py run RUN_DIR HEIGHT_MM [--code CHECKOUT] [--name NAME] [--eval-spp N]
+        [--stages quantize,export_gcvf,...]
     python bench/bench_last_mile.py extrapolate A.json B.json [--to-mm 100] [--name NAME]
     python bench/bench_last_mile.py size LABELS.npy --name NAME.json [--note TEXT]
 
@@ -109,9 +110,9 @@ def counts(run: Path) -> dict:
     }
 
 
-def run_stages(run: Path, code: Path, eval_spp: int) -> dict:
-    """Each stage on ``run`` in order (its earlier outputs removed first): its ``timed`` figures and the bytes it
-    left in the folder (``output_gb``)."""
+def run_stages(run: Path, code: Path, eval_spp: int, stages=STAGES) -> dict:
+    """Each of ``stages`` on ``run`` in order (its earlier outputs removed first): its ``timed`` figures and the
+    bytes it left in the folder (``output_gb``)."""
     for name in ("quantized.npz", "quantized_labels.npy", "quantized_labels.layers", "slices.gcvf", "report.html"):
         (run / name).unlink(missing_ok=True)
     shutil.rmtree(run / "slices", ignore_errors=True)
@@ -123,7 +124,7 @@ def run_stages(run: Path, code: Path, eval_spp: int) -> dict:
         "report": ["report", str(run)],
     }
     out = {}
-    for stage in STAGES:
+    for stage in stages:
         before = folder_bytes(run)
         res = timed(commands[stage], code)
         res["output_gb"] = (folder_bytes(run) - before) / 2**30
@@ -143,7 +144,7 @@ def main_run(args) -> dict:
 
     run, code = Path(args.run).resolve(), Path(args.code).resolve()
     load_before = os.getloadavg()[0]
-    stages = run_stages(run, code, args.eval_spp)
+    stages = run_stages(run, code, args.eval_spp, args.stages.split(","))
     res = {
         "run": str(run),
         "height_mm": args.height_mm,
@@ -177,13 +178,14 @@ def main_extrapolate(args) -> dict:
         a, b = b, a
     n = b["printer_voxels"] * (args.to_mm / b["height_mm"]) ** 3
     keys = ("peak_rss_gb", "cpu_seconds", "written_gb", "output_gb")
-    est = {s: {k: fit(a, b, k, s, n) for k in keys} for s in STAGES}
+    common = [s for s in STAGES if s in a["stages"] and s in b["stages"]]
+    est = {s: {k: fit(a, b, k, s, n) for k in keys} for s in common}
     dn = b["printer_voxels"] - a["printer_voxels"]
     per_voxel = {
-        s: {f"{k}_per_printer_voxel": (b["stages"][s][k] - a["stages"][s][k]) / dn for k in keys} for s in STAGES
+        s: {f"{k}_per_printer_voxel": (b["stages"][s][k] - a["stages"][s][k]) / dn for k in keys} for s in common
     }
     for k in ("peak_rss_gb", "written_gb", "output_gb"):  # bytes per printer voxel read more easily
-        for s in STAGES:
+        for s in common:
             per_voxel[s][k.replace("_gb", "_bytes") + "_per_printer_voxel"] = (
                 per_voxel[s].pop(f"{k}_per_printer_voxel") * 2**30
             )
@@ -257,6 +259,7 @@ def main() -> dict:
     r.add_argument("--code", default=str(ROOT))
     r.add_argument("--name")
     r.add_argument("--eval-spp", type=int, default=16)
+    r.add_argument("--stages", default=",".join(STAGES), help="comma list of the stages to run (default all)")
     e = sub.add_parser("extrapolate")
     e.add_argument("results", nargs=2)
     e.add_argument("--to-mm", type=float, default=100.0)
