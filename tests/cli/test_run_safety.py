@@ -16,6 +16,7 @@ from PIL import Image
 
 from inkopt.cli import main
 from inkopt.io import file_digest
+from inkopt.model.labelfile import LabelLayersWriter, load_label_file
 from inkopt.rundir import RunDir
 from inkopt.rundir.lock import LOCK_NAME, Holder
 
@@ -120,15 +121,18 @@ def test_a_damaged_quantized_volume_is_one_line(run, capsys):
 
 
 def test_the_labels_file_is_covered_by_a_digest(run, capsys):
-    labels = np.load(run / "quantized_labels.npy", mmap_mode="r+")
+    path = run / "quantized_labels.layers"
+    labels = load_label_file(path)
     with np.load(run / "quantized.npz") as z:
-        assert str(z["labels_digest"]) == file_digest(run / "quantized_labels.npy")  # streamed while written
+        assert str(z["labels_digest"]) == file_digest(path)  # streamed while written
         inks = len(z["ink_names"])
-    layer = labels[len(labels) // 2]
-    flat = layer.reshape(-1)
-    flat[:16] = (flat[:16] + 1) % inks  # 16 labels set to another valid ink
-    labels.flush()
-    del labels, layer, flat
+    changed = labels.copy()
+    flat = changed[len(labels) // 2].reshape(-1)
+    flat[:16] = (flat[:16] + 1) % inks  # 16 labels set to another valid ink: a readable file, other labels
+    w = LabelLayersWriter(path, labels.shape)
+    for k in range(len(changed)):
+        w[k] = changed[k]
+    w.commit()
     for argv in (
         ["export", run],
         ["export", run, "--format", "gcvf"],
@@ -136,7 +140,7 @@ def test_the_labels_file_is_covered_by_a_digest(run, capsys):
         ["evaluate", run, "--spp", "2"],
     ):
         line = refused(capsys, *argv)
-        assert f"{run / 'quantized_labels.npy'} is damaged or was changed" in line and "inkopt quantize" in line
+        assert f"{path} is damaged or was changed" in line and "inkopt quantize" in line
     assert main(["quantize", str(run)]) == 0 and main(["export", str(run)]) == 0
 
 

@@ -58,7 +58,7 @@ def test_quantized_and_slices_record_their_sources(tmp_path, capsys):
         assert run(capsys, "export", d, *fmt)[0] == 0
     assert rd.remove_stale() == []  # everything was made from this volume.npz: nothing goes
     make_run(d, seed=1)  # a resumed run writes a new volume.npz: what was made from the old one goes
-    gone = ["quantized.npz", "quantized_labels.npy", "slices", "slices.gcvf", "mixture.3mf", "quantized.3mf"]
+    gone = ["quantized.npz", "quantized_labels.layers", "slices", "slices.gcvf", "mixture.3mf", "quantized.3mf"]
     assert rd.remove_stale() == gone
 
 
@@ -106,10 +106,10 @@ def test_a_new_run_removes_what_it_would_make_stale(tmp_path, capsys):
     assert code == 0, err
     gone = [line for line in err.splitlines() if line.startswith("removed the outputs of an earlier run")]
     assert len(gone) == 1
-    for name in ("quantized.npz", "quantized_labels.npy", "slices", "evaluation.json", "volume.npz"):
+    for name in ("quantized.npz", "quantized_labels.layers", "slices", "evaluation.json", "volume.npz"):
         assert name in gone[0]
     left = {p.name for p in d.iterdir()}
-    assert not left & {"quantized.npz", "quantized_labels.npy", "slices", "evaluation.json"}
+    assert not left & {"quantized.npz", "quantized_labels.layers", "slices", "evaluation.json"}
     assert {"volume.npz", "report.json", "scene.npz"} <= left
 
 

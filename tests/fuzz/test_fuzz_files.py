@@ -250,8 +250,10 @@ def test_quantized_files(files, data):
         fuzz_npz(data, d.quantized_path, run.quantized_path)
     elif which == "labels":
         d.quantized_labels_path.write_bytes(data.draw(damaged(Short(run.quantized_labels_path.read_bytes()))))
-    else:
-        np.save(d.quantized_labels_path, data.draw(ARRAYS))
+    else:  # an array in the .npy form (label file version 1) in place of the labels file
+        buf = io.BytesIO()
+        np.save(buf, data.draw(ARRAYS))
+        d.quantized_labels_path.write_bytes(buf.getvalue())
     clean(lambda _: quantized_check(d), d.quantized_path, named=[d.quantized_labels_path])
 
 

@@ -1,17 +1,18 @@
 """Tests of the streaming printer output: inkopt.printing.stream (a run quantized layer by layer into
-quantized.npz + quantized_labels.npy), model.labelfile, the pre-release layouts refused, and GCVF's block
-outline."""
+quantized.npz + quantized_labels.layers), model.labelfile (both label file forms), the pre-release layouts refused,
+and GCVF's block outline."""
 
 import io
 import zipfile
+import zlib
 
 import numpy as np
 import pytest
 import trimesh
 
-from inkopt.io import FormatError, save_npz
+from inkopt.io import FormatError, file_digest, save_npz
 from inkopt.model import InkTable, Quantization, Volume
-from inkopt.model.labelfile import LabelFileWriter, load_label_file
+from inkopt.model.labelfile import LabelFileWriter, LabelLayers, LabelLayersWriter, load_label_file
 from inkopt.model.mixturefile import MixtureSource
 from inkopt.printing.formats import gcvf, outline
 from inkopt.printing.formats.job import LabelVoxels, PrintJob
@@ -52,8 +53,9 @@ def test_streaming_run_equals_in_memory_quantization(tmp_path, method, upsample)
     assert "labels" not in raw.files and str(raw["labels_file"]) == d.quantized_labels_path.name
     assert int(raw["format_version"]) == 1
     q = d.load_quantized()
-    assert isinstance(q.labels, np.memmap) or isinstance(q.labels.base, np.memmap)
+    assert not d.dense_labels_path.exists() and isinstance(d.quantized_layers().labels, LabelLayers)
     np.testing.assert_array_equal(q.labels, expect.labels)
+    np.testing.assert_array_equal(d.quantized_layers().labels[:], expect.labels)
     np.testing.assert_allclose(q.voxel_mm, expect.voxel_mm)
     np.testing.assert_allclose(q.origin_mm, vol.origin_mm)
     assert q.quantization == expect.quantization and q.inks.names == vol.inks.names
@@ -130,29 +132,116 @@ def test_quantized_files_of_each_version(tmp_path):
         d.load_quantized()
 
 
-def test_label_file_writer(tmp_path):
+@pytest.mark.parametrize("writer,name", [(LabelFileWriter, "l.npy"), (LabelLayersWriter, "l.layers")])
+def test_label_file_writer(tmp_path, writer, name):
     lab = np.random.default_rng(0).integers(0, 6, (3, 4, 5), dtype=np.uint8)
-    w = LabelFileWriter(tmp_path / "l.npy", lab.shape)
+    w = writer(tmp_path / name, lab.shape)
     with pytest.raises(ValueError, match="in order"):
         w[1] = lab[1]
     w[0] = lab[0]
     with pytest.raises(ValueError, match="incomplete"):
         w.commit()
     assert list(tmp_path.iterdir()) == []
-    w = LabelFileWriter(tmp_path / "l.npy", lab.shape)
+    w = writer(tmp_path / name, lab.shape)
     for k in range(3):
         w[k] = lab[k]
     w.commit()
-    np.testing.assert_array_equal(load_label_file(tmp_path / "l.npy", lab.shape), lab)
+    assert w.digest == file_digest(tmp_path / name)
+    np.testing.assert_array_equal(load_label_file(tmp_path / name, lab.shape), lab)
     np.testing.assert_array_equal(w.counts, np.bincount(lab.ravel(), minlength=256))
-    with pytest.raises(ValueError, match="expected uint8"):
-        load_label_file(tmp_path / "l.npy", (3, 4, 6))
+    with pytest.raises(ValueError, match="expected uint8|expected \\(3, 4, 6\\)"):
+        load_label_file(tmp_path / name, (3, 4, 6))
 
 
-def test_export_from_a_memory_mapped_label_file(tmp_path):
-    d, vol = mixture_run(tmp_path / "r")
+def test_label_layers_read_layers_slices_and_refuse_damage(tmp_path):
+    """A version-2 file gives each layer, slices of layers and the whole stack as written; a file cut short, one
+    with a damaged layer or index, and one that is no label file are one-line ValueErrors."""
+    rng = np.random.default_rng(2)
+    lab = np.full((9, 12, 17), 255, np.uint8)
+    lab[2:8, 2:10, 3:15] = 4  # a homogeneous core
+    lab[2:8, 2:4, 3:15] = rng.integers(0, 5, (6, 2, 12))  # a dithered band
+    w = LabelLayersWriter(tmp_path / "a.layers", lab.shape)
+    for k in range(lab.shape[0]):
+        w[k] = lab[k]
+    w.commit()
+    src = load_label_file(tmp_path / "a.layers", lab.shape, layered=True)
+    assert isinstance(src, LabelLayers) and src.shape == lab.shape and len(src) == 9
+    for k in (0, 3, 3, 8, -1, 5):
+        np.testing.assert_array_equal(src[k], lab[k])
+    np.testing.assert_array_equal(src[2:7:2], lab[2:7:2])
+    np.testing.assert_array_equal(src[4, 2, 3:9], lab[4, 2, 3:9])
+    dense = load_label_file(tmp_path / "a.layers")
+    np.testing.assert_array_equal(dense, lab)
+    assert not dense.flags.writeable and not src[1].flags.writeable
+    with pytest.raises(IndexError):
+        src[9]
+    data = (tmp_path / "a.layers").read_bytes()
+    cases = {
+        "cut": (data[:-20], "its end is missing"),
+        "index": (data[: -16 - 10 * 8] + b"\xff" * 8 + data[-16 - 9 * 8 :], "its index is damaged"),
+        "header": (data[:22] + b"{" + data[23:], "header is damaged"),
+        "other": (b"\x93NUMPY" + data[7:], "does not start as one"),
+    }
+    for name, (bad, what) in cases.items():
+        (tmp_path / name).write_bytes(bad)
+        with pytest.raises(ValueError, match=what) as e:
+            LabelLayers(tmp_path / name)
+        assert "\n" not in str(e.value)
+    start = int(src.offsets[3])
+    (tmp_path / "layer").write_bytes(data[:start] + bytes(4) + data[start + 4 :])
+    with pytest.raises(ValueError, match="layer 3 is damaged") as e:
+        LabelLayers(tmp_path / "layer")[3]
+    assert "\n" not in str(e.value)
+
+    class OneByteTooMany(LabelLayersWriter):  # layer 3 inflates to one byte more than a layer holds
+        def _layer(self, lay):
+            self.offsets.append(self.written)
+            self._write(zlib.compress(lay.tobytes() + bytes(len(self.offsets) == 4), 1))
+
+    w = OneByteTooMany(tmp_path / "long", lab.shape)
+    for k in range(lab.shape[0]):
+        w[k] = lab[k]
+    w.commit()
+    np.testing.assert_array_equal(LabelLayers(tmp_path / "long")[2], lab[2])
+    with pytest.raises(ValueError, match="layer 3 is damaged .it does not inflate to 204 bytes"):
+        LabelLayers(tmp_path / "long")[3]
+
+
+def test_both_label_file_forms_export_the_same_packages(tmp_path):
+    """A run quantized now (quantized_labels.layers) and the same labels in the version-1 file an older inkopt
+    wrote (quantized_labels.npy, read memory-mapped) load to the same labels and give byte-identical GCVF members
+    and PNG slices; writing one form removes the other."""
+    d, vol = mixture_run(tmp_path / "new")
     quantize_run(d, Quantization(**KW))
     q = d.load_quantized()
+    old = RunDir.create(tmp_path / "old")
+    old.save_volume(vol)
+    with old.quantized_writer(q, q.shape, dense=True) as w:
+        for k in range(q.shape[0]):
+            w[k] = q.labels[k]
+    assert old.dense_labels_path.is_file() and not old.quantized_labels_path.exists()
+    assert isinstance(old.quantized_layers().labels, np.memmap)
+    np.testing.assert_array_equal(old.load_quantized().labels, q.labels)
+    members = {}
+    for run in (d, old):
+        lq = run.quantized_layers()
+        job = PrintJob(LabelVoxels(lq.labels, lq.voxel_mm, lq.inks.names))
+        gcvf.write_gcvf(job, run.path / "j.gcvf")
+        write_png_slices(job, run.path / "s")
+        with zipfile.ZipFile(run.path / "j.gcvf") as zf:
+            members[run] = {n: zf.read(n) for n in zf.namelist()}
+        members[run]["slices"] = {p.name: p.read_bytes() for p in (run.path / "s").glob("*.png")}
+    assert members[d] == members[old] and len(members[d]["slices"]) == q.shape[0]
+    with old.quantized_writer(q, q.shape) as w:  # quantized again now: the version-1 file goes
+        for k in range(q.shape[0]):
+            w[k] = q.labels[k]
+    assert old.quantized_labels_path.is_file() and not old.dense_labels_path.exists()
+
+
+def test_export_from_a_label_layers_file(tmp_path):
+    d, vol = mixture_run(tmp_path / "r")
+    quantize_run(d, Quantization(**KW))
+    q = d.quantized_layers()
     write_png_slices(PrintJob(LabelVoxels(q.labels, q.voxel_mm, q.inks.names)), tmp_path / "s")
     np.testing.assert_array_equal(read_png_slices(tmp_path / "s")[0], q.labels)
 

@@ -67,7 +67,7 @@ def _write_mixture(fmt: Format, d: RunDir, out: Path, make_job) -> dict:
 def _write_labels(fmt: Format, d: RunDir, out: Path, make_job) -> dict:
     """The run's quantized print (quantized.npz, checked to be current) in ``fmt``; warns when its grid is not
     what the job's printer prints."""
-    q = d.load_quantized()
+    q = d.quantized_layers()
     d.check_quantized_current()
     provenance = Provenance(d.quantized_path.name, file_digest(d.quantized_path), d.volume_digest())
     job = make_job(LabelVoxels(q.labels, q.voxel_mm, q.inks.names), provenance=provenance)

@@ -1,5 +1,5 @@
 """``inkopt quantize DIR``: the run's continuous mixture (DIR/volume.npz) -> one ink per printer voxel
-(DIR/quantized.npz + DIR/quantized_labels.npy, a labels volume at printer resolution; docs/run-dir.md). The stage
+(DIR/quantized.npz + DIR/quantized_labels.layers, a labels volume at printer resolution; docs/run-dir.md). The stage
 is ``inkopt.printing.stream.quantize_run`` (layer by layer; ``inkopt.printing.quantize``); the arguments become one
 ``model.Quantization``. The run folder's lock (``RunDir.lock``) is held while it writes."""
 
@@ -38,7 +38,7 @@ def _quantize_cmd(args) -> int:
 def register_cli(sub) -> None:
     p = sub.add_parser(
         "quantize",
-        help="one ink per printer voxel: DIR/volume.npz -> DIR/quantized.npz (+ quantized_labels.npy)",
+        help="one ink per printer voxel: DIR/volume.npz -> DIR/quantized.npz (+ quantized_labels.layers)",
         description="Quantize a run's optimised mixture to one ink per printer voxel (600 x 300 "
         "DPI, 27 um layers by default) and write DIR/quantized.npz.",
     )

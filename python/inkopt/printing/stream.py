@@ -3,7 +3,7 @@
 The run's mixture volume file (volume.npz) is read one (y, x, N) layer at a time by ``model.mixturefile.MixtureSource``.
 
 ``quantize_run`` is ``inkopt quantize``: the labels go layer by layer from ``quantize.quantize`` into the run's
-label file (``RunDir.quantized_writer``: quantized.npz + quantized_labels.npy, docs/run-dir.md), so memory holds
+label file (``RunDir.quantized_writer``: quantized.npz + quantized_labels.layers, docs/run-dir.md), so memory holds
 the inside mask, a few mixture layers and a few printer layers; a mesh's shading normals go to the printer grid
 by ``grid.upsample_normals`` (20 bytes per printer voxel inside a surface voxel). Labels and normals are
 identical to ``quantize_volume``'s in memory. With ``q.refine`` iterations of the refinement on the printed
@@ -40,7 +40,7 @@ def run_target(d: RunDir, vol) -> PrintedLoss:
 
 
 def quantize_run(d: RunDir, q: Quantization, threads: int | None = None, log=None) -> list[str]:
-    """``inkopt quantize``: DIR/volume.npz -> DIR/quantized.npz + quantized_labels.npy by the settings ``q``
+    """``inkopt quantize``: DIR/volume.npz -> DIR/quantized.npz + quantized_labels.layers by the settings ``q``
     (module docstring), after ``q.refine`` iterations of the printed refinement (``threads``: its render threads;
     ``log``: its line per iteration). Returns the summary lines (``quantize.summary_lines``)."""
     check_quantization(q)  # before any file is read

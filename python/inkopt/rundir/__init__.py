@@ -95,7 +95,7 @@ class RunDir(QuantizedFiles):
 
     VOLUME, SCENE, CHECKPOINT, REPORT = "volume.npz", "scene.npz", "checkpoint.npz", "report.json"
     QUANTIZED, EVALUATION, SLICES, LOSS_PNG = "quantized.npz", "evaluation.json", "slices", "loss.png"
-    QUANTIZED_LABELS, GCVF = "quantized_labels.npy", "slices.gcvf"
+    QUANTIZED_LABELS, DENSE_LABELS, GCVF = "quantized_labels.layers", "quantized_labels.npy", "slices.gcvf"
     MIXTURE_3MF, LABELS_3MF = "mixture.3mf", "quantized.3mf"
     VIEWS_PNG, PREDICTION_GLB, TARGET_GLB = "views.png", "prediction.glb", "target.glb"
     PREDICTIONS, PROOF, LOCK = "predictions.npz", "report.html", LOCK_NAME
@@ -161,7 +161,12 @@ class RunDir(QuantizedFiles):
     checkpoint_path = _RunFile(CHECKPOINT, "checkpoint.npz: the optimiser's state for an exact resume.")
     report_path = _RunFile(REPORT, "report.json: the run's figures, times and settings.")
     quantized_path = _RunFile(QUANTIZED, "quantized.npz: the printer labels volume without its labels.")
-    quantized_labels_path = _RunFile(QUANTIZED_LABELS, "quantized_labels.npy: the printer labels (z, y, x) uint8.")
+    quantized_labels_path = _RunFile(
+        QUANTIZED_LABELS, "quantized_labels.layers: the printer labels (z, y, x) uint8, deflated layer by layer."
+    )
+    dense_labels_path = _RunFile(
+        DENSE_LABELS, "quantized_labels.npy: the printer labels (z, y, x) uint8 as inkopt wrote them before (read)."
+    )
     evaluation_path = _RunFile(EVALUATION, "evaluation.json: ``inkopt evaluate``'s figures.")
     slices_path = _RunFile(SLICES, "slices/: the default folder of ``inkopt export``'s PNG slices.")
     gcvf_path = _RunFile(GCVF, "slices.gcvf: the default GrabCAD Voxel Print package of ``inkopt export``.")
@@ -304,6 +309,7 @@ class RunDir(QuantizedFiles):
         return [
             self.quantized_path,
             self.quantized_labels_path,
+            self.dense_labels_path,
             self.slices_path,
             self.gcvf_path,
             self.threemf_path(),
@@ -349,7 +355,7 @@ class RunDir(QuantizedFiles):
         if (src := package_source(self.threemf_path())) and src["digest"] == digest:
             keep.add(self.threemf_path())
         if self.quantized_path in keep:
-            keep.add(self.quantized_labels_path)
+            keep.update((self.quantized_labels_path, self.dense_labels_path))
             quantized = self.quantized_digest()
             for pkg in (self.gcvf_path, self.threemf_path(labels=True)):
                 if (src := package_source(pkg)) and src["digest"] == quantized:

@@ -1,17 +1,20 @@
 """A run's printer labels (docs/run-dir.md): quantized.npz (everything but the labels, and the digests of the files
-they belong with) beside quantized_labels.npy (the labels, ``model.labelfile``), written one printer layer at a
+they belong with) beside the labels file (``model.labelfile``: quantized_labels.layers, each layer deflated; a run
+quantized by an older inkopt has quantized_labels.npy, which is read as before), written one printer layer at a
 time and read back checked. ``QuantizedFiles`` is the part of ``rundir.RunDir`` that owns them."""
 
 from __future__ import annotations
 
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..io import DamagedFileError, damage_of, damaged, file_digest, load_npz, save_npz
 from ..model import Volume
-from ..model.labelfile import LabelFileWriter
+from ..model.inks import InkTable
+from ..model.labelfile import LabelFileWriter, LabelLayersWriter, load_label_file
 from ..model.volume import upgrade_volume
 
 #: the key under which an output records the digest of the volume.npz / quantized.npz it was made from
@@ -22,6 +25,16 @@ LABELS_DIGEST = "labels_digest"
 
 class StaleOutputError(ValueError):
     """An output made from another version of the file it derives from (one line: what to run again)."""
+
+
+@dataclass(frozen=True)
+class QuantizedLayers:
+    """A run's printer labels for the output formats: ``labels`` uint8 (Z, Y, X) read a layer at a time
+    (``labels[k]``), ``voxel_mm`` (x, y, z) mm of a printer voxel, ``inks`` the ``InkTable``."""
+
+    labels: object
+    voxel_mm: np.ndarray
+    inks: InkTable
 
 
 class QuantizedFiles:
@@ -38,12 +51,13 @@ class QuantizedFiles:
         return self.quantized_path
 
     @contextmanager
-    def quantized_writer(self, meta: Volume, shape, normals=None, volume_digest: str | None = None):
+    def quantized_writer(self, meta: Volume, shape, normals=None, volume_digest: str | None = None, dense=False):
         """Write the quantized volume one printer layer at a time: ``with d.quantized_writer(meta, shape) as w:
-        w[k] = layer`` (k = 0, 1, ...; ``model.labelfile.LabelFileWriter``). ``meta``: a labels Volume giving
-        everything but the labels (voxel size, inks, settings; its own labels are ignored); ``normals``: the
-        printer grid's ``SurfaceNormals`` or None. On success
-        the labels file replaces quantized_labels.npy and then quantized.npz is written (the old quantized.npz is
+        w[k] = layer`` (k = 0, 1, ...; ``model.labelfile.LabelLayersWriter``, or with ``dense`` the version-1
+        ``LabelFileWriter`` into quantized_labels.npy; the other form's file is removed). ``meta``: a labels Volume
+        giving everything but the labels (voxel size, inks, settings; its own labels are ignored); ``normals``: the
+        printer grid's ``SurfaceNormals`` or None. On success the labels file replaces the earlier one (of either
+        form) and then quantized.npz is written (the old quantized.npz is
         removed first, so a crash never pairs an old quantized.npz with new labels), recording the labels file's
         digest (``labels_digest``, computed as the layers are written). ``volume_digest``: the ``io.file_digest``
         of the volume.npz the labels are made from, recorded as ``volume_digest``."""
@@ -52,7 +66,10 @@ class QuantizedFiles:
             arrays.update(normal_index=normals.index, normal_vectors=normals.vectors)
         if volume_digest is not None:
             arrays[VOLUME_DIGEST] = np.array(volume_digest)
-        w = LabelFileWriter(self.quantized_labels_path, shape)
+        path, other = self.quantized_labels_path, self.dense_labels_path
+        if dense:
+            path, other = other, path
+        w = (LabelFileWriter if dense else LabelLayersWriter)(path, shape)
         try:
             yield w
             self.quantized_path.unlink(missing_ok=True)
@@ -60,11 +77,12 @@ class QuantizedFiles:
         except BaseException:
             w.abort()
             raise
+        other.unlink(missing_ok=True)
         save_npz(
             self.quantized_path,
             {
                 **arrays,
-                "labels_file": np.array(self.QUANTIZED_LABELS),
+                "labels_file": np.array(path.name),
                 "labels_shape": np.asarray(w.shape, np.int64),
                 "label_counts": w.counts,
                 LABELS_DIGEST: np.array(w.digest),
@@ -84,6 +102,20 @@ class QuantizedFiles:
         if vol.form != "labels":
             raise ValueError(f"{p} holds a {vol.form} volume, not printer labels")
         return vol
+
+    def quantized_layers(self) -> QuantizedLayers:
+        """The printer labels as the formats read them, one layer at a time, without a Volume: the labels file
+        checked as ``load_quantized`` checks it, memory-mapped (version 1) or decoded per layer (version 2,
+        ``model.labelfile.LabelLayers``), with the printer voxel size and the ink table from quantized.npz."""
+        p = self._need(self.quantized_path, f"run 'inkopt quantize {self.path}' first")
+        arrays = self._quantized_arrays()
+        self._check_labels(arrays)
+        arrays = upgrade_volume(arrays, p, quantized=True)
+        if "labels_file" not in arrays or "labels_shape" not in arrays:
+            raise ValueError(f"{self.quantized_path} names no labels file; {self._quantize_again()}")
+        name = Path(str(arrays["labels_file"])).name
+        labels = load_label_file(self.path / name, arrays["labels_shape"], layered=True)
+        return QuantizedLayers(labels, np.asarray(arrays["voxel_mm"], np.float64), InkTable.from_arrays(arrays))
 
     def _quantize_again(self) -> str:
         return f"run 'inkopt quantize {self.path}' again"

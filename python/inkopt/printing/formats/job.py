@@ -20,6 +20,7 @@ import numpy as np
 from ...errors import ParameterError
 from ...model import EMPTY
 from ...model.inks import ink_name_problem
+from ...model.labelfile import LabelLayers
 from ...units import MM_PER_INCH
 from ..profiles import PrinterProfile, check_slots, material_name
 
@@ -38,16 +39,17 @@ def _voxel_mm(voxel_mm) -> np.ndarray:
 
 @dataclass(frozen=True)
 class LabelVoxels:
-    """One ink per printer voxel. ``labels`` uint8 (Z, Y, X), 255 = empty (may be memory-mapped: formats read one
-    layer at a time); ``voxel_mm`` (x, y, z) float64 mm of a printer voxel (DPI = 25.4 / size, layer thickness =
-    z); ``inks`` the ink names, label i -> ``inks[i]``."""
+    """One ink per printer voxel. ``labels`` uint8 (Z, Y, X), 255 = empty: an array (may be memory-mapped) or a
+    label file's layers (``model.labelfile.LabelLayers``); formats read one layer at a time. ``voxel_mm`` (x, y, z)
+    float64 mm of a printer voxel (DPI = 25.4 / size, layer thickness = z); ``inks`` the ink names, label i ->
+    ``inks[i]``."""
 
     labels: np.ndarray
     voxel_mm: np.ndarray
     inks: tuple[str, ...]
 
     def __post_init__(self):
-        labels = np.asarray(self.labels)
+        labels = self.labels if isinstance(self.labels, LabelLayers) else np.asarray(self.labels)
         if labels.ndim != 3 or labels.dtype != np.uint8 or min(labels.shape) < 1:
             raise ValueError(f"labels must be a non-empty uint8 (Z, Y, X) array, got {labels.dtype} {labels.shape}")
         names = tuple(str(n) for n in self.inks)
