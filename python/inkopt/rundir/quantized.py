@@ -38,12 +38,13 @@ class QuantizedLayers:
 
 
 class QuantizedFiles:
-    """quantized.npz and quantized_labels.npy of a run directory: written (``quantized_writer``), read
+    """quantized.npz and the printer labels file (quantized_labels.layers; quantized_labels.npy from an older inkopt) of
+    a run directory: written (``quantized_writer``), read
     (``load_quantized``) and checked (``check_quantized_current``). A part of ``RunDir``, whose names and
     ``check_volume_unchanged`` it uses."""
 
     def save_quantized(self, vol: Volume, volume_digest: str | None = None) -> Path:
-        """quantized.npz (everything but the labels) + quantized_labels.npy (the labels, copied layer by layer);
+        """quantized.npz (everything but the labels) + quantized_labels.layers (the labels, copied layer by layer);
         ``volume_digest``: that of the volume.npz it was made from."""
         with self.quantized_writer(vol, vol.shape, volume_digest=volume_digest) as w:
             for k in range(vol.shape[0]):
@@ -93,7 +94,8 @@ class QuantizedFiles:
         return self.quantized_path.is_file()
 
     def load_quantized(self) -> Volume:
-        """The printer labels volume (quantized.npz, its labels memory-mapped from quantized_labels.npy), checked:
+        """The printer labels volume (quantized.npz, its labels decoded from quantized_labels.layers, or memory-mapped
+        from an older run's quantized_labels.npy), checked:
         a file that cannot be read, or labels that are not the ones written with it, are damaged."""
         p = self._need(self.quantized_path, f"run 'inkopt quantize {self.path}' first")
         arrays = self._quantized_arrays()
