@@ -12,6 +12,20 @@ from PIL import Image
 from inkopt.cli import main
 
 
+@pytest.fixture(scope="module", autouse=True)
+def small_spectral_table(tmp_path_factory):
+    """The baselines' spectral colour table on a coarse lattice (step 1/2) with a 1 ΔE76 error target, cached for
+    the module: the default one's build takes minutes (evaluation.spectral_table)."""
+    from functools import partial
+
+    from inkopt.evaluation import spectral as es
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("INKOPT_CACHE_DIR", str(tmp_path_factory.mktemp("cache")))
+        mp.setattr(es, "spectral_patches", partial(es.spectral_patches, step=2, max_stderr=1.0))
+        yield
+
+
 @pytest.fixture(scope="module")
 def spectral_run(tmp_path_factory):
     return make_spectral_run(tmp_path_factory.mktemp("spectral_eval"))
@@ -67,6 +81,11 @@ def test_evaluate_judges_the_print_and_the_baselines(spectral_run, capsys):
     assert ev["quantized_digest"] is not None and (spectral_run / "quantized.npz").is_file()
     assert ev["quantization"]["method"] == "blue-noise" and ev["printer_texels"] > 0
     assert set(ev["print_beats_baselines"]) == {"D65", "A"}
+    # the baselines' mixtures come from the spectral colour table under the run's lights; the gamut floor per light
+    assert ev["colour_table"]["spectral"] and ev["colour_table"]["lights"] == ["D65", "A"]
+    assert ev["colour_table"]["step"] == 2 and set(ev["gamut_floor"]) == {"D65", "A"}
+    for floor in ev["gamut_floor"].values():
+        assert 0 <= floor["delta_e76_mean"] <= floor["delta_e76_p95"] + 1e-9  # a flat target: mean = p95
 
 
 def test_evaluate_without_baselines(spectral_run, capsys):
