@@ -57,6 +57,7 @@ def test_evaluate_under_other_lights(spectral_run, capsys):
     out = capsys.readouterr().out
     assert "figures under F11; mean ΔE2000 under each light: F11" in out and "colour inconstancy F11-D65" in out
     assert "quantized: figures under F11" in out and "extrusion: figures under F11" in out
+    assert "under each light: F11 " in out and "(colour table: spectral, looked up under D65,A)" in out
     ev = json.loads((spectral_run / "evaluation_lights.json").read_text())
     for light in ("F11", "D65"):
         won = ev["print_beats_baselines"][light]

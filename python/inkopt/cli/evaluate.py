@@ -173,6 +173,14 @@ def _evaluate_lights(args, d: RunDir, options: EvaluateOptions, log) -> int:
         q = out["quantized"]["by_light"][light]["delta_e2000_mean"]
         vs = ", ".join(f"{'beats' if won else 'does not beat'} {_versus(out, light, b)}" for b, won in beats.items())
         print(f"under {light}: the print (mean ΔE2000 {q:.2f}) {vs}")
+    if "gamut_floor" in out:
+        floors = ", ".join(f"{light} {f['delta_e76_mean']:.2f}" for light, f in out["gamut_floor"].items())
+        table = out["colour_table"]
+        how = f"spectral, looked up under {','.join(table['lights'])}" if table["spectral"] else "RGB"
+        print(
+            f"gamut floor: mean dE76 from the target to the nearest colour the inks reach in a {table['patch_mm']:g} "
+            f"mm patch, under each light: {floors} (colour table: {how})"
+        )
     spp, secs = out["continuous"]["spp"], out["seconds"]
     print(f"{spp} spp per scene texel (continuous result), {secs:.0f} s; wrote {d.evaluation_lights_path}")
     return 0

@@ -20,14 +20,14 @@ given per light (``differences``); no pictures and no predictions.npz then.
 evaluation_lights.json holds ``viewing``; with the baselines, ``colour_table`` (``evaluate``'s entry, ``spectral``
 and the ``lights`` of its look-up) and ``gamut_floor``: per light asked, the mean and 95th percentile ΔE76 from the
 targets to the nearest colour a thick patch of the inks shows under it; one entry per result (``continuous``,
-``quantized``, ``surface``, ``extrusion``: ``light_figures``' keys with ``spp``, ``spp_passes``, ``seconds``, and for
-the printed ones ``method`` and ``spp_printer``); ``print_beats_baselines`` (per light, whether the print's mean
-ΔE2000 is below each baseline's); ``quantization``, ``printer_texels``, ``seconds`` and the digests of the volume.npz and
-quantized.npz it was made from. predictions.npz (``rundir.Predictions``, source "evaluation") holds every result as
-sRGB under the first light and as band values with the lights' band matrices (``rundir.BandValues``), so the
-soft-proof page can show any light without rendering again. The pictures (the target beside every result shown
-as sRGB under the first light, ``Viewing.display``) go to evaluation_lights_<face>.png (meshes:
-evaluation_lights_views.png).
+``quantized``, ``surface``, ``extrusion``: ``light_figures``' keys with ``spp``, ``spp_passes``, ``seconds``, and
+for the printed ones ``method`` and ``spp_printer``); ``print_beats_baselines`` (per light, whether the print's mean
+ΔE2000 is below each baseline's); ``quantization``, ``printer_texels``, ``seconds`` and the digests of the
+volume.npz and quantized.npz it was made from. predictions.npz (``rundir.Predictions``, source "evaluation") holds
+every result as sRGB under the first light and as band values with the lights' band matrices
+(``rundir.BandValues``), so the soft-proof page can show any light without rendering again. The pictures (the target
+beside every result shown as sRGB under the first light, ``Viewing.display``) go to evaluation_lights_<face>.png
+(meshes: evaluation_lights_views.png).
 """
 
 from __future__ import annotations
