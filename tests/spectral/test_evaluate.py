@@ -111,9 +111,10 @@ def test_texel_sample_agrees_with_every_texel(tmp_path, capsys):
     assert (run / "predictions.npz").read_bytes() == before
     assert sampled["texel_sample"]["texels"] == 120 and sampled["sampling_choice"]["forced"]
     assert set(sampled["differences"]) == {"D65", "A"} and "quantized - extrusion" in sampled["differences"]["A"]
+    _check_sample_predictions(run, sampled)
     assert main(args) == 0
     full = json.loads(capsys.readouterr().out)
-    assert "texel_sample" not in full
+    assert "texel_sample" not in full and not (run / "predictions_sample.npz").exists()
     for r in ("continuous", "quantized", "surface", "extrusion"):
         assert sampled[r]["inconstancy_stderr"]["D65-A"] > 0
         for light in ("D65", "A"):
@@ -124,6 +125,27 @@ def test_texel_sample_agrees_with_every_texel(tmp_path, capsys):
                 and abs(got["delta_e2000_mean"] - want["delta_e2000_mean"])
                 < 4 * se + 2 * want["delta_e76_noise_contribution"]
             ), (r, light, got["delta_e2000_mean"], want["delta_e2000_mean"], se)
+
+
+def _check_sample_predictions(run, sampled: dict) -> None:
+    """predictions_sample.npz of a sampled evaluation: every result's band values on the sample's 120 points (sorted
+    scene texel indices), from which each light's mean ΔE2000 is the evaluation's (float32 storage)."""
+    from inkopt.color import ColourMap, delta_e2000, linear_to_lab
+    from inkopt.rundir import RunDir
+
+    d = RunDir(run)
+    pred = d.load_sample_predictions()
+    assert pred is not None and pred.source == "evaluation" and len(pred.texels) == 120
+    assert np.all(np.diff(pred.texels) > 0) and set(pred.bands.values) == {"continuous", "quantized", *BASELINE_NAMES}
+    target_lab = linear_to_lab(d.load_scene().target_rgb.astype(np.float64))[pred.texels]
+    for name, values in pred.bands.values.items():
+        assert values.shape == (120, 16) and pred.rgb[name].shape == (120, 3)
+        for light, m in pred.bands.lights.items():
+            de = delta_e2000(ColourMap(m, light).lab(values), target_lab).mean()
+            assert de == pytest.approx(sampled[name]["by_light"][light]["delta_e2000_mean"], abs=1e-3), (name, light)
+
+
+BASELINE_NAMES = ("surface", "extrusion")
 
 
 def test_predictions_keep_the_band_values(tmp_path, capsys):

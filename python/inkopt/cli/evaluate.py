@@ -182,7 +182,8 @@ def _evaluate_lights(args, d: RunDir, options: EvaluateOptions, log) -> int:
             f"mm patch, under each light: {floors} (colour table: {how})"
         )
     spp, secs = out["continuous"]["spp"], out["seconds"]
-    print(f"{spp} spp per scene texel (continuous result), {secs:.0f} s; wrote {d.evaluation_lights_path}")
+    more = f", {d.sample_predictions_path}" if "texel_sample" in out else ""
+    print(f"{spp} spp per scene texel (continuous result), {secs:.0f} s; wrote {d.evaluation_lights_path}{more}")
     return 0
 
 

@@ -15,7 +15,10 @@ under the first light, and scored under each light asked (default: the run's) by
 between the first light and each other. Every texel or a texel sample, chosen as for RGB runs
 (``choice.choose_sampling``, its pilot's colours under the first light): with a sample every figure under every
 light comes from the sampled texels with its standard error, and the paired differences between the results are
-given per light (``differences``); no pictures and no predictions.npz then.
+given per light (``differences``); no pictures and no predictions.npz then (they need every texel), but
+predictions_sample.npz: every result on the sample's points (``rundir.Predictions`` with ``texels``, the points'
+scene texel indices), band values and sRGB under the first light, so their figures under any light can be taken
+again.
 
 evaluation_lights.json holds ``viewing``; with the baselines, ``colour_table`` (``evaluate``'s entry, ``spectral``
 and the ``lights`` of its look-up) and ``gamut_floor``: per light asked, the mean and 95th percentile ΔE76 from the
@@ -153,16 +156,22 @@ def gamut_floors(table: ColourTable, ev: Evaluating) -> dict:
 
 
 def _write(d: RunDir, ev: Evaluating, viewing: Viewing, out: dict, names: tuple) -> None:
-    """evaluation_lights.json, and with every texel rendered the pictures and predictions.npz."""
+    """evaluation_lights.json; with every texel rendered the pictures and predictions.npz (an earlier sample's
+    predictions_sample.npz removed), with a texel sample predictions_sample.npz (the sample's points only)."""
     write_json(d.evaluation_lights_path, out)
+    spp = {name: out[name]["spp"] for name in names}
+    digest, lighting = file_digest(d.volume_path), ev.lighting.describe()
     if ev.sample is not None:
+        bands = {name: ev.renders[name].ads[0].rgb for name in names}  # on the points, in their (sorted) order
+        shown = {name: viewing.display(v) for name, v in bands.items()}
+        pred = Predictions(shown, "evaluation", spp, digest, lighting, bands_of(viewing, bands), ev.sample.points)
+        d.save_sample_predictions(pred)
         return
     bands = {name: ev.colours[name] for name in names}
     shown = {name: viewing.display(v) for name, v in bands.items()}
     _pictures(d, ev.rec, shown, ev.say)
-    spp = {name: out[name]["spp"] for name in names}
-    digest, lighting = file_digest(d.volume_path), ev.lighting.describe()
     d.save_predictions(Predictions(shown, "evaluation", spp, digest, lighting, bands_of(viewing, bands)))
+    d.sample_predictions_path.unlink(missing_ok=True)
 
 
 def bands_of(viewing: Viewing, values) -> BandValues | None:
