@@ -116,7 +116,7 @@ def main():
         "step": patches.step,
         "lights": LIGHTS.split(","),
         **out,
-        "spectral_table": {
+        "spectral_table_build": {
             "patches": len(patches.mixtures),
             "cached": patches.cached,
             "build_seconds": patches.seconds,
