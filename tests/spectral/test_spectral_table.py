@@ -81,3 +81,28 @@ def test_several_lights_minimise_the_sum_of_their_errors():
         alone = cost(ct.under_light(k).lookup(target))
         assert np.all(both <= alone * (1 + 1e-3) + 1e-3), np.max(both - alone)
         assert np.mean(both) < 0.95 * np.mean(alone)
+
+
+def test_the_default_spectral_inks_table_ships_with_the_package(tmp_path, monkeypatch):
+    """The spectral table of vero-cmykw@spectral (g 0.4, ior 1.5, the defaults) is in the package
+    (``spectral_table.PACKAGED``) under the key the current code gives it, so a first spectral evaluation need not
+    spend minutes building it; its patches' colours under D65 and A agree with fresh renders of 4 of them within 4
+    combined standard errors. When this fails, the spectral presets or the table's parameters changed: rebuild it
+    (``spectral_patches(load_ink_table("vero-cmykw@spectral"), 0.4, 1.5)`` with an empty ``INKOPT_CACHE_DIR``) and
+    copy the cache's file into the package's data/spectral_colour_tables/."""
+    from inkopt.color import delta_e76
+    from inkopt.model.spectral import load_ink_table
+
+    monkeypatch.setenv("INKOPT_CACHE_DIR", str(tmp_path))  # an empty cache: only the package has it
+    monkeypatch.setattr(st, "render_band_patches", lambda *a, **k: pytest.fail("the table was built, not read"))
+    table = load_ink_table("vero-cmykw@spectral")
+    patches = st.spectral_patches(table, 0.4, 1.5)
+    assert patches.cached and len(patches.mixtures) == len(table_mixtures(len(table.names), 8))
+    assert sorted(p.name for p in st.PACKAGED.iterdir()) == [f"spectral_colour_table_{patches.key}.npz"]
+    monkeypatch.undo()
+    rows = np.array([0, 300, 600, 900])
+    bands, var = st.render_band_patches(patches.mixtures[rows], table, (0.4, 1.5), 2.5, 0.3, seed=12, threads=2)
+    for light in ("D65", "A"):
+        cmap = named_light(light).colour_map(table.wavelengths_nm)
+        se = np.hypot(cmap.lab_stderr(bands, var), cmap.lab_stderr(patches.bands[rows], patches.bands_var[rows]))
+        assert np.all(delta_e76(cmap.lab(bands), cmap.lab(patches.bands[rows])) <= 4 * se), light
