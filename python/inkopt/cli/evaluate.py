@@ -63,7 +63,8 @@ OPTIONS = (
             type=int,
             metavar="N",
             help="figures from a random sample of N scene texels (and --sample-windows SSIM windows), each with its "
-            "standard error, and no pictures or predictions.npz; 0 renders every texel (default: whichever a short "
+            "standard error, and no pictures or predictions.npz (a spectral run: predictions_sample.npz, the "
+            "sample's values); 0 renders every texel (default: whichever a short "
             "pilot predicts to be clearly faster at the same accuracy of the mean dE76, logged and recorded as "
             "sampling_choice; the sample then has the texels whose standard error is that accuracy)",
         ),
