@@ -106,3 +106,23 @@ def test_the_default_spectral_inks_table_ships_with_the_package(tmp_path, monkey
         cmap = named_light(light).colour_map(table.wavelengths_nm)
         se = np.hypot(cmap.lab_stderr(bands, var), cmap.lab_stderr(patches.bands[rows], patches.bands_var[rows]))
         assert np.all(delta_e76(cmap.lab(bands), cmap.lab(patches.bands[rows])) <= 4 * se), light
+
+
+def test_the_run_lights_of_the_look_up(tmp_path):
+    """The baselines look up under the run's lights: an evaluation light of the name, a named light, or the band
+    matrix predictions.npz keeps for a light file that is gone; the evaluation's lights when one is found nowhere."""
+    from inkopt.evaluation.spectral import run_colours
+    from inkopt.rundir import BandValues, Predictions, RunDir
+    from inkopt.spectral.viewing import Viewing
+
+    table = smooth_table()
+    lamp = np.random.default_rng(0).uniform(0.1, 1.0, (3, table.bands))
+    d = RunDir(tmp_path)
+    bands = BandValues({"continuous": np.ones((4, table.bands), np.float32)}, table.wavelengths_nm, {"lamp.csv": lamp})
+    d.save_predictions(Predictions({"continuous": np.ones((4, 3), np.float32)}, "optimisation", {}, "x", {}, bands))
+    viewing = Viewing(table, (named_light("D65"),))
+    got = run_colours(d, ["A", "lamp.csv", "D65"], viewing)
+    assert [c.name for c in got] == ["A", "lamp.csv", "D65"]
+    np.testing.assert_array_equal(got[0].matrix, named_light("A").colour_map(table.wavelengths_nm).matrix)
+    np.testing.assert_array_equal(got[1].matrix, lamp)
+    assert [c.name for c in run_colours(d, ["gone.csv"], viewing)] == ["D65"]

@@ -40,7 +40,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..color import delta_e76, delta_e2000
+from ..color import ColourMap, delta_e76, delta_e2000
 from ..errors import ParameterError
 from ..io import file_digest, write_json
 from ..loss import TexelLoss
@@ -48,7 +48,7 @@ from ..model.inks import read_ink_file
 from ..model.spectral import spectral_from_data
 from ..render import Renderer
 from ..rundir import VOLUME_DIGEST, BandValues, Predictions, RunDir
-from ..spectral.lights import parse_lights
+from ..spectral.lights import NAMED, named_light, parse_lights
 from ..spectral.viewing import Viewing
 from . import sample as sampled
 from .baselines import BASELINES
@@ -83,12 +83,11 @@ def evaluate_lights(path, options: EvaluateOptions, lights: str | None = None, l
             "(`inks` vero-cmykw@spectral)"
         )
     table = spectral_from_data(read_ink_file(d.spectral_inks_path), d.spectral_inks_path)
-    run_lights = parse_lights(",".join(run["illuminants"]))
-    viewing = Viewing(table, parse_lights(lights) if lights else run_lights)
+    viewing = Viewing(table, parse_lights(lights or ",".join(run["illuminants"])))
     patches = None
     if options.baselines and options.table is None:  # the baselines' print shop has the spectral model too
         patches = band_patches(d, table, options, log)
-        options = replace(options, table=patches.under(Viewing(table, run_lights).colours()))
+        options = replace(options, table=patches.under(run_colours(d, run["illuminants"], viewing)))
     ev = Evaluating.open(path, replace(options, translucency=False), log)
     names = tuple(light.name for light in viewing.seen_under())
     ev.factory, ev.cmap = viewing.renderer_factory(Renderer, shared=True), viewing.colours()[0]  # geometry once
@@ -119,6 +118,30 @@ def evaluate_lights(path, options: EvaluateOptions, lights: str | None = None, l
     if options.write:
         _write(d, ev, viewing, out, tuple(results))
     return out
+
+
+def run_colours(d: RunDir, names, viewing: Viewing) -> tuple[ColourMap, ...]:
+    """The colour maps of the run's lights ``names`` (report.json's) on ``viewing``'s bands: the evaluation's light
+    of that name, else a named light, else the band matrix predictions.npz keeps for it (a light file's spectrum may
+    be gone); ``viewing``'s own when one of them is found nowhere."""
+    asked = {c.name: c for c in viewing.colours()}
+    wl = viewing.table.wavelengths_nm
+    try:
+        pred = d.load_predictions()
+    except ValueError:  # a damaged predictions.npz keeps no light
+        pred = None
+    kept = pred.bands.lights if pred is not None and pred.bands is not None else {}
+    out = []
+    for name in names:
+        if name in asked:
+            out.append(asked[name])
+        elif name in NAMED:
+            out.append(named_light(name).colour_map(wl))
+        elif np.shape(kept.get(name)) == (3, len(wl)):
+            out.append(ColourMap(kept[name], name))
+        else:
+            return tuple(asked.values())
+    return tuple(out)
 
 
 def band_patches(d: RunDir, table, options: EvaluateOptions, log) -> SpectralPatches:
