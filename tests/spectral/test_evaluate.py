@@ -12,6 +12,20 @@ from PIL import Image
 from inkopt.cli import main
 
 
+@pytest.fixture(scope="module", autouse=True)
+def small_spectral_table(tmp_path_factory):
+    """The baselines' spectral colour table on a coarse lattice (step 1/2) with a 1 ΔE76 error target, cached for
+    the module: the default one's build takes minutes (evaluation.spectral_table)."""
+    from functools import partial
+
+    from inkopt.evaluation import spectral as es
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("INKOPT_CACHE_DIR", str(tmp_path_factory.mktemp("cache")))
+        mp.setattr(es, "spectral_patches", partial(es.spectral_patches, step=2, max_stderr=1.0))
+        yield
+
+
 @pytest.fixture(scope="module")
 def spectral_run(tmp_path_factory):
     return make_spectral_run(tmp_path_factory.mktemp("spectral_eval"))
@@ -43,6 +57,7 @@ def test_evaluate_under_other_lights(spectral_run, capsys):
     out = capsys.readouterr().out
     assert "figures under F11; mean ΔE2000 under each light: F11" in out and "colour inconstancy F11-D65" in out
     assert "quantized: figures under F11" in out and "extrusion: figures under F11" in out
+    assert "under each light: F11 " in out and "(colour table: spectral, looked up under D65,A)" in out
     ev = json.loads((spectral_run / "evaluation_lights.json").read_text())
     for light in ("F11", "D65"):
         won = ev["print_beats_baselines"][light]
@@ -67,6 +82,11 @@ def test_evaluate_judges_the_print_and_the_baselines(spectral_run, capsys):
     assert ev["quantized_digest"] is not None and (spectral_run / "quantized.npz").is_file()
     assert ev["quantization"]["method"] == "blue-noise" and ev["printer_texels"] > 0
     assert set(ev["print_beats_baselines"]) == {"D65", "A"}
+    # the baselines' mixtures come from the spectral colour table under the run's lights; the gamut floor per light
+    assert ev["colour_table"]["spectral"] and ev["colour_table"]["lights"] == ["D65", "A"]
+    assert ev["colour_table"]["step"] == 2 and set(ev["gamut_floor"]) == {"D65", "A"}
+    for floor in ev["gamut_floor"].values():
+        assert 0 <= floor["delta_e76_mean"] <= floor["delta_e76_p95"] + 1e-9  # a flat target: mean = p95
 
 
 def test_evaluate_without_baselines(spectral_run, capsys):
@@ -91,9 +111,10 @@ def test_texel_sample_agrees_with_every_texel(tmp_path, capsys):
     assert (run / "predictions.npz").read_bytes() == before
     assert sampled["texel_sample"]["texels"] == 120 and sampled["sampling_choice"]["forced"]
     assert set(sampled["differences"]) == {"D65", "A"} and "quantized - extrusion" in sampled["differences"]["A"]
+    _check_sample_predictions(run, sampled)
     assert main(args) == 0
     full = json.loads(capsys.readouterr().out)
-    assert "texel_sample" not in full
+    assert "texel_sample" not in full and not (run / "predictions_sample.npz").exists()
     for r in ("continuous", "quantized", "surface", "extrusion"):
         assert sampled[r]["inconstancy_stderr"]["D65-A"] > 0
         for light in ("D65", "A"):
@@ -104,6 +125,27 @@ def test_texel_sample_agrees_with_every_texel(tmp_path, capsys):
                 and abs(got["delta_e2000_mean"] - want["delta_e2000_mean"])
                 < 4 * se + 2 * want["delta_e76_noise_contribution"]
             ), (r, light, got["delta_e2000_mean"], want["delta_e2000_mean"], se)
+
+
+def _check_sample_predictions(run, sampled: dict) -> None:
+    """predictions_sample.npz of a sampled evaluation: every result's band values on the sample's 120 points (sorted
+    scene texel indices), from which each light's mean ΔE2000 is the evaluation's (float32 storage)."""
+    from inkopt.color import ColourMap, delta_e2000, linear_to_lab
+    from inkopt.rundir import RunDir
+
+    d = RunDir(run)
+    pred = d.load_sample_predictions()
+    assert pred is not None and pred.source == "evaluation" and len(pred.texels) == 120
+    assert np.all(np.diff(pred.texels) > 0) and set(pred.bands.values) == {"continuous", "quantized", *BASELINE_NAMES}
+    target_lab = linear_to_lab(d.load_scene().target_rgb.astype(np.float64))[pred.texels]
+    for name, values in pred.bands.values.items():
+        assert values.shape == (120, 16) and pred.rgb[name].shape == (120, 3)
+        for light, m in pred.bands.lights.items():
+            de = delta_e2000(ColourMap(m, light).lab(values), target_lab).mean()
+            assert de == pytest.approx(sampled[name]["by_light"][light]["delta_e2000_mean"], abs=1e-3), (name, light)
+
+
+BASELINE_NAMES = ("surface", "extrusion")
 
 
 def test_predictions_keep_the_band_values(tmp_path, capsys):

@@ -63,7 +63,8 @@ OPTIONS = (
             type=int,
             metavar="N",
             help="figures from a random sample of N scene texels (and --sample-windows SSIM windows), each with its "
-            "standard error, and no pictures or predictions.npz; 0 renders every texel (default: whichever a short "
+            "standard error, and no pictures or predictions.npz (a spectral run: predictions_sample.npz, the "
+            "sample's values); 0 renders every texel (default: whichever a short "
             "pilot predicts to be clearly faster at the same accuracy of the mean dE76, logged and recorded as "
             "sampling_choice; the sample then has the texels whose standard error is that accuracy)",
         ),
@@ -173,8 +174,17 @@ def _evaluate_lights(args, d: RunDir, options: EvaluateOptions, log) -> int:
         q = out["quantized"]["by_light"][light]["delta_e2000_mean"]
         vs = ", ".join(f"{'beats' if won else 'does not beat'} {_versus(out, light, b)}" for b, won in beats.items())
         print(f"under {light}: the print (mean ΔE2000 {q:.2f}) {vs}")
+    if "gamut_floor" in out:
+        floors = ", ".join(f"{light} {f['delta_e76_mean']:.2f}" for light, f in out["gamut_floor"].items())
+        table = out["colour_table"]
+        how = f"spectral, looked up under {','.join(table['lights'])}" if table["spectral"] else "RGB"
+        print(
+            f"gamut floor: mean dE76 from the target to the nearest colour the inks reach in a {table['patch_mm']:g} "
+            f"mm patch, under each light: {floors} (colour table: {how})"
+        )
     spp, secs = out["continuous"]["spp"], out["seconds"]
-    print(f"{spp} spp per scene texel (continuous result), {secs:.0f} s; wrote {d.evaluation_lights_path}")
+    more = f", {d.sample_predictions_path}" if "texel_sample" in out else ""
+    print(f"{spp} spp per scene texel (continuous result), {secs:.0f} s; wrote {d.evaluation_lights_path}{more}")
     return 0
 
 

@@ -5,9 +5,10 @@ figures under each light (``slab``, ``optimize``, ``evaluate``)."""
 from __future__ import annotations
 
 
-def add_light_args(p) -> None:
+def add_light_args(p, combine: bool = True, what: str | None = None) -> None:
     """``--illuminant NAME|FILE.csv`` or ``--illuminants A,B``: the lights the print is seen under
-    (``spectral.lights``, ``spectral.viewing``)."""
+    (``spectral.lights``, ``spectral.viewing``), and ``--combine`` unless ``combine`` is False (a command that
+    takes no loss); ``what``: the two flags' help in place of an optimisation's."""
     from ..spectral.lights import NAMED
 
     g = p.add_mutually_exclusive_group()
@@ -15,7 +16,8 @@ def add_light_args(p) -> None:
     g.add_argument(
         "--illuminant",
         metavar=f"{names}|FILE.csv",
-        help="the light the print is seen under (CIE 1931 2° observer; a file: rows of nm, relative power). "
+        help=what
+        or "the light the print is seen under (CIE 1931 2° observer; a file: rows of nm, relative power). "
         "Default D65, the white of linear sRGB: with an RGB ink table the run is the RGB one; another light needs "
         "a spectral ink table (docs/spectral.md)",
     )
@@ -23,8 +25,12 @@ def add_light_args(p) -> None:
         "--illuminants",
         metavar="D65,A",
         help="several lights: the loss is the mean (or --combine worst) of the loss under each (a spectral ink table; "
-        "docs/spectral.md)",
+        "docs/spectral.md)"
+        if what is None
+        else "several lights, as --illuminant",
     )
+    if not combine:
+        return
     p.add_argument(
         "--combine",
         choices=("mean", "worst"),
@@ -41,7 +47,7 @@ def viewing_from_args(args, table=None):
     from ..spectral.viewing import Viewing
 
     if getattr(args, "illuminants", None):
-        return Viewing(table, lights=parse_lights(args.illuminants), combine=args.combine)
+        return Viewing(table, lights=parse_lights(args.illuminants), combine=getattr(args, "combine", "mean"))
     if getattr(args, "illuminant", None):
         return Viewing(table, lights=(load_light(args.illuminant),))
     return Viewing(table)

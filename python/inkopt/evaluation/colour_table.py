@@ -170,7 +170,16 @@ class ColourTable:
     cached: bool = False
 
     def __post_init__(self):
-        self._tree = cKDTree(self.lab)
+        self._tree = cKDTree(self.points())
+
+    def points(self) -> np.ndarray:
+        """(M, D) the entries' colours the look-up searches and blends in: ``lab`` (a spectral table under several
+        lights: their CIELAB side by side, ``spectral_table.SpectralColourTable``)."""
+        return self.lab
+
+    def target_points(self, lab_t: np.ndarray) -> np.ndarray:
+        """(U, D) targets' CIELAB (U, 3) in the space of :meth:`points`."""
+        return lab_t
 
     def lookup(self, target_rgb, refine: bool = True, k: int = REFINE_K, iterations: int = 300) -> np.ndarray:
         """Mixtures (I, N) float32 for target colours (I, 3) linear RGB (see module docstring)."""
@@ -178,13 +187,13 @@ class ColourTable:
         if target.ndim != 2 or target.shape[1] != 3 or not np.all(np.isfinite(target)):
             raise ValueError(f"target colours must be finite (I, 3) linear RGB, got {target.shape}")
         uniq, inv = np.unique(target, axis=0, return_inverse=True)
-        lab_t = linear_to_lab(uniq)
+        lab_t = self.target_points(linear_to_lab(uniq))
         k = int(min(k, len(self.lab)))
         if not refine or k < 2:
             _, idx = self._tree.query(lab_t, 1)
             return self.mixtures[idx][inv.reshape(-1)]
         _, idx = self._tree.query(lab_t, k)  # (U, k), nearest first
-        w = simplex_least_squares(self.lab[idx] - lab_t[:, None, :], iterations)
+        w = simplex_least_squares(self.points()[idx] - lab_t[:, None, :], iterations)
         out = np.einsum("uk,ukn->un", w, self.mixtures[idx].astype(np.float64))
         return out.astype(np.float32)[inv.reshape(-1)]
 

@@ -100,6 +100,7 @@ class RunDir(QuantizedFiles):
     VIEWS_PNG, PREDICTION_GLB, TARGET_GLB = "views.png", "prediction.glb", "target.glb"
     PREDICTIONS, PROOF, LOCK = "predictions.npz", "report.html", LOCK_NAME
     SPECTRAL_INKS, EVALUATION_LIGHTS = "spectral_inks.json", "evaluation_lights.json"
+    SAMPLE_PREDICTIONS = "predictions_sample.npz"
 
     def __init__(self, path):
         self.path = Path(path)
@@ -178,6 +179,9 @@ class RunDir(QuantizedFiles):
     proof_path = _RunFile(PROOF, "report.html: the soft-proof page (``inkopt report``).")
     spectral_inks_path = _RunFile(SPECTRAL_INKS, "spectral_inks.json: a spectral run's ink table.")
     evaluation_lights_path = _RunFile(EVALUATION_LIGHTS, "evaluation_lights.json: a spectral run's figures by light.")
+    sample_predictions_path = _RunFile(
+        SAMPLE_PREDICTIONS, "predictions_sample.npz: a spectral run's predictions on an evaluation's texel sample."
+    )
 
     def threemf_path(self, labels: bool = False) -> Path:
         """mixture.3mf (the continuous mixture) or quantized.3mf (``labels``): ``inkopt export --format 3mf``."""
@@ -318,6 +322,7 @@ class RunDir(QuantizedFiles):
             self.evaluation_lights_path,
             *sorted(self.path.glob("evaluation_*.png")),
             self.predictions_path,
+            self.sample_predictions_path,
             self.proof_path,
         ]
 
@@ -349,6 +354,7 @@ class RunDir(QuantizedFiles):
         digest = self.volume_digest()
         keep = set()
         derived = (self.quantized_path, self.evaluation_path, self.evaluation_lights_path, self.predictions_path)
+        derived += (self.sample_predictions_path,)
         for p in (*derived, self.slices_path / "manifest.json"):
             if p.is_file() and self._recorded(p) == digest:
                 keep.add(p.parent if p.name == "manifest.json" else p)
@@ -374,6 +380,18 @@ class RunDir(QuantizedFiles):
     def save_predictions(self, pred: Predictions) -> Path:
         save_npz(self.predictions_path, pred.arrays())
         return self.predictions_path
+
+    def save_sample_predictions(self, pred: Predictions) -> Path:
+        """predictions_sample.npz: ``pred`` on a texel sample (``Predictions.texels``)."""
+        if pred.texels is None:
+            raise ValueError("a texel sample's predictions need their texel indices")
+        save_npz(self.sample_predictions_path, pred.arrays())
+        return self.sample_predictions_path
+
+    def load_sample_predictions(self) -> Predictions | None:
+        """predictions_sample.npz, or None if no sampled spectral evaluation wrote one."""
+        path = self.sample_predictions_path
+        return Predictions.from_arrays(load_npz(path, "predictions file"), str(path)) if path.is_file() else None
 
     def load_predictions(self) -> Predictions | None:
         """predictions.npz, or None if neither the optimisation nor ``inkopt evaluate`` wrote one."""

@@ -76,7 +76,9 @@ class Predictions:
     evaluate`` does); source: "optimisation" or "evaluation"; spp: samples per scene texel of each result;
     volume_digest: ``io.file_digest`` of the volume.npz they were rendered from; lighting: the display lighting
     (``Lighting.describe()``, stored as JSON); bands: a spectral run's band values (``BandValues``; ``rgb`` then
-    holds them as sRGB under the first light), else None (then the file is format version 1).
+    holds them as sRGB under the first light), else None (then the file is format version 1); texels: None (the rows
+    are every scene texel), or (K,) int64 sorted scene texel indices of the rows (a texel sample's predictions,
+    predictions_sample.npz; stored as ``texels``).
     """
 
     rgb: dict[str, np.ndarray]
@@ -85,6 +87,7 @@ class Predictions:
     volume_digest: str
     lighting: dict
     bands: BandValues | None = None
+    texels: np.ndarray | None = None
 
     def arrays(self) -> dict:
         names = list(self.rgb)
@@ -99,6 +102,8 @@ class Predictions:
         out.update({f"rgb_{n}": np.asarray(self.rgb[n], np.float32) for n in names})
         if self.bands is not None:
             out.update(self.bands.arrays())
+        if self.texels is not None:
+            out["texels"] = np.asarray(self.texels, np.int64)
         return out
 
     @classmethod
@@ -119,6 +124,7 @@ class Predictions:
             str(d["volume_digest"]),
             json.loads(str(d["lighting"])),
             BandValues.from_arrays(d, where),
+            None if "texels" not in d else np.asarray(d["texels"], np.int64).reshape(-1),
         )
 
 

@@ -10,7 +10,7 @@ spectrum, so any other light needs a spectral table.
 from __future__ import annotations
 
 import hashlib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -18,7 +18,7 @@ from ..color import RGB, RGB_TO_XYZ, WHITE_XYZ, ColourMap
 from ..errors import ParameterError
 from ..loss import COMBINE, TexelLoss
 from ..model.spectral import SpectralInkTable
-from ..render import RendererFactory
+from ..render import RendererFactory, RenderResult
 from .lights import Light, named_light
 from .render import SpectralRenderer
 
@@ -134,6 +134,18 @@ def display_under(cmap: ColourMap, values) -> np.ndarray:
     (I, 3) float64: CIE XYZ relative to the light's white, carried to sRGB's D65 white by the Bradford chromatic
     adaptation transform (:func:`adaptation_matrix`); may leave [0, 1] for colours outside sRGB."""
     return cmap.xyz(values) @ (np.linalg.inv(RGB_TO_XYZ) @ adaptation_matrix(cmap.white)).T
+
+
+def display_result(cmap: ColourMap, res: RenderResult) -> RenderResult:
+    """A band render ``res`` (``rgb`` (I, B) band values, ``var_mean`` their variances) shown under colour map
+    ``cmap`` as :func:`display_under` shows it: ``rgb`` (I, 3) float32 linear sRGB and ``var_mean`` (I, 3) float32,
+    the band variances carried through the linear map (bands independent, as band paths trace them); counts and
+    seconds as ``res``'s."""
+    values = np.asarray(res.rgb, np.float64)
+    shown = display_under(cmap, values)
+    t = display_under(cmap, np.eye(values.shape[1]))  # (B, 3): each band's unit value as linear sRGB
+    var = np.asarray(res.var_mean, np.float64) @ (t * t)
+    return replace(res, rgb=shown.astype(np.float32), var_mean=var.astype(np.float32))
 
 
 #: how a spectral run's pictures carry the first light's white to sRGB's (:meth:`Viewing.display`)
