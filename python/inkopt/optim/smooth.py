@@ -112,9 +112,9 @@ def texel_guide(
 class GradientSmoother:
     """Diffuses per-free-voxel arrays (F, N) over a set of the free voxels' 6-neighbourhood (the loop in the Rust
     core, ``inkopt_core::smooth``: parallel, thread-count independent; during a call, a column at a time, the column
-    gathered and two working copies of it (12 bytes per voxel of the set) and each voxel's neighbours and weights (48
-    bytes); kept for the run: the set's rows, their voxel indices and the guide, 8 + 8 + 16 bytes per voxel of the
-    set).
+    gathered and two working copies of it (12 bytes per voxel of the set), each voxel's neighbours and weights (48
+    bytes) and the set's voxel indices (8 bytes); kept for the run: the set's rows and the guide, 8 + 16 bytes per
+    voxel of the set).
 
     shape (z, y, x) of the grid; index (F,) int64: the free voxels' increasing linear indices
     (``Parameterization.free_index``; kept by reference); ``rows``: which of them are smoothed (e.g. those under
@@ -143,20 +143,25 @@ class GradientSmoother:
         self.shape = tuple(int(v) for v in shape)
         self.rows = None if rows is None else np.asarray(rows, np.int64)
         index = np.asarray(index, np.int64)
-        self.index = index if self.rows is None else np.ascontiguousarray(index[self.rows])
-        n = len(self.index)
+        self.free_index = index  # the set's voxel indices are gathered from it at each call, not kept (8 B a voxel)
+        n = len(index) if self.rows is None else len(self.rows)
         self.guide = None if guide is None else np.ascontiguousarray(guide, np.float32)
         if self.guide is not None and len(self.guide) != n:
             raise ValueError(f"the guide has {len(self.guide)} rows for a set of {n} voxels")
         self.edge, self.threads = float(edge), check_threads(threads)
 
-    def _diffuse(self, g: np.ndarray) -> np.ndarray:
-        """The diffused copy of the set's values g (K, C) float32."""
+    @property
+    def index(self) -> np.ndarray:
+        """(K,) int64: the linear indices of the set's voxels (a new array when the set is not every free voxel)."""
+        return self.free_index if self.rows is None else np.ascontiguousarray(self.free_index[self.rows])
+
+    def _diffuse(self, g: np.ndarray, index: np.ndarray | None = None) -> np.ndarray:
+        """The diffused copy of the set's values g (K, C) float32 (``index``: the set's, if already gathered)."""
         from .. import _core
 
         return _core.smooth_rows(
             self.shape,
-            self.index,
+            self.index if index is None else index,
             np.ascontiguousarray(g, np.float32),
             self.steps,
             ALPHA,
@@ -176,7 +181,7 @@ class GradientSmoother:
         is the same bits as all columns at once, while a call's working copies (the column gathered, the kernel's
         two copies: 12 bytes per voxel of the set) are a fifth of the five inks' (60), beside the kernel's 48 bytes
         per voxel of neighbours and weights."""
-        rows = slice(None) if self.rows is None else self.rows
+        rows, index = slice(None) if self.rows is None else self.rows, self.index
         for c in range(g.shape[1]):
-            g[rows, c] = self._diffuse(g[rows, c][:, None])[:, 0]
+            g[rows, c] = self._diffuse(g[rows, c][:, None], index)[:, 0]
         return g
