@@ -1,11 +1,11 @@
 """The step's memory: the in-place update (the same bits as a step on copies; Ctrl-C during it finishes the step),
-the smoothing a column at a time, the smoother's guide made in chunks."""
+the smoothing a column at a time, the smoother's guide made in chunks, and the step scale's held voxels."""
 
 import signal
 
 import numpy as np
 import pytest
-from helpers import small_chart_scene
+from helpers import SPOT, small_chart_scene
 from helpers import small_run as run
 
 from inkopt.optim import optimizers
@@ -65,6 +65,32 @@ def test_ctrl_c_during_the_update_finishes_the_step(tmp_path, smooth):
     c.run()
     np.testing.assert_array_equal(a.x, c.x)
     assert a.history.loss == c.history.loss
+
+
+@pytest.mark.parametrize("zeros", [0, 1, 37, 400, 5000])
+def test_abs_percentile_with_zeros_is_numpys(zeros):
+    """The percentile of |g| with ``zeros`` more entries of 0 is numpy's of the padded array, bit for bit."""
+    rng = np.random.default_rng(zeros)
+    g = (rng.normal(size=(230, 5)) * rng.uniform(0.1, 3.0, size=(230, 1))).astype(np.float32)
+    for q in (99.0, 50.0, 0.0, 100.0):
+        padded = np.concatenate([np.abs(g).ravel(), np.zeros(zeros, np.float32)])
+        assert optimizers.abs_percentile(g, q, 2, zeros) == float(np.percentile(padded, q))
+
+
+def test_a_shell_runs_step_scale_counts_its_core():
+    """A shell run's exponentiated gradient counts the inside voxels that are not free as zero gradients of its step
+    scale's percentile; a run with every inside voxel free counts none (its step scale is unchanged)."""
+    from inkopt.model import InkTable
+    from inkopt.scenes import build_scene
+    from inkopt.scenes.spec import MeshSpec
+
+    inks = InkTable.parse("vero-cmykw")
+    for shell in (None, 0.3):
+        scene = build_scene(MeshSpec(str(SPOT), height_mm=4.0, shell_mm=shell), inks)
+        r = run(scene, iterations=1)
+        inside = int(np.count_nonzero(scene.volume.inside))
+        assert r.opt.held_rows == inside - r.param.n_free
+        assert (r.opt.held_rows > 0.2 * inside) if shell else (r.opt.held_rows == 0)
 
 
 @pytest.mark.parametrize("guided", [False, True])

@@ -98,7 +98,9 @@ class Optimization:
         self.param.fixed_share.digest(h)  # the dense array's bytes, a layer at a time
         self._problem_digest = h.hexdigest()[:16]
         self.x = self.param.variables_for(self._initial_free_mixture())
-        self.opt = make_optimizer(cfg.optimizer, cfg.step_size, self.x.shape, threads)
+        # the inside voxels held fixed (a shell's core) join the step scale's population with a zero gradient
+        held = 0 if base.inside is None else max(int(np.count_nonzero(base.inside)) - self.param.n_free, 0)
+        self.opt = make_optimizer(cfg.optimizer, cfg.step_size, self.x.shape, threads, held_rows=held)
         self.smoother = self._smoother()
         self._renderer: TexelRenderer | None = None
         self.iteration = 0

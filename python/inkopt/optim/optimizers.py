@@ -92,6 +92,12 @@ class ExponentiatedGradient(_Moments):
     voxels that barely affect the surface (deep ones) move in proportion to their influence instead of
     random-walking on their gradient noise as under per-coordinate normalisation.
 
+    ``held_rows``: rows of voxels that are not variables but belong to the percentile's population with a zero
+    gradient (the core below a shell, ``Optimization``): the percentile is taken over the object's inside voxels,
+    not only the free ones, so a shell run, whose free voxels are the surface's, steps as far as the run with every
+    voxel free does (its deep voxels' |g| lie far below the 99th percentile); 0 (every voxel free) leaves the
+    percentile that of g alone, bit for bit.
+
     The update and the percentile run in the Rust core (``inkopt_core::kernels::step``, on ``threads`` threads,
     default all cores), in float32 exactly as numpy evaluates ``x - lr * (m / bias) / s`` and ``np.percentile``:
     without the whole-array temporaries of numpy or the copy of |g| that its percentile partitions (the timings
@@ -108,9 +114,10 @@ class ExponentiatedGradient(_Moments):
         warmup: int = 5,
         percentile: float = 99.0,
         threads: int | None = None,
+        held_rows: int = 0,
     ):
         super().__init__(lr, shape, v_shape=(1,), threads=threads)
-        self.beta, self.warmup, self.percentile = beta, warmup, percentile
+        self.beta, self.warmup, self.percentile, self.held_rows = beta, warmup, percentile, int(held_rows)
 
     @staticmethod
     def _dtype(a: np.ndarray, g: np.ndarray):
@@ -119,7 +126,8 @@ class ExponentiatedGradient(_Moments):
     def _prepare(self, g: np.ndarray) -> None:
         if self.t <= self.warmup:
             g2 = np.ascontiguousarray(_rows(g), np.float32)
-            scale = abs_percentile(g2, self.percentile, self.threads) if g2.size else 0.0
+            zeros = self.held_rows * g2.shape[1]
+            scale = abs_percentile(g2, self.percentile, self.threads, zeros) if g2.size else 0.0
             self.v[0] += (scale - self.v[0]) / self.t
 
     def _block(self, x: np.ndarray, g: np.ndarray, b: slice) -> np.ndarray:
@@ -132,18 +140,20 @@ class ExponentiatedGradient(_Moments):
         return x_new.reshape(np.shape(x))
 
 
-def abs_percentile(g: np.ndarray, q: float, threads: int | None = None) -> float:
+def abs_percentile(g: np.ndarray, q: float, threads: int | None = None, zeros: int = 0) -> float:
     """``np.percentile(np.abs(g), q)`` (its default, linear method, bit for bit) of a float32 array g (rows, n) with
     at least one entry, from two exact order statistics (``_core.abs_order_statistics``) instead of a partitioned
-    copy of |g|."""
+    copy of |g|; with ``zeros``, of g and that many more entries of 0 (without making them)."""
     from .. import _core
 
-    n, qf = g.size, q / 100
+    n, qf = g.size + zeros, q / 100
     virtual = (n - 1) * qf  # numpy's virtual index of the linear method, in its order of operations
     lo = int(np.clip(np.floor(virtual), 0, n - 1))
     hi = min(lo + 1, n - 1)
     t = virtual - lo
-    a, b = (np.float32(v) for v in _core.abs_order_statistics(g, [lo, hi], threads))
+    ranks = [max(lo - zeros, 0), max(hi - zeros, 0)]  # below rank `zeros` the entries are the zeros
+    a, b = (np.float32(v) for v in _core.abs_order_statistics(g, ranks, threads))
+    a, b = (np.float32(0.0) if r < zeros else v for r, v in ((lo, a), (hi, b)))
     d = np.float32(b - a)
     return float(a + d * t) if t < 0.5 else float(b - d * (1 - t))
 
@@ -203,9 +213,12 @@ def step_factor(iteration: int, iterations: int, decay: float, halvings: int = D
 OPTIMIZER_CLASSES = {"eg": ExponentiatedGradient, "adagrad": AdaGrad, "adam": Adam}
 
 
-def make_optimizer(kind: str, lr: float, shape, threads: int | None = None):
+def make_optimizer(kind: str, lr: float, shape, threads: int | None = None, held_rows: int = 0):
     """The optimiser named ``kind`` (``OptimizeConfig.optimizer``) with its default hyperparameters; ``threads``: of
-    its Rust kernels (default all cores; results do not depend on it)."""
+    its Rust kernels (default all cores; results do not depend on it); ``held_rows``: the voxels held fixed that
+    the exponentiated gradient's step scale counts with a zero gradient (``ExponentiatedGradient``)."""
     if kind not in OPTIMIZER_CLASSES:
         raise ValueError(f"unknown optimizer '{kind}'; use one of {tuple(OPTIMIZER_CLASSES)}")
+    if kind == "eg":
+        return ExponentiatedGradient(lr, shape, threads=threads, held_rows=held_rows)
     return OPTIMIZER_CLASSES[kind](lr, shape, threads=threads)
