@@ -176,6 +176,9 @@ def main(argv=None) -> dict:
         "renderer_build": build,
         "iterations": iterations,
         "load_average_1min_before_after": load,
+        # glibc's mmap threshold when set (e.g. 131072: every array above 128 KB mapped and returned when freed, as
+        # the arrays of a big object are; unset, arrays below 32 MB come from the heap and its reuse)
+        "MALLOC_MMAP_THRESHOLD_": os.environ.get("MALLOC_MMAP_THRESHOLD_"),
         "machine": machine(),
     }
     key = (

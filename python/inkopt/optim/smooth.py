@@ -30,6 +30,7 @@ of the step over a connected free region is kept.
 
 from __future__ import annotations
 
+import ctypes
 import math
 
 import numpy as np
@@ -184,4 +185,17 @@ class GradientSmoother:
         rows, index = slice(None) if self.rows is None else self.rows, self.index
         for c in range(g.shape[1]):
             g[rows, c] = self._diffuse(g[rows, c][:, None], index)[:, 0]
+            _release_freed()  # each call's working arrays, so the next call's are not placed beside them
         return g
+
+
+def _release_freed() -> None:
+    """Give freed memory back to the operating system (glibc's ``malloc_trim``; elsewhere nothing). Below glibc's
+    mmap threshold (up to 32 MB) a kernel call's working arrays come from the heap, and freed there they are not
+    always reused by the next call's (measured: Spot 20 mm with a 1 mm shell peaked 50 B per free voxel higher
+    while smoothing a column at a time without it; bench/results/step_memory_spot.json)."""
+    try:
+        trim = ctypes.CDLL(None).malloc_trim
+    except (OSError, AttributeError, TypeError):  # not glibc
+        return
+    trim(0)
