@@ -7,7 +7,8 @@ the same seed. At each warm-up step of the shell run the 99th percentile of |g| 
 gradient: over the free voxels alone (what the step scale was before the core joined its population) and with the
 core's voxels counted as zero gradients (``ExponentiatedGradient.held_rows``, what it is now); the all-free run's
 own percentile is the reference. Their ratios are the shell run's step sizes relative to the all-free run's
-(the step is lr m / s). Writes the entry ``<H>mm_shell<D>`` of bench/results/step_scale_spot.json with the
+(the step is lr m / s). The shell run is made twice, stepping with each; its training ΔE76 after the same
+iterations, same seeds, is in both. Writes the entry ``<H>mm_shell<D>`` of bench/results/step_scale_spot.json with the
 command, the commit and the load average.
 """
 
@@ -26,8 +27,9 @@ sys.path.insert(0, str(ROOT / "bench"))
 RESULTS_FILE = "step_scale_spot.json"
 
 
-def percentiles(height: float, shell: float | None, iterations: int, spp: int) -> dict:
-    """Per iteration the percentile over the free voxels and with the held voxels as zeros, and the ΔE76."""
+def percentiles(height: float, shell: float | None, iterations: int, spp: int, core_zeros: bool = True) -> dict:
+    """Per iteration the percentile over the free voxels and with the held voxels as zeros, and the ΔE76;
+    ``core_zeros`` False: the run steps with the percentile over its free voxels alone (as before)."""
     import numpy as np
     from common import SPOT
 
@@ -40,20 +42,23 @@ def percentiles(height: float, shell: float | None, iterations: int, spp: int) -
     scene = build_mesh_scene(MeshSpec(str(SPOT), height_mm=height, shell_mm=shell), InkTable.parse("vero-cmykw"))
     run = Optimization(scene, OptimizeConfig(iterations=iterations, spp=spp).for_scene("mesh"), threads=2)
     opt, seen = run.opt, {"free": [], "with_core": []}
+    held = opt.held_rows
     prepare = opt._prepare
 
     def recorded(g):
         g2 = np.ascontiguousarray(_rows(g), np.float32)
         seen["free"].append(abs_percentile(g2, opt.percentile, 2))
-        seen["with_core"].append(abs_percentile(g2, opt.percentile, 2, opt.held_rows * g2.shape[1]))
+        seen["with_core"].append(abs_percentile(g2, opt.percentile, 2, held * g2.shape[1]))
         prepare(g)
 
     opt._prepare = recorded
+    opt.held_rows = held if core_zeros else 0
     for _ in range(iterations):
         run.step()
     return {
         "free_voxels": run.param.n_free,
-        "held_rows": opt.held_rows,
+        "held_rows": held,
+        "core_zeros": core_zeros,
         "texels": len(scene.texels),
         "percentile_free": seen["free"],
         "percentile_with_core": seen["with_core"],
@@ -74,6 +79,7 @@ def main(argv=None) -> dict:
     load = [os.getloadavg()[0]]
     free = percentiles(args.height_mm, None, args.iterations, args.spp)
     shell = percentiles(args.height_mm, args.shell_mm, args.iterations, args.spp)
+    shell_before = percentiles(args.height_mm, args.shell_mm, args.iterations, args.spp, core_zeros=False)
     ref = free["percentile_free"]
     ratio = {  # the shell run's step relative to the all-free run's: the inverse ratio of the scales
         way: [r / s for r, s in zip(ref, shell[f"percentile_{way}"], strict=True)] for way in ("free", "with_core")
@@ -86,6 +92,7 @@ def main(argv=None) -> dict:
         "spp": args.spp,
         "all_free": free,
         "shell": shell,
+        "shell_stepping_as_before": shell_before,
         "step_ratio_shell_to_all_free": {
             "before (free voxels only)": ratio["free"],
             "now (core as zeros)": ratio["with_core"],
