@@ -84,6 +84,9 @@ def main(argv=None) -> dict:
     ratio = {  # the shell run's step relative to the all-free run's: the inverse ratio of the scales
         way: [r / s for r, s in zip(ref, shell[f"percentile_{way}"], strict=True)] for way in ("free", "with_core")
     }
+    # over the warm-up so far (the step scale is the running mean of the percentiles): the steps' ratio
+    ratio["scale before"] = free["step_scale"] / shell_before["step_scale"]
+    ratio["scale now"] = free["step_scale"] / shell["step_scale"]
     load.append(os.getloadavg()[0])
     entry = {
         **provenance(),
@@ -94,8 +97,10 @@ def main(argv=None) -> dict:
         "shell": shell,
         "shell_stepping_as_before": shell_before,
         "step_ratio_shell_to_all_free": {
-            "before (free voxels only)": ratio["free"],
-            "now (core as zeros)": ratio["with_core"],
+            "per iteration, before (free voxels)": ratio["free"],
+            "per iteration, now (core as zeros)": ratio["with_core"],
+            "step scale, before": ratio["scale before"],
+            "step scale, now": ratio["scale now"],
         },
         "load_average_1min_before_after": load,
         "machine": machine(),
