@@ -294,28 +294,28 @@ class Optimization:
         t0 = time.perf_counter()
         fwd_seed, grad_seed = iteration_seeds(cfg.seed, self.iteration)
         renderer = self.renderer()
-        forward = cfg.forward_spp > 0 or self.c_avg is None
+        forward, passes = cfg.forward_spp > 0 or self.c_avg is None, {"forward": None}
         if forward:  # without forward passes (forward_spp 0) only the first iteration renders one
             spp0 = cfg.forward_spp or START_FORWARD_SPP
             res = renderer.render(self.texels, spp0, fwd_seed, cfg.include_specular)
             self._average(res.rgb, res.var_mean, spp0, decay=True)
+            passes["forward"] = res.stats()
+            del res
         t1 = time.perf_counter()
-        c = self.c_avg
-        lr = self.loss(c, self.c_var, all_terms=False)  # the terms it optimises; the evaluation has all
+        lr = self.loss(self.c_avg, self.c_var, all_terms=False)  # the terms it optimises; the evaluation has all
         de = float(delta_e76(lr.lab, self.loss.target_lab).mean())
+        adjoint, terms = lr.grad.astype(np.float32), dict(loss=lr.value, e1=lr.e1, e2=lr.e2, e3=lr.e3)
+        del lr  # its per-texel arrays: not beside the gradient pass's sums (the step's peak)
         t2 = time.perf_counter()
+        index = self.param.free_index
         gs, ga, gres = renderer.gradient(
-            self.texels,
-            lr.grad.astype(np.float32),
-            cfg.spp,
-            grad_seed,
-            cfg.include_specular,
-            cfg.grad_method,
-            grad_index=self.param.free_index,
+            self.texels, adjoint, cfg.spp, grad_seed, cfg.include_specular, cfg.grad_method, grad_index=index
         )
         # The gradient pass's own estimate joins the average only now, after its gradient is taken, so the
         # adjoint never correlates with the noise of the gradient it multiplies.
         self._average(gres.rgb, gres.var_mean, cfg.spp, decay=not forward)
+        passes["gradient"] = gres.stats()
+        del gres, adjoint
         t3 = time.perf_counter()
         g_x = np.empty_like(self.x)
         for lo, hi in self.param.chunks():  # dE/dsigma -> dE/drho -> dE/dx in pieces (bit-identical)
@@ -332,10 +332,10 @@ class Optimization:
             del g_x
             self.iteration += 1
             t4 = time.perf_counter()
-            self.last_passes = {"forward": res.stats() if forward else None, "gradient": gres.stats()}
+            self.last_passes = passes
             times = dict(seconds=t4 - t0, render_s=t1 - t0, gradient_s=t3 - t2, loss_s=t2 - t1, step_s=t4 - t3)
-            self.history.append(loss=lr.value, e1=lr.e1, e2=lr.e2, e3=lr.e3, delta_e76=de, **times)
-        return {"loss": lr.value, "delta_e76": de}
+            self.history.append(**terms, delta_e76=de, **times)
+        return {"loss": terms["loss"], "delta_e76": de}
 
     def _average(self, rgb: np.ndarray, var: np.ndarray, spp: int, decay: bool) -> np.ndarray:
         """Add an estimate of ``spp`` samples per texel (variance ``var``) to the sample-weighted running average
