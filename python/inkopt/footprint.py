@@ -65,8 +65,9 @@ RUN_INSIDE_BYTES = 24.0
 #:   working arrays: 120 B by what the code stores, 130 B measured (Spot 20 mm all free, each array above 128 KB
 #:   mapped as a big object's are: the phases' peak 82.5 B per free voxel above the step's start, plus the 48 B;
 #:   bench/results/step_memory_spot.json, entry 20mm_after_mmap128k; before the in-place update and the column-wise
-#:   smoothing 97.6 + 52 = 150 B, entry 20mm_before_mmap128k, where 148 B stood); per texel the passes' arrays
-#:   (rgb, variances, adjoint, running average, target, normal: ~128 B);
+#:   smoothing 97.6 + 52 = 150 B, entry 20mm_before_mmap128k, where 148 B stood); with it the step stage of Spot
+#:   40 mm all free is 2.50 GiB against the 2.52 GiB its step peaked at (entry 40mm_after); per texel the passes'
+#:   arrays (rgb, variances, adjoint, running average, target, normal: ~128 B);
 STEP_FREE_BYTES = 130.0
 STEP_TEXEL_BYTES = 128.0
 #: - the figures (the start's, the baseline's, the result's): per free voxel the variables and momentum (40 B) and
