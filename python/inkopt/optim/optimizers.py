@@ -96,7 +96,8 @@ class ExponentiatedGradient(_Moments):
     gradient (the core below a shell, ``Optimization``): the percentile is taken over the object's inside voxels,
     not only the free ones, so a shell run, whose free voxels are the surface's, steps as far as the run with every
     voxel free does (its deep voxels' |g| lie far below the 99th percentile); 0 (every voxel free) leaves the
-    percentile that of g alone, bit for bit.
+    percentile that of g alone, bit for bit. Spot 20 mm with a 1 mm shell stepped 0.82 times as far as the all-free
+    run over the free voxels alone, 0.99 times with its core counted (bench/results/step_scale_spot.json).
 
     The update and the percentile run in the Rust core (``inkopt_core::kernels::step``, on ``threads`` threads,
     default all cores), in float32 exactly as numpy evaluates ``x - lr * (m / bias) / s`` and ``np.percentile``:
