@@ -60,11 +60,15 @@ DEFAULT_BAND = 3
 #: sigma_t and albedo; then it peaks in one of two stages:
 RUN_GRID_BYTES = 2.125
 RUN_INSIDE_BYTES = 24.0
-#: - a step: per free voxel the variables, momentum, their replacements, index, share and gradient (100 B) and the
-#:   core's fixed-point gradient sums (48 B); with them Spot 40 mm's iterations come to 2.87 GiB against the
-#:   2.94 GiB bench/results/mesh_40mm.json measured (no figures there); per texel the passes' arrays (rgb,
-#:   variances, adjoint, running average, target, normal: ~128 B);
-STEP_FREE_BYTES = 148.0
+#: - a step: per free voxel the variables, momentum and index held through the run (48 B) and, at the step's peak,
+#:   the core's fixed-point gradient sums with the float gradients taken from them (72 B) or the smoothing's
+#:   working arrays: 120 B by what the code stores, 130 B measured (Spot 20 mm all free, each array above 128 KB
+#:   mapped as a big object's are: the phases' peak 82.5 B per free voxel above the step's start, plus the 48 B;
+#:   bench/results/step_memory_spot.json, entry 20mm_after_mmap128k; before the in-place update and the column-wise
+#:   smoothing 97.6 + 52 = 150 B, entry 20mm_before_mmap128k, where 148 B stood); with it the step stage of Spot
+#:   40 mm all free is 2.50 GiB against the 2.52 GiB its step peaked at (entry 40mm_after); per texel the passes'
+#:   arrays (rgb, variances, adjoint, running average, target, normal: ~128 B);
+STEP_FREE_BYTES = 130.0
 STEP_TEXEL_BYTES = 128.0
 #: - the figures (the start's, the baseline's, the result's): per free voxel the variables and momentum (40 B) and
 #:   per texel the loss's SSIM window (~120 entries of 5 B, its square sharing them) and Sobel operators (~17 entries

@@ -467,8 +467,8 @@ def test_the_loop_steps_with_the_decayed_step_size(decay):
     from inkopt.optim.optimizers import step_factor
 
     r = run(small_chart_scene(12, 8, 0.3), iterations=6, decay=decay)
-    used, step = [], r.opt.step
-    r.opt.step = lambda x, g: used.append(r.opt.lr) or step(x, g)
+    used, update = [], r.opt.update
+    r.opt.update = lambda x, g, into_g=False: used.append(r.opt.lr) or update(x, g, into_g)
     r.run()
     base = r.cfg.step_size
     assert used == [base * step_factor(t, 6, decay) for t in range(6)]

@@ -32,10 +32,11 @@ from ..scenes import Scene
 from ..spectral.viewing import Viewing
 from .checkpoint import History, check_state, read_checkpoint, write_checkpoint
 from .config import COLD_INITS, OptimizeConfig
+from .interrupt import interrupt_deferred
 from .optimizers import make_optimizer, step_factor
 from .param import Parameterization, initial_free_mixture
 from .progress import ProgressLines, changed_settings
-from .smooth import MAX_DEPTH, GradientSmoother, nearest_texels, texel_guide
+from .smooth import MAX_DEPTH, GradientSmoother, nearest_texel_chunks, texel_guide
 from .stopping import Schedule
 
 #: samples per texel of the first iteration's forward render of a run without forward passes (forward_spp 0)
@@ -97,7 +98,9 @@ class Optimization:
         self.param.fixed_share.digest(h)  # the dense array's bytes, a layer at a time
         self._problem_digest = h.hexdigest()[:16]
         self.x = self.param.variables_for(self._initial_free_mixture())
-        self.opt = make_optimizer(cfg.optimizer, cfg.step_size, self.x.shape, threads)
+        # the inside voxels held fixed (a shell's core) join the step scale's population with a zero gradient
+        held = 0 if base.inside is None else max(int(np.count_nonzero(base.inside)) - self.param.n_free, 0)
+        self.opt = make_optimizer(cfg.optimizer, cfg.step_size, self.x.shape, threads, held_rows=held)
         self.smoother = self._smoother()
         self._renderer: TexelRenderer | None = None
         self.iteration = 0
@@ -124,12 +127,15 @@ class Optimization:
             return None
         guide = rows = None
         if cfg.smooth_edge > 0:  # guided: the free voxels under flat texels only, down to MAX_DEPTH
-            nearest, dist = nearest_texels(
+            parts = []  # chunk by chunk, only the rows kept: no (F,) arrays beside the smoother's own
+            for lo, near, dist in nearest_texel_chunks(
                 self.param.shape, self.param.free_index, self.texels.pos_vox, MAX_DEPTH, threads=threads
-            )
-            rows = np.flatnonzero((nearest >= 0) & self.loss.flat[nearest])
-            guide = texel_guide(self.loss.target_lab, nearest[rows], dist[rows])
-            del nearest, dist  # not beside the smoother's own arrays
+            ):
+                keep = np.flatnonzero((near >= 0) & self.loss.flat[near])
+                parts.append((keep + lo, texel_guide(self.loss.target_lab, near[keep], dist[keep])))
+            rows = np.concatenate([r for r, _ in parts] or [np.empty(0, np.int64)])
+            guide = np.concatenate([g for _, g in parts] or [np.empty((0, 4), np.float32)])
+            del parts
         return GradientSmoother(
             self.param.shape, self.param.free_index, cfg.smooth, guide, cfg.smooth_edge, rows, threads
         )
@@ -272,7 +278,8 @@ class Optimization:
         self._renderer = None
 
     def _snapshot(self) -> tuple:
-        """References to everything a step replaces (it never changes these arrays in place)."""
+        """References to what a step changes: x and the optimiser's state arrays, which it changes in place only
+        at its end, with the iteration count, where an interrupt cannot stop it (``interrupt_deferred``)."""
         o = self.opt
         return (self.x, self.iteration, self.c_avg, self.c_var, self.c_weight, o.m, o.v, o.t, len(self.history.loss))
 
@@ -287,28 +294,28 @@ class Optimization:
         t0 = time.perf_counter()
         fwd_seed, grad_seed = iteration_seeds(cfg.seed, self.iteration)
         renderer = self.renderer()
-        forward = cfg.forward_spp > 0 or self.c_avg is None
+        forward, passes = cfg.forward_spp > 0 or self.c_avg is None, {"forward": None}
         if forward:  # without forward passes (forward_spp 0) only the first iteration renders one
             spp0 = cfg.forward_spp or START_FORWARD_SPP
             res = renderer.render(self.texels, spp0, fwd_seed, cfg.include_specular)
             self._average(res.rgb, res.var_mean, spp0, decay=True)
+            passes["forward"] = res.stats()
+            del res
         t1 = time.perf_counter()
-        c = self.c_avg
-        lr = self.loss(c, self.c_var, all_terms=False)  # the terms it optimises; the evaluation has all
+        lr = self.loss(self.c_avg, self.c_var, all_terms=False)  # the terms it optimises; the evaluation has all
         de = float(delta_e76(lr.lab, self.loss.target_lab).mean())
+        adjoint, terms = lr.grad.astype(np.float32), dict(loss=lr.value, e1=lr.e1, e2=lr.e2, e3=lr.e3)
+        del lr  # its per-texel arrays: not beside the gradient pass's sums (the step's peak)
         t2 = time.perf_counter()
+        index = self.param.free_index
         gs, ga, gres = renderer.gradient(
-            self.texels,
-            lr.grad.astype(np.float32),
-            cfg.spp,
-            grad_seed,
-            cfg.include_specular,
-            cfg.grad_method,
-            grad_index=self.param.free_index,
+            self.texels, adjoint, cfg.spp, grad_seed, cfg.include_specular, cfg.grad_method, grad_index=index
         )
         # The gradient pass's own estimate joins the average only now, after its gradient is taken, so the
         # adjoint never correlates with the noise of the gradient it multiplies.
         self._average(gres.rgb, gres.var_mean, cfg.spp, decay=not forward)
+        passes["gradient"] = gres.stats()
+        del gres, adjoint
         t3 = time.perf_counter()
         g_x = np.empty_like(self.x)
         for lo, hi in self.param.chunks():  # dE/dsigma -> dE/drho -> dE/dx in pieces (bit-identical)
@@ -316,28 +323,19 @@ class Optimization:
             g_x[lo:hi] = self.param.backward(self.x[lo:hi], g_rho, natural=self.opt.natural, lo=lo)
         del gs, ga
         self.opt.lr = cfg.step_size * step_factor(self.iteration, self.schedule.end, cfg.decay)
-        x_new = self.opt.step(self.x, g_x).astype(np.float32, copy=False)  # a new array (optimizers.py)
-        del g_x  # freed before the smoothing, whose working arrays make the step's (and a run's) memory peak
-        if self.smoother is not None:  # the step, not the gradient: the optimiser's step scale stays its own
-            step = self.smoother.apply(np.subtract(x_new, self.x, out=x_new))  # in place: x_new becomes the step
-            x_new = np.add(self.x, step, out=step)
-        self.x = x_new
-        self.iteration += 1
-        t4 = time.perf_counter()
-        self.last_passes = {"forward": res.stats() if forward else None, "gradient": gres.stats()}
-        self.history.append(
-            loss=lr.value,
-            e1=lr.e1,
-            e2=lr.e2,
-            e3=lr.e3,
-            delta_e76=de,
-            seconds=t4 - t0,
-            render_s=t1 - t0,
-            gradient_s=t3 - t2,
-            loss_s=t2 - t1,
-            step_s=t4 - t3,
-        )
-        return {"loss": lr.value, "delta_e76": de}
+        with interrupt_deferred():  # x and the optimiser's state change in place: the step runs to its end
+            # in place, no new (F, N) arrays; smoothed is the step (g_x becomes x' - x), not the gradient: the
+            # optimiser's step scale stays its own
+            self.opt.update(self.x, g_x, into_g=self.smoother is not None)
+            if self.smoother is not None:
+                np.add(self.x, self.smoother.apply(g_x), out=self.x)
+            del g_x
+            self.iteration += 1
+            t4 = time.perf_counter()
+            self.last_passes = passes
+            times = dict(seconds=t4 - t0, render_s=t1 - t0, gradient_s=t3 - t2, loss_s=t2 - t1, step_s=t4 - t3)
+            self.history.append(**terms, delta_e76=de, **times)
+        return {"loss": terms["loss"], "delta_e76": de}
 
     def _average(self, rgb: np.ndarray, var: np.ndarray, spp: int, decay: bool) -> np.ndarray:
         """Add an estimate of ``spp`` samples per texel (variance ``var``) to the sample-weighted running average
@@ -417,8 +415,8 @@ class Optimization:
                     lines.total = end
                     lines.update(self.iteration, info["loss"], info["delta_e76"])
         except KeyboardInterrupt:
-            if snap is not None:  # interrupted inside a step: back to its start, so a resume repeats it exactly
-                self._restore(snap)
+            if snap is not None and self.iteration == snap[1]:  # interrupted before a step's update: back to its
+                self._restore(snap)  # start, so a resume repeats it exactly (after it: the step is done)
             if checkpoint is not None:
                 self.save_checkpoint(checkpoint)
             raise

@@ -50,7 +50,8 @@ class Parameterization:
         #: this order)
         self.free_index = np.union1d(base[~np.isin(base, fs.index)], fs.index[room]) if len(fs.index) else base
         del base
-        #: the free voxels' free share (F,) and fixed shares (F, N) (None: all zero), made in pieces
+        #: the free voxels' free share (F,) float32 and fixed shares (F, N) (None: all zero), made in pieces; without
+        #: fixed shares every free share is 1, held as a read-only broadcast view of one value (nothing per voxel)
         self.share_f = np.empty(len(self.free_index), np.float32)
         any_fixed = False
         for lo, hi in self.chunks():
@@ -58,6 +59,8 @@ class Parameterization:
             self.share_f[lo:hi] = np.clip(1.0 - rows.sum(-1), 0.0, 1.0)
             any_fixed = any_fixed or bool(rows.any())
         self.fixed_f = fs.at(self.free_index) if any_fixed else None
+        if not any_fixed:
+            self.share_f = np.broadcast_to(np.float32(1.0), self.share_f.shape)  # the same values: 1 - 0
 
     @property
     def shape(self) -> tuple:
