@@ -14,7 +14,8 @@ PKG = REPO / "python" / "inkopt"
 CRATES = REPO / "crates"
 # top to bottom; a module may import from its own layer and any layer before it
 LAYERS = [
-    {"units", "color", "errors", "io", "threads", "images", "pictures", "charts", "lighting", "_core", "__init__"},
+    {"units", "color", "errors", "io", "threads", "heap", "images", "pictures", "charts", "lighting"}
+    | {"_core", "__init__"},
     {"model"},
     {"rundir"},
     {"render", "distributed", "shardwire"},

@@ -18,7 +18,6 @@ a spec (``scenes.spec``: ``scenes.build_scene(SlabSpec(...), inks)``, ``scenes.b
 
 from __future__ import annotations
 
-import ctypes
 import gc
 import resource
 import time
@@ -28,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import heap
 from .distributed import renderer_factory
 from .errors import ParameterError
 from .estimate import ANNOUNCE_SECONDS, Estimate, estimate_run
@@ -81,11 +81,7 @@ def release_freed_memory() -> None:
     peaked at 4.07 GiB without it, 3.72 GiB with it: bench/results/c2f_memory.json, entries ``spot40_c2f_after`` and
     ``spot40_c2f_after_trim``)."""
     gc.collect()
-    try:
-        trim = ctypes.CDLL(None).malloc_trim
-    except (OSError, AttributeError, TypeError):  # not glibc (macOS, Windows, musl builds without it)
-        return
-    trim(0)
+    heap.trim()
 
 
 @dataclass(frozen=True)

@@ -30,12 +30,12 @@ of the step over a connected free region is kept.
 
 from __future__ import annotations
 
-import ctypes
 import math
 
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .. import heap
 from ..threads import check_threads
 
 ALPHA = 0.125
@@ -185,18 +185,9 @@ class GradientSmoother:
         rows, index = slice(None) if self.rows is None else self.rows, self.index
         for c in range(g.shape[1]):
             g[rows, c] = self._diffuse(g[rows, c][:, None], index)[:, 0]
-            _release_freed()  # each call's working arrays, so the next call's are not placed beside them
+            # each call's working arrays given back, so the next call's are not placed beside them: Spot 20 mm with a
+            # 1 mm shell, smoothing a column at a time, 132 B per free voxel above the step's start without it, 72
+            # with it, 85 all columns at once (bench/results/step_memory_spot.json, entries ``20mm_shell1_after``,
+            # ``_after_trim``, ``_before``)
+            heap.trim()
         return g
-
-
-def _release_freed() -> None:
-    """Give freed memory back to the operating system (glibc's ``malloc_trim``; elsewhere nothing). Below glibc's
-    mmap threshold (up to 32 MB) a kernel call's working arrays come from the heap, and freed there they are not
-    always reused by the next call's (Spot 20 mm with a 1 mm shell, smoothing a column at a time: 132 B per free
-    voxel above the step's start without it, 72 with it, 85 all columns at once; bench/results/step_memory_spot.json,
-    entries ``20mm_shell1_after``, ``_after_trim``, ``_before``)."""
-    try:
-        trim = ctypes.CDLL(None).malloc_trim
-    except (OSError, AttributeError, TypeError):  # not glibc
-        return
-    trim(0)
