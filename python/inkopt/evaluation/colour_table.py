@@ -319,6 +319,14 @@ def _patch_colour(rnd: Renderer, texels: Texels, seed: int, max_stderr: float) -
     return mean, se
 
 
+def check_patch_settings(patch_mm: float, max_stderr: float) -> None:
+    """The one check of a colour table's patch thickness (mm) and error target (ΔE76), RGB or spectral."""
+    if not (np.isfinite(patch_mm) and patch_mm > 0):
+        raise ParameterError(f"`patch_mm` must be a positive thickness in mm, got {patch_mm}")
+    if not max_stderr > 0:
+        raise ParameterError(f"`max_stderr` must be positive, got {max_stderr}")
+
+
 def colour_table(
     inks: InkTable,
     g: float | None = None,
@@ -336,10 +344,7 @@ def colour_table(
     """
     g = inks.g if g is None else float(g)
     step = default_step(len(inks)) if step is None else int(step)
-    if not (np.isfinite(patch_mm) and patch_mm > 0):
-        raise ParameterError(f"`patch_mm` must be a positive thickness in mm, got {patch_mm}")
-    if not max_stderr > 0:
-        raise ParameterError(f"`max_stderr` must be positive, got {max_stderr}")
+    check_patch_settings(patch_mm, max_stderr)
     key = table_key(inks, g, ior, patch_mm, step, max_stderr)
     path = cache_dir() / f"colour_table_{key}.npz"
     for where in (path, PACKAGED / path.name) if cache else ():

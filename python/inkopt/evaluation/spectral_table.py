@@ -52,6 +52,7 @@ from .colour_table import (
     REFINE_K,
     ColourTable,
     cache_dir,
+    check_patch_settings,
     default_step,
     table_mixtures,
 )
@@ -176,10 +177,7 @@ def spectral_patches(
     when present, else built (and cached). ``g`` defaults to the table's."""
     g = table.g if g is None else float(g)
     step = default_step(len(table.names)) if step is None else int(step)
-    if not (np.isfinite(patch_mm) and patch_mm > 0):
-        raise ParameterError(f"`patch_mm` must be a positive thickness in mm, got {patch_mm}")
-    if not max_stderr > 0:
-        raise ParameterError(f"`max_stderr` must be positive, got {max_stderr}")
+    check_patch_settings(patch_mm, max_stderr)
     key = spectral_table_key(table, g, ior, patch_mm, step, max_stderr)
     path = cache_dir() / f"spectral_colour_table_{key}.npz"
     for where in (path, PACKAGED / path.name) if cache else ():
