@@ -5,6 +5,7 @@ inkopt's defaults at two sizes and three time budgets, quantized and evaluated a
     nice -n 5 python bench/mesh_suite.py run              # every mesh x size x budget (hours; resumable)
     nice -n 5 python bench/mesh_suite.py run --meshes duck,coin --sizes 8 --budgets 3it --results FILE
     python bench/mesh_suite.py run --meshes duck --sizes 10 --budgets short --variant NAME --optimize-args='...'
+    python bench/mesh_suite.py refresh                    # add paired differences to cells recorded without them
     python bench/mesh_suite.py table                      # the table between its markers in docs/quality.md
 
 ``fetch`` downloads each source package of ``SOURCES`` at its pinned version with the registry's own client
@@ -32,7 +33,10 @@ of str), ``texels``, ``iterations``, ``optimize_seconds``, ``seconds_per_iterati
 ``load_average_before``, ``load_average_after``, ``finished``, ``commit``, ``command``, and ``results`` ->
 "continuous" | "printed" | "surface" | "extrusion" -> ``delta_e76_corrected``, ``delta_e2000``, ``ssim``,
 ``mottle_l2`` and ``stderr`` (the same keys; null where every texel was rendered: those figures carry no sampling
-error, and the ΔE76 is corrected for the Monte Carlo noise).
+error, and the ΔE76 is corrected for the Monte Carlo noise), and ``differences`` -> "printed - extrusion" |
+"printed - surface" | "continuous - printed" -> ``delta_e76_corrected``, ``delta_e2000``, ``ssim`` -> ``value``,
+``stderr``: the paired differences of the evaluation (per texel of the same texels and renders, so their errors are
+far smaller than those of the figures' own; ``refresh`` adds them to cells recorded before).
 """
 
 from __future__ import annotations
@@ -314,6 +318,28 @@ def figures(entry: dict, stderr: dict | None) -> dict:
     return out
 
 
+#: evaluation.json's paired differences kept per cell: (name in the cell, name in evaluation.json)
+PAIRS = (
+    ("printed - extrusion", "quantized - extrusion"),
+    ("printed - surface", "quantized - surface"),
+    ("continuous - printed", "continuous - quantized"),
+)
+
+
+def differences(ev: dict) -> dict:
+    """The paired differences of evaluation.json ``ev`` (each result minus another, per texel of the same texels and
+    renders): ``{"printed - extrusion": {figure: {"value", "stderr"}}, ...}`` for the figures of ``figures``; empty
+    for an evaluation without baselines."""
+    keys = {"delta_e76_corrected": "delta_e76_mean_corrected", "delta_e2000": "delta_e2000_mean", "ssim": "ssim"}
+    got = ev.get("differences", {})
+    return {ours: {k: got[theirs].get(v) for k, v in keys.items()} for ours, theirs in PAIRS if theirs in got}
+
+
+def run_folder(cache: Path, mesh: str, height: float, budget: str, variant: str | None) -> Path:
+    """A cell's run folder: ``cache``/runs/MESH_Hmm_BUDGET, ``_VARIANT`` appended for a variant."""
+    return cache / "runs" / (f"{mesh}_{height:g}mm_{budget}" + (f"_{variant}" if variant else ""))
+
+
 def cell_key(mesh: str, height: float, budget: str, variant: str | None) -> str:
     """A cell's key in the results file: MESH/Hmm/BUDGET, and +VARIANT for a variant's cell."""
     return f"{mesh}/{height:g}mm/{budget}" + (f"+{variant}" if variant else "")
@@ -327,7 +353,7 @@ def run_cell(mesh: str, height: float, budget: str, cache: Path, extra: Extra) -
     path = mesh_file(mesh, cache)
     if not path.is_file():
         raise SystemExit(f"{path} is missing: run `python bench/mesh_suite.py fetch` first")
-    out = cache / "runs" / (f"{mesh}_{height:g}mm_{budget}" + (f"_{extra.variant}" if extra.variant else ""))
+    out = run_folder(cache, mesh, height, budget, extra.variant)
     out.mkdir(parents=True, exist_ok=True)
     log = out / "suite.log"
     settings = ["--height-mm", f"{height:g}", *budget_args(budget), *opt_args]
@@ -365,7 +391,28 @@ def run_cell(mesh: str, height: float, budget: str, cache: Path, extra: Extra) -
         "load_average_after": os.getloadavg()[0],
         "finished": time.strftime("%Y-%m-%d %H:%M"),
         "results": {k: figures(v, v.get("stderr")) for k, v in results.items()},
+        "differences": differences(ev),
     }
+
+
+def refresh(cache: Path, results: Path) -> None:
+    """Add each recorded cell's paired differences (``differences``) from its run folder's evaluation.json, for
+    cells recorded before the results kept them; nothing else of a cell changes."""
+    data = json.loads(results.read_text())
+    for key, c in data["cells"].items():
+        ev = run_folder(cache, c["mesh"], c["height_mm"], c["budget"], c.get("variant")) / "evaluation.json"
+        if "differences" not in c and ev.is_file():
+            c["differences"] = differences(json.loads(ev.read_text()))
+            print(f"{key}: paired differences added")
+    write_results(results, data)
+
+
+def write_results(results: Path, data: dict) -> None:
+    """Write the results file atomically."""
+    results.parent.mkdir(parents=True, exist_ok=True)
+    tmp = results.with_suffix(".tmp")
+    tmp.write_text(json.dumps(data, indent=2) + "\n")
+    tmp.replace(results)
 
 
 def run(cache: Path, results: Path, cells: list[tuple[str, float, str]], extra: Extra) -> None:
@@ -380,10 +427,7 @@ def run(cache: Path, results: Path, cells: list[tuple[str, float, str]], extra: 
         cell = run_cell(mesh, height, budget, cache, extra)
         data["cells"][key] = {**cell, **provenance()}
         data.update(provenance())
-        results.parent.mkdir(parents=True, exist_ok=True)
-        tmp = results.with_suffix(".tmp")
-        tmp.write_text(json.dumps(data, indent=2) + "\n")
-        tmp.replace(results)
+        write_results(results, data)
         r = cell["results"]
         print(f"{key}: " + ", ".join(f"{k} {v['delta_e76_corrected']:.2f}" for k, v in r.items()) + " dE76")
 
@@ -412,7 +456,7 @@ def table(results: Path, doc: Path, name: str = "mesh-suite") -> None:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("step", choices=["fetch", "run", "table"])
+    ap.add_argument("step", choices=["fetch", "run", "refresh", "table"])
     ap.add_argument("--cache", type=Path, default=CACHE, help=f"downloads, meshes and runs (default {CACHE})")
     ap.add_argument("--meshes", default=",".join(MESHES), help="comma-separated subset (default: all)")
     ap.add_argument("--sizes", default=",".join(f"{s:g}" for s in SIZES), help="heights in mm (default 10,20)")
@@ -436,6 +480,8 @@ def main(argv: list[str] | None = None) -> int:
         budgets = [b for b in a.budgets.split(",") if b and budget_args(b)]
         extra = Extra.of(shlex.split(a.optimize_args), shlex.split(a.evaluate_args), a.variant)
         run(a.cache, a.results, [(m, s, b) for m in meshes for s in sizes for b in budgets], extra)
+    elif a.step == "refresh":
+        refresh(a.cache, a.results)
     else:
         table(a.results, a.doc, a.table_name)
     return 0

@@ -964,10 +964,24 @@ def suite_cell(m: dict) -> str:
     return " / ".join([pm("delta_e76_corrected", 2), pm("delta_e2000", 2), pm("ssim", 3), pm("mottle_l2", 2)])
 
 
+def suite_difference(c: dict, pair: str, figures: tuple[str, ...], sign: int = 1) -> str:
+    """``sign`` times a mesh-suite cell's paired difference ``pair`` ("printed - extrusion", "continuous - printed")
+    in ``figures``, each ± its standard error; the difference of the two results' own figures (no ±) for a cell
+    recorded without paired differences."""
+    got = c.get("differences", {}).get(pair)
+    digits = {"ssim": 3}
+    if got is None:
+        a, b = (c["results"][k] for k in pair.split(" - "))
+        return " / ".join(f"{sign * (a[k] - b[k]):+.{digits.get(k, 2)}f}" for k in figures)
+    return " / ".join(
+        f"{sign * got[k]['value']:+.{digits.get(k, 2)}f} ± {got[k]['stderr']:.{digits.get(k, 2)}f}" for k in figures
+    )
+
+
 def mesh_suite(path: Path = BENCH / "mesh_suite.json", variants: bool | None = None) -> str:
     """bench/mesh_suite.py's cells (one row each, in file order; a variant's budget column names it; ``variants``
     False: the defaults' cells only, True: the variants' only, None: all): the four results' figures, the printed
-    result's lead over the extrusion baseline and its cost over the continuous one in ΔE76, the gamut floor, the
+    result's paired difference from the extrusion baseline and from the continuous result, the gamut floor, the
     run's iterations and times, and the machine's load."""
     d, rows = load(path), []
     for c in d["cells"].values():
@@ -985,8 +999,8 @@ def mesh_suite(path: Path = BENCH / "mesh_suite.json", variants: bool | None = N
                 suite_cell(p),
                 suite_cell(x),
                 suite_cell(r["surface"]),
-                f(p["delta_e76_corrected"] - x["delta_e76_corrected"]),
-                f(p["delta_e76_corrected"] - cont["delta_e76_corrected"]),
+                suite_difference(c, "printed - extrusion", ("delta_e76_corrected", "delta_e2000", "ssim")),
+                suite_difference(c, "continuous - printed", ("delta_e76_corrected", "ssim"), sign=-1),
                 f(c["gamut_floor_delta_e76"]),
                 f"{c['load_average_before']:.1f}",
             ]
@@ -1000,8 +1014,8 @@ def mesh_suite(path: Path = BENCH / "mesh_suite.json", variants: bool | None = N
         "printed",
         "extrusion baseline",
         "surface baseline",
-        "printed − extrusion ΔE76",
-        "printed − continuous ΔE76",
+        "printed − extrusion (paired): ΔE76 / ΔE2000 / SSIM",
+        "printed − continuous (paired): ΔE76 / SSIM",
         "gamut floor ΔE76",
         "load",
     ]
