@@ -74,17 +74,36 @@ def test_run_and_table_end_to_end(tmp_path, monkeypatch):
     results = tmp_path / "suite.json"
     argv = ["run", "--cache", str(tmp_path), "--meshes", "cube", "--sizes", "3", "--budgets", "2it"]
     fast = " ".join(FAST_RUN[2:])  # the fewest samples (the budget gives the iterations)
-    variant = [f"--optimize-args={fast}", "--evaluate-args=--spp 8", "--variant", "fast"]
+    variant = [f"--optimize-args={fast}", "--evaluate-args=--spp 8 --texel-sample 300", "--variant", "fast"]
     assert suite.main([*argv, "--results", str(results), *variant]) == 0
     cells = json.loads(results.read_text())["cells"]
     assert list(cells) == ["cube/3mm/2it+fast"] and (tmp_path / "runs" / "cube_3mm_2it_fast" / "report.json").is_file()
     cell = cells["cube/3mm/2it+fast"]
     assert cell["iterations"] == 2 and cell["height_mm"] == 3 and cell["variant"] == "fast"
     assert cell["optimize_args"][:4] == ["--height-mm", "3", "--iterations", "2"]
-    assert cell["optimize_args"][-2:] == ["--texture", "tex.png"] and cell["evaluate_args"] == ["--spp", "8"]
+    assert cell["optimize_args"][-2:] == ["--texture", "tex.png"] and cell["evaluate_args"] == [
+        "--spp",
+        "8",
+        "--texel-sample",
+        "300",
+    ]
     assert set(cell["results"]) == {"continuous", "printed", "surface", "extrusion"}
     for fig in cell["results"].values():
         assert 0 < fig["delta_e76_corrected"] < 100 and -1 <= fig["ssim"] <= 1 and fig["delta_e2000"] > 0
+    # the evaluation's paired differences, and refresh adding them to a cell recorded without them
+    ev = json.loads((tmp_path / "runs" / "cube_3mm_2it_fast" / "evaluation.json").read_text())
+    lead = cell["differences"]["printed - extrusion"]
+    assert lead["delta_e2000"] == ev["differences"]["quantized - extrusion"]["delta_e2000_mean"]
+    assert lead["ssim"]["stderr"] >= 0 and set(cell["differences"]) == {
+        "printed - extrusion",
+        "printed - surface",
+        "continuous - printed",
+    }
+    data = json.loads(results.read_text())
+    del data["cells"]["cube/3mm/2it+fast"]["differences"]
+    results.write_text(json.dumps(data))
+    assert suite.main(["refresh", "--cache", str(tmp_path), "--results", str(results)]) == 0
+    assert json.loads(results.read_text())["cells"]["cube/3mm/2it+fast"] == cell
     # a derived variant's volume: the run's last iterate after its one finishing pass is the run's own result
     paired = load_file_module(REPO / "bench" / "mesh_suite_paired.py", "mesh_suite_paired")
     run = tmp_path / "runs" / "cube_3mm_2it_fast"
@@ -104,6 +123,7 @@ def test_run_and_table_end_to_end(tmp_path, monkeypatch):
     row = next(line for line in text.splitlines() if line.startswith("| cube |"))
     printed = cell["results"]["printed"]["delta_e76_corrected"]
     assert "| 3 | 2it + fast | 2 it," in row and f"{printed:.2f}" in row
+    assert f"{lead['delta_e76_corrected']['value']:+.2f} ± {lead['delta_e76_corrected']['stderr']:.2f}" in row
     assert "old" not in text and text.endswith("<!-- /table:mesh-suite-variants -->\nafter\n")
 
 
