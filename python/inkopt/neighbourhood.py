@@ -95,8 +95,8 @@ def gaussian_window(pos_vox: np.ndarray, sigma: float):
     Chebyshev distance is <= radius = int(3.5 sigma + 0.5) (voxels), n (I,) = K @ 1 the window weight that falls on
     texels. On a flat face's interior W equals scikit-image's (truncate=3.5) Gaussian window. Returns (K, n, radius).
     K is written into its final arrays ``WINDOW_CHUNK_ROWS`` rows at a time (columns sorted within each row), so
-    building it takes little more than K itself (~5 bytes per entry, ~120 entries per texel on a face; 9 while it
-    is built).
+    building it takes little more than K itself (~5 bytes per entry, ~120 entries per texel on a face, while it is
+    built too).
     """
     pos = np.asarray(pos_vox, np.float64)
     radius = int(3.5 * sigma + 0.5)
@@ -111,7 +111,9 @@ def gaussian_window(pos_vox: np.ndarray, sigma: float):
     np.cumsum(counts, out=indptr[1:])
     del counts
     indices = np.empty(int(indptr[-1]), idx)
-    codes, table = np.empty(int(indptr[-1]), np.uint32), _Codes()
+    # codes in the narrowest type that holds the table so far (uint8 on the lattice: 5 B per entry while K is
+    # built instead of 8), widened if the table outgrows it
+    codes, table = np.empty(int(indptr[-1]), np.uint8), _Codes()
     for s in range(0, n_tex, WINDOW_CHUNK_ROWS):
         e = min(n_tex, s + WINDOW_CHUNK_ROWS)
         m = cKDTree(pos[s:e]).sparse_distance_matrix(tree, reach, p=np.inf, output_type="ndarray")
@@ -125,13 +127,12 @@ def gaussian_window(pos_vox: np.ndarray, sigma: float):
             d = pos[col, a] - pos[row, a]
             d2 += d * d
         indices[indptr[s] : indptr[e]] = col
-        codes[indptr[s] : indptr[e]] = table.of(d2)
+        chunk = table.of(d2)
+        if len(table.values) > np.iinfo(codes.dtype).max + 1:
+            codes = codes.astype(np.uint16 if len(table.values) <= 1 << 16 else np.uint32)
+        codes[indptr[s] : indptr[e]] = chunk
     values = np.exp(table.values * (-0.5 / (sigma * sigma)))
-    for small in (np.uint8, np.uint16):
-        if len(values) <= np.iinfo(small).max + 1:
-            codes = codes.astype(small)
-            break
-    else:  # positions off any lattice: one weight per entry
+    if codes.dtype == np.uint32:  # positions off any lattice: one weight per entry
         codes, values = None, values[codes]
     k = WindowOperator(indptr, indices, codes, values)
     return k, k.row_sums(), radius
