@@ -103,6 +103,20 @@ def test_gaussian_window_in_chunks_equals_the_dense_definition(monkeypatch):
     np.testing.assert_allclose(wsum, want.sum(1), rtol=1e-12)
 
 
+@pytest.mark.parametrize("step, dtype", [(1.0, np.uint8), (1 / 16, np.uint16)])
+def test_gaussian_window_codes_widen_as_the_weights_table_grows(monkeypatch, step, dtype):
+    """The codes start as uint8 and widen when a later chunk brings more distinct weights (uint16: positions on a
+    1/16-voxel lattice): K equals the dense definition in both cases."""
+    rng = np.random.default_rng(5)
+    pos = np.round(rng.uniform(0, 12, (400, 3)) / step) * step
+    monkeypatch.setattr(neighbourhood, "WINDOW_CHUNK_ROWS", 50)
+    k, _, r = neighbourhood.gaussian_window(pos, 1.5)
+    assert k.codes.dtype == dtype
+    diff = pos[:, None, :] - pos[None, :, :]
+    want = np.where(np.abs(diff).max(-1) <= r + 1e-6, np.exp(-(diff**2).sum(-1) / (2 * 1.5**2)), 0.0)
+    np.testing.assert_allclose(k.toarray(), want, rtol=1e-14, atol=0)
+
+
 # ----------------------------------------------------------------------------- the loss
 @pytest.mark.parametrize("sigma", [1.5, 1.0])
 def test_loss_gradient_finite_differences_box(sigma):
