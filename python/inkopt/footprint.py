@@ -61,14 +61,14 @@ DEFAULT_BAND = 3
 RUN_GRID_BYTES = 2.125
 RUN_INSIDE_BYTES = 24.0
 #: - a step: per free voxel the variables, momentum and index held through the run (48 B) and, at the step's peak,
-#:   the core's fixed-point gradient sums with the float gradients taken from them (72 B) or the smoothing's
-#:   working arrays: 120 B by what the code stores, 130 B measured (Spot 20 mm all free, each array above 128 KB
-#:   mapped as a big object's are: the phases' peak 82.5 B per free voxel above the step's start, plus the 48 B;
-#:   bench/results/step_memory_spot.json, entry 20mm_after_mmap128k; before the in-place update and the column-wise
-#:   smoothing 97.6 + 52 = 150 B, entry 20mm_before_mmap128k, where 148 B stood); with it the step stage of Spot
-#:   40 mm all free is 2.50 GiB against the 2.52 GiB its step peaked at (entry 40mm_after); per texel the passes'
-#:   arrays (rgb, variances, adjoint, running average, target, normal: ~128 B);
-STEP_FREE_BYTES = 130.0
+#:   the smoothing's working arrays or the core's fixed-point gradient sums (48 B; taking the gradient converts them
+#:   a block at a time and gives each block's memory back, so the float gradients are never beside all of them):
+#:   108 B, fitted to Spot 40 mm all free, whose step peaked at 2.182 GiB in the smoothing, 54.6 B per free voxel
+#:   above the step's start (bench/results/step_memory_spot.json, entry 40mm_after_gsum; 2.446 GiB in taking the
+#:   gradient, 72.0 B, with the sums and the float gradients side by side, entry 40mm_before_gsum, where 130 B
+#:   stood, fitted to Spot 20 mm, entry 20mm_after_mmap128k); per texel the passes' arrays (rgb, variances,
+#:   adjoint, running average, target, normal: ~128 B);
+STEP_FREE_BYTES = 108.0
 STEP_TEXEL_BYTES = 128.0
 #: - the figures (the start's, the baseline's, the result's): per free voxel the variables and momentum (40 B) and
 #:   per texel the loss's SSIM window (~120 entries of 5 B, its square sharing them) and Sobel operators (~17 entries
