@@ -180,6 +180,21 @@ def test_loss_values():
     np.testing.assert_allclose(lf.ssim_mean(target), 1.0)
 
 
+@pytest.mark.parametrize("combine", ["mean", "worst"])
+def test_a_call_without_gradient_gives_the_same_value_and_terms(combine):
+    """``gradient=False`` (the figures): value, terms and CIELAB bit-identical to the full call, with the noise
+    correction and under two colour maps, and no gradient."""
+    rng = _rng()
+    pos = Texels.box_faces((4, 5, 6)).pos_vox
+    target, pred = rng.uniform(0, 1, (2, len(pos), 3))
+    var = rng.uniform(0, 1e-3, pred.shape)
+    lf = loss.TexelLoss(target, pos, gamma=(1.0, 4.0, 2.0), colours=(color.RGB, color.RGB), combine=combine)
+    full, bare = lf(pred, var), lf(pred, var, gradient=False)
+    assert bare.grad is None and full.grad is not None
+    assert (bare.value, bare.e1, bare.e2, bare.e3) == (full.value, full.e1, full.e2, full.e3)
+    assert bare.lab.tobytes() == full.lab.tobytes()
+
+
 @pytest.mark.parametrize("gamma", [(1.0, 0.0, 0.0), (1.0, 4.0, 0.0), (0.0, 0.0, 2.0)])
 def test_training_call_skips_only_unweighted_terms(gamma):
     """all_terms=False (the optimiser's steps) gives the same value and gradient, bit for bit; a term of weight 0
