@@ -154,22 +154,28 @@ def sobel_operators(pos_vox: np.ndarray, tol: float = 1e-6) -> sp.csr_matrix:
     off = pos[pairs[:, 1]] - pos[pairs[:, 0]]
     r = np.rint(off)
     keep = np.all(np.abs(off - r) <= tol, axis=1) & np.any(r != 0, axis=1)
-    i, j, r = pairs[keep, 0], pairs[keep, 1], r[keep].astype(np.int64)
+    del off
+    i, j, r = pairs[keep, 0], pairs[keep, 1], r[keep].astype(np.int8)  # lattice offsets in {-1, 0, 1}
+    del pairs, keep
     dtap = np.array([-1.0, 0.0, 1.0])
     stap = np.array([1.0, 2.0, 1.0])
-    rows, cols, vals = [], [], []
+    # one axis's operator at a time, each in canonical CSR form (its coordinate lists, 24 B per entry, are
+    # transient per axis, not for all three at once), stacked: the same rows, entries and order as one build
+    axes = []
     for a in range(3):
         b, c = [x for x in range(3) if x != a]
         w = dtap[r[:, a] + 1] * stap[r[:, b] + 1] * stap[r[:, c] + 1]  # weight of j in row i; row j gets -w
         nz = w != 0
         wi, ii, jj = w[nz], i[nz], j[nz]
+        del w, nz
         centre = -(np.bincount(ii, wi, n_tex) - np.bincount(jj, wi, n_tex))
-        rows += [a * n_tex + ii, a * n_tex + jj, a * n_tex + np.arange(n_tex)]
-        cols += [jj, ii, np.arange(n_tex)]
-        vals += [wi, -wi, centre]
-    s = sp.coo_matrix(
-        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * n_tex, n_tex)
-    ).tocsr()
-    s.sum_duplicates()
-    s.eliminate_zeros()
-    return s
+        rows = np.concatenate([ii, jj, np.arange(n_tex)])
+        cols = np.concatenate([jj, ii, np.arange(n_tex)])
+        vals = np.concatenate([wi, -wi, centre])
+        del wi, ii, jj, centre
+        s = sp.coo_matrix((vals, (rows, cols)), shape=(n_tex, n_tex)).tocsr()
+        del rows, cols, vals
+        s.sum_duplicates()
+        s.eliminate_zeros()
+        axes.append(s)
+    return sp.vstack(axes, format="csr")
