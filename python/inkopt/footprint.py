@@ -75,9 +75,11 @@ STEP_TEXEL_BYTES = 128.0
 #:   of 12 B), the metrics' temporaries, the figures' renders and what the allocator keeps of them: the 6.6 KB
 #:   fitted to the peak of a whole run of Spot 20 mm (bench/results/footprint_spot.json, run_20mm, 0.82 GiB) less
 #:   the 1.8 KB the loss's side no longer takes since its window is coded (4.0 -> 2.2 KB per texel:
-#:   bench/results/stages_spot.json, 20mm_shell1_main and _new)
+#:   bench/results/stages_spot.json, 20mm_shell1_main and _new) and the 0.53 KB since its Sobel operators are built
+#:   an axis at a time (Spot 60 mm with a 1 mm shell, the figures' loss side 3.022 -> 2.589 GiB over 872 457 texels:
+#:   bench/results/mesh_60mm_shell1_gsum_nosobel.json and mesh_60mm_shell1_gsum.json)
 FIGURES_FREE_BYTES = 40.0
-FIGURES_TEXEL_BYTES = 4800.0
+FIGURES_TEXEL_BYTES = 4270.0
 #: a run with a shell stores the core's medium only for its band (the free voxels: ``BandMedium``), so its held
 #: per-inside term counts the free voxels; its iterations then peaked at 1.59x (Spot 40 mm) and 1.45x (60 mm, both
 #: 1 mm shells) what the held and step terms give (bench/results/stages_spot.json, 40mm_shell1_new_s58 and
