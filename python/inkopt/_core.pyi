@@ -119,7 +119,7 @@ class Scene:
         """Accumulate adjoint (I,3) f32 . d colour / d sigma ("replay", "li1"; hero: replay); returns its own render."""
 
     def take_grad(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-        """d e/d sigma_s, d e/d sigma_a: (z,y,x,3) f32 each, or (F,3) per slot; frees the buffers."""
+        """d e/d sigma_s, d e/d sigma_a: (z,y,x,3) f32 each, or (F,3) per slot; frees the buffers block by block."""
 
     def take_grad_fixed(self) -> tuple[NDArray[np.int64], NDArray[np.int64], float]:
         """The gradients as raw fixed-point sums (int64, shaped as take_grad's) and the quantum; frees the buffers."""

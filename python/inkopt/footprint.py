@@ -61,23 +61,25 @@ DEFAULT_BAND = 3
 RUN_GRID_BYTES = 2.125
 RUN_INSIDE_BYTES = 24.0
 #: - a step: per free voxel the variables, momentum and index held through the run (48 B) and, at the step's peak,
-#:   the core's fixed-point gradient sums with the float gradients taken from them (72 B) or the smoothing's
-#:   working arrays: 120 B by what the code stores, 130 B measured (Spot 20 mm all free, each array above 128 KB
-#:   mapped as a big object's are: the phases' peak 82.5 B per free voxel above the step's start, plus the 48 B;
-#:   bench/results/step_memory_spot.json, entry 20mm_after_mmap128k; before the in-place update and the column-wise
-#:   smoothing 97.6 + 52 = 150 B, entry 20mm_before_mmap128k, where 148 B stood); with it the step stage of Spot
-#:   40 mm all free is 2.50 GiB against the 2.52 GiB its step peaked at (entry 40mm_after); per texel the passes'
-#:   arrays (rgb, variances, adjoint, running average, target, normal: ~128 B);
-STEP_FREE_BYTES = 130.0
+#:   the smoothing's working arrays or the core's fixed-point gradient sums (48 B; taking the gradient converts them
+#:   a block at a time and gives each block's memory back, so the float gradients are never beside all of them):
+#:   108 B, fitted to Spot 40 mm all free, whose step peaked at 2.182 GiB in the smoothing, 54.6 B per free voxel
+#:   above the step's start (bench/results/step_memory_spot.json, entry 40mm_after_gsum; 2.446 GiB in taking the
+#:   gradient, 72.0 B, with the sums and the float gradients side by side, entry 40mm_before_gsum, where 130 B
+#:   stood, fitted to Spot 20 mm, entry 20mm_after_mmap128k); per texel the passes' arrays (rgb, variances,
+#:   adjoint, running average, target, normal: ~128 B);
+STEP_FREE_BYTES = 108.0
 STEP_TEXEL_BYTES = 128.0
 #: - the figures (the start's, the baseline's, the result's): per free voxel the variables and momentum (40 B) and
 #:   per texel the loss's SSIM window (~120 entries of 5 B, its square sharing them) and Sobel operators (~17 entries
 #:   of 12 B), the metrics' temporaries, the figures' renders and what the allocator keeps of them: the 6.6 KB
 #:   fitted to the peak of a whole run of Spot 20 mm (bench/results/footprint_spot.json, run_20mm, 0.82 GiB) less
 #:   the 1.8 KB the loss's side no longer takes since its window is coded (4.0 -> 2.2 KB per texel:
-#:   bench/results/stages_spot.json, 20mm_shell1_main and _new)
+#:   bench/results/stages_spot.json, 20mm_shell1_main and _new) and the 0.53 KB since its Sobel operators are built
+#:   an axis at a time (Spot 60 mm with a 1 mm shell, the figures' loss side 3.022 -> 2.589 GiB over 872 457 texels:
+#:   bench/results/mesh_60mm_shell1_gsum_nosobel.json and mesh_60mm_shell1_gsum.json)
 FIGURES_FREE_BYTES = 40.0
-FIGURES_TEXEL_BYTES = 4800.0
+FIGURES_TEXEL_BYTES = 4270.0
 #: a run with a shell stores the core's medium only for its band (the free voxels: ``BandMedium``), so its held
 #: per-inside term counts the free voxels; its iterations then peaked at 1.59x (Spot 40 mm) and 1.45x (60 mm, both
 #: 1 mm shells) what the held and step terms give (bench/results/stages_spot.json, 40mm_shell1_new_s58 and

@@ -39,14 +39,14 @@ COMBINE = ("mean", "worst")
 @dataclass
 class LossResult:
     """value = E; e1, e2, e3 the three terms (e2, e3 NaN when not evaluated: ``all_terms=False`` at weight 0);
-    grad (I, C) float64 = dE/d pred (the prediction's channels); lab (I, 3) float64 CIELAB of the prediction (under
-    the first colour map)."""
+    grad (I, C) float64 = dE/d pred (the prediction's channels; None when not asked); lab (I, 3) float64 CIELAB of
+    the prediction (under the first colour map)."""
 
     value: float
     e1: float
     e2: float
     e3: float
-    grad: np.ndarray
+    grad: np.ndarray | None
     lab: np.ndarray
 
 
@@ -260,23 +260,25 @@ class TexelLoss:
         g1, g2, g3 = self.gamma
         return (g1 * E1_WEIGHT_SCALE * e1 + g2 * e2 + g3 * e3) / self.gamma.sum()
 
-    def __call__(self, pred_rgb, pred_var=None, *, all_terms: bool = True) -> LossResult:
+    def __call__(self, pred_rgb, pred_var=None, *, all_terms: bool = True, gradient: bool = True) -> LossResult:
         """Loss and gradient at ``pred_rgb`` (I, C); ``pred_var`` (I, C) corrects the SSIM term for Monte Carlo
-        noise; ``all_terms=False``: terms of weight 0 are not evaluated (NaN in the result). Several colour maps:
-        combined by ``combine`` (the result's ``lab`` is under the first)."""
+        noise; ``all_terms=False``: terms of weight 0 are not evaluated (NaN in the result); ``gradient=False``:
+        the value and terms only (``grad`` None; the figures: none of the gradient's per-texel temporaries). Several
+        colour maps: combined by ``combine`` (the result's ``lab`` is under the first)."""
         pred = self._check(pred_rgb)
         if len(self.colours) == 1:
-            return self._under(pred, pred_var, all_terms, self.colours[0])
-        each = [self._under(pred, pred_var, all_terms, c) for c in self.colours]
+            return self._under(pred, pred_var, all_terms, self.colours[0], gradient)
+        each = [self._under(pred, pred_var, all_terms, c, gradient) for c in self.colours]
         if self.combine == "worst":
             worst = max(each, key=lambda r: r.value)
             return LossResult(worst.value, worst.e1, worst.e2, worst.e3, worst.grad, each[0].lab)
         k = len(each)
         terms = [sum(getattr(r, t) for r in each) / k for t in ("value", "e1", "e2", "e3")]
-        return LossResult(*terms, grad=sum(r.grad for r in each) / k, lab=each[0].lab)
+        grad = sum(r.grad for r in each) / k if gradient else None
+        return LossResult(*terms, grad=grad, lab=each[0].lab)
 
-    def _under(self, pred: np.ndarray, pred_var, all_terms: bool, cmap: ColourMap) -> LossResult:
-        """The loss and its gradient under one colour map (see ``__call__``)."""
+    def _under(self, pred: np.ndarray, pred_var, all_terms: bool, cmap: ColourMap, gradient: bool = True) -> LossResult:
+        """The loss and (``gradient``) its gradient under one colour map (see ``__call__``)."""
         n = self.n
         g1, g2, g3 = self.gamma
         lab = cmap.lab(pred)
@@ -295,6 +297,8 @@ class TexelLoss:
             e3 = float(c3 * np.sum(sob * sob))
         gs = self.gamma.sum()
         value = sum(g * e for g, e in ((g1 * E1_WEIGHT_SCALE, e1), (g2, e2), (g3, e3)) if g > 0) / gs
+        if not gradient:
+            return LossResult(value=float(value), e1=e1, e2=e2, e3=e3, grad=None, lab=lab)
 
         g_lab = (2.0 * g1 * E1_WEIGHT_SCALE / n) * dlab if g1 > 0 else np.zeros_like(lab)
         g_n = np.zeros_like(lab)

@@ -95,8 +95,8 @@ def gaussian_window(pos_vox: np.ndarray, sigma: float):
     Chebyshev distance is <= radius = int(3.5 sigma + 0.5) (voxels), n (I,) = K @ 1 the window weight that falls on
     texels. On a flat face's interior W equals scikit-image's (truncate=3.5) Gaussian window. Returns (K, n, radius).
     K is written into its final arrays ``WINDOW_CHUNK_ROWS`` rows at a time (columns sorted within each row), so
-    building it takes little more than K itself (~5 bytes per entry, ~120 entries per texel on a face; 9 while it
-    is built).
+    building it takes little more than K itself (~5 bytes per entry, ~120 entries per texel on a face, while it is
+    built too).
     """
     pos = np.asarray(pos_vox, np.float64)
     radius = int(3.5 * sigma + 0.5)
@@ -111,7 +111,9 @@ def gaussian_window(pos_vox: np.ndarray, sigma: float):
     np.cumsum(counts, out=indptr[1:])
     del counts
     indices = np.empty(int(indptr[-1]), idx)
-    codes, table = np.empty(int(indptr[-1]), np.uint32), _Codes()
+    # codes in the narrowest type that holds the table so far (uint8 on the lattice: 5 B per entry while K is
+    # built instead of 8), widened if the table outgrows it
+    codes, table = np.empty(int(indptr[-1]), np.uint8), _Codes()
     for s in range(0, n_tex, WINDOW_CHUNK_ROWS):
         e = min(n_tex, s + WINDOW_CHUNK_ROWS)
         m = cKDTree(pos[s:e]).sparse_distance_matrix(tree, reach, p=np.inf, output_type="ndarray")
@@ -125,13 +127,12 @@ def gaussian_window(pos_vox: np.ndarray, sigma: float):
             d = pos[col, a] - pos[row, a]
             d2 += d * d
         indices[indptr[s] : indptr[e]] = col
-        codes[indptr[s] : indptr[e]] = table.of(d2)
+        chunk = table.of(d2)
+        if len(table.values) > np.iinfo(codes.dtype).max + 1:
+            codes = codes.astype(np.uint16 if len(table.values) <= 1 << 16 else np.uint32)
+        codes[indptr[s] : indptr[e]] = chunk
     values = np.exp(table.values * (-0.5 / (sigma * sigma)))
-    for small in (np.uint8, np.uint16):
-        if len(values) <= np.iinfo(small).max + 1:
-            codes = codes.astype(small)
-            break
-    else:  # positions off any lattice: one weight per entry
+    if codes.dtype == np.uint32:  # positions off any lattice: one weight per entry
         codes, values = None, values[codes]
     k = WindowOperator(indptr, indices, codes, values)
     return k, k.row_sums(), radius
@@ -153,22 +154,28 @@ def sobel_operators(pos_vox: np.ndarray, tol: float = 1e-6) -> sp.csr_matrix:
     off = pos[pairs[:, 1]] - pos[pairs[:, 0]]
     r = np.rint(off)
     keep = np.all(np.abs(off - r) <= tol, axis=1) & np.any(r != 0, axis=1)
-    i, j, r = pairs[keep, 0], pairs[keep, 1], r[keep].astype(np.int64)
+    del off
+    i, j, r = pairs[keep, 0], pairs[keep, 1], r[keep].astype(np.int8)  # lattice offsets in {-1, 0, 1}
+    del pairs, keep
     dtap = np.array([-1.0, 0.0, 1.0])
     stap = np.array([1.0, 2.0, 1.0])
-    rows, cols, vals = [], [], []
+    # one axis's operator at a time, each in canonical CSR form (its coordinate lists, 24 B per entry, are
+    # transient per axis, not for all three at once), stacked: the same rows, entries and order as one build
+    axes = []
     for a in range(3):
         b, c = [x for x in range(3) if x != a]
         w = dtap[r[:, a] + 1] * stap[r[:, b] + 1] * stap[r[:, c] + 1]  # weight of j in row i; row j gets -w
         nz = w != 0
         wi, ii, jj = w[nz], i[nz], j[nz]
+        del w, nz
         centre = -(np.bincount(ii, wi, n_tex) - np.bincount(jj, wi, n_tex))
-        rows += [a * n_tex + ii, a * n_tex + jj, a * n_tex + np.arange(n_tex)]
-        cols += [jj, ii, np.arange(n_tex)]
-        vals += [wi, -wi, centre]
-    s = sp.coo_matrix(
-        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * n_tex, n_tex)
-    ).tocsr()
-    s.sum_duplicates()
-    s.eliminate_zeros()
-    return s
+        rows = np.concatenate([ii, jj, np.arange(n_tex)])
+        cols = np.concatenate([jj, ii, np.arange(n_tex)])
+        vals = np.concatenate([wi, -wi, centre])
+        del wi, ii, jj, centre
+        s = sp.coo_matrix((vals, (rows, cols)), shape=(n_tex, n_tex)).tocsr()
+        del rows, cols, vals
+        s.sum_duplicates()
+        s.eliminate_zeros()
+        axes.append(s)
+    return sp.vstack(axes, format="csr")

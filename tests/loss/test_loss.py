@@ -103,6 +103,20 @@ def test_gaussian_window_in_chunks_equals_the_dense_definition(monkeypatch):
     np.testing.assert_allclose(wsum, want.sum(1), rtol=1e-12)
 
 
+@pytest.mark.parametrize("step, dtype", [(1.0, np.uint8), (1 / 16, np.uint16)])
+def test_gaussian_window_codes_widen_as_the_weights_table_grows(monkeypatch, step, dtype):
+    """The codes start as uint8 and widen when a later chunk brings more distinct weights (uint16: positions on a
+    1/16-voxel lattice): K equals the dense definition in both cases."""
+    rng = np.random.default_rng(5)
+    pos = np.round(rng.uniform(0, 12, (400, 3)) / step) * step
+    monkeypatch.setattr(neighbourhood, "WINDOW_CHUNK_ROWS", 50)
+    k, _, r = neighbourhood.gaussian_window(pos, 1.5)
+    assert k.codes.dtype == dtype
+    diff = pos[:, None, :] - pos[None, :, :]
+    want = np.where(np.abs(diff).max(-1) <= r + 1e-6, np.exp(-(diff**2).sum(-1) / (2 * 1.5**2)), 0.0)
+    np.testing.assert_allclose(k.toarray(), want, rtol=1e-14, atol=0)
+
+
 # ----------------------------------------------------------------------------- the loss
 @pytest.mark.parametrize("sigma", [1.5, 1.0])
 def test_loss_gradient_finite_differences_box(sigma):
@@ -164,6 +178,21 @@ def test_loss_values():
     assert abs(same.value) < 1e-12 and abs(same.e2) < 1e-12 and same.e1 == 0 and same.e3 < 1e-24
     np.testing.assert_allclose(same.grad, 0.0, atol=1e-12)
     np.testing.assert_allclose(lf.ssim_mean(target), 1.0)
+
+
+@pytest.mark.parametrize("combine", ["mean", "worst"])
+def test_a_call_without_gradient_gives_the_same_value_and_terms(combine):
+    """``gradient=False`` (the figures): value, terms and CIELAB bit-identical to the full call, with the noise
+    correction and under two colour maps, and no gradient."""
+    rng = _rng()
+    pos = Texels.box_faces((4, 5, 6)).pos_vox
+    target, pred = rng.uniform(0, 1, (2, len(pos), 3))
+    var = rng.uniform(0, 1e-3, pred.shape)
+    lf = loss.TexelLoss(target, pos, gamma=(1.0, 4.0, 2.0), colours=(color.RGB, color.RGB), combine=combine)
+    full, bare = lf(pred, var), lf(pred, var, gradient=False)
+    assert bare.grad is None and full.grad is not None
+    assert (bare.value, bare.e1, bare.e2, bare.e3) == (full.value, full.e1, full.e2, full.e3)
+    assert bare.lab.tobytes() == full.lab.tobytes()
 
 
 @pytest.mark.parametrize("gamma", [(1.0, 0.0, 0.0), (1.0, 4.0, 0.0), (0.0, 0.0, 2.0)])

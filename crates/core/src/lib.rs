@@ -14,14 +14,16 @@
 //! - [`spans`]: voxel sets stored per grid row, the storage both share (sparse media, gradient slots, the
 //!   smoothing's neighbour lookup).
 //! - [`cache`]: software prefetch (the gradient replay's queued adds).
+//! - [`pages`]: giving a held buffer's pages back to the system (the gradient sums, as they are converted).
 //!
-//! Layering: `cache` and `spans` use nothing in the crate; `transport` uses them; `kernels` use `spans` and
+//! Layering: `cache`, `pages` and `spans` use nothing in the crate; `transport` uses them; `kernels` use `spans` and
 //! `transport::medium::EMPTY` (the label of an empty voxel, which `diffuse` writes); nothing uses `kernels`.
 //! Inside `transport` each module uses only the modules listed before it in `transport`'s documentation. The
 //! test `tests/layering.rs` checks this order on the source, so the module graph has no circles.
 
 pub mod cache;
 pub mod kernels;
+pub mod pages;
 pub mod spans;
 pub mod transport;
 

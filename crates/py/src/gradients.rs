@@ -124,10 +124,10 @@ pub(crate) fn backward<'py>(
 pub(crate) fn take_grad<'py>(scene: &mut Scene, py: Python<'py>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
     let g = scene.grads.take().ok_or_else(|| err("no gradient: call zero_grad and backward first"))?;
     let n = g.slots();
+    // Zeroed allocations (calloc: fresh pages, taken as they are written) filled as the sums are given back.
     let mut gs = vec![0.0f32; 3 * n];
     let mut ga = vec![0.0f32; 3 * n];
-    py.detach(|| g.collect(&mut gs, &mut ga));
-    drop(g);
+    py.detach(|| g.into_collected(&mut gs, &mut ga));
     Ok((grad_array(scene, py, gs)?, grad_array(scene, py, ga)?))
 }
 
@@ -138,11 +138,10 @@ pub(crate) fn take_grad_fixed<'py>(
 ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>, f64)> {
     let g = scene.grads.take().ok_or_else(|| err("no gradient: call zero_grad and backward first"))?;
     let n = g.slots();
+    let quantum = g.quantum();
     let mut gs = vec![0i64; 3 * n];
     let mut ga = vec![0i64; 3 * n];
-    py.detach(|| g.collect_fixed(&mut gs, &mut ga));
-    let quantum = g.quantum();
-    drop(g);
+    py.detach(|| g.into_collected_fixed(&mut gs, &mut ga));
     Ok((grad_array(scene, py, gs)?, grad_array(scene, py, ga)?, quantum))
 }
 

@@ -218,7 +218,8 @@ impl Scene {
 
     /// The accumulated gradients (d e/d sigma_s, d e/d sigma_a): (z, y, x, 3) float32 each, or (F, 3) per slot
     /// when zero_grad was given a grad_index. The buffers are freed (48 bytes per slot: a big object's optimiser
-    /// step should not hold them beside its own arrays); the next zero_grad allocates new ones.
+    /// step should not hold them beside its own arrays), a block of slots at a time as they are converted, so the
+    /// sums and the arrays are not resident at once; the next zero_grad allocates new ones.
     fn take_grad<'py>(&mut self, py: Python<'py>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
         gradients::take_grad(self, py)
     }

@@ -117,7 +117,7 @@ def prediction_metrics(loss: TexelLoss, rgb, var_mean=None) -> Metrics:
     and ``delta_e76_mean_corrected`` (the mean minus it), ``delta_e76_rms`` and ``delta_e76_rms_denoised`` (an
     unbiased estimate of the noise-free RMS ΔE76: E|c + n - t|² = |c - t|² + tr(cov n) to first order in Lab)."""
     rgb = np.asarray(rgb, np.float64)
-    res = loss(rgb, var_mean)
+    res = loss(rgb, var_mean, gradient=False)  # the figures read no gradient: none of its temporaries
     lab_t = loss.target_lab
     de = delta_e76(res.lab, lab_t)
     out = {

@@ -7,6 +7,7 @@ use std::path::Path;
 /// declare their children are above all of them; the tests in `src/tests` are not checked.
 const LAYERS: &[&str] = &[
     "cache",
+    "pages",
     "spans",
     "transport::sampling",
     "transport::rng",
@@ -23,6 +24,7 @@ const LAYERS: &[&str] = &[
     "transport::packet",
     "transport::packet::step",
     "transport::render",
+    "transport::sums",
     "transport::grad",
     "transport::hero",
     "transport::hero_lanes",

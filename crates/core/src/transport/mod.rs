@@ -1,7 +1,7 @@
 //! Light transport: Monte Carlo random walks of monochromatic paths through a voxel medium, their forward
 //! render and their gradients (path replay).
 //!
-//! Modules, each using only those listed before it (and `crate::spans`, `crate::cache`):
+//! Modules, each using only those listed before it (and `crate::spans`, `crate::cache`, `crate::pages`):
 //! - `sampling`: vectors, the Henyey-Greenstein phase function, Fresnel, reflection and refraction.
 //! - `rng`: counter-based random numbers (a path's numbers are a pure function of its key).
 //! - `light`: the `Light` trait (uniform light, environment maps).
@@ -16,7 +16,8 @@
 //! - `estimate`: render options, per-texel estimates, statistics and their fixed-order sums.
 //! - `packet`: eight paths per core in SIMD lanes (`packet::step` is its vector step and uses `packet`).
 //! - `render`: parallel drivers of the forward render.
-//! - `grad`: the gradient pass and its fixed-point buffers.
+//! - `sums`: the gradient's fixed-point sums (buffers, queued adds, their conversion to float gradients).
+//! - `grad`: the gradient pass.
 //! - `hero`: hero-channel paths (one path serves the three channels; the spectral band groups): the estimator
 //!   and its scalar walk.
 //! - `hero_lanes`: hero paths eight at a time in mask-free grids (null-collision delta tracking in SIMD lanes).
@@ -39,4 +40,5 @@ pub mod render;
 pub mod rng;
 pub mod sampling;
 pub mod scene;
+pub mod sums;
 pub mod trace;
