@@ -8,7 +8,8 @@ printer grid twice as fine in every axis, ``random``, ``blue-noise/tint-first`` 
 ``Quantization.ink_order``, ``blue-noise+comp`` with the shares pre-compensated with the pair factors (``+comp1``: each
 ink's factor against the base alone, what ``--compensate`` does; ``t0.05``: tapered below a share of 0.05),
 ``blue-noise-columns`` (``dithers.BlueNoiseColumns``: golden-ratio shifts of a 2D mask along depth),
-``blue-noise~mm`` with a blue-noise array whose energy is isotropic in mm rather than in printer voxels, ``~2d`` with
+``blue-noise~mm`` with a blue-noise array whose energy is isotropic in mm rather than in printer voxels (and
+``blue-noise-columns~mm`` with such a 2D mask), ``~2d`` with
 2D blue-noise layers, ``layered_tile``): if the bias shrinks on a finer grid, it comes from the size of the printer
 voxels (the grains of one ink absorb less than the same ink spread through the mixture), not from the dither's
 order. Writes the entry NAME of experiments/results/halftone_cause.json.
@@ -50,10 +51,17 @@ SHARE_EDGES = [0.0, 0.05, 0.15, 0.3, 0.5, 1.01]
 
 
 def physical_tile(q: Quantization) -> np.ndarray:
-    """A 32^3 blue-noise threshold array whose void-and-cluster energy is isotropic in mm on ``q``'s printer voxels:
-    per axis sigma = 1.5 x (the voxels' geometric mean size) / (the axis's voxel size)."""
+    """A blue-noise threshold array whose void-and-cluster energy is isotropic in mm on ``q``'s printer voxels: per
+    axis sigma = 1.5 x (the voxels' geometric mean size) / (the axis's voxel size). 32^3 for blue noise; for the
+    columns' dither (``blue-noise-columns``) a 2D mask (y, x) of 64 voxels along the finer axis and as many mm along
+    the other (32 x 64 at 600 x 300 DPI), float32 in (0, 1)."""
     vp = PrinterGrid.of((1, 1, 1), (1.0, 1.0, 1.0), q).voxel_mm[::-1]  # (z, y, x) mm
-    ranks = void_and_cluster(BLUE_NOISE_SHAPE, tuple(BLUE_NOISE_SIGMA * np.prod(vp) ** (1 / 3) / vp))
+    if q.method == "blue-noise-columns":
+        vp = vp[1:]
+        shape = tuple(int(round(64 * vp.min() / v)) for v in vp)
+    else:
+        shape = BLUE_NOISE_SHAPE
+    ranks = void_and_cluster(shape, tuple(BLUE_NOISE_SIGMA * np.prod(vp) ** (1 / len(vp)) / vp))
     return ((ranks.astype(np.float64) + 0.5) / ranks.size).astype(np.float32)
 
 
