@@ -194,8 +194,8 @@ class Quantization:
     dpi        printer resolution (x, y) or (x, y, z) dots per inch; None: 600 x 300 (``units.PRINTER_DPI``). A record
                holds (x, y, z), the printer voxels' own (``printing.quantize.record``); an old file may hold None
     upsample   "nearest" or "linear" (``printing.grid.UPSAMPLERS``)
-    ink_order  the order of the inks' bands where the dither orders them (both blue noises): "lightness" (lightest first,
-               ``dither.lightness_order``), "tint-first" (the second lightest before the lightest,
+    ink_order  the order of the inks' bands where the dither orders them (blue noise, either kind): "lightness"
+               (lightest first, ``dither.lightness_order``), "tint-first" (the second lightest before the lightest,
                ``printing.dithers``) or "index" (the ink set's order; files that do not say were made so)
     layer_um   layer thickness in µm where ``dpi`` has no z entry; None: 27 (``units.PRINTER_LAYER_UM``). Not
                recorded: a record's ``dpi`` holds z
