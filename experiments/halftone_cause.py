@@ -7,10 +7,12 @@ of each ink (where the print is lighter or less saturated than its mixture). A v
 printer grid twice as fine in every axis, ``random``, ``blue-noise/tint-first`` with the inks' bands in that
 ``Quantization.ink_order``, ``blue-noise+comp`` with the shares pre-compensated with the pair factors (``+comp1``: each
 ink's factor against the base alone, what ``--compensate`` does; ``t0.05``: tapered below a share of 0.05),
-``blue-noise~mm`` with a blue-noise array whose energy is isotropic in mm rather than in printer voxels, ``~2d`` with 2D
-blue-noise layers, ``layered_tile``): if the bias shrinks on a finer grid, it comes from the size of the printer voxels
-(the grains of one ink absorb less than the same ink spread through the mixture), not from the dither's order. Writes
-the entry NAME of experiments/results/halftone_cause.json.
+``blue-noise-columns`` (``dithers.BlueNoiseColumns``: golden-ratio shifts of a 2D mask along depth),
+``blue-noise~mm`` with a blue-noise array whose energy is isotropic in mm rather than in printer voxels (and
+``blue-noise-columns~mm`` with such a 2D mask), ``~2d`` with
+2D blue-noise layers, ``layered_tile``): if the bias shrinks on a finer grid, it comes from the size of the printer
+voxels (the grains of one ink absorb less than the same ink spread through the mixture), not from the dither's
+order. Writes the entry NAME of experiments/results/halftone_cause.json.
 
     .venv/bin/python experiments/halftone_cause.py NAME RUN VARIANT [VARIANT ...] [--texels 1500] [--spp 512]
 
@@ -18,6 +20,7 @@ Compensations are measured (and cached) outside the timed part.
 """
 
 import argparse
+import contextlib
 import sys
 import time
 from pathlib import Path
@@ -36,7 +39,7 @@ from inkopt.evaluation.printed import PrintedRenderer  # noqa: E402
 from inkopt.model import Quantization  # noqa: E402
 from inkopt.printing import dithers  # noqa: E402
 from inkopt.printing.compensate import share_compensation  # noqa: E402
-from inkopt.printing.dither import BLUE_NOISE_SHAPE, BLUE_NOISE_SIGMA, load_blue_noise, void_and_cluster  # noqa: E402
+from inkopt.printing.dither import BLUE_NOISE_SHAPE, BLUE_NOISE_SIGMA, void_and_cluster  # noqa: E402
 from inkopt.printing.grid import PrinterGrid  # noqa: E402
 from inkopt.printing.quantize import quantize_volume  # noqa: E402
 from inkopt.render import Renderer  # noqa: E402
@@ -48,10 +51,17 @@ SHARE_EDGES = [0.0, 0.05, 0.15, 0.3, 0.5, 1.01]
 
 
 def physical_tile(q: Quantization) -> np.ndarray:
-    """A 32^3 blue-noise threshold array whose void-and-cluster energy is isotropic in mm on ``q``'s printer voxels:
-    per axis sigma = 1.5 x (the voxels' geometric mean size) / (the axis's voxel size)."""
+    """A blue-noise threshold array whose void-and-cluster energy is isotropic in mm on ``q``'s printer voxels: per
+    axis sigma = 1.5 x (the voxels' geometric mean size) / (the axis's voxel size). 32^3 for blue noise; for the
+    columns' dither (``blue-noise-columns``) a 2D mask (y, x) of 64 voxels along the finer axis and as many mm along
+    the other (32 x 64 at 600 x 300 DPI), float32 in (0, 1)."""
     vp = PrinterGrid.of((1, 1, 1), (1.0, 1.0, 1.0), q).voxel_mm[::-1]  # (z, y, x) mm
-    ranks = void_and_cluster(BLUE_NOISE_SHAPE, tuple(BLUE_NOISE_SIGMA * np.prod(vp) ** (1 / 3) / vp))
+    if q.method == "blue-noise-columns":
+        vp = vp[1:]
+        shape = tuple(int(round(64 * vp.min() / v)) for v in vp)
+    else:
+        shape = BLUE_NOISE_SHAPE
+    ranks = void_and_cluster(shape, tuple(BLUE_NOISE_SIGMA * np.prod(vp) ** (1 / len(vp)) / vp))
     return ((ranks.astype(np.float64) + 0.5) / ranks.size).astype(np.float32)
 
 
@@ -118,10 +128,11 @@ def main():
         q = quantization(spec)
         if q.compensate:
             share_compensation(vol.inks, q, vol.g, vol.ior, a.threads, print)
-        tile = physical_tile(q) if "~mm" in spec else layered_tile() if "~2d" in spec else load_blue_noise()
+        tile = physical_tile(q) if "~mm" in spec else layered_tile() if "~2d" in spec else None
         t0 = time.perf_counter()
         variant = printed_refine.compensation_variant(printed_refine.quantization(spec.split("~")[0])[1])
-        with mock.patch.object(dithers, "load_blue_noise", lambda tile=tile: tile), variant:
+        own = mock.patch.object(dithers, "load_blue_noise", lambda *_, t=tile: t) if tile is not None else None
+        with own or contextlib.nullcontext(), variant:
             labels = quantize_volume(vol, q)
         printer = PrintedRenderer(labels, rec.texels, vol.voxel_mm, rec.kind, a.threads, None, [pick])
         printer.use(labels)

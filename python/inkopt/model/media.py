@@ -188,13 +188,14 @@ class Quantization:
     """The settings of a quantization (``inkopt.printing.quantize``): the one form they travel in, from the command
     line to the dither, and, kept in a labels volume, the record of how it was made.
 
-    method     the dither's name (``printing.dithers.DITHERS``: "blue-noise", "random", "error-diffusion")
+    method     the dither's name (``printing.dithers.DITHERS``: "blue-noise", "blue-noise-columns", "random",
+               "error-diffusion")
     seed       the dither's random state (``numpy.random.default_rng(seed)``)
     dpi        printer resolution (x, y) or (x, y, z) dots per inch; None: 600 x 300 (``units.PRINTER_DPI``). A record
                holds (x, y, z), the printer voxels' own (``printing.quantize.record``); an old file may hold None
     upsample   "nearest" or "linear" (``printing.grid.UPSAMPLERS``)
-    ink_order  the order of the inks' bands where the dither orders them (blue noise): "lightness" (lightest first,
-               ``dither.lightness_order``), "tint-first" (the second lightest before the lightest,
+    ink_order  the order of the inks' bands where the dither orders them (blue noise, either kind): "lightness"
+               (lightest first, ``dither.lightness_order``), "tint-first" (the second lightest before the lightest,
                ``printing.dithers``) or "index" (the ink set's order; files that do not say were made so)
     layer_um   layer thickness in µm where ``dpi`` has no z entry; None: 27 (``units.PRINTER_LAYER_UM``). Not
                recorded: a record's ``dpi`` holds z

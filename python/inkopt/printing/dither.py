@@ -1,8 +1,8 @@
 """Blue-noise dither arrays (void-and-cluster) for ordered dithering of ink mixtures (``quantize``), and the order of
 the inks in it (``lightness_order``).
 
-The default 32 x 32 x 32 array ships with the package (``inkopt/data``); other shapes are generated once and cached
-there when it is writable.
+The default 32 x 32 x 32 array and the 64 x 64 mask of the columns' dither ship with the package (``inkopt/data``);
+other shapes are generated once and cached there when it is writable.
 """
 
 from __future__ import annotations
@@ -18,6 +18,10 @@ from ..io import atomic_write_bytes
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 BLUE_NOISE_SHAPE = (32, 32, 32)
 BLUE_NOISE_SIGMA = 1.5
+#: the 2D mask of ``dithers.BlueNoiseColumns`` (y, x), shipped like the 3D array
+COLUMN_MASK_SHAPE = (64, 64)
+#: the golden ratio's conjugate, (sqrt(5) - 1) / 2: the step of the columns' thresholds from layer to layer
+GOLDEN = (5.0**0.5 - 1.0) / 2.0
 DATA_DIR = Path(__file__).resolve().parent.parent / "data"
 
 
@@ -98,7 +102,8 @@ def blue_noise_path(shape=BLUE_NOISE_SHAPE) -> Path:
 
 
 def load_blue_noise(shape=BLUE_NOISE_SHAPE) -> np.ndarray:
-    """Blue-noise thresholds, float32 array of ``shape`` (z, y, x) with values (rank + 0.5) / n in (0, 1).
+    """Blue-noise thresholds, float32 array of ``shape`` ((z, y, x), or (y, x) for a 2D mask) with values
+    (rank + 0.5) / n in (0, 1).
 
     Loads the shipped ranks (``inkopt/data/blue_noise_<shape>.npy``, uint16, ``void_and_cluster(shape)`` with
     the default sigma and seed); other shapes are generated and cached there (atomically) when writable.

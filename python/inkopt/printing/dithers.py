@@ -10,10 +10,12 @@ weight (``printing.grid``: the upsampling that made it).
   threshold ``t`` in [0, 1) per printer voxel (``Thresholds``): the voxel gets ink ``k`` with
   ``c_{k-1} <= t < c_k``. Uniform random numbers make it an exact draw from the mixture (the paper's method, white
   noise); a blue-noise array makes it ordered dithering.
+- ``blue-noise-columns`` (``BlueNoiseColumns``): the same rule with a 2D blue-noise mask whose thresholds shift
+  along z by the golden ratio, so every column of printer voxels holds an evenly spread sequence of thresholds.
 - ``error-diffusion`` (``ErrorDiffusion``): deterministic 3D vector error diffusion (``inkopt_core::diffuse``).
 
-Blue noise sums the inks in the order ``Quantization.ink_order`` says (``INK_ORDERS``; ``band_order``), lightest
-first by default (``dither.lightness_order`` says why); the other methods in index order.
+The blue-noise dithers sum the inks in the order ``Quantization.ink_order`` says (``INK_ORDERS``; ``band_order``),
+lightest first by default (``dither.lightness_order`` says why); the other methods in index order.
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ import numpy as np
 
 from ..errors import ParameterError
 from ..model import EMPTY, Quantization
-from .dither import lightness_order, load_blue_noise
+from .dither import COLUMN_MASK_SHAPE, GOLDEN, lightness_order, load_blue_noise
 from .grid import PrinterGrid
 
 
@@ -102,6 +104,38 @@ class BlueNoise(Thresholds):
         return self.tile[(k + self.oz) % self.tile.shape[0]][self.ty_idx, self.tx_idx]
 
 
+class BlueNoiseColumns(Thresholds):
+    """Ordered dithering whose every column of printer voxels is an even sequence in depth: the thresholds are
+    ``t(x, y, z) = frac(B(x, y) + (z + oz) * GOLDEN)``, with ``B`` a 2D blue-noise mask (void-and-cluster,
+    ``dither.COLUMN_MASK_SHAPE``) tiled over (y, x) at a toroidal offset drawn from the seed, and ``GOLDEN`` the
+    golden ratio's conjugate (the "spatiotemporal blue noise" of animation, with depth as time).
+
+    Why: a texel's colour is the light that came back through its column of printer voxels, weighted by depth.
+    Along a column the thresholds are a Kronecker sequence, the most evenly spread sequence of its kind: any k
+    consecutive layers hold each ink's share of them to within about one voxel, so a column's depth-weighted ink
+    counts stay close to its mixture. Each layer is the mask shifted in value, so it takes one band of the mask's
+    ranks per ink: still spread evenly in (y, x), though a band that is not a prefix of the ranks is less blue than
+    one that is. Consecutive layers' thresholds differ by 0.382 or 0.618, so an ink under 38 % never takes two
+    voxels on top of each other."""
+
+    help = "ordered dithering, every column's layers an even sequence (golden-ratio shifts of a 2D blue-noise mask)"
+    ordered = True
+
+    def __init__(self, q: Quantization, grid: PrinterGrid, n_inks: int, order: np.ndarray | None) -> None:
+        super().__init__(q, grid, n_inks, order)
+        mask = load_blue_noise(COLUMN_MASK_SHAPE)
+        _, Y, X = grid.shape
+        ty, tx = mask.shape
+        self.oz, oy, ox = (int(v) for v in self.rng.integers(0, (2**20, ty, tx)))
+        self.mask = mask[((np.arange(Y) + oy) % ty)[:, None], ((np.arange(X) + ox) % tx)[None, :]]
+
+    def thresholds(self, k: int) -> np.ndarray:
+        shift = np.float32(((k + self.oz) * GOLDEN) % 1.0)  # in float64: k * GOLDEN keeps its fraction
+        t = self.mask + shift
+        t[t >= 1.0] -= 1.0
+        return t
+
+
 class RandomDraws(Thresholds):
     """The paper's method: each printer voxel draws its ink independently with the (upsampled) mixture as the
     probability distribution, one layer after the other (so the result does not depend on any chunking). Adds
@@ -155,7 +189,12 @@ class ErrorDiffusion:
 
 
 #: the quantization methods by name (``Quantization.method``, ``inkopt quantize --method``)
-DITHERS: dict[str, type[Dither]] = {"blue-noise": BlueNoise, "random": RandomDraws, "error-diffusion": ErrorDiffusion}
+DITHERS: dict[str, type[Dither]] = {
+    "blue-noise": BlueNoise,
+    "blue-noise-columns": BlueNoiseColumns,
+    "random": RandomDraws,
+    "error-diffusion": ErrorDiffusion,
+}
 METHODS = tuple(DITHERS)
 
 
