@@ -94,11 +94,11 @@ def pilot(
     factory: RendererFactory | None = None,
     samples: int = PILOT_SAMPLES,
 ) -> Pilot:
-    """Every band of ``table`` rendered alone (its three channels that band, ``samples`` spread over the texels, at
-    least 2 per texel) on
-    :func:`pilot_texels` of ``texels`` at :data:`PILOT_SEED`, with one renderer (``factory``, default
-    :class:`~inkopt.render.Renderer`) whose medium each band swaps in; ``colours``: the lights' colour maps on the
-    table's bands (``Viewing.colours``)."""
+    """Every band of ``table`` rendered alone (its three channels that band, ``samples`` per channel spread over
+    the texels, at least 2 per texel) on :func:`pilot_texels` of ``texels`` at :data:`PILOT_SEED`, with one
+    renderer (``factory``, default :class:`~inkopt.render.Renderer`) whose medium each band swaps in; ``colours``:
+    the lights' colour maps on the table's bands (``Viewing.colours``). A_j uses each texel's CIELAB Jacobian at
+    the pilot's band values."""
     tex = pilot_texels(texels)
     spp = max(2, -(-int(samples) // len(tex)))
     light = check_grey(load_lighting(lighting))
@@ -114,7 +114,8 @@ def pilot(
             renderer.set_volume(vol)
         res = renderer.render_pass(tex, PassSettings(spp, PILOT_SEED + j))
         values[:, j] = np.mean(res.rgb, axis=1, dtype=np.float64)
-        var[:, j] = np.mean(res.var_mean, axis=1, dtype=np.float64) * spp  # per sample: 3 spp paths, mean of 3
+        # one path's variance: each channel's variance of its mean of spp paths, x spp, averaged over the channels
+        var[:, j] = np.mean(res.var_mean, axis=1, dtype=np.float64) * spp
         cost[j] = res.events / max(res.paths, 1)
         paths += res.paths
     w = sum(np.sum(c.lab_jacobian(values) ** 2, axis=-2) for c in colours)
