@@ -80,8 +80,13 @@ def bench_scene(spot_mm: float | None):
 
 def colour_noise(renderer, texels, spp: int, cmap) -> float:
     """The RMS over texels of the CIELAB standard error (ΔE76) of one render of ``spp`` samples per texel."""
+    return render_noise(renderer, texels, spp, cmap)[0]
+
+
+def render_noise(renderer, texels, spp: int, cmap) -> tuple[float, int]:
+    """:func:`colour_noise` and the render's path events."""
     res = renderer.render(texels, spp, seed=7)
-    return float(np.sqrt(np.mean(cmap.lab_stderr(res.rgb, res.var_mean) ** 2)))
+    return float(np.sqrt(np.mean(cmap.lab_stderr(res.rgb, res.var_mean) ** 2))), int(res.events)
 
 
 def iteration_seconds(scene, cfg, threads, viewing, iterations: int) -> tuple[list[float], list[int]]:
@@ -106,7 +111,7 @@ def kind_keys(name: str, noise: dict, per_it: dict, viewing, groups: int) -> dic
         f"noise_dE76_{name}_at_rgb_spp": pilot,
         f"{name}_spp_equal_noise": spp,
         f"noise_dE76_{name}": at,
-        f"{name}_over_rgb": per_it[name] / per_it["rgb"],
+        f"{name}_over_rgb": ratio(per_it[name], per_it["rgb"]),
     }
     if viewing.plan is not None:
         out.update(planned_groups=[list(g) for g in viewing.plan.groups], planned_weights=list(viewing.plan.weights))
@@ -117,7 +122,13 @@ def equal_noise_ratios(noise: dict, noise_rgb: float, per_it: dict) -> dict:
     """Each spectral kind's seconds (and events) per iteration over RGB's, scaled to the RGB noise exactly: its
     measured ratio x (its noise at its equal-noise spp / RGB's)^2 (a noise's square falls as 1 / samples), which
     removes the rounding of the samples per texel to a whole number."""
-    return {k: per_it[k] / per_it["rgb"] * (n[2] / noise_rgb) ** 2 for k, n in noise.items()}
+    scaled = {k: ratio(per_it[k], per_it["rgb"]) for k in noise}
+    return {k: None if n[2] is None else scaled[k] * (n[2] / noise_rgb) ** 2 for k, n in noise.items()}
+
+
+def ratio(a: float | None, b: float | None) -> float | None:
+    """a / b, None when either was not measured (``--iterations 0``: renders only)."""
+    return None if a is None or b is None else a / b
 
 
 def main():
@@ -136,7 +147,7 @@ def main():
     table = spectral_from_rgb(vol.inks, a.bands)
     d65 = named_light("D65").colour_map(table.wavelengths_nm)
     tex = scene.texels
-    noise_rgb = colour_noise(Renderer(vol, a.threads), tex, a.spp, RGB)
+    noise_rgb, events_rgb = render_noise(Renderer(vol, a.threads), tex, a.spp, RGB)
     kinds = {"spectral": Viewing(table, (named_light("D65"),), weighted=not a.equal_groups)}
     if not a.no_hero:
         kinds["hero"] = Viewing(table, (named_light("D65"),), weighted=not a.equal_groups, hero=True)
@@ -146,24 +157,28 @@ def main():
         kinds["planned"] = Viewing(table, (named_light("D65"),)).planned(vol, tex, a.threads)
         pilot_s = time.perf_counter() - t
     weights = kinds["spectral"].group_weights()
-    noise = {}
+    noise, render_events = {}, {}
     for name, viewing in kinds.items():
         spectral = viewing.renderer_factory(Renderer)(vol, a.threads, None)
-        pilot = colour_noise(spectral, tex, a.spp, d65)
+        pilot, ev = render_noise(spectral, tex, a.spp, d65)
+        # path events of a forward render at the RGB noise: both at --spp, scaled by the noise's square
+        render_events[name] = ev / events_rgb * (pilot / noise_rgb) ** 2
         spp = max(1, math.ceil(a.spp * (pilot / noise_rgb) ** 2))
-        noise[name] = (pilot, spp, colour_noise(spectral, tex, spp, d65))
+        noise[name] = (pilot, spp, colour_noise(spectral, tex, spp, d65) if a.iterations else None)
         del spectral
+    if not a.iterations:  # renders only
+        print({k: round(v, 3) for k, v in render_events.items()}, "forward-render events over RGB at equal noise")
     cfg_rgb = OptimizeConfig(iterations=a.iterations, spp=a.spp, forward_spp=a.spp)
     cfgs = {k: OptimizeConfig(iterations=a.iterations, spp=n[1], forward_spp=n[1]) for k, n in noise.items()}
     secs, events = {"rgb": [], **{k: [] for k in kinds}}, {"rgb": [], **{k: [] for k in kinds}}
     t0 = time.perf_counter()
-    for _ in range(2):  # alternating, so a change of the machine's load falls on all
+    for _ in range(2 if a.iterations else 0):  # alternating, so a change of the machine's load falls on all
         for k, viewing in {"rgb": None, **kinds}.items():
             s, e = iteration_seconds(scene, cfgs.get(k, cfg_rgb), a.threads, viewing, a.iterations)
             secs[k] += s
             events[k] += e
-    per_it = {k: float(np.median(v)) for k, v in secs.items()}
-    ev_it = {k: float(np.median(v)) for k, v in events.items()}
+    per_it = {k: float(np.median(v)) if v else None for k, v in secs.items()}
+    ev_it = {k: float(np.median(v)) if v else None for k, v in events.items()}
     groups = len(table.group_bands())
     out = {
         "scene": f"Spot {a.spot_mm:g} mm" if a.spot_mm else "reference slab 177x118x30 voxels, chart top, zebra below",
@@ -179,7 +194,7 @@ def main():
         "noise_dE76_spectral": noise["spectral"][2],
         "seconds_per_iteration": per_it,
         "iteration_seconds": secs,
-        "spectral_over_rgb": per_it["spectral"] / per_it["rgb"],
+        "spectral_over_rgb": ratio(per_it["spectral"], per_it["rgb"]),
         **kind_keys("hero", noise, per_it, kinds.get("hero"), groups),
         **kind_keys("planned", noise, per_it, kinds.get("planned"), groups),
         "planned_pilot_s": pilot_s,
@@ -187,11 +202,12 @@ def main():
         "events_per_iteration": ev_it,
         "iteration_events": events,
         "events_over_rgb_at_equal_noise": equal_noise_ratios(noise, noise_rgb, ev_it),
+        "render_events_over_rgb_at_equal_noise": render_events,
         "threads": a.threads,
         "wall_s": time.perf_counter() - t0,
         **machine(),
     }
-    for k, (pilot, spp, at) in noise.items():
+    for k, (pilot, spp, at) in noise.items() if a.iterations else ():
         print(
             f"noise ΔE76: rgb {noise_rgb:.3f} at spp {a.spp}; {k} {pilot:.3f} at spp {a.spp}, {at:.3f} at spp {spp}; "
             f"s/iteration rgb {per_it['rgb']:.2f}, {k} {per_it[k]:.2f} ({per_it[k] / per_it['rgb']:.2f}x; "
