@@ -131,6 +131,24 @@ def ratio(a: float | None, b: float | None) -> float | None:
     return None if a is None or b is None else a / b
 
 
+def measure_noise(kinds: dict, vol, tex, a, rgb: tuple[float, int], d65) -> tuple[dict, dict]:
+    """Per spectral kind: (noise at --spp, spp at RGB's noise, noise there or None with --iterations 0), and its
+    forward-render path events over RGB's (``rgb``: RGB's noise and events at --spp) at equal noise."""
+    noise_rgb, events_rgb = rgb
+    noise, render_events = {}, {}
+    for name, viewing in kinds.items():
+        spectral = viewing.renderer_factory(Renderer)(vol, a.threads, None)
+        pilot, ev = render_noise(spectral, tex, a.spp, d65)
+        # path events of a forward render at the RGB noise: both at --spp, scaled by the noise's square
+        render_events[name] = ev / events_rgb * (pilot / noise_rgb) ** 2
+        spp = max(1, math.ceil(a.spp * (pilot / noise_rgb) ** 2))
+        noise[name] = (pilot, spp, colour_noise(spectral, tex, spp, d65) if a.iterations else None)
+        del spectral
+    if not a.iterations:  # renders only
+        print({k: round(v, 3) for k, v in render_events.items()}, "forward-render events over RGB at equal noise")
+    return noise, render_events
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--bands", type=int, default=16)
@@ -157,17 +175,7 @@ def main():
         kinds["planned"] = Viewing(table, (named_light("D65"),)).planned(vol, tex, a.threads)
         pilot_s = time.perf_counter() - t
     weights = kinds["spectral"].group_weights()
-    noise, render_events = {}, {}
-    for name, viewing in kinds.items():
-        spectral = viewing.renderer_factory(Renderer)(vol, a.threads, None)
-        pilot, ev = render_noise(spectral, tex, a.spp, d65)
-        # path events of a forward render at the RGB noise: both at --spp, scaled by the noise's square
-        render_events[name] = ev / events_rgb * (pilot / noise_rgb) ** 2
-        spp = max(1, math.ceil(a.spp * (pilot / noise_rgb) ** 2))
-        noise[name] = (pilot, spp, colour_noise(spectral, tex, spp, d65) if a.iterations else None)
-        del spectral
-    if not a.iterations:  # renders only
-        print({k: round(v, 3) for k, v in render_events.items()}, "forward-render events over RGB at equal noise")
+    noise, render_events = measure_noise(kinds, vol, tex, a, (noise_rgb, events_rgb), d65)
     cfg_rgb = OptimizeConfig(iterations=a.iterations, spp=a.spp, forward_spp=a.spp)
     cfgs = {k: OptimizeConfig(iterations=a.iterations, spp=n[1], forward_spp=n[1]) for k, n in noise.items()}
     secs, events = {"rgb": [], **{k: [] for k in kinds}}, {"rgb": [], **{k: [] for k in kinds}}
