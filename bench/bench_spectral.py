@@ -1,7 +1,7 @@
 """Spectral against RGB optimisation on the reference slab: cost per iteration at equal colour noise.
 
     nice -n 5 .venv/bin/python bench/bench_spectral.py [--bands 16] [--spp 16] [--iterations 3] [--threads 2]
-        [--equal-groups] [--spot-mm 20] [--no-hero]
+        [--equal-groups] [--spot-mm 20] [--no-hero] [--no-plan] [--out NAME.json]
 
 The spectral table is made here from the Vero RGB table by a simple rule (an assumption of this benchmark, not the
 documented spectral Vero table): each ink's sigma_s and sigma_a per channel placed at 465 (B), 540 (G) and 610 nm
@@ -20,6 +20,12 @@ optimiser's do (``Viewing.group_weights``), or equally with ``--equal-groups``.
 Two spectral renderers: one path per band and sample (the keys without "hero"), and hero paths, each carrying a
 band group's three bands (``Viewing.hero``; the ``hero_*`` keys, and "hero" in the per-iteration seconds), both with
 the same group weights, measured alike (``--no-hero``: the first only).
+
+Third, band paths grouped and weighted by a pilot render of the volume (``Viewing.planned``,
+``spectral.allocation``: bands ordered by the samples they need, Neyman allocation with each band's path cost; the
+``planned_*`` keys; ``--no-plan``: left out). ``over_rgb_at_equal_noise``: each kind's ratio scaled to the RGB noise
+exactly (x (its noise / RGB's)^2); ``events_*``: the same in path events (forward, gradient and replay), which do
+not depend on the machine's load.
 
 ``--spot-mm H``: the same on Spot scaled to H mm (its scene's start mixture for the noise renders) instead of the
 reference slab. Writes bench/results/spectral_cost.json (Spot: spectral_cost_spot<H>mm.json).
@@ -46,7 +52,7 @@ from inkopt.scenes import build_scene  # noqa: E402
 from inkopt.scenes.slab import build_slab  # noqa: E402
 from inkopt.scenes.spec import MeshSpec  # noqa: E402
 from inkopt.spectral.lights import named_light  # noqa: E402
-from inkopt.spectral.render import SpectralRenderer, group_spp  # noqa: E402
+from inkopt.spectral.render import group_spp  # noqa: E402
 from inkopt.spectral.viewing import Viewing  # noqa: E402
 
 #: where each RGB channel's coefficients are placed (nm): R, G, B
@@ -74,30 +80,73 @@ def bench_scene(spot_mm: float | None):
 
 def colour_noise(renderer, texels, spp: int, cmap) -> float:
     """The RMS over texels of the CIELAB standard error (ΔE76) of one render of ``spp`` samples per texel."""
+    return render_noise(renderer, texels, spp, cmap)[0]
+
+
+def render_noise(renderer, texels, spp: int, cmap) -> tuple[float, int]:
+    """:func:`colour_noise` and the render's path events."""
     res = renderer.render(texels, spp, seed=7)
-    return float(np.sqrt(np.mean(cmap.lab_stderr(res.rgb, res.var_mean) ** 2)))
+    return float(np.sqrt(np.mean(cmap.lab_stderr(res.rgb, res.var_mean) ** 2))), int(res.events)
 
 
-def iteration_seconds(scene, cfg, threads, viewing, iterations: int) -> list[float]:
+def iteration_seconds(scene, cfg, threads, viewing, iterations: int) -> tuple[list[float], list[int]]:
+    """Seconds and path events (forward, gradient and replay) of each of ``iterations`` optimisation iterations."""
     run = Optimization(scene, cfg.for_scene(scene.kind), threads=threads, viewing=viewing)
     run.renderer()  # built before the clock starts (set-up is not an iteration's cost)
+    events = []
     for _ in range(iterations):
         run.step()
-    return list(run.history.seconds)
+        events.append(sum(p["events"] + p["replayed_events"] for p in run.last_passes.values() if p))
+    return list(run.history.seconds), events
 
 
-def hero_keys(noise: dict, per_it: dict, weights, groups: int) -> dict:
-    """The hero-path renderer's result keys (none without it)."""
-    if "hero" not in noise:
+def kind_keys(name: str, noise: dict, per_it: dict, viewing, groups: int) -> dict:
+    """A spectral renderer's result keys beyond the band paths' own (``name``: "hero" or "planned"; none when it
+    was left out)."""
+    if name not in noise:
         return {}
-    pilot, spp, at = noise["hero"]
-    return {
-        "hero_group_spp": group_spp(spp, weights, groups),
-        "noise_dE76_hero_at_rgb_spp": pilot,
-        "hero_spp_equal_noise": spp,
-        "noise_dE76_hero": at,
-        "hero_over_rgb": per_it["hero"] / per_it["rgb"],
+    pilot, spp, at = noise[name]
+    out = {
+        f"{name}_group_spp": group_spp(spp, viewing.group_weights(), groups),
+        f"noise_dE76_{name}_at_rgb_spp": pilot,
+        f"{name}_spp_equal_noise": spp,
+        f"noise_dE76_{name}": at,
+        f"{name}_over_rgb": ratio(per_it[name], per_it["rgb"]),
     }
+    if viewing.plan is not None:
+        out.update(planned_groups=[list(g) for g in viewing.plan.groups], planned_weights=list(viewing.plan.weights))
+    return out
+
+
+def equal_noise_ratios(noise: dict, noise_rgb: float, per_it: dict) -> dict:
+    """Each spectral kind's seconds (and events) per iteration over RGB's, scaled to the RGB noise exactly: its
+    measured ratio x (its noise at its equal-noise spp / RGB's)^2 (a noise's square falls as 1 / samples), which
+    removes the rounding of the samples per texel to a whole number."""
+    scaled = {k: ratio(per_it[k], per_it["rgb"]) for k in noise}
+    return {k: None if n[2] is None else scaled[k] * (n[2] / noise_rgb) ** 2 for k, n in noise.items()}
+
+
+def ratio(a: float | None, b: float | None) -> float | None:
+    """a / b, None when either was not measured (``--iterations 0``: renders only)."""
+    return None if a is None or b is None else a / b
+
+
+def measure_noise(kinds: dict, vol, tex, a, rgb: tuple[float, int], d65) -> tuple[dict, dict]:
+    """Per spectral kind: (noise at --spp, spp at RGB's noise, noise there or None with --iterations 0), and its
+    forward-render path events over RGB's (``rgb``: RGB's noise and events at --spp) at equal noise."""
+    noise_rgb, events_rgb = rgb
+    noise, render_events = {}, {}
+    for name, viewing in kinds.items():
+        spectral = viewing.renderer_factory(Renderer)(vol, a.threads, None)
+        pilot, ev = render_noise(spectral, tex, a.spp, d65)
+        # path events of a forward render at the RGB noise: both at --spp, scaled by the noise's square
+        render_events[name] = ev / events_rgb * (pilot / noise_rgb) ** 2
+        spp = max(1, math.ceil(a.spp * (pilot / noise_rgb) ** 2))
+        noise[name] = (pilot, spp, colour_noise(spectral, tex, spp, d65) if a.iterations else None)
+        del spectral
+    if not a.iterations:  # renders only
+        print({k: round(v, 3) for k, v in render_events.items()}, "forward-render events over RGB at equal noise")
+    return noise, render_events
 
 
 def main():
@@ -109,38 +158,42 @@ def main():
     ap.add_argument("--equal-groups", action="store_true", help="every band group the pass's spp")
     ap.add_argument("--spot-mm", type=float, help="Spot at this height instead of the reference slab")
     ap.add_argument("--no-hero", action="store_true", help="leave out the hero-path spectral renderer")
+    ap.add_argument("--no-plan", action="store_true", help="leave out the band paths grouped by a pilot's plan")
+    ap.add_argument("--out", help="results file name in bench/results (default by the scene)")
     a = ap.parse_args()
     vol, scene = bench_scene(a.spot_mm)
     table = spectral_from_rgb(vol.inks, a.bands)
     d65 = named_light("D65").colour_map(table.wavelengths_nm)
     tex = scene.texels
-    noise_rgb = colour_noise(Renderer(vol, a.threads), tex, a.spp, RGB)
+    noise_rgb, events_rgb = render_noise(Renderer(vol, a.threads), tex, a.spp, RGB)
     kinds = {"spectral": Viewing(table, (named_light("D65"),), weighted=not a.equal_groups)}
     if not a.no_hero:
         kinds["hero"] = Viewing(table, (named_light("D65"),), weighted=not a.equal_groups, hero=True)
+    pilot_s = None
+    if not a.no_plan:
+        t = time.perf_counter()
+        kinds["planned"] = Viewing(table, (named_light("D65"),)).planned(vol, tex, a.threads)
+        pilot_s = time.perf_counter() - t
     weights = kinds["spectral"].group_weights()
-    noise = {}
-    for name, viewing in kinds.items():
-        spectral = SpectralRenderer(vol, table, a.threads, weights=weights, hero=viewing.hero)
-        pilot = colour_noise(spectral, tex, a.spp, d65)
-        spp = max(1, math.ceil(a.spp * (pilot / noise_rgb) ** 2))
-        noise[name] = (pilot, spp, colour_noise(spectral, tex, spp, d65))
-        del spectral
+    noise, render_events = measure_noise(kinds, vol, tex, a, (noise_rgb, events_rgb), d65)
     cfg_rgb = OptimizeConfig(iterations=a.iterations, spp=a.spp, forward_spp=a.spp)
     cfgs = {k: OptimizeConfig(iterations=a.iterations, spp=n[1], forward_spp=n[1]) for k, n in noise.items()}
-    secs = {"rgb": [], **{k: [] for k in kinds}}
+    secs, events = {"rgb": [], **{k: [] for k in kinds}}, {"rgb": [], **{k: [] for k in kinds}}
     t0 = time.perf_counter()
-    for _ in range(2):  # alternating, so a change of the machine's load falls on all
-        secs["rgb"] += iteration_seconds(scene, cfg_rgb, a.threads, None, a.iterations)
-        for k, viewing in kinds.items():
-            secs[k] += iteration_seconds(scene, cfgs[k], a.threads, viewing, a.iterations)
-    per_it = {k: float(np.median(v)) for k, v in secs.items()}
+    for _ in range(2 if a.iterations else 0):  # alternating, so a change of the machine's load falls on all
+        for k, viewing in {"rgb": None, **kinds}.items():
+            s, e = iteration_seconds(scene, cfgs.get(k, cfg_rgb), a.threads, viewing, a.iterations)
+            secs[k] += s
+            events[k] += e
+    per_it = {k: float(np.median(v)) if v else None for k, v in secs.items()}
+    ev_it = {k: float(np.median(v)) if v else None for k, v in events.items()}
+    groups = len(table.group_bands())
     out = {
         "scene": f"Spot {a.spot_mm:g} mm" if a.spot_mm else "reference slab 177x118x30 voxels, chart top, zebra below",
         "texels": len(tex),
         "bands": a.bands,
-        "band_groups": len(table.group_bands()),
-        "group_spp": group_spp(noise["spectral"][1], weights, len(table.group_bands())),
+        "band_groups": groups,
+        "group_spp": group_spp(noise["spectral"][1], weights, groups),
         "spectral_table": "Vero RGB coefficients at 610/540/465 nm, linear in wavelength (bench rule)",
         "rgb_spp": a.spp,
         "noise_dE76_rgb": noise_rgb,
@@ -149,18 +202,28 @@ def main():
         "noise_dE76_spectral": noise["spectral"][2],
         "seconds_per_iteration": per_it,
         "iteration_seconds": secs,
-        "spectral_over_rgb": per_it["spectral"] / per_it["rgb"],
-        **hero_keys(noise, per_it, weights, len(table.group_bands())),
+        "spectral_over_rgb": ratio(per_it["spectral"], per_it["rgb"]),
+        **kind_keys("hero", noise, per_it, kinds.get("hero"), groups),
+        **kind_keys("planned", noise, per_it, kinds.get("planned"), groups),
+        "planned_pilot_s": pilot_s,
+        "over_rgb_at_equal_noise": equal_noise_ratios(noise, noise_rgb, per_it),
+        "events_per_iteration": ev_it,
+        "iteration_events": events,
+        "events_over_rgb_at_equal_noise": equal_noise_ratios(noise, noise_rgb, ev_it),
+        "render_events_over_rgb_at_equal_noise": render_events,
         "threads": a.threads,
         "wall_s": time.perf_counter() - t0,
         **machine(),
     }
-    for k, (pilot, spp, at) in noise.items():
+    for k, (pilot, spp, at) in noise.items() if a.iterations else ():
         print(
             f"noise ΔE76: rgb {noise_rgb:.3f} at spp {a.spp}; {k} {pilot:.3f} at spp {a.spp}, {at:.3f} at spp {spp}; "
-            f"s/iteration rgb {per_it['rgb']:.2f}, {k} {per_it[k]:.2f} ({per_it[k] / per_it['rgb']:.2f}x)"
+            f"s/iteration rgb {per_it['rgb']:.2f}, {k} {per_it[k]:.2f} ({per_it[k] / per_it['rgb']:.2f}x; "
+            f"at equal noise {out['over_rgb_at_equal_noise'][k]:.2f}x, events "
+            f"{out['events_over_rgb_at_equal_noise'][k]:.2f}x)"
         )
-    print("wrote", write(f"spectral_cost_spot{a.spot_mm:g}mm.json" if a.spot_mm else "spectral_cost.json", out))
+    name = a.out or (f"spectral_cost_spot{a.spot_mm:g}mm.json" if a.spot_mm else "spectral_cost.json")
+    print("wrote", write(name, out))
 
 
 if __name__ == "__main__":

@@ -68,6 +68,20 @@ def with_inks(volume: Volume, inks: InkTable) -> Volume:
     raise ParameterError("`volume` must hold a mixture or labels to be rendered with a spectral ink table")
 
 
+def check_groups(groups, bands: int) -> None:
+    """A ParameterError naming `groups` unless they split the bands 0..bands-1 into groups of 1-3 bands."""
+    flat = [b for g in groups for b in g]
+    if sorted(flat) != list(range(bands)) or not all(1 <= len(g) <= GROUP for g in groups):
+        raise ParameterError(f"`groups` must hold each of the {bands} bands once, at most {GROUP} per group")
+
+
+def band_table(table: SpectralInkTable, bands) -> InkTable:
+    """The RGB-shaped table of a group of 1-3 ``bands`` of ``table``: its channels the bands in order, a short
+    group's last band repeated to fill three channels (as ``SpectralInkTable.band_groups`` makes them)."""
+    pick = list(bands) + [bands[-1]] * (GROUP - len(bands))
+    return InkTable(table.names, table.sigma_s[:, pick], table.sigma_a[:, pick], table.g)
+
+
 def check_grey(lighting: Lighting) -> Lighting:
     """``lighting`` if its radiance is the same in R, G and B; a ParameterError naming `lighting` otherwise."""
     env = lighting.map
@@ -86,7 +100,9 @@ class SpectralRenderer(TexelRenderer):
     ``shared``: one renderer for every group, each group's medium swapped in before its pass (``set_volume``, which
     renders bit-identically to a renderer built for it): the geometry is held once instead of G times, for
     evaluations; its medium cannot be updated in place (``set_mixture``). ``hero``: hero-channel paths per group
-    (see the module's documentation)."""
+    (see the module's documentation). ``groups``: the bands of each group, each band in one group, at most three per
+    group, in any order (default ``table.group_bands()``; ``spectral.allocation.plan`` orders them by the samples
+    they need); ``weights`` then follow these groups."""
 
     def __init__(
         self,
@@ -98,6 +114,7 @@ class SpectralRenderer(TexelRenderer):
         weights=None,
         shared: bool = False,
         hero: bool = False,
+        groups=None,
     ):
         if volume.inks is None or tuple(volume.inks.names) != tuple(table.names):
             have = None if volume.inks is None else list(volume.inks.names)
@@ -106,8 +123,9 @@ class SpectralRenderer(TexelRenderer):
         self._source = volume  # whose medium the groups render (``shared``: swapped in from it)
         self.volume = volume
         self.lighting = check_grey(load_lighting(lighting))
-        self._bands = table.group_bands()
-        self._groups = table.band_groups()
+        self._bands = table.group_bands() if groups is None else [tuple(int(b) for b in g) for g in groups]
+        check_groups(self._bands, table.bands)
+        self._groups = [band_table(table, bands) for bands in self._bands]
         self.weights = None if weights is None else np.asarray(weights, np.float64)
         if self.weights is not None and (self.weights.shape != (len(self._groups),) or not np.all(self.weights > 0)):
             raise ParameterError(f"`weights` must be {len(self._groups)} positive numbers, one per band group")

@@ -19,6 +19,8 @@ from ..errors import ParameterError
 from ..loss import COMBINE, TexelLoss
 from ..model.spectral import SpectralInkTable
 from ..render import RendererFactory, RenderResult
+from .allocation import BandPlan, pilot
+from .allocation import plan as plan_bands
 from .lights import Light, named_light
 from .render import SpectralRenderer
 
@@ -32,13 +34,16 @@ class Viewing:
     ``combine``: "mean" or "worst" of the loss under several lights; ``weighted``: a pass's samples shared among the
     band groups by :meth:`group_weights` (False: equally); ``hero``: each band group's paths carry its three bands
     (``SpectralRenderer``'s ``hero``; off by default: 0.64x the band paths' cost at equal noise on the reference
-    slab but 8x on Spot 20 mm, whose hero noise is 4x the band paths', docs/spectral.md "Cost")."""
+    slab but 8x on Spot 20 mm, whose hero noise is 4x the band paths', docs/spectral.md "Cost"). ``plan``: which
+    bands share a group and the groups' sample weights, measured on the volume (``spectral.allocation``,
+    :meth:`planned`; None: bands in wavelength order, weighted by a mid grey's colour variance)."""
 
     table: SpectralInkTable | None = None
     lights: tuple[Light, ...] = ()
     combine: str = "mean"
     weighted: bool = True
     hero: bool = False
+    plan: BandPlan | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "lights", tuple(self.lights))
@@ -52,6 +57,8 @@ class Viewing:
             )
         if len({light.name for light in self.lights}) != len(self.lights):
             raise ParameterError("`illuminants` names a light twice")
+        if self.plan is not None and (self.table is None or sum(map(len, self.plan.groups)) != self.table.bands):
+            raise ParameterError("`plan` must be of the spectral ink table's bands")
 
     @property
     def spectral(self) -> bool:
@@ -78,17 +85,28 @@ class Viewing:
         if table is None:
             return inner
         w = self.group_weights()
-        hero = self.hero
+        hero, groups = self.hero, None if self.plan is None else self.plan.groups
         return lambda volume, threads, lighting: SpectralRenderer(
-            volume, table, threads, lighting, inner, w, shared, hero
+            volume, table, threads, lighting, inner, w, shared, hero, groups
         )
+
+    def planned(self, volume, texels, threads: int | None = None, lighting=None, inner: RendererFactory | None = None):
+        """This viewing with the ``plan`` measured by a pilot render of ``volume`` (a mixture or labels of the
+        table's inks; e.g. a run's start) on ``texels`` under ``lighting`` (``spectral.allocation.pilot``, through
+        ``inner``, default :class:`~inkopt.render.Renderer`; the same for any thread count)."""
+        if self.table is None:
+            raise ParameterError("`plan` needs a spectral ink table")
+        measured = pilot(volume, self.table, texels, self.colours(), threads, lighting, inner)
+        return replace(self, plan=plan_bands(measured))
 
     def group_weights(self) -> np.ndarray | None:
         """(G,) the band groups' sample weights (``spectral.render.group_spp``; None unless ``weighted``): the square
         root of each group's share of the CIELAB variance of a mid grey (reflectance 0.18 in every band) summed over
-        the lights, every band's variance taken equal."""
+        the lights, every band's variance taken equal; with a ``plan``, its weights (its groups)."""
         if not self.weighted:
             return None
+        if self.plan is not None:
+            return np.array(self.plan.weights)
         grey = np.full(self.table.bands, 0.18)
         per_band = sum(np.sum(c.lab_jacobian(grey) ** 2, axis=0) for c in self.colours())
         return np.sqrt([per_band[list(b)].sum() for b in self.table.group_bands()])
@@ -104,7 +122,8 @@ class Viewing:
         for light in self.seen_under():
             h.update(light.name.encode())
             h.update(np.ascontiguousarray(light.on_grid()).tobytes())
-        return f"{self.combine}:{h.hexdigest()[:16]}" + (":hero" if self.hero else "")
+        plan = "" if self.plan is None else f":plan-{self.plan.key()}"
+        return f"{self.combine}:{h.hexdigest()[:16]}" + (":hero" if self.hero else "") + plan
 
     def display(self, values) -> np.ndarray:
         """Predictions ``values`` (I, C) as linear sRGB (I, 3) float64 for pictures: the RGB path's as they are;

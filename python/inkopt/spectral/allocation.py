@@ -1,0 +1,137 @@
+"""Which bands share a path group and how many samples each group gets, from a pilot render of the volume itself.
+
+A band render's colour noise is a sum over bands (band paths are independent): the squared CIELAB standard error of
+a texel is sum_j w_j s_j^2 / n_j, with w_j = sum over the lights and L*, a*, b* of (d lab / d band j)^2, s_j^2 the
+band's variance per sample and n_j its samples; a band's cost per sample is c_j, the path events of one of its
+paths. Bands differ by orders of magnitude in both: where white ink scatters most (the blue bands) paths are 3.6x
+longer than in the red ones, and the bands at the spectrum's ends barely reach the eye. For a fixed cost the
+noise is least when n_j is proportional to sqrt(A_j / c_j), A_j = the texels' mean of w_j s_j^2 (Neyman allocation
+with costs). The core traces three bands per group with one sample count, so :func:`plan` puts the bands in order
+of that ideal density and takes consecutive triples (bands of one group then want about the same samples; a group
+need not be three neighbouring wavelengths), and gives group g the weight sqrt(A_g / C_g) (A_g, C_g: its bands'
+sums; the optimum for those groups). Every band's estimate stays the mean of its own paths: unbiased whatever the
+plan, which only moves cost between bands.
+
+:func:`pilot` measures A_j and c_j on the volume: every band rendered on its own (its three channels one band) at a
+fixed seed on an evenly spaced subset of the texels; it is a pure function of the volume, texels and lights
+(bit-identical for any thread count), so a run that repeats it (a resume) gets the same plan.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..color import ColourMap
+from ..errors import ParameterError
+from ..lighting import Lighting, load_lighting
+from ..model import Texels, Volume
+from ..model.spectral import GROUP, SpectralInkTable
+from ..render import PassSettings, Renderer, RendererFactory
+from .render import band_table, check_grey, check_groups, with_inks
+
+#: the pilot's random numbers (a constant: the plan is a function of the volume, not of a run's seed)
+PILOT_SEED = 0x5EC7_A110
+#: at most this many texels in the pilot (evenly spaced over the list)
+PILOT_TEXELS = 4096
+#: the pilot's samples per band slot: spread over its texels, at least 2 per texel (three slots per band: 3x this
+#: many paths per band), so a pilot of a few texels still sees every band's variance
+PILOT_SAMPLES = 2 * PILOT_TEXELS
+
+
+@dataclass(frozen=True)
+class BandPlan:
+    """``groups``: the bands of each path group (every band of the table in exactly one group, at most three per
+    group, in any order); ``weights`` (G,) > 0: the groups' shares of a pass's samples
+    (``spectral.render.group_spp``)."""
+
+    groups: tuple[tuple[int, ...], ...]
+    weights: tuple[float, ...]
+
+    def __post_init__(self):
+        groups = tuple(tuple(int(b) for b in g) for g in self.groups)
+        object.__setattr__(self, "groups", groups)
+        object.__setattr__(self, "weights", tuple(float(w) for w in self.weights))
+        check_groups(groups, sum(len(g) for g in groups))
+        if len(self.weights) != len(groups) or not all(np.isfinite(w) and w > 0 for w in self.weights):
+            raise ParameterError(f"`weights` must be {len(groups)} positive numbers, one per band group")
+
+    def key(self) -> str:
+        """A short digest of the plan (what a checkpoint's key holds)."""
+        h = hashlib.sha256(repr((self.groups, self.weights)).encode())
+        return h.hexdigest()[:12]
+
+
+@dataclass(frozen=True)
+class Pilot:
+    """What :func:`pilot` measured, per band (B,) float64: ``noise`` A_j, the texels' mean of the band's
+    contribution to the squared CIELAB standard error (ΔE76^2) of one sample per band, summed over the lights;
+    ``cost`` c_j, path events per path; ``texels``: how many texels it rendered; ``paths``: how many paths."""
+
+    noise: np.ndarray
+    cost: np.ndarray
+    texels: int
+    paths: int
+
+
+def pilot_texels(texels: Texels, most: int = PILOT_TEXELS) -> Texels:
+    """At most ``most`` of ``texels``, evenly spaced over the list (all of them if there are no more)."""
+    if len(texels) <= most:
+        return texels
+    return texels.subset(np.linspace(0, len(texels) - 1, most).round().astype(np.int64))
+
+
+def pilot(
+    volume: Volume,
+    table: SpectralInkTable,
+    texels: Texels,
+    colours: Sequence[ColourMap],
+    threads: int | None = None,
+    lighting: Lighting | str | None = None,
+    factory: RendererFactory | None = None,
+    samples: int = PILOT_SAMPLES,
+) -> Pilot:
+    """Every band of ``table`` rendered alone (its three channels that band, ``samples`` per channel spread over
+    the texels, at least 2 per texel) on :func:`pilot_texels` of ``texels`` at :data:`PILOT_SEED`, with one
+    renderer (``factory``, default :class:`~inkopt.render.Renderer`) whose medium each band swaps in; ``colours``:
+    the lights' colour maps on the table's bands (``Viewing.colours``). A_j uses each texel's CIELAB Jacobian at
+    the pilot's band values."""
+    tex = pilot_texels(texels)
+    spp = max(2, -(-int(samples) // len(tex)))
+    light = check_grey(load_lighting(lighting))
+    values = np.empty((len(tex), table.bands))
+    var = np.empty_like(values)
+    cost = np.empty(table.bands)
+    paths, renderer = 0, None
+    for j in range(table.bands):
+        vol = with_inks(volume, band_table(table, (j,) * GROUP))
+        if renderer is None:
+            renderer = (factory or Renderer)(vol, threads, light)
+        else:
+            renderer.set_volume(vol)
+        res = renderer.render_pass(tex, PassSettings(spp, PILOT_SEED + j))
+        values[:, j] = np.mean(res.rgb, axis=1, dtype=np.float64)
+        # one path's variance: each channel's variance of its mean of spp paths, x spp, averaged over the channels
+        var[:, j] = np.mean(res.var_mean, axis=1, dtype=np.float64) * spp
+        cost[j] = res.events / max(res.paths, 1)
+        paths += res.paths
+    w = sum(np.sum(c.lab_jacobian(values) ** 2, axis=-2) for c in colours)
+    return Pilot(np.mean(w * var, axis=0), cost, len(tex), paths)
+
+
+def plan(measured: Pilot) -> BandPlan:
+    """The bands in order of their ideal sample density sqrt(A_j / c_j) (largest first), consecutive triples as
+    groups, each group weighted sqrt(A_g / C_g) (its bands' summed noise over the cost of its three paths: a short
+    last group's slots repeat its last band and are traced). Weights are floored at 1e-6 of the largest (a band
+    that does not reach the colour still gets a sample: ``group_spp`` gives every group at least one)."""
+    noise = np.maximum(np.asarray(measured.noise, np.float64), 0.0)
+    cost = np.maximum(np.asarray(measured.cost, np.float64), 1e-9)
+    order = np.argsort(-np.sqrt(noise / cost), kind="stable")
+    groups = tuple(tuple(int(b) for b in order[k : k + GROUP]) for k in range(0, len(order), GROUP))
+    slots = [list(g) + [g[-1]] * (GROUP - len(g)) for g in groups]
+    w = np.array([np.sqrt(noise[list(g)].sum() / cost[s].sum()) for g, s in zip(groups, slots)])
+    w = np.maximum(w, 1e-6 * max(w.max(), 1e-300))
+    return BandPlan(groups, tuple(w / w.max()))
