@@ -2,10 +2,18 @@
 
 import numpy as np
 
-from inkopt.model import InkTable
+from inkopt.model import InkTable, Volume
 from inkopt.model.spectral import SpectralInkTable
 
 INKS = InkTable.parse("vero-cmykw")
+VOX = 0.0847  # mm: a 300-DPI voxel
+
+
+def random_volume(shape=(6, 7, 8), seed=0) -> Volume:
+    """A volume of random mixtures (Dirichlet) of ``INKS``, ``shape`` voxels of ``VOX`` mm."""
+    rng = np.random.default_rng(seed)
+    m = rng.dirichlet(np.ones(len(INKS)), size=shape).astype(np.float32)
+    return Volume.from_mixture(voxel_mm=(VOX,) * 3, mixture=m, inks=INKS)
 
 
 def rgb_as_bands(inks: InkTable, repeat: int = 1) -> SpectralInkTable:

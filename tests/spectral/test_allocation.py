@@ -5,7 +5,7 @@ standard error; the pilot, the plan and planned renders and gradients are bit-id
 
 import numpy as np
 import pytest
-from spectral_helpers import INKS, smooth_table
+from spectral_helpers import INKS, random_volume, smooth_table
 
 from inkopt.errors import ParameterError
 from inkopt.model import Texels, Volume
@@ -15,14 +15,6 @@ from inkopt.spectral.allocation import BandPlan, Pilot, pilot, pilot_texels, pla
 from inkopt.spectral.lights import named_light
 from inkopt.spectral.render import SpectralRenderer, group_spp
 from inkopt.spectral.viewing import Viewing
-
-VOX = 0.0847
-
-
-def random_volume(shape=(6, 7, 8), seed=0) -> Volume:
-    rng = np.random.default_rng(seed)
-    m = rng.dirichlet(np.ones(len(INKS)), size=shape).astype(np.float32)
-    return Volume.from_mixture(voxel_mm=(VOX,) * 3, mixture=m, inks=INKS)
 
 
 def test_plan_groups_bands_by_their_ideal_density_and_weights_groups_by_neyman():

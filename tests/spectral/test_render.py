@@ -4,7 +4,7 @@ render within the standard error; each band of a slab matches adding-doubling wi
 
 import numpy as np
 import pytest
-from spectral_helpers import INKS, rgb_as_bands, smooth_table
+from spectral_helpers import INKS, VOX, random_volume, rgb_as_bands, smooth_table
 
 from inkopt.errors import ParameterError
 from inkopt.lighting import Lighting
@@ -12,14 +12,6 @@ from inkopt.model import InkTable, Texels, Volume
 from inkopt.model.spectral import SpectralInkTable
 from inkopt.render import Renderer
 from inkopt.spectral.render import SpectralRenderer, group_seed, group_spp
-
-VOX = 0.0847
-
-
-def random_volume(shape=(6, 7, 8), seed=0) -> Volume:
-    rng = np.random.default_rng(seed)
-    m = rng.dirichlet(np.ones(len(INKS)), size=shape).astype(np.float32)
-    return Volume.from_mixture(voxel_mm=(VOX,) * 3, mixture=m, inks=INKS)
 
 
 def test_group_seeds():
