@@ -10,8 +10,10 @@ import time
 from dataclasses import replace
 
 from .errors import ParameterError
+from .evaluation.baselines import baseline_layers
 from .evaluation.noise import PILOT_SPP
 from .optim import EXTRUSION_START_MM, OptimizeConfig
+from .optim.param import BASELINE_INITS
 from .run import RunOptions, release_freed_memory, run_optimisation
 from .rundir import RunDir
 from .scenes import build_scene
@@ -89,7 +91,7 @@ def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: flo
     run's wall time count from the job's start (``options.started``); ``options.on_step`` is called in the fine
     stage only. Returns the fine run's report (``dry_run``: its estimate, from a white start; nothing is
     written)."""
-    from .optim.transfer import write_transferred_volume
+    from .optim.transfer import Baseline, write_transferred_volume
 
     options = options or RunOptions()
     if not 0 < coarse_dpi < spec.dpi:
@@ -102,24 +104,32 @@ def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: flo
     with rd.lock(options.log):  # the whole job's, the fine run's taken again inside it
         coarse_dir, start = rd.path / "coarse", rd.path / "coarse" / "fine_start.npz"
         fine_begun = options.resume and rd.checkpoint_path.is_file() and start.is_file()
-        if not fine_begun:
-            _coarse_stage(spec, inks, coarse_dir, cfg, coarse_dpi, options)
+        coarse_start = None if fine_begun else _coarse_stage(spec, inks, coarse_dir, cfg, coarse_dpi, options)
         fine = build_scene(spec, inks)
         if not fine_begun:
             t = time.perf_counter()
-            write_transferred_volume(RunDir(coarse_dir).load_volume(), fine.volume, fine.fixed_share, start)
+            baseline = None
+            if coarse_start is not None:  # the correction transfer: the fine grid's baseline plus the change
+                fine_start = baseline_layers(cfg.init, fine.volume, fine.texels, fine.target_rgb, fine.fixed_share)
+                baseline = Baseline(coarse_start, fine_start)
+            source = RunDir(coarse_dir).load_volume()
+            write_transferred_volume(source, fine.volume, fine.fixed_share, start, baseline=baseline)
+            del baseline, coarse_start, source
             t = time.perf_counter() - t
-            options.log(f"coarse result moved onto the {spec.dpi:g}-DPI grid in {t:.0f} s: {start}")
+            how = "" if cfg.init not in BASELINE_INITS else f" as a change of the {cfg.init} baseline"
+            options.log(f"coarse result moved onto the {spec.dpi:g}-DPI grid{how} in {t:.0f} s: {start}")
             release_freed_memory()  # the fine stage's peak is the job's: nothing of the stages before it under it
         return run_optimisation(fine, out_dir, replace(cfg, init=str(start)), options)
 
 
-def _coarse_stage(spec, inks, coarse_dir, cfg: OptimizeConfig, coarse_dpi: float, options: RunOptions) -> None:
+def _coarse_stage(spec, inks, coarse_dir, cfg: OptimizeConfig, coarse_dpi: float, options: RunOptions):
     """The coarse run of ``run_coarse_to_fine`` in ``coarse_dir``: ``spec`` at ``coarse_dpi``, within
     ``COARSE_BUDGET_SHARE`` of the time budget; its figures are one pilot pass (informative: the fine stage's are
     the run's, its baseline guard too); the caller's per-step hook sees the fine stage only (another grid here).
     The coarse result is not smoothed at its end (``finish_smooth`` 0): it is the fine stage's start, not an answer,
-    and a pass on the coarse grid blurs twice as far as the fine result's own (docs/quality.md, "The duck's margin")."""
+    and a pass on the coarse grid blurs twice as far as the fine result's own (docs/quality.md, "The duck's margin").
+    Returns the coarse run's start as a mixture ``Volume`` on the coarse grid when ``cfg.init`` is a print-shop
+    baseline (``optim.param.BASELINE_INITS``: the correction transfer's B_c), else None."""
     coarse = build_scene(replace(spec, dpi=coarse_dpi), inks)
     budget = None if cfg.time_budget is None else COARSE_BUDGET_SHARE * cfg.time_budget
     log = options.log
@@ -128,5 +138,10 @@ def _coarse_stage(spec, inks, coarse_dir, cfg: OptimizeConfig, coarse_dpi: float
         options, on_step=None, eval_spp=options.eval_spp or PILOT_SPP, log=lambda m: log(f"  {m}"), baseline_guard=False
     )
     run_optimisation(coarse, coarse_dir, replace(cfg, time_budget=budget, finish_smooth=0), coarse_options)
+    start = None
+    if cfg.init in BASELINE_INITS:  # the coarse grid's baseline: the coarse run's start (before its clip at 1e-6)
+        layers = baseline_layers(cfg.init, coarse.volume, coarse.texels, coarse.target_rgb, coarse.fixed_share)
+        start = coarse.volume.with_mixture(layers.array())
     del coarse
     release_freed_memory()
+    return start
