@@ -110,8 +110,9 @@ def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: flo
             t = time.perf_counter()
             baseline = None
             if coarse_start is not None:  # the correction transfer: the fine grid's baseline plus the change
-                fine_start = baseline_layers(cfg.init, fine.volume, fine.texels, fine.target_rgb, fine.fixed_share)
-                baseline = Baseline(coarse_start, fine_start)
+                layers = baseline_layers(cfg.init, fine.volume, fine.texels, fine.target_rgb, fine.fixed_share)
+                baseline = Baseline(coarse_start, layers)
+                options = replace(options, baselines={cfg.init: layers})  # the fine run's guard takes it as made
             source = RunDir(coarse_dir).load_volume()
             write_transferred_volume(source, fine.volume, fine.fixed_share, start, baseline=baseline)
             del baseline, coarse_start, source
