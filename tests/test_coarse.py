@@ -76,3 +76,27 @@ def test_a_job_from_white_starts_its_fine_stage_from_the_plain_transfer(spec, tm
     want = write_transferred_volume(result, fine.volume, fine.fixed_share, tmp_path / "want.npz")
     got = Volume.load(tmp_path / "job" / "coarse" / "fine_start.npz").mixture
     np.testing.assert_array_equal(got, Volume.load(want).mixture)
+
+
+def test_the_deadline_plan_takes_meshes_coarse_to_fine_from_the_extrusion_baseline():
+    """With a time budget and no coarse grid given: a mesh whose settings name no start goes coarse to fine at half
+    its DPI from the extrusion baseline (whatever its thickness); a mesh with a start, and a slab, go coarse to fine
+    from their own start, unless the slab is thinner than a voxel of the coarse grid."""
+    from inkopt.coarse import DEADLINE_COARSE_FACTOR, DEADLINE_MESH_START, deadline_plan
+    from inkopt.scenes.spec import MeshSpec
+
+    assert DEADLINE_MESH_START == "extrusion"
+    cfg = OptimizeConfig(time_budget=60.0)
+    lines = []
+    for mesh in (MeshSpec("thin.obj", height_mm=10.0), MeshSpec("thick.obj", height_mm=40.0, dpi=200)):
+        dpi, got = deadline_plan(mesh, cfg, log=lines.append)
+        assert dpi == DEADLINE_COARSE_FACTOR * mesh.dpi and got == OptimizeConfig(time_budget=60.0, init="extrusion")
+        assert "coarse to fine from the extrusion baseline" in lines[-1]
+    given = OptimizeConfig(time_budget=60.0, init="white")
+    mesh = MeshSpec("m.obj")
+    assert deadline_plan(mesh, given, log=lines.append) == (DEADLINE_COARSE_FACTOR * mesh.dpi, given)
+    slab = SlabSpec("chart.png", (40.0, 40.0, 10.0))
+    assert deadline_plan(slab, cfg, log=lines.append) == (DEADLINE_COARSE_FACTOR * slab.dpi, cfg)
+    assert len(lines) == 2
+    sheet = SlabSpec("chart.png", (40.0, 40.0, 0.1))  # one voxel at 300 DPI, less than one at the coarse 150
+    assert deadline_plan(sheet, cfg, log=lines.append) == (0.0, cfg) and "no coarse stage" in lines[-1]
