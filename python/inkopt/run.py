@@ -104,7 +104,8 @@ class RunOptions:
     figures at the start and check the result against them (``evaluation.guard``). ``baselines``: print-shop
     baselines' mixtures already made for this scene (kind -> ``evaluation.baselines.baseline_layers``'s layers, e.g.
     by a coarse-to-fine transfer from a baseline), taken by the run's start and its guard instead of being made
-    again (the extrusion baseline of a 20 mm mesh: ~25 s, five fine iterations of a 5-minute job)."""
+    again (the spider of the mesh suite at 20 mm: its fine stage ran 9 iterations in a 5-minute job instead of 6,
+    docs/quality.md, "The correction transfer")."""
 
     resume: bool = False
     eval_spp: int | None = None
