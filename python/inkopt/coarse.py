@@ -30,14 +30,14 @@ DEADLINE_COARSE_FACTOR = 0.5
 #: coarse stage starts from it at half the DPI, and the fine stage from the baseline on its own grid plus the coarse
 #: stage's change moved up (the correction transfer, ``optim.transfer``). On the mesh suite at 20 mm with the short
 #: budget (5 minutes; bench/results/mesh_suite.json, variant ``c2f-correction``; printed - extrusion, paired, ΔE76 /
-#: SSIM) it beats the extrusion baseline by more than 0.5 ΔE76 with no SSIM loss beyond the noise on the spider
-#: (-3.52 / -0.001), the coin (-1.99 / +0.012), the box (-0.84 / +0.001), the eyeball (-1.32 / +0.001), the
-#: orange (-0.71 / +0.009) and the checker (-1.51 / -0.004 ± 0.003), and misses the margin on the duck (-0.40 /
-#: -0.001); the plan before (the extrusion start on the full grid for meshes at least 2 mm thick by volume / area,
-#: else coarse to fine from white) missed the margin on the box (-0.40), the duck (-0.21) and the orange (-0.35) and
-#: lost SSIM on the spider (-0.073) and the eyeball (-0.009). Where both plans meet the margin, coarse to fine from white leads by ~0.5 ΔE76 (the coin
-#: -2.49; Spot 20 mm -2.42 against -1.97, bench/results/spot20_deadline_start.json) but loses SSIM on Spot (-0.011
-#: against +0.003). Not measured under this plan: 10 mm, Spot 40 mm, the longer budgets (docs/quality.md, "The
+#: SSIM) it beats the extrusion baseline by more than 0.5 ΔE76 with no SSIM loss beyond the noise on the spider (-3.52 /
+#: -0.001), the coin (-1.99 / +0.012), the box (-0.84 / +0.001), the eyeball (-1.32 / +0.001), the orange (-0.71 /
+#: +0.009) and the checker (-1.51 / -0.004 ± 0.003), and misses the margin on the duck (-0.40 / -0.001); the plan before
+#: (the extrusion start on the full grid for meshes at least 2 mm thick by volume / area, else coarse to fine from
+#: white) missed the margin on the box (-0.40), the duck (-0.21) and the orange (-0.35) and lost SSIM on the spider
+#: (-0.073) and the eyeball (-0.009). Where both plans meet the margin, coarse to fine from white leads by ~0.5 ΔE76
+#: (the coin -2.49; Spot 20 mm -2.42 against -1.97, bench/results/spot20_deadline_start.json) but loses SSIM on Spot
+#: (-0.011 against +0.003). Not measured under this plan: 10 mm, Spot 40 mm, the longer budgets (docs/quality.md, "The
 #: correction transfer").
 DEADLINE_MESH_START = "extrusion"
 
