@@ -294,14 +294,21 @@ def budget_args(budget: str) -> list[str]:
 
 
 def inkopt(args: list[str], log: Path) -> float:
-    """Run ``python -m inkopt ARGS`` (its output appended to ``log``); its wall time in s. Exits on failure."""
+    """Run ``python -m inkopt ARGS`` (its output appended to ``log``, each line after the seconds since the command
+    began: where a cell's time goes); its wall time in s. Exits on failure."""
     t0 = time.perf_counter()
     with open(log, "a") as fh:
         fh.write("$ inkopt " + " ".join(args) + "\n")
         fh.flush()
-        done = subprocess.run([sys.executable, "-m", "inkopt", *args], stdout=fh, stderr=subprocess.STDOUT)
-    if done.returncode:
-        raise SystemExit(f"inkopt {' '.join(args)} failed (exit {done.returncode}); its output: {log}")
+        cmd = [sys.executable, "-m", "inkopt", *args]
+        env = {**os.environ, "PYTHONUNBUFFERED": "1"}  # each line as it is written, for its time
+        with subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env) as proc:
+            for line in proc.stdout:
+                fh.write(f"[{time.perf_counter() - t0:7.1f} s] {line}")
+                fh.flush()
+        code = proc.wait()
+    if code:
+        raise SystemExit(f"inkopt {' '.join(args)} failed (exit {code}); its output: {log}")
     return time.perf_counter() - t0
 
 

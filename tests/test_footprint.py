@@ -128,7 +128,8 @@ def test_a_run_without_time_budget_or_iterations_gets_a_time_plan(monkeypatch, t
     assert cfg.time_budget == default_time_budget(fp.seconds_per_iteration()) >= PLAN_MIN_SECONDS
     assert np.isfinite(cfg.time_budget)
     assert logged[0].startswith("time plan: ") and "no --time-budget or --iterations given" in logged[0]
-    assert logged[1] == "the run's own first line"
+    assert logged[1].startswith("deadline: coarse to fine from the extrusion baseline")  # the plan of a mesh
+    assert logged[2] == "the run's own first line"
 
 
 def test_the_flags_decide_when_given(monkeypatch, tmp_path):

@@ -1,8 +1,7 @@
 """Jobs of more than one run and the plan of a deadline: coarse to fine (``run_coarse_to_fine``: a coarse run of the
 object, its result moved onto the fine grid as the fine run's start), ``deadline_plan``, how a run with a time
-budget and no coarse grid given goes (a thick mesh from the extrusion baseline on its own grid, every other run
-coarse to fine at half its DPI), and ``default_time_budget``, the deadline of a run given neither a time budget nor
-a number of iterations."""
+budget and no coarse grid given goes (coarse to fine at half its DPI; a mesh from the extrusion baseline), and
+``default_time_budget``, the deadline of a run given neither a time budget nor a number of iterations."""
 
 from __future__ import annotations
 
@@ -10,22 +9,14 @@ import time
 from dataclasses import replace
 
 from .errors import ParameterError
+from .evaluation.baselines import baseline_layers
 from .evaluation.noise import PILOT_SPP
-from .optim import EXTRUSION_START_MM, OptimizeConfig
+from .optim import OptimizeConfig
+from .optim.param import BASELINE_INITS
 from .run import RunOptions, release_freed_memory, run_optimisation
 from .rundir import RunDir
 from .scenes import build_scene
 from .units import voxel_mm
-
-
-def mesh_thickness_mm(spec) -> float:
-    """The volume over the surface area (mm) of a ``MeshSpec``'s placed mesh (``TexturedMesh.mean_thickness_mm``);
-    loads the mesh, does not voxelize it."""
-    from .scenes.mesh import load_spec_mesh
-
-    spec.validate()
-    return load_spec_mesh(spec).mean_thickness_mm()
-
 
 #: share of a time budget the coarse stage of a coarse-to-fine run may take; the fine stage has the rest
 COARSE_BUDGET_SHARE = 0.6
@@ -34,6 +25,21 @@ COARSE_BUDGET_SHARE = 0.6
 #: Spot 20 mm (8 min: 9.99 against 15.36) (bench/results/time_to_quality.json)
 DEADLINE_COARSE_FACTOR = 0.5
 
+
+#: A mesh run with a time budget whose settings name no start goes coarse to fine from this print-shop baseline: the
+#: coarse stage starts from it at half the DPI, and the fine stage from the baseline on its own grid plus the coarse
+#: stage's change moved up (the correction transfer, ``optim.transfer``). On the mesh suite at 20 mm with the short
+#: budget (5 minutes; bench/results/mesh_suite.json, variant ``c2f-correction``; printed - extrusion, paired, ΔE76 /
+#: SSIM) it beats the extrusion baseline by more than 0.5 ΔE76 with no SSIM loss beyond the noise on the spider (-3.52 /
+#: -0.001), the coin (-1.99 / +0.012), the box (-0.84 / +0.001), the eyeball (-1.32 / +0.001), the orange (-0.71 /
+#: +0.009) and the checker (-1.51 / -0.004 ± 0.003), and misses the margin on the duck (-0.40 / -0.001); the plan before
+#: (the extrusion start on the full grid for meshes at least 2 mm thick by volume / area, else coarse to fine from
+#: white) missed the margin on the box (-0.40), the duck (-0.21) and the orange (-0.35) and lost SSIM on the spider
+#: (-0.073) and the eyeball (-0.009). Where both plans meet the margin, coarse to fine from white leads by ~0.5 ΔE76
+#: (the coin -2.49; Spot 20 mm -2.42 against -1.97, bench/results/spot20_deadline_start.json) but loses SSIM on Spot
+#: (-0.011 against +0.003). Not measured under this plan: 10 mm, Spot 40 mm, the longer budgets (docs/quality.md, "The
+#: correction transfer").
+DEADLINE_MESH_START = "extrusion"
 
 #: a run given neither a time budget nor iterations gets the time of this many of its iterations (at its full grid,
 #: from white) as its deadline. Deadline jobs of about that size reached within 1 ΔE76 of 300 iterations: Spot
@@ -60,18 +66,17 @@ def default_time_budget(seconds_per_iteration: float) -> float:
 
 def deadline_plan(spec, cfg: OptimizeConfig, log=print) -> tuple[float, OptimizeConfig]:
     """How a run with a time budget and no ``--coarse-dpi`` goes: (coarse-stage DPI, 0 for none; the settings).
-    A mesh at least ``EXTRUSION_START_MM`` thick whose settings name no start (``cfg.init`` None) starts from the
-    extrusion baseline at its own DPI; a slab thinner than one voxel of the coarse grid has no coarse stage; every
-    other run goes coarse to fine at ``DEADLINE_COARSE_FACTOR`` of its DPI with its own start."""
-    if spec.kind == "mesh" and cfg.init is None:
-        thick = mesh_thickness_mm(spec)
-        if thick >= EXTRUSION_START_MM:
-            log(
-                f"deadline: the mesh is {thick:.2f} mm thick (volume / area, at least {EXTRUSION_START_MM:g}): "
-                f"starting from the extrusion baseline at {spec.dpi:g} DPI, no coarse stage"
-            )
-            return 0.0, replace(cfg, init="extrusion")
+    A slab thinner than one voxel of the coarse grid has no coarse stage; every other run goes coarse to fine at
+    ``DEADLINE_COARSE_FACTOR`` of its DPI, a mesh whose settings name no start (``cfg.init`` None) from
+    ``DEADLINE_MESH_START`` (moved onto the fine grid by the correction transfer), every other run from its own
+    start."""
     coarse_dpi = DEADLINE_COARSE_FACTOR * spec.dpi
+    if spec.kind == "mesh" and cfg.init is None:
+        log(
+            f"deadline: coarse to fine from the {DEADLINE_MESH_START} baseline ({coarse_dpi:g} DPI, then "
+            f"{spec.dpi:g} DPI from the baseline plus the coarse stage's change)"
+        )
+        return coarse_dpi, replace(cfg, init=DEADLINE_MESH_START)
     if spec.kind == "slab" and min(spec.size_mm) < voxel_mm(coarse_dpi):  # the coarse grid cannot hold it
         log(f"deadline: the slab is thinner than one voxel at {coarse_dpi:g} DPI: no coarse stage")
         return 0.0, cfg
@@ -89,7 +94,7 @@ def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: flo
     run's wall time count from the job's start (``options.started``); ``options.on_step`` is called in the fine
     stage only. Returns the fine run's report (``dry_run``: its estimate, from a white start; nothing is
     written)."""
-    from .optim.transfer import write_transferred_volume
+    from .optim.transfer import Baseline, write_transferred_volume
 
     options = options or RunOptions()
     if not 0 < coarse_dpi < spec.dpi:
@@ -102,24 +107,33 @@ def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: flo
     with rd.lock(options.log):  # the whole job's, the fine run's taken again inside it
         coarse_dir, start = rd.path / "coarse", rd.path / "coarse" / "fine_start.npz"
         fine_begun = options.resume and rd.checkpoint_path.is_file() and start.is_file()
-        if not fine_begun:
-            _coarse_stage(spec, inks, coarse_dir, cfg, coarse_dpi, options)
+        coarse_start = None if fine_begun else _coarse_stage(spec, inks, coarse_dir, cfg, coarse_dpi, options)
         fine = build_scene(spec, inks)
         if not fine_begun:
             t = time.perf_counter()
-            write_transferred_volume(RunDir(coarse_dir).load_volume(), fine.volume, fine.fixed_share, start)
+            baseline = None
+            if coarse_start is not None:  # the correction transfer: the fine grid's baseline plus the change
+                layers = baseline_layers(cfg.init, fine.volume, fine.texels, fine.target_rgb, fine.fixed_share)
+                baseline = Baseline(coarse_start, layers)
+                options = replace(options, baselines={cfg.init: layers})  # the fine run's guard takes it as made
+            source = RunDir(coarse_dir).load_volume()
+            write_transferred_volume(source, fine.volume, fine.fixed_share, start, baseline=baseline)
+            del baseline, coarse_start, source
             t = time.perf_counter() - t
-            options.log(f"coarse result moved onto the {spec.dpi:g}-DPI grid in {t:.0f} s: {start}")
+            how = "" if cfg.init not in BASELINE_INITS else f" as a change of the {cfg.init} baseline"
+            options.log(f"coarse result moved onto the {spec.dpi:g}-DPI grid{how} in {t:.0f} s: {start}")
             release_freed_memory()  # the fine stage's peak is the job's: nothing of the stages before it under it
         return run_optimisation(fine, out_dir, replace(cfg, init=str(start)), options)
 
 
-def _coarse_stage(spec, inks, coarse_dir, cfg: OptimizeConfig, coarse_dpi: float, options: RunOptions) -> None:
+def _coarse_stage(spec, inks, coarse_dir, cfg: OptimizeConfig, coarse_dpi: float, options: RunOptions):
     """The coarse run of ``run_coarse_to_fine`` in ``coarse_dir``: ``spec`` at ``coarse_dpi``, within
     ``COARSE_BUDGET_SHARE`` of the time budget; its figures are one pilot pass (informative: the fine stage's are
     the run's, its baseline guard too); the caller's per-step hook sees the fine stage only (another grid here).
     The coarse result is not smoothed at its end (``finish_smooth`` 0): it is the fine stage's start, not an answer,
-    and a pass on the coarse grid blurs twice as far as the fine result's own (docs/quality.md, "The duck's margin")."""
+    and a pass on the coarse grid blurs twice as far as the fine result's own (docs/quality.md, "The duck's margin").
+    Returns the coarse run's start as a mixture ``Volume`` on the coarse grid when ``cfg.init`` is a print-shop
+    baseline (``optim.param.BASELINE_INITS``: the correction transfer's B_c), else None."""
     coarse = build_scene(replace(spec, dpi=coarse_dpi), inks)
     budget = None if cfg.time_budget is None else COARSE_BUDGET_SHARE * cfg.time_budget
     log = options.log
@@ -128,5 +142,10 @@ def _coarse_stage(spec, inks, coarse_dir, cfg: OptimizeConfig, coarse_dpi: float
         options, on_step=None, eval_spp=options.eval_spp or PILOT_SPP, log=lambda m: log(f"  {m}"), baseline_guard=False
     )
     run_optimisation(coarse, coarse_dir, replace(cfg, time_budget=budget, finish_smooth=0), coarse_options)
+    start = None
+    if cfg.init in BASELINE_INITS:  # the coarse grid's baseline: the coarse run's start (before its clip at 1e-6)
+        layers = baseline_layers(cfg.init, coarse.volume, coarse.texels, coarse.target_rgb, coarse.fixed_share)
+        start = coarse.volume.with_mixture(layers.array())
     del coarse
     release_freed_memory()
+    return start

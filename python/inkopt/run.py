@@ -101,7 +101,11 @@ class RunOptions:
     ``started``: when the job began (``time.perf_counter()``, e.g. before the scene was built; default: when the
     run starts), the time ``cfg.time_budget`` and the run's wall time count from. ``on_step(optimization)``:
     called after every iteration (``Optimization.run``). ``baseline_guard``: measure the extrusion baseline's
-    figures at the start and check the result against them (``evaluation.guard``)."""
+    figures at the start and check the result against them (``evaluation.guard``). ``baselines``: print-shop
+    baselines' mixtures already made for this scene (kind -> ``evaluation.baselines.baseline_layers``'s layers, e.g.
+    by a coarse-to-fine transfer from a baseline), taken by the run's start and its guard instead of being made
+    again (the spider of the mesh suite at 20 mm: its fine stage ran 9 iterations in a 5-minute job instead of 6,
+    docs/quality.md, "The correction transfer")."""
 
     resume: bool = False
     eval_spp: int | None = None
@@ -118,6 +122,7 @@ class RunOptions:
     started: float | None = None
     on_step: Callable | None = None
     baseline_guard: bool = True
+    baselines: dict | None = None
 
     def validate(self) -> None:
         """One-line errors naming the option, before any work."""
@@ -197,6 +202,8 @@ def _start(scene: Scene, cfg: OptimizeConfig, options: RunOptions, make_renderer
     lighting = load_lighting(options.lighting)
 
     def baseline(kind: str):  # a print-shop start (cfg.init "surface" or "extrusion"), one z layer at a time
+        if options.baselines and kind in options.baselines:  # made already, for this scene
+            return options.baselines[kind]
         return baseline_layers(
             kind, scene.volume, scene.texels, scene.target_rgb, scene.fixed_share, progress=options.progress
         )

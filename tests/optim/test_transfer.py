@@ -132,3 +132,91 @@ def test_coarse_start_runs_the_coarse_scene_and_writes_the_fine_start(tmp_path):
     np.testing.assert_allclose(start_of(fine, None, info.path), start.mixture, atol=2e-6)
     again = write_transferred_volume(tmp_path / "coarse.npz", fine.volume, None, tmp_path / "again.npz")
     np.testing.assert_array_equal(Volume.load(again).mixture, start.mixture)  # the saved coarse result
+
+
+# ------------------------------------------------------------------------------------- the correction transfer
+def centres(shape, step: float) -> np.ndarray:
+    """(z, y, x, 3) voxel centres (x, y, z) in units of 300-DPI voxels of a grid whose voxels are ``step`` of
+    them (the slabs here share their origin)."""
+    zyx = np.stack(np.meshgrid(*[np.arange(n) for n in shape], indexing="ij"), -1)
+    return (zyx[..., ::-1] + 0.5) * step
+
+
+def linear(pos: np.ndarray, slope) -> np.ndarray:
+    """A mixture field linear in space whose rows sum to 0: ``slope`` (3, 3) ink x axis, in shares per voxel."""
+    s = np.asarray(slope, np.float64)
+    return pos @ (s - s.mean(0, keepdims=True)).T
+
+
+def test_the_correction_transfer_keeps_the_coarse_change_and_the_baselines_detail(tmp_path):
+    """B_f = a smooth baseline L plus detail H finer than the coarse grid (+-0.04 in alternate fine voxels: the fine
+    grid's Nyquist frequency), B_c = L on the coarse grid, C = B_c + a linear change D. Where the fine voxel's 8
+    coarse neighbours are inside, trilinear interpolation reproduces linear fields exactly, so the fine start is
+    L + H + D: its low-pass part (start - H) is the coarse result moved up, U(C) = L + D, its detail the baseline's."""
+    from inkopt.optim.transfer import Baseline
+
+    coarse, fine = slab(150), slab(300)
+    row, l_slope = np.array([0.3, 0.3, 0.4]), np.array([[0.01, 0.0, -0.005], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    lc = row + linear(centres(coarse.volume.shape, 2.0), l_slope)
+    lf = row + linear(centres(fine.volume.shape, 1.0), l_slope)
+    parity = np.indices(fine.volume.shape).sum(0) % 2 * 2 - 1.0  # +1 / -1 in alternate voxels
+    h = 0.04 * parity[..., None] * np.array([1.0, -1.0, 0.0])
+    d_slope = np.array([[-0.006, 0.004, 0.003], [0.002, -0.003, 0.0], [0.0, 0.0, 0.0]])
+    dc, df = linear(centres(coarse.volume.shape, 2.0), d_slope), linear(centres(fine.volume.shape, 1.0), d_slope)
+    src = coarse.volume.with_mixture((lc + dc).astype(np.float32))
+    base = Baseline(coarse.volume.with_mixture(lc.astype(np.float32)), (lf + h).astype(np.float32))
+    got = Volume.load(write_transferred_volume(src, fine.volume, None, tmp_path / "c.npz", baseline=base)).mixture
+    assert got.min() > 0.2 and np.allclose(got.sum(-1), 1.0, atol=1e-6)  # nothing clipped here
+    inner = (slice(1, -1),) * 3  # fine voxels 1 .. 2n - 2: their 8 coarse neighbours are on the grid
+    np.testing.assert_allclose(got[inner], (lf + h + df)[inner], atol=2e-6)
+    plain = Volume.load(write_transferred_volume(src, fine.volume, None, tmp_path / "p.npz")).mixture
+    np.testing.assert_allclose((got - h)[inner], plain[inner], atol=2e-6)  # low-pass: the coarse result's
+    np.testing.assert_allclose((got - plain)[inner], h[inner], atol=2e-6)  # detail: the baseline's
+    p = transferred_free_mixture(src, fine.volume, None, chunk=37, baseline=base)  # chunked, layers cut anywhere
+    np.testing.assert_allclose(p.reshape(got.shape), got, atol=1e-6)
+
+
+def test_the_correction_transfer_from_a_uniform_start_is_the_plain_one_and_keeps_fixed_shares(tmp_path):
+    """From white (B the same row on both grids) the change C - B_c moved up plus B_f is U(C), bit for bit; the fine
+    scene's fixed shares are kept as by the plain transfer, and a change that takes an ink below 0 is clipped."""
+    from inkopt.optim.transfer import Baseline
+
+    coarse, fine = slab(150), slab(300)
+    white = np.array([0.015, 0.015, 0.97], np.float32)
+    src = coarse.volume.with_mixture(
+        np.random.default_rng(2).dirichlet(np.ones(3), size=coarse.volume.shape).astype(np.float32)
+    )
+    fixed = constrained(fine.volume.shape)
+    uniform = Baseline(
+        coarse.volume.with_mixture(np.broadcast_to(white, coarse.volume.shape + (3,)).copy()),
+        np.broadcast_to(white, fine.volume.shape + (3,)),
+    )
+    plain = write_transferred_volume(src, fine.volume, fixed, tmp_path / "plain.npz")
+    got = write_transferred_volume(src, fine.volume, fixed, tmp_path / "c.npz", chunk=11, baseline=uniform)
+    np.testing.assert_array_equal(Volume.load(got).mixture, Volume.load(plain).mixture)
+    # a baseline richer in cyan on the coarse grid than on the fine one: the change takes cyan below 0 somewhere
+    cyan = np.array([0.9, 0.05, 0.05], np.float32)
+    poor = Baseline(
+        coarse.volume.with_mixture(np.broadcast_to(cyan, coarse.volume.shape + (3,)).copy()),
+        np.broadcast_to(white, fine.volume.shape + (3,)),
+    )
+    m = Volume.load(write_transferred_volume(src, fine.volume, fixed, tmp_path / "m.npz", baseline=poor)).mixture
+    assert m.min() >= 0 and np.allclose(m.sum(-1), 1.0, atol=1e-6)
+    np.testing.assert_array_equal(m[0, ..., 2], 1.0)  # the fixed white layer
+    assert np.all(m[1:, :3, :3, 0] >= 0.8 - 1e-6)  # the fixed cyan share
+    free = np.ones(fine.volume.shape, bool)
+    free[0] = False
+    free[1:, :3, :3] = False
+    assert np.mean(m[free][:, 0] == 0) > 0.1  # clipped where the coarse cyan fell below the fine baseline's
+
+
+def test_the_correction_transfer_needs_the_coarse_results_grid(tmp_path):
+    from inkopt.optim.transfer import Baseline
+
+    coarse, fine = slab(150), slab(300)
+    src = coarse.volume.with_mixture(np.full(coarse.volume.shape + (3,), 1 / 3, np.float32))
+    other = slab(100).volume.with_mixture(np.full(slab(100).volume.shape + (3,), 1 / 3, np.float32))
+    with pytest.raises(ValueError, match="coarse baseline"):
+        write_transferred_volume(src, fine.volume, None, tmp_path / "s.npz", baseline=Baseline(other, fine.volume))
+    with pytest.raises(ValueError, match="fine baseline"):
+        transferred_free_mixture(src, fine.volume, None, baseline=Baseline(src, np.zeros((2, 2, 2, 3), np.float32)))

@@ -321,45 +321,20 @@ def test_mean_thickness_is_volume_over_area():
     assert load_mesh(SPOT, height_mm=20.0).mean_thickness_mm() == pytest.approx(spot.mean_thickness_mm() / 2)
 
 
-def test_deadline_plan_starts_thick_meshes_from_the_extrusion_baseline(ball):
-    """With a time budget and no --coarse-dpi: a mesh at least ``EXTRUSION_START_MM`` thick starts from the
-    extrusion baseline on its own grid; a thinner one, one whose start is given, and a slab go coarse to fine,
-    unless the slab is thinner than a voxel of the coarse grid."""
-    from inkopt.coarse import DEADLINE_COARSE_FACTOR, deadline_plan
-    from inkopt.optim import EXTRUSION_START_MM, OptimizeConfig
-    from inkopt.scenes.spec import MeshSpec, SlabSpec
-
-    cfg = OptimizeConfig(time_budget=60.0)
-    r_thick = 3.0 * EXTRUSION_START_MM * 1.01  # a ball's volume / area is r / 3 (here within 0.1 %)
-    thick = MeshSpec(str(ball), scale=r_thick / RADIUS, up="z")
-    lines = []
-    dpi, got = deadline_plan(thick, cfg, log=lines.append)
-    assert dpi == 0 and got.init == "extrusion" and got.time_budget == 60.0
-    assert "starting from the extrusion baseline" in lines[0]
-    thin = MeshSpec(str(ball), scale=0.95 * 3.0 * EXTRUSION_START_MM / RADIUS, up="z")
-    assert deadline_plan(thin, cfg, log=lines.append) == (DEADLINE_COARSE_FACTOR * thin.dpi, cfg)
-    given = OptimizeConfig(time_budget=60.0, init="white")
-    assert deadline_plan(thick, given, log=lines.append) == (DEADLINE_COARSE_FACTOR * thick.dpi, given)
-    slab = SlabSpec("chart.png", (40.0, 40.0, 10.0))  # 5 mm thick by volume / area: slabs are not asked
-    assert deadline_plan(slab, cfg, log=lines.append) == (DEADLINE_COARSE_FACTOR * slab.dpi, cfg)
-    assert len(lines) == 1
-    sheet = SlabSpec("chart.png", (40.0, 40.0, 0.1))  # one voxel at 300 DPI, less than one at the coarse 150
-    assert deadline_plan(sheet, cfg, log=lines.append) == (0.0, cfg) and "no coarse stage" in lines[-1]
-
-
-def test_thick_mesh_deadline_run_from_the_command_line(ball, tmp_path, capsys):
-    """`inkopt optimize` of a 6 mm-thick ball with a time budget: one stage from the extrusion baseline (no
-    DIR/coarse/) at a warm start's step, the report's start says so, the budget ends it (the stop rule is off:
-    at the warm step the toy ball would converge first)."""
+def test_mesh_deadline_run_from_the_command_line(ball, tmp_path, capsys):
+    """`inkopt optimize` of a ball with a time budget and no start: coarse to fine from the extrusion baseline (the
+    coarse stage in DIR/coarse/ starts from it, the fine stage from the correction transfer's file) at a warm start's
+    step, the budget ends it (the stop rule is off: at the warm step the toy ball would converge first)."""
     from inkopt.optim.config import WARM_LR_FACTOR, default_lr
 
     out = tmp_path / "r"
-    argv = ["--scale", "18", "--up", "z", "--dpi", "25", "--time-budget", "10s", "--forward-spp", "2"]
+    argv = ["--scale", "18", "--up", "z", "--dpi", "25", "--time-budget", "20s", "--forward-spp", "2"]
     assert optimize(ball, out, *argv, "--stop-gain", "0", iterations=100000, spp=1, eval_spp=4) == 0
     rep = json.loads((out / "report.json").read_text())
-    assert rep["init"] == "extrusion" and not (out / "coarse").exists()
-    # the start is the guard's baseline: its figures are the start's, not a second render
-    assert rep["baseline"]["extrusion"]["delta_e76_mean_corrected"] == rep["initial_delta_e76_mean_corrected"]
+    coarse = json.loads((out / "coarse" / "report.json").read_text())
+    assert coarse["init"] == "extrusion" and rep["init"].endswith("coarse/fine_start.npz")
     assert rep["lr"] == default_lr("eg") * WARM_LR_FACTOR
     assert rep["stop"]["reason"] == "time budget" and 0 < rep["iterations"] < 100000
-    assert "starting from the extrusion baseline" in capsys.readouterr().err
+    assert rep["baseline"]["extrusion"]["delta_e76_mean_corrected"] is not None  # the guard, with the baseline made
+    err = capsys.readouterr().err
+    assert "coarse to fine from the extrusion baseline" in err and "as a change of the extrusion baseline" in err

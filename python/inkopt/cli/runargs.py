@@ -97,7 +97,7 @@ def _add_sampling_args(p, d) -> None:
 
 
 def _add_step_args(p, d) -> None:
-    from ..optim import EXTRUSION_START_MM, SCENE_DEFAULTS
+    from ..optim import SCENE_DEFAULTS
     from ..optim.config import WARM_LR_FACTOR
 
     slab, mesh = SCENE_DEFAULTS["slab"], SCENE_DEFAULTS["mesh"]
@@ -136,8 +136,8 @@ def _add_step_args(p, d) -> None:
         "--init",
         help="white (97 %% white), random, surface or extrusion (start from that print-shop baseline of "
         "`inkopt evaluate`; builds or reuses its cached colour table), or a volume .npz (default: "
-        f"{slab['init']} on slabs, {mesh['init']} on meshes; with --time-budget, extrusion on meshes at least "
-        f"{EXTRUSION_START_MM:g} mm thick (volume / area)). A start other than white or random takes "
+        f"{slab['init']} on slabs, {mesh['init']} on meshes; with --time-budget, a mesh goes coarse to fine from "
+        "extrusion). A start other than white or random takes "
         f"{WARM_LR_FACTOR:g} of the default step (--lr)",
     )
 

@@ -3,7 +3,7 @@
 (``loop``)."""
 
 from .checkpoint import History
-from .config import EXTRUSION_START_MM, OPTIMIZERS, PARAMS, SCENE_DEFAULTS, OptimizeConfig, default_lr
+from .config import OPTIMIZERS, PARAMS, SCENE_DEFAULTS, OptimizeConfig, default_lr
 from .loop import Optimization, iteration_seeds
 from .optimizers import AdaGrad, Adam, ExponentiatedGradient, make_optimizer
 from .param import BASELINE_INITS, Parameterization, initial_free_mixture
@@ -26,5 +26,4 @@ __all__ = [
     "initial_free_mixture",
     "GradientSmoother",
     "SCENE_DEFAULTS",
-    "EXTRUSION_START_MM",
 ]

@@ -22,8 +22,8 @@ GRAD_METHODS = ("replay", "li1")
 #: read 14.1 noise-corrected ΔE76 at 33 spp, bench/results/time_to_quality.json ``spot20/extrusion_lr1_budget55m``,
 #: against white's noise-free 27.7), but from it the runs measured so far improved more slowly
 #: (43 iterations: 11.0, bench/results/time_to_quality.json; 60 iterations from white: 9.76,
-#: experiments/results/mesh_convergence.json), so white stays the default; deadline runs on thick meshes start from
-#: the extrusion baseline (``EXTRUSION_START_MM``).
+#: experiments/results/mesh_convergence.json), so white stays the default; a mesh's deadline run goes coarse to fine
+#: from the extrusion baseline (``coarse.DEADLINE_MESH_START``).
 #: ``finish_smooth``: meshes 1. A mesh result carries voxel-scale variation under flat texels that the loss barely
 #: sees (its curvature is small there) and that no later step removes: averaging the last 10-40 iterates of a
 #: coarse stage changed nothing, while one pass of the step's smoothing over a Spot 20 mm deadline result lowered
@@ -33,16 +33,6 @@ SCENE_DEFAULTS = {
     "slab": {"adjoint_ema": 0.8, "smooth": 1.5, "init": "white", "finish_smooth": 0},
     "mesh": {"adjoint_ema": 0.5, "smooth": 3.0, "init": "white", "finish_smooth": 1},
 }
-#: A run with a time budget goes coarse to fine from white (``coarse.DEADLINE_COARSE_FACTOR``), except on a mesh at
-#: least this thick (``MeshSpec.mean_thickness_mm``: volume over surface area, mm), which starts from the extrusion
-#: baseline on its own grid with no coarse stage (``coarse.deadline_plan``). Spot 40 mm (2.98 mm thick), the 27-minute
-#: job's print against the baselines (noise-free ΔE76 / ΔE2000 / SSIM, ``inkopt evaluate``): 9.67 / 8.10 / 0.923
-#: from the extrusion start, 10.61 / 9.50 / 0.924 coarse to fine from white, the extrusion baseline 10.82 / 8.43 /
-#: 0.937. Spot 20 mm (1.49 mm) the other way round (256-spp renders of the results): from the extrusion start 11.12
-#: / 10.28 / 0.918 against 10.24 / 9.36 / 0.925 in 5.5 minutes, 10.95 against 10.11 ΔE76 in 7.75 (bench/results/
-#: job.json; docs/experiments.md, "Which start a deadline takes"). The threshold lies between the two measured
-#: thicknesses; no size between them was measured.
-EXTRUSION_START_MM = 2.0
 #: starts that are already close to the target: a volume file's mixture or a print-shop baseline
 COLD_INITS = ("white", "random")
 #: The default step of a warm start (any init but ``COLD_INITS``) relative to a cold one's: the exponentiated

@@ -5,10 +5,24 @@ The mixture is moved in millimetres by ``model.resample.MixtureResampler`` ("lin
 inside voxels; a voxel the source does not hold takes the nearest inside source voxel's mixture) to the free voxels
 of the destination scene, and mapped to their free part exactly as a start from a volume file is
 (``param.free_part``: the destination's fixed shares, the white core and translucency constraints, stay what its
-scene fixes). :func:`write_transferred_volume` writes the result as a mixture volume file on the destination's grid,
-which a run takes as its start with ``OptimizeConfig(init=PATH)``; :func:`transferred_free_mixture` gives the
-free part (F, N) directly. :func:`coarse_start` is the whole first stage: optimise the coarse scene (no evaluation,
-no checkpoints) and write its result as the start of the fine scene's run (a :class:`CoarseStart`).
+scene fixes).
+
+A coarse stage that started from a baseline B (a print-shop start, e.g. the extrusion baseline, on each grid: B_c
+on the coarse one, B_f on the fine one) is moved by the correction scheme of multigrid instead: the fine start is
+B_f + U(C - B_c), its whole mixture rows then mapped to the free part as above (clipped at 0, renormalised to sum 1,
+the fixed shares kept). U, the same resampler, is linear in the mixture (its weights depend on the inside masks
+only, the same for C and B_c), so U(C - B_c) = U(C) - U(B_c). The fine start keeps the baseline's detail finer
+than the coarse grid (B_f - U(B_c)) and takes the coarse stage's change at the scales that grid resolves. It is
+done in shares, not in the optimiser's logits: a change of logits is a ratio of shares, and a baseline's shares
+reach 0 (an ink its colour does not use), where a ratio is unbounded (a coarse voxel taking an ink from 1e-6 to 0.1
+would multiply that ink a hundred-thousand-fold in every fine voxel that has some of it); a change of shares is
+bounded by 1 and U reproduces a constant, so from white (B the same row everywhere) the correction is zero and the
+transfer is the plain one. :class:`Baseline` carries B; without it the plain transfer runs.
+
+:func:`write_transferred_volume` writes the result as a mixture volume file on the destination's grid, which a
+run takes as its start with ``OptimizeConfig(init=PATH)``; :func:`transferred_free_mixture` gives the free part
+(F, N) directly. :func:`coarse_start` is the whole first stage: optimise the coarse scene (no evaluation, no
+checkpoints) and write its result as the start of the fine scene's run (a :class:`CoarseStart`).
 
 Memory: the source volume, the destination's free index (``Parameterization``), and per z slab of the destination
 grid (``SLAB_VOXELS`` voxels) its mixture and the resampling temporaries; never a (z, y, x, N) array of the
@@ -48,9 +62,65 @@ def _check(src: Volume, base: Volume) -> None:
         raise ValueError(f"the source mixture's inks {have} differ from the destination's {want}")
 
 
-def _free_slab(resampler, param: Parameterization, base: Volume, a: int, b: int, chunk: int) -> np.ndarray:
+@dataclass(frozen=True)
+class Baseline:
+    """The start B of a coarse stage that began from a baseline, for the correction transfer (module docstring):
+    ``coarse``, its mixture volume on the coarse grid (the grid and inside mask of the coarse result); ``fine``, its
+    mixture on the destination grid one z layer at a time: ``fine[z]`` (Y, X, N) float32 and ``fine.shape``
+    (Z, Y, X, N) (``evaluation.baselines.BaselineLayers``, or a whole array)."""
+
+    coarse: Volume
+    fine: object
+
+
+class _LayerRows:
+    """The rows (K, N) float32 of a layer source (``Baseline.fine``) at flat grid indices, given in increasing order
+    over the calls: each z layer is made once (the last one is kept for the next call)."""
+
+    def __init__(self, layers, shape, n: int):
+        if tuple(layers.shape) != (*shape, n):
+            raise ValueError(f"the fine baseline has shape {tuple(layers.shape)}, expected {(*shape, n)}")
+        self.layers, self.plane, self.n, self.z, self.layer = layers, shape[1] * shape[2], n, -1, None
+
+    def __call__(self, index: np.ndarray) -> np.ndarray:
+        out = np.empty((len(index), self.n), np.float32)
+        z = index // self.plane
+        cuts = [0, *(np.flatnonzero(np.diff(z)) + 1), len(index)]
+        for lo, hi in zip(cuts[:-1], cuts[1:], strict=False):
+            if hi > lo:
+                if z[lo] != self.z:
+                    self.z, self.layer = int(z[lo]), np.asarray(self.layers[int(z[lo])]).reshape(-1, self.n)
+                out[lo:hi] = self.layer[index[lo:hi] - self.z * self.plane]
+        return out
+
+
+class _Mover:
+    """The whole mixture rows of the destination's free voxels: U(C) (the plain transfer), or with a baseline
+    B_f + U(C) - U(B_c) (float64; the correction transfer)."""
+
+    def __init__(self, src: Volume, base: Volume, method: str, baseline: Baseline | None):
+        self.up, self.base = MixtureResampler(src, method), base
+        self.coarse_up = self.fine_rows = None
+        if baseline is not None:
+            bc = _source(baseline.coarse)
+            _check(bc, base)
+            if bc.shape != src.shape or not np.array_equal(bc.inside_mask(), src.inside_mask()):
+                raise ValueError("the coarse baseline's grid or inside mask differs from the coarse result's")
+            self.coarse_up = MixtureResampler(bc, method)
+            self.fine_rows = _LayerRows(baseline.fine, base.shape, len(base.inks))
+
+    def rows(self, index: np.ndarray, chunk: int) -> np.ndarray:
+        grid = (self.base.shape, self.base.voxel_mm, self.base.origin_mm, chunk)
+        rows = self.up.on_grid(index, *grid)
+        if self.coarse_up is None:
+            return rows
+        change = rows.astype(np.float64) - self.coarse_up.on_grid(index, *grid)
+        return self.fine_rows(index) + change
+
+
+def _free_slab(mover: _Mover, param: Parameterization, a: int, b: int, chunk: int) -> np.ndarray:
     """The free part p (b - a, N) float64 of the free voxels a:b (``free_index`` order)."""
-    rows = resampler.on_grid(param.free_index[a:b], base.shape, base.voxel_mm, base.origin_mm, chunk)
+    rows = mover.rows(param.free_index[a:b], chunk)
     fixed = None if param.fixed_f is None else param.fixed_f[a:b]
     return free_part(rows, fixed, param.share_f[a:b])
 
@@ -61,19 +131,21 @@ def transferred_free_mixture(
     fixed_share: FixedShares | None = None,
     method: str = "linear",
     chunk: int = CHUNK,
+    baseline: Baseline | None = None,
 ) -> np.ndarray:
     """The free part (F, N) float32 (rows summing to 1, ``Parameterization.free_index`` order) of the mixture of
     ``source`` (a mixture volume or its file) moved onto the grid of ``base`` (the destination scene's volume:
-    shape, ``voxel_mm``, ``origin_mm``, inks) whose fixed shares are ``fixed_share`` (None: none)."""
+    shape, ``voxel_mm``, ``origin_mm``, inks) whose fixed shares are ``fixed_share`` (None: none); with
+    ``baseline`` (the source's start B, a :class:`Baseline`) by the correction transfer B_f + U(C - B_c)."""
     src = _source(source)
     _check(src, base)
     fs = FixedShares.none(base.shape, len(base.inks)) if fixed_share is None else fixed_share
     param = Parameterization("softmax", fs)
-    resampler = MixtureResampler(src, method)
+    mover = _Mover(src, base, method, baseline)
     out = np.empty((param.n_free, len(base.inks)), np.float32)
     for a in range(0, param.n_free, chunk):
         b = min(param.n_free, a + chunk)
-        out[a:b] = _free_slab(resampler, param, base, a, b, chunk)
+        out[a:b] = _free_slab(mover, param, a, b, chunk)
     return out
 
 
@@ -85,17 +157,19 @@ def write_transferred_volume(
     method: str = "linear",
     chunk: int = CHUNK,
     slab_voxels: int = SLAB_VOXELS,
+    baseline: Baseline | None = None,
 ) -> Path:
     """Write to ``path`` (atomically) a mixture volume file on the grid of ``base`` (its geometry: inside mask,
     normals, origin, boundary) holding the fixed shares ``fixed_share`` (None: none) plus, at the free voxels, the
-    free part of ``source``'s mixture moved onto that grid (:func:`transferred_free_mixture`), ``slab_voxels``
-    destination voxels at a time. A run of the destination scene started from it (``OptimizeConfig(init=path)``)
-    starts from exactly that free part (up to the parameterisation's clipping at 1e-6)."""
+    free part of ``source``'s mixture moved onto that grid (:func:`transferred_free_mixture`; with ``baseline``
+    by the correction transfer), ``slab_voxels`` destination voxels at a time. A run of the destination scene
+    started from it (``OptimizeConfig(init=path)``) starts from exactly that free part (up to the
+    parameterisation's clipping at 1e-6)."""
     src = _source(source)
     _check(src, base)
     fs = FixedShares.none(base.shape, len(base.inks)) if fixed_share is None else fixed_share
     param = Parameterization("softmax", fs)
-    resampler = MixtureResampler(src, method)
+    mover = _Mover(src, base, method, baseline)
     nz, ny, nx = base.shape
     plane, n = ny * nx, len(base.inks)
     step = max(1, slab_voxels // max(plane, 1))
@@ -107,7 +181,7 @@ def write_transferred_volume(
             lo, hi = np.searchsorted(param.free_index, [z0 * plane, z1 * plane])
             for a in range(lo, hi, chunk):
                 b = min(hi, a + chunk)
-                p = _free_slab(resampler, param, base, a, b, chunk)
+                p = _free_slab(mover, param, a, b, chunk)
                 whole = param.share_f[a:b, None] * p
                 if param.fixed_f is not None:
                     whole += param.fixed_f[a:b]

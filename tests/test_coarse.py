@@ -1,0 +1,102 @@
+"""Coarse to fine as a job (``coarse.run_coarse_to_fine``): from a print-shop baseline the fine stage starts from the
+correction transfer (the fine grid's baseline plus the coarse stage's change), and its baseline guard takes that
+baseline as made; from white it starts from the plain transfer of the coarse result."""
+
+import numpy as np
+import pytest
+
+import inkopt.coarse
+import inkopt.run
+from inkopt import charts
+from inkopt.coarse import run_coarse_to_fine
+from inkopt.evaluation.baselines import baseline_layers
+from inkopt.model import InkTable, Volume
+from inkopt.optim import OptimizeConfig
+from inkopt.optim.transfer import Baseline, write_transferred_volume
+from inkopt.run import RunOptions
+from inkopt.rundir import RunDir
+from inkopt.scenes import build_scene
+from inkopt.scenes.spec import SlabSpec
+
+INKS = InkTable.parse("vero-cmykw")
+
+
+@pytest.fixture(scope="module")
+def spec(tmp_path_factory):
+    chart = charts.save(charts.colour_chart(24, 16), tmp_path_factory.mktemp("chart") / "chart.png")
+    return SlabSpec(str(chart), (2.0, 4 / 3, 0.5))
+
+
+def job(spec, out, init: str, monkeypatch) -> dict:
+    """A 2 + 2 iteration coarse-to-fine job (150 then 300 DPI) from ``init``; returns how often each module made a
+    baseline."""
+    made = {"coarse": 0, "run": 0}
+
+    def counted(where):
+        def make(*args, **kw):
+            made[where] += 1
+            return baseline_layers(*args, **kw)
+
+        return make
+
+    monkeypatch.setattr(inkopt.coarse, "baseline_layers", counted("coarse"))
+    monkeypatch.setattr(inkopt.run, "baseline_layers", counted("run"))
+    cfg = OptimizeConfig(iterations=2, spp=2, forward_spp=4, init=init)
+    rep = run_coarse_to_fine(spec, INKS, out, cfg, 150.0, RunOptions(eval_spp=4, threads=1, log=lambda m: None))
+    assert rep.iterations == 2 and rep.baseline is not None  # the fine stage's guard measured the baseline
+    return made
+
+
+def test_a_job_from_the_extrusion_baseline_starts_its_fine_stage_from_the_correction(spec, tmp_path, monkeypatch):
+    made = job(spec, tmp_path / "job", "extrusion", monkeypatch)
+    # the coarse run's start (run), the coarse and fine grids' baselines (coarse); the fine guard makes none
+    assert made == {"coarse": 2, "run": 1}
+    coarse, fine = build_scene(SlabSpec(spec.top, spec.size_mm, dpi=150.0), INKS), build_scene(spec, INKS)
+    b_c = baseline_layers("extrusion", coarse.volume, coarse.texels, coarse.target_rgb, coarse.fixed_share)
+    b_f = baseline_layers("extrusion", fine.volume, fine.texels, fine.target_rgb, fine.fixed_share)
+    result = RunDir(tmp_path / "job" / "coarse").load_volume()
+    want = write_transferred_volume(
+        result,
+        fine.volume,
+        fine.fixed_share,
+        tmp_path / "want.npz",
+        baseline=Baseline(coarse.volume.with_mixture(b_c.array()), b_f),
+    )
+    got = Volume.load(tmp_path / "job" / "coarse" / "fine_start.npz").mixture
+    np.testing.assert_array_equal(got, Volume.load(want).mixture)
+    plain = Volume.load(write_transferred_volume(result, fine.volume, fine.fixed_share, tmp_path / "p.npz")).mixture
+    assert np.abs(got - plain).max() > 0.05  # the baseline's detail is there: not the plain transfer
+
+
+def test_a_job_from_white_starts_its_fine_stage_from_the_plain_transfer(spec, tmp_path, monkeypatch):
+    made = job(spec, tmp_path / "job", "white", monkeypatch)
+    assert made == {"coarse": 0, "run": 1}  # the fine stage's guard only
+    fine = build_scene(spec, INKS)
+    result = RunDir(tmp_path / "job" / "coarse").load_volume()
+    want = write_transferred_volume(result, fine.volume, fine.fixed_share, tmp_path / "want.npz")
+    got = Volume.load(tmp_path / "job" / "coarse" / "fine_start.npz").mixture
+    np.testing.assert_array_equal(got, Volume.load(want).mixture)
+
+
+def test_the_deadline_plan_takes_meshes_coarse_to_fine_from_the_extrusion_baseline():
+    """With a time budget and no coarse grid given: a mesh whose settings name no start goes coarse to fine at half
+    its DPI from the extrusion baseline (whatever its thickness); a mesh with a start, and a slab, go coarse to fine
+    from their own start, unless the slab is thinner than a voxel of the coarse grid."""
+    from inkopt.coarse import DEADLINE_COARSE_FACTOR, DEADLINE_MESH_START, deadline_plan
+    from inkopt.scenes.spec import MeshSpec
+
+    assert DEADLINE_MESH_START == "extrusion"
+    cfg = OptimizeConfig(time_budget=60.0)
+    lines = []
+    for mesh in (MeshSpec("thin.obj", height_mm=10.0), MeshSpec("thick.obj", height_mm=40.0, dpi=200)):
+        dpi, got = deadline_plan(mesh, cfg, log=lines.append)
+        assert dpi == DEADLINE_COARSE_FACTOR * mesh.dpi and got == OptimizeConfig(time_budget=60.0, init="extrusion")
+        assert "coarse to fine from the extrusion baseline" in lines[-1]
+    given = OptimizeConfig(time_budget=60.0, init="white")
+    mesh = MeshSpec("m.obj")
+    assert deadline_plan(mesh, given, log=lines.append) == (DEADLINE_COARSE_FACTOR * mesh.dpi, given)
+    slab = SlabSpec("chart.png", (40.0, 40.0, 10.0))
+    assert deadline_plan(slab, cfg, log=lines.append) == (DEADLINE_COARSE_FACTOR * slab.dpi, cfg)
+    assert len(lines) == 2
+    sheet = SlabSpec("chart.png", (40.0, 40.0, 0.1))  # one voxel at 300 DPI, less than one at the coarse 150
+    assert deadline_plan(sheet, cfg, log=lines.append) == (0.0, cfg) and "no coarse stage" in lines[-1]
