@@ -10,10 +10,13 @@ import pytest
 from helpers import SPOT
 
 from inkopt import footprint
-from inkopt.cli import main
+from inkopt.cli import build_parser, main
+from inkopt.cli.jobplan import plan_job
+from inkopt.cli.runargs import config_from_args, mesh_spec_from_args, run_options_from_args
 from inkopt.errors import ParameterError
 from inkopt.footprint import MemoryLimit, mesh_footprint, mesh_shape, spec_footprint
 from inkopt.footprint.fits import BAND_SHELL_MM, choose_shell
+from inkopt.model import InkTable
 from inkopt.scenes.mesh import load_spec_mesh
 from inkopt.scenes.spec import MeshSpec, spec_from_json
 
@@ -136,3 +139,16 @@ def test_a_run_that_does_not_fit_every_voxel_free_runs_the_band(monkeypatch, cap
         assert scene["shell_chosen"].startswith("automatic: every voxel free needs ~")
     band = spec_footprint(MeshSpec(str(SPOT), height_mm=10.0, shell_mm=1.0), N_INKS)[0]
     assert fine["free_voxels"] == pytest.approx(band.free_voxels, rel=0.05) and fine["free_voxels"] < band.inside_voxels
+    # resumed with memory to spare, the run keeps the band it started with (its checkpoint holds the band's voxels)
+    argv[argv.index("--memory-gb") + 1] = "64"
+    resumed = _planned_spec([*argv, "--resume"])
+    assert resumed.shell_mm == BAND_SHELL_MM and resumed.shell_chosen.startswith("kept from the run resumed")
+    assert _planned_spec(argv).shell_mm is None  # not resumed: the memory decides again
+
+
+def _planned_spec(argv):
+    """The spec ``optimize``'s plan (``cli.jobplan.plan_job``) runs for ``argv``."""
+    args = build_parser().parse_args(argv)
+    spec = mesh_spec_from_args(args, args.mesh)
+    inks = InkTable.parse("vero-cmykw")
+    return plan_job(args, spec, inks, config_from_args(args), run_options_from_args(args, 0))[0]

@@ -8,8 +8,8 @@ from __future__ import annotations
 from dataclasses import replace
 
 
-def plan_job(args, spec, n_inks: int, cfg, options):
-    """Check that the job of ``spec`` (checked) with ``n_inks`` inks fits the memory (a one-line ParameterError
+def plan_job(args, spec, inks, cfg, options):
+    """Check that the job of ``spec`` (checked) with the ink set ``inks`` fits the memory (a one-line ParameterError
     naming the largest size that fits; a dry run keeps it for after its estimate), give a mesh without
     ``--shell-mm`` the band when every voxel free does not fit (``footprint.fits.choose_shell``; ``--shell-mm 0``:
     every voxel free) and a run without ``--time-budget`` or ``--iterations`` its time plan (each logged before
@@ -22,6 +22,11 @@ def plan_job(args, spec, n_inks: int, cfg, options):
 
     limit = memory_limit(args.memory_gb)
     automatic = getattr(args, "shell_mm", None) is None  # `--shell-mm 0`: every voxel free by choice
+    n_inks = len(inks)
+    kept = _resumed_shell(args, inks) if automatic and spec.kind == "mesh" else None
+    if kept is not None:  # a resumed run keeps the band it started with, whatever the memory is now
+        spec = replace(spec, shell_mm=kept[0], core=kept[1], shell_chosen=f"kept from the run resumed in {args.out}")
+        automatic = False
     refusal, note = None, None
     try:
         choice = choose_shell(spec, n_inks, limit, automatic)
@@ -43,6 +48,29 @@ def plan_job(args, spec, n_inks: int, cfg, options):
     if args.dry_run and (spec.kind == "mesh" or refusal is not None):
         dry = _FootprintDryRun(fp, cfg.iterations, limit, refusal, planned, note)
     return spec, cfg, options, dry
+
+
+def _resumed_shell(args, inks) -> tuple[float, str] | None:
+    """(shell mm, "white") of the mesh run ``--resume`` continues in ``--out`` (its fine stage's scene.npz, else its
+    coarse stage's) when that run optimised a band over a white core of ``inks``, as a band chosen for the memory
+    is, else None."""
+    from pathlib import Path
+
+    import numpy as np
+
+    from ..rundir import RunDir
+
+    if not args.resume:
+        return None
+    white = np.eye(len(inks), dtype=np.float32)[list(inks.names).index("white")] if "white" in inks.names else None
+    for folder in (Path(args.out), Path(args.out) / "coarse"):
+        if (folder / RunDir.SCENE).is_file() and (folder / RunDir.CHECKPOINT).is_file():
+            mesh = RunDir(folder).load_scene().mesh
+            if mesh is None or mesh.shell_mm is None or white is None:
+                return None
+            held = np.asarray(mesh.core_share if mesh.core_share is not None else white, np.float32)
+            return (float(mesh.shell_mm), "white") if np.array_equal(held, white) else None
+    return None
 
 
 def _first_line(log, line: str):

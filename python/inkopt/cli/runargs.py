@@ -358,7 +358,7 @@ def run_from_args(args, spec):
     spec.validate()
     inks, table = run_inks(args.inks)  # the scene's RGB table; a spectral one renders the run's bands
     options = run_options_from_args(args, started, table)
-    spec, cfg, options, dry = plan_job(args, spec, len(inks), config_from_args(args), options)
+    spec, cfg, options, dry = plan_job(args, spec, inks, config_from_args(args), options)
     if dry is not None:
         return dry, cfg.time_budget
     coarse_dpi = args.coarse_dpi
