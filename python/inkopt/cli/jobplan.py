@@ -24,9 +24,10 @@ def plan_job(args, spec, inks, cfg, options):
     automatic = getattr(args, "shell_mm", None) is None  # `--shell-mm 0`: every voxel free by choice
     n_inks = len(inks)
     kept = _resumed_shell(args, inks) if automatic and spec.kind == "mesh" else None
-    if kept is not None:  # a resumed run keeps the band it started with, whatever the memory is now
-        spec = replace(spec, shell_mm=kept[0], core=kept[1], shell_chosen=f"kept from the run resumed in {args.out}")
+    if kept is not None:  # a resumed run keeps its band, or every voxel free, whatever the memory is now
         automatic = False
+        if kept > 0:
+            spec = replace(spec, shell_mm=kept, core="white", shell_chosen=f"kept from the run resumed in {args.out}")
     refusal, note = None, None
     try:
         choice = choose_shell(spec, n_inks, limit, automatic)
@@ -50,10 +51,10 @@ def plan_job(args, spec, inks, cfg, options):
     return spec, cfg, options, dry
 
 
-def _resumed_shell(args, inks) -> tuple[float, str] | None:
-    """(shell mm, "white") of the mesh run ``--resume`` continues in ``--out`` (its fine stage's scene.npz, else its
-    coarse stage's) when that run optimised a band over a white core of ``inks``, as a band chosen for the memory
-    is, else None."""
+def _resumed_shell(args, inks) -> float | None:
+    """What the mesh run ``--resume`` continues in ``--out`` optimised (its fine stage's scene.npz, else its coarse
+    stage's): its shell (mm) when it optimised a band over a white core of ``inks``, as a band chosen for the memory
+    is; 0 when every voxel was free; None when there is no such run to continue, or it had another core."""
     from pathlib import Path
 
     import numpy as np
@@ -66,10 +67,12 @@ def _resumed_shell(args, inks) -> tuple[float, str] | None:
     for folder in (Path(args.out), Path(args.out) / "coarse"):
         if (folder / RunDir.SCENE).is_file() and (folder / RunDir.CHECKPOINT).is_file():
             mesh = RunDir(folder).load_scene().mesh
-            if mesh is None or mesh.shell_mm is None or white is None:
+            if mesh is None or white is None:
                 return None
+            if mesh.shell_mm is None:
+                return 0.0
             held = np.asarray(mesh.core_share if mesh.core_share is not None else white, np.float32)
-            return (float(mesh.shell_mm), "white") if np.array_equal(held, white) else None
+            return float(mesh.shell_mm) if np.array_equal(held, white) else None
     return None
 
 
