@@ -157,10 +157,6 @@ def keep_baseline_figures(run: Optimization, measure: Callable[[np.ndarray], dic
     if run.cfg.init == kind and comparable(run.start_figures):
         run.keep_baseline_figures(kind, run.start_figures)
     elif table_available(run.base):
-        # the baseline's mixture is made with neither the start's renderer nor the loss's unread operators beside it
-        # (``measure`` builds them again, the same): the run's peak at Spot 60 mm with a 1 mm shell was here
-        run.release_renderer()
-        run.release_unread_operators()
         run.keep_baseline_figures(kind, measure(run.initial_variables(kind)))
     else:
         log(
