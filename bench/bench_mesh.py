@@ -1,7 +1,7 @@
 """Benchmark of the mesh pipeline on Spot: voxelization time, seconds per optimisation iteration, peak memory.
 
     python bench/bench_mesh.py [HEIGHT_MM=40] [--iterations 3] [--spp 4] [--threads 2] [--shell-mm D] [--core C]
-        [--smooth S] [--dpi 300] [--figure-metrics] [--code PYTHON_DIR] [--out JSON]
+        [--smooth S] [--dpi 300] [--figure-metrics] [--baseline] [--code PYTHON_DIR] [--out JSON]
 
 Writes bench/results/mesh_<height>mm.json (``--dpi`` other than 300: mesh_<height>mm_<dpi>dpi.json; the folder is
 created if missing). Peak memory is the process's
@@ -59,6 +59,12 @@ def main(argv=None) -> dict:
         "of 1e-4 (the loss's window and Sobel operators, SSIM with its noise correction, the mottle): their peak "
         "and seconds",
     )
+    ap.add_argument(
+        "--baseline",
+        action="store_true",
+        help="before the iterations, as a run's baseline guard: the extrusion baseline's variables (its nearest "
+        "texel of every inside voxel): their peak and seconds",
+    )
     args = ap.parse_args(argv)
 
     import resource
@@ -96,6 +102,14 @@ def main(argv=None) -> dict:
         figure_s = time.perf_counter() - t0
         rss["after_figure_metrics"] = peak_rss_gb()
         print(f"figure metrics in {figure_s:.1f} s; peaks so far (GiB) {rss}", file=sys.stderr, flush=True)
+    baseline_s = None
+    if args.baseline:  # as a run's baseline guard: the extrusion baseline's variables (its nearest texels)
+        t0 = time.perf_counter()
+        x_baseline = run.initial_variables("extrusion")
+        del x_baseline
+        baseline_s = time.perf_counter() - t0
+        rss["after_baseline"] = peak_rss_gb()
+        print(f"extrusion baseline in {baseline_s:.1f} s; peaks so far (GiB) {rss}", file=sys.stderr, flush=True)
     cpu0 = resource.getrusage(resource.RUSAGE_SELF)
     passes = []
     for i in range(args.iterations):
@@ -156,6 +170,7 @@ def main(argv=None) -> dict:
         "peak_rss_gb": rss["after_iterations"],
         "peak_rss_gb_by_stage": rss,
         "figure_metrics_seconds": figure_s,
+        "baseline_seconds": baseline_s,
         "machine": {"cpu": platform.processor() or platform.machine(), "python": platform.python_version()},
         "note": "CPU may be shared with other processes: wall-clock times are upper bounds; "
         "cpu_seconds_per_iteration (user + system, all threads) is not affected",

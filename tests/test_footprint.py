@@ -60,8 +60,9 @@ def test_a_shell_costs_its_band_not_the_volume():
 
 
 def _refuse(monkeypatch, capsys, tmp_path, extra=()):
-    """Run optimize of Spot 40 mm with 1 GiB available (80 % may be used) and voxelize patched to fail: the
-    one-line error and the output folder."""
+    """Run optimize of Spot 40 mm with every voxel free (``--shell-mm 0``; the band's refusal:
+    tests/test_shell_choice.py) with 1 GiB available (80 % may be used) and voxelize patched to fail: the one-line
+    error and the output folder."""
     import inkopt.scenes.mesh.scene as mesh_scene
 
     def no_voxelize(*a, **k):
@@ -71,7 +72,8 @@ def _refuse(monkeypatch, capsys, tmp_path, extra=()):
     monkeypatch.setattr(footprint, "available_bytes", lambda: 2.0**30)
     monkeypatch.delenv(footprint.MEMORY_ENV, raising=False)
     out = tmp_path / "run"
-    argv = ["optimize", str(SPOT), "--height-mm", "40", "--out", str(out), "--iterations", "1", *extra]
+    argv = ["optimize", str(SPOT), "--height-mm", "40", "--out", str(out), "--iterations", "1", "--shell-mm", "0"]
+    argv += extra
     code = main(argv)
     err = capsys.readouterr().err.strip().splitlines()
     return code, err, out

@@ -134,6 +134,12 @@ def diffuse_layer(
 ) -> None:
     """Error-diffuse layer z: mixture (N,Y,X) f32, masks (Y,X) u8, error (2,Y,X,N) f32 -> labels into out (Y,X) u8."""
 
+def feature_plane(
+    z: int, site_z: NDArray[np.int32], sampling: tuple[float, float, float], out: NDArray[np.int32]
+) -> None:
+    """Plane z of scipy's exact Euclidean feature transform: site_z (Y,X) i32 each column's nearest feature z (-1:
+    none), sampling (z, y, x) -> each voxel's nearest feature (z, y, x) into out (3,Y,X) i32."""
+
 def smooth_rows(
     shape: tuple[int, int, int],
     index: NDArray[np.int64],

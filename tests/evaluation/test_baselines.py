@@ -235,3 +235,30 @@ def test_extrusion_of_centred_texels_takes_a_nearest_texel(table3):
         got = dist[np.arange(len(flat)), src.nearest_texels(z, flat)]
         np.testing.assert_allclose(got, dist.min(1), rtol=1e-12, atol=1e-12)
         np.testing.assert_array_equal(src[z][inside[z]], src.mix_t[src.nearest_texels(z, flat)])
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_nearest_centred_is_scipys_feature_transform_ties_included(seed):
+    """The plane-at-a-time feature transform (``_core.feature_plane`` under ``_nearest_centred``) picks exactly the
+    texel scipy's whole-grid ``distance_transform_edt(return_indices=True)`` picks, equidistant ones included
+    (cubic voxels tie often), on random grids of sparse and dense features, cubic and anisotropic."""
+    from scipy import ndimage
+
+    from inkopt.evaluation.baselines import _nearest_centred
+
+    rng = np.random.default_rng(seed)
+    shape = tuple(int(v) for v in rng.integers(3, 14, 3))
+    vmm = np.full(3, 0.0847) if seed % 2 else rng.uniform(0.03, 0.1, 3)
+    voxel = np.argwhere(rng.random(shape) < (0.02, 0.1, 0.4)[seed % 3])
+    if not len(voxel):
+        voxel = np.array([[0, 0, 0]])
+    tex = Texels(voxel, np.zeros(len(voxel)), np.tile([0.0, 0.0, 1.0], (len(voxel), 1)), centred=True)
+    fill = rng.random(shape) < 0.7
+    near, offsets = _nearest_centred(tex, fill, vmm)
+    feature = np.ones(shape, bool)
+    feature[tuple(voxel.T)] = False
+    idx = ndimage.distance_transform_edt(feature, sampling=vmm[::-1], return_distances=False, return_indices=True)
+    want = np.ravel_multi_index(tuple(i[fill] for i in idx), shape)
+    got = np.ravel_multi_index(tuple(voxel[near].T), shape)
+    np.testing.assert_array_equal(got, want)
+    assert offsets[-1] == fill.sum()

@@ -25,6 +25,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<medium::Medium>()?;
     m.add_class::<texels::Texels>()?;
     m.add_function(wrap_pyfunction!(printing::diffuse_layer, m)?)?;
+    m.add_function(wrap_pyfunction!(printing::feature_plane, m)?)?;
     m.add_function(wrap_pyfunction!(optimiser::smooth_rows, m)?)?;
     m.add_function(wrap_pyfunction!(optimiser::softmax_rows, m)?)?;
     m.add_function(wrap_pyfunction!(optimiser::softmax_backward, m)?)?;

@@ -1,5 +1,6 @@
-//! The printing kernel: `diffuse_layer`, one printer layer of 3D vector error diffusion
-//! (`inkopt_core::kernels::diffuse`).
+//! The printing kernels: `diffuse_layer`, one printer layer of 3D vector error diffusion
+//! (`inkopt_core::kernels::diffuse`), and `feature_plane`, one plane of the exact Euclidean feature transform the
+//! extrusion baseline takes its nearest texels from (`inkopt_core::kernels::feature`).
 
 use numpy::{PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
 use pyo3::prelude::*;
@@ -36,4 +37,24 @@ pub(crate) fn diffuse_layer(
     let (cur, next) = if z.is_multiple_of(2) { (e0, e1) } else { (e1, e0) };
     let shape = inkopt_core::kernels::diffuse::LayerShape { n, ny, nx };
     py.detach(|| inkopt_core::kernels::diffuse::diffuse_layer(shape, z, m, i, i_next, cur, next, o)).map_err(err)
+}
+
+/// feature_plane(z, site_z (Y, X) i32, sampling (z, y, x) f64, out (3, Y, X) i32): plane z of the exact Euclidean
+/// feature transform of a (Z, Y, X) grid, as scipy.ndimage.distance_transform_edt(return_indices=True) gives it
+/// (ties included). site_z: the z of each column's nearest feature to plane z (ties to the lower z; -1: none);
+/// out receives each voxel's nearest feature's z, y and x (inkopt_core::kernels::feature). The GIL is released.
+#[pyfunction]
+pub(crate) fn feature_plane(
+    py: Python<'_>,
+    z: i64,
+    site_z: PyReadonlyArray2<i32>,
+    sampling: (f64, f64, f64),
+    mut out: numpy::PyReadwriteArray3<i32>,
+) -> PyResult<()> {
+    let (ny, nx) = (site_z.shape()[0], site_z.shape()[1]);
+    check_shape(out.shape(), &[3, ny, nx], "out")?;
+    let sites = c_slice(&site_z, "site_z")?;
+    let o = out.as_slice_mut().map_err(|_| err("out must be C-contiguous"))?;
+    let shape = inkopt_core::kernels::feature::PlaneShape { ny, nx, sampling: [sampling.0, sampling.1, sampling.2] };
+    py.detach(|| inkopt_core::kernels::feature::feature_plane(z, sites, shape, o)).map_err(err)
 }

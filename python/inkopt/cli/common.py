@@ -59,7 +59,8 @@ def add_mesh_args(p, what: str = "") -> None:
         type=float,
         metavar="D",
         help=f"{what}optimise only voxels less than D mm below the surface; deeper ones are printed as --core "
-        "(default: every voxel of the object is optimised)",
+        "(default: every voxel of the object is optimised; optimize takes a 1 mm band over a white core when that "
+        "does not fit the memory, --memory-gb; 0: every voxel, always)",
     )
     p.add_argument(
         "--core",

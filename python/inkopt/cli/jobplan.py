@@ -1,30 +1,45 @@
 """What a single run (``slab``, ``optimize``) settles before anything large is built: its footprint from its size
 (``inkopt.footprint``: a mesh is loaded, not voxelized), the refusal of a job beyond the memory it may use
-(``--memory-gb``), the time plan of a run given neither ``--time-budget`` nor ``--iterations``, and a dry run
-answered from the footprint."""
+(``--memory-gb``), the band of a mesh given no ``--shell-mm`` whose every voxel free does not fit, the time plan of
+a run given neither ``--time-budget`` nor ``--iterations``, and a dry run answered from the footprint."""
 
 from __future__ import annotations
 
 from dataclasses import replace
 
 
-def plan_job(args, spec, n_inks: int, cfg, options):
-    """Check that the job of ``spec`` (checked) with ``n_inks`` inks fits the memory (a one-line ParameterError
-    naming the largest size that fits; a dry run keeps it for after its estimate) and give a run without
-    ``--time-budget`` or ``--iterations`` its time plan (logged before the run's first line). Returns (``cfg``,
-    ``options``, a dry run's answer or None): the answer for a mesh's dry run and for any job that does not fit."""
+def plan_job(args, spec, inks, cfg, options):
+    """Check that the job of ``spec`` (checked) with the ink set ``inks`` fits the memory (a one-line ParameterError
+    naming the largest size that fits; a dry run keeps it for after its estimate), give a mesh without
+    ``--shell-mm`` the band when every voxel free does not fit (``footprint.fits.choose_shell``; ``--shell-mm 0``:
+    every voxel free) and a run without ``--time-budget`` or ``--iterations`` its time plan (each logged before
+    the run's first line). Returns (the spec the job runs, ``cfg``, ``options``, a dry run's answer or None): the
+    answer for a mesh's dry run and for any job that does not fit."""
     from ..errors import ParameterError
-    from ..footprint import check_spec_fits, memory_limit, spec_footprint
+    from ..footprint import memory_limit, spec_footprint
+    from ..footprint.fits import choose_shell
+    from .common import flag_of
 
     limit = memory_limit(args.memory_gb)
-    fp, shape = spec_footprint(spec, n_inks)
-    refusal = None
+    automatic = getattr(args, "shell_mm", None) is None  # `--shell-mm 0`: every voxel free by choice
+    n_inks = len(inks)
+    kept = _resumed_shell(args, inks) if automatic and spec.kind == "mesh" else None
+    if kept is not None:  # a resumed run keeps its band, or every voxel free, whatever the memory is now
+        automatic = False
+        if kept > 0:
+            spec = replace(spec, shell_mm=kept, core="white", shell_chosen=f"kept from the run resumed in {args.out}")
+    refusal, note = None, None
     try:
-        check_spec_fits(spec, fp, shape, limit)
+        choice = choose_shell(spec, n_inks, limit, automatic)
+        spec, fp, note = choice.spec, choice.footprint, choice.note
     except ParameterError as exc:
         if not args.dry_run:
             raise
         refusal = exc  # a dry run prints its estimate first
+        fp, _ = spec_footprint(spec, n_inks)
+    if note is not None:
+        note = ParameterError(note).render(flag_of)  # the library's parameter names as flags
+        options = replace(options, log=_first_line(options.log, note))
     planned = args.iterations is None and cfg.time_budget is None
     if planned:
         budget, line = _time_plan(fp)
@@ -32,8 +47,33 @@ def plan_job(args, spec, n_inks: int, cfg, options):
         options = replace(options, log=_first_line(options.log, line))
     dry = None
     if args.dry_run and (spec.kind == "mesh" or refusal is not None):
-        dry = _FootprintDryRun(fp, cfg.iterations, limit, refusal, planned)
-    return cfg, options, dry
+        dry = _FootprintDryRun(fp, cfg.iterations, limit, refusal, planned, note)
+    return spec, cfg, options, dry
+
+
+def _resumed_shell(args, inks) -> float | None:
+    """What the mesh run ``--resume`` continues in ``--out`` optimised (its fine stage's scene.npz, else its coarse
+    stage's): its shell (mm) when it optimised a band over a white core of ``inks``, as a band chosen for the memory
+    is; 0 when every voxel was free; None when there is no such run to continue, or it had another core."""
+    from pathlib import Path
+
+    import numpy as np
+
+    from ..rundir import RunDir
+
+    if not args.resume:
+        return None
+    white = np.eye(len(inks), dtype=np.float32)[list(inks.names).index("white")] if "white" in inks.names else None
+    for folder in (Path(args.out), Path(args.out) / "coarse"):
+        if (folder / RunDir.SCENE).is_file() and (folder / RunDir.CHECKPOINT).is_file():
+            mesh = RunDir(folder).load_scene().mesh
+            if mesh is None or white is None:
+                return None
+            if mesh.shell_mm is None:
+                return 0.0
+            held = np.asarray(mesh.core_share if mesh.core_share is not None else white, np.float32)
+            return float(mesh.shell_mm) if np.array_equal(held, white) else None
+    return None
 
 
 def _first_line(log, line: str):
@@ -70,10 +110,16 @@ def _time_plan(fp) -> tuple[float, str]:
 class _FootprintDryRun:
     """A dry run from the footprint (a mesh's, or a job that does not fit): its line for ``iterations`` against the
     memory ``limit``; ``refusal``: the error the run would end with (None: it fits); ``planned``: its time budget is
-    the time plan."""
+    the time plan; ``note``: the line of a band chosen for the memory (None: none), printed first."""
 
-    def __init__(self, fp, iterations: int, limit, refusal=None, planned: bool = False):
+    def __init__(self, fp, iterations: int, limit, refusal=None, planned: bool = False, note: str | None = None):
         self.fp, self.iterations, self.limit, self.refusal, self.planned = fp, iterations, limit, refusal, planned
+        self.note = note
 
     def line(self, time_budget: float | None = None) -> str:
-        return self.fp.line(self.iterations, time_budget, self.limit, "time plan" if self.planned else "time budget")
+        from ..errors import ParameterError
+        from .common import flag_of
+
+        line = self.fp.line(self.iterations, time_budget, self.limit, "time plan" if self.planned else "time budget")
+        line = ParameterError(line).render(flag_of)  # the memory limit's source may name a parameter
+        return line if self.note is None else f"{self.note}\n{line}"

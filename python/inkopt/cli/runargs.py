@@ -328,17 +328,22 @@ def slab_spec_from_args(args, top: str):
 
 def mesh_spec_from_args(args, path: str):
     """The ``MeshSpec`` of ``path`` and the mesh options, each named as the spec's field (``--height-mm`` or
-    ``--scale``, ``--shell-mm``, ``--dpi``, ``--up``, translucency, ``--texture``, ``--constant-color``)."""
+    ``--scale``, ``--shell-mm``, ``--dpi``, ``--up``, translucency, ``--texture``, ``--constant-color``);
+    ``--shell-mm 0``: every voxel free (no shell)."""
     from dataclasses import fields
 
     from ..scenes.spec import MeshSpec
 
-    return MeshSpec(path, **{f.name: getattr(args, f.name) for f in fields(MeshSpec) if f.name != "path"})
+    given = {f.name: getattr(args, f.name) for f in fields(MeshSpec) if f.name not in ("path", "shell_chosen")}
+    if given["shell_mm"] == 0:
+        given["shell_mm"] = None
+    return MeshSpec(path, **given)
 
 
 def run_from_args(args, spec):
     """``slab`` and ``optimize``: check ``spec`` (before the ink set and the optimiser settings are read) and that
-    its job fits the memory (``footprint``: a mesh is loaded, not voxelized), plan its time when neither
+    its job fits the memory (``footprint``: a mesh is loaded, not voxelized; a mesh given no ``--shell-mm`` takes a
+    band when every voxel free does not fit, ``footprint.fits.choose_shell``), plan its time when neither
     ``--time-budget`` nor ``--iterations`` is given (the first log line says so), build its scene with ``--inks``
     and optimise it into ``--out``. Returns (the run's ``Report``, or with ``--dry-run`` an estimate with a
     ``line(time_budget)``, nothing written; the run's time budget in seconds or None)."""
@@ -353,7 +358,7 @@ def run_from_args(args, spec):
     spec.validate()
     inks, table = run_inks(args.inks)  # the scene's RGB table; a spectral one renders the run's bands
     options = run_options_from_args(args, started, table)
-    cfg, options, dry = plan_job(args, spec, len(inks), config_from_args(args), options)
+    spec, cfg, options, dry = plan_job(args, spec, inks, config_from_args(args), options)
     if dry is not None:
         return dry, cfg.time_budget
     coarse_dpi = args.coarse_dpi

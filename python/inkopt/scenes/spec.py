@@ -100,7 +100,8 @@ class MeshSpec:
     "start" or ink shares "white=0.9,black=0.1"; ``model.fixed.core_shares``); ``translucency``: "alpha" or a grey
     mask file in texture space, down to ``translucency_depth_mm`` below the surface; ``texture``: an image file
     replacing the file's texture; ``constant_color``: a mesh without colours is accepted (its target is one
-    colour)."""
+    colour); ``shell_chosen``: why the shell was chosen for the run rather than given (``footprint.fits.choose_shell``;
+    None: given, or every voxel free), in report.json's scene entries."""
 
     path: str
     height_mm: float | None = None
@@ -113,6 +114,7 @@ class MeshSpec:
     texture: str | None = None
     constant_color: bool = False
     core: str = DEFAULT_CORE
+    shell_chosen: str | None = None
     kind: ClassVar[str] = "mesh"
 
     def __post_init__(self):
@@ -165,6 +167,8 @@ class MeshSpec:
             d["constant_color"] = True
         if self.core != "white":  # written only where it differs from the white core of specs without one
             d["core"] = self.core
+        if self.shell_chosen is not None:
+            d["shell_chosen"] = self.shell_chosen
         return _with_translucency(d, self)
 
 
@@ -208,5 +212,6 @@ def spec_from_json(d: dict) -> SceneSpec:
             texture=d.get("texture"),
             constant_color=bool(d.get("constant_color", False)),
             core=d.get("core", "white"),
+            shell_chosen=d.get("shell_chosen"),
         )
     raise ValueError(f"unknown scene kind {kind!r}; expected 'image' (a slab) or 'mesh'")

@@ -5,6 +5,8 @@
 //! - `smooth` (optimiser): explicit diffusion of per-voxel values over a sparse voxel set, the step
 //!   preconditioner.
 //! - `simplex` (optimiser): the row-wise softmax of the optimiser's variables and its backward map.
+//! - `feature` (baselines): the exact Euclidean feature transform of a grid one z plane at a time, scipy's answers
+//!   without a grid-sized index array.
 //! - `step` (optimiser): the exponentiated-gradient step over every variable and the order statistics of |g| that
 //!   set its scale.
 //!
@@ -13,6 +15,7 @@
 //! `transport::medium::EMPTY`.
 
 pub mod diffuse;
+pub mod feature;
 pub mod simplex;
 pub mod smooth;
 pub mod step;

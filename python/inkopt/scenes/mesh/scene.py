@@ -92,6 +92,7 @@ class MeshScene:
     up: str = "y"
     translucency: Translucency | None = None
     core: str = DEFAULT_CORE
+    shell_chosen: str | None = None  # why the shell was chosen rather than given (``scenes.spec.MeshSpec``)
     kind = "mesh"
 
     @property
@@ -166,6 +167,7 @@ class MeshScene:
             "colour_source": describe_colour_source(self.mesh),
             "voxel_mm": [float(v) for v in self.volume.voxel_mm],
             **translucency_fields(self.translucency),
+            **({} if self.shell_chosen is None else {"shell_chosen": self.shell_chosen}),
         }
 
     def write_pictures(
@@ -254,4 +256,4 @@ def build_mesh_scene(spec: MeshSpec, inks: InkTable) -> MeshScene:
         band=None if spec.shell_mm is None else Band.of_fixed(vox.inside, fixed),  # a core below the shell
     )
     path = str(Path(spec.path).resolve())
-    return MeshScene(mesh, vox, vol, fixed, spec.shell_mm, seconds, path, spec.up, tr, spec.core)
+    return MeshScene(mesh, vox, vol, fixed, spec.shell_mm, seconds, path, spec.up, tr, spec.core, spec.shell_chosen)

@@ -1,7 +1,7 @@
 """What a job needs before anything large is built: its grid's counts from the loaded mesh alone (no voxelization) or
 from a slab's size, the peak memory, seconds per iteration and disk those counts need (``Footprint``), the memory the
-machine can give (``memory_limit``) and the one-line refusal of a job beyond it that names the largest height (or
-DPI) that fits (``check_fits``).
+machine can give (``memory_limit``); ``footprint.fits``: the one-line refusal of a job beyond it that names the
+largest height (or DPI) that fits (``check_spec_fits``) and the shell of a mesh run given none (``choose_shell``).
 
 Counts of a mesh at voxel size h (mm) from its area A, volume V (trimesh), bounding box and face normals:
 
@@ -33,10 +33,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .errors import ParameterError
-from .estimate import PRINTER_PER_OPT_VOXEL
-from .model.volume import MAX_GRID_VOXELS
-from .units import format_duration, voxel_mm
+from ..errors import ParameterError
+from ..estimate import PRINTER_PER_OPT_VOXEL
+from ..model.volume import MAX_GRID_VOXELS
+from ..units import format_duration, voxel_mm
 
 #: the interpreter, numpy, the extension and the ink tables before a scene is built: the 'start' peak of
 #: bench/results/mesh_*mm.json is 0.066-0.070 GiB
@@ -323,96 +323,15 @@ def memory_limit(memory_gb: float | None = None) -> MemoryLimit:
     return MemoryLimit(MEMORY_MARGIN * available_bytes(), f"({MEMORY_MARGIN:.0%} of the available memory)")
 
 
-def _largest(fits, hi: float, steps: int = 40) -> float:
-    """The largest x in (0, hi] with ``fits(x)`` (monotone: true below some x), by halving from ``hi`` until one
-    fits and then bisection; 0 when none above hi / 2^steps fits."""
-    lo = hi
-    for _ in range(steps):
-        if fits(lo):
-            break
-        lo /= 2.0
-    else:
-        return 0.0
-    top = min(2.0 * lo, hi)
-    for _ in range(steps if lo < hi else 0):
-        mid = 0.5 * (lo + top)
-        lo, top = (mid, top) if fits(mid) else (lo, mid)
-    return lo
-
-
-def largest_mesh_height(shape: MeshShape, dpi: float, shell_mm, n_inks: int, band: float, limit: float) -> float:
-    """The largest height (mm) at which a mesh of ``shape`` fits ``limit`` bytes at ``dpi`` (0: none)."""
-
-    def fits(height: float) -> bool:
-        fp = mesh_footprint(shape.scaled(height / shape.height_mm), dpi, shell_mm, n_inks, band)
-        return fp.fits(limit)
-
-    return _largest(fits, shape.height_mm)
-
-
-def largest_dpi(footprint_at, dpi: float, limit: float) -> float:
-    """The largest DPI up to ``dpi`` at which ``footprint_at(dpi)`` fits ``limit`` bytes (0: none)."""
-    return _largest(lambda d: footprint_at(d).fits(limit), dpi)
-
-
-def check_fits(fp: Footprint, limit: MemoryLimit, what: str, larger: str, size: str, dpi: float) -> None:
-    """One-line ParameterError when ``fp``'s peak exceeds ``limit``: it names ``what`` (the input), the peak, the
-    limit, the largest ``size`` (text) of the parameter ``larger`` (e.g. height_mm) and the largest ``dpi`` that
-    fit."""
-    need = fp.peak_bytes()
-    if fp.fits(limit.bytes):
-        return
-    nx, ny, nz = fp.grid
-    over = f"more than the {limit.bytes / 2**30:.1f} GiB it may use {limit.source}"
-    if need <= limit.bytes:
-        over = "within memory, but its grid has more than the renderer's 2^31 voxels"
-    raise ParameterError(
-        f"{what}: the job needs ~{need / 2**30:.1f} GiB at its peak (grid {nx} x {ny} x {nz}, "
-        f"{_count(fp.inside_voxels)} inside, {_count(fp.free_voxels)} free, {_count(fp.texels)} texels at "
-        f"{fp.dpi:g} DPI), {over}; the largest "
-        f"`{larger}` that fits is {size}, or `dpi` {math.floor(dpi)} at this size"
-    )
-
-
-def _down(x: float) -> str:
-    """``x`` rounded down to 3 significant digits (a size that still fits)."""
-    if x <= 0:
-        return "none"
-    digits = max(0, 2 - math.floor(math.log10(x)))
-    return f"{math.floor(x * 10**digits) / 10**digits:.{digits}f}"
-
-
 def spec_footprint(spec, n_inks: int, mesh=None) -> tuple[Footprint, MeshShape | None]:
     """The ``Footprint`` of a scene spec (``scenes.spec.SlabSpec`` or ``MeshSpec``, checked) for ``n_inks`` inks and,
     for a mesh, its ``MeshShape``; loads a mesh (``mesh``: one already loaded), never voxelizes it."""
     if spec.kind == "slab":
         return slab_footprint(spec.size_mm, spec.dpi, 1 if spec.bottom is None else 2, n_inks), None
     if mesh is None:
-        from .scenes.mesh import load_spec_mesh
+        from ..scenes.mesh import load_spec_mesh
 
         mesh = load_spec_mesh(spec)
     shape = mesh_shape(mesh)
     band = mesh_band(voxel_mm(spec.dpi), spec.shell_mm, spec.translucency_depth_mm if spec.translucency else None)
     return mesh_footprint(shape, spec.dpi, spec.shell_mm, n_inks, band), shape
-
-
-def check_spec_fits(spec, fp: Footprint, shape: MeshShape | None, limit: MemoryLimit) -> None:
-    """One-line ParameterError (``check_fits``) when the job of ``spec`` (its ``fp`` and, for a mesh, ``shape`` from
-    ``spec_footprint``) needs more than ``limit``, naming the largest size (``height_mm``, ``scale`` or
-    ``size_mm``) and DPI that fit."""
-    if fp.fits(limit.bytes):
-        return
-    n = fp.n_inks
-    if spec.kind == "slab":
-        w, h, d = spec.size_mm
-        faces = 1 if spec.bottom is None else 2
-        f = _largest(lambda k: slab_footprint((k * w, k * h, d), spec.dpi, faces, n).fits(limit.bytes), 1.0)
-        dpi = largest_dpi(lambda x: slab_footprint(spec.size_mm, x, faces, n), spec.dpi, limit.bytes)
-        check_fits(fp, limit, spec.top, "size_mm", f"{_down(f * w)}x{_down(f * h)}x{d:g}", dpi)
-        return
-    height = largest_mesh_height(shape, spec.dpi, spec.shell_mm, n, fp.band, limit.bytes)
-    larger, size = "height_mm", _down(height)
-    if spec.height_mm is None:  # placed by scale: the scale that gives that height
-        larger, size = "scale", _down(spec.scale * height / shape.height_mm)
-    dpi = largest_dpi(lambda x: mesh_footprint(shape, x, spec.shell_mm, n, fp.band), spec.dpi, limit.bytes)
-    check_fits(fp, limit, spec.path, larger, size, dpi)
