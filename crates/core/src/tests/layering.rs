@@ -30,6 +30,7 @@ const LAYERS: &[&str] = &[
     "transport::hero_lanes",
     "transport::hero_pass",
     "kernels::diffuse",
+    "kernels::feature",
     "kernels::simplex",
     "kernels::smooth",
     "kernels::step",
