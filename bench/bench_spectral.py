@@ -15,7 +15,9 @@ optimiser's do (``Viewing.group_weights``), or equally with ``--equal-groups``.
    noise at ``--spp``: spp x (noise_spectral / noise_rgb)^2 rounded up (the noise's square falls as 1/spp), then
    measured again at that spp.
 2. Cost: ``--iterations`` optimisation iterations (forward + loss + gradient + step) of each at those samples,
-   RGB and spectral alternating twice in one process; seconds per iteration, median over each kind's iterations.
+   RGB and spectral alternating ``--rounds`` times (default 2) in one process; seconds per iteration, median over
+   each kind's iterations; ``rounds``: each round's medians, their ratios to RGB's and the load after it.
+   ``planned_pilot_s``: the plan's pilot in seconds, ``planned_pilot_over_rgb_iteration`` over RGB's iteration.
 
 Two spectral renderers: one path per band and sample (the keys without "hero"), and hero paths, each carrying a
 band group's three bands (``Viewing.hero``; the ``hero_*`` keys, and "hero" in the per-iteration seconds), both with
@@ -33,6 +35,7 @@ reference slab. Writes bench/results/spectral_cost.json (Spot: spectral_cost_spo
 
 import argparse
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -149,12 +152,30 @@ def measure_noise(kinds: dict, vol, tex, a, rgb: tuple[float, int], d65) -> tupl
     return noise, render_events
 
 
+def alternate(scene, kinds: dict, cfgs: dict, cfg_rgb, a) -> tuple[dict, dict, list]:
+    """Per kind ("rgb" and ``kinds``) every iteration's seconds and path events, RGB and the spectral kinds
+    alternating ``a.rounds`` times (so a change of the machine's load falls on all), and per round each kind's
+    median seconds and the load after it."""
+    secs, events = {"rgb": [], **{k: [] for k in kinds}}, {"rgb": [], **{k: [] for k in kinds}}
+    rounds = []
+    for _ in range(a.rounds if a.iterations else 0):
+        this = {}
+        for k, viewing in {"rgb": None, **kinds}.items():
+            s, e = iteration_seconds(scene, cfgs.get(k, cfg_rgb), a.threads, viewing, a.iterations)
+            secs[k] += s
+            events[k] += e
+            this[k] = float(np.median(s))
+        rounds.append({"seconds_per_iteration": this, "load_average_1min": os.getloadavg()[0]})
+    return secs, events, rounds
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--bands", type=int, default=16)
     ap.add_argument("--spp", type=int, default=16)
     ap.add_argument("--iterations", type=int, default=3)
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--rounds", type=int, default=2, help="rounds of the kinds' alternation")
     ap.add_argument("--equal-groups", action="store_true", help="every band group the pass's spp")
     ap.add_argument("--spot-mm", type=float, help="Spot at this height instead of the reference slab")
     ap.add_argument("--no-hero", action="store_true", help="leave out the hero-path spectral renderer")
@@ -178,13 +199,8 @@ def main():
     noise, render_events = measure_noise(kinds, vol, tex, a, (noise_rgb, events_rgb), d65)
     cfg_rgb = OptimizeConfig(iterations=a.iterations, spp=a.spp, forward_spp=a.spp)
     cfgs = {k: OptimizeConfig(iterations=a.iterations, spp=n[1], forward_spp=n[1]) for k, n in noise.items()}
-    secs, events = {"rgb": [], **{k: [] for k in kinds}}, {"rgb": [], **{k: [] for k in kinds}}
     t0 = time.perf_counter()
-    for _ in range(2 if a.iterations else 0):  # alternating, so a change of the machine's load falls on all
-        for k, viewing in {"rgb": None, **kinds}.items():
-            s, e = iteration_seconds(scene, cfgs.get(k, cfg_rgb), a.threads, viewing, a.iterations)
-            secs[k] += s
-            events[k] += e
+    secs, events, rounds = alternate(scene, kinds, cfgs, cfg_rgb, a)
     per_it = {k: float(np.median(v)) if v else None for k, v in secs.items()}
     ev_it = {k: float(np.median(v)) if v else None for k, v in events.items()}
     groups = len(table.group_bands())
@@ -206,6 +222,11 @@ def main():
         **kind_keys("hero", noise, per_it, kinds.get("hero"), groups),
         **kind_keys("planned", noise, per_it, kinds.get("planned"), groups),
         "planned_pilot_s": pilot_s,
+        "planned_pilot_over_rgb_iteration": ratio(pilot_s, per_it["rgb"]),
+        "rounds": [
+            {**r, "over_rgb": {k: v / r["seconds_per_iteration"]["rgb"] for k, v in r["seconds_per_iteration"].items()}}
+            for r in rounds
+        ],
         "over_rgb_at_equal_noise": equal_noise_ratios(noise, noise_rgb, per_it),
         "events_per_iteration": ev_it,
         "iteration_events": events,
