@@ -187,13 +187,14 @@ def main():
     d65 = named_light("D65").colour_map(table.wavelengths_nm)
     tex = scene.texels
     noise_rgb, events_rgb = render_noise(Renderer(vol, a.threads), tex, a.spp, RGB)
-    kinds = {"spectral": Viewing(table, (named_light("D65"),), weighted=not a.equal_groups)}
+    d65_only = (named_light("D65"),)
+    kinds = {"spectral": Viewing(table, d65_only, weighted=not a.equal_groups, pilot=False)}  # the mid grey's weights
     if not a.no_hero:
-        kinds["hero"] = Viewing(table, (named_light("D65"),), weighted=not a.equal_groups, hero=True)
+        kinds["hero"] = Viewing(table, d65_only, weighted=not a.equal_groups, hero=True, pilot=False)
     pilot_s = None
     if not a.no_plan:
         t = time.perf_counter()
-        kinds["planned"] = Viewing(table, (named_light("D65"),)).planned(vol, tex, a.threads)
+        kinds["planned"] = Viewing(table, d65_only).planned(vol, tex, a.threads)  # as a run's pilot of its start
         pilot_s = time.perf_counter() - t
     weights = kinds["spectral"].group_weights()
     noise, render_events = measure_noise(kinds, vol, tex, a, (noise_rgb, events_rgb), d65)

@@ -36,8 +36,8 @@ def test_bad_groups_are_refused(groups):
         BandPlan(groups, (1.0,) * len(groups))
     vol = random_volume((2, 2, 2))
     table = SpectralInkTable(INKS.names, [450.0, 550.0, 650.0, 700.0], *[np.ones((5, 4))] * 2, INKS.g)
-    with pytest.raises(ParameterError, match="groups must"):
-        SpectralRenderer(vol, table, groups=groups)
+    with pytest.raises(ParameterError, match="plan must"):
+        SpectralRenderer(vol, table, plan=BandPlan(((0, 1, 2),)))
     with pytest.raises(ParameterError, match="weights must"):
         BandPlan(((0, 1, 2), (3,)), (1.0, 0.0))
 
@@ -52,8 +52,8 @@ def test_regrouped_bands_render_as_the_reordered_table_bit_for_bit():
     order = [3, 1, 5, 0, 4, 2]
     moved = SpectralInkTable(INKS.names, np.arange(6.0) + 400, table.sigma_s[:, order], table.sigma_a[:, order])
     w = np.array([2.0, 1.0])
-    a = SpectralRenderer(vol, table, threads=2, weights=w, groups=((3, 1, 5), (0, 4, 2)))
-    b = SpectralRenderer(vol, moved, threads=1, weights=w)
+    a = SpectralRenderer(vol, table, threads=2, plan=BandPlan(((3, 1, 5), (0, 4, 2)), w))
+    b = SpectralRenderer(vol, moved, threads=1, plan=BandPlan.in_order(moved, w))
     ra, rb = a.render(tex, spp=3, seed=11), b.render(tex, spp=3, seed=11)
     np.testing.assert_array_equal(ra.rgb[:, order], rb.rgb)
     np.testing.assert_array_equal(ra.var_mean[:, order], rb.var_mean)

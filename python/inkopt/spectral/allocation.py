@@ -20,8 +20,9 @@ fixed seed on an evenly spaced subset of the texels; it is a pure function of th
 from __future__ import annotations
 
 import hashlib
+import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -31,7 +32,7 @@ from ..lighting import Lighting, load_lighting
 from ..model import Texels, Volume
 from ..model.spectral import GROUP, SpectralInkTable
 from ..render import PassSettings, Renderer, RendererFactory
-from .render import band_table, check_grey, check_groups, with_inks
+from .bands import band_table, check_grey, check_groups, with_inks
 
 #: the pilot's random numbers (a constant: the plan is a function of the volume, not of a run's seed)
 PILOT_SEED = 0x5EC7_A110
@@ -42,39 +43,100 @@ PILOT_TEXELS = 4096
 PILOT_SAMPLES = 2 * PILOT_TEXELS
 
 
+#: the format version of a plan's JSON object (:meth:`BandPlan.to_json`: report.json's ``viewing.plan``, a
+#: checkpoint's ``band_plan``)
+PLAN_FORMAT = 1
+
+
 @dataclass(frozen=True)
 class BandPlan:
-    """``groups``: the bands of each path group (every band of the table in exactly one group, at most three per
+    """How a band render samples a spectral table's bands (``spectral.render.SpectralRenderer``'s ``plan``).
+    ``groups``: the bands of each path group (every band of the table in exactly one group, at most three per
     group, in any order); ``weights`` (G,) > 0: the groups' shares of a pass's samples
-    (``spectral.render.group_spp``)."""
+    (``spectral.render.group_spp``; None: every group the pass's spp); ``hero``: each group's paths carry its
+    three bands (hero-channel paths) instead of one path per band and sample. ``measured``: what the pilot that
+    made the plan measured (:meth:`to_json` records it; not part of the plan's identity, :meth:`key`)."""
 
     groups: tuple[tuple[int, ...], ...]
-    weights: tuple[float, ...]
+    weights: tuple[float, ...] | None = None
+    hero: bool = False
+    measured: dict | None = field(default=None, compare=False, hash=False)
 
     def __post_init__(self):
         groups = tuple(tuple(int(b) for b in g) for g in self.groups)
         object.__setattr__(self, "groups", groups)
-        object.__setattr__(self, "weights", tuple(float(w) for w in self.weights))
+        object.__setattr__(self, "hero", bool(self.hero))
         check_groups(groups, sum(len(g) for g in groups))
+        if self.weights is None:
+            return
+        object.__setattr__(self, "weights", tuple(float(w) for w in self.weights))
         if len(self.weights) != len(groups) or not all(np.isfinite(w) and w > 0 for w in self.weights):
             raise ParameterError(f"`weights` must be {len(groups)} positive numbers, one per band group")
 
+    @classmethod
+    def in_order(cls, table: SpectralInkTable, weights=None, hero: bool = False) -> BandPlan:
+        """The table's bands in wavelength order, three to a group (``table.group_bands()``)."""
+        return cls(tuple(table.group_bands()), None if weights is None else tuple(weights), hero)
+
+    @property
+    def bands(self) -> int:
+        return sum(len(g) for g in self.groups)
+
     def key(self) -> str:
-        """A short digest of the plan (what a checkpoint's key holds)."""
-        h = hashlib.sha256(repr((self.groups, self.weights)).encode())
+        """A short digest of the plan's groups, weights and paths (what a checkpoint's key holds)."""
+        h = hashlib.sha256(repr((self.groups, self.weights) + (("hero",) if self.hero else ())).encode())
         return h.hexdigest()[:12]
+
+    def line(self, iteration_seconds: float | None = None) -> str:
+        """One line on the plan: its groups' bands and weights, and its pilot's cost (over ``iteration_seconds``,
+        one iteration's, when given)."""
+        groups = " ".join(f"({','.join(map(str, g))})" for g in self.groups)
+        weights = "equal" if self.weights is None else " ".join(f"{w:.2g}" for w in self.weights)
+        out = f"band plan: groups {groups}, weights {weights}" + (", hero paths" if self.hero else "")
+        m = self.measured or {}
+        if "seconds" in m:
+            per = "" if not iteration_seconds else f", {m['seconds'] / iteration_seconds:.2f} of an iteration"
+            out += f"; its pilot {m['seconds']:.1f} s ({m['paths'] / 1e6:.2f} M paths{per})"
+        return out
+
+    def to_json(self) -> dict:
+        """The plan as a JSON object (``format_version`` :data:`PLAN_FORMAT`); weights as Python floats, which
+        JSON carries exactly, so :meth:`from_json` gives the same plan bit for bit."""
+        d = {"format_version": PLAN_FORMAT, "groups": [list(g) for g in self.groups], "hero": self.hero}
+        d["weights"] = None if self.weights is None else list(self.weights)
+        return {**d, **({} if self.measured is None else {"measured": self.measured})}
+
+    @classmethod
+    def from_json(cls, d: dict) -> BandPlan:
+        """The plan of a :meth:`to_json` object; a ParameterError naming `plan` for another format version or a
+        malformed one."""
+        if not isinstance(d, dict) or d.get("format_version") != PLAN_FORMAT:
+            version = d.get("format_version") if isinstance(d, dict) else None
+            raise ParameterError(f"`plan` has format version {version}; this inkopt reads {PLAN_FORMAT}")
+        try:
+            return cls(tuple(map(tuple, d["groups"])), d["weights"], d["hero"], d.get("measured"))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ParameterError(f"`plan` is malformed: {exc}") from None
 
 
 @dataclass(frozen=True)
 class Pilot:
     """What :func:`pilot` measured, per band (B,) float64: ``noise`` A_j, the texels' mean of the band's
     contribution to the squared CIELAB standard error (ΔE76^2) of one sample per band, summed over the lights;
-    ``cost`` c_j, path events per path; ``texels``: how many texels it rendered; ``paths``: how many paths."""
+    ``cost`` c_j, path events per path; ``texels``: how many texels it rendered; ``paths``, ``events``: how many
+    paths and path events it traced; ``seconds``: its wall time (load-dependent; 0 when not given)."""
 
     noise: np.ndarray
     cost: np.ndarray
     texels: int
     paths: int
+    events: int = 0
+    seconds: float = 0.0
+
+    def describe(self) -> dict:
+        """JSON fields: per band ``noise`` and ``cost`` (lists), ``texels``, ``paths``, ``events``, ``seconds``."""
+        d = {"noise": [float(x) for x in self.noise], "cost": [float(x) for x in self.cost]}
+        return {**d, "texels": self.texels, "paths": self.paths, "events": self.events, "seconds": self.seconds}
 
 
 def pilot_texels(texels: Texels, most: int = PILOT_TEXELS) -> Texels:
@@ -99,13 +161,14 @@ def pilot(
     renderer (``factory``, default :class:`~inkopt.render.Renderer`) whose medium each band swaps in; ``colours``:
     the lights' colour maps on the table's bands (``Viewing.colours``). A_j uses each texel's CIELAB Jacobian at
     the pilot's band values."""
+    start = time.perf_counter()
     tex = pilot_texels(texels)
     spp = max(2, -(-int(samples) // len(tex)))
     light = check_grey(load_lighting(lighting))
     values = np.empty((len(tex), table.bands))
     var = np.empty_like(values)
     cost = np.empty(table.bands)
-    paths, renderer = 0, None
+    paths, events, renderer = 0, 0, None
     for j in range(table.bands):
         vol = with_inks(volume, band_table(table, (j,) * GROUP))
         if renderer is None:
@@ -117,9 +180,10 @@ def pilot(
         # one path's variance: each channel's variance of its mean of spp paths, x spp, averaged over the channels
         var[:, j] = np.mean(res.var_mean, axis=1, dtype=np.float64) * spp
         cost[j] = res.events / max(res.paths, 1)
-        paths += res.paths
+        paths, events = paths + res.paths, events + res.events
+    del renderer
     w = sum(np.sum(c.lab_jacobian(values) ** 2, axis=-2) for c in colours)
-    return Pilot(np.mean(w * var, axis=0), cost, len(tex), paths)
+    return Pilot(np.mean(w * var, axis=0), cost, len(tex), paths, events, time.perf_counter() - start)
 
 
 def plan(measured: Pilot) -> BandPlan:
@@ -134,4 +198,4 @@ def plan(measured: Pilot) -> BandPlan:
     slots = [list(g) + [g[-1]] * (GROUP - len(g)) for g in groups]
     w = np.array([np.sqrt(noise[list(g)].sum() / cost[s].sum()) for g, s in zip(groups, slots)])
     w = np.maximum(w, 1e-6 * max(w.max(), 1e-300))
-    return BandPlan(groups, tuple(w / w.max()))
+    return BandPlan(groups, tuple(w / w.max()), measured=measured.describe())
