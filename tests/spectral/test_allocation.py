@@ -3,6 +3,8 @@ pilot render. Regrouped bands render and replay their gradients exactly as a tab
 every band of a planned render agrees with band paths in wavelength order and with adding-doubling within the
 standard error; the pilot, the plan and planned renders and gradients are bit-identical for any thread count."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from spectral_helpers import INKS, random_volume, smooth_table
@@ -11,7 +13,7 @@ from inkopt.errors import ParameterError
 from inkopt.model import Texels, Volume
 from inkopt.model.spectral import SpectralInkTable
 from inkopt.render import Renderer
-from inkopt.spectral.allocation import BandPlan, Pilot, pilot, pilot_texels, plan
+from inkopt.spectral.allocation import BandPlan, Pilot, choose, pilot, pilot_texels, plan
 from inkopt.spectral.lights import named_light
 from inkopt.spectral.render import SpectralRenderer, group_spp
 from inkopt.spectral.viewing import Viewing
@@ -28,6 +30,22 @@ def test_plan_groups_bands_by_their_ideal_density_and_weights_groups_by_neyman()
     w = np.array([np.sqrt(50.0 / 3.0), np.sqrt(6.0 / 9.0), 1e-6 * np.sqrt(50.0 / 3.0)])
     np.testing.assert_allclose(p.weights, w / w[0], rtol=1e-12)
     assert group_spp(4, np.array(p.weights), 3) == [10, 2, 1]
+
+
+def test_the_pilots_choose_hero_paths_only_where_they_cost_less_at_equal_noise():
+    """Effort (sum_g sqrt(A_g C_g))^2: band paths' C_g is the three slots' cost, hero paths' one path's; the plan
+    chosen is the one of less effort, both efforts recorded."""
+    noise, cost = np.array([4.0, 1.0, 1.0, 9.0]), np.array([1.0, 1.0, 2.0, 1.0])
+    bands = Pilot(noise, cost, 10, 100, 500, 1.0)
+    assert bands.effort(((3, 0, 1), (2,))) == pytest.approx((np.sqrt(14.0 * 3.0) + np.sqrt(1.0 * 6.0)) ** 2)
+    cheap = Pilot(noise * 1.5, np.array([2.0, 2.0, 2.0, 1.5]), 10, 30, 60, 0.5, hero=True)
+    assert cheap.effort(((0, 1, 2), (3,))) == pytest.approx((np.sqrt(9.0 * 2.0) + np.sqrt(13.5 * 1.5)) ** 2)
+    p = choose(bands, cheap)
+    assert p.hero and p.groups == ((0, 1, 2), (3,)) and p.measured["effort_hero"] < p.measured["effort_bands"]
+    assert p.measured["paths"] == 130 and p.measured["seconds"] == 1.5
+    dear = Pilot(noise * 16.0, cheap.cost, 10, 30, 60, 0.5, hero=True)  # a hero path's noise 4x: 16x variance
+    q = choose(bands, dear)
+    assert not q.hero and q == plan(bands) and q.measured["effort_hero"] > q.measured["effort_bands"]
 
 
 @pytest.mark.parametrize("groups", [((0, 1), (1, 2)), ((0, 1, 2, 3),), ((0,), (2,)), ((0, 1), (2, 5))])
@@ -112,7 +130,8 @@ def test_planned_bands_match_adding_doubling_on_a_slab():
     m = np.broadcast_to(share.astype(np.float32), (20, 1, 1, 5)).copy()
     vol = Volume.from_mixture((0.1, 0.1, 0.05), m, INKS, g=float(INKS.g), ior=1.5, boundary="periodic-xy")
     tex, light = Texels.for_volume(vol, ["top"]), upper_hemisphere()
-    viewing = Viewing(table, (named_light("A"),)).planned(vol, tex, 2, light)
+    viewing = Viewing(table, (named_light("A"),))  # band paths' plan (a pilot here would choose hero paths)
+    viewing = replace(viewing, plan=plan(pilot(vol, table, tex, viewing.colours(), 2, light)))
     assert viewing.plan.groups != ((0, 1, 2), (3, 4, 5))  # regrouped: the test covers the groups' wiring
     res = viewing.renderer_factory(Renderer)(vol, 2, light).render(tex, spp=50_000, seed=7)
     mc, se = res.mean_rgb, res.mean_rgb_stderr

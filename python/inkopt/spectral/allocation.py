@@ -124,7 +124,8 @@ class Pilot:
     """What :func:`pilot` measured, per band (B,) float64: ``noise`` A_j, the texels' mean of the band's
     contribution to the squared CIELAB standard error (ΔE76^2) of one sample per band, summed over the lights;
     ``cost`` c_j, path events per path; ``texels``: how many texels it rendered; ``paths``, ``events``: how many
-    paths and path events it traced; ``seconds``: its wall time (load-dependent; 0 when not given)."""
+    paths and path events it traced; ``seconds``: its wall time (load-dependent; 0 when not given); ``hero``: the
+    bands were traced by hero paths in wavelength-order groups (``cost``: each band's group's events per path)."""
 
     noise: np.ndarray
     cost: np.ndarray
@@ -132,11 +133,25 @@ class Pilot:
     paths: int
     events: int = 0
     seconds: float = 0.0
+    hero: bool = False
 
     def describe(self) -> dict:
         """JSON fields: per band ``noise`` and ``cost`` (lists), ``texels``, ``paths``, ``events``, ``seconds``."""
         d = {"noise": [float(x) for x in self.noise], "cost": [float(x) for x in self.cost]}
         return {**d, "texels": self.texels, "paths": self.paths, "events": self.events, "seconds": self.seconds}
+
+    def effort(self, groups) -> float:
+        """The cost of the colour noise with these measures for ``groups`` of bands weighted by Neyman allocation
+        with costs: (sum_g sqrt(A_g C_g))^2, A_g its bands' summed ``noise`` and C_g the path events of one of its
+        samples (band paths: its three slots' ``cost``, a short group's last band repeated; hero paths: one
+        path). At equal colour noise a render's path events are proportional to it (bands taken independent, as
+        the noise is measured elsewhere; rounding to whole samples left out)."""
+        total = 0.0
+        for g in groups:
+            a = float(np.sum(np.maximum(self.noise[list(g)], 0.0)))
+            c = float(self.cost[g[0]]) if self.hero else float(np.sum(self.cost[list(g) + [g[-1]] * (GROUP - len(g))]))
+            total += np.sqrt(a * c)
+        return total**2
 
 
 def pilot_texels(texels: Texels, most: int = PILOT_TEXELS) -> Texels:
@@ -155,12 +170,14 @@ def pilot(
     lighting: Lighting | str | None = None,
     factory: RendererFactory | None = None,
     samples: int = PILOT_SAMPLES,
+    hero: bool = False,
 ) -> Pilot:
     """Every band of ``table`` rendered alone (its three channels that band, ``samples`` per channel spread over
     the texels, at least 2 per texel) on :func:`pilot_texels` of ``texels`` at :data:`PILOT_SEED`, with one
     renderer (``factory``, default :class:`~inkopt.render.Renderer`) whose medium each band swaps in; ``colours``:
     the lights' colour maps on the table's bands (``Viewing.colours``). A_j uses each texel's CIELAB Jacobian at
-    the pilot's band values."""
+    the pilot's band values. ``hero``: instead each group of ``table.group_bands()`` rendered with hero paths
+    (one path carries the group's bands), each band's ``cost`` its group's path events per path (``Pilot.hero``)."""
     start = time.perf_counter()
     tex = pilot_texels(texels)
     spp = max(2, -(-int(samples) // len(tex)))
@@ -169,21 +186,28 @@ def pilot(
     var = np.empty_like(values)
     cost = np.empty(table.bands)
     paths, events, renderer = 0, 0, None
-    for j in range(table.bands):
-        vol = with_inks(volume, band_table(table, (j,) * GROUP))
+    slots = table.group_bands() if hero else [(j,) * GROUP for j in range(table.bands)]
+    for k, bands in enumerate(slots):
+        vol = with_inks(volume, band_table(table, bands))
         if renderer is None:
             renderer = (factory or Renderer)(vol, threads, light)
         else:
             renderer.set_volume(vol)
-        res = renderer.render_pass(tex, PassSettings(spp, PILOT_SEED + j))
-        values[:, j] = np.mean(res.rgb, axis=1, dtype=np.float64)
-        # one path's variance: each channel's variance of its mean of spp paths, x spp, averaged over the channels
-        var[:, j] = np.mean(res.var_mean, axis=1, dtype=np.float64) * spp
-        cost[j] = res.events / max(res.paths, 1)
+        res = renderer.render_pass(tex, PassSettings(spp, PILOT_SEED + k, hero=hero))
+        b = list(bands[:1] if not hero else bands)
+        # one path's variance: a channel's variance of its mean of spp paths, x spp (band paths: the three
+        # channels' mean; hero paths: each band its channel)
+        n = len(b)
+        if hero:
+            values[:, b], var[:, b] = res.rgb[:, :n], res.var_mean[:, :n] * np.float64(spp)
+        else:
+            values[:, b] = np.mean(res.rgb, axis=1, keepdims=True, dtype=np.float64)
+            var[:, b] = np.mean(res.var_mean, axis=1, keepdims=True, dtype=np.float64) * spp
+        cost[b] = res.events / max(res.paths, 1)
         paths, events = paths + res.paths, events + res.events
     del renderer
     w = sum(np.sum(c.lab_jacobian(values) ** 2, axis=-2) for c in colours)
-    return Pilot(np.mean(w * var, axis=0), cost, len(tex), paths, events, time.perf_counter() - start)
+    return Pilot(np.mean(w * var, axis=0), cost, len(tex), paths, events, time.perf_counter() - start, hero)
 
 
 def plan(measured: Pilot) -> BandPlan:
@@ -197,5 +221,35 @@ def plan(measured: Pilot) -> BandPlan:
     groups = tuple(tuple(int(b) for b in order[k : k + GROUP]) for k in range(0, len(order), GROUP))
     slots = [list(g) + [g[-1]] * (GROUP - len(g)) for g in groups]
     w = np.array([np.sqrt(noise[list(g)].sum() / cost[s].sum()) for g, s in zip(groups, slots)])
+    return BandPlan(groups, _normalised(w), measured={**measured.describe(), "effort": measured.effort(groups)})
+
+
+def _normalised(w: np.ndarray) -> tuple[float, ...]:
+    """Weights floored at 1e-6 of the largest (every group keeps a sample), the largest 1."""
     w = np.maximum(w, 1e-6 * max(w.max(), 1e-300))
-    return BandPlan(groups, tuple(w / w.max()), measured=measured.describe())
+    return tuple(w / w.max())
+
+
+def hero_plan(measured: Pilot) -> BandPlan:
+    """Hero paths in the groups a hero pilot traced (bands in wavelength order, three to a group), group g
+    weighted sqrt(A_g / C_g) (its bands' summed noise over one path's events)."""
+    bands = len(measured.noise)
+    groups = tuple(tuple(range(k, min(k + GROUP, bands))) for k in range(0, bands, GROUP))
+    w = np.array([np.sqrt(max(measured.noise[list(g)].sum(), 0.0) / max(measured.cost[g[0]], 1e-9)) for g in groups])
+    measured_json = {**measured.describe(), "effort": measured.effort(groups)}
+    return BandPlan(groups, _normalised(w), hero=True, measured=measured_json)
+
+
+def choose(bands: Pilot, hero: Pilot | None = None) -> BandPlan:
+    """:func:`plan` of the band paths' pilot, or :func:`hero_plan` of the hero paths' when its measured effort
+    (``Pilot.effort``: path events at equal colour noise) is less. ``measured`` of the plan chosen records both
+    efforts (``effort_bands``, ``effort_hero``) and both pilots' paths, events and seconds together."""
+    p = plan(bands)
+    if hero is None:
+        return p
+    h = hero_plan(hero)
+    eb, eh = p.measured["effort"], h.measured["effort"]
+    pick = h if eh < eb else p
+    both = {k: bands.describe()[k] + hero.describe()[k] for k in ("paths", "events", "seconds")}
+    measured = {**pick.measured, **both, "effort_bands": eb, "effort_hero": eh}
+    return BandPlan(pick.groups, pick.weights, pick.hero, measured)

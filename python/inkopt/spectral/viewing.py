@@ -20,8 +20,7 @@ from ..errors import ParameterError
 from ..loss import COMBINE, TexelLoss
 from ..model.spectral import SpectralInkTable
 from ..render import RendererFactory, RenderResult
-from .allocation import BandPlan, pilot
-from .allocation import plan as plan_bands
+from .allocation import BandPlan, choose, pilot
 from .lights import Light, named_light
 from .render import SpectralRenderer
 
@@ -107,11 +106,14 @@ class Viewing:
     def planned(self, volume, texels, threads: int | None = None, lighting=None, inner: RendererFactory | None = None):
         """This viewing with the ``plan`` measured by a pilot render of ``volume`` (a mixture or labels of the
         table's inks; e.g. a run's start) on ``texels`` under ``lighting`` (``spectral.allocation.pilot``, through
-        ``inner``, default :class:`~inkopt.render.Renderer`; the same for any thread count)."""
+        ``inner``, default :class:`~inkopt.render.Renderer`; the same for any thread count): band paths by
+        ``allocation.plan`` or hero paths by ``allocation.hero_plan``, whichever the pilots measure cheaper at
+        equal colour noise (``allocation.choose``)."""
         if self.table is None:
             raise ParameterError("`plan` needs a spectral ink table")
         measured = pilot(volume, self.table, texels, self.colours(), threads, lighting, inner)
-        return replace(self, plan=plan_bands(measured))
+        hero = pilot(volume, self.table, texels, self.colours(), threads, lighting, inner, hero=True)
+        return replace(self, plan=choose(measured, hero))
 
     def checkpoint_entries(self) -> dict:
         """A checkpoint's entries of this viewing: ``band_plan``, its plan's JSON object (:meth:`BandPlan.to_json`)
