@@ -140,18 +140,20 @@ class Pilot:
         d = {"noise": [float(x) for x in self.noise], "cost": [float(x) for x in self.cost]}
         return {**d, "texels": self.texels, "paths": self.paths, "events": self.events, "seconds": self.seconds}
 
-    def effort(self, groups) -> float:
-        """The cost of the colour noise with these measures for ``groups`` of bands weighted by Neyman allocation
-        with costs: (sum_g sqrt(A_g C_g))^2, A_g its bands' summed ``noise`` and C_g the path events of one of its
-        samples (band paths: its three slots' ``cost``, a short group's last band repeated; hero paths: one
-        path). At equal colour noise a render's path events are proportional to it (bands taken independent, as
-        the noise is measured elsewhere; rounding to whole samples left out)."""
-        total = 0.0
-        for g in groups:
-            a = float(np.sum(np.maximum(self.noise[list(g)], 0.0)))
-            c = float(self.cost[g[0]]) if self.hero else float(np.sum(self.cost[list(g) + [g[-1]] * (GROUP - len(g))]))
-            total += np.sqrt(a * c)
-        return total**2
+    def effort(self, groups, weights=None) -> float:
+        """The cost of the colour noise with these measures for ``groups`` of bands given samples in proportion to
+        ``weights`` (G,): (sum_g A_g / w_g) (sum_g C_g w_g), A_g its bands' summed ``noise`` and C_g the path
+        events of one of its samples (band paths: its three slots' ``cost``, a short group's last band repeated;
+        hero paths: one path); without ``weights`` the Neyman allocation with costs, w_g = sqrt(A_g / C_g), where
+        it is (sum_g sqrt(A_g C_g))^2, the least. At equal colour noise a render's path events are proportional
+        to it (bands taken independent, as the noise is measured elsewhere; rounding to whole samples left out)."""
+        a = np.array([np.sum(np.maximum(self.noise[list(g)], 0.0)) for g in groups])
+        pad = [list(g) + [g[-1]] * (GROUP - len(g)) for g in groups]
+        c = np.array([self.cost[g[0]] if self.hero else np.sum(self.cost[s]) for g, s in zip(groups, pad)])
+        if weights is None:
+            return float(np.sum(np.sqrt(a * c)) ** 2)
+        w = np.asarray(weights, np.float64)
+        return float(np.sum(a / w) * np.sum(c * w))
 
 
 def pilot_texels(texels: Texels, most: int = PILOT_TEXELS) -> Texels:
