@@ -25,7 +25,8 @@ the same group weights, measured alike (``--no-hero``: the first only).
 
 Third, band paths grouped and weighted by a pilot render of the volume (``Viewing.planned``,
 ``spectral.allocation``: bands ordered by the samples they need, Neyman allocation with each band's path cost; the
-``planned_*`` keys; ``--no-plan``: left out). ``over_rgb_at_equal_noise``: each kind's ratio scaled to the RGB noise
+``planned_*`` keys, ``planned_hero`` and ``planned_effort`` the pilots' choice between hero paths and band paths
+and their efforts, ``allocation.choose``; ``--no-plan``: left out). ``over_rgb_at_equal_noise``: each kind's ratio scaled to the RGB noise
 exactly (x (its noise / RGB's)^2); ``events_*``: the same in path events (forward, gradient and replay), which do
 not depend on the machine's load.
 
@@ -118,6 +119,8 @@ def kind_keys(name: str, noise: dict, per_it: dict, viewing, groups: int) -> dic
     }
     if viewing.plan is not None:
         out.update(planned_groups=[list(g) for g in viewing.plan.groups], planned_weights=list(viewing.plan.weights))
+        m = viewing.plan.measured  # the pilots' choice: hero paths or band paths, by their efforts
+        out.update(planned_hero=viewing.plan.hero, planned_effort={k: m[f"effort_{k}"] for k in ("bands", "hero")})
     return out
 
 
