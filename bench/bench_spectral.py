@@ -26,9 +26,9 @@ the same group weights, measured alike (``--no-hero``: the first only).
 Third, band paths grouped and weighted by a pilot render of the volume (``Viewing.planned``,
 ``spectral.allocation``: bands ordered by the samples they need, Neyman allocation with each band's path cost; the
 ``planned_*`` keys, ``planned_hero`` and ``planned_effort`` the pilots' choice between hero paths and band paths
-and their efforts, ``allocation.choose``; ``--no-plan``: left out). ``over_rgb_at_equal_noise``: each kind's ratio scaled to the RGB noise
-exactly (x (its noise / RGB's)^2); ``events_*``: the same in path events (forward, gradient and replay), which do
-not depend on the machine's load.
+and their efforts, ``allocation.choose``; ``--no-plan``: left out). ``over_rgb_at_equal_noise``: each kind's ratio
+scaled to the RGB noise exactly (x (its noise / RGB's)^2); ``events_*``: the same in path events (forward, gradient
+and replay), which do not depend on the machine's load.
 
 ``--spot-mm H``: the same on Spot scaled to H mm (its scene's start mixture for the noise renders) instead of the
 reference slab. Writes bench/results/spectral_cost.json (Spot: spectral_cost_spot<H>mm.json).
