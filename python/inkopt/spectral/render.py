@@ -7,16 +7,17 @@ independent, group 0 keeps the pass's seed (a 3-band table renders exactly as th
 every group is bit-identical for any thread count. A group's fourth-or-later band slot repeats its last band
 (traced, its value dropped, its adjoint 0). Gradients replay each group's paths with the group's adjoints.
 
-Samples per group: a pass of ``spp`` samples gives every group ``spp`` samples unless the renderer has group
-``weights``; then the pass's G x spp samples are shared out in proportion to the weights (Neyman allocation:
-weight = the square root of the group's share of the colour's variance, :func:`group_spp`), at least one each, so
-bands that barely reach the colour (the spectrum's ends) cost little. Each band's estimate stays unbiased and its
-variance (``var_mean``) is its own.
+How the bands are sampled is the renderer's plan (``spectral.allocation.BandPlan``): which bands share a group
+(default: wavelength order), the groups' ``weights`` and ``hero`` paths. Samples per group: a pass of ``spp``
+samples gives every group ``spp`` samples unless the plan has group ``weights``; then the pass's G x spp samples are
+shared out in proportion to the weights (Neyman allocation: weight = the square root of the group's share of the
+colour's variance, :func:`group_spp`), at least one each, so bands that barely reach the colour (the spectrum's
+ends) cost little. Each band's estimate stays unbiased and its variance (``var_mean``) is its own.
 
-``hero``: each group's paths carry its three bands at once (the core's hero-channel paths: ``spp`` paths per texel
-serve the group's three bands, the hero band sample mod 3, the balance heuristic over the three bands' samplers,
-``PassSettings.hero``) instead of one path per band and sample; a group's bands are then correlated (one path),
-each stays unbiased with its own variance.
+``hero`` (the plan's): each group's paths carry its three bands at once (the core's hero-channel paths: ``spp``
+paths per texel serve the group's three bands, the hero band sample mod 3, the balance heuristic over the three
+bands' samplers, ``PassSettings.hero``) instead of one path per band and sample; a group's bands are then correlated
+(one path), each stays unbiased with its own variance.
 
 The light's spectrum does not enter transport (``spectral.lights``); what does is the geometric lighting, which
 must be grey (the same radiance in R, G and B: the uniform light or a grey map such as the calibration's upper
