@@ -172,6 +172,33 @@ def alternate(scene, kinds: dict, cfgs: dict, cfg_rgb, a) -> tuple[dict, dict, l
     return secs, events, rounds
 
 
+def pilot_only(viewing, vol, scene, a, rgb) -> dict:
+    """``--pilot-only``: a run's pilots of the start (``Viewing.planned``) against one RGB render at ``--spp`` (its
+    noise and events ``rgb``): the plan chosen, both pilots' efforts, the pilots' seconds, paths and events, and
+    ``predicted_events_over_rgb_at_equal_noise``: each effort (ΔE76^2 x events per texel sample) over RGB's, its
+    noise^2 x spp times its events per texel sample."""
+    t = time.perf_counter()
+    plan = viewing.planned(vol, scene.texels, a.threads).plan
+    seconds, m = time.perf_counter() - t, plan.measured
+    noise_rgb, events_rgb = rgb
+    rgb_effort = noise_rgb**2 * a.spp * events_rgb / (len(scene.texels) * a.spp)
+    return {
+        "scene": f"Spot {a.spot_mm:g} mm" if a.spot_mm else "reference slab 177x118x30 voxels, chart top, zebra below",
+        "texels": len(scene.texels),
+        "bands": a.bands,
+        "rgb_spp": a.spp,
+        "noise_dE76_rgb": noise_rgb,
+        "rgb_render_events": events_rgb,
+        "plan": plan.to_json(),
+        "planned_hero": plan.hero,
+        "planned_effort": {k: m[f"effort_{k}"] for k in ("bands", "hero")},
+        "predicted_events_over_rgb_at_equal_noise": {k: m[f"effort_{k}"] / rgb_effort for k in ("bands", "hero")},
+        "pilot_s": seconds,
+        "pilot_events_over_rgb_render": m["events"] / events_rgb,
+        **machine(),
+    }
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--bands", type=int, default=16)
@@ -184,13 +211,15 @@ def main():
     ap.add_argument("--no-hero", action="store_true", help="leave out the hero-path spectral renderer")
     ap.add_argument("--no-plan", action="store_true", help="leave out the band paths grouped by a pilot's plan")
     ap.add_argument("--out", help="results file name in bench/results (default by the scene)")
+    ap.add_argument("--pilot-only", action="store_true", help="the run's pilots and their plan only (needs --out)")
     a = ap.parse_args()
     vol, scene = bench_scene(a.spot_mm)
-    table = spectral_from_rgb(vol.inks, a.bands)
-    d65 = named_light("D65").colour_map(table.wavelengths_nm)
-    tex = scene.texels
+    table, d65_only, tex = spectral_from_rgb(vol.inks, a.bands), (named_light("D65"),), scene.texels
+    d65 = d65_only[0].colour_map(table.wavelengths_nm)
     noise_rgb, events_rgb = render_noise(Renderer(vol, a.threads), tex, a.spp, RGB)
-    d65_only = (named_light("D65"),)
+    if a.pilot_only:
+        out = pilot_only(Viewing(table, d65_only), vol, scene, a, (noise_rgb, events_rgb))
+        return print("wrote", write(a.out, out))
     kinds = {"spectral": Viewing(table, d65_only, weighted=not a.equal_groups, pilot=False)}  # the mid grey's weights
     if not a.no_hero:
         kinds["hero"] = Viewing(table, d65_only, weighted=not a.equal_groups, hero=True, pilot=False)
