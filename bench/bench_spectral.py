@@ -15,7 +15,9 @@ optimiser's do (``Viewing.group_weights``), or equally with ``--equal-groups``.
    noise at ``--spp``: spp x (noise_spectral / noise_rgb)^2 rounded up (the noise's square falls as 1/spp), then
    measured again at that spp.
 2. Cost: ``--iterations`` optimisation iterations (forward + loss + gradient + step) of each at those samples,
-   RGB and spectral alternating twice in one process; seconds per iteration, median over each kind's iterations.
+   RGB and spectral alternating ``--rounds`` times (default 2) in one process; seconds per iteration, median over
+   each kind's iterations; ``rounds``: each round's medians, their ratios to RGB's and the load after it.
+   ``planned_pilot_s``: the plan's pilot in seconds, ``planned_pilot_over_rgb_iteration`` over RGB's iteration.
 
 Two spectral renderers: one path per band and sample (the keys without "hero"), and hero paths, each carrying a
 band group's three bands (``Viewing.hero``; the ``hero_*`` keys, and "hero" in the per-iteration seconds), both with
@@ -23,9 +25,10 @@ the same group weights, measured alike (``--no-hero``: the first only).
 
 Third, band paths grouped and weighted by a pilot render of the volume (``Viewing.planned``,
 ``spectral.allocation``: bands ordered by the samples they need, Neyman allocation with each band's path cost; the
-``planned_*`` keys; ``--no-plan``: left out). ``over_rgb_at_equal_noise``: each kind's ratio scaled to the RGB noise
-exactly (x (its noise / RGB's)^2); ``events_*``: the same in path events (forward, gradient and replay), which do
-not depend on the machine's load.
+``planned_*`` keys, ``planned_hero`` and ``planned_effort`` the pilots' choice between hero paths and band paths
+and their efforts, ``allocation.choose``; ``--no-plan``: left out). ``over_rgb_at_equal_noise``: each kind's ratio
+scaled to the RGB noise exactly (x (its noise / RGB's)^2); ``events_*``: the same in path events (forward, gradient
+and replay), which do not depend on the machine's load.
 
 ``--spot-mm H``: the same on Spot scaled to H mm (its scene's start mixture for the noise renders) instead of the
 reference slab. Writes bench/results/spectral_cost.json (Spot: spectral_cost_spot<H>mm.json).
@@ -33,6 +36,7 @@ reference slab. Writes bench/results/spectral_cost.json (Spot: spectral_cost_spo
 
 import argparse
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -115,6 +119,8 @@ def kind_keys(name: str, noise: dict, per_it: dict, viewing, groups: int) -> dic
     }
     if viewing.plan is not None:
         out.update(planned_groups=[list(g) for g in viewing.plan.groups], planned_weights=list(viewing.plan.weights))
+        m = viewing.plan.measured  # the pilots' choice: hero paths or band paths, by their efforts
+        out.update(planned_hero=viewing.plan.hero, planned_effort={k: m[f"effort_{k}"] for k in ("bands", "hero")})
     return out
 
 
@@ -149,42 +155,85 @@ def measure_noise(kinds: dict, vol, tex, a, rgb: tuple[float, int], d65) -> tupl
     return noise, render_events
 
 
+def alternate(scene, kinds: dict, cfgs: dict, cfg_rgb, a) -> tuple[dict, dict, list]:
+    """Per kind ("rgb" and ``kinds``) every iteration's seconds and path events, RGB and the spectral kinds
+    alternating ``a.rounds`` times (so a change of the machine's load falls on all), and per round each kind's
+    median seconds and the load after it."""
+    secs, events = {"rgb": [], **{k: [] for k in kinds}}, {"rgb": [], **{k: [] for k in kinds}}
+    rounds = []
+    for _ in range(a.rounds if a.iterations else 0):
+        this = {}
+        for k, viewing in {"rgb": None, **kinds}.items():
+            s, e = iteration_seconds(scene, cfgs.get(k, cfg_rgb), a.threads, viewing, a.iterations)
+            secs[k] += s
+            events[k] += e
+            this[k] = float(np.median(s))
+        rounds.append({"seconds_per_iteration": this, "load_average_1min": os.getloadavg()[0]})
+    return secs, events, rounds
+
+
+def pilot_only(viewing, vol, scene, a, rgb) -> dict:
+    """``--pilot-only``: a run's pilots of the start (``Viewing.planned``) against one RGB render at ``--spp`` (its
+    noise and events ``rgb``): the plan chosen, both pilots' efforts, the pilots' seconds, paths and events, and
+    ``predicted_events_over_rgb_at_equal_noise``: each effort (ΔE76^2 x events per texel sample) over RGB's, its
+    noise^2 x spp times its events per texel sample."""
+    t = time.perf_counter()
+    plan = viewing.planned(vol, scene.texels, a.threads).plan
+    seconds, m = time.perf_counter() - t, plan.measured
+    noise_rgb, events_rgb = rgb
+    rgb_effort = noise_rgb**2 * a.spp * events_rgb / (len(scene.texels) * a.spp)
+    return {
+        "scene": f"Spot {a.spot_mm:g} mm" if a.spot_mm else "reference slab 177x118x30 voxels, chart top, zebra below",
+        "texels": len(scene.texels),
+        "bands": a.bands,
+        "rgb_spp": a.spp,
+        "noise_dE76_rgb": noise_rgb,
+        "rgb_render_events": events_rgb,
+        "plan": plan.to_json(),
+        "planned_hero": plan.hero,
+        "planned_effort": {k: m[f"effort_{k}"] for k in ("bands", "hero")},
+        "predicted_events_over_rgb_at_equal_noise": {k: m[f"effort_{k}"] / rgb_effort for k in ("bands", "hero")},
+        "pilot_s": seconds,
+        "pilot_events_over_rgb_render": m["events"] / events_rgb,
+        **machine(),
+    }
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--bands", type=int, default=16)
     ap.add_argument("--spp", type=int, default=16)
     ap.add_argument("--iterations", type=int, default=3)
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--rounds", type=int, default=2, help="rounds of the kinds' alternation")
     ap.add_argument("--equal-groups", action="store_true", help="every band group the pass's spp")
     ap.add_argument("--spot-mm", type=float, help="Spot at this height instead of the reference slab")
     ap.add_argument("--no-hero", action="store_true", help="leave out the hero-path spectral renderer")
     ap.add_argument("--no-plan", action="store_true", help="leave out the band paths grouped by a pilot's plan")
     ap.add_argument("--out", help="results file name in bench/results (default by the scene)")
+    ap.add_argument("--pilot-only", action="store_true", help="the run's pilots and their plan only (needs --out)")
     a = ap.parse_args()
     vol, scene = bench_scene(a.spot_mm)
-    table = spectral_from_rgb(vol.inks, a.bands)
-    d65 = named_light("D65").colour_map(table.wavelengths_nm)
-    tex = scene.texels
+    table, d65_only, tex = spectral_from_rgb(vol.inks, a.bands), (named_light("D65"),), scene.texels
+    d65 = d65_only[0].colour_map(table.wavelengths_nm)
     noise_rgb, events_rgb = render_noise(Renderer(vol, a.threads), tex, a.spp, RGB)
-    kinds = {"spectral": Viewing(table, (named_light("D65"),), weighted=not a.equal_groups)}
+    if a.pilot_only:
+        out = pilot_only(Viewing(table, d65_only), vol, scene, a, (noise_rgb, events_rgb))
+        return print("wrote", write(a.out, out))
+    kinds = {"spectral": Viewing(table, d65_only, weighted=not a.equal_groups, pilot=False)}  # the mid grey's weights
     if not a.no_hero:
-        kinds["hero"] = Viewing(table, (named_light("D65"),), weighted=not a.equal_groups, hero=True)
+        kinds["hero"] = Viewing(table, d65_only, weighted=not a.equal_groups, hero=True, pilot=False)
     pilot_s = None
     if not a.no_plan:
         t = time.perf_counter()
-        kinds["planned"] = Viewing(table, (named_light("D65"),)).planned(vol, tex, a.threads)
+        kinds["planned"] = Viewing(table, d65_only).planned(vol, tex, a.threads)  # as a run's pilot of its start
         pilot_s = time.perf_counter() - t
     weights = kinds["spectral"].group_weights()
     noise, render_events = measure_noise(kinds, vol, tex, a, (noise_rgb, events_rgb), d65)
     cfg_rgb = OptimizeConfig(iterations=a.iterations, spp=a.spp, forward_spp=a.spp)
     cfgs = {k: OptimizeConfig(iterations=a.iterations, spp=n[1], forward_spp=n[1]) for k, n in noise.items()}
-    secs, events = {"rgb": [], **{k: [] for k in kinds}}, {"rgb": [], **{k: [] for k in kinds}}
     t0 = time.perf_counter()
-    for _ in range(2 if a.iterations else 0):  # alternating, so a change of the machine's load falls on all
-        for k, viewing in {"rgb": None, **kinds}.items():
-            s, e = iteration_seconds(scene, cfgs.get(k, cfg_rgb), a.threads, viewing, a.iterations)
-            secs[k] += s
-            events[k] += e
+    secs, events, rounds = alternate(scene, kinds, cfgs, cfg_rgb, a)
     per_it = {k: float(np.median(v)) if v else None for k, v in secs.items()}
     ev_it = {k: float(np.median(v)) if v else None for k, v in events.items()}
     groups = len(table.group_bands())
@@ -206,6 +255,11 @@ def main():
         **kind_keys("hero", noise, per_it, kinds.get("hero"), groups),
         **kind_keys("planned", noise, per_it, kinds.get("planned"), groups),
         "planned_pilot_s": pilot_s,
+        "planned_pilot_over_rgb_iteration": ratio(pilot_s, per_it["rgb"]),
+        "rounds": [
+            {**r, "over_rgb": {k: v / r["seconds_per_iteration"]["rgb"] for k, v in r["seconds_per_iteration"].items()}}
+            for r in rounds
+        ],
         "over_rgb_at_equal_noise": equal_noise_ratios(noise, noise_rgb, per_it),
         "events_per_iteration": ev_it,
         "iteration_events": events,

@@ -321,6 +321,8 @@ def _iterate(job: _Job, final_budget: float | None) -> None:
         reserve=reserve,
         on_step=opts.on_step,
     )
+    if run.viewing.plan is not None and run.history.seconds:  # a spectral run's band plan and its pilot's cost
+        opts.log(run.viewing.plan.line(float(np.median(run.history.seconds))))
     run.release_renderer()  # not beside the writing of the result, nor beside the finishing smoothing
     run.finish()  # the result: the last iterate smoothed (cfg.finish_smooth); the checkpoint keeps the iterate
     rd.save_volume_slabs(run.base, run.mixture_slabs(), run.base.inks)  # a slab of layers at a time

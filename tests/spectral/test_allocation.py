@@ -3,6 +3,8 @@ pilot render. Regrouped bands render and replay their gradients exactly as a tab
 every band of a planned render agrees with band paths in wavelength order and with adding-doubling within the
 standard error; the pilot, the plan and planned renders and gradients are bit-identical for any thread count."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from spectral_helpers import INKS, random_volume, smooth_table
@@ -11,7 +13,7 @@ from inkopt.errors import ParameterError
 from inkopt.model import Texels, Volume
 from inkopt.model.spectral import SpectralInkTable
 from inkopt.render import Renderer
-from inkopt.spectral.allocation import BandPlan, Pilot, pilot, pilot_texels, plan
+from inkopt.spectral.allocation import BandPlan, Pilot, choose, pilot, pilot_texels, plan
 from inkopt.spectral.lights import named_light
 from inkopt.spectral.render import SpectralRenderer, group_spp
 from inkopt.spectral.viewing import Viewing
@@ -30,14 +32,30 @@ def test_plan_groups_bands_by_their_ideal_density_and_weights_groups_by_neyman()
     assert group_spp(4, np.array(p.weights), 3) == [10, 2, 1]
 
 
+def test_the_pilots_choose_hero_paths_only_where_they_cost_less_at_equal_noise():
+    """Effort (sum_g sqrt(A_g C_g))^2: band paths' C_g is the three slots' cost, hero paths' one path's; the plan
+    chosen is the one of less effort, both efforts recorded."""
+    noise, cost = np.array([4.0, 1.0, 1.0, 9.0]), np.array([1.0, 1.0, 2.0, 1.0])
+    bands = Pilot(noise, cost, 10, 100, 500, 1.0)
+    assert bands.effort(((3, 0, 1), (2,))) == pytest.approx((np.sqrt(14.0 * 3.0) + np.sqrt(1.0 * 6.0)) ** 2)
+    cheap = Pilot(noise * 1.5, np.array([2.0, 2.0, 2.0, 1.5]), 10, 30, 60, 0.5, hero=True)
+    assert cheap.effort(((0, 1, 2), (3,))) == pytest.approx((np.sqrt(9.0 * 2.0) + np.sqrt(13.5 * 1.5)) ** 2)
+    p = choose(bands, cheap)
+    assert p.hero and p.groups == ((0, 1, 2), (3,)) and p.measured["effort_hero"] < p.measured["effort_bands"]
+    assert p.measured["paths"] == 130 and p.measured["seconds"] == 1.5
+    dear = Pilot(noise * 16.0, cheap.cost, 10, 30, 60, 0.5, hero=True)  # a hero path's noise 4x: 16x variance
+    q = choose(bands, dear)
+    assert not q.hero and q == plan(bands) and q.measured["effort_hero"] > q.measured["effort_bands"]
+
+
 @pytest.mark.parametrize("groups", [((0, 1), (1, 2)), ((0, 1, 2, 3),), ((0,), (2,)), ((0, 1), (2, 5))])
 def test_bad_groups_are_refused(groups):
     with pytest.raises(ParameterError, match="groups must"):
         BandPlan(groups, (1.0,) * len(groups))
     vol = random_volume((2, 2, 2))
     table = SpectralInkTable(INKS.names, [450.0, 550.0, 650.0, 700.0], *[np.ones((5, 4))] * 2, INKS.g)
-    with pytest.raises(ParameterError, match="groups must"):
-        SpectralRenderer(vol, table, groups=groups)
+    with pytest.raises(ParameterError, match="plan must"):
+        SpectralRenderer(vol, table, plan=BandPlan(((0, 1, 2),)))
     with pytest.raises(ParameterError, match="weights must"):
         BandPlan(((0, 1, 2), (3,)), (1.0, 0.0))
 
@@ -52,8 +70,8 @@ def test_regrouped_bands_render_as_the_reordered_table_bit_for_bit():
     order = [3, 1, 5, 0, 4, 2]
     moved = SpectralInkTable(INKS.names, np.arange(6.0) + 400, table.sigma_s[:, order], table.sigma_a[:, order])
     w = np.array([2.0, 1.0])
-    a = SpectralRenderer(vol, table, threads=2, weights=w, groups=((3, 1, 5), (0, 4, 2)))
-    b = SpectralRenderer(vol, moved, threads=1, weights=w)
+    a = SpectralRenderer(vol, table, threads=2, plan=BandPlan(((3, 1, 5), (0, 4, 2)), w))
+    b = SpectralRenderer(vol, moved, threads=1, plan=BandPlan.in_order(moved, w))
     ra, rb = a.render(tex, spp=3, seed=11), b.render(tex, spp=3, seed=11)
     np.testing.assert_array_equal(ra.rgb[:, order], rb.rgb)
     np.testing.assert_array_equal(ra.var_mean[:, order], rb.var_mean)
@@ -112,7 +130,8 @@ def test_planned_bands_match_adding_doubling_on_a_slab():
     m = np.broadcast_to(share.astype(np.float32), (20, 1, 1, 5)).copy()
     vol = Volume.from_mixture((0.1, 0.1, 0.05), m, INKS, g=float(INKS.g), ior=1.5, boundary="periodic-xy")
     tex, light = Texels.for_volume(vol, ["top"]), upper_hemisphere()
-    viewing = Viewing(table, (named_light("A"),)).planned(vol, tex, 2, light)
+    viewing = Viewing(table, (named_light("A"),))  # band paths' plan (a pilot here would choose hero paths)
+    viewing = replace(viewing, plan=plan(pilot(vol, table, tex, viewing.colours(), 2, light)))
     assert viewing.plan.groups != ((0, 1, 2), (3, 4, 5))  # regrouped: the test covers the groups' wiring
     res = viewing.renderer_factory(Renderer)(vol, 2, light).render(tex, spp=50_000, seed=7)
     mc, se = res.mean_rgb, res.mean_rgb_stderr

@@ -9,6 +9,7 @@ from helpers import assert_same_mean
 from spectral_helpers import INKS, smooth_table
 
 from inkopt.model import Texels, Volume, mix_grad
+from inkopt.spectral.allocation import BandPlan
 from inkopt.spectral.lights import named_light
 from inkopt.spectral.render import SpectralRenderer
 from inkopt.spectral.viewing import Viewing
@@ -22,7 +23,7 @@ def test_spectral_share_gradient_matches_finite_differences(hero):
     m = (0.3 + rng.dirichlet(np.ones(5), size=(4, 2, 2))).astype(np.float32)
     vol = Volume.from_mixture((0.1, 0.1, 0.1), m, INKS, boundary="periodic-xy")
     tex = Texels.for_volume(vol, ["top"])
-    viewing = Viewing(table, (named_light("D65"), named_light("A")))
+    viewing, plan = Viewing(table, (named_light("D65"), named_light("A"))), BandPlan.in_order(table, hero=hero)
     target = np.full((len(tex), 3), 0.3)
     loss = viewing.loss(target, tex.pos_vox, (1.0, 0.0, 0.0))
     pred = SpectralRenderer(vol, table, threads=2).render(tex, spp=2000, seed=99)
@@ -31,13 +32,13 @@ def test_spectral_share_gradient_matches_finite_differences(hero):
     for z, n in ((3, 0), (1, 4)):
         g, fd = [], []
         for seed in range(11, 23):
-            gs, ga, _ = SpectralRenderer(vol, table, threads=2, hero=hero).gradient(tex, adj, spp=2000, seed=seed)
+            gs, ga, _ = SpectralRenderer(vol, table, threads=2, plan=plan).gradient(tex, adj, spp=2000, seed=seed)
             g.append(float(mix_grad(gs, ga, table)[z, :, :, n].sum()))  # the layer's voxels share one change
             vals = []
             for sign in (1, -1):
                 m2 = m.copy()
                 m2[z, :, :, n] += sign * h
-                r = SpectralRenderer(vol.with_mixture(m2), table, threads=2, hero=hero).render(tex, spp=2000, seed=seed)
+                r = SpectralRenderer(vol.with_mixture(m2), table, threads=2, plan=plan).render(tex, 2000, seed=seed)
                 vals.append(float(np.sum(r.rgb * adj)))
             fd.append((vals[0] - vals[1]) / (2 * h))
         assert abs(np.mean(fd)) > 0

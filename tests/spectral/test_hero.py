@@ -1,4 +1,4 @@
-"""Hero paths in band renders (``SpectralRenderer(hero=True)``: each group's paths carry its three bands): every
+"""Hero paths in band renders (``BandPlan(hero=True)``: each group's paths carry its three bands): every
 band agrees with the per-band render and with adding-doubling within the standard error, on the lanes (mask-free
 grids) and the scalar walk (masked grids); the option changes nothing else."""
 
@@ -8,6 +8,7 @@ from spectral_helpers import INKS, smooth_table
 
 from inkopt.model import Texels, Volume
 from inkopt.render import PassSettings
+from inkopt.spectral.allocation import BandPlan
 from inkopt.spectral.render import SpectralRenderer
 
 VOX = 0.0847
@@ -31,7 +32,7 @@ def test_hero_bands_agree_with_band_paths(inside):
     vol = volume(inside)
     table = smooth_table()
     tex = Texels.for_volume(vol, ["top", "front"])
-    hero = SpectralRenderer(vol, table, threads=2, hero=True).render(tex, spp=60, seed=5)
+    hero = SpectralRenderer(vol, table, threads=2, plan=BandPlan.in_order(table, hero=True)).render(tex, spp=60, seed=5)
     plain = SpectralRenderer(vol, table, threads=2).render(tex, spp=60, seed=1005)
     assert hero.paths * 3 == plain.paths  # one path per sample and group instead of three
     diff = hero.mean_rgb - plain.mean_rgb
@@ -49,9 +50,9 @@ def test_hero_bands_match_adding_doubling_on_a_slab():
     share = np.array([0.3, 0.1, 0.2, 0.05, 0.35])
     m = np.broadcast_to(share.astype(np.float32), (20, 1, 1, 5)).copy()
     vol = Volume.from_mixture((0.1, 0.1, 0.05), m, INKS, g=float(INKS.g), ior=1.5, boundary="periodic-xy")
-    res = SpectralRenderer(vol, table, threads=2, lighting=upper_hemisphere(), hero=True).render(
-        Texels.for_volume(vol, ["top"]), spp=100_000, seed=7
-    )
+    res = SpectralRenderer(
+        vol, table, threads=2, lighting=upper_hemisphere(), plan=BandPlan.in_order(table, hero=True)
+    ).render(Texels.for_volume(vol, ["top"]), spp=100_000, seed=7)
     mc, se = res.mean_rgb, res.mean_rgb_stderr
     s, a = share @ table.sigma_s, share @ table.sigma_a
     ad16 = np.array([channel_reflectance([(s[b], a[b], 1.0)], table.g, 1.5, 16) for b in range(6)])

@@ -11,6 +11,7 @@ from inkopt.lighting import Lighting
 from inkopt.model import InkTable, Texels, Volume
 from inkopt.model.spectral import SpectralInkTable
 from inkopt.render import Renderer
+from inkopt.spectral.allocation import BandPlan
 from inkopt.spectral.render import SpectralRenderer, group_seed, group_spp
 
 
@@ -99,7 +100,8 @@ def test_weighted_groups_stay_unbiased():
     errors of the RGB render's, and each band's variance that of its own sample count."""
     vol = random_volume(seed=3)
     tex = Texels.for_volume(vol, ["top"])
-    spec = SpectralRenderer(vol, rgb_as_bands(INKS, 3), threads=2, weights=np.array([1.0, 2.0, 0.5]))
+    bands = rgb_as_bands(INKS, 3)
+    spec = SpectralRenderer(vol, bands, threads=2, plan=BandPlan.in_order(bands, (1.0, 2.0, 0.5)))
     res = spec.render(tex, spp=32, seed=5)
     rgb = Renderer(vol, threads=2).render(tex, spp=64, seed=1005)
     channel = np.repeat([2, 1, 0], 3)
@@ -167,8 +169,8 @@ def test_shared_renderer_is_the_per_group_one(labels):
     tex = Texels.for_volume(vols[0])
     w = np.linspace(1.0, 2.0, len(table.band_groups()))
     each, one = (
-        SpectralRenderer(vols[0], table, 2, weights=w),
-        SpectralRenderer(vols[0], table, 2, weights=w, shared=True),
+        SpectralRenderer(vols[0], table, 2, plan=BandPlan.in_order(table, w)),
+        SpectralRenderer(vols[0], table, 2, plan=BandPlan.in_order(table, w), shared=True),
     )
     assert len(one._renderers) == 1 and len(each._renderers) == len(table.band_groups())
     for vol in vols:

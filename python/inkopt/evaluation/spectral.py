@@ -48,6 +48,7 @@ from ..model.inks import read_ink_file
 from ..model.spectral import spectral_from_data
 from ..render import Renderer
 from ..rundir import VOLUME_DIGEST, BandValues, Predictions, RunDir
+from ..spectral.allocation import BandPlan
 from ..spectral.lights import NAMED, named_light, parse_lights
 from ..spectral.viewing import Viewing
 from . import sample as sampled
@@ -83,7 +84,9 @@ def evaluate_lights(path, options: EvaluateOptions, lights: str | None = None, l
             "(`inks` vero-cmykw@spectral)"
         )
     table = spectral_from_data(read_ink_file(d.spectral_inks_path), d.spectral_inks_path)
-    viewing = Viewing(table, parse_lights(lights or ",".join(run["illuminants"])))
+    # the run's band plan (report.json's viewing.plan) samples every result's bands: each band stays unbiased
+    plan = BandPlan.from_json(run["plan"]) if "plan" in run else None
+    viewing = Viewing(table, parse_lights(lights or ",".join(run["illuminants"])), plan=plan)
     patches = None
     if options.baselines and options.table is None:  # the baselines' print shop has the spectral model too
         patches = band_patches(d, table, options, log)

@@ -211,7 +211,7 @@ def render_band_patches(
     inks = rgb_stand_in(table)  # the patch volume's RGB table gives only the ink names
     lights = tuple(named_light(n) for n in NAMED)
     cmaps = [light.colour_map(table.wavelengths_nm) for light in lights]
-    weights = Viewing(table, lights).group_weights()  # samples shared among the band groups as a run shares them
+    plan = Viewing(table, lights, pilot=False).sampling()  # samples shared among the groups by the mid grey's weights
     bands = np.zeros((len(mixtures), table.bands))
     var = np.zeros_like(bands)
     bar = _progress_bar(len(mixtures)) if kw.get("progress") else None
@@ -221,7 +221,7 @@ def render_band_patches(
         vmm = [PATCH_LATERAL_MM, PATCH_LATERAL_MM, patch_mm]
         vol = Volume.from_mixture(vmm, m, inks, g=g, ior=ior, boundary="periodic-xy")
         texels = texels or Texels.for_volume(vol, ["top"])
-        rnd = SpectralRenderer(vol, table, kw.get("threads"), weights=weights, shared=True)
+        rnd = SpectralRenderer(vol, table, kw.get("threads"), plan=plan, shared=True)
         bands[j], var[j] = _patch_bands(rnd, texels, 2 * j + seed * 1_000_003, max_stderr, cmaps)
         if bar is not None:
             bar.update()

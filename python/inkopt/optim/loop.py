@@ -81,8 +81,7 @@ class Optimization:
             raise ValueError(f"the settings must be resolved for a {scene.kind} first: cfg.for_scene({scene.kind!r})")
         cfg.validate()
         base, texels, fixed_share = scene.volume, scene.texels, scene.fixed_share
-        self.viewing = viewing or Viewing()
-        self.renderer_factory = self.viewing.renderer_factory(renderer_factory or Renderer)
+        self.viewing, self._make = viewing or Viewing(), renderer_factory or Renderer  # builds the renderer
         self.lighting = load_lighting(lighting)
         if base.inks is None:
             raise ValueError("the volume needs an ink table")
@@ -204,6 +203,7 @@ class Optimization:
         extra = {k: np.array(json.dumps(v)) for k, v in kept.items() if v}
         if self.c_avg is not None:
             extra.update(c_avg=self.c_avg, c_weight=np.float64(self.c_weight), c_var=self.c_var)
+        extra.update(self.viewing.checkpoint_entries())  # a spectral run's band plan
         write_checkpoint(
             path,
             {
@@ -228,6 +228,7 @@ class Optimization:
         per_texel = (len(self.texels), self.loss.channels)
         shapes = {"x": self.x.shape, "opt_m": self.opt.m.shape, "opt_v": self.opt.v.shape}
         check_state(d, path, {**shapes, "c_avg": per_texel, "c_var": per_texel})  # all or nothing is restored
+        self.viewing, self._renderer = self.viewing.resumed(d), None  # the run's own band plan (before the key)
         old, new = json.loads(str(d["config_key"])), json.loads(self.config_key())
         if old != new:
             raise ParameterError(
@@ -258,15 +259,17 @@ class Optimization:
         iteration then overwrites only the free voxels' media (``Renderer.set_mixture``), so no grid-sized mixture
         or coefficient array is made per step."""
         if self._renderer is None:
-            fs = self.param.fixed_share
+            if self.viewing.needs_pilot:  # a spectral run's band plan: a pilot render of its current mixture
+                self.viewing = self.viewing.planned(self.volume(), self.texels, self.threads, self.lighting, self._make)
+            fs, make = self.param.fixed_share, self.viewing.renderer_factory(self._make)
             if self.base.inside is not None:
-                self._renderer = self.renderer_factory(self.base, self.threads, self.lighting)
+                self._renderer = make(self.base, self.threads, self.lighting)
                 held = self.param.held_index(self.base)
                 for block in np.array_split(held, max(1, len(held) >> 20)):  # ~1 M voxels at a time
                     self._renderer.set_mixture(block, fs.at(block))
                 del held
             else:
-                self._renderer = self.renderer_factory(self.base.with_mixture(fs.dense()), self.threads, self.lighting)
+                self._renderer = make(self.base.with_mixture(fs.dense()), self.threads, self.lighting)
         x = self.x if x is None else x
         for lo, hi in self.param.chunks():  # in pieces: no (F, N) temporaries for a big object
             self._renderer.set_mixture(self.param.free_index[lo:hi], self.param.free_rows(x[lo:hi], lo))

@@ -7,16 +7,17 @@ independent, group 0 keeps the pass's seed (a 3-band table renders exactly as th
 every group is bit-identical for any thread count. A group's fourth-or-later band slot repeats its last band
 (traced, its value dropped, its adjoint 0). Gradients replay each group's paths with the group's adjoints.
 
-Samples per group: a pass of ``spp`` samples gives every group ``spp`` samples unless the renderer has group
-``weights``; then the pass's G x spp samples are shared out in proportion to the weights (Neyman allocation:
-weight = the square root of the group's share of the colour's variance, :func:`group_spp`), at least one each, so
-bands that barely reach the colour (the spectrum's ends) cost little. Each band's estimate stays unbiased and its
-variance (``var_mean``) is its own.
+How the bands are sampled is the renderer's plan (``spectral.allocation.BandPlan``): which bands share a group
+(default: wavelength order), the groups' ``weights`` and ``hero`` paths. Samples per group: a pass of ``spp``
+samples gives every group ``spp`` samples unless the plan has group ``weights``; then the pass's G x spp samples are
+shared out in proportion to the weights (Neyman allocation: weight = the square root of the group's share of the
+colour's variance, :func:`group_spp`), at least one each, so bands that barely reach the colour (the spectrum's
+ends) cost little. Each band's estimate stays unbiased and its variance (``var_mean``) is its own.
 
-``hero``: each group's paths carry its three bands at once (the core's hero-channel paths: ``spp`` paths per texel
-serve the group's three bands, the hero band sample mod 3, the balance heuristic over the three bands' samplers,
-``PassSettings.hero``) instead of one path per band and sample; a group's bands are then correlated (one path),
-each stays unbiased with its own variance.
+``hero`` (the plan's): each group's paths carry its three bands at once (the core's hero-channel paths: ``spp``
+paths per texel serve the group's three bands, the hero band sample mod 3, the balance heuristic over the three
+bands' samplers, ``PassSettings.hero``) instead of one path per band and sample; a group's bands are then correlated
+(one path), each stays unbiased with its own variance.
 
 The light's spectrum does not enter transport (``spectral.lights``); what does is the geometric lighting, which
 must be grey (the same radiance in R, G and B: the uniform light or a grey map such as the calibration's upper
@@ -35,9 +36,11 @@ import numpy as np
 
 from ..errors import ParameterError
 from ..lighting import Lighting, load_lighting
-from ..model import InkTable, Labels, Mixture, Texels, Volume
+from ..model import Texels, Volume
 from ..model.spectral import GROUP, SpectralInkTable
 from ..render import PassSettings, Renderer, RendererFactory, RenderResult, TexelRenderer
+from .allocation import BandPlan
+from .bands import band_table, check_grey, with_inks
 
 
 def group_seed(seed: int, group: int) -> int:
@@ -58,51 +61,16 @@ def group_spp(spp: int, weights: np.ndarray | None, groups: int) -> list[int]:
     return [max(1, int(round(groups * spp * x / w.sum()))) for x in w]
 
 
-def with_inks(volume: Volume, inks: InkTable) -> Volume:
-    """``volume`` with its mixture or labels read with another ink table of the same inks (a band group)."""
-    med = volume.medium
-    if isinstance(med, Mixture):
-        return volume.with_medium(Mixture(med.mixture, inks))
-    if isinstance(med, Labels):
-        return volume.with_medium(Labels(med.labels, inks))
-    raise ParameterError("`volume` must hold a mixture or labels to be rendered with a spectral ink table")
-
-
-def check_groups(groups, bands: int) -> None:
-    """A ParameterError naming `groups` unless they split the bands 0..bands-1 into groups of 1-3 bands."""
-    flat = [b for g in groups for b in g]
-    if sorted(flat) != list(range(bands)) or not all(1 <= len(g) <= GROUP for g in groups):
-        raise ParameterError(f"`groups` must hold each of the {bands} bands once, at most {GROUP} per group")
-
-
-def band_table(table: SpectralInkTable, bands) -> InkTable:
-    """The RGB-shaped table of a group of 1-3 ``bands`` of ``table``: its channels the bands in order, a short
-    group's last band repeated to fill three channels (as ``SpectralInkTable.band_groups`` makes them)."""
-    pick = list(bands) + [bands[-1]] * (GROUP - len(bands))
-    return InkTable(table.names, table.sigma_s[:, pick], table.sigma_a[:, pick], table.g)
-
-
-def check_grey(lighting: Lighting) -> Lighting:
-    """``lighting`` if its radiance is the same in R, G and B; a ParameterError naming `lighting` otherwise."""
-    env = lighting.map
-    if env is not None and not (np.array_equal(env[..., 0], env[..., 1]) and np.array_equal(env[..., 0], env[..., 2])):
-        raise ParameterError(
-            "`lighting` must be grey (equal R, G, B) with a spectral ink table: the light's spectrum is the illuminant"
-        )
-    return lighting
-
-
 class SpectralRenderer(TexelRenderer):
     """Renders band values (I, B) of ``volume`` (a mixture or labels of ``table``'s inks; the volume's own ink
     table gives only the names) with ``table``: one renderer per band group, built by ``factory(volume, threads,
     lighting)`` (default :class:`~inkopt.render.Renderer`). ``lighting`` must be grey (:func:`check_grey`).
-    ``weights`` (G,) > 0: how a pass's samples are shared among the groups (:func:`group_spp`; None: equally).
+    ``plan``: how the bands are sampled (``spectral.allocation.BandPlan``: the bands of each group, the groups'
+    shares of a pass's samples, :func:`group_spp`, and hero paths, see the module's documentation; None: the
+    table's bands in wavelength order, ``table.group_bands()``, every group the pass's spp, one path per band).
     ``shared``: one renderer for every group, each group's medium swapped in before its pass (``set_volume``, which
     renders bit-identically to a renderer built for it): the geometry is held once instead of G times, for
-    evaluations; its medium cannot be updated in place (``set_mixture``). ``hero``: hero-channel paths per group
-    (see the module's documentation). ``groups``: the bands of each group, each band in one group, at most three per
-    group, in any order (default ``table.group_bands()``; ``spectral.allocation.plan`` orders them by the samples
-    they need); ``weights`` then follow these groups."""
+    evaluations; its medium cannot be updated in place (``set_mixture``)."""
 
     def __init__(
         self,
@@ -111,26 +79,24 @@ class SpectralRenderer(TexelRenderer):
         threads: int | None = None,
         lighting: Lighting | str | None = None,
         factory: RendererFactory | None = None,
-        weights=None,
+        plan: BandPlan | None = None,
         shared: bool = False,
-        hero: bool = False,
-        groups=None,
     ):
         if volume.inks is None or tuple(volume.inks.names) != tuple(table.names):
             have = None if volume.inks is None else list(volume.inks.names)
             raise ParameterError(f"`inks` {list(table.names)} must be the volume's inks {have}, in order")
-        self.table = table
+        plan = BandPlan.in_order(table) if plan is None else plan
+        if plan.bands != table.bands:
+            raise ParameterError(f"`plan` must be of the spectral ink table's {table.bands} bands, not {plan.bands}")
+        self.table, self.plan = table, plan
         self._source = volume  # whose medium the groups render (``shared``: swapped in from it)
         self.volume = volume
         self.lighting = check_grey(load_lighting(lighting))
-        self._bands = table.group_bands() if groups is None else [tuple(int(b) for b in g) for g in groups]
-        check_groups(self._bands, table.bands)
+        self._bands = [tuple(g) for g in plan.groups]
         self._groups = [band_table(table, bands) for bands in self._bands]
-        self.weights = None if weights is None else np.asarray(weights, np.float64)
-        if self.weights is not None and (self.weights.shape != (len(self._groups),) or not np.all(self.weights > 0)):
-            raise ParameterError(f"`weights` must be {len(self._groups)} positive numbers, one per band group")
+        self.weights = None if plan.weights is None else np.asarray(plan.weights, np.float64)
         make = factory or Renderer
-        self.shared, self._current, self.hero = bool(shared), 0, bool(hero)
+        self.shared, self._current, self.hero = bool(shared), 0, plan.hero
         built = self._groups[:1] if self.shared else self._groups
         self._renderers = [make(with_inks(volume, g), threads, self.lighting) for g in built]
 

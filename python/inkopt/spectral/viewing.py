@@ -10,6 +10,7 @@ spectrum, so any other light needs a spectral table.
 from __future__ import annotations
 
 import hashlib
+import json
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -19,8 +20,7 @@ from ..errors import ParameterError
 from ..loss import COMBINE, TexelLoss
 from ..model.spectral import SpectralInkTable
 from ..render import RendererFactory, RenderResult
-from .allocation import BandPlan, pilot
-from .allocation import plan as plan_bands
+from .allocation import BandPlan, choose, pilot
 from .lights import Light, named_light
 from .render import SpectralRenderer
 
@@ -31,12 +31,13 @@ RGB_LIGHT = "D65"
 @dataclass(frozen=True)
 class Viewing:
     """``table``: the spectral ink table (None: the RGB path); ``lights``: what the print is seen under (empty: D65);
-    ``combine``: "mean" or "worst" of the loss under several lights; ``weighted``: a pass's samples shared among the
-    band groups by :meth:`group_weights` (False: equally); ``hero``: each band group's paths carry its three bands
-    (``SpectralRenderer``'s ``hero``; off by default: 0.64x the band paths' cost at equal noise on the reference
-    slab but 8x on Spot 20 mm, whose hero noise is 4x the band paths', docs/spectral.md "Cost"). ``plan``: which
-    bands share a group and the groups' sample weights, measured on the volume (``spectral.allocation``,
-    :meth:`planned`; None: bands in wavelength order, weighted by a mid grey's colour variance)."""
+    ``combine``: "mean" or "worst" of the loss under several lights. How the bands are sampled: ``plan``, measured
+    on a volume (``spectral.allocation.BandPlan``, :meth:`planned`); without one, ``pilot``: an optimisation makes
+    its plan from a pilot render of its start before its first step (``optim.Optimization``; the default), and
+    until then (and for renders outside an optimisation) the bands go in wavelength order, a pass's samples shared
+    among the groups by :meth:`group_weights` when ``weighted`` (False: equally), with hero paths when ``hero``
+    (each group's paths carry its three bands: 0.64x the band paths' cost at equal noise on the reference slab
+    but 8x on Spot 20 mm, docs/spectral.md "Cost")."""
 
     table: SpectralInkTable | None = None
     lights: tuple[Light, ...] = ()
@@ -44,6 +45,7 @@ class Viewing:
     weighted: bool = True
     hero: bool = False
     plan: BandPlan | None = None
+    pilot: bool = True
 
     def __post_init__(self):
         object.__setattr__(self, "lights", tuple(self.lights))
@@ -57,7 +59,7 @@ class Viewing:
             )
         if len({light.name for light in self.lights}) != len(self.lights):
             raise ParameterError("`illuminants` names a light twice")
-        if self.plan is not None and (self.table is None or sum(map(len, self.plan.groups)) != self.table.bands):
+        if self.plan is not None and (self.table is None or self.plan.bands != self.table.bands):
             raise ParameterError("`plan` must be of the spectral ink table's bands")
 
     @property
@@ -84,20 +86,47 @@ class Viewing:
         table = self.table
         if table is None:
             return inner
+        plan = self.sampling()
+        return lambda volume, threads, lighting: SpectralRenderer(volume, table, threads, lighting, inner, plan, shared)
+
+    def sampling(self) -> BandPlan:
+        """How a render of this viewing samples the bands: its ``plan``, else the bands in wavelength order with
+        :meth:`group_weights` and ``hero`` (a spectral viewing)."""
+        if self.plan is not None:
+            return self.plan
         w = self.group_weights()
-        hero, groups = self.hero, None if self.plan is None else self.plan.groups
-        return lambda volume, threads, lighting: SpectralRenderer(
-            volume, table, threads, lighting, inner, w, shared, hero, groups
-        )
+        return BandPlan.in_order(self.table, None if w is None else tuple(w), self.hero)
+
+    @property
+    def needs_pilot(self) -> bool:
+        """Whether an optimisation makes this viewing's plan from a pilot of its start (spectral, ``pilot``, no
+        ``plan`` yet)."""
+        return self.table is not None and self.pilot and self.plan is None
 
     def planned(self, volume, texels, threads: int | None = None, lighting=None, inner: RendererFactory | None = None):
         """This viewing with the ``plan`` measured by a pilot render of ``volume`` (a mixture or labels of the
         table's inks; e.g. a run's start) on ``texels`` under ``lighting`` (``spectral.allocation.pilot``, through
-        ``inner``, default :class:`~inkopt.render.Renderer`; the same for any thread count)."""
+        ``inner``, default :class:`~inkopt.render.Renderer`; the same for any thread count): band paths by
+        ``allocation.plan`` or hero paths by ``allocation.hero_plan``, whichever the pilots measure cheaper at
+        equal colour noise (``allocation.choose``)."""
         if self.table is None:
             raise ParameterError("`plan` needs a spectral ink table")
         measured = pilot(volume, self.table, texels, self.colours(), threads, lighting, inner)
-        return replace(self, plan=plan_bands(measured))
+        hero = pilot(volume, self.table, texels, self.colours(), threads, lighting, inner, hero=True)
+        return replace(self, plan=choose(measured, hero))
+
+    def checkpoint_entries(self) -> dict:
+        """A checkpoint's entries of this viewing: ``band_plan``, its plan's JSON object (:meth:`BandPlan.to_json`)
+        as text, when it has a plan; else none."""
+        return {} if self.plan is None else {"band_plan": np.array(json.dumps(self.plan.to_json()))}
+
+    def resumed(self, entries) -> Viewing:
+        """This viewing with the plan of a checkpoint's ``band_plan`` entry (``entries``: the checkpoint's arrays)
+        when it makes its plan by a pilot and has none yet, so a resumed run samples the bands as it did, bit for
+        bit; else itself."""
+        if "band_plan" not in entries or not self.needs_pilot:
+            return self
+        return replace(self, plan=BandPlan.from_json(json.loads(str(entries["band_plan"]))))
 
     def group_weights(self) -> np.ndarray | None:
         """(G,) the band groups' sample weights (``spectral.render.group_spp``; None unless ``weighted``): the square
@@ -106,7 +135,7 @@ class Viewing:
         if not self.weighted:
             return None
         if self.plan is not None:
-            return np.array(self.plan.weights)
+            return None if self.plan.weights is None else np.array(self.plan.weights)
         grey = np.full(self.table.bands, 0.18)
         per_band = sum(np.sum(c.lab_jacobian(grey) ** 2, axis=0) for c in self.colours())
         return np.sqrt([per_band[list(b)].sum() for b in self.table.group_bands()])
@@ -122,8 +151,11 @@ class Viewing:
         for light in self.seen_under():
             h.update(light.name.encode())
             h.update(np.ascontiguousarray(light.on_grid()).tobytes())
-        plan = "" if self.plan is None else f":plan-{self.plan.key()}"
-        return f"{self.combine}:{h.hexdigest()[:16]}" + (":hero" if self.hero else "") + plan
+        if self.plan is not None:
+            return f"{self.combine}:{h.hexdigest()[:16]}:plan-{self.plan.key()}"
+        return (
+            f"{self.combine}:{h.hexdigest()[:16]}" + (":hero" if self.hero else "") + (":pilot" if self.pilot else "")
+        )
 
     def display(self, values) -> np.ndarray:
         """Predictions ``values`` (I, C) as linear sRGB (I, 3) float64 for pictures: the RGB path's as they are;
@@ -145,6 +177,7 @@ class Viewing:
         d = {"colour": "spectral" if self.spectral else "rgb", "illuminants": [x.name for x in self.seen_under()]}
         if self.table is not None:
             d.update(bands=self.table.bands, combine=self.combine, pictures=f"under {d['illuminants'][0]}, {CAT}")
+            d.update({} if self.plan is None else {"plan": self.plan.to_json()})
         return d
 
 
