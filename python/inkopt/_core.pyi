@@ -137,8 +137,7 @@ def diffuse_layer(
 def feature_plane(
     z: int, site_z: NDArray[np.int32], sampling: tuple[float, float, float], out: NDArray[np.int32]
 ) -> None:
-    """Plane z of scipy's exact Euclidean feature transform: site_z (Y,X) i32 each column's nearest feature z (-1:
-    none), sampling (z, y, x) -> each voxel's nearest feature (z, y, x) into out (3,Y,X) i32."""
+    """Plane z of scipy's exact feature transform: site_z (Y,X) i32 (-1 none) -> nearest (z,y,x) in out (3,Y,X) i32."""
 
 def smooth_rows(
     shape: tuple[int, int, int],
