@@ -184,7 +184,7 @@ def run_optimisation(scene: Scene, out_dir, cfg: OptimizeConfig, options: RunOpt
         if options.baseline_guard:  # the extrusion baseline's figures, measured once like the start's
             keep_baseline_figures(job.run, lambda x: figures.start(x, keep_renderer=True), options.log)
         job.run.release_unread_operators()  # the figures' window is not held through the first render
-        _iterate(job, figures.final_budget)
+        _iterate(job, figures.final_reserve())
         res, metrics = figures.final()
         if job.run.start_figures is None:  # a checkpoint written before the start's figures were kept in it
             job.run.keep_start_figures(figures.start(job.run.initial_variables()))
@@ -273,6 +273,7 @@ class _Figures:
         self.seed = EVAL_SEED_OFFSET + job.cfg.seed
         budgets = figure_budgets(job.cfg, job.options.eval_time_budget, job.run.wall_seconds())
         self.start_budget, self.final_budget = budgets
+        self.overshoot = 0.0  # the most seconds a start's or baseline's figures took beyond their budget
 
     def _of(self, x, budget, max_spp: int, pilot_in_budget: bool = True, keep_renderer: bool = True):
         """(``AdaptiveResult``, ``Metrics``) of the mixture of variables ``x`` (None: the current ones)."""
@@ -304,8 +305,17 @@ class _Figures:
         is no longer at its start, a baseline's); the renderer is kept if ``keep_renderer`` (None: without ``x``)."""
         max_spp = min(self.job.options.eval_max_spp, PILOT_SPP)
         keep = x is None if keep_renderer is None else keep_renderer
+        t = time.perf_counter()
         res, m = self._of(x, self.start_budget, max_spp, keep_renderer=keep)
+        if self.start_budget is not None:
+            self.overshoot = max(self.overshoot, time.perf_counter() - t - self.start_budget)
         return kept_figures(m, res.spp, len(self.job.scene.texels))
+
+    def final_reserve(self) -> float | None:
+        """Seconds the result's figures are expected to take: their budget plus the most the start's and the
+        baseline's figures took beyond theirs (a renderer set to other variables, the figures' window operators:
+        at 20 mm 6-13 s on the mesh suite's solids, about as much as the result's figures overran theirs)."""
+        return None if self.final_budget is None else self.final_budget + self.overshoot
 
     def final(self):
         """The result's figures: the user's samples or budget, the run's budget share, or (neither) samples up to
@@ -317,11 +327,12 @@ class _Figures:
         return self._of(None, budget, max_spp, pilot_in_budget=False, keep_renderer=False)
 
 
-def _iterate(job: _Job, final_budget: float | None) -> None:
+def _iterate(job: _Job, final_seconds: float | None) -> None:
     """The iterations (checkpointed), the result's finishing smoothing and volume.npz; outputs made from an
-    earlier volume.npz are removed."""
+    earlier volume.npz are removed. A time budget keeps ``final_seconds`` (the result's figures,
+    ``_Figures.final_reserve``), the writing's share and ``options.after``'s seconds for after the iterations."""
     run, opts, cfg, rd = job.run, job.options, job.cfg, job.rd
-    reserve = 0.0 if cfg.time_budget is None else (final_budget or 0.0) + BUDGET_WRITING * cfg.time_budget
+    reserve = 0.0 if cfg.time_budget is None else (final_seconds or 0.0) + BUDGET_WRITING * cfg.time_budget
     if opts.after is not None and cfg.time_budget is not None:  # a later stage's seconds kept too
         own = reserve
 
