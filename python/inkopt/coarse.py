@@ -27,13 +27,13 @@ COARSE_MIN_SHARE = 0.2
 #: the fine stage's fixed costs (the fine grid's baseline and the transfer, scene set-up and estimate, start and
 #: baseline figures, the one iteration a run always does, the result's figures and writing), predicted as
 #: ``FINE_FIXED_SECONDS + FINE_SETUP_FACTOR * s``, s the coarse run's seconds outside its iterations (scene, start,
-#: estimate, start's figures; the same kinds of work on a grid of 1/8 the voxels and 1/4 the texels). Fitted as an
-#: upper bound (least total excess, linear programme) to the eight 20 mm short-budget coarse-to-fine jobs of the mesh
-#: suite (bench-out/mesh-suite/runs/*_20mm_short_c2f-correction*/suite.log, old budgets: the fine stage from the
-#: coarse result's writing to the job's end, its iterations after the first taken out): 71.6 s + 5.06 s, rounded up
-#: to 80 s + 5.5 s (excess 14-51 s, the box 18 s and the spider 14 s the closest). The coarse run's seconds per
-#: iteration added nothing to the fit (its factor came out 0: the spider's fine stage costs 140 s at 0.9 s per
-#: coarse iteration, the box's 181 s at 5.6 s).
+#: estimate, start's figures: the same kinds of work on a grid of 1/8 the voxels and 1/4 the texels). The least
+#: upper bound over the eight 20 mm short-budget coarse-to-fine jobs of the mesh suite before the coarse stage left
+#: room for them (variants c2f-correction and c2f-correction-shared; their fine stage from the coarse stage's end to
+#: the job's end, its iterations after the first taken out) is 74.0 s + 4.88 s (bench/results/mesh_suite_phases.json,
+#: ``fit``), rounded up: 14-52 s above each of those, 38-62 s above the fine stages of today's cells, whose start's
+#: and result's figures take shares of the time left. The coarse run's seconds per iteration add nothing to the
+#: bound: the spider's fine stage takes 140 s at 0.9 s per coarse iteration, the box's 181 s at 5.6 s.
 FINE_FIXED_SECONDS, FINE_SETUP_FACTOR = 80.0, 5.5
 #: a run with a time budget goes coarse to fine by default, the coarse grid at this fraction of the run's DPI: at
 #: equal budgets it ended lower than the plain run on the reference slab (3 min: 29.01 against 29.36 ΔE76) and on
