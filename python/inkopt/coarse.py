@@ -31,8 +31,8 @@ COARSE_MIN_SHARE = 0.2
 #: upper bound over the eight 20 mm short-budget coarse-to-fine jobs of the mesh suite before the coarse stage left
 #: room for them (variants c2f-correction and c2f-correction-shared; their fine stage from the coarse stage's end to
 #: the job's end, its iterations after the first taken out) is 74.0 s + 4.88 s (bench/results/mesh_suite_phases.json,
-#: ``fit``), rounded up: 14-52 s above each of those, 38-62 s above the fine stages of today's cells, whose start's
-#: and result's figures take shares of the time left. The coarse run's seconds per iteration add nothing to the
+#: ``fit``), rounded up: 14-52 s above each of those, 38-75 s above the fine stages of today's seven cells, whose
+#: start's and result's figures take shares of the time left. The coarse run's seconds per iteration add nothing to the
 #: bound: the spider's fine stage takes 140 s at 0.9 s per coarse iteration, the box's 181 s at 5.6 s.
 FINE_FIXED_SECONDS, FINE_SETUP_FACTOR = 80.0, 5.5
 #: a run with a time budget goes coarse to fine by default, the coarse grid at this fraction of the run's DPI: at
