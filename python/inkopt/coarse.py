@@ -1,6 +1,7 @@
 """Jobs of more than one run and the plan of a deadline: coarse to fine (``run_coarse_to_fine``: a coarse run of the
 object, its result moved onto the fine grid as the fine run's start), ``deadline_plan``, how a run with a time
-budget and no coarse grid given goes (coarse to fine at half its DPI; a mesh from the extrusion baseline), and
+budget and no coarse grid given goes (coarse to fine at half its DPI; a mesh from the extrusion baseline),
+``fine_stage_seconds``, the fine stage's predicted fixed cost that the coarse stage leaves room for, and
 ``default_time_budget``, the deadline of a run given neither a time budget nor a number of iterations."""
 
 from __future__ import annotations
@@ -116,8 +117,9 @@ def deadline_plan(spec, cfg: OptimizeConfig, log=print) -> tuple[float, Optimize
 def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: float, options: RunOptions | None = None):
     """Coarse to fine: optimise ``spec``'s object first on a grid of ``coarse_dpi`` (a run of its own in
     ``OUT/coarse/`` with ``cfg``'s settings: it stops when done, or within ``COARSE_BUDGET_SHARE`` of
-    ``cfg.time_budget``), move its result onto the grid of ``spec`` (``optim.transfer.write_transferred_volume``:
-    ``OUT/coarse/fine_start.npz``, fixed shares kept) and optimise from there (``cfg`` with that start, and a warm
+    ``cfg.time_budget`` less what the fine stage is predicted to need beyond the rest, ``coarse_reserve``), move its
+    result onto the grid of ``spec`` (``optim.transfer.write_transferred_volume``: ``OUT/coarse/fine_start.npz``,
+    fixed shares kept) and optimise from there (``cfg`` with that start, and a warm
     start's step unless ``cfg.lr`` is set). A half-DPI grid has a quarter of the texels: on Spot 20 mm an
     iteration took 5.9 CPU s at 150 DPI (bench/results/mesh_20mm_150dpi.json) against 22 at 300 DPI with newer code
     (bench/results/mesh_20mm.json). ``options.resume`` continues whichever stage was under way; the time budget and the
