@@ -28,7 +28,9 @@ Results keys (kept stable): ``cells`` -> "MESH/Hmm/BUDGET[+VARIANT]" -> ``mesh``
 ``variant`` (its name; null or absent for the defaults' cells), ``derived_from`` (the run whose last iterate a
 derived variant's result is, made by ``mesh_suite_paired.py checkpoint``; its ``optimize_args`` then only name the
 variant), ``finish_smooth`` (the result's finishing smoothing passes), ``optimize_args``, ``evaluate_args`` (lists
-of str), ``texels``, ``iterations``, ``optimize_seconds``, ``seconds_per_iteration``, ``quantize_seconds``,
+of str), ``texels``, ``iterations`` (a coarse-to-fine job's: the fine stage's), ``coarse_iterations`` (the coarse
+stage's; null without one), ``job_seconds`` (report.json's ``seconds``: the job's wall time from its start, which
+its time budget counts), ``optimize_seconds``, ``seconds_per_iteration``, ``quantize_seconds``,
 ``evaluate_seconds``, ``sampled`` (bool: figures from a texel sample), ``gamut_floor_delta_e76``,
 ``load_average_before``, ``load_average_after``, ``finished``, ``commit``, ``command``, and ``results`` ->
 "continuous" | "printed" | "surface" | "extrusion" -> ``delta_e76_corrected``, ``delta_e2000``, ``ssim``,
@@ -388,6 +390,7 @@ def run_cell(mesh: str, height: float, budget: str, cache: Path, extra: Extra) -
         "evaluate_args": eval_args,
         "texels": ev.get("texels"),
         "iterations": report.get("iterations"),
+        **job_times(out, report),
         "optimize_seconds": round(t_opt, 1) if t_opt is not None else report.get("seconds_total"),
         "seconds_per_iteration": report.get("seconds_per_iteration"),
         "quantize_seconds": round(t_q, 1) if t_q is not None else None,
@@ -402,15 +405,28 @@ def run_cell(mesh: str, height: float, budget: str, cache: Path, extra: Extra) -
     }
 
 
+def job_times(out: Path, report: dict) -> dict:
+    """``coarse_iterations`` (None: no coarse stage) and ``job_seconds`` of the run folder ``out`` whose report.json
+    is ``report``."""
+    coarse = out / "coarse" / "report.json"
+    its = json.loads(coarse.read_text()).get("iterations") if coarse.is_file() else None
+    return {"coarse_iterations": its, "job_seconds": report.get("seconds")}
+
+
 def refresh(cache: Path, results: Path) -> None:
-    """Add each recorded cell's paired differences (``differences``) from its run folder's evaluation.json, for
-    cells recorded before the results kept them; nothing else of a cell changes."""
+    """Add each recorded cell's paired differences (``differences``) from its run folder's evaluation.json, and its
+    ``coarse_iterations`` and ``job_seconds`` from its reports, for cells recorded before the results kept them;
+    nothing else of a cell changes."""
     data = json.loads(results.read_text())
     for key, c in data["cells"].items():
-        ev = run_folder(cache, c["mesh"], c["height_mm"], c["budget"], c.get("variant")) / "evaluation.json"
+        out = run_folder(cache, c["mesh"], c["height_mm"], c["budget"], c.get("variant"))
+        ev = out / "evaluation.json"
         if "differences" not in c and ev.is_file():
             c["differences"] = differences(json.loads(ev.read_text()))
             print(f"{key}: paired differences added")
+        if "job_seconds" not in c and (out / "report.json").is_file():
+            c.update(job_times(out, json.loads((out / "report.json").read_text())))
+            print(f"{key}: coarse iterations and job seconds added")
     write_results(results, data)
 
 

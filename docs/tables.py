@@ -994,7 +994,8 @@ def mesh_suite(path: Path = BENCH / "mesh_suite.json", variants: bool | None = N
                 c["mesh"],
                 f"{c['height_mm']:g}",
                 c["budget"] + (f" + {c['variant']}" if c.get("variant") else ""),
-                f"{c['iterations']} it, {c['optimize_seconds'] / 60:.1f} + {c['evaluate_seconds'] / 60:.1f} min",
+                (f"{c['coarse_iterations']} + " if c.get("coarse_iterations") is not None else "")
+                + f"{c['iterations']} it, {c['optimize_seconds'] / 60:.1f} + {c['evaluate_seconds'] / 60:.1f} min",
                 suite_cell(cont),
                 suite_cell(p),
                 suite_cell(x),
@@ -1009,7 +1010,7 @@ def mesh_suite(path: Path = BENCH / "mesh_suite.json", variants: bool | None = N
         "mesh",
         "mm",
         "budget",
-        "run (optimise + evaluate)",
+        "run: (coarse +) iterations, optimise + evaluate",
         "continuous: ΔE76 / ΔE2000 / SSIM / mottle",
         "printed",
         "extrusion baseline",

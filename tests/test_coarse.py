@@ -8,7 +8,15 @@ import pytest
 import inkopt.coarse
 import inkopt.run
 from inkopt import charts
-from inkopt.coarse import run_coarse_to_fine
+from inkopt.coarse import (
+    COARSE_BUDGET_SHARE,
+    COARSE_MIN_SHARE,
+    FINE_FIXED_SECONDS,
+    FINE_SETUP_FACTOR,
+    coarse_reserve,
+    fine_stage_seconds,
+    run_coarse_to_fine,
+)
 from inkopt.evaluation.baselines import baseline_layers
 from inkopt.model import InkTable, Volume
 from inkopt.optim import OptimizeConfig
@@ -49,8 +57,8 @@ def job(spec, out, init: str, monkeypatch) -> dict:
 
 def test_a_job_from_the_extrusion_baseline_starts_its_fine_stage_from_the_correction(spec, tmp_path, monkeypatch):
     made = job(spec, tmp_path / "job", "extrusion", monkeypatch)
-    # the coarse run's start (run), the coarse and fine grids' baselines (coarse); the fine guard makes none
-    assert made == {"coarse": 2, "run": 1}
+    # the coarse and fine grids' baselines (coarse), the coarse one also the coarse run's start; the runs make none
+    assert made == {"coarse": 2, "run": 0}
     coarse, fine = build_scene(SlabSpec(spec.top, spec.size_mm, dpi=150.0), INKS), build_scene(spec, INKS)
     b_c = baseline_layers("extrusion", coarse.volume, coarse.texels, coarse.target_rgb, coarse.fixed_share)
     b_f = baseline_layers("extrusion", fine.volume, fine.texels, fine.target_rgb, fine.fixed_share)
@@ -100,3 +108,33 @@ def test_the_deadline_plan_takes_meshes_coarse_to_fine_from_the_extrusion_baseli
     assert len(lines) == 2
     sheet = SlabSpec("chart.png", (40.0, 40.0, 0.1))  # one voxel at 300 DPI, less than one at the coarse 150
     assert deadline_plan(sheet, cfg, log=lines.append) == (0.0, cfg) and "no coarse stage" in lines[-1]
+
+
+def test_the_fine_stage_is_predicted_from_the_coarse_set_up():
+    assert fine_stage_seconds(0.0) == FINE_FIXED_SECONDS
+    assert fine_stage_seconds(20.0) == pytest.approx(FINE_FIXED_SECONDS + 20.0 * FINE_SETUP_FACTOR)
+    assert fine_stage_seconds(30.0) > fine_stage_seconds(20.0)
+
+
+def test_the_coarse_stage_shrinks_when_the_fine_stage_is_predicted_expensive():
+    """A 5-minute job: a cheap fine stage fits in the 40 % the share leaves (nothing kept); the box's set-up
+    (21.7 s, 80 + 5.5 x 21.7 = 199 s predicted) takes 79 s more from the coarse stage; a huge one stops at the
+    least share."""
+    budget = 300.0
+    assert coarse_reserve(budget, 0.0) == 0.0  # 80 s < 120 s
+    box = coarse_reserve(budget, 21.7)
+    assert box == pytest.approx(fine_stage_seconds(21.7) - (1 - COARSE_BUDGET_SHARE) * budget)
+    assert 75.0 < box < 85.0
+    assert coarse_reserve(budget, 30.0) > box
+    assert coarse_reserve(budget, 1e4) == pytest.approx((COARSE_BUDGET_SHARE - COARSE_MIN_SHARE) * budget)
+
+
+def test_a_tiny_deadline_job_keeps_its_fine_stage_and_says_what_it_predicted(spec, tmp_path):
+    """A tiny job with a short budget: the prediction exceeds what the budget leaves the fine stage (the coarse
+    stage keeps its least share and says the job may overrun), and both stages still run their iterations."""
+    lines = []
+    cfg = OptimizeConfig(iterations=3, spp=2, forward_spp=4, init="extrusion", time_budget=20.0)
+    rep = run_coarse_to_fine(spec, INKS, tmp_path / "job", cfg, 150.0, RunOptions(threads=1, log=lines.append))
+    said = [m for m in lines if m.startswith("fine stage predicted")]
+    assert len(said) == 1 and "least share" in said[0]
+    assert rep.iterations >= 1 and RunDir(tmp_path / "job" / "coarse").read_report()["iterations"] >= 1

@@ -1,6 +1,7 @@
 """Jobs of more than one run and the plan of a deadline: coarse to fine (``run_coarse_to_fine``: a coarse run of the
 object, its result moved onto the fine grid as the fine run's start), ``deadline_plan``, how a run with a time
-budget and no coarse grid given goes (coarse to fine at half its DPI; a mesh from the extrusion baseline), and
+budget and no coarse grid given goes (coarse to fine at half its DPI; a mesh from the extrusion baseline),
+``fine_stage_seconds``, the fine stage's predicted fixed cost that the coarse stage leaves room for, and
 ``default_time_budget``, the deadline of a run given neither a time budget nor a number of iterations."""
 
 from __future__ import annotations
@@ -18,8 +19,23 @@ from .rundir import RunDir
 from .scenes import build_scene
 from .units import voxel_mm
 
-#: share of a time budget the coarse stage of a coarse-to-fine run may take; the fine stage has the rest
+#: share of a time budget the coarse stage of a coarse-to-fine run may take; the fine stage has the rest, and more
+#: when its fixed costs are predicted to need it (``fine_stage_seconds``), down to ``COARSE_MIN_SHARE``
 COARSE_BUDGET_SHARE = 0.6
+#: the least share of the budget the coarse stage keeps however expensive its fine stage is predicted to be: a job
+#: whose fine stage needs more than the rest overruns its budget (the coarse stage's line says so)
+COARSE_MIN_SHARE = 0.2
+#: the fine stage's fixed costs (the fine grid's baseline and the transfer, scene set-up and estimate, start and
+#: baseline figures, the one iteration a run always does, the result's figures and writing), predicted as
+#: ``FINE_FIXED_SECONDS + FINE_SETUP_FACTOR * s``, s the coarse run's seconds outside its iterations (scene, start,
+#: estimate, start's figures: the same kinds of work on a grid of 1/8 the voxels and 1/4 the texels). The least
+#: upper bound over the eight 20 mm short-budget coarse-to-fine jobs of the mesh suite before the coarse stage left
+#: room for them (variants c2f-correction and c2f-correction-shared; their fine stage from the coarse stage's end to
+#: the job's end, its iterations after the first taken out) is 74.0 s + 4.88 s (bench/results/mesh_suite_phases.json,
+#: ``fit``), rounded up: 14-52 s above each of those, 38-75 s above the fine stages of today's seven cells, whose
+#: start's and result's figures take shares of the time left. The coarse run's seconds per iteration add nothing to the
+#: bound: the spider's fine stage takes 140 s at 0.9 s per coarse iteration, the box's 181 s at 5.6 s.
+FINE_FIXED_SECONDS, FINE_SETUP_FACTOR = 80.0, 5.5
 #: a run with a time budget goes coarse to fine by default, the coarse grid at this fraction of the run's DPI: at
 #: equal budgets it ended lower than the plain run on the reference slab (3 min: 29.01 against 29.36 ΔE76) and on
 #: Spot 20 mm (8 min: 9.99 against 15.36) (bench/results/time_to_quality.json)
@@ -64,6 +80,21 @@ def default_time_budget(seconds_per_iteration: float) -> float:
     return max(PLAN_ITERATIONS * seconds_per_iteration, PLAN_MIN_SECONDS)
 
 
+def fine_stage_seconds(setup_s: float) -> float:
+    """The predicted fixed cost (seconds, wall clock) of a coarse-to-fine job's fine stage, from the coarse run's
+    ``setup_s`` seconds outside its iterations (``FINE_FIXED_SECONDS``, ``FINE_SETUP_FACTOR``)."""
+    return FINE_FIXED_SECONDS + FINE_SETUP_FACTOR * max(setup_s, 0.0)
+
+
+def coarse_reserve(time_budget: float, setup_s: float) -> float:
+    """Seconds the coarse run keeps from its time budget (``COARSE_BUDGET_SHARE`` of the job's ``time_budget``,
+    seconds) for the fine stage beyond the rest of the job's budget: its iterations end by the earlier of the share
+    and the budget less the fine stage's predicted cost (``fine_stage_seconds(setup_s)``), but no earlier than
+    ``COARSE_MIN_SHARE`` of the budget."""
+    beyond = fine_stage_seconds(setup_s) - (1.0 - COARSE_BUDGET_SHARE) * time_budget
+    return min(max(beyond, 0.0), (COARSE_BUDGET_SHARE - COARSE_MIN_SHARE) * time_budget)
+
+
 def deadline_plan(spec, cfg: OptimizeConfig, log=print) -> tuple[float, OptimizeConfig]:
     """How a run with a time budget and no ``--coarse-dpi`` goes: (coarse-stage DPI, 0 for none; the settings).
     A slab thinner than one voxel of the coarse grid has no coarse stage; every other run goes coarse to fine at
@@ -86,8 +117,9 @@ def deadline_plan(spec, cfg: OptimizeConfig, log=print) -> tuple[float, Optimize
 def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: float, options: RunOptions | None = None):
     """Coarse to fine: optimise ``spec``'s object first on a grid of ``coarse_dpi`` (a run of its own in
     ``OUT/coarse/`` with ``cfg``'s settings: it stops when done, or within ``COARSE_BUDGET_SHARE`` of
-    ``cfg.time_budget``), move its result onto the grid of ``spec`` (``optim.transfer.write_transferred_volume``:
-    ``OUT/coarse/fine_start.npz``, fixed shares kept) and optimise from there (``cfg`` with that start, and a warm
+    ``cfg.time_budget`` less what the fine stage is predicted to need beyond the rest, ``coarse_reserve``), move its
+    result onto the grid of ``spec`` (``optim.transfer.write_transferred_volume``: ``OUT/coarse/fine_start.npz``,
+    fixed shares kept) and optimise from there (``cfg`` with that start, and a warm
     start's step unless ``cfg.lr`` is set). A half-DPI grid has a quarter of the texels: on Spot 20 mm an
     iteration took 5.9 CPU s at 150 DPI (bench/results/mesh_20mm_150dpi.json) against 22 at 300 DPI with newer code
     (bench/results/mesh_20mm.json). ``options.resume`` continues whichever stage was under way; the time budget and the
@@ -128,24 +160,52 @@ def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: flo
 
 def _coarse_stage(spec, inks, coarse_dir, cfg: OptimizeConfig, coarse_dpi: float, options: RunOptions):
     """The coarse run of ``run_coarse_to_fine`` in ``coarse_dir``: ``spec`` at ``coarse_dpi``, within
-    ``COARSE_BUDGET_SHARE`` of the time budget; its figures are one pilot pass (informative: the fine stage's are
-    the run's, its baseline guard too); the caller's per-step hook sees the fine stage only (another grid here).
-    The coarse result is not smoothed at its end (``finish_smooth`` 0): it is the fine stage's start, not an answer,
-    and a pass on the coarse grid blurs twice as far as the fine result's own (docs/quality.md, "The duck's margin").
-    Returns the coarse run's start as a mixture ``Volume`` on the coarse grid when ``cfg.init`` is a print-shop
-    baseline (``optim.param.BASELINE_INITS``: the correction transfer's B_c), else None."""
+    ``COARSE_BUDGET_SHARE`` of the time budget less what the fine stage is predicted to need beyond the rest
+    (``coarse_reserve``); its figures are one pilot pass (informative: the fine stage's are the run's, its baseline
+    guard too); the caller's per-step hook sees the fine stage only (another grid here). The coarse result is not
+    smoothed at its end (``finish_smooth`` 0): it is the fine stage's start, not an answer, and a pass on the coarse
+    grid blurs twice as far as the fine result's own (docs/quality.md, "The duck's margin"). Returns the coarse run's
+    start as a mixture ``Volume`` on the coarse grid when ``cfg.init`` is a print-shop baseline
+    (``optim.param.BASELINE_INITS``: the correction transfer's B_c, made once for the coarse run's start and the
+    transfer), else None."""
     coarse = build_scene(replace(spec, dpi=coarse_dpi), inks)
-    budget = None if cfg.time_budget is None else COARSE_BUDGET_SHARE * cfg.time_budget
-    log = options.log
+    budget, log, kept = None, options.log, {}
+    after = None
+    if cfg.time_budget is not None:
+        budget = COARSE_BUDGET_SHARE * cfg.time_budget
+
+        def after(setup_s: float) -> float:  # the fine stage's predicted cost beyond the rest of the budget
+            kept.update(setup=setup_s, reserve=coarse_reserve(cfg.time_budget, setup_s))
+            return kept["reserve"]
+
     log(f"coarse stage at {coarse_dpi:g} DPI into {coarse_dir}")
-    coarse_options = replace(
-        options, on_step=None, eval_spp=options.eval_spp or PILOT_SPP, log=lambda m: log(f"  {m}"), baseline_guard=False
-    )
-    run_optimisation(coarse, coarse_dir, replace(cfg, time_budget=budget, finish_smooth=0), coarse_options)
-    start = None
+    layers = start = None
     if cfg.init in BASELINE_INITS:  # the coarse grid's baseline: the coarse run's start (before its clip at 1e-6)
         layers = baseline_layers(cfg.init, coarse.volume, coarse.texels, coarse.target_rgb, coarse.fixed_share)
+    coarse_options = replace(
+        options,
+        on_step=None,
+        eval_spp=options.eval_spp or PILOT_SPP,
+        log=lambda m: log(f"  {m}"),
+        baseline_guard=False,
+        baselines=None if layers is None else {cfg.init: layers},
+        after=after,
+    )
+    run_optimisation(coarse, coarse_dir, replace(cfg, time_budget=budget, finish_smooth=0), coarse_options)
+    if kept:
+        predicted = fine_stage_seconds(kept["setup"])
+        log(
+            f"fine stage predicted to need {predicted:.0f} s (the coarse stage's set-up {kept['setup']:.0f} s): the "
+            f"coarse stage kept {kept['reserve']:.0f} s of its share for it"
+            + (" (at its least share: the job may overrun its budget)" if predicted > _most_fine(cfg) else "")
+        )
+    if layers is not None:
         start = coarse.volume.with_mixture(layers.array())
-    del coarse
+    del coarse, layers
     release_freed_memory()
     return start
+
+
+def _most_fine(cfg: OptimizeConfig) -> float:
+    """The most seconds the fine stage can have of ``cfg.time_budget`` (the coarse stage at its least share)."""
+    return (1.0 - COARSE_MIN_SHARE) * cfg.time_budget

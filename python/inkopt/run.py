@@ -51,7 +51,9 @@ from .spectral.viewing import Viewing
 #: baseline's: ``evaluation.guard``), the result's figures, and kept for writing the result (volume, pictures,
 #: predictions, report): the iterations get the rest,
 #: the step decay planned to end in time (``optim.stopping``). Not measured optima: the figures are informative
-#: and noise-corrected at any spp (their noise is reported), the quality is the iterations'.
+#: and noise-corrected at any spp (their noise is reported), the quality is the iterations'. The figures' shares are
+#: of the time left when the run's set-up ends (a coarse-to-fine job's fine stage: what the coarse stage left it),
+#: the writing's of the whole budget (it scales with the object, not with the time left).
 BUDGET_START_FIGURES, BUDGET_FINAL_FIGURES, BUDGET_WRITING = 0.03, 0.08, 0.04
 #: Without a budget, the result's figures add samples beyond the pilot only while they take at most this share of
 #: the run's time so far: on a mesh noise-free figures take hundreds of samples per texel where an iteration renders
@@ -60,13 +62,15 @@ BUDGET_START_FIGURES, BUDGET_FINAL_FIGURES, BUDGET_WRITING = 0.03, 0.08, 0.04
 FINAL_FIGURES_SHARE = 0.25
 
 
-def figure_budgets(cfg: OptimizeConfig, eval_time_budget: float | None) -> tuple:
+def figure_budgets(cfg: OptimizeConfig, eval_time_budget: float | None, elapsed: float = 0.0) -> tuple:
     """(start's, result's) time budget of the adaptive figures in seconds, or None: the user's
-    ``eval_time_budget``, within the shares of the run's time budget if it has one."""
+    ``eval_time_budget``, within the shares of what is left of the run's time budget (if it has one) after
+    ``elapsed`` seconds (the job's time so far)."""
     if cfg.time_budget is None:
         return eval_time_budget, eval_time_budget
     cap = float("inf") if eval_time_budget is None else eval_time_budget
-    return min(cap, BUDGET_START_FIGURES * cfg.time_budget), min(cap, BUDGET_FINAL_FIGURES * cfg.time_budget)
+    left = max(cfg.time_budget - elapsed, 0.0)
+    return min(cap, BUDGET_START_FIGURES * left), min(cap, BUDGET_FINAL_FIGURES * left)
 
 
 def peak_rss_gb() -> float:
@@ -105,7 +109,10 @@ class RunOptions:
     baselines' mixtures already made for this scene (kind -> ``evaluation.baselines.baseline_layers``'s layers, e.g.
     by a coarse-to-fine transfer from a baseline), taken by the run's start and its guard instead of being made
     again (the spider of the mesh suite at 20 mm: its fine stage ran 9 iterations in a 5-minute job instead of 6,
-    docs/quality.md, "The correction transfer")."""
+    docs/quality.md, "The correction transfer"). ``after(setup_s)``: seconds the job needs after this run, from the
+    run's seconds outside its iterations so far (its set-up); the run's time budget keeps them besides its own
+    figures and writing (a coarse stage's: its fine stage's predicted cost,
+    ``coarse.fine_stage_seconds``)."""
 
     resume: bool = False
     eval_spp: int | None = None
@@ -123,6 +130,7 @@ class RunOptions:
     on_step: Callable | None = None
     baseline_guard: bool = True
     baselines: dict | None = None
+    after: Callable[[float], float] | None = None
 
     def validate(self) -> None:
         """One-line errors naming the option, before any work."""
@@ -176,7 +184,7 @@ def run_optimisation(scene: Scene, out_dir, cfg: OptimizeConfig, options: RunOpt
         if options.baseline_guard:  # the extrusion baseline's figures, measured once like the start's
             keep_baseline_figures(job.run, lambda x: figures.start(x, keep_renderer=True), options.log)
         job.run.release_unread_operators()  # the figures' window is not held through the first render
-        _iterate(job, figures.final_budget)
+        _iterate(job, figures.final_reserve())
         res, metrics = figures.final()
         if job.run.start_figures is None:  # a checkpoint written before the start's figures were kept in it
             job.run.keep_start_figures(figures.start(job.run.initial_variables()))
@@ -263,7 +271,9 @@ class _Figures:
         self.job = job
         self.spp = int(job.options.eval_spp) if job.options.eval_spp else None  # None: adaptive
         self.seed = EVAL_SEED_OFFSET + job.cfg.seed
-        self.start_budget, self.final_budget = figure_budgets(job.cfg, job.options.eval_time_budget)
+        budgets = figure_budgets(job.cfg, job.options.eval_time_budget, job.run.wall_seconds())
+        self.start_budget, self.final_budget = budgets
+        self.overshoot = 0.0  # the most seconds a start's or baseline's figures took beyond their budget
 
     def _of(self, x, budget, max_spp: int, pilot_in_budget: bool = True, keep_renderer: bool = True):
         """(``AdaptiveResult``, ``Metrics``) of the mixture of variables ``x`` (None: the current ones)."""
@@ -295,8 +305,17 @@ class _Figures:
         is no longer at its start, a baseline's); the renderer is kept if ``keep_renderer`` (None: without ``x``)."""
         max_spp = min(self.job.options.eval_max_spp, PILOT_SPP)
         keep = x is None if keep_renderer is None else keep_renderer
+        t = time.perf_counter()
         res, m = self._of(x, self.start_budget, max_spp, keep_renderer=keep)
+        if self.start_budget is not None:
+            self.overshoot = max(self.overshoot, time.perf_counter() - t - self.start_budget)
         return kept_figures(m, res.spp, len(self.job.scene.texels))
+
+    def final_reserve(self) -> float | None:
+        """Seconds the result's figures are expected to take: their budget plus the most the start's and the
+        baseline's figures took beyond theirs (a renderer set to other variables, the figures' window operators:
+        at 20 mm 6-13 s on the mesh suite's solids, about as much as the result's figures overran theirs)."""
+        return None if self.final_budget is None else self.final_budget + self.overshoot
 
     def final(self):
         """The result's figures: the user's samples or budget, the run's budget share, or (neither) samples up to
@@ -308,11 +327,18 @@ class _Figures:
         return self._of(None, budget, max_spp, pilot_in_budget=False, keep_renderer=False)
 
 
-def _iterate(job: _Job, final_budget: float | None) -> None:
+def _iterate(job: _Job, final_seconds: float | None) -> None:
     """The iterations (checkpointed), the result's finishing smoothing and volume.npz; outputs made from an
-    earlier volume.npz are removed."""
+    earlier volume.npz are removed. A time budget keeps ``final_seconds`` (the result's figures,
+    ``_Figures.final_reserve``), the writing's share and ``options.after``'s seconds for after the iterations."""
     run, opts, cfg, rd = job.run, job.options, job.cfg, job.rd
-    reserve = 0.0 if cfg.time_budget is None else (final_budget or 0.0) + BUDGET_WRITING * cfg.time_budget
+    reserve = 0.0 if cfg.time_budget is None else (final_seconds or 0.0) + BUDGET_WRITING * cfg.time_budget
+    if opts.after is not None and cfg.time_budget is not None:  # a later stage's seconds kept too
+        own = reserve
+
+        def reserve(setup_s: float) -> float:
+            return own + opts.after(setup_s)
+
     run.run(
         rd.checkpoint_path,
         progress=opts.progress,

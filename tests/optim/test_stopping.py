@@ -106,6 +106,20 @@ def test_time_budget_slower_iterations_during_the_decay_still_stop_in_time():
     assert s.end == 90 and s.reason == "time budget"
 
 
+def test_a_reserve_given_as_a_function_of_the_set_up_is_kept():
+    """A reserve given as a function gets the run's seconds outside its iterations (12 s of set-up here, every
+    time) and the run ends where that many seconds are kept: as the 20 s reserve of the test above."""
+    cfg = OptimizeConfig(iterations=1000, time_budget=200.0, stop_gain=0.0)
+    seen = set()
+
+    def reserve(setup_s: float) -> float:
+        seen.add(setup_s)
+        return setup_s + 8.0
+
+    s, end, elapsed = simulate(cfg, lambda t: 30 - 0.1 * t, setup_s=12.0, reserve=reserve)
+    assert seen == {12.0} and s.reason == "time budget" and end == 168 and elapsed == 180.0
+
+
 def test_a_fixed_schedule_is_not_moved():
     cfg = OptimizeConfig(iterations=40, schedule_iterations=300)
     s, end, _ = simulate(cfg, lambda t: 10.0)  # flat: would converge at once

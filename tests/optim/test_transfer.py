@@ -177,7 +177,8 @@ def test_the_correction_transfer_keeps_the_coarse_change_and_the_baselines_detai
 
 
 def test_the_correction_transfer_from_a_uniform_start_is_the_plain_one_and_keeps_fixed_shares(tmp_path):
-    """From white (B the same row on both grids) the change C - B_c moved up plus B_f is U(C), bit for bit; the fine
+    """From white (B the same row on both grids) the change C - B_c moved up plus B_f is U(C) (to float32 rounding:
+    U(C) and U(B_c) are taken in one pass and each half renormalised; runs from white pass no baseline); the fine
     scene's fixed shares are kept as by the plain transfer, and a change that takes an ink below 0 is clipped."""
     from inkopt.optim.transfer import Baseline
 
@@ -193,7 +194,7 @@ def test_the_correction_transfer_from_a_uniform_start_is_the_plain_one_and_keeps
     )
     plain = write_transferred_volume(src, fine.volume, fixed, tmp_path / "plain.npz")
     got = write_transferred_volume(src, fine.volume, fixed, tmp_path / "c.npz", chunk=11, baseline=uniform)
-    np.testing.assert_array_equal(Volume.load(got).mixture, Volume.load(plain).mixture)
+    np.testing.assert_allclose(Volume.load(got).mixture, Volume.load(plain).mixture, rtol=0, atol=3e-7)
     # a baseline richer in cyan on the coarse grid than on the fine one: the change takes cyan below 0 somewhere
     cyan = np.array([0.9, 0.05, 0.05], np.float32)
     poor = Baseline(

@@ -37,7 +37,7 @@ from .optimizers import make_optimizer, step_factor
 from .param import Parameterization, initial_free_mixture
 from .progress import ProgressLines, changed_settings
 from .smooth import MAX_DEPTH, GradientSmoother, nearest_texel_chunks, texel_guide
-from .stopping import Schedule
+from .stopping import Reserve, Schedule
 
 #: samples per texel of the first iteration's forward render of a run without forward passes (forward_spp 0)
 START_FORWARD_SPP = 16
@@ -363,10 +363,10 @@ class Optimization:
         log(f"no checkpoint {checkpoint}; starting from scratch")
         return False
 
-    def plan(self, reserve: float = 0.0) -> int:
+    def plan(self, reserve: Reserve = 0.0) -> int:
         """Plan the run's end for the next step (``stopping.Schedule.plan``: converged, time budget, maximum) and
         return the iteration count the run stops at. ``reserve``: seconds the time budget keeps for after the
-        last iteration (the final evaluation and writing)."""
+        last iteration (the final evaluation and writing), or a function giving them (``stopping.Reserve``)."""
         h = self.history
         self.schedule.plan(self.cfg, self.iteration, h.delta_e76, h.seconds, self.wall_seconds(), reserve)
         return min(self.cfg.iterations, self.schedule.end)
@@ -377,7 +377,7 @@ class Optimization:
         progress: bool = False,
         log=None,
         log_every_s: float = 30.0,
-        reserve: float = 0.0,
+        reserve: Reserve = 0.0,
         on_step: Callable[[Optimization], None] | None = None,
     ) -> None:
         """Iterate until the planned end (:meth:`plan`: at most ``cfg.iterations``, earlier when converged or by

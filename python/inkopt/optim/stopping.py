@@ -16,8 +16,9 @@ and moves it, before the decay has begun, to the earliest of:
   [0, ``RHO_MAX``]). The curves fall ever more slowly, so the recent slope overstates
   what is left to gain: the rule errs towards running longer.
 - **time budget**: the last iteration whose end, at the median time of the recent iterations, leaves
-  ``reserve`` seconds (the final evaluation and writing) within the budget; during the decay the run still stops
-  when the next iteration would not fit.
+  ``reserve`` seconds (the final evaluation and writing; a coarse stage's also its fine stage's predicted cost,
+  which depends on the run's own set-up time) within the budget; during the decay the run still
+  stops when the next iteration would not fit.
 
 Once the decay has begun the end holds (the decay's stages are fractions of the run's length), so a run stops
 exactly where its plan said. The whole state is in the checkpoint: a resumed run plans as the uninterrupted one.
@@ -26,6 +27,7 @@ exactly where its plan said. The whole state is in the checkpoint: a resumed run
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,6 +44,10 @@ RHO_MAX = 0.9
 TIME_WINDOW = 10
 
 REASONS = ("iterations", "converged", "time budget")
+
+#: seconds a run keeps after its last iteration: a number, or a function of the run's seconds outside its iterations
+#: so far (its set-up: scene, start, estimate, start's figures) giving them
+Reserve = float | Callable[[float], float]
 
 
 @dataclass(frozen=True)
@@ -100,14 +106,18 @@ class Schedule:
         fixed = cfg.schedule_iterations is not None or (cfg.stop_gain <= 0 and cfg.time_budget is None)
         return cls(end=cfg.schedule_length, fixed=fixed)
 
-    def plan(self, cfg, iteration: int, delta_e76, seconds, elapsed: float, reserve: float = 0.0) -> None:
+    def plan(self, cfg, iteration: int, delta_e76, seconds, elapsed: float, reserve: Reserve = 0.0) -> None:
         """Move the end for the next iteration (module docstring). ``delta_e76``, ``seconds``: the training ΔE76
         and wall time of every iteration so far; ``elapsed``: the run's wall time so far, set-up included;
-        ``reserve``: seconds kept for after the last iteration."""
+        ``reserve``: seconds kept for after the last iteration, or a function of the run's seconds outside its
+        iterations so far giving them (``Reserve``)."""
         if self.fixed:
             return
         per = float(np.median(seconds[-TIME_WINDOW:])) if len(seconds) else None
-        left = None if cfg.time_budget is None or per is None else cfg.time_budget - reserve - elapsed
+        left = None
+        if cfg.time_budget is not None and per is not None:
+            kept = reserve(elapsed - float(np.sum(seconds))) if callable(reserve) else reserve
+            left = cfg.time_budget - kept - elapsed
         if self.frozen:
             if left is not None and left < per and iteration < self.end:
                 self.end, self.reason = iteration, "time budget"
