@@ -158,7 +158,7 @@ def main():
                     bins.append({"lo": lo, "hi": hi, **stats(d_lab[m], noise[m])})
             row[f"share_{ink}"] = bins
         entry["variants"][spec] = row
-        print(spec, {k: round(v, 3) for k, v in row["all"].items()}, f"{row['seconds']:.0f} s", flush=True)
+        print(spec, {k: np.round(v, 3).tolist() for k, v in row["all"].items()}, f"{row['seconds']:.0f} s", flush=True)
         del labels, printer
     entry.update(machine())
     add_study_entry("halftone_cause.json", a.name, entry)

@@ -8,7 +8,7 @@ spp + gradient 4 spp, the defaults) measured in the same session. Writes the ent
 experiments/results/printed_refine.json.
 
     .venv/bin/python experiments/printed_refine.py NAME RUN [--refine 3,6] [--control] [--methods M[:UPSAMPLE],...]
-        [--texel-sample N] [--windows W] [--threads T]
+        [--texel-sample N] [--windows W] [--threads T] [--no-cost]
 
 ``--control``: also the same steps with the loss on the continuous render (``control-N``: their blue-noise print)
 and the refined mixtures rendered continuous (``refine-N continuous``), with the paired differences refine-N -
@@ -76,8 +76,10 @@ class ContinuousRefinement(PrintedRefinement):
 
 
 def quantization(spec: str) -> tuple[Quantization, dict]:
-    """``METHOD[:UPSAMPLE][/ORDER][+comp[1][tP]]`` -> (the settings, the compensation's changes for
-    ``compensation_variant``; ``ORDER``: ``Quantization.ink_order``, e.g. ``tint-first``):
+    """``METHOD[:UPSAMPLE][/ORDER][+comp[1|w][tP]]`` -> (the settings, the compensation's changes for
+    ``compensation_variant``; ``ORDER``: ``Quantization.ink_order``, e.g. ``tint-first``; ``+compw``: each ink's
+    factor against white alone and none against the other inks, p_eff = p / (1 + k w), w the white share, so a
+    mixture without white is not corrected):
     ``+comp`` the shares compensated with the factors against other inks (``ShareCompensation.pairs``), ``+comp1``
     with each ink's factor against the base alone (the other inks counted as base: what ``Quantization.compensate``
     applies), ``tP`` (e.g. ``+compt0.05``) with the correction tapered below the share P
@@ -87,6 +89,7 @@ def quantization(spec: str) -> tuple[Quantization, dict]:
     m, _, up = head.partition(":")
     single, _, taper = tail.partition("t")
     changes = {"pairs": single != "1"} | ({"taper": float(taper)} if taper else {})
+    changes |= {"white_only": True, "pairs": True} if single == "w" else {}
     q = Quantization(m, upsample=up or "nearest", ink_order=order or "lightness", compensate=bool(comp))
     return q, changes
 
@@ -95,7 +98,14 @@ def quantization(spec: str) -> tuple[Quantization, dict]:
 def compensation_variant(changes: dict):
     """Within it, ``quantize`` uses the measured compensation with ``changes`` (fields of ``ShareCompensation``)."""
     full = Q.share_compensation
-    with mock.patch.object(Q, "share_compensation", lambda *a, **k: replace(full(*a, **k), **changes)):
+
+    def varied(*a, **k):
+        comp, own = full(*a, **k), dict(changes)
+        if own.pop("white_only", False):  # each ink's factor against white only: no correction among other inks
+            own["kappa"] = np.zeros((len(comp.k), len(comp.k)))
+        return replace(comp, **own)
+
+    with mock.patch.object(Q, "share_compensation", varied):
         yield
 
 
@@ -199,6 +209,7 @@ def main():
     ap.add_argument("--step", type=float, default=REFINE_STEP, help="the refinement's step (printing.refine)")
     ap.add_argument("--spp", type=int, default=REFINE_SPP, help="its printed render's and gradient pass's spp")
     ap.add_argument("--threads", type=int, default=None)
+    ap.add_argument("--no-cost", dest="cost", action="store_false", help="skip timing one iteration's passes")
     a = ap.parse_args()
     refine = sorted(int(v) for v in a.refine.split(",") if v)
     methods = [m for m in a.methods.split(",") if m]
@@ -210,8 +221,8 @@ def main():
     ev.progress = False
     vol = ev.d.load_volume()
     E._render_continuous(ev, vol)
-    per_it = iteration_seconds(vol, ev.rec.texels, a.threads)
-    print(f"one optimisation iteration's passes: {per_it:.1f} s", flush=True)
+    per_it = iteration_seconds(vol, ev.rec.texels, a.threads) if a.cost else None
+    print(f"one optimisation iteration's passes: {per_it} s", flush=True)
     settings = (a.step, (a.spp, a.spp))
     say = lambda s: print(s, flush=True)  # noqa: E731
     control = "only" if a.control_only else a.control
@@ -244,7 +255,7 @@ def main():
         row["spp"] = m.spp
         if name in made:
             row["seconds_to_make"] = made[name][1]
-            row["cost_iterations"] = made[name][1] / per_it
+            row["cost_iterations"] = None if per_it is None else made[name][1] / per_it
             row.update(made[name][2])
         entry["results"][name] = row
         print(name, {k: round(v, 4) if v is not None else None for k, v in row.items() if k in KEYS}, flush=True)
