@@ -240,7 +240,8 @@ def printed_refine() -> str:
         for i, (name, m) in enumerate(e["results"].items()):
             cost = ""
             if "seconds_to_make" in m:
-                cost = f"{m['seconds_to_make']:.0f} s ({m['cost_iterations']:.1f} it.)"
+                its = m["cost_iterations"]
+                cost = f"{m['seconds_to_make']:.0f} s" + ("" if its is None else f" ({its:.1f} it.)")
             vs_c, vs_b = diff(e, name, "continuous"), diff(e, name, "blue-noise")
             single = case.endswith(("_comp", "_comp_interp"))  # measured before the pair factors: single-ink
             rows.append(
@@ -350,6 +351,53 @@ def halftone_ssim_channels() -> str:
     header = ["case", "difference", "SSIM L* / a* / b*", "b*: luminance factor", "b*: contrast-structure factor"]
     header += ["b*: windowed std (b* units)", "mean b* at the centres"]
     return table(header, rows, [path])
+
+
+C2F_MESHES = ("spot", "spider", "coin", "box", "duck", "eyeball", "orange", "checker")
+
+
+def halftone_c2f() -> str:
+    """The compensation's variants on the mesh suite's 20 mm c2f-correction cells and a Spot 20 mm run of the same
+    plan (experiments/printed_refine.py entries MESH20_c2f and MESH20_fix): per variant its difference to blue
+    noise and to the continuous result, paired ± standard errors on the entry's texel sample, and the default rule's
+    verdict (a win or a loss beyond the noise: more than two standard errors)."""
+    path = STUDY / "printed_refine.json"
+    res = load(path)["results"]
+
+    def pd(e: dict, a: str, b: str, k: str, d: int) -> str:
+        v = ((e.get("differences") or {}).get(f"{a} - {b}") or {}).get(k) or {}
+        return "–" if v.get("value") is None else f"{v['value']:+.{d}f} ± {v['stderr']:.{d}f}"
+
+    def verdict(e: dict, a: str) -> str:
+        diff = e["differences"][f"{a} - blue-noise"]
+        beyond = {k: diff[k]["value"] / max(diff[k]["stderr"], 1e-12) for k in SIDE_KEYS_RULE}
+        wins = beyond["delta_e76_mean_corrected"] < -2 and beyond["delta_e2000_mean"] < -2
+        loses = beyond["ssim"] < -2
+        return ("passes" if wins and not loses else "fails") + (": SSIM lost" if loses else "")
+
+    rows = []
+    for mesh in C2F_MESHES:
+        first = True
+        for tag in ("c2f", "fix"):
+            e = res.get(f"{mesh}20_{tag}")
+            if e is None:
+                continue
+            names = [n for n in e["results"] if n not in ("continuous", "blue-noise")]
+            if tag == "c2f":
+                names = ["blue-noise", *names]
+            for name in names:
+                vs_b = "" if name == "blue-noise" else " / ".join(pd(e, name, "blue-noise", k, d) for k, d in SIDE_KEYS)
+                vs_c = " / ".join(pd(e, name, "continuous", k, d) for k, d in SIDE_KEYS)
+                rule = "" if name == "blue-noise" else verdict(e, name)
+                load_1 = f"{e['load_average_1min']:.1f}" if first and e.get("load_average_1min") is not None else ""
+                rows.append([mesh if first else "", f"{name} ({tag})", vs_b, rule, vs_c, load_1])
+                first = False
+    what = "ΔE76 / ΔE2000 / SSIM / mottle"
+    header = ["mesh (20 mm)", "result (entry)", f"− blue noise: {what}", "rule", f"− continuous: {what}", "load"]
+    return table(header, rows, [path])
+
+
+SIDE_KEYS_RULE = ("delta_e76_mean_corrected", "delta_e2000_mean", "ssim")
 
 
 def compensation_factors() -> str:
@@ -1278,6 +1326,7 @@ TABLES = {
     "halftone-cause": halftone_cause,
     "halftone-ssim-channels": halftone_ssim_channels,
     "halftone-side-by-side": halftone_side_by_side,
+    "halftone-c2f": halftone_c2f,
     "compensation-factors": compensation_factors,
     "speed": speed,
     "mesh-scaling": mesh_scaling,

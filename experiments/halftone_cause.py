@@ -47,7 +47,7 @@ from inkopt.rundir import RunDir  # noqa: E402
 from inkopt.units import parse_dpi  # noqa: E402
 
 SEED = 2**62 + 7
-SHARE_EDGES = [0.0, 0.05, 0.15, 0.3, 0.5, 1.01]
+SHARE_EDGES = [0.0, 0.01, 0.03, 0.05, 0.15, 0.3, 0.5, 1.01]
 
 
 def physical_tile(q: Quantization) -> np.ndarray:
@@ -85,8 +85,11 @@ def quantization(spec: str) -> Quantization:
     return Quantization(method, 0, dpi, up or "nearest", order or "lightness", compensate=bool(plus))
 
 
-def stats(d_lab: np.ndarray, noise: np.ndarray) -> dict:
-    """Bias (mean ΔL*, Δa*, Δb* and the standard error of ΔL*) and noise-corrected spread of (S, 3) differences."""
+def stats(d_lab: np.ndarray, noise_lab: np.ndarray) -> dict:
+    """Bias (mean ΔL*, Δa*, Δb* and the standard error of ΔL*) and noise-corrected spread of (S, 3) differences
+    (``noise_lab`` (S, 3): both renders' Monte Carlo variance per channel), in all and per channel (``spread_lab``:
+    L*, a*, b* less their bias; the grain each channel carries)."""
+    noise = noise_lab.sum(1)
     mean = d_lab.mean(0)
     se = d_lab.std(0) / np.sqrt(len(d_lab))
     power = np.sum(d_lab * d_lab, 1) - noise
@@ -100,7 +103,14 @@ def stats(d_lab: np.ndarray, noise: np.ndarray) -> dict:
         "bias_dE76": float(np.linalg.norm(mean)),
         "rms_corrected": float(np.sqrt(max(power.mean(), 0.0))),
         "rms_corrected_less_bias": float(np.sqrt(max(power.mean() - mean @ mean, 0.0))),
+        "spread_lab": [float(np.sqrt(max(v, 0.0))) for v in channel_power(d_lab, noise_lab) - mean * mean],
     }
+
+
+def channel_power(d_lab: np.ndarray, noise_lab: np.ndarray) -> np.ndarray:
+    """(3,) the noise-corrected mean square of each CIELAB channel of the (S, 3) differences, ``noise_lab`` (S, 3)
+    both renders' Monte Carlo variance per channel."""
+    return np.mean(d_lab * d_lab - noise_lab, 0)
 
 
 def main():
@@ -138,7 +148,7 @@ def main():
         printer.use(labels)
         p_rgb, p_var, _ = printer(a.spp, SEED + 1)
         d_lab = linear_to_lab(p_rgb) - linear_to_lab(c_rgb)
-        noise = np.trace(lab_covariance(c_rgb, c_var) + lab_covariance(p_rgb, p_var), axis1=1, axis2=2)
+        noise = np.diagonal(lab_covariance(c_rgb, c_var) + lab_covariance(p_rgb, p_var), axis1=1, axis2=2)
         row = {"seconds": time.perf_counter() - t0, "printer_shape": list(labels.shape), "all": stats(d_lab, noise)}
         for i, ink in enumerate(vol.inks.names):
             bins = []
@@ -148,7 +158,7 @@ def main():
                     bins.append({"lo": lo, "hi": hi, **stats(d_lab[m], noise[m])})
             row[f"share_{ink}"] = bins
         entry["variants"][spec] = row
-        print(spec, {k: round(v, 3) for k, v in row["all"].items()}, f"{row['seconds']:.0f} s", flush=True)
+        print(spec, {k: np.round(v, 3).tolist() for k, v in row["all"].items()}, f"{row['seconds']:.0f} s", flush=True)
         del labels, printer
     entry.update(machine())
     add_study_entry("halftone_cause.json", a.name, entry)

@@ -8,7 +8,7 @@ spp + gradient 4 spp, the defaults) measured in the same session. Writes the ent
 experiments/results/printed_refine.json.
 
     .venv/bin/python experiments/printed_refine.py NAME RUN [--refine 3,6] [--control] [--methods M[:UPSAMPLE],...]
-        [--texel-sample N] [--threads T]
+        [--texel-sample N] [--windows W] [--threads T] [--no-cost]
 
 ``--control``: also the same steps with the loss on the continuous render (``control-N``: their blue-noise print)
 and the refined mixtures rendered continuous (``refine-N continuous``), with the paired differences refine-N -
@@ -18,7 +18,10 @@ control-N and refine-N - refine-N continuous; ``--control-only``: the control wi
 pre-compensated for the halftone, ``printing.compensate``, with its factors against other inks; ``+comp1``: with each
 ink's factor against the base alone, the other inks counted as base (what ``--compensate`` does); ``t0.05``: the
 correction tapered below a share of 0.05; its seconds are those of a cached compensation when one is cached, else they
-include measuring it).
+include measuring it). On a texel sample the entry also holds ``ssim_channels``: each printed result's SSIM
+against blue noise per channel (L*, a*, b*), paired on the windows, and binned by each ink's share at the windows'
+centres (where a variant's SSIM is lost), and ``delta_e_bins``: its ΔE76 and ΔE2000 against blue noise binned by
+each ink's share at the points; ``--windows``: the sample's SSIM windows (``sample_windows``).
 """
 
 import argparse
@@ -48,6 +51,7 @@ from inkopt.printing.stream import run_target  # noqa: E402
 from inkopt.render import Renderer  # noqa: E402
 
 KEYS = ("delta_e76_mean_corrected", "delta_e2000_mean", "ssim", "mottle_l2")
+SHARE_BINS = (0.0, 0.01, 0.03, 0.1, 0.3, 1.01)  # an ink's share at a window's centre, for ``ssim_channels``
 
 
 def iteration_seconds(vol, texels, threads) -> float:
@@ -72,8 +76,10 @@ class ContinuousRefinement(PrintedRefinement):
 
 
 def quantization(spec: str) -> tuple[Quantization, dict]:
-    """``METHOD[:UPSAMPLE][/ORDER][+comp[1][tP]]`` -> (the settings, the compensation's changes for
-    ``compensation_variant``; ``ORDER``: ``Quantization.ink_order``, e.g. ``tint-first``):
+    """``METHOD[:UPSAMPLE][/ORDER][+comp[1|w][tP]]`` -> (the settings, the compensation's changes for
+    ``compensation_variant``; ``ORDER``: ``Quantization.ink_order``, e.g. ``tint-first``; ``+compw``: each ink's
+    factor against white alone and none against the other inks, p_eff = p / (1 + k w), w the white share, so a
+    mixture without white is not corrected):
     ``+comp`` the shares compensated with the factors against other inks (``ShareCompensation.pairs``), ``+comp1``
     with each ink's factor against the base alone (the other inks counted as base: what ``Quantization.compensate``
     applies), ``tP`` (e.g. ``+compt0.05``) with the correction tapered below the share P
@@ -83,6 +89,7 @@ def quantization(spec: str) -> tuple[Quantization, dict]:
     m, _, up = head.partition(":")
     single, _, taper = tail.partition("t")
     changes = {"pairs": single != "1"} | ({"taper": float(taper)} if taper else {})
+    changes |= {"white_only": True, "pairs": True} if single == "w" else {}
     q = Quantization(m, upsample=up or "nearest", ink_order=order or "lightness", compensate=bool(comp))
     return q, changes
 
@@ -91,7 +98,14 @@ def quantization(spec: str) -> tuple[Quantization, dict]:
 def compensation_variant(changes: dict):
     """Within it, ``quantize`` uses the measured compensation with ``changes`` (fields of ``ShareCompensation``)."""
     full = Q.share_compensation
-    with mock.patch.object(Q, "share_compensation", lambda *a, **k: replace(full(*a, **k), **changes)):
+
+    def varied(*a, **k):
+        comp, own = full(*a, **k), dict(changes)
+        if own.pop("white_only", False):  # each ink's factor against white only: no correction among other inks
+            own["kappa"] = np.zeros((len(comp.k), len(comp.k)))
+        return replace(comp, **own)
+
+    with mock.patch.object(Q, "share_compensation", varied):
         yield
 
 
@@ -124,6 +138,64 @@ def candidates(vol, rd, refine: list[int], methods: list[str], control, threads,
     return out, mixtures
 
 
+def centre_shares(ev, vol, texels: np.ndarray) -> np.ndarray:
+    """(k, N) float64: the mixture's shares at the voxels of scene texels ``texels`` (k,)."""
+    vox = ev.rec.texels.voxel[texels].astype(np.int64)
+    return np.asarray(vol.mixture, np.float64)[vox[:, 0], vox[:, 1], vox[:, 2]]
+
+
+def share_bins(d: dict, shares: np.ndarray, inks, population: int) -> dict:
+    """Per ink, the bins of its share (``SHARE_BINS``) with at least 3 rows: their count and the mean ± standard
+    error of each per-row difference of ``d`` (name -> (k,) array)."""
+    out = {}
+    for i, ink in enumerate(inks.names):
+        bins = []
+        for lo, hi in zip(SHARE_BINS[:-1], SHARE_BINS[1:]):
+            m = (shares[:, i] >= lo) & (shares[:, i] < hi)
+            if m.sum() >= 3:
+                bins.append({"lo": lo, "hi": hi, "count": int(m.sum())})
+                for k, v in d.items():
+                    bins[-1][k] = dict(zip(("value", "stderr"), sampled.mean_se(v[m], population)))
+        out[f"share_{ink}"] = bins
+    return out
+
+
+def delta_e_bins(ev, values: dict, vol, names) -> dict:
+    """Name -> each printed result's corrected ΔE76 and ΔE2000 minus blue noise's on the sample's points, binned by
+    each ink's share at the points' voxels (``share_bins``)."""
+    shares = centre_shares(ev, vol, ev.sample.points)
+    b = values["blue-noise"]
+    out = {}
+    for n in names:
+        if n != "blue-noise":
+            v = values[n]
+            d = {"delta_e76": (v["delta_e76"] - v["noise_contribution"]) - (b["delta_e76"] - b["noise_contribution"])}
+            d["delta_e2000"] = v["delta_e2000"] - b["delta_e2000"]
+            out[n] = share_bins(d, shares, vol.inks, ev.sample.population)
+    return out
+
+
+def ssim_channels(ev, loss: TexelLoss, vol, names) -> dict:
+    """Name -> each printed result's SSIM minus blue noise's on the sample's windows (``ev.renders`` still held):
+    ``L``, ``a``, ``b`` (per channel, normalised L*a*b* as ``TexelLoss.ssim_map``) and per ink the bins of its
+    share at the centres' voxels (``SHARE_BINS``): windows, the mean SSIM and b* differences, each {value, stderr}
+    (``sample.mean_se``)."""
+    s, big = ev.sample, ev.sample.population
+    ct = s.centre_rows
+    per = {n: loss.ssim_map(ev.renders[n].ads[1].rgb, ev.renders[n].ads[1].var)[ct] for n in names}
+    shares = centre_shares(ev, vol, s.centres)
+    pair = lambda d: dict(zip(("value", "stderr"), sampled.mean_se(d, big)))  # noqa: E731
+    out = {}
+    for n in names:
+        if n == "blue-noise":
+            continue
+        d = per[n] - per["blue-noise"]
+        row = {c: pair(d[:, i]) for i, c in enumerate("Lab")}
+        row |= share_bins({"ssim": d.mean(1), "b": d[:, 2]}, shares, vol.inks, big)
+        out[n] = row
+    return out
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("name")
@@ -133,20 +205,24 @@ def main():
     ap.add_argument("--control", action="store_true", help="also the control (ContinuousRefinement)")
     ap.add_argument("--control-only", action="store_true", help="the control without the refinement")
     ap.add_argument("--texel-sample", type=int, default=None)
+    ap.add_argument("--windows", type=int, default=None, help="the texel sample's SSIM windows")
     ap.add_argument("--step", type=float, default=REFINE_STEP, help="the refinement's step (printing.refine)")
     ap.add_argument("--spp", type=int, default=REFINE_SPP, help="its printed render's and gradient pass's spp")
     ap.add_argument("--threads", type=int, default=None)
+    ap.add_argument("--no-cost", dest="cost", action="store_false", help="skip timing one iteration's passes")
     a = ap.parse_args()
     refine = sorted(int(v) for v in a.refine.split(",") if v)
     methods = [m for m in a.methods.split(",") if m]
-    opts = EvaluateOptions(baselines=False, texel_sample=a.texel_sample, threads=a.threads, write=False)
+    opts = EvaluateOptions(
+        baselines=False, texel_sample=a.texel_sample, sample_windows=a.windows, threads=a.threads, write=False
+    )
     t_start = time.perf_counter()
     ev = E.Evaluating.open(a.run, opts, lambda s: print(s, flush=True))
     ev.progress = False
     vol = ev.d.load_volume()
     E._render_continuous(ev, vol)
-    per_it = iteration_seconds(vol, ev.rec.texels, a.threads)
-    print(f"one optimisation iteration's passes: {per_it:.1f} s", flush=True)
+    per_it = iteration_seconds(vol, ev.rec.texels, a.threads) if a.cost else None
+    print(f"one optimisation iteration's passes: {per_it} s", flush=True)
     settings = (a.step, (a.spp, a.spp))
     say = lambda s: print(s, flush=True)  # noqa: E731
     control = "only" if a.control_only else a.control
@@ -164,6 +240,7 @@ def main():
     measured, values = {}, {}
     target = ev.target if ev.sample is None else ev.target[ev.sample.windows]
     loss = TexelLoss(target, ev.groups[-1].texels.pos_vox, sigma=sampled.SIGMA)
+    channels = ssim_channels(ev, loss, vol, list(made)) if ev.sample is not None else None
     for name in list(ev.renders):
         measured[name] = E._measured(ev, loss, ev.renders.pop(name), values, name)
     entry = {**provenance(), "run": a.run, "texels": len(ev.rec.texels), "iteration_seconds": per_it}
@@ -178,7 +255,7 @@ def main():
         row["spp"] = m.spp
         if name in made:
             row["seconds_to_make"] = made[name][1]
-            row["cost_iterations"] = made[name][1] / per_it
+            row["cost_iterations"] = None if per_it is None else made[name][1] / per_it
             row.update(made[name][2])
         entry["results"][name] = row
         print(name, {k: round(v, 4) if v is not None else None for k, v in row.items() if k in KEYS}, flush=True)
@@ -189,6 +266,8 @@ def main():
         entry["differences"] = sampled.differences(values, pairs, ev.sample)
         for k, v in entry["differences"].items():
             print(k, {f: (round(d["value"], 4), round(d["stderr"], 4)) for f, d in v.items() if d["value"] is not None})
+        entry["ssim_channels"] = channels
+        entry["delta_e_bins"] = delta_e_bins(ev, values, vol, list(made))
     entry["seconds"] = time.perf_counter() - t_start
     entry.update(machine())
     add_study_entry("printed_refine.json", a.name, entry)
