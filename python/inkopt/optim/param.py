@@ -155,10 +155,11 @@ class Parameterization:
         centred = g - np.sum(g * p, axis=1, keepdims=True)
         return (centred * s * (1.0 - s) / s.sum(axis=1, keepdims=True)).astype(np.float32)
 
-    def variables_for(self, p: np.ndarray) -> np.ndarray:
+    def variables_for(self, p: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Variables x (F, N) float32 whose free-part mixture is p (F, N) (entries clipped to [1e-6, 1]); row by
-        row, in blocks (float64 temporaries of a block only)."""
-        x = np.empty(np.shape(p), np.float32)
+        row, in blocks (float64 temporaries of a block only). ``out``: a float32 (F, N) array x is written into,
+        ``p`` itself allowed (each block is read before it is written: no second (F, N) array)."""
+        x = np.empty(np.shape(p), np.float32) if out is None else out
         for lo in range(0, len(x), 1 << 20):
             q = np.clip(np.asarray(p[lo : lo + (1 << 20)], np.float64), 1e-6, 1.0)
             q /= q.sum(axis=1, keepdims=True)
