@@ -6,6 +6,7 @@ against what happens, on Spot.
     python bench/bench_footprint.py run 40 --dir D [--stages] [--tag T] [-- OPTIONS]   # a real run (--iterations 2
                                                    # unless OPTIONS say); --stages: each stage's own peak
     python bench/bench_footprint.py timed 40 --dir D --time-log LOG   # a run made under /usr/bin/time -v
+    python bench/bench_footprint.py fit --tag T             # the band runs' stages against the footprint's
     python bench/bench_footprint.py watch 40 --pid PID --stage TEXT --run-command CMD   # a run under way: peak so far
 
 Each mode writes its entries into bench/results/footprint_spot.json (``entries``: ``counts``, ``dry_<H>mm``,
@@ -150,6 +151,42 @@ def run(height: float, run_dir: str, options: list[str], stages: bool = False) -
     return {f"run_{height:g}mm" + ("" if shell is None else f"_shell{shell:g}"): rec}
 
 
+def stage_peaks(marks: list) -> dict:
+    """The largest peak (GiB) of each footprint stage among a run's marks (``run_stages.py``: [mark, peak since the
+    previous mark, seconds]): "voxelize" up to the scene's end, "step" inside ``Optimization.step``, "figures" the
+    rest (the set-up, the figures, the baseline guard, the result's files)."""
+    out = {"voxelize": 0.0, "step": 0.0, "figures": 0.0}
+    stage = "voxelize"
+    for name, peak, _ in marks:
+        out[stage] = max(out[stage], peak)  # the interval that ends at this mark
+        if name == "exit mesh.build_mesh_scene" or name == "exit Optimization.step":
+            stage = "figures"
+        elif name == "enter Optimization.step":
+            stage = "step"
+    return out
+
+
+def fit(tag: str, entries: dict) -> dict:
+    """The data the footprint's band constants are fitted to: for each recorded run ``run_<H>mm_shell<D><tag>``
+    with stages, its stages' measured peaks (``stage_peaks``), the footprint's counts and its stages' estimates
+    (GiB) and their ratio to the measured."""
+    rows = {}
+    for name, rec in sorted(entries.items()):
+        if not (name.startswith("run_") and name.endswith(tag) and "stages" in rec and rec.get("shell_mm")):
+            continue
+        fp = _footprint(rec["height_mm"], rec["shell_mm"])
+        est = {k: v / 2**30 for k, v in fp.stage_bytes().items()}
+        measured = stage_peaks(rec["stages"])
+        rows[name] = {
+            "counts": {"grid": fp.grid_voxels, "inside": fp.inside_voxels, "free": fp.free_voxels, "texels": fp.texels},
+            "measured_gib": measured,
+            "estimated_gib": est,
+            "peak": {"measured": rec["peak_rss_gb"], "estimated": fp.peak_bytes() / 2**30},
+            "ratio_estimated_to_measured": fp.peak_bytes() / 2**30 / rec["peak_rss_gb"],
+        }
+    return {f"fit_shell{tag}": {"rows": rows}}
+
+
 def timed(height: float, run_dir: str, time_log: str) -> dict:
     """A run made outside this script under ``/usr/bin/time -v`` (``time_log``: its stderr, the run's log with
     time's lines at the end): its peak RSS and CPU seconds from time's lines, its seconds per iteration from
@@ -207,7 +244,7 @@ def watch(height: float, pid: int, stage: str, command: str) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("mode", choices=("counts", "dry", "run", "timed", "watch"))
+    ap.add_argument("mode", choices=("counts", "dry", "run", "timed", "watch", "fit"))
     ap.add_argument("heights", type=float, nargs="*")
     ap.add_argument("--dir", help="run directory (run, timed)")
     ap.add_argument("--time-log", help="timed: the stderr of `/usr/bin/time -v inkopt optimize ...`")
@@ -222,6 +259,9 @@ def main() -> None:
     sys.path.insert(0, str(ROOT / "python"))
     if args.mode == "counts":
         entries = counts()
+    elif args.mode == "fit":
+        recorded = json.loads((RESULTS / RESULTS_FILE).read_text())["entries"]
+        entries = fit(args.tag, recorded)
     elif args.mode == "dry":
         entries = dry(args.heights or [100.0, 200.0], extra)
     elif args.mode == "watch":
