@@ -171,9 +171,8 @@ def run_optimisation(scene: Scene, out_dir, cfg: OptimizeConfig, options: RunOpt
         figures = _Figures(job)
         if job.run.start_figures is None and job.run.iteration == 0:
             # measured once, before the first step, then kept in the checkpoints: one pilot (noise-corrected;
-            # `inkopt evaluate` measures the baselines noise-free); with the guard, the renderer is not held beside
-            # the window operators the figures build, nor beside the baseline's variables: the guard builds it again
-            job.run.keep_start_figures(figures.start(keep_renderer=not options.baseline_guard))
+            # `inkopt evaluate` measures the baselines noise-free)
+            job.run.keep_start_figures(figures.start())
         if options.baseline_guard:  # the extrusion baseline's figures, measured once like the start's
             keep_baseline_figures(job.run, lambda x: figures.start(x, keep_renderer=True), options.log)
         job.run.release_unread_operators()  # the figures' window is not held through the first render
