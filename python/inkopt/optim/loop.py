@@ -160,10 +160,7 @@ class Optimization:
     def initial_variables(self, init: str | None = None) -> np.ndarray:
         """The run's starting variables x (F, N) (recomputed from the configuration: same after a resume), or
         those of the start ``init`` names (e.g. "extrusion": what a run started from that baseline renders)."""
-        p = self._initial_free_mixture(init)
-        # a mixture made for this call (a baseline's, a file's) becomes the variables in place: one (F, N) array
-        own = p.dtype == np.float32 and p.flags.writeable and p.flags.owndata and p.flags.c_contiguous
-        return self.param.variables_for(p, out=p if own else None)
+        return self.param.variables_for(self._initial_free_mixture(init), reuse=True)  # made for this call
 
     def initial_volume(self) -> Volume:
         """The run's starting point as a volume (the whole grid's mixture: see :meth:`renderer` for a render)."""
