@@ -19,7 +19,8 @@ On Spot at 6-60 mm these land within 0.1 % (grid, inside), 1.5 % (texels) and 1 
 of the voxelized counts (tests/test_footprint.py; docs/performance.md, "Estimates before allocation").
 
 Memory: the largest of three stages' peaks (voxelization, a step, the figures), each ``BASE_BYTES`` and the mesh
-plus bytes per grid voxel, inside voxel, free voxel and texel (the constants below say where each comes from).
+plus bytes per grid voxel, inside voxel, free voxel and texel (a band run's stages: their own per-free, per-texel
+and fixed terms; the constants below say where each comes from).
 Time: the measured cost of an iteration's passes per texel, growing like texels^``TEXEL_EXPONENT``, plus the step's
 cost per free voxel, both from Spot on 2 cores (bench/results/mesh_20mm.json and mesh_40mm.json); the machine's
 speed on the day, a shell's deeper paths (a pure-white core) and an optimised start's longer paths are not in it.
