@@ -19,8 +19,8 @@ On Spot at 6-60 mm these land within 0.1 % (grid, inside), 1.5 % (texels) and 1 
 of the voxelized counts (tests/test_footprint.py; docs/performance.md, "Estimates before allocation").
 
 Memory: the largest of three stages' peaks (voxelization, a step, the figures), each ``BASE_BYTES`` and the mesh
-plus bytes per grid voxel, inside voxel, free voxel and texel (a band run's stages: their own per-free, per-texel
-and fixed terms; the constants below say where each comes from).
+plus bytes per grid voxel, inside voxel, free voxel and texel (a band run's stages: their own per-free and per-texel
+terms; the constants below say where each comes from).
 Time: the measured cost of an iteration's passes per texel, growing like texels^``TEXEL_EXPONENT``, plus the step's
 cost per free voxel, both from Spot on 2 cores (bench/results/mesh_20mm.json and mesh_40mm.json); the machine's
 speed on the day, a shell's deeper paths (a pure-white core) and an optimised start's longer paths are not in it.
@@ -95,13 +95,13 @@ SHELL_STEP_TEXEL_BYTES = STEP_TEXEL_BYTES
 #: - the figures (the start's with the renderer held for the baseline guard, the guard's, the result's, and the
 #:   renderer's build): per free voxel the variables, momentum and index (48 B) and the renderer's band medium
 #:   (42 B: 0.437 GiB held at 60 mm), per texel the loss's operators, their build and the metrics' temporaries
-#:   (1.30 GiB above the set-up at 60 mm), and a fixed 0.2 GiB (the figures' libraries and the allocator's arenas:
-#:   Spot 20 mm's whole run peaks at 0.59 GiB): fitted to the start's metrics with the renderer held, 3.09 GiB at
-#:   60 mm (2.651 measured without it plus its 0.437) and 1.45 at 40 mm (1.266 + 0.184), 0.55 GiB estimated at
-#:   20 mm against 0.591 measured; the whole 60 mm run measured 3.10 GiB (3.09 estimated)
-SHELL_FIGURES_FIXED_BYTES = 0.2 * 2**30
+#:   (1.30 GiB above the set-up at 60 mm): 1.85 KB, between the 1.77 KB of the start's metrics with the renderer
+#:   held at 60 mm (2.651 GiB measured without it plus its 0.437) and the 2.07 KB at 40 mm (1.266 + 0.184); no fixed
+#:   term (the figures' libraries and arenas, ~0.2 GiB, which the all-free terms do not count either, so that a band
+#:   never estimates above every voxel free): 3.16 GiB at 60 mm against the whole run's 3.10, 1.37 at 40 mm
+#:   against 1.45-1.53, 0.38 at 20 mm against 0.59
 SHELL_FIGURES_FREE_BYTES = 90.0
-SHELL_FIGURES_TEXEL_BYTES = 1520.0
+SHELL_FIGURES_TEXEL_BYTES = 1850.0
 #: seconds per iteration of the passes (4-spp gradient, 16-spp forward, the loss) at ``TEXELS_REF`` texels, from
 #: white on 2 cores: 11.19 s on Spot 20 mm (bench/results/mesh_20mm.json, render + gradient + loss)
 PASS_SECONDS_REF = 11.19
@@ -200,7 +200,6 @@ class Footprint:
         if self.shell:
             step = held + SHELL_STEP_FREE_BYTES * self.free_voxels + SHELL_STEP_TEXEL_BYTES * self.texels
             figures = held + SHELL_FIGURES_FREE_BYTES * self.free_voxels + SHELL_FIGURES_TEXEL_BYTES * self.texels
-            figures += SHELL_FIGURES_FIXED_BYTES
         return {"voxelize": fixed + voxelize, "step": fixed + step, "figures": fixed + figures}
 
     def fits(self, limit_bytes: float) -> bool:
