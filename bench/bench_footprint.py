@@ -3,8 +3,10 @@ against what happens, on Spot.
 
     python bench/bench_footprint.py counts                 # against bench/results/mesh_*mm.json and the runs below
     python bench/bench_footprint.py dry 100 200 [-- --shell-mm 1]   # `inkopt optimize --dry-run`: seconds, peak
-    python bench/bench_footprint.py run 40 --dir D [-- OPTIONS]   # a real run (--iterations 2 unless OPTIONS say)
+    python bench/bench_footprint.py run 40 --dir D [--stages] [--tag T] [-- OPTIONS]   # a real run (--iterations 2
+                                                   # unless OPTIONS say); --stages: each stage's own peak
     python bench/bench_footprint.py timed 40 --dir D --time-log LOG   # a run made under /usr/bin/time -v
+    python bench/bench_footprint.py fit --tag T             # the band runs' stages against the footprint's
     python bench/bench_footprint.py watch 40 --pid PID --stage TEXT --run-command CMD   # a run under way: peak so far
 
 Each mode writes its entries into bench/results/footprint_spot.json (``entries``: ``counts``, ``dry_<H>mm``,
@@ -32,20 +34,29 @@ ROOT = Path(__file__).resolve().parents[1]
 RESULTS_FILE = "footprint_spot.json"
 
 
-def _process(args: list[str], log: Path) -> dict:
+def _process(args: list[str], log: Path, stages: Path | None = None) -> dict:
     """Run ``python -m inkopt.cli ARGS`` (stdout and stderr to ``log``): exit status, wall and CPU seconds, peak
-    RSS (GiB)."""
+    RSS (GiB); with ``stages`` (a JSON path) under ``run_stages.py``, which adds ``stages``: each stage's own peak
+    (``run_stages.py``'s marks, its reset peaks making ``peak_rss_gb`` the largest of them)."""
     t = time.perf_counter()
+    command = [sys.executable, "-m", "inkopt.cli"]
+    if stages is not None:
+        command = [sys.executable, str(ROOT / "bench" / "run_stages.py"), str(stages)]
     with open(log, "wb") as f:
-        proc = subprocess.Popen([sys.executable, "-m", "inkopt.cli", *args], stdout=f, stderr=f)
+        proc = subprocess.Popen([*command, *args], stdout=f, stderr=f)
         _, status, usage = os.wait4(proc.pid, 0)
-    return {
+    rec = {
         "exit_status": os.waitstatus_to_exitcode(status),
         "seconds": time.perf_counter() - t,
         "cpu_seconds": usage.ru_utime + usage.ru_stime,
         "peak_rss_gb": usage.ru_maxrss / 2**20,
         "output": log.read_text().strip().splitlines(),
     }
+    if stages is not None:
+        marks = json.loads(stages.read_text())["marks"]
+        rec["peak_rss_gb"] = max(m["peak_gib"] for m in marks)  # ru_maxrss is reset with the marks' peaks
+        rec["stages"] = [[m["mark"], m["peak_gib"], round(m["seconds"], 1)] for m in marks]
+    return rec
 
 
 def _footprint(height: float, shell_mm=None):
@@ -85,13 +96,18 @@ def reestimate(entries: dict) -> None:
     (``estimated_now``, ``ratio_now``)."""
     for name, rec in entries.items():
         if name.startswith("run_") and "peak_rss_gb" in rec:
-            fp = _footprint(float(name[4:-2]))
+            fp = _footprint(rec.get("height_mm", float(name[4:].split("mm")[0])), rec.get("shell_mm"))
             now = {"peak_gib": fp.peak_bytes() / 2**30, "seconds_per_iteration": fp.seconds_per_iteration()}
             rec["estimated_now"] = now
             rec["ratio_now"] = {
                 "peak": now["peak_gib"] / rec["peak_rss_gb"],
                 "seconds_per_iteration": now["seconds_per_iteration"] / rec["seconds_per_iteration"],
             }
+
+
+def _shell(options: list[str]) -> float | None:
+    """The ``--shell-mm`` of a run's options (None: not given)."""
+    return float(options[options.index("--shell-mm") + 1]) if "--shell-mm" in options[:-1] else None
 
 
 def dry(heights: list[float], extra: list[str]) -> dict:
@@ -108,13 +124,15 @@ def dry(heights: list[float], extra: list[str]) -> dict:
     return out
 
 
-def run(height: float, run_dir: str, options: list[str]) -> dict:
+def run(height: float, run_dir: str, options: list[str], stages: bool = False) -> dict:
+    """A run of Spot at ``height`` mm into ``run_dir`` with ``options``; ``stages``: each stage's own peak
+    (``_process``)."""
     if "--iterations" not in options and "--time-budget" not in options:
         options = ["--iterations", "2", *options]
-    fp = _footprint(height)
+    fp = _footprint(height, _shell(options))
     args = ["optimize", str(SPOT), "--height-mm", f"{height:g}", "--out", run_dir, *options]
     before = os.getloadavg()[0]
-    rec = _process(args, Path(run_dir + ".log"))
+    rec = _process(args, Path(run_dir + ".log"), Path(run_dir + ".stages.json") if stages else None)
     report = json.loads((Path(run_dir) / "report.json").read_text())
     per = report["seconds_iterations"] / max(report["iterations"], 1)
     rec.update(
@@ -128,7 +146,45 @@ def run(height: float, run_dir: str, options: list[str]) -> dict:
         "peak": rec["estimated"]["peak_gib"] / rec["peak_rss_gb"],
         "seconds_per_iteration": rec["estimated"]["seconds_per_iteration"] / per,
     }
-    return {f"run_{height:g}mm": rec}
+    shell = _shell(options)
+    rec.update(height_mm=height, shell_mm=shell, options=options)
+    return {f"run_{height:g}mm" + ("" if shell is None else f"_shell{shell:g}"): rec}
+
+
+def stage_peaks(marks: list) -> dict:
+    """The largest peak (GiB) of each footprint stage among a run's marks (``run_stages.py``: [mark, peak since the
+    previous mark, seconds]): "voxelize" up to the scene's end, "step" inside ``Optimization.step``, "figures" the
+    rest (the set-up, the figures, the baseline guard, the result's files)."""
+    out = {"voxelize": 0.0, "step": 0.0, "figures": 0.0}
+    stage = "voxelize"
+    for name, peak, _ in marks:
+        out[stage] = max(out[stage], peak)  # the interval that ends at this mark
+        if name == "exit mesh.build_mesh_scene" or name == "exit Optimization.step":
+            stage = "figures"
+        elif name == "enter Optimization.step":
+            stage = "step"
+    return out
+
+
+def fit(tag: str, entries: dict) -> dict:
+    """The data the footprint's band constants are fitted to: for each recorded run ``run_<H>mm_shell<D><tag>``
+    with stages, its stages' measured peaks (``stage_peaks``), the footprint's counts and its stages' estimates
+    (GiB) and their ratio to the measured."""
+    rows = {}
+    for name, rec in sorted(entries.items()):
+        if not (name.startswith("run_") and name.endswith(tag) and "stages" in rec and rec.get("shell_mm")):
+            continue
+        fp = _footprint(rec["height_mm"], rec["shell_mm"])
+        est = {k: v / 2**30 for k, v in fp.stage_bytes().items()}
+        measured = stage_peaks(rec["stages"])
+        rows[name] = {
+            "counts": {"grid": fp.grid_voxels, "inside": fp.inside_voxels, "free": fp.free_voxels, "texels": fp.texels},
+            "measured_gib": measured,
+            "estimated_gib": est,
+            "peak": {"measured": rec["peak_rss_gb"], "estimated": fp.peak_bytes() / 2**30},
+            "ratio_estimated_to_measured": fp.peak_bytes() / 2**30 / rec["peak_rss_gb"],
+        }
+    return {f"fit_shell{tag}": {"rows": rows}}
 
 
 def timed(height: float, run_dir: str, time_log: str) -> dict:
@@ -188,19 +244,24 @@ def watch(height: float, pid: int, stage: str, command: str) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("mode", choices=("counts", "dry", "run", "timed", "watch"))
+    ap.add_argument("mode", choices=("counts", "dry", "run", "timed", "watch", "fit"))
     ap.add_argument("heights", type=float, nargs="*")
     ap.add_argument("--dir", help="run directory (run, timed)")
     ap.add_argument("--time-log", help="timed: the stderr of `/usr/bin/time -v inkopt optimize ...`")
     ap.add_argument("--pid", type=int, help="watch: the run's process")
     ap.add_argument("--stage", default="", help="watch: how far the run has come")
     ap.add_argument("--run-command", default="", help="watch: the run's command line")
+    ap.add_argument("--stages", action="store_true", help="run: each stage's own peak (bench/run_stages.py)")
+    ap.add_argument("--tag", default="", help="run, timed, watch: appended to the entry's name (e.g. _before)")
     argv = sys.argv[1:]
     extra = argv[argv.index("--") + 1 :] if "--" in argv else []
     args = ap.parse_args(argv[: argv.index("--")] if "--" in argv else argv)
     sys.path.insert(0, str(ROOT / "python"))
     if args.mode == "counts":
         entries = counts()
+    elif args.mode == "fit":
+        recorded = json.loads((RESULTS / RESULTS_FILE).read_text())["entries"]
+        entries = fit(args.tag, recorded)
     elif args.mode == "dry":
         entries = dry(args.heights or [100.0, 200.0], extra)
     elif args.mode == "watch":
@@ -210,7 +271,9 @@ def main() -> None:
     elif args.mode == "timed":
         entries = timed(args.heights[0], args.dir, args.time_log)
     else:
-        entries = run(args.heights[0], args.dir, extra)
+        entries = run(args.heights[0], args.dir, extra, args.stages)
+    if args.mode in ("run", "timed", "watch"):
+        entries = {name + args.tag: rec for name, rec in entries.items()}
     path = RESULTS / RESULTS_FILE
     data = json.loads(path.read_text()) if path.is_file() else {"entries": {}}
     for name, rec in entries.items():

@@ -193,3 +193,22 @@ def test_a_slab_beyond_the_memory_is_refused_naming_the_size_that_fits(monkeypat
     limit = 0.8 * 2.0**30
     assert slab_footprint((side, side, 10.0), 300.0, 1, 5).peak_bytes() <= limit
     assert slab_footprint((side * 1.05, side * 1.05, 10.0), 300.0, 1, 5).peak_bytes() > limit
+
+
+def test_the_band_estimate_agrees_with_whole_band_runs():
+    """Spot with a 1 mm shell: the band's estimated peak within 15 % of what whole runs measured at 40 and 60 mm
+    (bench/results/footprint_spot.json, run_40mm_shell1_final; mesh_60mm_shell1_whole_run.json, /usr/bin/time -v),
+    and its stages ordered as measured there: the figures (the start's metrics beside the renderer) above a step."""
+    import json
+    from pathlib import Path
+
+    results = Path(__file__).resolve().parents[1] / "bench" / "results"
+    runs = json.loads((results / "footprint_spot.json").read_text())["entries"]
+    whole = json.loads((results / "mesh_60mm_shell1_whole_run.json").read_text())["entries"]
+    measured = {40.0: runs["run_40mm_shell1_final"]["peak_rss_gb"], 60.0: whole["60mm_shell1_plane_transform"]}
+    measured[60.0] = measured[60.0]["peak_rss_gb"]
+    for height, gib in measured.items():
+        fp, _ = spec_footprint(MeshSpec(str(SPOT), height_mm=height, shell_mm=1.0), len(INKS))
+        assert fp.peak_bytes() / 2**30 == pytest.approx(gib, rel=0.15)
+        stages = fp.stage_bytes()
+        assert stages["figures"] > stages["step"] > stages["voxelize"]

@@ -209,11 +209,14 @@ def _start(scene: Scene, cfg: OptimizeConfig, options: RunOptions, make_renderer
         log(f"warning: {note}")
     lighting = load_lighting(options.lighting)
 
+    free = []  # the run's free voxels once its set-up has made them: the guard's baseline is read there alone
+
     def baseline(kind: str):  # a print-shop start (cfg.init "surface" or "extrusion"), one z layer at a time
         if options.baselines and kind in options.baselines:  # made already, for this scene
             return options.baselines[kind]
+        only = free[0] if free else None  # a band's baseline for the band alone (4 B a voxel, not per inside voxel)
         return baseline_layers(
-            kind, scene.volume, scene.texels, scene.target_rgb, scene.fixed_share, progress=options.progress
+            kind, scene.volume, scene.texels, scene.target_rgb, scene.fixed_share, progress=options.progress, only=only
         )
 
     run = Optimization(
@@ -226,6 +229,7 @@ def _start(scene: Scene, cfg: OptimizeConfig, options: RunOptions, make_renderer
         viewing=options.viewing,
         started=options.started,  # the whole run's time counts this invocation's set-up too
     )
+    free.append(run.param.free_index)
     return _Job(scene, cfg, options, lighting, run)
 
 

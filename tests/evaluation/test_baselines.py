@@ -262,3 +262,35 @@ def test_nearest_centred_is_scipys_feature_transform_ties_included(seed):
     got = np.ravel_multi_index(tuple(voxel[near].T), shape)
     np.testing.assert_array_equal(got, want)
     assert offsets[-1] == fill.sum()
+
+
+@pytest.mark.parametrize("centred", [True, False])
+def test_extrusion_read_only_at_some_voxels_is_bit_identical_there(table3, centred):
+    """``only`` (a run's free voxels): the extrusion baseline's layers at those voxels equal the whole baseline's
+    bit for bit, with fixed shares; its other voxels are 0, and the distance-transform path keeps a texel index
+    for those voxels alone. Some asked voxels lie outside (they stay 0, as in the whole baseline)."""
+    n = 10
+    rng = np.random.default_rng(3)
+    vmm = np.array([0.05, 0.07, 0.03])
+    c = (np.indices((n, n, n)).transpose(1, 2, 3, 0)[..., ::-1] + 0.5 - n / 2) * vmm
+    inside = np.linalg.norm(c / vmm.max(), axis=-1) < 0.45 * n * vmm.min() / vmm.max()
+    normals = (c / np.maximum(np.linalg.norm(c, axis=-1, keepdims=True), 1e-9)).astype(np.float32)
+    vol = Volume.from_mixture(
+        voxel_mm=vmm, mixture=np.zeros((n, n, n, 3), np.float32), inks=INKS3, inside=inside, normals=normals
+    )
+    tex = Texels.from_normals(inside, normals)
+    if not centred:  # face-centre texels: the k-d tree path
+        tex = Texels(tex.voxel, tex.face, tex.normal, centred=False)
+    target = rng.random((len(tex), 3)).astype(np.float32)
+    fixed = np.zeros((n, n, n, 3), np.float32)
+    fixed[inside & (rng.random(inside.shape) < 0.3), 0] = 0.25
+    asked = np.flatnonzero((rng.random(inside.shape) < 0.4).ravel())
+    whole = BaselineLayers("extrusion", vol, tex, target, fixed, table3)
+    part = BaselineLayers("extrusion", vol, tex, target, fixed, table3, only=asked)
+    if centred:
+        assert part.near is not None and len(part.near) == int(inside.ravel()[asked].sum()) < len(whole.near)
+    a, b = whole.array().reshape(-1, 3), part.array().reshape(-1, 3)
+    np.testing.assert_array_equal(b[asked], a[asked])
+    rest = np.ones(len(b), bool)
+    rest[asked] = False
+    assert not b[rest & ~(fixed.reshape(-1, 3).any(1))].any()

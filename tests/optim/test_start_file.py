@@ -126,3 +126,21 @@ def test_bad_start_files_are_refused_in_one_line(tmp_path):
         assert "\n" not in str(e.value), name
     with pytest.raises(VolumeError, match="finite and non-negative"):
         file_free_mixture(tmp_path / "negative.npz", INKS, param, 7)
+
+
+@pytest.mark.parametrize("kind", ["softmax", "sigmoid"])
+def test_variables_written_over_their_mixture_are_bit_identical(kind):
+    """``variables_for(p, reuse=True)`` writes x over a float32 p of its own (a baseline's start: one (F, N) array,
+    not two), bit for bit what a new array gets, over several blocks; other mixtures (float64, a read-only view) are
+    left alone."""
+    param = Parameterization(kind, FixedShares.none((3, 4, 5), 4))
+    rng = np.random.default_rng(1)
+    p = rng.dirichlet(np.ones(4), size=(1 << 20) + 77).astype(np.float32)
+    want = param.variables_for(p)
+    mine = p.copy()
+    got = param.variables_for(mine, reuse=True)
+    assert got is mine and np.array_equal(got, want)
+    p64 = p.astype(np.float64)
+    assert param.variables_for(p64, reuse=True) is not p64 and np.array_equal(p64, p.astype(np.float64))
+    view = np.broadcast_to(p[0], p.shape)
+    assert np.array_equal(param.variables_for(view, reuse=True), param.variables_for(view))

@@ -57,15 +57,18 @@ class BaselineLayers:
     ``baseline_mixture(kind, ...)`` bit for bit, without the (z, y, x, N) array (a layer source for
     ``printing.quantize.quantize``, which asks for layers in increasing z). ``shape`` (z, y, x, N), ``dtype``.
 
-    Held: the per-texel mixtures (surface: per textured voxel), a k-d tree of the texel centres (extrusion) and
-    references to the volume's inside mask and ``fixed_share``; not the volume's medium (extrusion fills the
-    voxels of ``volume.inside_mask()``). Arguments as
-    ``surface_baseline``; ``kind`` "surface" or "extrusion"."""
+    Held: the per-texel mixtures (surface: per textured voxel), a k-d tree of the texel centres or the nearest
+    texel of each voxel it fills (extrusion: int32, 4 B a voxel) and references to the volume's inside mask and
+    ``fixed_share``; not the volume's medium (extrusion fills the voxels of ``volume.inside_mask()``). Arguments as
+    ``surface_baseline``; ``kind`` "surface" or "extrusion"; ``only`` (keyword; default every voxel): sorted flat
+    (z, y, x) int64 indices of the voxels whose mixture is read (a run's free voxels): extrusion then fills only
+    those, bit for bit as without it, and leaves the layer's other voxels 0, so that a run with a band keeps 4 B
+    per band voxel instead of per inside voxel."""
 
     def __init__(self, kind: str, volume: Volume, texels: Texels, target_rgb, fixed_share=None, table=None, **kw):
         if kind not in BASELINES:
             raise ValueError(f"unknown baseline '{kind}'; use one of {tuple(BASELINES)}")
-        refine, progress = kw.pop("refine", True), kw.pop("progress", False)
+        refine, progress, only = kw.pop("refine", True), kw.pop("progress", False), kw.pop("only", None)
         if kw:
             raise TypeError(f"unexpected arguments {sorted(kw)}")
         table = table or colour_table(volume.inks, volume.g, volume.ior, progress=progress)
@@ -89,8 +92,9 @@ class BaselineLayers:
             self.mix_t = mix_t
             self.vmm = np.asarray(volume.voxel_mm, np.float64)
             self.tree, self.near, self.offsets = None, None, None
+            self.only = None if only is None else np.asarray(only, np.int64)
             if texels.centred and self.fill is not None:
-                self.near, self.offsets = _nearest_centred(texels, self.fill, self.vmm)
+                self.near, self.offsets = _nearest_centred(texels, self.fill, self.vmm, self.only)
             else:
                 self.tree = cKDTree(texels.position_mm(volume.voxel_mm))
 
@@ -106,8 +110,7 @@ class BaselineLayers:
             out.reshape(-1, n)[self.vox[lo:hi] - z * ny * nx] = self.vox_mix[lo:hi]
         else:
             out = np.zeros((ny, nx, n), np.float32)
-            fill = None if self.fill is None else self.fill[z]
-            flat = np.arange(ny * nx) if fill is None else np.flatnonzero(fill.ravel())
+            flat = self._filled(z)
             if len(flat):
                 out.reshape(-1, n)[flat] = self.mix_t[self.nearest_texels(z, flat)]
         fixed = None
@@ -115,9 +118,20 @@ class BaselineLayers:
             fixed = self.fixed.plane(z) if hasattr(self.fixed, "plane") else np.asarray(self.fixed[z], np.float32)
         return _finish(inside, fixed, out)
 
+    def _filled(self, z: int) -> np.ndarray:
+        """Extrusion: the flat (y, x) indices (ascending) of layer z's voxels that it fills: its fill voxels (every
+        voxel without an inside mask) among ``only``'s."""
+        ny, nx = self.shape[1:3]
+        fill = None if self.fill is None else self.fill[z].ravel()
+        if self.only is None:
+            return np.arange(ny * nx) if fill is None else np.flatnonzero(fill)
+        sel = _layer_part(self.only, z, ny * nx)
+        return sel if fill is None else sel[fill[sel]]
+
     def nearest_texels(self, z: int, flat: np.ndarray) -> np.ndarray:
         """Extrusion: the nearest scene texel (int64 (K,)) of the voxels ``flat`` (flat (y, x) indices, ascending)
-        of layer z, which must be all the layer's fill voxels when they were found by the distance transform."""
+        of layer z, which must be all the layer's filled voxels (``_filled``) when they were found by the distance
+        transform."""
         if self.near is not None:
             return self.near[self.offsets[z] : self.offsets[z + 1]].astype(np.int64)
         yx = np.stack(np.unravel_index(flat, self.shape[1:3]), 1)
@@ -129,12 +143,19 @@ class BaselineLayers:
         return np.stack([self[z] for z in range(self.shape[0])]) if self.shape[0] else np.zeros(self.shape, np.float32)
 
 
-def _nearest_centred(texels: Texels, fill: np.ndarray, vmm: np.ndarray):
-    """For texels at voxel centres (meshes): the nearest texel of every ``fill`` voxel (z, y, x bool), by the exact
+def _layer_part(index: np.ndarray, z: int, plane: int) -> np.ndarray:
+    """The flat (y, x) indices of layer z's entries of sorted flat (z, y, x) indices ``index``."""
+    lo, hi = np.searchsorted(index, [z * plane, (z + 1) * plane])
+    return index[lo:hi] - z * plane
+
+
+def _nearest_centred(texels: Texels, fill: np.ndarray, vmm: np.ndarray, only: np.ndarray | None = None):
+    """For texels at voxel centres (meshes): the nearest texel of every ``fill`` voxel (z, y, x bool; with ``only``,
+    sorted flat (z, y, x) int64 indices, of those among them), by the exact
     Euclidean distance transform of the grid with voxel size ``vmm`` (x, y, z mm) to the texels' voxels, one z plane
     at a time (``_core.feature_plane``: scipy.ndimage.distance_transform_edt's answers, ties included, without its
-    12 bytes per grid voxel). Returns (int32 (K,) texel index per fill voxel in C order, int64 (Z + 1,) offset of each
-    layer's first). Equidistant texels are resolved by the transform, which may pick another than a tree search
+    12 bytes per grid voxel). Returns (int32 (K,) texel index per such voxel in C order, int64 (Z + 1,) offset of
+    each layer's first). Equidistant texels are resolved by the transform, which may pick another than a tree search
     would."""
     shape = fill.shape
     nz, ny, nx = shape
@@ -144,17 +165,28 @@ def _nearest_centred(texels: Texels, fill: np.ndarray, vmm: np.ndarray):
     v = texels.voxel.astype(np.int64)
     col_z = np.unique((v[:, 1] * nx + v[:, 2]) * nz + v[:, 0])
     cols = np.arange(ny * nx, dtype=np.int64)
-    counts = fill.reshape(nz, -1).sum(1)
+
+    def filled(z: int) -> np.ndarray:  # flat (y, x) indices of the layer's voxels asked for, ascending
+        f = fill[z].ravel()
+        if only is None:
+            return np.flatnonzero(f)
+        sel = _layer_part(only, z, ny * nx)
+        return sel[f[sel]]
+
+    if only is None:
+        counts = fill.reshape(nz, -1).sum(1)
+    else:
+        counts = np.array([len(filled(z)) for z in range(nz)], np.int64)
     offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     near = np.empty(int(offsets[-1]), np.int32)
     sampling = tuple(float(s) for s in vmm[::-1])
     ft = np.empty((3, ny, nx), np.int32)
     for z in range(nz):  # layer by layer: nothing grid-sized
-        f = fill[z]
         if not counts[z]:
             continue
         _core.feature_plane(z, _column_sites(col_z, cols, z, nz).reshape(ny, nx), sampling, ft)
-        hit = np.ravel_multi_index((ft[0][f], ft[1][f], ft[2][f]), shape)
+        k = filled(z)
+        hit = np.ravel_multi_index((ft[0].ravel()[k], ft[1].ravel()[k], ft[2].ravel()[k]), shape)
         near[offsets[z] : offsets[z + 1]] = order[np.searchsorted(flat_t, hit, sorter=order)]
     return near, offsets
 

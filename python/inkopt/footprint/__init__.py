@@ -19,7 +19,8 @@ On Spot at 6-60 mm these land within 0.1 % (grid, inside), 1.5 % (texels) and 1 
 of the voxelized counts (tests/test_footprint.py; docs/performance.md, "Estimates before allocation").
 
 Memory: the largest of three stages' peaks (voxelization, a step, the figures), each ``BASE_BYTES`` and the mesh
-plus bytes per grid voxel, inside voxel, free voxel and texel (the constants below say where each comes from).
+plus bytes per grid voxel, inside voxel, free voxel and texel (a band run's stages: their own per-free and per-texel
+terms; the constants below say where each comes from).
 Time: the measured cost of an iteration's passes per texel, growing like texels^``TEXEL_EXPONENT``, plus the step's
 cost per free voxel, both from Spot on 2 cores (bench/results/mesh_20mm.json and mesh_40mm.json); the machine's
 speed on the day, a shell's deeper paths (a pure-white core) and an optimised start's longer paths are not in it.
@@ -81,12 +82,26 @@ STEP_TEXEL_BYTES = 128.0
 FIGURES_FREE_BYTES = 40.0
 FIGURES_TEXEL_BYTES = 4270.0
 #: a run with a shell stores the core's medium only for its band (the free voxels: ``BandMedium``), so its held
-#: per-inside term counts the free voxels; its iterations then peaked at 1.59x (Spot 40 mm) and 1.45x (60 mm, both
-#: 1 mm shells) what the held and step terms give (bench/results/stages_spot.json, 40mm_shell1_new_s58 and
-#: 60mm_shell1_new_s58, run.peak_rss_gb_by_stage.after_iterations less the base and the mesh: the renderer's
-#: set-up indexes the core voxels it skips, the step's temporaries): the larger factor, rounded up, bounds a shell
-#: run's step stage (held and step terms)
-SHELL_STEP_FACTOR = 1.6
+#: per-inside term counts the free voxels. Its two stages are fitted to whole band runs of Spot (1 mm shell, one
+#: iteration at 1 spp), each stage's own peak measured by bench/run_stages.py (bench/results/footprint_spot.json,
+#: entries run_<H>mm_shell1_*; bench/results/mesh_60mm_shell1_whole_run.json; docs/performance.md, "The whole run's
+#: peak stage by stage"); the band's free voxels grow with the area as the texels do, so the two are not told
+#: apart and the per-free terms are what the code holds:
+#: - a step: per texel the all-free step's 128 B and per free voxel 195 B (the step's 108 B, the renderer's band
+#:   medium and its index of the core it skips), fitted to Spot 40 mm (the run's step: 1.244 GiB, 1.21 estimated)
+#:   and 60 mm (bench/results/step_memory_spot.json, 60mm_shell1_after: 2.768 GiB, 2.83 estimated);
+SHELL_STEP_FREE_BYTES = 195.0
+SHELL_STEP_TEXEL_BYTES = STEP_TEXEL_BYTES
+#: - the figures (the start's with the renderer held for the baseline guard, the guard's, the result's, and the
+#:   renderer's build): per free voxel the variables, momentum and index (48 B) and the renderer's band medium
+#:   (42 B: 0.437 GiB held at 60 mm), per texel the loss's operators, their build and the metrics' temporaries
+#:   (1.30 GiB above the set-up at 60 mm): 1.85 KB, between the 1.77 KB of the start's metrics with the renderer
+#:   held at 60 mm (2.651 GiB measured without it plus its 0.437) and the 2.07 KB at 40 mm (1.266 + 0.184); no fixed
+#:   term (the figures' libraries and arenas, ~0.2 GiB, which the all-free terms do not count either, so that a band
+#:   never estimates above every voxel free): 3.16 GiB at 60 mm against the whole run's 3.10, 1.37 at 40 mm
+#:   against 1.45-1.53, 0.38 at 20 mm against 0.59
+SHELL_FIGURES_FREE_BYTES = 90.0
+SHELL_FIGURES_TEXEL_BYTES = 1850.0
 #: seconds per iteration of the passes (4-spp gradient, 16-spp forward, the loss) at ``TEXELS_REF`` texels, from
 #: white on 2 cores: 11.19 s on Spot 20 mm (bench/results/mesh_20mm.json, render + gradient + loss)
 PASS_SECONDS_REF = 11.19
@@ -167,19 +182,25 @@ class Footprint:
 
     def peak_bytes(self) -> float:
         """The expected peak resident memory (bytes): the largest of the voxelization's, a step's and the figures'
-        (module docstring)."""
+        (module docstring; ``stage_bytes``)."""
+        return max(self.stage_bytes().values())
+
+    def stage_bytes(self) -> dict[str, float]:
+        """Each stage's expected peak resident memory (bytes): "voxelize", "step", "figures" (a slab: "run", its
+        one stage), each with ``BASE_BYTES`` and the mesh."""
+        fixed = BASE_BYTES + self.mesh_bytes
         if self.kind == "slab":
-            return BASE_BYTES + SLAB_VOXEL_BYTES * self.grid_voxels + FIGURES_TEXEL_BYTES * self.texels
+            return {"run": fixed + SLAB_VOXEL_BYTES * self.grid_voxels + FIGURES_TEXEL_BYTES * self.texels}
         per_texel = VOXELIZE_TEXEL_BYTES + VOXELIZE_NEAR_BYTES * self.band
         voxelize = VOXELIZE_GRID_BYTES * self.grid_voxels + VOXELIZE_FIXED_BYTES + per_texel * self.texels
         medium_voxels = self.free_voxels if self.shell else self.inside_voxels
         held = RUN_GRID_BYTES * self.grid_voxels + RUN_INSIDE_BYTES * medium_voxels
-        step = (held + STEP_FREE_BYTES * self.free_voxels + STEP_TEXEL_BYTES * self.texels) * (
-            SHELL_STEP_FACTOR if self.shell else 1.0
-        )
+        step = held + STEP_FREE_BYTES * self.free_voxels + STEP_TEXEL_BYTES * self.texels
         figures = held + FIGURES_FREE_BYTES * self.free_voxels + FIGURES_TEXEL_BYTES * self.texels
-        run = max(step, figures)
-        return BASE_BYTES + self.mesh_bytes + max(voxelize, run)
+        if self.shell:
+            step = held + SHELL_STEP_FREE_BYTES * self.free_voxels + SHELL_STEP_TEXEL_BYTES * self.texels
+            figures = held + SHELL_FIGURES_FREE_BYTES * self.free_voxels + SHELL_FIGURES_TEXEL_BYTES * self.texels
+        return {"voxelize": fixed + voxelize, "step": fixed + step, "figures": fixed + figures}
 
     def fits(self, limit_bytes: float) -> bool:
         """Whether the job's peak is at most ``limit_bytes`` and its grid within the renderer's 2^31 voxels."""

@@ -96,7 +96,7 @@ class Optimization:
         h = hashlib.sha256(self.target.tobytes())
         self.param.fixed_share.digest(h)  # the dense array's bytes, a layer at a time
         self._problem_digest = h.hexdigest()[:16]
-        self.x = self.param.variables_for(self._initial_free_mixture())
+        self.x = self.initial_variables()
         # the inside voxels held fixed (a shell's core) join the step scale's population with a zero gradient
         held = 0 if base.inside is None else max(int(np.count_nonzero(base.inside)) - self.param.n_free, 0)
         self.opt = make_optimizer(cfg.optimizer, cfg.step_size, self.x.shape, threads, held_rows=held)
@@ -160,7 +160,7 @@ class Optimization:
     def initial_variables(self, init: str | None = None) -> np.ndarray:
         """The run's starting variables x (F, N) (recomputed from the configuration: same after a resume), or
         those of the start ``init`` names (e.g. "extrusion": what a run started from that baseline renders)."""
-        return self.param.variables_for(self._initial_free_mixture(init))
+        return self.param.variables_for(self._initial_free_mixture(init), reuse=True)  # made for this call
 
     def initial_volume(self) -> Volume:
         """The run's starting point as a volume (the whole grid's mixture: see :meth:`renderer` for a render)."""

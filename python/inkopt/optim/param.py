@@ -155,10 +155,13 @@ class Parameterization:
         centred = g - np.sum(g * p, axis=1, keepdims=True)
         return (centred * s * (1.0 - s) / s.sum(axis=1, keepdims=True)).astype(np.float32)
 
-    def variables_for(self, p: np.ndarray) -> np.ndarray:
+    def variables_for(self, p: np.ndarray, reuse: bool = False) -> np.ndarray:
         """Variables x (F, N) float32 whose free-part mixture is p (F, N) (entries clipped to [1e-6, 1]); row by
-        row, in blocks (float64 temporaries of a block only)."""
-        x = np.empty(np.shape(p), np.float32)
+        row, in blocks (float64 temporaries of a block only). ``reuse``: p is the caller's to give up, and x is
+        written over it when it is a writable float32 array of its own (each block is read before it is written),
+        so that a baseline's start holds one (F, N) array, not two."""
+        own = reuse and p.dtype == np.float32 and p.flags.writeable and p.flags.owndata and p.flags.c_contiguous
+        x = p if own else np.empty(np.shape(p), np.float32)
         for lo in range(0, len(x), 1 << 20):
             q = np.clip(np.asarray(p[lo : lo + (1 << 20)], np.float64), 1e-6, 1.0)
             q /= q.sum(axis=1, keepdims=True)
