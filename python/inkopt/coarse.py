@@ -149,7 +149,9 @@ def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: flo
                 baseline = Baseline(coarse_start, layers)
                 options = replace(options, baselines={cfg.init: layers})  # the fine run's guard takes it as made
             source = RunDir(coarse_dir).load_volume()
-            write_transferred_volume(source, fine.volume, fine.fixed_share, start, baseline=baseline)
+            # stored without zlib: the job's own start, written and read once (its compression was a third of the
+            # box's 20 mm transfer)
+            write_transferred_volume(source, fine.volume, fine.fixed_share, start, baseline=baseline, compressed=False)
             del baseline, coarse_start, source
             t = time.perf_counter() - t
             how = "" if cfg.init not in BASELINE_INITS else f" as a change of the {cfg.init} baseline"
