@@ -36,6 +36,14 @@ COARSE_MIN_SHARE = 0.2
 #: start's and result's figures take shares of the time left. The coarse run's seconds per iteration add nothing to the
 #: bound: the spider's fine stage takes 140 s at 0.9 s per coarse iteration, the box's 181 s at 5.6 s.
 FINE_FIXED_SECONDS, FINE_SETUP_FACTOR = 80.0, 5.5
+#: a coarse-to-fine job with a time budget does not time its fine stage's iterations before they start (the estimate's
+#: calibration: 1.4-12.3 s on the mesh suite's 20 mm fine grids): it scales the coarse stage's measured seconds per
+#: iteration by (fine DPI / coarse DPI) ** ``FINE_ITERATION_EXPONENT``. The geometric mean of the fine / coarse ratio
+#: over the mesh suite's 14 short-budget cells at 10 and 20 mm (commits a1905bd, 03bf2f7, 5b85789: 4.26-8.03 at half
+#: the DPI) is 5.51 = 2 ** 2.46; the scaled estimate is then within -31 % / +29 % of the fine stage's measured seconds
+#: per iteration, the calibration's own within -22 % / +45 % on the same cells (the estimate's accuracy on a loaded
+#: machine is ±40 %, docs/experiments.md). Other DPI ratios: not measured.
+FINE_ITERATION_EXPONENT = 2.46
 #: a run with a time budget goes coarse to fine by default, the coarse grid at this fraction of the run's DPI: at
 #: equal budgets it ended lower than the plain run on the reference slab (3 min: 29.01 against 29.36 ΔE76) and on
 #: Spot 20 mm (8 min: 9.99 against 15.36) (bench/results/time_to_quality.json)
@@ -84,6 +92,12 @@ def fine_stage_seconds(setup_s: float) -> float:
     """The predicted fixed cost (seconds, wall clock) of a coarse-to-fine job's fine stage, from the coarse run's
     ``setup_s`` seconds outside its iterations (``FINE_FIXED_SECONDS``, ``FINE_SETUP_FACTOR``)."""
     return FINE_FIXED_SECONDS + FINE_SETUP_FACTOR * max(setup_s, 0.0)
+
+
+def fine_iteration_seconds(coarse_seconds: float, coarse_dpi: float, dpi: float) -> float:
+    """The expected seconds of a fine-stage iteration at ``dpi`` from the coarse stage's ``coarse_seconds`` per
+    iteration at ``coarse_dpi`` (``FINE_ITERATION_EXPONENT``)."""
+    return coarse_seconds * (dpi / coarse_dpi) ** FINE_ITERATION_EXPONENT
 
 
 def coarse_reserve(time_budget: float, setup_s: float) -> float:
@@ -139,7 +153,11 @@ def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: flo
     with rd.lock(options.log):  # the whole job's, the fine run's taken again inside it
         coarse_dir, start = rd.path / "coarse", rd.path / "coarse" / "fine_start.npz"
         fine_begun = options.resume and rd.checkpoint_path.is_file() and start.is_file()
-        coarse_start = None if fine_begun else _coarse_stage(spec, inks, coarse_dir, cfg, coarse_dpi, options)
+        coarse_start = per = None
+        if not fine_begun:
+            coarse_start, per = _coarse_stage(spec, inks, coarse_dir, cfg, coarse_dpi, options)
+        if per is not None and cfg.time_budget is not None:  # the fine stage's estimate scaled, not timed again
+            options = replace(options, seconds_per_iteration=fine_iteration_seconds(per, coarse_dpi, spec.dpi))
         fine = build_scene(spec, inks)
         if not fine_begun:
             t = time.perf_counter()
@@ -166,10 +184,10 @@ def _coarse_stage(spec, inks, coarse_dir, cfg: OptimizeConfig, coarse_dpi: float
     (``coarse_reserve``); its figures are one pilot pass (informative: the fine stage's are the run's, its baseline
     guard too); the caller's per-step hook sees the fine stage only (another grid here). The coarse result is not
     smoothed at its end (``finish_smooth`` 0): it is the fine stage's start, not an answer, and a pass on the coarse
-    grid blurs twice as far as the fine result's own (docs/quality.md, "The duck's margin"). Returns the coarse run's
+    grid blurs twice as far as the fine result's own (docs/quality.md, "The duck's margin"). Returns (the coarse run's
     start as a mixture ``Volume`` on the coarse grid when ``cfg.init`` is a print-shop baseline
     (``optim.param.BASELINE_INITS``: the correction transfer's B_c, made once for the coarse run's start and the
-    transfer), else None."""
+    transfer), else None; the coarse run's seconds per iteration, None when it ran none)."""
     coarse = build_scene(replace(spec, dpi=coarse_dpi), inks)
     budget, log, kept = None, options.log, {}
     after = None
@@ -193,7 +211,7 @@ def _coarse_stage(spec, inks, coarse_dir, cfg: OptimizeConfig, coarse_dpi: float
         baselines=None if layers is None else {cfg.init: layers},
         after=after,
     )
-    run_optimisation(coarse, coarse_dir, replace(cfg, time_budget=budget, finish_smooth=0), coarse_options)
+    report = run_optimisation(coarse, coarse_dir, replace(cfg, time_budget=budget, finish_smooth=0), coarse_options)
     if kept:
         predicted = fine_stage_seconds(kept["setup"])
         log(
@@ -205,7 +223,7 @@ def _coarse_stage(spec, inks, coarse_dir, cfg: OptimizeConfig, coarse_dpi: float
         start = coarse.volume.with_mixture(layers.array())
     del coarse, layers
     release_freed_memory()
-    return start
+    return start, (report.seconds_per_iteration if report.seconds_iterations > 0 else None)
 
 
 def _most_fine(cfg: OptimizeConfig) -> float:
