@@ -134,12 +134,13 @@ def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: flo
     ``OUT/coarse/`` with ``cfg``'s settings: it stops when done, or within ``COARSE_BUDGET_SHARE`` of
     ``cfg.time_budget`` less what the fine stage is predicted to need beyond the rest, ``coarse_reserve``), move its
     result onto the grid of ``spec`` (``optim.transfer.write_transferred_volume``: ``OUT/coarse/fine_start.npz``,
-    fixed shares kept) and optimise from there (``cfg`` with that start, and a warm
-    start's step unless ``cfg.lr`` is set). A half-DPI grid has a quarter of the texels: on Spot 20 mm an
-    iteration took 5.9 CPU s at 150 DPI (bench/results/mesh_20mm_150dpi.json) against 22 at 300 DPI with newer code
-    (bench/results/mesh_20mm.json). ``options.resume`` continues whichever stage was under way; the time budget and the
-    run's wall time count from the job's start (``options.started``); ``options.on_step`` is called in the fine
-    stage only. Returns the fine run's report (``dry_run``: its estimate, from a white start; nothing is
+    fixed shares kept; stored uncompressed) and optimise from there (``cfg`` with that start, and a warm start's
+    step unless ``cfg.lr`` is set; with a time budget its estimate is the coarse stage's seconds per iteration
+    scaled, ``fine_iteration_seconds``, not timed again). A half-DPI grid has a quarter of the texels: on Spot 20 mm
+    an iteration took 5.9 CPU s at 150 DPI (bench/results/mesh_20mm_150dpi.json) against 22 at 300 DPI with newer
+    code (bench/results/mesh_20mm.json). ``options.resume`` continues whichever stage was under way; the time budget
+    and the run's wall time count from the job's start (``options.started``); ``options.on_step`` is called in the
+    fine stage only. Returns the fine run's report (``dry_run``: its estimate, from a white start; nothing is
     written)."""
     from .optim.transfer import Baseline, write_transferred_volume
 
