@@ -1,6 +1,6 @@
 """Where a mesh suite deadline job's time goes after its coarse stage, and the fit of ``coarse.fine_stage_seconds``.
 
-    python bench/mesh_suite_phases.py --fit c2f-correction,c2f-correction-shared --check default
+    python bench/mesh_suite_phases.py --fit fixed-80 --check default,cuts-fixed-80
 
 Reads the optimize part of each 20 mm short-budget cell's ``suite.log`` (each line after the seconds since the
 command began, ``bench/mesh_suite.py``) in the run folders of the variants named (``default``: the defaults' cells,
@@ -76,8 +76,8 @@ def main(argv: list[str] | None = None) -> int:
     from inkopt.coarse import FINE_FIXED_SECONDS, FINE_SETUP_FACTOR, fine_stage_seconds
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--fit", default="c2f-correction,c2f-correction-shared", help="variants whose cells are fitted")
-    ap.add_argument("--check", default="default", help="variants whose cells are checked (default: the defaults')")
+    ap.add_argument("--fit", default="fixed-80", help="variants whose cells are fitted")
+    ap.add_argument("--check", default="default,cuts-fixed-80", help="variants whose cells are checked")
     ap.add_argument("--cache", type=Path, default=CACHE)
     a = ap.parse_args(argv)
     out = {"constants": {"FINE_FIXED_SECONDS": FINE_FIXED_SECONDS, "FINE_SETUP_FACTOR": FINE_SETUP_FACTOR}}

@@ -12,8 +12,10 @@ from inkopt.coarse import (
     COARSE_BUDGET_SHARE,
     COARSE_MIN_SHARE,
     FINE_FIXED_SECONDS,
+    FINE_ITERATION_EXPONENT,
     FINE_SETUP_FACTOR,
     coarse_reserve,
+    fine_iteration_seconds,
     fine_stage_seconds,
     run_coarse_to_fine,
 )
@@ -118,13 +120,13 @@ def test_the_fine_stage_is_predicted_from_the_coarse_set_up():
 
 def test_the_coarse_stage_shrinks_when_the_fine_stage_is_predicted_expensive():
     """A 5-minute job: a cheap fine stage fits in the 40 % the share leaves (nothing kept); the box's set-up
-    (21.7 s, 80 + 5.5 x 21.7 = 199 s predicted) takes 79 s more from the coarse stage; a huge one stops at the
+    (21.7 s, 48 + 5.2 x 21.7 = 161 s predicted) takes 41 s more from the coarse stage; a huge one stops at the
     least share."""
     budget = 300.0
-    assert coarse_reserve(budget, 0.0) == 0.0  # 80 s < 120 s
+    assert coarse_reserve(budget, 0.0) == 0.0  # 48 s < 120 s
     box = coarse_reserve(budget, 21.7)
     assert box == pytest.approx(fine_stage_seconds(21.7) - (1 - COARSE_BUDGET_SHARE) * budget)
-    assert 75.0 < box < 85.0
+    assert 35.0 < box < 45.0
     assert coarse_reserve(budget, 30.0) > box
     assert coarse_reserve(budget, 1e4) == pytest.approx((COARSE_BUDGET_SHARE - COARSE_MIN_SHARE) * budget)
 
@@ -137,4 +139,22 @@ def test_a_tiny_deadline_job_keeps_its_fine_stage_and_says_what_it_predicted(spe
     rep = run_coarse_to_fine(spec, INKS, tmp_path / "job", cfg, 150.0, RunOptions(threads=1, log=lines.append))
     said = [m for m in lines if m.startswith("fine stage predicted")]
     assert len(said) == 1 and "least share" in said[0]
-    assert rep.iterations >= 1 and RunDir(tmp_path / "job" / "coarse").read_report()["iterations"] >= 1
+    coarse = RunDir(tmp_path / "job" / "coarse").read_report()
+    assert rep.iterations >= 1 and coarse["iterations"] >= 1
+    # the fine stage's estimate is the coarse stage's measured iterations scaled, not timed again
+    assert rep.estimate["scaled"] and not coarse["estimate"]["scaled"]
+    assert rep.estimate["seconds_per_iteration"] == pytest.approx(
+        fine_iteration_seconds(coarse["seconds_per_iteration"], 150.0, spec.dpi)
+    )
+
+
+def test_a_job_without_a_budget_times_its_fine_stage(spec, tmp_path, monkeypatch):
+    """Without a time budget the fine stage's estimate is measured on its own renderer, as any run's."""
+    job(spec, tmp_path / "job", "white", monkeypatch)
+    assert not RunDir(tmp_path / "job").read_report()["estimate"]["scaled"]
+
+
+def test_the_fine_iteration_is_scaled_by_the_dpi_ratio():
+    assert fine_iteration_seconds(2.0, 150.0, 300.0) == pytest.approx(2.0 * 2**FINE_ITERATION_EXPONENT)
+    assert 5.0 < fine_iteration_seconds(1.0, 150.0, 300.0) < 6.0  # the suite's fine / coarse ratios: 4.3-8.0
+    assert fine_iteration_seconds(1.0, 300.0, 300.0) == 1.0

@@ -29,13 +29,22 @@ COARSE_MIN_SHARE = 0.2
 #: baseline figures, the one iteration a run always does, the result's figures and writing), predicted as
 #: ``FINE_FIXED_SECONDS + FINE_SETUP_FACTOR * s``, s the coarse run's seconds outside its iterations (scene, start,
 #: estimate, start's figures: the same kinds of work on a grid of 1/8 the voxels and 1/4 the texels). The least
-#: upper bound over the eight 20 mm short-budget coarse-to-fine jobs of the mesh suite before the coarse stage left
-#: room for them (variants c2f-correction and c2f-correction-shared; their fine stage from the coarse stage's end to
-#: the job's end, its iterations after the first taken out) is 74.0 s + 4.88 s (bench/results/mesh_suite_phases.json,
-#: ``fit``), rounded up: 14-52 s above each of those, 38-75 s above the fine stages of today's seven cells, whose
-#: start's and result's figures take shares of the time left. The coarse run's seconds per iteration add nothing to the
-#: bound: the spider's fine stage takes 140 s at 0.9 s per coarse iteration, the box's 181 s at 5.6 s.
-FINE_FIXED_SECONDS, FINE_SETUP_FACTOR = 80.0, 5.5
+#: upper bound over the seven 20 mm short-budget jobs of the mesh suite whose coarse stage kept 80 s + 5.5 s for them
+#: (variant fixed-80, commit a1905bd: their fine stages from the coarse stage's end to the job's end, the iterations
+#: after the first taken out, 39-160 s) is 47.26 s + 5.143 s (bench/results/mesh_suite_phases.json, ``fit``),
+#: rounded up. Those fine stages stored their start compressed and timed their estimate: today's are cheaper
+#: (``run_coarse_to_fine``), so the bound holds them with room (docs/quality.md, "The deadline's fine stage"). The
+#: coarse run's seconds per iteration add nothing to the bound: the spider's fine stage takes 101 s at 1.0 s per
+#: coarse iteration, the duck's 101 s at 4.6 s.
+FINE_FIXED_SECONDS, FINE_SETUP_FACTOR = 48.0, 5.2
+#: a coarse-to-fine job with a time budget does not time its fine stage's iterations before they start (the estimate's
+#: calibration: 1.4-12.3 s on the mesh suite's 20 mm fine grids): it scales the coarse stage's measured seconds per
+#: iteration by (fine DPI / coarse DPI) ** ``FINE_ITERATION_EXPONENT``. The geometric mean of the fine / coarse ratio
+#: over the mesh suite's 14 short-budget cells at 10 and 20 mm (commits a1905bd, 03bf2f7, 5b85789: 4.26-8.03 at half
+#: the DPI) is 5.51 = 2 ** 2.46; the scaled estimate is then within -31 % / +29 % of the fine stage's measured seconds
+#: per iteration, the calibration's own within -22 % / +45 % on the same cells (the estimate's accuracy on a loaded
+#: machine is ±40 %, docs/experiments.md). Other DPI ratios: not measured.
+FINE_ITERATION_EXPONENT = 2.46
 #: a run with a time budget goes coarse to fine by default, the coarse grid at this fraction of the run's DPI: at
 #: equal budgets it ended lower than the plain run on the reference slab (3 min: 29.01 against 29.36 ΔE76) and on
 #: Spot 20 mm (8 min: 9.99 against 15.36) (bench/results/time_to_quality.json)
@@ -86,6 +95,12 @@ def fine_stage_seconds(setup_s: float) -> float:
     return FINE_FIXED_SECONDS + FINE_SETUP_FACTOR * max(setup_s, 0.0)
 
 
+def fine_iteration_seconds(coarse_seconds: float, coarse_dpi: float, dpi: float) -> float:
+    """The expected seconds of a fine-stage iteration at ``dpi`` from the coarse stage's ``coarse_seconds`` per
+    iteration at ``coarse_dpi`` (``FINE_ITERATION_EXPONENT``)."""
+    return coarse_seconds * (dpi / coarse_dpi) ** FINE_ITERATION_EXPONENT
+
+
 def coarse_reserve(time_budget: float, setup_s: float) -> float:
     """Seconds the coarse run keeps from its time budget (``COARSE_BUDGET_SHARE`` of the job's ``time_budget``,
     seconds) for the fine stage beyond the rest of the job's budget: its iterations end by the earlier of the share
@@ -119,12 +134,13 @@ def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: flo
     ``OUT/coarse/`` with ``cfg``'s settings: it stops when done, or within ``COARSE_BUDGET_SHARE`` of
     ``cfg.time_budget`` less what the fine stage is predicted to need beyond the rest, ``coarse_reserve``), move its
     result onto the grid of ``spec`` (``optim.transfer.write_transferred_volume``: ``OUT/coarse/fine_start.npz``,
-    fixed shares kept) and optimise from there (``cfg`` with that start, and a warm
-    start's step unless ``cfg.lr`` is set). A half-DPI grid has a quarter of the texels: on Spot 20 mm an
-    iteration took 5.9 CPU s at 150 DPI (bench/results/mesh_20mm_150dpi.json) against 22 at 300 DPI with newer code
-    (bench/results/mesh_20mm.json). ``options.resume`` continues whichever stage was under way; the time budget and the
-    run's wall time count from the job's start (``options.started``); ``options.on_step`` is called in the fine
-    stage only. Returns the fine run's report (``dry_run``: its estimate, from a white start; nothing is
+    fixed shares kept; stored uncompressed) and optimise from there (``cfg`` with that start, and a warm start's
+    step unless ``cfg.lr`` is set; with a time budget its estimate is the coarse stage's seconds per iteration
+    scaled, ``fine_iteration_seconds``, not timed again). A half-DPI grid has a quarter of the texels: on Spot 20 mm
+    an iteration took 5.9 CPU s at 150 DPI (bench/results/mesh_20mm_150dpi.json) against 22 at 300 DPI with newer
+    code (bench/results/mesh_20mm.json). ``options.resume`` continues whichever stage was under way; the time budget
+    and the run's wall time count from the job's start (``options.started``); ``options.on_step`` is called in the
+    fine stage only. Returns the fine run's report (``dry_run``: its estimate, from a white start; nothing is
     written)."""
     from .optim.transfer import Baseline, write_transferred_volume
 
@@ -139,7 +155,11 @@ def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: flo
     with rd.lock(options.log):  # the whole job's, the fine run's taken again inside it
         coarse_dir, start = rd.path / "coarse", rd.path / "coarse" / "fine_start.npz"
         fine_begun = options.resume and rd.checkpoint_path.is_file() and start.is_file()
-        coarse_start = None if fine_begun else _coarse_stage(spec, inks, coarse_dir, cfg, coarse_dpi, options)
+        coarse_start = per = None
+        if not fine_begun:
+            coarse_start, per = _coarse_stage(spec, inks, coarse_dir, cfg, coarse_dpi, options)
+        if per is not None and cfg.time_budget is not None:  # the fine stage's estimate scaled, not timed again
+            options = replace(options, seconds_per_iteration=fine_iteration_seconds(per, coarse_dpi, spec.dpi))
         fine = build_scene(spec, inks)
         if not fine_begun:
             t = time.perf_counter()
@@ -149,7 +169,9 @@ def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: flo
                 baseline = Baseline(coarse_start, layers)
                 options = replace(options, baselines={cfg.init: layers})  # the fine run's guard takes it as made
             source = RunDir(coarse_dir).load_volume()
-            write_transferred_volume(source, fine.volume, fine.fixed_share, start, baseline=baseline)
+            # stored without zlib: the job's own start, written and read once (its compression was a third of the
+            # box's 20 mm transfer)
+            write_transferred_volume(source, fine.volume, fine.fixed_share, start, baseline=baseline, compressed=False)
             del baseline, coarse_start, source
             t = time.perf_counter() - t
             how = "" if cfg.init not in BASELINE_INITS else f" as a change of the {cfg.init} baseline"
@@ -164,10 +186,10 @@ def _coarse_stage(spec, inks, coarse_dir, cfg: OptimizeConfig, coarse_dpi: float
     (``coarse_reserve``); its figures are one pilot pass (informative: the fine stage's are the run's, its baseline
     guard too); the caller's per-step hook sees the fine stage only (another grid here). The coarse result is not
     smoothed at its end (``finish_smooth`` 0): it is the fine stage's start, not an answer, and a pass on the coarse
-    grid blurs twice as far as the fine result's own (docs/quality.md, "The duck's margin"). Returns the coarse run's
+    grid blurs twice as far as the fine result's own (docs/quality.md, "The duck's margin"). Returns (the coarse run's
     start as a mixture ``Volume`` on the coarse grid when ``cfg.init`` is a print-shop baseline
     (``optim.param.BASELINE_INITS``: the correction transfer's B_c, made once for the coarse run's start and the
-    transfer), else None."""
+    transfer), else None; the coarse run's seconds per iteration, None when it ran none)."""
     coarse = build_scene(replace(spec, dpi=coarse_dpi), inks)
     budget, log, kept = None, options.log, {}
     after = None
@@ -191,7 +213,7 @@ def _coarse_stage(spec, inks, coarse_dir, cfg: OptimizeConfig, coarse_dpi: float
         baselines=None if layers is None else {cfg.init: layers},
         after=after,
     )
-    run_optimisation(coarse, coarse_dir, replace(cfg, time_budget=budget, finish_smooth=0), coarse_options)
+    report = run_optimisation(coarse, coarse_dir, replace(cfg, time_budget=budget, finish_smooth=0), coarse_options)
     if kept:
         predicted = fine_stage_seconds(kept["setup"])
         log(
@@ -203,7 +225,7 @@ def _coarse_stage(spec, inks, coarse_dir, cfg: OptimizeConfig, coarse_dpi: float
         start = coarse.volume.with_mixture(layers.array())
     del coarse, layers
     release_freed_memory()
-    return start
+    return start, (report.seconds_per_iteration if report.seconds_iterations > 0 else None)
 
 
 def _most_fine(cfg: OptimizeConfig) -> float:

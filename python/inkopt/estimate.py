@@ -11,11 +11,15 @@ of neighbouring texels, ``texel_runs``), grown until the passes take ``MIN_TEXEL
 texel) stands clear of ``a``'s jitter; a stall only adds time, so every timing that decides is the smaller of two. An
 iteration takes ``a + b * texels`` plus the step's per-voxel work, timed on up to 65 536 free voxels and scaled to all
 of them (the step's smoothing is not included). The final evaluation (adaptive spp) is not in the estimate: the line
-says so.
+says so. A run whose seconds per iteration are known before it starts (a coarse-to-fine job's fine stage with a time
+budget: the coarse stage's, scaled, ``coarse.fine_iteration_seconds``) takes them instead of the calibration
+(``Estimate.scaled`` True); it builds the renderer only.
 
 Memory: this process's peak resident memory after the calibration, which has built the renderer, the optimiser's
 state and a gradient pass's per-voxel arrays, plus the per-texel arrays of full passes (``rgb``, variances, the
-adjoint and the running average: ~64 bytes per texel).
+adjoint and the running average: ~64 bytes per texel); without a calibration, the peak once the renderer is built,
+which leaves a gradient pass's per-voxel arrays out (the calibrated estimate was already 0.06-0.22 GiB below the
+peaks the mesh suite's 20 mm fine stages measured; report.json's ``peak_rss_gb`` is the run's own).
 
 Disk: volume.npz at most 4 bytes per ink per inside voxel (compressed, often less), the checkpoint (uncompressed:
 variables and the two optimiser moments, 12 bytes per ink per free voxel; the running average and its variance, 24
@@ -53,7 +57,8 @@ class Estimate:
     """A run's expected cost: ``iterations`` left at ``seconds_per_iteration`` (``seconds``; without the final
     evaluation; the most: a run stops earlier when done or by its time budget), ``peak_gib`` (GiB),
     ``disk_bytes`` in the run directory and ``quantized_bytes`` added by ``inkopt quantize``;
-    ``calibration_seconds`` (what measuring it cost)."""
+    ``calibration_seconds`` (what measuring it cost); ``scaled``: the seconds per iteration were given (scaled from
+    a coarse stage's), not measured."""
 
     iterations: int
     seconds_per_iteration: float
@@ -62,13 +67,14 @@ class Estimate:
     disk_bytes: int
     quantized_bytes: int
     calibration_seconds: float
+    scaled: bool = False
 
     def to_json(self) -> dict:
         return asdict(self)
 
     @classmethod
     def from_json(cls, d: dict) -> Estimate:
-        return cls(**{k: d[k] for k in cls.__dataclass_fields__})
+        return cls(**{k: d[k] for k in cls.__dataclass_fields__ if k in d})  # ``scaled``: absent before it was kept
 
     def line(self, time_budget: float | None = None) -> str:
         """The log line; with the run's ``time_budget`` (seconds) shorter than the estimate, it says so."""
@@ -80,8 +86,9 @@ class Estimate:
         return (
             f"estimate: up to {self.iterations} iterations x {each} s = "
             f"{format_duration(self.seconds)} (+ the final evaluation), peak memory ~{self.peak_gib:.1f} GiB, disk "
-            f"~{_size(self.disk_bytes)} (+ {_size(self.quantized_bytes)} after inkopt quantize); measured in "
-            f"{self.calibration_seconds:.1f} s{budget}"
+            f"~{_size(self.disk_bytes)} (+ {_size(self.quantized_bytes)} after inkopt quantize); "
+            + ("scaled from the coarse stage's iterations" if self.scaled else "measured")
+            + f" in {self.calibration_seconds:.1f} s{budget}"
         )
 
 
@@ -151,14 +158,20 @@ def texel_runs(n_tex: int, n: int, rng: np.random.Generator, runs: int = SAMPLE_
     return np.concatenate([np.arange(s, s + m) for s, m in zip(starts, lengths)])
 
 
-def estimate_run(run, inside_voxels: int, box_voxels: int, seed: int = 0) -> Estimate:
+def estimate_run(
+    run, inside_voxels: int, box_voxels: int, seed: int = 0, seconds_per_iteration: float | None = None
+) -> Estimate:
     """The cost of the iterations ``run`` (an ``optim.Optimization``, at its current iteration) has left, measured
-    on its own renderer (module docstring). ``inside_voxels``: the object's voxels; ``box_voxels``: its grid's."""
+    on its own renderer (module docstring). ``inside_voxels``: the object's voxels; ``box_voxels``: its grid's;
+    ``seconds_per_iteration``: known already (e.g. scaled from a coarse stage's): taken, not measured (the renderer
+    is built, for the peak memory)."""
     t0 = time.perf_counter()
     cfg, tex = run.cfg, run.texels
     n_tex = len(tex)
     rng = np.random.default_rng(seed)
     renderer = run.renderer()
+    if seconds_per_iteration is not None:
+        return _estimate(run, inside_voxels, box_voxels, float(seconds_per_iteration), time.perf_counter() - t0, True)
 
     def passes(n: int) -> float:  # seconds of a forward render and a gradient pass over n texels
         sub = tex.subset(texel_runs(n_tex, n, rng))
@@ -171,9 +184,15 @@ def estimate_run(run, inside_voxels: int, box_voxels: int, seed: int = 0) -> Est
         )
         return time.perf_counter() - t
 
-    whole = texel_passes_seconds(passes, n_tex)
-    step = _step_seconds(run)
-    per_iteration = whole + step
+    per_iteration = texel_passes_seconds(passes, n_tex) + _step_seconds(run)
+    return _estimate(run, inside_voxels, box_voxels, per_iteration, time.perf_counter() - t0, False)
+
+
+def _estimate(run, inside_voxels: int, box_voxels: int, per_iteration: float, took: float, scaled: bool) -> Estimate:
+    """The ``Estimate`` of ``run``'s iterations left at ``per_iteration`` seconds each, its peak memory from this
+    process's so far, its disk from the counts (module docstring); ``took``: seconds spent finding
+    ``per_iteration``."""
+    cfg, n_tex = run.cfg, len(run.texels)
     left = max(cfg.iterations - run.iteration, 0)
     n_inks = run.x.shape[1]
     disk = 4 * n_inks * inside_voxels + (12 * n_inks * len(run.x) + 24 * n_tex + 80 * cfg.iterations) + 40 * n_tex
@@ -184,5 +203,6 @@ def estimate_run(run, inside_voxels: int, box_voxels: int, seed: int = 0) -> Est
         peak_gib=_peak_gib() + 64 * n_tex / 2**30,
         disk_bytes=int(disk),
         quantized_bytes=int(PRINTER_PER_OPT_VOXEL * box_voxels),
-        calibration_seconds=time.perf_counter() - t0,
+        calibration_seconds=took,
+        scaled=scaled,
     )

@@ -112,7 +112,9 @@ class RunOptions:
     docs/quality.md, "The correction transfer"). ``after(setup_s)``: seconds the job needs after this run, from the
     run's seconds outside its iterations so far (its set-up); the run's time budget keeps them besides its own
     figures and writing (a coarse stage's: its fine stage's predicted cost,
-    ``coarse.fine_stage_seconds``)."""
+    ``coarse.fine_stage_seconds``). ``seconds_per_iteration``: known before the run starts (a coarse-to-fine job's
+    fine stage with a time budget: the coarse stage's, scaled, ``coarse.fine_iteration_seconds``): the run's estimate
+    takes it instead of timing passes on its renderer (``estimate.estimate_run``)."""
 
     resume: bool = False
     eval_spp: int | None = None
@@ -131,6 +133,7 @@ class RunOptions:
     baseline_guard: bool = True
     baselines: dict | None = None
     after: Callable[[float], float] | None = None
+    seconds_per_iteration: float | None = None
 
     def validate(self) -> None:
         """One-line errors naming the option, before any work."""
@@ -146,6 +149,9 @@ class RunOptions:
             )
         if not self.log_every_s >= 0:
             raise ParameterError(f"`log_every_s` must be a number of seconds >= 0, got {self.log_every_s}")
+        per = self.seconds_per_iteration
+        if per is not None and not 0 < per < float("inf"):
+            raise ParameterError(f"`seconds_per_iteration` must be a positive number of seconds, got {per}")
 
 
 @dataclass
@@ -259,7 +265,7 @@ def _prepare(job: _Job, out_dir) -> Estimate:
         if gone:
             log(f"removed the outputs of an earlier run in {rd}: {', '.join(gone)}")
     rd.save_scene(job.scene.record())
-    estimate = estimate_run(run, *_voxel_counts(job), job.cfg.seed)
+    estimate = estimate_run(run, *_voxel_counts(job), job.cfg.seed, job.options.seconds_per_iteration)
     if estimate.seconds > ANNOUNCE_SECONDS:
         log(estimate.line(job.cfg.time_budget))
     return estimate

@@ -106,6 +106,21 @@ def test_estimate_counts_the_iterations_left_and_is_recorded(tmp_path):
     assert r.returncode == 0 and r.stdout.startswith("estimate: up to 3 iterations x "), r.stderr
 
 
+def test_an_estimate_says_whether_it_was_measured_or_scaled():
+    """A scaled estimate (a coarse-to-fine job's fine stage) says so in its line; a report's estimate recorded before
+    ``scaled`` was kept reads as measured."""
+    from inkopt.estimate import Estimate
+
+    measured = Estimate(3, 2.0, 6.0, 0.5, 10**6, 10**6, 1.5)
+    assert "; measured in 1.5 s" in measured.line()
+    old = measured.to_json()
+    del old["scaled"]
+    assert Estimate.from_json(old) == measured
+    scaled = Estimate(3, 2.0, 6.0, 0.5, 10**6, 10**6, 0.2, scaled=True)
+    assert "; scaled from the coarse stage's iterations in 0.2 s" in scaled.line()
+    assert Estimate.from_json(scaled.to_json()) == scaled
+
+
 @pytest.mark.parametrize(
     "fixed, per_texel, n_tex",
     [

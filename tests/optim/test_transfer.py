@@ -2,6 +2,8 @@
 start, with the fine scene's fixed shares kept; and a start from a volume file maps its whole mixture to the free
 part, so a run's own result restarts it where it ended."""
 
+import zipfile
+
 import numpy as np
 import pytest
 from helpers import SPOT, with_fixed_shares
@@ -57,9 +59,15 @@ def test_a_coarse_slab_result_starts_the_fine_run(tmp_path):
     path = write_transferred_volume(src, fine.volume, fixed, tmp_path / "start.npz", chunk=7, slab_voxels=200)
     got = Volume.load(path)
     assert got.shape == fine.volume.shape and got.mixture.dtype == np.float32
-    # the same file without chunking
+    # the same file without chunking, and stored without compression (a coarse-to-fine job's own start)
     write_transferred_volume(src, fine.volume, fixed, tmp_path / "whole.npz")
     np.testing.assert_array_equal(got.mixture, Volume.load(tmp_path / "whole.npz").mixture)
+    stored = write_transferred_volume(src, fine.volume, fixed, tmp_path / "stored.npz", compressed=False)
+    np.testing.assert_array_equal(Volume.load(stored).mixture, got.mixture)
+    with zipfile.ZipFile(stored) as zf:
+        assert zf.getinfo("mixture.npy").compress_type == zipfile.ZIP_STORED
+    with zipfile.ZipFile(path) as zf:
+        assert zf.getinfo("mixture.npy").compress_type == zipfile.ZIP_DEFLATED
     m = got.mixture
     np.testing.assert_allclose(m.sum(-1), 1.0, atol=1e-6)
     np.testing.assert_array_equal(m[0, ..., 2], 1.0)  # the fixed white layer

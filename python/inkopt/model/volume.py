@@ -259,11 +259,12 @@ class Volume:
     def to_arrays(self) -> dict:
         return {**self.geometry_arrays(), **self.medium.arrays()}
 
-    def save_with_mixture(self, path: str | Path, mixture_slabs, inks: InkTable) -> None:
+    def save_with_mixture(self, path: str | Path, mixture_slabs, inks: InkTable, compressed: bool = True) -> None:
         """Save this geometry as a mixture volume whose (z, y, x, N) float32 mixture is given as slabs of layers
         (``mixture_slabs``: an iterable of (k, y, x, N) arrays in z order), written one at a time, so the whole
         grid's mixture is never in memory; the file reads back as ``self.with_mixture(whole).save(path)``'s does,
-        and each slab is checked like a ``Mixture``'s (finite, non-negative)."""
+        and each slab is checked like a ``Mixture``'s (finite, non-negative). ``compressed`` False: stored as is
+        (larger, written and read without zlib's time)."""
         shape = self.shape + (len(inks),)
 
         def checked():
@@ -272,9 +273,8 @@ class Volume:
                     raise VolumeError("mixture must be finite and non-negative")
                 yield part
 
-        save_npz(
-            path, {**self.geometry_arrays(), "mixture": Streamed(shape, np.float32, checked()), **inks.to_arrays()}
-        )
+        arrays = {**self.geometry_arrays(), "mixture": Streamed(shape, np.float32, checked()), **inks.to_arrays()}
+        save_npz(path, arrays, compressed=compressed)
 
     def geometry_arrays(self) -> dict:
         """Everything ``to_arrays`` writes but the medium's own arrays."""

@@ -180,11 +180,14 @@ def write_transferred_volume(
     chunk: int = CHUNK,
     slab_voxels: int = SLAB_VOXELS,
     baseline: Baseline | None = None,
+    compressed: bool = True,
 ) -> Path:
     """Write to ``path`` (atomically) a mixture volume file on the grid of ``base`` (its geometry: inside mask,
     normals, origin, boundary) holding the fixed shares ``fixed_share`` (None: none) plus, at the free voxels, the
     free part of ``source``'s mixture moved onto that grid (:func:`transferred_free_mixture`; with ``baseline``
-    by the correction transfer), ``slab_voxels`` destination voxels at a time. A run of the destination scene
+    by the correction transfer), ``slab_voxels`` destination voxels at a time; ``compressed`` False: the file is
+    stored without zlib (4 bytes per ink per grid voxel; a coarse-to-fine job's own start, written and read once:
+    zlib took a third of the box's 20 mm transfer, ``coarse.run_coarse_to_fine``). A run of the destination scene
     started from it (``OptimizeConfig(init=path)``) starts from exactly that free part (up to the
     parameterisation's clipping at 1e-6)."""
     src = _source(source)
@@ -210,7 +213,7 @@ def write_transferred_volume(
                 rho[param.free_index[a:b] - z0 * plane] = whole
             yield rho.reshape(z1 - z0, ny, nx, n)
 
-    base.save_with_mixture(path, slabs(), base.inks)
+    base.save_with_mixture(path, slabs(), base.inks, compressed=compressed)
     return Path(path)
 
 
