@@ -51,8 +51,9 @@ class Proof:
     """What ``write_proof`` wrote: ``path``, its size in bytes, the results shown, the atlas size (meshes; 0 for
     slabs), whether the pictures are coarser than the texels, the seconds it took, and what the size budget
     chose: ``max_mb`` the budget, ``reduced`` whether it made the pictures smaller, ``quality`` the mesh
-    textures' JPEG quality (0 for slabs), ``pixels_per_texel`` along the surface (meshes; None for slabs) and
-    ``step`` (slabs: one pixel per ``step`` x ``step`` texels)."""
+    textures' JPEG quality (0 for slabs), ``pixels_per_texel`` along the surface (meshes; None for slabs),
+    ``step`` (slabs: one pixel per ``step`` x ``step`` texels) and ``unreduced_bytes``, the size the page would
+    have had without the budget."""
 
     path: str
     bytes: int
@@ -65,6 +66,7 @@ class Proof:
     quality: int = 0
     pixels_per_texel: float | None = None
     step: int = 1
+    unreduced_bytes: int | None = None
 
     def to_json(self) -> dict:
         return asdict(self)
@@ -128,6 +130,7 @@ def write_proof(run, out=None, options: ProofOptions | None = None) -> Proof:
         fit.quality,
         None if atlas is None else atlas.pixels_per_texel,
         fit.step,
+        fit.first_bytes,
     )
 
 

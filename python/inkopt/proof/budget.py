@@ -60,7 +60,8 @@ class Composed:
 class Fitted:
     """The page that fits: ``page`` bytes; ``atlas`` (meshes; None for slabs) and its JPEG ``quality`` (0 for
     slabs); ``step`` (slabs: one pixel per ``step`` x ``step`` texels; 1 for meshes); ``reduced``: whether the
-    budget made the pictures smaller than the page's own choice; ``tries``: pages composed."""
+    budget made the pictures smaller than the page's own choice; ``tries``: pages composed; ``first_bytes``: the
+    size of the page as it chose its pictures itself (the first composed)."""
 
     page: bytes
     atlas: MeshAtlas | None
@@ -68,6 +69,7 @@ class Fitted:
     step: int
     reduced: bool
     tries: int
+    first_bytes: int
 
 
 def _too_small(options: ProofOptions, what: str) -> ParameterError:
@@ -120,7 +122,7 @@ def fit_mesh(
     (``next_mesh_choice``) until it fits. Raises ParameterError naming ``max_mb`` if even the smallest does not."""
     atlas, quality = build_atlas(ATLAS_MAX), JPEG_QUALITY
     c, tries = compose(atlas, quality, False), 1
-    one = one_pixel_cell(atlas)
+    first, one = len(c.page), one_pixel_cell(atlas)
     while len(c.page) > options.max_bytes:
         nxt = next_mesh_choice(atlas.cell, quality, _share(c, options), one)
         if nxt is None:
@@ -130,7 +132,7 @@ def fit_mesh(
         if cell != atlas.cell:
             atlas = build_atlas(atlas.grid * cell)
         c, tries = compose(atlas, quality, True), tries + 1
-    return Fitted(c.page, atlas, quality, 1, tries > 1, tries)
+    return Fitted(c.page, atlas, quality, 1, tries > 1, tries, first)
 
 
 def fit_slab(compose: Callable[[int], Composed], largest_side: int, options: ProofOptions) -> Fitted:
@@ -140,10 +142,11 @@ def fit_slab(compose: Callable[[int], Composed], largest_side: int, options: Pro
     even one pixel per face does not fit."""
     step = 1
     c, tries = compose(step), 1
+    first = len(c.page)
     while len(c.page) > options.max_bytes:
         share = _share(c, options)
         if step >= largest_side:
             raise _too_small(options, f"with one pixel per face it is {len(c.page) / MB:.2f} MB")
         step = min(largest_side, max(step + 1, math.ceil(step / math.sqrt(share * SAFETY))))
         c, tries = compose(step), tries + 1
-    return Fitted(c.page, None, 0, step, step > 1, tries)
+    return Fitted(c.page, None, 0, step, step > 1, tries, first)
