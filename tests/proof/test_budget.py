@@ -9,6 +9,7 @@ import sys
 
 import pytest
 from proof.conftest import picture_bytes
+from proof.payloads import PAYLOADS
 from proof.test_hostile import check_page
 
 from inkopt.errors import ParameterError
@@ -110,3 +111,15 @@ def test_mesh_choices_shrink_to_the_smallest():
         seen.append(nxt)
     assert seen[-1] == (MIN_CELL, MIN_QUALITY) and (one, JPEG_QUALITY) in seen
     assert next_mesh_choice(20, JPEG_QUALITY, 0.01, one) == (one, JPEG_QUALITY)  # not below one pixel per texel
+
+
+@pytest.mark.parametrize("kind", ["slab", "mesh"])
+def test_planted_page_within_a_budget(planted_runs, kind, tmp_path):
+    """The runs with a payload in every field of their files, written within a budget that reduces their
+    pictures: still only the page's own markup, every payload as text."""
+    full = planted_runs[kind] / "report.html"
+    budget = full.stat().st_size - picture_bytes(full) // 2
+    p = write_proof(planted_runs[kind], tmp_path / "page.html", ProofOptions(max_mb=budget / 1e6))
+    assert p.reduced and p.bytes <= budget
+    text = "".join(check_page(tmp_path / "page.html").text)
+    assert all(s in text for s in PAYLOADS), [s for s in PAYLOADS if s not in text]
