@@ -14,12 +14,13 @@ demo`` (demo-out/slab, demo-out/spot) or by ``inkopt optimize MESH --height-mm 4
 spp is recorded with it.
 
 ``--synthetic RUN`` writes a page (to bench-out/synthetic_report.html) through the page's own functions for the
-run's mesh scaled to ``--height-mm`` with ``--texels`` texels sampled evenly by area on its surface (the texel
-size: the square root of the area per texel): each texel takes every result's colour from the run's nearest texel
-plus independent Gaussian noise of ``--noise`` (linear RGB, per channel, per result) (a noisier picture than a
-real evaluation's, which compresses worse; ``--lights N``: N sets of pictures, as a spectral run's page under N
-lights); the page's other parts are the run's own. It shows that the budget
-holds at a texel count no run on this machine reaches.
+run's mesh scaled to ``--height-mm`` with ``--texels`` texels sampled at random by area on its surface (the texel
+size: the square root of the area per texel). Each texel takes every result's colour (the four of an evaluated
+run; a result the run lacks: its continuous one) from the run's nearest texel plus independent Gaussian noise of
+``--noise`` (linear RGB, per channel, per result): pictures noisier than a real evaluation's, which compress
+worse. ``--lights N``: N sets of pictures, each with its own noise, as a spectral run's page under N lights. The
+page's other parts are the run's own. It shows that the budget holds at a texel count no run on this machine
+reaches.
 """
 
 from __future__ import annotations
@@ -104,8 +105,9 @@ def synthetic(run, texels: int, height_mm: float, noise: float, lights: int, opt
     tm = trimesh.Trimesh(big.solid_vertices, big.solid_faces, process=False)
     points, face = trimesh.sample.sample_surface(tm, texels, seed=0)
     nearest = cKDTree(factor * info.texel_closest_mm + shift).query(points, workers=-1)[1]
-    keys = ["target", *pred.rgb]
-    baked, scale = _noisy_pictures(rec.target_rgb[nearest], {k: v[nearest] for k, v in pred.rgb.items()}, noise, lights)
+    base = {k: pred.rgb.get(k, pred.rgb["continuous"])[nearest] for k in proof.ORDER[1:]}
+    keys = ["target", *base]
+    baked, scale = _noisy_pictures(rec.target_rgb[nearest], base, noise, lights)
     pictures = proof.Pictures(keys, baked, data_uri(encode(heat_legend(scale)), "image/png"), scale, options)
     voxel = float(np.sqrt(tm.area / texels))
     fake = SimpleNamespace(
