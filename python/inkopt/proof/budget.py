@@ -29,7 +29,7 @@ MB = 1_000_000  # bytes per MB of the budget (as ``inkopt report`` prints the pa
 DEFAULT_MAX_MB = 30.0
 JPEG_QUALITY = 90  # a mesh's textures and heat maps, where the budget allows
 MIN_QUALITY = 60  # the lowest JPEG quality the budget goes to before the atlas drops below one pixel per texel
-QUALITY_STEP = 10
+QUALITY_STEP = 5  # small enough that one step down does not leave much of the budget unused
 SAFETY = 0.9  # the share of the predicted room a smaller choice aims at (bytes per pixel grow as pixels shrink)
 
 
