@@ -3,8 +3,11 @@ run, each made once per test session through the command line, with their pages;
 every user string the command line takes (``hostile_*_run``: payloads.py), and then in every field of their files
 (``planted_runs``)."""
 
+import contextlib
+import dataclasses
 import itertools
 import json
+import re
 import shutil
 
 import numpy as np
@@ -257,3 +260,73 @@ def planted_spectral_run(spectral_slab_run, tmp_path_factory):
     d.save_predictions(pred)
     _run("report", run)
     return run
+
+
+def _noisy(run, seed: int):
+    """Every result's predicted colours in ``run`` replaced by uniform noise per texel (pictures that compress
+    badly, as a large noisy evaluation's do)."""
+    d = RunDir(run)
+    pred = d.load_predictions()
+    rng = np.random.default_rng(seed)
+    pred.rgb = {k: rng.uniform(0, 1, v.shape).astype(v.dtype) for k, v in pred.rgb.items()}
+    d.save_predictions(pred)
+
+
+@pytest.fixture(scope="session")
+def large_mesh_run(mesh_run, tmp_path_factory):
+    """mesh_run drawn on a coarse ball of the same radius (80 triangles about 7 texels a side) with noise for every
+    result's colours, reported with the atlas's floor of ``bake.ATLAS_MIN`` pixels a side lifted (as for an
+    object whose texels fill that many: the page's own atlas then has two pixels per texel, and any smaller one
+    is downsampled). Its pages are written with the floor lifted too (``lifted_floor``)."""
+    root = tmp_path_factory.mktemp("largemesh")
+    run = root / "run"
+    shutil.copytree(mesh_run, run)
+    coarse = trimesh.creation.icosphere(subdivisions=1, radius=1.0)
+    trimesh.Trimesh(coarse.vertices, coarse.faces, process=False).export(root / "coarse.ply")
+    d = RunDir(run)
+    rec = d.load_scene()
+    rec.mesh = dataclasses.replace(rec.mesh, mesh_path=str(root / "coarse.ply"))
+    d.save_scene(rec)
+    _noisy(run, 1)
+    with lifted_floor():
+        _run("report", run)
+    return run
+
+
+@contextlib.contextmanager
+def lifted_floor():
+    """A context in which the mesh atlas has no floor of pixels a side (``bake.ATLAS_MIN`` 0)."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr("inkopt.proof.bake.ATLAS_MIN", 0)
+        yield
+
+
+@pytest.fixture(scope="session")
+def large_slab_run(slab_run, tmp_path_factory):
+    """slab_run with noise for every result's colours, reported."""
+    run = tmp_path_factory.mktemp("largeslab") / "run"
+    shutil.copytree(slab_run, run)
+    _noisy(run, 2)
+    _run("report", run)
+    return run
+
+
+def picture_bytes(path) -> int:
+    """The bytes of a page's pictures: every data: URL of an image in its data block."""
+    text = path.read_text()
+    blob = text.split('id="inkopt-data">', 1)[1].split("</script>", 1)[0]
+    return sum(len(s) for s in re.findall(r'"(data:image/[a-z]+;base64,[A-Za-z0-9+/=]*)"', blob))
+
+
+@pytest.fixture(scope="session")
+def budget_pages(large_mesh_run, large_slab_run):
+    """The large runs' pages written with ``--max-mb`` set to hold their other parts and a third of their
+    pictures (``small.html``): {kind: (path, budget in bytes, the default page's bytes)}."""
+    pages = {}
+    for kind, run in (("mesh", large_mesh_run), ("slab", large_slab_run)):
+        full = run / "report.html"
+        budget = full.stat().st_size - (2 * picture_bytes(full)) // 3
+        with lifted_floor():
+            _run("report", run, "--out", run / "small.html", "--max-mb", budget / 1e6)
+        pages[kind] = (run / "small.html", budget, full.stat().st_size)
+    return pages

@@ -259,3 +259,25 @@ def test_planted_light_names_do_not_run(browser, planted_spectral_run):
     page.wait_for_timeout(300)
     assert page.evaluate("document.querySelectorAll('[pwn], pwn').length") == 0
     assert not _problems(page, errors), _problems(page, errors)
+
+
+@pytest.mark.parametrize("kind", ["mesh", "slab"])
+def test_budget_page_loads(browser, budget_pages, kind):
+    """A page written within a small budget (``--max-mb``: smaller pictures) opens: the 3D view draws the object
+    and switches to a heat map, or every face picture loads; nothing fails or is refused."""
+    path = budget_pages[kind][0]
+    page, errors = _open(browser, path, "#3d" if kind == "mesh" else "")
+    if kind == "mesh":
+        page.wait_for_selector("#view3d[data-ready='1']", timeout=20000)
+        _settle(page)
+        a = _pixels(page, "#stage3d")
+        drawn = np.any(np.abs(a - 255) > 8, axis=2)
+        assert drawn.mean() > 0.02, drawn.mean()
+        page.check("#heat3d")
+        _settle(page)
+        assert np.abs(_pixels(page, "#stage3d") - a)[drawn].mean() > 5
+    else:
+        _settle(page)
+        assert page.evaluate("[...document.images].every(i => i.complete && i.naturalWidth > 0)")
+        assert page.locator("#faces p.note").inner_text().count("downsampled") == 1
+    assert not _problems(page, errors), _problems(page, errors)

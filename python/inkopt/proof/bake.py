@@ -23,6 +23,7 @@ from ..scenes.mesh.load import corner_normals
 ATLAS_MAX = 2048  # pixels per side of a mesh's atlas (larger objects are shown downsampled, and the page says so)
 ATLAS_MIN = 1024  # at least this many pixels per side where the cells allow (a sharp picture when zoomed in)
 MIN_CELL = 4  # pixels per side of one triangle pair's cell
+MARGIN = 0.75  # pixels between a triangle's corner and its cell's border: linear filtering stays inside
 HEAT_MIN_SCALE = 10.0  # ΔE76 at the top of the heat scale is at least this (a good result is not shown red)
 
 
@@ -43,6 +44,17 @@ class MeshAtlas:
     texel: np.ndarray
     pixel_mm: float
     texel_mm: float
+    cell: int
+
+    @property
+    def grid(self) -> int:
+        """Cells per side of the atlas."""
+        return self.size // self.cell
+
+    @property
+    def pixels_per_texel(self) -> float:
+        """Atlas pixels along one texel's side, on average (the page wants 2)."""
+        return self.texel_mm / self.pixel_mm
 
     @property
     def downsampled(self) -> bool:
@@ -70,7 +82,7 @@ def mesh_atlas(vertices, faces, texel_pos_mm, texel_normal, voxel_mm: float, max
     tri = v[f]
     area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     edge_mm = float(np.sqrt(2.0 * area.mean()))  # side of a square holding two mean triangles
-    margin = 0.75  # pixels between a triangle's corner and its cell's border: linear filtering stays inside
+    margin = MARGIN
     want = max(np.ceil(2.0 * edge_mm / voxel_mm + 2 * margin), ATLAS_MIN // grid)
     cell = int(np.clip(want, MIN_CELL, max(MIN_CELL, max_size // grid)))
     if grid * cell > max(max_size, grid * MIN_CELL) or grid * cell > 8192:
@@ -113,6 +125,7 @@ def mesh_atlas(vertices, faces, texel_pos_mm, texel_normal, voxel_mm: float, max
         texel=texel.reshape(size, size),
         pixel_mm=edge_mm / (cell - 2 * margin),
         texel_mm=float(voxel_mm),
+        cell=cell,
     )
 
 

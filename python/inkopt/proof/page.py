@@ -100,15 +100,16 @@ Safari since 2024).</p></div>
     )
 
 
-def slab_section(faces: list[dict], keys: list[str], legend_uri: str, scale: float) -> Markup:
+def slab_section(faces: list[dict], keys: list[str], legend_uri: str, scale: float, note: str | None = None) -> Markup:
     """Every textured face of a slab: two results with a swipe line, and the heat-map toggle (faces.js sizes
-    them)."""
+    them); ``note``: a line below them (text), if any."""
     second = "quantized" if "quantized" in keys else "continuous"
     left, right = _options(keys, "target"), _options(keys, second)
     return html(
-        '<section id="faces"><h2>Faces</h2>{}<div>{}</div></section>',
+        '<section id="faces"><h2>Faces</h2>{}<div>{}</div>{}</section>',
         join(_face(f["name"], left, right) for f in faces),
         _legend(legend_uri, scale),
+        "" if note is None else html('<p class="note">{}</p>', note),
     )
 
 
