@@ -42,7 +42,17 @@ def test_update_in_place_is_the_copying_step_bit_for_bit(kind, into_g, monkeypat
 @pytest.mark.parametrize("smooth", [0.0, 1.5])
 def test_ctrl_c_during_the_update_finishes_the_step(tmp_path, smooth):
     """SIGINT while the step changes x in place is held back until the step is done: the run stops after that step,
-    its checkpoint holds it, and the resumed run ends bit-identically to an uninterrupted one."""
+    its checkpoint holds it, and the resumed run ends bit-identically to an uninterrupted one. Python's own Ctrl-C
+    handler is set for the test: a pytest started in the background from a non-interactive shell inherits SIGINT
+    as ignored, and an ignored signal would never interrupt the run."""
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        _interrupt_a_run(tmp_path, smooth)
+    finally:
+        signal.signal(signal.SIGINT, before)
+
+
+def _interrupt_a_run(tmp_path, smooth):
     scene = small_chart_scene(12, 8, 0.3)
     a = run(scene, iterations=5, smooth=smooth)
     a.run()
