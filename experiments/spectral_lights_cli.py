@@ -7,8 +7,8 @@ settings for every run (``--iterations N --stop-gain 0``, the default optimiser)
 with every optimisation seed of ``--seeds`` (``inkopt optimize --seed N``: the run's render and gradient noise).
 Each result is then scored at two render seeds (0 and 1) at ``--spp`` samples per texel: the run's continuous
 result (volume.npz) rendered on its scene texels with its spectral table and band plan at the seed
-``noise.EVAL_SEED_OFFSET + seed`` (as ``inkopt evaluate --spp S --seed s`` renders it; the printed result and the
-baselines are left out) and scored under D65 and A (``evaluation.lights.light_figures``). The two render seeds'
+``noise.EVAL_SEED_OFFSET + seed`` (the seed ``inkopt evaluate --seed s`` renders with, in one pass of ``--spp``
+samples; the printed result and the baselines are left out: they cost most of an evaluation) and scored under D65 and A (``evaluation.lights.light_figures``). The two render seeds'
 difference gives each figure's Monte Carlo noise (standard error of their average = |difference| / 2, a one-pair
 estimate); the optimisation seeds' spread gives the optimisation's own randomness.
 
