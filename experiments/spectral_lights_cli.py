@@ -8,9 +8,10 @@ with every optimisation seed of ``--seeds`` (``inkopt optimize --seed N``: the r
 Each result is then scored at two render seeds (0 and 1) at ``--spp`` samples per texel: the run's continuous
 result (volume.npz) rendered on its scene texels with its spectral table and band plan at the seed
 ``noise.EVAL_SEED_OFFSET + seed`` (the seed ``inkopt evaluate --seed s`` renders with, in one pass of ``--spp``
-samples; the printed result and the baselines are left out: they cost most of an evaluation) and scored under D65 and A (``evaluation.lights.light_figures``). The two render seeds'
-difference gives each figure's Monte Carlo noise (standard error of their average = |difference| / 2, a one-pair
-estimate); the optimisation seeds' spread gives the optimisation's own randomness.
+samples; the printed result and the baselines are left out: they cost most of an evaluation) and scored under D65
+and A (``evaluation.lights.light_figures``). The two render seeds' difference gives each figure's Monte Carlo noise
+(standard error of their average = |difference| / 2, a one-pair estimate); the optimisation seeds' spread gives the
+optimisation's own randomness.
 
     nice -n 10 python experiments/spectral_lights_cli.py [--dpi 75] [--iterations 40] [--spp 128] [--seeds 0,1,2]
         [--variants D65,D65_A,worst] [--work DIR] [--out NAME.json]
