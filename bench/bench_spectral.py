@@ -17,6 +17,9 @@ optimiser's do (``Viewing.group_weights``), or equally with ``--equal-groups``.
 2. Cost: ``--iterations`` optimisation iterations (forward + loss + gradient + step) of each at those samples,
    RGB and spectral alternating ``--rounds`` times (default 2) in one process; seconds per iteration, median over
    each kind's iterations; ``rounds``: each round's medians, their ratios to RGB's and the load after it.
+   ``cpu_*``: the same in process CPU seconds (every thread of the process: what the iteration itself used, far
+   less moved by other processes' load than wall seconds); ``stage_seconds_per_iteration``: per kind the median
+   wall seconds of the iteration's stages (forward render, loss, gradient pass, mixing and step).
    ``planned_pilot_s``: the plan's pilot in seconds, ``planned_pilot_over_rgb_iteration`` over RGB's iteration.
 
 Two spectral renderers: one path per band and sample (the keys without "hero"), and hero paths, each carrying a
@@ -29,6 +32,9 @@ Third, band paths grouped and weighted by a pilot render of the volume (``Viewin
 and their efforts, ``allocation.choose``; ``--no-plan``: left out). ``over_rgb_at_equal_noise``: each kind's ratio
 scaled to the RGB noise exactly (x (its noise / RGB's)^2); ``events_*``: the same in path events (forward, gradient
 and replay), which do not depend on the machine's load.
+
+``--profile SPP`` (with ``--out``): where an iteration's CPU time goes, RGB at ``--spp`` against the run's plan at
+SPP samples per texel (the spp at RGB's noise, from a measurement), in process CPU seconds (:func:`profile`).
 
 ``--spot-mm H``: the same on Spot scaled to H mm (its scene's start mixture for the noise renders) instead of the
 reference slab. Writes bench/results/spectral_cost.json (Spot: spectral_cost_spot<H>mm.json).
@@ -93,15 +99,24 @@ def render_noise(renderer, texels, spp: int, cmap) -> tuple[float, int]:
     return float(np.sqrt(np.mean(cmap.lab_stderr(res.rgb, res.var_mean) ** 2))), int(res.events)
 
 
-def iteration_seconds(scene, cfg, threads, viewing, iterations: int) -> tuple[list[float], list[int]]:
-    """Seconds and path events (forward, gradient and replay) of each of ``iterations`` optimisation iterations."""
+#: an iteration's stages as the optimiser's history times them (wall seconds)
+STAGES = ("render_s", "loss_s", "gradient_s", "step_s")
+
+
+def iteration_seconds(scene, cfg, threads, viewing, iterations: int) -> tuple[list[float], list[int], dict]:
+    """Seconds and path events (forward, gradient and replay) of each of ``iterations`` optimisation iterations,
+    and per iteration its process CPU seconds (``cpu_s``: every thread of this process, less sensitive to other
+    processes' load than wall seconds) and its stages' wall seconds (:data:`STAGES`)."""
     run = Optimization(scene, cfg.for_scene(scene.kind), threads=threads, viewing=viewing)
     run.renderer()  # built before the clock starts (set-up is not an iteration's cost)
-    events = []
+    events, cpu = [], []
     for _ in range(iterations):
+        c0 = time.process_time()
         run.step()
+        cpu.append(time.process_time() - c0)
         events.append(sum(p["events"] + p["replayed_events"] for p in run.last_passes.values() if p))
-    return list(run.history.seconds), events
+    extra = {"cpu_s": cpu, **{k: list(getattr(run.history, k)) for k in STAGES}}
+    return list(run.history.seconds), events, extra
 
 
 def kind_keys(name: str, noise: dict, per_it: dict, viewing, groups: int) -> dict:
@@ -132,6 +147,13 @@ def equal_noise_ratios(noise: dict, noise_rgb: float, per_it: dict) -> dict:
     return {k: None if n[2] is None else scaled[k] * (n[2] / noise_rgb) ** 2 for k, n in noise.items()}
 
 
+def round_ratios(r: dict) -> dict:
+    """A round's medians over RGB's: wall seconds (``over_rgb``) and process CPU seconds (``cpu_over_rgb``)."""
+    out = {"over_rgb": {k: v / r["seconds_per_iteration"]["rgb"] for k, v in r["seconds_per_iteration"].items()}}
+    cpu = r["cpu_seconds_per_iteration"]
+    return {**out, "cpu_over_rgb": {k: v / cpu["rgb"] for k, v in cpu.items()}}
+
+
 def ratio(a: float | None, b: float | None) -> float | None:
     """a / b, None when either was not measured (``--iterations 0``: renders only)."""
     return None if a is None or b is None else a / b
@@ -160,16 +182,20 @@ def alternate(scene, kinds: dict, cfgs: dict, cfg_rgb, a) -> tuple[dict, dict, l
     alternating ``a.rounds`` times (so a change of the machine's load falls on all), and per round each kind's
     median seconds and the load after it."""
     secs, events = {"rgb": [], **{k: [] for k in kinds}}, {"rgb": [], **{k: [] for k in kinds}}
+    extra = {"rgb": {}, **{k: {} for k in kinds}}
     rounds = []
     for _ in range(a.rounds if a.iterations else 0):
-        this = {}
+        this, cpu = {}, {}
         for k, viewing in {"rgb": None, **kinds}.items():
-            s, e = iteration_seconds(scene, cfgs.get(k, cfg_rgb), a.threads, viewing, a.iterations)
+            s, e, x = iteration_seconds(scene, cfgs.get(k, cfg_rgb), a.threads, viewing, a.iterations)
             secs[k] += s
             events[k] += e
-            this[k] = float(np.median(s))
-        rounds.append({"seconds_per_iteration": this, "load_average_1min": os.getloadavg()[0]})
-    return secs, events, rounds
+            for name, v in x.items():
+                extra[k].setdefault(name, []).extend(v)
+            this[k], cpu[k] = float(np.median(s)), float(np.median(x["cpu_s"]))
+        load = os.getloadavg()[0]
+        rounds.append({"seconds_per_iteration": this, "cpu_seconds_per_iteration": cpu, "load_average_1min": load})
+    return secs, events, rounds, extra
 
 
 def pilot_only(viewing, vol, scene, a, rgb) -> dict:
@@ -199,6 +225,40 @@ def pilot_only(viewing, vol, scene, a, rgb) -> dict:
     }
 
 
+def profile(viewing, vol, scene, a) -> dict:
+    """``--profile N``: one iteration of RGB at ``--spp`` and one of the run's plan at N samples per texel (after a
+    warm-up iteration each), profiled in process CPU seconds (every thread of this process): per kind the CPU
+    seconds, the path events of its passes and the functions of most CPU time (cProfile, ``--top`` of them)."""
+    import cProfile
+    import pstats
+
+    out = {}
+    kinds = {"rgb": (None, a.spp), "planned": (viewing.planned(vol, scene.texels, a.threads), a.profile)}
+    for name, (view, spp) in kinds.items():
+        cfg = OptimizeConfig(iterations=2, spp=spp, forward_spp=spp).for_scene(scene.kind)
+        run = Optimization(scene, cfg, threads=a.threads, viewing=view)
+        run.renderer()
+        run.step()  # warm-up
+        prof, c0 = cProfile.Profile(time.process_time), time.process_time()
+        prof.enable()
+        run.step()
+        prof.disable()
+        stats = pstats.Stats(prof).stats  # {(file, line, function): (calls, ..., tottime, cumtime, callers)}
+        top = sorted(stats.items(), key=lambda kv: -kv[1][2])[: a.top]
+        out[name] = {
+            "spp": spp,
+            "cpu_s": time.process_time() - c0,
+            "events": sum(p["events"] + p["replayed_events"] for p in run.last_passes.values() if p),
+            "top_cpu_s": [
+                {"function": f"{Path(k[0]).name}:{k[1]}({k[2]})", "calls": v[1], "cpu_s": v[2]} for k, v in top
+            ],
+        }
+    out["cpu_over_rgb"] = out["planned"]["cpu_s"] / out["rgb"]["cpu_s"]
+    out["events_over_rgb"] = out["planned"]["events"] / out["rgb"]["events"]
+    out["cpu_per_event_over_rgb"] = out["cpu_over_rgb"] / out["events_over_rgb"]
+    return out
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--bands", type=int, default=16)
@@ -212,11 +272,16 @@ def main():
     ap.add_argument("--no-plan", action="store_true", help="leave out the band paths grouped by a pilot's plan")
     ap.add_argument("--out", help="results file name in bench/results (default by the scene)")
     ap.add_argument("--pilot-only", action="store_true", help="the run's pilots and their plan only (needs --out)")
+    ap.add_argument("--profile", type=int, metavar="SPP", help="profile one RGB and one planned iteration at SPP")
+    ap.add_argument("--top", type=int, default=12, help="functions listed per kind with --profile")
     a = ap.parse_args()
     vol, scene = bench_scene(a.spot_mm)
     table, d65_only, tex = spectral_from_rgb(vol.inks, a.bands), (named_light("D65"),), scene.texels
     d65 = d65_only[0].colour_map(table.wavelengths_nm)
     noise_rgb, events_rgb = render_noise(Renderer(vol, a.threads), tex, a.spp, RGB)
+    if a.profile:
+        out = {"profile": profile(Viewing(table, d65_only), vol, scene, a), "threads": a.threads, **machine()}
+        return print("wrote", write(a.out, out))
     if a.pilot_only:
         out = pilot_only(Viewing(table, d65_only), vol, scene, a, (noise_rgb, events_rgb))
         return print("wrote", write(a.out, out))
@@ -233,8 +298,10 @@ def main():
     cfg_rgb = OptimizeConfig(iterations=a.iterations, spp=a.spp, forward_spp=a.spp)
     cfgs = {k: OptimizeConfig(iterations=a.iterations, spp=n[1], forward_spp=n[1]) for k, n in noise.items()}
     t0 = time.perf_counter()
-    secs, events, rounds = alternate(scene, kinds, cfgs, cfg_rgb, a)
+    secs, events, rounds, extra = alternate(scene, kinds, cfgs, cfg_rgb, a)
     per_it = {k: float(np.median(v)) if v else None for k, v in secs.items()}
+    cpu_it = {k: float(np.median(x["cpu_s"])) if x else None for k, x in extra.items()}
+    stages = {k: {n: float(np.median(v)) for n, v in x.items() if n != "cpu_s"} for k, x in extra.items() if x}
     ev_it = {k: float(np.median(v)) if v else None for k, v in events.items()}
     groups = len(table.group_bands())
     out = {
@@ -256,11 +323,12 @@ def main():
         **kind_keys("planned", noise, per_it, kinds.get("planned"), groups),
         "planned_pilot_s": pilot_s,
         "planned_pilot_over_rgb_iteration": ratio(pilot_s, per_it["rgb"]),
-        "rounds": [
-            {**r, "over_rgb": {k: v / r["seconds_per_iteration"]["rgb"] for k, v in r["seconds_per_iteration"].items()}}
-            for r in rounds
-        ],
+        "rounds": [{**r, **round_ratios(r)} for r in rounds],
         "over_rgb_at_equal_noise": equal_noise_ratios(noise, noise_rgb, per_it),
+        "cpu_seconds_per_iteration": cpu_it,
+        "iteration_cpu_seconds": {k: x.get("cpu_s", []) for k, x in extra.items()},
+        "cpu_over_rgb_at_equal_noise": equal_noise_ratios(noise, noise_rgb, cpu_it),
+        "stage_seconds_per_iteration": stages,
         "events_per_iteration": ev_it,
         "iteration_events": events,
         "events_over_rgb_at_equal_noise": equal_noise_ratios(noise, noise_rgb, ev_it),
@@ -274,7 +342,8 @@ def main():
             f"noise ΔE76: rgb {noise_rgb:.3f} at spp {a.spp}; {k} {pilot:.3f} at spp {a.spp}, {at:.3f} at spp {spp}; "
             f"s/iteration rgb {per_it['rgb']:.2f}, {k} {per_it[k]:.2f} ({per_it[k] / per_it['rgb']:.2f}x; "
             f"at equal noise {out['over_rgb_at_equal_noise'][k]:.2f}x, events "
-            f"{out['events_over_rgb_at_equal_noise'][k]:.2f}x)"
+            f"{out['events_over_rgb_at_equal_noise'][k]:.2f}x, "
+            f"CPU seconds {out['cpu_over_rgb_at_equal_noise'][k]:.2f}x)"
         )
     name = a.out or (f"spectral_cost_spot{a.spot_mm:g}mm.json" if a.spot_mm else "spectral_cost.json")
     print("wrote", write(name, out))

@@ -16,6 +16,7 @@ from ..evaluation.options import EvaluateOptions
 from ..evaluation.outputs import picture_names, table_lines
 from ..evaluation.sample import DEFAULT_SAMPLE_WINDOWS
 from ..evaluation.spectral import evaluate_lights, run_viewing
+from ..evaluation.translucency import table_lines as translucency_lines
 from ..rundir import RunDir
 from .common import UsageError, add_lighting_args, add_seed_arg, add_threads_arg, lighting_from_args, stderr_log
 from .lights import under_lights
@@ -182,6 +183,9 @@ def _evaluate_lights(args, d: RunDir, options: EvaluateOptions, log) -> int:
             f"gamut floor: mean dE76 from the target to the nearest colour the inks reach in a {table['patch_mm']:g} "
             f"mm patch, under each light: {floors} (colour table: {how})"
         )
+    if "translucency" in out:  # its lines carry the first light's figures; the JSON has every light's
+        print(f"translucency under {out['translucency']['lights'][0]} (luminance Y under the light):")
+        print("\n".join(translucency_lines(out["translucency"])))
     spp, secs = out["continuous"]["spp"], out["seconds"]
     more = f", {d.sample_predictions_path}" if "texel_sample" in out else ""
     print(f"{spp} spp per scene texel (continuous result), {secs:.0f} s; wrote {d.evaluation_lights_path}{more}")

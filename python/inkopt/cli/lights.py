@@ -4,6 +4,10 @@ figures under each light (``slab``, ``optimize``, ``evaluate``)."""
 
 from __future__ import annotations
 
+#: how the loss under several lights combines unless ``--combine`` says: the worst light's, which lowers the worst
+#: light's mean ΔE2000 more than the mean of the lights' losses does (docs/spectral.md, "Two lights")
+DEFAULT_COMBINE = "worst"
+
 
 def add_light_args(p, combine: bool = True, what: str | None = None) -> None:
     """``--illuminant NAME|FILE.csv`` or ``--illuminants A,B``: the lights the print is seen under
@@ -24,8 +28,8 @@ def add_light_args(p, combine: bool = True, what: str | None = None) -> None:
     g.add_argument(
         "--illuminants",
         metavar="D65,A",
-        help="several lights: the loss is the mean (or --combine worst) of the loss under each (a spectral ink table; "
-        "docs/spectral.md)"
+        help="several lights: the loss is the worst (or --combine mean: the mean) of the loss under each (a spectral "
+        "ink table; docs/spectral.md)"
         if what is None
         else "several lights, as --illuminant",
     )
@@ -34,9 +38,9 @@ def add_light_args(p, combine: bool = True, what: str | None = None) -> None:
     p.add_argument(
         "--combine",
         choices=("mean", "worst"),
-        default="mean",
-        help="how the loss under several lights (--illuminants) combines: their mean (default) or the worst light's "
-        "(each iteration steps on the light whose loss is largest)",
+        default=DEFAULT_COMBINE,
+        help="how the loss under several lights (--illuminants) combines: the worst light's (default: each iteration "
+        "steps on the light whose loss is largest, which lowers the worst light's error most) or their mean",
     )
 
 
@@ -47,7 +51,7 @@ def viewing_from_args(args, table=None):
     from ..spectral.viewing import Viewing
 
     if getattr(args, "illuminants", None):
-        return Viewing(table, lights=parse_lights(args.illuminants), combine=getattr(args, "combine", "mean"))
+        return Viewing(table, lights=parse_lights(args.illuminants), combine=getattr(args, "combine", DEFAULT_COMBINE))
     if getattr(args, "illuminant", None):
         return Viewing(table, lights=(load_light(args.illuminant),))
     return Viewing(table)

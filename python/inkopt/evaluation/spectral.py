@@ -60,6 +60,7 @@ from .options import EvaluateOptions
 from .outputs import picture_names, write_face_pictures, write_mesh_views
 from .renders import Rendered
 from .spectral_table import SpectralColourTable, SpectralPatches, spectral_patches
+from .translucency_lights import evaluate_translucency_lights
 
 #: the loss weights the figures' TexelLoss is built with (the figures do not depend on them)
 FIGURE_GAMMA = (1.0, 0.0, 0.0)
@@ -96,6 +97,7 @@ def evaluate_lights(path, options: EvaluateOptions, lights: str | None = None, l
     ev.factory, ev.cmap = viewing.renderer_factory(Renderer, shared=True), viewing.colours()[0]  # geometry once
     ev.say(f"spectral: {table.bands} bands under {', '.join(names)}")
     grid, sources = _mixture_results(ev)  # the continuous result and the baselines' layer sources
+    translucency = _translucency(ev, options, table, viewing.colours())
     printed = _printed_results(ev, grid, sources)  # the quantized result and the baselines on printer texels
     if ev.sample is None:
         loss, diffs = viewing.loss(ev.target, ev.rec.texels.pos_vox, FIGURE_GAMMA), None
@@ -116,11 +118,25 @@ def evaluate_lights(path, options: EvaluateOptions, lights: str | None = None, l
     if ev.floor:
         out["colour_table"] = table_entry(ev.floor["colour_table"], options.table)
         out["gamut_floor"] = gamut_floors(options.table if patches is None else patches.under(viewing.colours()), ev)
+    if translucency is not None:
+        out["translucency"] = translucency
     if ev.sample is not None:
         out.update(texel_sample=ev.sample.to_json(), differences=diffs)
     if options.write:
         _write(d, ev, viewing, out, tuple(results))
     return out
+
+
+def _translucency(ev: Evaluating, options: EvaluateOptions, table, colours) -> dict | None:
+    """The translucency figures under each light (``translucency_lights``) when ``options`` ask for them as for an
+    RGB run (``translucency`` True, or None with a constrained run or ``translucency_compare``); else None."""
+    o = options
+    if not (o.translucency or (o.translucency is None and (ev.rec.translucency is not None or o.translucency_compare))):
+        return None
+    vol = ev.d.load_volume()
+    return evaluate_translucency_lights(
+        vol, ev.rec, table, colours, o.translucency_compare, ev.sampling.seed, o.threads, ev.say
+    )
 
 
 def run_colours(d: RunDir, names, viewing: Viewing) -> tuple[ColourMap, ...]:

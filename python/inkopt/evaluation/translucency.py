@@ -103,17 +103,29 @@ def knife_edge_spread(
 ) -> dict:
     """E|Δx| (mm) of a layered probe: ``sigma_s``, ``sigma_a`` (L, 3) mm^-1, layer 0 the viewed surface;
     ``width`` voxels along x (default ``PROBE_WIDTH``), rendered at ``renders.probe_spp``."""
-    L, width = len(sigma_s), int(width or PROBE_WIDTH)
+    width = int(width or PROBE_WIDTH)
+    vol, tex = probe_volume(sigma_s, sigma_a, voxel_mm, g, ior, width)
+    r = Renderer(vol, renders.threads, back_light(5)).render(tex, renders.probe_spp, renders.seed)
+    return edge_spread(r.rgb.astype(np.float64) @ LUMA, r.var_mean.astype(np.float64) @ LUMA**2, width, voxel_mm)
+
+
+def probe_volume(sigma_s: np.ndarray, sigma_a: np.ndarray, voxel_mm: float, g: float, ior: float, width: int):
+    """The knife-edge probe of layers ``sigma_s``, ``sigma_a`` (L, 3) mm^-1 (layer 0 the viewed surface),
+    ``width`` voxels along x, over its half-masked far face, and its top texels."""
+    L = len(sigma_s)
     ss = np.zeros((L + 1, 2, width, 3), np.float32)
     sa = np.full((L + 1, 2, width, 3), 1e-4, np.float32)
     ss[1:] = np.asarray(sigma_s, np.float32)[::-1, None, None]  # z = L: the surface layer, viewed from +z
     sa[1:] = np.asarray(sigma_a, np.float32)[::-1, None, None]
     sa[0, :, : width // 2] = MASK_SIGMA_A
     vol = Volume.from_coefficients((voxel_mm,) * 3, sigma_s=ss, sigma_a=sa, g=g, ior=ior, boundary="periodic-xy")
-    tex = Texels.box_faces(vol.shape, ["top"])
-    r = Renderer(vol, renders.threads, back_light(5)).render(tex, renders.probe_spp, renders.seed)
-    y = (r.rgb.astype(np.float64) @ LUMA).reshape(2, width).sum(0)
-    v = (r.var_mean.astype(np.float64) @ LUMA**2).reshape(2, width).sum(0)
+    return vol, Texels.box_faces(vol.shape, ["top"])
+
+
+def edge_spread(y: np.ndarray, v: np.ndarray, width: int, voxel_mm: float) -> dict:
+    """E|Δx| (mm) and its standard error from a probe's exit luminance ``y`` (2 x width,) and its variance ``v``
+    (the probe's top texels in order: two rows of ``width``), and the probe's mean transmittance."""
+    y, v = y.reshape(2, width).sum(0), v.reshape(2, width).sum(0)
     dark, total = y[: width // 2].sum(), y.sum()
     half = 0.5 * width * voxel_mm
     if total <= 0:
@@ -170,6 +182,11 @@ def depth_layers(vol: Volume, texels: Texels) -> tuple[np.ndarray, np.ndarray]:
 
 def probe_medium(vol: Volume, near: np.ndarray, depth: np.ndarray, texel_sel: np.ndarray):
     """Mean sigma_s, sigma_a (L, 3) per depth layer of the voxels whose nearest texel is in ``texel_sel``."""
+    return mix(probe_mixture(vol, near, depth, texel_sel), vol.inks)
+
+
+def probe_mixture(vol: Volume, near: np.ndarray, depth: np.ndarray, texel_sel: np.ndarray) -> np.ndarray:
+    """Mean mixture (L, N) float64 per depth layer of the voxels whose nearest texel is in ``texel_sel``."""
     member = np.zeros(near.max() + 2, bool)
     member[texel_sel] = True
     sel = member[near]  # near == -1 maps to member[-1], always False
@@ -177,8 +194,7 @@ def probe_medium(vol: Volume, near: np.ndarray, depth: np.ndarray, texel_sel: np
     mixture = vol.mixture[sel].astype(np.float64)
     L = int(d.max()) + 1
     cnt = np.maximum(np.bincount(d, minlength=L), 1)[:, None]
-    mean = np.stack([np.bincount(d, mixture[:, n], L) for n in range(mixture.shape[1])], 1) / cnt
-    return mix(mean, vol.inks)
+    return np.stack([np.bincount(d, mixture[:, n], L) for n in range(mixture.shape[1])], 1) / cnt
 
 
 @dataclass(frozen=True)
