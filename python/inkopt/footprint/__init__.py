@@ -99,7 +99,10 @@ SHELL_STEP_TEXEL_BYTES = STEP_TEXEL_BYTES
 #:   held at 60 mm (2.651 GiB measured without it plus its 0.437) and the 2.07 KB at 40 mm (1.266 + 0.184); no fixed
 #:   term (the figures' libraries and arenas, ~0.2 GiB, which the all-free terms do not count either, so that a band
 #:   never estimates above every voxel free): 3.16 GiB at 60 mm against the whole run's 3.10, 1.37 at 40 mm
-#:   against 1.45-1.53, 0.38 at 20 mm against 0.59
+#:   against 1.45-1.53, 0.38 at 20 mm against 0.59. Both figures' constants were fitted while the figures built and
+#:   held the loss's operators; they are found a block of rows at a time now, and the figures' loss side at 60 mm
+#:   takes 373 B per texel instead of 1536 (bench/results/figure_side_spot.json): not refitted until whole runs of
+#:   that code are measured, so the figures' stage is over-estimated by up to ~1.1 KB per texel
 SHELL_FIGURES_FREE_BYTES = 90.0
 SHELL_FIGURES_TEXEL_BYTES = 1850.0
 #: seconds per iteration of the passes (4-spp gradient, 16-spp forward, the loss) at ``TEXELS_REF`` texels, from
