@@ -99,7 +99,7 @@ def test_dry_run_shows_the_choice_and_shell_zero_refuses(monkeypatch, capsys, tm
     base = ["optimize", str(SPOT), "--height-mm", "20", "--out", str(out), "--memory-gb", gib, "--iterations", "3"]
     code, lines, _ = _cli(capsys, [*base, "--dry-run"])
     assert code == 0 and len(lines) == 2, lines
-    assert lines[0].startswith("memory: every voxel free needs ~") and f"{gib[:3]}" in lines[0]
+    assert lines[0].startswith("memory: every voxel free needs ~") and f"{float(gib):.1f} GiB it may use" in lines[0]
     assert "--shell-mm 0 forces every voxel free" in lines[0] and "`" not in lines[0]
     free = spec_footprint(MeshSpec(str(SPOT), height_mm=20.0, shell_mm=1.0), N_INKS)[0].free_voxels
     assert lines[1].startswith("estimate from the mesh's size") and f"{free / 1e6:.1f} M free" in lines[1]

@@ -16,7 +16,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .color import LAB_NORM_SCALE, RGB, ColourMap, linear_to_lab, normalise_lab
-from .neighbourhood import WindowOperator, gaussian_window, sobel_operators
+from .neighbourhood import TexelNeighbours, WindowOperator
 
 K1 = 0.01**2
 K2 = 0.03**2
@@ -50,6 +50,19 @@ class LossResult:
     lab: np.ndarray
 
 
+@dataclass
+class LossFigures:
+    """A prediction's loss and its figures' windowed statistics from one pass over the texels' neighbourhoods per
+    colour map (``TexelLoss.figures``): ``loss`` as ``TexelLoss.__call__(..., gradient=False)`` gives it; ``ssim`` the
+    mean SSIM under the first colour map (``TexelLoss.ssim_mean``'s); ``window`` (I, a) float64 K @ the asked columns
+    and ``window_sq`` (I, b) K^2 @ the asked columns (None when none were asked)."""
+
+    loss: LossResult
+    ssim: float
+    window: np.ndarray | None
+    window_sq: np.ndarray | None
+
+
 class TexelLoss:
     """E = (g1 E1 / 100^2 + g2 E2 + g3 E3) / (g1 + g2 + g3) over I texels (docs/method.md §5; E1 is scaled
     to units of (dE/100)^2 in the sum, see ``E1_WEIGHT_SCALE``).
@@ -73,8 +86,10 @@ class TexelLoss:
     All three terms are evaluated unless the call says ``all_terms=False`` (the optimiser's training steps): then a
     term of weight 0 is reported as NaN and costs nothing (on the reference slab at the default γ = (1, 0, 0) the
     SSIM and edge terms were half of the loss's time).
-    The sparse operators (W: ~(2r+1)^2 entries per texel on a face, r = int(3.5 sigma + 0.5)) are built on first
-    use; ``release_operators`` frees them between uses.
+    The sparse operators (W: ~(2r+1)^2 entries per texel on a face, r = int(3.5 sigma + 0.5)) are applied a block
+    of texel rows at a time without being held (``neighbourhood.TexelNeighbours``), unless a call with the gradient
+    at γ2 > 0 or γ3 > 0 (a training step that reads them) has built them: then they are held and reused until
+    ``release_operators``. Both give the same products bit for bit.
     """
 
     def __init__(
@@ -113,53 +128,63 @@ class TexelLoss:
         self.target_lab = linear_to_lab(target)
         self.target_n = normalise_lab(self.target_lab)
         self._pos = pos
-        self._K = self._K2 = self._S = self._ST = None  # the operators, built on first use (``release_operators``)
-        self._wsum = None  # kept by ``release_operators`` (I floats)
+        self._ops = TexelNeighbours(pos, self.sigma)  # applied a block of rows at a time unless held
         #: the window's Chebyshev radius in voxels (``gaussian_window``)
-        self.radius = int(3.5 * self.sigma + 0.5)
-        tn = self.target_n
-        self._mu_t = self._window(tn)
-        self._var_t = self._window(tn * tn) - self._mu_t**2
-        self._sobel_t = self.S @ tn
-        lab = self.target_lab
-        var = np.maximum(self._window(lab * lab) - self._window(lab) ** 2, 0.0)
+        self.radius = self._ops.radius
+        tn, lab = self.target_n, self.target_lab
+        # the target's windowed statistics in one pass (no operator held): W [t, t^2, lab, lab^2], S t, K @ 1
+        k, _, self._sobel_t, self._wsum = self._ops.products(
+            np.concatenate([tn, tn * tn, lab, lab * lab], axis=1), sobel=tn, wsum=True
+        )
+        w = k / self._wsum[:, None]
+        del k
+        self._mu_t = np.ascontiguousarray(w[:, 0:3])
+        self._var_t = w[:, 3:6] - self._mu_t**2
+        var = np.maximum(w[:, 9:12] - w[:, 6:9] ** 2, 0.0)
+        del w
         #: (I,) bool: texels whose target neighbourhood is flat (``FLAT_L_STD``, ``FLAT_CHROMA_STD``)
         self.flat = (np.sqrt(var[:, 0]) < FLAT_L_STD) & (np.sqrt(var[:, 1] + var[:, 2]) < FLAT_CHROMA_STD)
 
     @property
     def K(self) -> WindowOperator:
-        """The window's weights (``gaussian_window``), (I, I) float64; built on first use."""
-        if self._K is None:
-            self._K, self._wsum, _ = gaussian_window(self._pos, self.sigma)
-        return self._K
+        """The window's weights (``gaussian_window``), (I, I) float64; built and held on first use."""
+        return self._ops.window()
 
     @property
     def wsum(self) -> np.ndarray:
-        """(I,) float64: the window weight that falls on texels (``gaussian_window``'s n)."""
-        if self._wsum is None:
-            self.K  # noqa: B018 (builds the window)
+        """(I,) float64: the window weight that falls on texels (``gaussian_window``'s n; kept from the start)."""
         return self._wsum
 
     @property
     def K2(self) -> WindowOperator:
-        """K squared entrywise (the noise of windowed statistics), sharing K's structure; built on first use."""
-        if self._K2 is None:
-            self._K2 = self.K.squared
-        return self._K2
+        """K squared entrywise (the noise of windowed statistics), sharing K's structure; held with K."""
+        return self._ops.window_sq()
 
     @property
     def S(self) -> sp.csr_matrix:
-        """The stacked Sobel operators (``sobel_operators``), (3I, I) CSR float64; built on first use."""
-        if self._S is None:
-            self._S = sobel_operators(self._pos)
-        return self._S
+        """The stacked Sobel operators (``sobel_operators``), (3I, I) CSR float64; built and held on first use."""
+        return self._ops.sobel()
 
     def release_operators(self) -> None:
-        """Free the window and Sobel operators (~0.8 KB per texel: the window's ~120 entries of 5 bytes, its
-        square sharing them, the Sobel operators' ~17 entries of 12 bytes); the next call that needs them builds
-        them again, equal to the last. A colour-only training step (``all_terms=False`` at γ2 = γ3 = 0) never
-        reads them."""
-        self._K = self._K2 = self._S = self._ST = None
+        """Free the held window and Sobel operators (~0.8 KB per texel: the window's ~120 entries of 5 bytes, its
+        square sharing them, the Sobel operators' ~17 entries of 12 bytes); later calls apply them a block of rows
+        at a time (or build them again, equal to the last, for a step's gradient). A colour-only training step
+        (``all_terms=False`` at γ2 = γ3 = 0) never reads them."""
+        self._ops.release()
+
+    def _hold_operators(self) -> None:
+        """Build and hold the operators a gradient at the loss's weights reads (the window at γ2 > 0, the Sobel
+        operators at γ3 > 0): a training step's products then come from them, not from a new search each call."""
+        if self.gamma[1] > 0:
+            self._ops.window_sq()
+        if self.gamma[2] > 0:
+            self._ops.sobel_t()
+
+    def products(self, window=None, window_sq=None, sobel=None) -> tuple:
+        """(K @ window, K^2 @ window_sq, S @ sobel) for (I, k) float arrays or None: (I, k), (I, k), (3I, k) float64,
+        None where not asked (``TexelNeighbours.products``: from the held operators or a block of rows at a time,
+        the same bits)."""
+        return self._ops.products(window, window_sq, sobel)[:3]
 
     def under(self, light: int) -> TexelLoss:
         """This loss under its colour map ``light`` alone (the target's statistics and operators shared, not
@@ -179,11 +204,11 @@ class TexelLoss:
 
     def _window(self, x: np.ndarray) -> np.ndarray:
         """W @ x for x (I, k)."""
-        return (self.K @ x) / self.wsum[:, None]
+        return self.products(window=x)[0] / self.wsum[:, None]
 
     def _window_t(self, y: np.ndarray) -> np.ndarray:
         """W.T @ y for y (I, k) (K is symmetric)."""
-        return self.K @ (y / self.wsum[:, None])
+        return self._ops.window() @ (y / self.wsum[:, None])
 
     def _check(self, pred_rgb) -> np.ndarray:
         p = np.asarray(pred_rgb, np.float64)
@@ -203,26 +228,72 @@ class TexelLoss:
             raise ValueError(f"pred_var must be a non-negative (I, C) array like pred_rgb, got {var.shape}")
         return var
 
-    def _noise(self, pred: np.ndarray, pred_var, cmap: ColourMap | None = None) -> tuple[np.ndarray, np.ndarray] | None:
-        """Noise of a Monte Carlo prediction in the windowed statistics: (W v, sum_j W_ij^2 v_j) with v the
-        variance of each texel's normalised L*a*b* (delta method from the channels' variance ``pred_var``) under
-        ``cmap`` (default the first colour map)."""
+    def _lab_var(self, pred: np.ndarray, pred_var, cmap: ColourMap) -> np.ndarray | None:
+        """(I, 3) float64 variance of each texel's normalised L*a*b* under ``cmap`` (delta method from the channels'
+        variance ``pred_var``), or None without it."""
         var = self._check_var(pred, pred_var)
         if var is None:
             return None
-        jac = (cmap or self.colours[0]).lab_jacobian(pred)  # (I, 3 lab, C)
-        v = np.einsum("ikj,ij->ik", jac * jac, var) * LAB_NORM_SCALE**2
-        return (self.K @ v) / self.wsum[:, None], (self.K2 @ v) / (self.wsum**2)[:, None]
+        jac = cmap.lab_jacobian(pred)  # (I, 3 lab, C)
+        return np.einsum("ikj,ij->ik", jac * jac, var) * LAB_NORM_SCALE**2
 
-    def _ssim_parts(self, cn: np.ndarray, noise=None):
-        """SSIM terms. ``noise`` = (W v, W^2 v): with it, the prediction's windowed mean square and variance are
-        corrected for the estimator's noise (E[(W c^)^2] = (W c)^2 + W^2 v, E[W c^2] = W c^2 + W v); the noise is
-        independent of the target, so the covariance needs no correction. Corrections are constants for the
-        gradient."""
-        tn = self.target_n
-        m = self._window(np.concatenate([cn, cn * cn, cn * tn], axis=1))
+    def _noise(self, pred: np.ndarray, pred_var, cmap: ColourMap | None = None) -> tuple[np.ndarray, np.ndarray] | None:
+        """Noise of a Monte Carlo prediction in the windowed statistics: (W v, sum_j W_ij^2 v_j) with v the
+        variance of each texel's normalised L*a*b* (``_lab_var``) under ``cmap`` (default the first colour map)."""
+        v = self._lab_var(pred, pred_var, cmap or self.colours[0])
+        if v is None:
+            return None
+        k, k2, _ = self.products(window=v, window_sq=v)
+        return k / self.wsum[:, None], k2 / (self.wsum**2)[:, None]
+
+    def _terms(self, cn: np.ndarray, v, ssim: bool, sobel: bool, parts: bool, extra=(None, None)) -> tuple:
+        """One pass over the texels' neighbourhoods a block of rows at a time (``TexelNeighbours.blocks``) for a
+        prediction's normalised L*a*b* ``cn`` (I, 3) and its variance ``v`` (I, 3) (``_lab_var``, or None): (the
+        SSIM map (I, 3) if ``ssim``, S cn - S t (3I, 3) if ``sobel``, the SSIM parts (mx, a1, b1, a2, b2), each
+        (I, 3), if ``parts``, K @ extra[0], K^2 @ extra[1] for ``extra`` (I, a), (I, b) arrays or None), None where
+        not asked. Only these are whole arrays: the windowed statistics are a block's."""
+        n = self.n
+        window, window_sq = [], []
+        if ssim:
+            window.append(np.concatenate([cn, cn * cn, cn * self.target_n], axis=1))
+            if v is not None:
+                window.append(v)
+                window_sq.append(v)
+        at = (sum(x.shape[1] for x in window), sum(x.shape[1] for x in window_sq))  # where the extra columns start
+        for cols, to in zip(extra, (window, window_sq)):
+            if cols is not None:
+                to.append(cols)
+        window = np.concatenate(window, axis=1) if window else None
+        window_sq = np.concatenate(window_sq, axis=1) if window_sq else None
+        out = [np.empty((n, 3)) if ssim else None, np.empty((3 * n, 3)) if sobel else None]
+        out += [[np.empty((n, 3)) for _ in range(5)] if parts else None]
+        out += [None if c is None else np.empty((n, c.shape[1])) for c in extra]
+        for s, e, k, k2, sx, _ in self._ops.blocks(window, window_sq, cn if sobel else None):
+            if ssim:
+                w = self.wsum[s:e, None]
+                noise = None if v is None else (k[:, 9:12] / w, k2[:, :3] / (self.wsum[s:e] ** 2)[:, None])
+                got = self._ssim_parts(cn[s:e], noise, k[:, :9] / w, slice(s, e))
+                out[0][s:e] = got[0]
+                for o, g in zip(out[2] or (), got[1:]):
+                    o[s:e] = g
+            for a in range(3) if sobel else ():
+                rows = slice(a * n + s, a * n + e)
+                out[1][rows] = sx[a] - self._sobel_t[rows]
+            for o, r, c in zip(out[3:], (k, k2), at):
+                if o is not None:
+                    o[s:e] = r[:, c:]
+        return tuple(out)
+
+    def _ssim_parts(self, cn: np.ndarray, noise=None, m: np.ndarray | None = None, rows=slice(None)):
+        """SSIM terms of texels ``rows`` (``cn`` and ``noise`` theirs). ``noise`` = (W v, W^2 v): with it, the
+        prediction's windowed mean square and variance are corrected for the estimator's noise (E[(W c^)^2] =
+        (W c)^2 + W^2 v, E[W c^2] = W c^2 + W v); the noise is independent of the target, so the covariance needs
+        no correction. Corrections are constants for the gradient. ``m``: W [cn, cn^2, cn t] of the rows if taken
+        (``_terms``), else every texel's is taken here."""
+        if m is None:
+            m = self._window(np.concatenate([cn, cn * cn, cn * self.target_n], axis=1))
         mx, qx, pxy = m[:, :3], m[:, 3:6], m[:, 6:]
-        mt = self._mu_t
+        mt = self._mu_t[rows]
         mx2, var_x = mx * mx, qx - mx * mx
         if noise is not None:
             wv, w2v = noise
@@ -231,7 +302,7 @@ class TexelLoss:
         a1 = 2.0 * mx * mt + K1
         b1 = mx2 + mt * mt + K1
         a2 = 2.0 * (pxy - mx * mt) + K2
-        b2 = var_x + self._var_t + K2
+        b2 = var_x + self._var_t[rows] + K2
         return (a1 * a2) / (b1 * b2), mx, a1, b1, a2, b2
 
     def ssim_map(self, pred_rgb, pred_var=None, light: int = 0) -> np.ndarray:
@@ -241,7 +312,7 @@ class TexelLoss:
         pred = self._check(pred_rgb)
         cmap = self.colours[light]
         cn = normalise_lab(cmap.lab(pred))
-        return self._ssim_parts(cn, self._noise(pred, pred_var, cmap))[0]
+        return self._terms(cn, self._lab_var(pred, pred_var, cmap), ssim=True, sobel=False, parts=False)[0]
 
     def ssim_mean(self, pred_rgb, pred_var=None, light: int = 0) -> float:
         """Mean SSIM over texels and the three normalised L*a*b* channels (= 1 - E2); see ``ssim_map``."""
@@ -254,7 +325,7 @@ class TexelLoss:
         dlab = lab - self.target_lab
         cn = normalise_lab(lab)
         ssim = self._ssim_parts(cn, noise)[0]
-        sob = self.S @ cn - self._sobel_t
+        sob = self.products(sobel=cn)[2] - self._sobel_t
         e1, e2 = float(np.sum(dlab * dlab) / self.n), float(1.0 - ssim.mean())
         e3 = float(100.0 / (3.0 * self.n * 4.0 * 32.0) * np.sum(sob * sob))
         g1, g2, g3 = self.gamma
@@ -266,44 +337,70 @@ class TexelLoss:
         the value and terms only (``grad`` None; the figures: none of the gradient's per-texel temporaries). Several
         colour maps: combined by ``combine`` (the result's ``lab`` is under the first)."""
         pred = self._check(pred_rgb)
-        if len(self.colours) == 1:
-            return self._under(pred, pred_var, all_terms, self.colours[0], gradient)
-        each = [self._under(pred, pred_var, all_terms, c, gradient) for c in self.colours]
+        if gradient:  # a training step: the operators its gradient reads are held for the next steps
+            self._hold_operators()
+        return self._combined([self._under(pred, pred_var, all_terms, c, gradient)[0] for c in self.colours])
+
+    def figures(self, pred_rgb, pred_var=None, window=None, window_sq=None) -> LossFigures:
+        """The loss's value and terms at ``pred_rgb`` (I, C) (``self(pred_rgb, pred_var, gradient=False)``'s, bit for
+        bit), the mean SSIM under the first colour map (``ssim_mean``'s) and K @ ``window`` (I, a), K^2 @
+        ``window_sq`` (I, b) (float arrays or None: a figure's other windowed statistics, e.g. the mottle's), from
+        one pass over the texels' neighbourhoods per colour map: a prediction's figures without the operators held
+        (``TexelNeighbours``)."""
+        pred = self._check(pred_rgb)
+        each, first = [], None
+        for k, cmap in enumerate(self.colours):
+            res, parts = self._under(pred, pred_var, True, cmap, False, (window, window_sq) if k == 0 else (None, None))
+            each.append(res)
+            first = parts if first is None else first
+        return LossFigures(self._combined(each), *first)
+
+    def _combined(self, each: list[LossResult]) -> LossResult:
+        """The loss under each colour map combined by ``combine`` (one: itself)."""
+        if len(each) == 1:
+            return each[0]
         if self.combine == "worst":
             worst = max(each, key=lambda r: r.value)
             return LossResult(worst.value, worst.e1, worst.e2, worst.e3, worst.grad, each[0].lab)
         k = len(each)
         terms = [sum(getattr(r, t) for r in each) / k for t in ("value", "e1", "e2", "e3")]
-        grad = sum(r.grad for r in each) / k if gradient else None
+        grad = sum(r.grad for r in each) / k if each[0].grad is not None else None
         return LossResult(*terms, grad=grad, lab=each[0].lab)
 
-    def _under(self, pred: np.ndarray, pred_var, all_terms: bool, cmap: ColourMap, gradient: bool = True) -> LossResult:
-        """The loss and (``gradient``) its gradient under one colour map (see ``__call__``)."""
+    def _under(self, pred, pred_var, all_terms: bool, cmap: ColourMap, gradient: bool = True, extra=(None, None)):
+        """The loss and (``gradient``) its gradient under one colour map (see ``__call__``), and (mean SSIM, K @
+        extra[0], K^2 @ extra[1]) from the same pass over the neighbourhoods (``_statistics``; the SSIM NaN when not
+        evaluated): (``LossResult``, that tuple)."""
         n = self.n
         g1, g2, g3 = self.gamma
         lab = cmap.lab(pred)
         dlab = lab - self.target_lab
         e1 = float(np.sum(dlab * dlab) / n)
         cn = normalise_lab(lab)
-        e2 = e3 = float("nan")
-        if all_terms or g2 > 0:
-            ssim, mx, a1, b1, a2, b2 = self._ssim_parts(cn, self._noise(pred, pred_var, cmap))
-            e2 = float(1.0 - ssim.mean())
+        e2 = e3 = ssim_mean = float("nan")
+        want_ssim, want_sobel = all_terms or g2 > 0, all_terms or g3 > 0
+        if want_ssim:
+            v = self._lab_var(pred, pred_var, cmap)
         else:
-            self._check_var(pred, pred_var)  # unused, but a bad variance is still an error
+            v = self._check_var(pred, pred_var)  # unused, but a bad variance is still an error
+        ssim, sob, parts, *products = self._terms(cn, v, want_ssim, want_sobel, gradient and g2 > 0, extra)
+        if want_ssim:
+            mean = ssim.mean()
+            e2, ssim_mean = float(1.0 - mean), float(mean)
         c3 = 100.0 / (3.0 * n * 4.0 * 32.0)
-        if all_terms or g3 > 0:
-            sob = self.S @ cn - self._sobel_t
-            e3 = float(c3 * np.sum(sob * sob))
+        if want_sobel:  # squared in place when no gradient reads it: no second (3I, 3) array
+            e3 = float(c3 * np.sum(sob * sob if gradient else np.multiply(sob, sob, out=sob)))
         gs = self.gamma.sum()
         value = sum(g * e for g, e in ((g1 * E1_WEIGHT_SCALE, e1), (g2, e2), (g3, e3)) if g > 0) / gs
+        figures = (ssim_mean, *products)
         if not gradient:
-            return LossResult(value=float(value), e1=e1, e2=e2, e3=e3, grad=None, lab=lab)
+            return LossResult(value=float(value), e1=e1, e2=e2, e3=e3, grad=None, lab=lab), figures
 
         g_lab = (2.0 * g1 * E1_WEIGHT_SCALE / n) * dlab if g1 > 0 else np.zeros_like(lab)
         g_n = np.zeros_like(lab)
         if g2 > 0:
             coef = -g2 / (3.0 * n)  # dE2 / dSSIM_ic, times gamma2
+            mx, a1, b1, a2, b2 = parts
             mt = self._mu_t
             gm = coef * 2.0 * ssim * (mt / a1 - mx / b1 - mt / a2 + mx / b2)  # d/d(Wx)
             gq = coef * (-ssim / b2)  # d/d(W x^2)
@@ -311,9 +408,7 @@ class TexelLoss:
             back = self._window_t(np.concatenate([gm, gq, gp], axis=1))
             g_n += back[:, :3] + 2.0 * cn * back[:, 3:6] + self.target_n * back[:, 6:]
         if g3 > 0:
-            if self._ST is None:
-                self._ST = self.S.T.tocsr()
-            g_n += (2.0 * g3 * c3) * (self._ST @ sob)
+            g_n += (2.0 * g3 * c3) * (self._ops.sobel_t() @ sob)
         g_lab += g_n * LAB_NORM_SCALE
         grad = cmap.lab_vjp(pred, g_lab / gs)
-        return LossResult(value=float(value), e1=e1, e2=e2, e3=e3, grad=grad, lab=lab)
+        return LossResult(value=float(value), e1=e1, e2=e2, e3=e3, grad=grad, lab=lab), figures

@@ -190,6 +190,7 @@ def run_optimisation(scene: Scene, out_dir, cfg: OptimizeConfig, options: RunOpt
         if options.baseline_guard:  # the extrusion baseline's figures, measured once like the start's
             keep_baseline_figures(job.run, lambda x: figures.start(x, keep_renderer=True), options.log)
         job.run.release_unread_operators()  # the figures' window is not held through the first render
+        release_freed_memory()  # nor the heap the figures freed: a step's large arrays are mapped, not taken from it
         _iterate(job, figures.final_reserve())
         res, metrics = figures.final()
         if job.run.start_figures is None:  # a checkpoint written before the start's figures were kept in it

@@ -116,3 +116,21 @@ def test_metrics_json_round_trip(face):
         back = Metrics.from_json(json.loads(json.dumps(m.to_json())))
         assert back == m
         assert back.to_json() == m.to_json()
+
+
+def test_prediction_metrics_without_operators_held_equal_those_with_them(face):
+    """The figures found a block of texel rows at a time (nothing held) equal those from the built window and
+    Sobel operators bit for bit (noise-corrected and not), and the mottle equals the dense (1 - W) L*."""
+    base, sign, flat = face
+    loss = TexelLoss(base.target_rgb, base._pos, gamma=(1.0, 2.0, 1.0), sigma=SIGMA)
+    rng = np.random.default_rng(4)
+    rgb = np.clip(grey(50 + 3 * sign) + 0.02 * rng.standard_normal((loss.n, 3)), 0.001, 1)
+    var = rng.uniform(0, 1e-4, rgb.shape)
+    assert not loss._ops.held
+    found = [prediction_metrics(loss, rgb, v).to_json() for v in (var, None)]
+    lum = loss.colours[0].lab(rgb)[:, 0]
+    h = lum - (loss.K.toarray() @ lum) / loss.wsum
+    loss.S  # noqa: B018 (both operators held now)
+    assert loss._ops.held
+    assert [prediction_metrics(loss, rgb, v).to_json() for v in (var, None)] == found
+    assert found[1]["mottle_l2"] == pytest.approx(np.mean(h[flat] ** 2), rel=1e-12)

@@ -224,7 +224,7 @@ def test_released_operators_are_built_again_equal():
     lf = loss.TexelLoss(target, pos, gamma=(1.0, 2.0, 3.0))
     before, flat, wsum = lf(pred, var), lf.flat.copy(), lf.wsum.copy()
     lf.release_operators()
-    assert lf._K is None and lf._K2 is None and lf._S is None and lf._ST is None
+    assert not lf._ops.held
     after = lf(pred, var)
     assert (after.value, after.e1, after.e2, after.e3) == (before.value, before.e1, before.e2, before.e3)
     np.testing.assert_array_equal(after.grad, before.grad)
@@ -313,3 +313,91 @@ def test_window_operator_products_equal_its_csr_bit_for_bit(monkeypatch, jitter)
     np.testing.assert_array_equal(k @ x[:, 0], c @ x[:, 0])
     c2 = sp.csr_matrix((c.data * c.data, c.indices, c.indptr), shape=c.shape)
     np.testing.assert_array_equal(k.squared @ x, c2 @ x)
+
+
+def _sobel_all_pairs(pos, tol=1e-6):
+    """The Sobel operators from every pair at once (the construction before the blocks): a reference."""
+    n = len(pos)
+    pairs = neighbourhood.cKDTree(pos).query_pairs(1.0 + tol, p=np.inf, output_type="ndarray")
+    off = pos[pairs[:, 1]] - pos[pairs[:, 0]]
+    r = np.rint(off)
+    keep = np.all(np.abs(off - r) <= tol, axis=1) & np.any(r != 0, axis=1)
+    i, j, r = pairs[keep, 0], pairs[keep, 1], r[keep].astype(int)
+    d, s = np.array([-1.0, 0.0, 1.0]), np.array([1.0, 2.0, 1.0])
+    axes = []
+    for a in range(3):
+        b, c = [x for x in range(3) if x != a]
+        w = d[r[:, a] + 1] * s[r[:, b] + 1] * s[r[:, c] + 1]
+        centre = -(np.bincount(i, w, n) - np.bincount(j, w, n))
+        rows, cols = np.concatenate([i, j, np.arange(n)]), np.concatenate([j, i, np.arange(n)])
+        m = sp.coo_matrix((np.concatenate([w, -w, centre]), (rows, cols)), shape=(n, n)).tocsr()
+        m.sum_duplicates()
+        m.eliminate_zeros()
+        axes.append(m)
+    return sp.vstack(axes, format="csr")
+
+
+def _box_texels():
+    """A box's texels (edges, corners) and three repeated positions."""
+    pos = Texels.box_faces((9, 7, 8)).pos_vox
+    return np.concatenate([pos, pos[:3]])
+
+
+def test_sobel_operators_in_blocks_equal_the_all_pairs_construction_bit_for_bit(monkeypatch):
+    pos = _box_texels()
+    monkeypatch.setattr(neighbourhood, "NEIGHBOUR_BLOCK_ROWS", 41)
+    got, want = neighbourhood.sobel_operators(pos), _sobel_all_pairs(pos)
+    assert got.has_sorted_indices and got.shape == want.shape
+    np.testing.assert_array_equal(got.indptr, want.indptr)
+    np.testing.assert_array_equal(got.indices, want.indices)
+    assert got.data.tobytes() == want.data.tobytes()
+
+
+@pytest.mark.parametrize("sigma", [1.5, 0.2])
+def test_found_products_equal_the_held_operators_bit_for_bit(monkeypatch, sigma):
+    """``TexelNeighbours`` finds the rows a few at a time (blocks ending mid-face, a box's edges, repeated
+    positions; sigma 0.2: a window narrower than the Sobel operators' reach): K, K^2 and S products and the row
+    sums equal the built operators' bit for bit, and so do they with only some operators held."""
+    pos = _box_texels()
+    monkeypatch.setattr(neighbourhood, "NEIGHBOUR_BLOCK_ROWS", 41)
+    rng = _rng()
+    x, y, c = rng.standard_normal((len(pos), 5)), rng.standard_normal((len(pos), 2)), rng.standard_normal((len(pos), 3))
+    k, wsum, _ = neighbourhood.gaussian_window(pos, sigma)
+    s = neighbourhood.sobel_operators(pos)
+    want = (k @ x, k.squared @ y, s @ c, wsum)
+    ops = neighbourhood.TexelNeighbours(pos, sigma)
+    for hold in ((), ("window",), ("sobel",), ("window", "sobel")):
+        ops.release()
+        for h in hold:
+            getattr(ops, h)()
+        got = ops.products(x, y, c, wsum=True)
+        for g, w in zip(got, want):
+            assert g.tobytes() == w.tobytes(), hold
+    assert ops.held
+    ops.release()
+    assert not ops.held
+    assert all(g is None for g in ops.products())
+
+
+@pytest.mark.parametrize("gamma", [(1.0, 0.0, 0.0), (1.0, 4.0, 2.0)])
+def test_figures_equal_the_loss_and_ssim_bit_for_bit_held_or_not(gamma):
+    """``TexelLoss.figures`` (one pass, nothing held) gives the value, terms and CIELAB of a call without the
+    gradient, the first light's ``ssim_mean`` and K @ / K^2 @ the asked columns, bit for bit, under two colour maps;
+    the same with the operators held by a training call's gradient."""
+    rng = _rng()
+    pos = Texels.box_faces((4, 5, 6)).pos_vox
+    target, pred = rng.uniform(0, 1, (2, len(pos), 3))
+    var = rng.uniform(0, 1e-3, pred.shape)
+    cols, cols_sq = rng.standard_normal((len(pos), 2)), rng.standard_normal((len(pos), 1))
+    lf = loss.TexelLoss(target, pos, gamma=gamma, colours=(color.RGB, color.RGB))
+    k, wsum, _ = neighbourhood.gaussian_window(pos, 1.5)
+    for step in range(2):
+        assert lf._ops.held == (step == 1 and gamma[1] > 0)
+        fig = lf.figures(pred, var, cols, cols_sq)
+        bare = lf(pred, var, gradient=False)
+        assert (fig.loss.value, fig.loss.e1, fig.loss.e2, fig.loss.e3) == (bare.value, bare.e1, bare.e2, bare.e3)
+        assert fig.loss.lab.tobytes() == bare.lab.tobytes() and fig.ssim == lf.ssim_mean(pred, var)
+        assert fig.window.tobytes() == (k @ cols).tobytes()
+        assert fig.window_sq.tobytes() == (k.squared @ cols_sq).tobytes()
+        assert lf.wsum.tobytes() == wsum.tobytes()
+        lf(pred, var, all_terms=False)  # a training step: holds what its gradient reads

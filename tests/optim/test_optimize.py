@@ -150,16 +150,16 @@ def test_optimisation_lowers_delta_e_far_below_white_start():
 
 
 @pytest.mark.parametrize("gamma", [(1.0, 0.0, 0.0), (1.0, 1.0, 0.0)])
-def test_colour_only_steps_free_the_loss_operators(gamma):
-    """The set-up and the iterations free the loss's sparse operators when no step reads them (γ2 = γ3 = 0), and
-    the steps do not build them again; with an SSIM term they are kept."""
+def test_only_steps_that_read_the_loss_operators_hold_them(gamma):
+    """The set-up and the figures hold none of the loss's sparse operators (they are found a block of rows at a
+    time); the steps build and hold them only when they read them (γ2 > 0 or γ3 > 0)."""
     scene = small_chart_scene()
     r = run(scene, gamma=gamma, iterations=2)
-    assert (r.loss._K is None) == (gamma[1] == 0)
-    r.loss(Renderer(r.volume()).render(scene.texels, 4, 99).rgb)  # a full call, as the start's figures make
-    assert r.loss._K is not None
+    assert not r.loss._ops.held
+    prediction_metrics(r.loss, Renderer(r.volume()).render(scene.texels, 4, 99).rgb)  # as the start's figures
+    assert not r.loss._ops.held
     r.run()
-    assert (r.loss._K is None and r.loss._S is None) == (gamma[1] == 0)
+    assert r.loss._ops.held == (gamma[1] > 0)
 
 
 def test_without_forward_renders(monkeypatch):

@@ -33,8 +33,6 @@ def light_figures(loss: TexelLoss, values, var_mean=None, names: tuple[str, ...]
     names = tuple(names or (c.name for c in loss.colours))
     if len(names) != len(loss.colours):
         raise ValueError(f"{len(names)} names for {len(loss.colours)} lights")
-    if len(names) > 1:  # the window operators built once here are shared by the per-light views (``under``)
-        loss.K2  # noqa: B018
     by_light = {n: prediction_metrics(loss.under(k), values, var_mean).to_json() for k, n in enumerate(names)}
     worst = max(names, key=lambda n: by_light[n]["delta_e2000_mean"])
     labs = [c.lab(values) for c in loss.colours]

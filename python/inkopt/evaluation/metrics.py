@@ -27,40 +27,55 @@ def flat_texels(loss: TexelLoss) -> np.ndarray:
     return loss.flat
 
 
-def highpass_power(loss: TexelLoss, lum: np.ndarray) -> np.ndarray:
-    """h_i² per texel for a per-texel L* (I,)."""
-    h = loss.highpass(np.asarray(lum, np.float64)[:, None])[:, 0]
-    return h * h
+def _mottle_columns(loss: TexelLoss, rgb: np.ndarray, var_mean) -> tuple[np.ndarray, np.ndarray | None]:
+    """The mottle's windowed inputs: (I, 2) float64 the L* of predictions ``rgb`` (I, C) (the loss's first colour
+    map) and the target's L*, to be windowed by K; (I, 1) the predictions' L* variance (delta method from
+    ``var_mean``, the linear channels' variance), to be windowed by K^2, or None without ``var_mean``."""
+    cmap = loss.colours[0]
+    lum = np.stack([cmap.lab(rgb)[:, 0], loss.target_lab[:, 0]], axis=1)
+    if var_mean is None:
+        return lum, None
+    jl = cmap.lab_jacobian(rgb)[:, 0, :]
+    return lum, np.einsum("ij,ij->i", jl * jl, np.asarray(var_mean, np.float64))[:, None]
 
 
-def highpass_noise(loss: TexelLoss, var_l: np.ndarray) -> np.ndarray:
-    """E of the noise's part of h_i² for independent per-texel L* variances var_l (I,):
-    (1 - w_ii)² v_i + Σ_{j≠i} w_ij² v_j = Σ_j w_ij² v_j + (1 - 2 w_ii) v_i (w_ii = 1 / wsum_i)."""
-    w2v = (loss.K2 @ var_l) / loss.wsum**2
-    return w2v + (1.0 - 2.0 / loss.wsum) * var_l
+def _mottle_from(loss: TexelLoss, lum, var_l, k_lum, k2_var) -> tuple[np.ndarray, np.ndarray]:
+    """h_i^2 (I,) of the prediction less the noise's expected share (``var_l`` given), and the target's h_i^2 (I,),
+    from ``_mottle_columns``'s ``lum`` (I, 2), ``var_l`` (I, 1) or None and their products K @ lum, K^2 @ var_l.
+
+    h_i = L*_i - (W L*)_i; the noise's share for independent per-texel L* variances v:
+    (1 - w_ii)^2 v_i + sum_{j != i} w_ij^2 v_j = sum_j w_ij^2 v_j + (1 - 2 w_ii) v_i (w_ii = 1 / wsum_i)."""
+    h = lum - k_lum / loss.wsum[:, None]
+    p, pt = h[:, 0] * h[:, 0], h[:, 1] * h[:, 1]
+    if var_l is not None:
+        w2v = k2_var[:, 0] / loss.wsum**2
+        p = p - (w2v + (1.0 - 2.0 / loss.wsum) * var_l[:, 0])
+    return p, pt
 
 
 def mottle_per_texel(loss: TexelLoss, rgb, var_mean=None) -> tuple[np.ndarray, np.ndarray]:
     """h_i² (I,) of predictions ``rgb`` (I, C) (the loss's first colour map: linear RGB unless spectral), minus the
     noise's expected share when ``var_mean`` is given, and the target's h_i² (I,); every texel (the figure takes the
     flat ones)."""
-    rgb = np.asarray(rgb, np.float64)
-    cmap = loss.colours[0]
-    p = highpass_power(loss, cmap.lab(rgb)[:, 0])
-    if var_mean is not None:
-        jl = cmap.lab_jacobian(rgb)[:, 0, :]
-        p = p - highpass_noise(loss, np.einsum("ij,ij->i", jl * jl, np.asarray(var_mean, np.float64)))
-    return p, highpass_power(loss, loss.target_lab[:, 0])
+    lum, var_l = _mottle_columns(loss, np.asarray(rgb, np.float64), var_mean)
+    k, k2, _ = loss.products(lum, var_l)
+    return _mottle_from(loss, lum, var_l, k, k2)
 
 
-def mottle(loss: TexelLoss, rgb, var_mean=None) -> dict:
-    """``mottle_l2`` (noise-corrected when ``var_mean`` is given), ``mottle_l2_target``, ``flat_texels``."""
+def _mottle_figures(loss: TexelLoss, per_texel: tuple | None) -> dict:
+    """``mottle_l2``, ``mottle_l2_target``, ``flat_texels`` from ``per_texel`` = (p, pt) (``mottle_per_texel``; None
+    when no texel is flat)."""
     flat = flat_texels(loss)
     n = int(flat.sum())
     if n == 0:
         return {"mottle_l2": None, "mottle_l2_target": None, "flat_texels": 0}
-    p, pt = mottle_per_texel(loss, rgb, var_mean)
+    p, pt = per_texel
     return {"mottle_l2": float(p[flat].mean()), "mottle_l2_target": float(pt[flat].mean()), "flat_texels": n}
+
+
+def mottle(loss: TexelLoss, rgb, var_mean=None) -> dict:
+    """``mottle_l2`` (noise-corrected when ``var_mean`` is given), ``mottle_l2_target``, ``flat_texels``."""
+    return _mottle_figures(loss, mottle_per_texel(loss, rgb, var_mean) if loss.flat.any() else None)
 
 
 @dataclass
@@ -117,20 +132,25 @@ def prediction_metrics(loss: TexelLoss, rgb, var_mean=None) -> Metrics:
     and ``delta_e76_mean_corrected`` (the mean minus it), ``delta_e76_rms`` and ``delta_e76_rms_denoised`` (an
     unbiased estimate of the noise-free RMS ΔE76: E|c + n - t|² = |c - t|² + tr(cov n) to first order in Lab)."""
     rgb = np.asarray(rgb, np.float64)
-    res = loss(rgb, var_mean, gradient=False)  # the figures read no gradient: none of its temporaries
+    lum, var_l = _mottle_columns(loss, rgb, var_mean)
+    # the loss, its SSIM and the mottle's windowed L* from one pass over the texels' neighbourhoods per light, no
+    # operator held (``TexelLoss.figures``); no gradient: none of its temporaries
+    fig = loss.figures(rgb, var_mean, lum, var_l)
+    res = fig.loss
     lab_t = loss.target_lab
     de = delta_e76(res.lab, lab_t)
     out = {
         "delta_e76_mean": float(de.mean()),
         "delta_e76_p95": float(np.percentile(de, 95)),
         "delta_e2000_mean": float(delta_e2000(res.lab, lab_t).mean()),
-        "ssim": float(loss.ssim_mean(rgb, var_mean)),
+        "ssim": fig.ssim,
         "loss": res.value,
         "e1": res.e1,
         "e2": res.e2,
         "e3": res.e3,
     }
-    out.update(mottle(loss, rgb, var_mean))
+    out.update(_mottle_figures(loss, _mottle_from(loss, lum, var_l, fig.window, fig.window_sq)))
+    del fig, lum, var_l
     if var_mean is not None:
         var = np.asarray(var_mean, np.float64)
         se = loss.colours[0].lab_stderr(rgb, var)

@@ -93,15 +93,19 @@ FIGURES_TEXEL_BYTES = 4270.0
 SHELL_STEP_FREE_BYTES = 195.0
 SHELL_STEP_TEXEL_BYTES = STEP_TEXEL_BYTES
 #: - the figures (the start's with the renderer held for the baseline guard, the guard's, the result's, and the
-#:   renderer's build): per free voxel the variables, momentum and index (48 B) and the renderer's band medium
-#:   (42 B: 0.437 GiB held at 60 mm), per texel the loss's operators, their build and the metrics' temporaries
-#:   (1.30 GiB above the set-up at 60 mm): 1.85 KB, between the 1.77 KB of the start's metrics with the renderer
-#:   held at 60 mm (2.651 GiB measured without it plus its 0.437) and the 2.07 KB at 40 mm (1.266 + 0.184); no fixed
-#:   term (the figures' libraries and arenas, ~0.2 GiB, which the all-free terms do not count either, so that a band
-#:   never estimates above every voxel free): 3.16 GiB at 60 mm against the whole run's 3.10, 1.37 at 40 mm
-#:   against 1.45-1.53, 0.38 at 20 mm against 0.59
+#:   renderer's builds): per free voxel the variables, momentum and index (48 B) and the renderer's band medium
+#:   (42 B: 0.437 GiB held at 60 mm), per texel what the renderer's build and the figures take beyond what the set-up
+#:   holds: the loss's operators are found a block of rows at a time, not held (``neighbourhood.TexelNeighbours``),
+#:   so the stage's peak is the renderer's build (the result's at 60 mm: 2.630 GiB; the first at 40 mm: 1.158 GiB;
+#:   the metrics 2.32 and 1.05); 1.23 KB, between the 1.20 KB that fits 60 mm and the 1.26 KB that fits 40 mm
+#:   (bench/results/footprint_spot.json, entries run_60mm_shell1_stream and run_40mm_shell1_stream, fitted in
+#:   fit_shell_stream; 1.85 KB while the figures built and held the operators): 2.65 GiB at 60 mm, 1.15 at 40 mm;
+#:   no fixed term (the figures' libraries and arenas, ~0.2 GiB, which the all-free terms do not count either, so
+#:   that a band never estimates above every voxel free). The all-free ``FIGURES_TEXEL_BYTES`` is not refitted
+#:   (no all-free run of that code measured): it over-estimates by up to the ~1.1 KB per texel the figures' loss side
+#:   no longer takes (1536 -> 373 B per texel at 60 mm: bench/results/figure_side_spot.json)
 SHELL_FIGURES_FREE_BYTES = 90.0
-SHELL_FIGURES_TEXEL_BYTES = 1850.0
+SHELL_FIGURES_TEXEL_BYTES = 1230.0
 #: seconds per iteration of the passes (4-spp gradient, 16-spp forward, the loss) at ``TEXELS_REF`` texels, from
 #: white on 2 cores: 11.19 s on Spot 20 mm (bench/results/mesh_20mm.json, render + gradient + loss)
 PASS_SECONDS_REF = 11.19
