@@ -149,7 +149,8 @@ class Optimization:
         self.baseline_figures = {**(self.baseline_figures or {}), kind: dict(figures)}
 
     def release_unread_operators(self) -> None:
-        """Free the loss's sparse operators when no step reads them (~1 GiB at Spot 40 mm); a full call rebuilds."""
+        """Free the loss's sparse operators when no step reads them; a call that needs them applies them a block of
+        texel rows at a time (``neighbourhood.TexelNeighbours``) without holding them."""
         if not self.loss.needs_operators:
             self.loss.release_operators()
 
