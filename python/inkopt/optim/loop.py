@@ -149,8 +149,7 @@ class Optimization:
         self.baseline_figures = {**(self.baseline_figures or {}), kind: dict(figures)}
 
     def release_unread_operators(self) -> None:
-        """Free the loss's sparse operators when no step reads them; a call that needs them applies them a block of
-        texel rows at a time (``neighbourhood.TexelNeighbours``) without holding them."""
+        """Free the loss's sparse operators when no step reads them (later calls apply them a block at a time)."""
         if not self.loss.needs_operators:
             self.loss.release_operators()
 
