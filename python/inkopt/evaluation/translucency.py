@@ -305,27 +305,37 @@ def evaluate_translucency(
     """evaluation.json's ``translucency``: ``measure`` of the run (``vol``, ``rec``) and, with ``compare`` (the
     run directory of an unconstrained run of the same target), of that run on the same regions, each with its
     per-region ΔE76 from a ``COLOUR_SPP`` render under ``lighting``."""
-    import time
-
     from ..color import linear_to_lab
-    from ..rundir import RunDir
 
     target_lab = linear_to_lab(rec.target_rgb.astype(np.float64))
     say = log or (lambda msg: None)
 
     def one(v: Volume, r: SceneRecord) -> dict:
-        t0 = time.perf_counter()
         colours = Renderer(v, threads, lighting).render(r.texels, COLOUR_SPP, seed).rgb.astype(np.float64)
         renders = TranslucencyRenders(spp, PROBE_SPP, seed, threads)  # PROBE_SPP: the module's value at call time
-        m = measure(v, r, rec, renders, colours, target_lab)
-        m["seconds"] = time.perf_counter() - t0
-        return m
+        return measure(v, r, rec, renders, colours, target_lab)
 
-    out = one(vol, rec)
+    out = measured_with_compare(one, vol, rec, compare, say, "translucency")
     out["colour_spp"] = COLOUR_SPP
-    say(f"translucency: {len(out['regions'])} regions in {out['seconds']:.1f} s")
+    return out
+
+
+def measured_with_compare(one, vol: Volume, rec: SceneRecord, compare, say, what: str) -> dict:
+    """``one(volume, scene)`` (a dict with ``regions``) of the run and, with ``compare`` (a run directory), of that
+    run as its ``compare`` entry; each with its ``seconds`` and one line to ``say`` naming ``what``."""
+    import time
+
+    from ..rundir import RunDir
+
+    def timed(v: Volume, r: SceneRecord) -> dict:
+        t0 = time.perf_counter()
+        m = one(v, r)
+        return {**m, "seconds": time.perf_counter() - t0}
+
+    out = timed(vol, rec)
+    say(f"{what}: {len(out['regions'])} regions in {out['seconds']:.1f} s")
     if compare is not None:
         d = RunDir(compare)
-        out["compare"] = {"run": str(compare), **one(d.load_volume(), d.load_scene())}
+        out["compare"] = {"run": str(compare), **timed(d.load_volume(), d.load_scene())}
         say(f"translucency of {compare}: {out['compare']['seconds']:.1f} s")
     return out

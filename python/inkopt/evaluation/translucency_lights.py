@@ -165,23 +165,13 @@ def evaluate_translucency_lights(
     lights of ``colours`` and, with ``compare`` (the run directory of an unconstrained run of the same target and
     inks), of that run on the same regions; each with its ``seconds``. Rendered as ``translucency`` renders them
     (``DEFAULT_SPP`` per band, ``PROBE_SPP``; no per-region ΔE76: the evaluation's figures hold the colour)."""
-    import time
-
-    from ..rundir import RunDir
     from . import translucency
 
     renders = TranslucencyRenders(translucency.DEFAULT_SPP, translucency.PROBE_SPP, seed, threads)
     say = log or (lambda msg: None)
+    lights = ", ".join(c.name for c in colours)
 
     def one(v: Volume, r: SceneRecord) -> dict:
-        t0 = time.perf_counter()
-        m = measure_lights(v, r, table, colours, rec, renders)
-        return {**m, "seconds": time.perf_counter() - t0}
+        return measure_lights(v, r, table, colours, rec, renders)
 
-    out = one(vol, rec)
-    say(f"translucency under {', '.join(out['lights'])}: {len(out['regions'])} regions in {out['seconds']:.1f} s")
-    if compare is not None:
-        d = RunDir(compare)
-        out["compare"] = {"run": str(compare), **one(d.load_volume(), d.load_scene())}
-        say(f"translucency of {compare}: {out['compare']['seconds']:.1f} s")
-    return out
+    return translucency.measured_with_compare(one, vol, rec, compare, say, f"translucency under {lights}")
