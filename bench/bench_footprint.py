@@ -7,7 +7,8 @@ against what happens, on Spot.
                                                    # unless OPTIONS say); --stages: each stage's own peak
     python bench/bench_footprint.py timed 40 --dir D --time-log LOG   # a run made under /usr/bin/time -v
     python bench/bench_footprint.py fit --tag T             # the band runs' stages against the footprint's
-    python bench/bench_footprint.py walk [--check mesh_100mm_shell1_s65.json ...]   # the time model's fit (below)
+    python bench/bench_footprint.py walk [--check mesh_100mm_shell1_s65.json ...] [--estimate 80 ...]   # the time
+                                                   # model's fit (below); a 1 mm band's estimates at those heights
     python bench/bench_footprint.py watch 40 --pid PID --stage TEXT --run-command CMD   # a run under way: peak so far
 
 Each mode writes its entries into bench/results/footprint_spot.json (``entries``: ``counts``, ``dry_<H>mm``,
@@ -304,6 +305,34 @@ def walk_check(names: list[str]) -> dict:
     return out
 
 
+def walk_estimates(heights: list[float], shell_mm: float = 1.0) -> dict:
+    """The footprint's estimates of Spot at each height with a ``shell_mm`` band (entries
+    ``estimate_<H>mm_shell<D>``): counts, events per path, seconds per iteration on a quiet machine and their CPU
+    seconds, the set-up's seconds, each stage's peak (GiB)."""
+    out = {}
+    for h in heights:
+        fp = _footprint(h, shell_mm)
+        seconds = fp.seconds_per_iteration()
+        out[f"estimate_{h:g}mm_shell{shell_mm:g}"] = {
+            "height_mm": h,
+            "shell_mm": shell_mm,
+            "counts": {"grid": fp.grid_voxels, "inside": fp.inside_voxels, "free": fp.free_voxels, "texels": fp.texels},
+            "events_per_path": fp.events,
+            "seconds_per_iteration_quiet": seconds,
+            "cpu_seconds_per_iteration": _busy_cores() * seconds,
+            "setup_seconds": fp.setup_seconds(),
+            "stage_gib": {k: v / 2**30 for k, v in fp.stage_bytes().items()},
+            "peak_gib": fp.peak_bytes() / 2**30,
+        }
+    return out
+
+
+def _busy_cores() -> float:
+    from inkopt.footprint import walk
+
+    return walk.BUSY_CORES
+
+
 def timed(height: float, run_dir: str, time_log: str) -> dict:
     """A run made outside this script under ``/usr/bin/time -v`` (``time_log``: its stderr, the run's log with
     time's lines at the end): its peak RSS and CPU seconds from time's lines, its seconds per iteration from
@@ -370,6 +399,7 @@ def main() -> None:
     ap.add_argument("--run-command", default="", help="watch: the run's command line")
     ap.add_argument("--stages", action="store_true", help="run: each stage's own peak (bench/run_stages.py)")
     ap.add_argument("--check", nargs="*", default=[], help="walk: bench_mesh.py results to compare (bench/results/)")
+    ap.add_argument("--estimate", nargs="*", type=float, default=[], help="walk: heights to estimate with a band")
     ap.add_argument("--tag", default="", help="run, timed, watch: appended to the entry's name (e.g. _before)")
     argv = sys.argv[1:]
     extra = argv[argv.index("--") + 1 :] if "--" in argv else []
@@ -381,7 +411,7 @@ def main() -> None:
         recorded = json.loads((RESULTS / RESULTS_FILE).read_text())["entries"]
         entries = fit(args.tag, recorded)
     elif args.mode == "walk":
-        entries = {**walk_fit(), **walk_check(args.check)}
+        entries = {**walk_fit(), **walk_check(args.check), **walk_estimates(args.estimate)}
     elif args.mode == "dry":
         entries = dry(args.heights or [100.0, 200.0], extra)
     elif args.mode == "watch":
