@@ -400,7 +400,7 @@ def main() -> None:
     ap.add_argument("--stages", action="store_true", help="run: each stage's own peak (bench/run_stages.py)")
     ap.add_argument("--check", nargs="*", default=[], help="walk: bench_mesh.py results to compare (bench/results/)")
     ap.add_argument("--estimate", nargs="*", type=float, default=[], help="walk: heights to estimate with a band")
-    ap.add_argument("--tag", default="", help="run, timed, watch: appended to the entry's name (e.g. _before)")
+    ap.add_argument("--tag", default="", help="run, timed, watch, dry: appended to the entry's name (e.g. _before)")
     argv = sys.argv[1:]
     extra = argv[argv.index("--") + 1 :] if "--" in argv else []
     args = ap.parse_args(argv[: argv.index("--")] if "--" in argv else argv)
@@ -422,7 +422,7 @@ def main() -> None:
         entries = timed(args.heights[0], args.dir, args.time_log)
     else:
         entries = run(args.heights[0], args.dir, extra, args.stages)
-    if args.mode in ("run", "timed", "watch"):
+    if args.mode in ("run", "timed", "watch", "dry"):
         entries = {name + args.tag: rec for name, rec in entries.items()}
     path = RESULTS / RESULTS_FILE
     data = json.loads(path.read_text()) if path.is_file() else {"entries": {}}
