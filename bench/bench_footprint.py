@@ -9,7 +9,8 @@ against what happens, on Spot.
     python bench/bench_footprint.py fit --tag T             # the band runs' stages against the footprint's
     python bench/bench_footprint.py walk [--check mesh_100mm_shell1_s65.json ...] [--estimate 80 ...]   # the time
                                                    # model's fit (below); a 1 mm band's estimates at those heights
-    python bench/bench_footprint.py watch 40 --pid PID --stage TEXT --run-command CMD   # a run under way: peak so far
+    python bench/bench_footprint.py watch 40 --pid PID --stage TEXT --run-command CMD [-- --shell-mm 1]   # a run
+                                                   # under way: peak so far
 
 Each mode writes its entries into bench/results/footprint_spot.json (``entries``: ``counts``, ``dry_<H>mm``,
 ``run_<H>mm``) with
@@ -364,15 +365,15 @@ def timed(height: float, run_dir: str, time_log: str) -> dict:
     return {f"run_{height:g}mm": rec}
 
 
-def watch(height: float, pid: int, stage: str, command: str) -> dict:
+def watch(height: float, pid: int, stage: str, command: str, shell_mm: float | None = None) -> dict:
     """A run under way (process ``pid``, ``command``) that will not finish in time: its peak resident memory so far
-    (VmHWM) and CPU seconds from /proc, in ``stage``, against the footprint's peak."""
+    (VmHWM) and CPU seconds from /proc, in ``stage``, against the footprint's peak (with a ``shell_mm`` band)."""
     import subprocess as sp
 
     status = dict(line.split(":", 1) for line in Path(f"/proc/{pid}/status").read_text().splitlines())
     stat = Path(f"/proc/{pid}/stat").read_text().split()
     peak = int(status["VmHWM"].split()[0]) / 2**20
-    fp = _footprint(height)
+    fp = _footprint(height, shell_mm)
     est = {"peak_gib": fp.peak_bytes() / 2**30, "seconds_per_iteration": fp.seconds_per_iteration()}
     return {
         f"run_{height:g}mm": {
@@ -415,7 +416,7 @@ def main() -> None:
     elif args.mode == "dry":
         entries = dry(args.heights or [100.0, 200.0], extra)
     elif args.mode == "watch":
-        entries = watch(args.heights[0], args.pid, args.stage, args.run_command)
+        entries = watch(args.heights[0], args.pid, args.stage, args.run_command, _shell(extra))
     elif not args.dir or len(args.heights) != 1:
         raise SystemExit(f"{args.mode}: one height and --dir")
     elif args.mode == "timed":
