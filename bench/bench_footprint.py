@@ -7,7 +7,10 @@ against what happens, on Spot.
                                                    # unless OPTIONS say); --stages: each stage's own peak
     python bench/bench_footprint.py timed 40 --dir D --time-log LOG   # a run made under /usr/bin/time -v
     python bench/bench_footprint.py fit --tag T             # the band runs' stages against the footprint's
-    python bench/bench_footprint.py watch 40 --pid PID --stage TEXT --run-command CMD   # a run under way: peak so far
+    python bench/bench_footprint.py walk [--check mesh_100mm_shell1_s65.json ...] [--estimate 80 ...]   # the time
+                                                   # model's fit (below); a 1 mm band's estimates at those heights
+    python bench/bench_footprint.py watch 40 --pid PID --stage TEXT --run-command CMD [-- --shell-mm 1]   # a run
+                                                   # under way: peak so far
 
 Each mode writes its entries into bench/results/footprint_spot.json (``entries``: ``counts``, ``dry_<H>mm``,
 ``run_<H>mm``) with
@@ -187,6 +190,150 @@ def fit(tag: str, entries: dict) -> dict:
     return {f"fit_shell{tag}": {"rows": rows}}
 
 
+#: the runs the time model (``inkopt.footprint.walk``) is fitted to, bench/results/mesh_*.json: the events per path
+#: of every voxel free (Spot 10-60 mm) and of a 1 mm band over a white core (20-60 mm; events do not depend on the
+#: code's speed or the load); the CPU seconds per texel and event of the quiet runs (CPU / wall >= 1.85 with 2
+#: threads) of the code since the branch-free traversal (the 10 and 60 mm every-voxel-free runs are older code);
+#: the set-up's CPU seconds of the runs that record them (bench_mesh.py's build_cpu_seconds), below 100 mm
+WALK_FREE = ("mesh_10mm.json", "mesh_20mm.json", "mesh_40mm.json", "mesh_60mm.json")
+WALK_BAND = ("mesh_20mm_shell1_band.json", "mesh_40mm_shell1_corewhite.json", "mesh_60mm_shell1_vx.json")
+WALK_COST = ("mesh_20mm.json", "mesh_40mm.json", "mesh_40mm_shell1_corewhite.json", "mesh_60mm_shell1_vx.json")
+WALK_SETUP = ("mesh_20mm_s58.json", "mesh_60mm_shell1_gsum.json")
+QUIET_CPU_PER_WALL = 1.85
+
+
+def _thickness(rec: dict) -> float:
+    """r = 3 V / A (mm) of the Spot a bench_mesh.py result measured."""
+    from inkopt.footprint import mesh_shape, walk
+    from inkopt.scenes.mesh import load_spec_mesh
+    from inkopt.scenes.spec import MeshSpec
+
+    shape = mesh_shape(load_spec_mesh(MeshSpec(str(SPOT), height_mm=rec["height_mm"])))
+    return walk.thickness_mm(shape.volume_mm3, shape.area_mm2)
+
+
+def walk_fit() -> dict:
+    """The time model's constants fitted to the runs named above (least squares: every voxel free, events = L - K / r;
+    a band, events = E + S ln(r / r_20mm); the geometric mean of the quiet runs' passes' CPU seconds per texel and
+    event, and of their CPU per wall second; the mean set-up CPU seconds per texel), each run's residual, and the
+    constants the code holds (``walk``)."""
+    import numpy as np
+
+    from inkopt.footprint import walk
+
+    load = {n: json.loads((RESULTS / n).read_text()) for n in {*WALK_FREE, *WALK_BAND, *WALK_COST, *WALK_SETUP}}
+    r = {n: _thickness(rec) for n, rec in load.items()}
+    ev = {n: rec["events_per_path"]["forward"] for n, rec in load.items() if rec.get("events_per_path")}
+    a = np.array([[1.0, -1.0 / r[n]] for n in WALK_FREE])
+    limit, k = np.linalg.lstsq(a, [ev[n] for n in WALK_FREE], rcond=None)[0]
+    r_ref = r[WALK_BAND[0]]
+    a = np.array([[1.0, np.log(r[n] / r_ref)] for n in WALK_BAND])
+    ref, slope = np.linalg.lstsq(a, [ev[n] for n in WALK_BAND], rcond=None)[0]
+    cost, busy = {}, {}
+    for n in WALK_COST:
+        rec, split = load[n], load[n]["time_split"]
+        busy[n] = rec["cpu_seconds_per_iteration"] / rec["seconds_per_iteration"]
+        passes = rec["cpu_seconds_per_iteration"] * (split["render_s"] + split["gradient_s"] + split["loss_s"])
+        cost[n] = passes / rec["seconds_per_iteration"] / (rec["texels"] * ev[n])
+    quiet = [n for n in WALK_COST if busy[n] >= QUIET_CPU_PER_WALL]
+    setup = {n: (load[n]["build_cpu_seconds"] + load[n]["setup_cpu_seconds"]) / load[n]["texels"] for n in WALK_SETUP}
+    fitted = {
+        "FREE_EVENTS_LIMIT": limit,
+        "FREE_EVENTS_MM": k,
+        "BAND_EVENTS_REF": ref,
+        "BAND_R_REF_MM": r_ref,
+        "BAND_EVENTS_PER_LOG": slope,
+        "CPU_SECONDS_PER_TEXEL_EVENT": float(np.exp(np.mean(np.log([cost[n] for n in quiet])))),
+        "BUSY_CORES": float(np.exp(np.mean(np.log([busy[n] for n in quiet])))),
+        "SETUP_CPU_SECONDS_PER_TEXEL": float(np.mean(list(setup.values()))),
+    }
+    events = {
+        n: {"measured": ev[n], "r_mm": r[n], "model": walk.events_per_path(r[n], n in WALK_BAND)}
+        for n in (*WALK_FREE, *WALK_BAND)
+    }
+    return {
+        "fit_walk": {
+            "fitted": {k: float(v) for k, v in fitted.items()},
+            "code": {k: getattr(walk, k) for k in fitted},
+            "events_per_path": events,
+            "cpu_seconds_per_texel_event": cost,
+            "cpu_per_wall": busy,
+            "quiet_runs": quiet,
+            "setup_cpu_seconds_per_texel": setup,
+            "runs": {"free": WALK_FREE, "band": WALK_BAND, "cost": WALK_COST, "setup": WALK_SETUP},
+        }
+    }
+
+
+def walk_check(names: list[str]) -> dict:
+    """Each bench_mesh.py result of ``names`` against the footprint's estimates: seconds per iteration (the run's
+    CPU seconds over ``walk.BUSY_CORES``: what a quiet machine takes, whatever the load was), events per path,
+    the set-up's CPU seconds, and each stage's peak against the stage it measured (the scene: voxelize; through the
+    iterations: step; the figures' loss side against the figures' stage)."""
+    from inkopt.footprint import walk
+
+    out = {}
+    for name in names:
+        rec = json.loads((RESULTS / name).read_text())
+        fp = _footprint(rec["height_mm"], rec.get("shell_mm"))
+        stages, rss = {k: v / 2**30 for k, v in fp.stage_bytes().items()}, rec["peak_rss_gb_by_stage"]
+        measured = {
+            "seconds_per_iteration_quiet": rec["cpu_seconds_per_iteration"] / walk.BUSY_CORES,
+            "events_per_path": rec["events_per_path"]["forward"],
+            "setup_cpu_seconds": rec["build_cpu_seconds"] + rec["setup_cpu_seconds"],
+            "peak_gib": rec["peak_rss_gb"],
+            "voxelize_gib": rss["after_voxelize"],
+            "step_gib": rss["after_iterations"],
+            "figures_gib": rss.get("after_figure_metrics"),
+        }
+        estimated = {
+            "seconds_per_iteration_quiet": fp.seconds_per_iteration(),
+            "events_per_path": fp.events,
+            "setup_cpu_seconds": fp.setup_seconds(),
+            "peak_gib": fp.peak_bytes() / 2**30,
+            "voxelize_gib": stages["voxelize"],
+            "step_gib": stages["step"],
+            "figures_gib": stages["figures"],
+        }
+        ratio = {k: estimated[k] / measured[k] - 1.0 for k in measured if measured[k]}
+        out[f"check_{Path(name).stem}"] = {
+            "measured": measured,
+            "estimated": estimated,
+            "relative_error": ratio,
+            "measured_code": rec.get("commit"),
+            "measured_load": rec.get("load_average_1min"),
+        }
+    return out
+
+
+def walk_estimates(heights: list[float], shell_mm: float = 1.0) -> dict:
+    """The footprint's estimates of Spot at each height with a ``shell_mm`` band (entries
+    ``estimate_<H>mm_shell<D>``): counts, events per path, seconds per iteration on a quiet machine and their CPU
+    seconds, the set-up's seconds, each stage's peak (GiB)."""
+    out = {}
+    for h in heights:
+        fp = _footprint(h, shell_mm)
+        seconds = fp.seconds_per_iteration()
+        out[f"estimate_{h:g}mm_shell{shell_mm:g}"] = {
+            "height_mm": h,
+            "shell_mm": shell_mm,
+            "counts": {"grid": fp.grid_voxels, "inside": fp.inside_voxels, "free": fp.free_voxels, "texels": fp.texels},
+            "events_per_path": fp.events,
+            "seconds_per_iteration_quiet": seconds,
+            "cpu_seconds_per_iteration": _busy_cores() * seconds,
+            "setup_seconds": fp.setup_seconds(),
+            "stage_gib": {k: v / 2**30 for k, v in fp.stage_bytes().items()},
+            "peak_gib": fp.peak_bytes() / 2**30,
+        }
+    return out
+
+
+def _busy_cores() -> float:
+    from inkopt.footprint import walk
+
+    return walk.BUSY_CORES
+
+
 def timed(height: float, run_dir: str, time_log: str) -> dict:
     """A run made outside this script under ``/usr/bin/time -v`` (``time_log``: its stderr, the run's log with
     time's lines at the end): its peak RSS and CPU seconds from time's lines, its seconds per iteration from
@@ -218,15 +365,15 @@ def timed(height: float, run_dir: str, time_log: str) -> dict:
     return {f"run_{height:g}mm": rec}
 
 
-def watch(height: float, pid: int, stage: str, command: str) -> dict:
+def watch(height: float, pid: int, stage: str, command: str, shell_mm: float | None = None) -> dict:
     """A run under way (process ``pid``, ``command``) that will not finish in time: its peak resident memory so far
-    (VmHWM) and CPU seconds from /proc, in ``stage``, against the footprint's peak."""
+    (VmHWM) and CPU seconds from /proc, in ``stage``, against the footprint's peak (with a ``shell_mm`` band)."""
     import subprocess as sp
 
     status = dict(line.split(":", 1) for line in Path(f"/proc/{pid}/status").read_text().splitlines())
     stat = Path(f"/proc/{pid}/stat").read_text().split()
     peak = int(status["VmHWM"].split()[0]) / 2**20
-    fp = _footprint(height)
+    fp = _footprint(height, shell_mm)
     est = {"peak_gib": fp.peak_bytes() / 2**30, "seconds_per_iteration": fp.seconds_per_iteration()}
     return {
         f"run_{height:g}mm": {
@@ -244,7 +391,7 @@ def watch(height: float, pid: int, stage: str, command: str) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("mode", choices=("counts", "dry", "run", "timed", "watch", "fit"))
+    ap.add_argument("mode", choices=("counts", "dry", "run", "timed", "watch", "fit", "walk"))
     ap.add_argument("heights", type=float, nargs="*")
     ap.add_argument("--dir", help="run directory (run, timed)")
     ap.add_argument("--time-log", help="timed: the stderr of `/usr/bin/time -v inkopt optimize ...`")
@@ -252,7 +399,9 @@ def main() -> None:
     ap.add_argument("--stage", default="", help="watch: how far the run has come")
     ap.add_argument("--run-command", default="", help="watch: the run's command line")
     ap.add_argument("--stages", action="store_true", help="run: each stage's own peak (bench/run_stages.py)")
-    ap.add_argument("--tag", default="", help="run, timed, watch: appended to the entry's name (e.g. _before)")
+    ap.add_argument("--check", nargs="*", default=[], help="walk: bench_mesh.py results to compare (bench/results/)")
+    ap.add_argument("--estimate", nargs="*", type=float, default=[], help="walk: heights to estimate with a band")
+    ap.add_argument("--tag", default="", help="run, timed, watch, dry: appended to the entry's name (e.g. _before)")
     argv = sys.argv[1:]
     extra = argv[argv.index("--") + 1 :] if "--" in argv else []
     args = ap.parse_args(argv[: argv.index("--")] if "--" in argv else argv)
@@ -262,17 +411,19 @@ def main() -> None:
     elif args.mode == "fit":
         recorded = json.loads((RESULTS / RESULTS_FILE).read_text())["entries"]
         entries = fit(args.tag, recorded)
+    elif args.mode == "walk":
+        entries = {**walk_fit(), **walk_check(args.check), **walk_estimates(args.estimate)}
     elif args.mode == "dry":
         entries = dry(args.heights or [100.0, 200.0], extra)
     elif args.mode == "watch":
-        entries = watch(args.heights[0], args.pid, args.stage, args.run_command)
+        entries = watch(args.heights[0], args.pid, args.stage, args.run_command, _shell(extra))
     elif not args.dir or len(args.heights) != 1:
         raise SystemExit(f"{args.mode}: one height and --dir")
     elif args.mode == "timed":
         entries = timed(args.heights[0], args.dir, args.time_log)
     else:
         entries = run(args.heights[0], args.dir, extra, args.stages)
-    if args.mode in ("run", "timed", "watch"):
+    if args.mode in ("run", "timed", "watch", "dry"):
         entries = {name + args.tag: rec for name, rec in entries.items()}
     path = RESULTS / RESULTS_FILE
     data = json.loads(path.read_text()) if path.is_file() else {"entries": {}}

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import sys
 import time
@@ -73,6 +74,7 @@ def main(argv=None) -> dict:
         r = resource.getrusage(resource.RUSAGE_SELF)
         return r.ru_utime + r.ru_stime
 
+    load0 = os.getloadavg()[0]
     rss = {"start": peak_rss_gb()}
     cpu = {"start": cpu_s()}
     t0 = time.perf_counter()
@@ -101,6 +103,7 @@ def main(argv=None) -> dict:
         run.release_unread_operators()  # as a run does after its start's figures
         figure_s = time.perf_counter() - t0
         rss["after_figure_metrics"] = peak_rss_gb()
+        cpu["after_figure_metrics"] = cpu_s()
         print(f"figure metrics in {figure_s:.1f} s; peaks so far (GiB) {rss}", file=sys.stderr, flush=True)
     baseline_s = None
     if args.baseline:  # as a run's baseline guard: the extrusion baseline's variables (its nearest texels)
@@ -111,9 +114,11 @@ def main(argv=None) -> dict:
         rss["after_baseline"] = peak_rss_gb()
         print(f"extrusion baseline in {baseline_s:.1f} s; peaks so far (GiB) {rss}", file=sys.stderr, flush=True)
     cpu0 = resource.getrusage(resource.RUSAGE_SELF)
-    passes = []
+    passes, iteration_cpu = [], []
     for i in range(args.iterations):
+        c0 = cpu_s()
         info = run.step()
+        iteration_cpu.append(cpu_s() - c0)
         passes.append(run.last_passes)
         h = run.history
         print(
@@ -124,7 +129,7 @@ def main(argv=None) -> dict:
     rss["after_iterations"] = peak_rss_gb()
     media = medium_bytes(scene.volume)  # after the peak is read: its layer temporaries are not the run's
     cpu1 = resource.getrusage(resource.RUSAGE_SELF)
-    cpu_s = (cpu1.ru_utime + cpu1.ru_stime - cpu0.ru_utime - cpu0.ru_stime) / max(args.iterations, 1)
+    cpu_per_iteration = (cpu1.ru_utime + cpu1.ru_stime - cpu0.ru_utime - cpu0.ru_stime) / max(args.iterations, 1)
     h = run.history
     nz, ny, nx = scene.volume.shape
     result = {
@@ -152,7 +157,12 @@ def main(argv=None) -> dict:
         "smooth": run.cfg.smooth,
         "adjoint_ema": run.cfg.adjoint_ema,
         "seconds_per_iteration": float(np.mean(h.seconds)) if h.seconds else None,
-        "cpu_seconds_per_iteration": cpu_s,
+        "cpu_seconds_per_iteration": cpu_per_iteration,
+        # CPU seconds (user + system, all threads) of each iteration, of the start's figures (--figure-metrics)
+        "iteration_cpu_seconds": iteration_cpu,
+        "figure_metrics_cpu_seconds": cpu["after_figure_metrics"] - cpu["after_setup"] if args.figure_metrics else None,
+        # the machine's 1-minute load average (runnable threads, this process's included) at start and end
+        "load_average_1min": {"start": load0, "end": os.getloadavg()[0]},
         "time_split": {
             k: float(np.mean(getattr(h, k))) if h.seconds else None
             for k in ("render_s", "gradient_s", "loss_s", "step_s")

@@ -564,6 +564,84 @@ def mesh_scaling() -> str:
     )
 
 
+#: the band runs of the scaling table (a 1 mm band over a white core, bench_mesh.py --shell-mm 1): results file, or
+#: the footprint's estimate (footprint_spot.json entry) where no run was measured
+BAND_SCALING = (
+    (20.0, "mesh_20mm_shell1_s65.json"),
+    (40.0, "mesh_40mm_shell1_corewhite.json"),
+    (60.0, "mesh_60mm_shell1_gsum_it.json"),
+    (80.0, "estimate_80mm_shell1"),
+    (100.0, "mesh_100mm_shell1_it.json"),
+)
+
+
+def _band_row(height: float, name: str) -> tuple[dict, Path]:
+    """One band row's figures (grid, free, texels, events, CPU s per iteration, peak GiB, load, code) and its file."""
+    if name.endswith(".json"):
+        m = load(BENCH / name)
+        load1 = m.get("load_average_1min")
+        return {
+            "grid": m["voxels"],
+            "free": m["free_voxels"],
+            "texels": m["texels"],
+            "events": m["events_per_path"]["forward"],
+            "cpu": m["cpu_seconds_per_iteration"],
+            "gb": m["peak_rss_gb"],
+            "what": f"`{name}`" + ("" if load1 is None else f", load {load1['start']:.0f}–{load1['end']:.0f}"),
+            "code": code(m),
+        }, BENCH / name
+    e = load(BENCH / "footprint_spot.json")["entries"][name]
+    c = e["counts"]
+    return {
+        "grid": c["grid"],
+        "free": c["free"],
+        "texels": c["texels"],
+        "events": e["events_per_path"],
+        "cpu": e["cpu_seconds_per_iteration"],
+        "gb": e["peak_gib"],
+        "what": f"**estimate** (`footprint_spot.json`, `{name}`)",
+        "code": code(e),
+    }, BENCH / "footprint_spot.json"
+
+
+def mesh_scaling_band() -> str:
+    import math
+
+    rows, sources, prev, first = [], [], None, None
+    for height, name in BAND_SCALING:
+        r, path = _band_row(height, name)
+        sources += [path] if path not in sources else []
+        k = "–"
+        if prev is not None:
+            lh = math.log(height / prev[0])
+            k = f"{math.log(r['cpu'] / prev[1]['cpu']) / lh:.2f} / {math.log(r['gb'] / prev[1]['gb']) / lh:.2f}"
+        first = first or (height, r)
+        prev = (height, r)
+        rows.append(
+            [
+                f"{height:g} mm",
+                f"{r['grid'] / 1e6:.1f} M",
+                f"{r['free'] / 1e6:.2f} M",
+                f"{r['texels'] / 1e3:.0f} k",
+                f"{r['events']:.0f}",
+                f"{r['cpu']:.0f}",
+                f"{r['gb']:.2f} GiB",
+                k,
+                r["what"],
+                r["code"],
+            ]
+        )
+    lh = math.log(prev[0] / first[0])
+    growth = [math.log(prev[1][key] / first[1][key]) / lh for key in ("texels", "events", "cpu", "gb")]
+    rows.append(
+        [f"{first[0]:g} → {prev[0]:g} mm", "", "", f"k {growth[0]:.2f}", f"k {growth[1]:.2f}"]
+        + [f"k {growth[2]:.2f}", f"k {growth[3]:.2f}", "", "", ""]
+    )
+    header = ["height, 1 mm band", "grid voxels", "band (free) voxels", "texels", "events per path"]
+    header += ["CPU s per iteration", "peak memory", "k: CPU s / peak (height^k from the row above)", "from"]
+    return table([*header, "code measured"], rows, sources)
+
+
 def lighting() -> str:
     path = STUDY / "lighting.json"
     res = load(path)["results"]
@@ -1330,6 +1408,7 @@ TABLES = {
     "compensation-factors": compensation_factors,
     "speed": speed,
     "mesh-scaling": mesh_scaling,
+    "mesh-scaling-band": mesh_scaling_band,
     "lighting": lighting,
     "translucency": translucency,
     "extended-inks": extended_inks,

@@ -21,9 +21,10 @@ of the voxelized counts (tests/test_footprint.py; docs/performance.md, "Estimate
 Memory: the largest of three stages' peaks (voxelization, a step, the figures), each ``BASE_BYTES`` and the mesh
 plus bytes per grid voxel, inside voxel, free voxel and texel (a band run's stages: their own per-free and per-texel
 terms; the constants below say where each comes from).
-Time: the measured cost of an iteration's passes per texel, growing like texels^``TEXEL_EXPONENT``, plus the step's
-cost per free voxel, both from Spot on 2 cores (bench/results/mesh_20mm.json and mesh_40mm.json); the machine's
-speed on the day, a shell's deeper paths (a pure-white core) and an optimised start's longer paths are not in it.
+Time (``footprint.walk``): an iteration's passes cost in proportion to texels x events per path, the events per
+path following the object's thickness and whether a band over a white core or every voxel is free, plus the step's
+cost per free voxel; the set-up in proportion to the texels; all measured on Spot on 2 cores. The machine's speed
+on the day and an optimised start's longer paths are not in it.
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ from ..errors import ParameterError
 from ..estimate import PRINTER_PER_OPT_VOXEL
 from ..model.volume import MAX_GRID_VOXELS
 from ..units import format_duration, voxel_mm
+from . import walk
 
 #: the interpreter, numpy, the extension and the ink tables before a scene is built: the 'start' peak of
 #: bench/results/mesh_*mm.json is 0.066-0.070 GiB
@@ -106,15 +108,6 @@ SHELL_STEP_TEXEL_BYTES = STEP_TEXEL_BYTES
 #:   no longer takes (1536 -> 373 B per texel at 60 mm: bench/results/figure_side_spot.json)
 SHELL_FIGURES_FREE_BYTES = 90.0
 SHELL_FIGURES_TEXEL_BYTES = 1230.0
-#: seconds per iteration of the passes (4-spp gradient, 16-spp forward, the loss) at ``TEXELS_REF`` texels, from
-#: white on 2 cores: 11.19 s on Spot 20 mm (bench/results/mesh_20mm.json, render + gradient + loss)
-PASS_SECONDS_REF = 11.19
-TEXELS_REF = 96002
-#: their growth with the texels: 56.24 s at 386 829 texels (bench/results/mesh_40mm.json, same code):
-#: log(56.24 / 11.19) / log(386829 / 96002)
-TEXEL_EXPONENT = 1.159
-#: the step per free voxel: 2.59 s over 15.68 M free voxels (bench/results/mesh_40mm.json)
-STEP_SECONDS_PER_FREE = 1.65e-7
 #: a slab's passes per texel: 254 s for 300 iterations of the reference slab's 41 772 texels
 #: (experiments/results/printable.json, entry reference, report.seconds_iterations)
 SLAB_SECONDS_PER_TEXEL = 254.0 / 300 / 41772
@@ -170,7 +163,7 @@ class Footprint:
     """A job's expected counts and what they cost. ``kind``: "mesh" or "slab"; ``grid`` (x, y, z) voxels at ``dpi``;
     ``grid_voxels``, ``inside_voxels``, ``free_voxels``, ``texels``; ``n_inks``; ``band``: the voxelization's exact
     signed-distance band (voxels; meshes); ``mesh_bytes``: the loaded mesh's (``MeshShape``); ``shell``: only a
-    shell below the surface is free."""
+    shell below the surface is free; ``events``: a mesh's expected events per path from white (``walk``)."""
 
     kind: str
     dpi: float
@@ -183,6 +176,7 @@ class Footprint:
     band: float = DEFAULT_BAND
     mesh_bytes: float = 0.0
     shell: bool = False
+    events: float = 0.0
 
     def peak_bytes(self) -> float:
         """The expected peak resident memory (bytes): the largest of the voxelization's, a step's and the figures'
@@ -211,11 +205,14 @@ class Footprint:
         return self.peak_bytes() <= limit_bytes and self.grid_voxels <= MAX_GRID_VOXELS
 
     def seconds_per_iteration(self) -> float:
-        """The expected seconds of one iteration from white on 2 cores (module docstring)."""
+        """The expected seconds of one iteration from white on a quiet 2-core machine (``walk``)."""
         if self.kind == "slab":
-            return SLAB_SECONDS_PER_TEXEL * self.texels + STEP_SECONDS_PER_FREE * self.free_voxels
-        passes = PASS_SECONDS_REF * (self.texels / TEXELS_REF) ** TEXEL_EXPONENT
-        return passes + STEP_SECONDS_PER_FREE * self.free_voxels
+            return SLAB_SECONDS_PER_TEXEL * self.texels + walk.STEP_SECONDS_PER_FREE * self.free_voxels
+        return walk.iteration_seconds(self.texels, self.events, self.free_voxels)
+
+    def setup_seconds(self) -> float | None:
+        """The expected seconds of a mesh run's set-up on a quiet machine (``walk``; None: a slab, not modelled)."""
+        return None if self.kind == "slab" else walk.setup_seconds(self.texels)
 
     def disk_bytes(self, iterations: int) -> int:
         """The run directory's bytes (``estimate`` module docstring: volume.npz, the checkpoint, scene.npz)."""
@@ -246,10 +243,12 @@ class Footprint:
             f"grid {nx} x {ny} x {nz} ({_count(self.grid_voxels)} voxels), {_count(self.inside_voxels)} inside, "
             f"{_count(self.free_voxels)} free, {_count(self.texels)} texels"
         )
+        setup = "" if self.kind == "slab" else f"set-up ~{format_duration(self.setup_seconds())}, "
+        events = "" if self.kind == "slab" else f", {self.events:.0f} events per path"
         return (
             f"estimate from the {self.kind}'s size ({counts}): peak memory ~{self.peak_bytes() / 2**30:.1f} GiB{room}; "
-            f"up to {iterations} iterations x {_seconds(each)} s = {format_duration(total)} (+ the final evaluation; "
-            f"2 cores, from white){budget}; disk ~{_size(self.disk_bytes(iterations))} "
+            f"{setup}up to {iterations} iterations x {_seconds(each)} s = {format_duration(total)} (+ the final "
+            f"evaluation; 2 quiet cores, from white{events}){budget}; disk ~{_size(self.disk_bytes(iterations))} "
             f"(+ {_size(self.quantized_bytes())} after inkopt quantize)"
         )
 
@@ -273,7 +272,7 @@ def mesh_footprint(shape: MeshShape, dpi: float, shell_mm: float | None, n_inks:
     grid = tuple(int(max(math.ceil(b / h - 1e-9), 1)) + 2 for b in shape.box_mm)
     grid_voxels = grid[0] * grid[1] * grid[2]
     inside = shape.volume_mm3 / h**3
-    r = 3.0 * shape.volume_mm3 / max(shape.area_mm2, 1e-300)  # the equal-ratio ball's radius (mm)
+    r = walk.thickness_mm(shape.volume_mm3, shape.area_mm2)  # the equal-ratio ball's radius (mm)
     # the texels' centres lie about half a voxel deep, where that ball has (1 - h / 2r)^2 of its area
     texels = min(shape.texel_factor * shape.area_mm2 / h**2 * max(1.0 - 0.5 * h / r, 0.0) ** 2, inside)
     free = inside
@@ -281,7 +280,8 @@ def mesh_footprint(shape: MeshShape, dpi: float, shell_mm: float | None, n_inks:
         shell = inside * (1.0 - (1.0 - min(shell_mm / r, 1.0)) ** 3)
         free = min(max(shell, texels), inside)
     counts = (grid_voxels, round(inside), round(free), round(texels))
-    return Footprint("mesh", dpi, grid, *counts, n_inks, band, shape.mesh_bytes, shell_mm is not None)
+    events = walk.events_per_path(r, shell_mm is not None and free < inside)
+    return Footprint("mesh", dpi, grid, *counts, n_inks, band, shape.mesh_bytes, shell_mm is not None, events)
 
 
 def mesh_band(voxel: float, *depths_mm) -> float:
