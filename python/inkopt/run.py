@@ -35,7 +35,7 @@ from .distributed import renderer_factory
 from .errors import ParameterError
 from .estimate import ANNOUNCE_SECONDS, Estimate, estimate_run
 from .evaluation.baselines import baseline_layers
-from .evaluation.finish import FinishChoice, choice_seconds
+from .evaluation.finish import FinishChoice
 from .evaluation.guard import BaselineCheck, check_baseline, keep_baseline_figures
 from .evaluation.lights import light_figures
 from .evaluation.metrics import delta_e76_map
@@ -257,7 +257,7 @@ def _iterate(job: _Job, figures: RunFigures) -> FinishChoice | None:
     """The iterations (checkpointed), the result's finishing smoothing (``finish_smooth`` auto: where the run's paired
     render says it lowers the loss, ``RunFigures.choose_finish``) and volume.npz; outputs made from an earlier
     volume.npz are removed. A time budget keeps the result's figures' seconds (``RunFigures.final_reserve``), the
-    finishing choice's (``evaluation.finish.choice_seconds``), the writing's share and ``options.after``'s seconds for
+    finishing choice's (``RunFigures.choice_reserve``), the writing's share and ``options.after``'s seconds for
     after the iterations. Returns the finishing choice (None: ``cfg.finish_smooth`` passes, as set)."""
     run, opts, cfg, rd = job.run, job.options, job.cfg, job.rd
     auto = cfg.finish_smooth == FINISH_AUTO
@@ -265,7 +265,7 @@ def _iterate(job: _Job, figures: RunFigures) -> FinishChoice | None:
 
     def reserve(setup_s: float) -> float:  # read only with a time budget
         later = 0.0 if opts.after is None else opts.after(setup_s)  # a later stage's seconds
-        return own + later + (choice_seconds(run) if auto else 0.0)
+        return own + later + (figures.choice_reserve() if auto else 0.0)
 
     run.run(
         rd.checkpoint_path,

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import time
 
-from .evaluation.finish import FinishChoice, choose_finish
+from .evaluation.finish import FinishChoice, choice_seconds, choose_finish
 from .evaluation.guard import kept_figures
 from .evaluation.metrics import prediction_metrics
 from .evaluation.noise import EVAL_SEED_OFFSET, PILOT_SPP, Sampling, adaptive_render, first_pass
@@ -53,6 +53,7 @@ class RunFigures:
         budgets = figure_budgets(job.cfg, job.options.eval_time_budget, job.run.wall_seconds())
         self.start_budget, self.final_budget = budgets
         self.overshoot = 0.0  # the most seconds a start's or baseline's figures took beyond their budget
+        self.per_spp = None  # seconds per sample per texel of the latest start's or baseline's figures
         self.replay = None  # the result's first pass, rendered by the finishing choice (``evaluation.finish.Replay``)
 
     def _pass(self, renderer, n: int, s: int):
@@ -96,6 +97,7 @@ class RunFigures:
         keep = x is None if keep_renderer is None else keep_renderer
         t = time.perf_counter()
         res, m = self._of(x, self._sampling(self.start_budget, max_spp), keep_renderer=keep)
+        self.per_spp = (time.perf_counter() - t) / max(res.spp, 1)
         if self.start_budget is not None:
             self.overshoot = max(self.overshoot, time.perf_counter() - t - self.start_budget)
         return kept_figures(m, res.spp, len(self.job.scene.texels))
@@ -105,6 +107,12 @@ class RunFigures:
         baseline's figures took beyond theirs (a renderer set to other variables, the figures' window operators:
         at 20 mm 6-13 s on the mesh suite's solids, about as much as the result's figures overran theirs)."""
         return None if self.final_budget is None else self.final_budget + self.overshoot
+
+    def choice_reserve(self) -> float:
+        """Seconds the finishing choice takes beyond the result's figures (``evaluation.finish.choice_seconds``): one
+        render of their first pass, at the start's or baseline's figures' measured seconds per sample when this
+        invocation rendered them, and a step."""
+        return choice_seconds(self.job.run, first_pass(self._final_sampling())[0], self.per_spp)
 
     def _final_sampling(self) -> Sampling:
         """The result's samples: the user's samples or budget, the run's budget share, or (neither) samples up to

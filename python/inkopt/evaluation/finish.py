@@ -145,15 +145,19 @@ def changes_nothing(run: Optimization) -> bool:
     return run.smoother is None or (not isinstance(rows, slice) and len(rows) == 0)
 
 
-def choice_seconds(run: Optimization) -> float:
-    """Seconds to keep for the choice beyond the result's figures: one forward render of an iteration and one step
-    (the smoothing is one of its parts), the medians of the run's iterations so far (0 before any, or where the pass
-    changes nothing); without forward renders the gradient pass's seconds stand for the render."""
+def choice_seconds(run: Optimization, spp: int, per_spp: float | None = None) -> float:
+    """Seconds to keep for the choice beyond the result's figures (0 where the pass changes nothing): one render of
+    ``spp`` samples per texel (the other is the figures' own first pass) at ``per_spp`` seconds per sample per texel
+    (measured on the run's figures; None: the median forward render of its iterations so far per sample, or without
+    forward renders its gradient pass's), and one step of the iterations (the median; the smoothing is one of its
+    parts)."""
     h = run.history
     if changes_nothing(run) or not h.seconds:
         return 0.0
-    render = h.render_s if run.cfg.forward_spp > 0 else h.gradient_s
-    return float(np.median(render) + np.median(h.step_s))
+    if per_spp is None:
+        fwd = run.cfg.forward_spp
+        per_spp = float(np.median(h.render_s)) / fwd if fwd > 0 else float(np.median(h.gradient_s)) / run.cfg.spp
+    return per_spp * spp + float(np.median(h.step_s))
 
 
 def choose_finish(run: Optimization, render, spp: int, seed: int) -> tuple[FinishChoice, Replay | None]:
