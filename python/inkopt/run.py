@@ -5,8 +5,8 @@ scene's kind; ``options`` (``RunOptions``) say how the run is carried out. A fre
 every output of an earlier run in ``out_dir`` (``RunDir.remove_earlier_run``); write scene.npz, estimate the cost
 (``inkopt.estimate``), measure the start's figures and the extrusion baseline's once (kept in the checkpoints, so a
 resume does not render them again), optimise with checkpoints (``options.resume`` continues exactly), choose the
-result's finishing smoothing (``finish_smooth`` auto, the mesh default: where the run's paired render says it lowers
-the loss, ``evaluation.finish``), save volume.npz (and remove the outputs derived from an earlier one), then the
+result's finishing smoothing (``finish_smooth`` auto: where the run's paired render says it lowers the loss,
+``evaluation.finish``), save volume.npz (and remove the outputs derived from an earlier one), then the
 result's figures (``runfigures.RunFigures``; their first pass the finishing choice's render), checked against the
 baseline's
 (``evaluation.guard``: a warning if worse beyond their noise). Figures: renders with seeds from ``2**62 + cfg.seed``

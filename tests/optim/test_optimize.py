@@ -486,10 +486,10 @@ def test_settings_left_to_the_scene_kind():
     assert diffusion_steps(1.5) != diffusion_steps(3.0)
     assert SCENE_DEFAULTS == {
         "slab": {"adjoint_ema": 0.8, "smooth": 1.5, "init": "white", "finish_smooth": 0},
-        "mesh": {"adjoint_ema": 0.5, "smooth": 3.0, "init": "white", "finish_smooth": FINISH_AUTO},
+        "mesh": {"adjoint_ema": 0.5, "smooth": 3.0, "init": "white", "finish_smooth": 1},
     }
     assert OptimizeConfig(finish_smooth=2).for_scene("slab").finish_smooth == 2
-    assert OptimizeConfig(finish_smooth=1).for_scene("mesh").finish_smooth == 1  # a set number of passes is kept
+    assert OptimizeConfig(finish_smooth=FINISH_AUTO).for_scene("mesh").finish_smooth == FINISH_AUTO
     assert OptimizeConfig().adjoint_ema is None and OptimizeConfig().smooth is None and OptimizeConfig().init is None
     mesh = OptimizeConfig().for_scene("mesh")
     assert (mesh.adjoint_ema, mesh.smooth, mesh.init) == (0.5, 3.0, SCENE_DEFAULTS["mesh"]["init"])

@@ -173,8 +173,8 @@ def _add_smoothing_args(p, d) -> None:
         metavar="PASSES|auto",
         help="passes of that smoothing over the result after the last iteration, against the voxel-scale "
         f"variation the iterations leave; auto: one pass, kept unless the run's paired render of the result with "
-        f"and without it says it raises the loss beyond the noise (default {slab['finish_smooth']} on slabs, auto "
-        "on meshes; 0: off)",
+        f"and without it says it raises the loss beyond the noise (default {slab['finish_smooth']} on slabs, "
+        f"{mesh['finish_smooth']} on meshes; 0: off)",
     )
     p.add_argument(
         "--smooth-edge",

@@ -2,15 +2,15 @@
 finishing smoothing decided by the run").
 
 One pass of the step's smoothing over a run's last iterate (``Optimization.finish``) removes the voxel-scale variation
-under the target's flat texels that the loss barely sees. On some meshes it also moves those voxels off what the
-iterations found (the mesh suite's duck at 10 mm: +0.74 ± 0.01 ΔE76, paired), on others it lowers the error (Spot
-20 mm after a starved deadline run: -0.43 ± 0.04), on the checker and the eyeball it is within ±0.1-0.3. With
-``OptimizeConfig.finish_smooth`` ``FINISH_AUTO`` (the mesh default) ``choose_finish`` renders both candidates, the
-iterate and the iterate smoothed once, on the run's texels with the same seed and samples per texel: those of the first
-pass of the result's figures (``noise.first_pass``), so that the chosen candidate's render becomes that pass
-(``Replay``) and the choice costs one render. The renderer keys its random numbers by (seed, texel, sample): the two
-renders share their noise wherever the media are alike, and the paired difference's error is far below either
-figure's.
+under the target's flat texels that the loss barely sees. On some results it also moves those voxels off what the
+iterations found (the mesh suite's duck at 10 mm under a plan that smoothed its coarse stage too: +0.74 ± 0.01 ΔE76,
+paired), on others it lowers the error (Spot 20 mm after a starved deadline run: -0.43 ± 0.04), on the checker and the
+eyeball it is within ±0.1-0.3. With ``OptimizeConfig.finish_smooth`` ``FINISH_AUTO`` (``--finish-smooth auto``)
+``choose_finish`` renders both candidates, the iterate and the iterate smoothed once, on the run's texels with the same
+seed and samples per texel: those of the first pass of the result's figures (``noise.first_pass``), so that the chosen
+candidate's render becomes that pass (``Replay``) and the choice costs one render. The renderer keys its random numbers
+by (seed, texel, sample): the two renders share their noise wherever the media are alike, and the paired difference's
+error is far below either figure's.
 
 What is compared is the loss's colour term, the default loss: the mean over texels of ΔE76² (under the first light),
 each texel's noise-corrected (``texel_loss``: minus the trace of its CIELAB covariance, the square's expected excess

@@ -24,16 +24,18 @@ GRAD_METHODS = ("replay", "li1")
 #: (43 iterations: 11.0, bench/results/time_to_quality.json; 60 iterations from white: 9.76,
 #: experiments/results/mesh_convergence.json), so white stays the default; a mesh's deadline run goes coarse to fine
 #: from the extrusion baseline (``coarse.DEADLINE_MESH_START``).
-#: ``finish_smooth``: meshes ``FINISH_AUTO``. A mesh result carries voxel-scale variation under flat texels that the
-#: loss barely sees (its curvature is small there) and that no later step removes: averaging the last 10-40 iterates
-#: of a coarse stage changed nothing, while one pass of the step's smoothing over a Spot 20 mm deadline result lowered
+#: ``finish_smooth``: meshes 1. A mesh result carries voxel-scale variation under flat texels that the loss barely
+#: sees (its curvature is small there) and that no later step removes: averaging the last 10-40 iterates of a
+#: coarse stage changed nothing, while one pass of the step's smoothing over a Spot 20 mm deadline result lowered
 #: the mottle 0.34 -> 0.13 (ΔL*)² and raised SSIM 0.909 -> 0.920 for +0.07 ΔE76 (256-spp renders,
-#: experiments/results/finish_smooth.json; docs/experiments.md, "Finishing smoothing"). The same pass costs the duck of
-#: the mesh suite at 10 mm 0.74 ΔE76 (docs/quality.md, "The duck's margin"), so a mesh run keeps it only where its own
-#: paired render says it does not raise the loss (``evaluation.finish``). Slabs 0: not measured there.
+#: experiments/results/finish_smooth.json; docs/experiments.md, "Finishing smoothing"). Not ``FINISH_AUTO``: the
+#: run's own choice kept the pass on every mesh-suite cell it ran (the duck, box, eyeball, checker and coin at 20 mm,
+#: the duck at 10 mm, Spot at 20 mm; bench/results/mesh_suite.json, variant ``finish-auto``) and costs a render of
+#: every texel, 2-16 s of a 5-minute job (docs/quality.md, "The finishing smoothing decided by the run"). Slabs 0:
+#: not measured there.
 SCENE_DEFAULTS = {
     "slab": {"adjoint_ema": 0.8, "smooth": 1.5, "init": "white", "finish_smooth": 0},
-    "mesh": {"adjoint_ema": 0.5, "smooth": 3.0, "init": "white", "finish_smooth": -1},
+    "mesh": {"adjoint_ema": 0.5, "smooth": 3.0, "init": "white", "finish_smooth": 1},
 }
 #: ``finish_smooth`` "auto" (``--finish-smooth auto``): the result is the last iterate after one pass of the step's
 #: smoothing, or the last iterate itself where the run's paired render of both says the pass raises the loss beyond
