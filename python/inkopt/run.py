@@ -6,17 +6,17 @@ every output of an earlier run in ``out_dir`` (``RunDir.remove_earlier_run``); w
 (``inkopt.estimate``), measure the start's figures and the extrusion baseline's once (kept in the checkpoints, so a
 resume does not render them again), optimise with checkpoints (``options.resume`` continues exactly), choose the
 result's finishing smoothing (``finish_smooth`` auto: where the run's paired render says it lowers the loss,
-``evaluation.finish``), save volume.npz (and remove the outputs derived from an earlier one), then the
-result's figures (``runfigures.RunFigures``; their first pass the finishing choice's render), checked against the
-baseline's
+``evaluation.finish``), save volume.npz (and remove the outputs derived from an earlier one), then the result's figures
+(``runfigures.RunFigures``; their first pass the finishing choice's render), checked against the baseline's
 (``evaluation.guard``: a warning if worse beyond their noise). Figures: renders with seeds from ``2**62 + cfg.seed``
 (never used by the optimisation) at ``options.eval_spp`` samples per texel if given, else adaptively
 (``evaluation.noise.adaptive_render``: enough that the Monte Carlo noise adds at most ~0.5 to the mean ΔE76 and SSIM's
 and the mottle's noise correction is accurate, at most ``eval_max_spp`` (4096) and within ``eval_time_budget``, or
-within ``FINAL_FIGURES_SHARE`` of the run's time when neither that nor a run time budget is given; the start's and the
-baseline's figures are one pilot pass each), compared with the target by ``evaluation.metrics.prediction_metrics``; then
-the scene's pictures, loss.png and report.json (``evaluation.results.Report``). The scene comes from user inputs through
-a spec (``scenes.spec``: ``scenes.build_scene(SlabSpec(...), inks)``, ``scenes.build_scene(MeshSpec(...), inks)``).
+within ``runfigures.FINAL_FIGURES_SHARE`` of the run's time when neither that nor a run time budget is given; the
+start's and the baseline's figures are one pilot pass each), compared with the target by
+``evaluation.metrics.prediction_metrics``; then the scene's pictures, loss.png and report.json
+(``evaluation.results.Report``). The scene comes from user inputs through a spec (``scenes.spec``:
+``scenes.build_scene(SlabSpec(...), inks)``, ``scenes.build_scene(MeshSpec(...), inks)``).
 """
 
 from __future__ import annotations

@@ -215,3 +215,17 @@ def test_a_run_whose_pass_changes_nothing_renders_nothing_for_it(noisy, tmp_path
     assert rep.finish["decision"] == "unchanged" and rep.finish["loss_smoothed"] is None
     assert len(passes) == 2  # the start's and the result's
     assert [m for m in lines if "changes nothing" in m], lines
+
+
+def test_the_option_takes_a_number_of_passes_or_auto():
+    import argparse
+
+    from inkopt.cli.runargs import finish_passes
+
+    assert finish_passes("auto") == FINISH_AUTO and finish_passes("AUTO") == FINISH_AUTO
+    assert finish_passes("0") == 0 and finish_passes("2") == 2
+    for bad in ("-1", "x", "1.5"):
+        with pytest.raises(argparse.ArgumentTypeError):
+            finish_passes(bad)
+    assert OptimizeConfig(finish_smooth=1).for_scene("mesh").finish_smooth == 1  # the mesh default is one pass
+    assert OptimizeConfig().for_scene("mesh").finish_smooth == 1
