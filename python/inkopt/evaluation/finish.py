@@ -19,7 +19,7 @@ from the render's noise). The rule: the smoothing is kept unless dropping it low
 what the loss does not see (Spot 20 mm: mottle 0.34 -> 0.13 (ΔL*)², SSIM +0.011, experiments/results/
 finish_smooth.json) and helped or did nothing in every paired measurement but the duck's, whose loss from it is many
 standard errors wide; at 2 standard errors a pass that does not change the loss is dropped in ~2 % of runs. A run
-whose pass changes nothing (no flat texels: the orange, the spider; or no smoothing) renders nothing.
+whose pass changes nothing (no flat texels, or no smoothing) renders nothing.
 """
 
 from __future__ import annotations

@@ -29,10 +29,10 @@ GRAD_METHODS = ("replay", "li1")
 #: coarse stage changed nothing, while one pass of the step's smoothing over a Spot 20 mm deadline result lowered
 #: the mottle 0.34 -> 0.13 (ΔL*)² and raised SSIM 0.909 -> 0.920 for +0.07 ΔE76 (256-spp renders,
 #: experiments/results/finish_smooth.json; docs/experiments.md, "Finishing smoothing"). Not ``FINISH_AUTO``: the
-#: run's own choice kept the pass on every mesh-suite cell it ran (the duck, box, eyeball, checker and coin at 20 mm,
-#: the duck at 10 mm, Spot at 20 mm; bench/results/mesh_suite.json, variant ``finish-auto``) and costs a render of
-#: every texel, 2-16 s of a 5-minute job (docs/quality.md, "The finishing smoothing decided by the run"). Slabs 0:
-#: not measured there.
+#: run's own choice kept the pass on every mesh-suite cell it ran (the duck, box, eyeball, checker, coin and orange
+#: at 20 mm, the duck at 10 mm; Spot at 20 mm; bench/results/mesh_suite.json, variant ``finish-auto``) and costs a
+#: render of every texel, 2-16 s of a 5-minute job (docs/quality.md, "The finishing smoothing decided by the run").
+#: Slabs 0: not measured there.
 SCENE_DEFAULTS = {
     "slab": {"adjoint_ema": 0.8, "smooth": 1.5, "init": "white", "finish_smooth": 0},
     "mesh": {"adjoint_ema": 0.5, "smooth": 3.0, "init": "white", "finish_smooth": 1},
