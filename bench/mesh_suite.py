@@ -27,7 +27,8 @@ docs/tables.py's ``mesh_suite`` table of a results file between ``<!-- table:mes
 Results keys (kept stable): ``cells`` -> "MESH/Hmm/BUDGET[+VARIANT]" -> ``mesh``, ``height_mm``, ``budget``,
 ``variant`` (its name; null or absent for the defaults' cells), ``derived_from`` (the run whose last iterate a
 derived variant's result is, made by ``mesh_suite_paired.py checkpoint``; its ``optimize_args`` then only name the
-variant), ``finish_smooth`` (the result's finishing smoothing passes), ``optimize_args``, ``evaluate_args`` (lists
+variant), ``finish_smooth`` (the result's finishing smoothing passes), ``finish`` (report.json's ``finish``: the
+run's choice of that pass, null where the passes were set), ``optimize_args``, ``evaluate_args`` (lists
 of str), ``texels``, ``iterations`` (a coarse-to-fine job's: the fine stage's), ``coarse_iterations`` (the coarse
 stage's; null without one), ``job_seconds`` (report.json's ``seconds``: the job's wall time from its start, which
 its time budget counts), ``optimize_seconds``, ``seconds_per_iteration``, ``quantize_seconds``,
@@ -386,6 +387,7 @@ def run_cell(mesh: str, height: float, budget: str, cache: Path, extra: Extra) -
         # a result made from another run's last iterate (bench/mesh_suite_paired.py checkpoint), not optimised here
         "derived_from": report.get("finish_smooth_from"),
         "finish_smooth": report.get("finish_smooth"),
+        "finish": report.get("finish"),
         "optimize_args": settings,
         "evaluate_args": eval_args,
         "texels": ev.get("texels"),
@@ -415,8 +417,8 @@ def job_times(out: Path, report: dict) -> dict:
 
 def refresh(cache: Path, results: Path) -> None:
     """Add each recorded cell's paired differences (``differences``) from its run folder's evaluation.json, and its
-    ``coarse_iterations`` and ``job_seconds`` from its reports, for cells recorded before the results kept them;
-    nothing else of a cell changes."""
+    ``coarse_iterations``, ``job_seconds`` and ``finish`` from its reports, for cells recorded before the results
+    kept them; nothing else of a cell changes."""
     data = json.loads(results.read_text())
     for key, c in data["cells"].items():
         out = run_folder(cache, c["mesh"], c["height_mm"], c["budget"], c.get("variant"))
@@ -427,6 +429,9 @@ def refresh(cache: Path, results: Path) -> None:
         if "job_seconds" not in c and (out / "report.json").is_file():
             c.update(job_times(out, json.loads((out / "report.json").read_text())))
             print(f"{key}: coarse iterations and job seconds added")
+        if "finish" not in c and (out / "report.json").is_file():
+            c["finish"] = json.loads((out / "report.json").read_text()).get("finish")
+            print(f"{key}: the finishing choice added")
     write_results(results, data)
 
 

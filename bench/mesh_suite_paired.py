@@ -9,7 +9,8 @@ Writes the entry NAME of bench/results/mesh_suite_paired.json.
 
 SOURCE is a suite run folder (its volume.npz and quantized.npz), or ``RUN:fine_start`` (the volume its coarse stage
 handed to the fine stage, ``RUN/coarse/fine_start.npz``), or ``RUN:unsmoothed`` (the last iterate of the
-checkpoint, before the finishing smoothing: ``OptimizeConfig.finish_smooth``). The last two are quantized here into
+checkpoint, before the finishing smoothing: ``OptimizeConfig.finish_smooth``), or ``RUN:smoothed`` (that iterate after
+one pass, where the mesh names its texture: what ``--finish-smooth 1`` returns). The last three are quantized here into
 a temporary copy of the run; nothing is written into a run folder. All sources must share one scene (the same mesh,
 size and DPI: scene.npz's texels). The first candidate is the reference of the differences.
 
@@ -91,10 +92,10 @@ def candidate_run(source: str, tmp: Path) -> Path:
         shutil.copy2(run / name, dest / name)
     if part == "fine_start":
         shutil.copy2(run / "coarse" / "fine_start.npz", dest / "volume.npz")
-    elif part == "unsmoothed":
-        checkpoint_volume(run, dest / "volume.npz")
+    elif part in ("unsmoothed", "smoothed"):
+        checkpoint_volume(run, dest / "volume.npz", int(part == "smoothed"))
     else:
-        raise SystemExit(f"unknown part {part!r} of {source}: fine_start or unsmoothed")
+        raise SystemExit(f"unknown part {part!r} of {source}: fine_start, unsmoothed or smoothed")
     cmd = [sys.executable, "-m", "inkopt", "quantize", str(dest)]
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
     return dest

@@ -1,6 +1,7 @@
 """Where a mesh suite deadline job's time goes after its coarse stage, and the fit of ``coarse.fine_stage_seconds``.
 
     python bench/mesh_suite_phases.py --fit fixed-80 --check default,cuts-fixed-80
+    python bench/mesh_suite_phases.py --fit '' --check default --out mesh_suite_phases_finish.json   # a check only
 
 Reads the optimize part of each 20 mm short-budget cell's ``suite.log`` (each line after the seconds since the
 command began, ``bench/mesh_suite.py``) in the run folders of the variants named (``default``: the defaults' cells,
@@ -11,7 +12,7 @@ line ``... after N iterations``), and the fine stage's fixed seconds ``fine_stag
 to the job's end, the fine iterations after the first taken out (at their logged seconds per iteration). The cells of
 ``--fit`` give the least upper bound a + b * setup_s (least total excess, a linear programme; ``fit``), the others
 are checked against ``coarse.FINE_FIXED_SECONDS`` and ``FINE_SETUP_FACTOR`` (``excess_s``: predicted - measured).
-Writes bench/results/mesh_suite_phases.json.
+Writes bench/results/mesh_suite_phases.json (``--out``: another name in bench/results/; ``--fit ''``: no fit).
 """
 
 from __future__ import annotations
@@ -79,11 +80,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--fit", default="fixed-80", help="variants whose cells are fitted")
     ap.add_argument("--check", default="default,cuts-fixed-80", help="variants whose cells are checked")
     ap.add_argument("--cache", type=Path, default=CACHE)
+    ap.add_argument("--out", default="mesh_suite_phases.json", help="the results file's name in bench/results/")
     a = ap.parse_args(argv)
     out = {"constants": {"FINE_FIXED_SECONDS": FINE_FIXED_SECONDS, "FINE_SETUP_FACTOR": FINE_SETUP_FACTOR}}
     for group in ("fit", "check"):
         cells = {}
-        for variant in getattr(a, group).split(","):
+        for variant in [v for v in getattr(a, group).split(",") if v]:
             for mesh in MESHES:
                 name = f"{mesh}_20mm_short" + ("" if variant == "default" else f"_{variant}")
                 log = a.cache / "runs" / name / "suite.log"
@@ -94,9 +96,10 @@ def main(argv: list[str] | None = None) -> int:
                     cells[name]["excess_s"] = round(predicted - got["fine_stage_s"], 1)
                     print(f"{name:42s} " + ", ".join(f"{k} {v}" for k, v in cells[name].items()))
         out[group] = {"variants": getattr(a, group).split(","), "cells": cells}
-    out["fit"]["bound"] = fit(out["fit"]["cells"])
-    print("fit:", out["fit"]["bound"])
-    write("mesh_suite_phases.json", out)
+    if out["fit"]["cells"]:
+        out["fit"]["bound"] = fit(out["fit"]["cells"])
+        print("fit:", out["fit"]["bound"])
+    write(a.out, out)
     return 0
 
 

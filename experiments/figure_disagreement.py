@@ -44,7 +44,14 @@ CHROMA_BINS = (0.0, 20.0, 40.0, 60.0)
 #: a target farther than this (ΔE76) from what a thick patch reaches counts as outside the ink gamut
 OUT_OF_GAMUT_DE76 = 1.0
 NOISE_DRAWS = 8
-RUN_FILES = ("scene.npz", "volume.npz", "quantized.npz", "quantized_labels.npy", "report.json")
+RUN_FILES = (
+    "scene.npz",
+    "volume.npz",
+    "quantized.npz",
+    "quantized_labels.npy",
+    "quantized_labels.layers",
+    "report.json",
+)
 
 
 def ciede2000_terms(lab_ref: np.ndarray, lab: np.ndarray) -> dict:

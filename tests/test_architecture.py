@@ -26,7 +26,7 @@ LAYERS = [
     {"evaluation"},
     {"calibration"},
     {"proof"},
-    {"run", "estimate", "footprint", "coarse"},
+    {"run", "runfigures", "estimate", "footprint", "coarse"},
     {"inksets"},
     {"cli", "__main__"},
 ]

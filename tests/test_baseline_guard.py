@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from helpers import small_chart_scene
 
-from inkopt import run as run_module
+from inkopt import runfigures
 from inkopt.cli.runargs import print_run_summary
 from inkopt.evaluation import guard
 from inkopt.evaluation.guard import BaselineCheck, figure_error
@@ -44,13 +44,13 @@ def _run(scene, out, cfg, lines=None, **kw):
 @pytest.fixture
 def renders(monkeypatch):
     """The figures' renders of the runs in the test, one entry (their ``Sampling``) each."""
-    calls, real = [], run_module.adaptive_render
+    calls, real = [], runfigures.adaptive_render
 
     def counted(render, target_lab, sampling, log=None, **kw):
         calls.append(sampling)
         return real(render, target_lab, sampling, log=log, **kw)
 
-    monkeypatch.setattr(run_module, "adaptive_render", counted)
+    monkeypatch.setattr(runfigures, "adaptive_render", counted)
     return calls
 
 

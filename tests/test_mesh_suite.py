@@ -104,10 +104,13 @@ def test_run_and_table_end_to_end(tmp_path, monkeypatch):
     results.write_text(json.dumps(data))
     assert suite.main(["refresh", "--cache", str(tmp_path), "--results", str(results)]) == 0
     assert json.loads(results.read_text())["cells"]["cube/3mm/2it+fast"] == cell
-    # a derived variant's volume: the run's last iterate after its one finishing pass is the run's own result
+    # a derived variant's volume: the run's last iterate after the finishing passes its result has (report.json's
+    # finish_smooth: 1, the mesh default; 0 or 1 where the run chose them) is the run's own result
     paired = load_file_module(REPO / "bench" / "mesh_suite_paired.py", "mesh_suite_paired")
     run = tmp_path / "runs" / "cube_3mm_2it_fast"
-    paired.checkpoint_volume(run, tmp_path / "again.npz", 1, str(tmp_path / "meshes" / "cube" / "tex.png"))
+    passes = json.loads((run / "report.json").read_text())["finish_smooth"]
+    assert passes == 1 and cell["finish"] is None
+    paired.checkpoint_volume(run, tmp_path / "again.npz", passes, str(tmp_path / "meshes" / "cube" / "tex.png"))
     assert np.array_equal(np.load(tmp_path / "again.npz")["mixture"], np.load(run / "volume.npz")["mixture"])
     monkeypatch.setattr(suite, "inkopt", lambda *a: pytest.fail("a finished cell is run again"))
     assert suite.main([*argv, "--results", str(results), *variant]) == 0

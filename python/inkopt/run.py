@@ -4,16 +4,19 @@
 scene's kind; ``options`` (``RunOptions``) say how the run is carried out. A fresh run (not a resume) first removes
 every output of an earlier run in ``out_dir`` (``RunDir.remove_earlier_run``); write scene.npz, estimate the cost
 (``inkopt.estimate``), measure the start's figures and the extrusion baseline's once (kept in the checkpoints, so a
-resume does not render them again), optimise with checkpoints (``options.resume`` continues exactly), save volume.npz
-(and remove the outputs derived from an earlier one), then the result's figures, checked against the baseline's
+resume does not render them again), optimise with checkpoints (``options.resume`` continues exactly), choose the
+result's finishing smoothing (``finish_smooth`` auto: where the run's paired render says it lowers the loss,
+``evaluation.finish``), save volume.npz (and remove the outputs derived from an earlier one), then the result's figures
+(``runfigures.RunFigures``; their first pass the finishing choice's render), checked against the baseline's
 (``evaluation.guard``: a warning if worse beyond their noise). Figures: renders with seeds from ``2**62 + cfg.seed``
 (never used by the optimisation) at ``options.eval_spp`` samples per texel if given, else adaptively
 (``evaluation.noise.adaptive_render``: enough that the Monte Carlo noise adds at most ~0.5 to the mean ΔE76 and SSIM's
 and the mottle's noise correction is accurate, at most ``eval_max_spp`` (4096) and within ``eval_time_budget``, or
-within ``FINAL_FIGURES_SHARE`` of the run's time when neither that nor a run time budget is given; the start's and the
-baseline's figures are one pilot pass each), compared with the target by ``evaluation.metrics.prediction_metrics``; then
-the scene's pictures, loss.png and report.json (``evaluation.results.Report``). The scene comes from user inputs through
-a spec (``scenes.spec``: ``scenes.build_scene(SlabSpec(...), inks)``, ``scenes.build_scene(MeshSpec(...), inks)``).
+within ``runfigures.FINAL_FIGURES_SHARE`` of the run's time when neither that nor a run time budget is given; the
+start's and the baseline's figures are one pilot pass each), compared with the target by
+``evaluation.metrics.prediction_metrics``; then the scene's pictures, loss.png and report.json
+(``evaluation.results.Report``). The scene comes from user inputs through a spec (``scenes.spec``:
+``scenes.build_scene(SlabSpec(...), inks)``, ``scenes.build_scene(MeshSpec(...), inks)``).
 """
 
 from __future__ import annotations
@@ -32,45 +35,23 @@ from .distributed import renderer_factory
 from .errors import ParameterError
 from .estimate import ANNOUNCE_SECONDS, Estimate, estimate_run
 from .evaluation.baselines import baseline_layers
-from .evaluation.guard import BaselineCheck, check_baseline, keep_baseline_figures, kept_figures
+from .evaluation.finish import FinishChoice
+from .evaluation.guard import BaselineCheck, check_baseline, keep_baseline_figures
 from .evaluation.lights import light_figures
-from .evaluation.metrics import delta_e76_map, prediction_metrics
-from .evaluation.noise import EVAL_SEED_OFFSET, MAX_SPP, PILOT_SPP, Sampling, adaptive_render
+from .evaluation.metrics import delta_e76_map
+from .evaluation.noise import MAX_SPP
 from .evaluation.results import Report
 from .evaluation.spectral import bands_of
 from .io import file_digest
 from .lighting import Lighting, load_lighting
 from .model.spectral import write_spectral_ink_file
 from .optim import Optimization, OptimizeConfig
+from .optim.config import FINISH_AUTO
 from .pictures import loss_figure
 from .rundir import Predictions, RunDir
+from .runfigures import BUDGET_WRITING, RunFigures
 from .scenes import Scene
 from .spectral.viewing import Viewing
-
-#: Shares of a run's time budget (``OptimizeConfig.time_budget``) given to the start's figures (as much again to the
-#: baseline's: ``evaluation.guard``), the result's figures, and kept for writing the result (volume, pictures,
-#: predictions, report): the iterations get the rest,
-#: the step decay planned to end in time (``optim.stopping``). Not measured optima: the figures are informative
-#: and noise-corrected at any spp (their noise is reported), the quality is the iterations'. The figures' shares are
-#: of the time left when the run's set-up ends (a coarse-to-fine job's fine stage: what the coarse stage left it),
-#: the writing's of the whole budget (it scales with the object, not with the time left).
-BUDGET_START_FIGURES, BUDGET_FINAL_FIGURES, BUDGET_WRITING = 0.03, 0.08, 0.04
-#: Without a budget, the result's figures add samples beyond the pilot only while they take at most this share of
-#: the run's time so far: on a mesh noise-free figures take hundreds of samples per texel where an iteration renders
-#: 20 (Spot 20 mm: 553 spp, experiments/results/mesh_convergence.json, entry ``spot20_smooth3_60``). The noise left
-#: is corrected for and reported; `inkopt evaluate` measures the printed result against the baselines without noise.
-FINAL_FIGURES_SHARE = 0.25
-
-
-def figure_budgets(cfg: OptimizeConfig, eval_time_budget: float | None, elapsed: float = 0.0) -> tuple:
-    """(start's, result's) time budget of the adaptive figures in seconds, or None: the user's
-    ``eval_time_budget``, within the shares of what is left of the run's time budget (if it has one) after
-    ``elapsed`` seconds (the job's time so far)."""
-    if cfg.time_budget is None:
-        return eval_time_budget, eval_time_budget
-    cap = float("inf") if eval_time_budget is None else eval_time_budget
-    left = max(cfg.time_budget - elapsed, 0.0)
-    return min(cap, BUDGET_START_FIGURES * left), min(cap, BUDGET_FINAL_FIGURES * left)
 
 
 def peak_rss_gb() -> float:
@@ -182,7 +163,7 @@ def run_optimisation(scene: Scene, out_dir, cfg: OptimizeConfig, options: RunOpt
         if options.dry_run:
             return _dry_run(job, out_dir)
         estimate = _prepare(job, out_dir)
-        figures = _Figures(job)
+        figures = RunFigures(job)
         if job.run.start_figures is None and job.run.iteration == 0:
             # measured once, before the first step, then kept in the checkpoints: one pilot (noise-corrected;
             # `inkopt evaluate` measures the baselines noise-free)
@@ -191,13 +172,13 @@ def run_optimisation(scene: Scene, out_dir, cfg: OptimizeConfig, options: RunOpt
             keep_baseline_figures(job.run, lambda x: figures.start(x, keep_renderer=True), options.log)
         job.run.release_unread_operators()  # the figures' window is not held through the first render
         release_freed_memory()  # nor the heap the figures freed: a step's large arrays are mapped, not taken from it
-        _iterate(job, figures.final_reserve())
+        finish = _iterate(job, figures)
         res, metrics = figures.final()
         if job.run.start_figures is None:  # a checkpoint written before the start's figures were kept in it
             job.run.keep_start_figures(figures.start(job.run.initial_variables()))
         check = check_baseline(job.run, metrics, options.log)  # the warning when worse than the baseline
         de = _write_result_files(job, res)
-        report = _report(job, res, metrics, de, estimate, check)
+        report = _report(job, res, metrics, de, estimate, check, finish)
         job.rd.write_report(report.to_json())
         return report
 
@@ -272,83 +253,19 @@ def _prepare(job: _Job, out_dir) -> Estimate:
     return estimate
 
 
-class _Figures:
-    """A run's figures: renders with seeds unused by the optimisation (``EVAL_SEED_OFFSET + seed``), the user's
-    samples per texel or adaptive ones (at most ``eval_max_spp`` and ``eval_time_budget`` seconds per result). The
-    run's own renderer, set to a mixture (only the free voxels change: no grid-sized volume), renders exactly what
-    a renderer built from that volume would."""
-
-    def __init__(self, job: _Job):
-        self.job = job
-        self.spp = int(job.options.eval_spp) if job.options.eval_spp else None  # None: adaptive
-        self.seed = EVAL_SEED_OFFSET + job.cfg.seed
-        budgets = figure_budgets(job.cfg, job.options.eval_time_budget, job.run.wall_seconds())
-        self.start_budget, self.final_budget = budgets
-        self.overshoot = 0.0  # the most seconds a start's or baseline's figures took beyond their budget
-
-    def _of(self, x, budget, max_spp: int, pilot_in_budget: bool = True, keep_renderer: bool = True):
-        """(``AdaptiveResult``, ``Metrics``) of the mixture of variables ``x`` (None: the current ones)."""
-        run, opts = self.job.run, self.job.options
-        renderer = run.renderer(x)
-        texels, specular = self.job.scene.texels, self.job.cfg.include_specular
-
-        def render(n: int, s: int):
-            r = renderer.render(texels, n, s, specular, opts.progress)
-            return r.rgb, r.var_mean, n
-
-        res = adaptive_render(
-            render,
-            run.loss.target_lab,
-            Sampling(
-                seed=self.seed, spp=self.spp, max_spp=max_spp, time_budget=budget, pilot_in_budget=pilot_in_budget
-            ),
-            log=opts.log,
-            cmap=run.loss.colours[0],  # a spectral run's headline light
-        )
-        if not keep_renderer:  # its media are not needed beside the loss's window operators that the figures build
-            del renderer, render
-            run.release_renderer()
-        return res, prediction_metrics(run.loss, res.rgb, res.var)  # CIELAB under the first light
-
-    def start(self, x=None, keep_renderer: bool | None = None) -> dict:
-        """The start's figures (one pilot pass at most) as ``Optimization.keep_start_figures`` keeps them
-        (``evaluation.guard.kept_figures``); ``x``: other variables than the current ones (the start's when the run
-        is no longer at its start, a baseline's); the renderer is kept if ``keep_renderer`` (None: without ``x``)."""
-        max_spp = min(self.job.options.eval_max_spp, PILOT_SPP)
-        keep = x is None if keep_renderer is None else keep_renderer
-        t = time.perf_counter()
-        res, m = self._of(x, self.start_budget, max_spp, keep_renderer=keep)
-        if self.start_budget is not None:
-            self.overshoot = max(self.overshoot, time.perf_counter() - t - self.start_budget)
-        return kept_figures(m, res.spp, len(self.job.scene.texels))
-
-    def final_reserve(self) -> float | None:
-        """Seconds the result's figures are expected to take: their budget plus the most the start's and the
-        baseline's figures took beyond theirs (a renderer set to other variables, the figures' window operators:
-        at 20 mm 6-13 s on the mesh suite's solids, about as much as the result's figures overran theirs)."""
-        return None if self.final_budget is None else self.final_budget + self.overshoot
-
-    def final(self):
-        """The result's figures: the user's samples or budget, the run's budget share, or (neither) samples up to
-        ``FINAL_FIGURES_SHARE`` of the run's time so far after a whole pilot."""
-        max_spp = self.job.options.eval_max_spp
-        if self.spp is not None or self.final_budget is not None:
-            return self._of(None, self.final_budget, max_spp, keep_renderer=False)
-        budget = FINAL_FIGURES_SHARE * self.job.run.wall_seconds()
-        return self._of(None, budget, max_spp, pilot_in_budget=False, keep_renderer=False)
-
-
-def _iterate(job: _Job, final_seconds: float | None) -> None:
-    """The iterations (checkpointed), the result's finishing smoothing and volume.npz; outputs made from an
-    earlier volume.npz are removed. A time budget keeps ``final_seconds`` (the result's figures,
-    ``_Figures.final_reserve``), the writing's share and ``options.after``'s seconds for after the iterations."""
+def _iterate(job: _Job, figures: RunFigures) -> FinishChoice | None:
+    """The iterations (checkpointed), the result's finishing smoothing (``finish_smooth`` auto: where the run's paired
+    render says it lowers the loss, ``RunFigures.choose_finish``) and volume.npz; outputs made from an earlier
+    volume.npz are removed. A time budget keeps the result's figures' seconds (``RunFigures.final_reserve``), the
+    finishing choice's (``RunFigures.choice_reserve``), the writing's share and ``options.after``'s seconds for
+    after the iterations. Returns the finishing choice (None: ``cfg.finish_smooth`` passes, as set)."""
     run, opts, cfg, rd = job.run, job.options, job.cfg, job.rd
-    reserve = 0.0 if cfg.time_budget is None else (final_seconds or 0.0) + BUDGET_WRITING * cfg.time_budget
-    if opts.after is not None and cfg.time_budget is not None:  # a later stage's seconds kept too
-        own = reserve
+    auto = cfg.finish_smooth == FINISH_AUTO
+    own = 0.0 if cfg.time_budget is None else (figures.final_reserve() or 0.0) + BUDGET_WRITING * cfg.time_budget
 
-        def reserve(setup_s: float) -> float:
-            return own + opts.after(setup_s)
+    def reserve(setup_s: float) -> float:  # read only with a time budget
+        later = 0.0 if opts.after is None else opts.after(setup_s)  # a later stage's seconds
+        return own + later + (figures.choice_reserve() if auto else 0.0)
 
     run.run(
         rd.checkpoint_path,
@@ -360,12 +277,17 @@ def _iterate(job: _Job, final_seconds: float | None) -> None:
     )
     if run.viewing.plan is not None and run.history.seconds:  # a spectral run's band plan and its pilot's cost
         opts.log(run.viewing.plan.line(float(np.median(run.history.seconds))))
-    run.release_renderer()  # not beside the writing of the result, nor beside the finishing smoothing
-    run.finish()  # the result: the last iterate smoothed (cfg.finish_smooth); the checkpoint keeps the iterate
+    choice = figures.choose_finish() if auto else None  # with the run's renderer, as a step smooths beside it
+    if choice is not None:
+        opts.log(choice.line())
+    run.release_renderer()  # not beside the writing of the result, nor beside a set number of smoothing passes
+    if not auto:
+        run.finish()  # the result: the last iterate smoothed (cfg.finish_smooth); the checkpoint keeps the iterate
     rd.save_volume_slabs(run.base, run.mixture_slabs(), run.base.inks)  # a slab of layers at a time
     gone = rd.remove_stale()  # quantized volume, slices, evaluation made from an earlier volume.npz
     if gone:
         opts.log(f"removed outputs made from the earlier volume.npz: {', '.join(gone)}")
+    return choice
 
 
 def _write_result_files(job: _Job, res) -> np.ndarray:
@@ -390,9 +312,10 @@ def _write_result_files(job: _Job, res) -> np.ndarray:
     return de
 
 
-def _report(job: _Job, res, metrics, de: np.ndarray, estimate: Estimate, check: BaselineCheck | None) -> Report:
+def _report(job: _Job, res, metrics, de, estimate: Estimate, check: BaselineCheck | None, finish=None) -> Report:
     """report.json's contents: the result's figures ``metrics`` (render ``res``, per-texel ΔE76 ``de``), the
-    start's, the baseline's (``check``; None: not measured), the run's times and settings."""
+    start's, the baseline's (``check``; None: not measured), the finishing choice (``finish``, a ``FinishChoice``;
+    None: ``cfg.finish_smooth`` passes as set), the run's times and settings."""
     run, cfg, start = job.run, job.cfg, job.run.start_figures
     h = run.history
     n = max(len(h.seconds), 1)
@@ -421,7 +344,9 @@ def _report(job: _Job, res, metrics, de: np.ndarray, estimate: Estimate, check: 
         inks=list(job.scene.volume.inks.names),
         gamma=list(cfg.gamma),
         lr=cfg.step_size,
-        **{k: getattr(cfg, k) for k in ("optimizer", "param", "init", "seed", "decay", "smooth", "finish_smooth")},
+        **{k: getattr(cfg, k) for k in ("optimizer", "param", "init", "seed", "decay", "smooth")},
+        finish_smooth=cfg.finish_smooth if finish is None else finish.passes,  # the passes in the result
+        finish=None if finish is None else finish.to_json(),
         adjoint_ema=cfg.adjoint_ema,
         gradient=cfg.grad_method,
         threads=job.options.threads,

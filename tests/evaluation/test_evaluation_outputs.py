@@ -51,16 +51,16 @@ def test_evaluate_sample_cap(mesh_run, capsys):
 
 
 def test_the_start_is_rendered_once_per_run(tmp_path, monkeypatch, capsys):
-    import inkopt.run
+    import inkopt.runfigures
 
     calls = []
-    real = inkopt.run.adaptive_render
+    real = inkopt.runfigures.adaptive_render
 
     def counting(*a, **k):
         calls.append(1)
         return real(*a, **k)
 
-    monkeypatch.setattr(inkopt.run, "adaptive_render", counting)
+    monkeypatch.setattr(inkopt.runfigures, "adaptive_render", counting)
     chart = charts.save(charts.colour_chart(24, 16), tmp_path / "chart.png")
     argv = ["slab", str(chart), "--size-mm", "2x1.333x0.5", "--out", str(tmp_path / "r"), "--spp", "1"]
     argv += ["--forward-spp", "1", "--eval-spp", "2", "--threads", "1"]

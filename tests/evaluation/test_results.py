@@ -95,11 +95,11 @@ def run(tmp_path_factory):
 
 def test_report_keys_and_round_trip(run):
     data = json.loads((run / "report.json").read_text())
-    # "stop" (why the run ended), "finish_smooth" and the baseline guard's "baseline" and "beats_baseline" are the
-    # keys added since the files carried a version
-    added = {"format_version", "stop", "finish_smooth", "baseline", "beats_baseline"}
+    # "stop" (why the run ended), "finish_smooth", the baseline guard's "baseline" and "beats_baseline" and the
+    # finishing choice's "finish" are the keys added since the files carried a version
+    added = {"format_version", "stop", "finish_smooth", "baseline", "beats_baseline", "finish"}
     assert set(data) == SLAB_REPORT_KEYS | added and data["format_version"] == 1
-    assert data["finish_smooth"] == 0  # a slab's default
+    assert data["finish_smooth"] == 0 and data["finish"] is None  # a slab's default: no pass, nothing chosen
     assert data["stop"]["reason"] == "iterations" and data["stop"]["iterations"] == 2
     rep = Report.read(run / "report.json")
     assert rep.to_json() == data and list(rep.to_json()) == list(data)  # the same keys in the same order

@@ -480,6 +480,7 @@ def test_settings_left_to_the_scene_kind():
     kept). The run's cfg is the resolved one, so checkpoints of the two do not mix, and the running average's weight
     follows its recursion w <- ema * w + forward_spp + spp (tending to 20 / (1 - ema) samples per texel)."""
     from inkopt.optim import SCENE_DEFAULTS
+    from inkopt.optim.config import FINISH_AUTO
     from inkopt.optim.smooth import diffusion_steps
 
     assert diffusion_steps(1.5) != diffusion_steps(3.0)
@@ -488,6 +489,7 @@ def test_settings_left_to_the_scene_kind():
         "mesh": {"adjoint_ema": 0.5, "smooth": 3.0, "init": "white", "finish_smooth": 1},
     }
     assert OptimizeConfig(finish_smooth=2).for_scene("slab").finish_smooth == 2
+    assert OptimizeConfig(finish_smooth=FINISH_AUTO).for_scene("mesh").finish_smooth == FINISH_AUTO
     assert OptimizeConfig().adjoint_ema is None and OptimizeConfig().smooth is None and OptimizeConfig().init is None
     mesh = OptimizeConfig().for_scene("mesh")
     assert (mesh.adjoint_ema, mesh.smooth, mesh.init) == (0.5, 3.0, SCENE_DEFAULTS["mesh"]["init"])

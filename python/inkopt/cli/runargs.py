@@ -34,6 +34,19 @@ def parse_gamma(text: str) -> tuple[float, float, float]:
     return g
 
 
+def finish_passes(text: str) -> int:
+    """``--finish-smooth``'s value: a number of passes, or "auto" (``optim.config.FINISH_AUTO``)."""
+    import argparse
+
+    from ..optim.config import FINISH_AUTO
+
+    if text.strip().lower() == "auto":
+        return FINISH_AUTO
+    if not text.strip().isdigit():
+        raise argparse.ArgumentTypeError(f"a number of passes (0..8) or auto, got '{text}'")
+    return int(text)
+
+
 def add_run_args(p, translucency: str) -> None:
     """Everything ``slab`` and ``optimize`` share after their scene's own options: the run directory, the
     translucency options (``translucency``: "slab" or "mesh"), the ink set, the optimiser's options, a single run's
@@ -156,11 +169,12 @@ def _add_smoothing_args(p, d) -> None:
     )
     p.add_argument(
         "--finish-smooth",
-        type=int,
-        metavar="PASSES",
+        type=finish_passes,
+        metavar="PASSES|auto",
         help="passes of that smoothing over the result after the last iteration, against the voxel-scale "
-        f"variation the iterations leave (default {slab['finish_smooth']} on slabs, {mesh['finish_smooth']} on "
-        "meshes; 0: off)",
+        f"variation the iterations leave; auto: one pass, kept unless the run's paired render of the result with "
+        f"and without it says it raises the loss beyond the noise (default {slab['finish_smooth']} on slabs, "
+        f"{mesh['finish_smooth']} on meshes; 0: off)",
     )
     p.add_argument(
         "--smooth-edge",

@@ -238,16 +238,23 @@ def _fit(sampling: Sampling, clock, t0: float, per_spp: float) -> int:
     return int((sampling.time_budget - (clock() - t0)) / max(per_spp, 1e-12) + 1e-6)
 
 
+def first_pass(sampling: Sampling) -> tuple[int, bool]:
+    """(samples per texel of the first pass ``adaptive_render`` makes, at seed ``sampling.seed``; whether it is a
+    ``PROBE_SPP`` probe that times the samples before the rest of the pilot): ``spp``, or the pilot, or the probe
+    where a time budget bounds the pilot."""
+    s = sampling
+    first = int(s.spp) if s.spp is not None else min(int(s.pilot_spp), int(s.max_spp))
+    probe = s.spp is None and s.time_budget is not None and s.pilot_in_budget and first > PROBE_SPP
+    return (PROBE_SPP if probe else first), probe
+
+
 def _pilot(render, sampling: Sampling, clock, t0: float) -> tuple[_Pool, bool, int]:
-    """The first pass (``spp``, or the pilot); with a time budget that bounds the pilot, a ``PROBE_SPP`` pass that
-    times the samples and then the rest of the pilot that fits. Returns the pool, whether the budget cut the pilot,
-    and the index of the next pass."""
+    """The first pass (``first_pass``: ``spp``, or the pilot); with a time budget that bounds the pilot, a
+    ``PROBE_SPP`` pass that times the samples and then the rest of the pilot that fits. Returns the pool, whether the
+    budget cut the pilot, and the index of the next pass."""
     s = sampling
     pilot = min(int(s.pilot_spp), int(s.max_spp))
-    first = int(s.spp) if s.spp is not None else pilot
-    probe = s.spp is None and s.time_budget is not None and s.pilot_in_budget and first > PROBE_SPP
-    if probe:
-        first = PROBE_SPP
+    first, probe = first_pass(s)
     pool = _Pool.first(render, first, s.seed)
     if not probe:
         return pool, False, 1

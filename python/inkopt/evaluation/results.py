@@ -94,6 +94,9 @@ class Report:
     estimate: dict | None = None
     stop: dict | None = None
     finish_smooth: int | None = None  # passes of smoothing over the result (None: a report from before them)
+    #: the finishing smoothing's choice of a run with ``finish_smooth`` auto (``evaluation.finish.FinishChoice``'s
+    #: JSON); None: the passes were set
+    finish: dict | None = None
     baseline: dict | None = None
     beats_baseline: bool | None = None
     viewing: dict | None = None
@@ -116,6 +119,7 @@ class Report:
         "stop",
         "baseline",
         "beats_baseline",
+        "finish",
     )
     _SETTINGS = (
         "inks",

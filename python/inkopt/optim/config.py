@@ -28,11 +28,19 @@ GRAD_METHODS = ("replay", "li1")
 #: sees (its curvature is small there) and that no later step removes: averaging the last 10-40 iterates of a
 #: coarse stage changed nothing, while one pass of the step's smoothing over a Spot 20 mm deadline result lowered
 #: the mottle 0.34 -> 0.13 (ΔL*)² and raised SSIM 0.909 -> 0.920 for +0.07 ΔE76 (256-spp renders,
-#: experiments/results/finish_smooth.json; docs/experiments.md, "Finishing smoothing"). Slabs 0: not measured there.
+#: experiments/results/finish_smooth.json; docs/experiments.md, "Finishing smoothing"). Not ``FINISH_AUTO``: the
+#: run's own choice kept the pass on every mesh-suite cell it ran (the duck, box, eyeball, checker, coin and orange
+#: at 20 mm, the duck at 10 mm; Spot at 20 mm; bench/results/mesh_suite.json, variant ``finish-auto``) and costs a
+#: render of every texel, 2-16 s of a 5-minute job (docs/quality.md, "The finishing smoothing decided by the run").
+#: Slabs 0: not measured there.
 SCENE_DEFAULTS = {
     "slab": {"adjoint_ema": 0.8, "smooth": 1.5, "init": "white", "finish_smooth": 0},
     "mesh": {"adjoint_ema": 0.5, "smooth": 3.0, "init": "white", "finish_smooth": 1},
 }
+#: ``finish_smooth`` "auto" (``--finish-smooth auto``): the result is the last iterate after one pass of the step's
+#: smoothing, or the last iterate itself where the run's paired render of both says the pass raises the loss beyond
+#: its noise (``evaluation.finish.choose_finish``)
+FINISH_AUTO = -1
 #: starts that are already close to the target: a volume file's mixture or a print-shop baseline
 COLD_INITS = ("white", "random")
 #: The default step of a warm start (any init but ``COLD_INITS``) relative to a cold one's: the exponentiated
@@ -100,7 +108,8 @@ class OptimizeConfig:
     #: Passes of the smoothing operator of ``smooth`` (same width and guide) applied to the result after the last
     #: iteration (the variables x, not a step): removes the voxel-scale variation in flat regions that the
     #: iterations leave behind. The checkpoints keep the unsmoothed iterate, so a continued run steps on from
-    #: where the iterations were. 0: off (also without smoothing); None: the scene kind's (``SCENE_DEFAULTS``).
+    #: where the iterations were. 0: off (also without smoothing); ``FINISH_AUTO``: one pass where the run's own
+    #: render says it lowers the loss (``evaluation.finish``); None: the scene kind's (``SCENE_DEFAULTS``).
     finish_smooth: int | None = None
     #: Guide of the smoothing: the target-colour difference (ΔE76) at which the smoothing between two voxels falls
     #: to 1/e, so it stays within regions of one target colour; with a guide, only voxels under flat texels
@@ -146,8 +155,8 @@ class OptimizeConfig:
         # at most 4 voxels: 2 x 32 diffusion passes per iteration, already blurry
         if self.smooth is not None and not 0.0 <= self.smooth <= 4.0:
             raise ParameterError(f"`smooth` (the smoothing width) must lie in [0, 4] voxels, got {self.smooth}")
-        if self.finish_smooth is not None and not 0 <= self.finish_smooth <= 8:
-            raise ParameterError(f"`finish_smooth` passes must lie in 0..8, got {self.finish_smooth}")
+        if self.finish_smooth is not None and not FINISH_AUTO <= self.finish_smooth <= 8:
+            raise ParameterError(f"`finish_smooth` passes must lie in 0..8 (or be auto), got {self.finish_smooth}")
         if not 0.0 <= self.smooth_edge < float("inf"):
             raise ParameterError(f"`smooth_edge` must be >= 0 (dE76), got {self.smooth_edge}")
         if self.schedule_iterations is not None and self.schedule_iterations < self.iterations:

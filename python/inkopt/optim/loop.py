@@ -429,12 +429,12 @@ class Optimization:
         if checkpoint is not None:
             self.save_checkpoint(checkpoint)
 
-    def finish(self) -> None:
-        """Smooth the result: ``cfg.finish_smooth`` passes of the step's smoothing over x (none without smoothing),
-        once, after the iterations and their last checkpoint (which keeps the iterate a continued run steps from)."""
+    def finish(self, passes: int | None = None) -> None:
+        """Smooth the result: ``passes`` (None: ``cfg.finish_smooth``, auto as none) passes of the step's smoothing
+        over x in place (none without smoothing), after the iterations and their checkpoint (it keeps the iterate)."""
         if self.smoother is None:
             return
-        for _ in range(int(self.cfg.finish_smooth or 0)):
+        for _ in range(max(int(self.cfg.finish_smooth if passes is None else passes), 0)):
             self.x = self.smoother.apply(self.x)
 
     def plan_line(self) -> str:

@@ -1,0 +1,136 @@
+"""A run's figures (``RunFigures``): the start's, a baseline's and the result's renders with seeds unused by the
+optimisation, their time budgets within a run's time budget (``figure_budgets``), and the choice of the result's
+finishing smoothing (``evaluation.finish``), whose render of the chosen candidate is the result's figures' first
+pass."""
+
+from __future__ import annotations
+
+import time
+
+from .evaluation.finish import FinishChoice, choice_seconds, choose_finish
+from .evaluation.guard import kept_figures
+from .evaluation.metrics import prediction_metrics
+from .evaluation.noise import EVAL_SEED_OFFSET, PILOT_SPP, Sampling, adaptive_render, first_pass
+from .optim import OptimizeConfig
+
+#: Shares of a run's time budget (``OptimizeConfig.time_budget``) given to the start's figures (as much again to the
+#: baseline's: ``evaluation.guard``), the result's figures, and kept for writing the result (volume, pictures,
+#: predictions, report): the iterations get the rest,
+#: the step decay planned to end in time (``optim.stopping``). Not measured optima: the figures are informative
+#: and noise-corrected at any spp (their noise is reported), the quality is the iterations'. The figures' shares are
+#: of the time left when the run's set-up ends (a coarse-to-fine job's fine stage: what the coarse stage left it),
+#: the writing's of the whole budget (it scales with the object, not with the time left).
+BUDGET_START_FIGURES, BUDGET_FINAL_FIGURES, BUDGET_WRITING = 0.03, 0.08, 0.04
+#: Without a budget, the result's figures add samples beyond the pilot only while they take at most this share of
+#: the run's time so far: on a mesh noise-free figures take hundreds of samples per texel where an iteration renders
+#: 20 (Spot 20 mm: 553 spp, experiments/results/mesh_convergence.json, entry ``spot20_smooth3_60``). The noise left
+#: is corrected for and reported; `inkopt evaluate` measures the printed result against the baselines without noise.
+FINAL_FIGURES_SHARE = 0.25
+
+
+def figure_budgets(cfg: OptimizeConfig, eval_time_budget: float | None, elapsed: float = 0.0) -> tuple:
+    """(start's, result's) time budget of the adaptive figures in seconds, or None: the user's
+    ``eval_time_budget``, within the shares of what is left of the run's time budget (if it has one) after
+    ``elapsed`` seconds (the job's time so far)."""
+    if cfg.time_budget is None:
+        return eval_time_budget, eval_time_budget
+    cap = float("inf") if eval_time_budget is None else eval_time_budget
+    left = max(cfg.time_budget - elapsed, 0.0)
+    return min(cap, BUDGET_START_FIGURES * left), min(cap, BUDGET_FINAL_FIGURES * left)
+
+
+class RunFigures:
+    """A run's figures: renders with seeds unused by the optimisation (``EVAL_SEED_OFFSET + seed``), the user's
+    samples per texel or adaptive ones (at most ``eval_max_spp`` and ``eval_time_budget`` seconds per result). The
+    run's own renderer, set to a mixture (only the free voxels change: no grid-sized volume), renders exactly what
+    a renderer built from that volume would. ``job``: the run driver's job (its ``run``, ``scene``, ``cfg`` and
+    ``options``)."""
+
+    def __init__(self, job):
+        self.job = job
+        self.spp = int(job.options.eval_spp) if job.options.eval_spp else None  # None: adaptive
+        self.seed = EVAL_SEED_OFFSET + job.cfg.seed
+        budgets = figure_budgets(job.cfg, job.options.eval_time_budget, job.run.wall_seconds())
+        self.start_budget, self.final_budget = budgets
+        self.overshoot = 0.0  # the most seconds a start's or baseline's figures took beyond their budget
+        self.per_spp = None  # seconds per sample per texel of the latest start's or baseline's figures
+        self.replay = None  # the result's first pass, rendered by the finishing choice (``evaluation.finish.Replay``)
+
+    def _pass(self, renderer, n: int, s: int):
+        """One render pass of the scene's texels: (rgb, var_mean, n)."""
+        opts, cfg = self.job.options, self.job.cfg
+        r = renderer.render(self.job.scene.texels, n, s, cfg.include_specular, opts.progress)
+        return r.rgb, r.var_mean, n
+
+    def _sampling(self, budget, max_spp: int, pilot_in_budget: bool = True) -> Sampling:
+        return Sampling(
+            seed=self.seed, spp=self.spp, max_spp=max_spp, time_budget=budget, pilot_in_budget=pilot_in_budget
+        )
+
+    def _of(self, x, sampling: Sampling, keep_renderer: bool = True, replay=None):
+        """(``AdaptiveResult``, ``Metrics``) of the mixture of variables ``x`` (None: the current ones); ``replay``: a
+        pass rendered already (``evaluation.finish.Replay``)."""
+        run, opts = self.job.run, self.job.options
+        renderer = run.renderer(x)
+
+        def render(n: int, s: int):
+            return self._pass(renderer, n, s)
+
+        res = adaptive_render(
+            render if replay is None else replay.render(render),
+            run.loss.target_lab,
+            sampling,
+            log=opts.log,
+            clock=None if replay is None else replay.clock,  # the replayed pass's seconds count as spent
+            cmap=run.loss.colours[0],  # a spectral run's headline light
+        )
+        if not keep_renderer:  # its media are not needed beside the loss's window operators that the figures build
+            del renderer, render
+            run.release_renderer()
+        return res, prediction_metrics(run.loss, res.rgb, res.var)  # CIELAB under the first light
+
+    def start(self, x=None, keep_renderer: bool | None = None) -> dict:
+        """The start's figures (one pilot pass at most) as ``Optimization.keep_start_figures`` keeps them
+        (``evaluation.guard.kept_figures``); ``x``: other variables than the current ones (the start's when the run
+        is no longer at its start, a baseline's); the renderer is kept if ``keep_renderer`` (None: without ``x``)."""
+        max_spp = min(self.job.options.eval_max_spp, PILOT_SPP)
+        keep = x is None if keep_renderer is None else keep_renderer
+        t = time.perf_counter()
+        res, m = self._of(x, self._sampling(self.start_budget, max_spp), keep_renderer=keep)
+        self.per_spp = (time.perf_counter() - t) / max(res.spp, 1)
+        if self.start_budget is not None:
+            self.overshoot = max(self.overshoot, time.perf_counter() - t - self.start_budget)
+        return kept_figures(m, res.spp, len(self.job.scene.texels))
+
+    def final_reserve(self) -> float | None:
+        """Seconds the result's figures are expected to take: their budget plus the most the start's and the
+        baseline's figures took beyond theirs (a renderer set to other variables, the figures' window operators:
+        at 20 mm 6-13 s on the mesh suite's solids, about as much as the result's figures overran theirs)."""
+        return None if self.final_budget is None else self.final_budget + self.overshoot
+
+    def choice_reserve(self) -> float:
+        """Seconds the finishing choice takes beyond the result's figures (``evaluation.finish.choice_seconds``): one
+        render of their first pass, at the start's or baseline's figures' measured seconds per sample when this
+        invocation rendered them, and a step."""
+        return choice_seconds(self.job.run, first_pass(self._final_sampling())[0], self.per_spp)
+
+    def _final_sampling(self) -> Sampling:
+        """The result's samples: the user's samples or budget, the run's budget share, or (neither) samples up to
+        ``FINAL_FIGURES_SHARE`` of the run's time so far after a whole pilot."""
+        max_spp = self.job.options.eval_max_spp
+        if self.spp is not None or self.final_budget is not None:
+            return self._sampling(self.final_budget, max_spp)
+        return self._sampling(FINAL_FIGURES_SHARE * self.job.run.wall_seconds(), max_spp, pilot_in_budget=False)
+
+    def choose_finish(self) -> FinishChoice:
+        """The result's finishing smoothing where the run's paired render of both candidates says it lowers the loss
+        (``evaluation.finish.choose_finish``), rendered as the result's figures' first pass, which they then take."""
+        run = self.job.run
+        spp, _ = first_pass(self._final_sampling())
+        choice, self.replay = choose_finish(run, lambda n, s: self._pass(run.renderer(), n, s), spp, self.seed)
+        return choice
+
+    def final(self):
+        """The result's figures (``_final_sampling``), their first pass the finishing choice's render if it made one."""
+        replay, self.replay = self.replay, None
+        return self._of(None, self._final_sampling(), keep_renderer=False, replay=replay)
