@@ -23,6 +23,7 @@ optimiser settles to below a band.
 
 import argparse
 import json
+import resource
 import subprocess
 import sys
 from pathlib import Path
@@ -96,7 +97,11 @@ def optimize(a, d: Path, depth: str | None, core: str | None, seed: int) -> None
     if depth is not None:
         cmd += ["--shell-mm", depth, "--core", core]
     print("$ inkopt " + " ".join(cmd[3:]), flush=True)
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     subprocess.run(cmd, check=True)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
+    (d / "optimize_cpu.json").write_text(json.dumps({"cpu_seconds": cpu}))
 
 
 def evaluate(a, d: Path, ref: Path | None) -> dict:
@@ -131,6 +136,51 @@ def evaluate(a, d: Path, ref: Path | None) -> dict:
             diff = _lab_de(loss, z["rgb"], fn) - _lab_de(loss, zr["rgb"], fn)
             out[f"{name}_minus_free"] = float(diff.mean())
             out[f"{name}_minus_free_stderr"] = float(diff.std() / np.sqrt(len(diff)))
+            if name == "delta_e76":
+                out["delta_e76_minus_free_by_thickness"] = by_thickness(diff, thickness(ref, rec.texels))
+    return out
+
+
+#: the bins of ``thickness`` (mm): the deepest inside point near a texel, about half the local thickness up to
+#: ``THICK_RADIUS_MM``: thinner than 1 mm, 1-2 mm, 2-3 mm, thicker
+THICK_BINS_MM = (0.5, 1.0, 1.5)
+THICK_RADIUS_MM = 1.5
+
+
+def thickness(run_dir: Path, texels) -> np.ndarray:
+    """(I,) float64 mm: for each texel the largest depth (as ``deep_mixture``'s, from the voxel centre to the
+    nearest outside voxel's centre) of the inside voxels in the cube of +-``THICK_RADIUS_MM`` around its voxel:
+    about half the object's thickness there for features thinner than twice the radius (an ear, a horn), the
+    radius or more in the body. Cached beside the run (thickness.npy)."""
+    from scipy.ndimage import distance_transform_edt, maximum_filter
+
+    from inkopt.rundir import RunDir
+
+    cache = run_dir / "thickness.npy"
+    if cache.is_file():
+        return np.load(cache)
+    vol = RunDir(run_dir).load_volume()
+    depth = distance_transform_edt(vol.inside_mask(), sampling=tuple(np.asarray(vol.voxel_mm)[::-1]))
+    size = [2 * int(np.ceil(THICK_RADIUS_MM / v)) + 1 for v in np.asarray(vol.voxel_mm)[::-1]]
+    near = maximum_filter(depth.astype(np.float32), size=size)
+    z, y, x = texels.voxel.T
+    out = near[z, y, x].astype(np.float64)
+    np.save(cache, out)
+    return out
+
+
+def by_thickness(diff: np.ndarray, thick: np.ndarray) -> dict:
+    """The paired per-texel difference ``diff`` binned by ``thickness``: {"<0.5" | "0.5-1" | ... | ">=1.5":
+    {"texels": n, "mean": mean difference, "stderr": its standard error}} (whether a thin band loses colour where
+    the object is thin and light could travel sideways through the core)."""
+    edges = (0.0, *THICK_BINS_MM, np.inf)
+    out = {}
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        sel = (thick >= lo) & (thick < hi)
+        name = f"<{hi:g}" if lo == 0 else (f">={lo:g}" if np.isinf(hi) else f"{lo:g}-{hi:g}")
+        n = int(sel.sum())
+        out[name] = {"texels": n, "mean": float(diff[sel].mean()) if n else None}
+        out[name]["stderr"] = float(diff[sel].std() / np.sqrt(n)) if n > 1 else None
     return out
 
 
@@ -144,8 +194,12 @@ def cell_entry(a, d: Path, ev: dict, core: str | None, seed: int) -> dict:
     rep = json.loads((d / "report.json").read_text())
     ck = np.load(d / "checkpoint.npz")
     keep = ("free_voxels", "inside_voxels", "seconds_per_iteration", "peak_rss_gb", "iterations", "time_split")
+    cpu = d / "optimize_cpu.json"  # the optimize process's CPU seconds, set-up and its own short figures included
+    cpu = json.loads(cpu.read_text())["cpu_seconds"] if cpu.is_file() else None
     return {
         **{k: rep.get(k) for k in keep},
+        "cpu_seconds": cpu,
+        "cpu_seconds_per_iteration": None if cpu is None else cpu / max(rep.get("iterations") or 1, 1),
         "shell_mm": rep.get("shell_mm"),
         "core": core,
         "core_shares": rep.get("core_shares"),
@@ -174,6 +228,11 @@ def main():
         help="the figures' samples per texel, the same for every cell (default 256)",
     )
     ap.add_argument("--cells", default="free,1:white,1:start,1:deep,0.5:deep,2:deep,0.25:deep,1:grey")
+    ap.add_argument(
+        "--optimize-only",
+        action="store_true",
+        help="run the cells' optimisations and stop (another invocation renders them): cells run side by side",
+    )
     a = ap.parse_args()
     prefix = Path(a.out) / f"spot{a.height_mm:g}_{a.dpi:g}dpi_{a.iterations}it"
     deep, ref = stored_deep_mixture(a), Path(f"{prefix}_free")
@@ -185,6 +244,8 @@ def main():
         c = None if depth == "free" else core_arg(core, deep, a.deep_mm)
         if not (d / "report.json").is_file():
             optimize(a, d, None if depth == "free" else depth, c, seed)
+        if a.optimize_only:
+            continue
         ev = evaluate(a, d, None if cell == "free" else ref)
         entry = cell_entry(a, d, ev, core if c in (None, core) else f"{core} ({c})", seed)
         if cell == "free":
