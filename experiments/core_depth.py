@@ -35,6 +35,7 @@ from common import add_study_entry, machine, provenance  # noqa: E402
 
 SPOT = Path(__file__).resolve().parents[2] / "shared" / "data" / "spot" / "spot.obj"  # ../shared beside the repo
 RESULT = "core_depth.json"
+THICK_RESULT = "core_depth_thickness.json"
 GREY = "white=0.5,black=0.5"
 DEPTHS_MM = (0.25, 0.5, 1.0, 1.5, 2.0)
 FIGURES = ("delta_e76_mean_corrected", "delta_e2000_mean", "ssim")
@@ -137,7 +138,7 @@ def evaluate(a, d: Path, ref: Path | None) -> dict:
             out[f"{name}_minus_free"] = float(diff.mean())
             out[f"{name}_minus_free_stderr"] = float(diff.std() / np.sqrt(len(diff)))
             if name == "delta_e76":
-                out["delta_e76_minus_free_by_thickness"] = by_thickness(diff, thickness(ref, rec.texels))
+                out["delta_e76_minus_free_by_thickness"] = by_thickness(diff, thickness(ref))
     return out
 
 
@@ -147,40 +148,43 @@ THICK_BINS_MM = (0.5, 1.0, 1.5)
 THICK_RADIUS_MM = 1.5
 
 
-def thickness(run_dir: Path, texels) -> np.ndarray:
-    """(I,) float64 mm: for each texel the largest depth (as ``deep_mixture``'s, from the voxel centre to the
-    nearest outside voxel's centre) of the inside voxels in the cube of +-``THICK_RADIUS_MM`` around its voxel:
-    about half the object's thickness there for features thinner than twice the radius (an ear, a horn), the
-    radius or more in the body. Cached beside the run (thickness.npy)."""
+def thickness(free_dir: Path) -> np.ndarray:
+    """(I,) float64 mm: for each texel of the every-voxel-free run in ``free_dir`` the largest depth (as
+    ``deep_mixture``'s, from the voxel centre to the nearest outside voxel's centre) of the inside voxels in the cube
+    of +-``THICK_RADIUS_MM`` around its voxel: about half the object's thickness there for features thinner than twice
+    the radius (an ear, a horn), the radius or more in the body. From the run's scene.npz, whose free mask is the
+    inside when every voxel is free (written at the run's start); cached beside it (thickness.npy)."""
     from scipy.ndimage import distance_transform_edt, maximum_filter
 
     from inkopt.rundir import RunDir
 
-    cache = run_dir / "thickness.npy"
+    cache = free_dir / "thickness.npy"
     if cache.is_file():
         return np.load(cache)
-    vol = RunDir(run_dir).load_volume()
-    depth = distance_transform_edt(vol.inside_mask(), sampling=tuple(np.asarray(vol.voxel_mm)[::-1]))
-    size = [2 * int(np.ceil(THICK_RADIUS_MM / v)) + 1 for v in np.asarray(vol.voxel_mm)[::-1]]
-    near = maximum_filter(depth.astype(np.float32), size=size)
-    z, y, x = texels.voxel.T
+    rec = RunDir(free_dir).load_scene()
+    vox = np.asarray(rec.mesh.voxel_mm, np.float64)[::-1]  # (z, y, x) mm
+    depth = distance_transform_edt(rec.free_mask, sampling=tuple(vox))
+    near = maximum_filter(depth.astype(np.float32), size=[2 * int(np.ceil(THICK_RADIUS_MM / v)) + 1 for v in vox])
+    z, y, x = rec.texels.voxel.T
     out = near[z, y, x].astype(np.float64)
     np.save(cache, out)
     return out
 
 
-def by_thickness(diff: np.ndarray, thick: np.ndarray) -> dict:
+def by_thickness(diff: np.ndarray | None, thick: np.ndarray) -> dict:
     """The paired per-texel difference ``diff`` binned by ``thickness``: {"<0.5" | "0.5-1" | ... | ">=1.5":
     {"texels": n, "mean": mean difference, "stderr": its standard error}} (whether a thin band loses colour where
-    the object is thin and light could travel sideways through the core)."""
+    the object is thin and light could travel sideways through the core); ``diff`` None: the texel counts only."""
     edges = (0.0, *THICK_BINS_MM, np.inf)
     out = {}
     for lo, hi in zip(edges[:-1], edges[1:]):
         sel = (thick >= lo) & (thick < hi)
         name = f"<{hi:g}" if lo == 0 else (f">={lo:g}" if np.isinf(hi) else f"{lo:g}-{hi:g}")
         n = int(sel.sum())
-        out[name] = {"texels": n, "mean": float(diff[sel].mean()) if n else None}
-        out[name]["stderr"] = float(diff[sel].std() / np.sqrt(n)) if n > 1 else None
+        out[name] = {"texels": n}
+        if diff is not None:
+            out[name]["mean"] = float(diff[sel].mean()) if n else None
+            out[name]["stderr"] = float(diff[sel].std() / np.sqrt(n)) if n > 1 else None
     return out
 
 
@@ -233,9 +237,21 @@ def main():
         action="store_true",
         help="run the cells' optimisations and stop (another invocation renders them): cells run side by side",
     )
+    ap.add_argument(
+        "--thickness-only",
+        action="store_true",
+        help="the 'free' cell's texels by the object's local half-thickness (``thickness``; its scene.npz only), "
+        f"into experiments/results/{THICK_RESULT}",
+    )
     a = ap.parse_args()
     prefix = Path(a.out) / f"spot{a.height_mm:g}_{a.dpi:g}dpi_{a.iterations}it"
     deep, ref = stored_deep_mixture(a), Path(f"{prefix}_free")
+    if a.thickness_only:
+        counts = by_thickness(None, thickness(ref))
+        entry = {"texels_by_half_thickness_mm": counts, "radius_mm": THICK_RADIUS_MM, **provenance()}
+        add_study_entry(THICK_RESULT, f"spot{a.height_mm:g}mm_{a.dpi:g}dpi", entry)
+        print(json.dumps(counts))
+        return
     for cell in a.cells.split(","):
         setting, _, seed = cell.partition("@")
         depth, _, core = setting.partition(":")
