@@ -8,6 +8,7 @@ invocations).
 
     .venv/bin/python experiments/core_depth.py [--out bench-out/core] [--height-mm 20] [--dpi 150]
         [--iterations 60] [--cells free,1:white,1:start,1:deep,0.5:deep,2:deep,0.25:deep,1:grey]
+        [--eval-spp 256] [--optimize-only | --thickness-only]
 
 A cell is "free" (every voxel free) or "D:C", either with "@S" for the run's seed S (default 0; "free@1": the
 all-free run's spread between seeds, the yardstick of "within noise"): band depth D mm and core C, one of
