@@ -8,6 +8,7 @@ invocations).
 
     .venv/bin/python experiments/core_depth.py [--out bench-out/core] [--height-mm 20] [--dpi 150]
         [--iterations 60] [--cells free,1:white,1:start,1:deep,0.5:deep,2:deep,0.25:deep,1:grey]
+        [--eval-spp 256] [--optimize-only | --thickness-only]
 
 A cell is "free" (every voxel free) or "D:C", either with "@S" for the run's seed S (default 0; "free@1": the
 all-free run's spread between seeds, the yardstick of "within noise"): band depth D mm and core C, one of
@@ -23,6 +24,7 @@ optimiser settles to below a band.
 
 import argparse
 import json
+import resource
 import subprocess
 import sys
 from pathlib import Path
@@ -34,6 +36,7 @@ from common import add_study_entry, machine, provenance  # noqa: E402
 
 SPOT = Path(__file__).resolve().parents[2] / "shared" / "data" / "spot" / "spot.obj"  # ../shared beside the repo
 RESULT = "core_depth.json"
+THICK_RESULT = "core_depth_thickness.json"
 GREY = "white=0.5,black=0.5"
 DEPTHS_MM = (0.25, 0.5, 1.0, 1.5, 2.0)
 FIGURES = ("delta_e76_mean_corrected", "delta_e2000_mean", "ssim")
@@ -96,7 +99,11 @@ def optimize(a, d: Path, depth: str | None, core: str | None, seed: int) -> None
     if depth is not None:
         cmd += ["--shell-mm", depth, "--core", core]
     print("$ inkopt " + " ".join(cmd[3:]), flush=True)
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     subprocess.run(cmd, check=True)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
+    (d / "optimize_cpu.json").write_text(json.dumps({"cpu_seconds": cpu}))
 
 
 def evaluate(a, d: Path, ref: Path | None) -> dict:
@@ -131,6 +138,54 @@ def evaluate(a, d: Path, ref: Path | None) -> dict:
             diff = _lab_de(loss, z["rgb"], fn) - _lab_de(loss, zr["rgb"], fn)
             out[f"{name}_minus_free"] = float(diff.mean())
             out[f"{name}_minus_free_stderr"] = float(diff.std() / np.sqrt(len(diff)))
+            if name == "delta_e76":
+                out["delta_e76_minus_free_by_thickness"] = by_thickness(diff, thickness(ref))
+    return out
+
+
+#: the bins of ``thickness`` (mm): the deepest inside point near a texel, about half the local thickness up to
+#: ``THICK_RADIUS_MM``: thinner than 1 mm, 1-2 mm, 2-3 mm, thicker
+THICK_BINS_MM = (0.5, 1.0, 1.5)
+THICK_RADIUS_MM = 1.5
+
+
+def thickness(free_dir: Path) -> np.ndarray:
+    """(I,) float64 mm: for each texel of the every-voxel-free run in ``free_dir`` the largest depth (as
+    ``deep_mixture``'s, from the voxel centre to the nearest outside voxel's centre) of the inside voxels in the cube
+    of +-``THICK_RADIUS_MM`` around its voxel: about half the object's thickness there for features thinner than twice
+    the radius (an ear, a horn), the radius or more in the body. From the run's scene.npz, whose free mask is the
+    inside when every voxel is free (written at the run's start); cached beside it (thickness.npy)."""
+    from scipy.ndimage import distance_transform_edt, maximum_filter
+
+    from inkopt.rundir import RunDir
+
+    cache = free_dir / "thickness.npy"
+    if cache.is_file():
+        return np.load(cache)
+    rec = RunDir(free_dir).load_scene()
+    vox = np.asarray(rec.mesh.voxel_mm, np.float64)[::-1]  # (z, y, x) mm
+    depth = distance_transform_edt(rec.free_mask, sampling=tuple(vox))
+    near = maximum_filter(depth.astype(np.float32), size=[2 * int(np.ceil(THICK_RADIUS_MM / v)) + 1 for v in vox])
+    z, y, x = rec.texels.voxel.T
+    out = near[z, y, x].astype(np.float64)
+    np.save(cache, out)
+    return out
+
+
+def by_thickness(diff: np.ndarray | None, thick: np.ndarray) -> dict:
+    """The paired per-texel difference ``diff`` binned by ``thickness``: {"<0.5" | "0.5-1" | ... | ">=1.5":
+    {"texels": n, "mean": mean difference, "stderr": its standard error}} (whether a thin band loses colour where
+    the object is thin and light could travel sideways through the core); ``diff`` None: the texel counts only."""
+    edges = (0.0, *THICK_BINS_MM, np.inf)
+    out = {}
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        sel = (thick >= lo) & (thick < hi)
+        name = f"<{hi:g}" if lo == 0 else (f">={lo:g}" if np.isinf(hi) else f"{lo:g}-{hi:g}")
+        n = int(sel.sum())
+        out[name] = {"texels": n}
+        if diff is not None:
+            out[name]["mean"] = float(diff[sel].mean()) if n else None
+            out[name]["stderr"] = float(diff[sel].std() / np.sqrt(n)) if n > 1 else None
     return out
 
 
@@ -144,8 +199,12 @@ def cell_entry(a, d: Path, ev: dict, core: str | None, seed: int) -> dict:
     rep = json.loads((d / "report.json").read_text())
     ck = np.load(d / "checkpoint.npz")
     keep = ("free_voxels", "inside_voxels", "seconds_per_iteration", "peak_rss_gb", "iterations", "time_split")
+    cpu = d / "optimize_cpu.json"  # the optimize process's CPU seconds, set-up and its own short figures included
+    cpu = json.loads(cpu.read_text())["cpu_seconds"] if cpu.is_file() else None
     return {
         **{k: rep.get(k) for k in keep},
+        "cpu_seconds": cpu,
+        "cpu_seconds_per_iteration": None if cpu is None else cpu / max(rep.get("iterations") or 1, 1),
         "shell_mm": rep.get("shell_mm"),
         "core": core,
         "core_shares": rep.get("core_shares"),
@@ -174,9 +233,26 @@ def main():
         help="the figures' samples per texel, the same for every cell (default 256)",
     )
     ap.add_argument("--cells", default="free,1:white,1:start,1:deep,0.5:deep,2:deep,0.25:deep,1:grey")
+    ap.add_argument(
+        "--optimize-only",
+        action="store_true",
+        help="run the cells' optimisations and stop (another invocation renders them): cells run side by side",
+    )
+    ap.add_argument(
+        "--thickness-only",
+        action="store_true",
+        help="the 'free' cell's texels by the object's local half-thickness (``thickness``; its scene.npz only), "
+        f"into experiments/results/{THICK_RESULT}",
+    )
     a = ap.parse_args()
     prefix = Path(a.out) / f"spot{a.height_mm:g}_{a.dpi:g}dpi_{a.iterations}it"
     deep, ref = stored_deep_mixture(a), Path(f"{prefix}_free")
+    if a.thickness_only:
+        counts = by_thickness(None, thickness(ref))
+        entry = {"texels_by_half_thickness_mm": counts, "radius_mm": THICK_RADIUS_MM, **provenance()}
+        add_study_entry(THICK_RESULT, f"spot{a.height_mm:g}mm_{a.dpi:g}dpi", entry)
+        print(json.dumps(counts))
+        return
     for cell in a.cells.split(","):
         setting, _, seed = cell.partition("@")
         depth, _, core = setting.partition(":")
@@ -185,6 +261,8 @@ def main():
         c = None if depth == "free" else core_arg(core, deep, a.deep_mm)
         if not (d / "report.json").is_file():
             optimize(a, d, None if depth == "free" else depth, c, seed)
+        if a.optimize_only:
+            continue
         ev = evaluate(a, d, None if cell == "free" else ref)
         entry = cell_entry(a, d, ev, core if c in (None, core) else f"{core} ({c})", seed)
         if cell == "free":

@@ -1,7 +1,7 @@
 """The shell of a mesh run given none (``footprint.fits.choose_shell``): every voxel free when that fits the memory
-limit, a 1 mm band over a white core when only that fits (said on the run's first line, recorded in report.json,
-taken by a coarse-to-fine run's both stages), a one-line refusal naming both largest heights when neither fits;
-``--shell-mm 0`` keeps every voxel free."""
+limit, the ``BAND_SHELL_MM`` band over a white core when only that fits (said on the run's first line, recorded in
+report.json, taken by a coarse-to-fine run's both stages), a one-line refusal naming both largest heights when
+neither fits; ``--shell-mm 0`` keeps every voxel free."""
 
 import json
 import re
@@ -14,11 +14,12 @@ from inkopt.cli import build_parser, main
 from inkopt.cli.jobplan import plan_job
 from inkopt.cli.runargs import config_from_args, mesh_spec_from_args, run_options_from_args
 from inkopt.errors import ParameterError
-from inkopt.footprint import MemoryLimit, mesh_footprint, mesh_shape, spec_footprint
+from inkopt.footprint import MemoryLimit, mesh_band, mesh_footprint, mesh_shape, spec_footprint
 from inkopt.footprint.fits import BAND_SHELL_MM, choose_shell
 from inkopt.model import InkTable
 from inkopt.scenes.mesh import load_spec_mesh
 from inkopt.scenes.spec import MeshSpec, spec_from_json
+from inkopt.units import voxel_mm
 
 N_INKS = 5
 
@@ -72,18 +73,20 @@ def test_neither_fits_refused_naming_both_heights():
     with pytest.raises(ParameterError) as exc:
         choose_shell(spec, N_INKS, limit)
     text = str(exc.value)
-    m = re.search(r"largest height_mm that fits is ([0-9.]+) with every voxel free, ([0-9.]+) with shell_mm 1", text)
+    band = f"shell_mm {BAND_SHELL_MM:g}"
+    m = re.search(rf"largest height_mm that fits is ([0-9.]+) with every voxel free, ([0-9.]+) with {band}", text)
     assert m, text
     free_h, band_h = float(m.group(1)), float(m.group(2))
     assert 0 < free_h <= band_h < 40.0
     shape = mesh_shape(load_spec_mesh(spec))
 
     def peak(h, shell):
-        return mesh_footprint(shape.scaled(h / shape.height_mm), 300.0, shell, N_INKS, 14.0 if shell else 3.0)
+        near = mesh_band(voxel_mm(300.0), shell) if shell else footprint.DEFAULT_BAND
+        return mesh_footprint(shape.scaled(h / shape.height_mm), 300.0, shell, N_INKS, near)
 
     assert peak(free_h, None).fits(limit.bytes) and not peak(free_h * 1.02, None).fits(limit.bytes)
-    assert peak(band_h, 1.0).fits(limit.bytes) and not peak(band_h * 1.02, 1.0).fits(limit.bytes)
-    assert re.search(r"or dpi [0-9]+ \(every voxel free\) or [0-9]+ \(shell_mm 1\) at this size", text), text
+    assert peak(band_h, BAND_SHELL_MM).fits(limit.bytes) and not peak(band_h * 1.02, BAND_SHELL_MM).fits(limit.bytes)
+    assert re.search(rf"or dpi [0-9]+ \(every voxel free\) or [0-9]+ \({band}\) at this size", text), text
 
 
 def _cli(capsys, argv):
@@ -101,8 +104,8 @@ def test_dry_run_shows_the_choice_and_shell_zero_refuses(monkeypatch, capsys, tm
     assert code == 0 and len(lines) == 2, lines
     assert lines[0].startswith("memory: every voxel free needs ~") and f"{float(gib):.1f} GiB it may use" in lines[0]
     assert "--shell-mm 0 forces every voxel free" in lines[0] and "`" not in lines[0]
-    free = spec_footprint(MeshSpec(str(SPOT), height_mm=20.0, shell_mm=1.0), N_INKS)[0].free_voxels
-    assert lines[1].startswith("estimate from the mesh's size") and f"{free / 1e6:.1f} M free" in lines[1]
+    free = spec_footprint(MeshSpec(str(SPOT), height_mm=20.0, shell_mm=BAND_SHELL_MM), N_INKS)[0].free_voxels
+    assert lines[1].startswith("estimate from the mesh's size") and f"{footprint._count(free)} free" in lines[1]
     assert "(--memory-gb)" in lines[1]
     code, lines, err = _cli(capsys, [*base, "--dry-run", "--shell-mm", "0"])
     assert code == 2 and len(lines) == 1 and "memory:" not in lines[0]  # the estimate, then the refusal
@@ -117,13 +120,14 @@ def test_neither_fits_on_the_command_line(monkeypatch, capsys, tmp_path):
     code, _, err = _cli(capsys, argv)
     assert code == 2 and len(err) == 1 and not out.exists(), err
     assert re.search(
-        r"largest --height-mm that fits is [0-9.]+ with every voxel free, [0-9.]+ with --shell-mm 1", err[0]
+        rf"largest --height-mm that fits is [0-9.]+ with every voxel free, [0-9.]+ with --shell-mm {BAND_SHELL_MM:g}",
+        err[0],
     )
 
 
 def test_a_run_that_does_not_fit_every_voxel_free_runs_the_band(monkeypatch, capsys, tmp_path):
-    """Spot 10 mm with a limit between the two peaks, coarse to fine: both stages optimise the 1 mm band, the first
-    log line says why, report.json records it; the free voxels are those of ``--shell-mm 1``."""
+    """Spot 10 mm with a limit between the two peaks, coarse to fine: both stages optimise the ``BAND_SHELL_MM``
+    band, the first log line says why, report.json records it; the free voxels are those of that ``--shell-mm``."""
     monkeypatch.delenv(footprint.MEMORY_ENV, raising=False)
     out = tmp_path / "run"
     gib = f"{_between(10.0) / 2**30:.4f}"
@@ -137,7 +141,7 @@ def test_a_run_that_does_not_fit_every_voxel_free_runs_the_band(monkeypatch, cap
     for scene in (fine, coarse):
         assert scene["shell_mm"] == BAND_SHELL_MM and scene["core"] == "white"
         assert scene["shell_chosen"].startswith("automatic: every voxel free needs ~")
-    band = spec_footprint(MeshSpec(str(SPOT), height_mm=10.0, shell_mm=1.0), N_INKS)[0]
+    band = spec_footprint(MeshSpec(str(SPOT), height_mm=10.0, shell_mm=BAND_SHELL_MM), N_INKS)[0]
     assert fine["free_voxels"] == pytest.approx(band.free_voxels, rel=0.05) and fine["free_voxels"] < band.inside_voxels
     # resumed with memory to spare, the run keeps the band it started with (its checkpoint holds the band's voxels)
     argv[argv.index("--memory-gb") + 1] = "64"
