@@ -34,6 +34,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
 from common import add_study_entry, machine, provenance  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from loss_de2000 import check_gradient  # noqa: E402
+
 from inkopt.color import linear_to_lab, linear_to_lab_vjp  # noqa: E402
 from inkopt.evaluation.evaluate import evaluate_run  # noqa: E402
 from inkopt.evaluation.options import EvaluateOptions  # noqa: E402
@@ -75,28 +78,6 @@ class LinearColourLoss(TexelLoss):
         return LossResult(value=E1_WEIGHT_SCALE * e * e, e1=e1, e2=nan, e3=nan, grad=grad, lab=lab)
 
 
-def check_gradient(seed: int = 3, n: int = 40, h: float = 1e-6) -> float:
-    """Largest relative difference between ``LinearColourLoss``'s gradient and central differences of its value at
-    random colours; raises if above 1e-5."""
-    rng = np.random.default_rng(seed)
-    target = rng.uniform(0.0, 1.0, (n, 3))
-    loss = LinearColourLoss(target, rng.uniform(0, 10, (n, 3)))
-    pred = np.clip(target + rng.normal(0, 0.1, (n, 3)), 0.01, 1.0)
-    pred[:3] = target[:3]  # texels on their target: the smooth part of the term
-    grad = loss(pred).grad
-    num = np.zeros_like(pred)
-    for i in range(n):
-        for k in range(3):
-            up, dn = pred.copy(), pred.copy()
-            up[i, k] += h
-            dn[i, k] -= h
-            num[i, k] = (loss(up).value - loss(dn).value) / (2 * h)
-    err = float(np.max(np.abs(grad - num)) / np.max(np.abs(num)))
-    if err > 1e-5:
-        raise RuntimeError(f"the linear term's gradient is off by {err:g} (relative)")
-    return err
-
-
 def optimise(scene, cfg, linear: bool, eps: float, out: Path) -> None:
     """One arm: ``cfg.iterations`` iterations from ``cfg.init`` with today's or the linear colour term, finished as
     ``optimize`` finishes, its volume written to ``out``/volume.npz."""
@@ -127,7 +108,7 @@ def main():
     ap.add_argument("--keep", type=Path, help="keep the arms' folders under this directory")
     ap.add_argument("--texture", help="the texture the suite passes for a mesh without one of its own")
     a = ap.parse_args()
-    grad_err = check_gradient()
+    grad_err = check_gradient(LinearColourLoss)
     print(f"gradient check: largest relative difference {grad_err:.2e}")
     report = json.loads((a.run / "report.json").read_text())
     spec = MeshSpec(report["mesh_path"], height_mm=report["height_mm"], texture=a.texture)
