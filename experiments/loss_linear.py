@@ -1,7 +1,7 @@
 """The colour term as the figure users read, mean ΔE76, against today's mean ΔE76², side by side on suite meshes,
 each arm printed and evaluated as ``inkopt quantize`` and ``inkopt evaluate`` do, against the print-shop baselines.
 
-    nice -n 5 .venv/bin/python experiments/loss_linear.py RUN_DIR --name NAME --iterations N [--eps 1] [--texels T]
+    nice -n 5 .venv/bin/python experiments/loss_linear.py RUN_DIR --name NAME --iterations N [--texels T]
         [--texture PNG]
 
 Both arms start from the suite run's fine start (``coarse/fine_start.npz``: the coarse stage's result moved onto the
@@ -11,15 +11,17 @@ convergence rule off), are finished alike (the finishing smoothing), written int
 seed=0)``), so each arm's differences from the extrusion baseline are paired on those texels and the baselines'
 renders are the same bits in both arms. Writes the entry NAME of experiments/results/loss_linear.json.
 
-The linear term (``LinearColourLoss``) is the Charbonnier form of mean ΔE76, E = mean_i sqrt(|d_i|² + eps²) with
-d_i a texel's CIELAB error and eps = 1 ΔE76 (smooth at d = 0; for |d| >> eps it is |d|). Its value is reported
-as E1_WEIGHT_SCALE E² (the units of today's E1, so logs and the step rule read alike: a monotone function of E,
-same minimiser) and its gradient is that value's exact gradient, 2 E1_WEIGHT_SCALE E / I d_i / sqrt(|d_i|² + eps²)
-per texel through CIELAB; the Monte Carlo estimate of d_i / |d_i| from a 16-spp forward render is biased towards 0
-where the render's noise is comparable to |d_i| (texels already near their target get a smaller push). Why try it:
-on the suite's saturated meshes every texel is out of gamut, so the optimum of the squared term trades a lower mean
-ΔE76 for fewer large errors, while the suite's targets are stated in mean ΔE76 (docs/quality.md, "Which figure the
-optimiser serves").
+The linear term is the loss's ``colour_term="linear"`` (``inkopt optimize --colour-term linear``;
+``loss.TexelLoss``), the Charbonnier form of mean ΔE76, E = mean_i sqrt(|d_i|² + eps²) with d_i a texel's CIELAB
+error and eps = ``loss.LINEAR_EPS`` = 1 ΔE76, entering the loss as E1_WEIGHT_SCALE E² (same minimiser); the entries
+``duck_20mm_medium_11it``, ``box_20mm_medium_7it`` and ``eyeball_20mm_medium_5it`` ran with this script's own copy of
+the same formula (commit 13adcbf), before it became the library's option. The Monte Carlo estimate of d_i / |d_i|
+from a 16-spp forward render is biased towards 0 where the render's noise is comparable to |d_i| (texels already
+near their target get a smaller push).
+
+Why try it: on the suite's saturated meshes every texel is out of gamut, so the optimum of the squared term trades
+a lower mean ΔE76 for fewer large errors, while the suite's targets are stated in mean ΔE76 (docs/quality.md,
+"Which figure the optimiser serves").
 """
 
 import argparse
@@ -27,6 +29,8 @@ import json
 import shutil
 import sys
 import tempfile
+from dataclasses import replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -37,10 +41,9 @@ from common import add_study_entry, machine, provenance  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from loss_de2000 import check_gradient  # noqa: E402
 
-from inkopt.color import linear_to_lab, linear_to_lab_vjp  # noqa: E402
 from inkopt.evaluation.evaluate import evaluate_run  # noqa: E402
 from inkopt.evaluation.options import EvaluateOptions  # noqa: E402
-from inkopt.loss import E1_WEIGHT_SCALE, LossResult, TexelLoss  # noqa: E402
+from inkopt.loss import LINEAR_EPS, TexelLoss  # noqa: E402
 from inkopt.model import InkTable, Quantization  # noqa: E402
 from inkopt.optim import OptimizeConfig  # noqa: E402
 from inkopt.optim.loop import Optimization  # noqa: E402
@@ -53,38 +56,10 @@ from inkopt.scenes.spec import MeshSpec  # noqa: E402
 RUN_FILES = ("scene.npz", "report.json", "checkpoint.npz")
 
 
-class LinearColourLoss(TexelLoss):
-    """``TexelLoss`` whose colour term is mean sqrt(|d|² + eps²) (module docstring), colour only (γ = (1, 0, 0));
-    ``e1`` stays the mean ΔE76² (the logs' figure)."""
-
-    def __init__(self, target_rgb, pos_vox, eps: float = 1.0):
-        super().__init__(target_rgb, pos_vox)
-        if not eps > 0:
-            raise ValueError(f"eps must be positive, got {eps}")
-        self.eps = float(eps)
-
-    def __call__(self, pred_rgb, pred_var=None, *, all_terms: bool = True, gradient: bool = True) -> LossResult:
-        pred = self._check(pred_rgb)
-        self._check_var(pred, pred_var)
-        lab = linear_to_lab(pred)
-        d = lab - self.target_lab
-        r = np.sqrt(np.sum(d * d, axis=1) + self.eps**2)  # (I,)
-        e = float(r.mean())
-        e1 = float(np.sum(d * d) / self.n)
-        grad = None
-        if gradient:
-            grad = linear_to_lab_vjp(pred, (2.0 * E1_WEIGHT_SCALE * e / self.n) * d / r[:, None])
-        nan = float("nan")
-        return LossResult(value=E1_WEIGHT_SCALE * e * e, e1=e1, e2=nan, e3=nan, grad=grad, lab=lab)
-
-
-def optimise(scene, cfg, linear: bool, eps: float, out: Path) -> None:
-    """One arm: ``cfg.iterations`` iterations from ``cfg.init`` with today's or the linear colour term, finished as
-    ``optimize`` finishes, its volume written to ``out``/volume.npz."""
+def optimise(scene, cfg, out: Path) -> None:
+    """One arm: ``cfg.iterations`` iterations from ``cfg.init`` with ``cfg.colour_term``, finished as ``optimize``
+    finishes, its volume written to ``out``/volume.npz."""
     run = Optimization(scene, cfg, threads=2)
-    if linear:
-        run.loss = LinearColourLoss(run.target, scene.texels.pos_vox, eps)
-        run.loss.release_operators()  # colour only: the window and Sobel operators are never read
     run.run()
     run.finish()
     run.volume().save(out / "volume.npz")
@@ -103,12 +78,11 @@ def main():
     ap.add_argument("run", type=Path)
     ap.add_argument("--name", required=True)
     ap.add_argument("--iterations", type=int, required=True)
-    ap.add_argument("--eps", type=float, default=1.0)
     ap.add_argument("--texels", type=int, default=1500)
     ap.add_argument("--keep", type=Path, help="keep the arms' folders under this directory")
     ap.add_argument("--texture", help="the texture the suite passes for a mesh without one of its own")
     a = ap.parse_args()
-    grad_err = check_gradient(LinearColourLoss)
+    grad_err = check_gradient(partial(TexelLoss, colour_term="linear"))
     print(f"gradient check: largest relative difference {grad_err:.2e}")
     report = json.loads((a.run / "report.json").read_text())
     spec = MeshSpec(report["mesh_path"], height_mm=report["height_mm"], texture=a.texture)
@@ -118,16 +92,16 @@ def main():
         raise RuntimeError(f"the rebuilt scene differs from {a.run / 'scene.npz'}")
     start = a.run / "coarse" / "fine_start.npz"
     cfg = OptimizeConfig(init=str(start), iterations=a.iterations, stop_gain=0.0).for_scene("mesh")
-    entry = {**provenance(), "run": str(a.run), "init": str(start), "iterations": a.iterations, "eps": a.eps}
+    entry = {**provenance(), "run": str(a.run), "init": str(start), "iterations": a.iterations, "eps": LINEAR_EPS}
     entry |= {"texels_sampled": a.texels, "gradient_check": grad_err}
     root = Path(tempfile.mkdtemp(prefix="loss_linear_", dir=a.keep))
-    for arm, linear in (("delta_e76_squared", False), ("delta_e76_linear", True)):
+    for arm, term in (("delta_e76_squared", "squared"), ("delta_e76_linear", "linear")):
         folder = root / arm
         folder.mkdir()
         for name in RUN_FILES:
             if (a.run / name).exists():
                 shutil.copy2(a.run / name, folder / name)
-        optimise(scene, cfg, linear, a.eps, folder)
+        optimise(scene, replace(cfg, colour_term=term), folder)
         entry[arm] = evaluate(folder, a.texels)
         print(arm, json.dumps(entry[arm].get("differences", {}))[:600])
     if a.keep is None:

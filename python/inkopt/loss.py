@@ -33,6 +33,13 @@ FLAT_CHROMA_STD = 2.0
 
 #: how a loss over several lights combines the loss under each
 COMBINE = ("mean", "worst")
+#: the colour term E1: "squared", the mean ΔE76² (the paper's); "linear", the mean ΔE76 itself in a smooth
+#: (Charbonnier) form, mean sqrt(ΔE76² + LINEAR_EPS²), entering the loss squared (E1_WEIGHT_SCALE (mean)², the
+#: squared term's units; the same minimiser): the figure the suite's targets are stated in (docs/quality.md, "The
+#: colour term as the figure the targets are stated in")
+COLOUR_TERMS = ("squared", "linear")
+#: ΔE76 below which the linear term turns quadratic (smooth where a texel meets its target)
+LINEAR_EPS = 1.0
 
 
 # ----------------------------------------------------------------------------- the loss
@@ -75,7 +82,9 @@ class TexelLoss:
     the same under every light (``linear_to_lab(target_rgb)``): the print should look like the texture to a viewer
     adapted to the light.
 
-    - E1 = (1/I) sum_i dE76_i^2 (squared CIELAB distance).
+    - E1 = (1/I) sum_i dE76_i^2 (squared CIELAB distance); with ``colour_term`` "linear" the value and gradient
+      take ((1/I) sum_i sqrt(dE76_i^2 + LINEAR_EPS^2))^2 instead (``COLOUR_TERMS``), the reported ``e1`` stays
+      the mean dE76^2.
     - E2 = 1 - (1/(3I)) sum_i sum_{L,a,b} SSIM_i on normalised L*a*b*. We divide by 3 (the channel count)
       so E2 lies in [0, 2] (0 when the prediction equals the target). Local means, variances and covariance
       use the texel Gaussian window W (population form, sigma_x^2 = W(x^2) - (Wx)^2, like scikit-image's
@@ -100,6 +109,7 @@ class TexelLoss:
         sigma: float = 1.5,
         colours: tuple[ColourMap, ...] | None = None,
         combine: str = "mean",
+        colour_term: str = "squared",
     ):
         target = np.asarray(target_rgb, np.float64)
         pos = np.asarray(pos_vox, np.float64)
@@ -119,6 +129,10 @@ class TexelLoss:
             raise ValueError("colours must be one or more colour maps of one channel count")
         if combine not in COMBINE:
             raise ValueError(f"combine must be one of {', '.join(COMBINE)}, got {combine!r}")
+        if colour_term not in COLOUR_TERMS:
+            raise ValueError(f"colour_term must be one of {', '.join(COLOUR_TERMS)}, got {colour_term!r}")
+        #: the colour term's form (``COLOUR_TERMS``)
+        self.colour_term = colour_term
         #: the prediction's colour maps (one per light), its channel count and how the lights combine
         self.colours, self.channels, self.combine = colours, colours[0].channels, combine
         self.gamma = g
@@ -326,10 +340,20 @@ class TexelLoss:
         cn = normalise_lab(lab)
         ssim = self._ssim_parts(cn, noise)[0]
         sob = self.products(sobel=cn)[2] - self._sobel_t
-        e1, e2 = float(np.sum(dlab * dlab) / self.n), float(1.0 - ssim.mean())
+        c1, e2 = self._colour(dlab, False)[0], float(1.0 - ssim.mean())
         e3 = float(100.0 / (3.0 * self.n * 4.0 * 32.0) * np.sum(sob * sob))
         g1, g2, g3 = self.gamma
-        return (g1 * E1_WEIGHT_SCALE * e1 + g2 * e2 + g3 * e3) / self.gamma.sum()
+        return (g1 * E1_WEIGHT_SCALE * c1 + g2 * e2 + g3 * e3) / self.gamma.sum()
+
+    def _colour(self, dlab: np.ndarray, gradient: bool) -> tuple[float, np.ndarray | None]:
+        """The colour term in ΔE76² units (the mean ΔE76², or the squared mean of the linear form) of the CIELAB
+        errors ``dlab`` (I, 3), and (``gradient``) the direction its gradient takes: the term's gradient with
+        respect to ``dlab`` is 2 / I times it (``dlab`` itself for the squared term)."""
+        if self.colour_term == "squared":
+            return float(np.sum(dlab * dlab) / self.n), dlab
+        r = np.sqrt(np.sum(dlab * dlab, axis=1) + LINEAR_EPS**2)
+        e = float(r.mean())
+        return e * e, e * dlab / r[:, None] if gradient else None
 
     def __call__(self, pred_rgb, pred_var=None, *, all_terms: bool = True, gradient: bool = True) -> LossResult:
         """Loss and gradient at ``pred_rgb`` (I, C); ``pred_var`` (I, C) corrects the SSIM term for Monte Carlo
@@ -376,6 +400,7 @@ class TexelLoss:
         lab = cmap.lab(pred)
         dlab = lab - self.target_lab
         e1 = float(np.sum(dlab * dlab) / n)
+        c1, g_c1 = self._colour(dlab, gradient and g1 > 0)
         cn = normalise_lab(lab)
         e2 = e3 = ssim_mean = float("nan")
         want_ssim, want_sobel = all_terms or g2 > 0, all_terms or g3 > 0
@@ -391,12 +416,12 @@ class TexelLoss:
         if want_sobel:  # squared in place when no gradient reads it: no second (3I, 3) array
             e3 = float(c3 * np.sum(sob * sob if gradient else np.multiply(sob, sob, out=sob)))
         gs = self.gamma.sum()
-        value = sum(g * e for g, e in ((g1 * E1_WEIGHT_SCALE, e1), (g2, e2), (g3, e3)) if g > 0) / gs
+        value = sum(g * e for g, e in ((g1 * E1_WEIGHT_SCALE, c1), (g2, e2), (g3, e3)) if g > 0) / gs
         figures = (ssim_mean, *products)
         if not gradient:
             return LossResult(value=float(value), e1=e1, e2=e2, e3=e3, grad=None, lab=lab), figures
 
-        g_lab = (2.0 * g1 * E1_WEIGHT_SCALE / n) * dlab if g1 > 0 else np.zeros_like(lab)
+        g_lab = (2.0 * g1 * E1_WEIGHT_SCALE / n) * g_c1 if g1 > 0 else np.zeros_like(lab)
         g_n = np.zeros_like(lab)
         if g2 > 0:
             coef = -g2 / (3.0 * n)  # dE2 / dSSIM_ic, times gamma2

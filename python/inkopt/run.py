@@ -343,6 +343,7 @@ def _report(job: _Job, res, metrics, de, estimate: Estimate, check: BaselineChec
         scene=job.scene.report_fields(),
         inks=list(job.scene.volume.inks.names),
         gamma=list(cfg.gamma),
+        colour_term=cfg.colour_term,
         lr=cfg.step_size,
         **{k: getattr(cfg, k) for k in ("optimizer", "param", "init", "seed", "decay", "smooth")},
         finish_smooth=cfg.finish_smooth if finish is None else finish.passes,  # the passes in the result

@@ -401,3 +401,50 @@ def test_figures_equal_the_loss_and_ssim_bit_for_bit_held_or_not(gamma):
         assert fig.window_sq.tobytes() == (k.squared @ cols_sq).tobytes()
         assert lf.wsum.tobytes() == wsum.tobytes()
         lf(pred, var, all_terms=False)  # a training step: holds what its gradient reads
+
+
+# ----------------------------------------------------------------------------- the linear colour term
+def test_linear_colour_term_value_and_gradient():
+    """colour_term "linear": the value is E1_WEIGHT_SCALE (mean sqrt(dE76² + eps²))² (with the other terms as
+    before), e1 stays the mean dE76², and the gradient is the value's (central differences), alone and with the SSIM
+    and edge terms; the squared term's value is the mean dE76² as before."""
+    rng = _rng()
+    pos = Texels.box_faces((4, 5, 6)).pos_vox
+    n = len(pos)
+    target = rng.uniform(0.05, 0.9, (n, 3))
+    pred = np.clip(target + rng.normal(0, 0.1, (n, 3)), 0.03, 0.95)
+    pred[:3] = target[:3]  # texels on their target: the term's smooth part
+    d = color.linear_to_lab(pred) - color.linear_to_lab(target)
+    lin = loss.TexelLoss(target, pos, colour_term="linear")
+    r = lin(pred)
+    mean = np.mean(np.sqrt(np.sum(d * d, axis=1) + loss.LINEAR_EPS**2))
+    assert r.value == pytest.approx(loss.E1_WEIGHT_SCALE * mean**2, rel=1e-12)
+    assert r.e1 == pytest.approx(np.mean(np.sum(d * d, axis=1)), rel=1e-12)
+    sq = loss.TexelLoss(target, pos)(pred)
+    assert sq.value == pytest.approx(loss.E1_WEIGHT_SCALE * r.e1, rel=1e-12) and sq.e1 == r.e1
+    assert not np.allclose(sq.grad, r.grad)  # the two terms push texels differently
+    h = 1e-6
+    for gamma in ((1.0, 0.0, 0.0), (1.0, 2.0, 0.5)):
+        lf = loss.TexelLoss(target, pos, gamma=gamma, colour_term="linear")
+        g = lf(pred).grad
+        fd = np.zeros_like(pred)
+        for i in range(n):
+            for c in range(3):
+                p = pred.copy()
+                p[i, c] += h
+                up = lf(p).value
+                p[i, c] -= 2 * h
+                fd[i, c] = (up - lf(p).value) / (2 * h)
+        err = np.linalg.norm(g - fd) / np.linalg.norm(fd)
+        assert err < 1e-4, (gamma, err)
+
+
+def test_colour_term_is_checked():
+    pos = _face(4, 3)
+    with pytest.raises(ValueError, match="colour_term"):
+        loss.TexelLoss(np.full((len(pos), 3), 0.5), pos, colour_term="cubic")
+    from inkopt.errors import ParameterError
+    from inkopt.optim import OptimizeConfig
+
+    with pytest.raises(ParameterError, match="colour_term"):
+        OptimizeConfig(colour_term="cubic").validate()

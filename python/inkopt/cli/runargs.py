@@ -120,6 +120,13 @@ def _add_step_args(p, d) -> None:
         help="loss weights g1,g2,g3 of colour (dE76^2), SSIM and edge terms (default %(default)s)",
     )
     p.add_argument(
+        "--colour-term",
+        choices=["squared", "linear"],
+        default=d.colour_term,
+        help="the colour term: squared, the mean dE76^2 (default), or linear, the mean dE76 that the figures report "
+        "(docs/quality.md)",
+    )
+    p.add_argument(
         "--lr",
         type=float,
         help="step size (default: 2 for eg, 0.5 for adagrad, 0.1 for adam; from a warm start (--init) and in a "
@@ -278,6 +285,7 @@ CONFIG_OPTIONS = (
     "smooth_edge",
     "decay",
     "adjoint_ema",
+    "colour_term",
 )
 
 

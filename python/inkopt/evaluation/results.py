@@ -100,6 +100,7 @@ class Report:
     baseline: dict | None = None
     beats_baseline: bool | None = None
     viewing: dict | None = None
+    colour_term: str | None = None  # the loss's colour term (None: a report from before the choice, squared)
 
     _RUN = (
         "delta_e76_max",
@@ -124,6 +125,7 @@ class Report:
     _SETTINGS = (
         "inks",
         "gamma",
+        "colour_term",
         "lr",
         "optimizer",
         "param",

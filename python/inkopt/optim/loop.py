@@ -90,7 +90,7 @@ class Optimization:
         if fixed_share is None:
             fixed_share = FixedShares.none(base.shape, len(base.inks))
         self.param = Parameterization(cfg.param, fixed_share, threads)
-        self.loss = self.viewing.loss(self.target, texels.pos_vox, cfg.gamma)
+        self.loss = self.viewing.loss(self.target, texels.pos_vox, cfg.gamma, cfg.colour_term)
         self.release_unread_operators()
         # what the run optimises towards and under which constraints: part of the checkpoint key
         h = hashlib.sha256(self.target.tobytes())

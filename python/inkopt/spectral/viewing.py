@@ -76,9 +76,12 @@ class Viewing:
             return (RGB,)
         return tuple(light.colour_map(self.table.wavelengths_nm) for light in self.seen_under())
 
-    def loss(self, target_rgb, pos_vox, gamma) -> TexelLoss:
-        """The run's loss (``TexelLoss``) of targets (I, 3) linear RGB under :meth:`colours`, combined as asked."""
-        return TexelLoss(target_rgb, pos_vox, gamma, colours=self.colours(), combine=self.combine)
+    def loss(self, target_rgb, pos_vox, gamma, colour_term: str = "squared") -> TexelLoss:
+        """The run's loss (``TexelLoss``) of targets (I, 3) linear RGB under :meth:`colours`, combined as asked, with
+        the colour term ``colour_term`` (``loss.COLOUR_TERMS``)."""
+        return TexelLoss(
+            target_rgb, pos_vox, gamma, colours=self.colours(), combine=self.combine, colour_term=colour_term
+        )
 
     def renderer_factory(self, inner: RendererFactory, shared: bool = False) -> RendererFactory:
         """What renders a run: ``inner`` on the RGB path, else band renders through ``inner`` per group (``shared``:
