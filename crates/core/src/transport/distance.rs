@@ -206,7 +206,7 @@ impl BrickedDistances {
 
     /// `new`, `slab` z-planes at a time (a positive multiple of `BRICK`).
     pub fn in_slabs(inside: &[u8], n: [usize; 3], empty: bool, slab: usize) -> Self {
-        assert!(slab > 0 && slab % BRICK == 0 && inside.len() == n.iter().product::<usize>());
+        assert!(slab > 0 && slab.is_multiple_of(BRICK) && inside.len() == n.iter().product::<usize>());
         let nb: [usize; 3] = std::array::from_fn(|a| n[a].div_ceil(BRICK));
         let (plane, layer) = (n[0] * n[1], nb[0] * nb[1]);
         let mut table = vec![0u32; layer * nb[2]];
