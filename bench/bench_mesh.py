@@ -1,7 +1,7 @@
 """Benchmark of the mesh pipeline on Spot: voxelization time, seconds per optimisation iteration, peak memory.
 
     python bench/bench_mesh.py [HEIGHT_MM=40] [--iterations 3] [--spp 4] [--threads 2] [--shell-mm D] [--core C]
-        [--smooth S] [--dpi 300] [--figure-metrics] [--baseline] [--code PYTHON_DIR] [--out JSON]
+        [--smooth S] [--dpi 300] [--figure-metrics] [--baseline] [--renderer] [--code PYTHON_DIR] [--out JSON]
 
 Writes bench/results/mesh_<height>mm.json (``--dpi`` other than 300: mesh_<height>mm_<dpi>dpi.json; the folder is
 created if missing). Peak memory is the process's
@@ -66,6 +66,12 @@ def main(argv=None) -> dict:
         help="before the iterations, as a run's baseline guard: the extrusion baseline's variables (its nearest "
         "texel of every inside voxel): their peak and seconds",
     )
+    ap.add_argument(
+        "--renderer",
+        action="store_true",
+        help="after the set-up, build the run's renderer as its first iteration does (geometry, signed distances, "
+        "medium): its peak and CPU seconds",
+    )
     args = ap.parse_args(argv)
 
     import resource
@@ -93,6 +99,11 @@ def main(argv=None) -> dict:
     rss["after_setup"] = peak_rss_gb()
     cpu["after_setup"] = cpu_s()
     print(f"set-up done: {scene.describe()}; peaks so far (GiB) {rss}", file=sys.stderr, flush=True)
+    if args.renderer:
+        run.renderer()
+        rss["after_renderer"] = peak_rss_gb()
+        cpu["after_renderer"] = cpu_s()
+        print(f"renderer built; peaks so far (GiB) {rss}", file=sys.stderr, flush=True)
     figure_s = None
     if args.figure_metrics:  # as the start's figures, before the iterations
         from inkopt.evaluation.metrics import prediction_metrics
@@ -160,7 +171,13 @@ def main(argv=None) -> dict:
         "cpu_seconds_per_iteration": cpu_per_iteration,
         # CPU seconds (user + system, all threads) of each iteration, of the start's figures (--figure-metrics)
         "iteration_cpu_seconds": iteration_cpu,
-        "figure_metrics_cpu_seconds": cpu["after_figure_metrics"] - cpu["after_setup"] if args.figure_metrics else None,
+        "figure_metrics_cpu_seconds": cpu["after_figure_metrics"] - cpu.get("after_renderer", cpu["after_setup"])
+        if args.figure_metrics
+        else None,
+        # CPU seconds of building the run's renderer (--renderer)
+        "renderer_cpu_seconds": cpu["after_renderer"] - cpu["after_setup"] if args.renderer else None,
+        # the core's signed distances stored by bricks, once a renderer is built (None: not built, or code without it)
+        "distance_storage": getattr(getattr(run, "_renderer", None), "distance_storage", None),
         # the machine's 1-minute load average (runnable threads, this process's included) at start and end
         "load_average_1min": {"start": load0, "end": os.getloadavg()[0]},
         "time_split": {

@@ -87,6 +87,10 @@ class Scene:
     def threads(self) -> int:
         """Threads of the scene's pool."""
 
+    @property
+    def distance_storage(self) -> tuple[int, int, int] | None:
+        """(bricks, stored_bricks, bytes) of the inside mask's signed distances stored by 8^3 bricks; None: no mask."""
+
     def render(
         self,
         texels: Texels,

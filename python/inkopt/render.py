@@ -308,6 +308,13 @@ class Renderer(TexelRenderer):
         return index[ours], np.asarray(mixture)[ours]
 
     @property
+    def distance_storage(self) -> dict | None:
+        """The core's signed distances of the inside mask, stored by 8^3 bricks: {"bricks": the grid's, "stored_bricks":
+        those held as bytes (512 B each; the others, of one value, 4 B), "bytes": held}; None without a mask."""
+        s = self._scene.distance_storage
+        return None if s is None else dict(zip(("bricks", "stored_bricks", "bytes"), s))
+
+    @property
     def threads(self) -> int:
         return self._scene.threads
 

@@ -148,6 +148,14 @@ impl Scene {
         self.pool.current_num_threads()
     }
 
+    /// (bricks, stored_bricks, bytes) of the signed distances of the inside mask, stored by bricks of 8^3 voxels
+    /// (`inkopt_core::transport::distance::BrickedDistances`): the grid's bricks, those stored with their bytes (the
+    /// others, of one value, cost a table entry), the bytes held; None without an inside mask.
+    #[getter]
+    fn distance_storage(&self) -> Option<(usize, usize, usize)> {
+        self.geo.dist.as_ref().map(|d| (d.bricks(), d.stored_bricks(), d.bytes()))
+    }
+
     /// render(texels, *, spp, seed, first_texel=0, include_specular=True, hero=False) -> (mean (I,3) f32,
     /// var_mean (I,3) f32, stats dict). Random numbers are keyed by (seed, texel index, sample); `first_texel` is
     /// the index of the first of `texels`. `hero`: spp paths per texel each serving the three channels (hero

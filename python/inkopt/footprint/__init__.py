@@ -59,9 +59,15 @@ VOXELIZE_NEAR_BYTES = 24 * 0.9
 VOXELIZE_TEXEL_BYTES = 626.0 - VOXELIZE_NEAR_BYTES * 14
 DEFAULT_BAND = 3
 #: the run holds, by what the code stores (docs/performance.md, "Memory, by what the code stores"), per grid voxel
-#: the inside mask, the free mask's bits and the core's distance byte, and per inside voxel the core's sparse
-#: sigma_t and albedo; then it peaks in one of two stages:
-RUN_GRID_BYTES = 2.125
+#: the inside mask (1 B), the free mask's bits (1/8 B) and the core's table entry of its signed distances stored by
+#: 8^3 bricks (4 B per brick: 1/128 B), and per texel the bricks the core stores with their bytes (those within the
+#: distances' cap of 16 voxels of the surface, 512 B each; the others, of one value, are their table entry only):
+#: 59.5 B per texel at Spot 100 mm (282 307 of 1 854 884 bricks for 2 428 105 texels), 58.8 at 60 mm (100 205 of
+#: 404 950 for 872 457), 52.1 at 20 mm (9 773 of 15 810 for 96 002; bench/results/mesh_100mm_shell1_bricks.json,
+#: mesh_60mm_shell1_bricks.json, bricks_ab_20mm.json, distance_storage: 0.16, 0.26 and 0.65 B per grid voxel where
+#: the core held 1 B); and per inside voxel the core's sparse sigma_t and albedo; then it peaks in one of two stages:
+RUN_GRID_BYTES = 1.0 + 1.0 / 8 + 4.0 / 512
+RUN_TEXEL_BYTES = 59.5
 RUN_INSIDE_BYTES = 24.0
 #: - a step: per free voxel the variables, momentum and index held through the run (48 B) and, at the step's peak,
 #:   the smoothing's working arrays or the core's fixed-point gradient sums (48 B; taking the gradient converts them
@@ -192,7 +198,7 @@ class Footprint:
         per_texel = VOXELIZE_TEXEL_BYTES + VOXELIZE_NEAR_BYTES * self.band
         voxelize = VOXELIZE_GRID_BYTES * self.grid_voxels + VOXELIZE_FIXED_BYTES + per_texel * self.texels
         medium_voxels = self.free_voxels if self.shell else self.inside_voxels
-        held = RUN_GRID_BYTES * self.grid_voxels + RUN_INSIDE_BYTES * medium_voxels
+        held = RUN_GRID_BYTES * self.grid_voxels + RUN_TEXEL_BYTES * self.texels + RUN_INSIDE_BYTES * medium_voxels
         step = held + STEP_FREE_BYTES * self.free_voxels + STEP_TEXEL_BYTES * self.texels
         figures = held + FIGURES_FREE_BYTES * self.free_voxels + FIGURES_TEXEL_BYTES * self.texels
         if self.shell:

@@ -90,11 +90,11 @@ fn safe_balls_stay_inside_the_object() {
     let mut rng = crate::transport::rng::PathRng::new(9, 0, 0, 0);
     let mut checked = 0;
     for j in 0..inside.len() {
-        let s = geo.safe_distance(j);
+        let v = voxel_at(n, j);
+        let s = geo.safe_distance(v);
         if s < 2 {
             continue;
         }
-        let v = voxel_at(n, j);
         for _ in 0..20 {
             let p: V3 = std::array::from_fn(|a| (v[a] as f32 + rng.next_f32()) * size[a]);
             let r = safe_radius8(&geo, p.map(f32x8::splat), v.map(i32x8::splat), f32x8::splat(s as f32)).to_array()[0];
@@ -166,8 +166,9 @@ fn empty_distances_match_brute_force() {
     let safe = crate::transport::scene::safe_distances(&inside, n);
     let geo = Geometry::new(n, [0.1; 3], Boundary::Box, 1.5, 0.4).unwrap().with_inside(inside.clone()).unwrap();
     for j in 0..inside.len() {
+        let v = voxel_at(n, j);
         assert_eq!(
-            (geo.safe_distance(j), geo.empty_distance(j), geo.mask_inside(j)),
+            (geo.safe_distance(v), geo.empty_distance(v), geo.mask_inside(v)),
             (safe[j], empty[j], inside[j] != 0)
         );
     }

@@ -15,6 +15,7 @@ const LAYERS: &[&str] = &[
     "transport::normals",
     "transport::medium",
     "transport::band",
+    "transport::distance",
     "transport::scene",
     "transport::path",
     "transport::grid",

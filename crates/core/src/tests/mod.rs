@@ -1,13 +1,15 @@
 //! Statistical tests of the renderer against exact results, one file per topic: `analytic` (furnaces, slabs
 //! and free flights with closed forms), `samplers` (the samplers and walks against each other), `gradients`
 //! (gradients against finite differences), `light` (environment maps), `determinism` (thread counts, chunking,
-//! media forms), `geometry` (safe distances and balls), `smooth` (the step preconditioner against a plain
+//! media forms), `geometry` (safe distances and balls), `bricks` (the
+//! distances stored by bricks against the dense ones), `smooth` (the step preconditioner against a plain
 //! implementation), `storage` (in-place updates and compact storage against the plain forms, bit for bit), `band`
 //! (the band medium against them), `layering` (the module layering, on the source). Tolerances are multiples of the estimator's own standard
 //! error (computed from the samples), never fixed image values.
 
 mod analytic;
 mod band;
+mod bricks;
 mod determinism;
 mod geometry;
 mod gradients;

@@ -149,14 +149,14 @@ impl Tracker for Regular {
                 k = kw;
                 dj -= step as isize * geo.n[axis] as isize * geo.stride[axis];
             }
-            if (k as u32) < geo.n[axis] as u32 && geo.mask_inside((self.j as isize + dj) as usize) {
-                w.v[axis] = k;
+            let mut nb = w.v;
+            nb[axis] = k;
+            if (k as u32) < geo.n[axis] as u32 && geo.mask_inside(nb) {
+                w.v = nb;
                 self.j = (self.j as isize + dj) as usize;
                 continue;
             }
             // Leaving the object through the face of v on `axis`: the incident side is inside.
-            let mut nb = w.v;
-            nb[axis] = k;
             w.p = add(self.p0, scale(w.d, self.t));
             w.p[axis] = (if step > 0 { w.v[axis] + 1 } else { w.v[axis] }) as f32 * geo.size[axis];
             let n_geo = facing_normal(axis, step);

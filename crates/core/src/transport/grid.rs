@@ -83,7 +83,7 @@ pub(crate) fn empty_jump(geo: &Geometry, p: V3, d: V3, v: [i32; 3]) -> Option<(V
         let r = ball_radius(p, b, std::array::from_fn(|a| geo.size[a] * k as f32), e);
         (r, b.map(|c| (c - m) * k), b.map(|c| (c + m + 1) * k - 1))
     } else {
-        let e = geo.empty_distance(geo.index(v));
+        let e = geo.empty_distance(v);
         if e < 2 {
             return None;
         }

@@ -248,7 +248,7 @@ fn through_medium<M: Medium, T: Tally, U: Uniforms>(
                 ht.inner.scatter(j);
                 let (u1, u2) = rng.next_f32_pair();
                 s.d = hg_sample(s.d, geo.g, u1, u2);
-                if stop_deep && geo.safe_distance(j) >= 2 {
+                if stop_deep && geo.safe_distance(s.v) >= 2 {
                     return Inside::Deep;
                 }
                 tracker.start(geo, s, rng);

@@ -102,7 +102,7 @@ impl Lanes {
         self.t[l] = 0.0;
         if geo.masked() {
             let v = locate_box(geo, p);
-            let s = f32x8::splat(geo.safe_distance(geo.index(v)) as f32);
+            let s = f32x8::splat(geo.safe_distance(v) as f32);
             self.t_exit[l] = safe_radius8(geo, p.map(f32x8::splat), v.map(i32x8::splat), s).to_array()[0];
         } else {
             let (t_exit, axis) = grid_exit8(geo, p.map(f32x8::splat), d.map(f32x8::splat));
@@ -176,15 +176,12 @@ impl Lanes {
         let j = ((v[2] * i32x8::splat(geo.n[1]) + v[1]) * i32x8::splat(geo.n[0]) + v[0]).to_array();
         let va = v.map(|x| x.to_array());
         let masked = geo.masked();
-        let (mut st, mut albedo, mut st_h, mut safe) = ([[0.0f32; W]; 3], [[0.0f32; W]; 3], [0.0f32; W], [0.0f32; W]);
+        let (mut st, mut albedo, mut st_h) = ([[0.0f32; W]; 3], [[0.0f32; W]; 3], [0.0f32; W]);
         for l in 0..W {
             for c in 0..3 {
                 (st[c][l], albedo[c][l]) = med.coeffs_at(j[l] as usize, [va[0][l], va[1][l], va[2][l]], c);
             }
             st_h[l] = st[self.hero[l]][l];
-            if masked {
-                safe[l] = geo.safe_distance(j[l] as usize) as f32;
-            }
         }
         let st_h = f32x8::from(st_h);
         let flying = live & !exit;
@@ -210,7 +207,7 @@ impl Lanes {
         let d2 = [scatter.blend(nd[0], d[0]), scatter.blend(nd[1], d[1]), scatter.blend(nd[2], d[2])];
         let mut shallow = 0;
         if masked {
-            let safe = f32x8::from(safe);
+            let safe = f32x8::from(geo.safe_distances8(v));
             shallow = (scatter & safe.cmp_lt(f32x8::splat(2.0))).move_mask();
             self.t_exit = scatter.blend(safe_radius8(geo, q, v, safe), t_exit).into();
         } else {
@@ -327,7 +324,7 @@ pub(crate) fn trace_hero_lanes<M: Medium, P: PathTally>(
                 let mut p = [ln.p[0][l], ln.p[1][l], ln.p[2][l]];
                 if ev.exits >> l & 1 == 1 {
                     p = add(p, scale(d, ln.t_exit[l]));
-                    if geo.safe_distance(geo.index(locate_box(geo, p))) >= 2 {
+                    if geo.safe_distance(locate_box(geo, p)) >= 2 {
                         ln.start_flight(geo, l, p, d);
                         continue;
                     }

@@ -8,6 +8,7 @@
 //! - `normals`: sparse shading normals.
 //! - `medium`: the `Medium` trait and its dense, sparse and label forms.
 //! - `band`: the band medium (a band near the surface stored per voxel, one homogeneous core).
+//! - `distance`: safe and empty distances of an inside mask (erosions) and their signed byte stored by bricks.
 //! - `scene`: the grid geometry (size, boundary, inside mask, safe and empty distances), texels.
 //! - `path`: a path's walk state, its value, the `Tally` that receives its segments, the walk's limits.
 //! - `grid`: locating points, voxel traversal (DDA), exit distances, the periodic wrap, empty jumps.
@@ -24,6 +25,7 @@
 //! - `hero_pass`: the hero paths' render and gradient drivers.
 
 pub mod band;
+pub mod distance;
 pub mod estimate;
 pub(crate) mod flight;
 pub mod grad;

@@ -4,10 +4,14 @@
 //!
 //! Layout: voxel (x, y, z) has linear index `(z * ny + y) * nx + x`, i.e. C order of a (z, y, x) array.
 
+pub use crate::transport::distance::{
+    brick_empty_distances, empty_distances, safe_distances, signed_distances, BrickedDistances, BRICK, SAFE_CAP,
+};
 pub use crate::transport::light::{Light, UniformLight};
 pub use crate::transport::medium::{DenseMedium, LabelMedium, Medium, SparseMedium, EMPTY};
 pub use crate::transport::normals::ShadingNormals;
 use crate::transport::sampling::V3;
+use wide::i32x8;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Boundary {
@@ -28,13 +32,15 @@ pub struct Geometry {
     /// Linear-index stride of a step along x, y, z.
     pub stride: [isize; 3],
     pub boundary: Boundary,
-    /// With an inside mask (`with_inside`): each voxel's signed distance, one byte per voxel. Inside voxels hold
-    /// their safe distance, the Chebyshev distance in voxels to the nearest voxel outside the object or the grid
-    /// (1 at the surface); outside voxels minus their empty distance, the Chebyshev distance to the nearest
-    /// inside voxel (-1 next to the object; the grid's exterior counts as empty); both capped at `SAFE_CAP`. A
-    /// voxel is inside iff its value is positive. One array for both, so the flight that leaves the object
-    /// finds the empty distance of its next voxel in the cache line it just read. None: the whole box is inside.
-    pub dist: Option<Vec<i8>>,
+    /// With an inside mask (`with_inside`): each voxel's signed distance (`signed_distances`) stored by bricks of
+    /// `BRICK`^3 voxels (`BrickedDistances`: a brick of one value costs a table entry, the others their bytes; read
+    /// by voxel coordinates). Inside voxels hold their safe distance, the Chebyshev distance in voxels to the
+    /// nearest voxel outside the object or the grid (1 at the surface); outside voxels minus their empty distance,
+    /// the Chebyshev distance to the nearest inside voxel (-1 next to the object; the grid's exterior counts as
+    /// empty); both capped at `SAFE_CAP`. A voxel is inside iff its value is positive. One store for both, so the
+    /// flight that leaves the object finds the empty distance of its next voxel in the brick it just read. None:
+    /// the whole box is inside.
+    pub dist: Option<BrickedDistances>,
     /// With a mask and `Boundary::Box`: the empty distance per brick of `BRICK`^3 voxels (x fastest), in bricks
     /// (a brick is occupied if any of its voxels is inside), capped at 255: a few kilobytes that stay in cache,
     /// so a flight far from the object crosses it in a few jumps without touching the per-voxel array. Flights
@@ -100,28 +106,21 @@ impl Geometry {
     }
 
     /// Sets the inside mask (non-zero = inside; x fastest, one byte per voxel, read and not kept) and computes the
-    /// safe and empty distances from it. Works in three bytes per voxel besides the mask: the result and two
-    /// erosion buffers.
+    /// safe and empty distances from it (`BrickedDistances::new`: a slab of the grid at a time, so besides the
+    /// bricks it works in three bytes per voxel of a slab and its halo).
     pub fn with_inside(mut self, inside: impl AsRef<[u8]>) -> Result<Self, String> {
-        use rayon::prelude::*;
         let inside = inside.as_ref();
         if inside.len() != self.voxel_count() {
             return Err("inside mask size differs from the grid".into());
         }
         let n = [self.n[0] as usize, self.n[1] as usize, self.n[2] as usize];
-        // safe distances turned into the signed byte in place (same size and alignment: no second array)
-        let mut dist: Vec<i8> =
-            safe_distances(inside, n).into_iter().map(|s| if s > 0 { s as i8 } else { -1 }).collect();
         // On periodic axes a flight leaving the grid re-enters on the other side: no empty distances (every outside
         // voxel -1, "next to the object") and no jumps there.
-        if self.boundary == Boundary::Box {
-            // each erosion an outside voxel survives deepens its -1 by one (inside voxels are never in the set):
-            // `empty_distances` counted into `dist` directly
-            let outside = inside.par_iter().map(|&m| (m == 0) as u8).collect();
-            erode_counting(outside, n, 1, SAFE_CAP, &mut dist, |d, c| *d -= c as i8);
+        let boxed = self.boundary == Boundary::Box;
+        self.dist = Some(BrickedDistances::new(inside, n, boxed));
+        if boxed {
             self.brick_empty = Some(brick_empty_distances(inside, n));
         }
-        self.dist = Some(dist);
         Ok(self)
     }
 
@@ -131,22 +130,30 @@ impl Geometry {
         self.dist.is_some()
     }
 
-    /// Safe distance of voxel j (`dist`; 0 outside the object); `SAFE_CAP` when there is no mask.
+    /// Safe distance of in-grid voxel v (x, y, z) (`dist`; 0 outside the object); `SAFE_CAP` when there is no
+    /// mask.
     #[inline(always)]
-    pub fn safe_distance(&self, j: usize) -> u8 {
+    pub fn safe_distance(&self, v: [i32; 3]) -> u8 {
         match &self.dist {
             None => SAFE_CAP,
-            Some(d) => d[j].max(0) as u8,
+            Some(d) => d.get(v).max(0) as u8,
         }
     }
 
-    /// Empty distance of voxel j (`dist`; 0 inside the object and without a mask; 1 everywhere outside on
-    /// periodic grids, which have no empty distances).
+    /// `safe_distance` of eight in-grid voxels (x, y, z lanes), as floats; only with a mask.
     #[inline(always)]
-    pub fn empty_distance(&self, j: usize) -> u8 {
+    pub fn safe_distances8(&self, v: [i32x8; 3]) -> [f32; 8] {
+        let d = self.dist.as_ref().expect("safe_distances8 needs a mask").get8(v);
+        d.map(|d| d.max(0) as f32)
+    }
+
+    /// Empty distance of in-grid voxel v (x, y, z) (`dist`; 0 inside the object and without a mask; 1 everywhere
+    /// outside on periodic grids, which have no empty distances).
+    #[inline(always)]
+    pub fn empty_distance(&self, v: [i32; 3]) -> u8 {
         match &self.dist {
             None => 0,
-            Some(d) => (-d[j]).max(0) as u8,
+            Some(d) => (-d.get(v)).max(0) as u8,
         }
     }
 
@@ -177,19 +184,15 @@ impl Geometry {
 
     #[inline(always)]
     pub fn is_inside(&self, v: [i32; 3]) -> bool {
-        self.in_grid(v)
-            && match &self.dist {
-                None => true,
-                Some(d) => d[self.index(v)] > 0,
-            }
+        self.in_grid(v) && self.mask_inside(v)
     }
 
-    /// Whether in-grid voxel with linear index j is inside the object.
+    /// Whether in-grid voxel v (x, y, z) is inside the object.
     #[inline(always)]
-    pub fn mask_inside(&self, j: usize) -> bool {
+    pub fn mask_inside(&self, v: [i32; 3]) -> bool {
         match &self.dist {
             None => true,
-            Some(d) => d[j] > 0,
+            Some(d) => d.get(v) > 0,
         }
     }
 
@@ -198,146 +201,6 @@ impl Geometry {
     pub fn shading_normal(&self, v: [i32; 3]) -> Option<V3> {
         self.normals.as_ref()?.get(v)
     }
-}
-
-/// Largest safe distance stored: 16 voxels (1.3 mm at 300 DPI), far beyond a free flight in any ink.
-pub const SAFE_CAP: u8 = 16;
-// Safe and empty distances share a signed byte (`Geometry::dist`).
-const _: () = assert!(SAFE_CAP <= 127);
-
-/// Safe distances of a mask (non-zero = inside) over an (nx, ny, nz) grid: the number of successive erosions by
-/// the 3 x 3 x 3 cube (separable: three 1D passes) a voxel survives, outside the grid counting as outside. A
-/// voxel with safe distance s has every voxel within s - 1 steps (any of the 26 directions) inside.
-pub fn safe_distances(inside: &[u8], n: [usize; 3]) -> Vec<u8> {
-    use rayon::prelude::*;
-    erosion_depths(inside.par_iter().map(|&m| (m != 0) as u8).collect(), n, 0, SAFE_CAP)
-}
-
-/// Edge of the bricks of `Geometry::brick_empty`, in voxels.
-pub const BRICK: usize = 8;
-
-/// `empty_distances` at the scale of bricks of `BRICK`^3 voxels (x fastest over ceil(n / BRICK) bricks): each
-/// brick's Chebyshev distance in bricks to the nearest brick holding an inside voxel (capped at 255; the grid's
-/// exterior is empty). A brick with distance e has every voxel of the bricks within e - 1 brick steps outside.
-pub fn brick_empty_distances(inside: &[u8], n: [usize; 3]) -> Vec<u8> {
-    let nb: [usize; 3] = std::array::from_fn(|a| n[a].div_ceil(BRICK));
-    let mut free = vec![1u8; nb[0] * nb[1] * nb[2]];
-    for z in 0..n[2] {
-        for y in 0..n[1] {
-            let row = &inside[(z * n[1] + y) * n[0]..][..n[0]];
-            let b = ((z / BRICK) * nb[1] + y / BRICK) * nb[0];
-            for (x, &m) in row.iter().enumerate() {
-                if m != 0 {
-                    free[b + x / BRICK] = 0;
-                }
-            }
-        }
-    }
-    erosion_depths(free, nb, 1, 255)
-}
-
-/// Empty distances of a mask (non-zero = inside): `safe_distances` of its complement, with the grid's exterior
-/// counting as empty. An outside voxel with empty distance e has every voxel within e - 1 steps outside the
-/// object (or beyond the grid); inside voxels have 0.
-pub fn empty_distances(inside: &[u8], n: [usize; 3]) -> Vec<u8> {
-    use rayon::prelude::*;
-    erosion_depths(inside.par_iter().map(|&m| (m == 0) as u8).collect(), n, 1, SAFE_CAP)
-}
-
-/// For a set (1 = in it, 0 = not), the number of successive erosions by the 3 x 3 x 3 cube each voxel survives
-/// (its Chebyshev distance to the nearest voxel not in the set), capped at `cap`; beyond the grid is in the set
-/// if `border` is 1.
-fn erosion_depths(cur: Vec<u8>, n: [usize; 3], border: u8, cap: u8) -> Vec<u8> {
-    let mut depth = cur.clone();
-    erode_counting(cur, n, border, cap, &mut depth, |d, c| *d += c);
-    depth
-}
-
-/// Erodes the set `cur` (1 = in it) by the 3 x 3 x 3 cube up to `cap` - 1 times (beyond the grid is in the set if
-/// `border` is 1), calling `count(acc[j], c)` after each erosion with voxel j's membership c (0 or 1); stops once
-/// the set is empty.
-fn erode_counting<T: Send>(
-    mut cur: Vec<u8>,
-    n: [usize; 3],
-    border: u8,
-    cap: u8,
-    acc: &mut [T],
-    count: impl Fn(&mut T, u8) + Sync,
-) {
-    use rayon::prelude::*;
-    let plane = n[0] * n[1];
-    let mut tmp = vec![0u8; cur.len()];
-    for _ in 1..cap {
-        for a in 0..3 {
-            erode_axis(&cur, &mut tmp, n, a, border);
-            std::mem::swap(&mut cur, &mut tmp);
-        }
-        let any = acc
-            .par_chunks_mut(plane)
-            .zip(cur.par_chunks(plane))
-            .map(|(s, c)| {
-                s.iter_mut().zip(c).for_each(|(s, &c)| count(s, c));
-                c.iter().any(|&c| c != 0)
-            })
-            .reduce(|| false, |x, y| x || y);
-        if !any {
-            break;
-        }
-    }
-}
-
-/// out = cur eroded along axis a by one voxel (a voxel stays only if both neighbours on that axis are in the set;
-/// beyond the grid counts as `border`). Whole rows and planes at a time, so the loops vectorise.
-fn erode_axis(cur: &[u8], out: &mut [u8], n: [usize; 3], a: usize, border: u8) {
-    use rayon::prelude::*;
-    let (nx, plane) = (n[0], n[0] * n[1]);
-    let and3 = |o: &mut [u8], x: &[u8], y: &[u8], z: &[u8]| {
-        o.iter_mut().zip(x).zip(y).zip(z).for_each(|(((o, &x), &y), &z)| *o = x & y & z);
-    };
-    // The first and last of m cells of `st` bytes each (a row's voxels, a plane's rows): one neighbour beyond
-    // the grid; the interior cells are done by `and3`.
-    let ends = |o: &mut [u8], c: &[u8], m: usize, st: usize| {
-        let cell = |i: usize| &c[i * st..(i + 1) * st];
-        if m == 1 {
-            o.iter_mut().zip(c).for_each(|(o, &c)| *o = c & border);
-            return;
-        }
-        let (first, last) = (cell(0).iter().zip(cell(1)), cell(m - 1).iter().zip(cell(m - 2)));
-        o[..st].iter_mut().zip(first).for_each(|(o, (&c, &b))| *o = c & b & border);
-        o[(m - 1) * st..].iter_mut().zip(last).for_each(|(o, (&c, &b))| *o = c & b & border);
-    };
-    out.par_chunks_mut(plane).enumerate().for_each(|(k, o)| {
-        let c = &cur[k * plane..(k + 1) * plane];
-        match a {
-            0 => {
-                for (o, c) in o.chunks_mut(nx).zip(c.chunks(nx)) {
-                    ends(o, c, nx, 1);
-                    if nx > 2 {
-                        and3(&mut o[1..nx - 1], &c[..nx - 2], &c[1..nx - 1], &c[2..]);
-                    }
-                }
-            }
-            1 => {
-                let ny = n[1];
-                ends(o, c, ny, nx);
-                if ny > 2 {
-                    and3(&mut o[nx..plane - nx], &c[..plane - 2 * nx], &c[nx..plane - nx], &c[2 * nx..]);
-                }
-            }
-            _ => {
-                let nz = n[2];
-                if nz == 1 {
-                    o.iter_mut().zip(c).for_each(|(o, &c)| *o = c & border);
-                } else if k == 0 || k + 1 == nz {
-                    let m = if k == 0 { 1 } else { k - 1 };
-                    let nb = &cur[m * plane..(m + 1) * plane];
-                    o.iter_mut().zip(c).zip(nb).for_each(|((o, &c), &b)| *o = c & b & border);
-                } else {
-                    and3(o, &cur[(k - 1) * plane..k * plane], c, &cur[(k + 1) * plane..(k + 2) * plane]);
-                }
-            }
-        }
-    });
 }
 
 /// The outward unit normal (x, y, z) of face id f: 0 -x, 1 +x, 2 -y, 3 +y, 4 -z, 5 +z.

@@ -166,7 +166,7 @@ pub(crate) fn walk<K: Tracker, M: Medium, T: Tally, U: Uniforms>(
                         tally.scatter(j);
                         let (u1, u2) = rng.next_f32_pair();
                         s.d = hg_sample(s.d, geo.g, u1, u2);
-                        if stop_deep && geo.safe_distance(j) >= 2 {
+                        if stop_deep && geo.safe_distance(s.v) >= 2 {
                             *w = s;
                             return WalkEnd::Deep;
                         }

@@ -141,7 +141,7 @@ impl Packet {
         if geo.masked() {
             let v = locate_box(geo, p);
             let (pv, vv) = (p.map(f32x8::splat), v.map(i32x8::splat));
-            let s = f32x8::splat(geo.safe_distance(geo.index(v)) as f32);
+            let s = f32x8::splat(geo.safe_distance(v) as f32);
             self.t_exit[l] = safe_radius8(geo, pv, vv, s).to_array()[0];
         } else {
             let (t_exit, axis) = grid_exit8(geo, p.map(f32x8::splat), d.map(f32x8::splat));
@@ -302,7 +302,7 @@ pub(crate) fn trace_paths<M: Medium, P: PathTally>(
                 let mut p = [pk.p[0][l], pk.p[1][l], pk.p[2][l]];
                 if ev.exits >> l & 1 == 1 {
                     p = add(p, scale(d, pk.t_exit[l]));
-                    let s = geo.safe_distance(geo.index(locate_box(geo, p)));
+                    let s = geo.safe_distance(locate_box(geo, p));
                     if s >= 2 {
                         pk.start_flight(geo, l, p, d);
                         continue;

@@ -82,12 +82,9 @@ impl Packet {
         let v = locate8(geo, &mut q);
         let j = ((v[2] * i32x8::splat(geo.n[1]) + v[1]) * i32x8::splat(geo.n[0]) + v[0]).to_array();
         let va = v.map(|x| x.to_array());
-        let (mut st, mut albedo, mut safe) = ([0.0f32; W], [0.0f32; W], [0.0f32; W]);
+        let (mut st, mut albedo) = ([0.0f32; W], [0.0f32; W]);
         for l in 0..W {
             (st[l], albedo[l]) = med.coeffs_at(j[l] as usize, [va[0][l], va[1][l], va[2][l]], self.chan[l]);
-            if masked {
-                safe[l] = geo.safe_distance(j[l] as usize) as f32;
-            }
         }
         let (st, albedo) = (f32x8::from(st), f32x8::from(albedo));
         let maj = f32x8::from(self.maj);
@@ -109,7 +106,7 @@ impl Packet {
         let d2 = [scatter.blend(nd[0], d[0]), scatter.blend(nd[1], d[1]), scatter.blend(nd[2], d[2])];
         let mut shallow = 0;
         if masked {
-            let safe = f32x8::from(safe);
+            let safe = f32x8::from(geo.safe_distances8(v));
             shallow = (scatter & safe.cmp_lt(f32x8::splat(2.0))).move_mask();
             let radius = safe_radius8(geo, q, v, safe);
             self.t_exit = scatter.blend(radius, t_exit).into();
