@@ -144,8 +144,7 @@ def diffuse_counts_layer(
     down: float,
     counts: NDArray[np.uint32],
 ) -> float:
-    """Counts of optimisation layer z: share (N,y,x) f64, block (y,x) u32, masks (y,x) u8, error (2,y,x,N) f64 ->
-    counts (y,x,N) u32; returns the largest |residual component|."""
+    """Counts of layer z: share (N,y,x) f64, block (y,x) u32, classes (y,x) u8 -> counts (y,x,N) u32; max |residual|."""
 
 def feature_plane(
     z: int, site_z: NDArray[np.int32], sampling: tuple[float, float, float], out: NDArray[np.int32]
