@@ -8,7 +8,9 @@ printer grid twice as fine in every axis, ``random``, ``blue-noise/tint-first`` 
 ``Quantization.ink_order``, ``blue-noise+comp`` with the shares pre-compensated with the pair factors (``+comp1``: each
 ink's factor against the base alone, what ``--compensate`` does; ``t0.05``: tapered below a share of 0.05),
 ``blue-noise-columns`` (``dithers.BlueNoiseColumns``: golden-ratio shifts of a 2D mask along depth),
-``blue-noise~mm`` with a blue-noise array whose energy is isotropic in mm rather than in printer voxels (and
+``count-diffusion`` (``dithers.CountDiffusion``: each optimisation voxel's counts error-diffused, ``~shellsN`` with
+the error kept within N depth shells under the surface), ``blue-noise~mm`` with a blue-noise array whose energy is
+isotropic in mm rather than in printer voxels (and
 ``blue-noise-columns~mm`` with such a 2D mask), ``~2d`` with
 2D blue-noise layers, ``layered_tile``): if the bias shrinks on a finer grid, it comes from the size of the printer
 voxels (the grains of one ink absorb less than the same ink spread through the mixture), not from the dither's
@@ -76,7 +78,7 @@ def layered_tile() -> np.ndarray:
 def quantization(spec: str) -> Quantization:
     """``METHOD[:UPSAMPLE][@DPI][+comp[1][tP]][~mm]`` -> the settings (``+comp...``: shares compensated,
     ``printing.compensate``; ``~mm`` and ``~2d``, read by ``main``: ``physical_tile``, ``layered_tile``)."""
-    spec = spec.replace("~mm", "").replace("~2d", "")
+    spec = spec.partition("~shells")[0].replace("~mm", "").replace("~2d", "")
     spec, plus, _ = spec.partition("+comp")  # its model's variant: ``printed_refine.quantization``
     head, _, dpi = spec.partition("@")
     head, _, order = head.partition("/")
@@ -142,7 +144,9 @@ def main():
         t0 = time.perf_counter()
         variant = printed_refine.compensation_variant(printed_refine.quantization(spec.split("~")[0])[1])
         own = mock.patch.object(dithers, "load_blue_noise", lambda *_, t=tile: t) if tile is not None else None
-        with own or contextlib.nullcontext(), variant:
+        _, shells, n = spec.partition("~shells")  # ``CountDiffusion.shells`` for this variant
+        depth = mock.patch.object(dithers.CountDiffusion, "shells", int(n)) if shells else contextlib.nullcontext()
+        with own or contextlib.nullcontext(), variant, depth:
             labels = quantize_volume(vol, q)
         printer = PrintedRenderer(labels, rec.texels, vol.voxel_mm, rec.kind, a.threads, None, [pick])
         printer.use(labels)

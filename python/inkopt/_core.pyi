@@ -138,6 +138,18 @@ def diffuse_layer(
 ) -> None:
     """Error-diffuse layer z: mixture (N,Y,X) f32, masks (Y,X) u8, error (2,Y,X,N) f32 -> labels into out (Y,X) u8."""
 
+def diffuse_counts_layer(
+    share: NDArray[np.float64],
+    block: NDArray[np.uint32],
+    inside: NDArray[np.uint8],
+    inside_next: NDArray[np.uint8],
+    error: NDArray[np.float64],
+    z: int,
+    down: float,
+    counts: NDArray[np.uint32],
+) -> float:
+    """Counts of layer z: share (N,y,x) f64, block (y,x) u32, classes (y,x) u8 -> counts (y,x,N) u32; max |residual|."""
+
 def feature_plane(
     z: int, site_z: NDArray[np.int32], sampling: tuple[float, float, float], out: NDArray[np.int32]
 ) -> None:

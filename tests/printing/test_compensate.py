@@ -122,11 +122,12 @@ def test_quantize_uses_the_compensation(monkeypatch):
     mix[..., 2], mix[..., 4] = 0.24, 0.76
     vo = (25.4 / 300,) * 3
     src = MixtureLayers(mix, vo, None, inks)
-    for flag, want in ((False, 0.24), (True, 0.24 * 1.25 / (1 + 0.25 * 0.24))):
-        labels, vp = quantize(src, Quantization(compensate=flag))
-        frac, _ = ink_fractions(labels, 5, mix.shape[:3], vo, vp)
-        # blue noise over the whole volume: within 1 % of the share it was given
-        assert abs(frac[..., 2].mean() - want) < 0.01, (flag, frac[..., 2].mean())
+    for method in ("blue-noise", "count-diffusion"):
+        for flag, want in ((False, 0.24), (True, 0.24 * 1.25 / (1 + 0.25 * 0.24))):
+            labels, vp = quantize(src, Quantization(method, compensate=flag))
+            frac, _ = ink_fractions(labels, 5, mix.shape[:3], vo, vp)
+            # over the whole volume: within 1 % of the share it was given
+            assert abs(frac[..., 2].mean() - want) < 0.01, (method, flag, frac[..., 2].mean())
 
 
 def test_compensate_is_recorded_and_checked():

@@ -88,6 +88,10 @@ def test_shapes_one_ink_and_inside(method, upsample):
     mix *= rng.uniform(0.5, 2.0, shape)[..., None]  # rows need not sum to 1
     inside = rng.random(shape) < 0.7
     mix[~inside] = 0.0  # zero rows are allowed outside
+    if DITHERS[method].nearest_only and upsample != "nearest":
+        with pytest.raises(ParameterError, match="nearest"):
+            quantize_mix(mix, (V300, V300, V300), method=method, upsample=upsample, inside=inside)
+        return
     labels, vp = quantize_mix(mix, (V300, V300, V300), method=method, upsample=upsample, inside=inside, seed=3)
     assert labels.dtype == np.uint8
     assert labels.shape == printer_grid(shape, (V300,) * 3)[0]
@@ -112,7 +116,7 @@ def test_pure_inks_are_exact():
     mix[..., 1] = 1.0
     mix[2:, :, :, 1], mix[2:, :, :, 2] = 0.0, 1.0
     for method in METHODS:
-        for up in ("nearest", "linear"):
+        for up in ("nearest",) if DITHERS[method].nearest_only else ("nearest", "linear"):
             lab, vp = quantize_mix(mix, (V300,) * 3, method=method, upsample=up)
             assert set(np.unique(lab).tolist()) == {1, 2}
             if up == "nearest":
@@ -162,13 +166,14 @@ def test_record_says_how_the_labels_were_made():
     mix = np.full((2, 3, 4, 3), 1 / 3, np.float32)
     vol = Volume.from_mixture((V300,) * 3, mix, InkTable.from_names(["cyan", "magenta", "white"]))
     for method in METHODS:
-        q = Quantization(method, np.int64(4), [600, 300], "linear", "lightness", 14.0)
+        up = "nearest" if DITHERS[method].nearest_only else "linear"
+        q = Quantization(method, np.int64(4), [600, 300], up, "lightness", 14.0)
         made = quantize_volume(vol, q).quantization
         ink_order = "lightness" if DITHERS[method].ordered else "index"
-        assert made == Quantization(method, 4, (600.0, 300.0, 25.4 / 0.014), "linear", ink_order)
+        assert made == Quantization(method, 4, (600.0, 300.0, 25.4 / 0.014), up, ink_order)
         assert made == record(q, np.array([25.4 / 600, 25.4 / 300, 0.014])) and type(made.seed) is int
         assert made == Quantization.from_arrays(made.arrays())
-        assert made.to_json() == dict(method=method, seed=4, dpi=list(made.dpi), upsample="linear", ink_order=ink_order)
+        assert made.to_json() == dict(method=method, seed=4, dpi=list(made.dpi), upsample=up, ink_order=ink_order)
 
 
 class FirstBand(Thresholds):

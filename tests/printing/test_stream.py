@@ -43,7 +43,13 @@ def mixture_run(path, shape=(6, 9, 11), inside=True, normals=False):
 
 @pytest.mark.parametrize(
     "method,upsample",
-    [("blue-noise", "nearest"), ("random", "linear"), ("error-diffusion", "linear"), ("error-diffusion", "nearest")],
+    [
+        ("blue-noise", "nearest"),
+        ("random", "linear"),
+        ("error-diffusion", "linear"),
+        ("error-diffusion", "nearest"),
+        ("count-diffusion", "nearest"),
+    ],
 )
 def test_streaming_run_equals_in_memory_quantization(tmp_path, method, upsample):
     d, vol = mixture_run(tmp_path / "r")

@@ -5,7 +5,7 @@
 //!
 //! Files: `state` (the `Scene` class's fields), `scene` (its Python methods: construction, media, light, render),
 //! `medium` (the `Medium` class and the scene's medium built from it), `texels` (the `Texels` class),
-//! `gradients` (the gradient methods of `Scene`), `printing` (error diffusion), `optimiser` (smoothing and softmax
+//! `gradients` (the gradient methods of `Scene`), `printing` (error diffusion of labels and of counts), `optimiser` (smoothing and softmax
 //! kernels on kept thread pools), `arrays` (argument checks and conversions shared by all).
 
 use pyo3::prelude::*;
@@ -25,6 +25,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<medium::Medium>()?;
     m.add_class::<texels::Texels>()?;
     m.add_function(wrap_pyfunction!(printing::diffuse_layer, m)?)?;
+    m.add_function(wrap_pyfunction!(printing::diffuse_counts_layer, m)?)?;
     m.add_function(wrap_pyfunction!(printing::feature_plane, m)?)?;
     m.add_function(wrap_pyfunction!(optimiser::smooth_rows, m)?)?;
     m.add_function(wrap_pyfunction!(optimiser::softmax_rows, m)?)?;

@@ -1,5 +1,6 @@
 //! The printing kernels: `diffuse_layer`, one printer layer of 3D vector error diffusion
-//! (`inkopt_core::kernels::diffuse`), and `feature_plane`, one plane of the exact Euclidean feature transform the
+//! (`inkopt_core::kernels::diffuse`), `diffuse_counts_layer`, one optimisation layer of the error diffusion of ink
+//! counts between optimisation voxels (`inkopt_core::kernels::counts`), and `feature_plane`, one plane of the exact Euclidean feature transform the
 //! extrusion baseline takes its nearest texels from (`inkopt_core::kernels::feature`).
 
 use numpy::{PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
@@ -37,6 +38,46 @@ pub(crate) fn diffuse_layer(
     let (cur, next) = if z.is_multiple_of(2) { (e0, e1) } else { (e1, e0) };
     let shape = inkopt_core::kernels::diffuse::LayerShape { n, ny, nx };
     py.detach(|| inkopt_core::kernels::diffuse::diffuse_layer(shape, z, m, i, i_next, cur, next, o)).map_err(err)
+}
+
+/// diffuse_counts_layer(share (N, y, x) f64, block (y, x) u32, inside (y, x) u8, inside_next (y, x) u8, error
+/// (2, y, x, N) f64, z, down, counts (y, x, N) u32) -> float: the ink counts of optimisation layer z by vector
+/// error diffusion between optimisation voxels (inkopt_core::kernels::counts), a fraction `down` of each residual
+/// to layer z + 1. error[z % 2] holds the error carried into layer z and is zeroed on return; error[(z + 1) % 2]
+/// accumulates the next layer's. Writes `counts`; returns the layer's largest |residual component|. The GIL is
+/// released.
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn diffuse_counts_layer(
+    py: Python<'_>,
+    share: PyReadonlyArray3<f64>,
+    block: PyReadonlyArray2<u32>,
+    inside: PyReadonlyArray2<u8>,
+    inside_next: PyReadonlyArray2<u8>,
+    mut error: numpy::PyReadwriteArray4<f64>,
+    z: usize,
+    down: f64,
+    mut counts: numpy::PyReadwriteArray3<u32>,
+) -> PyResult<f64> {
+    use inkopt_core::kernels::counts::{diffuse_counts_layer, CountLayer, CountShape};
+    let (n, ny, nx) = (share.shape()[0], share.shape()[1], share.shape()[2]);
+    check_shape(block.shape(), &[ny, nx], "block")?;
+    check_shape(inside.shape(), &[ny, nx], "inside")?;
+    check_shape(inside_next.shape(), &[ny, nx], "inside_next")?;
+    check_shape(error.shape(), &[2, ny, nx, n], "error")?;
+    check_shape(counts.shape(), &[ny, nx, n], "counts")?;
+    let layer = CountLayer {
+        z,
+        share: c_slice(&share, "share")?,
+        block: c_slice(&block, "block")?,
+        inside: c_slice(&inside, "inside")?,
+        inside_next: c_slice(&inside_next, "inside_next")?,
+    };
+    let e = error.as_slice_mut().map_err(|_| err("error must be C-contiguous"))?;
+    let c = counts.as_slice_mut().map_err(|_| err("counts must be C-contiguous"))?;
+    let (e0, e1) = e.split_at_mut(n * ny * nx);
+    let (cur, next) = if z.is_multiple_of(2) { (e0, e1) } else { (e1, e0) };
+    py.detach(|| diffuse_counts_layer(CountShape { n, ny, nx }, &layer, down, cur, next, c)).map_err(err)
 }
 
 /// feature_plane(z, site_z (Y, X) i32, sampling (z, y, x) f64, out (3, Y, X) i32): plane z of the exact Euclidean

@@ -8,7 +8,8 @@ labels volume keeps of them). It is a pipeline of named steps, one printer layer
 2. the printer grid over it and its inside mask (``grid.PrinterGrid``: ``q.dpi``, ``q.layer_um``);
 3. the inks' order in the bands (``dithers.band_order``: ``q.ink_order`` where the dither orders them);
 4. where ``q.compensate``, each ink's share pre-compensated for the halftone (``compensate.share_compensation``);
-5. the dither (``dithers.DITHERS[q.method]``: blue-noise dithering, random draws or 3D error diffusion);
+5. the dither (``dithers.DITHERS[q.method]``: blue-noise dithering, random draws, 3D error diffusion or the error
+   diffusion of each optimisation voxel's counts);
 6. per printer layer, the cumulative mixture upsampled to it (``layers.CumulativeLayers``, ``grid.UPSAMPLERS
    [q.upsample]``), then the dither's labels (255 = ``EMPTY`` outside).
 
@@ -59,9 +60,12 @@ def check_quantization(q: Quantization) -> None:
     """One-line ParameterError for settings no quantization follows: an unknown ``method`` or ``upsample``, a
     ``dpi`` that is not 2 or 3 positive numbers, a ``layer_um`` that is not positive, or the layer thickness given
     twice (a z ``dpi`` and ``layer_um``), a ``refine`` that is not a whole number >= 0, a ``compensate`` that is
-    not a bool; a ValueError for an unknown ``ink_order`` (a record's, from a file)."""
-    dither_class(q.method)
+    not a bool, or linear upsampling for a dither of whole blocks (``Dither.nearest_only``); a ValueError for an
+    unknown ``ink_order`` (a record's, from a file)."""
+    dither = dither_class(q.method)
     upsampler_class(q.upsample)
+    if dither.nearest_only and q.upsample != "nearest":
+        raise ParameterError(f"method '{q.method}' works on the optimisation voxels' blocks: use upsample 'nearest'")
     if q.ink_order not in INK_ORDERS:  # no flag sets it: a plain ValueError
         raise ValueError(f"unknown ink_order '{q.ink_order}'; use one of {list(INK_ORDERS)}")
     dpi = () if q.dpi is None else q.dpi

@@ -2,6 +2,8 @@
 //!
 //! - `diffuse` (printing): 3D vector error diffusion of per-voxel ink mixtures to one ink label per printer
 //!   voxel, layer by layer.
+//! - `counts` (printing): vector error diffusion of whole ink counts between optimisation voxels (each voxel's
+//!   block of printer voxels), one optimisation layer at a time.
 //! - `smooth` (optimiser): explicit diffusion of per-voxel values over a sparse voxel set, the step
 //!   preconditioner.
 //! - `simplex` (optimiser): the row-wise softmax of the optimiser's variables and its backward map.
@@ -14,6 +16,7 @@
 //! thread count. They use `crate::spans` (voxel sets by grid row) and, for `diffuse`, the empty-voxel label
 //! `transport::medium::EMPTY`.
 
+pub mod counts;
 pub mod diffuse;
 pub mod feature;
 pub mod simplex;
