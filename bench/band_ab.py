@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import resource
 import sys
 import time
 from pathlib import Path
@@ -22,11 +21,7 @@ sys.path.insert(0, str(ROOT / "python"))
 sys.path.insert(0, str(ROOT / "bench"))
 
 from bench_mesh import SPOT, medium_bytes  # noqa: E402
-
-
-def cpu() -> float:
-    r = resource.getrusage(resource.RUSAGE_SELF)
-    return r.ru_utime + r.ru_stime
+from common import cpu_seconds as cpu  # noqa: E402
 
 
 def timed(fn) -> tuple[float, float, object]:

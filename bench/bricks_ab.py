@@ -20,7 +20,6 @@ import importlib.machinery
 import importlib.util
 import json
 import os
-import resource
 import sys
 from pathlib import Path
 
@@ -31,11 +30,7 @@ sys.path.insert(0, str(ROOT / "python"))
 sys.path.insert(0, str(ROOT / "bench"))
 
 from bench_mesh import SPOT  # noqa: E402
-
-
-def cpu() -> float:
-    r = resource.getrusage(resource.RUSAGE_SELF)
-    return r.ru_utime + r.ru_stime
+from common import cpu_seconds as cpu  # noqa: E402
 
 
 def load_core(path: str):

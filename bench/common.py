@@ -5,6 +5,7 @@ results JSON that records the commit and the command that produced it."""
 import json
 import os
 import platform
+import resource
 import shlex
 import subprocess
 import sys
@@ -84,3 +85,9 @@ def add_study_entry(name: str, key: str, entry: dict) -> Path:
     out = json.loads(path.read_text()) if path.is_file() else {"results": {}}
     out["results"][key] = entry
     return write_study(name, out)
+
+
+def cpu_seconds() -> float:
+    """This process's CPU seconds so far (user and system, every thread)."""
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
