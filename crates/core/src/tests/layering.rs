@@ -31,6 +31,7 @@ const LAYERS: &[&str] = &[
     "transport::hero_lanes",
     "transport::hero_pass",
     "kernels::diffuse",
+    "kernels::counts",
     "kernels::feature",
     "kernels::simplex",
     "kernels::smooth",
