@@ -96,8 +96,8 @@ def run(tmp_path_factory):
 def test_report_keys_and_round_trip(run):
     data = json.loads((run / "report.json").read_text())
     # "stop" (why the run ended), "finish_smooth", the baseline guard's "baseline" and "beats_baseline" and the
-    # finishing choice's "finish" are the keys added since the files carried a version
-    added = {"format_version", "stop", "finish_smooth", "baseline", "beats_baseline", "finish"}
+    # finishing choice's "finish" and the loss's "colour_term" are the keys added since the files carried a version
+    added = {"format_version", "stop", "finish_smooth", "baseline", "beats_baseline", "finish", "colour_term"}
     assert set(data) == SLAB_REPORT_KEYS | added and data["format_version"] == 1
     assert data["finish_smooth"] == 0 and data["finish"] is None  # a slab's default: no pass, nothing chosen
     assert data["stop"]["reason"] == "iterations" and data["stop"]["iterations"] == 2
@@ -115,6 +115,9 @@ def test_report_keys_and_round_trip(run):
     assert Report.from_json(old) == replace(rep, stop=None)
     unguarded = {k: v for k, v in data.items() if k not in ("baseline", "beats_baseline")}  # before the guard
     assert Report.from_json(unguarded) == replace(rep, baseline=None, beats_baseline=None)
+    assert data["colour_term"] == "squared"
+    before_term = {k: v for k, v in data.items() if k != "colour_term"}  # before the colour term was a choice
+    assert Report.from_json(before_term) == replace(rep, colour_term=None)
 
 
 def test_newer_format_is_a_one_line_error(run, tmp_path):
