@@ -485,8 +485,8 @@ def test_settings_left_to_the_scene_kind():
 
     assert diffusion_steps(1.5) != diffusion_steps(3.0)
     assert SCENE_DEFAULTS == {
-        "slab": {"adjoint_ema": 0.8, "smooth": 1.5, "init": "white", "finish_smooth": 0},
-        "mesh": {"adjoint_ema": 0.5, "smooth": 3.0, "init": "white", "finish_smooth": 1},
+        "slab": {"adjoint_ema": 0.8, "smooth": 1.5, "init": "white", "finish_smooth": 0, "colour_term": "squared"},
+        "mesh": {"adjoint_ema": 0.5, "smooth": 3.0, "init": "white", "finish_smooth": 1, "colour_term": "linear"},
     }
     assert OptimizeConfig(finish_smooth=2).for_scene("slab").finish_smooth == 2
     assert OptimizeConfig(finish_smooth=FINISH_AUTO).for_scene("mesh").finish_smooth == FINISH_AUTO
@@ -554,6 +554,20 @@ def test_finish_smooths_the_result_not_the_checkpoint(tmp_path):
     assert plain.smoother is None and np.array_equal(plain.x, x)
     with pytest.raises(ValueError, match="finish_smooth"):
         OptimizeConfig(finish_smooth=9).validate()
+
+
+def test_the_colour_term_is_the_scene_kinds_unless_given():
+    """No ``--colour-term``: the config leaves it to the scene kind, the mean dE76 on meshes and the mean dE76^2 on
+    slabs (``SCENE_DEFAULTS``); given, it is kept on either."""
+    from inkopt.cli import build_parser
+    from inkopt.cli.runargs import config_from_args
+
+    cfg = config_from_args(build_parser().parse_args(["slab", "top.png", "--size-mm", "6x4x1", "--out", "run"]))
+    assert cfg.colour_term is None
+    assert cfg.for_scene("mesh").colour_term == "linear" and cfg.for_scene("slab").colour_term == "squared"
+    assert replace(cfg, colour_term="squared").for_scene("mesh").colour_term == "squared"
+    assert replace(cfg, colour_term="linear").for_scene("slab").colour_term == "linear"
+    assert not cfg.resolved and cfg.for_scene("mesh").resolved
 
 
 def test_the_linear_colour_term_optimises_and_is_an_option():

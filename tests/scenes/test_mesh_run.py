@@ -116,7 +116,8 @@ def test_outputs_and_quality(ball_run):
     rep = json.loads((ball_run / "report.json").read_text())
     assert set(REPORT_KEYS) <= set(rep)
     assert rep["iterations"] == 30 and rep["shell_mm"] is None
-    assert (rep["adjoint_ema"], rep["smooth"]) == (0.5, 3.0)  # the mesh defaults (OptimizeConfig.for_scene)
+    # the mesh defaults (OptimizeConfig.for_scene)
+    assert (rep["adjoint_ema"], rep["smooth"], rep["colour_term"]) == (0.5, 3.0, "linear")
     assert rep["inside_voxels"] == rep["free_voxels"] < rep["voxels"]
     # The final and the all-white start are evaluated with the same seed at 32 spp over ~1400 texels: the
     # evaluation noise of each mean ΔE76 is ~0.1 (per-texel ΔE spread of a few units / sqrt(1400)). The run itself

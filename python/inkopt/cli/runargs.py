@@ -122,9 +122,8 @@ def _add_step_args(p, d) -> None:
     p.add_argument(
         "--colour-term",
         choices=["squared", "linear"],
-        default=d.colour_term,
-        help="the colour term: squared, the mean dE76^2 (default), or linear, the mean dE76 that the figures report "
-        "(docs/quality.md)",
+        help="the colour term: squared, the mean dE76^2, or linear, the mean dE76 that the figures report "
+        f"(default: {slab['colour_term']} on slabs, {mesh['colour_term']} on meshes; docs/quality.md)",
     )
     p.add_argument(
         "--lr",
