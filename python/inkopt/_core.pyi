@@ -166,8 +166,7 @@ def smooth_rows(
     threads: int | None = None,
     rows: NDArray[np.int64] | None = None,
 ) -> None:
-    """Diffuse, in place, the rows ``rows`` (K,) i64 (None: all) of values (F, C) f32 of voxels index (F,) i64 over
-    their voxels' 6-neighbours, guide (K, D) f32."""
+    """Diffuse in place rows (K,) i64 (None: all) of values (F, C) f32 of voxels index (F,) i64, guide (K, D) f32."""
 
 def softmax_rows(x: NDArray[np.float32], threads: int | None = None) -> NDArray[np.float32]:
     """The softmax of each row of x (rows, n) f32 -> (rows, n) f32."""
