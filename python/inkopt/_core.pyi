@@ -164,8 +164,9 @@ def smooth_rows(
     guide: NDArray[np.float32] | None = None,
     tau: float = 1.0,
     threads: int | None = None,
-) -> NDArray[np.float32]:
-    """Diffuse values (F, C) f32 of voxels index (F,) i64 over their 6-neighbours, guide (F, D) f32 -> (F, C) f32."""
+    rows: NDArray[np.int64] | None = None,
+) -> None:
+    """Diffuse in place rows (K,) i64 (None: all) of values (F, C) f32 of voxels index (F,) i64, guide (K, D) f32."""
 
 def softmax_rows(x: NDArray[np.float32], threads: int | None = None) -> NDArray[np.float32]:
     """The softmax of each row of x (rows, n) f32 -> (rows, n) f32."""

@@ -46,28 +46,33 @@ pub struct RowSpans {
 impl RowSpans {
     /// The voxels `index` (strictly increasing linear indices) of a grid of (nx, ny, nz) voxels.
     pub fn new(n_xyz: [usize; 3], index: &[i64]) -> Result<Self, String> {
+        Self::of(n_xyz, index.len(), |e| index[e])
+    }
+
+    /// The `listed` voxels `voxel(0)`, `voxel(1)`, ... (strictly increasing linear indices) of a grid of (nx, ny,
+    /// nz) voxels, read through `voxel` (e.g. a subset of another list, without gathering it).
+    pub fn of(n_xyz: [usize; 3], listed: usize, voxel: impl Fn(usize) -> i64) -> Result<Self, String> {
         let (nx, n) = (n_xyz[0], n_xyz.iter().product::<usize>());
-        let listed = index.len();
-        if let Some(e) = index.iter().position(|&j| j < 0 || j as u64 >= n as u64) {
-            return Err(format!("index entry {e} is voxel {}, outside the grid of {n} voxels", index[e]));
+        if let Some(e) = (0..listed).find(|&e| voxel(e) < 0 || voxel(e) as u64 >= n as u64) {
+            return Err(format!("index entry {e} is voxel {}, outside the grid of {n} voxels", voxel(e)));
         }
-        if let Some(e) = (1..listed).find(|&e| index[e] <= index[e - 1]) {
+        if let Some(e) = (1..listed).find(|&e| voxel(e) <= voxel(e - 1)) {
             return Err(format!(
                 "index must be strictly increasing; entry {e} is voxel {} after {}",
-                index[e],
-                index[e - 1]
+                voxel(e),
+                voxel(e - 1)
             ));
         }
         let mut spans = vec![Span { off: 0, x0: 0, x1: 0 }; n / nx];
         let mut positions = 0usize;
         let mut e = 0;
         while e < listed {
-            let row = index[e] as usize / nx;
+            let row = voxel(e) as usize / nx;
             let first = e;
-            while e < listed && index[e] as usize / nx == row {
+            while e < listed && voxel(e) as usize / nx == row {
                 e += 1;
             }
-            let (x0, x1) = (index[first] as usize % nx, index[e - 1] as usize % nx + 1);
+            let (x0, x1) = (voxel(first) as usize % nx, voxel(e - 1) as usize % nx + 1);
             spans[row] = Span { off: positions as i64 - x0 as i64, x0: x0 as u32, x1: x1 as u32 };
             positions += x1 - x0;
         }
@@ -85,8 +90,8 @@ impl RowSpans {
             bits: vec![0u64; positions.div_ceil(64)],
             before: vec![],
         };
-        for &j in index {
-            let p = s.position(j as usize).expect("a listed voxel lies in its row's span");
+        for e in 0..listed {
+            let p = s.position(voxel(e) as usize).expect("a listed voxel lies in its row's span");
             s.bits[p / 64] |= 1 << (p % 64);
         }
         let mut count = 0u32;

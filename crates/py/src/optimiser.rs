@@ -6,7 +6,7 @@
 use std::sync::{Arc, Mutex};
 
 use numpy::ndarray::Array2;
-use numpy::{IntoPyArray, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use numpy::{IntoPyArray, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadwriteArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
 use crate::arrays::{c_slice, check_shape, err};
@@ -39,35 +39,43 @@ fn run_on<R: Send>(threads: Option<usize>, f: impl FnOnce() -> R + Send) -> PyRe
     Ok(pool.install(f))
 }
 
-/// smooth_rows(shape (Z, Y, X), index (F,) i64, values (F, C) f32, steps, alpha, guide (F, D) f32 or None, tau,
-/// threads=None) -> (F, C) f32: `steps` explicit diffusion steps of weight `alpha` over the 6-neighbourhood of the
-/// voxels `index` (strictly increasing linear indices into the grid `shape`; row r of the values is voxel index[r]),
-/// each neighbour weighted by exp(-|guide_r - guide_q|² / tau²) if a guide is given
-/// (inkopt_core::kernels::smooth). The GIL is released; `threads` as for a `Scene` (default all cores).
+/// smooth_rows(shape (Z, Y, X), index (F,) i64, values (F, C) f32, steps, alpha, guide (K, D) f32 or None, tau,
+/// threads=None, rows=None) -> None: `steps` explicit diffusion steps of weight `alpha`, in place, of the rows `rows`
+/// of the values ((K,) i64, strictly increasing; None: all, K = F) over the 6-neighbourhood of their voxels
+/// index[rows] (strictly increasing linear indices into the grid `shape`; row r of the values is voxel index[r]),
+/// each neighbour weighted by exp(-|guide_r - guide_q|² / tau²) if a guide is given (a row per row of the subset);
+/// the other rows are unchanged (inkopt_core::kernels::smooth::diffuse_subset: one channel at a time, 37 bytes
+/// per row of the subset while it runs). The GIL is released; `threads` as for a `Scene` (default all cores).
 #[pyfunction]
-#[pyo3(signature = (shape, index, values, steps, alpha, guide=None, tau=1.0, threads=None))]
-pub(crate) fn smooth_rows<'py>(
-    py: Python<'py>,
+#[pyo3(signature = (shape, index, values, steps, alpha, guide=None, tau=1.0, threads=None, rows=None))]
+pub(crate) fn smooth_rows(
+    py: Python<'_>,
     shape: (usize, usize, usize),
     index: PyReadonlyArray1<i64>,
-    values: PyReadonlyArray2<f32>,
+    mut values: PyReadwriteArray2<f32>,
     steps: usize,
     alpha: f32,
     guide: Option<PyReadonlyArray2<f32>>,
     tau: f32,
     threads: Option<usize>,
-) -> PyResult<Bound<'py, PyArray2<f32>>> {
+    rows: Option<PyReadonlyArray1<i64>>,
+) -> PyResult<()> {
     let n = [shape.0, shape.1, shape.2];
-    let (rows, ch) = (values.shape()[0], values.shape()[1]);
+    let ch = values.shape()[1];
     let idx = c_slice(&index, "index")?;
-    let mut v = c_slice(&values, "values")?.to_vec();
+    let subset = match &rows {
+        Some(r) => Some(c_slice(r, "rows")?),
+        None => None,
+    };
+    let v = values.as_slice_mut().map_err(|_| err("values must be C-contiguous"))?;
     let g = match &guide {
         Some(a) => Some(inkopt_core::kernels::smooth::Guide { values: c_slice(a, "guide")?, dims: a.shape()[1], tau }),
         None => None,
     };
-    py.detach(|| run_on(threads, || inkopt_core::kernels::smooth::diffuse_rows(n, idx, &mut v, ch, steps, alpha, g)))?
-        .map_err(err)?;
-    Ok(Array2::from_shape_vec((rows, ch), v).map_err(|e| err(e.to_string()))?.into_pyarray(py))
+    py.detach(|| {
+        run_on(threads, || inkopt_core::kernels::smooth::diffuse_subset(n, idx, subset, v, ch, steps, alpha, g))
+    })?
+    .map_err(err)
 }
 
 /// softmax_rows(x, threads=None) -> p: the softmax of each row of x (rows, n) float32 (`inkopt_core::kernels::simplex`,

@@ -95,14 +95,21 @@ FIGURES_TEXEL_BYTES = 4270.0
 #: entries run_<H>mm_shell1_*; bench/results/mesh_60mm_shell1_whole_run.json; docs/performance.md, "The whole run's
 #: peak stage by stage"); the band's free voxels grow with the area as the texels do, so the two are not told
 #: apart and the per-free terms are what the code holds:
-#: - a step: per texel the all-free step's 128 B and per free voxel 195 B (the step's 108 B, the renderer's band
-#:   medium and its index of the core it skips), fitted to Spot 40 mm (the run's step: 1.244 GiB, 1.21 estimated)
-#:   and 60 mm (bench/results/step_memory_spot.json, 60mm_shell1_after: 2.768 GiB, 2.83 estimated);
-SHELL_STEP_FREE_BYTES = 195.0
+#: - a step: per texel the all-free step's 128 B and per free voxel 152 B (x and momentum, 40 B; the free index,
+#:   which is the band's own, 8 B; the smoothed set's rows and guide, 24 B; at the peak dE/dx, 20 B, and the
+#:   smoothing's neighbours, weights and two copies of a column, 37 B, or the core's gradient sums, 48 B; and what
+#:   the allocator keeps), fitted to Spot 100 mm through an iteration, 6.66 GiB (python bench/bench_mesh.py 100
+#:   --shell-mm 1 --iterations 1 --figure-metrics --renderer, bench/results/mesh_100mm_shell1_mem.json); Spot 40 mm's
+#:   step measured 1.094 GiB, 0.99 estimated (python bench/bench_step_memory.py 40 --shell-mm 1 --iterations 1,
+#:   bench/results/step_memory_spot.json, 40mm_shell1_mem_after). 195 B where the smoothing gathered its column and
+#:   the set's indices and kept six neighbours and six weights per voxel, and the band kept its own index;
+SHELL_STEP_FREE_BYTES = 152.0
 SHELL_STEP_TEXEL_BYTES = STEP_TEXEL_BYTES
 #: - the figures (the start's with the renderer held for the baseline guard, the guard's, the result's, and the
 #:   renderer's builds): per free voxel the variables, momentum and index (48 B) and the renderer's band medium
-#:   (42 B: 0.437 GiB held at 60 mm), per texel what the renderer's build and the figures take beyond what the set-up
+#:   (34 B: 0.437 GiB held at 60 mm less the band's own copy of the index, 8 B, now the free index; Spot 100 mm's
+#:   renderer build 6.14 -> 5.90 GiB, bench/results/mesh_100mm_shell1_bricks.json and mesh_100mm_shell1_mem.json,
+#:   after_renderer), per texel what the renderer's build and the figures take beyond what the set-up
 #:   holds: the loss's operators are found a block of rows at a time, not held (``neighbourhood.TexelNeighbours``),
 #:   so the stage's peak is the renderer's build (the result's at 60 mm: 2.630 GiB; the first at 40 mm: 1.158 GiB;
 #:   the metrics 2.32 and 1.05); 1.23 KB, between the 1.20 KB that fits 60 mm and the 1.26 KB that fits 40 mm
@@ -111,8 +118,11 @@ SHELL_STEP_TEXEL_BYTES = STEP_TEXEL_BYTES
 #:   no fixed term (the figures' libraries and arenas, ~0.2 GiB, which the all-free terms do not count either, so
 #:   that a band never estimates above every voxel free). The all-free ``FIGURES_TEXEL_BYTES`` is not refitted
 #:   (no all-free run of that code measured): it over-estimates by up to the ~1.1 KB per texel the figures' loss side
-#:   no longer takes (1536 -> 373 B per texel at 60 mm: bench/results/figure_side_spot.json)
-SHELL_FIGURES_FREE_BYTES = 90.0
+#:   no longer takes (1536 -> 373 B per texel at 60 mm: bench/results/figure_side_spot.json). Nor is the per-texel
+#:   term refitted since the core builds its distances by slabs (no band run's figures measured since): it still
+#:   counts the dense build's 3 B per grid voxel, so it over-estimates that stage (Spot 100 mm: 7.1 GiB, the figures'
+#:   metrics and the renderer's build measured 5.90)
+SHELL_FIGURES_FREE_BYTES = 82.0
 SHELL_FIGURES_TEXEL_BYTES = 1230.0
 #: a slab's passes per texel: 254 s for 300 iterations of the reference slab's 41 772 texels
 #: (experiments/results/printable.json, entry reference, report.seconds_iterations)

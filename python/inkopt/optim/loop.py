@@ -90,6 +90,7 @@ class Optimization:
         if fixed_share is None:
             fixed_share = FixedShares.none(base.shape, len(base.inks))
         self.param = Parameterization(cfg.param, fixed_share, threads)
+        self.param.share_index(None if base.band is None else base.band.index)
         self.loss = self.viewing.loss(self.target, texels.pos_vox, cfg.gamma, cfg.colour_term)
         self.release_unread_operators()
         # what the run optimises towards and under which constraints: part of the checkpoint key
@@ -121,23 +122,21 @@ class Optimization:
     def _smoother(self) -> GradientSmoother | None:
         """The step's spatial preconditioner (``cfg.smooth``; None when off), guided by the target's flat texels
         down to ``MAX_DEPTH`` when ``cfg.smooth_edge`` is set."""
-        cfg, threads = self.cfg, self.threads
+        cfg, threads, p = self.cfg, self.threads, self.param
         if not cfg.smooth > 0:
             return None
         guide = rows = None
         if cfg.smooth_edge > 0:  # guided: the free voxels under flat texels only, down to MAX_DEPTH
             parts = []  # chunk by chunk, only the rows kept: no (F,) arrays beside the smoother's own
             for lo, near, dist in nearest_texel_chunks(
-                self.param.shape, self.param.free_index, self.texels.pos_vox, MAX_DEPTH, threads=threads
+                p.shape, p.free_index, self.texels.pos_vox, MAX_DEPTH, threads=threads
             ):
                 keep = np.flatnonzero((near >= 0) & self.loss.flat[near])
                 parts.append((keep + lo, texel_guide(self.loss.target_lab, near[keep], dist[keep])))
             rows = np.concatenate([r for r, _ in parts] or [np.empty(0, np.int64)])
             guide = np.concatenate([g for _, g in parts] or [np.empty((0, 4), np.float32)])
             del parts
-        return GradientSmoother(
-            self.param.shape, self.param.free_index, cfg.smooth, guide, cfg.smooth_edge, rows, threads
-        )
+        return GradientSmoother(p.shape, p.free_index, cfg.smooth, guide, cfg.smooth_edge, rows, threads)
 
     def keep_start_figures(self, figures: dict) -> None:
         """Keep the start's evaluated figures (``delta_e76_mean``, ``ssim``, ``delta_e76_mean_corrected``,

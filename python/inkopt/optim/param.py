@@ -62,6 +62,12 @@ class Parameterization:
         if not any_fixed:
             self.share_f = np.broadcast_to(np.float32(1.0), self.share_f.shape)  # the same values: 1 - 0
 
+    def share_index(self, index: np.ndarray | None) -> None:
+        """Hold ``index`` ((F,) int64, e.g. a band's, ``model.media.Band``) as ``free_index`` when it lists the same
+        voxels: one array for both (8 bytes per free voxel) where a band is only the free voxels."""
+        if index is not None and np.array_equal(index, self.free_index):
+            self.free_index = index
+
     @property
     def shape(self) -> tuple:
         """(z, y, x) of the grid."""

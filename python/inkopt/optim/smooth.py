@@ -112,10 +112,9 @@ def texel_guide(
 
 class GradientSmoother:
     """Diffuses per-free-voxel arrays (F, N) over a set of the free voxels' 6-neighbourhood (the loop in the Rust
-    core, ``inkopt_core::smooth``: parallel, thread-count independent; during a call, a column at a time, the column
-    gathered and two working copies of it (12 bytes per voxel of the set), each voxel's neighbours and weights (48
-    bytes) and the set's voxel indices (8 bytes); kept for the run: the set's rows and the guide, 8 + 16 bytes per
-    voxel of the set).
+    core, ``inkopt_core::kernels::smooth``: parallel, thread-count independent; during a call, a column at a time,
+    two working copies of the column (8 bytes per voxel of the set) and each voxel's neighbours and weights (29
+    bytes); kept for the run: the set's rows and the guide, 8 + 16 bytes per voxel of the set).
 
     shape (z, y, x) of the grid; index (F,) int64: the free voxels' increasing linear indices
     (``Parameterization.free_index``; kept by reference); ``rows``: which of them are smoothed (e.g. those under
@@ -156,38 +155,27 @@ class GradientSmoother:
         """(K,) int64: the linear indices of the set's voxels (a new array when the set is not every free voxel)."""
         return self.free_index if self.rows is None else np.ascontiguousarray(self.free_index[self.rows])
 
-    def _diffuse(self, g: np.ndarray, index: np.ndarray | None = None) -> np.ndarray:
-        """The diffused copy of the set's values g (K, C) float32 (``index``: the set's, if already gathered)."""
-        from .. import _core
-
-        return _core.smooth_rows(
-            self.shape,
-            self.index if index is None else index,
-            np.ascontiguousarray(g, np.float32),
-            self.steps,
-            ALPHA,
-            self.guide,
-            self.edge or 1.0,
-            self.threads,
-        )
-
     def __call__(self, g: np.ndarray) -> np.ndarray:
         """The diffused copy of g (F, N) float32 (g itself is not changed; rows outside the set are copied)."""
         return self.apply(np.array(g, np.float32))
 
     def apply(self, g: np.ndarray) -> np.ndarray:
-        """Diffuse g (F, N) float32 in place (rows outside the set unchanged) and return it.
+        """Diffuse g (F, N) float32 (C-contiguous) in place (rows outside the set unchanged) and return it.
 
-        One column at a time: the diffusion of each column is its own (the weights are the guide's), so the result
-        is the same bits as all columns at once, while a call's working copies (the column gathered, the kernel's
-        two copies: 12 bytes per voxel of the set) are a fifth of the five inks' (60), beside the kernel's 48 bytes
-        per voxel of neighbours and weights."""
-        rows, index = slice(None) if self.rows is None else self.rows, self.index
-        for c in range(g.shape[1]):
-            g[rows, c] = self._diffuse(g[rows, c][:, None], index)[:, 0]
-            # each call's working arrays given back, so the next call's are not placed beside them: Spot 20 mm with a
-            # 1 mm shell, smoothing a column at a time, 132 B per free voxel above the step's start without it, 72
-            # with it, 85 all columns at once (bench/results/step_memory_spot.json, entries ``20mm_shell1_after``,
-            # ``_after_trim``, ``_before``)
-            heap.trim()
+        The kernel reads the set's rows of g through ``rows`` and diffuses one column at a time (each column's
+        diffusion is its own: the same bits as all columns at once), so a call holds the column's two working copies
+        (8 bytes per voxel of the set) and the neighbours and weights (29 bytes), no gathered copy of g or of the
+        set's voxel indices."""
+        from .. import _core
+
+        if g.dtype != np.float32 or not g.flags.c_contiguous:
+            raise ValueError("the smoothed array must be C-contiguous float32")
+        # the heap's free memory (what the step's earlier temporaries left there) given back first, so that the
+        # kernel's working arrays are not placed beside it: Spot 40 mm with a 1 mm shell, 17 B per free voxel
+        # resident above the step's start after the update without it (bench/results/step_memory_spot.json,
+        # entries 40mm_shell1_mem_before and _mem_after)
+        heap.trim()
+        _core.smooth_rows(
+            self.shape, self.free_index, g, self.steps, ALPHA, self.guide, self.edge or 1.0, self.threads, self.rows
+        )
         return g

@@ -15,8 +15,8 @@
 //! diffusion, as in Perona and Malik's) and the properties above still hold. Each output row is a fixed-order
 //! sum of its own inputs, so the result does not depend on the thread count. A neighbour's row is found through
 //! a `RowSpans` of the set (16 bytes per grid row and a bit per stored voxel), not a map over the grid, once per call
-//! (with the guide's weights); work per step: the rows in parallel blocks; memory: one more copy of the values and
-//! 48 bytes per row for the call.
+//! (with the guide's weights); work per step: the rows in parallel blocks; memory for the call: 29 bytes per row of
+//! neighbours and weights, and two copies of one channel (8 bytes per row), the channels diffused one at a time.
 
 use rayon::prelude::*;
 
@@ -46,6 +46,23 @@ pub fn diffuse_rows(
     alpha: f32,
     guide: Option<Guide>,
 ) -> Result<(), String> {
+    diffuse_subset(n, index, None, values, channels, steps, alpha, guide)
+}
+
+/// `diffuse_rows` on the rows `subset` of `values` (strictly increasing row numbers; None: every row), over
+/// their voxels `index[subset[r]]`, in place; the other rows are neither changed nor neighbours. `guide` has a
+/// vector per row of the subset. Each channel is diffused on its own (the same bits as all at once), so the call
+/// holds one channel's two copies, not the subset's values.
+pub fn diffuse_subset(
+    n: [usize; 3],
+    index: &[i64],
+    subset: Option<&[i64]>,
+    values: &mut [f32],
+    channels: usize,
+    steps: usize,
+    alpha: f32,
+    guide: Option<Guide>,
+) -> Result<(), String> {
     let [nz, ny, nx] = n;
     if nz * ny * nx == 0 {
         return Err(format!("the grid {nz} x {ny} x {nx} has no voxels"));
@@ -53,11 +70,19 @@ pub fn diffuse_rows(
     if channels == 0 || !values.len().is_multiple_of(channels) {
         return Err(format!("values ({}) are not a whole number of rows of {channels} channels", values.len()));
     }
-    let rows = values.len() / channels;
-    if index.len() != rows {
-        return Err(format!("index has {} voxels, values have {rows} rows", index.len()));
+    let all = values.len() / channels;
+    if index.len() != all {
+        return Err(format!("index has {} voxels, values have {all} rows", index.len()));
     }
-    let set = RowSpans::new([nx, ny, nz], index)?;
+    if let Some(s) = subset {
+        if s.iter().any(|&r| r < 0 || r as u64 >= all as u64) || (1..s.len()).any(|e| s[e] <= s[e - 1]) {
+            return Err(format!("the subset must be strictly increasing rows of the {all}"));
+        }
+    }
+    let row_of = |r: usize| subset.map_or(r, |s| s[r] as usize);
+    let rows = subset.map_or(all, |s| s.len());
+    let voxel = |r: usize| index[row_of(r)];
+    let set = RowSpans::of([nx, ny, nz], rows, voxel)?;
     if let Some(g) = guide {
         // `!(tau > 0)` rejects NaN too.
         #[allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -71,17 +96,18 @@ pub fn diffuse_rows(
     if steps == 0 || rows == 0 {
         return Ok(());
     }
-    let stencil = Stencil::new(n, index, &set, alpha, guide);
-    let mut src = values.to_vec();
-    for s in 0..steps {
-        // After an odd number of steps the latest values are in `values`, else in `src`.
-        let (from, to): (&[f32], &mut [f32]) = if s % 2 == 0 { (&src, &mut *values) } else { (&*values, &mut src) };
-        to.par_chunks_mut(BLOCK * channels)
-            .enumerate()
-            .for_each(|(b, out)| stencil.step(from, out, b * BLOCK, channels));
-    }
-    if steps.is_multiple_of(2) {
-        values.copy_from_slice(&src);
+    let stencil = Stencil::new(n, voxel, rows, &set, alpha, guide);
+    drop(set);
+    let (mut a, mut b) = (vec![0.0f32; rows], vec![0.0f32; rows]);
+    for c in 0..channels {
+        a.iter_mut().enumerate().for_each(|(r, v)| *v = values[row_of(r) * channels + c]);
+        for s in 0..steps {
+            // After an odd number of steps the latest values are in `b`, else in `a`.
+            let (from, to): (&[f32], &mut [f32]) = if s % 2 == 0 { (&a, &mut b) } else { (&b, &mut a) };
+            to.par_chunks_mut(BLOCK).enumerate().for_each(|(k, out)| stencil.step(from, out, k * BLOCK));
+        }
+        let last = if steps.is_multiple_of(2) { &a } else { &b };
+        last.iter().enumerate().for_each(|(r, &v)| values[row_of(r) * channels + c] = v);
     }
     Ok(())
 }
@@ -89,71 +115,100 @@ pub fn diffuse_rows(
 /// No neighbour in the set.
 const NONE: u32 = u32::MAX;
 
-/// Every row's 6 neighbours' rows (`NONE`: not in the set) and their weights, found once per call, so that the
-/// steps read them instead of looking the neighbours up in the `RowSpans` and weighting them by the guide again
-/// at every step (the same bits either way).
-/// 48 bytes per row, for the call only (its two copies of the values are 8 bytes per row and channel).
+/// `Stencil::x` bits: the row before (after) is the voxel's -x (+x) neighbour.
+const MINUS_X: u8 = 1;
+const PLUS_X: u8 = 2;
+
+/// Every row's neighbours and weights, found once per call, so that the steps read them instead of looking the
+/// neighbours up in the `RowSpans` and weighting them by the guide again at every step (the same bits either
+/// way). A weight is symmetric (the same bits from either side: (a - b)² = (b - a)²), so each row keeps those of
+/// its +z, +y and +x neighbours and reads a -z, -y or -x one from that neighbour's row; a set in grid order has
+/// its ±x neighbours in the rows beside it. 29 bytes per row, for the call only.
 struct Stencil {
-    nb: Vec<[u32; 6]>,
-    w: Vec<[f32; 6]>,
+    /// rows of the -z, +z, -y, +y neighbours (`NONE`: not in the set)
+    nb: Vec<[u32; 4]>,
+    /// weights towards the +z, +y, +x neighbours (0 where there is none)
+    w: Vec<[f32; 3]>,
+    /// `MINUS_X` | `PLUS_X`
+    x: Vec<u8>,
 }
 
 impl Stencil {
-    fn new(n: [usize; 3], index: &[i64], set: &RowSpans, alpha: f32, guide: Option<Guide>) -> Stencil {
+    fn new(
+        n: [usize; 3],
+        voxel: impl Fn(usize) -> i64 + Sync,
+        rows: usize,
+        set: &RowSpans,
+        alpha: f32,
+        guide: Option<Guide>,
+    ) -> Stencil {
         let [nz, ny, nx] = n;
         let plane = ny * nx;
         let row_of = |j: usize| set.rank(j).map_or(NONE, |r| r as u32);
-        let mut nb = vec![[NONE; 6]; index.len()];
-        let mut w = vec![[0.0f32; 6]; index.len()];
-        nb.par_chunks_mut(BLOCK).zip(w.par_chunks_mut(BLOCK)).enumerate().for_each(|(b, (nbb, wb))| {
-            for (k, (nr, wr)) in nbb.iter_mut().zip(wb.iter_mut()).enumerate() {
-                let row = b * BLOCK + k;
-                let j = index[row] as usize;
-                let (z, y, x) = (j / plane, j / nx % ny, j % nx);
-                // neighbours in a fixed order: -z, +z, -y, +y, -x, +x
-                *nr = [
-                    if z > 0 { row_of(j - plane) } else { NONE },
-                    if z + 1 < nz { row_of(j + plane) } else { NONE },
-                    if y > 0 { row_of(j - nx) } else { NONE },
-                    if y + 1 < ny { row_of(j + nx) } else { NONE },
-                    if x > 0 { row_of(j - 1) } else { NONE },
-                    if x + 1 < nx { row_of(j + 1) } else { NONE },
-                ];
-                for (wk, &q) in wr.iter_mut().zip(nr.iter()) {
-                    if q == NONE {
-                        continue;
-                    }
-                    *wk = match guide {
-                        Some(g) => {
-                            let a = &g.values[row * g.dims..(row + 1) * g.dims];
-                            let b = &g.values[q as usize * g.dims..(q as usize + 1) * g.dims];
-                            let d2: f32 = a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum();
-                            alpha * (-d2 / (g.tau * g.tau)).exp()
-                        }
-                        None => alpha,
-                    };
-                }
+        let weight = |row: usize, q: u32| match guide {
+            _ if q == NONE => 0.0,
+            Some(g) => {
+                let a = &g.values[row * g.dims..(row + 1) * g.dims];
+                let b = &g.values[q as usize * g.dims..(q as usize + 1) * g.dims];
+                let d2: f32 = a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum();
+                alpha * (-d2 / (g.tau * g.tau)).exp()
             }
-        });
-        Stencil { nb, w }
+            None => alpha,
+        };
+        let mut nb = vec![[NONE; 4]; rows];
+        let mut w = vec![[0.0f32; 3]; rows];
+        let mut xs = vec![0u8; rows];
+        nb.par_chunks_mut(BLOCK).zip(w.par_chunks_mut(BLOCK)).zip(xs.par_chunks_mut(BLOCK)).enumerate().for_each(
+            |(b, ((nbb, wb), xb))| {
+                for (k, ((nr, wr), xr)) in nbb.iter_mut().zip(wb.iter_mut()).zip(xb.iter_mut()).enumerate() {
+                    let row = b * BLOCK + k;
+                    let j = voxel(row) as usize;
+                    let (z, y, x) = (j / plane, j / nx % ny, j % nx);
+                    *nr = [
+                        if z > 0 { row_of(j - plane) } else { NONE },
+                        if z + 1 < nz { row_of(j + plane) } else { NONE },
+                        if y > 0 { row_of(j - nx) } else { NONE },
+                        if y + 1 < ny { row_of(j + nx) } else { NONE },
+                    ];
+                    let minus_x = x > 0 && row > 0 && voxel(row - 1) as usize == j - 1;
+                    let plus_x = x + 1 < nx && row + 1 < rows && voxel(row + 1) as usize == j + 1;
+                    *xr = if minus_x { MINUS_X } else { 0 } | if plus_x { PLUS_X } else { 0 };
+                    let next = if plus_x { row as u32 + 1 } else { NONE };
+                    *wr = [weight(row, nr[1]), weight(row, nr[3]), weight(row, next)];
+                }
+            },
+        );
+        Stencil { nb, w, x: xs }
     }
 
-    /// One step for rows `first..first + out.len() / channels`.
-    fn step(&self, from: &[f32], out: &mut [f32], first: usize, channels: usize) {
-        for (k, o) in out.chunks_exact_mut(channels).enumerate() {
+    /// One step of one channel for rows `first..first + out.len()`: the neighbours in a fixed order, -z, +z, -y,
+    /// +y, -x, +x.
+    fn step(&self, from: &[f32], out: &mut [f32], first: usize) {
+        for (k, o) in out.iter_mut().enumerate() {
             let row = first + k;
-            let (nb, w) = (&self.nb[row], &self.w[row]);
-            let r = row * channels;
-            for (c, oc) in o.iter_mut().enumerate() {
-                let v = from[r + c];
-                let mut acc = 0.0f32;
-                for (&q, &wk) in nb.iter().zip(w) {
-                    if q != NONE {
-                        acc += wk * (from[q as usize * channels + c] - v);
-                    }
-                }
-                *oc = v + acc;
+            let (nb, w, x) = (&self.nb[row], &self.w[row], self.x[row]);
+            let v = from[row];
+            let mut acc = 0.0f32;
+            let mut add = |q: usize, wk: f32| acc += wk * (from[q] - v);
+            if nb[0] != NONE {
+                add(nb[0] as usize, self.w[nb[0] as usize][0]);
             }
+            if nb[1] != NONE {
+                add(nb[1] as usize, w[0]);
+            }
+            if nb[2] != NONE {
+                add(nb[2] as usize, self.w[nb[2] as usize][1]);
+            }
+            if nb[3] != NONE {
+                add(nb[3] as usize, w[1]);
+            }
+            if x & MINUS_X != 0 {
+                add(row - 1, self.w[row - 1][2]);
+            }
+            if x & PLUS_X != 0 {
+                add(row + 1, w[2]);
+            }
+            *o = v + acc;
         }
     }
 }
