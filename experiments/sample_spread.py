@@ -26,18 +26,11 @@ from scipy import stats
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
 from common import add_study_entry, machine, provenance  # noqa: E402
 
-from inkopt.evaluation.evaluate import evaluate_run  # noqa: E402
-from inkopt.evaluation.options import EvaluateOptions  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from colour_term_cells import evaluation  # noqa: E402
 
 PAIRS = {"printed - extrusion": "quantized - extrusion", "printed - surface": "quantized - surface"}
 FIGURES = {"delta_e76_corrected": "delta_e76_mean_corrected", "delta_e2000": "delta_e2000_mean", "ssim": "ssim"}
-
-
-def evaluation(run: Path, out: Path, texels: int, seed: int) -> dict:
-    """The evaluation file ``out`` of ``run`` on ``texels`` sampled texels with ``seed``, made when missing."""
-    if not out.is_file():
-        evaluate_run(run, EvaluateOptions(seed=seed, texel_sample=texels, out=out))
-    return json.loads(out.read_text())
 
 
 def differences(ev: dict) -> dict:
