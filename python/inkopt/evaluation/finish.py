@@ -12,15 +12,14 @@ candidate's render becomes that pass (``Replay``) and the choice costs one rende
 by (seed, texel, sample): the two renders share their noise wherever the media are alike, and the paired difference's
 error is far below either figure's.
 
-What is compared is the loss's colour term, the default loss: the mean over texels of ΔE76² (under the first light),
-each texel's noise-corrected (``texel_loss``: minus the trace of its CIELAB covariance, the square's expected excess
-from the render's noise). The rule: the smoothing is kept unless dropping it lowers that mean by more than
-``DROP_STDERRS`` standard errors of the paired per-texel difference. Keeping is the default because the pass buys
-what the loss does not see (Spot 20 mm: mottle 0.34 -> 0.13 (ΔL*)², SSIM +0.011, experiments/results/
-finish_smooth.json) and helped or did nothing in every paired measurement but the duck's, whose loss from it is many
-standard errors wide; at 2 standard errors a pass that does not change the loss is dropped in ~2 % of runs. A run
-whose pass changes nothing (no flat texels, or no smoothing) renders nothing.
-"""
+What is compared is the squared colour term, the slabs' default loss, whatever the run's ``colour_term``: the mean over
+texels of ΔE76² (under the first light), each texel's noise-corrected (``texel_loss``: minus the trace of its CIELAB
+covariance, the square's expected excess from the render's noise). The rule: the smoothing is kept unless dropping it
+lowers that mean by more than ``DROP_STDERRS`` standard errors of the paired per-texel difference. Keeping is the
+default because the pass buys what the loss does not see (Spot 20 mm: mottle 0.34 -> 0.13 (ΔL*)², SSIM +0.011,
+experiments/results/finish_smooth.json) and helped or did nothing in every paired measurement but the duck's, whose
+loss from it is many standard errors wide; at 2 standard errors a pass that does not change the loss is dropped in ~2 %
+of runs. A run whose pass changes nothing (no flat texels, or no smoothing) renders nothing."""
 
 from __future__ import annotations
 

@@ -5,11 +5,11 @@ table) once at its start, with its own renderer, lighting, texels and evaluation
 (``run_optimisation``; kept in the checkpoints). At the end ``BaselineCheck`` compares the result's figures with
 them: a result worse beyond the figures' noise is reported (``warning()``, report.json's ``beats_baseline``).
 
-The figure compared is the noise-corrected mean ΔE76 (``Metrics.delta_e76_mean_corrected``), not the training loss:
-it is the figure the run's report, ``inkopt evaluate``'s table and the user compare results by; its noise
-correction has a measured accuracy (``noise.ESTIMATE_RANGE``), which gives the tolerance below; the loss's colour
-term (mean ΔE76², the default loss) is inflated by the whole noise variance with no correction of known accuracy, and
-with an SSIM or edge weight the loss's scale differs from run to run. The loss of both is recorded beside it.
+The figure compared is the noise-corrected mean ΔE76 (``Metrics.delta_e76_mean_corrected``), not the training loss: it
+is the figure the run's report, ``inkopt evaluate``'s table and the user compare results by; its noise correction has a
+measured accuracy (``noise.ESTIMATE_RANGE``), which gives the tolerance below; the loss's colour term (mean ΔE76², the
+slabs' default; on meshes the mean ΔE76) is inflated by the noise with no correction of known accuracy, and with an SSIM
+or edge weight the loss's scale differs from run to run. The loss of both is recorded beside it.
 
 The figure's uncertainty (``figure_error``): the correction's accuracy, ``ESTIMATE_RANGE[1] - 1`` (35 %) of the
 estimated noise contribution, plus the mean's sampling error, a texel's ΔE76 varying by about its CIELAB standard
