@@ -29,6 +29,8 @@ from inkopt.evaluation.options import EvaluateOptions  # noqa: E402
 
 ARMS = ("squared", "linear")
 FIGURES = ("delta_e76_corrected", "delta_e2000", "ssim")
+#: each figure's key in an evaluation file's differences
+FIGURE_KEYS = {"delta_e76_corrected": "delta_e76_mean_corrected", "delta_e2000": "delta_e2000_mean", "ssim": "ssim"}
 PAIR = "printed - extrusion"
 
 
@@ -43,14 +45,13 @@ def evaluation(run: Path, out: Path, texels: int, seed: int) -> dict:
     return ev
 
 
-def paired(ev: dict) -> dict:
-    """printed − extrusion of an evaluation file: figure -> {"value", "stderr"} (the keys of ``FIGURES``)."""
-    diffs = ev["differences"]
-    d = diffs.get("quantized - extrusion baseline") or diffs.get("quantized - extrusion")
+def paired(ev: dict, baseline: str = "extrusion") -> dict:
+    """printed − ``baseline`` of an evaluation file: figure -> {"value", "stderr"} (the keys of ``FIGURES``)."""
+    diffs = ev.get("differences") or {}
+    d = diffs.get(f"quantized - {baseline} baseline") or diffs.get(f"quantized - {baseline}")
     if d is None:
-        raise SystemExit(f"no printed - extrusion difference among {sorted(diffs)}")
-    names = {"delta_e76_corrected": "delta_e76_mean_corrected", "delta_e2000": "delta_e2000_mean", "ssim": "ssim"}
-    return {k: d[v] for k, v in names.items()}
+        raise SystemExit(f"no printed - {baseline} difference among {sorted(diffs)}: not a sampled evaluation")
+    return {k: d[v] for k, v in FIGURE_KEYS.items()}
 
 
 def baseline_figures(ev: dict) -> dict:

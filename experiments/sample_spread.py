@@ -27,22 +27,17 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
 from common import add_study_entry, machine, provenance  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from colour_term_cells import evaluation  # noqa: E402
+from colour_term_cells import FIGURES, evaluation, paired  # noqa: E402
 
-PAIRS = {"printed - extrusion": "quantized - extrusion", "printed - surface": "quantized - surface"}
-FIGURES = {"delta_e76_corrected": "delta_e76_mean_corrected", "delta_e2000": "delta_e2000_mean", "ssim": "ssim"}
+PAIRS = {"printed - extrusion": "extrusion", "printed - surface": "surface"}
 
 
 def differences(ev: dict) -> dict:
     """pair -> figure -> (value, stderr) of an evaluation file's paired differences (``PAIRS``, ``FIGURES``)."""
-    diffs = ev.get("differences") or {}
-    out = {}
-    for pair, key in PAIRS.items():
-        d = diffs.get(key) or diffs.get(key + " baseline")
-        if d is None:
-            raise SystemExit(f"no {key} difference among {sorted(diffs)}: not a sampled evaluation with baselines")
-        out[pair] = {f: (d[k]["value"], d[k]["stderr"]) for f, k in FIGURES.items()}
-    return out
+    return {
+        pair: {f: (v["value"], v["stderr"]) for f, v in paired(ev, baseline).items()}
+        for pair, baseline in PAIRS.items()
+    }
 
 
 def spread(values: list[tuple[float, float]]) -> dict:
