@@ -32,7 +32,7 @@ def test_counts_match_the_voxelized_mesh(height, shell):
     shape = scene.volume.shape  # (z, y, x)
     assert fp.grid == shape[::-1]
     assert fp.grid_voxels == int(np.prod(shape))
-    inside = int(scene.volume.inside.sum())
+    inside = scene.volume.inside.count
     assert fp.inside_voxels == pytest.approx(inside, rel=0.01)
     assert fp.texels == pytest.approx(len(scene.texels), rel=0.03)
     assert fp.free_voxels == pytest.approx(int(scene.free.sum()), rel=0.03 if shell else 0.01)

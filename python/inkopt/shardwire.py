@@ -14,13 +14,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from .model import Band, InkTable, SurfaceNormals, Volume
+from .model.mask import PackedMask
 
 
 def payload_bytes(obj) -> int:
     """The bytes ``obj`` carries between processes: its arrays' and byte strings' lengths, in tuples, lists, dicts
-    and dataclasses (a Volume, Texels, Lighting); 8 for a scalar or another small object (Ray's framing is not
-    counted)."""
-    if isinstance(obj, np.ndarray):
+    and dataclasses (a Volume, Texels, Lighting), a ``PackedMask``'s bits; 8 for a scalar or another small object
+    (Ray's framing is not counted)."""
+    if isinstance(obj, (np.ndarray, PackedMask)):
         return int(obj.nbytes)
     if isinstance(obj, (bytes, bytearray, memoryview)):
         return len(obj)

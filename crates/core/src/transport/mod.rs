@@ -34,6 +34,7 @@ pub mod hero;
 pub(crate) mod hero_lanes;
 pub mod hero_pass;
 pub mod light;
+pub mod mask;
 pub mod medium;
 pub mod normals;
 pub(crate) mod packet;
