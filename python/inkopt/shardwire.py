@@ -175,7 +175,7 @@ class BandObject:
                 row, x = np.nonzero(edge == sign)  # in grid order
                 out.append((z * ny + row.astype(np.int64)) * nx + x)
         index = volume.band.index
-        labels = volume.labels.reshape(-1)[index] if volume.form == "labels" else None
+        labels = volume.medium.labels_at(index) if volume.form == "labels" else None  # no grid-sized array
         rows = volume.mixture.reshape(-1, len(volume.inks))[index] if volume.form == "mixture" else None
         return cls(
             volume.shape, volume.voxel_mm, volume.g, volume.ior, volume.boundary, volume.normals,
