@@ -8,7 +8,7 @@
 use rayon::prelude::*;
 use wide::i32x8;
 
-use super::mask::MaskRef;
+use crate::transport::mask::MaskRef;
 
 /// Largest safe distance stored: 16 voxels (1.3 mm at 300 DPI), far beyond a free flight in any ink.
 pub const SAFE_CAP: u8 = 16;
