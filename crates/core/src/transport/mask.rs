@@ -54,7 +54,7 @@ impl<'a> MaskRef<'a> {
             MaskRef::Bits(bits, _) => {
                 let mut out = Vec::with_capacity(b - a);
                 let mut j = a;
-                while j < b && j % 8 != 0 {
+                while j < b && !j.is_multiple_of(8) {
                     out.push((bits[j >> 3] >> (7 - (j & 7))) & 1);
                     j += 1;
                 }
