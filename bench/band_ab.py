@@ -55,7 +55,7 @@ def main(argv=None) -> dict:
         r = Renderer(vol, threads=args.threads)
         free = np.flatnonzero(scene.free)
         fs = scene.fixed_share
-        held = np.setdiff1d(np.flatnonzero(vol.inside), free)
+        held = np.setdiff1d(vol.inside.nonzero(), free)
         r.set_mixture(held, fs.at(held))
         rows = np.random.default_rng(0).dirichlet(np.ones(len(inks)), size=len(free)).astype(np.float32)
         r.set_mixture(free, rows)
@@ -82,7 +82,7 @@ def main(argv=None) -> dict:
         "spp": args.spp,
         "threads": args.threads,
         "texels": len(tex),
-        "inside_voxels": int(scene.vox.inside.sum()),
+        "inside_voxels": scene.vox.inside.count,
         "band_voxels": len(scene.volume.band.index),
         "medium_bytes": medium_bytes(scene.volume),
         "seconds": times,

@@ -54,7 +54,7 @@ def measure(height_mm: float) -> dict:
 
     scene = build_scene(MeshSpec(str(SPOT), height_mm=height_mm, shell_mm=1.0), InkTable.parse("vero-cmykw"))
     vmm = np.asarray(scene.volume.voxel_mm, np.float64)
-    inside = scene.volume.inside
+    inside = scene.volume.inside.dense()  # the input both versions read
     row = {"grid_voxels": int(inside.size), "inside_voxels": int(inside.sum()), "texels": len(scene.texels)}
     answers = {}
     for name, fn in (("plane_at_a_time", _nearest_centred), ("whole_grid", whole_grid)):

@@ -149,7 +149,7 @@ def main(argv=None) -> dict:
         "dpi": args.dpi,
         "grid_zyx": [nz, ny, nx],
         "voxels": nz * ny * nx,
-        "inside_voxels": int(scene.vox.inside.sum()),
+        "inside_voxels": scene.vox.inside.count,
         "free_voxels": int(scene.free.sum()),
         "texels": len(scene.vox.texels),
         "shell_mm": args.shell_mm,

@@ -44,7 +44,7 @@ def build(out: Path, height_mm: float, mesh: str) -> None:
     d = RunDir.create(out)
     d.save_volume(vol.with_mixture(mix))
     d.save_scene(scene.record())
-    print(f"built {out}: grid {vol.shape}, {int(vol.inside.sum())} inside voxels")
+    print(f"built {out}: grid {vol.shape}, {vol.inside.count} inside voxels")
 
 
 def timed(args: list[str]) -> dict:

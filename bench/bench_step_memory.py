@@ -171,7 +171,7 @@ def main(argv=None) -> dict:
         "shell_mm": args.shell_mm,
         "free_voxels": n_free,
         "texels": len(scene.texels),
-        "inside_voxels": int(scene.vox.inside.sum()),
+        "inside_voxels": scene.vox.inside.count,
         "code": args.code,
         "renderer_build": build,
         "iterations": iterations,

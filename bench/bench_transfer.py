@@ -44,7 +44,8 @@ def main(argv=None) -> dict:
     rss = {"start": peak_rss_gb()}
     coarse = build_mesh_scene(MeshSpec(SPOT, height_mm=a.height_mm, dpi=a.coarse_dpi), inks)
     mix = np.zeros(coarse.volume.shape + (len(inks),), np.float32)
-    mix[coarse.volume.inside] = np.random.default_rng(0).dirichlet(np.ones(len(inks)), int(coarse.volume.inside.sum()))
+    inside = coarse.volume.inside
+    mix[inside.dense()] = np.random.default_rng(0).dirichlet(np.ones(len(inks)), inside.count)
     src = Volume.from_mixture(
         coarse.volume.voxel_mm, mix, inks, inside=coarse.volume.inside, origin_mm=coarse.volume.origin_mm
     )

@@ -86,7 +86,7 @@ def main(argv=None) -> dict:
         with core_as(core):
             c = cpu()
             r = Renderer(vol, threads=args.threads)
-            held = np.setdiff1d(np.flatnonzero(vol.inside), free)
+            held = np.setdiff1d(vol.inside.nonzero(), free)
             r.set_mixture(held, scene.fixed_share.at(held))
             r.set_mixture(free, rows)
             build_cpu[name], renderers[name] = cpu() - c, r

@@ -38,7 +38,7 @@ def main():
     ap.add_argument("--layers", default=None)
     a = ap.parse_args()
     vol = RunDir(a.run).load_volume()
-    mix, inside = np.asarray(vol.mixture, np.float32), vol.inside
+    mix, inside = np.asarray(vol.mixture, np.float32), vol.inside.dense()
     if a.layers:
         lo, hi = (int(v) for v in a.layers.split(":"))
         mix, inside = mix[lo:hi], inside[lo:hi]

@@ -55,7 +55,7 @@ def main(argv=None) -> dict:
         vol.shape,
         tuple(float(v) for v in vol.voxel_mm),
         _core.Medium.dense(dense_s, dense_a),
-        inside=vol.inside.astype(np.uint8),
+        inside=vol.inside.dense().view(np.uint8),
         normal_index=vol.normals.index,
         normal_vectors=vol.normals.vectors,
         threads=args.threads,

@@ -224,7 +224,7 @@ class Renderer(TexelRenderer):
         threads = check_threads(threads)  # before the core starts a pool of that many threads
         self.volume = volume
         kw = dict(boundary=volume.boundary, ior=float(volume.ior), g=float(volume.g), threads=threads)
-        inside = _inside_bytes(volume)
+        inside = _core_inside(volume)
         if inside is not None:
             kw["inside"] = inside
         if volume.normals is not None:
@@ -244,7 +244,7 @@ class Renderer(TexelRenderer):
     @staticmethod
     def _medium(volume: Volume, inside: np.ndarray | None = None) -> _core.Medium:
         """The core's medium (``_core.Medium``): with a band (``Volume.band``), the band's coefficients and the
-        core's (24 bytes per band voxel, nothing per core voxel; ``inside``: the mask as ``_inside_bytes`` gives
+        core's (24 bytes per band voxel, nothing per core voxel; ``inside``: the mask as ``_core_inside`` gives
         it, if already made); labels with the ink table; the inside voxels' coefficients (sparse: 24 bytes per
         voxel of each grid row's span of them) when the volume has an inside mask; else dense coefficients."""
         from ._core import Medium
@@ -253,14 +253,14 @@ class Renderer(TexelRenderer):
             # Mixed as a row of a batch: a one-row product takes another BLAS path whose float32 sums may round
             # differently, and the core must read exactly what the sparse form's batched rows hold.
             core_s, core_a = mix(np.stack([volume.band.core] * 2), volume.inks)
-            inside = _inside_bytes(volume) if inside is None else inside
+            inside = _core_inside(volume) if inside is None else inside
             band = volume.band.index
             return Medium.band(inside, band, *volume.coefficients_at(band), core_s[0], core_a[0])
         if volume.form == "labels":
             inks = volume.inks
             return Medium.labels(volume.labels, inks.sigma_s.astype(np.float32), inks.sigma_a.astype(np.float32))
         if volume.inside is not None:
-            index = np.flatnonzero(volume.inside)
+            index = volume.inside.nonzero()
             return Medium.sparse(index, *volume.coefficients_at(index))
         s, a = volume.coefficients()
         return Medium.dense(np.ascontiguousarray(s, np.float32), np.ascontiguousarray(a, np.float32))
@@ -281,7 +281,7 @@ class Renderer(TexelRenderer):
             vol = self.volume
             if vol.inside is None:
                 raise ValueError("set_mixture on a label volume needs an inside mask")
-            inside = np.flatnonzero(vol.inside)
+            inside = vol.inside.nonzero()
             self._scene.set_medium(Medium.sparse(inside, *vol.coefficients_at(inside)))
             self._labels = False
         if self.volume.band is not None:
@@ -405,13 +405,17 @@ class Renderer(TexelRenderer):
         return self._run(texels, settings, adjoint, progress)
 
 
-def _inside_bytes(volume: Volume) -> np.ndarray | None:
-    """The inside mask (z, y, x) as uint8 0/1 (a Volume's bool bytes: no copy), or None for a volume without one;
-    a volume that makes its own (``shardwire.BandObject``, a Ray worker's band volume) makes it."""
+def _core_inside(volume: Volume) -> np.ndarray | None:
+    """The inside mask as the core reads it (``_core.Scene``'s and ``_core.Medium.band``'s ``inside``): a volume's
+    mask as its bits (``PackedMask.bits``, (ceil(V / 8),) uint8, no copy; the core unpacks a slab at a time), a
+    labels volume without one as (z, y, x) uint8 0/1 of its labels (a new array), or None for a volume without
+    one; a volume that makes its own (``shardwire.BandObject``, a Ray worker's band volume) makes it."""
     make = getattr(volume, "inside_bytes", None)
     if make is not None:
         return make()
-    if volume.inside is not None or volume.form == "labels":
+    if volume.inside is not None:
+        return volume.inside.bits
+    if volume.form == "labels":
         return np.ascontiguousarray(volume.inside_mask()).view(np.uint8)
     return None
 

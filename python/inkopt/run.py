@@ -225,7 +225,7 @@ def _voxel_counts(job: _Job) -> tuple[int, int]:
     """(inside voxels, grid voxels) of the scene's volume."""
     vol = job.scene.volume
     box = int(np.prod(vol.shape))
-    return (box if vol.inside is None else int(vol.inside.sum())), box
+    return (box if vol.inside is None else vol.inside.count), box
 
 
 def _dry_run(job: _Job, out_dir) -> Estimate:

@@ -14,13 +14,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from .model import Band, InkTable, SurfaceNormals, Volume
+from .model.mask import PackedMask
 
 
 def payload_bytes(obj) -> int:
     """The bytes ``obj`` carries between processes: its arrays' and byte strings' lengths, in tuples, lists, dicts
-    and dataclasses (a Volume, Texels, Lighting); 8 for a scalar or another small object (Ray's framing is not
-    counted)."""
-    if isinstance(obj, np.ndarray):
+    and dataclasses (a Volume, Texels, Lighting), a ``PackedMask``'s bits; 8 for a scalar or another small object
+    (Ray's framing is not counted)."""
+    if isinstance(obj, (np.ndarray, PackedMask)):
         return int(obj.nbytes)
     if isinstance(obj, (bytes, bytearray, memoryview)):
         return len(obj)
@@ -174,7 +175,7 @@ class BandObject:
                 row, x = np.nonzero(edge == sign)  # in grid order
                 out.append((z * ny + row.astype(np.int64)) * nx + x)
         index = volume.band.index
-        labels = volume.labels.reshape(-1)[index] if volume.form == "labels" else None
+        labels = volume.medium.labels_at(index) if volume.form == "labels" else None  # no grid-sized array
         rows = volume.mixture.reshape(-1, len(volume.inks))[index] if volume.form == "mixture" else None
         return cls(
             volume.shape, volume.voxel_mm, volume.g, volume.ior, volume.boundary, volume.normals,

@@ -98,6 +98,6 @@ def test_chart_volume_stacks_each_patch():
     assert vol.voxel_mm[0] == pytest.approx(0.2) and vol.voxel_mm[2] == pytest.approx(0.1)
     # Patch 1 (top left, largest y): 2 mm white under 0.1 mm cyan; patch of white alone: no white under it.
     col = vol.mixture[:, -1, 0]
-    inside = vol.inside[:, -1, 0]
+    inside = vol.inside.dense()[:, -1, 0]
     assert inside.sum() == 21 and np.all(col[:20, 1] == 1) and np.all(col[20, 0] == 1)
-    assert not vol.inside[:, -1, 20:24].any()  # the gap between patches
+    assert not vol.inside.dense()[:, -1, 20:24].any()  # the gap between patches

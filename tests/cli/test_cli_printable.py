@@ -118,7 +118,7 @@ def test_quantize_upsamples_mesh_normals(tmp_path, capsys):
         _enclosing(X, q.voxel_mm[0], 6, V300),
     )
     np.testing.assert_array_equal(q.normals.dense(), vol.normals.dense()[np.ix_(iz, iy, ix)])
-    np.testing.assert_array_equal(q.labels == 255, ~vol.inside[np.ix_(iz, iy, ix)])
+    np.testing.assert_array_equal(q.labels == 255, ~vol.inside.dense()[np.ix_(iz, iy, ix)])
     tex = Texels.for_volume(q)  # one texel per printer surface voxel, from the normals
     assert len(tex) > 0 and np.all(np.abs(np.linalg.norm(tex.normal, axis=1) - 1) < 1e-5)
 

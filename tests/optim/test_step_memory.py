@@ -98,7 +98,7 @@ def test_a_shell_runs_step_scale_counts_its_core():
     for shell in (None, 0.3):
         scene = build_scene(MeshSpec(str(SPOT), height_mm=4.0, shell_mm=shell), inks)
         r = run(scene, iterations=1)
-        inside = int(np.count_nonzero(scene.volume.inside))
+        inside = scene.volume.inside.count
         assert r.opt.held_rows == inside - r.param.n_free
         assert (r.opt.held_rows > 0.2 * inside) if shell else (r.opt.held_rows == 0)
 

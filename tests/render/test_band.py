@@ -53,7 +53,7 @@ def assert_same(a, b):
 
 def test_band_renders_and_differentiates_as_the_sparse_and_dense_forms():
     vol, plain = banded()
-    assert 0 < len(vol.band.index) < vol.inside.sum() - 100  # a core of its own
+    assert 0 < len(vol.band.index) < vol.inside.count - 100  # a core of its own
     want = passes(plain, 1)
     assert want[0].mean() > 0.05
     for threads in (1, 2, 3):
@@ -70,7 +70,7 @@ def test_set_mixture_writes_the_band_and_refuses_core_voxels():
     rows = rng.dirichlet(np.ones(5), size=len(index)).astype(np.float32)
     changed = plain.mixture.copy()
     changed.reshape(-1, 5)[index] = rows
-    core_voxel = np.setdiff1d(np.flatnonzero(vol.inside), vol.band.index)[:3]
+    core_voxel = np.setdiff1d(vol.inside.nonzero(), vol.band.index)[:3]
     reused = Renderer(vol)
     # core voxels given the core's mixture are taken as they are (the optimiser's fixed shares pass them)
     both = np.concatenate([index, core_voxel])
@@ -114,7 +114,7 @@ def test_mesh_scene_with_a_shell_optimises_as_without_the_band():
 
     scene = build_scene(MeshSpec(str(SPOT), height_mm=4.0, shell_mm=0.3), INKS)
     band = scene.volume.band
-    assert band is not None and 0 < len(band.index) < scene.volume.inside.sum()
+    assert band is not None and 0 < len(band.index) < scene.volume.inside.count
     np.testing.assert_array_equal(band.index, np.flatnonzero(scene.free))
     cfg = OptimizeConfig(iterations=1, spp=1).for_scene(scene.kind)
     runs = [

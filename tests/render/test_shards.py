@@ -130,7 +130,7 @@ def test_ray_shards_equal_one_machine_on_a_mesh(tmp_path):
     trimesh.Trimesh(sph.vertices, sph.faces, vertex_colors=colours, process=False).export(tmp_path / "ball.ply")
     spec = MeshSpec(tmp_path / "ball.ply", scale=1.0, up="z", shell_mm=0.2)
     scene = build_mesh_scene(spec, InkTable.parse("vero-cmykw"))
-    assert 0 < scene.free.sum() < scene.vox.inside.sum()
+    assert 0 < scene.free.sum() < scene.vox.inside.count
     cfg = OptimizeConfig(iterations=2, spp=2, forward_spp=4).for_scene("mesh")
     plain = Optimization(scene, cfg, threads=2)
     plain.run()

@@ -24,7 +24,7 @@ def sphere():
 def test_sphere_volume_and_depth(sphere):
     sph, vo = sphere
     assert vo.voxel_mm == pytest.approx([25.4 / 300] * 3)
-    vol = vo.inside.sum() * np.prod(vo.voxel_mm)
+    vol = vo.inside.count * np.prod(vo.voxel_mm)
     assert vol == pytest.approx(sph.volume, rel=0.01)  # 0.02 % in practice; 47 voxels across
     # analytic sphere SDF (the icosphere's faces lie within ~2 um of the sphere): the inside mask is its sign, the
     # near depths are exact for the inside voxels less than the band deep, and listed for no other voxel
@@ -33,17 +33,17 @@ def test_sphere_volume_and_depth(sphere):
     pos = vo.origin_mm + (np.stack([xx, yy, zz], -1) + 0.5) * vo.voxel_mm
     true = (np.linalg.norm(pos - [0, 0, 2.0], axis=-1) - 2.0).reshape(-1)
     clear = np.abs(true) > 0.005
-    assert np.all(vo.inside.reshape(-1)[clear] == (true[clear] < 0))
+    assert np.all(vo.inside.at(np.flatnonzero(clear)) == (true[clear] < 0))
     dp = vo.depth
-    assert dp.index.dtype == np.int64 and dp.mm.dtype == np.float32 and vo.inside.dtype == bool
-    assert len(np.unique(dp.index)) == len(dp.index) and vo.inside.reshape(-1)[dp.index].all()
+    assert dp.index.dtype == np.int64 and dp.mm.dtype == np.float32 and vo.inside.dense().dtype == bool
+    assert len(np.unique(dp.index)) == len(dp.index) and vo.inside.at(dp.index).all()
     assert np.abs(dp.mm - (-true[dp.index])).max() < 0.005
     assert np.all((dp.mm > 0) & (dp.mm < vo.band_mm))
     listed = np.zeros(true.size, bool)
     listed[dp.index] = True
-    deep_enough = vo.inside.reshape(-1) & (-true < vo.band_mm - 0.01)
+    deep_enough = vo.inside.dense().reshape(-1) & (-true < vo.band_mm - 0.01)
     assert np.all(listed[deep_enough])
-    assert not listed[vo.inside.reshape(-1) & (-true > vo.band_mm + 0.01)].any()
+    assert not listed[vo.inside.dense().reshape(-1) & (-true > vo.band_mm + 0.01)].any()
     # within: the voxels at most that deep; a depth beyond the band is refused
     sel = dp.within(0.2)
     assert np.array_equal(np.sort(sel), np.sort(dp.index[dp.mm <= np.float32(0.2)]))
@@ -55,7 +55,7 @@ def test_sphere_texels_and_normals(sphere):
     _, vo = sphere
     tx = vo.texels
     # texels = inside voxels with a 6-neighbour outside, in C order of (z, y, x)
-    ins = np.pad(vo.inside, 1)
+    ins = np.pad(vo.inside.dense(), 1)
     core = (
         ins[1:-1, 1:-1, 1:-1]
         & ins[:-2, 1:-1, 1:-1]
@@ -65,7 +65,7 @@ def test_sphere_texels_and_normals(sphere):
         & ins[1:-1, 1:-1, :-2]
         & ins[1:-1, 1:-1, 2:]
     )
-    np.testing.assert_array_equal(tx.voxel, np.argwhere(vo.inside & ~core))
+    np.testing.assert_array_equal(tx.voxel, np.argwhere(vo.inside.dense() & ~core))
     # Bound 0.5 deg: subdivision-4 icosphere edges span ~4 deg of arc, so flat face normals deviate up to
     # ~2.7 deg from radial and a one-voxel SDF gradient by several degrees; interpolated smooth normals at the
     # closest point deviate only to second order (~0.2 deg measured).
@@ -76,7 +76,7 @@ def test_sphere_texels_and_normals(sphere):
     # the chosen face is exposed and the most aligned of the exposed ones
     off = np.array([[0, 0, -1], [0, 0, 1], [0, -1, 0], [0, 1, 0], [-1, 0, 0], [1, 0, 0]])
     nb = tx.voxel + off[tx.face]
-    assert not vo.inside[nb[:, 0], nb[:, 1], nb[:, 2]].any()
+    assert not vo.inside.dense()[nb[:, 0], nb[:, 1], nb[:, 2]].any()
     assert np.mean(np.sum(FACE_NORMALS[tx.face] * tx.normal, 1) > 0.55) > 0.99
     # the normals volume carries the texel normals and nothing else
     np.testing.assert_array_equal(vo.normals.at(tx.voxel), tx.normal)
@@ -123,7 +123,7 @@ def _textured_cube(side=2.0, margin=0.15):
 
 def _check_cube(m, vo, file_face_of_ours):
     assert m.color_source == "texture"
-    assert vo.inside.sum() == 20**3 and len(vo.texels) == 20**3 - 18**3  # faces on voxel boundaries
+    assert vo.inside.count == 20**3 and len(vo.texels) == 20**3 - 18**3  # faces on voxel boundaries
     ours = np.argmax(vo.texels.normal @ FACE_NORMALS.T, 1)
     assert np.all(np.max(vo.texels.normal @ FACE_NORMALS.T, 1) > 0.9999)  # sharp creases stay sharp
     np.testing.assert_array_equal(vo.texels.face, ours)
@@ -168,7 +168,7 @@ def test_spot_loads_and_voxelizes():
     assert solid.is_watertight and solid.volume > 0
     assert m.vertices[:, 2].min() == pytest.approx(0) and np.ptp(m.vertices[:, 2]) == pytest.approx(6.0)
     vo = voxelize(m)
-    assert vo.inside.sum() * np.prod(vo.voxel_mm) == pytest.approx(solid.volume, rel=0.01)
+    assert vo.inside.count * np.prod(vo.voxel_mm) == pytest.approx(solid.volume, rel=0.01)
     t = vo.targets
     assert t.shape == (len(vo.texels), 3) and t.dtype == np.float32 and np.all((t >= 0) & (t <= 1))
     lum = t @ [0.2126, 0.7152, 0.0722]
@@ -210,7 +210,7 @@ def test_orientation_repaired(damage):
     vo = voxelize(
         mesh_from_trimesh(trimesh.Trimesh(sph.vertices, faces, process=False), scale=1.0, up="z"), voxel_mm=0.1
     )
-    np.testing.assert_array_equal(vo.inside, ref.inside)
+    np.testing.assert_array_equal(vo.inside.dense(), ref.inside.dense())
     np.testing.assert_allclose(vo.texels.normal, ref.texels.normal, atol=1e-6)
     assert np.all(np.sum(vo.texels.normal * (vo.closest_mm - [0, 0, 1]), 1) > 0)  # outward
 

@@ -152,10 +152,10 @@ def test_volume_and_scene_files(ball_run):
     assert t.shape == (len(tx), 3) and t.dtype == np.float32
     # fixed_share: one-hot white exactly outside the object (nothing inside is fixed without a shell)
     fixed, white = scene["fixed_share"], vol.inks.index("white")
-    np.testing.assert_array_equal(fixed[..., white], (~vol.inside).astype(np.float32))
-    assert fixed.sum() == (~vol.inside).sum()
-    np.testing.assert_array_equal(scene["free_mask"], vol.inside)
-    assert np.all(vol.mixture[~vol.inside][:, white] == 1.0)
+    np.testing.assert_array_equal(fixed[..., white], (~vol.inside.dense()).astype(np.float32))
+    assert fixed.sum() == (~vol.inside.dense()).sum()
+    np.testing.assert_array_equal(scene["free_mask"], vol.inside.dense())
+    assert np.all(vol.mixture[~vol.inside.dense()][:, white] == 1.0)
     # the optimiser puts each cap's ink under that cap: mean share of cyan (magenta, yellow) in the surface voxels
     # of the cyan (magenta, yellow) region is over 3x its share in the other regions (measured: 10-100x)
     p = scene["texel_closest_mm"] - CENTRE
@@ -185,7 +185,7 @@ def test_shell_fixes_deep_voxels(ball, tmp_path):
     pos = scene["origin_mm"] + (np.stack([xx, yy, zz], -1) + 0.5) * vol.voxel_mm
     sdf = np.linalg.norm(pos - CENTRE, axis=-1) - RADIUS
     deep = sdf < -shell - 0.005
-    near = (sdf > -shell + 0.005) & vol.inside
+    near = (sdf > -shell + 0.005) & vol.inside.dense()
     assert deep.sum() > 1000 and rep["shell_mm"] == shell
     assert rep["free_voxels"] == int(scene["free_mask"].sum()) < rep["inside_voxels"]
     white = vol.inks.index("white")

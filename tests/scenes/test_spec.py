@@ -118,7 +118,7 @@ def test_build_scene_reads_the_spec(chart, ball):
     np.testing.assert_array_equal(a.target_rgb, b.target_rgb)
     assert a.volume.shape == b.volume.shape and a.faces == b.faces and "chart.png" in a.describe()
     m = build_scene(MeshSpec(ball, height_mm=1, up="z", shell_mm=0.2), INKS)
-    assert m.kind == "mesh" and 0 < m.free.sum() < m.vox.inside.sum()
+    assert m.kind == "mesh" and 0 < m.free.sum() < m.vox.inside.count
     with pytest.raises(ValueError, match="shell_mm"):
         build_scene(MeshSpec(str(ball) + ".missing", height_mm=1, shell_mm=-1), INKS)
 

@@ -123,7 +123,7 @@ def test_mesh_alpha_depth_and_core(tmp_path):
     spec = MeshSpec(path, scale=1.0, up="z", shell_mm=2 * vox, translucency="alpha", translucency_depth_mm=4 * vox)
     sc = build_mesh_scene(spec, INKS)
     g = sc.translucency.grid()
-    inside = sc.vox.inside
+    inside = sc.vox.inside.dense()
     assert np.all(g[~inside] == 0)
     tex = sc.vox.texels
     ts = sc.translucency.texel_share(tex)

@@ -2,6 +2,7 @@
 //! when it is built), the core medium a scene holds, and the macro that runs a generic core function on whichever form
 //! the scene holds.
 
+use inkopt_core::transport::mask::MaskRef;
 use inkopt_core::{BandMedium, DenseMedium, LabelMedium, SparseMedium};
 use numpy::ndarray::Dimension;
 use numpy::{
@@ -45,8 +46,48 @@ pub(crate) struct Medium(Form);
 enum Form {
     Dense { sigma_s: Py<PyArray4<f32>>, sigma_a: Py<PyArray4<f32>> },
     Sparse(Sparse),
-    Band { inside: Py<PyArray3<u8>>, band: Sparse, core_sigma_s: [f32; 3], core_sigma_a: [f32; 3] },
+    Band { inside: Inside, band: Sparse, core_sigma_s: [f32; 3], core_sigma_a: [f32; 3] },
     Labels { labels: Py<PyArray3<u8>>, ink_sigma_s: Py<PyArray2<f32>>, ink_sigma_a: Py<PyArray2<f32>> },
+}
+
+/// An inside mask as the caller gives it: (Z, Y, X) uint8 (non-zero: inside), or its bits, (ceil(Z Y X / 8),)
+/// uint8 (`np.packbits` of the C-order flattening, as `model.mask.PackedMask.bits` holds it).
+pub(crate) enum Inside {
+    Bytes(Py<PyArray3<u8>>),
+    Bits(Py<PyArray1<u8>>),
+}
+
+impl Inside {
+    /// `obj` as a mask (its dtype, dimensions and layout checked; the grid is checked by `with`).
+    pub(crate) fn extract(obj: &Bound<'_, PyAny>) -> PyResult<Self> {
+        if let Ok(a) = obj.cast::<PyArray3<u8>>() {
+            return Ok(Inside::Bytes(checked(a.clone(), "inside", &[None, None, None])?));
+        }
+        if let Ok(a) = obj.cast::<PyArray1<u8>>() {
+            return Ok(Inside::Bits(checked(a.clone(), "inside", &[None])?));
+        }
+        Err(err("inside must be a (Z, Y, X) uint8 mask or its bits, (ceil(Z * Y * X / 8),) uint8 (np.packbits)"))
+    }
+
+    /// `f` of the mask read in place (no copy) as a `MaskRef` of the grid `shape` (Z, Y, X).
+    pub(crate) fn with<R>(
+        &self,
+        py: Python<'_>,
+        shape: [usize; 3],
+        f: impl FnOnce(MaskRef<'_>) -> PyResult<R>,
+    ) -> PyResult<R> {
+        match self {
+            Inside::Bytes(a) => {
+                let m = view(a, py)?;
+                check_shape(m.shape(), &shape, "inside")?;
+                f(MaskRef::Bytes(c_slice(&m, "inside")?))
+            }
+            Inside::Bits(a) => {
+                let m = view(a, py)?;
+                f(MaskRef::bits(c_slice(&m, "inside")?, shape.iter().product()).map_err(err)?)
+            }
+        }
+    }
 }
 
 /// Listed voxels' coefficients: `index` (K,) int64, `sigma_s` and `sigma_a` (K, 3) float32.
@@ -117,21 +158,22 @@ impl Medium {
     }
 
     /// Medium.band(inside, index, sigma_s, sigma_a, core_sigma_s, core_sigma_a): an object as a band and a core.
-    /// `inside` (Z, Y, X) uint8 (non-zero: inside; read when a scene takes the medium, not kept); the band's voxels
+    /// `inside` (Z, Y, X) uint8 (non-zero: inside) or its bits ((ceil(Z Y X / 8),) uint8, `np.packbits`; read a
+    /// z-plane at a time when a scene takes the medium, not kept); the band's voxels
     /// `index` (K,) int64 (strictly increasing linear (z, y, x) indices of inside voxels) with their coefficients
     /// (K, 3) float32 each; every other inside voxel has the core's `core_sigma_s`, `core_sigma_a` (3,) float32;
     /// outside voxels are vacuum; mm^-1. 24 bytes per band voxel, 12 per run of band or core voxels in a grid
     /// row and 4 per row; renders exactly as the sparse or dense form holding the same coefficients.
     #[staticmethod]
     fn band(
-        inside: Bound<'_, PyArray3<u8>>,
+        inside: Bound<'_, PyAny>,
         index: Bound<'_, PyArray1<i64>>,
         sigma_s: Bound<'_, PyArray2<f32>>,
         sigma_a: Bound<'_, PyArray2<f32>>,
         core_sigma_s: PyReadonlyArray1<'_, f32>,
         core_sigma_a: PyReadonlyArray1<'_, f32>,
     ) -> PyResult<Self> {
-        let inside = checked(inside, "inside", &[None, None, None])?;
+        let inside = Inside::extract(&inside)?;
         let band = Sparse::checked(index, sigma_s, sigma_a)?;
         let three = |a: &PyReadonlyArray1<'_, f32>, name: &str| -> PyResult<[f32; 3]> {
             let v = a.as_array();
@@ -191,13 +233,12 @@ impl Medium {
                 Ok(MediumKind::Sparse(SparseMedium::new([nx, ny, nz], ix, s, a).map_err(err)?))
             }
             Form::Band { inside, band: Sparse { index, sigma_s, sigma_a }, core_sigma_s, core_sigma_a } => {
-                let m = view(inside, py)?;
-                check_shape(m.shape(), &[nz, ny, nx], "inside")?;
                 let (ix, s, a) = (view(index, py)?, view(sigma_s, py)?, view(sigma_a, py)?);
                 let (ix, s, a) = (c_slice(&ix, "index")?, c_slice(&s, "sigma_s")?, c_slice(&a, "sigma_a")?);
                 let core = (*core_sigma_s, *core_sigma_a);
-                let m = BandMedium::new([nx, ny, nz], c_slice(&m, "inside")?, ix, s, a, core);
-                Ok(MediumKind::Band(m.map_err(err)?))
+                let m =
+                    inside.with(py, [nz, ny, nx], |m| BandMedium::new([nx, ny, nz], m, ix, s, a, core).map_err(err))?;
+                Ok(MediumKind::Band(m))
             }
             Form::Labels { labels, ink_sigma_s, ink_sigma_a } => {
                 let (l, is, ia) = (view(labels, py)?, view(ink_sigma_s, py)?, view(ink_sigma_a, py)?);

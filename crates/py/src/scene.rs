@@ -13,14 +13,15 @@ use pyo3::prelude::*;
 
 use crate::arrays::{c_slice, check_shape, err, options, pack, Packed};
 use crate::gradients;
-use crate::medium::{with_medium, Medium, MediumKind};
+use crate::medium::{with_medium, Inside, Medium, MediumKind};
 use crate::state::Scene;
 use crate::texels::Texels;
 
 #[pymethods]
 impl Scene {
     /// Scene(shape_zyx, voxel_mm_xyz, medium, *, inside=None, normals=None, normal_index=None,
-    /// normal_vectors=None, boundary="box", ior=1.5, g=0.4, threads=None). `medium`: a `Medium` of this grid.
+    /// normal_vectors=None, boundary="box", ior=1.5, g=0.4, threads=None). `medium`: a `Medium` of this grid;
+    /// `inside`: the object's mask, (Z, Y, X) uint8 or its bits (`np.packbits`, as `Medium.band` takes it).
     /// Shading normals: dense (`normals` (Z, Y, X, 3) f32) or sparse (`normal_index` (K,) i64 increasing linear
     /// indices, `normal_vectors` (K, 3) f32).
     #[new]
@@ -31,7 +32,7 @@ impl Scene {
         shape: (usize, usize, usize),
         voxel_mm: (f32, f32, f32),
         medium: PyRef<'_, Medium>,
-        inside: Option<PyReadonlyArray3<u8>>,
+        inside: Option<Bound<'_, PyAny>>,
         normals: Option<PyReadonlyArray4<f32>>,
         normal_index: Option<PyReadonlyArray1<i64>>,
         normal_vectors: Option<PyReadonlyArray2<f32>>,
@@ -49,8 +50,8 @@ impl Scene {
         let mut geo = Geometry::new([nx, ny, nz], [voxel_mm.0, voxel_mm.1, voxel_mm.2], bnd, ior, g).map_err(err)?;
         let medium = medium.build(py, [nz, ny, nx])?;
         if let Some(m) = inside {
-            check_shape(m.shape(), &[nz, ny, nx], "inside")?;
-            geo = geo.with_inside(c_slice(&m, "inside")?).map_err(err)?; // read in place, not copied
+            // read in place a slab at a time (a bit mask unpacked a slab at a time), not copied
+            geo = Inside::extract(&m)?.with(py, [nz, ny, nx], |m| geo.with_inside_mask(m).map_err(err))?;
         }
         if let Some(nrm) = &normals {
             check_shape(nrm.shape(), &[nz, ny, nx, 3], "normals")?;

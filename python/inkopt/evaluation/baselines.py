@@ -174,7 +174,7 @@ def _nearest_centred(texels: Texels, fill: np.ndarray, vmm: np.ndarray, only: np
         return sel[f[sel]]
 
     if only is None:
-        counts = fill.reshape(nz, -1).sum(1)
+        counts = np.array([np.count_nonzero(fill[z]) for z in range(nz)], np.int64)  # a plane at a time
     else:
         counts = np.array([len(filled(z)) for z in range(nz)], np.int64)
     offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)

@@ -59,14 +59,15 @@ VOXELIZE_NEAR_BYTES = 24 * 0.9
 VOXELIZE_TEXEL_BYTES = 626.0 - VOXELIZE_NEAR_BYTES * 14
 DEFAULT_BAND = 3
 #: the run holds, by what the code stores (docs/performance.md, "Memory, by what the code stores"), per grid voxel
-#: the inside mask (1 B), the free mask's bits (1/8 B) and the core's table entry of its signed distances stored by
-#: 8^3 bricks (4 B per brick: 1/128 B), and per texel the bricks the core stores with their bytes (those within the
-#: distances' cap of 16 voxels of the surface, 512 B each; the others, of one value, are their table entry only):
+#: the inside and free masks' bits (``model.mask.PackedMask``, 1/8 B each; the inside mask held 1 B before) and the
+#: core's table entry of its signed distances stored by 8^3 bricks (4 B per brick: 1/128 B), and per texel the
+#: bricks the core stores with their bytes (those within the distances' cap of 16 voxels of the surface, 512 B each;
+#: the others, of one value, are their table entry only):
 #: 59.5 B per texel at Spot 100 mm (282 307 of 1 854 884 bricks for 2 428 105 texels), 58.8 at 60 mm (100 205 of
 #: 404 950 for 872 457), 52.1 at 20 mm (9 773 of 15 810 for 96 002; bench/results/mesh_100mm_shell1_bricks.json,
 #: mesh_60mm_shell1_bricks.json, bricks_ab_20mm.json, distance_storage: 0.16, 0.26 and 0.65 B per grid voxel where
 #: the core held 1 B); and per inside voxel the core's sparse sigma_t and albedo; then it peaks in one of two stages:
-RUN_GRID_BYTES = 1.0 + 1.0 / 8 + 4.0 / 512
+RUN_GRID_BYTES = 1.0 / 8 + 1.0 / 8 + 4.0 / 512
 RUN_TEXEL_BYTES = 59.5
 RUN_INSIDE_BYTES = 24.0
 #: - a step: per free voxel the variables, momentum and index held through the run (48 B) and, at the step's peak,
@@ -95,15 +96,16 @@ FIGURES_TEXEL_BYTES = 4270.0
 #: entries run_<H>mm_shell1_*; bench/results/mesh_60mm_shell1_whole_run.json; docs/performance.md, "The whole run's
 #: peak stage by stage"); the band's free voxels grow with the area as the texels do, so the two are not told
 #: apart and the per-free terms are what the code holds:
-#: - a step: per texel the all-free step's 128 B and per free voxel 152 B (x and momentum, 40 B; the free index,
+#: - a step: per texel the all-free step's 128 B and per free voxel 146 B (x and momentum, 40 B; the free index,
 #:   which is the band's own, 8 B; the smoothed set's rows and guide, 24 B; at the peak dE/dx, 20 B, and the
 #:   smoothing's neighbours, weights and two copies of a column, 37 B, or the core's gradient sums, 48 B; and what
-#:   the allocator keeps), fitted to Spot 100 mm through an iteration, 6.66 GiB (python bench/bench_mesh.py 100
-#:   --shell-mm 1 --iterations 1 --figure-metrics --renderer, bench/results/mesh_100mm_shell1_mem.json); Spot 40 mm's
+#:   the allocator keeps), fitted to Spot 100 mm through an iteration, 5.70 GiB with the inside mask as bits (python
+#:   bench/bench_mesh.py 100 --shell-mm 1 --iterations 1 --figure-metrics --renderer, bench/results/
+#:   mesh_100mm_shell1_mem68.json; 152 B fitted the 6.66 GiB of mesh_100mm_shell1_mem.json with its byte); Spot 40 mm's
 #:   step measured 1.094 GiB, 0.99 estimated (python bench/bench_step_memory.py 40 --shell-mm 1 --iterations 1,
 #:   bench/results/step_memory_spot.json, 40mm_shell1_mem_after). 195 B where the smoothing gathered its column and
 #:   the set's indices and kept six neighbours and six weights per voxel, and the band kept its own index;
-SHELL_STEP_FREE_BYTES = 152.0
+SHELL_STEP_FREE_BYTES = 146.0
 SHELL_STEP_TEXEL_BYTES = STEP_TEXEL_BYTES
 #: - the figures (the start's with the renderer held for the baseline guard, the guard's, the result's, and the
 #:   renderer's builds): per free voxel the variables, momentum and index (48 B) and the renderer's band medium

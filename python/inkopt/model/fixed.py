@@ -14,55 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-
-class PackedMask:
-    """A (z, y, x) bool mask as bits: ``bits`` (ceil(V / 8),) uint8, ``np.packbits`` of its C-order flattening
-    (1 bit per voxel), packed and read a slab at a time."""
-
-    #: voxels packed or unpacked at a time (a multiple of 8: slabs start on byte boundaries)
-    STEP = 1 << 24
-
-    def __init__(self, mask: np.ndarray):
-        mask = np.asarray(mask, bool)
-        if mask.ndim != 3:
-            raise ValueError(f"free must be a (z, y, x) mask, got shape {mask.shape}")
-        self.shape = tuple(int(s) for s in mask.shape)
-        flat = mask.reshape(-1)
-        self.bits = np.empty(-(-flat.size // 8), np.uint8)
-        for a in range(0, flat.size, self.STEP):
-            self.bits[a // 8 : (a + self.STEP + 7) // 8] = np.packbits(flat[a : a + self.STEP])
-        #: voxels in the mask
-        self.count = sum(int(np.count_nonzero(self.range(a, a + self.STEP))) for a in range(0, self.size, self.STEP))
-
-    @property
-    def size(self) -> int:
-        return int(np.prod(self.shape, dtype=np.int64))
-
-    def all(self) -> bool:
-        return self.count == self.size
-
-    def at(self, index: np.ndarray) -> np.ndarray:
-        """(K,) bool: the mask at the flat (z, y, x) indices ``index`` ((K,) int64)."""
-        index = np.asarray(index, np.int64)
-        return ((self.bits[index >> 3] >> (7 - (index & 7)).astype(np.uint8)) & 1).astype(bool)
-
-    def range(self, a: int, b: int) -> np.ndarray:
-        """(min(b, V) - a,) bool: the flat voxels a:b (a a multiple of 8)."""
-        b = min(b, self.size)
-        return np.unpackbits(self.bits[a // 8 : (b + 7) // 8], count=b - a).astype(bool)
-
-    def dense(self) -> np.ndarray:
-        """The (z, y, x) bool mask (1 byte per voxel, a new array)."""
-        out = np.empty(self.shape, bool)
-        flat = out.reshape(-1)
-        for a in range(0, flat.size, self.STEP):
-            flat[a : a + self.STEP] = self.range(a, a + self.STEP)
-        return out
-
-    def nonzero(self) -> np.ndarray:
-        """(count,) int64 sorted flat indices of the voxels in the mask, a slab at a time."""
-        parts = [np.flatnonzero(self.range(a, a + self.STEP)) + a for a in range(0, self.size, self.STEP)]
-        return np.concatenate(parts or [np.empty(0, np.int64)]).astype(np.int64, copy=False)
+from .mask import PackedMask
 
 
 class FixedShares:

@@ -13,6 +13,7 @@ import numpy as np
 
 from ..errors import ParameterError
 from .inks import InkTable
+from .mask import PackedMask
 
 EMPTY = 255  # the label of a voxel without ink
 
@@ -111,35 +112,44 @@ class Labels:
 
 
 class InsideLabels(Labels):
-    """``Labels`` of one ink ``label`` on every voxel of ``inside`` ((z, y, x) bool, kept by reference) and
-    ``EMPTY`` elsewhere, with no label array of its own: an object's base medium (white inside) costs nothing per
-    voxel. ``labels`` makes the dense (z, y, x) uint8 array when asked (1 byte per voxel, not kept)."""
+    """``Labels`` of one ink ``label`` on every voxel of ``inside`` (a ``PackedMask``, kept by reference; a (z, y, x)
+    bool array is packed) and ``EMPTY`` elsewhere, with no label array of its own: an object's base medium (white
+    inside) costs nothing per voxel. ``labels`` makes the dense (z, y, x) uint8 array when asked (1 byte per voxel,
+    not kept)."""
 
-    def __init__(self, inside: np.ndarray, label: int, inks: InkTable):
-        self.inside = np.asarray(inside, bool)
+    def __init__(self, inside, label: int, inks: InkTable):
+        self.inside = _packed(inside)
         self.label = int(label)
         self.inks = inks
-        if self.inside.ndim != 3:
-            raise VolumeError(f"an inside mask must be (z, y, x), got shape {self.inside.shape}")
         if not 0 <= self.label < len(inks):
             raise VolumeError(f"label {self.label} is not an ink of the table's {len(inks)}")
 
     @property
     def labels(self) -> np.ndarray:
-        return np.where(self.inside, np.uint8(self.label), np.uint8(EMPTY))
+        return np.where(self.inside.dense(), np.uint8(self.label), np.uint8(EMPTY))
 
     @property
     def shape(self):
         return self.inside.shape
 
     def labels_at(self, index: np.ndarray) -> np.ndarray:
-        return np.where(self.inside.reshape(-1)[index], np.uint8(self.label), np.uint8(EMPTY))
+        return np.where(self.inside.at(index), np.uint8(self.label), np.uint8(EMPTY))
 
     def __repr__(self) -> str:
         return f"InsideLabels(ink {self.label} on {self.inside.shape} inside, {len(self.inks)} inks)"
 
 
 Medium = Dense | Mixture | Labels
+
+
+def _packed(inside) -> PackedMask:
+    """``inside`` as a ``PackedMask`` (itself if it is one; a (z, y, x) bool array is packed)."""
+    if isinstance(inside, PackedMask):
+        return inside
+    inside = np.asarray(inside, bool)
+    if inside.ndim != 3:
+        raise VolumeError(f"an inside mask must be (z, y, x), got shape {inside.shape}")
+    return PackedMask(inside)
 
 
 @dataclass(frozen=True)
@@ -160,26 +170,27 @@ class Band:
         object.__setattr__(self, "core", np.ascontiguousarray(self.core, np.float32).reshape(-1))
 
     @classmethod
-    def of_fixed(cls, inside: np.ndarray, fixed) -> Band:
-        """The band of an object whose inside voxels ((z, y, x) bool) are free or hold fixed shares ``fixed``
+    def of_fixed(cls, inside, fixed) -> Band:
+        """The band of an object whose inside voxels (``inside``) are free or hold fixed shares ``fixed``
         (``model.fixed.FixedShares``: ``held`` in every voxel that is not free, except its indexed rows): the
-        inside voxels that are free or indexed, and ``held`` as the core."""
-        flat, mask = inside.reshape(-1), fixed.mask
+        inside voxels that are free or indexed, and ``held`` as the core (a (z, y, x) bool ``inside`` is packed)."""
+        mask, inside = fixed.mask, _packed(inside)
         step = mask.STEP  # voxels at a time: no grid-sized temporary
         free = np.concatenate(
-            [np.flatnonzero(mask.range(a, a + step) & flat[a : a + step]) + a for a in range(0, flat.size, step)]
+            [np.flatnonzero(mask.range(a, a + step) & inside.range(a, a + step)) + a for a in range(0, mask.size, step)]
             or [np.empty(0, np.int64)]
         )
-        rows = fixed.index[flat[fixed.index]]
+        rows = fixed.index[inside.at(fixed.index)]
         return cls(np.union1d(free, rows) if len(rows) else free, fixed.held)
 
-    def check(self, inside: np.ndarray, n_inks: int) -> None:
-        """One-line VolumeError unless the band lies inside ``inside`` ((z, y, x) bool) and ``core`` has ``n_inks``
-        finite non-negative shares."""
+    def check(self, inside, n_inks: int) -> None:
+        """One-line VolumeError unless the band lies inside ``inside`` and ``core`` has ``n_inks`` finite
+        non-negative shares (a (z, y, x) bool ``inside`` is packed)."""
+        inside = _packed(inside)
         if len(self.core) != n_inks or not np.all(np.isfinite(self.core)) or np.any(self.core < 0):
             raise VolumeError(f"a band's core must be {n_inks} finite non-negative ink shares, got {self.core}")
-        flat = inside.reshape(-1)
-        if len(self.index) and (self.index[0] < 0 or self.index[-1] >= flat.size or not flat[self.index].all()):
+        n = inside.size
+        if len(self.index) and (self.index[0] < 0 or self.index[-1] >= n or not inside.at(self.index).all()):
             raise VolumeError("a band's voxels must lie inside the object")
 
 

@@ -33,6 +33,7 @@ from ..errors import ParameterError
 from ..io import FORMAT_KEY, FormatError, Streamed, load_npz, save_npz, upgrade_format
 from .inks import DEFAULT_G, InkTable, mix
 from .labelfile import load_label_file
+from .mask import PackedMask
 from .media import EMPTY, Band, Dense, Labels, Medium, Mixture, Quantization, VolumeError
 from .normals import SurfaceNormals
 
@@ -79,7 +80,8 @@ class Volume:
     medium: Medium
     g: float = DEFAULT_G
     ior: float = 1.5
-    inside: np.ndarray | None = None
+    #: the inside voxels (``PackedMask``, a bit per grid voxel; a (z, y, x) bool array given is packed)
+    inside: PackedMask | None = None
     #: shading normals of the surface voxels (``SurfaceNormals``; a dense (z, y, x, 3) array is converted)
     normals: SurfaceNormals | None = None
     boundary: str = "box"
@@ -156,10 +158,11 @@ class Volume:
         if min(shp) < 1:
             raise VolumeError(f"volume shape {shp} is empty")
         if self.inside is not None:
-            ins = np.asarray(self.inside)
-            if ins.shape != shp:
-                raise VolumeError(f"inside mask shape {ins.shape} differs from volume shape {shp}")
-            self.inside = np.ascontiguousarray(ins, dtype=bool)
+            shape = tuple(self.inside.shape) if isinstance(self.inside, PackedMask) else np.shape(self.inside)
+            if shape != shp:
+                raise VolumeError(f"inside mask shape {shape} differs from volume shape {shp}")
+            if not isinstance(self.inside, PackedMask):  # kept as bits (1 bit per grid voxel)
+                self.inside = PackedMask(self.inside)
         if self.normals is not None:
             try:
                 if not isinstance(self.normals, SurfaceNormals):
@@ -191,7 +194,7 @@ class Volume:
         elif self.form == "labels":
             need = n
         elif self.inside is not None:
-            need = 4 * n + 24 * int(np.count_nonzero(self.inside))
+            need = 4 * n + 24 * self.inside.count
         else:
             need = 24 * n
         need += 2 * n if self.inside is not None else 0
@@ -235,8 +238,10 @@ class Volume:
         return s, a
 
     def inside_mask(self) -> np.ndarray:
+        """(z, y, x) bool: the inside voxels (the mask's dense bytes, a new array; a labels volume without one, its
+        labels other than ``EMPTY``; else every voxel)."""
         if self.inside is not None:
-            return self.inside
+            return self.inside.dense()
         if isinstance(self.medium, Labels):
             return self.medium.labels != EMPTY
         return np.ones(self.shape, bool)
@@ -286,7 +291,7 @@ class Volume:
             "boundary": np.array(self.boundary),
         }
         if self.inside is not None:
-            out["inside"] = self.inside
+            out["inside"] = self.inside.dense()
         if self.normals is not None:
             out["normal_index"], out["normal_vectors"] = self.normals.index, self.normals.vectors
         if self.origin_mm is not None:

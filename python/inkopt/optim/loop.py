@@ -99,7 +99,7 @@ class Optimization:
         self._problem_digest = h.hexdigest()[:16]
         self.x = self.initial_variables()
         # the inside voxels held fixed (a shell's core) join the step scale's population with a zero gradient
-        held = 0 if base.inside is None else max(int(np.count_nonzero(base.inside)) - self.param.n_free, 0)
+        held = 0 if base.inside is None else max(base.inside.count - self.param.n_free, 0)
         self.opt = make_optimizer(cfg.optimizer, cfg.step_size, self.x.shape, threads, held_rows=held)
         self.smoother = self._smoother()
         self._renderer: TexelRenderer | None = None

@@ -83,7 +83,7 @@ class Parameterization:
         band's, since its core holds the core's mixture already; else every one."""
         if base.band is not None:
             return np.setdiff1d(base.band.index, self.free_index, assume_unique=True)
-        held = base.inside.copy()
+        held = base.inside.dense()
         held.reshape(-1)[self.free_index] = False
         return np.flatnonzero(held)
 

@@ -22,6 +22,7 @@ import numpy as np
 
 from ..errors import ParameterError
 from ..model import Quantization, SurfaceNormals
+from ..model.mask import PackedMask
 from ..units import MM_PER_INCH, PRINTER_DPI, PRINTER_LAYER_UM
 
 DEFAULT_DPI = PRINTER_DPI
@@ -75,13 +76,13 @@ def _linear(n_p: int, vp: float, n_o: int, vo: float):
 class PrinterGrid:
     """A printer grid over an optimisation grid: ``shape`` (Z, Y, X) printer voxels of ``voxel_mm`` (x, y, z) mm
     over ``source_shape`` (z, y, x) voxels of ``source_voxel_mm`` (x, y, z) mm, and the optimisation grid's
-    ``inside`` mask (bool (z, y, x), None: every voxel inside)."""
+    ``inside`` mask (bool (z, y, x) or a ``PackedMask``, read a plane at a time; None: every voxel inside)."""
 
     shape: tuple[int, int, int]
     voxel_mm: np.ndarray
     source_shape: tuple[int, int, int]
     source_voxel_mm: np.ndarray
-    inside_mask: np.ndarray | None = None
+    inside_mask: np.ndarray | PackedMask | None = None
 
     @classmethod
     def of(cls, source_shape, source_voxel_mm, q: Quantization, inside=None) -> PrinterGrid:

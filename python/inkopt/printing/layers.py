@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..model import DEFAULT_G, EMPTY, InkTable, Volume
+from ..model.mask import PackedMask
 
 
 @dataclass(frozen=True, eq=False)
@@ -27,14 +28,15 @@ class MixtureLayers:
               increasing z and checked as it is read (``model.mixturefile.MixtureSource``, the evaluation's
               ``BaselineLayers``). Rows are normalised to sum 1; rows inside must have a positive sum
     voxel_mm  (x, y, z) mm of the optimisation grid
-    inside    bool (z, y, x) or None (every voxel inside); printer voxels of an outside voxel get ``EMPTY``
+    inside    bool (z, y, x), a ``PackedMask`` (read a plane at a time) or None (every voxel inside); printer
+              voxels of an outside voxel get ``EMPTY``
     inks      the ``InkTable`` of the N inks, or None (then only index order: ``Quantization.ink_order`` "index")
     g, ior    the medium's, for the inks' order (``dithers.band_order``)
     """
 
     mixture: object
     voxel_mm: object
-    inside: np.ndarray | None = None
+    inside: np.ndarray | PackedMask | None = None
     inks: InkTable | None = None
     g: float = DEFAULT_G
     ior: float = 1.5
@@ -50,15 +52,16 @@ class MixtureLayers:
         if shape[3] >= EMPTY:
             raise ValueError(f"at most {EMPTY - 1} inks fit uint8 labels, got {shape[3]}")
         if self.inside is not None:
-            inside = np.asarray(self.inside, bool)
-            if inside.shape != tuple(shape[:3]):
+            inside = self.inside if isinstance(self.inside, PackedMask) else np.asarray(self.inside, bool)
+            if tuple(inside.shape) != tuple(shape[:3]):
                 raise ValueError(f"inside mask shape {inside.shape} differs from mixture shape {tuple(shape[:3])}")
             object.__setattr__(self, "inside", inside)
         if self.inks is not None and len(self.inks) != shape[3]:
             raise ValueError(f"mixture of {shape[3]} inks, but the ink table has {len(self.inks)}")
         object.__setattr__(self, "voxel_mm", np.asarray(self.voxel_mm, np.float64).reshape(-1))
         if not self.is_source:
-            object.__setattr__(self, "total", _checked_total(self.mixture, self.inside))
+            inside = None if self.inside is None else np.asarray(self.inside)  # an array's grid: dense bytes
+            object.__setattr__(self, "total", _checked_total(self.mixture, inside))
 
     @classmethod
     def of(cls, volume) -> MixtureLayers:

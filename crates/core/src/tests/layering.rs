@@ -9,6 +9,7 @@ const LAYERS: &[&str] = &[
     "cache",
     "pages",
     "spans",
+    "transport::mask",
     "transport::sampling",
     "transport::rng",
     "transport::light",

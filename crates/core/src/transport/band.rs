@@ -8,6 +8,7 @@
 //! and renders and gradients are bit-identical to the dense and sparse forms.
 
 use crate::spans::row_of;
+use crate::transport::mask::MaskRef;
 use crate::transport::medium::{check_coefficients, extinction_albedo, majorant_of, Medium};
 
 /// `Run::start` of a core run.
@@ -49,24 +50,25 @@ pub struct BandMedium {
 }
 
 impl BandMedium {
-    /// A grid of (nx, ny, nz) voxels whose inside voxels are those with `inside[j] != 0` ((z, y, x) order, one byte
-    /// per voxel; read here, not kept). `index` (strictly increasing linear indices of inside voxels) lists the
+    /// A grid of (nx, ny, nz) voxels whose inside voxels are those of the mask `inside` ((z, y, x) order, a byte
+    /// (non-zero: inside) or a bit per voxel, `MaskRef`; read a z-plane at a time here, not kept). `index` (strictly increasing linear indices of inside voxels) lists the
     /// band with interleaved (entry, channel) coefficients `sigma_s`, `sigma_a`; every other inside voxel has the
     /// core's `core_sigma_s`, `core_sigma_a` (per channel); all in mm^-1.
-    pub fn new(
+    pub fn new<'m>(
         n_xyz: [usize; 3],
-        inside: &[u8],
+        inside: impl Into<MaskRef<'m>>,
         index: &[i64],
         sigma_s: &[f32],
         sigma_a: &[f32],
         core: ([f32; 3], [f32; 3]),
     ) -> Result<Self, String> {
+        let inside = inside.into();
         let (nx, ny, n) = (n_xyz[0], n_xyz[1], n_xyz.iter().product::<usize>());
         if inside.len() != n {
             return Err(format!("the inside mask has {} voxels, the grid {n}", inside.len()));
         }
         check_index(index, n)?;
-        if let Some(e) = index.iter().position(|&j| inside[j as usize] == 0) {
+        if let Some(e) = index.iter().position(|&j| !inside.get(j as usize)) {
             return Err(format!("band entry {e} is voxel {}, which is not inside the object", index[e]));
         }
         check_coefficients(index.len(), sigma_s, sigma_a, |e| format!("entry {e} (voxel {})", index[e]))?;
@@ -76,7 +78,7 @@ impl BandMedium {
                 .ok_or_else(|| format!("the core's coefficients of channel {c} are negative or not finite"))?;
             core_pairs[c] = [t, a];
         }
-        let (rows, runs, has_core) = row_runs(nx, inside, index)?;
+        let (rows, runs, has_core) = row_runs([nx, ny], inside, index)?;
         let k = index.len();
         let mut medium = BandMedium {
             n,
@@ -205,13 +207,18 @@ fn check_index(index: &[i64], n: usize) -> Result<(), String> {
 /// The runs of each row of the inside mask (rows of nx voxels), split where a voxel's class (band: listed in
 /// `index`, an increasing subset of the inside voxels; core: any other inside voxel) changes: the row table
 /// (rows + 1 entries), the runs, and whether any voxel is core.
-fn row_runs(nx: usize, inside: &[u8], index: &[i64]) -> Result<(Vec<u32>, Vec<Run>, bool), String> {
+fn row_runs(n_xy: [usize; 2], inside: MaskRef<'_>, index: &[i64]) -> Result<(Vec<u32>, Vec<Run>, bool), String> {
+    let [nx, ny] = n_xy;
     let n_rows = inside.len() / nx;
     let (mut rows, mut runs) = (Vec::with_capacity(n_rows + 1), Vec::new());
     let (mut e, mut has_core) = (0usize, false);
+    let mut layer = std::borrow::Cow::Borrowed(&[][..]);
     for row in 0..n_rows {
         rows.push(u32::try_from(runs.len()).map_err(|_| "more runs of inside voxels than a band numbers")?);
-        let line = &inside[row * nx..(row + 1) * nx];
+        if row % ny == 0 {
+            layer = inside.span(row * nx, (row + ny) * nx); // a z-plane at a time (a bit mask unpacked)
+        }
+        let line = &layer[(row % ny) * nx..(row % ny + 1) * nx];
         let mut x = 0;
         while x < nx {
             if line[x] == 0 {

@@ -8,6 +8,8 @@
 use rayon::prelude::*;
 use wide::i32x8;
 
+use crate::transport::mask::MaskRef;
+
 /// Largest safe distance stored: 16 voxels (1.3 mm at 300 DPI), far beyond a free flight in any ink.
 pub const SAFE_CAP: u8 = 16;
 // Safe and empty distances share a signed byte (`signed_distances`).
@@ -26,12 +28,15 @@ pub const BRICK: usize = 8;
 /// `empty_distances` at the scale of bricks of `BRICK`^3 voxels (x fastest over ceil(n / BRICK) bricks): each
 /// brick's Chebyshev distance in bricks to the nearest brick holding an inside voxel (capped at 255; the grid's
 /// exterior is empty). A brick with distance e has every voxel of the bricks within e - 1 brick steps outside.
-pub fn brick_empty_distances(inside: &[u8], n: [usize; 3]) -> Vec<u8> {
+pub fn brick_empty_distances<'m>(inside: impl Into<MaskRef<'m>>, n: [usize; 3]) -> Vec<u8> {
+    let inside = inside.into();
     let nb: [usize; 3] = std::array::from_fn(|a| n[a].div_ceil(BRICK));
     let mut free = vec![1u8; nb[0] * nb[1] * nb[2]];
+    let plane = n[0] * n[1];
     for z in 0..n[2] {
+        let layer = inside.span(z * plane, (z + 1) * plane); // a plane at a time (a bit mask unpacked)
         for y in 0..n[1] {
-            let row = &inside[(z * n[1] + y) * n[0]..][..n[0]];
+            let row = &layer[y * n[0]..][..n[0]];
             let b = ((z / BRICK) * nb[1] + y / BRICK) * nb[0];
             for (x, &m) in row.iter().enumerate() {
                 if m != 0 {
@@ -197,15 +202,16 @@ pub struct BrickedDistances {
 }
 
 impl BrickedDistances {
-    /// The signed distances of the inside mask (non-zero = inside; x fastest, one byte per voxel, read and not
-    /// kept) of an (nx, ny, nz) grid (`signed_distances` with `empty`), found `SLAB_PLANES` z-planes at a time
+    /// The signed distances of the inside mask (non-zero = inside; x fastest, a byte or a bit per voxel, read a
+    /// slab at a time and not kept) of an (nx, ny, nz) grid (`signed_distances` with `empty`), found `SLAB_PLANES` z-planes at a time
     /// with `HALO` planes either side: besides the bricks it works in three bytes per voxel of a slab and its halo.
-    pub fn new(inside: &[u8], n: [usize; 3], empty: bool) -> Self {
+    pub fn new<'m>(inside: impl Into<MaskRef<'m>>, n: [usize; 3], empty: bool) -> Self {
         Self::in_slabs(inside, n, empty, SLAB_PLANES)
     }
 
     /// `new`, `slab` z-planes at a time (a positive multiple of `BRICK`).
-    pub fn in_slabs(inside: &[u8], n: [usize; 3], empty: bool, slab: usize) -> Self {
+    pub fn in_slabs<'m>(inside: impl Into<MaskRef<'m>>, n: [usize; 3], empty: bool, slab: usize) -> Self {
+        let inside = inside.into();
         assert!(slab > 0 && slab.is_multiple_of(BRICK) && inside.len() == n.iter().product::<usize>());
         let nb: [usize; 3] = std::array::from_fn(|a| n[a].div_ceil(BRICK));
         let (plane, layer) = (n[0] * n[1], nb[0] * nb[1]);
@@ -214,7 +220,7 @@ impl BrickedDistances {
         for z0 in (0..n[2]).step_by(slab) {
             let z1 = (z0 + slab).min(n[2]);
             let (h0, h1) = (z0.saturating_sub(HALO), (z1 + HALO).min(n[2]));
-            let dist = signed_distances(&inside[h0 * plane..h1 * plane], [n[0], n[1], h1 - h0], empty);
+            let dist = signed_distances(&inside.span(h0 * plane, h1 * plane), [n[0], n[1], h1 - h0], empty);
             let part = Part { dist: &dist, n, z0: h0, nb };
             let bricks = z0 / BRICK * layer..z1.div_ceil(BRICK) * layer;
             let uniform: Vec<Option<i8>> = bricks.clone().into_par_iter().map(|k| part.uniform(k)).collect();

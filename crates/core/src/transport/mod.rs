@@ -2,6 +2,7 @@
 //! render and their gradients (path replay).
 //!
 //! Modules, each using only those listed before it (and `crate::spans`, `crate::cache`, `crate::pages`):
+//! - `mask`: an inside mask as bytes or bits (`MaskRef`), read by the builds a row or a slab at a time.
 //! - `sampling`: vectors, the Henyey-Greenstein phase function, Fresnel, reflection and refraction.
 //! - `rng`: counter-based random numbers (a path's numbers are a pure function of its key).
 //! - `light`: the `Light` trait (uniform light, environment maps).
@@ -34,6 +35,7 @@ pub mod hero;
 pub(crate) mod hero_lanes;
 pub mod hero_pass;
 pub mod light;
+pub mod mask;
 pub mod medium;
 pub mod normals;
 pub(crate) mod packet;

@@ -8,6 +8,7 @@ pub use crate::transport::distance::{
     brick_empty_distances, empty_distances, safe_distances, signed_distances, BrickedDistances, BRICK, SAFE_CAP,
 };
 pub use crate::transport::light::{Light, UniformLight};
+pub use crate::transport::mask::MaskRef;
 pub use crate::transport::medium::{DenseMedium, LabelMedium, Medium, SparseMedium, EMPTY};
 pub use crate::transport::normals::ShadingNormals;
 use crate::transport::sampling::V3;
@@ -108,8 +109,12 @@ impl Geometry {
     /// Sets the inside mask (non-zero = inside; x fastest, one byte per voxel, read and not kept) and computes the
     /// safe and empty distances from it (`BrickedDistances::new`: a slab of the grid at a time, so besides the
     /// bricks it works in three bytes per voxel of a slab and its halo).
-    pub fn with_inside(mut self, inside: impl AsRef<[u8]>) -> Result<Self, String> {
-        let inside = inside.as_ref();
+    pub fn with_inside(self, inside: impl AsRef<[u8]>) -> Result<Self, String> {
+        self.with_inside_mask(MaskRef::Bytes(inside.as_ref()))
+    }
+
+    /// `with_inside` of a mask given as bytes or bits (`MaskRef`), read a slab at a time and not kept.
+    pub fn with_inside_mask(mut self, inside: MaskRef<'_>) -> Result<Self, String> {
         if inside.len() != self.voxel_count() {
             return Err("inside mask size differs from the grid".into());
         }

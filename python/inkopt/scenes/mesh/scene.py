@@ -61,7 +61,7 @@ def free_voxels(vox: VoxelizedObject, shell_mm: float | None = None) -> np.ndarr
     than the voxelization's exact-distance band ``vox.depth.band_mm``) those at most ``shell_mm`` below the surface
     (``NearDepth.within``), plus every texel voxel (so a shell thinner than half a voxel still frees the surface)."""
     if shell_mm is None:
-        return vox.inside.copy()
+        return vox.inside.dense()
     if not (np.isfinite(shell_mm) and shell_mm > 0):
         raise ParameterError(f"`shell_mm` must be a positive thickness in mm, got {shell_mm}")
     free = np.zeros(vox.inside.shape, bool)
@@ -145,7 +145,7 @@ class MeshScene:
         return (
             f"mesh {self.height_mm:.1f} mm high, target colour from {describe_colour_source(self.mesh)}: "
             f"grid {nx} x {ny} x {nz} voxels "
-            f"({self.volume.voxel_mm[0] * 1000:.1f} µm), {int(self.vox.inside.sum())} inside, "
+            f"({self.volume.voxel_mm[0] * 1000:.1f} µm), {self.vox.inside.count} inside, "
             f"{self.fixed_share.mask.count} free, {len(self.texels)} texels; voxelized in {self.voxelize_seconds:.1f} s"
         )
 
@@ -154,7 +154,7 @@ class MeshScene:
         return {
             "voxels": int(nz * ny * nx),
             "grid_zyx": [nz, ny, nx],
-            "inside_voxels": int(self.vox.inside.sum()),
+            "inside_voxels": self.vox.inside.count,
             "free_voxels": self.fixed_share.mask.count,
             "texels": len(self.texels),
             "voxelize_seconds": self.voxelize_seconds,

@@ -37,7 +37,7 @@ def mesh_translucency(
     transparent_ink(inks)
     depth_mm = check_depth(depth_mm)
     if depth_mm is None:
-        sel = vox.inside.copy()
+        sel = vox.inside.dense()
     else:
         sel = np.zeros(vox.inside.shape, bool)
         sel.reshape(-1)[vox.depth.within(depth_mm)] = True

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...model import SurfaceNormals, Texels
+from ...model.mask import PackedMask
 from ...units import voxel_mm as _voxel_mm
 from .load import TexturedMesh, barycentric, corner_normals, winding_number
 
@@ -43,7 +44,7 @@ class NearDepth:
 class VoxelizedObject:
     """A mesh on the voxel grid.
 
-    inside     (z, y, x) bool       voxel centre inside (generalized winding number > 0.5)
+    inside     ``PackedMask`` (z, y, x), a bit per voxel: voxel centre inside (generalized winding number > 0.5)
     depth      ``NearDepth``: the exact distance below the surface (mm) of the inside voxels less than
                ``band_mm`` deep (the only distances the scene reads: shell and translucency depths lie within the
                band), a few bytes per near voxel instead of 4 per grid voxel; None once dropped
@@ -56,7 +57,7 @@ class VoxelizedObject:
     normals    ``SurfaceNormals``: the texels' normals at the surface voxels (for ``Volume.normals``)
     """
 
-    inside: np.ndarray
+    inside: PackedMask
     depth: NearDepth | None
     voxel_mm: np.ndarray
     origin_mm: np.ndarray
@@ -69,7 +70,7 @@ class VoxelizedObject:
 
     @property
     def shape(self) -> tuple[int, int, int]:
-        return tuple(int(s) for s in self.inside.shape)
+        return self.inside.shape
 
     def texel_centres_mm(self) -> np.ndarray:
         """(I, 3) float64 world positions (x, y, z, mm) of the texels' voxel centres."""
@@ -215,7 +216,7 @@ def voxelize(
         raise RuntimeError("Texels.from_normals lists other surface voxels than voxelize")
     normals = SurfaceNormals.from_voxels(shape, idx, texels.normal)  # as re-normalised there
     return VoxelizedObject(
-        inside=inside,
+        inside=PackedMask(inside),
         depth=depth,
         voxel_mm=v,
         origin_mm=origin,
