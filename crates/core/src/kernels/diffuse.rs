@@ -276,17 +276,12 @@ mod tests {
     }
 
     #[test]
-    fn speed() {
-        // 2.5 M printer voxels, 5 inks: a loose bound, release builds only, that catches a loop gone slow
+    fn a_large_volume_gets_a_label_per_voxel() {
+        // 2.5 M printer voxels, 5 inks (its time is a benchmark's, not this test's)
         let shape = LayerShape { n: 5, ny: 118, nx: 354 };
         let nz = 60;
         let mix = uniform(shape, nz, &[0.1, 0.2, 0.3, 0.15, 0.25]);
-        let t = std::time::Instant::now();
         let lab = diffuse_volume(shape, nz, &mix, &vec![1u8; nz * 118 * 354]).unwrap();
-        let s = t.elapsed().as_secs_f64();
         assert_eq!(lab.len(), nz * 118 * 354);
-        if !cfg!(debug_assertions) {
-            assert!(s < 3.0, "{s} s");
-        }
     }
 }
