@@ -112,7 +112,7 @@ def test_guide_stops_the_flux_at_target_edges():
     pos = np.stack([x.ravel() + 0.5, y.ravel() + 0.5, np.full(48, 4.0)], 1)
     lab = rng.normal(size=(48, 3)).astype(np.float32)
     nearest, dist = nearest_texels(shape, np.flatnonzero(mask), pos, chunk=7)
-    got = texel_guide(lab, nearest, dist, depth_de=30.0).reshape(2, 48, 4)
+    got = texel_guide(lab, nearest, dist, depth_de=30.0).dense().reshape(2, 48, 4)
     np.testing.assert_array_equal(got[..., :3], np.stack([lab, lab]))
     np.testing.assert_allclose(got[..., 3], [[45.0] * 48, [15.0] * 48])  # 1.5 and 0.5 voxels below the face
     near, d = nearest_texels(shape, np.flatnonzero(mask), pos, max_dist=1.0)  # only the top layer is that close
@@ -165,7 +165,7 @@ def test_depth_guide_lets_neighbours_under_a_sloped_surface_exchange():
         near, dist = nearest_texels(inside.shape, idx, np.stack([sx, sy, sz], 1) + 0.5, MAX_DEPTH)
         ok = near >= 0
         depth = np.full(inside.size, np.nan)
-        depth[idx[ok]] = texel_guide(np.zeros((len(sx), 3), np.float32), near[ok], dist[ok], **kw)[:, 3]
+        depth[idx[ok]] = texel_guide(np.zeros((len(sx), 3), np.float32), near[ok], dist[ok], **kw).extra
         d = np.diff(depth.reshape(inside.shape), axis=2).ravel()
         d = d[np.isfinite(d)]
         return float(np.mean(np.exp(-((d / edge) ** 2)) > 0.1))

@@ -144,4 +144,8 @@ def test_the_smoothers_guide_made_in_chunks_is_the_whole_arrays(monkeypatch):
     rows = np.flatnonzero((nearest >= 0) & r.loss.flat[nearest])
     assert 0 < len(rows) < p.n_free
     np.testing.assert_array_equal(r.smoother.rows, rows)
-    np.testing.assert_array_equal(r.smoother.guide, texel_guide(r.loss.target_lab, nearest[rows], dist[rows]))
+    want = texel_guide(r.loss.target_lab, nearest[rows], dist[rows])
+    assert r.smoother.rows.dtype == np.uint32 and r.smoother.guide.key.dtype == np.uint32
+    np.testing.assert_array_equal(r.smoother.guide.key, want.key)
+    np.testing.assert_array_equal(r.smoother.guide.extra, want.extra)
+    np.testing.assert_array_equal(r.smoother.guide.dense(), want.dense())

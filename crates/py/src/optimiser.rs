@@ -39,15 +39,19 @@ fn run_on<R: Send>(threads: Option<usize>, f: impl FnOnce() -> R + Send) -> PyRe
     Ok(pool.install(f))
 }
 
-/// smooth_rows(shape (Z, Y, X), index (F,) i64, values (F, C) f32, steps, alpha, guide (K, D) f32 or None, tau,
-/// threads=None, rows=None) -> None: `steps` explicit diffusion steps of weight `alpha`, in place, of the rows `rows`
-/// of the values ((K,) i64, strictly increasing; None: all, K = F) over the 6-neighbourhood of their voxels
-/// index[rows] (strictly increasing linear indices into the grid `shape`; row r of the values is voxel index[r]),
-/// each neighbour weighted by exp(-|guide_r - guide_q|² / tau²) if a guide is given (a row per row of the subset);
-/// the other rows are unchanged (inkopt_core::kernels::smooth::diffuse_subset: one channel at a time, 37 bytes
-/// per row of the subset while it runs). The GIL is released; `threads` as for a `Scene` (default all cores).
+/// smooth_rows(shape (Z, Y, X), index (F,) i64, values (F, C) f32, steps, alpha, guide (T, D) f32 or None, tau,
+/// threads=None, rows=None, guide_key=None, guide_extra=None) -> None: `steps` explicit diffusion steps of weight
+/// `alpha`, in place, of the rows `rows` of the values ((K,) u32, strictly increasing; None: all, K = F) over the
+/// 6-neighbourhood of their voxels index[rows] (strictly increasing linear indices into the grid `shape`; row r of
+/// the values is voxel index[r]), each neighbour weighted by exp(-|guide_r - guide_q|² / tau²) if a guide is given:
+/// row r's guide vector is `guide[guide_key[r]]` ((K,) u32; None: guide[r], T = K) followed by `guide_extra[r]`
+/// ((K,) f32) if given. The other rows are unchanged (inkopt_core::kernels::smooth::diffuse_subset: one channel at
+/// a time, 37 bytes per row of the subset while it runs). The GIL is released; `threads` as for a `Scene` (default
+/// all cores).
 #[pyfunction]
-#[pyo3(signature = (shape, index, values, steps, alpha, guide=None, tau=1.0, threads=None, rows=None))]
+#[pyo3(signature = (shape, index, values, steps, alpha, guide=None, tau=1.0, threads=None, rows=None, guide_key=None,
+    guide_extra=None))]
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn smooth_rows(
     py: Python<'_>,
     shape: (usize, usize, usize),
@@ -58,18 +62,25 @@ pub(crate) fn smooth_rows(
     guide: Option<PyReadonlyArray2<f32>>,
     tau: f32,
     threads: Option<usize>,
-    rows: Option<PyReadonlyArray1<i64>>,
+    rows: Option<PyReadonlyArray1<u32>>,
+    guide_key: Option<PyReadonlyArray1<u32>>,
+    guide_extra: Option<PyReadonlyArray1<f32>>,
 ) -> PyResult<()> {
     let n = [shape.0, shape.1, shape.2];
     let ch = values.shape()[1];
     let idx = c_slice(&index, "index")?;
-    let subset = match &rows {
-        Some(r) => Some(c_slice(r, "rows")?),
-        None => None,
-    };
+    let subset = rows.as_ref().map(|r| c_slice(r, "rows")).transpose()?;
+    let key = guide_key.as_ref().map(|k| c_slice(k, "guide_key")).transpose()?;
+    let extra = guide_extra.as_ref().map(|e| c_slice(e, "guide_extra")).transpose()?;
+    if guide.is_none() && (key.is_some() || extra.is_some()) {
+        return Err(err("guide_key and guide_extra need a guide"));
+    }
     let v = values.as_slice_mut().map_err(|_| err("values must be C-contiguous"))?;
     let g = match &guide {
-        Some(a) => Some(inkopt_core::kernels::smooth::Guide { values: c_slice(a, "guide")?, dims: a.shape()[1], tau }),
+        Some(a) => {
+            let table = c_slice(a, "guide")?;
+            Some(inkopt_core::kernels::smooth::Guide { table, dims: a.shape()[1], key, extra, tau })
+        }
         None => None,
     };
     py.detach(|| {

@@ -132,10 +132,12 @@ class Optimization:
                 p.shape, p.free_index, self.texels.pos_vox, MAX_DEPTH, threads=threads
             ):
                 keep = np.flatnonzero((near >= 0) & self.loss.flat[near])
-                parts.append((keep + lo, texel_guide(self.loss.target_lab, near[keep], dist[keep])))
-            rows = np.concatenate([r for r, _ in parts] or [np.empty(0, np.int64)])
-            guide = np.concatenate([g for _, g in parts] or [np.empty((0, 4), np.float32)])
+                parts.append(((keep + lo).astype(np.uint32), near[keep].astype(np.uint32), dist[keep]))
+            empty = (np.empty(0, np.uint32), np.empty(0, np.uint32), np.empty(0, np.float32))
+            rows, near, dist = (np.concatenate(a) for a in zip(*(parts or [empty]), strict=True))
             del parts
+            guide = texel_guide(self.loss.target_lab, near, dist)
+            del near, dist
         return GradientSmoother(p.shape, p.free_index, cfg.smooth, guide, cfg.smooth_edge, rows, threads)
 
     def keep_start_figures(self, figures: dict) -> None:

@@ -31,6 +31,7 @@ of the step over a connected free region is kept.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -99,29 +100,70 @@ def nearest_texel_chunks(
         yield s, k.astype(np.int64, copy=False), dist.astype(np.float32)
 
 
+@dataclass(frozen=True)
+class SmoothGuide:
+    """The smoothing's guide: row r's vector is ``table[key[r]]`` followed by ``extra[r]`` if given.
+
+    table (T, D) float32; key (K,) uint32 (None: row r's entry is r, T = K); extra (K,) float32 or None. Voxels
+    under one texel share its entry of the table (its target CIELAB), so the loop's guide holds 8 bytes per voxel
+    (a key and a depth), not 16.
+    """
+
+    table: np.ndarray
+    key: np.ndarray | None = None
+    extra: np.ndarray | None = None
+
+    @classmethod
+    def of_rows(cls, values: np.ndarray) -> SmoothGuide:
+        """A vector per row: ``values`` (K, D)."""
+        return cls(np.ascontiguousarray(values, np.float32))
+
+    def __post_init__(self):
+        object.__setattr__(self, "table", np.ascontiguousarray(self.table, np.float32))
+        if self.table.ndim != 2 or self.table.shape[1] == 0:
+            raise ValueError(f"the guide's table must be (entries, dims), got {self.table.shape}")
+        for name, dtype in (("key", np.uint32), ("extra", np.float32)):
+            v = getattr(self, name)
+            if v is not None:
+                object.__setattr__(self, name, np.ascontiguousarray(v, dtype))
+        if self.key is not None and len(self.key) and int(self.key.max()) >= len(self.table):
+            raise ValueError(f"the guide's keys reach past its table of {len(self.table)} entries")
+        if self.key is not None and self.extra is not None and len(self.key) != len(self.extra):
+            raise ValueError(f"the guide has {len(self.key)} keys and {len(self.extra)} extra values")
+
+    def __len__(self) -> int:
+        """K, the number of rows it guides."""
+        return len(self.key if self.key is not None else self.table)
+
+    def dense(self) -> np.ndarray:
+        """(K, D [+ 1]) float32: every row's vector (for small sets and tests)."""
+        rows = self.table if self.key is None else self.table[self.key]
+        return rows if self.extra is None else np.concatenate([rows, self.extra[:, None]], axis=1)
+
+
 def texel_guide(
     target_lab: np.ndarray, nearest: np.ndarray, dist: np.ndarray, depth_de: float = DEPTH_DE
-) -> np.ndarray:
-    """(F, 4) float32 per voxel: the CIELAB target (``target_lab`` (I, 3)) of its nearest texel ``nearest`` (F,)
-    and its distance ``dist`` (F,) to that texel (voxels) times ``depth_de`` (from :func:`nearest_texels`)."""
-    out = np.empty((len(nearest), 4), np.float32)
-    out[:, :3] = np.asarray(target_lab, np.float32)[nearest]
-    out[:, 3] = dist * depth_de
-    return out
+) -> SmoothGuide:
+    """The guide of voxels whose nearest texel is ``nearest`` (K,) at ``dist`` (K,) voxels (from
+    :func:`nearest_texels`): that texel's CIELAB target (``target_lab`` (I, 3), shared as the table) and the
+    distance times ``depth_de``."""
+    dist = np.asarray(dist, np.float32)
+    return SmoothGuide(np.asarray(target_lab, np.float32), np.asarray(nearest, np.uint32), dist * depth_de)
 
 
 class GradientSmoother:
     """Diffuses per-free-voxel arrays (F, N) over a set of the free voxels' 6-neighbourhood (the loop in the Rust
     core, ``inkopt_core::kernels::smooth``: parallel, thread-count independent; during a call, a column at a time,
     two working copies of the column (8 bytes per voxel of the set) and each voxel's neighbours and weights (29
-    bytes); kept for the run: the set's rows and the guide, 8 + 16 bytes per voxel of the set).
+    bytes); kept for the run: the set's rows and the guide's key and depth, 4 + 8 bytes per voxel of the set).
 
     shape (z, y, x) of the grid; index (F,) int64: the free voxels' increasing linear indices
     (``Parameterization.free_index``; kept by reference); ``rows``: which of them are smoothed (e.g. those under
-    flat texels), increasing row numbers, or None for all; the others are left as they are and exchange nothing
-    with the set (no flux crosses its boundary). ``sigma``: kernel width in voxels (> 0); ``guide`` (len(rows), D)
-    float32 and ``edge``: neighbours are weighted by exp(-|guide_r - guide_q|² / edge²) (e.g. the voxels' target
-    CIELAB and depth from :func:`texel_guide` and an edge in ΔE76); None: unweighted. ``threads``: default all
+    flat texels), increasing row numbers (kept as uint32), or None for all; the others are left as they are and
+    exchange nothing with the set (no flux crosses its boundary). ``sigma``: kernel width in voxels (> 0);
+    ``guide`` (a :class:`SmoothGuide`, or a (len(rows), D) float32 array: a vector per row) and ``edge``:
+    neighbours are weighted by exp(-|guide_r - guide_q|² / edge²) (e.g. the voxels' target CIELAB and depth from
+    :func:`texel_guide` and an edge in ΔE76); None: unweighted. ``threads``: default all
     cores (results do not depend on it).
     """
 
@@ -130,7 +172,7 @@ class GradientSmoother:
         shape,
         index: np.ndarray,
         sigma: float,
-        guide: np.ndarray | None = None,
+        guide: SmoothGuide | np.ndarray | None = None,
         edge: float = 0.0,
         rows: np.ndarray | None = None,
         threads: int | None = None,
@@ -141,11 +183,13 @@ class GradientSmoother:
             raise ValueError(f"the guide's edge must be positive, got {edge}")
         self.steps = diffusion_steps(sigma)
         self.shape = tuple(int(v) for v in shape)
-        self.rows = None if rows is None else np.asarray(rows, np.int64)
+        self.rows = None if rows is None else _row_numbers(rows)
         index = np.asarray(index, np.int64)
         self.free_index = index  # the set's voxel indices are gathered from it at each call, not kept (8 B a voxel)
         n = len(index) if self.rows is None else len(self.rows)
-        self.guide = None if guide is None else np.ascontiguousarray(guide, np.float32)
+        if guide is not None and not isinstance(guide, SmoothGuide):
+            guide = SmoothGuide.of_rows(guide)
+        self.guide = guide
         if self.guide is not None and len(self.guide) != n:
             raise ValueError(f"the guide has {len(self.guide)} rows for a set of {n} voxels")
         self.edge, self.threads = float(edge), check_threads(threads)
@@ -175,7 +219,26 @@ class GradientSmoother:
         # resident above the step's start after the update without it (bench/results/step_memory_spot.json,
         # entries 40mm_shell1_mem_before and _mem_after)
         heap.trim()
+        gd = self.guide
         _core.smooth_rows(
-            self.shape, self.free_index, g, self.steps, ALPHA, self.guide, self.edge or 1.0, self.threads, self.rows
+            self.shape,
+            self.free_index,
+            g,
+            self.steps,
+            ALPHA,
+            None if gd is None else gd.table,
+            self.edge or 1.0,
+            self.threads,
+            self.rows,
+            None if gd is None else gd.key,
+            None if gd is None else gd.extra,
         )
         return g
+
+
+def _row_numbers(rows) -> np.ndarray:
+    """(K,) uint32 row numbers (4 bytes per smoothed voxel; the kernel refuses sets of 2³² - 1 rows or more)."""
+    rows = np.asarray(rows)
+    if len(rows) and (rows.min() < 0 or rows.max() >= np.iinfo(np.uint32).max):
+        raise ValueError("the smoothed rows must be row numbers below 2**32 - 1")
+    return np.ascontiguousarray(rows, np.uint32)

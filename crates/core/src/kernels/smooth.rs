@@ -10,7 +10,7 @@
 //!
 //! so nothing flows across the set's boundary (the sum of each channel is conserved) and a constant is a fixed
 //! point; with alpha <= 1/6 no value leaves the range of its neighbourhood. With a `Guide` (a vector per row,
-//! e.g. the target colour the voxel shows) each term is weighted by w = exp(-|guide[r] - guide[q]|² / tau²),
+//! e.g. the target colour the voxel shows and its depth) each term is weighted by w = exp(-|guide[r] - guide[q]|² / tau²),
 //! symmetric in r and q, so the flux between rows that should look different fades (an edge-stopping
 //! diffusion, as in Perona and Malik's) and the properties above still hold. Each output row is a fixed-order
 //! sum of its own inputs, so the result does not depend on the thread count. A neighbour's row is found through
@@ -22,13 +22,68 @@ use rayon::prelude::*;
 
 use crate::spans::RowSpans;
 
-/// Per-row vectors that weight the diffusion between two rows by exp(-|a - b|² / tau²).
+/// Per-row vectors that weight the diffusion between two rows by exp(-|a - b|² / tau²). Row r's vector is the
+/// `dims` values of entry `key[r]` of `table` (entry r without a key), followed by `extra[r]` if given: so rows
+/// that share a vector's first components (voxels under one texel: its target colour) hold a 4-byte key into a
+/// shared table, not the components themselves.
 #[derive(Clone, Copy)]
 pub struct Guide<'a> {
-    /// rows × `dims` values
-    pub values: &'a [f32],
+    /// entries × `dims` values
+    pub table: &'a [f32],
     pub dims: usize,
+    /// per row, its entry of `table` (None: row r's entry is r)
+    pub key: Option<&'a [u32]>,
+    /// per row, one more component after the table's (None: no more)
+    pub extra: Option<&'a [f32]>,
     pub tau: f32,
+}
+
+impl<'a> Guide<'a> {
+    /// A vector of `dims` values per row: `values` is rows × `dims`.
+    pub fn rows(values: &'a [f32], dims: usize, tau: f32) -> Guide<'a> {
+        Guide { table: values, dims, key: None, extra: None, tau }
+    }
+
+    /// Checks the sizes against `rows` rows and `tau`.
+    fn check(&self, rows: usize) -> Result<(), String> {
+        let entries = self.table.len().checked_div(self.dims).unwrap_or(0);
+        let shape_ok = self.dims > 0 && self.table.len() == entries * self.dims;
+        let key_ok = match self.key {
+            Some(k) => k.len() == rows && k.iter().all(|&e| (e as usize) < entries),
+            None => entries == rows,
+        };
+        let extra_ok = self.extra.is_none_or(|e| e.len() == rows);
+        // `!(tau > 0)` rejects NaN too.
+        #[allow(clippy::neg_cmp_op_on_partial_ord)]
+        if !shape_ok || !key_ok || !extra_ok || !(self.tau > 0.0) {
+            return Err(format!(
+                "guide: a table of {} values in {} dims, {} keys and {} extra values for {rows} rows, tau {}",
+                self.table.len(),
+                self.dims,
+                self.key.map_or(0, |k| k.len()),
+                self.extra.map_or(0, |e| e.len()),
+                self.tau
+            ));
+        }
+        Ok(())
+    }
+
+    /// exp(-|guide[a] - guide[b]|² / tau²) times `alpha`: the squared differences summed in the vector's order
+    /// from 0.
+    fn weight(&self, a: usize, b: usize, alpha: f32) -> f32 {
+        let entry = |r: usize| self.key.map_or(r, |k| k[r] as usize) * self.dims;
+        let (ea, eb) = (entry(a), entry(b));
+        let mut d2 = 0.0f32;
+        for i in 0..self.dims {
+            let d = self.table[ea + i] - self.table[eb + i];
+            d2 += d * d;
+        }
+        if let Some(e) = self.extra {
+            let d = e[a] - e[b];
+            d2 += d * d;
+        }
+        alpha * (-d2 / (self.tau * self.tau)).exp()
+    }
 }
 
 /// Rows per parallel block of a step.
@@ -56,7 +111,7 @@ pub fn diffuse_rows(
 pub fn diffuse_subset(
     n: [usize; 3],
     index: &[i64],
-    subset: Option<&[i64]>,
+    subset: Option<&[u32]>,
     values: &mut [f32],
     channels: usize,
     steps: usize,
@@ -75,7 +130,7 @@ pub fn diffuse_subset(
         return Err(format!("index has {} voxels, values have {all} rows", index.len()));
     }
     if let Some(s) = subset {
-        if s.iter().any(|&r| r < 0 || r as u64 >= all as u64) || (1..s.len()).any(|e| s[e] <= s[e - 1]) {
+        if s.iter().any(|&r| r as u64 >= all as u64) || (1..s.len()).any(|e| s[e] <= s[e - 1]) {
             return Err(format!("the subset must be strictly increasing rows of the {all}"));
         }
     }
@@ -84,11 +139,7 @@ pub fn diffuse_subset(
     let voxel = |r: usize| index[row_of(r)];
     let set = RowSpans::of([nx, ny, nz], rows, voxel)?;
     if let Some(g) = guide {
-        // `!(tau > 0)` rejects NaN too.
-        #[allow(clippy::neg_cmp_op_on_partial_ord)]
-        if g.dims == 0 || g.values.len() != rows * g.dims || !(g.tau > 0.0) {
-            return Err(format!("guide: {} values for {rows} rows of {} dims, tau {}", g.values.len(), g.dims, g.tau));
-        }
+        g.check(rows)?;
     }
     if rows >= NONE as usize {
         return Err(format!("{rows} rows: at most {} can be diffused", NONE - 1));
@@ -147,12 +198,7 @@ impl Stencil {
         let row_of = |j: usize| set.rank(j).map_or(NONE, |r| r as u32);
         let weight = |row: usize, q: u32| match guide {
             _ if q == NONE => 0.0,
-            Some(g) => {
-                let a = &g.values[row * g.dims..(row + 1) * g.dims];
-                let b = &g.values[q as usize * g.dims..(q as usize + 1) * g.dims];
-                let d2: f32 = a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum();
-                alpha * (-d2 / (g.tau * g.tau)).exp()
-            }
+            Some(g) => g.weight(row, q as usize, alpha),
             None => alpha,
         };
         let mut nb = vec![[NONE; 4]; rows];

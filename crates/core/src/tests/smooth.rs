@@ -31,7 +31,7 @@ fn check_against_plain(guided: bool) {
     let rows = v0.len() / ch;
     let gv: Vec<f32> = (0..rows * 2).map(|i| uniform(14, 0, i as u32)).collect();
     let tau = 0.4f32;
-    let guide = guided.then_some(Guide { values: &gv, dims: 2, tau });
+    let guide = guided.then_some(Guide::rows(&gv, 2, tau));
     let (steps, alpha) = (5, 0.125f32);
     let mut v = v0.clone();
     diffuse_rows(n, &index, &mut v, ch, steps, alpha, guide).unwrap();
@@ -117,7 +117,7 @@ fn check_against_plain(guided: bool) {
 fn same_bits_for_any_thread_count() {
     let (n, index, v0) = set(2);
     let gv: Vec<f32> = (0..v0.len()).map(|i| uniform(13, 0, i as u32)).collect();
-    let guide = Guide { values: &gv, dims: 2, tau: 0.5 };
+    let guide = Guide::rows(&gv, 2, 0.5);
     let run = |threads: usize| {
         let mut v = v0.clone();
         rayon::ThreadPoolBuilder::new()
@@ -140,4 +140,41 @@ fn refuses_sets_out_of_grid_order_and_size_mismatches() {
     assert!(diffuse_rows(n, &index, &mut v, 1, 1, 0.125, None).unwrap_err().contains("rows"));
     v.pop();
     assert!(diffuse_rows([1, 1, 1], &index, &mut v, 1, 1, 0.125, None).unwrap_err().contains("outside the grid"));
+}
+
+/// A guide held as a key per row into a shared table plus a per-row extra component (the loop's form: a texel's
+/// target colour and the voxel's depth) gives the same bits as the same vectors held per row.
+#[test]
+fn a_keyed_guide_is_its_vectors_per_row_bit_for_bit() {
+    let (n, index, v0) = set(2);
+    let rows = index.len();
+    let entries = 37;
+    let table: Vec<f32> = (0..entries * 3).map(|i| uniform(15, 0, i as u32) * 20.0).collect();
+    let key: Vec<u32> =
+        (0..rows).map(|r| (uniform(16, 0, r as u32) * entries as f32) as u32 % entries as u32).collect();
+    let extra: Vec<f32> = (0..rows).map(|r| uniform(17, 0, r as u32) * 5.0).collect();
+    let dense: Vec<f32> = (0..rows)
+        .flat_map(|r| {
+            let e = key[r] as usize * 3;
+            [table[e], table[e + 1], table[e + 2], extra[r]]
+        })
+        .collect();
+    let keyed = Guide { table: &table, dims: 3, key: Some(&key), extra: Some(&extra), tau: 4.0 };
+    let (mut a, mut b) = (v0.clone(), v0.clone());
+    diffuse_rows(n, &index, &mut a, 2, 6, 0.125, Some(keyed)).unwrap();
+    diffuse_rows(n, &index, &mut b, 2, 6, 0.125, Some(Guide::rows(&dense, 4, 4.0))).unwrap();
+    assert_ne!(a, v0);
+    assert_eq!(a, b);
+    // a key past the table's end, or a key or extra value per row missing, is refused
+    let mut bad = key.clone();
+    bad[5] = entries as u32;
+    let mut v = v0.clone();
+    for g in [
+        Guide { key: Some(&bad), ..keyed },
+        Guide { key: Some(&key[1..]), ..keyed },
+        Guide { extra: Some(&extra[1..]), ..keyed },
+        Guide { key: None, ..keyed },
+    ] {
+        assert!(diffuse_rows(n, &index, &mut v, 2, 2, 0.125, Some(g)).unwrap_err().contains("guide"));
+    }
 }
