@@ -132,12 +132,13 @@ def test_the_smoothers_guide_made_in_chunks_is_the_whole_arrays(monkeypatch):
     a time: the same as from the whole (F,) nearest-texel arrays."""
     from functools import partial
 
-    from inkopt.optim import loop
+    from inkopt.optim import smooth
     from inkopt.optim.smooth import MAX_DEPTH, nearest_texel_chunks, nearest_texels, texel_guide
 
-    monkeypatch.setattr(loop, "nearest_texel_chunks", partial(nearest_texel_chunks, chunk=37))
+    monkeypatch.setattr(smooth, "nearest_texel_chunks", partial(nearest_texel_chunks, chunk=37))
     scene = small_chart_scene(48, 32, 0.3)
     r = run(scene, iterations=1, smooth=1.0)
+    monkeypatch.undo()  # the whole arrays below, from the module's own chunking
     p = r.param
     assert p.n_free > 10 * 37
     nearest, dist = nearest_texels(p.shape, p.free_index, scene.texels.pos_vox, MAX_DEPTH)

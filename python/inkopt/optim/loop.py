@@ -36,7 +36,7 @@ from .interrupt import interrupt_deferred
 from .optimizers import make_optimizer, step_factor
 from .param import Parameterization, initial_free_mixture
 from .progress import ProgressLines, changed_settings
-from .smooth import MAX_DEPTH, GradientSmoother, nearest_texel_chunks, texel_guide
+from .smooth import GradientSmoother, flat_texel_guide
 from .stopping import Reserve, Schedule
 
 #: samples per texel of the first iteration's forward render of a run without forward passes (forward_spp 0)
@@ -127,17 +127,7 @@ class Optimization:
             return None
         guide = rows = None
         if cfg.smooth_edge > 0:  # guided: the free voxels under flat texels only, down to MAX_DEPTH
-            parts = []  # chunk by chunk, only the rows kept: no (F,) arrays beside the smoother's own
-            for lo, near, dist in nearest_texel_chunks(
-                p.shape, p.free_index, self.texels.pos_vox, MAX_DEPTH, threads=threads
-            ):
-                keep = np.flatnonzero((near >= 0) & self.loss.flat[near])
-                parts.append(((keep + lo).astype(np.uint32), near[keep].astype(np.uint32), dist[keep]))
-            empty = (np.empty(0, np.uint32), np.empty(0, np.uint32), np.empty(0, np.float32))
-            rows, near, dist = (np.concatenate(a) for a in zip(*(parts or [empty]), strict=True))
-            del parts
-            guide = texel_guide(self.loss.target_lab, near, dist)
-            del near, dist
+            rows, guide = flat_texel_guide(p.shape, p.free_index, self.texels.pos_vox, self.loss, threads)
         return GradientSmoother(p.shape, p.free_index, cfg.smooth, guide, cfg.smooth_edge, rows, threads)
 
     def keep_start_figures(self, figures: dict) -> None:

@@ -151,6 +151,21 @@ def texel_guide(
     return SmoothGuide(np.asarray(target_lab, np.float32), np.asarray(nearest, np.uint32), dist * depth_de)
 
 
+def flat_texel_guide(shape, free_index: np.ndarray, pos_vox: np.ndarray, loss, threads=None):
+    """The guided smoothing's set and guide: the free voxels (``free_index`` (F,), increasing linear indices into
+    the grid ``shape``) whose nearest texel (``pos_vox`` (I, 3)) is within ``MAX_DEPTH`` voxels and flat
+    (``loss.flat`` (I,) bool), as row numbers (K,) uint32, and their :func:`texel_guide` (``loss.target_lab``).
+    Found a chunk of voxels at a time, keeping only those rows: no (F,) arrays beside the smoother's own."""
+    parts = []
+    for lo, near, dist in nearest_texel_chunks(shape, free_index, pos_vox, MAX_DEPTH, threads=threads):
+        keep = np.flatnonzero((near >= 0) & loss.flat[near])
+        parts.append(((keep + lo).astype(np.uint32), near[keep].astype(np.uint32), dist[keep]))
+    empty = (np.empty(0, np.uint32), np.empty(0, np.uint32), np.empty(0, np.float32))
+    rows, near, dist = (np.concatenate(a) for a in zip(*(parts or [empty]), strict=True))
+    del parts
+    return rows, texel_guide(loss.target_lab, near, dist)
+
+
 class GradientSmoother:
     """Diffuses per-free-voxel arrays (F, N) over a set of the free voxels' 6-neighbourhood (the loop in the Rust
     core, ``inkopt_core::kernels::smooth``: parallel, thread-count independent; during a call, a column at a time,
