@@ -96,16 +96,17 @@ FIGURES_TEXEL_BYTES = 4270.0
 #: entries run_<H>mm_shell1_*; bench/results/mesh_60mm_shell1_whole_run.json; docs/performance.md, "The whole run's
 #: peak stage by stage"); the band's free voxels grow with the area as the texels do, so the two are not told
 #: apart and the per-free terms are what the code holds:
-#: - a step: per texel the all-free step's 128 B and per free voxel 146 B (x and momentum, 40 B; the free index,
-#:   which is the band's own, 8 B; the smoothed set's rows and guide, 24 B; at the peak dE/dx, 20 B, and the
-#:   smoothing's neighbours, weights and two copies of a column, 37 B, or the core's gradient sums, 48 B; and what
-#:   the allocator keeps), fitted to Spot 100 mm through an iteration, 5.70 GiB with the inside mask as bits (python
+#: - a step: per texel the all-free step's 128 B and per free voxel 136 B (x and momentum, 40 B; the free index,
+#:   which is the band's own, 8 B; the smoothed set's row numbers and guide keys and depths, 12 B; at the peak
+#:   dE/dx, 20 B, and the smoothing's neighbours, weights and two copies of a column, 37 B, or the core's gradient
+#:   sums, 48 B; and what the allocator keeps), fitted to Spot 100 mm through an iteration, 5.42 GiB (python
 #:   bench/bench_mesh.py 100 --shell-mm 1 --iterations 1 --figure-metrics --renderer, bench/results/
-#:   mesh_100mm_shell1_mem68.json; 152 B fitted the 6.66 GiB of mesh_100mm_shell1_mem.json with its byte); Spot 40 mm's
+#:   mesh_100mm_shell1_mem69.json; 146 B fitted the 5.70 GiB of mesh_100mm_shell1_mem68.json, whose smoothed set
+#:   held 24 B a voxel, and 152 B the 6.66 GiB of mesh_100mm_shell1_mem.json with the inside mask's byte); Spot 40 mm's
 #:   step measured 1.094 GiB, 0.99 estimated (python bench/bench_step_memory.py 40 --shell-mm 1 --iterations 1,
 #:   bench/results/step_memory_spot.json, 40mm_shell1_mem_after). 195 B where the smoothing gathered its column and
 #:   the set's indices and kept six neighbours and six weights per voxel, and the band kept its own index;
-SHELL_STEP_FREE_BYTES = 146.0
+SHELL_STEP_FREE_BYTES = 136.0
 SHELL_STEP_TEXEL_BYTES = STEP_TEXEL_BYTES
 #: - the figures (the start's with the renderer held for the baseline guard, the guard's, the result's, and the
 #:   renderer's builds): per free voxel the variables, momentum and index (48 B) and the renderer's band medium
