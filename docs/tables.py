@@ -570,8 +570,8 @@ BAND_SCALING = (
     (20.0, "mesh_20mm_shell1_s65.json"),
     (40.0, "mesh_40mm_shell1_corewhite.json"),
     (60.0, "mesh_60mm_shell1_gsum_it.json"),
-    (80.0, "estimate_80mm_shell1"),
-    (100.0, "mesh_100mm_shell1_it.json"),
+    (80.0, "mesh_80mm_shell1_s69.json"),
+    (100.0, "mesh_100mm_shell1_mem69.json"),
 )
 
 

@@ -197,7 +197,7 @@ def test_a_slab_beyond_the_memory_is_refused_naming_the_size_that_fits(monkeypat
 
 def test_the_band_estimate_agrees_with_measured_band_runs():
     """Spot with a 1 mm shell: the band's estimated stages within 15 % of what was measured: the scene's and the
-    figures' in whole runs at 40 and 60 mm (bench/results/footprint_spot.json, fit_shell_stream: each stage's own
+    figures' in whole runs at 40 and 60 mm (bench/results/footprint_spot.json, fit_shell_s69: each stage's own
     peak, bench/run_stages.py), a step's through an iteration at 100 mm (bench/results/mesh_100mm_shell1_mem69.json,
     bench/bench_mesh.py, to which it is fitted) and at 40 mm (bench/results/step_memory_spot.json,
     40mm_shell1_mem_after_trim, bench/bench_step_memory.py); and the scene's stage below the others."""
@@ -205,9 +205,9 @@ def test_the_band_estimate_agrees_with_measured_band_runs():
     from pathlib import Path
 
     results = Path(__file__).resolve().parents[1] / "bench" / "results"
-    rows = json.loads((results / "footprint_spot.json").read_text())["entries"]["fit_shell_stream"]["rows"]
+    rows = json.loads((results / "footprint_spot.json").read_text())["entries"]["fit_shell_s69"]["rows"]
     for height in (40.0, 60.0):
-        measured = rows[f"run_{height:g}mm_shell1_stream"]["measured_gib"]
+        measured = rows[f"run_{height:g}mm_shell1_s69"]["measured_gib"]
         fp, _ = spec_footprint(MeshSpec(str(SPOT), height_mm=height, shell_mm=1.0), len(INKS))
         stages = {k: v / 2**30 for k, v in fp.stage_bytes().items()}
         for stage in ("voxelize", "figures"):

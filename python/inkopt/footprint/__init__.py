@@ -44,19 +44,22 @@ from . import walk
 #: the interpreter, numpy, the extension and the ink tables before a scene is built: the 'start' peak of
 #: bench/results/mesh_*mm.json is 0.066-0.070 GiB
 BASE_BYTES = 0.07 * 2**30
-#: voxelization and the scene's masks (the mesh's stage before the run), by what the code stores: per grid voxel the
-#: inside mask (1 B) and the free mask, as bytes and as the bits it is packed into (1.125 B), all at the grid's own
-#: shape and filled a slab or a chunk at a time; per texel its closest points, faces, normals, colours and exposed
-#: faces, and the exact depths of the inside voxels within the band below it (``voxelize.NearDepth``, 12 B per near
-#: voxel and their chunks while they are joined, ``VOXELIZE_NEAR_BYTES`` per texel and voxel of the band: Spot 20 mm
-#: has 0.89 near voxels per texel and band voxel at a 1 mm shell, band 14) with the near-surface queries' chunks,
-#: fitted to the scene stage of bench/results/stages_spot.json, 40mm_shell1_new_s58 and 60mm_shell1_new_s58
-#: (run.peak_rss_gb_by_stage.after_voxelize 0.426 and 0.992 GiB less the base, the mesh and 2.125 B per grid voxel:
-#: 626 B per texel at band 14, nothing fixed)
-VOXELIZE_GRID_BYTES = 2.125
+#: voxelization and the scene's masks (the mesh's stage before the run): per grid voxel the inside and free masks'
+#: bits (1/8 B each; the bytes they are filled in, a slab or a chunk at a time, are resident only where pages were
+#: written, the object's own, so they are counted in the per-texel term); per texel its closest points, faces,
+#: normals, colours and exposed faces, and the exact depths of the inside voxels within the band below it
+#: (``voxelize.NearDepth``, 12 B per near voxel and their chunks while they are joined, ``VOXELIZE_NEAR_BYTES`` per
+#: texel and voxel of the band: Spot 20 mm has 0.89 near voxels per texel and band voxel at a 1 mm shell, band 14)
+#: with the near-surface queries' chunks: 900 B per texel at band 14, between the 929 B that fits Spot 40 mm's
+#: scene stage (0.419 GiB) and the 864 B that fits 60 mm's (0.820 GiB) less the base and 0.25 B per grid voxel
+#: (python bench/bench_footprint.py run H --stages --tag _s69 -- --shell-mm 1 ..., bench/results/
+#: footprint_spot.json, fit_shell_s69; Spot 100 mm's 2.37 GiB, mesh_100mm_shell1_mem69.json after_voxelize, is
+#: estimated 2.33); nothing fixed. 2.125 B per grid voxel and 626 B per texel fitted the code that held the dense
+#: masks whole (bench/results/stages_spot.json, 40mm_shell1_new_s58 and 60mm_shell1_new_s58)
+VOXELIZE_GRID_BYTES = 0.25
 VOXELIZE_FIXED_BYTES = 0.0
 VOXELIZE_NEAR_BYTES = 24 * 0.9
-VOXELIZE_TEXEL_BYTES = 626.0 - VOXELIZE_NEAR_BYTES * 14
+VOXELIZE_TEXEL_BYTES = 900.0 - VOXELIZE_NEAR_BYTES * 14
 DEFAULT_BAND = 3
 #: the run holds, by what the code stores (docs/performance.md, "Memory, by what the code stores"), per grid voxel
 #: the inside and free masks' bits (``model.mask.PackedMask``, 1/8 B each; the inside mask held 1 B before) and the
@@ -114,19 +117,20 @@ SHELL_STEP_TEXEL_BYTES = STEP_TEXEL_BYTES
 #:   renderer build 6.14 -> 5.90 GiB, bench/results/mesh_100mm_shell1_bricks.json and mesh_100mm_shell1_mem.json,
 #:   after_renderer), per texel what the renderer's build and the figures take beyond what the set-up
 #:   holds: the loss's operators are found a block of rows at a time, not held (``neighbourhood.TexelNeighbours``),
-#:   so the stage's peak is the renderer's build (the result's at 60 mm: 2.630 GiB; the first at 40 mm: 1.158 GiB;
-#:   the metrics 2.32 and 1.05); 1.23 KB, between the 1.20 KB that fits 60 mm and the 1.26 KB that fits 40 mm
-#:   (bench/results/footprint_spot.json, entries run_60mm_shell1_stream and run_40mm_shell1_stream, fitted in
-#:   fit_shell_stream; 1.85 KB while the figures built and held the operators): 2.65 GiB at 60 mm, 1.15 at 40 mm;
+#:   so the stage's peak is the renderer's build; 1.0 KB, between the 0.96 KB that fits 60 mm (2.049 GiB) and the
+#:   1.18 KB that fits 40 mm (1.011 GiB) in whole runs of the code with the inside mask as bits, the distances
+#:   built by slabs and the smoothed set's 12 B (python bench/bench_footprint.py run H --dir D --stages --tag _s69
+#:   -- --shell-mm 1 --iterations 1 --spp 1 --forward-spp 1 --eval-spp 1, bench/results/footprint_spot.json,
+#:   entries run_60mm_shell1_s69 and run_40mm_shell1_s69, fitted in fit_shell_s69; 1.23 KB fitted the runs of the
+#:   dense distance build, 1.85 KB while the figures built and held the operators): 2.08 GiB at 60 mm, 0.94 at
+#:   40 mm; the term per texel falls with the size (the renderer's build at 100 mm, bench/results/
+#:   mesh_100mm_shell1_mem69.json, 4.77 GiB, would fit ~0.5 KB), so at 100 mm it is an upper bound (5.7 GiB);
 #:   no fixed term (the figures' libraries and arenas, ~0.2 GiB, which the all-free terms do not count either, so
 #:   that a band never estimates above every voxel free). The all-free ``FIGURES_TEXEL_BYTES`` is not refitted
 #:   (no all-free run of that code measured): it over-estimates by up to the ~1.1 KB per texel the figures' loss side
-#:   no longer takes (1536 -> 373 B per texel at 60 mm: bench/results/figure_side_spot.json). Nor is the per-texel
-#:   term refitted since the core builds its distances by slabs (no band run's figures measured since): it still
-#:   counts the dense build's 3 B per grid voxel, so it over-estimates that stage (Spot 100 mm: 7.1 GiB, the figures'
-#:   metrics and the renderer's build measured 5.90)
+#:   no longer takes (1536 -> 373 B per texel at 60 mm: bench/results/figure_side_spot.json)
 SHELL_FIGURES_FREE_BYTES = 82.0
-SHELL_FIGURES_TEXEL_BYTES = 1230.0
+SHELL_FIGURES_TEXEL_BYTES = 1000.0
 #: a slab's passes per texel: 254 s for 300 iterations of the reference slab's 41 772 texels
 #: (experiments/results/printable.json, entry reference, report.seconds_iterations)
 SLAB_SECONDS_PER_TEXEL = 254.0 / 300 / 41772
