@@ -164,9 +164,11 @@ def smooth_rows(
     guide: NDArray[np.float32] | None = None,
     tau: float = 1.0,
     threads: int | None = None,
-    rows: NDArray[np.int64] | None = None,
+    rows: NDArray[np.uint32] | None = None,
+    guide_key: NDArray[np.uint32] | None = None,
+    guide_extra: NDArray[np.float32] | None = None,
 ) -> None:
-    """Diffuse in place rows (K,) i64 (None: all) of values (F, C) f32 of voxels index (F,) i64, guide (K, D) f32."""
+    """Diffuse rows (K,) u32 of values (F, C) f32 in place; row r's guide: guide[guide_key[r]], guide_extra[r]."""
 
 def softmax_rows(x: NDArray[np.float32], threads: int | None = None) -> NDArray[np.float32]:
     """The softmax of each row of x (rows, n) f32 -> (rows, n) f32."""
