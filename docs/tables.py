@@ -567,9 +567,9 @@ def mesh_scaling() -> str:
 #: the band runs of the scaling table (a 1 mm band over a white core, bench_mesh.py --shell-mm 1): results file, or
 #: the footprint's estimate (footprint_spot.json entry) where no run was measured
 BAND_SCALING = (
-    (20.0, "mesh_20mm_shell1_s65.json"),
-    (40.0, "mesh_40mm_shell1_corewhite.json"),
-    (60.0, "mesh_60mm_shell1_gsum_it.json"),
+    (20.0, "mesh_20mm_shell1_s69.json"),
+    (40.0, "mesh_40mm_shell1_s69.json"),
+    (60.0, "mesh_60mm_shell1_s69.json"),
     (80.0, "mesh_80mm_shell1_s69.json"),
     (100.0, "mesh_100mm_shell1_mem69.json"),
 )
