@@ -1,6 +1,7 @@
 """A whole `inkopt` command's peak resident memory stage by stage: runs ``python -m inkopt.cli ARGS`` in this
 process with marks around the run driver's stages (the optimisation's set-up, each renderer build, render, metrics,
-the baseline's variables, each step, the result's files), and at each mark reads the peak since the previous one
+the baseline's variables, each step, the result's files; ``evaluate``'s continuous result, quantized labels,
+printer texels, each printed render and the figures), and at each mark reads the peak since the previous one
 (/proc/self/status VmHWM) and resets it (``/proc/self/clear_refs`` 5), so each stage's own peak is measured, not
 sampled.
 
@@ -40,6 +41,13 @@ STAGES = (
     ("inkopt.run", None, "_write_result_files"),
     ("inkopt.run", None, "_report"),
     ("inkopt.scenes.mesh", None, "build_mesh_scene"),
+    ("inkopt.evaluation.evaluate", None, "_mixture_results"),
+    ("inkopt.evaluation.evaluate", None, "_render_continuous"),
+    ("inkopt.evaluation.evaluate", None, "_quantized_volume"),
+    ("inkopt.evaluation.evaluate", None, "_printed_results"),
+    ("inkopt.evaluation.evaluate", None, "_render_printed"),
+    ("inkopt.evaluation.evaluate", None, "_figures"),
+    ("inkopt.evaluation.printed", "PrintedRenderer", "__init__"),
 )
 
 

@@ -35,12 +35,27 @@ class Medium:
         """Band voxels index (K,) i64 of inside (Z,Y,X) u8 with (K,3) f32, other inside voxels the core's (3,) f32."""
 
     @staticmethod
-    def labels(labels: NDArray[np.uint8], ink_sigma_s: NDArray[np.float32], ink_sigma_a: NDArray[np.float32]) -> Medium:
-        """One ink per voxel, labels (Z,Y,X) u8 (255: vacuum), and the ink table (N,3) f32 mm^-1 each."""
+    def labels(
+        labels: NDArray[np.uint8] | LabelBricks, ink_sigma_s: NDArray[np.float32], ink_sigma_a: NDArray[np.float32]
+    ) -> Medium:
+        """One ink per voxel, labels (Z,Y,X) u8 (255: vacuum) or LabelBricks with every plane pushed (the scene takes
+        them), and the ink table (N,3) f32 mm^-1 each; the scene stores the labels by 8^3 bricks."""
 
     @property
     def form(self) -> str:
         """ "dense", "sparse", "band" or "labels"."""
+
+class LabelBricks:
+    """A label grid built from its z-planes pushed in order, stored by 8^3 bricks (one table entry for a brick of one
+    label); Medium.labels takes it once every plane is pushed."""
+
+    def __init__(self, shape: tuple[int, int, int]) -> None: ...
+    def push(self, planes: NDArray[np.uint8]) -> None:
+        """The next z-planes, (K,Y,X) u8 C-contiguous; ValueError for another (Y,X) or more planes than are left."""
+    @property
+    def planes_left(self) -> int: ...
+    @property
+    def shape(self) -> tuple[int, int, int]: ...
 
 class Texels:
     """Texels of a render or gradient pass, converted and checked once (28 bytes per texel)."""
@@ -60,7 +75,7 @@ class Scene:
         voxel_mm: tuple[float, float, float],
         medium: Medium,
         *,
-        inside: NDArray[np.uint8] | None = None,
+        inside: NDArray[np.uint8] | str | None = None,
         normals: NDArray[np.float32] | None = None,
         normal_index: NDArray[np.int64] | None = None,
         normal_vectors: NDArray[np.float32] | None = None,

@@ -9,10 +9,9 @@ is its own monochromatic random walk (exact free flights by delta tracking, and 
 masked objects; implicit absorption with Russian roulette; Henyey-Greenstein scattering; Fresnel reflection/refraction),
 eight paths per core at a time (SIMD lanes).
 
-Gradients (``Renderer.gradient``): given per-texel adjoints de/dc (I, 3), the derivatives de/dsigma_s and
-de/dsigma_a (z, y, x, 3) by path replay backpropagation (unbiased, ``method="replay"``) or the paper's biased
-one-pass approximation (``method="li1"``: radiance along the adjoint path approximated by 1, whatever the
-lighting; only sigma_a receives gradient under it).
+Gradients (``Renderer.gradient``): given per-texel adjoints de/dc (I, 3), de/dsigma_s and de/dsigma_a (z, y, x, 3)
+by path replay backpropagation (unbiased, ``method="replay"``) or the paper's biased one-pass approximation
+(``method="li1"``: radiance along the adjoint path taken as 1, whatever the lighting; only sigma_a gets gradient).
 
 :class:`TexelRenderer` is what every renderer offers (render, gradient, set_volume, set_mixture, set_lighting);
 :class:`Renderer` implements it in this process, :class:`inkopt.distributed.ShardedRenderer` over texel shards on
@@ -245,8 +244,8 @@ class Renderer(TexelRenderer):
     def _medium(volume: Volume, inside: np.ndarray | None = None) -> _core.Medium:
         """The core's medium (``_core.Medium``): with a band (``Volume.band``), the band's coefficients and the
         core's (24 bytes per band voxel, nothing per core voxel; ``inside``: the mask as ``_core_inside`` gives
-        it, if already made); labels with the ink table; the inside voxels' coefficients (sparse: 24 bytes per
-        voxel of each grid row's span of them) when the volume has an inside mask; else dense coefficients."""
+        it, if already made); labels (by bricks) with the ink table; the inside voxels' coefficients (sparse: 24
+        bytes per voxel of each grid row's span) when the volume has an inside mask; else dense coefficients."""
         from ._core import Medium
 
         if volume.band is not None:
@@ -256,9 +255,9 @@ class Renderer(TexelRenderer):
             inside = _core_inside(volume) if inside is None else inside
             band = volume.band.index
             return Medium.band(inside, band, *volume.coefficients_at(band), core_s[0], core_a[0])
-        if volume.form == "labels":
-            inks = volume.inks
-            return Medium.labels(volume.labels, inks.sigma_s.astype(np.float32), inks.sigma_a.astype(np.float32))
+        if volume.form == "labels":  # by bricks
+            s, a = (np.asarray(c, np.float32) for c in (volume.inks.sigma_s, volume.inks.sigma_a))
+            return Medium.labels(label_bricks(volume.labels, volume.shape), s, a)
         if volume.inside is not None:
             index = volume.inside.nonzero()
             return Medium.sparse(index, *volume.coefficients_at(index))
@@ -405,18 +404,29 @@ class Renderer(TexelRenderer):
         return self._run(texels, settings, adjoint, progress)
 
 
-def _core_inside(volume: Volume) -> np.ndarray | None:
+def label_bricks(labels, shape) -> _core.LabelBricks:
+    """A label grid as the core stores it (``_core.LabelBricks``: 8^3 bricks, one table entry for a brick of one
+    label), pushed 8 z-planes at a time from ``labels`` (uint8 (Z, Y, X), read by slices of planes)."""
+    from ._core import LabelBricks
+
+    bricks = LabelBricks(tuple(int(s) for s in shape))
+    for z in range(0, shape[0], 8):
+        bricks.push(np.ascontiguousarray(labels[z : z + 8], np.uint8))
+    return bricks
+
+
+def _core_inside(volume: Volume):
     """The inside mask as the core reads it (``_core.Scene``'s and ``_core.Medium.band``'s ``inside``): a volume's
-    mask as its bits (``PackedMask.bits``, (ceil(V / 8),) uint8, no copy; the core unpacks a slab at a time), a
-    labels volume without one as (z, y, x) uint8 0/1 of its labels (a new array), or None for a volume without
-    one; a volume that makes its own (``shardwire.BandObject``, a Ray worker's band volume) makes it."""
+    mask as its bits (``PackedMask.bits``, (ceil(V / 8),) uint8, no copy; the core unpacks a slab at a time), for a
+    labels volume without one "labels" (the core's own label bricks, read a slab at a time), or None for a volume
+    without one; a volume that makes its own (``shardwire.BandObject``, a Ray worker's band volume) makes it."""
     make = getattr(volume, "inside_bytes", None)
     if make is not None:
         return make()
     if volume.inside is not None:
         return volume.inside.bits
-    if volume.form == "labels":
-        return np.ascontiguousarray(volume.inside_mask()).view(np.uint8)
+    if volume.form == "labels":  # a band medium reads a mask of its own
+        return "labels" if volume.band is None else np.ascontiguousarray(volume.inside_mask()).view(np.uint8)
     return None
 
 

@@ -4,7 +4,8 @@
 //! The type stub `python/inkopt/_core.pyi` lists the Python API.
 //!
 //! Files: `state` (the `Scene` class's fields), `scene` (its Python methods: construction, media, light, render),
-//! `medium` (the `Medium` class and the scene's medium built from it), `texels` (the `Texels` class),
+//! `medium` (the `Medium` class and the scene's medium built from it), `labels` (the `LabelBricks` class: label
+//! planes pushed into bricks), `texels` (the `Texels` class),
 //! `gradients` (the gradient methods of `Scene`), `printing` (error diffusion of labels and of counts), `optimiser` (smoothing and softmax
 //! kernels on kept thread pools), `arrays` (argument checks and conversions shared by all).
 
@@ -12,6 +13,7 @@ use pyo3::prelude::*;
 
 mod arrays;
 mod gradients;
+mod labels;
 mod medium;
 mod optimiser;
 mod printing;
@@ -23,6 +25,7 @@ mod texels;
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<state::Scene>()?;
     m.add_class::<medium::Medium>()?;
+    m.add_class::<labels::LabelBricks>()?;
     m.add_class::<texels::Texels>()?;
     m.add_function(wrap_pyfunction!(printing::diffuse_layer, m)?)?;
     m.add_function(wrap_pyfunction!(printing::diffuse_counts_layer, m)?)?;

@@ -12,6 +12,7 @@ use numpy::{
 use pyo3::prelude::*;
 
 use crate::arrays::{c_slice, check_shape, err};
+use crate::labels::LabelBricks;
 
 /// The four forms of a scene's medium. A scene holds one, so the size difference between the variants costs
 /// nothing worth a box (an extra indirection on every render call).
@@ -47,7 +48,13 @@ enum Form {
     Dense { sigma_s: Py<PyArray4<f32>>, sigma_a: Py<PyArray4<f32>> },
     Sparse(Sparse),
     Band { inside: Inside, band: Sparse, core_sigma_s: [f32; 3], core_sigma_a: [f32; 3] },
-    Labels { labels: Py<PyArray3<u8>>, ink_sigma_s: Py<PyArray2<f32>>, ink_sigma_a: Py<PyArray2<f32>> },
+    Labels { labels: Labels, ink_sigma_s: Py<PyArray2<f32>>, ink_sigma_a: Py<PyArray2<f32>> },
+}
+
+/// A label grid as the caller gives it: (Z, Y, X) uint8, or its planes already pushed into `LabelBricks`.
+enum Labels {
+    Dense(Py<PyArray3<u8>>),
+    Bricks(Py<LabelBricks>),
 }
 
 /// An inside mask as the caller gives it: (Z, Y, X) uint8 (non-zero: inside), or its bits, (ceil(Z Y X / 8),)
@@ -185,16 +192,23 @@ impl Medium {
         Ok(Medium(Form::Band { inside, band, core_sigma_s, core_sigma_a }))
     }
 
-    /// Medium.labels(labels, ink_sigma_s, ink_sigma_a): one ink per voxel, (Z, Y, X) uint8 (255: vacuum), and
-    /// the ink table, (N, 3) float32 each, mm^-1.
+    /// Medium.labels(labels, ink_sigma_s, ink_sigma_a): one ink per voxel, (Z, Y, X) uint8 (255: vacuum), or a
+    /// `LabelBricks` whose planes are all pushed (the scene built from this medium takes its bricks); and the ink
+    /// table, (N, 3) float32 each, mm^-1. The scene stores the labels by bricks either way.
     #[staticmethod]
     fn labels(
-        labels: Bound<'_, PyArray3<u8>>,
+        labels: Bound<'_, PyAny>,
         ink_sigma_s: Bound<'_, PyArray2<f32>>,
         ink_sigma_a: Bound<'_, PyArray2<f32>>,
     ) -> PyResult<Self> {
         let n = Some(ink_sigma_s.shape()[0]);
-        let labels = checked(labels, "labels", &[None, None, None])?;
+        let labels = if let Ok(b) = labels.cast::<LabelBricks>() {
+            Labels::Bricks(b.clone().unbind())
+        } else if let Ok(a) = labels.cast::<PyArray3<u8>>() {
+            Labels::Dense(checked(a.clone(), "labels", &[None, None, None])?)
+        } else {
+            return Err(err("labels must be a (Z, Y, X) uint8 array or LabelBricks"));
+        };
         let ink_sigma_s = checked(ink_sigma_s, "ink_sigma_s", &[n, Some(3)])?;
         Ok(Medium(Form::Labels {
             labels,
@@ -241,10 +255,20 @@ impl Medium {
                 Ok(MediumKind::Band(m))
             }
             Form::Labels { labels, ink_sigma_s, ink_sigma_a } => {
-                let (l, is, ia) = (view(labels, py)?, view(ink_sigma_s, py)?, view(ink_sigma_a, py)?);
-                check_shape(l.shape(), &[nz, ny, nx], "labels")?;
-                let l = c_slice(&l, "labels")?.to_vec();
-                let m = LabelMedium::new(l, c_slice(&is, "ink_sigma_s")?, c_slice(&ia, "ink_sigma_a")?);
+                let (is, ia) = (view(ink_sigma_s, py)?, view(ink_sigma_a, py)?);
+                let (is, ia) = (c_slice(&is, "ink_sigma_s")?, c_slice(&ia, "ink_sigma_a")?);
+                let m = match labels {
+                    Labels::Dense(l) => {
+                        let l = view(l, py)?;
+                        check_shape(l.shape(), &[nz, ny, nx], "labels")?;
+                        let l = c_slice(&l, "labels")?;
+                        py.detach(|| LabelMedium::new([nx, ny, nz], l, is, ia))
+                    }
+                    Labels::Bricks(b) => {
+                        let bricks = b.borrow_mut(py).take(py, shape)?;
+                        LabelMedium::from_bricks(bricks, is, ia)
+                    }
+                };
                 Ok(MediumKind::Labels(m.map_err(err)?))
             }
         }

@@ -4,6 +4,7 @@
 //! only some voxels); `set_light` lights it by a uniform light or an environment map. The gradient methods'
 //! work is in `gradients`. The GIL is released while rendering.
 
+use inkopt_core::transport::mask::MaskRef;
 use inkopt_core::{render, render_hero, Boundary, EnvMap, Geometry, UniformLight};
 use numpy::{
     IntoPyArray, PyArray1, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4,
@@ -21,7 +22,8 @@ use crate::texels::Texels;
 impl Scene {
     /// Scene(shape_zyx, voxel_mm_xyz, medium, *, inside=None, normals=None, normal_index=None,
     /// normal_vectors=None, boundary="box", ior=1.5, g=0.4, threads=None). `medium`: a `Medium` of this grid;
-    /// `inside`: the object's mask, (Z, Y, X) uint8 or its bits (`np.packbits`, as `Medium.band` takes it).
+    /// `inside`: the object's mask, (Z, Y, X) uint8 or its bits (`np.packbits`, as `Medium.band` takes it), or
+    /// "labels": a label medium's voxels other than 255 (a printed volume's own labels; no mask array at all).
     /// Shading normals: dense (`normals` (Z, Y, X, 3) f32) or sparse (`normal_index` (K,) i64 increasing linear
     /// indices, `normal_vectors` (K, 3) f32).
     #[new]
@@ -50,8 +52,16 @@ impl Scene {
         let mut geo = Geometry::new([nx, ny, nz], [voxel_mm.0, voxel_mm.1, voxel_mm.2], bnd, ior, g).map_err(err)?;
         let medium = medium.build(py, [nz, ny, nx])?;
         if let Some(m) = inside {
-            // read in place a slab at a time (a bit mask unpacked a slab at a time), not copied
-            geo = Inside::extract(&m)?.with(py, [nz, ny, nx], |m| geo.with_inside_mask(m).map_err(err))?;
+            if m.extract::<&str>().is_ok_and(|s| s == "labels") {
+                let MediumKind::Labels(labels) = &medium else {
+                    return Err(err("inside='labels' needs a label medium"));
+                };
+                let mask = MaskRef::Labels(labels.labels());
+                geo = py.detach(|| geo.with_inside_mask(mask)).map_err(err)?;
+            } else {
+                // read in place a slab at a time (a bit mask unpacked a slab at a time), not copied
+                geo = Inside::extract(&m)?.with(py, [nz, ny, nx], |m| geo.with_inside_mask(m).map_err(err))?;
+            }
         }
         if let Some(nrm) = &normals {
             check_shape(nrm.shape(), &[nz, ny, nx, 3], "normals")?;

@@ -52,17 +52,20 @@ printer renderer, then the figures of every result, the ``Evaluation`` and its f
 Memory: one renderer exists at a time. The run's mixture is dropped once the continuous result (and translucency)
 is rendered; the printer texels, their map and one printer renderer (``printed.PrintedRenderer``: geometry built
 once, each later result's labels swapped in) serve the quantized result and both baselines (same printer grid and
-inside voxels); each baseline goes layer by layer from ``baselines.BaselineLayers``
-through ``printing.quantize.quantize`` into one printer label grid (1 byte per printer voxel), never as a whole
-(z, y, x, N) mixture; the texel loss and its figures come after the last render. The peak is then the larger of
-the continuous render and one printer renderer's build (docs/performance.md, "Evaluation memory").
+inside voxels). No printer-grid array exists: the quantized labels are read from their layered file a layer at a
+time (``RunDir.load_quantized(layered=True)``), each baseline goes layer by layer from
+``baselines.BaselineLayers`` through ``printing.quantize.quantize`` into a temporary layered label file, never as a
+whole (z, y, x, N) mixture, and the core stores each result's labels, and the inside mask's distances, by 8^3
+bricks (a table entry for a brick of one label: the empty outside and the white core); the texel loss and its
+figures come after the last render. The peak is then the larger of the continuous render and the printed
+renders' bricks, texels and map (docs/performance.md, "Evaluation memory").
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
 
@@ -74,7 +77,7 @@ from ..io import file_digest
 from ..lighting import Lighting, load_lighting
 from ..loss import TexelLoss
 from ..model import Quantization, Volume
-from ..printing.quantize import MixtureLayers, printer_grid, quantize
+from ..printing.quantize import printer_grid
 from ..printing.stream import quantize_run
 from ..render import Renderer, RendererFactory
 from ..rundir import Predictions, RunDir, SceneRecord
@@ -87,7 +90,7 @@ from .metrics import prediction_metrics
 from .noise import EVAL_SEED_OFFSET, MAX_SPP, PILOT_SPP, TARGET_NOISE_DE76, Sampling
 from .options import EvaluateOptions
 from .outputs import picture_names, write_face_pictures, write_mesh_views
-from .printed import PrintedRenderer
+from .printed import PrintedRenderer, quantized_baselines
 from .renders import (
     ContinuousSource,
     PrintedSource,
@@ -296,7 +299,7 @@ def _quantized_volume(ev: Evaluating, shape: tuple) -> tuple[Volume, Quantizatio
     when missing. A method other than ``options.method`` is refused."""
     d, method = ev.d, ev.options.method
     if d.has_quantized():
-        qvol = d.load_quantized()
+        qvol = d.load_quantized(layered=True)
         q = qvol.quantization or Quantization()
         if method is not None and method != q.method:
             raise ParameterError(
@@ -306,7 +309,7 @@ def _quantized_volume(ev: Evaluating, shape: tuple) -> tuple[Volume, Quantizatio
         return qvol, q
     t0 = time.perf_counter()  # inkopt quantize's defaults, layer by layer as that command does
     quantize_run(d, Quantization() if method is None else Quantization(method))
-    qvol = d.load_quantized()
+    qvol = d.load_quantized(layered=True)
     q = qvol.quantization
     ev.say(
         f"quantized {shape} -> {qvol.shape} ({q.method}) in {time.perf_counter() - t0:.1f} s; wrote {d.quantized_path}"
@@ -351,23 +354,14 @@ def _render_printed(ev: Evaluating, printer: PrintedRenderer, name: str, labels_
 
 
 def _render_baselines(ev: Evaluating, printer: PrintedRenderer, sources: dict, grid: _Grid, dpi: tuple, meta: dict):
-    """Each baseline quantized like ours (method, seed, DPI, upsampling and ink order of quantized.npz's settings
-    ``meta["quantization"]``), never share-compensated (our method's step), into one printer-grid label array."""
-    q, shape, vmm = meta["quantization"], grid.shape, grid.voxel_mm
-    shape_p = printer_grid(shape, vmm, dpi=dpi)[0]
+    """Each baseline quantized like ours (``printed.quantized_baselines``: the settings of quantized.npz
+    ``meta["quantization"]``, uncompensated) into a temporary layered label file and rendered from it as the
+    quantized result is: no printer-grid array."""
+    shape_p = printer_grid(grid.shape, grid.voxel_mm, dpi=dpi)[0]
     if shape_p != printer.shape:
         raise ValueError(f"{ev.d.quantized_path} has a printer grid of {printer.shape}, its settings give {shape_p}")
-    for name in list(sources):
-        t0 = time.perf_counter()  # quantized exactly like ours, into one printer-grid label array
-        src = sources.pop(name)
-        labels, _ = quantize(
-            MixtureLayers(src, vmm, src.inside, meta["inks"], meta["g"], meta["ior"]),
-            replace(q, dpi=dpi, compensate=False),  # as ours was (its inks' order included), uncompensated
-            out=np.empty(shape_p, np.uint8),
-        )
-        del src
-        _render_printed(ev, printer, name, Volume.from_labels(labels=labels, **meta), t0, q.method)
-        del labels
+    for name, labels, t0 in quantized_baselines(sources, grid.voxel_mm, shape_p, dpi, meta):
+        _render_printed(ev, printer, name, labels, t0, meta["quantization"].method)
 
 
 def _figures(ev: Evaluating) -> tuple[dict[str, Measured], dict | None]:

@@ -13,13 +13,28 @@ Conventions: docs/conventions.md.
 
 from __future__ import annotations
 
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
 import numpy as np
 
 from ..model import EMPTY, Texels, Volume
+from ..model.labelfile import LabelLayers, LabelLayersWriter
+from ..printing.quantize import MixtureLayers, quantize
 from ..printing.texelmap import average_to_scene, map_texels, printer_texels
 from ..render import Renderer
 
-__all__ = ["PrintedRenderer", "average_to_scene", "map_texels", "printer_texels", "restrict", "same_inside"]
+__all__ = [
+    "PrintedRenderer",
+    "average_to_scene",
+    "map_texels",
+    "printer_texels",
+    "quantized_baselines",
+    "restrict",
+    "same_inside",
+]
 
 
 def restrict(ptex: Texels, to_scene, stand_in, subset):
@@ -37,6 +52,30 @@ def restrict(ptex: Texels, to_scene, stand_in, subset):
     sub_to = row[to_scene[keep]]  # -1 for a stand-in that maps to an unsampled scene texel
     sub_stand = np.where(standing >= 0, new_index[np.maximum(standing, 0)], -1)
     return ptex.subset(keep), sub_to, sub_stand
+
+
+def quantized_baselines(sources: dict, voxel_mm, shape_p: tuple, dpi: tuple, meta: dict):
+    """Each baseline of ``sources`` (name -> ``baselines.BaselineLayers`` on the optimisation grid of ``voxel_mm``;
+    emptied as they go) quantized as the run's labels were (method, seed, upsampling and inks' order of
+    ``meta["quantization"]``, at ``dpi``), never share-compensated (our method's step), a layer at a time into a
+    temporary layered label file of the printer grid ``shape_p`` (a few bytes per layer of the homogeneous core).
+    Yields (name, its labels ``Volume`` read a layer at a time with ``meta``'s geometry, the ``perf_counter`` its
+    quantization began at); each file is removed when the next baseline begins, all of them on any exit."""
+    q = replace(meta["quantization"], dpi=dpi, compensate=False)  # as ours was (its inks' order included)
+    with tempfile.TemporaryDirectory(prefix="inkopt-baselines-") as tmp:
+        for name in list(sources):
+            t0 = time.perf_counter()
+            src, path = sources.pop(name), Path(tmp) / f"{name}.layers"
+            w = LabelLayersWriter(path, shape_p)
+            try:
+                quantize(MixtureLayers(src, voxel_mm, src.inside, meta["inks"], meta["g"], meta["ior"]), q, out=w)
+                w.commit()
+            except BaseException:
+                w.abort()
+                raise
+            del src
+            yield name, Volume.from_labels(labels=LabelLayers(path, shape_p), **meta), t0
+            path.unlink()
 
 
 def same_inside(a: Volume, b: Volume) -> bool:

@@ -13,6 +13,7 @@ import numpy as np
 
 from ..errors import ParameterError
 from .inks import InkTable
+from .labelfile import LabelLayers
 from .mask import PackedMask
 
 EMPTY = 255  # the label of a voxel without ink
@@ -89,10 +90,13 @@ class Labels:
     form = "labels"
 
     def __post_init__(self):
-        lab = np.ascontiguousarray(self.labels)  # a read-only memory map (a label file) stays one
+        # a read-only memory map (a label file) stays one; a layered label file (``labelfile.LabelLayers``) stays
+        # read a layer at a time
+        lab = self.labels if isinstance(self.labels, LabelLayers) else np.ascontiguousarray(self.labels)
         if lab.dtype != np.uint8 or lab.ndim != 3:
             raise VolumeError(f"labels must be uint8 (z, y, x), got {lab.dtype} {lab.shape}")
-        step = max(1, 2**24 // max(1, lab[0].size))  # checked in slabs of layers: bounded temporaries
+        # checked in slabs of layers (bounded temporaries); a layered file a layer at a time, as it is decoded
+        step = 1 if isinstance(lab, LabelLayers) else max(1, 2**24 // max(1, lab[0].size))
         for z in range(0, lab.shape[0], step):
             used = lab[z : z + step][lab[z : z + step] != EMPTY]
             if used.size and int(used.max()) >= len(self.inks):
@@ -105,10 +109,34 @@ class Labels:
 
     def labels_at(self, index: np.ndarray) -> np.ndarray:
         """(K,) uint8 labels of the voxels ``index`` ((K,) int64 flat (z, y, x) indices)."""
-        return self.labels.reshape(-1)[index]
+        if not isinstance(self.labels, LabelLayers):
+            return self.labels.reshape(-1)[index]
+        index = np.asarray(index, np.int64)
+        plane = int(np.prod(self.shape[1:]))
+        out = np.empty(len(index), np.uint8)
+        z = index // plane
+        for k in np.unique(z):  # each layer decoded once
+            at = z == k
+            out[at] = self.labels[int(k)].reshape(-1)[index[at] - k * plane]
+        return out
 
     def arrays(self) -> dict:
         return {"labels": self.labels, **self.inks.to_arrays()}
+
+
+class NonEmpty:
+    """The inside mask of a label grid (its labels other than ``EMPTY``) read by z-planes, as ``PackedMask`` is:
+    ``mask[z]`` (y, x) bool, ``mask[z0:z1]`` (k, y, x) bool, new arrays made from those planes of the labels only
+    (a layered label file is never decoded whole)."""
+
+    def __init__(self, labels):
+        self.labels = labels
+        self.shape = tuple(int(s) for s in labels.shape)
+
+    def __getitem__(self, key) -> np.ndarray:
+        if isinstance(key, (int, np.integer)) or (isinstance(key, slice) and key.step in (None, 1)):
+            return np.asarray(self.labels[key]) != EMPTY
+        raise IndexError("a label grid's mask is read by a z-plane or a slice of them")
 
 
 class InsideLabels(Labels):

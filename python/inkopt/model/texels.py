@@ -108,17 +108,22 @@ class Texels:
         return cls(vox, fid, FACE_NORMALS[fid])
 
     @classmethod
-    def exposed_faces(cls, inside: np.ndarray, faces=None) -> Texels:
+    def exposed_faces(cls, inside, faces=None) -> Texels:
         """Every exposed face of an arbitrary ``inside`` mask (a face whose neighbour is outside or off-grid), face by
-        face, each in C order of (z, y, x); found ``EXPOSED_SLAB`` z layers at a time (a few bytes per voxel of a
-        slab, not of the grid)."""
-        inside = np.asarray(inside, bool)
+        face, each in C order of (z, y, x); found ``EXPOSED_SLAB`` z layers at a time, each slab read once with a
+        plane either side (a few bytes per voxel of a slab, not of the grid). ``inside``: a (z, y, x) bool array,
+        or a mask read by slices of z-planes (``PackedMask``, ``media.NonEmpty``), never made whole."""
+        if isinstance(inside, np.ndarray) or not hasattr(inside, "shape"):
+            inside = np.asarray(inside, bool)
+        nz = inside.shape[0]
         fids = list(range(6)) if faces is None else sorted({face_id(x) for x in faces})
         vox: dict[int, list] = {f: [] for f in fids}
-        for z0 in range(0, inside.shape[0], EXPOSED_SLAB):
-            z1 = min(inside.shape[0], z0 + EXPOSED_SLAB)
+        for z0 in range(0, nz, EXPOSED_SLAB):
+            z1 = min(nz, z0 + EXPOSED_SLAB)
+            lo, hi = max(z0 - 1, 0), min(z1 + 1, nz)
+            block = np.asarray(inside[lo:hi], bool)  # beyond the block is beyond the grid
             for f in fids:
-                v = np.argwhere(inside[z0:z1] & ~_neighbours(inside, f, z0, z1))
+                v = np.argwhere(block[z0 - lo : z1 - lo] & ~_neighbours(block, f, z0 - lo, z1 - lo))
                 v[:, 0] += z0
                 vox[f].append(v)
         fid = np.concatenate([np.full(sum(len(v) for v in vox[f]), f, np.uint8) for f in fids])
@@ -126,10 +131,11 @@ class Texels:
         return cls(voxels, fid, FACE_NORMALS[fid])
 
     @classmethod
-    def from_normals(cls, inside: np.ndarray, normals) -> Texels:
+    def from_normals(cls, inside, normals) -> Texels:
         """Mesh texels: one per surface voxel (an inside voxel with an outside 6-neighbour), in C order of
         (z, y, x); ``normal`` = the voxel's shading normal from ``normals`` (``SurfaceNormals``, or a dense
-        (z, y, x, 3) array), and ``face`` = its exposed face most aligned with that normal."""
+        (z, y, x, 3) array), and ``face`` = its exposed face most aligned with that normal. ``inside``: as
+        ``exposed_faces`` takes it."""
         if not isinstance(normals, SurfaceNormals):  # a dense (z, y, x, 3) array
             normals = SurfaceNormals.from_dense(normals)
         faces = cls.exposed_faces(inside)
@@ -153,8 +159,9 @@ class Texels:
     def for_volume(cls, volume, faces=None) -> Texels:
         """The default sensor of a volume: its exposed faces (periodic-xy: only -z and +z), or for a volume with
         shading normals (a voxelized mesh) one texel per surface voxel. ``faces`` restricts to some faces."""
+        planes = volume.inside_planes()  # read a slab at a time: no grid-sized mask
         if volume.normals is not None and faces is None:
-            return cls.from_normals(volume.inside_mask(), volume.normals)
+            return cls.from_normals(volume.inside_mask() if planes is None else planes, volume.normals)
         if volume.boundary == "periodic-xy":
             allowed = {4, 5}
             faces = allowed if faces is None else {face_id(f) for f in faces} & allowed
@@ -162,7 +169,7 @@ class Texels:
                 raise ValueError("a periodic-xy volume has only the top and bottom faces")
         if volume.inside is None and volume.form != "labels":
             return cls.box_faces(volume.shape, faces)
-        return cls.exposed_faces(volume.inside_mask(), faces)
+        return cls.exposed_faces(volume.inside_mask() if planes is None else planes, faces)
 
     def to_arrays(self) -> dict:
         return {

@@ -34,7 +34,7 @@ from ..io import FORMAT_KEY, FormatError, Streamed, load_npz, save_npz, upgrade_
 from .inks import DEFAULT_G, InkTable, mix
 from .labelfile import load_label_file
 from .mask import PackedMask
-from .media import EMPTY, Band, Dense, Labels, Medium, Mixture, Quantization, VolumeError
+from .media import EMPTY, Band, Dense, InsideLabels, Labels, Medium, Mixture, NonEmpty, Quantization, VolumeError
 from .normals import SurfaceNormals
 
 BOUNDARIES = ("box", "periodic-xy")
@@ -246,6 +246,13 @@ class Volume:
             return self.medium.labels != EMPTY
         return np.ones(self.shape, bool)
 
+    def inside_planes(self):
+        """The inside mask read by z-planes (``mask[z]``, ``mask[z0:z1]``: bool, new arrays; no grid-sized array): its
+        bits, a labels volume's labels other than ``EMPTY`` (``NonEmpty``), or None: every voxel."""
+        if self.inside is not None or isinstance(self.medium, InsideLabels):  # an InsideLabels' mask
+            return self.inside if self.inside is not None else self.medium.inside
+        return NonEmpty(self.medium.labels) if isinstance(self.medium, Labels) else None
+
     def with_medium(self, medium: Medium, **changes) -> Volume:
         """The same geometry with another medium (and any other field ``changes``); no band unless ``changes``
         gives one (another medium need not hold the band's core)."""
@@ -313,17 +320,17 @@ class Volume:
         return cls.from_arrays(upgrade_volume(data, path), path)
 
     @classmethod
-    def from_arrays(cls, data: dict, path: str | Path) -> Volume:
-        """The volume of a volume file's arrays ``data`` (current format version), read from ``path`` (which
-        names it in errors and locates a ``labels_file``). Arrays that make no volume (missing, of the wrong
-        dtype or shape, non-finite) are a one-line VolumeError naming ``path``."""
+    def from_arrays(cls, data: dict, path: str | Path, layered: bool = False) -> Volume:
+        """The volume of a volume file's arrays ``data`` (current format version) from ``path`` (named in errors;
+        locates a ``labels_file``, with ``layered`` a layered one read a layer at a time). Arrays that make no
+        volume (missing, of the wrong dtype or shape, non-finite) are a one-line VolumeError naming ``path``."""
         try:
-            return cls._from_arrays(data, path)
+            return cls._from_arrays(data, path, layered)
         except (TypeError, ValueError, KeyError, IndexError, OverflowError) as exc:
             raise naming_file(exc, path) from None
 
     @classmethod
-    def _from_arrays(cls, data: dict, path: str | Path) -> Volume:
+    def _from_arrays(cls, data: dict, path: str | Path, layered: bool = False) -> Volume:
         if "voxel_mm" not in data:
             raise VolumeError(f"{path}: missing array 'voxel_mm' (3 voxel sizes x, y, z in mm)")
         check_kinds(data, path)
@@ -340,7 +347,7 @@ class Volume:
             if Path(name).name != name:
                 raise VolumeError(f"{path}: labels_file must be a file name beside it, got '{name}'")
             try:
-                labels = load_label_file(Path(path).parent / name, data.get("labels_shape"))
+                labels = load_label_file(Path(path).parent / name, data.get("labels_shape"), layered=layered)
             except ValueError as exc:
                 raise VolumeError(str(exc)) from None
         vol = cls(

@@ -93,14 +93,14 @@ class QuantizedFiles:
     def has_quantized(self) -> bool:
         return self.quantized_path.is_file()
 
-    def load_quantized(self) -> Volume:
-        """The printer labels volume (quantized.npz, its labels decoded from quantized_labels.layers, or memory-mapped
-        from an older run's quantized_labels.npy), checked:
-        a file that cannot be read, or labels that are not the ones written with it, are damaged."""
+    def load_quantized(self, layered: bool = False) -> Volume:
+        """The printer labels volume (quantized.npz, its labels decoded from quantized_labels.layers, or with
+        ``layered`` read from it a layer at a time; memory-mapped from an older run's quantized_labels.npy),
+        checked: a file that cannot be read, or labels that are not the ones written with it, are damaged."""
         p = self._need(self.quantized_path, f"run 'inkopt quantize {self.path}' first")
         arrays = self._quantized_arrays()
         self._check_labels(arrays)
-        vol = Volume.from_arrays(upgrade_volume(arrays, p, quantized=True), p)
+        vol = Volume.from_arrays(upgrade_volume(arrays, p, quantized=True), p, layered=layered)
         if vol.form != "labels":
             raise ValueError(f"{p} holds a {vol.form} volume, not printer labels")
         return vol

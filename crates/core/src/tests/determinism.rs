@@ -45,7 +45,7 @@ fn label_medium_matches_dense() {
     let s: Vec<f32> = labels.iter().flat_map(|&l| ink_s[3 * l as usize..3 * l as usize + 3].to_vec()).collect();
     let a: Vec<f32> = labels.iter().flat_map(|&l| ink_a[3 * l as usize..3 * l as usize + 3].to_vec()).collect();
     let geo = Geometry::new(n, [0.04, 0.08, 0.03], Boundary::Box, 1.5, 0.4).unwrap();
-    let lm = LabelMedium::new(labels, &ink_s, &ink_a).unwrap();
+    let lm = LabelMedium::new(n, &labels, &ink_s, &ink_a).unwrap();
     let dm = DenseMedium::from_interleaved(&s, &a).unwrap();
     let texels = top_texels(n);
     let opts = RenderOptions { spp: 16, seed: 5, include_specular: false };

@@ -9,6 +9,8 @@ const LAYERS: &[&str] = &[
     "cache",
     "pages",
     "spans",
+    "transport::bricks",
+    "transport::label_bricks",
     "transport::mask",
     "transport::sampling",
     "transport::rng",

@@ -2,7 +2,8 @@
 //! and free flights with closed forms), `samplers` (the samplers and walks against each other), `gradients`
 //! (gradients against finite differences), `light` (environment maps), `determinism` (thread counts, chunking,
 //! media forms), `geometry` (safe distances and balls), `bricks` (the
-//! distances stored by bricks against the dense ones), `mask` (builds from a bit mask against a byte mask), `smooth` (the step preconditioner against a plain
+//! distances stored by bricks against the dense ones), `label_bricks` (labels stored by bricks against the dense
+//! labels), `mask` (builds from a bit mask against a byte mask), `smooth` (the step preconditioner against a plain
 //! implementation), `storage` (in-place updates and compact storage against the plain forms, bit for bit), `band`
 //! (the band medium against them), `layering` (the module layering, on the source). Tolerances are multiples of the estimator's own standard
 //! error (computed from the samples), never fixed image values.
@@ -14,6 +15,7 @@ mod determinism;
 mod geometry;
 mod gradients;
 mod hero;
+mod label_bricks;
 mod layering;
 mod light;
 mod mask;

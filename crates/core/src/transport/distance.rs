@@ -8,6 +8,8 @@
 use rayon::prelude::*;
 use wide::i32x8;
 
+pub use crate::transport::bricks::BRICK;
+use crate::transport::bricks::{Part, BRICK_VOXELS, SHIFT};
 use crate::transport::mask::MaskRef;
 
 /// Largest safe distance stored: 16 voxels (1.3 mm at 300 DPI), far beyond a free flight in any ink.
@@ -21,9 +23,6 @@ const _: () = assert!(SAFE_CAP <= 127);
 pub fn safe_distances(inside: &[u8], n: [usize; 3]) -> Vec<u8> {
     erosion_depths(inside.par_iter().map(|&m| (m != 0) as u8).collect(), n, 0, SAFE_CAP)
 }
-
-/// Edge of the bricks (of `brick_empty_distances` and `BrickedDistances`), in voxels.
-pub const BRICK: usize = 8;
 
 /// `empty_distances` at the scale of bricks of `BRICK`^3 voxels (x fastest over ceil(n / BRICK) bricks): each
 /// brick's Chebyshev distance in bricks to the nearest brick holding an inside voxel (capped at 255; the grid's
@@ -166,11 +165,6 @@ pub fn signed_distances(inside: &[u8], n: [usize; 3], empty: bool) -> Vec<i8> {
     dist
 }
 
-/// log2 of `BRICK`: a voxel's brick and its place in it are shifts and masks of its coordinates.
-const SHIFT: u32 = BRICK.trailing_zeros();
-const _: () = assert!(1 << SHIFT == BRICK);
-/// Voxels of a brick.
-const BRICK_VOXELS: usize = BRICK * BRICK * BRICK;
 /// Pool bricks of one value each, for the values -`SAFE_CAP` ..= `SAFE_CAP` (value v at brick v + `SAFE_CAP`).
 const SHARED: usize = 2 * SAFE_CAP as usize + 1;
 /// z-planes of the grid built at a time (a multiple of `BRICK`).
@@ -221,7 +215,7 @@ impl BrickedDistances {
             let z1 = (z0 + slab).min(n[2]);
             let (h0, h1) = (z0.saturating_sub(HALO), (z1 + HALO).min(n[2]));
             let dist = signed_distances(&inside.span(h0 * plane, h1 * plane), [n[0], n[1], h1 - h0], empty);
-            let part = Part { dist: &dist, n, z0: h0, nb };
+            let part = Part { values: &dist, n, z0: h0, nb };
             let bricks = z0 / BRICK * layer..z1.div_ceil(BRICK) * layer;
             let uniform: Vec<Option<i8>> = bricks.clone().into_par_iter().map(|k| part.uniform(k)).collect();
             let mut stored = vec![];
@@ -284,42 +278,5 @@ impl BrickedDistances {
     /// Bytes held: the table and the pool.
     pub fn bytes(&self) -> usize {
         self.table.len() * std::mem::size_of::<u32>() + self.pool.len()
-    }
-}
-
-/// The signed distances of a slab with its halo: planes z0.. of an (nx, ny, nz) grid of `nb` bricks.
-struct Part<'a> {
-    dist: &'a [i8],
-    n: [usize; 3],
-    z0: usize,
-    nb: [usize; 3],
-}
-
-impl Part<'_> {
-    /// Brick k's in-grid rows: (z, y) within the brick and the row's values, each `BRICK` or fewer at the far face.
-    fn rows(&self, k: usize) -> impl Iterator<Item = (usize, usize, &[i8])> + '_ {
-        let (n, nb) = (self.n, self.nb);
-        let b = [k % nb[0], (k / nb[0]) % nb[1], k / (nb[0] * nb[1])];
-        let lo: [usize; 3] = std::array::from_fn(|a| b[a] * BRICK);
-        let hi: [usize; 3] = std::array::from_fn(|a| (lo[a] + BRICK).min(n[a]));
-        (lo[2]..hi[2]).flat_map(move |z| {
-            (lo[1]..hi[1]).map(move |y| {
-                let row = ((z - self.z0) * n[1] + y) * n[0];
-                (z - lo[2], y - lo[1], &self.dist[row + lo[0]..row + hi[0]])
-            })
-        })
-    }
-
-    /// The one value of brick k's in-grid voxels, or None if they differ.
-    fn uniform(&self, k: usize) -> Option<i8> {
-        let first = self.rows(k).next()?.2[0];
-        self.rows(k).all(|(_, _, r)| r.iter().all(|&d| d == first)).then_some(first)
-    }
-
-    /// Brick k's values into `out` (`BRICK`^3, (z, y, x) order, x fastest).
-    fn copy(&self, k: usize, out: &mut [i8]) {
-        for (z, y, r) in self.rows(k) {
-            out[(z * BRICK + y) * BRICK..][..r.len()].copy_from_slice(r);
-        }
     }
 }

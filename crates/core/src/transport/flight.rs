@@ -224,7 +224,7 @@ impl Tracker for Delta {
             let mut q = add(p_start, scale(d, t));
             let v = if periodic { locate(geo, &mut q) } else { locate_box(geo, q) };
             let j = geo.index(v);
-            let (st, albedo) = med.coeffs(j, c);
+            let (st, albedo) = med.coeffs_at(j, v, c);
             if u_accept * maj < st {
                 if T::ACTIVE {
                     tally_segments(geo, p_start, d, v_start, t, tally);

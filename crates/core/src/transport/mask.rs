@@ -1,18 +1,23 @@
-//! An inside mask as its builds read it: one byte per voxel (non-zero: inside) or one bit per voxel (numpy's
+//! An inside mask as its builds read it: one byte per voxel (non-zero: inside), one bit per voxel (numpy's
 //! `packbits` of the (z, y, x) C-order flattening: voxel j is bit 7 - j % 8 of byte j / 8, as Python's
-//! `model.mask.PackedMask` holds it). The builds (the band medium's runs, the safe and empty distances) read it a
-//! grid row or a slab of z-planes at a time as bytes (`span`): a byte mask lends them its own bytes, a bit mask
-//! unpacks just that span, so a bit mask is never expanded to a byte per grid voxel.
+//! `model.mask.PackedMask` holds it), or the voxels of a label grid other than `EMPTY` (`LabelBricks`: a printed
+//! volume's own labels). The builds (the band medium's runs, the safe and empty distances) read it a grid row or
+//! a slab of z-planes at a time as bytes (`span`): a byte mask lends them its own bytes, a bit or label mask makes
+//! just that span, so neither is ever expanded to a byte per grid voxel.
 
 use std::borrow::Cow;
 
-/// An inside mask of `len()` voxels in (z, y, x) order, as bytes or as bits.
+use crate::transport::label_bricks::{LabelBricks, EMPTY};
+
+/// An inside mask of `len()` voxels in (z, y, x) order, as bytes, as bits or as a label grid's non-empty voxels.
 #[derive(Clone, Copy, Debug)]
 pub enum MaskRef<'a> {
     /// One byte per voxel (non-zero: inside).
     Bytes(&'a [u8]),
     /// One bit per voxel, most significant bit first, and the number of voxels (`bits.len() == voxels.div_ceil(8)`).
     Bits(&'a [u8], usize),
+    /// The voxels whose label is not `EMPTY`.
+    Labels(&'a LabelBricks),
 }
 
 impl<'a> MaskRef<'a> {
@@ -29,6 +34,7 @@ impl<'a> MaskRef<'a> {
         match self {
             MaskRef::Bytes(b) => b.len(),
             MaskRef::Bits(_, n) => *n,
+            MaskRef::Labels(l) => l.len(),
         }
     }
 
@@ -42,11 +48,12 @@ impl<'a> MaskRef<'a> {
         match self {
             MaskRef::Bytes(b) => b[j] != 0,
             MaskRef::Bits(b, _) => (b[j >> 3] >> (7 - (j & 7))) & 1 != 0,
+            MaskRef::Labels(l) => l.get_index(j) != EMPTY,
         }
     }
 
     /// Voxels a..b (a <= b <= `len()`) as bytes 0 / 1 (a byte mask's own bytes, which may be any non-zero value
-    /// inside; a bit mask's span unpacked: b - a bytes, a new vector).
+    /// inside; a bit or label mask's span made: b - a bytes, a new vector).
     pub fn span(&self, a: usize, b: usize) -> Cow<'a, [u8]> {
         assert!(a <= b && b <= self.len(), "mask span {a}..{b} outside its {} voxels", self.len());
         match *self {
@@ -68,6 +75,7 @@ impl<'a> MaskRef<'a> {
                 }
                 Cow::Owned(out)
             }
+            MaskRef::Labels(l) => Cow::Owned(l.inside_span(a, b)),
         }
     }
 }

@@ -5,7 +5,8 @@
 //!   voxel of each grid row's span from its first to its last inside voxel, and 16 bytes per row. For a
 //!   figurine whose inside is a quarter of its bounding grid this is about a third of the dense form, and a
 //!   lookup reads the same values, so renders are bit-identical.
-//! - `LabelMedium`: one ink label per voxel and an ink table, 1 byte per voxel (quantized volumes).
+//! - `LabelMedium`: one ink label per voxel and an ink table (quantized volumes), the labels stored by bricks
+//!   (`label_bricks`): a byte per voxel of the bricks near the surface, 4 bytes per brick of one label.
 //! - `BandMedium` (in `band`): a band of voxels near the surface with their own coefficients, one homogeneous
 //!   core, no array per grid voxel.
 //!
@@ -13,9 +14,8 @@
 //! (sigma_t, albedo) pairs, the two numbers the random walk needs, so one lookup is one load.
 
 use crate::spans::RowSpans;
-
-/// Label of an empty voxel in label media.
-pub const EMPTY: u8 = 255;
+use crate::transport::label_bricks::LabelBricks;
+pub use crate::transport::label_bricks::EMPTY;
 
 /// Per-voxel optical parameters for one channel.
 // A medium always covers its whole grid (`len` voxels), so it has no `is_empty`.
@@ -146,17 +146,24 @@ impl Medium for DenseMedium {
     }
 }
 
-/// One ink label (u8) per voxel and a small ink table: 1 byte per voxel.
+/// One ink label (u8) per voxel, stored by bricks (`LabelBricks`: about a byte per voxel near the surface, a
+/// table entry per brick of one label), and a small ink table.
 pub struct LabelMedium {
-    labels: Vec<u8>,
+    labels: LabelBricks,
     majorant: [f32; 3],
     /// [channel][ink] (sigma_t, albedo); index 255 (EMPTY) maps to vacuum.
     table: [[(f32, f32); 256]; 3],
 }
 
 impl LabelMedium {
-    /// `ink_sigma_s`, `ink_sigma_a`: (N, 3) row-major, mm^-1.
-    pub fn new(labels: Vec<u8>, ink_sigma_s: &[f32], ink_sigma_a: &[f32]) -> Result<Self, String> {
+    /// The labels of an (nx, ny, nz) grid, one byte per voxel (x fastest); `ink_sigma_s`, `ink_sigma_a`: (N, 3)
+    /// row-major, mm^-1.
+    pub fn new(n: [usize; 3], labels: &[u8], ink_sigma_s: &[f32], ink_sigma_a: &[f32]) -> Result<Self, String> {
+        Self::from_bricks(LabelBricks::from_dense(labels, n)?, ink_sigma_s, ink_sigma_a)
+    }
+
+    /// Labels already stored by bricks, and the ink table as `new` takes it.
+    pub fn from_bricks(labels: LabelBricks, ink_sigma_s: &[f32], ink_sigma_a: &[f32]) -> Result<Self, String> {
         let n_inks = ink_sigma_s.len() / 3;
         let rows = ink_sigma_s.len() == ink_sigma_a.len() && ink_sigma_s.len().is_multiple_of(3);
         if !rows || n_inks == 0 || n_inks > 255 {
@@ -169,20 +176,29 @@ impl LabelMedium {
                     .ok_or_else(|| format!("ink {k} has negative or non-finite coefficients"))?;
             }
         }
-        if let Some(bad) = labels.iter().find(|&&l| l != EMPTY && l as usize >= n_inks) {
+        let used = *labels.used();
+        if let Some(bad) = (0..256).find(|&l| used[l] && l != EMPTY as usize && l >= n_inks) {
             return Err(format!("label {bad} has no ink in a table of {n_inks}"));
         }
-        let mut used = [false; 256];
-        labels.iter().for_each(|&l| used[l as usize] = true);
         let majorant = std::array::from_fn(|c| (0..256).filter(|&k| used[k]).fold(0.0f32, |a, k| a.max(table[c][k].0)));
         Ok(LabelMedium { labels, majorant, table })
+    }
+
+    /// The labels (the inside mask of a printed volume is their voxels other than `EMPTY`: `MaskRef::Labels`).
+    pub fn labels(&self) -> &LabelBricks {
+        &self.labels
     }
 }
 
 impl Medium for LabelMedium {
     #[inline(always)]
     fn coeffs(&self, idx: usize, c: usize) -> (f32, f32) {
-        self.table[c][self.labels[idx] as usize]
+        self.table[c][self.labels.get_index(idx) as usize]
+    }
+    #[inline(always)]
+    fn coeffs_at(&self, idx: usize, v: [i32; 3], c: usize) -> (f32, f32) {
+        debug_assert_eq!(self.labels.get_index(idx), self.labels.get(v));
+        self.table[c][self.labels.get(v) as usize]
     }
     fn len(&self) -> usize {
         self.labels.len()

@@ -2,7 +2,10 @@
 //! render and their gradients (path replay).
 //!
 //! Modules, each using only those listed before it (and `crate::spans`, `crate::cache`, `crate::pages`):
-//! - `mask`: an inside mask as bytes or bits (`MaskRef`), read by the builds a row or a slab at a time.
+//! - `bricks`: bricks of 8^3 voxels (their constants, a slab of planes cut into bricks).
+//! - `label_bricks`: a grid's ink labels stored by bricks, built from planes pushed in order.
+//! - `mask`: an inside mask as bytes, bits or a label grid's non-empty voxels (`MaskRef`), read by the builds a row
+//!   or a slab at a time.
 //! - `sampling`: vectors, the Henyey-Greenstein phase function, Fresnel, reflection and refraction.
 //! - `rng`: counter-based random numbers (a path's numbers are a pure function of its key).
 //! - `light`: the `Light` trait (uniform light, environment maps).
@@ -26,6 +29,7 @@
 //! - `hero_pass`: the hero paths' render and gradient drivers.
 
 pub mod band;
+pub mod bricks;
 pub mod distance;
 pub mod estimate;
 pub(crate) mod flight;
@@ -34,6 +38,7 @@ pub(crate) mod grid;
 pub mod hero;
 pub(crate) mod hero_lanes;
 pub mod hero_pass;
+pub mod label_bricks;
 pub mod light;
 pub mod mask;
 pub mod medium;
