@@ -11,6 +11,7 @@ from PIL import Image
 from slab_run import make_run
 
 import inkopt.evaluation.evaluate as evaluate_mod
+import inkopt.evaluation.printed as printed_mod
 import inkopt.model.texels as texels_module
 from inkopt.cli.common import flag_of
 from inkopt.color import linear_to_srgb
@@ -215,7 +216,7 @@ def test_baselines_are_dithered_without_our_share_compensation(tmp_path, table3,
     labels, vp = recording(q, ours)
     record = replace(ours, dpi=tuple(25.4 / vp))
     Volume.from_labels(voxel_mm=vp, labels=labels, inks=INKS3, quantization=record).save(d / "quantized.npz")
-    monkeypatch.setattr(evaluate_mod, "quantize", recording)
+    monkeypatch.setattr(printed_mod, "quantize", recording)
     ev = evaluate_run(d, EvaluateOptions(spp=2, table=table3)).to_json()
     assert ev["quantization"]["compensate"] is True  # the print's record says it was compensated
     baselines = seen[1:]

@@ -44,21 +44,18 @@ Writes DIR/evaluation.json (or ``out``), DIR/predictions.npz (every result's col
 | surface | extrusion (sRGB); for meshes DIR/evaluation_views.png, the same rows seen from four sides. ``max_spp``
 and ``time_budget`` cap the adaptive renders.
 
-The stage is a pipeline of named steps over one ``Evaluating`` (what the steps share: the run, its scene, the
-options, the texel groups, the render seed and time shares, each result's renders): the continuous result (and
-translucency, and the baselines' layer sources) while the run's mixture is loaded, then the printed results on one
-printer renderer, then the figures of every result, the ``Evaluation`` and its files.
+The stage is a pipeline of named steps over one ``Evaluating`` (the run, its scene, the options, the texel groups,
+the render seed and time shares, each result's renders): the continuous result (and translucency, and the baselines'
+layer sources) while the run's mixture is loaded, the printed results, the figures, the ``Evaluation`` and its files.
 
-Memory: one renderer exists at a time. The run's mixture is dropped once the continuous result (and translucency)
-is rendered; the printer texels, their map and one printer renderer (``printed.PrintedRenderer``: geometry built
-once, each later result's labels swapped in) serve the quantized result and both baselines (same printer grid and
-inside voxels). No printer-grid array exists: the quantized labels are read from their layered file a layer at a
-time (``RunDir.load_quantized(layered=True)``), each baseline goes layer by layer from
-``baselines.BaselineLayers`` through ``printing.quantize.quantize`` into a temporary layered label file, never as a
-whole (z, y, x, N) mixture, and the core stores each result's labels, and the inside mask's distances, by 8^3
-bricks (a table entry for a brick of one label: the empty outside and the white core); the texel loss and its
-figures come after the last render. The peak is then the larger of the continuous render and the printed
-renders' bricks, texels and map (docs/performance.md, "Evaluation memory").
+Memory: one renderer exists at a time, and nothing per grid voxel but bits. The run's mixture is read by its band
+(``MixtureSource.band_volume``: 28 B per voxel that differs from the core) and dropped once the continuous result is
+rendered; the printer texels, their map and one printer renderer (``printed.PrintedRenderer``: geometry built once,
+each later result's labels swapped in) serve the quantized result and both baselines. No printer-grid array exists:
+the quantized labels are read a layer at a time (``RunDir.load_quantized(layered=True)``), each baseline goes layer
+by layer from ``baselines.BaselineLayers`` through ``printing.quantize.quantize`` into a temporary layered label
+file, and the core keeps labels and distances by 8^3 bricks (a table entry for a brick of one value); the texel loss
+and its figures come after the last render (docs/performance.md, "Evaluation memory").
 """
 
 from __future__ import annotations
@@ -77,6 +74,7 @@ from ..io import file_digest
 from ..lighting import Lighting, load_lighting
 from ..loss import TexelLoss
 from ..model import Quantization, Volume
+from ..model.mixturefile import MixtureSource
 from ..printing.quantize import printer_grid
 from ..printing.stream import quantize_run
 from ..render import Renderer, RendererFactory
@@ -230,23 +228,32 @@ def evaluate_run(path, options: EvaluateOptions | None = None, log=None) -> Eval
 
 def _mixture_results(ev: Evaluating) -> tuple[_Grid, dict]:
     """What needs the run's mixture: the continuous result, the translucency figures and the baselines' layer
-    sources (by name; none without baselines). The mixture is dropped on return, before the printer-resolution
-    renders."""
-    vol = ev.d.load_volume()
-    _render_continuous(ev, vol)
+    sources (by name; none without baselines). The mixture is read by its band (``MixtureSource.band_volume``)
+    unless the translucency figures need it whole, and dropped on return, before the printer-resolution renders."""
     o = ev.options
-    if o.translucency or (o.translucency is None and (ev.rec.translucency is not None or o.translucency_compare)):
+    whole = o.translucency or (o.translucency is None and (ev.rec.translucency is not None or o.translucency_compare))
+    if whole:
+        vol, band_mixture = ev.d.load_volume(), None
+    else:
+        with MixtureSource(ev.d.volume_file(), "evaluate") as src:
+            vol, band_mixture = src.band_volume()
+    _render_continuous(ev, vol, band_mixture)
+    del band_mixture
+    if whole:
         compare, seed = o.translucency_compare, ev.sampling.seed
         ev.translucency = evaluate_translucency(vol, ev.rec, compare, seed, o.threads, ev.lighting, log=ev.say)
     sources = _baseline_sources(ev, vol) if o.baselines else {}
     return _Grid(vol.shape, vol.voxel_mm), sources
 
 
-def _render_continuous(ev: Evaluating, vol: Volume) -> None:
-    """The continuous result: ``vol`` on the scene texels, after the choice of its texels (``Evaluating.settle``,
-    whose pilot its seconds include); its renderer is freed on return."""
+def _render_continuous(ev: Evaluating, vol: Volume, band_mixture: np.ndarray | None = None) -> None:
+    """The continuous result: ``vol`` (``band_mixture``: its band's (K, N) mixture, its medium a placeholder) on
+    the scene texels, after their choice (``Evaluating.settle``, whose pilot its seconds include); its renderer is
+    freed on return."""
     started = time.perf_counter()
     renderer = ev.factory(vol, ev.options.threads, ev.lighting)
+    if band_mixture is not None:
+        renderer.set_mixture(vol.band.index, band_mixture)
     ev.settle(renderer)
     source = ContinuousSource(renderer, ev.groups, ev.progress)
     rendered = ev.render("continuous", source, started, None)

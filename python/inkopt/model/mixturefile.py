@@ -22,7 +22,8 @@ import numpy as np
 from ..errors import ParameterError
 from ..io import ZIP_READ_ERRORS
 from .inks import DEFAULT_G, InkTable
-from .media import VolumeError
+from .mask import PackedMask
+from .media import Band, InsideLabels, VolumeError
 from .volume import Quantization, Volume, check_kinds, file_normals, naming_file, upgrade_volume
 
 HEAVY = ("mixture", "normals")  # members not loaded at once (dense normals: a pre-release layout, refused)
@@ -184,6 +185,46 @@ class MixtureSource:
             if not np.all(np.isfinite(rows)) or np.any(rows < 0):
                 raise VolumeError(f"{self.path}: mixture must be finite and non-negative")
             yield v0, rows
+
+    def band_volume(self) -> tuple[Volume, np.ndarray]:
+        """This volume for a renderer, in proportion to its band: (a ``Volume`` with a ``Band`` of the inside voxels
+        whose mixture is not the core's, its medium a placeholder that holds nothing per voxel (``InsideLabels`` of
+        ink 0: a renderer takes the band's mixture from ``set_mixture``), the band's mixture (K, N) float32). The
+        core is the mixture most inside voxels of the middle layer hold (a run's fixed core below its shell; any
+        choice is exact, as every other voxel is in the band). Read a layer at a time: 8 B of index and 4N of
+        mixture per band voxel, the inside mask's bits; the mixtures are those ``Volume.load`` holds, bit for bit."""
+        shape, n = self.shape, int(self.shape[3])
+        inside = np.ones(shape[:3], bool) if self.inside is None else self.inside
+        core = self._core(inside)
+        index, rows, plane = [], [], shape[1] * shape[2]
+        for z in range(shape[0]):
+            lay = np.asarray(self[z], np.float32).reshape(-1, n)
+            k = np.flatnonzero(inside[z].reshape(-1) & np.any(lay != core, axis=1))
+            index.append(k + z * plane)
+            rows.append(lay[k])
+        mask = PackedMask(inside)  # one bit per voxel, shared by the volume and its placeholder medium
+        vol = Volume(
+            self.voxel_mm,
+            InsideLabels(mask, 0, self.inks),
+            g=self.g,
+            ior=self.ior,
+            inside=mask,
+            normals=self.normals,
+            boundary=self.boundary,
+            origin_mm=self.origin_mm,
+            band=Band(np.concatenate(index), core),
+        )
+        return vol, np.concatenate(rows)
+
+    def _core(self, inside: np.ndarray) -> np.ndarray:
+        """(N,) float32: the mixture most inside voxels of the middle layer that has some hold."""
+        held = np.flatnonzero(inside.reshape(inside.shape[0], -1).any(1))
+        if not len(held):
+            raise VolumeError(f"{self.path}: the volume has no inside voxel")
+        z = int(held[len(held) // 2])
+        lay = np.asarray(self[z], np.float32).reshape(-1, self.shape[3])[inside[z].reshape(-1)]
+        rows, counts = np.unique(lay, axis=0, return_counts=True)
+        return rows[int(np.argmax(counts))]
 
     def labels_meta(self, vp, q: Quantization) -> Volume:
         """A labels Volume with this file's inks, g, ior, boundary and origin on the printer grid ``vp``, for
