@@ -47,9 +47,9 @@ TERMS = {
     "export_gcvf": "per layer (labels, RGBA image, PNG); the labels file memory-mapped (its pages count as "
     "resident once read: 1 B per printer voxel) or decoded a layer at a time",
     "export_png": "as export_gcvf",
-    "evaluate": "the printer renderer: the label grid (1 B per printer voxel, in Python, and the core's copy), the "
-    "inside mask (1 B), the core's signed distances (1 B) and its build's erosion buffers (3 B), the baselines' "
-    "label grid (1 B); per printer texel its texel and map",
+    "evaluate": "the run's mixture by its band (28 B per band voxel) and the band medium; the printer renderer's "
+    "labels and distances by 8^3 bricks (a table entry per brick of one value), the labels read a layer at a time, "
+    "the baselines through temporary layered files; per printer texel its texel and map",
     "report": "per scene texel and per predictions entry; nothing per voxel",
 }
 

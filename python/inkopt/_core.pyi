@@ -38,24 +38,28 @@ class Medium:
     def labels(
         labels: NDArray[np.uint8] | LabelBricks, ink_sigma_s: NDArray[np.float32], ink_sigma_a: NDArray[np.float32]
     ) -> Medium:
-        """One ink per voxel, labels (Z,Y,X) u8 (255: vacuum) or LabelBricks with every plane pushed (the scene takes
-        them), and the ink table (N,3) f32 mm^-1 each; the scene stores the labels by 8^3 bricks."""
+        """Labels (Z,Y,X) u8 (255: vacuum) or LabelBricks with every plane pushed, the ink table (N,3) f32 mm^-1 each."""
 
     @property
     def form(self) -> str:
         """ "dense", "sparse", "band" or "labels"."""
 
 class LabelBricks:
-    """A label grid built from its z-planes pushed in order, stored by 8^3 bricks (one table entry for a brick of one
-    label); Medium.labels takes it once every plane is pushed."""
+    """A label grid built from its z-planes pushed in order and stored by 8^3 bricks, for Medium.labels."""
 
-    def __init__(self, shape: tuple[int, int, int]) -> None: ...
+    def __new__(cls, shape: tuple[int, int, int]) -> LabelBricks:
+        """An empty builder for a grid of shape (Z,Y,X)."""
+
     def push(self, planes: NDArray[np.uint8]) -> None:
         """The next z-planes, (K,Y,X) u8 C-contiguous; ValueError for another (Y,X) or more planes than are left."""
+
     @property
-    def planes_left(self) -> int: ...
+    def planes_left(self) -> int:
+        """Planes not pushed yet (0 once the bricks are taken)."""
+
     @property
-    def shape(self) -> tuple[int, int, int]: ...
+    def shape(self) -> tuple[int, int, int]:
+        """The grid's shape (Z,Y,X)."""
 
 class Texels:
     """Texels of a render or gradient pass, converted and checked once (28 bytes per texel)."""

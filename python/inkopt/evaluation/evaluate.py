@@ -229,17 +229,18 @@ def evaluate_run(path, options: EvaluateOptions | None = None, log=None) -> Eval
 def _mixture_results(ev: Evaluating) -> tuple[_Grid, dict]:
     """What needs the run's mixture: the continuous result, the translucency figures and the baselines' layer
     sources (by name; none without baselines). The mixture is read by its band (``MixtureSource.band_volume``)
-    unless the translucency figures need it whole, and dropped on return, before the printer-resolution renders."""
+    unless the translucency figures or the renderer need it whole; dropped on return, before the printed renders."""
     o = ev.options
-    whole = o.translucency or (o.translucency is None and (ev.rec.translucency is not None or o.translucency_compare))
-    if whole:
+    asked = o.translucency
+    translucency = bool(asked if asked is not None else ev.rec.translucency is not None or o.translucency_compare)
+    if translucency or ev.factory is not Renderer:  # a spectral run's band renders swap whole media in
         vol, band_mixture = ev.d.load_volume(), None
     else:
         with MixtureSource(ev.d.volume_file(), "evaluate") as src:
             vol, band_mixture = src.band_volume()
     _render_continuous(ev, vol, band_mixture)
     del band_mixture
-    if whole:
+    if translucency:
         compare, seed = o.translucency_compare, ev.sampling.seed
         ev.translucency = evaluate_translucency(vol, ev.rec, compare, seed, o.threads, ev.lighting, log=ev.say)
     sources = _baseline_sources(ev, vol) if o.baselines else {}
@@ -248,8 +249,7 @@ def _mixture_results(ev: Evaluating) -> tuple[_Grid, dict]:
 
 def _render_continuous(ev: Evaluating, vol: Volume, band_mixture: np.ndarray | None = None) -> None:
     """The continuous result: ``vol`` (``band_mixture``: its band's (K, N) mixture, its medium a placeholder) on
-    the scene texels, after their choice (``Evaluating.settle``, whose pilot its seconds include); its renderer is
-    freed on return."""
+    the scene texels after their choice (``Evaluating.settle``: its seconds include the pilot); renderer freed."""
     started = time.perf_counter()
     renderer = ev.factory(vol, ev.options.threads, ev.lighting)
     if band_mixture is not None:
