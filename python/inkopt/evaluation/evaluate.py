@@ -230,14 +230,14 @@ def _mixture_results(ev: Evaluating) -> tuple[_Grid, dict]:
     """What needs the run's mixture: the continuous result, the translucency figures and the baselines' layer
     sources (by name; none without baselines). The mixture is read by its band (``MixtureSource.band_volume``)
     unless the translucency figures or the renderer need it whole; dropped on return, before the printed renders."""
-    o = ev.options
-    asked = o.translucency
+    o, asked = ev.options, ev.options.translucency
     translucency = bool(asked if asked is not None else ev.rec.translucency is not None or o.translucency_compare)
     if translucency or ev.factory is not Renderer:  # a spectral run's band renders swap whole media in
         vol, band_mixture = ev.d.load_volume(), None
     else:
         with MixtureSource(ev.d.volume_file(), "evaluate") as src:
             vol, band_mixture = src.band_volume()
+        del src  # and its inside mask's bytes (the volume keeps its bits)
     _render_continuous(ev, vol, band_mixture)
     del band_mixture
     if translucency:
