@@ -285,7 +285,8 @@ class Renderer(TexelRenderer):
             self._labels = False
         if self.volume.band is not None:
             index, mixture = self._band_rows(index, mixture)
-        s, a = mix(mixture, inks)
+        # one row mixed as a row of a batch, as every other (a one-row product rounds by another BLAS path)
+        s, a = (c[: len(mixture)] for c in mix(mixture if len(mixture) != 1 else np.repeat(mixture, 2, 0), inks))
         self._scene.set_voxels(
             np.ascontiguousarray(index, np.int64),
             np.ascontiguousarray(s, np.float32),
@@ -417,9 +418,8 @@ def label_bricks(labels, shape) -> _core.LabelBricks:
 
 def _core_inside(volume: Volume):
     """The inside mask as the core reads it (``_core.Scene``'s and ``_core.Medium.band``'s ``inside``): a volume's
-    mask as its bits (``PackedMask.bits``, (ceil(V / 8),) uint8, no copy; the core unpacks a slab at a time), for a
-    labels volume without one "labels" (the core's own label bricks, read a slab at a time), or None for a volume
-    without one; a volume that makes its own (``shardwire.BandObject``, a Ray worker's band volume) makes it."""
+    mask as its bits (``PackedMask.bits``, no copy; the core unpacks a slab at a time), "labels" for a labels volume
+    without one (the core's own label bricks), else None; ``shardwire.BandObject`` (a Ray worker's) makes its own."""
     make = getattr(volume, "inside_bytes", None)
     if make is not None:
         return make()

@@ -57,6 +57,8 @@ def test_a_layered_label_volume_renders_and_textures_as_the_whole_one(tmp_path):
     assert np.array_equal(a.rgb, b.rgb) and np.array_equal(a.var_mean, b.var_mean)
     index = np.random.default_rng(0).integers(0, labels.size, 999)
     assert np.array_equal(by_layers.medium.labels_at(index), labels.reshape(-1)[index])
+    assert np.array_equal(by_layers.inside_mask(), labels != EMPTY)  # the whole-array readers decode it
+    assert all(np.array_equal(x, y) for x, y in zip(by_layers.coefficients(), whole.coefficients()))
 
 
 def test_the_labels_own_mask_renders_as_the_mask_given():

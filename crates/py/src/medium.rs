@@ -265,7 +265,8 @@ impl Medium {
                         py.detach(|| LabelMedium::new([nx, ny, nz], l, is, ia))
                     }
                     Labels::Bricks(b) => {
-                        let bricks = b.borrow_mut(py).take(py, shape)?;
+                        let mut b = b.try_borrow_mut(py).map_err(|_| err("label bricks in use by another thread"))?;
+                        let bricks = b.take(py, shape)?;
                         LabelMedium::from_bricks(bricks, is, ia)
                     }
                 };

@@ -227,17 +227,17 @@ def evaluate_run(path, options: EvaluateOptions | None = None, log=None) -> Eval
 
 
 def _mixture_results(ev: Evaluating) -> tuple[_Grid, dict]:
-    """What needs the run's mixture: the continuous result, the translucency figures and the baselines' layer
-    sources (by name; none without baselines). The mixture is read by its band (``MixtureSource.band_volume``)
-    unless the translucency figures or the renderer need it whole; dropped on return, before the printed renders."""
+    """What needs the run's mixture (by its band, ``MixtureSource.band_volume``, unless translucency or the renderer
+    needs it whole; dropped on return): the continuous result, translucency, the baselines' layer sources by name."""
     o, asked = ev.options, ev.options.translucency
     translucency = bool(asked if asked is not None else ev.rec.translucency is not None or o.translucency_compare)
-    if translucency or ev.factory is not Renderer:  # a spectral run's band renders swap whole media in
-        vol, band_mixture = ev.d.load_volume(), None
-    else:
+    vol = band_mixture = None  # read by the band, or whole below
+    if not translucency and ev.factory is Renderer:  # a spectral run's band renders swap whole media in
         with MixtureSource(ev.d.volume_file(), "evaluate") as src:
-            vol, band_mixture = src.band_volume()
+            if src.inside is not None:  # an unmasked volume (a slab) renders by the unmasked walk: whole
+                vol, band_mixture = src.band_volume()
         del src  # and its inside mask's bytes (the volume keeps its bits)
+    vol = ev.d.load_volume() if vol is None else vol
     _render_continuous(ev, vol, band_mixture)
     del band_mixture
     if translucency:

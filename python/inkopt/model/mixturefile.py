@@ -192,9 +192,11 @@ class MixtureSource:
         ink 0: a renderer takes the band's mixture from ``set_mixture``), the band's mixture (K, N) float32). The
         core is the mixture most inside voxels of the middle layer hold (a run's fixed core below its shell; any
         choice is exact, as every other voxel is in the band). Read a layer at a time: 8 B of index and 4N of
-        mixture per band voxel, the inside mask's bits; the mixtures are those ``Volume.load`` holds, bit for bit."""
-        shape, n = self.shape, int(self.shape[3])
-        inside = np.ones(shape[:3], bool) if self.inside is None else self.inside
+        mixture per band voxel, the inside mask's bits; the mixtures are those ``Volume.load`` holds, bit for bit.
+        Only for a volume with an inside mask."""
+        shape, n, inside = self.shape, int(self.shape[3]), self.inside
+        if inside is None:  # a mask would change how a renderer walks it
+            raise VolumeError(f"{self.path} has no inside mask: read it whole (Volume.load), not by a band")
         core = self._core(inside)
         index, rows, plane = [], [], shape[1] * shape[2]
         for z in range(shape[0]):

@@ -211,7 +211,7 @@ class Volume:
         s = np.zeros(self.shape + (3,), np.float32)
         a = np.zeros_like(s)
         for k in range(len(med.inks)):
-            sel = med.labels == k
+            sel = np.asarray(med.labels) == k  # a layered label file decoded
             s[sel] = med.inks.sigma_s[k]
             a[sel] = med.inks.sigma_a[k]
         return s, a
@@ -243,7 +243,7 @@ class Volume:
         if self.inside is not None:
             return self.inside.dense()
         if isinstance(self.medium, Labels):
-            return self.medium.labels != EMPTY
+            return np.asarray(self.medium.labels) != EMPTY
         return np.ones(self.shape, bool)
 
     def inside_planes(self):

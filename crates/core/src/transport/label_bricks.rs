@@ -137,6 +137,8 @@ impl std::fmt::Debug for LabelBricks {
 /// the bricks built so far and at most one layer of bricks' planes (`BRICK` planes).
 pub struct LabelBricksBuilder {
     bricks: LabelBricks,
+    /// Why a push failed after taking planes: the builder refuses everything after it.
+    broken: Option<String>,
     /// The planes of the layer of bricks being filled.
     slab: Vec<u8>,
     /// Planes pushed so far.
@@ -153,7 +155,7 @@ impl LabelBricksBuilder {
         let pool = (0..SHARED * BRICK_VOXELS).map(|i| (i / BRICK_VOXELS) as u8).collect();
         let table = vec![0u32; nb[0] * nb[1] * nb[2]];
         let bricks = LabelBricks { n, nb: [nb[0], nb[1]], table, pool, used: [false; 256] };
-        Ok(LabelBricksBuilder { bricks, slab: Vec::with_capacity(n[0] * n[1] * BRICK), z: 0 })
+        Ok(LabelBricksBuilder { bricks, broken: None, slab: Vec::with_capacity(n[0] * n[1] * BRICK), z: 0 })
     }
 
     /// Planes not pushed yet.
@@ -162,8 +164,12 @@ impl LabelBricksBuilder {
     }
 
     /// Push the next whole z-planes (x fastest): an error, nothing taken, if `planes` is not whole planes or holds
-    /// more than are left.
+    /// more than are left; an error that leaves the builder refusing everything after it if the bricks of mixed
+    /// labels outgrow the pool's 32-bit offsets.
     pub fn push(&mut self, planes: &[u8]) -> Result<(), String> {
+        if let Some(why) = &self.broken {
+            return Err(why.clone());
+        }
         let plane = self.bricks.n[0] * self.bricks.n[1];
         if !planes.len().is_multiple_of(plane) || planes.len() / plane > self.planes_left() {
             return Err(format!(
@@ -176,7 +182,10 @@ impl LabelBricksBuilder {
             self.slab.extend_from_slice(chunk);
             self.z += 1;
             if self.z.is_multiple_of(BRICK) || self.z == self.bricks.n[2] {
-                self.brick_layer()?;
+                if let Err(why) = self.brick_layer() {
+                    self.broken = Some(why.clone());
+                    return Err(why);
+                }
             }
         }
         Ok(())
@@ -184,6 +193,9 @@ impl LabelBricksBuilder {
 
     /// The bricks, once every plane is pushed.
     pub fn finish(self) -> Result<LabelBricks, String> {
+        if let Some(why) = self.broken {
+            return Err(why);
+        }
         if self.planes_left() > 0 {
             return Err(format!("{} of {} planes were not pushed", self.planes_left(), self.bricks.n[2]));
         }
@@ -200,17 +212,24 @@ impl LabelBricksBuilder {
         let part = Part { values: &self.slab, n: b.n, z0, nb: [b.nb[0], b.nb[1], b.table.len() / layer] };
         let ks = z0 / BRICK * layer..(z0 / BRICK + 1) * layer;
         let uniform: Vec<Option<u8>> = ks.clone().into_par_iter().map(|k| part.uniform(k)).collect();
+        let first = b.pool.len() / BRICK_VOXELS;
+        let mixed = uniform.iter().filter(|u| u.is_none()).count();
+        if (first + mixed) * BRICK_VOXELS > u32::MAX as usize + 1 {
+            return Err(format!(
+                "more than {} bricks of mixed labels",
+                (u32::MAX as usize + 1) / BRICK_VOXELS - SHARED
+            ));
+        }
         let mut stored = vec![];
         for (k, u) in ks.zip(uniform) {
             let brick = match u {
                 Some(v) => v as usize,
                 None => {
                     stored.push(k);
-                    b.pool.len() / BRICK_VOXELS + stored.len() - 1
+                    first + stored.len() - 1
                 }
             };
-            b.table[k] = u32::try_from(brick * BRICK_VOXELS)
-                .map_err(|_| format!("more than {} bricks of mixed labels", u32::MAX as usize / BRICK_VOXELS))?;
+            b.table[k] = (brick * BRICK_VOXELS) as u32; // fits: checked above
         }
         let start = b.pool.len();
         b.pool.resize(start + stored.len() * BRICK_VOXELS, 0);

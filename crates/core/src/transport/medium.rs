@@ -197,7 +197,8 @@ impl Medium for LabelMedium {
     }
     #[inline(always)]
     fn coeffs_at(&self, idx: usize, v: [i32; 3], c: usize) -> (f32, f32) {
-        debug_assert_eq!(self.labels.get_index(idx), self.labels.get(v));
+        // (the packets' 32-bit index wraps on grids above 2^31 voxels, where only `v` is right)
+        debug_assert!(self.labels.len() > i32::MAX as usize || self.labels.get_index(idx) == self.labels.get(v));
         self.table[c][self.labels.get(v) as usize]
     }
     fn len(&self) -> usize {
