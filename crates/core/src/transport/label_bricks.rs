@@ -99,18 +99,6 @@ impl LabelBricks {
         &self.used
     }
 
-    /// Whether both grids have the same shape and the same voxels inside (a label other than `EMPTY`).
-    pub fn same_inside(&self, other: &LabelBricks) -> bool {
-        if self.n != other.n {
-            return false;
-        }
-        let plane = self.n[0] * self.n[1];
-        (0..self.n[2]).into_par_iter().all(|z| {
-            let (a, b) = (z * plane, (z + 1) * plane);
-            self.inside_span(a, b) == other.inside_span(a, b)
-        })
-    }
-
     /// Bricks stored in the pool (those whose voxels differ).
     pub fn stored_bricks(&self) -> usize {
         self.pool.len() / BRICK_VOXELS - SHARED
