@@ -218,3 +218,14 @@ def test_the_band_estimate_agrees_with_measured_band_runs():
     for height, gib in ((40.0, step40["iterations"][0]["peak_gib"]), (100.0, run100["peak_rss_gb"])):
         fp, _ = spec_footprint(MeshSpec(str(SPOT), height_mm=height, shell_mm=1.0), len(INKS))
         assert fp.stage_bytes()["step"] / 2**30 == pytest.approx(gib, rel=0.15), height
+
+
+def test_what_quantize_writes_follows_the_surface():
+    """The dry run's "+ ... after inkopt quantize" against what `inkopt quantize` wrote (quantized_labels.layers plus
+    quantized.npz) for 1-iteration Spot runs with a 1 mm shell: 16.86 MB at 40 mm and 166.98 MB at 100 mm
+    (docs/performance.md, "The last mile"), within 10 %; a byte per printer voxel, what it said before, is 35 times
+    too much at 100 mm."""
+    for height, written in ((40.0, 16.86e6), (100.0, 166.98e6)):
+        fp, _ = spec_footprint(MeshSpec(str(SPOT), height_mm=height, shell_mm=1.0), len(INKS))
+        assert fp.quantized_bytes() == pytest.approx(written, rel=0.10), height
+        assert fp.quantized_bytes() < 0.1 * 6.27 * fp.grid_voxels

@@ -24,8 +24,10 @@ peaks the mesh suite's 20 mm fine stages measured; report.json's ``peak_rss_gb``
 Disk: volume.npz at most 4 bytes per ink per inside voxel (compressed, often less), the checkpoint (uncompressed:
 variables and the two optimiser moments, 12 bytes per ink per free voxel; the running average and its variance, 24
 bytes per texel; ~80 bytes of history per iteration) and scene.npz (~40 bytes per texel: voxel, face, normal,
-target); ``inkopt quantize`` adds one byte per printer voxel (600 x 300 DPI,
-27 µm layers: ~6.3 per optimisation voxel of the object's box).
+target); ``inkopt quantize`` adds what ``quantized_bytes`` says: for a mesh, its layered labels file (the dithered
+band; a few bytes per layer of the empty outside and the homogeneous core) and quantized.npz (the printer surface
+voxels' normals), fitted per texel and per grid voxel; for a slab, whose every voxel may be dithered, at most a byte
+per printer voxel (600 x 300 DPI, 27 µm layers: ~6.3 per optimisation voxel of the object's box).
 """
 
 from __future__ import annotations
@@ -50,6 +52,18 @@ FIXED_MULTIPLE = 4.0
 ANNOUNCE_SECONDS = 180.0
 #: printer voxels per optimisation voxel at the default 600 x 300 DPI and 27 µm layers on the 300 DPI grid
 PRINTER_PER_OPT_VOXEL = 2.0 * 1.0 * (25.4 / 300 / 0.027)
+#: bytes ``inkopt quantize`` writes for a mesh per scene texel and per grid voxel: fitted to Spot 40 and 100 mm with a
+#: 1 mm band (16.9 and 167 MB), within 3 % of Spot 20 mm (a band or every voxel free) and 60 mm
+#: (docs/performance.md, "The last mile")
+QUANTIZED_BYTES_PER_TEXEL, QUANTIZED_BYTES_PER_GRID_VOXEL = 26.3, 0.11
+
+
+def quantized_bytes(texels: int, grid_voxels: int, mesh: bool) -> int:
+    """What ``inkopt quantize`` writes (module docstring): the fit above for a mesh, a byte per printer voxel of the
+    grid for a slab."""
+    if mesh:
+        return int(QUANTIZED_BYTES_PER_TEXEL * texels + QUANTIZED_BYTES_PER_GRID_VOXEL * grid_voxels)
+    return int(PRINTER_PER_OPT_VOXEL * grid_voxels)
 
 
 @dataclass
@@ -159,10 +173,11 @@ def texel_runs(n_tex: int, n: int, rng: np.random.Generator, runs: int = SAMPLE_
 
 
 def estimate_run(
-    run, inside_voxels: int, box_voxels: int, seed: int = 0, seconds_per_iteration: float | None = None
+    run, inside_voxels: int, box_voxels: int, seed: int = 0, seconds_per_iteration: float | None = None, mesh=False
 ) -> Estimate:
     """The cost of the iterations ``run`` (an ``optim.Optimization``, at its current iteration) has left, measured
     on its own renderer (module docstring). ``inside_voxels``: the object's voxels; ``box_voxels``: its grid's;
+    ``mesh``: a mesh's (what ``inkopt quantize`` writes follows its surface);
     ``seconds_per_iteration``: known already (e.g. scaled from a coarse stage's): taken, not measured (the renderer
     is built, for the peak memory)."""
     t0 = time.perf_counter()
@@ -171,7 +186,8 @@ def estimate_run(
     rng = np.random.default_rng(seed)
     renderer = run.renderer()
     if seconds_per_iteration is not None:
-        return _estimate(run, inside_voxels, box_voxels, float(seconds_per_iteration), time.perf_counter() - t0, True)
+        took = time.perf_counter() - t0
+        return _estimate(run, (inside_voxels, box_voxels, mesh), float(seconds_per_iteration), took, True)
 
     def passes(n: int) -> float:  # seconds of a forward render and a gradient pass over n texels
         sub = tex.subset(texel_runs(n_tex, n, rng))
@@ -185,14 +201,14 @@ def estimate_run(
         return time.perf_counter() - t
 
     per_iteration = texel_passes_seconds(passes, n_tex) + _step_seconds(run)
-    return _estimate(run, inside_voxels, box_voxels, per_iteration, time.perf_counter() - t0, False)
+    return _estimate(run, (inside_voxels, box_voxels, mesh), per_iteration, time.perf_counter() - t0, False)
 
 
-def _estimate(run, inside_voxels: int, box_voxels: int, per_iteration: float, took: float, scaled: bool) -> Estimate:
+def _estimate(run, counts: tuple, per_iteration: float, took: float, scaled: bool) -> Estimate:
     """The ``Estimate`` of ``run``'s iterations left at ``per_iteration`` seconds each, its peak memory from this
-    process's so far, its disk from the counts (module docstring); ``took``: seconds spent finding
-    ``per_iteration``."""
-    cfg, n_tex = run.cfg, len(run.texels)
+    process's so far, its disk from the counts (module docstring; ``counts``: inside and grid voxels, whether a
+    mesh); ``took``: seconds spent finding ``per_iteration``."""
+    (inside_voxels, box_voxels, mesh), cfg, n_tex = counts, run.cfg, len(run.texels)
     left = max(cfg.iterations - run.iteration, 0)
     n_inks = run.x.shape[1]
     disk = 4 * n_inks * inside_voxels + (12 * n_inks * len(run.x) + 24 * n_tex + 80 * cfg.iterations) + 40 * n_tex
@@ -202,7 +218,7 @@ def _estimate(run, inside_voxels: int, box_voxels: int, per_iteration: float, to
         seconds=per_iteration * left,
         peak_gib=_peak_gib() + 64 * n_tex / 2**30,
         disk_bytes=int(disk),
-        quantized_bytes=int(PRINTER_PER_OPT_VOXEL * box_voxels),
+        quantized_bytes=quantized_bytes(n_tex, box_voxels, mesh),
         calibration_seconds=took,
         scaled=scaled,
     )

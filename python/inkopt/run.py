@@ -228,13 +228,18 @@ def _voxel_counts(job: _Job) -> tuple[int, int]:
     return (box if vol.inside is None else vol.inside.count), box
 
 
+def _is_mesh(job: _Job) -> bool:
+    """Whether the scene is a mesh's (its volume has shading normals)."""
+    return job.scene.volume.normals is not None
+
+
 def _dry_run(job: _Job, out_dir) -> Estimate:
     """The estimate of the iterations a run would do, from the checkpoint a resume would continue from; writes
     nothing."""
     checkpoint = RunDir(out_dir).checkpoint_path if Path(out_dir).is_dir() else None
     if job.options.resume and checkpoint is not None and checkpoint.is_file():
         job.run.load_checkpoint(checkpoint)
-    return estimate_run(job.run, *_voxel_counts(job), job.cfg.seed)
+    return estimate_run(job.run, *_voxel_counts(job), job.cfg.seed, mesh=_is_mesh(job))
 
 
 def _prepare(job: _Job, out_dir) -> Estimate:
@@ -247,7 +252,7 @@ def _prepare(job: _Job, out_dir) -> Estimate:
         if gone:
             log(f"removed the outputs of an earlier run in {rd}: {', '.join(gone)}")
     rd.save_scene(job.scene.record())
-    estimate = estimate_run(run, *_voxel_counts(job), job.cfg.seed, job.options.seconds_per_iteration)
+    estimate = estimate_run(run, *_voxel_counts(job), job.cfg.seed, job.options.seconds_per_iteration, _is_mesh(job))
     if estimate.seconds > ANNOUNCE_SECONDS:
         log(estimate.line(job.cfg.time_budget))
     return estimate

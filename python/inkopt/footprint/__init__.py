@@ -36,7 +36,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..errors import ParameterError
-from ..estimate import PRINTER_PER_OPT_VOXEL
+from ..estimate import quantized_bytes
 from ..model.volume import MAX_GRID_VOXELS
 from ..units import format_duration, voxel_mm
 from . import walk
@@ -243,8 +243,8 @@ class Footprint:
         return int(4 * n * self.inside_voxels + 12 * n * self.free_voxels + 64 * self.texels + 80 * iterations)
 
     def quantized_bytes(self) -> int:
-        """What ``inkopt quantize`` adds: a byte per printer voxel of the grid."""
-        return int(PRINTER_PER_OPT_VOXEL * self.grid_voxels)
+        """What ``inkopt quantize`` adds (``estimate.quantized_bytes``)."""
+        return quantized_bytes(self.texels, self.grid_voxels, self.kind == "mesh")
 
     def line(
         self,
