@@ -53,7 +53,7 @@ ANNOUNCE_SECONDS = 180.0
 #: printer voxels per optimisation voxel at the default 600 x 300 DPI and 27 µm layers on the 300 DPI grid
 PRINTER_PER_OPT_VOXEL = 2.0 * 1.0 * (25.4 / 300 / 0.027)
 #: bytes ``inkopt quantize`` writes for a mesh per scene texel and per grid voxel: fitted to Spot 40 and 100 mm with a
-#: 1 mm band (16.9 and 167 MB), within 3 % of Spot 20 mm (a band or every voxel free) and 60 mm
+#: 1 mm band (16.9 and 167 MB), within 4 % of Spot 20 mm (a band or every voxel free) and 60 mm
 #: (docs/performance.md, "The last mile")
 QUANTIZED_BYTES_PER_TEXEL, QUANTIZED_BYTES_PER_GRID_VOXEL = 26.3, 0.11
 
