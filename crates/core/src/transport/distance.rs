@@ -9,7 +9,7 @@ use rayon::prelude::*;
 use wide::i32x8;
 
 pub use crate::transport::bricks::BRICK;
-use crate::transport::bricks::{Part, BRICK_VOXELS, SHIFT};
+use crate::transport::bricks::{Bricks, Part, SHIFT};
 use crate::transport::mask::MaskRef;
 
 /// Largest safe distance stored: 16 voxels (1.3 mm at 300 DPI), far beyond a free flight in any ink.
@@ -177,22 +177,10 @@ const HALO: usize = SAFE_CAP as usize;
 /// `signed_distances` of a grid stored by bricks of `BRICK`^3 voxels. Far from the surface (more than `SAFE_CAP`
 /// voxels) every value is +-`SAFE_CAP`, so a big object's bricks are mostly of one value.
 ///
-/// Layout: `pool` holds bricks of `BRICK`^3 bytes, (z, y, x) order within a brick (x fastest); its first
-/// `SHARED` bricks hold one value each, -`SAFE_CAP` ..= `SAFE_CAP` (brick v + `SAFE_CAP` is all v), and after
-/// them come the bricks whose in-grid voxels differ, in brick order. `table` holds, per brick of the grid
-/// (`ceil(n / BRICK)` of them per axis, x fastest), the offset in the pool of the brick it reads: a brick whose
-/// in-grid voxels all hold one value v reads the shared brick of v, so it costs its 4-byte entry only. A lookup
-/// is two loads and no branch: the table entry, then the byte (`get`; `get8` for eight SIMD lanes). Bricks at the
-/// grid's far faces hold voxels beyond the grid, which are never read (zero in the pool).
+/// Layout: `bricks::Bricks`, whose first `SHARED` bricks hold one value each, -`SAFE_CAP` ..= `SAFE_CAP` (brick
+/// v + `SAFE_CAP` is all v); `get8` reads eight SIMD lanes' voxels.
 pub struct BrickedDistances {
-    /// Voxels along x, y, z.
-    n: [usize; 3],
-    /// Bricks along x and y.
-    nb: [usize; 2],
-    /// Per brick of the grid (x fastest), the offset in `pool` of the brick it reads (a multiple of `BRICK`^3).
-    table: Vec<u32>,
-    /// Bricks of `BRICK`^3 signed bytes: the `SHARED` bricks of one value, then the stored bricks.
-    pool: Vec<i8>,
+    store: Bricks<i8>,
 }
 
 impl BrickedDistances {
@@ -209,74 +197,54 @@ impl BrickedDistances {
         assert!(slab > 0 && slab.is_multiple_of(BRICK) && inside.len() == n.iter().product::<usize>());
         let nb: [usize; 3] = std::array::from_fn(|a| n[a].div_ceil(BRICK));
         let (plane, layer) = (n[0] * n[1], nb[0] * nb[1]);
-        let mut table = vec![0u32; layer * nb[2]];
-        let mut pool: Vec<i8> = (0..SHARED * BRICK_VOXELS).map(|i| (i / BRICK_VOXELS) as i8 - SAFE_CAP as i8).collect();
+        let mut store = Bricks::new(n, SHARED, |i| i as i8 - SAFE_CAP as i8);
         for z0 in (0..n[2]).step_by(slab) {
             let z1 = (z0 + slab).min(n[2]);
             let (h0, h1) = (z0.saturating_sub(HALO), (z1 + HALO).min(n[2]));
             let dist = signed_distances(&inside.span(h0 * plane, h1 * plane), [n[0], n[1], h1 - h0], empty);
             let part = Part { values: &dist, n, z0: h0, nb };
             let bricks = z0 / BRICK * layer..z1.div_ceil(BRICK) * layer;
-            let uniform: Vec<Option<i8>> = bricks.clone().into_par_iter().map(|k| part.uniform(k)).collect();
-            let mut stored = vec![];
-            for (k, u) in bricks.zip(uniform) {
-                let brick = match u {
-                    Some(v) => (v as i32 + SAFE_CAP as i32) as usize,
-                    None => {
-                        stored.push(k);
-                        pool.len() / BRICK_VOXELS + stored.len() - 1
-                    }
-                };
-                table[k] = u32::try_from(brick * BRICK_VOXELS).expect("the pool's offsets fit 32 bits");
-            }
-            let start = pool.len();
-            pool.resize(start + stored.len() * BRICK_VOXELS, 0);
-            pool[start..].par_chunks_mut(BRICK_VOXELS).zip(&stored).for_each(|(out, &k)| part.copy(k, out));
+            let shared_of = |v: i8| (v as i32 + SAFE_CAP as i32) as usize;
+            store.store(&part, bricks, shared_of).expect("the pool's offsets fit 32 bits");
         }
-        pool.shrink_to_fit();
-        BrickedDistances { n, nb: [nb[0], nb[1]], table, pool }
+        store.pool.shrink_to_fit();
+        BrickedDistances { store }
     }
 
     /// The value of in-grid voxel v (x, y, z): its brick's table entry (the pool offset of the brick it reads), then
     /// the byte at its place within the brick.
     #[inline(always)]
     pub fn get(&self, v: [i32; 3]) -> i8 {
-        let [x, y, z] = v.map(|c| c as usize);
-        let b = ((z >> SHIFT) * self.nb[1] + (y >> SHIFT)) * self.nb[0] + (x >> SHIFT);
-        let m = BRICK - 1;
-        let within = (((z & m) << SHIFT | (y & m)) << SHIFT) | (x & m);
-        debug_assert!(x < self.n[0] && y < self.n[1] && z < self.n[2], "voxel {v:?} outside the grid {:?}", self.n);
-        let offset = self.table[b] as usize;
-        // SAFETY: every table entry is the offset of a whole brick of the pool (`in_slabs`) and `within` < BRICK^3.
-        unsafe { *self.pool.get_unchecked(offset + within) }
+        self.store.get(v)
     }
 
     /// `get` of eight in-grid voxels (x, y, z lanes), their bricks and places found in SIMD lanes.
     #[inline(always)]
     pub fn get8(&self, v: [i32x8; 3]) -> [i8; 8] {
         let m = i32x8::splat(BRICK as i32 - 1);
-        let (nbx, nby) = (i32x8::splat(self.nb[0] as i32), i32x8::splat(self.nb[1] as i32));
+        let (table, pool) = (&self.store.table, &self.store.pool);
+        let (nbx, nby) = (i32x8::splat(self.store.nb[0] as i32), i32x8::splat(self.store.nb[1] as i32));
         let b = (((v[2] >> SHIFT) * nby + (v[1] >> SHIFT)) * nbx + (v[0] >> SHIFT)).to_array();
         let within = ((((v[2] & m) << SHIFT) | (v[1] & m)) << SHIFT | (v[0] & m)).to_array();
         std::array::from_fn(|l| {
-            let offset = self.table[b[l] as usize] as usize;
-            // SAFETY: as in `get` (`within` < BRICK^3: the low bits of each coordinate).
-            unsafe { *self.pool.get_unchecked(offset + within[l] as usize) }
+            let offset = table[b[l] as usize] as usize;
+            // SAFETY: as in `Bricks::get` (`within` < BRICK^3: the low bits of each coordinate).
+            unsafe { *pool.get_unchecked(offset + within[l] as usize) }
         })
     }
 
     /// Bricks stored in the pool (those whose voxels differ).
     pub fn stored_bricks(&self) -> usize {
-        self.pool.len() / BRICK_VOXELS - SHARED
+        self.store.stored_bricks()
     }
 
     /// Bricks of the grid.
     pub fn bricks(&self) -> usize {
-        self.table.len()
+        self.store.bricks()
     }
 
     /// Bytes held: the table and the pool.
     pub fn bytes(&self) -> usize {
-        self.table.len() * std::mem::size_of::<u32>() + self.pool.len()
+        self.store.bytes()
     }
 }

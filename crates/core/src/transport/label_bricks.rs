@@ -2,14 +2,10 @@
 //! (`LabelBricksBuilder`), so that a printer-resolution grid never exists as one byte per voxel: a printed object is
 //! empty outside and one ink (white) in its core, and only the bricks near its surface hold differing labels.
 //!
-//! Layout: as `distance::BrickedDistances`. `pool` holds bricks of `BRICK`^3 labels, (z, y, x) order within a brick
-//! (x fastest); its first 256 bricks hold one label each (brick v is all v), then come the stored bricks, in the
-//! order they were built. `table` holds, per brick of the grid (`ceil(n / BRICK)` per axis, x fastest), the offset
-//! in the pool of the brick it reads. A lookup is two loads: the table entry, then the byte.
+//! Layout: `bricks::Bricks`, whose first 256 bricks hold one label each (brick v is all v); the stored bricks follow
+//! in the order their layers were pushed.
 
-use rayon::prelude::*;
-
-use crate::transport::bricks::{Part, BRICK, BRICK_VOXELS, SHIFT};
+use crate::transport::bricks::{Bricks, Part, BRICK};
 
 /// Label of an empty voxel (outside the object).
 pub const EMPTY: u8 = 255;
@@ -19,14 +15,7 @@ const SHARED: usize = 256;
 
 /// A grid's labels (one byte per voxel: an ink, or `EMPTY` outside the object) by bricks.
 pub struct LabelBricks {
-    /// Voxels along x, y, z.
-    n: [usize; 3],
-    /// Bricks along x and y.
-    nb: [usize; 2],
-    /// Per brick of the grid (x fastest), the offset in `pool` of the brick it reads (a multiple of `BRICK`^3).
-    table: Vec<u32>,
-    /// The `SHARED` bricks of one label, then the stored bricks.
-    pool: Vec<u8>,
+    store: Bricks<u8>,
     /// Whether each label occurs in the grid.
     used: [bool; 256],
 }
@@ -46,12 +35,12 @@ impl LabelBricks {
 
     /// Voxels along x, y, z.
     pub fn shape(&self) -> [usize; 3] {
-        self.n
+        self.store.n
     }
 
     /// Voxels of the grid.
     pub fn len(&self) -> usize {
-        self.n.iter().product()
+        self.store.n.iter().product()
     }
 
     pub fn is_empty(&self) -> bool {
@@ -61,33 +50,25 @@ impl LabelBricks {
     /// The label of in-grid voxel v (x, y, z).
     #[inline(always)]
     pub fn get(&self, v: [i32; 3]) -> u8 {
-        let [x, y, z] = v.map(|c| c as usize);
-        debug_assert!(x < self.n[0] && y < self.n[1] && z < self.n[2], "voxel {v:?} outside the grid {:?}", self.n);
-        let b = ((z >> SHIFT) * self.nb[1] + (y >> SHIFT)) * self.nb[0] + (x >> SHIFT);
-        let m = BRICK - 1;
-        let within = (((z & m) << SHIFT | (y & m)) << SHIFT) | (x & m);
-        let offset = self.table[b] as usize;
-        // SAFETY: every table entry is the offset of a whole brick of the pool (`LabelBricksBuilder::brick_layer`)
-        // and `within` < BRICK^3.
-        unsafe { *self.pool.get_unchecked(offset + within) }
+        self.store.get(v)
     }
 
     /// The label of voxel j (linear index, x fastest).
     #[inline(always)]
     pub fn get_index(&self, j: usize) -> u8 {
-        let (nx, ny) = (self.n[0], self.n[1]);
+        let (nx, ny) = (self.store.n[0], self.store.n[1]);
         self.get([(j % nx) as i32, ((j / nx) % ny) as i32, (j / (nx * ny)) as i32])
     }
 
     /// Voxels a..b (linear indices, a <= b <= `len()`) as bytes 1 (a label other than `EMPTY`: inside) or 0.
     pub fn inside_span(&self, a: usize, b: usize) -> Vec<u8> {
         assert!(a <= b && b <= self.len(), "label span {a}..{b} outside its {} voxels", self.len());
-        let nx = self.n[0];
+        let [nx, ny, _] = self.store.n;
         let mut out = Vec::with_capacity(b - a);
         let mut j = a;
         while j < b {
             let row_end = ((j / nx + 1) * nx).min(b);
-            let (y, z) = (((j / nx) % self.n[1]) as i32, (j / (nx * self.n[1])) as i32);
+            let (y, z) = (((j / nx) % ny) as i32, (j / (nx * ny)) as i32);
             out.extend((j % nx..j % nx + (row_end - j)).map(|x| (self.get([x as i32, y, z]) != EMPTY) as u8));
             j = row_end;
         }
@@ -101,23 +82,23 @@ impl LabelBricks {
 
     /// Bricks stored in the pool (those whose voxels differ).
     pub fn stored_bricks(&self) -> usize {
-        self.pool.len() / BRICK_VOXELS - SHARED
+        self.store.stored_bricks()
     }
 
     /// Bricks of the grid.
     pub fn bricks(&self) -> usize {
-        self.table.len()
+        self.store.bricks()
     }
 
     /// Bytes held: the table and the pool.
     pub fn bytes(&self) -> usize {
-        self.table.len() * std::mem::size_of::<u32>() + self.pool.len()
+        self.store.bytes()
     }
 }
 
 impl std::fmt::Debug for LabelBricks {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "LabelBricks({:?} voxels, {} of {} bricks stored)", self.n, self.stored_bricks(), self.bricks())
+        write!(f, "LabelBricks({:?} voxels, {} of {} bricks stored)", self.shape(), self.stored_bricks(), self.bricks())
     }
 }
 
@@ -139,16 +120,13 @@ impl LabelBricksBuilder {
         if n.contains(&0) {
             return Err(format!("grid size {n:?} must be positive"));
         }
-        let nb: [usize; 3] = std::array::from_fn(|a| n[a].div_ceil(BRICK));
-        let pool = (0..SHARED * BRICK_VOXELS).map(|i| (i / BRICK_VOXELS) as u8).collect();
-        let table = vec![0u32; nb[0] * nb[1] * nb[2]];
-        let bricks = LabelBricks { n, nb: [nb[0], nb[1]], table, pool, used: [false; 256] };
+        let bricks = LabelBricks { store: Bricks::new(n, SHARED, |i| i as u8), used: [false; 256] };
         Ok(LabelBricksBuilder { bricks, broken: None, slab: Vec::with_capacity(n[0] * n[1] * BRICK), z: 0 })
     }
 
     /// Planes not pushed yet.
     pub fn planes_left(&self) -> usize {
-        self.bricks.n[2] - self.z
+        self.bricks.store.n[2] - self.z
     }
 
     /// Push the next whole z-planes (x fastest): an error, nothing taken, if `planes` is not whole planes or holds
@@ -158,7 +136,7 @@ impl LabelBricksBuilder {
         if let Some(why) = &self.broken {
             return Err(why.clone());
         }
-        let plane = self.bricks.n[0] * self.bricks.n[1];
+        let plane = self.bricks.store.n[0] * self.bricks.store.n[1];
         if !planes.len().is_multiple_of(plane) || planes.len() / plane > self.planes_left() {
             return Err(format!(
                 "{} labels are not whole planes of {plane} or exceed the {} planes left",
@@ -169,7 +147,7 @@ impl LabelBricksBuilder {
         for chunk in planes.chunks(plane) {
             self.slab.extend_from_slice(chunk);
             self.z += 1;
-            if self.z.is_multiple_of(BRICK) || self.z == self.bricks.n[2] {
+            if self.z.is_multiple_of(BRICK) || self.z == self.bricks.store.n[2] {
                 if let Err(why) = self.brick_layer() {
                     self.broken = Some(why.clone());
                     return Err(why);
@@ -185,43 +163,21 @@ impl LabelBricksBuilder {
             return Err(why);
         }
         if self.planes_left() > 0 {
-            return Err(format!("{} of {} planes were not pushed", self.planes_left(), self.bricks.n[2]));
+            return Err(format!("{} of {} planes were not pushed", self.planes_left(), self.bricks.store.n[2]));
         }
         let mut bricks = self.bricks;
-        bricks.pool.shrink_to_fit();
+        bricks.store.pool.shrink_to_fit();
         Ok(bricks)
     }
 
     /// Turn the planes in `slab` (the layer of bricks that ends at plane `z`) into bricks, and empty it.
     fn brick_layer(&mut self) -> Result<(), String> {
         let b = &mut self.bricks;
-        let layer = b.nb[0] * b.nb[1];
+        let (n, nb) = (b.store.n, b.store.nb);
         let z0 = (self.z - 1) / BRICK * BRICK;
-        let part = Part { values: &self.slab, n: b.n, z0, nb: [b.nb[0], b.nb[1], b.table.len() / layer] };
-        let ks = z0 / BRICK * layer..(z0 / BRICK + 1) * layer;
-        let uniform: Vec<Option<u8>> = ks.clone().into_par_iter().map(|k| part.uniform(k)).collect();
-        let first = b.pool.len() / BRICK_VOXELS;
-        let mixed = uniform.iter().filter(|u| u.is_none()).count();
-        if (first + mixed) * BRICK_VOXELS > u32::MAX as usize + 1 {
-            return Err(format!(
-                "more than {} bricks of mixed labels",
-                (u32::MAX as usize + 1) / BRICK_VOXELS - SHARED
-            ));
-        }
-        let mut stored = vec![];
-        for (k, u) in ks.zip(uniform) {
-            let brick = match u {
-                Some(v) => v as usize,
-                None => {
-                    stored.push(k);
-                    first + stored.len() - 1
-                }
-            };
-            b.table[k] = (brick * BRICK_VOXELS) as u32; // fits: checked above
-        }
-        let start = b.pool.len();
-        b.pool.resize(start + stored.len() * BRICK_VOXELS, 0);
-        b.pool[start..].par_chunks_mut(BRICK_VOXELS).zip(&stored).for_each(|(out, &k)| part.copy(k, out));
+        let part = Part { values: &self.slab, n, z0, nb: [nb[0], nb[1], n[2].div_ceil(BRICK)] };
+        let layer = nb[0] * nb[1];
+        b.store.store(&part, z0 / BRICK * layer..(z0 / BRICK + 1) * layer, |v| v as usize)?;
         self.slab.iter().for_each(|&l| b.used[l as usize] = true);
         self.slab.clear();
         Ok(())
