@@ -1,12 +1,15 @@
 """The step's memory: the in-place update (the same bits as a step on copies; Ctrl-C during it finishes the step),
-the smoothing a column at a time, the smoother's guide made in chunks, and the step scale's held voxels."""
+the smoothing a column at a time, the smoother's guide made in chunks, the step scale's held voxels, and the band
+voxels a renderer is given fixed shares for."""
 
 import signal
 
 import numpy as np
 import pytest
-from helpers import SPOT, small_chart_scene
+from helpers import SPOT, fuzz, small_chart_scene
 from helpers import small_run as run
+from hypothesis import given
+from hypothesis import strategies as st
 
 from inkopt.optim import optimizers
 from inkopt.optim.optimizers import OPTIMIZER_CLASSES
@@ -150,3 +153,29 @@ def test_the_smoothers_guide_made_in_chunks_is_the_whole_arrays(monkeypatch):
     np.testing.assert_array_equal(r.smoother.guide.key, want.key)
     np.testing.assert_array_equal(r.smoother.guide.extra, want.extra)
     np.testing.assert_array_equal(r.smoother.guide.dense(), want.dense())
+
+
+@fuzz(40)
+@given(st.lists(st.integers(0, 300), unique=True), st.lists(st.integers(0, 300), unique=True), st.integers(1, 7))
+def test_held_band_voxels_are_numpys_set_difference(a, b, chunk):
+    """The band voxels a renderer is given fixed shares for (``held_index``: the band less the free voxels) are
+    ``np.setdiff1d``'s, found a chunk at a time by binary search, for any pair of increasing indices."""
+    from inkopt.optim.param import _sorted_difference
+
+    a, b = (np.array(sorted(v), np.int64) for v in (a, b))
+    want = np.setdiff1d(a, b, assume_unique=True)
+    got = _sorted_difference(a, b, chunk)
+    assert got.dtype == np.int64 and np.array_equal(got, want)
+    assert len(_sorted_difference(a, a)) == 0  # a band that is the free voxels holds none
+
+
+def test_a_band_runs_renderer_holds_no_band_voxel_fixed():
+    """A band run whose free voxels are its band (one index array for both) gives its renderer no held voxels."""
+    from inkopt.model import InkTable
+    from inkopt.scenes import build_scene
+    from inkopt.scenes.spec import MeshSpec
+
+    scene = build_scene(MeshSpec(str(SPOT), height_mm=4.0, shell_mm=0.3), InkTable.parse("vero-cmykw"))
+    r = run(scene, iterations=1)
+    assert r.param.free_index is scene.volume.band.index
+    assert len(r.param.held_index(scene.volume)) == 0

@@ -82,7 +82,7 @@ class Parameterization:
         variables and whose fixed shares a renderer of it is given once: with a band (``Volume.band``) only the
         band's, since its core holds the core's mixture already; else every one."""
         if base.band is not None:
-            return np.setdiff1d(base.band.index, self.free_index, assume_unique=True)
+            return _sorted_difference(base.band.index, self.free_index)
         held = base.inside.dense()
         held.reshape(-1)[self.free_index] = False
         return np.flatnonzero(held)
@@ -258,3 +258,17 @@ def free_part(rows: np.ndarray, fixed: np.ndarray | None, share: np.ndarray) -> 
     p = np.clip(rho - (0.0 if fixed is None else fixed), 0.0, None) / np.asarray(share)[:, None]
     total = p.sum(1, keepdims=True)
     return np.where(total > 0, p / np.where(total > 0, total, 1.0), 1.0 / rho.shape[1])
+
+
+def _sorted_difference(a: np.ndarray, b: np.ndarray, chunk: int = 1 << 20) -> np.ndarray:
+    """The entries of ``a`` not in ``b``, both (K,) int64 strictly increasing, in ``a``'s order: what
+    ``np.setdiff1d(a, b, assume_unique=True)`` gives, found ``chunk`` entries of ``a`` at a time by binary search
+    in ``b``; sorting both joined, as ``setdiff1d`` does, holds ~50 B per entry (2.4 GB for a band of 47 M)."""
+    if a is b or len(b) == 0:
+        return a[:0].copy() if a is b else np.asarray(a, np.int64).copy()
+    keep = []
+    for lo in range(0, len(a), chunk):
+        part = a[lo : lo + chunk]
+        at = np.minimum(np.searchsorted(b, part), len(b) - 1)
+        keep.append(part[b[at] != part])
+    return np.concatenate(keep) if keep else a[:0].copy()
