@@ -221,10 +221,10 @@ class GradientSmoother:
     def apply(self, g: np.ndarray) -> np.ndarray:
         """Diffuse g (F, N) float32 (C-contiguous) in place (rows outside the set unchanged) and return it.
 
-        The kernel reads the set's rows of g through ``rows`` and diffuses one column at a time (each column's
-        diffusion is its own: the same bits as all columns at once), so a call holds the column's two working copies
-        (8 bytes per voxel of the set) and the neighbours and weights (29 bytes), no gathered copy of g or of the
-        set's voxel indices."""
+        The kernel reads the set's rows of g through ``rows`` and diffuses a slab of z-planes at a time (with the
+        planes the steps reach on either side) and one column at a time (each column's and each slab's diffusion is
+        the whole set's, bit for bit), so a call holds a slab's neighbours and weights (29 bytes per voxel) and its
+        column's two working copies (8 bytes), no copy of g or of the set's voxel indices."""
         from .. import _core
 
         if g.dtype != np.float32 or not g.flags.c_contiguous:

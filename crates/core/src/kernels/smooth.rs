@@ -14,9 +14,10 @@
 //! symmetric in r and q, so the flux between rows that should look different fades (an edge-stopping
 //! diffusion, as in Perona and Malik's) and the properties above still hold. Each output row is a fixed-order
 //! sum of its own inputs, so the result does not depend on the thread count. A neighbour's row is found through
-//! a `RowSpans` of the set (16 bytes per grid row and a bit per stored voxel), not a map over the grid, once per call
-//! (with the guide's weights); work per step: the rows in parallel blocks; memory for the call: 29 bytes per row of
-//! neighbours and weights, and two copies of one channel (8 bytes per row), the channels diffused one at a time.
+//! a `RowSpans` of the set (16 bytes per grid row and a bit per stored voxel), not a map over the grid, once per
+//! slab of z-planes (with the guide's weights); work per step: the rows in parallel blocks; memory beside the
+//! values: per row of a slab and its halo, 29 bytes of neighbours and weights and two copies of one channel (8
+//! bytes), the channels diffused one at a time, and the slab's result until the next slab has read its halo.
 
 use rayon::prelude::*;
 
@@ -106,8 +107,10 @@ pub fn diffuse_rows(
 
 /// `diffuse_rows` on the rows `subset` of `values` (strictly increasing row numbers; None: every row), over
 /// their voxels `index[subset[r]]`, in place; the other rows are neither changed nor neighbours. `guide` has a
-/// vector per row of the subset. Each channel is diffused on its own (the same bits as all at once), so the call
-/// holds one channel's two copies, not the subset's values.
+/// vector per row of the subset. The set is diffused `SLAB_PLANES` z-planes at a time, each slab with `steps`
+/// planes either side (a value after `steps` steps depends only on the rows within `steps` planes), and each
+/// channel on its own (the same bits as all at once), so the call holds a slab's stencil and copies, not the set's.
+#[allow(clippy::too_many_arguments)]
 pub fn diffuse_subset(
     n: [usize; 3],
     index: &[i64],
@@ -117,6 +120,25 @@ pub fn diffuse_subset(
     steps: usize,
     alpha: f32,
     guide: Option<Guide>,
+) -> Result<(), String> {
+    diffuse_in_slabs(n, index, subset, values, channels, steps, alpha, guide, SLAB_PLANES)
+}
+
+/// z-planes of the set a call diffuses at a time (besides the halo).
+pub const SLAB_PLANES: usize = 64;
+
+/// `diffuse_subset`, `slab` z-planes at a time (at least `steps`).
+#[allow(clippy::too_many_arguments)]
+pub fn diffuse_in_slabs(
+    n: [usize; 3],
+    index: &[i64],
+    subset: Option<&[u32]>,
+    values: &mut [f32],
+    channels: usize,
+    steps: usize,
+    alpha: f32,
+    guide: Option<Guide>,
+    slab: usize,
 ) -> Result<(), String> {
     let [nz, ny, nx] = n;
     if nz * ny * nx == 0 {
@@ -147,20 +169,51 @@ pub fn diffuse_subset(
     if steps == 0 || rows == 0 {
         return Ok(());
     }
-    let stencil = Stencil::new(n, voxel, rows, &set, alpha, guide);
-    drop(set);
-    let (mut a, mut b) = (vec![0.0f32; rows], vec![0.0f32; rows]);
-    for c in 0..channels {
-        a.iter_mut().enumerate().for_each(|(r, v)| *v = values[row_of(r) * channels + c]);
-        for s in 0..steps {
-            // After an odd number of steps the latest values are in `b`, else in `a`.
-            let (from, to): (&[f32], &mut [f32]) = if s % 2 == 0 { (&a, &mut b) } else { (&b, &mut a) };
-            to.par_chunks_mut(BLOCK).enumerate().for_each(|(k, out)| stencil.step(from, out, k * BLOCK));
+    let (plane, slab) = (ny * nx, slab.max(steps).max(1));
+    // the set's first row in z-plane z or after it (rows are in grid order)
+    let first_row = |z: usize| partition_point(rows, |r| (voxel(r) as usize) < z * plane);
+    let (z_first, z_end) = (voxel(0) as usize / plane, voxel(rows - 1) as usize / plane + 1);
+    // A slab's result is written once the next slab has read its halo, which reaches back into this slab only.
+    let mut pending: Option<(usize, Vec<f32>)> = None;
+    for z0 in (z_first..z_end).step_by(slab) {
+        let z1 = (z0 + slab).min(z_end);
+        let (r0, r1) = (first_row(z0), first_row(z1));
+        if r0 == r1 {
+            continue;
         }
-        let last = if steps.is_multiple_of(2) { &a } else { &b };
-        last.iter().enumerate().for_each(|(r, &v)| values[row_of(r) * channels + c] = v);
+        let window = first_row(z0.saturating_sub(steps))..first_row(z1 + steps);
+        let stencil = Stencil::new(n, voxel, window.clone(), &set, alpha, guide);
+        let out = stencil.diffuse(values, row_of, channels, steps, r0..r1);
+        if let Some((p0, done)) = pending.replace((r0, out)) {
+            write_rows(values, row_of, channels, p0, &done);
+        }
+    }
+    if let Some((p0, done)) = pending {
+        write_rows(values, row_of, channels, p0, &done);
     }
     Ok(())
+}
+
+/// The first r in 0..rows where `before(r)` is false (`before` true then false over the rows).
+fn partition_point(rows: usize, before: impl Fn(usize) -> bool) -> usize {
+    let (mut lo, mut hi) = (0, rows);
+    while lo < hi {
+        let mid = lo + (hi - lo) / 2;
+        if before(mid) {
+            lo = mid + 1;
+        } else {
+            hi = mid;
+        }
+    }
+    lo
+}
+
+/// Write `done` (rows × `channels`, the set's rows from `first`) into `values` at those rows.
+fn write_rows(values: &mut [f32], row_of: impl Fn(usize) -> usize, channels: usize, first: usize, done: &[f32]) {
+    for (k, row) in done.chunks_exact(channels).enumerate() {
+        let at = row_of(first + k) * channels;
+        values[at..at + channels].copy_from_slice(row);
+    }
 }
 
 /// No neighbour in the set.
@@ -170,12 +223,15 @@ const NONE: u32 = u32::MAX;
 const MINUS_X: u8 = 1;
 const PLUS_X: u8 = 2;
 
-/// Every row's neighbours and weights, found once per call, so that the steps read them instead of looking the
-/// neighbours up in the `RowSpans` and weighting them by the guide again at every step (the same bits either
-/// way). A weight is symmetric (the same bits from either side: (a - b)² = (b - a)²), so each row keeps those of
-/// its +z, +y and +x neighbours and reads a -z, -y or -x one from that neighbour's row; a set in grid order has
-/// its ±x neighbours in the rows beside it. 29 bytes per row, for the call only.
+/// The neighbours and weights of a window of the set's rows (whole z-planes), found once per slab, so that the
+/// steps read them instead of looking the neighbours up in the `RowSpans` and weighting them by the guide again at
+/// every step (the same bits either way). A weight is symmetric (the same bits from either side: (a - b)² = (b -
+/// a)²), so each row keeps those of its +z, +y and +x neighbours and reads a -z, -y or -x one from that neighbour's
+/// row; a set in grid order has its ±x neighbours in the rows beside it. Rows are the window's (0: its first); a
+/// neighbour outside the window is none. 29 bytes per row of the window.
 struct Stencil {
+    /// the set's row of the window's row 0
+    first: usize,
     /// rows of the -z, +z, -y, +y neighbours (`NONE`: not in the set)
     nb: Vec<[u32; 4]>,
     /// weights towards the +z, +y, +x neighbours (0 where there is none)
@@ -187,18 +243,20 @@ struct Stencil {
 impl Stencil {
     fn new(
         n: [usize; 3],
-        voxel: impl Fn(usize) -> i64 + Sync,
-        rows: usize,
+        set_voxel: impl Fn(usize) -> i64 + Sync,
+        window: std::ops::Range<usize>,
         set: &RowSpans,
         alpha: f32,
         guide: Option<Guide>,
     ) -> Stencil {
         let [nz, ny, nx] = n;
         let plane = ny * nx;
-        let row_of = |j: usize| set.rank(j).map_or(NONE, |r| r as u32);
+        let (first, rows) = (window.start, window.len());
+        let voxel = |row: usize| set_voxel(first + row);
+        let row_of = |j: usize| set.rank(j).filter(|r| window.contains(r)).map_or(NONE, |r| (r - first) as u32);
         let weight = |row: usize, q: u32| match guide {
             _ if q == NONE => 0.0,
-            Some(g) => g.weight(row, q as usize, alpha),
+            Some(g) => g.weight(first + row, first + q as usize, alpha),
             None => alpha,
         };
         let mut nb = vec![[NONE; 4]; rows];
@@ -224,7 +282,36 @@ impl Stencil {
                 }
             },
         );
-        Stencil { nb, w, x: xs }
+        Stencil { first, nb, w, x: xs }
+    }
+
+    /// `steps` steps of each channel of `values` (the set's row r at `row_of(r)`) over the window, one channel at a
+    /// time; the result of the set's rows `out` (within the window, at least `steps` planes from its ends unless
+    /// those are the set's), rows × `channels`.
+    fn diffuse(
+        &self,
+        values: &[f32],
+        row_of: impl Fn(usize) -> usize,
+        channels: usize,
+        steps: usize,
+        out: std::ops::Range<usize>,
+    ) -> Vec<f32> {
+        let rows = self.nb.len();
+        let (mut a, mut b) = (vec![0.0f32; rows], vec![0.0f32; rows]);
+        let mut result = vec![0.0f32; out.len() * channels];
+        for c in 0..channels {
+            a.iter_mut().enumerate().for_each(|(r, v)| *v = values[row_of(self.first + r) * channels + c]);
+            for s in 0..steps {
+                // After an odd number of steps the latest values are in `b`, else in `a`.
+                let (from, to): (&[f32], &mut [f32]) = if s % 2 == 0 { (&a, &mut b) } else { (&b, &mut a) };
+                to.par_chunks_mut(BLOCK).enumerate().for_each(|(k, o)| self.step(from, o, k * BLOCK));
+            }
+            let last = if steps.is_multiple_of(2) { &a } else { &b };
+            for (k, r) in out.clone().enumerate() {
+                result[k * channels + c] = last[r - self.first];
+            }
+        }
+        result
     }
 
     /// One step of one channel for rows `first..first + out.len()`: the neighbours in a fixed order, -z, +z, -y,

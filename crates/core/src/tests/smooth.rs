@@ -1,8 +1,9 @@
 //! `smooth::diffuse_rows` against a plain dense implementation (f64, every neighbour looked up by coordinates in
 //! a map over the grid; and the same in f32 in the core's order of operations, bit for bit), its conservation,
-//! thread-count independence and its refusal of bad sets. The set has more than two parallel blocks of rows.
+//! thread-count independence, its slabs of z-planes and its refusal of bad sets. The set has more than two parallel
+//! blocks of rows.
 
-use crate::kernels::smooth::{diffuse_rows, Guide};
+use crate::kernels::smooth::{diffuse_in_slabs, diffuse_rows, Guide};
 use crate::transport::rng::uniform;
 
 /// An irregular set (about 60 % of a 26 x 24 x 22 grid: ~8 200 rows, more than two of the core's parallel blocks
@@ -176,5 +177,34 @@ fn a_keyed_guide_is_its_vectors_per_row_bit_for_bit() {
         Guide { key: None, ..keyed },
     ] {
         assert!(diffuse_rows(n, &index, &mut v, 2, 2, 0.125, Some(g)).unwrap_err().contains("guide"));
+    }
+}
+
+/// Diffused a slab of z-planes at a time (any thickness, planes without a row of the set between slabs, a subset of
+/// the rows, with or without a guide), the set's values are those of the whole set at once, bit for bit.
+#[test]
+fn slabs_of_any_thickness_are_the_whole_set_bit_for_bit() {
+    let (n, full, _) = set(2);
+    let plane = (n[1] * n[2]) as i64;
+    // planes 9..12 hold no voxel of the set: a slab can be empty, and rows on either side are not neighbours
+    let index: Vec<i64> = full.into_iter().filter(|&j| !(9..12).contains(&(j / plane))).collect();
+    let v0: Vec<f32> = (0..index.len() * 2).map(|i| uniform(18, 0, i as u32) * 2.0 - 1.0).collect();
+    let gv: Vec<f32> = (0..index.len() * 2).map(|i| uniform(19, 0, i as u32)).collect();
+    let subset: Vec<u32> = (0..index.len() as u32).filter(|&r| uniform(20, 0, r) < 0.8).collect();
+    let sub_guide: Vec<f32> = subset.iter().flat_map(|&r| [gv[2 * r as usize], gv[2 * r as usize + 1]]).collect();
+    for (rows, guide) in [(None, None), (Some(&subset[..]), None), (Some(&subset[..]), Some(&sub_guide[..]))] {
+        let guide = guide.map(|g| Guide::rows(g, 2, 0.5));
+        for steps in [1, 3, 6] {
+            let run = |slab: usize| {
+                let mut v = v0.clone();
+                diffuse_in_slabs(n, &index, rows, &mut v, 2, steps, 0.125, guide, slab).unwrap();
+                v
+            };
+            let whole = run(1000);
+            assert_ne!(whole, v0);
+            for slab in [1, 2, 3, 5, 7, 64] {
+                assert_eq!(run(slab), whole, "{steps} steps, {slab} planes a slab, subset {}", rows.is_some());
+            }
+        }
     }
 }
