@@ -213,6 +213,38 @@ def test_label_layers_read_layers_slices_and_refuse_damage(tmp_path):
         LabelLayers(tmp_path / "long")[3]
 
 
+def test_label_layers_read_the_file_they_opened(tmp_path):
+    """Label layers opened before their file is rewritten under the same name (an atomic rewrite, as a second
+    ``inkopt quantize`` does) or removed read every layer of the file they opened, never the new one's; pickled,
+    they open the path again and refuse a file that changed; closed, a read is a one-line ValueError."""
+    import pickle
+
+    def write(path, lab):
+        w = LabelLayersWriter(path, lab.shape)
+        for k in range(lab.shape[0]):
+            w[k] = lab[k]
+        w.commit()
+
+    rng = np.random.default_rng(3)
+    old, new = (rng.integers(0, 5, (6, 8, 9), dtype=np.uint8) for _ in range(2))
+    path = tmp_path / "labels.layers"
+    write(path, old)
+    src = LabelLayers(path)
+    np.testing.assert_array_equal(src[0], old[0])
+    again = pickle.loads(pickle.dumps(src))  # the same file, opened again
+    np.testing.assert_array_equal(again[:], old)
+    write(path, new)  # replaced by rename: the layers opened before still read the old file
+    np.testing.assert_array_equal(src[1:], old[1:])
+    with pytest.raises(ValueError, match="changed since"):
+        pickle.loads(pickle.dumps(src))
+    path.unlink()
+    np.testing.assert_array_equal(again[:], old)
+    src.close()
+    with pytest.raises(ValueError, match="closed") as e:
+        src[5]
+    assert "\n" not in str(e.value)
+
+
 def test_both_label_file_forms_export_the_same_packages(tmp_path):
     """A run quantized now (quantized_labels.layers) and the same labels in the version-1 file an older inkopt
     wrote (quantized_labels.npy, read memory-mapped) load to the same labels and give byte-identical GCVF members

@@ -160,20 +160,51 @@ class LabelLayersWriter(LabelFileWriter):
 class LabelLayers:
     """A version-2 label file read a layer at a time: ``shape`` (Z, Y, X), ``dtype`` uint8, ``ndim`` 3;
     ``labels[k]`` layer k (Y, X) (read-only; the last two decoded are kept), ``labels[a:b]`` a stack of layers,
-    ``dense()`` every layer in one read-only array. Reads use ``os.pread``, so threads may read layers at once.
-    A file that is not one, or whose parts disagree, is a one-line ValueError when opened; a layer that does not
-    inflate to its size is one when read."""
+    ``dense()`` every layer in one read-only array. The file stays open until ``close()`` (or the object is
+    dropped), and every layer is read from it with ``os.pread``: a file replaced under the same name meanwhile (an
+    atomic rewrite) or removed is still read as it was opened, never a mixture of two files; threads may read
+    layers at once. A file that is not one, or whose parts disagree, is a one-line ValueError when opened; a layer
+    that does not inflate to its size is one when read."""
 
     dtype, ndim = np.dtype(np.uint8), 3
 
     def __init__(self, path, shape=None):
         self.path = Path(path)
-        with open(self.path, "rb") as fh:
-            self.shape, self.offsets = self._read_layout(fh, os.fstat(fh.fileno()).st_size)
-        if shape is not None and self.shape != tuple(int(s) for s in shape):
-            raise ValueError(f"{self.path} holds labels of shape {self.shape}, expected {tuple(shape)}")
+        self._fh = open(self.path, "rb")  # noqa: SIM115 (held for the reads; closed by close())
+        try:
+            self.shape, self.offsets = self._read_layout(self._fh, os.fstat(self._fh.fileno()).st_size)
+            if shape is not None and self.shape != tuple(int(s) for s in shape):
+                raise ValueError(f"{self.path} holds labels of shape {self.shape}, expected {tuple(shape)}")
+        except BaseException:
+            self._fh.close()
+            raise
         self._cache: dict[int, np.ndarray] = {}
         self._lock = threading.Lock()  # the cache, for threads reading layers at once
+
+    def close(self) -> None:
+        """Close the file and drop the decoded layers kept (a later layer read is a ValueError)."""
+        self._fh.close()
+        with self._lock:
+            self._cache.clear()
+
+    def __del__(self) -> None:
+        fh = getattr(self, "_fh", None)
+        if fh is not None:
+            fh.close()
+
+    def __enter__(self) -> LabelLayers:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __getstate__(self) -> dict:  # pickled (a process pool, Ray) by its path, opened again where it is read
+        return {"path": self.path, "shape": self.shape, "offsets": self.offsets}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__init__(state["path"], state["shape"])
+        if not np.array_equal(self.offsets, state["offsets"]):
+            raise ValueError(f"{self.path} changed since its label layers were opened")
 
     def _read_layout(self, fh, size: int):
         """(shape, (Z + 1,) int64 layer offsets) from the header and the index, checked against each other."""
@@ -219,11 +250,9 @@ class LabelLayers:
         if hit is not None:
             return hit
         start, end = int(self.offsets[k]), int(self.offsets[k + 1])
-        fd = os.open(self.path, os.O_RDONLY)
-        try:
-            data = os.pread(fd, end - start, start)
-        finally:
-            os.close(fd)
+        if self._fh.closed:
+            raise ValueError(f"{self.path}: its label layers were closed")
+        data = os.pread(self._fh.fileno(), end - start, start)
         size = self.shape[1] * self.shape[2]
         inflate = zlib.decompressobj()
         try:  # inflated at most one byte past the layer's size: a damaged layer never fills the memory
