@@ -229,3 +229,26 @@ def test_the_correction_transfer_needs_the_coarse_results_grid(tmp_path):
         write_transferred_volume(src, fine.volume, None, tmp_path / "s.npz", baseline=Baseline(other, fine.volume))
     with pytest.raises(ValueError, match="fine baseline"):
         transferred_free_mixture(src, fine.volume, None, baseline=Baseline(src, np.zeros((2, 2, 2, 3), np.float32)))
+
+
+def test_the_correction_transfer_holds_no_copy_of_both_coarse_grids():
+    """U(C) and U(B_c) are resampled apart: beside its output and index the transfer holds less than one more source
+    grid's mixture (side by side, C and B_c were copied into one (z, y, x, 2N) array: two grids' worth). The source
+    grid is the finer one here, so that its mixture outweighs the destination's temporaries."""
+    import tracemalloc
+
+    from inkopt.optim.transfer import Baseline
+
+    source, dest = slab(300, (48, 36, 24)), slab(100, (48, 36, 24))
+    rng = np.random.default_rng(0)
+    mix_c, mix_b = (rng.dirichlet(np.ones(3), source.volume.shape).astype(np.float32) for _ in range(2))
+    src, bc = source.volume.with_mixture(mix_c), source.volume.with_mixture(mix_b)
+    dest_b = rng.dirichlet(np.ones(3), dest.volume.shape).astype(np.float32)
+    tracemalloc.start()
+    try:
+        p = transferred_free_mixture(src, dest.volume, None, chunk=256, baseline=Baseline(bc, dest_b))
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    held = p.nbytes + 8 * len(p)  # the output and the free voxels' index
+    assert peak < held + mix_c.nbytes, (peak, held, mix_c.nbytes)
