@@ -26,11 +26,11 @@ run takes as its start with ``OptimizeConfig(init=PATH)``; :func:`transferred_fr
 (F, N) directly. :func:`coarse_start` is the whole first stage: optimise the coarse scene (no evaluation, no
 checkpoints) and write its result as the start of the fine scene's run (a :class:`CoarseStart`).
 
-Memory: the source volume (with a baseline, B_c's too), the destination's free index (``Parameterization``), and per z slab of the destination
-grid (``SLAB_VOXELS`` voxels) its mixture and the resampling temporaries; never a (z, y, x, N) array of the
-destination grid, so a 40 mm figurine's 61 M-voxel grid is written in slabs of about 80 MB each. The run that
-starts from the file reads it in blocks of grid voxels too (``param.file_free_mixture``), keeping only the free
-voxels' free part (F, N).
+Memory: the source volume (with a baseline, B_c's too), the destination's free index (``Parameterization``), and
+per z slab of the destination grid (``SLAB_VOXELS`` voxels) its mixture and the resampling temporaries; never a
+(z, y, x, N) array of the destination grid, so a 40 mm figurine's 61 M-voxel grid is written in slabs of about 80
+MB each. The run that starts from the file reads it in blocks of grid voxels too (``param.file_free_mixture``),
+keeping only the free voxels' free part (F, N).
 """
 
 from __future__ import annotations
