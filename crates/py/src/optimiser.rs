@@ -10,6 +10,7 @@ use numpy::{IntoPyArray, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadwri
 use pyo3::prelude::*;
 
 use crate::arrays::{c_slice, check_shape, err};
+use inkopt_core::kernels::smooth;
 
 /// Run `f` on `threads` threads: None (or 0) in rayon's global pool (all cores, as a `Scene` without
 /// `threads`), else in a pool of that many (threads named `inkopt-p{n}-{i}`), built once per process and count
@@ -84,7 +85,7 @@ pub(crate) fn smooth_rows(
         None => None,
     };
     py.detach(|| {
-        run_on(threads, || inkopt_core::kernels::smooth::diffuse_subset(n, idx, subset, v, ch, steps, alpha, g))
+        run_on(threads, || smooth::diffuse_subset(n, idx, subset, v, ch, steps, alpha, g, smooth::SLAB_PLANES))
     })?
     .map_err(err)
 }

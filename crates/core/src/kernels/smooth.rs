@@ -102,34 +102,20 @@ pub fn diffuse_rows(
     alpha: f32,
     guide: Option<Guide>,
 ) -> Result<(), String> {
-    diffuse_subset(n, index, None, values, channels, steps, alpha, guide)
+    diffuse_subset(n, index, None, values, channels, steps, alpha, guide, SLAB_PLANES)
 }
+
+/// z-planes of the set a call of `diffuse_rows` diffuses at a time (besides the halo).
+pub const SLAB_PLANES: usize = 64;
 
 /// `diffuse_rows` on the rows `subset` of `values` (strictly increasing row numbers; None: every row), over
 /// their voxels `index[subset[r]]`, in place; the other rows are neither changed nor neighbours. `guide` has a
-/// vector per row of the subset. The set is diffused `SLAB_PLANES` z-planes at a time, each slab with `steps`
-/// planes either side (a value after `steps` steps depends only on the rows within `steps` planes), and each
-/// channel on its own (the same bits as all at once), so the call holds a slab's stencil and copies, not the set's.
+/// vector per row of the subset. The set is diffused `slab` z-planes at a time (at least `steps`; `SLAB_PLANES`),
+/// each slab with `steps` planes either side (a value after `steps` steps depends only on the rows within `steps`
+/// planes), and each channel on its own (the same bits as all at once, and as any slab thickness), so the call
+/// holds a slab's stencil and copies, not the set's.
 #[allow(clippy::too_many_arguments)]
 pub fn diffuse_subset(
-    n: [usize; 3],
-    index: &[i64],
-    subset: Option<&[u32]>,
-    values: &mut [f32],
-    channels: usize,
-    steps: usize,
-    alpha: f32,
-    guide: Option<Guide>,
-) -> Result<(), String> {
-    diffuse_in_slabs(n, index, subset, values, channels, steps, alpha, guide, SLAB_PLANES)
-}
-
-/// z-planes of the set a call diffuses at a time (besides the halo).
-pub const SLAB_PLANES: usize = 64;
-
-/// `diffuse_subset`, `slab` z-planes at a time (at least `steps`).
-#[allow(clippy::too_many_arguments)]
-pub fn diffuse_in_slabs(
     n: [usize; 3],
     index: &[i64],
     subset: Option<&[u32]>,

@@ -3,7 +3,7 @@
 //! thread-count independence, its slabs of z-planes and its refusal of bad sets. The set has more than two parallel
 //! blocks of rows.
 
-use crate::kernels::smooth::{diffuse_in_slabs, diffuse_rows, Guide};
+use crate::kernels::smooth::{diffuse_rows, diffuse_subset, Guide};
 use crate::transport::rng::uniform;
 
 /// An irregular set (about 60 % of a 26 x 24 x 22 grid: ~8 200 rows, more than two of the core's parallel blocks
@@ -197,7 +197,7 @@ fn slabs_of_any_thickness_are_the_whole_set_bit_for_bit() {
         for steps in [1, 3, 6] {
             let run = |slab: usize| {
                 let mut v = v0.clone();
-                diffuse_in_slabs(n, &index, rows, &mut v, 2, steps, 0.125, guide, slab).unwrap();
+                diffuse_subset(n, &index, rows, &mut v, 2, steps, 0.125, guide, slab).unwrap();
                 v
             };
             let whole = run(1000);
