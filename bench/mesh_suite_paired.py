@@ -79,6 +79,22 @@ def checkpoint_run(run: Path, dest: Path, passes: int = 0, texture: str | None =
     (dest / "report.json").write_text(json.dumps(report, indent=2) + "\n")
 
 
+def start_volume(run: Path, path: Path) -> None:
+    """``run``'s coarse-to-fine start (``RUN/coarse/fine_start.npz``, its fine run's free voxels' rows) as a mixture
+    volume file of the whole grid at ``path`` (the run's volume.npz's geometry, its scene's fixed shares)."""
+    from inkopt.model import Volume
+    from inkopt.optim.startrows import is_start_rows
+    from inkopt.optim.transfer import write_start_volume
+    from inkopt.rundir import RunDir
+
+    start = run / "coarse" / "fine_start.npz"
+    if not is_start_rows(start):  # a whole-grid start (written before the start held its free voxels only)
+        shutil.copy2(start, path)
+        return
+    base = Volume.load(run / "volume.npz")
+    write_start_volume(start, base, RunDir(run).load_scene().fixed_share(base.inks, base.shape), path)
+
+
 def candidate_run(source: str, tmp: Path) -> Path:
     """The run folder to render for ``source`` (module docstring): the run itself, or a copy in ``tmp`` with the
     volume the source names, quantized with the defaults."""
@@ -91,7 +107,7 @@ def candidate_run(source: str, tmp: Path) -> Path:
     for name in COPIED:
         shutil.copy2(run / name, dest / name)
     if part == "fine_start":
-        shutil.copy2(run / "coarse" / "fine_start.npz", dest / "volume.npz")
+        start_volume(run, dest / "volume.npz")
     elif part in ("unsmoothed", "smoothed"):
         checkpoint_volume(run, dest / "volume.npz", int(part == "smoothed"))
     else:

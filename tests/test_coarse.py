@@ -22,7 +22,7 @@ from inkopt.coarse import (
 from inkopt.evaluation.baselines import baseline_layers
 from inkopt.model import InkTable, Volume
 from inkopt.optim import OptimizeConfig
-from inkopt.optim.transfer import Baseline, write_transferred_volume
+from inkopt.optim.transfer import Baseline, destination, write_transferred_volume
 from inkopt.run import RunOptions
 from inkopt.rundir import RunDir
 from inkopt.scenes import build_scene
@@ -57,6 +57,15 @@ def job(spec, out, init: str, monkeypatch) -> dict:
     return made
 
 
+def start_rows(job_dir, fine) -> tuple[np.ndarray, np.ndarray]:
+    """The fine stage's start of the job in ``job_dir``: its free voxels (F,), checked to be the run of the scene
+    ``fine``'s, and their mixtures (F, N)."""
+    with np.load(job_dir / "coarse" / "fine_start.npz") as f:
+        index, rows = f["free_index"], f["free_rows"]
+    np.testing.assert_array_equal(index, destination(fine.volume, fine.fixed_share).free_index)
+    return index, rows
+
+
 def test_a_job_from_the_extrusion_baseline_starts_its_fine_stage_from_the_correction(spec, tmp_path, monkeypatch):
     made = job(spec, tmp_path / "job", "extrusion", monkeypatch)
     # the coarse and fine grids' baselines (coarse), the coarse one also the coarse run's start; the runs make none
@@ -72,10 +81,10 @@ def test_a_job_from_the_extrusion_baseline_starts_its_fine_stage_from_the_correc
         tmp_path / "want.npz",
         baseline=Baseline(coarse.volume.with_mixture(b_c.array()), b_f),
     )
-    got = Volume.load(tmp_path / "job" / "coarse" / "fine_start.npz").mixture
-    np.testing.assert_array_equal(got, Volume.load(want).mixture)
+    index, got = start_rows(tmp_path / "job", fine)
+    np.testing.assert_array_equal(got, Volume.load(want).mixture.reshape(-1, len(INKS))[index])
     plain = Volume.load(write_transferred_volume(result, fine.volume, fine.fixed_share, tmp_path / "p.npz")).mixture
-    assert np.abs(got - plain).max() > 0.05  # the baseline's detail is there: not the plain transfer
+    assert np.abs(got - plain.reshape(-1, len(INKS))[index]).max() > 0.05  # the baseline's detail: not the plain one
 
 
 def test_a_job_from_white_starts_its_fine_stage_from_the_plain_transfer(spec, tmp_path, monkeypatch):
@@ -84,8 +93,8 @@ def test_a_job_from_white_starts_its_fine_stage_from_the_plain_transfer(spec, tm
     fine = build_scene(spec, INKS)
     result = RunDir(tmp_path / "job" / "coarse").load_volume()
     want = write_transferred_volume(result, fine.volume, fine.fixed_share, tmp_path / "want.npz")
-    got = Volume.load(tmp_path / "job" / "coarse" / "fine_start.npz").mixture
-    np.testing.assert_array_equal(got, Volume.load(want).mixture)
+    index, got = start_rows(tmp_path / "job", fine)
+    np.testing.assert_array_equal(got, Volume.load(want).mixture.reshape(-1, len(INKS))[index])
 
 
 def test_the_deadline_plan_takes_meshes_coarse_to_fine_from_the_extrusion_baseline():
@@ -158,3 +167,19 @@ def test_the_fine_iteration_is_scaled_by_the_dpi_ratio():
     assert fine_iteration_seconds(2.0, 150.0, 300.0) == pytest.approx(2.0 * 2**FINE_ITERATION_EXPONENT)
     assert 5.0 < fine_iteration_seconds(1.0, 150.0, 300.0) < 6.0  # the suite's fine / coarse ratios: 4.3-8.0
     assert fine_iteration_seconds(1.0, 300.0, 300.0) == 1.0
+
+
+def test_a_run_releases_the_baselines_it_was_given_before_its_iterations(spec, tmp_path):
+    """The baselines a run is given (a coarse-to-fine job's fine grid baseline) serve its start and its guard, then
+    the run lets them go: none is held through the iterations."""
+    from inkopt.run import run_optimisation
+
+    scene = build_scene(spec, INKS)
+    given = {"extrusion": baseline_layers("extrusion", scene.volume, scene.texels, scene.target_rgb)}
+    seen = []
+    options = RunOptions(
+        eval_spp=4, threads=1, log=lambda m: None, baselines=given, on_step=lambda r: seen.append(len(given))
+    )
+    cfg = OptimizeConfig(iterations=2, spp=2, forward_spp=4, init="extrusion")
+    rep = run_optimisation(scene, tmp_path / "run", cfg, options)
+    assert seen == [0, 0] and rep.baseline is not None

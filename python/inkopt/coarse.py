@@ -12,6 +12,8 @@ from dataclasses import replace
 from .errors import ParameterError
 from .evaluation.baselines import baseline_layers
 from .evaluation.noise import PILOT_SPP
+from .model import Volume
+from .model.banded import BandMixture, band_mixture
 from .optim import OptimizeConfig
 from .optim.param import BASELINE_INITS
 from .run import RunOptions, release_freed_memory, run_optimisation
@@ -133,8 +135,9 @@ def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: flo
     """Coarse to fine: optimise ``spec``'s object first on a grid of ``coarse_dpi`` (a run of its own in
     ``OUT/coarse/`` with ``cfg``'s settings: it stops when done, or within ``COARSE_BUDGET_SHARE`` of
     ``cfg.time_budget`` less what the fine stage is predicted to need beyond the rest, ``coarse_reserve``), move its
-    result onto the grid of ``spec`` (``optim.transfer.write_transferred_volume``: ``OUT/coarse/fine_start.npz``,
-    fixed shares kept; stored uncompressed) and optimise from there (``cfg`` with that start, and a warm start's
+    result onto the grid of ``spec`` (``optim.transfer.write_transferred_rows``: ``OUT/coarse/fine_start.npz``, the
+    fine run's free voxels' rows, fixed shares kept; the coarse result and its baseline held by their bands, the
+    fine baseline made at the free voxels only) and optimise from there (``cfg`` with that start, and a warm start's
     step unless ``cfg.lr`` is set; with a time budget its estimate is the coarse stage's seconds per iteration
     scaled, ``fine_iteration_seconds``, not timed again). A half-DPI grid has a quarter of the texels: on Spot 20 mm
     an iteration took 5.9 CPU s at 150 DPI (bench/results/mesh_20mm_150dpi.json) against 22 at 300 DPI with newer
@@ -142,7 +145,7 @@ def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: flo
     and the run's wall time count from the job's start (``options.started``); ``options.on_step`` is called in the
     fine stage only. Returns the fine run's report (``dry_run``: its estimate, from a white start; nothing is
     written)."""
-    from .optim.transfer import Baseline, write_transferred_volume
+    from .optim.transfer import Baseline, coarse_result, destination, write_transferred_rows
 
     options = options or RunOptions()
     if not 0 < coarse_dpi < spec.dpi:
@@ -163,16 +166,17 @@ def run_coarse_to_fine(spec, inks, out_dir, cfg: OptimizeConfig, coarse_dpi: flo
         fine = build_scene(spec, inks)
         if not fine_begun:
             t = time.perf_counter()
-            baseline = None
+            baseline = layers = None
+            param = destination(fine.volume, fine.fixed_share)  # the fine run's free voxels
             if coarse_start is not None:  # the correction transfer: the fine grid's baseline plus the change
-                layers = baseline_layers(cfg.init, fine.volume, fine.texels, fine.target_rgb, fine.fixed_share)
+                layers = baseline_layers(
+                    cfg.init, fine.volume, fine.texels, fine.target_rgb, fine.fixed_share, only=param.free_index
+                )
                 baseline = Baseline(coarse_start, layers)
                 options = replace(options, baselines={cfg.init: layers})  # the fine run's guard takes it as made
-            source = RunDir(coarse_dir).load_volume()
-            # stored without zlib: the job's own start, written and read once (its compression was a third of the
-            # box's 20 mm transfer)
-            write_transferred_volume(source, fine.volume, fine.fixed_share, start, baseline=baseline, compressed=False)
-            del baseline, coarse_start, source
+            source = coarse_result(RunDir(coarse_dir).volume_file())
+            write_transferred_rows(source, fine.volume, param, start, baseline=baseline)
+            del baseline, coarse_start, source, param, layers  # the layers: the fine run's, released after its guard
             t = time.perf_counter() - t
             how = "" if cfg.init not in BASELINE_INITS else f" as a change of the {cfg.init} baseline"
             options.log(f"coarse result moved onto the {spec.dpi:g}-DPI grid{how} in {t:.0f} s: {start}")
@@ -187,7 +191,7 @@ def _coarse_stage(spec, inks, coarse_dir, cfg: OptimizeConfig, coarse_dpi: float
     guard too); the caller's per-step hook sees the fine stage only (another grid here). The coarse result is not
     smoothed at its end (``finish_smooth`` 0): it is the fine stage's start, not an answer, and a pass on the coarse
     grid blurs twice as far as the fine result's own (docs/quality.md, "The duck's margin"). Returns (the coarse run's
-    start as a mixture ``Volume`` on the coarse grid when ``cfg.init`` is a print-shop baseline
+    start on the coarse grid, held by its band (``baseline_by_band``), when ``cfg.init`` is a print-shop baseline
     (``optim.param.BASELINE_INITS``: the correction transfer's B_c, made once for the coarse run's start and the
     transfer), else None; the coarse run's seconds per iteration, None when it ran none)."""
     coarse = build_scene(replace(spec, dpi=coarse_dpi), inks)
@@ -222,10 +226,20 @@ def _coarse_stage(spec, inks, coarse_dir, cfg: OptimizeConfig, coarse_dpi: float
             + (" (at its least share: the job may overrun its budget)" if predicted > _most_fine(cfg) else "")
         )
     if layers is not None:
-        start = coarse.volume.with_mixture(layers.array())
+        start = baseline_by_band(coarse.volume, layers)
     del coarse, layers
     release_freed_memory()
     return start, (report.seconds_per_iteration if report.seconds_iterations > 0 else None)
+
+
+def baseline_by_band(volume: Volume, layers) -> BandMixture | Volume:
+    """The coarse stage's baseline ``layers`` (``BaselineLayers`` on the grid of ``volume``, the coarse scene's) as
+    the correction transfer's B_c: held by its band (``model.banded``; the band's core where the scene has one,
+    e.g. the white core its fixed shares give the baseline too) when the volume has an inside mask, else whole
+    (a ``Volume``)."""
+    if volume.inside is None:  # a slab without a mask: small enough to hold whole
+        return volume.with_mixture(layers.array())
+    return band_mixture(volume, layers, None if volume.band is None else volume.band.core)
 
 
 def _most_fine(cfg: OptimizeConfig) -> float:

@@ -21,9 +21,10 @@ import numpy as np
 
 from ..errors import ParameterError
 from ..io import ZIP_READ_ERRORS
+from .banded import BandMixture, band_mixture, most_common_row
 from .inks import DEFAULT_G, InkTable
 from .mask import PackedMask
-from .media import Band, InsideLabels, VolumeError
+from .media import InsideLabels, VolumeError
 from .volume import Quantization, Volume, check_kinds, file_normals, naming_file, upgrade_volume
 
 HEAVY = ("mixture", "normals")  # members not loaded at once (dense normals: a pre-release layout, refused)
@@ -186,26 +187,21 @@ class MixtureSource:
                 raise VolumeError(f"{self.path}: mixture must be finite and non-negative")
             yield v0, rows
 
-    def band_volume(self) -> tuple[Volume, np.ndarray]:
-        """This volume for a renderer, in proportion to its band: (a ``Volume`` with a ``Band`` of the inside voxels
-        whose mixture is not the core's, its medium a placeholder that holds nothing per voxel (``InsideLabels`` of
-        ink 0: a renderer takes the band's mixture from ``set_mixture``), the band's mixture (K, N) float32). The
-        core is the mixture most inside voxels of the middle layer hold (a run's fixed core below its shell; any
-        choice is exact, as every other voxel is in the band). Read a layer at a time: 8 B of index and 4N of
-        mixture per band voxel, the inside mask's bits; the mixtures are those ``Volume.load`` holds, bit for bit.
-        Only for a volume with an inside mask."""
-        shape, n, inside = self.shape, int(self.shape[3]), self.inside
+    def band_volume(self) -> BandMixture:
+        """This volume for a renderer, in proportion to its band: a ``BandMixture`` (``model.banded``) whose band is
+        the inside voxels whose mixture is not the core's, its volume's medium a placeholder that holds nothing per
+        voxel (``InsideLabels`` of ink 0: a renderer takes the band's mixture from ``set_mixture``). The core is the
+        mixture most inside voxels of the middle layer hold (a run's fixed core below its shell; any choice is
+        exact, as every other voxel is in the band). Read a layer at a time: 8 B of index and 4N of mixture per band
+        voxel, the inside mask's bits; the mixtures are those ``Volume.load`` holds, bit for bit. Only for a volume
+        with an inside mask."""
+        inside = self.inside
         if inside is None:  # a mask would change how a renderer walks it
             raise VolumeError(f"{self.path} has no inside mask: read it whole (Volume.load), not by a band")
-        core = self._core(inside)
-        index, rows, plane = [], [], shape[1] * shape[2]
-        for z in range(shape[0]):
-            lay = np.asarray(self[z], np.float32).reshape(-1, n)
-            k = np.flatnonzero(inside[z].reshape(-1) & np.any(lay != core, axis=1))
-            index.append(k + z * plane)
-            rows.append(lay[k])
+        if not inside.any():
+            raise VolumeError(f"{self.path}: the volume has no inside voxel")
         mask = PackedMask(inside)  # one bit per voxel, shared by the volume and its placeholder medium
-        vol = Volume(
+        geometry = Volume(
             self.voxel_mm,
             InsideLabels(mask, 0, self.inks),
             g=self.g,
@@ -214,19 +210,8 @@ class MixtureSource:
             normals=self.normals,
             boundary=self.boundary,
             origin_mm=self.origin_mm,
-            band=Band(np.concatenate(index), core),
         )
-        return vol, np.concatenate(rows)
-
-    def _core(self, inside: np.ndarray) -> np.ndarray:
-        """(N,) float32: the mixture most inside voxels of the middle layer that has some hold."""
-        held = np.flatnonzero(inside.reshape(inside.shape[0], -1).any(1))
-        if not len(held):
-            raise VolumeError(f"{self.path}: the volume has no inside voxel")
-        z = int(held[len(held) // 2])
-        lay = np.asarray(self[z], np.float32).reshape(-1, self.shape[3])[inside[z].reshape(-1)]
-        rows, counts = np.unique(lay, axis=0, return_counts=True)
-        return rows[int(np.argmax(counts))]
+        return band_mixture(geometry, self, most_common_row(self, inside))
 
     def labels_meta(self, vp, q: Quantization) -> Volume:
         """A labels Volume with this file's inks, g, ior, boundary and origin on the printer grid ``vp``, for

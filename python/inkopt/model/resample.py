@@ -16,9 +16,9 @@ among the source's boundary voxels (inside, with a 6-neighbour outside or off th
 nearest inside voxel of a point that none of its 8 surrounding centres holds is always one of them, since a step
 towards the point along its largest offset is shorter.
 
-Memory: the source mixture as given (it is not copied), its boundary voxels' positions (a KD-tree, built on the
-first point that needs it), and per chunk of ``chunk`` points a few (chunk, N) float64 arrays; no array the size
-of the destination grid.
+Memory: the source mixture as given (it is not copied; a ``BandMixture`` holds its band's rows only), its inside
+mask (a byte per source voxel), its boundary voxels' positions (a KD-tree, built on the first point that needs it),
+and per chunk of ``chunk`` points a few (chunk, N) float64 arrays; no array the size of the destination grid.
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
+from .banded import BandMixture
 from .volume import Volume, VolumeError
 
 METHODS = ("linear", "nearest")
@@ -42,19 +43,26 @@ def voxel_centres_mm(index: np.ndarray, shape, voxel_mm, origin_mm=None) -> np.n
 
 
 class MixtureResampler:
-    """The mixture of ``source`` (a mixture ``Volume``: (z, y, x, N) float32, its inside mask, ``voxel_mm``,
-    ``origin_mm``) at other points, by ``method`` ("linear" or "nearest", module docstring)."""
+    """The mixture of ``source`` at other points, by ``method`` ("linear" or "nearest", module docstring). ``source``:
+    a mixture ``Volume`` ((z, y, x, N) float32, its inside mask, ``voxel_mm``, ``origin_mm``), or a
+    ``BandMixture`` (``model.banded``: the same mixture held by its band; the same results, bit for bit)."""
 
-    def __init__(self, source: Volume, method: str = "linear"):
+    def __init__(self, source: Volume | BandMixture, method: str = "linear"):
         if method not in METHODS:
             raise ValueError(f"unknown resampling method '{method}'; use one of {list(METHODS)}")
-        self.mixture = source.require_mixture("resampling a mixture").mixture
-        self.inside = source.inside_mask()
+        if isinstance(source, BandMixture):
+            geometry, self.n_inks, self._mixture_at = source.volume, source.rows.shape[1], source.at
+        else:
+            geometry, flat = source, source.require_mixture("resampling a mixture").mixture
+            self.n_inks = flat.shape[-1]
+            flat = flat.reshape(-1, self.n_inks)
+            self._mixture_at = flat.__getitem__
+        self.inside = geometry.inside_mask()
         if not self.inside.any():
             raise VolumeError("the source volume has no inside voxel to take a mixture from")
-        self.method, self.shape, self.n_inks = method, self.inside.shape, self.mixture.shape[-1]
-        self.voxel_mm = np.asarray(source.voxel_mm, np.float64)
-        self.origin_mm = np.zeros(3) if source.origin_mm is None else np.asarray(source.origin_mm, np.float64)
+        self.method, self.shape = method, self.inside.shape
+        self.voxel_mm = np.asarray(geometry.voxel_mm, np.float64)
+        self.origin_mm = np.zeros(3) if geometry.origin_mm is None else np.asarray(geometry.origin_mm, np.float64)
         self._tree = self._tree_index = None
 
     def at(self, points_mm: np.ndarray, chunk: int = CHUNK) -> np.ndarray:
@@ -77,7 +85,6 @@ class MixtureResampler:
 
     def _rows(self, p: np.ndarray) -> np.ndarray:
         u = ((p - self.origin_mm) / self.voxel_mm - 0.5)[:, ::-1]  # continuous source index (z, y, x)
-        flat_mix = self.mixture.reshape(-1, self.n_inks)
         acc = np.zeros((len(p), self.n_inks), np.float64)
         wsum = np.zeros(len(p), np.float64)
         if self.method == "linear":
@@ -95,12 +102,12 @@ class MixtureResampler:
             if f is not None:
                 w *= np.prod(np.where(np.asarray(off) == 1, f, 1.0 - f), axis=1)
             hit = np.flatnonzero(w > 0)
-            acc[hit] += w[hit, None] * flat_mix[lin[hit]]
+            acc[hit] += w[hit, None] * self._mixture_at(lin[hit])
             wsum += w
         # no inside source voxel around: the nearest one's mixture (a tiny total weight counts as none)
         lost = np.flatnonzero(wsum < 1e-6)
         if len(lost):
-            acc[lost] = flat_mix[self._nearest_inside(p[lost])]
+            acc[lost] = self._mixture_at(self._nearest_inside(p[lost]))
             wsum[lost] = 1.0
         acc /= wsum[:, None]
         acc /= np.maximum(acc.sum(axis=1, keepdims=True), 1e-30)  # rows sum to 1 (the source's, up to rounding)

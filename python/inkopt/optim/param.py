@@ -227,11 +227,21 @@ BLOCK_VOXELS = 1 << 20
 
 def file_free_mixture(path, inks: InkTable, param: Parameterization, voxels: int = BLOCK_VOXELS) -> np.ndarray:
     """The free part (F, N) float32 of the mixture volume file ``path`` (``--init FILE``: any mixture volume of
-    the grid ``param.shape`` with ``inks``, e.g. a run's volume.npz or a coarse-to-fine start) at ``param``'s free
+    the grid ``param.shape`` with ``inks``, e.g. a run's volume.npz; or a start-rows file of the run's free voxels,
+    ``optim.startrows``, e.g. a coarse-to-fine job's start) at ``param``'s free
     voxels: ``free_part`` of its rows, read ``voxels`` grid voxels at a time (``MixtureSource.blocks``), so that
     only a block of the file's mixture is in memory beside the result; bit for bit what ``free_part`` of the whole
     ``Volume.load(path).mixture`` gives."""
+    from .startrows import is_start_rows, start_rows_blocks
+
     n = len(inks)
+    if is_start_rows(path):  # the free voxels' rows only (a coarse-to-fine job's start)
+        out = np.empty((param.n_free, n), np.float32)
+        for lo, rows in start_rows_blocks(path, inks, param.shape, param.free_index, voxels):
+            hi = lo + len(rows)
+            fixed = None if param.fixed_f is None else param.fixed_f[lo:hi]
+            out[lo:hi] = free_part(rows, fixed, param.share_f[lo:hi])
+        return out
     with MixtureSource(path, f"`init` {path}") as src:
         if src.inks.names != inks.names:
             raise ParameterError(f"`init` {path}: needs a mixture volume with inks {list(inks.names)}")

@@ -22,15 +22,18 @@ bounded by 1 and U reproduces a constant, so from white (B the same row everywhe
 transfer is the plain one. :class:`Baseline` carries B; without it the plain transfer runs.
 
 :func:`write_transferred_volume` writes the result as a mixture volume file on the destination's grid, which a
-run takes as its start with ``OptimizeConfig(init=PATH)``; :func:`transferred_free_mixture` gives the free part
-(F, N) directly. :func:`coarse_start` is the whole first stage: optimise the coarse scene (no evaluation, no
-checkpoints) and write its result as the start of the fine scene's run (a :class:`CoarseStart`).
+run takes as its start with ``OptimizeConfig(init=PATH)``; :func:`write_transferred_rows` writes only the
+destination's free voxels' rows (``optim.startrows``: 8 + 4N bytes per free voxel, what a coarse-to-fine job
+writes, ``coarse.run_coarse_to_fine``) and :func:`write_start_volume` turns such a file into the whole grid's
+volume; :func:`transferred_free_mixture` gives the free part (F, N) directly. :func:`coarse_start` is the whole
+first stage: optimise the coarse scene (no evaluation, no checkpoints) and write its result as the start of the
+fine scene's run (a :class:`CoarseStart`).
 
-Memory: the source volume (with a baseline, B_c's too), the destination's free index (``Parameterization``), and
-per z slab of the destination grid (``SLAB_VOXELS`` voxels) its mixture and the resampling temporaries; never a
-(z, y, x, N) array of the destination grid, so a 40 mm figurine's 61 M-voxel grid is written in slabs of about 80
-MB each. The run that starts from the file reads it in blocks of grid voxels too (``param.file_free_mixture``),
-keeping only the free voxels' free part (F, N).
+Memory: the source (a mixture volume, or held by its band, ``model.banded.BandMixture``: a run's result read by
+:func:`coarse_result`; with a baseline, B_c too), the destination's free index (``Parameterization``), and per
+chunk of free voxels the resampling temporaries; never a (z, y, x, N) array of the destination grid (the volume
+file is written in z slabs of ``SLAB_VOXELS`` voxels, about 80 MB each). The run that starts from the file reads it
+in blocks (``param.file_free_mixture``), keeping only the free voxels' free part (F, N).
 """
 
 from __future__ import annotations
@@ -42,24 +45,45 @@ from pathlib import Path
 import numpy as np
 
 from ..model import FixedShares, Volume
+from ..model.banded import BandMixture
+from ..model.mixturefile import MixtureSource
 from ..model.resample import CHUNK, MixtureResampler
 from .config import OptimizeConfig
 from .loop import Optimization
 from .param import Parameterization, free_part
+from .startrows import save_start_rows, start_rows_blocks
 
 #: destination voxels per written slab of layers (about 80 MB of float32 mixture at 5 inks)
 SLAB_VOXELS = 1 << 22
 
 
-def _source(source: Volume | str | Path) -> Volume:
+def _source(source: Volume | BandMixture | str | Path) -> Volume | BandMixture:
+    if isinstance(source, BandMixture):
+        return source
     vol = source if isinstance(source, Volume) else Volume.load(source)
     vol.require_mixture("a coarse-to-fine start")
     return vol
 
 
-def _check(src: Volume, base: Volume) -> None:
-    if base.inks is None or src.inks.names != base.inks.names:
-        have = list(src.inks.names)
+def coarse_result(path: str | Path) -> Volume | BandMixture:
+    """A run's result volume file ``path`` as a transfer's source: held by its band when it has an inside mask
+    (``MixtureSource.band_volume``: read a layer at a time, 8 + 4N bytes per voxel not in its core), else whole
+    (a slab's)."""
+    with MixtureSource(path, "a coarse-to-fine start") as src:
+        if src.inside is not None:
+            return src.band_volume()
+    return _source(path)
+
+
+def _geometry(src: Volume | BandMixture) -> Volume:
+    """The volume holding ``src``'s grid, inside mask and inks."""
+    return src.volume if isinstance(src, BandMixture) else src
+
+
+def _check(src: Volume | BandMixture, base: Volume) -> None:
+    inks = _geometry(src).inks
+    if base.inks is None or inks.names != base.inks.names:
+        have = list(inks.names)
         want = None if base.inks is None else list(base.inks.names)
         raise ValueError(f"the source mixture's inks {have} differ from the destination's {want}")
 
@@ -67,11 +91,12 @@ def _check(src: Volume, base: Volume) -> None:
 @dataclass(frozen=True)
 class Baseline:
     """The start B of a coarse stage that began from a baseline, for the correction transfer (module docstring):
-    ``coarse``, its mixture volume on the coarse grid (the grid and inside mask of the coarse result); ``fine``, its
+    ``coarse``, its mixture on the coarse grid (the grid and inside mask of the coarse result), a mixture volume or
+    a ``BandMixture`` (``model.banded``: held by its band, the same values); ``fine``, its
     mixture on the destination grid one z layer at a time: ``fine[z]`` (Y, X, N) float32 and ``fine.shape``
     (Z, Y, X, N) (``evaluation.baselines.BaselineLayers``, or a whole array)."""
 
-    coarse: Volume
+    coarse: Volume | BandMixture
     fine: object
 
 
@@ -100,14 +125,15 @@ class _Mover:
     """The whole mixture rows of the destination's free voxels: U(C) (the plain transfer), or with a baseline
     B_f + U(C) - U(B_c) (float64; the correction transfer), U(C) and U(B_c) resampled apart."""
 
-    def __init__(self, src: Volume, base: Volume, method: str, baseline: Baseline | None):
+    def __init__(self, src: Volume | BandMixture, base: Volume, method: str, baseline: Baseline | None):
         self.base, self.n, self.fine_rows, self.up_b = base, len(base.inks), None, None
         self.up = MixtureResampler(src, method)
         if baseline is None:
             return
         bc = _source(baseline.coarse)
         _check(bc, base)
-        if bc.shape != src.shape or not np.array_equal(bc.inside_mask(), src.inside_mask()):
+        geo_b, geo_c = _geometry(bc), _geometry(src)
+        if geo_b.shape != geo_c.shape or not np.array_equal(geo_b.inside_mask(), geo_c.inside_mask()):
             raise ValueError("the coarse baseline's grid or inside mask differs from the coarse result's")
         self.up_b = MixtureResampler(bc, method)
         self.fine_rows = _LayerRows(baseline.fine, base.shape, self.n)
@@ -120,6 +146,13 @@ class _Mover:
         up_c, up_b = up_c.astype(np.float64), self.up_b.on_grid(index, *grid).astype(np.float64)
         change = up_c / up_c.sum(axis=1, keepdims=True) - up_b / up_b.sum(axis=1, keepdims=True)
         return self.fine_rows(index) + change
+
+
+def destination(base: Volume, fixed_share: FixedShares | None) -> Parameterization:
+    """The free voxels of a run of the scene of ``base`` (the destination's volume) whose fixed shares are
+    ``fixed_share`` (None: none): its ``Parameterization`` (their ``free_index`` is the run's, whatever its kind)."""
+    fs = FixedShares.none(base.shape, len(base.inks)) if fixed_share is None else fixed_share
+    return Parameterization("softmax", fs)
 
 
 def _free_slab(mover: _Mover, param: Parameterization, a: int, b: int, chunk: int) -> np.ndarray:
@@ -143,8 +176,7 @@ def transferred_free_mixture(
     ``baseline`` (the source's start B, a :class:`Baseline`) by the correction transfer B_f + U(C - B_c)."""
     src = _source(source)
     _check(src, base)
-    fs = FixedShares.none(base.shape, len(base.inks)) if fixed_share is None else fixed_share
-    param = Parameterization("softmax", fs)
+    param = destination(base, fixed_share)
     mover = _Mover(src, base, method, baseline)
     out = np.empty((param.n_free, len(base.inks)), np.float32)
     for a in range(0, param.n_free, chunk):
@@ -174,29 +206,79 @@ def write_transferred_volume(
     parameterisation's clipping at 1e-6)."""
     src = _source(source)
     _check(src, base)
-    fs = FixedShares.none(base.shape, len(base.inks)) if fixed_share is None else fixed_share
-    param = Parameterization("softmax", fs)
+    param = destination(base, fixed_share)
     mover = _Mover(src, base, method, baseline)
-    nz, ny, nx = base.shape
-    plane, n = ny * nx, len(base.inks)
-    step = max(1, slab_voxels // max(plane, 1))
-
-    def slabs():
-        for z0 in range(0, nz, step):
-            z1 = min(nz, z0 + step)
-            rho = fs.at(np.arange(z0 * plane, z1 * plane, dtype=np.int64))
-            lo, hi = np.searchsorted(param.free_index, [z0 * plane, z1 * plane])
-            for a in range(lo, hi, chunk):
-                b = min(hi, a + chunk)
-                p = _free_slab(mover, param, a, b, chunk)
-                whole = param.share_f[a:b, None] * p
-                if param.fixed_f is not None:
-                    whole += param.fixed_f[a:b]
-                rho[param.free_index[a:b] - z0 * plane] = whole
-            yield rho.reshape(z1 - z0, ny, nx, n)
-
-    base.save_with_mixture(path, slabs(), base.inks, compressed=compressed)
+    whole = _whole_rows(mover, param, chunk)
+    slabs = _grid_slabs(param, len(base.inks), whole, slab_voxels, chunk)
+    base.save_with_mixture(path, slabs, base.inks, compressed=compressed)
     return Path(path)
+
+
+def write_start_volume(
+    start: str | Path, base: Volume, fixed_share: FixedShares | None, path: str | Path, slab_voxels: int = SLAB_VOXELS
+) -> Path:
+    """Write to ``path`` (atomically) the start-rows file ``start`` (``optim.startrows``, of a run of the scene of
+    ``base`` whose fixed shares are ``fixed_share``) as a mixture volume file of the whole grid of ``base``: the
+    fixed shares, the file's rows at its free voxels (what :func:`write_transferred_volume` writes for the same
+    transfer, bit for bit), e.g. to render or print a coarse-to-fine job's start. Holds the file's rows (F, N)."""
+    param = destination(base, fixed_share)
+    rows = np.empty((param.n_free, len(base.inks)), np.float32)
+    for lo, part in start_rows_blocks(start, base.inks, base.shape, param.free_index):
+        rows[lo : lo + len(part)] = part
+    base.save_with_mixture(path, _grid_slabs(param, len(base.inks), lambda a, b: rows[a:b], slab_voxels), base.inks)
+    return Path(path)
+
+
+def _whole_rows(mover: _Mover, param: Parameterization, chunk: int):
+    """rows(a, b): the whole mixtures (b - a, N) float64 (fixed shares plus the free part moved) of the free voxels
+    a:b, at most ``chunk`` of them."""
+
+    def rows(a: int, b: int) -> np.ndarray:
+        whole = param.share_f[a:b, None] * _free_slab(mover, param, a, b, chunk)
+        return whole if param.fixed_f is None else whole + param.fixed_f[a:b]
+
+    return rows
+
+
+def _grid_slabs(param: Parameterization, n: int, rows, slab_voxels: int, chunk: int = CHUNK):
+    """The whole grid's mixture as (k, y, x, N) float32 slabs of about ``slab_voxels`` voxels in z order: the fixed
+    shares of ``param``, and at its free voxels a:b the rows ``rows(a, b)`` (b - a at most ``chunk``)."""
+    fs, (nz, ny, nx) = param.fixed_share, param.shape
+    plane = ny * nx
+    step = max(1, slab_voxels // max(plane, 1))
+    for z0 in range(0, nz, step):
+        z1 = min(nz, z0 + step)
+        rho = fs.at(np.arange(z0 * plane, z1 * plane, dtype=np.int64))
+        lo, hi = np.searchsorted(param.free_index, [z0 * plane, z1 * plane])
+        for a in range(lo, hi, chunk):
+            b = min(hi, a + chunk)
+            rho[param.free_index[a:b] - z0 * plane] = rows(a, b)
+        yield rho.reshape(z1 - z0, ny, nx, n)
+
+
+def write_transferred_rows(
+    source: Volume | BandMixture | str | Path,
+    base: Volume,
+    param: Parameterization,
+    path: str | Path,
+    method: str = "linear",
+    chunk: int = CHUNK,
+    baseline: Baseline | None = None,
+) -> Path:
+    """Write to ``path`` (atomically) a start-rows file (``optim.startrows``) of ``param``'s free voxels (a
+    ``Parameterization`` of the fixed shares of ``base``, the destination scene's volume): their whole mixtures,
+    the fixed shares plus the free part of ``source``'s mixture moved onto the grid of ``base``
+    (:func:`transferred_free_mixture`; with ``baseline`` by the correction transfer), ``chunk`` voxels at a time:
+    the rows :func:`write_transferred_volume` writes at those voxels, bit for bit, in 8 + 4N bytes per free voxel
+    instead of 4N per grid voxel. A run of the destination scene started from it (``OptimizeConfig(init=path)``)
+    starts from exactly that free part (up to the parameterisation's clipping at 1e-6)."""
+    src = _source(source)
+    _check(src, base)
+    if tuple(param.shape) != tuple(base.shape):
+        raise ValueError(f"the free voxels are of a grid of {param.shape}, the destination's is {base.shape}")
+    whole = _whole_rows(_Mover(src, base, method, baseline), param, chunk)
+    rows = (whole(a, min(param.n_free, a + chunk)) for a in range(0, param.n_free, chunk))
+    return save_start_rows(path, base.shape, base.inks, param.free_index, rows)
 
 
 @dataclass
