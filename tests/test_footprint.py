@@ -10,7 +10,7 @@ from helpers import SPOT
 
 from inkopt import footprint
 from inkopt.cli import main
-from inkopt.coarse import PLAN_ITERATIONS, PLAN_MIN_SECONDS, default_time_budget
+from inkopt.coarse import PLAN_ITERATIONS, PLAN_MAX_SECONDS, PLAN_MIN_SECONDS, default_time_budget
 from inkopt.footprint import mesh_footprint, mesh_shape, spec_footprint
 from inkopt.model import InkTable
 from inkopt.scenes import build_scene
@@ -146,6 +146,8 @@ def test_the_flags_decide_when_given(monkeypatch, tmp_path):
 def test_the_plan_rule():
     assert default_time_budget(0.5) == PLAN_MIN_SECONDS
     assert default_time_budget(60.0) == PLAN_ITERATIONS * 60.0
+    assert default_time_budget(876.0) == PLAN_MAX_SECONDS  # Spot 100 mm: within 3 hours, not 40 x 876 s
+    assert default_time_budget(PLAN_MAX_SECONDS / PLAN_ITERATIONS) == PLAN_MAX_SECONDS
     with pytest.raises(ValueError):
         default_time_budget(float("inf"))
 
@@ -229,3 +231,30 @@ def test_what_quantize_writes_follows_the_surface():
         fp, _ = spec_footprint(MeshSpec(str(SPOT), height_mm=height, shell_mm=1.0), len(INKS))
         assert fp.quantized_bytes() == pytest.approx(written, rel=0.10), height
         assert fp.quantized_bytes() < 0.1 * 6.27 * fp.grid_voxels
+
+
+def test_the_plan_of_a_large_object_is_at_most_its_cap_and_says_so():
+    from inkopt.cli.jobplan import _time_plan
+
+    fp, _ = spec_footprint(MeshSpec(str(SPOT), height_mm=100.0, shell_mm=1.0), 5)
+    assert PLAN_ITERATIONS * fp.seconds_per_iteration() > PLAN_MAX_SECONDS  # 40 iterations: ~10 hours
+    budget, line = _time_plan(fp)
+    assert budget == PLAN_MAX_SECONDS and line.startswith("time plan: 2 h 45 min (")
+    assert "at most 2 h 45 min, mesh to printer package within 3 hours" in line
+
+
+def test_a_coarse_to_fine_dry_run_counts_the_coarse_stage_and_its_start_on_disk(capsys, tmp_path):
+    """Its disk: the fine run's folder, plus the coarse run's (its footprint at the coarse DPI) and the start (8 + 4N
+    bytes per free voxel); a run that does not go coarse to fine adds nothing."""
+    from inkopt.footprint import mesh_footprint
+
+    out, args = tmp_path / "run", ["optimize", str(SPOT), "--height-mm", "20", "--dry-run", "--shell-mm", "1"]
+    assert main([*args, "--out", str(out), "--iterations", "9"]) == 0
+    assert "coarse stage" not in capsys.readouterr().out
+    assert main([*args, "--out", str(out), "--iterations", "9", "--coarse-dpi", "150"]) == 0
+    line = capsys.readouterr().out
+    fp, shape = spec_footprint(MeshSpec(str(SPOT), height_mm=20.0, shell_mm=1.0), 5)
+    coarse = mesh_footprint(shape, 150.0, 1.0, 5, footprint.mesh_band(25.4 / 150, 1.0))
+    extra = coarse.disk_bytes(9) + 28 * fp.free_voxels
+    assert f"disk ~{(fp.disk_bytes(9) + extra) / 1e9:.2f} GB (of which {extra / 1e6:.1f} MB the coarse stage" in line
+    assert not out.exists()

@@ -31,12 +31,12 @@ def plan_job(args, spec, inks, cfg, options):
     refusal, note = None, None
     try:
         choice = choose_shell(spec, n_inks, limit, automatic)
-        spec, fp, note = choice.spec, choice.footprint, choice.note
+        spec, fp, note, shape = choice.spec, choice.footprint, choice.note, choice.shape
     except ParameterError as exc:
         if not args.dry_run:
             raise
         refusal = exc  # a dry run prints its estimate first
-        fp, _ = spec_footprint(spec, n_inks)
+        fp, shape = spec_footprint(spec, n_inks)
     if note is not None:
         note = ParameterError(note).render(flag_of)  # the library's parameter names as flags
         options = replace(options, log=_first_line(options.log, note))
@@ -47,8 +47,27 @@ def plan_job(args, spec, inks, cfg, options):
         options = replace(options, log=_first_line(options.log, line))
     dry = None
     if args.dry_run and (spec.kind == "mesh" or refusal is not None):
-        dry = _FootprintDryRun(fp, cfg.iterations, limit, refusal, planned, note)
+        coarse = _coarse_disk(args, spec, shape, fp, cfg) if spec.kind == "mesh" else 0.0
+        dry = _FootprintDryRun(fp, cfg.iterations, limit, refusal, planned, note, coarse)
     return spec, cfg, options, dry
+
+
+def _coarse_disk(args, spec, shape, fp, cfg) -> float:
+    """The disk (bytes) a mesh job's coarse stage adds when it goes coarse to fine (``--coarse-dpi``, or a time
+    budget's deadline plan: half the DPI, ``coarse.deadline_plan``): the coarse run's folder (its footprint at that
+    DPI) and the fine stage's start (``optim.startrows``: 8 + 4N bytes per free voxel); 0 when it does not."""
+    from ..coarse import DEADLINE_COARSE_FACTOR
+    from ..footprint import mesh_band, mesh_footprint
+    from ..units import voxel_mm
+
+    dpi = args.coarse_dpi
+    if dpi is None and cfg.time_budget is not None:
+        dpi = DEADLINE_COARSE_FACTOR * spec.dpi
+    if not dpi or not 0 < dpi < spec.dpi:
+        return 0.0
+    depth = spec.translucency_depth_mm if spec.translucency else None
+    coarse = mesh_footprint(shape, dpi, spec.shell_mm, fp.n_inks, mesh_band(voxel_mm(dpi), spec.shell_mm, depth))
+    return coarse.disk_bytes(cfg.iterations) + (8 + 4 * fp.n_inks) * fp.free_voxels
 
 
 def _resumed_shell(args, inks) -> float | None:
@@ -92,7 +111,7 @@ def _first_line(log, line: str):
 def _time_plan(fp) -> tuple[float, str]:
     """The time budget of a run given neither ``--time-budget`` nor ``--iterations`` (``coarse.default_time_budget``
     from the footprint's seconds per iteration) and the line that says so."""
-    from ..coarse import PLAN_ITERATIONS, PLAN_MIN_SECONDS, default_time_budget
+    from ..coarse import PLAN_ITERATIONS, PLAN_MAX_SECONDS, PLAN_MIN_SECONDS, default_time_budget
     from ..units import format_duration
 
     each = fp.seconds_per_iteration()
@@ -100,6 +119,11 @@ def _time_plan(fp) -> tuple[float, str]:
     why = f"{PLAN_ITERATIONS} iterations' time at the estimated {each:.3g} s each"
     if budget > PLAN_ITERATIONS * each:
         why = f"at least {format_duration(PLAN_MIN_SECONDS)}; {why} is less"
+    elif budget < PLAN_ITERATIONS * each:
+        why = (
+            f"at most {format_duration(PLAN_MAX_SECONDS)}, mesh to printer package within 3 hours; {why} "
+            f"({format_duration(PLAN_ITERATIONS * each)}) is more"
+        )
     return budget, (
         f"time plan: {format_duration(budget)} (no --time-budget or --iterations given; {why}, the deadline "
         "that reached within 1 ΔE76 of 300 iterations on Spot and the reference slab, docs/performance.md; "
@@ -110,16 +134,18 @@ def _time_plan(fp) -> tuple[float, str]:
 class _FootprintDryRun:
     """A dry run from the footprint (a mesh's, or a job that does not fit): its line for ``iterations`` against the
     memory ``limit``; ``refusal``: the error the run would end with (None: it fits); ``planned``: its time budget is
-    the time plan; ``note``: the line of a band chosen for the memory (None: none), printed first."""
+    the time plan; ``note``: the line of a band chosen for the memory (None: none), printed first; ``coarse_disk``:
+    the bytes a coarse stage adds to the disk (``_coarse_disk``)."""
 
-    def __init__(self, fp, iterations: int, limit, refusal=None, planned: bool = False, note: str | None = None):
+    def __init__(self, fp, iterations: int, limit, refusal=None, planned=False, note=None, coarse_disk: float = 0.0):
         self.fp, self.iterations, self.limit, self.refusal, self.planned = fp, iterations, limit, refusal, planned
-        self.note = note
+        self.note, self.coarse_disk = note, coarse_disk
 
     def line(self, time_budget: float | None = None) -> str:
         from ..errors import ParameterError
         from .common import flag_of
 
-        line = self.fp.line(self.iterations, time_budget, self.limit, "time plan" if self.planned else "time budget")
+        budget_name = "time plan" if self.planned else "time budget"
+        line = self.fp.line(self.iterations, time_budget, self.limit, budget_name, self.coarse_disk)
         line = ParameterError(line).render(flag_of)  # the memory limit's source may name a parameter
         return line if self.note is None else f"{self.note}\n{line}"

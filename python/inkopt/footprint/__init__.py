@@ -252,9 +252,11 @@ class Footprint:
         time_budget: float | None = None,
         limit: MemoryLimit | None = None,
         budget_name="time budget",
+        coarse_disk: float = 0.0,
     ) -> str:
         """The dry run's line: the counts, the peak memory (against ``limit``), the time of up to ``iterations``
-        (ended sooner by ``time_budget`` seconds when shorter, named ``budget_name``) and the disk."""
+        (ended sooner by ``time_budget`` seconds when shorter, named ``budget_name``) and the disk (with
+        ``coarse_disk`` bytes of a coarse stage and its start, said apart)."""
         each = self.seconds_per_iteration()
         total = each * iterations
         budget = ""
@@ -267,11 +269,13 @@ class Footprint:
             f"{_count(self.free_voxels)} free, {_count(self.texels)} texels"
         )
         setup = "" if self.kind == "slab" else f"set-up ~{format_duration(self.setup_seconds())}, "
+        disk = self.disk_bytes(iterations) + coarse_disk
+        coarse = f" (of which {_size(coarse_disk)} the coarse stage and its start)" if coarse_disk else ""
         events = "" if self.kind == "slab" else f", {self.events:.0f} events per path"
         return (
             f"estimate from the {self.kind}'s size ({counts}): peak memory ~{self.peak_bytes() / 2**30:.1f} GiB{room}; "
             f"{setup}up to {iterations} iterations x {_seconds(each)} s = {format_duration(total)} (+ the final "
-            f"evaluation; 2 quiet cores, from white{events}){budget}; disk ~{_size(self.disk_bytes(iterations))} "
+            f"evaluation; 2 quiet cores, from white{events}){budget}; disk ~{_size(disk)}{coarse} "
             f"(+ {_size(self.quantized_bytes())} after inkopt quantize)"
         )
 
