@@ -5,11 +5,12 @@ then its renderer set to the start; it stops before the first iteration (``--ste
     python bench/bench_fine_setup.py START.npz [HEIGHT_MM=40] [--mesh spot.obj] [--step] [--name NAME]
         [-- OPTIONS ...]
 
-``START.npz``: a start volume on the fine grid (``DIR/coarse/fine_start.npz`` of a coarse-to-fine run of that
-mesh and height). ``OPTIONS`` after ``--``: ``inkopt optimize``'s, read as the command line reads them (default
-``--coarse-dpi 150 --time-budget 27m``). Peak memory is the process's resident-set high-water mark (getrusage)
-after each stage (and the resident set at its end, ``rss_gb_by_stage``); run one per process, with nothing else
-heavy on the machine. Writes the entry NAME (default ``spot<H>``) of bench/results/fine_setup.json.
+``START.npz``: a start on the fine grid, a mixture volume or a start-rows file (``DIR/coarse/fine_start.npz`` of a
+coarse-to-fine run of that mesh and height). ``OPTIONS`` after ``--``: ``inkopt optimize``'s, read as the command
+line reads them (default ``--coarse-dpi 150 --time-budget 27m``). Peak memory is the process's resident-set
+high-water mark (getrusage) after each stage (and the resident set at its end, ``rss_gb_by_stage``); run one per
+process, with nothing else heavy on the machine. Writes the entry NAME (default ``spot<H>``) of
+bench/results/fine_setup.json.
 """
 
 from __future__ import annotations
@@ -50,7 +51,7 @@ def main(argv=None) -> dict:
     extra = argv[argv.index("--") + 1 :] if "--" in argv else ["--coarse-dpi", "150", "--time-budget", "27m"]
     argv = argv[: argv.index("--")] if "--" in argv else argv
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("start", help="the start volume on the fine grid (DIR/coarse/fine_start.npz)")
+    ap.add_argument("start", help="the start on the fine grid (DIR/coarse/fine_start.npz)")
     ap.add_argument("height_mm", type=float, nargs="?", default=40.0)
     ap.add_argument("--mesh", default=str(SPOT))
     ap.add_argument("--step", action="store_true", help="also run the first iteration")

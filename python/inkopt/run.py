@@ -89,7 +89,7 @@ class RunOptions:
     figures at the start and check the result against them (``evaluation.guard``). ``baselines``: print-shop
     baselines' mixtures already made for this scene (kind -> ``evaluation.baselines.baseline_layers``'s layers,
     e.g. by a coarse-to-fine transfer from a baseline), taken by the run's start and its guard instead of being made
-    again, then released: the run empties the dict before its iterations (the spider of the mesh suite at 20 mm: its
+    again, then released: the run empties a dict given before its iterations (the spider of the mesh suite at 20 mm: its
     fine stage ran 9 iterations in a 5-minute job instead of 6, docs/quality.md, "The correction transfer").
     ``after(setup_s)``: seconds the job needs after this run, from the run's seconds outside its iterations so far
     (its set-up); the run's time budget keeps them besides its own figures and writing (a coarse stage's: its fine
@@ -171,7 +171,7 @@ def run_optimisation(scene: Scene, out_dir, cfg: OptimizeConfig, options: RunOpt
             job.run.keep_start_figures(figures.start())
         if options.baseline_guard:  # the extrusion baseline's figures, measured once like the start's
             keep_baseline_figures(job.run, lambda x: figures.start(x, keep_renderer=True), options.log)
-        if options.baselines:  # read by the start and the guard alone: not held through the iterations
+        if isinstance(options.baselines, dict):  # read by the start and the guard alone: not held further
             options.baselines.clear()
         job.run.release_unread_operators()  # the figures' window is not held through the first render
         release_freed_memory()  # nor the heap the figures freed: a step's large arrays are mapped, not taken from it

@@ -193,3 +193,32 @@ def test_the_coarse_result_and_its_baseline_are_held_by_their_bands(tmp_path):
         np.testing.assert_array_equal(
             got.at(np.arange(vol.inside.size)[vol.inside_mask().ravel()]), vol.mixture[vol.inside_mask()]
         )
+
+
+def test_start_rows_declaring_huge_or_trailing_members_are_refused_in_one_line(tmp_path):
+    """Headers are checked before anything is allocated, and a member with more than it declares is refused."""
+    import io
+
+    fine, fixed = fine_ball()
+    param = destination(fine, fixed)
+    good = valid(tmp_path, param)
+
+    def rewrite(name: str, member: str, body: bytes) -> str:
+        with zipfile.ZipFile(good) as src, zipfile.ZipFile(tmp_path / name, "w") as zf:
+            for info in src.infolist():
+                zf.writestr(info.filename, body if info.filename == member else src.read(info.filename))
+        return str(tmp_path / name)
+
+    huge = io.BytesIO()  # a header claiming 10^12 int64 entries, then nothing
+    np.lib.format.write_array_header_2_0(huge, {"descr": "<i8", "fortran_order": False, "shape": (10**12,)})
+    with zipfile.ZipFile(good) as src:
+        rows = src.read("free_rows.npy")
+    cases = {
+        rewrite("huge.npz", "grid_shape.npy", huge.getvalue()): "declares",
+        rewrite("trailing.npz", "free_rows.npy", rows + b"\0" * 8): "more than its header declares",
+        rewrite("v9.npz", "grid_shape.npy", b"\x93NUMPY\x09\x00" + huge.getvalue()[8:]): "format version",
+    }
+    for path, match in cases.items():
+        with pytest.raises(ValueError, match=match) as e:
+            initial_free_mixture(INKS, param, path, 0)
+        assert "\n" not in str(e.value) and path in str(e.value)

@@ -58,8 +58,9 @@ def band_of_layers(layers, inside, core: np.ndarray) -> tuple[np.ndarray, np.nda
     core = np.asarray(core, np.float32).reshape(n)
     index, rows = [np.empty(0, np.int64)], [np.empty((0, n), np.float32)]
     for z in range(nz):
-        lay = np.asarray(layers[z], np.float32).reshape(-1, n)
-        k = np.flatnonzero(np.asarray(inside[z]).reshape(-1) & np.any(lay != core, axis=1))
+        lay = np.ascontiguousarray(layers[z], np.float32).reshape(-1, n)
+        differ = np.any(lay.view(np.uint32) != core.view(np.uint32), axis=1)  # bits: -0.0 is not the core's 0.0
+        k = np.flatnonzero(np.asarray(inside[z]).reshape(-1) & differ)
         index.append(k + z * ny * nx)
         rows.append(lay[k])
     return np.concatenate(index), np.concatenate(rows)

@@ -226,12 +226,12 @@ BLOCK_VOXELS = 1 << 20
 
 
 def file_free_mixture(path, inks: InkTable, param: Parameterization, voxels: int = BLOCK_VOXELS) -> np.ndarray:
-    """The free part (F, N) float32 of the mixture volume file ``path`` (``--init FILE``: any mixture volume of
-    the grid ``param.shape`` with ``inks``, e.g. a run's volume.npz; or a start-rows file of the run's free voxels,
-    ``optim.startrows``, e.g. a coarse-to-fine job's start) at ``param``'s free
-    voxels: ``free_part`` of its rows, read ``voxels`` grid voxels at a time (``MixtureSource.blocks``), so that
-    only a block of the file's mixture is in memory beside the result; bit for bit what ``free_part`` of the whole
-    ``Volume.load(path).mixture`` gives."""
+    """The free part (F, N) float32 of the start file ``path`` (``--init FILE``) at ``param``'s free voxels:
+    ``free_part`` of its rows. A mixture volume file (any of the grid ``param.shape`` with ``inks``, e.g. a run's
+    volume.npz) is read ``voxels`` grid voxels at a time (``MixtureSource.blocks``), bit for bit what ``free_part``
+    of the whole ``Volume.load(path).mixture`` gives; a start-rows file of exactly the run's free voxels
+    (``optim.startrows``, a coarse-to-fine job's start) ``voxels`` rows at a time. Only a block of the file's
+    mixture is in memory beside the result."""
     from .startrows import is_start_rows, start_rows_blocks
 
     n = len(inks)

@@ -92,7 +92,7 @@ def _small(zf: zipfile.ZipFile, where: str) -> dict:
     missing = [k for k in (*SMALL[:4], "free_index", ROWS) if k + ".npy" not in names]
     if missing:
         raise VolumeError(f"{where}: a start file without {', '.join(missing)}")
-    small = {k: np.lib.format.read_array(zf.open(k + ".npy"), allow_pickle=False) for k in SMALL if k + ".npy" in names}
+    small = {k: _small_array(zf, k, where) for k in SMALL if k + ".npy" in names}
     small = upgrade_format(small, kind="start file", where=where, current=START_FORMAT, upgrades={})
     if small["ink_names"].dtype.kind != "U" or np.asarray(small["grid_shape"]).dtype.kind not in "iu":
         raise VolumeError(f"{where}: its ink names or grid shape are not text and integers")
@@ -101,11 +101,34 @@ def _small(zf: zipfile.ZipFile, where: str) -> dict:
     return small
 
 
+#: the most entries a small member (the format version, the grid shape, the ink table) may declare
+SMALL_ENTRIES = 1 << 12
+
+
+def _small_array(zf: zipfile.ZipFile, name: str, where: str) -> np.ndarray:
+    """The small member ``name`` of the file, its declared size checked before it is read (a header claiming a
+    huge array is refused in one line, not allocated)."""
+    with zf.open(name + ".npy") as member:
+        shape, _, _ = _read_header(member, where)
+    if any(d < 0 for d in shape) or int(np.prod(shape, dtype=np.float64)) > SMALL_ENTRIES:
+        raise VolumeError(f"{where}: its {name} declares {tuple(shape)} entries, not a start file's")
+    with zf.open(name + ".npy") as member:
+        return np.lib.format.read_array(member, allow_pickle=False)
+
+
+def _read_header(member, where: str) -> tuple:
+    """(shape, fortran_order, dtype) of the .npy header of ``member`` (versions 1.0 and 2.0, which numpy and
+    inkopt write)."""
+    version = np.lib.format.read_magic(member)
+    if version not in ((1, 0), (2, 0)):
+        raise VolumeError(f"{where}: a member of .npy format version {version}, not 1.0 or 2.0")
+    read = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+    return read(member)
+
+
 def _header(member, where: str, dtype, shape) -> None:
     """Read the .npy header of ``member``; one-line VolumeError unless it is C-order ``dtype`` of ``shape``."""
-    major, _ = np.lib.format.read_magic(member)
-    read = np.lib.format.read_array_header_1_0 if major == 1 else np.lib.format.read_array_header_2_0
-    got_shape, fortran, got_dtype = read(member)
+    got_shape, fortran, got_dtype = _read_header(member, where)
     if fortran or got_dtype != np.dtype(dtype) or tuple(got_shape) != tuple(shape):
         raise VolumeError(f"{where}: holds {got_dtype} {tuple(got_shape)}, expected {np.dtype(dtype)} {tuple(shape)}")
 
@@ -120,9 +143,7 @@ def _read(member, n: int, where: str) -> bytes:
 def _same_index(zf: zipfile.ZipFile, free_index: np.ndarray, where: str, block: int = 1 << 20) -> None:
     """One-line ParameterError unless the file's ``free_index`` is ``free_index``, compared a block at a time."""
     with zf.open("free_index.npy") as member:
-        major, _ = np.lib.format.read_magic(member)
-        read = np.lib.format.read_array_header_1_0 if major == 1 else np.lib.format.read_array_header_2_0
-        shape, fortran, dtype = read(member)
+        shape, fortran, dtype = _read_header(member, where)
         if fortran or dtype != np.dtype("<i8") or len(shape) != 1:
             raise VolumeError(f"{where}: its free_index is {dtype} {tuple(shape)}, expected int64 (F,)")
         if shape[0] != len(free_index):
@@ -133,6 +154,14 @@ def _same_index(zf: zipfile.ZipFile, free_index: np.ndarray, where: str, block: 
             part = np.frombuffer(_read(member, 8 * min(block, len(free_index) - lo), where), "<i8")
             if not np.array_equal(part, free_index[lo : lo + block]):
                 raise ParameterError(f"{where}: a start for other free voxels than this run's (another scene)")
+        _at_end(member, where)
+
+
+def _at_end(member, where: str) -> None:
+    """One-line VolumeError unless ``member`` has nothing after what was read (reading to its end also checks its
+    CRC)."""
+    if member.read(1):
+        raise VolumeError(f"{where}: a member holds more than its header declares")
 
 
 def _row_blocks(zf: zipfile.ZipFile, f: int, n: int, voxels: int, where: str):
@@ -145,3 +174,4 @@ def _row_blocks(zf: zipfile.ZipFile, f: int, n: int, voxels: int, where: str):
             if not np.all(np.isfinite(rows)) or np.any(rows < 0):
                 raise VolumeError(f"{where}: its mixture must be finite and non-negative")
             yield lo, rows
+        _at_end(member, where)
