@@ -122,6 +122,12 @@ class Parameterization:
         """The whole grid's mixture of variables x (F, N) as (k, y, x, N) float32 slabs of about ``voxels`` voxels
         in z order (an iterator; each slab equals the same layers of :meth:`mixture`, bit for bit), so that a big
         object's result can be written without the grid-sized array."""
+        return self.grid_slabs(lambda a, b: self.free_rows(x[a:b], a), voxels)
+
+    def grid_slabs(self, rows, voxels: int = 1 << 22, chunk: int = 1 << 20):
+        """The whole grid's mixture as (k, y, x, N) float32 slabs of about ``voxels`` voxels in z order (an
+        iterator): the fixed shares, and at the free voxels a:b (``free_index`` order) the whole mixtures
+        ``rows(a, b)`` ((b - a, N), at most ``chunk`` of them)."""
         nz, ny, nx = self.shape
         plane = ny * nx
         step = max(1, voxels // max(plane, 1))
@@ -130,9 +136,9 @@ class Parameterization:
             z1 = min(nz, z0 + step)
             rho = fs.at(np.arange(z0 * plane, z1 * plane, dtype=np.int64))
             lo, hi = np.searchsorted(self.free_index, [z0 * plane, z1 * plane])
-            for a in range(lo, hi, 1 << 20):
-                b = min(hi, a + (1 << 20))
-                rho[self.free_index[a:b] - z0 * plane] = self.free_rows(x[a:b], a)
+            for a in range(lo, hi, chunk):
+                b = min(hi, a + chunk)
+                rho[self.free_index[a:b] - z0 * plane] = rows(a, b)
             yield rho.reshape(z1 - z0, ny, nx, self.n_inks)
 
     def backward(self, x: np.ndarray, grad_rho: np.ndarray, natural: bool = False, lo: int = 0) -> np.ndarray:

@@ -209,8 +209,7 @@ def write_transferred_volume(
     param = destination(base, fixed_share)
     mover = _Mover(src, base, method, baseline)
     whole = _whole_rows(mover, param, chunk)
-    slabs = _grid_slabs(param, len(base.inks), whole, slab_voxels, chunk)
-    base.save_with_mixture(path, slabs, base.inks, compressed=compressed)
+    base.save_with_mixture(path, param.grid_slabs(whole, slab_voxels, chunk), base.inks, compressed=compressed)
     return Path(path)
 
 
@@ -225,7 +224,7 @@ def write_start_volume(
     rows = np.empty((param.n_free, len(base.inks)), np.float32)
     for lo, part in start_rows_blocks(start, base.inks, base.shape, param.free_index):
         rows[lo : lo + len(part)] = part
-    base.save_with_mixture(path, _grid_slabs(param, len(base.inks), lambda a, b: rows[a:b], slab_voxels), base.inks)
+    base.save_with_mixture(path, param.grid_slabs(lambda a, b: rows[a:b], slab_voxels), base.inks)
     return Path(path)
 
 
@@ -238,22 +237,6 @@ def _whole_rows(mover: _Mover, param: Parameterization, chunk: int):
         return whole if param.fixed_f is None else whole + param.fixed_f[a:b]
 
     return rows
-
-
-def _grid_slabs(param: Parameterization, n: int, rows, slab_voxels: int, chunk: int = CHUNK):
-    """The whole grid's mixture as (k, y, x, N) float32 slabs of about ``slab_voxels`` voxels in z order: the fixed
-    shares of ``param``, and at its free voxels a:b the rows ``rows(a, b)`` (b - a at most ``chunk``)."""
-    fs, (nz, ny, nx) = param.fixed_share, param.shape
-    plane = ny * nx
-    step = max(1, slab_voxels // max(plane, 1))
-    for z0 in range(0, nz, step):
-        z1 = min(nz, z0 + step)
-        rho = fs.at(np.arange(z0 * plane, z1 * plane, dtype=np.int64))
-        lo, hi = np.searchsorted(param.free_index, [z0 * plane, z1 * plane])
-        for a in range(lo, hi, chunk):
-            b = min(hi, a + chunk)
-            rho[param.free_index[a:b] - z0 * plane] = rows(a, b)
-        yield rho.reshape(z1 - z0, ny, nx, n)
 
 
 def write_transferred_rows(
