@@ -96,7 +96,8 @@ class RunOptions:
     stage's predicted cost, ``coarse.fine_stage_seconds``). ``seconds_per_iteration``: known before the run starts
     (a coarse-to-fine job's fine stage with a time budget: the coarse stage's, scaled,
     ``coarse.fine_iteration_seconds``): the run's estimate takes it instead of timing passes on its renderer
-    (``estimate.estimate_run``)."""
+    (``estimate.estimate_run``). ``start_texel_sample``: the start's and baselines' figures of every texel (0) or of a
+    texel sample of that many texels (None: whichever a pilot predicts is faster, ``runfigures``)."""
 
     resume: bool = False
     eval_spp: int | None = None
@@ -116,6 +117,7 @@ class RunOptions:
     baselines: dict | None = None
     after: Callable[[float], float] | None = None
     seconds_per_iteration: float | None = None
+    start_texel_sample: int | None = None
 
     def validate(self) -> None:
         """One-line errors naming the option, before any work."""
@@ -134,6 +136,9 @@ class RunOptions:
         per = self.seconds_per_iteration
         if per is not None and not 0 < per < float("inf"):
             raise ParameterError(f"`seconds_per_iteration` must be a positive number of seconds, got {per}")
+        n = self.start_texel_sample
+        if n is not None and (n < 0 or n == 1):
+            raise ParameterError(f"`start_texel_sample` must be 0 (every texel) or at least 2 texels, got {n}")
 
 
 @dataclass
@@ -339,6 +344,7 @@ def _report(job: _Job, res, metrics, de, estimate: Estimate, check: BaselineChec
         spp_adaptive=job.options.eval_spp is None,
         eval_spp_passes=res.passes,
         initial_eval_spp=start["eval_spp"],
+        initial_texel_sample=start.get("texel_sample"),
         # this invocation's wall time (set-up, the iterations it ran, the evaluation); a resumed run's earlier
         # iterations are in the history, so seconds_iterations covers all of them
         seconds=time.perf_counter() - job.options.started,

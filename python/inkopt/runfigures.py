@@ -1,16 +1,29 @@
 """A run's figures (``RunFigures``): the start's, a baseline's and the result's renders with seeds unused by the
 optimisation, their time budgets within a run's time budget (``figure_budgets``), and the choice of the result's
 finishing smoothing (``evaluation.finish``), whose render of the chosen candidate is the result's figures' first
-pass."""
+pass.
+
+The start's and the baselines' figures are one pilot pass (``noise.PILOT_SPP`` samples per texel at most), of every
+texel or of a texel sample (``evaluation.sample``): whichever a short pilot predicts is at least twice as fast for a
+mean ΔE76 whose standard error is ``START_STDERR_DE76`` (``evaluation.choice.choose_sampling``; ``RunOptions.
+start_texel_sample`` forces either). The sample is chosen once, by the first of them, and drawn with the figures'
+seed, so the start and the baseline are measured on the same texels. An object's texels grow with its surface and a
+sample's with its figures' spread, so at 100 mm these figures take seconds where a pass over every texel takes about
+three iterations' time. The result's figures render every texel: its pictures and predictions.npz need them."""
 
 from __future__ import annotations
 
 import time
+from typing import NamedTuple
 
+from .evaluation.choice import MIN_SAMPLE_TEXELS, SAMPLE_MIN_GAIN, SamplingChoice, choose_sampling
 from .evaluation.finish import FinishChoice, choice_seconds, choose_finish
 from .evaluation.guard import kept_figures
 from .evaluation.metrics import prediction_metrics
 from .evaluation.noise import EVAL_SEED_OFFSET, PILOT_SPP, Sampling, adaptive_render, first_pass
+from .evaluation.renders import TimeShares, render_result, texel_groups
+from .evaluation.sample import SIGMA, TexelSample, per_texel, sampled_figures
+from .loss import TexelLoss
 from .optim import OptimizeConfig
 
 #: Shares of a run's time budget (``OptimizeConfig.time_budget``) given to the start's figures (as much again to the
@@ -26,6 +39,20 @@ BUDGET_START_FIGURES, BUDGET_FINAL_FIGURES, BUDGET_WRITING = 0.03, 0.08, 0.04
 #: 20 (Spot 20 mm: 553 spp, experiments/results/mesh_convergence.json, entry ``spot20_smooth3_60``). The noise left
 #: is corrected for and reported; `inkopt evaluate` measures the printed result against the baselines without noise.
 FINAL_FIGURES_SHARE = 0.25
+#: the standard error (ΔE76) of the start's and baselines' mean ΔE76 when they are measured on a texel sample: a
+#: third of ``evaluation.choice.TARGET_STDERR_DE76``, so that the guard's tolerance (the baseline's error and the
+#: result's in quadrature) grows by at most ~0.05 ΔE76 over a render of every texel; about (6 / 0.05)² = 14 400
+#: points for a typical spread of 6 ΔE76, with 100 SSIM windows of ~120 texels each
+START_STDERR_DE76 = 0.05
+
+
+class _Ask(NamedTuple):
+    """What ``choose_sampling`` reads of an evaluation's options, for the start's and baselines' figures."""
+
+    texel_sample: int | None
+    spp: int | None
+    max_spp: int
+    sample_windows: int | None = None
 
 
 def figure_budgets(cfg: OptimizeConfig, eval_time_budget: float | None, elapsed: float = 0.0) -> tuple:
@@ -55,11 +82,13 @@ class RunFigures:
         self.overshoot = 0.0  # the most seconds a start's or baseline's figures took beyond their budget
         self.per_spp = None  # seconds per sample per texel of the latest start's or baseline's figures
         self.replay = None  # the result's first pass, rendered by the finishing choice (``evaluation.finish.Replay``)
+        self.choice = None  # the start's and baselines' choice of a texel sample (``evaluation.choice.SamplingChoice``)
 
-    def _pass(self, renderer, n: int, s: int):
-        """One render pass of the scene's texels: (rgb, var_mean, n)."""
+    def _pass(self, renderer, n: int, s: int, texels=None):
+        """One render pass of the scene's texels (or of ``texels``, some of them): (rgb, var_mean, n)."""
         opts, cfg = self.job.options, self.job.cfg
-        r = renderer.render(self.job.scene.texels, n, s, cfg.include_specular, opts.progress)
+        texels = self.job.scene.texels if texels is None else texels
+        r = renderer.render(texels, n, s, cfg.include_specular, opts.progress)
         return r.rgb, r.var_mean, n
 
     def _sampling(self, budget, max_spp: int, pilot_in_budget: bool = True) -> Sampling:
@@ -67,11 +96,11 @@ class RunFigures:
             seed=self.seed, spp=self.spp, max_spp=max_spp, time_budget=budget, pilot_in_budget=pilot_in_budget
         )
 
-    def _of(self, x, sampling: Sampling, keep_renderer: bool = True, replay=None):
-        """(``AdaptiveResult``, ``Metrics``) of the mixture of variables ``x`` (None: the current ones); ``replay``: a
-        pass rendered already (``evaluation.finish.Replay``)."""
+    def _of(self, x, sampling: Sampling, keep_renderer: bool = True, replay=None, renderer=None):
+        """(``AdaptiveResult``, ``Metrics``) of the mixture of variables ``x`` (None: the current ones; ``renderer``:
+        the run's, set to it already); ``replay``: a pass rendered already (``evaluation.finish.Replay``)."""
         run, opts = self.job.run, self.job.options
-        renderer = run.renderer(x)
+        renderer = run.renderer(x) if renderer is None else renderer
 
         def render(n: int, s: int):
             return self._pass(renderer, n, s)
@@ -90,17 +119,73 @@ class RunFigures:
         return res, prediction_metrics(run.loss, res.rgb, res.var)  # CIELAB under the first light
 
     def start(self, x=None, keep_renderer: bool | None = None) -> dict:
-        """The start's figures (one pilot pass at most) as ``Optimization.keep_start_figures`` keeps them
-        (``evaluation.guard.kept_figures``); ``x``: other variables than the current ones (the start's when the run
-        is no longer at its start, a baseline's); the renderer is kept if ``keep_renderer`` (None: without ``x``)."""
+        """The start's figures (one pilot pass at most; of every texel or of the texel sample, module docstring) as
+        ``Optimization.keep_start_figures`` keeps them (``evaluation.guard.kept_figures``); ``x``: other variables
+        than the current ones (the start's when the run is no longer at its start, a baseline's); the renderer is
+        kept if ``keep_renderer`` (None: without ``x``)."""
         max_spp = min(self.job.options.eval_max_spp, PILOT_SPP)
         keep = x is None if keep_renderer is None else keep_renderer
         t = time.perf_counter()
-        res, m = self._of(x, self._sampling(self.start_budget, max_spp), keep_renderer=keep)
-        self.per_spp = (time.perf_counter() - t) / max(res.spp, 1)
+        if self.choice is None:  # the renderer set for the pilot is set again below: no reference held across
+            self._choose_sample(self.job.run.renderer(x), max_spp)
+        sample = self.choice.sample
+        if sample is None:
+            res, m = self._of(x, self._sampling(self.start_budget, max_spp), keep_renderer=keep)
+            kept = kept_figures(m, res.spp, len(self.job.scene.texels))
+            self.per_spp = (time.perf_counter() - t) / max(res.spp, 1)
+        else:
+            self.per_spp, kept = self._sampled(x, sample, max_spp, keep)
         if self.start_budget is not None:
             self.overshoot = max(self.overshoot, time.perf_counter() - t - self.start_budget)
-        return kept_figures(m, res.spp, len(self.job.scene.texels))
+        return kept
+
+    def _choose_sample(self, renderer, max_spp: int) -> None:
+        """The start's and baselines' choice of a texel sample (``self.choice``; module docstring), by a pilot through
+        ``renderer``, the run's set to the first of them; logged when a sample is taken."""
+        job, loss = self.job, self.job.run.loss
+        ask = _Ask(job.options.start_texel_sample, self.spp, max_spp)
+
+        def pilot(texels, n: int, s: int):
+            return self._pass(renderer, n, s, texels)[:2]
+
+        cmap, texels = loss.colours[0], job.scene.texels
+        if ask.texel_sample is None and len(texels) < SAMPLE_MIN_GAIN * MIN_SAMPLE_TEXELS:  # no sample is faster
+            self.choice = SamplingChoice(None, False)
+            return
+        self.choice = choose_sampling(pilot, texels, loss.target_lab, ask, self.seed, cmap, START_STDERR_DE76)
+        s = self.choice.sample
+        if s is not None:
+            job.options.log(
+                f"the start's and baseline's figures: a texel sample of {len(s.points)} of {s.population} texels and "
+                f"{len(s.centres)} SSIM windows ({len(s.windows)} texels)"
+            )
+
+    def _sampled(self, x, sample: TexelSample, max_spp: int, keep_renderer: bool) -> tuple:
+        """(seconds per sample per texel of every texel, the kept figures) of the mixture of variables ``x`` (None: the
+        current ones) on ``sample``'s points and window texels (``evaluation.sample``), under the run's first colour
+        map; the seconds are the sample's renders' per texel-sample, times the scene's texels."""
+        run, opts, scene, loss = self.job.run, self.job.options, self.job.scene, self.job.run.loss
+        renderer = run.renderer(x)
+        groups = texel_groups(scene.texels, loss.target_lab, sample)
+
+        def source(n: int, s: int, group: int = 0):
+            return self._pass(renderer, n, s, groups[group].texels)
+
+        shares = TimeShares(self.start_budget, time.perf_counter(), len(groups))
+        cmap = loss.colours[0]
+        ads = render_result(source, groups, self._sampling(None, max_spp), shares, opts.log, cmap)
+        texel_samples = sum(len(g.texels) * ad.spp for g, ad in zip(groups, ads))
+        per_spp = (time.perf_counter() - shares.started) / max(texel_samples, 1) * sample.population
+        if not keep_renderer:
+            del renderer, source
+            run.release_renderer()
+        points, windows = ads
+        on = sample.windows
+        window_loss = TexelLoss(loss.target_rgb[on], scene.texels.pos_vox[on], sigma=SIGMA, colours=(cmap,))
+        colours = (windows.rgb, windows.var), (points.rgb, points.var)
+        values = per_texel(window_loss, *colours, groups[0].target_lab, sample)
+        m, err = sampled_figures(window_loss, values, sample)
+        return per_spp, kept_figures(m, points.spp, sample.population, {"sample": sample.to_json(), "stderr": err})
 
     def final_reserve(self) -> float | None:
         """Seconds the result's figures are expected to take: their budget plus the most the start's and the

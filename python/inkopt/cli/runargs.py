@@ -418,8 +418,10 @@ def print_run_summary(rep, init: str, extra: str = "") -> None:
             f"; corrected ΔE76 {m.delta_e76_mean_corrected:.2f} ± {b['result_delta_e76_error']:.2f} against the {kind} "
             f"baseline's {b['delta_e76_mean_corrected']:.2f} ± {b['delta_e76_error']:.2f}: {verdict}"
         )
+    sample = (rep.initial_texel_sample or {}).get("sample")
+    on = "" if not sample else f", {sample['texels']} sampled texels"
     print(
-        f"mean ΔE76 {rep.initial_delta_e76_mean:.2f} ({init} start) -> {m.delta_e76_mean:.2f} "
+        f"mean ΔE76 {rep.initial_delta_e76_mean:.2f} ({init} start{on}) -> {m.delta_e76_mean:.2f} "
         f"(p95 {m.delta_e76_p95:.2f}, ΔE2000 {m.delta_e2000_mean:.2f}, SSIM {m.ssim:.3f}) "
         f"after {rep.iterations} iterations{stopped(rep)} in {rep.seconds:.0f} s{whole}{extra}{against}"
     )

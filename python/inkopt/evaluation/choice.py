@@ -156,11 +156,13 @@ class SamplingChoice:
         )
 
 
-def predict(cost: CostModel, texels: Texels, windows: int | None, seed: int) -> SamplingChoice:
+def predict(
+    cost: CostModel, texels: Texels, windows: int | None, seed: int, target: float = TARGET_STDERR_DE76
+) -> SamplingChoice:
     """The choice between every texel of ``texels`` and a sample (``windows`` SSIM windows, None: the default;
-    drawn with ``seed``) from a pilot's ``cost`` (module docstring)."""
+    drawn with ``seed``; its mean ΔE76's standard error ``target``) from a pilot's ``cost`` (module docstring)."""
     population = len(texels)
-    n, m = sample_size(cost.sample_texels(population), windows, population)
+    n, m = sample_size(cost.sample_texels(population, target), windows, population)
     sample = TexelSample.draw(texels, n, m, seed)
     per = cost.seconds_per_texel_sample
     full = population * cost.spp_full * per
@@ -184,13 +186,16 @@ def pilot(
     return CostModel.of_pilot(rgb, var, np.asarray(target_lab)[rows], seconds, pilot_spp, spp, max_spp, cmap)
 
 
-def choose_sampling(render: PilotRender, texels: Texels, target_lab, options, seed: int, cmap=RGB) -> SamplingChoice:
+def choose_sampling(
+    render: PilotRender, texels: Texels, target_lab, options, seed: int, cmap=RGB, target: float = TARGET_STDERR_DE76
+) -> SamplingChoice:
     """Every texel or a texel sample as ``options`` (``EvaluateOptions``: ``texel_sample``, ``sample_windows``,
     ``spp``, ``max_spp``) ask: forced by ``texel_sample``, else predicted from a pilot through ``render`` (module
-    docstring). ``seed``: the evaluation's render seed (the sample is drawn with it)."""
+    docstring) for a sample whose mean ΔE76 has standard error ``target``. ``seed``: the evaluation's render seed
+    (the sample is drawn with it)."""
     o = options
     if o.texel_sample is not None:
         n, m = sample_size(o.texel_sample, o.sample_windows, len(texels))
         return SamplingChoice(TexelSample.draw(texels, n, m, seed) if n else None, True)
     cost = pilot(render, texels, target_lab, o.spp, o.max_spp, seed, cmap)
-    return predict(cost, texels, o.sample_windows, seed)
+    return predict(cost, texels, o.sample_windows, seed, target)

@@ -13,7 +13,9 @@ or edge weight the loss's scale differs from run to run. The loss of both is rec
 
 The figure's uncertainty (``figure_error``): the correction's accuracy, ``ESTIMATE_RANGE[1] - 1`` (35 %) of the
 estimated noise contribution, plus the mean's sampling error, a texel's ΔE76 varying by about its CIELAB standard
-error over √3 (the noise along the error's direction), over √I texels. A result is worse than the baseline when its
+error over √3 (the noise along the error's direction), over √I texels. Figures of a texel sample (a large object's
+start and baseline, ``runfigures``) take the sample's standard error instead of the last term (``sampled_error``):
+it covers the render noise and which texels were drawn. A result is worse than the baseline when its
 figure exceeds the baseline's by more than the two uncertainties combined (in quadrature); above it by less, the
 run notes that the two are not told apart by its figures (``note()``; ``inkopt evaluate`` measures both noise-free).
 
@@ -53,16 +55,29 @@ def figure_error(m: Metrics, texels: int) -> float:
     return CORRECTION_ERROR * m.delta_e76_noise_contribution + sampling
 
 
-def kept_figures(m: Metrics, spp: int, texels: int) -> dict:
-    """The figures a run keeps of its start or of a baseline (JSON-able; ``Optimization.keep_start_figures``)."""
+def sampled_error(m: Metrics, stderr: dict) -> float:
+    """Uncertainty (ΔE76) of a texel sample's ``m.delta_e76_mean_corrected`` (``evaluation.sample``, its standard
+    errors ``stderr`` by figure): the correction's accuracy and the sample's standard error, which covers the render
+    noise and which texels were drawn."""
+    contribution = m.delta_e76_noise_contribution or 0.0
+    return CORRECTION_ERROR * contribution + float(stderr.get("delta_e76_mean_corrected") or 0.0)
+
+
+def kept_figures(m: Metrics, spp: int, texels: int, sample: dict | None = None) -> dict:
+    """The figures a run keeps of its start or of a baseline (JSON-able; ``Optimization.keep_start_figures``), of
+    every one of ``texels`` texels, or of a texel sample: ``sample`` = {"sample": ``TexelSample.to_json()``,
+    "stderr": the figures' standard errors} (its loss is not kept: the sample estimates the figures' loss, not the
+    run's)."""
+    error = figure_error(m, texels) if sample is None else sampled_error(m, sample["stderr"])
     return {
         "delta_e76_mean": m.delta_e76_mean,
         "ssim": m.ssim,
         "delta_e76_mean_corrected": m.delta_e76_mean_corrected,
         "delta_e76_noise_contribution": m.delta_e76_noise_contribution,
-        "delta_e76_error": figure_error(m, texels),
-        "loss": m.loss,
+        "delta_e76_error": error,
+        "loss": m.loss if sample is None else None,
         "eval_spp": int(spp),
+        "texel_sample": sample,
     }
 
 
@@ -112,9 +127,11 @@ class BaselineCheck:
     def _figures(self, verb: str) -> str:
         """'the result (its figure) VERB the baseline (its figure)'."""
         b = self.baseline
+        sample = b.get("texel_sample")
+        on = "" if not sample else f" on {sample['sample']['texels']} sampled texels"
         return (
             f"the result (noise-corrected ΔE76 {self.result:.2f} ± {self.result_error:.2f}) {verb} the {self.kind} "
-            f"baseline ({b['delta_e76_mean_corrected']:.2f} ± {b['delta_e76_error']:.2f}, {b['eval_spp']} spp)"
+            f"baseline ({b['delta_e76_mean_corrected']:.2f} ± {b['delta_e76_error']:.2f}, {b['eval_spp']} spp{on})"
         )
 
     def warning(self) -> str | None:

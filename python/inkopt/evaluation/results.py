@@ -45,9 +45,10 @@ class Report:
 
     ``metrics``: the final mixture's figures; ``initial_*``: the starting mixture's; ``delta_e76_max``: the
     largest per-texel ΔE76; ``iterations``, ``spp`` (gradient pass); ``eval_spp`` (the final evaluation's samples
-    per texel), ``spp_adaptive``, ``eval_spp_passes``, ``initial_eval_spp``; wall times in seconds
-    (``seconds``: this invocation's; ``seconds_total``: the whole run's across resumes, None in older reports;
-    ``time_split``: per iteration, by phase; ``estimate``: the cost estimated before the iterations,
+    per texel), ``spp_adaptive``, ``eval_spp_passes``, ``initial_eval_spp``, ``initial_texel_sample`` (the start's
+    figures' texel sample and their standard errors, ``evaluation.guard.kept_figures``; None: every texel); wall
+    times in seconds (``seconds``: this invocation's; ``seconds_total``: the whole run's across resumes, None in
+    older reports; ``time_split``: per iteration, by phase; ``estimate``: the cost estimated before the iterations,
     ``inkopt.estimate.Estimate.to_json()``, None in older reports); ``stop``: why the run ended where it did
     (``optim.stopping.Schedule.describe``: converged, time budget or its maximum; None in older reports);
     ``scene``: the scene's own entries
@@ -101,6 +102,7 @@ class Report:
     beats_baseline: bool | None = None
     viewing: dict | None = None
     colour_term: str | None = None  # the loss's colour term (None: a report from before the choice, squared)
+    initial_texel_sample: dict | None = None
 
     _RUN = (
         "delta_e76_max",
@@ -111,6 +113,7 @@ class Report:
         "eval_spp_passes",
         "initial_eval_spp",
         "initial_delta_e76_mean_corrected",
+        "initial_texel_sample",
         "seconds",
         "seconds_total",
         "seconds_iterations",

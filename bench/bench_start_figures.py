@@ -1,0 +1,104 @@
+"""Time and agreement of a mesh run's start figures (``runfigures.RunFigures.start``) from a texel sample and from
+every texel: the figures a run measures of its start and of the extrusion baseline before its first iteration.
+
+    python bench/bench_start_figures.py [HEIGHT_MM=20] [--mesh spot.obj] [--only sample|every] [--name NAME]
+        [-- OPTIONS ...]
+
+``OPTIONS`` after ``--``: ``inkopt optimize``'s, read as the command line reads them (default ``--init
+white``; a print-shop start needs the run driver's baseline and is not read here; a coarse-to-fine job's fine
+stage: ``--init DIR/coarse/fine_start.npz --shell-mm 1 --core white``).
+The scene and the run's set-up are built once; then the start's figures are measured as a run measures them (the
+choice of a texel sample by its pilot, ``START_STDERR_DE76``), then again over every texel (``start_texel_sample``
+0), each with the run's figure seed. Reported per way: seconds (the sample's include its pilot), the figures, their
+uncertainty as the baseline guard takes it (``delta_e76_error``), and the difference of the two corrected mean ΔE76s
+against the two uncertainties combined. Writes the entry NAME (default ``spot<H>``) of
+bench/results/start_figures.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+from types import SimpleNamespace
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "python"))
+sys.path.insert(0, str(ROOT / "bench"))
+
+SPOT = ROOT.parent / "shared" / "data" / "spot" / "spot.obj"  # ../shared beside the repository
+RESULTS_FILE = "start_figures.json"
+WAYS = {"sample": None, "every": 0}  # RunOptions.start_texel_sample of each way
+
+
+def measure(run, scene, cfg, way: str) -> dict:
+    """The start's figures of ``run`` measured ``way`` (``WAYS``) by a fresh ``RunFigures``, with their seconds."""
+    from inkopt.run import RunOptions
+    from inkopt.runfigures import RunFigures
+
+    options = RunOptions(start_texel_sample=WAYS[way], log=lambda m: print(f"  {m}", flush=True))
+    job = SimpleNamespace(run=run, scene=scene, cfg=cfg, options=options)
+    t = time.perf_counter()
+    kept = RunFigures(job).start()
+    return {"seconds": time.perf_counter() - t, **kept}
+
+
+def main(argv=None) -> dict:
+    from common import RESULTS, machine, provenance, write
+
+    from inkopt.cli import build_parser
+    from inkopt.cli.runargs import config_from_args, mesh_spec_from_args
+    from inkopt.model import InkTable
+    from inkopt.optim import Optimization
+    from inkopt.run import peak_rss_gb
+    from inkopt.scenes import build_scene
+
+    argv = sys.argv[1:] if argv is None else list(argv)
+    extra = argv[argv.index("--") + 1 :] if "--" in argv else ["--init", "white"]
+    argv = argv[: argv.index("--")] if "--" in argv else argv
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("height_mm", type=float, nargs="?", default=20.0)
+    ap.add_argument("--mesh", default=str(SPOT))
+    ap.add_argument("--only", choices=sorted(WAYS))
+    ap.add_argument("--name")
+    a = ap.parse_args(argv)
+    args = build_parser().parse_args(["optimize", a.mesh, "--height-mm", f"{a.height_mm:g}", "--out", "-", *extra])
+    cfg = config_from_args(args)
+    t = time.perf_counter()
+    scene = build_scene(mesh_spec_from_args(args, args.mesh), InkTable.parse(args.inks))
+    run = Optimization(scene, cfg.for_scene(scene.kind), threads=args.threads)
+    setup = time.perf_counter() - t
+    print(f"scene and set-up in {setup:.0f} s: {len(scene.texels)} texels, {run.param.n_free} free voxels", flush=True)
+    ways = {}
+    for way in [a.only] if a.only else list(WAYS):
+        ways[way] = measure(run, scene, run.cfg, way)
+        print(f"{way}: {json.dumps(ways[way])}", flush=True)
+    result = {
+        "height_mm": a.height_mm,
+        "mesh": Path(a.mesh).name,
+        "optimize_options": extra,
+        "texels": len(scene.texels),
+        "free_voxels": run.param.n_free,
+        "setup_seconds": setup,
+        "ways": ways,
+        "peak_rss_gb": peak_rss_gb(),
+        "machine": machine(),
+    }
+    if len(ways) == 2:
+        s, e = ways["sample"], ways["every"]
+        diff = s["delta_e76_mean_corrected"] - e["delta_e76_mean_corrected"]
+        result["sample_minus_every_delta_e76_corrected"] = diff
+        result["combined_error_delta_e76"] = math.hypot(s["delta_e76_error"], e["delta_e76_error"])
+        result["time_ratio_every_over_sample"] = e["seconds"] / s["seconds"]
+    path = RESULTS / RESULTS_FILE
+    data = json.loads(path.read_text()) if path.is_file() else {}
+    data.setdefault("results", {})[a.name or f"spot{a.height_mm:g}"] = {**result, **provenance()}
+    write(RESULTS_FILE, data)
+    return result
+
+
+if __name__ == "__main__":
+    main()
