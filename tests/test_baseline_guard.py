@@ -7,6 +7,7 @@ The runs are a 24 x 16-voxel colour chart on a 0.5 mm slab in CMYKW (the package
 beyond the figures' noise (their uncertainty is ~0.1-0.4 ΔE76 at these samples)."""
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -14,6 +15,7 @@ from helpers import small_chart_scene
 
 from inkopt import runfigures
 from inkopt.cli.runargs import print_run_summary
+from inkopt.errors import ParameterError
 from inkopt.evaluation import guard
 from inkopt.evaluation.guard import BaselineCheck, figure_error
 from inkopt.evaluation.metrics import Metrics
@@ -98,6 +100,34 @@ def test_resume_does_not_measure_the_baseline_again(scene, tmp_path, renders):
     assert resumed.iterations == 4
     kept = ("delta_e76_mean_corrected", "delta_e76_error", "eval_spp")
     assert [resumed.baseline["extrusion"][k] for k in kept] == [first.baseline["extrusion"][k] for k in kept]
+
+
+def test_figures_of_a_texel_sample_agree_with_every_texels_and_keep_the_guard(scene, tmp_path, renders, capsys):
+    """Told to measure its start and the baseline on a texel sample (``start_texel_sample``), a run measures both on
+    the same texels, keeps their standard errors (no loss: the sample's is not the run's), reports the sample, and
+    still warns about a result far worse than the baseline. Its figures agree with a run's over every texel from
+    the same white start within four of their combined uncertainties (the difference is which texels were drawn
+    and the render noise; four: a two-sided chance of ~6e-5 under a normal error)."""
+    every = _run(scene, tmp_path / "every", _cfg(init="white"), start_texel_sample=0)
+    lines = []
+    rep = _run(scene, tmp_path / "sample", _cfg(init="white"), lines, start_texel_sample=200)
+    assert len(renders) == 4  # every texel: the start, the baseline, the result; the sample's run: the result
+    assert every.initial_texel_sample is None and every.baseline["extrusion"]["texel_sample"] is None
+    drawn = rep.initial_texel_sample["sample"]
+    assert (drawn["texels"], drawn["population"]) == (200, len(scene.texels))
+    assert rep.initial_texel_sample["stderr"]["delta_e76_mean_corrected"] > 0
+    base = rep.baseline["extrusion"]
+    assert base["texel_sample"]["sample"] == drawn and base["loss"] is None
+    assert rep.beats_baseline is False and any("on 200 sampled texels" in m for m in lines), lines
+    kept = {d: json.loads(str(np.load(tmp_path / d / "checkpoint.npz")["start_figures"])) for d in ("every", "sample")}
+    for a, b in ((kept["sample"], kept["every"]), (base, every.baseline["extrusion"])):
+        diff = a["delta_e76_mean_corrected"] - b["delta_e76_mean_corrected"]
+        assert abs(diff) <= 4 * math.hypot(a["delta_e76_error"], b["delta_e76_error"]), (a, b)
+    assert kept["sample"]["delta_e76_error"] > kept["every"]["delta_e76_error"]  # 200 of 384 texels
+    print_run_summary(Report.read(tmp_path / "sample" / "report.json"), "white")
+    assert "white start, 200 sampled texels" in capsys.readouterr().out
+    with pytest.raises(ParameterError, match="start_texel_sample"):
+        _run(scene, tmp_path / "bad", _cfg(), start_texel_sample=1)
 
 
 def test_the_guard_changes_no_result(scene, tmp_path):

@@ -5,8 +5,9 @@ pass.
 
 The start's and the baselines' figures are one pilot pass (``noise.PILOT_SPP`` samples per texel at most), of every
 texel or of a texel sample (``evaluation.sample``): whichever a short pilot predicts is at least twice as fast for a
-mean ΔE76 whose standard error is ``START_STDERR_DE76`` (``evaluation.choice.choose_sampling``; ``RunOptions.
-start_texel_sample`` forces either). The sample is chosen once, by the first of them, and drawn with the figures'
+mean ΔE76 whose standard error is ``START_STDERR_DE76``, or, with a time budget that every texel's pass would not
+fit, the sample when it is faster (``evaluation.choice.choose_sampling``; ``RunOptions.start_texel_sample`` forces
+either). The sample is chosen once, by the first of them, and drawn with the figures'
 seed, so the start and the baseline are measured on the same texels. An object's texels grow with its surface and a
 sample's with its figures' spread, so at 100 mm these figures take seconds where a pass over every texel takes about
 three iterations' time. The result's figures render every texel: its pictures and predictions.npz need them."""
@@ -152,7 +153,9 @@ class RunFigures:
         if ask.texel_sample is None and len(texels) < SAMPLE_MIN_GAIN * MIN_SAMPLE_TEXELS:  # no sample is faster
             self.choice = SamplingChoice(None, False)
             return
-        self.choice = choose_sampling(pilot, texels, loss.target_lab, ask, self.seed, cmap, START_STDERR_DE76)
+        self.choice = choose_sampling(
+            pilot, texels, loss.target_lab, ask, self.seed, cmap, START_STDERR_DE76, self.start_budget
+        )
         s = self.choice.sample
         if s is not None:
             job.options.log(
