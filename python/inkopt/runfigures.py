@@ -7,10 +7,12 @@ The start's and the baselines' figures are one pilot pass (``noise.PILOT_SPP`` s
 texel or of a texel sample (``evaluation.sample``): whichever a short pilot predicts is at least twice as fast for a
 mean ΔE76 whose standard error is ``START_STDERR_DE76``, or, with a time budget that every texel's pass would not
 fit, the sample when it is faster (``evaluation.choice.choose_sampling``; ``RunOptions.start_texel_sample`` forces
-either). The sample is chosen once, by the first of them, and drawn with the figures'
-seed, so the start and the baseline are measured on the same texels. An object's texels grow with its surface and a
-sample's with its figures' spread, so at 100 mm these figures take seconds where a pass over every texel takes about
-three iterations' time. The result's figures render every texel: its pictures and predictions.npz need them."""
+either; no pilot where no sample could be twice as fast and there is no budget). The first of them chooses, and a
+resumed run takes the sample its start's figures recorded, so the start and the baseline are measured on the same
+texels, drawn with the figures' seed. The figures' texels then grow with their spread, not with the object's
+surface: at Spot 100 mm they took 114 s against about an hour for every texel (docs/quality.md, "The run's own check
+against the extrusion baseline"). The result's figures render every texel: its pictures and predictions.npz need
+them."""
 
 from __future__ import annotations
 
@@ -23,7 +25,7 @@ from .evaluation.guard import kept_figures
 from .evaluation.metrics import prediction_metrics
 from .evaluation.noise import EVAL_SEED_OFFSET, PILOT_SPP, Sampling, adaptive_render, first_pass
 from .evaluation.renders import TimeShares, render_result, texel_groups
-from .evaluation.sample import SIGMA, TexelSample, per_texel, sampled_figures
+from .evaluation.sample import DEFAULT_SAMPLE_WINDOWS, SIGMA, TexelSample, per_texel, sampled_figures
 from .loss import TexelLoss
 from .optim import OptimizeConfig
 
@@ -41,9 +43,9 @@ BUDGET_START_FIGURES, BUDGET_FINAL_FIGURES, BUDGET_WRITING = 0.03, 0.08, 0.04
 #: is corrected for and reported; `inkopt evaluate` measures the printed result against the baselines without noise.
 FINAL_FIGURES_SHARE = 0.25
 #: the standard error (ΔE76) of the start's and baselines' mean ΔE76 when they are measured on a texel sample: a
-#: third of ``evaluation.choice.TARGET_STDERR_DE76``, so that the guard's tolerance (the baseline's error and the
-#: result's in quadrature) grows by at most ~0.05 ΔE76 over a render of every texel; about (6 / 0.05)² = 14 400
-#: points for a typical spread of 6 ΔE76, with 100 SSIM windows of ~120 texels each
+#: third of ``evaluation.choice.TARGET_STDERR_DE76``, so that the sampling adds little to the guard's tolerance
+#: (the baseline's error and the result's in quadrature), whose largest part at 64 spp is the noise correction's
+#: (Spot 100 mm: 1.09 of the baseline's 1.15 ΔE76; the sample's standard error 0.065 with 13 960 points)
 START_STDERR_DE76 = 0.05
 
 
@@ -65,6 +67,17 @@ def figure_budgets(cfg: OptimizeConfig, eval_time_budget: float | None, elapsed:
     cap = float("inf") if eval_time_budget is None else eval_time_budget
     left = max(cfg.time_budget - elapsed, 0.0)
     return min(cap, BUDGET_START_FIGURES * left), min(cap, BUDGET_FINAL_FIGURES * left)
+
+
+def _sample_can_win(texels, seed: int) -> bool:
+    """Whether a texel sample of the fewest points (``choice.MIN_SAMPLE_TEXELS``) and the default SSIM windows holds
+    at most 1 / ``choice.SAMPLE_MIN_GAIN`` of ``texels`` (the start's figures are one pass, at one spp for every
+    texel and the sample alike): else no pilot can choose a sample without a budget."""
+    population = len(texels)
+    if population < SAMPLE_MIN_GAIN * MIN_SAMPLE_TEXELS:
+        return False
+    smallest = TexelSample.draw(texels, MIN_SAMPLE_TEXELS, DEFAULT_SAMPLE_WINDOWS, seed)
+    return SAMPLE_MIN_GAIN * (len(smallest.points) + len(smallest.windows)) <= population
 
 
 class RunFigures:
@@ -97,11 +110,12 @@ class RunFigures:
             seed=self.seed, spp=self.spp, max_spp=max_spp, time_budget=budget, pilot_in_budget=pilot_in_budget
         )
 
-    def _of(self, x, sampling: Sampling, keep_renderer: bool = True, replay=None, renderer=None):
-        """(``AdaptiveResult``, ``Metrics``) of the mixture of variables ``x`` (None: the current ones; ``renderer``:
-        the run's, set to it already); ``replay``: a pass rendered already (``evaluation.finish.Replay``)."""
+    def _of(self, x, sampling: Sampling, keep_renderer: bool = True, replay=None, held: list | None = None):
+        """(``AdaptiveResult``, ``Metrics``) of the mixture of variables ``x`` (None: the current ones); ``replay``: a
+        pass rendered already (``evaluation.finish.Replay``); ``held``: a one-item list of the run's renderer set to
+        ``x`` already, taken out of it (so that releasing the renderer frees it)."""
         run, opts = self.job.run, self.job.options
-        renderer = run.renderer(x) if renderer is None else renderer
+        renderer = held.pop() if held else run.renderer(x)
 
         def render(n: int, s: int):
             return self._pass(renderer, n, s)
@@ -120,65 +134,76 @@ class RunFigures:
         return res, prediction_metrics(run.loss, res.rgb, res.var)  # CIELAB under the first light
 
     def start(self, x=None, keep_renderer: bool | None = None) -> dict:
-        """The start's figures (one pilot pass at most; of every texel or of the texel sample, module docstring) as
+        """The start's figures (one pilot pass at most, of every texel or of the texel sample: module docstring) as
         ``Optimization.keep_start_figures`` keeps them (``evaluation.guard.kept_figures``); ``x``: other variables
         than the current ones (the start's when the run is no longer at its start, a baseline's); the renderer is
         kept if ``keep_renderer`` (None: without ``x``)."""
         max_spp = min(self.job.options.eval_max_spp, PILOT_SPP)
         keep = x is None if keep_renderer is None else keep_renderer
+        held = [self.job.run.renderer(x)]  # set once; the step that ends with it takes it out
+        if self.choice is None:
+            self._choose_sample(held[0], max_spp)
         t = time.perf_counter()
-        if self.choice is None:  # the renderer set for the pilot is set again below: no reference held across
-            self._choose_sample(self.job.run.renderer(x), max_spp)
-        sample = self.choice.sample
-        if sample is None:
-            res, m = self._of(x, self._sampling(self.start_budget, max_spp), keep_renderer=keep)
+        if self.choice.sample is None:
+            res, m = self._of(x, self._sampling(self.start_budget, max_spp), keep_renderer=keep, held=held)
             kept = kept_figures(m, res.spp, len(self.job.scene.texels))
             self.per_spp = (time.perf_counter() - t) / max(res.spp, 1)
         else:
-            self.per_spp, kept = self._sampled(x, sample, max_spp, keep)
+            self.per_spp, kept = self._sampled(held, max_spp, keep)
         if self.start_budget is not None:
             self.overshoot = max(self.overshoot, time.perf_counter() - t - self.start_budget)
         return kept
 
     def _choose_sample(self, renderer, max_spp: int) -> None:
-        """The start's and baselines' choice of a texel sample (``self.choice``; module docstring), by a pilot through
-        ``renderer``, the run's set to the first of them; logged when a sample is taken."""
+        """The start's and baselines' choice of a texel sample (``self.choice``; module docstring): the start's
+        sample again when the run kept its figures (a resumed run), every texel when no sample can be at least
+        ``SAMPLE_MIN_GAIN`` times smaller than the texels and there is no budget to fit, else by a pilot through
+        ``renderer`` (the run's, set to the first figures' mixture). Logged when a sample is taken."""
         job, loss = self.job, self.job.run.loss
-        ask = _Ask(job.options.start_texel_sample, self.spp, max_spp)
-
-        def pilot(texels, n: int, s: int):
-            return self._pass(renderer, n, s, texels)[:2]
-
-        cmap, texels = loss.colours[0], job.scene.texels
-        if ask.texel_sample is None and len(texels) < SAMPLE_MIN_GAIN * MIN_SAMPLE_TEXELS:  # no sample is faster
+        texels, ask = job.scene.texels, _Ask(job.options.start_texel_sample, self.spp, max_spp)
+        kept = ((job.run.start_figures or {}).get("texel_sample") or {}).get("sample")
+        if kept is not None and ask.texel_sample is None:  # measured on this sample: the baseline on it too
+            drawn = TexelSample.draw(texels, kept["texels"], kept["windows"], kept["seed"])
+            self.choice = SamplingChoice(drawn, False)
+            return
+        if ask.texel_sample is None and self.start_budget is None and not _sample_can_win(texels, self.seed):
             self.choice = SamplingChoice(None, False)
             return
-        self.choice = choose_sampling(
-            pilot, texels, loss.target_lab, ask, self.seed, cmap, START_STDERR_DE76, self.start_budget
-        )
-        s = self.choice.sample
+
+        def pilot(part, n: int, s: int):
+            return self._pass(renderer, n, s, part)[:2]
+
+        cmap, budget = loss.colours[0], self.start_budget
+        self.choice = choose_sampling(pilot, texels, loss.target_lab, ask, self.seed, cmap, START_STDERR_DE76, budget)
+        s, c = self.choice.sample, self.choice
         if s is not None:
+            why = "as asked" if c.forced else f"predicted {c.sample_seconds:.0f} s against {c.full_seconds:.0f} s"
             job.options.log(
-                f"the start's and baseline's figures: a texel sample of {len(s.points)} of {s.population} texels and "
-                f"{len(s.centres)} SSIM windows ({len(s.windows)} texels)"
+                f"the start's figures: a texel sample of {len(s.points)} of {s.population} texels and "
+                f"{len(s.centres)} SSIM windows ({len(s.windows)} texels; {why} for every texel)"
             )
 
-    def _sampled(self, x, sample: TexelSample, max_spp: int, keep_renderer: bool) -> tuple:
-        """(seconds per sample per texel of every texel, the kept figures) of the mixture of variables ``x`` (None: the
-        current ones) on ``sample``'s points and window texels (``evaluation.sample``), under the run's first colour
-        map; the seconds are the sample's renders' per texel-sample, times the scene's texels."""
+    def _sampled(self, held: list, max_spp: int, keep_renderer: bool) -> tuple:
+        """(seconds per sample per texel of every texel, the kept figures) of the run's renderer (``held``, as
+        ``_of`` takes it) on the texel sample's points and window texels (``evaluation.sample``), under the run's
+        first colour map; the seconds are those of the sample's render passes after the first per texel-sample, times
+        the scene's texels (the first pass of a Ray renderer waits for the mixture to reach its workers)."""
         run, opts, scene, loss = self.job.run, self.job.options, self.job.scene, self.job.run.loss
-        renderer = run.renderer(x)
+        sample, renderer = self.choice.sample, held.pop()
         groups = texel_groups(scene.texels, loss.target_lab, sample)
+        passes = []  # (seconds, texel-samples) of each render pass
 
         def source(n: int, s: int, group: int = 0):
-            return self._pass(renderer, n, s, groups[group].texels)
+            t = time.perf_counter()
+            out = self._pass(renderer, n, s, groups[group].texels)
+            passes.append((time.perf_counter() - t, n * len(groups[group].texels)))
+            return out
 
         shares = TimeShares(self.start_budget, time.perf_counter(), len(groups))
         cmap = loss.colours[0]
         ads = render_result(source, groups, self._sampling(None, max_spp), shares, opts.log, cmap)
-        texel_samples = sum(len(g.texels) * ad.spp for g, ad in zip(groups, ads))
-        per_spp = (time.perf_counter() - shares.started) / max(texel_samples, 1) * sample.population
+        seconds, work = (sum(p) for p in zip(*passes[1:]))  # the first pass may wait for the mixture to arrive
+        per_spp = seconds / max(work, 1) * sample.population
         if not keep_renderer:
             del renderer, source
             run.release_renderer()
@@ -188,7 +213,8 @@ class RunFigures:
         colours = (windows.rgb, windows.var), (points.rgb, points.var)
         values = per_texel(window_loss, *colours, groups[0].target_lab, sample)
         m, err = sampled_figures(window_loss, values, sample)
-        return per_spp, kept_figures(m, points.spp, sample.population, {"sample": sample.to_json(), "stderr": err})
+        taken = {"sample": sample.to_json(), "stderr": err, "choice": self.choice.to_json()}
+        return per_spp, kept_figures(m, points.spp, sample.population, taken)
 
     def final_reserve(self) -> float | None:
         """Seconds the result's figures are expected to take: their budget plus the most the start's and the

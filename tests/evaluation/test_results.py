@@ -96,8 +96,10 @@ def run(tmp_path_factory):
 def test_report_keys_and_round_trip(run):
     data = json.loads((run / "report.json").read_text())
     # "stop" (why the run ended), "finish_smooth", the baseline guard's "baseline" and "beats_baseline" and the
-    # finishing choice's "finish" and the loss's "colour_term" are the keys added since the files carried a version
+    # finishing choice's "finish", the loss's "colour_term" and the start figures' "initial_texel_sample" are the keys
+    # added since the files carried a version
     added = {"format_version", "stop", "finish_smooth", "baseline", "beats_baseline", "finish", "colour_term"}
+    added |= {"initial_texel_sample"}
     assert set(data) == SLAB_REPORT_KEYS | added and data["format_version"] == 1
     assert data["finish_smooth"] == 0 and data["finish"] is None  # a slab's default: no pass, nothing chosen
     assert data["stop"]["reason"] == "iterations" and data["stop"]["iterations"] == 2
@@ -118,6 +120,9 @@ def test_report_keys_and_round_trip(run):
     assert data["colour_term"] == "squared"
     before_term = {k: v for k, v in data.items() if k != "colour_term"}  # before the colour term was a choice
     assert Report.from_json(before_term) == replace(rep, colour_term=None)
+    assert data["initial_texel_sample"] is None  # a small slab's start: every texel
+    before_sample = {k: v for k, v in data.items() if k != "initial_texel_sample"}  # before the start's sample
+    assert Report.from_json(before_sample) == rep
 
 
 def test_newer_format_is_a_one_line_error(run, tmp_path):

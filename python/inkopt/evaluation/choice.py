@@ -212,8 +212,7 @@ def choose_sampling(
     """Every texel or a texel sample as ``options`` (``EvaluateOptions``: ``texel_sample``, ``sample_windows``,
     ``spp``, ``max_spp``) ask: forced by ``texel_sample``, else predicted from a pilot through ``render`` (module
     docstring) for a sample whose mean ΔE76 has standard error ``target``, within ``budget`` seconds (None: none).
-    ``seed``: the evaluation's render seed
-    (the sample is drawn with it)."""
+    ``seed``: the evaluation's render seed (the sample is drawn with it)."""
     o = options
     if o.texel_sample is not None:
         n, m = sample_size(o.texel_sample, o.sample_windows, len(texels))

@@ -55,20 +55,25 @@ def figure_error(m: Metrics, texels: int) -> float:
     return CORRECTION_ERROR * m.delta_e76_noise_contribution + sampling
 
 
-def sampled_error(m: Metrics, stderr: dict) -> float:
+def sampled_error(m: Metrics, stderr: dict, points: int) -> float:
     """Uncertainty (ΔE76) of a texel sample's ``m.delta_e76_mean_corrected`` (``evaluation.sample``, its standard
-    errors ``stderr`` by figure): the correction's accuracy and the sample's standard error, which covers the render
-    noise and which texels were drawn."""
+    errors ``stderr`` by figure, ``points`` texels): the correction's accuracy and the sample's standard error, which
+    covers the render noise and which texels were drawn; at least the render noise's share of ``figure_error``, which
+    the finite-population correction would shrink where the sample is most of the texels."""
     contribution = m.delta_e76_noise_contribution or 0.0
-    return CORRECTION_ERROR * contribution + float(stderr.get("delta_e76_mean_corrected") or 0.0)
+    noise = (m.delta_e76_noise or 0.0) / math.sqrt(3.0 * max(int(points), 1))
+    return CORRECTION_ERROR * contribution + max(float(stderr["delta_e76_mean_corrected"]), noise)
 
 
 def kept_figures(m: Metrics, spp: int, texels: int, sample: dict | None = None) -> dict:
     """The figures a run keeps of its start or of a baseline (JSON-able; ``Optimization.keep_start_figures``), of
     every one of ``texels`` texels, or of a texel sample: ``sample`` = {"sample": ``TexelSample.to_json()``,
-    "stderr": the figures' standard errors} (its loss is not kept: the sample estimates the figures' loss, not the
-    run's)."""
-    error = figure_error(m, texels) if sample is None else sampled_error(m, sample["stderr"])
+    "stderr": the figures' standard errors, "choice": ``SamplingChoice.to_json()``} (its loss is not kept: the
+    sample estimates the figures' loss, not the run's)."""
+    if sample is None:
+        error = figure_error(m, texels)
+    else:
+        error = sampled_error(m, sample["stderr"], sample["sample"]["texels"])
     return {
         "delta_e76_mean": m.delta_e76_mean,
         "ssim": m.ssim,
@@ -166,7 +171,8 @@ def keep_baseline_figures(run: Optimization, measure: Callable[[np.ndarray], dic
     """The run driver's step before the iterations: ``GUARD_BASELINE``'s figures kept with ``run``
     (``Optimization.keep_baseline_figures``, so that a resume does not measure them again): the start's own when the
     run starts from that baseline (not rendered twice), else ``measure(x)`` of the baseline's variables x (F, N) (one
-    pilot with the run's renderer, as the start's figures), or a note in ``log`` when its colour table is not cached
+    pilot with the run's renderer, as the start's figures and on the same texels: every one or the start's sample,
+    ``runfigures``), or a note in ``log`` when its colour table is not cached
     (module docstring)."""
     kind = GUARD_BASELINE
     if comparable((run.baseline_figures or {}).get(kind)):
