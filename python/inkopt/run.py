@@ -97,8 +97,7 @@ class RunOptions:
     (a coarse-to-fine job's fine stage with a time budget: the coarse stage's, scaled,
     ``coarse.fine_iteration_seconds``): the run's estimate takes it instead of timing passes on its renderer
     (``estimate.estimate_run``). ``start_texel_sample``: the start's and baselines' figures of every texel (0) or of a
-    texel sample of that many texels (None: a sample where a pilot predicts it twice as fast, or faster where the
-    figures' time budget would cut every texel's pass short: ``runfigures``)."""
+    texel sample of that many texels (None: a sample where a pilot predicts it twice as fast, ``runfigures``)."""
 
     resume: bool = False
     eval_spp: int | None = None

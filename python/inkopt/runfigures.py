@@ -5,14 +5,13 @@ pass.
 
 The start's and the baselines' figures are one pilot pass (``noise.PILOT_SPP`` samples per texel at most), of every
 texel or of a texel sample (``evaluation.sample``): whichever a short pilot predicts is at least twice as fast for a
-mean ΔE76 whose standard error is ``START_STDERR_DE76``, or, with a time budget that every texel's pass would not
-fit, the sample when it is faster (``evaluation.choice.choose_sampling``; ``RunOptions.start_texel_sample`` forces
-either; no pilot where no sample could be twice as fast and there is no budget). The first of them chooses, and a
-resumed run takes the sample its start's figures recorded, so the start and the baseline are measured on the same
-texels, drawn with the figures' seed. The figures' texels then grow with their spread, not with the object's
-surface: at Spot 100 mm they took 114 s against about an hour for every texel (docs/quality.md, "The run's own check
-against the extrusion baseline"). The result's figures render every texel: its pictures and predictions.npz need
-them."""
+mean ΔE76 whose standard error is ``START_STDERR_DE76`` (``evaluation.choice.choose_sampling``; no pilot where no
+sample could be; ``RunOptions.start_texel_sample`` forces either). Under a time budget the sample gets the samples
+per texel that fit its share, as every texel would. The first of them chooses, and a resumed run takes the sample
+its start's figures recorded, so the start and the baseline are measured on the same texels, drawn with the
+figures' seed. The figures' texels then grow with their spread, not with the object's surface: at Spot 100 mm they
+took 114 s against about an hour for every texel (docs/quality.md, "The run's own check against the extrusion
+baseline"). The result's figures render every texel: its pictures and predictions.npz need them."""
 
 from __future__ import annotations
 
@@ -157,7 +156,7 @@ class RunFigures:
     def _choose_sample(self, renderer, max_spp: int) -> None:
         """The start's and baselines' choice of a texel sample (``self.choice``; module docstring): the start's
         sample again when the run kept its figures (a resumed run), every texel when no sample can be at least
-        ``SAMPLE_MIN_GAIN`` times smaller than the texels and there is no budget to fit, else by a pilot through
+        ``SAMPLE_MIN_GAIN`` times smaller than the texels, else by a pilot through
         ``renderer`` (the run's, set to the first figures' mixture). Logged when a sample is taken."""
         job, loss = self.job, self.job.run.loss
         texels, ask = job.scene.texels, _Ask(job.options.start_texel_sample, self.spp, max_spp)
@@ -166,15 +165,15 @@ class RunFigures:
             drawn = TexelSample.draw(texels, kept["texels"], kept["windows"], kept["seed"])
             self.choice = SamplingChoice(drawn, False)
             return
-        if ask.texel_sample is None and self.start_budget is None and not _sample_can_win(texels, self.seed):
+        if ask.texel_sample is None and not _sample_can_win(texels, self.seed):
             self.choice = SamplingChoice(None, False)
             return
 
         def pilot(part, n: int, s: int):
             return self._pass(renderer, n, s, part)[:2]
 
-        cmap, budget = loss.colours[0], self.start_budget
-        self.choice = choose_sampling(pilot, texels, loss.target_lab, ask, self.seed, cmap, START_STDERR_DE76, budget)
+        cmap = loss.colours[0]
+        self.choice = choose_sampling(pilot, texels, loss.target_lab, ask, self.seed, cmap, START_STDERR_DE76)
         s, c = self.choice.sample, self.choice
         if s is not None:
             why = "as asked" if c.forced else f"predicted {c.sample_seconds:.0f} s against {c.full_seconds:.0f} s"

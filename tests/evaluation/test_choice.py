@@ -129,14 +129,3 @@ def test_a_smaller_standard_error_asks_for_more_texels():
     assert 8 * len(loose.sample.points) < len(tight.sample.points) < 10 * len(loose.sample.points)
     assert tight.to_json()["target_stderr_delta_e76"] == TARGET_STDERR_DE76 / 3
     assert tight.to_json()["sample"]["texels"] == len(tight.sample.points)
-
-
-def test_a_budget_too_short_for_every_texel_takes_a_faster_sample():
-    """A slab whose sample is not twice as fast is rendered whole, unless a time budget would cut its full render
-    short: then the faster sample; a budget the full render fits keeps every texel."""
-    cost = CostModel(**SPOT20)
-    small = predict(cost, sheet(48), None, seed=3)
-    assert small.sample is None and small.sample_seconds < small.full_seconds
-    short = predict(cost, sheet(48), None, seed=3, budget=small.full_seconds / 2)
-    assert short.sample is not None and len(short.sample.points) == cost.sample_texels(48 * 48)
-    assert predict(cost, sheet(48), None, seed=3, budget=small.full_seconds * 2).sample is None

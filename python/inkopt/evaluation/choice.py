@@ -25,11 +25,7 @@ texel-samples only, not on the machine's speed or load (the pilot's seconds per 
 **Choice** (``choose_sampling``): the sample when it is predicted to take at most 1 / ``SAMPLE_MIN_GAIN`` of the
 full render's time and draws fewer texels than there are, else every texel. The margin is there because the
 sample gives up the pictures and predictions.npz and measures SSIM and the mottle less precisely: worth it only
-for a clear gain. With a time budget for the render (``budget``: a run's start figures under a deadline,
-``runfigures``) the sample is also taken whenever it is faster and every texel's render is predicted not to fit in
-the budget: cut to the few samples that fit, that render's noise correction leaves a larger error (35 % of a
-contribution that grows as 1 / spp) than the sample's standard error at the samples asked. ``texel_sample`` (0:
-every texel, N: a sample of N) forces the choice without a pilot.
+for a clear gain. ``texel_sample`` (0: every texel, N: a sample of N) forces the choice without a pilot.
 """
 
 from __future__ import annotations
@@ -168,19 +164,16 @@ def predict(
     windows: int | None,
     seed: int,
     target: float = TARGET_STDERR_DE76,
-    budget: float | None = None,
 ) -> SamplingChoice:
     """The choice between every texel of ``texels`` and a sample (``windows`` SSIM windows, None: the default;
-    drawn with ``seed``; its mean ΔE76's standard error ``target``) from a pilot's ``cost``, within a time
-    ``budget`` in seconds (None: none) (module docstring)."""
+    drawn with ``seed``; its mean ΔE76's standard error ``target``) from a pilot's ``cost`` (module docstring)."""
     population = len(texels)
     n, m = sample_size(cost.sample_texels(population, target), windows, population)
     sample = TexelSample.draw(texels, n, m, seed)
     per = cost.seconds_per_texel_sample
     full = population * cost.spp_full * per
     part = (n * cost.spp_points + len(sample.windows) * cost.spp_windows) * per
-    over = budget is not None and full > budget and part < full  # every texel would be cut to fit the budget
-    take = n < population and (part * SAMPLE_MIN_GAIN <= full or over)
+    take = n < population and part * SAMPLE_MIN_GAIN <= full
     return SamplingChoice(sample if take else None, False, cost, population, len(sample.windows), full, part, target)
 
 
@@ -207,15 +200,14 @@ def choose_sampling(
     seed: int,
     cmap=RGB,
     target: float = TARGET_STDERR_DE76,
-    budget: float | None = None,
 ) -> SamplingChoice:
     """Every texel or a texel sample as ``options`` (``EvaluateOptions``: ``texel_sample``, ``sample_windows``,
     ``spp``, ``max_spp``) ask: forced by ``texel_sample``, else predicted from a pilot through ``render`` (module
-    docstring) for a sample whose mean ΔE76 has standard error ``target``, within ``budget`` seconds (None: none).
-    ``seed``: the evaluation's render seed (the sample is drawn with it)."""
+    docstring) for a sample whose mean ΔE76 has standard error ``target``. ``seed``: the evaluation's render seed
+    (the sample is drawn with it)."""
     o = options
     if o.texel_sample is not None:
         n, m = sample_size(o.texel_sample, o.sample_windows, len(texels))
         return SamplingChoice(TexelSample.draw(texels, n, m, seed) if n else None, True)
     cost = pilot(render, texels, target_lab, o.spp, o.max_spp, seed, cmap)
-    return predict(cost, texels, o.sample_windows, seed, target, budget)
+    return predict(cost, texels, o.sample_windows, seed, target)
