@@ -139,6 +139,7 @@ class RunFigures:
         kept if ``keep_renderer`` (None: without ``x``)."""
         max_spp = min(self.job.options.eval_max_spp, PILOT_SPP)
         keep = x is None if keep_renderer is None else keep_renderer
+        t0 = time.perf_counter()
         held = [self.job.run.renderer(x)]  # set once; the step that ends with it takes it out
         if self.choice is None:
             self._choose_sample(held[0], max_spp)
@@ -150,7 +151,7 @@ class RunFigures:
         else:
             self.per_spp, kept = self._sampled(held, max_spp, keep)
         if self.start_budget is not None:
-            self.overshoot = max(self.overshoot, time.perf_counter() - t - self.start_budget)
+            self.overshoot = max(self.overshoot, time.perf_counter() - t0 - self.start_budget)
         return kept
 
     def _choose_sample(self, renderer, max_spp: int) -> None:
@@ -201,8 +202,8 @@ class RunFigures:
         shares = TimeShares(self.start_budget, time.perf_counter(), len(groups))
         cmap = loss.colours[0]
         ads = render_result(source, groups, self._sampling(None, max_spp), shares, opts.log, cmap)
-        seconds, work = (sum(p) for p in zip(*passes[1:]))  # the first pass may wait for the mixture to arrive
-        per_spp = seconds / max(work, 1) * sample.population
+        timed = passes[1:] or passes  # the first pass may wait for the mixture to arrive
+        per_spp = sum(p[0] for p in timed) / max(sum(p[1] for p in timed), 1) * sample.population
         if not keep_renderer:
             del renderer, source
             run.release_renderer()
