@@ -10,7 +10,7 @@ sample could be; ``RunOptions.start_texel_sample`` forces either). Under a time 
 per texel that fit its share, as every texel would. The first of them chooses, and a resumed run takes the sample
 its start's figures recorded, so the start and the baseline are measured on the same texels, drawn with the
 figures' seed. The figures' texels then grow with their spread, not with the object's surface: at Spot 100 mm they
-took 114 s against about an hour for every texel (docs/quality.md, "The run's own check against the extrusion
+took 57 s against 46 minutes for every texel (docs/quality.md, "The run's own check against the extrusion
 baseline"). The result's figures render every texel: its pictures and predictions.npz need them."""
 
 from __future__ import annotations
