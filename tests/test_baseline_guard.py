@@ -130,6 +130,29 @@ def test_figures_of_a_texel_sample_agree_with_every_texels_and_keep_the_guard(sc
         _run(scene, tmp_path / "bad", _cfg(), start_texel_sample=1)
 
 
+def test_a_sample_a_pilot_chose_takes_the_time_every_texel_would(scene, tmp_path, monkeypatch):
+    """A sample chosen by the pilot's prediction renders beyond the pilot's 64 spp, adaptively, within the time the
+    prediction gave every texel's pass (the chart is too small for the pilot to choose one: the choice is given)."""
+
+    def chosen(seconds):
+        def choose(render, texels, target_lab, options, seed, cmap, target):
+            drawn = runfigures.TexelSample.draw(texels, 200, 50, seed)
+            return runfigures.SamplingChoice(drawn, False, full_seconds=seconds, sample_seconds=seconds / 4)
+
+        return choose
+
+    spp = {}
+    for name, seconds in (("long", 60.0), ("spent", 0.0)):
+        monkeypatch.setattr(runfigures, "_sample_can_win", lambda texels, seed: True)
+        monkeypatch.setattr(runfigures, "choose_sampling", chosen(seconds))
+        rep = _run(scene, tmp_path / name, _cfg(init="white"))
+        spp[name] = (rep.initial_eval_spp, rep.baseline["extrusion"]["eval_spp"])
+        assert rep.initial_texel_sample["sample"]["texels"] == 200
+    # the white start's large errors meet the noise target at the pilot's 64 spp, the baseline's need more; with no
+    # time, a probe pass alone
+    assert spp["long"][0] >= 64 and spp["long"][1] > 64 and max(spp["spent"]) < 64, spp
+
+
 def test_the_guard_changes_no_result(scene, tmp_path):
     """The baseline's render uses the evaluation's seeds and leaves the optimisation as it was: the same mixture
     with the guard on and off, and (at fixed samples: adaptive ones follow the run's time) the same figures."""

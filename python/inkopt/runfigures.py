@@ -3,15 +3,17 @@ optimisation, their time budgets within a run's time budget (``figure_budgets``)
 finishing smoothing (``evaluation.finish``), whose render of the chosen candidate is the result's figures' first
 pass.
 
-The start's and the baselines' figures are one pilot pass (``noise.PILOT_SPP`` samples per texel at most), of every
-texel or of a texel sample (``evaluation.sample``): whichever a short pilot predicts is at least twice as fast for a
-mean ΔE76 whose standard error is ``START_STDERR_DE76`` (``evaluation.choice.choose_sampling``; no pilot where no
-sample could be; ``RunOptions.start_texel_sample`` forces either). Under a time budget the sample gets the samples
-per texel that fit its share, as every texel would. The first of them chooses, and a resumed run takes the sample
-its start's figures recorded, so the start and the baseline are measured on the same texels, drawn with the
-figures' seed. The figures' texels then grow with their spread, not with the object's surface: at Spot 100 mm they
-took 57 s against 46 minutes for every texel (docs/quality.md, "The run's own check against the extrusion
-baseline"). The result's figures render every texel: its pictures and predictions.npz need them."""
+The start's and the baselines' figures are of every texel, one pilot pass (``noise.PILOT_SPP`` samples per texel
+at most), or of a texel sample (``evaluation.sample``): the sample where a short pilot predicts it at least twice as
+fast for a mean ΔE76 whose standard error is ``START_STDERR_DE76`` (``evaluation.choice.choose_sampling``; no pilot
+where no sample could be; ``RunOptions.start_texel_sample`` forces either). The sample then takes the time every
+texel's pass was predicted to take for samples beyond the pilot's, adaptive to ``inkopt evaluate``'s noise targets:
+its figures are more accurate than that pass's would have been, in no more time (a forced sample: one pilot pass).
+Under a time budget both get what fits its share. The first of them chooses, and a resumed run takes the sample its
+start's figures recorded, so the start and the baseline are measured on the same texels, drawn with the figures'
+seed. The figures' texels then grow with their spread, not with the object's surface (docs/quality.md, "The run's
+own check against the extrusion baseline"). The result's figures render every texel: its pictures and
+predictions.npz need them."""
 
 from __future__ import annotations
 
@@ -186,8 +188,11 @@ class RunFigures:
     def _sampled(self, held: list, max_spp: int, keep_renderer: bool) -> tuple:
         """(seconds per sample per texel of every texel, the kept figures) of the run's renderer (``held``, as
         ``_of`` takes it) on the texel sample's points and window texels (``evaluation.sample``), under the run's
-        first colour map; the seconds are those of the sample's render passes after the first per texel-sample, times
-        the scene's texels (the first pass of a Ray renderer waits for the mixture to reach its workers)."""
+        first colour map: at most ``max_spp`` samples per texel, or, for a sample a pilot chose, adaptive ones (to
+        ``inkopt evaluate``'s noise targets, at most ``eval_max_spp``) within the time its prediction gave every
+        texel's pass (and the figures' budget); the seconds are those of the sample's render passes after the first
+        per texel-sample, times the scene's texels (the first pass of a Ray renderer waits for the mixture to reach
+        its workers)."""
         run, opts, scene, loss = self.job.run, self.job.options, self.job.scene, self.job.run.loss
         sample, renderer = self.choice.sample, held.pop()
         groups = texel_groups(scene.texels, loss.target_lab, sample)
@@ -199,7 +204,11 @@ class RunFigures:
             passes.append((time.perf_counter() - t, n * len(groups[group].texels)))
             return out
 
-        shares = TimeShares(self.start_budget, time.perf_counter(), len(groups))
+        c, budget = self.choice, self.start_budget
+        if not c.forced and c.full_seconds is not None:  # chosen by a pilot: as long as every texel would take
+            budget = c.full_seconds if budget is None else min(budget, c.full_seconds)
+            max_spp = opts.eval_max_spp
+        shares = TimeShares(budget, time.perf_counter(), len(groups))
         cmap = loss.colours[0]
         ads = render_result(source, groups, self._sampling(None, max_spp), shares, opts.log, cmap)
         timed = passes[1:] or passes  # the first pass may wait for the mixture to arrive
