@@ -71,8 +71,8 @@ def figure_budgets(cfg: OptimizeConfig, eval_time_budget: float | None, elapsed:
 
 def _sample_can_win(texels, seed: int) -> bool:
     """Whether a texel sample of the fewest points (``choice.MIN_SAMPLE_TEXELS``) and the default SSIM windows holds
-    at most 1 / ``choice.SAMPLE_MIN_GAIN`` of ``texels`` (the start's figures are one pass, at one spp for every
-    texel and the sample alike): else no pilot can choose a sample without a budget."""
+    at most 1 / ``choice.SAMPLE_MIN_GAIN`` of ``texels`` (the pilot's prediction compares one 64-spp pass of each):
+    else no pilot can choose a sample."""
     population = len(texels)
     if population < SAMPLE_MIN_GAIN * MIN_SAMPLE_TEXELS:
         return False
