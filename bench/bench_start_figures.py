@@ -8,7 +8,7 @@ every texel: the figures a run measures of its start and of the extrusion baseli
 white``; a print-shop start needs the run driver's baseline and is not read here; a coarse-to-fine job's fine
 stage: ``--init DIR/coarse/fine_start.npz --shell-mm 1 --core white``).
 The scene and the run's set-up are built once; then the start's figures are measured as a run measures them (the
-choice of a texel sample by its pilot, ``START_STDERR_DE76``), then again over every texel (``start_texel_sample``
+choice of a texel sample by its pilot, ``START_STDERR_DE76``), then again over every texel (``figure_texel_sample``
 0), each with the run's figure seed. Reported per way: seconds (the sample's include its pilot), the figures, their
 uncertainty as the baseline guard takes it (``delta_e76_error``), and the difference of the two corrected mean ΔE76s
 against the two uncertainties combined. Writes the entry NAME (default ``spot<H>``) of
@@ -31,7 +31,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 
 SPOT = ROOT.parent / "shared" / "data" / "spot" / "spot.obj"  # ../shared beside the repository
 RESULTS_FILE = "start_figures.json"
-WAYS = {"sample": None, "every": 0}  # RunOptions.start_texel_sample of each way
+WAYS = {"sample": None, "every": 0}  # RunOptions.figure_texel_sample of each way
 
 
 def measure(run, scene, cfg, way: str) -> dict:
@@ -39,27 +39,27 @@ def measure(run, scene, cfg, way: str) -> dict:
     from inkopt.run import RunOptions
     from inkopt.runfigures import RunFigures
 
-    options = RunOptions(start_texel_sample=WAYS[way], log=lambda m: print(f"  {m}", flush=True))
+    options = RunOptions(figure_texel_sample=WAYS[way], log=lambda m: print(f"  {m}", flush=True))
     job = SimpleNamespace(run=run, scene=scene, cfg=cfg, options=options)
     t = time.perf_counter()
     kept = RunFigures(job).start()
     return {"seconds": time.perf_counter() - t, **kept}
 
 
-def main(argv=None) -> dict:
-    from common import RESULTS, machine, provenance, write
-
+def set_up(argv, doc: str, default_options: list) -> tuple:
+    """(the bench's arguments, ``inkopt optimize``'s OPTIONS, the scene, its ``Optimization``, the set-up's seconds)
+    of a bench's command line ``argv`` (None: sys.argv; usage in ``doc``) as the module docstring gives it, OPTIONS
+    ``default_options`` unless given."""
     from inkopt.cli import build_parser
     from inkopt.cli.runargs import config_from_args, mesh_spec_from_args
     from inkopt.model import InkTable
     from inkopt.optim import Optimization
-    from inkopt.run import peak_rss_gb
     from inkopt.scenes import build_scene
 
     argv = sys.argv[1:] if argv is None else list(argv)
-    extra = argv[argv.index("--") + 1 :] if "--" in argv else ["--init", "white"]
+    extra = argv[argv.index("--") + 1 :] if "--" in argv else default_options
     argv = argv[: argv.index("--")] if "--" in argv else argv
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(description=doc.split("\n\n")[0])
     ap.add_argument("height_mm", type=float, nargs="?", default=20.0)
     ap.add_argument("--mesh", default=str(SPOT))
     ap.add_argument("--only", choices=sorted(WAYS))
@@ -72,6 +72,15 @@ def main(argv=None) -> dict:
     run = Optimization(scene, cfg.for_scene(scene.kind), threads=args.threads)
     setup = time.perf_counter() - t
     print(f"scene and set-up in {setup:.0f} s: {len(scene.texels)} texels, {run.param.n_free} free voxels", flush=True)
+    return a, extra, scene, run, setup
+
+
+def main(argv=None) -> dict:
+    from common import RESULTS, machine, provenance, write
+
+    from inkopt.run import peak_rss_gb
+
+    a, extra, scene, run, setup = set_up(argv, __doc__, ["--init", "white"])
     ways = {}
     for way in [a.only] if a.only else list(WAYS):
         ways[way] = measure(run, scene, run.cfg, way)

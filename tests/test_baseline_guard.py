@@ -103,14 +103,14 @@ def test_resume_does_not_measure_the_baseline_again(scene, tmp_path, renders):
 
 
 def test_figures_of_a_texel_sample_agree_with_every_texels_and_keep_the_guard(scene, tmp_path, renders, capsys):
-    """Told to measure its start and the baseline on a texel sample (``start_texel_sample``), a run measures both on
-    the same texels, keeps their standard errors (no loss: the sample's is not the run's), reports the sample, and
-    still warns about a result far worse than the baseline. Its figures agree with a run's over every texel from
-    the same white start within four of their combined uncertainties (the difference is which texels were drawn
-    and the render noise; four: a two-sided chance of ~6e-5 under a normal error)."""
-    every = _run(scene, tmp_path / "every", _cfg(init="white"), start_texel_sample=0)
+    """Told to measure its figures on a texel sample (``figure_texel_sample``), a run measures its start, the baseline
+    and its result on the same texels, keeps their standard errors (no loss: the sample's is not the run's), reports
+    the sample, and still warns about a result far worse than the baseline. Its figures agree with a run's over
+    every texel from the same white start within four of their combined uncertainties (the difference is which
+    texels were drawn and the render noise; four: a two-sided chance of ~6e-5 under a normal error)."""
+    every = _run(scene, tmp_path / "every", _cfg(init="white"), figure_texel_sample=0)
     lines = []
-    rep = _run(scene, tmp_path / "sample", _cfg(init="white"), lines, start_texel_sample=200)
+    rep = _run(scene, tmp_path / "sample", _cfg(init="white"), lines, figure_texel_sample=200)
     assert len(renders) == 4  # every texel: the start, the baseline, the result; the sample's run: the result
     assert every.initial_texel_sample is None and every.baseline["extrusion"]["texel_sample"] is None
     drawn = rep.initial_texel_sample["sample"]
@@ -124,10 +124,16 @@ def test_figures_of_a_texel_sample_agree_with_every_texels_and_keep_the_guard(sc
         diff = a["delta_e76_mean_corrected"] - b["delta_e76_mean_corrected"]
         assert abs(diff) <= 4 * math.hypot(a["delta_e76_error"], b["delta_e76_error"]), (a, b)
     assert kept["sample"]["delta_e76_error"] > kept["every"]["delta_e76_error"]  # 200 of 384 texels
+    # the result (the same mixture in both runs) on the start's texels, its pictures of every texel
+    assert rep.texel_sample["sample"] == drawn and every.texel_sample is None
+    assert rep.texel_sample["stderr"]["delta_e76_mean_corrected"] > 0 and rep.pictures_spp >= 1
+    errors = [r.baseline["extrusion"]["result_delta_e76_error"] for r in (rep, every)]
+    diff = rep.metrics.delta_e76_mean_corrected - every.metrics.delta_e76_mean_corrected
+    assert abs(diff) <= 4 * math.hypot(*errors) and errors[0] > errors[1], (diff, errors)
     print_run_summary(Report.read(tmp_path / "sample" / "report.json"), "white")
     assert "white start, 200 sampled texels" in capsys.readouterr().out
-    with pytest.raises(ParameterError, match="start_texel_sample"):
-        _run(scene, tmp_path / "bad", _cfg(), start_texel_sample=1)
+    with pytest.raises(ParameterError, match="figure_texel_sample"):
+        _run(scene, tmp_path / "bad", _cfg(), figure_texel_sample=1)
 
 
 def test_a_sample_a_pilot_chose_takes_the_time_every_texel_would(scene, tmp_path, monkeypatch):

@@ -1,16 +1,19 @@
-"""Tests of the choice of a texel sample for a run's start and baseline figures (``inkopt.runfigures``): no pilot
-where no sample can be twice as fast, and a resumed run's baseline on the sample its start's figures recorded. The
-figures themselves, sampled and whole, are tested through runs in tests/test_baseline_guard.py."""
+"""Tests of the choice of a texel sample for a run's figures (``inkopt.runfigures``): no pilot where no sample can be
+twice as fast, a resumed run's baseline and result on the sample its start's figures recorded, and the result's time
+shared between the sample and every texel's render for the pictures. The figures themselves, sampled and whole, are
+tested through runs in tests/test_baseline_guard.py and tests/evaluation/test_finish.py."""
 
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 
 from inkopt.evaluation.sample import TexelSample
 from inkopt.model import Texels
 from inkopt.optim import OptimizeConfig
 from inkopt.run import RunOptions
-from inkopt.runfigures import RunFigures, _sample_can_win
+from inkopt.runfigures import FINAL_FIGURES_SHARE, RESULT_SAMPLE_SHARE, RunFigures, _sample_can_win
 
 
 def sheet(side: int) -> Texels:
@@ -30,20 +33,49 @@ def no_pilot(*args):
     raise AssertionError("a recorded sample is drawn again, with no pilot")
 
 
-def test_a_resumed_run_takes_the_sample_its_start_recorded():
-    """A run whose start's figures were measured on a sample (kept in its checkpoint) measures the baseline on the
-    same texels: the sample is drawn again from its recorded size, windows and seed."""
-    texels = sheet(200)
-    recorded = TexelSample.draw(texels, 3000, 40, seed=11)
+def _figures(texels, start_figures=None, cfg=None, wall=0.0, **options) -> RunFigures:
+    """The figures of a stand-in run of ``texels`` (only what ``RunFigures`` reads), its time so far ``wall`` s."""
     run = SimpleNamespace(
-        start_figures={"texel_sample": {"sample": recorded.to_json()}},
+        start_figures=start_figures,
         loss=SimpleNamespace(colours=(None,), target_lab=np.zeros((len(texels), 3))),
-        wall_seconds=lambda: 0.0,
+        wall_seconds=lambda: wall,
     )
-    job = SimpleNamespace(run=run, scene=SimpleNamespace(texels=texels), cfg=OptimizeConfig(), options=RunOptions())
+    scene = SimpleNamespace(texels=texels)
+    job = SimpleNamespace(run=run, scene=scene, cfg=cfg or OptimizeConfig(), options=RunOptions(**options))
     figures = RunFigures(job)
     figures._pass = no_pilot
-    figures._choose_sample(renderer=None, max_spp=64)
-    again = figures.choice.sample
+    return figures
+
+
+@pytest.mark.parametrize("when", ["start", "result"])
+def test_a_resumed_run_takes_the_sample_its_start_recorded(when):
+    """A run whose start's figures were measured on a sample (kept in its checkpoint) measures the baseline and its
+    result on the same texels: the sample is drawn again from its recorded size, windows and seed."""
+    texels = sheet(200)
+    recorded = TexelSample.draw(texels, 3000, 40, seed=11)
+    figures = _figures(texels, {"texel_sample": {"sample": recorded.to_json()}})
+    if when == "start":
+        figures._choose_sample(renderer=None, max_spp=64)
+    again = figures._result_sample()
     for name in ("points", "centres", "windows"):
         np.testing.assert_array_equal(getattr(again, name), getattr(recorded, name))
+    assert _figures(texels, {"texel_sample": None})._result_sample() is None  # a start of every texel: every texel
+
+
+def test_the_result_shares_its_time_between_the_sample_and_the_pictures():
+    """Without a run budget the result's figures on a sample take at most ``RESULT_SAMPLE_SHARE`` of
+    ``FINAL_FIGURES_SHARE`` of the run's time, their pilot beside it (the finishing choice renders that pass); every
+    texel's render for the pictures gets the rest, its pilot within it. Under a run budget both are within its
+    share; the user's samples per texel are taken as given."""
+    figures = _figures(sheet(20), wall=1000.0)
+    share = FINAL_FIGURES_SHARE * 1000.0
+    on_sample, pictures = figures._sample_sampling(), figures._final_sampling(spent=30.0)
+    assert on_sample.time_budget == pytest.approx(RESULT_SAMPLE_SHARE * share) and not on_sample.pilot_in_budget
+    assert pictures.time_budget == pytest.approx(share - 30.0) and pictures.pilot_in_budget
+    assert figures._final_sampling(spent=2 * share).time_budget == 0.0
+    whole = figures._final_sampling()  # no sample: the figures' own render, its pilot outside the time as before
+    assert whole.time_budget == pytest.approx(share) and not whole.pilot_in_budget
+    budgeted = _figures(sheet(20), cfg=replace(OptimizeConfig(), time_budget=600.0))
+    assert budgeted._sample_sampling().pilot_in_budget and budgeted._final_sampling(spent=1.0).pilot_in_budget
+    fixed = _figures(sheet(20), eval_spp=32)
+    assert fixed._sample_sampling().spp == fixed._final_sampling(spent=5.0).spp == 32

@@ -14,7 +14,9 @@ result's finishing smoothing (``finish_smooth`` auto: where the run's paired ren
 and the mottle's noise correction is accurate, at most ``eval_max_spp`` (4096) and within ``eval_time_budget``, or
 within ``runfigures.FINAL_FIGURES_SHARE`` of the run's time when neither that nor a run time budget is given; the
 start's and the baseline's figures are one pilot pass each), compared with the target by
-``evaluation.metrics.prediction_metrics``; then the scene's pictures, loss.png and report.json
+``evaluation.metrics.prediction_metrics``, on every texel or on a texel sample (``runfigures``: a large object's,
+and then every texel is rendered for the pictures within the time the sample leaves); then the scene's pictures,
+loss.png and report.json
 (``evaluation.results.Report``). The scene comes from user inputs through a spec (``scenes.spec``:
 ``scenes.build_scene(SlabSpec(...), inks)``, ``scenes.build_scene(MeshSpec(...), inks)``).
 """
@@ -96,8 +98,9 @@ class RunOptions:
     stage's predicted cost, ``coarse.fine_stage_seconds``). ``seconds_per_iteration``: known before the run starts
     (a coarse-to-fine job's fine stage with a time budget: the coarse stage's, scaled,
     ``coarse.fine_iteration_seconds``): the run's estimate takes it instead of timing passes on its renderer
-    (``estimate.estimate_run``). ``start_texel_sample``: the start's and baselines' figures of every texel (0) or of a
-    texel sample of that many texels (None: a sample where a pilot predicts it twice as fast, ``runfigures``)."""
+    (``estimate.estimate_run``). ``figure_texel_sample``: the start's, the baselines' and the result's figures of every
+    texel (0) or of a texel sample of that many texels (None: a sample where a pilot predicts it twice as fast,
+    ``runfigures``)."""
 
     resume: bool = False
     eval_spp: int | None = None
@@ -117,7 +120,7 @@ class RunOptions:
     baselines: dict | None = None
     after: Callable[[float], float] | None = None
     seconds_per_iteration: float | None = None
-    start_texel_sample: int | None = None
+    figure_texel_sample: int | None = None
 
     def validate(self) -> None:
         """One-line errors naming the option, before any work."""
@@ -136,9 +139,9 @@ class RunOptions:
         per = self.seconds_per_iteration
         if per is not None and not 0 < per < float("inf"):
             raise ParameterError(f"`seconds_per_iteration` must be a positive number of seconds, got {per}")
-        n = self.start_texel_sample
+        n = self.figure_texel_sample
         if n is not None and (n < 0 or n == 1):
-            raise ParameterError(f"`start_texel_sample` must be 0 (every texel) or at least 2 texels, got {n}")
+            raise ParameterError(f"`figure_texel_sample` must be 0 (every texel) or at least 2 texels, got {n}")
 
 
 @dataclass
@@ -181,12 +184,12 @@ def run_optimisation(scene: Scene, out_dir, cfg: OptimizeConfig, options: RunOpt
         job.run.release_unread_operators()  # the figures' window is not held through the first render
         release_freed_memory()  # nor the heap the figures freed: a step's large arrays are mapped, not taken from it
         finish = _iterate(job, figures)
-        res, metrics = figures.final()
+        result = figures.final()
         if job.run.start_figures is None:  # a checkpoint written before the start's figures were kept in it
             job.run.keep_start_figures(figures.start(job.run.initial_variables()))
-        check = check_baseline(job.run, metrics, options.log)  # the warning when worse than the baseline
-        de = _write_result_files(job, res)
-        report = _report(job, res, metrics, de, estimate, check, finish)
+        check = check_baseline(job.run, result.metrics, options.log, result.error)  # warns when worse than it
+        de = _write_result_files(job, result.pictures)
+        report = _report(job, result, de, estimate, check, finish)
         job.rd.write_report(report.to_json())
         return report
 
@@ -325,11 +328,13 @@ def _write_result_files(job: _Job, res) -> np.ndarray:
     return de
 
 
-def _report(job: _Job, res, metrics, de, estimate: Estimate, check: BaselineCheck | None, finish=None) -> Report:
-    """report.json's contents: the result's figures ``metrics`` (render ``res``, per-texel ΔE76 ``de``), the
+def _report(job: _Job, result, de, estimate: Estimate, check: BaselineCheck | None, finish=None) -> Report:
+    """report.json's contents: the result's figures (``runfigures.ResultFigures``; per-texel ΔE76 ``de`` of its
+    pictures' render), the
     start's, the baseline's (``check``; None: not measured), the finishing choice (``finish``, a ``FinishChoice``;
     None: ``cfg.finish_smooth`` passes as set), the run's times and settings."""
     run, cfg, start = job.run, job.cfg, job.run.start_figures
+    res, metrics = result.render, result.metrics
     h = run.history
     n = max(len(h.seconds), 1)
     return Report(
@@ -345,6 +350,8 @@ def _report(job: _Job, res, metrics, de, estimate: Estimate, check: BaselineChec
         eval_spp_passes=res.passes,
         initial_eval_spp=start["eval_spp"],
         initial_texel_sample=start.get("texel_sample"),
+        texel_sample=result.sample,
+        pictures_spp=result.pictures.spp,
         # this invocation's wall time (set-up, the iterations it ran, the evaluation); a resumed run's earlier
         # iterations are in the history, so seconds_iterations covers all of them
         seconds=time.perf_counter() - job.options.started,
@@ -369,7 +376,7 @@ def _report(job: _Job, res, metrics, de, estimate: Estimate, check: BaselineChec
         lighting=job.lighting.describe(),
         baseline=None if check is None else check.to_json(),
         beats_baseline=None if check is None else check.beats,
-        viewing=_lights_report(run, res),
+        viewing=_lights_report(run, result.pictures),
     )
 
 

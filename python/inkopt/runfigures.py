@@ -3,30 +3,41 @@ optimisation, their time budgets within a run's time budget (``figure_budgets``)
 finishing smoothing (``evaluation.finish``), whose render of the chosen candidate is the result's figures' first
 pass.
 
-The start's and the baselines' figures are of every texel, one pilot pass (``noise.PILOT_SPP`` samples per texel
-at most), or of a texel sample (``evaluation.sample``): the sample where a short pilot predicts it at least twice as
-fast for a mean ΔE76 whose standard error is ``START_STDERR_DE76`` (``evaluation.choice.choose_sampling``; no pilot
-where no sample could be; ``RunOptions.start_texel_sample`` forces either). The sample then takes the time every
-texel's pass was predicted to take for samples beyond the pilot's, adaptive to ``inkopt evaluate``'s noise targets:
-its figures are more accurate than that pass's would have been, in no more time (a forced sample: one pilot pass).
-Under a time budget both get what fits its share. The first of them chooses, and a resumed run takes the sample its
-start's figures recorded, so the start and the baseline are measured on the same texels, drawn with the figures'
-seed. The figures' texels then grow with their spread, not with the object's surface (docs/quality.md, "The run's
-own check against the extrusion baseline"). The result's figures render every texel: its pictures and
-predictions.npz need them."""
+The figures are of every texel, or of a texel sample (``evaluation.sample``): the sample where a short pilot before
+the start's figures predicts it at least twice as fast for a mean ΔE76 whose standard error is ``START_STDERR_DE76``
+(``evaluation.choice.choose_sampling``; no pilot where no sample could be; ``RunOptions.figure_texel_sample`` forces
+either). The start, the baseline and the result are then measured on the same texels, drawn with the figures' seed;
+a resumed run takes the sample its start's figures recorded. The figures' texels then grow with their spread, not
+with the object's surface (docs/quality.md, "The run's own check against the extrusion baseline").
+
+The start's and the baselines' figures: every texel's in one pilot pass (``noise.PILOT_SPP`` samples per texel at
+most); a sample's in the time every texel's pass was predicted to take, adaptive to ``inkopt evaluate``'s noise
+targets beyond the pilot (a forced sample: one pilot pass); under a time budget both get what fits its share. The
+result's figures: adaptive within their share of the run's budget, or without one ``FINAL_FIGURES_SHARE`` of the
+run's time; on a sample they take at most ``RESULT_SAMPLE_SHARE`` of it, the finishing choice renders the sample's
+points, and every texel is rendered in the time left for the pictures and predictions.npz, which need every texel
+(``ResultFigures.pictures``)."""
 
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from typing import NamedTuple
 
 from .evaluation.choice import MIN_SAMPLE_TEXELS, SAMPLE_MIN_GAIN, SamplingChoice, choose_sampling
 from .evaluation.finish import FinishChoice, choice_seconds, choose_finish
-from .evaluation.guard import kept_figures
-from .evaluation.metrics import prediction_metrics
-from .evaluation.noise import EVAL_SEED_OFFSET, PILOT_SPP, Sampling, adaptive_render, first_pass
+from .evaluation.guard import figure_error, kept_figures, sampled_error
+from .evaluation.metrics import Metrics, prediction_metrics
+from .evaluation.noise import EVAL_SEED_OFFSET, PILOT_SPP, AdaptiveResult, Sampling, adaptive_render, first_pass
 from .evaluation.renders import TimeShares, render_result, texel_groups
-from .evaluation.sample import DEFAULT_SAMPLE_WINDOWS, SIGMA, TexelSample, per_texel, sampled_figures
+from .evaluation.sample import (
+    DEFAULT_SAMPLE_WINDOWS,
+    SIGMA,
+    TexelSample,
+    per_texel,
+    sample_size,
+    sampled_figures,
+)
 from .loss import TexelLoss
 from .optim import OptimizeConfig
 
@@ -47,6 +58,25 @@ FINAL_FIGURES_SHARE = 0.25
 #: third of ``evaluation.choice.TARGET_STDERR_DE76``, so that the sampling adds little to the figures' uncertainty,
 #: the noise correction's above all (Spot 100 mm, 13 960 points: 0.16 of 0.20 ΔE76 at 1107 spp, 1.09 of 1.15 at 64)
 START_STDERR_DE76 = 0.05
+#: the share of the result's figures' time (``FINAL_FIGURES_SHARE`` or their budget) their render on a texel sample
+#: may take; every texel's render for the pictures and predictions.npz gets what it leaves. The sample reaches its
+#: noise targets in a fraction of it (Spot 100 mm: 374 s of a 1-h plan, docs/quality.md)
+RESULT_SAMPLE_SHARE = 0.5
+
+
+@dataclass(frozen=True)
+class ResultFigures:
+    """The result's figures (``RunFigures.final``): ``metrics`` (``Metrics``, CIELAB under the first light) of
+    ``render`` (``AdaptiveResult``: of every texel, or of the texel sample's points), the uncertainty ``error``
+    (ΔE76) of their noise-corrected mean ΔE76 (``evaluation.guard``), their ``sample`` (None: every texel; else
+    {"sample": ``TexelSample.to_json()``, "stderr": the figures' standard errors by name}), and ``pictures``:
+    the render of every texel that the pictures and predictions.npz show (``render`` itself without a sample)."""
+
+    metrics: Metrics
+    render: AdaptiveResult
+    error: float
+    sample: dict | None
+    pictures: AdaptiveResult
 
 
 class _Ask(NamedTuple):
@@ -110,10 +140,11 @@ class RunFigures:
             seed=self.seed, spp=self.spp, max_spp=max_spp, time_budget=budget, pilot_in_budget=pilot_in_budget
         )
 
-    def _of(self, x, sampling: Sampling, keep_renderer: bool = True, replay=None, held: list | None = None):
-        """(``AdaptiveResult``, ``Metrics``) of the mixture of variables ``x`` (None: the current ones); ``replay``: a
-        pass rendered already (``evaluation.finish.Replay``); ``held``: a one-item list of the run's renderer set to
-        ``x`` already, taken out of it (so that releasing the renderer frees it)."""
+    def _of(self, x, sampling: Sampling, keep_renderer=True, replay=None, held: list | None = None, measure=True):
+        """(``AdaptiveResult``, ``Metrics``, None unless ``measure``) of every texel's render of the mixture of
+        variables ``x`` (None: the current ones); ``replay``: a pass rendered already (``evaluation.finish.Replay``);
+        ``held``: a one-item list of the run's renderer set to ``x`` already, taken out of it (so that releasing the
+        renderer frees it)."""
         run, opts = self.job.run, self.job.options
         renderer = held.pop() if held else run.renderer(x)
 
@@ -131,6 +162,8 @@ class RunFigures:
         if not keep_renderer:  # its media are not needed beside the loss's window operators that the figures build
             del renderer, render
             run.release_renderer()
+        if not measure:
+            return res, None
         return res, prediction_metrics(run.loss, res.rgb, res.var)  # CIELAB under the first light
 
     def start(self, x=None, keep_renderer: bool | None = None) -> dict:
@@ -161,11 +194,10 @@ class RunFigures:
         ``SAMPLE_MIN_GAIN`` times smaller than the texels, else by a pilot through
         ``renderer`` (the run's, set to the first figures' mixture). Logged when a sample is taken."""
         job, loss = self.job, self.job.run.loss
-        texels, ask = job.scene.texels, _Ask(job.options.start_texel_sample, self.spp, max_spp)
-        kept = ((job.run.start_figures or {}).get("texel_sample") or {}).get("sample")
-        if kept is not None and ask.texel_sample is None:  # measured on this sample: the baseline on it too
-            drawn = TexelSample.draw(texels, kept["texels"], kept["windows"], kept["seed"])
-            self.choice = SamplingChoice(drawn, False)
+        texels, ask = job.scene.texels, _Ask(job.options.figure_texel_sample, self.spp, max_spp)
+        kept = self._kept_sample()
+        if kept is not None:  # measured on this sample: the baseline and the result on it too
+            self.choice = SamplingChoice(kept, False)
             return
         if ask.texel_sample is None and not _sample_can_win(texels, self.seed):
             self.choice = SamplingChoice(None, False)
@@ -180,49 +212,81 @@ class RunFigures:
         if s is not None:
             why = "as asked" if c.forced else f"predicted {c.sample_seconds:.0f} s against {c.full_seconds:.0f} s"
             job.options.log(
-                f"the start's figures: a texel sample of {len(s.points)} of {s.population} texels and "
+                f"the run's figures: a texel sample of {len(s.points)} of {s.population} texels and "
                 f"{len(s.centres)} SSIM windows ({len(s.windows)} texels; {why} for every texel)"
             )
 
+    def _kept_sample(self) -> TexelSample | None:
+        """The texel sample the run's start figures were measured on (a resumed run's, redrawn), unless the user
+        asks for a sample of their own (``RunOptions.figure_texel_sample``); None: none kept."""
+        kept = ((self.job.run.start_figures or {}).get("texel_sample") or {}).get("sample")
+        if kept is None or self.job.options.figure_texel_sample is not None:
+            return None
+        return TexelSample.draw(self.job.scene.texels, kept["texels"], kept["windows"], kept["seed"])
+
+    def _result_sample(self) -> TexelSample | None:
+        """The texel sample of the result's figures: the start's and baseline's (``self.choice``, decided by
+        ``start``), else the one the run's start figures were measured on, else the user's (``RunOptions.
+        figure_texel_sample``: no pilot is spent at the end of a run); None: every texel."""
+        if self.choice is None:
+            n = self.job.options.figure_texel_sample
+            kept, texels = self._kept_sample(), self.job.scene.texels
+            if kept is None and n:
+                kept = TexelSample.draw(texels, *sample_size(n, None, len(texels)), self.seed)
+            self.choice = SamplingChoice(kept, kept is not None and n is not None)
+        return self.choice.sample
+
     def _sampled(self, held: list, max_spp: int, keep_renderer: bool) -> tuple:
         """(seconds per sample per texel of every texel, the kept figures) of the run's renderer (``held``, as
-        ``_of`` takes it) on the texel sample's points and window texels (``evaluation.sample``), under the run's
-        first colour map: at most ``max_spp`` samples per texel, or, for a sample a pilot chose, adaptive ones (to
-        ``inkopt evaluate``'s noise targets, at most ``eval_max_spp``) within the time its prediction gave every
-        texel's pass (and the figures' budget); the seconds are those of the sample's render passes after the first
-        per texel-sample, times the scene's texels (the first pass of a Ray renderer waits for the mixture to reach
-        its workers)."""
+        ``_of`` takes it) on the texel sample (``_sample_figures``): at most ``max_spp`` samples per texel, or, for
+        a sample a pilot chose, adaptive ones (to ``inkopt evaluate``'s noise targets, at most ``eval_max_spp``)
+        within the time its prediction gave every texel's pass (and the figures' budget)."""
+        c, budget = self.choice, self.start_budget
+        if not c.forced and c.full_seconds is not None:  # chosen by a pilot: as long as every texel would take
+            budget = c.full_seconds if budget is None else min(budget, c.full_seconds)
+            max_spp = self.job.options.eval_max_spp
+        per_spp, points, m, err = self._sample_figures(held.pop(), self._sampling(budget, max_spp), keep_renderer)
+        taken = {"sample": c.sample.to_json(), "stderr": err, "choice": c.to_json()}
+        return per_spp, kept_figures(m, points.spp, c.sample.population, taken)
+
+    def _sample_figures(self, renderer, sampling: Sampling, keep_renderer: bool, replay=None) -> tuple:
+        """(seconds per sample per texel of every texel, the points' ``AdaptiveResult``, ``Metrics``, their standard
+        errors by name) of ``renderer`` (the run's, set to the figures' mixture) on the texel sample's points and
+        window texels (``evaluation.sample``), under the run's first colour map, as ``sampling`` asks (its time
+        budget shared by the two groups); ``replay``: the points' first pass rendered already
+        (``evaluation.finish.Replay``). The seconds are those of the render passes after the first, times the
+        scene's texels (the first pass of a Ray renderer waits for the mixture to reach its workers)."""
         run, opts, scene, loss = self.job.run, self.job.options, self.job.scene, self.job.run.loss
-        sample, renderer = self.choice.sample, held.pop()
+        sample = self.choice.sample
         groups = texel_groups(scene.texels, loss.target_lab, sample)
         passes = []  # (seconds, texel-samples) of each render pass
 
-        def source(n: int, s: int, group: int = 0):
+        def rendered(n: int, s: int, group: int = 0):
             t = time.perf_counter()
             out = self._pass(renderer, n, s, groups[group].texels)
             passes.append((time.perf_counter() - t, n * len(groups[group].texels)))
             return out
 
-        c, budget = self.choice, self.start_budget
-        if not c.forced and c.full_seconds is not None:  # chosen by a pilot: as long as every texel would take
-            budget = c.full_seconds if budget is None else min(budget, c.full_seconds)
-            max_spp = opts.eval_max_spp
-        shares = TimeShares(budget, time.perf_counter(), len(groups))
+        first = rendered if replay is None else replay.render(rendered)  # the points' first pass: replayed
+
+        def source(n: int, s: int, group: int = 0):
+            return first(n, s) if group == 0 else rendered(n, s, group)
+
+        shares = TimeShares(sampling.time_budget, time.perf_counter(), len(groups))
+        clock = None if replay is None else replay.clock  # the replayed pass's seconds count as spent
         cmap = loss.colours[0]
-        ads = render_result(source, groups, self._sampling(None, max_spp), shares, opts.log, cmap)
-        timed = passes[1:] or passes  # the first pass may wait for the mixture to arrive
+        points, windows = render_result(source, groups, sampling, shares, opts.log, cmap, clock)
+        timed = passes[1:] or passes
         per_spp = sum(p[0] for p in timed) / max(sum(p[1] for p in timed), 1) * sample.population
         if not keep_renderer:
-            del renderer, source
+            del renderer, source, first, rendered
             run.release_renderer()
-        points, windows = ads
         on = sample.windows
         window_loss = TexelLoss(loss.target_rgb[on], scene.texels.pos_vox[on], sigma=SIGMA, colours=(cmap,))
         colours = (windows.rgb, windows.var), (points.rgb, points.var)
         values = per_texel(window_loss, *colours, groups[0].target_lab, sample)
         m, err = sampled_figures(window_loss, values, sample)
-        taken = {"sample": sample.to_json(), "stderr": err, "choice": self.choice.to_json()}
-        return per_spp, kept_figures(m, points.spp, sample.population, taken)
+        return per_spp, points, m, err
 
     def final_reserve(self) -> float | None:
         """Seconds the result's figures are expected to take: their budget plus the most the start's and the
@@ -232,27 +296,75 @@ class RunFigures:
 
     def choice_reserve(self) -> float:
         """Seconds the finishing choice takes beyond the result's figures (``evaluation.finish.choice_seconds``): one
-        render of their first pass, at the start's or baseline's figures' measured seconds per sample when this
-        invocation rendered them, and a step."""
-        return choice_seconds(self.job.run, first_pass(self._final_sampling())[0], self.per_spp)
+        render of their first pass (of every texel, or of the texel sample's points), at the start's or baseline's
+        figures' measured seconds per sample when this invocation rendered them, and a step."""
+        sample = self._result_sample()
+        if sample is None:
+            spp = first_pass(self._final_sampling())[0]
+        else:  # samples per texel of every texel that take as long
+            spp = first_pass(self._sample_sampling())[0] * len(sample.points) / sample.population
+        return choice_seconds(self.job.run, spp, self.per_spp)
 
-    def _final_sampling(self) -> Sampling:
-        """The result's samples: the user's samples or budget, the run's budget share, or (neither) samples up to
-        ``FINAL_FIGURES_SHARE`` of the run's time so far after a whole pilot."""
+    def _final_seconds(self) -> float:
+        """Seconds the result's figures may take without the user's samples per texel: their budget, or without one
+        ``FINAL_FIGURES_SHARE`` of the run's time so far."""
+        if self.final_budget is not None:
+            return self.final_budget
+        return FINAL_FIGURES_SHARE * self.job.run.wall_seconds()
+
+    def _final_sampling(self, spent: float | None = None) -> Sampling:
+        """The samples of the result's render of every texel: the user's samples, or adaptive ones within
+        ``_final_seconds``, less the ``spent`` seconds of the result's figures on the texel sample (this render is
+        then the pictures' alone, its pilot within the time; else the pilot is outside it where the run has no
+        budget)."""
         max_spp = self.job.options.eval_max_spp
-        if self.spp is not None or self.final_budget is not None:
-            return self._sampling(self.final_budget, max_spp)
-        return self._sampling(FINAL_FIGURES_SHARE * self.job.run.wall_seconds(), max_spp, pilot_in_budget=False)
+        if self.spp is not None:
+            return self._sampling(None, max_spp)
+        within = self.final_budget is not None or spent is not None
+        return self._sampling(max(self._final_seconds() - (spent or 0.0), 0.0), max_spp, pilot_in_budget=within)
+
+    def _sample_sampling(self) -> Sampling:
+        """The samples of the result's figures on the texel sample: the user's samples, or adaptive ones within
+        ``RESULT_SAMPLE_SHARE`` of ``_final_seconds`` (the pilot outside it where the run has no budget)."""
+        max_spp = self.job.options.eval_max_spp
+        if self.spp is not None:
+            return self._sampling(None, max_spp)
+        within = self.final_budget is not None
+        return self._sampling(RESULT_SAMPLE_SHARE * self._final_seconds(), max_spp, pilot_in_budget=within)
 
     def choose_finish(self) -> FinishChoice:
         """The result's finishing smoothing where the run's paired render of both candidates says it lowers the loss
-        (``evaluation.finish.choose_finish``), rendered as the result's figures' first pass, which they then take."""
-        run = self.job.run
-        spp, _ = first_pass(self._final_sampling())
-        choice, self.replay = choose_finish(run, lambda n, s: self._pass(run.renderer(), n, s), spp, self.seed)
+        (``evaluation.finish.choose_finish``), on every texel or on the texel sample's points, rendered as the
+        result's figures' first pass there, which they then take."""
+        run, sample = self.job.run, self._result_sample()
+        if sample is None:
+            spp, _ = first_pass(self._final_sampling())
+            choice, self.replay = choose_finish(run, lambda n, s: self._pass(run.renderer(), n, s), spp, self.seed)
+            return choice
+        points = self.job.scene.texels.subset(sample.points)
+        spp, _ = first_pass(self._sample_sampling())
+
+        def render(n: int, s: int):
+            return self._pass(run.renderer(), n, s, points)
+
+        choice, self.replay = choose_finish(run, render, spp, self.seed, sample.points)
         return choice
 
-    def final(self):
-        """The result's figures (``_final_sampling``), their first pass the finishing choice's render if it made one."""
+    def final(self) -> ResultFigures:
+        """The result's figures and its render for the pictures (``ResultFigures``): of every texel
+        (``_final_sampling``), or of the texel sample (``_sample_sampling``) and then every texel's render within
+        the time they left; their first pass the finishing choice's render if it made one."""
         replay, self.replay = self.replay, None
-        return self._of(None, self._final_sampling(), keep_renderer=False, replay=replay)
+        sample, texels = self._result_sample(), len(self.job.scene.texels)
+        if sample is None:
+            res, m = self._of(None, self._final_sampling(), keep_renderer=False, replay=replay)
+            return ResultFigures(m, res, figure_error(m, texels), None, res)
+        t0 = time.perf_counter()
+        renderer = self.job.run.renderer()
+        _, points, m, err = self._sample_figures(renderer, self._sample_sampling(), True, replay)
+        spent = time.perf_counter() - t0
+        held = [renderer]
+        del renderer  # held alone, so that the pictures' render releases it
+        pictures, _ = self._of(None, self._final_sampling(spent), False, held=held, measure=False)
+        taken = {"sample": sample.to_json(), "stderr": err}
+        return ResultFigures(m, points, sampled_error(m, err, len(sample.points)), taken, pictures)

@@ -258,17 +258,17 @@ def test_eval_spp_below_one_is_refused(tmp_path, capsys):
     assert not (tmp_path / "r").exists()
 
 
-def test_start_texel_sample_is_taken_and_checked(tmp_path, capsys):
-    """--start-texel-sample N measures the start's and the baseline's figures on N texels (report.json says so);
+def test_figure_texel_sample_is_taken_and_checked(tmp_path, capsys):
+    """--figure-texel-sample N measures the start's and the baseline's figures on N texels (report.json says so);
     1 is refused in one line, exit 2, nothing written."""
     from PIL import Image
 
     Image.new("RGB", (12, 8), (200, 30, 30)).save(tmp_path / "p.png")
     args = ["slab", str(tmp_path / "p.png"), "--size-mm", "1.5x1x0.5", "--iterations", "1", "--spp", "2"]
-    code = main([*args, "--out", str(tmp_path / "bad"), "--start-texel-sample", "1"])
+    code = main([*args, "--out", str(tmp_path / "bad"), "--figure-texel-sample", "1"])
     err = capsys.readouterr().err.strip().splitlines()
-    assert code == 2 and len(err) == 1 and "start_texel_sample" in err[0].replace("-", "_"), err
+    assert code == 2 and len(err) == 1 and "figure_texel_sample" in err[0].replace("-", "_"), err
     assert not (tmp_path / "bad").exists()
-    assert main([*args, "--out", str(tmp_path / "r"), "--start-texel-sample", "40"]) == 0
+    assert main([*args, "--out", str(tmp_path / "r"), "--figure-texel-sample", "40"]) == 0
     report = json.loads((tmp_path / "r" / "report.json").read_text())
     assert report["initial_texel_sample"]["sample"]["texels"] == 40

@@ -23,6 +23,7 @@ from inkopt.model import InkTable, Volume
 from inkopt.optim import Optimization, OptimizeConfig
 from inkopt.optim.config import FINISH_AUTO
 from inkopt.run import RunOptions, run_optimisation
+from inkopt.rundir import RunDir
 from inkopt.scenes.slab import build_slab
 
 pytest.importorskip("inkopt._core")
@@ -146,9 +147,9 @@ def passes(monkeypatch):
     """The figures' render passes of the runs in the test (``RunFigures._pass`` calls)."""
     calls, real = [], runfigures.RunFigures._pass
 
-    def counted(self, renderer, n, s):
-        calls.append((n, s))
-        return real(self, renderer, n, s)
+    def counted(self, renderer, n, s, texels=None):
+        calls.append((n, s) if texels is None else (n, s, len(texels)))
+        return real(self, renderer, n, s, texels)
 
     monkeypatch.setattr(runfigures.RunFigures, "_pass", counted)
     return calls
@@ -176,6 +177,25 @@ def test_a_run_reports_its_choice_and_writes_the_chosen_result(noisy, tmp_path, 
     np.testing.assert_array_equal(a.mixture, b.mixture)
     assert rep.metrics.delta_e76_mean_corrected == plain.metrics.delta_e76_mean_corrected
     assert rep.eval_spp == plain.eval_spp == SPP
+
+
+def test_a_run_measured_on_a_texel_sample_chooses_on_its_points(noisy, tmp_path, passes):
+    """A run whose figures are of a texel sample renders the two candidates on the sample's points alone, the chosen
+    one then the points' first pass of the result's figures; every texel is rendered once, for the pictures."""
+    scene, _ = noisy
+    lines = []
+    rep = _run(scene, tmp_path / "r", lines, figure_texel_sample=100)
+    f = rep.finish
+    assert f["decision"] == "dropped" and f["texels"] == 100 and f["difference"] < -2 * f["stderr"], f
+    assert rep.texel_sample["sample"]["texels"] == 100 and rep.pictures_spp == rep.eval_spp == SPP
+    windows = rep.texel_sample["sample"]["window_texels"]
+    # the start: points and windows; the choice: the points twice; the result: its windows (the points replayed)
+    # and every texel for the pictures
+    want = [100, windows, 100, 100, windows, len(scene.texels)]
+    assert [c[2] if len(c) == 3 else len(scene.texels) for c in passes] == want, passes
+    predictions = RunDir(tmp_path / "r").load_predictions()
+    assert predictions.rgb["continuous"].shape == (len(scene.texels), 3) and predictions.texels is None
+    assert predictions.spp["continuous"] == SPP
 
 
 def test_finish_smooth_1_forces_the_pass_without_a_choice(noisy, tmp_path, passes):

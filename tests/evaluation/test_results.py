@@ -96,10 +96,10 @@ def run(tmp_path_factory):
 def test_report_keys_and_round_trip(run):
     data = json.loads((run / "report.json").read_text())
     # "stop" (why the run ended), "finish_smooth", the baseline guard's "baseline" and "beats_baseline" and the
-    # finishing choice's "finish", the loss's "colour_term" and the start figures' "initial_texel_sample" are the keys
-    # added since the files carried a version
+    # finishing choice's "finish", the loss's "colour_term", the start figures' "initial_texel_sample", the result
+    # figures' "texel_sample" and the pictures' "pictures_spp" are the keys added since the files carried a version
     added = {"format_version", "stop", "finish_smooth", "baseline", "beats_baseline", "finish", "colour_term"}
-    added |= {"initial_texel_sample"}
+    added |= {"initial_texel_sample", "texel_sample", "pictures_spp"}
     assert set(data) == SLAB_REPORT_KEYS | added and data["format_version"] == 1
     assert data["finish_smooth"] == 0 and data["finish"] is None  # a slab's default: no pass, nothing chosen
     assert data["stop"]["reason"] == "iterations" and data["stop"]["iterations"] == 2
@@ -123,6 +123,9 @@ def test_report_keys_and_round_trip(run):
     assert data["initial_texel_sample"] is None  # a small slab's start: every texel
     before_sample = {k: v for k, v in data.items() if k != "initial_texel_sample"}  # before the start's sample
     assert Report.from_json(before_sample) == rep
+    assert data["texel_sample"] is None and data["pictures_spp"] == data["eval_spp"]  # every texel: one render
+    before_result_sample = {k: v for k, v in data.items() if k not in ("texel_sample", "pictures_spp")}
+    assert Report.from_json(before_result_sample) == replace(rep, pictures_spp=None)
 
 
 def test_newer_format_is_a_one_line_error(run, tmp_path):

@@ -246,12 +246,13 @@ def add_single_run_args(p) -> None:
         "the time measured per sample says more would not fit (default: none)",
     )
     p.add_argument(
-        "--start-texel-sample",
+        "--figure-texel-sample",
         type=int,
         metavar="N",
-        help="the start's and the extrusion baseline's figures from a random sample of N texels (and 100 SSIM "
-        "windows); 0: every texel (default: a sample where a short pilot predicts it at least twice as fast, then "
-        "as many samples per texel as every texel's pass would have taken the time for)",
+        help="the start's, the extrusion baseline's and the result's figures from a random sample of N texels (and "
+        "100 SSIM windows; the pictures still show every texel); 0: every texel (default: a sample where a short "
+        "pilot predicts it at least twice as fast, then as many samples per texel as every texel's pass would have "
+        "taken the time for)",
     )
     p.add_argument(
         "--dry-run",
@@ -326,7 +327,7 @@ def run_options_from_args(args, started: float, table=None):
         eval_spp=args.eval_spp,
         eval_max_spp=args.eval_max_spp,
         eval_time_budget=args.eval_time_budget,
-        start_texel_sample=args.start_texel_sample,
+        figure_texel_sample=args.figure_texel_sample,
         threads=args.threads,
         progress=sys.stderr.isatty(),
         lighting=lighting_from_args(args),

@@ -106,14 +106,15 @@ class Replay:
         return time.perf_counter() + (self.seconds if self.used else 0.0)
 
 
-def texel_loss(loss, rgb, var) -> np.ndarray:
+def texel_loss(loss, rgb, var, rows=None) -> np.ndarray:
     """(I,) float64: each texel's squared ΔE76 of predictions ``rgb`` (I, C) against ``loss``'s target under its first
-    colour map, minus the trace of its CIELAB covariance (from the variances of the means ``var`` (I, C)), the
-    square's expected excess from the render's noise."""
+    colour map (its texels ``rows`` (I,) int64; None: all of them), minus the trace of its CIELAB covariance (from
+    the variances of the means ``var`` (I, C)), the square's expected excess from the render's noise."""
     cmap, out = loss.colours[0], np.empty(len(rgb), np.float64)
+    target = loss.target_lab if rows is None else loss.target_lab[rows]
     for lo in range(0, len(rgb), BLOCK):
         c, v = np.asarray(rgb[lo : lo + BLOCK], np.float64), np.asarray(var[lo : lo + BLOCK], np.float64)
-        err = np.sum((cmap.lab(c) - loss.target_lab[lo : lo + BLOCK]) ** 2, axis=1)
+        err = np.sum((cmap.lab(c) - target[lo : lo + BLOCK]) ** 2, axis=1)
         jac = cmap.lab_jacobian(c)  # (b, 3, C)
         out[lo : lo + BLOCK] = err - np.einsum("ikj,ij,ikj->i", jac, v, jac)
     return out
@@ -159,10 +160,11 @@ def choice_seconds(run: Optimization, spp: int, per_spp: float | None = None) ->
     return per_spp * spp + float(np.median(h.step_s))
 
 
-def choose_finish(run: Optimization, render, spp: int, seed: int) -> tuple[FinishChoice, Replay | None]:
+def choose_finish(run: Optimization, render, spp: int, seed: int, on=None) -> tuple[FinishChoice, Replay | None]:
     """Leave ``run.x`` at its last iterate or that iterate after ``FINISH_PASSES`` passes of the smoothing, whichever
     the paired render says (module docstring). ``render(spp, seed) -> (rgb (I, C), var_mean (I, C), weight)`` renders
-    the run's current variables. Returns the choice and the chosen candidate's render as a ``Replay`` (None where
+    the run's current variables on every texel or on its texels ``on`` (I,) int64, a random sample of them (a
+    large object's: ``runfigures``). Returns the choice and the chosen candidate's render as a ``Replay`` (None where
     nothing was rendered)."""
     t0 = time.perf_counter()
     rows = _rows(run)
@@ -179,7 +181,7 @@ def choose_finish(run: Optimization, render, spp: int, seed: int) -> tuple[Finis
     del before
     t = time.perf_counter()
     plain, t_plain = render(spp, seed), time.perf_counter() - t
-    ls, lu = texel_loss(run.loss, *smoothed[:2]), texel_loss(run.loss, *plain[:2])
+    ls, lu = texel_loss(run.loss, *smoothed[:2], on), texel_loss(run.loss, *plain[:2], on)
     diff, se = paired(ls, lu)
     keep = decide(diff, se)
     if keep:

@@ -111,8 +111,8 @@ class BaselineCheck:
     baseline: dict
 
     @classmethod
-    def of(cls, metrics: Metrics, texels: int, kind: str, baseline: dict) -> BaselineCheck:
-        return cls(kind, float(metrics.delta_e76_mean_corrected), figure_error(metrics, texels), dict(baseline))
+    def of(cls, metrics: Metrics, error: float, kind: str, baseline: dict) -> BaselineCheck:
+        return cls(kind, float(metrics.delta_e76_mean_corrected), float(error), dict(baseline))
 
     @property
     def difference(self) -> float:
@@ -188,13 +188,17 @@ def keep_baseline_figures(run: Optimization, measure: Callable[[np.ndarray], dic
         )
 
 
-def check_baseline(run: Optimization, metrics: Metrics, log: Callable[[str], None]) -> BaselineCheck | None:
-    """The result's figures ``metrics`` against the baseline figures kept with ``run``, the warning (or note) in
-    ``log``; None when the run kept none."""
+def check_baseline(
+    run: Optimization, metrics: Metrics, log: Callable[[str], None], error: float | None = None
+) -> BaselineCheck | None:
+    """The result's figures ``metrics`` (uncertainty ``error``, ΔE76; None: ``figure_error`` of every texel's)
+    against the baseline figures kept with ``run``, the warning (or note) in ``log``; None when the run kept
+    none."""
     kept = (run.baseline_figures or {}).get(GUARD_BASELINE)
     if not comparable(kept) or metrics.delta_e76_mean_corrected is None:
         return None
-    check = BaselineCheck.of(metrics, len(run.texels), GUARD_BASELINE, kept)
+    error = figure_error(metrics, len(run.texels)) if error is None else error
+    check = BaselineCheck.of(metrics, error, GUARD_BASELINE, kept)
     line = check.warning() or check.note()
     if line:
         log(line)

@@ -115,10 +115,17 @@ class Rendered:
 
 
 def render_result(
-    source, groups: list[TexelGroup], sampling: Sampling, shares: TimeShares, log: Callable, cmap: ColourMap = RGB
+    source,
+    groups: list[TexelGroup],
+    sampling: Sampling,
+    shares: TimeShares,
+    log: Callable,
+    cmap: ColourMap = RGB,
+    clock: Callable[[], float] | None = None,
 ) -> list:
     """``source`` rendered adaptively on each group (``sampling`` with the group's noise targets and its share of
-    the time budget; ``cmap``: the colour map of the source's C channels, a spectral render's bands under the first
+    the time budget; ``clock``: the renders' clock, ``noise.adaptive_render``'s; ``cmap``: the colour map of the
+    source's C channels, a spectral render's bands under the first
     light); one ``AdaptiveResult`` per group."""
     return [
         adaptive_render(
@@ -126,6 +133,7 @@ def render_result(
             group.target_lab,
             replace(sampling, target=group.noise_target, ratio=group.ssim_ratio, time_budget=shares.next()),
             log=log,
+            clock=clock,
             cmap=cmap,
         )
         for g, group in enumerate(groups)

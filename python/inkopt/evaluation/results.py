@@ -46,7 +46,10 @@ class Report:
     ``metrics``: the final mixture's figures; ``initial_*``: the starting mixture's; ``delta_e76_max``: the
     largest per-texel ΔE76; ``iterations``, ``spp`` (gradient pass); ``eval_spp`` (the final evaluation's samples
     per texel), ``spp_adaptive``, ``eval_spp_passes``, ``initial_eval_spp``, ``initial_texel_sample`` (the start's
-    figures' texel sample and their standard errors, ``evaluation.guard.kept_figures``; None: every texel); wall
+    figures' texel sample and their standard errors, ``evaluation.guard.kept_figures``; None: every texel),
+    ``texel_sample`` (the result's figures': ``runfigures.ResultFigures.sample``; their ``eval_spp`` are then the
+    sample's points'), ``pictures_spp`` (samples per texel of the render of every texel that the pictures and
+    predictions.npz show; None in older reports); wall
     times in seconds (``seconds``: this invocation's; ``seconds_total``: the whole run's across resumes, None in
     older reports; ``time_split``: per iteration, by phase; ``estimate``: the cost estimated before the iterations,
     ``inkopt.estimate.Estimate.to_json()``, None in older reports); ``stop``: why the run ended where it did
@@ -103,6 +106,8 @@ class Report:
     viewing: dict | None = None
     colour_term: str | None = None  # the loss's colour term (None: a report from before the choice, squared)
     initial_texel_sample: dict | None = None
+    texel_sample: dict | None = None
+    pictures_spp: int | None = None
 
     _RUN = (
         "delta_e76_max",
@@ -114,6 +119,8 @@ class Report:
         "initial_eval_spp",
         "initial_delta_e76_mean_corrected",
         "initial_texel_sample",
+        "texel_sample",
+        "pictures_spp",
         "seconds",
         "seconds_total",
         "seconds_iterations",
