@@ -65,17 +65,18 @@ def test_a_resumed_run_takes_the_sample_its_start_recorded(when):
 def test_the_result_shares_its_time_between_the_sample_and_the_pictures():
     """Without a run budget the result's figures on a sample take at most ``RESULT_SAMPLE_SHARE`` of
     ``FINAL_FIGURES_SHARE`` of the run's time, their pilot beside it (the finishing choice renders that pass); every
-    texel's render for the pictures gets the rest, its pilot within it. Under a run budget both are within its
+    texel's render for the pictures gets the rest, its pilot within it. Under a run budget the same, within its
     share; the user's samples per texel are taken as given."""
     figures = _figures(sheet(20), wall=1000.0)
     share = FINAL_FIGURES_SHARE * 1000.0
-    on_sample, pictures = figures._sample_sampling(), figures._final_sampling(spent=30.0)
+    on_sample, pictures = figures._sample_figures_sampling(), figures._final_sampling(spent=30.0)
     assert on_sample.time_budget == pytest.approx(RESULT_SAMPLE_SHARE * share) and not on_sample.pilot_in_budget
     assert pictures.time_budget == pytest.approx(share - 30.0) and pictures.pilot_in_budget
     assert figures._final_sampling(spent=2 * share).time_budget == 0.0
     whole = figures._final_sampling()  # no sample: the figures' own render, its pilot outside the time as before
     assert whole.time_budget == pytest.approx(share) and not whole.pilot_in_budget
     budgeted = _figures(sheet(20), cfg=replace(OptimizeConfig(), time_budget=600.0))
-    assert budgeted._sample_sampling().pilot_in_budget and budgeted._final_sampling(spent=1.0).pilot_in_budget
+    assert not budgeted._sample_figures_sampling().pilot_in_budget  # a sample's pilot is cheap: the choice renders it
+    assert budgeted._final_sampling(spent=1.0).pilot_in_budget
     fixed = _figures(sheet(20), eval_spp=32)
-    assert fixed._sample_sampling().spp == fixed._final_sampling(spent=5.0).spp == 32
+    assert fixed._sample_figures_sampling().spp == fixed._final_sampling(spent=5.0).spp == 32
