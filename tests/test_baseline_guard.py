@@ -131,7 +131,7 @@ def test_figures_of_a_texel_sample_agree_with_every_texels_and_keep_the_guard(sc
     diff = rep.metrics.delta_e76_mean_corrected - every.metrics.delta_e76_mean_corrected
     assert abs(diff) <= 4 * math.hypot(*errors) and errors[0] > errors[1], (diff, errors)
     print_run_summary(Report.read(tmp_path / "sample" / "report.json"), "white")
-    assert "white start, 200 sampled texels" in capsys.readouterr().out
+    assert "; both on 200 sampled texels) after" in capsys.readouterr().out
     with pytest.raises(ParameterError, match="figure_texel_sample"):
         _run(scene, tmp_path / "bad", _cfg(), figure_texel_sample=1)
 

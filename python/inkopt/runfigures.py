@@ -354,8 +354,8 @@ class RunFigures:
 
     def final(self) -> ResultFigures:
         """The result's figures and its render for the pictures (``ResultFigures``): of every texel
-        (``_final_sampling``), or of the texel sample (``_sample_figures_sampling``) and then every texel's render within
-        the time they left; their first pass the finishing choice's render if it made one."""
+        (``_final_sampling``), or of the texel sample (``_sample_figures_sampling``) and then every texel's render
+        within the time they left; their first pass the finishing choice's render if it made one."""
         replay, self.replay = self.replay, None
         sample, texels = self._result_sample(), len(self.job.scene.texels)
         if sample is None:

@@ -13,6 +13,7 @@ mixture, which the render averages; the pass turns each neighbourhood into its m
 
 import json
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,6 +23,7 @@ from inkopt.evaluation import finish
 from inkopt.model import InkTable, Volume
 from inkopt.optim import Optimization, OptimizeConfig
 from inkopt.optim.config import FINISH_AUTO
+from inkopt.proof import write_proof
 from inkopt.run import RunOptions, run_optimisation
 from inkopt.rundir import RunDir
 from inkopt.scenes.slab import build_slab
@@ -196,6 +198,8 @@ def test_a_run_measured_on_a_texel_sample_chooses_on_its_points(noisy, tmp_path,
     predictions = RunDir(tmp_path / "r").load_predictions()
     assert predictions.rgb["continuous"].shape == (len(scene.texels), 3) and predictions.texels is None
     assert predictions.spp["continuous"] == SPP
+    page = Path(write_proof(tmp_path / "r").path).read_text()  # the soft proof says where its figures come from
+    assert f"on a random sample of 100 of its {len(scene.texels)} texels" in page
 
 
 def test_finish_smooth_1_forces_the_pass_without_a_choice(noisy, tmp_path, passes):

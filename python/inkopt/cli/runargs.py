@@ -428,11 +428,12 @@ def print_run_summary(rep, init: str, extra: str = "") -> None:
             f"; corrected ΔE76 {m.delta_e76_mean_corrected:.2f} ± {b['result_delta_e76_error']:.2f} against the {kind} "
             f"baseline's {b['delta_e76_mean_corrected']:.2f} ± {b['delta_e76_error']:.2f}: {verdict}"
         )
-    sample = (rep.initial_texel_sample or {}).get("sample")
-    on = "" if not sample else f", {sample['texels']} sampled texels"
+    start, result = ((t or {}).get("sample") for t in (rep.initial_texel_sample, rep.texel_sample))
+    on = f", {start['texels']} sampled texels" if start and not result else ""
+    both = "" if not result else f"; {'both ' if start else ''}on {result['texels']} sampled texels"
     print(
         f"mean ΔE76 {rep.initial_delta_e76_mean:.2f} ({init} start{on}) -> {m.delta_e76_mean:.2f} "
-        f"(p95 {m.delta_e76_p95:.2f}, ΔE2000 {m.delta_e2000_mean:.2f}, SSIM {m.ssim:.3f}) "
+        f"(p95 {m.delta_e76_p95:.2f}, ΔE2000 {m.delta_e2000_mean:.2f}, SSIM {m.ssim:.3f}{both}) "
         f"after {rep.iterations} iterations{stopped(rep)} in {rep.seconds:.0f} s{whole}{extra}{against}"
     )
     if rep.viewing is not None:  # a spectral run: the figures above are under its first light

@@ -88,8 +88,22 @@ def figures_html(report: Report, ev: Evaluation | None) -> Markup:
             )
     else:
         rows = [_metric_row("continuous", report.metrics, report.eval_spp)]
+        sample = (report.texel_sample or {}).get("sample")
+        on = (
+            ""
+            if not sample
+            else html(
+                " on a random sample of {} of its {} texels and {} SSIM windows (the figures' standard errors: "
+                "report.json's <code>texel_sample</code>)",
+                sample["texels"],
+                sample["population"],
+                sample["windows"],
+            )
+        )
         note = html(
-            "the optimisation's final render; run <code>inkopt evaluate</code> for the printed result and the baselines"
+            "the optimisation's final render{}; run <code>inkopt evaluate</code> for the printed result and the "
+            "baselines",
+            on,
         )
     m = report.metrics
     return html(
