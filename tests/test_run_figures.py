@@ -9,6 +9,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from inkopt.evaluation.noise import PILOT_SPP, PROBE_SPP
 from inkopt.evaluation.sample import TexelSample
 from inkopt.model import Texels
 from inkopt.optim import OptimizeConfig
@@ -39,6 +40,7 @@ def _figures(texels, start_figures=None, cfg=None, wall=0.0, **options) -> RunFi
         start_figures=start_figures,
         loss=SimpleNamespace(colours=(None,), target_lab=np.zeros((len(texels), 3))),
         wall_seconds=lambda: wall,
+        history=SimpleNamespace(seconds=[]),  # no iteration yet
     )
     scene = SimpleNamespace(texels=texels)
     job = SimpleNamespace(run=run, scene=scene, cfg=cfg or OptimizeConfig(), options=RunOptions(**options))
@@ -64,19 +66,38 @@ def test_a_resumed_run_takes_the_sample_its_start_recorded(when):
 
 def test_the_result_shares_its_time_between_the_sample_and_the_pictures():
     """Without a run budget the result's figures on a sample take at most ``RESULT_SAMPLE_SHARE`` of
-    ``FINAL_FIGURES_SHARE`` of the run's time, their pilot beside it (the finishing choice renders that pass); every
-    texel's render for the pictures gets the rest, its pilot within it. Under a run budget the same, within its
-    share; the user's samples per texel are taken as given."""
+    ``FINAL_FIGURES_SHARE`` of the run's time, their 64-spp pilot beside it (the finishing choice renders that pass);
+    every texel's render for the pictures gets what they leave, its pilot within it. The user's samples per texel
+    are taken as given."""
     figures = _figures(sheet(20), wall=1000.0)
     share = FINAL_FIGURES_SHARE * 1000.0
-    on_sample, pictures = figures._sample_figures_sampling(), figures._final_sampling(spent=30.0)
+    on_sample, pictures = figures._sample_figures_sampling(), figures._final_sampling(left=share - 30.0)
     assert on_sample.time_budget == pytest.approx(RESULT_SAMPLE_SHARE * share) and not on_sample.pilot_in_budget
+    assert on_sample.pilot_spp == PILOT_SPP
     assert pictures.time_budget == pytest.approx(share - 30.0) and pictures.pilot_in_budget
-    assert figures._final_sampling(spent=2 * share).time_budget == 0.0
+    assert figures._final_sampling(left=-5.0).time_budget == 0.0
     whole = figures._final_sampling()  # no sample: the figures' own render, its pilot outside the time as before
     assert whole.time_budget == pytest.approx(share) and not whole.pilot_in_budget
-    budgeted = _figures(sheet(20), cfg=replace(OptimizeConfig(), time_budget=600.0))
-    assert not budgeted._sample_figures_sampling().pilot_in_budget  # a sample's pilot is cheap: the choice renders it
-    assert budgeted._final_sampling(spent=1.0).pilot_in_budget
     fixed = _figures(sheet(20), eval_spp=32)
-    assert fixed._sample_figures_sampling().spp == fixed._final_sampling(spent=5.0).spp == 32
+    assert fixed._sample_figures_sampling().spp == fixed._final_sampling(left=5.0).spp == 32
+
+
+def test_under_a_budget_the_samples_pilot_is_what_fits():
+    """Under a run budget the pilot of the result's figures on a texel sample has as many samples per texel as the
+    measured seconds per sample say fit in their share, from the probe's 4 to 64 (a probe where nothing was
+    measured)."""
+    texels = sheet(200)
+    drawn = TexelSample.draw(texels, 3000, 40, seed=11)
+    kept = {"texel_sample": {"sample": drawn.to_json()}}
+    figures = _figures(texels, kept, cfg=replace(OptimizeConfig(), time_budget=1000.0))
+    assert figures._result_sample() is not None
+    seconds = RESULT_SAMPLE_SHARE * figures.final_budget
+    assert figures._sample_figures_sampling().pilot_spp == PROBE_SPP  # no cost measured, no iteration yet
+    sampled = len(drawn.points) + len(drawn.windows)
+    for want in (PROBE_SPP, 10, PILOT_SPP):  # seconds per sample of every texel for a pilot of `want` to fit
+        figures.per_spp = seconds / (want + 0.5) / sampled * len(texels)
+        assert figures._sample_figures_sampling().pilot_spp == want
+    figures.per_spp = seconds / 1000 / sampled * len(texels)  # 1000 spp would fit: 64
+    assert figures._sample_figures_sampling().pilot_spp == PILOT_SPP
+    figures.per_spp = seconds / sampled * len(texels)  # not even one: the probe
+    assert figures._sample_figures_sampling().pilot_spp == PROBE_SPP

@@ -21,14 +21,22 @@ points, and every texel is rendered in the time left for the pictures and predic
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import NamedTuple
 
 from .evaluation.choice import MIN_SAMPLE_TEXELS, SAMPLE_MIN_GAIN, SamplingChoice, choose_sampling
-from .evaluation.finish import FinishChoice, choice_seconds, choose_finish
+from .evaluation.finish import FinishChoice, choice_seconds, choose_finish, iteration_seconds_per_spp
 from .evaluation.guard import figure_error, kept_figures, sampled_error
 from .evaluation.metrics import Metrics, prediction_metrics
-from .evaluation.noise import EVAL_SEED_OFFSET, PILOT_SPP, AdaptiveResult, Sampling, adaptive_render, first_pass
+from .evaluation.noise import (
+    EVAL_SEED_OFFSET,
+    PILOT_SPP,
+    PROBE_SPP,
+    AdaptiveResult,
+    Sampling,
+    adaptive_render,
+    first_pass,
+)
 from .evaluation.renders import TimeShares, render_result, texel_groups
 from .evaluation.sample import (
     DEFAULT_SAMPLE_WINDOWS,
@@ -227,13 +235,16 @@ class RunFigures:
     def _result_sample(self) -> TexelSample | None:
         """The texel sample of the result's figures: the start's and baseline's (``self.choice``, decided by
         ``start``), else the one the run's start figures were measured on, else the user's (``RunOptions.
-        figure_texel_sample``: no pilot is spent at the end of a run); None: every texel."""
+        figure_texel_sample``: no pilot is spent at the end of a run); None: every texel (undecided: the start's
+        figures of an older checkpoint, measured after the result's, still choose)."""
         if self.choice is None:
             n = self.job.options.figure_texel_sample
             kept, texels = self._kept_sample(), self.job.scene.texels
             if kept is None and n:
                 kept = TexelSample.draw(texels, *sample_size(n, None, len(texels)), self.seed)
-            self.choice = SamplingChoice(kept, kept is not None and n is not None)
+            if kept is None:
+                return None
+            self.choice = SamplingChoice(kept, n is not None)
         return self.choice.sample
 
     def _sampled(self, held: list, max_spp: int, keep_renderer: bool) -> tuple:
@@ -272,8 +283,8 @@ class RunFigures:
         def source(n: int, s: int, group: int = 0):
             return first(n, s) if group == 0 else rendered(n, s, group)
 
-        shares = TimeShares(sampling.time_budget, time.perf_counter(), len(groups))
-        clock = None if replay is None else replay.clock  # the replayed pass's seconds count as spent
+        clock = time.perf_counter if replay is None else replay.clock  # the replayed pass's seconds count as spent
+        shares = TimeShares(sampling.time_budget, clock(), len(groups), clock)
         cmap = loss.colours[0]
         points, windows = render_result(source, groups, sampling, shares, opts.log, cmap, clock)
         timed = passes[1:] or passes
@@ -312,27 +323,41 @@ class RunFigures:
             return self.final_budget
         return FINAL_FIGURES_SHARE * self.job.run.wall_seconds()
 
-    def _final_sampling(self, spent: float | None = None) -> Sampling:
+    def _final_sampling(self, left: float | None = None) -> Sampling:
         """The samples of the result's render of every texel: the user's samples, or adaptive ones within
-        ``_final_seconds``, less the ``spent`` seconds of the result's figures on the texel sample (this render is
-        then the pictures' alone, its pilot within the time; else the pilot is outside it where the run has no
-        budget)."""
+        ``_final_seconds``, or the ``left`` seconds the result's figures on the texel sample left of them (this
+        render is then the pictures' alone, its pilot within the time; else the pilot is outside it where the run
+        has no budget)."""
         max_spp = self.job.options.eval_max_spp
         if self.spp is not None:
             return self._sampling(None, max_spp)
-        within = self.final_budget is not None or spent is not None
-        return self._sampling(max(self._final_seconds() - (spent or 0.0), 0.0), max_spp, pilot_in_budget=within)
+        if left is not None:
+            return self._sampling(max(left, 0.0), max_spp)
+        return self._sampling(self._final_seconds(), max_spp, pilot_in_budget=self.final_budget is not None)
 
-    def _sample_figures_sampling(self) -> Sampling:
+    def _sample_figures_sampling(self, total: float | None = None) -> Sampling:
         """The samples of the result's figures on the texel sample: the user's samples, or adaptive ones within
-        ``RESULT_SAMPLE_SHARE`` of ``_final_seconds``, the whole pilot beside it (under any budget a sample's 64-spp
-        pilot is fewer texel-samples than a 4-spp probe of every texel; the finishing choice renders the points'
-        pilot twice, and its paired difference at 4 spp would be mostly noise: Spot 100 mm, 13 960 points, -1.40 ±
-        4.11 on a loss of 542)."""
+        ``RESULT_SAMPLE_SHARE`` of ``total`` seconds (None: ``_final_seconds``), after a pilot of ``PILOT_SPP`` or,
+        under a run budget, of as many as its measured cost fits in that time (``_sample_pilot``)."""
         max_spp = self.job.options.eval_max_spp
         if self.spp is not None:
             return self._sampling(None, max_spp)
-        return self._sampling(RESULT_SAMPLE_SHARE * self._final_seconds(), max_spp, pilot_in_budget=False)
+        seconds = RESULT_SAMPLE_SHARE * (self._final_seconds() if total is None else total)
+        sampling = self._sampling(seconds, max_spp, pilot_in_budget=False)
+        return sampling if self.final_budget is None else replace(sampling, pilot_spp=self._sample_pilot(seconds))
+
+    def _sample_pilot(self, seconds: float) -> int:
+        """Samples per texel of the pilot of the result's figures on the texel sample under a run budget: as many as
+        fit in ``seconds`` at the seconds per sample measured on the start's figures (or on the iterations), from
+        ``noise.PROBE_SPP`` to ``PILOT_SPP``. The finishing choice renders the points at the pilot's samples, and its
+        paired difference at a 4-spp probe is mostly noise (Spot 100 mm, 13 960 points: -1.40 ± 4.11 on a loss of
+        542 at 4 spp, -0.51 ± 0.26 at 64); a 20 mm deadline's whole share fits less than a 64-spp pilot."""
+        sample = self.choice.sample
+        per_spp = self.per_spp if self.per_spp is not None else iteration_seconds_per_spp(self.job.run)
+        if per_spp is None:
+            return PROBE_SPP
+        pilot_seconds = per_spp * (len(sample.points) + len(sample.windows)) / sample.population
+        return int(min(PILOT_SPP, max(PROBE_SPP, seconds // max(pilot_seconds, 1e-12))))
 
     def choose_finish(self) -> FinishChoice:
         """The result's finishing smoothing where the run's paired render of both candidates says it lowers the loss
@@ -361,12 +386,13 @@ class RunFigures:
         if sample is None:
             res, m = self._of(None, self._final_sampling(), keep_renderer=False, replay=replay)
             return ResultFigures(m, res, figure_error(m, texels), None, res)
-        t0 = time.perf_counter()
+        clock = time.perf_counter if replay is None else replay.clock  # the replayed pass counts as spent
+        t0, total = clock(), self._final_seconds()
         renderer = self.job.run.renderer()
-        _, points, m, err = self._sample_figures(renderer, self._sample_figures_sampling(), True, replay)
-        spent = time.perf_counter() - t0
+        _, points, m, err = self._sample_figures(renderer, self._sample_figures_sampling(total), True, replay)
+        left = total - (clock() - t0)
         held = [renderer]
         del renderer  # held alone, so that the pictures' render releases it
-        pictures, _ = self._of(None, self._final_sampling(spent), False, held=held, measure=False)
+        pictures, _ = self._of(None, self._final_sampling(left), False, held=held, measure=False)
         taken = {"sample": sample.to_json(), "stderr": err}
         return ResultFigures(m, points, sampled_error(m, err, len(sample.points)), taken, pictures)

@@ -430,7 +430,7 @@ def print_run_summary(rep, init: str, extra: str = "") -> None:
         )
     start, result = ((t or {}).get("sample") for t in (rep.initial_texel_sample, rep.texel_sample))
     on = f", {start['texels']} sampled texels" if start and not result else ""
-    both = "" if not result else f"; {'both ' if start else ''}on {result['texels']} sampled texels"
+    both = "" if not result else f"; {'both ' if start == result else ''}on {result['texels']} sampled texels"
     print(
         f"mean ΔE76 {rep.initial_delta_e76_mean:.2f} ({init} start{on}) -> {m.delta_e76_mean:.2f} "
         f"(p95 {m.delta_e76_p95:.2f}, ΔE2000 {m.delta_e2000_mean:.2f}, SSIM {m.ssim:.3f}{both}) "

@@ -154,10 +154,18 @@ def choice_seconds(run: Optimization, spp: int, per_spp: float | None = None) ->
     h = run.history
     if changes_nothing(run) or not h.seconds:
         return 0.0
-    if per_spp is None:
-        fwd = run.cfg.forward_spp
-        per_spp = float(np.median(h.render_s)) / fwd if fwd > 0 else float(np.median(h.gradient_s)) / run.cfg.spp
+    per_spp = iteration_seconds_per_spp(run) if per_spp is None else per_spp
     return per_spp * spp + float(np.median(h.step_s))
+
+
+def iteration_seconds_per_spp(run: Optimization) -> float | None:
+    """Seconds per sample per texel of every texel of the run's iterations so far: their median forward render's,
+    or without forward renders their gradient pass's; None before any iteration."""
+    h = run.history
+    if not h.seconds:
+        return None
+    fwd = run.cfg.forward_spp
+    return float(np.median(h.render_s)) / fwd if fwd > 0 else float(np.median(h.gradient_s)) / run.cfg.spp
 
 
 def choose_finish(run: Optimization, render, spp: int, seed: int, on=None) -> tuple[FinishChoice, Replay | None]:

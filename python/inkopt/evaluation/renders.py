@@ -49,17 +49,19 @@ def texel_groups(texels: Texels, target_lab: np.ndarray, sample: TexelSample | N
 @dataclass
 class TimeShares:
     """The adaptive renders' time budget (``total`` seconds, None: none) shared out evenly: each render gets what is
-    left of it since ``started`` (``time.perf_counter``) over the ``left`` renders still to do, itself included."""
+    left of it since ``started`` (on ``clock``, default ``time.perf_counter``) over the ``left`` renders still to do,
+    itself included."""
 
     total: float | None
     started: float
     left: int
+    clock: Callable[[], float] = time.perf_counter
 
     def next(self) -> float | None:
         """The next render's budget in seconds (None without a budget); one render fewer is left."""
         budget = None
         if self.total is not None:
-            budget = max(self.total - (time.perf_counter() - self.started), 0.0) / max(self.left, 1)
+            budget = max(self.total - (self.clock() - self.started), 0.0) / max(self.left, 1)
         self.left -= 1
         return budget
 

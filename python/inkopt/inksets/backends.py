@@ -58,6 +58,7 @@ def run_candidate(task: dict) -> dict:
         threads=task["threads"],
         log=lambda msg: None,
         baseline_guard=False,  # the subsets are ranked against each other, not against a baseline
+        figure_texel_sample=0,  # ranked by the result's loss over every texel, the run's own (not a sample's)
     )
     rep = run_optimisation(scene, task["out"], cfg, options)
     m = rep.metrics
