@@ -9,7 +9,8 @@ texel sample and on every texel, within the time a run's budget gives them: what
 set-up leaves; a coarse-to-fine job's fine stage: ``--init DIR/coarse/fine_start.npz --shell-mm 1 --core white
 --time-budget 2h``). The scene and the run's set-up are built once; the mixture of ``--init`` stands for the
 result. Per way, from that mixture: a fresh ``RunFigures`` takes the way's texels (the sample as the run's start
-chooses it, by its pilot: its seconds reported apart; or every texel), then chooses the finishing smoothing and
+chooses it, by its pilot: its seconds reported apart, its cost per sample standing for the start's figures'; or
+every texel), then chooses the finishing smoothing and
 measures the result's figures, timed together as a run spends them. Reported per way: those seconds, the figures,
 their uncertainty as the baseline guard takes it (``error``), the samples per texel of the figures and of the
 pictures' render, the finishing decision; and the difference of the two corrected mean ΔE76s against their combined
@@ -46,6 +47,8 @@ def measure(run, scene, cfg, way: str) -> dict:
     t = time.perf_counter()
     if way == "sample":
         figures._choose_sample(run.renderer(), PILOT_SPP)  # the run's choice before its start's figures
+        cost = figures.choice.cost  # the seconds per sample the start's figures would measure: the pilot's
+        figures.per_spp = None if cost is None else cost.seconds_per_texel_sample * len(scene.texels)
     else:
         figures.choice = SamplingChoice(None, True)
     pilot = time.perf_counter() - t
@@ -67,6 +70,7 @@ def measure(run, scene, cfg, way: str) -> dict:
         "error": result.error,
         "eval_spp": result.render.spp,
         "pictures_spp": result.pictures.spp,
+        "first_pass_spp": result.render.passes[0],
         "texel_sample": result.sample,
     }
 

@@ -14,7 +14,13 @@ from inkopt.evaluation.sample import TexelSample
 from inkopt.model import Texels
 from inkopt.optim import OptimizeConfig
 from inkopt.run import RunOptions
-from inkopt.runfigures import FINAL_FIGURES_SHARE, RESULT_SAMPLE_SHARE, RunFigures, _sample_can_win
+from inkopt.runfigures import (
+    FINAL_FIGURES_SHARE,
+    RESULT_SAMPLE_MIN_GAIN,
+    RESULT_SAMPLE_SHARE,
+    RunFigures,
+    _sample_can_win,
+)
 
 
 def sheet(side: int) -> Texels:
@@ -53,15 +59,27 @@ def _figures(texels, start_figures=None, cfg=None, wall=0.0, **options) -> RunFi
 def test_a_resumed_run_takes_the_sample_its_start_recorded(when):
     """A run whose start's figures were measured on a sample (kept in its checkpoint) measures the baseline and its
     result on the same texels: the sample is drawn again from its recorded size, windows and seed."""
-    texels = sheet(200)
+    texels = sheet(400)
     recorded = TexelSample.draw(texels, 3000, 40, seed=11)
     figures = _figures(texels, {"texel_sample": {"sample": recorded.to_json()}})
     if when == "start":
         figures._choose_sample(renderer=None, max_spp=64)
-    again = figures._result_sample()
+    again = figures.choice.sample if when == "start" else figures._result_sample()
     for name in ("points", "centres", "windows"):
         np.testing.assert_array_equal(getattr(again, name), getattr(recorded, name))
     assert _figures(texels, {"texel_sample": None})._result_sample() is None  # a start of every texel: every texel
+
+
+def test_the_result_takes_the_sample_only_where_it_is_far_smaller():
+    """The result's figures are of the start's sample where its texels are at most 1 / ``RESULT_SAMPLE_MIN_GAIN``
+    of every texel (else every texel: the pictures need them, and the sample would gain little), or where the user
+    asked for the sample."""
+    recorded = {"texel_sample": {"sample": TexelSample.draw(sheet(400), 3000, 40, seed=11).to_json()}}
+    s = _figures(sheet(400), recorded)._result_sample()
+    assert RESULT_SAMPLE_MIN_GAIN * (len(s.points) + len(s.windows)) <= s.population
+    recorded = {"texel_sample": {"sample": TexelSample.draw(sheet(200), 3000, 40, seed=11).to_json()}}
+    assert _figures(sheet(200), recorded)._result_sample() is None  # 3000 points and 4319 window texels of 40 000
+    assert len(_figures(sheet(200), recorded, figure_texel_sample=3000)._result_sample().points) == 3000
 
 
 def test_the_result_shares_its_time_between_the_sample_and_the_pictures():
@@ -86,7 +104,7 @@ def test_under_a_budget_the_samples_pilot_is_what_fits():
     """Under a run budget the pilot of the result's figures on a texel sample has as many samples per texel as the
     measured seconds per sample say fit in their share, from the probe's 4 to 64 (a probe where nothing was
     measured)."""
-    texels = sheet(200)
+    texels = sheet(400)
     drawn = TexelSample.draw(texels, 3000, 40, seed=11)
     kept = {"texel_sample": {"sample": drawn.to_json()}}
     figures = _figures(texels, kept, cfg=replace(OptimizeConfig(), time_budget=1000.0))
