@@ -20,7 +20,6 @@ uncertainty. Writes the entry NAME (default ``spot<H>``) of bench/results/result
 from __future__ import annotations
 
 import json
-import math
 import sys
 import time
 from pathlib import Path
@@ -76,10 +75,7 @@ def measure(run, scene, cfg, way: str) -> dict:
 
 
 def main(argv=None) -> dict:
-    from bench_start_figures import set_up
-    from common import RESULTS, machine, provenance, write
-
-    from inkopt.run import peak_rss_gb
+    from bench_start_figures import entry, record, set_up
 
     a, extra, scene, run, setup = set_up(argv, __doc__, ["--init", "white", "--time-budget", "1h"])
     x0, ways = run.x.copy(), {}
@@ -88,26 +84,7 @@ def main(argv=None) -> dict:
         ways[way] = measure(run, scene, run.cfg, way)
         run.release_renderer()
         print(f"{way}: {json.dumps(ways[way])}", flush=True)
-    result = {
-        "height_mm": a.height_mm,
-        "mesh": Path(a.mesh).name,
-        "optimize_options": extra,
-        "texels": len(scene.texels),
-        "free_voxels": run.param.n_free,
-        "setup_seconds": setup,
-        "ways": ways,
-        "peak_rss_gb": peak_rss_gb(),
-        "machine": machine(),
-    }
-    if len(ways) == 2:
-        s, e = ways["sample"], ways["every"]
-        result["sample_minus_every_delta_e76_corrected"] = s["delta_e76_mean_corrected"] - e["delta_e76_mean_corrected"]
-        result["combined_error_delta_e76"] = math.hypot(s["error"], e["error"])
-    path = RESULTS / RESULTS_FILE
-    data = json.loads(path.read_text()) if path.is_file() else {}
-    data.setdefault("results", {})[a.name or f"spot{a.height_mm:g}"] = {**result, **provenance()}
-    write(RESULTS_FILE, data)
-    return result
+    return record(RESULTS_FILE, a, entry(a, extra, scene, run, setup, ways, "error"))
 
 
 if __name__ == "__main__":

@@ -76,15 +76,24 @@ def set_up(argv, doc: str, default_options: list) -> tuple:
 
 
 def main(argv=None) -> dict:
-    from common import RESULTS, machine, provenance, write
-
-    from inkopt.run import peak_rss_gb
-
     a, extra, scene, run, setup = set_up(argv, __doc__, ["--init", "white"])
     ways = {}
     for way in [a.only] if a.only else list(WAYS):
         ways[way] = measure(run, scene, run.cfg, way)
         print(f"{way}: {json.dumps(ways[way])}", flush=True)
+    result = entry(a, extra, scene, run, setup, ways, "delta_e76_error")
+    if len(ways) == 2:
+        result["time_ratio_every_over_sample"] = ways["every"]["seconds"] / ways["sample"]["seconds"]
+    return record(RESULTS_FILE, a, result)
+
+
+def entry(a, extra: list, scene, run, setup: float, ways: dict, error_key: str) -> dict:
+    """A bench's results entry: the scene's and the run's counts, each way's figures (``ways``), and with both
+    ways the difference of their corrected mean ΔE76s and their uncertainties (``ways[...][error_key]``) combined."""
+    from common import machine
+
+    from inkopt.run import peak_rss_gb
+
     result = {
         "height_mm": a.height_mm,
         "mesh": Path(a.mesh).name,
@@ -100,12 +109,19 @@ def main(argv=None) -> dict:
         s, e = ways["sample"], ways["every"]
         diff = s["delta_e76_mean_corrected"] - e["delta_e76_mean_corrected"]
         result["sample_minus_every_delta_e76_corrected"] = diff
-        result["combined_error_delta_e76"] = math.hypot(s["delta_e76_error"], e["delta_e76_error"])
-        result["time_ratio_every_over_sample"] = e["seconds"] / s["seconds"]
-    path = RESULTS / RESULTS_FILE
+        result["combined_error_delta_e76"] = math.hypot(s[error_key], e[error_key])
+    return result
+
+
+def record(results_file: str, a, result: dict) -> dict:
+    """``result`` written as the entry ``a.name`` (default ``spot<H>``) of bench/results/``results_file``, with its
+    commit and command."""
+    from common import RESULTS, provenance, write
+
+    path = RESULTS / results_file
     data = json.loads(path.read_text()) if path.is_file() else {}
     data.setdefault("results", {})[a.name or f"spot{a.height_mm:g}"] = {**result, **provenance()}
-    write(RESULTS_FILE, data)
+    write(results_file, data)
     return result
 
 
