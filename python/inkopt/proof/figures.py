@@ -54,6 +54,20 @@ def _metric_row(name: str, m, spp) -> list:
     ]
 
 
+def _sampled(taken) -> Markup | str:
+    """Where the run's figures come from when report.json's ``texel_sample`` names a sample (a dict with a
+    ``sample`` dict; anything else, as a hostile file may hold: nothing said), its counts escaped."""
+    sample = taken.get("sample") if isinstance(taken, dict) else None
+    if not isinstance(sample, dict):
+        return ""
+    counts = (sample.get(k, "?") for k in ("texels", "population", "windows"))
+    return html(
+        " on a random sample of {} of its {} texels and {} SSIM windows (the figures' standard errors: "
+        "report.json's <code>texel_sample</code>)",
+        *counts,
+    )
+
+
 FIGURE_HEAD = [
     "result",
     "ΔE76 mean",
@@ -88,22 +102,10 @@ def figures_html(report: Report, ev: Evaluation | None) -> Markup:
             )
     else:
         rows = [_metric_row("continuous", report.metrics, report.eval_spp)]
-        sample = (report.texel_sample or {}).get("sample")
-        on = (
-            ""
-            if not sample
-            else html(
-                " on a random sample of {} of its {} texels and {} SSIM windows (the figures' standard errors: "
-                "report.json's <code>texel_sample</code>)",
-                sample["texels"],
-                sample["population"],
-                sample["windows"],
-            )
-        )
         note = html(
             "the optimisation's final render{}; run <code>inkopt evaluate</code> for the printed result and the "
             "baselines",
-            on,
+            _sampled(report.texel_sample),
         )
     m = report.metrics
     return html(
