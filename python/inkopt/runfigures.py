@@ -7,9 +7,9 @@ The figures are of every texel, or of a texel sample (``evaluation.sample``): th
 the start's figures predicts it at least twice as fast for a mean ΔE76 whose standard error is ``START_STDERR_DE76``
 (``evaluation.choice.choose_sampling``; no pilot where no sample could be; ``RunOptions.figure_texel_sample`` forces
 either). The start and the baseline (and the result, below) are then measured on the same texels, drawn with the
-figures' seed;
-a resumed run takes the sample its start's figures recorded. The figures' texels then grow with their spread, not
-with the object's surface (docs/quality.md, "The run's own check against the extrusion baseline").
+figures' seed; a resumed run takes the sample its start's figures recorded. The figures' texels then grow with
+their spread, not with the object's surface (docs/quality.md, "The run's own check against the extrusion
+baseline").
 
 The start's and the baselines' figures: every texel's in one pilot pass (``noise.PILOT_SPP`` samples per texel at
 most); a sample's in the time every texel's pass was predicted to take, adaptive to ``inkopt evaluate``'s noise
@@ -68,14 +68,15 @@ FINAL_FIGURES_SHARE = 0.25
 #: the noise correction's above all (Spot 100 mm, 13 960 points: 0.16 of 0.20 ΔE76 at 1107 spp, 1.09 of 1.15 at 64)
 START_STDERR_DE76 = 0.05
 #: the share of the result's figures' time (``FINAL_FIGURES_SHARE`` or their budget) their render on a texel sample
-#: may take; every texel's render for the pictures and predictions.npz gets what it leaves. The sample reaches its
-#: noise targets in a fraction of it (Spot 100 mm: 374 s of a 1-h plan, docs/quality.md)
+#: may take; every texel's render for the pictures and predictions.npz gets what it leaves. Spot 100 mm under a 2-h
+#: budget: in 288 s of it the sample's points reached 551 spp, where the noise adds 0.73 to the mean ΔE76, and every
+#: texel's render 8 spp in the rest (docs/quality.md)
 RESULT_SAMPLE_SHARE = 0.5
 #: the result's figures are of the run's texel sample (unless the user asked for it) only where its texels, points
 #: and windows, are at most 1 / this of every texel: in half of the figures' time the sample's texels then get at
 #: least 8 times the samples every texel's would, where the pictures' render gives up half. Spot 100 mm: 25 947 of
-#: 2.43 M texels (94 times fewer), the figures 8.15 ± 0.30 ΔE76 at 531 spp against 12.42 ± 3.21 at 10 over every
-#: texel, the pictures 9 spp against 10; Spot 20 mm under a 5-minute deadline: 28 174 of 96 002 (3.4), the
+#: 2.43 M texels (94 times fewer), the figures 8.15 ± 0.30 ΔE76 at 551 spp against 12.42 ± 3.21 at 10 over every
+#: texel, the pictures 8 spp against 10; Spot 20 mm under a 5-minute deadline: 28 174 of 96 002 (3.4), the
 #: figures ± 2.30 at 21 spp and the pictures 4 spp, against ± 2.76 and 13 spp over every texel (docs/quality.md,
 #: "The figures from a texel sample")
 RESULT_SAMPLE_MIN_GAIN = 16
@@ -158,7 +159,7 @@ class RunFigures:
         )
 
     def _of(self, x, sampling: Sampling, keep_renderer=True, replay=None, held: list | None = None, measure=True):
-        """(``AdaptiveResult``, ``Metrics``, None unless ``measure``) of every texel's render of the mixture of
+        """(``AdaptiveResult``, ``Metrics`` or without ``measure`` None) of every texel's render of the mixture of
         variables ``x`` (None: the current ones); ``replay``: a pass rendered already (``evaluation.finish.Replay``);
         ``held``: a one-item list of the run's renderer set to ``x`` already, taken out of it (so that releasing the
         renderer frees it)."""
