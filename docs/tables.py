@@ -1287,6 +1287,38 @@ def core_deep_mixture() -> str:
     return table(header, rows, [path])
 
 
+def core_reach() -> str:
+    """experiments/core_reach.py: per band mixture and channel, the light a white core returns from below a depth,
+    the events its paths spend there, and the most a roulette by depth can gain (its lower bound)."""
+    path = STUDY / "core_reach.json"
+    rows = []
+    for key, r in load(path)["results"].items():
+        for name, m in r["mixtures"].items():
+            deep, cut = m["deep"], {row["depth_mm"]: row for row in m["cut"]}
+            for c, channel in enumerate("RGB"):
+                events = deep["events_per_path"][c]
+                below = [
+                    f"{100 * (deep['R'][c] - cut[h]['R'][c]) / deep['R'][c]:.1f} / "
+                    f"{max(0.0, 100 * (events - cut[h]['events_per_path'][c]) / events):.0f}"
+                    for h in (3.0, 8.0)
+                ]
+                best = max(m["cut"], key=lambda row: row["roulette_gain"]["low"][c])
+                rows.append(
+                    [
+                        f"{key}: {name}" if c == 0 else "",
+                        channel,
+                        f(cut[1.0]["R"][c], 3),
+                        f(deep["R"][c], 3),
+                        f(deep["events_per_path"][c], 1),
+                        *below,
+                        f"{best['roulette_gain']['low'][c]:.2f} at {best['depth_mm']:g} mm",
+                    ]
+                )
+    header = ["slab: band mixture", "channel", "R, band alone", "R, deep core", "events / path, deep core"]
+    header += ["from below 3 mm: % of R / % of events", "from below 8 mm", "roulette's best gain (lower bound)"]
+    return table(header, rows, [path])
+
+
 def _pm(pair, digits: int = 2) -> str:
     """'mean ± se' of a [mean, se] pair."""
     return f(pair[0], digits) + ("" if pair[1] is None else " ± " + f(pair[1], digits))
@@ -1468,6 +1500,7 @@ TABLES = {
     "shell-mm": shell_mm,
     "core-depth": core_depth,
     "core-deep-mixture": core_deep_mixture,
+    "core-reach": core_reach,
     "figure-terms": figure_terms,
     "figure-verdicts": figure_verdicts,
     "loss-de2000": loss_de2000,
