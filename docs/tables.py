@@ -1298,7 +1298,7 @@ def core_reach() -> str:
             for c, channel in enumerate("RGB"):
                 events = deep["events_per_path"][c]
                 below = [
-                    f"{100 * (deep['R'][c] - cut[h]['R'][c]) / deep['R'][c]:.1f} / "
+                    f"{round(100 * (deep['R'][c] - cut[h]['R'][c]) / deep['R'][c], 1) + 0.0:.1f} / "
                     f"{max(0.0, 100 * (events - cut[h]['events_per_path'][c]) / events):.0f}"
                     for h in (3.0, 8.0)
                 ]
