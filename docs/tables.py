@@ -1319,6 +1319,20 @@ def core_reach() -> str:
     return table(header, rows, [path])
 
 
+def compensation_depth() -> str:
+    """experiments/compensation_depth.py: each ink's package factor k fitted on patches whose tint fills only a top
+    layer of thickness L over white, against the shipped k (tint through the whole patch)."""
+    path = STUDY / "compensation_depth.json"
+    rows = []
+    for key, r in load(path)["results"].items():
+        for ink, m in r["inks"].items():
+            ks = [f"{row['k']:.3f} ± {row['k_stderr']:.3f}" for row in m["layers"]]
+            rows.append([key, ink, f"{m['shipped_k']:.3f}", *ks])
+        layers = [f"L = {row['layer_mm']:g} mm" for row in next(iter(r["inks"].values()))["layers"]]
+    header = ["inks", "ink", "shipped k", *layers]
+    return table(header, rows, [path])
+
+
 def _pm(pair, digits: int = 2) -> str:
     """'mean ± se' of a [mean, se] pair."""
     return f(pair[0], digits) + ("" if pair[1] is None else " ± " + f(pair[1], digits))
@@ -1501,6 +1515,7 @@ TABLES = {
     "core-depth": core_depth,
     "core-deep-mixture": core_deep_mixture,
     "core-reach": core_reach,
+    "compensation-depth": compensation_depth,
     "figure-terms": figure_terms,
     "figure-verdicts": figure_verdicts,
     "loss-de2000": loss_de2000,
