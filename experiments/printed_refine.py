@@ -26,6 +26,7 @@ each ink's share at the points; ``--windows``: the sample's SSIM windows (``samp
 
 import argparse
 import contextlib
+import json
 import sys
 import time
 from dataclasses import replace
@@ -50,6 +51,7 @@ from inkopt.printing.refine import REFINE_SPP, REFINE_STEP, PrintedRefinement  #
 from inkopt.printing.stream import run_target  # noqa: E402
 from inkopt.render import Renderer  # noqa: E402
 
+STUDY = Path(__file__).resolve().parent / "results"
 KEYS = ("delta_e76_mean_corrected", "delta_e2000_mean", "ssim", "mottle_l2")
 SHARE_BINS = (0.0, 0.01, 0.03, 0.1, 0.3, 1.01)  # an ink's share at a window's centre, for ``ssim_channels``
 
@@ -75,20 +77,36 @@ class ContinuousRefinement(PrintedRefinement):
         return res.rgb.astype(np.float64), res.var_mean.astype(np.float64)
 
 
+def layer_factors(layer_mm: float) -> dict:
+    """{ink name: k} fitted on patches whose tint fills a top layer of ``layer_mm`` (experiments/compensation_depth.py's
+    results, entry "vero-cmykw")."""
+    entry = json.loads((STUDY / "compensation_depth.json").read_text())["results"]["vero-cmykw"]
+    out = {}
+    for ink, m in entry["inks"].items():
+        row = next((r for r in m["layers"] if abs(r["layer_mm"] - layer_mm) < 1e-9), None)
+        if row is None:
+            raise SystemExit(f"compensation_depth.json has no {layer_mm:g} mm layer for {ink}")
+        out[ink] = float(row["k"])
+    return out
+
+
 def quantization(spec: str) -> tuple[Quantization, dict]:
-    """``METHOD[:UPSAMPLE][/ORDER][+comp[1|w][tP]]`` -> (the settings, the compensation's changes for
+    """``METHOD[:UPSAMPLE][/ORDER][+comp[1|w][tP][@LX]]`` -> (the settings, the compensation's changes for
     ``compensation_variant``; ``ORDER``: ``Quantization.ink_order``, e.g. ``tint-first``; ``+compw``: each ink's
     factor against white alone and none against the other inks, p_eff = p / (1 + k w), w the white share, so a
     mixture without white is not corrected):
     ``+comp`` the shares compensated with the factors against other inks (``ShareCompensation.pairs``), ``+comp1``
     with each ink's factor against the base alone (the other inks counted as base: what ``Quantization.compensate``
     applies), ``tP`` (e.g. ``+compt0.05``) with the correction tapered below the share P
-    (``ShareCompensation.taper``); no ``+comp``: uncompensated."""
+    (``ShareCompensation.taper``), ``@LX`` (e.g. ``+comp1@L0.16``) with each ink's k fitted on a tint in a top layer
+    of X mm (``layer_factors``); no ``+comp``: uncompensated."""
     head, comp, tail = spec.partition("+comp")
     head, _, order = head.partition("/")
     m, _, up = head.partition(":")
+    tail, _, layer = tail.partition("@L")
     single, _, taper = tail.partition("t")
     changes = {"pairs": single != "1"} | ({"taper": float(taper)} if taper else {})
+    changes |= {"layer_k": layer_factors(float(layer))} if layer else {}
     changes |= {"white_only": True, "pairs": True} if single == "w" else {}
     q = Quantization(m, upsample=up or "nearest", ink_order=order or "lightness", compensate=bool(comp))
     return q, changes
@@ -103,6 +121,10 @@ def compensation_variant(changes: dict):
         comp, own = full(*a, **k), dict(changes)
         if own.pop("white_only", False):  # each ink's factor against white only: no correction among other inks
             own["kappa"] = np.zeros((len(comp.k), len(comp.k)))
+        layer_k = own.pop("layer_k", None)
+        if layer_k is not None:  # the inks' factors of a thin tinted layer (the base keeps 0)
+            names = a[0].names  # share_compensation(inks, q, g, ior)
+            own["k"] = np.array([layer_k.get(n, k) for n, k in zip(names, comp.k)])
         return replace(comp, **own)
 
     with mock.patch.object(Q, "share_compensation", varied):
