@@ -376,14 +376,17 @@ def _report(job: _Job, result, de, estimate: Estimate, check: BaselineCheck | No
         lighting=job.lighting.describe(),
         baseline=None if check is None else check.to_json(),
         beats_baseline=None if check is None else check.beats,
-        viewing=_lights_report(run, result.pictures),
+        viewing=_lights_report(run, result),
     )
 
 
-def _lights_report(run: Optimization, res) -> dict | None:
+def _lights_report(run: Optimization, result) -> dict | None:
     """report.json's ``viewing`` of a spectral run (None on the RGB path): ``Viewing.describe()``, the headline
-    light, and the result's figures under each light (``evaluation.lights.light_figures``)."""
+    light, and the result's figures under each light (``ResultFigures``: on the texel sample with their standard
+    errors where the result took one, else ``evaluation.lights.light_figures`` of every texel's render)."""
     if not run.viewing.spectral:
         return None
     names = tuple(light.name for light in run.viewing.seen_under())
-    return {**run.viewing.describe(), "headline": names[0], **light_figures(run.loss, res.rgb, res.var, names)}
+    res = result.pictures
+    figures = result.by_light or light_figures(run.loss, res.rgb, res.var, names)
+    return {**run.viewing.describe(), "headline": names[0], **figures}

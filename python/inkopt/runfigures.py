@@ -28,6 +28,7 @@ from typing import NamedTuple
 from .evaluation.choice import MIN_SAMPLE_TEXELS, SAMPLE_MIN_GAIN, SamplingChoice, choose_sampling
 from .evaluation.finish import FinishChoice, choice_seconds, choose_finish, iteration_seconds_per_spp
 from .evaluation.guard import figure_error, kept_figures, sampled_error
+from .evaluation.lights import sampled_light_figures
 from .evaluation.metrics import Metrics, prediction_metrics
 from .evaluation.noise import (
     EVAL_SEED_OFFSET,
@@ -88,13 +89,16 @@ class ResultFigures:
     ``render`` (``AdaptiveResult``: of every texel, or of the texel sample's points), the uncertainty ``error``
     (ΔE76) of their noise-corrected mean ΔE76 (``evaluation.guard``), their ``sample`` (None: every texel; else
     {"sample": ``TexelSample.to_json()``, "stderr": the figures' standard errors by name}), and ``pictures``:
-    the render of every texel that the pictures and predictions.npz show (``render`` itself without a sample)."""
+    the render of every texel that the pictures and predictions.npz show (``render`` itself without a sample);
+    ``by_light``: a spectral run's figures under each light on the texel sample, with their standard errors
+    (``evaluation.lights.sampled_light_figures``; None: every texel's, from ``pictures``, or not spectral)."""
 
     metrics: Metrics
     render: AdaptiveResult
     error: float
     sample: dict | None
     pictures: AdaptiveResult
+    by_light: dict | None = None
 
 
 class _Ask(NamedTuple):
@@ -270,17 +274,18 @@ class RunFigures:
         if not c.forced and c.full_seconds is not None:  # chosen by a pilot: as long as every texel would take
             budget = c.full_seconds if budget is None else min(budget, c.full_seconds)
             max_spp = self.job.options.eval_max_spp
-        per_spp, points, m, err = self._sample_figures(held.pop(), self._sampling(budget, max_spp), keep_renderer)
+        per_spp, points, m, err, _ = self._sample_figures(held.pop(), self._sampling(budget, max_spp), keep_renderer)
         taken = {"sample": c.sample.to_json(), "stderr": err, "choice": c.to_json()}
         return per_spp, kept_figures(m, points.spp, c.sample.population, taken)
 
-    def _sample_figures(self, renderer, sampling: Sampling, keep_renderer: bool, replay=None) -> tuple:
+    def _sample_figures(self, renderer, sampling: Sampling, keep_renderer: bool, replay=None, lights=False) -> tuple:
         """(seconds per sample per texel of every texel, the points' ``AdaptiveResult``, ``Metrics``, their standard
-        errors by name) of ``renderer`` (the run's, set to the figures' mixture) on the texel sample's points and
-        window texels (``evaluation.sample``), under the run's first colour map, as ``sampling`` asks (its time
-        budget shared by the two groups); ``replay``: the points' first pass rendered already
-        (``evaluation.finish.Replay``). The seconds are those of the render passes after the first, times the
-        scene's texels (the first pass of a Ray renderer waits for the mixture to reach its workers)."""
+        errors by name, and with ``lights`` a spectral run's figures under each light or else None) of ``renderer``
+        (the run's, set to the figures' mixture) on the texel sample's points and window texels
+        (``evaluation.sample``), under the run's first colour map (``evaluation.lights.sampled_light_figures`` under
+        each), as ``sampling`` asks (its time budget shared by the two groups); ``replay``: the points' first pass
+        rendered already (``evaluation.finish.Replay``). The seconds are those of the render passes after the first,
+        times the scene's texels (the first pass of a Ray renderer waits for the mixture to reach its workers)."""
         run, opts, scene, loss = self.job.run, self.job.options, self.job.scene, self.job.run.loss
         sample = self.choice.sample
         groups = texel_groups(scene.texels, loss.target_lab, sample)
@@ -311,7 +316,12 @@ class RunFigures:
         colours = (windows.rgb, windows.var), (points.rgb, points.var)
         values = per_texel(window_loss, *colours, groups[0].target_lab, sample)
         m, err = sampled_figures(window_loss, values, sample)
-        return per_spp, points, m, err
+        by_light = None
+        if lights and run.viewing.spectral:
+            names = tuple(light.name for light in run.viewing.seen_under())
+            every = TexelLoss(loss.target_rgb[on], scene.texels.pos_vox[on], sigma=SIGMA, colours=loss.colours)
+            by_light, _ = sampled_light_figures(every, *colours, groups[0].target_lab, sample, names)
+        return per_spp, points, m, err, by_light
 
     def final_reserve(self) -> float | None:
         """Seconds the result's figures are expected to take: their budget plus the most the start's and the
@@ -403,10 +413,11 @@ class RunFigures:
         clock = time.perf_counter if replay is None else replay.clock  # the replayed pass counts as spent
         t0, total = clock(), self._final_seconds()
         renderer = self.job.run.renderer()
-        _, points, m, err = self._sample_figures(renderer, self._sample_figures_sampling(total), True, replay)
+        sampling = self._sample_figures_sampling(total)
+        _, points, m, err, by_light = self._sample_figures(renderer, sampling, True, replay, lights=True)
         left = total - (clock() - t0)
         held = [renderer]
         del renderer  # held alone, so that the pictures' render releases it
         pictures, _ = self._of(None, self._final_sampling(left), False, held=held, measure=False)
         taken = {"sample": sample.to_json(), "stderr": err}
-        return ResultFigures(m, points, sampled_error(m, err, len(sample.points)), taken, pictures)
+        return ResultFigures(m, points, sampled_error(m, err, len(sample.points)), taken, pictures, by_light)

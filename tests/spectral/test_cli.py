@@ -73,6 +73,22 @@ def test_spectral_slab_runs_under_two_lights(tmp_path, capsys, picture):
     assert err.startswith("inkopt: error: ") and "different settings (viewing" in err, err
 
 
+def test_a_sampled_result_gives_every_lights_figures_on_its_sample(tmp_path, picture):
+    """A spectral run whose result is measured on a texel sample reports each light's figures on that sample, with
+    their standard errors (not from the pictures' render of every texel)."""
+    out = tmp_path / "r"
+    args = ["slab", picture, "--size-mm", "1.5x1x0.5", "--out", str(out), *FAST_RUN, *SPECTRAL]
+    assert main([*args, "--illuminants", "D65,A", "--figure-texel-sample", "30"]) == 0
+    rep = json.loads((out / "report.json").read_text())
+    v, sample = rep["viewing"], rep["texel_sample"]
+    assert sample["sample"]["texels"] == 30
+    for light in ("D65", "A"):
+        assert v["by_light"][light]["stderr"]["delta_e2000_mean"] > 0, v["by_light"][light]
+    assert rep["delta_e2000_mean"] == v["by_light"]["D65"]["delta_e2000_mean"]  # the headline: the sample's
+    assert sample["stderr"]["delta_e2000_mean"] == v["by_light"]["D65"]["stderr"]["delta_e2000_mean"]
+    assert v["inconstancy_stderr"]["D65-A"] > 0
+
+
 def test_rgb_report_has_no_viewing(tmp_path, picture):
     out = tmp_path / "r"
     assert main(["slab", picture, "--size-mm", "1.5x1x0.5", "--out", str(out), *FAST_RUN]) == 0

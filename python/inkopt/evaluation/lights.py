@@ -19,6 +19,7 @@ import numpy as np
 
 from ..color import delta_e2000
 from ..loss import TexelLoss
+from . import sample as sampled
 from .metrics import prediction_metrics
 
 
@@ -43,3 +44,31 @@ def light_figures(loss: TexelLoss, values, var_mean=None, names: tuple[str, ...]
         "worst_delta_e2000_mean": by_light[worst]["delta_e2000_mean"],
         "inconstancy_delta_e2000_mean": inconstancy,
     }
+
+
+def sampled_light_figures(loss: TexelLoss, windows, points, target_lab, sample, names: tuple[str, ...]):
+    """``light_figures`` of a result rendered on a texel sample (``evaluation.sample``): ``loss`` built on the sample's
+    window texels with every light's colour map, ``windows`` and ``points`` = (values, var_mean) of the two groups,
+    ``target_lab`` (n, 3) the points' targets. Every light's figures from its own view of the loss
+    (``TexelLoss.under``, ``sample.sampled_figures``) with their standard errors (``by_light[light]["stderr"]``), the
+    colour inconstancy on the points with its standard error (``inconstancy_stderr``). Returns (the figures, the
+    per-texel values of each light, for ``sample.differences``)."""
+    values = [sampled.per_texel(loss.under(k), windows, points, target_lab, sample) for k in range(len(names))]
+    by_light = {}
+    for k, light in enumerate(names):
+        m, err = sampled.sampled_figures(loss.under(k), values[k], sample)
+        by_light[light] = {**m.to_json(), "stderr": err}
+    labs = [c.lab(np.asarray(points[0], np.float64)) for c in loss.colours]
+    moves = {
+        f"{names[0]}-{names[k]}": sampled.mean_se(delta_e2000(labs[0], labs[k]), sample.population)
+        for k in range(1, len(names))
+    }
+    worst = max(names, key=lambda n: by_light[n]["delta_e2000_mean"])
+    figures = {
+        "by_light": by_light,
+        "worst_light": worst,
+        "worst_delta_e2000_mean": by_light[worst]["delta_e2000_mean"],
+        "inconstancy_delta_e2000_mean": {k: v[0] for k, v in moves.items()},
+        "inconstancy_stderr": {k: v[1] for k, v in moves.items()},
+    }
+    return figures, values

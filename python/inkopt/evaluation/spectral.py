@@ -40,7 +40,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..color import ColourMap, delta_e76, delta_e2000
+from ..color import ColourMap, delta_e76
 from ..errors import ParameterError
 from ..io import file_digest, write_json
 from ..loss import TexelLoss
@@ -55,7 +55,7 @@ from . import sample as sampled
 from .baselines import BASELINES
 from .colour_table import ColourTable
 from .evaluate import Evaluating, _mixture_results, _printed_results
-from .lights import light_figures
+from .lights import light_figures, sampled_light_figures
 from .options import EvaluateOptions
 from .outputs import picture_names, write_face_pictures, write_mesh_views
 from .renders import Rendered
@@ -251,25 +251,10 @@ def _sampled_results(ev: Evaluating, viewing: Viewing, names: tuple[str, ...]) -
     results = {}
     for name, rendered in ev.renders.items():
         ad, win = rendered.ads
-        by_light = {}
-        for k, light in enumerate(names):
-            view = loss.under(k)
-            values[k][name] = sampled.per_texel(view, (win.rgb, win.var), (ad.rgb, ad.var), ev.groups[0].target_lab, s)
-            m, err = sampled.sampled_figures(view, values[k][name], s)
-            by_light[light] = {**m.to_json(), "stderr": err}
-        labs = [c.lab(ad.rgb) for c in loss.colours]
-        moves = {
-            f"{names[0]}-{names[k]}": sampled.mean_se(delta_e2000(labs[0], labs[k]), s.population)
-            for k in range(1, len(names))
-        }
-        worst = max(names, key=lambda n: by_light[n]["delta_e2000_mean"])
-        figures = {
-            "by_light": by_light,
-            "worst_light": worst,
-            "worst_delta_e2000_mean": by_light[worst]["delta_e2000_mean"],
-            "inconstancy_delta_e2000_mean": {k: v[0] for k, v in moves.items()},
-            "inconstancy_stderr": {k: v[1] for k, v in moves.items()},
-        }
+        points, windows = (ad.rgb, ad.var), (win.rgb, win.var)
+        figures, own = sampled_light_figures(loss, windows, points, ev.groups[0].target_lab, s, names)
+        for k, v in enumerate(own):
+            values[k][name] = v
         results[name] = {**_result_figures(loss, rendered, names, figures), "spp_windows": win.spp}
     pairs = [("continuous", "quantized")] + [("quantized", b) for b in BASELINES if b in ev.renders]
     return results, {light: sampled.differences(values[k], pairs, s) for k, light in enumerate(names)}
