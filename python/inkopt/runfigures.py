@@ -311,17 +311,18 @@ class RunFigures:
         if not keep_renderer:
             del renderer, source, first, rendered
             run.release_renderer()
-        on = sample.windows
-        window_loss = TexelLoss(loss.target_rgb[on], scene.texels.pos_vox[on], sigma=SIGMA, colours=(cmap,))
+        on, lights = sample.windows, lights and run.viewing.spectral
+        maps = loss.colours if lights else (cmap,)
+        window_loss = TexelLoss(loss.target_rgb[on], scene.texels.pos_vox[on], sigma=SIGMA, colours=maps)
         colours = (windows.rgb, windows.var), (points.rgb, points.var)
+        if lights:  # every light's figures; the headline's are the first light's
+            names = tuple(light.name for light in run.viewing.seen_under())
+            by_light, values = sampled_light_figures(window_loss, *colours, groups[0].target_lab, sample, names)
+            m, err = sampled_figures(window_loss.under(0), values[0], sample)
+            return per_spp, points, m, err, by_light
         values = per_texel(window_loss, *colours, groups[0].target_lab, sample)
         m, err = sampled_figures(window_loss, values, sample)
-        by_light = None
-        if lights and run.viewing.spectral:
-            names = tuple(light.name for light in run.viewing.seen_under())
-            every = TexelLoss(loss.target_rgb[on], scene.texels.pos_vox[on], sigma=SIGMA, colours=loss.colours)
-            by_light, _ = sampled_light_figures(every, *colours, groups[0].target_lab, sample, names)
-        return per_spp, points, m, err, by_light
+        return per_spp, points, m, err, None
 
     def final_reserve(self) -> float | None:
         """Seconds the result's figures are expected to take: their budget plus the most the start's and the

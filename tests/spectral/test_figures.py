@@ -7,7 +7,8 @@ import pytest
 from spectral_helpers import INKS, smooth_table
 
 from inkopt.color import delta_e2000, linear_to_lab
-from inkopt.evaluation.lights import light_figures
+from inkopt.evaluation import sample as sampled
+from inkopt.evaluation.lights import light_figures, sampled_light_figures
 from inkopt.evaluation.metrics import prediction_metrics
 from inkopt.loss import TexelLoss
 from inkopt.model import Texels
@@ -38,6 +39,34 @@ def test_per_light_figures_equal_one_light_losses():
         assert all(got[k] == (v if v is None else pytest.approx(v, rel=1e-12)) for k, v in alone.items())
     worst = max(lights, key=lambda n: fig["by_light"][n]["delta_e2000_mean"])
     assert fig["worst_light"] == worst and set(fig["inconstancy_delta_e2000_mean"]) == {"D65-A", "D65-F11"}
+
+
+def test_a_sample_of_every_texel_gives_every_lights_figures():
+    """A texel sample that holds every texel (points and windows) estimates each light's figures as every texel's
+    do, with standard errors 0 (the finite-population correction), light by light: a light's view is its own."""
+    texels = Texels.box_faces((3, 4, 5))
+    pos, target, rng = setup(3)
+    values = rng.uniform(0.05, 0.9, (len(pos), 16))
+    var = np.zeros_like(values)  # noise-free: no noise terms between the two estimates
+    lights = ("D65", "A", "F11")
+    maps = tuple(named_light(n).colour_map(WL) for n in lights)
+    every = light_figures(TexelLoss(target, pos, colours=maps), values, var, lights)
+    s = sampled.TexelSample.draw(texels, len(pos), len(pos), seed=0)
+    assert len(s.windows) == len(pos)
+    loss = TexelLoss(target[s.windows], pos[s.windows], sigma=sampled.SIGMA, colours=maps)
+    target_lab = linear_to_lab(target[s.points])
+    points = (values[s.points], var[s.points])
+    got, per_light = sampled_light_figures(loss, (values, var), points, target_lab, s, lights)
+    assert len(per_light) == 3
+    for n in lights:
+        for key in ("delta_e76_mean", "delta_e2000_mean", "ssim"):
+            assert got["by_light"][n][key] == pytest.approx(every["by_light"][n][key], rel=1e-9), (n, key)
+            assert got["by_light"][n]["stderr"][key] == pytest.approx(0.0, abs=1e-12)
+    assert got["worst_light"] == every["worst_light"]
+    for pair, v in every["inconstancy_delta_e2000_mean"].items():
+        assert got["inconstancy_delta_e2000_mean"][pair] == pytest.approx(v, rel=1e-9)
+    with pytest.raises(ValueError, match="2 names for 3 lights"):
+        sampled_light_figures(loss, (values, var), points, target_lab, s, lights[:2])
 
 
 def test_inconstancy_of_grey_and_coloured_prints():

@@ -53,6 +53,8 @@ def sampled_light_figures(loss: TexelLoss, windows, points, target_lab, sample, 
     (``TexelLoss.under``, ``sample.sampled_figures``) with their standard errors (``by_light[light]["stderr"]``), the
     colour inconstancy on the points with its standard error (``inconstancy_stderr``). Returns (the figures, the
     per-texel values of each light, for ``sample.differences``)."""
+    if len(names) != len(loss.colours):
+        raise ValueError(f"{len(names)} names for {len(loss.colours)} lights")
     values = [sampled.per_texel(loss.under(k), windows, points, target_lab, sample) for k in range(len(names))]
     by_light = {}
     for k, light in enumerate(names):

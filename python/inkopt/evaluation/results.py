@@ -61,7 +61,9 @@ class Report:
     (``evaluation.guard.BaselineCheck.to_json``); ``beats_baseline``: False when the result is worse than it beyond
     the figures' noise (both None when the run did not measure the baseline, and in older reports). ``viewing``:
     a spectral run's lights (``spectral.viewing.Viewing.describe``), its headline light (the one ``metrics`` are
-    under) and its figures under each light (``evaluation.lights.light_figures``); None on the RGB path.
+    under) and its figures under each light (``evaluation.lights.light_figures``; where the result's figures are of a
+    texel sample, ``sampled_light_figures``: that sample's, with ``stderr`` and ``inconstancy_stderr``); None on the
+    RGB path.
     """
 
     metrics: Metrics
