@@ -156,3 +156,29 @@ def _planned_spec(argv):
     spec = mesh_spec_from_args(args, args.mesh)
     inks = InkTable.parse("vero-cmykw")
     return plan_job(args, spec, inks, config_from_args(args), run_options_from_args(args, 0))[0]
+
+
+@pytest.mark.parametrize("gib", [16.0, 1000.0])
+def test_a_grid_beyond_the_renderer_names_the_bands_largest_height(gib):
+    """Spot 200 mm has more grid voxels than the renderer takes (the band has the same grid): refused in one line
+    that says so, naming the largest height at which the band fits both the grid and the memory, not only every
+    voxel free's."""
+    limit = MemoryLimit(gib * 2**30, "(test)")
+    spec = MeshSpec(str(SPOT), height_mm=200.0)
+    with pytest.raises(ParameterError) as exc:
+        choose_shell(spec, N_INKS, limit)
+    text = str(exc.value)
+    assert "\n" not in text and "more than the renderer's 2^31" in text, text
+    assert ("within memory, but" in text) == (gib == 1000.0), text
+    band = f"shell_mm {BAND_SHELL_MM:g}"
+    m = re.search(rf"largest height_mm that fits is ([0-9.]+) with every voxel free, ([0-9.]+) with {band}", text)
+    assert m, text
+    band_h = float(m.group(2))
+    shape = mesh_shape(load_spec_mesh(spec))
+
+    def band_at(h):
+        return mesh_footprint(
+            shape.scaled(h / shape.height_mm), 300.0, BAND_SHELL_MM, N_INKS, mesh_band(voxel_mm(300.0), BAND_SHELL_MM)
+        )
+
+    assert 100.0 < band_h < 200.0 and band_at(band_h).fits(limit.bytes) and not band_at(band_h * 1.02).fits(limit.bytes)

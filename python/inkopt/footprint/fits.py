@@ -61,15 +61,22 @@ def check_fits(fp: Footprint, limit: MemoryLimit, what: str, larger: str, size: 
     if fp.fits(limit.bytes):
         return
     nx, ny, nz = fp.grid
-    over = f"more than the {limit.bytes / 2**30:.1f} GiB it may use {limit.source}"
-    if need <= limit.bytes:
-        over = "within memory, but its grid has more than the renderer's 2^31 voxels"
     raise ParameterError(
         f"{what}: the job needs ~{need / 2**30:.1f} GiB at its peak (grid {nx} x {ny} x {nz}, "
         f"{_count(fp.inside_voxels)} inside, {_count(fp.free_voxels)} free, {_count(fp.texels)} texels at "
-        f"{fp.dpi:g} DPI), {over}; the largest "
+        f"{fp.dpi:g} DPI), {_beyond(fp, limit)}; the largest "
         f"`{larger}` that fits is {size}, or `dpi` {math.floor(dpi)} at this size"
     )
+
+
+def _beyond(fp: Footprint, limit: MemoryLimit) -> str:
+    """What of ``limit`` and the renderer's grid the job ``fp`` (the smallest of its ways) exceeds, as words."""
+    over = []
+    if fp.peak_bytes() > limit.bytes:
+        over.append(f"more than the {limit.bytes / 2**30:.1f} GiB it may use {limit.source}")
+    if fp.grid_voxels > MAX_GRID_VOXELS:
+        over.append(f"its grid of {_count(fp.grid_voxels)} voxels more than the renderer's 2^31")
+    return " and ".join(over) if fp.peak_bytes() > limit.bytes else "within memory, but " + over[0]
 
 
 def _down(x: float) -> str:
@@ -133,7 +140,7 @@ def choose_shell(spec, n_inks: int, limit: MemoryLimit, automatic: bool = True, 
     band. Loads a mesh (``mesh``: one already loaded), never voxelizes it."""
     fp, shape = spec_footprint(spec, n_inks, mesh)
     eligible = automatic and spec.kind == "mesh" and spec.shell_mm is None and spec.translucency is None
-    if not eligible or fp.fits(limit.bytes) or fp.grid_voxels > MAX_GRID_VOXELS:  # a band has the same grid
+    if not eligible or fp.fits(limit.bytes):
         check_spec_fits(spec, fp, shape, limit)
         return ShellChoice(spec, fp, shape)
     band = mesh_footprint(shape, spec.dpi, BAND_SHELL_MM, n_inks, mesh_band(voxel_mm(spec.dpi), BAND_SHELL_MM))
@@ -162,8 +169,8 @@ def _refuse_both(spec, fp: Footprint, band: Footprint, shape: MeshShape, limit: 
         f"{spec.path}: the job needs ~{fp.peak_bytes() / 2**30:.1f} GiB at its peak with every voxel free and "
         f"~{band.peak_bytes() / 2**30:.1f} GiB with a {BAND_SHELL_MM:g} mm band over a {BAND_CORE} core (grid "
         f"{nx} x {ny} x {nz}, {_count(fp.inside_voxels)} inside, {_count(band.free_voxels)} in the band, "
-        f"{_count(fp.texels)} texels at {fp.dpi:g} DPI), more than the {limit.bytes / 2**30:.1f} GiB it may use "
-        f"{limit.source}; the largest `{larger}` that fits is {size} with every voxel free, {band_size} with "
+        f"{_count(fp.texels)} texels at {fp.dpi:g} DPI), {_beyond(band, limit)}; the largest `{larger}` that fits "
+        f"is {size} with every voxel free, {band_size} with "
         f"`shell_mm` {BAND_SHELL_MM:g}, or `dpi` {math.floor(dpi)} (every voxel free) or {math.floor(band_dpi)} "
         f"(`shell_mm` {BAND_SHELL_MM:g}) at this size"
     )
