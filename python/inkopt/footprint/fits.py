@@ -70,13 +70,13 @@ def check_fits(fp: Footprint, limit: MemoryLimit, what: str, larger: str, size: 
 
 
 def _beyond(fp: Footprint, limit: MemoryLimit) -> str:
-    """What of ``limit`` and the renderer's grid the job ``fp`` (the smallest of its ways) exceeds, as words."""
-    over = []
-    if fp.peak_bytes() > limit.bytes:
-        over.append(f"more than the {limit.bytes / 2**30:.1f} GiB it may use {limit.source}")
-    if fp.grid_voxels > MAX_GRID_VOXELS:
-        over.append(f"its grid of {_count(fp.grid_voxels)} voxels more than the renderer's 2^31")
-    return " and ".join(over) if fp.peak_bytes() > limit.bytes else "within memory, but " + over[0]
+    """In words, what the job ``fp``, which does not fit, exceeds: ``limit``, the renderer's 2^31 grid voxels or
+    both."""
+    memory = f"more than the {limit.bytes / 2**30:.1f} GiB it may use {limit.source}"
+    grid = f"its grid of {_count(fp.grid_voxels)} voxels more than the renderer's 2^31"
+    if fp.peak_bytes() <= limit.bytes:
+        return f"within memory, but {grid}"
+    return f"{memory} and {grid}" if fp.grid_voxels > MAX_GRID_VOXELS else memory
 
 
 def _down(x: float) -> str:
