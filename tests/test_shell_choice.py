@@ -38,6 +38,13 @@ def _between(height: float) -> float:
     return 0.5 * (free + band)
 
 
+def _footprint_at(shape, height: float, shell):
+    """The estimated footprint of a mesh of ``shape`` at ``height`` mm and 300 DPI with a shell of ``shell`` mm (None:
+    every voxel free)."""
+    near = mesh_band(voxel_mm(300.0), shell) if shell else footprint.DEFAULT_BAND
+    return mesh_footprint(shape.scaled(height / shape.height_mm), 300.0, shell, N_INKS, near)
+
+
 def test_every_voxel_free_when_it_fits():
     spec = MeshSpec(str(SPOT), height_mm=20.0)
     free, _ = _peaks(20.0)
@@ -81,8 +88,7 @@ def test_neither_fits_refused_naming_both_heights():
     shape = mesh_shape(load_spec_mesh(spec))
 
     def peak(h, shell):
-        near = mesh_band(voxel_mm(300.0), shell) if shell else footprint.DEFAULT_BAND
-        return mesh_footprint(shape.scaled(h / shape.height_mm), 300.0, shell, N_INKS, near)
+        return _footprint_at(shape, h, shell)
 
     assert peak(free_h, None).fits(limit.bytes) and not peak(free_h * 1.02, None).fits(limit.bytes)
     assert peak(band_h, BAND_SHELL_MM).fits(limit.bytes) and not peak(band_h * 1.02, BAND_SHELL_MM).fits(limit.bytes)
@@ -177,8 +183,6 @@ def test_a_grid_beyond_the_renderer_names_the_bands_largest_height(gib):
     shape = mesh_shape(load_spec_mesh(spec))
 
     def band_at(h):
-        return mesh_footprint(
-            shape.scaled(h / shape.height_mm), 300.0, BAND_SHELL_MM, N_INKS, mesh_band(voxel_mm(300.0), BAND_SHELL_MM)
-        )
+        return _footprint_at(shape, h, BAND_SHELL_MM)
 
     assert 100.0 < band_h < 200.0 and band_at(band_h).fits(limit.bytes) and not band_at(band_h * 1.02).fits(limit.bytes)
