@@ -8,7 +8,7 @@ leaves a smaller low-passed error. Writes the entry NAME of experiments/results/
 
     .venv/bin/python experiments/count_error.py NAME RUN METHOD [METHOD ...] [--sigma 1.0] [--down F] [--shells S]
 
-``--down`` and ``--shells``: ``dithers.CountDiffusion.down`` (the fraction of each residual carried to the next
+``--down`` and ``--shells``: ``counts.CountDiffusion.down`` (the fraction of each residual carried to the next
 optimisation layer) and ``.shells`` (the depth shells the error stays in) for this run, to measure them.
 """
 
@@ -24,7 +24,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
 from common import add_study_entry, machine, provenance  # noqa: E402
 
 from inkopt.model import Quantization  # noqa: E402
-from inkopt.printing.dithers import CountDiffusion  # noqa: E402
+from inkopt.printing.counts import CountDiffusion  # noqa: E402
 from inkopt.printing.quantize import ink_fractions, quantize  # noqa: E402
 from inkopt.rundir import RunDir  # noqa: E402
 

@@ -7,8 +7,8 @@ of each ink (where the print is lighter or less saturated than its mixture). A v
 printer grid twice as fine in every axis, ``random``, ``blue-noise/tint-first`` with the inks' bands in that
 ``Quantization.ink_order``, ``blue-noise+comp`` with the shares pre-compensated with the pair factors (``+comp1``: each
 ink's factor against the base alone, what ``--compensate`` does; ``t0.05``: tapered below a share of 0.05),
-``blue-noise-columns`` (``dithers.BlueNoiseColumns``: golden-ratio shifts of a 2D mask along depth),
-``count-diffusion`` (``dithers.CountDiffusion``: each optimisation voxel's counts error-diffused, ``~shellsN`` with
+``blue-noise-columns`` (``thresholds.BlueNoiseColumns``: golden-ratio shifts of a 2D mask along depth),
+``count-diffusion`` (``counts.CountDiffusion``: each optimisation voxel's counts error-diffused, ``~shellsN`` with
 the error kept within N depth shells under the surface), ``blue-noise~mm`` with a blue-noise array whose energy is
 isotropic in mm rather than in printer voxels (and
 ``blue-noise-columns~mm`` with such a 2D mask), ``~2d`` with
@@ -39,7 +39,7 @@ from inkopt.color import linear_to_lab  # noqa: E402
 from inkopt.evaluation.noise import lab_covariance  # noqa: E402
 from inkopt.evaluation.printed import PrintedRenderer  # noqa: E402
 from inkopt.model import Quantization  # noqa: E402
-from inkopt.printing import dithers  # noqa: E402
+from inkopt.printing import counts, thresholds  # noqa: E402
 from inkopt.printing.compensate import share_compensation  # noqa: E402
 from inkopt.printing.dither import BLUE_NOISE_SHAPE, BLUE_NOISE_SIGMA, void_and_cluster  # noqa: E402
 from inkopt.printing.grid import PrinterGrid  # noqa: E402
@@ -143,9 +143,9 @@ def main():
         tile = physical_tile(q) if "~mm" in spec else layered_tile() if "~2d" in spec else None
         t0 = time.perf_counter()
         variant = printed_refine.compensation_variant(printed_refine.quantization(spec.split("~")[0])[1])
-        own = mock.patch.object(dithers, "load_blue_noise", lambda *_, t=tile: t) if tile is not None else None
+        own = mock.patch.object(thresholds, "load_blue_noise", lambda *_, t=tile: t) if tile is not None else None
         _, shells, n = spec.partition("~shells")  # ``CountDiffusion.shells`` for this variant
-        depth = mock.patch.object(dithers.CountDiffusion, "shells", int(n)) if shells else contextlib.nullcontext()
+        depth = mock.patch.object(counts.CountDiffusion, "shells", int(n)) if shells else contextlib.nullcontext()
         with own or contextlib.nullcontext(), variant, depth:
             labels = quantize_volume(vol, q)
         printer = PrintedRenderer(labels, rec.texels, vol.voxel_mm, rec.kind, a.threads, None, [pick])

@@ -166,8 +166,10 @@ def diffuse_counts_layer(
     z: int,
     down: float,
     counts: NDArray[np.uint32],
+    thresholds: NDArray[np.float64] | None = None,
 ) -> float:
-    """Counts of layer z: share (N,y,x) f64, block (y,x) u32, classes (y,x) u8 -> counts (y,x,N) u32; max |residual|."""
+    """Counts of layer z: share (N,y,x) f64, block (y,x) u32, classes (y,x) u8 -> counts (y,x,N) u32; max |residual|.
+    thresholds (y,x,T) f64 sorted per block: round as that ordered dither would (None: the nearest counts)."""
 
 def feature_plane(
     z: int, site_z: NDArray[np.int32], sampling: tuple[float, float, float], out: NDArray[np.int32]

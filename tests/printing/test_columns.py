@@ -1,4 +1,4 @@
-"""Tests of the columns' dither (``printing.dithers.BlueNoiseColumns``): golden-ratio shifts of a shipped 2D
+"""Tests of the columns' dither (``printing.thresholds.BlueNoiseColumns``): golden-ratio shifts of a shipped 2D
 blue-noise mask along depth."""
 
 import numpy as np
@@ -6,9 +6,10 @@ from scipy.ndimage import gaussian_filter
 
 from inkopt.model import InkTable, Quantization, Volume
 from inkopt.printing.dither import COLUMN_MASK_SHAPE, GOLDEN, blue_noise_path, load_blue_noise, void_and_cluster
-from inkopt.printing.dithers import DITHERS, BlueNoiseColumns, band_order
+from inkopt.printing.dithers import DITHERS, band_order
 from inkopt.printing.grid import PrinterGrid
 from inkopt.printing.quantize import MixtureLayers, quantize, quantize_volume
+from inkopt.printing.thresholds import BlueNoiseColumns
 
 V300 = 25.4 / 300
 #: shares of cyan, magenta, yellow, black, white: a grey with every ink present

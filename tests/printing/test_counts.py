@@ -1,4 +1,4 @@
-"""Tests of the counts' dither (``printing.dithers.CountDiffusion``): each optimisation voxel's whole ink counts by
+"""Tests of the counts' dither (``printing.counts.CountDiffusion``): each optimisation voxel's whole ink counts by
 vector error diffusion between optimisation voxels (``inkopt_core::kernels::counts``), placed by blue noise."""
 
 import numpy as np
@@ -7,7 +7,8 @@ from scipy.ndimage import gaussian_filter
 
 from inkopt.errors import ParameterError
 from inkopt.model import EMPTY, InkTable, Quantization
-from inkopt.printing.dithers import DITHERS, CountDiffusion, band_order
+from inkopt.printing.counts import AdaptiveCounts, CountDiffusion
+from inkopt.printing.dithers import DITHERS, band_order
 from inkopt.printing.grid import Nearest, PrinterGrid
 from inkopt.printing.layers import CumulativeLayers
 from inkopt.printing.quantize import MixtureLayers, check_quantization, ink_fractions, quantize
@@ -135,3 +136,33 @@ def test_seed_moves_the_pattern_and_repeats():
     c, _, _ = run(mix, inside, seed=8)
     np.testing.assert_array_equal(a, b)
     assert np.mean(a != c) > 0.1
+
+
+def window_error(labels, vp, mix, inside=None):
+    """RMS over 2 x 2 x 2 windows of optimisation voxels of the ink counts minus block x share."""
+    frac, tot = ink_fractions(labels, mix.shape[3], mix.shape[:3], VO, vp)
+    rows = mix / np.maximum(mix.sum(-1, keepdims=True), 1e-30)
+    e = (frac - rows) * tot[..., None]
+    nz, ny, nx = (s // 2 * 2 for s in mix.shape[:3])
+    e = e[:nz, :ny, :nx].reshape(nz // 2, 2, ny // 2, 2, nx // 2, 2, -1).sum((1, 3, 5))
+    return float(np.sqrt(np.mean(e**2)))
+
+
+def test_adaptive_is_blue_noise_where_smooth_and_counts_where_sharp():
+    """``count-adaptive``: on a mixture half constant grey, half changing sharply from voxel to voxel, the smooth
+    half's printer voxels are blue noise's (but along the seam, where a voxel's neighbours differ), and the sharp
+    half keeps its 2 x 2 x 2 windows' counts as the counts' dither does, far closer than blue noise."""
+    assert DITHERS["count-adaptive"] is AdaptiveCounts and AdaptiveCounts.nearest_only
+    sharp, _ = sharp_mixture(shape=(8, 14, 24), n=5)
+    mix = sharp.copy()
+    mix[:, :, :12] = GREY
+    q = {m: Quantization(m, 3, ink_order="index") for m in ("blue-noise", "count-diffusion", "count-adaptive")}
+    out = {m: quantize(MixtureLayers(mix, VO, None, None), qm) for m, qm in q.items()}
+    (ours, vp), (blue, _) = out["count-adaptive"], out["blue-noise"]
+    ix = PrinterGrid.of(mix.shape[:3], VO, q["blue-noise"]).enclosing[2]
+    seam, start = np.searchsorted(ix, 11), np.searchsorted(ix, 12)  # x = 11 has a sharp neighbour
+    np.testing.assert_array_equal(ours[..., :seam], blue[..., :seam])
+    assert np.mean(ours[..., start:] != blue[..., start:]) > 0.05
+    errs = {m: window_error(out[m][0][..., start:], vp, mix[:, :, 12:]) for m in out}
+    assert errs["count-adaptive"] < 0.5 * errs["blue-noise"], errs
+    assert errs["count-adaptive"] < 1.5 * errs["count-diffusion"], errs

@@ -17,7 +17,7 @@ from inkopt.printing.dither import (
     load_blue_noise,
     void_and_cluster,
 )
-from inkopt.printing.dithers import DITHERS, METHODS, Thresholds, band_order
+from inkopt.printing.dithers import DITHERS, METHODS, band_order
 from inkopt.printing.quantize import (
     MixtureLayers,
     check_quantization,
@@ -27,6 +27,7 @@ from inkopt.printing.quantize import (
     quantize_volume,
     record,
 )
+from inkopt.printing.thresholds import Thresholds
 
 V300 = 25.4 / 300
 

@@ -41,12 +41,14 @@ pub(crate) fn diffuse_layer(
 }
 
 /// diffuse_counts_layer(share (N, y, x) f64, block (y, x) u32, inside (y, x) u8, inside_next (y, x) u8, error
-/// (2, y, x, N) f64, z, down, counts (y, x, N) u32) -> float: the ink counts of optimisation layer z by vector
-/// error diffusion between optimisation voxels (inkopt_core::kernels::counts), a fraction `down` of each residual
-/// to layer z + 1. error[z % 2] holds the error carried into layer z and is zeroed on return; error[(z + 1) % 2]
-/// accumulates the next layer's. Writes `counts`; returns the layer's largest |residual component|. The GIL is
-/// released.
+/// (2, y, x, N) f64, z, down, counts (y, x, N) u32, thresholds=None) -> float: the ink counts of optimisation layer
+/// z by vector error diffusion between optimisation voxels (inkopt_core::kernels::counts), a fraction `down` of
+/// each residual to layer z + 1. error[z % 2] holds the error carried into layer z and is zeroed on return;
+/// error[(z + 1) % 2] accumulates the next layer's. thresholds: None for the nearest counts, or (y, x, T) f64 each
+/// block's ordered-dither thresholds in increasing order (the first `block` used) to round by. Writes `counts`;
+/// returns the layer's largest |residual component|. The GIL is released.
 #[pyfunction]
+#[pyo3(signature = (share, block, inside, inside_next, error, z, down, counts, thresholds=None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn diffuse_counts_layer(
     py: Python<'_>,
@@ -58,6 +60,7 @@ pub(crate) fn diffuse_counts_layer(
     z: usize,
     down: f64,
     mut counts: numpy::PyReadwriteArray3<u32>,
+    thresholds: Option<PyReadonlyArray3<f64>>,
 ) -> PyResult<f64> {
     use inkopt_core::kernels::counts::{diffuse_counts_layer, CountLayer, CountShape};
     let (n, ny, nx) = (share.shape()[0], share.shape()[1], share.shape()[2]);
@@ -66,12 +69,16 @@ pub(crate) fn diffuse_counts_layer(
     check_shape(inside_next.shape(), &[ny, nx], "inside_next")?;
     check_shape(error.shape(), &[2, ny, nx, n], "error")?;
     check_shape(counts.shape(), &[ny, nx, n], "counts")?;
+    if let Some(t) = &thresholds {
+        check_shape(&t.shape()[..2], &[ny, nx], "thresholds")?;
+    }
     let layer = CountLayer {
         z,
         share: c_slice(&share, "share")?,
         block: c_slice(&block, "block")?,
         inside: c_slice(&inside, "inside")?,
         inside_next: c_slice(&inside_next, "inside_next")?,
+        thresholds: thresholds.as_ref().map(|t| c_slice(t, "thresholds")).transpose()?,
     };
     let e = error.as_slice_mut().map_err(|_| err("error must be C-contiguous"))?;
     let c = counts.as_slice_mut().map_err(|_| err("counts must be C-contiguous"))?;

@@ -18,7 +18,7 @@ from ..io import atomic_write_bytes
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 BLUE_NOISE_SHAPE = (32, 32, 32)
 BLUE_NOISE_SIGMA = 1.5
-#: the 2D mask of ``dithers.BlueNoiseColumns`` (y, x), shipped like the 3D array
+#: the 2D mask of ``thresholds.BlueNoiseColumns`` (y, x), shipped like the 3D array
 COLUMN_MASK_SHAPE = (64, 64)
 #: the golden ratio's conjugate, (sqrt(5) - 1) / 2: the step of the columns' thresholds from layer to layer
 GOLDEN = (5.0**0.5 - 1.0) / 2.0

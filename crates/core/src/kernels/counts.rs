@@ -21,12 +21,17 @@
 //! ```
 //!
 //! Floyd–Steinberg's proportions in the layer (a texel sees its neighbours side by side under the surface), the
-//! fraction `down` to the next layer. Each inside voxel has a class (`inside`, 1 to 255: the caller's depth shell
+//! fraction `down` to the next layer. Each inside voxel has a class (`inside`, 1 to 254: the caller's depth shell
 //! under the surface), and passes error only to neighbours of its own class, so that the surface's voxels keep their
 //! errors among themselves rather than taking those of the hidden voxels below. The weights are renormalised over
 //! the neighbours that exist, are of the voxel's class and have a positive weight; a voxel with none drops its
 //! residual. Voxels outside (`inside == 0`) get counts 0 and neither take nor pass error; inside voxels with an
 //! empty block (`b == 0`, at the printer grid's rounded edges) take their carried error and pass it on whole.
+//!
+//! The dither's own counts (class `DITHER_CLASS`): such a voxel takes the counts an ordered dither gives its block
+//! (`CountLayer::thresholds`, the block's thresholds sorted): its mixture cut into bands at its cumulative shares,
+//! `c_k` the number of thresholds in band k, the last band taking the rest; it neither takes nor passes error.
+//! The caller gives this class to voxels where the dither alone does better than the diffusion (a smooth mixture).
 //!
 //! Local error: error is conserved (non-negative weights summing to 1), so the counts of any window of voxels
 //! differ from its summed `b * share` only by the residuals crossing its boundary: each component at most
@@ -37,6 +42,9 @@
 const IN_LAYER: [(i64, i64, f64); 4] = [(1, 0, 7.0), (-1, 1, 3.0), (0, 1, 5.0), (1, 1, 1.0)];
 /// (dx, dy, weight in 16ths) on the next layer.
 const NEXT_LAYER: [(i64, i64, f64); 5] = [(0, 0, 8.0), (-1, 0, 2.0), (1, 0, 2.0), (0, -1, 2.0), (0, 1, 2.0)];
+
+/// The class of voxels that take the ordered dither's own counts and carry no error (module docs).
+pub const DITHER_CLASS: u8 = 255;
 
 /// Shape of an optimisation layer: `n` inks on an `ny` × `nx` grid.
 #[derive(Clone, Copy, Debug)]
@@ -49,12 +57,15 @@ pub struct CountShape {
 /// One optimisation layer's inputs: `share` (n, ny, nx) planar, each inside row summing to 1 (band order, any
 /// order the caller keeps); `block` (ny, nx) the printer voxels each voxel encloses; `inside`, `inside_next`
 /// (ny, nx): 0 outside, else the voxel's class, for this layer and the next (all zero after the last).
+/// `thresholds`: (ny, nx, t) each block's ordered-dither thresholds in increasing order, the first `block` of each
+/// row used (t at least the largest block); needed only where a voxel is of `DITHER_CLASS`.
 pub struct CountLayer<'a> {
     pub z: usize,
     pub share: &'a [f64],
     pub block: &'a [u32],
     pub inside: &'a [u8],
     pub inside_next: &'a [u8],
+    pub thresholds: Option<&'a [f64]>,
 }
 
 /// Nearest non-negative integer vector to `u` with sum `b` (module docs), written into `c`.
@@ -72,6 +83,24 @@ fn nearest_counts(u: &[f64], b: u32, c: &mut [u32]) {
         }
         c[best] += 1;
     }
+}
+
+/// The counts an ordered dither gives a block of mixture `share` (summing to 1) whose sorted thresholds are `t`
+/// (module docs), written into `c`: a threshold below the k-th cumulative share and not below the one before it
+/// takes ink k, as `printing.dithers.Thresholds` labels a voxel.
+fn threshold_counts(share: &[f64], t: &[f64], c: &mut [u32]) {
+    c.fill(0);
+    let n = share.len();
+    let mut i = 0;
+    let mut edge = 0.0;
+    for (k, &s) in share[..n - 1].iter().enumerate() {
+        edge += s;
+        while i < t.len() && t[i] < edge {
+            c[k] += 1;
+            i += 1;
+        }
+    }
+    c[n - 1] += (t.len() - i) as u32;
 }
 
 /// Diffuse the counts of optimisation layer `layer.z` with the fraction `down` of each residual to the next layer.
@@ -109,6 +138,16 @@ pub fn diffuse_counts_layer(
     if !(0.0..=1.0).contains(&down) {
         return Err(format!("down must be in [0, 1], got {down}"));
     }
+    let width = match layer.thresholds {
+        Some(t) if m > 0 => t.len() / m,
+        _ => 0,
+    };
+    let big = layer.block.iter().zip(layer.inside).filter(|(_, &c)| c == DITHER_CLASS).map(|(&b, _)| b).max();
+    if let Some(big) = big {
+        if layer.thresholds.is_none_or(|t| t.len() != m * width) || width < big as usize {
+            return Err(format!("the dither's class needs (ny, nx, >= {big}) thresholds"));
+        }
+    }
     let (inside, inside_next) = (layer.inside, layer.inside_next);
     let mut u = vec![0.0f64; n];
     let mut worst = 0.0f64;
@@ -124,6 +163,15 @@ pub fn diffuse_counts_layer(
                 continue;
             }
             let b = layer.block[i];
+            if inside[i] == DITHER_CLASS {
+                for k in 0..n {
+                    u[k] = layer.share[k * m + i];
+                }
+                let t = layer.thresholds.unwrap_or_default();
+                threshold_counts(&u, &t[i * width..i * width + b as usize], c);
+                err[i * n..(i + 1) * n].fill(0.0);
+                continue;
+            }
             for k in 0..n {
                 u[k] = b as f64 * layer.share[k * m + i] + err[i * n + k];
             }
@@ -179,7 +227,8 @@ mod tests {
         let mut worst = 0.0f64;
         for z in 0..nz {
             let nxt = if z + 1 < nz { &ins[..] } else { &none[..] };
-            let layer = CountLayer { z, share: &share, block: &block, inside: &ins, inside_next: nxt };
+            let layer =
+                CountLayer { z, share: &share, block: &block, inside: &ins, inside_next: nxt, thresholds: None };
             let c = &mut out[z * n * m..(z + 1) * n * m];
             worst = worst.max(diffuse_counts_layer(shape, &layer, down, &mut e, &mut en, c).unwrap());
             std::mem::swap(&mut e, &mut en);
@@ -217,12 +266,72 @@ mod tests {
     }
 
     #[test]
+    fn threshold_counts_are_the_dithers_bands() {
+        let mut c = [0u32; 3];
+        let t = [0.05, 0.2, 0.3, 0.55, 0.7, 0.9];
+        threshold_counts(&[0.3, 0.5, 0.2], &t, &mut c); // edges 0.3 and 0.8; a threshold on an edge is above it
+        assert_eq!(c, [2, 3, 1]);
+        threshold_counts(&[0.0, 1.0, 0.0], &t, &mut c);
+        assert_eq!(c, [0, 6, 0]);
+        threshold_counts(&[0.5, 0.5, 0.0], &t[..2], &mut c);
+        assert_eq!(c, [2, 0, 0]);
+    }
+
+    #[test]
+    fn dither_class_takes_the_dithers_counts_and_no_error() {
+        // a 3 x 4 layer, the dither's class on a checkerboard, the others one diffusion class among themselves
+        let shape = CountShape { n: 3, ny: 3, nx: 4 };
+        let m = 12;
+        let rows: Vec<[f64; 3]> = (0..m).map(|i| [0.1 + 0.05 * i as f64, 0.3, 0.6 - 0.05 * i as f64]).collect();
+        let share: Vec<f64> = (0..3).flat_map(|k| rows.iter().map(move |r| r[k])).collect();
+        let ins: Vec<u8> = (0..m).map(|i| if (i / 4 + i % 4) % 2 == 0 { DITHER_CLASS } else { 1 }).collect();
+        let t: Vec<f64> = (0..m).flat_map(|i| (0..6).map(move |s| ((i * 7 + s * 11) % 60) as f64 / 60.0)).collect();
+        let t: Vec<f64> = t
+            .chunks(6)
+            .flat_map(|r| {
+                let mut r = r.to_vec();
+                r.sort_by(f64::total_cmp);
+                r
+            })
+            .collect();
+        let layer = CountLayer {
+            z: 0,
+            share: &share,
+            block: &[6; 12],
+            inside: &ins,
+            inside_next: &[0; 12],
+            thresholds: Some(&t),
+        };
+        let (mut e, mut en, mut c) = (vec![0.0; 36], vec![0.0; 36], vec![0u32; 36]);
+        let worst = diffuse_counts_layer(shape, &layer, 0.0, &mut e, &mut en, &mut c).unwrap();
+        let mut own = [0u32; 3];
+        let mut total = [0.0f64; 3];
+        for i in 0..m {
+            if ins[i] == DITHER_CLASS {
+                threshold_counts(&rows[i], &t[i * 6..i * 6 + 6], &mut own);
+                assert_eq!(&c[i * 3..i * 3 + 3], &own, "{i}");
+            } else {
+                for k in 0..3 {
+                    total[k] += c[i * 3 + k] as f64 - 6.0 * rows[i][k];
+                }
+            }
+        }
+        // the diffusion class conserves its error but for the last voxel's residual
+        assert!(total.iter().all(|d| d.abs() <= worst + 1e-9), "{total:?} {worst}");
+        let short = CountLayer { thresholds: Some(&t[..30]), ..layer };
+        assert!(diffuse_counts_layer(shape, &short, 0.0, &mut e, &mut en, &mut c).unwrap_err().contains("thresholds"));
+        let none = CountLayer { thresholds: None, ..layer };
+        assert!(diffuse_counts_layer(shape, &none, 0.0, &mut e, &mut en, &mut c).is_err());
+    }
+
+    #[test]
     fn classes_keep_their_errors() {
         // two classes in alternate columns: each column's count of ink 0 stays within one residual of its target
         let shape = CountShape { n: 2, ny: 30, nx: 2 };
         let share: Vec<f64> = [0.3; 60].into_iter().chain([0.7; 60]).collect();
         let ins: Vec<u8> = (0..60).map(|i| 1 + (i % 2) as u8).collect();
-        let layer = CountLayer { z: 0, share: &share, block: &[6; 60], inside: &ins, inside_next: &[0; 60] };
+        let layer =
+            CountLayer { z: 0, share: &share, block: &[6; 60], inside: &ins, inside_next: &[0; 60], thresholds: None };
         let (mut e, mut en, mut c) = (vec![0.0; 120], vec![0.0; 120], vec![0u32; 120]);
         let worst = diffuse_counts_layer(shape, &layer, 0.0, &mut e, &mut en, &mut c).unwrap();
         for col in 0..2 {
@@ -235,7 +344,14 @@ mod tests {
     fn outside_gets_nothing_and_bad_sizes() {
         let shape = CountShape { n: 2, ny: 2, nx: 2 };
         let share = [0.5; 8];
-        let layer = CountLayer { z: 0, share: &share, block: &[6; 4], inside: &[1, 0, 1, 1], inside_next: &[0; 4] };
+        let layer = CountLayer {
+            z: 0,
+            share: &share,
+            block: &[6; 4],
+            inside: &[1, 0, 1, 1],
+            inside_next: &[0; 4],
+            thresholds: None,
+        };
         let (mut e, mut en, mut c) = (vec![0.0; 8], vec![0.0; 8], vec![9u32; 8]);
         diffuse_counts_layer(shape, &layer, 0.1, &mut e, &mut en, &mut c).unwrap();
         assert_eq!(&c[2..4], &[0, 0]);

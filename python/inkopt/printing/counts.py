@@ -1,0 +1,222 @@
+"""The counts' dithers: each optimisation voxel's whole ink counts chosen by vector error diffusion between
+optimisation voxels (``inkopt_core::kernels::counts``) and placed in its block of printer voxels by blue noise's
+thresholds (``CountDiffusion``), and the same only where the mixture changes from voxel to voxel, blue noise's own
+labels elsewhere (``AdaptiveCounts``). Both follow ``dithers.Dither``'s protocol and are registered there."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from ..errors import ParameterError
+from ..model import EMPTY, Quantization
+from .grid import PrinterGrid
+from .thresholds import BlueNoise
+
+#: the class of the counts kernel's voxels that take the ordered dither's own counts (``kernels::counts``)
+DITHER_CLASS = 255
+
+
+class CountDiffusion:
+    """Whole ink counts per optimisation voxel chosen by vector error diffusion between optimisation voxels, placed
+    in each voxel's block of printer voxels by the blue-noise array (``BlueNoise``'s thresholds and bands).
+
+    Why: under nearest upsampling an optimisation voxel encloses a block of ``b`` printer voxels (2 x 1 x 3 or 4 at
+    600 x 300 DPI x 27 µm over 85 µm voxels), so any dither gives it its shares in steps of 1/b; blue noise rounds
+    each block on its own, and where the mixture changes from voxel to voxel the neighbours' rounding errors do not
+    cancel. Here the counts ``c`` of a block are the nearest whole vector to ``b * share + carried error`` with sum
+    ``b``, and the residual goes to the unvisited optimisation voxels (``inkopt_core::kernels::counts``: in-layer
+    Floyd–Steinberg, the fraction ``down`` to the next optimisation layer), so the counts of any window of
+    optimisation voxels differ from its summed mixture only by the residuals crossing its boundary. The error flows
+    only between voxels of one depth shell under the surface (``shells``: the surface's voxels, the next shell, and
+    so on, the last holding the rest, by 6-connected erosions of the inside mask), so the surface, which a texel
+    sees, does not take the errors of the hidden voxels below it.
+
+    Placement: the block's printer voxels sorted by their blue-noise thresholds take the bands in order (the first
+    ``c_0`` voxels band 0, the lightest ink by default, and so on): where the diffused counts are the ones blue noise
+    would give the block, the labels are blue noise's; elsewhere the voxels nearest a band's edge change ink.
+
+    Follows the dither protocol: the counts of optimisation layer z are diffused when its first printer layer is
+    asked for (from that layer's cumulative mixture, taken at one printer voxel per block, so ``--compensate`` and
+    the bands' order apply as for blue noise) and the labels of its printer layers kept until asked for; memory
+    holds one optimisation layer's printer layers (labels and thresholds) and two (y, x, N) f64 error planes.
+    Deterministic for a seed (the blue-noise offset; the diffusion is sequential). Linear upsampling has no blocks
+    of one mixture and is refused."""
+
+    help = "ink counts per optimisation voxel by error diffusion between them, placed by blue noise"
+    ordered = True
+    nearest_only = True
+    #: the fraction of each optimisation voxel's residual carried to the next optimisation layer (the rest stays in
+    #: its layer) and the depth shells the error stays in (1: one class; docs/quality.md, "Counts kept per
+    #: optimisation voxel")
+    down = 0.125
+    shells = 1
+
+    def __init__(self, q: Quantization, grid: PrinterGrid, n_inks: int, order: np.ndarray | None) -> None:
+        if q.upsample != "nearest":
+            raise ParameterError(f"method '{q.method}' needs upsample 'nearest' (its blocks), got '{q.upsample}'")
+        self.grid, self.n_inks = grid, n_inks
+        self.blue = BlueNoise(q, grid, n_inks, order)
+        self.iz, iy, ix = grid.enclosing
+        nz, ny, nx = grid.source_shape
+        self.per_z = np.bincount(self.iz, minlength=nz)
+        # one printer row / column per optimisation row / column (its first), and the blocks' lateral sizes
+        self.first_y = np.minimum(np.searchsorted(iy, np.arange(ny)), len(iy) - 1)
+        self.first_x = np.minimum(np.searchsorted(ix, np.arange(nx)), len(ix) - 1)
+        self.block_yx = np.outer(np.bincount(iy, minlength=ny), np.bincount(ix, minlength=nx)).astype(np.uint32)
+        self.block_id = (iy[:, None] * nx + ix[None, :]).astype(np.int64)  # (Y, X): the block of each column
+        self.error = np.zeros((2, ny, nx, n_inks), np.float64)
+        self.counts = np.zeros((ny, nx, n_inks), np.uint32)
+        self.next_z, self.labels = 0, {}
+        self.classes = None if grid.inside_mask is None else depth_shells(grid.inside_mask, self.shells)
+        self.max_residual = 0.0  # the largest |residual component| so far (the window bound's factor)
+
+    def layer(self, k: int, cum: np.ndarray, weight: np.ndarray | None) -> np.ndarray:
+        z = int(self.iz[k])
+        while self.next_z <= z:  # optimisation layers without printer layers pass their carried error on
+            self._diffuse(self.next_z, cum if self.next_z == z else None)
+            self.next_z += 1
+        return self.labels.pop(k)
+
+    def _inside(self, z: int) -> np.ndarray:
+        nz, ny, nx = self.grid.source_shape
+        if z >= nz:
+            return np.zeros((ny, nx), np.uint8)
+        return np.ones((ny, nx), np.uint8) if self.classes is None else np.ascontiguousarray(self.classes[z])
+
+    def _diffuse(self, z: int, cum: np.ndarray | None) -> None:
+        """Diffuses optimisation layer z's counts (``cum``: its first printer layer's, None: no printer layer) and
+        places them (``_place``)."""
+        from .. import _core
+
+        if cum is None:
+            share = np.zeros((self.n_inks,) + self.block_yx.shape)
+        else:
+            at = cum[:, self.first_y[:, None], self.first_x[None, :]].astype(np.float64)
+            share = np.diff(at, axis=0, prepend=0.0)
+        block = np.ascontiguousarray(self.block_yx * np.uint32(self.per_z[z]))
+        order = self._sorted(z) if cum is not None else None
+        classes, thresholds = self._classes(z, share), None
+        if order is not None and np.any(classes == DITHER_CLASS):
+            thresholds = np.full((block.size, max(int(block.max(initial=0)), 1)), 2.0)
+            thresholds[order.bid, order.rank] = order.t
+            thresholds = thresholds.reshape(block.shape + (-1,))
+        worst = _core.diffuse_counts_layer(
+            np.ascontiguousarray(share),
+            block,
+            classes,
+            self._inside(z + 1),
+            self.error,
+            z,
+            self.down,
+            self.counts,
+            thresholds,
+        )
+        self.max_residual = max(self.max_residual, worst)
+        if order is not None:
+            self._place(order)
+
+    def _classes(self, z: int, share: np.ndarray) -> np.ndarray:
+        """Optimisation layer z's classes (``_inside``); here every inside voxel diffuses."""
+        return self._inside(z)
+
+    def _sorted(self, z: int) -> BlockOrder:
+        """Optimisation layer z's printer voxels sorted by block, then by blue-noise threshold."""
+        ks = np.flatnonzero(self.iz == z)
+        t = np.stack([self.blue.thresholds(int(k)) for k in ks])  # (K, Y, X) in [0, 1)
+        key = (self.block_id[None] + t.astype(np.float64)).ravel()
+        sort = np.argsort(key, kind="stable")
+        bid = np.broadcast_to(self.block_id, t.shape).ravel()[sort]
+        start = np.searchsorted(bid, bid, side="left")  # the first sorted position of each voxel's block
+        return BlockOrder(ks, t.shape, sort, bid, np.arange(len(bid)) - start, t.ravel()[sort].astype(np.float64))
+
+    def _place(self, order: BlockOrder) -> None:
+        """The labels of one optimisation layer's printer layers: in every block, the voxels in increasing threshold
+        take ``counts`` bands in order (band order, mapped to inks by ``BlueNoise.band_ink``); outside EMPTY."""
+        ks, sort, bid, rank = order.ks, order.sort, order.bid, order.rank
+        edges = np.cumsum(self.counts.reshape(-1, self.n_inks), axis=1)[bid]  # (M, N): the bands' ends
+        band = np.empty(len(bid), np.uint8)
+        band[sort] = np.sum(rank[:, None] >= edges[:, :-1], axis=1)
+        lab = band.reshape(order.shape)
+        if self.blue.band_ink is not None:
+            lab = self.blue.band_ink[lab]
+        for j, k in enumerate(ks):
+            if self.grid.masked:
+                lab[j][~self.grid.inside(int(k))] = EMPTY
+            self.labels[int(k)] = lab[j]
+
+
+class BlockOrder(NamedTuple):
+    """One optimisation layer's printer voxels sorted by block, then by threshold: ``ks`` its printer layers,
+    ``shape`` (K, Y, X), ``sort`` the flat indices in that order, ``bid`` and ``rank`` each sorted voxel's block and
+    place in it, ``t`` its threshold (f64)."""
+
+    ks: np.ndarray
+    shape: tuple
+    sort: np.ndarray
+    bid: np.ndarray
+    rank: np.ndarray
+    t: np.ndarray
+
+
+class AdaptiveCounts(CountDiffusion):
+    """Blue noise where the mixture is smooth, the counts' diffusion (``CountDiffusion``) where it changes from
+    voxel to voxel: an optimisation voxel whose mixture differs from its inside neighbours' (four in its layer, one
+    below) by less than ``smooth`` (the root mean square over them of the share vectors' Euclidean distance; 0 for
+    a voxel without inside neighbours) takes blue noise's own labels and neither takes nor passes error
+    (``inkopt_core::kernels::counts::DITHER_CLASS``); the others diffuse their counts among themselves, by depth
+    shell, as ``CountDiffusion``'s do.
+
+    Why: on the suite the counts' diffusion lowers the grain where the optimiser's mixture changes from voxel to
+    voxel (the duck), but where it is smooth it decides at the optimisation voxel's scale which blocks get an ink's
+    extra printer voxel and doubles the grain (the eyeball), where blue noise's 3D array does better
+    (docs/quality.md, "Counts kept per optimisation voxel"). Error a diffusing voxel passes down to a voxel that
+    turns out smooth in the next layer is dropped (the next layer's mixture is not read before its turn)."""
+
+    help = "blue noise where the mixture is smooth, counts diffused where it changes from voxel to voxel"
+    #: the RMS share distance to the neighbours below which a voxel takes blue noise's labels
+    smooth = 0.05
+
+    def __init__(self, q: Quantization, grid: PrinterGrid, n_inks: int, order: np.ndarray | None) -> None:
+        super().__init__(q, grid, n_inks, order)
+        self.below: np.ndarray | None = None  # the previous optimisation layer's (N, y, x) shares and inside mask
+        self.below_inside: np.ndarray | None = None
+
+    def _classes(self, z: int, share: np.ndarray) -> np.ndarray:
+        classes = self._inside(z).copy()
+        inside = classes > 0
+        ny, nx = inside.shape
+        sq, cnt = np.zeros(inside.shape), np.zeros(inside.shape)
+        for dy, dx in ((1, 0), (0, 1)):  # each pair of in-layer neighbours once
+            a, b = np.s_[: ny - dy, : nx - dx], np.s_[dy:, dx:]
+            both = inside[a] & inside[b]
+            d = np.where(both, np.sum((share[:, a[0], a[1]] - share[:, b[0], b[1]]) ** 2, axis=0), 0.0)
+            sq[a] += d
+            sq[b] += d
+            cnt[a] += both
+            cnt[b] += both
+        if self.below is not None:
+            both = inside & self.below_inside
+            sq += np.where(both, np.sum((share - self.below) ** 2, axis=0), 0.0)
+            cnt += both
+        rms = np.sqrt(sq / np.maximum(cnt, 1))
+        classes[inside & (rms < self.smooth)] = DITHER_CLASS
+        if share.any():  # an optimisation layer without printer layers keeps the one below
+            self.below, self.below_inside = share, inside
+        return classes
+
+
+def depth_shells(inside: np.ndarray, shells: int) -> np.ndarray:
+    """uint8 (z, y, x): 0 outside, else the voxel's depth shell under the surface, 1 (has an outside 6-neighbour or
+    lies on the grid's edge) to ``shells`` (the rest), by repeated 6-connected erosion of ``inside`` (bool)."""
+    from scipy.ndimage import binary_erosion
+
+    out = np.zeros(inside.shape, np.uint8)
+    cur = np.asarray(inside, bool)
+    for s in range(1, shells):
+        eroded = binary_erosion(cur, border_value=0)
+        out[cur & ~eroded] = s
+        cur = eroded
+    out[cur] = shells
+    return out
