@@ -326,6 +326,33 @@ def halftone_side_by_side() -> str:
 SIDE_KEYS = (("delta_e76_mean_corrected", 2), ("delta_e2000_mean", 2), ("ssim", 3), ("mottle_l2", 2))
 
 
+def halftone_adaptive() -> str:
+    """The counts' dithers against blue noise per result (experiments/printed_refine.py entries NAME_adaptive): for
+    blue noise, the counts' diffusion and count-adaptive, each − blue noise and − the continuous result, paired ± their
+    standard errors on the entry's texel sample."""
+    path = STUDY / "printed_refine.json"
+    res = load(path)["results"]
+    keys = SIDE_KEYS[:3]
+
+    def pd(e: dict, a: str, b: str) -> str:
+        out = []
+        for k, d in keys:
+            v = ((e.get("differences") or {}).get(f"{a} - {b}") or {}).get(k) or {}
+            out.append("–" if v.get("value") is None else f"{v['value']:+.{d}f} ± {v['stderr']:.{d}f}")
+        return " / ".join(out)
+
+    rows = []
+    for name, e in res.items():
+        if not name.endswith("_adaptive"):
+            continue
+        case = f"{name[: -len('_adaptive')]} ({e['sample']['points']} texels)" if e.get("sample") else name
+        for i, method in enumerate(("count-adaptive", "count-diffusion", "blue-noise")):
+            vs_b = "" if method == "blue-noise" else pd(e, method, "blue-noise")
+            rows.append([case if i == 0 else "", method, vs_b, pd(e, method, "continuous")])
+    what = "ΔE76 / ΔE2000 / SSIM"
+    return table(["result", "method", f"− blue noise: {what}", f"− continuous: {what}"], rows, [path])
+
+
 def halftone_ssim_channels() -> str:
     """SSIM per CIELAB channel and its factors (experiments/halftone_ssim_channels.py): per result the mean SSIM of
     L*, a*, b* over the texel sample's window centres and the mean b* there, and per paired comparison the b*
@@ -1499,6 +1526,7 @@ TABLES = {
     "halftone-cause": halftone_cause,
     "halftone-ssim-channels": halftone_ssim_channels,
     "halftone-side-by-side": halftone_side_by_side,
+    "halftone-adaptive": halftone_adaptive,
     "halftone-c2f": halftone_c2f,
     "compensation-factors": compensation_factors,
     "speed": speed,

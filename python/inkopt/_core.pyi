@@ -168,8 +168,25 @@ def diffuse_counts_layer(
     counts: NDArray[np.uint32],
     thresholds: NDArray[np.float64] | None = None,
 ) -> float:
-    """Counts of layer z: share (N,y,x) f64, block (y,x) u32, classes (y,x) u8 -> counts (y,x,N) u32; max |residual|.
-    thresholds (y,x,T) f64 sorted per block: round as that ordered dither would (None: the nearest counts)."""
+    """Counts of layer z: share (N,y,x), block (y,x), classes (y,x) (255: the thresholds' own) -> counts; max |r|."""
+
+def sort_blocks(
+    t: NDArray[np.float32],
+    ry: NDArray[np.uint32],
+    rx: NDArray[np.uint32],
+    order: NDArray[np.uint32],
+    sorted: NDArray[np.float64],
+) -> None:
+    """Each block's printer voxels of t (k,Y,X) f32 by threshold -> order (ny,nx,W) u32 flat, sorted (ny,nx,W) f64."""
+
+def place_blocks(
+    order: NDArray[np.uint32],
+    counts: NDArray[np.uint32],
+    ry: NDArray[np.uint32],
+    rx: NDArray[np.uint32],
+    labels: NDArray[np.uint8],
+) -> None:
+    """Each block's voxels in order (ny,nx,W) take its counts (ny,nx,N) bands in turn -> labels (k,Y,X) u8 bands."""
 
 def feature_plane(
     z: int, site_z: NDArray[np.int32], sampling: tuple[float, float, float], out: NDArray[np.int32]

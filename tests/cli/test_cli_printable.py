@@ -62,11 +62,11 @@ def test_quantize_writes_renderable_labels(tmp_path, capsys):
     assert code == 0 and "printer grid 20 x 8 x 13" in out and "cyan" in out, out + err
     q = Volume.load(tmp_path / "r" / "quantized.npz")
     shape_p, vp = printer_grid(vol.shape, vol.voxel_mm)
-    # the defaults: blue-noise with the inks lightest first, seed 0, nearest
-    labels, _ = quantize(vol, Quantization("blue-noise", 0, ink_order="lightness"))
+    # the defaults: count-adaptive with the inks lightest first, seed 0, nearest
+    labels, _ = quantize(vol, Quantization("count-adaptive", 0, ink_order="lightness"))
     np.testing.assert_array_equal(q.labels, labels)
     np.testing.assert_allclose(q.voxel_mm, vp)
-    assert q.quantization.method == "blue-noise" and q.quantization.seed == 0
+    assert q.quantization.method == "count-adaptive" and q.quantization.seed == 0
     np.testing.assert_allclose(q.quantization.dpi, [600, 300, 25.4 / 0.027])
     assert q.inks.names == vol.inks.names and q.inside is None and q.normals is None
     # renderable by `inkopt render` (a fresh process, as a user would run it)
@@ -232,7 +232,7 @@ def test_evaluate_cli_json(tmp_path, capsys):
     assert code == 0, err
     ev = json.loads(out)
     assert ev == json.loads((tmp_path / "r" / "evaluation.json").read_text())
-    assert ev["quantized"]["method"] == "blue-noise" and np.isfinite(ev["quantized"]["delta_e76_mean"])
+    assert ev["quantized"]["method"] == "count-adaptive" and np.isfinite(ev["quantized"]["delta_e76_mean"])
     assert (tmp_path / "r" / "quantized.npz").is_file() and (tmp_path / "r" / "evaluation_top.png").is_file()
     code, out, err = run(capsys, "evaluate", tmp_path / "r", "--spp", "2", "--no-baselines")
     assert code == 0 and "dE76 mean" in out and "quantized" in out

@@ -108,7 +108,7 @@ def test_evaluate_run_synthetic(tmp_path, table3):
         assert keys <= set(entry)
         assert all(np.isfinite(entry[k]) for k in keys - {"method"})
         assert 0 <= entry["delta_e76_mean"] <= entry["delta_e76_p95"] + 1e-9 and -1 <= entry["ssim"] <= 1
-    assert disk["quantized"]["method"] == "blue-noise" and (tmp_path / "run" / "quantized.npz").is_file()
+    assert disk["quantized"]["method"] == "count-adaptive" and (tmp_path / "run" / "quantized.npz").is_file()
     # the run's mixture is the extrusion baseline: quantized the same way and rendered with the same seed it
     # is bit-identical, so its figures equal ours exactly
     for k in ("delta_e76_mean", "delta_e76_p95", "delta_e2000_mean", "ssim"):

@@ -166,3 +166,14 @@ def test_adaptive_is_blue_noise_where_smooth_and_counts_where_sharp():
     errs = {m: window_error(out[m][0][..., start:], vp, mix[:, :, 12:]) for m in out}
     assert errs["count-adaptive"] < 0.5 * errs["blue-noise"], errs
     assert errs["count-adaptive"] < 1.5 * errs["count-diffusion"], errs
+
+
+def test_adaptive_shares_blue_noise_compensation():
+    """The compensation's flat patches are constant mixtures, where count-adaptive is blue noise: the two share one
+    measured (and shipped) compensation."""
+    from inkopt.printing.compensate import compensation_key
+
+    inks = InkTable.parse("vero-cmykw")
+    key = compensation_key(inks, Quantization("count-adaptive"), 0.4, 1.5)
+    assert key == compensation_key(inks, Quantization("blue-noise"), 0.4, 1.5)
+    assert key != compensation_key(inks, Quantization("count-diffusion"), 0.4, 1.5)

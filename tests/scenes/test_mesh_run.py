@@ -228,11 +228,13 @@ def test_core_mixture_below_the_shell_is_recorded_and_printed(ball, tmp_path):
     from inkopt.rundir import RunDir
 
     labels = RunDir(tmp_path).load_quantized()
-    deep_p = _sphere_sdf(labels) < -shell - 0.05  # printer voxels well inside the core
+    # printer voxels well inside the core: the core's outermost optimisation voxels border the shell's, whose carried
+    # count error they share (the default dither, count-adaptive, diffuses counts where the mixture changes)
+    deep_p = _sphere_sdf(labels) < -shell - 2 * max(vol.voxel_mm)
     got = np.asarray(labels.labels)[deep_p]
     n = len(got)
     assert n > 5000 and set(np.unique(got)) == {vol.inks.index(k) for k in core}
-    for k, v in core.items():  # blue-noise thresholds: the shares within a binomial's 5 standard errors
+    for k, v in core.items():  # blue noise's thresholds there: the shares within a binomial's 5 standard errors
         assert abs(np.mean(got == vol.inks.index(k)) - v) < 5 * np.sqrt(v * (1 - v) / n), k
 
 

@@ -75,12 +75,12 @@ def test_evaluate_judges_the_print_and_the_baselines(spectral_run, capsys):
     keys = set(ev["continuous"])
     for r in ("quantized", "surface", "extrusion"):
         assert set(ev[r]) == keys | {"method", "spp_printer"}, r
-        assert ev[r]["method"] == "blue-noise" and ev[r]["spp_printer"] >= 1
+        assert ev[r]["method"] == "count-adaptive" and ev[r]["spp_printer"] >= 1
         assert set(ev[r]["by_light"]) == {"D65", "A"} and set(ev[r]["inconstancy_delta_e2000_mean"]) == {"D65-A"}
         for m in ev[r]["by_light"].values():
             assert 0 < m["delta_e2000_mean"] < 100 and 0 < m["ssim"] <= 1
     assert ev["quantized_digest"] is not None and (spectral_run / "quantized.npz").is_file()
-    assert ev["quantization"]["method"] == "blue-noise" and ev["printer_texels"] > 0
+    assert ev["quantization"]["method"] == "count-adaptive" and ev["printer_texels"] > 0
     assert set(ev["print_beats_baselines"]) == {"D65", "A"}
     # the baselines' mixtures come from the spectral colour table under the run's lights; the gamut floor per light
     assert ev["colour_table"]["spectral"] and ev["colour_table"]["lights"] == ["D65", "A"]

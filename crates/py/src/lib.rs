@@ -29,6 +29,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<texels::Texels>()?;
     m.add_function(wrap_pyfunction!(printing::diffuse_layer, m)?)?;
     m.add_function(wrap_pyfunction!(printing::diffuse_counts_layer, m)?)?;
+    m.add_function(wrap_pyfunction!(printing::sort_blocks, m)?)?;
+    m.add_function(wrap_pyfunction!(printing::place_blocks, m)?)?;
     m.add_function(wrap_pyfunction!(printing::feature_plane, m)?)?;
     m.add_function(wrap_pyfunction!(optimiser::smooth_rows, m)?)?;
     m.add_function(wrap_pyfunction!(optimiser::softmax_rows, m)?)?;

@@ -3,7 +3,7 @@
 //! counts between optimisation voxels (`inkopt_core::kernels::counts`), and `feature_plane`, one plane of the exact Euclidean feature transform the
 //! extrusion baseline takes its nearest texels from (`inkopt_core::kernels::feature`).
 
-use numpy::{PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
+use numpy::{PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
 use crate::arrays::{c_slice, check_shape, err};
@@ -105,4 +105,47 @@ pub(crate) fn feature_plane(
     let o = out.as_slice_mut().map_err(|_| err("out must be C-contiguous"))?;
     let shape = inkopt_core::kernels::feature::PlaneShape { ny, nx, sampling: [sampling.0, sampling.1, sampling.2] };
     py.detach(|| inkopt_core::kernels::feature::feature_plane(z, sites, shape, o)).map_err(err)
+}
+
+/// sort_blocks(t (k, Y, X) f32, ry (ny + 1) u32, rx (nx + 1) u32, order (ny, nx, W) u32, sorted (ny, nx, W) f64):
+/// each block's printer voxels (rows ry[y]..ry[y + 1], columns rx[x]..rx[x + 1], all k layers) in increasing
+/// threshold, ties to the lower flat index: their flat (k, Y, X) indices into `order` and thresholds into `sorted`
+/// (unused slots u32::MAX and 2.0; inkopt_core::kernels::blocks). The GIL is released.
+#[pyfunction]
+pub(crate) fn sort_blocks(
+    py: Python<'_>,
+    t: PyReadonlyArray3<f32>,
+    ry: PyReadonlyArray1<u32>,
+    rx: PyReadonlyArray1<u32>,
+    mut order: numpy::PyReadwriteArray3<u32>,
+    mut sorted: numpy::PyReadwriteArray3<f64>,
+) -> PyResult<()> {
+    use inkopt_core::kernels::blocks::{sort_blocks, Blocks};
+    let width = order.shape()[2];
+    check_shape(sorted.shape(), order.shape(), "sorted")?;
+    let b = Blocks { k: t.shape()[0], ry: c_slice(&ry, "ry")?, rx: c_slice(&rx, "rx")?, width };
+    let tt = c_slice(&t, "t")?;
+    let o = order.as_slice_mut().map_err(|_| err("order must be C-contiguous"))?;
+    let s = sorted.as_slice_mut().map_err(|_| err("sorted must be C-contiguous"))?;
+    py.detach(|| sort_blocks(b, tt, o, s)).map_err(err)
+}
+
+/// place_blocks(order (ny, nx, W) u32, counts (ny, nx, N) u32, ry (ny + 1) u32, rx (nx + 1) u32, labels (k, Y, X)
+/// u8): every block's voxels in `order` (sort_blocks) take its counts' bands in turn, band indices into `labels`
+/// (inkopt_core::kernels::blocks). The GIL is released.
+#[pyfunction]
+pub(crate) fn place_blocks(
+    py: Python<'_>,
+    order: PyReadonlyArray3<u32>,
+    counts: PyReadonlyArray3<u32>,
+    ry: PyReadonlyArray1<u32>,
+    rx: PyReadonlyArray1<u32>,
+    mut labels: numpy::PyReadwriteArray3<u8>,
+) -> PyResult<()> {
+    use inkopt_core::kernels::blocks::{place_blocks, Blocks};
+    let n = counts.shape()[2];
+    let b = Blocks { k: labels.shape()[0], ry: c_slice(&ry, "ry")?, rx: c_slice(&rx, "rx")?, width: order.shape()[2] };
+    let (o, c) = (c_slice(&order, "order")?, c_slice(&counts, "counts")?);
+    let l = labels.as_slice_mut().map_err(|_| err("labels must be C-contiguous"))?;
+    py.detach(|| place_blocks(b, o, c, n, l)).map_err(err)
 }

@@ -79,7 +79,7 @@ OPTIONS = (
             f"(default {DEFAULT_SAMPLE_WINDOWS})",
         ),
     ),
-    ("--method", dict(help="quantization method (default: that of DIR/quantized.npz, else blue-noise)")),
+    ("--method", dict(help="quantization method (default: that of DIR/quantized.npz, else count-adaptive)")),
     (
         "--patch-mm",
         dict(

@@ -29,9 +29,9 @@ class EvaluateOptions:
     uniform; the baselines' colour table stays a uniform-light property of the inks).
 
     Printed results: ``method``, the quantization method of ours (when quantized.npz is missing) and of the
-    baselines (None: that of quantized.npz, else blue-noise). ``baselines``: render the print-shop baselines, their
-    colour table ``table`` (None: ``colour_table(inks, g, ior, patch_mm)``, cached) of patches ``patch_mm`` thick,
-    looked up by the blend of the nearest entries (``refine``) or the nearest entry.
+    baselines (None: that of quantized.npz, else ``Quantization``'s default). ``baselines``: render the print-shop
+    baselines, their colour table ``table`` (None: ``colour_table(inks, g, ior, patch_mm)``, cached) of patches
+    ``patch_mm`` thick, looked up by the blend of the nearest entries (``refine``) or the nearest entry.
 
     ``translucency``: measure the translucency figures (None: when the scene is constrained or
     ``translucency_compare``, the run directory of an unconstrained run of the same target, is given).

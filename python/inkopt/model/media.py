@@ -227,8 +227,9 @@ class Quantization:
     """The settings of a quantization (``inkopt.printing.quantize``): the one form they travel in, from the command
     line to the dither, and, kept in a labels volume, the record of how it was made.
 
-    method     the dither's name (``printing.dithers.DITHERS``: "blue-noise", "blue-noise-columns", "random",
-               "error-diffusion")
+    method     the dither's name (``printing.dithers.DITHERS``: "count-adaptive", blue noise where the mixture is
+               smooth and its counts diffused where it changes from voxel to voxel, nearest upsampling only;
+               "blue-noise", "blue-noise-columns", "count-diffusion", "random", "error-diffusion")
     seed       the dither's random state (``numpy.random.default_rng(seed)``)
     dpi        printer resolution (x, y) or (x, y, z) dots per inch; None: 600 x 300 (``units.PRINTER_DPI``). A record
                holds (x, y, z), the printer voxels' own (``printing.quantize.record``); an old file may hold None
@@ -247,7 +248,7 @@ class Quantization:
                not say were made without
     ``printing.quantize.check_quantization`` checks them; a labels volume file stores a record's ``arrays``."""
 
-    method: str = "blue-noise"
+    method: str = "count-adaptive"
     seed: int = 0
     dpi: tuple[float, ...] | None = None
     upsample: str = "nearest"

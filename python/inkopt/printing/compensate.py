@@ -358,13 +358,15 @@ def measure_mixed(comp: ShareCompensation, inks, q, g, ior, seed: int, threads=N
 
 
 def compensation_key(inks: InkTable, q: Quantization, g: float, ior: float) -> str:
-    """A hash of what a compensation depends on: the inks' coefficients, g, ior, the dither, its printer voxel (µm,
-    rounded to 0.01) and the measurement's settings."""
+    """A hash of what a compensation depends on: the inks' coefficients, g, ior, the dither (the one whose labels it
+    gives on the patches' constant mixtures, ``Dither.constant_as``), its printer voxel (µm, rounded to 0.01) and the
+    measurement's settings."""
     vp_um = tuple(np.round(PrinterGrid.of((1, 1, 1), (1.0, 1.0, 1.0), q).voxel_mm * 1000.0, 2).tolist())
     h = hashlib.sha256()
     for a in (inks.sigma_a, inks.sigma_s):  # as float32: an ink table read from a run's files has them so
         h.update(np.ascontiguousarray(a, np.float32).tobytes())
-    h.update(repr((FORMAT, float(g), float(ior), q.method, q.ink_order, vp_um, DITHERED_SHARES)).encode())
+    method = dither_class(q.method).constant_as or q.method  # the patches are constant mixtures
+    h.update(repr((FORMAT, float(g), float(ior), method, q.ink_order, vp_um, DITHERED_SHARES)).encode())
     h.update(repr((CONTINUOUS_SHARES, PATCH_LATERAL, PATCH_MM, PATCH_SPP, PAIR_SHARES, PAIR_STEP, PAIR_SPP)).encode())
     return h.hexdigest()[:16]
 

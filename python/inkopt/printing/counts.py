@@ -5,8 +5,6 @@ labels elsewhere (``AdaptiveCounts``). Both follow ``dithers.Dither``'s protocol
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
 import numpy as np
 
 from ..errors import ParameterError
@@ -47,6 +45,7 @@ class CountDiffusion:
     help = "ink counts per optimisation voxel by error diffusion between them, placed by blue noise"
     ordered = True
     nearest_only = True
+    constant_as = None
     #: the fraction of each optimisation voxel's residual carried to the next optimisation layer (the rest stays in
     #: its layer) and the depth shells the error stays in (1: one class; docs/quality.md, "Counts kept per
     #: optimisation voxel")
@@ -65,11 +64,15 @@ class CountDiffusion:
         self.first_y = np.minimum(np.searchsorted(iy, np.arange(ny)), len(iy) - 1)
         self.first_x = np.minimum(np.searchsorted(ix, np.arange(nx)), len(ix) - 1)
         self.block_yx = np.outer(np.bincount(iy, minlength=ny), np.bincount(ix, minlength=nx)).astype(np.uint32)
-        self.block_id = (iy[:, None] * nx + ix[None, :]).astype(np.int64)  # (Y, X): the block of each column
+        # the printer rows and columns of optimisation row / column y: ry[y]..ry[y + 1] (``kernels::blocks``)
+        self.ry = np.searchsorted(iy, np.arange(ny + 1)).astype(np.uint32)
+        self.rx = np.searchsorted(ix, np.arange(nx + 1)).astype(np.uint32)
         self.error = np.zeros((2, ny, nx, n_inks), np.float64)
         self.counts = np.zeros((ny, nx, n_inks), np.uint32)
         self.next_z, self.labels = 0, {}
-        self.classes = None if grid.inside_mask is None else depth_shells(grid.inside_mask, self.shells)
+        # one class needs no erosion: each layer's classes are its inside plane, read when its turn comes
+        several = grid.inside_mask is not None and self.shells > 1
+        self.classes = depth_shells(grid.inside_mask, self.shells) if several else None
         self.max_residual = 0.0  # the largest |residual component| so far (the window bound's factor)
 
     def layer(self, k: int, cum: np.ndarray, weight: np.ndarray | None) -> np.ndarray:
@@ -83,7 +86,11 @@ class CountDiffusion:
         nz, ny, nx = self.grid.source_shape
         if z >= nz:
             return np.zeros((ny, nx), np.uint8)
-        return np.ones((ny, nx), np.uint8) if self.classes is None else np.ascontiguousarray(self.classes[z])
+        if self.classes is not None:
+            return np.ascontiguousarray(self.classes[z])
+        if self.grid.inside_mask is None:
+            return np.ones((ny, nx), np.uint8)
+        return np.asarray(self.grid.inside_mask[z], np.uint8)
 
     def _diffuse(self, z: int, cum: np.ndarray | None) -> None:
         """Diffuses optimisation layer z's counts (``cum``: its first printer layer's, None: no printer layer) and
@@ -96,12 +103,9 @@ class CountDiffusion:
             at = cum[:, self.first_y[:, None], self.first_x[None, :]].astype(np.float64)
             share = np.diff(at, axis=0, prepend=0.0)
         block = np.ascontiguousarray(self.block_yx * np.uint32(self.per_z[z]))
-        order = self._sorted(z) if cum is not None else None
-        classes, thresholds = self._classes(z, share), None
-        if order is not None and np.any(classes == DITHER_CLASS):
-            thresholds = np.full((block.size, max(int(block.max(initial=0)), 1)), 2.0)
-            thresholds[order.bid, order.rank] = order.t
-            thresholds = thresholds.reshape(block.shape + (-1,))
+        ks = np.flatnonzero(self.iz == z)
+        order, sorted_t = self._sorted(ks) if cum is not None else (None, None)
+        classes = self._classes(z, share)
         worst = _core.diffuse_counts_layer(
             np.ascontiguousarray(share),
             block,
@@ -111,53 +115,43 @@ class CountDiffusion:
             z,
             self.down,
             self.counts,
-            thresholds,
+            sorted_t if np.any(classes == DITHER_CLASS) else None,
         )
         self.max_residual = max(self.max_residual, worst)
         if order is not None:
-            self._place(order)
+            self._place(ks, order)
 
     def _classes(self, z: int, share: np.ndarray) -> np.ndarray:
         """Optimisation layer z's classes (``_inside``); here every inside voxel diffuses."""
         return self._inside(z)
 
-    def _sorted(self, z: int) -> BlockOrder:
-        """Optimisation layer z's printer voxels sorted by block, then by blue-noise threshold."""
-        ks = np.flatnonzero(self.iz == z)
-        t = np.stack([self.blue.thresholds(int(k)) for k in ks])  # (K, Y, X) in [0, 1)
-        key = (self.block_id[None] + t.astype(np.float64)).ravel()
-        sort = np.argsort(key, kind="stable")
-        bid = np.broadcast_to(self.block_id, t.shape).ravel()[sort]
-        start = np.searchsorted(bid, bid, side="left")  # the first sorted position of each voxel's block
-        return BlockOrder(ks, t.shape, sort, bid, np.arange(len(bid)) - start, t.ravel()[sort].astype(np.float64))
+    def _sorted(self, ks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The printer layers ``ks`` of one optimisation layer: each block's voxels in increasing blue-noise
+        threshold, (ny, nx, W) their flat (K, Y, X) indices and (ny, nx, W) f64 their thresholds
+        (``kernels::blocks::sort_blocks``)."""
+        from .. import _core
 
-    def _place(self, order: BlockOrder) -> None:
-        """The labels of one optimisation layer's printer layers: in every block, the voxels in increasing threshold
-        take ``counts`` bands in order (band order, mapped to inks by ``BlueNoise.band_ink``); outside EMPTY."""
-        ks, sort, bid, rank = order.ks, order.sort, order.bid, order.rank
-        edges = np.cumsum(self.counts.reshape(-1, self.n_inks), axis=1)[bid]  # (M, N): the bands' ends
-        band = np.empty(len(bid), np.uint8)
-        band[sort] = np.sum(rank[:, None] >= edges[:, :-1], axis=1)
-        lab = band.reshape(order.shape)
+        t = np.ascontiguousarray(np.stack([self.blue.thresholds(int(k)) for k in ks]), np.float32)  # (K, Y, X)
+        width = len(ks) * int(np.diff(self.ry).max()) * int(np.diff(self.rx).max())
+        order = np.empty(self.block_yx.shape + (width,), np.uint32)
+        sorted_t = np.empty(order.shape, np.float64)
+        _core.sort_blocks(t, self.ry, self.rx, order, sorted_t)
+        return order, sorted_t
+
+    def _place(self, ks: np.ndarray, order: np.ndarray) -> None:
+        """The labels of one optimisation layer's printer layers ``ks``: in every block, the voxels in increasing
+        threshold take ``counts`` bands in order (band order, mapped to inks by ``BlueNoise.band_ink``); outside
+        EMPTY."""
+        from .. import _core
+
+        lab = np.zeros((len(ks),) + self.grid.shape[1:], np.uint8)
+        _core.place_blocks(order, self.counts, self.ry, self.rx, lab)
         if self.blue.band_ink is not None:
             lab = self.blue.band_ink[lab]
         for j, k in enumerate(ks):
             if self.grid.masked:
                 lab[j][~self.grid.inside(int(k))] = EMPTY
             self.labels[int(k)] = lab[j]
-
-
-class BlockOrder(NamedTuple):
-    """One optimisation layer's printer voxels sorted by block, then by threshold: ``ks`` its printer layers,
-    ``shape`` (K, Y, X), ``sort`` the flat indices in that order, ``bid`` and ``rank`` each sorted voxel's block and
-    place in it, ``t`` its threshold (f64)."""
-
-    ks: np.ndarray
-    shape: tuple
-    sort: np.ndarray
-    bid: np.ndarray
-    rank: np.ndarray
-    t: np.ndarray
 
 
 class AdaptiveCounts(CountDiffusion):
@@ -175,6 +169,7 @@ class AdaptiveCounts(CountDiffusion):
     turns out smooth in the next layer is dropped (the next layer's mixture is not read before its turn)."""
 
     help = "blue noise where the mixture is smooth, counts diffused where it changes from voxel to voxel"
+    constant_as = "blue-noise"  # every voxel of a constant mixture takes blue noise's labels
     #: the RMS share distance to the neighbours below which a voxel takes blue noise's labels
     smooth = 0.05
 

@@ -49,6 +49,9 @@ class Dither(Protocol):
     ordered: ClassVar[bool]
     #: whether it needs nearest upsampling (``check_quantization`` refuses another for it)
     nearest_only: ClassVar[bool]
+    #: the method whose labels it gives on a constant mixture, where it has one (None: its own); a compensation
+    #: measured on flat patches is shared with that method (``compensate.compensation_key``)
+    constant_as: ClassVar[str | None]
 
     def __init__(self, q: Quantization, grid: PrinterGrid, n_inks: int, order: np.ndarray | None) -> None: ...
 
@@ -74,6 +77,7 @@ class ErrorDiffusion:
     help = "deterministic 3D vector error diffusion"
     ordered = False
     nearest_only = False
+    constant_as = None
 
     def __init__(self, q: Quantization, grid: PrinterGrid, n_inks: int, order: np.ndarray | None) -> None:
         self.grid = grid

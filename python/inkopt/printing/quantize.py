@@ -65,7 +65,10 @@ def check_quantization(q: Quantization) -> None:
     dither = dither_class(q.method)
     upsampler_class(q.upsample)
     if dither.nearest_only and q.upsample != "nearest":
-        raise ParameterError(f"method '{q.method}' works on the optimisation voxels' blocks: use upsample 'nearest'")
+        raise ParameterError(
+            f"method '{q.method}' works on the optimisation voxels' blocks: use upsample 'nearest', or method"
+            " 'blue-noise' with linear upsampling"
+        )
     if q.ink_order not in INK_ORDERS:  # no flag sets it: a plain ValueError
         raise ValueError(f"unknown ink_order '{q.ink_order}'; use one of {list(INK_ORDERS)}")
     dpi = () if q.dpi is None else q.dpi

@@ -23,6 +23,7 @@ class Thresholds:
     help: ClassVar[str] = ""
     ordered: ClassVar[bool] = False
     nearest_only: ClassVar[bool] = False
+    constant_as: ClassVar[str | None] = None
 
     def __init__(self, q: Quantization, grid: PrinterGrid, n_inks: int, order: np.ndarray | None) -> None:
         self.grid, self.n_inks = grid, n_inks

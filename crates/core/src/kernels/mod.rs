@@ -16,6 +16,7 @@
 //! thread count. They use `crate::spans` (voxel sets by grid row) and, for `diffuse`, the empty-voxel label
 //! `transport::medium::EMPTY`.
 
+pub mod blocks;
 pub mod counts;
 pub mod diffuse;
 pub mod feature;
