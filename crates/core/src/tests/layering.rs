@@ -33,6 +33,7 @@ const LAYERS: &[&str] = &[
     "transport::hero",
     "transport::hero_lanes",
     "transport::hero_pass",
+    "kernels::blocks",
     "kernels::diffuse",
     "kernels::counts",
     "kernels::feature",
