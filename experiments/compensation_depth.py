@@ -93,7 +93,7 @@ def main() -> None:
     ap.add_argument("--name", default="vero-cmykw")
     args = ap.parse_args()
     inks = InkTable.parse("vero-cmykw")
-    q = Quantization()
+    q = Quantization("blue-noise")
     white = inks.names.index("white")
     dz = PrinterGrid.of((1, 1, 1), (1.0, 1.0, 1.0), q).voxel_mm[2]
     shipped = share_compensation(inks, q, inks.g, 1.5)

@@ -57,7 +57,7 @@ def main():
     a = ap.parse_args()
     d = RunDir(a.run)
     rec, vol = d.load_scene(), d.load_volume()
-    q = Quantization()
+    q = Quantization("blue-noise")
     comp = C.share_compensation(vol.inks, replace_compensate(q), vol.g, vol.ior, a.threads, print)
     rows = draw_rows(np.asarray(vol.mixture), rec.texels.voxel.astype(np.int64), comp.base, a.per_bin)
     t0 = time.perf_counter()

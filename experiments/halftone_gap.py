@@ -87,7 +87,7 @@ def main():
     tex = rec.texels.subset(pick)
     t0 = time.perf_counter()
     cont = Renderer(vol, a.threads).render(tex, a.spp, SEED)
-    labels = quantize_volume(vol, Quantization())
+    labels = quantize_volume(vol, Quantization("blue-noise"))
     printer = PrintedRenderer(labels, rec.texels, vol.voxel_mm, rec.kind, a.threads, None, [pick])
     printer.use(labels)
     p_rgb, p_var, _ = printer(a.spp, SEED + 1)

@@ -1,6 +1,6 @@
-"""The halftone's cost and what keeps it, side by side on one run: the continuous mixture, blue noise (the default
-quantization), the printed refinement after N iterations (``printing.refine``: blue noise of a mixture refined on the
-printed prediction) and other dithers, all evaluated at equal settings in one session on one texel set (the
+"""The halftone's cost and what keeps it, side by side on one run: the continuous mixture, blue noise (the reference
+every variant is paired with), the printed refinement after N iterations (``printing.refine``: blue noise of a
+mixture refined on the printed prediction) and other dithers, all evaluated at equal settings in one session on one texel set (the
 evaluation's own choice of every texel or a texel sample, its adaptive noise-free sampling; no baselines), with the
 paired differences of every printed result against the continuous one and against blue noise (on a texel sample),
 the seconds each candidate took to make and that cost as a ratio to one optimisation iteration's passes (forward 16
@@ -137,7 +137,7 @@ def candidates(vol, rd, refine: list[int], methods: list[str], control, threads,
     (the refinement and its control) or "only" (the control alone)."""
     out, mixtures = {}, {}
     t0 = time.perf_counter()
-    out["blue-noise"] = (quantize_volume(vol, Quantization()), time.perf_counter() - t0, {})
+    out["blue-noise"] = (quantize_volume(vol, Quantization("blue-noise")), time.perf_counter() - t0, {})
     for spec in methods:  # METHOD[:UPSAMPLE][/ORDER][+comp[1][tP]]
         q, changes = quantization(spec)
         t0 = time.perf_counter()
@@ -152,7 +152,7 @@ def candidates(vol, rd, refine: list[int], methods: list[str], control, threads,
             log(f"{label} {ref.iteration}: ΔE76 {e['delta_e76']:.3f} at {ref.spp[0]} spp, {e['seconds']:.1f} s")
             if ref.iteration in refine:  # its iterations' seconds and the final dither
                 t0 = time.perf_counter()
-                labels = quantize_volume(ref.volume(), Quantization())
+                labels = quantize_volume(ref.volume(), Quantization("blue-noise"))
                 seconds = sum(h["seconds"] for h in ref.history) + time.perf_counter() - t0
                 out[f"{label}-{ref.iteration}"] = (labels, seconds, {"history": list(ref.history)})
                 if control is True and label == "refine":
