@@ -1,10 +1,10 @@
 """The halftone's cost and what keeps it, side by side on one run: the continuous mixture, blue noise (the reference
-every variant is paired with), the printed refinement after N iterations (``printing.refine``: blue noise of a
-mixture refined on the printed prediction) and other dithers, all evaluated at equal settings in one session on one texel set (the
-evaluation's own choice of every texel or a texel sample, its adaptive noise-free sampling; no baselines), with the
-paired differences of every printed result against the continuous one and against blue noise (on a texel sample),
-the seconds each candidate took to make and that cost as a ratio to one optimisation iteration's passes (forward 16
-spp + gradient 4 spp, the defaults) measured in the same session. Writes the entry NAME of
+every variant is paired with), the printed refinement after N iterations (``printing.refine``: blue noise of a mixture
+refined on the printed prediction) and other dithers, all evaluated at equal settings in one session on one texel set
+(the evaluation's own choice of every texel or a texel sample, its adaptive noise-free sampling; no baselines), with the
+paired differences of every printed result against the continuous one and against blue noise (on a texel sample), the
+seconds each candidate took to make and that cost as a ratio to one optimisation iteration's passes (forward 16 spp +
+gradient 4 spp, the defaults) measured in the same session. Writes the entry NAME of
 experiments/results/printed_refine.json.
 
     .venv/bin/python experiments/printed_refine.py NAME RUN [--refine 3,6] [--control] [--methods M[:UPSAMPLE],...]
