@@ -38,7 +38,8 @@ class CountDiffusion:
     Follows the dither protocol: the counts of optimisation layer z are diffused when its first printer layer is
     asked for (from that layer's cumulative mixture, taken at one printer voxel per block, so ``--compensate`` and
     the bands' order apply as for blue noise) and the labels of its printer layers kept until asked for; memory
-    holds one optimisation layer's printer layers (labels and thresholds) and two (y, x, N) f64 error planes.
+    holds one optimisation layer's printer layers (labels and thresholds, and each block's voxels in threshold order,
+    ``kernels::blocks``) and two (y, x, N) f64 error planes.
     Deterministic for a seed (the blue-noise offset; the diffusion is sequential). Linear upsampling has no blocks
     of one mixture and is refused."""
 
