@@ -61,13 +61,13 @@ class CountDiffusion:
         self.iz, iy, ix = grid.enclosing
         nz, ny, nx = grid.source_shape
         self.per_z = np.bincount(self.iz, minlength=nz)
-        # one printer row / column per optimisation row / column (its first), and the blocks' lateral sizes
-        self.first_y = np.minimum(np.searchsorted(iy, np.arange(ny)), len(iy) - 1)
-        self.first_x = np.minimum(np.searchsorted(ix, np.arange(nx)), len(ix) - 1)
-        self.block_yx = np.outer(np.bincount(iy, minlength=ny), np.bincount(ix, minlength=nx)).astype(np.uint32)
-        # the printer rows and columns of optimisation row / column y: ry[y]..ry[y + 1] (``kernels::blocks``)
+        # the printer rows and columns of optimisation row / column y: ry[y]..ry[y + 1] (``kernels::blocks``); from
+        # them one printer row / column per optimisation row / column (its first) and the blocks' lateral sizes
         self.ry = np.searchsorted(iy, np.arange(ny + 1)).astype(np.uint32)
         self.rx = np.searchsorted(ix, np.arange(nx + 1)).astype(np.uint32)
+        self.first_y = np.minimum(self.ry[:-1], len(iy) - 1).astype(np.int64)
+        self.first_x = np.minimum(self.rx[:-1], len(ix) - 1).astype(np.int64)
+        self.block_yx = np.outer(np.diff(self.ry), np.diff(self.rx)).astype(np.uint32)
         self.error = np.zeros((2, ny, nx, n_inks), np.float64)
         self.counts = np.zeros((ny, nx, n_inks), np.uint32)
         self.next_z, self.labels = 0, {}
