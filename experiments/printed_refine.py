@@ -232,6 +232,7 @@ def main():
     ap.add_argument("--spp", type=int, default=REFINE_SPP, help="its printed render's and gradient pass's spp")
     ap.add_argument("--threads", type=int, default=None)
     ap.add_argument("--no-cost", dest="cost", action="store_false", help="skip timing one iteration's passes")
+    ap.add_argument("--reference", default=None, help="also pair every other method with this one (e.g. the default)")
     a = ap.parse_args()
     refine = sorted(int(v) for v in a.refine.split(",") if v)
     methods = [m for m in a.methods.split(",") if m]
@@ -284,6 +285,7 @@ def main():
     if ev.sample is not None:
         pairs = [(n, "continuous") for n in made] + [(n, "blue-noise") for n in made if n != "blue-noise"]
         pairs += [(n, f"{n} continuous") for n in made if f"{n} continuous" in values]
+        pairs += [(n, a.reference) for n in made if a.reference in made and n not in (a.reference, "blue-noise")]
         pairs += [(f"refine-{n[8:]}", n) for n in made if n.startswith("control-") and f"refine-{n[8:]}" in made]
         entry["differences"] = sampled.differences(values, pairs, ev.sample)
         for k, v in entry["differences"].items():
