@@ -5,6 +5,7 @@ inkopt's defaults at two sizes and three time budgets, quantized and evaluated a
     nice -n 5 python bench/mesh_suite.py run              # every mesh x size x budget (hours; resumable)
     nice -n 5 python bench/mesh_suite.py run --meshes duck,coin --sizes 8 --budgets 3it --results FILE
     python bench/mesh_suite.py run --meshes duck --sizes 10 --budgets short --variant NAME --optimize-args='...'
+    python bench/mesh_suite.py run --meshes coin --sizes 20 --budgets medium --again   # today's print of a cell
     python bench/mesh_suite.py refresh                    # add paired differences to cells recorded without them
     python bench/mesh_suite.py table                      # the table between its markers in docs/quality.md
 
@@ -21,7 +22,10 @@ figures; a texel sample where that reaches the same accuracy sooner), and adds t
 (default bench/results/mesh_suite.json) as it finishes: a cell already there is skipped, a step whose output exists
 in the cell's run folder is not repeated. A variant (``--variant NAME`` with ``--optimize-args`` or
 ``--evaluate-args``: an alternative to a default, measured at the same budget) gets cells of its own, keyed
-MESH/Hmm/BUDGET+NAME, in run folders MESH_Hmm_BUDGET_NAME, beside the defaults' cells. ``table`` writes
+MESH/Hmm/BUDGET+NAME, in run folders MESH_Hmm_BUDGET_NAME, beside the defaults' cells. ``--again`` runs recorded
+cells again with today's defaults and replaces their entries: where the run folder still holds the optimised result,
+only ``quantize`` and ``evaluate`` (their outputs removed first), so a new default halftone is measured on the same
+result; otherwise the whole cell. ``table`` writes
 docs/tables.py's ``mesh_suite`` table of a results file between ``<!-- table:mesh-suite -->`` markers.
 
 Results keys (kept stable): ``cells`` -> "MESH/Hmm/BUDGET[+VARIANT]" -> ``mesh``, ``height_mm``, ``budget``,
@@ -33,7 +37,8 @@ of str), ``texels``, ``iterations`` (a coarse-to-fine job's: the fine stage's), 
 stage's; null without one), ``job_seconds`` (report.json's ``seconds``: the job's wall time from its start, which
 its time budget counts), ``optimize_seconds``, ``seconds_per_iteration``, ``quantize_seconds``,
 ``evaluate_seconds``, ``sampled`` (bool: figures from a texel sample), ``gamut_floor_delta_e76``,
-``load_average_before``, ``load_average_after``, ``finished``, ``commit``, ``command``, and ``results`` ->
+``load_average_before``, ``load_average_after``, ``finished``, ``commit``, ``command``, ``quantization``
+(evaluation.json's: the halftone's ``method``, ``ink_order``, ``upsample``, ``seed``, ``dpi``), and ``results`` ->
 "continuous" | "printed" | "surface" | "extrusion" -> ``delta_e76_corrected``, ``delta_e2000``, ``ssim``,
 ``mottle_l2`` and ``stderr`` (the same keys; null where every texel was rendered: those figures carry no sampling
 error, and the ΔE76 is corrected for the Monte Carlo noise), and ``differences`` -> "printed - extrusion" |
@@ -399,6 +404,7 @@ def run_cell(mesh: str, height: float, budget: str, cache: Path, extra: Extra) -
         "evaluate_seconds": round(t_ev, 1) if t_ev is not None else ev.get("seconds"),
         "sampled": ev.get("texel_sample") is not None,
         "gamut_floor_delta_e76": ev.get("gamut_floor_delta_e76"),
+        "quantization": ev.get("quantization"),
         "load_average_before": load_before,
         "load_average_after": os.getloadavg()[0],
         "finished": time.strftime("%Y-%m-%d %H:%M"),
@@ -416,9 +422,9 @@ def job_times(out: Path, report: dict) -> dict:
 
 
 def refresh(cache: Path, results: Path) -> None:
-    """Add each recorded cell's paired differences (``differences``) from its run folder's evaluation.json, and its
-    ``coarse_iterations``, ``job_seconds`` and ``finish`` from its reports, for cells recorded before the results
-    kept them; nothing else of a cell changes."""
+    """Add each recorded cell's paired differences (``differences``) and halftone settings (``quantization``) from
+    its run folder's evaluation.json, and its ``coarse_iterations``, ``job_seconds`` and ``finish`` from its reports,
+    for cells recorded before the results kept them; nothing else of a cell changes."""
     data = json.loads(results.read_text())
     for key, c in data["cells"].items():
         out = run_folder(cache, c["mesh"], c["height_mm"], c["budget"], c.get("variant"))
@@ -432,6 +438,9 @@ def refresh(cache: Path, results: Path) -> None:
         if "finish" not in c and (out / "report.json").is_file():
             c["finish"] = json.loads((out / "report.json").read_text()).get("finish")
             print(f"{key}: the finishing choice added")
+        if "quantization" not in c and ev.is_file():
+            c["quantization"] = json.loads(ev.read_text()).get("quantization")
+            print(f"{key}: the halftone's settings added")
     write_results(results, data)
 
 
@@ -443,14 +452,23 @@ def write_results(results: Path, data: dict) -> None:
     tmp.replace(results)
 
 
-def run(cache: Path, results: Path, cells: list[tuple[str, float, str]], extra: Extra) -> None:
-    """Run every cell not yet in ``results`` (``cell_key``), writing the file after each."""
+#: what ``quantize`` and ``evaluate`` write into a run folder (``--again`` removes them to print the result anew)
+PRINT_OUTPUTS = ("quantized.npz", "quantized_labels.layers", "evaluation.json")
+
+
+def run(cache: Path, results: Path, cells: list[tuple[str, float, str]], extra: Extra, again: bool = False) -> None:
+    """Run every cell not yet in ``results`` (``cell_key``), writing the file after each; ``again``: the recorded
+    cells too, printed and evaluated anew from their optimised result where the run folder holds it."""
     data = json.loads(results.read_text()) if results.is_file() else {"cells": {}}
     for mesh, height, budget in cells:
         key = cell_key(mesh, height, budget, extra.variant)
-        if key in data["cells"]:
+        if key in data["cells"] and not again:
             print(f"{key}: done before, skipped")
             continue
+        if key in data["cells"]:
+            out = run_folder(cache, mesh, height, budget, extra.variant)
+            for name in PRINT_OUTPUTS:
+                (out / name).unlink(missing_ok=True)
         print(f"{key}: optimize, quantize, evaluate ...", flush=True)
         cell = run_cell(mesh, height, budget, cache, extra)
         data["cells"][key] = {**cell, **provenance()}
@@ -496,6 +514,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--optimize-args", default="", help=more % ("optimize", "optimize"))
     ap.add_argument("--evaluate-args", default="", help=more % ("evaluate", "evaluate"))
     ap.add_argument("--variant", help="run: the name of a variant's cells (key MESH/Hmm/BUDGET+NAME, run folder _NAME)")
+    ap.add_argument("--again", action="store_true", help="run: recorded cells too, with today's defaults")
     a = ap.parse_args(argv)
     meshes = [m for m in a.meshes.split(",") if m]
     unknown = [m for m in meshes if m not in MESHES]
@@ -507,7 +526,7 @@ def main(argv: list[str] | None = None) -> int:
         sizes = [float(s) for s in a.sizes.split(",")]
         budgets = [b for b in a.budgets.split(",") if b and budget_args(b)]
         extra = Extra.of(shlex.split(a.optimize_args), shlex.split(a.evaluate_args), a.variant)
-        run(a.cache, a.results, [(m, s, b) for m in meshes for s in sizes for b in budgets], extra)
+        run(a.cache, a.results, [(m, s, b) for m in meshes for s in sizes for b in budgets], extra, a.again)
     elif a.step == "refresh":
         refresh(a.cache, a.results)
     else:

@@ -1131,11 +1131,22 @@ def suite_difference(c: dict, pair: str, figures: tuple[str, ...], sign: int = 1
     )
 
 
+def halftone(q: dict | None) -> str:
+    """A print's quantization settings (evaluation.json's ``quantization``) in a few words: the method, the inks'
+    order where the method orders them and it is not lightest first, and the compensation; "–" where a cell does
+    not record them."""
+    if not q:
+        return "–"
+    order = q.get("ink_order", "lightness")
+    shown = q["method"] + (f"/{order}" if order not in ("lightness", "index") else "")
+    return shown + (" +comp" if q.get("compensate") else "")
+
+
 def mesh_suite(path: Path = BENCH / "mesh_suite.json", variants: bool | None = None) -> str:
     """bench/mesh_suite.py's cells (one row each, in file order; a variant's budget column names it; ``variants``
     False: the defaults' cells only, True: the variants' only, None: all): the four results' figures, the printed
     result's paired difference from the extrusion baseline and from the continuous result, the gamut floor, the
-    run's iterations and times, and the machine's load."""
+    run's iterations and times, the halftone the print was made with, and the machine's load."""
     d, rows = load(path), []
     for c in d["cells"].values():
         if variants is not None and bool(c.get("variant")) != variants:
@@ -1147,6 +1158,7 @@ def mesh_suite(path: Path = BENCH / "mesh_suite.json", variants: bool | None = N
                 c["mesh"],
                 f"{c['height_mm']:g}",
                 c["budget"] + (f" + {c['variant']}" if c.get("variant") else ""),
+                halftone(c.get("quantization")),
                 (f"{c['coarse_iterations']} + " if c.get("coarse_iterations") is not None else "")
                 + f"{c['iterations']} it, {c['optimize_seconds'] / 60:.1f} + {c['evaluate_seconds'] / 60:.1f} min",
                 suite_cell(cont),
@@ -1163,6 +1175,7 @@ def mesh_suite(path: Path = BENCH / "mesh_suite.json", variants: bool | None = N
         "mesh",
         "mm",
         "budget",
+        "halftone",
         "run: (coarse +) iterations, optimise + evaluate",
         "continuous: ΔE76 / ΔE2000 / SSIM / mottle",
         "printed",

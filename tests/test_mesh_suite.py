@@ -88,6 +88,7 @@ def test_run_and_table_end_to_end(tmp_path, monkeypatch):
         "300",
     ]
     assert set(cell["results"]) == {"continuous", "printed", "surface", "extrusion"}
+    assert cell["quantization"]["method"] == "count-adaptive"  # the halftone the print was made with
     for fig in cell["results"].values():
         assert 0 < fig["delta_e76_corrected"] < 100 and -1 <= fig["ssim"] <= 1 and fig["delta_e2000"] > 0
     # the evaluation's paired differences, and refresh adding them to a cell recorded without them
@@ -101,6 +102,7 @@ def test_run_and_table_end_to_end(tmp_path, monkeypatch):
     }
     data = json.loads(results.read_text())
     del data["cells"]["cube/3mm/2it+fast"]["differences"]
+    del data["cells"]["cube/3mm/2it+fast"]["quantization"]
     results.write_text(json.dumps(data))
     assert suite.main(["refresh", "--cache", str(tmp_path), "--results", str(results)]) == 0
     assert json.loads(results.read_text())["cells"]["cube/3mm/2it+fast"] == cell
@@ -112,8 +114,18 @@ def test_run_and_table_end_to_end(tmp_path, monkeypatch):
     assert passes == 1 and cell["finish"] is None
     paired.checkpoint_volume(run, tmp_path / "again.npz", passes, str(tmp_path / "meshes" / "cube" / "tex.png"))
     assert np.array_equal(np.load(tmp_path / "again.npz")["mixture"], np.load(run / "volume.npz")["mixture"])
+    real = suite.inkopt
     monkeypatch.setattr(suite, "inkopt", lambda *a: pytest.fail("a finished cell is run again"))
     assert suite.main([*argv, "--results", str(results), *variant]) == 0
+    # --again: the recorded cell printed and evaluated anew from its optimised result, its entry replaced
+    calls = []
+    monkeypatch.setattr(suite, "inkopt", lambda args, log: calls.append(args[0]) or real(args, log))
+    (run / "evaluation.json").write_text("{}")  # a stale output: removed, not read
+    assert suite.main([*argv, "--results", str(results), *variant, "--again"]) == 0
+    assert calls == ["quantize", "evaluate"]
+    again = json.loads(results.read_text())["cells"]["cube/3mm/2it+fast"]
+    assert again["results"]["printed"] == cell["results"]["printed"]  # the same result, seed and settings
+    assert again["iterations"] == 2 and again["quantize_seconds"] > 0
 
     doc = tmp_path / "doc.md"
     doc.write_text("# x\n<!-- table:mesh-suite -->\nold\n<!-- /table:mesh-suite -->\nafter\n")
@@ -125,7 +137,7 @@ def test_run_and_table_end_to_end(tmp_path, monkeypatch):
     text = doc.read_text()
     row = next(line for line in text.splitlines() if line.startswith("| cube |"))
     printed = cell["results"]["printed"]["delta_e76_corrected"]
-    assert "| 3 | 2it + fast | 2 it," in row and f"{printed:.2f}" in row
+    assert "| 3 | 2it + fast | count-adaptive | 2 it," in row and f"{printed:.2f}" in row
     assert f"{lead['delta_e76_corrected']['value']:+.2f} ± {lead['delta_e76_corrected']['stderr']:.2f}" in row
     assert "old" not in text and text.endswith("<!-- /table:mesh-suite-variants -->\nafter\n")
 
