@@ -326,10 +326,23 @@ def halftone_side_by_side() -> str:
 SIDE_KEYS = (("delta_e76_mean_corrected", 2), ("delta_e2000_mean", 2), ("ssim", 3), ("mottle_l2", 2))
 
 
-def halftone_adaptive() -> str:
-    """The counts' dithers against blue noise per result (experiments/printed_refine.py entries NAME_adaptive): for
-    blue noise, the counts' diffusion and count-adaptive, each − blue noise and − the continuous result, paired ± their
-    standard errors on the entry's texel sample."""
+#: the compensation's variants with count-adaptive (experiments/printed_refine.py entries NAME_adaptcomp)
+ADAPTIVE_COMP = (
+    "count-adaptive+comp1",
+    "count-adaptive/tint-first+comp1",
+    "count-adaptive/tint-first+compw",
+    "count-adaptive",
+)
+
+
+def halftone_adaptive(
+    suffix: str = "_adaptive",
+    methods: tuple[str, ...] = ("count-adaptive", "count-diffusion", "blue-noise"),
+    reference: str = "blue-noise",
+) -> str:
+    """Quantizations side by side per result (experiments/printed_refine.py entries NAME``suffix``): each of
+    ``methods`` − ``reference`` and − the continuous result, paired ± their standard errors on the entry's texel
+    sample. Default: the counts' dithers against blue noise (entries NAME_adaptive)."""
     path = STUDY / "printed_refine.json"
     res = load(path)["results"]
     keys = SIDE_KEYS[:3]
@@ -343,14 +356,15 @@ def halftone_adaptive() -> str:
 
     rows = []
     for name, e in res.items():
-        if not name.endswith("_adaptive"):
+        if not name.endswith(suffix):
             continue
-        case = f"{name[: -len('_adaptive')]} ({e['sample']['points']} texels)" if e.get("sample") else name
-        for i, method in enumerate(("count-adaptive", "count-diffusion", "blue-noise")):
-            vs_b = "" if method == "blue-noise" else pd(e, method, "blue-noise")
-            rows.append([case if i == 0 else "", method, vs_b, pd(e, method, "continuous")])
+        case = f"{name[: -len(suffix)]} ({e['sample']['points']} texels)" if e.get("sample") else name
+        for i, method in enumerate(methods):
+            vs_r = "" if method == reference else pd(e, method, reference)
+            rows.append([case if i == 0 else "", method, vs_r, pd(e, method, "continuous")])
     what = "ΔE76 / ΔE2000 / SSIM"
-    return table(["result", "method", f"− blue noise: {what}", f"− continuous: {what}"], rows, [path])
+    ref = reference.replace("-", " ")
+    return table(["result", "method", f"− {ref}: {what}", f"− continuous: {what}"], rows, [path])
 
 
 def halftone_ssim_channels() -> str:

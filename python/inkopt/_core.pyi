@@ -170,6 +170,15 @@ def diffuse_counts_layer(
 ) -> float:
     """Counts of layer z: share (N,y,x), block (y,x), classes (y,x) (255: the thresholds' own) -> counts; max |r|."""
 
+def mark_smooth(
+    share: NDArray[np.float64],
+    classes: NDArray[np.uint8],
+    smooth: float,
+    below: NDArray[np.float64] | None = None,
+    below_inside: NDArray[np.uint8] | None = None,
+) -> None:
+    """Sets 255 in classes (y,x) u8 where the RMS share distance of share (N,y,x) to the inside neighbours < smooth."""
+
 def sort_blocks(
     t: NDArray[np.float32],
     ry: NDArray[np.uint32],

@@ -7,7 +7,7 @@ from scipy.ndimage import gaussian_filter
 
 from inkopt.errors import ParameterError
 from inkopt.model import EMPTY, InkTable, Quantization
-from inkopt.printing.counts import AdaptiveCounts, CountDiffusion
+from inkopt.printing.counts import DITHER_CLASS, AdaptiveCounts, CountDiffusion
 from inkopt.printing.dithers import DITHERS, band_order
 from inkopt.printing.grid import Nearest, PrinterGrid
 from inkopt.printing.layers import CumulativeLayers
@@ -177,3 +177,53 @@ def test_adaptive_shares_blue_noise_compensation():
     key = compensation_key(inks, Quantization("count-adaptive"), 0.4, 1.5)
     assert key == compensation_key(inks, Quantization("blue-noise"), 0.4, 1.5)
     assert key != compensation_key(inks, Quantization("count-diffusion"), 0.4, 1.5)
+
+
+def _smooth_reference(share, inside, below, below_inside, smooth):
+    """The smooth voxels by whole-plane numpy arithmetic: each inside voxel's RMS share distance to its inside
+    neighbours (4 in the layer, 1 below) below ``smooth``."""
+    ny, nx = inside.shape
+    sq, cnt = np.zeros(inside.shape), np.zeros(inside.shape)
+    for dy, dx in ((1, 0), (0, 1)):
+        a, b = np.s_[: ny - dy, : nx - dx], np.s_[dy:, dx:]
+        both = inside[a] & inside[b]
+        d = np.where(both, np.sum((share[:, a[0], a[1]] - share[:, b[0], b[1]]) ** 2, axis=0), 0.0)
+        sq[a] += d
+        sq[b] += d
+        cnt[a] += both
+        cnt[b] += both
+    if below is not None:
+        both = inside & below_inside
+        sq += np.where(both, np.sum((share - below) ** 2, axis=0), 0.0)
+        cnt += both
+    return inside & (np.sqrt(sq / np.maximum(cnt, 1)) < smooth)
+
+
+def test_smooth_voxels_are_the_whole_plane_arithmetic_bit_for_bit():
+    """``_core.mark_smooth`` marks exactly the voxels numpy's whole-plane arithmetic finds smooth, also at
+    distances near the threshold, with and without a layer below, and leaves the other classes as they were."""
+    from inkopt import _core
+
+    rng = np.random.default_rng(3)
+    for trial in range(6):
+        n, ny, nx = 4, 23, 31
+        patches = rng.integers(0, 64, (n, 3, 4))  # 8 x 8 patches of one mixture, some voxels moved by 1/64 steps
+        raw = np.repeat(np.repeat(patches, 8, 1), 8, 2)[:, :ny, :nx]
+        raw = raw + (rng.random((n, ny, nx)) < 0.1) * rng.integers(-2, 3, (n, ny, nx))
+        share = np.maximum(raw, 0) / np.maximum(np.maximum(raw, 0).sum(0), 1)
+        inside = rng.random((ny, nx)) < 0.8
+        classes = np.where(inside, rng.integers(1, 4, (ny, nx)), 0).astype(np.uint8)
+        below = rng.permutation(share.reshape(n, -1).T).T.reshape(share.shape) if trial % 2 else None
+        below_inside = (rng.random((ny, nx)) < 0.7) if trial % 2 else None
+        smooth = [0.05, 1 / 64, 0.2][trial % 3]
+        want = _smooth_reference(share, inside, below, below_inside, smooth)
+        got = classes.copy()
+        extra = (
+            {}
+            if below is None
+            else {"below": np.ascontiguousarray(below), "below_inside": below_inside.astype(np.uint8)}
+        )
+        _core.mark_smooth(np.ascontiguousarray(share), got, smooth, **extra)
+        np.testing.assert_array_equal(got == DITHER_CLASS, want)
+        np.testing.assert_array_equal(got[~want], classes[~want])
+        assert 0 < want.sum() < inside.sum()  # both kinds of voxel present

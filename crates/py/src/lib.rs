@@ -29,6 +29,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<texels::Texels>()?;
     m.add_function(wrap_pyfunction!(printing::diffuse_layer, m)?)?;
     m.add_function(wrap_pyfunction!(printing::diffuse_counts_layer, m)?)?;
+    m.add_function(wrap_pyfunction!(printing::mark_smooth, m)?)?;
     m.add_function(wrap_pyfunction!(printing::sort_blocks, m)?)?;
     m.add_function(wrap_pyfunction!(printing::place_blocks, m)?)?;
     m.add_function(wrap_pyfunction!(printing::feature_plane, m)?)?;

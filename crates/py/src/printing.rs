@@ -1,7 +1,10 @@
 //! The printing kernels: `diffuse_layer`, one printer layer of 3D vector error diffusion
-//! (`inkopt_core::kernels::diffuse`), `diffuse_counts_layer`, one optimisation layer of the error diffusion of ink
-//! counts between optimisation voxels (`inkopt_core::kernels::counts`), and `feature_plane`, one plane of the exact Euclidean feature transform the
-//! extrusion baseline takes its nearest texels from (`inkopt_core::kernels::feature`).
+//! (`inkopt_core::kernels::diffuse`); `diffuse_counts_layer`, one optimisation layer of the error diffusion of ink
+//! counts between optimisation voxels (`inkopt_core::kernels::counts`); `mark_smooth`, the voxels that take the
+//! ordered dither's counts instead (`inkopt_core::kernels::adaptive`); `sort_blocks` and `place_blocks`, each
+//! block's printer voxels in threshold order and their labels (`inkopt_core::kernels::blocks`); and
+//! `feature_plane`, one plane of the exact Euclidean feature transform the extrusion baseline takes its nearest
+//! texels from (`inkopt_core::kernels::feature`).
 
 use numpy::{PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
 use pyo3::prelude::*;
@@ -105,6 +108,34 @@ pub(crate) fn feature_plane(
     let o = out.as_slice_mut().map_err(|_| err("out must be C-contiguous"))?;
     let shape = inkopt_core::kernels::feature::PlaneShape { ny, nx, sampling: [sampling.0, sampling.1, sampling.2] };
     py.detach(|| inkopt_core::kernels::feature::feature_plane(z, sites, shape, o)).map_err(err)
+}
+
+/// mark_smooth(share (N, y, x) f64, classes (y, x) u8, smooth, below=None, below_inside=None): sets
+/// `DITHER_CLASS` (255) in `classes` (each voxel's class, 0 outside) at every inside voxel whose RMS share distance
+/// to its inside neighbours (four in the layer; one in `below` (N, y, x) f64 where `below_inside` (y, x) u8 is
+/// nonzero) is below `smooth` (inkopt_core::kernels::adaptive). The GIL is released.
+#[pyfunction]
+#[pyo3(signature = (share, classes, smooth, below=None, below_inside=None))]
+pub(crate) fn mark_smooth(
+    py: Python<'_>,
+    share: PyReadonlyArray3<f64>,
+    mut classes: numpy::PyReadwriteArray2<u8>,
+    smooth: f64,
+    below: Option<PyReadonlyArray3<f64>>,
+    below_inside: Option<PyReadonlyArray2<u8>>,
+) -> PyResult<()> {
+    use inkopt_core::kernels::adaptive::{mark_smooth, Below};
+    use inkopt_core::kernels::counts::CountShape;
+    let (n, ny, nx) = (share.shape()[0], share.shape()[1], share.shape()[2]);
+    check_shape(classes.shape(), &[ny, nx], "classes")?;
+    let b = match (&below, &below_inside) {
+        (Some(s), Some(i)) => Some(Below { share: c_slice(s, "below")?, inside: c_slice(i, "below_inside")? }),
+        (None, None) => None,
+        _ => return Err(err("below and below_inside go together")),
+    };
+    let sh = c_slice(&share, "share")?;
+    let c = classes.as_slice_mut().map_err(|_| err("classes must be C-contiguous"))?;
+    py.detach(|| mark_smooth(CountShape { n, ny, nx }, sh, b, smooth, c)).map_err(err)
 }
 
 /// sort_blocks(t (k, Y, X) f32, ry (ny + 1) u32, rx (nx + 1) u32, order (ny, nx, W) u32, sorted (ny, nx, W) f64):

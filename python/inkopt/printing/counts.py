@@ -180,26 +180,14 @@ class AdaptiveCounts(CountDiffusion):
         self.below_inside: np.ndarray | None = None
 
     def _classes(self, z: int, share: np.ndarray) -> np.ndarray:
+        from .. import _core
+
         classes = self._inside(z).copy()
-        inside = classes > 0
-        ny, nx = inside.shape
-        sq, cnt = np.zeros(inside.shape), np.zeros(inside.shape)
-        for dy, dx in ((1, 0), (0, 1)):  # each pair of in-layer neighbours once
-            a, b = np.s_[: ny - dy, : nx - dx], np.s_[dy:, dx:]
-            both = inside[a] & inside[b]
-            d = np.where(both, np.sum((share[:, a[0], a[1]] - share[:, b[0], b[1]]) ** 2, axis=0), 0.0)
-            sq[a] += d
-            sq[b] += d
-            cnt[a] += both
-            cnt[b] += both
-        if self.below is not None:
-            both = inside & self.below_inside
-            sq += np.where(both, np.sum((share - self.below) ** 2, axis=0), 0.0)
-            cnt += both
-        rms = np.sqrt(sq / np.maximum(cnt, 1))
-        classes[inside & (rms < self.smooth)] = DITHER_CLASS
+        inside = (classes > 0).view(np.uint8)
+        below = {} if self.below is None else {"below": self.below, "below_inside": self.below_inside}
+        _core.mark_smooth(np.ascontiguousarray(share), classes, self.smooth, **below)
         if share.any():  # an optimisation layer without printer layers keeps the one below
-            self.below, self.below_inside = share, inside
+            self.below, self.below_inside = np.ascontiguousarray(share), inside
         return classes
 
 

@@ -6,7 +6,10 @@
 //! belong to it: block (y, x) is those rows × columns × layers. `sort_blocks` lists each block's voxels (flat
 //! indices into the layer's (k, Y, X) printer voxels) in increasing threshold, ties to the lower index;
 //! `place_blocks` gives the first `c_0` of them band 0, the next `c_1` band 1, and so on. Where the counts are the
-//! ones the thresholds give the block's mixture, the labels are the ordered dither's own.
+//! ones the thresholds give the block's mixture, the labels are the ordered dither's own. Blocks are sorted in
+//! parallel by optimisation row; each block's order depends only on its own thresholds.
+
+use rayon::prelude::*;
 
 /// An optimisation layer's blocks: `k` printer layers of `ny` × `nx` blocks over a `(k, Y, X)` printer slab, with
 /// `ry` (ny + 1) and `rx` (nx + 1) the printer rows' and columns' offsets; `width` the largest block's voxels.
@@ -60,18 +63,18 @@ pub fn sort_blocks(b: Blocks<'_>, t: &[f32], order: &mut [u32], sorted: &mut [f6
     if order.len() != slots || sorted.len() != slots {
         return Err(format!("order and sorted need {slots} slots, got {} and {}", order.len(), sorted.len()));
     }
-    let mut ids = Vec::with_capacity(b.width);
-    for y in 0..ny {
+    let row = nx * b.width;
+    order.par_chunks_mut(row).zip(sorted.par_chunks_mut(row)).enumerate().for_each(|(y, (o, s))| {
+        let mut ids = Vec::with_capacity(b.width);
         for x in 0..nx {
             b.voxels(y, x, yy, xx, &mut ids);
             ids.sort_by(|&p, &q| t[p as usize].total_cmp(&t[q as usize]).then(p.cmp(&q)));
-            let at = (y * nx + x) * b.width;
-            for (s, slot) in (at..at + b.width).enumerate() {
-                order[slot] = ids.get(s).copied().unwrap_or(u32::MAX);
-                sorted[slot] = ids.get(s).map_or(2.0, |&i| t[i as usize] as f64);
+            for slot in 0..b.width {
+                o[x * b.width + slot] = ids.get(slot).copied().unwrap_or(u32::MAX);
+                s[x * b.width + slot] = ids.get(slot).map_or(2.0, |&i| t[i as usize] as f64);
             }
         }
-    }
+    });
     Ok(())
 }
 

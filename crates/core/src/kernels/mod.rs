@@ -4,6 +4,8 @@
 //!   voxel, layer by layer.
 //! - `counts` (printing): vector error diffusion of whole ink counts between optimisation voxels (each voxel's
 //!   block of printer voxels), one optimisation layer at a time.
+//! - `adaptive` (printing): which optimisation voxels of a layer are smooth enough to take the ordered dither's
+//!   own counts instead (count-adaptive dithering).
 //! - `smooth` (optimiser): explicit diffusion of per-voxel values over a sparse voxel set, the step
 //!   preconditioner.
 //! - `simplex` (optimiser): the row-wise softmax of the optimiser's variables and its backward map.
@@ -16,6 +18,7 @@
 //! thread count. They use `crate::spans` (voxel sets by grid row) and, for `diffuse`, the empty-voxel label
 //! `transport::medium::EMPTY`.
 
+pub mod adaptive;
 pub mod blocks;
 pub mod counts;
 pub mod diffuse;

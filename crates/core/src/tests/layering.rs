@@ -36,6 +36,7 @@ const LAYERS: &[&str] = &[
     "kernels::blocks",
     "kernels::diffuse",
     "kernels::counts",
+    "kernels::adaptive",
     "kernels::feature",
     "kernels::simplex",
     "kernels::smooth",
