@@ -94,7 +94,7 @@ def quantization(spec: str) -> tuple[Quantization, dict]:
     """``METHOD[:UPSAMPLE][/ORDER][+comp[1|w][tP][@LX]]`` -> (the settings, the compensation's changes for
     ``compensation_variant``; ``ORDER``: ``Quantization.ink_order``, e.g. ``tint-first``; ``+compw``: each ink's
     factor against white alone and none against the other inks, p_eff = p / (1 + k w), w the white share, so a
-    mixture without white is not corrected):
+    mixture without white is not corrected (``ShareCompensation.base_only``)):
     ``+comp`` the shares compensated with the factors against other inks (``ShareCompensation.pairs``), ``+comp1``
     with each ink's factor against the base alone (the other inks counted as base: what ``Quantization.compensate``
     applies), ``tP`` (e.g. ``+compt0.05``) with the correction tapered below the share P
@@ -107,7 +107,7 @@ def quantization(spec: str) -> tuple[Quantization, dict]:
     single, _, taper = tail.partition("t")
     changes = {"pairs": single != "1"} | ({"taper": float(taper)} if taper else {})
     changes |= {"layer_k": layer_factors(float(layer))} if layer else {}
-    changes |= {"white_only": True, "pairs": True} if single == "w" else {}
+    changes |= {"base_only": True, "pairs": False} if single == "w" else {}
     q = Quantization(m, upsample=up or "nearest", ink_order=order or "lightness", compensate=bool(comp))
     return q, changes
 
@@ -119,8 +119,6 @@ def compensation_variant(changes: dict):
 
     def varied(*a, **k):
         comp, own = full(*a, **k), dict(changes)
-        if own.pop("white_only", False):  # each ink's factor against white only: no correction among other inks
-            own["kappa"] = np.zeros((len(comp.k), len(comp.k)))
         layer_k = own.pop("layer_k", None)
         if layer_k is not None:  # the inks' factors of a thin tinted layer (the base keeps 0)
             names = a[0].names  # share_compensation(inks, q, g, ior)

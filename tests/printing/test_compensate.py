@@ -285,3 +285,22 @@ def test_taper_scales_the_correction_below_its_share():
     np.testing.assert_allclose(tapered[0, 0] - mix[0, 0], (full[0, 0] - mix[0, 0]) * 0.2)  # 0.01 / 0.05
     np.testing.assert_allclose(tapered[:, 1], full[:, 1])  # at or above the taper share: the whole correction
     np.testing.assert_allclose(tapered[1, 0], full[1, 0])
+
+
+def test_base_only_corrects_against_the_base_share_alone():
+    """With ``base_only`` an ink's dithered share p looks like p / (1 + k w), w the base's share: ``apply`` inverts
+    it, leaves a row without the base as it is, and corrects less than the single-ink model where other inks stand
+    in for the base."""
+    comp = replace(scaled(base=4, n=5, k=0.3), base_only=True)
+    rng = np.random.default_rng(5)
+    rows = rng.dirichlet(np.ones(5) * 0.4, size=200) * np.array([0.3, 0.3, 0.3, 0.3, 1.0])
+    rows[:, 4] += 1.0 - rows.sum(-1)
+    out = comp.apply(rows)
+    np.testing.assert_allclose(out.sum(-1), 1.0, atol=1e-12)
+    np.testing.assert_allclose(comp.effective_rows(out), rows, atol=1e-10)
+    eff = comp.effective_rows(rows)
+    np.testing.assert_allclose(eff[:, :4], rows[:, :4] / (1.0 + 0.3 * rows[:, 4:5]), atol=1e-12)
+    no_base = np.array([[0.2, 0.3, 0.5, 0.0, 0.0]])
+    np.testing.assert_allclose(comp.apply(no_base), no_base, atol=1e-12)
+    single = scaled(4, 5, 0.3).apply(rows)
+    assert np.all(out[:, :4] <= single[:, :4] + 1e-12) and np.any(out[:, :4] < single[:, :4] - 1e-3)

@@ -77,6 +77,9 @@ class ShareCompensation:
     pairs         whether ``kappa`` is applied (a setting, default off: on the duck, the spider and Spot 20 mm the
                   correction with it gained less ΔE76 and ΔE2000 than each ink fitted alone against the base;
                   docs/quality.md, "Where inks mix")
+    base_only     whether each ink is corrected against the base's share alone, ``p / (1 + k_i w)`` with w the
+                  base's share, so that a row without the base is left as it is (a setting; otherwise every other
+                  ink counts as base, ``p / (1 + k_i (1 - p))``; ``pairs`` takes precedence)
     """
 
     base: int
@@ -92,6 +95,7 @@ class ShareCompensation:
     mixed_stderr: np.ndarray | None = None
     taper: float = 0.0
     pairs: bool = False
+    base_only: bool = False
 
     def effective(self, p, i: int) -> np.ndarray:
         """The continuous share that ink ``i`` dithered at share ``p`` (array, in [0, 1]) in the base alone looks
@@ -101,11 +105,13 @@ class ShareCompensation:
 
     def factors(self) -> np.ndarray:
         """(N, N) float64: entry (i, j) the package factor of ink i against ink j's share, k_i against the base
-        (j = base), ``kappa`` against another ink where ``pairs`` (else k_i, every other ink acting as the base);
-        the diagonal and the base's row are 0."""
+        (j = base), ``kappa`` against another ink where ``pairs``, else 0 where ``base_only``, else k_i (every other
+        ink acting as the base); the diagonal and the base's row are 0."""
         n = len(self.k)
-        single = self.kappa is None or not self.pairs
-        f = np.repeat(np.asarray(self.k, np.float64)[:, None], n, 1) if single else np.array(self.kappa)
+        if self.kappa is not None and self.pairs:
+            f = np.array(self.kappa, np.float64)
+        else:
+            f = np.repeat(np.asarray(self.k, np.float64)[:, None], n, 1) * (0.0 if self.base_only else 1.0)
         f[:, self.base] = self.k
         np.fill_diagonal(f, 0.0)
         f[self.base] = 0.0
@@ -123,11 +129,12 @@ class ShareCompensation:
     def apply(self, mix: np.ndarray) -> np.ndarray:
         """The pre-compensated rows of ``mix`` (..., N) (rows summing to 1, or 0 outside), same shape, float64:
         every ink but the base takes the share p' whose dither looks like its share p in ``mix`` (``effective_rows``
-        of the result equals ``mix``; without ``kappa`` p' = p (1 + k) / (1 + k p)), the base the rest; where the
-        non-base shares would sum above 1, they are scaled to 1 (no base); below ``taper`` the correction shrinks."""
+        of the result equals ``mix``; without ``kappa`` or ``base_only`` p' = p (1 + k) / (1 + k p)), the base the
+        rest; where the non-base shares would sum above 1, they are scaled to 1 (no base); below ``taper`` the
+        correction shrinks."""
         mix = np.asarray(mix, np.float64)
         total = mix.sum(-1)
-        if self.kappa is None or not self.pairs:
+        if (self.kappa is None or not self.pairs) and not self.base_only:
             out = np.empty_like(mix)
             for i in range(mix.shape[-1]):
                 if i != self.base:
