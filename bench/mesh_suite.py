@@ -25,7 +25,8 @@ in the cell's run folder is not repeated. A variant (``--variant NAME`` with ``-
 MESH/Hmm/BUDGET+NAME, in run folders MESH_Hmm_BUDGET_NAME, beside the defaults' cells. ``--again`` runs recorded
 cells again with today's defaults and replaces their entries: where the run folder still holds the optimised result,
 only ``quantize`` and ``evaluate`` (their outputs removed first), so a new default halftone is measured on the same
-result; otherwise the whole cell. ``table`` writes
+result, and the cell keeps its optimisation's ``optimize_args``, ``optimize_seconds`` and commit (as
+``optimize_commit``); otherwise the whole cell. ``table`` writes
 docs/tables.py's ``mesh_suite`` table of a results file between ``<!-- table:mesh-suite -->`` markers.
 
 Results keys (kept stable): ``cells`` -> "MESH/Hmm/BUDGET[+VARIANT]" -> ``mesh``, ``height_mm``, ``budget``,
@@ -37,8 +38,10 @@ of str), ``texels``, ``iterations`` (a coarse-to-fine job's: the fine stage's), 
 stage's; null without one), ``job_seconds`` (report.json's ``seconds``: the job's wall time from its start, which
 its time budget counts), ``optimize_seconds``, ``seconds_per_iteration``, ``quantize_seconds``,
 ``evaluate_seconds``, ``sampled`` (bool: figures from a texel sample), ``gamut_floor_delta_e76``,
-``load_average_before``, ``load_average_after``, ``finished``, ``commit``, ``command``, ``quantization``
-(evaluation.json's: the halftone's ``method``, ``ink_order``, ``upsample``, ``seed``, ``dpi``), and ``results`` ->
+``load_average_before``, ``load_average_after``, ``finished``, ``commit``, ``command``, ``optimize_commit`` (a
+cell printed anew by ``--again``: the commit its optimisation ran at), ``quantization`` (evaluation.json's: the
+halftone's ``method``, ``ink_order``, ``upsample``, ``seed``, ``dpi``, and ``refine`` and ``compensate`` where
+set), and ``results`` ->
 "continuous" | "printed" | "surface" | "extrusion" -> ``delta_e76_corrected``, ``delta_e2000``, ``ssim``,
 ``mottle_l2`` and ``stderr`` (the same keys; null where every texel was rendered: those figures carry no sampling
 error, and the ΔE76 is corrected for the Monte Carlo noise), and ``differences`` -> "printed - extrusion" |
@@ -454,6 +457,8 @@ def write_results(results: Path, data: dict) -> None:
 
 #: what ``quantize`` and ``evaluate`` write into a run folder (``--again`` removes them to print the result anew)
 PRINT_OUTPUTS = ("quantized.npz", "quantized_labels.layers", "evaluation.json")
+#: a cell's fields of its optimisation, which ``--again`` keeps where it prints the recorded result anew
+OPTIMISED = ("optimize_args", "optimize_seconds")
 
 
 def run(cache: Path, results: Path, cells: list[tuple[str, float, str]], extra: Extra, again: bool = False) -> None:
@@ -465,13 +470,18 @@ def run(cache: Path, results: Path, cells: list[tuple[str, float, str]], extra: 
         if key in data["cells"] and not again:
             print(f"{key}: done before, skipped")
             continue
-        if key in data["cells"]:
-            out = run_folder(cache, mesh, height, budget, extra.variant)
+        before = data["cells"].get(key)
+        out = run_folder(cache, mesh, height, budget, extra.variant)
+        kept = before is not None and (out / "report.json").is_file()  # the optimised result is printed anew
+        if before is not None:
             for name in PRINT_OUTPUTS:
                 (out / name).unlink(missing_ok=True)
         print(f"{key}: optimize, quantize, evaluate ...", flush=True)
-        cell = run_cell(mesh, height, budget, cache, extra)
-        data["cells"][key] = {**cell, **provenance()}
+        cell = {**run_cell(mesh, height, budget, cache, extra), **provenance()}
+        if kept:  # the optimisation is the recorded one: its arguments, time and commit stay
+            cell.update({k: before[k] for k in OPTIMISED if k in before})
+            cell["optimize_commit"] = before.get("optimize_commit", before["commit"])
+        data["cells"][key] = cell
         data.update(provenance())
         write_results(results, data)
         r = cell["results"]

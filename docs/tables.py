@@ -326,9 +326,11 @@ def halftone_side_by_side() -> str:
 SIDE_KEYS = (("delta_e76_mean_corrected", 2), ("delta_e2000_mean", 2), ("ssim", 3), ("mottle_l2", 2))
 
 
-#: the compensation's variants with count-adaptive (experiments/printed_refine.py entries NAME_adaptcomp)
+#: the compensation's variants with count-adaptive (experiments/printed_refine.py entries NAME_adaptcomp, and
+#: NAME_adaptcompw for a variant measured afterwards on the same texel sample)
 ADAPTIVE_COMP = (
     "count-adaptive+comp1",
+    "count-adaptive+compw",
     "count-adaptive/tint-first+comp1",
     "count-adaptive/tint-first+compw",
     "count-adaptive",
@@ -336,32 +338,38 @@ ADAPTIVE_COMP = (
 
 
 def halftone_adaptive(
-    suffix: str = "_adaptive",
+    suffixes: tuple[str, ...] = ("_adaptive",),
     methods: tuple[str, ...] = ("count-adaptive", "count-diffusion", "blue-noise"),
     reference: str = "blue-noise",
 ) -> str:
-    """Quantizations side by side per result (experiments/printed_refine.py entries NAME``suffix``): each of
-    ``methods`` − ``reference`` and − the continuous result, paired ± their standard errors on the entry's texel
-    sample. Default: the counts' dithers against blue noise (entries NAME_adaptive)."""
+    """Quantizations side by side per result (experiments/printed_refine.py entries NAME + the first of
+    ``suffixes``, a method missing there read from NAME + a later one): each of ``methods`` − ``reference`` and −
+    the continuous result, paired ± their standard errors on the entry's texel sample. Default: the counts' dithers
+    against blue noise (entries NAME_adaptive)."""
     path = STUDY / "printed_refine.json"
     res = load(path)["results"]
     keys = SIDE_KEYS[:3]
 
-    def pd(e: dict, a: str, b: str) -> str:
+    def pd(es: list[dict], a: str, b: str) -> str:
+        d = next((e["differences"][f"{a} - {b}"] for e in es if f"{a} - {b}" in (e.get("differences") or {})), {})
         out = []
-        for k, d in keys:
-            v = ((e.get("differences") or {}).get(f"{a} - {b}") or {}).get(k) or {}
-            out.append("–" if v.get("value") is None else f"{v['value']:+.{d}f} ± {v['stderr']:.{d}f}")
+        for k, dg in keys:
+            v = d.get(k) or {}
+            out.append("–" if v.get("value") is None else f"{v['value']:+.{dg}f} ± {v['stderr']:.{dg}f}")
         return " / ".join(out)
 
     rows = []
     for name, e in res.items():
-        if not name.endswith(suffix):
+        if not name.endswith(suffixes[0]):
             continue
-        case = f"{name[: -len(suffix)]} ({e['sample']['points']} texels)" if e.get("sample") else name
+        base = name[: -len(suffixes[0])]
+        es = [res[base + s] for s in suffixes if base + s in res]
+        if any(x.get("sample") != e.get("sample") or x["run"] != e["run"] for x in es):
+            raise ValueError(f"{base}: the entries {suffixes} are not of one run and texel sample")
+        case = f"{base} ({e['sample']['points']} texels)" if e.get("sample") else base
         for i, method in enumerate(methods):
-            vs_r = "" if method == reference else pd(e, method, reference)
-            rows.append([case if i == 0 else "", method, vs_r, pd(e, method, "continuous")])
+            vs_r = "" if method == reference else pd(es, method, reference)
+            rows.append([case if i == 0 else "", method, vs_r, pd(es, method, "continuous")])
     what = "ΔE76 / ΔE2000 / SSIM"
     ref = reference.replace("-", " ")
     return table(["result", "method", f"− {ref}: {what}", f"− continuous: {what}"], rows, [path])
@@ -1147,13 +1155,21 @@ def suite_difference(c: dict, pair: str, figures: tuple[str, ...], sign: int = 1
 
 def halftone(q: dict | None) -> str:
     """A print's quantization settings (evaluation.json's ``quantization``) in a few words: the method, the inks'
-    order where the method orders them and it is not lightest first, and the compensation; "–" where a cell does
-    not record them."""
+    order where it is not lightest first (and the method orders the inks: "index" is a record's word for a dither
+    that does not), the refinement's iterations and the compensation; "–" where a cell does not record them."""
     if not q:
         return "–"
     order = q.get("ink_order", "lightness")
-    shown = q["method"] + (f"/{order}" if order not in ("lightness", "index") else "")
+    shown = q["method"] + (f"/{order}" if order not in ("lightness", "index") or dithers_ordered(q, order) else "")
+    shown += f" +refine {q['refine']}" if q.get("refine") else ""
     return shown + (" +comp" if q.get("compensate") else "")
+
+
+def dithers_ordered(q: dict, order: str) -> bool:
+    """Whether a record's "index" order was chosen (the dither orders the inks) rather than implied."""
+    from inkopt.printing.dithers import dither_class
+
+    return order == "index" and dither_class(q["method"]).ordered
 
 
 def mesh_suite(path: Path = BENCH / "mesh_suite.json", variants: bool | None = None) -> str:

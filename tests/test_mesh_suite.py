@@ -126,6 +126,8 @@ def test_run_and_table_end_to_end(tmp_path, monkeypatch):
     again = json.loads(results.read_text())["cells"]["cube/3mm/2it+fast"]
     assert again["results"]["printed"] == cell["results"]["printed"]  # the same result, seed and settings
     assert again["iterations"] == 2 and again["quantize_seconds"] > 0
+    assert again["optimize_commit"] == cell["commit"]  # the optimisation's own record stays
+    assert again["optimize_args"] == cell["optimize_args"] and again["optimize_seconds"] == cell["optimize_seconds"]
 
     doc = tmp_path / "doc.md"
     doc.write_text("# x\n<!-- table:mesh-suite -->\nold\n<!-- /table:mesh-suite -->\nafter\n")

@@ -129,7 +129,11 @@ pub(crate) fn mark_smooth(
     let (n, ny, nx) = (share.shape()[0], share.shape()[1], share.shape()[2]);
     check_shape(classes.shape(), &[ny, nx], "classes")?;
     let b = match (&below, &below_inside) {
-        (Some(s), Some(i)) => Some(Below { share: c_slice(s, "below")?, inside: c_slice(i, "below_inside")? }),
+        (Some(s), Some(i)) => {
+            check_shape(s.shape(), &[n, ny, nx], "below")?;
+            check_shape(i.shape(), &[ny, nx], "below_inside")?;
+            Some(Below { share: c_slice(s, "below")?, inside: c_slice(i, "below_inside")? })
+        }
         (None, None) => None,
         _ => return Err(err("below and below_inside go together")),
     };

@@ -4,8 +4,9 @@
 //! of the share vectors' Euclidean distance. The others keep their depth shell's class and diffuse their counts.
 //!
 //! The sums run in a fixed order per voxel (each distance's squares over the inks in turn; then the distances to the
-//! neighbour below in y, above in y, after in x, before in x and below in z), the order numpy's whole-plane
-//! arithmetic gives them, so the classes are the same as that code's, bit for bit, for any thread count.
+//! neighbour below in y, above in y, after in x, before in x and below in z), so the classes do not depend on the
+//! thread count. It is the order of the numpy arithmetic this replaced for up to 7 inks; numpy sums 8 or more inks
+//! pairwise, so there a voxel within rounding of the threshold may fall on the other side.
 
 use crate::kernels::counts::{CountShape, DITHER_CLASS};
 use rayon::prelude::*;
@@ -36,6 +37,9 @@ pub fn mark_smooth(
         if b.share.len() != n * m || b.inside.len() != m {
             return Err(format!("the layer below must be {n} x {ny} x {nx} with a {ny} x {nx} mask"));
         }
+    }
+    if m == 0 {
+        return Ok(());
     }
     let inside: Vec<bool> = classes.iter().map(|&c| c > 0).collect();
     let dist =
@@ -95,5 +99,6 @@ mod tests {
         mark_smooth(shape, &share, None, 0.05, &mut lone).unwrap();
         assert_eq!(lone, [0, 0, DITHER_CLASS, 0]);
         assert!(mark_smooth(shape, &share[..6], None, 0.05, &mut lone).is_err());
+        assert!(mark_smooth(CountShape { n: 2, ny: 0, nx: 3 }, &[], None, 0.05, &mut []).is_ok());
     }
 }

@@ -64,6 +64,9 @@ pub fn sort_blocks(b: Blocks<'_>, t: &[f32], order: &mut [u32], sorted: &mut [f6
         return Err(format!("order and sorted need {slots} slots, got {} and {}", order.len(), sorted.len()));
     }
     let row = nx * b.width;
+    if row == 0 {
+        return Ok(());
+    }
     order.par_chunks_mut(row).zip(sorted.par_chunks_mut(row)).enumerate().for_each(|(y, (o, s))| {
         let mut ids = Vec::with_capacity(b.width);
         for x in 0..nx {
@@ -142,5 +145,7 @@ mod tests {
         assert!(sort_blocks(b, &[0.0; 10], &mut o, &mut s).is_err());
         let b = Blocks { rx: &[0, 2, 1], ..b };
         assert!(sort_blocks(b, &[0.0; 12], &mut o, &mut s).is_err());
+        let empty = Blocks { k: 0, ry: &[0, 2], rx: &[0, 1, 3], width: 0 };
+        assert!(sort_blocks(empty, &[], &mut [], &mut []).is_ok());
     }
 }
