@@ -1570,6 +1570,7 @@ TABLES = {
     "halftone-ssim-channels": halftone_ssim_channels,
     "halftone-side-by-side": halftone_side_by_side,
     "halftone-adaptive": halftone_adaptive,
+    "halftone-adaptive-comp": lambda: halftone_adaptive(("_adaptcomp", "_adaptcompw"), ADAPTIVE_COMP, "count-adaptive"),
     "halftone-c2f": halftone_c2f,
     "compensation-factors": compensation_factors,
     "speed": speed,
