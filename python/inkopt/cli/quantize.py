@@ -5,9 +5,9 @@ is ``inkopt.printing.stream.quantize_run`` (layer by layer; ``inkopt.printing.qu
 
 from __future__ import annotations
 
-import argparse
 from dataclasses import replace
 
+from ..evaluation.halftone_choice import quantize_run_auto
 from ..model import Quantization
 from ..printing.dithers import DITHERS, INK_ORDERS
 from ..printing.grid import DEFAULT_LAYER_UM, UPSAMPLERS
@@ -16,19 +16,35 @@ from ..rundir import RunDir
 from ..units import parse_dpi
 from .common import add_seed_arg, stderr_log
 
+#: ``inkopt quantize``'s ``--compensate`` when it is not given
+DEFAULT_COMPENSATE = "off"
+
+
+#: ``--compensate`` values: the share compensation on, off, or chosen by the run's printed prediction
+COMPENSATE = {"on": True, "off": False, "auto": None}
+
 
 def quantization_of(args) -> Quantization:
-    """The settings the arguments give (checked by ``printing.quantize.check_quantization``)."""
+    """The settings the arguments give (checked by ``printing.quantize.check_quantization``); ``--compensate auto``
+    gives compensate False here (``compensate_auto`` says it is to be chosen)."""
     dpi = None if args.dpi is None else parse_dpi(args.dpi)
     q = Quantization(args.method, args.seed, dpi, args.upsample, args.ink_order, args.layer_um, args.refine)
-    return replace(q, compensate=args.compensate)
+    return replace(q, compensate=bool(COMPENSATE[args.compensate]))
+
+
+def compensate_auto(args) -> bool:
+    return COMPENSATE[args.compensate] is None
 
 
 def _quantize_cmd(args) -> int:
     d = RunDir(args.dir)
     q = quantization_of(args)
     with d.lock(stderr_log):
-        lines = quantize_run(d, q, log=stderr_log)
+        if compensate_auto(args):
+            lines, choice = quantize_run_auto(d, q, log=stderr_log)
+            lines.append(choice.line())
+        else:
+            lines = quantize_run(d, q, log=stderr_log)
     for line in lines:
         print(line)
     print(f"wrote {d.quantized_path} and {d.quantized_labels_path}")
@@ -69,10 +85,16 @@ def register_cli(sub) -> None:
     )
     p.add_argument(
         "--compensate",
-        action=argparse.BooleanOptionalAction,
-        default=default.compensate,
+        nargs="?",
+        const="on",
+        default=DEFAULT_COMPENSATE,
+        choices=list(COMPENSATE),
         help="give the dither each ink's share pre-compensated for the halftone (a dithered ink looks lighter than "
         "its mixture; the default inks' factors ship with inkopt, another ink set or printer grid is measured once "
-        "on flat patches, about two minutes, then cached; default off; docs/quality.md)",
+        "on flat patches, about two minutes, then cached). auto: quantize both ways and keep the compensated "
+        "labels only where the run's printed prediction on a texel sample is closer to the target in both dE76 "
+        f"and dE2000 (two quantizations and two sample renders). --compensate alone: on (default "
+        f"{DEFAULT_COMPENSATE}; docs/quality.md)",
     )
+    p.add_argument("--no-compensate", dest="compensate", action="store_const", const="off", help="--compensate off")
     p.set_defaults(func=_quantize_cmd)

@@ -39,10 +39,13 @@ def run_target(d: RunDir, vol) -> PrintedLoss:
     )
 
 
-def quantize_run(d: RunDir, q: Quantization, threads: int | None = None, log=None) -> list[str]:
+def quantize_run(
+    d: RunDir, q: Quantization, threads: int | None = None, log=None, into: RunDir | None = None
+) -> list[str]:
     """``inkopt quantize``: DIR/volume.npz -> DIR/quantized.npz + quantized_labels.layers by the settings ``q``
     (module docstring), after ``q.refine`` iterations of the printed refinement (``threads``: its render threads;
-    ``log``: its line per iteration). Returns the summary lines (``quantize.summary_lines``)."""
+    ``log``: its line per iteration). ``into``: another directory the labels are written to instead (a candidate,
+    ``RunDir.adopt_quantized`` makes it the run's). Returns the summary lines (``quantize.summary_lines``)."""
     check_quantization(q)  # before any file is read
     t0 = time.perf_counter()
     digest = d.volume_digest()  # recorded in quantized.npz: export and evaluate refuse it once volume.npz changes
@@ -57,7 +60,7 @@ def quantize_run(d: RunDir, q: Quantization, threads: int | None = None, log=Non
         nrm = None if src.normals is None else upsample_normals(src.normals, grid)
         if q.compensate:  # measured (about a minute) or read from the cache before the labels file is opened
             share_compensation(src.inks, q, src.g, src.ior, threads, log)
-        with d.quantized_writer(
+        with (into or d).quantized_writer(
             src.labels_meta(grid.voxel_mm, made), grid.shape, normals=nrm, volume_digest=digest
         ) as w:
             quantize(src if refined is None else refined, q, out=w)

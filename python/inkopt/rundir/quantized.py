@@ -90,6 +90,22 @@ class QuantizedFiles:
             },
         )
 
+    def adopt_quantized(self, other) -> None:
+        """Make another run directory's printer labels this run's: ``other`` (a ``RunDir`` on the same file
+        system, written by ``quantized_writer`` from this run's volume.npz) gives up its labels file and
+        quantized.npz, which replace this run's in the order ``quantized_writer`` writes them (quantized.npz
+        removed first, the labels file renamed into place, then quantized.npz), so a crash never pairs an old
+        quantized.npz with new labels."""
+        labels = other.path / Path(str(other._quantized_arrays()["labels_file"])).name
+        if not labels.is_file():
+            raise ValueError(f"{other.quantized_path} names no labels file beside it")
+        self.quantized_path.unlink(missing_ok=True)
+        for path in (self.quantized_labels_path, self.dense_labels_path):
+            if path.name != labels.name:
+                path.unlink(missing_ok=True)
+        labels.replace(self.path / labels.name)
+        other.quantized_path.replace(self.quantized_path)
+
     def has_quantized(self) -> bool:
         return self.quantized_path.is_file()
 

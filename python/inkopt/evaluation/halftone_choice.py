@@ -1,0 +1,155 @@
+"""Whether a run's dither is share-compensated, decided by the run's own printed prediction (``inkopt quantize
+--compensate auto``; docs/quality.md, "The compensation decided by the run").
+
+The compensation (``printing.compensate``) gives each ink the share whose dither looks like its mixture on flat
+patches of that ink in white. Where a mixture is mostly white that removes the halftone's bias (the eyeball, the
+box, the checker of the mesh suite: −0.1 to −0.4 ΔE76); where it is not, it overshoots (the spider's fur, Spot's
+cream: up to +0.16 ΔE2000). No fixed setting suits every mesh, so ``quantize_run_auto`` asks the run:
+
+1. the mixture is quantized twice, plain and compensated, each into a candidate directory inside the run folder
+   (``printing.stream.quantize_run`` with ``into``);
+2. both label volumes are rendered at printer resolution on one random sample of ``CHOICE_TEXELS`` scene texels
+   with the same seed and ``CHOICE_SPP`` samples per texel (``printed.PrintedRenderer``: as the evaluation renders a
+   print); the renderer keys its random numbers by (seed, texel, sample), so the two renders share their noise
+   wherever the labels agree;
+3. per sampled texel, the noise-corrected ΔE76 and the ΔE2000 against the target; the compensated candidate is
+   chosen only where it lowers the mean ΔE76 (the figure a mesh run's loss serves) by more than ``GAIN_STDERRS``
+   standard errors of the paired per-texel difference and does not raise the mean ΔE2000 by more than as many.
+   Keeping the plain dither is the safer side: it is what the calibration chart and the baselines are dithered
+   with, and a mesh where the compensation neither clearly gains nor loses keeps it;
+4. the winner's files replace the run's (``RunDir.adopt_quantized``); the candidate directory is removed on any
+   exit.
+
+Cost: two quantizations instead of one and two renders of the sample (the evaluation's printed render is one).
+Seeds: the sample and the renders use the quantization's seed, apart from the optimisation's and the evaluation's.
+Conventions: docs/conventions.md.
+"""
+
+from __future__ import annotations
+
+import math
+import tempfile
+import time
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from ..color import delta_e76, delta_e2000, linear_to_lab
+from ..errors import ParameterError
+from ..model import Quantization
+from ..model.mixturefile import MixtureSource
+from ..printing.stream import quantize_run
+from ..rundir import RunDir
+from .noise import EVAL_SEED_OFFSET, SEED_STRIDE, NoiseModel
+from .printed import PrintedRenderer
+from .sample import mean_se
+
+#: scene texels of the choice's sample (at most all of them) and samples per scene texel of each candidate's render
+#: (shared by its printer texels). The paired difference's error is mostly the two renders' own noise (the
+#: candidates' labels differ wherever an ink's share is compensated, so their paths part after a few events), which
+#: falls with the texel-samples rendered, not with how they are split: on the eyeball's 20 mm result, ± 0.110 ΔE76
+#: at 1000 x 256, 0.065 at 1000 x 1024, 0.055 at 4000 x 256 (docs/quality.md). So many texels at few samples.
+CHOICE_TEXELS = 4000
+CHOICE_SPP = 256
+#: the compensation must lower the mean ΔE76 by more than this many standard errors and may not raise ΔE2000 by more
+GAIN_STDERRS = 2.0
+#: the choice's seed pass (``EVAL_SEED_OFFSET + seed + CHOICE_SEED_PASS x SEED_STRIDE``): no evaluation pass uses it
+CHOICE_SEED_PASS = 48
+
+
+@dataclass(frozen=True)
+class CompensationChoice:
+    """What ``quantize_run_auto`` chose: ``compensate`` (the run's labels are the compensated candidate's), the
+    paired differences compensated − plain of the mean noise-corrected ΔE76 and the mean ΔE2000 with their standard
+    errors, on ``texels`` sampled scene texels of ``population`` rendered at ``spp`` samples each, and the
+    ``seconds`` the whole command took (both quantizations and both renders)."""
+
+    compensate: bool
+    delta_e76: float
+    delta_e76_stderr: float
+    delta_e2000: float
+    delta_e2000_stderr: float
+    texels: int
+    population: int
+    spp: int
+    seconds: float
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+    def line(self) -> str:
+        verdict = "compensated" if self.compensate else "plain (uncompensated)"
+        return (
+            f"compensation auto: {verdict}; compensated - plain on {self.texels} of {self.population} texels at "
+            f"{self.spp} spp: {self.delta_e76:+.3f} +- {self.delta_e76_stderr:.3f} dE76 (noise-corrected), "
+            f"{self.delta_e2000:+.3f} +- {self.delta_e2000_stderr:.3f} dE2000; {self.seconds:.1f} s"
+        )
+
+
+def compensate_wins(d76: tuple[float, float], d2000: tuple[float, float], stderrs: float = GAIN_STDERRS) -> bool:
+    """The rule (module docstring, step 3) on the paired differences compensated − plain, each (mean, stderr)."""
+    if not all(math.isfinite(v) for v in (*d76, *d2000)):
+        return False
+    return d76[0] < -stderrs * d76[1] and d2000[0] <= stderrs * d2000[1]
+
+
+def quantize_run_auto(
+    d: RunDir,
+    q: Quantization,
+    threads: int | None = None,
+    log=None,
+    texels: int = CHOICE_TEXELS,
+    spp: int = CHOICE_SPP,
+) -> tuple[list[str], CompensationChoice]:
+    """``inkopt quantize --compensate auto`` of run ``d`` with the other settings of ``q`` (module docstring);
+    returns the chosen candidate's summary lines (``quantize.summary_lines``) and the choice."""
+    if q.refine:
+        raise ParameterError("`compensate` auto refines nothing: give `refine` 0, or choose compensate on or off")
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix=".inkopt-compensation-", dir=d.path) as tmp:
+        stage = {c: RunDir(_mkdir(Path(tmp) / c)) for c in ("plain", "compensated")}
+        lines = {}
+        for name, run in stage.items():
+            lines[name] = quantize_run(d, replace(q, compensate=name == "compensated"), threads, log, into=run)
+            if log is not None:
+                log(f"compensation auto: {name} candidate quantized, {time.perf_counter() - t0:.1f} s")
+        d76, d2000, n, population = paired_figures(
+            d, stage["plain"], stage["compensated"], q.seed, texels, spp, threads
+        )
+        wins = compensate_wins(d76, d2000)
+        d.adopt_quantized(stage["compensated" if wins else "plain"])
+    seconds = time.perf_counter() - t0
+    choice = CompensationChoice(wins, *d76, *d2000, n, population, spp, seconds)
+    return lines["compensated" if wins else "plain"], choice
+
+
+def _mkdir(path: Path) -> Path:
+    path.mkdir()
+    return path
+
+
+def paired_figures(d: RunDir, plain: RunDir, comp: RunDir, seed: int, texels: int, spp: int, threads=None):
+    """The paired differences compensated − plain (each (mean, stderr)) of the noise-corrected ΔE76 and the ΔE2000
+    on a random sample of ``texels`` scene texels, both label volumes rendered at ``spp`` with one seed; and the
+    sample's size and the scene's texel count."""
+    rec = d.load_scene()
+    with MixtureSource(d.volume_file()) as src:
+        voxel_mm = np.asarray(src.voxel_mm, np.float64)
+    population = len(rec.texels)
+    n = min(int(texels), population)
+    sample = np.sort(np.random.default_rng([int(seed), CHOICE_SEED_PASS]).choice(population, n, replace=False))
+    target_lab = linear_to_lab(rec.target_rgb.astype(np.float64))[sample]
+    render_seed = EVAL_SEED_OFFSET + int(seed) + CHOICE_SEED_PASS * SEED_STRIDE
+    vols = [plain.load_quantized(layered=True), comp.load_quantized(layered=True)]
+    printer = PrintedRenderer(vols[0], rec.texels, voxel_mm, rec.kind, threads, groups=[sample])
+    e76, e2000 = [], []
+    for vol in vols:
+        printer.use(vol)
+        rgb, var, _ = printer(spp, render_seed)
+        lab = linear_to_lab(rgb)
+        e76.append(delta_e76(lab, target_lab) - NoiseModel.of(rgb, var, target_lab).per_texel())
+        e2000.append(delta_e2000(lab, target_lab))
+    printer.use(None)
+    del vols
+    return mean_se(e76[1] - e76[0], population), mean_se(e2000[1] - e2000[0], population), n, population
