@@ -152,4 +152,6 @@ def paired_figures(d: RunDir, plain: RunDir, comp: RunDir, seed: int, texels: in
         e2000.append(delta_e2000(lab, target_lab))
     printer.use(None)
     del vols
-    return mean_se(e76[1] - e76[0], population), mean_se(e2000[1] - e2000[0], population), n, population
+    # no finite-population correction: each texel's render noise is an error of its own even where the sample is
+    # every texel
+    return mean_se(e76[1] - e76[0], math.inf), mean_se(e2000[1] - e2000[0], math.inf), n, population

@@ -1,0 +1,103 @@
+"""Tests of inkopt.evaluation.halftone_choice: ``inkopt quantize --compensate auto`` keeps the compensated labels
+only where the run's printed prediction says they are closer to its target."""
+
+import math
+
+import numpy as np
+import pytest
+
+from inkopt.cli import main
+from inkopt.errors import ParameterError
+from inkopt.evaluation import halftone_choice as hc
+from inkopt.io import save_npz
+from inkopt.model import InkTable, Quantization, Texels, Volume
+from inkopt.printing import compensate as C
+from inkopt.printing.quantize import quantize_volume
+from inkopt.render import Renderer
+from inkopt.rundir import RunDir
+
+V300 = 25.4 / 300
+SHAPE = (8, 12, 12)  # z, y, x optimisation voxels: 0.68 mm deep, 1 mm square, 144 top texels
+
+
+def test_the_rule_asks_a_de76_gain_beyond_two_standard_errors_and_no_de2000_loss_beyond_them():
+    assert hc.compensate_wins((-0.25, 0.05), (-0.05, 0.03))
+    assert hc.compensate_wins((-0.25, 0.05), (+0.05, 0.03))  # ΔE2000 within its noise
+    assert not hc.compensate_wins((-0.09, 0.05), (-0.5, 0.03))  # ΔE76 gain within its noise
+    assert not hc.compensate_wins((-0.25, 0.05), (+0.07, 0.03))  # ΔE2000 lost beyond its noise
+    assert not hc.compensate_wins((0.0, 0.0), (0.0, 0.0))  # identical labels: the plain dither stays
+    assert not hc.compensate_wins((-1.0, math.nan), (-1.0, 0.1))
+
+
+def yellow_run(path, yellow: float, target_yellow: float) -> RunDir:
+    """A slab run of the default inks, every voxel ``yellow`` in white, whose top face's target is the continuous
+    render of ``target_yellow`` in white (256 spp: its noise is far below the halftone's effect)."""
+    inks = InkTable.parse("vero-cmykw")
+    y, w = inks.names.index("yellow"), inks.names.index("white")
+
+    def mixture(share):
+        m = np.zeros(SHAPE + (len(inks),), np.float32)
+        m[..., y], m[..., w] = share, 1.0 - share
+        return m
+
+    tex = Texels.box_faces(SHAPE, ["top"])
+    target = Volume.from_mixture(voxel_mm=[V300] * 3, mixture=mixture(target_yellow), inks=inks)
+    target_rgb = Renderer(target).render(tex, 256, seed=7).rgb.astype(np.float32)
+    d = RunDir.create(path)
+    d.save_volume(Volume.from_mixture(voxel_mm=[V300] * 3, mixture=mixture(yellow), inks=inks))
+    ny, nx = SHAPE[1:]
+    pix = (np.arange(ny)[::-1, None] * nx + np.arange(nx)[None, :]).astype(np.int32)
+    scene = {**tex.to_arrays(), "target_rgb": target_rgb, "kind": np.array("slab"), "faces": np.array(["top"])}
+    save_npz(d.scene_path, {**scene, "fixed_share": np.zeros(SHAPE + (len(inks),), np.float32), "pix_top": pix})
+    return d
+
+
+@pytest.fixture
+def shipped_compensation(monkeypatch, tmp_path):
+    """The default inks' shipped factors, nothing measured or cached outside ``tmp_path``."""
+    monkeypatch.setenv("INKOPT_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(C, "_MEMORY", {})
+    monkeypatch.setattr(C, "measure_compensation", lambda *a, **k: pytest.fail("measured"))
+
+
+def test_auto_compensates_where_the_plain_print_is_lighter_than_its_mixture(tmp_path, capsys, shipped_compensation):
+    """A target that is the mixture's own continuous render: the plain print of 0.15 yellow looks like less yellow
+    (yellow's package factor, k = 0.34), the compensated one like the mixture, so auto keeps the compensated labels,
+    exactly those ``--compensate`` makes, and leaves no candidate folder behind."""
+    d = yellow_run(tmp_path / "r", 0.15, 0.15)
+    assert main(["quantize", str(d.path), "--compensate", "auto"]) == 0
+    out = capsys.readouterr().out
+    assert "compensation auto: compensated" in out
+    got = d.load_quantized()
+    assert got.quantization.compensate is True
+    expect = quantize_volume(d.load_volume(), Quantization(compensate=True))
+    np.testing.assert_array_equal(got.labels, expect.labels)
+    assert sorted(p.name for p in d.path.iterdir() if p.name.startswith(".")) == []
+
+
+def test_auto_keeps_the_plain_print_where_the_compensation_overshoots(tmp_path, shipped_compensation):
+    """A target of the less yellow mixture the plain print of 0.15 yellow looks like (0.15 / (1 + 0.34 x 0.85)):
+    the compensated print is the one too yellow now; auto keeps the plain labels, and says by how much."""
+    d = yellow_run(tmp_path / "r", 0.15, 0.116)
+    lines, choice = hc.quantize_run_auto(d, Quantization())
+    assert not choice.compensate and choice.delta_e76 > 2 * choice.delta_e76_stderr
+    assert choice.texels == choice.population == SHAPE[1] * SHAPE[2]
+    got = d.load_quantized()
+    assert got.quantization.compensate is False
+    np.testing.assert_array_equal(got.labels, quantize_volume(d.load_volume(), Quantization()).labels)
+    assert any("method count-adaptive" in line for line in lines)
+
+
+def test_auto_refuses_a_refinement_and_flags_keep_their_meaning(tmp_path, shipped_compensation):
+    d = yellow_run(tmp_path / "r", 0.15, 0.15)
+    with pytest.raises(ParameterError, match="refine"):
+        hc.quantize_run_auto(d, Quantization(refine=1))
+    assert not d.has_quantized()
+    assert main(["quantize", str(d.path), "--compensate"]) == 0  # alone: on
+    assert d.load_quantized().quantization.compensate is True
+    assert main(["quantize", str(d.path), "--no-compensate"]) == 0
+    assert d.load_quantized().quantization.compensate is False
+    assert main(["quantize", str(d.path), "--compensate", "on"]) == 0
+    assert d.load_quantized().quantization.compensate is True
+    assert main(["quantize", str(d.path), "--compensate", "off"]) == 0
+    assert d.load_quantized().quantization.compensate is False
