@@ -73,6 +73,11 @@ def test_auto_compensates_where_the_plain_print_is_lighter_than_its_mixture(tmp_
     expect = quantize_volume(d.load_volume(), Quantization(compensate=True))
     np.testing.assert_array_equal(got.labels, expect.labels)
     assert sorted(p.name for p in d.path.iterdir() if p.name.startswith(".")) == []
+    # what a killed choice leaves is one of the temporaries the next job under the run's lock removes
+    killed = d.path / f"{hc.STAGE_PREFIX}abcd_123.tmp"
+    (killed / "plain").mkdir(parents=True)
+    assert main(["quantize", str(d.path), "--compensate", "off"]) == 0
+    assert not killed.exists()
 
 
 def test_auto_keeps_the_plain_print_where_the_compensation_overshoots(tmp_path, shipped_compensation):

@@ -17,8 +17,8 @@ cream: up to +0.16 ΔE2000). No fixed setting suits every mesh, so ``quantize_ru
    standard errors of the paired per-texel difference and does not raise the mean ΔE2000 by more than as many.
    Keeping the plain dither is the safer side: it is what the calibration chart and the baselines are dithered
    with, and a mesh where the compensation neither clearly gains nor loses keeps it;
-4. the winner's files replace the run's (``RunDir.adopt_quantized``); the candidate directory is removed on any
-   exit.
+4. the winner's files replace the run's (``RunDir.adopt_quantized``); the candidates' folder is removed on any
+   exit, and where a killed process left it, by the next job that takes the run's lock.
 
 Cost: two quantizations instead of one and two renders of the sample (the evaluation's printed render is one).
 Seeds: the sample and the renders use the quantization's seed, apart from the optimisation's and the evaluation's.
@@ -54,6 +54,9 @@ CHOICE_TEXELS = 4000
 CHOICE_SPP = 256
 #: the compensation must lower the mean ΔE76 by more than this many standard errors and may not raise ΔE2000 by more
 GAIN_STDERRS = 2.0
+#: the candidates' folder in the run folder, ``.compensation.XXXXXXXX.tmp``: removed on exit, and where a killed
+#: process left it, by the next job that takes the run's lock (``io.is_temporary``)
+STAGE_PREFIX = ".compensation."
 #: the choice's seed pass (``EVAL_SEED_OFFSET + seed + CHOICE_SEED_PASS x SEED_STRIDE``): no evaluation pass uses it
 CHOICE_SEED_PASS = 48
 
@@ -107,7 +110,7 @@ def quantize_run_auto(
     if q.refine:
         raise ParameterError("`compensate` auto refines nothing: give `refine` 0, or choose compensate on or off")
     t0 = time.perf_counter()
-    with tempfile.TemporaryDirectory(prefix=".inkopt-compensation-", dir=d.path) as tmp:
+    with tempfile.TemporaryDirectory(prefix=STAGE_PREFIX, suffix=".tmp", dir=d.path) as tmp:
         stage = {c: RunDir(_mkdir(Path(tmp) / c)) for c in ("plain", "compensated")}
         lines = {}
         for name, run in stage.items():
