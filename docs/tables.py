@@ -375,6 +375,51 @@ def halftone_adaptive(
     return table(["result", "method", f"− {ref}: {what}", f"− continuous: {what}"], rows, [path])
 
 
+def compensation_choice(name: str = "adaptive") -> str:
+    """``inkopt quantize --compensate auto`` per result (experiments/compensation_choice.py entry ``name``): the run's
+    own paired figures and its choice, what the choice gives against count-adaptive and against the continuous
+    result on the compensation study's texel sample (experiments/printed_refine.py entries RESULT_adaptcomp: the
+    ``+comp1`` labels where it compensated, count-adaptive's own where not), and its cost."""
+    path, study_path = STUDY / "compensation_choice.json", STUDY / "printed_refine.json"
+    runs, study = load(path)["results"][name]["runs"], load(study_path)["results"]
+    keys = SIDE_KEYS[:3]
+
+    def pd(d: dict | None, ks=keys) -> str:
+        if d is None:
+            return " / ".join("0" for _ in ks)
+        return " / ".join(
+            "–" if (v := d.get(k) or {}).get("value") is None else f"{v['value']:+.{dg}f} ± {v['stderr']:.{dg}f}"
+            for k, dg in ks
+        )
+
+    rows = []
+    for label, r in runs.items():
+        e = study[f"{label}_adaptcomp"]
+        if e["run"] != r["run"]:
+            raise ValueError(f"{label}: the choice and the study are of different runs")
+        diffs, chosen = e["differences"], "count-adaptive+comp1" if r["compensate"] else "count-adaptive"
+        own = f"{r['delta_e76']:+.2f} ± {r['delta_e76_stderr']:.2f} / {r['delta_e2000']:+.2f} ± {r['delta_e2000_stderr']:.2f}"
+        rows.append(
+            [
+                f"{label} ({r['texels']} of {r['population']} texels, {r['spp']} spp)",
+                own,
+                "compensated" if r["compensate"] else "plain",
+                pd(diffs[f"{chosen} - count-adaptive"] if r["compensate"] else None),
+                pd(diffs[f"{chosen} - continuous"], (keys[0], keys[2])),
+                f"{r['quantize_seconds_plain']:.0f} + {r['quantize_seconds_compensated']:.0f} + {r['render_seconds']:.0f} s",
+            ]
+        )
+    header = [
+        "result",
+        "the run's choice: compensated − plain, ΔE76 / ΔE2000",
+        "chosen",
+        "auto − count-adaptive: ΔE76 / ΔE2000 / SSIM",
+        "auto − continuous: ΔE76 / SSIM",
+        "cost: quantizations + renders",
+    ]
+    return table(header, rows, [path, study_path])
+
+
 def halftone_ssim_channels() -> str:
     """SSIM per CIELAB channel and its factors (experiments/halftone_ssim_channels.py): per result the mean SSIM of
     L*, a*, b* over the texel sample's window centres and the mean b* there, and per paired comparison the b*
@@ -1571,6 +1616,7 @@ TABLES = {
     "halftone-side-by-side": halftone_side_by_side,
     "halftone-adaptive": halftone_adaptive,
     "halftone-adaptive-comp": lambda: halftone_adaptive(("_adaptcomp", "_adaptcompw"), ADAPTIVE_COMP, "count-adaptive"),
+    "compensation-choice": compensation_choice,
     "halftone-c2f": halftone_c2f,
     "compensation-factors": compensation_factors,
     "speed": speed,

@@ -93,11 +93,18 @@ def test_auto_keeps_the_plain_print_where_the_compensation_overshoots(tmp_path, 
     assert any("method count-adaptive" in line for line in lines)
 
 
-def test_auto_refuses_a_refinement_and_flags_keep_their_meaning(tmp_path, shipped_compensation):
+def test_auto_refines_each_candidate_and_flags_keep_their_meaning(tmp_path, shipped_compensation):
+    """With ``--refine 1`` each candidate is refined on its own dither's render: the chosen labels are those
+    ``--refine 1`` with the chosen compensation makes."""
     d = yellow_run(tmp_path / "r", 0.15, 0.15)
-    with pytest.raises(ParameterError, match="refine"):
-        hc.quantize_run_auto(d, Quantization(refine=1))
-    assert not d.has_quantized()
+    d.write_report({"gamma": [1.0, 0.0, 0.0], "smooth": 0.0})  # the refinement's loss weights
+    _, choice = hc.quantize_run_auto(d, Quantization(refine=1))
+    got = d.load_quantized()
+    assert got.quantization.refine == 1 and got.quantization.compensate is choice.compensate
+    assert main(["quantize", str(d.path), "--refine", "1", "--compensate", "on" if choice.compensate else "off"]) == 0
+    np.testing.assert_array_equal(d.load_quantized().labels, got.labels)
+    with pytest.raises(ParameterError, match="compensate"):
+        hc.quantize_run_as(d, Quantization(), "sometimes")
     assert main(["quantize", str(d.path), "--compensate"]) == 0  # alone: on
     assert d.load_quantized().quantization.compensate is True
     assert main(["quantize", str(d.path), "--no-compensate"]) == 0
@@ -105,4 +112,22 @@ def test_auto_refuses_a_refinement_and_flags_keep_their_meaning(tmp_path, shippe
     assert main(["quantize", str(d.path), "--compensate", "on"]) == 0
     assert d.load_quantized().quantization.compensate is True
     assert main(["quantize", str(d.path), "--compensate", "off"]) == 0
+    assert d.load_quantized().quantization.compensate is False
+
+
+def test_auto_dithers_a_job_without_a_target_plain(tmp_path, capsys, shipped_compensation):
+    """The calibration chart's job has no scene.npz: its patches are dithered plain, as the chart is measured."""
+    d = yellow_run(tmp_path / "r", 0.15, 0.15)
+    d.scene_path.unlink()
+    assert main(["quantize", str(d.path), "--compensate", "auto"]) == 0
+    assert "no target" in capsys.readouterr().out
+    assert d.load_quantized().quantization.compensate is False
+
+
+def test_auto_does_not_measure_a_compensation_unasked(tmp_path, capsys, monkeypatch, shipped_compensation):
+    """Inks whose factors are neither shipped nor cached are dithered plain, and the line says how to measure them."""
+    d = yellow_run(tmp_path / "r", 0.15, 0.15)
+    monkeypatch.setattr(C, "PACKAGED", tmp_path / "nothing shipped")
+    assert main(["quantize", str(d.path), "--compensate", "auto"]) == 0
+    assert "--compensate on` measures it" in capsys.readouterr().out
     assert d.load_quantized().quantization.compensate is False

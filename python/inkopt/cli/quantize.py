@@ -5,46 +5,27 @@ is ``inkopt.printing.stream.quantize_run`` (layer by layer; ``inkopt.printing.qu
 
 from __future__ import annotations
 
-from dataclasses import replace
-
-from ..evaluation.halftone_choice import quantize_run_auto
+from ..evaluation.halftone_choice import COMPENSATE, DEFAULT_COMPENSATE, quantize_run_as
 from ..model import Quantization
 from ..printing.dithers import DITHERS, INK_ORDERS
 from ..printing.grid import DEFAULT_LAYER_UM, UPSAMPLERS
-from ..printing.stream import quantize_run
 from ..rundir import RunDir
 from ..units import parse_dpi
 from .common import add_seed_arg, stderr_log
 
-#: ``inkopt quantize``'s ``--compensate`` when it is not given
-DEFAULT_COMPENSATE = "off"
-
-
-#: ``--compensate`` values: the share compensation on, off, or chosen by the run's printed prediction
-COMPENSATE = {"on": True, "off": False, "auto": None}
-
 
 def quantization_of(args) -> Quantization:
-    """The settings the arguments give (checked by ``printing.quantize.check_quantization``); ``--compensate auto``
-    gives compensate False here (``compensate_auto`` says it is to be chosen)."""
+    """The settings the arguments give but the compensation (``args.compensate``: ``halftone_choice.COMPENSATE``),
+    checked by ``printing.quantize.check_quantization``."""
     dpi = None if args.dpi is None else parse_dpi(args.dpi)
-    q = Quantization(args.method, args.seed, dpi, args.upsample, args.ink_order, args.layer_um, args.refine)
-    return replace(q, compensate=bool(COMPENSATE[args.compensate]))
-
-
-def compensate_auto(args) -> bool:
-    return COMPENSATE[args.compensate] is None
+    return Quantization(args.method, args.seed, dpi, args.upsample, args.ink_order, args.layer_um, args.refine)
 
 
 def _quantize_cmd(args) -> int:
     d = RunDir(args.dir)
     q = quantization_of(args)
     with d.lock(stderr_log):
-        if compensate_auto(args):
-            lines, choice = quantize_run_auto(d, q, log=stderr_log)
-            lines.append(choice.line())
-        else:
-            lines = quantize_run(d, q, log=stderr_log)
+        lines = quantize_run_as(d, q, args.compensate, log=stderr_log)
     for line in lines:
         print(line)
     print(f"wrote {d.quantized_path} and {d.quantized_labels_path}")
@@ -92,8 +73,9 @@ def register_cli(sub) -> None:
         help="give the dither each ink's share pre-compensated for the halftone (a dithered ink looks lighter than "
         "its mixture; the default inks' factors ship with inkopt, another ink set or printer grid is measured once "
         "on flat patches, about two minutes, then cached). auto: quantize both ways and keep the compensated "
-        "labels only where the run's printed prediction on a texel sample is closer to the target in both dE76 "
-        f"and dE2000 (two quantizations and two sample renders). --compensate alone: on (default "
+        "labels only where the run's printed prediction on a texel sample is closer to its target in dE76 beyond "
+        "two standard errors and not further in dE2000 beyond them (two quantizations and two sample renders; "
+        "plain where the inks' factors are not shipped or cached). --compensate alone: on (default "
         f"{DEFAULT_COMPENSATE}; docs/quality.md)",
     )
     p.add_argument("--no-compensate", dest="compensate", action="store_const", const="off", help="--compensate off")

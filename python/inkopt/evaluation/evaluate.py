@@ -76,7 +76,6 @@ from ..loss import TexelLoss
 from ..model import Quantization, Volume
 from ..model.mixturefile import MixtureSource
 from ..printing.quantize import printer_grid
-from ..printing.stream import quantize_run
 from ..render import Renderer, RendererFactory
 from ..rundir import Predictions, RunDir, SceneRecord
 from ..units import dpi_of
@@ -84,6 +83,7 @@ from . import sample as sampled
 from .baselines import BASELINES, BaselineLayers
 from .choice import SamplingChoice, choose_sampling
 from .colour_table import ColourTable, colour_table
+from .halftone_choice import quantize_run_as
 from .metrics import prediction_metrics
 from .noise import EVAL_SEED_OFFSET, MAX_SPP, PILOT_SPP, TARGET_NOISE_DE76, Sampling
 from .options import EvaluateOptions
@@ -315,7 +315,7 @@ def _quantized_volume(ev: Evaluating, shape: tuple) -> tuple[Volume, Quantizatio
             )
         return qvol, q
     t0 = time.perf_counter()  # inkopt quantize's defaults, layer by layer as that command does
-    quantize_run(d, Quantization() if method is None else Quantization(method))
+    ev.say(quantize_run_as(d, Quantization() if method is None else Quantization(method))[-1])  # its last line
     qvol = d.load_quantized(layered=True)
     q = qvol.quantization
     ev.say(

@@ -20,7 +20,9 @@ cream: up to +0.16 ΔE2000). No fixed setting suits every mesh, so ``quantize_ru
 4. the winner's files replace the run's (``RunDir.adopt_quantized``); the candidates' folder is removed on any
    exit, and where a killed process left it, by the next job that takes the run's lock.
 
-Cost: two quantizations instead of one and two renders of the sample (the evaluation's printed render is one).
+Cost: two quantizations instead of one and two renders of the sample (the evaluation's printed render is one); with
+a refinement on the printed prediction (``q.refine``) each candidate has its own, since it renders that candidate's
+dither.
 Seeds: the sample and the renders use the quantization's seed, apart from the optimisation's and the evaluation's.
 Conventions: docs/conventions.md.
 """
@@ -39,6 +41,7 @@ from ..color import delta_e76, delta_e2000, linear_to_lab
 from ..errors import ParameterError
 from ..model import Quantization
 from ..model.mixturefile import MixtureSource
+from ..printing.compensate import has_compensation
 from ..printing.stream import quantize_run
 from ..rundir import RunDir
 from .noise import EVAL_SEED_OFFSET, SEED_STRIDE, NoiseModel
@@ -54,6 +57,11 @@ CHOICE_TEXELS = 4000
 CHOICE_SPP = 256
 #: the compensation must lower the mean ΔE76 by more than this many standard errors and may not raise ΔE2000 by more
 GAIN_STDERRS = 2.0
+#: ``inkopt quantize --compensate`` values: the share compensation on, off, or chosen by the run (None)
+COMPENSATE = {"on": True, "off": False, "auto": None}
+#: a run's quantization when the user does not say (``inkopt quantize``, and ``inkopt evaluate`` of a run not
+#: quantized yet): the run chooses (docs/quality.md, "The compensation decided by the run")
+DEFAULT_COMPENSATE = "auto"
 #: the candidates' folder in the run folder, ``.compensation.XXXXXXXX.tmp``: removed on exit, and where a killed
 #: process left it, by the next job that takes the run's lock (``io.is_temporary``)
 STAGE_PREFIX = ".compensation."
@@ -66,7 +74,8 @@ class CompensationChoice:
     """What ``quantize_run_auto`` chose: ``compensate`` (the run's labels are the compensated candidate's), the
     paired differences compensated − plain of the mean noise-corrected ΔE76 and the mean ΔE2000 with their standard
     errors, on ``texels`` sampled scene texels of ``population`` rendered at ``spp`` samples each, and the
-    ``seconds`` the whole command took (both quantizations and both renders)."""
+    ``seconds`` the whole command took (both quantizations and both renders). A run quantized plain without a
+    choice says why in ``reason`` (``_plain_reason``) and has ``texels`` 0 and NaN differences."""
 
     compensate: bool
     delta_e76: float
@@ -77,11 +86,14 @@ class CompensationChoice:
     population: int
     spp: int
     seconds: float
+    reason: str = ""
 
     def to_json(self) -> dict:
         return asdict(self)
 
     def line(self) -> str:
+        if self.reason:
+            return f"compensation auto: plain (uncompensated): {self.reason}"
         verdict = "compensated" if self.compensate else "plain (uncompensated)"
         return (
             f"compensation auto: {verdict}; compensated - plain on {self.texels} of {self.population} texels at "
@@ -97,6 +109,19 @@ def compensate_wins(d76: tuple[float, float], d2000: tuple[float, float], stderr
     return d76[0] < -stderrs * d76[1] and d2000[0] <= stderrs * d2000[1]
 
 
+def quantize_run_as(
+    d: RunDir, q: Quantization, compensate: str = DEFAULT_COMPENSATE, threads: int | None = None, log=None
+) -> list[str]:
+    """Run ``d`` quantized by the settings ``q`` with the compensation ``compensate`` (a key of ``COMPENSATE``; "on"
+    and "off" set ``q.compensate``, "auto" is ``quantize_run_auto``, whose choice ends the returned summary lines)."""
+    if compensate not in COMPENSATE:
+        raise ParameterError(f"`compensate` must be one of {list(COMPENSATE)}, got {compensate!r}")
+    if COMPENSATE[compensate] is None:
+        lines, choice = quantize_run_auto(d, q, threads, log)
+        return [*lines, choice.line()]
+    return quantize_run(d, replace(q, compensate=COMPENSATE[compensate]), threads, log)
+
+
 def quantize_run_auto(
     d: RunDir,
     q: Quantization,
@@ -107,13 +132,15 @@ def quantize_run_auto(
 ) -> tuple[list[str], CompensationChoice]:
     """``inkopt quantize --compensate auto`` of run ``d`` with the other settings of ``q`` (module docstring);
     returns the chosen candidate's summary lines (``quantize.summary_lines``) and the choice."""
-    if q.refine:
-        raise ParameterError("`compensate` auto refines nothing: give `refine` 0, or choose compensate on or off")
     t0 = time.perf_counter()
+    if reason := _plain_reason(d, q):
+        lines = quantize_run(d, replace(q, compensate=False), threads, log)
+        nan = math.nan
+        return lines, CompensationChoice(False, nan, nan, nan, nan, 0, 0, spp, time.perf_counter() - t0, reason)
     with tempfile.TemporaryDirectory(prefix=STAGE_PREFIX, suffix=".tmp", dir=d.path) as tmp:
         stage = {c: RunDir(_mkdir(Path(tmp) / c)) for c in ("plain", "compensated")}
         lines = {}
-        for name, run in stage.items():
+        for name, run in stage.items():  # each with its own refinement where ``q.refine``: it renders its dither
             lines[name] = quantize_run(d, replace(q, compensate=name == "compensated"), threads, log, into=run)
             if log is not None:
                 log(f"compensation auto: {name} candidate quantized, {time.perf_counter() - t0:.1f} s")
@@ -125,6 +152,22 @@ def quantize_run_auto(
     seconds = time.perf_counter() - t0
     choice = CompensationChoice(wins, *d76, *d2000, n, population, spp, seconds)
     return lines["compensated" if wins else "plain"], choice
+
+
+def _plain_reason(d: RunDir, q: Quantization) -> str:
+    """Why run ``d`` is quantized plain without a choice, or "": a job without a target (no scene.npz: the
+    calibration chart's, whose patches are measured as dithered plain), or inks whose compensation is not shipped or
+    cached (auto does not spend the measurement's two minutes unasked)."""
+    if not d.scene_path.is_file():
+        return "the job has no target to compare the prints with"
+    with MixtureSource(d.volume_file()) as src:
+        known = has_compensation(src.inks, q, src.g, src.ior)
+    if not known:
+        return (
+            "no compensation is measured for these inks on this printer grid (`--compensate on` measures it once, "
+            "about two minutes, and auto uses it from then on)"
+        )
+    return ""
 
 
 def _mkdir(path: Path) -> Path:

@@ -393,6 +393,14 @@ def cache_path(key: str) -> Path:
     return root / f"compensation_{key}.npz"
 
 
+def has_compensation(inks: InkTable | None, q: Quantization, g: float, ior: float) -> bool:
+    """Whether ``share_compensation`` would find the factors without measuring them (in memory, shipped or cached)."""
+    if inks is None:
+        return False
+    key = compensation_key(inks, q, g, ior)
+    return key in _MEMORY or any(p.is_file() for p in (PACKAGED / cache_path(key).name, cache_path(key)))
+
+
 def share_compensation(inks: InkTable | None, q: Quantization, g: float, ior: float, threads=None, log=None):
     """The ``ShareCompensation`` of ``inks`` dithered by ``q`` (its base: the lightest ink, whatever the bands'
     order), from this process's memory, the package's copy (``PACKAGED``), the disk cache (``cache_path``) or
