@@ -408,12 +408,21 @@ def run_cell(mesh: str, height: float, budget: str, cache: Path, extra: Extra) -
         "sampled": ev.get("texel_sample") is not None,
         "gamut_floor_delta_e76": ev.get("gamut_floor_delta_e76"),
         "quantization": ev.get("quantization"),
+        "compensation_choice": compensation_choice(log),
         "load_average_before": load_before,
         "load_average_after": os.getloadavg()[0],
         "finished": time.strftime("%Y-%m-%d %H:%M"),
         "results": {k: figures(v, v.get("stderr")) for k, v in results.items()},
         "differences": differences(ev),
     }
+
+
+def compensation_choice(log: Path) -> str | None:
+    """The last line ``inkopt quantize --compensate auto`` (the default) wrote in the cell's log: what the run chose
+    and why (its text after "compensation auto: "), or None where the cell's print was made without the choice."""
+    lines = [ln for ln in log.read_text().splitlines() if "compensation auto: " in ln] if log.is_file() else []
+    lines = [ln for ln in lines if "candidate quantized" not in ln]
+    return lines[-1].split("compensation auto: ", 1)[1] if lines else None
 
 
 def job_times(out: Path, report: dict) -> dict:

@@ -398,7 +398,7 @@ def compensation_choice(name: str = "adaptive") -> str:
         if e["run"] != r["run"]:
             raise ValueError(f"{label}: the choice and the study are of different runs")
         diffs, chosen = e["differences"], "count-adaptive+comp1" if r["compensate"] else "count-adaptive"
-        own = f"{r['delta_e76']:+.2f} ± {r['delta_e76_stderr']:.2f} / {r['delta_e2000']:+.2f} ± {r['delta_e2000_stderr']:.2f}"
+        own = " / ".join(f"{r[k]:+.2f} ± {r[k + '_stderr']:.2f}" for k in ("delta_e76", "delta_e2000"))
         rows.append(
             [
                 f"{label} ({r['texels']} of {r['population']} texels, {r['spp']} spp)",
@@ -406,7 +406,8 @@ def compensation_choice(name: str = "adaptive") -> str:
                 "compensated" if r["compensate"] else "plain",
                 pd(diffs[f"{chosen} - count-adaptive"] if r["compensate"] else None),
                 pd(diffs[f"{chosen} - continuous"], (keys[0], keys[2])),
-                f"{r['quantize_seconds_plain']:.0f} + {r['quantize_seconds_compensated']:.0f} + {r['render_seconds']:.0f} s",
+                " + ".join(f"{r[k]:.0f}" for k in ("quantize_seconds_plain", "quantize_seconds_compensated"))
+                + f" + {r['render_seconds']:.0f} s",
             ]
         )
     header = [
@@ -1210,6 +1211,11 @@ def halftone(q: dict | None) -> str:
     return shown + (" +comp" if q.get("compensate") else "")
 
 
+def halftone_chosen(cell: dict) -> str:
+    """``halftone`` of a suite cell, and "(auto)" where the run chose its compensation (``compensation_choice``)."""
+    return halftone(cell.get("quantization")) + (" (auto)" if cell.get("compensation_choice") else "")
+
+
 def dithers_ordered(q: dict, order: str) -> bool:
     """Whether a record's "index" order was chosen (the dither orders the inks) rather than implied."""
     from inkopt.printing.dithers import dither_class
@@ -1233,7 +1239,7 @@ def mesh_suite(path: Path = BENCH / "mesh_suite.json", variants: bool | None = N
                 c["mesh"],
                 f"{c['height_mm']:g}",
                 c["budget"] + (f" + {c['variant']}" if c.get("variant") else ""),
-                halftone(c.get("quantization")),
+                halftone_chosen(c),
                 (f"{c['coarse_iterations']} + " if c.get("coarse_iterations") is not None else "")
                 + f"{c['iterations']} it, {c['optimize_seconds'] / 60:.1f} + {c['evaluate_seconds'] / 60:.1f} min",
                 suite_cell(cont),

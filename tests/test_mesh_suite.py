@@ -89,6 +89,9 @@ def test_run_and_table_end_to_end(tmp_path, monkeypatch):
     ]
     assert set(cell["results"]) == {"continuous", "printed", "surface", "extrusion"}
     assert cell["quantization"]["method"] == "count-adaptive"  # the halftone the print was made with
+    # and what the run chose of the compensation (the default inks' factors ship: a choice was made)
+    choice = cell["compensation_choice"]
+    assert choice.startswith("compensated;" if cell["quantization"].get("compensate") else "plain"), choice
     for fig in cell["results"].values():
         assert 0 < fig["delta_e76_corrected"] < 100 and -1 <= fig["ssim"] <= 1 and fig["delta_e2000"] > 0
     # the evaluation's paired differences, and refresh adding them to a cell recorded without them
@@ -139,7 +142,7 @@ def test_run_and_table_end_to_end(tmp_path, monkeypatch):
     text = doc.read_text()
     row = next(line for line in text.splitlines() if line.startswith("| cube |"))
     printed = cell["results"]["printed"]["delta_e76_corrected"]
-    assert "| 3 | 2it + fast | count-adaptive | 2 it," in row and f"{printed:.2f}" in row
+    assert "| 3 | 2it + fast | count-adaptive (auto) | 2 it," in row and f"{printed:.2f}" in row
     assert f"{lead['delta_e76_corrected']['value']:+.2f} ± {lead['delta_e76_corrected']['stderr']:.2f}" in row
     assert "old" not in text and text.endswith("<!-- /table:mesh-suite-variants -->\nafter\n")
 
