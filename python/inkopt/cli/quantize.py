@@ -1,7 +1,9 @@
 """``inkopt quantize DIR``: the run's continuous mixture (DIR/volume.npz) -> one ink per printer voxel
 (DIR/quantized.npz + DIR/quantized_labels.layers, a labels volume at printer resolution; docs/run-dir.md). The stage
-is ``inkopt.printing.stream.quantize_run`` (layer by layer; ``inkopt.printing.quantize``); the arguments become one
-``model.Quantization``. The run folder's lock (``RunDir.lock``) is held while it writes."""
+is ``inkopt.evaluation.halftone_choice.quantize_run_as``: ``inkopt.printing.stream.quantize_run`` (layer by layer;
+``inkopt.printing.quantize``), twice where the run chooses the compensation (``--compensate auto``, the default);
+the other arguments become one ``model.Quantization``. The run folder's lock (``RunDir.lock``) is held while it
+writes."""
 
 from __future__ import annotations
 

@@ -2,7 +2,8 @@
 
 The run's mixture volume file (volume.npz) is read one (y, x, N) layer at a time by ``model.mixturefile.MixtureSource``.
 
-``quantize_run`` is ``inkopt quantize``: the labels go layer by layer from ``quantize.quantize`` into the run's
+``quantize_run`` is ``inkopt quantize`` (which runs it twice where the run chooses the compensation:
+``evaluation.halftone_choice``): the labels go layer by layer from ``quantize.quantize`` into the run's
 label file (``RunDir.quantized_writer``: quantized.npz + quantized_labels.layers, docs/run-dir.md), so memory holds
 the inside mask, a few mixture layers and a few printer layers; a mesh's shading normals go to the printer grid
 by ``grid.upsample_normals`` (20 bytes per printer voxel inside a surface voxel). Labels and normals are
