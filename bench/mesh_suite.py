@@ -418,7 +418,7 @@ def run_cell(mesh: str, height: float, budget: str, cache: Path, extra: Extra) -
 
 
 def compensation_choice(log: Path) -> str | None:
-    """The last line ``inkopt quantize --compensate auto`` (the default) wrote in the cell's log: what the run chose
+    """The last line ``inkopt quantize --compensate-auto`` (the default) wrote in the cell's log: what the run chose
     and why (its text after "compensation auto: "), or None where the cell's print was made without the choice."""
     lines = [ln for ln in log.read_text().splitlines() if "compensation auto: " in ln] if log.is_file() else []
     lines = [ln for ln in lines if "candidate quantized" not in ln]

@@ -376,7 +376,7 @@ def halftone_adaptive(
 
 
 def compensation_choice(name: str = "adaptive") -> str:
-    """``inkopt quantize --compensate auto`` per result (experiments/compensation_choice.py entry ``name``): the run's
+    """``inkopt quantize --compensate-auto`` per result (experiments/compensation_choice.py entry ``name``): the run's
     own paired figures and its choice, what the choice gives against count-adaptive and against the continuous
     result on the compensation study's texel sample (experiments/printed_refine.py entries RESULT_adaptcomp: the
     ``+comp1`` labels where it compensated, count-adaptive's own where not), and its cost."""

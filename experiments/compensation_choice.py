@@ -1,4 +1,4 @@
-"""What ``inkopt quantize --compensate auto`` chooses on optimised results, and what the choice costs (docs/quality.md,
+"""What ``inkopt quantize --compensate-auto`` chooses on optimised results, and what the choice costs (docs/quality.md,
 "The compensation decided by the run").
 
     nice -n 5 .venv/bin/python experiments/compensation_choice.py NAME LABEL=RUN [LABEL=RUN ...] [--texels N --spp S]

@@ -1,4 +1,4 @@
-"""Tests of inkopt.evaluation.halftone_choice: ``inkopt quantize --compensate auto`` keeps the compensated labels
+"""Tests of inkopt.evaluation.halftone_choice: ``inkopt quantize --compensate-auto`` keeps the compensated labels
 only where the run's printed prediction says they are closer to its target."""
 
 import math
@@ -65,7 +65,7 @@ def test_auto_compensates_where_the_plain_print_is_lighter_than_its_mixture(tmp_
     (yellow's package factor, k = 0.34), the compensated one like the mixture, so auto keeps the compensated labels,
     exactly those ``--compensate`` makes, and leaves no candidate folder behind."""
     d = yellow_run(tmp_path / "r", 0.15, 0.15)
-    assert main(["quantize", str(d.path), "--compensate", "auto"]) == 0
+    assert main(["quantize", str(d.path), "--compensate-auto"]) == 0
     out = capsys.readouterr().out
     assert "compensation auto: compensated" in out
     got = d.load_quantized()
@@ -76,7 +76,7 @@ def test_auto_compensates_where_the_plain_print_is_lighter_than_its_mixture(tmp_
     # what a killed choice leaves is one of the temporaries the next job under the run's lock removes
     killed = d.path / f"{hc.STAGE_PREFIX}abcd_123.tmp"
     (killed / "plain").mkdir(parents=True)
-    assert main(["quantize", str(d.path), "--compensate", "off"]) == 0
+    assert main(["quantize", str(d.path), "--no-compensate"]) == 0
     assert not killed.exists()
 
 
@@ -101,7 +101,10 @@ def test_auto_refines_each_candidate_and_flags_keep_their_meaning(tmp_path, ship
     _, choice = hc.quantize_run_auto(d, Quantization(refine=1))
     got = d.load_quantized()
     assert got.quantization.refine == 1 and got.quantization.compensate is choice.compensate
-    assert main(["quantize", str(d.path), "--refine", "1", "--compensate", "on" if choice.compensate else "off"]) == 0
+    assert (
+        main(["quantize", str(d.path), "--refine", "1", "--compensate" if choice.compensate else "--no-compensate"])
+        == 0
+    )
     np.testing.assert_array_equal(d.load_quantized().labels, got.labels)
     with pytest.raises(ParameterError, match="compensate"):
         hc.quantize_run_as(d, Quantization(), "sometimes")
@@ -109,17 +112,17 @@ def test_auto_refines_each_candidate_and_flags_keep_their_meaning(tmp_path, ship
     assert d.load_quantized().quantization.compensate is True
     assert main(["quantize", str(d.path), "--no-compensate"]) == 0
     assert d.load_quantized().quantization.compensate is False
-    assert main(["quantize", str(d.path), "--compensate", "on"]) == 0
+    assert main(["quantize", "--compensate", str(d.path)]) == 0  # the flag takes no value: DIR after it
     assert d.load_quantized().quantization.compensate is True
-    assert main(["quantize", str(d.path), "--compensate", "off"]) == 0
-    assert d.load_quantized().quantization.compensate is False
+    assert main(["quantize", str(d.path), "--compensate", "--compensate-auto"]) == 0  # the last one counts
+    assert d.load_quantized().quantization.compensate is choice.compensate
 
 
 def test_auto_dithers_a_job_without_a_target_plain(tmp_path, capsys, shipped_compensation):
     """The calibration chart's job has no scene.npz: its patches are dithered plain, as the chart is measured."""
     d = yellow_run(tmp_path / "r", 0.15, 0.15)
     d.scene_path.unlink()
-    assert main(["quantize", str(d.path), "--compensate", "auto"]) == 0
+    assert main(["quantize", str(d.path), "--compensate-auto"]) == 0
     assert "no target" in capsys.readouterr().out
     assert d.load_quantized().quantization.compensate is False
 
@@ -128,6 +131,34 @@ def test_auto_does_not_measure_a_compensation_unasked(tmp_path, capsys, monkeypa
     """Inks whose factors are neither shipped nor cached are dithered plain, and the line says how to measure them."""
     d = yellow_run(tmp_path / "r", 0.15, 0.15)
     monkeypatch.setattr(C, "PACKAGED", tmp_path / "nothing shipped")
-    assert main(["quantize", str(d.path), "--compensate", "auto"]) == 0
-    assert "--compensate on` measures it" in capsys.readouterr().out
+    assert main(["quantize", str(d.path), "--compensate-auto"]) == 0
+    assert "--compensate` measures it" in capsys.readouterr().out
     assert d.load_quantized().quantization.compensate is False
+
+
+@pytest.mark.parametrize(
+    "report, says",
+    [({"lighting": "studio.hdr"}, "seen under 'studio.hdr'"), ({"viewing": {"lights": ["D50"]}}, "spectral run")],
+)
+def test_auto_does_not_judge_a_run_seen_under_other_lights(tmp_path, report, says, shipped_compensation):
+    """The choice renders RGB under the uniform light: a run optimised under a map or in spectral bands is plain."""
+    d = yellow_run(tmp_path / "r", 0.15, 0.15)
+    d.write_report(report)
+    lines, choice = hc.quantize_run_auto(d, Quantization())
+    assert not choice.compensate and says in choice.reason and says in choice.line()
+    assert d.load_quantized().quantization.compensate is False
+
+
+def test_a_print_too_large_to_render_keeps_the_plain_labels(tmp_path, monkeypatch, shipped_compensation):
+    """The candidates are made layer by layer; where their renders do not fit, the plain labels are the run's."""
+    from inkopt.model import VolumeError
+
+    def too_large(*a, **k):
+        raise VolumeError("the labels volume needs 9 GB to render (INKOPT_MAX_VOLUME_BYTES 1 GB)")
+
+    d = yellow_run(tmp_path / "r", 0.15, 0.15)
+    monkeypatch.setattr(hc, "paired_figures", too_large)
+    _, choice = hc.quantize_run_auto(d, Quantization())
+    assert not choice.compensate and "could not be rendered here (the labels volume needs 9 GB" in choice.reason
+    np.testing.assert_array_equal(d.load_quantized().labels, quantize_volume(d.load_volume(), Quantization()).labels)
+    assert not [p for p in d.path.iterdir() if p.name.startswith(".")]

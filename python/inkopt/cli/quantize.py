@@ -1,13 +1,13 @@
 """``inkopt quantize DIR``: the run's continuous mixture (DIR/volume.npz) -> one ink per printer voxel
 (DIR/quantized.npz + DIR/quantized_labels.layers, a labels volume at printer resolution; docs/run-dir.md). The stage
 is ``inkopt.evaluation.halftone_choice.quantize_run_as``: ``inkopt.printing.stream.quantize_run`` (layer by layer;
-``inkopt.printing.quantize``), twice where the run chooses the compensation (``--compensate auto``, the default);
+``inkopt.printing.quantize``), twice where the run chooses the compensation (``--compensate-auto``, the default);
 the other arguments become one ``model.Quantization``. The run folder's lock (``RunDir.lock``) is held while it
 writes."""
 
 from __future__ import annotations
 
-from ..evaluation.halftone_choice import COMPENSATE, DEFAULT_COMPENSATE, quantize_run_as
+from ..evaluation.halftone_choice import DEFAULT_COMPENSATE, quantize_run_as
 from ..model import Quantization
 from ..printing.dithers import DITHERS, INK_ORDERS
 from ..printing.grid import DEFAULT_LAYER_UM, UPSAMPLERS
@@ -68,17 +68,23 @@ def register_cli(sub) -> None:
     )
     p.add_argument(
         "--compensate",
-        nargs="?",
+        dest="compensate",
+        action="store_const",
         const="on",
         default=DEFAULT_COMPENSATE,
-        choices=list(COMPENSATE),
         help="give the dither each ink's share pre-compensated for the halftone (a dithered ink looks lighter than "
         "its mixture; the default inks' factors ship with inkopt, another ink set or printer grid is measured once "
-        "on flat patches, about two minutes, then cached). auto: quantize both ways and keep the compensated "
+        "on flat patches, about two minutes, then cached; docs/quality.md)",
+    )
+    p.add_argument("--no-compensate", dest="compensate", action="store_const", const="off", help="dither plain")
+    p.add_argument(
+        "--compensate-auto",
+        dest="compensate",
+        action="store_const",
+        const="auto",
+        help=f"{'(default) ' if DEFAULT_COMPENSATE == 'auto' else ''}quantize both ways and keep the compensated "
         "labels only where the run's printed prediction on a texel sample is closer to its target in dE76 beyond "
         "two standard errors and not further in dE2000 beyond them (two quantizations and two sample renders; "
-        "plain where the inks' factors are not shipped or cached). --compensate alone: on (default "
-        f"{DEFAULT_COMPENSATE}; docs/quality.md)",
+        "plain where the inks' factors are not shipped or cached, and for runs seen under other lights)",
     )
-    p.add_argument("--no-compensate", dest="compensate", action="store_const", const="off", help="--compensate off")
     p.set_defaults(func=_quantize_cmd)

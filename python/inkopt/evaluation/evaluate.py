@@ -315,12 +315,11 @@ def _quantized_volume(ev: Evaluating, shape: tuple) -> tuple[Volume, Quantizatio
             )
         return qvol, q
     t0 = time.perf_counter()  # inkopt quantize's defaults, layer by layer as that command does
-    ev.say(quantize_run_as(d, Quantization() if method is None else Quantization(method))[-1])  # its last line
+    q, threads = Quantization() if method is None else Quantization(method), ev.options.threads
+    ev.say(quantize_run_as(d, q, threads=threads, log=ev.say)[-1])  # its last line: the compensation's choice
     qvol = d.load_quantized(layered=True)
-    q = qvol.quantization
-    ev.say(
-        f"quantized {shape} -> {qvol.shape} ({q.method}) in {time.perf_counter() - t0:.1f} s; wrote {d.quantized_path}"
-    )
+    q, seconds = qvol.quantization, time.perf_counter() - t0
+    ev.say(f"quantized {shape} -> {qvol.shape} ({q.method}) in {seconds:.1f} s; wrote {d.quantized_path}")
     return qvol, q
 
 

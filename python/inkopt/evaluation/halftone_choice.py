@@ -1,9 +1,9 @@
 """Whether a run's dither is share-compensated, decided by the run's own printed prediction (``inkopt quantize
---compensate auto``; docs/quality.md, "The compensation decided by the run").
+--compensate-auto``; docs/quality.md, "The compensation decided by the run").
 
 The compensation (``printing.compensate``) gives each ink the share whose dither looks like its mixture on flat
-patches of that ink in white. Where a mixture is mostly white that removes the halftone's bias (the eyeball, the
-box, the checker of the mesh suite: −0.1 to −0.4 ΔE76); where it is not, it overshoots (the spider's fur, Spot's
+patches of that ink in white. Where a mixture is mostly white that removes the halftone's bias (the eyeball and the
+box of the mesh suite: −0.08 to −0.4 ΔE76); where it is not, it overshoots (the spider's fur: +0.3 ΔE76; Spot's
 cream: up to +0.16 ΔE2000). No fixed setting suits every mesh, so ``quantize_run_auto`` asks the run:
 
 1. the mixture is quantized twice, plain and compensated, each into a candidate directory inside the run folder
@@ -19,6 +19,13 @@ cream: up to +0.16 ΔE2000). No fixed setting suits every mesh, so ``quantize_ru
    with, and a mesh where the compensation neither clearly gains nor loses keeps it;
 4. the winner's files replace the run's (``RunDir.adopt_quantized``); the candidates' folder is removed on any
    exit, and where a killed process left it, by the next job that takes the run's lock.
+
+The run is quantized plain without a choice where the choice cannot judge it (``_plain_reason``): a job without a
+target (the calibration chart's), inks whose factors are neither shipped nor cached, a run seen under other lights
+than the uniform one or in spectral bands (the choice renders RGB under the uniform light), and a print too large to
+render on this machine (the candidates are made layer by layer, as ``inkopt quantize`` makes its labels; the renders
+hold them whole). The ΔE2000 is not corrected for the render noise (as the evaluation's is not): a candidate further
+from the target has a little less of its noise's inflation, so a loss reads a little small.
 
 Cost: two quantizations instead of one and two renders of the sample (the evaluation's printed render is one); with
 a refinement on the printed prediction (``q.refine``) each candidate has its own, since it renders that candidate's
@@ -39,9 +46,11 @@ import numpy as np
 
 from ..color import delta_e76, delta_e2000, linear_to_lab
 from ..errors import ParameterError
-from ..model import Quantization
+from ..lighting import UNIFORM
+from ..model import Quantization, VolumeError
 from ..model.mixturefile import MixtureSource
 from ..printing.compensate import has_compensation
+from ..printing.quantize import check_quantization
 from ..printing.stream import quantize_run
 from ..rundir import RunDir
 from .noise import EVAL_SEED_OFFSET, SEED_STRIDE, NoiseModel
@@ -130,8 +139,9 @@ def quantize_run_auto(
     texels: int = CHOICE_TEXELS,
     spp: int = CHOICE_SPP,
 ) -> tuple[list[str], CompensationChoice]:
-    """``inkopt quantize --compensate auto`` of run ``d`` with the other settings of ``q`` (module docstring);
+    """``inkopt quantize --compensate-auto`` of run ``d`` with the other settings of ``q`` (module docstring);
     returns the chosen candidate's summary lines (``quantize.summary_lines``) and the choice."""
+    check_quantization(q)  # before any file is read
     t0 = time.perf_counter()
     if reason := _plain_reason(d, q):
         lines = quantize_run(d, replace(q, compensate=False), threads, log)
@@ -144,14 +154,20 @@ def quantize_run_auto(
             lines[name] = quantize_run(d, replace(q, compensate=name == "compensated"), threads, log, into=run)
             if log is not None:
                 log(f"compensation auto: {name} candidate quantized, {time.perf_counter() - t0:.1f} s")
-        d76, d2000, n, population = paired_figures(
-            d, stage["plain"], stage["compensated"], q.seed, texels, spp, threads
-        )
+        try:
+            d76, d2000, n, population = paired_figures(d, *stage.values(), q.seed, texels, spp, threads)
+        except (VolumeError, MemoryError) as e:  # the print is beyond this machine's renders; the labels are not
+            d.adopt_quantized(stage["plain"])
+            nan, reason = math.nan, f"the prints could not be rendered here ({str(e).splitlines()[0]})"
+            return lines["plain"], CompensationChoice(False, nan, nan, nan, nan, 0, 0, spp, _since(t0), reason)
         wins = compensate_wins(d76, d2000)
         d.adopt_quantized(stage["compensated" if wins else "plain"])
-    seconds = time.perf_counter() - t0
-    choice = CompensationChoice(wins, *d76, *d2000, n, population, spp, seconds)
+    choice = CompensationChoice(wins, *d76, *d2000, n, population, spp, _since(t0))
     return lines["compensated" if wins else "plain"], choice
+
+
+def _since(t0: float) -> float:
+    return time.perf_counter() - t0
 
 
 def _plain_reason(d: RunDir, q: Quantization) -> str:
@@ -160,11 +176,16 @@ def _plain_reason(d: RunDir, q: Quantization) -> str:
     cached (auto does not spend the measurement's two minutes unasked)."""
     if not d.scene_path.is_file():
         return "the job has no target to compare the prints with"
+    report = d.read_report() if d.report_path.is_file() else {}
+    if report.get("viewing"):
+        return "a spectral run: the choice renders RGB under the uniform light only"
+    if str(report.get("lighting", UNIFORM)) != UNIFORM:
+        return f"the run is seen under '{report['lighting']}': the choice renders under the uniform light only"
     with MixtureSource(d.volume_file()) as src:
         known = has_compensation(src.inks, q, src.g, src.ior)
     if not known:
         return (
-            "no compensation is measured for these inks on this printer grid (`--compensate on` measures it once, "
+            "no compensation is measured for these inks on this printer grid (`--compensate` measures it once, "
             "about two minutes, and auto uses it from then on)"
         )
     return ""
