@@ -96,6 +96,7 @@ def test_run_and_table_end_to_end(tmp_path, monkeypatch):
         assert 0 < fig["delta_e76_corrected"] < 100 and -1 <= fig["ssim"] <= 1 and fig["delta_e2000"] > 0
     # the evaluation's paired differences, and refresh adding them to a cell recorded without them
     ev = json.loads((tmp_path / "runs" / "cube_3mm_2it_fast" / "evaluation.json").read_text())
+    assert ev["quantization"]["compensation_choice"]["compensate"] is bool(cell["quantization"].get("compensate"))
     lead = cell["differences"]["printed - extrusion"]
     assert lead["delta_e2000"] == ev["differences"]["quantized - extrusion"]["delta_e2000_mean"]
     assert lead["ssim"]["stderr"] >= 0 and set(cell["differences"]) == {

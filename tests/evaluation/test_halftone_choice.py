@@ -70,6 +70,8 @@ def test_auto_compensates_where_the_plain_print_is_lighter_than_its_mixture(tmp_
     assert "compensation auto: compensated" in out
     got = d.load_quantized()
     assert got.quantization.compensate is True
+    kept = d.compensation_choice()["compensation_choice"]  # quantized.npz keeps the choice, the labels check out
+    assert kept["compensate"] is True and kept["delta_e76"] < -2 * kept["delta_e76_stderr"]
     expect = quantize_volume(d.load_volume(), Quantization(compensate=True))
     np.testing.assert_array_equal(got.labels, expect.labels)
     assert sorted(p.name for p in d.path.iterdir() if p.name.startswith(".")) == []
@@ -125,6 +127,9 @@ def test_auto_dithers_a_job_without_a_target_plain(tmp_path, capsys, shipped_com
     assert main(["quantize", str(d.path), "--compensate-auto"]) == 0
     assert "no target" in capsys.readouterr().out
     assert d.load_quantized().quantization.compensate is False
+    assert "no target" in d.compensation_choice()["compensation_choice"]["reason"]
+    assert main(["quantize", str(d.path), "--no-compensate"]) == 0
+    assert d.compensation_choice() == {}  # a quantization without a choice records none
 
 
 def test_auto_does_not_measure_a_compensation_unasked(tmp_path, capsys, monkeypatch, shipped_compensation):

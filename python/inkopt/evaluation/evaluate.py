@@ -415,7 +415,7 @@ def _evaluation(ev: Evaluating, printed: _Printed, measured: dict, diffs: dict |
         spp_max=MAX_SPP,
         lighting=ev.lighting.describe(),
         continuous=cont,
-        quantization={**printed.quantization.to_json(), "dpi": list(printed.dpi)},
+        quantization={**printed.quantization.to_json(), "dpi": list(printed.dpi), **ev.d.compensation_choice()},
         printer_texels=printed.printer_texels,
         quantized=quantized,
         seconds=time.perf_counter() - ev.shares.started,

@@ -98,7 +98,8 @@ class CompensationChoice:
     reason: str = ""
 
     def to_json(self) -> dict:
-        return asdict(self)
+        """The choice as JSON values (NaN differences as null)."""
+        return {k: None if isinstance(v, float) and math.isnan(v) else v for k, v in asdict(self).items()}
 
     def line(self) -> str:
         if self.reason:
@@ -127,6 +128,7 @@ def quantize_run_as(
         raise ParameterError(f"`compensate` must be one of {list(COMPENSATE)}, got {compensate!r}")
     if COMPENSATE[compensate] is None:
         lines, choice = quantize_run_auto(d, q, threads, log)
+        d.record_compensation_choice(choice.to_json())
         return [*lines, choice.line()]
     return quantize_run(d, replace(q, compensate=COMPENSATE[compensate]), threads, log)
 
@@ -140,7 +142,8 @@ def quantize_run_auto(
     spp: int = CHOICE_SPP,
 ) -> tuple[list[str], CompensationChoice]:
     """``inkopt quantize --compensate-auto`` of run ``d`` with the other settings of ``q`` (module docstring);
-    returns the chosen candidate's summary lines (``quantize.summary_lines``) and the choice."""
+    returns the chosen candidate's summary lines (``quantize.summary_lines``) and the choice (``quantize_run_as``
+    records it in quantized.npz, ``RunDir.record_compensation_choice``)."""
     check_quantization(q)  # before any file is read
     t0 = time.perf_counter()
     if reason := _plain_reason(d, q):

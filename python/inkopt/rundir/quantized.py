@@ -5,6 +5,7 @@ time and read back checked. ``QuantizedFiles`` is the part of ``rundir.RunDir`` 
 
 from __future__ import annotations
 
+import json
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,6 +22,8 @@ from ..model.volume import upgrade_volume
 VOLUME_DIGEST, QUANTIZED_DIGEST = "volume_digest", "quantized_digest"
 #: the key under which quantized.npz records the digest of its labels file
 LABELS_DIGEST = "labels_digest"
+#: the key under which quantized.npz records the compensation a run chose (JSON text)
+COMPENSATION_CHOICE = "compensation_choice"
 
 
 class StaleOutputError(ValueError):
@@ -105,6 +108,17 @@ class QuantizedFiles:
                 path.unlink(missing_ok=True)
         labels.replace(self.path / labels.name)
         other.quantized_path.replace(self.quantized_path)
+
+    def record_compensation_choice(self, choice: dict) -> None:
+        """Keep what ``inkopt quantize --compensate-auto`` chose (``evaluation.halftone_choice``, JSON values) in
+        quantized.npz as ``compensation_choice``: the file is written again atomically with it, the labels file
+        untouched."""
+        save_npz(self.quantized_path, {**self._quantized_arrays(), COMPENSATION_CHOICE: np.array(json.dumps(choice))})
+
+    def compensation_choice(self) -> dict:
+        """``{"compensation_choice": {...}}`` where quantized.npz records the run's choice, else ``{}``."""
+        got = self._quantized_arrays([COMPENSATION_CHOICE]).get(COMPENSATION_CHOICE)
+        return {} if got is None else {COMPENSATION_CHOICE: json.loads(str(got))}
 
     def has_quantized(self) -> bool:
         return self.quantized_path.is_file()
