@@ -408,7 +408,7 @@ def run_cell(mesh: str, height: float, budget: str, cache: Path, extra: Extra) -
         "sampled": ev.get("texel_sample") is not None,
         "gamut_floor_delta_e76": ev.get("gamut_floor_delta_e76"),
         "quantization": ev.get("quantization"),
-        "compensation_choice": compensation_choice(ev, log),
+        "compensation_choice": compensation_choice(ev),
         "load_average_before": load_before,
         "load_average_after": os.getloadavg()[0],
         "finished": time.strftime("%Y-%m-%d %H:%M"),
@@ -417,18 +417,14 @@ def run_cell(mesh: str, height: float, budget: str, cache: Path, extra: Extra) -
     }
 
 
-def compensation_choice(ev: dict, log: Path) -> str | None:
+def compensation_choice(ev: dict) -> str | None:
     """What the run chose of the compensation (``inkopt quantize --compensate-auto``, the default) and why: the text
-    of its line after "compensation auto: ", from evaluation.json ``ev`` (its quantization's record) or, for a print
-    quantized before quantized.npz kept the choice, the last such line of the cell's log; None where the cell's print
-    was made without the choice."""
+    of its line after "compensation auto: ", from evaluation.json ``ev`` (its quantization's record); None where the
+    cell's print was made without the choice."""
     from inkopt.evaluation.halftone_choice import CompensationChoice
 
-    if rec := (ev.get("quantization") or {}).get("compensation_choice"):
-        return CompensationChoice(**rec).line().split("compensation auto: ", 1)[1]
-    lines = [ln for ln in log.read_text().splitlines() if "compensation auto: " in ln] if log.is_file() else []
-    lines = [ln for ln in lines if "candidate quantized" not in ln]
-    return lines[-1].split("compensation auto: ", 1)[1] if lines else None
+    rec = (ev.get("quantization") or {}).get("compensation_choice")
+    return CompensationChoice(**rec).line().split("compensation auto: ", 1)[1] if rec else None
 
 
 def job_times(out: Path, report: dict) -> dict:

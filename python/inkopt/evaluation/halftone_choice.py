@@ -60,8 +60,8 @@ from .sample import mean_se
 #: scene texels of the choice's sample (at most all of them) and samples per scene texel of each candidate's render
 #: (shared by its printer texels). The paired difference's error is mostly the two renders' own noise (the
 #: candidates' labels differ wherever an ink's share is compensated, so their paths part after a few events), which
-#: falls with the texel-samples rendered, not with how they are split: on the eyeball's 20 mm result, ± 0.110 ΔE76
-#: at 1000 x 256, 0.065 at 1000 x 1024, 0.055 at 4000 x 256 (docs/quality.md). So many texels at few samples.
+#: falls with the texel-samples rendered, not with how they are split: on the eyeball's 20 mm result, ± 0.111 ΔE76
+#: at 1000 x 256, 0.065 at 1000 x 1024, 0.056 at 4000 x 256 (docs/quality.md). So many texels at few samples.
 CHOICE_TEXELS = 4000
 CHOICE_SPP = 256
 #: the compensation must lower the mean ΔE76 by more than this many standard errors and may not raise ΔE2000 by more
