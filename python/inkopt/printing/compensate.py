@@ -398,7 +398,13 @@ def has_compensation(inks: InkTable | None, q: Quantization, g: float, ior: floa
     if inks is None:
         return False
     key = compensation_key(inks, q, g, ior)
-    return key in _MEMORY or any(p.is_file() for p in (PACKAGED / cache_path(key).name, cache_path(key)))
+    return key in _MEMORY or _stored(key) is not None
+
+
+def _stored(key: str):
+    """The file holding the factors of ``key``: the package's copy (``PACKAGED``), else the disk cache's; None."""
+    path = cache_path(key)
+    return next((p for p in (PACKAGED / path.name, path) if p.is_file()), None)
 
 
 def share_compensation(inks: InkTable | None, q: Quantization, g: float, ior: float, threads=None, log=None):
@@ -411,8 +417,7 @@ def share_compensation(inks: InkTable | None, q: Quantization, g: float, ior: fl
     key = compensation_key(inks, q, g, ior)
     if key in _MEMORY:
         return _MEMORY[key]
-    path = cache_path(key)
-    stored = next((p for p in (PACKAGED / path.name, path) if p.is_file()), None)
+    path, stored = cache_path(key), _stored(key)
     if stored is not None:
         with np.load(stored, allow_pickle=False) as z:
             comp = ShareCompensation(**{f: z[f] for f in z.files if f != "base"}, base=int(z["base"]))
